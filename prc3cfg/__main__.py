@@ -1,0 +1,3 @@
+from prc3cfg.cli import main
+
+main()

@@ -1,0 +1,46 @@
+"""The `prc3cfg` command line: typer apps, wiring only.
+
+Each command lives in a module of this package that registers itself on `app` (or on one
+of the sub-apps) when imported; `main()` imports them all and turns a `UserError` into one
+line on stderr and a non-zero exit.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from prc3cfg.errors import UserError
+
+app = typer.Typer(
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    help="Plant configuration as code for PRC 3 powder reciprocator controllers.",
+)
+emulator_app = typer.Typer(no_args_is_help=True, help="A software PRC 3 bus.")
+link_app = typer.Typer(no_args_is_help=True, help="Gateway and line settings.")
+app.add_typer(emulator_app, name="emulator")
+app.add_typer(link_app, name="link")
+
+COMMAND_MODULES: tuple[str, ...] = ()
+
+
+def _register_commands() -> None:
+    import importlib
+
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"prc3cfg.cli.{name}")
+
+
+def main() -> None:
+    _register_commands()
+    try:
+        app()
+    except UserError as error:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(error.exit_code)
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        sys.exit(130)

@@ -1,0 +1,12 @@
+"""The error a person can act on: one line, no traceback.
+
+Every user mistake and every bus fault ends up as a `UserError` (or a subclass) whose
+message names the place (file:line:column, or bus/module), what is wrong and what to do.
+The CLI prints it on stderr and exits non-zero; nothing else is caught there.
+"""
+
+
+class UserError(Exception):
+    """A problem the user can fix; `str()` is the whole one-line message."""
+
+    exit_code = 1
