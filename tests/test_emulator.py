@@ -1,0 +1,209 @@
+"""The emulator end to end: real server threads, real pyserial clients over socket:// and a pty."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import replace
+
+import pytest
+import serial
+
+from prc3cfg import codec
+from prc3cfg.device import ModuleState
+from prc3cfg.emulator import Emulator, FaultInjection, load_state
+from prc3cfg.framing import NEED_DATA, Direction, Frame, get_framing
+from prc3cfg.image import DEFAULT_SYSTEM, Program
+from prc3cfg.line import LineSettings
+
+WRITE_P10 = codec.WriteProgram(10, Program(P=150, V=300, Vr=53, T=20, F1=1010, F2=50, A=5))
+
+
+def modules(*addresses: int) -> dict[int, ModuleState]:
+    return {a: ModuleState.factory(a) for a in addresses}
+
+
+class Client:
+    """A master on the line, built from the real framing and pyserial."""
+
+    def __init__(self, url: str, framing: str = "crc16", **settings) -> None:
+        self.framing = get_framing(framing)
+        self.port = serial.serial_for_url(url, timeout=0.3, **settings)
+        self.line = LineSettings(parity="none") if settings.get("parity") == "N" else LineSettings()
+
+    def send_raw(self, frame: bytes) -> bytes | None:
+        """Write bytes; the reply message, or None when nothing valid arrives within the time-out."""
+        self.port.write(frame)
+        decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=0.02)
+        while chunk := self.port.read(max(1, self.port.in_waiting)):
+            decoder.receive_data(chunk, 0.0)
+            event = decoder.next_event(0.0)
+            if isinstance(event, Frame):
+                return event.message
+        decoder.line_idle()
+        event = decoder.next_event(0.0)
+        return event.message if isinstance(event, Frame) else None
+
+    def send(self, address: int, message: bytes) -> bytes | None:
+        return self.send_raw(self.framing.encode(Direction.REQUEST, address, message))
+
+    def close(self) -> None:
+        self.port.close()
+
+
+@pytest.fixture
+def bus(tmp_path):
+    emulator = Emulator(modules(1, 3), state_path=tmp_path / "state.json")
+    host, port = emulator.listen()
+    client = Client(f"socket://{host}:{port}")
+    yield emulator, client, tmp_path / "state.json"
+    client.close()
+    emulator.close()
+
+
+def test_write_is_answered_stored_and_saved(bus):
+    emulator, client, state_path = bus
+    assert client.send(1, WRITE_P10.encode()) == b"\x00\x00"
+    assert emulator.module(1).image.program(10) == WRITE_P10.program
+    saved = load_state(state_path)
+    assert saved[1].image.program(10) == WRITE_P10.program
+    assert json.loads(state_path.read_text())["format"] == "prc3-emulator/1"
+
+
+def test_manual_example_read_of_system_parameters(bus):
+    _, client, _ = bus
+    reply = client.send(1, bytes.fromhex("5000"))
+    assert reply == bytes.fromhex("0190003202F20258000A05DC03E800010247044C000A")
+
+
+def test_absent_module_is_silent(bus):
+    _, client, _ = bus
+    assert client.send(2, bytes.fromhex("5000")) is None
+
+
+def test_broadcast_is_processed_by_all_and_answered_by_none(bus):
+    emulator, client, state_path = bus
+    assert client.send(0, codec.WriteSpeeds(((4, 123),)).encode()) is None
+    assert client.send(1, bytes.fromhex("5000")) is not None  # the line still works
+    assert emulator.module(1).image.program(4).V == 123
+    assert emulator.module(3).image.program(4).V == 123
+    assert load_state(state_path)[3].image.program(4).V == 123
+
+
+def test_rejected_write_answers_its_code_and_saves_nothing(bus):
+    emulator, client, state_path = bus
+    before = state_path.read_bytes()
+    bad = codec.WriteProgram(10, replace(WRITE_P10.program, P=5000))  # P > S1 = 400
+    assert client.send(1, bad.encode()) == bytes.fromhex("2000")
+    assert state_path.read_bytes() == before
+
+
+def test_bad_crc_is_silence(bus):
+    _, client, _ = bus
+    frame = bytearray(client.framing.encode(Direction.REQUEST, 1, bytes.fromhex("5000")))
+    frame[-1] ^= 0xFF
+    assert client.send_raw(bytes(frame)) is None
+    assert client.send(1, bytes.fromhex("5000")) is not None  # and the next frame is heard
+
+
+def test_operating_states_through_the_python_api(bus):
+    emulator, client, _ = bus
+    emulator.update(1, mode="manual")
+    assert client.send(1, bytes.fromhex("5000")) is None
+    emulator.update(1, mode="run", active_program=10)
+    assert client.send(1, codec.InitSystem().encode()) == bytes([20, 0])
+    assert client.send(1, WRITE_P10.encode()) == bytes([16, 0])
+    emulator.update(1, mode="stop", fault="E09")
+    assert client.send(1, codec.InitProgram(3).encode()) == bytes([21, 0])
+    emulator.teach_in(3, 7, 321)
+    reply = client.send(3, codec.ReadProgram(7).encode())
+    assert codec.decode_reply(codec.ReadProgram(7), reply).programs[0].P == 321
+
+
+@pytest.mark.parametrize("framing", ["crc16", "open-driver", "stx"])
+def test_every_framing_over_socket(framing):
+    with Emulator(modules(5), framing=framing) as emulator:
+        host, port = emulator.listen()
+        client = Client(f"socket://{host}:{port}", framing)
+        try:
+            assert client.send(5, WRITE_P10.encode()) == b"\x00\x00"
+            reply = client.send(5, codec.ReadPrograms(9, 11).encode())
+            decoded = codec.decode_reply(codec.ReadPrograms(9, 11), reply)
+            assert decoded.programs[1] == WRITE_P10.program
+        finally:
+            client.close()
+
+
+def test_pty_serves_any_serial_program():
+    with Emulator(modules(2)) as emulator:
+        path = emulator.open_pty()
+        assert os.path.exists(path)
+        client = Client(path, parity="N")
+        try:
+            reply = client.send(2, codec.ReadSystem().encode())
+            assert codec.decode_reply(codec.ReadSystem(), reply) == codec.SystemReply(DEFAULT_SYSTEM, 2)
+        finally:
+            client.close()
+
+
+def test_fault_injection_is_seeded_and_repeatable():
+    def answered(seed: int) -> list[bool]:
+        with Emulator(modules(1), faults=FaultInjection(drop_rate=0.5, seed=seed)) as emulator:
+            host, port = emulator.listen()
+            client = Client(f"socket://{host}:{port}")
+            try:
+                return [client.send(1, b"\x50\x00") is not None for _ in range(12)]
+            finally:
+                client.close()
+
+    first = answered(7)
+    assert first == answered(7)
+    assert 0 < sum(first) < 12
+
+
+def test_corrupted_replies_fail_their_crc():
+    with Emulator(modules(1), faults=FaultInjection(corrupt_rate=1.0, seed=1)) as emulator:
+        host, port = emulator.listen()
+        client = Client(f"socket://{host}:{port}")
+        try:
+            replies = [client.send(1, b"\x50\x00") for _ in range(6)]
+        finally:
+            client.close()
+    assert replies == [None] * 6  # a damaged request is discarded, a damaged reply fails its CRC
+
+
+def test_serve_command_answers_and_saves(tmp_path):
+    state = tmp_path / "bus.json"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
+         "--state", str(state), "--modules", "1,3-4", "--framing", "crc16"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        banner = process.stdout.readline()
+        assert banner.startswith("listening on 127.0.0.1:"), banner + process.stderr.read()
+        port = int(banner.split()[2].rsplit(":", 1)[1])
+        client = Client(f"socket://127.0.0.1:{port}")
+        try:
+            assert client.send(4, WRITE_P10.encode()) == b"\x00\x00"
+            assert client.send(2, b"\x50\x00") is None
+        finally:
+            client.close()
+        saved = json.loads(state.read_text())
+        assert [m["address"] for m in saved["modules"]] == [1, 3, 4]
+        assert saved["modules"][2]["programs"][9] == WRITE_P10.program.to_json()
+    finally:
+        process.terminate()
+        assert process.wait(timeout=10) == 0
+
+
+def test_serve_command_rejects_bad_modules_in_one_line():
+    result = subprocess.run(
+        [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--modules", "0-40"],
+        capture_output=True, text=True, timeout=30,
+    )  # fmt: skip
+    assert result.returncode == 1
+    assert result.stderr.strip().count("\n") == 0
+    assert "outside 1..30" in result.stderr
