@@ -1,0 +1,166 @@
+"""The link client: PRC 3 messages to modules over a real line, with retries.
+
+A `Link` *holds* a pyserial port, a framing and a retry policy (composition, not
+inheritance). `request()` sends one message to one module and returns its decoded reply;
+a lost or damaged reply is retried — every PRC 3 message is idempotent (an absolute write
+or a read) — and every retry is logged and traced. The reply's address and length are
+checked. Time-outs are detected here, with the port's timeout fixed at the framing's gap
+(link.md: `inter_byte_timeout` does nothing on Linux).
+
+Does not own what the messages mean (`prc3cfg.codec`), how frames look
+(`prc3cfg.framing`) or which port to open (`prc3cfg.link.ports`).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import serial
+
+from prc3cfg import codec
+from prc3cfg.errors import UserError
+from prc3cfg.framing import NEED_DATA, Direction, Discarded, Framing
+from prc3cfg.line import LineSettings
+from prc3cfg.link.trace import Trace
+
+log = logging.getLogger(__name__)
+
+READ_SLICE = 0.05  # s: longest single read on framings that do not end frames by a gap
+
+
+class LinkError(UserError):
+    """A module could not be reached, or answered nonsense, after every retry."""
+
+
+@dataclass(frozen=True, slots=True)
+class Exchange:
+    """One attempt on the line, for journals: what went out, what came back."""
+
+    bus: str
+    address: int
+    request: bytes  # the message
+    reply: bytes | None  # the reply message, None when nothing (valid) came back
+    attempt: int
+    started: float  # time.time()
+    duration: float  # s
+
+
+class Link:
+    """One line: a port, a framing, a reply time-out and a retry policy."""
+
+    def __init__(
+        self,
+        port: serial.SerialBase,
+        framing: Framing,
+        *,
+        bus: str,
+        line: LineSettings = LineSettings(),
+        timeout: float = 0.5,
+        zvz: float = 0.020,
+        turnaround: float = 0.010,
+        retries: int = 3,
+        trace: Trace | None = None,
+        observer: Callable[[Exchange], None] | None = None,
+    ) -> None:
+        self.port = port
+        self.framing = framing
+        self.bus = bus
+        self.line = line
+        self.timeout = timeout
+        self.zvz = zvz
+        self.turnaround = turnaround
+        self.retries = retries
+        self.trace = trace
+        self.observer = observer
+        self._gap_ends_frame = framing.name == "open-driver"
+        port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
+        self.exchanges = 0  # attempts made, for benchmarks and summaries
+
+    def _where(self, address: int) -> str:
+        return f"bus {self.bus}, module {address}"
+
+    def request(self, address: int, message: codec.Message) -> int | codec.SystemReply | codec.ProgramsReply:
+        """Send `message` to the module at `address`; its error code (0 = accepted) or data block."""
+        data = message.encode()
+        attempts = 1 + self.retries
+        problem = ""
+        for attempt in range(1, attempts + 1):
+            started = time.time()
+            raw = self._exchange(address, data)
+            self._observe(address, data, raw, attempt, started)
+            if raw is None:
+                problem = f"no reply within {self.timeout:g} s"
+            else:
+                try:
+                    return codec.decode_reply(message, raw)
+                except codec.BadReply as error:
+                    problem = f"bad reply ({error})"
+            if attempt < attempts:
+                note = f"{self._where(address)}: {problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
+                log.warning(note)
+                if self.trace:
+                    self.trace.remark(self.bus, note)
+        raise LinkError(
+            f"{self._where(address)}: {problem} to {message.ID:02X}h after {attempts} attempts — check that "
+            f"the module is powered, in STOP and AUTOMATIC, at address {address}, and that the bus's framing "
+            f"({self.framing.name}) and line settings ({self.line.baud} baud, {self.line.data_bits}"
+            f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
+        )
+
+    def broadcast(self, message: codec.Message) -> None:
+        """Send to address 0: every module processes it, none answers."""
+        frame = self.framing.encode(Direction.REQUEST, 0, message.encode())
+        self._send(frame)
+        time.sleep(len(frame) * self.line.char_time + self.turnaround)
+
+    def _observe(self, address: int, data: bytes, raw: bytes | None, attempt: int, started: float) -> None:
+        self.exchanges += 1
+        if self.observer:
+            self.observer(Exchange(self.bus, address, data, raw, attempt, started, time.time() - started))
+
+    def _send(self, frame: bytes) -> None:
+        try:
+            self.port.reset_input_buffer()
+            self.port.write(frame)
+            self.port.flush()
+        except (serial.SerialException, OSError) as error:
+            raise LinkError(f"bus {self.bus}: cannot write to the port ({error}) — check the adapter and cable") from None
+        if self.trace:
+            self.trace.sent(self.bus, frame)
+
+    def _exchange(self, address: int, data: bytes) -> bytes | None:
+        """One attempt: the reply message from `address`, or None (time-out, nothing valid)."""
+        self._send(self.framing.encode(Direction.REQUEST, address, data))
+        decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz)
+        deadline = time.monotonic() + self.timeout
+        pending = False  # bytes of a frame that only a gap can end
+        while True:
+            try:
+                chunk = self.port.read(max(1, self.port.in_waiting))
+            except (serial.SerialException, OSError) as error:
+                raise LinkError(f"bus {self.bus}: cannot read from the port ({error}) — check the adapter and cable") from None
+            now = time.monotonic()
+            if chunk:
+                decoder.receive_data(chunk, now)
+                pending = self._gap_ends_frame
+            elif pending:
+                decoder.line_idle()
+                pending = False
+            while (event := decoder.next_event(now)) is not NEED_DATA:
+                if isinstance(event, Discarded):
+                    if self.trace:
+                        self.trace.discarded(self.bus, event.data, event.reason)
+                    continue
+                if self.trace:
+                    self.trace.received(self.bus, self.framing.encode(Direction.REPLY, event.address, event.message))
+                if event.address == address:
+                    return event.message
+                if self.trace:
+                    self.trace.remark(self.bus, f"reply from address {event.address}, expected {address}: ignored")
+            if now >= deadline and not pending:
+                if self.trace:
+                    self.trace.remark(self.bus, f"timeout after {self.timeout:g} s waiting for module {address}")
+                return None

@@ -1,0 +1,105 @@
+"""Opening a plant bus's line: a device path, any pyserial URL, or `emulator://NAME`.
+
+`emulator://NAME` runs the bus emulator in this process (the same code as `prc3cfg
+emulator serve`) on a loopback port and connects to it through pyserial's `socket://`, so
+the whole link is exercised. Its state is kept in `.prc3cfg/emulators/NAME.json` beside
+the plant file, created with factory-default modules at the plant's addresses.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import termios
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+import serial
+
+from prc3cfg.device import ModuleState
+from prc3cfg.emulator import Emulator, load_state
+from prc3cfg.errors import UserError
+from prc3cfg.framing import get_framing
+from prc3cfg.line import LineSettings
+from prc3cfg.link.client import Exchange, Link
+from prc3cfg.link.trace import Trace
+
+EMULATOR_SCHEME = "emulator://"
+PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.PARITY_EVEN}
+STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
+
+
+def emulator_state_path(plant_path: Path, port: str) -> Path:
+    return plant_path.parent / ".prc3cfg" / "emulators" / f"{port[len(EMULATOR_SCHEME):]}.json"
+
+
+def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
+    """Open a device path (exclusively) or a pyserial URL with the line's settings."""
+    is_url = "://" in url
+    try:
+        return serial.serial_for_url(
+            url,
+            baudrate=line.baud,
+            bytesize=line.data_bits,
+            parity=PARITY[line.parity],
+            stopbits=STOP_BITS[line.stop_bits],
+            timeout=0.05,
+            **({} if is_url else {"exclusive": True}),
+        )
+    except termios.error:
+        raise UserError(
+            f"bus {bus}: port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
+            f"{line.stop_bits:g} stop bits — a pseudo-terminal carries no parity: set parity: none"
+        ) from None
+    except (serial.SerialException, ValueError, OSError) as error:
+        raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path or the URL") from None
+
+
+@contextlib.contextmanager
+def open_link(
+    bus,
+    plant_path: Path,
+    *,
+    retries: int = 3,
+    trace: Trace | None = None,
+    observer: Callable[[Exchange], None] | None = None,
+) -> Iterator[Link]:
+    """A `Link` to one plant bus (`prc3cfg.plant.Bus`), closed on exit."""
+    with contextlib.ExitStack() as stack:
+        url = bus.port
+        if url.startswith(EMULATOR_SCHEME):
+            state_path = emulator_state_path(plant_path, url)
+            modules = load_state(state_path)
+            for module in bus.modules:
+                modules.setdefault(module.address, ModuleState.factory(module.address))
+            emulator = stack.enter_context(
+                Emulator(modules, framing=bus.framing, line=bus.line, zvz=bus.zvz,
+                         turnaround=bus.turnaround, state_path=state_path)
+            )  # fmt: skip
+            host, port = emulator.listen("127.0.0.1", 0)
+            url = f"socket://{host}:{port}"
+        port = open_port(url, bus.line, bus=bus.name)
+        stack.callback(port.close)
+        yield Link(
+            port,
+            get_framing(bus.framing),
+            bus=bus.name,
+            line=bus.line,
+            timeout=bus.timeout,
+            zvz=bus.zvz,
+            turnaround=bus.turnaround,
+            retries=retries,
+            trace=trace,
+            observer=observer,
+        )
+
+
+@contextlib.contextmanager
+def open_plant_links(plant, buses: Iterable[str] | None = None, **options) -> Iterator[dict[str, Link]]:
+    """A `Link` per bus of `plant` (or of the named buses), all closed on exit."""
+    names = None if buses is None else set(buses)
+    with contextlib.ExitStack() as stack:
+        yield {
+            bus.name: stack.enter_context(open_link(bus, plant.path, **options))
+            for bus in plant.buses
+            if names is None or bus.name in names
+        }
