@@ -1,0 +1,394 @@
+"""The search for the cheapest plan of one module.
+
+Bus time is dominated by the fixed cost of an exchange (turnaround, frame overhead, the
+reply, open-driver gaps), so the question is which *messages* to open, not which bytes
+to send. The search is built around that:
+
+1. **Channels.** A candidate opens a subset of the per-field messages: 40h..45h per
+   field, 33h/32h (P and V of consecutive programs) and 46h. A program that still differs
+   in a field none of its open messages can write takes a 21h. For a fixed subset the rest
+   is exact dynamic programming over program numbers 1..64:
+   - P and V: 33h runs (at most 15 consecutive managed programs, which may include
+     programs that need no change: their desired P, V are rewritten; a run of one is a
+     32h) against 40h/41h items;
+   - A: link (30h) and unlink (31h) ranges against 46h items (or a 21h when 46h is shut);
+   - Vr, T, F1, F2: their items, counted.
+   Every subset of the channels that matter is tried, most open first; a subset whose
+   forced 21h alone cost more than the best plan so far is skipped. Items are priced by
+   their exact message count (ceil(n/15), ceil(n/31)).
+2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
+   step) is a second dynamic programme over program numbers: runs of initialised
+   programs cost one message each and may never cover an unmanaged program; each program
+   is charged what its remaining differences cost under a channel subset. It is run for
+   the best subset without inits, for all channels open and for all shut, and again for
+   the best subset found, until the plan stops improving.
+3. The best few layouts (and the all-21h layout, which is never dearer than the naive
+   download) go back to the caller, which prices their messages exactly and keeps the
+   cheapest.
+
+Prices come from `prc3cfg.planner.pricing`, bases and masks from `prc3cfg.planner.problem`.
+Owns the search. Does not own building messages (`layout`) or checking the result (the
+caller runs it on `prc3cfg.device`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+from prc3cfg import codec
+from prc3cfg.image import PROGRAM_COUNT
+from prc3cfg.planner.layout import Layout, Writes, runs_of
+from prc3cfg.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, PLAIN_FIELDS, PV_BITS, V_BIT, Problem
+
+INF = float("inf")
+PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
+#: How many of the best layouts of each init choice are priced exactly.
+KEPT = 3
+
+
+@dataclass(frozen=True, slots=True)
+class Channels:
+    """The per-field messages a candidate may use."""
+
+    plain: int  # FIELD_BIT mask of the Vr, T, F1, F2 whose 42h..45h is open
+    positions: bool  # 40h
+    speeds: bool  # 41h
+    parts: bool  # 33h / 32h
+    addresses: bool  # 46h
+
+    @classmethod
+    def everything(cls, open_: bool) -> Channels:
+        return cls(sum(PLAIN_BITS) if open_ else 0, open_, open_, open_, open_)
+
+
+class WritePhase:
+    """The write phase for one choice of init kinds: its bases, masks and the exact DPs over them."""
+
+    def __init__(self, problem: Problem, kinds: tuple[int, ...]) -> None:
+        self.prices = problem.prices
+        self.managed = problem.managed
+        self.masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
+        self.base_a = [problem.bases[k][i].A for i, k in enumerate(kinds)]
+        self.target_a = [0 if p is None else p.A for p in problem.desired.programs]
+        self.changed = {bit: _mask_of(m & bit for m in self.masks) for bit in FIELD_BIT.values()}
+        self.relevant = 0
+        for m in self.masks:
+            self.relevant |= m
+        self.pv_changed = self.changed[P_BIT] | self.changed[V_BIT]
+        self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
+        self._parts_cache: dict[tuple, tuple] = {}
+        self._address_cache: dict[tuple, tuple] = {}
+
+    # -- the channel subsets ---------------------------------------------------------------
+
+    def subsets(self) -> list[Channels]:
+        """Every subset of the channels some program differs in, most open first."""
+        rel = self.relevant
+        plain = [bit for bit in PLAIN_BITS if rel & bit]
+        options = (True, False)
+        out = []
+        for opened in itertools.product(options, repeat=len(plain)):
+            for positions, speeds, parts, addresses in itertools.product(
+                options if rel & P_BIT else (False,),
+                options if rel & V_BIT else (False,),
+                options if rel & PV_BITS else (False,),
+                options if rel & A_BIT else (False,),
+            ):
+                mask = sum(bit for bit, o in zip(plain, opened) if o)
+                out.append(Channels(mask, positions, speeds, parts, addresses))
+        return out
+
+    def solve(self, bound: float = INF) -> list[tuple[Writes, Channels]]:
+        """The KEPT cheapest write phases found over every channel subset, cheapest first."""
+        found: list[tuple[Writes, Channels]] = []
+        for channels in self.subsets():
+            writes = self.evaluate(channels, bound)
+            if writes is None:
+                continue
+            found.append((writes, channels))
+            bound = min(bound, writes.estimate)
+        found.sort(key=lambda pair: pair[0].estimate)
+        return found[:KEPT]
+
+    def forced(self, channels: Channels) -> int:
+        """Programs that differ in a field no open message writes: they take a 21h."""
+        whole = 0
+        for bit in PLAIN_BITS:
+            if not channels.plain & bit:
+                whole |= self.changed[bit]
+        if not channels.parts:
+            if not channels.positions:
+                whole |= self.changed[P_BIT]
+            if not channels.speeds:
+                whole |= self.changed[V_BIT]
+        return whole
+
+    def evaluate(self, channels: Channels, bound: float = INF) -> Writes | None:
+        """The cheapest write phase with these channels; None when it cannot beat `bound`."""
+        prices = self.prices
+        whole = self.forced(channels)
+        if whole.bit_count() * prices.program >= bound:
+            return None
+        ranges, addresses, extra = self.addresses(whole, channels.addresses)
+        whole |= extra
+        runs, positions, speeds, runs_cost = self.parts(whole, channels)
+        plain = {bit: self.changed[bit] & ~whole for bit in PLAIN_BITS}
+        items = (positions, speeds, *plain.values())
+        estimate = (
+            whole.bit_count() * prices.program
+            + runs_cost
+            + sum(prices.fields(mask.bit_count()) for mask in items)
+            + len(ranges) * prices.link
+            + prices.addresses(addresses.bit_count())
+        )
+        return Writes(whole, runs, items, ranges, addresses, estimate)
+
+    # -- P and V: 33h/32h runs against 40h/41h items -------------------------------------------
+
+    def parts(self, whole: int, channels: Channels) -> tuple[tuple[tuple[int, int], ...], int, int, float]:
+        """(runs, 40h programs, 41h programs, cost of the runs) for the programs not in `whole`."""
+        need = self.pv_changed & ~whole
+        key = (need, channels.positions, channels.speeds, channels.parts)
+        cached = self._parts_cache.get(key)
+        if cached is None:
+            cached = self._parts_cache[key] = self._solve_parts(need, channels)
+        return cached
+
+    def _solve_parts(self, need: int, channels: Channels) -> tuple:
+        if not need:
+            return (), 0, 0, 0.0
+        item, masks, managed, price = self.prices.field_item, self.masks, self.managed, self.parts_price
+        best = [INF] * (PROGRAM_COUNT + 1)
+        back: list[tuple[int, bool]] = [(0, False)] * (PROGRAM_COUNT + 1)
+        best[0] = 0.0
+        for i in range(PROGRAM_COUNT):
+            b = best[i]
+            if b == INF:
+                continue
+            if not need >> i & 1:
+                if b < best[i + 1]:
+                    best[i + 1], back[i + 1] = b, (i, False)
+                continue
+            m = masks[i]
+            c = b
+            if m & P_BIT:
+                c += item if channels.positions else INF
+            if m & V_BIT:
+                c += item if channels.speeds else INF
+            if c < best[i + 1]:
+                best[i + 1], back[i + 1] = c, (i, False)
+            if channels.parts:
+                for j in range(i, min(i + codec.MAX_FIELD_ITEMS, PROGRAM_COUNT)):
+                    if not managed[j]:
+                        break
+                    if need >> j & 1 and b + price[j - i + 1] < best[j + 1]:
+                        best[j + 1], back[j + 1] = b + price[j - i + 1], (i, True)
+        runs, positions, speeds, runs_cost = [], 0, 0, 0.0
+        j = PROGRAM_COUNT
+        while j > 0:
+            i, is_run = back[j]
+            if is_run:
+                runs.append((i, j - 1))
+                runs_cost += price[j - i]
+            elif need >> i & 1:
+                positions |= (masks[i] & P_BIT and 1) << i
+                speeds |= (masks[i] & V_BIT and 1) << i
+            j = i
+        return tuple(reversed(runs)), positions, speeds, runs_cost
+
+    # -- A: link/unlink ranges against 46h items -----------------------------------------------
+
+    def addresses(self, whole: int, open46: bool) -> tuple[tuple[tuple[bool, int, int], ...], int, int]:
+        """(ranges, 46h programs, programs that need a 21h for their A) for the programs not in `whole`."""
+        key = (whole, open46)
+        cached = self._address_cache.get(key)
+        if cached is None:
+            cached = self._address_cache[key] = self._solve_addresses(whole, open46)
+        return cached
+
+    def _solve_addresses(self, whole: int, open46: bool) -> tuple:
+        if not self.changed[A_BIT] & ~whole:
+            return (), 0, 0
+        managed, target, base = self.managed, self.target_a, self.base_a
+        miss = self.prices.address_item if open46 else self.prices.program
+        link = self.prices.link
+        # States after program i: 0 no range open, 1 a link range goes on to i+1, 2 an unlink range
+        # may go on. Actions give program i its A: kept, 0 (unlink, end of a link) or i+2 (link goes on).
+        cost = [0.0, INF, INF]
+        back: list[tuple[tuple[int, str], ...]] = []
+        for i in range(PROGRAM_COUNT):
+            c0, c1, c2 = cost
+            if not managed[i]:
+                step = ((0, "keep") if c0 <= c2 else (2, "keep"), (0, ""), (0, ""))
+                cost = [min(c0, c2), INF, INF]
+                back.append(step)
+                continue
+            free = whole >> i & 1
+            t = target[i]
+            m_keep = 0.0 if free or base[i] == t else miss
+            m_zero = 0.0 if free or t == 0 else miss
+            m_next = 0.0 if free or t == i + 2 else miss
+            goes_on = i + 1 < PROGRAM_COUNT and managed[i + 1]
+            open_prev, open_cost = (0, c0) if c0 <= c2 else (2, c2)
+            n0, b0 = open_cost + m_keep, (open_prev, "keep")
+            if c1 + m_zero < n0:
+                n0, b0 = c1 + m_zero, (1, "end")
+            n1, b1 = INF, (0, "")
+            if goes_on:
+                n1, b1 = open_cost + link + m_next, (open_prev, "link")
+                if c1 + m_next < n1:
+                    n1, b1 = c1 + m_next, (1, "link+")
+            n2, b2 = c0 + link + m_zero, (0, "unlink")
+            if c2 + m_zero < n2:
+                n2, b2 = c2 + m_zero, (2, "unlink+")
+            cost = [n0, n1, n2]
+            back.append((b0, b1, b2))
+        state = 0 if cost[0] <= cost[2] else 2
+        actions = [""] * PROGRAM_COUNT
+        for i in range(PROGRAM_COUNT - 1, -1, -1):
+            state, actions[i] = back[i][state]
+        return self._ranges_and_misses(whole, open46, actions)
+
+    def _ranges_and_misses(self, whole: int, open46: bool, actions: list[str]) -> tuple:
+        ranges: list[tuple[bool, int, int]] = []
+        items = extra = 0
+        for i, action in enumerate(actions):
+            if not self.managed[i]:
+                continue
+            if action in ("link", "unlink"):
+                ranges.append((action == "link", i, i))
+            elif action in ("link+", "unlink+", "end"):
+                link, first, _ = ranges[-1]
+                ranges[-1] = (link, first, i)
+            value = self.base_a[i] if action == "keep" else i + 2 if action in ("link", "link+") else 0
+            if not whole >> i & 1 and value != self.target_a[i]:
+                if open46:
+                    items |= 1 << i
+                else:
+                    extra |= 1 << i
+        return tuple(ranges), items, extra
+
+    # -- what a program's differences cost, for the init DP ------------------------------------
+
+    def residual(self, i: int, mask: int, channels: Channels) -> float:
+        """A program's remaining differences priced one by one (no message headers)."""
+        prices = self.prices
+        if not mask:
+            return 0.0
+        cost = 0.0
+        for bit in PLAIN_BITS:
+            if mask & bit:
+                if not channels.plain & bit:
+                    return prices.program
+                cost += prices.field_item
+        if mask & PV_BITS:
+            if channels.parts:
+                cost += prices.field_item
+            elif (mask & P_BIT and not channels.positions) or (mask & V_BIT and not channels.speeds):
+                return prices.program
+            else:
+                cost += prices.field_item * (mask & PV_BITS).bit_count()
+        if mask & A_BIT:
+            if channels.addresses:
+                cost += prices.address_item
+            elif self.target_a[i] in (0, i + 2):
+                cost += prices.link
+            else:
+                return prices.program
+        return min(cost, prices.program)
+
+
+def _mask_of(flags: object) -> int:
+    mask = 0
+    for i, flag in enumerate(flags):  # type: ignore[call-overload]
+        if flag:
+            mask |= 1 << i
+    return mask
+
+
+# -- inits -----------------------------------------------------------------------------------
+
+
+def init_cost(problem: Problem, kinds: tuple[int, ...]) -> float:
+    prices = problem.prices
+    total = 0.0
+    for kind in problem.kinds[1:]:
+        for first, last in runs_of(kinds, kind):
+            total += prices.init if first == last or last == PROGRAM_COUNT - 1 else prices.init_range
+    return total
+
+
+def choose_inits(problem: Problem, residual: list[dict[int, float]]) -> tuple[int, ...]:
+    """The init kind of every program minimising init messages + `residual[i][kind]`.
+
+    A run of programs of one kind costs one 14h, or a 12h/13h/11h when it is one program
+    or ends at 64. Unmanaged programs are always KEEP, so no run covers them.
+    """
+    prices = problem.prices
+    refund = prices.init_range - prices.init
+    # state: (kind of the previous program, whether its run is a single program so far)
+    cost: dict[tuple[int, bool], float] = {(KEEP, False): 0.0}
+    back: list[dict[tuple[int, bool], tuple[int, bool]]] = []
+    for i in range(PROGRAM_COUNT):
+        allowed = problem.kinds if problem.managed[i] else (KEEP,)
+        new: dict[tuple[int, bool], float] = {}
+        step: dict[tuple[int, bool], tuple[int, bool]] = {}
+        for (prev, single), c in cost.items():
+            closing = c - (refund if prev != KEEP and single else 0.0)
+            for kind in allowed:
+                if kind == KEEP:
+                    state, value = (KEEP, False), closing + residual[i][KEEP]
+                elif kind == prev:
+                    state, value = (kind, False), c + residual[i][kind]
+                else:
+                    state, value = (kind, True), closing + prices.init_range + residual[i][kind]
+                if value < new.get(state, INF):
+                    new[state], step[state] = value, (prev, single)
+        cost = new
+        back.append(step)
+    state = min(cost, key=lambda s: cost[s] - (refund if s[0] != KEEP else 0.0))
+    kinds = [KEEP] * PROGRAM_COUNT
+    for i in range(PROGRAM_COUNT - 1, -1, -1):
+        kinds[i] = state[0]
+        state = back[i][state]
+    return tuple(kinds)
+
+
+def _residuals(problem: Problem, phase: WritePhase, channels: Channels) -> list[dict[int, float]]:
+    return [
+        {kind: phase.residual(i, problem.masks[kind][i], channels) for kind in problem.kinds}
+        for i in range(PROGRAM_COUNT)
+    ]
+
+
+# -- the whole search ------------------------------------------------------------------------
+
+
+def search(problem: Problem) -> list[Layout]:
+    """Candidate layouts, cheapest estimate first; the all-21h layout is always among them."""
+    fixed = problem.system_cost
+    keep = (KEEP,) * PROGRAM_COUNT
+    phase = WritePhase(problem, keep)
+    found = phase.solve()
+    layouts = [Layout(keep, writes, fixed + writes.estimate) for writes, _ in found]
+    naive = phase.evaluate(Channels.everything(False))
+    assert naive is not None
+    layouts.append(Layout(keep, naive, fixed + naive.estimate))
+    if problem.init_useful():
+        best = layouts[0].estimate
+        tried = {keep}
+        queue = [found[0][1], Channels.everything(True), Channels.everything(False)]
+        while queue:
+            kinds = choose_inits(problem, _residuals(problem, phase, queue.pop(0)))
+            if kinds in tried:
+                continue
+            tried.add(kinds)
+            base = fixed + init_cost(problem, kinds)
+            found = WritePhase(problem, kinds).solve()
+            layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
+            if base + found[0][0].estimate < best:
+                best = base + found[0][0].estimate
+                queue.append(found[0][1])
+    layouts.sort(key=lambda layout: layout.estimate)
+    return layouts

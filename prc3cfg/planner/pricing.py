@@ -1,0 +1,97 @@
+"""The planner's price list: what each kind of message costs on one module's line, as a formula.
+
+The search compares thousands of partial plans, so it prices a message as
+`exchange + byte × message bytes`: a fixed cost per exchange (turnaround, frame overhead,
+reply frame, open-driver gaps) and a cost per message byte. Both are measured from the
+line's own `LineCost` by pricing two probe messages, so every framing and line setting is
+priced by `prc3cfg.bustime`, never by a copy of its rules. The formula is exact up to stx
+stuffing; the final plans are priced exactly with `LineCost.message_time`.
+
+Message sizes are measured on `prc3cfg.codec` messages, not written down again here.
+Owns: the formula and the sizes. Does not own the cost of an exchange (`prc3cfg.bustime`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import ceil
+
+from prc3cfg import codec
+from prc3cfg.bustime import LineCost
+from prc3cfg.image import Program
+
+
+def _size(message: codec.Message) -> int:
+    return len(message.encode())
+
+
+_ITEM = ((1, 0),)
+#: Bytes of the messages the planner sends, measured on the codec.
+INIT_SIZE = _size(codec.InitProgram(1))  # 11h, 12h and 13h alike
+INIT_RANGE_SIZE = _size(codec.InitPrograms(1, 2))  # 14h
+LINK_SIZE = _size(codec.LinkPrograms(1, 2))  # 30h and 31h alike
+PROGRAM_SIZE = _size(codec.WriteProgram(1, Program(0, 1)))  # 21h
+PART_SIZE = _size(codec.WritePartProgram(1, 0, 1))  # 32h
+PARTS_ITEM_SIZE = _size(codec.WritePartPrograms(1, _ITEM * 2)) - _size(codec.WritePartPrograms(1, _ITEM))
+PARTS_HEADER_SIZE = _size(codec.WritePartPrograms(1, _ITEM)) - PARTS_ITEM_SIZE  # 33h
+FIELD_ITEM_SIZE = _size(codec.WritePositions(_ITEM * 2)) - _size(codec.WritePositions(_ITEM))
+FIELD_HEADER_SIZE = _size(codec.WritePositions(_ITEM)) - FIELD_ITEM_SIZE  # 40h..45h
+ADDRESS_ITEM_SIZE = _size(codec.WriteAddresses(_ITEM * 2)) - _size(codec.WriteAddresses(_ITEM))
+ADDRESS_HEADER_SIZE = _size(codec.WriteAddresses(_ITEM)) - ADDRESS_ITEM_SIZE  # 46h
+
+
+@dataclass(frozen=True, slots=True)
+class Prices:
+    """Seconds per exchange and per message byte on one module's line, and the planner's unit prices."""
+
+    exchange: float
+    byte: float
+
+    @classmethod
+    def measure(cls, cost: LineCost, address: int) -> Prices:
+        """Fit `exchange + byte × n` to two probes priced by the line itself."""
+        small = codec.InitProgram(1)
+        large = codec.WriteProgram(1, Program(1, 1))
+        t_small = cost.message_time(address, small)
+        t_large = cost.message_time(address, large)
+        byte = (t_large - t_small) / (_size(large) - _size(small))
+        return cls(exchange=t_small - byte * _size(small), byte=byte)
+
+    def message(self, size: int) -> float:
+        return self.exchange + self.byte * size
+
+    @property
+    def init(self) -> float:
+        return self.message(INIT_SIZE)
+
+    @property
+    def init_range(self) -> float:
+        return self.message(INIT_RANGE_SIZE)
+
+    @property
+    def link(self) -> float:
+        return self.message(LINK_SIZE)
+
+    @property
+    def program(self) -> float:
+        return self.message(PROGRAM_SIZE)
+
+    def parts(self, n: int) -> float:
+        """P and V of n consecutive programs: a 32h for one, a 33h for more."""
+        return self.message(PART_SIZE) if n == 1 else self.message(PARTS_HEADER_SIZE + n * PARTS_ITEM_SIZE)
+
+    @property
+    def field_item(self) -> float:
+        return self.byte * FIELD_ITEM_SIZE
+
+    @property
+    def address_item(self) -> float:
+        return self.byte * ADDRESS_ITEM_SIZE
+
+    def fields(self, n: int) -> float:
+        """n items of one field (40h..45h), in as few messages as the 15-item limit allows."""
+        return ceil(n / codec.MAX_FIELD_ITEMS) * self.message(FIELD_HEADER_SIZE) + n * self.field_item
+
+    def addresses(self, n: int) -> float:
+        """n jump addresses (46h), in as few messages as the 31-item limit allows."""
+        return ceil(n / codec.MAX_ADDRESS_ITEMS) * self.message(ADDRESS_HEADER_SIZE) + n * self.address_item
