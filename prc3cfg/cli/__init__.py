@@ -24,7 +24,7 @@ link_app = typer.Typer(no_args_is_help=True, help="Gateway and line settings.")
 app.add_typer(emulator_app, name="emulator")
 app.add_typer(link_app, name="link")
 
-COMMAND_MODULES: tuple[str, ...] = ("emulator_commands",)
+COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands")
 
 
 def _register_commands() -> None:

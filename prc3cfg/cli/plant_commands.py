@@ -1,0 +1,121 @@
+"""`prc3cfg validate`, `show` and `schema`: plant files checked, explained and described.
+
+- `validate PLANT`: "PLANT: valid (N buses, M modules)", exit 0; or every problem on
+  stderr, one line each, exit 1.
+- `show PLANT [--module NAME]`: a module's effective configuration in human units, each
+  value with its device value and where it came from (default, profile NAME, module);
+  without `--module`, the plant's modules.
+- `schema`: the plant file's JSON Schema (draft-07), as `schemas/plant.schema.json` holds it.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich import box
+from rich.console import Console
+from rich.table import Table
+
+from prc3cfg.cli import app
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Module, Plant, PlantError, load_plant, plant_schema_text
+from prc3cfg.plant.profiles import Sourced
+from prc3cfg.plant.models import ChainSpec
+from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, format_function_output
+
+PlantPath = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
+
+
+@app.command()
+def validate(plant: PlantPath) -> None:
+    """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
+    try:
+        loaded = load_plant(plant)
+    except PlantError as error:
+        print(error, file=sys.stderr)
+        raise typer.Exit(1) from None
+    modules = len(loaded.modules())
+    print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, {_count(modules, 'module', 'modules')})")
+
+
+@app.command()
+def show(
+    plant: PlantPath,
+    module: Annotated[Optional[str], typer.Option("--module", "-m", help="The module to show, by name.")] = None,
+) -> None:
+    """Print a module's effective configuration and where each value came from."""
+    loaded = load_plant(plant)
+    console = Console()
+    if module is None:
+        console.print(_modules_table(loaded))
+        return
+    found = {m.name: (bus.name, m) for bus, m in loaded.modules()}
+    if module not in found:
+        raise UserError(f"{plant}: no module named '{module}' — the modules are {', '.join(found)}")
+    bus, chosen = found[module]
+    _show_module(console, bus, chosen)
+
+
+@app.command()
+def schema() -> None:
+    """Print the JSON Schema of plant files (draft-07; schemas/plant.schema.json)."""
+    sys.stdout.write(plant_schema_text())
+
+
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"
+
+
+def _modules_table(plant: Plant) -> Table:
+    table = Table(title=f"plant {plant.name}", title_justify="left", box=box.SIMPLE_HEAD)
+    for column in ("bus", "address", "module", "profiles", "programs", "unmanaged"):
+        table.add_column(column)
+    for bus, module in plant.modules():
+        programs = ", ".join(map(str, module.settings.programs)) or "-"
+        table.add_row(bus.name, str(module.address), module.name, ", ".join(module.profiles) or "-",
+                      programs, module.unmanaged_programs)
+    return table
+
+
+def _show_module(console: Console, bus: str, module: Module) -> None:
+    settings = module.settings
+    console.print(f"module [bold]{module.name}[/] — bus {bus}, address {module.address}, "
+                  f"profiles: {', '.join(module.profiles) or 'none'}")
+    console.print(f"unmanaged_programs: {module.unmanaged_programs} ({settings.unmanaged_programs.source})")
+
+    system = Table(title="system", title_justify="left", box=box.SIMPLE_HEAD)
+    for column in ("key", "value", "device", "from"):
+        system.add_column(column, no_wrap=True)
+    device = module.desired_system()
+    for q in SYSTEM_QUANTITIES:
+        value = getattr(device, q.symbol)
+        system.add_row(f"{q.key} ({q.symbol})", q.format(value), str(value), settings.system[q.key].source)
+    console.print(system)
+
+    programs = Table(title="programs", title_justify="left", box=box.SIMPLE_HEAD)
+    for column in ("#", "key", "value", "device", "from"):
+        programs.add_column(column, no_wrap=True)
+    jumps = settings.jumps()
+    for number, program in module.desired_programs().items():
+        fields = settings.programs[number]
+        rows = [(q.key, q.symbol, q.format(getattr(program, q.symbol)), getattr(program, q.symbol), fields[q.key])
+                for q in PROGRAM_QUANTITIES]
+        rows += [(key, key.upper(), format_function_output(getattr(program, key.upper())),
+                  getattr(program, key.upper()), fields[key]) for key in ("f1", "f2")]
+        jump = jumps.get(number, Sourced(0))
+        rows.append(("jump", "A", f"program {program.A}" if program.A else "stop", program.A, jump))
+        for i, (key, symbol, human, raw, sourced) in enumerate(rows):
+            programs.add_row(str(number) if i == 0 else "", f"{key} ({symbol})", human, str(raw), sourced.source,
+                             end_section=i == len(rows) - 1)
+    console.print(programs)
+    if settings.chains.value:
+        chains = "; ".join(_chain_text(chain) for chain in settings.chains.value)
+        console.print(f"chains ({settings.chains.source}): {chains}")
+
+
+def _chain_text(chain: ChainSpec) -> str:
+    steps = [*map(str, chain.programs), str(chain.programs[0]) if chain.loop else "stop"]
+    return " → ".join(steps) + (" (loop)" if chain.loop else "")

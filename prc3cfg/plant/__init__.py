@@ -1,0 +1,17 @@
+"""Plant files: the declarative description of every bus, module, system parameter and program.
+
+    from prc3cfg.plant import load_plant, PlantError, Plant, Bus, Module
+
+`load_plant(path)` reads a plant file (interfaces.md §1) and returns a `Plant`, or raises
+`PlantError` listing every problem as `file:line:column: what is wrong — what would be
+right`. The parts: `units` (human ↔ device units, exactly), `models` (the file's structure
+and the JSON Schema), `document` (YAML with positions), `messages` (wording), `profiles`
+(layering), `rules` (cross-value checks), `plant` (the loaded plant), `loader`.
+"""
+
+from prc3cfg.plant.loader import load_plant
+from prc3cfg.plant.models import Gateway, plant_schema, plant_schema_text
+from prc3cfg.plant.plant import Bus, Module, Plant
+from prc3cfg.plant.problems import PlantError
+
+__all__ = ["Bus", "Gateway", "Module", "Plant", "PlantError", "load_plant", "plant_schema", "plant_schema_text"]

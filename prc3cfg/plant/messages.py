@@ -1,0 +1,175 @@
+"""pydantic's errors in a plant engineer's words: "what is wrong — what would be right".
+
+Owns the wording of every error about one key or one value: one template per pydantic
+error type (the number errors are `models`' own types), and the names of places
+("program 3", "module booth-a-left", "the gateway"). No "Input should be", no URLs.
+Does not own positions (`document`) or rules that span values (`rules`).
+"""
+
+from __future__ import annotations
+
+import functools
+from decimal import Decimal
+from typing import Any
+
+from pydantic import BaseModel
+from pydantic_core import ErrorDetails
+
+from prc3cfg.plant.models import (
+    BusSpec,
+    ChainSpec,
+    Draft07,
+    FunctionOutputSpec,
+    Gateway,
+    ModuleSpec,
+    PlantSpec,
+    ProfileSpec,
+    ProgramSpec,
+    SystemSpec,
+)
+from prc3cfg.plant.problems import Path_, Problem
+
+#: The model of a mapping, by the key that holds it (a section) or holds a collection of them.
+SECTIONS: dict[str, type[BaseModel]] = {
+    "system": SystemSpec, "gateway": Gateway, "f1": FunctionOutputSpec, "f2": FunctionOutputSpec,
+}
+ITEMS: dict[str, tuple[str, type[BaseModel]]] = {
+    "buses": ("bus", BusSpec), "modules": ("module", ModuleSpec), "profiles": ("profile", ProfileSpec),
+    "programs": ("program", ProgramSpec), "chains": ("chain", ChainSpec),
+}
+#: What a list item or a mapping key is called, by the key of its list or mapping.
+ENTRY_NAMES = {"programs": "program number", "profiles": "profile name"}
+
+TEMPLATES = {
+    "extra_forbidden": "unknown key '{key}' in {container} — expected one of {expected}",
+    "invalid_key": "unknown key '{key}' in {container} — expected one of {expected}",
+    "missing": "{container} has no {key} — add {key}:{hint}",
+    "empty": "{what} is empty — give it a value or leave the key out",
+    "not_number": "{what} should be a {number}{unit}, not {input}",
+    "not_finite": "{what} {value} is not a finite number — give a number",
+    "out_of_range": "{what} {value} is out of range — {what} must be {allowed}{note}",
+    "not_whole": "{value} is not a whole number of {step_name} — {what_steps} in steps of {step}",
+    "not_whole_count": "{what} {value} is not a whole number — {what} takes whole numbers",
+    "not_allowed": "{what} {input} is not allowed — expected one of {expected}",
+    "literal_error": "{what} {input} is not allowed — expected one of {expected}",
+    "string_type": "{what} should be text, not {input} — put it in quotes",
+    "bool_type": "{what} should be true or false, not {input}",
+    "model_type": "{what} should be a mapping (key: value), not {input}",
+    "dict_type": "{what} should be a mapping (key: value), not {input}",
+    "list_type": "{what} should be a list, not {input}",
+    "tuple_type": "{what} should be a list, not {input}",
+    "string_too_short": "{what} is empty — give it a name",
+    "too_short": "{what} is empty — list at least one {item}",
+}
+_LIST_ITEMS = {"buses": "bus", "modules": "module", "programs": "program"}
+
+
+def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
+    """The problem a pydantic error describes, at the key or value it is about.
+
+    None for pydantic's "too short" about a list whose items all failed: those items'
+    own errors say what is wrong.
+    """
+    loc = tuple(error["loc"])
+    kind = error["type"]
+    ctx = error.get("ctx", {})
+    if kind == "too_short" and ctx.get("actual_length") == 0 and error["input"]:
+        return None
+    if error["input"] is None and kind != "missing":
+        kind = "empty"
+    if kind == "not_whole" and not ctx.get("step_name"):
+        kind = "not_whole_count"
+    template = TEMPLATES.get(kind)
+    if template is None:
+        return Problem(loc, f"{what(loc, data)}: {error['msg']}")
+    container = loc[:-1]
+    words = {
+        "what": what(loc, data),
+        "key": loc[-1] if loc else "",
+        "container": what(container, data) if container else "the plant file",
+        "input": shown(error["input"]),
+        "expected": _expected(kind, ctx, container),
+        "hint": _hint(container, loc[-1]) if kind == "missing" else "",
+        "number": "whole number" if ctx.get("whole") else "number",
+        "unit": f" in {ctx['unit']}" if ctx.get("unit") else "",
+        "what_steps": ctx.get("what", ""),
+        "item": _LIST_ITEMS.get(loc[-1] if loc else "", "item"),
+        **{k: v for k, v in ctx.items() if k not in ("unit", "what", "expected")},
+    }
+    at_key = kind in ("extra_forbidden", "invalid_key") or (loc and loc[-1] == "[key]")
+    return Problem(loc, template.format(**words), at_key=bool(at_key))
+
+
+def what(path: Path_, data: Any) -> str:
+    """How a message names the thing at `path`: "speed", "program 3", "module booth-a-left"."""
+    if not path:
+        return "the plant file"
+    *head, last = path
+    parent = head[-1] if head else None
+    if last == "[key]":
+        return ENTRY_NAMES.get(head[-2] if len(head) > 1 else "", "key")
+    if parent == "programs" and len(head) >= 3 and head[-3] == "chains":
+        return "program number"
+    if parent == "profiles" and isinstance(last, int):
+        return "profile name"
+    if parent in ITEMS and (isinstance(last, int) or len(head) == 1 or parent == "programs"):
+        label = ITEMS[parent][0]
+        name = _lookup(data, path + ("name",)) if parent in ("buses", "modules") else None
+        if isinstance(name, str) and name:
+            return f"{label} {name}"
+        return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
+    return {"gateway": "the gateway"}.get(last, str(last))
+
+
+def shown(value: Any) -> str:
+    """A value as a message quotes it: 'fast', 12, true, a list, nothing."""
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, (int, Decimal)):
+        return str(value)
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    return repr(str(value))
+
+
+def _model_at(container: Path_) -> type[BaseModel]:
+    if not container:
+        return PlantSpec
+    *head, last = container
+    if isinstance(last, str) and last in SECTIONS:
+        return SECTIONS[last]
+    parent = head[-1] if head else None
+    if parent in ITEMS:
+        return ITEMS[parent][1]
+    return PlantSpec
+
+
+def _expected(kind: str, ctx: dict[str, Any], container: Path_) -> str:
+    if kind in ("extra_forbidden", "invalid_key"):
+        return ", ".join(_model_at(container).model_fields)
+    return str(ctx.get("expected", "")).replace("'", "").replace(" or ", ", ")
+
+
+def _hint(container: Path_, key: Any) -> str:
+    description = _descriptions(_model_at(container)).get(key)
+    return f" ({description})" if description else ""
+
+
+@functools.cache
+def _descriptions(model: type[BaseModel]) -> dict[str, str]:
+    """Each key's description, as the schema gives it (numbers describe themselves there)."""
+    properties = model.model_json_schema(schema_generator=Draft07).get("properties", {})
+    return {key: p["description"] for key, p in properties.items() if "description" in p}
+
+
+def _lookup(data: Any, path: Path_) -> Any:
+    for part in path:
+        try:
+            data = data[part]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return data

@@ -1,0 +1,290 @@
+"""The plant file as written (interfaces.md §1): pydantic models, their ranges, their JSON Schema.
+
+Owns the structure of a plant file and every rule about one value on its own: key names,
+types, ranges in human units (from `units.QUANTITIES`), whole device units, and the
+draft-07 schema generated from these models (`plant_schema`). Does not own rules that
+span values (P ≤ S1, chains, unique names: `rules`), profile layering (`profiles`) or
+where a value is in the file (`loader`).
+
+Every model is frozen and forbids unknown keys. A key left out is `None` ("not given
+here"), so profiles can be layered: "given" and "given as the default" differ.
+
+Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`. A number
+field rejects booleans and strings, checks its range and its step, and hands back an
+`int`, an exact `Decimal` (human units) or, for the bus's times, a `float` of seconds.
+Its failures are `PydanticCustomError`s whose type names the problem
+(`not_number`, `not_finite`, `out_of_range`, `not_whole`, `not_allowed`) and whose
+context carries the words; `loader` turns them into sentences.
+"""
+
+from __future__ import annotations
+
+import json
+from decimal import Decimal
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, GetJsonSchemaHandler, PlainValidator, WithJsonSchema, model_validator
+from pydantic.json_schema import GenerateJsonSchema, JsonSchemaValue
+from pydantic_core import PydanticCustomError, core_schema
+
+from prc3cfg import gateway
+from prc3cfg.framing import FRAMINGS
+from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_COUNT
+from prc3cfg.line import DATA_BITS, PARITIES, STOP_BITS
+from prc3cfg.plant.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
+
+SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
+#: JSON object keys are strings: a program number key is "1".."64".
+PROGRAM_KEY_PATTERN = "^([1-9]|[1-5][0-9]|6[0-4])$"
+
+
+def _plain(number: Decimal) -> int | float:
+    return int(number) if number == number.to_integral_value() else float(number)
+
+
+def _number_type(
+    lo: Decimal | int | None,
+    hi: Decimal | int | None = None,
+    *,
+    step: Decimal | int | None = None,
+    unit: str = "",
+    step_name: str = "",
+    what: str = "",
+    note: str = "",
+    out: type = Decimal,
+    description: str = "",
+) -> Any:
+    """An annotated number type: range lo..hi (either may be open), whole steps, result type `out`."""
+    lo_, hi_, step_ = (None if x is None else Decimal(x) for x in (lo, hi, step))
+    with_unit = (lambda x: f"{x} {unit}") if unit else str
+    if lo_ is not None and hi_ is not None:
+        allowed = f"{with_unit(f'{lo_}..{hi_}')}"
+    else:
+        allowed = f"at least {with_unit(lo_)}" if lo_ is not None else f"at most {with_unit(hi_)}"
+
+    def validate(value: Any) -> Any:
+        if isinstance(value, bool) or not isinstance(value, (int, float, Decimal)):
+            raise PydanticCustomError("not_number", "not a number", {"whole": out is int, "unit": unit})
+        number = Decimal(repr(value)) if isinstance(value, float) else Decimal(value)
+        if not number.is_finite():
+            raise PydanticCustomError("not_finite", "not a finite number", {"value": str(value)})
+        context = {"value": with_unit(number), "allowed": allowed, "note": note, "unit": unit}
+        if (lo_ is not None and number < lo_) or (hi_ is not None and number > hi_):
+            raise PydanticCustomError("out_of_range", "out of range", context)
+        if step_ is not None and number % step_:
+            step_words = {"step": with_unit(step_), "step_name": step_name, "what": what}
+            raise PydanticCustomError("not_whole", "not a whole number", context | step_words)
+        return out(number)
+
+    schema: dict[str, Any] = {"type": "integer" if out is int else "number"}
+    schema |= {"minimum": _plain(lo_)} if lo_ is not None else {}
+    schema |= {"maximum": _plain(hi_)} if hi_ is not None else {}
+    schema |= {"description": description} if description else {}
+    return Annotated[out, PlainValidator(validate), WithJsonSchema(schema)]
+
+
+def _quantity_type(q: Quantity, description: str) -> Any:
+    return _number_type(
+        q.human_lo, q.human_hi, step=q.step, unit=q.unit, step_name=q.step_name, what=q.what,
+        out=int if q.integer else Decimal,
+        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}",
+    )
+
+
+def _one_of_type(allowed: tuple[int | float, ...], description: str) -> Any:
+    """A number that must be one of `allowed` (stop bits: 1, 1.5, 2); returned as float."""
+
+    def validate(value: Any) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float, Decimal)) or value not in allowed:
+            raise PydanticCustomError("not_allowed", "not allowed", {"expected": ", ".join(map(str, allowed))})
+        return float(value)
+
+    schema = {"enum": list(allowed), "description": description}
+    return Annotated[float, PlainValidator(validate), WithJsonSchema(schema)]
+
+
+Name = Annotated[str, Field(min_length=1, strict=True)]
+ProgramNumber = _number_type(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")
+
+
+class FileModel(BaseModel):
+    """A part of a plant file: frozen, unknown keys refused."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class SystemSpec(FileModel):
+    """System parameters S1..S12 (not S9) in human units; a key left out is the factory default."""
+
+    upper_reversing_point: _quantity_type(QUANTITIES["upper_reversing_point"], "upper reversing point") = None
+    reference_point: _quantity_type(QUANTITIES["reference_point"], "reference point") = None
+    increment_pulses: _quantity_type(QUANTITIES["increment_pulses"], "increment pulse generator, pulses/dm") = None
+    max_speed: _quantity_type(QUANTITIES["max_speed"], "maximum speed") = None
+    min_speed: _quantity_type(QUANTITIES["min_speed"], "minimum speed") = None
+    acceleration: _quantity_type(QUANTITIES["acceleration"], "acceleration") = None
+    circuit_gain: _quantity_type(QUANTITIES["circuit_gain"], "circuit amplification") = None
+    alarm: Annotated[bool, Field(strict=True, description="S8: alarm")] = None
+    sync_increment: _quantity_type(QUANTITIES["sync_increment"], "sync increment") = None
+    sync_circuit_gain: _quantity_type(QUANTITIES["sync_circuit_gain"], "sync circuit amplification") = None
+    sync_conveyor_sequence: _quantity_type(QUANTITIES["sync_conveyor_sequence"], "sync conveyor sequence") = None
+
+
+class FunctionOutputSpec(FileModel):
+    """F1 or F2: set or reset the output at a distance after START (F1) or before the reversing point (F2)."""
+
+    action: Literal[tuple(ACTIONS)] = Field(description="set or reset the output")
+    distance: _quantity_type(DISTANCE, "distance")
+
+
+class ProgramSpec(FileModel):
+    """One program in human units; every field may come from a profile instead."""
+
+    position: _quantity_type(QUANTITIES["position"], "position, at most the upper reversing point") = None
+    speed: _quantity_type(QUANTITIES["speed"], "speed, between min_speed and max_speed") = None
+    relative_speed: _quantity_type(QUANTITIES["relative_speed"], "relative speed (default 0)") = None
+    dwell: _quantity_type(QUANTITIES["dwell"], "dwell time (default 0)") = None
+    f1: FunctionOutputSpec = Field(None, description="F1, counted after START (default: reset at 0)")
+    f2: FunctionOutputSpec = Field(None, description="F2, counted before the reversing point (default: reset at 0)")
+    next: _number_type(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to jump to next") = None
+
+
+class ChainSpec(FileModel):
+    """Programs run one after the other (A = the next one); `loop` makes the last jump to the first.
+
+    Written as a list of program numbers or as `{programs: [...], loop: true}`.
+    """
+
+    programs: tuple[ProgramNumber, ...] = Field(min_length=1)
+    loop: Annotated[bool, Field(strict=True)] = False
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_list(cls, data: Any) -> Any:
+        return {"programs": data} if isinstance(data, list) else data
+
+    @classmethod
+    def __get_pydantic_json_schema__(cls, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler) -> JsonSchemaValue:
+        as_object = handler.resolve_ref_schema(handler(schema))
+        as_list = {"type": "array", "items": as_object["properties"]["programs"]["items"], "minItems": 1}
+        return {"anyOf": [as_list, dict(as_object)], "description": cls.__doc__.split("\n")[0]}
+
+
+UnmanagedPrograms = Literal["keep", "reset"]
+Programs = Annotated[
+    dict[ProgramNumber, ProgramSpec],
+    Field(json_schema_extra={"propertyNames": {"pattern": PROGRAM_KEY_PATTERN}},
+          description="programs by number 1..64"),
+]
+
+
+class ProfileSpec(FileModel):
+    """What modules share: system parameters, programs, chains, the unmanaged-program policy."""
+
+    system: SystemSpec = None
+    programs: Programs = None
+    chains: tuple[ChainSpec, ...] = Field(None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop")
+    unmanaged_programs: UnmanagedPrograms = Field(
+        None, description="keep (default): programs not listed are neither read nor written; "
+        "reset: they must hold factory defaults"
+    )
+
+
+def _names(value: Any) -> Any:
+    return [value] if isinstance(value, str) else value
+
+
+class ModuleSpec(ProfileSpec):
+    """One PRC 3 module: its address (S9), its name, the profiles it uses, its own settings."""
+
+    address: _number_type(1, MAX_MODULE_ADDRESS, step=1, out=int, description="S9, 1..30, set by Address Init on the module")
+    name: Name = Field(description="unique in the plant")
+    profiles: Annotated[
+        tuple[Name, ...],
+        BeforeValidator(_names),
+        WithJsonSchema({
+            "anyOf": [{"type": "string"}, {"type": "array", "items": {"type": "string"}}],
+            "description": "profile names, applied in order (later wins); the module's own keys win over all",
+        }),
+    ] = ()
+
+
+class Gateway(FileModel):
+    """The CP 524/525 running the Open Driver that this line ends in (link.md, INIT-DB words 1 and 2)."""
+
+    receive_db: _number_type(
+        gateway.MIN_RECEIVE_DB, 255, step=1, out=int, description="EMPFDB, the receive data block",
+        note=f" (the Open Driver refuses a receive DB below {gateway.MIN_RECEIVE_DB}: SYSTAT 8Fh)",
+    )
+    receive_dw: _number_type(0, 255, step=1, out=int, description="EMPFDW, the first data word")
+    cpu: _number_type(
+        0, gateway.MAX_CPU, step=1, out=int, description="ECPUNR, the CPU number",
+        note=f" (the Open Driver refuses a CPU number above {gateway.MAX_CPU}: SYSTAT 90h)",
+    )
+    identifier: _number_type(
+        gateway.IDENTIFIERS.start, gateway.IDENTIFIERS.stop - 1, step=1, out=int,
+        description="EKENN, the receive identifier",
+        note=" (the Open Driver refuses any other EKENN: SYSTAT 91h)",
+    )
+
+
+class BusLine(FileModel):
+    """A bus without its modules: where it is and how it talks (link.md)."""
+
+    name: Name = Field(description="unique in the plant")
+    port: Name = Field(description="a device path, any pyserial URL, or emulator://NAME")
+    framing: Literal[tuple(FRAMINGS)] = "crc16"
+    baud: _number_type(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud") = 9600
+    parity: Literal[PARITIES] = "even"
+    data_bits: _number_type(DATA_BITS[0], DATA_BITS[-1], step=1, out=int, description="5..8") = 8
+    stop_bits: _one_of_type(STOP_BITS, "1, 1.5 or 2") = 1.0
+    timeout: _number_type(Decimal("0.001"), unit="s", out=float, description="s to wait for a reply") = 0.5
+    turnaround: _number_type(0, unit="s", out=float, description="s, the module's turnaround, for the bus-time estimate") = 0.010
+    zvz: _number_type(
+        Decimal("0.001"), Decimal("65.535"), step=Decimal("0.001"), unit="s", step_name="milliseconds",
+        what="character delay times are", out=float, description="s, character delay time ZVZ (open-driver)",
+    ) = 0.020
+    gateway: Gateway = None
+
+
+class BusSpec(BusLine):
+    """A bus as a plant file writes it: its line and its modules."""
+
+    modules: tuple[ModuleSpec, ...] = Field(min_length=1)
+
+
+class PlantSpec(FileModel):
+    """A whole plant file."""
+
+    model_config = ConfigDict(title="PRC 3 plant")
+
+    plant: Name = Field(description="the plant's name")
+    profiles: dict[Name, ProfileSpec] = Field(None, description="named settings that modules use and override")
+    buses: tuple[BusSpec, ...] = Field(min_length=1)
+
+
+class Draft07(GenerateJsonSchema):
+    """pydantic's schema, made draft-07: `definitions`, no `default: null` for "not given", no field titles."""
+
+    def generate(self, schema: core_schema.CoreSchema, mode: str = "validation") -> JsonSchemaValue:
+        result = super().generate(schema, mode)
+        definitions = result.pop("$defs", {})
+        return {"$schema": SCHEMA_DIALECT, **result, "definitions": definitions}
+
+    def default_schema(self, schema: core_schema.WithDefaultSchema) -> JsonSchemaValue:
+        result = super().default_schema(schema)
+        if result.get("default", ...) is None:
+            del result["default"]
+        return result
+
+    def field_title_should_be_set(self, schema: Any) -> bool:
+        return False
+
+
+def plant_schema() -> dict[str, Any]:
+    """The JSON Schema of a plant file."""
+    return PlantSpec.model_json_schema(ref_template="#/definitions/{model}", schema_generator=Draft07)
+
+
+def plant_schema_text() -> str:
+    """The schema as `schemas/plant.schema.json` holds it and `prc3cfg schema` prints it."""
+    return json.dumps(plant_schema(), indent=2, ensure_ascii=False) + "\n"

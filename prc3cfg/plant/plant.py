@@ -1,0 +1,96 @@
+"""A loaded, valid plant: `Plant` → `Bus` → `Module`, and each module's desired image.
+
+What the rest of prc3cfg uses: a bus's port, framing, line settings and times; a module's
+address, name, the programs the plant manages, and its desired `ModuleImage` in device
+units (interfaces.md §2). A `Module` also keeps its effective settings with their sources
+(`profiles.Effective`) for `prc3cfg show`. Built only by `loader.load_plant`, after every
+rule passed — so converting to device units cannot fail here.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict
+
+from prc3cfg.image import PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.line import LineSettings
+from prc3cfg.plant.models import BusLine
+from prc3cfg.plant.profiles import Effective
+from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, function_output
+
+
+class Module(BaseModel):
+    """One module of a plant, with its settings after profiles."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+
+    address: int
+    name: str
+    profiles: tuple[str, ...]
+    unmanaged_programs: Literal["keep", "reset"]
+    settings: Effective
+
+    def managed_programs(self) -> tuple[int, ...]:
+        """The program numbers the plant manages: the listed ones, or all 64 with `reset`."""
+        if self.unmanaged_programs == "reset":
+            return tuple(PROGRAM_NUMBERS)
+        return tuple(self.settings.programs)
+
+    def desired_system(self) -> SystemParameters:
+        return SystemParameters(**{q.symbol: q.to_device(self.settings.system[q.key].value) for q in SYSTEM_QUANTITIES})
+
+    def desired_programs(self) -> dict[int, Program]:
+        """The listed programs in device units, A from chains and `next` (0 if neither)."""
+        jumps = self.settings.jumps()
+        programs = {}
+        for number, fields in self.settings.programs.items():
+            values = {q.symbol: q.to_device(fields[q.key].value) for q in PROGRAM_QUANTITIES}
+            f1, f2 = fields["f1"].value, fields["f2"].value
+            jump = jumps.get(number)
+            programs[number] = Program(
+                **values,
+                F1=function_output(f1.action, f1.distance),
+                F2=function_output(f2.action, f2.distance),
+                A=0 if jump is None else jump.value,
+            )
+        return programs
+
+    def desired_image(self) -> ModuleImage:
+        """What the module should hold. Unlisted programs: `None` with keep, factory defaults with reset."""
+        system = self.desired_system()
+        listed = self.desired_programs()
+        unlisted = default_program(system) if self.unmanaged_programs == "reset" else None
+        return ModuleImage(
+            address=self.address,
+            system=system,
+            programs=tuple(listed.get(number, unlisted) for number in PROGRAM_NUMBERS),
+        )
+
+
+class Bus(BusLine):
+    """One RS-422 line: port, framing, line settings, times, optional gateway, and its modules."""
+
+    model_config = ConfigDict(arbitrary_types_allowed=True)
+
+    modules: tuple[Module, ...]
+
+    @property
+    def line(self) -> LineSettings:
+        return LineSettings(baud=self.baud, data_bits=self.data_bits, parity=self.parity, stop_bits=self.stop_bits)
+
+
+class Plant(BaseModel):
+    """A plant file, loaded: its name, its buses, the file and the SHA-256 of its bytes."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    name: str
+    buses: tuple[Bus, ...]
+    path: Path
+    sha256: str
+
+    def modules(self) -> tuple[tuple[Bus, Module], ...]:
+        """Every module of the plant with its bus, in file order."""
+        return tuple((bus, module) for bus in self.buses for module in bus.modules)

@@ -1,0 +1,41 @@
+"""What is wrong with a plant file: a `Problem` at a place in the document, and `PlantError`.
+
+A `Problem` names its place as a path of keys and indexes from the top of the document
+(`("buses", 0, "modules", 2, "programs", 3, "speed")`); the loader turns the path into
+`file:line:column`. `PlantError` carries every problem of one file, one line each.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from prc3cfg.errors import UserError
+
+Path_ = tuple[str | int, ...]
+#: Stands in a message for "first at line N", the place of `Problem.first`.
+FIRST = "(first)"
+
+
+@dataclass(frozen=True, slots=True)
+class Problem:
+    """`message` is "what is wrong — what would be right"; `at_key` points at the key, not its value.
+
+    `at` is a (line, column) known without a path, for what has none (a duplicate key).
+    `first` is the earlier of two things that must differ; the message says where it is
+    with `FIRST`.
+    """
+
+    path: Path_
+    message: str
+    at_key: bool = False
+    at: tuple[int, int] | None = None
+    first: Path_ | None = None
+
+
+class PlantError(UserError):
+    """A plant file that cannot be used; `str()` is every problem, one line each, sorted by line."""
+
+    def __init__(self, problems: Sequence[str]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))

@@ -1,0 +1,123 @@
+"""Profiles: how a module's effective settings are layered, and where each value came from.
+
+Precedence, lowest first — fixed:
+
+    factory defaults  <  each profile in the module's `profiles:` list, in order  <  the module
+
+- `system`: per key; the last layer that gives a key wins.
+- `programs`: per program number and per field; a module may give only `position` for
+  program 3 and take the rest of program 3 from its profile. A program is listed if any
+  layer lists it. Fields no layer gives: relative_speed 0, dwell 0, f1 and f2 reset at 0;
+  position and speed have no default (`rules` reports them missing).
+- `chains`: the last layer that gives `chains` wins whole; chains are never merged
+  (`chains: []` in a module drops its profile's chains).
+- `unmanaged_programs`: the last layer that gives it wins; default `keep`.
+
+Every effective value is a `Sourced`: the value in human units, its source (`default`,
+`profile NAME` or `module`) and its path in the file. Does not check anything (`rules`)
+and does not convert to device units (`plant`). Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from decimal import Decimal
+from typing import Any
+
+from prc3cfg.image import DEFAULT_SYSTEM
+from prc3cfg.plant.models import FunctionOutputSpec, ModuleSpec, ProfileSpec
+from prc3cfg.plant.problems import Path_
+from prc3cfg.plant.units import SYSTEM_QUANTITIES
+
+DEFAULT = "default"
+MODULE = "module"
+
+
+@dataclass(frozen=True, slots=True)
+class Sourced:
+    """A value and where it came from: `source` is "default", "profile NAME" or "module"."""
+
+    value: Any
+    source: str = DEFAULT
+    path: Path_ | None = None
+
+
+_RESET_AT_ZERO = FunctionOutputSpec(action="reset", distance=Decimal(0))
+#: The program fields an omitted key stands for (position and speed have none).
+PROGRAM_DEFAULTS = {
+    "relative_speed": Sourced(Decimal(0)),
+    "dwell": Sourced(Decimal(0)),
+    "f1": Sourced(_RESET_AT_ZERO),
+    "f2": Sourced(_RESET_AT_ZERO),
+}
+SYSTEM_DEFAULTS = {q.key: Sourced(q.to_human(getattr(DEFAULT_SYSTEM, q.symbol))) for q in SYSTEM_QUANTITIES}
+
+
+@dataclass(frozen=True, slots=True)
+class Layer:
+    """One layer of a module's settings: a profile or the module itself, and where it is."""
+
+    source: str
+    path: Path_
+    spec: ProfileSpec
+
+
+@dataclass(frozen=True, slots=True)
+class Effective:
+    """A module's settings after layering, in human units, each value with its source."""
+
+    system: Mapping[str, Sourced]
+    programs: Mapping[int, Mapping[str, Sourced]]
+    program_paths: Mapping[int, Path_]  # each program's key in the last layer that lists it
+    chains: Sourced                     # tuple[ChainSpec, ...]
+    unmanaged_programs: Sourced         # "keep" | "reset"
+
+    def jumps(self) -> dict[int, Sourced]:
+        """The jump address A of each program that jumps: from its chain, or from its `next`."""
+        result: dict[int, Sourced] = {}
+        for chain in self.chains.value:
+            targets = chain.programs[1:] + ((chain.programs[0],) if chain.loop else (0,))
+            for number, target in zip(chain.programs, targets):
+                result[number] = Sourced(target, self.chains.source, self.chains.path)
+        for number, fields in self.programs.items():
+            if "next" in fields:
+                result[number] = fields["next"]
+        return result
+
+
+def module_layers(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec]) -> tuple[Layer, ...]:
+    """The layers of `module` at `path`, lowest first; every name in `module.profiles` must exist."""
+    used = tuple(Layer(f"profile {name}", ("profiles", name), profiles[name]) for name in module.profiles)
+    return (*used, Layer(MODULE, path, module))
+
+
+def resolve(layers: tuple[Layer, ...]) -> Effective:
+    """Lay `layers` over the factory defaults, lowest first."""
+    system = dict(SYSTEM_DEFAULTS)
+    programs: dict[int, dict[str, Sourced]] = {}
+    program_paths: dict[int, Path_] = {}
+    chains = Sourced(())
+    unmanaged = Sourced("keep")
+    for layer in layers:
+        spec, source = layer.spec, layer.source
+        if spec.system is not None:
+            for key in spec.system.model_fields_set:
+                system[key] = Sourced(getattr(spec.system, key), source, layer.path + ("system", key))
+        for number, program in (spec.programs or {}).items():
+            path = layer.path + ("programs", number)
+            fields = programs.setdefault(number, dict(PROGRAM_DEFAULTS))
+            program_paths[number] = path
+            for key in program.model_fields_set:
+                fields[key] = Sourced(getattr(program, key), source, path + (key,))
+        if spec.chains is not None:
+            chains = Sourced(spec.chains, source, layer.path + ("chains",))
+        if spec.unmanaged_programs is not None:
+            unmanaged = Sourced(spec.unmanaged_programs, source, layer.path + ("unmanaged_programs",))
+    return Effective(
+        system=system,
+        programs={n: programs[n] for n in sorted(programs)},
+        program_paths=program_paths,
+        chains=chains,
+        unmanaged_programs=unmanaged,
+    )

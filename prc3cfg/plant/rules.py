@@ -1,0 +1,159 @@
+"""The offline rules that span more than one value (interfaces.md §1, prc3-protocol.md §4.5).
+
+On a module's effective settings (after profiles):
+- every listed program has a position and a speed (given in the module or a profile);
+- S4 ≥ S5 (max_speed ≥ min_speed); P ≤ S1; S5 ≤ V ≤ S4 — the device's checks 32, 40,
+  41, 110, with the S1, S4, S5 the plant file gives that module;
+- chains: a chain names only listed programs, each program in at most one chain and
+  once; a chain of one program must loop (it jumps to itself) — otherwise it does nothing;
+- `next: N`: N must be a listed program, whether unlisted programs are kept or reset
+  (a jump into a program the plant does not describe would run unknown contents); a
+  program may not both have `next` and be in a chain.
+
+On a bus: with a `gateway`, the Open Driver's own checks on the line (`prc3cfg.gateway`:
+illegal baud rate SYSTAT 8Bh, ZVZ below 4 ms SYSTAT 8Eh, …).
+
+On the whole file (read from the plain data, so that they are found even beside other
+problems): bus names, ports and module names are unique in the plant; module addresses
+are unique on their bus.
+
+A value that came from a profile is reported where the profile gives it, with the
+module's name in front. Does not check single values (`models`). Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+from prc3cfg import gateway
+from prc3cfg.line import LineSettings
+from prc3cfg.plant.document import mappings_in
+from prc3cfg.plant.models import BusLine, Gateway
+from prc3cfg.plant.problems import FIRST, Path_, Problem
+from prc3cfg.plant.profiles import DEFAULT, Effective, Sourced
+from prc3cfg.plant.units import QUANTITIES
+
+def check_module(name: str, path: Path_, settings: Effective) -> list[Problem]:
+    """The problems of one module's effective settings (module `name` at `path`)."""
+    problems = [*_missing_fields(settings), *_speeds_and_positions(settings), *_jumps(settings)]
+    return [p if p.path[: len(path)] == path else Problem(p.path, f"in module {name}, {p.message}", p.at_key)
+            for p in problems]
+
+
+def _missing_fields(settings: Effective) -> Iterator[Problem]:
+    for number, fields in settings.programs.items():
+        for key in ("position", "speed"):
+            if key not in fields:
+                yield Problem(settings.program_paths[number], f"program {number} has no {key} "
+                              f"— give {key}: in the module or in one of its profiles", at_key=True)
+
+
+def _speeds_and_positions(settings: Effective) -> Iterator[Problem]:
+    system = settings.system
+    s1, s4, s5 = system["upper_reversing_point"], system["max_speed"], system["min_speed"]
+    if s4.value < s5.value:
+        at = s5 if s5.source != DEFAULT else s4
+        yield Problem(at.path, f"max_speed {_said(s4, 'max_speed', at)} is below min_speed "
+                      f"{_said(s5, 'min_speed', at)} "
+                      "— max_speed (S4) must be at least min_speed (S5)")
+        return
+    for fields in settings.programs.values():
+        if (position := fields.get("position")) and position.value > s1.value:
+            yield Problem(position.path, f"position {_said(position, 'position')} is above upper_reversing_point "
+                          f"{_said(s1, 'upper_reversing_point', position)} — a position must be at most the upper reversing point "
+                          "(P ≤ S1): lower it or raise upper_reversing_point")
+        if (speed := fields.get("speed")) and not s5.value <= speed.value <= s4.value:
+            limit, word = (s4, "max_speed") if speed.value > s4.value else (s5, "min_speed")
+            side = "above" if limit is s4 else "below"
+            yield Problem(speed.path, f"speed {_said(speed, 'speed')} is {side} {word} {_said(limit, word, speed)} "
+                          f"— a speed must be min_speed..max_speed (S5 ≤ V ≤ S4), here {s5.value}..{s4.value} m/s")
+
+
+def _jumps(settings: Effective) -> Iterator[Problem]:
+    listed = settings.programs
+    chained: dict[int, int] = {}  # program → chain number (1-based)
+    for k, chain in enumerate(settings.chains.value):
+        at = settings.chains.path + (k,)
+        if len(chain.programs) == 1 and not chain.loop:
+            yield Problem(at, f"a chain of one program does nothing — add loop: true to make program "
+                          f"{chain.programs[0]} jump to itself, or drop the chain")
+        for i, number in enumerate(chain.programs):
+            item = at + ("programs", i)
+            if number not in listed:
+                yield Problem(item, f"program {number} is not listed under programs — a chain may only "
+                              f"name listed programs: list program {number} or drop it from the chain")
+            elif number in chained:
+                where = "this chain" if chained[number] == k + 1 else f"chain {chained[number]}"
+                yield Problem(item, f"program {number} is already in {where} — a program may be in one chain, once")
+            else:
+                chained[number] = k + 1
+    for number, fields in listed.items():
+        if (target := fields.get("next")) is None:
+            continue
+        if target.value not in listed:
+            yield Problem(target.path, f"next: {target.value} is not a listed program — list program "
+                          f"{target.value} under programs, or jump to a listed one")
+        if number in chained:
+            yield Problem(target.path, f"program {number} has next: {target.value} and is in chain "
+                          f"{chained[number]} — its jump is set by the chain or by next, not both: drop one")
+
+
+def _said(value: Sourced, key: str, beside: Sourced | None = None) -> str:
+    """A value with its unit, and its source when that differs from the value it is compared with."""
+    text = f"{value.value} {QUANTITIES[key].unit}"
+    return text + f" ({value.source})" if beside is not None and value.source != beside.source else text
+
+
+def check_bus(path: Path_, bus: BusLine) -> list[Problem]:
+    """With a gateway, what the Open Driver would refuse about this line (SYSTAT 8Bh..95h)."""
+    if bus.gateway is None:
+        return []
+    settings = gateway.GatewaySettings(
+        receive_db=bus.gateway.receive_db, receive_dw=bus.gateway.receive_dw, cpu=bus.gateway.cpu,
+        identifier=bus.gateway.identifier, zvz_ms=round(bus.zvz * 1000),
+        line=LineSettings(baud=bus.baud, data_bits=bus.data_bits, parity=bus.parity, stop_bits=bus.stop_bits),
+    )
+    problems = []
+    for refusal in gateway.refusals(settings):
+        key = {"zvz_ms": "zvz"}.get(refusal.field, refusal.field.removeprefix("line."))
+        if key in Gateway.model_fields:
+            at, given = path + ("gateway", key), True
+        else:
+            at, given = path + (key,), key in bus.model_fields_set
+        problems.append(Problem(at if given else path + ("gateway",), f"{refusal.reason} — the gateway's Open "
+                                f"Driver refuses it (SYSTAT {refusal.systat:02X}h): change {key}",
+                                at_key=not given))
+    return problems
+
+
+def check_unique(data: Any) -> list[Problem]:
+    """Unique bus names, ports and module names in the plant; unique addresses on each bus."""
+    problems: list[Problem] = []
+    bus_names: dict[Any, Path_] = {}
+    ports: dict[Any, Path_] = {}
+    module_names: dict[Any, Path_] = {}
+    for bus_path, bus in mappings_in(data, ("buses",)):
+        _unique(problems, bus, bus_path, "name", bus_names,
+                f"bus name '{{}}' is already used ({FIRST}) — give each bus its own name")
+        _unique(problems, bus, bus_path, "port", ports,
+                f"port '{{}}' is already used by another bus ({FIRST}) — each bus needs its own port")
+        addresses: dict[Any, Path_] = {}
+        for module_path, module in mappings_in(bus, bus_path + ("modules",)):
+            _unique(problems, module, module_path, "name", module_names,
+                    f"module name '{{}}' is already used ({FIRST}) — module names must be unique in the plant")
+            _unique(problems, module, module_path, "address", addresses,
+                    f"address {{}} is already used on this bus ({FIRST}) — each module on a bus needs its "
+                    "own address (its S9)")
+    return problems
+
+
+def _unique(problems: list[Problem], item: dict[Any, Any], path: Path_, key: str,
+            seen: dict[Any, Path_], message: str) -> None:
+    value = item.get(key)
+    if isinstance(value, bool) or not isinstance(value, (str, int)):
+        return
+    if value in seen:
+        problems.append(Problem(path + (key,), message.replace("{}", str(value)), first=seen[value]))
+    else:
+        seen[value] = path + (key,)

@@ -1,0 +1,123 @@
+"""Human units ↔ device units, exactly: the one table of every PRC 3 value a plant file sets.
+
+A plant file says metres, m/s, seconds and m/s²; a module holds integers in mm, mm/s,
+0.1 s and 0.001 m/s² (prc3-protocol.md §1). The conversion is decimal arithmetic on the
+number as written: `step` is the size of one device unit in human units, a human value
+must be a whole number of steps (0.0005 m is an error, never rounded), and device → human
+is `device × step` (1050 → Decimal("1.050")). F1/F2 are `{action, distance}` ↔
+`action × 1000 + mm` (§1.1). S9 (the module address) is not here: a plant file sets it as
+`address`.
+
+Owns the table and the arithmetic. Does not own validation messages or the plant file's
+structure (`prc3cfg.plant.models`). Pure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from decimal import Decimal
+
+MM = Decimal("0.001")
+
+
+@dataclass(frozen=True, slots=True)
+class Quantity:
+    """One value: its plant-file key, its device symbol, its step and device range.
+
+    `step_name` and `what` word the "not a whole number" message: "0.0005 m is not a whole
+    number of millimetres — positions are in steps of 0.001 m".
+    """
+
+    key: str
+    symbol: str
+    step: Decimal
+    unit: str
+    lo: int
+    hi: int
+    step_name: str = ""
+    what: str = ""
+    boolean: bool = False
+
+    @property
+    def integer(self) -> bool:
+        """A plain count (S3, S7, …): step 1, no unit, written as a whole number."""
+        return self.step == 1 and not self.unit
+
+    @property
+    def human_lo(self) -> Decimal:
+        return self.lo * self.step
+
+    @property
+    def human_hi(self) -> Decimal:
+        return self.hi * self.step
+
+    def to_device(self, human: Decimal | int | bool) -> int:
+        """The device value of an in-range human value; ValueError if not a whole number of steps."""
+        units = Decimal(int(human) if isinstance(human, bool) else human) / self.step
+        if units != units.to_integral_value():
+            raise ValueError(f"{human} {self.unit} is not a whole number of {self.step_name}")
+        return int(units)
+
+    def to_human(self, device: int) -> Decimal | int | bool:
+        if self.boolean:
+            return bool(device)
+        if self.integer:
+            return device
+        return device * self.step
+
+    def format(self, device: int) -> str:
+        """The human value with its unit, as a plant file would say it: "1.050 m", "true"."""
+        human = self.to_human(device)
+        if self.boolean:
+            return str(human).lower()
+        return f"{human} {self.unit}".rstrip()
+
+
+#: Every value a plant file sets, keyed by the plant-file key; order: programs, then system.
+QUANTITIES: dict[str, Quantity] = {
+    q.key: q
+    for q in (
+        Quantity("position", "P", MM, "m", 0, 9999, "millimetres", "positions are"),
+        Quantity("speed", "V", MM, "m/s", 1, 600, "millimetres per second", "speeds are"),
+        Quantity("relative_speed", "Vr", MM, "m/s", -600, 600, "millimetres per second", "relative speeds are"),
+        Quantity("dwell", "T", Decimal("0.1"), "s", 0, 600, "tenths of a second", "dwell times are"),
+        Quantity("distance", "F", MM, "m", 0, 999, "millimetres", "function output distances are"),
+        Quantity("upper_reversing_point", "S1", MM, "m", 100, 9999, "millimetres", "reversing points are"),
+        Quantity("reference_point", "S2", MM, "m", 50, 500, "millimetres", "reference points are"),
+        Quantity("increment_pulses", "S3", Decimal(1), "", 1, 9999),
+        Quantity("max_speed", "S4", MM, "m/s", 1, 600, "millimetres per second", "speeds are"),
+        Quantity("min_speed", "S5", MM, "m/s", 1, 600, "millimetres per second", "speeds are"),
+        Quantity("acceleration", "S6", MM, "m/s²", 1000, 1500, "millimetres per second squared", "accelerations are"),
+        Quantity("circuit_gain", "S7", Decimal(1), "", 800, 1500),
+        Quantity("alarm", "S8", Decimal(1), "", 0, 1, boolean=True),
+        Quantity("sync_increment", "S10", Decimal(1), "", 1, 9999),
+        Quantity("sync_circuit_gain", "S11", Decimal(1), "", 1, 1500),
+        Quantity("sync_conveyor_sequence", "S12", MM, "m", 5, 50, "millimetres", "sync conveyor sequences are"),
+    )
+}
+BY_SYMBOL: dict[str, Quantity] = {q.symbol: q for q in QUANTITIES.values()}
+
+#: Program fields set by a number; F1, F2 and A are set otherwise (function outputs, chains).
+PROGRAM_QUANTITIES = tuple(QUANTITIES[k] for k in ("position", "speed", "relative_speed", "dwell"))
+#: System parameters in message order (image.SYSTEM_KEYS).
+SYSTEM_QUANTITIES = tuple(q for q in QUANTITIES.values() if q.symbol.startswith("S"))
+
+#: F1/F2: action × 1000 + distance in mm (prc3-protocol.md §1.1).
+ACTIONS = {"reset": 0, "set": 1}
+DISTANCE = QUANTITIES["distance"]
+
+
+def function_output(action: str, distance: Decimal) -> int:
+    """{action: set, distance: 0.010} → 1010."""
+    return ACTIONS[action] * 1000 + DISTANCE.to_device(distance)
+
+
+def split_function_output(device: int) -> tuple[str, Decimal]:
+    """1010 → ("set", Decimal("0.010")); 50 → ("reset", Decimal("0.050"))."""
+    action = {code: name for name, code in ACTIONS.items()}[device // 1000]
+    return action, DISTANCE.to_human(device % 1000)
+
+
+def format_function_output(device: int) -> str:
+    action, distance = split_function_output(device)
+    return f"{action} at {distance} m"
