@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 from prc3cfg import codec
 from prc3cfg.error_codes import describe, remedy
@@ -66,40 +67,47 @@ def read_module(link: Link, address: int, programs: Iterable[int], *, name: str 
     return ModuleImage(address=address, system=system, programs=tuple(slots))
 
 
-def read_plant(
-    plant,
+@dataclass(frozen=True, slots=True)
+class Target:
+    """A module to read: where it is, what it is called, which programs."""
+
+    bus: str
+    address: int
+    name: str
+    programs: tuple[int, ...]
+
+
+def read_all(
+    targets: Iterable[Target],
     links: dict[str, Link],
     *,
-    modules: Iterable[tuple[str, int]] | None = None,
-    progress: Callable[[str, int], None] | None = None,
+    progress: Callable[[], None] | None = None,
 ) -> dict[tuple[str, int], ModuleImage]:
-    """Read every module (or the given (bus, address) pairs) of `plant`; buses in parallel.
+    """Read every target, buses in parallel, the modules of one bus one after another.
 
-    `progress(bus, address)` is called after each module. The first error on a bus stops that
-    bus and is raised once every bus has finished.
+    `progress()` is called after each module. The first error on a bus stops that bus; the
+    errors of all buses are raised together (one line each) once every bus has finished.
     """
-    chosen = None if modules is None else set(modules)
+    per_bus: dict[str, list[Target]] = {}
+    for target in targets:
+        per_bus.setdefault(target.bus, []).append(target)
 
-    def read_bus(bus) -> dict[tuple[str, int], ModuleImage]:
+    def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
-        for module in bus.modules:
-            if chosen is not None and (bus.name, module.address) not in chosen:
-                continue
-            image = read_module(links[bus.name], module.address, module.managed_programs(), name=module.name)
-            images[(bus.name, module.address)] = image
+        for t in bus_targets:
+            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name)
             if progress:
-                progress(bus.name, module.address)
+                progress()
         return images
 
     result: dict[tuple[str, int], ModuleImage] = {}
-    with ThreadPoolExecutor(max_workers=max(1, len(plant.buses))) as pool:
-        futures = [pool.submit(read_bus, bus) for bus in plant.buses]
-        errors = []
-        for future in futures:
+    errors = []
+    with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
+        for future in [pool.submit(read_bus, bus_targets) for bus_targets in per_bus.values()]:
             try:
                 result.update(future.result())
             except UserError as error:
                 errors.append(str(error))
     if errors:
-        raise UserError("\n".join(errors) if len(errors) > 1 else errors[0])
+        raise UserError("\n".join(errors))
     return result

@@ -24,7 +24,7 @@ link_app = typer.Typer(no_args_is_help=True, help="Gateway and line settings.")
 app.add_typer(emulator_app, name="emulator")
 app.add_typer(link_app, name="link")
 
-COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands")
+COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands")
 
 
 def _register_commands() -> None:
@@ -34,13 +34,32 @@ def _register_commands() -> None:
         importlib.import_module(f"prc3cfg.cli.{name}")
 
 
+#: A command line prc3cfg does not understand. click exits 2 for it, which `plan
+#: --detailed-exitcode` uses for "changes": a CI job must never read a typo as changes.
+EXIT_USAGE = 64
+
+
+class Outcome(Exception):
+    """A command's result that is not an error but needs its own exit code (plan: 2 = changes)."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
 def main() -> None:
     _register_commands()
     try:
         app()
+    except Outcome as outcome:
+        sys.exit(outcome.code)
     except UserError as error:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(error.exit_code)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         sys.exit(130)
+    except SystemExit as exit:
+        if exit.code == 2:  # click: usage error
+            sys.exit(EXIT_USAGE)
+        raise

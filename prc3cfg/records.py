@@ -1,0 +1,101 @@
+"""What an apply leaves behind: snapshots of the modules before the first write, and a journal.
+
+- A snapshot (`.prc3cfg/snapshots/<time>-<plant>.json` beside the plant file) holds the
+  read-back images of every module an apply will touch, the plant file's path and hash,
+  and the time — `prc3cfg restore` plans and applies back to it.
+- A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
+  one JSON object per line: time, bus, address, request and reply in hex, attempt, duration.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from prc3cfg.errors import UserError
+from prc3cfg.image import ModuleImage
+from prc3cfg.link import Exchange
+
+SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
+
+
+def _stamp() -> str:
+    return datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
+
+
+def records_dir(plant_path: Path, kind: str) -> Path:
+    return plant_path.parent / ".prc3cfg" / kind
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    plant_path: Path
+    plant_sha256: str
+    taken: str
+    images: dict[tuple[str, int], ModuleImage]  # (bus, address) → image
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": SNAPSHOT_FORMAT,
+            "plant": str(self.plant_path),
+            "plant_sha256": self.plant_sha256,
+            "taken": self.taken,
+            "modules": [{"bus": bus, **image.to_json()} for (bus, _), image in sorted(self.images.items())],
+        }
+
+    def save(self) -> Path:
+        directory = records_dir(self.plant_path, "snapshots")
+        directory.mkdir(parents=True, exist_ok=True)
+        path = directory / f"{self.taken}-{self.plant_path.stem}.json"
+        path.write_text(json.dumps(self.to_json(), indent=1))
+        return path
+
+    @classmethod
+    def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage]) -> Snapshot:
+        return cls(plant_path, plant_sha256, _stamp(), dict(images))
+
+    @classmethod
+    def load(cls, path: Path) -> Snapshot:
+        try:
+            data = json.loads(path.read_text())
+            if data.get("format") != SNAPSHOT_FORMAT:
+                raise ValueError(f'expected "format": "{SNAPSHOT_FORMAT}"')
+            images = {(m["bus"], int(m["address"])): ModuleImage.from_json(m) for m in data["modules"]}
+            return cls(Path(data["plant"]), data["plant_sha256"], data["taken"], images)
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise UserError(f"{path}: not a readable snapshot ({error}) — name a file under .prc3cfg/snapshots/") from None
+
+
+class Journal:
+    """Every exchange of one apply, appended as JSON lines; thread-safe (buses run in parallel)."""
+
+    def __init__(self, plant_path: Path) -> None:
+        directory = records_dir(plant_path, "journal")
+        directory.mkdir(parents=True, exist_ok=True)
+        self.path = directory / f"{_stamp()}-{plant_path.stem}.jsonl"
+        self._handle = self.path.open("a")
+        self._lock = threading.Lock()
+
+    def record(self, event: str, **fields: Any) -> None:
+        line = json.dumps({"time": datetime.now(timezone.utc).isoformat(), "event": event, **fields})
+        with self._lock:
+            self._handle.write(line + "\n")
+            self._handle.flush()
+
+    def exchange(self, exchange: Exchange) -> None:
+        self.record(
+            "exchange",
+            bus=exchange.bus,
+            address=exchange.address,
+            request=exchange.request.hex(),
+            reply=None if exchange.reply is None else exchange.reply.hex(),
+            attempt=exchange.attempt,
+            duration_s=round(exchange.duration, 6),
+        )
+
+    def close(self) -> None:
+        self._handle.close()

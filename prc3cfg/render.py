@@ -1,0 +1,205 @@
+"""Showing plans to people: the diff in human units, chains as chains, axis warnings.
+
+Owns the words and layout of `plan` output — human (Terraform-like), markdown for pull
+request comments, and the `changes` list of the JSON output. Reasons shown here never
+steer an apply (the plan's steps do). The structural diff is deepdiff's; the units are
+`prc3cfg.plant.units`. Pure: returns strings.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from deepdiff import DeepDiff
+
+from prc3cfg.image import ModuleImage, default_program
+from prc3cfg.plant.units import BY_SYMBOL, format_function_output
+from prc3cfg.plantplan import ModuleChange, PlantPlan
+
+AXIS_WARNING = "releases the axes: travel to reference point required after apply"
+FIELD_NAMES = {"P": "position", "V": "speed", "Vr": "relative speed", "T": "dwell", "F1": "F1", "F2": "F2"}
+SYSTEM_NAMES = {
+    "S1": "upper reversing point", "S2": "reference point", "S3": "increment pulses", "S4": "max speed",
+    "S5": "min speed", "S6": "acceleration", "S7": "circuit gain", "S8": "alarm", "S10": "sync increment",
+    "S11": "sync circuit gain", "S12": "sync conveyor sequence",
+}  # fmt: skip
+_PATH = re.compile(r"root\['(system|programs)'\](?:\[(\d+)\])?(?:\['(\w+)'\])?")
+
+
+def format_value(symbol: str, device: int) -> str:
+    if symbol in ("F1", "F2"):
+        return format_function_output(device)
+    return BY_SYMBOL[symbol].format(device)
+
+
+@dataclass(frozen=True, slots=True)
+class FieldChange:
+    program: int | None  # None: a system parameter
+    symbol: str
+    before: int
+    after: int
+
+    def text(self) -> str:
+        name = SYSTEM_NAMES.get(self.symbol) or FIELD_NAMES[self.symbol]
+        return f"{name} {format_value(self.symbol, self.before)} → {format_value(self.symbol, self.after)}"
+
+    def to_json(self) -> dict:
+        return {"program": self.program, "field": self.symbol, "before": self.before, "after": self.after}
+
+
+def field_changes(actual: ModuleImage, desired: ModuleImage) -> list[FieldChange]:
+    """Every differing system parameter and program field (A excluded: see `chain_changes`)."""
+    diff = DeepDiff(actual.to_json(), desired.to_json(), ignore_order=False)
+    changes = []
+    for path, change in diff.get("values_changed", {}).items():
+        match = _PATH.fullmatch(path)
+        if match is None or match.group(3) == "A":
+            continue
+        section, index, key = match.groups()
+        program = None if section == "system" else int(index) + 1
+        changes.append(FieldChange(program, key, change["old_value"], change["new_value"]))
+    return sorted(changes, key=lambda c: (c.program or 0, list(BY_SYMBOL).index(c.symbol) if c.symbol in BY_SYMBOL else 99))
+
+
+def chains(image: ModuleImage, within: set[int]) -> list[tuple[int, ...]]:
+    """The jump chains among the programs in `within`: (1, 2, 3) for 1→2→3→stop; a loop repeats its head."""
+    jumps = {n: image.programs[n - 1].A for n in within if image.programs[n - 1] is not None and image.programs[n - 1].A}
+    targets = set(jumps.values())
+    result, seen = [], set()
+    for start in sorted(n for n in jumps if n not in targets) + sorted(jumps):
+        if start in seen:
+            continue
+        chain = [start]
+        seen.add(start)
+        while (nxt := jumps.get(chain[-1])) and nxt not in chain and nxt not in seen:
+            chain.append(nxt)
+            seen.add(nxt)
+        if (nxt := jumps.get(chain[-1])) and (nxt in chain or nxt in seen):
+            chain.append(nxt)  # loop back, or into another chain
+        result.append(tuple(chain))
+    return result
+
+
+def format_chain(chain: tuple[int, ...]) -> str:
+    return " → ".join(map(str, chain)) + ("" if len(chain) > 1 and chain[-1] in chain[:-1] else " → stop")
+
+
+def chain_changes(actual: ModuleImage, desired: ModuleImage) -> tuple[list[str], list[str]]:
+    """(chains removed, chains added) among the managed programs."""
+    managed = {n for n, p in enumerate(desired.programs, start=1) if p is not None}
+    before, after = set(chains(actual, managed)), set(chains(desired, managed))
+    return [format_chain(c) for c in sorted(before - after)], [format_chain(c) for c in sorted(after - before)]
+
+
+def program_symbol(actual: ModuleImage, desired: ModuleImage, number: int) -> str:
+    """`+` a program set up from factory defaults, `-` one put back to them, `~` otherwise."""
+    if actual.programs[number - 1] == default_program(actual.system):
+        return "+"
+    if desired.programs[number - 1] == default_program(desired.system):
+        return "-"
+    return "~"
+
+
+def module_lines(change: ModuleChange) -> list[str]:
+    """The diff of one module, one change per line, indented under its header."""
+    lines: list[str] = []
+    fields = field_changes(change.actual, change.desired)
+    system = [f.text() for f in fields if f.program is None]
+    if system:
+        lines.append(f"~ system: {', '.join(system)}")
+    programs: dict[int, list[str]] = {}
+    for f in fields:
+        if f.program is not None:
+            programs.setdefault(f.program, []).append(f.text())
+    for number, texts in sorted(programs.items()):
+        lines.append(f"{program_symbol(change.actual, change.desired, number)} program {number}: {', '.join(texts)}")
+    removed, added = chain_changes(change.actual, change.desired)
+    lines += [f"- chain {c}" for c in removed] + [f"+ chain {c}" for c in added]
+    return lines
+
+
+def module_header(change: ModuleChange) -> str:
+    head = f"bus {change.bus}, module {change.address} ({change.name})"
+    if not change.steps:
+        return f"  {head}: no changes"
+    warn = f"  ⚠ {AXIS_WARNING}" if change.releases_axes else ""
+    return f"~ {head}: {len(change.steps)} steps, {change.plan.bus_time:.3f} s{warn}"
+
+
+def step_lines(change: ModuleChange) -> list[str]:
+    return [
+        f"{i:>3}. {step.message.hex():<24} {step.summary}" + ("  ⚠ RELEASES AXES" if step.releases_axes else "")
+        for i, step in enumerate(change.steps, start=1)
+    ]
+
+
+def summary_line(plan: PlantPlan) -> str:
+    changed = len(plan.changes)
+    if not changed:
+        return "No changes: every module matches the plant file."
+    releases = len(plan.axis_releases)
+    return (
+        f"Plan: {changed} of {len(plan.modules)} modules change, {plan.message_count} messages, "
+        f"estimated bus time {plan.bus_time:.3f} s (naive download {plan.naive_bus_time:.3f} s)"
+        + (f"; ⚠ {releases} module{'s' if releases != 1 else ''} release the axes" if releases else "")
+    )
+
+
+def human(plan: PlantPlan, *, steps: bool = True) -> str:
+    out = [f"Plant {plan.plant}", ""]
+    for change in plan.modules:
+        out.append(module_header(change))
+        if change.steps:
+            out += [f"    {line}" for line in module_lines(change)]
+            if steps:
+                out += ["    steps:"] + [f"    {line}" for line in step_lines(change)]
+            out.append("")
+    if plan.axis_releases:
+        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(
+            f"{m.bus}/{m.name}" for m in plan.axis_releases))  # fmt: skip
+    out.append(summary_line(plan))
+    return "\n".join(out)
+
+
+def markdown(plan: PlantPlan) -> str:
+    out = [f"### prc3cfg plan — `{plan.plant}`", "", summary_line(plan), ""]
+    if plan.axis_releases:
+        out += [
+            "> [!WARNING]",
+            "> These modules release their axes: **travel to reference point required after apply** — "
+            + ", ".join(f"`{m.bus}/{m.name}`" for m in plan.axis_releases),
+            "",
+        ]
+    if plan.changes:
+        out += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
+        for m in plan.changes:
+            axes = "⚠ released: travel to reference point required" if m.releases_axes else ""
+            out.append(f"| {m.bus} | {m.name} | {m.address} | {len(m.steps)} | {m.plan.bus_time:.3f} s | {axes} |")
+        out.append("")
+        for m in plan.changes:
+            out += [
+                f"<details><summary>{m.bus} / {m.name} (address {m.address})"
+                + (" ⚠ releases axes" if m.releases_axes else "") + "</summary>",
+                "",
+                "```diff",
+                *module_lines(m),
+                "```",
+                "",
+                "```",
+                *step_lines(m),
+                "```",
+                "</details>",
+                "",
+            ]
+    return "\n".join(out)
+
+
+def changes_json(change: ModuleChange) -> dict:
+    removed, added = chain_changes(change.actual, change.desired)
+    return {
+        "fields": [f.to_json() | {"text": f.text()} for f in field_changes(change.actual, change.desired)],
+        "chains_removed": removed,
+        "chains_added": added,
+        "warning": AXIS_WARNING if change.releases_axes else None,
+    }
