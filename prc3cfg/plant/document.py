@@ -31,14 +31,20 @@ _MERGE_TAG = "tag:yaml.org,2002:merge"
 _NULL_TAG = "tag:yaml.org,2002:null"
 _SPECIAL_FLOATS = {".inf": "Infinity", "+.inf": "Infinity", "-.inf": "-Infinity", ".nan": "NaN"}
 
-#: What to do about a YAML syntax error, by a piece of PyYAML's wording of it.
+#: What to do about a YAML syntax error, by a piece of PyYAML's wording of it; the flag
+#: says the error is best shown where the construct began (an unclosed quote), not where
+#: PyYAML gave up (the end of the file).
 _SYNTAX_HINTS = {
-    "'\\t'": "a tab character — indent with spaces; YAML does not allow tabs here",
-    "mapping values are not allowed here": "a colon where no key can start — indent this key "
-    "under its parent, or put a value that contains ': ' in quotes",
-    "could not find expected ':'": "a line that is not 'key: value' — add the colon, or start a list item with '- '",
-    "found undefined alias": "an alias (*name) with no anchor (&name) before it — define the anchor first",
-    "expected a single document": "a second YAML document (---) — a plant file is one document",
+    "'\\t'": ("a tab character — indent with spaces; YAML does not allow tabs here", False),
+    "mapping values are not allowed here": ("a colon where no key can start — indent this key "
+                                            "under its parent, or put a value that contains ': ' in quotes", False),
+    "could not find expected ':'": ("a line that is not 'key: value' — add the colon, or start a list "
+                                    "item with '- '", False),
+    "expected <block end>": ("this line is indented differently from the lines above it — line it up "
+                             "with the keys beside it", False),
+    "while scanning a quoted scalar": ("a quoted value that never ends — close the quote", True),
+    "found undefined alias": ("an alias (*name) with no anchor (&name) before it — define the anchor first", False),
+    "expected a single document": ("a second YAML document (---) — a plant file is one document", False),
 }
 
 Position = tuple[int, int]  # 1-based line and column
@@ -85,7 +91,9 @@ def read_document(path: Path) -> Document:
     except IsADirectoryError:
         raise PlantError([f"{name}: is a directory — give the plant file (*.yaml) in it"]) from None
     except UnicodeDecodeError as error:
-        raise PlantError([f"{name}: not UTF-8 text (byte {error.start}) — save the file as UTF-8"]) from None
+        before = error.object[: error.start].decode("utf-8", "replace")
+        line, column = _line_column(before, len(before))
+        raise PlantError([f"{name}:{line}:{column}: not UTF-8 text — save the file as UTF-8"]) from None
     except OSError as error:
         raise PlantError([f"{name}: cannot read it ({error.strerror}) — check the path and its permissions"]) from None
     try:
@@ -150,8 +158,8 @@ class _Reader:
                 continue
             if key in result:
                 first = self.positions[path + (key,)][0]
-                self.problems.append(Problem(path, f"duplicate key '{key}' — it is already given at line "
-                                             f"{first[0]}; give each key once", at=key_at))
+                self.problems.append(Problem(path, f"duplicate key '{key}' — it is already given at "
+                                             f"{first[0]}:{first[1]}; give each key once", at=key_at))
                 continue
             empty = isinstance(value_node, ScalarNode) and value_node.tag == _NULL_TAG and not value_node.value
             self.positions[path + (key,)] = (key_at, key_at if empty else _position(value_node))
@@ -169,7 +177,7 @@ class _Reader:
             return self.constructor.construct_object(node)
         except yaml.constructor.ConstructorError:
             self.problems.append(Problem(path, f"a YAML tag {node.tag} that a plant file does not use — remove it"))
-            return None
+            return node.value
 
 
 def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]]:
@@ -198,10 +206,11 @@ def _hashable(key: Any) -> bool:
 
 
 def _syntax_error(name: str, error: yaml.MarkedYAMLError) -> str:
-    mark = error.problem_mark or error.context_mark
     problem = error.problem or error.context or "not valid YAML"
-    hint = next((text for piece, text in _SYNTAX_HINTS.items() if piece in problem or piece in (error.context or "")), None)
+    said = f"{problem} {error.context or ''}"
+    hint, at_start = next((h for piece, h in _SYNTAX_HINTS.items() if piece in said), (None, False))
     if hint is None:
         where = f" ({error.context} at line {error.context_mark.line + 1})" if error.context and error.context_mark else ""
         hint = f"not valid YAML: {problem}{where} — check the indentation, colons, quotes and brackets here"
+    mark = (error.context_mark if at_start else error.problem_mark) or error.problem_mark or error.context_mark
     return f"{name}:{mark.line + 1}:{mark.column + 1}: {hint}"

@@ -45,19 +45,23 @@ TEMPLATES = {
     "invalid_key": "unknown key '{key}' in {container} — expected one of {expected}",
     "missing": "{container} has no {key} — add {key}:{hint}",
     "empty": "{what} is empty — give it a value or leave the key out",
-    "not_number": "{what} should be a {number}{unit}, not {input}",
+    "empty_required": "{what} is empty — give it a value",
+    "not_number": "{what} {input} is not a number — give a {number}{unit}",
+    "quoted_number": "{what} {input} is text, not a number — write it without quotes",
     "not_finite": "{what} {value} is not a finite number — give a number",
     "out_of_range": "{what} {value} is out of range — {what} must be {allowed}{note}",
     "not_whole": "{value} is not a whole number of {step_name} — {what_steps} in steps of {step}",
     "not_whole_count": "{what} {value} is not a whole number — {what} takes whole numbers",
     "not_allowed": "{what} {input} is not allowed — expected one of {expected}",
     "literal_error": "{what} {input} is not allowed — expected one of {expected}",
-    "string_type": "{what} should be text, not {input} — put it in quotes",
-    "bool_type": "{what} should be true or false, not {input}",
-    "model_type": "{what} should be a mapping (key: value), not {input}",
-    "dict_type": "{what} should be a mapping (key: value), not {input}",
-    "list_type": "{what} should be a list, not {input}",
-    "tuple_type": "{what} should be a list, not {input}",
+    "string_type": "{what} {input} is not text — put it in quotes",
+    "bool_type": "{what} {input} is not true or false — write true or false",
+    "model_type": "{what} is {input}, not a mapping — write it as key: value pairs",
+    "dict_type": "{what} is {input}, not a mapping — write it as key: value pairs",
+    "list_type": "{what} is {input}, not a list — write it as [a, b] or as '- ' lines",
+    "tuple_type": "{what} is {input}, not a list — write it as [a, b] or as '- ' lines",
+    "chain_type": "{what} is {input}, not a chain — write a list of program numbers or "
+    "{{programs: [...], loop: true}}",
     "string_too_short": "{what} is empty — give it a name",
     "too_short": "{what} is empty — list at least one {item}",
 }
@@ -76,12 +80,14 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
     if kind == "too_short" and ctx.get("actual_length") == 0 and error["input"]:
         return None
     if error["input"] is None and kind != "missing":
-        kind = "empty"
+        kind = "empty_required" if _required(loc) else "empty"
+    if kind == "not_number" and _is_number_text(error["input"]):
+        kind = "quoted_number"
     if kind == "not_whole" and not ctx.get("step_name"):
         kind = "not_whole_count"
     template = TEMPLATES.get(kind)
     if template is None:
-        return Problem(loc, f"{what(loc, data)}: {error['msg']}")
+        return Problem(loc, f"{what(loc, data)} is not valid: {error['msg']} — see schemas/plant.schema.json")
     container = loc[:-1]
     words = {
         "what": what(loc, data),
@@ -96,7 +102,9 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
         "item": _LIST_ITEMS.get(loc[-1] if loc else "", "item"),
         **{k: v for k, v in ctx.items() if k not in ("unit", "what", "expected")},
     }
-    at_key = kind in ("extra_forbidden", "invalid_key") or (loc and loc[-1] == "[key]")
+    if isinstance(error["input"], bool) and kind in ("literal_error", "string_type"):
+        template += " (YAML reads yes, no, on, off as true and false: put the word in quotes)"
+    at_key = kind in ("extra_forbidden", "invalid_key", "missing") or (loc and loc[-1] == "[key]")
     return Problem(loc, template.format(**words), at_key=bool(at_key))
 
 
@@ -110,6 +118,8 @@ def what(path: Path_, data: Any) -> str:
         return ENTRY_NAMES.get(head[-2] if len(head) > 1 else "", "key")
     if parent == "programs" and len(head) >= 3 and head[-3] == "chains":
         return "program number"
+    if last == "programs" and len(head) >= 2 and head[-2] == "chains":
+        return what(tuple(head), data)
     if parent == "profiles" and isinstance(last, int):
         return "profile name"
     if parent in ITEMS and (isinstance(last, int) or len(head) == 1 or parent == "programs"):
@@ -146,6 +156,18 @@ def _model_at(container: Path_) -> type[BaseModel]:
     if parent in ITEMS:
         return ITEMS[parent][1]
     return PlantSpec
+
+
+def _is_number_text(value: Any) -> bool:
+    try:
+        return isinstance(value, str) and Decimal(value).is_finite()
+    except ArithmeticError:
+        return False
+
+
+def _required(loc: Path_) -> bool:
+    field = _model_at(loc[:-1]).model_fields.get(loc[-1]) if loc and isinstance(loc[-1], str) else None
+    return field is not None and field.is_required()
 
 
 def _expected(kind: str, ctx: dict[str, Any], container: Path_) -> str:

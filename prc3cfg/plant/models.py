@@ -133,7 +133,7 @@ class FunctionOutputSpec(FileModel):
     """F1 or F2: set or reset the output at a distance after START (F1) or before the reversing point (F2)."""
 
     action: Literal[tuple(ACTIONS)] = Field(description="set or reset the output")
-    distance: _quantity_type(DISTANCE, "distance")
+    distance: _quantity_type(DISTANCE, "where the output switches, 0.000..0.999")
 
 
 class ProgramSpec(FileModel):
@@ -160,7 +160,11 @@ class ChainSpec(FileModel):
     @model_validator(mode="before")
     @classmethod
     def _from_list(cls, data: Any) -> Any:
-        return {"programs": data} if isinstance(data, list) else data
+        if isinstance(data, list):
+            return {"programs": data}
+        if data is not None and not isinstance(data, dict):
+            raise PydanticCustomError("chain_type", "not a chain")
+        return data
 
     @classmethod
     def __get_pydantic_json_schema__(cls, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler) -> JsonSchemaValue:

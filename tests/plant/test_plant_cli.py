@@ -1,0 +1,73 @@
+"""`prc3cfg validate`, `show` and `schema` from the command line: output and exit codes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
+from prc3cfg.cli import app
+from prc3cfg.plant import plant_schema_text
+
+ROOT = Path(__file__).parents[2]
+DEMO = ROOT / "plants" / "demo-line.yaml"
+BROKEN = Path(__file__).parent / "broken"
+runner = CliRunner()
+
+
+def test_validate_a_good_plant() -> None:
+    result = runner.invoke(app, ["validate", str(DEMO)])
+    assert result.exit_code == 0
+    assert result.stdout == f"{DEMO}: valid (2 buses, 6 modules)\n"
+
+
+def test_validate_a_broken_plant_prints_the_problems_on_stderr() -> None:
+    path = BROKEN / "unknown-key-program.yaml"
+    result = runner.invoke(app, ["validate", str(path)])
+    assert result.exit_code == 1
+    assert result.stdout == ""
+    assert result.stderr == (f"{path}:13:13: unknown key 'sped' in program 3 — expected one of position, "
+                             "speed, relative_speed, dwell, f1, f2, next\n")
+
+
+def test_validate_as_a_process_never_shows_a_traceback(tmp_path: Path) -> None:
+    for path, code in [(DEMO, 0), (BROKEN / "tab-indent.yaml", 1), (BROKEN / "empty.yaml", 1),
+                       (BROKEN / "not-utf8.yaml", 1), (tmp_path / "missing.yaml", 1), (tmp_path, 1)]:
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "validate", str(path)],
+                              capture_output=True, text=True, cwd=ROOT)
+        assert done.returncode == code, done.stderr
+        assert "Traceback" not in done.stderr
+        assert (done.stdout if code == 0 else done.stderr).startswith(str(path))
+
+
+def test_show_a_module_names_every_source() -> None:
+    result = runner.invoke(app, ["show", str(DEMO), "--module", "booth-a-top"])
+    assert result.exit_code == 0
+    out = result.stdout
+    assert "module booth-a-top — bus booth-a, address 5" in out
+    for text in ("upper_reversing_point (S1)", "1.800 m", "profile reciprocator", "profile short-stroke",
+                 "default", "program 10", "set at 0.020 m", "1 → 2 → 1 (loop)"):
+        assert text in out
+
+
+def test_show_without_a_module_lists_the_modules() -> None:
+    result = runner.invoke(app, ["show", str(DEMO)])
+    assert result.exit_code == 0
+    assert "booth-b-right" in result.stdout and "reset" in result.stdout
+
+
+def test_show_an_unknown_module_is_one_clean_line() -> None:
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(DEMO), "--module", "nope"],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 1
+    assert done.stderr.startswith(f"error: {DEMO}: no module named 'nope' — the modules are booth-a-left, ")
+    assert "Traceback" not in done.stderr
+
+
+def test_schema_prints_the_schema() -> None:
+    result = runner.invoke(app, ["schema"])
+    assert result.exit_code == 0
+    assert result.stdout == plant_schema_text()

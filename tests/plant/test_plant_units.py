@@ -1,0 +1,78 @@
+"""Human ↔ device units: every device value in range survives device → human → device, exactly."""
+
+from __future__ import annotations
+
+from decimal import Decimal
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from prc3cfg.image import SYSTEM_KEYS
+from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
+from prc3cfg.plant.units import (
+    DISTANCE,
+    PROGRAM_QUANTITIES,
+    QUANTITIES,
+    SYSTEM_QUANTITIES,
+    Quantity,
+    format_function_output,
+    function_output,
+    split_function_output,
+)
+
+#: Which model validates each quantity's key, so the round trip goes through the plant file's rules too.
+MODEL_OF = {q.key: SystemSpec for q in SYSTEM_QUANTITIES} | {q.key: ProgramSpec for q in PROGRAM_QUANTITIES}
+MODEL_OF["distance"] = FunctionOutputSpec
+
+
+@st.composite
+def quantity_and_device_value(draw: st.DrawFn) -> tuple[Quantity, int]:
+    quantity = draw(st.sampled_from(list(QUANTITIES.values())))
+    return quantity, draw(st.integers(quantity.lo, quantity.hi))
+
+
+@given(quantity_and_device_value())
+def test_device_to_human_to_device_is_the_identity(case: tuple[Quantity, int]) -> None:
+    quantity, device = case
+    assert quantity.to_device(quantity.to_human(device)) == device
+
+
+@given(quantity_and_device_value())
+def test_the_human_text_read_by_the_plant_models_gives_the_device_value_back(case: tuple[Quantity, int]) -> None:
+    """What `show` prints, read back as a plant file reads a number (Decimal of its text)."""
+    quantity, device = case
+    text = quantity.format(device).split(" ")[0]
+    value = text == "true" if quantity.boolean else Decimal(text)
+    extra = {"action": "set"} if quantity is DISTANCE else {}
+    validated = getattr(MODEL_OF[quantity.key].model_validate({quantity.key: value, **extra}), quantity.key)
+    assert quantity.to_device(validated) == device
+
+
+@given(st.integers(0, 1999))
+def test_function_outputs_round_trip(device: int) -> None:
+    action, distance = split_function_output(device)
+    assert function_output(action, distance) == device
+
+
+def test_the_table() -> None:
+    assert tuple(q.symbol for q in SYSTEM_QUANTITIES) == SYSTEM_KEYS
+    assert tuple(q.symbol for q in PROGRAM_QUANTITIES) == ("P", "V", "Vr", "T")
+    assert QUANTITIES["position"].human_hi == Decimal("9.999")
+    assert QUANTITIES["dwell"].to_human(20) == Decimal("2.0")
+    assert QUANTITIES["acceleration"].format(1500) == "1.500 m/s²"
+    assert QUANTITIES["alarm"].format(1) == "true"
+    assert QUANTITIES["increment_pulses"].format(754) == "754"
+
+
+def test_manual_examples_of_function_outputs() -> None:
+    """prc3-protocol.md §1.1: F1 = 1010 sets 0.010 m after START, 50 resets at 0.050 m."""
+    assert function_output("set", Decimal("0.010")) == 1010
+    assert function_output("reset", Decimal("0.050")) == 50
+    assert format_function_output(1050) == "set at 0.050 m"
+
+
+@pytest.mark.parametrize(("key", "text"), [("position", "0.0005"), ("dwell", "2.05"), ("speed", "0.1001")])
+def test_no_rounding(key: str, text: str) -> None:
+    with pytest.raises(ValueError, match="not a whole number"):
+        QUANTITIES[key].to_device(Decimal(text))
