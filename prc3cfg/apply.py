@@ -1,17 +1,19 @@
 """Running plans on the modules: steps in order, verification, repair, an exact account.
 
 Owns execution: per module the steps in order, buses in parallel (a thread per line), the
-modules of one line one after another. An error reply stops that module — naming the step,
-the code, its meaning and what to do — while the other modules go on; a module that stops
-answering stops the same way. Afterwards every touched module is read back and compared
-with what it should hold; a difference (a write damaged on an `open-driver` line, a module
-changed on the floor meanwhile) is planned and repaired again, at most `REPAIRS` times.
-Success means verified. Gating, snapshots and locks are the caller's (`prc3cfg.cli`).
+modules of one line one after another. An error reply stops that module for good —
+naming the step, the code, its meaning and what to do — while the other modules go on.
+A module that stops answering (every retry lost) is not given up at once: every PRC 3
+message is idempotent, so the module is read back and whatever still differs is planned
+and sent again. Afterwards every touched module is read back and compared with what it
+should hold; a difference (a write damaged on an `open-driver` line, a lost exchange, a
+module changed on the floor meanwhile) is repaired, at most `REPAIRS` times. Success
+means verified. Gating, snapshots and locks are the caller's (`prc3cfg.cli`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -20,11 +22,14 @@ from prc3cfg.bustime import LineCost
 from prc3cfg.error_codes import describe, remedy
 from prc3cfg.errors import UserError
 from prc3cfg.image import ModuleImage
-from prc3cfg.link import Link
+from prc3cfg.link import Link, LinkError
 from prc3cfg.planner import plan_module
 from prc3cfg.readback import read_module
 
 REPAIRS = 2
+#: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
+#: one, so a difference counts only when two reads in a row agree on it.
+CONFIRMING_READS = 4
 
 
 @dataclass(slots=True)
@@ -36,74 +41,86 @@ class ModuleRun:
     name: str
     desired: ModuleImage
     steps: tuple[codec.Message, ...]
-    summaries: tuple[str, ...] = ()
+    summaries: tuple[str, ...]
     sent: list[codec.Message] = field(default_factory=list)  # accepted, over all rounds
     failure: str | None = None
+    refused: bool = False  # the module answered an error code: stop for good
     verified: bool = False
     repairs: int = 0
-    released_axes: bool = False
 
     @property
     def where(self) -> str:
         return f"bus {self.bus}, module {self.address} ({self.name})"
 
-    def run(self, link: Link, steps: Iterable[codec.Message], summaries: Iterable[str], tick: Callable[[], None]) -> bool:
-        """Send steps in order; False (with `failure` set) at the first that is not accepted."""
-        steps, summaries = list(steps), list(summaries)
+    @property
+    def released_axes(self) -> bool:
+        return any(m.RELEASES_AXES for m in self.sent)
+
+    def run(self, link: Link, steps: Sequence[codec.Message], summaries: Sequence[str], tick: Callable[[], None]) -> bool:
+        """Send steps in order; False at the first one not accepted (`failure` says why)."""
         for index, (message, summary) in enumerate(zip(steps, summaries), start=1):
             try:
                 reply = link.request(self.address, message)
-            except UserError as error:
+            except LinkError as error:
                 self.failure = f"step {index} of {len(steps)} ({summary}): {error}"
                 return False
             if reply != 0:
                 code = reply if isinstance(reply, int) else -1
+                self.refused = True
                 self.failure = (
-                    f"{self.where}: step {index} of {len(steps)} ({summary}, {message.hex()}) was refused with "
-                    f"{describe(code)} — {remedy(code)}"
+                    f"{self.where}: step {index} of {len(steps)} ({summary}, {message.hex()}) was refused "
+                    f"with {describe(code)} — {remedy(code)}"
                 )
                 return False
             self.sent.append(message)
-            self.released_axes |= message.RELEASES_AXES
             tick()
         return True
 
-
-def _by_bus(runs: Iterable[ModuleRun]) -> dict[str, list[ModuleRun]]:
-    grouped: dict[str, list[ModuleRun]] = {}
-    for run in runs:
-        grouped.setdefault(run.bus, []).append(run)
-    return grouped
-
-
-def _verify(run: ModuleRun, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool) -> None:
-    """Read back; while it differs from the desired image, plan and repair (at most REPAIRS times)."""
-    managed = [n for n, p in enumerate(run.desired.programs, start=1) if p is not None]
-    try:
-        for _ in range(REPAIRS + 1):
-            actual = read_module(link, run.address, managed, name=run.name)
-            if actual == run.desired:
-                run.verified = True
-                return
-            if run.repairs == REPAIRS:
+    def read_back(self, link: Link) -> ModuleImage:
+        """The module's image: the desired one as soon as a read shows it, else two reads that agree."""
+        managed = [n for n, p in enumerate(self.desired.programs, start=1) if p is not None]
+        previous = read_module(link, self.address, managed, name=self.name)
+        for _ in range(CONFIRMING_READS):
+            if previous == self.desired:
                 break
-            repair = plan_module(actual, run.desired, cost)
+            current = read_module(link, self.address, managed, name=self.name)
+            if current == previous:
+                break
+            previous = current
+        return previous
+
+    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool) -> None:
+        """Read back; while it differs from the desired image, plan and repair (at most REPAIRS times)."""
+        for _ in range(REPAIRS + 1):
+            try:
+                actual = self.read_back(link)
+            except LinkError as error:
+                self.failure = f"verification: {error}"
+                continue
+            except UserError as error:
+                self.failure = f"verification: {error}"
+                return
+            if actual == self.desired:
+                self.verified, self.failure = True, None
+                return
+            if self.repairs == REPAIRS:
+                break
+            repair = plan_module(actual, self.desired, cost)
             if repair.releases_axes and not may_release_axes:
-                run.failure = (
-                    f"{run.where}: read-back shows different system parameters; repairing them would "
-                    "release the axes — apply again with --allow-axis-release"
+                self.failure = (
+                    f"{self.where}: the read-back shows other system parameters; writing them would release "
+                    "the axes — apply again with --allow-axis-release"
                 )
                 return
-            run.repairs += 1
-            if not run.run(link, [s.message for s in repair.steps], [s.summary for s in repair.steps], tick):
-                return
-    except UserError as error:
-        run.failure = f"verification: {error}"
-        return
-    run.failure = (
-        f"{run.where}: still differs from the plant file after {REPAIRS} repairs — "
-        "check the line (damaged frames?) and the module, then apply again"
-    )
+            self.repairs += 1
+            if not self.run(link, [s.message for s in repair.steps], [s.summary for s in repair.steps], tick):
+                if self.refused:
+                    return
+        self.failure = (
+            f"{self.where}: still differs from the plant file after {REPAIRS} repairs"
+            + (f" (last problem: {self.failure})" if self.failure else "")
+            + " — check the line (damaged frames?) and the module, then apply again"
+        )
 
 
 def execute(
@@ -118,15 +135,17 @@ def execute(
 
     Buses run in parallel; on one bus, all modules are written first, then verified.
     """
+    per_bus: dict[str, list[ModuleRun]] = {}
+    for run in runs:
+        per_bus.setdefault(run.bus, []).append(run)
 
     def on_bus(bus: str, bus_runs: list[ModuleRun]) -> None:
         for run in bus_runs:
-            run.run(links[bus], run.steps, run.summaries or [m.hex() for m in run.steps], tick)
+            run.run(links[bus], run.steps, run.summaries, tick)
         for run in bus_runs:
-            if run.failure is None:
-                _verify(run, links[bus], costs[bus], tick, may_release_axes)
+            if not run.refused:
+                run.converge(links[bus], costs[bus], tick, may_release_axes)
 
-    per_bus = _by_bus(runs)
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
         for future in [pool.submit(on_bus, bus, bus_runs) for bus, bus_runs in per_bus.items()]:
             future.result()

@@ -47,10 +47,11 @@ class Outcome(Exception):
         self.code = code
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    """The console script; `argv` (default: sys.argv) lets tests run a command in-process."""
     _register_commands()
     try:
-        app()
+        app(args=argv)
     except Outcome as outcome:
         sys.exit(outcome.code)
     except UserError as error:

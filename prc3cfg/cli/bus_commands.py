@@ -98,7 +98,7 @@ def import_plant(
     stop_bits: float = 1,
     timeout: TimeoutOpt = 0.5,
     zvz: float = 0.020,
-    retries: int = 3,
+    retries: int = 5,
     plant_name: Annotated[str, typer.Option(help="The plant's name in the file.")] = "imported",
     bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
     modules: Annotated[Optional[str], typer.Option(help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,

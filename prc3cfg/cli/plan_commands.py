@@ -47,7 +47,7 @@ def read(
     json_out: Annotated[bool, typer.Option("--json", help="Print a list of module images (device units).")] = False,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
-    retries: RetriesOpt = 3,
+    retries: RetriesOpt = 5,
 ) -> None:
     """Read back every module of the plant (system parameters and managed programs)."""
     loaded = load(plant)
@@ -98,7 +98,7 @@ def plan(
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
-    retries: RetriesOpt = 3,
+    retries: RetriesOpt = 5,
 ) -> None:
     """Read back, diff against the plant file and print the cheapest plan."""
     loaded = load(plant)
@@ -144,17 +144,14 @@ def _gate_axes(plan_modules: list[tuple[str, str, bool]], allow: bool, auto: boo
 
 
 def _account(run: ModuleRun) -> str:
-    sent = len(run.sent)
+    """What was and was not written to one module, and how it ended."""
     head = f"bus {run.bus}, module {run.address} ({run.name})"
     if run.verified:
-        repaired = f", {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
-        return f"✓ {head}: {sent} messages written, verified{repaired}"
-    unsent = [m.hex() for m in run.steps[sent:]] if not run.repairs else []
+        repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
+        return f"✓ {head}: {len(run.sent)} messages written, verified{repaired}"
     written = ", ".join(m.hex() for m in run.sent) or "nothing"
-    return (
-        f"✗ {head}: written: {written}; not written: {', '.join(unsent) or '—'}\n"
-        f"    {run.failure}"
-    )
+    unsent = ", ".join(m.hex() for m in run.steps if m not in run.sent) or "—"
+    return f"✗ {head}: written: {written}; not written: {unsent}\n    {run.failure}"
 
 
 def _apply(
@@ -254,7 +251,7 @@ def apply(
     lock_timeout: LockOpt = 0.0,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
-    retries: RetriesOpt = 3,
+    retries: RetriesOpt = 5,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     if plant is None and plan_file is None:
@@ -280,7 +277,7 @@ def restore(
     allow_axis_release: AxesOpt = False,
     lock_timeout: LockOpt = 0.0,
     trace: TraceOpt = None,
-    retries: RetriesOpt = 3,
+    retries: RetriesOpt = 5,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     taken = Snapshot.load(snapshot)

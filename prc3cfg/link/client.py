@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import serial
 
 from prc3cfg import codec
+from prc3cfg.error_codes import describe
 from prc3cfg.errors import UserError
 from prc3cfg.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.line import LineSettings
@@ -29,6 +30,9 @@ from prc3cfg.link.trace import Trace
 log = logging.getLogger(__name__)
 
 READ_SLICE = 0.05  # s: longest single read on framings that do not end frames by a gap
+#: Codes of the structural checks (§4.5 steps 1–5). We only send messages the codec built,
+#: so the module saw a message damaged on the line (open-driver has no checksum): retry.
+DAMAGED_CODES = frozenset(range(10, 16))
 
 
 class LinkError(UserError):
@@ -83,7 +87,11 @@ class Link:
         return f"bus {self.bus}, module {address}"
 
     def request(self, address: int, message: codec.Message) -> int | codec.SystemReply | codec.ProgramsReply:
-        """Send `message` to the module at `address`; its error code (0 = accepted) or data block."""
+        """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
+
+        A lost reply, a damaged one, and a structural error code (the module got our message
+        damaged) are retried; after the last retry a `LinkError` names the bus and module.
+        """
         data = message.encode()
         attempts = 1 + self.retries
         problem = ""
@@ -95,9 +103,13 @@ class Link:
                 problem = f"no reply within {self.timeout:g} s"
             else:
                 try:
-                    return codec.decode_reply(message, raw)
+                    reply = codec.decode_reply(message, raw)
                 except codec.BadReply as error:
                     problem = f"bad reply ({error})"
+                else:
+                    if reply not in DAMAGED_CODES:
+                        return reply
+                    problem = f"the module reports a damaged message ({describe(reply)})"
             if attempt < attempts:
                 note = f"{self._where(address)}: {problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
                 log.warning(note)

@@ -59,7 +59,7 @@ def open_link(
     bus,
     plant_path: Path,
     *,
-    retries: int = 3,
+    retries: int = 5,
     trace: Trace | None = None,
     observer: Callable[[Exchange], None] | None = None,
 ) -> Iterator[Link]:

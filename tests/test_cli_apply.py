@@ -1,0 +1,165 @@
+"""`prc3cfg apply` and `restore` against real emulators: gates, stale plans, locks, faults, convergence."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import pytest
+from emulated import emulated_plant, run_cli
+
+from prc3cfg.emulator import FaultInjection
+from prc3cfg.locks import line_lock
+
+
+@pytest.fixture(autouse=True)
+def private_locks(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+
+
+@pytest.fixture
+def plant(tmp_path):
+    with emulated_plant(tmp_path) as emulated:
+        yield emulated
+
+
+def test_apply_converges_and_replan_is_empty(plant, capsys):
+    result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+    assert result.code == 0, result.err
+    assert plant.matches_plant()
+    assert "Apply complete: 6 modules written and verified." in result.out
+    assert "Travel to reference point required before production on: booth-a/booth-a-left" in result.out
+    assert all(not s.referenced for e in plant.emulators.values() for s in e.modules().values())
+    assert run_cli(capsys, "plan", plant.path, "--detailed-exitcode").code == 0
+
+
+def test_axis_release_is_refused_without_the_flag_and_nothing_is_written(plant, capsys):
+    before = plant.images()
+    result = run_cli(capsys, "apply", plant.path, "--auto-approve")
+    assert result.code == 1
+    assert "releases the axes of booth-a/booth-a-left" in result.err and "nothing was written" in result.err
+    assert plant.images() == before
+    assert all(s.referenced for e in plant.emulators.values() for s in e.modules().values())
+
+
+def test_without_a_terminal_apply_needs_auto_approve(plant, capsys):
+    result = run_cli(capsys, "apply", plant.path, "--allow-axis-release")
+    assert result.code == 1 and "pass --auto-approve" in result.err
+    assert not plant.matches_plant()
+
+
+def test_a_plan_file_is_applied_as_reviewed(plant, capsys, tmp_path):
+    assert run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json").code == 0
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert result.code == 0, result.err
+    assert plant.matches_plant()
+
+
+def test_a_plan_file_alone_finds_its_plant(plant, capsys, tmp_path):
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    result = run_cli(capsys, "apply", "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert result.code == 0, result.err
+
+
+def test_stale_plan_refused_after_teach_in(plant, capsys, tmp_path):
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    plant.emulators["booth-a"].teach_in(2, 1, 123)
+    before = plant.images()
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert result.code == 1
+    assert "stale plan — bus booth-a, module 2 (booth-a-right) changed since the plan was made" in result.err
+    assert plant.images() == before
+
+
+def test_stale_plan_refused_after_plant_file_change(plant, capsys, tmp_path):
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    plant.path.write_text(plant.path.read_text().replace("dwell: 0.5", "dwell: 0.6", 1))
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert result.code == 1 and "stale plan — the plant file" in result.err
+
+
+def test_a_second_apply_on_the_same_line_is_refused(plant, capsys):
+    port = next(line for line in plant.path.read_text().splitlines() if "socket://" in line).split("port:")[1].strip()
+    with line_lock(port, "another apply"):
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+    assert result.code == 1
+    assert "the line is locked by" in result.err and f"pid {os.getpid()}" in result.err
+    assert not plant.matches_plant()
+
+
+def test_an_error_reply_stops_that_module_and_the_others_go_on(plant, capsys):
+    plant.emulators["booth-b"].update(3, fault="E21")
+    result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+    assert result.code == 1
+    assert "bus booth-b, module 3 (booth-b-right): step 1 of" in result.err
+    assert "refused with code 25: operating condition is error E21 (positioning error) — clear the fault" in result.err
+    assert "written: nothing; not written: 2000" in result.err
+    assert "✓ bus booth-b, module 4 (booth-b-pretreat)" in result.out
+    assert result.out.count("✓") == 5
+
+
+def test_snapshot_and_restore(plant, capsys, tmp_path):
+    before = plant.images()
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    snapshots = sorted((tmp_path / ".prc3cfg" / "snapshots").iterdir())
+    assert len(snapshots) == 1
+    snapshot = json.loads(snapshots[0].read_text())
+    assert snapshot["plant_sha256"] and len(snapshot["modules"]) == 6
+    refused = run_cli(capsys, "restore", snapshots[0], "--auto-approve")
+    assert refused.code == 1 and "--allow-axis-release" in refused.err
+    restored = run_cli(capsys, "restore", snapshots[0], "--auto-approve", "--allow-axis-release")
+    assert restored.code == 0, restored.err
+    after = plant.images()
+    for key, image in before.items():
+        assert after[key].system == image.system
+        for number, program in enumerate(snapshot["modules"][0]["programs"], start=1):
+            if program is not None and key == ("booth-a", 1):
+                assert after[key].program(number) == image.program(number)
+
+
+def test_journal_records_every_exchange(plant, capsys, tmp_path):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    (journal,) = (tmp_path / ".prc3cfg" / "journal").iterdir()
+    events = [json.loads(line) for line in journal.read_text().splitlines()]
+    exchanges = [e for e in events if e["event"] == "exchange"]
+    assert {e["request"][:2] for e in exchanges} >= {"50", "20"}
+    assert all(e["reply"] is not None for e in exchanges)
+    assert sum(e["event"] == "result" and e["verified"] for e in events) == 6
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_apply_converges_under_lost_and_damaged_frames(tmp_path, capsys, seed):
+    with emulated_plant(tmp_path, faults=FaultInjection(drop_rate=0.1, corrupt_rate=0.05, seed=seed), timeout=0.05) as plant:
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 0, result.err
+        assert plant.matches_plant()
+
+
+@pytest.mark.parametrize("framing", ["open-driver", "stx"])
+def test_apply_converges_on_every_framing_under_faults(tmp_path, capsys, framing):
+    faults = FaultInjection(drop_rate=0.1, corrupt_rate=0.05, seed=11)
+    with emulated_plant(tmp_path, faults=faults, timeout=0.1, framing=framing) as plant:
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 0, result.err
+        assert plant.matches_plant()
+
+
+def test_an_apply_killed_half_way_converges_when_run_again(tmp_path):
+    """A real process, SIGKILLed once it has started writing to a 9600-baud line, then run again."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        command = [sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve", "--allow-axis-release"]
+        env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "PYTHONUNBUFFERED": "1"}
+        killed = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
+        for line in killed.stdout:
+            if line.startswith("Snapshot of the modules before writing"):
+                killed.send_signal(signal.SIGKILL)  # the first writes are on the line
+                break
+        assert killed.wait(timeout=60) == -signal.SIGKILL
+        assert not plant.matches_plant()  # left half-way (a whole apply takes over a second here)
+        assert list((tmp_path / "locks").iterdir())  # and its lock behind
+        again = subprocess.run(command, capture_output=True, text=True, env=env, timeout=120)
+        assert again.returncode == 0, again.stderr
+        assert plant.matches_plant()

@@ -1,0 +1,117 @@
+"""`prc3cfg read` and `prc3cfg plan` against real emulators: outputs, exit codes, warnings, plan file."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from emulated import emulated_plant, run_cli
+
+from prc3cfg import codec
+from prc3cfg.plantplan import image_sha256
+
+WARNING = "travel to reference point required"
+
+
+@pytest.fixture
+def plant(tmp_path):
+    with emulated_plant(tmp_path) as emulated:
+        yield emulated
+
+
+def test_read_json_is_exactly_what_the_emulators_hold(plant, capsys):
+    result = run_cli(capsys, "read", plant.path, "--json")
+    assert result.code == 0, result.err
+    entries = json.loads(result.out)
+    held = plant.images()
+    assert len(entries) == 6
+    for entry in entries:
+        image = held[(entry["bus"], entry["address"])]
+        for number, program in enumerate(entry["programs"], start=1):
+            assert program is None or program == image.program(number).to_json()
+        assert entry["system"] == image.system.to_json()
+
+
+def test_plan_from_factory_shows_changes_and_axis_warnings_everywhere(plant, capsys, tmp_path):
+    human = run_cli(capsys, "plan", plant.path, "--detailed-exitcode", "--out", tmp_path / "plan.json")
+    assert human.code == 2
+    assert WARNING in human.out and "RELEASES AXES" in human.out
+    assert "upper reversing point 0.400 m → 2.200 m" in human.out
+
+    document = json.loads((tmp_path / "plan.json").read_text())
+    assert document["format"] == "prc3cfg-plan/1" and document["plant"] == "demo-line"
+    module = document["buses"][0]["modules"][0]
+    assert module["releases_axes"] is True and WARNING in module["warning"]
+    assert module["steps"][0]["releases_axes"] is True
+    assert codec.decode_message(bytes.fromhex(module["steps"][0]["message"])).ID == 0x20
+    assert sum(len(m["steps"]) for b in document["buses"] for m in b["modules"]) == document["message_count"]
+
+    as_json = run_cli(capsys, "plan", plant.path, "--json")
+    assert as_json.code == 0
+    assert json.loads(as_json.out)["axis_releases"] == [f"{b}/{n}" for b, n in (
+        ("booth-a", "booth-a-left"), ("booth-a", "booth-a-right"), ("booth-a", "booth-a-top"),
+        ("booth-b", "booth-b-left"), ("booth-b", "booth-b-right"), ("booth-b", "booth-b-pretreat"))]  # fmt: skip
+
+    markdown = run_cli(capsys, "plan", plant.path, "--markdown")
+    assert markdown.code == 0
+    assert "<details>" in markdown.out and "| bus | module |" in markdown.out
+    assert WARNING in markdown.out and "⚠ releases axes" in markdown.out
+
+
+def test_plan_state_hash_is_the_read_back(plant, capsys, tmp_path):
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    document = json.loads((tmp_path / "plan.json").read_text())
+    read = json.loads(run_cli(capsys, "read", plant.path, "--json").out)
+    hashes = {(e["bus"], e["address"]): e for e in read}
+    from prc3cfg.image import ModuleImage
+
+    for bus in document["buses"]:
+        for module in bus["modules"]:
+            entry = hashes[(bus["name"], module["address"])]
+            assert module["state_sha256"] == image_sha256(ModuleImage.from_json(entry))
+
+
+def test_no_change_plan_has_no_warning_and_exit_0(plant, capsys):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    result = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
+    assert result.code == 0
+    assert WARNING not in result.out and "No changes" in result.out
+
+
+def test_a_speed_tweak_is_one_cheap_step_without_axis_release(plant, capsys, tmp_path):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    plant.path.write_text(plant.path.read_text().replace("speed: 0.35", "speed: 0.34", 1))
+    result = run_cli(capsys, "plan", plant.path, "--json", "--module", "booth-a-left")
+    document = json.loads(result.out)
+    steps = document["buses"][0]["modules"][0]["steps"]
+    assert [s["message"][:2] for s in steps] in (["41"], ["32"])
+    assert not steps[0]["releases_axes"] and document["axis_releases"] == []
+    assert document["estimated_bus_time_s"] < document["naive_bus_time_s"] or len(steps) == 1
+
+
+def test_plan_against_saved_images_needs_no_bus(plant, capsys, tmp_path):
+    saved = tmp_path / "actual.json"
+    saved.write_text(run_cli(capsys, "read", plant.path, "--json").out)
+    for emulator in plant.emulators.values():
+        emulator.close()  # the bus is gone
+    result = run_cli(capsys, "plan", plant.path, "--actual", saved, "--detailed-exitcode")
+    assert result.code == 2 and "Plan: 6 of 6 modules change" in result.out
+
+
+def test_usage_error_under_detailed_exitcode_is_not_changes(plant, capsys):
+    result = run_cli(capsys, "plan", plant.path, "--detailed-exitcode", "--no-such-option")
+    assert result.code not in (0, 2)
+
+
+def test_unknown_module_name_is_one_line(plant, capsys):
+    result = run_cli(capsys, "plan", plant.path, "--module", "nope")
+    assert result.code == 1
+    assert result.err.count("\n") == 1 and "no module named nope" in result.err
+
+
+def test_a_silent_bus_is_one_line_naming_bus_and_module(plant, capsys):
+    plant.emulators["booth-b"].update(3, mode="manual")
+    result = run_cli(capsys, "plan", plant.path, "--module", "booth-b-right", "--retries", "1")
+    assert result.code == 1
+    assert result.err.startswith("error: bus booth-b, module 3: no reply within 0.1 s")
+    assert result.err.count("\n") == 1
