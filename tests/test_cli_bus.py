@@ -1,0 +1,114 @@
+"""`prc3cfg scan`, `import` and `link init-db` against real emulators and plant files."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from emulated import run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prc3cfg.device import ModuleState
+from prc3cfg.emulator import Emulator
+from prc3cfg.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
+
+GATEWAY_PLANT = """\
+plant: gateway-test
+buses:
+  - name: line-1
+    port: /dev/ttyUSB0
+    framing: open-driver
+    baud: 9600
+    parity: even
+    data_bits: 8
+    stop_bits: 1
+    zvz: {zvz}
+    gateway: {{receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}}
+    modules:
+      - {{address: 1, name: m1}}
+"""
+
+
+def test_init_db_reproduces_the_manuals_db189_example(tmp_path, capsys):
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(GATEWAY_PLANT.format(zvz=0.220))
+    result = run_cli(capsys, "link", "init-db", plant, "--bus", "line-1")
+    assert result.code == 0, result.err
+    rows = [line.split() for line in result.out.splitlines()[1:]]
+    assert [" ".join(r[2:-1]) for r in rows] == [
+        "KY = 030,001", "KY = 000,001", "KM = 00000000 00110100", "KM = 00000000 00000000",
+        "KH = 0000", "KH = 0000", "KF = +220", "KH = 0000",
+    ]  # fmt: skip
+    assert [r[-1] for r in rows] == ["1E01h", "0001h", "0034h", "0000h", "0000h", "0000h", "00DCh", "0000h"]
+
+
+def test_init_db_refuses_zvz_below_4_ms_naming_systat_8e(tmp_path, capsys):
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(GATEWAY_PLANT.format(zvz=0.003))
+    result = run_cli(capsys, "link", "init-db", plant, "--bus", "line-1")
+    assert result.code == 1
+    assert "SYSTAT 8Eh" in result.err and "Traceback" not in result.err
+
+
+def test_init_db_needs_a_gateway(tmp_path, capsys):
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(GATEWAY_PLANT.format(zvz=0.02).replace("    gateway: {receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}\n", ""))
+    result = run_cli(capsys, "link", "init-db", plant, "--bus", "line-1")
+    assert result.code == 1 and "has no gateway block" in result.err
+
+
+def test_scan_lists_the_answering_addresses(capsys):
+    with Emulator({2: ModuleState.factory(2), 17: ModuleState.factory(17)}) as emulator:
+        host, port = emulator.listen()
+        result = run_cli(capsys, "scan", "--port", f"socket://{host}:{port}", "--timeout", "0.05", "--retries", "0")
+    assert result.code == 0, result.err
+    assert "2 modules answered" in result.out
+    assert " 17 " in result.out and "0.400 m" in result.out
+
+
+def test_scan_of_a_silent_line_is_one_line(capsys):
+    with Emulator({}) as emulator:
+        host, port = emulator.listen()
+        result = run_cli(capsys, "scan", "--port", f"socket://{host}:{port}", "--timeout", "0.02", "--retries", "0")
+    assert result.code == 1 and result.err.count("\n") == 1 and "no module answered" in result.err
+
+
+@st.composite
+def module_states(draw, address: int) -> ModuleState:
+    s5 = draw(st.integers(1, 300))
+    system = SystemParameters(
+        S1=draw(st.integers(100, 9999)), S2=draw(st.integers(50, 500)), S3=draw(st.integers(1, 9999)),
+        S4=draw(st.integers(s5, 600)), S5=s5, S6=draw(st.integers(1000, 1500)), S7=draw(st.integers(800, 1500)),
+        S8=draw(st.integers(0, 1)), S10=draw(st.integers(1, 9999)), S11=draw(st.integers(1, 1500)),
+        S12=draw(st.integers(5, 50)),
+    )  # fmt: skip
+    base = ModuleImage.factory(address)
+    programs = list(replace(base, system=system).programs)
+    default = Program(P=min(system.S2 + 100, system.S1), V=min(max(50, system.S5), system.S4))
+    programs = [default] * PROGRAM_COUNT
+    for number in draw(st.lists(st.integers(1, PROGRAM_COUNT), max_size=12, unique=True)):
+        f = st.integers(0, 1999)
+        programs[number - 1] = Program(
+            P=draw(st.integers(0, system.S1)), V=draw(st.integers(system.S5, system.S4)),
+            Vr=draw(st.integers(-600, 600)), T=draw(st.integers(0, 600)), F1=draw(f), F2=draw(f),
+            A=draw(st.sampled_from([0, 0, number % 64 + 1, draw(st.integers(1, 64))])),
+        )  # fmt: skip
+    for number in draw(st.lists(st.integers(1, PROGRAM_COUNT), max_size=6)):
+        programs[number - 1] = replace(programs[number - 1], A=draw(st.integers(0, 64)))
+    return ModuleState(ModuleImage(address, system, tuple(programs)))
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.tuples(module_states(3), module_states(9)))
+def test_import_then_plan_is_empty(tmp_path_factory, capsys, states):
+    directory = tmp_path_factory.mktemp("import")
+    with Emulator({s.address: s for s in states}) as emulator:
+        host, port = emulator.listen()
+        url = f"socket://{host}:{port}"
+        imported = run_cli(capsys, "import", "--port", url, "--modules", "3,9", "--timeout", "0.2")
+        assert imported.code == 0, imported.err
+        plant = directory / "imported.yaml"
+        plant.write_text(imported.out)
+        assert run_cli(capsys, "validate", plant).code == 0
+        planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
+        assert planned.code == 0, planned.out + planned.err
