@@ -167,17 +167,22 @@ class _Reader:
         return result
 
     def scalar(self, node: ScalarNode, path: Path_) -> Any:
-        if node.tag == _FLOAT_TAG:
-            text = node.value.replace("_", "")
-            try:
-                return Decimal(_SPECIAL_FLOATS.get(text.lower(), text))
-            except InvalidOperation:  # YAML 1.1 sexagesimal "1:30.5"
-                return Decimal(repr(self.constructor.construct_object(node)))
         try:
+            if node.tag == _FLOAT_TAG:
+                return self.decimal(node)
             return self.constructor.construct_object(node)
-        except yaml.constructor.ConstructorError:
-            self.problems.append(Problem(path, f"a YAML tag {node.tag} that a plant file does not use — remove it"))
+        except (yaml.YAMLError, ValueError, TypeError, ArithmeticError):
+            self.problems.append(Problem(path, f"'{node.value}' cannot be read as {node.tag} — remove the tag; "
+                                         "a plant file needs none"))
             return node.value
+
+    def decimal(self, node: ScalarNode) -> Decimal:
+        """A float exactly as written: "0.1" is Decimal("0.1")."""
+        text = node.value.replace("_", "")
+        try:
+            return Decimal(_SPECIAL_FLOATS.get(text.lower(), text))
+        except InvalidOperation:  # YAML 1.1 sexagesimal "1:30.5"
+            return Decimal(repr(self.constructor.construct_object(node)))
 
 
 def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]]:

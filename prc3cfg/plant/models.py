@@ -43,7 +43,7 @@ def _plain(number: Decimal) -> int | float:
 
 
 def _number_type(
-    lo: Decimal | int | None,
+    lo: Decimal | int,
     hi: Decimal | int | None = None,
     *,
     step: Decimal | int | None = None,
@@ -54,13 +54,10 @@ def _number_type(
     out: type = Decimal,
     description: str = "",
 ) -> Any:
-    """An annotated number type: range lo..hi (either may be open), whole steps, result type `out`."""
-    lo_, hi_, step_ = (None if x is None else Decimal(x) for x in (lo, hi, step))
+    """An annotated number type: at least `lo`, at most `hi` (if any), whole `step`s (if any), as `out`."""
+    lo_, hi_, step_ = Decimal(lo), None if hi is None else Decimal(hi), None if step is None else Decimal(step)
     with_unit = (lambda x: f"{x} {unit}") if unit else str
-    if lo_ is not None and hi_ is not None:
-        allowed = f"{with_unit(f'{lo_}..{hi_}')}"
-    else:
-        allowed = f"at least {with_unit(lo_)}" if lo_ is not None else f"at most {with_unit(hi_)}"
+    allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
 
     def validate(value: Any) -> Any:
         if isinstance(value, bool) or not isinstance(value, (int, float, Decimal)):
@@ -69,15 +66,14 @@ def _number_type(
         if not number.is_finite():
             raise PydanticCustomError("not_finite", "not a finite number", {"value": str(value)})
         context = {"value": with_unit(number), "allowed": allowed, "note": note, "unit": unit}
-        if (lo_ is not None and number < lo_) or (hi_ is not None and number > hi_):
+        if number < lo_ or (hi_ is not None and number > hi_):
             raise PydanticCustomError("out_of_range", "out of range", context)
         if step_ is not None and number % step_:
             step_words = {"step": with_unit(step_), "step_name": step_name, "what": what}
             raise PydanticCustomError("not_whole", "not a whole number", context | step_words)
         return out(number)
 
-    schema: dict[str, Any] = {"type": "integer" if out is int else "number"}
-    schema |= {"minimum": _plain(lo_)} if lo_ is not None else {}
+    schema: dict[str, Any] = {"type": "integer" if out is int else "number", "minimum": _plain(lo_)}
     schema |= {"maximum": _plain(hi_)} if hi_ is not None else {}
     schema |= {"description": description} if description else {}
     return Annotated[out, PlainValidator(validate), WithJsonSchema(schema)]
