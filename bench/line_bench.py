@@ -1,0 +1,111 @@
+"""Bus time on a real-speed line: measured read-back and apply against their estimates.
+
+    python bench/line_bench.py [--modules 30] [--baud 9600] [--framing crc16] [--skip-read] [--skip-apply]
+
+Starts `prc3cfg emulator serve --line-speed BAUD` (a separate process, so the emulator
+and the client do not share an interpreter), then
+
+- **read**: `prc3cfg read --json` of a plant of N fully managed modules (one 50h and
+  sixteen 52h each) — prints the wall time, the bus-time estimate (link.md's cost model
+  summed over those exchanges) and the ratio; acceptance: at most 1.10;
+- **apply**: `prc3cfg apply` of the same plant from factory defaults — prints the wall
+  time against the plan's estimated bus time plus its verifying read-back; acceptance:
+  at most 1.10. (Reading before planning is not counted: it is the `read` figure.)
+
+Wall times include each command's start-up (imports, about 0.3 s), reported separately.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from prc3cfg.bustime import LineCost
+from prc3cfg.line import LineSettings
+from prc3cfg.readback import read_messages
+
+PROGRAMS = "\n".join(
+    f"          {n}: {{position: {0.5 + n / 100:.3f}, speed: 0.{200 + n:03d}, dwell: {n % 7}.5}}" for n in range(1, 33)
+)
+PLANT = """\
+plant: line-bench
+buses:
+  - name: line
+    port: {port}
+    framing: {framing}
+    baud: {baud}
+    parity: none
+    timeout: 1.0
+    modules:
+{modules}
+"""
+MODULE = """\
+      - address: {address}
+        name: m{address}
+        unmanaged_programs: reset
+        system: {{upper_reversing_point: 2.000, max_speed: 0.500}}
+        programs:
+{programs}
+        chains: [[1, 2, 3, 4], {{programs: [10, 11], loop: true}}]
+"""
+
+
+def run(command: list[str]) -> tuple[float, str]:
+    start = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    elapsed = time.perf_counter() - start
+    if done.returncode != 0:
+        sys.exit(f"{' '.join(command)} failed:\n{done.stdout}\n{done.stderr}")
+    return elapsed, done.stdout
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--modules", type=int, default=30)
+    parser.add_argument("--baud", type=int, default=9600)
+    parser.add_argument("--framing", default="crc16")
+    parser.add_argument("--skip-read", action="store_true")
+    parser.add_argument("--skip-apply", action="store_true")
+    args = parser.parse_args()
+    prc3cfg = [sys.executable, "-m", "prc3cfg"]
+    startup, _ = run([*prc3cfg, "--help"])
+    cost = LineCost.of(args.framing, LineSettings(baud=args.baud, parity="none"), 0.010, 0.020)
+
+    with tempfile.TemporaryDirectory() as work:
+        emulator = subprocess.Popen(
+            [*prc3cfg, "emulator", "serve", "--listen", "127.0.0.1:0", "--modules", f"1-{args.modules}",
+             "--framing", args.framing, "--line-speed", str(args.baud), "--parity", "none"],
+            stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        try:
+            port = emulator.stdout.readline().split()[2]
+            plant = Path(work) / "plant.yaml"
+            modules = "".join(MODULE.format(address=a, programs=PROGRAMS) for a in range(1, args.modules + 1))
+            plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=modules))
+            read_estimate = args.modules * sum(cost.message_time(1, m) for m in read_messages(range(1, 65)))
+            print(f"{args.modules} modules, {args.framing}, {args.baud} baud 8N1, turnaround 10 ms; "
+                  f"command start-up {startup:.2f} s (included below)")  # fmt: skip
+            if not args.skip_read:
+                wall, _ = run([*prc3cfg, "read", str(plant), "--json"])
+                print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio {wall / read_estimate:.3f}")
+            if not args.skip_apply:
+                _, plan_json = run([*prc3cfg, "plan", str(plant), "--json"])
+                plan_estimate = json.loads(plan_json)["estimated_bus_time_s"]
+                # Reset the modules to factory state is not needed: the plan above was made
+                # from what they hold now, and apply plans again from the same state.
+                wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release"])
+                estimate = read_estimate + plan_estimate + read_estimate  # read, write, verify
+                print(f"  apply: wall {wall:7.2f} s   estimate {estimate:7.2f} s   ratio {wall / estimate:.3f}"
+                      f"   (plan {plan_estimate:.2f} s + read-back before and after {2 * read_estimate:.2f} s)")  # fmt: skip
+        finally:
+            emulator.terminate()
+            emulator.wait()
+
+
+if __name__ == "__main__":
+    main()
