@@ -14,7 +14,15 @@ field rejects booleans and strings, checks its range and its step, and hands bac
 `int`, an exact `Decimal` (human units) or, for the bus's times, a `float` of seconds.
 Its failures are `PydanticCustomError`s whose type names the problem
 (`not_number`, `not_finite`, `out_of_range`, `not_whole`, `not_allowed`) and whose
-context carries the words; `loader` turns them into sentences.
+context carries the words; `messages` turns them into sentences.
+
+Decisions about the bus (link.md): `port` any non-empty text (a device path, a pyserial
+URL, `emulator://NAME`); `baud` any positive whole number (with a gateway, `rules` asks
+the Open Driver's own list); `timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz`
+whole milliseconds, 0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms with a gateway is
+a `rules` check, SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and
+the Open Driver allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223
+SYSTAT 91h), from `prc3cfg.gateway`.
 """
 
 from __future__ import annotations

@@ -10,13 +10,11 @@ rule passed — so converting to device units cannot fail here.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
-
 from pydantic import BaseModel, ConfigDict
 
 from prc3cfg.image import PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
 from prc3cfg.line import LineSettings
-from prc3cfg.plant.models import BusLine
+from prc3cfg.plant.models import BusLine, UnmanagedPrograms
 from prc3cfg.plant.profiles import Effective
 from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, function_output
 
@@ -29,7 +27,7 @@ class Module(BaseModel):
     address: int
     name: str
     profiles: tuple[str, ...]
-    unmanaged_programs: Literal["keep", "reset"]
+    unmanaged_programs: UnmanagedPrograms
     settings: Effective
 
     def managed_programs(self) -> tuple[int, ...]:
@@ -71,8 +69,6 @@ class Module(BaseModel):
 
 class Bus(BusLine):
     """One RS-422 line: port, framing, line settings, times, optional gateway, and its modules."""
-
-    model_config = ConfigDict(arbitrary_types_allowed=True)
 
     modules: tuple[Module, ...]
 
