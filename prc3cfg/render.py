@@ -11,8 +11,6 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from deepdiff import DeepDiff
-
 from prc3cfg.image import ModuleImage, default_program
 from prc3cfg.plant.units import BY_SYMBOL, format_function_output
 from prc3cfg.plantplan import ModuleChange, PlantPlan
@@ -50,6 +48,8 @@ class FieldChange:
 
 def field_changes(actual: ModuleImage, desired: ModuleImage) -> list[FieldChange]:
     """Every differing system parameter and program field (A excluded: see `chain_changes`)."""
+    from deepdiff import DeepDiff  # imported here: it loads numpy, which every command would pay for
+
     diff = DeepDiff(actual.to_json(), desired.to_json(), ignore_order=False)
     changes = []
     for path, change in diff.get("values_changed", {}).items():
