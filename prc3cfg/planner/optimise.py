@@ -34,14 +34,17 @@ caller runs it on `prc3cfg.device`).
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from prc3cfg import codec
 from prc3cfg.image import PROGRAM_COUNT
-from prc3cfg.planner.layout import Layout, Writes, runs_of
+from prc3cfg.planner.layout import Layout, Writes, members, runs_of
 from prc3cfg.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, PLAIN_FIELDS, PV_BITS, V_BIT, Problem
 
 INF = float("inf")
+#: What a program (index) with a difference mask costs to fix, in seconds.
+Residual = Callable[[int, int], float]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
 #: How many of the best layouts of each init choice are priced exactly.
 KEPT = 3
@@ -109,7 +112,7 @@ class WritePhase:
             found.append((writes, channels))
             bound = min(bound, writes.estimate)
         found.sort(key=lambda pair: pair[0].estimate)
-        return found[:KEPT]
+        return sorted(((self.refine(w, c), c) for w, c in found[:KEPT]), key=lambda pair: pair[0].estimate)
 
     def forced(self, channels: Channels) -> int:
         """Programs that differ in a field no open message writes: they take a 21h."""
@@ -124,17 +127,21 @@ class WritePhase:
                 whole |= self.changed[V_BIT]
         return whole
 
-    def evaluate(self, channels: Channels, bound: float = INF) -> Writes | None:
-        """The cheapest write phase with these channels; None when it cannot beat `bound`."""
-        prices = self.prices
-        whole = self.forced(channels)
-        if whole.bit_count() * prices.program >= bound:
+    def evaluate(self, channels: Channels, bound: float = INF, whole: int = 0) -> Writes | None:
+        """The cheapest write phase with these channels (and 21h for `whole`); None when it cannot beat `bound`."""
+        whole |= self.forced(channels)
+        if whole.bit_count() * self.prices.program >= bound:
             return None
         ranges, addresses, extra = self.addresses(whole, channels.addresses)
         whole |= extra
-        runs, positions, speeds, runs_cost = self.parts(whole, channels)
-        plain = {bit: self.changed[bit] & ~whole for bit in PLAIN_BITS}
-        items = (positions, speeds, *plain.values())
+        runs, positions, speeds, extra, runs_cost = self.parts(whole, addresses, channels)
+        whole |= extra
+        items = (positions, speeds, *(self.changed[bit] & ~whole for bit in PLAIN_BITS))
+        return self._priced(whole, runs, runs_cost, items, ranges, addresses & ~whole)
+
+    def _priced(self, whole: int, runs: tuple, runs_cost: float, items: tuple[int, ...], ranges: tuple,
+                addresses: int) -> Writes:  # fmt: skip
+        prices = self.prices
         estimate = (
             whole.bit_count() * prices.program
             + runs_cost
@@ -144,23 +151,66 @@ class WritePhase:
         )
         return Writes(whole, runs, items, ranges, addresses, estimate)
 
-    # -- P and V: 33h/32h runs against 40h/41h items -------------------------------------------
+    def refine(self, writes: Writes, channels: Channels) -> Writes:
+        """Give programs a 21h while that saves messages (the DPs price items one by one).
 
-    def parts(self, whole: int, channels: Channels) -> tuple[tuple[tuple[int, int], ...], int, int, float]:
-        """(runs, 40h programs, 41h programs, cost of the runs) for the programs not in `whole`."""
+        A program that takes a 21h leaves its items; a 33h run shrinks to the programs that
+        still need it (or goes); link ranges stay, its 21h comes after them.
+        """
+        while True:
+            best = writes
+            in_runs = sum((1 << (last + 1)) - (1 << first) for first, last in writes.part_runs)
+            for j in members((_all_of(writes.items) | writes.addresses | in_runs) & ~writes.whole):
+                bit = 1 << j
+                whole = writes.whole | bit
+                runs = self._trimmed(writes.part_runs, self.pv_changed & ~whole)
+                moved = self._priced(
+                    whole, runs, self._runs_cost(runs), tuple(mask & ~bit for mask in writes.items),
+                    writes.ranges, writes.addresses & ~bit,
+                )  # fmt: skip
+                if moved.estimate < best.estimate - 1e-12:
+                    best = moved
+            if best is writes:
+                break
+            writes = best
+        again = self.evaluate(channels, whole=writes.whole)
+        return again if again is not None and again.estimate < writes.estimate else writes
+
+    @staticmethod
+    def _trimmed(runs: tuple[tuple[int, int], ...], need: int) -> tuple[tuple[int, int], ...]:
+        """The runs cut down to their first and last program in `need`; runs needing none dropped."""
+        out = []
+        for first, last in runs:
+            inside = need & ((1 << (last + 1)) - (1 << first))
+            if inside:
+                out.append(((inside & -inside).bit_length() - 1, inside.bit_length() - 1))
+        return tuple(out)
+
+    def _runs_cost(self, runs: tuple[tuple[int, int], ...]) -> float:
+        return sum(self.parts_price[last - first + 1] for first, last in runs)
+
+    # -- P and V: 33h/32h runs against 40h/41h items (or a 21h) ---------------------------------
+
+    def parts(self, whole: int, addresses: int, channels: Channels) -> tuple:
+        """(runs, 40h programs, 41h programs, programs better off with a 21h, cost of the runs).
+
+        For the programs not in `whole` that differ in P or V. A program may take a 21h instead
+        when that costs less than its P and V writes plus its other items (`addresses`: its 46h item).
+        """
         need = self.pv_changed & ~whole
-        key = (need, channels.positions, channels.speeds, channels.parts)
+        key = (need, addresses & need, channels.positions, channels.speeds, channels.parts)
         cached = self._parts_cache.get(key)
         if cached is None:
-            cached = self._parts_cache[key] = self._solve_parts(need, channels)
+            cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels)
         return cached
 
-    def _solve_parts(self, need: int, channels: Channels) -> tuple:
+    def _solve_parts(self, need: int, addresses: int, channels: Channels) -> tuple:
         if not need:
-            return (), 0, 0, 0.0
-        item, masks, managed, price = self.prices.field_item, self.masks, self.managed, self.parts_price
+            return (), 0, 0, 0, 0.0
+        prices, masks, managed, price = self.prices, self.masks, self.managed, self.parts_price
+        item = prices.field_item
         best = [INF] * (PROGRAM_COUNT + 1)
-        back: list[tuple[int, bool]] = [(0, False)] * (PROGRAM_COUNT + 1)
+        back: list[tuple[int, str]] = [(0, "")] * (PROGRAM_COUNT + 1)
         best[0] = 0.0
         for i in range(PROGRAM_COUNT):
             b = best[i]
@@ -168,7 +218,7 @@ class WritePhase:
                 continue
             if not need >> i & 1:
                 if b < best[i + 1]:
-                    best[i + 1], back[i + 1] = b, (i, False)
+                    best[i + 1], back[i + 1] = b, (i, "")
                 continue
             m = masks[i]
             c = b
@@ -177,25 +227,31 @@ class WritePhase:
             if m & V_BIT:
                 c += item if channels.speeds else INF
             if c < best[i + 1]:
-                best[i + 1], back[i + 1] = c, (i, False)
+                best[i + 1], back[i + 1] = c, (i, "items")
+            others = sum(1 for bit in PLAIN_BITS if m & bit) * item + (addresses >> i & 1) * prices.address_item
+            c = b + prices.program - others
+            if c < best[i + 1]:
+                best[i + 1], back[i + 1] = c, (i, "whole")
             if channels.parts:
                 for j in range(i, min(i + codec.MAX_FIELD_ITEMS, PROGRAM_COUNT)):
                     if not managed[j]:
                         break
                     if need >> j & 1 and b + price[j - i + 1] < best[j + 1]:
-                        best[j + 1], back[j + 1] = b + price[j - i + 1], (i, True)
-        runs, positions, speeds, runs_cost = [], 0, 0, 0.0
+                        best[j + 1], back[j + 1] = b + price[j - i + 1], (i, "run")
+        runs, positions, speeds, whole, runs_cost = [], 0, 0, 0, 0.0
         j = PROGRAM_COUNT
         while j > 0:
-            i, is_run = back[j]
-            if is_run:
+            i, how = back[j]
+            if how == "run":
                 runs.append((i, j - 1))
                 runs_cost += price[j - i]
-            elif need >> i & 1:
+            elif how == "items":
                 positions |= (masks[i] & P_BIT and 1) << i
                 speeds |= (masks[i] & V_BIT and 1) << i
+            elif how == "whole":
+                whole |= 1 << i
             j = i
-        return tuple(reversed(runs)), positions, speeds, runs_cost
+        return tuple(reversed(runs)), positions, speeds, whole, runs_cost
 
     # -- A: link/unlink ranges against 46h items -----------------------------------------------
 
@@ -271,32 +327,95 @@ class WritePhase:
 
     # -- what a program's differences cost, for the init DP ------------------------------------
 
-    def residual(self, i: int, mask: int, channels: Channels) -> float:
-        """A program's remaining differences priced one by one (no message headers)."""
+    def linear(self, channels: Channels) -> Residual:
+        """A program's differences priced item by item under `channels`, no message headers."""
         prices = self.prices
-        if not mask:
-            return 0.0
-        cost = 0.0
-        for bit in PLAIN_BITS:
-            if mask & bit:
-                if not channels.plain & bit:
+
+        def cost(i: int, mask: int) -> float:
+            if not mask:
+                return 0.0
+            total = 0.0
+            for bit in PLAIN_BITS:
+                if mask & bit:
+                    if not channels.plain & bit:
+                        return prices.program
+                    total += prices.field_item
+            if mask & PV_BITS:
+                if channels.parts:
+                    total += prices.field_item
+                elif (mask & P_BIT and not channels.positions) or (mask & V_BIT and not channels.speeds):
                     return prices.program
-                cost += prices.field_item
-        if mask & PV_BITS:
-            if channels.parts:
-                cost += prices.field_item
-            elif (mask & P_BIT and not channels.positions) or (mask & V_BIT and not channels.speeds):
-                return prices.program
-            else:
-                cost += prices.field_item * (mask & PV_BITS).bit_count()
-        if mask & A_BIT:
-            if channels.addresses:
-                cost += prices.address_item
-            elif self.target_a[i] in (0, i + 2):
-                cost += prices.link
-            else:
-                return prices.program
-        return min(cost, prices.program)
+                else:
+                    total += prices.field_item * (mask & PV_BITS).bit_count()
+            if mask & A_BIT:
+                if channels.addresses:
+                    total += prices.address_item
+                elif self.target_a[i] in (0, i + 2):
+                    total += prices.link
+                else:
+                    return prices.program
+            return min(total, prices.program)
+
+        return cost
+
+    def marginal(self, writes: Writes) -> Residual:
+        """What a program's differences would add to `writes`, everything else staying as it is.
+
+        Header-aware: a program that alone opens a message pays for the message, one that
+        joins an open one pays its item, one inside a 33h run or a fitting link range nothing.
+        """
+        prices = self.prices
+        counts = [mask.bit_count() for mask in writes.items]
+        addresses = writes.addresses.bit_count()
+        need = self.pv_changed & ~writes.whole
+        run_of = {i: (first, last) for first, last in writes.part_runs for i in range(first, last + 1)}
+        ranged = {i: (i + 2 if link and i < last else 0) for link, first, last in writes.ranges
+                  for i in range(first, last + 1)}  # fmt: skip
+
+        def items(k: int, i: int) -> float:
+            n = counts[k] - (writes.items[k] >> i & 1)
+            return prices.fields(n + 1) - prices.fields(n)
+
+        def parts(i: int, mask: int) -> float:
+            alone = min(self.parts_price[1], sum(items(k, i) for k, bit in enumerate((P_BIT, V_BIT)) if mask & bit))
+            if i not in run_of:
+                return alone
+            first, last = run_of[i]
+            others = need & ((1 << (last + 1)) - (1 << first)) & ~(1 << i)
+            if not others:
+                return alone
+            low, high = (others & -others).bit_length() - 1, others.bit_length() - 1
+            span = max(high, i) - min(low, i) + 1
+            if span > codec.MAX_FIELD_ITEMS:
+                return alone
+            return min(alone, self.parts_price[span] - self.parts_price[high - low + 1])
+
+        def jump(i: int, mask: int) -> float:
+            if i in ranged:
+                return 0.0 if ranged[i] == self.target_a[i] else prices.addresses(addresses + 1) - prices.addresses(addresses)
+            if not mask & A_BIT:
+                return 0.0
+            n = addresses - (writes.addresses >> i & 1)
+            single = prices.link if self.target_a[i] == 0 else INF
+            return min(single, prices.addresses(n + 1) - prices.addresses(n))
+
+        def cost(i: int, mask: int) -> float:
+            total = jump(i, mask)
+            for k, bit in enumerate(PLAIN_BITS, start=2):
+                if mask & bit:
+                    total += items(k, i)
+            if mask & PV_BITS:
+                total += parts(i, mask)
+            return min(total, prices.program) if mask else total
+
+        return cost
+
+
+def _all_of(masks: tuple[int, ...]) -> int:
+    union = 0
+    for mask in masks:
+        union |= mask
+    return union
 
 
 def _mask_of(flags: object) -> int:
@@ -355,11 +474,8 @@ def choose_inits(problem: Problem, residual: list[dict[int, float]]) -> tuple[in
     return tuple(kinds)
 
 
-def _residuals(problem: Problem, phase: WritePhase, channels: Channels) -> list[dict[int, float]]:
-    return [
-        {kind: phase.residual(i, problem.masks[kind][i], channels) for kind in problem.kinds}
-        for i in range(PROGRAM_COUNT)
-    ]
+def _table(problem: Problem, residual: Residual) -> list[dict[int, float]]:
+    return [{kind: residual(i, problem.masks[kind][i]) for kind in problem.kinds} for i in range(PROGRAM_COUNT)]
 
 
 # -- the whole search ------------------------------------------------------------------------
@@ -378,17 +494,19 @@ def search(problem: Problem) -> list[Layout]:
     if problem.init_useful():
         best = layouts[0].estimate
         tried = {keep}
-        queue = [found[0][1], Channels.everything(True), Channels.everything(False)]
+        queue = [phase.marginal(found[0][0]), phase.linear(Channels.everything(True)),
+                 phase.linear(Channels.everything(False))]  # fmt: skip
         while queue:
-            kinds = choose_inits(problem, _residuals(problem, phase, queue.pop(0)))
+            kinds = choose_inits(problem, _table(problem, queue.pop(0)))
             if kinds in tried:
                 continue
             tried.add(kinds)
             base = fixed + init_cost(problem, kinds)
-            found = WritePhase(problem, kinds).solve()
+            with_inits = WritePhase(problem, kinds)
+            found = with_inits.solve()
             layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
             if base + found[0][0].estimate < best:
                 best = base + found[0][0].estimate
-                queue.append(found[0][1])
+                queue.append(with_inits.marginal(found[0][0]))
     layouts.sort(key=lambda layout: layout.estimate)
     return layouts

@@ -1,0 +1,204 @@
+"""Planner cases as tables: (read-back, plant file) → the steps, or the properties the steps must have."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+from planner_helpers import FRAMINGS, check_plan, line, with_programs
+
+from prc3cfg import codec
+from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, default_program
+from prc3cfg.planner import ModulePlan, UnreachableImage, plan_module
+from prc3cfg.planner.plan import program_list
+
+SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
+
+
+def recipe(number: int) -> Program:
+    """A realistic program: a position, a speed, a dwell, a function output, chained in fours."""
+    return Program(P=300 + 29 * number, V=100 + 5 * number, Vr=0, T=10 * (number % 3), F1=1010 if number % 2 else 0,
+                   F2=0, A=number + 1 if number % 4 else 0)  # fmt: skip
+
+
+PLANT = ModuleImage(3, SYSTEM, tuple(recipe(n) for n in range(1, PROGRAM_COUNT + 1)))
+
+
+def ids(plan: ModulePlan) -> list[int]:
+    return [step.message.ID for step in plan.steps]
+
+
+def planned(actual: ModuleImage, desired: ModuleImage, framing: str = "crc16") -> ModulePlan:
+    cost = line(framing)
+    plan = plan_module(actual, desired, cost)
+    check_plan(plan, actual, desired, cost)
+    return plan
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_nothing_differs_no_steps(framing: str) -> None:
+    plan = planned(PLANT, PLANT, framing)
+    assert plan.steps == () and plan.bus_time == 0.0 and not plan.releases_axes
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_one_speed_is_one_message_the_cheapest_of_41h_and_32h(framing: str) -> None:
+    desired = with_programs(PLANT, {7: replace(recipe(7), V=444)})
+    plan = planned(PLANT, desired, framing)
+    cost = line(framing)
+    choices = [codec.WriteSpeeds(((7, 444),)), codec.WritePartProgram(7, recipe(7).P, 444)]
+    assert len(plan.steps) == 1 and plan.steps[0].message in choices
+    assert plan.bus_time == min(cost.message_time(3, m) for m in choices)
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_teach_in_revert_of_twelve_positions_is_one_40h(framing: str) -> None:
+    numbers = [2, 5, 9, 14, 20, 21, 33, 40, 41, 50, 58, 63]
+    taught = with_programs(PLANT, {n: replace(recipe(n), P=recipe(n).P + 7) for n in numbers})
+    plan = planned(taught, PLANT, framing)
+    assert [step.message for step in plan.steps] == [codec.WritePositions(tuple((n, recipe(n).P) for n in numbers))]
+    assert plan.steps[0].summary == "write P of programs 2, 5, 9, 14, 20, 21, 33, 40, 41, 50, 58, 63 (40h)"
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_commissioning_from_factory_defaults_batches(framing: str) -> None:
+    desired = with_programs(ModuleImage.factory(3), {n: recipe(n) for n in range(1, 25)})
+    desired = replace(desired, system=SYSTEM)
+    plan = planned(ModuleImage.factory(3), desired, framing)
+    assert ids(plan)[0] == 0x20
+    assert 0x33 in ids(plan), "P and V of consecutive programs go in 33h"
+    assert plan.bus_time < 0.8 * plan.naive_bus_time
+
+
+def test_lowering_s1_lets_the_module_clamp_the_positions() -> None:
+    lowered = replace(SYSTEM, S1=1000)
+    desired = replace(PLANT, system=lowered, programs=tuple(replace(p, P=min(p.P, 1000)) for p in PLANT.programs))
+    assert desired.programs != PLANT.programs
+    plan = planned(PLANT, desired)
+    assert [step.message for step in plan.steps] == [codec.WriteSystem(lowered)]
+    assert plan.releases_axes and plan.steps[0].summary == "write system parameters S1 (20h)"
+
+
+def test_a_speed_range_that_forces_values_is_written_after_the_system_step() -> None:
+    """New S4/S5 that old speeds violate: the system step first, then writes the new limits accept."""
+    narrowed = replace(SYSTEM, S4=300, S5=200)
+    desired = with_programs(replace(PLANT, system=narrowed), {
+        n: replace(recipe(n), V=250) for n in range(1, PROGRAM_COUNT + 1)
+    })  # fmt: skip
+    plan = planned(PLANT, desired)
+    assert ids(plan)[0] == 0x20
+
+
+def test_rechaining_a_range_is_one_30h() -> None:
+    actual = with_programs(PLANT, {n: replace(recipe(n), A=0) for n in range(10, 31)})
+    desired = with_programs(PLANT, {n: replace(recipe(n), A=n + 1 if n < 30 else 0) for n in range(10, 31)})
+    plan = planned(actual, desired)
+    assert [step.message for step in plan.steps] == [codec.LinkPrograms(10, 30)]
+
+
+def test_unchaining_is_31h_or_46h_whichever_is_cheaper() -> None:
+    desired = replace(PLANT, programs=tuple(replace(p, A=0) for p in PLANT.programs))
+    plan = planned(PLANT, desired)
+    assert ids(plan) == [0x31]
+    one = with_programs(PLANT, {5: replace(recipe(5), A=0)})
+    assert ids(planned(PLANT, one)) == [0x46]
+
+
+def test_cleanup_of_unused_programs_with_reset_is_init_ranges() -> None:
+    junk = PLANT
+    default = default_program(SYSTEM)
+    desired = with_programs(PLANT, {n: default for n in range(30, PROGRAM_COUNT + 1)})
+    assert [step.message for step in planned(junk, desired).steps] == [codec.InitProgramsFrom(30)]
+    desired = with_programs(PLANT, {n: default for n in range(10, 41)})
+    assert [step.message for step in planned(junk, desired).steps] == [codec.InitPrograms(10, 40)]
+
+
+def test_an_unmanaged_program_is_never_covered_by_a_range() -> None:
+    default = default_program(SYSTEM)
+    desired = with_programs(PLANT, {n: default for n in range(30, PROGRAM_COUNT + 1)} | {45: None})
+    actual = with_programs(PLANT, {45: None})
+    plan = planned(actual, desired)
+    assert [step.message for step in plan.steps] == [codec.InitPrograms(30, 44), codec.InitProgramsFrom(46)]
+    for step in plan.steps:
+        assert 45 not in step.message.touched_programs()
+
+
+def test_unmanaged_programs_inside_chains_and_runs_are_skipped() -> None:
+    desired = replace(PLANT, programs=tuple(
+        None if n % 5 == 0 else replace(recipe(n), P=recipe(n).P + 1, V=recipe(n).V + 1, A=0)
+        for n in range(1, PROGRAM_COUNT + 1)
+    ))  # fmt: skip
+    actual = replace(PLANT, programs=tuple(None if n % 5 == 0 else recipe(n) for n in range(1, PROGRAM_COUNT + 1)))
+    plan = planned(actual, desired)
+    for step in plan.steps:
+        assert not {n for n in step.message.touched_programs() if n % 5 == 0}
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_factory_reset_is_10h_and_11h(framing: str) -> None:
+    plan = planned(PLANT, ModuleImage.factory(3), framing)
+    assert [step.message for step in plan.steps] == [codec.InitSystem(), codec.InitAllPrograms()]
+    assert plan.steps[0].releases_axes and plan.releases_axes
+
+
+def test_factory_system_parameters_are_10h_not_20h() -> None:
+    actual = replace(PLANT, system=SYSTEM, programs=tuple(replace(p, P=min(p.P, 400)) for p in PLANT.programs))
+    desired = replace(actual, system=DEFAULT_SYSTEM)
+    assert ids(planned(actual, desired)) == [0x10]
+
+
+def test_defaults_of_the_old_system_are_reached_by_initialising_before_the_system_step() -> None:
+    """Programs that should keep the old default position: init first, then the new S2."""
+    actual = PLANT
+    new = replace(SYSTEM, S2=400)
+    desired = replace(PLANT, system=new, programs=(default_program(SYSTEM),) * PROGRAM_COUNT)
+    plan = planned(actual, desired)
+    assert [step.message for step in plan.steps] == [codec.InitAllPrograms(), codec.WriteSystem(new)]
+    desired = replace(desired, programs=(default_program(new),) * PROGRAM_COUNT)
+    assert [step.message for step in planned(actual, desired).steps] == [codec.WriteSystem(new),
+                                                                          codec.InitAllPrograms()]  # fmt: skip
+
+
+def test_a_program_that_needs_everything_is_one_21h() -> None:
+    other = Program(P=2000, V=400, Vr=-20, T=300, F1=1500, F2=1100, A=40)
+    plan = planned(PLANT, with_programs(PLANT, {17: other}))
+    assert [step.message for step in plan.steps] == [codec.WriteProgram(17, other)]
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_open_driver_pays_for_exchanges_so_plans_never_have_more_of_them(framing: str) -> None:
+    changes = {n: replace(recipe(n), T=recipe(n).T + 1, F2=5) for n in range(1, 40, 3)}
+    plan = planned(PLANT, with_programs(PLANT, changes), framing)
+    assert len(plan.steps) <= len(changes)
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"programs": {4: Program(P=2600, V=100)}},  # P above S1
+        {"programs": {4: Program(P=100, V=501)}},  # V above S4
+        {"programs": {4: Program(P=100, V=100, T=601)}},
+        {"system": replace(SYSTEM, S4=10, S5=20)},  # S4 < S5: the module rejects the 20h
+    ],
+)
+def test_unreachable_plant_files_are_refused(change: dict) -> None:
+    desired = PLANT
+    if "programs" in change:
+        desired = with_programs(desired, change["programs"])
+    if "system" in change:
+        desired = replace(desired, system=change["system"], programs=(Program(100, 15),) * PROGRAM_COUNT)
+    with pytest.raises(UnreachableImage):
+        plan_module(PLANT, desired, line())
+
+
+def test_a_managed_program_that_was_not_read_is_a_caller_error() -> None:
+    with pytest.raises(ValueError, match="not read"):
+        plan_module(with_programs(PLANT, {3: None}), PLANT, line())
+
+
+@pytest.mark.parametrize(
+    ("numbers", "text"),
+    [([3, 7, 9], "3, 7, 9"), ([1, 2, 3, 4, 9], "1..4, 9"), ([5, 6], "5, 6"), ([64], "64")],
+)
+def test_program_lists(numbers: list[int], text: str) -> None:
+    assert program_list(numbers) == text
