@@ -40,6 +40,7 @@ from dataclasses import dataclass
 from prc3cfg import codec
 from prc3cfg.image import PROGRAM_COUNT
 from prc3cfg.planner.layout import Layout, Writes, members, runs_of
+from prc3cfg.planner.pricing import FIELD_HEADER_SIZE
 from prc3cfg.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, PLAIN_FIELDS, PV_BITS, V_BIT, Problem
 
 INF = float("inf")
@@ -48,6 +49,8 @@ Residual = Callable[[int, int], float]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
 #: How many of the best layouts of each init choice are priced exactly.
 KEPT = 3
+#: How many promising 21h moves `WritePhase.refine` re-plans with the DPs in each round.
+REGROUPED = 4
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,10 +137,17 @@ class WritePhase:
             return None
         ranges, addresses, extra = self.addresses(whole, channels.addresses)
         whole |= extra
-        runs, positions, speeds, extra, runs_cost = self.parts(whole, addresses, channels)
-        whole |= extra
-        items = (positions, speeds, *(self.changed[bit] & ~whole for bit in PLAIN_BITS))
-        return self._priced(whole, runs, runs_cost, items, ranges, addresses & ~whole)
+        best = None
+        for surcharge in (0.0, self.prices.message(FIELD_HEADER_SIZE) / codec.MAX_FIELD_ITEMS):
+            runs, positions, speeds, extra, runs_cost = self.parts(whole, addresses, channels, surcharge)
+            more = whole | extra
+            items = (positions, speeds, *(self.changed[bit] & ~more for bit in PLAIN_BITS))
+            writes = self._priced(more, runs, runs_cost, items, ranges, addresses & ~more)
+            if best is None or writes.estimate < best.estimate:
+                best = writes
+            if max(positions.bit_count(), speeds.bit_count()) <= codec.MAX_FIELD_ITEMS:
+                break  # one 40h and one 41h at most: items are priced right without a surcharge
+        return best
 
     def _priced(self, whole: int, runs: tuple, runs_cost: float, items: tuple[int, ...], ranges: tuple,
                 addresses: int) -> Writes:  # fmt: skip
@@ -158,23 +168,25 @@ class WritePhase:
         still need it (or goes); link ranges stay, its 21h comes after them.
         """
         while True:
-            best = writes
             in_runs = sum((1 << (last + 1)) - (1 << first) for first, last in writes.part_runs)
+            moves = []
             for j in members((_all_of(writes.items) | writes.addresses | in_runs) & ~writes.whole):
                 bit = 1 << j
                 whole = writes.whole | bit
                 runs = self._trimmed(writes.part_runs, self.pv_changed & ~whole)
-                moved = self._priced(
+                moves.append(self._priced(
                     whole, runs, self._runs_cost(runs), tuple(mask & ~bit for mask in writes.items),
                     writes.ranges, writes.addresses & ~bit,
-                )  # fmt: skip
-                if moved.estimate < best.estimate - 1e-12:
-                    best = moved
-            if best is writes:
-                break
-            writes = best
-        again = self.evaluate(channels, whole=writes.whole)
-        return again if again is not None and again.estimate < writes.estimate else writes
+                ))  # fmt: skip
+            moves.sort(key=lambda moved: moved.estimate)
+            # The best quick move; and, with the DPs run again (33h runs may regroup and save an
+            # exchange), the few that come within an exchange of paying off.
+            close = [moved for moved in moves[:REGROUPED] if moved.estimate < writes.estimate + self.prices.exchange]
+            tries = moves[:1] + [self.evaluate(channels, whole=moved.whole) for moved in close]
+            better = [moved for moved in tries if moved is not None and moved.estimate < writes.estimate - 1e-12]
+            if not better:
+                return writes
+            writes = min(better, key=lambda moved: moved.estimate)
 
     @staticmethod
     def _trimmed(runs: tuple[tuple[int, int], ...], need: int) -> tuple[tuple[int, int], ...]:
@@ -191,24 +203,25 @@ class WritePhase:
 
     # -- P and V: 33h/32h runs against 40h/41h items (or a 21h) ---------------------------------
 
-    def parts(self, whole: int, addresses: int, channels: Channels) -> tuple:
+    def parts(self, whole: int, addresses: int, channels: Channels, surcharge: float = 0.0) -> tuple:
         """(runs, 40h programs, 41h programs, programs better off with a 21h, cost of the runs).
 
         For the programs not in `whole` that differ in P or V. A program may take a 21h instead
         when that costs less than its P and V writes plus its other items (`addresses`: its 46h item).
+        Items are priced one by one, plus `surcharge` for their share of the 40h/41h messages.
         """
         need = self.pv_changed & ~whole
-        key = (need, addresses & need, channels.positions, channels.speeds, channels.parts)
+        key = (need, addresses & need, channels.positions, channels.speeds, channels.parts, surcharge)
         cached = self._parts_cache.get(key)
         if cached is None:
-            cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels)
+            cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels, surcharge)
         return cached
 
-    def _solve_parts(self, need: int, addresses: int, channels: Channels) -> tuple:
+    def _solve_parts(self, need: int, addresses: int, channels: Channels, surcharge: float) -> tuple:
         if not need:
             return (), 0, 0, 0, 0.0
         prices, masks, managed, price = self.prices, self.masks, self.managed, self.parts_price
-        item = prices.field_item
+        item = prices.field_item + surcharge
         best = [INF] * (PROGRAM_COUNT + 1)
         back: list[tuple[int, str]] = [(0, "")] * (PROGRAM_COUNT + 1)
         best[0] = 0.0
@@ -228,7 +241,7 @@ class WritePhase:
                 c += item if channels.speeds else INF
             if c < best[i + 1]:
                 best[i + 1], back[i + 1] = c, (i, "items")
-            others = sum(1 for bit in PLAIN_BITS if m & bit) * item + (addresses >> i & 1) * prices.address_item
+            others = sum(1 for bit in PLAIN_BITS if m & bit) * prices.field_item + (addresses >> i & 1) * prices.address_item
             c = b + prices.program - others
             if c < best[i + 1]:
                 best[i + 1], back[i + 1] = c, (i, "whole")
