@@ -14,7 +14,7 @@ import serial
 from prc3cfg import codec
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
-from prc3cfg.framing import NEED_DATA, Direction, Frame, get_framing
+from prc3cfg.framing import Direction, Frame, get_framing
 from prc3cfg.image import DEFAULT_SYSTEM, Program
 from prc3cfg.line import LineSettings
 

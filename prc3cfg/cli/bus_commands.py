@@ -8,12 +8,14 @@ from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
+from rich.console import Console
 from rich.table import Table
 
 from prc3cfg import codec, gateway
 from prc3cfg.cli import app, link_app
-from prc3cfg.cli.common import PlantArg, TraceOpt, load, progress_bar, stderr
+from prc3cfg.cli.common import PlantArg, TraceOpt, parse_addresses, progress_bar, stderr
 from prc3cfg.errors import UserError
+from prc3cfg.plant import load_plant
 from prc3cfg.framing import FRAMINGS, get_framing
 from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_COUNT
 from prc3cfg.importer import module_entry, plant_yaml
@@ -82,8 +84,6 @@ def scan(
         others = ", ".join(f"{k}={BY_SYMBOL[k].format(getattr(s, k))}" for k in ("S3", "S7", "S8", "S10", "S11", "S12"))
         warn = "" if reply.address == address else " ⚠"
         table.add_row(str(address), f"{reply.address}{warn}", *(BY_SYMBOL[k].format(getattr(s, k)) for k in ("S1", "S2", "S4", "S5", "S6")), others)
-    from rich.console import Console
-
     Console().print(table)
     print(f"{len(found)} module{'s' if len(found) != 1 else ''} answered on {port}.")
 
@@ -105,8 +105,6 @@ def import_plant(
     trace: TraceOpt = None,
 ) -> None:
     """Write a plant file (to stdout) from the live modules of one bus."""
-    from prc3cfg.cli.emulator_commands import parse_addresses
-
     with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace) as link:
         addresses = parse_addresses(modules) if modules else sorted(_scan(link))
         if not addresses:
@@ -131,7 +129,7 @@ def init_db(
     bus: Annotated[str, typer.Option("--bus", help="The bus whose gateway to parameterise.")],
 ) -> None:
     """The CP 524/525 Open Driver INIT data block (eight data words) for a bus's gateway."""
-    loaded = load(plant)
+    loaded = load_plant(plant)
     found = [b for b in loaded.buses if b.name == bus]
     if not found:
         raise UserError(f"{plant}: no bus named {bus} — the plant's buses are {', '.join(b.name for b in loaded.buses)}")

@@ -14,10 +14,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from prc3cfg.bustime import LineCost
 from prc3cfg.errors import UserError
-from prc3cfg.image import ModuleImage
+from prc3cfg.image import MAX_MODULE_ADDRESS, ModuleImage
 from prc3cfg.link import Link, Trace, open_plant_links
 from prc3cfg.planner import UnreachableImage, plan_module
-from prc3cfg.plant import Plant, load_plant
+from prc3cfg.plant import Plant
 from prc3cfg.plantplan import ModuleChange, PlantPlan
 from prc3cfg.readback import Target, read_all
 
@@ -31,8 +31,19 @@ RetriesOpt = Annotated[int, typer.Option(help="Retries of a lost or damaged repl
 Key = tuple[str, int]  # (bus name, module address)
 
 
-def load(path: Path) -> Plant:
-    return load_plant(path)
+def parse_addresses(text: str) -> list[int]:
+    """"1,3-5" → [1, 3, 4, 5]; every address must lie in 1..30."""
+    addresses: set[int] = set()
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        low, _, high = part.partition("-")
+        try:
+            first, last = int(low), int(high or low)
+        except ValueError:
+            raise UserError(f"--modules: '{part}' is not an address or a range like 3-5") from None
+        if not 1 <= first <= last <= MAX_MODULE_ADDRESS:
+            raise UserError(f"--modules: '{part}' is outside 1..{MAX_MODULE_ADDRESS} — module addresses are 1..30")
+        addresses.update(range(first, last + 1))
+    return sorted(addresses)
 
 
 def chosen_modules(plant: Plant, names: Iterable[str] | None) -> list[tuple[object, object]]:

@@ -10,27 +10,13 @@ from typing import Annotated, Optional
 import typer
 
 from prc3cfg.cli import emulator_app
+from prc3cfg.cli.common import parse_addresses
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
 from prc3cfg.errors import UserError
 from prc3cfg.framing import FRAMINGS
 from prc3cfg.image import MAX_MODULE_ADDRESS
 from prc3cfg.line import LineSettings
-
-
-def parse_addresses(text: str) -> list[int]:
-    """"1,3-5" → [1, 3, 4, 5]; every address must lie in 1..30."""
-    addresses: set[int] = set()
-    for part in filter(None, (p.strip() for p in text.split(","))):
-        low, _, high = part.partition("-")
-        try:
-            first, last = int(low), int(high or low)
-        except ValueError:
-            raise UserError(f"--modules: '{part}' is not an address or a range like 3-5") from None
-        if not 1 <= first <= last <= MAX_MODULE_ADDRESS:
-            raise UserError(f"--modules: '{part}' is outside 1..{MAX_MODULE_ADDRESS} — module addresses are 1..30")
-        addresses.update(range(first, last + 1))
-    return sorted(addresses)
 
 
 def parse_listen(text: str) -> tuple[str, int]:

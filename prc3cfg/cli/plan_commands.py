@@ -21,16 +21,15 @@ from prc3cfg.cli.common import (
     TraceOpt,
     chosen_modules,
     line_cost,
-    load,
     load_actual,
     make_plan,
     plant_links,
     plant_targets,
     progress_bar,
     read_images,
-    stderr,
 )
 from prc3cfg.errors import UserError
+from prc3cfg.plant import load_plant
 from prc3cfg.image import ModuleImage
 from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
 from prc3cfg.locks import line_lock
@@ -50,16 +49,15 @@ def read(
     retries: RetriesOpt = 5,
 ) -> None:
     """Read back every module of the plant (system parameters and managed programs)."""
-    loaded = load(plant)
+    loaded = load_plant(plant)
     pairs = chosen_modules(loaded, module)
     targets = plant_targets(pairs)
     with plant_links(loaded, {b.name for b, _ in pairs}, trace, retries) as links:
         images = read_images(targets, links)
-    entries = [{"bus": bus.name, **images[(bus.name, m.address)].to_json()} for bus, m in pairs]
     if json_out:
-        print(json.dumps(entries, indent=1))
+        print(json.dumps([{"bus": bus.name, **images[(bus.name, m.address)].to_json()} for bus, m in pairs], indent=1))
         return
-    for (bus, m), entry in zip(pairs, entries):
+    for bus, m in pairs:
         image = images[(bus.name, m.address)]
         print(f"bus {bus.name}, module {m.address} ({m.name})")
         print("  system: " + ", ".join(
@@ -101,7 +99,7 @@ def plan(
     retries: RetriesOpt = 5,
 ) -> None:
     """Read back, diff against the plant file and print the cheapest plan."""
-    loaded = load(plant)
+    loaded = load_plant(plant)
     pairs = chosen_modules(loaded, module)
     if actual is not None:
         images = load_actual(actual, loaded, pairs)
@@ -261,7 +259,7 @@ def apply(
             plant = Path(json.loads(plan_file.read_text())["plant_path"])
         except (OSError, ValueError, KeyError, TypeError):
             raise UserError(f"{plan_file}: name the plant file too: prc3cfg apply PLANT --plan {plan_file}") from None
-    loaded = load(plant)
+    loaded = load_plant(plant)
     pairs = chosen_modules(loaded, module)
     _apply(
         loaded, pairs, desired=None, targets=plant_targets(pairs), plan_file=plan_file,
@@ -280,8 +278,8 @@ def restore(
     retries: RetriesOpt = 5,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
-    taken = Snapshot.load(snapshot)
-    loaded = load(taken.plant_path)
+    taken = Snapshot.load_plant(snapshot)
+    loaded = load_plant(taken.plant_path)
     pairs = [(bus, m) for bus in loaded.buses for m in bus.modules if (bus.name, m.address) in taken.images]
     if len(pairs) != len(taken.images):
         raise UserError(f"{snapshot}: the plant file {taken.plant_path} no longer has every module of the snapshot — nothing was written")
