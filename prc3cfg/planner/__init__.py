@@ -18,9 +18,14 @@ from dataclasses import replace
 from prc3cfg import codec, device
 from prc3cfg.bustime import LineCost
 from prc3cfg.image import ModuleImage
-from prc3cfg.planner.optimise import search
+from prc3cfg.planner.layout import Layout
+from prc3cfg.planner.optimise import search, whole_programs
 from prc3cfg.planner.plan import ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
 from prc3cfg.planner.problem import Problem
+
+#: Layouts within this fraction of the best estimate are priced exactly (stx stuffing adds bytes).
+STUFFING_MARGIN = 0.03
+EXACTLY_PRICED = 4
 
 
 def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> ModulePlan:
@@ -30,29 +35,33 @@ def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> Mo
     `actual` too (not read). Raises `UnreachableImage` when no plan can reach `desired`.
     """
     problem = Problem.build(actual, desired, cost)
-    best: list[codec.Message] | None = None
-    best_time = 0.0
-    for layout in search(problem):
-        messages = layout.messages(problem)
-        time = sum(cost.message_time(problem.address, m) for m in messages)
-        if best is None or time < best_time:
-            best, best_time = messages, time
-    assert best is not None
+    layouts = search(problem)
+    # The estimates are exact but for stx stuffing: price exactly only the layouts that could win.
+    close = [layout for layout in layouts if layout.estimate <= layouts[0].estimate * (1 + STUFFING_MARGIN)]
+    best, best_time = _cheapest(problem, cost, close[:EXACTLY_PRICED])
+    naive_time = naive_bus_time(actual, desired, cost)
+    if best_time > naive_time:
+        best, best_time = _cheapest(problem, cost, [whole_programs(problem)])
     predicted = _verify(problem, best)
-    steps = []
-    system = actual.system
-    for message in best:
-        steps.append(Step(message, summarise(message, system), message.RELEASES_AXES))
-        if isinstance(message, codec.WriteSystem):
-            system = message.system
+    steps = tuple(Step(message, summarise(message, actual.system), message.RELEASES_AXES) for message in best)
     return ModulePlan(
         address=problem.address,
-        steps=tuple(steps),
+        steps=steps,
         bus_time=best_time,
-        naive_bus_time=naive_bus_time(actual, desired, cost),
+        naive_bus_time=naive_time,
         releases_axes=any(step.releases_axes for step in steps),
         predicted=predicted,
     )
+
+
+def _cheapest(problem: Problem, cost: LineCost, layouts: list[Layout]) -> tuple[list[codec.Message], float]:
+    """The messages of the layout that is cheapest on the line, and their bus time."""
+    priced = []
+    for layout in layouts:
+        messages = layout.messages(problem)
+        priced.append((sum(cost.message_time(problem.address, m) for m in messages), messages))
+    time, messages = min(priced, key=lambda pair: pair[0])
+    return messages, time
 
 
 def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> float:

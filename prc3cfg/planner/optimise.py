@@ -40,7 +40,6 @@ from dataclasses import dataclass
 from prc3cfg import codec
 from prc3cfg.image import PROGRAM_COUNT
 from prc3cfg.planner.layout import Layout, Writes, members, runs_of
-from prc3cfg.planner.pricing import FIELD_HEADER_SIZE
 from prc3cfg.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, PLAIN_FIELDS, PV_BITS, V_BIT, Problem
 
 INF = float("inf")
@@ -83,6 +82,14 @@ class WritePhase:
             self.relevant |= m
         self.pv_changed = self.changed[P_BIT] | self.changed[V_BIT]
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
+        # What a 21h saves in plain items; where a 33h run from each program must end (exclusive).
+        self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
+        self.reach = []
+        for i in range(PROGRAM_COUNT):
+            end = i
+            while end < min(i + codec.MAX_FIELD_ITEMS, PROGRAM_COUNT) and self.managed[end]:
+                end += 1
+            self.reach.append(end)
         self._parts_cache: dict[tuple, tuple] = {}
         self._address_cache: dict[tuple, tuple] = {}
 
@@ -108,7 +115,20 @@ class WritePhase:
     def solve(self, bound: float = INF) -> list[tuple[Writes, Channels]]:
         """The KEPT cheapest write phases found over every channel subset, cheapest first."""
         found: list[tuple[Writes, Channels]] = []
+        seen = set()
         for channels in self.subsets():
+            # A subset acts only through the 21h it forces and the messages left with work to do.
+            whole = self.forced(channels)
+            key = (
+                whole,
+                channels.positions and bool(self.changed[P_BIT] & ~whole),
+                channels.speeds and bool(self.changed[V_BIT] & ~whole),
+                channels.parts and bool(self.pv_changed & ~whole),
+                channels.addresses and bool(self.changed[A_BIT] & ~whole),
+            )
+            if key in seen:
+                continue
+            seen.add(key)
             writes = self.evaluate(channels, bound)
             if writes is None:
                 continue
@@ -133,12 +153,12 @@ class WritePhase:
     def evaluate(self, channels: Channels, bound: float = INF, whole: int = 0) -> Writes | None:
         """The cheapest write phase with these channels (and 21h for `whole`); None when it cannot beat `bound`."""
         whole |= self.forced(channels)
-        if whole.bit_count() * self.prices.program >= bound:
+        if self.lower_bound(whole) >= bound:
             return None
         ranges, addresses, extra = self.addresses(whole, channels.addresses)
         whole |= extra
         best = None
-        for surcharge in (0.0, self.prices.message(FIELD_HEADER_SIZE) / codec.MAX_FIELD_ITEMS):
+        for surcharge in (0.0, self.prices.field_header / codec.MAX_FIELD_ITEMS):
             runs, positions, speeds, extra, runs_cost = self.parts(whole, addresses, channels, surcharge)
             more = whole | extra
             items = (positions, speeds, *(self.changed[bit] & ~more for bit in PLAIN_BITS))
@@ -148,6 +168,22 @@ class WritePhase:
             if max(positions.bit_count(), speeds.bit_count()) <= codec.MAX_FIELD_ITEMS:
                 break  # one 40h and one 41h at most: items are priced right without a surcharge
         return best
+
+    def lower_bound(self, whole: int) -> float:
+        """No write phase that gives at least `whole` a 21h costs less.
+
+        Each of those 21h; each remaining plain difference and each program left differing
+        in P or V at least an item; and one exchange for P and V if any is left. (Another 21h
+        costs more than the items it saves, and at least that exchange.)
+        """
+        prices = self.prices
+        plain = sum((self.changed[bit] & ~whole).bit_count() for bit in PLAIN_BITS)
+        need = (self.pv_changed & ~whole).bit_count()
+        return (
+            whole.bit_count() * prices.program
+            + (plain + need) * prices.field_item
+            + (prices.field_header if need else 0.0)
+        )
 
     def _priced(self, whole: int, runs: tuple, runs_cost: float, items: tuple[int, ...], ranges: tuple,
                 addresses: int) -> Writes:  # fmt: skip
@@ -167,26 +203,40 @@ class WritePhase:
         A program that takes a 21h leaves its items; a 33h run shrinks to the programs that
         still need it (or goes); link ranges stay, its 21h comes after them.
         """
+        prices = self.prices
         while True:
-            in_runs = sum((1 << (last + 1)) - (1 << first) for first, last in writes.part_runs)
+            saving = [prices.fields(n) - prices.fields(n - 1) if n else 0.0 for n in map(int.bit_count, writes.items)]
+            n = writes.addresses.bit_count()
+            address_saving = prices.addresses(n) - prices.addresses(n - 1) if n else 0.0
+            run_of = {j: run for run in writes.part_runs for j in range(run[0], run[1] + 1)}
             moves = []
-            for j in members((_all_of(writes.items) | writes.addresses | in_runs) & ~writes.whole):
-                bit = 1 << j
-                whole = writes.whole | bit
-                runs = self._trimmed(writes.part_runs, self.pv_changed & ~whole)
-                moves.append(self._priced(
-                    whole, runs, self._runs_cost(runs), tuple(mask & ~bit for mask in writes.items),
-                    writes.ranges, writes.addresses & ~bit,
-                ))  # fmt: skip
-            moves.sort(key=lambda moved: moved.estimate)
+            for j in members((_all_of(writes.items) | writes.addresses | _all_runs(writes.part_runs)) & ~writes.whole):
+                delta = prices.program - sum(s for s, mask in zip(saving, writes.items) if mask >> j & 1)
+                if writes.addresses >> j & 1:
+                    delta -= address_saving
+                if j in run_of:
+                    run = run_of[j]
+                    rest = self._trimmed((run,), self.pv_changed & ~(writes.whole | 1 << j))
+                    delta += self._runs_cost(rest) - self._runs_cost((run,))
+                moves.append((delta, j))
+            moves.sort()
             # The best quick move; and, with the DPs run again (33h runs may regroup and save an
             # exchange), the few that come within an exchange of paying off.
-            close = [moved for moved in moves[:REGROUPED] if moved.estimate < writes.estimate + self.prices.exchange]
-            tries = moves[:1] + [self.evaluate(channels, whole=moved.whole) for moved in close]
+            tries = [self._moved(writes, moves[0][1])] if moves and moves[0][0] < -1e-12 else []
+            tries += [self.evaluate(channels, whole=writes.whole | 1 << j)
+                      for delta, j in moves[:REGROUPED] if delta < prices.exchange]  # fmt: skip
             better = [moved for moved in tries if moved is not None and moved.estimate < writes.estimate - 1e-12]
             if not better:
                 return writes
             writes = min(better, key=lambda moved: moved.estimate)
+
+    def _moved(self, writes: Writes, j: int) -> Writes:
+        """`writes` with program j given a 21h instead of its items."""
+        bit = 1 << j
+        whole = writes.whole | bit
+        runs = self._trimmed(writes.part_runs, self.pv_changed & ~whole)
+        items = tuple(mask & ~bit for mask in writes.items)
+        return self._priced(whole, runs, self._runs_cost(runs), items, writes.ranges, writes.addresses & ~bit)
 
     @staticmethod
     def _trimmed(runs: tuple[tuple[int, int], ...], need: int) -> tuple[tuple[int, int], ...]:
@@ -220,37 +270,37 @@ class WritePhase:
     def _solve_parts(self, need: int, addresses: int, channels: Channels, surcharge: float) -> tuple:
         if not need:
             return (), 0, 0, 0, 0.0
-        prices, masks, managed, price = self.prices, self.masks, self.managed, self.parts_price
+        prices, masks, price, reach, plain_items = self.prices, self.masks, self.parts_price, self.reach, self.plain_items
         item = prices.field_item + surcharge
+        p_item = item if channels.positions else INF
+        v_item = item if channels.speeds else INF
+        program, address_item, runs_allowed = prices.program, prices.address_item, channels.parts
+        needed = list(members(need))
+        position = {j: k for k, j in enumerate(needed)}
         best = [INF] * (PROGRAM_COUNT + 1)
         back: list[tuple[int, str]] = [(0, "")] * (PROGRAM_COUNT + 1)
         best[0] = 0.0
         for i in range(PROGRAM_COUNT):
             b = best[i]
-            if b == INF:
-                continue
             if not need >> i & 1:
                 if b < best[i + 1]:
                     best[i + 1], back[i + 1] = b, (i, "")
                 continue
             m = masks[i]
-            c = b
-            if m & P_BIT:
-                c += item if channels.positions else INF
-            if m & V_BIT:
-                c += item if channels.speeds else INF
+            c = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0)
             if c < best[i + 1]:
                 best[i + 1], back[i + 1] = c, (i, "items")
-            others = sum(1 for bit in PLAIN_BITS if m & bit) * prices.field_item + (addresses >> i & 1) * prices.address_item
-            c = b + prices.program - others
+            c = b + program - plain_items[i] - (address_item if addresses >> i & 1 else 0.0)
             if c < best[i + 1]:
                 best[i + 1], back[i + 1] = c, (i, "whole")
-            if channels.parts:
-                for j in range(i, min(i + codec.MAX_FIELD_ITEMS, PROGRAM_COUNT)):
-                    if not managed[j]:
+            if runs_allowed:
+                end = reach[i]
+                for j in needed[position[i]:]:
+                    if j >= end:
                         break
-                    if need >> j & 1 and b + price[j - i + 1] < best[j + 1]:
-                        best[j + 1], back[j + 1] = b + price[j - i + 1], (i, "run")
+                    c = b + price[j - i + 1]
+                    if c < best[j + 1]:
+                        best[j + 1], back[j + 1] = c, (i, "run")
         runs, positions, speeds, whole, runs_cost = [], 0, 0, 0, 0.0
         j = PROGRAM_COUNT
         while j > 0:
@@ -424,6 +474,10 @@ class WritePhase:
         return cost
 
 
+def _all_runs(runs: tuple[tuple[int, int], ...]) -> int:
+    return sum((1 << (last + 1)) - (1 << first) for first, last in runs)
+
+
 def _all_of(masks: tuple[int, ...]) -> int:
     union = 0
     for mask in masks:
@@ -495,15 +549,12 @@ def _table(problem: Problem, residual: Residual) -> list[dict[int, float]]:
 
 
 def search(problem: Problem) -> list[Layout]:
-    """Candidate layouts, cheapest estimate first; the all-21h layout is always among them."""
+    """Candidate layouts, cheapest estimate first."""
     fixed = problem.system_cost
     keep = (KEEP,) * PROGRAM_COUNT
     phase = WritePhase(problem, keep)
     found = phase.solve()
     layouts = [Layout(keep, writes, fixed + writes.estimate) for writes, _ in found]
-    naive = phase.evaluate(Channels.everything(False))
-    assert naive is not None
-    layouts.append(Layout(keep, naive, fixed + naive.estimate))
     if problem.init_useful():
         best = layouts[0].estimate
         tried = {keep}
@@ -516,10 +567,18 @@ def search(problem: Problem) -> list[Layout]:
             tried.add(kinds)
             base = fixed + init_cost(problem, kinds)
             with_inits = WritePhase(problem, kinds)
-            found = with_inits.solve()
+            found = with_inits.solve(bound=best - base + problem.prices.exchange)  # refine may still gain
             layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
-            if base + found[0][0].estimate < best:
+            if found and base + found[0][0].estimate < best:
                 best = base + found[0][0].estimate
                 queue.append(with_inits.marginal(found[0][0]))
-    layouts.sort(key=lambda layout: layout.estimate)
-    return layouts
+    unique = {(layout.kinds, layout.writes): layout for layout in layouts}
+    return sorted(unique.values(), key=lambda layout: layout.estimate)
+
+
+def whole_programs(problem: Problem) -> Layout:
+    """The system step and a 21h for every program that still differs: never dearer than the naive download."""
+    keep = (KEEP,) * PROGRAM_COUNT
+    writes = WritePhase(problem, keep).evaluate(Channels.everything(False))
+    assert writes is not None
+    return Layout(keep, writes, problem.system_cost + writes.estimate)

@@ -13,12 +13,12 @@ Owns: the formula and the sizes. Does not own the cost of an exchange (`prc3cfg.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from math import ceil
 
 from prc3cfg import codec
 from prc3cfg.bustime import LineCost
-from prc3cfg.image import Program
+from prc3cfg.image import PROGRAM_COUNT, Program
 
 
 def _size(message: codec.Message) -> int:
@@ -42,10 +42,45 @@ ADDRESS_HEADER_SIZE = _size(codec.WriteAddresses(_ITEM)) - ADDRESS_ITEM_SIZE  # 
 
 @dataclass(frozen=True, slots=True)
 class Prices:
-    """Seconds per exchange and per message byte on one module's line, and the planner's unit prices."""
+    """Seconds per exchange and per message byte on one module's line, and the planner's unit prices.
+
+    The unit prices are worked out once, when the prices are made: the search asks for them
+    hundreds of thousands of times.
+    """
 
     exchange: float
     byte: float
+    init: float = field(init=False)  # 11h, 12h, 13h
+    init_range: float = field(init=False)  # 14h
+    link: float = field(init=False)  # 30h, 31h
+    program: float = field(init=False)  # 21h
+    field_item: float = field(init=False)  # one more item in a 40h..45h
+    address_item: float = field(init=False)  # one more item in a 46h
+    field_header: float = field(init=False)  # a 40h..45h without its items
+    _parts: tuple[float, ...] = field(init=False, repr=False)
+    _fields: tuple[float, ...] = field(init=False, repr=False)
+    _addresses: tuple[float, ...] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        def put(name: str, value: object) -> None:
+            object.__setattr__(self, name, value)
+
+        put("init", self.message(INIT_SIZE))
+        put("init_range", self.message(INIT_RANGE_SIZE))
+        put("link", self.message(LINK_SIZE))
+        put("program", self.message(PROGRAM_SIZE))
+        put("field_item", self.byte * FIELD_ITEM_SIZE)
+        put("address_item", self.byte * ADDRESS_ITEM_SIZE)
+        put("field_header", self.message(FIELD_HEADER_SIZE))
+        part = self.message(PART_SIZE)
+        put("_parts", (0.0, part, *(self.message(PARTS_HEADER_SIZE + n * PARTS_ITEM_SIZE)
+                                    for n in range(2, codec.MAX_FIELD_ITEMS + 1))))  # fmt: skip
+        counts = range(PROGRAM_COUNT + 1)
+        put("_fields", tuple(ceil(n / codec.MAX_FIELD_ITEMS) * self.field_header + n * self.field_item
+                             for n in counts))  # fmt: skip
+        address_header = self.message(ADDRESS_HEADER_SIZE)
+        put("_addresses", tuple(ceil(n / codec.MAX_ADDRESS_ITEMS) * address_header + n * self.address_item
+                                for n in counts))  # fmt: skip
 
     @classmethod
     def measure(cls, cost: LineCost, address: int) -> Prices:
@@ -60,38 +95,14 @@ class Prices:
     def message(self, size: int) -> float:
         return self.exchange + self.byte * size
 
-    @property
-    def init(self) -> float:
-        return self.message(INIT_SIZE)
-
-    @property
-    def init_range(self) -> float:
-        return self.message(INIT_RANGE_SIZE)
-
-    @property
-    def link(self) -> float:
-        return self.message(LINK_SIZE)
-
-    @property
-    def program(self) -> float:
-        return self.message(PROGRAM_SIZE)
-
     def parts(self, n: int) -> float:
         """P and V of n consecutive programs: a 32h for one, a 33h for more."""
-        return self.message(PART_SIZE) if n == 1 else self.message(PARTS_HEADER_SIZE + n * PARTS_ITEM_SIZE)
-
-    @property
-    def field_item(self) -> float:
-        return self.byte * FIELD_ITEM_SIZE
-
-    @property
-    def address_item(self) -> float:
-        return self.byte * ADDRESS_ITEM_SIZE
+        return self._parts[n]
 
     def fields(self, n: int) -> float:
         """n items of one field (40h..45h), in as few messages as the 15-item limit allows."""
-        return ceil(n / codec.MAX_FIELD_ITEMS) * self.message(FIELD_HEADER_SIZE) + n * self.field_item
+        return self._fields[n]
 
     def addresses(self, n: int) -> float:
         """n jump addresses (46h), in as few messages as the 31-item limit allows."""
-        return ceil(n / codec.MAX_ADDRESS_ITEMS) * self.message(ADDRESS_HEADER_SIZE) + n * self.address_item
+        return self._addresses[n]
