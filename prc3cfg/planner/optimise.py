@@ -48,6 +48,10 @@ Residual = Callable[[int, int], float]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
 #: How many of the best layouts of each init choice are priced exactly.
 KEPT = 3
+#: A bias far below any price (seconds): ties between keeping and initialising go to initialising.
+TIE = 1e-9
+#: Items per message assumed by one of the init choices (few items: headers matter).
+INIT_SHARE = 4
 #: How many promising 21h moves `WritePhase.refine` re-plans with the DPs in each round.
 REGROUPED = 4
 
@@ -390,9 +394,10 @@ class WritePhase:
 
     # -- what a program's differences cost, for the init DP ------------------------------------
 
-    def linear(self, channels: Channels) -> Residual:
-        """A program's differences priced item by item under `channels`, no message headers."""
+    def linear(self, channels: Channels, share: float = 0.0) -> Residual:
+        """A program's differences priced item by item under `channels`, each item with `share` of a header."""
         prices = self.prices
+        item = prices.field_item + share
 
         def cost(i: int, mask: int) -> float:
             if not mask:
@@ -402,17 +407,17 @@ class WritePhase:
                 if mask & bit:
                     if not channels.plain & bit:
                         return prices.program
-                    total += prices.field_item
+                    total += item
             if mask & PV_BITS:
                 if channels.parts:
-                    total += prices.field_item
+                    total += item
                 elif (mask & P_BIT and not channels.positions) or (mask & V_BIT and not channels.speeds):
                     return prices.program
                 else:
-                    total += prices.field_item * (mask & PV_BITS).bit_count()
+                    total += item * (mask & PV_BITS).bit_count()
             if mask & A_BIT:
                 if channels.addresses:
-                    total += prices.address_item
+                    total += prices.address_item + share
                 elif self.target_a[i] in (0, i + 2):
                     total += prices.link
                 else:
@@ -542,7 +547,11 @@ def choose_inits(problem: Problem, residual: list[dict[int, float]]) -> tuple[in
 
 
 def _table(problem: Problem, residual: Residual) -> list[dict[int, float]]:
-    return [{kind: residual(i, problem.masks[kind][i]) for kind in problem.kinds} for i in range(PROGRAM_COUNT)]
+    """Residuals per program and init kind; on a tie the init wins, so runs grow over programs they do not harm."""
+    return [
+        {kind: residual(i, problem.masks[kind][i]) - (TIE if kind != KEEP else 0.0) for kind in problem.kinds}
+        for i in range(PROGRAM_COUNT)
+    ]
 
 
 # -- the whole search ------------------------------------------------------------------------
@@ -558,8 +567,13 @@ def search(problem: Problem) -> list[Layout]:
     if problem.init_useful():
         best = layouts[0].estimate
         tried = {keep}
-        queue = [phase.marginal(found[0][0]), phase.linear(Channels.everything(True)),
-                 phase.linear(Channels.everything(False))]  # fmt: skip
+        everything = Channels.everything(True)
+        queue = [
+            phase.marginal(found[0][0]),
+            phase.linear(everything),
+            phase.linear(everything, problem.prices.field_header / INIT_SHARE),
+            phase.linear(Channels.everything(False)),
+        ]
         while queue:
             kinds = choose_inits(problem, _table(problem, queue.pop(0)))
             if kinds in tried:
