@@ -5,9 +5,10 @@
 For each scenario and framing (9600 baud 8E1, turnaround 10 ms, ZVZ 20 ms) it prints the
 plan's estimated bus time, the naive download's (20h if the system differs, one 21h per
 changed program), a lower bound on *any* plan, the plan's message count and the planning
-CPU time. Then it plans a whole plant — N modules × 64 programs, fully managed, each with
-one of the scenarios' changes — from images saved as JSON, and prints the total CPU time
-(acceptance: under 1 s for 30 modules).
+CPU time. Then it plans whole plants — N modules × 64 programs, fully managed, each with
+one of the scenarios' changes ("mixed"), or each commissioned or changed a lot ("heavy") —
+from images saved as JSON, and prints the total CPU time (acceptance: under 1 s for 30
+modules).
 
 The lower bound. A message of n bytes costs `exchange + byte × n` (exact for crc16 and
 open-driver: no stuffing), and every message has a 2-byte ID word, so a plan of E
@@ -19,10 +20,15 @@ exchanges carrying B bytes beyond the ID words costs `E × (exchange + 2 byte) +
   predicts (`Problem.masks`, for each of: not initialised, initialised before or after
   the system step), and every one of them must be written by a message carrying bytes
   for that program alone: a 21h (14 bytes), a 32h/33h pair (4 bytes for P and V), a
-  40h..45h item (4 bytes per field). Jump addresses may come free from a link range.
+  40h..45h item (4 bytes per field), a 46h item (2 bytes) for a jump address no link or
+  unlink range can give (other jump addresses may come free from a range).
   So B ≥ Σ over programs of the least such count over the ways it can be initialised.
-- E: at least one exchange when any managed program differs after the system step, and
-  at least B / 62 (no message carries more than 62 bytes beyond its ID word).
+- E: at least one exchange when any managed program differs after the system step;
+  at least B / 62 (no message carries more than 62 bytes beyond its ID word); and at
+  least the size of a maximum matching between programs and the field classes {P and V},
+  Vr, T, F1, F2, over the fields a program differs in however it is initialised: two such
+  writes of different programs and different classes need two messages (a 21h writes one
+  program, a 40h..45h one field, a 32h/33h only P and V, an init only defaults).
 Inits and ranges are counted only through E, so the bound is loose where they do the work
 and tight where items do (a teach-in revert is priced exactly).
 """
@@ -43,8 +49,8 @@ from prc3cfg.bustime import LineCost
 from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, default_program
 from prc3cfg.line import LineSettings
 from prc3cfg.planner import plan_module
-from prc3cfg.planner.pricing import FIELD_ITEM_SIZE, PARTS_ITEM_SIZE, PROGRAM_SIZE
-from prc3cfg.planner.problem import PLAIN_FIELDS, PV_BITS, FIELD_BIT, KEEP, Problem
+from prc3cfg.planner.pricing import ADDRESS_ITEM_SIZE, FIELD_ITEM_SIZE, PARTS_ITEM_SIZE, PROGRAM_SIZE
+from prc3cfg.planner.problem import A_BIT, FIELD_BIT, KEEP, PLAIN_FIELDS, PV_BITS, Problem
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S2=120, S4=500, S5=20)
 USED = 40  # programs a recipe uses; the rest are at their defaults (plant files with `reset`)
@@ -162,16 +168,43 @@ def lower_bound(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> fl
     problem = Problem.build(actual, desired, cost)
     plain = [FIELD_BIT[name] for name in PLAIN_FIELDS]
 
-    def payload(mask: int) -> int:
+    def payload(i: int, mask: int) -> int:
         fields = (PARTS_ITEM_SIZE if mask & PV_BITS else 0) + FIELD_ITEM_SIZE * sum(1 for bit in plain if mask & bit)
+        jump = desired.programs[i].A
+        if mask & A_BIT and not (jump == 0 or (jump == i + 2 and problem.managed[jump - 1])):
+            fields += ADDRESS_ITEM_SIZE  # no link or unlink range gives this jump
         return min(PROGRAM_SIZE - ID_WORD, fields)
 
     managed = [i for i in range(PROGRAM_COUNT) if problem.managed[i]]
-    carried = sum(min(payload(problem.masks[kind][i]) for kind in problem.kinds) for i in managed)
+    carried = sum(min(payload(i, problem.masks[kind][i]) for kind in problem.kinds) for i in managed)
     differs = any(problem.masks[KEEP][i] for i in managed)
-    exchanges = max(int(differs), ceil(carried / (codec.MAX_MESSAGE_BYTES - ID_WORD)))
+    exchanges = max(int(differs), ceil(carried / (codec.MAX_MESSAGE_BYTES - ID_WORD)), separate_writes(problem))
     prices = problem.prices
     return problem.system_cost + exchanges * prices.message(ID_WORD) + carried * prices.byte
+
+
+def separate_writes(problem: Problem) -> int:
+    """How many writes no two of which one message can make (a maximum matching, see the docstring)."""
+    classes = [PV_BITS] + [FIELD_BIT[name] for name in PLAIN_FIELDS]
+    must = {}
+    for i in range(PROGRAM_COUNT):
+        if problem.managed[i]:
+            mask = PV_BITS | sum(classes)
+            for kind in problem.kinds:
+                mask &= problem.masks[kind][i]
+            must[i] = mask
+    owner: dict[int, int] = {}  # program → the class it is matched with
+
+    def augment(c: int, seen: set[int]) -> bool:
+        for i, mask in must.items():
+            if mask & classes[c] and i not in seen:
+                seen.add(i)
+                if i not in owner or augment(owner[i], seen):
+                    owner[i] = c
+                    return True
+        return False
+
+    return sum(augment(c, set()) for c in range(len(classes)))
 
 
 # -- running ------------------------------------------------------------------------------------
@@ -197,10 +230,10 @@ def scenarios_table(framings: list[str]) -> None:
                   f"{bound * 1e3:9.1f} {ratio:10.2f} {len(plan.steps):5d} {cpu * 1e3:7.1f}")  # fmt: skip
 
 
-def plant_run(framing: str, modules: int) -> None:
+def plant_run(framing: str, modules: int, scenarios: list[str], label: str) -> None:
     """Plan a whole plant from saved images, as `prc3cfg plan --actual` does."""
-    rnd = random.Random(f"plant-{modules}")
-    makers = list(SCENARIOS.values())
+    rnd = random.Random(f"plant-{label}-{modules}")
+    makers = [SCENARIOS[name] for name in scenarios]
     cases = [makers[m % len(makers)](rnd, address=m % 30 + 1) for m in range(modules)]
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "images.json"
@@ -210,7 +243,7 @@ def plant_run(framing: str, modules: int) -> None:
     start = time.process_time()
     plans = [plan_module(actual, desired, cost) for actual, desired in saved]
     cpu = time.process_time() - start
-    print(f"plant of {modules} modules × {PROGRAM_COUNT} programs on {framing}: planning CPU {cpu * 1e3:.0f} ms, "
+    print(f"{label} plant, {modules} modules × {PROGRAM_COUNT} programs, {framing}: planning CPU {cpu * 1e3:.0f} ms, "
           f"bus time {sum(p.bus_time for p in plans):.2f} s (naive {sum(p.naive_bus_time for p in plans):.2f} s), "
           f"{sum(len(p.steps) for p in plans)} messages")  # fmt: skip
 
@@ -224,7 +257,8 @@ def main() -> None:
     scenarios_table(framings)
     print()
     for framing in framings:
-        plant_run(framing, args.modules)
+        plant_run(framing, args.modules, list(SCENARIOS), "mixed")
+        plant_run(framing, args.modules, ["commissioning", "large mixed change"], "heavy")
 
 
 if __name__ == "__main__":
