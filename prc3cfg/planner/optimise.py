@@ -159,18 +159,22 @@ class WritePhase:
         whole |= self.forced(channels)
         if self.lower_bound(whole) >= bound:
             return None
-        ranges, addresses, extra = self.addresses(whole, channels.addresses)
-        whole |= extra
-        best = None
-        for surcharge in (0.0, self.prices.field_header / codec.MAX_FIELD_ITEMS):
-            runs, positions, speeds, extra, runs_cost = self.parts(whole, addresses, channels, surcharge)
-            more = whole | extra
-            items = (positions, speeds, *(self.changed[bit] & ~more for bit in PLAIN_BITS))
-            writes = self._priced(more, runs, runs_cost, items, ranges, addresses & ~more)
-            if best is None or writes.estimate < best.estimate:
-                best = writes
-            if max(positions.bit_count(), speeds.bit_count()) <= codec.MAX_FIELD_ITEMS:
-                break  # one 40h and one 41h at most: items are priced right without a surcharge
+        best: Writes | None = None
+        # Items are priced one by one in the DPs; when they overflow one message, again with
+        # a share of the extra message's header (ceil(n/31) 46h, ceil(n/15) 40h/41h).
+        for address_share in (0.0, self.prices.address_header / codec.MAX_ADDRESS_ITEMS):
+            ranges, addresses, extra = self.addresses(whole, channels.addresses, address_share)
+            for field_share in (0.0, self.prices.field_header / codec.MAX_FIELD_ITEMS):
+                runs, positions, speeds, more, runs_cost = self.parts(whole | extra, addresses, channels, field_share)
+                more |= whole | extra
+                items = (positions, speeds, *(self.changed[bit] & ~more for bit in PLAIN_BITS))
+                writes = self._priced(more, runs, runs_cost, items, ranges, addresses & ~more)
+                if best is None or writes.estimate < best.estimate:
+                    best = writes
+                if max(positions.bit_count(), speeds.bit_count()) <= codec.MAX_FIELD_ITEMS:
+                    break
+            if addresses.bit_count() <= codec.MAX_ADDRESS_ITEMS:
+                break
         return best
 
     def lower_bound(self, whole: int) -> float:
@@ -322,19 +326,22 @@ class WritePhase:
 
     # -- A: link/unlink ranges against 46h items -----------------------------------------------
 
-    def addresses(self, whole: int, open46: bool) -> tuple[tuple[tuple[bool, int, int], ...], int, int]:
-        """(ranges, 46h programs, programs that need a 21h for their A) for the programs not in `whole`."""
-        key = (whole, open46)
+    def addresses(self, whole: int, open46: bool, share: float = 0.0) -> tuple:
+        """(ranges, 46h programs, programs that need a 21h for their A) for the programs not in `whole`.
+
+        46h items are priced one by one plus `share` for their share of the 46h messages.
+        """
+        key = (whole, open46, share)
         cached = self._address_cache.get(key)
         if cached is None:
-            cached = self._address_cache[key] = self._solve_addresses(whole, open46)
+            cached = self._address_cache[key] = self._solve_addresses(whole, open46, share)
         return cached
 
-    def _solve_addresses(self, whole: int, open46: bool) -> tuple:
+    def _solve_addresses(self, whole: int, open46: bool, share: float) -> tuple:
         if not self.changed[A_BIT] & ~whole:
             return (), 0, 0
         managed, target, base = self.managed, self.target_a, self.base_a
-        miss = self.prices.address_item if open46 else self.prices.program
+        miss = self.prices.address_item + share if open46 else self.prices.program
         link = self.prices.link
         # States after program i: 0 no range open, 1 a link range goes on to i+1, 2 an unlink range
         # may go on. Actions give program i its A: kept, 0 (unlink, end of a link) or i+2 (link goes on).

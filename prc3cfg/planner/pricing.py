@@ -57,6 +57,7 @@ class Prices:
     field_item: float = field(init=False)  # one more item in a 40h..45h
     address_item: float = field(init=False)  # one more item in a 46h
     field_header: float = field(init=False)  # a 40h..45h without its items
+    address_header: float = field(init=False)  # a 46h without its items
     _parts: tuple[float, ...] = field(init=False, repr=False)
     _fields: tuple[float, ...] = field(init=False, repr=False)
     _addresses: tuple[float, ...] = field(init=False, repr=False)
@@ -78,8 +79,8 @@ class Prices:
         counts = range(PROGRAM_COUNT + 1)
         put("_fields", tuple(ceil(n / codec.MAX_FIELD_ITEMS) * self.field_header + n * self.field_item
                              for n in counts))  # fmt: skip
-        address_header = self.message(ADDRESS_HEADER_SIZE)
-        put("_addresses", tuple(ceil(n / codec.MAX_ADDRESS_ITEMS) * address_header + n * self.address_item
+        put("address_header", self.message(ADDRESS_HEADER_SIZE))
+        put("_addresses", tuple(ceil(n / codec.MAX_ADDRESS_ITEMS) * self.address_header + n * self.address_item
                                 for n in counts))  # fmt: skip
 
     @classmethod
