@@ -92,7 +92,9 @@ def recipe_tweak(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, Mod
 def teach_in_revert(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
     desired = plant(rnd, address)
     p = desired.programs
-    taught = {n: replace(p[n - 1], P=p[n - 1].P + rnd.choice([-15, -5, 5, 15])) for n in rnd.sample(range(1, USED + 1), 12)}
+    taught = {
+        n: replace(p[n - 1], P=p[n - 1].P + rnd.choice([-15, -5, 5, 15])) for n in rnd.sample(range(1, USED + 1), 12)
+    }
     return changed(desired, taught), desired
 
 

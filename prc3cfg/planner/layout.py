@@ -103,4 +103,3 @@ class Layout:
 
 def _chunked(cls: type, items: list[tuple[int, int]], size: int) -> list[codec.Message]:
     return [cls(tuple(items[k : k + size])) for k in range(0, len(items), size)]
-

@@ -4,27 +4,32 @@ Bus time is dominated by the fixed cost of an exchange (turnaround, frame overhe
 reply, open-driver gaps), so the question is which *messages* to open, not which bytes
 to send. The search is built around that:
 
-1. **Channels.** A candidate opens a subset of the per-field messages: 40h..45h per
-   field, 33h/32h (P and V of consecutive programs) and 46h. A program that still differs
-   in a field none of its open messages can write takes a 21h. For a fixed subset the rest
-   is exact dynamic programming over program numbers 1..64:
+1. **Channels** (`WritePhase`). A candidate opens a subset of the per-field messages:
+   40h..45h per field, 33h/32h (P and V of consecutive programs) and 46h. A program that
+   still differs in a field none of its open messages can write takes a 21h. For a fixed
+   subset the rest is dynamic programming over program numbers 1..64:
    - P and V: 33h runs (at most 15 consecutive managed programs, which may include
      programs that need no change: their desired P, V are rewritten; a run of one is a
-     32h) against 40h/41h items;
+     32h) against 40h/41h items, or a 21h where that is cheaper;
    - A: link (30h) and unlink (31h) ranges against 46h items (or a 21h when 46h is shut);
    - Vr, T, F1, F2: their items, counted.
-   Every subset of the channels that matter is tried, most open first; a subset whose
-   forced 21h alone cost more than the best plan so far is skipped. Items are priced by
-   their exact message count (ceil(n/15), ceil(n/31)).
+   The DPs price an item on its own; the result is priced by its exact message count
+   (ceil(n/15), ceil(n/31)), and when items overflow one message the DP runs again with
+   a share of a header on each item. Every subset of the channels that matter is tried,
+   most open first; subsets that force the same 21h are tried once, and a subset whose
+   lower bound (its forced 21h and items) cannot beat the best so far is skipped.
+   The best few are then refined: programs take a 21h while that saves messages (an
+   overflowing 40h..46h, a 33h run that regroups).
 2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
-   step) is a second dynamic programme over program numbers: runs of initialised
-   programs cost one message each and may never cover an unmanaged program; each program
-   is charged what its remaining differences cost under a channel subset. It is run for
-   the best subset without inits, for all channels open and for all shut, and again for
-   the best subset found, until the plan stops improving.
-3. The best few layouts (and the all-21h layout, which is never dearer than the naive
-   download) go back to the caller, which prices their messages exactly and keeps the
-   cheapest.
+   step) is a second DP over program numbers: runs of initialised programs cost one
+   message each and never cover an unmanaged program; each program is charged what its
+   remaining differences would cost. That charge is estimated four ways — what they add to
+   the best plan without inits (headers included), item by item with every channel open,
+   the same with a share of a header per item, and as 21h — and again from each better
+   plan found, until none improves; each init choice gets its own channel search.
+3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
+   close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
+   never dearer than the naive download.
 
 Prices come from `prc3cfg.planner.pricing`, bases and masks from `prc3cfg.planner.problem`.
 Owns the search. Does not own building messages (`layout`) or checking the result (the
@@ -46,7 +51,7 @@ INF = float("inf")
 #: What a program (index) with a difference mask costs to fix, in seconds.
 Residual = Callable[[int, int], float]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
-#: How many of the best layouts of each init choice are priced exactly.
+#: How many of the best write phases of each init choice are refined and kept as candidates.
 KEPT = 3
 #: A bias far below any price (seconds): ties between keeping and initialising go to initialising.
 TIE = 1e-9
@@ -80,7 +85,7 @@ class WritePhase:
         self.masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
         self.base_a = [problem.bases[k][i].A for i, k in enumerate(kinds)]
         self.target_a = [0 if p is None else p.A for p in problem.desired.programs]
-        self.changed = {bit: _mask_of(m & bit for m in self.masks) for bit in FIELD_BIT.values()}
+        self.changed = {bit: sum(1 << i for i, m in enumerate(self.masks) if m & bit) for bit in FIELD_BIT.values()}
         self.relevant = 0
         for m in self.masks:
             self.relevant |= m
@@ -180,18 +185,14 @@ class WritePhase:
     def lower_bound(self, whole: int) -> float:
         """No write phase that gives at least `whole` a 21h costs less.
 
-        Each of those 21h; each remaining plain difference and each program left differing
-        in P or V at least an item; and one exchange for P and V if any is left. (Another 21h
-        costs more than the items it saves, and at least that exchange.)
+        Each of those 21h, and at least an item for each remaining plain difference and each
+        program left differing in P or V. Giving one more program a 21h never lowers this:
+        a 21h (16 bytes and an exchange) costs more than the five items it can save.
         """
         prices = self.prices
         plain = sum((self.changed[bit] & ~whole).bit_count() for bit in PLAIN_BITS)
         need = (self.pv_changed & ~whole).bit_count()
-        return (
-            whole.bit_count() * prices.program
-            + (plain + need) * prices.field_item
-            + (prices.field_header if need else 0.0)
-        )
+        return whole.bit_count() * prices.program + (plain + need) * prices.field_item
 
     def _priced(self, whole: int, runs: tuple, runs_cost: float, items: tuple[int, ...], ranges: tuple,
                 addresses: int) -> Writes:  # fmt: skip
@@ -278,7 +279,13 @@ class WritePhase:
     def _solve_parts(self, need: int, addresses: int, channels: Channels, surcharge: float) -> tuple:
         if not need:
             return (), 0, 0, 0, 0.0
-        prices, masks, price, reach, plain_items = self.prices, self.masks, self.parts_price, self.reach, self.plain_items
+        prices, masks, price, reach, plain_items = (
+            self.prices,
+            self.masks,
+            self.parts_price,
+            self.reach,
+            self.plain_items,
+        )
         item = prices.field_item + surcharge
         p_item = item if channels.positions else INF
         v_item = item if channels.speeds else INF
@@ -303,7 +310,7 @@ class WritePhase:
                 best[i + 1], back[i + 1] = c, (i, "whole")
             if runs_allowed:
                 end = reach[i]
-                for j in needed[position[i]:]:
+                for j in needed[position[i] :]:
                     if j >= end:
                         break
                     c = b + price[j - i + 1]
@@ -467,7 +474,11 @@ class WritePhase:
 
         def jump(i: int, mask: int) -> float:
             if i in ranged:
-                return 0.0 if ranged[i] == self.target_a[i] else prices.addresses(addresses + 1) - prices.addresses(addresses)
+                return (
+                    0.0
+                    if ranged[i] == self.target_a[i]
+                    else prices.addresses(addresses + 1) - prices.addresses(addresses)
+                )
             if not mask & A_BIT:
                 return 0.0
             n = addresses - (writes.addresses >> i & 1)
@@ -495,14 +506,6 @@ def _all_of(masks: tuple[int, ...]) -> int:
     for mask in masks:
         union |= mask
     return union
-
-
-def _mask_of(flags: object) -> int:
-    mask = 0
-    for i, flag in enumerate(flags):  # type: ignore[call-overload]
-        if flag:
-            mask |= 1 << i
-    return mask
 
 
 # -- inits -----------------------------------------------------------------------------------
@@ -598,7 +601,8 @@ def search(problem: Problem) -> list[Layout]:
 
 
 def whole_programs(problem: Problem) -> Layout:
-    """The system step and a 21h for every program that still differs: never dearer than the naive download."""
+    """The system step, then a 21h for every program that still differs (a link or unlink range
+    where only a jump address does and that is cheaper): never dearer than the naive download."""
     keep = (KEEP,) * PROGRAM_COUNT
     writes = WritePhase(problem, keep).evaluate(Channels.everything(False))
     assert writes is not None

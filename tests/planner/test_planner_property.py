@@ -15,8 +15,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from planner_helpers import FRAMINGS, check_plan, line
 
-from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters
-from prc3cfg.image import default_program
+from prc3cfg.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    ModuleImage,
+    Program,
+    SystemParameters,
+    default_program,
+)
 from prc3cfg.planner import plan_module
 
 
@@ -136,4 +143,3 @@ def test_plan_reaches_the_desired_image(scenario) -> None:
     cost = line(framing, turnaround)
     plan = plan_module(actual, desired, cost)
     check_plan(plan, actual, desired, cost, unread)
-
