@@ -39,6 +39,7 @@ caller runs it on `prc3cfg.device`).
 from __future__ import annotations
 
 import itertools
+import operator
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -51,6 +52,7 @@ INF = float("inf")
 #: What a program (index) with a difference mask costs to fix, in seconds.
 Residual = Callable[[int, int], float]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
+ESTIMATE = operator.attrgetter("estimate")
 #: How many of the best write phases of each init choice are refined and kept as candidates.
 KEPT = 3
 #: A bias far below any price (seconds): ties between keeping and initialising go to initialising.
@@ -164,23 +166,31 @@ class WritePhase:
         whole |= self.forced(channels)
         if self.lower_bound(whole) >= bound:
             return None
-        best: Writes | None = None
-        # Items are priced one by one in the DPs; when they overflow one message, again with
-        # a share of the extra message's header (ceil(n/31) 46h, ceil(n/15) 40h/41h).
-        for address_share in (0.0, self.prices.address_header / codec.MAX_ADDRESS_ITEMS):
-            ranges, addresses, extra = self.addresses(whole, channels.addresses, address_share)
-            for field_share in (0.0, self.prices.field_header / codec.MAX_FIELD_ITEMS):
-                runs, positions, speeds, more, runs_cost = self.parts(whole | extra, addresses, channels, field_share)
-                more |= whole | extra
-                items = (positions, speeds, *(self.changed[bit] & ~more for bit in PLAIN_BITS))
-                writes = self._priced(more, runs, runs_cost, items, ranges, addresses & ~more)
-                if best is None or writes.estimate < best.estimate:
-                    best = writes
-                if max(positions.bit_count(), speeds.bit_count()) <= codec.MAX_FIELD_ITEMS:
-                    break
-            if addresses.bit_count() <= codec.MAX_ADDRESS_ITEMS:
-                break
-        return best
+        # The DPs price items one by one. When the items of a 46h, 40h or 41h overflow into one
+        # more message, each DP runs again with a share of that message's header on every item:
+        # spread over a full message, and over just the overflow (which may then go elsewhere).
+        first = self._with_addresses(whole, channels, 0.0)
+        shares = _shares(first.addresses.bit_count(), codec.MAX_ADDRESS_ITEMS, self.prices.address_header)
+        return min([first, *(self._with_addresses(whole, channels, share) for share in shares)], key=ESTIMATE)
+
+    def _with_addresses(self, whole: int, channels: Channels, share: float) -> Writes:
+        ranges, addresses, extra = self.addresses(whole, channels.addresses, share)
+        whole |= extra
+        first = self._with_parts(whole, ranges, addresses, channels, (0.0, 0.0))
+        overflow = [
+            _shares(mask.bit_count(), codec.MAX_FIELD_ITEMS, self.prices.field_header) for mask in first.items[:2]
+        ]
+        others = [
+            self._with_parts(whole, ranges, addresses, channels, pair)
+            for pair in itertools.zip_longest(*overflow, fillvalue=0.0)
+        ]
+        return min([first, *others], key=ESTIMATE)
+
+    def _with_parts(self, whole: int, ranges: tuple, addresses: int, channels: Channels, share: tuple) -> Writes:
+        runs, positions, speeds, more, runs_cost = self.parts(whole, addresses, channels, share)
+        whole |= more
+        items = (positions, speeds, *(self.changed[bit] & ~whole for bit in PLAIN_BITS))
+        return self._priced(whole, runs, runs_cost, items, ranges, addresses & ~whole)
 
     def lower_bound(self, whole: int) -> float:
         """No write phase that gives at least `whole` a 21h costs less.
@@ -262,21 +272,21 @@ class WritePhase:
 
     # -- P and V: 33h/32h runs against 40h/41h items (or a 21h) ---------------------------------
 
-    def parts(self, whole: int, addresses: int, channels: Channels, surcharge: float = 0.0) -> tuple:
+    def parts(self, whole: int, addresses: int, channels: Channels, share: tuple[float, float] = (0.0, 0.0)) -> tuple:
         """(runs, 40h programs, 41h programs, programs better off with a 21h, cost of the runs).
 
         For the programs not in `whole` that differ in P or V. A program may take a 21h instead
         when that costs less than its P and V writes plus its other items (`addresses`: its 46h item).
-        Items are priced one by one, plus `surcharge` for their share of the 40h/41h messages.
+        Items are priced one by one, plus `share` (40h, 41h) of their messages' headers.
         """
         need = self.pv_changed & ~whole
-        key = (need, addresses & need, channels.positions, channels.speeds, channels.parts, surcharge)
+        key = (need, addresses & need, channels.positions, channels.speeds, channels.parts, share)
         cached = self._parts_cache.get(key)
         if cached is None:
-            cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels, surcharge)
+            cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels, share)
         return cached
 
-    def _solve_parts(self, need: int, addresses: int, channels: Channels, surcharge: float) -> tuple:
+    def _solve_parts(self, need: int, addresses: int, channels: Channels, share: tuple[float, float]) -> tuple:
         if not need:
             return (), 0, 0, 0, 0.0
         prices, masks, price, reach, plain_items = (
@@ -286,9 +296,8 @@ class WritePhase:
             self.reach,
             self.plain_items,
         )
-        item = prices.field_item + surcharge
-        p_item = item if channels.positions else INF
-        v_item = item if channels.speeds else INF
+        p_item = prices.field_item + share[0] if channels.positions else INF
+        v_item = prices.field_item + share[1] if channels.speeds else INF
         program, address_item, runs_allowed = prices.program, prices.address_item, channels.parts
         needed = list(members(need))
         position = {j: k for k, j in enumerate(needed)}
@@ -495,6 +504,14 @@ class WritePhase:
             return min(total, prices.program) if mask else total
 
         return cost
+
+
+def _shares(n: int, capacity: int, header: float) -> list[float]:
+    """Header shares per item worth trying when n items overflow one message: none if they fit."""
+    if n <= capacity:
+        return []
+    overflow = n - capacity * ((n - 1) // capacity)
+    return sorted({header / capacity, header / overflow})
 
 
 def _all_runs(runs: tuple[tuple[int, int], ...]) -> int:
