@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import itertools
 import operator
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -93,14 +94,8 @@ class WritePhase:
             self.relevant |= m
         self.pv_changed = self.changed[P_BIT] | self.changed[V_BIT]
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
-        # What a 21h saves in plain items; where a 33h run from each program must end (exclusive).
+        # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
-        self.reach = []
-        for i in range(PROGRAM_COUNT):
-            end = i
-            while end < min(i + codec.MAX_FIELD_ITEMS, PROGRAM_COUNT) and self.managed[end]:
-                end += 1
-            self.reach.append(end)
         self._parts_cache: dict[tuple, tuple] = {}
         self._address_cache: dict[tuple, tuple] = {}
 
@@ -239,11 +234,11 @@ class WritePhase:
                     delta += self._runs_cost(rest) - self._runs_cost((run,))
                 moves.append((delta, j))
             moves.sort()
-            # The best quick move; and, with the DPs run again (33h runs may regroup and save an
-            # exchange), the few that come within an exchange of paying off.
+            # The best quick move; and, with the DPs run again (the 33h runs they leave may regroup
+            # and save an exchange), the few in runs that come within an exchange of paying off.
             tries = [self._moved(writes, moves[0][1])] if moves and moves[0][0] < -1e-12 else []
             tries += [self.evaluate(channels, whole=writes.whole | 1 << j)
-                      for delta, j in moves[:REGROUPED] if delta < prices.exchange]  # fmt: skip
+                      for delta, j in moves[:REGROUPED] if delta < prices.exchange and j in run_of]  # fmt: skip
             better = [moved for moved in tries if moved is not None and moved.estimate < writes.estimate - 1e-12]
             if not better:
                 return writes
@@ -289,42 +284,42 @@ class WritePhase:
     def _solve_parts(self, need: int, addresses: int, channels: Channels, share: tuple[float, float]) -> tuple:
         if not need:
             return (), 0, 0, 0, 0.0
-        prices, masks, price, reach, plain_items = (
-            self.prices,
-            self.masks,
-            self.parts_price,
-            self.reach,
-            self.plain_items,
-        )
+        prices, masks, managed, price = self.prices, self.masks, self.managed, self.parts_price
         p_item = prices.field_item + share[0] if channels.positions else INF
         v_item = prices.field_item + share[1] if channels.speeds else INF
         program, address_item, runs_allowed = prices.program, prices.address_item, channels.parts
-        needed = list(members(need))
-        position = {j: k for k, j in enumerate(needed)}
-        best = [INF] * (PROGRAM_COUNT + 1)
+        # best[j]: the cheapest way to write P and V of the programs before j. A 33h run i..j
+        # costs head + per × (j - i + 1), so the best run ending at j starts at the i that
+        # minimises best[i] - per × i over the last 15 managed programs: a sliding-window minimum.
+        head, per = prices.parts_header, prices.parts_item
+        best = [0.0] * (PROGRAM_COUNT + 1)
         back: list[tuple[int, str]] = [(0, "")] * (PROGRAM_COUNT + 1)
-        best[0] = 0.0
-        for i in range(PROGRAM_COUNT):
-            b = best[i]
-            if not need >> i & 1:
-                if b < best[i + 1]:
-                    best[i + 1], back[i + 1] = b, (i, "")
+        starts: deque[tuple[float, int]] = deque()  # (best[i] - per × i, i), keys increasing
+        for j in range(PROGRAM_COUNT):
+            b = best[j]
+            if not managed[j]:
+                starts.clear()
+            if not need >> j & 1:
+                best[j + 1], back[j + 1] = b, (j, "")
                 continue
-            m = masks[i]
-            c = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0)
-            if c < best[i + 1]:
-                best[i + 1], back[i + 1] = c, (i, "items")
-            c = b + program - plain_items[i] - (address_item if addresses >> i & 1 else 0.0)
-            if c < best[i + 1]:
-                best[i + 1], back[i + 1] = c, (i, "whole")
+            m = masks[j]
+            c, how = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0), (j, "items")
+            whole = b + program - self.plain_items[j] - (address_item if addresses >> j & 1 else 0.0)
+            if whole < c:
+                c, how = whole, (j, "whole")
             if runs_allowed:
-                end = reach[i]
-                for j in needed[position[i] :]:
-                    if j >= end:
-                        break
-                    c = b + price[j - i + 1]
-                    if c < best[j + 1]:
-                        best[j + 1], back[j + 1] = c, (i, "run")
+                key = b - per * j
+                while starts and starts[-1][0] >= key:
+                    starts.pop()
+                starts.append((key, j))
+                while starts[0][1] <= j - codec.MAX_FIELD_ITEMS:
+                    starts.popleft()
+                if b + price[1] < c:
+                    c, how = b + price[1], (j, "run")
+                key, first = starts[0]
+                if key + head + per * (j + 1) < c:
+                    c, how = key + head + per * (j + 1), (first, "run")
+            best[j + 1], back[j + 1] = c, how
         runs, positions, speeds, whole, runs_cost = [], 0, 0, 0, 0.0
         j = PROGRAM_COUNT
         while j > 0:

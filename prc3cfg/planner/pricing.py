@@ -58,6 +58,8 @@ class Prices:
     address_item: float = field(init=False)  # one more item in a 46h
     field_header: float = field(init=False)  # a 40h..45h without its items
     address_header: float = field(init=False)  # a 46h without its items
+    parts_header: float = field(init=False)  # a 33h of n programs costs parts_header + n × parts_item
+    parts_item: float = field(init=False)
     _parts: tuple[float, ...] = field(init=False, repr=False)
     _fields: tuple[float, ...] = field(init=False, repr=False)
     _addresses: tuple[float, ...] = field(init=False, repr=False)
@@ -73,9 +75,10 @@ class Prices:
         put("field_item", self.byte * FIELD_ITEM_SIZE)
         put("address_item", self.byte * ADDRESS_ITEM_SIZE)
         put("field_header", self.message(FIELD_HEADER_SIZE))
-        part = self.message(PART_SIZE)
-        put("_parts", (0.0, part, *(self.message(PARTS_HEADER_SIZE + n * PARTS_ITEM_SIZE)
-                                    for n in range(2, codec.MAX_FIELD_ITEMS + 1))))  # fmt: skip
+        put("parts_header", self.message(PARTS_HEADER_SIZE))
+        put("parts_item", self.byte * PARTS_ITEM_SIZE)
+        runs = (self.parts_header + n * self.parts_item for n in range(2, codec.MAX_FIELD_ITEMS + 1))
+        put("_parts", (0.0, self.message(PART_SIZE), *runs))
         counts = range(PROGRAM_COUNT + 1)
         put("_fields", tuple(ceil(n / codec.MAX_FIELD_ITEMS) * self.field_header + n * self.field_item
                              for n in counts))  # fmt: skip
