@@ -278,7 +278,7 @@ def restore(
     retries: RetriesOpt = 5,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
-    taken = Snapshot.load_plant(snapshot)
+    taken = Snapshot.load(snapshot)
     loaded = load_plant(taken.plant_path)
     pairs = [(bus, m) for bus in loaded.buses for m in bus.modules if (bus.name, m.address) in taken.images]
     if len(pairs) != len(taken.images):
