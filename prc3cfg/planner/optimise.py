@@ -60,6 +60,8 @@ KEPT = 3
 TIE = 1e-9
 #: Items per message assumed by one of the init choices (few items: headers matter).
 INIT_SHARE = 4
+#: Probes of the header share that makes overflowing 40h/41h items fit one message less.
+BISECTIONS = 6
 #: How many promising 21h moves `WritePhase.refine` re-plans with the DPs in each round.
 REGROUPED = 4
 
@@ -172,14 +174,26 @@ class WritePhase:
         ranges, addresses, extra = self.addresses(whole, channels.addresses, share)
         whole |= extra
         first = self._with_parts(whole, ranges, addresses, channels, (0.0, 0.0))
-        overflow = [
-            _shares(mask.bit_count(), codec.MAX_FIELD_ITEMS, self.prices.field_header) for mask in first.items[:2]
-        ]
-        others = [
-            self._with_parts(whole, ranges, addresses, channels, pair)
-            for pair in itertools.zip_longest(*overflow, fillvalue=0.0)
-        ]
-        return min([first, *others], key=ESTIMATE)
+        counts = [mask.bit_count() for mask in first.items[:2]]
+        over = [n > codec.MAX_FIELD_ITEMS for n in counts]
+        if not any(over):
+            return first
+        # 40h/41h items overflow: find by bisection the least share of a header on each of their
+        # items that makes the DP save a message (a Lagrangian relaxation of ceil(n/15)).
+        # The shares that matter are small beside the header, so the bisection is geometric.
+        goal = [codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS) for n in counts]
+        tried = [first]
+        low, high = self.prices.field_item / 16, self.prices.field_header
+        for _ in range(BISECTIONS):
+            middle = (low * high) ** 0.5
+            pair = (middle if over[0] else 0.0, middle if over[1] else 0.0)
+            tried.append(self._with_parts(whole, ranges, addresses, channels, pair))
+            n = [mask.bit_count() for mask in tried[-1].items[:2]]
+            if all(n[k] <= goal[k] for k in (0, 1) if over[k]):
+                high = middle
+            else:
+                low = middle
+        return min(tried, key=ESTIMATE)
 
     def _with_parts(self, whole: int, ranges: tuple, addresses: int, channels: Channels, share: tuple) -> Writes:
         runs, positions, speeds, more, runs_cost = self.parts(whole, addresses, channels, share)
