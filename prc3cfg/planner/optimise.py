@@ -14,8 +14,9 @@ to send. The search is built around that:
    - A: link (30h) and unlink (31h) ranges against 46h items (or a 21h when 46h is shut);
    - Vr, T, F1, F2: their items, counted.
    The DPs price an item on its own; the result is priced by its exact message count
-   (ceil(n/15), ceil(n/31)), and when items overflow one message the DP runs again with
-   a share of a header on each item. Every subset of the channels that matter is tried,
+   (ceil(n/15), ceil(n/31)). When items overflow a message, the DP runs again with a share
+   of a header on each item (for 40h/41h the least share that saves the message, found by
+   bisection: a Lagrangian relaxation of the ceiling). Every subset of the channels that matter is tried,
    most open first; subsets that force the same 21h are tried once, and a subset whose
    lower bound (its forced 21h and items) cannot beat the best so far is skipped.
    The best few are then refined: programs take a 21h while that saves messages (an
