@@ -10,7 +10,7 @@ from planner_helpers import FRAMINGS, check_plan, line, with_programs
 from prc3cfg import codec
 from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, default_program
 from prc3cfg.planner import ModulePlan, UnreachableImage, plan_module
-from prc3cfg.planner.plan import program_list
+from prc3cfg.planner.plan import program_list, summarise
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
 
@@ -202,3 +202,25 @@ def test_a_managed_program_that_was_not_read_is_a_caller_error() -> None:
 )
 def test_program_lists(numbers: list[int], text: str) -> None:
     assert program_list(numbers) == text
+
+
+@pytest.mark.parametrize(
+    ("message", "summary"),
+    [
+        (codec.InitSystem(), "initialise system parameters to factory defaults (10h)"),
+        (codec.WriteSystem(replace(SYSTEM, S1=900, S5=30)), "write system parameters S1, S5 (20h)"),
+        (codec.InitAllPrograms(), "initialise all 64 programs (11h)"),
+        (codec.InitProgram(5), "initialise program 5 (12h)"),
+        (codec.InitProgramsFrom(40), "initialise programs 40..64 (13h)"),
+        (codec.InitPrograms(3, 9), "initialise programs 3..9 (14h)"),
+        (codec.WriteProgram(7, recipe(7)), "write program 7 (21h)"),
+        (codec.LinkPrograms(5, 48), "link programs 5..48 (30h)"),
+        (codec.UnlinkPrograms(5, 64), "unlink programs 5..64 (31h)"),
+        (codec.WritePartProgram(5, 100, 50), "write P, V of program 5 (32h)"),
+        (codec.WritePartPrograms(3, ((100, 50),) * 4), "write P, V of programs 3..6 (33h)"),
+        (codec.WriteF2(((1, 0), (2, 0))), "write F2 of programs 1, 2 (45h)"),
+        (codec.WriteAddresses(((1, 2), (8, 1), (9, 0))), "write A of programs 1, 8, 9 (46h)"),
+    ],
+)
+def test_step_summaries(message: codec.Message, summary: str) -> None:
+    assert summarise(message, SYSTEM) == summary
