@@ -64,12 +64,11 @@ class ModuleRun:
             except LinkError as error:
                 self.failure = f"step {index} of {len(steps)} ({summary}): {error}"
                 return False
-            if reply != 0:
-                code = reply if isinstance(reply, int) else -1
+            if reply != 0:  # a write is answered with a code word only (decode_reply sees to it)
                 self.refused = True
                 self.failure = (
                     f"{self.where}: step {index} of {len(steps)} ({summary}, {message.hex()}) was refused "
-                    f"with {describe(code)} — {remedy(code)}"
+                    f"with {describe(reply)} — {remedy(reply)}"
                 )
                 return False
             self.sent.append(message)
