@@ -27,7 +27,8 @@ to send. The search is built around that:
    remaining differences would cost. That charge is estimated four ways — what they add to
    the best plan without inits (headers included), item by item with every channel open,
    the same with a share of a header per item, and as 21h — and again from each better
-   plan found, until none improves; each init choice gets its own channel search.
+   plan found (and with each of its init runs moved across the system step), until none
+   improves; each init choice gets its own channel search.
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
    never dearer than the naive download.
@@ -48,7 +49,18 @@ from dataclasses import dataclass
 from prc3cfg import codec
 from prc3cfg.image import PROGRAM_COUNT
 from prc3cfg.planner.layout import Layout, Writes, members, runs_of
-from prc3cfg.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, PLAIN_FIELDS, PV_BITS, V_BIT, Problem
+from prc3cfg.planner.problem import (
+    A_BIT,
+    FIELD_BIT,
+    INIT_AFTER,
+    INIT_BEFORE,
+    KEEP,
+    P_BIT,
+    PLAIN_FIELDS,
+    PV_BITS,
+    V_BIT,
+    Problem,
+)
 
 INF = float("inf")
 #: What a program (index) with a difference mask costs to fix, in seconds.
@@ -605,14 +617,15 @@ def search(problem: Problem) -> list[Layout]:
         best = layouts[0].estimate
         tried = {keep}
         everything = Channels.everything(True)
-        queue = [
+        residuals = [
             phase.marginal(found[0][0]),
             phase.linear(everything),
             phase.linear(everything, problem.prices.field_header / INIT_SHARE),
             phase.linear(Channels.everything(False)),
         ]
+        queue = [choose_inits(problem, _table(problem, residual)) for residual in residuals]
         while queue:
-            kinds = choose_inits(problem, _table(problem, queue.pop(0)))
+            kinds = queue.pop(0)
             if kinds in tried:
                 continue
             tried.add(kinds)
@@ -622,9 +635,21 @@ def search(problem: Problem) -> list[Layout]:
             layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
             if found and base + found[0][0].estimate < best:
                 best = base + found[0][0].estimate
-                queue.append(with_inits.marginal(found[0][0]))
+                queue.append(choose_inits(problem, _table(problem, with_inits.marginal(found[0][0]))))
+                queue += _moved_across(problem, kinds)
     unique = {(layout.kinds, layout.writes): layout for layout in layouts}
     return sorted(unique.values(), key=lambda layout: layout.estimate)
+
+
+def _moved_across(problem: Problem, kinds: tuple[int, ...]) -> list[tuple[int, ...]]:
+    """`kinds` with one init run moved to the other side of the system step (the residuals may tie)."""
+    if INIT_BEFORE not in problem.kinds:
+        return []
+    out = []
+    for kind, other in ((INIT_BEFORE, INIT_AFTER), (INIT_AFTER, INIT_BEFORE)):
+        for first, last in runs_of(kinds, kind):
+            out.append(kinds[:first] + (other,) * (last - first + 1) + kinds[last + 1 :])
+    return out
 
 
 def whole_programs(problem: Problem) -> Layout:
