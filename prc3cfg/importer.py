@@ -22,13 +22,17 @@ PROGRAM_KEYS = {"P": "position", "V": "speed", "Vr": "relative_speed", "T": "dwe
 
 
 def jumps_as_chains(programs: dict[int, Program]) -> tuple[list[Any], dict[int, int]]:
-    """(chains, next) that give exactly the programs' jump addresses A."""
+    """(chains, next) that give exactly the programs' jump addresses A.
+
+    Chains are written as a plant file writes them: `[1, 2, 3]`, `{"programs": [...], "loop": True}`.
+    A jump to a program not in `programs` is always a `next`.
+    """
     succ = {n: p.A for n, p in programs.items() if p.A}
     preds: dict[int, list[int]] = {}
     for n, a in sorted(succ.items()):
         preds.setdefault(a, []).append(n)
-    # A jump can be a chain link only into a program that no other program jumps to.
-    link = {n: a for n, a in succ.items() if len(preds[a]) == 1}
+    # A jump can be a chain link only into a given program that no other program jumps to.
+    link = {n: a for n, a in succ.items() if len(preds[a]) == 1 and a in programs}
     linked_to = set(link.values())
     chains: list[Any] = []
     placed: set[int] = set()

@@ -12,17 +12,17 @@ import re
 from dataclasses import dataclass
 
 from prc3cfg.image import ModuleImage, default_program
+from prc3cfg.importer import jumps_as_chains
 from prc3cfg.plant.units import BY_SYMBOL, format_function_output
 from prc3cfg.plantplan import ModuleChange, PlantPlan
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
-FIELD_NAMES = {"P": "position", "V": "speed", "Vr": "relative speed", "T": "dwell", "F1": "F1", "F2": "F2"}
-SYSTEM_NAMES = {
-    "S1": "upper reversing point", "S2": "reference point", "S3": "increment pulses", "S4": "max speed",
-    "S5": "min speed", "S6": "acceleration", "S7": "circuit gain", "S8": "alarm", "S10": "sync increment",
-    "S11": "sync circuit gain", "S12": "sync conveyor sequence",
-}  # fmt: skip
 _PATH = re.compile(r"root\['(system|programs)'\](?:\[(\d+)\])?(?:\['(\w+)'\])?")
+
+
+def field_name(symbol: str) -> str:
+    """The plant-file key in words: S1 → "upper reversing point", Vr → "relative speed"."""
+    return BY_SYMBOL[symbol].key.replace("_", " ") if symbol in BY_SYMBOL else symbol
 
 
 def format_value(symbol: str, device: int) -> str:
@@ -39,8 +39,7 @@ class FieldChange:
     after: int
 
     def text(self) -> str:
-        name = SYSTEM_NAMES.get(self.symbol) or FIELD_NAMES[self.symbol]
-        return f"{name} {format_value(self.symbol, self.before)} → {format_value(self.symbol, self.after)}"
+        return f"{field_name(self.symbol)} {format_value(self.symbol, self.before)} → {format_value(self.symbol, self.after)}"
 
     def to_json(self) -> dict:
         return {"program": self.program, "field": self.symbol, "before": self.before, "after": self.after}
@@ -62,34 +61,23 @@ def field_changes(actual: ModuleImage, desired: ModuleImage) -> list[FieldChange
     return sorted(changes, key=lambda c: (c.program or 0, list(BY_SYMBOL).index(c.symbol) if c.symbol in BY_SYMBOL else 99))
 
 
-def chains(image: ModuleImage, within: set[int]) -> list[tuple[int, ...]]:
-    """The jump chains among the programs in `within`: (1, 2, 3) for 1→2→3→stop; a loop repeats its head."""
-    jumps = {n: image.programs[n - 1].A for n in within if image.programs[n - 1] is not None and image.programs[n - 1].A}
-    targets = set(jumps.values())
-    result, seen = [], set()
-    for start in sorted(n for n in jumps if n not in targets) + sorted(jumps):
-        if start in seen:
-            continue
-        chain = [start]
-        seen.add(start)
-        while (nxt := jumps.get(chain[-1])) and nxt not in chain and nxt not in seen:
-            chain.append(nxt)
-            seen.add(nxt)
-        if (nxt := jumps.get(chain[-1])) and (nxt in chain or nxt in seen):
-            chain.append(nxt)  # loop back, or into another chain
-        result.append(tuple(chain))
-    return result
-
-
-def format_chain(chain: tuple[int, ...]) -> str:
-    return " → ".join(map(str, chain)) + ("" if len(chain) > 1 and chain[-1] in chain[:-1] else " → stop")
+def jumps(image: ModuleImage, within: set[int]) -> set[str]:
+    """The jumps among the programs in `within` as people read them: chains, loops, single jumps."""
+    chain_list, nexts = jumps_as_chains({n: image.programs[n - 1] for n in within})
+    lines = {f"jump {n} → {a}" for n, a in nexts.items()}
+    for chain in chain_list:
+        if isinstance(chain, dict):  # a loop: back to its first program
+            lines.add("chain " + " → ".join(map(str, [*chain["programs"], chain["programs"][0]])))
+        else:
+            lines.add("chain " + " → ".join(map(str, chain)) + " → stop")
+    return lines
 
 
 def chain_changes(actual: ModuleImage, desired: ModuleImage) -> tuple[list[str], list[str]]:
-    """(chains removed, chains added) among the managed programs."""
+    """(jumps removed, jumps added) among the managed programs."""
     managed = {n for n, p in enumerate(desired.programs, start=1) if p is not None}
-    before, after = set(chains(actual, managed)), set(chains(desired, managed))
-    return [format_chain(c) for c in sorted(before - after)], [format_chain(c) for c in sorted(after - before)]
+    before, after = jumps(actual, managed), jumps(desired, managed)
+    return sorted(before - after), sorted(after - before)
 
 
 def program_symbol(actual: ModuleImage, desired: ModuleImage, number: int) -> str:
@@ -115,7 +103,7 @@ def module_lines(change: ModuleChange) -> list[str]:
     for number, texts in sorted(programs.items()):
         lines.append(f"{program_symbol(change.actual, change.desired, number)} program {number}: {', '.join(texts)}")
     removed, added = chain_changes(change.actual, change.desired)
-    lines += [f"- chain {c}" for c in removed] + [f"+ chain {c}" for c in added]
+    lines += [f"- {c}" for c in removed] + [f"+ {c}" for c in added]
     return lines
 
 
