@@ -133,13 +133,6 @@ def _clamped(system: SystemParameters, programs: tuple[Program, ...]) -> tuple[P
     return tuple(out)
 
 
-def _with_programs(image: ModuleImage, changes: dict[int, Program]) -> ModuleImage:
-    programs = list(image.programs)
-    for number, program in changes.items():
-        programs[number - 1] = program
-    return replace(image, programs=tuple(programs))
-
-
 def _set_system(state: ModuleState, system: SystemParameters) -> ModuleState:
     """10h/20h: store, clamp every program, release the axes; an E12 fault is cleared (§4.3, §4.4)."""
     image = replace(state.image, system=system, programs=_clamped(system, state.image.programs))
@@ -148,7 +141,7 @@ def _set_system(state: ModuleState, system: SystemParameters) -> ModuleState:
 
 def _init_programs(state: ModuleState, numbers: range | tuple[int, ...]) -> ModuleState:
     default = default_program(state.image.system)
-    return replace(state, image=_with_programs(state.image, {n: default for n in numbers}))
+    return replace(state, image=state.image.with_programs({n: default for n in numbers}))
 
 
 def _set_fields(state: ModuleState, field: str, items: tuple[tuple[int, int], ...]) -> ModuleState:
@@ -157,7 +150,7 @@ def _set_fields(state: ModuleState, field: str, items: tuple[tuple[int, int], ..
     for number, value in items:
         current = changes.get(number) or image.programs[number - 1]
         changes[number] = current.with_field(field, value)
-    return replace(state, image=_with_programs(image, changes))
+    return replace(state, image=image.with_programs(changes))
 
 
 def _set_positions_and_speeds(state: ModuleState, first: int, items: tuple[tuple[int, int], ...]) -> ModuleState:
@@ -166,13 +159,13 @@ def _set_positions_and_speeds(state: ModuleState, first: int, items: tuple[tuple
         first + i: replace(image.programs[first + i - 1], P=position, V=speed)
         for i, (position, speed) in enumerate(items)
     }
-    return replace(state, image=_with_programs(image, changes))
+    return replace(state, image=image.with_programs(changes))
 
 
 def _link(state: ModuleState, first: int, last: int) -> ModuleState:
     image = state.image
     changes = {n: image.programs[n - 1].with_field("A", n + 1 if n < last else 0) for n in range(first, last + 1)}
-    return replace(state, image=_with_programs(image, changes))
+    return replace(state, image=image.with_programs(changes))
 
 
 _EFFECTS: dict[type[Message], Callable[[ModuleState, Any], ModuleState]] = {
@@ -182,7 +175,7 @@ _EFFECTS: dict[type[Message], Callable[[ModuleState, Any], ModuleState]] = {
     codec.InitProgram: lambda s, m: _init_programs(s, m.touched_programs()),
     codec.InitProgramsFrom: lambda s, m: _init_programs(s, m.touched_programs()),
     codec.InitPrograms: lambda s, m: _init_programs(s, m.touched_programs()),
-    codec.WriteProgram: lambda s, m: replace(s, image=_with_programs(s.image, {m.pn: m.program})),
+    codec.WriteProgram: lambda s, m: replace(s, image=s.image.with_programs({m.pn: m.program})),
     codec.LinkPrograms: lambda s, m: _link(s, m.first, m.last),
     codec.UnlinkPrograms: lambda s, m: _set_fields(s, "A", tuple((n, 0) for n in m.programs)),
     codec.WritePartProgram: lambda s, m: _set_positions_and_speeds(s, m.pn, ((m.position, m.speed),)),

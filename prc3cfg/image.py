@@ -111,6 +111,13 @@ class ModuleImage:
     def program(self, number: int) -> Program | None:
         return self.programs[number - 1]
 
+    def with_programs(self, changes: dict[int, Program]) -> ModuleImage:
+        """This image with the given programs (by number) replaced."""
+        programs = list(self.programs)
+        for number, program in changes.items():
+            programs[number - 1] = program
+        return replace(self, programs=tuple(programs))
+
     def to_json(self) -> dict[str, Any]:
         return {
             "address": self.address,

@@ -20,10 +20,7 @@ FRAMINGS = ["crc16", "open-driver", "stx"]
 
 
 def teach(state: ModuleState, changes: dict[int, Program]) -> ModuleState:
-    programs = list(state.image.programs)
-    for number, program in changes.items():
-        programs[number - 1] = program
-    return replace(state, image=replace(state.image, programs=tuple(programs)))
+    return replace(state, image=state.image.with_programs(changes))
 
 
 def connect(emulator: Emulator, framing: str = "crc16", *, retries: int = 3, timeout: float = 0.3, **kw) -> Link:

@@ -48,7 +48,7 @@ def parse_addresses(text: str) -> list[int]:
 
 def chosen_modules(plant: Plant, names: Iterable[str] | None) -> list[tuple[object, object]]:
     """(bus, module) pairs of the plant, limited to the named modules; unknown names are an error."""
-    pairs = [(bus, module) for bus in plant.buses for module in bus.modules]
+    pairs = list(plant.modules())
     if not names:
         return pairs
     wanted = set(names)

@@ -61,10 +61,10 @@ def read(
         image = images[(bus.name, m.address)]
         print(f"bus {bus.name}, module {m.address} ({m.name})")
         print("  system: " + ", ".join(
-            f"{render.SYSTEM_NAMES[k]} {render.format_value(k, v)}" for k, v in image.system.to_json().items()))  # fmt: skip
+            f"{render.field_name(k)} {render.format_value(k, v)}" for k, v in image.system.to_json().items()))  # fmt: skip
         for number, program in enumerate(image.programs, start=1):
             if program is not None:
-                values = ", ".join(f"{render.FIELD_NAMES[k]} {render.format_value(k, v)}" for k, v in program.to_json().items() if k != "A")
+                values = ", ".join(f"{render.field_name(k)} {render.format_value(k, v)}" for k, v in program.to_json().items() if k != "A")
                 print(f"  program {number}: {values}" + (f", next {program.A}" if program.A else ""))
 
 
@@ -280,7 +280,7 @@ def restore(
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     taken = Snapshot.load(snapshot)
     loaded = load_plant(taken.plant_path)
-    pairs = [(bus, m) for bus in loaded.buses for m in bus.modules if (bus.name, m.address) in taken.images]
+    pairs = [(bus, m) for bus, m in loaded.modules() if (bus.name, m.address) in taken.images]
     if len(pairs) != len(taken.images):
         raise UserError(f"{snapshot}: the plant file {taken.plant_path} no longer has every module of the snapshot — nothing was written")
     targets = [

@@ -100,9 +100,8 @@ class Emulator:
         """Teach In on the module's inputs (manual §2.6): a program's position changes."""
         with self._lock:
             state = self._bus.modules[address]
-            programs = list(state.image.programs)
-            programs[program - 1] = replace(programs[program - 1], P=position)
-            state = replace(state, image=replace(state.image, programs=tuple(programs)))
+            taught = replace(state.image.program(program), P=position)
+            state = replace(state, image=state.image.with_programs({program: taught}))
             self._store(address, state)
             return state
 
