@@ -64,7 +64,6 @@ class Link:
         line: LineSettings = LineSettings(),
         timeout: float = 0.5,
         zvz: float = 0.020,
-        turnaround: float = 0.010,
         retries: int = 3,
         trace: Trace | None = None,
         observer: Callable[[Exchange], None] | None = None,
@@ -75,7 +74,6 @@ class Link:
         self.line = line
         self.timeout = timeout
         self.zvz = zvz
-        self.turnaround = turnaround
         self.retries = retries
         self.trace = trace
         self.observer = observer
@@ -121,12 +119,6 @@ class Link:
             f"({self.framing.name}) and line settings ({self.line.baud} baud, {self.line.data_bits}"
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
         )
-
-    def broadcast(self, message: codec.Message) -> None:
-        """Send to address 0: every module processes it, none answers."""
-        frame = self.framing.encode(Direction.REQUEST, 0, message.encode())
-        self._send(frame)
-        time.sleep(len(frame) * self.line.char_time + self.turnaround)
 
     def _observe(self, address: int, data: bytes, raw: bytes | None, attempt: int, started: float) -> None:
         self.exchanges += 1

@@ -86,7 +86,6 @@ def open_link(
             line=bus.line,
             timeout=bus.timeout,
             zvz=bus.zvz,
-            turnaround=bus.turnaround,
             retries=retries,
             trace=trace,
             observer=observer,
