@@ -79,6 +79,7 @@ def test_stale_plan_refused_after_plant_file_change(plant, capsys, tmp_path):
     plant.path.write_text(plant.path.read_text().replace("dwell: 0.5", "dwell: 0.6", 1))
     result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
     assert result.code == 1 and "stale plan — the plant file" in result.err
+    assert not (tmp_path / ".prc3cfg" / "journal").exists()  # refused before any exchange on the line
 
 
 def test_a_second_apply_on_the_same_line_is_refused(plant, capsys):

@@ -33,7 +33,7 @@ from prc3cfg.plant import load_plant
 from prc3cfg.image import ModuleImage
 from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
 from prc3cfg.locks import line_lock
-from prc3cfg.plantplan import PlanFileError, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.plantplan import PlanFileError, PlannedModule, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.readback import Target
 from prc3cfg.records import Journal, Snapshot
 
@@ -166,6 +166,7 @@ def _apply(
     retries: int,
 ) -> None:
     """Lock, read back, plan (or check the plan file), gate, snapshot, run, verify, account."""
+    planned = None if plan_file is None else _read_plan_file(plan_file, loaded)  # before any time on the line
     buses = {b.name: b for b, _ in pairs}
     with contextlib.ExitStack() as stack:
         for bus in buses.values():
@@ -176,15 +177,15 @@ def _apply(
         stack.callback(journal.close)
         links = stack.enter_context(plant_links(loaded, buses, trace, retries, observer=journal.exchange))
         images = read_images(targets, links)
-        the_plan = make_plan(loaded, pairs, images, desired)
-        if plan_file is None:
+        if planned is None:
+            the_plan = make_plan(loaded, pairs, images, desired)
             print(render.human(the_plan))
             runs = [
                 ModuleRun(c.bus, c.address, c.name, c.desired, tuple(s.message for s in c.steps), tuple(s.summary for s in c.steps))
                 for c in the_plan.changes
             ]
         else:
-            runs = _runs_from_plan_file(plan_file, loaded, the_plan, images)
+            runs = _runs_from_plan_file(plan_file, planned, pairs, images)
             print(f"Applying {plan_file}: {sum(len(r.steps) for r in runs)} messages to {len(runs)} modules")
         if not runs:
             print("Nothing to do: every module matches the plant file.")
@@ -211,27 +212,33 @@ def _apply(
     print(f"Apply complete: {len(runs)} modules written and verified.")
 
 
-def _runs_from_plan_file(path: Path, loaded, fresh: PlantPlan, images: dict[Key, ModuleImage]) -> list[ModuleRun]:
-    """The plan file's steps, refused when the plant file or any module changed since it was made."""
+def _read_plan_file(path: Path, loaded) -> list[PlannedModule]:
+    """The plan file's modules; refused when it is damaged or the plant file changed since it was made."""
     try:
-        plant_name, plant_sha, planned = read_plan_file(json.loads(path.read_text()))
+        _, plant_sha, planned = read_plan_file(json.loads(path.read_text()))
     except (OSError, ValueError, PlanFileError) as error:
         raise UserError(f"{path}: {error}") from None
     if plant_sha != loaded.sha256:
         raise UserError(f"{path}: stale plan — the plant file {loaded.path} changed since the plan was made; plan again")
-    by_key = {(c.bus, c.address): c for c in fresh.modules}
+    return planned
+
+
+def _runs_from_plan_file(path: Path, planned: list[PlannedModule], pairs, images: dict[Key, ModuleImage]) -> list[ModuleRun]:
+    """The plan file's steps, refused when any module changed since the plan was made."""
+    modules = {(bus.name, m.address): m for bus, m in pairs}
     runs = []
     for entry in planned:
-        change = by_key.get((entry.bus, entry.address))
-        if change is None:
-            raise UserError(f"{path}: stale plan — bus {entry.bus}, module {entry.address} is not in the plant file; plan again")
+        module = modules.get((entry.bus, entry.address))
+        if module is None:
+            raise UserError(f"{path}: bus {entry.bus}, module {entry.address} is not among the modules to apply — plan again")
         if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
             raise UserError(
                 f"{path}: stale plan — bus {entry.bus}, module {entry.address} ({entry.name}) changed since the "
                 "plan was made (teach-in or another apply?); nothing was written — plan again"
             )
         if entry.steps:
-            runs.append(ModuleRun(entry.bus, entry.address, entry.name, change.desired, entry.steps, tuple(m.hex() for m in entry.steps)))
+            runs.append(ModuleRun(entry.bus, entry.address, entry.name, module.desired_image(), entry.steps,
+                                  tuple(m.hex() for m in entry.steps)))  # fmt: skip
     return runs
 
 
