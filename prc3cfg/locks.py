@@ -61,8 +61,8 @@ def _try_acquire(path: Path, record: dict) -> dict | None:
             holder = {}
         if holder and _holder_alive(holder):
             return holder
-        path.unlink(missing_ok=True)  # stale (or unreadable half-written): recover it
-        return _try_acquire(path, record) if not path.exists() else holder
+        path.unlink(missing_ok=True)  # stale (or unreadable half-written): recover it and try again
+        return _try_acquire(path, record)
     with os.fdopen(fd, "w") as handle:
         json.dump(record, handle)
     return None

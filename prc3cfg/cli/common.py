@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -66,7 +66,7 @@ def line_cost(bus) -> LineCost:
 
 
 @contextlib.contextmanager
-def progress_bar(total: int, description: str) -> Iterator[callable]:
+def progress_bar(total: int, description: str) -> Iterator[Callable[..., None]]:
     """A rich progress bar on stderr; yields a function that advances it by one."""
     with Progress(
         TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
