@@ -1,49 +1,266 @@
-"""One apply per line: the lock file, its holder, waiting, and recovery of a stale lock."""
+"""One apply per line: the kernel lock, its holder's details, waiting, and the identities of a line.
+
+Holders are real processes (`python -c` taking the lock and printing "locked"), told to let
+go through their stdin; nothing is synchronised by sleeping.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import signal
+import socket
+import stat
 import subprocess
 import sys
+import threading
 
 import pytest
 
-from prc3cfg.locks import LineBusy, line_lock, lock_path
+from prc3cfg.errors import UserError
+from prc3cfg.locks import LineBusy, line_keys, line_lock, lock_dir, lock_path
+
+HOLDER = """
+import json, sys
+from prc3cfg.locks import line_lock
+with line_lock(json.loads(sys.argv[1]), "bus held"):
+    print("locked", flush=True)
+    sys.stdin.readline()
+"""
+
+# A process between taking the lock and writing its details: the file holds what argv[2] says.
+RAW_HOLDER = """
+import fcntl, os, sys
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT)
+fcntl.flock(fd, fcntl.LOCK_EX)
+os.ftruncate(fd, 0)
+os.write(fd, sys.argv[2].encode())
+print("locked", flush=True)
+sys.stdin.readline()
+"""
+
+KEY = "tcp/127.0.0.1/7001"
 
 
 @pytest.fixture(autouse=True)
-def lock_dir(tmp_path, monkeypatch):
+def private_locks(tmp_path, monkeypatch):
     monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
 
 
+@contextlib.contextmanager
+def holding(*argv: str, script: str = HOLDER):
+    """A process that holds a lock until its stdin gets a line (or closes)."""
+    process = subprocess.Popen([sys.executable, "-c", script, *argv], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert process.stdout.readline() == "locked\n"
+        yield process
+    finally:
+        with contextlib.suppress(BrokenPipeError):
+            process.stdin.close()
+        process.wait()
+
+
+def held(*keys: str):
+    return holding(json.dumps(keys))
+
+
 def test_a_held_line_is_refused_naming_the_holder():
-    with line_lock("socket://x:1", "bus a") as path:
-        holder = json.loads(path.read_text())
-        with pytest.raises(LineBusy, match=rf"^bus a: the line is locked by .* \(pid {holder['pid']}, apply since"):
-            with line_lock("socket://x:1", "bus a"):
+    with held(KEY) as holder:
+        with pytest.raises(LineBusy) as refused:
+            with line_lock((KEY,), "bus a (socket://127.0.0.1:7001)"):
                 pass
-    assert not path.exists()
+    assert str(refused.value).startswith("bus a (socket://127.0.0.1:7001): the line is locked by ")
+    assert f"@{socket.gethostname()} (pid {holder.pid}, apply since 20" in str(refused.value)
+    assert str(refused.value).endswith(") — wait for it to finish, or pass --lock-timeout SECONDS to wait")
+
+
+def test_the_lock_file_names_the_holder_while_held_and_stays():
+    with line_lock((KEY,), "bus a (socket://127.0.0.1:7001)", purpose="restore") as (path,):
+        record = json.loads(path.read_text())
+    assert record["pid"] == os.getpid() and record["host"] == socket.gethostname()
+    assert record["holder"].endswith(f"@{socket.gethostname()}") and record["since"].startswith("20")
+    assert record["purpose"] == "restore" and record["line"] == "bus a (socket://127.0.0.1:7001)"
+    assert path.exists() and path.read_text() == ""  # never deleted; no details of a holder that is gone
 
 
 def test_other_lines_are_independent():
-    with line_lock("/dev/ttyUSB0", "bus a"), line_lock("/dev/ttyUSB1", "bus b"):
-        assert lock_path("/dev/ttyUSB0") != lock_path("/dev/ttyUSB1")
+    with held("dev/dev/ttyUSB0"):
+        with line_lock(("dev/dev/ttyUSB1",), "bus b"):
+            pass
 
 
-def test_a_stale_lock_is_recovered():
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    path = lock_path("/dev/ttyUSB0")
-    path.parent.mkdir(parents=True)
-    import socket
+def test_the_lock_dies_with_its_process():
+    with held(KEY) as holder:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+        with line_lock((KEY,), "bus a") as (path,):  # at once: timeout 0
+            assert json.loads(path.read_text())["pid"] == os.getpid()
 
-    path.write_text(json.dumps({"holder": "x@y", "host": socket.gethostname(), "pid": int(dead.stdout), "since": "then"}))
-    with line_lock("/dev/ttyUSB0", "bus a") as held:
-        assert json.loads(held.read_text())["pid"] != int(dead.stdout)
+
+@pytest.mark.parametrize("content", ["", "{garbage", '{"holder": "alice@floor", "pid": 99999999, "since": "2026"}'])
+def test_a_lock_file_left_behind_does_not_block(content):
+    lock_path(KEY).parent.mkdir(parents=True)
+    lock_path(KEY).write_text(content)
+    with line_lock((KEY,), "bus a") as (path,):
+        assert json.loads(path.read_text())["pid"] == os.getpid()
+
+
+@pytest.mark.parametrize("content", ["", '{"holder": "alice@fl'])
+def test_a_holder_that_has_not_written_its_details_is_another_process(content):
+    lock_dir().mkdir(parents=True)
+    with holding(str(lock_path(KEY)), content, script=RAW_HOLDER):
+        with pytest.raises(LineBusy, match=r"^bus a: the line is locked by another process — wait for it"):
+            with line_lock((KEY,), "bus a"):
+                pass
+
+
+def test_waiting_is_told_once_naming_the_holder_and_the_lock_follows_its_release():
+    told = []
+    with held(KEY) as holder:
+
+        def waiting(text: str) -> None:
+            told.append(text)
+            holder.stdin.write("release\n")
+            holder.stdin.flush()
+
+        with line_lock((KEY,), "bus a (socket://127.0.0.1:7001)", timeout=600, waiting=waiting) as (path,):
+            assert json.loads(path.read_text())["pid"] == os.getpid()
+    (text,) = told
+    assert text.startswith("bus a (socket://127.0.0.1:7001): waiting for the line lock held by ")
+    assert f"(pid {holder.pid}, apply since 20" in text and text.endswith(") — up to 600 s")
+
+
+def test_a_wait_that_runs_out_is_refused_and_told_once():
+    told = []
+    with held(KEY):
+        with pytest.raises(LineBusy, match=r"^bus a: the line is locked by .* after waiting 0.3 s — wait for it to finish, or pass a longer --lock-timeout$"):
+            with line_lock((KEY,), "bus a", timeout=0.3, waiting=told.append):
+                pass
+    assert len(told) == 1
+
+
+def test_a_cancelled_wait_stops():
+    cancel = threading.Event()
+    with held(KEY):
+        with pytest.raises(KeyboardInterrupt):
+            with line_lock((KEY,), "bus a", timeout=600, waiting=lambda _: cancel.set(), cancel=cancel):
+                pass
+
+
+def test_all_keys_or_none():
+    with held("b"):
+        with pytest.raises(LineBusy):
+            with line_lock(("c", "a", "b"), "bus a"):
+                pass
+        with held("a"), held("c"):  # the keys taken before "b" was found busy were let go
+            pass
+    with line_lock(("c", "a", "b"), "bus a") as paths:
+        assert sorted(paths) == list(paths) and len(paths) == 3
 
 
 def test_the_lock_is_released_on_error():
     with pytest.raises(RuntimeError):
-        with line_lock("/dev/ttyS0", "bus a"):
+        with line_lock((KEY,), "bus a"):
             raise RuntimeError("boom")
-    with line_lock("/dev/ttyS0", "bus a"):
+    with held(KEY):
         pass
+
+
+def test_a_port_is_not_a_key():
+    with pytest.raises(TypeError, match=r"line_keys\(port\)"):
+        with line_lock("socket://127.0.0.1:7001", "bus a"):
+            pass
+
+
+def test_shared_directory_and_files_whatever_the_umask(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "shared" / "locks"))
+    previous = os.umask(0o077)
+    try:
+        with line_lock((KEY,), "bus a") as (path,):
+            pass
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE(path.parent.stat().st_mode) == 0o1777
+    assert stat.S_IMODE(path.stat().st_mode) == 0o666
+
+
+def test_a_symlink_in_place_of_a_lock_file_is_not_followed(tmp_path):
+    lock_dir().mkdir(parents=True)
+    lock_path(KEY).symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(UserError, match=r"^bus a: cannot open the line lock .* — check the lock directory"):
+        with line_lock((KEY,), "bus a"):
+            pass
+    assert not (tmp_path / "elsewhere").exists()
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes any file")
+def test_a_read_only_lock_file_is_still_locked():
+    lock_dir().mkdir(parents=True)
+    lock_path(KEY).write_text("")
+    lock_path(KEY).chmod(0o444)
+    with line_lock((KEY,), "bus a"):
+        with pytest.raises(LineBusy, match="locked by another process"):
+            with line_lock((KEY,), "bus a"):
+                pass
+
+
+# -- the identities of a line --------------------------------------------------------------
+
+
+def _loopback_name() -> str:
+    """This machine's name if it resolves to 127.0.0.1 only (a hosts file entry), else skip."""
+    name = socket.gethostname()
+    try:
+        addresses = {a[4][0] for a in socket.getaddrinfo(name, 1, type=socket.SOCK_STREAM)}
+    except OSError:
+        addresses = set()
+    if addresses != {"127.0.0.1"}:
+        pytest.skip(f"{name} does not resolve to 127.0.0.1 only")
+    return name
+
+
+@pytest.mark.parametrize("spelling", ["localhost", "LOCALHOST", "127.1", "hostname"])
+def test_spellings_of_one_address_share_a_key(spelling):
+    host = _loopback_name() if spelling == "hostname" else spelling
+    assert "tcp/127.0.0.1/7001" in line_keys(f"socket://{host}:7001")
+    assert set(line_keys(f"socket://{host}:7001")) & set(line_keys("socket://127.0.0.1:7001"))
+    assert set(line_keys(f"rfc2217://{host}:7001?logging=debug")) & set(line_keys("socket://127.0.0.1:7001"))
+    assert not set(line_keys(f"socket://{host}:7002")) & set(line_keys("socket://127.0.0.1:7001"))
+
+
+def test_tcp_keys():
+    assert line_keys("socket://127.0.0.1:7001") == ("tcp/127.0.0.1/7001",)
+    assert line_keys("socket://[::1]:7001") == ("tcp/::1/7001",)
+    assert line_keys("socket://No-Such-Host.invalid:7001") == ("tcp/no-such-host.invalid/7001",)
+    assert line_keys("socket://127.0.0.1:seven") == ("socket://127.0.0.1:seven",)
+
+
+def test_a_device_and_a_link_to_it_share_a_key(tmp_path):
+    device = tmp_path / "ttyUSB0"
+    device.touch()
+    (tmp_path / "by-id").mkdir()
+    link = tmp_path / "by-id" / "usb-FTDI_FT232R_A50285BI-if00-port0"
+    link.symlink_to(device)
+    assert line_keys(str(link)) == line_keys(str(device)) == (f"dev/{os.path.realpath(device)}",)
+    assert line_keys(str(tmp_path / "ttyUSB1")) != line_keys(str(device))
+    with held(*line_keys(str(link))):
+        with pytest.raises(LineBusy):
+            with line_lock(line_keys(str(device)), "bus a"):
+                pass
+
+
+def test_an_emulator_is_known_by_its_state_file(tmp_path):
+    (tmp_path / "plant" / ".prc3cfg" / "emulators").mkdir(parents=True)
+    (tmp_path / "checkout").symlink_to(tmp_path / "plant")
+    state = tmp_path / "plant" / ".prc3cfg" / "emulators" / "demo-a.json"
+    via_link = tmp_path / "checkout" / ".prc3cfg" / "emulators" / "demo-a.json"
+    assert line_keys("emulator://demo-a", emulator_state=via_link) == (f"emulator/{os.path.realpath(state)}",)
+    assert line_keys("emulator://demo-a", emulator_state=state) != line_keys("emulator://demo-b", emulator_state=state.with_name("demo-b.json"))
+    with pytest.raises(ValueError, match="emulator_state"):
+        line_keys("emulator://demo-a")
+
+
+def test_any_other_url_is_its_own_key():
+    assert line_keys("loop://") == ("loop://",)
+    assert line_keys("spy:///dev/ttyUSB0") == ("spy:///dev/ttyUSB0",)
