@@ -1,0 +1,190 @@
+"""The acceptance race of the line lock (issue 9): two real `prc3cfg apply` processes started
+at the same instant on one line never both write — 200 races on one spelling of the line,
+200 on two spellings of one address (`socket://localhost:P` and `socket://127.0.0.1:P`).
+
+A line is an emulator server process (`prc3cfg emulator serve`); `LINES` of them are raced
+side by side. A driver process — this file run as a script — imports the CLI and has no
+thread (it checks). For each wave it writes two plant files per line, each in a directory of
+its own so each apply keeps its own journal, whose program 1 position differs from the wave
+before, so every race has something to write; it forks every child, all blocked reading one
+pipe, and closing the pipe's write end releases them at once. Each child runs
+`prc3cfg.cli.main(["apply", …])` with its output in files.
+
+What a child wrote is read from its journal — every exchange whose request is not a read
+(50h..52h) — not from what it prints, so two applies that both read the old state and both
+write are caught even when both verify. In every race exactly one child writes, and the
+other was refused ("locked by") or found nothing to do. Against the old lock file (create,
+then write the holder; a file read empty taken for stale and deleted) both wrote in 16 of
+200 races on one spelling, and in 147 of 200 on two spellings.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import traceback
+from pathlib import Path
+
+import pytest
+
+ROUNDS = 200  # races per test
+LINES = 4  # raced side by side, each with its own emulator and lock
+WAVES = ROUNDS // LINES
+READS = {0x50, 0x51, 0x52}
+APPLY = ["apply", "--auto-approve", "--allow-axis-release"]
+
+PLANT = """\
+plant: race
+buses:
+  - name: booth-a
+    port: {port}
+    framing: crc16
+    timeout: 0.2
+    modules:
+      - address: 1
+        name: left
+        programs:
+          1: {{position: {position}, speed: 0.300}}
+"""
+
+
+def _position(n: int) -> str:
+    """Program 1's position in round `n` (m): never the one of the round before, always ≤ S1 (0.400 m)."""
+    return f"{0.100 + (n % 300) / 1000:.3f}"
+
+
+def _writes(plant_dir: Path) -> int:
+    """Write requests in the journal an apply in `plant_dir` left (none if it never held the line)."""
+    journal = plant_dir / ".prc3cfg" / "journal"
+    if not journal.exists():
+        return 0
+    events = [json.loads(line) for path in journal.iterdir() for line in path.read_text().splitlines()]
+    return sum(e["event"] == "exchange" and bytes.fromhex(e["request"])[0] not in READS for e in events)
+
+
+def _child(plant: Path, release: int) -> None:
+    """In a forked child: output to files, wait for the release, run the CLI, exit with its code."""
+    out = os.open(plant.parent / "stdout", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    err = os.open(plant.parent / "stderr", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    os.dup2(out, 1)
+    os.dup2(err, 2)
+    code = 70
+    try:
+        os.read(release, 1)  # EOF when the parent closes the write end: both children at once
+        from prc3cfg.cli import main
+
+        main([APPLY[0], str(plant), *APPLY[1:]])
+        code = 0
+    except SystemExit as exit:
+        code = exit.code if isinstance(exit.code, int) else (0 if exit.code is None else 1)
+    except BaseException:
+        traceback.print_exc()
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+
+def drive(lines: list[tuple[str, str]], waves: int, first: int, workdir: Path) -> list[dict]:
+    """Race two applies on each of `lines` (the two ports one line is named by), `waves` times.
+
+    A wave forks every child of every line before releasing them all with one pipe: the lines
+    are independent (one lock each), so they share the wall time of pyserial's 0.3 s pause on
+    closing a `socket://` port. Returns per race each child's exit code, writes and output."""
+    from prc3cfg.cli import _register_commands
+
+    _register_commands()
+    import deepdiff  # noqa: F401 — imported lazily by the plan rendering: once here, not per child
+
+    results = []
+    for wave in range(first, first + waves):
+        plants = []
+        for line, ports in enumerate(lines):
+            for side, port in zip("ab", ports):
+                directory = workdir / f"{wave}-{line}{side}"
+                directory.mkdir()
+                plant = directory / "plant.yaml"
+                plant.write_text(PLANT.format(port=port, position=_position(wave)))
+                plants.append(plant)
+        if len(os.listdir("/proc/self/task")) != 1:
+            raise RuntimeError("the driver has a thread: forking it is not safe")
+        sys.stdout.flush()
+        sys.stderr.flush()
+        release, go = os.pipe()
+        children = []
+        for plant in plants:
+            pid = os.fork()
+            if pid == 0:
+                os.close(go)
+                _child(plant, release)
+            children.append(pid)
+        os.close(release)
+        os.close(go)  # every child's read returns at once
+        codes = [os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) for pid in children]
+        for line in range(len(lines)):
+            pair = plants[2 * line : 2 * line + 2]
+            results.append({
+                "race": f"wave {wave}, line {line}",
+                "codes": codes[2 * line : 2 * line + 2],
+                "writes": [_writes(p.parent) for p in pair],
+                "out": [(p.parent / "stdout").read_text() for p in pair],
+                "err": [(p.parent / "stderr").read_text() for p in pair],
+            })  # fmt: skip
+    return results
+
+
+@pytest.fixture(scope="module")
+def lines(tmp_path_factory):
+    """`LINES` emulator server processes with module 1 each; yields their ports."""
+    servers = []
+    try:
+        for n in range(LINES):
+            state = tmp_path_factory.mktemp("line") / "state.json"
+            command = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
+                       "--state", str(state), "--modules", "1"]  # fmt: skip
+            servers.append(subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
+        banners = [server.stdout.readline() for server in servers]
+        assert all(b.startswith("listening on 127.0.0.1:") for b in banners), banners
+        yield [int(b.split()[2].rpartition(":")[2]) for b in banners]
+    finally:
+        for server in servers:
+            server.terminate()
+            server.wait()
+
+
+def _race(tmp_path: Path, lines: list[tuple[str, str]], first: int) -> list[dict]:
+    """Run the driver in a process of its own (no thread of pytest's, no BLAS threads)."""
+    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    command = [sys.executable, __file__, str(tmp_path), str(first), json.dumps(lines)]
+    driver = subprocess.run(command, env=env, capture_output=True, text=True)
+    assert driver.returncode == 0, driver.stderr
+    return json.loads(driver.stdout)
+
+
+def _judge(results: list[dict]) -> None:
+    assert len(results) == ROUNDS
+    both = [r for r in results if all(r["writes"])]
+    assert not both, f"both applies wrote in {len(both)} of {ROUNDS} races, e.g. {both[0]}"
+    for r in results:
+        writer = [i for i in (0, 1) if r["writes"][i]]
+        assert len(writer) == 1, f"{r['race']}: no apply wrote: {r}"
+        other = 1 - writer[0]
+        assert r["codes"][writer[0]] == 0 and "Apply complete" in r["out"][writer[0]], r
+        refused = r["codes"][other] == 1 and "the line is locked by" in r["err"][other]
+        idle = r["codes"][other] == 0 and "Nothing to do" in r["out"][other]
+        assert refused or idle, f"{r['race']}: the other apply neither was refused nor found nothing to do: {r}"
+
+
+def test_two_applies_on_one_line_never_both_write(tmp_path, lines):
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], first=0))
+
+
+def test_two_spellings_of_one_address_never_both_write(tmp_path, lines):
+    spellings = [(f"socket://localhost:{p}", f"socket://127.0.0.1:{p}") for p in lines]
+    _judge(_race(tmp_path, spellings, first=WAVES))
+
+
+if __name__ == "__main__":  # the driver: WORKDIR FIRST_WAVE LINES (JSON: [[port, port], …])
+    json.dump(drive(json.loads(sys.argv[3]), WAVES, int(sys.argv[2]), Path(sys.argv[1])), sys.stdout)
