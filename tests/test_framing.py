@@ -399,3 +399,36 @@ def test_framing_package_imports_no_io():
             assert all(n in ALLOWED_IMPORTS or n.startswith("prc3cfg.framing") for n in names), f"{path.name}: {names}"
     blocked = "import sys; sys.modules.update(serial=None, socket=None, time=None); import prc3cfg.framing"
     subprocess.run([sys.executable, "-c", blocked], check=True)
+
+
+@pytest.mark.parametrize("name", ["crc16", "stx"])
+def test_garbage_outside_frames_is_reported_in_bounded_pieces(name):
+    """A line of endless garbage never grows a decoder: runs are discarded in pieces, every byte accounted."""
+    decoder = get_framing(name).decoder(REPLY, LINE, zvz=ZVZ)
+    garbage = bytes([0x55]) * 10_000  # no start code of either framing
+    decoder.receive_data(garbage, 0.0)
+    events = []
+    while (event := decoder.next_event()) is not NEED_DATA:
+        events.append(event)
+    decoder.line_idle()
+    while (event := decoder.next_event()) is not NEED_DATA:
+        events.append(event)
+    assert all(isinstance(e, Discarded) and len(e.data) <= prc3cfg.framing.base.MAX_SKIPPED for e in events)
+    assert b"".join(e.data for e in events) == garbage
+
+
+def test_an_open_driver_frame_that_never_ends_is_discarded_in_pieces():
+    decoder = get_framing("open-driver").decoder(REPLY, LINE, zvz=ZVZ)
+    endless = bytes(range(256)) * 20  # 5120 bytes without a gap: longer than any frame the driver takes
+    decoder.receive_data(endless, 0.0)
+    decoder.line_idle()
+    events = []
+    while (event := decoder.next_event()) is not NEED_DATA:
+        events.append(event)
+    assert all(isinstance(e, Discarded) and "longer than 1025 bytes" in e.reason for e in events)
+    assert max(len(e.data) for e in events) == 1025
+    assert b"".join(e.data for e in events) == endless
+
+
+def test_only_open_driver_lacks_a_checksum():
+    assert {name: f.checked for name, f in FRAMINGS.items()} == {"crc16": True, "open-driver": False, "stx": True}

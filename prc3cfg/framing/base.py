@@ -68,6 +68,11 @@ NEED_DATA: Final = _NeedData()
 """`next_event` returns this when no complete frame or discard is ready yet."""
 
 
+#: The longest run of bytes outside any frame that a decoder holds: a longer run is reported
+#: in pieces, so a line of endless garbage cannot grow a decoder without bound.
+MAX_SKIPPED = 256
+
+
 class FramingError(Exception):
     """Our own misuse: a frame cannot carry this address or message length."""
 
@@ -124,6 +129,12 @@ class Decoder(abc.ABC):
     def _discard(self, reason: str, data: bytes | bytearray) -> None:
         self._events.append(Discarded(reason, bytes(data)))
 
+    def _skip(self, byte: int, reason: str) -> None:
+        """A byte outside any frame; a long run is reported in pieces of MAX_SKIPPED bytes."""
+        self._skipped.append(byte)
+        if len(self._skipped) >= MAX_SKIPPED:
+            self._flush_skipped(reason)
+
     def _flush_skipped(self, reason: str) -> None:
         if self._skipped:
             self._discard(reason, self._skipped)
@@ -134,6 +145,7 @@ class Framing(abc.ABC):
     """One way to put a message and its module address on the line (link.md "Framing …")."""
 
     name: ClassVar[str]
+    checked: ClassVar[bool]  # a checksum protects the frame: a damaged one is discarded, never delivered
     addresses: ClassVar[range]  # addresses `encode` accepts
     lengths: ClassVar[range]  # message lengths `encode` accepts
 

@@ -44,6 +44,7 @@ def crc(data: bytes | bytearray) -> int:
 
 class Crc16Framing(Framing):
     name = "crc16"
+    checked = True
     addresses = range(0, 31)
     lengths = range(1, 257)
 
@@ -92,7 +93,7 @@ class Crc16Decoder(Decoder):
                 self._flush_skipped(self._no_start_code)
                 frame.append(byte)
             else:
-                self._skipped.append(byte)
+                self._skip(byte, self._no_start_code)
             return
         frame.append(byte)
         if len(frame) > HEADER and len(frame) == HEADER + frame[2] + 1 + TRAILER:

@@ -22,6 +22,9 @@ Readings (where link.md is silent):
 - `decoder()` needs `zvz` in seconds, > 0 (ValueError otherwise); the driver's 4 ms minimum
   is checked with the INIT data block, not here (reading).
 - `inter_char_timeout` is not used by this framing: ZVZ is its only gap (reading).
+- A frame longer than the driver's longest (address and 1024 bytes, TELLEN's range) is
+  discarded, in pieces of that length as it arrives, so a line that never goes quiet
+  cannot grow the decoder without bound (reading).
 """
 
 from __future__ import annotations
@@ -29,9 +32,12 @@ from __future__ import annotations
 from prc3cfg.framing.base import Decoder, Direction, Framing
 from prc3cfg.line import LineSettings
 
+MAX_FRAME = 1 + 1024  # the address byte and TELLEN's longest message
+
 
 class OpenDriverFraming(Framing):
     name = "open-driver"
+    checked = False
     addresses = range(0, 32)
     lengths = range(0, 1025)
 
@@ -56,15 +62,21 @@ class OpenDriverDecoder(Decoder):
         super().__init__(direction, line)
         self.zvz = zvz
         self._frame = bytearray()
+        self._too_long = False  # the frame being received has passed MAX_FRAME bytes
 
     def line_idle(self) -> None:
-        if self._frame:
+        if self._too_long:
+            self._discard(f"a frame longer than {MAX_FRAME} bytes", self._frame)
+        elif self._frame:
             self._emit(self._frame[0], self._frame[1:])
-            self._frame = bytearray()
+        self._frame, self._too_long = bytearray(), False
 
     def _clock(self, now: float, n_bytes: int) -> None:
         if self._silence(now, n_bytes) >= self.zvz:
             self.line_idle()
 
     def _byte(self, byte: int, at: float) -> None:
+        if len(self._frame) == MAX_FRAME:
+            self._discard(f"a frame longer than {MAX_FRAME} bytes", self._frame)
+            self._frame, self._too_long = bytearray(), True
         self._frame.append(byte)

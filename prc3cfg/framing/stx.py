@@ -61,6 +61,7 @@ def checksum(data: bytes | bytearray) -> int:
 
 class StxFraming(Framing):
     name = "stx"
+    checked = True
     addresses = range(0, 32)
     lengths = range(1, 256)
 
@@ -126,7 +127,7 @@ class StxDecoder(Decoder):
             self._raw.append(byte)
             self._unstuffed(byte, at)
         else:
-            self._skipped.append(byte)
+            self._skip(byte, "no 7Eh start code")
 
     def _begin(self, at: float) -> None:
         self._flush_skipped("no 7Eh start code")
