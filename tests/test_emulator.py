@@ -11,7 +11,7 @@ from dataclasses import replace
 import pytest
 import serial
 
-from prc3cfg import codec
+from prc3cfg import codec, device
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
 from prc3cfg.framing import Direction, Frame, get_framing
@@ -207,3 +207,33 @@ def test_serve_command_rejects_bad_modules_in_one_line():
     assert result.returncode == 1
     assert result.stderr.strip().count("\n") == 0
     assert "outside 1..30" in result.stderr
+
+
+@pytest.mark.parametrize(("parity", "undetected"), [("even", False), ("none", True)])
+def test_corruption_on_open_driver_respects_parity(parity, undetected):
+    """A flipped bit on a line with parity is a parity error the UART drops: the module then sees a
+    message one byte short (refused as damaged), never a valid different one. Without parity it can."""
+    line = LineSettings(parity=parity)
+    with Emulator(modules(1), framing="open-driver", line=line, faults=FaultInjection(corrupt_rate=1.0, seed=5)) as emulator:
+        outcomes = set()
+        for n in range(1, 301):
+            before = emulator.module(1).image
+            message = codec.WriteSpeeds(((n % 64 + 1, 100 + n % 300),))
+            emulator.exchange(Frame(Direction.REQUEST, 1, message.encode()), 0.0)
+            after = emulator.module(1).image
+            intended = device_after(before, message)
+            outcomes.add("unchanged" if after == before else "intended" if after == intended else "other")
+    assert outcomes >= {"unchanged", "intended"}  # damaged requests, and damaged replies to executed ones
+    assert ("other" in outcomes) is undetected
+
+
+def device_after(image, message):
+    return device.execute(ModuleState(image), message).image
+
+
+def test_a_damaged_reply_with_parity_is_a_character_short():
+    with Emulator(modules(1), framing="open-driver", faults=FaultInjection(corrupt_rate=1.0, seed=2)) as emulator:
+        replies = [emulator.exchange(Frame(Direction.REQUEST, 1, b"\x50\x00"), 0.0) for _ in range(40)]
+    whole = 1 + 2 * 11  # address and the 11 words of 50h's reply
+    # a damaged reply lacks a character; a damaged request (one byte short) is answered with a code word
+    assert {len(r) for r in replies if r is not None} == {whole - 1, 1 + 2}

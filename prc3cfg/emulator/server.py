@@ -36,7 +36,12 @@ POLL = 0.1  # s: how often an idle stream looks whether the emulator is closing
 class FaultInjection:
     """Damage on the line, for tests: each exchange is lost with `drop_rate` (the request or
     the reply, at even odds) and damaged with `corrupt_rate` (one bit of the request or the
-    reply frame flipped). Seeded, so a test run is repeatable."""
+    reply frame flipped). Seeded, so a test run is repeatable.
+
+    A flipped bit is what the receiving UART makes of it: on a line with parity it is a
+    parity error and the character is dropped; without parity it is a valid, different
+    byte. A damaged request reaches the modules only if the framing still finds a frame
+    in what is left (never on crc16 or stx: their checksums catch one flipped bit)."""
 
     drop_rate: float = 0.0
     corrupt_rate: float = 0.0
@@ -76,7 +81,7 @@ class Emulator:
         self._closing = threading.Event()
         self._threads: list[threading.Thread] = []
         self._closers: list[Callable[[], None]] = []
-        if state_path is not None:
+        if state_path is not None and not state_path.exists():
             save_state(state_path, self._bus.modules)
 
     # -- the Python API ----------------------------------------------------------------
@@ -115,11 +120,22 @@ class Emulator:
     def _chance(self, rate: float) -> bool:
         return rate > 0 and self._random.random() < rate
 
-    def _flip_bit(self, data: bytes) -> bytes:
-        if not data:
-            return data
-        i = self._random.randrange(len(data))
-        return data[:i] + bytes([data[i] ^ (1 << self._random.randrange(8))]) + data[i + 1 :]
+    def _damage(self, frame: bytes) -> bytes:
+        """`frame` with one bit flipped on the line, as the receiving UART hands it on."""
+        i = self._random.randrange(len(frame))
+        if self.line.parity != "none":  # a parity error: the UART drops the character
+            return frame[:i] + frame[i + 1 :]
+        return frame[:i] + bytes([frame[i] ^ (1 << self._random.randrange(self.line.data_bits))]) + frame[i + 1 :]
+
+    def _received(self, data: bytes) -> Frame | None:
+        """The request frame a module's receiver finds in damaged bytes, if any."""
+        decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz)
+        decoder.receive_data(data, 0.0)
+        decoder.line_idle()
+        while (event := decoder.next_event()) is not NEED_DATA:
+            if isinstance(event, Frame):
+                return event
+        return None
 
     def exchange(self, frame: Frame, received_at: float) -> bytes | None:
         """Serve one request frame; the reply frame to send, or None for silence."""
@@ -127,17 +143,18 @@ class Emulator:
             drop = self._chance(self.faults.drop_rate)
             corrupt = self._chance(self.faults.corrupt_rate)
             damage_request = self._random.random() < 0.5 if (drop or corrupt) else False
-            address, message = frame.address, frame.message
             if damage_request and drop:
-                log.info("fault injection: request to %d lost", address)
+                log.info("fault injection: request to %d lost", frame.address)
                 return None
             if damage_request and corrupt:
-                if self.framing.name != "open-driver":  # a checksum catches it: the frame is discarded
-                    log.info("fault injection: request to %d damaged and discarded", address)
+                sent = self.framing.encode(Direction.REQUEST, frame.address, frame.message)
+                damaged = self._received(self._damage(sent))
+                if damaged is None:
+                    log.info("fault injection: request to %d damaged and discarded", frame.address)
                     return None
-                raw = self._flip_bit(bytes([address]) + message)
-                address, message = raw[0], raw[1:]
-                log.info("fault injection: request damaged, delivered to %d as %s", address, message.hex())
+                log.info("fault injection: request damaged, delivered to %d as %s", damaged.address, damaged.message.hex())
+                frame = damaged
+            address, message = frame.address, frame.message
             delivery = self._bus.deliver(address, message)
             if delivery.changed and self.state_path is not None:
                 save_state(self.state_path, self._bus.modules)
@@ -153,7 +170,7 @@ class Emulator:
                 return None
             if not damage_request and corrupt:
                 log.info("fault injection: reply from %d damaged", address)
-                reply = self._flip_bit(reply)
+                reply = self._damage(reply)
             return reply
 
     def _serve_stream(self, recv: Callable[[float], bytes | None], send: Callable[[bytes], None]) -> None:

@@ -1,18 +1,17 @@
 """The emulator state file `prc3-emulator/1` (interfaces.md §3): load, and save atomically.
 
-Saving writes a temporary file beside the target, flushes it to disk and renames it over
-the target, so a killed emulator leaves either the old or the new file, never half of one.
+Saving goes through `prc3cfg.files.write_atomically`, so a killed emulator leaves either
+the old or the new file, never half of one.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 from prc3cfg.device import ModuleState
 from prc3cfg.errors import UserError
+from prc3cfg.files import write_atomically
 
 FORMAT = "prc3-emulator/1"
 
@@ -44,16 +43,5 @@ def state_document(modules: dict[int, ModuleState]) -> dict:
 
 
 def save_state(path: Path, modules: dict[int, ModuleState]) -> None:
-    """Write the state file atomically (temporary file, fsync, rename)."""
-    text = json.dumps(state_document(modules), indent=1)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write the state file atomically."""
+    write_atomically(path, json.dumps(state_document(modules), indent=1))
