@@ -10,3 +10,12 @@ class UserError(Exception):
     """A problem the user can fix; `str()` is the whole one-line message."""
 
     exit_code = 1
+
+
+class Interrupted(UserError):
+    """Ctrl-C or SIGTERM: the work stopped after the exchange in flight (`prc3cfg.cancel`)."""
+
+    exit_code = 130
+
+    def __init__(self) -> None:
+        super().__init__("interrupted")

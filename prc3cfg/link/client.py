@@ -7,6 +7,13 @@ or a read) — and every retry is logged and traced. The reply's address and len
 checked. Time-outs are detected here, with the port's timeout fixed at the framing's gap
 (link.md: `inter_byte_timeout` does nothing on Linux).
 
+On a framing without a checksum (`open-driver`) a damaged reply can look like any code:
+an error code there is believed only when the module gives the same one twice in a row
+(asking again is harmless: the message is idempotent). Every attempt has an overall
+deadline, so a line that never goes quiet ends in a time-out, not a hang. Before each
+attempt the link looks at its `cancel` event (Ctrl-C, SIGTERM: `prc3cfg.cancel`) and
+stops with `Interrupted` — so work stops after the exchange in flight, never inside one.
+
 Does not own what the messages mean (`prc3cfg.codec`), how frames look
 (`prc3cfg.framing`) or which port to open (`prc3cfg.link.ports`).
 """
@@ -14,6 +21,7 @@ Does not own what the messages mean (`prc3cfg.codec`), how frames look
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -22,7 +30,7 @@ import serial
 
 from prc3cfg import codec
 from prc3cfg.error_codes import describe
-from prc3cfg.errors import UserError
+from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.line import LineSettings
 from prc3cfg.link.trace import Trace
@@ -33,6 +41,8 @@ READ_SLICE = 0.05  # s: longest single read on framings that do not end frames b
 #: Codes of the structural checks (§4.5 steps 1–5). We only send messages the codec built,
 #: so the module saw a message damaged on the line (open-driver has no checksum): retry.
 DAMAGED_CODES = frozenset(range(10, 16))
+#: The longest reply frame any framing makes of a PRC 3 reply (64 bytes, stx stuffing doubled).
+LONGEST_REPLY_FRAME = 2 * (codec.MAX_MESSAGE_BYTES + 8)
 
 
 class LinkError(UserError):
@@ -67,6 +77,7 @@ class Link:
         retries: int = 3,
         trace: Trace | None = None,
         observer: Callable[[Exchange], None] | None = None,
+        cancel: threading.Event | None = None,
     ) -> None:
         self.port = port
         self.framing = framing
@@ -77,8 +88,11 @@ class Link:
         self.retries = retries
         self.trace = trace
         self.observer = observer
+        self.cancel = cancel
         self._gap_ends_frame = framing.name == "open-driver"
         port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
+        #: Once a reply started, the longest it can take to end; past it the line is not quiet.
+        self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
         self.exchanges = 0  # attempts made, for benchmarks and summaries
 
     def _where(self, address: int) -> str:
@@ -88,15 +102,21 @@ class Link:
         """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
 
         A lost reply, a damaged one, and a structural error code (the module got our message
-        damaged) are retried; after the last retry a `LinkError` names the bus and module.
+        damaged) are retried; on a framing without a checksum an error code is asked for
+        again until two agree. After the last attempt a `LinkError` names the bus and
+        module. `Interrupted` when the link's `cancel` event is set before an attempt.
         """
         data = message.encode()
         attempts = 1 + self.retries
         problem = ""
+        unconfirmed: int | None = None  # an error code heard once on a line without a checksum
         for attempt in range(1, attempts + 1):
+            if self.cancel is not None and self.cancel.is_set():
+                raise Interrupted()
             started = time.time()
             raw = self._exchange(address, data)
             self._observe(address, data, raw, attempt, started)
+            heard, unconfirmed = unconfirmed, None
             if raw is None:
                 problem = f"no reply within {self.timeout:g} s"
             else:
@@ -105,9 +125,13 @@ class Link:
                 except codec.BadReply as error:
                     problem = f"bad reply ({error})"
                 else:
-                    if reply not in DAMAGED_CODES:
+                    if reply in DAMAGED_CODES:
+                        problem = f"the module reports a damaged message ({describe(reply)})"
+                    elif not isinstance(reply, int) or reply == 0 or self.framing.checked or reply == heard:
                         return reply
-                    problem = f"the module reports a damaged message ({describe(reply)})"
+                    else:
+                        unconfirmed = reply
+                        problem = f"{describe(reply)} on a line without a checksum, asking again to confirm it"
             if attempt < attempts:
                 note = f"{self._where(address)}: {problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
                 log.warning(note)
@@ -140,6 +164,7 @@ class Link:
         self._send(self.framing.encode(Direction.REQUEST, address, data))
         decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz)
         deadline = time.monotonic() + self.timeout
+        last_call = deadline + self._longest_reply  # even a line that never goes quiet ends here
         pending = False  # bytes of a frame that only a gap can end
         while True:
             try:
@@ -167,4 +192,8 @@ class Link:
             if now >= deadline and not pending:
                 if self.trace:
                     self.trace.remark(self.bus, f"timeout after {self.timeout:g} s waiting for module {address}")
+                return None
+            if now >= last_call:
+                if self.trace:
+                    self.trace.remark(self.bus, f"the line did not go quiet within {last_call - deadline + self.timeout:.3f} s")
                 return None

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import termios
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
@@ -62,6 +63,7 @@ def open_link(
     retries: int = 5,
     trace: Trace | None = None,
     observer: Callable[[Exchange], None] | None = None,
+    cancel: threading.Event | None = None,
 ) -> Iterator[Link]:
     """A `Link` to one plant bus (`prc3cfg.plant.Bus`), closed on exit."""
     with contextlib.ExitStack() as stack:
@@ -89,6 +91,7 @@ def open_link(
             retries=retries,
             trace=trace,
             observer=observer,
+            cancel=cancel,
         )
 
 
