@@ -133,6 +133,12 @@ def _clamped(system: SystemParameters, programs: tuple[Program, ...]) -> tuple[P
     return tuple(out)
 
 
+def can_clamp(before: SystemParameters, after: SystemParameters) -> bool:
+    """Whether storing `after` over `before` can clamp a program that `before` let stand (§4.2):
+    a lower S1 or S4, or a higher S5."""
+    return after.S1 < before.S1 or after.S4 < before.S4 or after.S5 > before.S5
+
+
 def _set_system(state: ModuleState, system: SystemParameters) -> ModuleState:
     """10h/20h: store, clamp every program, release the axes; an E12 fault is cleared (§4.3, §4.4)."""
     image = replace(state.image, system=system, programs=_clamped(system, state.image.programs))

@@ -2,10 +2,11 @@
 
 `plan_module(actual, desired, cost)` derives the module's problem (`problem`), searches
 for cheap layouts (`optimise`), builds their messages (`layout`), prices them exactly
-with the line's `LineCost`, keeps the cheapest, and runs it on the device model
-(`prc3cfg.device`) from the read-back: every step must be accepted and the result must be
-the desired image on the system and every managed program, touching no unmanaged program.
-A plan that fails this is a planner bug (`PlanVerificationError`), never returned.
+with the line's `LineCost`, keeps the cheapest, and proves it on the device model from the
+read-back (`check.run_steps`, the same proof a plan file passes before `apply --plan`
+sends it): every step accepted, the desired image on the system and every managed
+program, no unmanaged program written. A plan that fails this is a planner bug
+(`PlanVerificationError`), never returned.
 
 Owns: the module plan. Does not own the diff shown to people, rendering, the plan file
 (`prc3cfg.plantplan`) or sending anything. Pure: no I/O.
@@ -13,11 +14,10 @@ Owns: the module plan. Does not own the diff shown to people, rendering, the pla
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-from prc3cfg import codec, device
+from prc3cfg import codec
 from prc3cfg.bustime import LineCost
 from prc3cfg.image import ModuleImage
+from prc3cfg.planner.check import StepProblem, run_steps
 from prc3cfg.planner.layout import Layout
 from prc3cfg.planner.optimise import search, whole_programs
 from prc3cfg.planner.plan import ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
@@ -39,16 +39,26 @@ def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> Mo
     # The estimates are exact but for stx stuffing: price exactly only the layouts that could win.
     close = [layout for layout in layouts if layout.estimate <= layouts[0].estimate * (1 + STUFFING_MARGIN)]
     best, best_time = _cheapest(problem, cost, close[:EXACTLY_PRICED])
-    naive_time = naive_bus_time(actual, desired, cost)
-    if best_time > naive_time:
+    if best_time > naive_bus_time(actual, desired, cost):
         best, best_time = _cheapest(problem, cost, [whole_programs(problem)])
-    predicted = _verify(problem, best)
-    steps = tuple(Step(message, summarise(message, actual.system), message.RELEASES_AXES) for message in best)
+    try:
+        return plan_from_steps(actual, desired, best, cost)
+    except StepProblem as found:
+        raise PlanVerificationError(f"module {desired.address}: {found}; steps: {[m.hex() for m in best]}") from None
+
+
+def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[codec.Message], cost: LineCost) -> ModulePlan:
+    """A plan of given steps (the planner's, or a plan file's), proved on the device model.
+
+    Raises `StepProblem` naming the first step that breaks a rule of `check.run_steps`.
+    """
+    predicted = run_steps(actual, desired, messages)
+    steps = tuple(Step(message, summarise(message, actual.system), message.RELEASES_AXES) for message in messages)
     return ModulePlan(
-        address=problem.address,
+        address=desired.address,
         steps=steps,
-        bus_time=best_time,
-        naive_bus_time=naive_time,
+        bus_time=sum(cost.message_time(desired.address, m) for m in messages),
+        naive_bus_time=naive_bus_time(actual, desired, cost),
         releases_axes=any(step.releases_axes for step in steps),
         predicted=predicted,
     )
@@ -75,30 +85,4 @@ def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) ->
     return sum(cost.message_time(desired.address, m) for m in messages)
 
 
-def _verify(problem: Problem, messages: list[codec.Message]) -> ModuleImage:
-    """Run the plan on the device model; the predicted image (managed programs only) or a bug report."""
-    state = problem.start
-    for index, message in enumerate(messages, start=1):
-        trespass = [n for n in message.touched_programs() if not problem.managed[n - 1]]
-        if trespass:
-            raise PlanVerificationError(f"module {problem.address}: step {index} ({message.hex()}) "
-                                        f"touches unmanaged programs {trespass}")  # fmt: skip
-        try:
-            state = device.execute(state, message)
-        except codec.Rejected as rejected:
-            raise PlanVerificationError(f"module {problem.address}: step {index} ({message.hex()}) "
-                                        f"would be rejected with code {rejected.code}: {rejected}") from None  # fmt: skip
-    image = state.image
-    predicted = replace(
-        image, programs=tuple(p if managed else None for p, managed in zip(image.programs, problem.managed))
-    )
-    wrong = [n for n, (p, want) in enumerate(zip(predicted.programs, problem.desired.programs), 1) if p != want]
-    if predicted.system != problem.desired.system or wrong:
-        raise PlanVerificationError(
-            f"module {problem.address}: the plan gives system {predicted.system} and programs {wrong} "
-            f"differing from the desired image; steps: {[m.hex() for m in messages]}"
-        )
-    return predicted
-
-
-__all__ = ["ModulePlan", "PlanVerificationError", "Step", "UnreachableImage", "plan_module"]
+__all__ = ["ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "plan_from_steps", "plan_module", "run_steps", "summarise"]
