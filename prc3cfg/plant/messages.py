@@ -63,6 +63,9 @@ TEMPLATES = {
     "chain_type": "{what} is {input}, not a chain — write a list of program numbers or "
     "{{programs: [...], loop: true}}",
     "string_too_short": "{what} is empty — give it a name",
+    "tcp_port": "{what} {input} has no TCP port 1..65535 — write {scheme}://HOST:PORT, e.g. {scheme}://127.0.0.1:7001",
+    "emulator_name": "{what} {input} does not end in a plain emulator name — the name is a file in "
+    ".prc3cfg/emulators/: letters, digits, '-', '_' and '.' (not first), e.g. emulator://booth-a",
     "too_short": "{what} is empty — list at least one {item}",
 }
 _LIST_ITEMS = {"buses": "bus", "modules": "module", "programs": "program"}

@@ -9,29 +9,40 @@ where a value is in the file (`loader`).
 Every model is frozen and forbids unknown keys. A key left out is `None` ("not given
 here"), so profiles can be layered: "given" and "given as the default" differ.
 
-Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`. A number
-field rejects booleans and strings, checks its range and its step, and hands back an
-`int`, an exact `Decimal` (human units) or, for the bus's times, a `float` of seconds.
-Its failures are `PydanticCustomError`s whose type names the problem
-(`not_number`, `not_finite`, `out_of_range`, `not_whole`, `not_allowed`) and whose
-context carries the words; `messages` turns them into sentences.
+Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`, of at most 28
+digits written out (`document.MAX_DIGITS`), so that no conversion here is slow or infinite.
+A number field rejects booleans and strings, checks its range and its step, and hands back
+an `int`, an exact `Decimal` (human units) or, for the bus's times, a `float` of seconds.
+Its failures are `PydanticCustomError`s whose type names the problem (`not_number`,
+`not_finite`, `out_of_range`, `not_whole`, `not_allowed`; `tcp_port`, `emulator_name` for a
+port) and whose context carries the words; `messages` turns them into sentences.
 
 Decisions about the bus (link.md): `port` any non-empty text (a device path, a pyserial
-URL, `emulator://NAME`); `baud` any positive whole number (with a gateway, `rules` asks
-the Open Driver's own list); `timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz`
-whole milliseconds, 0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms with a gateway is
-a `rules` check, SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and
-the Open Driver allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223
-SYSTAT 91h), from `prc3cfg.gateway`.
+URL, `emulator://NAME`), except that a `socket://` or `rfc2217://` URL must end its host in a
+TCP port 1..65535 (pyserial would fail later, or compare None with 0), and an emulator name
+must be plain — letters, digits, `-`, `_`, `.` not first — because it names the file
+`.prc3cfg/emulators/NAME.json` (`emulator://../../etc` would write elsewhere); the schema's
+`PORT_PATTERN` says the same, loosely enough never to refuse a port the validator takes.
+`baud` any positive whole number (with a gateway, `rules` asks the Open Driver's own list);
+`timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz` whole milliseconds,
+0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms on an open-driver line is a `rules` check,
+SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and the Open Driver
+allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223 SYSTAT 91h), from
+`prc3cfg.gateway`.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from decimal import Decimal
 from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, GetJsonSchemaHandler, PlainValidator, WithJsonSchema, model_validator
+from pydantic import (
+    AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, GetJsonSchemaHandler, PlainValidator, WithJsonSchema,
+    model_validator,
+)
 from pydantic.json_schema import GenerateJsonSchema, JsonSchemaValue
 from pydantic_core import PydanticCustomError, core_schema
 
@@ -44,6 +55,16 @@ from prc3cfg.plant.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
 SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
 #: JSON object keys are strings: a program number key is "1".."64".
 PROGRAM_KEY_PATTERN = "^([1-9]|[1-5][0-9]|6[0-4])$"
+#: pyserial URL schemes that connect to HOST:PORT over TCP.
+TCP_SCHEMES = ("socket", "rfc2217")
+EMULATOR_SCHEME = "emulator://"
+EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
+#: A port as the schema checks it: not a TCP or emulator URL, or one with HOST:DIGITS, or a
+#: plain emulator name. Draft-07 `pattern` is an ECMA 262 search; the end is a lookahead, not
+#: `$`, which Python (but not ECMA) also finds before a final newline.
+PORT_PATTERN = (f"^(?!({'|'.join(TCP_SCHEMES)}|{EMULATOR_SCHEME.removesuffix('://')})://)"
+                f"|^({'|'.join(TCP_SCHEMES)})://[^/?#]*:[0-9]+(?![^/?#])"
+                rf"|^{EMULATOR_SCHEME}{EMULATOR_NAME}(?![\s\S])")
 
 
 def _plain(number: Decimal) -> int | float:
@@ -108,6 +129,30 @@ def _one_of_type(allowed: tuple[int | float, ...], description: str) -> Any:
 
 
 Name = Annotated[str, Field(min_length=1, strict=True)]
+
+
+def _port(url: str) -> str:
+    scheme = url.partition("://")[0]
+    if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
+        raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": scheme})
+    if url.startswith(EMULATOR_SCHEME) and not re.fullmatch(EMULATOR_NAME, url.removeprefix(EMULATOR_SCHEME)):
+        raise PydanticCustomError("emulator_name", "not a plain emulator name")
+    return url
+
+
+def _tcp_port(url: str) -> bool:
+    """A TCP port 1..65535 as pyserial reads it (`urlsplit`), written as the schema wants it."""
+    try:
+        port = urlsplit(url).port
+    except ValueError:  # not digits, out of range, a broken [IPv6] host
+        return False
+    return bool(port) and re.search(PORT_PATTERN, url) is not None
+
+
+Port = Annotated[
+    Name, AfterValidator(_port),
+    Field(description="a device path, any pyserial URL, or emulator://NAME", json_schema_extra={"pattern": PORT_PATTERN}),
+]
 ProgramNumber = _number_type(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")
 
 
@@ -239,7 +284,7 @@ class BusLine(FileModel):
     """A bus without its modules: where it is and how it talks (link.md)."""
 
     name: Name = Field(description="unique in the plant")
-    port: Name = Field(description="a device path, any pyserial URL, or emulator://NAME")
+    port: Port
     framing: Literal[tuple(FRAMINGS)] = "crc16"
     baud: _number_type(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud") = 9600
     parity: Literal[PARITIES] = "even"

@@ -8,8 +8,12 @@ from pathlib import Path
 import jsonschema
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pydantic import ValidationError
 
 from prc3cfg.plant import plant_schema, plant_schema_text
+from prc3cfg.plant.models import BusLine
 
 ROOT = Path(__file__).parents[2]
 SCHEMA_FILE = ROOT / "schemas" / "plant.schema.json"
@@ -63,6 +67,9 @@ def test_accepts_every_plant_and_names_the_schema_in_its_first_line(path: Path) 
         (lambda p: p["buses"][0].update(framing="modbus"), "modbus"),
         (lambda p: p["buses"][0]["modules"][0].update(system={"max_speed": 0.7}), "0.7"),
         (lambda p: p.update(site="hall 4"), "site"),
+        (lambda p: p["buses"][0].update(port="emulator://../../etc"), "emulator://../../etc"),
+        (lambda p: p["buses"][0].update(port="socket://127.0.0.1"), "socket://127.0.0.1"),
+        (lambda p: p["buses"][0].update(port="rfc2217://host:notaport"), "rfc2217://host:notaport"),
     ],
 )
 def test_rejects_what_the_loader_rejects(change, where: str) -> None:
@@ -77,3 +84,27 @@ def test_a_chain_may_be_a_list_or_a_mapping() -> None:
     validator = jsonschema.Draft7Validator(chain)
     assert validator.is_valid([1, 2]) and validator.is_valid({"programs": [3], "loop": True})
     assert not validator.is_valid([]) and not validator.is_valid({"programs": [1], "lop": True})
+
+
+JUNK = ["", "/", "?logging=debug", "#", "@", "..", ".", "-", "_", "\n", "\t", " ", "a", "é", "٣", ":", "[", "]"]
+PORTS = st.builds(
+    "".join,
+    st.tuples(
+        st.sampled_from(["socket://", "rfc2217://", "emulator://", "SOCKET://", "/dev/ttyUSB", ""]),
+        st.sampled_from(["host", "127.0.0.1", "[::1]", "booth-a", ".x", "", "a_b.c"]),
+        st.sampled_from([":", ""]),
+        st.sampled_from(["7001", "0", "65535", "70000", "", "x"]),
+        st.lists(st.sampled_from(JUNK), max_size=2).map("".join),
+    ),
+)
+
+
+@settings(max_examples=500, derandomize=True, deadline=None)
+@given(PORTS)
+def test_the_schema_takes_every_port_the_loader_takes(port: str) -> None:
+    try:
+        BusLine.model_validate({"name": "a", "port": port})
+    except ValidationError:
+        return
+    plant = {"plant": "p", "buses": [{"name": "a", "port": port, "modules": [{"address": 1, "name": "m"}]}]}
+    assert VALIDATOR.is_valid(plant), port
