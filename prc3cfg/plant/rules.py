@@ -11,7 +11,9 @@ On a module's effective settings (after profiles):
   program may not both have `next` and be in a chain.
 
 On a bus: with a `gateway`, the Open Driver's own checks on the line (`prc3cfg.gateway`:
-illegal baud rate SYSTAT 8Bh, ZVZ below 4 ms SYSTAT 8Eh, …).
+illegal baud rate SYSTAT 8Bh, ZVZ below 4 ms SYSTAT 8Eh, …). An `open-driver` line ends in
+that driver whether or not the file describes the gateway, so its ZVZ minimum (8Eh) holds
+without a `gateway:` too; the other checks need the gateway's own words.
 
 On the whole file (read from the plain data, so that they are found even beside other
 problems): bus names, ports and module names are unique in the plant; module addresses
@@ -105,18 +107,25 @@ def _said(value: Sourced, key: str, beside: Sourced | None = None) -> str:
     return text + f" ({value.source})" if beside is not None and value.source != beside.source else text
 
 
+#: Gateway words the Open Driver accepts, to check an `open-driver` line that has no `gateway:`.
+_ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0, identifier=gateway.IDENTIFIERS.start)
+
+
 def check_bus(path: Path_, bus: BusLine) -> list[Problem]:
-    """With a gateway, what the Open Driver would refuse about this line (SYSTAT 8Bh..95h)."""
-    if bus.gateway is None:
+    """What the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any open-driver line."""
+    if bus.gateway is None and bus.framing != "open-driver":
         return []
+    words = bus.gateway or _ANY_GATEWAY
     settings = gateway.GatewaySettings(
-        receive_db=bus.gateway.receive_db, receive_dw=bus.gateway.receive_dw, cpu=bus.gateway.cpu,
-        identifier=bus.gateway.identifier, zvz_ms=round(bus.zvz * 1000),
+        receive_db=words.receive_db, receive_dw=words.receive_dw, cpu=words.cpu,
+        identifier=words.identifier, zvz_ms=round(bus.zvz * 1000),
         line=LineSettings(baud=bus.baud, data_bits=bus.data_bits, parity=bus.parity, stop_bits=bus.stop_bits),
     )
     problems = []
     for refusal in gateway.refusals(settings):
         key = {"zvz_ms": "zvz"}.get(refusal.field, refusal.field.removeprefix("line."))
+        if bus.gateway is None and key != "zvz":
+            continue
         if key in Gateway.model_fields:
             at, given = path + ("gateway", key), True
         else:
