@@ -1,20 +1,40 @@
 """A plant file read as YAML: plain data, exact numbers, and where every key and value stands.
 
-PyYAML (pure-Python `SafeLoader`, so messages do not depend on whether libyaml is
-installed) composes the node tree; this module builds the data from it itself so that
+PyYAML composes the node tree — with libyaml (`yaml.CSafeLoader`) when it is installed, else
+the pure-Python `SafeLoader`; both keep every position. Where libyaml stops (a syntax error,
+a limit), the file is parsed again by the pure parser and its first stop is said, so that
+messages do not depend on which one ran; they differ only where the two disagree on what is
+valid YAML (libyaml takes a tab inside a plain scalar, PyYAML does not). This module builds
+the data from the nodes itself so that
 - a float keeps the text it was written with: `0.1` becomes `Decimal("0.1")`, never the
   binary 0.1000000000000000055…; integers, booleans, strings are YAML 1.1 as usual;
+- a number has at most `MAX_DIGITS` digits written out in full (`1e30` has 31): decimal
+  arithmetic is exact to that precision, and reading `1e999999` as an integer would take
+  seconds, `1.0e+400` as a float would be infinite;
 - a duplicate key is a problem at the second key's line and column (the first value stays);
-- a merge key (`<<`) is refused: profiles are the plant file's way to share settings;
+- a merge key (`<<`) and an alias (`*name`) are refused: profiles are the plant file's way to
+  share settings. Aliases are refused rather than expanded within a bound because a problem
+  in an aliased value would have one position for several places (a speed above one
+  module's max_speed but not another's), and because expanding them is how a 400-byte file
+  becomes gigabytes ("billion laughs"). An anchor that no alias uses does nothing;
 - every key and value keeps its position, by path: `("buses", 0, "modules", 2, "name")`.
 
-Problems that stop reading altogether (no such file, not UTF-8, a YAML syntax error, an
-empty file, a top level that is not a mapping) raise `PlantError` at once; the others are
-collected in `Document.problems`. Does not know what a plant file contains.
+Reading is bounded in time and memory: only a regular file is read (a FIFO could block,
+`/dev/zero` never ends), at most `MAX_BYTES` of it; nesting deeper than `MAX_DEPTH` lists and
+mappings is refused on the event stream, before the composer (which recurses) sees it.
+
+Problems that stop reading altogether (no such file, not a regular file, too large, not UTF-8,
+a control character or a byte order mark after the start, a YAML syntax error, an alias,
+too deep, an empty file, a top level that is not a mapping) raise `PlantError` at once; the
+others are collected in `Document.problems`. Does not know what a plant file contains.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
+import re
+import stat
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
@@ -26,14 +46,32 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from prc3cfg.plant.problems import FIRST, Path_, PlantError, Problem
 
+#: The composer: libyaml's when PyYAML was built with it (issue 11 wants its speed).
+LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+#: Far above a written plant (the 30-module coating-line example is 4 KB, with profiles) and
+#: room for two buses as `bus import` writes them (30 modules, all 64 programs: 370 KB, read in
+#: 0.4 s); the worst a file this size can do — 350 000 one-character list items, each wrong —
+#: takes 8 s and 700 MB to read and report, so the limit is not much higher.
+MAX_BYTES = 1024 * 1024
+#: A plant file nests 8 deep (plant → buses → bus → modules → module → programs → program → f1).
+MAX_DEPTH = 100
+#: Python's decimal precision: arithmetic on numbers of more digits would round.
+MAX_DIGITS = 28
+
 _FLOAT_TAG = "tag:yaml.org,2002:float"
+_INT_TAG = "tag:yaml.org,2002:int"
 _MERGE_TAG = "tag:yaml.org,2002:merge"
 _NULL_TAG = "tag:yaml.org,2002:null"
+_NUMBER_TAGS = (_INT_TAG, _FLOAT_TAG)
 _SPECIAL_FLOATS = {".inf": "Infinity", "+.inf": "Infinity", "-.inf": "-Infinity", ".nan": "NaN"}
 
-#: What to do about a YAML syntax error, by a piece of PyYAML's wording of it; the flag
-#: says the error is best shown where the construct began (an unclosed quote), not where
-#: PyYAML gave up (the end of the file).
+#: A number in decimal or exponent notation, with YAML 1.1's underscores: whole digits, fraction
+#: digits, exponent — to count its digits without building it.
+_DECIMAL_FORM = re.compile(r"[-+]?([0-9_]*)(?:\.([0-9_]*))?(?:[eE]([-+]?[0-9]+))?")
+
+#: What to do about a YAML syntax error, by a piece of PyYAML's wording of it (of libyaml's too
+#: where its composer's differs); the flag says the error is best shown where the construct
+#: began (an unclosed quote), not where PyYAML gave up (the end of the file).
 _SYNTAX_HINTS = {
     "'\\t'": ("a tab character — indent with spaces; YAML does not allow tabs here", False),
     "mapping values are not allowed here": ("a colon where no key can start — indent this key "
@@ -43,8 +81,16 @@ _SYNTAX_HINTS = {
     "expected <block end>": ("this line is indented differently from the lines above it — line it up "
                              "with the keys beside it", False),
     "while scanning a quoted scalar": ("a quoted value that never ends — close the quote", True),
-    "found undefined alias": ("an alias (*name) with no anchor (&name) before it — define the anchor first", False),
     "expected a single document": ("a second YAML document (---) — a plant file is one document", False),
+    "found duplicate anchor": ("an anchor (&name) given twice — a plant file needs no anchors: remove them", False),
+}
+#: What PyYAML refuses as not printable, and a byte order mark after the start, which PyYAML
+#: reads as part of a key and libyaml does not.
+_NOT_TEXT = re.compile(f"{yaml.reader.Reader.NON_PRINTABLE.pattern}|(?!\\A)\ufeff")
+#: What a plant path is when it is not a regular file, by its `stat` file type.
+_NOT_FILES = {
+    stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
+    stat.S_IFSOCK: "a socket",
 }
 
 Position = tuple[int, int]  # 1-based line and column
@@ -52,12 +98,13 @@ Position = tuple[int, int]  # 1-based line and column
 
 @dataclass
 class Document:
-    """The data of one YAML file and the positions of its keys and values."""
+    """The data of one YAML file, the positions of its keys and values, the SHA-256 of its bytes."""
 
     name: str
     data: dict[Any, Any]
     #: path → (position of its key, or None for a list item; position of its value)
     positions: dict[Path_, tuple[Position | None, Position]]
+    sha256: str
     problems: list[Problem] = field(default_factory=list)
 
     def position(self, path: Path_, at_key: bool = False) -> Position:
@@ -84,26 +131,23 @@ class Document:
 def read_document(path: Path) -> Document:
     """Read and parse `path`; `PlantError` if it is not a YAML mapping at all."""
     name = str(path)
+    data = _read_bytes(path, name)
     try:
-        text = path.read_bytes().decode("utf-8")
-    except FileNotFoundError:
-        raise PlantError([f"{name}: no such file — check the path"]) from None
-    except IsADirectoryError:
-        raise PlantError([f"{name}: is a directory — give the plant file (*.yaml) in it"]) from None
+        text = data.decode("utf-8")
     except UnicodeDecodeError as error:
         before = error.object[: error.start].decode("utf-8", "replace")
         line, column = _line_column(before, len(before))
         raise PlantError([f"{name}:{line}:{column}: not UTF-8 text — save the file as UTF-8"]) from None
-    except OSError as error:
-        raise PlantError([f"{name}: cannot read it ({error.strerror}) — check the path and its permissions"]) from None
+    if found := _NOT_TEXT.search(text):
+        line, column = _line_column(text, found.start())
+        what = "a byte order mark" if found.group() == "\ufeff" else "a control character"
+        raise PlantError([f"{name}:{line}:{column}: {what} (#x{ord(found.group()):04x}) — remove it; "
+                          "a plant file is plain text"])
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        _check_events(name, text)
+        root = yaml.compose(text, Loader=LOADER)
     except yaml.MarkedYAMLError as error:
         raise PlantError([_syntax_error(name, error)]) from None
-    except yaml.reader.ReaderError as error:
-        line, column = _line_column(text, error.position)
-        raise PlantError([f"{name}:{line}:{column}: a control character (#x{error.character:04x}) "
-                          "— remove it; a plant file is plain text"]) from None
     if root is None or (isinstance(root, ScalarNode) and root.tag == _NULL_TAG):
         raise PlantError([f"{name}:1:1: the file is empty — a plant file starts with 'plant: NAME' and 'buses:'"])
     if not isinstance(root, MappingNode):
@@ -113,8 +157,73 @@ def read_document(path: Path) -> Document:
                           "— a plant file is a mapping with 'plant:' and 'buses:'"])
     reader = _Reader()
     reader.positions[()] = (None, _position(root))
-    data = reader.value(root, ())
-    return Document(name, data, reader.positions, reader.problems)
+    result = reader.value(root, ())
+    return Document(name, result, reader.positions, hashlib.sha256(data).hexdigest(), reader.problems)
+
+
+def _read_bytes(path: Path, name: str) -> bytes:
+    """The bytes of the regular file `path`, at most `MAX_BYTES`; opened so that a FIFO cannot block."""
+    try:
+        _regular_file(name, os.stat(path).st_mode)
+        with open(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as file:
+            _regular_file(name, os.fstat(file.fileno()).st_mode)  # it may have changed since
+            data = file.read(MAX_BYTES + 1)
+    except FileNotFoundError:
+        raise PlantError([f"{name}: no such file — check the path"]) from None
+    except (OSError, ValueError) as error:  # ValueError: a NUL in the path
+        reason = getattr(error, "strerror", None) or str(error)
+        raise PlantError([f"{name}: cannot read it ({reason}) — check the path and its permissions"]) from None
+    if len(data) > MAX_BYTES:
+        raise PlantError([f"{name}: larger than {MAX_BYTES // 2**20} MiB — a plant file is far smaller: "
+                          "check that this is the plant file"])
+    return data
+
+
+def _regular_file(name: str, mode: int) -> None:
+    if stat.S_ISDIR(mode):
+        raise PlantError([f"{name}: is a directory — give the plant file (*.yaml) in it"])
+    if not stat.S_ISREG(mode):
+        kind = _NOT_FILES.get(stat.S_IFMT(mode), "not a regular file")
+        raise PlantError([f"{name}: is {kind}, not a file — give the plant file (*.yaml) itself"])
+
+
+def _check_events(name: str, text: str) -> None:
+    """Refuse what composing would recurse on (deep nesting) or share (aliases), before it does.
+
+    When libyaml stops (a syntax error, a limit), what is said is where the pure parser stops
+    first: the two word syntax errors differently, and may meet them in another order.
+    """
+    try:
+        _events_within_limits(name, text, LOADER)
+    except (yaml.MarkedYAMLError, PlantError):
+        if LOADER is yaml.SafeLoader:
+            raise
+        _events_within_limits(name, text, yaml.SafeLoader)
+        raise  # the pure parser takes the whole file: libyaml's stop stands
+
+
+def _events_within_limits(name: str, text: str, loader: type) -> None:
+    """`PlantError` for nesting deeper than `MAX_DEPTH` or any alias, from `loader`'s events."""
+    depth = 0
+    aliases: dict[str, list[Position]] = {}  # each alias name, where it is used
+    for event in yaml.parse(text, Loader=loader):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                line, column = _position(event)
+                raise PlantError([f"{name}:{line}:{column}: lists and mappings nested more than {MAX_DEPTH} "
+                                  "deep — a plant file needs fewer than ten: check the brackets and the indentation"])
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+        elif isinstance(event, yaml.AliasEvent):
+            aliases.setdefault(event.anchor, []).append(_position(event))
+    lines = []
+    for anchor, uses in aliases.items():
+        (line, column), times = uses[0], f", used {len(uses)} times" if len(uses) > 1 else ""
+        lines.append(f"{name}:{line}:{column}: an alias (*{anchor}{times}) — a plant file does not use aliases: "
+                     "share settings with profiles: and a module's profiles: [NAME], or write the value out")
+    if lines:
+        raise PlantError(lines)
 
 
 class _Reader:
@@ -124,25 +233,18 @@ class _Reader:
         self.constructor = yaml.SafeLoader("")
         self.positions: dict[Path_, tuple[Position | None, Position]] = {}
         self.problems: list[Problem] = []
-        self.open: set[int] = set()  # nodes being built: an alias to one of them is a cycle
 
     def value(self, node: Node, path: Path_) -> Any:
-        if id(node) in self.open:
-            self.problems.append(Problem(path, "an alias that contains itself — write the value out"))
-            return None
-        self.open.add(id(node))
-        try:
-            if isinstance(node, MappingNode):
-                return self.mapping(node, path)
-            if isinstance(node, SequenceNode):
-                items = []
-                for index, item in enumerate(node.value):
-                    self.positions[path + (index,)] = (None, _position(item))
-                    items.append(self.value(item, path + (index,)))
-                return items
-            return self.scalar(node, path)
-        finally:
-            self.open.discard(id(node))
+        if isinstance(node, MappingNode):
+            return self.mapping(node, path)
+        if isinstance(node, SequenceNode):
+            items = []
+            for index, item in enumerate(node.value):
+                self.positions[path + (index,)] = (None, _position(item))
+                items.append(self.value(item, path + (index,)))
+            return items
+        key = path[-1] if path and isinstance(path[-1], str) else ""
+        return self.scalar(node, path, key)
 
     def mapping(self, node: MappingNode, path: Path_) -> dict[Any, Any]:
         result: dict[Any, Any] = {}
@@ -152,7 +254,7 @@ class _Reader:
                 self.problems.append(Problem(path, "a YAML merge key (<<) — share settings with "
                                              "profiles: and a module's profiles: [NAME] instead", at=key_at))
                 continue
-            key = self.scalar(key_node, path) if isinstance(key_node, ScalarNode) else None
+            key = self.scalar(key_node, path, "key") if isinstance(key_node, ScalarNode) else None
             if key is None or not _hashable(key):
                 self.problems.append(Problem(path, "a key that is not a name or a number — write a plain key", at=key_at))
                 continue
@@ -161,20 +263,28 @@ class _Reader:
                 self.problems.append(Problem(path, f"duplicate key '{key}' — it is already given at "
                                              f"{first[0]}:{first[1]}; give each key once", at=key_at))
                 continue
-            empty = isinstance(value_node, ScalarNode) and value_node.tag == _NULL_TAG and not value_node.value
-            self.positions[path + (key,)] = (key_at, key_at if empty else _position(value_node))
+            self.positions[path + (key,)] = (key_at, key_at if _empty(value_node) else _position(value_node))
             result[key] = self.value(value_node, path + (key,))
         return result
 
-    def scalar(self, node: ScalarNode, path: Path_) -> Any:
+    def scalar(self, node: ScalarNode, path: Path_, key: str) -> Any:
+        """The value of `node` (under `key`, for messages); a problem when it is too long a number."""
+        text = node.value
+        if node.tag in _NUMBER_TAGS and _too_long(text):
+            self.problems.append(Problem(path, f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, "
+                                         f"written out — a plant file's numbers are read exactly: write at most "
+                                         f"{MAX_DIGITS} digits", at=_position(node)))
+            return text
         try:
-            if node.tag == _FLOAT_TAG:
-                return self.decimal(node)
-            return self.constructor.construct_object(node)
+            return self.construct(node)
         except (yaml.YAMLError, ValueError, TypeError, ArithmeticError):
-            self.problems.append(Problem(path, f"'{node.value}' cannot be read as {node.tag} — remove the tag; "
+            self.problems.append(Problem(path, f"'{text}' cannot be read as {node.tag} — remove the tag; "
                                          "a plant file needs none"))
-            return node.value
+            return text
+
+    def construct(self, node: ScalarNode) -> Any:
+        """The YAML 1.1 value of a scalar; a float as an exact `Decimal`."""
+        return self.decimal(node) if node.tag == _FLOAT_TAG else self.constructor.construct_object(node)
 
     def decimal(self, node: ScalarNode) -> Decimal:
         """A float exactly as written: "0.1" is Decimal("0.1")."""
@@ -185,6 +295,25 @@ class _Reader:
             return Decimal(repr(self.constructor.construct_object(node)))
 
 
+def _too_long(text: str) -> bool:
+    """More than `MAX_DIGITS` digits written out: 1e30 has 31, 1.0e-400 has 402; 0x1F, 1:30 their own."""
+    form = _DECIMAL_FORM.fullmatch(text)
+    if form is None:
+        return sum(c.isalnum() for c in text) > MAX_DIGITS
+    whole, fraction = (form[1] or "").replace("_", ""), (form[2] or "").replace("_", "")
+    exponent = (form[3] or "0").lstrip("+")
+    if len(exponent.lstrip("-0")) > 2:  # 100 or more: more than MAX_DIGITS either way, and not worth an int
+        return True
+    shift = int(exponent)
+    return max(len(whole) + shift, 1) + max(len(fraction) - shift, 0) > MAX_DIGITS
+
+
+def _subject(key: str, text: str, quoted: bool) -> str:
+    """A scalar as a message names it: "address 010", "alarm 'on'"; shortened when long."""
+    short = text if len(text) <= 24 else text[:20] + "…"
+    return f"{key} {repr(short) if quoted else short}".lstrip()
+
+
 def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]]:
     """The mappings in the list that `data` holds under `path[-1]`, with their paths; others skipped."""
     items = data.get(path[-1]) if isinstance(data, dict) else None
@@ -193,7 +322,11 @@ def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]
             yield path + (index,), item
 
 
-def _position(node: Node) -> Position:
+def _empty(node: Node) -> bool:
+    return isinstance(node, ScalarNode) and node.tag == _NULL_TAG and not node.value
+
+
+def _position(node: Node | yaml.Event) -> Position:
     return node.start_mark.line + 1, node.start_mark.column + 1
 
 

@@ -8,12 +8,13 @@ The rules run on the parts that validated even when others did not: each profile
 bus's line settings and each module is validated on its own, so that one unknown key
 does not hide a P > S1 three modules further down. A module whose profiles are unknown
 or invalid is not checked further (its profile's problems are reported already).
-All problems come back sorted by line and column, one line each.
+All problems come back sorted by line and column, one line each. Where the reading itself
+found a problem (a number too long to read, a merge key), that is the one said there: the
+models' view of the same value would only say it again, worse.
 """
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -21,7 +22,7 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from prc3cfg.plant import rules
-from prc3cfg.plant.document import mappings_in, read_document
+from prc3cfg.plant.document import Document, mappings_in, read_document
 from prc3cfg.plant.messages import from_pydantic
 from prc3cfg.plant.models import BusLine, ModuleSpec, PlantSpec, ProfileSpec
 from prc3cfg.plant.plant import Bus, Module, Plant
@@ -35,7 +36,7 @@ def load_plant(path: str | Path) -> Plant:
     """The plant in `path`; `PlantError` with every problem ("file:line:column: …") otherwise."""
     path = Path(path)
     document = read_document(path)
-    problems = list(document.problems)
+    problems: list[Problem] = []
     try:
         PlantSpec.model_validate(document.data)
     except ValidationError as error:
@@ -54,15 +55,21 @@ def load_plant(path: str | Path) -> Plant:
                 problems += found
                 modules.append(built)
         buses.append((line, modules))
-    if problems:
-        located = sorted({document.format(p) for p in problems})
-        raise PlantError([text for _, text in located])
+    if problems or document.problems:
+        raise PlantError(_lines(document, problems))
     return Plant(
         name=document.data["plant"],
         buses=tuple(Bus(**{k: getattr(line, k) for k in line.model_fields_set}, modules=tuple(modules)) for line, modules in buses),
         path=path,
-        sha256=hashlib.sha256(path.read_bytes()).hexdigest(),
+        sha256=document.sha256,
     )
+
+
+def _lines(document: Document, problems: list[Problem]) -> list[str]:
+    """Every problem as one line, sorted; none of the models' where reading found one."""
+    read = {document.format(p) for p in document.problems}
+    places = {at for at, _ in read}
+    return [text for _, text in sorted(read | {(at, text) for at, text in map(document.format, problems) if at not in places})]
 
 
 def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec | None]) -> tuple[list[Problem], Module | None]:
