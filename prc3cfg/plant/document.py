@@ -7,7 +7,16 @@ messages do not depend on which one ran; they differ only where the two disagree
 valid YAML (libyaml takes a tab inside a plain scalar, PyYAML does not). This module builds
 the data from the nodes itself so that
 - a float keeps the text it was written with: `0.1` becomes `Decimal("0.1")`, never the
-  binary 0.1000000000000000055…; integers, booleans, strings are YAML 1.1 as usual;
+  binary 0.1000000000000000055…; integers, booleans, strings are what both YAML versions read;
+- a plain scalar that YAML 1.1 (PyYAML) and YAML 1.2 (yaml-language-server, JSON Schema
+  tools, most other readers) read differently is a problem that says what to write: `010` is
+  8 to one and 10 to the other, `on` true or text, `1:30` 90 or text, `1e3` text or 1000,
+  `0b101`, `1_000`, `2024-01-01`, `=`. The 1.2 side is `core_schema`, the YAML 1.2.2 core
+  schema's table (§10.3.2); the 1.1 side is PyYAML's resolver (which, unlike the 1.1 type
+  repository, reads `y` and `n` as text, as 1.2 does). Quoted scalars and explicit tags are
+  never ambiguous. The value kept is the YAML 1.2 reading, what editors and schema tools
+  see; the models' objection to it, if any, says what the key wants. A tag on a scalar that
+  it cannot be read as, or any tag on a mapping or a list (`!!set`, `!!omap`), is refused;
 - a number has at most `MAX_DIGITS` digits written out in full (`1e30` has 31): decimal
   arithmetic is exact to that precision, and reading `1e999999` as an integer would take
   seconds, `1.0e+400` as a float would be infinite;
@@ -35,7 +44,7 @@ import hashlib
 import os
 import re
 import stat
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
@@ -58,13 +67,42 @@ MAX_DEPTH = 100
 #: Python's decimal precision: arithmetic on numbers of more digits would round.
 MAX_DIGITS = 28
 
+_BOOL_TAG = "tag:yaml.org,2002:bool"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
 _INT_TAG = "tag:yaml.org,2002:int"
 _MERGE_TAG = "tag:yaml.org,2002:merge"
 _NULL_TAG = "tag:yaml.org,2002:null"
+_STR_TAG = "tag:yaml.org,2002:str"
 _NUMBER_TAGS = (_INT_TAG, _FLOAT_TAG)
 _SPECIAL_FLOATS = {".inf": "Infinity", "+.inf": "Infinity", "-.inf": "-Infinity", ".nan": "NaN"}
 
+#: A number in the YAML 1.2 core schema's decimal or exponent notation: "0.300", "-5", "1e3".
+DECIMAL_NUMBER = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
+#: The YAML 1.2 core schema (YAML 1.2.2 §10.3.2): a plain scalar's tag by the first pattern it
+#: matches, and its value; anything else is a string.
+_CORE_SCHEMA: tuple[tuple[str, re.Pattern[str], Callable[[str], Any]], ...] = tuple(
+    (tag, re.compile(pattern), value)
+    for tag, pattern, value in (
+        (_NULL_TAG, r"null|Null|NULL|~|", lambda text: None),
+        (_BOOL_TAG, r"true|True|TRUE|false|False|FALSE", lambda text: text.lower() == "true"),
+        (_INT_TAG, r"[-+]?[0-9]+", int),
+        (_INT_TAG, r"0o[0-7]+", lambda text: int(text[2:], 8)),
+        (_INT_TAG, r"0x[0-9a-fA-F]+", lambda text: int(text[2:], 16)),
+        (_FLOAT_TAG, DECIMAL_NUMBER.pattern, Decimal),
+        (_FLOAT_TAG, r"[-+]?(\.inf|\.Inf|\.INF)|\.nan|\.NaN|\.NAN", lambda text: Decimal(_SPECIAL_FLOATS[text.lower()])),
+    )
+)
+_CORE_TAGS = {tag for tag, _, _ in _CORE_SCHEMA} | {_STR_TAG}  # every tag YAML 1.2 can give a plain scalar
+#: How a message says what a reader takes a plain scalar for, by its tag (and value).
+_READINGS: dict[str, Callable[[Any], str]] = {
+    _INT_TAG: lambda value: _as_written(value),
+    _FLOAT_TAG: lambda value: _as_written(value),
+    _BOOL_TAG: lambda value: f"the boolean {str(value).lower()}",
+    _STR_TAG: lambda value: "text",
+    "tag:yaml.org,2002:timestamp": lambda value: "a date",
+    "tag:yaml.org,2002:value": lambda value: "the default-value key",
+    _MERGE_TAG: lambda value: "a merge key",
+}
 #: A number in decimal or exponent notation, with YAML 1.1's underscores: whole digits, fraction
 #: digits, exponent — to count its digits without building it.
 _DECIMAL_FORM = re.compile(r"[-+]?([0-9_]*)(?:\.([0-9_]*))?(?:[eE]([-+]?[0-9]+))?")
@@ -87,6 +125,8 @@ _SYNTAX_HINTS = {
 #: What PyYAML refuses as not printable, and a byte order mark after the start, which PyYAML
 #: reads as part of a key and libyaml does not.
 _NOT_TEXT = re.compile(f"{yaml.reader.Reader.NON_PRINTABLE.pattern}|(?!\\A)\ufeff")
+#: The tag of a mapping or a list that has none written, and what a message calls it.
+_COLLECTIONS = {MappingNode: ("tag:yaml.org,2002:map", "mapping"), SequenceNode: ("tag:yaml.org,2002:seq", "list")}
 #: What a plant path is when it is not a regular file, by its `stat` file type.
 _NOT_FILES = {
     stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
@@ -235,6 +275,9 @@ class _Reader:
         self.problems: list[Problem] = []
 
     def value(self, node: Node, path: Path_) -> Any:
+        if type(node) in _COLLECTIONS and node.tag != _COLLECTIONS[type(node)][0]:  # !!set, !!omap, !!float
+            self.problems.append(Problem(path, f"a {_COLLECTIONS[type(node)][1]} cannot be read as {_written(node.tag)} "
+                                         "— remove the tag; a plant file needs none", at=_position(node)))
         if isinstance(node, MappingNode):
             return self.mapping(node, path)
         if isinstance(node, SequenceNode):
@@ -268,18 +311,29 @@ class _Reader:
         return result
 
     def scalar(self, node: ScalarNode, path: Path_, key: str) -> Any:
-        """The value of `node` (under `key`, for messages); a problem when it is too long a number."""
-        text = node.value
-        if node.tag in _NUMBER_TAGS and _too_long(text):
+        """The value of `node` (under `key`, for messages); a problem when it is not one value to every reader."""
+        text, at = node.value, _position(node)
+        plain = not node.style and node.tag == self.constructor.resolve(ScalarNode, text, (True, False))
+        core_tag, core_value = _core_rule(text) if plain else (None, None)
+        if (node.tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
             self.problems.append(Problem(path, f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, "
                                          f"written out — a plant file's numbers are read exactly: write at most "
-                                         f"{MAX_DIGITS} digits", at=_position(node)))
+                                         f"{MAX_DIGITS} digits", at=at))
             return text
+        if plain:
+            # a tag the core schema does not have (a date, `=`) differs without building a value
+            yaml11 = (node.tag, self.construct(node) if node.tag in _CORE_TAGS else None)
+            yaml12 = (core_tag, core_value(text))
+            if (yaml11[0], str(yaml11[1])) != (yaml12[0], str(yaml12[1])):  # str: NaN is not equal to NaN
+                subject = _subject(key, text, _STR_TAG in (yaml11[0], yaml12[0]))
+                self.problems.append(Problem(path, _ambiguity(subject, yaml11, yaml12), at=at, models_fix=True))
+                return yaml12[1]
+            return yaml11[1]
         try:
             return self.construct(node)
         except (yaml.YAMLError, ValueError, TypeError, ArithmeticError):
-            self.problems.append(Problem(path, f"'{text}' cannot be read as {node.tag} — remove the tag; "
-                                         "a plant file needs none"))
+            self.problems.append(Problem(path, f"'{text}' cannot be read as {_written(node.tag)} — remove the tag; "
+                                         "a plant file needs none", at=at))
             return text
 
     def construct(self, node: ScalarNode) -> Any:
@@ -293,6 +347,36 @@ class _Reader:
             return Decimal(_SPECIAL_FLOATS.get(text.lower(), text))
         except InvalidOperation:  # YAML 1.1 sexagesimal "1:30.5"
             return Decimal(repr(self.constructor.construct_object(node)))
+
+
+def core_schema(text: str) -> tuple[str, Any]:
+    """The tag and value the YAML 1.2 core schema gives the plain scalar `text`."""
+    tag, value = _core_rule(text)
+    return tag, value(text)
+
+
+def _core_rule(text: str) -> tuple[str, Callable[[str], Any]]:
+    """The core schema's tag for `text`, and how to build its value (not built yet: it may be long)."""
+    return next(((tag, value) for tag, pattern, value in _CORE_SCHEMA if pattern.fullmatch(text)), (_STR_TAG, str))
+
+
+def _ambiguity(subject: str, yaml11: tuple[str, Any], yaml12: tuple[str, Any]) -> str:
+    """How YAML 1.1 and 1.2 read `subject`, and what to write so that both read one thing."""
+    said = (f"{subject} is read as {_READINGS[yaml11[0]](yaml11[1])} by YAML 1.1 "
+            f"and as {_READINGS[yaml12[0]](yaml12[1])} by YAML 1.2")
+    if yaml11[0] in _NUMBER_TAGS and yaml12[0] in _NUMBER_TAGS:  # only a leading zero does that: 010
+        return f"{said} — write {_as_written(yaml12[1])} (or {_as_written(yaml11[1])}), without the leading zero"
+    tag, value = yaml11 if yaml12[0] == _STR_TAG else yaml12
+    if tag in _NUMBER_TAGS:
+        return f"{said} — write {_as_written(value)}, or quote it"
+    if tag == _BOOL_TAG:
+        return f"{said} — write true or false, or quote it"
+    return f"{said} — quote it"
+
+
+def _as_written(number: int | Decimal) -> str:
+    """A number as both YAML versions read it: 90, 0.001, 1000 (not 1E+3)."""
+    return format(number, "f") if isinstance(number, Decimal) and number.is_finite() else str(number)
 
 
 def _too_long(text: str) -> bool:
@@ -320,6 +404,11 @@ def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]
     for index, item in enumerate(items if isinstance(items, list) else ()):
         if isinstance(item, dict):
             yield path + (index,), item
+
+
+def _written(tag: str) -> str:
+    """A tag as a file writes it: `!!float`, `!env`."""
+    return tag.replace("tag:yaml.org,2002:", "!!", 1)
 
 
 def _empty(node: Node) -> bool:

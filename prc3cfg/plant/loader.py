@@ -9,8 +9,10 @@ bus's line settings and each module is validated on its own, so that one unknown
 does not hide a P > S1 three modules further down. A module whose profiles are unknown
 or invalid is not checked further (its profile's problems are reported already).
 All problems come back sorted by line and column, one line each. Where the reading itself
-found a problem (a number too long to read, a merge key), that is the one said there: the
-models' view of the same value would only say it again, worse.
+found a problem (`010`, `on`, a number too long to read), that is the one said there; the models'
+objection to the same value only lends it their "what to do" when the reading's problem
+asks for that (`Problem.models_fix`: "… read as true by YAML 1.1 and as text by YAML 1.2 —
+give a number in m").
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from prc3cfg.plant import rules
-from prc3cfg.plant.document import Document, mappings_in, read_document
+from prc3cfg.plant.document import Document, Position, mappings_in, read_document
 from prc3cfg.plant.messages import from_pydantic
 from prc3cfg.plant.models import BusLine, ModuleSpec, PlantSpec, ProfileSpec
 from prc3cfg.plant.plant import Bus, Module, Plant
@@ -66,10 +68,21 @@ def load_plant(path: str | Path) -> Plant:
 
 
 def _lines(document: Document, problems: list[Problem]) -> list[str]:
-    """Every problem as one line, sorted; none of the models' where reading found one."""
-    read = {document.format(p) for p in document.problems}
+    """Every problem as one line, sorted; at a place where reading found one, the models' only lend a fix."""
+    read = {document.format(p): p for p in document.problems}
     places = {at for at, _ in read}
-    return [text for _, text in sorted(read | {(at, text) for at, text in map(document.format, problems) if at not in places})]
+    fixes: dict[Position, str] = {}
+    lines = set()
+    for at, text in sorted(map(document.format, problems)):
+        if at in places:
+            fixes.setdefault(at, text.partition(" — ")[2])
+        else:
+            lines.add((at, text))
+    for (at, text), problem in read.items():
+        if problem.models_fix and at in fixes:
+            text = f"{text.partition(' — ')[0]} — {fixes[at]}"
+        lines.add((at, text))
+    return [text for _, text in sorted(lines)]
 
 
 def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec | None]) -> tuple[list[Problem], Module | None]:

@@ -15,6 +15,7 @@ from typing import Any
 from pydantic import BaseModel
 from pydantic_core import ErrorDetails
 
+from prc3cfg.plant.document import DECIMAL_NUMBER
 from prc3cfg.plant.models import (
     BusSpec,
     ChainSpec,
@@ -105,8 +106,6 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
         "item": _LIST_ITEMS.get(loc[-1] if loc else "", "item"),
         **{k: v for k, v in ctx.items() if k not in ("unit", "what", "expected")},
     }
-    if isinstance(error["input"], bool) and kind in ("literal_error", "string_type"):
-        template += " (YAML reads yes, no, on, off as true and false: put the word in quotes)"
     at_key = kind in ("extra_forbidden", "invalid_key", "missing") or (loc and loc[-1] == "[key]")
     return Problem(loc, template.format(**words), at_key=bool(at_key))
 
@@ -162,10 +161,8 @@ def _model_at(container: Path_) -> type[BaseModel]:
 
 
 def _is_number_text(value: Any) -> bool:
-    try:
-        return isinstance(value, str) and Decimal(value).is_finite()
-    except ArithmeticError:
-        return False
+    """Text that is a number when written without quotes: "0.300", not "1_000" or "fast"."""
+    return isinstance(value, str) and DECIMAL_NUMBER.fullmatch(value) is not None
 
 
 def _required(loc: Path_) -> bool:

@@ -23,7 +23,9 @@ class Problem:
 
     `at` is a (line, column) known without a path, for what has none (a duplicate key).
     `first` is the earlier of two things that must differ; the message says where it is
-    with `FIRST`.
+    with `FIRST`. `models_fix`: what the models would have the value be (a number in m, one
+    of set, reset) is a better "what to do" than this message's own, which cannot know what
+    the key wants; the loader puts theirs in when they object to the same value.
     """
 
     path: Path_
@@ -31,6 +33,7 @@ class Problem:
     at_key: bool = False
     at: tuple[int, int] | None = None
     first: Path_ | None = None
+    models_fix: bool = False
 
 
 class PlantError(UserError):

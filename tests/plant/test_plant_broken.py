@@ -163,6 +163,23 @@ def test_aliases_and_deep_nesting_are_refused_before_the_composer_sees_them(tmp_
         load_plant(path)
 
 
+@pytest.mark.parametrize(("text", "tag", "value"), [
+    # YAML 1.2.2 example 10.9, "Core Tag Resolution", every scalar of it
+    ("null", "null", None), ("", "null", None), ("true", "bool", True), ("True", "bool", True),
+    ("false", "bool", False), ("FALSE", "bool", False), ("0", "int", 0), ("0o7", "int", 7),
+    ("0x3A", "int", 58), ("-19", "int", -19), ("0.", "float", 0), ("-0.0", "float", 0), (".5", "float", 0.5),
+    ("+12e03", "float", 12000), ("-2E+05", "float", -200000), (".inf", "float", float("inf")),
+    ("-.Inf", "float", float("-inf")), ("+.INF", "float", float("inf")),
+    # and where YAML 1.1 (PyYAML) reads otherwise
+    ("010", "int", 10), ("0b101", "str", "0b101"), ("1_000", "str", "1_000"), ("1:30", "str", "1:30"),
+    ("on", "str", "on"), ("y", "str", "y"), ("2024-01-01", "str", "2024-01-01"), ("=", "str", "="),
+    ("-0x1F", "str", "-0x1F"), ("0o17", "int", 15), ("1e3", "float", 1000), ("~", "null", None),
+])
+def test_the_yaml_1_2_core_schema(text: str, tag: str, value) -> None:
+    assert document.core_schema(text) == (f"tag:yaml.org,2002:{tag}", value)
+    assert document.core_schema(".NaN")[1].is_nan()
+
+
 # What a hurried edit leaves: YAML debris, YAML 1.1 forms, bombs in miniature, huge numbers.
 DEBRIS = [":", "- ", "[", "]", "{", "}", "'", '"', "\t", "&a ", "*a", "<<: ", "!!float ", "!!int ", "? ",
           "0", "-0.1", "0.0005", "yes", "null", ".inf", "1_000", "2:30", "2024-01-01", "x", "\n", "  ",
