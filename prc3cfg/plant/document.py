@@ -20,6 +20,8 @@ the data from the nodes itself so that
 - a number has at most `MAX_DIGITS` digits written out in full (`1e30` has 31): decimal
   arithmetic is exact to that precision, and reading `1e999999` as an integer would take
   seconds, `1.0e+400` as a float would be infinite;
+- `{position: 2,000}` is a decimal comma, not a position of 2 and a key `000`: a problem, and
+  the number meant (2.000) is kept;
 - a duplicate key is a problem at the second key's line and column (the first value stays);
 - a merge key (`<<`) and an alias (`*name`) are refused: profiles are the plant file's way to
   share settings. Aliases are refused rather than expanded within a bound because a problem
@@ -53,7 +55,7 @@ from typing import Any
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from prc3cfg.plant.problems import FIRST, Path_, PlantError, Problem
+from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, Path_, PlantError, Problem
 
 #: The composer: libyaml's when PyYAML was built with it (issue 11 wants its speed).
 LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -291,11 +293,19 @@ class _Reader:
 
     def mapping(self, node: MappingNode, path: Path_) -> dict[Any, Any]:
         result: dict[Any, Any] = {}
+        before: tuple[Any, Node] | None = None  # the key and value node read last
         for key_node, value_node in node.value:
             key_at = _position(key_node)
             if key_node.tag == _MERGE_TAG:
                 self.problems.append(Problem(path, "a YAML merge key (<<) — share settings with "
                                              "profiles: and a module's profiles: [NAME] instead", at=key_at))
+                continue
+            if before is not None and node.flow_style and _split_number(before[1], key_node, value_node):
+                written = f"{before[1].value},{key_node.value}"
+                point = written.replace(",", ".")
+                result[before[0]] = Decimal(point)  # what was meant, for the models to judge
+                self.problems.append(Problem(path, DECIMAL_COMMA.format(what=before[0], written=written, point=point),
+                                             at=_position(before[1]), models_fix=True))
                 continue
             key = self.scalar(key_node, path, "key") if isinstance(key_node, ScalarNode) else None
             if key is None or not _hashable(key):
@@ -308,6 +318,7 @@ class _Reader:
                 continue
             self.positions[path + (key,)] = (key_at, key_at if _empty(value_node) else _position(value_node))
             result[key] = self.value(value_node, path + (key,))
+            before = (key, value_node)
         return result
 
     def scalar(self, node: ScalarNode, path: Path_, key: str) -> Any:
@@ -390,6 +401,13 @@ def _too_long(text: str) -> bool:
         return True
     shift = int(exponent)
     return max(len(whole) + shift, 1) + max(len(fraction) - shift, 0) > MAX_DIGITS
+
+
+def _split_number(number: Node, key: Node, value: Node) -> bool:
+    """`{position: 2,000}`: a whole number, a comma and digits that became a key without a value."""
+    return bool(isinstance(number, ScalarNode) and not number.style and re.fullmatch(r"[-+]?[0-9]+", number.value)
+                and isinstance(key, ScalarNode) and not key.style and re.fullmatch(r"[0-9]+", key.value)
+                and _empty(value) and key.start_mark.index == number.end_mark.index + 1)
 
 
 def _subject(key: str, text: str, quoted: bool) -> str:

@@ -9,7 +9,7 @@ bus's line settings and each module is validated on its own, so that one unknown
 does not hide a P > S1 three modules further down. A module whose profiles are unknown
 or invalid is not checked further (its profile's problems are reported already).
 All problems come back sorted by line and column, one line each. Where the reading itself
-found a problem (`010`, `on`, a number too long to read), that is the one said there; the models'
+found a problem (`010`, `on`, a decimal comma), that is the one said there; the models'
 objection to the same value only lends it their "what to do" when the reading's problem
 asks for that (`Problem.models_fix`: "… read as true by YAML 1.1 and as text by YAML 1.2 —
 give a number in m").

@@ -9,6 +9,7 @@ Does not own positions (`document`) or rules that span values (`rules`).
 from __future__ import annotations
 
 import functools
+import re
 from decimal import Decimal
 from typing import Any
 
@@ -28,7 +29,7 @@ from prc3cfg.plant.models import (
     ProgramSpec,
     SystemSpec,
 )
-from prc3cfg.plant.problems import Path_, Problem
+from prc3cfg.plant.problems import DECIMAL_COMMA, Path_, Problem
 
 #: The model of a mapping, by the key that holds it (a section) or holds a collection of them.
 SECTIONS: dict[str, type[BaseModel]] = {
@@ -49,6 +50,7 @@ TEMPLATES = {
     "empty_required": "{what} is empty — give it a value",
     "not_number": "{what} cannot be {input} — give a {number}{unit}",
     "quoted_number": "{what} cannot be the text {input} — write the number without quotes",
+    "decimal_comma": DECIMAL_COMMA,
     "not_finite": "{what} {value} is not a finite number — give a number",
     "out_of_range": "{what} {value} is out of range — {what} must be {allowed}{note}",
     "not_whole": "{value} is not a whole number of {step_name} — {what_steps} in steps of {step}",
@@ -70,6 +72,7 @@ TEMPLATES = {
     "too_short": "{what} is empty — list at least one {item}",
 }
 _LIST_ITEMS = {"buses": "bus", "modules": "module", "programs": "program"}
+_DECIMAL_COMMA = re.compile(r"[-+]?[0-9]+,[0-9]+")
 
 
 def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
@@ -85,7 +88,9 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
         return None
     if error["input"] is None and kind != "missing":
         kind = "empty_required" if _required(loc) else "empty"
-    if kind == "not_number" and _is_number_text(error["input"]):
+    if kind == "not_number" and isinstance(error["input"], str) and _DECIMAL_COMMA.fullmatch(error["input"]):
+        kind = "decimal_comma"
+    elif kind == "not_number" and _is_number_text(error["input"]):
         kind = "quoted_number"
     if kind == "not_whole" and not ctx.get("step_name"):
         kind = "not_whole_count"
@@ -103,6 +108,8 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
         "number": "whole number" if ctx.get("whole") else "number",
         "unit": f" in {ctx['unit']}" if ctx.get("unit") else "",
         "what_steps": ctx.get("what", ""),
+        "written": error["input"],
+        "point": str(error["input"]).replace(",", "."),
         "item": _LIST_ITEMS.get(loc[-1] if loc else "", "item"),
         **{k: v for k, v in ctx.items() if k not in ("unit", "what", "expected")},
     }

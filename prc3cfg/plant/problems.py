@@ -15,6 +15,9 @@ from prc3cfg.errors import UserError
 Path_ = tuple[str | int, ...]
 #: Stands in a message for "first at line N", the place of `Problem.first`.
 FIRST = "(first)"
+#: A number written with a decimal comma: said by `messages` of a text where a number belongs
+#: ("2,000") and by `document` of a number that a flow mapping's comma split (`{position: 2,000}`).
+DECIMAL_COMMA = "{what} {written} has a decimal comma — write {point} with a point"
 
 
 @dataclass(frozen=True, slots=True)
