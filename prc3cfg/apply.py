@@ -1,35 +1,53 @@
 """Running plans on the modules: steps in order, verification, repair, an exact account.
 
 Owns execution: per module the steps in order, buses in parallel (a thread per line), the
-modules of one line one after another. An error reply stops that module for good —
-naming the step, the code, its meaning and what to do — while the other modules go on.
-A module that stops answering (every retry lost) is not given up at once: every PRC 3
-message is idempotent, so the module is read back and whatever still differs is planned
-and sent again. Afterwards every touched module is read back and compared with what it
-should hold; a difference (a write damaged on an `open-driver` line, a lost exchange, a
-module changed on the floor meanwhile) is repaired, at most `REPAIRS` times. Success
-means verified. Gating, snapshots and locks are the caller's (`prc3cfg.cli`).
+modules of one line one after another. Afterwards every module is read back — always,
+also after a refusal — and compared with what it should hold; what the account says
+about a module comes from that read-back, not from the replies (on `open-driver` a reply
+carries no checksum). A difference (a lost or damaged exchange, a module changed on the
+floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
+
+What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
+acknowledgement was lost released the axes all the same. `Release` says for each module
+whether its axes were released — certainly (acknowledged, or the read-back shows other
+system parameters than before), possibly (a 10h/20h went out and no reply or read-back
+settles it), or not.
+
+An error code stops that module for good (the link confirms codes on lines without a
+checksum) — naming the step, the code, its meaning and what to do — while the other
+modules go on. A module that stops answering (every retry lost) is not given up at once:
+every PRC 3 message is idempotent, so it is read back and whatever still differs is sent
+again. Ctrl-C (`prc3cfg.cancel`) stops every module after the exchange in flight.
+Gating, snapshots and locks are the caller's.
 """
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
-from prc3cfg import codec
 from prc3cfg.bustime import LineCost
 from prc3cfg.error_codes import describe, remedy
-from prc3cfg.errors import UserError
+from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.image import ModuleImage
 from prc3cfg.link import Link, LinkError
-from prc3cfg.planner import plan_module
+from prc3cfg.planner import Step, plan_module
 from prc3cfg.readback import read_module
 
 REPAIRS = 2
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
 #: one, so a difference counts only when two reads in a row agree on it.
 CONFIRMING_READS = 4
+
+
+class Release(enum.Enum):
+    """Whether a module's axes were released (10h/20h) and it must travel to its reference point."""
+
+    NO = "no"
+    YES = "yes"
+    POSSIBLY = "possibly"  # a 10h/20h went out unacknowledged, and no read-back settles it
 
 
 @dataclass(slots=True)
@@ -39,12 +57,17 @@ class ModuleRun:
     bus: str
     address: int
     name: str
+    before: ModuleImage  # the read-back the steps were planned from
     desired: ModuleImage
-    steps: tuple[codec.Message, ...]
-    summaries: tuple[str, ...]
-    sent: list[codec.Message] = field(default_factory=list)  # accepted, over all rounds
+    steps: tuple[Step, ...]
+    sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
+    written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
+    release_sent: bool = False  # a 10h/20h went out on the line
+    release_acknowledged: bool = False
+    final: ModuleImage | None = None  # the last read-back
     failure: str | None = None
     refused: bool = False  # the module answered an error code: stop for good
+    interrupted: bool = False
     verified: bool = False
     repairs: int = 0
 
@@ -53,25 +76,61 @@ class ModuleRun:
         return f"bus {self.bus}, module {self.address} ({self.name})"
 
     @property
-    def released_axes(self) -> bool:
-        return any(m.RELEASES_AXES for m in self.sent)
+    def released(self) -> Release:
+        if self.release_acknowledged:
+            return Release.YES
+        if not self.release_sent:
+            return Release.NO
+        if self.final is None:
+            return Release.POSSIBLY
+        # A 10h/20h is only sent when the system parameters differ: if they still read as
+        # before, none of them was executed.
+        return Release.YES if self.final.system != self.before.system else Release.NO
 
-    def run(self, link: Link, steps: Sequence[codec.Message], summaries: Sequence[str], tick: Callable[[], None]) -> bool:
+    @property
+    def unchanged(self) -> bool:
+        """Whether the last read-back shows the module as it was before the apply."""
+        final = self.final
+        return final is not None and final.system == self.before.system and all(
+            have is None or have == was for have, was in zip(final.programs, self.before.programs)
+        )
+
+    @property
+    def unacknowledged(self) -> tuple[Step, ...]:
+        """Steps that went out but no reply acknowledged (their effect may be there: see `final`)."""
+        written = {step.message for step in self.written}
+        return tuple(dict.fromkeys(step for step in self.sent if step.message not in written))
+
+    @property
+    def unsent(self) -> tuple[Step, ...]:
+        """Planned steps that never went out."""
+        sent = {step.message for step in self.sent}
+        return tuple(step for step in self.steps if step.message not in sent)
+
+    def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> bool:
         """Send steps in order; False at the first one not accepted (`failure` says why)."""
-        for index, (message, summary) in enumerate(zip(steps, summaries), start=1):
+        for index, step in enumerate(steps, start=1):
+            message = step.message
+            where = f"step {index} of {len(steps)} ({step.summary})"
             try:
+                if link.cancel is not None and link.cancel.is_set():
+                    raise Interrupted()
+                self.sent.append(step)  # from here on it may have reached the module
+                self.release_sent |= message.RELEASES_AXES
                 reply = link.request(self.address, message)
+            except Interrupted:  # before this step, or between its attempts (then it counts as sent)
+                self.interrupted = True
+                self.failure = f"interrupted before {where}"
+                return False
             except LinkError as error:
-                self.failure = f"step {index} of {len(steps)} ({summary}): {error}"
+                self.failure = f"{where}: {error}"
                 return False
             if reply != 0:  # a write is answered with a code word only (decode_reply sees to it)
                 self.refused = True
-                self.failure = (
-                    f"{self.where}: step {index} of {len(steps)} ({summary}, {message.hex()}) was refused "
-                    f"with {describe(reply)} — {remedy(reply)}"
-                )
+                self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
                 return False
-            self.sent.append(message)
+            self.written.append(step)
+            self.release_acknowledged |= message.RELEASES_AXES
             tick()
         return True
 
@@ -89,37 +148,48 @@ class ModuleRun:
         return previous
 
     def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool) -> None:
-        """Read back; while it differs from the desired image, plan and repair (at most REPAIRS times)."""
+        """Read back; while it differs from the desired image and may be repaired, plan and repair.
+
+        A refused module is read back once, for the account, and not repaired.
+        """
         for _ in range(REPAIRS + 1):
             try:
                 actual = self.read_back(link)
+            except Interrupted:
+                self.interrupted = True
+                return
             except LinkError as error:
                 self.failure = f"verification: {error}"
                 continue
             except UserError as error:
                 self.failure = f"verification: {error}"
                 return
+            self.final = actual
             if actual == self.desired:
-                self.verified, self.failure = True, None
+                self.verified, self.failure, self.refused = True, None, False
                 return
-            if self.repairs == REPAIRS:
+            if self.refused or self.repairs == REPAIRS:
                 break
             repair = plan_module(actual, self.desired, cost)
             if repair.releases_axes and not may_release_axes:
                 self.failure = (
-                    f"{self.where}: the read-back shows other system parameters; writing them would release "
+                    "the read-back shows other system parameters; writing them would release "
                     "the axes — apply again with --allow-axis-release"
                 )
                 return
             self.repairs += 1
-            if not self.run(link, [s.message for s in repair.steps], [s.summary for s in repair.steps], tick):
-                if self.refused:
-                    return
-        self.failure = (
-            f"{self.where}: still differs from the plant file after {REPAIRS} repairs"
-            + (f" (last problem: {self.failure})" if self.failure else "")
-            + " — check the line (damaged frames?) and the module, then apply again"
-        )
+            if not self.run(link, repair.steps, tick) and self.interrupted:
+                return
+        if self.refused:
+            return
+        if self.final is None:
+            self.failure = f"could not be read back to verify it ({self.failure}) — check the line and the module, then apply again"
+        else:
+            self.failure = (
+                f"still differs from the plant file after {REPAIRS} repairs"
+                + (f" (last problem: {self.failure})" if self.failure else "")
+                + " — check the line (damaged frames?) and the module, then apply again"
+            )
 
 
 def execute(
@@ -132,7 +202,8 @@ def execute(
 ) -> None:
     """Run every module's steps, then verify and repair; results are left in `runs`.
 
-    Buses run in parallel; on one bus, all modules are written first, then verified.
+    Buses run in parallel; on one bus, all modules are written first, then verified (so a
+    module's verification also sees what a damaged frame for another did to it).
     """
     per_bus: dict[str, list[ModuleRun]] = {}
     for run in runs:
@@ -140,9 +211,9 @@ def execute(
 
     def on_bus(bus: str, bus_runs: list[ModuleRun]) -> None:
         for run in bus_runs:
-            run.run(links[bus], run.steps, run.summaries, tick)
+            run.run(links[bus], run.steps, tick)
         for run in bus_runs:
-            if not run.refused:
+            if not run.interrupted:
                 run.converge(links[bus], costs[bus], tick, may_release_axes)
 
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:

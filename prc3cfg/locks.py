@@ -24,7 +24,6 @@ import json
 import os
 import socket
 import tempfile
-import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from datetime import datetime, timezone
@@ -163,13 +162,12 @@ def line_lock(
     timeout: float = 0.0,
     purpose: str = "apply",
     waiting: Callable[[str], None] | None = None,
-    cancel: threading.Event | None = None,
 ) -> Iterator[tuple[Path, ...]]:
     """Hold the lock of one line (all of its `keys`, from `line_keys`) for the block; yields the lock files.
 
     A busy line is tried again every `POLL` s for up to `timeout` s, then refused with
     `LineBusy` naming the holder; `waiting` is told once, with the holder, when a wait begins.
-    `cancel` set while waiting raises `KeyboardInterrupt`."""
+    (Ctrl-C while waiting: the CLI's signal handler interrupts the sleep, `prc3cfg.cancel`.)"""
     if isinstance(keys, str):
         raise TypeError("line_lock takes the keys of a line (line_keys(port)), not one string")
     paths = sorted({lock_path(key) for key in keys})
@@ -190,10 +188,7 @@ def line_lock(
         if waiting is not None and not told:
             waiting(f"{description}: waiting for the line lock held by {holder} — up to {timeout:g} s")
             told = True
-        if cancel is None:
-            time.sleep(min(POLL, left))
-        elif cancel.wait(min(POLL, left)):
-            raise KeyboardInterrupt
+        time.sleep(min(POLL, left))
     record = json.dumps({
         "holder": f"{_user()}@{socket.gethostname()}",
         "host": socket.gethostname(),

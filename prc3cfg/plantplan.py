@@ -14,9 +14,10 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from prc3cfg import codec
+from prc3cfg import __version__, codec
 from prc3cfg.image import ModuleImage
 from prc3cfg.planner import ModulePlan, Step
+from prc3cfg.planner.check import MAX_STEPS
 
 FORMAT = "prc3cfg-plan/1"
 
@@ -99,6 +100,7 @@ class PlantPlan:
     def to_json(self) -> dict[str, Any]:
         return {
             "format": FORMAT,
+            "prc3cfg_version": __version__,
             "plant": self.plant,
             "plant_path": self.plant_path,
             "plant_sha256": self.plant_sha256,
@@ -114,37 +116,82 @@ class PlantPlan:
 
 @dataclass(frozen=True, slots=True)
 class PlannedModule:
-    """A module's entry of a plan file, as `apply --plan` reads it back."""
+    """A module's entry of a plan file, as `apply --plan` reads it back (not yet proved:
+    `prc3cfg.planner.plan_from_steps` runs the steps on the device model from the read-back)."""
 
     bus: str
     address: int
     name: str
     state_sha256: str
     steps: tuple[codec.Message, ...]
-    releases_axes: bool
 
 
 class PlanFileError(ValueError):
     pass
 
 
-def read_plan_file(data: dict[str, Any]) -> tuple[str, str, list[PlannedModule]]:
-    """(plant, plant_sha256, modules) of a parsed plan file; raises PlanFileError."""
+@dataclass(frozen=True, slots=True)
+class PlanFile:
+    """A plan file as read: what it was made from, by which prc3cfg, and its modules."""
+
+    plant: str
+    plant_path: str
+    plant_sha256: str
+    version: str
+    modules: tuple[PlannedModule, ...]
+
+
+def read_plan_file(data: dict[str, Any]) -> PlanFile:
+    """A parsed plan file; raises PlanFileError.
+
+    Refused here, before the line is touched: a damaged file, a module listed twice, more
+    steps than any plan needs (`MAX_STEPS`), a message not in the bytes prc3cfg sends for
+    it (a "don't care" byte changed), and `releases_axes` flags that are not what the
+    steps' bytes say.
+    """
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
     try:
-        modules = [
-            PlannedModule(
-                bus=bus["name"],
-                address=int(module["address"]),
-                name=module["name"],
-                state_sha256=module["state_sha256"],
-                steps=tuple(codec.decode_message(bytes.fromhex(step["message"])) for step in module["steps"]),
-                releases_axes=bool(module["releases_axes"]),
-            )
-            for bus in data["buses"]
-            for module in bus["modules"]
-        ]
-        return data["plant"], data["plant_sha256"], modules
+        modules = []
+        seen: set[tuple[str, int]] = set()
+        for bus in data["buses"]:
+            for module in bus["modules"]:
+                entry = _planned_module(bus["name"], module)
+                if (entry.bus, entry.address) in seen:
+                    raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — make the plan again")
+                seen.add((entry.bus, entry.address))
+                modules.append(entry)
+        fields = (data["plant"], data["plant_path"], data["plant_sha256"], data.get("prc3cfg_version", "before 0.1.0"))
+        if not all(isinstance(f, str) for f in fields):
+            raise PlanFileError("damaged plan file (plant, plant_path, plant_sha256 and prc3cfg_version are texts) — make the plan again")
+        return PlanFile(*fields, tuple(modules))
     except (KeyError, TypeError, ValueError, codec.Rejected) as error:
+        if isinstance(error, PlanFileError):
+            raise
         raise PlanFileError(f"damaged plan file ({type(error).__name__}: {error}) — make the plan again") from None
+
+
+def _planned_module(bus: str, module: dict[str, Any]) -> PlannedModule:
+    address = module["address"]
+    if type(address) is not int or type(bus) is not str:
+        raise PlanFileError(f"bus {json.dumps(bus)}: module address {json.dumps(address)} is not a bus name and "
+                            "a whole number — make the plan again")  # fmt: skip
+    where = f"bus {bus}, module {address}"
+    steps = module["steps"]
+    if len(steps) > MAX_STEPS:
+        raise PlanFileError(f"{where}: {len(steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — make the plan again")
+    messages = []
+    for index, step in enumerate(steps, start=1):
+        message = codec.decode_message(bytes.fromhex(step["message"]))
+        if message.hex() != step["message"]:  # "don't care" bytes that are not 00h, upper-case digits
+            raise PlanFileError(f"{where}: step {index} ({step['message']}) is not written as prc3cfg writes that "
+                                f"message ({message.hex()}) — make the plan again")  # fmt: skip
+        if step["releases_axes"] is not message.RELEASES_AXES:
+            raise PlanFileError(
+                f"{where}: step {index} ({step['message']}) says releases_axes: {json.dumps(step['releases_axes'])}, "
+                f"but {message.ID:02X}h {'releases' if message.RELEASES_AXES else 'does not release'} the axes — make the plan again"
+            )
+        messages.append(message)
+    if module["releases_axes"] is not any(m.RELEASES_AXES for m in messages):
+        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module['releases_axes'])} is not what its steps do — make the plan again")
+    return PlannedModule(bus, address, str(module["name"]), str(module["state_sha256"]), tuple(messages))

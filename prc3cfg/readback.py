@@ -6,6 +6,11 @@ the lowest unread program, which is the fewest exchanges for any set of programs
 read ends at the last wanted program of its window, so no byte is read for nothing at
 the end of a run. A fully managed module takes 1 + 16 exchanges.
 
+When the system parameters a plan will write can clamp programs (a lower S1 or S4, a
+higher S5: prc3-protocol.md §4.2), every program is read, not only the managed ones: the
+module's own clamping reaches programs the plant does not manage, and what it does to
+them must be shown in the plan and kept in the snapshot (`Target.clamped_by`).
+
 S9 must equal the configured address, else the wiring or the plant file is wrong.
 Buses are read in parallel (one thread per line), the modules of one line one after
 another (the line is half duplex).
@@ -18,9 +23,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from prc3cfg import codec
+from prc3cfg.device import can_clamp
 from prc3cfg.error_codes import describe, remedy
-from prc3cfg.errors import UserError
-from prc3cfg.image import PROGRAM_COUNT, ModuleImage, Program
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.image import PROGRAM_COUNT, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters
 from prc3cfg.link.client import Link
 
 
@@ -42,39 +48,50 @@ def read_messages(programs: Iterable[int]) -> list[codec.Message]:
     return messages
 
 
-def read_module(link: Link, address: int, programs: Iterable[int], *, name: str = "") -> ModuleImage:
-    """The image of the module at `address`: system parameters and the given programs (others None)."""
+def read_module(
+    link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None
+) -> ModuleImage:
+    """The image of the module at `address`: system parameters and the given programs (others None).
+
+    With `clamped_by` (the system parameters a plan will write), every program is read when
+    writing them can clamp programs on this module.
+    """
     where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")
-    slots: list[Program | None] = [None] * PROGRAM_COUNT
-    wanted = set(programs)
-    system = None
-    for message in read_messages(wanted):
+
+    def request(message: codec.Message) -> codec.SystemReply | codec.ProgramsReply:
         reply = link.request(address, message)
         if isinstance(reply, int):
             raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — {remedy(reply)}")
-        if isinstance(reply, codec.SystemReply):
-            if reply.address != address:
-                raise ReadBackError(
-                    f"{where}: the module answering at address {address} reports S9 = {reply.address} — "
-                    "check the module's Address Init and the plant file's address"
-                )
-            system = reply.system
-        else:
-            for offset, program in enumerate(reply.programs):
-                if reply.first + offset in wanted:
-                    slots[reply.first + offset - 1] = program
-    assert system is not None
-    return ModuleImage(address=address, system=system, programs=tuple(slots))
+        return reply
+
+    system_reply = request(codec.ReadSystem())
+    if system_reply.address != address:
+        raise ReadBackError(
+            f"{where}: the module answering at address {address} reports S9 = {system_reply.address} — "
+            "check the module's Address Init and the plant file's address"
+        )
+    wanted = set(programs)
+    if clamped_by is not None and can_clamp(system_reply.system, clamped_by):
+        wanted = set(PROGRAM_NUMBERS)
+    slots: list[Program | None] = [None] * PROGRAM_COUNT
+    for message in read_messages(wanted)[1:]:
+        reply = request(message)
+        for offset, program in enumerate(reply.programs):
+            if reply.first + offset in wanted:
+                slots[reply.first + offset - 1] = program
+    return ModuleImage(address=address, system=system_reply.system, programs=tuple(slots))
 
 
 @dataclass(frozen=True, slots=True)
 class Target:
-    """A module to read: where it is, what it is called, which programs."""
+    """A module to read: where it is, what it is called, which programs, and the system
+    parameters a plan may write there (every program is read when they can clamp)."""
 
     bus: str
     address: int
     name: str
     programs: tuple[int, ...]
+    clamped_by: SystemParameters | None = None
 
 
 def read_all(
@@ -86,7 +103,8 @@ def read_all(
     """Read every target, buses in parallel, the modules of one bus one after another.
 
     `progress()` is called after each module. The first error on a bus stops that bus; the
-    errors of all buses are raised together (one line each) once every bus has finished.
+    errors of all buses are raised together (one line each) once every bus has finished;
+    an interruption (Ctrl-C) wins over them.
     """
     per_bus: dict[str, list[Target]] = {}
     for target in targets:
@@ -95,19 +113,24 @@ def read_all(
     def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
         for t in bus_targets:
-            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name)
+            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by)
             if progress:
                 progress()
         return images
 
     result: dict[tuple[str, int], ModuleImage] = {}
     errors = []
+    interrupted = False
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
         for future in [pool.submit(read_bus, bus_targets) for bus_targets in per_bus.values()]:
             try:
                 result.update(future.result())
+            except Interrupted:
+                interrupted = True
             except UserError as error:
                 errors.append(str(error))
+    if interrupted:
+        raise Interrupted()
     if errors:
         raise UserError("\n".join(errors))
     return result

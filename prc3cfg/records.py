@@ -1,8 +1,10 @@
 """What an apply leaves behind: snapshots of the modules before the first write, and a journal.
 
 - A snapshot (`.prc3cfg/snapshots/<time>-<plant>.json` beside the plant file) holds the
-  read-back images of every module an apply will touch, the plant file's path and hash,
-  and the time — `prc3cfg restore` plans and applies back to it.
+  read-back images of every module an apply will touch (with every program a system
+  change could clamp), the plant file's absolute path and hash, and the time — `prc3cfg
+  restore` plans and applies back to it, from any directory. It is written atomically
+  (`prc3cfg.files`) before the first write: a killed apply leaves a whole snapshot or none.
 - A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
   one JSON object per line: time, bus, address, request and reply in hex, attempt, duration.
 """
@@ -14,9 +16,10 @@ import threading
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from prc3cfg.errors import UserError
+from prc3cfg.files import write_atomically
 from prc3cfg.image import ModuleImage
 from prc3cfg.link import Exchange
 
@@ -51,12 +54,12 @@ class Snapshot:
         directory = records_dir(self.plant_path, "snapshots")
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / f"{self.taken}-{self.plant_path.stem}.json"
-        path.write_text(json.dumps(self.to_json(), indent=1))
+        write_atomically(path, json.dumps(self.to_json(), indent=1))
         return path
 
     @classmethod
     def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage]) -> Snapshot:
-        return cls(plant_path, plant_sha256, _stamp(), dict(images))
+        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images))
 
     @classmethod
     def load(cls, path: Path) -> Snapshot:
@@ -65,24 +68,31 @@ class Snapshot:
             if data.get("format") != SNAPSHOT_FORMAT:
                 raise ValueError(f'expected "format": "{SNAPSHOT_FORMAT}"')
             images = {(m["bus"], int(m["address"])): ModuleImage.from_json(m) for m in data["modules"]}
-            return cls(Path(data["plant"]), data["plant_sha256"], data["taken"], images)
+            plant = Path(data["plant"])
+            beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
+            if not plant.is_absolute() or (not plant.exists() and beside.exists()):
+                plant = beside  # an older relative path, or the plant repository moved
+            return cls(plant, data["plant_sha256"], data["taken"], images)
         except (OSError, ValueError, KeyError, TypeError) as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — name a file under .prc3cfg/snapshots/") from None
 
 
 class Journal:
-    """Every exchange of one apply, appended as JSON lines; thread-safe (buses run in parallel)."""
+    """Every exchange of one apply, appended as JSON lines; thread-safe (buses run in parallel).
+
+    The file is made at the first record, so an apply that never reached the line leaves none."""
 
     def __init__(self, plant_path: Path) -> None:
-        directory = records_dir(plant_path, "journal")
-        directory.mkdir(parents=True, exist_ok=True)
-        self.path = directory / f"{_stamp()}-{plant_path.stem}.jsonl"
-        self._handle = self.path.open("a")
+        self.path = records_dir(plant_path, "journal") / f"{_stamp()}-{plant_path.stem}.jsonl"
+        self._handle: TextIO | None = None
         self._lock = threading.Lock()
 
     def record(self, event: str, **fields: Any) -> None:
         line = json.dumps({"time": datetime.now(timezone.utc).isoformat(), "event": event, **fields})
         with self._lock:
+            if self._handle is None:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._handle = self.path.open("a")
             self._handle.write(line + "\n")
             self._handle.flush()
 
@@ -98,4 +108,5 @@ class Journal:
         )
 
     def close(self) -> None:
-        self._handle.close()
+        if self._handle is not None:
+            self._handle.close()

@@ -17,6 +17,7 @@ from prc3cfg.plant.units import BY_SYMBOL, format_function_output
 from prc3cfg.plantplan import ModuleChange, PlantPlan
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
+CLAMPED = "clamped by the module itself when its system parameters change"
 _PATH = re.compile(r"root\['(system|programs)'\](?:\[(\d+)\])?(?:\['(\w+)'\])?")
 
 
@@ -25,7 +26,16 @@ def field_name(symbol: str) -> str:
     return BY_SYMBOL[symbol].key.replace("_", " ") if symbol in BY_SYMBOL else symbol
 
 
+#: Device ranges of the fields whose range does not depend on the system parameters;
+#: a read-back outside them (a damaged or foreign module) is shown raw, never decoded.
+_RANGES = {**{q.symbol: (q.lo, q.hi) for q in BY_SYMBOL.values()}, "F1": (0, 1999), "F2": (0, 1999)}
+
+
 def format_value(symbol: str, device: int) -> str:
+    """A device value in human units: "1.050 m", "set at 0.010 m"; raw when it is out of range."""
+    low, high = _RANGES[symbol]
+    if not low <= device <= high:
+        return f"{device} (raw, outside {low}..{high})"
     if symbol in ("F1", "F2"):
         return format_function_output(device)
     return BY_SYMBOL[symbol].format(device)
@@ -89,6 +99,24 @@ def program_symbol(actual: ModuleImage, desired: ModuleImage, number: int) -> st
     return "~"
 
 
+def clamped_changes(change: ModuleChange) -> list[FieldChange]:
+    """What the module's own clamping does to programs the plant does not manage (§4.2)."""
+    unmanaged = change.actual.with_programs(
+        {n: None for n, p in enumerate(change.desired.programs, start=1) if p is not None}
+    )
+    predicted = change.plan.predicted.with_programs(
+        {n: None for n, p in enumerate(change.desired.programs, start=1) if p is not None}
+    )
+    return [f for f in field_changes(unmanaged, predicted) if f.program is not None]
+
+
+def differences(have: ModuleImage, want: ModuleImage) -> list[str]:
+    """Where a module holds something else than the plant file says, "what it holds → what it should"."""
+    fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text()}" for f in field_changes(have, want)]
+    removed, added = chain_changes(have, want)
+    return fields + [f"has {c}" for c in removed] + [f"lacks {c}" for c in added]
+
+
 def module_lines(change: ModuleChange) -> list[str]:
     """The diff of one module, one change per line, indented under its header."""
     lines: list[str] = []
@@ -104,6 +132,10 @@ def module_lines(change: ModuleChange) -> list[str]:
         lines.append(f"{program_symbol(change.actual, change.desired, number)} program {number}: {', '.join(texts)}")
     removed, added = chain_changes(change.actual, change.desired)
     lines += [f"- {c}" for c in removed] + [f"+ {c}" for c in added]
+    clamped: dict[int, list[str]] = {}
+    for f in clamped_changes(change):
+        clamped.setdefault(f.program, []).append(f.text())
+    lines += [f"~ program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}" for n, texts in sorted(clamped.items())]
     return lines
 
 
@@ -189,5 +221,6 @@ def changes_json(change: ModuleChange) -> dict:
         "fields": [f.to_json() | {"text": f.text()} for f in field_changes(change.actual, change.desired)],
         "chains_removed": removed,
         "chains_added": added,
+        "clamped": [f.to_json() | {"text": f.text(), "reason": CLAMPED} for f in clamped_changes(change)],
         "warning": AXIS_WARNING if change.releases_axes else None,
     }

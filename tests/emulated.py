@@ -15,6 +15,8 @@ from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection
 from prc3cfg.plant import load_plant
 
+from lossy import LossyProxy, Rule
+
 DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
 
 
@@ -43,9 +45,10 @@ class EmulatedPlant:
 @contextlib.contextmanager
 def emulated_plant(
     directory: Path, *, faults: FaultInjection = FaultInjection(), timeout: float = 0.1, framing: str = "crc16",
-    line_speed: bool = False, source: Path = DEMO,
+    line_speed: bool = False, source: Path = DEMO, lossy: dict[str, Rule] | None = None, zvz: float = 0.020,
 ) -> Iterator[EmulatedPlant]:
-    """`source` with every bus on an in-process emulator (factory-default modules) via socket://."""
+    """`source` with every bus on an in-process emulator (factory-default modules) via socket://;
+    a bus named in `lossy` is reached through a `LossyProxy` with that rule."""
     document = yaml.safe_load(source.read_text())
     plant = load_plant(source)
     with contextlib.ExitStack() as stack:
@@ -53,10 +56,14 @@ def emulated_plant(
         for bus_doc, bus in zip(document["buses"], plant.buses):
             modules = {m.address: ModuleState.factory(m.address) for m in bus.modules}
             emulator = stack.enter_context(
-                Emulator(modules, framing=framing, faults=faults, line=bus.line, line_speed=line_speed)
+                Emulator(modules, framing=framing, faults=faults, line=bus.line, line_speed=line_speed, zvz=zvz)
             )
             host, port = emulator.listen()
-            bus_doc.update(port=f"socket://{host}:{port}", timeout=timeout, framing=framing)
+            url = f"socket://{host}:{port}"
+            if lossy and bus.name in lossy:
+                proxy = stack.enter_context(LossyProxy((host, port), lossy[bus.name], framing=framing, line=bus.line, zvz=zvz))
+                url = proxy.listen()
+            bus_doc.update(port=url, timeout=timeout, framing=framing, zvz=zvz)
             emulators[bus.name] = emulator
         path = directory / "plant.yaml"
         path.write_text(yaml.safe_dump(document, sort_keys=False))
@@ -68,6 +75,11 @@ class Result:
     code: int
     out: str
     err: str
+
+    @property
+    def problems(self) -> list[str]:
+        """stderr without its notes (a busy test machine can make a line repeat an exchange)."""
+        return [line for line in self.err.splitlines() if not line.startswith("note: ")]
 
 
 def run_cli(capsys: pytest.CaptureFixture, *args: str) -> Result:

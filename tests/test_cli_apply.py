@@ -12,7 +12,7 @@ import pytest
 from emulated import emulated_plant, run_cli
 
 from prc3cfg.emulator import FaultInjection
-from prc3cfg.locks import line_lock
+from prc3cfg.locks import line_keys, line_lock
 
 
 @pytest.fixture(autouse=True)
@@ -84,7 +84,7 @@ def test_stale_plan_refused_after_plant_file_change(plant, capsys, tmp_path):
 
 def test_a_second_apply_on_the_same_line_is_refused(plant, capsys):
     port = next(line for line in plant.path.read_text().splitlines() if "socket://" in line).split("port:")[1].strip()
-    with line_lock(port, "another apply"):
+    with line_lock(line_keys(port), "another apply"):
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
     assert result.code == 1
     assert "the line is locked by" in result.err and f"pid {os.getpid()}" in result.err
@@ -97,7 +97,7 @@ def test_an_error_reply_stops_that_module_and_the_others_go_on(plant, capsys):
     assert result.code == 1
     assert "bus booth-b, module 3 (booth-b-right): step 1 of" in result.err
     assert "refused with code 25: operating condition is error E21 (positioning error) — clear the fault" in result.err
-    assert "written: nothing; not written: 2000" in result.err
+    assert "written: nothing acknowledged" in result.err and "read back: unchanged, as before the apply" in result.err
     assert "✓ bus booth-b, module 4 (booth-b-pretreat)" in result.out
     assert result.out.count("✓") == 5
 

@@ -14,7 +14,6 @@ import socket
 import stat
 import subprocess
 import sys
-import threading
 
 import pytest
 
@@ -138,14 +137,6 @@ def test_a_wait_that_runs_out_is_refused_and_told_once():
             with line_lock((KEY,), "bus a", timeout=0.3, waiting=told.append):
                 pass
     assert len(told) == 1
-
-
-def test_a_cancelled_wait_stops():
-    cancel = threading.Event()
-    with held(KEY):
-        with pytest.raises(KeyboardInterrupt):
-            with line_lock((KEY,), "bus a", timeout=600, waiting=lambda _: cancel.set(), cancel=cancel):
-                pass
 
 
 def test_all_keys_or_none():

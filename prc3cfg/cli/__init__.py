@@ -50,12 +50,16 @@ class Outcome(Exception):
 def main(argv: list[str] | None = None) -> None:
     """The console script; `argv` (default: sys.argv) lets tests run a command in-process."""
     _register_commands()
+    from prc3cfg.cli.common import CANCEL
+
     try:
-        app(args=argv)
+        with CANCEL.handling():
+            app(args=argv)
     except Outcome as outcome:
         sys.exit(outcome.code)
     except UserError as error:
-        print(f"error: {error}", file=sys.stderr)
+        for line in str(error).splitlines():  # several problems: one line each
+            print(f"error: {line}", file=sys.stderr)
         sys.exit(error.exit_code)
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)

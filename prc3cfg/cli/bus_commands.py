@@ -13,7 +13,7 @@ from rich.table import Table
 
 from prc3cfg import codec, gateway
 from prc3cfg.cli import app, link_app
-from prc3cfg.cli.common import PlantArg, TraceOpt, parse_addresses, progress_bar, stderr
+from prc3cfg.cli.common import CANCEL, LockOpt, PlantArg, TraceOpt, locked_line, parse_addresses, progress_bar, stderr
 from prc3cfg.errors import UserError
 from prc3cfg.plant import load_plant
 from prc3cfg.framing import FRAMINGS, get_framing
@@ -21,6 +21,7 @@ from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_COUNT
 from prc3cfg.importer import module_entry, plant_yaml
 from prc3cfg.line import LineSettings
 from prc3cfg.link import Link, LinkError, Trace, open_port
+from prc3cfg.locks import line_keys
 from prc3cfg.plant.units import BY_SYMBOL
 from prc3cfg.readback import read_module
 
@@ -32,7 +33,7 @@ TimeoutOpt = Annotated[float, typer.Option(help="Seconds to wait for a reply.")]
 
 
 @contextlib.contextmanager
-def _bare_link(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float, retries: int, trace: Path | None):
+def _bare_link(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float, retries: int, trace: Path | None, lock_timeout: float, purpose: str):
     if framing not in FRAMINGS:
         raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMINGS)}")
     try:
@@ -40,10 +41,12 @@ def _bare_link(port: str, framing: str, baud: int, parity: str, data_bits: int, 
     except ValueError as error:
         raise UserError(f"line settings: {error}") from None
     with contextlib.ExitStack() as stack:
+        stack.enter_context(locked_line(line_keys(port), port, lock_timeout, purpose))
         tracer = Trace(stack.enter_context(trace.open("a"))) if trace else None
         serial_port = open_port(port, line, bus=port)
         stack.callback(serial_port.close)
-        yield Link(serial_port, get_framing(framing), bus=port, line=line, timeout=timeout, zvz=zvz, retries=retries, trace=tracer)
+        yield Link(serial_port, get_framing(framing), bus=port, line=line, timeout=timeout, zvz=zvz, retries=retries,
+                   trace=tracer, cancel=CANCEL.event)  # fmt: skip
 
 
 def _scan(link: Link) -> dict[int, codec.SystemReply]:
@@ -72,9 +75,10 @@ def scan(
     zvz: float = 0.020,
     retries: int = 1,
     trace: TraceOpt = None,
+    lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Which addresses 1..30 answer, with their S9 and system parameters."""
-    with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace) as link:
+    with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace, lock_timeout, "scan") as link:
         found = _scan(link)
     if not found:
         raise UserError(f"{port}: no module answered at any address 1..30 — check the framing ({framing}), line settings and wiring")
@@ -103,9 +107,10 @@ def import_plant(
     bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
     modules: Annotated[Optional[str], typer.Option(help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
+    lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Write a plant file (to stdout) from the live modules of one bus."""
-    with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace) as link:
+    with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace, lock_timeout, "import") as link:
         addresses = parse_addresses(modules) if modules else sorted(_scan(link))
         if not addresses:
             raise UserError(f"{port}: no module answered — nothing to import")

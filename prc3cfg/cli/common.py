@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Annotated, Optional
@@ -13,20 +14,27 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from prc3cfg.bustime import LineCost
+from prc3cfg.cancel import Cancellation
+from prc3cfg.device import can_clamp
 from prc3cfg.errors import UserError
 from prc3cfg.image import MAX_MODULE_ADDRESS, ModuleImage
 from prc3cfg.link import Link, Trace, open_plant_links
+from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
+from prc3cfg.locks import line_keys, line_lock
 from prc3cfg.planner import UnreachableImage, plan_module
 from prc3cfg.plant import Plant
 from prc3cfg.plantplan import ModuleChange, PlantPlan
 from prc3cfg.readback import Target, read_all
 
 stderr = Console(stderr=True)
+#: Ctrl-C and SIGTERM for the running command (`main` installs the handlers).
+CANCEL = Cancellation()
 
 PlantArg = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
 ModuleOpt = Annotated[Optional[list[str]], typer.Option("--module", help="Only this module (name); repeatable.")]
 TraceOpt = Annotated[Optional[Path], typer.Option(help="Write every frame, both directions, with timestamps, in hex.")]
 RetriesOpt = Annotated[int, typer.Option(help="Retries of a lost or damaged reply, per message.")]
+LockOpt = Annotated[float, typer.Option("--lock-timeout", help="Seconds to wait while another prc3cfg uses the line.")]
 
 Key = tuple[str, int]  # (bus name, module address)
 
@@ -76,19 +84,74 @@ def progress_bar(total: int, description: str) -> Iterator[Callable[..., None]]:
         yield lambda *_: progress.advance(task)
 
 
+def _lock_waiting(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
 @contextlib.contextmanager
-def plant_links(plant: Plant, buses: Iterable[str], trace: Path | None, retries: int, observer=None) -> Iterator[dict[str, Link]]:
+def locked_line(keys: tuple[str, ...], description: str, timeout: float, purpose: str) -> Iterator[None]:
+    """Hold the lock of one line (`prc3cfg.locks`), saying on stderr whose lock a wait is for."""
+    with line_lock(keys, description, timeout=timeout, purpose=purpose, waiting=_lock_waiting):
+        yield
+
+
+def bus_line_keys(plant: Plant, bus) -> tuple[str, ...]:
+    """The identities of a bus's line: its port, or for `emulator://` the emulator's state file."""
+    state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
+    return line_keys(bus.port, emulator_state=state)
+
+
+@contextlib.contextmanager
+def plant_links(
+    plant: Plant, buses: Iterable[str], trace: Path | None, retries: int, observer=None, *,
+    lock_timeout: float = 0.0, purpose: str = "read",
+) -> Iterator[dict[str, Link]]:  # fmt: skip
+    """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
+
+    Two buses that are one line (two spellings of one address) are refused: they would
+    wait for each other's lock."""
+    names = set(buses)
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
+    owner: dict[str, str] = {}
+    for name, identities in keys.items():
+        for key in identities:
+            if key in owner:
+                raise UserError(f"{plant.path}: buses {owner[key]} and {name} are one line ({key}) — "
+                                "describe each line once, as one bus")  # fmt: skip
+            owner[key] = name
     with contextlib.ExitStack() as stack:
+        for bus in plant.buses:
+            if bus.name in names:
+                stack.enter_context(locked_line(keys[bus.name], f"bus {bus.name} ({bus.port})", lock_timeout, purpose))
         tracer = Trace(stack.enter_context(trace.open("a"))) if trace else None
-        yield stack.enter_context(open_plant_links(plant, buses, trace=tracer, retries=retries, observer=observer))
+        links = stack.enter_context(
+            open_plant_links(plant, buses, trace=tracer, retries=retries, observer=observer, cancel=CANCEL.event)
+        )
+        yield links
+        note_repeats(links.values())  # after a success only: a failure's own line says what went wrong
+
+
+def note_repeats(links: Iterable[Link]) -> None:
+    """One line per line that had to repeat exchanges: a noisy line is worth knowing about."""
+    for link in links:
+        if link.repeated:
+            print(f"note: bus {link.bus}: {link.repeated} of {link.exchanges} exchanges were lost or damaged and "
+                  "made again — check the cabling if this is not a test line (--trace shows every frame)",
+                  file=sys.stderr)  # fmt: skip
 
 
 def plant_targets(pairs) -> list[Target]:
-    return [Target(bus.name, module.address, module.name, tuple(module.managed_programs())) for bus, module in pairs]
+    """What to read of each module: its managed programs, and every program its plant
+    system parameters could clamp."""
+    return [
+        Target(bus.name, module.address, module.name, tuple(module.managed_programs()), module.desired_system())
+        for bus, module in pairs
+    ]
 
 
 def read_images(targets: list[Target], links: dict[str, Link]) -> dict[Key, ModuleImage]:
-    with progress_bar(len(targets), "reading modules") as tick:
+    """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`)."""
+    with CANCEL.deferred(), progress_bar(len(targets), "reading modules") as tick:
         return read_all(targets, links, progress=tick)
 
 
@@ -113,6 +176,12 @@ def load_actual(path: Path, plant: Plant, pairs) -> dict[Key, ModuleImage]:
                 f"{path}: the image of bus {bus.name}, module {module.address} lacks program {missing[0]}, "
                 "which the plant manages — save the images again with prc3cfg read --json"
             )
+        unread = [n for n, p in enumerate(found[0].programs, start=1) if p is None]
+        if unread and can_clamp(found[0].system, module.desired_system()):
+            raise UserError(
+                f"{path}: the image of bus {bus.name}, module {module.address} lacks program {unread[0]}, which "
+                "the plant's system parameters would clamp — save the images again with prc3cfg read --json"
+            )
         images[(bus.name, module.address)] = found[0]
     return images
 
@@ -128,4 +197,4 @@ def make_plan(plant: Plant, pairs, actual: dict[Key, ModuleImage], desired: dict
         except UnreachableImage as error:
             raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
         changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
-    return PlantPlan(plant.name, str(plant.path), plant.sha256, tuple(changes))
+    return PlantPlan(plant.name, str(plant.path.resolve()), plant.sha256, tuple(changes))

@@ -10,11 +10,13 @@ from typing import Annotated, Optional
 
 import typer
 
-from prc3cfg import render
-from prc3cfg.apply import ModuleRun, execute
+from prc3cfg import __version__, render
+from prc3cfg.apply import ModuleRun, Release, execute
 from prc3cfg.cli import Outcome, app
 from prc3cfg.cli.common import (
+    CANCEL,
     Key,
+    LockOpt,
     ModuleOpt,
     PlantArg,
     RetriesOpt,
@@ -28,12 +30,12 @@ from prc3cfg.cli.common import (
     progress_bar,
     read_images,
 )
-from prc3cfg.errors import UserError
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.files import write_atomically
 from prc3cfg.plant import load_plant
 from prc3cfg.image import ModuleImage
-from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
-from prc3cfg.locks import line_lock
-from prc3cfg.plantplan import PlanFileError, PlannedModule, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.planner import StepProblem, plan_from_steps, plan_module
+from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.readback import Target
 from prc3cfg.records import Journal, Snapshot
 
@@ -47,12 +49,14 @@ def read(
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
+    lock_timeout: LockOpt = 0.0,
 ) -> None:
-    """Read back every module of the plant (system parameters and managed programs)."""
+    """Read back every module of the plant (system parameters, managed programs, and the
+    programs the plant's system parameters would clamp)."""
     loaded = load_plant(plant)
     pairs = chosen_modules(loaded, module)
     targets = plant_targets(pairs)
-    with plant_links(loaded, {b.name for b, _ in pairs}, trace, retries) as links:
+    with plant_links(loaded, {b.name for b, _ in pairs}, trace, retries, lock_timeout=lock_timeout) as links:
         images = read_images(targets, links)
     if json_out:
         print(json.dumps([{"bus": bus.name, **images[(bus.name, m.address)].to_json()} for bus, m in pairs], indent=1))
@@ -75,7 +79,7 @@ def _emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: b
             entry["changes"] = render.changes_json(change)
             entry["warning"] = render.AXIS_WARNING if change.releases_axes else None
     if out is not None:
-        out.write_text(json.dumps(document, indent=1) + "\n")
+        write_atomically(out, json.dumps(document, indent=1) + "\n")
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
@@ -97,6 +101,7 @@ def plan(
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
+    lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Read back, diff against the plant file and print the cheapest plan."""
     loaded = load_plant(plant)
@@ -104,18 +109,12 @@ def plan(
     if actual is not None:
         images = load_actual(actual, loaded, pairs)
     else:
-        with plant_links(loaded, {b.name for b, _ in pairs}, trace, retries) as links:
+        with plant_links(loaded, {b.name for b, _ in pairs}, trace, retries, lock_timeout=lock_timeout, purpose="plan") as links:
             images = read_images(plant_targets(pairs), links)
     result = make_plan(loaded, pairs, images)
     _emit_plan(result, out=out, json_out=json_out, markdown=markdown)
     if detailed_exitcode and result.changes:
         raise Outcome(EXIT_CHANGES)
-
-
-def _line_key(bus, plant_path: Path) -> str:
-    if bus.port.startswith(EMULATOR_SCHEME):
-        return str(emulator_state_path(plant_path.resolve(), bus.port))
-    return bus.port
 
 
 def _confirm(question: str, auto: bool) -> bool:
@@ -142,14 +141,38 @@ def _gate_axes(plan_modules: list[tuple[str, str, bool]], allow: bool, auto: boo
 
 
 def _account(run: ModuleRun) -> str:
-    """What was and was not written to one module, and how it ended."""
+    """What was and was not written to one module, and what a read-back says it holds now."""
     head = f"bus {run.bus}, module {run.address} ({run.name})"
     if run.verified:
         repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
-        return f"✓ {head}: {len(run.sent)} messages written, verified{repaired}"
-    written = ", ".join(m.hex() for m in run.sent) or "nothing"
-    unsent = ", ".join(m.hex() for m in run.steps if m not in run.sent) or "—"
-    return f"✗ {head}: written: {written}; not written: {unsent}\n    {run.failure}"
+        return f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} written, verified{repaired}"
+    lines = [f"✗ {head}: {run.failure}"]
+    if not run.sent:
+        lines.append("    nothing was sent to it")
+    else:
+        lines.append("    written: " + ("; ".join(s.summary for s in run.written) or "nothing acknowledged"))
+        if run.unacknowledged:
+            lines.append("    sent, not acknowledged: " + "; ".join(s.summary for s in run.unacknowledged))
+        if run.unsent:
+            lines.append("    not sent: " + "; ".join(s.summary for s in run.unsent))
+        if run.final is None:
+            lines.append("    not read back: what the module holds is not known")
+        elif run.unchanged:
+            lines.append("    read back: unchanged, as before the apply")
+        else:
+            lines.append("    read back, it differs from the plant file: " + "; ".join(render.differences(run.final, run.desired)))
+    return "\n".join(lines)
+
+
+def _travel_list(runs: list[ModuleRun]) -> str | None:
+    released = [r for r in runs if r.released is not Release.NO]
+    if not released:
+        return None
+    names = ", ".join(
+        f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
+        for r in released
+    )
+    return f"⚠ Travel to reference point required before production on: {names}"
 
 
 def _apply(
@@ -165,92 +188,136 @@ def _apply(
     trace: Path | None,
     retries: int,
 ) -> None:
-    """Lock, read back, plan (or check the plan file), gate, snapshot, run, verify, account."""
+    """Lock, read back, plan (or prove the plan file), gate, snapshot, run, verify, account."""
     planned = None if plan_file is None else _read_plan_file(plan_file, loaded)  # before any time on the line
     buses = {b.name: b for b, _ in pairs}
     with contextlib.ExitStack() as stack:
-        for bus in buses.values():
-            stack.enter_context(
-                line_lock(_line_key(bus, loaded.path), f"bus {bus.name} ({bus.port})", timeout=lock_timeout)
-            )
-        journal = Journal(loaded.path)
+        journal = Journal(loaded.path)  # its file is made at the first record: not for a busy line
         stack.callback(journal.close)
-        links = stack.enter_context(plant_links(loaded, buses, trace, retries, observer=journal.exchange))
+        links = stack.enter_context(
+            plant_links(loaded, buses, trace, retries, observer=journal.exchange, lock_timeout=lock_timeout, purpose="apply")
+        )
         images = read_images(targets, links)
         if planned is None:
             the_plan = make_plan(loaded, pairs, images, desired)
-            print(render.human(the_plan))
-            runs = [
-                ModuleRun(c.bus, c.address, c.name, c.desired, tuple(s.message for s in c.steps), tuple(s.summary for s in c.steps))
-                for c in the_plan.changes
-            ]
         else:
-            runs = _runs_from_plan_file(plan_file, planned, pairs, images)
-            print(f"Applying {plan_file}: {sum(len(r.steps) for r in runs)} messages to {len(runs)} modules")
+            the_plan = _plan_from_file(plan_file, planned, loaded, pairs, images)
+            print(f"Applying {plan_file}, proved against the modules as read back now:")
+        print(render.human(the_plan))
+        runs = [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps) for c in the_plan.changes]
         if not runs:
             print("Nothing to do: every module matches the plant file.")
             return
-        _gate_axes([(r.bus, r.name, any(m.RELEASES_AXES for m in r.steps)) for r in runs], allow_axis_release, auto_approve)
+        _gate_axes([(r.bus, r.name, any(s.releases_axes for s in r.steps)) for r in runs], allow_axis_release, auto_approve)
         if not _confirm(f"Apply {sum(len(r.steps) for r in runs)} messages to {len(runs)} modules?", auto_approve):
             raise UserError("not applied — nothing was written")
-        snapshot = Snapshot.take(loaded.path, loaded.sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
-        print(f"Snapshot of the modules before writing: {snapshot.save()}")
-        journal.record("apply", plant=loaded.name, plant_sha256=loaded.sha256, modules=[f"{r.bus}/{r.address}" for r in runs])
-        costs = {name: line_cost(bus) for name, bus in buses.items()}
-        with progress_bar(sum(len(r.steps) for r in runs), "applying") as tick:
-            execute(runs, links, costs, tick=tick, may_release_axes=allow_axis_release)
-        for run in runs:
-            journal.record("result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure)
-            print(_account(run), file=sys.stdout if run.verified else sys.stderr)
-    released = [f"{r.bus}/{r.name}" for r in runs if r.released_axes]
-    if released:
-        print(f"⚠ Travel to reference point required before production on: {', '.join(released)}")
-    failed = [r for r in runs if not r.verified]
+        with CANCEL.deferred():  # from the snapshot to the last line of the account, a signal waits its turn
+            snapshot = Snapshot.take(loaded.path, loaded.sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+            snapshot_path = snapshot.save()
+            print(f"Snapshot of the modules before writing: {snapshot_path}")
+            journal.record("apply", plant=loaded.name, plant_sha256=loaded.sha256, snapshot=str(snapshot_path),
+                           modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+            costs = {name: line_cost(bus) for name, bus in buses.items()}
+            with progress_bar(sum(len(r.steps) for r in runs), "applying") as tick:
+                execute(runs, links, costs, tick=tick, may_release_axes=allow_axis_release)
+            _report(runs, journal, snapshot_path)
+
+
+def _report(runs: list[ModuleRun], journal: Journal, snapshot_path: Path) -> None:
+    """The account of every module, the reference-travel list, where the records are; then the outcome."""
+    for run in runs:
+        journal.record(
+            "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
+            released_axes=run.released.value, written=[s.message.hex() for s in run.written],
+            interrupted=run.interrupted,
+        )  # fmt: skip
+        print(_account(run), file=sys.stdout if run.verified else sys.stderr)
+    if (travel := _travel_list(runs)) is not None:
+        print(travel)
+        journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in runs if r.released is not Release.NO])
     print(f"Journal: {journal.path}")
+    failed = [r for r in runs if not r.verified]
+    if CANCEL.requested:
+        journal.record("interrupted")
+        touched = sum(1 for r in failed if r.sent)
+        print(f"Interrupted: {len(runs) - len(failed)} of {len(runs)} modules written and verified, "
+              + (f"{touched} written in part — restore them with: prc3cfg restore {snapshot_path}" if touched
+                 else "nothing sent to the others"))  # fmt: skip
+        raise Interrupted()
     if failed:
-        raise UserError(f"apply failed on {len(failed)} of {len(runs)} modules (see above) — the snapshot above restores them")
+        raise UserError(
+            f"apply failed on {len(failed)} of {len(runs)} modules (see above) — restore with: prc3cfg restore {snapshot_path}"
+        )
     print(f"Apply complete: {len(runs)} modules written and verified.")
 
 
-def _read_plan_file(path: Path, loaded) -> list[PlannedModule]:
-    """The plan file's modules; refused when it is damaged or the plant file changed since it was made."""
+def _read_plan_file(path: Path, loaded) -> PlanFile:
+    """The plan file; refused when it is damaged, made by another prc3cfg, or the plant file changed since."""
     try:
-        _, plant_sha, planned = read_plan_file(json.loads(path.read_text()))
+        planned = read_plan_file(json.loads(path.read_text()))
     except (OSError, ValueError, PlanFileError) as error:
         raise UserError(f"{path}: {error}") from None
-    if plant_sha != loaded.sha256:
+    if planned.version != __version__:
+        raise UserError(f"{path}: made by prc3cfg {planned.version}, this is {__version__} — plan again with this version")
+    if planned.plant_sha256 != loaded.sha256:
         raise UserError(f"{path}: stale plan — the plant file {loaded.path} changed since the plan was made; plan again")
     return planned
 
 
-def _runs_from_plan_file(path: Path, planned: list[PlannedModule], pairs, images: dict[Key, ModuleImage]) -> list[ModuleRun]:
-    """The plan file's steps, refused when any module changed since the plan was made."""
-    modules = {(bus.name, m.address): m for bus, m in pairs}
-    runs = []
-    for entry in planned:
-        module = modules.get((entry.bus, entry.address))
-        if module is None:
-            raise UserError(f"{path}: bus {entry.bus}, module {entry.address} is not among the modules to apply — plan again")
-        if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
+def _plan_from_file(path: Path, planned: PlanFile, loaded, pairs, images: dict[Key, ModuleImage]) -> PlantPlan:
+    """The plan file as a plan, proved module by module before anything is written.
+
+    Refused when a module changed since the plan was made; when its steps do anything but
+    turn the read-back into the plant file's image (`run_steps` names the rule they break);
+    and when they are not exactly the steps prc3cfg plans from this read-back — the plan
+    and the read-back are the same as when the file was made, so any difference is an edit.
+    """
+    modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
+    changes = []
+    for entry in planned.modules:
+        where = f"bus {entry.bus}, module {entry.address}"
+        if (entry.bus, entry.address) not in modules:
+            raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
+        bus, module = modules[(entry.bus, entry.address)]
+        if entry.name != module.name:
+            raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {module.name!r} in the plant file — plan again")
+        actual = images[(entry.bus, entry.address)]
+        if image_sha256(actual) != entry.state_sha256:
             raise UserError(
-                f"{path}: stale plan — bus {entry.bus}, module {entry.address} ({entry.name}) changed since the "
-                "plan was made (teach-in or another apply?); nothing was written — plan again"
+                f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
+                "(teach-in or another apply?); nothing was written — plan again"
             )
-        if entry.steps:
-            runs.append(ModuleRun(entry.bus, entry.address, entry.name, module.desired_image(), entry.steps,
-                                  tuple(m.hex() for m in entry.steps)))  # fmt: skip
-    return runs
+        desired, cost = module.desired_image(), line_cost(bus)
+        edited = f"{path}: {where} ({entry.name}): {{}} — the plan file was changed after it was made; nothing was written: plan again and review it"
+        theirs, ours = list(entry.steps), [step.message for step in plan_module(actual, desired, cost).steps]
+        try:
+            module_plan = plan_from_steps(actual, desired, theirs, cost)
+        except StepProblem as problem:
+            if problem.index:  # the step that breaks a rule
+                raise UserError(edited.format(problem)) from None
+            raise UserError(edited.format(f"{_first_difference(theirs, ours)}, and {problem}")) from None
+        if theirs != ours:
+            raise UserError(edited.format(_first_difference(theirs, ours)))
+        changes.append(ModuleChange(entry.bus, entry.name, actual, desired, module_plan))
+    return PlantPlan(loaded.name, str(loaded.path.resolve()), loaded.sha256, tuple(changes))
+
+
+def _first_difference(theirs: list, ours: list) -> str:
+    """Where a plan file's steps part from the plan made from the same read-back."""
+    index = next(i for i, (a, b) in enumerate(zip([*theirs, None], [*ours, None]), 1) if a != b)
+    said = theirs[index - 1].hex() if index <= len(theirs) else "missing"
+    planned = ours[index - 1].hex() if index <= len(ours) else "nothing"
+    return f"step {index} is {said}, where the plan made from this read-back has {planned}"
 
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
-LockOpt = Annotated[float, typer.Option("--lock-timeout", help="Seconds to wait for another apply on the same line.")]
 
 
 @app.command()
 def apply(
     plant: Annotated[Optional[Path], typer.Argument(help="The plant file (YAML).", show_default=False)] = None,
-    plan_file: Annotated[Optional[Path], typer.Option("--plan", help="Apply this plan file, without planning again.")] = None,
+    plan_file: Annotated[Optional[Path], typer.Option("--plan", help="Apply this plan file as reviewed (refused if stale or edited).")] = None,
     auto_approve: ApproveOpt = False,
     allow_axis_release: AxesOpt = False,
     lock_timeout: LockOpt = 0.0,
@@ -291,8 +358,9 @@ def restore(
     if len(pairs) != len(taken.images):
         raise UserError(f"{snapshot}: the plant file {taken.plant_path} no longer has every module of the snapshot — nothing was written")
     targets = [
-        Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(taken.images[(bus.name, m.address)].programs, 1) if p is not None))
+        Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(image.programs, 1) if p is not None), image.system)
         for bus, m in pairs
+        for image in [taken.images[(bus.name, m.address)]]
     ]
     _apply(
         loaded, pairs, desired=taken.images, targets=targets, plan_file=None,

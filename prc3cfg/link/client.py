@@ -94,6 +94,7 @@ class Link:
         #: Once a reply started, the longest it can take to end; past it the line is not quiet.
         self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
         self.exchanges = 0  # attempts made, for benchmarks and summaries
+        self.repeated = 0  # attempts that failed (lost, damaged, unconfirmed) and were made again
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
@@ -134,7 +135,8 @@ class Link:
                         problem = f"{describe(reply)} on a line without a checksum, asking again to confirm it"
             if attempt < attempts:
                 note = f"{self._where(address)}: {problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
-                log.warning(note)
+                self.repeated += 1
+                log.info(note)
                 if self.trace:
                     self.trace.remark(self.bus, note)
         raise LinkError(

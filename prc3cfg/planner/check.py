@@ -53,7 +53,7 @@ def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[code
     for index, message in enumerate(messages, start=1):
         step = f"step {index} ({message.hex()})"
         if message.IS_READ:
-            raise StepProblem(index, f"{step} is a read ({message.ID:02X}h), not a write — a plan holds writes only")
+            raise StepProblem(index, f"{step} is a read ({message.ID:02X}h), not a write")
         trespass = unmanaged.intersection(message.touched_programs())
         if trespass:
             which = f"program {program_list(trespass)}" if len(trespass) == 1 else f"programs {program_list(trespass)}"

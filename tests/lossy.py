@@ -1,0 +1,165 @@
+"""Test support: a lossy TCP proxy between the link client and an emulator.
+
+The proxy decodes the client's request frames with the real framing, forwards each one
+to the emulator and its reply back — unless its rule says to lose the request or the
+reply. Losing a reply after the module executed the request is the fault a checksum
+cannot help with: the module did it, the master never heard so. The rule sees every
+request frame with its running number (1-based) and answers a set of `Loss`es:
+`REFUSAL` replaces the module's reply with a well-formed error code 32 (what a damaged
+reply can look like on a line without a checksum), `FLOOD` answers with bytes that never
+stop (a line that never goes quiet).
+"""
+
+from __future__ import annotations
+
+import enum
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+from prc3cfg.framing import NEED_DATA, Direction, Frame, get_framing
+from prc3cfg.line import LineSettings
+
+POLL = 0.01
+
+
+class Loss(enum.Enum):
+    REQUEST = "request"  # the emulator never sees the request
+    REPLY = "reply"  # the emulator executes it, its reply is swallowed
+    REFUSAL = "refusal"  # the emulator executes it, the client hears code 32 instead
+    FLOOD = "flood"  # the client hears bytes that never stop instead of a reply
+
+
+FAKE_CODE = 32
+
+
+Rule = Callable[[Frame, int], set[Loss]]
+
+
+def lose_replies_to(
+    message_id: int | None, *, address: int | None = None, times: int | None = None, loss: Loss = Loss.REPLY
+) -> Rule:
+    """A rule: `loss` for requests with this message ID (any: None) to `address` (any: None), the first `times`."""
+    seen = 0
+
+    def rule(frame: Frame, _: int) -> set[Loss]:
+        nonlocal seen
+        if message_id is not None and frame.message[:1] != bytes([message_id]):
+            return set()
+        if address is not None and frame.address != address:
+            return set()
+        seen += 1
+        return {loss} if times is None or seen <= times else set()
+
+    return rule
+
+
+class LossyProxy:
+    """Listens on loopback; every connection is forwarded to `upstream` through the rule."""
+
+    def __init__(self, upstream: tuple[str, int], rule: Rule, *, framing: str = "crc16",
+                 line: LineSettings = LineSettings(), zvz: float = 0.020) -> None:  # fmt: skip
+        self.upstream = upstream
+        self.rule = rule
+        self.framing = get_framing(framing)
+        self.line = line
+        self.zvz = zvz
+        self.requests = 0
+        self.lost: list[tuple[Loss, Frame]] = []
+        self._closing = threading.Event()
+        self._sockets: list[socket.socket] = []
+        self._threads: list[threading.Thread] = []
+
+    def listen(self) -> str:
+        server = socket.create_server(("127.0.0.1", 0))
+        server.settimeout(POLL)
+        self._sockets.append(server)
+        self._start(self._accept, server)
+        host, port = server.getsockname()[:2]
+        return f"socket://{host}:{port}"
+
+    def _start(self, target: Callable[..., None], *args: object) -> None:
+        thread = threading.Thread(target=target, args=args, daemon=True)
+        self._threads.append(thread)
+        thread.start()
+
+    def _accept(self, server: socket.socket) -> None:
+        while not self._closing.is_set():
+            try:
+                client, _ = server.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            upstream = socket.create_connection(self.upstream)
+            self._sockets += [client, upstream]
+            swallow, flood = threading.Event(), threading.Event()
+            self._start(self._requests, client, upstream, swallow, flood)
+            self._start(self._replies, upstream, client, swallow)
+            self._start(self._flood, client, flood)
+
+    def _requests(self, client: socket.socket, upstream: socket.socket, swallow: threading.Event,
+                  flood: threading.Event) -> None:  # fmt: skip
+        decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz)
+        client.settimeout(self.zvz if self.framing.name == "open-driver" else POLL)
+        while not self._closing.is_set():
+            try:
+                data = client.recv(4096)
+                if not data:
+                    return
+                decoder.receive_data(data, time.monotonic())
+            except TimeoutError:
+                decoder.line_idle()
+            except OSError:
+                return
+            while (event := decoder.next_event()) is not NEED_DATA:
+                if not isinstance(event, Frame):
+                    continue
+                self.requests += 1
+                losses = self.rule(event, self.requests)
+                self.lost += [(loss, event) for loss in sorted(losses, key=lambda x: x.value)]
+                flood.set() if Loss.FLOOD in losses else flood.clear()
+                if Loss.REQUEST in losses:
+                    continue
+                swallow.set() if losses & {Loss.REPLY, Loss.REFUSAL, Loss.FLOOD} else swallow.clear()
+                upstream.sendall(self.framing.encode(Direction.REQUEST, event.address, event.message))
+                if Loss.REFUSAL in losses:
+                    client.sendall(self.framing.encode(Direction.REPLY, event.address, bytes([FAKE_CODE, 0])))
+
+    def _replies(self, upstream: socket.socket, client: socket.socket, swallow: threading.Event) -> None:
+        while not self._closing.is_set():
+            try:
+                data = upstream.recv(4096)
+            except OSError:
+                return
+            if not data:
+                return
+            if not swallow.is_set():
+                client.sendall(data)
+
+    def _flood(self, client: socket.socket, flood: threading.Event) -> None:
+        while not self._closing.is_set():
+            if not flood.wait(POLL):
+                continue
+            try:
+                client.sendall(b"\x55" * 8)
+            except OSError:
+                return
+            time.sleep(0.001)  # a steady stream: never a gap of a character delay time
+
+    def close(self) -> None:
+        self._closing.set()
+        for sock in self._sockets:
+            try:
+                sock.close()
+            except OSError:
+                pass
+        for thread in self._threads:
+            thread.join(timeout=2)
+
+    def __enter__(self) -> LossyProxy:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,105 @@
+"""Ctrl-C and SIGTERM against real `prc3cfg` processes on emulated 9600-baud lines.
+
+An apply stops after the exchange in flight and gives its whole account; `plan` and `read`
+stop promptly with one line. The tests synchronise on what the process says (its stdout,
+its stderr, or its frame trace written to a FIFO), never on time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+from emulated import emulated_plant
+
+from prc3cfg.device import ModuleState
+from prc3cfg.locks import line_keys, line_lock
+from prc3cfg.plant import load_plant
+
+TRAVEL = "Travel to reference point required before production on:"
+
+
+def prc3cfg(tmp_path: Path, *args: object, **popen) -> subprocess.Popen:
+    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "PYTHONUNBUFFERED": "1"}
+    return subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], env=env, text=True, **popen)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_for_every_module(tmp_path, signum):
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release",
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+        out = []
+        for line in process.stdout:
+            out.append(line)
+            if line.startswith("Snapshot of the modules before writing"):
+                process.send_signal(signum)  # the first writes are on the line
+                break
+        rest, err = process.communicate(timeout=60)
+        out = "".join(out) + rest
+        assert process.returncode == 130
+        assert err.splitlines()[-1] == "error: interrupted"
+        assert sum(line.startswith("error:") for line in err.splitlines()) == 1
+        accounts = [line for line in (out + err).splitlines() if line.startswith(("✓ bus", "✗ bus"))]
+        assert len(accounts) == 6
+        assert "Journal: " in out and "Interrupted: " in out
+        untouched = [line for line in err.split("✗ ")[1:] if "nothing was sent to it" in line]
+        assert untouched, "an interrupted apply still wrote every module"
+        factory = {address: ModuleState.factory(address).image for address in range(1, 31)}
+        for entry in untouched:
+            bus, address = entry.split(",")[0].removeprefix("bus "), int(entry.split("module ")[1].split(" ")[0])
+            assert plant.emulators[bus].module(address).image == factory[address], entry
+        travel = next((line for line in out.splitlines() if TRAVEL in line), "")
+        for bus, module in load_plant(plant.path).modules():
+            if not plant.emulators[bus.name].module(module.address).referenced:
+                assert f"{bus.name}/{module.name}" in travel
+        journal = next((tmp_path / ".prc3cfg" / "journal").iterdir())
+        events = [json.loads(line) for line in journal.read_text().splitlines()]
+        assert events[-1]["event"] == "interrupted"
+
+
+def drain(stream) -> threading.Thread:
+    thread = threading.Thread(target=lambda: stream.read(), daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize("command", ["plan", "read"])
+def test_plan_and_read_stop_promptly_with_one_line(tmp_path, command):
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        process = prc3cfg(tmp_path, command, plant.path, "--trace", fifo, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        with fifo.open() as trace:
+            for line in trace:
+                if "\t>\t" in line:  # the first request is on the line
+                    process.send_signal(signal.SIGINT)
+                    break
+            drain(trace)
+            out, err = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert err == "error: interrupted\n"
+    assert out == ""
+
+
+def test_a_wait_for_the_lock_stops_on_ctrl_c(tmp_path):
+    with emulated_plant(tmp_path) as plant:
+        port = next(line.split("port:")[1].strip() for line in plant.path.read_text().splitlines() if "socket://" in line)
+        os.environ["PRC3CFG_LOCK_DIR"] = str(tmp_path / "locks")
+        try:
+            with line_lock(line_keys(port), "another apply"):
+                process = prc3cfg(tmp_path, "plan", plant.path, "--lock-timeout", 600, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                waiting = process.stderr.readline()
+                assert f"waiting for the line lock held by" in waiting and f"(pid {os.getpid()}, apply since" in waiting
+                process.send_signal(signal.SIGINT)
+                out, err = process.communicate(timeout=60)
+        finally:
+            del os.environ["PRC3CFG_LOCK_DIR"]
+    assert process.returncode == 130
+    assert err == "error: interrupted\n"
