@@ -1,4 +1,9 @@
-"""Writing a file so that a reader only ever sees the old contents or the new, whole.
+"""Files prc3cfg reads and writes: bounded reads of regular files, atomic writes.
+
+`read_regular` reads a file that must be a regular file (never a FIFO that would block, a
+device such as `/dev/zero` that never ends, a directory) and at most `limit` bytes of it;
+`FileProblem` says why not, in words the caller completes with what to do. Plant files,
+plan files, snapshots and saved images are read this way.
 
 `write_atomically` writes a temporary file beside the target, flushes it to disk, renames
 it over the target and flushes the directory: a process killed at any point leaves either
@@ -8,9 +13,63 @@ plan files (`plan --out`) and the emulator's state file are written this way.
 
 from __future__ import annotations
 
+import enum
 import os
+import stat
 import tempfile
 from pathlib import Path
+
+#: What a path is when it is not a regular file, by its `stat` file type.
+NOT_FILES = {
+    stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
+    stat.S_IFSOCK: "a socket",
+}  # fmt: skip
+
+
+class Why(enum.Enum):
+    """Why a file cannot be read — each caller says what to do about it."""
+
+    MISSING = "missing"
+    DIRECTORY = "directory"
+    NOT_A_FILE = "not a file"
+    UNREADABLE = "unreadable"
+    TOO_LARGE = "too large"
+
+
+class FileProblem(Exception):
+    """`str()` is what is wrong ("is a directory", "is a device, not a file", …); `why` its kind."""
+
+    def __init__(self, why: Why, text: str) -> None:
+        super().__init__(text)
+        self.why = why
+
+
+def read_regular(path: Path, limit: int) -> bytes:
+    """The bytes of the regular file `path`, at most `limit`; opened so that a FIFO cannot block."""
+    try:
+        _regular(os.stat(path).st_mode)
+        with open(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as file:
+            _regular(os.fstat(file.fileno()).st_mode)  # it may have changed since
+            data = file.read(limit + 1)
+    except FileNotFoundError:
+        raise FileProblem(Why.MISSING, "no such file") from None
+    except (OSError, ValueError) as error:  # ValueError: a NUL in the path
+        reason = getattr(error, "strerror", None) or str(error)
+        raise FileProblem(Why.UNREADABLE, f"cannot read it ({reason})") from None
+    if len(data) > limit:
+        raise FileProblem(Why.TOO_LARGE, f"larger than {_size(limit)}")
+    return data
+
+
+def _regular(mode: int) -> None:
+    if stat.S_ISDIR(mode):
+        raise FileProblem(Why.DIRECTORY, "is a directory")
+    if not stat.S_ISREG(mode):
+        raise FileProblem(Why.NOT_A_FILE, f"is {NOT_FILES.get(stat.S_IFMT(mode), 'not a regular file')}, not a file")
+
+
+def _size(limit: int) -> str:
+    return f"{limit // 2**20} MiB" if limit % 2**20 == 0 else f"{limit} bytes"
 
 
 def write_atomically(path: Path, text: str) -> None:

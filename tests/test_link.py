@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import io
+import os
+import tty
 from dataclasses import replace
 
 import pytest
 
 from prc3cfg import codec
 from prc3cfg.device import ModuleState
+from prc3cfg.errors import UserError
 from prc3cfg.emulator import Emulator, FaultInjection
 from prc3cfg.framing import Direction, get_framing
 from prc3cfg.image import Program
@@ -154,3 +157,22 @@ def test_pty_with_parity_is_refused_in_one_line():
 def test_unreachable_port_is_one_line():
     with pytest.raises(Exception, match=r"^bus b1: cannot open port socket://127.0.0.1:1 .* — check"):
         open_port("socket://127.0.0.1:1", LineSettings(), bus="b1")
+
+
+@pytest.mark.parametrize("use", ["first", "second"])
+def test_a_fresh_pty_that_drops_parity_is_refused_at_once_in_one_line(use):
+    """A pty takes parity without a word the first time, then refuses the next change with a bare
+    termios.error: both uses must give the same one line."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        name = os.ttyname(slave)
+        if use == "second":
+            with pytest.raises(UserError):
+                open_port(name, LineSettings(parity="even"), bus="b")
+        with pytest.raises(UserError, match=rf"^bus b: port {name} refuses 8 data bits, parity even, 1 stop bits — "):
+            open_port(name, LineSettings(parity="even"), bus="b")
+        open_port(name, LineSettings(parity="none"), bus="b").close()  # what a pty can carry
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -34,10 +34,18 @@ def emulator_state_path(plant_path: Path, port: str) -> Path:
 
 
 def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
-    """Open a device path (exclusively) or a pyserial URL with the line's settings."""
+    """Open a device path (exclusively) or a pyserial URL with the line's settings.
+
+    A device that silently drops a setting (a pseudo-terminal takes parity without a word,
+    then refuses the next change with a bare `termios.error`) is refused here, at once.
+    """
     is_url = "://" in url
+    refused = UserError(
+        f"bus {bus}: port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
+        f"{line.stop_bits:g} stop bits — a pseudo-terminal carries no parity: set parity: none"
+    )
     try:
-        return serial.serial_for_url(
+        port = serial.serial_for_url(
             url,
             baudrate=line.baud,
             bytesize=line.data_bits,
@@ -47,12 +55,24 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
             **({} if is_url else {"exclusive": True}),
         )
     except termios.error:
-        raise UserError(
-            f"bus {bus}: port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
-            f"{line.stop_bits:g} stop bits — a pseudo-terminal carries no parity: set parity: none"
-        ) from None
+        raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
         raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path or the URL") from None
+    if not is_url and not _holds(port, line):
+        port.close()
+        raise refused
+    return port
+
+
+def _holds(port: serial.SerialBase, line: LineSettings) -> bool:
+    """Whether the device kept the character format it was given (parity, data bits, stop bits)."""
+    try:
+        cflag = termios.tcgetattr(port.fileno())[2]
+    except (termios.error, OSError, AttributeError):
+        return True  # not a terminal: nothing to read back
+    parity = "none" if not cflag & termios.PARENB else "odd" if cflag & termios.PARODD else "even"
+    sizes = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
+    return parity == line.parity and sizes[cflag & termios.CSIZE] == line.data_bits and bool(cflag & termios.CSTOPB) == (line.stop_bits != 1)
 
 
 @contextlib.contextmanager

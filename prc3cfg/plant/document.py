@@ -43,9 +43,7 @@ others are collected in `Document.problems`. Does not know what a plant file con
 from __future__ import annotations
 
 import hashlib
-import os
 import re
-import stat
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
@@ -55,6 +53,7 @@ from typing import Any
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
+from prc3cfg.files import FileProblem, Why, read_regular
 from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, Path_, PlantError, Problem
 
 #: The composer: libyaml's when PyYAML was built with it (issue 11 wants its speed).
@@ -129,12 +128,6 @@ _SYNTAX_HINTS = {
 _NOT_TEXT = re.compile(f"{yaml.reader.Reader.NON_PRINTABLE.pattern}|(?!\\A)\ufeff")
 #: The tag of a mapping or a list that has none written, and what a message calls it.
 _COLLECTIONS = {MappingNode: ("tag:yaml.org,2002:map", "mapping"), SequenceNode: ("tag:yaml.org,2002:seq", "list")}
-#: What a plant path is when it is not a regular file, by its `stat` file type.
-_NOT_FILES = {
-    stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
-    stat.S_IFSOCK: "a socket",
-}
-
 Position = tuple[int, int]  # 1-based line and column
 
 
@@ -203,30 +196,22 @@ def read_document(path: Path) -> Document:
     return Document(name, result, reader.positions, hashlib.sha256(data).hexdigest(), reader.problems)
 
 
+#: What to do about a plant path that cannot be read, by why.
+_REMEDIES = {
+    Why.MISSING: "check the path",
+    Why.DIRECTORY: "give the plant file (*.yaml) in it",
+    Why.NOT_A_FILE: "give the plant file (*.yaml) itself",
+    Why.UNREADABLE: "check the path and its permissions",
+    Why.TOO_LARGE: "a plant file is far smaller: check that this is the plant file",
+}
+
+
 def _read_bytes(path: Path, name: str) -> bytes:
-    """The bytes of the regular file `path`, at most `MAX_BYTES`; opened so that a FIFO cannot block."""
+    """The bytes of the plant file, at most `MAX_BYTES` (`prc3cfg.files.read_regular`)."""
     try:
-        _regular_file(name, os.stat(path).st_mode)
-        with open(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as file:
-            _regular_file(name, os.fstat(file.fileno()).st_mode)  # it may have changed since
-            data = file.read(MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise PlantError([f"{name}: no such file — check the path"]) from None
-    except (OSError, ValueError) as error:  # ValueError: a NUL in the path
-        reason = getattr(error, "strerror", None) or str(error)
-        raise PlantError([f"{name}: cannot read it ({reason}) — check the path and its permissions"]) from None
-    if len(data) > MAX_BYTES:
-        raise PlantError([f"{name}: larger than {MAX_BYTES // 2**20} MiB — a plant file is far smaller: "
-                          "check that this is the plant file"])
-    return data
-
-
-def _regular_file(name: str, mode: int) -> None:
-    if stat.S_ISDIR(mode):
-        raise PlantError([f"{name}: is a directory — give the plant file (*.yaml) in it"])
-    if not stat.S_ISREG(mode):
-        kind = _NOT_FILES.get(stat.S_IFMT(mode), "not a regular file")
-        raise PlantError([f"{name}: is {kind}, not a file — give the plant file (*.yaml) itself"])
+        return read_regular(path, MAX_BYTES)
+    except FileProblem as problem:
+        raise PlantError([f"{name}: {problem} — {_REMEDIES[problem.why]}"]) from None
 
 
 def _check_events(name: str, text: str) -> None:
