@@ -153,12 +153,13 @@ def test_an_apply_killed_half_way_converges_when_run_again(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         command = [sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve", "--allow-axis-release"]
         env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "PYTHONUNBUFFERED": "1"}
-        killed = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
-        for line in killed.stdout:
-            if line.startswith("Snapshot of the modules before writing"):
-                killed.send_signal(signal.SIGKILL)  # the first writes are on the line
-                break
-        assert killed.wait(timeout=60) == -signal.SIGKILL
+        with (tmp_path / "stderr").open("w") as stderr:
+            killed = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=stderr, text=True, env=env)
+            for line in killed.stdout:
+                if line.startswith("Snapshot of the modules before writing"):
+                    killed.send_signal(signal.SIGKILL)  # the first writes are on the line
+                    break
+        assert killed.wait(timeout=60) == -signal.SIGKILL, (tmp_path / "stderr").read_text()
         assert not plant.matches_plant()  # left half-way (a whole apply takes over a second here)
         assert list((tmp_path / "locks").iterdir())  # and its lock behind
         again = subprocess.run(command, capture_output=True, text=True, env=env, timeout=120)

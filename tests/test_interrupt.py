@@ -96,7 +96,7 @@ def test_a_wait_for_the_lock_stops_on_ctrl_c(tmp_path):
             with line_lock(line_keys(port), "another apply"):
                 process = prc3cfg(tmp_path, "plan", plant.path, "--lock-timeout", 600, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
                 waiting = process.stderr.readline()
-                assert f"waiting for the line lock held by" in waiting and f"(pid {os.getpid()}, apply since" in waiting
+                assert "waiting for the line lock held by" in waiting and f"(pid {os.getpid()}, apply since" in waiting
                 process.send_signal(signal.SIGINT)
                 out, err = process.communicate(timeout=60)
         finally:
