@@ -14,11 +14,16 @@ plan files (`plan --out`) and the emulator's state file are written this way.
 from __future__ import annotations
 
 import enum
+import json
 import os
 import stat
 import tempfile
 from pathlib import Path
+from typing import Any
 
+#: The largest JSON file prc3cfg reads: a plan file, a snapshot, saved images (a plan of
+#: 8 buses × 30 fully changed modules is a few MB).
+JSON_LIMIT = 64 * 2**20
 #: What a path is when it is not a regular file, by its `stat` file type.
 NOT_FILES = {
     stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
@@ -34,14 +39,21 @@ class Why(enum.Enum):
     NOT_A_FILE = "not a file"
     UNREADABLE = "unreadable"
     TOO_LARGE = "too large"
+    NOT_JSON = "not JSON"
 
 
 class FileProblem(Exception):
-    """`str()` is what is wrong ("is a directory", "is a device, not a file", …); `why` its kind."""
+    """`str()` is what is wrong ("is a directory", "is a device, not a file", …); `why` its kind;
+    `at` the line and column in the file, where there is one."""
 
-    def __init__(self, why: Why, text: str) -> None:
+    def __init__(self, why: Why, text: str, at: tuple[int, int] | None = None) -> None:
         super().__init__(text)
         self.why = why
+        self.at = at
+
+    def where(self, path: Path) -> str:
+        """`path`, with the line and column when there are some: "plan.json:1:7"."""
+        return f"{path}:{self.at[0]}:{self.at[1]}" if self.at else str(path)
 
 
 def read_regular(path: Path, limit: int) -> bytes:
@@ -59,6 +71,20 @@ def read_regular(path: Path, limit: int) -> bytes:
     if len(data) > limit:
         raise FileProblem(Why.TOO_LARGE, f"larger than {_size(limit)}")
     return data
+
+
+def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
+    """The JSON document in the regular file `path` (at most `limit` bytes); `FileProblem` otherwise,
+    with line and column where the JSON breaks."""
+    data = read_regular(path, limit)
+    try:
+        return json.loads(data)
+    except json.JSONDecodeError as error:
+        raise FileProblem(Why.NOT_JSON, f"not valid JSON ({error.msg})", (error.lineno, error.colno)) from None
+    except UnicodeDecodeError:
+        raise FileProblem(Why.NOT_JSON, "not UTF-8 text") from None
+    except RecursionError:
+        raise FileProblem(Why.NOT_JSON, "nested too deeply for any file prc3cfg writes") from None
 
 
 def _regular(mode: int) -> None:

@@ -21,6 +21,13 @@ SYSTEM_KEYS = ("S1", "S2", "S3", "S4", "S5", "S6", "S7", "S8", "S10", "S11", "S1
 PROGRAM_FIELDS = ("P", "V", "Vr", "T", "F1", "F2", "A")
 
 
+def whole(value: Any, name: str) -> int:
+    """A value read from JSON that must be a whole number of device units (never "2", 2.7 or true)."""
+    if type(value) is not int:
+        raise ValueError(f"{name} = {value!r} is not a whole number")
+    return value
+
+
 @dataclass(frozen=True, slots=True)
 class SystemParameters:
     """S1..S12 without S9, in device units (mm, mm/s, mm/s², 0.001 m/s², …)."""
@@ -45,7 +52,7 @@ class SystemParameters:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> SystemParameters:
-        return cls(**{key: int(data[key]) for key in SYSTEM_KEYS})
+        return cls(**{key: whole(data[key], key) for key in SYSTEM_KEYS})
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,7 +78,7 @@ class Program:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Program:
-        return cls(**{key: int(data[key]) for key in PROGRAM_FIELDS})
+        return cls(**{key: whole(data[key], key) for key in PROGRAM_FIELDS})
 
 
 #: Factory defaults after 10h (prc3-protocol.md §4.1). (reading) S2 = 50, not the
@@ -128,8 +135,10 @@ class ModuleImage:
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> ModuleImage:
         programs = data["programs"]
+        if not isinstance(programs, list):
+            raise ValueError(f"programs is {type(programs).__name__}, not a list of {PROGRAM_COUNT}")
         return cls(
-            address=int(data["address"]),
+            address=whole(data["address"], "address"),
             system=SystemParameters.from_json(data["system"]),
             programs=tuple(None if p is None else Program.from_json(p) for p in programs),
         )

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from prc3cfg.errors import UserError
-from prc3cfg.files import write_atomically
+from prc3cfg.files import FileProblem, read_json, write_atomically
 from prc3cfg.image import ModuleImage
 from prc3cfg.link import Exchange
 
@@ -63,9 +63,13 @@ class Snapshot:
 
     @classmethod
     def load(cls, path: Path) -> Snapshot:
+        remedy = "name a file under .prc3cfg/snapshots/"
         try:
-            data = json.loads(path.read_text())
-            if data.get("format") != SNAPSHOT_FORMAT:
+            data = read_json(path)
+        except FileProblem as problem:
+            raise UserError(f"{problem.where(path)}: {problem} — {remedy}") from None
+        try:
+            if not isinstance(data, dict) or data.get("format") != SNAPSHOT_FORMAT:
                 raise ValueError(f'expected "format": "{SNAPSHOT_FORMAT}"')
             images = {(m["bus"], int(m["address"])): ModuleImage.from_json(m) for m in data["modules"]}
             plant = Path(data["plant"])
@@ -73,8 +77,8 @@ class Snapshot:
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
             return cls(plant, data["plant_sha256"], data["taken"], images)
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            raise UserError(f"{path}: not a readable snapshot ({error}) — name a file under .prc3cfg/snapshots/") from None
+        except (ValueError, KeyError, TypeError, AttributeError) as error:
+            raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
 
 
 class Journal:

@@ -1,16 +1,31 @@
 """The `prc3cfg` command line: typer apps, wiring only.
 
 Each command lives in a module of this package that registers itself on `app` (or on one
-of the sub-apps) when imported; `main()` imports them all and turns a `UserError` into one
-line on stderr and a non-zero exit.
+of the sub-apps) when imported; `main()` imports them all and turns every way a command
+can end into one line on stderr and an exit code:
+
+- a `UserError`: `error: …` (one line per problem), its `exit_code` (1; 130 interrupted);
+- a command line prc3cfg does not understand: `error: prc3cfg CMD: … — see prc3cfg CMD --help`,
+  exit 64 (`EXIT_USAGE`) — never a boxed panel; a Terraform habit (`-out=p.json`,
+  `-auto-approve`) gets "did you mean --out p.json";
+- stdout closed by its reader (`prc3cfg plan … | head`): quietly, exit 1 (as typer does).
 """
 
 from __future__ import annotations
 
+import os
+import re
 import sys
+from typing import Annotated
 
 import typer
 
+try:  # typer 0.2x carries its own copy of click, and raises that copy's exceptions
+    from typer._click import exceptions as click_errors
+except ImportError:  # pragma: no cover - older typer uses click itself
+    from click import exceptions as click_errors
+
+from prc3cfg import __version__
 from prc3cfg.errors import UserError
 
 app = typer.Typer(
@@ -34,9 +49,24 @@ def _register_commands() -> None:
         importlib.import_module(f"prc3cfg.cli.{name}")
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        print(f"prc3cfg {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_print_version, is_eager=True, help="Print the version.")] = False,
+) -> None:
+    pass
+
+
 #: A command line prc3cfg does not understand. click exits 2 for it, which `plan
 #: --detailed-exitcode` uses for "changes": a CI job must never read a typo as changes.
 EXIT_USAGE = 64
+#: A single-dash word option, as Terraform spells its options: -out=plan.json, -auto-approve.
+_SINGLE_DASH = re.compile(r"-([a-z][a-z0-9]*(?:-[a-z0-9]+)+|[a-z]{2,})(?:=(.*))?")
 
 
 class Outcome(Exception):
@@ -47,24 +77,65 @@ class Outcome(Exception):
         self.code = code
 
 
+def _options(command) -> set[str]:
+    """Every long option of a command and of the commands under it."""
+    names = {name for param in command.params for name in param.opts if name.startswith("--")}
+    for sub in getattr(command, "commands", {}).values():
+        names |= _options(sub)
+    return names
+
+
+def _single_dash_habit(args: list[str]) -> str | None:
+    """ "-out=p.json: prc3cfg options take two dashes — did you mean --out p.json?", or None."""
+    known = _options(typer.main.get_command(app))
+    for arg in args:
+        if arg == "--":
+            return None
+        match = _SINGLE_DASH.fullmatch(arg)
+        if match and f"--{match.group(1)}" in known:
+            value = f" {match.group(2)}" if match.group(2) is not None else ""
+            return f"{arg}: prc3cfg options take two dashes — did you mean --{match.group(1)}{value}?"
+    return None
+
+
+def _usage(error: click_errors.UsageError) -> str:
+    command = error.ctx.command_path if error.ctx is not None else "prc3cfg"
+    message = " ".join(error.format_message().split()).rstrip(".")
+    return f"error: {command}: {message} — see {command} --help"
+
+
 def main(argv: list[str] | None = None) -> None:
     """The console script; `argv` (default: sys.argv) lets tests run a command in-process."""
     _register_commands()
     from prc3cfg.cli.common import CANCEL
 
+    args = sys.argv[1:] if argv is None else list(argv)
     try:
+        if (habit := _single_dash_habit(args)) is not None:
+            print(f"error: {habit}", file=sys.stderr)
+            sys.exit(EXIT_USAGE)
         with CANCEL.handling():
-            app(args=argv)
+            code = app(args=args, prog_name="prc3cfg", standalone_mode=False)
+        sys.stdout.flush()
     except Outcome as outcome:
         sys.exit(outcome.code)
+    except click_errors.NoArgsIsHelpError:  # typer has shown the help
+        sys.exit(EXIT_USAGE)
+    except click_errors.UsageError as error:
+        print(_usage(error), file=sys.stderr)
+        sys.exit(EXIT_USAGE)
+    except click_errors.ClickException as error:
+        print(f"error: {' '.join(error.format_message().split())}", file=sys.stderr)
+        sys.exit(1)
     except UserError as error:
         for line in str(error).splitlines():  # several problems: one line each
             print(f"error: {line}", file=sys.stderr)
         sys.exit(error.exit_code)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, typer.Abort):
         print("error: interrupted", file=sys.stderr)
         sys.exit(130)
-    except SystemExit as exit:
-        if exit.code == 2:  # click: usage error
-            sys.exit(EXIT_USAGE)
-        raise
+    except BrokenPipeError:
+        # the reader went away (`| head`): nothing more to say, and nothing more to flush
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(1)
+    sys.exit(code if isinstance(code, int) else 0)

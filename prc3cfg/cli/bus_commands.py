@@ -13,7 +13,7 @@ from rich.table import Table
 
 from prc3cfg import codec, gateway
 from prc3cfg.cli import app, link_app
-from prc3cfg.cli.common import CANCEL, LockOpt, PlantArg, TraceOpt, locked_line, parse_addresses, progress_bar, stderr
+from prc3cfg.cli.common import CANCEL, LockOpt, PlantArg, RetriesOpt, TraceOpt, locked_line, parse_addresses, progress_bar, stderr
 from prc3cfg.errors import UserError
 from prc3cfg.plant import load_plant
 from prc3cfg.framing import FRAMINGS, get_framing
@@ -29,7 +29,8 @@ PortOpt = Annotated[str, typer.Option("--port", help="Device path or pyserial UR
 FramingOpt = Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMINGS)}.")]
 BaudOpt = Annotated[int, typer.Option(help="Baud rate.")]
 ParityOpt = Annotated[str, typer.Option(help="none | odd | even")]
-TimeoutOpt = Annotated[float, typer.Option(help="Seconds to wait for a reply.")]
+TimeoutOpt = Annotated[float, typer.Option(min=0.001, help="Seconds to wait for a reply.")]
+ZvzOpt = Annotated[float, typer.Option(min=0.004, help="open-driver: the character delay time ZVZ that ends a frame, s.")]
 
 
 @contextlib.contextmanager
@@ -72,8 +73,8 @@ def scan(
     data_bits: int = 8,
     stop_bits: float = 1,
     timeout: TimeoutOpt = 0.2,
-    zvz: float = 0.020,
-    retries: int = 1,
+    zvz: ZvzOpt = 0.020,
+    retries: RetriesOpt = 1,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
 ) -> None:
@@ -101,8 +102,8 @@ def import_plant(
     data_bits: int = 8,
     stop_bits: float = 1,
     timeout: TimeoutOpt = 0.5,
-    zvz: float = 0.020,
-    retries: int = 5,
+    zvz: ZvzOpt = 0.020,
+    retries: RetriesOpt = 5,
     plant_name: Annotated[str, typer.Option(help="The plant's name in the file.")] = "imported",
     bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
     modules: Annotated[Optional[str], typer.Option(help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,

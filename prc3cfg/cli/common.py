@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import contextlib
-import json
+import os
+import stat
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 from rich.console import Console
@@ -17,6 +19,7 @@ from prc3cfg.bustime import LineCost
 from prc3cfg.cancel import Cancellation
 from prc3cfg.device import can_clamp
 from prc3cfg.errors import UserError
+from prc3cfg.files import FileProblem, Why, read_json, write_atomically
 from prc3cfg.image import MAX_MODULE_ADDRESS, ModuleImage
 from prc3cfg.link import Link, Trace, open_plant_links
 from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
@@ -30,11 +33,82 @@ stderr = Console(stderr=True)
 #: Ctrl-C and SIGTERM for the running command (`main` installs the handlers).
 CANCEL = Cancellation()
 
+#: Bytes written and flushed in the folder of an output file before any time on the line:
+#: a full disk or a read-only folder says so then, not after the read-back.
+PROBE = 4096
+#: Linux's /dev/full (character device 1:7): every write fails with "no space left on device".
+DEV_FULL = (1, 7)
+
+
+def check_output(path: Path | None, option: str, *, plant: Path | None = None) -> Path | None:
+    """Refuse in one line — before any time is spent on the line — an output that cannot be written:
+    a directory, a missing folder, a read-only or full one, /dev/full, the plant file itself."""
+    if path is None:
+        return None
+    where = f"{option} {path}"
+    try:
+        found = os.stat(path)
+    except FileNotFoundError:
+        found = None
+    except OSError as error:
+        raise UserError(f"{where}: {error.strerror} — name a file in a folder you can write to") from None
+    if found is not None:
+        if stat.S_ISDIR(found.st_mode):
+            raise UserError(f"{where} is a directory — name a file in it")
+        if plant is not None and plant.exists() and os.path.samefile(path, plant):
+            raise UserError(f"{where} is the plant file itself — name another file")
+        if stat.S_ISCHR(found.st_mode) and (os.major(found.st_rdev), os.minor(found.st_rdev)) == DEV_FULL:
+            raise UserError(f"{where}: no space left on device — name a file on a disk with space")
+        if not stat.S_ISREG(found.st_mode):
+            return path  # a device or a FIFO (/dev/stdout, a pipe): written as it is
+    folder = path.parent
+    if not folder.is_dir():
+        raise UserError(f"{where}: the folder {folder} does not exist — create it, or name a file in an existing folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".prc3cfg-probe-", dir=folder)
+        try:
+            os.write(fd, bytes(PROBE))
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+            os.unlink(probe)
+    except OSError as error:
+        raise UserError(f"{where}: cannot write in {folder} ({error.strerror}) — name a file on a disk and in a folder you can write to") from None
+    return path
+
+
+def write_output(path: Path, text: str, option: str) -> None:
+    """Write an output file: a regular file atomically, a device or FIFO as it is; one line if it fails."""
+    try:
+        if path.exists() and not path.is_file():
+            with path.open("w") as handle:
+                handle.write(text)
+        else:
+            write_atomically(path, text)
+    except OSError as error:
+        raise UserError(f"{option} {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
+
+
+def read_input(path: Path, what: str, remedy: str) -> Any:
+    """A JSON file prc3cfg wrote (`what`: "the plan file …"), within `files.JSON_LIMIT`; one line otherwise."""
+    try:
+        return read_json(path)
+    except FileProblem as problem:
+        raise UserError(f"{problem.where(path)}: {problem} — {remedy if problem.why is Why.NOT_JSON else f'name {what}'}") from None
+
+
+def _output_option(option: str) -> Callable[[Optional[Path]], Optional[Path]]:
+    return lambda value: check_output(value, option)
+
+
 PlantArg = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
 ModuleOpt = Annotated[Optional[list[str]], typer.Option("--module", help="Only this module (name); repeatable.")]
-TraceOpt = Annotated[Optional[Path], typer.Option(help="Write every frame, both directions, with timestamps, in hex.")]
-RetriesOpt = Annotated[int, typer.Option(help="Retries of a lost or damaged reply, per message.")]
-LockOpt = Annotated[float, typer.Option("--lock-timeout", help="Seconds to wait while another prc3cfg uses the line.")]
+TraceOpt = Annotated[
+    Optional[Path],
+    typer.Option(callback=_output_option("--trace"), help="Write every frame, both directions, with timestamps, in hex."),
+]
+RetriesOpt = Annotated[int, typer.Option(min=0, max=100, help="Retries of a lost or damaged reply, per message.")]
+LockOpt = Annotated[float, typer.Option("--lock-timeout", min=0, help="Seconds to wait while another prc3cfg uses the line.")]
 
 Key = tuple[str, int]  # (bus name, module address)
 
@@ -157,11 +231,12 @@ def read_images(targets: list[Target], links: dict[str, Link]) -> dict[Key, Modu
 
 def load_actual(path: Path, plant: Plant, pairs) -> dict[Key, ModuleImage]:
     """Module images saved by `read --json`, matched to the plant's modules by bus and address."""
+    remedy = "save the images again with prc3cfg read --json"
+    entries = read_input(path, "the file prc3cfg read --json wrote", remedy)
     try:
-        entries = json.loads(path.read_text())
         saved = [(entry.get("bus"), ModuleImage.from_json(entry)) for entry in entries]
-    except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
-        raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error})") from None
+    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
     images: dict[Key, ModuleImage] = {}
     for bus, module in pairs:
         found = [img for b, img in saved if img.address == module.address and b in (None, bus.name)]

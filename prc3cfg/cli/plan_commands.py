@@ -6,13 +6,13 @@ import contextlib
 import json
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
 from prc3cfg import __version__, render
 from prc3cfg.apply import ModuleRun, Release, execute
-from prc3cfg.cli import Outcome, app
+from prc3cfg.cli import Outcome, app, click_errors
 from prc3cfg.cli.common import (
     CANCEL,
     Key,
@@ -21,6 +21,7 @@ from prc3cfg.cli.common import (
     PlantArg,
     RetriesOpt,
     TraceOpt,
+    check_output,
     chosen_modules,
     line_cost,
     load_actual,
@@ -29,9 +30,10 @@ from prc3cfg.cli.common import (
     plant_targets,
     progress_bar,
     read_images,
+    read_input,
+    write_output,
 )
 from prc3cfg.errors import Interrupted, UserError
-from prc3cfg.files import write_atomically
 from prc3cfg.plant import load_plant
 from prc3cfg.image import ModuleImage
 from prc3cfg.planner import StepProblem, plan_from_steps, plan_module
@@ -79,7 +81,7 @@ def _emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: b
             entry["changes"] = render.changes_json(change)
             entry["warning"] = render.AXIS_WARNING if change.releases_axes else None
     if out is not None:
-        write_atomically(out, json.dumps(document, indent=1) + "\n")
+        write_output(out, json.dumps(document, indent=1) + "\n", "--out")
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
@@ -93,7 +95,7 @@ def _emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: b
 @app.command()
 def plan(
     plant: PlantArg,
-    out: Annotated[Optional[Path], typer.Option(help="Write the plan file (prc3cfg-plan/1).")] = None,
+    out: Annotated[Optional[Path], typer.Option(callback=lambda v: check_output(v, "--out"), help="Write the plan file (prc3cfg-plan/1).")] = None,
     actual: Annotated[Optional[Path], typer.Option(help="Plan against module images saved by `read --json`.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan as markdown (PR comments).")] = False,
@@ -104,6 +106,8 @@ def plan(
     lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Read back, diff against the plant file and print the cheapest plan."""
+    check_output(out, "--out", plant=plant)
+    check_output(trace, "--trace", plant=plant)
     loaded = load_plant(plant)
     pairs = chosen_modules(loaded, module)
     if actual is not None:
@@ -181,7 +185,7 @@ def _apply(
     *,
     desired: dict[Key, ModuleImage] | None,
     targets: list[Target],
-    plan_file: Path | None,
+    plan_file: tuple[Path, Any] | None,
     auto_approve: bool,
     allow_axis_release: bool,
     lock_timeout: float,
@@ -189,7 +193,7 @@ def _apply(
     retries: int,
 ) -> None:
     """Lock, read back, plan (or prove the plan file), gate, snapshot, run, verify, account."""
-    planned = None if plan_file is None else _read_plan_file(plan_file, loaded)  # before any time on the line
+    planned = None if plan_file is None else _read_plan_file(*plan_file, loaded)  # before any time on the line
     buses = {b.name: b for b, _ in pairs}
     with contextlib.ExitStack() as stack:
         journal = Journal(loaded.path)  # its file is made at the first record: not for a busy line
@@ -201,8 +205,8 @@ def _apply(
         if planned is None:
             the_plan = make_plan(loaded, pairs, images, desired)
         else:
-            the_plan = _plan_from_file(plan_file, planned, loaded, pairs, images)
-            print(f"Applying {plan_file}, proved against the modules as read back now:")
+            the_plan = _plan_from_file(plan_file[0], planned, loaded, pairs, images)
+            print(f"Applying {plan_file[0]}, proved against the modules as read back now:")
         print(render.human(the_plan))
         runs = [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps) for c in the_plan.changes]
         if not runs:
@@ -224,21 +228,27 @@ def _apply(
 
 
 def _report(runs: list[ModuleRun], journal: Journal, snapshot_path: Path) -> None:
-    """The account of every module, the reference-travel list, where the records are; then the outcome."""
+    """The account of every module, the reference-travel list, where the records are; then the outcome.
+
+    The journal is written first: it must be whole even when stdout has gone (`| head`)."""
+    released = [r for r in runs if r.released is not Release.NO]
     for run in runs:
         journal.record(
             "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
             released_axes=run.released.value, written=[s.message.hex() for s in run.written],
             interrupted=run.interrupted,
         )  # fmt: skip
+    if released:
+        journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in released])
+    if CANCEL.requested:
+        journal.record("interrupted")
+    for run in runs:
         print(_account(run), file=sys.stdout if run.verified else sys.stderr)
     if (travel := _travel_list(runs)) is not None:
         print(travel)
-        journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in runs if r.released is not Release.NO])
     print(f"Journal: {journal.path}")
     failed = [r for r in runs if not r.verified]
     if CANCEL.requested:
-        journal.record("interrupted")
         touched = sum(1 for r in failed if r.sent)
         print(f"Interrupted: {len(runs) - len(failed)} of {len(runs)} modules written and verified, "
               + (f"{touched} written in part — restore them with: prc3cfg restore {snapshot_path}" if touched
@@ -251,11 +261,11 @@ def _report(runs: list[ModuleRun], journal: Journal, snapshot_path: Path) -> Non
     print(f"Apply complete: {len(runs)} modules written and verified.")
 
 
-def _read_plan_file(path: Path, loaded) -> PlanFile:
+def _read_plan_file(path: Path, document: Any, loaded) -> PlanFile:
     """The plan file; refused when it is damaged, made by another prc3cfg, or the plant file changed since."""
     try:
-        planned = read_plan_file(json.loads(path.read_text()))
-    except (OSError, ValueError, PlanFileError) as error:
+        planned = read_plan_file(document)
+    except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
     if planned.version != __version__:
         raise UserError(f"{path}: made by prc3cfg {planned.version}, this is {__version__} — plan again with this version")
@@ -316,6 +326,7 @@ AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps
 
 @app.command()
 def apply(
+    ctx: typer.Context,
     plant: Annotated[Optional[Path], typer.Argument(help="The plant file (YAML).", show_default=False)] = None,
     plan_file: Annotated[Optional[Path], typer.Option("--plan", help="Apply this plan file as reviewed (refused if stale or edited).")] = None,
     auto_approve: ApproveOpt = False,
@@ -327,16 +338,21 @@ def apply(
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     if plant is None and plan_file is None:
-        raise UserError("apply: name the plant file, or a plan file with --plan")
+        raise click_errors.UsageError("name the plant file, or a plan file with --plan", ctx=ctx)
+    plan = None
+    if plan_file is not None:
+        plan = (plan_file, read_input(plan_file, "the plan file prc3cfg plan --out wrote", "make the plan again"))
     if plant is None:
-        try:
-            plant = Path(json.loads(plan_file.read_text())["plant_path"])
-        except (OSError, ValueError, KeyError, TypeError):
-            raise UserError(f"{plan_file}: name the plant file too: prc3cfg apply PLANT --plan {plan_file}") from None
+        recorded = plan[1].get("plant_path") if isinstance(plan[1], dict) else None
+        if not isinstance(recorded, str) or not Path(recorded).is_file():
+            raise UserError(f"{plan_file}: the plant file it was made from is not at {recorded!r} — name it: "
+                            f"prc3cfg apply PLANT --plan {plan_file}")  # fmt: skip
+        plant = Path(recorded)
+    check_output(trace, "--trace", plant=plant)
     loaded = load_plant(plant)
     pairs = chosen_modules(loaded, module)
     _apply(
-        loaded, pairs, desired=None, targets=plant_targets(pairs), plan_file=plan_file,
+        loaded, pairs, desired=None, targets=plant_targets(pairs), plan_file=plan,
         auto_approve=auto_approve, allow_axis_release=allow_axis_release, lock_timeout=lock_timeout,
         trace=trace, retries=retries,
     )  # fmt: skip

@@ -1,0 +1,210 @@
+"""Every input a person can get wrong or an attacker can craft, on the command line: one line, the
+right exit code, and no time spent on the line first.
+
+Tables of cases per class: the command line itself (usage errors, exit 64), output paths,
+plan files and other JSON inputs. A case's plant points at a port where nothing listens,
+so an error about the line would mean the input was not checked first. A fuzz test mangles
+plan files. Run in-process with the real CLI, and as processes where the process matters
+(a closed stdout pipe).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from emulated import DEMO, emulated_plant, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prc3cfg import __version__
+
+EXIT_USAGE = 64
+
+
+@pytest.fixture(autouse=True)
+def private_locks(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+
+
+@pytest.fixture
+def nowhere(tmp_path) -> Path:
+    """The demo plant on a port where nothing listens: any time spent on the line is an error there."""
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9").replace("emulator://demo-b", "socket://127.0.0.1:19"))
+    return plant
+
+
+# -- the command line ------------------------------------------------------------------------
+
+USAGE = {
+    "apply without a plant": (["apply"], "error: prc3cfg apply: name the plant file, or a plan file with --plan — see prc3cfg apply --help"),
+    "plan without a plant": (["plan"], "error: prc3cfg plan: Missing argument 'plant' — see prc3cfg plan --help"),
+    "an unknown command": (["nosuch"], "error: prc3cfg: No such command 'nosuch' — see prc3cfg --help"),
+    "an unknown option": (["plan", "p.yaml", "--outt", "x"], "error: prc3cfg plan: No such option: --outt (Possible options: --out) — see prc3cfg plan --help"),
+    "negative retries": (["plan", "p.yaml", "--retries", "-1"], "error: prc3cfg plan: Invalid value for '--retries': Input should be greater than or equal to 0 — see prc3cfg plan --help"),
+    "a negative lock time-out": (["apply", "p.yaml", "--lock-timeout", "-5"], "error: prc3cfg apply: Invalid value for '--lock-timeout': Input should be greater than or equal to 0 — see prc3cfg apply --help"),
+    "retries as text": (["read", "p.yaml", "--retries", "many"], "error: prc3cfg read: Invalid value for '--retries': Input should be a valid integer, unable to parse string as an integer — see prc3cfg read --help"),
+    "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
+    "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),
+    "terraform's -lock-timeout=": (["apply", "p.yaml", "-lock-timeout=10"], "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?"),
+}
+
+
+@pytest.mark.parametrize("case", USAGE, ids=list(USAGE))
+def test_every_usage_error_is_one_line_and_exits_64(capsys, case):
+    args, line = USAGE[case]
+    result = run_cli(capsys, *args)
+    assert (result.code, result.err, result.out) == (EXIT_USAGE, line + "\n", "")
+
+
+def test_version(capsys):
+    result = run_cli(capsys, "--version")
+    assert (result.code, result.out) == (0, f"prc3cfg {__version__}\n")
+
+
+def test_a_usage_error_under_detailed_exitcode_is_never_changes(capsys):
+    assert run_cli(capsys, "plan", "p.yaml", "--detailed-exitcode", "--no-such").code == EXIT_USAGE
+
+
+# -- output paths: checked before any time on the line -------------------------------------------
+
+
+def outputs(tmp_path: Path, plant: Path) -> dict[str, tuple[list[str], str]]:
+    (tmp_path / "folder").mkdir()
+    return {
+        "--out in a missing folder": (
+            ["plan", plant, "--out", tmp_path / "missing" / "plan.json"],
+            f"error: --out {tmp_path}/missing/plan.json: the folder {tmp_path}/missing does not exist — create it, or name a file in an existing folder",
+        ),
+        "--out a directory": (["plan", plant, "--out", tmp_path / "folder"], f"error: --out {tmp_path}/folder is a directory — name a file in it"),
+        "--out /dev/full": (["plan", plant, "--out", "/dev/full"], "error: --out /dev/full: no space left on device — name a file on a disk with space"),
+        "--out the plant file": (["plan", plant, "--out", plant], f"error: --out {plant} is the plant file itself — name another file"),
+        "--trace /dev/full": (["read", plant, "--trace", "/dev/full"], "error: --trace /dev/full: no space left on device — name a file on a disk with space"),
+        "--trace in a missing folder": (
+            ["apply", plant, "--trace", tmp_path / "missing" / "t.txt"],
+            f"error: --trace {tmp_path}/missing/t.txt: the folder {tmp_path}/missing does not exist — create it, or name a file in an existing folder",
+        ),
+        "--trace the plant file": (["plan", plant, "--trace", plant], f"error: --trace {plant} is the plant file itself — name another file"),
+    }
+
+
+@pytest.mark.parametrize("case", ["--out in a missing folder", "--out a directory", "--out /dev/full", "--out the plant file",
+                                  "--trace /dev/full", "--trace in a missing folder", "--trace the plant file"])  # fmt: skip
+def test_an_output_that_cannot_be_written_is_one_line_before_the_line_is_touched(nowhere, tmp_path, capsys, case):
+    args, line = outputs(tmp_path, nowhere)[case]
+    before = nowhere.read_bytes()
+    result = run_cli(capsys, *args)
+    assert (result.code, result.err) == (1, line + "\n")
+    assert nowhere.read_bytes() == before
+    assert not (tmp_path / ".prc3cfg" / "journal").exists()
+
+
+def test_a_plan_file_to_a_device_is_written_as_it_is(tmp_path, capsys):
+    with emulated_plant(tmp_path) as plant:
+        result = run_cli(capsys, "plan", plant.path, "--out", "/dev/null")
+    assert result.code == 0, result.err
+
+
+def test_a_closed_stdout_pipe_ends_quietly(tmp_path, capsys):
+    with emulated_plant(tmp_path) as plant:
+        saved = tmp_path / "images.json"
+        saved.write_text(run_cli(capsys, "read", plant.path, "--json").out)
+        env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
+        gone, stdout = os.pipe()
+        os.close(gone)  # the reader has gone, as `| head` does once it has its lines
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant.path, "--actual", saved],
+                              stdout=stdout, stderr=subprocess.PIPE, text=True, env=env)  # fmt: skip
+        os.close(stdout)
+    assert (done.returncode, done.stderr) == (1, "")
+
+
+# -- plan files and other JSON inputs ------------------------------------------------------------
+
+
+def json_inputs(tmp_path: Path, plant: Path) -> dict[str, tuple[list[str], str]]:
+    def write(name: str, text: str | bytes) -> Path:
+        path = tmp_path / name
+        path.write_bytes(text if isinstance(text, bytes) else text.encode())
+        return path
+
+    huge = tmp_path / "huge.json"
+    with huge.open("wb") as handle:
+        handle.truncate(300 * 2**20)  # 300 MB, sparse
+    fifo = tmp_path / "fifo.json"
+    os.mkfifo(fifo)
+    plan = "the plan file prc3cfg plan --out wrote"
+    return {
+        "a truncated plan": (["apply", plant, "--plan", write("cut.json", '{"format": "prc3cfg-plan/1", "buses": [')],
+                             f"error: {tmp_path}/cut.json:1:40: not valid JSON (Expecting value) — make the plan again"),
+        "a plan nested 10,000 deep": (["apply", plant, "--plan", write("deep.json", "[" * 10_000 + "]" * 10_000)],
+                                      f"error: {tmp_path}/deep.json: nested too deeply for any file prc3cfg writes — make the plan again"),
+        "a 300 MB plan": (["apply", plant, "--plan", huge], f"error: {huge}: larger than 64 MiB — name {plan}"),
+        "a plan that is a FIFO": (["apply", plant, "--plan", fifo], f"error: {fifo}: is a named pipe (FIFO), not a file — name {plan}"),
+        "a plan that is a directory": (["apply", plant, "--plan", tmp_path], f"error: {tmp_path}: is a directory — name {plan}"),
+        "a missing plan": (["apply", plant, "--plan", tmp_path / "none.json"], f"error: {tmp_path}/none.json: no such file — name {plan}"),
+        "a plan that is a list": (["apply", plant, "--plan", write("list.json", "[]")],
+                                  f'error: {tmp_path}/list.json: not a plan file — expected "format": "prc3cfg-plan/1"'),
+        "a plan without its plant": (["apply", "--plan", write("alone.json", '{"format": "prc3cfg-plan/1"}')],
+                                     f"error: {tmp_path}/alone.json: the plant file it was made from is not at None — name it: "
+                                     f"prc3cfg apply PLANT --plan {tmp_path}/alone.json"),
+        "saved images that are not JSON": (["plan", plant, "--actual", write("images.json", "\x00\x01")],
+                                           f"error: {tmp_path}/images.json:1:1: not valid JSON (Expecting value) — save the images again with prc3cfg read --json"),
+        "saved images with text for numbers": (
+            ["plan", plant, "--actual", write("texts.json", json.dumps([{"address": "1", "system": {}, "programs": []}]))],
+            f"error: {tmp_path}/texts.json: not a list of module images as `prc3cfg read --json` writes (address = '1' is not a whole number) "
+            "— save the images again with prc3cfg read --json"),
+        "a snapshot that is a directory": (["restore", tmp_path], f"error: {tmp_path}: is a directory — name a file under .prc3cfg/snapshots/"),
+    }
+
+
+JSON_CASES = ["a truncated plan", "a plan nested 10,000 deep", "a 300 MB plan", "a plan that is a FIFO", "a plan that is a directory",
+              "a missing plan", "a plan that is a list", "a plan without its plant", "saved images that are not JSON",
+              "saved images with text for numbers", "a snapshot that is a directory"]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", JSON_CASES)
+def test_a_bad_json_input_is_one_line_before_the_line_is_touched(nowhere, tmp_path, capsys, case):
+    args, line = json_inputs(tmp_path, nowhere)[case]
+    result = run_cli(capsys, *args)
+    assert (result.code, result.err) == (1, line + "\n")
+    assert not (tmp_path / ".prc3cfg" / "journal").exists()
+
+
+# -- fuzzed plan files -----------------------------------------------------------------------------
+
+DEBRIS = ['"', "{", "}", "[", "]", ",", ":", "0", "-1", "1e999", "null", "true", '"2"', "2.7", "\\u0000", "9" * 40, "[" * 300]
+
+
+@pytest.fixture(scope="module")
+def fuzz_plant(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("fuzz")
+    with emulated_plant(directory) as plant:
+        yield plant
+
+
+@settings(max_examples=60, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_mangled_plan_file_is_refused_in_one_line(fuzz_plant, capsys, tmp_path, data, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(fuzz_plant.path.parent / "locks"))
+    made = fuzz_plant.path.parent / "made.json"
+    if not made.exists():
+        assert run_cli(capsys, "plan", fuzz_plant.path, "--out", made).code == 0
+    text = made.read_text()
+    for _ in range(data.draw(st.integers(1, 4))):
+        at = data.draw(st.integers(0, len(text)))
+        cut = data.draw(st.integers(0, 12))
+        text = text[:at] + data.draw(st.sampled_from(DEBRIS)) + text[at + cut :]
+    mangled = fuzz_plant.path.parent / "mangled.json"
+    mangled.write_text(text)
+    before = fuzz_plant.images()
+    result = run_cli(capsys, "apply", fuzz_plant.path, "--plan", mangled, "--auto-approve", "--allow-axis-release")
+    if text == made.read_text():
+        return
+    assert result.code == 1, result.out
+    assert len(result.problems) == 1 and result.problems[0].startswith("error: "), result.err
+    assert fuzz_plant.images() == before
