@@ -9,48 +9,22 @@ import sys
 from dataclasses import replace
 
 import pytest
-import serial
 
 from prc3cfg import codec, device
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
-from prc3cfg.framing import Direction, Frame, get_framing
+from prc3cfg.errors import UserError
+from prc3cfg.framing import Direction, Frame
 from prc3cfg.image import DEFAULT_SYSTEM, Program
 from prc3cfg.line import LineSettings
+
+from emulator_client import Client, serve
 
 WRITE_P10 = codec.WriteProgram(10, Program(P=150, V=300, Vr=53, T=20, F1=1010, F2=50, A=5))
 
 
 def modules(*addresses: int) -> dict[int, ModuleState]:
     return {a: ModuleState.factory(a) for a in addresses}
-
-
-class Client:
-    """A master on the line, built from the real framing and pyserial."""
-
-    def __init__(self, url: str, framing: str = "crc16", **settings) -> None:
-        self.framing = get_framing(framing)
-        self.port = serial.serial_for_url(url, timeout=0.3, **settings)
-        self.line = LineSettings(parity="none") if settings.get("parity") == "N" else LineSettings()
-
-    def send_raw(self, frame: bytes) -> bytes | None:
-        """Write bytes; the reply message, or None when nothing valid arrives within the time-out."""
-        self.port.write(frame)
-        decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=0.02)
-        while chunk := self.port.read(max(1, self.port.in_waiting)):
-            decoder.receive_data(chunk, 0.0)
-            event = decoder.next_event(0.0)
-            if isinstance(event, Frame):
-                return event.message
-        decoder.line_idle()
-        event = decoder.next_event(0.0)
-        return event.message if isinstance(event, Frame) else None
-
-    def send(self, address: int, message: bytes) -> bytes | None:
-        return self.send_raw(self.framing.encode(Direction.REQUEST, address, message))
-
-    def close(self) -> None:
-        self.port.close()
 
 
 @pytest.fixture
@@ -176,16 +150,8 @@ def test_corrupted_replies_fail_their_crc():
 
 def test_serve_command_answers_and_saves(tmp_path):
     state = tmp_path / "bus.json"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
-         "--state", str(state), "--modules", "1,3-4", "--framing", "crc16"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        banner = process.stdout.readline()
-        assert banner.startswith("listening on 127.0.0.1:"), banner + process.stderr.read()
-        port = int(banner.split()[2].rsplit(":", 1)[1])
-        client = Client(f"socket://127.0.0.1:{port}")
+    with serve(tmp_path, "--state", str(state), "--modules", "1,3-4", "--framing", "crc16") as served:
+        client = Client(served.url)
         try:
             assert client.send(4, WRITE_P10.encode()) == b"\x00\x00"
             assert client.send(2, b"\x50\x00") is None
@@ -194,9 +160,6 @@ def test_serve_command_answers_and_saves(tmp_path):
         saved = json.loads(state.read_text())
         assert [m["address"] for m in saved["modules"]] == [1, 3, 4]
         assert saved["modules"][2]["programs"][9] == WRITE_P10.program.to_json()
-    finally:
-        process.terminate()
-        assert process.wait(timeout=10) == 0
 
 
 def test_serve_command_rejects_bad_modules_in_one_line():
@@ -207,6 +170,61 @@ def test_serve_command_rejects_bad_modules_in_one_line():
     assert result.returncode == 1
     assert result.stderr.strip().count("\n") == 0
     assert "outside 1..30" in result.stderr
+
+
+def state_file(path, *entries: dict):
+    path.write_text(json.dumps({"format": "prc3-emulator/1", "modules": list(entries)}))
+    return path
+
+
+def module_3(change) -> dict:
+    """Module 3's state-file entry at factory defaults, after `change(entry)`."""
+    data = ModuleState.factory(3).to_json()
+    change(data)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("change", "says"),
+    [
+        (lambda m: m["programs"][6].update(P=12000), "module 3: program 7: P = 12000 is outside 0..9999"),
+        (lambda m: m["programs"][0].update(V=0), "module 3: program 1: V = 0 is outside 1..600"),
+        (lambda m: m["programs"][1].update(Vr=-601), "module 3: program 2: Vr = -601 is outside -600..600"),
+        (lambda m: m["programs"][63].update(A=65), "module 3: program 64: A = 65 is outside 0..64"),
+        (lambda m: m["programs"][2].update(T=1.5), "module 3: program 3: T = 1.5 is not a whole number"),
+        (lambda m: m["programs"][2].update(F1=True), "module 3: program 3: F1 = True is not a whole number"),
+        (lambda m: m["programs"][4].pop("F2"), "module 3: program 5: F2 is missing"),
+        (lambda m: m["programs"].__setitem__(8, None), "module 3: program 9: None is not a program"),
+        (lambda m: m["programs"].pop(), "module 3: programs: a list of all 64 programs is needed, not 63 programs"),
+        (lambda m: m["system"].update(S6=999), "module 3: system: S6 = 999 is outside 1000..1500"),
+        (lambda m: m["system"].update(S1=70000), "module 3: system: S1 = 70000 is outside 100..9999"),
+        (lambda m: m["system"].update(S1="400"), "module 3: system: S1 = '400' is not a whole number"),
+        (lambda m: m["system"].pop("S12"), "module 3: system: S12 is missing"),
+        (lambda m: m.update(address=40), "module entry 0: address S9 = 40 is outside 1..30"),
+        (lambda m: m.update(mode="flying"), "module 3: mode must be one of stop, run, manual, not 'flying'"),
+        (lambda m: m.update(fault=["E09"]), "module 3: fault = ['E09'] must be null or the name of a fault"),
+        (lambda m: m.update(active_program=65), "module 3: active_program = 65 is outside 1..64"),
+        (lambda m: m.update(referenced="yes"), "module 3: referenced = 'yes' must be true or false"),
+    ],
+)
+def test_state_file_values_no_message_can_carry_are_refused_naming_module_and_field(tmp_path, change, says):
+    path = state_file(tmp_path / "state.json", module_3(change))
+    with pytest.raises(UserError) as refused:
+        load_state(path)
+    assert str(refused.value) == f"{path}: {says} — fix or delete the entry"
+
+
+def test_state_file_may_hold_what_odd_history_leaves(tmp_path):
+    """Only each value's own range is checked: a Teach In can leave P above S1, and so on."""
+
+    def odd(m: dict) -> None:
+        m["system"].update(S1=100, S4=20, S5=30)
+        m["programs"][0].update(P=9999, V=600)
+        m.update(mode="run", active_program=4, fault="E09", referenced=False)
+
+    loaded = load_state(state_file(tmp_path / "state.json", module_3(odd)))
+    assert loaded == {3: ModuleState.from_json(module_3(odd))}
+    assert loaded[3].image.program(1) == Program(P=9999, V=600)
 
 
 @pytest.mark.parametrize(("parity", "undetected"), [("even", False), ("none", True)])
