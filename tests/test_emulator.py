@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import socket
 import subprocess
 import sys
 from dataclasses import replace
@@ -14,11 +16,11 @@ from prc3cfg import codec, device
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
 from prc3cfg.errors import UserError
-from prc3cfg.framing import Direction, Frame
+from prc3cfg.framing import Direction, Frame, get_framing
 from prc3cfg.image import DEFAULT_SYSTEM, Program
 from prc3cfg.line import LineSettings
 
-from emulator_client import Client, serve
+from emulator_client import Client, answered, hang_up, serve
 
 WRITE_P10 = codec.WriteProgram(10, Program(P=150, V=300, Vr=53, T=20, F1=1010, F2=50, A=5))
 
@@ -255,3 +257,98 @@ def test_a_damaged_reply_with_parity_is_a_character_short():
     whole = 1 + 2 * 11  # address and the 11 words of 50h's reply
     # a damaged reply lacks a character; a damaged request (one byte short) is answered with a code word
     assert {len(r) for r in replies if r is not None} == {whole - 1, 1 + 2}
+
+
+# -- the emulator as a service (the heavy acceptance tests are in test_emulator_service.py) ----
+
+READ_SYSTEM = codec.ReadSystem()
+
+
+def is_factory_system(conn: socket.socket, address: int) -> bool:
+    reply = answered(conn, address, READ_SYSTEM.encode())
+    return codec.decode_reply(READ_SYSTEM, reply) == codec.SystemReply(DEFAULT_SYSTEM, address)
+
+
+def test_a_connection_beyond_the_limit_is_closed_at_once_and_a_freed_slot_serves_again(caplog):
+    with Emulator(modules(1), max_connections=2) as emulator:
+        address = emulator.listen()
+        holders = [socket.create_connection(address, timeout=10) for _ in range(2)]
+        assert all(is_factory_system(conn, 1) for conn in holders)  # both served: both slots taken
+        with socket.create_connection(address, timeout=10) as third:
+            assert third.recv(1) == b""
+        hang_up(holders[0])
+        with socket.create_connection(address, timeout=10) as fourth:
+            assert is_factory_system(fourth, 1)
+        hang_up(holders[1])
+    assert "refused — 2 connections are open, the most allowed" in caplog.text
+
+
+def test_closed_connections_leave_no_threads_or_sockets_behind():
+    with Emulator(modules(1)) as emulator:
+        address = emulator.listen()
+        for _ in range(200):
+            conn = socket.create_connection(address, timeout=10)
+            assert is_factory_system(conn, 1)
+            hang_up(conn)
+        assert not emulator._connections
+        assert len(emulator._threads) < 10  # the accept loop, and perhaps a few threads finishing
+        assert len(emulator._closers) == 1  # the listening socket
+
+
+@pytest.mark.parametrize("sent", [b"", b"\xa5\x01"], ids=["silent", "stopped mid-frame"])
+def test_an_idle_connection_is_closed_and_frees_its_slot(sent, caplog):
+    with Emulator(modules(1), max_connections=1, idle_timeout=0.2) as emulator:
+        address = emulator.listen()
+        with socket.create_connection(address, timeout=10) as idle:
+            idle.sendall(sent)
+            assert idle.recv(1) == b""
+        with socket.create_connection(address, timeout=10) as conn:
+            assert is_factory_system(conn, 1)
+    assert "nothing received for 0.2 s — closed (idle time-out)" in caplog.text
+
+
+def test_a_client_that_takes_no_replies_is_disconnected():
+    with Emulator(modules(1)) as emulator:
+        with socket.socket() as conn:
+            conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # replies pile up soon
+            conn.settimeout(10)
+            conn.connect(emulator.listen())
+            request = get_framing("crc16").encode(Direction.REQUEST, 1, READ_SYSTEM.encode()) * 100
+            with pytest.raises((BrokenPipeError, ConnectionResetError)):
+                while True:
+                    conn.sendall(request)
+
+
+@pytest.mark.parametrize("breakage", ["state file is a folder", "folder is a file"])
+def test_a_write_that_cannot_be_saved_is_not_answered_and_changes_nothing(tmp_path, caplog, breakage):
+    folder = tmp_path / "emulators"
+    state = folder / "bus.json"
+    with Emulator(modules(1, 3), state_path=state) as emulator:
+        with socket.create_connection(emulator.listen(), timeout=10) as conn:
+            if breakage == "state file is a folder":
+                state.unlink()
+                state.mkdir()
+            else:
+                shutil.rmtree(folder)
+                folder.write_text("")
+            crc16 = get_framing("crc16")
+            conn.sendall(crc16.encode(Direction.REQUEST, 0, codec.WriteSpeeds(((4, 123),)).encode()))
+            conn.sendall(crc16.encode(Direction.REQUEST, 1, WRITE_P10.encode()))
+            reply = answered(conn, 1, codec.ReadProgram(10).encode())  # the first reply: the read's
+            assert codec.decode_reply(codec.ReadProgram(10), reply).programs == (ModuleState.factory(1).image.program(10),)
+            assert emulator.modules() == modules(1, 3)
+            with pytest.raises(OSError):
+                emulator.update(1, mode="run")
+            with pytest.raises(OSError):
+                emulator.teach_in(3, 7, 321)
+            assert emulator.modules() == modules(1, 3)
+            if state.is_dir():
+                state.rmdir()
+            else:
+                folder.unlink()
+            assert answered(conn, 1, WRITE_P10.encode()) == b"\x00\x00"
+    assert load_state(state) == {1: emulator.module(1), 3: ModuleState.factory(3)}
+    assert load_state(state)[1].image.program(10) == WRITE_P10.program
+    assert f"{state}: cannot save the emulator state file (" in caplog.text
+    assert "the write to all modules (broadcast) is not answered and not applied" in caplog.text
+    assert "the write to module 1 is not answered and not applied" in caplog.text

@@ -5,6 +5,28 @@ and reply frames out through `prc3cfg.framing`, one exchange at a time on the li
 duplex), line-speed timing, fault injection, saving the state file after every accepted
 write, and the Python API tests use to change a module while it runs (mode, fault, active
 program, teach-in). What a message does is `prc3cfg.device`; who gets it, `bus.Bus`.
+
+A long-running service that survives its clients:
+
+- **At most `max_connections` TCP connections** (default 64), each served by its own
+  thread. One more is accepted and closed at once, with a logged warning, never given a
+  thread. A connection's slot is free again before its socket is closed, so a client that
+  sees its connection end can connect again at once. The pty is one more stream.
+- **An idle time-out** (default 300 s): a connection that sends nothing for that long —
+  connected and silent, or stopped in the middle of a frame — is closed. A client that
+  does not take its replies is closed when a reply cannot be sent within the poll time.
+- **Bounded memory**: a connection holds one framing decoder, which discards endless
+  garbage and frames that never end in bounded pieces (`prc3cfg.framing`), and reads at
+  most `RECV_SIZE` bytes at a time; the kernel's socket buffer holds back a faster
+  sender. Threads of closed connections end and are forgotten.
+- **Running out of file descriptors** (or kernel buffers) in `accept()` is logged once,
+  retried every `ACCEPT_BACKOFF` seconds, and its end logged: the server keeps listening.
+- **A write is acknowledged only once it is saved.** When the state file cannot be
+  written (disk full, permissions, its folder replaced by a file, the file replaced by a
+  folder), the error is logged naming the file and the reason, every module is put back
+  as it was before the write — in memory as in the file — and the write is not answered,
+  as if it never arrived: the master sees no reply, repeats it, and reports it. Reads go
+  on being answered; the next write is saved once the file can be written again.
 """
 
 from __future__ import annotations
@@ -17,19 +39,24 @@ import socket
 import threading
 import time
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator.bus import BROADCAST, Bus
-from prc3cfg.emulator.state import save_state
+from prc3cfg.emulator.state import cannot_save, save_state
+from prc3cfg.errors import UserError
 from prc3cfg.framing import NEED_DATA, Direction, Discarded, Frame, get_framing
 from prc3cfg.line import LineSettings
 
 log = logging.getLogger(__name__)
 
 POLL = 0.1  # s: how often an idle stream looks whether the emulator is closing
+RECV_SIZE = 4096  # bytes read from a stream at a time
+ACCEPT_BACKOFF = 0.1  # s: the pause before accepting again after accept() failed (EMFILE, ENFILE, …)
+MAX_CONNECTIONS = 64
+IDLE_TIMEOUT = 300.0  # s
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +81,11 @@ class FaultInjection:
 
 
 class Emulator:
-    """A running emulated bus. Use as a context manager, or call `close()`."""
+    """A running emulated bus. Use as a context manager, or call `close()`.
+
+    `unserved` are modules of the state file this emulator does not serve: every save
+    writes them back unchanged, so serving a few modules of a state file loses no others.
+    """
 
     def __init__(
         self,
@@ -67,7 +98,14 @@ class Emulator:
         line_speed: bool = False,
         faults: FaultInjection = FaultInjection(),
         state_path: Path | None = None,
+        unserved: Mapping[int, ModuleState] | None = None,
+        max_connections: int = MAX_CONNECTIONS,
+        idle_timeout: float = IDLE_TIMEOUT,
     ) -> None:
+        if max_connections < 1:
+            raise ValueError(f"max-connections must be at least 1, not {max_connections}")
+        if not idle_timeout > 0:
+            raise ValueError(f"idle-timeout must be more than 0 s, not {idle_timeout}")
         self.framing = get_framing(framing)
         self.line = line
         self.zvz = zvz
@@ -75,14 +113,22 @@ class Emulator:
         self.line_speed = line_speed
         self.faults = faults
         self.state_path = state_path
+        self.max_connections = max_connections
+        self.idle_timeout = idle_timeout
         self._bus = Bus(modules)
+        self._unserved = dict(unserved or {})
         self._random = random.Random(faults.seed)
         self._lock = threading.Lock()  # the line: one exchange at a time
         self._closing = threading.Event()
-        self._threads: list[threading.Thread] = []
-        self._closers: list[Callable[[], None]] = []
+        self._guard = threading.Lock()  # the two sets below
+        self._threads: set[threading.Thread] = set()  # running; each removes itself when it ends
+        self._connections: set[socket.socket] = set()  # open TCP connections
+        self._closers: list[Callable[[], None]] = []  # listening sockets and ptys
         if state_path is not None and not state_path.exists():
-            save_state(state_path, self._bus.modules)
+            try:
+                self._save()
+            except OSError as error:
+                raise UserError(f"{cannot_save(state_path, error)} — check the path, its folder and the disk") from None
 
     # -- the Python API ----------------------------------------------------------------
 
@@ -95,14 +141,16 @@ class Emulator:
             return self._bus.modules[address]
 
     def update(self, address: int, **changes) -> ModuleState:
-        """Change a module as the floor would: mode, fault, active_program, referenced."""
+        """Change a module as the floor would: mode, fault, active_program, referenced.
+        Raises OSError, and changes nothing, when the state file cannot be saved."""
         with self._lock:
             state = replace(self._bus.modules[address], **changes)
             self._store(address, state)
             return state
 
     def teach_in(self, address: int, program: int, position: int) -> ModuleState:
-        """Teach In on the module's inputs (manual §2.6): a program's position changes."""
+        """Teach In on the module's inputs (manual §2.6): a program's position changes.
+        Raises OSError, and changes nothing, when the state file cannot be saved."""
         with self._lock:
             state = self._bus.modules[address]
             taught = replace(state.image.program(program), P=position)
@@ -111,9 +159,22 @@ class Emulator:
             return state
 
     def _store(self, address: int, state: ModuleState) -> None:
+        before = dict(self._bus.modules)
         self._bus.modules[address] = state
-        if self.state_path is not None:
-            save_state(self.state_path, self._bus.modules)
+        self._save_or_roll_back(before)
+
+    def _save(self) -> None:
+        save_state(self.state_path, {**self._unserved, **self._bus.modules})
+
+    def _save_or_roll_back(self, before: dict[int, ModuleState]) -> None:
+        """Save the state file; when that fails, put every module back as in `before` and raise OSError."""
+        if self.state_path is None:
+            return
+        try:
+            self._save()
+        except OSError:
+            self._bus.modules.update(before)
+            raise
 
     # -- exchanges ---------------------------------------------------------------------
 
@@ -155,9 +216,15 @@ class Emulator:
                 log.info("fault injection: request damaged, delivered to %d as %s", damaged.address, damaged.message.hex())
                 frame = damaged
             address, message = frame.address, frame.message
+            before = dict(self._bus.modules)
             delivery = self._bus.deliver(address, message)
-            if delivery.changed and self.state_path is not None:
-                save_state(self.state_path, self._bus.modules)
+            if delivery.changed:
+                try:
+                    self._save_or_roll_back(before)
+                except OSError as error:
+                    to = "all modules (broadcast)" if address == BROADCAST else f"module {address}"
+                    log.error("%s — the write to %s is not answered and not applied", cannot_save(self.state_path, error), to)
+                    return None
             if delivery.reply is None or address == BROADCAST:
                 return None
             reply = self.framing.encode(Direction.REPLY, address, delivery.reply)
@@ -173,37 +240,66 @@ class Emulator:
                 reply = self._damage(reply)
             return reply
 
-    def _serve_stream(self, recv: Callable[[float], bytes | None], send: Callable[[bytes], None]) -> None:
-        """Decode request frames from one byte stream and answer them until it ends."""
+    def _serve_stream(
+        self,
+        recv: Callable[[float], bytes | None],
+        send: Callable[[bytes], None],
+        *,
+        name: str,
+        idle_timeout: float | None = None,
+    ) -> None:
+        """Decode request frames from one byte stream and answer them until it ends, the
+        emulator closes, or nothing arrives for `idle_timeout` seconds."""
         decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz)
         gap = self.zvz if self.framing.name == "open-driver" else POLL
+        heard = time.monotonic()
         while not self._closing.is_set():
             data = recv(gap)
             now = time.monotonic()
             if data is None:
                 return
             if data:
+                heard = now
                 decoder.receive_data(data, now)
+            elif idle_timeout is not None and now - heard >= idle_timeout:
+                log.warning("%s: nothing received for %g s — closed (idle time-out)", name, idle_timeout)
+                return
             elif self.framing.name == "open-driver":
                 decoder.line_idle()
             while (event := decoder.next_event(now)) is not NEED_DATA:
                 if isinstance(event, Discarded):
-                    log.info("discarded %s: %s", event.data.hex(), event.reason)
+                    if log.isEnabledFor(logging.INFO):
+                        log.info("%s: discarded %s: %s", name, event.data.hex(), event.reason)
                     continue
                 reply = self.exchange(event, now)
                 if reply is not None:
                     send(reply)
 
     def _start(self, target: Callable[[], None], name: str) -> None:
-        thread = threading.Thread(target=target, name=name, daemon=True)
-        self._threads.append(thread)
-        thread.start()
+        """Run `target` in a thread that is forgotten when it ends; RuntimeError if none can start."""
+
+        def run() -> None:
+            try:
+                target()
+            finally:
+                with self._guard:
+                    self._threads.discard(thread)
+
+        thread = threading.Thread(target=run, name=name, daemon=True)
+        with self._guard:
+            self._threads.add(thread)
+        try:
+            thread.start()
+        except RuntimeError:
+            with self._guard:
+                self._threads.discard(thread)
+            raise
 
     # -- TCP ---------------------------------------------------------------------------
 
     def listen(self, host: str = "127.0.0.1", port: int = 0) -> tuple[str, int]:
         """Accept TCP connections (pyserial `socket://HOST:PORT`); returns the bound address."""
-        server = socket.create_server((host, port), reuse_port=False)
+        server = socket.create_server((host, port), backlog=socket.SOMAXCONN)  # a burst of connections waits in the kernel
         server.settimeout(POLL)
         self._closers.append(server.close)
         self._start(lambda: self._accept(server), "emulator-accept")
@@ -211,22 +307,53 @@ class Emulator:
         return bound[0], bound[1]
 
     def _accept(self, server: socket.socket) -> None:
+        failing = False
         while not self._closing.is_set():
             try:
-                conn, _ = server.accept()
+                conn, peer = server.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._closers.append(conn.close)
-            self._start(lambda c=conn: self._serve_socket(c), "emulator-conn")
+            except OSError as error:
+                if self._closing.is_set():
+                    return
+                if not failing:
+                    log.error("cannot accept a connection (%s) — trying again every %g s", error.strerror or error, ACCEPT_BACKOFF)
+                    failing = True
+                self._closing.wait(ACCEPT_BACKOFF)
+                continue
+            if failing:
+                log.warning("accepting connections again")
+                failing = False
+            self._admit(conn, f"{peer[0]}:{peer[1]}")
 
-    def _serve_socket(self, conn: socket.socket) -> None:
+    def _admit(self, conn: socket.socket, name: str) -> None:
+        """Serve a new connection in its own thread, or close it at once when all slots are taken."""
+        with self._guard:
+            full = len(self._connections) >= self.max_connections
+            if not full:
+                self._connections.add(conn)
+        if full:
+            log.warning("%s: refused — %d connections are open, the most allowed", name, self.max_connections)
+            conn.close()
+            return
+        log.info("%s: connected", name)
+        try:
+            self._start(lambda: self._serve_socket(conn, name), "emulator-conn")
+        except RuntimeError as error:
+            log.error("%s: refused — cannot start a thread (%s)", name, error)
+            self._release(conn)
+
+    def _release(self, conn: socket.socket) -> None:
+        """Free the connection's slot, then close it: a client that sees it end can connect again."""
+        with self._guard:
+            self._connections.discard(conn)
+        conn.close()
+
+    def _serve_socket(self, conn: socket.socket, name: str) -> None:
         def recv(timeout: float) -> bytes | None:
-            conn.settimeout(timeout)
+            conn.settimeout(timeout)  # also bounds `sendall` to a client that takes no replies
             try:
-                data = conn.recv(4096)
+                data = conn.recv(RECV_SIZE)
             except TimeoutError:
                 return b""
             except OSError:
@@ -234,11 +361,13 @@ class Emulator:
             return data or None
 
         try:
-            self._serve_stream(recv, conn.sendall)
-        except OSError:
-            pass
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._serve_stream(recv, conn.sendall, name=name, idle_timeout=self.idle_timeout)
+        except OSError as error:
+            log.info("%s: %s", name, error.strerror or error)
         finally:
-            conn.close()
+            self._release(conn)
+            log.info("%s: closed", name)
 
     # -- pty ---------------------------------------------------------------------------
 
@@ -251,15 +380,16 @@ class Emulator:
         def recv(timeout: float) -> bytes | None:
             try:
                 ready, _, _ = select.select([master], [], [], timeout)
-                return os.read(master, 4096) if ready else b""
+                return os.read(master, RECV_SIZE) if ready else b""
             except OSError:
                 return None
 
         def send(data: bytes) -> None:
             os.write(master, data)
 
-        self._start(lambda: self._serve_stream(recv, send), "emulator-pty")
-        return os.ttyname(slave)
+        path = os.ttyname(slave)
+        self._start(lambda: self._serve_stream(recv, send, name=path), "emulator-pty")
+        return path
 
     # -- lifetime ----------------------------------------------------------------------
 
@@ -270,7 +400,9 @@ class Emulator:
                 close()
             except OSError:
                 pass
-        for thread in self._threads:
+        with self._guard:
+            threads = list(self._threads)
+        for thread in threads:
             thread.join(timeout=2)
 
     def __enter__(self) -> Emulator:

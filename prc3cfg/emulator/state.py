@@ -105,3 +105,10 @@ def save_state(path: Path, modules: dict[int, ModuleState]) -> None:
     """Write the state file atomically; OSError when it cannot be written."""
     write_atomically(path, json.dumps(state_document(modules), indent=1))
 
+
+def cannot_save(path: Path, error: OSError) -> str:
+    """What went wrong saving the state file `path`, in a few words (for logs and errors)."""
+    reason = error.strerror or str(error)
+    if error.filename is not None and Path(error.filename) in path.parents:  # its folder is the trouble
+        reason = f"{reason}: {error.filename}"
+    return f"{path}: cannot save the emulator state file ({reason})"
