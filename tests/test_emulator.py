@@ -15,6 +15,7 @@ import pytest
 from prc3cfg import codec, device
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
+from prc3cfg.emulator.state import state_document
 from prc3cfg.errors import UserError
 from prc3cfg.framing import Direction, Frame, get_framing
 from prc3cfg.image import DEFAULT_SYSTEM, Program
@@ -164,14 +165,54 @@ def test_serve_command_answers_and_saves(tmp_path):
         assert saved["modules"][2]["programs"][9] == WRITE_P10.program.to_json()
 
 
-def test_serve_command_rejects_bad_modules_in_one_line():
-    result = subprocess.run(
-        [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--modules", "0-40"],
-        capture_output=True, text=True, timeout=30,
-    )  # fmt: skip
+def test_serve_with_modules_and_state_serves_exactly_those_and_keeps_the_others(tmp_path):
+    state = tmp_path / "bus.json"
+    kept = replace(ModuleState.factory(2), mode="run")
+    state.write_text(json.dumps(state_document({**modules(1, 3), 2: kept})))
+    with serve(tmp_path, "--state", str(state), "--modules", "3-4") as served:
+        client = Client(served.url)
+        try:
+            assert client.send(1, b"\x50\x00") is None  # in the state file, not named
+            assert client.send(4, WRITE_P10.encode()) == b"\x00\x00"  # named, not in the file: factory
+        finally:
+            client.close()
+    saved = load_state(state)
+    assert sorted(saved) == [1, 2, 3, 4]
+    assert saved[2] == kept and saved[1] == ModuleState.factory(1)
+    assert saved[4].image.program(10) == WRITE_P10.program
+
+
+def busy_port() -> socket.socket:
+    return socket.create_server(("127.0.0.1", 0))
+
+
+@pytest.mark.parametrize(
+    ("options", "says"),
+    [
+        (["--modules", "0-40"], "--modules: '0-40' is outside 1..30"),
+        (["--listen", "nonsense"], "--listen: 'nonsense' is not HOST:PORT"),
+        (["--listen", "127.0.0.1:70000"], "is not HOST:PORT"),
+        (["--listen", "127.0.0.1:{busy}"], "cannot listen (Address already in use) — choose a free port"),
+        (["--state", "{tmp}"], "is a directory — give an emulator state file, or a path where none is yet"),
+        (["--state", "{tmp}/broken.json"], "broken.json:1:43: not valid JSON (Expecting value) — fix or delete it"),
+        (["--state", "{tmp}/odd.json"], "odd.json: module 3: program 7: P = 12000 is outside 0..9999 — fix or delete the entry"),
+        (["--max-connections", "0"], "emulator: max-connections must be at least 1, not 0"),
+        (["--idle-timeout", "0"], "emulator: idle-timeout must be more than 0 s"),
+    ],
+)
+def test_serve_errors_are_one_line(tmp_path, options, says):
+    (tmp_path / "broken.json").write_text('{"format": "prc3-emulator/1", "modules": [')
+    odd = ModuleState.factory(3).to_json()
+    odd["programs"][6]["P"] = 12000
+    (tmp_path / "odd.json").write_text(json.dumps({"format": "prc3-emulator/1", "modules": [odd]}))
+    with busy_port() as busy:
+        arguments = [o.format(tmp=tmp_path, busy=busy.getsockname()[1]) for o in options]
+        result = subprocess.run(
+            [sys.executable, "-m", "prc3cfg", "emulator", "serve", *arguments], capture_output=True, text=True, timeout=30
+        )
     assert result.returncode == 1
-    assert result.stderr.strip().count("\n") == 0
-    assert "outside 1..30" in result.stderr
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: "), result.stderr
+    assert says in result.stderr
 
 
 def state_file(path, *entries: dict):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import signal
 import threading
 from pathlib import Path
@@ -13,6 +14,7 @@ from prc3cfg.cli import emulator_app
 from prc3cfg.cli.common import parse_addresses
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, FaultInjection, load_state
+from prc3cfg.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 from prc3cfg.errors import UserError
 from prc3cfg.framing import FRAMINGS
 from prc3cfg.image import MAX_MODULE_ADDRESS
@@ -31,7 +33,7 @@ def serve(
     listen: Annotated[Optional[str], typer.Option(help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
     state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1), loaded and saved after every accepted write.")] = None,
-    modules: Annotated[Optional[str], typer.Option(help="Module addresses, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
+    modules: Annotated[Optional[str], typer.Option(help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMINGS)}.")] = "crc16",
     line_speed: Annotated[Optional[int], typer.Option("--line-speed", help="Make every exchange take as long as on a line of this baud rate.")] = None,
     parity: Annotated[str, typer.Option(help="none | odd | even (character time, and framing time-outs).")] = "even",
@@ -42,33 +44,56 @@ def serve(
     drop_rate: Annotated[float, typer.Option(help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(help="Fraction of exchanges with one bit flipped.")] = 0.0,
     seed: Annotated[Optional[int], typer.Option(help="Seed for fault injection.")] = None,
+    max_connections: Annotated[int, typer.Option("--max-connections", help="TCP clients served at once; one more is closed at once (logged).")] = MAX_CONNECTIONS,
+    idle_timeout: Annotated[float, typer.Option("--idle-timeout", help="Close a TCP connection that sends nothing for this many seconds.")] = IDLE_TIMEOUT,
+    verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
-    """Run a PRC 3 bus emulator until interrupted."""
+    """Run a PRC 3 bus emulator until SIGINT or SIGTERM (exit 0).
+
+    Serves the modules of --modules, else those of the state file, else
+    1-30. The state file keeps the modules it holds that are not served.
+
+    At most --max-connections TCP clients are served at once; one more is
+    closed at once. A client that sends nothing for --idle-timeout seconds
+    is disconnected. Running out of file descriptors only pauses accepting.
+
+    A write is answered only once it is saved to --state. When the file
+    cannot be written, the error is logged, the module keeps its state and
+    the write gets no reply: the master repeats it. Warnings and errors are
+    logged on stderr.
+    """
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if framing not in FRAMINGS:
         raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMINGS)}")
+    stored = load_state(state) if state is not None else {}
+    addresses = parse_addresses(modules) if modules else (sorted(stored) or range(1, MAX_MODULE_ADDRESS + 1))
+    bus = {address: stored.get(address) or ModuleState.factory(address) for address in addresses}
     try:
-        line = LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits)
-        faults = FaultInjection(drop_rate, corrupt_rate, seed)
+        emulator = Emulator(
+            bus, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed is not None,
+            line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
+            faults=FaultInjection(drop_rate, corrupt_rate, seed), state_path=state,
+            unserved={a: s for a, s in stored.items() if a not in bus},
+            max_connections=max_connections, idle_timeout=idle_timeout,
+        )  # fmt: skip
     except ValueError as error:
         raise UserError(f"emulator: {error}") from None
-    bus = load_state(state) if state is not None else {}
-    addresses = parse_addresses(modules) if modules else ([] if bus else range(1, MAX_MODULE_ADDRESS + 1))
-    for address in addresses:
-        bus.setdefault(address, ModuleState.factory(address))
-    emulator = Emulator(
-        bus, framing=framing, line=line, zvz=zvz, turnaround=turnaround,
-        line_speed=line_speed is not None, faults=faults, state_path=state,
-    )  # fmt: skip
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
     with emulator:
         if listen is not None or not pty:
+            address = listen or "127.0.0.1:7001"
             try:
-                host, port = emulator.listen(*parse_listen(listen or "127.0.0.1:7001"))
-            except OSError as error:
-                raise UserError(f"--listen {listen}: {error.strerror} — choose another port") from None
+                host, port = emulator.listen(*parse_listen(address))
+            except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds
+                reason = str(error.strerror or error).partition(" (while attempting")[0]
+                raise UserError(f"--listen {address}: cannot listen ({reason}) — choose a free port on an address of this host") from None
             print(f"listening on {host}:{port} ({framing}, modules {', '.join(map(str, sorted(bus)))})", flush=True)
         if pty:
-            print(f"pty: {emulator.open_pty()}", flush=True)
+            try:
+                path = emulator.open_pty()
+            except OSError as error:
+                raise UserError(f"--pty: cannot open a pseudo-terminal ({error.strerror or error})") from None
+            print(f"pty: {path}", flush=True)
         stop.wait()
