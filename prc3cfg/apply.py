@@ -2,10 +2,16 @@
 
 Owns execution: per module the steps in order, buses in parallel (a thread per line), the
 modules of one line one after another. Afterwards every module is read back — always,
-also after a refusal — and compared with what it should hold; what the account says
-about a module comes from that read-back, not from the replies (on `open-driver` a reply
-carries no checksum). A difference (a lost or damaged exchange, a module changed on the
-floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
+also after a refusal — and compared with what the steps should have left; what the account
+says about a module comes from that read-back, not from the replies (on `open-driver` a
+reply carries no checksum). A difference (a lost or damaged exchange, a module changed on
+the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
+
+Verification reads exactly what the steps that went out could have changed (`reach`): the
+system block if a system step went out, the programs the steps write and the programs the
+module's own clamping changes — in the fewest 50h/51h/52h exchanges; a repair round reads
+what it repairs. `Verify.FULL` reads the system and every program known from the first
+read-back instead, for the paranoid. A difference counts only when two reads agree on it.
 
 What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
 acknowledgement was lost released the axes all the same. `Release` says for each module
@@ -26,20 +32,38 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from prc3cfg.bustime import LineCost
 from prc3cfg.error_codes import describe, remedy
 from prc3cfg.errors import Interrupted, UserError
-from prc3cfg.image import ModuleImage
+from prc3cfg.image import ModuleImage, Program
 from prc3cfg.link import Link, LinkError
 from prc3cfg.planner import Step, plan_module
-from prc3cfg.readback import read_module
+from prc3cfg.readback import read_programs, read_system
 
 REPAIRS = 2
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
 #: one, so a difference counts only when two reads in a row agree on it.
 CONFIRMING_READS = 4
+
+
+class Verify(enum.Enum):
+    """How much the verifying read-back reads."""
+
+    FLOOR = "floor"  # what the steps could have changed
+    FULL = "full"  # the system and every program known from the first read-back
+
+
+def reach(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step]) -> tuple[bool, frozenset[int]]:
+    """What `steps` (those that went out) could have changed on a module: whether the system
+    parameters, and which programs — those they write, and, after a system step, those whose
+    prediction differs from the read-back (the module's own clamping)."""
+    system = any(step.releases_axes for step in steps)
+    programs = {n for step in steps for n in step.message.touched_programs()}
+    if system:
+        programs |= {n for n, (b, p) in enumerate(zip(before.programs, predicted.programs), 1) if b is not None and p != b}
+    return system, frozenset(programs)
 
 
 class Release(enum.Enum):
@@ -60,11 +84,12 @@ class ModuleRun:
     before: ModuleImage  # the read-back the steps were planned from
     desired: ModuleImage
     steps: tuple[Step, ...]
+    predicted: ModuleImage  # what the steps leave, by the device model
     sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
     written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
     release_sent: bool = False  # a 10h/20h went out on the line
     release_acknowledged: bool = False
-    final: ModuleImage | None = None  # the last read-back
+    final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     failure: str | None = None
     refused: bool = False  # the module answered an error code: stop for good
     interrupted: bool = False
@@ -94,6 +119,16 @@ class ModuleRun:
         return final is not None and final.system == self.before.system and all(
             have is None or have == was for have, was in zip(final.programs, self.before.programs)
         )
+
+    def trespassed(self) -> str | None:
+        """A program the plant does not manage that the last read-back shows other than the module's
+        own clamping leaves it (a damaged frame on a line without a checksum can do that)."""
+        assert self.final is not None
+        for number, (have, want, kept) in enumerate(zip(self.final.programs, self.desired.programs, self.predicted.programs), 1):
+            if want is None and have is not None and have != kept:
+                return (f"program {number}, which the plant file does not manage, reads back other than "
+                        "before the apply (and than the module's clamping leaves it) — check the line and restore it from the snapshot")  # fmt: skip
+        return None
 
     @property
     def unacknowledged(self) -> tuple[Step, ...]:
@@ -134,27 +169,41 @@ class ModuleRun:
             tick()
         return True
 
-    def read_back(self, link: Link) -> ModuleImage:
-        """The module's image: the desired one as soon as a read shows it, else two reads that agree."""
-        managed = [n for n, p in enumerate(self.desired.programs, start=1) if p is not None]
-        previous = read_module(link, self.address, managed, name=self.name)
+    def verify_read(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage) -> ModuleImage:
+        """`known` with what the module holds now in `system`/`programs`: as soon as a read shows
+        what is `expected` there, else once two reads in a row agree."""
+        known = self.final or self.before
+
+        def once() -> ModuleImage:
+            read = read_system(link, self.address, name=self.name) if system else known.system
+            found: dict[int, Program | None] = dict(read_programs(link, self.address, programs, name=self.name))
+            return replace(known, system=read).with_programs(found)
+
+        previous = once()
         for _ in range(CONFIRMING_READS):
-            if previous == self.desired:
+            if _agree(previous, expected, system, programs):
                 break
-            current = read_module(link, self.address, managed, name=self.name)
-            if current == previous:
+            current = once()
+            if _agree(current, previous, system, programs):
                 break
             previous = current
         return previous
 
-    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool) -> None:
-        """Read back; while it differs from the desired image and may be repaired, plan and repair.
+    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool,
+                 verify: Verify = Verify.FLOOR) -> None:  # fmt: skip
+        """Read back what the steps could have changed; while the module differs from the desired
+        image and may be repaired, plan, repair, and read back what the repair could have changed.
 
         A refused module is read back once, for the account, and not repaired.
         """
+        expected, sent_before = self.predicted, 0
+        known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
         for _ in range(REPAIRS + 1):
+            system, programs = reach(self.final or self.before, expected, self.sent[sent_before:])
+            if verify is Verify.FULL:
+                system, programs = True, known_programs
             try:
-                actual = self.read_back(link)
+                self.final = self.verify_read(link, system, programs, expected)
             except Interrupted:
                 self.interrupted = True
                 return
@@ -164,13 +213,15 @@ class ModuleRun:
             except UserError as error:
                 self.failure = f"verification: {error}"
                 return
-            self.final = actual
-            if actual == self.desired:
+            if _agree(self.final, self.desired, True, known_programs):
+                if trespass := self.trespassed():
+                    self.failure = trespass  # no plan may write those programs: nothing to repair
+                    return
                 self.verified, self.failure, self.refused = True, None, False
                 return
             if self.refused or self.repairs == REPAIRS:
                 break
-            repair = plan_module(actual, self.desired, cost)
+            repair = plan_module(self.final, self.desired, cost)
             if repair.releases_axes and not may_release_axes:
                 self.failure = (
                     "the read-back shows other system parameters; writing them would release "
@@ -178,6 +229,7 @@ class ModuleRun:
                 )
                 return
             self.repairs += 1
+            expected, sent_before = repair.predicted, len(self.sent)
             if not self.run(link, repair.steps, tick) and self.interrupted:
                 return
         if self.refused:
@@ -192,6 +244,14 @@ class ModuleRun:
             )
 
 
+def _agree(image: ModuleImage, other: ModuleImage, system: bool, programs: frozenset[int]) -> bool:
+    """Whether two images agree on the system parameters (if `system`) and on `programs`
+    (where `other` has a value: `None` in a desired image is a program the plant leaves alone)."""
+    return (not system or image.system == other.system) and all(
+        other.programs[n - 1] is None or image.programs[n - 1] == other.programs[n - 1] for n in programs
+    )
+
+
 def execute(
     runs: list[ModuleRun],
     links: dict[str, Link],
@@ -199,6 +259,7 @@ def execute(
     *,
     tick: Callable[[], None] = lambda: None,
     may_release_axes: bool = False,
+    verify: Verify = Verify.FLOOR,
 ) -> None:
     """Run every module's steps, then verify and repair; results are left in `runs`.
 
@@ -214,7 +275,7 @@ def execute(
             run.run(links[bus], run.steps, tick)
         for run in bus_runs:
             if not run.interrupted:
-                run.converge(links[bus], costs[bus], tick, may_release_axes)
+                run.converge(links[bus], costs[bus], tick, may_release_axes, verify)
 
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
         for future in [pool.submit(on_bus, bus, bus_runs) for bus, bus_runs in per_bus.items()]:

@@ -56,30 +56,43 @@ def read_module(
     With `clamped_by` (the system parameters a plan will write), every program is read when
     writing them can clamp programs on this module.
     """
-    where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")
-
-    def request(message: codec.Message) -> codec.SystemReply | codec.ProgramsReply:
-        reply = link.request(address, message)
-        if isinstance(reply, int):
-            raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — {remedy(reply)}")
-        return reply
-
-    system_reply = request(codec.ReadSystem())
-    if system_reply.address != address:
-        raise ReadBackError(
-            f"{where}: the module answering at address {address} reports S9 = {system_reply.address} — "
-            "check the module's Address Init and the plant file's address"
-        )
-    wanted = set(programs)
-    if clamped_by is not None and can_clamp(system_reply.system, clamped_by):
-        wanted = set(PROGRAM_NUMBERS)
+    system = read_system(link, address, name=name)
+    wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
     slots: list[Program | None] = [None] * PROGRAM_COUNT
+    for number, program in read_programs(link, address, wanted, name=name).items():
+        slots[number - 1] = program
+    return ModuleImage(address=address, system=system, programs=tuple(slots))
+
+
+def _request(link: Link, address: int, message: codec.Message, name: str) -> codec.SystemReply | codec.ProgramsReply:
+    reply = link.request(address, message)
+    if isinstance(reply, int):
+        where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")
+        raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — {remedy(reply)}")
+    return reply
+
+
+def read_system(link: Link, address: int, *, name: str = "") -> SystemParameters:
+    """One 50h: the system parameters; S9 must be `address`."""
+    reply = _request(link, address, codec.ReadSystem(), name)
+    if reply.address != address:
+        raise ReadBackError(
+            f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering at address "
+            f"{address} reports S9 = {reply.address} — check the module's Address Init and the plant file's address"
+        )
+    return reply.system
+
+
+def read_programs(link: Link, address: int, programs: Iterable[int], *, name: str = "") -> dict[int, Program]:
+    """The given programs, in the fewest 51h/52h exchanges (`read_messages`)."""
+    wanted = set(programs)
+    found: dict[int, Program] = {}
     for message in read_messages(wanted)[1:]:
-        reply = request(message)
+        reply = _request(link, address, message, name)
         for offset, program in enumerate(reply.programs):
             if reply.first + offset in wanted:
-                slots[reply.first + offset - 1] = program
-    return ModuleImage(address=address, system=system_reply.system, programs=tuple(slots))
+                found[reply.first + offset] = program
+    return found
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 from emulated import emulated_plant, run_cli
 
 from prc3cfg.emulator import FaultInjection
@@ -165,3 +166,42 @@ def test_an_apply_killed_half_way_converges_when_run_again(tmp_path):
         again = subprocess.run(command, capture_output=True, text=True, env=env, timeout=120)
         assert again.returncode == 0, again.stderr
         assert plant.matches_plant()
+
+
+def verification(tmp_path) -> list[str]:
+    """The requests after each bus's last write in the newest apply's journal (hex, message only)."""
+    newest = sorted((tmp_path / ".prc3cfg" / "journal").iterdir())[-1]
+    exchanges = [e for e in map(json.loads, newest.read_text().splitlines()) if e["event"] == "exchange"]
+    requests = []
+    for bus in sorted({e["bus"] for e in exchanges}):
+        on_bus = [e["request"] for e in exchanges if e["bus"] == bus]
+        writes = [i for i, r in enumerate(on_bus) if r[:2] not in ("50", "51", "52")]
+        requests += on_bus[writes[-1] + 1 :] if writes else []
+    return requests
+
+
+def slow_down_program_3(plant) -> None:
+    """The reciprocator profile's program 3 a little slower: a 41h to each module that uses it."""
+    document = yaml.safe_load(plant.path.read_text())
+    document["profiles"]["reciprocator"]["programs"][3]["speed"] = 0.24
+    plant.path.write_text(yaml.safe_dump(document, sort_keys=False))
+
+
+def test_verification_reads_only_what_the_steps_could_have_changed(plant, capsys, tmp_path):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    slow_down_program_3(plant)
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve").code == 0
+    assert verification(tmp_path) == ["5103"] * 5  # program 3 of the five modules that take it from the profile
+    assert plant.matches_plant()
+
+
+def test_full_verification_reads_the_system_and_every_program(plant, capsys, tmp_path):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    slow_down_program_3(plant)
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--verify", "full").code == 0
+    assert verification(tmp_path).count("5000") == 5
+
+
+def test_a_system_step_is_verified_with_the_system_block(plant, capsys, tmp_path):
+    assert run_cli(capsys, "apply", plant.path, "--module", "booth-b-pretreat", "--auto-approve", "--allow-axis-release").code == 0
+    assert verification(tmp_path) == ["5000", "52000102"]  # the system, and programs 1..2 (33h, 46h)

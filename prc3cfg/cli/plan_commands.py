@@ -11,7 +11,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 from prc3cfg import __version__, render
-from prc3cfg.apply import ModuleRun, Release, execute
+from prc3cfg.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.cli import Outcome, app, click_errors
 from prc3cfg.cli.common import (
     CANCEL,
@@ -191,6 +191,7 @@ def _apply(
     lock_timeout: float,
     trace: Path | None,
     retries: int,
+    verify: Verify,
 ) -> None:
     """Lock, read back, plan (or prove the plan file), gate, snapshot, run, verify, account."""
     planned = None if plan_file is None else _read_plan_file(*plan_file, loaded)  # before any time on the line
@@ -208,7 +209,7 @@ def _apply(
             the_plan = _plan_from_file(plan_file[0], planned, loaded, pairs, images)
             print(f"Applying {plan_file[0]}, proved against the modules as read back now:")
         print(render.human(the_plan))
-        runs = [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps) for c in the_plan.changes]
+        runs = [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted) for c in the_plan.changes]
         if not runs:
             print("Nothing to do: every module matches the plant file.")
             return
@@ -223,7 +224,7 @@ def _apply(
                            modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
             costs = {name: line_cost(bus) for name, bus in buses.items()}
             with progress_bar(sum(len(r.steps) for r in runs), "applying") as tick:
-                execute(runs, links, costs, tick=tick, may_release_axes=allow_axis_release)
+                execute(runs, links, costs, tick=tick, may_release_axes=allow_axis_release, verify=verify)
             _report(runs, journal, snapshot_path)
 
 
@@ -322,6 +323,7 @@ def _first_difference(theirs: list, ours: list) -> str:
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
+VerifyOpt = Annotated[Verify, typer.Option(help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
 
 @app.command()
@@ -335,6 +337,7 @@ def apply(
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
+    verify: VerifyOpt = Verify.FLOOR,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     if plant is None and plan_file is None:
@@ -354,7 +357,7 @@ def apply(
     _apply(
         loaded, pairs, desired=None, targets=plant_targets(pairs), plan_file=plan,
         auto_approve=auto_approve, allow_axis_release=allow_axis_release, lock_timeout=lock_timeout,
-        trace=trace, retries=retries,
+        trace=trace, retries=retries, verify=verify,
     )  # fmt: skip
 
 
@@ -366,6 +369,7 @@ def restore(
     lock_timeout: LockOpt = 0.0,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
+    verify: VerifyOpt = Verify.FLOOR,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     taken = Snapshot.load(snapshot)
@@ -381,5 +385,5 @@ def restore(
     _apply(
         loaded, pairs, desired=taken.images, targets=targets, plan_file=None,
         auto_approve=auto_approve, allow_axis_release=allow_axis_release, lock_timeout=lock_timeout,
-        trace=trace, retries=retries,
+        trace=trace, retries=retries, verify=verify,
     )  # fmt: skip
