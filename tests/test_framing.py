@@ -224,6 +224,17 @@ CRC16_CASES = [
     case("own-inter-char-timeout",
          ((0, "A50101"), []),
          ((0.04, "50005704"), [F(1, "5000")]), inter_char_timeout=0.05),
+    # over TCP a frame ends by its length: no pause inside it discards it
+    case("tcp-a-pause-inside-a-frame",
+         ((0, "A50101"), []),
+         ((30.0, None), []),
+         ((60.0, "50005704"), [F(1, "5000")]), uart=False),
+    case("tcp-garbage-still-discarded",
+         ((0, "FF00"), []),
+         ((5.0, REQ_50), [D("FF00", "no A5h"), F(1, "5000")]), uart=False),
+    case("tcp-own-inter-char-timeout-is-not-used",
+         ((0, "A50101"), []),
+         ((1.0, "50005704"), [F(1, "5000")]), inter_char_timeout=0.001, uart=False),
 ]
 
 REQ_S = "7E2102500073"  # stx request, module 1, 50h
@@ -284,6 +295,14 @@ STX_CASES = [
          ((0, "7E"), []),
          ((0.05, STX_64[2:-2]), []),
          ((0.1099, STX_64[-2:]), [F(31, MSG_64)])),
+    # over TCP there is no message time-out: a frame ends by its N
+    case("tcp-no-message-time-out",
+         ((0, "7E"), []),
+         ((10.0, None), []),
+         ((20.0, "21017E"), []),
+         ((30.0, "00A0"), [F(1, "7E")]), uart=False),
+    case("tcp-a-bad-checksum-is-still-discarded",
+         ((0, "7E2102500074"), [D("7E2102500074", "bad checksum")]), uart=False),
 ]
 
 OPEN_DRIVER_CASES = [
@@ -318,6 +337,11 @@ OPEN_DRIVER_CASES = [
     case("any-address-byte",
          ((0, "FF01"), []),
          (IDLE, [F(255, "01")])),
+    # no length: over TCP too, ZVZ is the only end of a frame
+    case("tcp-ended-by-zvz-all-the-same",
+         ((0, "015000"), []),
+         ((0.1, "025000"), [F(1, "5000")]),
+         ((0.2, None), [F(2, "5000")]), uart=False),
 ]
 
 
@@ -371,6 +395,11 @@ def test_open_driver_decoder_needs_zvz():
         get_framing("open-driver").decoder(REQUEST, LINE)
 
 
+def test_over_tcp_the_length_framings_have_no_time_outs():
+    assert get_framing("crc16").decoder(REQUEST, LINE, uart=False).inter_char_timeout == float("inf")
+    assert get_framing("stx").decoder(REQUEST, LINE, uart=False).message_timeout == float("inf")
+
+
 def test_crc16_default_inter_char_timeout_is_five_characters():
     assert get_framing("crc16").decoder(REQUEST, LINE).inter_char_timeout == pytest.approx(5 * 11 / 9600)
     slow = LineSettings(baud=1200, parity="none")
@@ -415,6 +444,22 @@ def test_garbage_outside_frames_is_reported_in_bounded_pieces(name):
         events.append(event)
     assert all(isinstance(e, Discarded) and len(e.data) <= prc3cfg.framing.base.MAX_SKIPPED for e in events)
     assert b"".join(e.data for e in events) == garbage
+
+
+@pytest.mark.parametrize("name", ["crc16", "stx"])
+def test_garbage_in_chunks_is_reported_in_whole_pieces_and_the_rest_at_the_next_start_code(name):
+    framing = get_framing(name)
+    decoder = framing.decoder(REQUEST, LINE)
+    garbage = bytes([0x55]) * 1000
+    for start in range(0, len(garbage), 100):
+        decoder.receive_data(garbage[start : start + 100], 0.0)
+    decoder.receive_data(framing.encode(REQUEST, 1, b"\x50\x00"), 0.0)
+    events = []
+    while (event := decoder.next_event()) is not NEED_DATA:
+        events.append(event)
+    assert [len(e.data) for e in events[:-1]] == [256, 256, 256, 232]
+    assert b"".join(e.data for e in events[:-1]) == garbage
+    assert events[-1] == Frame(REQUEST, 1, b"\x50\x00")
 
 
 def test_an_open_driver_frame_that_never_ends_is_discarded_in_pieces():

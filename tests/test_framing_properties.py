@@ -101,6 +101,24 @@ def test_frames_back_to_back(combo, line, data):
 
 
 @EXAMPLES
+@given(combo=st.sampled_from(HUNTING), line=lines, data=st.data())
+def test_over_tcp_frames_survive_any_split_and_any_pauses(combo, line, data):
+    """Over TCP (uart=False) a frame with a length is taken whole however it is split and delayed."""
+    name, direction = combo
+    framing = FRAMINGS[name]
+    contents = data.draw(st.lists(frame_contents(framing), min_size=1, max_size=4))
+    stream = b"".join(framing.encode(direction, address, message) for address, message in contents)
+    decoder = framing.decoder(direction, line, uart=False)
+    events, now = [], 0.0
+    for chunk in split(data.draw, stream):
+        now += data.draw(st.floats(0, 100, allow_nan=False))
+        decoder.receive_data(chunk, now)
+        events += drain(decoder, now)
+    events += drain(decoder, now + 100)
+    assert events == [Frame(direction, address, message) for address, message in contents]
+
+
+@EXAMPLES
 @given(direction=st.sampled_from(Direction), line=lines, by_idle=st.booleans(), data=st.data())
 def test_open_driver_frames_separated_by_zvz(direction, line, by_idle, data):
     framing = FRAMINGS["open-driver"]

@@ -16,6 +16,21 @@ Time, for every decoder (reading):
   framing's gap or time-out just as a later chunk would;
 - `line_idle()` says the caller saw the line idle for the framing's gap, whatever the times.
 
+Where the bytes come from (`uart`, a choice of the caller, who knows its port):
+- `uart=True` (the default): from a UART — a serial port, a pseudo-terminal. Arrival times
+  are the line's, and a gap inside a frame or a late frame means the frame is broken;
+- `uart=False`: from a network byte stream — TCP (`socket://`, `rfc2217://`, the emulator's
+  TCP side). TCP delivers every byte in order but not on time: a frame can be split into
+  pieces and held back by the network, a paused process or a busy machine, so arrival
+  times say nothing about the line. A framing whose frames carry their length (crc16,
+  stx) then ends a frame by its length alone: no inter-character time-out (crc16) and no
+  message time-out (stx) discards it. open-driver frames carry no length: its ZVZ gap
+  stays the delimiter everywhere, and it ignores `uart`.
+
+Speed: bytes outside any frame are skipped a run at a time (`bytes.find` of the start
+code), not byte by byte, and still reported as `Discarded` pieces of at most `MAX_SKIPPED`
+bytes, so a line of endless garbage costs little and never grows a decoder.
+
 Errors are split like h11's: `FramingError` is *our* misuse when encoding (address or length
 out of range). What the *peer* sends is never an exception: a receiver throws bad bytes away,
 and the decoder reports them as `Discarded` for traces.
@@ -94,8 +109,7 @@ class Decoder(abc.ABC):
     def receive_data(self, data: bytes, now: float) -> None:
         """Take a chunk of bytes whose last byte arrived at `now`."""
         self._clock(now, len(data))
-        for behind, byte in enumerate(data, 1 - len(data)):  # behind: -(bytes after this one)
-            self._byte(byte, now + behind * self.line.char_time)
+        self._take(bytes(data), now)
         if data:
             self._last = now
 
@@ -114,8 +128,8 @@ class Decoder(abc.ABC):
         """Time has reached `now`; `n_bytes` bytes are about to arrive (0: none)."""
 
     @abc.abstractmethod
-    def _byte(self, byte: int, at: float) -> None:
-        """Take one byte, which arrived at `at`."""
+    def _take(self, data: bytes, now: float) -> None:
+        """Take a chunk of bytes whose last byte arrived at `now` (byte i of n at `now - (n - 1 - i) × char time`)."""
 
     def _silence(self, now: float, n_bytes: int) -> float:
         """How long the line was idle before `n_bytes` bytes arriving back to back up to `now`."""
@@ -129,11 +143,15 @@ class Decoder(abc.ABC):
     def _discard(self, reason: str, data: bytes | bytearray) -> None:
         self._events.append(Discarded(reason, bytes(data)))
 
-    def _skip(self, byte: int, reason: str) -> None:
-        """A byte outside any frame; a long run is reported in pieces of MAX_SKIPPED bytes."""
-        self._skipped.append(byte)
-        if len(self._skipped) >= MAX_SKIPPED:
-            self._flush_skipped(reason)
+    def _skip(self, run: bytes, reason: str) -> None:
+        """Bytes outside any frame; a long run is reported in pieces of MAX_SKIPPED bytes."""
+        skipped = self._skipped
+        skipped += run
+        if len(skipped) >= MAX_SKIPPED:
+            whole = len(skipped) - len(skipped) % MAX_SKIPPED
+            for start in range(0, whole, MAX_SKIPPED):
+                self._discard(reason, skipped[start : start + MAX_SKIPPED])
+            del skipped[:whole]
 
     def _flush_skipped(self, reason: str) -> None:
         if self._skipped:
@@ -168,8 +186,10 @@ class Framing(abc.ABC):
         *,
         zvz: float | None = None,
         inter_char_timeout: float | None = None,
+        uart: bool = True,
     ) -> Decoder:
-        """A decoder for frames travelling in `direction`; times in seconds."""
+        """A decoder for frames travelling in `direction`; times in seconds; `uart=False` for
+        bytes from a TCP stream, where arrival times say nothing about the line."""
 
 
 def _span(values: range) -> str:

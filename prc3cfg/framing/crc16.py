@@ -9,8 +9,11 @@
     ("123456789" → 29B1h), `binascii.crc_hqx(data, 0xFFFF)`.
 
 A receiver hunts for its direction's start code, reads N from the third byte and checks
-the CRC. It discards a frame with a bad CRC and a frame with a gap of more than the
-inter-character time-out inside it (default 5 character times: 5.7 ms at 9600 8E1).
+the CRC. It discards a frame with a bad CRC and, from a UART, a frame with a gap of more
+than the inter-character time-out inside it (default 5 character times: 5.7 ms at 9600
+8E1). From a TCP stream (`uart=False`, see `base`) a frame ends by its length alone: the
+inter-character time-out is infinite, so a frame split and delayed by the network or a
+paused process is still taken whole.
 
 Readings (where link.md is silent):
 - Bytes before a start code, a start code of the other direction included, are skipped and
@@ -59,9 +62,13 @@ class Crc16Framing(Framing):
         *,
         zvz: float | None = None,
         inter_char_timeout: float | None = None,
+        uart: bool = True,
     ) -> Crc16Decoder:
-        timeout = TIMEOUT_CHARS * line.char_time if inter_char_timeout is None else inter_char_timeout
-        return Crc16Decoder(direction, line, timeout)
+        if not uart:
+            inter_char_timeout = float("inf")
+        elif inter_char_timeout is None:
+            inter_char_timeout = TIMEOUT_CHARS * line.char_time
+        return Crc16Decoder(direction, line, inter_char_timeout)
 
 
 class Crc16Decoder(Decoder):
@@ -86,20 +93,29 @@ class Crc16Decoder(Decoder):
             self._frame = bytearray()
         self._flush_skipped(self._no_start_code)
 
-    def _byte(self, byte: int, at: float) -> None:
-        frame = self._frame
-        if not frame:
-            if byte == self._start_code:
+    def _take(self, data: bytes, now: float) -> None:
+        """Whole runs at a time: garbage up to the next start code, then as much of the frame as N asks for."""
+        i, n = 0, len(data)
+        while i < n:
+            frame = self._frame
+            if not frame:
+                start = data.find(self._start_code, i)
+                if start < 0:
+                    self._skip(data[i:], self._no_start_code)
+                    return
+                self._skip(data[i:start], self._no_start_code)
                 self._flush_skipped(self._no_start_code)
-                frame.append(byte)
-            else:
-                self._skip(byte, self._no_start_code)
-            return
-        frame.append(byte)
-        if len(frame) > HEADER and len(frame) == HEADER + frame[2] + 1 + TRAILER:
-            self._frame = bytearray()
-            received, expected = int.from_bytes(frame[-TRAILER:], "big"), crc(frame[:-TRAILER])
-            if received == expected:
-                self._emit(frame[1], frame[HEADER:-TRAILER])
-            else:
-                self._discard(f"bad CRC {received:04X}h, expected {expected:04X}h", frame)
+                frame.append(self._start_code)
+                i = start + 1
+                continue
+            length = HEADER + frame[2] + 1 + TRAILER if len(frame) >= HEADER else HEADER
+            taken = data[i : i + length - len(frame)]
+            frame += taken
+            i += len(taken)
+            if len(frame) == length and length > HEADER:
+                self._frame = bytearray()
+                received, expected = int.from_bytes(frame[-TRAILER:], "big"), crc(frame[:-TRAILER])
+                if received == expected:
+                    self._emit(frame[1], frame[HEADER:-TRAILER])
+                else:
+                    self._discard(f"bad CRC {received:04X}h, expected {expected:04X}h", frame)

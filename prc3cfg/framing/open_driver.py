@@ -21,7 +21,8 @@ Readings (where link.md is silent):
 - The direction cannot be told from the bytes: a decoder stamps its own (reading).
 - `decoder()` needs `zvz` in seconds, > 0 (ValueError otherwise); the driver's 4 ms minimum
   is checked with the INIT data block, not here (reading).
-- `inter_char_timeout` is not used by this framing: ZVZ is its only gap (reading).
+- `inter_char_timeout` and `uart` are not used by this framing: ZVZ is its only gap, from a
+  UART and from a TCP stream alike — a frame without a length has no other end (reading).
 - A frame longer than the driver's longest (address and 1024 bytes, TELLEN's range) is
   discarded, in pieces of that length as it arrives, so a line that never goes quiet
   cannot grow the decoder without bound (reading).
@@ -51,6 +52,7 @@ class OpenDriverFraming(Framing):
         *,
         zvz: float | None = None,
         inter_char_timeout: float | None = None,
+        uart: bool = True,
     ) -> OpenDriverDecoder:
         if zvz is None or not zvz > 0:
             raise ValueError(f"the open-driver framing needs the character delay time zvz (s > 0), not {zvz}")
@@ -75,8 +77,12 @@ class OpenDriverDecoder(Decoder):
         if self._silence(now, n_bytes) >= self.zvz:
             self.line_idle()
 
-    def _byte(self, byte: int, at: float) -> None:
-        if len(self._frame) == MAX_FRAME:
-            self._discard(f"a frame longer than {MAX_FRAME} bytes", self._frame)
-            self._frame, self._too_long = bytearray(), True
-        self._frame.append(byte)
+    def _take(self, data: bytes, now: float) -> None:
+        i, n = 0, len(data)
+        while i < n:
+            if len(self._frame) == MAX_FRAME:
+                self._discard(f"a frame longer than {MAX_FRAME} bytes", self._frame)
+                self._frame, self._too_long = bytearray(), True
+            taken = data[i : i + MAX_FRAME - len(self._frame)]
+            self._frame += taken
+            i += len(taken)

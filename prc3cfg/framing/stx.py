@@ -9,8 +9,10 @@
     CHK) is sent as 7Eh 00h; the receiver drops the 00h. A 7Eh followed by anything else
     starts a new frame. CHK is the sum of the unstuffed bytes.
 
-The whole frame must arrive within the SPD message time-out for the baud, counted from its
-7Eh, plus the frame's own transmission time (link.md).
+From a UART the whole frame must arrive within the SPD message time-out for the baud,
+counted from its 7Eh, plus the frame's own transmission time (link.md). From a TCP stream
+(`uart=False`, see `base`) there is no message time-out: a frame ends by its N alone, so a
+frame split and delayed by the network or a paused process is still taken whole.
 
 Readings (where link.md is silent):
 - SPD time-out for a baud not in the table: the entry of the next lower listed baud; below
@@ -39,6 +41,7 @@ from prc3cfg.framing.base import Decoder, Direction, Framing, ms
 from prc3cfg.line import LineSettings
 
 START = 0x7E
+NO_START = "no 7Eh start code"  # why bytes outside a frame are discarded
 STUFFED = bytes([START, 0x00])
 TYPES = {Direction.REQUEST: 0b001, Direction.REPLY: 0b010}  # bits 7-5 of CMD|ADDR
 ADDRESS_MASK = 0x1F
@@ -76,14 +79,15 @@ class StxFraming(Framing):
         *,
         zvz: float | None = None,
         inter_char_timeout: float | None = None,
+        uart: bool = True,
     ) -> StxDecoder:
-        return StxDecoder(direction, line)
+        return StxDecoder(direction, line, message_timeout(line.baud) if uart else float("inf"))
 
 
 class StxDecoder(Decoder):
-    def __init__(self, direction: Direction, line: LineSettings) -> None:
+    def __init__(self, direction: Direction, line: LineSettings, message_timeout: float) -> None:
         super().__init__(direction, line)
-        self.message_timeout = message_timeout(line.baud)
+        self.message_timeout = message_timeout
         self._type = TYPES[direction]
         self._raw = bytearray()  # the frame as received, from its 7Eh; empty while hunting
         self._body = bytearray()  # unstuffed: CMD|ADDR, N, D0 … D(N-1), CHK
@@ -92,7 +96,7 @@ class StxDecoder(Decoder):
 
     def line_idle(self) -> None:
         self._abandon("incomplete frame, then the line went idle")
-        self._flush_skipped("no 7Eh start code")
+        self._flush_skipped(NO_START)
 
     def _clock(self, now: float, n_bytes: int) -> None:
         # the coming bytes may complete the frame, so allow for all of them
@@ -108,29 +112,55 @@ class StxDecoder(Decoder):
     def _late(self, at: float, deadline: float) -> str:
         return f"message time-out: {ms(at - self._start)} after its 7Eh, limit {ms(deadline - self._start)}"
 
+    def _take(self, data: bytes, now: float) -> None:
+        """A run at a time: garbage up to the next 7Eh, and the bytes of a frame up to the next 7Eh
+        or the end of the frame's header or body; a 7Eh, and the byte after it, one by one."""
+        i, n = 0, len(data)
+        while i < n:
+            if not self._raw:
+                start = data.find(START, i)
+                if start < 0:
+                    self._skip(data[i:], NO_START)
+                    return
+                self._skip(data[i:start], NO_START)
+                i = start
+            elif self._escape_at is None and data[i] != START:
+                body = self._body
+                end = min(n, i + (body[1] + 3 if len(body) >= 2 else 2) - len(body))
+                if (stop := data.find(START, i, end)) >= 0:
+                    end = stop
+                run = data[i:end]
+                self._raw += run
+                body += run
+                i = end
+                self._grown(now - (n - end) * self.line.char_time)
+                continue
+            self._byte(data[i], now - (n - 1 - i) * self.line.char_time)
+            i += 1
+
     def _byte(self, byte: int, at: float) -> None:
+        """A 7Eh, or the byte after a 7Eh inside a frame; arrived at `at`."""
         if self._escape_at is not None:
             escape_at, self._escape_at = self._escape_at, None
             if byte == 0x00:
                 self._raw.append(byte)
-                self._unstuffed(START, at)
+                self._body.append(START)
+                self._grown(at)
                 return
             self._abandon("cut short by a 7Eh start code", self._raw[:-1])
             self._begin(escape_at)
-        if byte == START:
-            if self._raw:
-                self._raw.append(byte)
-                self._escape_at = at
-            else:
-                self._begin(at)
+        if byte != START:
+            self._raw.append(byte)
+            self._body.append(byte)
+            self._grown(at)
         elif self._raw:
             self._raw.append(byte)
-            self._unstuffed(byte, at)
+            self._escape_at = at
         else:
-            self._skip(byte, "no 7Eh start code")
+            self._begin(at)
 
     def _begin(self, at: float) -> None:
-        self._flush_skipped("no 7Eh start code")
+        self._flush_skipped(NO_START)
         self._raw, self._body, self._start = bytearray([START]), bytearray(), at
 
     def _abandon(self, reason: str, data: bytearray | None = None) -> None:
@@ -138,10 +168,10 @@ class StxDecoder(Decoder):
             self._discard(reason, self._raw if data is None else data)
         self._raw, self._body, self._escape_at = bytearray(), bytearray(), None
 
-    def _unstuffed(self, byte: int, at: float) -> None:
+    def _grown(self, at: float) -> None:
+        """The body has grown, its last byte arrived at `at`: a bad length, or a complete frame?"""
         body = self._body
-        body.append(byte)
-        if len(body) == 2 and byte == 0:
+        if len(body) == 2 and body[1] == 0:
             self._abandon("bad length N = 0")
         elif len(body) >= 2 and len(body) == body[1] + 3:
             self._complete(at)
