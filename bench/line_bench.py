@@ -14,7 +14,9 @@ and the client do not share an interpreter), then
   *minimal* verification (the floor: the 50h if a system step runs, and the fewest 51h/52h
   that read the programs the steps write), and, from the apply's journal, each phase on the
   line and the verification exchanges against the floor; acceptance: at most 1.10, and
-  verification exchanges = the floor.
+  verification exchanges = the floor. A third apply changes one program alike on every
+  module: with a full line (30 modules) that is one broadcast and a verifying read per
+  module; it prints the writes' bus time against the same change as addressed writes.
 
 Wall times include each command's start-up (imports, about 0.3 s), reported separately.
 """
@@ -33,18 +35,19 @@ from pathlib import Path
 from prc3cfg import codec
 from prc3cfg.bustime import LineCost
 from prc3cfg.line import LineSettings
-from prc3cfg.readback import read_messages
+from prc3cfg.verification import read_messages
 
-def changed_programs(changed: int) -> str:
-    """Programs 1..32 of every module; the first `changed` of them a little further and faster."""
+def changed_programs(changed: set[int] = frozenset(), faster: set[int] = frozenset()) -> str:
+    """Programs 1..32 of a module; those in `changed` a little further and faster, those in
+    `faster` only faster."""
     return "\n".join(
-        f"          {n}: {{position: {0.5 + n / 100 + (0.01 if n <= changed else 0):.3f}, "
-        f"speed: 0.{200 + n + (10 if n <= changed else 0):03d}, dwell: {n % 7}.5}}"
+        f"          {n}: {{position: {0.5 + n / 100 + (0.01 if n in changed else 0):.3f}, "
+        f"speed: 0.{200 + n + (10 if n in changed | faster else 0):03d}, dwell: {n % 7}.5}}"
         for n in range(1, 33)
     )
 
 
-PROGRAMS = changed_programs(0)
+PROGRAMS = changed_programs()
 PLANT = """\
 plant: line-bench
 buses:
@@ -121,6 +124,10 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
     for name, part in (("read-back", read_estimate), ("writes", plan["estimated_bus_time_s"]), ("verify", floor_time)):
         print(f"    {name:<10} on the line {phases[name]:7.2f} s   estimate {part:7.2f} s   ratio {phases[name] / part:.3f}")
     print(f"    verification exchanges {verifying}, floor {floor}{'' if verifying == floor else '   ✗ above the floor'}")
+    broadcasts = [b for bus in plan["buses"] for b in bus.get("broadcasts", [])]
+    if broadcasts:
+        print(f"    {len(broadcasts)} broadcast{'s' if len(broadcasts) != 1 else ''} to {len(broadcasts[0]['modules'])} modules: "
+              f"writes {plan['estimated_bus_time_s']:.3f} s, as addressed writes {plan['without_broadcasts_bus_time_s']:.3f} s")  # fmt: skip
 
 
 def main() -> None:
@@ -155,9 +162,15 @@ def main() -> None:
                 print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio {wall / read_estimate:.3f}")
             if not args.skip_apply:
                 measure_apply("commissioning from factory defaults", prc3cfg, plant, Path(work), cost, read_estimate)
-                changed = "".join(MODULE.format(address=a, programs=changed_programs(args.changed)) for a in range(1, args.modules + 1))
-                plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=changed))
-                measure_apply(f"{args.changed} changed programs per module", prc3cfg, plant, Path(work), cost, read_estimate)
+                for title, programs in (
+                    (f"{args.changed} changed programs per module, other ones on each",
+                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)})),
+                    ("the same speed of program 32 on every module",
+                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}, {32})),
+                ):  # fmt: skip
+                    changed = "".join(MODULE.format(address=a, programs=programs(a)) for a in range(1, args.modules + 1))
+                    plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=changed))
+                    measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate)
         finally:
             emulator.terminate()
             emulator.wait()

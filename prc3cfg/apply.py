@@ -7,10 +7,10 @@ says about a module comes from that read-back, not from the replies (on `open-dr
 reply carries no checksum). A difference (a lost or damaged exchange, a module changed on
 the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
 
-Verification reads exactly what the steps that went out could have changed (`reach`): the
-system block if a system step went out, the programs the steps write and the programs the
-module's own clamping changes — in the fewest 50h/51h/52h exchanges; a repair round reads
-what it repairs. `Verify.FULL` reads the system and every program known from the first
+Verification reads exactly what the steps that went out could have changed
+(`prc3cfg.verification.reach`): the system block if a system step went out, the programs
+the steps write and the programs the module's own clamping changes — in the fewest
+50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
 read-back instead, for the paranoid. A difference counts only when two reads agree on it.
 
 What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
@@ -41,6 +41,7 @@ from prc3cfg.image import ModuleImage, Program
 from prc3cfg.link import Link, LinkError
 from prc3cfg.planner import Step, plan_module
 from prc3cfg.readback import read_programs, read_system
+from prc3cfg.verification import reach
 
 REPAIRS = 2
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
@@ -53,17 +54,6 @@ class Verify(enum.Enum):
 
     FLOOR = "floor"  # what the steps could have changed
     FULL = "full"  # the system and every program known from the first read-back
-
-
-def reach(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step]) -> tuple[bool, frozenset[int]]:
-    """What `steps` (those that went out) could have changed on a module: whether the system
-    parameters, and which programs — those they write, and, after a system step, those whose
-    prediction differs from the read-back (the module's own clamping)."""
-    system = any(step.releases_axes for step in steps)
-    programs = {n for step in steps for n in step.message.touched_programs()}
-    if system:
-        programs |= {n for n, (b, p) in enumerate(zip(before.programs, predicted.programs), 1) if b is not None and p != b}
-    return system, frozenset(programs)
 
 
 class Release(enum.Enum):
@@ -85,6 +75,7 @@ class ModuleRun:
     desired: ModuleImage
     steps: tuple[Step, ...]
     predicted: ModuleImage  # what the steps leave, by the device model
+    broadcasts: int = 0  # the first steps are the bus's broadcasts: the bus sends them, once for all
     sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
     written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
     release_sent: bool = False  # a 10h/20h went out on the line
@@ -161,7 +152,9 @@ class ModuleRun:
                 self.failure = f"{where}: {error}"
                 return False
             if reply != 0:  # a write is answered with a code word only (decode_reply sees to it)
-                self.refused = True
+                # Final — unless a broadcast before it may have been lost (none answers one): then
+                # the read-back and an addressed repair get their chance first.
+                self.refused = not (self.broadcasts and self.repairs == 0)
                 self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
                 return False
             self.written.append(step)
@@ -252,6 +245,28 @@ def _agree(image: ModuleImage, other: ModuleImage, system: bool, programs: froze
     )
 
 
+def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callable[[], None]) -> None:
+    """The bus's broadcasts, once each; every receiver counts them as sent (none answers: the
+    verifying read-back tells whether they arrived, and addressed repairs follow where not)."""
+    steps = next((run.steps[: run.broadcasts] for run in runs if run.broadcasts), ())
+    receivers = [run for run in runs if run.broadcasts]
+    for index, step in enumerate(steps, start=1):
+        try:
+            link.broadcast(step.message, turnaround)
+        except Interrupted:
+            for run in receivers:
+                run.interrupted, run.failure = True, f"interrupted before broadcast {index} of {len(steps)} ({step.summary})"
+            return
+        except LinkError as error:
+            for run in receivers:
+                run.failure = f"broadcast {index} of {len(steps)} ({step.summary}): {error}"
+            return
+        for run in receivers:
+            run.sent.append(step)  # it may have reached every module: they count it as sent
+            run.release_sent |= step.releases_axes
+        tick()
+
+
 def execute(
     runs: list[ModuleRun],
     links: dict[str, Link],
@@ -271,8 +286,10 @@ def execute(
         per_bus.setdefault(run.bus, []).append(run)
 
     def on_bus(bus: str, bus_runs: list[ModuleRun]) -> None:
+        broadcast(links[bus], costs[bus].turnaround, bus_runs, tick)
         for run in bus_runs:
-            run.run(links[bus], run.steps, tick)
+            if not run.interrupted:
+                run.run(links[bus], run.steps[run.broadcasts :], tick)
         for run in bus_runs:
             if not run.interrupted:
                 run.converge(links[bus], costs[bus], tick, may_release_axes, verify)

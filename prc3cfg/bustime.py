@@ -2,8 +2,10 @@
 
     t = (bytes_request + bytes_reply) × bits_per_char / baud + turnaround (+ 2 × ZVZ for open-driver)
 
-Bytes are whole frames (framing overhead and stx stuffing included). Plans are made of
-addressed exchanges only: a broadcast is answered by none, so it cannot be verified.
+Bytes are whole frames (framing overhead and stx stuffing included). A broadcast (address
+0, the manual's ring call) has no reply frame. (reading) It still costs the turnaround
+(and an open-driver line's gap after the request): the master cannot send the next frame
+sooner, and gets no reply that would say the modules are ready.
 
 Owns the cost of exchanges. Does not own which exchanges a plan makes (`prc3cfg.planner`).
 Pure.
@@ -38,3 +40,9 @@ class LineCost:
         reply = self.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message)))
         gaps = 2 * self.zvz if self.framing.name == "open-driver" else 0.0
         return (len(request) + len(reply)) * self.line.char_time + self.turnaround + gaps
+
+    def broadcast_time(self, message: codec.Message) -> float:
+        """Seconds a broadcast of `message` holds the line: request frame and turnaround."""
+        request = self.framing.encode(Direction.REQUEST, 0, message.encode())
+        gap = self.zvz if self.framing.name == "open-driver" else 0.0
+        return len(request) * self.line.char_time + self.turnaround + gap

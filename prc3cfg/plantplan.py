@@ -4,7 +4,12 @@ A plan is data: per bus, per module, the steps to send (the PRC 3 message, exact
 goes on the line), what they were planned from (the plant file's hash and each module's
 read-back hash, so a stale plan can be refused) and what they are predicted to do. The
 optimiser that makes a module's steps is `prc3cfg.planner`; rendering is `prc3cfg.render`.
-Pure.
+
+A bus may start with broadcasts (`prc3cfg.sharing`): steps sent once to address 0 that
+every module of the line processes. In the plan file they are the leading steps of every
+module of that bus, marked `"broadcast": true` — so each module's steps still say, in
+order, everything that reaches it (a reader that sent them addressed would do the same,
+only slower) — and the bus lists them once under `"broadcasts"`. Pure.
 """
 
 from __future__ import annotations
@@ -30,13 +35,16 @@ def image_sha256(image: ModuleImage) -> str:
 
 @dataclass(frozen=True, slots=True)
 class ModuleChange:
-    """One module of a plant plan: where it is, what it holds, what it should hold, the steps."""
+    """One module of a plant plan: where it is, what it holds, what it should hold, the steps.
+
+    The first `broadcasts` steps are its bus's broadcasts; `plan.bus_time` counts its own steps only."""
 
     bus: str
     name: str
     actual: ModuleImage
     desired: ModuleImage
     plan: ModulePlan
+    broadcasts: int = 0
 
     @property
     def address(self) -> int:
@@ -59,17 +67,22 @@ class ModuleChange:
             "estimated_bus_time_s": round(self.plan.bus_time, 4),
             "steps": [
                 {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes}
-                for step in self.steps
+                | ({"broadcast": True} if index < self.broadcasts else {})
+                for index, step in enumerate(self.steps)
             ],
         }
 
 
 @dataclass(frozen=True, slots=True)
 class PlantPlan:
+    """Every module's change, the broadcasts of each bus, and what they cost on the line."""
+
     plant: str
     plant_path: str
     plant_sha256: str
     modules: tuple[ModuleChange, ...]
+    broadcast_time: float = 0.0  # every bus's broadcasts, once each
+    unshared_bus_time: float | None = None  # the same changes without broadcasts, where some were shared
 
     @property
     def changes(self) -> tuple[ModuleChange, ...]:
@@ -77,7 +90,11 @@ class PlantPlan:
 
     @property
     def bus_time(self) -> float:
-        return sum(m.plan.bus_time for m in self.modules)
+        return sum(m.plan.bus_time for m in self.modules) + self.broadcast_time
+
+    def broadcasts(self, bus: str) -> tuple[Step, ...]:
+        """The steps sent once to address 0 on `bus`, before any module's own steps."""
+        return next((m.steps[: m.broadcasts] for m in self.modules if m.bus == bus and m.broadcasts), ())
 
     @property
     def naive_bus_time(self) -> float:
@@ -85,7 +102,8 @@ class PlantPlan:
 
     @property
     def message_count(self) -> int:
-        return sum(len(m.steps) for m in self.modules)
+        """Messages on the lines: every module's own steps, and each broadcast once."""
+        return sum(len(m.steps) - m.broadcasts for m in self.modules) + sum(len(self.broadcasts(b)) for b in self.buses())
 
     @property
     def axis_releases(self) -> tuple[ModuleChange, ...]:
@@ -105,13 +123,19 @@ class PlantPlan:
             "plant_path": self.plant_path,
             "plant_sha256": self.plant_sha256,
             "buses": [
-                {"name": bus, "modules": [m.to_json() for m in modules]} for bus, modules in self.buses().items()
-            ],
+                {"name": bus, "modules": [m.to_json() for m in modules]}
+                | ({"broadcasts": [
+                    {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
+                     "modules": [m.address for m in modules if m.broadcasts]}
+                    for step in self.broadcasts(bus)
+                ]} if self.broadcasts(bus) else {})
+                for bus, modules in self.buses().items()
+            ],  # fmt: skip
             "estimated_bus_time_s": round(self.bus_time, 4),
             "naive_bus_time_s": round(self.naive_bus_time, 4),
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
-        }
+        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +148,7 @@ class PlannedModule:
     name: str
     state_sha256: str
     steps: tuple[codec.Message, ...]
+    broadcasts: int  # how many of the leading steps are the bus's broadcasts
 
 
 class PlanFileError(ValueError):
@@ -180,8 +205,12 @@ def _planned_module(bus: str, module: dict[str, Any]) -> PlannedModule:
     steps = module["steps"]
     if len(steps) > MAX_STEPS:
         raise PlanFileError(f"{where}: {len(steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — make the plan again")
-    messages = []
+    messages, flags = [], []
     for index, step in enumerate(steps, start=1):
+        flags.append(step.get("broadcast", False))
+        if flags[-1] not in (True, False) or (flags[-1] and not all(flags)):
+            raise PlanFileError(f"{where}: step {index} ({step['message']}) is marked broadcast after a step that is not — "
+                                "broadcasts lead a module's steps: make the plan again")  # fmt: skip
         message = codec.decode_message(bytes.fromhex(step["message"]))
         if message.hex() != step["message"]:  # "don't care" bytes that are not 00h, upper-case digits
             raise PlanFileError(f"{where}: step {index} ({step['message']}) is not written as prc3cfg writes that "
@@ -194,4 +223,4 @@ def _planned_module(bus: str, module: dict[str, Any]) -> PlannedModule:
         messages.append(message)
     if module["releases_axes"] is not any(m.RELEASES_AXES for m in messages):
         raise PlanFileError(f"{where}: releases_axes: {json.dumps(module['releases_axes'])} is not what its steps do — make the plan again")
-    return PlannedModule(bus, address, str(module["name"]), str(module["state_sha256"]), tuple(messages))
+    return PlannedModule(bus, address, str(module["name"]), str(module["state_sha256"]), tuple(messages), sum(flags))

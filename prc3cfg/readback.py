@@ -1,10 +1,8 @@
 """Read-back: what every module holds, in the fewest exchanges.
 
 A module image is one 50h (system parameters, S9) and, for the managed programs only,
-52h reads of up to four consecutive programs (51h for a lone one): a greedy cover from
-the lowest unread program, which is the fewest exchanges for any set of programs; each
-read ends at the last wanted program of its window, so no byte is read for nothing at
-the end of a run. A fully managed module takes 1 + 16 exchanges.
+the fewest 52h/51h reads (`prc3cfg.verification.read_messages`): a fully managed module
+takes 1 + 16 exchanges.
 
 When the system parameters a plan will write can clamp programs (a lower S1 or S4, a
 higher S5: prc3-protocol.md §4.2), every program is read, not only the managed ones: the
@@ -28,24 +26,11 @@ from prc3cfg.error_codes import describe, remedy
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.image import PROGRAM_COUNT, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters
 from prc3cfg.link.client import Link
+from prc3cfg.verification import read_messages
 
 
 class ReadBackError(UserError):
     """A module answered a read with an error code, or is not the module the plant says."""
-
-
-def read_messages(programs: Iterable[int]) -> list[codec.Message]:
-    """50h, then the fewest 51h/52h that read exactly the programs wanted (and between them)."""
-    wanted = sorted(set(programs))
-    messages: list[codec.Message] = [codec.ReadSystem()]
-    i = 0
-    while i < len(wanted):
-        first = wanted[i]
-        while i < len(wanted) and wanted[i] <= first + codec.MAX_READ_PROGRAMS - 1:
-            i += 1
-        last = wanted[i - 1]
-        messages.append(codec.ReadProgram(first) if first == last else codec.ReadPrograms(first, last))
-    return messages
 
 
 def read_module(

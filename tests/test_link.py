@@ -17,7 +17,8 @@ from prc3cfg.framing import Direction, get_framing
 from prc3cfg.image import Program
 from prc3cfg.line import LineSettings
 from prc3cfg.link import Link, LinkError, Trace, open_port
-from prc3cfg.readback import ReadBackError, read_messages, read_module
+from prc3cfg.readback import ReadBackError, read_module
+from prc3cfg.verification import read_messages
 
 FRAMINGS = ["crc16", "open-driver", "stx"]
 

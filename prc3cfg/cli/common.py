@@ -8,6 +8,7 @@ import stat
 import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any, Optional
 
@@ -28,6 +29,7 @@ from prc3cfg.planner import UnreachableImage, plan_module
 from prc3cfg.plant import Plant
 from prc3cfg.plantplan import ModuleChange, PlantPlan
 from prc3cfg.readback import Target, read_all
+from prc3cfg.sharing import Module, share
 
 stderr = Console(stderr=True)
 #: Ctrl-C and SIGTERM for the running command (`main` installs the handlers).
@@ -262,7 +264,8 @@ def load_actual(path: Path, plant: Plant, pairs) -> dict[Key, ModuleImage]:
 
 
 def make_plan(plant: Plant, pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None) -> PlantPlan:
-    """Plan every chosen module from its read-back to its desired image (the plant file's by default)."""
+    """Plan every chosen module from its read-back to its desired image (the plant file's by default),
+    then broadcast what the modules of a line share, where every receiver is known (`sharing`)."""
     changes = []
     for bus, module in pairs:
         key = (bus.name, module.address)
@@ -272,4 +275,23 @@ def make_plan(plant: Plant, pairs, actual: dict[Key, ModuleImage], desired: dict
         except UnreachableImage as error:
             raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
         changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
-    return PlantPlan(plant.name, str(plant.path.resolve()), plant.sha256, tuple(changes))
+    broadcast_time, unshared = 0.0, sum(c.plan.bus_time for c in changes)
+    for bus in {bus.name: bus for bus, _ in pairs}.values():
+        on_bus = [c for c in changes if c.bus == bus.name]
+        if not receivers_known(bus, on_bus):
+            continue
+        shared = share([Module(c.actual, c.desired, c.plan) for c in on_bus], line_cost(bus))
+        if shared.broadcasts:
+            plans = {c.address: (plan, len(shared.broadcasts)) for c, plan in zip(on_bus, shared.plans)}
+            changes = [replace(c, plan=plans[c.address][0], broadcasts=plans[c.address][1]) if c.bus == bus.name else c for c in changes]
+            broadcast_time += sum(line_cost(bus).broadcast_time(step.message) for step in shared.broadcasts)
+    return PlantPlan(plant.name, str(plant.path.resolve()), plant.sha256, tuple(changes), broadcast_time,
+                     unshared if broadcast_time else None)  # fmt: skip
+
+
+def receivers_known(bus, changes: list[ModuleChange]) -> bool:
+    """Whether every module on the bus's line is planned: the plant lists all the line holds (all 30
+    addresses, or `only_these_modules: true`) and the plan covers each of them."""
+    listed = {m.address for m in bus.modules}
+    complete = len(listed) == MAX_MODULE_ADDRESS or getattr(bus, "only_these_modules", False)
+    return complete and {c.address for c in changes} == listed

@@ -36,8 +36,8 @@ from prc3cfg.cli.common import (
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import load_plant
 from prc3cfg.image import ModuleImage
-from prc3cfg.planner import StepProblem, plan_from_steps, plan_module
-from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.planner import StepProblem, plan_from_steps
+from prc3cfg.plantplan import PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.readback import Target
 from prc3cfg.records import Journal, Snapshot
 
@@ -149,7 +149,8 @@ def _account(run: ModuleRun) -> str:
     head = f"bus {run.bus}, module {run.address} ({run.name})"
     if run.verified:
         repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
-        return f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} written, verified{repaired}"
+        received = f" and {run.broadcasts} broadcast{'s' if run.broadcasts != 1 else ''} received" if run.broadcasts else ""
+        return f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} written{received}, verified{repaired}"
     lines = [f"✗ {head}: {run.failure}"]
     if not run.sent:
         lines.append("    nothing was sent to it")
@@ -209,7 +210,8 @@ def _apply(
             the_plan = _plan_from_file(plan_file[0], planned, loaded, pairs, images)
             print(f"Applying {plan_file[0]}, proved against the modules as read back now:")
         print(render.human(the_plan))
-        runs = [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted) for c in the_plan.changes]
+        runs = [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts)
+                for c in the_plan.changes]  # fmt: skip
         if not runs:
             print("Nothing to do: every module matches the plant file.")
             return
@@ -223,7 +225,7 @@ def _apply(
             journal.record("apply", plant=loaded.name, plant_sha256=loaded.sha256, snapshot=str(snapshot_path),
                            modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
             costs = {name: line_cost(bus) for name, bus in buses.items()}
-            with progress_bar(sum(len(r.steps) for r in runs), "applying") as tick:
+            with progress_bar(the_plan.message_count, "applying") as tick:
                 execute(runs, links, costs, tick=tick, may_release_axes=allow_axis_release, verify=verify)
             _report(runs, journal, snapshot_path)
 
@@ -276,15 +278,16 @@ def _read_plan_file(path: Path, document: Any, loaded) -> PlanFile:
 
 
 def _plan_from_file(path: Path, planned: PlanFile, loaded, pairs, images: dict[Key, ModuleImage]) -> PlantPlan:
-    """The plan file as a plan, proved module by module before anything is written.
+    """The plan file's plan, proved before anything is written.
 
-    Refused when a module changed since the plan was made; when its steps do anything but
-    turn the read-back into the plant file's image (`run_steps` names the rule they break);
-    and when they are not exactly the steps prc3cfg plans from this read-back — the plan
-    and the read-back are the same as when the file was made, so any difference is an edit.
+    Refused when a module changed since the plan was made; when a module's steps do anything
+    but turn its read-back into the plant file's image (`run_steps` names the rule they
+    break); and when they are not exactly the steps — broadcasts included — that prc3cfg
+    plans from this read-back: the plant file and the read-back are the same as when the file
+    was made, so any difference is an edit. What is applied is then that plan.
     """
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
-    changes = []
+    chosen = []
     for entry in planned.modules:
         where = f"bus {entry.bus}, module {entry.address}"
         if (entry.bus, entry.address) not in modules:
@@ -292,25 +295,28 @@ def _plan_from_file(path: Path, planned: PlanFile, loaded, pairs, images: dict[K
         bus, module = modules[(entry.bus, entry.address)]
         if entry.name != module.name:
             raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {module.name!r} in the plant file — plan again")
-        actual = images[(entry.bus, entry.address)]
-        if image_sha256(actual) != entry.state_sha256:
+        if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
             raise UserError(
                 f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
                 "(teach-in or another apply?); nothing was written — plan again"
             )
-        desired, cost = module.desired_image(), line_cost(bus)
-        edited = f"{path}: {where} ({entry.name}): {{}} — the plan file was changed after it was made; nothing was written: plan again and review it"
-        theirs, ours = list(entry.steps), [step.message for step in plan_module(actual, desired, cost).steps]
+        chosen.append((bus, module))
+    ours = make_plan(loaded, chosen, images)
+    for entry, change in zip(planned.modules, ours.modules):
+        edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
+                  "after it was made; nothing was written: plan again and review it")  # fmt: skip
+        theirs, steps = list(entry.steps), [step.message for step in change.steps]
         try:
-            module_plan = plan_from_steps(actual, desired, theirs, cost)
+            plan_from_steps(change.actual, change.desired, theirs, line_cost(modules[(entry.bus, entry.address)][0]))
         except StepProblem as problem:
             if problem.index:  # the step that breaks a rule
                 raise UserError(edited.format(problem)) from None
-            raise UserError(edited.format(f"{_first_difference(theirs, ours)}, and {problem}")) from None
-        if theirs != ours:
-            raise UserError(edited.format(_first_difference(theirs, ours)))
-        changes.append(ModuleChange(entry.bus, entry.name, actual, desired, module_plan))
-    return PlantPlan(loaded.name, str(loaded.path.resolve()), loaded.sha256, tuple(changes))
+            raise UserError(edited.format(f"{_first_difference(theirs, steps)}, and {problem}")) from None
+        if theirs != steps:
+            raise UserError(edited.format(_first_difference(theirs, steps)))
+        if entry.broadcasts != change.broadcasts:
+            raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
+    return ours
 
 
 def _first_difference(theirs: list, ours: list) -> str:

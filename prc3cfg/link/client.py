@@ -7,6 +7,12 @@ or a read) — and every retry is logged and traced. The reply's address and len
 checked. Time-outs are detected here, with the port's timeout fixed at the framing's gap
 (link.md: `inter_byte_timeout` does nothing on Linux).
 
+The link decodes replies as the port delivers them: from a UART (a device path, a pty)
+with the framing's inter-character or message time-out; over TCP (a `socket://` or
+`rfc2217://` URL, and so `emulator://`) with `uart=False` (`prc3cfg.framing.base`): a
+reply split and delayed by the network or a paused process is taken whole by its length,
+never discarded and asked for again.
+
 On a framing without a checksum (`open-driver`) a damaged reply can look like any code:
 an error code there is believed only when the module gives the same one twice in a row
 (asking again is harmless: the message is idempotent). Every attempt has an overall
@@ -25,6 +31,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from urllib.parse import urlsplit
 
 import serial
 
@@ -34,6 +41,7 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.line import LineSettings
 from prc3cfg.link.trace import Trace
+from prc3cfg.locks import TCP_SCHEMES
 
 log = logging.getLogger(__name__)
 
@@ -90,6 +98,8 @@ class Link:
         self.observer = observer
         self.cancel = cancel
         self._gap_ends_frame = framing.name == "open-driver"
+        #: Whether the bytes come from a UART, or over TCP, where their arrival times say nothing.
+        self.uart = urlsplit(str(port.port)).scheme.lower() not in TCP_SCHEMES
         port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
         #: Once a reply started, the longest it can take to end; past it the line is not quiet.
         self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
@@ -146,6 +156,20 @@ class Link:
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
         )
 
+    def broadcast(self, message: codec.Message, turnaround: float) -> None:
+        """Send `message` to address 0: every module processes it, none answers. Waits the
+        modules' `turnaround` (and on open-driver the gap that ends the frame) before returning,
+        so the next frame does not arrive while they work; `Interrupted` when cancelled first."""
+        if self.cancel is not None and self.cancel.is_set():
+            raise Interrupted()
+        data = message.encode()
+        frame = self.framing.encode(Direction.REQUEST, 0, data)
+        started = time.time()
+        self._send(frame)
+        gap = self.zvz if self._gap_ends_frame else 0.0
+        time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
+        self._observe(0, data, None, 1, started)
+
     def _observe(self, address: int, data: bytes, raw: bytes | None, attempt: int, started: float) -> None:
         self.exchanges += 1
         if self.observer:
@@ -164,7 +188,7 @@ class Link:
     def _exchange(self, address: int, data: bytes) -> bytes | None:
         """One attempt: the reply message from `address`, or None (time-out, nothing valid)."""
         self._send(self.framing.encode(Direction.REQUEST, address, data))
-        decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz)
+        decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz, uart=self.uart)
         deadline = time.monotonic() + self.timeout
         last_call = deadline + self._longest_reply  # even a line that never goes quiet ends here
         pending = False  # bytes of a frame that only a gap can end

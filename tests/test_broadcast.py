@@ -1,0 +1,163 @@
+"""Broadcasts: what every module of a full line needs alike goes once to address 0.
+
+The pure part (`prc3cfg.sharing`) as tables of lines; then a 30-module line on a real
+emulator: commissioning and a shared change by broadcast, each receiver verified by reading
+back, a lost broadcast repaired with addressed writes, and a plan file with broadcasts.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from emulated import emulated_plant, run_cli
+from lossy import Loss
+
+from prc3cfg import codec
+from prc3cfg.bustime import LineCost
+from prc3cfg.image import ModuleImage, Program
+from prc3cfg.line import LineSettings
+from prc3cfg.planner import plan_module
+from prc3cfg.sharing import Module, share
+
+COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
+
+
+def line(changes: dict[int, dict[int, Program | None]], *, count: int = 30, actual_changes=None) -> list[Module]:
+    """`count` factory modules; module a's desired image has `changes.get(a, changes[0])` programs."""
+    modules = []
+    for address in range(1, count + 1):
+        actual = ModuleImage.factory(address).with_programs((actual_changes or {}).get(address, {}))
+        desired = actual.with_programs(changes.get(address, changes[0]))
+        modules.append(Module(actual, desired, plan_module(actual, desired, COST)))
+    return modules
+
+
+def test_the_same_speed_on_every_module_is_one_broadcast():
+    shared = share(line({0: {5: Program(P=150, V=300)}}), COST)
+    assert [s.message for s in shared.broadcasts] == [codec.WriteSpeeds(((5, 300),))]
+    assert all([s.message for s in p.steps] == [codec.WriteSpeeds(((5, 300),))] and p.bus_time == 0 for p in shared.plans)
+    assert shared.bus_time == COST.broadcast_time(codec.WriteSpeeds(((5, 300),)))
+
+
+def test_a_module_that_already_holds_the_value_takes_the_broadcast_harmlessly():
+    modules = line({0: {5: Program(P=150, V=300)}}, actual_changes={7: {5: Program(P=150, V=300)}})
+    shared = share(modules, COST)
+    assert len(shared.broadcasts) == 1
+    assert shared.plans[6].steps == shared.broadcasts  # module 7 receives it all the same, and is verified
+
+
+def test_values_that_differ_between_modules_are_sent_to_each():
+    shared = share(line({0: {5: Program(P=150, V=300)}, 3: {5: Program(P=150, V=310)}}), COST)
+    assert shared.broadcasts == ()
+
+
+def test_a_broadcast_may_not_write_a_program_a_module_leaves_alone():
+    modules = line({0: {5: Program(P=150, V=300)}})
+    keep = modules[4].desired.with_programs({n: None for n in range(1, 65) if n != 6})  # module 5 manages only program 6
+    modules[4] = Module(modules[4].actual, keep, plan_module(modules[4].actual, keep, COST))
+    assert share(modules, COST).broadcasts == ()
+
+
+def test_a_system_block_is_broadcast_only_when_every_module_needs_it():
+    new_system = replace(ModuleImage.factory(1).system, S1=2000)
+    everyone = line({0: {}}, count=30)
+    everyone = [Module(m.actual, replace(m.desired, system=new_system), plan_module(m.actual, replace(m.desired, system=new_system), COST))
+                for m in everyone]  # fmt: skip
+    assert [s.message.ID for s in share(everyone, COST).broadcasts] == [0x20]
+    but_one = everyone[:29] + [line({0: {}}, count=30)[29]]
+    assert all(s.message.ID != 0x20 for s in share(but_one, COST).broadcasts)  # module 30 would release its axes for nothing
+
+
+# -- a full line of 30 modules on a real emulator ------------------------------------------
+
+FULL_LINE = """\
+plant: full-line
+profiles:
+  booth:
+    system: {upper_reversing_point: 2.000, max_speed: 0.500}
+    programs:
+      1: {position: 1.500, speed: 0.300}
+      2: {position: 0.200, speed: 0.300, dwell: 1.0}
+    chains: [{programs: [1, 2], loop: true}]
+buses:
+  - name: line
+    port: socket://127.0.0.1:1
+    modules:
+"""
+
+
+@pytest.fixture(autouse=True)
+def private_locks(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+
+
+def full_line(tmp_path: Path, speed: str = "0.300", modules: int = 30) -> Path:
+    source = tmp_path / "source.yaml"
+    source.write_text(FULL_LINE.replace("2: {position: 0.200, speed: 0.300", f"2: {{position: 0.200, speed: {speed}")
+                      + "".join(f"      - {{address: {a}, name: m{a}, profiles: booth}}\n" for a in range(1, modules + 1)))  # fmt: skip
+    return source
+
+
+def journal(tmp_path: Path) -> list[dict]:
+    newest = sorted((tmp_path / ".prc3cfg" / "journal").iterdir())[-1]
+    return [e for e in map(json.loads, newest.read_text().splitlines()) if e["event"] == "exchange"]
+
+
+def test_commissioning_and_a_shared_change_go_by_broadcast_and_every_module_is_read_back(tmp_path, capsys):
+    with emulated_plant(tmp_path, source=full_line(tmp_path)) as plant:
+        first = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert first.code == 0, first.err
+        assert plant.matches_plant()
+        assert {e["address"] for e in journal(tmp_path) if e["request"][:2] not in ("50", "51", "52")} == {0}
+        assert all(not s.referenced for s in plant.emulators["line"].modules().values())
+        assert first.out.count("broadcasts received, verified") == 30
+
+        plant.path.write_text(plant.path.read_text().replace("speed: 0.3\n", "speed: 0.31\n", 1))  # program 1, every module
+        second = run_cli(capsys, "apply", plant.path, "--auto-approve")
+        assert second.code == 0, second.err
+        exchanges = journal(tmp_path)
+        writes = [e for e in exchanges if e["request"][:2] not in ("50", "51", "52")]
+        assert [(e["address"], e["request"]) for e in writes] == [(0, codec.WriteSpeeds(((1, 310),)).hex())]
+        verifying = exchanges[exchanges.index(writes[0]) + 1 :]
+        assert sorted(e["address"] for e in verifying) == list(range(1, 31)) and {e["request"] for e in verifying} == {"5101"}
+        assert plant.matches_plant()
+
+
+def test_a_line_not_known_to_be_complete_gets_no_broadcast(tmp_path, capsys):
+    with emulated_plant(tmp_path, source=full_line(tmp_path, modules=29)) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        assert 0 not in {e["address"] for e in journal(tmp_path)}
+
+
+def test_a_lost_broadcast_is_repaired_with_addressed_writes(tmp_path, capsys):
+    def lose_the_first_broadcast(frame, number):
+        return {Loss.REQUEST} if frame.address == 0 and not lost else set()
+
+    lost: list = []
+    rule = lambda frame, number: (lost.append(frame) or {Loss.REQUEST}) if frame.address == 0 and not lost else set()  # noqa: E731
+    with emulated_plant(tmp_path, source=full_line(tmp_path), lossy={"line": rule}) as plant:
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 0, result.err
+        assert plant.matches_plant()
+        assert "after 1 repair round" in result.out
+        assert lost and lost[0].message[:1] == b"\x20"  # the system block never arrived: repaired module by module
+
+
+def test_a_plan_file_with_broadcasts_is_applied_as_made_and_refused_when_edited(tmp_path, capsys):
+    with emulated_plant(tmp_path, source=full_line(tmp_path)) as plant:
+        made = tmp_path / "plan.json"
+        assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
+        document = json.loads(made.read_text())
+        assert document["buses"][0]["broadcasts"] and document["buses"][0]["broadcasts"][0]["modules"] == list(range(1, 31))
+        for step in document["buses"][0]["modules"][4]["steps"]:
+            step.pop("broadcast")  # module 5's steps sent addressed: not the plan that was made
+        edited = tmp_path / "edited.json"
+        edited.write_text(json.dumps(document))
+        refused = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve", "--allow-axis-release")
+        assert refused.code == 1 and "bus line, module 5 (m5): 0 of its steps are marked broadcast, where the plan has" in refused.err
+        applied = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve", "--allow-axis-release")
+        assert applied.code == 0, applied.err
+        assert plant.matches_plant()
