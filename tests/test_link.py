@@ -4,19 +4,24 @@ from __future__ import annotations
 
 import io
 import os
+import socket
+import threading
+import time
 import tty
 from dataclasses import replace
+from types import SimpleNamespace
 
 import pytest
 
 from prc3cfg import codec
+from prc3cfg.bustime import LineCost
 from prc3cfg.device import ModuleState
 from prc3cfg.errors import UserError
 from prc3cfg.emulator import Emulator, FaultInjection
 from prc3cfg.framing import Direction, get_framing
-from prc3cfg.image import Program
+from prc3cfg.image import DEFAULT_SYSTEM, Program
 from prc3cfg.line import LineSettings
-from prc3cfg.link import Link, LinkError, Trace, open_port
+from prc3cfg.link import Link, LinkError, Trace, open_link, open_port
 from prc3cfg.readback import ReadBackError, read_module
 from prc3cfg.verification import read_messages
 
@@ -177,3 +182,81 @@ def test_a_fresh_pty_that_drops_parity_is_refused_at_once_in_one_line(use):
     finally:
         os.close(master)
         os.close(slave)
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_reply_split_by_a_pause_over_tcp_is_taken_whole(framing):
+    """Over socket:// the second half of a reply may come long after the first (a paused process,
+    a busy machine): longer than the inter-character (crc16) or message (stx) time-out of a UART.
+    It is one good reply — not a discarded frame, a time-out and a retry."""
+    encoding = get_framing(framing)
+    reply = encoding.encode(Direction.REPLY, 1, codec.SystemReply(DEFAULT_SYSTEM, 1).encode())
+    paused = threading.Event()  # the link has read half the reply, then found nothing three times
+    with socket.create_server(("127.0.0.1", 0)) as server:
+
+        def module() -> None:
+            conn, _ = server.accept()
+            with conn:
+                conn.recv(4096)  # the request
+                conn.sendall(reply[:5])
+                paused.wait()
+                conn.sendall(reply[5:])
+
+        threading.Thread(target=module, daemon=True).start()
+        line = LineSettings()
+        port = open_port(f"socket://127.0.0.1:{server.getsockname()[1]}", line, bus="test")
+        read, heard, silent = port.read, [], []
+
+        def read_and_count_silence(size: int = 1) -> bytes:
+            data = read(size)  # an empty read has waited a read slice (50 ms): 150 ms > 63 ms for stx, 5.7 ms for crc16
+            heard.append(data) if data else silent.append(heard != [])
+            if sum(silent) == 3:
+                paused.set()
+            return data
+
+        port.read = read_and_count_silence
+        text = io.StringIO()
+        link = Link(port, encoding, bus="test", line=line, timeout=10, retries=0, trace=Trace(text))
+        try:
+            assert link.request(1, codec.ReadSystem()) == codec.SystemReply(DEFAULT_SYSTEM, 1)
+        finally:
+            paused.set()
+            port.close()
+    assert b"".join(heard) == reply and sum(silent) == 3
+    assert [line.split("\t")[2] for line in text.getvalue().splitlines()] == [">", "<"]  # nothing discarded
+
+
+def emulator_bus(port: str) -> SimpleNamespace:
+    """A plant bus with one module, as `open_link` reads it."""
+    return SimpleNamespace(name="b1", port=port, framing="crc16", line=LineSettings(), zvz=0.020, turnaround=0.010,
+                           timeout=5.0, modules=[SimpleNamespace(address=1)])  # fmt: skip
+
+
+def test_an_emulator_at_line_speed_answers_no_sooner_than_the_line_would(tmp_path):
+    with open_link(emulator_bus("emulator://rehearsal?line-speed=1200"), tmp_path / "plant.yaml") as link:
+        started = time.monotonic()
+        assert link.request(1, codec.ReadSystem()) == codec.SystemReply(DEFAULT_SYSTEM, 1)
+        took = time.monotonic() - started
+    line_time = LineCost.of("crc16", LineSettings(baud=1200), 0.010, 0.020).message_time(1, codec.ReadSystem())
+    assert took >= line_time  # 34 bytes of 11 bits at 1200 baud and the turnaround: 0.32 s
+    assert (tmp_path / ".prc3cfg" / "emulators" / "rehearsal.json").exists()  # the query is no part of the name
+
+
+@pytest.mark.parametrize(
+    ("query", "says"),
+    [
+        ("?speed=9600", "unknown option 'speed' — emulator:// takes only ?line-speed=BAUD"),
+        ("?line-speed=9600&trace=1", "unknown option 'trace' — emulator:// takes only ?line-speed=BAUD"),
+        ("?line-speed=fast", "line-speed 'fast' is not a baud rate — write a whole number, e.g. line-speed=9600"),
+        ("?line-speed=0", "line-speed '0' is not a baud rate — write a whole number, e.g. line-speed=9600"),
+        ("?line-speed", "line-speed '' is not a baud rate — write a whole number, e.g. line-speed=9600"),
+        ("?line-speed=9600&line-speed=1200", "line-speed is given more than once — give it once"),
+    ],
+)
+def test_an_emulator_port_takes_only_a_line_speed_and_says_so_in_one_line(tmp_path, query, says):
+    port = f"emulator://rehearsal{query}"
+    with pytest.raises(UserError) as refused:
+        with open_link(emulator_bus(port), tmp_path / "plant.yaml"):
+            pass
+    assert str(refused.value) == f"bus b1: port {port}: {says}"
+    assert not (tmp_path / ".prc3cfg").exists()  # refused before the emulator starts

@@ -1,20 +1,33 @@
 """Opening a plant bus's line: a device path, any pyserial URL, or `emulator://NAME`.
 
 `emulator://NAME` runs the bus emulator in this process (the same code as `prc3cfg
-emulator serve`) on a loopback port and connects to it through pyserial's `socket://`, so
-the whole link is exercised. Its state is kept in `.prc3cfg/emulators/NAME.json` beside
-the plant file, created with factory-default modules at the plant's addresses.
+emulator serve`) on a loopback port and connects to it through `socket://`, so the whole
+link is exercised. Its state is kept in `.prc3cfg/emulators/NAME.json` beside the plant
+file (with its journal beside it while it runs, `prc3cfg.emulator.journal`), created with
+factory-default modules at the plant's addresses. `emulator://NAME?line-speed=BAUD` makes
+every exchange take as long as on a line of BAUD baud with the bus's character format, to
+rehearse real timings without hardware; the query takes no other key.
+
+`socket://` ports are pyserial's with two changes (`TcpPort`): `in_waiting` says how many
+bytes have arrived (pyserial says 1 whenever there are any, so a reply would be read a
+byte at a time), and closing does not sleep 0.3 s (pyserial's pause for a quick
+reconnect, which prc3cfg never makes: it closes a line when a command is done with it).
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
+import sys
 import termios
 import threading
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import replace
 from pathlib import Path
+from urllib.parse import parse_qsl, urlsplit
 
 import serial
+from serial.urlhandler import protocol_socket
 
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, load_state
@@ -29,8 +42,43 @@ PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.P
 STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
 
 
+class TcpPort(protocol_socket.Serial):
+    """pyserial's `socket://` port that tells how many bytes have arrived and closes at once."""
+
+    @property
+    def in_waiting(self) -> int:
+        if not self.is_open:
+            raise serial.PortNotOpenError()
+        return int.from_bytes(fcntl.ioctl(self._socket, termios.FIONREAD, bytes(4)), sys.byteorder)
+
+    def close(self) -> None:
+        if self.is_open and self._socket:
+            with contextlib.suppress(OSError):
+                self._socket.close()
+            self._socket = None
+        self.is_open = False
+
+
 def emulator_state_path(plant_path: Path, port: str) -> Path:
-    return plant_path.parent / ".prc3cfg" / "emulators" / f"{port[len(EMULATOR_SCHEME):]}.json"
+    name = port[len(EMULATOR_SCHEME) :].partition("?")[0]
+    return plant_path.parent / ".prc3cfg" / "emulators" / f"{name}.json"
+
+
+def emulator_line_speed(port: str) -> int | None:
+    """The baud rate of `emulator://NAME?line-speed=BAUD`, None without a query; ValueError,
+    in words that say what to write, for any other query."""
+    options = parse_qsl(urlsplit(port).query, keep_blank_values=True)
+    for key, _ in options:
+        if key != "line-speed":
+            raise ValueError(f"unknown option '{key}' — emulator:// takes only ?line-speed=BAUD")
+    if len(options) > 1:
+        raise ValueError("line-speed is given more than once — give it once")
+    if not options:
+        return None
+    value = options[0][1]
+    if not value.isascii() or not value.isdigit() or int(value) == 0:
+        raise ValueError(f"line-speed '{value}' is not a baud rate — write a whole number, e.g. line-speed=9600")
+    return int(value)
 
 
 def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
@@ -44,16 +92,15 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
         f"bus {bus}: port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
         f"{line.stop_bits:g} stop bits — a pseudo-terminal carries no parity: set parity: none"
     )
+    settings = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
+                "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}  # fmt: skip
     try:
-        port = serial.serial_for_url(
-            url,
-            baudrate=line.baud,
-            bytesize=line.data_bits,
-            parity=PARITY[line.parity],
-            stopbits=STOP_BITS[line.stop_bits],
-            timeout=0.05,
-            **({} if is_url else {"exclusive": True}),
-        )
+        if url.partition("://")[0].lower() == "socket":
+            port = TcpPort(None, **settings)
+            port.port = url
+            port.open()
+        else:
+            port = serial.serial_for_url(url, **settings, **({} if is_url else {"exclusive": True}))
     except termios.error:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
@@ -89,13 +136,17 @@ def open_link(
     with contextlib.ExitStack() as stack:
         url = bus.port
         if url.startswith(EMULATOR_SCHEME):
+            try:
+                line_speed = emulator_line_speed(url)
+            except ValueError as error:
+                raise UserError(f"bus {bus.name}: port {url}: {error}") from None
             state_path = emulator_state_path(plant_path, url)
             modules = load_state(state_path)
             for module in bus.modules:
                 modules.setdefault(module.address, ModuleState.factory(module.address))
             emulator = stack.enter_context(
-                Emulator(modules, framing=bus.framing, line=bus.line, zvz=bus.zvz,
-                         turnaround=bus.turnaround, state_path=state_path)
+                Emulator(modules, framing=bus.framing, zvz=bus.zvz, turnaround=bus.turnaround, state_path=state_path,
+                         line=replace(bus.line, baud=line_speed or bus.line.baud), line_speed=line_speed is not None)
             )  # fmt: skip
             host, port = emulator.listen("127.0.0.1", 0)
             url = f"socket://{host}:{port}"
