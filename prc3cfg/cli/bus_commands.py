@@ -2,28 +2,22 @@
 
 from __future__ import annotations
 
-import contextlib
 from decimal import Decimal
-from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
-from prc3cfg import codec, gateway
+from prc3cfg import api, gateway
 from prc3cfg.cli import app, link_app
-from prc3cfg.cli.common import CANCEL, LockOpt, PlantArg, RetriesOpt, TraceOpt, locked_line, parse_addresses, progress_bar, stderr
+from prc3cfg.cli.common import LockOpt, PlantArg, RetriesOpt, TraceOpt, check_output, line_options, parse_addresses, stderr
 from prc3cfg.errors import UserError
 from prc3cfg.plant import load_plant
-from prc3cfg.framing import FRAMINGS, get_framing
-from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_COUNT
+from prc3cfg.framing import FRAMINGS
 from prc3cfg.importer import module_entry, plant_yaml
 from prc3cfg.line import LineSettings
-from prc3cfg.link import Link, LinkError, Trace, open_port
-from prc3cfg.locks import line_keys
 from prc3cfg.plant.units import BY_SYMBOL
-from prc3cfg.readback import read_module
 
 PortOpt = Annotated[str, typer.Option("--port", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
 FramingOpt = Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMINGS)}.")]
@@ -33,35 +27,14 @@ TimeoutOpt = Annotated[float, typer.Option(min=0.001, help="Seconds to wait for 
 ZvzOpt = Annotated[float, typer.Option(min=0.004, help="open-driver: the character delay time ZVZ that ends a frame, s.")]
 
 
-@contextlib.contextmanager
-def _bare_link(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float, retries: int, trace: Path | None, lock_timeout: float, purpose: str):
+def _bare_line(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
     if framing not in FRAMINGS:
         raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMINGS)}")
     try:
         line = LineSettings(baud=baud, data_bits=data_bits, parity=parity, stop_bits=stop_bits)
     except ValueError as error:
         raise UserError(f"line settings: {error}") from None
-    with contextlib.ExitStack() as stack:
-        stack.enter_context(locked_line(line_keys(port), port, lock_timeout, purpose))
-        tracer = Trace(stack.enter_context(trace.open("a"))) if trace else None
-        serial_port = open_port(port, line, bus=port)
-        stack.callback(serial_port.close)
-        yield Link(serial_port, get_framing(framing), bus=port, line=line, timeout=timeout, zvz=zvz, retries=retries,
-                   trace=tracer, cancel=CANCEL.event)  # fmt: skip
-
-
-def _scan(link: Link) -> dict[int, codec.SystemReply]:
-    found = {}
-    with progress_bar(MAX_MODULE_ADDRESS, "scanning addresses") as tick:
-        for address in range(1, MAX_MODULE_ADDRESS + 1):
-            try:
-                reply = link.request(address, codec.ReadSystem())
-            except LinkError:
-                reply = None
-            if isinstance(reply, codec.SystemReply):
-                found[address] = reply
-            tick()
-    return found
+    return api.BareLine(port, framing, line, timeout, zvz)
 
 
 @app.command()
@@ -79,8 +52,10 @@ def scan(
     lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Which addresses 1..30 answer, with their S9 and system parameters."""
-    with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace, lock_timeout, "scan") as link:
-        found = _scan(link)
+    check_output(trace, "--trace")
+    bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
+    with line_options(trace, retries, lock_timeout) as options:
+        found = api.scan(bare, options)
     if not found:
         raise UserError(f"{port}: no module answered at any address 1..30 — check the framing ({framing}), line settings and wiring")
     table = Table("address", "S9", *(f"{k} {BY_SYMBOL[k].key}" for k in ("S1", "S2", "S4", "S5", "S6")), "others")
@@ -111,15 +86,10 @@ def import_plant(
     lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Write a plant file (to stdout) from the live modules of one bus."""
-    with _bare_link(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz, retries, trace, lock_timeout, "import") as link:
-        addresses = parse_addresses(modules) if modules else sorted(_scan(link))
-        if not addresses:
-            raise UserError(f"{port}: no module answered — nothing to import")
-        images = []
-        with progress_bar(len(addresses), "reading modules") as tick:
-            for address in addresses:
-                images.append(read_module(link, address, range(1, PROGRAM_COUNT + 1)))
-                tick()
+    check_output(trace, "--trace")
+    bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
+    with line_options(trace, retries, lock_timeout) as options:
+        images = api.import_modules(bare, parse_addresses(modules) if modules else None, options)
     bus = {"name": bus_name, "port": port, "framing": framing, "baud": baud, "parity": parity,
            "data_bits": data_bits, "stop_bits": stop_bits, "timeout": Decimal(str(timeout))}  # fmt: skip
     if framing == "open-driver":

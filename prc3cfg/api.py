@@ -1,0 +1,581 @@
+"""The Python API: everything the command line does, as functions of plain values.
+
+    >>> from prc3cfg import api
+    >>> plant = api.load("plant.yaml")                    # doctest: +SKIP
+    >>> plan = api.plan(plant)                            # reads the modules back  # doctest: +SKIP
+    >>> [f"{m.bus}/{m.name}" for m in plan.changes]       # doctest: +SKIP
+    ['booth-a/booth-a-left', ...]
+    >>> result = api.apply(plant, gates=api.Gates(allow_axis_release=True))  # doctest: +SKIP
+    >>> result.verified, [r.name for r in result.released]  # doctest: +SKIP
+    (True, ['booth-a-left', ...])
+
+(the README's "Python API" section has the same example as a runnable test.)
+
+Each function returns values — a `Plant`, module images, a `PlantPlan`, an `ApplyResult` —
+and raises a `UserError` subclass whose `str()` is one line saying what is wrong and what to
+do: `PlantError`, `LinkError`, `LineBusy`, `StalePlan`, `AxisReleaseRefused`, `NotApproved`,
+`ApplyFailed` and `ApplyInterrupted` (both carry the `ApplyResult`, for the account).
+Every function that talks on a line takes `LineOptions`: retries, the lock time-out, a frame
+trace, a cancel event (Ctrl-C, `prc3cfg.cancel`) and a `Progress` to report to.
+
+Owns the workflows: which modules, what to read, locking the lines, reading back, planning
+(and broadcasts), proving a plan file, gating, the snapshot and the journal, running and
+verifying, restoring, scanning, importing. Does not own what they are made of (the pure core:
+`codec`, `framing`, `device`, `planner`, `sharing`, `verification`, `plantplan`, `render`; the
+shell: `link`, `locks`, `records`, `apply`), nor arguments, prompts and output (`prc3cfg.cli`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Protocol, TextIO
+
+from prc3cfg import __version__, codec
+from prc3cfg.apply import ModuleRun, Release, Verify, execute
+from prc3cfg.bustime import LineCost
+from prc3cfg.cancel import Cancellation
+from prc3cfg.device import can_clamp
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.files import FileProblem, Why, read_json
+from prc3cfg.framing import get_framing
+from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.line import LineSettings
+from prc3cfg.link import Link, LinkError, Trace, open_plant_links, open_port
+from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
+from prc3cfg.locks import LineBusy, line_keys, line_lock
+from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module
+from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
+from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.readback import Target, read_all, read_module
+from prc3cfg.records import Journal, Snapshot
+from prc3cfg import sharing
+
+__all__ = [
+    "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Gates", "LineBusy", "LineOptions", "LinkError",
+    "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "apply", "import_modules",
+    "load", "load_images", "plan", "read", "restore", "scan", "select",
+]  # fmt: skip
+
+Key = tuple[str, int]  # (bus name, module address)
+Pairs = list[tuple[Bus, Module]]
+
+
+class StalePlan(UserError):
+    """A plan file made from another plant file, another read-back, or another prc3cfg."""
+
+
+class AxisReleaseRefused(UserError):
+    """The plan releases axes and `allow_axis_release` was not given: nothing was written."""
+
+
+class NotApproved(UserError):
+    """`approve` said no: nothing was written."""
+
+
+class ApplyFailed(UserError):
+    """Some module did not verify; `result` has the account of every module."""
+
+    def __init__(self, result: ApplyResult) -> None:
+        failed = [r for r in result.runs if not r.verified]
+        super().__init__(
+            f"apply failed on {len(failed)} of {len(result.runs)} modules (see above) — restore with: "
+            f"prc3cfg restore {result.snapshot}"
+        )
+        self.result = result
+
+
+class ApplyInterrupted(Interrupted):
+    """Ctrl-C or SIGTERM stopped the apply after the exchange in flight; `result` has the account."""
+
+    def __init__(self, result: ApplyResult) -> None:
+        super().__init__()
+        self.result = result
+
+
+class Progress(Protocol):
+    """Where long work reports: a phase with its total, each step done, a line to show."""
+
+    def start(self, what: str, total: int) -> None: ...
+
+    def advance(self) -> None: ...
+
+    def note(self, text: str) -> None: ...
+
+
+class Quiet:
+    """A `Progress` that reports nothing."""
+
+    def start(self, what: str, total: int) -> None:
+        pass
+
+    def advance(self) -> None:
+        pass
+
+    def note(self, text: str) -> None:
+        pass
+
+
+@dataclass
+class LineOptions:
+    """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
+    frame trace, Ctrl-C handling (`prc3cfg.cancel.Cancellation`) and progress reports."""
+
+    retries: int = 5
+    lock_timeout: float = 0.0
+    trace: TextIO | None = None
+    cancel: Cancellation | None = None
+    progress: Progress = field(default_factory=Quiet)
+    #: called with the text when a line is busy and a wait for its lock begins
+    waiting: Callable[[str], None] | None = None
+    #: after a command that succeeded: the links used, with their `repeated` exchanges
+    links_used: list[Link] = field(default_factory=list)
+
+    def deferred(self) -> contextlib.AbstractContextManager[None]:
+        """A phase a signal must not cut (`Cancellation.deferred`), when there is a cancellation."""
+        return self.cancel.deferred() if self.cancel is not None else contextlib.nullcontext()
+
+
+@dataclass(frozen=True)
+class ApplyResult:
+    """What an apply did: the plan it ran, every module's run, the snapshot and journal it left."""
+
+    plan: PlantPlan
+    runs: tuple[ModuleRun, ...]
+    snapshot: Path | None
+    journal: Path
+
+    @property
+    def verified(self) -> bool:
+        return all(run.verified for run in self.runs)
+
+    @property
+    def released(self) -> tuple[ModuleRun, ...]:
+        """Every module whose axes were — or may have been — released: it must travel to its reference point."""
+        return tuple(run for run in self.runs if run.released is not Release.NO)
+
+
+# -- the plant and its modules ----------------------------------------------------------
+
+
+def load(path: str | Path) -> Plant:
+    """The plant file at `path`; `PlantError` with every problem, one line each."""
+    return load_plant(path)
+
+
+def select(plant: Plant, names: Iterable[str] | None = None) -> Pairs:
+    """(bus, module) pairs of the plant, limited to the named modules; unknown names are an error."""
+    pairs = list(plant.modules())
+    if not names:
+        return pairs
+    wanted = set(names)
+    unknown = wanted - {module.name for _, module in pairs}
+    if unknown:
+        raise UserError(
+            f"{plant.path}: no module named {', '.join(sorted(unknown))} — the plant's modules are "
+            + ", ".join(module.name for _, module in pairs)
+        )
+    return [(bus, module) for bus, module in pairs if module.name in wanted]
+
+
+def line_cost(bus: Bus) -> LineCost:
+    return LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz)
+
+
+def targets(pairs: Pairs) -> list[Target]:
+    """What to read of each module: its managed programs, and every program its plant system
+    parameters could clamp."""
+    return [Target(bus.name, m.address, m.name, tuple(m.managed_programs()), m.desired_system()) for bus, m in pairs]
+
+
+# -- the lines --------------------------------------------------------------------------
+
+
+def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
+    """The identities of a bus's line: its port, or for `emulator://` the emulator's state file."""
+    state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
+    return line_keys(bus.port, emulator_state=state)
+
+
+@contextlib.contextmanager
+def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read",
+          observer=None) -> Iterator[dict[str, Link]]:  # fmt: skip
+    """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
+
+    Two buses that are one line (two spellings of one address) are refused: they would wait
+    for each other's lock."""
+    names = set(buses)
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
+    owner: dict[str, str] = {}
+    for name, identities in keys.items():
+        for key in identities:
+            if key in owner:
+                raise UserError(f"{plant.path}: buses {owner[key]} and {name} are one line ({key}) — "
+                                "describe each line once, as one bus")  # fmt: skip
+            owner[key] = name
+    with contextlib.ExitStack() as stack:
+        for bus in plant.buses:
+            if bus.name in names:
+                stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", timeout=options.lock_timeout,
+                                              purpose=purpose, waiting=options.waiting))  # fmt: skip
+        trace = Trace(options.trace) if options.trace is not None else None
+        cancel = options.cancel.event if options.cancel is not None else None
+        links = stack.enter_context(
+            open_plant_links(plant, names, trace=trace, retries=options.retries, observer=observer, cancel=cancel)
+        )
+        yield links
+        options.links_used.extend(links.values())
+
+
+def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions) -> dict[Key, ModuleImage]:
+    """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`)."""
+    options.progress.start("reading modules", len(targets_))
+    with options.deferred():
+        return read_all(targets_, links, progress=options.progress.advance)
+
+
+def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None) -> dict[Key, ModuleImage]:
+    """Read back the chosen modules: system parameters, managed programs, and every program the
+    plant's system parameters could clamp — by (bus, address)."""
+    options = options or LineOptions()
+    pairs = select(plant, modules)
+    with lines(plant, {bus.name for bus, _ in pairs}, options) as links:
+        return _read(targets(pairs), links, options)
+
+
+def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
+    """Module images saved by `prc3cfg read --json`, matched to the plant's modules by bus and address."""
+    remedy = "save the images again with prc3cfg read --json"
+    entries = read_input(path, "the file prc3cfg read --json wrote", remedy)
+    try:
+        saved = [(entry.get("bus"), ModuleImage.from_json(entry)) for entry in entries]
+    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
+    images: dict[Key, ModuleImage] = {}
+    for bus, module in select(plant, modules):
+        found = [img for b, img in saved if img.address == module.address and b in (None, bus.name)]
+        if len(found) != 1:
+            raise UserError(
+                f"{path}: {'no' if not found else 'more than one'} image for bus {bus.name}, module "
+                f"{module.address} ({module.name}) — {remedy}"
+            )
+        missing = [n for n in module.managed_programs() if found[0].programs[n - 1] is None]
+        if missing:
+            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program {missing[0]}, "
+                            f"which the plant manages — {remedy}")  # fmt: skip
+        unread = [n for n, p in enumerate(found[0].programs, start=1) if p is None]
+        if unread and can_clamp(found[0].system, module.desired_system()):
+            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program {unread[0]}, "
+                            f"which the plant's system parameters would clamp — {remedy}")  # fmt: skip
+        images[(bus.name, module.address)] = found[0]
+    return images
+
+
+def read_input(path: Path, what: str, remedy: str) -> Any:
+    """A JSON file prc3cfg wrote (`what`: "the plan file …"), within `files.JSON_LIMIT`; one line otherwise."""
+    try:
+        return read_json(path)
+    except FileProblem as problem:
+        raise UserError(f"{problem.where(path)}: {problem} — {remedy if problem.why is Why.NOT_JSON else f'name {what}'}") from None
+
+
+# -- planning ---------------------------------------------------------------------------
+
+
+def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
+         options: LineOptions | None = None) -> PlantPlan:  # fmt: skip
+    """The cheapest plan from what the modules hold (read back now, or `images` as `read` or
+    `load_images` gave them) to the plant file."""
+    options = options or LineOptions()
+    pairs = select(plant, modules)
+    if images is None:
+        with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan") as links:
+            images = _read(targets(pairs), links, options)
+    return make_plan(plant, pairs, images)
+
+
+def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None) -> PlantPlan:
+    """Plan every chosen module from its read-back to its desired image (the plant file's by default),
+    then broadcast what the modules of a line share, where every receiver is known (`sharing`)."""
+    changes = []
+    for bus, module in pairs:
+        key = (bus.name, module.address)
+        target = desired[key] if desired is not None else module.desired_image()
+        try:
+            module_plan = plan_module(actual[key], target, line_cost(bus))
+        except UnreachableImage as error:
+            raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
+        changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
+    broadcast_time, unshared = 0.0, sum(c.plan.bus_time for c in changes)
+    for bus in {bus.name: bus for bus, _ in pairs}.values():
+        on_bus = [c for c in changes if c.bus == bus.name]
+        if not receivers_known(bus, on_bus):
+            continue
+        shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in on_bus], line_cost(bus))
+        if shared.broadcasts:
+            plans = {c.address: plan_ for c, plan_ in zip(on_bus, shared.plans)}
+            changes = [replace(c, plan=plans[c.address], broadcasts=len(shared.broadcasts)) if c.bus == bus.name else c
+                       for c in changes]  # fmt: skip
+            broadcast_time += sum(line_cost(bus).broadcast_time(step.message) for step in shared.broadcasts)
+    return PlantPlan(plant.name, str(plant.path.resolve()), plant.sha256, tuple(changes), broadcast_time,
+                     unshared if broadcast_time else None)  # fmt: skip
+
+
+def receivers_known(bus: Bus, changes: list[ModuleChange]) -> bool:
+    """Whether every module on the bus's line is planned: the plant lists all the line holds (all 30
+    addresses, or `only_these_modules: true`) and the plan covers each of them."""
+    listed = {m.address for m in bus.modules}
+    complete = len(listed) == MAX_MODULE_ADDRESS or getattr(bus, "only_these_modules", False)
+    return complete and {c.address for c in changes} == listed
+
+
+def read_plan(path: Path, plant: Plant) -> PlanFile:
+    """A plan file, refused (one line) when damaged, made by another prc3cfg or for another plant file."""
+    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
+    try:
+        planned = read_plan_file(document)
+    except PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
+    if planned.version != __version__:
+        raise StalePlan(f"{path}: made by prc3cfg {planned.version}, this is {__version__} — plan again with this version")
+    if planned.plant_sha256 != plant.sha256:
+        raise StalePlan(f"{path}: stale plan — the plant file {plant.path} changed since the plan was made; plan again")
+    return planned
+
+
+def plan_file_plant(path: Path) -> Path:
+    """The plant file a plan file was made from, where it says it is."""
+    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
+    recorded = document.get("plant_path") if isinstance(document, dict) else None
+    if not isinstance(recorded, str) or not Path(recorded).is_file():
+        raise UserError(f"{path}: the plant file it was made from is not at {recorded!r} — name it: "
+                        f"prc3cfg apply PLANT --plan {path}")  # fmt: skip
+    return Path(recorded)
+
+
+def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage]) -> PlantPlan:
+    """The plan file's plan, proved before anything is written.
+
+    Refused when a module changed since the plan was made; when a module's steps do anything
+    but turn its read-back into the plant file's image (`run_steps` names the rule they
+    break); and when they are not exactly the steps — broadcasts included — that prc3cfg
+    plans from this read-back: the plant file and the read-back are the same as when the file
+    was made, so any difference is an edit. What is applied is then that plan.
+    """
+    modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
+    chosen = []
+    for entry in planned.modules:
+        where = f"bus {entry.bus}, module {entry.address}"
+        if (entry.bus, entry.address) not in modules:
+            raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
+        bus, module = modules[(entry.bus, entry.address)]
+        if entry.name != module.name:
+            raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {module.name!r} in the plant file — plan again")
+        if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
+            raise StalePlan(
+                f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
+                "(teach-in or another apply?); nothing was written — plan again"
+            )
+        chosen.append((bus, module))
+    ours = make_plan(plant, chosen, images)
+    for entry, change in zip(planned.modules, ours.modules):
+        edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
+                  "after it was made; nothing was written: plan again and review it")  # fmt: skip
+        theirs, steps = list(entry.steps), [step.message for step in change.steps]
+        try:
+            plan_from_steps(change.actual, change.desired, theirs, line_cost(modules[(entry.bus, entry.address)][0]))
+        except StepProblem as problem:
+            if problem.index:  # the step that breaks a rule
+                raise UserError(edited.format(problem)) from None
+            raise UserError(edited.format(f"{_first_difference(theirs, steps)}, and {problem}")) from None
+        if theirs != steps:
+            raise UserError(edited.format(_first_difference(theirs, steps)))
+        if entry.broadcasts != change.broadcasts:
+            raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
+    return ours
+
+
+def _first_difference(theirs: list, ours: list) -> str:
+    """Where a plan file's steps part from the plan made from the same read-back."""
+    index = next(i for i, (a, b) in enumerate(zip([*theirs, None], [*ours, None]), 1) if a != b)
+    said = theirs[index - 1].hex() if index <= len(theirs) else "missing"
+    planned = ours[index - 1].hex() if index <= len(ours) else "nothing"
+    return f"step {index} is {said}, where the plan made from this read-back has {planned}"
+
+
+# -- applying ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Gates:
+    """What an apply asks before it writes, in this order, each seeing the plan:
+
+    - `show(plan)`: the plan is ready (to print it);
+    - `allow_axis_release`: True, False, or a question — called with the modules whose axes
+      the plan releases, True to allow — else `AxisReleaseRefused`; the answer also decides
+      whether a repair may release axes;
+    - `approve(plan)`: False stops with `NotApproved`.
+    """
+
+    show: Callable[[PlantPlan], None] | None = None
+    allow_axis_release: bool | Callable[[list[str]], bool] = False
+    approve: Callable[[PlantPlan], bool] | None = None
+
+
+def apply(
+    plant: Plant,
+    modules: Iterable[str] | None = None,
+    *,
+    plan_file: Path | None = None,
+    gates: Gates = Gates(),
+    verify: Verify = Verify.FLOOR,
+    options: LineOptions | None = None,
+) -> ApplyResult:
+    """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
+
+    Returns the result when every module verified; raises `ApplyFailed` or `ApplyInterrupted`,
+    each with the result, otherwise; before anything is written, any other `UserError`.
+    """
+    planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
+    pairs = select(plant, modules)
+    return _apply(plant, pairs, targets(pairs), None, planned, gates, verify, options or LineOptions())
+
+
+def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR,
+            options: LineOptions | None = None) -> ApplyResult:  # fmt: skip
+    """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply`."""
+    taken = Snapshot.load(snapshot)
+    plant = load_plant(taken.plant_path)
+    pairs = [(bus, m) for bus, m in plant.modules() if (bus.name, m.address) in taken.images]
+    if len(pairs) != len(taken.images):
+        raise UserError(f"{snapshot}: the plant file {taken.plant_path} no longer has every module of the snapshot — nothing was written")
+    to_read = [
+        Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(image.programs, 1) if p is not None), image.system)
+        for bus, m in pairs
+        for image in [taken.images[(bus.name, m.address)]]
+    ]
+    return _apply(plant, pairs, to_read, taken.images, None, gates, verify, options or LineOptions())
+
+
+def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key, ModuleImage] | None,
+           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
+    buses = {bus.name: bus for bus, _ in pairs}
+    journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
+    try:
+        with lines(plant, buses, options, purpose="apply", observer=journal.exchange) as links:
+            images = _read(to_read, links, options)
+            if plan_file is None:
+                the_plan = make_plan(plant, pairs, images, desired)
+            else:
+                the_plan = prove(*plan_file, plant, pairs, images)
+            if gates.show is not None:
+                gates.show(the_plan)
+            if not the_plan.changes:
+                return ApplyResult(the_plan, (), None, journal.path)
+            releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
+            allow = gates.allow_axis_release
+            allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
+            if releasing and not allow_axis_release:
+                raise AxisReleaseRefused(
+                    f"the plan releases the axes of {', '.join(releasing)} (10h/20h: they must travel to their "
+                    "reference point before production) — nothing was written; apply again with --allow-axis-release"
+                )
+            if gates.approve is not None and not gates.approve(the_plan):
+                raise NotApproved("not applied — nothing was written")
+            with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
+                return _run(the_plan, images, links, buses, journal, allow_axis_release, verify, options)
+    finally:
+        journal.close()
+
+
+def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus],
+         journal: Journal, allow_axis_release: bool, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
+    runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts)
+                 for c in the_plan.changes)  # fmt: skip
+    snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+    snapshot_path = snapshot.save()
+    options.progress.note(f"Snapshot of the modules before writing: {snapshot_path}")
+    journal.record("apply", plant=the_plan.plant, plant_sha256=the_plan.plant_sha256, snapshot=str(snapshot_path),
+                   modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+    options.progress.start("applying", the_plan.message_count)
+    execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=options.progress.advance,
+            may_release_axes=allow_axis_release, verify=verify)  # fmt: skip
+    result = ApplyResult(the_plan, runs, snapshot_path, journal.path)
+    for run in runs:
+        journal.record(
+            "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
+            released_axes=run.released.value, written=[s.message.hex() for s in run.written],
+            interrupted=run.interrupted,
+        )  # fmt: skip
+    if result.released:
+        journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
+    if options.cancel is not None and options.cancel.requested:
+        journal.record("interrupted")
+        raise ApplyInterrupted(result)
+    if not result.verified:
+        raise ApplyFailed(result)
+    return result
+
+
+# -- a bus without a plant file ------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BareLine:
+    """A line named by its port alone (`scan`, `import`): framing, character format, times."""
+
+    port: str
+    framing: str = "crc16"
+    line: LineSettings = LineSettings()
+    timeout: float = 0.5
+    zvz: float = 0.020
+
+
+@contextlib.contextmanager
+def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(line_lock(line_keys(bare.port), bare.port, timeout=options.lock_timeout, purpose=purpose,
+                                      waiting=options.waiting))  # fmt: skip
+        port = open_port(bare.port, bare.line, bus=bare.port)
+        stack.callback(port.close)
+        yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
+                   retries=options.retries, trace=Trace(options.trace) if options.trace is not None else None,
+                   cancel=options.cancel.event if options.cancel is not None else None)  # fmt: skip
+
+
+def scan(bare: BareLine, options: LineOptions | None = None) -> dict[int, codec.SystemReply]:
+    """Which addresses 1..30 answer a 50h, with what they answer (S9 and the system parameters)."""
+    options = options or LineOptions()
+    with _bare_link(bare, options, "scan") as link:
+        return _scan(link, options)
+
+
+def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
+    found = {}
+    options.progress.start("scanning addresses", MAX_MODULE_ADDRESS)
+    for address in range(1, MAX_MODULE_ADDRESS + 1):
+        try:
+            reply = link.request(address, codec.ReadSystem())
+        except LinkError:
+            reply = None
+        if isinstance(reply, codec.SystemReply):
+            found[address] = reply
+        options.progress.advance()
+    return found
+
+
+def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None) -> list[ModuleImage]:
+    """The complete images of the modules at `addresses` (default: those a scan finds)."""
+    options = options or LineOptions()
+    with _bare_link(bare, options, "import") as link:
+        wanted = sorted(addresses) if addresses is not None else sorted(_scan(link, options))
+        if not wanted:
+            raise UserError(f"{bare.port}: no module answered — nothing to import")
+        options.progress.start("reading modules", len(wanted))
+        images = []
+        for address in wanted:
+            images.append(read_module(link, address, PROGRAM_NUMBERS))
+            options.progress.advance()
+        return images
