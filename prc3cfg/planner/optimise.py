@@ -28,7 +28,12 @@ to send. The search is built around that:
    the best plan without inits (headers included), item by item with every channel open,
    the same with a share of a header per item, and as 21h — and again from each better
    plan found (and with each of its init runs moved across the system step), until none
-   improves; each init choice gets its own channel search.
+   improves; each init choice gets its own channel search. Those charges price items one
+   by one, so they miss inits that pay only by saving whole messages: when the Vr, T, F1 or
+   F2 items of the best plan overflow into one more 42h..45h message and inits could take
+   the overflow out, header shares per field are bisected until the init DP takes it out
+   (for every set of such fields), and each init choice that does is searched too; then
+   again from the better plan, until none improves (`_header_targets`).
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
    never dearer than the naive download.
@@ -77,6 +82,8 @@ INIT_SHARE = 4
 BISECTIONS = 6
 #: How many promising 21h moves `WritePhase.refine` re-plans with the DPs in each round.
 REGROUPED = 4
+#: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
+TARGET_PROBES = 6
 
 
 @dataclass(frozen=True, slots=True)
@@ -471,6 +478,23 @@ class WritePhase:
 
         return cost
 
+    def shared(self, shares: dict[int, float]) -> Residual:
+        """A program's differences with every channel open: a Vr, T, F1, F2 item with its field's share
+        of a header (`shares`, by field bit), P and V as a 33h pair, a jump address a link or unlink
+        range can give as free (a range over initialised programs restores their chain), any other
+        as a 46h item."""
+        prices = self.prices
+
+        def cost(i: int, mask: int) -> float:
+            total = sum(prices.field_item + shares.get(bit, 0.0) for bit in PLAIN_BITS if mask & bit)
+            if mask & PV_BITS:
+                total += prices.parts_item
+            if mask & A_BIT and self.target_a[i] not in (0, i + 2):
+                total += prices.address_item
+            return min(total, prices.program)
+
+        return cost
+
     def marginal(self, writes: Writes) -> Residual:
         """What a program's differences would add to `writes`, everything else staying as it is.
 
@@ -614,7 +638,7 @@ def search(problem: Problem) -> list[Layout]:
     found = phase.solve()
     layouts = [Layout(keep, writes, fixed + writes.estimate) for writes, _ in found]
     if problem.init_useful():
-        best = layouts[0].estimate
+        best = layouts[0]
         tried = {keep}
         everything = Channels.everything(True)
         residuals = [
@@ -626,19 +650,56 @@ def search(problem: Problem) -> list[Layout]:
         queue = [choose_inits(problem, _table(problem, residual)) for residual in residuals]
         while queue:
             kinds = queue.pop(0)
-            if kinds in tried:
-                continue
-            tried.add(kinds)
-            base = fixed + init_cost(problem, kinds)
-            with_inits = WritePhase(problem, kinds)
-            found = with_inits.solve(bound=best - base + problem.prices.exchange)  # refine may still gain
-            layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
-            if found and base + found[0][0].estimate < best:
-                best = base + found[0][0].estimate
-                queue.append(choose_inits(problem, _table(problem, with_inits.marginal(found[0][0]))))
-                queue += _moved_across(problem, kinds)
+            if kinds not in tried:
+                tried.add(kinds)
+                base = fixed + init_cost(problem, kinds)
+                with_inits = WritePhase(problem, kinds)
+                found = with_inits.solve(bound=best.estimate - base + problem.prices.exchange)  # refine may still gain
+                layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
+                if found and base + found[0][0].estimate < best.estimate:
+                    best = Layout(kinds, found[0][0], base + found[0][0].estimate)
+                    queue.append(choose_inits(problem, _table(problem, with_inits.marginal(found[0][0]))))
+                    queue += _moved_across(problem, kinds)
+            if not queue:
+                queue = [kinds for kinds in _header_targets(problem, phase, best) if kinds not in tried]
     unique = {(layout.kinds, layout.writes): layout for layout in layouts}
     return sorted(unique.values(), key=lambda layout: layout.estimate)
+
+
+def _header_targets(problem: Problem, phase: WritePhase, best: Layout) -> list[tuple[int, ...]]:
+    """Init choices that take enough Vr, T, F1, F2 items out of `best` to save whole 42h..45h messages.
+
+    A field whose items overflow into one more message saves that message when inits remove
+    the overflow. For every set of such fields whose programs could lose enough items to an
+    init, header shares per field are bisected until the init DP removes the overflow of each
+    (a Lagrangian relaxation of the message count); every init choice that does is a candidate.
+    """
+    goals = []
+    for bit, mask in zip(PLAIN_BITS, best.writes.items[2:]):
+        n = mask.bit_count()
+        goal = codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS)
+        if not goal:
+            continue
+        reducible = sum(1 for i in members(mask) if any(not problem.masks[k][i] & bit for k in problem.kinds))
+        if n - reducible <= goal:
+            goals.append((bit, goal))
+    found: dict[tuple[int, ...], None] = {}
+    for size in range(1, len(goals) + 1):
+        for chosen in itertools.combinations(goals, size):
+            shares = {bit: problem.prices.field_header / codec.MAX_FIELD_ITEMS for bit, _ in chosen}
+            low, high = dict.fromkeys(shares, 0.0), dict.fromkeys(shares, INF)
+            for _ in range(TARGET_PROBES):
+                kinds = choose_inits(problem, _table(problem, phase.shared(shares)))
+                met = True
+                for bit, goal in chosen:
+                    if sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit) > goal:
+                        low[bit], met = shares[bit], False
+                    else:
+                        high[bit] = shares[bit]
+                    shares[bit] = 2 * shares[bit] if high[bit] == INF else (low[bit] + high[bit]) / 2
+                if met:
+                    found[kinds] = None
+    return list(found)
 
 
 def _moved_across(problem: Problem, kinds: tuple[int, ...]) -> list[tuple[int, ...]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import random
 from dataclasses import replace
 
 import pytest
@@ -224,3 +225,27 @@ def test_program_lists(numbers: list[int], text: str) -> None:
 )
 def test_step_summaries(message: codec.Message, summary: str) -> None:
     assert summarise(message, SYSTEM) == summary
+
+
+def rewritten_recipe(seed: int, managed: int) -> tuple[ModuleImage, ModuleImage]:
+    """A recipe of programs 1..`managed` (the rest unmanaged) replaced by a new one: new positions,
+    speeds, dwells and outputs, the same chains of four."""
+    rnd = random.Random(seed)
+
+    def program(n: int) -> Program:
+        return Program(P=rnd.randrange(300, 2500, 5), V=rnd.randrange(50, 500, 10), Vr=0, T=rnd.choice([0, 0, 5, 10, 20]),
+                       F1=rnd.choice([0, 1010, 1050]), F2=rnd.choice([0, 0, 1050]), A=n + 1 if n % 4 else 0)  # fmt: skip
+
+    old = tuple(program(n) if n <= managed else None for n in range(1, PROGRAM_COUNT + 1))
+    new = tuple(program(n) if n <= managed else None for n in range(1, PROGRAM_COUNT + 1))
+    return ModuleImage(3, SYSTEM, old), ModuleImage(3, SYSTEM, new)
+
+
+def test_inits_that_save_whole_messages_are_found() -> None:
+    """Initialising programs 1..22 takes enough T, F1 and F2 items out to save a 43h and a 44h
+    (one item at a time an init never pays here); one 46h puts the chains back."""
+    actual, desired = rewritten_recipe(30, 24)
+    plan = planned(actual, desired)
+    assert plan.steps[0].message == codec.InitPrograms(1, 22)
+    assert ids(plan) == [0x14, 0x33, 0x33, 0x43, 0x44, 0x45, 0x46]
+    assert planned(actual, desired, "open-driver").steps[0].message == codec.InitPrograms(1, 22)
