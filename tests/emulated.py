@@ -1,4 +1,5 @@
-"""Test support: the demo plant on real emulators behind socket://, and the CLI run in-process."""
+"""Test support: the demo plant on real emulators behind socket:// (`prc3cfg.testing`, as plant
+repositories use it), reached through a lossy proxy where a test says, and the CLI run in-process."""
 
 from __future__ import annotations
 
@@ -8,38 +9,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-import yaml
-
-from prc3cfg.cli import main
-from prc3cfg.device import ModuleState
-from prc3cfg.emulator import Emulator, FaultInjection
-from prc3cfg.plant import load_plant
 
 from lossy import LossyProxy, Rule
+from prc3cfg.cli import main
+from prc3cfg.emulator import FaultInjection
+from prc3cfg.testing import EmulatedPlant, emulate
 
 DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
-
-
-@dataclass
-class EmulatedPlant:
-    path: Path
-    emulators: dict[str, Emulator]  # by bus name
-
-    def images(self) -> dict[tuple[str, int], object]:
-        return {(bus, a): s.image for bus, e in self.emulators.items() for a, s in e.modules().items()}
-
-    def matches_plant(self) -> bool:
-        """Every module holds exactly what the plant file says (managed programs, system)."""
-        plant = load_plant(self.path)
-        for bus in plant.buses:
-            for module in bus.modules:
-                held = self.emulators[bus.name].module(module.address).image
-                desired = module.desired_image()
-                if held.system != desired.system:
-                    return False
-                if any(want is not None and have != want for have, want in zip(held.programs, desired.programs)):
-                    return False
-        return True
 
 
 @contextlib.contextmanager
@@ -47,27 +23,18 @@ def emulated_plant(
     directory: Path, *, faults: FaultInjection = FaultInjection(), timeout: float = 0.1, framing: str = "crc16",
     line_speed: bool = False, source: Path = DEMO, lossy: dict[str, Rule] | None = None, zvz: float = 0.020,
 ) -> Iterator[EmulatedPlant]:
-    """`source` with every bus on an in-process emulator (factory-default modules) via socket://;
-    a bus named in `lossy` is reached through a `LossyProxy` with that rule."""
-    document = yaml.safe_load(source.read_text())
-    plant = load_plant(source)
+    """`source` with every bus on an emulator (factory-default modules) via socket:// as `plant.yaml`
+    in `directory`; a bus named in `lossy` is reached through a `LossyProxy` with that rule."""
     with contextlib.ExitStack() as stack:
-        emulators = {}
-        for bus_doc, bus in zip(document["buses"], plant.buses):
-            modules = {m.address: ModuleState.factory(m.address) for m in bus.modules}
-            emulator = stack.enter_context(
-                Emulator(modules, framing=framing, faults=faults, line=bus.line, line_speed=line_speed, zvz=zvz)
-            )
-            host, port = emulator.listen()
-            url = f"socket://{host}:{port}"
-            if lossy and bus.name in lossy:
-                proxy = stack.enter_context(LossyProxy((host, port), lossy[bus.name], framing=framing, line=bus.line, zvz=zvz))
-                url = proxy.listen()
-            bus_doc.update(port=url, timeout=timeout, framing=framing, zvz=zvz)
-            emulators[bus.name] = emulator
-        path = directory / "plant.yaml"
-        path.write_text(yaml.safe_dump(document, sort_keys=False))
-        yield EmulatedPlant(path, emulators)
+
+        def route(bus: str, host: str, port: int) -> str:
+            if lossy and bus in lossy:
+                return stack.enter_context(LossyProxy((host, port), lossy[bus], framing=framing, zvz=zvz)).listen()
+            return f"socket://{host}:{port}"
+
+        emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed, route=route,
+                                               timeout=timeout, framing=framing, zvz=zvz))  # fmt: skip
+        yield emulated
 
 
 @dataclass
