@@ -29,6 +29,7 @@ shell: `link`, `locks`, `records`, `apply`), nor arguments, prompts and output (
 from __future__ import annotations
 
 import contextlib
+import hashlib
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -51,13 +52,13 @@ from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.readback import Target, read_all, read_module
-from prc3cfg.records import Journal, Snapshot
+from prc3cfg.records import Journal, Snapshot, applied_copy, save_applied
 from prc3cfg import sharing
 
 __all__ = [
     "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Gates", "LineBusy", "LineOptions", "LinkError",
     "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "apply", "import_modules",
-    "load", "load_images", "plan", "read", "restore", "scan", "select",
+    "left_alone", "load", "load_images", "plan", "read", "restore", "scan", "select",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -486,7 +487,10 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             if gates.approve is not None and not gates.approve(the_plan):
                 raise NotApproved("not applied — nothing was written")
             with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
-                return _run(the_plan, images, links, buses, journal, allow_axis_release, verify, options)
+                result = _run(the_plan, images, links, buses, journal, allow_axis_release, verify, options)
+                if desired is None and len(pairs) == len(plant.modules()):
+                    _keep_applied(plant)
+                return result
     finally:
         journal.close()
 
@@ -518,6 +522,36 @@ def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, L
     if not result.verified:
         raise ApplyFailed(result)
     return result
+
+
+def _keep_applied(plant: Plant) -> None:
+    """The plant file just applied in full, kept for `left_alone` — if it is still the one applied."""
+    text = plant.path.read_bytes()
+    if hashlib.sha256(text).hexdigest() == plant.sha256:
+        save_applied(plant.path, text)
+
+
+def left_alone(plant: Plant) -> list[str]:
+    """What the plant file no longer describes since it was last applied in full — modules, and
+    programs under `unmanaged_programs: keep` — which stays on the hardware as it is."""
+    try:
+        before = load_plant(applied_copy(plant.path))
+    except UserError:
+        return []  # never applied in full here, or a copy this prc3cfg cannot read: nothing to compare
+    now = {(bus.name, m.address): m for bus, m in plant.modules()}
+    notes = []
+    for bus, old in before.modules():
+        new = now.get((bus.name, old.address))
+        if new is None:
+            notes.append(f"{bus.name}/{old.name} (address {old.address}) is no longer in the plant file: "
+                         "it stays on the hardware as it is, no longer managed")  # fmt: skip
+        elif new.unmanaged_programs == "keep":
+            gone = sorted(set(old.managed_programs()) - set(new.managed_programs()))
+            if gone:
+                which = f"program {gone[0]}" if len(gone) == 1 else f"programs {', '.join(map(str, gone))}"
+                notes.append(f"{bus.name}/{new.name}: {which} no longer in the plant file (unmanaged_programs: keep): "
+                             "it stays on the module as it is")  # fmt: skip
+    return notes
 
 
 # -- a bus without a plant file ------------------------------------------------------------

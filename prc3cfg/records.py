@@ -7,6 +7,9 @@
   (`prc3cfg.files`) before the first write: a killed apply leaves a whole snapshot or none.
 - A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
   one JSON object per line: time, bus, address, request and reply in hex, attempt, duration.
+- The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
+  an apply that verified every module of the plant): what `plan` compares with to say which
+  modules and programs left the plant file — they stay on the hardware as they are.
 """
 
 from __future__ import annotations
@@ -79,6 +82,16 @@ class Snapshot:
             return cls(plant, data["plant_sha256"], data["taken"], images)
         except (ValueError, KeyError, TypeError, AttributeError) as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
+
+
+def applied_copy(plant_path: Path) -> Path:
+    """Where the copy of the plant file last applied in full is kept."""
+    return records_dir(plant_path, "applied") / plant_path.name
+
+
+def save_applied(plant_path: Path, text: bytes) -> None:
+    """Keep the plant file just applied in full (atomically: a killed apply leaves the old copy)."""
+    write_atomically(applied_copy(plant_path), text.decode("utf-8"))
 
 
 class Journal:

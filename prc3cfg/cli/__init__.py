@@ -30,7 +30,7 @@ from prc3cfg.errors import UserError
 
 app = typer.Typer(
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
     help="Plant configuration as code for PRC 3 powder reciprocator controllers.",
 )

@@ -6,12 +6,11 @@ from decimal import Decimal
 from typing import Annotated, Optional
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from prc3cfg import api, gateway
 from prc3cfg.cli import app, link_app
-from prc3cfg.cli.common import LockOpt, PlantArg, RetriesOpt, TraceOpt, check_output, line_options, parse_addresses, stderr
+from prc3cfg.cli.common import LockOpt, PlantArg, RetriesOpt, TraceOpt, check_output, line_options, parse_addresses, stderr, stdout_console
 from prc3cfg.errors import UserError
 from prc3cfg.plant import load_plant
 from prc3cfg.framing import FRAMINGS
@@ -64,7 +63,7 @@ def scan(
         others = ", ".join(f"{k}={BY_SYMBOL[k].format(getattr(s, k))}" for k in ("S3", "S7", "S8", "S10", "S11", "S12"))
         warn = "" if reply.address == address else " ⚠"
         table.add_row(str(address), f"{reply.address}{warn}", *(BY_SYMBOL[k].format(getattr(s, k)) for k in ("S1", "S2", "S4", "S5", "S6")), others)
-    Console().print(table)
+    stdout_console().print(table)
     print(f"{len(found)} module{'s' if len(found) != 1 else ''} answered on {port}.")
 
 

@@ -24,6 +24,28 @@ from prc3cfg.image import MAX_MODULE_ADDRESS
 from prc3cfg.link import Link
 
 stderr = Console(stderr=True)
+
+
+#: Colours of a plan's lines on a terminal, by how the line starts (after its indentation).
+COLOURS = {"+": "green", "-": "red", "~": "yellow", "⚠": "bold red", "✗": "red", "✓": "green"}
+
+
+def print_lines(text: str) -> None:
+    """Print plan or account text: coloured by each line's leading symbol on a terminal (and not
+    under NO_COLOR, which rich honours), plain when piped."""
+    console = Console(highlight=False)
+    if not console.is_terminal or console.no_color:
+        print(text)
+        return
+    for line in text.splitlines():
+        console.print(line, style=COLOURS.get(line.lstrip()[:1]), markup=False, soft_wrap=True)
+
+
+def stdout_console() -> Console:
+    """A console for tables on stdout: the terminal's width there; piped or redirected, as wide as the
+    table needs — never cut (colour follows the terminal, and NO_COLOR is honoured)."""
+    console = Console()
+    return console if console.is_terminal else Console(width=1_000, soft_wrap=True)
 #: Ctrl-C and SIGTERM for the running command (`main` installs the handlers).
 CANCEL = Cancellation()
 

@@ -25,6 +25,7 @@ from prc3cfg.cli.common import (
     TraceOpt,
     check_output,
     line_options,
+    print_lines,
     write_output,
 )
 from prc3cfg.errors import UserError
@@ -63,8 +64,8 @@ def read(
                 print(f"  program {number}: {values}" + (f", next {program.A}" if program.A else ""))
 
 
-def _emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool) -> None:
-    document = plan.to_json()
+def _emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, notes: list[str]) -> None:
+    document = plan.to_json() | {"left_alone": notes}
     for bus in document["buses"]:
         for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
             entry["changes"] = render.changes_json(change)
@@ -74,11 +75,33 @@ def _emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: b
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
-        print(render.markdown(plan))
+        print(render.markdown(plan) + "".join(f"\n> Left as it is: {note}" for note in notes))
     else:
-        print(render.human(plan))
+        print_lines("\n".join([render.human(plan), *(f"Left as it is: {note}" for note in notes)]))
         if out is not None:
             print(f"Plan written to {out}; apply it with: prc3cfg apply --plan {out}")
+
+
+def _targeting(modules: list[str] | None) -> None:
+    """Terraform's -target warning: a plan of some modules is not the plan of the plant."""
+    if modules:
+        print(f"⚠ Only {', '.join(modules)} (--module): the rest of the plant file is left out of this "
+              "plan — run without --module to see everything it would change")  # fmt: skip
+
+
+def _drift(images: dict, pairs) -> int:
+    """What the modules hold other than the plant file says — drift (Teach In, work on the floor),
+    not a plan; the number of modules that drifted."""
+    drifted = 0
+    for bus, module in pairs:
+        differences = render.differences(images[(bus.name, module.address)], module.desired_image())
+        if differences:
+            drifted += 1
+            print(f"~ bus {bus.name}, module {module.address} ({module.name}) differs from the plant file:")
+            print("\n".join(f"    {text}" for text in differences))
+    print(f"Drift: {drifted} of {len(pairs)} module{'s' if len(pairs) != 1 else ''} hold{'s' if drifted == 1 else ''} "
+          "something other than the plant file says." if drifted else "No drift: every module holds what the plant file says.")  # fmt: skip
+    return drifted
 
 
 @app.command()
@@ -89,6 +112,7 @@ def plan(
     json_out: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan as markdown (PR comments).")] = False,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
+    refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
@@ -98,10 +122,19 @@ def plan(
     check_output(out, "--out", plant=plant)
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
+    if not json_out:
+        _targeting(module)
     images = None if actual is None else api.load_images(actual, loaded, module)
+    if refresh_only:
+        if images is None:
+            with line_options(trace, retries, lock_timeout) as options:
+                images = api.read(loaded, module, options)
+        if _drift(images, api.select(loaded, module)) and detailed_exitcode:
+            raise Outcome(EXIT_CHANGES)
+        return
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options)
-    _emit_plan(result, out=out, json_out=json_out, markdown=markdown)
+    _emit_plan(result, out=out, json_out=json_out, markdown=markdown, notes=[] if module else api.left_alone(loaded))
     if detailed_exitcode and result.changes:
         raise Outcome(EXIT_CHANGES)
 
@@ -112,7 +145,7 @@ def _gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool)
     def show(the_plan: PlantPlan) -> None:
         if plan_file is not None:
             print(f"Applying {plan_file}, proved against the modules as read back now:")
-        print(render.human(the_plan))
+        print_lines(render.human(the_plan))
         if not the_plan.changes:
             print("Nothing to do: every module matches the plant file.")
 
@@ -228,6 +261,7 @@ def apply(
     plant = plant if plant is not None else api.plan_file_plant(plan_file)
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
+    _targeting(module)
     with line_options(trace, retries, lock_timeout) as options, _accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=_gates(plan_file, auto_approve, allow_axis_release),
                            verify=verify, options=options)  # fmt: skip

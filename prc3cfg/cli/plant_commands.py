@@ -20,6 +20,7 @@ from rich.console import Console
 from rich.table import Table
 
 from prc3cfg.cli import app
+from prc3cfg.cli.common import stdout_console
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Module, Plant, PlantError, load_plant, plant_schema_text
 from prc3cfg.plant.profiles import Sourced
@@ -48,7 +49,7 @@ def show(
 ) -> None:
     """Print a module's effective configuration and where each value came from."""
     loaded = load_plant(plant)
-    console = Console()
+    console = stdout_console()
     if module is None:
         console.print(_modules_table(loaded))
         return

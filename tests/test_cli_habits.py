@@ -1,0 +1,117 @@
+"""Terraform habits a plant engineer brings along: targeting warnings, what leaves the plant file
+stays on the hardware, drift reported as drift, colour on terminals, whole tables when piped,
+shell completion."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+import yaml
+from emulated import DEMO, emulated_plant, run_cli
+
+
+@pytest.fixture(autouse=True)
+def private_locks(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+
+
+@pytest.fixture
+def plant(tmp_path):
+    with emulated_plant(tmp_path) as emulated:
+        yield emulated
+
+
+def edit(plant, change) -> None:
+    document = yaml.safe_load(plant.path.read_text())
+    change(document)
+    plant.path.write_text(yaml.safe_dump(document, sort_keys=False))
+
+
+def test_a_targeted_plan_and_apply_say_that_the_rest_is_left_out(plant, capsys):
+    planned = run_cli(capsys, "plan", plant.path, "--module", "booth-a-top")
+    assert planned.out.startswith("⚠ Only booth-a-top (--module): the rest of the plant file is left out of this plan")
+    applied = run_cli(capsys, "apply", plant.path, "--module", "booth-a-top", "--auto-approve", "--allow-axis-release")
+    assert applied.code == 0 and applied.out.startswith("⚠ Only booth-a-top (--module)")
+
+
+def test_modules_and_kept_programs_that_leave_the_plant_file_stay_on_the_hardware(plant, capsys):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+
+    def remove(document):
+        booth_b = document["buses"][1]
+        booth_b["modules"] = [m for m in booth_b["modules"] if m["name"] != "booth-b-pretreat"]
+        right = next(m for m in booth_b["modules"] if m["name"] == "booth-b-right")
+        del right["programs"][4]  # under keep
+
+    edit(plant, remove)
+    result = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
+    assert result.code == 0  # nothing to write: leaving them alone is not a change
+    assert ("Left as it is: booth-b/booth-b-pretreat (address 4) is no longer in the plant file: it stays on the "
+            "hardware as it is, no longer managed") in result.out  # fmt: skip
+    assert ("Left as it is: booth-b/booth-b-right: program 4 no longer in the plant file (unmanaged_programs: keep): "
+            "it stays on the module as it is") in result.out  # fmt: skip
+    assert plant.emulators["booth-b"].module(3).image.program(4).T == 120  # still there, untouched
+
+
+def test_refresh_only_reports_drift_not_a_plan(plant, capsys):
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    assert run_cli(capsys, "plan", plant.path, "--refresh-only", "--detailed-exitcode").out.startswith("No drift")
+    plant.emulators["booth-a"].teach_in(2, 1, 1987)  # taught on the floor
+    result = run_cli(capsys, "plan", plant.path, "--refresh-only", "--detailed-exitcode")
+    assert result.code == 2
+    assert result.out.splitlines() == [
+        "~ bus booth-a, module 2 (booth-a-right) differs from the plant file:",
+        "    program 1 position 1.987 m → 2.000 m",
+        "Drift: 1 of 6 modules holds something other than the plant file says.",
+    ]
+    assert "steps" not in result.out
+
+
+def test_tables_are_never_cut_when_piped(tmp_path):
+    plant = tmp_path / "plant.yaml"
+    long_name = "booth-a-left-with-a-name-long-enough-to-overflow-eighty-columns-of-a-narrow-terminal"
+    plant.write_text(DEMO.read_text().replace("name: booth-a-left", f"name: {long_name}"))
+    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "show", plant], capture_output=True, text=True, env={**os.environ, "COLUMNS": "40"})
+    assert shown.returncode == 0, shown.stderr
+    assert long_name in shown.stdout and "…" not in shown.stdout
+
+
+def test_shell_completion_is_offered():
+    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "--show-completion", "bash"], capture_output=True, text=True,
+                           env={**os.environ, "SHELL": "/bin/bash"})  # fmt: skip
+    assert shown.returncode == 0 and "_PRC3CFG_COMPLETE" in shown.stdout
+
+
+def on_a_terminal(args: list, env: dict) -> bytes:
+    """What `prc3cfg ARGS` writes to stdout when stdout is a terminal."""
+    master, slave = os.openpty()
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], stdout=slave, stderr=subprocess.DEVNULL,
+                               env={**os.environ, **env})  # fmt: skip
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # the other end closed
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    process.wait()
+    os.close(master)
+    return b"".join(chunks)
+
+
+def test_plans_are_coloured_on_a_terminal_unless_no_color(tmp_path):
+    plant = tmp_path / "plants" / "demo-line.yaml"
+    plant.parent.mkdir()
+    plant.write_text(DEMO.read_text())
+    env = {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
+    coloured = on_a_terminal(["plan", plant], env)
+    assert b"\x1b[32m    + program 1: position" in coloured  # what the plan sets up: green
+    assert b"\x1b[3" not in on_a_terminal(["plan", plant], env | {"NO_COLOR": "1"})
+    piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True, env={**os.environ, **env})
+    assert b"\x1b[" not in piped.stdout
