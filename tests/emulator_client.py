@@ -93,9 +93,8 @@ class Served:
         return len(list(Path(f"/proc/{self.process.pid}/task").iterdir()))
 
 
-@contextlib.contextmanager
-def serve(directory: Path, *options: str) -> Iterator[Served]:
-    """`prc3cfg emulator serve --listen 127.0.0.1:0 OPTIONS`, stopped with SIGTERM (which must exit 0).
+def spawn(directory: Path, *options: str) -> tuple[subprocess.Popen, Path]:
+    """Start `prc3cfg emulator serve --listen 127.0.0.1:0 OPTIONS`; the process and its log.
 
     Its stderr goes to a file, never a pipe: a pipe nobody reads would stall its logging."""
     log = directory / "serve.log"
@@ -104,10 +103,22 @@ def serve(directory: Path, *options: str) -> Iterator[Served]:
             [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", *options],
             stdout=subprocess.PIPE, stderr=stderr, text=True,
         )  # fmt: skip
+    return process, log
+
+
+def listening(process: subprocess.Popen, log: Path) -> Served:
+    """A spawned emulator once it listens (its banner read)."""
+    banner = process.stdout.readline()
+    assert banner.startswith("listening on 127.0.0.1:"), banner + log.read_text()
+    return Served(process, int(banner.split()[2].rsplit(":", 1)[1]), log)
+
+
+@contextlib.contextmanager
+def serve(directory: Path, *options: str) -> Iterator[Served]:
+    """A spawned emulator while it listens, stopped with SIGTERM (which must exit 0)."""
+    process, log = spawn(directory, *options)
     try:
-        banner = process.stdout.readline()
-        assert banner.startswith("listening on 127.0.0.1:"), banner + log.read_text()
-        yield Served(process, int(banner.split()[2].rsplit(":", 1)[1]), log)
+        yield listening(process, log)
     finally:
         process.terminate()
         assert process.wait(timeout=10) == 0, log.read_text()

@@ -2,20 +2,23 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shutil
 import socket
 import subprocess
 import sys
+import time
 from dataclasses import replace
+from types import SimpleNamespace
 
 import pytest
 
 from prc3cfg import codec, device
 from prc3cfg.device import ModuleState
-from prc3cfg.emulator import Emulator, FaultInjection, load_state
-from prc3cfg.emulator.state import state_document
+from prc3cfg.emulator import Emulator, FaultInjection, load_state, server
+from prc3cfg.emulator.state import journal_path, state_document
 from prc3cfg.errors import UserError
 from prc3cfg.framing import Direction, Frame, get_framing
 from prc3cfg.image import DEFAULT_SYSTEM, Program
@@ -160,9 +163,11 @@ def test_serve_command_answers_and_saves(tmp_path):
             assert client.send(2, b"\x50\x00") is None
         finally:
             client.close()
-        saved = json.loads(state.read_text())
-        assert [m["address"] for m in saved["modules"]] == [1, 3, 4]
-        assert saved["modules"][2]["programs"][9] == WRITE_P10.program.to_json()
+        assert load_state(state)[4].image.program(10) == WRITE_P10.program  # the journal holds the tail meanwhile
+    saved = json.loads(state.read_text())  # after a clean exit the state file holds everything
+    assert [m["address"] for m in saved["modules"]] == [1, 3, 4]
+    assert saved["modules"][2]["programs"][9] == WRITE_P10.program.to_json()
+    assert not journal_path(state).exists()
 
 
 def test_serve_with_modules_and_state_serves_exactly_those_and_keeps_the_others(tmp_path):
@@ -298,6 +303,70 @@ def test_a_damaged_reply_with_parity_is_a_character_short():
     whole = 1 + 2 * 11  # address and the 11 words of 50h's reply
     # a damaged reply lacks a character; a damaged request (one byte short) is answered with a code word
     assert {len(r) for r in replies if r is not None} == {whole - 1, 1 + 2}
+
+
+class Scripted:
+    """A connection as the server uses it, whose client sends `chunks` with a silence after each
+    (a receive that times out), then hangs up; what the server sends back is kept in `sent`."""
+
+    def __init__(self, *chunks: bytes) -> None:
+        self.incoming: list[bytes | None] = [item for chunk in chunks for item in (chunk, None)]
+        self.sent: list[bytes] = []
+
+    def recv(self, size: int) -> bytes:
+        if not self.incoming:
+            return b""
+        if (item := self.incoming.pop(0)) is None:
+            raise TimeoutError
+        return item
+
+    def sendall(self, data: bytes) -> None:
+        self.sent.append(data)
+
+    def settimeout(self, timeout: float) -> None:
+        pass
+
+    def setsockopt(self, *option: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.fixture
+def slow_clock(monkeypatch):
+    """The server's clock moves a second every time it is read: every silence is far longer than
+    any inter-character or message time-out."""
+    seconds = itertools.count()
+    monkeypatch.setattr(server, "time", SimpleNamespace(monotonic=lambda: float(next(seconds)), sleep=time.sleep))
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_request_split_by_a_pause_over_tcp_is_answered(framing, slow_clock):
+    """TCP connections are decoded with uart=False: half a request, a pause, the other half is one request."""
+    encoding = get_framing(framing)
+    frame = encoding.encode(Direction.REQUEST, 1, READ_SYSTEM.encode())
+    conn = Scripted(frame[:4], frame[4:])
+    with Emulator(modules(1), framing=framing) as emulator:
+        emulator._serve_socket(conn, "scripted")
+    assert conn.sent == [encoding.encode(Direction.REPLY, 1, codec.SystemReply(DEFAULT_SYSTEM, 1).encode())]
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_request_split_by_a_pause_on_a_uart_is_discarded(framing, slow_clock):
+    """The pty is a UART: there the same pause breaks the frame, which the module never answers."""
+    frame = get_framing(framing).encode(Direction.REQUEST, 1, READ_SYSTEM.encode())
+    conn = Scripted(frame[:4], frame[4:])
+
+    def recv(timeout: float) -> bytes | None:
+        try:
+            return conn.recv(4096) or None
+        except TimeoutError:
+            return b""
+
+    with Emulator(modules(1), framing=framing) as emulator:
+        emulator._serve_stream(recv, conn.sendall, name="uart", uart=True)
+    assert conn.sent == []
 
 
 # -- the emulator as a service (the heavy acceptance tests are in test_emulator_service.py) ----

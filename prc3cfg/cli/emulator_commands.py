@@ -32,7 +32,7 @@ def parse_listen(text: str) -> tuple[str, int]:
 def serve(
     listen: Annotated[Optional[str], typer.Option(help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
-    state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1), loaded and saved after every accepted write.")] = None,
+    state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
     modules: Annotated[Optional[str], typer.Option(help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMINGS)}.")] = "crc16",
     line_speed: Annotated[Optional[int], typer.Option("--line-speed", help="Make every exchange take as long as on a line of this baud rate.")] = None,
@@ -57,10 +57,13 @@ def serve(
     closed at once. A client that sends nothing for --idle-timeout seconds
     is disconnected. Running out of file descriptors only pauses accepting.
 
-    A write is answered only once it is saved to --state. When the file
-    cannot be written, the error is logged, the module keeps its state and
-    the write gets no reply: the master repeats it. Warnings and errors are
-    logged on stderr.
+    A write is answered only once it is saved: appended to the journal
+    beside --state and flushed to disk, so a killed emulator loses no
+    acknowledged write (the next start replays the journal). The state file
+    takes everything on exit, at a start after a kill, and after every
+    1000 journal lines. When a write cannot be saved, the error is logged, the module
+    keeps its state and the write gets no reply: the master repeats it.
+    Warnings and errors are logged on stderr.
     """
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if framing not in FRAMINGS:

@@ -2,9 +2,15 @@
 
 Owns the outside of the emulator: byte streams (TCP connections, a pty), request frames in
 and reply frames out through `prc3cfg.framing`, one exchange at a time on the line (half
-duplex), line-speed timing, fault injection, saving the state file after every accepted
-write, and the Python API tests use to change a module while it runs (mode, fault, active
-program, teach-in). What a message does is `prc3cfg.device`; who gets it, `bus.Bus`.
+duplex), line-speed timing, fault injection, making every accepted write durable before it
+is answered, and the Python API tests use to change a module while it runs (mode, fault,
+active program, teach-in). What a message does is `prc3cfg.device`; who gets it,
+`bus.Bus`; how the state is kept on disk (a journal beside the state file, compacted into
+it), `state.Store`.
+
+Frames from a TCP connection are decoded with `uart=False` (`prc3cfg.framing.base`): a
+request split and delayed by the network or a paused client is taken whole by its length.
+Frames from the pty are decoded as a UART's, with the framing's time-outs.
 
 A long-running service that survives its clients:
 
@@ -21,16 +27,19 @@ A long-running service that survives its clients:
   sender. Threads of closed connections end and are forgotten.
 - **Running out of file descriptors** (or kernel buffers) in `accept()` is logged once,
   retried every `ACCEPT_BACKOFF` seconds, and its end logged: the server keeps listening.
-- **A write is acknowledged only once it is saved.** When the state file cannot be
-  written (disk full, permissions, its folder replaced by a file, the file replaced by a
-  folder), the error is logged naming the file and the reason, every module is put back
-  as it was before the write — in memory as in the file — and the write is not answered,
-  as if it never arrived: the master sees no reply, repeats it, and reports it. Reads go
-  on being answered; the next write is saved once the file can be written again.
+- **A write is acknowledged only once it is saved** — appended to the journal and flushed
+  to disk, or written into the state file (`state.Store`), so a killed emulator loses no
+  acknowledged write. When neither can take it (disk full, permissions, its folder
+  replaced by a file, the file replaced by a folder), the error is logged naming the file
+  and the reason, every module is put back as it was before the write — in memory as on
+  disk — and the write is not answered, as if it never arrived: the master sees no reply,
+  repeats it, and reports it. Reads go on being answered; the next write is saved once the
+  file can be written again. On exit the state file takes everything.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import random
@@ -45,7 +54,7 @@ from pathlib import Path
 
 from prc3cfg.device import ModuleState
 from prc3cfg.emulator.bus import BROADCAST, Bus
-from prc3cfg.emulator.state import cannot_save, save_state
+from prc3cfg.emulator.state import COMPACT_EVERY, Store, cannot_save
 from prc3cfg.errors import UserError
 from prc3cfg.framing import NEED_DATA, Direction, Discarded, Frame, get_framing
 from prc3cfg.line import LineSettings
@@ -85,6 +94,7 @@ class Emulator:
 
     `unserved` are modules of the state file this emulator does not serve: every save
     writes them back unchanged, so serving a few modules of a state file loses no others.
+    `compact_every`: journal lines between compactions of the state file (`state.Store`).
     """
 
     def __init__(
@@ -101,6 +111,7 @@ class Emulator:
         unserved: Mapping[int, ModuleState] | None = None,
         max_connections: int = MAX_CONNECTIONS,
         idle_timeout: float = IDLE_TIMEOUT,
+        compact_every: int = COMPACT_EVERY,
     ) -> None:
         if max_connections < 1:
             raise ValueError(f"max-connections must be at least 1, not {max_connections}")
@@ -124,9 +135,10 @@ class Emulator:
         self._threads: set[threading.Thread] = set()  # running; each removes itself when it ends
         self._connections: set[socket.socket] = set()  # open TCP connections
         self._closers: list[Callable[[], None]] = []  # listening sockets and ptys
-        if state_path is not None and not state_path.exists():
+        self._store = None if state_path is None else Store(state_path, compact_every=compact_every)
+        if self._store is not None:
             try:
-                self._save()
+                self._store.start(self._all())
             except OSError as error:
                 raise UserError(f"{cannot_save(state_path, error)} — check the path, its folder and the disk") from None
 
@@ -145,7 +157,7 @@ class Emulator:
         Raises OSError, and changes nothing, when the state file cannot be saved."""
         with self._lock:
             state = replace(self._bus.modules[address], **changes)
-            self._store(address, state)
+            self._change(address, state)
             return state
 
     def teach_in(self, address: int, program: int, position: int) -> ModuleState:
@@ -155,23 +167,26 @@ class Emulator:
             state = self._bus.modules[address]
             taught = replace(state.image.program(program), P=position)
             state = replace(state, image=state.image.with_programs({program: taught}))
-            self._store(address, state)
+            self._change(address, state)
             return state
 
-    def _store(self, address: int, state: ModuleState) -> None:
+    def _change(self, address: int, state: ModuleState) -> None:
+        """A change no message says: into the state file at once (compaction)."""
         before = dict(self._bus.modules)
         self._bus.modules[address] = state
-        self._save_or_roll_back(before)
+        self._saved_or_rolled_back(before, lambda store: store.compact(self._all()))
 
-    def _save(self) -> None:
-        save_state(self.state_path, {**self._unserved, **self._bus.modules})
+    def _all(self) -> dict[int, ModuleState]:
+        """Every module the state file keeps: those served and those kept unchanged."""
+        return {**self._unserved, **self._bus.modules}
 
-    def _save_or_roll_back(self, before: dict[int, ModuleState]) -> None:
-        """Save the state file; when that fails, put every module back as in `before` and raise OSError."""
-        if self.state_path is None:
+    def _saved_or_rolled_back(self, before: dict[int, ModuleState], save: Callable[[Store], None]) -> None:
+        """`save` into the store (if there is a state file); when that fails, put every module
+        back as in `before` and raise OSError."""
+        if self._store is None:
             return
         try:
-            self._save()
+            save(self._store)
         except OSError:
             self._bus.modules.update(before)
             raise
@@ -219,8 +234,9 @@ class Emulator:
             before = dict(self._bus.modules)
             delivery = self._bus.deliver(address, message)
             if delivery.changed:
+                writes = [(a, message) for a, state in self._bus.modules.items() if state is not before[a]]
                 try:
-                    self._save_or_roll_back(before)
+                    self._saved_or_rolled_back(before, lambda store: store.record(writes, self._all()))
                 except OSError as error:
                     to = "all modules (broadcast)" if address == BROADCAST else f"module {address}"
                     log.error("%s — the write to %s is not answered and not applied", cannot_save(self.state_path, error), to)
@@ -246,11 +262,12 @@ class Emulator:
         send: Callable[[bytes], None],
         *,
         name: str,
+        uart: bool,
         idle_timeout: float | None = None,
     ) -> None:
-        """Decode request frames from one byte stream and answer them until it ends, the
-        emulator closes, or nothing arrives for `idle_timeout` seconds."""
-        decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz)
+        """Decode request frames from one byte stream — a UART's, or TCP's (`uart=False`) — and
+        answer them until it ends, the emulator closes, or nothing arrives for `idle_timeout` seconds."""
+        decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz, uart=uart)
         gap = self.zvz if self.framing.name == "open-driver" else POLL
         heard = time.monotonic()
         while not self._closing.is_set():
@@ -301,7 +318,13 @@ class Emulator:
         """Accept TCP connections (pyserial `socket://HOST:PORT`); returns the bound address."""
         server = socket.create_server((host, port), backlog=socket.SOMAXCONN)  # a burst of connections waits in the kernel
         server.settimeout(POLL)
-        self._closers.append(server.close)
+
+        def stop_listening() -> None:
+            with contextlib.suppress(OSError):
+                server.shutdown(socket.SHUT_RDWR)  # wakes the accept() waiting in another thread at once
+            server.close()
+
+        self._closers.append(stop_listening)
         self._start(lambda: self._accept(server), "emulator-accept")
         bound = server.getsockname()
         return bound[0], bound[1]
@@ -362,7 +385,7 @@ class Emulator:
 
         try:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._serve_stream(recv, conn.sendall, name=name, idle_timeout=self.idle_timeout)
+            self._serve_stream(recv, conn.sendall, name=name, uart=False, idle_timeout=self.idle_timeout)
         except OSError as error:
             log.info("%s: %s", name, error.strerror or error)
         finally:
@@ -388,7 +411,7 @@ class Emulator:
             os.write(master, data)
 
         path = os.ttyname(slave)
-        self._start(lambda: self._serve_stream(recv, send, name=path), "emulator-pty")
+        self._start(lambda: self._serve_stream(recv, send, name=path, uart=True), "emulator-pty")
         return path
 
     # -- lifetime ----------------------------------------------------------------------
@@ -404,6 +427,12 @@ class Emulator:
             threads = list(self._threads)
         for thread in threads:
             thread.join(timeout=2)
+        with self._lock:
+            if self._store is not None:
+                try:
+                    self._store.close(self._all())
+                except OSError as error:
+                    log.error("%s — its journal keeps every write for the next start", cannot_save(self.state_path, error))
 
     def __enter__(self) -> Emulator:
         return self

@@ -1,0 +1,272 @@
+"""The emulator's journal (`prc3cfg.emulator.state`): every accepted write is on disk before it
+is answered, without rewriting the state file, and a killed emulator loses nothing it
+acknowledged — checked by SIGKILL of a real `prc3cfg emulator serve` at random points."""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import os
+import random
+import select
+import shutil
+import signal
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import serial
+
+from prc3cfg import codec
+from prc3cfg.device import ModuleState
+from prc3cfg.emulator import BROADCAST, Emulator, load_state
+from prc3cfg.emulator import state as store
+from prc3cfg.emulator.state import JOURNAL_FORMAT, journal_path, state_document
+from prc3cfg.errors import UserError
+from prc3cfg.framing import Direction
+from prc3cfg.image import Program
+
+from emulator_client import Client, listening, spawn
+
+ACCEPTED = b"\x00\x00"
+
+
+def modules(*addresses: int) -> dict[int, ModuleState]:
+    return {a: ModuleState.factory(a) for a in addresses}
+
+
+def write(program: int, position: int) -> bytes:
+    return codec.WriteProgram(program, Program(P=position, V=100)).encode()
+
+
+def identity(path: Path) -> tuple[int, int, int]:
+    status = os.stat(path)
+    return status.st_ino, status.st_size, status.st_mtime_ns
+
+
+def send_only(client: Client, address: int, message: bytes) -> None:
+    """Send without waiting for a reply (a broadcast has none)."""
+    client.port.write(client.framing.encode(Direction.REQUEST, address, message))
+
+
+def client_of(emulator: Emulator) -> Client:
+    host, port = emulator.listen()
+    return Client(f"socket://{host}:{port}")
+
+
+def test_a_write_goes_into_the_journal_and_the_state_file_takes_it_on_exit(tmp_path):
+    state = tmp_path / "bus.json"
+    with Emulator(modules(1, 3), state_path=state) as emulator:
+        created = identity(state)  # at start: there was none
+        client = client_of(emulator)
+        try:
+            assert [client.send(1, write(n, 100 + n)) for n in (4, 5, 6)] == [ACCEPTED] * 3
+        finally:
+            client.close()
+        assert identity(state) == created  # not rewritten
+        lines = journal_path(state).read_text().splitlines()
+        assert lines[0] == f"{JOURNAL_FORMAT} {hashlib.sha256(state.read_bytes()).hexdigest()}"
+        assert lines[1:] == [f"1 {write(n, 100 + n).hex()}" for n in (4, 5, 6)]
+        assert load_state(state) == emulator.modules()  # the state file and its journal: what was acknowledged
+    assert not journal_path(state).exists()
+    saved = json.loads(state.read_text())  # the contract alone, after a clean exit
+    assert [m["programs"][n - 1]["P"] for m in saved["modules"] if m["address"] == 1 for n in (4, 5, 6)] == [104, 105, 106]
+
+
+def test_what_is_on_disk_is_what_was_acknowledged_after_every_write(tmp_path):
+    """Writes, broadcasts, refused writes and reads, with a compaction every 7 journal lines: a copy of
+    the folder taken after any reply — what a kill would leave — loads as the modules the emulator holds."""
+    state = tmp_path / "live" / "bus.json"
+    kept = {9: replace(ModuleState.factory(9), mode="run")}
+    rng = random.Random(3)
+    with Emulator(modules(1, 2, 3), state_path=state, unserved=kept, compact_every=7) as emulator:
+        client = client_of(emulator)
+        try:
+            for step in range(60):
+                address = rng.choice([BROADCAST, 1, 2, 3])
+                message = write(rng.randrange(1, 65), rng.choice([50, 150, 250, 399, 5000]))  # 5000: refused, P > S1
+                send_only(client, address, message) if address == BROADCAST else client.send(address, message)
+                assert client.send(1, codec.ReadSystem().encode()) is not None  # a broadcast is processed by now
+                copy = tmp_path / f"copy-{step}"
+                shutil.copytree(state.parent, copy)
+                assert load_state(copy / "bus.json") == {**kept, **emulator.modules()}, f"step {step}"
+                assert len(journal_path(state).read_text().splitlines()) <= 1 + 7
+        finally:
+            client.close()
+    assert load_state(state) == {**kept, **emulator.modules()}
+
+
+def test_a_journal_left_behind_is_replayed_and_compacted_at_start(tmp_path):
+    state = tmp_path / "live" / "bus.json"
+    with Emulator(modules(1, 2), state_path=state) as emulator:
+        client = client_of(emulator)
+        try:
+            assert client.send(2, write(7, 321)) == ACCEPTED
+            send_only(client, BROADCAST, codec.WriteSpeeds(((4, 123),)).encode())
+            assert client.send(2, codec.ReadSystem().encode()) is not None
+        finally:
+            client.close()
+        killed = tmp_path / "killed"
+        shutil.copytree(state.parent, killed)  # what SIGKILL would leave behind
+        held = emulator.modules()
+    left = killed / "bus.json"
+    assert len(journal_path(left).read_text().splitlines()) == 1 + 1 + 2  # the header, the write, the broadcast to both
+    assert load_state(left) == held
+    with Emulator(load_state(left), state_path=left) as restarted:
+        assert load_state(left) == held
+        assert store._load_file(left) == held  # compacted: the state file alone holds it all
+        assert journal_path(left).read_text().splitlines() == [f"{JOURNAL_FORMAT} {hashlib.sha256(left.read_bytes()).hexdigest()}"]
+        assert restarted.modules() == held
+
+
+def journal(state: Path, *lines: str, follows: bool = True, end: str = "\n") -> None:
+    base = hashlib.sha256(state.read_bytes() if follows else b"another file").hexdigest()
+    journal_path(state).write_text("\n".join([f"{JOURNAL_FORMAT} {base}", *lines]) + end)
+
+
+def test_a_cut_line_and_a_journal_of_another_state_file_are_ignored(tmp_path):
+    state = tmp_path / "bus.json"
+    state.write_text(json.dumps(state_document(modules(1))))
+    factory = modules(1)
+    written = ModuleState.factory(1).image.with_programs({3: Program(P=200, V=100)})
+    journal(state, f"1 {write(3, 200).hex()}", f"1 {write(4, 300).hex()[:9]}", end="")  # the last line cut by a kill
+    assert load_state(state) == {1: ModuleState(written)}
+    journal(state, f"1 {write(3, 200).hex()}", follows=False)  # the state file already took it, or was replaced
+    assert load_state(state) == factory
+    journal(state, f"2 {write(3, 200).hex()}")  # a module served from factory defaults, not yet in the file
+    assert load_state(state) == {**factory, 2: ModuleState(ModuleState.factory(2).image.with_programs({3: Program(P=200, V=100)}))}
+
+
+@pytest.mark.parametrize(
+    ("line", "says"),
+    [
+        ("1 21zz", "bus.json.journal:3: not an address and a message in hex — fix or delete the line"),
+        ("one 2100", "bus.json.journal:3: not an address and a message in hex — fix or delete the line"),
+        ("40 2100", "bus.json.journal:3: address 40 is outside 1..30 — fix or delete the line"),
+    ],
+)
+def test_a_journal_line_that_is_not_a_write_is_refused_with_its_line_number(tmp_path, line, says):
+    state = tmp_path / "bus.json"
+    state.write_text(json.dumps(state_document(modules(1))))
+    journal(state, f"1 {write(3, 200).hex()}", line)
+    with pytest.raises(UserError) as refused:
+        load_state(state)
+    assert str(refused.value) == f"{tmp_path}/{says}"
+
+
+def test_a_write_the_journal_cannot_take_is_taken_back_and_neither_answered_nor_applied(tmp_path, monkeypatch, caplog):
+    state = tmp_path / "bus.json"
+    sync = os.fdatasync
+    failures = [OSError(errno.EIO, "Input/output error")]
+
+    def fails_once(fd: int) -> None:
+        if failures:
+            raise failures.pop()
+        sync(fd)
+
+    with Emulator(modules(1), state_path=state) as emulator:
+        client = client_of(emulator)
+        try:
+            assert client.send(1, write(3, 111)) == ACCEPTED
+            monkeypatch.setattr(store.os, "fdatasync", fails_once)
+            assert client.send(1, write(3, 222)) is None  # not answered
+            assert emulator.module(1).image.program(3).P == 111  # not applied
+            assert load_state(state)[1].image.program(3).P == 111  # and taken back from the journal
+            assert client.send(1, write(4, 333)) == ACCEPTED  # the next write is saved by compaction
+            assert store._load_file(state)[1].image.program(4).P == 333
+        finally:
+            client.close()
+    assert f"{state}: cannot save the emulator state file (Input/output error)" in caplog.text
+    assert load_state(state)[1].image.program(3).P == 111
+
+
+# -- SIGKILL of a real `prc3cfg emulator serve` -----------------------------------------------
+
+ROUNDS = 24
+MODULES = 30
+
+
+def written(state: Path) -> dict[tuple[int, int], int]:
+    """Every program's position in the state file alone (the contract), by (address, program)."""
+    return {(m["address"], n): p["P"] for m in json.loads(state.read_text())["modules"] for n, p in enumerate(m["programs"], 1)}
+
+
+def kill_during_start(process, state: Path, before: tuple[int, int, int] | None) -> None:
+    """SIGKILL as soon as the state file changes (the start's compaction) or the emulator listens."""
+    while process.poll() is None:
+        try:
+            if identity(state) != before:
+                break
+        except FileNotFoundError:
+            pass
+        if select.select([process.stdout], [], [], 0)[0]:  # it listens: the start is over
+            break
+    process.kill()
+
+
+def test_a_killed_emulator_loses_no_acknowledged_write(tmp_path):
+    """Rounds of writes to a real `emulator serve --state`, each ended by SIGKILL — after a random number
+    of acknowledged writes (past a compaction at 1,000 in some rounds) while the client keeps writing, or
+    during the start's replay and compaction — then a restart: every acknowledged write is in the state
+    file the restarted emulator compacted, and the one write in flight at the kill is there or not."""
+    state = tmp_path / "bus.json"
+    rng = random.Random(5)
+    allowed: dict[tuple[int, int], set[int]] = {}  # (address, program) → positions the state may hold
+    killed_in_start = writes = 0
+    for round_ in range(ROUNDS + 1):
+        before = identity(state) if state.exists() else None
+        process, log = spawn(tmp_path, "--state", str(state), "--modules", f"1-{MODULES}")
+        if 0 < round_ < ROUNDS and rng.random() < 0.25:
+            kill_during_start(process, state, before)
+            process.wait()
+            killed_in_start += 1
+            continue
+        served = listening(process, log)
+        held = written(state)
+        for key, positions in allowed.items():
+            assert held[key] in positions, f"round {round_}: {key} holds {held[key]}, acknowledged {positions}"
+        allowed = {key: {held[key]} for key in allowed}
+        if round_ == ROUNDS:
+            process.terminate()
+            assert process.wait() == 0, log.read_text()
+            break
+        writes += kill_after_writes(served, rng, allowed)
+        assert process.wait() == -signal.SIGKILL, log.read_text()
+    assert not journal_path(state).exists()  # the last exit was clean
+    assert "Traceback" not in log.read_text()
+    assert killed_in_start > 0 and writes > 5_000
+
+
+def kill_after_writes(served, rng: random.Random, allowed: dict[tuple[int, int], set[int]]) -> int:
+    """Write until a SIGKILL, sent from another thread after a random number of acknowledged writes,
+    ends the emulator; `allowed` follows what the state may hold. The writes acknowledged."""
+    target = rng.choice([rng.randrange(0, 300), rng.randrange(900, 1_500)])
+    reached = threading.Event()
+    killer = threading.Thread(target=lambda: (reached.wait(), served.process.kill()))
+    killer.start()
+    client = Client(served.url)
+    acknowledged = 0
+    try:
+        while True:
+            if acknowledged == target:
+                reached.set()
+            address, program, position = rng.randint(1, MODULES), rng.randint(1, 64), rng.randrange(0, 401)
+            key = (address, program)
+            factory = ModuleState.factory(address).image.program(program).P
+            allowed[key] = allowed.get(key, {factory}) | {position}  # in flight: it may be executed or not
+            try:
+                reply = client.send(address, write(program, position))
+            except (serial.SerialException, OSError):
+                break
+            if reply is None:
+                break
+            assert reply == ACCEPTED
+            allowed[key] = {position}
+            acknowledged += 1
+    finally:
+        reached.set()
+        killer.join()
+        client.close()
+    return acknowledged
