@@ -14,8 +14,11 @@ programs reset. Prints, medians of `--runs`:
 - **against the real line**: `--buses` buses of `--modules` modules through `emulator://`
   against the time the real line would take — every exchange of the apply's journal (the
   read-back, the plan's writes, the verification) priced at 9600 baud 8E1 by link.md's cost
-  model; buses are separate lines and run in parallel, so the real line takes as long as
-  its slowest bus; acceptance: at least 10 times faster.
+  model (beside the plan's own estimated bus time of its writes, from `plan --json`);
+  acceptance: at least 10 times faster. Two figures for the real line: summed over the
+  buses, as the plan file sums its estimate, and the slowest bus alone, as buses are
+  separate lines that apply runs in parallel. The apply's phases (from its journal) show
+  where the emulator:// time goes.
 
 Wall times include each command's start-up (imports, about 0.3 s), reported separately.
 """
@@ -30,10 +33,13 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 
 from prc3cfg import codec
 from prc3cfg.bustime import LineCost
+from prc3cfg.emulator import BROADCAST
 from prc3cfg.line import LineSettings
 
 PLANT = """\
@@ -65,6 +71,7 @@ WITHOUT_STATE_FILE = (
     "main()\n"
 )
 REAL_LINE = LineSettings(baud=9600, parity="even")
+READS = ("50", "51", "52")  # message IDs of reads, in hex
 TURNAROUND, ZVZ = 0.010, 0.020
 
 
@@ -78,28 +85,49 @@ def write_plant(folder: Path, buses: int, modules: int, framing: str) -> Path:
     return plant
 
 
-def timed(command: list[str]) -> float:
+def run(command: list[str]) -> tuple[float, str]:
+    """The wall time and standard output of a command that must succeed."""
     start = time.perf_counter()
     done = subprocess.run(command, capture_output=True, text=True)
     elapsed = time.perf_counter() - start
     if done.returncode != 0:
         sys.exit(f"{' '.join(command[:3])} … failed (exit {done.returncode}):\n{done.stdout}\n{done.stderr}")
-    return elapsed
+    return elapsed, done.stdout
 
 
-def apply(prc3cfg: list[str], buses: int, modules: int, framing: str) -> tuple[float, dict[str, float]]:
-    """One apply from factory defaults in a fresh folder: its wall time, and each bus's time on the real line."""
+@dataclass
+class Applied:
+    wall: float  # s, the apply command
+    line: dict[str, float]  # bus → s its exchanges take on the real line
+    planned: float  # s, the plan's estimated bus time (its writes, all buses)
+    phases: dict[str, float]  # s of the apply, from its start: to the first exchange, read-back, planning, …
+
+
+def apply(prc3cfg: list[str], buses: int, modules: int, framing: str, *, estimate: bool = False) -> Applied:
+    """One apply from factory defaults in a fresh folder (after `plan --json`, with `estimate`)."""
     with tempfile.TemporaryDirectory() as work:
         plant = write_plant(Path(work), buses, modules, framing)
-        wall = timed([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release"])
+        planned = json.loads(run([*prc3cfg, "plan", str(plant), "--json"])[1])["estimated_bus_time_s"] if estimate else 0.0
+        started = time.time()
+        wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release"])
         (journal,) = (Path(work) / ".prc3cfg" / "journal").iterdir()
-        cost = LineCost.of(framing, REAL_LINE, TURNAROUND, ZVZ)
-        line: dict[str, float] = defaultdict(float)
-        for record in map(json.loads, journal.read_text().splitlines()):
-            if record["event"] == "exchange":
-                message = codec.decode_message(bytes.fromhex(record["request"]))
-                line[record["bus"]] += cost.message_time(record["address"], message)
-        return wall, dict(line)
+        exchanges = [r for r in map(json.loads, journal.read_text().splitlines()) if r["event"] == "exchange"]
+    cost = LineCost.of(framing, REAL_LINE, TURNAROUND, ZVZ)
+    line: dict[str, float] = defaultdict(float)
+    for record in exchanges:
+        message = codec.decode_message(bytes.fromhex(record["request"]))
+        address = record["address"]
+        line[record["bus"]] += cost.broadcast_time(message) if address == BROADCAST else cost.message_time(address, message)
+    return Applied(wall, dict(line), planned, phases(exchanges, started, wall))
+
+
+def phases(exchanges: list[dict], started: float, wall: float) -> dict[str, float]:
+    """Seconds of an apply by phase, from the times its journal gives each exchange (when it ended)."""
+    ends = [datetime.fromisoformat(r["time"]).timestamp() - started for r in exchanges]
+    writes = [i for i, r in enumerate(exchanges) if not r["request"].startswith(READS)]
+    first, last = writes[0], writes[-1]
+    return {"start": ends[0] - exchanges[0]["duration_s"], "read-back": ends[first - 1], "planning": ends[first],
+            "writes": ends[last], "verification": ends[-1], "end": wall}  # fmt: skip
 
 
 def main() -> None:
@@ -111,21 +139,24 @@ def main() -> None:
     args = parser.parse_args()
     prc3cfg = [sys.executable, "-m", "prc3cfg"]
     without_state = [sys.executable, "-c", WITHOUT_STATE_FILE]
-    startup = statistics.median(timed([*prc3cfg, "--help"]) for _ in range(args.runs))
+    startup = statistics.median(run([*prc3cfg, "--help"])[0] for _ in range(args.runs))
     print(f"{args.framing}, runs {args.runs} (medians); command start-up {startup:.2f} s (included below)")
 
-    kept = statistics.median(apply(prc3cfg, 1, args.modules, args.framing)[0] for _ in range(args.runs))
-    bare = statistics.median(apply(without_state, 1, args.modules, args.framing)[0] for _ in range(args.runs))
+    kept = statistics.median(apply(prc3cfg, 1, args.modules, args.framing).wall for _ in range(args.runs))
+    bare = statistics.median(apply(without_state, 1, args.modules, args.framing).wall for _ in range(args.runs))
     print(f"  persistence, 1 bus × {args.modules} modules: with the state file {kept:6.2f} s   without {bare:6.2f} s"
           f"   ratio {kept / bare:.2f} (acceptance ≤ 1.3; without start-up {(kept - startup) / (bare - startup):.2f})")  # fmt: skip
 
-    runs = [apply(prc3cfg, args.buses, args.modules, args.framing) for _ in range(args.runs)]
-    wall = statistics.median(w for w, _ in runs)
-    per_bus = runs[0][1]
-    real = max(per_bus.values())
-    print(f"  real line, {args.buses} buses × {args.modules} modules: emulator:// {wall:6.2f} s   real line {real:7.2f} s"
-          f" (slowest bus at {REAL_LINE.baud} baud 8E1; {sum(per_bus.values()):.2f} s summed over buses)"
-          f"   {real / wall:.1f}× faster (acceptance ≥ 10)")  # fmt: skip
+    runs = [apply(prc3cfg, args.buses, args.modules, args.framing, estimate=n == 0) for n in range(args.runs)]
+    wall = statistics.median(r.wall for r in runs)
+    summed, slowest = sum(runs[0].line.values()), max(runs[0].line.values())
+    print(f"  real line, {args.buses} buses × {args.modules} modules: emulator:// {wall:6.2f} s; at {REAL_LINE.baud} baud 8E1 "
+          f"{summed:.2f} s summed over the buses (the plan's estimate {runs[0].planned:.2f} s + read-backs "
+          f"{summed - runs[0].planned:.2f} s), {slowest:.2f} s on the slowest bus")  # fmt: skip
+    print(f"    {summed / wall:.1f}× faster than the buses summed, {slowest / wall:.1f}× than the slowest bus (acceptance ≥ 10)")
+    middle = sorted(runs, key=lambda r: r.wall)[len(runs) // 2]
+    marks = list(middle.phases.items())
+    print("    where the time goes: " + ", ".join(f"{name} {end - (marks[i - 1][1] if i else 0):.2f} s" for i, (name, end) in enumerate(marks)))
 
 
 if __name__ == "__main__":

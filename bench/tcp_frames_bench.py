@@ -9,6 +9,8 @@ client and the emulator are stopped and continued (SIGSTOP/SIGCONT) for 1..20 ms
 random, every 5..50 ms. No fault is injected, so every frame on the line is good. Prints
 the exchanges made, the frames the client's decoder discarded (its trace), the link's
 retries and the frames the emulator discarded (its log); acceptance: all three zero.
+`--uart-timeouts` makes the client decode as from a UART (`uart=True`, as before TCP
+was told apart), for comparison.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ class CountingTrace(io.StringIO):
         return len(text)
 
 
-def client(url: str, framing: str, exchanges: int) -> None:
+def client(url: str, framing: str, exchanges: int, uart: bool) -> None:
     """The client process: `exchanges` exchanges; prints its counts as JSON."""
     from prc3cfg import codec
     from prc3cfg.framing import get_framing
@@ -51,6 +53,7 @@ def client(url: str, framing: str, exchanges: int) -> None:
     line = LineSettings()
     stream = CountingTrace()
     link = Link(open_port(url, line, bus="bench"), get_framing(framing), bus="bench", line=line, retries=5, trace=Trace(stream))
+    link.uart = uart
     messages = [codec.ReadSystem(), codec.ReadPrograms(1, 4), codec.ReadProgram(9)]
     start = time.perf_counter()
     for n in range(exchanges):
@@ -85,10 +88,11 @@ def main() -> None:
     parser.add_argument("--framing", default="crc16")
     parser.add_argument("--no-pauses", action="store_true")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--uart-timeouts", action="store_true")
     parser.add_argument("--client", metavar="URL", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client:
-        client(args.client, args.framing, args.exchanges)
+        client(args.client, args.framing, args.exchanges, args.uart_timeouts)
         return
 
     emulator = subprocess.Popen(
@@ -103,7 +107,8 @@ def main() -> None:
     try:
         url = "socket://" + emulator.stdout.readline().split()[2]
         worker = subprocess.Popen(
-            [sys.executable, __file__, "--client", url, "--framing", args.framing, "--exchanges", str(args.exchanges)],
+            [sys.executable, __file__, "--client", url, "--framing", args.framing, "--exchanges", str(args.exchanges),
+             *(["--uart-timeouts"] if args.uart_timeouts else [])],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
         running = threading.Event()
@@ -130,7 +135,7 @@ def main() -> None:
         reader.join()
     counts = json.loads(output)
     emulator_discards = sum("discarded" in line for line in server_log)
-    print(f"{args.framing}: {counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} busy "
+    print(f"{args.framing}{' (client decoding as from a UART)' if args.uart_timeouts else ''}: {counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} busy "
           f"processes and {pauses[0] if pauses else 0} SIGSTOP/SIGCONT pauses of the client or the emulator")  # fmt: skip
     print(f"  good frames discarded by the client {counts['discarded']}, link retries {counts['retries']}, "
           f"discarded by the emulator {emulator_discards}   (acceptance: all 0)")  # fmt: skip
