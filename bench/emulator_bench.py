@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -41,6 +40,8 @@ from prc3cfg import codec
 from prc3cfg.bustime import LineCost
 from prc3cfg.emulator import BROADCAST
 from prc3cfg.line import LineSettings
+
+from line_bench import run  # the wall time and output of a command that must succeed
 
 PLANT = """\
 plant: emulator-bench
@@ -83,16 +84,6 @@ def write_plant(folder: Path, buses: int, modules: int, framing: str) -> Path:
     )
     plant.write_text(PLANT.format(buses=text))
     return plant
-
-
-def run(command: list[str]) -> tuple[float, str]:
-    """The wall time and standard output of a command that must succeed."""
-    start = time.perf_counter()
-    done = subprocess.run(command, capture_output=True, text=True)
-    elapsed = time.perf_counter() - start
-    if done.returncode != 0:
-        sys.exit(f"{' '.join(command[:3])} … failed (exit {done.returncode}):\n{done.stdout}\n{done.stderr}")
-    return elapsed, done.stdout
 
 
 @dataclass

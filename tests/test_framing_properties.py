@@ -88,16 +88,21 @@ def test_round_trip_in_random_pieces_after_garbage(combo, line, data):
     assert drain(decoder) == [*skipped, Frame(direction, address, message)]
 
 
+def frames_in_a_row(draw, framing: Framing, direction: Direction) -> tuple[list[Frame], bytes]:
+    """One to four frames, and their bytes back to back."""
+    contents = draw(st.lists(frame_contents(framing), min_size=1, max_size=4))
+    frames = [Frame(direction, address, message) for address, message in contents]
+    return frames, b"".join(framing.encode(direction, address, message) for address, message in contents)
+
+
 @EXAMPLES
 @given(combo=st.sampled_from(HUNTING), line=lines, data=st.data())
 def test_frames_back_to_back(combo, line, data):
     name, direction = combo
-    framing = FRAMINGS[name]
-    contents = data.draw(st.lists(frame_contents(framing), min_size=1, max_size=4))
-    stream = b"".join(framing.encode(direction, address, message) for address, message in contents)
-    decoder = framing.decoder(direction, line)
+    frames, stream = frames_in_a_row(data.draw, FRAMINGS[name], direction)
+    decoder = FRAMINGS[name].decoder(direction, line)
     end = feed_back_to_back(decoder, split(data.draw, stream), line)
-    assert drain(decoder, end) == [Frame(direction, address, message) for address, message in contents]
+    assert drain(decoder, end) == frames
 
 
 @EXAMPLES
@@ -105,17 +110,15 @@ def test_frames_back_to_back(combo, line, data):
 def test_over_tcp_frames_survive_any_split_and_any_pauses(combo, line, data):
     """Over TCP (uart=False) a frame with a length is taken whole however it is split and delayed."""
     name, direction = combo
-    framing = FRAMINGS[name]
-    contents = data.draw(st.lists(frame_contents(framing), min_size=1, max_size=4))
-    stream = b"".join(framing.encode(direction, address, message) for address, message in contents)
-    decoder = framing.decoder(direction, line, uart=False)
+    frames, stream = frames_in_a_row(data.draw, FRAMINGS[name], direction)
+    decoder = FRAMINGS[name].decoder(direction, line, uart=False)
     events, now = [], 0.0
     for chunk in split(data.draw, stream):
         now += data.draw(st.floats(0, 100, allow_nan=False))
         decoder.receive_data(chunk, now)
         events += drain(decoder, now)
     events += drain(decoder, now + 100)
-    assert events == [Frame(direction, address, message) for address, message in contents]
+    assert events == frames
 
 
 @EXAMPLES

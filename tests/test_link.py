@@ -255,8 +255,7 @@ def test_an_emulator_at_line_speed_answers_no_sooner_than_the_line_would(tmp_pat
 )
 def test_an_emulator_port_takes_only_a_line_speed_and_says_so_in_one_line(tmp_path, query, says):
     port = f"emulator://rehearsal{query}"
-    with pytest.raises(UserError) as refused:
-        with open_link(emulator_bus(port), tmp_path / "plant.yaml"):
-            pass
+    with pytest.raises(UserError) as refused, open_link(emulator_bus(port), tmp_path / "plant.yaml"):
+        pass
     assert str(refused.value) == f"bus b1: port {port}: {says}"
     assert not (tmp_path / ".prc3cfg").exists()  # refused before the emulator starts

@@ -1,7 +1,8 @@
 """The PRC 3 bus emulator: the device model served behind a real framing on a real stream.
 
-`bus` is pure (who gets a message); `state` is the state file; `server` is the running
-emulator over TCP and pseudo-terminals, with the Python API tests use while it runs.
+`bus` is pure (who gets a message); `state` is the state file and, while an emulator
+runs, the journal beside it; `server` is the running emulator over TCP and
+pseudo-terminals, with the Python API tests use while it runs.
 """
 
 from prc3cfg.emulator.bus import BROADCAST, Bus
