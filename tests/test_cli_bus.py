@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from emulated import run_cli
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -112,3 +113,16 @@ def test_import_then_plan_is_empty(tmp_path_factory, capsys, states):
         assert run_cli(capsys, "validate", plant).code == 0
         planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
         assert planned.code == 0, planned.out + planned.err
+
+
+@pytest.mark.parametrize("command", ["scan", "import"])
+def test_an_absent_address_costs_one_short_try(capsys, tmp_path, command):
+    """An empty line: one 50h per address, none asked again, and no warning lines."""
+    trace = tmp_path / "trace.txt"
+    with Emulator({5: ModuleState.factory(5)}) as emulator:
+        host, port = emulator.listen()
+        result = run_cli(capsys, command, "--port", f"socket://{host}:{port}", "--trace", trace)
+    assert result.code == 0, result.err
+    sent = [line for line in trace.read_text().splitlines() if "\t>\t" in line]
+    assert len(sent) == 30 + (0 if command == "scan" else 1 + 16)  # import then reads module 5 whole
+    assert "retrying" not in result.err and "warning" not in result.err.lower()

@@ -156,6 +156,25 @@ class Link:
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
         )
 
+    def probe(self, address: int, message: codec.Message, timeout: float) -> int | codec.SystemReply | codec.ProgramsReply | None:
+        """Whether a module answers at `address`: one attempt, waiting `timeout`; silence is None —
+        an absent address is normal on a scan, and is not asked again. Something heard but not
+        usable (a damaged reply) gets the usual retries (`request`)."""
+        if self.cancel is not None and self.cancel.is_set():
+            raise Interrupted()
+        data, started = message.encode(), time.time()
+        raw = self._exchange(address, data, timeout)
+        self._observe(address, data, raw, 1, started)
+        if raw is None:
+            return None
+        try:
+            reply = codec.decode_reply(message, raw)
+        except codec.BadReply:
+            return self.request(address, message)
+        if reply in DAMAGED_CODES or (isinstance(reply, int) and reply and not self.framing.checked):
+            return self.request(address, message)
+        return reply
+
     def broadcast(self, message: codec.Message, turnaround: float) -> None:
         """Send `message` to address 0: every module processes it, none answers. Waits the
         modules' `turnaround` (and on open-driver the gap that ends the frame) before returning,
@@ -185,11 +204,12 @@ class Link:
         if self.trace:
             self.trace.sent(self.bus, frame)
 
-    def _exchange(self, address: int, data: bytes) -> bytes | None:
-        """One attempt: the reply message from `address`, or None (time-out, nothing valid)."""
+    def _exchange(self, address: int, data: bytes, timeout: float | None = None) -> bytes | None:
+        """One attempt: the reply message from `address`, or None (nothing valid within `timeout`,
+        the link's own by default)."""
         self._send(self.framing.encode(Direction.REQUEST, address, data))
         decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz, uart=self.uart)
-        deadline = time.monotonic() + self.timeout
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         last_call = deadline + self._longest_reply  # even a line that never goes quiet ends here
         pending = False  # bytes of a frame that only a gap can end
         while True:
