@@ -210,6 +210,7 @@ class Store:
         self._entries = 0  # lines in the journal
         self._size = 0  # bytes in the journal
         self._without_journal = False  # a journal could not be begun (logged once)
+        self._closed = False  # after `close`, nothing more is saved
 
     def start(self, modules: Mapping[int, ModuleState]) -> None:
         """Compact when there is no state file yet or a journal was left behind (a killed
@@ -220,6 +221,8 @@ class Store:
     def record(self, writes: list[tuple[int, bytes]], modules: Mapping[int, ModuleState]) -> None:
         """Make accepted writes durable — (address, message) per module changed — before they
         are answered: appended to the journal, or by compaction; OSError when neither can."""
+        if self._closed:
+            raise OSError(errno.ESHUTDOWN, "the emulator has closed its state file")
         if self._fd is None or self._entries + len(writes) > self.compact_every or not self._unchanged():
             self.compact(modules)
             return
@@ -240,6 +243,8 @@ class Store:
         """Write every module into the state file, then begin a fresh journal; OSError when the
         state file cannot be written. A journal that cannot be begun leaves every later write to
         compaction (logged), the state file holding them."""
+        if self._closed:
+            raise OSError(errno.ESHUTDOWN, "the emulator has closed its state file")
         text = _text(modules)
         write_atomically(self.path, text)
         self._close_journal()
@@ -268,7 +273,9 @@ class Store:
 
     def close(self, modules: Mapping[int, ModuleState]) -> None:
         """On exit: the state file takes everything, and the journal is removed. OSError when
-        the state file cannot be written; the journal is then kept for the next start."""
+        the state file cannot be written; the journal is then kept for the next start. A write
+        that comes later (a connection that outlived the emulator's close) is refused."""
+        self._closed = True
         if self._fd is None and not self.journal.exists():
             return
         if self._fd is None or self._entries or not self._unchanged():  # after a failed append the journal holds lines
