@@ -240,6 +240,14 @@ def test_an_emulator_at_line_speed_answers_no_sooner_than_the_line_would(tmp_pat
     line_time = LineCost.of("crc16", LineSettings(baud=1200), 0.010, 0.020).message_time(1, codec.ReadSystem())
     assert took >= line_time  # 34 bytes of 11 bits at 1200 baud and the turnaround: 0.32 s
     assert (tmp_path / ".prc3cfg" / "emulators" / "rehearsal.json").exists()  # the query is no part of the name
+    assert link.takes_line_time  # so a broadcast waits as on the line
+
+
+def test_an_emulator_takes_frames_at_once_so_a_broadcast_waits_for_nothing(tmp_path):
+    with open_link(emulator_bus("emulator://quick"), tmp_path / "plant.yaml") as link:
+        assert not link.takes_line_time
+        link.broadcast(codec.WriteSpeeds(((4, 123),)), turnaround=0.010)
+        assert link.request(1, codec.ReadProgram(4)).programs[0].V == 123  # taken before the next frame
 
 
 @pytest.mark.parametrize(

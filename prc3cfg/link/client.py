@@ -86,6 +86,7 @@ class Link:
         trace: Trace | None = None,
         observer: Callable[[Exchange], None] | None = None,
         cancel: threading.Event | None = None,
+        takes_line_time: bool = True,
     ) -> None:
         self.port = port
         self.framing = framing
@@ -97,6 +98,9 @@ class Link:
         self.trace = trace
         self.observer = observer
         self.cancel = cancel
+        #: Whether frames take their time on a line at the far end; False for an emulator that takes
+        #: every frame at once and in order, where a broadcast needs no wait before the next frame.
+        self.takes_line_time = takes_line_time
         self._gap_ends_frame = framing.name == "open-driver"
         #: Whether the bytes come from a UART, or over TCP, where their arrival times say nothing.
         self.uart = urlsplit(str(port.port)).scheme.lower() not in TCP_SCHEMES
@@ -176,17 +180,19 @@ class Link:
         return reply
 
     def broadcast(self, message: codec.Message, turnaround: float) -> None:
-        """Send `message` to address 0: every module processes it, none answers. Waits the
-        modules' `turnaround` (and on open-driver the gap that ends the frame) before returning,
-        so the next frame does not arrive while they work; `Interrupted` when cancelled first."""
+        """Send `message` to address 0: every module processes it, none answers. Where frames take
+        line time, waits the frame's transmission, the modules' `turnaround` (and on open-driver the
+        gap that ends the frame) before returning, so the next frame does not arrive while they
+        work; `Interrupted` when cancelled first."""
         if self.cancel is not None and self.cancel.is_set():
             raise Interrupted()
         data = message.encode()
         frame = self.framing.encode(Direction.REQUEST, 0, data)
         started = time.time()
         self._send(frame)
-        gap = self.zvz if self._gap_ends_frame else 0.0
-        time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
+        if self.takes_line_time:
+            gap = self.zvz if self._gap_ends_frame else 0.0
+            time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
         self._observe(0, data, None, 1, started)
 
     def _observe(self, address: int, data: bytes, raw: bytes | None, attempt: int, started: float) -> None:

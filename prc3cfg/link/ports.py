@@ -3,10 +3,12 @@
 `emulator://NAME` runs the bus emulator in this process (the same code as `prc3cfg
 emulator serve`) on a loopback port and connects to it through `socket://`, so the whole
 link is exercised. Its state is kept in `.prc3cfg/emulators/NAME.json` beside the plant
-file (with its journal beside it while it runs, `prc3cfg.emulator.journal`), created with
-factory-default modules at the plant's addresses. `emulator://NAME?line-speed=BAUD` makes
+file (with its journal beside it while it runs, `prc3cfg.emulator.state`), created with
+factory-default modules at the plant's addresses. It takes every frame at once and in order,
+so the link waits no line time after a broadcast. `emulator://NAME?line-speed=BAUD` makes
 every exchange take as long as on a line of BAUD baud with the bus's character format, to
-rehearse real timings without hardware; the query takes no other key.
+rehearse real timings without hardware (broadcasts then wait as on a line); the query
+takes no other key.
 
 `socket://` ports are pyserial's with two changes (`TcpPort`): `in_waiting` says how many
 bytes have arrived (pyserial says 1 whenever there are any, so a reply would be read a
@@ -134,7 +136,7 @@ def open_link(
 ) -> Iterator[Link]:
     """A `Link` to one plant bus (`prc3cfg.plant.Bus`), closed on exit."""
     with contextlib.ExitStack() as stack:
-        url = bus.port
+        url, takes_line_time = bus.port, True
         if url.startswith(EMULATOR_SCHEME):
             try:
                 line_speed = emulator_line_speed(url)
@@ -149,7 +151,7 @@ def open_link(
                          line=replace(bus.line, baud=line_speed or bus.line.baud), line_speed=line_speed is not None)
             )  # fmt: skip
             host, port = emulator.listen("127.0.0.1", 0)
-            url = f"socket://{host}:{port}"
+            url, takes_line_time = f"socket://{host}:{port}", line_speed is not None
         port = open_port(url, bus.line, bus=bus.name)
         stack.callback(port.close)
         yield Link(
@@ -163,6 +165,7 @@ def open_link(
             trace=trace,
             observer=observer,
             cancel=cancel,
+            takes_line_time=takes_line_time,
         )
 
 
