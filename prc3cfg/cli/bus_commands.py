@@ -3,23 +3,30 @@
 from __future__ import annotations
 
 from decimal import Decimal
-from typing import Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
-from rich.table import Table
 
-from prc3cfg import api, gateway
 from prc3cfg.cli import app, link_app
-from prc3cfg.cli.common import LockOpt, PlantArg, RetriesOpt, TraceOpt, check_output, line_options, parse_addresses, stderr, stdout_console
+from prc3cfg.cli.common import (
+    FRAMING_NAMES,
+    LockOpt,
+    PlantArg,
+    RetriesOpt,
+    TraceOpt,
+    check_output,
+    line_options,
+    parse_addresses,
+    stderr_console,
+    stdout_console,
+)
 from prc3cfg.errors import UserError
-from prc3cfg.plant import load_plant
-from prc3cfg.framing import FRAMINGS
-from prc3cfg.importer import module_entry, plant_yaml
-from prc3cfg.line import LineSettings
-from prc3cfg.plant.units import BY_SYMBOL
+
+if TYPE_CHECKING:
+    from prc3cfg import api
 
 PortOpt = Annotated[str, typer.Option("--port", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
-FramingOpt = Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMINGS)}.")]
+FramingOpt = Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
 BaudOpt = Annotated[int, typer.Option(help="Baud rate.")]
 ParityOpt = Annotated[str, typer.Option(help="none | odd | even")]
 TimeoutOpt = Annotated[float, typer.Option(min=0.001, help="Seconds to wait for a reply.")]
@@ -27,8 +34,11 @@ ZvzOpt = Annotated[float, typer.Option(min=0.004, help="open-driver: the charact
 
 
 def _bare_line(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
-    if framing not in FRAMINGS:
-        raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMINGS)}")
+    from prc3cfg import api
+    from prc3cfg.line import LineSettings
+
+    if framing not in FRAMING_NAMES:
+        raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMING_NAMES)}")
     try:
         line = LineSettings(baud=baud, data_bits=data_bits, parity=parity, stop_bits=stop_bits)
     except ValueError as error:
@@ -51,6 +61,11 @@ def scan(
     lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Which addresses 1..30 answer, with their S9 and system parameters."""
+    from rich.table import Table
+
+    from prc3cfg import api
+    from prc3cfg.plant.units import BY_SYMBOL
+
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
     with line_options(trace, retries, lock_timeout) as options:
@@ -85,6 +100,9 @@ def import_plant(
     lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Write a plant file (to stdout) from the live modules of one bus."""
+    from prc3cfg import api
+    from prc3cfg.importer import module_entry, plant_yaml
+
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
     with line_options(trace, retries, lock_timeout) as options:
@@ -95,7 +113,7 @@ def import_plant(
         bus["zvz"] = Decimal(str(zvz))
     entries = [module_entry(image, f"{bus_name}-{image.address}") for image in images]
     print(plant_yaml(plant_name, bus, entries), end="")
-    stderr.print(f"imported {len(images)} modules from {port}")
+    stderr_console().print(f"imported {len(images)} module{'s' if len(images) != 1 else ''} from {port}")
 
 
 @link_app.command("init-db")
@@ -104,6 +122,9 @@ def init_db(
     bus: Annotated[str, typer.Option("--bus", help="The bus whose gateway to parameterise.")],
 ) -> None:
     """The CP 524/525 Open Driver INIT data block (eight data words) for a bus's gateway."""
+    from prc3cfg import gateway
+    from prc3cfg.plant import load_plant
+
     loaded = load_plant(plant)
     found = [b for b in loaded.buses if b.name == bus]
     if not found:

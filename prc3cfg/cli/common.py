@@ -4,6 +4,7 @@ terminal, and the `LineOptions` every line-using command hands to `prc3cfg.api`.
 from __future__ import annotations
 
 import contextlib
+import enum
 import os
 import stat
 import sys
@@ -12,27 +13,48 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Annotated, Optional
 
-import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from typing import TYPE_CHECKING
 
-from prc3cfg.api import LineOptions
+import typer
+
 from prc3cfg.cancel import Cancellation
 from prc3cfg.errors import UserError
 from prc3cfg.files import write_atomically
-from prc3cfg.image import MAX_MODULE_ADDRESS
-from prc3cfg.link import Link
 
-stderr = Console(stderr=True)
+if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3cfg --help` stays quick
+    from rich.console import Console
+
+    from prc3cfg.api import LineOptions
+    from prc3cfg.link import Link
+
+#: The framings, as option help names them (a test checks them against `prc3cfg.framing.FRAMINGS`).
+FRAMING_NAMES = ("crc16", "open-driver", "stx")
+#: Module addresses on a line (`prc3cfg.image.MAX_MODULE_ADDRESS`, checked by the same test).
+ADDRESSES = range(1, 31)
+
+
+class Verify(str, enum.Enum):
+    """`--verify`: the values of `prc3cfg.apply.Verify` (checked by the same test)."""
+
+    FLOOR = "floor"
+    FULL = "full"
 
 
 #: Colours of a plan's lines on a terminal, by how the line starts (after its indentation).
 COLOURS = {"+": "green", "-": "red", "~": "yellow", "⚠": "bold red", "✗": "red", "✓": "green"}
 
 
+def stderr_console() -> Console:
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
 def print_lines(text: str) -> None:
     """Print plan or account text: coloured by each line's leading symbol on a terminal (and not
     under NO_COLOR, which rich honours), plain when piped."""
+    from rich.console import Console
+
     console = Console(highlight=False)
     if not console.is_terminal or console.no_color:
         print(text)
@@ -44,6 +66,8 @@ def print_lines(text: str) -> None:
 def stdout_console() -> Console:
     """A console for tables on stdout: the terminal's width there; piped or redirected, as wide as the
     table needs — never cut (colour follows the terminal, and NO_COLOR is honoured)."""
+    from rich.console import Console
+
     console = Console()
     return console if console.is_terminal else Console(width=1_000, soft_wrap=True)
 #: Ctrl-C and SIGTERM for the running command (`main` installs the handlers).
@@ -130,8 +154,8 @@ def parse_addresses(text: str) -> list[int]:
             first, last = int(low), int(high or low)
         except ValueError:
             raise UserError(f"--modules: '{part}' is not an address or a range like 3-5") from None
-        if not 1 <= first <= last <= MAX_MODULE_ADDRESS:
-            raise UserError(f"--modules: '{part}' is outside 1..{MAX_MODULE_ADDRESS} — module addresses are 1..30")
+        if first not in ADDRESSES or last not in ADDRESSES or first > last:
+            raise UserError(f"--modules: '{part}' is outside 1..{ADDRESSES[-1]} — module addresses are 1..{ADDRESSES[-1]}")
         addresses.update(range(first, last + 1))
     return sorted(addresses)
 
@@ -142,11 +166,14 @@ class TerminalProgress:
 
     def __init__(self, stack: contextlib.ExitStack) -> None:
         self._stack = stack
-        self._bar: Progress | None = None
+        self._bar = None
         self._task = None
 
     def start(self, what: str, total: int) -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
         if self._bar is None:
+            stderr = stderr_console()
             self._bar = self._stack.enter_context(Progress(
                 TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                 console=stderr, transient=True, disable=not stderr.is_terminal,
@@ -167,6 +194,8 @@ class TerminalProgress:
 def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Iterator[LineOptions]:
     """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal;
     after a command that succeeded, a note for every line that had to repeat exchanges."""
+    from prc3cfg.api import LineOptions
+
     with contextlib.ExitStack() as stack:
         options = LineOptions(
             retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=TerminalProgress(stack),

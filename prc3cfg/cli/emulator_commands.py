@@ -11,14 +11,8 @@ from typing import Annotated, Optional
 import typer
 
 from prc3cfg.cli import emulator_app
-from prc3cfg.cli.common import parse_addresses
-from prc3cfg.device import ModuleState
-from prc3cfg.emulator import Emulator, FaultInjection, load_state
-from prc3cfg.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
+from prc3cfg.cli.common import ADDRESSES, FRAMING_NAMES, parse_addresses
 from prc3cfg.errors import UserError
-from prc3cfg.framing import FRAMINGS
-from prc3cfg.image import MAX_MODULE_ADDRESS
-from prc3cfg.line import LineSettings
 
 
 def parse_listen(text: str) -> tuple[str, int]:
@@ -34,7 +28,7 @@ def serve(
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
     state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
     modules: Annotated[Optional[str], typer.Option(help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
-    framing: Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMINGS)}.")] = "crc16",
+    framing: Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
     line_speed: Annotated[Optional[int], typer.Option("--line-speed", help="Make every exchange take as long as on a line of this baud rate.")] = None,
     parity: Annotated[str, typer.Option(help="none | odd | even (character time, and framing time-outs).")] = "even",
     data_bits: Annotated[int, typer.Option(help="5..8")] = 8,
@@ -44,8 +38,8 @@ def serve(
     drop_rate: Annotated[float, typer.Option(help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(help="Fraction of exchanges with one bit flipped.")] = 0.0,
     seed: Annotated[Optional[int], typer.Option(help="Seed for fault injection.")] = None,
-    max_connections: Annotated[int, typer.Option("--max-connections", help="TCP clients served at once; one more is closed at once (logged).")] = MAX_CONNECTIONS,
-    idle_timeout: Annotated[float, typer.Option("--idle-timeout", help="Close a TCP connection that sends nothing for this many seconds.")] = IDLE_TIMEOUT,
+    max_connections: Annotated[Optional[int], typer.Option("--max-connections", help="TCP clients served at once (default 64); one more is closed at once (logged).")] = None,
+    idle_timeout: Annotated[Optional[float], typer.Option("--idle-timeout", help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
     """Run a PRC 3 bus emulator until SIGINT or SIGTERM (exit 0).
@@ -65,11 +59,16 @@ def serve(
     keeps its state and the write gets no reply: the master repeats it.
     Warnings and errors are logged on stderr.
     """
+    from prc3cfg.device import ModuleState
+    from prc3cfg.emulator import Emulator, FaultInjection, load_state
+    from prc3cfg.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
+    from prc3cfg.line import LineSettings
+
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
-    if framing not in FRAMINGS:
-        raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMINGS)}")
+    if framing not in FRAMING_NAMES:
+        raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMING_NAMES)}")
     stored = load_state(state) if state is not None else {}
-    addresses = parse_addresses(modules) if modules else (sorted(stored) or range(1, MAX_MODULE_ADDRESS + 1))
+    addresses = parse_addresses(modules) if modules else (sorted(stored) or ADDRESSES)
     bus = {address: stored.get(address) or ModuleState.factory(address) for address in addresses}
     try:
         emulator = Emulator(
@@ -77,7 +76,8 @@ def serve(
             line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
             faults=FaultInjection(drop_rate, corrupt_rate, seed), state_path=state,
             unserved={a: s for a, s in stored.items() if a not in bus},
-            max_connections=max_connections, idle_timeout=idle_timeout,
+            max_connections=MAX_CONNECTIONS if max_connections is None else max_connections,
+            idle_timeout=IDLE_TIMEOUT if idle_timeout is None else idle_timeout,
         )  # fmt: skip
     except ValueError as error:
         raise UserError(f"emulator: {error}") from None

@@ -14,18 +14,20 @@ import sys
 from pathlib import Path
 from typing import Annotated, Optional
 
+from typing import TYPE_CHECKING
+
 import typer
-from rich import box
-from rich.console import Console
-from rich.table import Table
 
 from prc3cfg.cli import app
 from prc3cfg.cli.common import stdout_console
 from prc3cfg.errors import UserError
-from prc3cfg.plant import Module, Plant, PlantError, load_plant, plant_schema_text
-from prc3cfg.plant.profiles import Sourced
-from prc3cfg.plant.models import ChainSpec
-from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, format_function_output
+
+if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
+    from rich.console import Console
+    from rich.table import Table
+
+    from prc3cfg.plant import Module, Plant
+    from prc3cfg.plant.models import ChainSpec
 
 PlantPath = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
 
@@ -33,6 +35,8 @@ PlantPath = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_d
 @app.command()
 def validate(plant: PlantPath) -> None:
     """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
+    from prc3cfg.plant import PlantError, load_plant
+
     try:
         loaded = load_plant(plant)
     except PlantError as error:
@@ -48,6 +52,8 @@ def show(
     module: Annotated[Optional[str], typer.Option("--module", "-m", help="The module to show, by name.")] = None,
 ) -> None:
     """Print a module's effective configuration and where each value came from."""
+    from prc3cfg.plant import load_plant
+
     loaded = load_plant(plant)
     console = stdout_console()
     if module is None:
@@ -63,6 +69,8 @@ def show(
 @app.command()
 def schema() -> None:
     """Print the JSON Schema of plant files (draft-07; schemas/plant.schema.json)."""
+    from prc3cfg.plant import plant_schema_text
+
     sys.stdout.write(plant_schema_text())
 
 
@@ -71,6 +79,9 @@ def _count(n: int, one: str, many: str) -> str:
 
 
 def _modules_table(plant: Plant) -> Table:
+    from rich import box
+    from rich.table import Table
+
     table = Table(title=f"plant {plant.name}", title_justify="left", box=box.SIMPLE_HEAD)
     for column in ("bus", "address", "module", "profiles", "programs", "unmanaged"):
         table.add_column(column)
@@ -82,6 +93,12 @@ def _modules_table(plant: Plant) -> Table:
 
 
 def _show_module(console: Console, bus: str, module: Module) -> None:
+    from rich import box
+    from rich.table import Table
+
+    from prc3cfg.plant.profiles import Sourced
+    from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, format_function_output
+
     settings = module.settings
     console.print(f"module [bold]{module.name}[/] — bus {bus}, address {module.address}, "
                   f"profiles: {', '.join(module.profiles) or 'none'}")

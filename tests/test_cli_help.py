@@ -1,0 +1,36 @@
+"""`prc3cfg --help` is quick because the commands import what they use only when they run: listing
+them loads typer and prc3cfg's command modules, never the plant loader, the planner or the link."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+from prc3cfg.apply import Verify as ApplyVerify
+from prc3cfg.cli.common import ADDRESSES, FRAMING_NAMES, Verify
+from prc3cfg.framing import FRAMINGS
+from prc3cfg.image import MAX_MODULE_ADDRESS
+
+LISTING = """
+import sys
+from prc3cfg.cli import main
+try:
+    main(["--help"])
+except SystemExit:
+    pass
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("pydantic", "serial", "yaml", "deepdiff")
+               or m in ("prc3cfg.api", "prc3cfg.planner", "prc3cfg.link", "prc3cfg.plant", "prc3cfg.emulator"))
+print("heavy:", heavy, file=sys.stderr)
+"""
+
+
+def test_listing_the_commands_loads_nothing_heavy():
+    done = subprocess.run([sys.executable, "-c", LISTING], capture_output=True, text=True)
+    assert "Commands" in done.stdout and "apply" in done.stdout
+    assert done.stderr.strip() == "heavy: []"
+
+
+def test_the_names_the_help_uses_are_the_real_ones():
+    assert FRAMING_NAMES == tuple(FRAMINGS)
+    assert ADDRESSES == range(1, MAX_MODULE_ADDRESS + 1)
+    assert [v.value for v in Verify] == [v.value for v in ApplyVerify]
