@@ -302,11 +302,12 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known (`sharing`)."""
     changes = []
+    memo: dict = {}  # modules alike (`sharing.alike`) are planned, and priced for broadcasts, once
     for bus, module in pairs:
         key = (bus.name, module.address)
         target = desired[key] if desired is not None else module.desired_image()
         try:
-            module_plan = plan_module(actual[key], target, line_cost(bus))
+            module_plan = _plan_alike(actual[key], target, line_cost(bus), memo)
         except UnreachableImage as error:
             raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
         changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
@@ -315,7 +316,7 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
         on_bus = [c for c in changes if c.bus == bus.name]
         if not receivers_known(bus, on_bus):
             continue
-        shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in on_bus], line_cost(bus))
+        shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in on_bus], line_cost(bus), memo)
         if shared.broadcasts:
             plans = {c.address: plan_ for c, plan_ in zip(on_bus, shared.plans)}
             changes = [replace(c, plan=plans[c.address], broadcasts=len(shared.broadcasts)) if c.bus == bus.name else c
@@ -323,6 +324,18 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
             broadcast_time += sum(line_cost(bus).broadcast_time(step.message) for step in shared.broadcasts)
     return PlantPlan(plant.name, str(plant.path.resolve()), plant.sha256, tuple(changes), broadcast_time,
                      unshared if broadcast_time else None)  # fmt: skip
+
+
+def _plan_alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost, memo: dict):
+    """`plan_module`, once for modules alike but for their address (a plant commissioned from factory
+    defaults is one plan per line profile)."""
+    key = ("plan", sharing.alike(actual, desired, cost))
+    if key not in memo:
+        memo[key] = plan_module(actual, desired, cost)
+    found = memo[key]
+    if found.address == actual.address:
+        return found
+    return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))
 
 
 def receivers_known(bus: Bus, changes: list[ModuleChange]) -> bool:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 from prc3cfg import codec, device
 from prc3cfg.bustime import LineCost
 from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, default_program
-from prc3cfg.planner import ModulePlan, Step, StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
+from prc3cfg.planner import ModulePlan, Step, StepProblem, UnreachableImage, plan_from_steps, plan_module, run_steps, summarise
 from prc3cfg.verification import verification_time
 
 #: Items per message of the per-field messages (40h..45h; 46h carries 31).
@@ -48,6 +48,18 @@ class Module:
     actual: ModuleImage
     desired: ModuleImage
     plan: ModulePlan
+    kind: int | None = None  # modules of one kind cost alike (`alike`)
+
+
+def alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple:
+    """What a module's plan depends on: what it holds and should hold, and the line — its address
+    only on stx, where it can change a frame's stuffing."""
+    address = actual.address if cost.framing.name == "stx" else None
+    return (actual.system, actual.programs, desired.system, desired.programs, address, cost)
+
+
+def _kind(module: Module, cost: LineCost, memo: dict) -> int:
+    return memo.setdefault(("kind", alike(module.actual, module.desired, cost)), len(memo))
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,29 +71,36 @@ class Shared:
     bus_time: float  # the broadcasts once, plus every module's own steps
 
 
-def share(modules: Sequence[Module], cost: LineCost) -> Shared:
+def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None) -> Shared:
     """The cheapest broadcasts found for a line whose every module is in `modules`: groups added
-    one by one while they pay, or all of them with those dropped that do not — the cheaper."""
+    one by one while they pay, or all of them with those dropped that do not — the cheaper.
+
+    `memo` (shared by the lines of a plant) prices each module once per set of broadcasts and
+    what it holds and should hold: modules alike but for their address cost the same (the
+    address counts only on stx, where it can change a frame's stuffing)."""
+    memo = {} if memo is None else memo
     groups = _candidates(modules)
-    own: dict[tuple, tuple[Step, ...]] = {}  # modules alike but for their address are planned once
-    nothing = _priced((), [m.plan for m in modules], modules, cost)
-    added = dropped = nothing
+    modules = [replace(m, kind=_kind(m, cost, memo)) for m in modules]
+    nothing = _attempt((), modules, cost, memo)
+    assert nothing is not None  # without broadcasts, every module's own plan stands
+    added = nothing
     for group in groups:  # add while it pays
-        trial = _attempt(added[0] + group, modules, cost, own)
+        trial = _attempt(added[0] + group, modules, cost, memo)
         if trial is not None and trial[2] < added[2] - 1e-9:
             added = trial
     kept = list(groups)
-    dropped = _attempt(tuple(step for group in kept for step in group), modules, cost, own) or nothing
+    dropped = _attempt(tuple(step for group in kept for step in group), modules, cost, memo) or nothing
     for group in groups:  # from all of them, drop while that pays
         rest = [g for g in kept if g is not group]
-        trial = _attempt(tuple(step for g in rest for step in g), modules, cost, own) or nothing
+        trial = _attempt(tuple(step for g in rest for step in g), modules, cost, memo) or nothing
         if trial[2] < dropped[2] - 1e-9:
             kept, dropped = rest, trial
-    best = min((nothing, added, dropped), key=lambda priced: priced[2])
-    broadcasts, plans, _ = best
-    bus_time = sum(cost.broadcast_time(step.message) for step in broadcasts) + sum(
-        p.bus_time for p in plans
-    )
+    broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2])
+    plans = []
+    for module, own in zip(modules, owns):
+        proved = plan_from_steps(module.actual, module.desired, [s.message for s in (*broadcasts, *own)], cost)
+        plans.append(replace(proved, bus_time=sum(cost.message_time(module.actual.address, s.message) for s in own)))
+    bus_time = sum(cost.broadcast_time(step.message) for step in broadcasts) + sum(p.bus_time for p in plans)
     return Shared(broadcasts, tuple(plans), bus_time)
 
 
@@ -111,34 +130,34 @@ def _candidates(modules: Sequence[Module]) -> list[tuple[Step, ...]]:
     return groups
 
 
-def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[Module], cost: LineCost, planned: dict):
-    """Each module's plan with these broadcasts first, priced; None where a module cannot take them.
-
-    `planned` remembers each module's own steps by what it holds and should hold — the address
-    only counts on stx, where it can change a frame's stuffing."""
-    plans = []
-    for module in modules:
-        try:
-            after = _after(module.actual, [step.message for step in broadcasts])
-            key = (after.system, after.programs, module.desired.system, module.desired.programs,
-                   module.actual.address if cost.framing.name == "stx" else None)  # fmt: skip
-            if key not in planned:
-                planned[key] = plan_module(after, module.desired, cost).steps
-            own = planned[key]
-            proved = plan_from_steps(module.actual, module.desired, [s.message for s in (*broadcasts, *own)], cost)
-        except (codec.Rejected, StepProblem, UnreachableImage):
-            return None
-        addressed_time = sum(cost.message_time(module.actual.address, s.message) for s in own)
-        plans.append(replace(proved, bus_time=addressed_time))
-    return _priced(broadcasts, plans, modules, cost)
-
-
-def _priced(broadcasts: tuple[Step, ...], plans: list[ModulePlan], modules: Sequence[Module], cost: LineCost):
-    """(broadcasts, plans, total): the line's bus time, verifying read-backs included."""
+def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[Module], cost: LineCost, memo: dict):
+    """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
+    verifying read-back); None where a module cannot take the broadcasts."""
     total = sum(cost.broadcast_time(step.message) for step in broadcasts)
-    for plan, module in zip(plans, modules):
-        total += plan.bus_time + verification_time(module.actual, plan.predicted, plan.steps, cost)
-    return broadcasts, plans, total
+    owns = []
+    for module in modules:
+        key = (tuple(s.message for s in broadcasts), module.kind)
+        if key not in memo:
+            memo[key] = _priced(broadcasts, module, cost)
+        if memo[key] is None:
+            return None
+        own, seconds = memo[key]
+        owns.append(own)
+        total += seconds
+    return broadcasts, tuple(owns), total
+
+
+def _priced(broadcasts: tuple[Step, ...], module: Module, cost: LineCost) -> tuple[tuple[Step, ...], float] | None:
+    """A module's own steps after the broadcasts, and their bus time with the verifying read-back of
+    everything that reaches it; None when the module cannot take the broadcasts."""
+    try:
+        own = plan_module(_after(module.actual, [s.message for s in broadcasts]), module.desired, cost).steps if broadcasts else module.plan.steps
+        steps = (*broadcasts, *own)
+        predicted = run_steps(module.actual, module.desired, [s.message for s in steps])
+    except (codec.Rejected, StepProblem, UnreachableImage):
+        return None
+    seconds = sum(cost.message_time(module.actual.address, s.message) for s in own)
+    return own, seconds + verification_time(module.actual, predicted, steps, cost)
 
 
 def _after(actual: ModuleImage, messages: list[codec.Message]) -> ModuleImage:
