@@ -15,10 +15,11 @@ to send. The search is built around that:
    - Vr, T, F1, F2: their items, counted.
    The DPs price an item on its own; the result is priced by its exact message count
    (ceil(n/15), ceil(n/31)). When items overflow a message, the DP runs again with a share
-   of a header on each item (for 40h/41h the least share that saves the message, found by
-   bisection: a Lagrangian relaxation of the ceiling). Every subset of the channels that matter is tried,
-   most open first; subsets that force the same 21h are tried once, and a subset whose
-   lower bound (its forced 21h and items) cannot beat the best so far is skipped.
+   of a header on each item (for 46h, 40h and 41h the least share that saves the message,
+   found by bisection: a Lagrangian relaxation of the ceiling). Every subset of the
+   channels that matter is tried, most open first; subsets that force the same 21h are
+   tried once, and a subset whose lower bound (its forced 21h and items) cannot beat the
+   best so far is skipped.
    The best few are then refined: programs take a 21h while that saves messages (an
    overflowing 40h..46h, a 33h run that regroups).
 2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
@@ -27,13 +28,18 @@ to send. The search is built around that:
    remaining differences would cost. That charge is estimated four ways — what they add to
    the best plan without inits (headers included), item by item with every channel open,
    the same with a share of a header per item, and as 21h — and again from each better
-   plan found (and with each of its init runs moved across the system step), until none
-   improves; each init choice gets its own channel search. Those charges price items one
-   by one, so they miss inits that pay only by saving whole messages: when the Vr, T, F1 or
-   F2 items of the best plan overflow into one more 42h..45h message and inits could take
-   the overflow out, header shares per field are bisected until the init DP takes it out
-   (for every set of such fields), and each init choice that does is searched too; then
-   again from the better plan, until none improves (`_header_targets`).
+   plan found (and with each of its init runs moved across the system step), then the
+   best with each of its init runs left out, each program it writes whole initialised, or
+   the programs of each field that fits one 40h..46h initialised where that takes their
+   items out, until none improves; each init choice gets its own channel search. Those charges price items one
+   by one, so they miss inits that pay only by saving whole messages: when the items of a
+   field in a plan overflow into one more 40h..46h message and inits could take the
+   overflow out, header shares per field are bisected until the init DP takes it out
+   (for every set of such fields), and each init choice met on the way that takes out all
+   but an item or two is searched too. That is done for the two plans closest to the best
+   within an exchange (an init choice that overflows may be one init away from the best),
+   again after each better plan, until none improves (`_header_targets`); 40h and 41h
+   count the programs outside 33h runs.
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
    never dearer than the naive download.
@@ -71,6 +77,8 @@ INF = float("inf")
 #: What a program (index) with a difference mask costs to fix, in seconds.
 Residual = Callable[[int, int], float]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
+#: The fields of 40h..45h, in `Writes.items` order.
+ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)
 ESTIMATE = operator.attrgetter("estimate")
 #: How many of the best write phases of each init choice are refined and kept as candidates.
 KEPT = 3
@@ -84,6 +92,10 @@ BISECTIONS = 6
 REGROUPED = 4
 #: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
 TARGET_PROBES = 6
+#: Items of the overflow an init choice of `_header_targets` may leave for 21h to take out.
+SLACK_ITEMS = 2
+#: How many init choices closest to the best (within an exchange) `_header_targets` starts from in each round.
+TARGETED = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,12 +195,25 @@ class WritePhase:
         whole |= self.forced(channels)
         if self.lower_bound(whole) >= bound:
             return None
-        # The DPs price items one by one. When the items of a 46h, 40h or 41h overflow into one
-        # more message, each DP runs again with a share of that message's header on every item:
-        # spread over a full message, and over just the overflow (which may then go elsewhere).
+        # The DPs price items one by one. When the items of a 46h overflow into one more message,
+        # find by bisection the least share of a header on each item that makes the DP save the
+        # message (as for 40h/41h in `_with_addresses`); the shares that matter are small beside
+        # the header, so the bisection is geometric.
         first = self._with_addresses(whole, channels, 0.0)
-        shares = _shares(first.addresses.bit_count(), codec.MAX_ADDRESS_ITEMS, self.prices.address_header)
-        return min([first, *(self._with_addresses(whole, channels, share) for share in shares)], key=ESTIMATE)
+        n = first.addresses.bit_count()
+        if n <= codec.MAX_ADDRESS_ITEMS:
+            return first
+        goal = codec.MAX_ADDRESS_ITEMS * ((n - 1) // codec.MAX_ADDRESS_ITEMS)
+        tried = [first]
+        low, high = self.prices.address_item / 16, self.prices.address_header
+        for _ in range(BISECTIONS):
+            middle = (low * high) ** 0.5
+            tried.append(self._with_addresses(whole, channels, middle))
+            if tried[-1].addresses.bit_count() <= goal:
+                high = middle
+            else:
+                low = middle
+        return min(tried, key=ESTIMATE)
 
     def _with_addresses(self, whole: int, channels: Channels, share: float) -> Writes:
         ranges, addresses, extra = self.addresses(whole, channels.addresses, share)
@@ -479,18 +504,20 @@ class WritePhase:
         return cost
 
     def shared(self, shares: dict[int, float]) -> Residual:
-        """A program's differences with every channel open: a Vr, T, F1, F2 item with its field's share
-        of a header (`shares`, by field bit), P and V as a 33h pair, a jump address a link or unlink
-        range can give as free (a range over initialised programs restores their chain), any other
-        as a 46h item."""
+        """A program's differences with every channel open, each item of a field in `shares` (by
+        field bit) with that share of a header: P and V as a 33h pair unless one of them has a
+        share, a jump address a link or unlink range can give as free (a range over initialised
+        programs restores their chain), any other as a 46h item."""
         prices = self.prices
+        pv_items = any(bit & PV_BITS for bit in shares)
 
         def cost(i: int, mask: int) -> float:
             total = sum(prices.field_item + shares.get(bit, 0.0) for bit in PLAIN_BITS if mask & bit)
             if mask & PV_BITS:
-                total += prices.parts_item
+                total += (sum(prices.field_item + shares.get(bit, 0.0) for bit in (P_BIT, V_BIT) if mask & bit)
+                          if pv_items else prices.parts_item)  # fmt: skip
             if mask & A_BIT and self.target_a[i] not in (0, i + 2):
-                total += prices.address_item
+                total += prices.address_item + shares.get(A_BIT, 0.0)
             return min(total, prices.program)
 
         return cost
@@ -550,14 +577,6 @@ class WritePhase:
             return min(total, prices.program) if mask else total
 
         return cost
-
-
-def _shares(n: int, capacity: int, header: float) -> list[float]:
-    """Header shares per item worth trying when n items overflow one message: none if they fit."""
-    if n <= capacity:
-        return []
-    overflow = n - capacity * ((n - 1) // capacity)
-    return sorted({header / capacity, header / overflow})
 
 
 def _all_runs(runs: tuple[tuple[int, int], ...]) -> int:
@@ -639,7 +658,7 @@ def search(problem: Problem) -> list[Layout]:
     layouts = [Layout(keep, writes, fixed + writes.estimate) for writes, _ in found]
     if problem.init_useful():
         best = layouts[0]
-        tried = {keep}
+        tried, targeted = {keep}, set()
         everything = Channels.everything(True)
         residuals = [
             phase.marginal(found[0][0]),
@@ -661,45 +680,87 @@ def search(problem: Problem) -> list[Layout]:
                     queue.append(choose_inits(problem, _table(problem, with_inits.marginal(found[0][0]))))
                     queue += _moved_across(problem, kinds)
             if not queue:
-                queue = [kinds for kinds in _header_targets(problem, phase, best) if kinds not in tried]
+                queue = [kinds for kinds in _neighbours(problem, best) if kinds not in tried]
+            if not queue:  # inits that save whole messages, from the plans closest to the best
+                close = sorted({layout.kinds: layout for layout in layouts if layout.kinds not in targeted
+                                and layout.estimate < best.estimate + problem.prices.exchange}.values(), key=ESTIMATE)
+                for layout in close[:TARGETED]:
+                    targeted.add(layout.kinds)
+                    goals = _overflows(problem, layout)
+                    queue += [kinds for kinds in _header_targets(problem, phase, goals) if kinds not in tried]
     unique = {(layout.kinds, layout.writes): layout for layout in layouts}
     return sorted(unique.values(), key=lambda layout: layout.estimate)
 
 
-def _header_targets(problem: Problem, phase: WritePhase, best: Layout) -> list[tuple[int, ...]]:
-    """Init choices that take enough Vr, T, F1, F2 items out of `best` to save whole 42h..45h messages.
-
-    A field whose items overflow into one more message saves that message when inits remove
-    the overflow. For every set of such fields whose programs could lose enough items to an
-    init, header shares per field are bisected until the init DP removes the overflow of each
-    (a Lagrangian relaxation of the message count); every init choice that does is a candidate.
-    """
+def _overflows(problem: Problem, layout: Layout) -> list[tuple[int, int, int, int]]:
+    """The fields whose 40h..46h items in `layout` overflow into one more message and whose
+    programs could lose the overflow to an init: (field bit, the items that fit one message
+    less, the overflow, the programs counted). P and V count only outside
+    the layout's 33h runs."""
+    outside = ~_all_runs(layout.writes.part_runs)
+    channels = [(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, layout.writes.items)]
     goals = []
-    for bit, mask in zip(PLAIN_BITS, best.writes.items[2:]):
+    for bit, mask, capacity in [*channels, (A_BIT, layout.writes.addresses, codec.MAX_ADDRESS_ITEMS)]:
         n = mask.bit_count()
-        goal = codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS)
-        if not goal:
-            continue
+        goal = capacity * ((n - 1) // capacity)
         reducible = sum(1 for i in members(mask) if any(not problem.masks[k][i] & bit for k in problem.kinds))
-        if n - reducible <= goal:
-            goals.append((bit, goal))
+        if goal and n - reducible <= goal:
+            goals.append((bit, goal, n - goal, outside if bit & PV_BITS else ~0))
+    return goals
+
+
+def _header_targets(problem: Problem, phase: WritePhase, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
+    """Init choices that take the overflow of the `goals` fields out, to save whole messages.
+
+    For every set of those fields, header shares per field are bisected until the init DP
+    just removes the overflow of each (a Lagrangian relaxation of the message count); every
+    init choice met on the way that leaves at most SLACK_ITEMS of the overflow is a candidate
+    (a 21h the search adds may take out the last items).
+    """
     found: dict[tuple[int, ...], None] = {}
-    for size in range(1, len(goals) + 1):
+    for size in range(len(goals), 0, -1):
         for chosen in itertools.combinations(goals, size):
-            shares = {bit: problem.prices.field_header / codec.MAX_FIELD_ITEMS for bit, _ in chosen}
+            # removing the overflow saves a header: start from that header spread over the overflow
+            shares = {bit: (problem.prices.address_header if bit == A_BIT else problem.prices.field_header) / over
+                      for bit, _, over, _ in chosen}  # fmt: skip
             low, high = dict.fromkeys(shares, 0.0), dict.fromkeys(shares, INF)
             for _ in range(TARGET_PROBES):
                 kinds = choose_inits(problem, _table(problem, phase.shared(shares)))
-                met = True
-                for bit, goal in chosen:
-                    if sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit) > goal:
-                        low[bit], met = shares[bit], False
+                left = 0
+                for bit, goal, _, counted in chosen:
+                    over = sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit and counted >> i & 1) - goal
+                    left += max(over, 0)
+                    if over > 0:
+                        low[bit] = shares[bit]
                     else:
                         high[bit] = shares[bit]
                     shares[bit] = 2 * shares[bit] if high[bit] == INF else (low[bit] + high[bit]) / 2
-                if met:
+                if left <= SLACK_ITEMS:
                     found[kinds] = None
     return list(found)
+
+
+def _neighbours(problem: Problem, layout: Layout) -> list[tuple[int, ...]]:
+    """The init choice of `layout` with one init run left out (the charges may take out several
+    where one pays), with one program it writes whole (21h) initialised instead, or with every
+    program that has an item in one 40h..46h message initialised where that takes the item
+    out (one by one the items never pay for an init; all together they save the message)."""
+    kinds = layout.kinds
+    out = [kinds[:first] + (KEEP,) * (last - first + 1) + kinds[last + 1 :]
+           for kind in problem.kinds[1:] for first, last in runs_of(kinds, kind)]  # fmt: skip
+    out += [kinds[:i] + (kind,) + kinds[i + 1 :] for i in members(layout.writes.whole) if kinds[i] == KEEP
+            for kind in problem.kinds[1:]]  # fmt: skip
+    channels = [(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, layout.writes.items)]
+    for bit, mask, capacity in [*channels, (A_BIT, layout.writes.addresses, codec.MAX_ADDRESS_ITEMS)]:
+        if mask.bit_count() > capacity:
+            continue
+        changed = list(kinds)
+        for i in members(mask):
+            fixing = [k for k in problem.kinds[1:] if not problem.masks[k][i] & bit]
+            if kinds[i] == KEEP and fixing:
+                changed[i] = fixing[0]
+        out.append(tuple(changed))
+    return out
 
 
 def _moved_across(problem: Problem, kinds: tuple[int, ...]) -> list[tuple[int, ...]]:

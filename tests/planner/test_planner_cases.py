@@ -249,3 +249,33 @@ def test_inits_that_save_whole_messages_are_found() -> None:
     assert plan.steps[0].message == codec.InitPrograms(1, 22)
     assert ids(plan) == [0x14, 0x33, 0x33, 0x43, 0x44, 0x45, 0x46]
     assert planned(actual, desired, "open-driver").steps[0].message == codec.InitPrograms(1, 22)
+
+
+def test_a_program_written_whole_is_initialised_when_its_items_join_open_messages() -> None:
+    """Program 24's new recipe is the defaults but for P, V and F2: a 12h, its P and V in the
+    33h and its F2 in the 45h that go anyway, instead of a 21h."""
+    actual, desired = rewritten_recipe(19, 24)
+    plan = planned(actual, desired)
+    assert plan.steps[0].message == codec.InitProgram(24)
+    assert ids(plan) == [0x12, 0x33, 0x33, 0x43, 0x44, 0x45]
+
+
+def test_init_runs_are_left_out_when_items_and_a_21h_do_better() -> None:
+    """Initialising programs 2..5 and 23..24 costs two 14h and a 46h for the chains they break;
+    a 12h of program 24 and a 21h of program 13 leave the rest to the messages that go anyway."""
+    actual, desired = rewritten_recipe(25, 24)
+    plan = planned(actual, desired)
+    assert [step.message for step in plan.steps[:2]] == [codec.InitProgram(24), codec.WriteProgram(13, desired.programs[12])]
+    assert ids(plan) == [0x12, 0x21, 0x33, 0x33, 0x43, 0x44, 0x45]
+
+
+def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> None:
+    """32 jump addresses need two 46h; a 30h over 41..49 gives eight of them (44 wrong, fixed
+    by its item), so one 46h is enough."""
+    unchained = replace(PLANT, programs=tuple(replace(p, A=0) for p in PLANT.programs))
+    chains = {n: replace(recipe(n), A=60) for n in range(1, 25)} | {n: replace(recipe(n), A=n + 1) for n in range(41, 49)}
+    desired = with_programs(unchained, chains | {44: replace(recipe(44), A=10)})
+    plan = planned(unchained, desired)
+    assert plan.steps[0].message == codec.LinkPrograms(41, 49)
+    assert ids(plan) == [0x30, 0x46]
+    assert set(plan.steps[1].message.touched_programs()) == set(range(1, 25)) | {44}
