@@ -28,18 +28,20 @@ to send. The search is built around that:
    remaining differences would cost. That charge is estimated four ways — what they add to
    the best plan without inits (headers included), item by item with every channel open,
    the same with a share of a header per item, and as 21h — and again from each better
-   plan found (and with each of its init runs moved across the system step), then the
-   best with each of its init runs left out, each program it writes whole initialised, or
-   the programs of each field that fits one 40h..46h initialised where that takes their
-   items out, until none improves; each init choice gets its own channel search. Those charges price items one
-   by one, so they miss inits that pay only by saving whole messages: when the items of a
-   field in a plan overflow into one more 40h..46h message and inits could take the
-   overflow out, header shares per field are bisected until the init DP takes it out
-   (for every set of such fields), and each init choice met on the way that takes out all
-   but an item or two is searched too. That is done for the two plans closest to the best
-   within an exchange (an init choice that overflows may be one init away from the best),
-   again after each better plan, until none improves (`_header_targets`); 40h and 41h
-   count the programs outside 33h runs.
+   plan found (and with each of its init runs moved across the system step); each init
+   choice gets its own channel search. When that finds nothing better, two more sources:
+   - neighbours of the best plan (`_neighbours`): each of its init runs left out, each
+     program it writes whole (21h) initialised, and the programs with an item in one
+     40h..46h message initialised where that takes the items out (together they save the
+     message, one by one they never pay for an init);
+   - inits that pay only by saving whole messages (`_header_targets`): the charges price
+     items one by one, so when a field's items overflow into one more 40h..46h message and
+     inits could take the overflow out, header shares per field are bisected until the init
+     DP just takes it out (for every set of such fields); each init choice met on the way
+     that leaves at most an item or two (a 21h may take those) is searched. This starts
+     from the two plans closest to the best within an exchange (one that overflows may be
+     one init away from the best); 40h and 41h count the programs outside 33h runs.
+   Both start again from each better plan, until none improves.
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
    never dearer than the naive download.
@@ -92,7 +94,7 @@ BISECTIONS = 6
 REGROUPED = 4
 #: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
 TARGET_PROBES = 6
-#: Items of the overflow an init choice of `_header_targets` may leave for 21h to take out.
+#: Items of the overflow an init choice of `_header_targets` may leave for a 21h to take out.
 SLACK_ITEMS = 2
 #: How many init choices closest to the best (within an exchange) `_header_targets` starts from in each round.
 TARGETED = 2
@@ -692,15 +694,20 @@ def search(problem: Problem) -> list[Layout]:
     return sorted(unique.values(), key=lambda layout: layout.estimate)
 
 
+def _item_channels(writes: Writes) -> list[tuple[int, int, int]]:
+    """(field bit, programs with an item, items per message) of every 40h..46h field."""
+    channels = [(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, writes.items)]
+    return [*channels, (A_BIT, writes.addresses, codec.MAX_ADDRESS_ITEMS)]
+
+
 def _overflows(problem: Problem, layout: Layout) -> list[tuple[int, int, int, int]]:
     """The fields whose 40h..46h items in `layout` overflow into one more message and whose
     programs could lose the overflow to an init: (field bit, the items that fit one message
-    less, the overflow, the programs counted). P and V count only outside
-    the layout's 33h runs."""
+    less, the overflow, the programs counted). P and V count only outside the layout's
+    33h runs."""
     outside = ~_all_runs(layout.writes.part_runs)
-    channels = [(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, layout.writes.items)]
     goals = []
-    for bit, mask, capacity in [*channels, (A_BIT, layout.writes.addresses, codec.MAX_ADDRESS_ITEMS)]:
+    for bit, mask, capacity in _item_channels(layout.writes):
         n = mask.bit_count()
         goal = capacity * ((n - 1) // capacity)
         reducible = sum(1 for i in members(mask) if any(not problem.masks[k][i] & bit for k in problem.kinds))
@@ -750,8 +757,7 @@ def _neighbours(problem: Problem, layout: Layout) -> list[tuple[int, ...]]:
            for kind in problem.kinds[1:] for first, last in runs_of(kinds, kind)]  # fmt: skip
     out += [kinds[:i] + (kind,) + kinds[i + 1 :] for i in members(layout.writes.whole) if kinds[i] == KEEP
             for kind in problem.kinds[1:]]  # fmt: skip
-    channels = [(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, layout.writes.items)]
-    for bit, mask, capacity in [*channels, (A_BIT, layout.writes.addresses, codec.MAX_ADDRESS_ITEMS)]:
+    for bit, mask, capacity in _item_channels(layout.writes):
         if mask.bit_count() > capacity:
             continue
         changed = list(kinds)
