@@ -1,4 +1,4 @@
-"""Helpers for the planner tests: lines to plan for, and the acceptance check of a plan.
+"""Helpers for the planner tests: lines to plan for, the acceptance check of a plan, and the bench's lower bound.
 
 `check_plan` is the invariant of issue 5, checked from outside the planner: the steps,
 run on the device model from the read-back (programs that were not read filled with
@@ -8,7 +8,10 @@ programs, and leave every unmanaged program as the module's own clamping leaves 
 
 from __future__ import annotations
 
+import importlib
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 from prc3cfg import codec, device
 from prc3cfg.bustime import LineCost
@@ -17,6 +20,10 @@ from prc3cfg.line import LineSettings
 from prc3cfg.planner import ModulePlan
 
 FRAMINGS = ("crc16", "open-driver", "stx")
+
+#: bench/plan_bench.py, whose lower bound the tests hold below the plans.
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+plan_bench = importlib.import_module("plan_bench")
 
 
 def line(framing: str = "crc16", turnaround: float = 0.010, zvz: float = 0.020) -> LineCost:

@@ -4,7 +4,8 @@ Only programs 1..3 are managed; the others are unmanaged and not read. The candi
 messages are every message that touches only programs 1..3 and writes desired values
 (and the system step, the inits, the link/unlink ranges). A cheapest-first search over
 the module states the device model gives for them finds the cheapest plan of at most
-three messages; the planner's plan must cost no more.
+three messages; the planner's plan must cost no more, and the lower bound of
+bench/plan_bench.py (`Relaxation`, run without the plan as its incumbent) no more than it.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import random
 from dataclasses import replace
 
 import pytest
-from planner_helpers import FRAMINGS, check_plan, line
+from planner_helpers import FRAMINGS, check_plan, line, plan_bench
 
 from prc3cfg import codec, device
 from prc3cfg.bustime import LineCost
@@ -124,3 +125,5 @@ def test_no_short_plan_is_cheaper(framing: str, seed: int) -> None:
     check_plan(plan, actual, desired, cost)
     cheaper = cheapest_short_plan(actual, desired, cost, bound=plan.bus_time - 1e-9)
     assert cheaper is None, f"a plan of {cheaper * 1000:.2f} ms beats the planner's {plan.bus_time * 1000:.2f} ms"
+    bound, _ = plan_bench.Relaxation(actual, desired, cost).bound()
+    assert bound <= plan.bus_time + 1e-9, f"the bound {bound * 1000:.2f} ms is above a plan of {plan.bus_time * 1000:.2f} ms"
