@@ -38,9 +38,12 @@ to send. The search is built around that:
      items one by one, so when a field's items overflow into one more 40h..46h message and
      inits could take the overflow out, header shares per field are bisected until the init
      DP just takes it out (for every set of such fields); each init choice met on the way
-     that leaves at most an item or two (a 21h may take those) is searched. This starts
-     from the two plans closest to the best within an exchange (one that overflows may be
-     one init away from the best); 40h and 41h count the programs outside 33h runs.
+     that leaves at most an item or two (a 21h may take those) is searched, and so are, per
+     field, init runs that take its items out and add no difference, most items first,
+     until the overflow is out (`_harmless_inits`: where runs alike tie, the DP takes all
+     or none). This starts from the two plans closest to the best within an exchange (one
+     that overflows may be one init away from the best); 40h and 41h count the programs
+     outside 33h runs.
    Both start again from each better plan, until none improves.
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
@@ -689,7 +692,8 @@ def search(problem: Problem) -> list[Layout]:
                 for layout in close[:TARGETED]:
                     targeted.add(layout.kinds)
                     goals = _overflows(problem, layout)
-                    queue += [kinds for kinds in _header_targets(problem, phase, goals) if kinds not in tried]
+                    candidates = _header_targets(problem, phase, goals) + _harmless_inits(problem, layout, goals)
+                    queue += [kinds for kinds in candidates if kinds not in tried]
     unique = {(layout.kinds, layout.writes): layout for layout in layouts}
     return sorted(unique.values(), key=lambda layout: layout.estimate)
 
@@ -745,6 +749,34 @@ def _header_targets(problem: Problem, phase: WritePhase, goals: list[tuple[int, 
                 if left <= SLACK_ITEMS:
                     found[kinds] = None
     return list(found)
+
+
+def _harmless_inits(problem: Problem, layout: Layout, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
+    """Per overflowing field, `layout` with init runs added that take its items out and add no
+    difference, the runs taking out most first, until the overflow is out (where runs alike
+    tie, the init DP takes all of them or none)."""
+    out = []
+    for bit, goal, over, counted in goals:
+        harmless = [next((k for k in problem.kinds[1:] if problem.masks[k][i] & bit < problem.masks[KEEP][i] & bit
+                          and not problem.masks[k][i] & ~problem.masks[KEEP][i]), None)
+                    if kind == KEEP and problem.managed[i] and counted >> i & 1 else None
+                    for i, kind in enumerate(layout.kinds)]  # fmt: skip
+        runs: list[list[int]] = []
+        for i, kind in enumerate(harmless):
+            if kind is not None and runs and runs[-1][-1] == i - 1:
+                runs[-1].append(i)
+            elif kind is not None:
+                runs.append([i])
+        changed, left = list(layout.kinds), over
+        for run in sorted(runs, key=len, reverse=True):
+            if left <= 0:
+                break
+            for i in run:
+                changed[i] = harmless[i]
+            left -= len(run)
+        if left <= 0:
+            out.append(tuple(changed))
+    return out
 
 
 def _neighbours(problem: Problem, layout: Layout) -> list[tuple[int, ...]]:

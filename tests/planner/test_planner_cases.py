@@ -279,3 +279,16 @@ def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> N
     assert plan.steps[0].message == codec.LinkPrograms(41, 49)
     assert ids(plan) == [0x30, 0x46]
     assert set(plan.steps[1].message.touched_programs()) == set(range(1, 25)) | {44}
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_an_init_takes_out_the_overflow_of_items_where_runs_alike_tie(framing: str) -> None:
+    """48 programs (every fourth unmanaged) are the defaults but for P: 48 P items need four
+    40h, sixteen 14h cost more; one 14h takes out the three that overflow three full 40h."""
+    default = default_program(SYSTEM)
+    actual = replace(PLANT, programs=tuple(None if n % 4 == 0 else replace(default, P=default.P + n)
+                                           for n in range(1, PROGRAM_COUNT + 1)))  # fmt: skip
+    desired = replace(PLANT, programs=tuple(None if n % 4 == 0 else default for n in range(1, PROGRAM_COUNT + 1)))
+    plan = planned(actual, desired, framing)
+    assert plan.steps[0].message == codec.InitPrograms(1, 3)
+    assert ids(plan) == [0x14, 0x40, 0x40, 0x40]
