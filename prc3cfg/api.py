@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -231,11 +232,20 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         options.links_used.extend(links.values())
 
 
-def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions) -> dict[Key, ModuleImage]:
+def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, then=None) -> dict[Key, ModuleImage]:
     """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`)."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
-        return read_all(targets_, links, progress=options.progress.advance)
+        return read_all(targets_, links, progress=options.progress.advance, then=then)
+
+
+def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
+                   desired: dict[Key, ModuleImage] | None = None) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
+    """Read back and plan, each line planned as soon as it is read — while the other lines are
+    still being read: the lines never wait for all of the planning."""
+    planner = Planner(plant, desired)
+    images = _read(to_read, links, options, then=lambda bus, read: planner.plan_bus(bus, pairs, read))
+    return images, planner.plan(pairs, images)
 
 
 def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None) -> dict[Key, ModuleImage]:
@@ -292,38 +302,69 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
     `load_images` gave them) to the plant file."""
     options = options or LineOptions()
     pairs = select(plant, modules)
-    if images is None:
-        with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan") as links:
-            images = _read(targets(pairs), links, options)
-    return make_plan(plant, pairs, images)
+    if images is not None:
+        return make_plan(plant, pairs, images)
+    with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan") as links:
+        return _read_and_plan(plant, pairs, targets(pairs), links, options)[1]
 
 
 def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None) -> PlantPlan:
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known (`sharing`)."""
-    changes = []
-    memo: dict = {}  # modules alike (`sharing.alike`) are planned, and priced for broadcasts, once
-    for bus, module in pairs:
-        key = (bus.name, module.address)
-        target = desired[key] if desired is not None else module.desired_image()
-        try:
-            module_plan = _plan_alike(actual[key], target, line_cost(bus), memo)
-        except UnreachableImage as error:
-            raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
-        changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
-    broadcast_time, unshared = 0.0, sum(c.plan.bus_time for c in changes)
-    for bus in {bus.name: bus for bus, _ in pairs}.values():
-        on_bus = [c for c in changes if c.bus == bus.name]
-        if not receivers_known(bus, on_bus):
-            continue
-        shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in on_bus], line_cost(bus), memo)
-        if shared.broadcasts:
-            plans = {c.address: plan_ for c, plan_ in zip(on_bus, shared.plans)}
-            changes = [replace(c, plan=plans[c.address], broadcasts=len(shared.broadcasts)) if c.bus == bus.name else c
-                       for c in changes]  # fmt: skip
-            broadcast_time += sum(line_cost(bus).broadcast_time(step.message) for step in shared.broadcasts)
-    return PlantPlan(plant.name, str(plant.path.resolve()), plant.sha256, tuple(changes), broadcast_time,
-                     unshared if broadcast_time else None)  # fmt: skip
+    return Planner(plant, desired).plan(pairs, actual)
+
+
+class Planner:
+    """The plan of a plant, made line by line — each line as soon as its modules are read, in the
+    line's own thread (one at a time: the memo of plans is shared, so modules alike on any line
+    are planned once, `sharing.alike`)."""
+
+    def __init__(self, plant: Plant, desired: dict[Key, ModuleImage] | None) -> None:
+        self.plant, self.desired = plant, desired
+        self._memo: dict = {}
+        self._lock = threading.Lock()
+        self._buses: dict[str, tuple[list[ModuleChange], float]] = {}
+
+    def plan_bus(self, bus_name: str, pairs: Pairs, actual: dict[Key, ModuleImage]) -> None:
+        """Plan the chosen modules of one bus, and its broadcasts."""
+        with self._lock:
+            changes = []
+            for bus, module in pairs:
+                if bus.name != bus_name:
+                    continue
+                key = (bus.name, module.address)
+                target = self.desired[key] if self.desired is not None else module.desired_image()
+                try:
+                    module_plan = _plan_alike(actual[key], target, line_cost(bus), self._memo)
+                except UnreachableImage as error:
+                    raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
+                changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
+            bus = self._bus(bus_name)
+            broadcast_time = 0.0
+            if changes and receivers_known(bus, changes):
+                shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], line_cost(bus), self._memo)
+                if shared.broadcasts:
+                    changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
+                    broadcast_time = sum(line_cost(bus).broadcast_time(step.message) for step in shared.broadcasts)
+            self._buses[bus_name] = (changes, broadcast_time)
+
+    def plan(self, pairs: Pairs, actual: dict[Key, ModuleImage]) -> PlantPlan:
+        """The plant's plan, in the order of `pairs`: buses not planned yet are planned now."""
+        for bus_name in dict.fromkeys(bus.name for bus, _ in pairs):
+            if bus_name not in self._buses:
+                self.plan_bus(bus_name, pairs, actual)
+        changes = {(c.bus, c.address): c for changes, _ in self._buses.values() for c in changes}
+        ordered = tuple(changes[(bus.name, module.address)] for bus, module in pairs)
+        broadcast_time = sum(seconds for _, seconds in self._buses.values())
+        return PlantPlan(self.plant.name, str(self.plant.path.resolve()), self.plant.sha256, ordered, broadcast_time,
+                         None if not broadcast_time else self._unshared(ordered))  # fmt: skip
+
+    def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
+        """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
+        return sum(self._memo[("plan", sharing.alike(c.actual, c.desired, line_cost(self._bus(c.bus))))].bus_time for c in ordered)
+
+    def _bus(self, name: str) -> Bus:
+        return next(b for b in self.plant.buses if b.name == name)
 
 
 def _plan_alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost, memo: dict):
@@ -480,10 +521,10 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
     try:
         with lines(plant, buses, options, purpose="apply", observer=journal.exchange) as links:
-            images = _read(to_read, links, options)
             if plan_file is None:
-                the_plan = make_plan(plant, pairs, images, desired)
+                images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired)
             else:
+                images = _read(to_read, links, options)
                 the_plan = prove(*plan_file, plant, pairs, images)
             if gates.show is not None:
                 gates.show(the_plan)

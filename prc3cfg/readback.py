@@ -97,12 +97,14 @@ def read_all(
     links: dict[str, Link],
     *,
     progress: Callable[[], None] | None = None,
+    then: Callable[[str, dict[tuple[str, int], ModuleImage]], None] | None = None,
 ) -> dict[tuple[str, int], ModuleImage]:
     """Read every target, buses in parallel, the modules of one bus one after another.
 
-    `progress()` is called after each module. The first error on a bus stops that bus; the
-    errors of all buses are raised together (one line each) once every bus has finished;
-    an interruption (Ctrl-C) wins over them.
+    `progress()` is called after each module; `then(bus, images)` in the bus's thread as soon as
+    its modules are read (to plan them while other lines are still being read). The first error
+    on a bus stops that bus; the errors of all buses are raised together (one line each) once
+    every bus has finished; an interruption (Ctrl-C) wins over them.
     """
     per_bus: dict[str, list[Target]] = {}
     for target in targets:
@@ -114,6 +116,8 @@ def read_all(
             images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by)
             if progress:
                 progress()
+        if then is not None and bus_targets:
+            then(bus_targets[0].bus, images)
         return images
 
     result: dict[tuple[str, int], ModuleImage] = {}
