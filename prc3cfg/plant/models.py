@@ -89,18 +89,20 @@ def _number_type(
     allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
 
     def validate(value: Any) -> Any:
-        if isinstance(value, bool) or not isinstance(value, (int, float, Decimal)):
+        kind = type(value)
+        if kind is bool or not isinstance(value, (int, float, Decimal)):
             raise PydanticCustomError("not_number", "not a number", {"whole": out is int, "unit": unit})
-        number = Decimal(repr(value)) if isinstance(value, float) else Decimal(value)
+        number = value if kind is Decimal else Decimal(repr(value)) if kind is float else Decimal(value)
         if not number.is_finite():
             raise PydanticCustomError("not_finite", "not a finite number", {"value": str(value)})
-        context = {"value": with_unit(number), "allowed": allowed, "note": note, "unit": unit}
-        if number < lo_ or (hi_ is not None and number > hi_):
-            raise PydanticCustomError("out_of_range", "out of range", context)
-        if step_ is not None and number % step_:
+        out_of_range = number < lo_ or (hi_ is not None and number > hi_)
+        if out_of_range or (step_ is not None and number % step_):  # the words are made only for a message
+            context = {"value": with_unit(number), "allowed": allowed, "note": note, "unit": unit}
+            if out_of_range:
+                raise PydanticCustomError("out_of_range", "out of range", context)
             step_words = {"step": with_unit(step_), "step_name": step_name, "what": what}
             raise PydanticCustomError("not_whole", "not a whole number", context | step_words)
-        return out(number)
+        return number if out is Decimal else out(number)
 
     schema: dict[str, Any] = {"type": "integer" if out is int else "number", "minimum": _plain(lo_)}
     schema |= {"maximum": _plain(hi_)} if hi_ is not None else {}
