@@ -2,14 +2,16 @@
 
 What the rest of prc3cfg uses: a bus's port, framing, line settings and times; a module's
 address, name, the programs the plant manages, and its desired `ModuleImage` in device
-units (interfaces.md §2). A `Module` also keeps its effective settings with their sources
-(`profiles.Effective`) for `prc3cfg show`. Built only by `loader.load_plant`, after every
-rule passed — so converting to device units cannot fail here.
+units (interfaces.md §2), converted once and kept. A `Module` also keeps its effective settings
+with their sources (`profiles.Effective`) for `prc3cfg show`. Built only by `loader.load_plant`,
+after every rule passed — so converting to device units cannot fail here.
 """
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
+
 from pydantic import BaseModel, ConfigDict
 
 from prc3cfg.image import PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
@@ -37,10 +39,20 @@ class Module(BaseModel):
         return tuple(self.settings.programs)
 
     def desired_system(self) -> SystemParameters:
-        return SystemParameters(**{q.symbol: q.to_device(self.settings.system[q.key].value) for q in SYSTEM_QUANTITIES})
+        return self.desired_image().system
 
     def desired_programs(self) -> dict[int, Program]:
         """The listed programs in device units, A from chains and `next` (0 if neither)."""
+        image = self.desired_image()
+        return {number: image.programs[number - 1] for number in self.settings.programs}
+
+    def desired_image(self) -> ModuleImage:
+        """What the module should hold. Unlisted programs: `None` with keep, factory defaults with reset."""
+        return self._desired_image
+
+    @functools.cached_property
+    def _desired_image(self) -> ModuleImage:
+        system = SystemParameters(**{q.symbol: q.to_device(self.settings.system[q.key].value) for q in SYSTEM_QUANTITIES})
         jumps = self.settings.jumps()
         programs = {}
         for number, fields in self.settings.programs.items():
@@ -53,17 +65,11 @@ class Module(BaseModel):
                 F2=function_output(f2.action, f2.distance),
                 A=0 if jump is None else jump.value,
             )
-        return programs
-
-    def desired_image(self) -> ModuleImage:
-        """What the module should hold. Unlisted programs: `None` with keep, factory defaults with reset."""
-        system = self.desired_system()
-        listed = self.desired_programs()
         unlisted = default_program(system) if self.unmanaged_programs == "reset" else None
         return ModuleImage(
             address=self.address,
             system=system,
-            programs=tuple(listed.get(number, unlisted) for number in PROGRAM_NUMBERS),
+            programs=tuple(programs.get(number, unlisted) for number in PROGRAM_NUMBERS),
         )
 
 

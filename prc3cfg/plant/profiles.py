@@ -14,13 +14,15 @@ Precedence, lowest first — fixed:
 - `unmanaged_programs`: the last layer that gives it wins; default `keep`.
 
 Every effective value is a `Sourced`: the value in human units, its source (`default`,
-`profile NAME` or `module`) and its path in the file. Does not check anything (`rules`)
-and does not convert to device units (`plant`). Pure.
+`profile NAME` or `module`) and its path in the file. A program's fields are kept as each
+layer gives them (`ProgramFields`), and a field's `Sourced` is made when it is asked for: a
+plant of 240 modules has 60,000 of them. Does not check anything (`rules`) and does not
+convert to device units (`plant`). Pure.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from decimal import Decimal
 from typing import Any
@@ -63,12 +65,36 @@ class Layer:
     spec: ProfileSpec
 
 
+class ProgramFields(Mapping[str, Sourced]):
+    """One program's fields after layering, each with where it came from."""
+
+    __slots__ = ("_layers",)
+
+    def __init__(self, layers: tuple[tuple[str, Path_, Mapping[str, Any]], ...]) -> None:
+        self._layers = layers  # each layer that lists the program, lowest first: (source, its path, the fields it gives)
+
+    def __getitem__(self, key: str) -> Sourced:
+        for source, path, given in reversed(self._layers):
+            if key in given:
+                return Sourced(given[key], source, path + (key,))
+        return PROGRAM_DEFAULTS[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._keys())
+
+    def __len__(self) -> int:
+        return len(self._keys())
+
+    def _keys(self) -> dict[str, None]:
+        return dict.fromkeys([*PROGRAM_DEFAULTS, *(key for _, _, given in self._layers for key in given)])
+
+
 @dataclass(frozen=True, slots=True)
 class Effective:
     """A module's settings after layering, in human units, each value with its source."""
 
     system: Mapping[str, Sourced]
-    programs: Mapping[int, Mapping[str, Sourced]]
+    programs: Mapping[int, ProgramFields]
     program_paths: Mapping[int, Path_]  # each program's key in the last layer that lists it
     chains: Sourced                     # tuple[ChainSpec, ...]
     unmanaged_programs: Sourced         # "keep" | "reset"
@@ -95,7 +121,7 @@ def module_layers(module: ModuleSpec, path: Path_, profiles: Mapping[str, Profil
 def resolve(layers: tuple[Layer, ...]) -> Effective:
     """Lay `layers` over the factory defaults, lowest first."""
     system = dict(SYSTEM_DEFAULTS)
-    programs: dict[int, dict[str, Sourced]] = {}
+    programs: dict[int, list[tuple[str, Path_, dict[str, Any]]]] = {}
     program_paths: dict[int, Path_] = {}
     chains = Sourced(())
     unmanaged = Sourced("keep")
@@ -106,17 +132,15 @@ def resolve(layers: tuple[Layer, ...]) -> Effective:
                 system[key] = Sourced(getattr(spec.system, key), source, layer.path + ("system", key))
         for number, program in (spec.programs or {}).items():
             path = layer.path + ("programs", number)
-            fields = programs.setdefault(number, dict(PROGRAM_DEFAULTS))
+            programs.setdefault(number, []).append((source, path, {key: getattr(program, key) for key in program.model_fields_set}))
             program_paths[number] = path
-            for key in program.model_fields_set:
-                fields[key] = Sourced(getattr(program, key), source, path + (key,))
         if spec.chains is not None:
             chains = Sourced(spec.chains, source, layer.path + ("chains",))
         if spec.unmanaged_programs is not None:
             unmanaged = Sourced(spec.unmanaged_programs, source, layer.path + ("unmanaged_programs",))
     return Effective(
         system=system,
-        programs={n: programs[n] for n in sorted(programs)},
+        programs={n: ProgramFields(tuple(programs[n])) for n in sorted(programs)},
         program_paths=program_paths,
         chains=chains,
         unmanaged_programs=unmanaged,
