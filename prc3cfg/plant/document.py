@@ -1,11 +1,14 @@
-"""A plant file read as YAML: plain data, exact numbers, and where every key and value stands.
+"""A plant file read as YAML: plain data, exact numbers, the problems of its YAML, and their places.
 
-PyYAML composes the node tree — with libyaml (`yaml.CSafeLoader`) when it is installed, else
-the pure-Python `SafeLoader`; both keep every position. Where libyaml stops (a syntax error,
-a limit), the file is parsed again by the pure parser and its first stop is said, so that
-messages do not depend on which one ran; they differ only where the two disagree on what is
-valid YAML (libyaml takes a tab inside a plain scalar, PyYAML does not). This module builds
-the data from the nodes itself so that
+PyYAML parses — with libyaml (`yaml.CSafeLoader`) when it is installed, else the pure-Python
+`SafeLoader`. Its events are read in one pass that builds the data directly: no node tree (a
+PyYAML node and its two marks cost several hundred bytes; a large plant has 160,000 of them),
+and no position kept for a key or value that nothing is wrong with (`Document.lines` finds the
+places of the problems it is given). Where libyaml stops (a syntax error, a limit), the file is
+parsed again by the pure parser and its first stop is said, so that messages do not depend on
+which one ran; they differ only where the two disagree on what is valid YAML (libyaml takes a
+tab inside a plain scalar, PyYAML does not), and where the pure parser would take more than
+about a second to get there (`_REREAD_EVENTS`). This module builds the data itself so that
 - a float keeps the text it was written with: `0.1` becomes `Decimal("0.1")`, never the
   binary 0.1000000000000000055…; integers, booleans, strings are what both YAML versions read;
 - a plain scalar that YAML 1.1 (PyYAML) and YAML 1.2 (yaml-language-server, JSON Schema
@@ -28,45 +31,64 @@ the data from the nodes itself so that
   in an aliased value would have one position for several places (a speed above one
   module's max_speed but not another's), and because expanding them is how a 400-byte file
   becomes gigabytes ("billion laughs"). An anchor that no alias uses does nothing;
-- every key and value keeps its position, by path: `("buses", 0, "modules", 2, "name")`.
+- a problem names its place by path, `("buses", 0, "modules", 2, "name")`, or by the line
+  and column it was found at.
 
 Reading is bounded in time and memory: only a regular file is read (a FIFO could block,
-`/dev/zero` never ends), at most `MAX_BYTES` of it; nesting deeper than `MAX_DEPTH` lists and
-mappings is refused on the event stream, before the composer (which recurses) sees it.
+`/dev/zero` never ends), at most `MAX_BYTES` of it; more than `MAX_NODES` keys, values, lists
+and mappings, or nesting deeper than `MAX_DEPTH`, is refused on the event stream where it is
+reached; a scalar's reading is worked out once per text (a plant file says the same few
+things many times); at most `MAX_PROBLEMS` problems are kept, and one more to show that
+there are more.
 
 Problems that stop reading altogether (no such file, not a regular file, too large, not UTF-8,
-a control character or a byte order mark after the start, a YAML syntax error, an alias,
-too deep, an empty file, a top level that is not a mapping) raise `PlantError` at once; the
+a control character or a byte order mark after the start, a YAML syntax error, a limit, an
+alias, an empty file, a top level that is not a mapping) raise `PlantError` at once; the
 others are collected in `Document.problems`. Does not know what a plant file contains.
 """
 
 from __future__ import annotations
 
 import hashlib
+import itertools
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import yaml
-from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+from yaml.composer import ComposerError
+from yaml.events import (
+    AliasEvent, DocumentStartEvent, MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent,
+    SequenceStartEvent, StreamEndEvent,
+)
+from yaml.nodes import ScalarNode
 
 from prc3cfg.files import FileProblem, Why, read_regular
-from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, Path_, PlantError, Problem
+from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, MAX_PROBLEMS, Path_, PlantError, Problem
 
-#: The composer: libyaml's when PyYAML was built with it (issue 11 wants its speed).
+#: The parser: libyaml's when PyYAML was built with it (issue 11 wants its speed).
 LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-#: Far above a written plant (the 30-module coating-line example is 4 KB, with profiles) and
-#: room for two buses as `bus import` writes them (30 modules, all 64 programs: 370 KB, read in
-#: 0.4 s); the worst a file this size can do — 350 000 one-character list items, each wrong —
-#: takes 8 s and 700 MB to read and report, so the limit is not much higher.
-MAX_BYTES = 1024 * 1024
+#: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
+#: comments, long names and every field, a few MB. Bytes cost little: nodes are what is bounded.
+MAX_BYTES = 16 * 2**20
+#: Keys, values, lists and mappings: 8 buses × 30 modules managing all 64 programs, each program
+#: a flow mapping of position, speed, dwell and relative speed, have 157,000; with f1, f2 and
+#: next on every program, 372,000. The worst a file of this many can do (every one wrong) is
+#: read and reported in a few seconds and well under 200 MB (bench/plan_time_bench.py --worst).
+MAX_NODES = 400_000
 #: A plant file nests 8 deep (plant → buses → bus → modules → module → programs → program → f1).
 MAX_DEPTH = 100
 #: Python's decimal precision: arithmetic on numbers of more digits would round.
 MAX_DIGITS = 28
+#: Entries of each of `_Reader`'s caches before it starts again.
+_CACHE_SIZE = 4096
+#: Events the pure parser re-reads where libyaml stopped (about a second of it): its first stop
+#: there is said. Beyond, libyaml's stop stands, in libyaml's words.
+_REREAD_EVENTS = 50_000
 
 _BOOL_TAG = "tag:yaml.org,2002:bool"
 _FLOAT_TAG = "tag:yaml.org,2002:float"
@@ -76,6 +98,7 @@ _NULL_TAG = "tag:yaml.org,2002:null"
 _STR_TAG = "tag:yaml.org,2002:str"
 _NUMBER_TAGS = (_INT_TAG, _FLOAT_TAG)
 _SPECIAL_FLOATS = {".inf": "Infinity", "+.inf": "Infinity", "-.inf": "-Infinity", ".nan": "NaN"}
+_NODE_EVENTS = frozenset({ScalarEvent, AliasEvent, MappingStartEvent, SequenceStartEvent})
 
 #: A number in the YAML 1.2 core schema's decimal or exponent notation: "0.300", "-5", "1e3".
 DECIMAL_NUMBER = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
@@ -94,6 +117,8 @@ _CORE_SCHEMA: tuple[tuple[str, re.Pattern[str], Callable[[str], Any]], ...] = tu
     )
 )
 _CORE_TAGS = {tag for tag, _, _ in _CORE_SCHEMA} | {_STR_TAG}  # every tag YAML 1.2 can give a plain scalar
+#: The table as one pattern: the name of the group that matches is the rule's index.
+_CORE_PATTERN = re.compile("|".join(f"(?P<r{index}>{pattern.pattern})" for index, (_, pattern, _) in enumerate(_CORE_SCHEMA)))
 #: How a message says what a reader takes a plain scalar for, by its tag (and value).
 _READINGS: dict[str, Callable[[Any], str]] = {
     _INT_TAG: lambda value: _as_written(value),
@@ -104,21 +129,29 @@ _READINGS: dict[str, Callable[[Any], str]] = {
     "tag:yaml.org,2002:value": lambda value: "the default-value key",
     _MERGE_TAG: lambda value: "a merge key",
 }
+#: The two sides of a decimal comma that a flow mapping split: `{position: 2,000}`.
+_WHOLE = re.compile(r"[-+]?[0-9]+")
+_DIGITS = re.compile(r"[0-9]+")
 #: A number in decimal or exponent notation, with YAML 1.1's underscores: whole digits, fraction
 #: digits, exponent — to count its digits without building it.
 _DECIMAL_FORM = re.compile(r"[-+]?([0-9_]*)(?:\.([0-9_]*))?(?:[eE]([-+]?[0-9]+))?")
 
 #: What to do about a YAML syntax error, by a piece of PyYAML's wording of it (of libyaml's too
-#: where its composer's differs); the flag says the error is best shown where the construct
+#: where it differs: libyaml's stop is said as it is when the pure parser does not re-read the
+#: file, see `_REREAD_EVENTS`); the flag says the error is best shown where the construct
 #: began (an unclosed quote), not where PyYAML gave up (the end of the file).
+_INDENTED = ("this line is indented differently from the lines above it — line it up with the keys beside it", False)
+_COLON = ("a colon where no key can start — indent this key under its parent, or put a value that contains "
+          "': ' in quotes", False)
 _SYNTAX_HINTS = {
     "'\\t'": ("a tab character — indent with spaces; YAML does not allow tabs here", False),
-    "mapping values are not allowed here": ("a colon where no key can start — indent this key "
-                                            "under its parent, or put a value that contains ': ' in quotes", False),
+    "mapping values are not allowed here": _COLON,
+    "mapping values are not allowed in this context": _COLON,
     "could not find expected ':'": ("a line that is not 'key: value' — add the colon, or start a list "
                                     "item with '- '", False),
-    "expected <block end>": ("this line is indented differently from the lines above it — line it up "
-                             "with the keys beside it", False),
+    "expected <block end>": _INDENTED,
+    "did not find expected key": _INDENTED,
+    "did not find expected '-' indicator": _INDENTED,
     "while scanning a quoted scalar": ("a quoted value that never ends — close the quote", True),
     "expected a single document": ("a second YAML document (---) — a plant file is one document", False),
     "found duplicate anchor": ("an anchor (&name) given twice — a plant file needs no anchors: remove them", False),
@@ -127,40 +160,56 @@ _SYNTAX_HINTS = {
 #: reads as part of a key and libyaml does not.
 _NOT_TEXT = re.compile(f"{yaml.reader.Reader.NON_PRINTABLE.pattern}|(?!\\A)\ufeff")
 #: The tag of a mapping or a list that has none written, and what a message calls it.
-_COLLECTIONS = {MappingNode: ("tag:yaml.org,2002:map", "mapping"), SequenceNode: ("tag:yaml.org,2002:seq", "list")}
+_COLLECTIONS = {MappingStartEvent: ("tag:yaml.org,2002:map", "mapping"),
+                SequenceStartEvent: ("tag:yaml.org,2002:seq", "list")}
 Position = tuple[int, int]  # 1-based line and column
 
 
 @dataclass
 class Document:
-    """The data of one YAML file, the positions of its keys and values, the SHA-256 of its bytes."""
+    """The data of one YAML file, the problems found reading it, the SHA-256 of its bytes, its text."""
 
     name: str
+    text: str
     data: dict[Any, Any]
-    #: path → (position of its key, or None for a list item; position of its value)
-    positions: dict[Path_, tuple[Position | None, Position]]
     sha256: str
     problems: list[Problem] = field(default_factory=list)
 
-    def position(self, path: Path_, at_key: bool = False) -> Position:
-        """Where `path` is, or the nearest enclosing node; parts the file does not have are skipped.
+    def lines(self, problems: Sequence[Problem]) -> list[tuple[Position, str]]:
+        """Each problem as its position and its line, "file:line:column: message", in the order given.
 
-        Skipping lets a path of the models' shape find the file's shape: a chain written
-        as a list has no `programs` key, and pydantic's `[key]` marks a mapping key.
+        A problem's path is first followed in the data, skipping the parts the file does not
+        have, so that a path of the models' shape finds the file's shape: a chain written as a
+        list has no `programs` key, and pydantic's `[key]` marks a mapping key; where nothing
+        is left, the nearest enclosing node is meant. The places of the paths so found are
+        read in one more pass over the file (`_Reader` with `wanted`), only when needed.
         """
-        found: Path_ = ()
-        for part in path:
-            if found + (part,) in self.positions:
-                found += (part,)
-        key, value = self.positions[found]
-        return key if at_key and key is not None else value
+        paths = [(_in_file(self.data, p.path), None if p.first is None else _in_file(self.data, p.first)) for p in problems]
+        wanted: dict[Any, Any] = {}
+        for problem, (path, first) in zip(problems, paths):
+            if problem.at is None:
+                _want(wanted, path)
+            if first is not None:
+                _want(wanted, first)
+        places = self._locate(wanted) if any(p.at is None or p.first is not None for p in problems) else {}
+        result = []
+        for problem, (path, first) in zip(problems, paths):
+            if problem.at is not None:
+                line, column = problem.at
+            else:
+                key, value = places[path]
+                line, column = key if problem.at_key and key is not None else value
+            message = problem.message
+            if first is not None:
+                message = message.replace(FIRST, f"first at line {places[first][1][0]}")
+            result.append(((line, column), f"{self.name}:{line}:{column}: {message}"))
+        return result
 
-    def format(self, problem: Problem) -> tuple[Position, str]:
-        line, column = problem.at or self.position(problem.path, problem.at_key)
-        message = problem.message
-        if problem.first is not None:
-            message = message.replace(FIRST, f"first at line {self.position(problem.first)[0]}")
-        return (line, column), f"{self.name}:{line}:{column}: {message}"
+    def _locate(self, wanted: dict[Any, Any]) -> dict[Path_, tuple[Position | None, Position]]:
+        """path → (position of its key, or None for a list item or the top; position of its value)."""
+        reader = _Reader(_Events(self.name, self.text, LOADER), wanted)
+        reader.read()
+        return reader.positions
 
 
 def read_document(path: Path) -> Document:
@@ -178,22 +227,16 @@ def read_document(path: Path) -> Document:
         what = "a byte order mark" if found.group() == "\ufeff" else "a control character"
         raise PlantError([f"{name}:{line}:{column}: {what} (#x{ord(found.group()):04x}) — remove it; "
                           "a plant file is plain text"])
-    try:
-        _check_events(name, text)
-        root = yaml.compose(text, Loader=LOADER)
-    except yaml.MarkedYAMLError as error:
-        raise PlantError([_syntax_error(name, error)]) from None
-    if root is None or (isinstance(root, ScalarNode) and root.tag == _NULL_TAG):
+    reader = _read(name, text)
+    root, value = reader.root, reader.value
+    if root is None or (type(root) is ScalarEvent and reader.tag(root) == _NULL_TAG):
         raise PlantError([f"{name}:1:1: the file is empty — a plant file starts with 'plant: NAME' and 'buses:'"])
-    if not isinstance(root, MappingNode):
+    if type(root) is not MappingStartEvent:
         line, column = _position(root)
-        kind = "a list" if isinstance(root, SequenceNode) else f"the value {root.value!r}"
+        kind = "a list" if type(root) is SequenceStartEvent else f"the value {root.value!r}"
         raise PlantError([f"{name}:{line}:{column}: the top level is {kind}, not a mapping "
                           "— a plant file is a mapping with 'plant:' and 'buses:'"])
-    reader = _Reader()
-    reader.positions[()] = (None, _position(root))
-    result = reader.value(root, ())
-    return Document(name, result, reader.positions, hashlib.sha256(data).hexdigest(), reader.problems)
+    return Document(name, text, value, hashlib.sha256(data).hexdigest(), reader.problems)
 
 
 #: What to do about a plant path that cannot be read, by why.
@@ -214,127 +257,293 @@ def _read_bytes(path: Path, name: str) -> bytes:
         raise PlantError([f"{name}: {problem} — {_REMEDIES[problem.why]}"]) from None
 
 
-def _check_events(name: str, text: str) -> None:
-    """Refuse what composing would recurse on (deep nesting) or share (aliases), before it does.
+def _read(name: str, text: str) -> _Reader:
+    """`text` read by `LOADER`, or `PlantError` for what stops it: a syntax error, a limit, an alias,
+    an anchor given twice, a second document.
 
-    When libyaml stops (a syntax error, a limit), what is said is where the pure parser stops
-    first: the two word syntax errors differently, and may meet them in another order.
+    When libyaml stops (a syntax error, a limit, aliases), what is said is where the pure parser
+    stops first: the two word syntax errors differently, and may meet them in another order.
     """
+    events = _Events(name, text, LOADER)
+    reader = _Reader(events)
     try:
-        _events_within_limits(name, text, LOADER)
-    except (yaml.MarkedYAMLError, PlantError):
-        if LOADER is yaml.SafeLoader:
-            raise
-        _events_within_limits(name, text, yaml.SafeLoader)
-        raise  # the pure parser takes the whole file: libyaml's stop stands
+        try:
+            reader.read()
+            events.refuse_aliases()
+        except (yaml.MarkedYAMLError, PlantError):
+            if LOADER is not yaml.SafeLoader:
+                _reread(name, text)
+            raise  # the pure parser takes the file (as far as it reads it): libyaml's stop stands
+        if events.stop is not None:
+            raise events.stop
+    except yaml.MarkedYAMLError as error:
+        raise PlantError([_syntax_error(name, error)]) from None
+    return reader
 
 
-def _events_within_limits(name: str, text: str, loader: type) -> None:
-    """`PlantError` for nesting deeper than `MAX_DEPTH` or any alias, from `loader`'s events."""
-    depth = 0
-    aliases: dict[str, list[Position]] = {}  # each alias name, where it is used
-    for event in yaml.parse(text, Loader=loader):
-        if isinstance(event, yaml.CollectionStartEvent):
-            depth += 1
-            if depth > MAX_DEPTH:
-                line, column = _position(event)
-                raise PlantError([f"{name}:{line}:{column}: lists and mappings nested more than {MAX_DEPTH} "
-                                  "deep — a plant file needs fewer than ten: check the brackets and the indentation"])
-        elif isinstance(event, yaml.CollectionEndEvent):
-            depth -= 1
-        elif isinstance(event, yaml.AliasEvent):
-            aliases.setdefault(event.anchor, []).append(_position(event))
-    lines = []
-    for anchor, uses in aliases.items():
-        (line, column), times = uses[0], f", used {len(uses)} times" if len(uses) > 1 else ""
-        lines.append(f"{name}:{line}:{column}: an alias (*{anchor}{times}) — a plant file does not use aliases: "
-                     "share settings with profiles: and a module's profiles: [NAME], or write the value out")
-    if lines:
-        raise PlantError(lines)
+def _reread(name: str, text: str) -> None:
+    """Where the pure parser stops in `text` (a syntax error, a limit, aliases), if it does within
+    `_REREAD_EVENTS` events: it takes some 20 µs an event, libyaml a fiftieth of that."""
+    pure = _Events(name, text, yaml.SafeLoader)
+    if sum(1 for _ in itertools.islice(pure, _REREAD_EVENTS + 1)) <= _REREAD_EVENTS:
+        pure.refuse_aliases()
+
+
+class _Events:
+    """The events of a text, refused at the limits as they come (`PlantError`: deeper than
+    `MAX_DEPTH`, more than `MAX_NODES` nodes), with what PyYAML's composer would object to
+    noted, to be said once the whole text has parsed (a syntax error anywhere comes first):
+    each alias's places (`refuse_aliases`), and `stop`, the first anchor given twice or the
+    second document."""
+
+    def __init__(self, name: str, text: str, loader: type) -> None:
+        self.name, self.text, self.loader = name, text, loader
+        self.aliases: dict[str, list[Position]] = {}  # each alias name, where it is used
+        self.stop: yaml.MarkedYAMLError | None = None
+        self.document = 0  # documents begun
+
+    def __iter__(self) -> Iterator[yaml.Event]:
+        parser = self.loader(self.text)
+        anchors: dict[str, yaml.Mark] = {}
+        depth = nodes = 0
+        while (event := parser.get_event()) is not None:
+            kind = type(event)
+            if kind in _NODE_EVENTS:
+                nodes += 1
+                if nodes > MAX_NODES:
+                    line, column = _position(event)
+                    raise PlantError([f"{self.name}:{line}:{column}: more than {MAX_NODES:,} keys, values, lists and "
+                                      "mappings — 8 buses of 30 modules with all 64 programs written out have about "
+                                      "160,000: check that this is the plant file"])
+                if kind is AliasEvent:
+                    self.aliases.setdefault(event.anchor, []).append(_position(event))
+                elif event.anchor is not None and self.document == 1:
+                    if event.anchor in anchors and self.stop is None:
+                        self.stop = ComposerError("found duplicate anchor; first occurrence", anchors[event.anchor],
+                                                  "second occurrence", event.start_mark)
+                    anchors.setdefault(event.anchor, event.start_mark)
+                if kind is not ScalarEvent and kind is not AliasEvent:
+                    depth += 1
+                    if depth > MAX_DEPTH:
+                        line, column = _position(event)
+                        raise PlantError([f"{self.name}:{line}:{column}: lists and mappings nested more than {MAX_DEPTH} "
+                                          "deep — a plant file needs fewer than ten: check the brackets and the indentation"])
+            elif kind is MappingEndEvent or kind is SequenceEndEvent:
+                depth -= 1
+            elif kind is DocumentStartEvent:
+                self.document += 1
+                if self.document == 2 and self.stop is None:
+                    self.stop = ComposerError("expected a single document in the stream", None,
+                                              "but found another document", event.start_mark)
+            yield event
+
+    def refuse_aliases(self) -> None:
+        """`PlantError` naming every alias, once the text has been parsed."""
+        lines = []
+        for anchor, uses in self.aliases.items():
+            (line, column), times = uses[0], f", used {len(uses)} times" if len(uses) > 1 else ""
+            lines.append(f"{self.name}:{line}:{column}: an alias (*{anchor}{times}) — a plant file does not use aliases: "
+                         "share settings with profiles: and a module's profiles: [NAME], or write the value out")
+        if lines:
+            raise PlantError(lines)
+
+
+#: A path's end in a trie of wanted paths (`_Reader`): it is wanted, nothing under it is.
+_LEAF: Mapping[Any, Any] = MappingProxyType({})
 
 
 class _Reader:
-    """Builds plain data from YAML nodes, recording positions and the problems found on the way."""
+    """One pass over the events of a YAML file.
 
-    def __init__(self) -> None:
-        self.constructor = yaml.SafeLoader("")
+    Without `wanted`, it builds the data and collects the problems found on the way (at most
+    `MAX_PROBLEMS` + 1: enough to know that there are more). With `wanted`, a trie of paths
+    (`_want`), it records `positions` of those paths and of the paths on the way to them, and
+    only passes over the rest. The same code reads keys both times, so paths match.
+    """
+
+    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None) -> None:
+        self.next = iter(events).__next__
+        self.wanted = wanted
         self.positions: dict[Path_, tuple[Position | None, Position]] = {}
         self.problems: list[Problem] = []
+        self.root: yaml.Event | None = None  # the top node's first event; None for an empty stream
+        self.value: Any = None
+        self.constructor = yaml.SafeLoader("")
+        self.tags: dict[tuple[str, tuple[bool, bool]], str] = {}  # YAML 1.1's tag of a plain or quoted text
+        #: How a scalar reads, by its text, tag and plainness (`reading`): a plant file says the
+        #: same few things many times.
+        self.scalars: dict[tuple[str, str | None, bool], tuple[Any, Callable[[str], str] | None, bool]] = {}
 
-    def value(self, node: Node, path: Path_) -> Any:
-        if type(node) in _COLLECTIONS and node.tag != _COLLECTIONS[type(node)][0]:  # !!set, !!omap, !!float
-            self.problems.append(Problem(path, f"a {_COLLECTIONS[type(node)][1]} cannot be read as {_written(node.tag)} "
-                                         "— remove the tag; a plant file needs none", at=_position(node)))
-        if isinstance(node, MappingNode):
-            return self.mapping(node, path)
-        if isinstance(node, SequenceNode):
-            items = []
-            for index, item in enumerate(node.value):
-                self.positions[path + (index,)] = (None, _position(item))
-                items.append(self.value(item, path + (index,)))
-            return items
-        key = path[-1] if path and isinstance(path[-1], str) else ""
-        return self.scalar(node, path, key)
+    def read(self) -> None:
+        self.next()  # the stream's start
+        if type(self.next()) is StreamEndEvent:
+            return
+        self.root = self.next()
+        if self.wanted is not None:
+            self.positions[()] = (None, _position(self.root))
+        self.value = self.node(self.root, (), self.wanted)
+        while type(self.next()) is not StreamEndEvent:  # the end of the document, or more of them
+            pass
 
-    def mapping(self, node: MappingNode, path: Path_) -> dict[Any, Any]:
+    def problem(self, problem: Problem) -> None:
+        if len(self.problems) <= MAX_PROBLEMS:
+            self.problems.append(problem)
+
+    def node(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
+        """The value of the node that `event` begins, read to its end."""
+        kind = type(event)
+        if kind is ScalarEvent:
+            return self.scalar(event, path, path[-1] if path and isinstance(path[-1], str) else "")
+        if kind is AliasEvent:
+            return None  # refused once the whole file is read (`_Events.refuse_aliases`)
+        if (tag := self.tag(event)) != _COLLECTIONS[kind][0]:  # !!set, !!omap, !!float
+            self.problem(Problem(path, f"a {_COLLECTIONS[kind][1]} cannot be read as {_written(tag)} "
+                                 "— remove the tag; a plant file needs none", at=_position(event)))
+        if kind is MappingStartEvent:
+            return self.mapping(event, path, wanted)
+        items = []
+        while type(item := self.next()) is not SequenceEndEvent:
+            items.append(self.entry(path + (len(items),), None, item, wanted))
+        return items
+
+    def entry(self, path: Path_, key_at: Position | None, event: yaml.Event, wanted: Mapping[Any, Any] | None) -> Any:
+        """The value of a list item or mapping value at `path`; passed over when locating another path."""
+        if wanted is None:
+            return self.node(event, path, None)
+        below = wanted.get(path[-1])
+        if below is not None:
+            self.positions[path] = (key_at, key_at if key_at is not None and self.empty(event) else _position(event))
+        if below is None or below is _LEAF:
+            self.skip(event)
+            return None
+        return self.node(event, path, below)
+
+    def mapping(self, start: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> dict[Any, Any]:
         result: dict[Any, Any] = {}
-        before: tuple[Any, Node] | None = None  # the key and value node read last
-        for key_node, value_node in node.value:
-            key_at = _position(key_node)
-            if key_node.tag == _MERGE_TAG:
-                self.problems.append(Problem(path, "a YAML merge key (<<) — share settings with "
-                                             "profiles: and a module's profiles: [NAME] instead", at=key_at))
+        keys: dict[Any, Position] = {}  # where each key read here is
+        before: tuple[Any, yaml.Event] | None = None  # the key read last and its value's first event
+        while type(key_event := self.next()) is not MappingEndEvent:
+            key_at = _position(key_event)
+            if type(key_event) is not ScalarEvent:
+                self.skip(key_event)
+            value_event = self.next()
+            if self.merge_key(key_event):
+                self.problem(Problem(path, "a YAML merge key (<<) — share settings with "
+                                     "profiles: and a module's profiles: [NAME] instead", at=key_at))
+                self.skip(value_event)
                 continue
-            if before is not None and node.flow_style and _split_number(before[1], key_node, value_node):
-                written = f"{before[1].value},{key_node.value}"
+            if before is not None and start.flow_style and self.split_number(before[1], key_event, value_event):
+                written = f"{before[1].value},{key_event.value}"
                 point = written.replace(",", ".")
                 result[before[0]] = Decimal(point)  # what was meant, for the models to judge
-                self.problems.append(Problem(path, DECIMAL_COMMA.format(what=before[0], written=written, point=point),
-                                             at=_position(before[1]), models_fix=True))
+                self.problem(Problem(path, DECIMAL_COMMA.format(what=before[0], written=written, point=point),
+                                     at=_position(before[1]), models_fix=True))
                 continue
-            key = self.scalar(key_node, path, "key") if isinstance(key_node, ScalarNode) else None
+            key = self.scalar(key_event, path, "key") if type(key_event) is ScalarEvent else None
             if key is None or not _hashable(key):
-                self.problems.append(Problem(path, "a key that is not a name or a number — write a plain key", at=key_at))
+                self.problem(Problem(path, "a key that is not a name or a number — write a plain key", at=key_at))
+                self.skip(value_event)
                 continue
-            if key in result:
-                first = self.positions[path + (key,)][0]
-                self.problems.append(Problem(path, f"duplicate key '{key}' — it is already given at "
-                                             f"{first[0]}:{first[1]}; give each key once", at=key_at))
+            if key in keys:
+                first = keys[key]
+                self.problem(Problem(path, f"duplicate key '{key}' — it is already given at "
+                                     f"{first[0]}:{first[1]}; give each key once", at=key_at))
+                self.skip(value_event)
                 continue
-            self.positions[path + (key,)] = (key_at, key_at if _empty(value_node) else _position(value_node))
-            result[key] = self.value(value_node, path + (key,))
-            before = (key, value_node)
+            keys[key] = key_at
+            result[key] = self.entry(path + (key,), key_at, value_event, wanted)
+            before = (key, value_event)
         return result
 
-    def scalar(self, node: ScalarNode, path: Path_, key: str) -> Any:
-        """The value of `node` (under `key`, for messages); a problem when it is not one value to every reader."""
-        text, at = node.value, _position(node)
-        plain = not node.style and node.tag == self.constructor.resolve(ScalarNode, text, (True, False))
+    def skip(self, event: yaml.Event) -> None:
+        """Pass over the node that `event` begins."""
+        depth = 0
+        while True:
+            kind = type(event)
+            if kind is MappingStartEvent or kind is SequenceStartEvent:
+                depth += 1
+            elif kind is MappingEndEvent or kind is SequenceEndEvent:
+                depth -= 1
+            if depth == 0:
+                return
+            event = self.next()
+
+    def tag(self, event: yaml.Event) -> str | None:
+        """A node's tag as PyYAML's composer gives it: the one written, else YAML 1.1's reading."""
+        kind = type(event)
+        if kind is AliasEvent:
+            return None
+        if event.tag not in (None, "!"):
+            return event.tag
+        if kind is ScalarEvent:
+            return self.resolve(event.value, event.implicit)
+        return _COLLECTIONS[kind][0]
+
+    def merge_key(self, event: yaml.Event) -> bool:
+        """`<<`, or any key tagged `!!merge`."""
+        if type(event) is AliasEvent:
+            return False
+        maybe = event.tag not in (None, "!") or (type(event) is ScalarEvent and event.value == "<<")
+        return maybe and self.tag(event) == _MERGE_TAG
+
+    def resolve(self, text: str, implicit: tuple[bool, bool]) -> str:
+        if (tag := self.tags.get((text, implicit))) is None:
+            tag = self.constructor.resolve(ScalarNode, text, implicit)
+            _remember(self.tags, (text, implicit), tag)
+        return tag
+
+    def empty(self, event: yaml.Event) -> bool:
+        """An empty value (`key:` alone), which YAML reads as null."""
+        return type(event) is ScalarEvent and not event.value and self.tag(event) == _NULL_TAG
+
+    def split_number(self, number: yaml.Event, key: yaml.Event, value: yaml.Event) -> bool:
+        """`{position: 2,000}`: a whole number, a comma and digits that became a key without a value."""
+        return bool(type(value) is ScalarEvent and not value.value and self.empty(value)
+                    and type(number) is ScalarEvent and not number.style and _WHOLE.fullmatch(number.value)
+                    and type(key) is ScalarEvent and not key.style and _DIGITS.fullmatch(key.value)
+                    and key.start_mark.index == number.end_mark.index + 1)
+
+    def scalar(self, event: yaml.Event, path: Path_, key: str) -> Any:
+        """The value of a scalar (under `key`, for messages); a problem when it is not one value to every reader."""
+        seen = (event.value, event.tag, not event.style)
+        if (known := self.scalars.get(seen)) is None:
+            known = self.reading(event.value, self.tag(event), not event.style)
+            _remember(self.scalars, seen, known)
+        value, problem, models_fix = known
+        if problem is not None:
+            self.problem(Problem(path, problem(key), at=_position(event), models_fix=models_fix))
+        return value
+
+    def reading(self, text: str, tag: str, unstyled: bool) -> tuple[Any, Callable[[str], str] | None, bool]:
+        """How a scalar reads: its value; None, or what is wrong with it, worded for the key it is
+        under; whether the models' fix is better than that message's."""
+        plain = unstyled and tag == self.resolve(text, (True, False))
         core_tag, core_value = _core_rule(text) if plain else (None, None)
-        if (node.tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
-            self.problems.append(Problem(path, f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, "
-                                         f"written out — a plant file's numbers are read exactly: write at most "
-                                         f"{MAX_DIGITS} digits", at=at))
-            return text
+        if (tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
+            return text, lambda key: (f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, written out "
+                                      f"— a plant file's numbers are read exactly: write at most {MAX_DIGITS} digits"), False
         if plain:
             # a tag the core schema does not have (a date, `=`) differs without building a value
-            yaml11 = (node.tag, self.construct(node) if node.tag in _CORE_TAGS else None)
+            yaml11 = (tag, self.construct(tag, text) if tag in _CORE_TAGS else None)
             yaml12 = (core_tag, core_value(text))
             if (yaml11[0], str(yaml11[1])) != (yaml12[0], str(yaml12[1])):  # str: NaN is not equal to NaN
-                subject = _subject(key, text, _STR_TAG in (yaml11[0], yaml12[0]))
-                self.problems.append(Problem(path, _ambiguity(subject, yaml11, yaml12), at=at, models_fix=True))
-                return yaml12[1]
-            return yaml11[1]
+                quoted = _STR_TAG in (yaml11[0], yaml12[0])
+                return yaml12[1], lambda key: _ambiguity(_subject(key, text, quoted), yaml11, yaml12), True
+            return yaml11[1], None, False
         try:
-            return self.construct(node)
+            return self.construct(tag, text), None, False
         except (yaml.YAMLError, ValueError, TypeError, ArithmeticError):
-            self.problems.append(Problem(path, f"'{text}' cannot be read as {_written(node.tag)} — remove the tag; "
-                                         "a plant file needs none", at=at))
-            return text
+            return text, lambda key: f"'{text}' cannot be read as {_written(tag)} — remove the tag; a plant file needs none", False
 
-    def construct(self, node: ScalarNode) -> Any:
+    def construct(self, tag: str, text: str) -> Any:
         """The YAML 1.1 value of a scalar; a float as an exact `Decimal`."""
-        return self.decimal(node) if node.tag == _FLOAT_TAG else self.constructor.construct_object(node)
+        if tag == _STR_TAG:
+            return text
+        node = ScalarNode(tag, text)
+        try:
+            return self.decimal(node) if tag == _FLOAT_TAG else self.constructor.construct_object(node)
+        finally:
+            self.constructor.constructed_objects.clear()  # it would keep every node it built
 
     def decimal(self, node: ScalarNode) -> Decimal:
         """A float exactly as written: "0.1" is Decimal("0.1")."""
@@ -345,6 +554,41 @@ class _Reader:
             return Decimal(repr(self.constructor.construct_object(node)))
 
 
+def _remember(cache: dict[Any, Any], key: Any, value: Any) -> None:
+    """`cache[key] = value`, the cache emptied first when it is full: a file of all different values gains nothing."""
+    if len(cache) >= _CACHE_SIZE:
+        cache.clear()
+    cache[key] = value
+
+
+def _want(wanted: dict[Any, Any], path: Path_) -> None:
+    """Add `path` to the trie `wanted`."""
+    node = wanted
+    for depth, part in enumerate(path, start=1):
+        below = node.get(part)
+        if depth == len(path):
+            if below is None:
+                node[part] = _LEAF
+        else:
+            if below is None or below is _LEAF:
+                below = node[part] = {}
+            node = below
+
+
+def _in_file(data: Any, path: Path_) -> Path_:
+    """The parts of `path` that the file has, in order: those it does not have are skipped."""
+    found: Path_ = ()
+    for part in path:
+        if isinstance(data, dict):
+            present = _hashable(part) and part in data
+        else:
+            present = isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data)
+        if present:
+            data = data[part]
+            found += (part,)
+    return found
+
+
 def core_schema(text: str) -> tuple[str, Any]:
     """The tag and value the YAML 1.2 core schema gives the plain scalar `text`."""
     tag, value = _core_rule(text)
@@ -353,7 +597,10 @@ def core_schema(text: str) -> tuple[str, Any]:
 
 def _core_rule(text: str) -> tuple[str, Callable[[str], Any]]:
     """The core schema's tag for `text`, and how to build its value (not built yet: it may be long)."""
-    return next(((tag, value) for tag, pattern, value in _CORE_SCHEMA if pattern.fullmatch(text)), (_STR_TAG, str))
+    if (found := _CORE_PATTERN.fullmatch(text)) is None:
+        return _STR_TAG, str
+    tag, _, value = _CORE_SCHEMA[int(found.lastgroup[1:])]
+    return tag, value
 
 
 def _ambiguity(subject: str, yaml11: tuple[str, Any], yaml12: tuple[str, Any]) -> str:
@@ -388,13 +635,6 @@ def _too_long(text: str) -> bool:
     return max(len(whole) + shift, 1) + max(len(fraction) - shift, 0) > MAX_DIGITS
 
 
-def _split_number(number: Node, key: Node, value: Node) -> bool:
-    """`{position: 2,000}`: a whole number, a comma and digits that became a key without a value."""
-    return bool(isinstance(number, ScalarNode) and not number.style and re.fullmatch(r"[-+]?[0-9]+", number.value)
-                and isinstance(key, ScalarNode) and not key.style and re.fullmatch(r"[0-9]+", key.value)
-                and _empty(value) and key.start_mark.index == number.end_mark.index + 1)
-
-
 def _subject(key: str, text: str, quoted: bool) -> str:
     """A scalar as a message names it: "address 010", "alarm 'on'"; shortened when long."""
     short = text if len(text) <= 24 else text[:20] + "…"
@@ -414,12 +654,8 @@ def _written(tag: str) -> str:
     return tag.replace("tag:yaml.org,2002:", "!!", 1)
 
 
-def _empty(node: Node) -> bool:
-    return isinstance(node, ScalarNode) and node.tag == _NULL_TAG and not node.value
-
-
-def _position(node: Node | yaml.Event) -> Position:
-    return node.start_mark.line + 1, node.start_mark.column + 1
+def _position(event: yaml.Event) -> Position:
+    return event.start_mark.line + 1, event.start_mark.column + 1
 
 
 def _line_column(text: str, offset: int) -> Position:

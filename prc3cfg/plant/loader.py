@@ -1,23 +1,29 @@
-"""`load_plant`: read a plant file, find every problem in it at once, or build the `Plant`.
+"""`load_plant`: read a plant file, find its problems at once, or build the `Plant`.
 
-    read YAML (`document`)  →  pydantic on the whole file (`models`, worded by `messages`)
+    read YAML (`document`)  →  pydantic, part by part (`models`, worded by `messages`)
                             →  rules on every part that is valid on its own (`rules`,
                                after `profiles`)  →  `Plant`, or `PlantError`
 
-The rules run on the parts that validated even when others did not: each profile, each
-bus's line settings and each module is validated on its own, so that one unknown key
-does not hide a P > S1 three modules further down. A module whose profiles are unknown
-or invalid is not checked further (its profile's problems are reported already).
-All problems come back sorted by line and column, one line each. Where the reading itself
-found a problem (`010`, `on`, a decimal comma), that is the one said there; the models'
-objection to the same value only lends it their "what to do" when the reading's problem
-asks for that (`Problem.models_fix`: "… read as true by YAML 1.1 and as text by YAML 1.2 —
-give a number in m").
+Each part of a plant file is validated once, on its own: every profile, every module, and the
+rest of the file with a valid stand-in for each of those. The rules run on the parts that
+validated even when others did not, so that one unknown key does not hide a P > S1 three
+modules further down. A module whose profiles are unknown or invalid is not checked further
+(its profile's problems are reported already).
+
+pydantic keeps every error of one call (some 400 bytes each, and a mapping that lacks three
+required keys has three), so what one call costs is bounded: a part of more than
+`MAX_PART_NODES` keys, values, lists and mappings is refused where that is reached — no valid
+module or profile comes near it. All problems come back sorted by line and column, one line
+each; once there are more than `MAX_PROBLEMS`, the file is checked no further and the last
+line says so. Where the reading itself found a problem (`010`, `on`, a decimal comma), that is
+the one said there; the models' objection to the same value only lends it their "what to do"
+when the reading's problem asks for that (`Problem.models_fix`: "… read as true by YAML 1.1
+and as text by YAML 1.2 — give a number in m").
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -25,55 +31,99 @@ from pydantic import BaseModel, ValidationError
 
 from prc3cfg.plant import rules
 from prc3cfg.plant.document import Document, Position, mappings_in, read_document
-from prc3cfg.plant.messages import from_pydantic
+from prc3cfg.plant.messages import from_pydantic, what
 from prc3cfg.plant.models import BusLine, ModuleSpec, PlantSpec, ProfileSpec
 from prc3cfg.plant.plant import Bus, Module, Plant
-from prc3cfg.plant.problems import Path_, PlantError, Problem
+from prc3cfg.plant.problems import MAX_PROBLEMS, Path_, PlantError, Problem
 from prc3cfg.plant.profiles import module_layers, resolve
 
 M = TypeVar("M", bound=BaseModel)
+#: Keys, values, lists and mappings in one part: a module or profile with every field of all
+#: 64 programs and a chain of all of them written out has about 2,000; the rest of a plant
+#: of 8 buses × 30 modules, about 1,300, and 2 more for each profile.
+MAX_PART_NODES = 10_000
+#: What stands for a module or a profile while the rest of the file is validated.
+_MODULE_STAND_IN = {"address": 1, "name": "-"}
+_PROFILE_STAND_IN: dict[str, Any] = {}
 
 
 def load_plant(path: str | Path) -> Plant:
-    """The plant in `path`; `PlantError` with every problem ("file:line:column: …") otherwise."""
+    """The plant in `path`; `PlantError` with its problems ("file:line:column: …") otherwise."""
     path = Path(path)
     document = read_document(path)
-    problems: list[Problem] = []
+    _check_sizes(document)
+    problems = _Problems(MAX_PROBLEMS - len(document.problems))
     try:
-        PlantSpec.model_validate(document.data)
-    except ValidationError as error:
-        problems += filter(None, (from_pydantic(e, document.data) for e in error.errors(include_url=False)))
-    problems += rules.check_unique(document.data)
-    profiles = dict(_profiles(document.data))
-    buses = []
-    for bus_path, raw_bus in mappings_in(document.data, ("buses",)):
-        line = _valid(BusLine, {k: v for k, v in raw_bus.items() if k != "modules"})
-        problems += rules.check_bus(bus_path, line) if line else []
-        modules = []
-        for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
-            module = _valid(ModuleSpec, raw_module)
-            if module is not None:
-                found, built = _module(module, module_path, profiles)
-                problems += found
-                modules.append(built)
-        buses.append((line, modules))
+        buses = _checked(document.data, problems)
+    except _Enough:
+        raise PlantError(_lines(document, problems, stopped=True)) from None
     if problems or document.problems:
-        raise PlantError(_lines(document, problems))
+        raise PlantError(_lines(document, problems, stopped=False))
     return Plant(
         name=document.data["plant"],
-        buses=tuple(Bus(**{k: getattr(line, k) for k in line.model_fields_set}, modules=tuple(modules)) for line, modules in buses),
+        buses=tuple(Bus(**{k: getattr(line, k) for k in line.model_fields_set if k != "modules"}, modules=tuple(modules))
+                    for line, modules in buses),
         path=path,
         sha256=document.sha256,
     )
 
 
-def _lines(document: Document, problems: list[Problem]) -> list[str]:
-    """Every problem as one line, sorted; at a place where reading found one, the models' only lend a fix."""
-    read = {document.format(p): p for p in document.problems}
+class _Enough(Exception):
+    """More problems than are listed: the file is checked no further."""
+
+
+class _Problems(list[Problem]):
+    """The problems found so far; `add` stops the checking (`_Enough`) once there are more than `room`."""
+
+    def __init__(self, room: int) -> None:
+        super().__init__()
+        self.room = room
+
+    def add(self, found: Iterable[Problem]) -> None:
+        self.extend(found)
+        if len(self) > self.room:
+            raise _Enough
+
+
+def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine | None, list[Module]]]:
+    """Every bus's line and its modules that have no problem; the problems go to `problems`."""
+    problems.add(())  # the reading may have found enough already
+    spec, found = _validated(PlantSpec, _with_stand_ins(data), (), data)
+    problems.add(found)
+    problems.add(rules.check_unique(data))
+    profiles: dict[str, ProfileSpec | None] = {}
+    for profile_path, raw in _profiles(data):
+        profile, found = _validated(ProfileSpec, raw, profile_path, data)
+        problems.add(found)
+        if isinstance(profile_path[1], str):
+            profiles[profile_path[1]] = profile
+    buses = []
+    for bus_path, raw_bus in mappings_in(data, ("buses",)):
+        line = spec.buses[bus_path[1]] if spec is not None else _valid(BusLine, {k: v for k, v in raw_bus.items() if k != "modules"})
+        problems.add(rules.check_bus(bus_path, line) if line else ())
+        modules = []
+        for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
+            module, found = _validated(ModuleSpec, raw_module, module_path, data)
+            problems.add(found)
+            if module is not None:
+                found, built = _module(module, module_path, profiles)
+                problems.add(found)
+                modules.append(built)
+        buses.append((line, modules))
+    return buses
+
+
+def _lines(document: Document, problems: list[Problem], *, stopped: bool) -> list[str]:
+    """Every problem as one line, sorted; at a place where reading found one, the models' only lend a fix.
+
+    After `MAX_PROBLEMS` lines (or when the checking `stopped` early), a last one says there are more.
+    """
+    located = document.lines([*document.problems, *problems])
+    read = dict(zip(located, document.problems))
     places = {at for at, _ in read}
     fixes: dict[Position, str] = {}
     lines = set()
-    for at, text in sorted(map(document.format, problems)):
+    for at, text in sorted(located[len(document.problems):]):
         if at in places:
             fixes.setdefault(at, text.partition(" — ")[2])
         else:
@@ -82,7 +132,82 @@ def _lines(document: Document, problems: list[Problem]) -> list[str]:
         if problem.models_fix and at in fixes:
             text = f"{text.partition(' — ')[0]} — {fixes[at]}"
         lines.add((at, text))
-    return [text for _, text in sorted(lines)]
+    ordered = sorted(lines)
+    if stopped or len(ordered) > MAX_PROBLEMS:
+        ordered = ordered[:MAX_PROBLEMS]
+        (line, column), _ = ordered[-1]
+        ordered.append(((line, column), f"{document.name}:{line}:{column}: more than {MAX_PROBLEMS} problems, the "
+                        "file was checked no further — fix those listed and check it again"))
+    return [text for _, text in ordered]
+
+
+def _check_sizes(document: Document) -> None:
+    """`PlantError` at the node where a part passes `MAX_PART_NODES`: the rest of the file, a profile, a module."""
+    data = document.data
+    parts = [((), _with_stand_ins(data)), *_profiles(data), *_modules(data)]
+    for path, value in parts:
+        if _size(value) > MAX_PART_NODES:
+            reached, at_key = _node_past(value, path, MAX_PART_NODES)
+            nodes = f"more than {MAX_PART_NODES:,} keys, values, lists and mappings"
+            message = (f"{what(path, data)} has {nodes} — a module with every field of all 64 programs written out "
+                       "has about 2,000" if path else
+                       f"the plant file has {nodes} besides its modules and profiles — 8 buses of 30 modules have "
+                       "about 1,300")
+            problem = Problem(reached, f"{message}: check that this is the plant file", at_key=at_key)
+            raise PlantError([text for _, text in document.lines([problem])])
+
+
+def _size(value: Any) -> int:
+    """The nodes of `value`: itself, and each key and value in it."""
+    if isinstance(value, dict):
+        return 1 + len(value) + sum(map(_size, value.values()))
+    if isinstance(value, list):
+        return 1 + sum(map(_size, value))
+    return 1
+
+
+def _node_past(value: Any, path: Path_, limit: int) -> tuple[Path_, bool]:
+    """The node of `value` (at `path`) after the first `limit`, in file order: its path, and whether it is a key."""
+    count, stack = 0, [(path, value, False)]
+    while stack:
+        at, item, is_key = stack.pop()
+        count += 1
+        if count > limit:
+            return at, is_key
+        if isinstance(item, dict) and not is_key:
+            for key, child in reversed(item.items()):
+                stack += [(at + (key,), child, False), (at + (key,), key, True)]
+        elif isinstance(item, list):
+            stack += [(at + (index,), child, False) for index, child in reversed(list(enumerate(item)))]
+    raise ValueError(f"{path} has at most {limit} nodes")
+
+
+def _with_stand_ins(data: dict[Any, Any]) -> dict[Any, Any]:
+    """The file with a valid stand-in for each profile and module that is a mapping (validated on their own)."""
+    result = dict(data)
+    if isinstance(data.get("profiles"), dict):
+        result["profiles"] = {name: _PROFILE_STAND_IN if isinstance(p, dict) else p for name, p in data["profiles"].items()}
+    if isinstance(data.get("buses"), list):
+        result["buses"] = [
+            {**bus, "modules": [_MODULE_STAND_IN if isinstance(m, dict) else m for m in bus["modules"]]}
+            if isinstance(bus, dict) and isinstance(bus.get("modules"), list) else bus
+            for bus in data["buses"]
+        ]
+    return result
+
+
+def _profiles(data: dict[Any, Any]) -> Iterator[tuple[Path_, dict[Any, Any]]]:
+    """Every profile that is a mapping, with its path."""
+    profiles = data.get("profiles")
+    for name, raw in (profiles.items() if isinstance(profiles, dict) else ()):
+        if isinstance(raw, dict):
+            yield ("profiles", name), raw
+
+
+def _modules(data: dict[Any, Any]) -> Iterator[tuple[Path_, dict[Any, Any]]]:
+    """Every module that is a mapping, with its path."""
+    for bus_path, bus in mappings_in(data, ("buses",)):
+        yield from mappings_in(bus, bus_path + ("modules",))
 
 
 def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec | None]) -> tuple[list[Problem], Module | None]:
@@ -101,12 +226,13 @@ def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec 
     return problems, built
 
 
-def _profiles(data: dict[Any, Any]) -> Iterator[tuple[str, ProfileSpec | None]]:
-    """Every profile name, with the profile or None when it is not valid."""
-    profiles = data.get("profiles")
-    for name, raw in (profiles.items() if isinstance(profiles, dict) else ()):
-        if isinstance(name, str):
-            yield name, _valid(ProfileSpec, raw)
+def _validated(model: type[M], data: Any, path: Path_, document: Any) -> tuple[M | None, list[Problem]]:
+    """`data` (at `path` in `document`) as `model`, or None and its problems."""
+    try:
+        return model.model_validate(data), []
+    except ValidationError as error:
+        found = (from_pydantic({**e, "loc": path + tuple(e["loc"])}, document) for e in error.errors(include_url=False))
+        return None, [problem for problem in found if problem is not None]
 
 
 def _valid(model: type[M], data: Any) -> M | None:

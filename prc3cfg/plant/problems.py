@@ -2,7 +2,8 @@
 
 A `Problem` names its place as a path of keys and indexes from the top of the document
 (`("buses", 0, "modules", 2, "programs", 3, "speed")`); the loader turns the path into
-`file:line:column`. `PlantError` carries every problem of one file, one line each.
+`file:line:column`. `PlantError` carries the problems of one file, one line each: every one,
+up to `MAX_PROBLEMS`.
 """
 
 from __future__ import annotations
@@ -13,6 +14,9 @@ from dataclasses import dataclass
 from prc3cfg.errors import UserError
 
 Path_ = tuple[str | int, ...]
+#: Problems listed for one file. A file with more is read no further than needed to know
+#: that: it is not the plant file meant, or it is best fixed from the first ones.
+MAX_PROBLEMS = 1000
 #: Stands in a message for "first at line N", the place of `Problem.first`.
 FIRST = "(first)"
 #: A number written with a decimal comma: said by `messages` of a text where a number belongs

@@ -5,8 +5,9 @@ An `.expected` file holds the lines of `PlantError.problems` without the leading
 is read with the pure-Python parser and, when installed, with libyaml: the lines are the same.
 
 Hostile inputs (devices, pipes, huge files, alias and nesting bombs, numbers of a million
-digits) are refused by a limit the message names, before the work they would cause: these
-tests would hang or run out of memory otherwise, so none needs a clock.
+digits, hundreds of thousands of nodes, parts or problems) are refused by a limit the message
+names, before the work they would cause: these tests would hang or run out of memory
+otherwise, so none needs a clock. (bench/plan_time_bench.py --worst times files at the limits.)
 """
 
 from __future__ import annotations
@@ -24,7 +25,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg.errors import UserError
-from prc3cfg.plant import PlantError, document, load_plant, plant_schema
+from prc3cfg.plant import PlantError, document, load_plant, loader, plant_schema
+from prc3cfg.plant.problems import MAX_PROBLEMS
 
 BROKEN = sorted((Path(__file__).parent / "broken").glob("*.yaml"))
 PLANTS = Path(__file__).parents[2] / "plants"
@@ -98,22 +100,22 @@ def _sparse(tmp_path: Path) -> Path:
     (_fifo, "is a named pipe (FIFO), not a file — give the plant file (*.yaml) itself"),
     (_socket, "is a socket, not a file — give the plant file (*.yaml) itself"),
     (lambda tmp_path: tmp_path, "is a directory — give the plant file (*.yaml) in it"),
-    (_sparse, "larger than 1 MiB — a plant file is far smaller: check that this is the plant file"),
+    (_sparse, "larger than 16 MiB — a plant file is far smaller: check that this is the plant file"),
 ], ids=["dev-zero", "fifo", "socket", "directory", "16-GiB"])
-def test_only_a_regular_file_is_read_and_only_its_first_mebibyte(tmp_path: Path, make, problem: str) -> None:
+def test_only_a_regular_file_is_read_and_only_its_first_16_mebibytes(tmp_path: Path, make, problem: str) -> None:
     path = make(tmp_path)
     with pytest.raises(PlantError) as raised:
         load_plant(path)
     assert raised.value.problems == [f"{path}: {problem}"]
 
 
-def test_a_plant_file_may_be_one_mebibyte(tmp_path: Path) -> None:
+def test_a_plant_file_may_be_16_mebibytes(tmp_path: Path) -> None:
     demo = (PLANTS / "demo-line.yaml").read_bytes()
     path = tmp_path / "plant.yaml"
     path.write_bytes(demo + b"#" * (document.MAX_BYTES - len(demo) - 1) + b"\n")
     assert load_plant(path).name == "demo-line"
     path.write_bytes(demo + b"#" * (document.MAX_BYTES - len(demo)) + b"\n")
-    with pytest.raises(PlantError, match="larger than 1 MiB"):
+    with pytest.raises(PlantError, match="larger than 16 MiB"):
         load_plant(path)
 
 
@@ -151,16 +153,119 @@ def test_bombs_are_refused_by_the_limit_they_meet_first(tmp_path: Path, text: st
     assert raised.value.problems == [f"{path}:{problem}"]
 
 
-@pytest.mark.parametrize("text", [ALIAS_BOMB, FLOW_NESTING, BLOCK_NESTING], ids=["aliases", "flow", "block"])
-def test_aliases_and_deep_nesting_are_refused_before_the_composer_sees_them(tmp_path: Path, monkeypatch, text) -> None:
+@pytest.mark.usefixtures("each_loader")
+def test_no_node_tree_is_composed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The data is built from the parser's events: PyYAML's composer, which recurses and keeps a
+    node and two marks for every key and value, never runs."""
+
     def composer(*args, **kwargs):
         raise AssertionError("composed")
 
+    monkeypatch.setattr(yaml.composer.Composer, "compose_node", composer)
     monkeypatch.setattr(yaml, "compose", composer)
+    assert len(load_plant(PLANTS / "examples" / "coating-line.yaml").modules()) == 30
+
+
+def _plant(modules: list[str], head: str = "plant: demo\n") -> str:
+    return head + "buses:\n  - name: a\n    port: emulator://a\n    modules:\n" + "".join(f"      - {m}\n" for m in modules)
+
+
+@pytest.mark.usefixtures("each_loader")
+def test_more_nodes_than_the_limit_are_refused_where_it_is_reached(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(document, "MAX_NODES", 50)
+    path = tmp_path / "plant.yaml"
+    path.write_text("plant: demo\nbuses: [" + "a, " * 60 + "]\n")  # the 51st node is the 46th a
+    with pytest.raises(PlantError) as raised:
+        load_plant(path)
+    assert raised.value.problems == [f"{path}:2:144: more than 50 keys, values, lists and mappings — 8 buses of 30 "
+                                     "modules with all 64 programs written out have about 160,000: check that this "
+                                     "is the plant file"]
+
+
+PROGRAMS = "{" + ", ".join(f"{n}: {{position: 0.1, speed: 0.1}}" for n in range(1, 6)) + "}"
+
+
+@pytest.mark.usefixtures("each_loader")
+@pytest.mark.parametrize(("text", "problem"), [
+    # node 31 of module m2: the map, 2 keys and values, programs and its map, 6 nodes a program: program 4's speed
+    (_plant(["{address: 1, name: m1}", f"{{address: 2, name: m2, programs: {PROGRAMS}}}"]),
+     f"7:{len('      - {address: 2, name: m2, programs: ' + PROGRAMS[:PROGRAMS.index('4: {')] + '4: {position: 0.1, speed: ') + 1}: "
+     "module m2 has "
+     "more than 30 keys, values, lists and mappings — a module with every field of all 64 programs written out has "
+     "about 2,000: check that this is the plant file"),
+    # node 31 of the rest: 16 up to the modules' list, then 5 for each module's stand-in: m3's name
+    (_plant([f"{{address: {a}, name: m{a}}}" for a in range(1, 6)], head="plant: demo\nprofiles: {p: {}}\n"),
+     "9:28: the plant file has more than 30 keys, values, lists and mappings besides its modules and profiles "
+     "— 8 buses of 30 modules have about 1,300: check that this is the plant file"),
+], ids=["module", "the-rest"])
+def test_a_part_larger_than_the_limit_is_refused_where_it_is_reached(tmp_path: Path, monkeypatch, text, problem) -> None:
+    """What one pydantic call sees is bounded: each module, each profile, the rest of the file."""
+    monkeypatch.setattr(loader, "MAX_PART_NODES", 30)
     path = tmp_path / "plant.yaml"
     path.write_text(text)
-    with pytest.raises(PlantError):
+    with pytest.raises(PlantError) as raised:
         load_plant(path)
+    assert raised.value.problems == [f"{path}:{problem}"]
+
+
+MORE = "more than 1000 problems, the file was checked no further — fix those listed and check it again"
+
+
+@pytest.mark.usefixtures("each_loader")
+def test_reading_stops_collecting_after_the_problem_limit(tmp_path: Path) -> None:
+    path = tmp_path / "plant.yaml"
+    path.write_text("plant: demo\nextra: [" + "on, " * (MAX_PROBLEMS + 100) + "]\n" + _plant(["{address: 1, name: m1}"], ""))
+    with pytest.raises(PlantError) as raised:
+        load_plant(path)
+    problem = "'on' is read as the boolean true by YAML 1.1 and as text by YAML 1.2 — write true or false, or quote it"
+    columns = [9 + 4 * k for k in range(MAX_PROBLEMS)]
+    assert raised.value.problems == [f"{path}:2:{c}: {problem}" for c in columns] + [f"{path}:2:{columns[-1]}: {MORE}"]
+
+
+def test_checking_stops_after_the_problem_limit_with_the_first_problems(tmp_path: Path) -> None:
+    """Parts are checked in file order until there are more problems than are listed: the first are."""
+    module = "      - {{address: {a}, name: m{b}-{a}, unmanaged_programs: sometimes}}\n"
+    buses = [f"  - name: b{b}\n    port: emulator://b{b}\n    modules:\n" + "".join(module.format(a=a, b=b) for a in range(1, 31))
+             for b in range(MAX_PROBLEMS // 30 + 2)]
+    path = tmp_path / "plant.yaml"
+    path.write_text("plant: demo\nbuses:\n" + "".join(buses))
+    with pytest.raises(PlantError) as raised:
+        load_plant(path)
+    *problems, more = raised.value.problems
+    lines = [6 + 33 * (k // 30) + k % 30 for k in range(MAX_PROBLEMS)]  # module k: after 2 lines and its bus's 3
+    assert [int(p.split(":")[1]) for p in problems] == lines
+    assert problems[0] == f"{path}:6:54: unmanaged_programs cannot be 'sometimes' — expected one of keep, reset"
+    assert more == problems[-1].replace(problems[-1].split(": ", 1)[1], MORE)
+
+
+def test_a_problem_far_into_a_large_file_is_found_where_it_is(tmp_path: Path) -> None:
+    """Positions are not kept while reading: a second pass finds the places of the problems only."""
+    programs = "{" + ", ".join(f"{n}: {{position: 0.{n:03d}, speed: 0.300}}" for n in range(1, 65)) + "}"
+    modules = [f"{{address: {a}, name: m{a}, programs: {programs}}}" for a in range(1, 31)]
+    modules[27] = modules[27].replace("40: {position: 0.040, speed: 0.300}", "40: {position: 0.040, speed: 0.900}")
+    path = tmp_path / "plant.yaml"
+    path.write_text(_plant(modules))
+    column = modules[27].index("speed: 0.900") + len("speed: ") + 9
+    with pytest.raises(PlantError) as raised:
+        load_plant(path)
+    assert raised.value.problems == [f"{path}:33:{column}: speed 0.900 m/s is out of range — speed must be 0.001..0.600 m/s"]
+
+
+@pytest.mark.skipif(not yaml.__with_libyaml__, reason="libyaml is not installed")
+def test_past_the_reread_libyaml_words_the_syntax_error(tmp_path: Path, monkeypatch) -> None:
+    """The pure parser re-reads the file for its wording only within `_REREAD_EVENTS`: it is fifty
+    times slower than libyaml. Beyond, libyaml's words get the same hints where they say the same."""
+    monkeypatch.setattr(document, "LOADER", yaml.CSafeLoader)
+    path = tmp_path / "plant.yaml"
+    path.write_text(_plant(["{address: 1, name: m1}"]) + "  other: 1\n")
+    expected = f"{path}:7:3: this line is indented differently from the lines above it — line it up with the keys beside it"
+    with pytest.raises(PlantError) as raised:
+        load_plant(path)
+    assert raised.value.problems == [expected]  # PyYAML's words
+    monkeypatch.setattr(document, "_REREAD_EVENTS", 5)
+    with pytest.raises(PlantError) as raised:
+        load_plant(path)
+    assert raised.value.problems == [expected]  # libyaml's "did not find expected key"
 
 
 @pytest.mark.parametrize(("text", "tag", "value"), [
