@@ -1,11 +1,19 @@
-"""How plans show jumps and field names to people."""
+"""How plans show diffs, jumps and field names to people."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
+from prc3cfg.bustime import LineCost
 from prc3cfg.image import ModuleImage, Program
-from prc3cfg.render import field_name, jumps
+from prc3cfg.line import LineSettings
+from prc3cfg.planner import plan_module
+from prc3cfg.plantplan import ModuleChange, PlantPlan
+from prc3cfg.render import (
+    CLAMPED, FieldChange, changes_json, field_changes, field_name, human, jumps, markdown, module_diff, module_lines,
+)
 
 
 def image_with(jumps_: dict[int, int]) -> ModuleImage:
@@ -34,3 +42,46 @@ def test_jumps(jumps_, within, expected):
 )
 def test_field_name(symbol, name):
     assert field_name(symbol) == name
+
+
+COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
+
+
+def a_change() -> ModuleChange:
+    """Program 1 set up, program 2's jump changed, S1 lowered below unmanaged program 5's position."""
+    actual = ModuleImage.factory(1).with_programs({2: Program(P=300, V=100, A=3), 3: Program(P=350, V=100), 5: Program(P=390, V=90)})
+    desired = replace(actual, system=replace(actual.system, S1=380)).with_programs(
+        {1: Program(P=200, V=60, Vr=5, F1=1010, A=2), 2: Program(P=300, V=100, A=1), **{n: None for n in range(3, 65)}})
+    return ModuleChange("a", "m", actual, desired, plan_module(actual, desired, COST))
+
+
+def test_a_module_diff_compares_the_images_field_by_field() -> None:
+    change = a_change()
+    assert module_lines(change) == [
+        "~ system: upper reversing point 0.400 m → 0.380 m",
+        "+ program 1: position 0.150 m → 0.200 m, speed 0.050 m/s → 0.060 m/s, relative speed 0.000 m/s → 0.005 m/s, "
+        "F1 reset at 0.000 m → set at 0.010 m",
+        "- jump 2 → 3",
+        "+ chain 1 → 2 → 1",
+        f"~ program 5 (not managed, kept): position 0.390 m → 0.380 m — {CLAMPED}",
+    ]
+    changes = changes_json(change)
+    assert [(f["program"], f["field"], f["before"], f["after"]) for f in changes["fields"]] == [
+        (None, "S1", 400, 380), (1, "P", 150, 200), (1, "V", 50, 60), (1, "Vr", 0, 5), (1, "F1", 0, 1010)]
+    assert changes["clamped"] == [{"program": 5, "field": "P", "before": 390, "after": 380,
+                                   "text": "position 0.390 m → 0.380 m", "reason": CLAMPED}]
+    assert (changes["chains_removed"], changes["chains_added"]) == (["jump 2 → 3"], ["chain 1 → 2 → 1"])
+
+
+def test_a_program_either_image_lacks_has_no_field_changes() -> None:
+    factory = ModuleImage.factory(1)
+    assert field_changes(factory, factory.with_programs({1: None, 2: Program(P=160, V=50)})) == [
+        FieldChange(2, "P", 150, 160, "position 0.150 m → 0.160 m")]
+
+
+def test_each_module_diff_is_worked_out_once_for_every_output() -> None:
+    change = a_change()
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (change,))
+    module_diff.cache_clear()
+    changes_json(change), human(plan), markdown(plan)
+    assert module_diff.cache_info().misses == 1
