@@ -4,7 +4,9 @@
   stderr, one line each, exit 1.
 - `show PLANT [--module NAME]`: a module's effective configuration in human units, each
   value with its device value and where it came from (default, profile NAME, module);
-  without `--module`, the plant's modules.
+  without `--module`, the plant's modules. `--plot FILE.svg|png` draws the module's chains
+  instead (`prc3cfg.plot`; the `plot` extra), and `--actual FILE` (a `read --json` file)
+  overlays what the module holds as before, against what the plan leaves it holding.
 - `schema`: the plant file's JSON Schema (draft-07), as `schemas/plant.schema.json` holds it.
 """
 
@@ -19,7 +21,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from prc3cfg.cli import app
-from prc3cfg.cli.common import stdout_console
+from prc3cfg.cli.common import check_output, stdout_console
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
@@ -50,20 +52,35 @@ def validate(plant: PlantPath) -> None:
 def show(
     plant: PlantPath,
     module: Annotated[Optional[str], typer.Option("--module", "-m", help="The module to show, by name.")] = None,
+    plot: Annotated[Optional[Path], typer.Option(
+        help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
+    actual: Annotated[Optional[Path], typer.Option(
+        help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
 ) -> None:
-    """Print a module's effective configuration and where each value came from."""
+    """Print a module's effective configuration and where each value came from; or draw its chains."""
+    if plot is not None:
+        from prc3cfg.plot import plot_format
+
+        fmt = plot_format(plot)
+        if module is None:
+            raise UserError("--plot draws one module — name it with --module NAME")
+        check_output(plot, "--plot", plant=plant)
+    elif actual is not None:
+        raise UserError("--actual is what --plot overlays — give --plot FILE.svg or FILE.png too")
     from prc3cfg.plant import load_plant
 
     loaded = load_plant(plant)
-    console = stdout_console()
     if module is None:
-        console.print(_modules_table(loaded))
+        stdout_console().print(_modules_table(loaded))
         return
     found = {m.name: (bus.name, m) for bus, m in loaded.modules()}
     if module not in found:
         raise UserError(f"{plant}: no module named '{module}' — the modules are {', '.join(found)}")
     bus, chosen = found[module]
-    _show_module(console, bus, chosen)
+    if plot is None:
+        _show_module(stdout_console(), bus, chosen)
+        return
+    _plot_module(loaded, bus, chosen, plot, fmt, actual)
 
 
 @app.command()
@@ -132,6 +149,26 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     if settings.chains.value:
         chains = "; ".join(_chain_text(chain) for chain in settings.chains.value)
         console.print(f"chains ({settings.chains.source}): {chains}")
+
+
+def _plot_module(plant: Plant, bus: str, module: Module, path: Path, fmt: str, actual: Path | None) -> None:
+    """Draw the module's desired image; with `actual`, what it holds now as before and what the
+    plan leaves (`plan.predicted`: the plant file's programs and the kept ones, as clamped) as after."""
+    from prc3cfg import api
+    from prc3cfg.plot import picture
+
+    title = f"module {module.name} — bus {bus}, address {module.address}"
+    if actual is None:
+        data = picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
+    else:
+        images = api.load_images(actual, plant, [module.name])
+        change = api.plan(plant, [module.name], images=images).modules[0]
+        data = picture(change.plan.predicted, change.actual, fmt=fmt, title=f"{title}: before (dashed) and after the plan")
+    try:
+        path.write_bytes(data)
+    except OSError as error:
+        raise UserError(f"--plot {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
+    print(f"{path}: the chains of module {module.name}")
 
 
 def _chain_text(chain: ChainSpec) -> str:
