@@ -44,12 +44,12 @@ from prc3cfg.device import can_clamp
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.files import FileProblem, Why, read_json
 from prc3cfg.framing import get_framing
-from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.line import LineSettings
 from prc3cfg.link import Link, LinkError, Trace, open_plant_links, open_port
 from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
 from prc3cfg.locks import LineBusy, line_keys, line_lock
-from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module
+from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.readback import Target, read_all, read_module
@@ -399,6 +399,32 @@ def read_plan(path: Path, plant: Plant) -> PlanFile:
     if planned.plant_sha256 != plant.sha256:
         raise StalePlan(f"{path}: stale plan — the plant file {plant.path} changed since the plan was made; plan again")
     return planned
+
+
+def plan_document(path: Path) -> dict:
+    """A plan file to show (`prc3cfg show PLAN.json`): checked as `apply --plan` checks it before
+    the line (damaged, edited flags, a module twice, not prc3cfg's bytes: one line), and every
+    step's summary worked out again from its bytes — what is shown is what would be sent."""
+    document = read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again")
+    try:
+        planned = read_plan_file(document)
+    except PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
+    for bus in document["buses"]:
+        for module, entry in zip(bus["modules"], (m for m in planned.modules if m.bus == bus["name"])):
+            system_keys = [f["field"] for f in module.get("changes", {}).get("fields", []) if f.get("program") is None]
+            for step, message in zip(module["steps"], entry.steps):
+                step["summary"] = _summary(message, system_keys)
+        for broadcast in bus.get("broadcasts", []):
+            broadcast["summary"] = _summary(codec.decode_message(bytes.fromhex(broadcast["message"])), [])
+    return document
+
+
+def _summary(message: codec.Message, system_keys: list[str]) -> str:
+    """A step's summary from its bytes (a 20h names the system parameters the plan says it changes)."""
+    if isinstance(message, codec.WriteSystem):
+        return f"write system parameters {', '.join(system_keys) or '(all)'} (20h)"
+    return summarise(message, DEFAULT_SYSTEM)
 
 
 def plan_file_plant(path: Path) -> Path:

@@ -8,7 +8,7 @@ planner, their factory defaults (prc3-protocol.md §4.1) and the module image JS
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 PROGRAM_COUNT = 64
@@ -48,7 +48,7 @@ class SystemParameters:
         return tuple(getattr(self, key) for key in SYSTEM_KEYS)
 
     def to_json(self) -> dict[str, int]:
-        return asdict(self)
+        return dict(zip(SYSTEM_KEYS, self.values()))
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> SystemParameters:
@@ -74,7 +74,7 @@ class Program:
         return replace(self, **{name: value})
 
     def to_json(self) -> dict[str, int]:
-        return asdict(self)
+        return dict(zip(PROGRAM_FIELDS, self.values()))
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Program:

@@ -1,7 +1,8 @@
 """Showing plans to people: the diff in human units, chains as chains, axis warnings.
 
 Owns the words and layout of `plan` output — human (Terraform-like), markdown for pull
-request comments, and the `changes` list of the JSON output. Reasons shown here never
+request comments (within a comment's size, with a stroke chart per changed chain), and the
+`changes` list of the JSON output. Reasons shown here never
 steer an apply (the plan's steps do). A module's diff (`ModuleDiff`: its fields, its jumps,
 the programs it clamps) is worked out once, by comparing the two images field by field, and
 every output of the same plan is made from it (`module_diff` keeps the diffs of the last
@@ -11,13 +12,16 @@ every output of the same plan is made from it (`module_diff` keeps the diffs of 
 from __future__ import annotations
 
 import functools
+import html
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 from prc3cfg.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
 from prc3cfg.importer import jumps_as_chains
+from prc3cfg.motion import MotionError, paired_chains
 from prc3cfg.plant.units import BY_SYMBOL, format_function_output
 from prc3cfg.plantplan import ModuleChange, PlantPlan
+from prc3cfg.plot import mermaid
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"
@@ -153,107 +157,210 @@ def module_diff(change: ModuleChange) -> ModuleDiff:
     )
 
 
-def module_lines(change: ModuleChange) -> list[str]:
-    """The diff of one module, one change per line, indented under its header."""
-    diff = module_diff(change)
+def module_lines(changes: dict) -> list[str]:
+    """The diff of one module, one change per line, from its `changes` (`changes_json`, or a plan file's)."""
     lines: list[str] = []
-    system = [f.text for f in diff.fields if f.program is None]
+    system = [f["text"] for f in changes["fields"] if f["program"] is None]
     if system:
         lines.append(f"~ system: {', '.join(system)}")
     programs: dict[int, list[str]] = {}
-    for f in diff.fields:
-        if f.program is not None:
-            programs.setdefault(f.program, []).append(f.text)
-    lines += [f"{diff.symbols[number]} program {number}: {', '.join(texts)}" for number, texts in programs.items()]
-    lines += [f"- {c}" for c in diff.chains_removed] + [f"+ {c}" for c in diff.chains_added]
+    for f in changes["fields"]:
+        if f["program"] is not None:
+            programs.setdefault(f["program"], []).append(f["text"])
+    symbols = changes.get("symbols", {})
+    lines += [f"{symbols.get(str(number), '~')} program {number}: {', '.join(texts)}" for number, texts in programs.items()]
+    lines += [f"- {c}" for c in changes["chains_removed"]] + [f"+ {c}" for c in changes["chains_added"]]
     clamped: dict[int, list[str]] = {}
-    for f in diff.clamped:
-        clamped.setdefault(f.program, []).append(f.text)
+    for f in changes["clamped"]:
+        clamped.setdefault(f["program"], []).append(f["text"])
     lines += [f"~ program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}" for n, texts in clamped.items()]
     return lines
 
 
-def module_header(change: ModuleChange) -> str:
-    head = f"bus {change.bus}, module {change.address} ({change.name})"
-    if not change.steps:
+def plural(count: int, one: str, many: str | None = None) -> str:
+    """ "1 module", "2 modules", "1 bus", "3 buses"."""
+    return f"{count} {one if count == 1 else many or one + 's'}"
+
+
+def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float, releases: bool) -> str:
+    """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
+    head = f"bus {bus}, module {address} ({name})"
+    if not steps:
         return f"  {head}: no changes"
-    warn = f"  ⚠ {AXIS_WARNING}" if change.releases_axes else ""
-    return f"~ {head}: {len(change.steps)} steps, {change.plan.bus_time:.3f} s{warn}"
+    received = f" ({broadcasts} by broadcast)" if broadcasts else ""
+    warn = f"  ⚠ {AXIS_WARNING}" if releases else ""
+    return f"~ {head}: {plural(steps, 'step')}{received}, {seconds:.3f} s{warn}"
 
 
-def step_lines(change: ModuleChange) -> list[str]:
-    return [
-        f"{i:>3}. {step.message.hex():<24} {step.summary}" + ("  ⚠ RELEASES AXES" if step.releases_axes else "")
-        for i, step in enumerate(change.steps, start=1)
-    ]
-
-
-def summary_line(plan: PlantPlan) -> str:
-    changed = len(plan.changes)
-    if not changed:
-        return "No changes: every module matches the plant file."
-    releases = len(plan.axis_releases)
-    return (
-        f"Plan: {changed} of {len(plan.modules)} modules change, {plan.message_count} messages, "
-        f"estimated bus time {plan.bus_time:.3f} s (naive download {plan.naive_bus_time:.3f} s)"
-        + (f"; ⚠ {releases} module{'s' if releases != 1 else ''} release the axes" if releases else "")
-    )
-
-
-def human(plan: PlantPlan, *, steps: bool = True) -> str:
-    out = [f"Plant {plan.plant}", ""]
-    for change in plan.modules:
-        if not change.steps:
-            out.append(module_header(change))
-            continue
-        lines = [module_header(change), *module_lines(change), *(["steps:", *step_lines(change)] if steps else [])]
-        out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
-    if plan.axis_releases:
-        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(
-            f"{m.bus}/{m.name}" for m in plan.axis_releases))  # fmt: skip
-    out.append(summary_line(plan))
-    return "\n".join(out)
-
-
-def markdown(plan: PlantPlan) -> str:
-    out = [f"### prc3cfg plan — `{plan.plant}`", "", summary_line(plan), ""]
-    if plan.axis_releases:
-        out += [
-            "> [!WARNING]",
-            "> These modules release their axes: **travel to reference point required after apply** — "
-            + ", ".join(f"`{m.bus}/{m.name}`" for m in plan.axis_releases),
-            "",
-        ]
-    if plan.changes:
-        out += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
-        for m in plan.changes:
-            axes = "⚠ released: travel to reference point required" if m.releases_axes else ""
-            out.append(f"| {m.bus} | {m.name} | {m.address} | {len(m.steps)} | {m.plan.bus_time:.3f} s | {axes} |")
-        out.append("")
-        for m in plan.changes:
-            out += [
-                f"<details><summary>{m.bus} / {m.name} (address {m.address})"
-                + (" ⚠ releases axes" if m.releases_axes else "") + "</summary>",
-                "",
-                "```diff",
-                *module_lines(m),
-                "```",
-                "",
-                "```",
-                *step_lines(m),
-                "```",
-                "</details>",
-                "",
-            ]
-    return "\n".join(out)
+def step_line(index: int, message_hex: str, summary: str, releases: bool, broadcast: bool) -> str:
+    """One step: number, the message as sent, what it does, and what it means for the axes."""
+    return (f"{index:>3}. {message_hex:<24} {summary}" + ("  (broadcast)" if broadcast else "")
+            + ("  ⚠ RELEASES AXES" if releases else ""))  # fmt: skip
 
 
 def changes_json(change: ModuleChange) -> dict:
+    """What people read of one module's change: its fields, the symbol of each changed program,
+    its jumps, what the module's clamping does, the axis warning (a plan file keeps it beside the steps)."""
     diff = module_diff(change)
     return {
         "fields": [f.to_json() for f in diff.fields],
+        "symbols": {str(number): symbol for number, symbol in diff.symbols.items()},
         "chains_removed": list(diff.chains_removed),
         "chains_added": list(diff.chains_added),
         "clamped": [{**f.to_json(), "reason": CLAMPED} for f in diff.clamped],
         "warning": AXIS_WARNING if change.releases_axes else None,
     }
+
+
+def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict:
+    """The plan file `prc3cfg-plan/1` (interfaces.md §4) with what people read beside the steps:
+    each module's `changes` and `warning`, and what stays on the hardware (`left_alone`). Every
+    output of a plan — human, markdown — is made from this document, and so is that of a saved
+    plan file (`prc3cfg show PLAN.json`)."""
+    document = plan.to_json() | {"left_alone": list(notes)}
+    for bus in document["buses"]:
+        for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
+            entry["changes"] = changes_json(change)
+            entry["warning"] = AXIS_WARNING if change.releases_axes else None
+    return document
+
+
+def _modules(document: dict) -> list[tuple[str, dict]]:
+    return [(bus["name"], module) for bus in document["buses"] for module in bus["modules"]]
+
+
+def _header(bus: str, module: dict) -> str:
+    steps = module["steps"]
+    return header_line(bus, module["address"], module["name"], len(steps), sum(bool(s.get("broadcast")) for s in steps),
+                       module.get("estimated_bus_time_s", 0.0), module["releases_axes"])  # fmt: skip
+
+
+def _step_lines(module: dict) -> list[str]:
+    return [step_line(i, s["message"], s["summary"], s["releases_axes"], bool(s.get("broadcast")))
+            for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
+
+
+def _broadcast_lines(bus: dict) -> list[str]:
+    """A bus's broadcasts, once: one step for all of its modules."""
+    steps = bus.get("broadcasts", [])
+    if not steps:
+        return []
+    head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all {len(steps[0]['modules'])} modules "
+            "(address 0), each verified by reading back")  # fmt: skip
+    return [head, *(f"    {step_line(i, s['message'], s['summary'], s['releases_axes'], True)}" for i, s in enumerate(steps, 1)), ""]
+
+
+def summary_line(document: dict) -> str:
+    modules = _modules(document)
+    changed = sum(1 for _, m in modules if m["steps"])
+    if not changed:
+        return "No changes: every module matches the plant file."
+    releases = len(document["axis_releases"])
+    return (
+        f"Plan: {changed} of {plural(len(modules), 'module')} change{'s' if changed == 1 else ''}, "
+        f"{plural(document['message_count'], 'message')}, "
+        f"estimated bus time {document['estimated_bus_time_s']:.3f} s (naive download {document['naive_bus_time_s']:.3f} s)"
+        + (f"; ⚠ {plural(releases, 'module')} release{'s' if releases == 1 else ''} the axes" if releases else "")
+    )
+
+
+def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:
+    """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
+    each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary."""
+    document = plan if isinstance(plan, dict) else plan_json(plan, notes)
+    out = [f"Plant {document['plant']}", ""]
+    for bus in document["buses"]:
+        out += _broadcast_lines(bus)
+    for bus, module in _modules(document):
+        if not module["steps"]:
+            out.append(_header(bus, module))
+            continue
+        lines = [_header(bus, module), *module_lines(module["changes"]), "steps:", *_step_lines(module)]
+        out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
+    if document["axis_releases"]:
+        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+    out.append(summary_line(document))
+    out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
+    return "\n".join(out)
+
+
+#: Marks the pull-request comment a plan is posted as, so that CI updates it instead of adding one.
+MARKER = "<!-- prc3cfg-plan -->"
+#: What a GitHub comment holds, with room to spare (65,536 characters).
+COMMENT_BUDGET = 65_000
+#: Stroke charts (mermaid, about 1 KB each) a module's details show at most.
+CHARTS = 3
+
+
+def cell(text: str) -> str:
+    """Text for a markdown table cell or HTML: `|` escaped, `<`, `>` and `&` as entities."""
+    return html.escape(text, quote=False).replace("|", "\\|")
+
+
+def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
+             full_plan: str = "the plan file") -> str:  # fmt: skip
+    """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
+    the marker, the summary, every axis-release warning and the table of changed modules always;
+    then each module's details (with a stroke chart per changed chain, for a live plan) while they
+    fit, and a last line saying how many were left out and where the full plan is."""
+    document = plan if isinstance(plan, dict) else plan_json(plan, notes)
+    charts = {} if isinstance(plan, dict) else {(m.bus, m.address): m for m in plan.changes}
+    changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
+    head = [MARKER, f"### prc3cfg plan — `{cell(document['plant'])}`", "", summary_line(document), ""]
+    if document["axis_releases"]:
+        head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
+                 + ", ".join(f"`{cell(name)}`" for name in document["axis_releases"]), ""]  # fmt: skip
+    left_alone = document.get("left_alone", [])
+    head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
+    if changed:
+        head += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
+        for bus, m in changed:
+            axes = "⚠ released: travel to reference point required" if m["releases_axes"] else ""
+            head.append(f"| {cell(bus)} | {cell(m['name'])} | {m['address']} | {len(m['steps'])} | "
+                        f"{m.get('estimated_bus_time_s', 0.0):.3f} s | {axes} |")  # fmt: skip
+        head.append("")
+    for bus in document["buses"]:
+        if lines := _broadcast_lines(bus):
+            head += ["```", *lines[:-1], "```", ""]
+    text = "\n".join(head)
+    for shown, (bus, m) in enumerate(changed):
+        block = _details(bus, m, charts.get((bus, m["address"])))
+        left = len(changed) - shown
+        closing = (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
+                   f"{max_chars:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
+        if len(text) + len(block) + (len(closing) if left > 1 else 0) > max_chars:
+            return text + closing
+        text += block
+    return text
+
+
+def _details(bus: str, m: dict, change: ModuleChange | None) -> str:
+    return "\n".join([
+        f"<details><summary>{cell(bus)} / {cell(m['name'])} (address {m['address']})"
+        + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
+        "",
+        "```diff",
+        *module_lines(m["changes"]),
+        "```",
+        "",
+        "```",
+        *_step_lines(m),
+        "```",
+        *(_charts(change) if change is not None else []),
+        "</details>",
+        "",
+        "",
+    ])  # fmt: skip
+
+
+def _charts(m: ModuleChange) -> list[str]:
+    """The stroke of each changed chain, before and after, as GitHub draws it (`plot.mermaid`)."""
+    try:
+        pairs = paired_chains(m.actual, m.plan.predicted, changed_only=True)
+    except MotionError:  # a damaged read-back: the diff above still shows it
+        return []
+    charts = ["", *(mermaid(before, after) for before, after in pairs[:CHARTS])]
+    if len(pairs) > CHARTS:
+        charts.append(f"\n_{plural(len(pairs) - CHARTS, 'more chain')} changed: `prc3cfg show PLANT --module "
+                      f"{cell(m.name)} --plot FILE.svg` draws them all._")  # fmt: skip
+    return charts if pairs else []

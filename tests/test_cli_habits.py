@@ -4,6 +4,7 @@ shell completion."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -115,3 +116,20 @@ def test_plans_are_coloured_on_a_terminal_unless_no_color(tmp_path):
     assert b"\x1b[3" not in on_a_terminal(["plan", plant], env | {"NO_COLOR": "1"})
     piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True, env={**os.environ, **env})
     assert b"\x1b[" not in piped.stdout
+
+
+def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsys, tmp_path):
+    made = tmp_path / "plan.json"
+    planned = run_cli(capsys, "plan", plant.path, "--out", made)
+    shown = run_cli(capsys, "show", made)
+    assert shown.code == 0 and shown.out == planned.out.replace(f"Plan written to {made}; apply it with: prc3cfg apply --plan {made}\n", "")
+    document = json.loads(made.read_text())
+    document["buses"][0]["modules"][0]["steps"][1]["summary"] = "harmless, look away"  # a lie beside the bytes
+    made.write_text(json.dumps(document))
+    assert "harmless, look away" not in run_cli(capsys, "show", made).out
+    markdown = run_cli(capsys, "show", made, "--markdown")
+    assert markdown.out.startswith("<!-- prc3cfg-plan -->") and "`plan.json`" not in markdown.out
+    document["buses"][0]["modules"][0]["steps"][0]["releases_axes"] = False
+    made.write_text(json.dumps(document))
+    refused = run_cli(capsys, "show", made)
+    assert refused.code == 1 and "says releases_axes: false, but 20h releases the axes" in refused.err

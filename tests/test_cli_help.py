@@ -18,7 +18,7 @@ try:
     main(["--help"])
 except SystemExit:
     pass
-heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("pydantic", "serial", "yaml", "deepdiff")
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("pydantic", "serial", "yaml")
                or m in ("prc3cfg.api", "prc3cfg.planner", "prc3cfg.link", "prc3cfg.plant", "prc3cfg.emulator"))
 print("heavy:", heavy, file=sys.stderr)
 """

@@ -96,7 +96,6 @@ def drive(lines: list[tuple[str, str]], waves: int, first: int, workdir: Path) -
     from prc3cfg.cli import _register_commands
 
     _register_commands()
-    import deepdiff  # noqa: F401 — imported lazily by the plan rendering: once here, not per child
 
     results = []
     for wave in range(first, first + waves):

@@ -10,6 +10,7 @@ from prc3cfg.bustime import LineCost
 from prc3cfg.image import ModuleImage, Program
 from prc3cfg.line import LineSettings
 from prc3cfg.planner import plan_module
+from prc3cfg import render
 from prc3cfg.plantplan import ModuleChange, PlantPlan
 from prc3cfg.render import (
     CLAMPED, FieldChange, changes_json, field_changes, field_name, human, jumps, markdown, module_diff, module_lines,
@@ -57,7 +58,7 @@ def a_change() -> ModuleChange:
 
 def test_a_module_diff_compares_the_images_field_by_field() -> None:
     change = a_change()
-    assert module_lines(change) == [
+    assert module_lines(changes_json(change)) == [
         "~ system: upper reversing point 0.400 m → 0.380 m",
         "+ program 1: position 0.150 m → 0.200 m, speed 0.050 m/s → 0.060 m/s, relative speed 0.000 m/s → 0.005 m/s, "
         "F1 reset at 0.000 m → set at 0.010 m",
@@ -85,3 +86,50 @@ def test_each_module_diff_is_worked_out_once_for_every_output() -> None:
     module_diff.cache_clear()
     changes_json(change), human(plan), markdown(plan)
     assert module_diff.cache_info().misses == 1
+
+
+def full_line_plan(tmp_path):
+    """30 modules × 64 programs, every program changed, names that are hard on markdown."""
+    import yaml
+
+    from prc3cfg import api
+    from prc3cfg.image import ModuleImage
+
+    modules = []
+    for address in range(1, 31):
+        programs = {n: {"position": round(0.3 + (n * 7 + address) % 150 / 100, 3), "speed": round(0.05 + (n + address) % 40 / 100, 3)}
+                    for n in range(1, 65)}  # fmt: skip
+        name = {1: "left|right", 2: "<b>bold</b>", 3: "a & b"}.get(address, f"m{address}")
+        modules.append({"address": address, "name": name, "unmanaged_programs": "reset",
+                        "system": {"upper_reversing_point": 2.0, "max_speed": 0.5}, "programs": programs})  # fmt: skip
+    plant_file = tmp_path / "plant.yaml"
+    plant_file.write_text(yaml.safe_dump({"plant": "full|line", "buses": [{"name": "line", "port": "socket://127.0.0.1:9", "modules": modules}]}))
+    plant = api.load(plant_file)
+    return api.plan(plant, images={("line", a): ModuleImage.factory(a) for a in range(1, 31)})
+
+
+def test_a_full_line_plan_fits_a_comment_with_every_warning_and_a_row_per_module(tmp_path):
+    import re
+
+    import cmarkgfm
+
+    plan = full_line_plan(tmp_path)
+    text = render.markdown(plan, full_plan="`plan.json`")
+    assert len(text) <= render.COMMENT_BUDGET
+    assert text.startswith(render.MARKER)
+    assert len(plan.axis_releases) == 30 and all(f"`line/{render.cell(m.name)}`" in text for m in plan.axis_releases)
+    assert "are left out to keep this comment under 65,000 characters: the full plan is `plan.json`." in text
+    page = cmarkgfm.github_flavored_markdown_to_html(text)
+    body = page.split("<tbody>", 1)[1].split("</tbody>", 1)[0]
+    rows = re.findall(r"<tr>(.*?)</tr>", body, re.S)
+    assert len(rows) == 30
+    cells = [re.findall(r"<td[^>]*>(.*?)</td>", row, re.S) for row in rows]
+    assert [c[1] for c in cells[:3]] == ["left|right", "&lt;b&gt;bold&lt;/b&gt;", "a &amp; b"]
+
+
+def test_the_budget_is_kept_for_any_size(tmp_path):
+    plan = full_line_plan(tmp_path)
+    for budget in (5_000, 20_000, 200_000):
+        text = render.markdown(plan, max_chars=budget)
+        assert len(text) <= max(budget, len(render.markdown(plan, max_chars=1)))  # the table and warnings always
+    assert "left out" not in render.markdown(plan, max_chars=10_000_000)

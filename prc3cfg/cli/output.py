@@ -22,20 +22,17 @@ from prc3cfg.errors import UserError
 from prc3cfg.plantplan import PlantPlan
 
 
-def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, notes: list[str]) -> None:
-    document = plan.to_json() | {"left_alone": notes}
-    for bus in document["buses"]:
-        for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
-            entry["changes"] = render.changes_json(change)
-            entry["warning"] = render.AXIS_WARNING if change.releases_axes else None
+def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str]) -> None:
+    document = render.plan_json(plan, notes) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
     if json_out:
-        print(json.dumps(document, indent=1))
+        json.dump(document, sys.stdout, indent=1)  # streamed: a large plan is never one string
+        print()
     elif markdown:
-        print(render.markdown(plan) + "".join(f"\n> Left as it is: {note}" for note in notes))
+        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=f"`{out.name}`" if out else "the plan file"))
     else:
-        print_lines("\n".join([render.human(plan), *(f"Left as it is: {note}" for note in notes)]))
+        print_lines(render.human(document or plan, notes=notes))
         if out is not None:
             print(f"Plan written to {out}; apply it with: prc3cfg apply --plan {out}")
 

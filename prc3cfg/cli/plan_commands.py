@@ -57,6 +57,7 @@ def plan(
     actual: Annotated[Optional[Path], typer.Option(help="Plan against module images saved by `read --json`.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan as markdown (PR comments).")] = False,
+    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
     module: ModuleOpt = None,
@@ -83,7 +84,8 @@ def plan(
         return
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options)
-    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, notes=[] if module else api.left_alone(loaded))
+    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars,
+                     notes=[] if module else api.left_alone(loaded))  # fmt: skip
     if detailed_exitcode and result.changes:
         raise Outcome(EXIT_CHANGES)
 

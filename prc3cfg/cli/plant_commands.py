@@ -50,14 +50,21 @@ def validate(plant: PlantPath) -> None:
 
 @app.command()
 def show(
-    plant: PlantPath,
+    plant: Annotated[Path, typer.Argument(help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
     module: Annotated[Optional[str], typer.Option("--module", "-m", help="The module to show, by name.")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="A plan file: print it as JSON.")] = False,
+    markdown: Annotated[bool, typer.Option("--markdown", help="A plan file: print it as markdown (PR comments).")] = False,
+    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters.")] = 65_000,
     plot: Annotated[Optional[Path], typer.Option(
         help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
     actual: Annotated[Optional[Path], typer.Option(
         help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
 ) -> None:
-    """Print a module's effective configuration and where each value came from; or draw its chains."""
+    """Print a module's effective configuration and where each value came from, or draw its chains;
+    or show a saved plan file as `plan` shows a plan (human, --json, --markdown)."""
+    if plant.suffix == ".json":
+        _show_plan_file(plant, json_out=json_out, markdown=markdown, max_chars=max_chars)
+        return
     if plot is not None:
         from prc3cfg.plot import plot_format
 
@@ -81,6 +88,22 @@ def show(
         _show_module(stdout_console(), bus, chosen)
         return
     _plot_module(loaded, bus, chosen, plot, fmt, actual)
+
+
+def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: int) -> None:
+    """A saved plan file as the plan was shown — its steps' summaries worked out again from their bytes."""
+    import json
+
+    from prc3cfg import api, render
+    from prc3cfg.cli.common import print_lines
+
+    document = api.plan_document(path)
+    if json_out:
+        print(json.dumps(document, indent=1))
+    elif markdown:
+        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`"))
+    else:
+        print_lines(render.human(document))
 
 
 @app.command()
