@@ -45,9 +45,9 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.files import FileProblem, Why, read_json
 from prc3cfg.framing import get_framing
 from prc3cfg.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
-from prc3cfg.line import LineSettings
+from prc3cfg.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.link import Link, LinkError, Trace, open_plant_links, open_port
-from prc3cfg.link.ports import EMULATOR_SCHEME, emulator_state_path
+from prc3cfg.link.ports import emulator_state_path
 from prc3cfg.locks import LineBusy, line_keys, line_lock
 from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
@@ -383,7 +383,7 @@ def receivers_known(bus: Bus, changes: list[ModuleChange]) -> bool:
     """Whether every module on the bus's line is planned: the plant lists all the line holds (all 30
     addresses, or `only_these_modules: true`) and the plan covers each of them."""
     listed = {m.address for m in bus.modules}
-    complete = len(listed) == MAX_MODULE_ADDRESS or getattr(bus, "only_these_modules", False)
+    complete = len(listed) == MAX_MODULE_ADDRESS or bus.only_these_modules
     return complete and {c.address for c in changes} == listed
 
 

@@ -1,6 +1,7 @@
 """Line settings of an RS-422 line and the times that follow from them (link.md "The line").
 
-Owns the character format and the character time. Does not own framing (see
+Owns the character format and the character time, and the URL schemes of ports that are not
+UARTs (TCP, the emulator). Does not own framing (see
 `prc3cfg.framing`) or the cost of a plan (see `prc3cfg.bustime`). Pure.
 """
 
@@ -8,6 +9,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: Ports whose bytes come over TCP (pyserial URLs): `HOST:PORT`, no UART between (link.md).
+TCP_SCHEMES = ("socket", "rfc2217")
+#: The in-process emulator a plant file can name as its port: `emulator://NAME`.
+EMULATOR_SCHEME = "emulator://"
 PARITIES = ("none", "odd", "even")
 DATA_BITS = (5, 6, 7, 8)
 STOP_BITS = (1, 1.5, 2)

@@ -31,9 +31,9 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from prc3cfg.errors import UserError
+from prc3cfg.line import TCP_SCHEMES
 
 POLL = 0.1  # s between attempts on a busy line
-TCP_SCHEMES = ("socket", "rfc2217")
 _OPEN_FLAGS = os.O_NOFOLLOW | os.O_CLOEXEC
 
 

@@ -132,10 +132,18 @@ def test_a_line_not_known_to_be_complete_gets_no_broadcast(tmp_path, capsys):
         assert 0 not in {e["address"] for e in journal(tmp_path)}
 
 
-def test_a_lost_broadcast_is_repaired_with_addressed_writes(tmp_path, capsys):
-    def lose_the_first_broadcast(frame, number):
-        return {Loss.REQUEST} if frame.address == 0 and not lost else set()
+def test_a_line_declared_complete_gets_broadcasts_with_fewer_than_30_modules(tmp_path, capsys):
+    source = full_line(tmp_path, modules=12)
+    source.write_text(source.read_text().replace("    port: socket://127.0.0.1:1\n", "    port: socket://127.0.0.1:1\n    only_these_modules: true\n"))
+    with emulated_plant(tmp_path, source=source) as plant:
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 0, result.err
+        assert {e["address"] for e in journal(tmp_path) if e["request"][:2] not in ("50", "51", "52")} == {0}
+        assert result.out.count("broadcasts received, verified") == 12
+        assert plant.matches_plant()
 
+
+def test_a_lost_broadcast_is_repaired_with_addressed_writes(tmp_path, capsys):
     lost: list = []
     rule = lambda frame, number: (lost.append(frame) or {Loss.REQUEST}) if frame.address == 0 and not lost else set()  # noqa: E731
     with emulated_plant(tmp_path, source=full_line(tmp_path), lossy={"line": rule}) as plant:

@@ -39,9 +39,8 @@ from prc3cfg import codec
 from prc3cfg.error_codes import describe
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.framing import NEED_DATA, Direction, Discarded, Framing
-from prc3cfg.line import LineSettings
+from prc3cfg.line import TCP_SCHEMES, LineSettings
 from prc3cfg.link.trace import Trace
-from prc3cfg.locks import TCP_SCHEMES
 
 log = logging.getLogger(__name__)
 

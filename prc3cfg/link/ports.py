@@ -35,11 +35,10 @@ from prc3cfg.device import ModuleState
 from prc3cfg.emulator import Emulator, load_state
 from prc3cfg.errors import UserError
 from prc3cfg.framing import get_framing
-from prc3cfg.line import LineSettings
+from prc3cfg.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.link.client import Exchange, Link
 from prc3cfg.link.trace import Trace
 
-EMULATOR_SCHEME = "emulator://"
 PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.PARITY_EVEN}
 STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
 

@@ -49,22 +49,22 @@ from pydantic_core import PydanticCustomError, core_schema
 from prc3cfg import gateway
 from prc3cfg.framing import FRAMINGS
 from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_COUNT
-from prc3cfg.line import DATA_BITS, PARITIES, STOP_BITS
+from prc3cfg.line import DATA_BITS, EMULATOR_SCHEME, PARITIES, STOP_BITS, TCP_SCHEMES
 from prc3cfg.plant.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
 
 SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
 #: JSON object keys are strings: a program number key is "1".."64".
 PROGRAM_KEY_PATTERN = "^([1-9]|[1-5][0-9]|6[0-4])$"
 #: pyserial URL schemes that connect to HOST:PORT over TCP.
-TCP_SCHEMES = ("socket", "rfc2217")
-EMULATOR_SCHEME = "emulator://"
 EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
+#: `?line-speed=9600` and the like, which the link reads (and names what it does not know).
+EMULATOR_QUERY = r"(\?[^#\s]*)?"
 #: A port as the schema checks it: not a TCP or emulator URL, or one with HOST:DIGITS, or a
 #: plain emulator name. Draft-07 `pattern` is an ECMA 262 search; the end is a lookahead, not
 #: `$`, which Python (but not ECMA) also finds before a final newline.
 PORT_PATTERN = (f"^(?!({'|'.join(TCP_SCHEMES)}|{EMULATOR_SCHEME.removesuffix('://')})://)"
                 f"|^({'|'.join(TCP_SCHEMES)})://[^/?#]*:[0-9]+(?![^/?#])"
-                rf"|^{EMULATOR_SCHEME}{EMULATOR_NAME}(?![\s\S])")
+                rf"|^{EMULATOR_SCHEME}{EMULATOR_NAME}{EMULATOR_QUERY}(?![\s\S])")
 
 
 def _plain(number: Decimal) -> int | float:
@@ -137,7 +137,7 @@ def _port(url: str) -> str:
     scheme = url.partition("://")[0]
     if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
         raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": scheme})
-    if url.startswith(EMULATOR_SCHEME) and not re.fullmatch(EMULATOR_NAME, url.removeprefix(EMULATOR_SCHEME)):
+    if url.startswith(EMULATOR_SCHEME) and not re.fullmatch(EMULATOR_NAME + EMULATOR_QUERY, url.removeprefix(EMULATOR_SCHEME)):
         raise PydanticCustomError("emulator_name", "not a plain emulator name")
     return url
 
@@ -299,6 +299,9 @@ class BusLine(FileModel):
         what="character delay times are", out=float, description="s, character delay time ZVZ (open-driver)",
     ) = 0.020
     gateway: Gateway = None
+    only_these_modules: Annotated[bool, Field(strict=True, description=(
+        "true: the modules listed are every module on this line — prc3cfg may then send what they all need "
+        "alike once, as a broadcast to address 0 (a full line of 30 modules needs no saying)"))] = False
 
 
 class BusSpec(BusLine):
