@@ -6,6 +6,11 @@ draft-07 schema generated from these models (`plant_schema`). Does not own rules
 span values (P ≤ S1, chains, unique names: `rules`), profile layering (`profiles`) or
 where a value is in the file (`loader`).
 
+The schema is written for editors (yaml-language-server): every key described, every value
+with its range, and either the default a key left out stands for (the factory's S1..S12) or an
+example, which completion inserts; program keys checked as YAML integers and JSON strings;
+`$id` the same in every version.
+
 Every model is frozen and forbids unknown keys. A key left out is `None` ("not given
 here"), so profiles can be layered: "given" and "given as the default" differ.
 
@@ -48,14 +53,17 @@ from pydantic_core import PydanticCustomError, core_schema
 
 from prc3cfg import gateway
 from prc3cfg.framing import FRAMINGS
-from prc3cfg.image import MAX_MODULE_ADDRESS, PROGRAM_COUNT
+from prc3cfg.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
 from prc3cfg.line import DATA_BITS, EMULATOR_SCHEME, PARITIES, STOP_BITS, TCP_SCHEMES
 from prc3cfg.plant.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
 
 SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
-#: JSON object keys are strings: a program number key is "1".."64".
-PROGRAM_KEY_PATTERN = "^([1-9]|[1-5][0-9]|6[0-4])$"
-#: pyserial URL schemes that connect to HOST:PORT over TCP.
+#: The schema's `$id`: the same for every version, since plant files only gain keys.
+SCHEMA_ID = "urn:prc3cfg:plant-file"
+#: A program number key: "1".."64" where keys are strings (JSON), 1..64 where a YAML editor
+#: keeps them integers. A quoted "7" passes here; the loader asks for it without quotes.
+PROGRAM_KEY = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5][0-9]|6[0-4])$", "minimum": 1, "maximum": 64}
+#: An emulator's name: it names the file of its state.
 EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 #: `?line-speed=9600` and the like, which the link reads (and names what it does not know).
 EMULATOR_QUERY = r"(\?[^#\s]*)?"
@@ -82,8 +90,15 @@ def _number_type(
     note: str = "",
     out: type = Decimal,
     description: str = "",
+    default: Decimal | int | None = None,
+    example: Decimal | int | None = None,
 ) -> Any:
-    """An annotated number type: at least `lo`, at most `hi` (if any), whole `step`s (if any), as `out`."""
+    """An annotated number type: at least `lo`, at most `hi` (if any), whole `step`s (if any), as `out`.
+
+    The schema names what an editor completes the key with: `default` (what a key left out stands
+    for, where the model's own default is None), else an example: `example`, else `lo`. Not both:
+    given both, yaml-language-server completes with neither.
+    """
     lo_, hi_, step_ = Decimal(lo), None if hi is None else Decimal(hi), None if step is None else Decimal(step)
     with_unit = (lambda x: f"{x} {unit}") if unit else str
     allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
@@ -107,15 +122,26 @@ def _number_type(
     schema: dict[str, Any] = {"type": "integer" if out is int else "number", "minimum": _plain(lo_)}
     schema |= {"maximum": _plain(hi_)} if hi_ is not None else {}
     schema |= {"description": description} if description else {}
+    if default is not None:
+        schema["default"] = _plain(Decimal(default))
+    else:
+        schema["examples"] = [_plain(Decimal(lo_ if example is None else example))]
     return Annotated[out, PlainValidator(validate), WithJsonSchema(schema)]
 
 
-def _quantity_type(q: Quantity, description: str) -> Any:
+def _quantity_type(q: Quantity, description: str, **schema: Decimal | int) -> Any:
     return _number_type(
         q.human_lo, q.human_hi, step=q.step, unit=q.unit, step_name=q.step_name, what=q.what,
         out=int if q.integer else Decimal,
-        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}",
+        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}", **schema,
     )
+
+
+def _system_type(key: str, description: str) -> Any:
+    """S1..S12 (not S8, S9): a key left out is the factory default, which the schema names."""
+    q = QUANTITIES[key]
+    factory = q.to_human(getattr(DEFAULT_SYSTEM, q.symbol))
+    return _quantity_type(q, f"{description} (factory {q.format(getattr(DEFAULT_SYSTEM, q.symbol))})", default=factory)
 
 
 def _one_of_type(allowed: tuple[int | float, ...], description: str) -> Any:
@@ -153,7 +179,8 @@ def _tcp_port(url: str) -> bool:
 
 Port = Annotated[
     Name, AfterValidator(_port),
-    Field(description="a device path, any pyserial URL, or emulator://NAME", json_schema_extra={"pattern": PORT_PATTERN}),
+    Field(description="a device path, any pyserial URL, or emulator://NAME", json_schema_extra={"pattern": PORT_PATTERN},
+          examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
 ]
 ProgramNumber = _number_type(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")
 
@@ -167,35 +194,44 @@ class FileModel(BaseModel):
 class SystemSpec(FileModel):
     """System parameters S1..S12 (not S9) in human units; a key left out is the factory default."""
 
-    upper_reversing_point: _quantity_type(QUANTITIES["upper_reversing_point"], "upper reversing point") = None
-    reference_point: _quantity_type(QUANTITIES["reference_point"], "reference point") = None
-    increment_pulses: _quantity_type(QUANTITIES["increment_pulses"], "increment pulse generator, pulses/dm") = None
-    max_speed: _quantity_type(QUANTITIES["max_speed"], "maximum speed") = None
-    min_speed: _quantity_type(QUANTITIES["min_speed"], "minimum speed") = None
-    acceleration: _quantity_type(QUANTITIES["acceleration"], "acceleration") = None
-    circuit_gain: _quantity_type(QUANTITIES["circuit_gain"], "circuit amplification") = None
-    alarm: Annotated[bool, Field(strict=True, description="S8: alarm")] = None
-    sync_increment: _quantity_type(QUANTITIES["sync_increment"], "sync increment") = None
-    sync_circuit_gain: _quantity_type(QUANTITIES["sync_circuit_gain"], "sync circuit amplification") = None
-    sync_conveyor_sequence: _quantity_type(QUANTITIES["sync_conveyor_sequence"], "sync conveyor sequence") = None
+    upper_reversing_point: _system_type("upper_reversing_point", "upper reversing point") = None
+    reference_point: _system_type("reference_point", "reference point") = None
+    increment_pulses: _system_type("increment_pulses", "increment pulse generator, pulses/dm") = None
+    max_speed: _system_type("max_speed", "maximum speed") = None
+    min_speed: _system_type("min_speed", "minimum speed") = None
+    acceleration: _system_type("acceleration", "acceleration") = None
+    circuit_gain: _system_type("circuit_gain", "circuit amplification") = None
+    alarm: Annotated[bool, Field(strict=True), WithJsonSchema({
+        "type": "boolean", "description": "S8: alarm (factory false)", "default": False})] = None
+    sync_increment: _system_type("sync_increment", "sync increment") = None
+    sync_circuit_gain: _system_type("sync_circuit_gain", "sync circuit amplification") = None
+    sync_conveyor_sequence: _system_type("sync_conveyor_sequence", "sync conveyor sequence") = None
 
 
 class FunctionOutputSpec(FileModel):
     """F1 or F2: set or reset the output at a distance after START (F1) or before the reversing point (F2)."""
 
-    action: Literal[tuple(ACTIONS)] = Field(description="set or reset the output")
+    action: Literal[tuple(ACTIONS)] = Field(description="set or reset the output", examples=["set"])
     distance: _quantity_type(DISTANCE, "where the output switches, 0.000..0.999")
+
+
+_FACTORY_PROGRAM = default_program(DEFAULT_SYSTEM)
+_RESET_AT_ZERO = {"action": "reset", "distance": 0}
 
 
 class ProgramSpec(FileModel):
     """One program in human units; every field may come from a profile instead."""
 
-    position: _quantity_type(QUANTITIES["position"], "position, at most the upper reversing point") = None
-    speed: _quantity_type(QUANTITIES["speed"], "speed, between min_speed and max_speed") = None
-    relative_speed: _quantity_type(QUANTITIES["relative_speed"], "relative speed (default 0)") = None
-    dwell: _quantity_type(QUANTITIES["dwell"], "dwell time (default 0)") = None
-    f1: FunctionOutputSpec = Field(None, description="F1, counted after START (default: reset at 0)")
-    f2: FunctionOutputSpec = Field(None, description="F2, counted before the reversing point (default: reset at 0)")
+    position: _quantity_type(QUANTITIES["position"], "position, at most the upper reversing point",
+                             example=QUANTITIES["position"].to_human(_FACTORY_PROGRAM.P)) = None
+    speed: _quantity_type(QUANTITIES["speed"], "speed, between min_speed and max_speed",
+                          example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V)) = None
+    relative_speed: _quantity_type(QUANTITIES["relative_speed"], "relative speed (default 0)", default=0) = None
+    dwell: _quantity_type(QUANTITIES["dwell"], "dwell time (default 0)", default=0) = None
+    f1: FunctionOutputSpec = Field(None, description="F1, counted after START (default: reset at 0)",
+                                   json_schema_extra={"default": _RESET_AT_ZERO})
+    f2: FunctionOutputSpec = Field(None, description="F2, counted before the reversing point (default: reset at 0)",
+                                   json_schema_extra={"default": _RESET_AT_ZERO})
     next: _number_type(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to jump to next") = None
 
 
@@ -205,8 +241,9 @@ class ChainSpec(FileModel):
     Written as a list of program numbers or as `{programs: [...], loop: true}`.
     """
 
-    programs: tuple[ProgramNumber, ...] = Field(min_length=1)
-    loop: Annotated[bool, Field(strict=True)] = False
+    programs: tuple[ProgramNumber, ...] = Field(min_length=1, description="program numbers in the order they run",
+                                                examples=[[1, 2]])
+    loop: Annotated[bool, Field(strict=True, description="true: the last program jumps back to the first")] = False
 
     @model_validator(mode="before")
     @classmethod
@@ -227,20 +264,20 @@ class ChainSpec(FileModel):
 UnmanagedPrograms = Literal["keep", "reset"]
 Programs = Annotated[
     dict[ProgramNumber, ProgramSpec],
-    Field(json_schema_extra={"propertyNames": {"pattern": PROGRAM_KEY_PATTERN}},
-          description="programs by number 1..64"),
+    Field(json_schema_extra={"propertyNames": PROGRAM_KEY}, description="programs by number 1..64"),
 ]
 
 
 class ProfileSpec(FileModel):
     """What modules share: system parameters, programs, chains, the unmanaged-program policy."""
 
-    system: SystemSpec = None
+    system: SystemSpec = Field(None, description="system parameters S1..S12 (not S9); a key left out is the factory default")
     programs: Programs = None
-    chains: tuple[ChainSpec, ...] = Field(None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop")
+    chains: tuple[ChainSpec, ...] = Field(None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop",
+                                          examples=[[[1, 2, 3]], [{"programs": [1, 2], "loop": True}]])
     unmanaged_programs: UnmanagedPrograms = Field(
         None, description="keep (default): programs not listed are neither read nor written; "
-        "reset: they must hold factory defaults"
+        "reset: they must hold factory defaults", json_schema_extra={"default": "keep"},
     )
 
 
@@ -252,13 +289,14 @@ class ModuleSpec(ProfileSpec):
     """One PRC 3 module: its address (S9), its name, the profiles it uses, its own settings."""
 
     address: _number_type(1, MAX_MODULE_ADDRESS, step=1, out=int, description="S9, 1..30, set by Address Init on the module")
-    name: Name = Field(description="unique in the plant")
+    name: Name = Field(description="unique in the plant", examples=["booth-1-left"])
     profiles: Annotated[
         tuple[Name, ...],
         BeforeValidator(_names),
         WithJsonSchema({
             "anyOf": [{"type": "string"}, {"type": "array", "items": {"type": "string"}}],
             "description": "profile names, applied in order (later wins); the module's own keys win over all",
+            "examples": ["reciprocator", ["reciprocator", "short-stroke"]],
         }),
     ] = ()
 
@@ -285,11 +323,11 @@ class Gateway(FileModel):
 class BusLine(FileModel):
     """A bus without its modules: where it is and how it talks (link.md)."""
 
-    name: Name = Field(description="unique in the plant")
+    name: Name = Field(description="unique in the plant", examples=["line-1"])
     port: Port
-    framing: Literal[tuple(FRAMINGS)] = "crc16"
+    framing: Literal[tuple(FRAMINGS)] = Field("crc16", description="how messages are framed on the line (link.md)")
     baud: _number_type(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud") = 9600
-    parity: Literal[PARITIES] = "even"
+    parity: Literal[PARITIES] = Field("even", description="the parity bit of each character")
     data_bits: _number_type(DATA_BITS[0], DATA_BITS[-1], step=1, out=int, description="5..8") = 8
     stop_bits: _one_of_type(STOP_BITS, "1, 1.5 or 2") = 1.0
     timeout: _number_type(Decimal("0.001"), unit="s", out=float, description="s to wait for a reply") = 0.5
@@ -298,7 +336,7 @@ class BusLine(FileModel):
         Decimal("0.001"), Decimal("65.535"), step=Decimal("0.001"), unit="s", step_name="milliseconds",
         what="character delay times are", out=float, description="s, character delay time ZVZ (open-driver)",
     ) = 0.020
-    gateway: Gateway = None
+    gateway: Gateway = Field(None, description="the Siemens CP 524/525 (Open Driver) the line ends in, if any")
     only_these_modules: Annotated[bool, Field(strict=True, description=(
         "true: the modules listed are every module on this line — prc3cfg may then send what they all need "
         "alike once, as a broadcast to address 0 (a full line of 30 modules needs no saying)"))] = False
@@ -307,7 +345,7 @@ class BusLine(FileModel):
 class BusSpec(BusLine):
     """A bus as a plant file writes it: its line and its modules."""
 
-    modules: tuple[ModuleSpec, ...] = Field(min_length=1)
+    modules: tuple[ModuleSpec, ...] = Field(min_length=1, description="the PRC 3 modules on this line, up to 30")
 
 
 class PlantSpec(FileModel):
@@ -315,9 +353,9 @@ class PlantSpec(FileModel):
 
     model_config = ConfigDict(title="PRC 3 plant")
 
-    plant: Name = Field(description="the plant's name")
+    plant: Name = Field(description="the plant's name", examples=["paint-shop"])
     profiles: dict[Name, ProfileSpec] = Field(None, description="named settings that modules use and override")
-    buses: tuple[BusSpec, ...] = Field(min_length=1)
+    buses: tuple[BusSpec, ...] = Field(min_length=1, description="the RS-422 lines, each with its modules")
 
 
 class Draft07(GenerateJsonSchema):
@@ -326,13 +364,18 @@ class Draft07(GenerateJsonSchema):
     def generate(self, schema: core_schema.CoreSchema, mode: str = "validation") -> JsonSchemaValue:
         result = super().generate(schema, mode)
         definitions = result.pop("$defs", {})
-        return {"$schema": SCHEMA_DIALECT, **result, "definitions": definitions}
+        return {"$schema": SCHEMA_DIALECT, "$id": SCHEMA_ID, **result, "definitions": definitions}
 
     def default_schema(self, schema: core_schema.WithDefaultSchema) -> JsonSchemaValue:
+        """A default of None is "not given": the value's own schema, with the default it names
+        itself (a factory default), if any. Any other default is what an editor completes with,
+        in place of an example (given both, yaml-language-server completes with neither) — but an
+        empty list, which leaves the examples to show what to write."""
+        if schema.get("default", ...) is None:
+            return self.generate_inner(schema["schema"])
         result = super().default_schema(schema)
-        if result.get("default", ...) is None:
-            del result["default"]
-        return result
+        unwanted = "default" if result["default"] == [] else "examples"
+        return {k: v for k, v in result.items() if k != unwanted}
 
     def field_title_should_be_set(self, schema: Any) -> bool:
         return False

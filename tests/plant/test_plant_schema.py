@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from prc3cfg.plant import plant_schema, plant_schema_text
+from prc3cfg.plant import load_plant, plant_schema, plant_schema_text
 from prc3cfg.plant.models import BusLine
 
 ROOT = Path(__file__).parents[2]
@@ -45,45 +45,83 @@ def test_objects_forbid_unknown_keys_and_program_keys_have_names() -> None:
     objects = [d for d in definitions.values() if d.get("type") == "object"]
     objects.append(definitions["ChainSpec"]["anyOf"][1])
     assert all(d["additionalProperties"] is False for d in objects)
-    programs = definitions["ModuleSpec"]["properties"]["programs"]
-    assert programs["propertyNames"] == {"pattern": "^([1-9]|[1-5][0-9]|6[0-4])$"}
+    for owner in ("ModuleSpec", "ProfileSpec"):
+        keys = jsonschema.Draft7Validator(definitions[owner]["properties"]["programs"]["propertyNames"])
+        assert all(keys.is_valid(k) for k in (1, 64, "1", "64"))  # a YAML editor's integer keys, JSON's strings
+        assert not any(keys.is_valid(k) for k in (0, 65, 1.5, "0", "65", "01", "1.5", "abc", True))
 
 
-@pytest.mark.parametrize("path", PLANTS, ids=lambda p: p.name)
-def test_accepts_every_plant_and_names_the_schema_in_its_first_line(path: Path) -> None:
-    VALIDATOR.validate(as_json(path))
-    first = path.read_text().splitlines()[0]
-    prefix = "# yaml-language-server: $schema="
-    assert first.startswith(prefix)
-    assert (path.parent / first.removeprefix(prefix)).resolve() == SCHEMA_FILE.resolve()
+def properties(schema: dict, where: str = "") -> list[tuple[str, dict]]:
+    """Every key a plant file may write, with its schema: (path, schema)."""
+    found = []
+    for name, value in schema.get("properties", {}).items():
+        found.append((f"{where}.{name}", value))
+    for name, value in schema.get("definitions", {}).items():
+        found += properties(value, name)
+    for branch in schema.get("anyOf", []):
+        found += properties(branch, where)
+    return found
 
 
-@pytest.mark.parametrize(
-    ("change", "where"),
-    [
-        (lambda p: p["buses"][0]["modules"][0].update(sped=1), "modules"),
-        (lambda p: p["buses"][0]["modules"][0].update(programs={"1": {"position": 1.0, "sped": 0.3}}), "sped"),
-        (lambda p: p["buses"][0]["modules"][0].update(programs={"65": {"position": 1.0, "speed": 0.3}}), "65"),
-        (lambda p: p["buses"][0].update(framing="modbus"), "modbus"),
-        (lambda p: p["buses"][0]["modules"][0].update(system={"max_speed": 0.7}), "0.7"),
-        (lambda p: p.update(site="hall 4"), "site"),
-        (lambda p: p["buses"][0].update(port="emulator://../../etc"), "emulator://../../etc"),
-        (lambda p: p["buses"][0].update(port="socket://127.0.0.1"), "socket://127.0.0.1"),
-        (lambda p: p["buses"][0].update(port="rfc2217://host:notaport"), "rfc2217://host:notaport"),
-    ],
-)
-def test_rejects_what_the_loader_rejects(change, where: str) -> None:
-    plant = as_json(ROOT / "plants" / "demo-line.yaml")
-    change(plant)
-    errors = list(VALIDATOR.iter_errors(plant))
-    assert errors and any(where in str(e.message) or where in str(list(e.path)) for e in errors)
+KEYS = properties(plant_schema())
 
 
-def test_a_chain_may_be_a_list_or_a_mapping() -> None:
-    chain = {"$ref": "#/definitions/ChainSpec", "definitions": plant_schema()["definitions"]}
-    validator = jsonschema.Draft7Validator(chain)
-    assert validator.is_valid([1, 2]) and validator.is_valid({"programs": [3], "loop": True})
-    assert not validator.is_valid([]) and not validator.is_valid({"programs": [1], "lop": True})
+def resolved(value: dict) -> dict:
+    return {**value, "definitions": plant_schema()["definitions"]}
+
+
+def a_value(value: dict) -> bool:
+    """Not an object or a list of objects, whose keys are checked one by one."""
+    items = value.get("items", {})
+    return "$ref" not in value and value.get("type") != "object" and "$ref" not in items
+
+
+@pytest.mark.parametrize(("where", "value"), KEYS, ids=[w for w, _ in KEYS])
+def test_every_key_has_a_description_and_every_value_a_valid_example(where: str, value: dict) -> None:
+    assert value.get("description"), f"{where} has no description"
+    if a_value(value):  # what yaml-language-server completes it with: one or the other, not both
+        assert ("examples" in value) != ("default" in value), f"{where}: an editor would complete it with nothing"
+    checker = jsonschema.Draft7Validator(resolved(value))
+    for example in value.get("examples", []) + ([value["default"]] if "default" in value else []):
+        assert checker.is_valid(example), (where, example)
+
+
+def test_the_factory_defaults_are_the_devices():
+    system = plant_schema()["definitions"]["SystemSpec"]["properties"]
+    assert {k: v["default"] for k, v in system.items()} == {
+        "upper_reversing_point": 0.4, "reference_point": 0.05, "increment_pulses": 754, "max_speed": 0.6,
+        "min_speed": 0.01, "acceleration": 1.5, "circuit_gain": 1000, "alarm": False, "sync_increment": 583,
+        "sync_circuit_gain": 1100, "sync_conveyor_sequence": 0.01,
+    }  # prc3-protocol.md's factory table
+
+
+def from_examples(value: dict) -> object:
+    """A value made of the schema's first examples, every optional key written."""
+    value = plant_schema()["definitions"][value["$ref"].rpartition("/")[2]] if "$ref" in value else value
+    if "examples" in value or "default" in value:
+        return value["examples"][0] if "examples" in value else value["default"]
+    if "anyOf" in value:
+        return from_examples(value["anyOf"][-1])
+    if value.get("type") == "array":
+        return [from_examples(value["items"])]
+    if "properties" in value:
+        return {k: from_examples(v) for k, v in value["properties"].items()}
+    key = 1 if "integer" in value["propertyNames"].get("type", ()) else "booth"  # a program, a profile
+    return {key: from_examples(value["additionalProperties"])}
+
+
+def test_a_plant_written_from_the_examples_alone_loads(tmp_path) -> None:
+    """What an editor completes with is a plant prc3cfg takes: no 0 where 0 is out of range."""
+    plant = from_examples(plant_schema())
+    bus = plant["buses"][0]
+    bus |= {"framing": "open-driver", "modules": [{**bus["modules"][0], "profiles": "booth"}]}  # the gateway's framing
+    for settings in (plant["profiles"]["booth"], bus["modules"][0]):
+        del settings["chains"]  # they name programs 1..3, where the example lists program 1 only
+    del bus["modules"][0]["programs"][1]["next"]  # a program's next and a chain are alternatives
+    source = tmp_path / "plant.yaml"
+    source.write_text(yaml.safe_dump(plant, sort_keys=False))
+    loaded = load_plant(source)
+    assert loaded.buses[0].modules[0].desired_programs()[1].P == 150 and VALIDATOR.is_valid(as_json(source))
 
 
 JUNK = ["", "/", "?logging=debug", "#", "@", "..", ".", "-", "_", "\n", "\t", " ", "a", "é", "٣", ":", "[", "]"]
