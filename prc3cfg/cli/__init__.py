@@ -32,14 +32,15 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: rich's help renderer alone takes 70 ms to import
     help="Plant configuration as code for PRC 3 powder reciprocator controllers.",
 )
-emulator_app = typer.Typer(no_args_is_help=True, help="A software PRC 3 bus.")
-link_app = typer.Typer(no_args_is_help=True, help="Gateway and line settings.")
+emulator_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="A software PRC 3 bus.")
+link_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Gateway and line settings.")
 app.add_typer(emulator_app, name="emulator")
 app.add_typer(link_app, name="link")
 
-COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands")
+COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands", "adopt_commands")
 
 
 def _register_commands() -> None:
