@@ -53,6 +53,7 @@ from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.readback import Target, read_all, read_module
+from prc3cfg.render import plan_json
 from prc3cfg.records import Journal, Snapshot, applied_copy, save_applied
 from prc3cfg import sharing
 
@@ -444,7 +445,10 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     but turn its read-back into the plant file's image (`run_steps` names the rule they
     break); and when they are not exactly the steps — broadcasts included — that prc3cfg
     plans from this read-back: the plant file and the read-back are the same as when the file
-    was made, so any difference is an edit. What is applied is then that plan.
+    was made, so any difference is an edit. Then anything else in it — a summary, a figure, a
+    name, an axis warning — that is not what prc3cfg writes for that plan is an edit too, since
+    people review what the file says (only `plant_path` may differ: a plan made in another
+    checkout). What is applied is then that plan.
     """
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     chosen = []
@@ -476,7 +480,22 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
             raise UserError(edited.format(_first_difference(theirs, steps)))
         if entry.broadcasts != change.broadcasts:
             raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
+    said = planned.document.get("left_alone")  # a plan for some modules says nothing, which may stand
+    written = plan_json(ours, said if said == [] else left_alone(plant)) | {"plant_path": planned.plant_path}
+    if (at := _edited_at(planned.document, written)) is not None:
+        raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
+                        "made; nothing was written: plan again and review it")  # fmt: skip
     return ours
+
+
+def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:
+    """Where a plan file differs from the one prc3cfg writes for the plan proved — its texts and
+    figures, which reach no module but a reviewer — as a JSON path; None where it does not."""
+    if isinstance(theirs, dict) and isinstance(ours, dict) and theirs.keys() == ours.keys():
+        return next((f for k in ours if (f := _edited_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
+    if isinstance(theirs, list) and isinstance(ours, list) and len(theirs) == len(ours):
+        return next((f for i, (a, b) in enumerate(zip(theirs, ours)) if (f := _edited_at(a, b, f"{at}[{i}]")) is not None), None)
+    return None if type(theirs) is type(ours) and theirs == ours else at
 
 
 def _first_difference(theirs: list, ours: list) -> str:

@@ -164,6 +164,7 @@ class PlanFile:
     plant_sha256: str
     version: str
     modules: tuple[PlannedModule, ...]
+    document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
 
 
 def read_plan_file(data: dict[str, Any]) -> PlanFile:
@@ -189,7 +190,7 @@ def read_plan_file(data: dict[str, Any]) -> PlanFile:
         fields = (data["plant"], data["plant_path"], data["plant_sha256"], data.get("prc3cfg_version", "before 0.1.0"))
         if not all(isinstance(f, str) for f in fields):
             raise PlanFileError("damaged plan file (plant, plant_path, plant_sha256 and prc3cfg_version are texts) — make the plan again")
-        return PlanFile(*fields, tuple(modules))
+        return PlanFile(*fields, tuple(modules), data)
     except (KeyError, TypeError, ValueError, codec.Rejected) as error:
         if isinstance(error, PlanFileError):
             raise

@@ -189,6 +189,13 @@ TAMPERING = {
     "an address as text": (lambda d: module_entry(d, "booth-a", 2).update(address="2"), 'module address "2" is not a bus name and a whole number'),
     "an address 2.7": (lambda d: module_entry(d, "booth-a", 2).update(address=2.7), "module address 2.7 is not"),
     "another prc3cfg version": (lambda d: d.update(prc3cfg_version="0.0.9"), "made by prc3cfg 0.0.9"),
+    "a summary reworded": (lambda d: module_entry(d, "booth-a", 2)["steps"][0].update(summary="write nothing"),
+                           "buses[0].modules[1].steps[0].summary is not what prc3cfg wrote for this plan"),
+    "the axis warning removed": (lambda d: module_entry(d, "booth-a", 2)["changes"].update(warning=None),
+                                 "buses[0].modules[1].changes.warning is not what prc3cfg wrote"),
+    "a field's value in the review": (lambda d: module_entry(d, "booth-a", 2)["changes"]["fields"][0].update(after=1),
+                                      "buses[0].modules[1].changes.fields[0].after is not what"),
+    "a note added": (lambda d: d.update(left_alone=["nothing to see"]), ": left_alone is not what"),
 }
 
 
