@@ -8,7 +8,8 @@ relative_speed in flow mappings, every module's values its own (about 1.3 MB), a
 `read --json` images file in which every program differs from the plant's. Then prints
 - each command in a fresh process — `prc3cfg validate`, `prc3cfg plan --actual` with human,
   `--json` and `--markdown` output — its wall time, CPU time and peak memory (max RSS, MiB), the
-  median of RUNS (acceptance, issue 11: plan ≤ 4 s wall and < 100 MB on a 2-core machine);
+  median of RUNS (acceptance, issue 11: plan ≤ 4 s wall and < 100 MB on a 2-core machine),
+  and `prc3cfg --help` as the installed script (acceptance: ≤ 150 ms);
 - where the time of `plan` goes, in this process after a warm-up that pays for imports:
   loading the plant, loading the images, planning, and rendering each output.
 
@@ -173,7 +174,9 @@ def main() -> None:
               f"images {actual.stat().st_size / 1e6:.2f} MB; median of {args.runs} runs")
         prc3cfg = [sys.executable, "-m", "prc3cfg"]
         plan = [*prc3cfg, "plan", str(plant), "--actual", str(actual)]
-        commands = {"validate": [*prc3cfg, "validate", str(plant)], "plan --actual": plan,
+        script = Path(sys.executable).with_name("prc3cfg")  # what a user runs: the script pip installed beside python
+        commands = {"prc3cfg --help": [str(script), "--help"] if script.exists() else [*prc3cfg, "--help"],
+                    "validate": [*prc3cfg, "validate", str(plant)], "plan --actual": plan,
                     "plan --actual --json": [*plan, "--json"], "plan --actual --markdown": [*plan, "--markdown"]}
         for name, command in commands.items():
             run = median_run(command, args.runs)
