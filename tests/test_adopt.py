@@ -1,0 +1,271 @@
+"""`prc3cfg adopt`: positions taught in on the floor written back into the plant file, in place.
+
+Against real emulators (`prc3cfg.testing`, through tests/emulated.py) and the real command line:
+the plant repository tests/adopt/plant.yaml (comments, flow and block mappings, quoted names) is
+applied, positions are taught in on the emulated modules, and adopt must change exactly the
+lines of those values — in the module, in the profile when every user drifted alike, as an
+override otherwise — after which validate passes and plan has nothing to do. The property at
+the end adopts random teach-ins on the demo plant without a line (`prc3cfg.adopt` is pure).
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import subprocess
+import sys
+import tempfile
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from emulated import DEMO, emulated_plant, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prc3cfg import adopt, api
+from prc3cfg.plant import load_plant
+
+REPOSITORY = Path(__file__).resolve().parent / "adopt" / "plant.yaml"
+
+
+@pytest.fixture(autouse=True)
+def private_locks(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+
+
+@pytest.fixture
+def repository(tmp_path, capsys):
+    """The plant repository on emulators, applied: its file (comments and all) beside the emulated copy."""
+    (tmp_path / "emulated").mkdir()
+    with emulated_plant(tmp_path / "emulated", source=REPOSITORY) as emulated:
+        text = REPOSITORY.read_text()
+        for name, bus in zip(("adopt-a", "adopt-b"), emulated.plant.buses):
+            text = text.replace(f"emulator://{name}", bus.port)
+        plant = tmp_path / "plant.yaml"
+        plant.write_text(text)
+        assert run_cli(capsys, "apply", plant, "--auto-approve", "--allow-axis-release").code == 0
+        yield plant, emulated.emulators
+
+
+def edited(text: str, changes: dict[str, list[str]]) -> list[str]:
+    """The lines of `text` with each line that is a key of `changes` replaced by its lines."""
+    lines = text.splitlines()
+    assert all(lines.count(line) == 1 for line in changes), "each line to change is in the file once"
+    return [new for line in lines for new in changes.get(line, [line])]
+
+
+def test_taught_positions_are_adopted_where_they_came_from_and_nothing_else_changes(repository, capsys):
+    plant, emulators = repository
+    line_a, line_b = emulators["line-a"], emulators["line-b"]
+    for bus, address in ((line_a, 1), (line_a, 2), (line_a, 3), (line_b, 1)):
+        bus.teach_in(address, 2, 160)  # every module that takes program 2 from the profile: alike
+    line_a.teach_in(1, 3, 1150)        # one user of the profile's program 3: an override
+    line_a.teach_in(3, 1, 2050)        # the same in a module written as one flow mapping
+    line_a.teach_in(2, 1, 1987)        # the module's own value
+    line_b.teach_in(1, 4, 950)         # the module's own value, in a block mapping
+    original = plant.read_text()
+
+    checked = run_cli(capsys, "adopt", plant, "--check")
+    assert checked.code == 2, checked.err
+    assert plant.read_text() == original
+    assert checked.out.splitlines()[:5] == [
+        "~ profile booth: program 2 position 0.150 m → 0.160 m (every module that takes it from there holds it: "
+        "line-a/a-left, line-a/a-right, line-a/a-top, line-b/b-left)",
+        "+ line-a/a-left: program 3 position 1.200 m → 1.150 m (new in the module: profile booth keeps its value)",
+        "~ line-a/a-right: program 1 position 2.000 m → 1.987 m (in the module)",
+        "+ line-a/a-top: program 1 position 2.100 m → 2.050 m (new in the module: profile booth keeps its value)",
+        "~ line-b/b-left: program 4 position 0.900 m → 0.950 m (in the module)",
+    ]
+    assert f"--- {plant}" in checked.out and "+      2: {position: 0.160, speed: 0.350, dwell: 0.5}   # stroke down" in checked.out
+
+    adopted = run_cli(capsys, "adopt", plant, "--auto-approve")
+    assert adopted.code == 0, adopted.err
+    assert adopted.out.splitlines()[-1].startswith(f"Adopted 5 values into {plant}")
+    assert plant.read_text().splitlines() == edited(original, {
+        "      2: {position: 0.150, speed: 0.350, dwell: 0.5}   # stroke down":
+            ["      2: {position: 0.160, speed: 0.350, dwell: 0.5}   # stroke down"],
+        "        profiles: [booth, 'spray-gun']":
+            ["        profiles: [booth, 'spray-gun']", "        programs:", "          3: {position: 1.150}"],
+        "          1: {position: 2.000}       # the right side has a lower hood":
+            ["          1: {position: 1.987}       # the right side has a lower hood"],
+        "      - {address: 3, name: a-top, profiles: [booth], programs: {4: {position: 1.000, speed: 0.100}}}  # one flow mapping":
+            ["      - {address: 3, name: a-top, profiles: [booth], programs: {1: {position: 2.050}, 4: {position: 1.000, "
+             "speed: 0.100}}}  # one flow mapping"],
+        "            position: 0.900          # park for cleaning": ["            position: 0.950          # park for cleaning"],
+    })  # fmt: skip
+    assert run_cli(capsys, "validate", plant).code == 0
+    planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
+    assert planned.code == 0, planned.out + planned.err
+
+    again = plant.read_bytes()
+    nothing = run_cli(capsys, "adopt", plant, "--check")
+    assert (nothing.code, nothing.out) == (0, "No drift to adopt: the modules hold what the plant file says.\n")
+    assert run_cli(capsys, "adopt", plant, "--auto-approve").code == 0
+    assert plant.read_bytes() == again
+
+
+def test_every_program_field_and_system_parameter_is_adopted_in_its_own_layer(repository, capsys, tmp_path):
+    plant, _ = repository
+    original = plant.read_text()
+    floor = tmp_path / "floor.yaml"  # what another tool wrote to the modules since
+    floor.write_text(original.replace("min_speed: 0.020", "min_speed: 0.030")
+                     .replace("f1: {action: set, distance: 0.020}", "f1: {action: reset, distance: 0.030}")
+                     .replace("max_speed: 0.450", "max_speed: 0.440")
+                     .replace("            dwell: 12.0", "            dwell: 9.5\n            relative_speed: -0.015")
+                     .replace("1: {position: 2.000}", "1: {position: 2.000, f2: {action: set, distance: 0.005}}"))  # fmt: skip
+    assert run_cli(capsys, "apply", floor, "--auto-approve", "--allow-axis-release").code == 0
+
+    adopted = run_cli(capsys, "adopt", plant, "--auto-approve")
+    assert adopted.code == 0, adopted.err
+    assert plant.read_text().splitlines() == edited(original, {
+        "      min_speed: 0.020               # S5": ["      min_speed: 0.030               # S5"],
+        "        f1: {action: set, distance: 0.020}             # gun on after START":
+            ["        f1: {action: reset, distance: 0.030}           # gun on after START"],
+        "          max_speed: 0.450           # a slower drive": ["          max_speed: 0.440           # a slower drive"],
+        "          1: {position: 2.000}       # the right side has a lower hood":
+            ["          1: {position: 2.000, f2: {action: set, distance: 0.005}}  # the right side has a lower hood"],
+        "            speed: 0.200": ["            speed: 0.200", "            relative_speed: -0.015"],
+        "            dwell: 12.0": ["            dwell: 9.5"],
+    })  # fmt: skip
+    assert run_cli(capsys, "plan", plant, "--detailed-exitcode").code == 0
+
+
+def test_module_and_program_limit_what_is_adopted(repository, capsys):
+    plant, emulators = repository
+    line_a, line_b = emulators["line-a"], emulators["line-b"]
+    for bus, address in ((line_a, 1), (line_a, 2), (line_a, 3), (line_b, 1)):
+        bus.teach_in(address, 2, 170)
+    line_b.teach_in(1, 4, 950)
+    original = plant.read_text()
+
+    one = run_cli(capsys, "adopt", plant, "--module", "a-left", "--auto-approve")
+    assert one.code == 0, one.err
+    # the others drifted alike but were not read: the profile stays, a-left gets an override
+    assert plant.read_text().splitlines() == edited(original, {
+        "        profiles: [booth, 'spray-gun']":
+            ["        profiles: [booth, 'spray-gun']", "        programs:", "          2: {position: 0.170}"],
+    })  # fmt: skip
+    before = plant.read_text()
+    program = run_cli(capsys, "adopt", plant, "--program", "4", "--auto-approve")
+    assert program.code == 0, program.err
+    assert plant.read_text().splitlines() == edited(before, {
+        "            position: 0.900          # park for cleaning": ["            position: 0.950          # park for cleaning"],
+    })  # fmt: skip
+    assert run_cli(capsys, "plan", plant, "--module", "a-left", "--detailed-exitcode").code == 0
+    assert run_cli(capsys, "plan", plant, "--module", "b-left", "--detailed-exitcode").code == 2  # program 2 left alone
+    unmanaged = run_cli(capsys, "adopt", plant, "--program", "9", "--check")
+    assert unmanaged.code == 1 and unmanaged.problems == [
+        "error: program 9: no chosen module manages it — name a program the plant file lists"]
+
+
+def test_what_the_plant_file_cannot_say_is_refused_naming_module_and_program(repository, capsys, tmp_path):
+    plant, emulators = repository
+    original = plant.read_bytes()
+    emulators["line-a"].teach_in(2, 1, 2300)  # above the upper reversing point 2.200 m
+    refused = run_cli(capsys, "adopt", plant, "--auto-approve")
+    assert refused.code == 1 and refused.problems == [
+        "error: bus line-a, module 2 (a-right): program 1 holds position 2.300 m, outside 0.000 m..2.200 m — a plant "
+        "file cannot say that: set it right on the module (teach it again), then adopt again"]  # fmt: skip
+    assert plant.read_bytes() == original
+
+    emulators["line-a"].teach_in(2, 1, 2000)
+    floor = tmp_path / "floor.yaml"
+    floor.write_text(original.decode().replace("{programs: [1, 2], loop: true}", "[1, 2]"))
+    assert run_cli(capsys, "apply", floor, "--auto-approve", "--allow-axis-release").code == 0
+    jumps = run_cli(capsys, "adopt", plant, "--check")
+    assert jumps.code == 1 and jumps.problems == [
+        "error: bus line-a, module 1 (a-left): program 2 jumps to no program on the module where the plant file says 1 "
+        "— adopt leaves jumps (chains, next:) alone: edit them in the plant file by hand, or apply it to set the jump "
+        "back, then adopt again"]  # fmt: skip
+    assert plant.read_bytes() == original
+
+
+def test_without_a_terminal_adopt_asks_for_auto_approve_and_writes_nothing(repository, capsys):
+    plant, emulators = repository
+    emulators["line-a"].teach_in(2, 1, 1987)
+    original = plant.read_bytes()
+    refused = run_cli(capsys, "adopt", plant)
+    assert refused.code == 1 and refused.problems == [
+        f"error: Write 1 value into {plant}? — no terminal to ask: pass --auto-approve to write it without "
+        "asking, or --check to see the diff only"]  # fmt: skip
+    assert plant.read_bytes() == original
+
+
+def answered(args: list, answer: str) -> str:
+    """What `prc3cfg ARGS` prints when its input is a terminal on which the user types `answer`."""
+    master, terminal = os.openpty()
+    try:
+        os.write(master, answer.encode())
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], stdin=terminal, capture_output=True,
+                              text=True, timeout=60)  # fmt: skip
+    finally:
+        os.close(terminal)
+        os.close(master)
+    return done.stdout + done.stderr
+
+
+def test_on_a_terminal_adopt_asks_before_it_writes_and_keeps_the_file_mode(repository):
+    plant, emulators = repository
+    emulators["line-a"].teach_in(2, 1, 1987)
+    plant.chmod(0o664)
+    original = plant.read_bytes()
+    declined = answered(["adopt", plant], "n\n")
+    assert f"Write 1 value into {plant}? [y/N]" in declined and "error: not adopted — the plant file was not changed" in declined
+    assert plant.read_bytes() == original
+    accepted = answered(["adopt", plant], "y\n")
+    assert f"Adopted 1 value into {plant}" in accepted
+    assert plant.read_text() == original.decode().replace("1: {position: 2.000}", "1: {position: 1.987}")
+    assert plant.stat().st_mode & 0o777 == 0o664
+
+
+def test_a_file_with_crlf_line_ends_and_no_final_newline_keeps_both():
+    text = "\r\n".join([
+        "plant: tiny", "profiles:", "  r:", "    programs:", "      1: {position: 0.300, speed: 0.100}",
+        "buses:", "  - name: b", "    port: emulator://tiny", "    modules:",
+        "      - {address: 1, name: m1, profiles: r}", "      - address: 2", "        name: m2", "        profiles: r",
+    ])  # fmt: skip
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "plant.yaml"
+        path.write_bytes(text.encode())
+        plant = load_plant(path)
+    images = {(bus.name, m.address): m.desired_image() for bus, m in plant.modules()}
+    taught = images[("b", 2)]
+    images[("b", 2)] = taught.with_programs({1: replace(taught.program(1), P=250)})
+    adoption = adopt.adopt(plant, images, text)
+    assert adoption.text == text + "\r\n        programs:\r\n          1: {position: 0.250}"
+
+
+@st.composite
+def teach_ins(draw):
+    """Positions taught in on the demo plant's modules, as applied: (module index, program, mm)."""
+    plant = load_plant(DEMO)
+    modules = plant.modules()
+    taught = []
+    for _ in range(draw(st.integers(1, 6))):
+        index = draw(st.integers(0, len(modules) - 1))
+        module = modules[index][1]
+        number = draw(st.sampled_from(module.managed_programs()))
+        taught.append((index, number, draw(st.integers(0, module.desired_system().S1))))
+    return taught
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(teach_ins())
+def test_adopting_any_teach_in_leaves_a_valid_file_that_plans_no_changes(taught):
+    plant = load_plant(DEMO)
+    text = DEMO.read_text()
+    images = {(bus.name, m.address): m.desired_image() for bus, m in plant.modules()}
+    for index, number, position in taught:
+        bus, module = plant.modules()[index]
+        image = images[(bus.name, module.address)]
+        images[(bus.name, module.address)] = image.with_programs({number: replace(image.program(number), P=position)})
+    adoption = adopt.adopt(plant, images, text)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "demo-line.yaml"
+        path.write_text(adoption.text)
+        adopted = load_plant(path)
+    assert not api.plan(adopted, images=images).changes
+    changed = Counter(line[0] for line in difflib.ndiff(text.splitlines(), adoption.text.splitlines()) if line[0] in "+-")
+    assert changed["-"] <= len(taught) and changed["+"] <= 2 * len(taught)  # a value changed, or an override added
