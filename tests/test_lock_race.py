@@ -139,7 +139,7 @@ def lines(tmp_path_factory):
     """`LINES` emulator server processes with module 1 each; yields their ports."""
     servers = []
     try:
-        for n in range(LINES):
+        for _ in range(LINES):
             state = tmp_path_factory.mktemp("line") / "state.json"
             command = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
                        "--state", str(state), "--modules", "1"]  # fmt: skip

@@ -8,6 +8,7 @@ from decimal import Decimal
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 
 from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, Program, default_program
 from prc3cfg.line import LineSettings
@@ -165,7 +166,7 @@ def test_numbers_are_exact_decimals(tmp_path: Path) -> None:
 
 def test_the_module_and_the_objects_are_immutable(tmp_path: Path) -> None:
     module = one_module(tmp_path, "- {address: 1, name: m}\n")
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match="frozen"):
         module.name = "other"  # type: ignore[misc]
 
 

@@ -115,8 +115,8 @@ def test_a_plant_written_from_the_examples_alone_loads(tmp_path) -> None:
     plant = from_examples(plant_schema())
     bus = plant["buses"][0]
     bus |= {"framing": "open-driver", "modules": [{**bus["modules"][0], "profiles": "booth"}]}  # the gateway's framing
-    for settings in (plant["profiles"]["booth"], bus["modules"][0]):
-        del settings["chains"]  # they name programs 1..3, where the example lists program 1 only
+    for layer in (plant["profiles"]["booth"], bus["modules"][0]):
+        del layer["chains"]  # they name programs 1..3, where the example lists program 1 only
     del bus["modules"][0]["programs"][1]["next"]  # a program's next and a chain are alternatives
     source = tmp_path / "plant.yaml"
     source.write_text(yaml.safe_dump(plant, sort_keys=False))
