@@ -30,10 +30,12 @@ to send. The search is built around that:
    the same with a share of a header per item, and as 21h — and again from each better
    plan found (and with each of its init runs moved across the system step); each init
    choice gets its own channel search. When that finds nothing better, two more sources:
-   - neighbours of the best plan (`_neighbours`): each of its init runs left out, each
-     program it writes whole (21h) initialised, and the programs with an item in one
-     40h..46h message initialised where that takes the items out (together they save the
-     message, one by one they never pay for an init);
+   - neighbours of the best plan (`_neighbours`): each of its init runs left out; the
+     shortest runs left out whose programs then differ in one set of fields only (as many
+     as one message of items takes); each program it writes whole (21h) initialised; the
+     programs with an item in one 40h..46h message, or in one 33h run, initialised where
+     that takes the items out (together they save the message, one by one they never pay
+     for an init);
    - inits that pay only by saving whole messages (`_header_targets`): the charges price
      items one by one, so when a field's items overflow into one more 40h..46h message and
      inits could take the overflow out, header shares per field are bisected until the init
@@ -780,21 +782,35 @@ def _harmless_inits(problem: Problem, layout: Layout, goals: list[tuple[int, int
 
 
 def _neighbours(problem: Problem, layout: Layout) -> list[tuple[int, ...]]:
-    """The init choice of `layout` with one init run left out (the charges may take out several
-    where one pays), with one program it writes whole (21h) initialised instead, or with every
-    program that has an item in one 40h..46h message initialised where that takes the item
-    out (one by one the items never pay for an init; all together they save the message)."""
+    """The init choice of `layout` changed where the init DP, charging programs one by one,
+    cannot see the change pay: one init run left out; the shortest runs left out whose
+    programs then differ in one set of fields only, as many as one message of items takes
+    (their items share the headers); one program it writes whole (21h) initialised; every
+    program with an item in one 40h..46h message, or in one 33h run, initialised where that
+    takes its item out (together they save the message)."""
     kinds = layout.kinds
-    out = [kinds[:first] + (KEEP,) * (last - first + 1) + kinds[last + 1 :]
-           for kind in problem.kinds[1:] for first, last in runs_of(kinds, kind)]  # fmt: skip
+    runs = [(first, last) for kind in problem.kinds[1:] for first, last in runs_of(kinds, kind)]
+    out = [kinds[:first] + (KEEP,) * (last - first + 1) + kinds[last + 1 :] for first, last in runs]
+    # the shortest runs left out whose programs then differ only in fields of one set, as many
+    # as one message of items takes (those items share their headers; no run alone pays them)
+    adds = [_all_of(tuple(problem.masks[KEEP][i] for i in range(first, last + 1))) for first, last in runs]
+    for fields in set(adds):
+        changed, room = list(kinds), codec.MAX_FIELD_ITEMS
+        for first, last in sorted((run for run, added in zip(runs, adds) if not added & ~fields),
+                                  key=lambda run: run[1] - run[0]):  # fmt: skip
+            room -= last - first + 1
+            if room < 0:
+                break
+            changed[first : last + 1] = [KEEP] * (last - first + 1)
+        out.append(tuple(changed))
     out += [kinds[:i] + (kind,) + kinds[i + 1 :] for i in members(layout.writes.whole) if kinds[i] == KEEP
             for kind in problem.kinds[1:]]  # fmt: skip
-    for bit, mask, capacity in _item_channels(layout.writes):
-        if mask.bit_count() > capacity:
-            continue
+    one_message = [(bit, mask) for bit, mask, capacity in _item_channels(layout.writes) if mask.bit_count() <= capacity]
+    runs33 = [(PV_BITS, (1 << (last + 1)) - (1 << first)) for first, last in layout.writes.part_runs]
+    for bits, mask in one_message + runs33:
         changed = list(kinds)
         for i in members(mask):
-            fixing = [k for k in problem.kinds[1:] if not problem.masks[k][i] & bit]
+            fixing = [k for k in problem.kinds[1:] if not problem.masks[k][i] & bits]
             if kinds[i] == KEEP and fixing:
                 changed[i] = fixing[0]
         out.append(tuple(changed))

@@ -292,3 +292,35 @@ def test_an_init_takes_out_the_overflow_of_items_where_runs_alike_tie(framing: s
     plan = planned(actual, desired, framing)
     assert plan.steps[0].message == codec.InitPrograms(1, 3)
     assert ids(plan) == [0x14, 0x40, 0x40, 0x40]
+
+
+def small_groups() -> tuple[ModuleImage, ModuleImage]:
+    """Programs 1, 3..5, 7..10, 12..16 and 18..29 (the rest unmanaged) are the defaults but for
+    P and V; the plant file wants them back to the defaults."""
+    default = default_program(SYSTEM)
+    managed = {1, 3, 4, 5, 7, 8, 9, 10, 12, 13, 14, 15, 16, *range(18, 30)}
+    actual = replace(PLANT, programs=tuple(replace(default, P=default.P + n, V=default.V + 1) if n in managed else None
+                                           for n in range(1, PROGRAM_COUNT + 1)))  # fmt: skip
+    desired = replace(PLANT, programs=tuple(default if n in managed else None for n in range(1, PROGRAM_COUNT + 1)))
+    return actual, desired
+
+
+def test_short_init_runs_are_left_out_together_when_their_items_fill_one_message() -> None:
+    """On open-driver a message costs two ZVZ: the four short groups' 13 P and V go in one 40h and
+    one 41h rather than four inits (one by one, each group would open both for itself)."""
+    actual, desired = small_groups()
+    plan = planned(actual, desired, "open-driver")
+    assert plan.steps[0].message == codec.InitPrograms(18, 29)
+    assert ids(plan) == [0x14, 0x40, 0x41]
+    assert ids(planned(actual, desired)) == [0x12, 0x14, 0x14, 0x14, 0x14]  # crc16: an init is cheaper
+
+
+def test_a_33h_run_is_replaced_by_an_init_when_its_programs_want_the_defaults() -> None:
+    """With a 50 ms turnaround a 33h of twelve programs costs more than one 14h: one by one,
+    no program leaves the run for an init (each saves only its P and V)."""
+    actual, desired = small_groups()
+    cost = line("open-driver", turnaround=0.050)
+    plan = plan_module(actual, desired, cost)
+    check_plan(plan, actual, desired, cost)
+    assert [step.message.ID for step in plan.steps] == [0x14, 0x40, 0x41]
+    assert plan.steps[0].message == codec.InitPrograms(18, 29)
