@@ -36,12 +36,12 @@ from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
-from prc3cfg import codec
-from prc3cfg.bustime import LineCost
-from prc3cfg.emulator import BROADCAST
-from prc3cfg.line import LineSettings
-
 from line_bench import run  # the wall time and output of a command that must succeed
+
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.line import LineSettings
+from prc3cfg.shell.emulator import BROADCAST
 
 PLANT = """\
 plant: emulator-bench
@@ -65,7 +65,7 @@ MODULE = """\
 PROGRAMS = "\n".join(f"          {n}: {{position: {0.5 + n / 100:.3f}, speed: 0.{200 + n:03d}, dwell: {n % 7}.5}}" for n in range(1, 33))
 #: `prc3cfg` whose in-process emulators keep no state file: the apply without persistence.
 WITHOUT_STATE_FILE = (
-    "import prc3cfg.link.ports as ports\n"
+    "import prc3cfg.shell.link.ports as ports\n"
     "from prc3cfg.cli import main\n"
     "Emulator = ports.Emulator\n"
     "ports.Emulator = lambda *args, **options: Emulator(*args, **{**options, 'state_path': None})\n"

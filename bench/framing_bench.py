@@ -19,8 +19,8 @@ import argparse
 import random
 import time
 
-from prc3cfg.framing import NEED_DATA, Direction, get_framing
-from prc3cfg.line import LineSettings
+from prc3cfg.core.framing import NEED_DATA, Direction, get_framing
+from prc3cfg.core.line import LineSettings
 
 CHUNK = 4096
 START_CODES = {"crc16": b"\xa5", "stx": b"\x7e"}

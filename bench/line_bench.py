@@ -32,10 +32,11 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from prc3cfg import codec
-from prc3cfg.bustime import LineCost
-from prc3cfg.line import LineSettings
-from prc3cfg.verification import read_messages
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.verification import read_messages
+
 
 def changed_programs(changed: set[int] = frozenset(), faster: set[int] = frozenset()) -> str:
     """Programs 1..32 of a module; those in `changed` a little further and faster, those in

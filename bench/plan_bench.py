@@ -74,13 +74,13 @@ from dataclasses import replace
 from math import ceil
 from pathlib import Path
 
-from prc3cfg import codec
-from prc3cfg.bustime import LineCost
-from prc3cfg.framing.stx import START
-from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
-from prc3cfg.line import LineSettings
-from prc3cfg.planner import plan_module
-from prc3cfg.planner.problem import FIELD_BIT, INIT_AFTER, INIT_BEFORE, KEEP, Problem
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.framing.stx import START
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.planner import plan_module
+from prc3cfg.core.planner.problem import FIELD_BIT, INIT_AFTER, INIT_BEFORE, KEEP, Problem
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S2=120, S4=500, S5=20)
 USED = 40  # programs a recipe uses; the rest are at their defaults (plant files with `reset`)

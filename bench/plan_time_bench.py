@@ -34,8 +34,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from prc3cfg import api, render
-from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program
+from prc3cfg import api
+from prc3cfg.core import render
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program
 from prc3cfg.plant.document import MAX_NODES
 from prc3cfg.plant.loader import MAX_PART_NODES
 

@@ -44,11 +44,11 @@ class CountingTrace(io.StringIO):
 
 def client(url: str, framing: str, exchanges: int, uart: bool) -> None:
     """The client process: `exchanges` exchanges; prints its counts as JSON."""
-    from prc3cfg import codec
-    from prc3cfg.framing import get_framing
-    from prc3cfg.image import Program
-    from prc3cfg.line import LineSettings
-    from prc3cfg.link import Link, Trace, open_port
+    from prc3cfg.core import codec
+    from prc3cfg.core.framing import get_framing
+    from prc3cfg.core.image import Program
+    from prc3cfg.core.line import LineSettings
+    from prc3cfg.shell.link import Link, Trace, open_port
 
     line = LineSettings()
     stream = CountingTrace()

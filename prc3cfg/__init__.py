@@ -1,7 +1,9 @@
 """prc3cfg: plant configuration as code for PRC 3 powder reciprocator controllers.
 
-The pure core (`image`, `codec`, `device`, `framing`, `line`, the planner) does no I/O;
-the link client, the emulator server and the CLI are the thin shell around it.
+In layers, one folder each: `core` (the pure core: images, messages, device model, framings,
+planner, rendering — no I/O), `plant` (plant files), `shell` (links, emulator, locks, records,
+apply), then `api` (the workflow as functions of plain values) and `cli` (arguments, prompts,
+rendering). `errors` holds the one-line errors every layer raises.
 """
 
 __version__ = "0.1.0"

@@ -17,7 +17,7 @@ and raises a `UserError` subclass whose `str()` is one line saying what is wrong
 do: `PlantError`, `LinkError`, `LineBusy`, `StalePlan`, `AxisReleaseRefused`, `NotApproved`,
 `ApplyFailed` and `ApplyInterrupted` (both carry the `ApplyResult`, for the account).
 Every function that talks on a line takes `LineOptions`: retries, the lock time-out, a frame
-trace, a cancel event (Ctrl-C, `prc3cfg.cancel`) and a `Progress` to report to.
+trace, a cancel event (Ctrl-C, `prc3cfg.shell.cancel`) and a `Progress` to report to.
 
 Owns the workflows: which modules, what to read, locking the lines, reading back, planning
 (and broadcasts), proving a plan file, gating, the snapshot and the journal, running and
@@ -36,26 +36,26 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol, TextIO
 
-from prc3cfg import __version__, codec
-from prc3cfg.apply import ModuleRun, Release, Verify, execute
-from prc3cfg.bustime import LineCost
-from prc3cfg.cancel import Cancellation
-from prc3cfg.device import can_clamp
+from prc3cfg import __version__
+from prc3cfg.core import codec, sharing
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.device import can_clamp
+from prc3cfg.core.framing import get_framing
+from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
+from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
+from prc3cfg.core.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.core.render import plan_json
 from prc3cfg.errors import Interrupted, UserError
-from prc3cfg.files import FileProblem, Why, read_json
-from prc3cfg.framing import get_framing
-from prc3cfg.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
-from prc3cfg.line import EMULATOR_SCHEME, LineSettings
-from prc3cfg.link import Link, LinkError, Trace, open_plant_links, open_port
-from prc3cfg.link.ports import emulator_state_path
-from prc3cfg.locks import LineBusy, line_keys, line_lock
-from prc3cfg.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
-from prc3cfg.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
-from prc3cfg.readback import Target, read_all, read_module
-from prc3cfg.render import plan_json
-from prc3cfg.records import Journal, Snapshot, applied_copy, save_applied
-from prc3cfg import sharing
+from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
+from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.files import FileProblem, Why, read_json
+from prc3cfg.shell.link import Link, LinkError, Trace, open_plant_links, open_port
+from prc3cfg.shell.link.ports import emulator_state_path
+from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
+from prc3cfg.shell.readback import Target, read_all, read_module
+from prc3cfg.shell.records import Journal, Snapshot, applied_copy, save_applied
 
 __all__ = [
     "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Gates", "LineBusy", "LineOptions", "LinkError",
@@ -125,7 +125,7 @@ class Quiet:
 @dataclass
 class LineOptions:
     """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
-    frame trace, Ctrl-C handling (`prc3cfg.cancel.Cancellation`) and progress reports."""
+    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports."""
 
     retries: int = 5
     lock_timeout: float = 0.0

@@ -13,7 +13,7 @@ class UserError(Exception):
 
 
 class Interrupted(UserError):
-    """Ctrl-C or SIGTERM: the work stopped after the exchange in flight (`prc3cfg.cancel`)."""
+    """Ctrl-C or SIGTERM: the work stopped after the exchange in flight (`prc3cfg.shell.cancel`)."""
 
     exit_code = 130
 

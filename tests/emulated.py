@@ -1,4 +1,4 @@
-"""Test support: the demo plant on real emulators behind socket:// (`prc3cfg.testing`, as plant
+"""Test support: the demo plant on real emulators behind socket:// (`prc3cfg.shell.testing`, as plant
 repositories use it), reached through a lossy proxy where a test says, and the CLI run in-process."""
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-
 from lossy import LossyProxy, Rule
+
 from prc3cfg.cli import main
-from prc3cfg.emulator import FaultInjection
-from prc3cfg.testing import EmulatedPlant, emulate
+from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.testing import EmulatedPlant, emulate
 
 DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import serial
 
-from prc3cfg.framing import NEED_DATA, Direction, Frame, get_framing
-from prc3cfg.line import LineSettings
+from prc3cfg.core.framing import NEED_DATA, Direction, Frame, get_framing
+from prc3cfg.core.line import LineSettings
 
 
 class Client:

@@ -18,8 +18,8 @@ import threading
 import time
 from collections.abc import Callable
 
-from prc3cfg.framing import NEED_DATA, Direction, Frame, get_framing
-from prc3cfg.line import LineSettings
+from prc3cfg.core.framing import NEED_DATA, Direction, Frame, get_framing
+from prc3cfg.core.line import LineSettings
 
 POLL = 0.01
 

@@ -1,11 +1,11 @@
 """`prc3cfg adopt`: positions taught in on the floor written back into the plant file, in place.
 
-Against real emulators (`prc3cfg.testing`, through tests/emulated.py) and the real command line:
+Against real emulators (`prc3cfg.shell.testing`, through tests/emulated.py) and the real command line:
 the plant repository tests/adopt/plant.yaml (comments, flow and block mappings, quoted names) is
 applied, positions are taught in on the emulated modules, and adopt must change exactly the
 lines of those values — in the module, in the profile when every user drifted alike, as an
 override otherwise — after which validate passes and plan has nothing to do. The property at
-the end adopts random teach-ins on the demo plant without a line (`prc3cfg.adopt` is pure).
+the end adopts random teach-ins on the demo plant without a line (`prc3cfg.plant.adopt` is pure).
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from emulated import DEMO, emulated_plant, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from prc3cfg import adopt, api
-from prc3cfg.plant import load_plant
+from prc3cfg import api
+from prc3cfg.plant import adopt, load_plant
 
 REPOSITORY = Path(__file__).resolve().parent / "adopt" / "plant.yaml"
 

@@ -22,10 +22,10 @@ from dataclasses import replace
 import pytest
 from emulated import emulated_plant
 
-from prc3cfg import codec, device
-from prc3cfg.emulator import FaultInjection
-from prc3cfg.image import PROGRAM_COUNT, ModuleImage, Program
+from prc3cfg.core import codec, device
+from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program
 from prc3cfg.plant import load_plant
+from prc3cfg.shell.emulator import FaultInjection
 
 SEEDS = range(40)
 TRAVEL = "Travel to reference point required before production on:"

@@ -22,9 +22,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lossy import Loss, lose_replies_to
 
-from prc3cfg import codec
-from prc3cfg.image import ModuleImage, Program, SystemParameters, default_program
-from prc3cfg.records import Snapshot
+from prc3cfg.core import codec
+from prc3cfg.core.image import ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.shell.records import Snapshot
 
 TRAVEL = "Travel to reference point required before production on:"
 

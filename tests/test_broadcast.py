@@ -1,6 +1,6 @@
 """Broadcasts: what every module of a full line needs alike goes once to address 0.
 
-The pure part (`prc3cfg.sharing`) as tables of lines; then a 30-module line on a real
+The pure part (`prc3cfg.core.sharing`) as tables of lines; then a 30-module line on a real
 emulator: commissioning and a shared change by broadcast, each receiver verified by reading
 back, a lost broadcast repaired with addressed writes, and a plan file with broadcasts.
 """
@@ -15,12 +15,12 @@ import pytest
 from emulated import emulated_plant, run_cli
 from lossy import Loss
 
-from prc3cfg import codec
-from prc3cfg.bustime import LineCost
-from prc3cfg.image import ModuleImage, Program
-from prc3cfg.line import LineSettings
-from prc3cfg.planner import plan_module
-from prc3cfg.sharing import Module, share
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.planner import plan_module
+from prc3cfg.core.sharing import Module, share
 
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
 

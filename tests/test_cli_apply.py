@@ -12,8 +12,8 @@ import pytest
 import yaml
 from emulated import emulated_plant, run_cli
 
-from prc3cfg.emulator import FaultInjection
-from prc3cfg.locks import line_keys, line_lock
+from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.locks import line_keys, line_lock
 
 
 @pytest.fixture(autouse=True)

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from emulated import run_cli
 import pytest
+from emulated import run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from prc3cfg.device import ModuleState
-from prc3cfg.emulator import Emulator
-from prc3cfg.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
+from prc3cfg.shell.emulator import Emulator
 
 GATEWAY_PLANT = """\
 plant: gateway-test

@@ -6,10 +6,10 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from prc3cfg.apply import Verify as ApplyVerify
 from prc3cfg.cli.common import ADDRESSES, FRAMING_NAMES, Verify
-from prc3cfg.framing import FRAMINGS
-from prc3cfg.image import MAX_MODULE_ADDRESS
+from prc3cfg.core.framing import FRAMINGS
+from prc3cfg.core.image import MAX_MODULE_ADDRESS
+from prc3cfg.shell.apply import Verify as ApplyVerify
 
 LISTING = """
 import sys
@@ -19,7 +19,7 @@ try:
 except SystemExit:
     pass
 heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("pydantic", "serial", "yaml")
-               or m in ("prc3cfg.api", "prc3cfg.planner", "prc3cfg.link", "prc3cfg.plant", "prc3cfg.emulator"))
+               or m in ("prc3cfg.api", "prc3cfg.core.planner", "prc3cfg.shell.link", "prc3cfg.plant", "prc3cfg.shell.emulator"))
 print("heavy:", heavy, file=sys.stderr)
 """
 

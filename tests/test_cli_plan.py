@@ -7,8 +7,8 @@ import json
 import pytest
 from emulated import emulated_plant, run_cli
 
-from prc3cfg import codec
-from prc3cfg.plantplan import image_sha256
+from prc3cfg.core import codec
+from prc3cfg.core.plantplan import image_sha256
 
 WARNING = "travel to reference point required"
 
@@ -63,7 +63,7 @@ def test_plan_state_hash_is_the_read_back(plant, capsys, tmp_path):
     document = json.loads((tmp_path / "plan.json").read_text())
     read = json.loads(run_cli(capsys, "read", plant.path, "--json").out)
     hashes = {(e["bus"], e["address"]): e for e in read}
-    from prc3cfg.image import ModuleImage
+    from prc3cfg.core.image import ModuleImage
 
     for bus in document["buses"]:
         for module in bus["modules"]:

@@ -8,8 +8,8 @@ from dataclasses import replace
 
 import pytest
 
-from prc3cfg import codec, error_codes
-from prc3cfg.codec import (
+from prc3cfg.core import codec, error_codes
+from prc3cfg.core.codec import (
     InitAllPrograms,
     InitProgram,
     InitPrograms,
@@ -34,7 +34,7 @@ from prc3cfg.codec import (
     WriteSpeeds,
     WriteSystem,
 )
-from prc3cfg.image import DEFAULT_SYSTEM, Program, SystemParameters
+from prc3cfg.core.image import DEFAULT_SYSTEM, Program, SystemParameters
 
 
 def h(text: str) -> bytes:

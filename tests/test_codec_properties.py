@@ -7,8 +7,8 @@ from __future__ import annotations
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from prc3cfg import codec
-from prc3cfg.image import Program, SystemParameters
+from prc3cfg.core import codec
+from prc3cfg.core.image import Program, SystemParameters
 
 PROPERTY = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

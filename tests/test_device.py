@@ -9,8 +9,8 @@ from dataclasses import replace
 
 import pytest
 
-from prc3cfg import codec, device, error_codes
-from prc3cfg.codec import (
+from prc3cfg.core import codec, device, error_codes
+from prc3cfg.core.codec import (
     InitAllPrograms,
     InitProgram,
     InitPrograms,
@@ -33,8 +33,8 @@ from prc3cfg.codec import (
     WriteSpeeds,
     WriteSystem,
 )
-from prc3cfg.device import ModuleState
-from prc3cfg.image import DEFAULT_SYSTEM, Program, SystemParameters
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.image import DEFAULT_SYSTEM, Program, SystemParameters
 
 ACCEPTED = b"\x00\x00"
 

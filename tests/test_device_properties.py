@@ -8,9 +8,9 @@ from dataclasses import replace
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from prc3cfg import codec, device, error_codes
-from prc3cfg.device import ModuleState
-from prc3cfg.image import DEFAULT_SYSTEM, ModuleImage, Program, SystemParameters
+from prc3cfg.core import codec, device, error_codes
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.image import DEFAULT_SYSTEM, ModuleImage, Program, SystemParameters
 
 PROPERTY = settings(
     max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]

@@ -14,17 +14,16 @@ from dataclasses import replace
 from types import SimpleNamespace
 
 import pytest
-
-from prc3cfg import codec, device
-from prc3cfg.device import ModuleState
-from prc3cfg.emulator import Emulator, FaultInjection, load_state, server
-from prc3cfg.emulator.state import journal_path, state_document
-from prc3cfg.errors import UserError
-from prc3cfg.framing import Direction, Frame, get_framing
-from prc3cfg.image import DEFAULT_SYSTEM, Program
-from prc3cfg.line import LineSettings
-
 from emulator_client import Client, answered, hang_up, serve
+
+from prc3cfg.core import codec, device
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import Direction, Frame, get_framing
+from prc3cfg.core.image import DEFAULT_SYSTEM, Program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.errors import UserError
+from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state, server
+from prc3cfg.shell.emulator.state import journal_path, state_document
 
 WRITE_P10 = codec.WriteProgram(10, Program(P=150, V=300, Vr=53, T=20, F1=1010, F2=50, A=5))
 

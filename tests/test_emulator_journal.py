@@ -1,4 +1,4 @@
-"""The emulator's journal (`prc3cfg.emulator.state`): every accepted write is on disk before it
+"""The emulator's journal (`prc3cfg.shell.emulator.state`): every accepted write is on disk before it
 is answered, without rewriting the state file, and a killed emulator loses nothing it
 acknowledged — checked by SIGKILL of a real `prc3cfg emulator serve` at random points."""
 
@@ -18,17 +18,16 @@ from pathlib import Path
 
 import pytest
 import serial
-
-from prc3cfg import codec
-from prc3cfg.device import ModuleState
-from prc3cfg.emulator import BROADCAST, Emulator, load_state
-from prc3cfg.emulator import state as store
-from prc3cfg.emulator.state import JOURNAL_FORMAT, journal_path, state_document
-from prc3cfg.errors import UserError
-from prc3cfg.framing import Direction
-from prc3cfg.image import Program
-
 from emulator_client import Client, listening, spawn
+
+from prc3cfg.core import codec
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import Direction
+from prc3cfg.core.image import Program
+from prc3cfg.errors import UserError
+from prc3cfg.shell.emulator import BROADCAST, Emulator, load_state
+from prc3cfg.shell.emulator import state as store
+from prc3cfg.shell.emulator.state import JOURNAL_FORMAT, journal_path, state_document
 
 ACCEPTED = b"\x00\x00"
 

@@ -21,12 +21,11 @@ import threading
 from collections.abc import Iterator
 
 import pytest
-
-from prc3cfg import codec
-from prc3cfg.framing import Direction, get_framing
-from prc3cfg.image import DEFAULT_SYSTEM, Program
-
 from emulator_client import Client, Served, answered, hang_up, serve
+
+from prc3cfg.core import codec
+from prc3cfg.core.framing import Direction, get_framing
+from prc3cfg.core.image import DEFAULT_SYSTEM, Program
 
 MAX_CONNECTIONS = 64
 FLOOD = 1_100

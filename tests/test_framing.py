@@ -16,10 +16,10 @@ from pathlib import Path
 
 import pytest
 
-import prc3cfg.framing
-from prc3cfg.framing import FRAMINGS, NEED_DATA, Direction, Discarded, Frame, FramingError, get_framing
-from prc3cfg.framing.stx import message_timeout
-from prc3cfg.line import LineSettings
+import prc3cfg.core.framing
+from prc3cfg.core.framing import FRAMINGS, NEED_DATA, Direction, Discarded, Frame, FramingError, get_framing
+from prc3cfg.core.framing.stx import message_timeout
+from prc3cfg.core.line import LineSettings
 
 REQUEST, REPLY = Direction.REQUEST, Direction.REPLY
 LINE = LineSettings()
@@ -413,11 +413,11 @@ def test_events_are_frozen_and_need_data_is_a_sentinel():
     assert get_framing("stx").decoder(REQUEST, LINE).next_event() is NEED_DATA
 
 
-ALLOWED_IMPORTS = {"__future__", "abc", "binascii", "collections", "dataclasses", "enum", "typing", "prc3cfg.line"}
+ALLOWED_IMPORTS = {"__future__", "abc", "binascii", "collections", "dataclasses", "enum", "typing", "prc3cfg.core.line"}
 
 
 def test_framing_package_imports_no_io():
-    for path in Path(prc3cfg.framing.__file__).parent.glob("*.py"):
+    for path in Path(prc3cfg.core.framing.__file__).parent.glob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
@@ -425,8 +425,8 @@ def test_framing_package_imports_no_io():
                 names = [node.module]
             else:
                 continue
-            assert all(n in ALLOWED_IMPORTS or n.startswith("prc3cfg.framing") for n in names), f"{path.name}: {names}"
-    blocked = "import sys; sys.modules.update(serial=None, socket=None, time=None); import prc3cfg.framing"
+            assert all(n in ALLOWED_IMPORTS or n.startswith("prc3cfg.core.framing") for n in names), f"{path.name}: {names}"
+    blocked = "import sys; sys.modules.update(serial=None, socket=None, time=None); import prc3cfg.core.framing"
     subprocess.run([sys.executable, "-c", blocked], check=True)
 
 
@@ -442,7 +442,7 @@ def test_garbage_outside_frames_is_reported_in_bounded_pieces(name):
     decoder.line_idle()
     while (event := decoder.next_event()) is not NEED_DATA:
         events.append(event)
-    assert all(isinstance(e, Discarded) and len(e.data) <= prc3cfg.framing.base.MAX_SKIPPED for e in events)
+    assert all(isinstance(e, Discarded) and len(e.data) <= prc3cfg.core.framing.base.MAX_SKIPPED for e in events)
     assert b"".join(e.data for e in events) == garbage
 
 

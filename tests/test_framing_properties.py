@@ -8,8 +8,8 @@ import binascii
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from prc3cfg.framing import FRAMINGS, NEED_DATA, Decoder, Direction, Discarded, Frame, Framing
-from prc3cfg.line import LineSettings
+from prc3cfg.core.framing import FRAMINGS, NEED_DATA, Decoder, Direction, Discarded, Frame, Framing
+from prc3cfg.core.line import LineSettings
 
 COMBOS = [(name, direction) for name in FRAMINGS for direction in Direction]
 HUNTING = [(name, direction) for name, direction in COMBOS if name != "open-driver"]

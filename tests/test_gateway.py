@@ -10,16 +10,9 @@ from types import SimpleNamespace
 
 import pytest
 
+from prc3cfg.core.gateway import GatewayRefused, GatewaySettings, Refusal, format_data_block, init_data_block, refusals
+from prc3cfg.core.line import LineSettings
 from prc3cfg.errors import UserError
-from prc3cfg.gateway import (
-    GatewayRefused,
-    GatewaySettings,
-    Refusal,
-    format_data_block,
-    init_data_block,
-    refusals,
-)
-from prc3cfg.line import LineSettings
 
 # seed 004 §10.3.2, interface 0: DB 30 from DW 1, all CPUs, identifier 1, 9600 8E1, ZVZ 220 ms.
 DB189 = GatewaySettings(receive_db=30, receive_dw=1, cpu=0, identifier=1,
@@ -219,5 +212,5 @@ def test_refusal_str():
 
 def test_pure_without_serial_or_socket():
     code = ("import sys; sys.modules['serial'] = None; sys.modules['socket'] = None; "
-            "import prc3cfg.gateway")
+            "import prc3cfg.core.gateway")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).parents[1])

@@ -5,8 +5,8 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from prc3cfg.image import Program
-from prc3cfg.importer import jumps_as_chains
+from prc3cfg.core.chains import jumps_as_chains
+from prc3cfg.core.image import Program
 
 
 def rebuild(chains, nexts) -> dict[int, int]:

@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 from emulated import emulated_plant
 
-from prc3cfg.device import ModuleState
-from prc3cfg.locks import line_keys, line_lock
+from prc3cfg.core.device import ModuleState
 from prc3cfg.plant import load_plant
+from prc3cfg.shell.locks import line_keys, line_lock
 
 TRAVEL = "Travel to reference point required before production on:"
 

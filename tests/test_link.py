@@ -13,17 +13,17 @@ from types import SimpleNamespace
 
 import pytest
 
-from prc3cfg import codec
-from prc3cfg.bustime import LineCost
-from prc3cfg.device import ModuleState
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import Direction, get_framing
+from prc3cfg.core.image import DEFAULT_SYSTEM, Program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.verification import read_messages
 from prc3cfg.errors import UserError
-from prc3cfg.emulator import Emulator, FaultInjection
-from prc3cfg.framing import Direction, get_framing
-from prc3cfg.image import DEFAULT_SYSTEM, Program
-from prc3cfg.line import LineSettings
-from prc3cfg.link import Link, LinkError, Trace, open_link, open_port
-from prc3cfg.readback import ReadBackError, read_module
-from prc3cfg.verification import read_messages
+from prc3cfg.shell.emulator import Emulator, FaultInjection
+from prc3cfg.shell.link import Link, LinkError, Trace, open_link, open_port
+from prc3cfg.shell.readback import ReadBackError, read_module
 
 FRAMINGS = ["crc16", "open-driver", "stx"]
 

@@ -18,11 +18,11 @@ import sys
 import pytest
 
 from prc3cfg.errors import UserError
-from prc3cfg.locks import LineBusy, line_keys, line_lock, lock_dir, lock_path
+from prc3cfg.shell.locks import LineBusy, line_keys, line_lock, lock_dir, lock_path
 
 HOLDER = """
 import json, sys
-from prc3cfg.locks import line_lock
+from prc3cfg.shell.locks import line_lock
 with line_lock(json.loads(sys.argv[1]), "bus held"):
     print("locked", flush=True)
     sys.stdin.readline()

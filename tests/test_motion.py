@@ -1,4 +1,4 @@
-"""The motion of a module's chains (`prc3cfg.motion`) against hand calculations and properties.
+"""The motion of a module's chains (`prc3cfg.core.motion`) against hand calculations and properties.
 
 The known chain (issue 13's acceptance case), worked out by hand with S6 = 1.2 m/s²:
 
@@ -31,8 +31,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program
-from prc3cfg.motion import DWELL, MOVE, MotionError, OutputInterval, TurningPoint, chain_motions, paired_chains
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program
+from prc3cfg.core.motion import DWELL, MOVE, MotionError, OutputInterval, TurningPoint, chain_motions, paired_chains
 
 TOLERANCE = 1e-9
 

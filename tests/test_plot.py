@@ -1,4 +1,4 @@
-"""Pictures of the motion (`prc3cfg.plot`, `prc3cfg show --plot`): mermaid text, SVG and PNG files,
+"""Pictures of the motion (`prc3cfg.core.plot`, `prc3cfg show --plot`): mermaid text, SVG and PNG files,
 and the SVG opened in headless Chromium.
 
 The files need matplotlib (the `plot` extra) and the browser test Debian's chromium: without
@@ -15,14 +15,14 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+from test_motion import TWO_PROGRAMS, image
 from typer.testing import CliRunner
 
 import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
 from prc3cfg.cli import app
-from prc3cfg.image import ModuleImage, Program
-from prc3cfg.motion import chain_motions, paired_chains
-from prc3cfg.plot import MERMAID_POINTS, MISSING, PlotError, mermaid, picture, plot_format
-from test_motion import TWO_PROGRAMS, image
+from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.motion import chain_motions, paired_chains
+from prc3cfg.core.plot import MERMAID_POINTS, MISSING, PlotError, mermaid, picture, plot_format
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "plants" / "demo-line.yaml"

@@ -1,12 +1,14 @@
-"""The pure core imports no `serial` and no `socket` (style.md §"A pure core, a thin shell").
+"""The folders are the layers, and the pure core imports no `serial` and no `socket`
+(style.md §"A pure core, a thin shell").
 
-Each module is imported in a fresh interpreter whose import system refuses `serial` and
+Each layer imports only the layers below it (read from the source). Each core module is imported in a fresh interpreter whose import system refuses `serial` and
 `socket` (and their submodules), so a core module that reaches for the outside — directly or
 through anything it imports — fails here.
 """
 
 from __future__ import annotations
 
+import ast
 import subprocess
 import sys
 from pathlib import Path
@@ -15,14 +17,65 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: The pure core: what a module does, what a plan is, how it is found, priced and shared.
-#: (`render` and `importer` are pure too, but reach pydantic through `prc3cfg.plant`, and
-#: pydantic imports `socket` itself.)
-CORE = [
-    "prc3cfg.image", "prc3cfg.codec", "prc3cfg.device", "prc3cfg.error_codes", "prc3cfg.line", "prc3cfg.framing",
-    "prc3cfg.bustime", "prc3cfg.planner", "prc3cfg.verification", "prc3cfg.sharing", "prc3cfg.plantplan",
-    "prc3cfg.gateway",
-]  # fmt: skip
+PACKAGE = ROOT / "prc3cfg"
+
+
+def modules_of(folder: str) -> list[str]:
+    """Every module of a layer folder, by its dotted name."""
+    return sorted(".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+                  for p in (PACKAGE / folder).rglob("*.py"))
+
+
+#: The pure core: every module of `prc3cfg/core/` — what a module holds and does, what a plan
+#: is, how it is found, priced, shared and rendered.
+CORE = modules_of("core")
+
+#: What each layer may import of prc3cfg (style.md §1: the folders show the layers). The core
+#: imports only itself; plant files read through the shell's bounded reads; the shell never
+#: reaches up into the API or the CLI; the API never into the CLI.
+MAY_IMPORT = {
+    "core": ("prc3cfg.core", "prc3cfg.errors"),
+    "plant": ("prc3cfg.core", "prc3cfg.plant", "prc3cfg.errors", "prc3cfg.shell.files"),
+    "shell": ("prc3cfg.core", "prc3cfg.plant", "prc3cfg.shell", "prc3cfg.errors"),
+}
+
+
+def prc3cfg_imports(path: Path) -> set[str]:
+    """The prc3cfg modules a file imports (`from prc3cfg.x import y` gives prc3cfg.x.y and prc3cfg.x)."""
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names if a.name.split(".")[0] == "prc3cfg")
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "prc3cfg":
+            found.update(f"{node.module}.{a.name}" for a in node.names)
+    return found
+
+
+def allowed(name: str, prefixes: tuple[str, ...]) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes) or name == "prc3cfg.__version__"
+
+
+@pytest.mark.parametrize("layer", sorted(MAY_IMPORT))
+def test_each_layer_imports_only_the_layers_below_it(layer):
+    wrong = {f"{path.relative_to(ROOT)} imports {name}"
+             for path in (PACKAGE / layer).rglob("*.py")
+             for name in prc3cfg_imports(path) if not allowed(name, MAY_IMPORT[layer])}
+    assert not wrong, sorted(wrong)
+
+
+def test_the_layer_check_can_fail():
+    """A core module that reached for the shell would be caught."""
+    assert not allowed("prc3cfg.shell.link.client.Link", MAY_IMPORT["core"])
+    assert any(not allowed(name, MAY_IMPORT["core"]) for name in prc3cfg_imports(PACKAGE / "shell" / "readback.py"))
+
+
+def test_every_module_is_in_a_layer():
+    """Only the package's entry points live outside a layer folder."""
+    top = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert top == ["__init__.py", "__main__.py", "api.py", "errors.py"]
+    assert sorted(p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__") == [
+        "cli", "core", "plant", "shell"]
+
 
 BLOCKING_IMPORT = """
 import importlib, importlib.abc, sys

@@ -6,14 +6,23 @@ from dataclasses import replace
 
 import pytest
 
-from prc3cfg.bustime import LineCost
-from prc3cfg.image import ModuleImage, Program
-from prc3cfg.line import LineSettings
-from prc3cfg.planner import plan_module
-from prc3cfg import render
-from prc3cfg.plantplan import ModuleChange, PlantPlan
-from prc3cfg.render import (
-    CLAMPED, FieldChange, changes_json, field_changes, field_name, human, jumps, markdown, module_diff, module_lines,
+from prc3cfg.core import render
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.planner import plan_module
+from prc3cfg.core.plantplan import ModuleChange, PlantPlan
+from prc3cfg.core.render import (
+    CLAMPED,
+    FieldChange,
+    changes_json,
+    field_changes,
+    field_name,
+    human,
+    jumps,
+    markdown,
+    module_diff,
+    module_lines,
 )
 
 
@@ -93,7 +102,7 @@ def full_line_plan(tmp_path):
     import yaml
 
     from prc3cfg import api
-    from prc3cfg.image import ModuleImage
+    from prc3cfg.core.image import ModuleImage
 
     modules = []
     for address in range(1, 31):

@@ -1,12 +1,12 @@
 """`prc3cfg adopt`: the plant file rewritten in place to describe what the modules hold (Teach In).
 
-Reads the modules (`prc3cfg.api.read`), works out the new text (`prc3cfg.adopt`), shows each
+Reads the modules (`prc3cfg.api.read`), works out the new text (`prc3cfg.plant.adopt`), shows each
 value adopted and the unified diff of the file, then writes it atomically — after asking on a
 terminal, or with `--auto-approve`; without a terminal it refuses in one line. `--check` shows
 the same and writes nothing: exit 2 when there is drift to adopt, 0 when there is none. The
 file is written only if it is still the one that was read; its permissions are kept.
 
-Arguments, prompts and output only: the work is `prc3cfg.adopt`'s.
+Arguments, prompts and output only: the work is `prc3cfg.plant.adopt`'s.
 """
 
 from __future__ import annotations
@@ -18,7 +18,16 @@ from typing import Annotated, Optional
 import typer
 
 from prc3cfg.cli import Outcome, app
-from prc3cfg.cli.common import LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, check_output, line_options, print_lines
+from prc3cfg.cli.common import (
+    LockOpt,
+    ModuleOpt,
+    PlantArg,
+    RetriesOpt,
+    TraceOpt,
+    check_output,
+    line_options,
+    print_lines,
+)
 from prc3cfg.cli.plan_commands import EXIT_CHANGES, ApproveOpt
 from prc3cfg.errors import UserError
 
@@ -46,8 +55,9 @@ def adopt(
     import os
     import stat
 
-    from prc3cfg import adopt as adopting, api
-    from prc3cfg.files import write_atomically
+    from prc3cfg import api
+    from prc3cfg.plant import adopt as adopting
+    from prc3cfg.shell.files import write_atomically
 
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
@@ -84,7 +94,7 @@ def adopt(
 
 
 def _text(plant: Path) -> str:
-    """The plant file's text as it is now (`prc3cfg.adopt` checks it is the one loaded)."""
+    """The plant file's text as it is now (`prc3cfg.plant.adopt` checks it is the one loaded)."""
     try:
         return plant.read_bytes().decode("utf-8", "replace")
     except OSError as error:

@@ -35,7 +35,7 @@ ZvzOpt = Annotated[float, typer.Option(min=0.004, help="open-driver: the charact
 
 def _bare_line(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
     from prc3cfg import api
-    from prc3cfg.line import LineSettings
+    from prc3cfg.core.line import LineSettings
 
     if framing not in FRAMING_NAMES:
         raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMING_NAMES)}")
@@ -64,7 +64,7 @@ def scan(
     from rich.table import Table
 
     from prc3cfg import api
-    from prc3cfg.plant.units import BY_SYMBOL
+    from prc3cfg.core.units import BY_SYMBOL
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
@@ -101,7 +101,7 @@ def import_plant(
 ) -> None:
     """Write a plant file (to stdout) from the live modules of one bus."""
     from prc3cfg import api
-    from prc3cfg.importer import module_entry, plant_yaml
+    from prc3cfg.plant.importer import module_entry, plant_yaml
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
@@ -122,7 +122,7 @@ def init_db(
     bus: Annotated[str, typer.Option("--bus", help="The bus whose gateway to parameterise.")],
 ) -> None:
     """The CP 524/525 Open Driver INIT data block (eight data words) for a bus's gateway."""
-    from prc3cfg import gateway
+    from prc3cfg.core import gateway
     from prc3cfg.plant import load_plant
 
     loaded = load_plant(plant)

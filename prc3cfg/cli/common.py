@@ -11,30 +11,28 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Annotated, Optional
-
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
-from prc3cfg.cancel import Cancellation
 from prc3cfg.errors import UserError
-from prc3cfg.files import write_atomically
+from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.files import write_atomically
 
 if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3cfg --help` stays quick
     from rich.console import Console
 
     from prc3cfg.api import LineOptions
-    from prc3cfg.link import Link
+    from prc3cfg.shell.link import Link
 
-#: The framings, as option help names them (a test checks them against `prc3cfg.framing.FRAMINGS`).
+#: The framings, as option help names them (a test checks them against `prc3cfg.core.framing.FRAMINGS`).
 FRAMING_NAMES = ("crc16", "open-driver", "stx")
-#: Module addresses on a line (`prc3cfg.image.MAX_MODULE_ADDRESS`, checked by the same test).
+#: Module addresses on a line (`prc3cfg.core.image.MAX_MODULE_ADDRESS`, checked by the same test).
 ADDRESSES = range(1, 31)
 
 
 class Verify(str, enum.Enum):
-    """`--verify`: the values of `prc3cfg.apply.Verify` (checked by the same test)."""
+    """`--verify`: the values of `prc3cfg.shell.apply.Verify` (checked by the same test)."""
 
     FLOOR = "floor"
     FULL = "full"
@@ -170,7 +168,13 @@ class TerminalProgress:
         self._task = None
 
     def start(self, what: str, total: int) -> None:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+        )
 
         if self._bar is None:
             stderr = stderr_console()

@@ -59,10 +59,10 @@ def serve(
     keeps its state and the write gets no reply: the master repeats it.
     Warnings and errors are logged on stderr.
     """
-    from prc3cfg.device import ModuleState
-    from prc3cfg.emulator import Emulator, FaultInjection, load_state
-    from prc3cfg.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
-    from prc3cfg.line import LineSettings
+    from prc3cfg.core.device import ModuleState
+    from prc3cfg.core.line import LineSettings
+    from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state
+    from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if framing not in FRAMING_NAMES:

@@ -1,7 +1,7 @@
 """What `read`, `plan`, `apply` and `restore` print and ask: plans, drift, gates, the account of an apply.
 
 Imported by the commands when they run (not when `prc3cfg --help` lists them). Rendering is
-`prc3cfg.render`'s; this module arranges it for the terminal and asks the questions.
+`prc3cfg.core.render`'s; this module arranges it for the terminal and asks the questions.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from pathlib import Path
 
 import typer
 
-from prc3cfg import render
 from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Gates
-from prc3cfg.apply import ModuleRun, Release
 from prc3cfg.cli.common import print_lines, write_output
+from prc3cfg.core import render
+from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.errors import UserError
-from prc3cfg.plantplan import PlantPlan
+from prc3cfg.shell.apply import ModuleRun, Release
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str]) -> None:

@@ -29,7 +29,8 @@ def read(
     programs the plant's system parameters would clamp)."""
     import json
 
-    from prc3cfg import api, render
+    from prc3cfg import api
+    from prc3cfg.core import render
 
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)

@@ -5,7 +5,7 @@
 - `show PLANT [--module NAME]`: a module's effective configuration in human units, each
   value with its device value and where it came from (default, profile NAME, module);
   without `--module`, the plant's modules. `--plot FILE.svg|png` draws the module's chains
-  instead (`prc3cfg.plot`; the `plot` extra), and `--actual FILE` (a `read --json` file)
+  instead (`prc3cfg.core.plot`; the `plot` extra), and `--actual FILE` (a `read --json` file)
   overlays what the module holds as before, against what the plan leaves it holding.
 - `schema`: the plant file's JSON Schema (draft-07), as `schemas/plant.schema.json` holds it.
 """
@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
-
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
 
@@ -66,7 +64,7 @@ def show(
         _show_plan_file(plant, json_out=json_out, markdown=markdown, max_chars=max_chars)
         return
     if plot is not None:
-        from prc3cfg.plot import plot_format
+        from prc3cfg.core.plot import plot_format
 
         fmt = plot_format(plot)
         if module is None:
@@ -94,8 +92,9 @@ def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: in
     """A saved plan file as the plan was shown — its steps' summaries worked out again from their bytes."""
     import json
 
-    from prc3cfg import api, render
+    from prc3cfg import api
     from prc3cfg.cli.common import print_lines
+    from prc3cfg.core import render
 
     document = api.plan_document(path)
     if json_out:
@@ -136,8 +135,12 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     from rich import box
     from rich.table import Table
 
+    from prc3cfg.core.units import (
+        PROGRAM_QUANTITIES,
+        SYSTEM_QUANTITIES,
+        format_function_output,
+    )
     from prc3cfg.plant.profiles import Sourced
-    from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, format_function_output
 
     settings = module.settings
     console.print(f"module [bold]{module.name}[/] — bus {bus}, address {module.address}, "
@@ -178,7 +181,7 @@ def _plot_module(plant: Plant, bus: str, module: Module, path: Path, fmt: str, a
     """Draw the module's desired image; with `actual`, what it holds now as before and what the
     plan leaves (`plan.predicted`: the plant file's programs and the kept ones, as clamped) as after."""
     from prc3cfg import api
-    from prc3cfg.plot import picture
+    from prc3cfg.core.plot import picture
 
     title = f"module {module.name} — bus {bus}, address {module.address}"
     if actual is None:

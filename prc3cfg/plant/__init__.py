@@ -4,9 +4,10 @@
 
 `load_plant(path)` reads a plant file (interfaces.md §1) and returns a `Plant`, or raises
 `PlantError` listing every problem as `file:line:column: what is wrong — what would be
-right`. The parts: `units` (human ↔ device units, exactly), `models` (the file's structure
-and the JSON Schema), `document` (YAML with positions), `messages` (wording), `profiles`
-(layering), `rules` (cross-value checks), `plant` (the loaded plant), `loader`.
+right`. The parts: `models` (the file's structure and the JSON Schema), `document` (YAML
+with positions), `messages` (wording), `profiles` (layering), `rules` (cross-value checks),
+`plant` (the loaded plant), `loader`; and the two writers, `importer` (a plant file from
+modules) and `adopt` (a plant file rewritten in place). Units are `prc3cfg.core.units`.
 """
 
 from prc3cfg.plant.loader import load_plant

@@ -62,13 +62,19 @@ from typing import Any
 import yaml
 from yaml.composer import ComposerError
 from yaml.events import (
-    AliasEvent, DocumentStartEvent, MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent,
-    SequenceStartEvent, StreamEndEvent,
+    AliasEvent,
+    DocumentStartEvent,
+    MappingEndEvent,
+    MappingStartEvent,
+    ScalarEvent,
+    SequenceEndEvent,
+    SequenceStartEvent,
+    StreamEndEvent,
 )
 from yaml.nodes import ScalarNode
 
-from prc3cfg.files import FileProblem, Why, read_regular
 from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, MAX_PROBLEMS, Path_, PlantError, Problem
+from prc3cfg.shell.files import FileProblem, Why, read_regular
 
 #: The parser: libyaml's when PyYAML was built with it (issue 11 wants its speed).
 LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -250,7 +256,7 @@ _REMEDIES = {
 
 
 def _read_bytes(path: Path, name: str) -> bytes:
-    """The bytes of the plant file, at most `MAX_BYTES` (`prc3cfg.files.read_regular`)."""
+    """The bytes of the plant file, at most `MAX_BYTES` (`prc3cfg.shell.files.read_regular`)."""
     try:
         return read_regular(path, MAX_BYTES)
     except FileProblem as problem:

@@ -33,7 +33,7 @@ must be plain — letters, digits, `-`, `_`, `.` not first — because it names 
 0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms on an open-driver line is a `rules` check,
 SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and the Open Driver
 allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223 SYSTAT 91h), from
-`prc3cfg.gateway`.
+`prc3cfg.core.gateway`.
 """
 
 from __future__ import annotations
@@ -45,17 +45,24 @@ from typing import Annotated, Any, Literal
 from urllib.parse import urlsplit
 
 from pydantic import (
-    AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, GetJsonSchemaHandler, PlainValidator, WithJsonSchema,
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    GetJsonSchemaHandler,
+    PlainValidator,
+    WithJsonSchema,
     model_validator,
 )
 from pydantic.json_schema import GenerateJsonSchema, JsonSchemaValue
 from pydantic_core import PydanticCustomError, core_schema
 
-from prc3cfg import gateway
-from prc3cfg.framing import FRAMINGS
-from prc3cfg.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
-from prc3cfg.line import DATA_BITS, EMULATOR_SCHEME, PARITIES, STOP_BITS, TCP_SCHEMES
-from prc3cfg.plant.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
+from prc3cfg.core import gateway
+from prc3cfg.core.framing import FRAMINGS
+from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
+from prc3cfg.core.line import DATA_BITS, EMULATOR_SCHEME, PARITIES, STOP_BITS, TCP_SCHEMES
+from prc3cfg.core.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
 
 SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
 #: The schema's `$id`: the same for every version, since plant files only gain keys.

@@ -14,11 +14,11 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict
 
-from prc3cfg.image import PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
-from prc3cfg.line import LineSettings
+from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, function_output
 from prc3cfg.plant.models import BusLine, UnmanagedPrograms
 from prc3cfg.plant.profiles import Effective
-from prc3cfg.plant.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, function_output
 
 
 class Module(BaseModel):

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 from decimal import Decimal
 from typing import Any
 
-from prc3cfg.image import DEFAULT_SYSTEM
+from prc3cfg.core.image import DEFAULT_SYSTEM
+from prc3cfg.core.units import SYSTEM_QUANTITIES
 from prc3cfg.plant.models import FunctionOutputSpec, ModuleSpec, ProfileSpec
 from prc3cfg.plant.problems import Path_
-from prc3cfg.plant.units import SYSTEM_QUANTITIES
 
 DEFAULT = "default"
 MODULE = "module"

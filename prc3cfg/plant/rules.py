@@ -10,7 +10,7 @@ On a module's effective settings (after profiles):
   (a jump into a program the plant does not describe would run unknown contents); a
   program may not both have `next` and be in a chain.
 
-On a bus: with a `gateway`, the Open Driver's own checks on the line (`prc3cfg.gateway`:
+On a bus: with a `gateway`, the Open Driver's own checks on the line (`prc3cfg.core.gateway`:
 illegal baud rate SYSTAT 8Bh, ZVZ below 4 ms SYSTAT 8Eh, …). An `open-driver` line ends in
 that driver whether or not the file describes the gateway, so its ZVZ minimum (8Eh) holds
 without a `gateway:` too; the other checks need the gateway's own words.
@@ -28,13 +28,14 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any
 
-from prc3cfg import gateway
-from prc3cfg.line import LineSettings
+from prc3cfg.core import gateway
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.units import QUANTITIES
 from prc3cfg.plant.document import mappings_in
 from prc3cfg.plant.models import BusLine, Gateway
 from prc3cfg.plant.problems import FIRST, Path_, Problem
 from prc3cfg.plant.profiles import DEFAULT, Effective, Sourced
-from prc3cfg.plant.units import QUANTITIES
+
 
 def check_module(name: str, path: Path_, settings: Effective) -> list[Problem]:
     """The problems of one module's effective settings (module `name` at `path`)."""

@@ -13,11 +13,11 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from prc3cfg import codec, device
-from prc3cfg.bustime import LineCost
-from prc3cfg.image import ModuleImage, Program, default_program
-from prc3cfg.line import LineSettings
-from prc3cfg.planner import ModulePlan
+from prc3cfg.core import codec, device
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.image import ModuleImage, Program, default_program
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.planner import ModulePlan
 
 FRAMINGS = ("crc16", "open-driver", "stx")
 

@@ -19,8 +19,8 @@ from planner_helpers import FRAMINGS, line, plan_bench, with_programs
 from test_planner_cases import PLANT, recipe
 from test_planner_property import plant_file, read_back
 
-from prc3cfg.image import PROGRAM_COUNT
-from prc3cfg.planner import plan_module
+from prc3cfg.core.image import PROGRAM_COUNT
+from prc3cfg.core.planner import plan_module
 
 EPSILON = 1e-9
 

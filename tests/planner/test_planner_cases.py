@@ -8,10 +8,10 @@ from dataclasses import replace
 import pytest
 from planner_helpers import FRAMINGS, check_plan, line, with_programs
 
-from prc3cfg import codec
-from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, default_program
-from prc3cfg.planner import ModulePlan, UnreachableImage, plan_module
-from prc3cfg.planner.plan import program_list, summarise
+from prc3cfg.core import codec
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, default_program
+from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
+from prc3cfg.core.planner.plan import program_list, summarise
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
 

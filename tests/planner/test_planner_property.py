@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from planner_helpers import FRAMINGS, check_plan, line
 
-from prc3cfg.image import (
+from prc3cfg.core.image import (
     DEFAULT_SYSTEM,
     PROGRAM_COUNT,
     PROGRAM_FIELDS,
@@ -24,7 +24,7 @@ from prc3cfg.image import (
     SystemParameters,
     default_program,
 )
-from prc3cfg.planner import plan_module
+from prc3cfg.core.planner import plan_module
 
 
 def random_system(rnd: random.Random) -> SystemParameters:

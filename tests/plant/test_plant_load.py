@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from prc3cfg.image import DEFAULT_SYSTEM, PROGRAM_COUNT, Program, default_program
-from prc3cfg.line import LineSettings
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, Program, default_program
+from prc3cfg.core.line import LineSettings
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 
 ROOT = Path(__file__).parents[2]

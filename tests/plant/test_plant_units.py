@@ -8,9 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from prc3cfg.image import SYSTEM_KEYS
-from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
-from prc3cfg.plant.units import (
+from prc3cfg.core.image import SYSTEM_KEYS
+from prc3cfg.core.units import (
     DISTANCE,
     PROGRAM_QUANTITIES,
     QUANTITIES,
@@ -20,6 +19,7 @@ from prc3cfg.plant.units import (
     function_output,
     split_function_output,
 )
+from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 
 #: Which model validates each quantity's key, so the round trip goes through the plant file's rules too.
 MODEL_OF = {q.key: SystemSpec for q in SYSTEM_QUANTITIES} | {q.key: ProgramSpec for q in PROGRAM_QUANTITIES}

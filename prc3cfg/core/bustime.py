@@ -1,0 +1,48 @@
+"""Bus time: what one exchange costs on a line (link.md "Bus time — the cost a plan is judged by").
+
+    t = (bytes_request + bytes_reply) × bits_per_char / baud + turnaround (+ 2 × ZVZ for open-driver)
+
+Bytes are whole frames (framing overhead and stx stuffing included). A broadcast (address
+0, the manual's ring call) has no reply frame. (reading) It still costs the turnaround
+(and an open-driver line's gap after the request): the master cannot send the next frame
+sooner, and gets no reply that would say the modules are ready.
+
+Owns the cost of exchanges. Does not own which exchanges a plan makes (`prc3cfg.core.planner`).
+Pure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from prc3cfg.core import codec
+from prc3cfg.core.framing import Direction, Framing, get_framing
+from prc3cfg.core.line import LineSettings
+
+
+@dataclass(frozen=True, slots=True)
+class LineCost:
+    """The settings of one line that price its exchanges."""
+
+    framing: Framing
+    line: LineSettings = LineSettings()
+    turnaround: float = 0.010
+    zvz: float = 0.020
+
+    @classmethod
+    def of(cls, framing: str, line: LineSettings, turnaround: float, zvz: float) -> LineCost:
+        return cls(get_framing(framing), line, turnaround, zvz)
+
+    def message_time(self, address: int, message: codec.Message) -> float:
+        """Seconds an exchange of `message` holds the line: request frame, turnaround, reply frame
+        (a read's data block, a write's code word)."""
+        request = self.framing.encode(Direction.REQUEST, address, message.encode())
+        reply = self.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message)))
+        gaps = 2 * self.zvz if self.framing.name == "open-driver" else 0.0
+        return (len(request) + len(reply)) * self.line.char_time + self.turnaround + gaps
+
+    def broadcast_time(self, message: codec.Message) -> float:
+        """Seconds a broadcast of `message` holds the line: request frame and turnaround."""
+        request = self.framing.encode(Direction.REQUEST, 0, message.encode())
+        gap = self.zvz if self.framing.name == "open-driver" else 0.0
+        return len(request) * self.line.char_time + self.turnaround + gap

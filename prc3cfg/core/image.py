@@ -1,0 +1,154 @@
+"""What a PRC 3 module holds, in device units: system parameters, programs, the module image.
+
+Owns the value types shared by the codec, the device model, plant files, read-back and the
+planner, their factory defaults (prc3-protocol.md §4.1) and the module image JSON
+(interfaces.md §2). Owns no behaviour of a module: what a module *does* with a message is
+`prc3cfg.core.device`. Pure: no I/O.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+PROGRAM_COUNT = 64
+PROGRAM_NUMBERS = range(1, PROGRAM_COUNT + 1)
+MAX_MODULE_ADDRESS = 30
+
+#: System parameters in message order (20h, 50h), S9 excluded: it is read-only.
+SYSTEM_KEYS = ("S1", "S2", "S3", "S4", "S5", "S6", "S7", "S8", "S10", "S11", "S12")
+#: Program fields in message order (21h, 51h, 52h).
+PROGRAM_FIELDS = ("P", "V", "Vr", "T", "F1", "F2", "A")
+
+
+def whole(value: Any, name: str) -> int:
+    """A value read from JSON that must be a whole number of device units (never "2", 2.7 or true)."""
+    if type(value) is not int:
+        raise ValueError(f"{name} = {value!r} is not a whole number")
+    return value
+
+
+@dataclass(frozen=True, slots=True)
+class SystemParameters:
+    """S1..S12 without S9, in device units (mm, mm/s, mm/s², 0.001 m/s², …)."""
+
+    S1: int
+    S2: int
+    S3: int
+    S4: int
+    S5: int
+    S6: int
+    S7: int
+    S8: int
+    S10: int
+    S11: int
+    S12: int
+
+    def values(self) -> tuple[int, ...]:
+        return tuple(getattr(self, key) for key in SYSTEM_KEYS)
+
+    def to_json(self) -> dict[str, int]:
+        return dict(zip(SYSTEM_KEYS, self.values()))
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> SystemParameters:
+        return cls(**{key: whole(data[key], key) for key in SYSTEM_KEYS})
+
+
+@dataclass(frozen=True, slots=True)
+class Program:
+    """One program: position, speed, relative speed, dwell, function outputs, jump address."""
+
+    P: int
+    V: int
+    Vr: int = 0
+    T: int = 0
+    F1: int = 0
+    F2: int = 0
+    A: int = 0
+
+    def values(self) -> tuple[int, ...]:
+        return (self.P, self.V, self.Vr, self.T, self.F1, self.F2, self.A)
+
+    def with_field(self, name: str, value: int) -> Program:
+        return replace(self, **{name: value})
+
+    def to_json(self) -> dict[str, int]:
+        return dict(zip(PROGRAM_FIELDS, self.values()))
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Program:
+        return cls(**{key: whole(data[key], key) for key in PROGRAM_FIELDS})
+
+
+#: Factory defaults after 10h (prc3-protocol.md §4.1). (reading) S2 = 50, not the
+#: "0.500 m" printed in manual §2.3.1, which contradicts its own example words.
+DEFAULT_SYSTEM = SystemParameters(
+    S1=400, S2=50, S3=754, S4=600, S5=10, S6=1500, S7=1000, S8=0, S10=583, S11=1100, S12=10
+)
+DEFAULT_SPEED = 50
+
+
+def default_program(system: SystemParameters) -> Program:
+    """The program an init (11h..14h) leaves: P = Def_Pos, V = 50, everything else 0.
+
+    Def_Pos = min(S2 + 100, S1) (manual §2.2.1). (reading) "SP_2 + 0.0100" in manual §2.3.2
+    is the same rule with a misprinted unit. (reading) V = 50 is clamped into [S5, S4]
+    like any speed.
+    """
+    return Program(P=min(system.S2 + 100, system.S1), V=min(max(DEFAULT_SPEED, system.S5), system.S4))
+
+
+@dataclass(frozen=True, slots=True)
+class ModuleImage:
+    """A module's contents (interfaces.md §2): S9 as `address`, system parameters, 64 programs.
+
+    `programs[i]` is program i + 1; `None` marks a program that was not read (or, in a
+    desired image, is not managed).
+    """
+
+    address: int
+    system: SystemParameters
+    programs: tuple[Program | None, ...]
+
+    def __post_init__(self) -> None:
+        if len(self.programs) != PROGRAM_COUNT:
+            raise ValueError(f"a module image holds {PROGRAM_COUNT} programs, not {len(self.programs)}")
+
+    def program(self, number: int) -> Program | None:
+        return self.programs[number - 1]
+
+    def with_programs(self, changes: dict[int, Program]) -> ModuleImage:
+        """This image with the given programs (by number) replaced."""
+        programs = list(self.programs)
+        for number, program in changes.items():
+            programs[number - 1] = program
+        return replace(self, programs=tuple(programs))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "address": self.address,
+            "system": self.system.to_json(),
+            "programs": [None if p is None else p.to_json() for p in self.programs],
+        }
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> ModuleImage:
+        programs = data["programs"]
+        if not isinstance(programs, list):
+            raise ValueError(f"programs is {type(programs).__name__}, not a list of {PROGRAM_COUNT}")
+        return cls(
+            address=whole(data["address"], "address"),
+            system=SystemParameters.from_json(data["system"]),
+            programs=tuple(None if p is None else Program.from_json(p) for p in programs),
+        )
+
+    @classmethod
+    def factory(cls, address: int) -> ModuleImage:
+        """A module as it leaves the factory: default system parameters, default programs."""
+        program = default_program(DEFAULT_SYSTEM)
+        return cls(address=address, system=DEFAULT_SYSTEM, programs=(program,) * PROGRAM_COUNT)
+
+
+assert tuple(f.name for f in fields(SystemParameters)) == SYSTEM_KEYS
+assert tuple(f.name for f in fields(Program)) == PROGRAM_FIELDS

@@ -1,0 +1,366 @@
+"""Showing plans to people: the diff in human units, chains as chains, axis warnings.
+
+Owns the words and layout of `plan` output — human (Terraform-like), markdown for pull
+request comments (within a comment's size, with a stroke chart per changed chain), and the
+`changes` list of the JSON output. Reasons shown here never
+steer an apply (the plan's steps do). A module's diff (`ModuleDiff`: its fields, its jumps,
+the programs it clamps) is worked out once, by comparing the two images field by field, and
+every output of the same plan is made from it (`module_diff` keeps the diffs of the last
+`_KEPT_DIFFS` modules). The units are `prc3cfg.core.units`. Pure: returns strings.
+"""
+
+from __future__ import annotations
+
+import functools
+import html
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from prc3cfg.core.chains import jumps_as_chains
+from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
+from prc3cfg.core.motion import MotionError, paired_chains
+from prc3cfg.core.plantplan import ModuleChange, PlantPlan
+from prc3cfg.core.plot import mermaid
+from prc3cfg.core.units import BY_SYMBOL, format_function_output
+
+AXIS_WARNING = "releases the axes: travel to reference point required after apply"
+CLAMPED = "clamped by the module itself when its system parameters change"
+#: The program fields a diff compares: A is shown as jumps (`chain_changes`).
+_DIFF_FIELDS = tuple(f for f in PROGRAM_FIELDS if f != "A")
+#: Modules whose diff `module_diff` keeps: every module of a plant of 8 buses × 30 modules and more.
+_KEPT_DIFFS = 1024
+
+
+def field_name(symbol: str) -> str:
+    """The plant-file key in words: S1 → "upper reversing point", Vr → "relative speed"."""
+    return BY_SYMBOL[symbol].key.replace("_", " ") if symbol in BY_SYMBOL else symbol
+
+
+#: Device ranges of the fields whose range does not depend on the system parameters;
+#: a read-back outside them (a damaged or foreign module) is shown raw, never decoded.
+_RANGES = {**{q.symbol: (q.lo, q.hi) for q in BY_SYMBOL.values()}, "F1": (0, 1999), "F2": (0, 1999)}
+
+
+@functools.lru_cache(maxsize=4096)
+def format_value(symbol: str, device: int) -> str:
+    """A device value in human units: "1.050 m", "set at 0.010 m"; raw when it is out of range."""
+    low, high = _RANGES[symbol]
+    if not low <= device <= high:
+        return f"{device} (raw, outside {low}..{high})"
+    if symbol in ("F1", "F2"):
+        return format_function_output(device)
+    return BY_SYMBOL[symbol].format(device)
+
+
+@dataclass(frozen=True, slots=True)
+class FieldChange:
+    """One differing field, and how people read it: "position 1.050 m → 0.600 m"."""
+
+    program: int | None  # None: a system parameter
+    symbol: str
+    before: int
+    after: int
+    text: str
+
+    @classmethod
+    def of(cls, program: int | None, symbol: str, before: int, after: int) -> FieldChange:
+        text = f"{field_name(symbol)} {format_value(symbol, before)} → {format_value(symbol, after)}"
+        return cls(program, symbol, before, after, text)
+
+    def to_json(self) -> dict:
+        return {"program": self.program, "field": self.symbol, "before": self.before, "after": self.after, "text": self.text}
+
+
+def field_changes(actual: ModuleImage, desired: ModuleImage) -> list[FieldChange]:
+    """Every differing system parameter and program field (A excluded: see `chain_changes`), in
+    message order; a program missing from either image (not read, not managed) has none."""
+    system = [FieldChange.of(None, key, getattr(actual.system, key), getattr(desired.system, key))
+              for key in SYSTEM_KEYS if getattr(actual.system, key) != getattr(desired.system, key)]
+    return system + _program_changes(actual.programs, desired.programs, PROGRAM_NUMBERS)
+
+
+def _program_changes(before: tuple[Program | None, ...], after: tuple[Program | None, ...],
+                     numbers: Iterable[int]) -> list[FieldChange]:
+    """The differing fields (A excluded) of the programs `numbers` that both images hold."""
+    changes = []
+    for number in numbers:
+        old, new = before[number - 1], after[number - 1]
+        if old is not None and new is not None and old != new:
+            changes += [FieldChange.of(number, key, getattr(old, key), getattr(new, key))
+                        for key in _DIFF_FIELDS if getattr(old, key) != getattr(new, key)]
+    return changes
+
+
+def jumps(image: ModuleImage, within: set[int]) -> set[str]:
+    """The jumps among the programs in `within` as people read them: chains, loops, single jumps."""
+    chain_list, nexts = jumps_as_chains({n: image.programs[n - 1] for n in within})
+    lines = {f"jump {n} → {a}" for n, a in nexts.items()}
+    for chain in chain_list:
+        if isinstance(chain, dict):  # a loop: back to its first program
+            lines.add("chain " + " → ".join(map(str, [*chain["programs"], chain["programs"][0]])))
+        else:
+            lines.add("chain " + " → ".join(map(str, chain)) + " → stop")
+    return lines
+
+
+def chain_changes(actual: ModuleImage, desired: ModuleImage) -> tuple[list[str], list[str]]:
+    """(jumps removed, jumps added) among the managed programs."""
+    managed = {n for n, p in enumerate(desired.programs, start=1) if p is not None}
+    before, after = jumps(actual, managed), jumps(desired, managed)
+    return sorted(before - after), sorted(after - before)
+
+
+def program_symbols(actual: ModuleImage, desired: ModuleImage, numbers: Iterable[int]) -> dict[int, str]:
+    """`+` a program set up from factory defaults, `-` one put back to them, `~` otherwise."""
+    was, will = default_program(actual.system), default_program(desired.system)
+    return {n: "+" if actual.programs[n - 1] == was else "-" if desired.programs[n - 1] == will else "~" for n in numbers}
+
+
+def clamped_changes(change: ModuleChange) -> list[FieldChange]:
+    """What the module's own clamping does to programs the plant does not manage (§4.2)."""
+    unmanaged = [n for n, p in enumerate(change.desired.programs, start=1) if p is None]
+    return _program_changes(change.actual.programs, change.plan.predicted.programs, unmanaged)
+
+
+def differences(have: ModuleImage, want: ModuleImage) -> list[str]:
+    """Where a module holds something else than the plant file says, "what it holds → what it should"."""
+    fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text}" for f in field_changes(have, want)]
+    removed, added = chain_changes(have, want)
+    return fields + [f"has {c}" for c in removed] + [f"lacks {c}" for c in added]
+
+
+@dataclass(frozen=True, slots=True)
+class ModuleDiff:
+    """What one module's plan changes, as every output shows it: the differing fields (their
+    texts made once: a plan of 240 changed modules has 60,000), each changed program's symbol
+    (`program_symbols`), the jumps removed and added, and what the module's clamping does to
+    programs the plant does not manage."""
+
+    fields: tuple[FieldChange, ...]
+    symbols: dict[int, str]
+    chains_removed: tuple[str, ...]
+    chains_added: tuple[str, ...]
+    clamped: tuple[FieldChange, ...]
+
+
+@functools.lru_cache(maxsize=_KEPT_DIFFS)
+def module_diff(change: ModuleChange) -> ModuleDiff:
+    """The diff of one module, worked out once for the human, markdown and JSON outputs of a plan."""
+    fields = field_changes(change.actual, change.desired)
+    removed, added = chain_changes(change.actual, change.desired)
+    return ModuleDiff(
+        fields=tuple(fields),
+        symbols=program_symbols(change.actual, change.desired, {f.program for f in fields if f.program is not None}),
+        chains_removed=tuple(removed),
+        chains_added=tuple(added),
+        clamped=tuple(clamped_changes(change)),
+    )
+
+
+def module_lines(changes: dict) -> list[str]:
+    """The diff of one module, one change per line, from its `changes` (`changes_json`, or a plan file's)."""
+    lines: list[str] = []
+    system = [f["text"] for f in changes["fields"] if f["program"] is None]
+    if system:
+        lines.append(f"~ system: {', '.join(system)}")
+    programs: dict[int, list[str]] = {}
+    for f in changes["fields"]:
+        if f["program"] is not None:
+            programs.setdefault(f["program"], []).append(f["text"])
+    symbols = changes.get("symbols", {})
+    lines += [f"{symbols.get(str(number), '~')} program {number}: {', '.join(texts)}" for number, texts in programs.items()]
+    lines += [f"- {c}" for c in changes["chains_removed"]] + [f"+ {c}" for c in changes["chains_added"]]
+    clamped: dict[int, list[str]] = {}
+    for f in changes["clamped"]:
+        clamped.setdefault(f["program"], []).append(f["text"])
+    lines += [f"~ program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}" for n, texts in clamped.items()]
+    return lines
+
+
+def plural(count: int, one: str, many: str | None = None) -> str:
+    """ "1 module", "2 modules", "1 bus", "3 buses"."""
+    return f"{count} {one if count == 1 else many or one + 's'}"
+
+
+def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float, releases: bool) -> str:
+    """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
+    head = f"bus {bus}, module {address} ({name})"
+    if not steps:
+        return f"  {head}: no changes"
+    received = f" ({broadcasts} by broadcast)" if broadcasts else ""
+    warn = f"  ⚠ {AXIS_WARNING}" if releases else ""
+    return f"~ {head}: {plural(steps, 'step')}{received}, {seconds:.3f} s{warn}"
+
+
+def step_line(index: int, message_hex: str, summary: str, releases: bool, broadcast: bool) -> str:
+    """One step: number, the message as sent, what it does, and what it means for the axes."""
+    return (f"{index:>3}. {message_hex:<24} {summary}" + ("  (broadcast)" if broadcast else "")
+            + ("  ⚠ RELEASES AXES" if releases else ""))  # fmt: skip
+
+
+def changes_json(change: ModuleChange) -> dict:
+    """What people read of one module's change: its fields, the symbol of each changed program,
+    its jumps, what the module's clamping does, the axis warning (a plan file keeps it beside the steps)."""
+    diff = module_diff(change)
+    return {
+        "fields": [f.to_json() for f in diff.fields],
+        "symbols": {str(number): symbol for number, symbol in diff.symbols.items()},
+        "chains_removed": list(diff.chains_removed),
+        "chains_added": list(diff.chains_added),
+        "clamped": [{**f.to_json(), "reason": CLAMPED} for f in diff.clamped],
+        "warning": AXIS_WARNING if change.releases_axes else None,
+    }
+
+
+def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict:
+    """The plan file `prc3cfg-plan/1` (interfaces.md §4) with what people read beside the steps:
+    each module's `changes` and `warning`, and what stays on the hardware (`left_alone`). Every
+    output of a plan — human, markdown — is made from this document, and so is that of a saved
+    plan file (`prc3cfg show PLAN.json`)."""
+    document = plan.to_json() | {"left_alone": list(notes)}
+    for bus in document["buses"]:
+        for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
+            entry["changes"] = changes_json(change)
+            entry["warning"] = AXIS_WARNING if change.releases_axes else None
+    return document
+
+
+def _modules(document: dict) -> list[tuple[str, dict]]:
+    return [(bus["name"], module) for bus in document["buses"] for module in bus["modules"]]
+
+
+def _header(bus: str, module: dict) -> str:
+    steps = module["steps"]
+    return header_line(bus, module["address"], module["name"], len(steps), sum(bool(s.get("broadcast")) for s in steps),
+                       module.get("estimated_bus_time_s", 0.0), module["releases_axes"])  # fmt: skip
+
+
+def _step_lines(module: dict) -> list[str]:
+    return [step_line(i, s["message"], s["summary"], s["releases_axes"], bool(s.get("broadcast")))
+            for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
+
+
+def _broadcast_lines(bus: dict) -> list[str]:
+    """A bus's broadcasts, once: one step for all of its modules."""
+    steps = bus.get("broadcasts", [])
+    if not steps:
+        return []
+    head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all {len(steps[0]['modules'])} modules "
+            "(address 0), each verified by reading back")  # fmt: skip
+    return [head, *(f"    {step_line(i, s['message'], s['summary'], s['releases_axes'], True)}" for i, s in enumerate(steps, 1)), ""]
+
+
+def summary_line(document: dict) -> str:
+    modules = _modules(document)
+    changed = sum(1 for _, m in modules if m["steps"])
+    if not changed:
+        return "No changes: every module matches the plant file."
+    releases = len(document["axis_releases"])
+    return (
+        f"Plan: {changed} of {plural(len(modules), 'module')} change{'s' if changed == 1 else ''}, "
+        f"{plural(document['message_count'], 'message')}, "
+        f"estimated bus time {document['estimated_bus_time_s']:.3f} s (naive download {document['naive_bus_time_s']:.3f} s)"
+        + (f"; ⚠ {plural(releases, 'module')} release{'s' if releases == 1 else ''} the axes" if releases else "")
+    )
+
+
+def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:
+    """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
+    each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary."""
+    document = plan if isinstance(plan, dict) else plan_json(plan, notes)
+    out = [f"Plant {document['plant']}", ""]
+    for bus in document["buses"]:
+        out += _broadcast_lines(bus)
+    for bus, module in _modules(document):
+        if not module["steps"]:
+            out.append(_header(bus, module))
+            continue
+        lines = [_header(bus, module), *module_lines(module["changes"]), "steps:", *_step_lines(module)]
+        out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
+    if document["axis_releases"]:
+        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+    out.append(summary_line(document))
+    out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
+    return "\n".join(out)
+
+
+#: Marks the pull-request comment a plan is posted as, so that CI updates it instead of adding one.
+MARKER = "<!-- prc3cfg-plan -->"
+#: What a GitHub comment holds, with room to spare (65,536 characters).
+COMMENT_BUDGET = 65_000
+#: Stroke charts (mermaid, about 1 KB each) a module's details show at most.
+CHARTS = 3
+
+
+def cell(text: str) -> str:
+    """Text for a markdown table cell or HTML: `|` escaped, `<`, `>` and `&` as entities."""
+    return html.escape(text, quote=False).replace("|", "\\|")
+
+
+def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
+             full_plan: str = "the plan file") -> str:  # fmt: skip
+    """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
+    the marker, the summary, every axis-release warning and the table of changed modules always;
+    then each module's details (with a stroke chart per changed chain, for a live plan) while they
+    fit, and a last line saying how many were left out and where the full plan is."""
+    document = plan if isinstance(plan, dict) else plan_json(plan, notes)
+    charts = {} if isinstance(plan, dict) else {(m.bus, m.address): m for m in plan.changes}
+    changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
+    head = [MARKER, f"### prc3cfg plan — `{cell(document['plant'])}`", "", summary_line(document), ""]
+    if document["axis_releases"]:
+        head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
+                 + ", ".join(f"`{cell(name)}`" for name in document["axis_releases"]), ""]  # fmt: skip
+    left_alone = document.get("left_alone", [])
+    head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
+    if changed:
+        head += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
+        for bus, m in changed:
+            axes = "⚠ released: travel to reference point required" if m["releases_axes"] else ""
+            head.append(f"| {cell(bus)} | {cell(m['name'])} | {m['address']} | {len(m['steps'])} | "
+                        f"{m.get('estimated_bus_time_s', 0.0):.3f} s | {axes} |")  # fmt: skip
+        head.append("")
+    for bus in document["buses"]:
+        if lines := _broadcast_lines(bus):
+            head += ["```", *lines[:-1], "```", ""]
+    text = "\n".join(head)
+    for shown, (bus, m) in enumerate(changed):
+        block = _details(bus, m, charts.get((bus, m["address"])))
+        left = len(changed) - shown
+        closing = (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
+                   f"{max_chars:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
+        if len(text) + len(block) + (len(closing) if left > 1 else 0) > max_chars:
+            return text + closing
+        text += block
+    return text
+
+
+def _details(bus: str, m: dict, change: ModuleChange | None) -> str:
+    return "\n".join([
+        f"<details><summary>{cell(bus)} / {cell(m['name'])} (address {m['address']})"
+        + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
+        "",
+        "```diff",
+        *module_lines(m["changes"]),
+        "```",
+        "",
+        "```",
+        *_step_lines(m),
+        "```",
+        *(_charts(change) if change is not None else []),
+        "</details>",
+        "",
+        "",
+    ])  # fmt: skip
+
+
+def _charts(m: ModuleChange) -> list[str]:
+    """The stroke of each changed chain, before and after, as GitHub draws it (`plot.mermaid`)."""
+    try:
+        pairs = paired_chains(m.actual, m.plan.predicted, changed_only=True)
+    except MotionError:  # a damaged read-back: the diff above still shows it
+        return []
+    charts = ["", *(mermaid(before, after) for before, after in pairs[:CHARTS])]
+    if len(pairs) > CHARTS:
+        charts.append(f"\n_{plural(len(pairs) - CHARTS, 'more chain')} changed: `prc3cfg show PLANT --module "
+                      f"{cell(m.name)} --plot FILE.svg` draws them all._")  # fmt: skip
+    return charts if pairs else []

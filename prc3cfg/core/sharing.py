@@ -1,0 +1,178 @@
+"""Broadcasts: what every module of a line needs alike is sent once, to address 0.
+
+The manual's ring call (address 0) is processed by every module on the line and answered by
+none. When several modules of a line need the same values — a plant-wide speed limit, a
+shared program, one system block — one broadcast can replace an addressed message per
+module. It is used only where the plan can prove what it does to *every* receiver:
+
+- every module on the line is a module of the plan (`receivers_known`: the caller knows that
+  the plant lists every module of the line — a full line of 30 modules, or the plant's own
+  declaration — and that the plan covers all of them);
+- the broadcasts come first on the line, and each module's own plan is made from the state
+  the broadcasts leave (the device model predicts it: defaults, clamping, refusals);
+- each module's whole sequence — broadcasts, then its own steps — passes the proof every plan
+  passes (`prc3cfg.core.planner.check.run_steps`): nothing refused, nothing written that the plant
+  does not manage, no axis release for a module whose system parameters already match (so a
+  10h/20h is broadcast only when every receiver needs exactly it, and every receiver is then
+  in the axis gate);
+- it is cheaper in bus time than the addressed plans, counting the verifying read-back of
+  every receiver (a broadcast has no reply: each module is verified by reading back what it
+  can have changed, and repaired with addressed writes if it does not match).
+
+Candidates are the values every module of the line is to hold alike: the system block,
+then per field (P, V, Vr, T, F1, F2, A) the programs whose desired value is the same on every
+module and differs on at least two of them — sent as 40h..46h items. Groups that pay only
+together (P and V, which one 33h run writes per module) are found by starting from all of
+them and dropping what does not pay, beside adding them one by one; the cheaper wins. Pure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from prc3cfg.core import codec, device
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, default_program
+from prc3cfg.core.planner import (
+    ModulePlan,
+    Step,
+    StepProblem,
+    UnreachableImage,
+    plan_from_steps,
+    plan_module,
+    run_steps,
+    summarise,
+)
+from prc3cfg.core.verification import verification_time
+
+#: Items per message of the per-field messages (40h..45h; 46h carries 31).
+FIELD_ITEMS = codec.MAX_FIELD_ITEMS
+
+
+@dataclass(frozen=True, slots=True)
+class Module:
+    """One module of the line as the sharing sees it: read-back, desired image, its own plan."""
+
+    actual: ModuleImage
+    desired: ModuleImage
+    plan: ModulePlan
+    kind: int | None = None  # modules of one kind cost alike (`alike`)
+
+
+def alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple:
+    """What a module's plan depends on: what it holds and should hold, and the line — its address
+    only on stx, where it can change a frame's stuffing."""
+    address = actual.address if cost.framing.name == "stx" else None
+    return (actual.system, actual.programs, desired.system, desired.programs, address, cost)
+
+
+def _kind(module: Module, cost: LineCost, memo: dict) -> int:
+    return memo.setdefault(("kind", alike(module.actual, module.desired, cost)), len(memo))
+
+
+@dataclass(frozen=True, slots=True)
+class Shared:
+    """The broadcasts of a line, and each module's plan: the broadcasts first, then its own steps."""
+
+    broadcasts: tuple[Step, ...]
+    plans: tuple[ModulePlan, ...]  # in the order of the modules given; steps include the broadcasts
+    bus_time: float  # the broadcasts once, plus every module's own steps
+
+
+def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None) -> Shared:
+    """The cheapest broadcasts found for a line whose every module is in `modules`: groups added
+    one by one while they pay, or all of them with those dropped that do not — the cheaper.
+
+    `memo` (shared by the lines of a plant) prices each module once per set of broadcasts and
+    what it holds and should hold: modules alike but for their address cost the same (the
+    address counts only on stx, where it can change a frame's stuffing)."""
+    memo = {} if memo is None else memo
+    groups = _candidates(modules)
+    modules = [replace(m, kind=_kind(m, cost, memo)) for m in modules]
+    nothing = _attempt((), modules, cost, memo)
+    assert nothing is not None  # without broadcasts, every module's own plan stands
+    added = nothing
+    for group in groups:  # add while it pays
+        trial = _attempt(added[0] + group, modules, cost, memo)
+        if trial is not None and trial[2] < added[2] - 1e-9:
+            added = trial
+    kept = list(groups)
+    dropped = _attempt(tuple(step for group in kept for step in group), modules, cost, memo) or nothing
+    for group in groups:  # from all of them, drop while that pays
+        rest = [g for g in kept if g is not group]
+        trial = _attempt(tuple(step for g in rest for step in g), modules, cost, memo) or nothing
+        if trial[2] < dropped[2] - 1e-9:
+            kept, dropped = rest, trial
+    broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2])
+    plans = []
+    for module, own in zip(modules, owns):
+        proved = plan_from_steps(module.actual, module.desired, [s.message for s in (*broadcasts, *own)], cost)
+        plans.append(replace(proved, bus_time=sum(cost.message_time(module.actual.address, s.message) for s in own)))
+    bus_time = sum(cost.broadcast_time(step.message) for step in broadcasts) + sum(p.bus_time for p in plans)
+    return Shared(broadcasts, tuple(plans), bus_time)
+
+
+def _candidates(modules: Sequence[Module]) -> list[tuple[Step, ...]]:
+    """Groups of broadcast steps: the system block, then per field the items every module shares."""
+    first = modules[0]
+    groups: list[tuple[Step, ...]] = []
+    wanted = first.desired.system
+    if all(m.desired.system == wanted for m in modules) and sum(m.actual.system != wanted for m in modules) >= 2:
+        message = codec.InitSystem() if wanted == DEFAULT_SYSTEM else codec.WriteSystem(wanted)
+        groups.append((Step(message, summarise(message, first.actual.system), True),))
+    for field in PROGRAM_FIELDS:
+        items = []
+        for number in PROGRAM_NUMBERS:
+            values = {None if m.desired.program(number) is None else getattr(m.desired.program(number), field) for m in modules}
+            if len(values) != 1 or None in values:
+                continue
+            (value,) = values
+            differing = sum(m.actual.program(number) is None or getattr(m.actual.program(number), field) != value for m in modules)
+            if differing >= 2:
+                items.append((number, value))
+        kind = codec.WriteAddresses if field == "A" else codec.FIELD_MESSAGES[field]
+        size = codec.MAX_ADDRESS_ITEMS if field == "A" else FIELD_ITEMS
+        messages = [kind(tuple(items[i : i + size])) for i in range(0, len(items), size)]
+        if messages:
+            groups.append(tuple(Step(m, summarise(m, first.actual.system), False) for m in messages))
+    return groups
+
+
+def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[Module], cost: LineCost, memo: dict):
+    """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
+    verifying read-back); None where a module cannot take the broadcasts."""
+    total = sum(cost.broadcast_time(step.message) for step in broadcasts)
+    owns = []
+    for module in modules:
+        key = (tuple(s.message for s in broadcasts), module.kind)
+        if key not in memo:
+            memo[key] = _priced(broadcasts, module, cost)
+        if memo[key] is None:
+            return None
+        own, seconds = memo[key]
+        owns.append(own)
+        total += seconds
+    return broadcasts, tuple(owns), total
+
+
+def _priced(broadcasts: tuple[Step, ...], module: Module, cost: LineCost) -> tuple[tuple[Step, ...], float] | None:
+    """A module's own steps after the broadcasts, and their bus time with the verifying read-back of
+    everything that reaches it; None when the module cannot take the broadcasts."""
+    try:
+        own = plan_module(_after(module.actual, [s.message for s in broadcasts]), module.desired, cost).steps if broadcasts else module.plan.steps
+        steps = (*broadcasts, *own)
+        predicted = run_steps(module.actual, module.desired, [s.message for s in steps])
+    except (codec.Rejected, StepProblem, UnreachableImage):
+        return None
+    seconds = sum(cost.message_time(module.actual.address, s.message) for s in own)
+    return own, seconds + verification_time(module.actual, predicted, steps, cost)
+
+
+def _after(actual: ModuleImage, messages: list[codec.Message]) -> ModuleImage:
+    """The read-back as the broadcasts leave it (programs not read stay unknown); `Rejected` if refused."""
+    filler = default_program(actual.system)
+    state = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
+    for message in messages:
+        state = device.execute(state, message)
+    return replace(state.image, programs=tuple(None if a is None else p for a, p in zip(actual.programs, state.image.programs)))

@@ -1,0 +1,299 @@
+"""Running plans on the modules: steps in order, verification, repair, an exact account.
+
+Owns execution: per module the steps in order, buses in parallel (a thread per line), the
+modules of one line one after another. Afterwards every module is read back — always,
+also after a refusal — and compared with what the steps should have left; what the account
+says about a module comes from that read-back, not from the replies (on `open-driver` a
+reply carries no checksum). A difference (a lost or damaged exchange, a module changed on
+the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
+
+Verification reads exactly what the steps that went out could have changed
+(`prc3cfg.core.verification.reach`): the system block if a system step went out, the programs
+the steps write and the programs the module's own clamping changes — in the fewest
+50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
+read-back instead, for the paranoid. A difference counts only when two reads agree on it.
+
+What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
+acknowledgement was lost released the axes all the same. `Release` says for each module
+whether its axes were released — certainly (acknowledged, or the read-back shows other
+system parameters than before), possibly (a 10h/20h went out and no reply or read-back
+settles it), or not.
+
+An error code stops that module for good (the link confirms codes on lines without a
+checksum) — naming the step, the code, its meaning and what to do — while the other
+modules go on. A module that stops answering (every retry lost) is not given up at once:
+every PRC 3 message is idempotent, so it is read back and whatever still differs is sent
+again. Ctrl-C (`prc3cfg.shell.cancel`) stops every module after the exchange in flight.
+Gating, snapshots and locks are the caller's.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.error_codes import describe, remedy
+from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.planner import Step, plan_module
+from prc3cfg.core.verification import reach
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.shell.link import Link, LinkError
+from prc3cfg.shell.readback import read_programs, read_system
+
+REPAIRS = 2
+#: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
+#: one, so a difference counts only when two reads in a row agree on it.
+CONFIRMING_READS = 4
+
+
+class Verify(enum.Enum):
+    """How much the verifying read-back reads."""
+
+    FLOOR = "floor"  # what the steps could have changed
+    FULL = "full"  # the system and every program known from the first read-back
+
+
+class Release(enum.Enum):
+    """Whether a module's axes were released (10h/20h) and it must travel to its reference point."""
+
+    NO = "no"
+    YES = "yes"
+    POSSIBLY = "possibly"  # a 10h/20h went out unacknowledged, and no read-back settles it
+
+
+@dataclass(slots=True)
+class ModuleRun:
+    """One module's part of an apply, and what happened to it."""
+
+    bus: str
+    address: int
+    name: str
+    before: ModuleImage  # the read-back the steps were planned from
+    desired: ModuleImage
+    steps: tuple[Step, ...]
+    predicted: ModuleImage  # what the steps leave, by the device model
+    broadcasts: int = 0  # the first steps are the bus's broadcasts: the bus sends them, once for all
+    sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
+    written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
+    release_sent: bool = False  # a 10h/20h went out on the line
+    release_acknowledged: bool = False
+    final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
+    failure: str | None = None
+    refused: bool = False  # the module answered an error code: stop for good
+    interrupted: bool = False
+    verified: bool = False
+    repairs: int = 0
+
+    @property
+    def where(self) -> str:
+        return f"bus {self.bus}, module {self.address} ({self.name})"
+
+    @property
+    def released(self) -> Release:
+        if self.release_acknowledged:
+            return Release.YES
+        if not self.release_sent:
+            return Release.NO
+        if self.final is None:
+            return Release.POSSIBLY
+        # A 10h/20h is only sent when the system parameters differ: if they still read as
+        # before, none of them was executed.
+        return Release.YES if self.final.system != self.before.system else Release.NO
+
+    @property
+    def unchanged(self) -> bool:
+        """Whether the last read-back shows the module as it was before the apply."""
+        final = self.final
+        return final is not None and final.system == self.before.system and all(
+            have is None or have == was for have, was in zip(final.programs, self.before.programs)
+        )
+
+    def trespassed(self) -> str | None:
+        """A program the plant does not manage that the last read-back shows other than the module's
+        own clamping leaves it (a damaged frame on a line without a checksum can do that)."""
+        assert self.final is not None
+        for number, (have, want, kept) in enumerate(zip(self.final.programs, self.desired.programs, self.predicted.programs), 1):
+            if want is None and have is not None and have != kept:
+                return (f"program {number}, which the plant file does not manage, reads back other than "
+                        "before the apply (and than the module's clamping leaves it) — check the line and restore it from the snapshot")  # fmt: skip
+        return None
+
+    @property
+    def unacknowledged(self) -> tuple[Step, ...]:
+        """Steps that went out but no reply acknowledged (their effect may be there: see `final`)."""
+        written = {step.message for step in self.written}
+        return tuple(dict.fromkeys(step for step in self.sent if step.message not in written))
+
+    @property
+    def unsent(self) -> tuple[Step, ...]:
+        """Planned steps that never went out."""
+        sent = {step.message for step in self.sent}
+        return tuple(step for step in self.steps if step.message not in sent)
+
+    def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> bool:
+        """Send steps in order; False at the first one not accepted (`failure` says why)."""
+        for index, step in enumerate(steps, start=1):
+            message = step.message
+            where = f"step {index} of {len(steps)} ({step.summary})"
+            try:
+                if link.cancel is not None and link.cancel.is_set():
+                    raise Interrupted()
+                self.sent.append(step)  # from here on it may have reached the module
+                self.release_sent |= message.RELEASES_AXES
+                reply = link.request(self.address, message)
+            except Interrupted:  # before this step, or between its attempts (then it counts as sent)
+                self.interrupted = True
+                self.failure = f"interrupted before {where}"
+                return False
+            except LinkError as error:
+                self.failure = f"{where}: {error}"
+                return False
+            if reply != 0:  # a write is answered with a code word only (decode_reply sees to it)
+                # Final — unless a broadcast before it may have been lost (none answers one): then
+                # the read-back and an addressed repair get their chance first.
+                self.refused = not (self.broadcasts and self.repairs == 0)
+                self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
+                return False
+            self.written.append(step)
+            self.release_acknowledged |= message.RELEASES_AXES
+            tick()
+        return True
+
+    def verify_read(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage) -> ModuleImage:
+        """`known` with what the module holds now in `system`/`programs`: as soon as a read shows
+        what is `expected` there, else once two reads in a row agree."""
+        known = self.final or self.before
+
+        def once() -> ModuleImage:
+            read = read_system(link, self.address, name=self.name) if system else known.system
+            found: dict[int, Program | None] = dict(read_programs(link, self.address, programs, name=self.name))
+            return replace(known, system=read).with_programs(found)
+
+        previous = once()
+        for _ in range(CONFIRMING_READS):
+            if _agree(previous, expected, system, programs):
+                break
+            current = once()
+            if _agree(current, previous, system, programs):
+                break
+            previous = current
+        return previous
+
+    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool,
+                 verify: Verify = Verify.FLOOR) -> None:  # fmt: skip
+        """Read back what the steps could have changed; while the module differs from the desired
+        image and may be repaired, plan, repair, and read back what the repair could have changed.
+
+        A refused module is read back once, for the account, and not repaired.
+        """
+        expected, sent_before = self.predicted, 0
+        known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
+        for _ in range(REPAIRS + 1):
+            system, programs = reach(self.final or self.before, expected, self.sent[sent_before:])
+            if verify is Verify.FULL:
+                system, programs = True, known_programs
+            try:
+                self.final = self.verify_read(link, system, programs, expected)
+            except Interrupted:
+                self.interrupted = True
+                return
+            except LinkError as error:
+                self.failure = f"verification: {error}"
+                continue
+            except UserError as error:
+                self.failure = f"verification: {error}"
+                return
+            if _agree(self.final, self.desired, True, known_programs):
+                if trespass := self.trespassed():
+                    self.failure = trespass  # no plan may write those programs: nothing to repair
+                    return
+                self.verified, self.failure, self.refused = True, None, False
+                return
+            if self.refused or self.repairs == REPAIRS:
+                break
+            repair = plan_module(self.final, self.desired, cost)
+            if repair.releases_axes and not may_release_axes:
+                self.failure = (
+                    "the read-back shows other system parameters; writing them would release "
+                    "the axes — apply again with --allow-axis-release"
+                )
+                return
+            self.repairs += 1
+            expected, sent_before = repair.predicted, len(self.sent)
+            if not self.run(link, repair.steps, tick) and self.interrupted:
+                return
+        if self.refused:
+            return
+        if self.final is None:
+            self.failure = f"could not be read back to verify it ({self.failure}) — check the line and the module, then apply again"
+        else:
+            self.failure = (
+                f"still differs from the plant file after {REPAIRS} repairs"
+                + (f" (last problem: {self.failure})" if self.failure else "")
+                + " — check the line (damaged frames?) and the module, then apply again"
+            )
+
+
+def _agree(image: ModuleImage, other: ModuleImage, system: bool, programs: frozenset[int]) -> bool:
+    """Whether two images agree on the system parameters (if `system`) and on `programs`
+    (where `other` has a value: `None` in a desired image is a program the plant leaves alone)."""
+    return (not system or image.system == other.system) and all(
+        other.programs[n - 1] is None or image.programs[n - 1] == other.programs[n - 1] for n in programs
+    )
+
+
+def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callable[[], None]) -> None:
+    """The bus's broadcasts, once each; every receiver counts them as sent (none answers: the
+    verifying read-back tells whether they arrived, and addressed repairs follow where not)."""
+    steps = next((run.steps[: run.broadcasts] for run in runs if run.broadcasts), ())
+    receivers = [run for run in runs if run.broadcasts]
+    for index, step in enumerate(steps, start=1):
+        try:
+            link.broadcast(step.message, turnaround)
+        except Interrupted:
+            for run in receivers:
+                run.interrupted, run.failure = True, f"interrupted before broadcast {index} of {len(steps)} ({step.summary})"
+            return
+        except LinkError as error:
+            for run in receivers:
+                run.failure = f"broadcast {index} of {len(steps)} ({step.summary}): {error}"
+            return
+        for run in receivers:
+            run.sent.append(step)  # it may have reached every module: they count it as sent
+            run.release_sent |= step.releases_axes
+        tick()
+
+
+def execute(
+    runs: list[ModuleRun],
+    links: dict[str, Link],
+    costs: dict[str, LineCost],
+    *,
+    tick: Callable[[], None] = lambda: None,
+    may_release_axes: bool = False,
+    verify: Verify = Verify.FLOOR,
+) -> None:
+    """Run every module's steps, then verify and repair; results are left in `runs`.
+
+    Buses run in parallel; on one bus, all modules are written first, then verified (so a
+    module's verification also sees what a damaged frame for another did to it).
+    """
+    per_bus: dict[str, list[ModuleRun]] = {}
+    for run in runs:
+        per_bus.setdefault(run.bus, []).append(run)
+
+    def on_bus(bus: str, bus_runs: list[ModuleRun]) -> None:
+        broadcast(links[bus], costs[bus].turnaround, bus_runs, tick)
+        for run in bus_runs:
+            if not run.interrupted:
+                run.run(links[bus], run.steps[run.broadcasts :], tick)
+        for run in bus_runs:
+            if not run.interrupted:
+                run.converge(links[bus], costs[bus], tick, may_release_axes, verify)
+
+    with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
+        for future in [pool.submit(on_bus, bus, bus_runs) for bus, bus_runs in per_bus.items()]:
+            future.result()

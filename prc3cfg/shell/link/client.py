@@ -1,0 +1,250 @@
+"""The link client: PRC 3 messages to modules over a real line, with retries.
+
+A `Link` *holds* a pyserial port, a framing and a retry policy (composition, not
+inheritance). `request()` sends one message to one module and returns its decoded reply;
+a lost or damaged reply is retried — every PRC 3 message is idempotent (an absolute write
+or a read) — and every retry is logged and traced. The reply's address and length are
+checked. Time-outs are detected here, with the port's timeout fixed at the framing's gap
+(link.md: `inter_byte_timeout` does nothing on Linux).
+
+The link decodes replies as the port delivers them: from a UART (a device path, a pty)
+with the framing's inter-character or message time-out; over TCP (a `socket://` or
+`rfc2217://` URL, and so `emulator://`) with `uart=False` (`prc3cfg.core.framing.base`): a
+reply split and delayed by the network or a paused process is taken whole by its length,
+never discarded and asked for again.
+
+On a framing without a checksum (`open-driver`) a damaged reply can look like any code:
+an error code there is believed only when the module gives the same one twice in a row
+(asking again is harmless: the message is idempotent). Every attempt has an overall
+deadline, so a line that never goes quiet ends in a time-out, not a hang. Before each
+attempt the link looks at its `cancel` event (Ctrl-C, SIGTERM: `prc3cfg.shell.cancel`) and
+stops with `Interrupted` — so work stops after the exchange in flight, never inside one.
+
+Does not own what the messages mean (`prc3cfg.core.codec`), how frames look
+(`prc3cfg.core.framing`) or which port to open (`prc3cfg.shell.link.ports`).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from urllib.parse import urlsplit
+
+import serial
+
+from prc3cfg.core import codec
+from prc3cfg.core.error_codes import describe
+from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
+from prc3cfg.core.line import TCP_SCHEMES, LineSettings
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.shell.link.trace import Trace
+
+log = logging.getLogger(__name__)
+
+READ_SLICE = 0.05  # s: longest single read on framings that do not end frames by a gap
+#: Codes of the structural checks (§4.5 steps 1–5). We only send messages the codec built,
+#: so the module saw a message damaged on the line (open-driver has no checksum): retry.
+DAMAGED_CODES = frozenset(range(10, 16))
+#: The longest reply frame any framing makes of a PRC 3 reply (64 bytes, stx stuffing doubled).
+LONGEST_REPLY_FRAME = 2 * (codec.MAX_MESSAGE_BYTES + 8)
+
+
+class LinkError(UserError):
+    """A module could not be reached, or answered nonsense, after every retry."""
+
+
+@dataclass(frozen=True, slots=True)
+class Exchange:
+    """One attempt on the line, for journals: what went out, what came back."""
+
+    bus: str
+    address: int
+    request: bytes  # the message
+    reply: bytes | None  # the reply message, None when nothing (valid) came back
+    attempt: int
+    started: float  # time.time()
+    duration: float  # s
+
+
+class Link:
+    """One line: a port, a framing, a reply time-out and a retry policy."""
+
+    def __init__(
+        self,
+        port: serial.SerialBase,
+        framing: Framing,
+        *,
+        bus: str,
+        line: LineSettings = LineSettings(),
+        timeout: float = 0.5,
+        zvz: float = 0.020,
+        retries: int = 3,
+        trace: Trace | None = None,
+        observer: Callable[[Exchange], None] | None = None,
+        cancel: threading.Event | None = None,
+        takes_line_time: bool = True,
+    ) -> None:
+        self.port = port
+        self.framing = framing
+        self.bus = bus
+        self.line = line
+        self.timeout = timeout
+        self.zvz = zvz
+        self.retries = retries
+        self.trace = trace
+        self.observer = observer
+        self.cancel = cancel
+        #: Whether frames take their time on a line at the far end; False for an emulator that takes
+        #: every frame at once and in order, where a broadcast needs no wait before the next frame.
+        self.takes_line_time = takes_line_time
+        self._gap_ends_frame = framing.name == "open-driver"
+        #: Whether the bytes come from a UART, or over TCP, where their arrival times say nothing.
+        self.uart = urlsplit(str(port.port)).scheme.lower() not in TCP_SCHEMES
+        port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
+        #: Once a reply started, the longest it can take to end; past it the line is not quiet.
+        self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
+        self.exchanges = 0  # attempts made, for benchmarks and summaries
+        self.repeated = 0  # attempts that failed (lost, damaged, unconfirmed) and were made again
+
+    def _where(self, address: int) -> str:
+        return f"bus {self.bus}, module {address}"
+
+    def request(self, address: int, message: codec.Message) -> int | codec.SystemReply | codec.ProgramsReply:
+        """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
+
+        A lost reply, a damaged one, and a structural error code (the module got our message
+        damaged) are retried; on a framing without a checksum an error code is asked for
+        again until two agree. After the last attempt a `LinkError` names the bus and
+        module. `Interrupted` when the link's `cancel` event is set before an attempt.
+        """
+        data = message.encode()
+        attempts = 1 + self.retries
+        problem = ""
+        unconfirmed: int | None = None  # an error code heard once on a line without a checksum
+        for attempt in range(1, attempts + 1):
+            if self.cancel is not None and self.cancel.is_set():
+                raise Interrupted()
+            started = time.time()
+            raw = self._exchange(address, data)
+            self._observe(address, data, raw, attempt, started)
+            heard, unconfirmed = unconfirmed, None
+            if raw is None:
+                problem = f"no reply within {self.timeout:g} s"
+            else:
+                try:
+                    reply = codec.decode_reply(message, raw)
+                except codec.BadReply as error:
+                    problem = f"bad reply ({error})"
+                else:
+                    if reply in DAMAGED_CODES:
+                        problem = f"the module reports a damaged message ({describe(reply)})"
+                    elif not isinstance(reply, int) or reply == 0 or self.framing.checked or reply == heard:
+                        return reply
+                    else:
+                        unconfirmed = reply
+                        problem = f"{describe(reply)} on a line without a checksum, asking again to confirm it"
+            if attempt < attempts:
+                note = f"{self._where(address)}: {problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
+                self.repeated += 1
+                log.info(note)
+                if self.trace:
+                    self.trace.remark(self.bus, note)
+        raise LinkError(
+            f"{self._where(address)}: {problem} to {message.ID:02X}h after {attempts} attempts — check that "
+            f"the module is powered, in STOP and AUTOMATIC, at address {address}, and that the bus's framing "
+            f"({self.framing.name}) and line settings ({self.line.baud} baud, {self.line.data_bits}"
+            f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
+        )
+
+    def probe(self, address: int, message: codec.Message, timeout: float) -> int | codec.SystemReply | codec.ProgramsReply | None:
+        """Whether a module answers at `address`: one attempt, waiting `timeout`; silence is None —
+        an absent address is normal on a scan, and is not asked again. Something heard but not
+        usable (a damaged reply) gets the usual retries (`request`)."""
+        if self.cancel is not None and self.cancel.is_set():
+            raise Interrupted()
+        data, started = message.encode(), time.time()
+        raw = self._exchange(address, data, timeout)
+        self._observe(address, data, raw, 1, started)
+        if raw is None:
+            return None
+        try:
+            reply = codec.decode_reply(message, raw)
+        except codec.BadReply:
+            return self.request(address, message)
+        if reply in DAMAGED_CODES or (isinstance(reply, int) and reply and not self.framing.checked):
+            return self.request(address, message)
+        return reply
+
+    def broadcast(self, message: codec.Message, turnaround: float) -> None:
+        """Send `message` to address 0: every module processes it, none answers. Where frames take
+        line time, waits the frame's transmission, the modules' `turnaround` (and on open-driver the
+        gap that ends the frame) before returning, so the next frame does not arrive while they
+        work; `Interrupted` when cancelled first."""
+        if self.cancel is not None and self.cancel.is_set():
+            raise Interrupted()
+        data = message.encode()
+        frame = self.framing.encode(Direction.REQUEST, 0, data)
+        started = time.time()
+        self._send(frame)
+        if self.takes_line_time:
+            gap = self.zvz if self._gap_ends_frame else 0.0
+            time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
+        self._observe(0, data, None, 1, started)
+
+    def _observe(self, address: int, data: bytes, raw: bytes | None, attempt: int, started: float) -> None:
+        self.exchanges += 1
+        if self.observer:
+            self.observer(Exchange(self.bus, address, data, raw, attempt, started, time.time() - started))
+
+    def _send(self, frame: bytes) -> None:
+        try:
+            self.port.reset_input_buffer()
+            self.port.write(frame)
+            self.port.flush()
+        except (serial.SerialException, OSError) as error:
+            raise LinkError(f"bus {self.bus}: cannot write to the port ({error}) — check the adapter and cable") from None
+        if self.trace:
+            self.trace.sent(self.bus, frame)
+
+    def _exchange(self, address: int, data: bytes, timeout: float | None = None) -> bytes | None:
+        """One attempt: the reply message from `address`, or None (nothing valid within `timeout`,
+        the link's own by default)."""
+        self._send(self.framing.encode(Direction.REQUEST, address, data))
+        decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz, uart=self.uart)
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        last_call = deadline + self._longest_reply  # even a line that never goes quiet ends here
+        pending = False  # bytes of a frame that only a gap can end
+        while True:
+            try:
+                chunk = self.port.read(max(1, self.port.in_waiting))
+            except (serial.SerialException, OSError) as error:
+                raise LinkError(f"bus {self.bus}: cannot read from the port ({error}) — check the adapter and cable") from None
+            now = time.monotonic()
+            if chunk:
+                decoder.receive_data(chunk, now)
+                pending = self._gap_ends_frame
+            elif pending:
+                decoder.line_idle()
+                pending = False
+            while (event := decoder.next_event(now)) is not NEED_DATA:
+                if isinstance(event, Discarded):
+                    if self.trace:
+                        self.trace.discarded(self.bus, event.data, event.reason)
+                    continue
+                if self.trace:
+                    self.trace.received(self.bus, self.framing.encode(Direction.REPLY, event.address, event.message))
+                if event.address == address:
+                    return event.message
+                if self.trace:
+                    self.trace.remark(self.bus, f"reply from address {event.address}, expected {address}: ignored")
+            if now >= deadline and not pending:
+                if self.trace:
+                    self.trace.remark(self.bus, f"timeout after {self.timeout:g} s waiting for module {address}")
+                return None
+            if now >= last_call:
+                if self.trace:
+                    self.trace.remark(self.bus, f"the line did not go quiet within {last_call - deadline + self.timeout:.3f} s")
+                return None

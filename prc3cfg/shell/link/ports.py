@@ -1,0 +1,180 @@
+"""Opening a plant bus's line: a device path, any pyserial URL, or `emulator://NAME`.
+
+`emulator://NAME` runs the bus emulator in this process (the same code as `prc3cfg
+emulator serve`) on a loopback port and connects to it through `socket://`, so the whole
+link is exercised. Its state is kept in `.prc3cfg/emulators/NAME.json` beside the plant
+file (with its journal beside it while it runs, `prc3cfg.shell.emulator.state`), created with
+factory-default modules at the plant's addresses. It takes every frame at once and in order,
+so the link waits no line time after a broadcast. `emulator://NAME?line-speed=BAUD` makes
+every exchange take as long as on a line of BAUD baud with the bus's character format, to
+rehearse real timings without hardware (broadcasts then wait as on a line); the query
+takes no other key.
+
+`socket://` ports are pyserial's with two changes (`TcpPort`): `in_waiting` says how many
+bytes have arrived (pyserial says 1 whenever there are any, so a reply would be read a
+byte at a time), and closing does not sleep 0.3 s (pyserial's pause for a quick
+reconnect, which prc3cfg never makes: it closes a line when a command is done with it).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import sys
+import termios
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import replace
+from pathlib import Path
+from urllib.parse import parse_qsl, urlsplit
+
+import serial
+from serial.urlhandler import protocol_socket
+
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import get_framing
+from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
+from prc3cfg.errors import UserError
+from prc3cfg.shell.emulator import Emulator, load_state
+from prc3cfg.shell.link.client import Exchange, Link
+from prc3cfg.shell.link.trace import Trace
+
+PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.PARITY_EVEN}
+STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
+
+
+class TcpPort(protocol_socket.Serial):
+    """pyserial's `socket://` port that tells how many bytes have arrived and closes at once."""
+
+    @property
+    def in_waiting(self) -> int:
+        if not self.is_open:
+            raise serial.PortNotOpenError()
+        return int.from_bytes(fcntl.ioctl(self._socket, termios.FIONREAD, bytes(4)), sys.byteorder)
+
+    def close(self) -> None:
+        if self.is_open and self._socket:
+            with contextlib.suppress(OSError):
+                self._socket.close()
+            self._socket = None
+        self.is_open = False
+
+
+def emulator_state_path(plant_path: Path, port: str) -> Path:
+    name = port[len(EMULATOR_SCHEME) :].partition("?")[0]
+    return plant_path.parent / ".prc3cfg" / "emulators" / f"{name}.json"
+
+
+def emulator_line_speed(port: str) -> int | None:
+    """The baud rate of `emulator://NAME?line-speed=BAUD`, None without a query; ValueError,
+    in words that say what to write, for any other query."""
+    options = parse_qsl(urlsplit(port).query, keep_blank_values=True)
+    for key, _ in options:
+        if key != "line-speed":
+            raise ValueError(f"unknown option '{key}' — emulator:// takes only ?line-speed=BAUD")
+    if len(options) > 1:
+        raise ValueError("line-speed is given more than once — give it once")
+    if not options:
+        return None
+    value = options[0][1]
+    if not value.isascii() or not value.isdigit() or int(value) == 0:
+        raise ValueError(f"line-speed '{value}' is not a baud rate — write a whole number, e.g. line-speed=9600")
+    return int(value)
+
+
+def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
+    """Open a device path (exclusively) or a pyserial URL with the line's settings.
+
+    A device that silently drops a setting (a pseudo-terminal takes parity without a word,
+    then refuses the next change with a bare `termios.error`) is refused here, at once.
+    """
+    is_url = "://" in url
+    refused = UserError(
+        f"bus {bus}: port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
+        f"{line.stop_bits:g} stop bits — a pseudo-terminal carries no parity: set parity: none"
+    )
+    settings = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
+                "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}  # fmt: skip
+    try:
+        if url.partition("://")[0].lower() == "socket":
+            port = TcpPort(None, **settings)
+            port.port = url
+            port.open()
+        else:
+            port = serial.serial_for_url(url, **settings, **({} if is_url else {"exclusive": True}))
+    except termios.error:
+        raise refused from None
+    except (serial.SerialException, ValueError, OSError) as error:
+        raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path or the URL") from None
+    if not is_url and not _holds(port, line):
+        port.close()
+        raise refused
+    return port
+
+
+def _holds(port: serial.SerialBase, line: LineSettings) -> bool:
+    """Whether the device kept the character format it was given (parity, data bits, stop bits)."""
+    try:
+        cflag = termios.tcgetattr(port.fileno())[2]
+    except (termios.error, OSError, AttributeError):
+        return True  # not a terminal: nothing to read back
+    parity = "none" if not cflag & termios.PARENB else "odd" if cflag & termios.PARODD else "even"
+    sizes = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
+    return parity == line.parity and sizes[cflag & termios.CSIZE] == line.data_bits and bool(cflag & termios.CSTOPB) == (line.stop_bits != 1)
+
+
+@contextlib.contextmanager
+def open_link(
+    bus,
+    plant_path: Path,
+    *,
+    retries: int = 5,
+    trace: Trace | None = None,
+    observer: Callable[[Exchange], None] | None = None,
+    cancel: threading.Event | None = None,
+) -> Iterator[Link]:
+    """A `Link` to one plant bus (`prc3cfg.plant.Bus`), closed on exit."""
+    with contextlib.ExitStack() as stack:
+        url, takes_line_time = bus.port, True
+        if url.startswith(EMULATOR_SCHEME):
+            try:
+                line_speed = emulator_line_speed(url)
+            except ValueError as error:
+                raise UserError(f"bus {bus.name}: port {url}: {error}") from None
+            state_path = emulator_state_path(plant_path, url)
+            modules = load_state(state_path)
+            for module in bus.modules:
+                modules.setdefault(module.address, ModuleState.factory(module.address))
+            emulator = stack.enter_context(
+                Emulator(modules, framing=bus.framing, zvz=bus.zvz, turnaround=bus.turnaround, state_path=state_path,
+                         line=replace(bus.line, baud=line_speed or bus.line.baud), line_speed=line_speed is not None)
+            )  # fmt: skip
+            host, port = emulator.listen("127.0.0.1", 0)
+            url, takes_line_time = f"socket://{host}:{port}", line_speed is not None
+        port = open_port(url, bus.line, bus=bus.name)
+        stack.callback(port.close)
+        yield Link(
+            port,
+            get_framing(bus.framing),
+            bus=bus.name,
+            line=bus.line,
+            timeout=bus.timeout,
+            zvz=bus.zvz,
+            retries=retries,
+            trace=trace,
+            observer=observer,
+            cancel=cancel,
+            takes_line_time=takes_line_time,
+        )
+
+
+@contextlib.contextmanager
+def open_plant_links(plant, buses: Iterable[str] | None = None, **options) -> Iterator[dict[str, Link]]:
+    """A `Link` per bus of `plant` (or of the named buses), all closed on exit."""
+    names = None if buses is None else set(buses)
+    with contextlib.ExitStack() as stack:
+        yield {
+            bus.name: stack.enter_context(open_link(bus, plant.path, **options))
+            for bus in plant.buses
+            if names is None or bus.name in names
+        }

@@ -1,0 +1,208 @@
+"""One apply per line at a time: a kernel lock (`flock`) on a file per identity of the line.
+
+Owns the identities of a line (`line_keys`: each address a `socket://` or `rfc2217://` host
+resolves to, a device's real path, an emulator's state file — so two spellings of one line
+share a key), the lock files in a directory every user of the machine shares, and the wait
+for a busy line. The lock is the kernel's: it dies with the process that holds it, so there
+is no stale lock to guess at, and a lock file is never deleted (a process could be holding
+the deleted file while a third locks a new one of the same name). The holder's details
+written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) only name the holder to
+whoever waits; an empty or half-written file, as a holder leaves it between taking the lock
+and writing, names "another process".
+
+Does not own what a bus's line is (the caller passes its port and, for `emulator://`, the
+state file) nor where a message goes (`waiting` is the caller's).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import getpass
+import hashlib
+import json
+import os
+import socket
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Iterator
+from datetime import datetime, timezone
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from prc3cfg.core.line import TCP_SCHEMES
+from prc3cfg.errors import UserError
+
+POLL = 0.1  # s between attempts on a busy line
+_OPEN_FLAGS = os.O_NOFOLLOW | os.O_CLOEXEC
+
+
+class LineBusy(UserError):
+    pass
+
+
+def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ...]:
+    """The identities of the line `port` names; two spellings of one line share at least one.
+
+    `socket://HOST:PORT` and `rfc2217://HOST:PORT`: `tcp/ADDRESS/PORT` for every address HOST
+    resolves to (a host that does not resolve: its name); a device path: `dev/REALPATH`;
+    `emulator://NAME`: `emulator/REALPATH` of its state file `emulator_state`; any other URL:
+    the URL."""
+    scheme, sep, _ = port.partition("://")
+    if not sep:
+        return (f"dev/{os.path.realpath(port)}",)
+    if scheme == "emulator":
+        if emulator_state is None:
+            raise ValueError(f"{port}: an emulator line is known by its state file — pass emulator_state")
+        return (f"emulator/{os.path.realpath(emulator_state)}",)
+    if scheme in TCP_SCHEMES:
+        parts = urlsplit(port)
+        try:
+            host, tcp_port = parts.hostname, parts.port
+        except ValueError:  # a port that is no number: the open says so
+            return (port,)
+        if host is None or tcp_port is None:
+            return (port,)
+        try:
+            addresses = socket.getaddrinfo(host, tcp_port, type=socket.SOCK_STREAM, proto=socket.IPPROTO_TCP)
+        except (OSError, UnicodeError):  # does not resolve: the open fails with its own message
+            return (f"tcp/{host}/{tcp_port}",)
+        return tuple(sorted({f"tcp/{sockaddr[0]}/{tcp_port}" for *_, sockaddr in addresses}))
+    return (port,)
+
+
+def lock_dir() -> Path:
+    return Path(os.environ.get("PRC3CFG_LOCK_DIR") or Path(tempfile.gettempdir()) / "prc3cfg-locks")
+
+
+def lock_path(key: str) -> Path:
+    return lock_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:24]}.lock"
+
+
+def _make_lock_dir(description: str) -> None:
+    """The lock directory, made sticky and writable by every user when this process makes it."""
+    directory = lock_dir()
+    try:
+        directory.mkdir(mode=0o1777, parents=True)
+        os.chmod(directory, 0o1777)  # umask aside
+    except FileExistsError:
+        pass
+    except OSError as error:
+        raise UserError(f"{description}: cannot make the lock directory {directory} ({error.strerror}) — set PRC3CFG_LOCK_DIR") from None
+
+
+def _open(path: Path, description: str) -> tuple[int, bool]:
+    """A descriptor of the lock file (made readable and writable by all if this call makes it),
+    and whether it is open for writing — another user's read-only lock is locked all the same."""
+    try:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _OPEN_FLAGS, 0o666)
+            os.fchmod(fd, 0o666)  # umask aside
+            return fd, True
+        except FileExistsError:
+            pass
+        try:
+            return os.open(path, os.O_RDWR | _OPEN_FLAGS), True
+        except PermissionError:
+            return os.open(path, os.O_RDONLY | _OPEN_FLAGS), False
+    except OSError as error:
+        raise UserError(f"{description}: cannot open the line lock {path} ({error.strerror}) — check the lock directory or set PRC3CFG_LOCK_DIR") from None
+
+
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):  # no login name and no passwd entry (a container)
+        return f"uid {os.getuid()}"
+
+
+def _holder(fd: int) -> str:
+    """Who holds the lock, as its file says: "alice@host (pid 123, apply since …)", or "another process"."""
+    try:
+        record = json.loads(os.pread(fd, 4096, 0))
+        return f"{record['holder']} (pid {record['pid']}, {record['purpose']} since {record['since']})"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another process"
+
+
+def _take_all(paths: list[Path], description: str) -> tuple[list[tuple[int, bool]], str | None]:
+    """Lock every path or none: the descriptors taken, or none and the holder of the first busy one."""
+    taken: list[tuple[int, bool]] = []
+    try:
+        for path in paths:
+            fd, writable = _open(path, description)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = _holder(fd)
+                os.close(fd)
+                _release(taken)
+                return [], holder
+            taken.append((fd, writable))
+    except BaseException:
+        _release(taken)
+        raise
+    return taken, None
+
+
+def _release(taken: list[tuple[int, bool]]) -> None:
+    for fd, writable in taken:
+        if writable:
+            with contextlib.suppress(OSError):
+                os.ftruncate(fd, 0)  # no details of a holder that is gone
+        fcntl.flock(fd, fcntl.LOCK_UN)  # also for a child forked while the lock was held
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def line_lock(
+    keys: Iterable[str],
+    description: str,
+    *,
+    timeout: float = 0.0,
+    purpose: str = "apply",
+    waiting: Callable[[str], None] | None = None,
+) -> Iterator[tuple[Path, ...]]:
+    """Hold the lock of one line (all of its `keys`, from `line_keys`) for the block; yields the lock files.
+
+    A busy line is tried again every `POLL` s for up to `timeout` s, then refused with
+    `LineBusy` naming the holder; `waiting` is told once, with the holder, when a wait begins.
+    (Ctrl-C while waiting: the CLI's signal handler interrupts the sleep, `prc3cfg.shell.cancel`.)"""
+    if isinstance(keys, str):
+        raise TypeError("line_lock takes the keys of a line (line_keys(port)), not one string")
+    paths = sorted({lock_path(key) for key in keys})
+    _make_lock_dir(description)
+    deadline = time.monotonic() + timeout
+    told = False
+    while True:
+        taken, holder = _take_all(paths, description)
+        if holder is None:
+            break
+        left = deadline - time.monotonic()
+        if left <= 0:
+            if timeout > 0:
+                raise LineBusy(f"{description}: the line is locked by {holder} after waiting {timeout:g} s — "
+                               "wait for it to finish, or pass a longer --lock-timeout")  # fmt: skip
+            raise LineBusy(f"{description}: the line is locked by {holder} — wait for it to finish, "
+                           "or pass --lock-timeout SECONDS to wait")  # fmt: skip
+        if waiting is not None and not told:
+            waiting(f"{description}: waiting for the line lock held by {holder} — up to {timeout:g} s")
+            told = True
+        time.sleep(min(POLL, left))
+    record = json.dumps({
+        "holder": f"{_user()}@{socket.gethostname()}",
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+        "since": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "purpose": purpose,
+        "line": description,
+    }).encode()  # fmt: skip
+    try:
+        for fd, writable in taken:
+            if writable:
+                with contextlib.suppress(OSError):  # the details only name the holder to others
+                    os.ftruncate(fd, 0)
+                    os.pwrite(fd, record, 0)
+        yield tuple(paths)
+    finally:
+        _release(taken)

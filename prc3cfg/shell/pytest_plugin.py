@@ -1,0 +1,43 @@
+"""The pytest plugin of prc3cfg (entry point `pytest11`): plant repositories test their plant files.
+
+    from prc3cfg import api
+
+    def test_the_plant_applies_and_then_has_nothing_to_do(prc3cfg_emulated):
+        emulated = prc3cfg_emulated("plant.yaml")        # every bus on an emulator, factory modules
+        plan = api.plan(emulated.plant)
+        assert plan.changes
+        result = api.apply(emulated.plant, gates=api.Gates(allow_axis_release=True))
+        assert result.verified
+        assert not api.plan(emulated.plant).changes
+
+`prc3cfg_emulated(path, images=None, **bus_settings)` puts the plant file's buses on emulators
+(`prc3cfg.shell.testing.emulate`): modules at factory defaults, or as a `prc3cfg read --json` file
+says; a relative path is taken from pytest's rootdir. The emulators stop when the test ends.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from prc3cfg.shell.testing import EmulatedPlant, emulate
+
+
+@pytest.fixture
+def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Callable[..., EmulatedPlant]]:
+    """Put a plant file's buses on emulators: `prc3cfg_emulated("plant.yaml", images=None)`."""
+    numbers = itertools.count(1)
+    with contextlib.ExitStack() as stack:
+
+        def start(plant_path: str | Path, **options: Any) -> EmulatedPlant:
+            path = Path(request.config.rootpath) / plant_path
+            folder = tmp_path / f"emulated-{next(numbers)}"
+            folder.mkdir()
+            return stack.enter_context(emulate(path, folder, **options))
+
+        yield start

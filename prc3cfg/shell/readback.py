@@ -1,0 +1,138 @@
+"""Read-back: what every module holds, in the fewest exchanges.
+
+A module image is one 50h (system parameters, S9) and, for the managed programs only,
+the fewest 52h/51h reads (`prc3cfg.core.verification.read_messages`): a fully managed module
+takes 1 + 16 exchanges.
+
+When the system parameters a plan will write can clamp programs (a lower S1 or S4, a
+higher S5: prc3-protocol.md §4.2), every program is read, not only the managed ones: the
+module's own clamping reaches programs the plant does not manage, and what it does to
+them must be shown in the plan and kept in the snapshot (`Target.clamped_by`).
+
+S9 must equal the configured address, else the wiring or the plant file is wrong.
+Buses are read in parallel (one thread per line), the modules of one line one after
+another (the line is half duplex).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from prc3cfg.core import codec
+from prc3cfg.core.device import can_clamp
+from prc3cfg.core.error_codes import describe, remedy
+from prc3cfg.core.image import PROGRAM_COUNT, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters
+from prc3cfg.core.verification import read_messages
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.shell.link.client import Link
+
+
+class ReadBackError(UserError):
+    """A module answered a read with an error code, or is not the module the plant says."""
+
+
+def read_module(
+    link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None
+) -> ModuleImage:
+    """The image of the module at `address`: system parameters and the given programs (others None).
+
+    With `clamped_by` (the system parameters a plan will write), every program is read when
+    writing them can clamp programs on this module.
+    """
+    system = read_system(link, address, name=name)
+    wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
+    slots: list[Program | None] = [None] * PROGRAM_COUNT
+    for number, program in read_programs(link, address, wanted, name=name).items():
+        slots[number - 1] = program
+    return ModuleImage(address=address, system=system, programs=tuple(slots))
+
+
+def _request(link: Link, address: int, message: codec.Message, name: str) -> codec.SystemReply | codec.ProgramsReply:
+    reply = link.request(address, message)
+    if isinstance(reply, int):
+        where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")
+        raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — {remedy(reply)}")
+    return reply
+
+
+def read_system(link: Link, address: int, *, name: str = "") -> SystemParameters:
+    """One 50h: the system parameters; S9 must be `address`."""
+    reply = _request(link, address, codec.ReadSystem(), name)
+    if reply.address != address:
+        raise ReadBackError(
+            f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering at address "
+            f"{address} reports S9 = {reply.address} — check the module's Address Init and the plant file's address"
+        )
+    return reply.system
+
+
+def read_programs(link: Link, address: int, programs: Iterable[int], *, name: str = "") -> dict[int, Program]:
+    """The given programs, in the fewest 51h/52h exchanges (`read_messages`)."""
+    wanted = set(programs)
+    found: dict[int, Program] = {}
+    for message in read_messages(wanted)[1:]:
+        reply = _request(link, address, message, name)
+        for offset, program in enumerate(reply.programs):
+            if reply.first + offset in wanted:
+                found[reply.first + offset] = program
+    return found
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    """A module to read: where it is, what it is called, which programs, and the system
+    parameters a plan may write there (every program is read when they can clamp)."""
+
+    bus: str
+    address: int
+    name: str
+    programs: tuple[int, ...]
+    clamped_by: SystemParameters | None = None
+
+
+def read_all(
+    targets: Iterable[Target],
+    links: dict[str, Link],
+    *,
+    progress: Callable[[], None] | None = None,
+    then: Callable[[str, dict[tuple[str, int], ModuleImage]], None] | None = None,
+) -> dict[tuple[str, int], ModuleImage]:
+    """Read every target, buses in parallel, the modules of one bus one after another.
+
+    `progress()` is called after each module; `then(bus, images)` in the bus's thread as soon as
+    its modules are read (to plan them while other lines are still being read). The first error
+    on a bus stops that bus; the errors of all buses are raised together (one line each) once
+    every bus has finished; an interruption (Ctrl-C) wins over them.
+    """
+    per_bus: dict[str, list[Target]] = {}
+    for target in targets:
+        per_bus.setdefault(target.bus, []).append(target)
+
+    def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
+        images = {}
+        for t in bus_targets:
+            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by)
+            if progress:
+                progress()
+        if then is not None and bus_targets:
+            then(bus_targets[0].bus, images)
+        return images
+
+    result: dict[tuple[str, int], ModuleImage] = {}
+    errors = []
+    interrupted = False
+    with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
+        for future in [pool.submit(read_bus, bus_targets) for bus_targets in per_bus.values()]:
+            try:
+                result.update(future.result())
+            except Interrupted:
+                interrupted = True
+            except UserError as error:
+                errors.append(str(error))
+    if interrupted:
+        raise Interrupted()
+    if errors:
+        raise UserError("\n".join(errors))
+    return result

@@ -1,0 +1,129 @@
+"""What an apply leaves behind: snapshots of the modules before the first write, and a journal.
+
+- A snapshot (`.prc3cfg/snapshots/<time>-<plant>.json` beside the plant file) holds the
+  read-back images of every module an apply will touch (with every program a system
+  change could clamp), the plant file's absolute path and hash, and the time — `prc3cfg
+  restore` plans and applies back to it, from any directory. It is written atomically
+  (`prc3cfg.shell.files`) before the first write: a killed apply leaves a whole snapshot or none.
+- A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
+  one JSON object per line: time, bus, address, request and reply in hex, attempt, duration.
+- The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
+  an apply that verified every module of the plant): what `plan` compares with to say which
+  modules and programs left the plant file — they stay on the hardware as they are.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, TextIO
+
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.errors import UserError
+from prc3cfg.shell.files import FileProblem, read_json, write_atomically
+from prc3cfg.shell.link import Exchange
+
+SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
+
+
+def _stamp() -> str:
+    return datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
+
+
+def records_dir(plant_path: Path, kind: str) -> Path:
+    return plant_path.parent / ".prc3cfg" / kind
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    plant_path: Path
+    plant_sha256: str
+    taken: str
+    images: dict[tuple[str, int], ModuleImage]  # (bus, address) → image
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "format": SNAPSHOT_FORMAT,
+            "plant": str(self.plant_path),
+            "plant_sha256": self.plant_sha256,
+            "taken": self.taken,
+            "modules": [{"bus": bus, **image.to_json()} for (bus, _), image in sorted(self.images.items())],
+        }
+
+    def save(self) -> Path:
+        directory = records_dir(self.plant_path, "snapshots")
+        directory.mkdir(parents=True, exist_ok=True)
+        path = directory / f"{self.taken}-{self.plant_path.stem}.json"
+        write_atomically(path, json.dumps(self.to_json(), indent=1))
+        return path
+
+    @classmethod
+    def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage]) -> Snapshot:
+        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images))
+
+    @classmethod
+    def load(cls, path: Path) -> Snapshot:
+        remedy = "name a file under .prc3cfg/snapshots/"
+        try:
+            data = read_json(path)
+        except FileProblem as problem:
+            raise UserError(f"{problem.where(path)}: {problem} — {remedy}") from None
+        try:
+            if not isinstance(data, dict) or data.get("format") != SNAPSHOT_FORMAT:
+                raise ValueError(f'expected "format": "{SNAPSHOT_FORMAT}"')
+            images = {(m["bus"], int(m["address"])): ModuleImage.from_json(m) for m in data["modules"]}
+            plant = Path(data["plant"])
+            beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
+            if not plant.is_absolute() or (not plant.exists() and beside.exists()):
+                plant = beside  # an older relative path, or the plant repository moved
+            return cls(plant, data["plant_sha256"], data["taken"], images)
+        except (ValueError, KeyError, TypeError, AttributeError) as error:
+            raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
+
+
+def applied_copy(plant_path: Path) -> Path:
+    """Where the copy of the plant file last applied in full is kept."""
+    return records_dir(plant_path, "applied") / plant_path.name
+
+
+def save_applied(plant_path: Path, text: bytes) -> None:
+    """Keep the plant file just applied in full (atomically: a killed apply leaves the old copy)."""
+    write_atomically(applied_copy(plant_path), text.decode("utf-8"))
+
+
+class Journal:
+    """Every exchange of one apply, appended as JSON lines; thread-safe (buses run in parallel).
+
+    The file is made at the first record, so an apply that never reached the line leaves none."""
+
+    def __init__(self, plant_path: Path) -> None:
+        self.path = records_dir(plant_path, "journal") / f"{_stamp()}-{plant_path.stem}.jsonl"
+        self._handle: TextIO | None = None
+        self._lock = threading.Lock()
+
+    def record(self, event: str, **fields: Any) -> None:
+        line = json.dumps({"time": datetime.now(timezone.utc).isoformat(), "event": event, **fields})
+        with self._lock:
+            if self._handle is None:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self._handle = self.path.open("a")
+            self._handle.write(line + "\n")
+            self._handle.flush()
+
+    def exchange(self, exchange: Exchange) -> None:
+        self.record(
+            "exchange",
+            bus=exchange.bus,
+            address=exchange.address,
+            request=exchange.request.hex(),
+            reply=None if exchange.reply is None else exchange.reply.hex(),
+            attempt=exchange.attempt,
+            duration_s=round(exchange.duration, 6),
+        )
+
+    def close(self) -> None:
+        if self._handle is not None:
+            self._handle.close()
