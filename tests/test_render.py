@@ -21,8 +21,8 @@ from prc3cfg.core.render import (
     human,
     jumps,
     markdown,
-    module_diff,
     module_lines,
+    plan_json,
 )
 
 
@@ -89,12 +89,14 @@ def test_a_program_either_image_lacks_has_no_field_changes() -> None:
         FieldChange(2, "P", 150, 160, "position 0.150 m → 0.160 m")]
 
 
-def test_each_module_diff_is_worked_out_once_for_every_output() -> None:
-    change = a_change()
-    plan = PlantPlan("p", "p.yaml", "0" * 64, (change,))
-    module_diff.cache_clear()
-    changes_json(change), human(plan), markdown(plan)
-    assert module_diff.cache_info().misses == 1
+def test_a_live_plan_shows_what_its_plan_file_shows() -> None:
+    """The human and markdown outputs of a live plan work each module's diff out as they show it;
+    the plan file's document carries them all: both must read the same."""
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (a_change(),))
+    document = plan_json(plan, ["module x left the plant file: it stays on the hardware"])
+    assert human(plan, notes=document["left_alone"]) == human(document)
+    assert module_lines(changes_json(plan.changes[0]))[0] in markdown(plan)
+    assert "```diff\n" + "\n".join(module_lines(document["buses"][0]["modules"][0]["changes"])) in markdown(document)
 
 
 def full_line_plan(tmp_path):

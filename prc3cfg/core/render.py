@@ -4,9 +4,9 @@ Owns the words and layout of `plan` output — human (Terraform-like), markdown 
 request comments (within a comment's size, with a stroke chart per changed chain), and the
 `changes` list of the JSON output. Reasons shown here never
 steer an apply (the plan's steps do). A module's diff (`ModuleDiff`: its fields, its jumps,
-the programs it clamps) is worked out once, by comparing the two images field by field, and
-every output of the same plan is made from it (`module_diff` keeps the diffs of the last
-`_KEPT_DIFFS` modules). The units are `prc3cfg.core.units`. Pure: returns strings.
+the programs it clamps) is worked out by comparing the two images field by field, once
+per output and module, as the module is shown (kept for all 240 modules of a large plant, the
+diffs would hold 20 MB). The units are `prc3cfg.core.units`. Pure: returns strings.
 """
 
 from __future__ import annotations
@@ -27,8 +27,6 @@ AXIS_WARNING = "releases the axes: travel to reference point required after appl
 CLAMPED = "clamped by the module itself when its system parameters change"
 #: The program fields a diff compares: A is shown as jumps (`chain_changes`).
 _DIFF_FIELDS = tuple(f for f in PROGRAM_FIELDS if f != "A")
-#: Modules whose diff `module_diff` keeps: every module of a plant of 8 buses × 30 modules and more.
-_KEPT_DIFFS = 1024
 
 
 def field_name(symbol: str) -> str:
@@ -143,9 +141,8 @@ class ModuleDiff:
     clamped: tuple[FieldChange, ...]
 
 
-@functools.lru_cache(maxsize=_KEPT_DIFFS)
 def module_diff(change: ModuleChange) -> ModuleDiff:
-    """The diff of one module, worked out once for the human, markdown and JSON outputs of a plan."""
+    """The diff of one module, for the human, markdown and JSON outputs of a plan."""
     fields = field_changes(change.actual, change.desired)
     removed, added = chain_changes(change.actual, change.desired)
     return ModuleDiff(
@@ -225,6 +222,21 @@ def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict:
     return document
 
 
+def _outline(plan: PlantPlan | dict, notes: Iterable[str]) -> tuple[dict, dict[tuple[str, int], ModuleChange]]:
+    """What the human and markdown outputs are made from: a plan file's document as it is, or a live
+    plan's without the modules' `changes`, each worked out by `_changes` as its module is shown (all
+    of them at once, for 8 × 30 modules with every program changed, hold 35 MB), with the changes by
+    (bus, address)."""
+    if isinstance(plan, dict):
+        return plan, {}
+    return plan.to_json() | {"left_alone": list(notes)}, {(c.bus, c.address): c for c in plan.changes}
+
+
+def _changes(bus: str, module: dict, live: dict[tuple[str, int], ModuleChange]) -> dict:
+    """A module's `changes` (`changes_json`): the plan file's, or worked out now from the live plan."""
+    return changes_json(live[(bus, module["address"])]) if live else module["changes"]
+
+
 def _modules(document: dict) -> list[tuple[str, dict]]:
     return [(bus["name"], module) for bus in document["buses"] for module in bus["modules"]]
 
@@ -267,7 +279,7 @@ def summary_line(document: dict) -> str:
 def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:
     """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
     each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary."""
-    document = plan if isinstance(plan, dict) else plan_json(plan, notes)
+    document, live = _outline(plan, notes)
     out = [f"Plant {document['plant']}", ""]
     for bus in document["buses"]:
         out += _broadcast_lines(bus)
@@ -275,7 +287,7 @@ def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:
         if not module["steps"]:
             out.append(_header(bus, module))
             continue
-        lines = [_header(bus, module), *module_lines(module["changes"]), "steps:", *_step_lines(module)]
+        lines = [_header(bus, module), *module_lines(_changes(bus, module, live)), "steps:", *_step_lines(module)]
         out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
@@ -303,8 +315,7 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
     the marker, the summary, every axis-release warning and the table of changed modules always;
     then each module's details (with a stroke chart per changed chain, for a live plan) while they
     fit, and a last line saying how many were left out and where the full plan is."""
-    document = plan if isinstance(plan, dict) else plan_json(plan, notes)
-    charts = {} if isinstance(plan, dict) else {(m.bus, m.address): m for m in plan.changes}
+    document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — `{cell(document['plant'])}`", "", summary_line(document), ""]
     if document["axis_releases"]:
@@ -324,7 +335,7 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
             head += ["```", *lines[:-1], "```", ""]
     text = "\n".join(head)
     for shown, (bus, m) in enumerate(changed):
-        block = _details(bus, m, charts.get((bus, m["address"])))
+        block = _details(bus, m, live)
         left = len(changed) - shown
         closing = (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
                    f"{max_chars:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
@@ -334,13 +345,14 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
     return text
 
 
-def _details(bus: str, m: dict, change: ModuleChange | None) -> str:
+def _details(bus: str, m: dict, live: dict[tuple[str, int], ModuleChange]) -> str:
+    change = live.get((bus, m["address"]))
     return "\n".join([
         f"<details><summary>{cell(bus)} / {cell(m['name'])} (address {m['address']})"
         + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
         "",
         "```diff",
-        *module_lines(m["changes"]),
+        *module_lines(_changes(bus, m, live)),
         "```",
         "",
         "```",
