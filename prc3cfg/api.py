@@ -21,7 +21,8 @@ trace, a cancel event (Ctrl-C, `prc3cfg.shell.cancel`) and a `Progress` to repor
 
 Owns the workflows: which modules, what to read, locking the lines, reading back, planning
 (and broadcasts), proving a plan file, gating, the snapshot and the journal, running and
-verifying, restoring, scanning, importing. Does not own what they are made of (the pure core:
+verifying, restoring, drift, adopting Teach In into the plant file, scanning, importing, a
+gateway's INIT block and the pictures of a module's motion. Does not own what they are made of (the pure core:
 `codec`, `framing`, `device`, `planner`, `sharing`, `verification`, `plantplan`, `render`; the
 shell: `link`, `locks`, `records`, `apply`), nor arguments, prompts and output (`prc3cfg.cli`).
 """
@@ -30,14 +31,17 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import os
+import stat
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
+from decimal import Decimal
 from pathlib import Path
 from typing import Any, Protocol, TextIO
 
 from prc3cfg import __version__
-from prc3cfg.core import codec, sharing
+from prc3cfg.core import codec, gateway, plot, sharing
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import get_framing
@@ -45,12 +49,15 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBE
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
 from prc3cfg.core.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
-from prc3cfg.core.render import plan_json
+from prc3cfg.core.render import differences, plan_json
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
+from prc3cfg.plant.adopt import Adopted
+from prc3cfg.plant.adopt import adopt as adopt_text
+from prc3cfg.plant.importer import module_entry, plant_yaml
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.files import FileProblem, Why, read_json
+from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
 from prc3cfg.shell.link import Link, LinkError, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
@@ -58,9 +65,10 @@ from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, Snapshot, applied_copy, save_applied
 
 __all__ = [
-    "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Gates", "LineBusy", "LineOptions", "LinkError",
-    "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "apply", "import_modules",
-    "left_alone", "load", "load_images", "plan", "read", "restore", "scan", "select",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "Gates", "LineBusy",
+    "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "adopt",
+    "apply", "drift", "import_modules", "import_plant", "init_data_block", "left_alone", "load", "load_images", "picture", "plan",
+    "read", "restore", "scan", "select", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -719,3 +727,127 @@ def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, optio
             images.append(read_module(link, address, PROGRAM_NUMBERS))
             options.progress.advance()
         return images
+
+
+# -- drift and Teach In ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Drift:
+    """A module that holds something other than the plant file says (Teach In, work on the
+    floor): each difference one line in human units, "program 3 position 1.200 m → 1.150 m"."""
+
+    bus: str
+    address: int
+    name: str
+    differences: tuple[str, ...]
+
+
+def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
+          options: LineOptions | None = None) -> list[Drift]:  # fmt: skip
+    """The chosen modules that drifted from the plant file — read back now, or as `images` —
+    reported as drift, not as a plan (`prc3cfg plan --refresh-only`)."""
+    images = read(plant, modules, options) if images is None else images
+    found = []
+    for bus, module in select(plant, modules):
+        said = differences(images[(bus.name, module.address)], module.desired_image())
+        if said:
+            found.append(Drift(bus.name, module.address, module.name, tuple(said)))
+    return found
+
+
+@dataclass(frozen=True)
+class Adoption:
+    """The plant file rewritten to describe what the modules hold (`adopt`), not written yet:
+    `before` is the file as read, `after` the new text, `adopted` each value with its one-line `text`."""
+
+    path: Path
+    before: str
+    after: str
+    adopted: tuple[Adopted, ...]
+
+
+def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
+          options: LineOptions | None = None) -> Adoption:  # fmt: skip
+    """Read the chosen modules and work out the plant file that describes what they hold: only the
+    values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
+    writes it."""
+    before = _plant_text(plant.path)
+    images = read(plant, modules, options)
+    found = adopt_text(plant, images, before, programs)
+    return Adoption(plant.path, before, found.text, found.adopted)
+
+
+def write_adoption(adoption: Adoption) -> None:
+    """Write the adopted plant file in place of the one read, atomically and with its permissions
+    (through a link, to the file linked to) — refused if the file changed since it was read."""
+    if _plant_text(adoption.path) != adoption.before:
+        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+    target = adoption.path.resolve()
+    try:
+        mode = stat.S_IMODE(os.stat(target).st_mode)
+        write_atomically(target, adoption.after)
+        os.chmod(target, mode)
+    except OSError as error:
+        raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+
+
+def _plant_text(path: Path) -> str:
+    try:
+        return path.read_bytes().decode("utf-8", "replace")
+    except OSError as error:
+        raise UserError(f"{path}: cannot read it ({error.strerror}) — nothing was adopted") from None
+
+
+# -- what a plant file says of its gateways and pictures -------------------------------------
+
+
+def init_data_block(plant: Plant, bus_name: str) -> list[tuple[str, str, str]]:
+    """The CP 524/525 Open Driver INIT data block of a bus's gateway: (label, notation, hex) per
+    data word — refused in one line where the bus has no gateway or the driver would refuse it."""
+    found = [b for b in plant.buses if b.name == bus_name]
+    if not found:
+        raise UserError(f"{plant.path}: no bus named {bus_name} — the plant's buses are {', '.join(b.name for b in plant.buses)}")
+    bus = found[0]
+    if bus.gateway is None:
+        raise UserError(f"{plant.path}: bus {bus_name} has no gateway block — add gateway: {{receive_db, receive_dw, cpu, identifier}}")
+    zvz_ms = Decimal(str(bus.zvz)) * 1000
+    if zvz_ms != zvz_ms.to_integral_value():
+        raise UserError(f"{plant.path}: bus {bus_name}: zvz {bus.zvz} s is not a whole number of milliseconds — ZVZTIM is set in ms")
+    settings = gateway.GatewaySettings(
+        receive_db=bus.gateway.receive_db, receive_dw=bus.gateway.receive_dw, cpu=bus.gateway.cpu,
+        identifier=bus.gateway.identifier, line=bus.line, zvz_ms=int(zvz_ms),
+    )  # fmt: skip
+    problems = gateway.refusals(settings)
+    if problems:
+        raise UserError(f"bus {bus_name}: the CP 524/525 Open Driver would refuse these settings: " + "; ".join(map(str, problems)))
+    return gateway.format_data_block(gateway.init_data_block(settings))
+
+
+def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, ModuleImage] | None = None) -> bytes:
+    """The chains of a module drawn (`prc3cfg.core.plot`, the plot extra): the plant file's, or with
+    `images` (as `read` or `load_images` gave them) what the module holds as before and what the
+    plan leaves it holding as after."""
+    (bus, module), = select(plant, [module_name])
+    title = f"module {module.name} — bus {bus.name}, address {module.address}"
+    if images is None:
+        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
+    change = plan(plant, [module.name], images=images).modules[0]
+    return plot.picture(change.plan.predicted, change.actual, fmt=fmt, title=f"{title}: before (dashed) and after the plan")
+
+
+# -- a plant file from a bus -----------------------------------------------------------------
+
+
+def import_plant(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
+                 plant_name: str = "imported", bus_name: str = "bus-1") -> tuple[str, int]:  # fmt: skip
+    """A plant file (its text) describing the live modules of one bus (`import_modules`), and how
+    many modules it describes: `unmanaged_programs: reset`, so planning it against that bus is empty."""
+    images = import_modules(bare, addresses, options)
+    bus = {"name": bus_name, "port": bare.port, "framing": bare.framing, "baud": bare.line.baud,
+           "parity": bare.line.parity, "data_bits": bare.line.data_bits, "stop_bits": bare.line.stop_bits,
+           "timeout": Decimal(str(bare.timeout))}  # fmt: skip
+    if bare.framing == "open-driver":
+        bus["zvz"] = Decimal(str(bare.zvz))
+    entries = [module_entry(image, f"{bus_name}-{image.address}") for image in images]
+    return plant_yaml(plant_name, bus, entries), len(images)

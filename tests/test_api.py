@@ -3,6 +3,7 @@ in a plant repository made of nothing but the built wheel."""
 
 from __future__ import annotations
 
+import difflib
 import os
 import re
 import shutil
@@ -71,3 +72,47 @@ def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel
     assert "1 passed" in ran.stdout
     schema = subprocess.run([venv / "bin" / "prc3cfg", "schema"], capture_output=True, text=True)
     assert schema.returncode == 0 and '"title": "PRC 3 plant"' in schema.stdout
+
+
+def test_drift_and_adopt_are_api_values(tmp_path):
+    """`plan --refresh-only` and `adopt` are the API's: a teach-in shows as drift, adopting it
+    rewrites exactly that value, and the file written plans to no changes."""
+    with emulated_plant(tmp_path) as emulated:
+        prc3cfg.api.apply(emulated.plant, gates=prc3cfg.api.Gates(allow_axis_release=True))
+        assert prc3cfg.api.drift(emulated.plant) == []
+        bus, module = emulated.plant.modules()[0]
+        emulated.emulators[bus.name].teach_in(module.address, 1, 1234)
+        assert prc3cfg.api.drift(emulated.plant) == [prc3cfg.api.Drift(
+            bus.name, module.address, module.name, ("program 1 position 1.234 m → 2.100 m",))]  # holds → says
+        adoption = prc3cfg.api.adopt(emulated.plant)
+        assert [value.text for value in adoption.adopted] == [
+            f"+ {bus.name}/{module.name}: program 1 position 2.100 m → 1.234 m (new in the module: profile reciprocator keeps its value)"]
+        added = [line for line in difflib.ndiff(adoption.before.splitlines(), adoption.after.splitlines()) if line[0] in "+-"]
+        assert [line.split() for line in added] == [["+", "programs:"], ["+", "1:"], ["+", "position:", "1.234"]]
+        assert emulated.path.read_text() == adoption.before  # not written yet
+        prc3cfg.api.write_adoption(adoption)
+        assert emulated.path.read_text() == adoption.after
+        assert not prc3cfg.api.plan(prc3cfg.api.load(emulated.path)).changes
+
+
+def test_an_adoption_is_not_written_over_a_file_edited_meanwhile(tmp_path):
+    with emulated_plant(tmp_path) as emulated:
+        prc3cfg.api.apply(emulated.plant, gates=prc3cfg.api.Gates(allow_axis_release=True))
+        bus, module = emulated.plant.modules()[0]
+        emulated.emulators[bus.name].teach_in(module.address, 1, 1234)
+        adoption = prc3cfg.api.adopt(emulated.plant)
+        emulated.path.write_text(adoption.before + "# edited\n")
+        with pytest.raises(prc3cfg.api.UserError, match="changed while adopting — it was not written"):
+            prc3cfg.api.write_adoption(adoption)
+        assert emulated.path.read_text().endswith("# edited\n")
+
+
+def test_import_plant_gives_a_plant_file_that_plans_to_no_changes(tmp_path):
+    with emulated_plant(tmp_path) as emulated:
+        bus = emulated.plant.buses[0]
+        text, count = prc3cfg.api.import_plant(prc3cfg.api.BareLine(bus.port, timeout=0.1), plant_name="again", bus_name="b")
+        assert count == len(bus.modules)
+        (tmp_path / "imported.yaml").write_text(text)
+        imported = prc3cfg.api.load(tmp_path / "imported.yaml")
+        assert imported.name == "again" and [b.name for b in imported.buses] == ["b"]
+        assert not prc3cfg.api.plan(imported).changes

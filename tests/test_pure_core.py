@@ -63,6 +63,34 @@ def test_each_layer_imports_only_the_layers_below_it(layer):
     assert not wrong, sorted(wrong)
 
 
+#: What the command line may import: the API, and what it needs to parse arguments, ask and render
+#: (style.md §1: "The CLI parses arguments, asks, and renders: nothing else"). The workflow's
+#: parts — planner, device model, read-back, apply, locks, records, adopt, importer — only through
+#: `prc3cfg.api`.
+CLI_MAY_IMPORT = (
+    "prc3cfg.api", "prc3cfg.cli", "prc3cfg.errors",
+    # rendering, and the values it shows
+    "prc3cfg.core.render", "prc3cfg.core.units", "prc3cfg.core.plot.plot_format", "prc3cfg.core.line.LineSettings",
+    "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.apply.ModuleRun", "prc3cfg.shell.apply.Release",
+    "prc3cfg.shell.link.Link",
+    # plant files: loading one is validating it; showing one shows where each value came from
+    "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError", "prc3cfg.plant.load_plant",
+    "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.models.ChainSpec", "prc3cfg.plant.profiles.Sourced",
+    # the terminal: Ctrl-C, output files
+    "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically",
+    # `prc3cfg emulator serve` is the emulator's own front end
+    "prc3cfg.shell.emulator",
+)  # fmt: skip
+
+
+def test_the_command_line_reaches_the_workflow_only_through_the_api():
+    wrong = {f"{path.relative_to(ROOT)} imports {name}"
+             for path in (PACKAGE / "cli").rglob("*.py")
+             for name in prc3cfg_imports(path) if not allowed(name, CLI_MAY_IMPORT)}
+    assert not wrong, sorted(wrong)
+    assert not allowed("prc3cfg.plant.adopt.adopt", CLI_MAY_IMPORT)  # the check can fail
+
+
 def test_the_layer_check_can_fail():
     """A core module that reached for the shell would be caught."""
     assert not allowed("prc3cfg.shell.link.client.Link", MAY_IMPORT["core"])

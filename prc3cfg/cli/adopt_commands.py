@@ -1,18 +1,17 @@
 """`prc3cfg adopt`: the plant file rewritten in place to describe what the modules hold (Teach In).
 
-Reads the modules (`prc3cfg.api.read`), works out the new text (`prc3cfg.plant.adopt`), shows each
-value adopted and the unified diff of the file, then writes it atomically — after asking on a
+Reads the modules and works out the new text (`prc3cfg.api.adopt`), shows each value adopted
+and the unified diff of the file, then writes it (`prc3cfg.api.write_adoption`: atomically) — after asking on a
 terminal, or with `--auto-approve`; without a terminal it refuses in one line. `--check` shows
 the same and writes nothing: exit 2 when there is drift to adopt, 0 when there is none. The
 file is written only if it is still the one that was read; its permissions are kept.
 
-Arguments, prompts and output only: the work is `prc3cfg.plant.adopt`'s.
+Arguments, prompts and output only: the work is `prc3cfg.api`'s.
 """
 
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
@@ -52,24 +51,18 @@ def adopt(
     """Rewrite the plant file in place to describe what the modules hold (positions taught on the
     floor): only the values that drifted, in the layer they came from; comments and layout kept."""
     import difflib
-    import os
-    import stat
 
     from prc3cfg import api
-    from prc3cfg.plant import adopt as adopting
-    from prc3cfg.shell.files import write_atomically
 
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
-    text = _text(plant)
     with line_options(trace, retries, lock_timeout) as options:
-        images = api.read(loaded, module, options)
-    adoption = adopting.adopt(loaded, images, text, program)
+        adoption = api.adopt(loaded, module, program, options)
     if not adoption.adopted:
         print("No drift to adopt: the modules hold what the plant file says.")
         return
     print_lines("\n".join(value.text for value in adoption.adopted))
-    diff = difflib.unified_diff(text.splitlines(), adoption.text.splitlines(), str(plant), f"{plant} (adopted)", lineterm="")
+    diff = difflib.unified_diff(adoption.before.splitlines(), adoption.after.splitlines(), str(plant), f"{plant} (adopted)", lineterm="")
     print("\n".join(diff))
     if check:
         raise Outcome(EXIT_CHANGES)
@@ -80,25 +73,9 @@ def adopt(
                             "or --check to see the diff only")  # fmt: skip
         if not typer.confirm(question, default=False):
             raise UserError("not adopted — the plant file was not changed")
-    if _text(plant) != text:
-        raise UserError(f"{plant}: the plant file changed while adopting — it was not written: adopt again")
-    target = plant.resolve()  # a link to the plant file stays a link
-    mode = stat.S_IMODE(os.stat(target).st_mode)
-    try:
-        write_atomically(target, adoption.text)
-        os.chmod(target, mode)
-    except OSError as error:
-        raise UserError(f"{plant}: cannot write it ({error.strerror}) — it was not changed") from None
+    api.write_adoption(adoption)
     print(f"Adopted {_count(len(adoption.adopted))} into {plant}: it describes what the modules hold now "
           "— review the diff and commit it.")  # fmt: skip
-
-
-def _text(plant: Path) -> str:
-    """The plant file's text as it is now (`prc3cfg.plant.adopt` checks it is the one loaded)."""
-    try:
-        return plant.read_bytes().decode("utf-8", "replace")
-    except OSError as error:
-        raise UserError(f"{plant}: cannot read it ({error.strerror}) — nothing was adopted") from None
 
 
 def _count(values: int) -> str:

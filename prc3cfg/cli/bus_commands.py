@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from decimal import Decimal
 from typing import TYPE_CHECKING, Annotated, Optional
 
 import typer
@@ -64,6 +63,7 @@ def scan(
     from rich.table import Table
 
     from prc3cfg import api
+    from prc3cfg.core.render import plural
     from prc3cfg.core.units import BY_SYMBOL
 
     check_output(trace, "--trace")
@@ -79,7 +79,7 @@ def scan(
         warn = "" if reply.address == address else " ⚠"
         table.add_row(str(address), f"{reply.address}{warn}", *(BY_SYMBOL[k].format(getattr(s, k)) for k in ("S1", "S2", "S4", "S5", "S6")), others)
     stdout_console().print(table)
-    print(f"{len(found)} module{'s' if len(found) != 1 else ''} answered on {port}.")
+    print(f"{plural(len(found), 'module')} answered on {port}.")
 
 
 @app.command("import")
@@ -101,19 +101,15 @@ def import_plant(
 ) -> None:
     """Write a plant file (to stdout) from the live modules of one bus."""
     from prc3cfg import api
-    from prc3cfg.plant.importer import module_entry, plant_yaml
+    from prc3cfg.core.render import plural
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
     with line_options(trace, retries, lock_timeout) as options:
-        images = api.import_modules(bare, parse_addresses(modules) if modules else None, options)
-    bus = {"name": bus_name, "port": port, "framing": framing, "baud": baud, "parity": parity,
-           "data_bits": data_bits, "stop_bits": stop_bits, "timeout": Decimal(str(timeout))}  # fmt: skip
-    if framing == "open-driver":
-        bus["zvz"] = Decimal(str(zvz))
-    entries = [module_entry(image, f"{bus_name}-{image.address}") for image in images]
-    print(plant_yaml(plant_name, bus, entries), end="")
-    stderr_console().print(f"imported {len(images)} module{'s' if len(images) != 1 else ''} from {port}")
+        text, count = api.import_plant(bare, parse_addresses(modules) if modules else None, options,
+                                       plant_name=plant_name, bus_name=bus_name)  # fmt: skip
+    print(text, end="")
+    stderr_console().print(f"imported {plural(count, 'module')} from {port}")
 
 
 @link_app.command("init-db")
@@ -122,26 +118,11 @@ def init_db(
     bus: Annotated[str, typer.Option("--bus", help="The bus whose gateway to parameterise.")],
 ) -> None:
     """The CP 524/525 Open Driver INIT data block (eight data words) for a bus's gateway."""
-    from prc3cfg.core import gateway
-    from prc3cfg.plant import load_plant
+    from prc3cfg import api
 
-    loaded = load_plant(plant)
-    found = [b for b in loaded.buses if b.name == bus]
-    if not found:
-        raise UserError(f"{plant}: no bus named {bus} — the plant's buses are {', '.join(b.name for b in loaded.buses)}")
-    b = found[0]
-    if b.gateway is None:
-        raise UserError(f"{plant}: bus {bus} has no gateway block — add gateway: {{receive_db, receive_dw, cpu, identifier}}")
-    zvz_ms = Decimal(str(b.zvz)) * 1000
-    if zvz_ms != zvz_ms.to_integral_value():
-        raise UserError(f"{plant}: bus {bus}: zvz {b.zvz} s is not a whole number of milliseconds — ZVZTIM is set in ms")
-    settings = gateway.GatewaySettings(
-        receive_db=b.gateway.receive_db, receive_dw=b.gateway.receive_dw, cpu=b.gateway.cpu,
-        identifier=b.gateway.identifier, line=b.line, zvz_ms=int(zvz_ms),
-    )  # fmt: skip
-    problems = gateway.refusals(settings)
-    if problems:
-        raise UserError(f"bus {bus}: the CP 524/525 Open Driver would refuse these settings: " + "; ".join(map(str, problems)))
-    print(f"INIT data block for bus {bus} (CP 524/525 Open Driver S5D004, interface for {b.port}):")
-    for label, notation, hex_value in gateway.format_data_block(gateway.init_data_block(settings)):
+    loaded = api.load(plant)
+    words = api.init_data_block(loaded, bus)
+    port = next(b.port for b in loaded.buses if b.name == bus)
+    print(f"INIT data block for bus {bus} (CP 524/525 Open Driver S5D004, interface for {port}):")
+    for label, notation, hex_value in words:
         print(f"  {label:<5} {notation:<26} {hex_value}")

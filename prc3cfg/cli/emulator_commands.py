@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from prc3cfg.cli import emulator_app
-from prc3cfg.cli.common import ADDRESSES, FRAMING_NAMES, parse_addresses
+from prc3cfg.cli.common import FRAMING_NAMES, parse_addresses
 from prc3cfg.errors import UserError
 
 
@@ -59,23 +59,20 @@ def serve(
     keeps its state and the write gets no reply: the master repeats it.
     Warnings and errors are logged on stderr.
     """
-    from prc3cfg.core.device import ModuleState
     from prc3cfg.core.line import LineSettings
-    from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state
+    from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
     from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if framing not in FRAMING_NAMES:
         raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMING_NAMES)}")
-    stored = load_state(state) if state is not None else {}
-    addresses = parse_addresses(modules) if modules else (sorted(stored) or ADDRESSES)
-    bus = {address: stored.get(address) or ModuleState.factory(address) for address in addresses}
+    bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules else None)
     try:
         emulator = Emulator(
             bus, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed is not None,
             line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
             faults=FaultInjection(drop_rate, corrupt_rate, seed), state_path=state,
-            unserved={a: s for a, s in stored.items() if a not in bus},
+            unserved=unserved,
             max_connections=MAX_CONNECTIONS if max_connections is None else max_connections,
             idle_timeout=IDLE_TIMEOUT if idle_timeout is None else idle_timeout,
         )  # fmt: skip

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import typer
 
-from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Gates
+from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates
 from prc3cfg.cli.common import print_lines, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plantplan import PlantPlan
@@ -47,19 +47,17 @@ def targeting(modules: list[str] | None) -> None:
               "plan — run without --module to see everything it would change")  # fmt: skip
 
 
-def drift(images: dict, pairs) -> int:
-    """What the modules hold other than the plant file says — drift (Teach In, work on the floor),
-    not a plan; the number of modules that drifted."""
-    drifted = 0
-    for bus, module in pairs:
-        differences = render.differences(images[(bus.name, module.address)], module.desired_image())
-        if differences:
-            drifted += 1
-            print(f"~ bus {bus.name}, module {module.address} ({module.name}) differs from the plant file:")
-            print("\n".join(f"    {text}" for text in differences))
-    print(f"Drift: {drifted} of {len(pairs)} module{'s' if len(pairs) != 1 else ''} hold{'s' if drifted == 1 else ''} "
-          "something other than the plant file says." if drifted else "No drift: every module holds what the plant file says.")  # fmt: skip
-    return drifted
+def drift(drifted: list[Drift], modules: int) -> None:
+    """Drift (Teach In, work on the floor) as drift, not as a plan: each module that drifted, its
+    differences, and how many of the `modules` read drifted."""
+    for found in drifted:
+        print(f"~ bus {found.bus}, module {found.address} ({found.name}) differs from the plant file:")
+        print("\n".join(f"    {text}" for text in found.differences))
+    if drifted:
+        print(f"Drift: {len(drifted)} of {render.plural(modules, 'module')} hold{'s' if len(drifted) == 1 else ''} "
+              "something other than the plant file says.")  # fmt: skip
+    else:
+        print("No drift: every module holds what the plant file says.")
 
 
 def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) -> Gates:

@@ -79,8 +79,11 @@ def plan(
     if refresh_only:
         if images is None:
             with line_options(trace, retries, lock_timeout) as options:
-                images = api.read(loaded, module, options)
-        if output.drift(images, api.select(loaded, module)) and detailed_exitcode:
+                drifted = api.drift(loaded, module, options=options)
+        else:
+            drifted = api.drift(loaded, module, images=images)
+        output.drift(drifted, len(api.select(loaded, module)))
+        if drifted and detailed_exitcode:
             raise Outcome(EXIT_CHANGES)
         return
     with line_options(trace, retries, lock_timeout) as options:

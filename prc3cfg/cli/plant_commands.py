@@ -85,7 +85,7 @@ def show(
     if plot is None:
         _show_module(stdout_console(), bus, chosen)
         return
-    _plot_module(loaded, bus, chosen, plot, fmt, actual)
+    _plot_module(loaded, chosen, plot, fmt, actual)
 
 
 def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: int) -> None:
@@ -177,19 +177,13 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
         console.print(f"chains ({settings.chains.source}): {chains}")
 
 
-def _plot_module(plant: Plant, bus: str, module: Module, path: Path, fmt: str, actual: Path | None) -> None:
-    """Draw the module's desired image; with `actual`, what it holds now as before and what the
-    plan leaves (`plan.predicted`: the plant file's programs and the kept ones, as clamped) as after."""
+def _plot_module(plant: Plant, module: Module, path: Path, fmt: str, actual: Path | None) -> None:
+    """Draw the module's chains as the plant file says them; with `actual`, what it holds now as
+    before and what the plan leaves it holding as after (`prc3cfg.api.picture`)."""
     from prc3cfg import api
-    from prc3cfg.core.plot import picture
 
-    title = f"module {module.name} — bus {bus}, address {module.address}"
-    if actual is None:
-        data = picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
-    else:
-        images = api.load_images(actual, plant, [module.name])
-        change = api.plan(plant, [module.name], images=images).modules[0]
-        data = picture(change.plan.predicted, change.actual, fmt=fmt, title=f"{title}: before (dashed) and after the plan")
+    images = None if actual is None else api.load_images(actual, plant, [module.name])
+    data = api.picture(plant, module.name, fmt=fmt, images=images)
     try:
         path.write_bytes(data)
     except OSError as error:

@@ -7,6 +7,6 @@ pseudo-terminals, with the Python API tests use while it runs.
 
 from prc3cfg.shell.emulator.bus import BROADCAST, Bus
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
-from prc3cfg.shell.emulator.state import load_state, save_state
+from prc3cfg.shell.emulator.state import load_state, modules_to_serve, save_state
 
-__all__ = ["BROADCAST", "Bus", "Emulator", "FaultInjection", "load_state", "save_state"]
+__all__ = ["BROADCAST", "Bus", "Emulator", "FaultInjection", "load_state", "modules_to_serve", "save_state"]

@@ -83,6 +83,16 @@ def load_state(path: Path) -> dict[int, ModuleState]:
     return modules
 
 
+def modules_to_serve(path: Path | None, addresses: list[int] | None) -> tuple[dict[int, ModuleState], dict[int, ModuleState]]:
+    """(served, unserved): the modules at `addresses` — else those of the state file at `path`,
+    else 1..30 — as the state file holds them or at factory defaults, and the modules the state
+    file holds that are not served (kept in it untouched)."""
+    stored = load_state(path) if path is not None else {}
+    wanted = addresses or sorted(stored) or range(1, MAX_MODULE_ADDRESS + 1)
+    served = {address: stored.get(address) or ModuleState.factory(address) for address in wanted}
+    return served, {address: state for address, state in stored.items() if address not in served}
+
+
 def journal_path(path: Path) -> Path:
     return path.with_name(f"{path.name}.journal")
 
