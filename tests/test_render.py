@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 from dataclasses import replace
 
 import pytest
@@ -128,7 +129,7 @@ def test_a_full_line_plan_fits_a_comment_with_every_warning_and_a_row_per_module
     text = render.markdown(plan, full_plan="`plan.json`")
     assert len(text) <= render.COMMENT_BUDGET
     assert text.startswith(render.MARKER)
-    assert len(plan.axis_releases) == 30 and all(f"`line/{render.cell(m.name)}`" in text for m in plan.axis_releases)
+    assert len(plan.axis_releases) == 30 and all(render.code(f"line/{m.name}") in text for m in plan.axis_releases)
     assert "are left out to keep this comment under 65,000 characters: the full plan is `plan.json`." in text
     page = cmarkgfm.github_flavored_markdown_to_html(text)
     body = page.split("<tbody>", 1)[1].split("</tbody>", 1)[0]
@@ -136,6 +137,21 @@ def test_a_full_line_plan_fits_a_comment_with_every_warning_and_a_row_per_module
     assert len(rows) == 30
     cells = [re.findall(r"<td[^>]*>(.*?)</td>", row, re.S) for row in rows]
     assert [c[1] for c in cells[:3]] == ["left|right", "&lt;b&gt;bold&lt;/b&gt;", "a &amp; b"]
+    # outside the table, names read as written too: in code spans, and in each module's summary
+    assert "<h3>prc3cfg plan — <code>full|line</code></h3>" in page
+    warning = page.split("travel to reference point required after apply", 1)[1].split("</blockquote>", 1)[0]
+    assert re.findall(r"<code>(.*?)</code>", warning)[:3] == ["line/left|right", "line/&lt;b&gt;bold&lt;/b&gt;", "line/a &amp; b"]
+    shown = cmarkgfm.github_flavored_markdown_to_html(text, options=cmarkgfm.cmark.Options.CMARK_OPT_UNSAFE)  # as GitHub: <details> kept
+    summaries = re.findall(r"<summary>(.*?) \(address", shown)
+    assert summaries[:3] == ["line / left|right", "line / &lt;b&gt;bold&lt;/b&gt;", "line / a &amp; b"]
+
+
+@pytest.mark.parametrize("text", ["plain", "a|b", "<b>", "`tick`", "a``b", "&amp;"])
+def test_a_code_span_shows_its_text_as_written(text):
+    import cmarkgfm
+
+    page = cmarkgfm.github_flavored_markdown_to_html(f"x {render.code(text)} y")
+    assert html.unescape(page.split("<code>", 1)[1].split("</code>", 1)[0]) == text
 
 
 def test_the_budget_is_kept_for_any_size(tmp_path):

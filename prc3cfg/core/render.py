@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import functools
 import html
+import re
+import shlex
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -305,8 +307,16 @@ CHARTS = 3
 
 
 def cell(text: str) -> str:
-    """Text for a markdown table cell or HTML: `|` escaped, `<`, `>` and `&` as entities."""
+    """Text for a markdown table cell or paragraph: `|` escaped, `<`, `>` and `&` as entities."""
     return html.escape(text, quote=False).replace("|", "\\|")
+
+
+def code(text: str) -> str:
+    """Text as a markdown code span outside a table: shown exactly as written — inside one, an
+    entity or a backslash would show as typed. Its fence is longer than any run of backticks in it."""
+    fence = "`" * (max(map(len, re.findall("`+", text)), default=0) + 1)
+    pad = " " if text[:1] == "`" or text[-1:] == "`" else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
 
 
 def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
@@ -317,10 +327,10 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
     fit, and a last line saying how many were left out and where the full plan is."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
-    head = [MARKER, f"### prc3cfg plan — `{cell(document['plant'])}`", "", summary_line(document), ""]
+    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), ""]
     if document["axis_releases"]:
         head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
-                 + ", ".join(f"`{cell(name)}`" for name in document["axis_releases"]), ""]  # fmt: skip
+                 + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
     left_alone = document.get("left_alone", [])
     head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
     if changed:
@@ -348,7 +358,7 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
 def _details(bus: str, m: dict, live: dict[tuple[str, int], ModuleChange]) -> str:
     change = live.get((bus, m["address"]))
     return "\n".join([
-        f"<details><summary>{cell(bus)} / {cell(m['name'])} (address {m['address']})"
+        f"<details><summary>{html.escape(bus)} / {html.escape(m['name'])} (address {m['address']})"
         + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
         "",
         "```diff",
@@ -373,6 +383,6 @@ def _charts(m: ModuleChange) -> list[str]:
         return []
     charts = ["", *(mermaid(before, after) for before, after in pairs[:CHARTS])]
     if len(pairs) > CHARTS:
-        charts.append(f"\n_{plural(len(pairs) - CHARTS, 'more chain')} changed: `prc3cfg show PLANT --module "
-                      f"{cell(m.name)} --plot FILE.svg` draws them all._")  # fmt: skip
+        command = code(f"prc3cfg show PLANT --module {shlex.quote(m.name)} --plot FILE.svg")
+        charts.append(f"\n_{plural(len(pairs) - CHARTS, 'more chain')} changed: {command} draws them all._")
     return charts if pairs else []
