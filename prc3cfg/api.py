@@ -49,7 +49,7 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBE
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
 from prc3cfg.core.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
-from prc3cfg.core.render import differences, plan_json
+from prc3cfg.core.render import differences, plan_json, plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plant.adopt import Adopted
@@ -93,7 +93,7 @@ class ApplyFailed(UserError):
     def __init__(self, result: ApplyResult) -> None:
         failed = [r for r in result.runs if not r.verified]
         super().__init__(
-            f"apply failed on {len(failed)} of {len(result.runs)} modules (see above) — restore with: "
+            f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
             f"prc3cfg restore {result.snapshot}"
         )
         self.result = result

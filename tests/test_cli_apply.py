@@ -37,6 +37,14 @@ def test_apply_converges_and_replan_is_empty(plant, capsys):
     assert run_cli(capsys, "plan", plant.path, "--detailed-exitcode").code == 0
 
 
+def test_one_module_is_one_module(plant, capsys):
+    """Counts read right: "1 module", never "1 modules"."""
+    result = run_cli(capsys, "apply", plant.path, "--module", "booth-a-top", "--auto-approve", "--allow-axis-release")
+    assert result.code == 0, result.err
+    assert "Apply complete: 1 module written and verified." in result.out
+    assert " 1 modules" not in result.out + result.err
+
+
 def test_axis_release_is_refused_without_the_flag_and_nothing_is_written(plant, capsys):
     before = plant.images()
     result = run_cli(capsys, "apply", plant.path, "--auto-approve")

@@ -212,8 +212,11 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
 
 def note_repeats(links: Iterable[Link]) -> None:
     """One line per line that had to repeat exchanges: a noisy line is worth knowing about."""
+    from prc3cfg.core.render import plural
+
     for link in links:
         if link.repeated:
-            print(f"note: bus {link.bus}: {link.repeated} of {link.exchanges} exchanges were lost or damaged and "
+            were = "was" if link.repeated == 1 else "were"
+            print(f"note: bus {link.bus}: {link.repeated} of {plural(link.exchanges, 'exchange')} {were} lost or damaged and "
                   "made again — check the cabling if this is not a test line (--trace shows every frame)",
                   file=sys.stderr)  # fmt: skip

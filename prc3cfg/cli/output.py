@@ -79,7 +79,7 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) 
         return True
 
     def approve(the_plan: PlantPlan) -> bool:
-        question = f"Apply {the_plan.message_count} messages to {len(the_plan.changes)} modules?"
+        question = f"Apply {render.plural(the_plan.message_count, 'message')} to {render.plural(len(the_plan.changes), 'module')}?"
         if auto_approve:
             return True
         if not sys.stdin.isatty():
@@ -143,7 +143,8 @@ def accounted() -> Iterator[None]:
         report(stopped.result)
         failed = [r for r in stopped.result.runs if not r.verified]
         touched = sum(1 for r in failed if r.sent)
-        print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of {len(stopped.result.runs)} modules written and verified, "
+        print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of {render.plural(len(stopped.result.runs), 'module')} "
+              "written and verified, "
               + (f"{touched} written in part — restore them with: prc3cfg restore {stopped.result.snapshot}" if touched
                  else "nothing sent to the others"))  # fmt: skip
         raise
@@ -155,4 +156,4 @@ def accounted() -> Iterator[None]:
 def applied(result: ApplyResult) -> None:
     if result.runs:
         report(result)
-        print(f"Apply complete: {len(result.runs)} modules written and verified.")
+        print(f"Apply complete: {render.plural(len(result.runs), 'module')} written and verified.")

@@ -57,6 +57,7 @@ from typing import Any
 from prc3cfg.core import device
 from prc3cfg.core.device import VALUE_RANGES, ModuleState, value_range
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, PROGRAM_FIELDS, SYSTEM_KEYS, whole
+from prc3cfg.core.render import plural
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json, read_regular, write_atomically
 
@@ -160,7 +161,7 @@ def _module(entry: dict[str, Any]) -> ModuleState:
     _values(system, SYSTEM_KEYS, "system")
     programs = entry.get("programs")
     if not isinstance(programs, list) or len(programs) != PROGRAM_COUNT:
-        held = f"{len(programs)} programs" if isinstance(programs, list) else repr(programs)
+        held = plural(len(programs), "program") if isinstance(programs, list) else repr(programs)
         raise ValueError(f"programs: a list of all {PROGRAM_COUNT} programs is needed, not {held}")
     for number, program in enumerate(programs, 1):
         if not isinstance(program, dict):
