@@ -55,10 +55,11 @@ from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import module_entry, plant_yaml
+from prc3cfg.plant.messages import port_error
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
-from prc3cfg.shell.link import Link, LinkError, Trace, open_plant_links, open_port
+from prc3cfg.shell.link import Link, LinkError, PortFailed, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.readback import Target, read_all, read_module
@@ -677,6 +678,12 @@ class BareLine:
 
 @contextlib.contextmanager
 def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
+    problem = port_error("port", bare.port)
+    if problem is None and bare.port.startswith(EMULATOR_SCHEME):
+        problem = (f"port {bare.port} is a plant file's emulator (its state is kept beside the plant file) — for a "
+                   "bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT")  # fmt: skip
+    if problem is not None:
+        raise UserError(problem)
     with contextlib.ExitStack() as stack:
         stack.enter_context(line_lock(line_keys(bare.port), bare.port, timeout=options.lock_timeout, purpose=purpose,
                                       waiting=options.waiting))  # fmt: skip
@@ -706,6 +713,8 @@ def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
     for address in range(1, MAX_MODULE_ADDRESS + 1):
         try:
             reply = link.probe(address, codec.ReadSystem(), min(link.timeout, PROBE_TIMEOUT))
+        except PortFailed:
+            raise  # the port, not an absent module
         except LinkError:
             reply = None  # heard, but never usable: not a module this scan can report
         if isinstance(reply, codec.SystemReply):

@@ -6,7 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from prc3cfg.cli.common import ADDRESSES, FRAMING_NAMES, Verify
+from prc3cfg.cli.common import ADDRESSES, DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, Verify
+from prc3cfg.core import line
 from prc3cfg.core.framing import FRAMINGS
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.shell.apply import Verify as ApplyVerify
@@ -33,4 +34,5 @@ def test_listing_the_commands_loads_nothing_heavy():
 def test_the_names_the_help_uses_are_the_real_ones():
     assert FRAMING_NAMES == tuple(FRAMINGS)
     assert ADDRESSES == range(1, MAX_MODULE_ADDRESS + 1)
+    assert (PARITY_NAMES, DATA_BITS, STOP_BITS) == (line.PARITIES, line.DATA_BITS, line.STOP_BITS)
     assert [v.value for v in Verify] == [v.value for v in ApplyVerify]

@@ -49,6 +49,10 @@ USAGE = {
     "negative retries": (["plan", "p.yaml", "--retries", "-1"], "error: prc3cfg plan: Invalid value for '--retries': Input should be greater than or equal to 0 — see prc3cfg plan --help"),
     "a negative lock time-out": (["apply", "p.yaml", "--lock-timeout", "-5"], "error: prc3cfg apply: Invalid value for '--lock-timeout': Input should be greater than or equal to 0 — see prc3cfg apply --help"),
     "retries as text": (["read", "p.yaml", "--retries", "many"], "error: prc3cfg read: Invalid value for '--retries': Input should be a valid integer, unable to parse string as an integer — see prc3cfg read --help"),
+    "scan's baud 0": (["scan", "--port", "socket://127.0.0.1:9", "--baud", "0"], "error: prc3cfg scan: Invalid value for '--baud': Input should be greater than or equal to 1 — see prc3cfg scan --help"),
+    "scan's parity": (["scan", "--port", "socket://127.0.0.1:9", "--parity", "x"], "error: prc3cfg scan: Invalid value for '--parity': 'x' is not one of none, odd, even — see prc3cfg scan --help"),
+    "import's framing": (["import", "--port", "socket://127.0.0.1:9", "--framing", "modbus"], "error: prc3cfg import: Invalid value for '--framing': 'modbus' is not one of crc16, open-driver, stx — see prc3cfg import --help"),
+    "scan's stop bits": (["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"], "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 — see prc3cfg scan --help"),
     "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
     "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),
     "terraform's -lock-timeout=": (["apply", "p.yaml", "-lock-timeout=10"], "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?"),
@@ -60,6 +64,38 @@ def test_every_usage_error_is_one_line_and_exits_64(capsys, case):
     args, line = USAGE[case]
     result = run_cli(capsys, *args)
     assert (result.code, result.err, result.out) == (EXIT_USAGE, line + "\n", "")
+
+
+@pytest.mark.parametrize("group", [[], ["emulator"], ["link"]])
+def test_no_command_shows_what_there_is_to_run_and_exits_64(capsys, group):
+    result = run_cli(capsys, *group)
+    assert result.code == EXIT_USAGE and result.err == ""
+    assert result.out.startswith(f"Usage: prc3cfg {' '.join(group)}".rstrip() + " [OPTIONS] COMMAND") and "Commands" in result.out
+
+
+PORTS = {
+    "no TCP port": ("socket://127.0.0.1", "error: port 'socket://127.0.0.1' has no TCP port 1..65535 — write socket://HOST:PORT, e.g. socket://127.0.0.1:7001"),
+    "a broken IPv6 host": ("socket://[::1", "error: port 'socket://[::1' has no TCP port 1..65535 — write socket://HOST:PORT, e.g. socket://127.0.0.1:7001"),
+    "a TCP port too high": ("rfc2217://127.0.0.1:99999", "error: port 'rfc2217://127.0.0.1:99999' has no TCP port 1..65535 — write rfc2217://HOST:PORT, e.g. rfc2217://127.0.0.1:7001"),
+    "a NUL": ("/dev/ttyS0\x00x", "error: port '/dev/ttyS0\\x00x' holds a control character — write the device path or URL as plain text"),
+    "an emulator of a plant file": ("emulator://demo-a", "error: port emulator://demo-a is a plant file's emulator (its state is kept beside the plant file) — for a bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT"),
+}
+
+
+@pytest.mark.parametrize("command", ["scan", "import"])
+@pytest.mark.parametrize("case", PORTS, ids=list(PORTS))
+def test_a_bad_port_on_the_command_line_is_one_line(capsys, command, case):
+    port, line = PORTS[case]
+    result = run_cli(capsys, command, "--port", port)
+    assert (result.code, result.err, result.out) == (1, line + "\n", "")
+
+
+def test_a_control_character_in_a_plant_port_is_refused_by_validate(tmp_path, capsys):
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(DEMO.read_text().replace("emulator://demo-a", '"/dev/ttyS0\\0x"'))
+    result = run_cli(capsys, "validate", plant)
+    assert result.code == 1 and result.err.count("\n") == 1
+    assert "holds a control character — write the device path or URL as plain text" in result.err
 
 
 def test_version(capsys):

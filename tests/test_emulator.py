@@ -200,8 +200,6 @@ def busy_port() -> socket.socket:
         (["--state", "{tmp}"], "is a directory — give an emulator state file, or a path where none is yet"),
         (["--state", "{tmp}/broken.json"], "broken.json:1:43: not valid JSON (Expecting value) — fix or delete it"),
         (["--state", "{tmp}/odd.json"], "odd.json: module 3: program 7: P = 12000 is outside 0..9999 — fix or delete the entry"),
-        (["--max-connections", "0"], "emulator: max-connections must be at least 1, not 0"),
-        (["--idle-timeout", "0"], "emulator: idle-timeout must be more than 0 s"),
     ],
 )
 def test_serve_errors_are_one_line(tmp_path, options, says):
@@ -217,6 +215,29 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
     assert result.returncode == 1
     assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: "), result.stderr
     assert says in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("options", "says"),
+    [
+        (["--max-connections", "0"], "Invalid value for '--max-connections': Input should be greater than or equal to 1"),
+        (["--idle-timeout", "0"], "Invalid value for '--idle-timeout': Input should be greater than or equal to 0.001"),
+        (["--parity", "weird"], "Invalid value for '--parity': 'weird' is not one of none, odd, even"),
+        (["--framing", "xyz"], "Invalid value for '--framing': 'xyz' is not one of crc16, open-driver, stx"),
+        (["--zvz", "-1"], "Invalid value for '--zvz': Input should be greater than or equal to 0.001"),
+        (["--zvz", "nan"], "Invalid value for '--zvz'"),
+        (["--turnaround", "nan"], "Invalid value for '--turnaround'"),
+        (["--line-speed", "0"], "Invalid value for '--line-speed': Input should be greater than or equal to 1"),
+        (["--data-bits", "9"], "Invalid value for '--data-bits': 9 is not one of 5, 6, 7, 8"),
+    ],
+)
+def test_a_bad_option_value_is_a_usage_error(options, says):
+    """A value no emulator can take is a usage error (exit 64), before anything starts."""
+    result = subprocess.run([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", *options],
+                            capture_output=True, text=True, timeout=30)  # fmt: skip
+    assert result.returncode == 64
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: prc3cfg emulator serve: "), result.stderr
+    assert says in result.stderr and result.stdout == ""
 
 
 def state_file(path, *entries: dict):

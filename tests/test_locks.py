@@ -220,6 +220,23 @@ def test_spellings_of_one_address_share_a_key(spelling):
     assert not set(line_keys(f"socket://{host}:7002")) & set(line_keys("socket://127.0.0.1:7001"))
 
 
+@pytest.mark.parametrize("spelling", ["0.0.0.0", "[::ffff:127.0.0.1]", "[::ffff:7f00:1]"])
+def test_addresses_that_reach_the_loopback_share_its_key(spelling):
+    assert line_keys(f"socket://{spelling}:7001") == ("tcp/127.0.0.1/7001",)
+    assert line_keys("socket://[::]:7001") == ("tcp/::1/7001",)
+
+
+def test_a_pyserial_wrapper_of_a_device_shares_the_device_key(tmp_path):
+    device = tmp_path / "ttyUSB0"
+    device.touch()
+    assert line_keys(f"spy://{device}?file=/tmp/spy.txt")[1] == line_keys(str(device))[0]
+    assert line_keys(f"alt://{device}?class=PosixPollSerial")[1] == line_keys(str(device))[0]
+
+
+def test_a_nul_in_a_path_is_a_key_not_an_error():
+    assert line_keys("/dev/ttyS0\x00x") == ("dev/'/dev/ttyS0\\x00x'",)
+
+
 def test_tcp_keys():
     assert line_keys("socket://127.0.0.1:7001") == ("tcp/127.0.0.1/7001",)
     assert line_keys("socket://[::1]:7001") == ("tcp/::1/7001",)
@@ -254,4 +271,4 @@ def test_an_emulator_is_known_by_its_state_file(tmp_path):
 
 def test_any_other_url_is_its_own_key():
     assert line_keys("loop://") == ("loop://",)
-    assert line_keys("spy:///dev/ttyUSB0") == ("spy:///dev/ttyUSB0",)
+    assert line_keys("spy:///dev/ttyUSB0")[0] == "spy:///dev/ttyUSB0"

@@ -120,7 +120,8 @@ def main(argv: list[str] | None = None) -> None:
         sys.stdout.flush()
     except Outcome as outcome:
         sys.exit(outcome.code)
-    except click_errors.NoArgsIsHelpError:  # typer has shown the help
+    except click_errors.NoArgsIsHelpError as error:  # `prc3cfg`, `prc3cfg emulator`: what there is to run
+        print(error.ctx.get_help() if error.ctx is not None else "see prc3cfg --help")
         sys.exit(EXIT_USAGE)
     except click_errors.UsageError as error:
         print(_usage(error), file=sys.stderr)

@@ -8,13 +8,17 @@ import typer
 
 from prc3cfg.cli import app, link_app
 from prc3cfg.cli.common import (
+    DATA_BITS,
     FRAMING_NAMES,
+    PARITY_NAMES,
+    STOP_BITS,
     LockOpt,
     PlantArg,
     RetriesOpt,
     TraceOpt,
     check_output,
     line_options,
+    one_of,
     parse_addresses,
     stderr_console,
     stdout_console,
@@ -25,23 +29,20 @@ if TYPE_CHECKING:
     from prc3cfg import api
 
 PortOpt = Annotated[str, typer.Option("--port", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
-FramingOpt = Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
-BaudOpt = Annotated[int, typer.Option(help="Baud rate.")]
-ParityOpt = Annotated[str, typer.Option(help="none | odd | even")]
-TimeoutOpt = Annotated[float, typer.Option(min=0.001, help="Seconds to wait for a reply.")]
-ZvzOpt = Annotated[float, typer.Option(min=0.004, help="open-driver: the character delay time ZVZ that ends a frame, s.")]
+FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
+BaudOpt = Annotated[int, typer.Option(min=1, max=10_000_000, help="Baud rate.")]
+ParityOpt = Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=" | ".join(PARITY_NAMES))]
+DataBitsOpt = Annotated[int, typer.Option(callback=one_of(DATA_BITS), help=" | ".join(map(str, DATA_BITS)))]
+StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), help=" | ".join(map(str, STOP_BITS)))]
+TimeoutOpt = Annotated[float, typer.Option(min=0.001, max=3600, help="Seconds to wait for a reply.")]
+ZvzOpt = Annotated[float, typer.Option(min=0.004, max=65.535, help="open-driver: the character delay time ZVZ that ends a frame, s.")]
 
 
 def _bare_line(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
     from prc3cfg import api
     from prc3cfg.core.line import LineSettings
 
-    if framing not in FRAMING_NAMES:
-        raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMING_NAMES)}")
-    try:
-        line = LineSettings(baud=baud, data_bits=data_bits, parity=parity, stop_bits=stop_bits)
-    except ValueError as error:
-        raise UserError(f"line settings: {error}") from None
+    line = LineSettings(baud=baud, data_bits=data_bits, parity=parity, stop_bits=stop_bits)  # the options' callbacks checked them
     return api.BareLine(port, framing, line, timeout, zvz)
 
 
@@ -51,8 +52,8 @@ def scan(
     framing: FramingOpt = "crc16",
     baud: BaudOpt = 9600,
     parity: ParityOpt = "even",
-    data_bits: int = 8,
-    stop_bits: float = 1,
+    data_bits: DataBitsOpt = 8,
+    stop_bits: StopBitsOpt = 1,
     timeout: TimeoutOpt = 0.2,
     zvz: ZvzOpt = 0.020,
     retries: RetriesOpt = 1,
@@ -88,8 +89,8 @@ def import_plant(
     framing: FramingOpt = "crc16",
     baud: BaudOpt = 9600,
     parity: ParityOpt = "even",
-    data_bits: int = 8,
-    stop_bits: float = 1,
+    data_bits: DataBitsOpt = 8,
+    stop_bits: StopBitsOpt = 1,
     timeout: TimeoutOpt = 0.5,
     zvz: ZvzOpt = 0.020,
     retries: RetriesOpt = 5,

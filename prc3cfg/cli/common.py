@@ -11,7 +11,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated, Any, Optional
 
 import typer
 
@@ -29,6 +29,21 @@ if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3
 FRAMING_NAMES = ("crc16", "open-driver", "stx")
 #: Module addresses on a line (`prc3cfg.core.image.MAX_MODULE_ADDRESS`, checked by the same test).
 ADDRESSES = range(1, 31)
+#: Character formats (`prc3cfg.core.line`, checked by the same test).
+PARITY_NAMES = ("none", "odd", "even")
+DATA_BITS = (5, 6, 7, 8)
+STOP_BITS = (1, 1.5, 2)
+
+
+def one_of(allowed: tuple) -> Callable[[Any], Any]:
+    """An option's callback: a value outside `allowed` is a usage error (exit 64), as click words it."""
+
+    def check(value: Any) -> Any:
+        if value is not None and value not in allowed:
+            raise typer.BadParameter(f"{value!r} is not one of {', '.join(map(str, allowed))}")
+        return value
+
+    return check
 
 
 class Verify(str, enum.Enum):

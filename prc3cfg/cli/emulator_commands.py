@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from prc3cfg.cli import emulator_app
-from prc3cfg.cli.common import FRAMING_NAMES, parse_addresses
+from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, one_of, parse_addresses
 from prc3cfg.errors import UserError
 
 
@@ -28,18 +28,18 @@ def serve(
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
     state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
     modules: Annotated[Optional[str], typer.Option(help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
-    framing: Annotated[str, typer.Option(help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
-    line_speed: Annotated[Optional[int], typer.Option("--line-speed", help="Make every exchange take as long as on a line of this baud rate.")] = None,
-    parity: Annotated[str, typer.Option(help="none | odd | even (character time, and framing time-outs).")] = "even",
-    data_bits: Annotated[int, typer.Option(help="5..8")] = 8,
-    stop_bits: Annotated[float, typer.Option(help="1 | 1.5 | 2")] = 1,
-    zvz: Annotated[float, typer.Option(help="open-driver end-of-frame gap, s.")] = 0.020,
-    turnaround: Annotated[float, typer.Option(help="Module turnaround, s (with --line-speed).")] = 0.010,
-    drop_rate: Annotated[float, typer.Option(help="Fraction of exchanges lost (request or reply).")] = 0.0,
-    corrupt_rate: Annotated[float, typer.Option(help="Fraction of exchanges with one bit flipped.")] = 0.0,
+    framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
+    line_speed: Annotated[Optional[int], typer.Option("--line-speed", min=1, max=10_000_000, help="Make every exchange take as long as on a line of this baud rate.")] = None,
+    parity: Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs).")] = "even",
+    data_bits: Annotated[int, typer.Option(callback=one_of(DATA_BITS), help=" | ".join(map(str, DATA_BITS)))] = 8,
+    stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), help=" | ".join(map(str, STOP_BITS)))] = 1,
+    zvz: Annotated[float, typer.Option(min=0.001, max=65.535, help="open-driver end-of-frame gap, s.")] = 0.020,
+    turnaround: Annotated[float, typer.Option(min=0, max=10, help="Module turnaround, s (with --line-speed).")] = 0.010,
+    drop_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges lost (request or reply).")] = 0.0,
+    corrupt_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges with one bit flipped.")] = 0.0,
     seed: Annotated[Optional[int], typer.Option(help="Seed for fault injection.")] = None,
-    max_connections: Annotated[Optional[int], typer.Option("--max-connections", help="TCP clients served at once (default 64); one more is closed at once (logged).")] = None,
-    idle_timeout: Annotated[Optional[float], typer.Option("--idle-timeout", help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
+    max_connections: Annotated[Optional[int], typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 64); one more is closed at once (logged).")] = None,
+    idle_timeout: Annotated[Optional[float], typer.Option("--idle-timeout", min=0.001, max=10_000_000, help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
     """Run a PRC 3 bus emulator until SIGINT or SIGTERM (exit 0).
@@ -64,8 +64,6 @@ def serve(
     from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
-    if framing not in FRAMING_NAMES:
-        raise UserError(f"--framing: unknown framing '{framing}' — use one of {', '.join(FRAMING_NAMES)}")
     bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules else None)
     try:
         emulator = Emulator(

@@ -13,7 +13,7 @@ import re
 from decimal import Decimal
 from typing import Any
 
-from pydantic import BaseModel
+from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic_core import ErrorDetails
 
 from prc3cfg.plant.document import DECIMAL_NUMBER
@@ -25,6 +25,7 @@ from prc3cfg.plant.models import (
     Gateway,
     ModuleSpec,
     PlantSpec,
+    Port,
     ProfileSpec,
     ProgramSpec,
     SystemSpec,
@@ -70,6 +71,7 @@ TEMPLATES = {
     "emulator_name": "{what} {input} does not end in a plain emulator name — the name is a file in "
     ".prc3cfg/emulators/: letters, digits, '-', '_' and '.' (not first), e.g. emulator://booth-a",
     "too_short": "{what} is empty — list at least one {item}",
+    "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
 }
 _LIST_ITEMS = {"buses": "bus", "modules": "module", "programs": "program"}
 _DECIMAL_COMMA = re.compile(r"[-+]?[0-9]+,[0-9]+")
@@ -115,6 +117,19 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
     }
     at_key = kind in ("extra_forbidden", "invalid_key", "missing") or (loc and loc[-1] == "[key]")
     return Problem(loc, template.format(**words), at_key=bool(at_key))
+
+
+def port_error(what_: str, port: str) -> str | None:
+    """What is wrong with `port` as a plant file's bus would say it, about `what_` ("--port"); None if nothing."""
+    try:
+        TypeAdapter(Port).validate_python(port)
+    except ValidationError as error:
+        details = error.errors()[0]
+        template = TEMPLATES.get(details["type"])
+        if template is None:
+            return f"{what_} {shown(port)} is not a port: {details['msg']}"
+        return template.format(what=what_, input=shown(port), **details.get("ctx", {}))
+    return None
 
 
 def what(path: Path_, data: Any) -> str:

@@ -23,7 +23,7 @@ Its failures are `PydanticCustomError`s whose type names the problem (`not_numbe
 port) and whose context carries the words; `messages` turns them into sentences.
 
 Decisions about the bus (link.md): `port` any non-empty text (a device path, a pyserial
-URL, `emulator://NAME`), except that a `socket://` or `rfc2217://` URL must end its host in a
+URL, `emulator://NAME`) without control characters (a NUL would cut a device path), except that a `socket://` or `rfc2217://` URL must end its host in a
 TCP port 1..65535 (pyserial would fail later, or compare None with 0), and an emulator name
 must be plain — letters, digits, `-`, `_`, `.` not first — because it names the file
 `.prc3cfg/emulators/NAME.json` (`emulator://../../etc` would write elsewhere); the schema's
@@ -167,6 +167,8 @@ Name = Annotated[str, Field(min_length=1, strict=True)]
 
 
 def _port(url: str) -> str:
+    if any(ord(c) < 32 or ord(c) == 127 for c in url):
+        raise PydanticCustomError("port_control", "a control character")
     scheme = url.partition("://")[0]
     if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
         raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": scheme})

@@ -20,6 +20,7 @@ import contextlib
 import fcntl
 import getpass
 import hashlib
+import ipaddress
 import json
 import os
 import socket
@@ -45,12 +46,13 @@ def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ..
     """The identities of the line `port` names; two spellings of one line share at least one.
 
     `socket://HOST:PORT` and `rfc2217://HOST:PORT`: `tcp/ADDRESS/PORT` for every address HOST
-    resolves to (a host that does not resolve: its name); a device path: `dev/REALPATH`;
-    `emulator://NAME`: `emulator/REALPATH` of its state file `emulator_state`; any other URL:
-    the URL."""
+    resolves to, as a connection reaches it (`::ffff:127.0.0.1` and `0.0.0.0` are 127.0.0.1; a
+    host that does not resolve: its name); a device path: `dev/REALPATH`; `emulator://NAME`:
+    `emulator/REALPATH` of its state file `emulator_state`; any other URL: the URL, and
+    `dev/REALPATH` of the device it names by an absolute path (pyserial's `spy://`, `alt://`)."""
     scheme, sep, _ = port.partition("://")
     if not sep:
-        return (f"dev/{os.path.realpath(port)}",)
+        return (_device_key(port),)
     if scheme == "emulator":
         if emulator_state is None:
             raise ValueError(f"{port}: an emulator line is known by its state file — pass emulator_state")
@@ -67,8 +69,33 @@ def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ..
             addresses = socket.getaddrinfo(host, tcp_port, type=socket.SOCK_STREAM, proto=socket.IPPROTO_TCP)
         except (OSError, UnicodeError):  # does not resolve: the open fails with its own message
             return (f"tcp/{host}/{tcp_port}",)
-        return tuple(sorted({f"tcp/{sockaddr[0]}/{tcp_port}" for *_, sockaddr in addresses}))
+        return tuple(sorted({f"tcp/{_reached(sockaddr[0])}/{tcp_port}" for *_, sockaddr in addresses}))
+    path = urlsplit(port).path
+    if path.startswith("/"):  # a pyserial wrapper of a device (spy:///dev/ttyUSB0?file=…): the device's line too
+        return (port, _device_key(path))
     return (port,)
+
+
+def _device_key(path: str) -> str:
+    try:
+        return f"dev/{os.path.realpath(path)}"
+    except ValueError:  # a NUL in the path: no device has it, and the open says so
+        return f"dev/{path!r}"
+
+
+def _reached(address: str) -> str:
+    """The address a connection to `address` reaches: an IPv4 address written as IPv6
+    (`::ffff:127.0.0.1`) is that IPv4 address; the unspecified one (`0.0.0.0`, `::`) is this host's
+    loopback, where Linux connects it."""
+    try:
+        ip = ipaddress.ip_address(address.partition("%")[0])
+    except ValueError:
+        return address
+    if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:
+        ip = ip.ipv4_mapped
+    if ip.is_unspecified:
+        ip = ipaddress.ip_address("127.0.0.1" if ip.version == 4 else "::1")
+    return str(ip)
 
 
 def lock_dir() -> Path:

@@ -56,6 +56,10 @@ class LinkError(UserError):
     """A module could not be reached, or answered nonsense, after every retry."""
 
 
+class PortFailed(LinkError):
+    """The port itself failed to read or write: no module is to blame, and no retry helps."""
+
+
 @dataclass(frozen=True, slots=True)
 class Exchange:
     """One attempt on the line, for journals: what went out, what came back."""
@@ -204,8 +208,8 @@ class Link:
             self.port.reset_input_buffer()
             self.port.write(frame)
             self.port.flush()
-        except (serial.SerialException, OSError) as error:
-            raise LinkError(f"bus {self.bus}: cannot write to the port ({error}) — check the adapter and cable") from None
+        except Exception as error:  # noqa: BLE001 — pyserial's URL handlers (alt://…) fail in ways of their own
+            raise PortFailed(f"bus {self.bus}: cannot write to the port ({_said(error)}) — check the adapter and cable") from None
         if self.trace:
             self.trace.sent(self.bus, frame)
 
@@ -220,8 +224,8 @@ class Link:
         while True:
             try:
                 chunk = self.port.read(max(1, self.port.in_waiting))
-            except (serial.SerialException, OSError) as error:
-                raise LinkError(f"bus {self.bus}: cannot read from the port ({error}) — check the adapter and cable") from None
+            except Exception as error:  # noqa: BLE001 — as in _send
+                raise PortFailed(f"bus {self.bus}: cannot read from the port ({_said(error)}) — check the adapter and cable") from None
             now = time.monotonic()
             if chunk:
                 decoder.receive_data(chunk, now)
@@ -248,3 +252,10 @@ class Link:
                 if self.trace:
                     self.trace.remark(self.bus, f"the line did not go quiet within {last_call - deadline + self.timeout:.3f} s")
                 return None
+
+
+def _said(error: Exception) -> str:
+    """A port's failure in one line: pyserial's own errors as they say it, others with their kind."""
+    if isinstance(error, (serial.SerialException, OSError)):
+        return str(error)
+    return f"{type(error).__name__}: {error}"

@@ -106,6 +106,9 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
         raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path or the URL") from None
+    except Exception as error:  # noqa: BLE001 — a pyserial URL handler (alt://, spy://, …) failing its own way
+        raise UserError(f"bus {bus}: cannot open port {url} (pyserial's {url.partition('://')[0]}:// handler failed: "
+                        f"{type(error).__name__}: {error}) — check the URL's options") from None  # fmt: skip
     if not is_url and not _holds(port, line):
         port.close()
         raise refused
