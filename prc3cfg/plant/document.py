@@ -15,8 +15,8 @@ about a second to get there (`_REREAD_EVENTS`). This module builds the data itse
   tools, most other readers) read differently is a problem that says what to write: `010` is
   8 to one and 10 to the other, `on` true or text, `1:30` 90 or text, `1e3` text or 1000,
   `0b101`, `1_000`, `2024-01-01`, `=`. The 1.2 side is `core_schema`, the YAML 1.2.2 core
-  schema's table (§10.3.2); the 1.1 side is PyYAML's resolver (which, unlike the 1.1 type
-  repository, reads `y` and `n` as text, as 1.2 does). Quoted scalars and explicit tags are
+  schema's table (§10.3.2); the 1.1 side is PyYAML's resolver, and the 1.1 type repository's
+  `y`, `Y`, `n`, `N` as booleans (PyYAML reads them as text, other 1.1 readers as true and false). Quoted scalars and explicit tags are
   never ambiguous. The value kept is the YAML 1.2 reading, what editors and schema tools
   see; the models' objection to it, if any, says what the key wants. A tag on a scalar that
   it cannot be read as, or any tag on a mapping or a list (`!!set`, `!!omap`), is refused;
@@ -531,6 +531,8 @@ class _Reader:
         if plain:
             # a tag the core schema does not have (a date, `=`) differs without building a value
             yaml11 = (tag, self.construct(tag, text) if tag in _CORE_TAGS else None)
+            if tag == _STR_TAG and text in _YES_NO:  # the 1.1 type repository's y and n, which PyYAML leaves out
+                yaml11 = (_BOOL_TAG, text in "yY")
             yaml12 = (core_tag, core_value(text))
             if (yaml11[0], str(yaml11[1])) != (yaml12[0], str(yaml12[1])):  # str: NaN is not equal to NaN
                 quoted = _STR_TAG in (yaml11[0], yaml12[0])
@@ -586,6 +588,8 @@ def _in_file(data: Any, path: Path_) -> Path_:
     found: Path_ = ()
     for part in path:
         if isinstance(data, dict):
+            if isinstance(part, str) and part not in data:  # pydantic writes a key that is no str or int as its repr
+                part = next((key for key in data if isinstance(key, Decimal | float) and part in (str(key), repr(key))), part)
             present = _hashable(part) and part in data
         else:
             present = isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data)
@@ -607,6 +611,10 @@ def _core_rule(text: str) -> tuple[str, Callable[[str], Any]]:
         return _STR_TAG, str
     tag, _, value = _CORE_SCHEMA[int(found.lastgroup[1:])]
     return tag, value
+
+
+#: Plain scalars the YAML 1.1 type repository reads as booleans and PyYAML's resolver as text.
+_YES_NO = frozenset({"y", "Y", "n", "N"})
 
 
 def _ambiguity(subject: str, yaml11: tuple[str, Any], yaml12: tuple[str, Any]) -> str:

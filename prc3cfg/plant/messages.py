@@ -71,6 +71,7 @@ TEMPLATES = {
     "emulator_name": "{what} {input} does not end in a plain emulator name — the name is a file in "
     ".prc3cfg/emulators/: letters, digits, '-', '_' and '.' (not first), e.g. emulator://booth-a",
     "too_short": "{what} is empty — list at least one {item}",
+    "program_key": "{what} {input} is written with a decimal point — {fix}",
     "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
 }
 _LIST_ITEMS = {"buses": "bus", "modules": "module", "programs": "program"}
@@ -167,7 +168,14 @@ def shown(value: Any) -> str:
         return "a mapping"
     if isinstance(value, list):
         return "a list"
-    return repr(str(value))
+    text = str(value)
+    if len(text) > SHOWN:  # an error is one line a person reads, whatever the file holds
+        return f"{text[:SHOWN]!r}… ({len(text):,} characters)"
+    return repr(text)
+
+
+#: The characters of a value an error quotes at most.
+SHOWN = 60
 
 
 def _model_at(container: Path_) -> type[BaseModel]:

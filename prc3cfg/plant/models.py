@@ -271,8 +271,18 @@ class ChainSpec(FileModel):
 
 
 UnmanagedPrograms = Literal["keep", "reset"]
+def _program_key(value: Any) -> Any:
+    """A program number as a key is written whole: `1.0:` is refused, as the schema's `propertyNames`
+    refuses it (a JSON key is text, and its pattern takes digits only)."""
+    if isinstance(value, (float, Decimal)) and not isinstance(value, bool):
+        fix = f"write it as {int(value)}:" if value == int(value) else "program numbers are whole, 1..64"
+        raise PydanticCustomError("program_key", "a program number with a point", {"fix": fix})
+    return value
+
+
+ProgramKey = Annotated[ProgramNumber, BeforeValidator(_program_key)]
 Programs = Annotated[
-    dict[ProgramNumber, ProgramSpec],
+    dict[ProgramKey, ProgramSpec],
     Field(json_schema_extra={"propertyNames": PROGRAM_KEY}, description="programs by number 1..64"),
 ]
 

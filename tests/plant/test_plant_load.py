@@ -290,7 +290,7 @@ def test_a_profile_problem_names_the_module_and_points_into_the_profile(tmp_path
     with pytest.raises(PlantError) as raised:
         with_profiles(tmp_path, PROFILES, """\
             - {address: 1, name: m, profiles: a}
-            - {address: 2, name: n, profiles: a, system: {upper_reversing_point: 0.900}}
+            - {address: 2, name: "n", profiles: a, system: {upper_reversing_point: 0.900}}
             """)
     assert raised.value.problems == [
         f"{tmp_path / 'plant.yaml'}:6:21: in module n, position 1.000 m is above upper_reversing_point "
