@@ -5,6 +5,14 @@ device such as `/dev/zero` that never ends, a directory) and at most `limit` byt
 `FileProblem` says why not, in words the caller completes with what to do. Plant files,
 plan files, snapshots and saved images are read this way.
 
+`read_json` reads a JSON document so, and refuses — in a `FileProblem`, never a Python
+error — what would cost far more to parse than any file prc3cfg writes: more than
+`MAX_CONTAINERS` objects and lists (counted as the `{` and `[` bytes, an upper bound found
+before parsing: 63 MB of `[{},{},…]` took 1.6 GB and seconds to parse), a number of more
+digits than Python converts (`sys.get_int_max_str_digits`, 4300), nesting deeper than
+Python's recursion. Its size is bounded by `JSON_LIMIT`. Within those limits the worst a
+document of numbers and texts can cost is about 0.8 GB for 64 MiB of `[1e1,1e1,…]`.
+
 `write_atomically` writes a temporary file beside the target, flushes it to disk, renames
 it over the target and flushes the directory: a process killed at any point leaves either
 the previous file (or none) or the complete new one, never a truncated one. Snapshots,
@@ -17,13 +25,21 @@ import enum
 import json
 import os
 import stat
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
 #: The largest JSON file prc3cfg reads: a plan file, a snapshot, saved images (a plan of
-#: 8 buses × 30 fully changed modules is a few MB).
+#: 8 buses × 30 fully changed modules is 11–17 MB).
 JSON_LIMIT = 64 * 2**20
+#: The most objects and lists (`{` and `[` bytes, strings included) a JSON file prc3cfg reads
+#: may hold. The largest inputs prc3cfg writes, 8 buses × 30 modules × 64 programs all
+#: changed (bench/plan_time_bench.py): a plan file of position, speed, dwell and relative
+#: speed, 10.9 MB, 66,448; of every field (F1, F2, next too), 17.1 MB, 100,504; the `read
+#: --json` images, 1.1 MB, 16,081; an emulator's state file, 30 modules, about 2,000. Five
+#: times the largest: 500,000 empty objects parse in under 0.1 s and 40 MB.
+MAX_CONTAINERS = 500_000
 #: What a path is when it is not a regular file, by its `stat` file type.
 NOT_FILES = {
     stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
@@ -77,6 +93,9 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
     """The JSON document in the regular file `path` (at most `limit` bytes); `FileProblem` otherwise,
     with line and column where the JSON breaks."""
     data = read_regular(path, limit)
+    if data.count(b"{") + data.count(b"[") > MAX_CONTAINERS:
+        raise FileProblem(Why.TOO_LARGE, f"more than {MAX_CONTAINERS:,} objects and lists (counting '{{' and '['), "
+                                         "more than any file prc3cfg writes holds")  # fmt: skip
     try:
         return json.loads(data)
     except json.JSONDecodeError as error:
@@ -85,6 +104,9 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
         raise FileProblem(Why.NOT_JSON, "not UTF-8 text") from None
     except RecursionError:
         raise FileProblem(Why.NOT_JSON, "nested too deeply for any file prc3cfg writes") from None
+    except ValueError:  # the only other ValueError json raises: an integer longer than Python converts
+        digits = sys.get_int_max_str_digits()
+        raise FileProblem(Why.NOT_JSON, f"a number of more than {digits} digits, which no file prc3cfg writes holds") from None
 
 
 def _regular(mode: int) -> None:
