@@ -53,6 +53,8 @@ USAGE = {
     "scan's parity": (["scan", "--port", "socket://127.0.0.1:9", "--parity", "x"], "error: prc3cfg scan: Invalid value for '--parity': 'x' is not one of none, odd, even — see prc3cfg scan --help"),
     "import's framing": (["import", "--port", "socket://127.0.0.1:9", "--framing", "modbus"], "error: prc3cfg import: Invalid value for '--framing': 'modbus' is not one of crc16, open-driver, stx — see prc3cfg import --help"),
     "scan's stop bits": (["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"], "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 — see prc3cfg scan --help"),
+    "refresh-only with --json": (["plan", "p.yaml", "--refresh-only", "--json"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --out, --json and --markdown — see prc3cfg plan --help"),
+    "refresh-only with --out": (["plan", "p.yaml", "--refresh-only", "--out", "p.json"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --out, --json and --markdown — see prc3cfg plan --help"),
     "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
     "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),
     "terraform's -lock-timeout=": (["apply", "p.yaml", "-lock-timeout=10"], "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?"),

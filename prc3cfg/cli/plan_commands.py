@@ -53,6 +53,7 @@ def read(
 
 @app.command()
 def plan(
+    ctx: typer.Context,
     plant: PlantArg,
     out: Annotated[Optional[Path], typer.Option(callback=lambda v: check_output(v, "--out"), help="Write the plan file (prc3cfg-plan/1).")] = None,
     actual: Annotated[Optional[Path], typer.Option(help="Plan against module images saved by `read --json`.")] = None,
@@ -70,6 +71,8 @@ def plan(
     from prc3cfg import api
     from prc3cfg.cli import output
 
+    if refresh_only and (out is not None or json_out or markdown):
+        raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --out, --json and --markdown", ctx=ctx)
     check_output(out, "--out", plant=plant)
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)

@@ -12,7 +12,7 @@
 
 `prc3cfg_emulated(path, images=None, **bus_settings)` puts the plant file's buses on emulators
 (`prc3cfg.shell.testing.emulate`): modules at factory defaults, or as a `prc3cfg read --json` file
-says; a relative path is taken from pytest's rootdir. The emulators stop when the test ends.
+says; a relative path (of either file) is taken from pytest's rootdir. The emulators stop when the test ends.
 """
 
 from __future__ import annotations
@@ -34,8 +34,10 @@ def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator
     numbers = itertools.count(1)
     with contextlib.ExitStack() as stack:
 
-        def start(plant_path: str | Path, **options: Any) -> EmulatedPlant:
-            path = Path(request.config.rootpath) / plant_path
+        def start(plant_path: str | Path, images: str | Path | None = None, **options: Any) -> EmulatedPlant:
+            root = Path(request.config.rootpath)
+            path = root / plant_path
+            options["images"] = None if images is None else root / images  # both from the rootdir, wherever pytest runs
             folder = tmp_path / f"emulated-{next(numbers)}"
             folder.mkdir()
             return stack.enter_context(emulate(path, folder, **options))

@@ -31,7 +31,7 @@ from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, default_program
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant, load_plant
 from prc3cfg.shell.emulator import Emulator, FaultInjection
-from prc3cfg.shell.files import read_json
+from prc3cfg.shell.files import FileProblem, read_json
 
 
 @dataclass
@@ -58,9 +58,19 @@ class EmulatedPlant:
 def seeded(images: Path) -> dict[tuple[str | None, int], ModuleState]:
     """Module states from a `prc3cfg read --json` file, by (bus or None, address); programs it
     did not read hold their defaults."""
+    remedy = "give the file prc3cfg read --json wrote"
+    try:
+        entries = read_json(images)
+    except FileProblem as problem:
+        raise UserError(f"{problem.where(images)}: {problem} — {remedy}") from None
+    if not isinstance(entries, list):
+        raise UserError(f"{images}: not a list of module images — {remedy}")
     states = {}
-    for entry in read_json(images):
-        image = ModuleImage.from_json(entry)
+    for entry in entries:
+        try:
+            image = ModuleImage.from_json(entry)
+        except (ValueError, KeyError, TypeError, AttributeError) as error:
+            raise UserError(f"{images}: not a module image as prc3cfg read --json writes it ({error}) — {remedy}") from None
         filler = default_program(image.system)
         complete = image.with_programs({n: filler for n in PROGRAM_NUMBERS if image.program(n) is None})
         states[(entry.get("bus"), image.address)] = ModuleState(complete)
