@@ -417,12 +417,13 @@ def plan_document(path: Path) -> dict:
     step's summary worked out again from its bytes — what is shown is what would be sent."""
     document = read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again")
     try:
-        planned = read_plan_file(document)
+        planned = read_plan_file(document, shown=True)
     except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
+    entries = iter(planned.modules)  # in the file's order
     for bus in document["buses"]:
-        for module, entry in zip(bus["modules"], (m for m in planned.modules if m.bus == bus["name"])):
-            system_keys = [f["field"] for f in module.get("changes", {}).get("fields", []) if f.get("program") is None]
+        for module, entry in zip(bus["modules"], entries):
+            system_keys = [f["field"] for f in module["changes"]["fields"] if f["program"] is None]
             for step, message in zip(module["steps"], entry.steps):
                 step["summary"] = _summary(message, system_keys)
         for broadcast in bus.get("broadcasts", []):
@@ -489,8 +490,11 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
             raise UserError(edited.format(_first_difference(theirs, steps)))
         if entry.broadcasts != change.broadcasts:
             raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
-    said = planned.document.get("left_alone")  # a plan for some modules says nothing, which may stand
-    written = plan_json(ours, said if said == [] else left_alone(plant)) | {"plant_path": planned.plant_path}
+    # what stays on the hardware is what the plan's maker compared with (`plan --previous`, or the copy last
+    # applied there): words only, which send nothing — any list of them stands
+    said = planned.document.get("left_alone")
+    notes = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else left_alone(plant)
+    written = plan_json(ours, notes) | {"plant_path": planned.plant_path}
     if (at := _edited_at(planned.document, written)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
@@ -639,13 +643,17 @@ def _keep_applied(plant: Plant) -> None:
         save_applied(plant.path, text)
 
 
-def left_alone(plant: Plant) -> list[str]:
-    """What the plant file no longer describes since it was last applied in full — modules, and
-    programs under `unmanaged_programs: keep` — which stays on the hardware as it is."""
-    try:
-        before = load_plant(applied_copy(plant.path))
-    except UserError:
-        return []  # never applied in full here, or a copy this prc3cfg cannot read: nothing to compare
+def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
+    """What the plant file no longer describes — modules, and programs under `unmanaged_programs:
+    keep` — which stays on the hardware as it is: against `previous` (the plant file as it was, e.g.
+    on the main branch), else against the copy last applied in full from here (`.prc3cfg/applied/`)."""
+    if previous is not None:
+        before = load_plant(previous)  # named by the caller: its problems are said
+    else:
+        try:
+            before = load_plant(applied_copy(plant.path))
+        except UserError:
+            return []  # never applied in full here, or a copy this prc3cfg cannot read: nothing to compare
     now = {(bus.name, m.address): m for bus, m in plant.modules()}
     notes = []
     for bus, old in before.modules():

@@ -195,7 +195,7 @@ TAMPERING = {
                                  "buses[0].modules[1].changes.warning is not what prc3cfg wrote"),
     "a field's value in the review": (lambda d: module_entry(d, "booth-a", 2)["changes"]["fields"][0].update(after=1),
                                       "buses[0].modules[1].changes.fields[0].after is not what"),
-    "a note added": (lambda d: d.update(left_alone=["nothing to see"]), ": left_alone is not what"),
+    "notes that are no text": (lambda d: d.update(left_alone=[{"step": 1}]), ": left_alone is not what"),
 }
 
 

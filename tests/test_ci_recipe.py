@@ -101,6 +101,14 @@ class Repository:
         self.path.mkdir()
         shutil.copy(DEMO, self.path / "plant.yaml")  # emulator:// buses: state in .prc3cfg/ beside it
         (self.path / ".gitignore").write_text(".prc3cfg/\n")
+        # a checkout whose origin's main holds the plant file as it was before the pull request
+        git = {**os.environ, "GIT_AUTHOR_NAME": "ci", "GIT_AUTHOR_EMAIL": "ci@example.org", "GIT_COMMITTER_NAME": "ci",
+               "GIT_COMMITTER_EMAIL": "ci@example.org"}  # fmt: skip
+        for command in (["init", "-q", "-b", "main"], ["add", "."], ["commit", "-q", "-m", "plant"],
+                        ["clone", "-q", "--bare", ".", str(tmp_path / "origin.git")],
+                        ["remote", "add", "origin", str(tmp_path / "origin.git")]):  # fmt: skip
+            subprocess.run(["git", *command], cwd=self.path, env=git, check=True, capture_output=True)
+        (tmp_path / "runner-temp").mkdir()
         self.state = tmp_path / "github"
         (self.state / "artifacts").mkdir(parents=True)
         bin_dir = tmp_path / "bin"
@@ -108,7 +116,8 @@ class Repository:
         (bin_dir / "gh").write_text(GH.replace("PYTHON", sys.executable))
         (bin_dir / "gh").chmod(0o755)
         self.env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "GH_STATE": str(self.state),
-                    "GITHUB_REPOSITORY": "plant-org/plant", "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}  # fmt: skip
+                    "GITHUB_REPOSITORY": "plant-org/plant", "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"),
+                    "GITHUB_BASE_REF": "main", "RUNNER_TEMP": str(tmp_path / "runner-temp")}  # fmt: skip
 
     def run_job(self, job: str, values: dict[str, str]) -> list[subprocess.CompletedProcess]:
         """Every step of the job in order, as the runner would; stops at the first that fails."""
@@ -130,6 +139,12 @@ class Repository:
             if result.returncode != 0:
                 break
         return done
+
+    def move(self, to: Path) -> None:
+        """The same checkout, with its emulators' state, in another runner's workspace."""
+        to.parent.mkdir(parents=True)
+        shutil.move(self.path, to)
+        self.path = to
 
     def comments(self) -> list[dict]:
         file = self.state / "comments.json"
@@ -157,13 +172,28 @@ def test_the_workflow_plans_a_pull_request_and_applies_the_reviewed_plan_on_merg
     assert "speed 0.050 m/s → 0.240 m/s" in comment["body"]
 
     repository.env["PR_HEAD_SHA"] = "bbb222"  # merged: main's commit belongs to the pull request's head
+    repository.move(tmp_path / "another-runner" / "plant-repo")  # the apply job's workspace is elsewhere
     steps = repository.run_job("apply", {"github.token": "t"})
     assert all(s.returncode == 0 for s in steps), [s.stdout + s.stderr for s in steps]
     assert "Apply complete: 6 modules written and verified." in steps[-1].stdout
-    assert "apply --plan plan.json" in WORKFLOW_TEXT
+    assert "apply plant.yaml --plan plan.json" in WORKFLOW_TEXT
     after = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=repository.path,
                            env=repository.env, capture_output=True, text=True)  # fmt: skip
     assert after.returncode == 0, after.stdout + after.stderr
+
+
+def test_a_pull_request_that_removes_a_module_says_it_stays_on_the_hardware(tmp_path):
+    """The comment compares with the plant file on main (`plan --previous`): `.prc3cfg/applied/` is
+    not in a fresh checkout."""
+    repository = Repository(tmp_path)
+    document = yaml.safe_load((repository.path / "plant.yaml").read_text())
+    removed = document["buses"][0]["modules"].pop()
+    (repository.path / "plant.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
+    steps = repository.run_job("plan", pull_request("ddd444"))
+    assert all(s.returncode == 0 for s in steps), [s.stderr for s in steps]
+    (comment,) = repository.comments()
+    assert f"{document['buses'][0]['name']}/{removed['name']} (address {removed['address']}) is no longer in the plant file: " \
+           "it stays on the hardware as it is" in comment["body"]
 
 
 def test_the_apply_job_refuses_a_plan_made_for_another_plant_file(tmp_path):

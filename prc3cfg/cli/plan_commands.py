@@ -62,6 +62,7 @@ def plan(
     max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
+    previous: Annotated[Optional[Path], typer.Option("--previous", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
@@ -89,10 +90,10 @@ def plan(
         if drifted and detailed_exitcode:
             raise Outcome(EXIT_CHANGES)
         return
+    notes = [] if module else api.left_alone(loaded, previous)  # a bad --previous is said before the line is used
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options)
-    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars,
-                     notes=[] if module else api.left_alone(loaded))  # fmt: skip
+    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes)
     if detailed_exitcode and result.changes:
         raise Outcome(EXIT_CHANGES)
 
