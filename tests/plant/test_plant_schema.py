@@ -34,6 +34,7 @@ def test_it_is_a_draft_07_schema_without_later_keywords() -> None:
     schema = plant_schema()
     jsonschema.Draft7Validator.check_schema(schema)
     assert schema["$schema"] == "http://json-schema.org/draft-07/schema#"
+    assert schema["$id"] == "urn:prc3cfg:plant-file"  # stable in every version: editors and caches key on it
     text = SCHEMA_FILE.read_text()
     for later in ("$defs", "prefixItems", "unevaluatedProperties", "dependentRequired", "multipleOf"):
         assert later not in text
