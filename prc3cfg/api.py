@@ -841,15 +841,17 @@ def init_data_block(plant: Plant, bus_name: str) -> list[tuple[str, str, str]]:
     return gateway.format_data_block(gateway.init_data_block(settings))
 
 
-def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, ModuleImage] | None = None) -> bytes:
-    """The chains of a module drawn (`prc3cfg.core.plot`, the plot extra): the plant file's, or with
-    `images` (as `read` or `load_images` gave them) what the module holds as before and what the
-    plan leaves it holding as after."""
+def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, ModuleImage] | None = None,
+            planned: PlantPlan | None = None) -> bytes:  # fmt: skip
+    """The chains of a module drawn (`prc3cfg.core.plot`, the plot extra): the plant file's, or what
+    the module holds as before and what the plan leaves it holding as after — of `planned`, or of a
+    plan from `images` (as `read` or `load_images` gave them)."""
     (bus, module), = select(plant, [module_name])
     title = f"module {module.name} — bus {bus.name}, address {module.address}"
-    if images is None:
+    if images is None and planned is None:
         return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
-    change = plan(plant, [module.name], images=images).modules[0]
+    planned = planned or plan(plant, [module.name], images=images)
+    change = next(c for c in planned.modules if (c.bus, c.address) == (bus.name, module.address))
     return plot.picture(change.plan.predicted, change.actual, fmt=fmt, title=f"{title}: before (dashed) and after the plan")
 
 

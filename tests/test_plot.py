@@ -172,3 +172,20 @@ def test_show_plot_mistakes_are_one_line_before_any_work(args, message, tmp_path
     done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(DEMO), *args],
                           capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
     assert (done.returncode, done.stderr, done.stdout) == (1, message + "\n", "")
+
+
+def test_plan_plot_draws_the_module_before_and_after_its_plan(matplotlib, tmp_path, capsys, monkeypatch):
+    """`plan --module NAME --plot FILE` draws what the module holds (dashed) and what the plan leaves,
+    from the same read-back as the plan — the drawing `api.picture` makes of those images."""
+    from emulated import emulated_plant, run_cli
+
+    from prc3cfg import api
+
+    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+    svg = tmp_path / "top.svg"
+    with emulated_plant(tmp_path) as emulated:
+        result = run_cli(capsys, "plan", emulated.path, "--module", "booth-a-top", "--plot", svg)
+        assert result.code == 0, result.err
+        assert result.out.endswith(f"{svg}: the chains of module booth-a-top\n")
+        held = {key: image for key, image in emulated.images().items() if key == ("booth-a", 5)}
+        assert svg.read_bytes() == api.picture(emulated.plant, "booth-a-top", fmt="svg", images=held)

@@ -157,3 +157,12 @@ def applied(result: ApplyResult) -> None:
     if result.runs:
         report(result)
         print(f"Apply complete: {render.plural(len(result.runs), 'module')} written and verified.")
+
+
+def write_picture(path: Path, data: bytes, module: str) -> None:
+    """A drawing of a module's chains (`--plot`) written where it was asked for."""
+    try:
+        path.write_bytes(data)
+    except OSError as error:
+        raise UserError(f"--plot {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
+    print(f"{path}: the chains of module {module}")

@@ -62,6 +62,7 @@ def plan(
     max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
+    plot: Annotated[Optional[Path], typer.Option("--plot", help="With one --module: draw its chains before (dashed) and after the plan to this .svg or .png file.")] = None,
     previous: Annotated[Optional[Path], typer.Option("--previous", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
@@ -71,10 +72,15 @@ def plan(
     """Read back, diff against the plant file and print the cheapest plan."""
     from prc3cfg import api
     from prc3cfg.cli import output
+    from prc3cfg.core.plot import plot_format
 
-    if refresh_only and (out is not None or json_out or markdown):
-        raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --out, --json and --markdown", ctx=ctx)
+    if refresh_only and (out is not None or json_out or markdown or plot is not None):
+        raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --out, --json, --markdown and --plot", ctx=ctx)
+    if plot is not None and len(module or []) != 1:
+        raise click_errors.UsageError("--plot draws one module — name it with --module NAME", ctx=ctx)
+    fmt = plot_format(plot) if plot is not None else None
     check_output(out, "--out", plant=plant)
+    check_output(plot, "--plot", plant=plant)
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
     if not json_out:
@@ -94,6 +100,8 @@ def plan(
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options)
     output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes)
+    if plot is not None:
+        output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
     if detailed_exitcode and result.changes:
         raise Outcome(EXIT_CHANGES)
 

@@ -182,13 +182,10 @@ def _plot_module(plant: Plant, module: Module, path: Path, fmt: str, actual: Pat
     before and what the plan leaves it holding as after (`prc3cfg.api.picture`)."""
     from prc3cfg import api
 
+    from prc3cfg.cli.output import write_picture
+
     images = None if actual is None else api.load_images(actual, plant, [module.name])
-    data = api.picture(plant, module.name, fmt=fmt, images=images)
-    try:
-        path.write_bytes(data)
-    except OSError as error:
-        raise UserError(f"--plot {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
-    print(f"{path}: the chains of module {module.name}")
+    write_picture(path, api.picture(plant, module.name, fmt=fmt, images=images), module.name)
 
 
 def _chain_text(chain: ChainSpec) -> str:
