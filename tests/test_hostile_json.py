@@ -1,19 +1,26 @@
 """Hostile JSON inputs on the command line: every one is refused in one line (file, what is
 wrong, what to do), exit 1, no traceback — and before the line, or the emulator, is started.
 
-Numbers longer than Python will convert, and documents that would take gigabytes to parse.
-The plant points at ports where nothing listens, so an error about the line would mean the
-input was not checked first.
+Numbers longer than Python will convert, documents that would take gigabytes to parse, and
+plan files whose structure was damaged (a hypothesis test: drop a key or an item, change a
+type). The plant points at ports where nothing listens, so an error about the line would
+mean the input was not checked first.
 """
 
 from __future__ import annotations
 
+import copy
+import json
 import re
 from pathlib import Path
 
 import pytest
 from emulated import DEMO, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from prc3cfg.core.device import ModuleState
+from prc3cfg.plant import load_plant
 from prc3cfg.shell import files
 
 #: What a message a person reads must never show: Python's own words for what went wrong.
@@ -30,6 +37,13 @@ def nowhere_plant(folder: Path) -> Path:
     plant = folder / "plant.yaml"
     plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9").replace("emulator://demo-b", "socket://127.0.0.1:19"))
     return plant
+
+
+def factory_images(plant: Path, out: Path) -> Path:
+    """A `read --json` file of the plant's modules at factory defaults (made without a line)."""
+    entries = [{"bus": bus.name, **ModuleState.factory(module.address).image.to_json()} for bus, module in load_plant(plant).modules()]
+    out.write_text(json.dumps(entries, indent=1))
+    return out
 
 
 @pytest.fixture
@@ -102,3 +116,107 @@ def test_a_document_at_the_limit_is_read(tmp_path):
     path = tmp_path / "many.json"
     path.write_text("[" + ",".join(["{}"] * (files.MAX_CONTAINERS - 1)) + "]")
     assert len(files.read_json(path)) == files.MAX_CONTAINERS - 1
+
+
+# -- plan files whose structure is damaged ------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def made_plan(tmp_path_factory) -> tuple[Path, dict]:
+    """A plant on no line, and a plan file for it made from factory-default images (`plan --actual`)."""
+    folder = tmp_path_factory.mktemp("made")
+    plant = nowhere_plant(folder)
+    images = factory_images(plant, folder / "images.json")
+    out = folder / "plan.json"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("PRC3CFG_LOCK_DIR", str(folder / "locks"))
+        from prc3cfg.cli import main
+
+        with pytest.raises(SystemExit) as done:
+            main(["plan", str(plant), "--actual", str(images), "--out", str(out)])
+    assert done.value.code in (0, None)
+    return plant, json.loads(out.read_text())
+
+
+def damage(document: dict, change) -> dict:
+    damaged = copy.deepcopy(document)
+    change(damaged)
+    return damaged
+
+
+def first_module(document: dict) -> dict:
+    return document["buses"][0]["modules"][0]
+
+
+DAMAGE = {
+    "no buses": (lambda d: d.pop("buses"), 'the plan has no "buses"'),
+    "buses null": (lambda d: d.update(buses=None), "buses is null, where a list belongs"),
+    "a bus that is a number": (lambda d: d["buses"].__setitem__(0, 7), "buses[0] is 7, where an object belongs"),
+    "a bus without modules": (lambda d: d["buses"][0].pop("modules"), 'buses[0] has no "modules"'),
+    "steps null": (lambda d: first_module(d).update(steps=None), "buses[0].modules[0].steps is null, where a list belongs"),
+    "a step without its message": (lambda d: first_module(d)["steps"][0].pop("message"), 'buses[0].modules[0].steps[0] has no "message"'),
+    "a message that is not hex": (lambda d: first_module(d)["steps"][0].update(message="zz"),
+                                  "buses[0].modules[0].steps[0].message is not a PRC 3 message in hex"),
+    "a message as a number": (lambda d: first_module(d)["steps"][0].update(message=2000),
+                              "buses[0].modules[0].steps[0].message is 2000, where text belongs"),
+    "no plant": (lambda d: d.pop("plant"), 'has no "plant"'),
+    "plant_sha256 false": (lambda d: d.update(plant_sha256=False), "plant_sha256 is false, where text belongs"),
+    "a name that is a list": (lambda d: first_module(d).update(name=["a"]), "buses[0].modules[0].name is a list, where text belongs"),
+}
+
+
+@pytest.mark.parametrize("case", DAMAGE, ids=list(DAMAGE))
+@pytest.mark.parametrize("command", ["show", "apply"])
+def test_a_damaged_plan_file_says_where_and_what_in_words(made_plan, tmp_path, capsys, case, command):
+    plant, document = made_plan
+    change, expected = DAMAGE[case]
+    path = tmp_path / "damaged.json"
+    path.write_text(json.dumps(damage(document, change)))
+    args = ["show", path] if command == "show" else ["apply", plant, "--plan", path]
+    line = one_line(run_cli(capsys, *args), f"error: {path}: ")
+    assert expected in line, line
+    assert line.endswith(" — make the plan again with prc3cfg plan --out"), line
+
+
+def paths(value, at: tuple = ()) -> list[tuple]:
+    """Every place in a JSON document, as the keys and indexes that lead there."""
+    found = [at]
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found += paths(item, (*at, key))
+    elif isinstance(value, list):
+        for index, item in enumerate(value[:3]):  # the first few of a list: the rest are alike
+            found += paths(item, (*at, index))
+    return found
+
+
+OTHERS = [None, True, False, 0, -1, 2.5, 1e300, "", "x", "20", [], {}, [None], {"a": 1}, [[]], "ff" * 40]
+
+
+@settings(max_examples=200, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_path, capsys, data):
+    """Drop a key or an item, or give a value of another type, anywhere: `show` and `apply --plan`
+    refuse it in one line that says where, in words — or, where the file still makes sense to
+    show, show it; never a traceback."""
+    plant, document = made_plan
+    mangled = copy.deepcopy(document)
+    for _ in range(data.draw(st.integers(1, 3))):
+        places = [p for p in paths(mangled) if p]
+        if not places:
+            break
+        place = data.draw(st.sampled_from(places))
+        parent = mangled
+        for key in place[:-1]:
+            parent = parent[key]
+        if data.draw(st.booleans()):
+            del parent[place[-1]]
+        else:
+            parent[place[-1]] = data.draw(st.sampled_from(OTHERS))
+    path = tmp_path / "mangled.json"
+    path.write_text(json.dumps(mangled))
+    shown = run_cli(capsys, "show", path)
+    if shown.code != 0:
+        one_line(shown, f"error: {path}: ")
+    applied = run_cli(capsys, "apply", plant, "--plan", path, "--auto-approve")
+    assert " — " in one_line(applied, "error: ")  # what is wrong — what to do (or what was expected)
