@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -23,6 +24,19 @@ from prc3cfg.plant import load_plant
 from prc3cfg.shell.locks import line_keys, line_lock
 
 TRAVEL = "Travel to reference point required before production on:"
+#: What an interrupted module's account line may say became of it — always in words.
+STATES = re.compile(r": interrupted (before step \d+ of \d+ \(.+\)|before broadcast \d+ of \d+ \(.+\)"
+                    r"|while verifying: \d+ of \d+ steps? acknowledged(, \d+ broadcasts? sent)?(, after \d+ repair rounds?)?, not verified"
+                    r"|before repair step \d+ of \d+ \(.+\))")
+
+
+def accounts_of(out: str, err: str) -> list[str]:
+    """The first line of every module's account, each checked to say in words what became of it."""
+    accounts = [line for line in (out + err).splitlines() if line.startswith(("✓ bus", "✗ bus"))]
+    for line in accounts:
+        assert not line.endswith("None"), line
+        assert line.startswith("✓") or STATES.search(line), line
+    return accounts
 
 
 def prc3cfg(tmp_path: Path, *args: object, **popen) -> subprocess.Popen:
@@ -46,8 +60,7 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
         assert process.returncode == 130
         assert err.splitlines()[-1] == "error: interrupted"
         assert sum(line.startswith("error:") for line in err.splitlines()) == 1
-        accounts = [line for line in (out + err).splitlines() if line.startswith(("✓ bus", "✗ bus"))]
-        assert len(accounts) == 6
+        assert len(accounts_of(out, err)) == 6
         assert "Journal: " in out and "Interrupted: " in out
         untouched = [line for line in err.split("✗ ")[1:] if "nothing was sent to it" in line]
         assert untouched, "an interrupted apply still wrote every module"
@@ -62,6 +75,30 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
         journal = next((tmp_path / ".prc3cfg" / "journal").iterdir())
         events = [json.loads(line) for line in journal.read_text().splitlines()]
         assert events[-1]["event"] == "interrupted"
+
+
+def test_a_module_written_but_not_yet_verified_says_so(tmp_path):
+    """Module 1 of booth-a is written in full when module 2's first write goes out; Ctrl-C then
+    stops the apply before module 1 is verified: its account says so, not "None"."""
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+        with fifo.open() as trace:
+            for line in trace:
+                _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
+                # a crc16 request: A5h, address, length, message ID — a write is below 50h
+                if (bus, direction) == ("booth-a", ">") and int(frame[2:4], 16) == 2 and int(frame[6:8], 16) < 0x50:
+                    process.send_signal(signal.SIGINT)
+                    break
+            drain(trace)
+            out, err = process.communicate()
+    assert process.returncode == 130, err
+    accounts = accounts_of(out, err)
+    assert len(accounts) == 6
+    (first,) = [line for line in accounts if line.startswith("✗ bus booth-a, module 1 (booth-a-left): ")]
+    assert re.search(r": interrupted while verifying: (\d+) of \1 steps acknowledged, not verified$", first), first
 
 
 def drain(stream) -> threading.Thread:

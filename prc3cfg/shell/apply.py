@@ -23,7 +23,9 @@ An error code stops that module for good (the link confirms codes on lines witho
 checksum) — naming the step, the code, its meaning and what to do — while the other
 modules go on. A module that stops answering (every retry lost) is not given up at once:
 every PRC 3 message is idempotent, so it is read back and whatever still differs is sent
-again. Ctrl-C (`prc3cfg.shell.cancel`) stops every module after the exchange in flight.
+again. Ctrl-C (`prc3cfg.shell.cancel`) stops every module after the exchange in flight, and
+its `failure` says where in words: before which step, broadcast or repair step, or while
+verifying (how many of its steps were acknowledged).
 Gating, snapshots and locks are the caller's.
 """
 
@@ -38,6 +40,7 @@ from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.planner import Step, plan_module
+from prc3cfg.core.render import plural
 from prc3cfg.core.verification import reach
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.shell.link import Link, LinkError
@@ -133,11 +136,24 @@ class ModuleRun:
         sent = {step.message for step in self.sent}
         return tuple(step for step in self.steps if step.message not in sent)
 
-    def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> bool:
-        """Send steps in order; False at the first one not accepted (`failure` says why)."""
+    def stopped_verifying(self) -> None:
+        """Ctrl-C during the verifying read-back: `failure` says what was acknowledged, and that it
+        was not verified (and what went wrong before, if anything did)."""
+        written, sent = {step.message for step in self.written}, {step.message for step in self.sent}
+        own = self.steps[self.broadcasts :]
+        said = f"interrupted while verifying: {sum(s.message in written for s in own)} of {plural(len(own), 'step')} acknowledged"
+        if self.broadcasts:
+            said += f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent"
+        if self.repairs:
+            said += f", after {plural(self.repairs, 'repair round')}"
+        self.interrupted, self.failure = True, f"{said}, not verified" + (f" (before that: {self.failure})" if self.failure else "")
+
+    def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None], what: str = "step") -> bool:
+        """Send steps in order; False at the first one not accepted (`failure` says why, naming
+        the step as `what`: "step", "repair step")."""
         for index, step in enumerate(steps, start=1):
             message = step.message
-            where = f"step {index} of {len(steps)} ({step.summary})"
+            where = f"{what} {index} of {len(steps)} ({step.summary})"
             try:
                 if link.cancel is not None and link.cancel.is_set():
                     raise Interrupted()
@@ -198,7 +214,7 @@ class ModuleRun:
             try:
                 self.final = self.verify_read(link, system, programs, expected)
             except Interrupted:
-                self.interrupted = True
+                self.stopped_verifying()
                 return
             except LinkError as error:
                 self.failure = f"verification: {error}"
@@ -223,7 +239,7 @@ class ModuleRun:
                 return
             self.repairs += 1
             expected, sent_before = repair.predicted, len(self.sent)
-            if not self.run(link, repair.steps, tick) and self.interrupted:
+            if not self.run(link, repair.steps, tick, "repair step") and self.interrupted:
                 return
         if self.refused:
             return
