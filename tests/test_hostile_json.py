@@ -3,8 +3,8 @@ wrong, what to do), exit 1, no traceback — and before the line, or the emulato
 
 Numbers longer than Python will convert, documents that would take gigabytes to parse, and
 plan files whose structure was damaged (a hypothesis test: drop a key or an item, change a
-type). The plant points at ports where nothing listens, so an error about the line would
-mean the input was not checked first.
+type), and an emulator state file in a folder that does not exist. The plant points at ports
+where nothing listens, so an error about the line would mean the input was not checked first.
 """
 
 from __future__ import annotations
@@ -220,3 +220,20 @@ def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_pat
         one_line(shown, f"error: {path}: ")
     applied = run_cli(capsys, "apply", plant, "--plan", path, "--auto-approve")
     assert " — " in one_line(applied, "error: ")  # what is wrong — what to do (or what was expected)
+
+
+# -- the emulator's state file ----------------------------------------------------------------------
+
+
+def test_a_state_file_in_a_missing_folder_is_refused_before_the_emulator_starts(tmp_path, capsys):
+    state = tmp_path / "new" / "a" / "b.json"
+    result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "nowhere")
+    assert (result.code, result.err) == (1, f"error: --state {state}: the folder {tmp_path}/new/a does not exist — create it first\n")
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_state_file_whose_folder_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "file").write_text("")
+    state = tmp_path / "file" / "b.json"
+    result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "nowhere")
+    assert (result.code, result.err) == (1, f"error: --state {state}: {tmp_path}/file is not a folder — name a state file in a folder\n")

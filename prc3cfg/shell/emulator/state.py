@@ -49,6 +49,7 @@ import hashlib
 import json
 import logging
 import os
+import stat
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -85,13 +86,32 @@ def load_state(path: Path) -> dict[int, ModuleState]:
 
 
 def modules_to_serve(path: Path | None, addresses: list[int] | None) -> tuple[dict[int, ModuleState], dict[int, ModuleState]]:
-    """(served, unserved): the modules at `addresses` — else those of the state file at `path`,
-    else 1..30 — as the state file holds them or at factory defaults, and the modules the state
-    file holds that are not served (kept in it untouched)."""
+    """(served, unserved) for `emulator serve --state PATH`: the modules at `addresses` — else
+    those of the state file at `path`, else 1..30 — as the state file holds them or at factory
+    defaults, and the modules the state file holds that are not served (kept in it untouched).
+
+    A state file whose folder does not exist is refused (UserError): `serve` makes no folders,
+    so a mistyped --state is said before the emulator starts, not kept somewhere new. (The
+    emulators of `emulator://` ports make their folder, `.prc3cfg/emulators/`, themselves.)"""
+    if path is not None:
+        _check_folder(path)
     stored = load_state(path) if path is not None else {}
     wanted = addresses or sorted(stored) or range(1, MAX_MODULE_ADDRESS + 1)
     served = {address: stored.get(address) or ModuleState.factory(address) for address in wanted}
     return served, {address: state for address, state in stored.items() if address not in served}
+
+
+def _check_folder(path: Path) -> None:
+    """The folder of the state file `path` exists; UserError, naming --state, otherwise."""
+    folder = path.parent
+    try:
+        found = os.stat(folder)
+    except (FileNotFoundError, NotADirectoryError):
+        raise UserError(f"--state {path}: the folder {folder} does not exist — create it first") from None
+    except OSError as error:
+        raise UserError(f"--state {path}: cannot reach the folder {folder} ({error.strerror}) — name a state file in a folder you can write to") from None
+    if not stat.S_ISDIR(found.st_mode):
+        raise UserError(f"--state {path}: {folder} is not a folder — name a state file in a folder")
 
 
 def journal_path(path: Path) -> Path:
