@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -116,6 +119,28 @@ def test_a_document_at_the_limit_is_read(tmp_path):
     path = tmp_path / "many.json"
     path.write_text("[" + ",".join(["{}"] * (files.MAX_CONTAINERS - 1)) + "]")
     assert len(files.read_json(path)) == files.MAX_CONTAINERS - 1
+
+
+def test_a_document_of_too_many_values_is_refused_before_it_is_parsed(nowhere, tmp_path, capsys):
+    plan = tmp_path / "numbers.json"
+    plan.write_text("[" + "1e1," * files.MAX_VALUES + "1]")  # 10 MB here; 64 MiB of them took 0.8 GB to parse
+    line = one_line(run_cli(capsys, "apply", nowhere, "--plan", plan), f"error: {plan}: ")
+    assert line == (f"error: {plan}: more than {files.MAX_VALUES:,} values (counting ','), more than any file prc3cfg "
+                    "writes holds — name the plan file prc3cfg plan --out wrote")  # fmt: skip
+    at_the_limit = tmp_path / "at-the-limit.json"
+    at_the_limit.write_text("[" + "0," * (files.MAX_VALUES - 1) + "0]")
+    assert len(files.read_json(at_the_limit)) == files.MAX_VALUES
+
+
+def test_a_long_integer_is_refused_even_where_python_would_convert_it(tmp_path):
+    """PYTHONINTMAXSTRDIGITS=0 lifts Python's limit (and int() of a huge number takes quadratic time)."""
+    path = tmp_path / "big.json"
+    path.write_text(f"[{BIG}]")
+    script = "import sys; from pathlib import Path; from prc3cfg.shell import files\n" \
+             "try: files.read_json(Path(sys.argv[1]))\nexcept files.FileProblem as problem: print(problem)"
+    done = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONINTMAXSTRDIGITS": "0"})  # fmt: skip
+    assert done.stdout == f"a number of more than {files.MAX_DIGITS} digits, which no file prc3cfg writes holds\n", done.stderr
 
 
 # -- plan files whose structure is damaged ------------------------------------------------------------

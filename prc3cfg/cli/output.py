@@ -145,7 +145,7 @@ def accounted() -> Iterator[None]:
         touched = sum(1 for r in failed if r.sent)
         print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of {render.plural(len(stopped.result.runs), 'module')} "
               "written and verified, "
-              + (f"{touched} written in part — restore them with: prc3cfg restore {stopped.result.snapshot}" if touched
+              + (f"{touched} written in part or whole but not verified — restore them with: prc3cfg restore {stopped.result.snapshot}" if touched
                  else "nothing sent to the others"))  # fmt: skip
         raise
     except ApplyFailed as failed:

@@ -8,10 +8,10 @@ plan files, snapshots and saved images are read this way.
 `read_json` reads a JSON document so, and refuses — in a `FileProblem`, never a Python
 error — what would cost far more to parse than any file prc3cfg writes: more than
 `MAX_CONTAINERS` objects and lists (counted as the `{` and `[` bytes, an upper bound found
-before parsing: 63 MB of `[{},{},…]` took 1.6 GB and seconds to parse), a number of more
-digits than Python converts (`sys.get_int_max_str_digits`, 4300), nesting deeper than
-Python's recursion. Its size is bounded by `JSON_LIMIT`. Within those limits the worst a
-document of numbers and texts can cost is about 0.8 GB for 64 MiB of `[1e1,1e1,…]`.
+before parsing: 63 MB of `[{},{},…]` took 1.6 GB and seconds to parse), more than
+`MAX_VALUES` values (counted as its `,` bytes: 64 MiB of `[1e1,1e1,…]` took 0.8 GB), an integer
+of more than `MAX_DIGITS` digits (whatever PYTHONINTMAXSTRDIGITS says), nesting deeper than
+Python's recursion. Its size is bounded by `JSON_LIMIT`.
 
 `write_atomically` writes a temporary file beside the target, flushes it to disk, renames
 it over the target and flushes the directory: a process killed at any point leaves either
@@ -25,7 +25,6 @@ import enum
 import json
 import os
 import stat
-import sys
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,12 @@ JSON_LIMIT = 64 * 2**20
 #: --json` images, 1.1 MB, 16,081; an emulator's state file, 30 modules, about 2,000. Five
 #: times the largest: 500,000 empty objects parse in under 0.1 s and 40 MB.
 MAX_CONTAINERS = 500_000
+#: Values a JSON document may hold (counted as its `,` bytes, an upper bound less one): the
+#: largest plan file has about 505,000; five times that, so that numbers and texts cannot make
+#: a 64 MiB file cost 0.8 GB.
+MAX_VALUES = 2_500_000
+#: Digits a JSON integer may have: Python's own default limit, kept when the environment lifts it.
+MAX_DIGITS = 4300
 #: What a path is when it is not a regular file, by its `stat` file type.
 NOT_FILES = {
     stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
@@ -96,17 +101,26 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
     if data.count(b"{") + data.count(b"[") > MAX_CONTAINERS:
         raise FileProblem(Why.TOO_LARGE, f"more than {MAX_CONTAINERS:,} objects and lists (counting '{{' and '['), "
                                          "more than any file prc3cfg writes holds")  # fmt: skip
+    if data.count(b",") >= MAX_VALUES:
+        raise FileProblem(Why.TOO_LARGE, f"more than {MAX_VALUES:,} values (counting ','), more than any file prc3cfg writes holds")
     try:
-        return json.loads(data)
+        return json.loads(data, parse_int=_integer)
     except json.JSONDecodeError as error:
         raise FileProblem(Why.NOT_JSON, f"not valid JSON ({error.msg})", (error.lineno, error.colno)) from None
     except UnicodeDecodeError:
         raise FileProblem(Why.NOT_JSON, "not UTF-8 text") from None
     except RecursionError:
         raise FileProblem(Why.NOT_JSON, "nested too deeply for any file prc3cfg writes") from None
-    except ValueError:  # the only other ValueError json raises: an integer longer than Python converts
-        digits = sys.get_int_max_str_digits()
-        raise FileProblem(Why.NOT_JSON, f"a number of more than {digits} digits, which no file prc3cfg writes holds") from None
+    except ValueError:  # the only other ValueError: an integer longer than `_integer` converts
+        raise FileProblem(Why.NOT_JSON, f"a number of more than {MAX_DIGITS} digits, which no file prc3cfg writes holds") from None
+
+
+def _integer(text: str) -> int:
+    """A JSON integer, refused past `MAX_DIGITS` digits whatever PYTHONINTMAXSTRDIGITS says (the
+    conversion takes time quadratic in the digits)."""
+    if len(text) > MAX_DIGITS + 1:
+        raise ValueError(text[:20])
+    return int(text)
 
 
 def _regular(mode: int) -> None:
