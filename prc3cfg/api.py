@@ -22,9 +22,9 @@ trace, a cancel event (Ctrl-C, `prc3cfg.shell.cancel`) and a `Progress` to repor
 Owns the workflows: which modules, what to read, locking the lines, reading back, planning
 (and broadcasts), proving a plan file, gating, the snapshot and the journal, running and
 verifying, restoring, drift, adopting Teach In into the plant file, scanning, importing, a
-gateway's INIT block and the pictures of a module's motion. Does not own what they are made of (the pure core:
-`codec`, `framing`, `device`, `planner`, `sharing`, `verification`, `plantplan`, `render`; the
-shell: `link`, `locks`, `records`, `apply`), nor arguments, prompts and output (`prc3cfg.cli`).
+gateway's INIT block and the pictures of a module's motion. Does not own what they are made
+of (the pure core, `prc3cfg.core`; plant files, `prc3cfg.plant`; the shell: links, locks,
+records, apply, `prc3cfg.shell`), nor arguments, prompts and output (`prc3cfg.cli`).
 """
 
 from __future__ import annotations
