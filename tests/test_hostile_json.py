@@ -23,6 +23,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg.core.device import ModuleState
+from prc3cfg.core.image import DEFAULT_SYSTEM
 from prc3cfg.plant import load_plant
 from prc3cfg.shell import files
 
@@ -94,6 +95,43 @@ def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsy
     line = one_line(run_cli(capsys, *args), f"error: {path}: ")
     assert "more than 4300 digits" in line and line.endswith(f" — {remedy}")
     assert not (tmp_path / ".prc3cfg" / "journal").exists()
+
+
+# -- module images and snapshots whose structure is damaged -----------------------------------------
+
+IMAGES = {
+    "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', 'a module image has no "system"'),
+    "a program that is a list": ('[{"bus": "booth-a", "address": 1, "system": %s, "programs": [[1]]}]' % json.dumps(DEFAULT_SYSTEM.to_json()),
+                                 "a program is a list, not an object"),
+    "programs that are an object": ('[{"bus": "booth-a", "address": 1, "system": {}, "programs": {}}]', "programs is an object, not a list of 64"),
+    "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', 'the system block has no "S2"'),
+}
+
+
+@pytest.mark.parametrize("case", IMAGES, ids=list(IMAGES))
+def test_a_damaged_images_file_says_what_is_missing_in_words(nowhere, tmp_path, capsys, case):
+    text, said = IMAGES[case]
+    images = tmp_path / "images.json"
+    images.write_text(text)
+    line = one_line(run_cli(capsys, "plan", nowhere, "--actual", images), f"error: {images}: ")
+    assert said in line, line
+
+
+SNAPSHOTS = {
+    "no modules": ('{"format": "prc3cfg-snapshot/1", "plant": "/p.yaml"}', 'the snapshot has no "modules"'),
+    "a module without its bus": ('{"format": "prc3cfg-snapshot/1", "modules": [{"address": 1}]}', 'a module has no "bus"'),
+    "an image without programs": ('{"format": "prc3cfg-snapshot/1", "modules": [{"bus": "a", "address": 1}]}',
+                                  'a module image has no "programs"'),
+}
+
+
+@pytest.mark.parametrize("case", SNAPSHOTS, ids=list(SNAPSHOTS))
+def test_a_damaged_snapshot_says_what_is_missing_in_words(tmp_path, capsys, case):
+    text, said = SNAPSHOTS[case]
+    snapshot = tmp_path / "snapshot.json"
+    snapshot.write_text(text)
+    line = one_line(run_cli(capsys, "restore", snapshot), f"error: {snapshot}: not a readable snapshot (")
+    assert said in line, line
 
 
 # -- too many objects and lists --------------------------------------------------------------------

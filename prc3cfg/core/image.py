@@ -28,6 +28,21 @@ def whole(value: Any, name: str) -> int:
     return value
 
 
+def member(data: Any, key: str, within: str) -> Any:
+    """`data[key]` of a JSON object read from a file, or a ValueError that says in words what is
+    missing where: 'the image has no "system"', 'a program is a list, not an object'."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{within} is {_json_kind(data)}, not an object")
+    if key not in data:
+        raise ValueError(f'{within} has no "{key}"')
+    return data[key]
+
+
+def _json_kind(value: Any) -> str:
+    kinds = {dict: "an object", list: "a list", str: "text", bool: "true or false", type(None): "null"}
+    return kinds.get(type(value), "a number")
+
+
 @dataclass(frozen=True, slots=True)
 class SystemParameters:
     """S1..S12 without S9, in device units (mm, mm/s, mm/s², 0.001 m/s², …)."""
@@ -52,7 +67,7 @@ class SystemParameters:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> SystemParameters:
-        return cls(**{key: whole(data[key], key) for key in SYSTEM_KEYS})
+        return cls(**{key: whole(member(data, key, "the system block"), key) for key in SYSTEM_KEYS})
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,7 +93,7 @@ class Program:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Program:
-        return cls(**{key: whole(data[key], key) for key in PROGRAM_FIELDS})
+        return cls(**{key: whole(member(data, key, "a program"), key) for key in PROGRAM_FIELDS})
 
 
 #: Factory defaults after 10h (prc3-protocol.md §4.1). (reading) S2 = 50, not the
@@ -134,12 +149,12 @@ class ModuleImage:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> ModuleImage:
-        programs = data["programs"]
+        programs = member(data, "programs", "a module image")
         if not isinstance(programs, list):
-            raise ValueError(f"programs is {type(programs).__name__}, not a list of {PROGRAM_COUNT}")
+            raise ValueError(f"programs is {_json_kind(programs)}, not a list of {PROGRAM_COUNT}")
         return cls(
-            address=whole(data["address"], "address"),
-            system=SystemParameters.from_json(data["system"]),
+            address=whole(member(data, "address", "a module image"), "address"),
+            system=SystemParameters.from_json(member(data, "system", "a module image")),
             programs=tuple(None if p is None else Program.from_json(p) for p in programs),
         )
 

@@ -21,7 +21,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
 
-from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.image import ModuleImage, member, whole
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
 from prc3cfg.shell.link import Exchange
@@ -74,12 +74,16 @@ class Snapshot:
         try:
             if not isinstance(data, dict) or data.get("format") != SNAPSHOT_FORMAT:
                 raise ValueError(f'expected "format": "{SNAPSHOT_FORMAT}"')
-            images = {(m["bus"], int(m["address"])): ModuleImage.from_json(m) for m in data["modules"]}
-            plant = Path(data["plant"])
+            modules = member(data, "modules", "the snapshot")
+            if not isinstance(modules, list):
+                raise ValueError("its modules are no list")
+            images = {(member(m, "bus", "a module"), whole(member(m, "address", "a module"), "address")): ModuleImage.from_json(m)
+                      for m in modules}  # fmt: skip
+            plant = Path(member(data, "plant", "the snapshot"))
             beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
-            return cls(plant, data["plant_sha256"], data["taken"], images)
+            return cls(plant, member(data, "plant_sha256", "the snapshot"), member(data, "taken", "the snapshot"), images)
         except (ValueError, KeyError, TypeError, AttributeError) as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
 
