@@ -269,6 +269,9 @@ def _read(name: str, text: str) -> _Reader:
 
     When libyaml stops (a syntax error, a limit, aliases), what is said is where the pure parser
     stops first: the two word syntax errors differently, and may meet them in another order.
+    Not when libyaml got further than `_reread` looks (`_REREAD_EVENTS`): then the pure parser
+    could stop first only where the two disagree on what is valid YAML, and looking would cost a
+    second a file (a file at the node limit: 1.2 s, without 0.2 s).
     """
     events = _Events(name, text, LOADER)
     reader = _Reader(events)
@@ -277,7 +280,7 @@ def _read(name: str, text: str) -> _Reader:
             reader.read()
             events.refuse_aliases()
         except (yaml.MarkedYAMLError, PlantError):
-            if LOADER is not yaml.SafeLoader:
+            if LOADER is not yaml.SafeLoader and events.count <= _REREAD_EVENTS:
                 _reread(name, text)
             raise  # the pure parser takes the file (as far as it reads it): libyaml's stop stands
         if events.stop is not None:
@@ -307,6 +310,7 @@ class _Events:
         self.aliases: dict[str, list[Position]] = {}  # each alias name, where it is used
         self.stop: yaml.MarkedYAMLError | None = None
         self.document = 0  # documents begun
+        self.count = 0  # events given so far
 
     def __iter__(self) -> Iterator[yaml.Event]:
         parser = self.loader(self.text)
@@ -341,6 +345,7 @@ class _Events:
                 if self.document == 2 and self.stop is None:
                     self.stop = ComposerError("expected a single document in the stream", None,
                                               "but found another document", event.start_mark)
+            self.count += 1
             yield event
 
     def refuse_aliases(self) -> None:
