@@ -243,10 +243,14 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
 
 
 def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, then=None) -> dict[Key, ModuleImage]:
-    """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`)."""
+    """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`) — also
+    one that came during the last exchanges, when the read ended anyway: it is not forgotten."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
-        return read_all(targets_, links, progress=options.progress.advance, then=then)
+        images = read_all(targets_, links, progress=options.progress.advance, then=then)
+    if options.cancel is not None:
+        options.cancel.check()
+    return images
 
 
 def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
