@@ -30,11 +30,6 @@ from prc3cfg.plant import adopt, load_plant
 REPOSITORY = Path(__file__).resolve().parent / "adopt" / "plant.yaml"
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
 @pytest.fixture
 def repository(tmp_path, capsys):
     """The plant repository on emulators, applied: its file (comments and all) beside the emulated copy."""

@@ -28,11 +28,6 @@ def readme_block(heading: str) -> str:
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
 def test_the_api_docstring_example_runs(tmp_path, monkeypatch, capsys):
     example = textwrap.dedent(prc3cfg.api.__doc__.split("\n", 1)[1].split("\n(a test runs")[0])
     with emulated_plant(tmp_path):

@@ -29,17 +29,6 @@ from prc3cfg.shell.records import Snapshot
 TRAVEL = "Travel to reference point required before production on:"
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
-@pytest.fixture
-def plant(tmp_path):
-    with emulated_plant(tmp_path) as emulated:
-        yield emulated
-
-
 def travel_list(out: str) -> str:
     return next((line for line in out.splitlines() if TRAVEL in line), "")
 

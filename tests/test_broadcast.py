@@ -11,7 +11,6 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-import pytest
 from emulated import emulated_plant, run_cli
 from lossy import Loss
 
@@ -87,11 +86,6 @@ buses:
     port: socket://127.0.0.1:1
     modules:
 """
-
-
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
 
 
 def full_line(tmp_path: Path, speed: str = "0.300", modules: int = 30) -> Path:

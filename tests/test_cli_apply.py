@@ -16,17 +16,6 @@ from prc3cfg.shell.emulator import FaultInjection
 from prc3cfg.shell.locks import line_keys, line_lock
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
-@pytest.fixture
-def plant(tmp_path):
-    with emulated_plant(tmp_path) as emulated:
-        yield emulated
-
-
 def test_apply_converges_and_replan_is_empty(plant, capsys):
     result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
     assert result.code == 0, result.err

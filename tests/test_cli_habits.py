@@ -9,20 +9,8 @@ import os
 import subprocess
 import sys
 
-import pytest
 import yaml
-from emulated import DEMO, emulated_plant, run_cli
-
-
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
-@pytest.fixture
-def plant(tmp_path):
-    with emulated_plant(tmp_path) as emulated:
-        yield emulated
+from emulated import DEMO, run_cli
 
 
 def edit(plant, change) -> None:

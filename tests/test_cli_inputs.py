@@ -26,11 +26,6 @@ from prc3cfg import __version__
 EXIT_USAGE = 64
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
 @pytest.fixture
 def nowhere(tmp_path) -> Path:
     """The demo plant on a port where nothing listens: any time spent on the line is an error there."""

@@ -4,19 +4,12 @@ from __future__ import annotations
 
 import json
 
-import pytest
-from emulated import emulated_plant, run_cli
+from emulated import run_cli
 
 from prc3cfg.core import codec
 from prc3cfg.core.plantplan import image_sha256
 
 WARNING = "travel to reference point required"
-
-
-@pytest.fixture
-def plant(tmp_path):
-    with emulated_plant(tmp_path) as emulated:
-        yield emulated
 
 
 def test_read_json_is_exactly_what_the_emulators_hold(plant, capsys):

@@ -31,11 +31,6 @@ from prc3cfg.shell import files
 PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no len|not subscriptable|\bdict\b|\bstr\b|\bint\b")
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
 def nowhere_plant(folder: Path) -> Path:
     """The demo plant on ports where nothing listens."""
     plant = folder / "plant.yaml"

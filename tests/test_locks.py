@@ -42,11 +42,6 @@ sys.stdin.readline()
 KEY = "tcp/127.0.0.1/7001"
 
 
-@pytest.fixture(autouse=True)
-def private_locks(tmp_path, monkeypatch):
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
-
-
 @contextlib.contextmanager
 def holding(*argv: str, script: str = HOLDER):
     """A process that holds a lock until its stdin gets a line (or closes)."""

@@ -174,14 +174,13 @@ def test_show_plot_mistakes_are_one_line_before_any_work(args, message, tmp_path
     assert (done.returncode, done.stderr, done.stdout) == (1, message + "\n", "")
 
 
-def test_plan_plot_draws_the_module_before_and_after_its_plan(matplotlib, tmp_path, capsys, monkeypatch):
+def test_plan_plot_draws_the_module_before_and_after_its_plan(matplotlib, tmp_path, capsys):
     """`plan --module NAME --plot FILE` draws what the module holds (dashed) and what the plan leaves,
     from the same read-back as the plan — the drawing `api.picture` makes of those images."""
     from emulated import emulated_plant, run_cli
 
     from prc3cfg import api
 
-    monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
     svg = tmp_path / "top.svg"
     with emulated_plant(tmp_path) as emulated:
         result = run_cli(capsys, "plan", emulated.path, "--module", "booth-a-top", "--plot", svg)
