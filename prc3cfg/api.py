@@ -621,8 +621,10 @@ def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, L
     journal.record("apply", plant=the_plan.plant, plant_sha256=the_plan.plant_sha256, snapshot=str(snapshot_path),
                    modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
     options.progress.start("applying", the_plan.message_count)
+    # consent is per module: the releases of the plan shown, and no other (a repair may not add one)
+    consented = frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allow_axis_release else frozenset()
     execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=options.progress.advance,
-            may_release_axes=allow_axis_release, verify=verify)  # fmt: skip
+            consented=consented, verify=verify)  # fmt: skip
     result = ApplyResult(the_plan, runs, snapshot_path, journal.path)
     for run in runs:
         journal.record(

@@ -198,12 +198,14 @@ class ModuleRun:
             previous = current
         return previous
 
-    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], may_release_axes: bool,
+    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], consented: frozenset[tuple[str, int]],
                  verify: Verify = Verify.FLOOR) -> None:  # fmt: skip
         """Read back what the steps could have changed; while the module differs from the desired
         image and may be repaired, plan, repair, and read back what the repair could have changed.
 
-        A refused module is read back once, for the account, and not repaired.
+        A refused module is read back once, for the account, and not repaired. A repair that would
+        release the axes (10h/20h) is sent only to a module in `consented` — the modules whose
+        release the operator agreed to with the plan shown; any other needs a plan of its own.
         """
         expected, sent_before = self.predicted, 0
         known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
@@ -231,10 +233,11 @@ class ModuleRun:
             if self.refused or self.repairs == REPAIRS:
                 break
             repair = plan_module(self.final, self.desired, cost)
-            if repair.releases_axes and not may_release_axes:
+            if repair.releases_axes and (self.bus, self.address) not in consented:
                 self.failure = (
-                    "the read-back shows other system parameters; writing them would release "
-                    "the axes — apply again with --allow-axis-release"
+                    "the read-back shows other system parameters than the plan expected (changed on the floor "
+                    "meanwhile?); writing them would release the axes, which the plan agreed to did not — "
+                    "nothing more was sent to it: plan again and review the new plan"
                 )
                 return
             self.repairs += 1
@@ -289,10 +292,13 @@ def execute(
     costs: dict[str, LineCost],
     *,
     tick: Callable[[], None] = lambda: None,
-    may_release_axes: bool = False,
+    consented: frozenset[tuple[str, int]] = frozenset(),
     verify: Verify = Verify.FLOOR,
 ) -> None:
     """Run every module's steps, then verify and repair; results are left in `runs`.
+
+    `consented`: the (bus, address) of every module whose axes the operator agreed to release —
+    a repair may send a 10h/20h to those only.
 
     Buses run in parallel; on one bus, all modules are written first, then verified (so a
     module's verification also sees what a damaged frame for another did to it).
@@ -308,7 +314,7 @@ def execute(
                 run.run(links[bus], run.steps[run.broadcasts :], tick)
         for run in bus_runs:
             if not run.interrupted:
-                run.converge(links[bus], costs[bus], tick, may_release_axes, verify)
+                run.converge(links[bus], costs[bus], tick, consented, verify)
 
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
         for future in [pool.submit(on_bus, bus, bus_runs) for bus, bus_runs in per_bus.items()]:
