@@ -48,7 +48,7 @@ from prc3cfg.core.framing import get_framing
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
-from prc3cfg.core.plantplan import ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.core.plantplan import LineProof, ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.core.render import differences, plan_json, plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
@@ -59,9 +59,10 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
-from prc3cfg.shell.link import Link, LinkError, PortFailed, Trace, open_plant_links, open_port
+from prc3cfg.shell.link import Exchange, Link, LinkError, PortFailed, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
+from prc3cfg.shell import releases
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, Snapshot, applied_copy, save_applied
 
@@ -145,6 +146,15 @@ class LineOptions:
     waiting: Callable[[str], None] | None = None
     #: after a command that succeeded: the links used, with their `repeated` exchanges
     links_used: list[Link] = field(default_factory=list)
+    #: called with each warning a command has for the operator (an axis release nobody was told
+    #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
+    notice: Callable[[str], None] | None = None
+    notices: list[str] = field(default_factory=list)
+
+    def tell(self, text: str) -> None:
+        self.notices.append(text)
+        if self.notice is not None:
+            self.notice(text)
 
     def deferred(self) -> contextlib.AbstractContextManager[None]:
         """A phase a signal must not cut (`Cancellation.deferred`), when there is a cancellation."""
@@ -159,6 +169,17 @@ class ApplyResult:
     runs: tuple[ModuleRun, ...]
     snapshot: Path | None
     journal: Path
+    #: axis releases earlier applies on these lines left untold (killed after a 10h/20h): this
+    #: apply's account lists them too
+    earlier: tuple[releases.Pending, ...] = ()
+    records: releases.Releases | None = None
+
+    def told(self) -> None:
+        """The account — `released` and `earlier` — has been shown to the operator: the records of
+        those releases, kept on disk since before their frames left, can go (`prc3cfg.shell.releases`).
+        Until this is called, every command on these lines warns of them."""
+        if self.records is not None:
+            self.records.told(self.earlier)
 
     @property
     def verified(self) -> bool:
@@ -214,8 +235,9 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
 
 @contextlib.contextmanager
 def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read",
-          observer=None) -> Iterator[dict[str, Link]]:  # fmt: skip
+          observer=None, announce=None) -> Iterator[dict[str, Link]]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
+    Every axis release on these lines that no account has named yet is told (`LineOptions.tell`).
 
     Two buses that are one line (two spellings of one address) are refused: they would wait
     for each other's lock."""
@@ -233,11 +255,12 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
             if bus.name in names:
                 stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", timeout=options.lock_timeout,
                                               purpose=purpose, waiting=options.waiting))  # fmt: skip
+        for record in releases.pending(owner):
+            options.tell(record.said())
         trace = Trace(options.trace) if options.trace is not None else None
         cancel = options.cancel.event if options.cancel is not None else None
-        links = stack.enter_context(
-            open_plant_links(plant, names, trace=trace, retries=options.retries, observer=observer, cancel=cancel)
-        )
+        links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=observer,
+                                                     announce=announce, cancel=cancel))  # fmt: skip
         yield links
         options.links_used.extend(links.values())
 
@@ -258,7 +281,8 @@ def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dic
     """Read back and plan, each line planned as soon as it is read — while the other lines are
     still being read: the lines never wait for all of the planning."""
     planner = Planner(plant, desired)
-    images = _read(to_read, links, options, then=lambda bus, read: planner.plan_bus(bus, pairs, read))
+    buses = {bus.name: bus for bus, _ in pairs}
+    images = _read(to_read, links, options, then=lambda bus, read: planner.plan_bus(bus, pairs, read, prober(links[bus], buses[bus])))
     return images, planner.plan(pairs, images)
 
 
@@ -322,10 +346,12 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
         return _read_and_plan(plant, pairs, targets(pairs), links, options)[1]
 
 
-def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None) -> PlantPlan:
+def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,
+              probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
-    then broadcast what the modules of a line share, where every receiver is known (`sharing`)."""
-    return Planner(plant, desired).plan(pairs, actual)
+    then broadcast what the modules of a line share, where every receiver is known — proven by the
+    line's `probers` (`Planner.plan_bus`)."""
+    return Planner(plant, desired).plan(pairs, actual, probers)
 
 
 class Planner:
@@ -337,10 +363,14 @@ class Planner:
         self.plant, self.desired = plant, desired
         self._memo: dict = {}
         self._lock = threading.Lock()
-        self._buses: dict[str, tuple[list[ModuleChange], float]] = {}
+        self._buses: dict[str, tuple[list[ModuleChange], float, LineProof | None]] = {}
 
-    def plan_bus(self, bus_name: str, pairs: Pairs, actual: dict[Key, ModuleImage]) -> None:
-        """Plan the chosen modules of one bus, and its broadcasts."""
+    def plan_bus(self, bus_name: str, pairs: Pairs, actual: dict[Key, ModuleImage], probe: Prober | None = None) -> None:
+        """Plan the chosen modules of one bus, and its broadcasts — where the plant lists every module
+        of the line and the plan covers them all, and then only once `probe` (the line's, in this run,
+        under its lock) has found every other address silent: a declaration in a file is no proof.
+        The probes cost line time, which the broadcasts must save; without `probe` (planning from
+        saved images) a line whose every address the plant does not list gets no broadcast."""
         with self._lock:
             changes = []
             for bus, module in pairs:
@@ -354,24 +384,40 @@ class Planner:
                     raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
                 changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
             bus = self._bus(bus_name)
-            broadcast_time = 0.0
-            if changes and receivers_known(bus, changes):
-                shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], line_cost(bus), self._memo)
-                if shared.broadcasts:
-                    changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
-                    broadcast_time = sum(line_cost(bus).broadcast_time(step.message) for step in shared.broadcasts)
-            self._buses[bus_name] = (changes, broadcast_time)
+        others = unlisted_addresses(bus)
+        if not changes or not receivers_declared(bus, changes) or (others and probe is None):
+            self._keep(bus_name, changes, 0.0, None)
+            return
+        cost = line_cost(bus)
+        proof_time = len(others) * PROOF_PROBES * cost.silence_time(codec.ReadSystem(), probe_timeout(bus))
+        with self._lock:
+            shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], cost, self._memo, proof_time)
+        if not shared.broadcasts:
+            self._keep(bus_name, changes, 0.0, None)
+            return
+        answered = probe(others) if probe is not None and others else ()
+        if answered:  # the plant file is wrong about its line: no broadcast, and the modules named
+            self._keep(bus_name, changes, 0.0, LineProof(bus_name, answered=tuple(answered)))
+            return
+        changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
+        seconds = sum(cost.broadcast_time(step.message) for step in shared.broadcasts) + (proof_time if others else 0.0)
+        self._keep(bus_name, changes, seconds, LineProof(bus_name, silent=tuple(others)) if others else None)
 
-    def plan(self, pairs: Pairs, actual: dict[Key, ModuleImage]) -> PlantPlan:
+    def _keep(self, bus_name: str, changes: list[ModuleChange], broadcast_time: float, proof: LineProof | None) -> None:
+        with self._lock:
+            self._buses[bus_name] = (changes, broadcast_time, proof)
+
+    def plan(self, pairs: Pairs, actual: dict[Key, ModuleImage], probers: dict[str, Prober] | None = None) -> PlantPlan:
         """The plant's plan, in the order of `pairs`: buses not planned yet are planned now."""
         for bus_name in dict.fromkeys(bus.name for bus, _ in pairs):
             if bus_name not in self._buses:
-                self.plan_bus(bus_name, pairs, actual)
-        changes = {(c.bus, c.address): c for changes, _ in self._buses.values() for c in changes}
+                self.plan_bus(bus_name, pairs, actual, (probers or {}).get(bus_name))
+        changes = {(c.bus, c.address): c for changes, _, _ in self._buses.values() for c in changes}
         ordered = tuple(changes[(bus.name, module.address)] for bus, module in pairs)
-        broadcast_time = sum(seconds for _, seconds in self._buses.values())
+        broadcast_time = sum(seconds for _, seconds, _ in self._buses.values())
+        proofs = tuple(proof for name in dict.fromkeys(bus.name for bus, _ in pairs) if (proof := self._buses[name][2]) is not None)
         return PlantPlan(self.plant.name, str(self.plant.path.resolve()), self.plant.sha256, ordered, broadcast_time,
-                         None if not broadcast_time else self._unshared(ordered))  # fmt: skip
+                         None if not broadcast_time else self._unshared(ordered), proofs)  # fmt: skip
 
     def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
         """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
@@ -393,12 +439,60 @@ def _plan_alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost, memo:
     return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))
 
 
-def receivers_known(bus: Bus, changes: list[ModuleChange]) -> bool:
-    """Whether every module on the bus's line is planned: the plant lists all the line holds (all 30
-    addresses, or `only_these_modules: true`) and the plan covers each of them."""
+def receivers_declared(bus: Bus, changes: list[ModuleChange]) -> bool:
+    """Whether the plant says it lists every module on the bus's line (all 30 addresses, or
+    `only_these_modules: true`) and the plan covers each of them — to be proven by probing the rest."""
     listed = {m.address for m in bus.modules}
     complete = len(listed) == MAX_MODULE_ADDRESS or bus.only_these_modules
     return complete and {c.address for c in changes} == listed
+
+
+def _addresses(addresses: Iterable[int]) -> str:
+    """"address 5", "addresses 5, 7"."""
+    listed = list(addresses)
+    return f"address{'es' if len(listed) > 1 else ''} {', '.join(map(str, listed))}"
+
+
+def unlisted_addresses(bus: Bus) -> list[int]:
+    """The addresses of the bus's line where the plant lists no module."""
+    listed = {m.address for m in bus.modules}
+    return [a for a in range(1, MAX_MODULE_ADDRESS + 1) if a not in listed]
+
+
+#: The longest a probe waits at an address (or the line's time-out, if shorter) — a scan's, a
+#: broadcast's proof: a module answers a 50h within tens of milliseconds even at 9600 baud.
+PROBE_TIMEOUT = 0.2
+#: Probes of each address the plant does not list before a broadcast: a reply lost once on a noisy
+#: line must not pass for an empty address.
+PROOF_PROBES = 2
+
+Prober = Callable[[list[int]], list[int]]
+
+
+def probe_timeout(bus: Bus) -> float:
+    """How long a probe waits at an address: the line's time-out, at most `PROBE_TIMEOUT`."""
+    return min(bus.timeout, PROBE_TIMEOUT)
+
+
+def prober(link: Link, bus: Bus) -> Prober:
+    """The addresses among those given where something answers a 50h (`PROOF_PROBES` tries each)."""
+
+    def probe(addresses: list[int]) -> list[int]:
+        found = []
+        for address in addresses:
+            for _ in range(PROOF_PROBES):
+                try:
+                    heard = link.probe(address, codec.ReadSystem(), probe_timeout(bus)) is not None
+                except PortFailed:
+                    raise
+                except LinkError:
+                    heard = True  # something answered, if garbled: not an empty address
+                if heard:
+                    found.append(address)
+                    break
+        return found
+
+    return probe
 
 
 def read_plan(path: Path, plant: Plant) -> PlanFile:
@@ -452,7 +546,8 @@ def plan_file_plant(path: Path) -> Path:
     return Path(recorded)
 
 
-def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage]) -> PlantPlan:
+def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage],
+          probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
     """The plan file's plan, proved before anything is written.
 
     Refused when a module changed since the plan was made; when a module's steps do anything
@@ -479,7 +574,11 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                 "(teach-in or another apply?); nothing was written — plan again"
             )
         chosen.append((bus, module))
-    ours = make_plan(plant, chosen, images)
+    ours = make_plan(plant, chosen, images, probers=probers)
+    for proof in ours.proofs:
+        if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in planned.modules):
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {_addresses(proof.answered)}, which the "
+                            "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
     for entry, change in zip(planned.modules, ours.modules):
         edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
                   "after it was made; nothing was written: plan again and review it")  # fmt: skip
@@ -581,17 +680,20 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
            plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in pairs}
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
+    records = releases.Releases(journal.path)
+    announce = _announcer(plant, buses, journal, records)
     try:
-        with lines(plant, buses, options, purpose="apply", observer=journal.exchange) as links:
+        with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce) as links:
+            earlier = tuple(releases.pending(key for bus in buses.values() for key in bus_line_keys(plant, bus)))
             if plan_file is None:
                 images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired)
             else:
                 images = _read(to_read, links, options)
-                the_plan = prove(*plan_file, plant, pairs, images)
+                the_plan = prove(*plan_file, plant, pairs, images, {name: prober(links[name], bus) for name, bus in buses.items()})
             if gates.show is not None:
                 gates.show(the_plan)
             if not the_plan.changes:
-                return ApplyResult(the_plan, (), None, journal.path)
+                return ApplyResult(the_plan, (), None, journal.path, earlier, records)
             releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
             allow = gates.allow_axis_release
             allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
@@ -603,7 +705,7 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             if gates.approve is not None and not gates.approve(the_plan):
                 raise NotApproved("not applied — nothing was written")
             with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
-                result = _run(the_plan, images, links, buses, journal, allow_axis_release, verify, options)
+                result = _run(the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
                 if desired is None and len(pairs) == len(plant.modules()):
                     _keep_applied(plant)
                 return result
@@ -611,8 +713,25 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
         journal.close()
 
 
-def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus],
-         journal: Journal, allow_axis_release: bool, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
+def _announcer(plant: Plant, buses: dict[str, Bus], journal: Journal, records: releases.Releases) -> Callable[[Exchange], None]:
+    """What is done before an apply's frame leaves: the attempt journalled, and a 10h/20h recorded
+    durably as an axis release not yet told (a broadcast's for every module on the line)."""
+    keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}
+    names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+
+    def announce(exchange: Exchange) -> None:
+        journal.request(exchange)
+        if codec.MESSAGE_TYPES[exchange.request[0]].RELEASES_AXES:
+            name = names.get((exchange.bus, exchange.address)) if exchange.address else \
+                ", ".join(m.name for m in buses[exchange.bus].modules)  # fmt: skip
+            records.record(keys[exchange.bus], exchange.bus, exchange.address, name or f"address {exchange.address}")
+
+    return announce
+
+
+def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus], journal: Journal,
+         allow_axis_release: bool, verify: Verify, options: LineOptions, earlier: tuple[releases.Pending, ...],
+         records: releases.Releases) -> ApplyResult:  # fmt: skip
     runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts)
                  for c in the_plan.changes)  # fmt: skip
     snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
@@ -625,7 +744,7 @@ def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, L
     consented = frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allow_axis_release else frozenset()
     execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=options.progress.advance,
             consented=consented, verify=verify)  # fmt: skip
-    result = ApplyResult(the_plan, runs, snapshot_path, journal.path)
+    result = ApplyResult(the_plan, runs, snapshot_path, journal.path, earlier, records)
     for run in runs:
         journal.record(
             "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
@@ -699,8 +818,10 @@ def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[L
     if problem is not None:
         raise UserError(problem)
     with contextlib.ExitStack() as stack:
-        stack.enter_context(line_lock(line_keys(bare.port), bare.port, timeout=options.lock_timeout, purpose=purpose,
-                                      waiting=options.waiting))  # fmt: skip
+        keys = line_keys(bare.port)
+        stack.enter_context(line_lock(keys, bare.port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting))
+        for record in releases.pending(keys):
+            options.tell(record.said())
         port = open_port(bare.port, bare.line, bus=bare.port)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
@@ -713,11 +834,6 @@ def scan(bare: BareLine, options: LineOptions | None = None) -> dict[int, codec.
     options = options or LineOptions()
     with _bare_link(bare, options, "scan") as link:
         return _scan(link, options)
-
-
-#: The longest a scan waits at an address (or the line's time-out, if shorter): a module answers
-#: a 50h within tens of milliseconds even at 9600 baud, and an absent address is normal.
-PROBE_TIMEOUT = 0.2
 
 
 def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:

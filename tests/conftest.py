@@ -8,8 +8,10 @@ from emulated import emulated_plant
 
 @pytest.fixture(autouse=True)
 def private_locks(tmp_path, monkeypatch):
-    """Line locks in the test's own folder: tests running at once never wait for each other."""
+    """Line locks and records of untold axis releases in the test's own folder: tests running at
+    once never wait for each other, and a test that kills an apply leaves nothing to the next."""
     monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
+    monkeypatch.setenv("PRC3CFG_STATE_DIR", str(tmp_path / "state"))
 
 
 @pytest.fixture

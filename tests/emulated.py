@@ -22,6 +22,7 @@ DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
 def emulated_plant(
     directory: Path, *, faults: FaultInjection = FaultInjection(), timeout: float = 0.1, framing: str = "crc16",
     line_speed: bool = False, source: Path = DEMO, lossy: dict[str, Rule] | None = None, zvz: float = 0.020,
+    unlisted: dict[str, list[int]] | None = None,
 ) -> Iterator[EmulatedPlant]:
     """`source` with every bus on an emulator (factory-default modules) via socket:// as `plant.yaml`
     in `directory`; a bus named in `lossy` is reached through a `LossyProxy` with that rule."""
@@ -33,7 +34,7 @@ def emulated_plant(
             return f"socket://{host}:{port}"
 
         emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed, route=route,
-                                               timeout=timeout, framing=framing, zvz=zvz))  # fmt: skip
+                                               unlisted=unlisted, timeout=timeout, framing=framing, zvz=zvz))  # fmt: skip
         yield emulated
 
 

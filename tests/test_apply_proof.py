@@ -7,10 +7,19 @@ between them where a frame must be lost, damaged or watched.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+import threading
 from dataclasses import replace
 from pathlib import Path
 
 from emulated import emulated_plant, run_cli
+from lossy import Loss
+from test_broadcast import declared, full_line
+
+from prc3cfg.core.device import ModuleState
+from prc3cfg.plant import load_plant
 
 TRAVEL = "Travel to reference point required before production on:"
 
@@ -63,3 +72,75 @@ def test_a_repair_never_releases_the_axes_of_a_module_the_operator_was_not_asked
         assert releases and {a for a, _ in releases} == {1}  # booth-a-left's, agreed to; none to booth-a-right
         assert plant.emulators["booth-a"].module(2).referenced
         assert plant.emulators["booth-a"].module(2).image.system.S7 == 900
+
+
+# -- 4. a release is recorded before its frame leaves, and told until an account names it -------
+
+
+def test_an_apply_killed_after_its_20h_leaves_every_later_command_saying_so_until_an_account_lists_it(tmp_path, capsys):
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve",
+                                    "--allow-axis-release", "--trace", str(fifo)], text=True,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+        with fifo.open() as trace:
+            for line in trace:
+                _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
+                # a crc16 request: A5h, address, length, message ID
+                if (bus, direction) == ("booth-a", ">") and frame[6:8] == "20":
+                    process.kill()  # the 20h is on the line: no account will ever be printed
+                    break
+            threading.Thread(target=trace.read, daemon=True).start()
+            process.wait()
+        address = int(frame[2:4], 16)
+        name = {1: "booth-a-left", 2: "booth-a-right", 5: "booth-a-top"}[address]
+        assert not plant.emulators["booth-a"].module(address).referenced  # it did release the axes
+
+        planned = run_cli(capsys, "plan", plant.path)
+        assert planned.code == 0
+        (warning,) = [line for line in planned.err.splitlines() if "warning" in line]
+        assert f"bus booth-a, module {address} ({name})" in warning and f"pid {process.pid}" in warning
+        port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
+        scanned = run_cli(capsys, "scan", "--port", port)
+        assert f"bus booth-a, module {address} ({name})" in scanned.err  # no plant file: found by the line
+
+        applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert applied.code == 0, applied.err
+        assert f"booth-a/{name} (possibly: an earlier apply, pid {process.pid}" in applied.out
+        again = run_cli(capsys, "plan", plant.path)
+        assert "warning" not in again.err  # told once in an account: no more
+
+
+# -- 1. a declaration in a file is not proof -------------------------------------------------
+
+
+def test_a_module_the_plant_does_not_list_stops_every_broadcast_and_is_named(tmp_path, capsys):
+    """The plant lists 28 modules and says they are all; a 29th is on the line. It must hear nothing."""
+    source = declared(full_line(tmp_path, modules=28))
+    with emulated_plant(tmp_path, source=source, unlisted={"line": [29]}) as plant:
+        planned = run_cli(capsys, "plan", plant.path, "--json")
+        assert json.loads(planned.out)["buses"][0]["unlisted_modules"] == [29]
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 0, result.err
+        assert "a module answers at address 29, which the plant file does not list" in result.out
+        assert 0 not in {address for address, _ in sent(tmp_path)}  # no broadcast
+        stranger = plant.emulators["line"].module(29)
+        assert stranger.referenced and stranger == ModuleState.factory(29)  # untouched
+        assert plant.matches_plant()
+
+
+def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does_not_list_answers(tmp_path, capsys):
+    source = declared(full_line(tmp_path, modules=28))
+    powered = False  # module 30, which the plant does not list, is switched off while the plan is made
+    off = lambda frame, _: {Loss.REQUEST} if frame.address == 30 and not powered else set()  # noqa: E731
+    with emulated_plant(tmp_path, source=source, unlisted={"line": [30]}, lossy={"line": off}) as plant:
+        made = tmp_path / "plan.json"
+        assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
+        document = json.loads(made.read_text())
+        assert document["buses"][0]["broadcasts"] and document["buses"][0]["proven_silent"] == [29, 30]
+        powered = True
+        refused = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve", "--allow-axis-release")
+        assert refused.code == 1
+        assert "stale plan — on bus line a module now answers at address 30" in refused.err
+        assert not [r for _, r in sent(tmp_path) if r[:2] not in ("50", "51", "52")]  # nothing written

@@ -126,14 +126,32 @@ def test_a_line_not_known_to_be_complete_gets_no_broadcast(tmp_path, capsys):
         assert 0 not in {e["address"] for e in journal(tmp_path)}
 
 
-def test_a_line_declared_complete_gets_broadcasts_with_fewer_than_30_modules(tmp_path, capsys):
-    source = full_line(tmp_path, modules=12)
+def declared(source: Path) -> Path:
     source.write_text(source.read_text().replace("    port: socket://127.0.0.1:1\n", "    port: socket://127.0.0.1:1\n    only_these_modules: true\n"))
-    with emulated_plant(tmp_path, source=source) as plant:
+    return source
+
+
+def test_a_line_declared_complete_gets_broadcasts_once_its_other_addresses_are_proven_silent(tmp_path, capsys):
+    with emulated_plant(tmp_path, source=declared(full_line(tmp_path, modules=28))) as plant:
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, result.err
-        assert {e["address"] for e in journal(tmp_path) if e["request"][:2] not in ("50", "51", "52")} == {0}
-        assert result.out.count("broadcasts received, verified") == 12
+        exchanges = journal(tmp_path)
+        first_broadcast = next(i for i, e in enumerate(exchanges) if e["address"] == 0)
+        probes = [e["address"] for e in exchanges[:first_broadcast] if e["address"] > 28]
+        assert sorted(set(probes)) == [29, 30] and all(e["request"] == "5000" for e in exchanges[:first_broadcast] if e["address"] > 28)
+        assert {e["address"] for e in exchanges if e["request"][:2] not in ("50", "51", "52")} == {0}
+        assert result.out.count("broadcasts received, verified") == 28
+        assert "Bus line: broadcast after addresses 29, 30 answered no probe" in result.out
+        assert plant.matches_plant()
+
+
+def test_proving_a_line_of_12_declared_modules_costs_more_than_its_broadcasts_save(tmp_path, capsys):
+    """18 addresses to probe, twice each, before a broadcast may go: addressed writes are cheaper."""
+    with emulated_plant(tmp_path, source=declared(full_line(tmp_path, modules=12))) as plant:
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 0, result.err
+        assert 0 not in {e["address"] for e in journal(tmp_path)}
+        assert not [e for e in journal(tmp_path) if e["address"] > 12]  # and it did not probe in vain
         assert plant.matches_plant()
 
 

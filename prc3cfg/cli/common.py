@@ -220,6 +220,7 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
             retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=TerminalProgress(stack),
             trace=stack.enter_context(trace.open("a")) if trace else None,
             waiting=lambda text: print(text, file=sys.stderr, flush=True),
+            notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),
         )  # fmt: skip
         yield options
         note_repeats(options.links_used)

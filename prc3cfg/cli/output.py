@@ -126,12 +126,21 @@ def travel_list(runs: list[ModuleRun]) -> str | None:
 
 
 def report(result: ApplyResult) -> None:
-    """The account of every module, the reference-travel list, where the records are."""
+    """The account of every module, the reference-travel list (with the releases earlier applies
+    left untold), where the records are — and then those releases count as told."""
     for run in result.runs:
         print(account(run), file=sys.stdout if run.verified else sys.stderr)
     if (travel := travel_list(list(result.runs))) is not None:
         print(travel)
-    print(f"Journal: {result.journal}")
+    for proof in result.plan.proofs:
+        if proof.silent and any(run.bus == proof.bus and run.broadcasts for run in result.runs):
+            print(f"Bus {proof.bus}: broadcast after {render.address_ranges(proof.silent)} answered no probe — only the plan's modules heard it")
+    for record in result.earlier:
+        print(f"⚠ Travel to reference point required before production on: {record.bus}/{record.name} (possibly: an "
+              f"earlier apply, pid {record.pid} at {record.time}, sent a 10h/20h and ended before its account; journal {record.journal})")  # fmt: skip
+    if result.runs:
+        print(f"Journal: {result.journal}", flush=True)
+    result.told()
 
 
 @contextlib.contextmanager
@@ -154,8 +163,9 @@ def accounted() -> Iterator[None]:
 
 
 def applied(result: ApplyResult) -> None:
-    if result.runs:
+    if result.runs or result.earlier:
         report(result)
+    if result.runs:
         print(f"Apply complete: {render.plural(len(result.runs), 'module')} written and verified.")
 
 

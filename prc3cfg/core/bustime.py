@@ -41,6 +41,13 @@ class LineCost:
         gaps = 2 * self.zvz if self.framing.name == "open-driver" else 0.0
         return (len(request) + len(reply)) * self.line.char_time + self.turnaround + gaps
 
+    def silence_time(self, message: codec.Message, timeout: float) -> float:
+        """Seconds an exchange with an address where nobody answers holds the line: the request
+        frame, then the wait of `timeout` for a reply that never comes (and on open-driver the gap)."""
+        request = self.framing.encode(Direction.REQUEST, 1, message.encode())
+        gap = self.zvz if self.framing.name == "open-driver" else 0.0
+        return len(request) * self.line.char_time + timeout + gap
+
     def broadcast_time(self, message: codec.Message) -> float:
         """Seconds a broadcast of `message` holds the line: request frame and turnaround."""
         request = self.framing.encode(Direction.REQUEST, 0, message.encode())

@@ -77,6 +77,21 @@ class ModuleChange:
 
 
 @dataclass(frozen=True, slots=True)
+class LineProof:
+    """What a line's probes found at the addresses its plant file does not list (before a broadcast):
+    `silent` — none answered, the broadcasts reach only the plan's modules; `answered` — modules the
+    plant file does not know are on the line, so it gets no broadcast."""
+
+    bus: str
+    silent: tuple[int, ...] = ()
+    answered: tuple[int, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        return ({"proven_silent": list(self.silent)} if self.silent else {}) | (
+            {"unlisted_modules": list(self.answered)} if self.answered else {})
+
+
+@dataclass(frozen=True, slots=True)
 class PlantPlan:
     """Every module's change, the broadcasts of each bus, and what they cost on the line."""
 
@@ -84,8 +99,12 @@ class PlantPlan:
     plant_path: str
     plant_sha256: str
     modules: tuple[ModuleChange, ...]
-    broadcast_time: float = 0.0  # every bus's broadcasts, once each
+    broadcast_time: float = 0.0  # every bus's broadcasts, once each, and the probes that proved them safe
     unshared_bus_time: float | None = None  # the same changes without broadcasts, where some were shared
+    proofs: tuple[LineProof, ...] = ()  # per line probed: what answered at the addresses the plant does not list
+
+    def proof(self, bus: str) -> LineProof | None:
+        return next((p for p in self.proofs if p.bus == bus), None)
 
     @property
     def changes(self) -> tuple[ModuleChange, ...]:
@@ -127,6 +146,7 @@ class PlantPlan:
             "plant_sha256": self.plant_sha256,
             "buses": [
                 {"name": bus, "modules": [m.to_json() for m in modules]}
+                | (proof.to_json() if (proof := self.proof(bus)) is not None else {})
                 | ({"broadcasts": [
                     {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
                      "modules": [m.address for m in modules if m.broadcasts]}
@@ -201,7 +221,7 @@ _CHANGES = {
 }  # fmt: skip
 _BROADCAST = {"message": TEXT, "releases_axes": FLAG, "modules": [WHOLE]}
 SHOWN_PLAN_FILE = PLAN_FILE | {
-    "buses": [{"name": TEXT, "broadcasts": Maybe([_BROADCAST]),
+    "buses": [{"name": TEXT, "broadcasts": Maybe([_BROADCAST]), "proven_silent": Maybe([WHOLE]), "unlisted_modules": Maybe([WHOLE]),
                "modules": [_MODULE | {"estimated_bus_time_s": Maybe(NUMBER), "changes": _CHANGES}]}],
     "axis_releases": [TEXT], "message_count": WHOLE, "estimated_bus_time_s": NUMBER, "naive_bus_time_s": NUMBER,
     "left_alone": Maybe([TEXT]),

@@ -254,14 +254,40 @@ def _step_lines(module: dict) -> list[str]:
             for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
 
 
+def address_ranges(addresses: Iterable[int]) -> str:
+    """"address 5", "addresses 7–30", "addresses 2, 4–6"."""
+    listed = sorted(addresses)
+    runs: list[list[int]] = []
+    for address in listed:
+        if runs and address == runs[-1][-1] + 1:
+            runs[-1].append(address)
+        else:
+            runs.append([address])
+    text = ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
+    return f"address{'es' if len(listed) > 1 else ''} {text}"
+
+
+def line_proof(bus: dict) -> str | None:
+    """What the probes of a bus's line found at the addresses its plant file does not list, in one line."""
+    if bus.get("unlisted_modules"):
+        return (f"⚠ bus {bus['name']}: a module answers at {address_ranges(bus['unlisted_modules'])}, which the plant file does not "
+                "list — the line has modules the plant does not know, so it gets no broadcast: add them to the plant file, "
+                "or drop only_these_modules")  # fmt: skip
+    if bus.get("proven_silent"):
+        return f"bus {bus['name']}: {address_ranges(bus['proven_silent'])} answered no probe — the broadcasts reach the plan's modules only"
+    return None
+
+
 def _broadcast_lines(bus: dict) -> list[str]:
-    """A bus's broadcasts, once: one step for all of its modules."""
+    """A bus's broadcasts, once: one step for all of its modules — and what proved nobody else hears them."""
     steps = bus.get("broadcasts", [])
+    proof = line_proof(bus)
     if not steps:
-        return []
+        return [proof, ""] if proof else []
     head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all {len(steps[0]['modules'])} modules "
             "(address 0), each verified by reading back")  # fmt: skip
-    return [head, *(f"    {step_line(i, s['message'], s['summary'], s['releases_axes'], True)}" for i, s in enumerate(steps, 1)), ""]
+    return [head, *(f"    {step_line(i, s['message'], s['summary'], s['releases_axes'], True)}" for i, s in enumerate(steps, 1)),
+            *([f"    {proof}"] if proof else []), ""]
 
 
 def summary_line(document: dict) -> str:
@@ -333,6 +359,8 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
                  + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
     left_alone = document.get("left_alone", [])
     head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
+    proofs = [proof for bus in document["buses"] if (proof := line_proof(bus))]
+    head += [f"> {cell(proof)}" for proof in proofs] + ([""] if proofs else [])
     if changed:
         head += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
         for bus, m in changed:

@@ -5,9 +5,10 @@ none. When several modules of a line need the same values — a plant-wide speed
 shared program, one system block — one broadcast can replace an addressed message per
 module. It is used only where the plan can prove what it does to *every* receiver:
 
-- every module on the line is a module of the plan (`receivers_known`: the caller knows that
-  the plant lists every module of the line — a full line of 30 modules, or the plant's own
-  declaration — and that the plan covers all of them);
+- every module on the line is a module of the plan: the plant lists every module of the line
+  (a full line of 30 modules, or its own declaration) and the plan covers all of them — and,
+  since a declaration in a file is no proof, the caller probes every other address in the same
+  run and finds it silent; that costs line time (`proof_time`), which a broadcast must save;
 - the broadcasts come first on the line, and each module's own plan is made from the state
   the broadcasts leave (the device model predicts it: defaults, clamping, refusals);
 - each module's whole sequence — broadcasts, then its own steps — passes the proof every plan
@@ -80,9 +81,11 @@ class Shared:
     bus_time: float  # the broadcasts once, plus every module's own steps
 
 
-def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None) -> Shared:
+def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None, proof_time: float = 0.0) -> Shared:
     """The cheapest broadcasts found for a line whose every module is in `modules`: groups added
     one by one while they pay, or all of them with those dropped that do not — the cheaper.
+    `proof_time` is what any broadcast costs besides: proving that nobody else is on the line
+    (every address outside `modules` probed, and silent), so broadcasts must save more than it.
 
     `memo` (shared by the lines of a plant) prices each module once per set of broadcasts and
     what it holds and should hold: modules alike but for their address cost the same (the
@@ -104,7 +107,7 @@ def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None) -
         trial = _attempt(tuple(step for g in rest for step in g), modules, cost, memo) or nothing
         if trial[2] < dropped[2] - 1e-9:
             kept, dropped = rest, trial
-    broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2])
+    broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2] + (proof_time if priced[0] else 0.0))
     plans = []
     for module, own in zip(modules, owns):
         proved = plan_from_steps(module.actual, module.desired, [s.message for s in (*broadcasts, *own)], cost)

@@ -6,7 +6,8 @@
   restore` plans and applies back to it, from any directory. It is written atomically
   (`prc3cfg.shell.files`) before the first write: a killed apply leaves a whole snapshot or none.
 - A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
-  one JSON object per line: time, bus, address, request and reply in hex, attempt, duration.
+  one JSON object per line: each attempt as a `request` before its frame leaves, then as an
+  `exchange` with time, bus, address, request and reply in hex, attempt, duration.
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
   modules and programs left the plant file — they stay on the hardware as they are.
@@ -116,6 +117,11 @@ class Journal:
                 self._handle = self.path.open("a")
             self._handle.write(line + "\n")
             self._handle.flush()
+
+    def request(self, exchange: Exchange) -> None:
+        """An attempt about to go out (before its frame leaves: a port that fails after sending
+        leaves it in the journal all the same)."""
+        self.record("request", bus=exchange.bus, address=exchange.address, request=exchange.request.hex(), attempt=exchange.attempt)
 
     def exchange(self, exchange: Exchange) -> None:
         self.record(

@@ -19,7 +19,7 @@ installed) gives tests the fixture `prc3cfg_emulated` built on this. Shell: sock
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -86,13 +86,15 @@ def emulate(
     faults: FaultInjection = FaultInjection(),
     line_speed: bool = False,
     route: Callable[[str, str, int], str] | None = None,
+    unlisted: dict[str, Iterable[int]] | None = None,
     **bus_settings: Any,
 ) -> Iterator[EmulatedPlant]:
     """Every bus of the plant file on an emulator, and a copy of the file in `directory` that uses them.
 
     `bus_settings` (e.g. `timeout=0.1`, `framing="stx"`) are written into every bus of the copy;
     `route(bus, host, port)` may put something between the link and the emulator (a URL to use
-    instead of `socket://host:port`)."""
+    instead of `socket://host:port`); `unlisted` puts factory modules the plant file does not list
+    on a bus's line, at the given addresses (a plant file wrong about its line)."""
     source = Path(plant_path)
     plant = load_plant(source)  # refused here, with its own lines, if it is not a valid plant file
     document = yaml.safe_load(source.read_text())
@@ -105,6 +107,8 @@ def emulate(
             for module in bus.modules:
                 state = seeds.get((bus.name, module.address)) or seeds.get((None, module.address))
                 modules[module.address] = state or ModuleState.factory(module.address)
+            for address in (unlisted or {}).get(bus.name, ()):
+                modules[address] = ModuleState.factory(address)
             emulator = stack.enter_context(Emulator(
                 modules, framing=bus_document.get("framing", bus.framing), line=bus.line, line_speed=line_speed,
                 zvz=bus_document.get("zvz", bus.zvz), turnaround=bus.turnaround, faults=faults,

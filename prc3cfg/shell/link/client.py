@@ -88,6 +88,7 @@ class Link:
         retries: int = 3,
         trace: Trace | None = None,
         observer: Callable[[Exchange], None] | None = None,
+        announce: Callable[[Exchange], None] | None = None,
         cancel: threading.Event | None = None,
         takes_line_time: bool = True,
     ) -> None:
@@ -100,6 +101,8 @@ class Link:
         self.retries = retries
         self.trace = trace
         self.observer = observer
+        #: told of every attempt before its frame leaves (`reply` None): a journal, a release record
+        self.announce = announce
         self.cancel = cancel
         #: Whether frames take their time on a line at the far end; False for an emulator that takes
         #: every frame at once and in order, where a broadcast needs no wait before the next frame.
@@ -132,6 +135,7 @@ class Link:
             if self.cancel is not None and self.cancel.is_set():
                 raise Interrupted()
             started = time.time()
+            self._announce(address, data, attempt, started)
             raw = self._exchange(address, data)
             self._observe(address, data, raw, attempt, started)
             heard, unconfirmed = unconfirmed, None
@@ -170,6 +174,7 @@ class Link:
         if self.cancel is not None and self.cancel.is_set():
             raise Interrupted()
         data, started = message.encode(), time.time()
+        self._announce(address, data, 1, started)
         raw = self._exchange(address, data, timeout)
         self._observe(address, data, raw, 1, started)
         if raw is None:
@@ -192,11 +197,16 @@ class Link:
         data = message.encode()
         frame = self.framing.encode(Direction.REQUEST, 0, data)
         started = time.time()
+        self._announce(0, data, 1, started)
         self._send(frame)
         if self.takes_line_time:
             gap = self.zvz if self._gap_ends_frame else 0.0
             time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
         self._observe(0, data, None, 1, started)
+
+    def _announce(self, address: int, data: bytes, attempt: int, started: float) -> None:
+        if self.announce:
+            self.announce(Exchange(self.bus, address, data, None, attempt, started, 0.0))
 
     def _observe(self, address: int, data: bytes, raw: bytes | None, attempt: int, started: float) -> None:
         self.exchanges += 1

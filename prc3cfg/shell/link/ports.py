@@ -134,6 +134,7 @@ def open_link(
     retries: int = 5,
     trace: Trace | None = None,
     observer: Callable[[Exchange], None] | None = None,
+    announce: Callable[[Exchange], None] | None = None,
     cancel: threading.Event | None = None,
 ) -> Iterator[Link]:
     """A `Link` to one plant bus (`prc3cfg.plant.Bus`), closed on exit."""
@@ -166,6 +167,7 @@ def open_link(
             retries=retries,
             trace=trace,
             observer=observer,
+            announce=announce,
             cancel=cancel,
             takes_line_time=takes_line_time,
         )

@@ -1,0 +1,170 @@
+"""Axis releases nobody has been told of yet: kept on disk from before the frame leaves until an
+account has named them.
+
+A 10h or 20h releases the axes of every module it reaches (a broadcast: of every module on the
+line). Before such a frame is put on the line, a record of it — the line's identities, bus,
+address (0 for a broadcast) and module, the time, the process and the apply's journal — is
+appended to this run's file and flushed to disk (`fsync`), so a process killed a moment later
+still leaves someone who knows. The record is removed only once an apply's closing account,
+which lists the module on its reference-travel list (or shows its system parameters unchanged),
+has been printed (`Releases.told`). Until then every command that opens the line — read, plan,
+apply, restore, scan, import, adopt — reports it (`pending`), and the next apply on the line
+lists it in its own account and so clears it.
+
+The records live in one folder for the machine (`state_dir`), one file per apply
+(`<time>-<pid>.jsonl`), whatever the plant file's folder: `scan`, which has no plant file, finds
+them by the line's identities (`prc3cfg.shell.locks.line_keys`).
+
+Does not own when a release happens (`prc3cfg.shell.apply`) nor what is said of it (`prc3cfg.cli`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+from collections.abc import Iterable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from prc3cfg.errors import UserError
+from prc3cfg.shell.files import write_atomically
+
+#: The folder for the machine when `PRC3CFG_STATE_DIR` does not say otherwise (it lasts across a
+#: reboot, unlike /run); a user who cannot write there keeps the records in their own state folder.
+SYSTEM_STATE_DIR = Path("/var/lib/prc3cfg")
+
+
+def state_dirs() -> list[Path]:
+    """Where records are looked for: `PRC3CFG_STATE_DIR` alone, else the machine's folder and the user's."""
+    if (chosen := os.environ.get("PRC3CFG_STATE_DIR")):
+        return [Path(chosen)]
+    home = Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state") / "prc3cfg"
+    return [SYSTEM_STATE_DIR, home]
+
+
+def _folder() -> Path:
+    """The folder this process writes its records into: the first of `state_dirs` it can write."""
+    problems = []
+    for directory in state_dirs():
+        folder = directory / "releases"
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            os.chmod(folder, 0o1777) if directory == SYSTEM_STATE_DIR else None
+            if os.access(folder, os.W_OK):
+                return folder
+            problems.append(f"{folder}: not writable")
+        except OSError as error:
+            problems.append(f"{folder}: {error.strerror}")
+    raise UserError(f"cannot keep the record of an axis release ({'; '.join(problems)}) — nothing was written; "
+                    "set PRC3CFG_STATE_DIR to a folder this user can write")  # fmt: skip
+
+
+@dataclass(frozen=True, slots=True)
+class Pending:
+    """A 10h/20h that went out (or was about to) and that no account has named yet."""
+
+    keys: tuple[str, ...]  # the line's identities
+    bus: str
+    address: int  # 0: a broadcast, which reached every module on the line
+    name: str  # the module, or for a broadcast the modules the plant knows on the line
+    time: str
+    pid: int
+    journal: str
+    file: Path
+
+    def said(self) -> str:
+        """One line: which module, when, which run — and what to do."""
+        who = f"bus {self.bus}, module {self.address} ({self.name})" if self.address else f"bus {self.bus}, every module on the line ({self.name})"
+        return (f"{who}: an apply (pid {self.pid}, {self.time}, journal {self.journal}) sent a 10h/20h and ended before its "
+                "account said so — its axes may be released: travel to the reference point before production; "
+                "the next apply on this line lists it and clears this")  # fmt: skip
+
+
+def pending(keys: Iterable[str]) -> list[Pending]:
+    """Every release recorded on a line with one of `keys` that no account has named yet."""
+    wanted = set(keys)
+    found = []
+    for directory in state_dirs():
+        folder = directory / "releases"
+        try:
+            files = sorted(folder.glob("*.jsonl"))
+        except OSError:
+            continue
+        for path in files:
+            try:
+                lines = path.read_text(encoding="utf-8").splitlines()
+            except (OSError, UnicodeDecodeError):
+                continue
+            for line in lines:
+                try:
+                    entry = json.loads(line)
+                    record = Pending(tuple(entry["keys"]), entry["bus"], int(entry["address"]), entry["name"],
+                                     entry["time"], int(entry["pid"]), entry["journal"], path)  # fmt: skip
+                except (ValueError, KeyError, TypeError):
+                    continue  # a line cut by a kill as it was written: the frame never left
+                if wanted & set(record.keys):
+                    found.append(record)
+    return found
+
+
+class Releases:
+    """The records of one apply: `record` before a release frame leaves, `told` once the account is out."""
+
+    def __init__(self, journal: Path) -> None:
+        self.journal = journal
+        self._path: Path | None = None
+        self._lock = threading.Lock()
+        self._recorded: set[tuple[str, int]] = set()
+
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str) -> None:
+        """Durably, before the frame leaves: a 10h/20h to `address` on the line `keys` (once per module)."""
+        with self._lock:
+            if (bus, address) in self._recorded:
+                return
+            stamp = datetime.now(timezone.utc)
+            if self._path is None:
+                self._path = _folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
+            line = json.dumps({"keys": list(keys), "bus": bus, "address": address, "name": name,
+                               "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "journal": str(self.journal)})  # fmt: skip
+            fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            try:
+                os.write(fd, (line + "\n").encode())
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+            self._recorded.add((bus, address))
+
+    def told(self, earlier: Iterable[Pending] = ()) -> None:
+        """The account naming this apply's releases, and the `earlier` ones it listed, has been
+        printed: their records go (an earlier apply's records of other lines stay)."""
+        gone: dict[Path, set[tuple[str, int]]] = {}
+        for record in earlier:
+            gone.setdefault(record.file, set()).add((record.bus, record.address))
+        for path, which in gone.items():
+            if path != self._path:
+                _remove(path, which)
+        if self._path is not None:
+            self._path.unlink(missing_ok=True)
+            self._path = None
+
+def _remove(path: Path, which: set[tuple[str, int]] | None) -> None:
+    """The records `which` (None: all) out of `path`; the file goes when none is left."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        return
+    kept = []
+    for line in lines:
+        try:
+            entry = json.loads(line)
+            told = which is None or (entry["bus"], int(entry["address"])) in which
+        except (ValueError, KeyError, TypeError):
+            told = True  # a line cut by a kill as it was written: its frame never left
+        if not told:
+            kept.append(line)
+    if kept:
+        write_atomically(path, "".join(line + "\n" for line in kept))
+    else:
+        path.unlink(missing_ok=True)
