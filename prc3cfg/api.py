@@ -44,7 +44,7 @@ from prc3cfg import __version__
 from prc3cfg.core import codec, gateway, plot, sharing
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.framing import get_framing
+from prc3cfg.core.framing import detects_damage, get_framing
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
@@ -59,7 +59,7 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
-from prc3cfg.shell.link import Exchange, Link, LinkError, PortFailed, Trace, open_plant_links, open_port
+from prc3cfg.shell.link import Exchange, Link, LinkError, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell import releases
@@ -234,10 +234,11 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
 
 
 @contextlib.contextmanager
-def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read",
-          observer=None, announce=None) -> Iterator[dict[str, Link]]:  # fmt: skip
+def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer=None, announce=None,
+          records: releases.Releases | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
-    Every axis release on these lines that no account has named yet is told (`LineOptions.tell`).
+    Every axis release on these lines that no account has named yet is told (`LineOptions.tell`),
+    and a read a module answers as a write is recorded as one in `records` (`PossibleWrite`).
 
     Two buses that are one line (two spellings of one address) are refused: they would wait
     for each other's lock."""
@@ -259,10 +260,27 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
             options.tell(record.said())
         trace = Trace(options.trace) if options.trace is not None else None
         cancel = options.cancel.event if options.cancel is not None else None
-        links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=observer,
+        module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+        watch = _written_reads(module_names, keys, records or releases.Releases(purpose), observer)
+        links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=watch,
                                                      announce=announce, cancel=cancel))  # fmt: skip
         yield links
         options.links_used.extend(links.values())
+
+
+def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: releases.Releases,
+                   observer: Callable[[Exchange], None] | None = None) -> Callable[[Exchange], None]:  # fmt: skip
+    """`observer`, and a read answered with an acknowledgement recorded as an axis release: the
+    module executed a damaged frame as a write, a 10h as likely as any (`PossibleWrite`)."""
+
+    def watch(exchange: Exchange) -> None:
+        if observer is not None:
+            observer(exchange)
+        if exchange.reply == codec.encode_code(0) and codec.MESSAGE_TYPES[exchange.request[0]].IS_READ:
+            name = names.get((exchange.bus, exchange.address), f"address {exchange.address}")
+            records.record(keys[exchange.bus], exchange.bus, exchange.address, name)
+
+    return watch
 
 
 def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, then=None) -> dict[Key, ModuleImage]:
@@ -483,7 +501,7 @@ def prober(link: Link, bus: Bus) -> Prober:
             for _ in range(PROOF_PROBES):
                 try:
                     heard = link.probe(address, codec.ReadSystem(), probe_timeout(bus)) is not None
-                except PortFailed:
+                except (PortFailed, PossibleWrite):
                     raise
                 except LinkError:
                     heard = True  # something answered, if garbled: not an empty address
@@ -679,11 +697,16 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
 def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key, ModuleImage] | None,
            plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in pairs}
+    for bus in buses.values():
+        if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
+            raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
+                            "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
+                            "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
-    records = releases.Releases(journal.path)
+    records = releases.Releases("restore" if desired is not None else "apply", journal.path)
     announce = _announcer(plant, buses, journal, records)
     try:
-        with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce) as links:
+        with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
             earlier = tuple(releases.pending(key for bus in buses.values() for key in bus_line_keys(plant, bus)))
             if plan_file is None:
                 images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired)
@@ -732,8 +755,11 @@ def _announcer(plant: Plant, buses: dict[str, Bus], journal: Journal, records: r
 def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus], journal: Journal,
          allow_axis_release: bool, verify: Verify, options: LineOptions, earlier: tuple[releases.Pending, ...],
          records: releases.Releases) -> ApplyResult:  # fmt: skip
-    runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts)
-                 for c in the_plan.changes)  # fmt: skip
+    exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
+    # on a line without error detection every module is watched, the unchanged ones too: a damaged
+    # frame meant for another can release its axes
+    runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in exposed)
+                 for c in the_plan.modules if c.steps or c.bus in exposed)  # fmt: skip
     snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
     snapshot_path = snapshot.save()
     options.progress.note(f"Snapshot of the modules before writing: {snapshot_path}")
@@ -826,6 +852,7 @@ def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[L
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
                    retries=options.retries, trace=Trace(options.trace) if options.trace is not None else None,
+                   observer=_written_reads({}, {bare.port: keys}, releases.Releases(purpose)),
                    cancel=options.cancel.event if options.cancel is not None else None)  # fmt: skip
 
 
@@ -843,8 +870,8 @@ def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
     for address in range(1, MAX_MODULE_ADDRESS + 1):
         try:
             reply = link.probe(address, codec.ReadSystem(), min(link.timeout, PROBE_TIMEOUT))
-        except PortFailed:
-            raise  # the port, not an absent module
+        except (PortFailed, PossibleWrite):
+            raise  # the port, not an absent module; a read a module executed as a write
         except LinkError:
             reply = None  # heard, but never usable: not a module this scan can report
         if isinstance(reply, codec.SystemReply):

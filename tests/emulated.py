@@ -22,10 +22,11 @@ DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
 def emulated_plant(
     directory: Path, *, faults: FaultInjection = FaultInjection(), timeout: float = 0.1, framing: str = "crc16",
     line_speed: bool = False, source: Path = DEMO, lossy: dict[str, Rule] | None = None, zvz: float = 0.020,
-    unlisted: dict[str, list[int]] | None = None,
+    unlisted: dict[str, list[int]] | None = None, **bus_settings: object,
 ) -> Iterator[EmulatedPlant]:
     """`source` with every bus on an emulator (factory-default modules) via socket:// as `plant.yaml`
-    in `directory`; a bus named in `lossy` is reached through a `LossyProxy` with that rule."""
+    in `directory`; a bus named in `lossy` is reached through a `LossyProxy` with that rule;
+    `bus_settings` (`parity="none"`, …) are written into every bus."""
     with contextlib.ExitStack() as stack:
 
         def route(bus: str, host: str, port: int) -> str:
@@ -34,7 +35,8 @@ def emulated_plant(
             return f"socket://{host}:{port}"
 
         emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed, route=route,
-                                               unlisted=unlisted, timeout=timeout, framing=framing, zvz=zvz))  # fmt: skip
+                                               unlisted=unlisted, timeout=timeout, framing=framing, zvz=zvz,
+                                               **bus_settings))  # fmt: skip
         yield emulated
 
 

@@ -29,6 +29,9 @@ class Loss(enum.Enum):
     REPLY = "reply"  # the emulator executes it, its reply is swallowed
     REFUSAL = "refusal"  # the emulator executes it, the client hears code 32 instead
     FLOOD = "flood"  # the client hears bytes that never stop instead of a reply
+    # what a line without error detection (open-driver, no parity) lets a flipped bit do to a request:
+    AS_INIT = "as-init"  # the module receives 10h [10 00] (a 50h's bit 6 flipped) and executes it
+    TO_BROADCAST = "to-broadcast"  # it arrives at address 0: every module executes it, none answers
 
 
 FAKE_CODE = 32
@@ -123,7 +126,9 @@ class LossyProxy:
                 if Loss.REQUEST in losses:
                     continue
                 swallow.set() if losses & {Loss.REPLY, Loss.REFUSAL, Loss.FLOOD} else swallow.clear()
-                upstream.sendall(self.framing.encode(Direction.REQUEST, event.address, event.message))
+                address = 0 if Loss.TO_BROADCAST in losses else event.address
+                message = bytes([0x10, 0]) if Loss.AS_INIT in losses else event.message
+                upstream.sendall(self.framing.encode(Direction.REQUEST, address, message))
                 if Loss.REFUSAL in losses:
                     client.sendall(self.framing.encode(Direction.REPLY, event.address, bytes([FAKE_CODE, 0])))
 

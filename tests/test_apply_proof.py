@@ -99,8 +99,10 @@ def test_an_apply_killed_after_its_20h_leaves_every_later_command_saying_so_unti
 
         planned = run_cli(capsys, "plan", plant.path)
         assert planned.code == 0
-        (warning,) = [line for line in planned.err.splitlines() if "warning" in line]
-        assert f"bus booth-a, module {address} ({name})" in warning and f"pid {process.pid}" in warning
+        warnings = [line for line in planned.err.splitlines() if "warning" in line]
+        # the module whose 20h was seen on the line — and any whose 20h was about to leave when it died
+        assert any(f"bus booth-a, module {address} ({name})" in line for line in warnings)
+        assert all(f"pid {process.pid}" in line and "may be released" in line for line in warnings)
         port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
         scanned = run_cli(capsys, "scan", "--port", port)
         assert f"bus booth-a, module {address} ({name})" in scanned.err  # no plant file: found by the line
@@ -123,8 +125,7 @@ def test_a_module_the_plant_does_not_list_stops_every_broadcast_and_is_named(tmp
         assert json.loads(planned.out)["buses"][0]["unlisted_modules"] == [29]
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, result.err
-        assert "a module answers at address 29, which the plant file does not list" in result.out
-        assert 0 not in {address for address, _ in sent(tmp_path)}  # no broadcast
+        assert "a module answers at address 29, which the plant file does not list" in result.out not in {address for address, _ in sent(tmp_path)}  # no broadcast
         stranger = plant.emulators["line"].module(29)
         assert stranger.referenced and stranger == ModuleState.factory(29)  # untouched
         assert plant.matches_plant()
@@ -144,3 +145,107 @@ def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does
         assert refused.code == 1
         assert "stale plan — on bus line a module now answers at address 30" in refused.err
         assert not [r for _, r in sent(tmp_path) if r[:2] not in ("50", "51", "52")]  # nothing written
+
+
+# -- 3. on a line without error detection a read can become a write -----------------------------
+
+UNCHECKED = {"framing": "open-driver", "parity": "none", "accept_undetected_damage": True}
+
+
+def test_apply_on_a_line_without_error_detection_needs_the_risk_accepted_in_the_plant_file(tmp_path, capsys):
+    with emulated_plant(tmp_path, framing="open-driver", parity="none") as plant:
+        refused = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert refused.code == 1
+        (line,) = refused.err.splitlines()
+        assert "bus booth-a: open-driver with parity none detects no damage" in line
+        assert "parity: even" in line and "accept_undetected_damage: true" in line
+        assert not (tmp_path / ".prc3cfg" / "journal").exists()  # the line was not touched
+
+
+def test_a_read_the_module_executes_as_a_10h_is_a_possible_release_never_accepted(tmp_path, capsys):
+    """The first 50h to booth-a-right arrives as 10h: the module goes to factory defaults and answers
+    "accepted". The plan stops in one line; every later command says the module may be released."""
+    armed = False
+
+    def flip(frame, _):
+        nonlocal armed
+        if armed and frame.address == 2 and frame.message[:1] == b"\x50":
+            armed = False
+            return {Loss.AS_INIT}
+        return set()
+
+    with emulated_plant(tmp_path, lossy={"booth-a": flip}, **UNCHECKED) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        for address in (1, 2, 5):
+            plant.emulators["booth-a"].update(address, referenced=True)
+        armed = True
+        planned = run_cli(capsys, "plan", plant.path)
+        assert planned.code == 1
+        assert "bus booth-a, module 2: a read (50h) was answered as a write is" in planned.err
+        assert not plant.emulators["booth-a"].module(2).referenced  # it did execute a 10h
+        again = run_cli(capsys, "plan", plant.path)
+        assert "bus booth-a, module 2 (booth-a-right): prc3cfg plan" in again.err and "may be released" in again.err
+        applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert applied.code == 0, applied.err
+        assert "booth-a/booth-a-right" in next(line for line in applied.out.splitlines() if TRAVEL in line)
+
+
+def test_a_write_whose_address_became_the_broadcast_is_found_on_every_module_of_the_line(tmp_path, capsys):
+    """Booth-a-left's 20h arrives at address 0: booth-a-right and booth-a-top take its system block and
+    release their axes. Their own steps never touched the system: they are read all the same, and named."""
+    armed = False
+
+    def flip(frame, _):
+        nonlocal armed
+        if armed and frame.address == 1 and frame.message[:1] == b"\x20":
+            armed = False
+            return {Loss.TO_BROADCAST}
+        return set()
+
+    with emulated_plant(tmp_path, lossy={"booth-a": flip}, **UNCHECKED) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        for address in (1, 2, 5):
+            plant.emulators["booth-a"].update(address, referenced=True)
+        edit(plant.path, "name: booth-a-left\n", "name: booth-a-left\n    system: {circuit_gain: 900}\n")
+        armed = True
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert not plant.emulators["booth-a"].module(2).referenced and not plant.emulators["booth-a"].module(5).referenced
+        assert result.code == 1, result.out
+        travel = next(line for line in result.out.splitlines() if TRAVEL in line)
+        assert "booth-a/booth-a-left" in travel and "booth-a/booth-a-right" in travel and "booth-a/booth-a-top" in travel
+        assert not [line for line in result.out.splitlines() if "✓ bus booth-a, module 2" in line or "✓ bus booth-a, module 5" in line]
+        assert "✗ bus booth-a, module 2 (booth-a-right): the read-back shows other system parameters" in result.err
+        differs = [line for line in result.err.splitlines() if "read back, it differs from the plant file:" in line]
+        assert len(differs) == 2 and all("circuit gain" in line for line in differs)
+        assert "✓ bus booth-b" not in result.out  # no release on that line: nothing to watch for
+
+
+def test_a_verifying_read_executed_as_a_10h_stops_the_line_and_names_the_module(tmp_path, capsys):
+    """Booth-a-right's verifying read arrives as 10h: nothing more is sent on booth-a, the module is on
+    the reference-travel list, and no module of the line is called verified after it."""
+    armed, written, after = False, False, []
+
+    def flip(frame, _):
+        nonlocal armed, written
+        if after:
+            after.append(frame)
+        written |= armed and frame.address == 2 and frame.message[0] < 0x50  # its write has gone out
+        if written and frame.address == 2 and frame.message[:1] in (b"\x51", b"\x52"):
+            armed = written = False
+            after.append(frame)
+            return {Loss.AS_INIT}
+        return set()
+
+    with emulated_plant(tmp_path, lossy={"booth-a": flip}, **UNCHECKED) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        for address in (1, 2, 5):
+            plant.emulators["booth-a"].update(address, referenced=True)
+        edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
+        armed = True
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert after, "the verifying read was never sent"
+        assert result.code == 1
+        assert "booth-a/booth-a-right" in next(line for line in result.out.splitlines() if TRAVEL in line)
+        assert "✗ bus booth-a, module 2 (booth-a-right): bus booth-a, module 2: a read (51h) was answered as a write is" in result.err \
+            or "a read (52h) was answered as a write is" in result.err
+        assert [f.message[:1] for f in after[1:]] == [b"\x50"] * len(after[1:])  # afterwards: its system block read, nothing else

@@ -89,9 +89,14 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) 
     return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=approve)
 
 
-def account(run: ModuleRun) -> str:
-    """What was and was not written to one module, and what a read-back says it holds now."""
+def account(run: ModuleRun) -> str | None:
+    """What was and was not written to one module, and what a read-back says it holds now (None: a
+    module not in the plan that was not looked at — nothing to say)."""
     head = f"bus {run.bus}, module {run.address} ({run.name})"
+    if run.verified and not run.steps:
+        if not run.watched:
+            return None
+        return f"✓ {head}: not in the plan; its system parameters read back as they were (a release went out on a line without error detection)"
     if run.verified:
         repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
         received = f" and {run.broadcasts} broadcast{'s' if run.broadcasts != 1 else ''} received" if run.broadcasts else ""
@@ -105,12 +110,12 @@ def account(run: ModuleRun) -> str:
             lines.append("    sent, not acknowledged: " + "; ".join(s.summary for s in run.unacknowledged))
         if run.unsent:
             lines.append("    not sent: " + "; ".join(s.summary for s in run.unsent))
-        if run.final is None:
-            lines.append("    not read back: what the module holds is not known")
-        elif run.unchanged:
-            lines.append("    read back: unchanged, as before the apply")
-        else:
-            lines.append("    read back, it differs from the plant file: " + "; ".join(render.differences(run.final, run.desired)))
+    if run.final is None:
+        lines.append("    not read back: what the module holds is not known")
+    elif run.unchanged:
+        lines.append("    read back: unchanged, as before the apply")
+    else:
+        lines.append("    read back, it differs from the plant file: " + "; ".join(render.differences(run.final, run.desired)))
     return "\n".join(lines)
 
 
@@ -129,7 +134,8 @@ def report(result: ApplyResult) -> None:
     """The account of every module, the reference-travel list (with the releases earlier applies
     left untold), where the records are — and then those releases count as told."""
     for run in result.runs:
-        print(account(run), file=sys.stdout if run.verified else sys.stderr)
+        if (said := account(run)) is not None:
+            print(said, file=sys.stdout if run.verified else sys.stderr)
     if (travel := travel_list(list(result.runs))) is not None:
         print(travel)
     for proof in result.plan.proofs:
@@ -166,7 +172,7 @@ def applied(result: ApplyResult) -> None:
     if result.runs or result.earlier:
         report(result)
     if result.runs:
-        print(f"Apply complete: {render.plural(len(result.runs), 'module')} written and verified.")
+        print(f"Apply complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:

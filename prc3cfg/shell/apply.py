@@ -43,7 +43,7 @@ from prc3cfg.core.planner import Step, plan_module
 from prc3cfg.core.render import plural
 from prc3cfg.core.verification import reach
 from prc3cfg.errors import Interrupted, UserError
-from prc3cfg.shell.link import Link, LinkError
+from prc3cfg.shell.link import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
 
 REPAIRS = 2
@@ -79,10 +79,15 @@ class ModuleRun:
     steps: tuple[Step, ...]
     predicted: ModuleImage  # what the steps leave, by the device model
     broadcasts: int = 0  # the first steps are the bus's broadcasts: the bus sends them, once for all
+    #: on a line without error detection (open-driver, no parity): a damaged frame meant for another
+    #: module — or a read — can reach this one as a 10h/20h
+    exposed: bool = False
     sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
     written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
     release_sent: bool = False  # a 10h/20h went out on the line
     release_acknowledged: bool = False
+    possibly_written: bool = False  # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
+    watched: bool = False  # its system block was read because a release went out on its unprotected line
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     failure: str | None = None
     refused: bool = False  # the module answered an error code: stop for good
@@ -98,13 +103,17 @@ class ModuleRun:
     def released(self) -> Release:
         if self.release_acknowledged:
             return Release.YES
+        changed = self.final is not None and self.final.system != self.before.system
+        if self.possibly_written or (self.exposed and changed):
+            # a damaged frame executed as a write: a 10h leaves a module at defaults as it was
+            return Release.YES if changed else Release.POSSIBLY
         if not self.release_sent:
             return Release.NO
         if self.final is None:
             return Release.POSSIBLY
         # A 10h/20h is only sent when the system parameters differ: if they still read as
         # before, none of them was executed.
-        return Release.YES if self.final.system != self.before.system else Release.NO
+        return Release.YES if changed else Release.NO
 
     @property
     def unchanged(self) -> bool:
@@ -199,7 +208,7 @@ class ModuleRun:
         return previous
 
     def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], consented: frozenset[tuple[str, int]],
-                 verify: Verify = Verify.FLOOR) -> None:  # fmt: skip
+                 verify: Verify = Verify.FLOOR, with_system: bool = False) -> None:  # fmt: skip
         """Read back what the steps could have changed; while the module differs from the desired
         image and may be repaired, plan, repair, and read back what the repair could have changed.
 
@@ -211,6 +220,8 @@ class ModuleRun:
         known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
         for _ in range(REPAIRS + 1):
             system, programs = reach(self.final or self.before, expected, self.sent[sent_before:])
+            system |= with_system
+            self.watched |= with_system
             if verify is Verify.FULL:
                 system, programs = True, known_programs
             try:
@@ -218,6 +229,8 @@ class ModuleRun:
             except Interrupted:
                 self.stopped_verifying()
                 return
+            except PossibleWrite:
+                raise  # the line stops: `execute` says so for every module on it
             except LinkError as error:
                 self.failure = f"verification: {error}"
                 continue
@@ -236,8 +249,9 @@ class ModuleRun:
             if repair.releases_axes and (self.bus, self.address) not in consented:
                 self.failure = (
                     "the read-back shows other system parameters than the plan expected (changed on the floor "
-                    "meanwhile?); writing them would release the axes, which the plan agreed to did not — "
-                    "nothing more was sent to it: plan again and review the new plan"
+                    "meanwhile" + (", or by a damaged frame meant for another module" if self.exposed else "") + "?); writing "
+                    "them would release the axes, which the plan agreed to did not — nothing more was sent to it: plan "
+                    "again and review the new plan"
                 )
                 return
             self.repairs += 1
@@ -286,6 +300,21 @@ def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callab
         tick()
 
 
+def stopped(link: Link, runs: list[ModuleRun], error: PossibleWrite) -> None:
+    """A module of the line executed a damaged frame as a write: nothing more is sent on the line.
+    That module's system block is read once more for the account; every module not verified yet
+    says why it was left."""
+    for run in runs:
+        if run.address == error.address:
+            run.possibly_written = True
+            try:
+                run.final = replace(run.final or run.before, system=read_system(link, run.address, name=run.name))
+            except (LinkError, UserError):
+                pass  # not read back: `released` says "possibly"
+        if not run.verified:
+            run.refused, run.failure = True, str(error)
+
+
 def execute(
     runs: list[ModuleRun],
     links: dict[str, Link],
@@ -308,13 +337,19 @@ def execute(
         per_bus.setdefault(run.bus, []).append(run)
 
     def on_bus(bus: str, bus_runs: list[ModuleRun]) -> None:
-        broadcast(links[bus], costs[bus].turnaround, bus_runs, tick)
-        for run in bus_runs:
-            if not run.interrupted:
-                run.run(links[bus], run.steps[run.broadcasts :], tick)
-        for run in bus_runs:
-            if not run.interrupted:
-                run.converge(links[bus], costs[bus], tick, consented, verify)
+        link = links[bus]
+        try:
+            broadcast(link, costs[bus].turnaround, bus_runs, tick)
+            for run in bus_runs:
+                if not run.interrupted:
+                    run.run(link, run.steps[run.broadcasts :], tick)
+            # where a damaged frame can become a release of any module, every module's system block is read
+            with_system = any(run.exposed for run in bus_runs) and any(run.release_sent for run in bus_runs)
+            for run in bus_runs:
+                if not run.interrupted:
+                    run.converge(link, costs[bus], tick, consented, verify, with_system)
+        except PossibleWrite as error:
+            stopped(link, bus_runs, error)
 
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
         for future in [pool.submit(on_bus, bus, bus_runs) for bus, bus_runs in per_bus.items()]:

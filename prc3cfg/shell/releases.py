@@ -2,7 +2,8 @@
 account has named them.
 
 A 10h or 20h releases the axes of every module it reaches (a broadcast: of every module on the
-line). Before such a frame is put on the line, a record of it — the line's identities, bus,
+line). Before such a frame is put on the line — and as soon as a read is answered as a write is,
+on a line where damage can turn one into the other — a record of it — the line's identities, bus,
 address (0 for a broadcast) and module, the time, the process and the apply's journal — is
 appended to this run's file and flushed to disk (`fsync`), so a process killed a moment later
 still leaves someone who knows. The record is removed only once an apply's closing account,
@@ -63,7 +64,8 @@ def _folder() -> Path:
 
 @dataclass(frozen=True, slots=True)
 class Pending:
-    """A 10h/20h that went out (or was about to) and that no account has named yet."""
+    """A 10h/20h that went out (or was about to) — or a read a module executed as a write — that no
+    account has named yet."""
 
     keys: tuple[str, ...]  # the line's identities
     bus: str
@@ -71,15 +73,17 @@ class Pending:
     name: str  # the module, or for a broadcast the modules the plant knows on the line
     time: str
     pid: int
-    journal: str
+    command: str  # the prc3cfg command that sent it: apply, restore — or plan, read, when a read became a write
+    journal: str | None
     file: Path
 
     def said(self) -> str:
         """One line: which module, when, which run — and what to do."""
         who = f"bus {self.bus}, module {self.address} ({self.name})" if self.address else f"bus {self.bus}, every module on the line ({self.name})"
-        return (f"{who}: an apply (pid {self.pid}, {self.time}, journal {self.journal}) sent a 10h/20h and ended before its "
-                "account said so — its axes may be released: travel to the reference point before production; "
-                "the next apply on this line lists it and clears this")  # fmt: skip
+        run = f"pid {self.pid}, {self.time}" + (f", journal {self.journal}" if self.journal else "")
+        return (f"{who}: prc3cfg {self.command} ({run}) sent it a 10h/20h, or a frame it took for one, and no account has said "
+                "so — its axes may be released: travel to the reference point before production; the next apply on this "
+                "line lists it and clears this")  # fmt: skip
 
 
 def pending(keys: Iterable[str]) -> list[Pending]:
@@ -100,8 +104,8 @@ def pending(keys: Iterable[str]) -> list[Pending]:
             for line in lines:
                 try:
                     entry = json.loads(line)
-                    record = Pending(tuple(entry["keys"]), entry["bus"], int(entry["address"]), entry["name"],
-                                     entry["time"], int(entry["pid"]), entry["journal"], path)  # fmt: skip
+                    record = Pending(tuple(entry["keys"]), entry["bus"], int(entry["address"]), entry["name"], entry["time"],
+                                     int(entry["pid"]), entry["command"], entry["journal"], path)  # fmt: skip
                 except (ValueError, KeyError, TypeError):
                     continue  # a line cut by a kill as it was written: the frame never left
                 if wanted & set(record.keys):
@@ -112,8 +116,8 @@ def pending(keys: Iterable[str]) -> list[Pending]:
 class Releases:
     """The records of one apply: `record` before a release frame leaves, `told` once the account is out."""
 
-    def __init__(self, journal: Path) -> None:
-        self.journal = journal
+    def __init__(self, command: str, journal: Path | None = None) -> None:
+        self.command, self.journal = command, journal
         self._path: Path | None = None
         self._lock = threading.Lock()
         self._recorded: set[tuple[str, int]] = set()
@@ -127,7 +131,8 @@ class Releases:
             if self._path is None:
                 self._path = _folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
             line = json.dumps({"keys": list(keys), "bus": bus, "address": address, "name": name,
-                               "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "journal": str(self.journal)})  # fmt: skip
+                               "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "command": self.command,
+                               "journal": None if self.journal is None else str(self.journal)})  # fmt: skip
             fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644)
             try:
                 os.write(fd, (line + "\n").encode())

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -109,8 +109,9 @@ def emulate(
                 modules[module.address] = state or ModuleState.factory(module.address)
             for address in (unlisted or {}).get(bus.name, ()):
                 modules[address] = ModuleState.factory(address)
+            line = replace(bus.line, **{key: bus_document[key] for key in ("baud", "parity", "data_bits", "stop_bits") if key in bus_settings})
             emulator = stack.enter_context(Emulator(
-                modules, framing=bus_document.get("framing", bus.framing), line=bus.line, line_speed=line_speed,
+                modules, framing=bus_document.get("framing", bus.framing), line=line, line_speed=line_speed,
                 zvz=bus_document.get("zvz", bus.zvz), turnaround=bus.turnaround, faults=faults,
             ))  # fmt: skip
             host, port = emulator.listen("127.0.0.1", 0)

@@ -26,6 +26,13 @@ def get_framing(name: str) -> Framing:
         raise ValueError(f"unknown framing {name!r}: use one of {', '.join(FRAMINGS)}") from None
 
 
+def detects_damage(framing: str, parity: str) -> bool:
+    """Whether a damaged frame can be told from a good one on a line: by a checksum (crc16, stx) or
+    by parity on each character. Without either (open-driver, no parity) any damage passes — a
+    write can become another write, a read a write, an address the broadcast 0."""
+    return get_framing(framing).checked or parity != "none"
+
+
 __all__ = [
     "FRAMINGS",
     "NEED_DATA",
@@ -35,5 +42,6 @@ __all__ = [
     "Frame",
     "Framing",
     "FramingError",
+    "detects_damage",
     "get_framing",
 ]

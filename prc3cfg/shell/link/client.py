@@ -60,6 +60,20 @@ class PortFailed(LinkError):
     """The port itself failed to read or write: no module is to blame, and no retry helps."""
 
 
+class PossibleWrite(LinkError):
+    """A read was answered with an acknowledgement: the module received a damaged frame as a write
+    and executed it — any write, 10h and 20h among them. Nothing more may be sent on the line
+    until a person has looked; never retried."""
+
+    def __init__(self, bus: str, address: int, message: codec.Message) -> None:
+        super().__init__(
+            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — the module took a damaged "
+            "frame for a write and executed it, which may have changed any value or released its axes (10h/20h): "
+            "nothing more is sent on this line; travel the module to its reference point, read it back, and use parity on the line"
+        )
+        self.bus, self.address = bus, address
+
+
 @dataclass(frozen=True, slots=True)
 class Exchange:
     """One attempt on the line, for journals: what went out, what came back."""
@@ -123,7 +137,7 @@ class Link:
         """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
 
         A lost reply, a damaged one, and a structural error code (the module got our message
-        damaged) are retried; on a framing without a checksum an error code is asked for
+        damaged) are retried — but a read answered with an acknowledgement is `PossibleWrite`; on a framing without a checksum an error code is asked for
         again until two agree. After the last attempt a `LinkError` names the bus and
         module. `Interrupted` when the link's `cancel` event is set before an attempt.
         """
@@ -147,6 +161,8 @@ class Link:
                 except codec.BadReply as error:
                     problem = f"bad reply ({error})"
                 else:
+                    if reply == 0 and message.IS_READ:
+                        raise PossibleWrite(self.bus, address, message)
                     if reply in DAMAGED_CODES:
                         problem = f"the module reports a damaged message ({describe(reply)})"
                     elif not isinstance(reply, int) or reply == 0 or self.framing.checked or reply == heard:
@@ -183,6 +199,8 @@ class Link:
             reply = codec.decode_reply(message, raw)
         except codec.BadReply:
             return self.request(address, message)
+        if reply == 0 and message.IS_READ:
+            raise PossibleWrite(self.bus, address, message)
         if reply in DAMAGED_CODES or (isinstance(reply, int) and reply and not self.framing.checked):
             return self.request(address, message)
         return reply
