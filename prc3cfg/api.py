@@ -59,12 +59,12 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
-from prc3cfg.shell.link import Exchange, Link, LinkError, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
+from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell import releases
 from prc3cfg.shell.readback import Target, read_all, read_module
-from prc3cfg.shell.records import Journal, Snapshot, applied_copy, save_applied
+from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, save_applied
 
 __all__ = [
     "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "Gates", "LineBusy",
@@ -256,6 +256,9 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
             if bus.name in names:
                 stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", timeout=options.lock_timeout,
                                               purpose=purpose, waiting=options.waiting))  # fmt: skip
+        if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
+            raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
+                            "read or written: run it again, with the file as it is now")  # fmt: skip
         for record in releases.pending(owner):
             options.tell(record.said())
         trace = Trace(options.trace) if options.trace is not None else None
@@ -266,6 +269,13 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
                                                      announce=announce, cancel=cancel))  # fmt: skip
         yield links
         options.links_used.extend(links.values())
+
+
+def _sha256_of(path: Path) -> str | None:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: releases.Releases,
@@ -298,8 +308,8 @@ def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dic
                    desired: dict[Key, ModuleImage] | None = None) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
     """Read back and plan, each line planned as soon as it is read — while the other lines are
     still being read: the lines never wait for all of the planning."""
-    planner = Planner(plant, desired)
     buses = {bus.name: bus for bus, _ in pairs}
+    planner = Planner(plant, desired, unset_systems(plant, buses.values()))
     images = _read(to_read, links, options, then=lambda bus, read: planner.plan_bus(bus, pairs, read, prober(links[bus], buses[bus])))
     return images, planner.plan(pairs, images)
 
@@ -365,11 +375,11 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
 
 
 def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,
-              probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
+              probers: dict[str, Prober] | None = None, unset: frozenset[Key] = frozenset()) -> PlantPlan:  # fmt: skip
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
     line's `probers` (`Planner.plan_bus`)."""
-    return Planner(plant, desired).plan(pairs, actual, probers)
+    return Planner(plant, desired, unset).plan(pairs, actual, probers)
 
 
 class Planner:
@@ -377,8 +387,8 @@ class Planner:
     line's own thread (one at a time: the memo of plans is shared, so modules alike on any line
     are planned once, `sharing.alike`)."""
 
-    def __init__(self, plant: Plant, desired: dict[Key, ModuleImage] | None) -> None:
-        self.plant, self.desired = plant, desired
+    def __init__(self, plant: Plant, desired: dict[Key, ModuleImage] | None, unset: frozenset[Key] = frozenset()) -> None:
+        self.plant, self.desired, self.unset = plant, desired, unset
         self._memo: dict = {}
         self._lock = threading.Lock()
         self._buses: dict[str, tuple[list[ModuleChange], float, LineProof | None]] = {}
@@ -397,10 +407,10 @@ class Planner:
                 key = (bus.name, module.address)
                 target = self.desired[key] if self.desired is not None else module.desired_image()
                 try:
-                    module_plan = _plan_alike(actual[key], target, line_cost(bus), self._memo)
+                    module_plan = _plan_alike(actual[key], target, line_cost(bus), self._memo, key in self.unset)
                 except UnreachableImage as error:
                     raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
-                changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan))
+                changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan, system_unset=key in self.unset))
             bus = self._bus(bus_name)
         others = unlisted_addresses(bus)
         if not changes or not receivers_declared(bus, changes) or (others and probe is None):
@@ -439,22 +449,28 @@ class Planner:
 
     def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
         """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
-        return sum(self._memo[("plan", sharing.alike(c.actual, c.desired, line_cost(self._bus(c.bus))))].bus_time for c in ordered)
+        return sum(self._memo[("plan", sharing.alike(c.actual, c.desired, line_cost(self._bus(c.bus))), c.system_unset)].bus_time
+                   for c in ordered)  # fmt: skip
 
     def _bus(self, name: str) -> Bus:
         return next(b for b in self.plant.buses if b.name == name)
 
 
-def _plan_alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost, memo: dict):
+def _plan_alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost, memo: dict, system_unset: bool = False):
     """`plan_module`, once for modules alike but for their address (a plant commissioned from factory
     defaults is one plan per line profile)."""
-    key = ("plan", sharing.alike(actual, desired, cost))
+    key = ("plan", sharing.alike(actual, desired, cost), system_unset)
     if key not in memo:
-        memo[key] = plan_module(actual, desired, cost)
+        memo[key] = plan_module(actual, desired, cost, system_unset=system_unset)
     found = memo[key]
     if found.address == actual.address:
         return found
     return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))
+
+
+def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
+    """The modules of these buses that reported E12 to an earlier apply and were not cleared since."""
+    return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12))
 
 
 def receivers_declared(bus: Bus, changes: list[ModuleChange]) -> bool:
@@ -501,7 +517,7 @@ def prober(link: Link, bus: Bus) -> Prober:
             for _ in range(PROOF_PROBES):
                 try:
                     heard = link.probe(address, codec.ReadSystem(), probe_timeout(bus)) is not None
-                except (PortFailed, PossibleWrite):
+                except (PortFailed, PossibleWrite, NoReadMessages):
                     raise
                 except LinkError:
                     heard = True  # something answered, if garbled: not an empty address
@@ -592,7 +608,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                 "(teach-in or another apply?); nothing was written — plan again"
             )
         chosen.append((bus, module))
-    ours = make_plan(plant, chosen, images, probers=probers)
+    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()))
     for proof in ours.proofs:
         if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in planned.modules):
             raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {_addresses(proof.answered)}, which the "
@@ -602,7 +618,8 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                   "after it was made; nothing was written: plan again and review it")  # fmt: skip
         theirs, steps = list(entry.steps), [step.message for step in change.steps]
         try:
-            plan_from_steps(change.actual, change.desired, theirs, line_cost(modules[(entry.bus, entry.address)][0]))
+            plan_from_steps(change.actual, change.desired, theirs, line_cost(modules[(entry.bus, entry.address)][0]),
+                            system_unset=change.system_unset)  # fmt: skip
         except StepProblem as problem:
             if problem.index:  # the step that breaks a rule
                 raise UserError(edited.format(problem)) from None
@@ -678,14 +695,22 @@ def apply(
     return _apply(plant, pairs, targets(pairs), None, planned, gates, verify, options or LineOptions())
 
 
-def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR,
-            options: LineOptions | None = None) -> ApplyResult:  # fmt: skip
-    """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply`."""
+def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
+            onto_current_lines: bool = False) -> ApplyResult:  # fmt: skip
+    """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
+    onto the lines it was taken on: a bus of the plant file that now names another line (port or
+    framing) is refused, unless `onto_current_lines`."""
     taken = Snapshot.load(snapshot)
     plant = load_plant(taken.plant_path)
     pairs = [(bus, m) for bus, m in plant.modules() if (bus.name, m.address) in taken.images]
     if len(pairs) != len(taken.images):
         raise UserError(f"{snapshot}: the plant file {taken.plant_path} no longer has every module of the snapshot — nothing was written")
+    for bus in {bus.name: bus for bus, _ in pairs}.values():
+        line = taken.lines.get(bus.name)
+        if line is not None and not onto_current_lines and not line.same_line(bus.port, bus.framing, bus_line_keys(plant, bus)):
+            raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
+                            f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
+                            "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
     to_read = [
         Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(image.programs, 1) if p is not None), image.system)
         for bus, m in pairs
@@ -728,7 +753,7 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             if gates.approve is not None and not gates.approve(the_plan):
                 raise NotApproved("not applied — nothing was written")
             with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
-                result = _run(the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
+                result = _run(plant, the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
                 if desired is None and len(pairs) == len(plant.modules()):
                     _keep_applied(plant)
                 return result
@@ -752,15 +777,17 @@ def _announcer(plant: Plant, buses: dict[str, Bus], journal: Journal, records: r
     return announce
 
 
-def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus], journal: Journal,
-         allow_axis_release: bool, verify: Verify, options: LineOptions, earlier: tuple[releases.Pending, ...],
+def _run(plant: Plant, the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus],
+         journal: Journal, allow_axis_release: bool, verify: Verify, options: LineOptions, earlier: tuple[releases.Pending, ...],
          records: releases.Releases) -> ApplyResult:  # fmt: skip
     exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
     # on a line without error detection every module is watched, the unchanged ones too: a damaged
     # frame meant for another can release its axes
     runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in exposed)
                  for c in the_plan.modules if c.steps or c.bus in exposed)  # fmt: skip
-    snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+    taken_on = {name: LineTaken(bus.port, bus.framing, bus_line_keys(plant, bus)) for name, bus in buses.items()}
+    snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs},
+                             taken_on)  # fmt: skip
     snapshot_path = snapshot.save()
     options.progress.note(f"Snapshot of the modules before writing: {snapshot_path}")
     journal.record("apply", plant=the_plan.plant, plant_sha256=the_plan.plant_sha256, snapshot=str(snapshot_path),
@@ -771,6 +798,12 @@ def _run(the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, L
     execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=options.progress.advance,
             consented=consented, verify=verify)  # fmt: skip
     result = ApplyResult(the_plan, runs, snapshot_path, journal.path, earlier, records)
+    keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}
+    for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
+        if run.system_unset:
+            records.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
+    releases.cleared(r for r in releases.pending((k for ks in keys.values() for k in ks), releases.E12)
+                     if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
     for run in runs:
         journal.record(
             "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
@@ -870,7 +903,7 @@ def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
     for address in range(1, MAX_MODULE_ADDRESS + 1):
         try:
             reply = link.probe(address, codec.ReadSystem(), min(link.timeout, PROBE_TIMEOUT))
-        except (PortFailed, PossibleWrite):
+        except (PortFailed, PossibleWrite, NoReadMessages):
             raise  # the port, not an absent module; a read a module executed as a write
         except LinkError:
             reply = None  # heard, but never usable: not a module this scan can report

@@ -20,6 +20,8 @@ from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.plant import load_plant
+from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.locks import line_keys, line_lock
 
 TRAVEL = "Travel to reference point required before production on:"
 
@@ -249,3 +251,104 @@ def test_a_verifying_read_executed_as_a_10h_stops_the_line_and_names_the_module(
         assert "✗ bus booth-a, module 2 (booth-a-right): bus booth-a, module 2: a read (51h) was answered as a write is" in result.err \
             or "a read (52h) was answered as a write is" in result.err
         assert [f.message[:1] for f in after[1:]] == [b"\x50"] * len(after[1:])  # afterwards: its system block read, nothing else
+
+
+# -- 7. a module in RUN ---------------------------------------------------------------------
+
+
+def test_a_running_module_is_told_to_stop_and_left_out_never_written_in_a_loop(tmp_path, capsys):
+    with emulated_plant(tmp_path) as plant:
+        plant.emulators["booth-a"].update(2, mode="run", active_program=1)
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert result.code == 1
+        (line,) = [line for line in result.err.splitlines() if line.startswith("✗")]
+        assert line.startswith("✗ bus booth-a, module 2 (booth-a-right): running: step 1 of ")
+        assert line.endswith("— stop it (STOP and AUTOMATIC) and apply again")
+        writes_to_2 = [r for a, r in sent(tmp_path) if a == 2 and r[:2] not in ("50", "51", "52")]
+        assert len(writes_to_2) == 1  # refused once, never again, its other steps left out
+        assert plant.emulators["booth-a"].module(2).image == ModuleState.factory(2).image
+        assert "✓ bus booth-a, module 1 (booth-a-left)" in result.out  # the others go on
+
+
+# -- 8. a module in E12 ----------------------------------------------------------------------
+
+
+def test_a_module_in_e12_is_given_its_system_parameters_by_the_next_plan_gated_and_saying_why(tmp_path, capsys):
+    with emulated_plant(tmp_path) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        emulator = plant.emulators["booth-a"]
+        for address in (1, 2, 5):
+            emulator.update(address, referenced=True)
+        emulator.update(2, fault="E12")  # its system parameters read back as the plant file's, yet it is in E12
+        edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
+        first = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert first.code == 1
+        assert "the module is in E12 (system parameters not set), which only a 10h/20h clears — plan again" in first.err
+        assert emulator.module(2).referenced  # nothing released without asking
+
+        planned = run_cli(capsys, "plan", plant.path)
+        assert "it reported E12 (system parameters not set), which only this clears (20h)  ⚠ RELEASES AXES" in planned.out
+        assert "⚠ Travel to reference point required after apply on: booth-a/booth-a-right" in planned.out
+        refused = run_cli(capsys, "apply", plant.path, "--auto-approve")
+        assert refused.code == 1 and "the plan releases the axes of booth-a/booth-a-right" in refused.err  # gated like any release
+        second = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert second.code == 0, second.err
+        assert emulator.module(2).fault is None and plant.matches_plant()
+        assert "No changes" in run_cli(capsys, "plan", plant.path).out  # cleared: no 20h for nothing
+
+
+# -- 9. firmware without read messages -------------------------------------------------------
+
+
+def test_a_module_whose_firmware_has_no_read_messages_is_said_so_once_not_blamed_on_the_line(tmp_path, capsys):
+    asked: list[bytes] = []
+    count = lambda frame, _: (asked.append(frame.message) if frame.address == 2 else None) or set()  # noqa: E731
+    with emulated_plant(tmp_path, lossy={"booth-a": count}) as plant:
+        plant.emulators["booth-a"].update(2, read_messages=False)  # PRC 3 before firmware 3.03.1
+        result = run_cli(capsys, "plan", plant.path)
+        assert result.code == 1
+        (line,) = result.problems
+        assert line == ("error: bus booth-a, module 2: answers 50h as an unknown message — its firmware has no read messages "
+                        "(they came with PRC 3.03.1), so prc3cfg can neither plan nor verify it: update the module's firmware")
+        assert asked == [bytes([0x50, 0])]  # asked once: a checksum passed, so it is no damage
+
+
+# -- 5. a wait for the line does not apply the file as it was before the wait --------------------
+
+
+def test_an_apply_that_waited_for_the_line_refuses_a_plant_file_edited_meanwhile(tmp_path):
+    with emulated_plant(tmp_path) as plant:
+        port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
+        with line_lock(line_keys(port), "another apply"):
+            process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve",
+                                        "--allow-axis-release", "--lock-timeout", "600"], text=True,
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+            assert "waiting for the line lock held by" in process.stderr.readline()
+            edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # adopt, or an editor, while it waits
+        out, err = process.communicate(timeout=120)
+    assert process.returncode == 1, out + err
+    assert err.splitlines()[-1] == (f"error: {plant.path}: the plant file changed while this command waited for the line — "
+                                    "nothing was read or written: run it again, with the file as it is now")
+    assert not (tmp_path / ".prc3cfg" / "journal").exists()
+    assert all(state.image == ModuleState.factory(a).image for a, state in plant.emulators["booth-a"].modules().items())
+
+
+# -- 6. a snapshot goes back onto the line it was taken on --------------------------------------
+
+
+def test_restore_refuses_a_snapshot_of_one_line_onto_another_unless_told(tmp_path, capsys):
+    with emulated_plant(tmp_path) as plant, Emulator({a: ModuleState.factory(a) for a in (1, 2, 5)}) as other:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        (snapshot,) = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
+        host, port = other.listen("127.0.0.1", 0)
+        old_port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
+        edit(plant.path, old_port, f"socket://{host}:{port}")  # the plant's booth-a now names another line
+        refused = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release")
+        assert refused.code == 1
+        assert refused.problems == [
+            f"error: {snapshot}: taken on bus booth-a at {old_port} (crc16), which the plant file now puts at socket://{host}:{port} "
+            "(crc16) — restoring there would write one line's modules onto another; nothing was written: give "
+            "--onto-current-lines if that is what you mean"]
+        assert all(s.image == ModuleState.factory(a).image for a, s in other.modules().items())
+        told = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release", "--onto-current-lines")
+        assert told.code == 0, told.err

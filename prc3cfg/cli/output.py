@@ -84,7 +84,8 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) 
             return True
         if not sys.stdin.isatty():
             raise UserError(f"{question} — no terminal to ask: pass --auto-approve to apply without asking")
-        return typer.confirm(question, default=False)
+        return typer.confirm(f"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next "
+                             f"move. {question}", default=False)  # fmt: skip
 
     return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=approve)
 

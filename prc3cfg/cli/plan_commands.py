@@ -149,6 +149,8 @@ def restore(
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
     verify: VerifyOpt = Verify.FLOOR,
+    onto_current_lines: Annotated[bool, typer.Option("--onto-current-lines", help=(
+        "Restore onto the lines the plant file names now, though they are not those the snapshot was taken on."))] = False,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
@@ -156,5 +158,5 @@ def restore(
 
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release), verify=api.Verify(verify.value),
-                             options=options)  # fmt: skip
+                             options=options, onto_current_lines=onto_current_lines)  # fmt: skip
     output.applied(result)

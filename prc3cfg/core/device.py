@@ -74,6 +74,10 @@ class ModuleState:
     active_program: int | None = None
     fault: str | None = None
     referenced: bool = True
+    #: False for firmware before PRC 3.03.1 (June 1994), which added the read messages 50h..52h: such a
+    #: module answers them as it answers any ID it does not know (code 10). (reading: the manual names
+    #: the firmware that added them, not how an older one answers; any unknown ID is refused with 10.)
+    read_messages: bool = True
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -100,7 +104,7 @@ class ModuleState:
             "active_program": self.active_program,
             "fault": self.fault,
             "referenced": self.referenced,
-        }
+        } | ({} if self.read_messages else {"read_messages": False})
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> ModuleState:
@@ -110,6 +114,7 @@ class ModuleState:
             active_program=data.get("active_program"),
             fault=data.get("fault"),
             referenced=data.get("referenced", True),
+            read_messages=data.get("read_messages", True),
         )
 
 
@@ -252,6 +257,8 @@ def process(state: ModuleState, data: bytes, *, broadcast: bool = False) -> Outc
         return Outcome(state, None)
     try:
         message = codec.decode_message(data)
+        if message.IS_READ and not state.read_messages:
+            raise Rejected(10, f"ID {message.ID:02X}h: firmware before PRC 3.03.1")
         if message.IS_READ:
             new_state, reply = state, read(state, message)
         else:

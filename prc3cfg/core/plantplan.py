@@ -48,6 +48,7 @@ class ModuleChange:
     desired: ModuleImage
     plan: ModulePlan
     broadcasts: int = 0
+    system_unset: bool = False  # the module reported E12: its plan writes the system parameters first
 
     @property
     def address(self) -> int:

@@ -32,14 +32,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from prc3cfg.core import codec, device
+from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.planner import (
     ModulePlan,
     Step,
     StepProblem,
     UnreachableImage,
+    after,
     plan_from_steps,
     plan_module,
     run_steps,
@@ -163,19 +164,10 @@ def _priced(broadcasts: tuple[Step, ...], module: Module, cost: LineCost) -> tup
     """A module's own steps after the broadcasts, and their bus time with the verifying read-back of
     everything that reaches it; None when the module cannot take the broadcasts."""
     try:
-        own = plan_module(_after(module.actual, [s.message for s in broadcasts]), module.desired, cost).steps if broadcasts else module.plan.steps
+        own = plan_module(after(module.actual, [s.message for s in broadcasts]), module.desired, cost).steps if broadcasts else module.plan.steps
         steps = (*broadcasts, *own)
         predicted = run_steps(module.actual, module.desired, [s.message for s in steps])
     except (codec.Rejected, StepProblem, UnreachableImage):
         return None
     seconds = sum(cost.message_time(module.actual.address, s.message) for s in own)
     return own, seconds + verification_time(module.actual, predicted, steps, cost)
-
-
-def _after(actual: ModuleImage, messages: list[codec.Message]) -> ModuleImage:
-    """The read-back as the broadcasts leave it (programs not read stay unknown); `Rejected` if refused."""
-    filler = default_program(actual.system)
-    state = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
-    for message in messages:
-        state = device.execute(state, message)
-    return replace(state.image, programs=tuple(None if a is None else p for a, p in zip(actual.programs, state.image.programs)))

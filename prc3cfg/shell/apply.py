@@ -47,6 +47,10 @@ from prc3cfg.shell.link import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
 
 REPAIRS = 2
+#: The codes of a module that is not in STOP (program active, not in STOP: §4.4): it takes writes to
+#: its other programs, so an apply would change the stroke of a moving machine — it is left alone.
+RUNNING = frozenset({16, 20})
+SYSTEM_UNSET = 23  # E12: every write but 10h/20h refused
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
 #: one, so a difference counts only when two reads in a row agree on it.
 CONFIRMING_READS = 4
@@ -88,6 +92,7 @@ class ModuleRun:
     release_acknowledged: bool = False
     possibly_written: bool = False  # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
     watched: bool = False  # its system block was read because a release went out on its unprotected line
+    system_unset: bool = False  # it answered E12 (system parameters not set): the next plan writes them first
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     failure: str | None = None
     refused: bool = False  # the module answered an error code: stop for good
@@ -175,6 +180,15 @@ class ModuleRun:
                 return False
             except LinkError as error:
                 self.failure = f"{where}: {error}"
+                return False
+            if reply == SYSTEM_UNSET:  # only a 10h/20h clears E12, and this plan has none for it
+                self.refused = self.system_unset = True
+                self.failure = (f"{where} was refused: the module is in E12 (system parameters not set), which only a 10h/20h "
+                                "clears — plan again: the new plan writes its system parameters first (20h, releasing its axes)")  # fmt: skip
+                return False
+            if reply in RUNNING:  # it moves: none of its steps may go now, nor be repeated in a loop
+                self.refused = True
+                self.failure = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
                 return False
             if reply != 0:  # a write is answered with a code word only (decode_reply sees to it)
                 # Final — unless a broadcast before it may have been lost (none answers one): then

@@ -2,7 +2,8 @@
 
 - A snapshot (`.prc3cfg/snapshots/<time>-<plant>.json` beside the plant file) holds the
   read-back images of every module an apply will touch (with every program a system
-  change could clamp), the plant file's absolute path and hash, and the time — `prc3cfg
+  change could clamp), the line each bus's modules were read on (port, framing, identities),
+  the plant file's absolute path and hash, and the time — `prc3cfg
   restore` plans and applies back to it, from any directory. It is written atomically
   (`prc3cfg.shell.files`) before the first write: a killed apply leaves a whole snapshot or none.
 - A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 import json
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
@@ -39,11 +40,25 @@ def records_dir(plant_path: Path, kind: str) -> Path:
 
 
 @dataclass(frozen=True, slots=True)
+class LineTaken:
+    """The line a snapshot's modules were read on: the bus's port, framing and the line's identities
+    (`prc3cfg.shell.locks.line_keys`) — `restore` writes them back onto that line only."""
+
+    port: str
+    framing: str
+    keys: tuple[str, ...]
+
+    def same_line(self, port: str, framing: str, keys: tuple[str, ...]) -> bool:
+        return framing == self.framing and (port == self.port or bool(set(keys) & set(self.keys)))
+
+
+@dataclass(frozen=True, slots=True)
 class Snapshot:
     plant_path: Path
     plant_sha256: str
     taken: str
     images: dict[tuple[str, int], ModuleImage]  # (bus, address) → image
+    lines: dict[str, LineTaken] = field(default_factory=dict)  # bus → its line (empty in snapshots before 0.1.0's)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -51,6 +66,7 @@ class Snapshot:
             "plant": str(self.plant_path),
             "plant_sha256": self.plant_sha256,
             "taken": self.taken,
+            "lines": {bus: {"port": line.port, "framing": line.framing, "keys": list(line.keys)} for bus, line in sorted(self.lines.items())},
             "modules": [{"bus": bus, **image.to_json()} for (bus, _), image in sorted(self.images.items())],
         }
 
@@ -62,8 +78,9 @@ class Snapshot:
         return path
 
     @classmethod
-    def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage]) -> Snapshot:
-        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images))
+    def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage],
+             lines: dict[str, LineTaken]) -> Snapshot:  # fmt: skip
+        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images), dict(lines))
 
     @classmethod
     def load(cls, path: Path) -> Snapshot:
@@ -84,7 +101,9 @@ class Snapshot:
             beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
-            return cls(plant, member(data, "plant_sha256", "the snapshot"), member(data, "taken", "the snapshot"), images)
+            lines = {bus: LineTaken(member(line, "port", "a line"), member(line, "framing", "a line"), tuple(member(line, "keys", "a line")))
+                     for bus, line in data.get("lines", {}).items()}  # fmt: skip
+            return cls(plant, member(data, "plant_sha256", "the snapshot"), member(data, "taken", "the snapshot"), images, lines)
         except (ValueError, KeyError, TypeError, AttributeError) as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
 

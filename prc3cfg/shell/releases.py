@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import os
 import threading
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -62,10 +62,15 @@ def _folder() -> Path:
                     "set PRC3CFG_STATE_DIR to a folder this user can write")  # fmt: skip
 
 
+#: What a record is of: an axis release nobody was told of, or a module that reported E12 ("system
+#: parameters not set", code 23) — which only a 10h/20h clears, so the next plan writes them first.
+RELEASE, E12 = "release", "e12"
+
+
 @dataclass(frozen=True, slots=True)
 class Pending:
     """A 10h/20h that went out (or was about to) — or a read a module executed as a write — that no
-    account has named yet."""
+    account has named yet; or (`kind` E12) a module that answered code 23 and has not been cleared."""
 
     keys: tuple[str, ...]  # the line's identities
     bus: str
@@ -76,6 +81,7 @@ class Pending:
     command: str  # the prc3cfg command that sent it: apply, restore — or plan, read, when a read became a write
     journal: str | None
     file: Path
+    kind: str = RELEASE
 
     def said(self) -> str:
         """One line: which module, when, which run — and what to do."""
@@ -86,31 +92,42 @@ class Pending:
                 "line lists it and clears this")  # fmt: skip
 
 
-def pending(keys: Iterable[str]) -> list[Pending]:
-    """Every release recorded on a line with one of `keys` that no account has named yet."""
+def pending(keys: Iterable[str], kind: str = RELEASE) -> list[Pending]:
+    """Every record of `kind` on a line with one of `keys` that is not cleared yet."""
     wanted = set(keys)
     found = []
     for directory in state_dirs():
-        folder = directory / "releases"
         try:
-            files = sorted(folder.glob("*.jsonl"))
+            files = sorted((directory / "releases").glob("*.jsonl"))
         except OSError:
             continue
         for path in files:
-            try:
-                lines = path.read_text(encoding="utf-8").splitlines()
-            except (OSError, UnicodeDecodeError):
-                continue
-            for line in lines:
+            for entry in _entries(path):
                 try:
-                    entry = json.loads(line)
                     record = Pending(tuple(entry["keys"]), entry["bus"], int(entry["address"]), entry["name"], entry["time"],
-                                     int(entry["pid"]), entry["command"], entry["journal"], path)  # fmt: skip
-                except (ValueError, KeyError, TypeError):
-                    continue  # a line cut by a kill as it was written: the frame never left
-                if wanted & set(record.keys):
+                                     int(entry["pid"]), entry["command"], entry["journal"], path, entry.get("kind", RELEASE))  # fmt: skip
+                except (KeyError, TypeError, ValueError):
+                    continue
+                if record.kind == kind and wanted & set(record.keys):
                     found.append(record)
     return found
+
+
+def _entries(path: Path) -> list[dict]:
+    """The records of a file; a line cut by a kill as it was written is left out (its frame never left)."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return []
+    entries = []
+    for line in lines:
+        try:
+            entry = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(entry, dict):
+            entries.append(entry)
+    return entries
 
 
 class Releases:
@@ -120,17 +137,17 @@ class Releases:
         self.command, self.journal = command, journal
         self._path: Path | None = None
         self._lock = threading.Lock()
-        self._recorded: set[tuple[str, int]] = set()
+        self._recorded: set[tuple[str, str, int]] = set()
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str) -> None:
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = RELEASE) -> None:
         """Durably, before the frame leaves: a 10h/20h to `address` on the line `keys` (once per module)."""
         with self._lock:
-            if (bus, address) in self._recorded:
+            if (kind, bus, address) in self._recorded:
                 return
             stamp = datetime.now(timezone.utc)
             if self._path is None:
                 self._path = _folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
-            line = json.dumps({"keys": list(keys), "bus": bus, "address": address, "name": name,
+            line = json.dumps({"kind": kind, "keys": list(keys), "bus": bus, "address": address, "name": name,
                                "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "command": self.command,
                                "journal": None if self.journal is None else str(self.journal)})  # fmt: skip
             fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644)
@@ -139,37 +156,29 @@ class Releases:
                 os.fsync(fd)
             finally:
                 os.close(fd)
-            self._recorded.add((bus, address))
+            self._recorded.add((kind, bus, address))
 
     def told(self, earlier: Iterable[Pending] = ()) -> None:
         """The account naming this apply's releases, and the `earlier` ones it listed, has been
-        printed: their records go (an earlier apply's records of other lines stay)."""
-        gone: dict[Path, set[tuple[str, int]]] = {}
-        for record in earlier:
-            gone.setdefault(record.file, set()).add((record.bus, record.address))
-        for path, which in gone.items():
-            if path != self._path:
-                _remove(path, which)
+        printed: those records go (others — another line's, an E12 — stay)."""
+        cleared(earlier)
         if self._path is not None:
-            self._path.unlink(missing_ok=True)
-            self._path = None
+            _keep(self._path, lambda entry: entry.get("kind", RELEASE) != RELEASE)
 
-def _remove(path: Path, which: set[tuple[str, int]] | None) -> None:
-    """The records `which` (None: all) out of `path`; the file goes when none is left."""
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        return
-    kept = []
-    for line in lines:
-        try:
-            entry = json.loads(line)
-            told = which is None or (entry["bus"], int(entry["address"])) in which
-        except (ValueError, KeyError, TypeError):
-            told = True  # a line cut by a kill as it was written: its frame never left
-        if not told:
-            kept.append(line)
+
+def cleared(records: Iterable[Pending]) -> None:
+    """These records are settled: out of their files."""
+    gone: dict[Path, set[tuple[str, str, int]]] = {}
+    for record in records:
+        gone.setdefault(record.file, set()).add((record.kind, record.bus, record.address))
+    for path, which in gone.items():
+        _keep(path, lambda entry: (entry.get("kind", RELEASE), entry.get("bus"), entry.get("address")) not in which)
+
+
+def _keep(path: Path, keep: Callable[[dict], bool]) -> None:
+    """Only the records of `path` that `keep` says; the file goes when none is left."""
+    kept = [entry for entry in _entries(path) if keep(entry)]
     if kept:
-        write_atomically(path, "".join(line + "\n" for line in kept))
+        write_atomically(path, "".join(json.dumps(entry) + "\n" for entry in kept))
     else:
         path.unlink(missing_ok=True)

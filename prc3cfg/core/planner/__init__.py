@@ -14,26 +14,37 @@ Owns: the module plan. Does not own the diff shown to people, rendering, the pla
 
 from __future__ import annotations
 
-from prc3cfg.core import codec
+from dataclasses import replace
+
+from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.image import ModuleImage, default_program
 from prc3cfg.core.planner.check import StepProblem, run_steps
 from prc3cfg.core.planner.layout import Layout
 from prc3cfg.core.planner.optimise import search, whole_programs
 from prc3cfg.core.planner.plan import ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
 from prc3cfg.core.planner.problem import Problem
 
+#: What a 20h that writes the system parameters a module already holds is for.
+E12_SUMMARY = "write the system parameters it holds: it reported E12 (system parameters not set), which only this clears"
 #: Layouts within this fraction of the best estimate are priced exactly (stx stuffing adds bytes).
 STUFFING_MARGIN = 0.03
 EXACTLY_PRICED = 4
 
 
-def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> ModulePlan:
+def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, system_unset: bool = False) -> ModulePlan:
     """The cheapest plan found from `actual` (the read-back) to `desired` (the plant file's image).
 
     `None` programs in `desired` are unmanaged and never touched; they may be `None` in
     `actual` too (not read). Raises `UnreachableImage` when no plan can reach `desired`.
+    `system_unset`: the module reported E12 ("system parameters not set", code 23): it refuses every
+    write but 10h/20h, and only they clear it — so its system parameters are written first even
+    where they read back as the plant file's (releasing its axes, like any 20h).
     """
+    if system_unset:  # the 20h first: until it has gone, the module refuses every other write
+        first = codec.WriteSystem(desired.system)
+        rest = plan_module(after(actual, [first]), desired, cost)
+        return plan_from_steps(actual, desired, [first, *(s.message for s in rest.steps)], cost, system_unset=True)
     problem = Problem.build(actual, desired, cost)
     layouts = search(problem)
     # The estimates are exact but for stx stuffing: price exactly only the layouts that could win.
@@ -47,13 +58,27 @@ def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> Mo
         raise PlanVerificationError(f"module {desired.address}: {found}; steps: {[m.hex() for m in best]}") from None
 
 
-def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[codec.Message], cost: LineCost) -> ModulePlan:
-    """A plan of given steps (the planner's, or a plan file's), proved on the device model.
+def after(actual: ModuleImage, messages: list[codec.Message]) -> ModuleImage:
+    """The read-back as `messages` leave it, by the device model (programs not read stay unknown);
+    `codec.Rejected` if the module would refuse one."""
+    filler = default_program(actual.system)
+    state = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
+    for message in messages:
+        state = device.execute(state, message)
+    return replace(state.image, programs=tuple(None if a is None else p for a, p in zip(actual.programs, state.image.programs)))
+
+
+def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[codec.Message], cost: LineCost, *,
+                    system_unset: bool = False) -> ModulePlan:  # fmt: skip
+    """A plan of given steps (the planner's, or a plan file's), proved on the device model
+    (`system_unset`: see `plan_module`).
 
     Raises `StepProblem` naming the first step that breaks a rule of `check.run_steps`.
     """
-    predicted = run_steps(actual, desired, messages)
+    predicted = run_steps(actual, desired, messages, system_unset=system_unset)
     steps = tuple(Step(message, summarise(message, actual.system), message.RELEASES_AXES) for message in messages)
+    if system_unset and steps and actual.system == desired.system:
+        steps = (replace(steps[0], summary=f"{E12_SUMMARY} (20h)"), *steps[1:])
     return ModulePlan(
         address=desired.address,
         steps=steps,
@@ -85,4 +110,4 @@ def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) ->
     return sum(cost.message_time(desired.address, m) for m in messages)
 
 
-__all__ = ["ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "plan_from_steps", "plan_module", "run_steps", "summarise"]
+__all__ = ["ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "plan_from_steps", "plan_module", "run_steps", "summarise"]

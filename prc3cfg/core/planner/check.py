@@ -7,7 +7,8 @@ step that breaks a rule:
 1. a plan holds writes only (10h..46h), at most `MAX_STEPS` of them;
 2. no step writes a program the desired image does not manage (`None` there);
 3. at most one step releases the axes (10h, 20h), and only when the read-back's system
-   parameters differ from the desired ones — never an axis release for nothing;
+   parameters differ from the desired ones — never an axis release for nothing — or, first, for a
+   module in E12 (`system_unset`), which takes no other write until one has cleared it;
 4. the module accepts every step (the checks of §4.5, in the state the earlier steps leave);
 5. afterwards the system parameters and every managed program are the desired ones.
 
@@ -42,8 +43,9 @@ class StepProblem(ValueError):
         self.index = index
 
 
-def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[codec.Message]) -> ModuleImage:
-    """The image the steps leave on the module (programs read or managed), or `StepProblem`."""
+def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[codec.Message], *, system_unset: bool = False) -> ModuleImage:
+    """The image the steps leave on the module (programs read or managed), or `StepProblem`.
+    `system_unset`: the module is in E12, which only a 10h/20h clears — one may go for it, first."""
     if len(messages) > MAX_STEPS:
         raise StepProblem(MAX_STEPS + 1, f"{len(messages)} steps for one module, more than any plan needs ({MAX_STEPS})")
     filler = default_program(actual.system)
@@ -60,7 +62,7 @@ def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[code
             raise StepProblem(index, f"{step} writes {which}, which the plant file does not manage")
         if message.RELEASES_AXES:
             releases += 1
-            if actual.system == desired.system:
+            if actual.system == desired.system and not (system_unset and index == 1):
                 raise StepProblem(index, f"{step} releases the axes, but the system parameters already match the plant file")
             if releases > 1:
                 raise StepProblem(index, f"{step} releases the axes a second time")

@@ -191,8 +191,9 @@ def _module(entry: dict[str, Any]) -> ModuleState:
         _whole(entry, "active_program", 1, PROGRAM_COUNT, name="active_program")
     if not isinstance(entry.get("fault"), str | None):
         raise ValueError(f"fault = {entry['fault']!r} must be null or the name of a fault")
-    if not isinstance(entry.get("referenced", True), bool):
-        raise ValueError(f"referenced = {entry['referenced']!r} must be true or false")
+    for flag in ("referenced", "read_messages"):
+        if not isinstance(entry.get(flag, True), bool):
+            raise ValueError(f"{flag} = {entry[flag]!r} must be true or false")
     return ModuleState.from_json(entry)  # mode and fault: the device model's own checks
 
 

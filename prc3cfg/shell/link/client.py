@@ -48,6 +48,7 @@ READ_SLICE = 0.05  # s: longest single read on framings that do not end frames b
 #: Codes of the structural checks (§4.5 steps 1–5). We only send messages the codec built,
 #: so the module saw a message damaged on the line (open-driver has no checksum): retry.
 DAMAGED_CODES = frozenset(range(10, 16))
+UNKNOWN_ID = 10  # to a read: damage — or firmware before PRC 3.03.1, which has no read messages
 #: The longest reply frame any framing makes of a PRC 3 reply (64 bytes, stx stuffing doubled).
 LONGEST_REPLY_FRAME = 2 * (codec.MAX_MESSAGE_BYTES + 8)
 
@@ -58,6 +59,17 @@ class LinkError(UserError):
 
 class PortFailed(LinkError):
     """The port itself failed to read or write: no module is to blame, and no retry helps."""
+
+
+class NoReadMessages(LinkError):
+    """A module answered a read as an unknown message: its firmware is older than PRC 3.03.1, which
+    added 50h..52h. prc3cfg can neither plan nor verify such a module; asking again will not help."""
+
+    def __init__(self, bus: str, address: int, message: codec.Message) -> None:
+        super().__init__(
+            f"bus {bus}, module {address}: answers {message.ID:02X}h as an unknown message — its firmware has no read "
+            "messages (they came with PRC 3.03.1), so prc3cfg can neither plan nor verify it: update the module's firmware"
+        )
 
 
 class PossibleWrite(LinkError):
@@ -137,8 +149,9 @@ class Link:
         """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
 
         A lost reply, a damaged one, and a structural error code (the module got our message
-        damaged) are retried — but a read answered with an acknowledgement is `PossibleWrite`; on a framing without a checksum an error code is asked for
-        again until two agree. After the last attempt a `LinkError` names the bus and
+        damaged) are retried — but a read answered with an acknowledgement is `PossibleWrite`, and
+        one answered as unknown is `NoReadMessages` (on a line without a checksum once heard twice).
+        On a framing without a checksum an error code is asked for again until two agree. After the last attempt a `LinkError` names the bus and
         module. `Interrupted` when the link's `cancel` event is set before an attempt.
         """
         data = message.encode()
@@ -163,7 +176,12 @@ class Link:
                 else:
                     if reply == 0 and message.IS_READ:
                         raise PossibleWrite(self.bus, address, message)
-                    if reply in DAMAGED_CODES:
+                    if reply == UNKNOWN_ID and message.IS_READ and (self.framing.checked or heard == reply):
+                        raise NoReadMessages(self.bus, address, message)  # a checksum passed, or heard twice: not damage
+                    if reply == UNKNOWN_ID and message.IS_READ:
+                        unconfirmed = reply
+                        problem = f"{describe(reply)} on a line without a checksum, asking again to confirm it"
+                    elif reply in DAMAGED_CODES:
                         problem = f"the module reports a damaged message ({describe(reply)})"
                     elif not isinstance(reply, int) or reply == 0 or self.framing.checked or reply == heard:
                         return reply
