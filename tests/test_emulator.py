@@ -414,7 +414,7 @@ def test_a_connection_beyond_the_limit_is_closed_at_once_and_a_freed_slot_serves
         with socket.create_connection(address, timeout=10) as fourth:
             assert is_factory_system(fourth, 1)
         hang_up(holders[1])
-    assert "refused — 2 connections are open, the most allowed" in caplog.text
+    assert "refused — the most connections allowed (2) are open" in caplog.text
 
 
 def test_closed_connections_leave_no_threads_or_sockets_behind():

@@ -51,7 +51,7 @@ def serve(
     drop_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges with one bit flipped.")] = 0.0,
     seed: Annotated[Optional[int], typer.Option(help="Seed for fault injection.")] = None,
-    max_connections: Annotated[Optional[int], typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 64); one more is closed at once (logged).")] = None,
+    max_connections: Annotated[Optional[int], typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
     idle_timeout: Annotated[Optional[float], typer.Option("--idle-timeout", min=0.001, max=10_000_000, help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
@@ -60,8 +60,8 @@ def serve(
     Serves the modules of --modules, else those of the state file, else
     1-30. The state file keeps the modules it holds that are not served.
 
-    At most --max-connections TCP clients are served at once; one more is
-    closed at once. A client that sends nothing for --idle-timeout seconds
+    One TCP client is served at a time (--max-connections raises it), as a
+    gateway serves one client per serial line; one more is closed at once. A client that sends nothing for --idle-timeout seconds
     is disconnected. Running out of file descriptors only pauses accepting.
 
     A write is answered only once it is saved: appended to the journal
