@@ -12,6 +12,8 @@ import random
 import select
 import shutil
 import signal
+import subprocess
+import sys
 import threading
 from dataclasses import replace
 from pathlib import Path
@@ -269,3 +271,57 @@ def kill_after_writes(served, rng: random.Random, allowed: dict[tuple[int, int],
         killer.join()
         client.close()
     return acknowledged
+
+
+# -- one emulator per state file ----------------------------------------------------------------
+
+EMULATED_PLANT = """\
+plant: owned
+buses:
+  - name: booth-a
+    port: emulator://line
+    framing: crc16
+    modules:
+      - address: 1
+        name: left
+        programs:
+          1: {position: 0.200, speed: 0.300}
+"""
+
+
+def refused_serve(directory: Path, *options: str) -> subprocess.CompletedProcess:
+    """Run `emulator serve OPTIONS`, which must be refused: stopped (and the test failed) if it listens."""
+    directory.mkdir()
+    process, log = spawn(directory, *options)
+    banner = process.stdout.readline()
+    if banner:
+        process.terminate()
+        process.wait()
+        pytest.fail(f"a second emulator of the state file started: {banner}")
+    return subprocess.CompletedProcess(process.args, process.wait(), "", log.read_text())
+
+
+def test_an_emulator_owns_its_state_file_while_it_runs(tmp_path):
+    """`emulator serve --state FILE` and an `emulator://` apply on the same file (the apply's verified
+    writes were lost when the server exited), or a second serve: the second is refused in one line
+    naming the first; once the first exits, the file is free."""
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(EMULATED_PLANT)
+    state = tmp_path / ".prc3cfg" / "emulators" / "line.json"
+    state.parent.mkdir(parents=True)
+    process, log = spawn(tmp_path, "--state", str(state), "--modules", "1")
+    served = listening(process, log)
+    try:
+        apply = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+                               capture_output=True, text=True)  # fmt: skip
+        second = refused_serve(tmp_path / "second", "--state", str(state))
+    finally:
+        served.process.terminate()
+        assert served.process.wait() == 0, log.read_text()
+    for refused in (apply, second):
+        assert refused.returncode == 1 and refused.stdout in ("", None), refused
+        assert refused.stderr.count("\n") == 1, refused.stderr
+        assert refused.stderr.startswith(f"error: {state}: the state file is in use by another emulator (pid {served.process.pid}, since 20"), refused.stderr
+    assert "Apply complete" in subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+                                              capture_output=True, text=True).stdout  # fmt: skip
+    assert written(state)[(1, 1)] == 200

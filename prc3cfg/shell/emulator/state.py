@@ -26,6 +26,13 @@ fault, Teach In: no message says them), and on exit, which then removes the jour
 **after a clean exit the state file holds everything; while an emulator runs, the journal
 holds the tail.**
 
+An emulator **owns** its state file while it runs: a kernel lock (`flock`) on `NAME.json.lock`
+beside it, which names the owner (pid, since when) and dies with its process. A second
+emulator of the same file — `emulator serve --state`, or the `emulator://` port of a plant
+file — is refused at its start, naming the first: two would each keep their own modules
+and the last to exit would overwrite the other's acknowledged writes. The lock file stays
+(an empty one after a clean exit), as line locks do (`prc3cfg.shell.locks`).
+
 A write is appended only while the state file and the journal are the very files the
 store last wrote; when either was removed, replaced or changed meanwhile, or an append
 failed, the write is saved by compaction instead. `OSError` when neither can save it: the
@@ -45,11 +52,13 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import hashlib
 import json
 import logging
 import os
 import stat
+from datetime import datetime, timezone
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -116,6 +125,11 @@ def _check_folder(path: Path) -> None:
 
 def journal_path(path: Path) -> Path:
     return path.with_name(f"{path.name}.journal")
+
+
+def owner_path(path: Path) -> Path:
+    """The lock file by which a running emulator owns the state file `path`."""
+    return path.with_name(f"{path.name}.lock")
 
 
 def _journal(path: Path) -> list[tuple[int, bytes]]:
@@ -242,12 +256,47 @@ class Store:
         self._size = 0  # bytes in the journal
         self._without_journal = False  # a journal could not be begun (logged once)
         self._closed = False  # after `close`, nothing more is saved
+        self._owner: int | None = None  # the locked `owner_path`, while this store owns the state file
 
     def start(self, modules: Mapping[int, ModuleState]) -> None:
-        """Compact when there is no state file yet or a journal was left behind (a killed
-        emulator's, replayed by `load_state`); OSError when the state file cannot be written."""
-        if not self.path.exists() or self.journal.exists():
-            self.compact(modules)
+        """Own the state file (UserError naming the emulator that does), then compact when there
+        is no state file yet or a journal was left behind (a killed emulator's, replayed by
+        `load_state`); OSError when the state file cannot be written."""
+        self._own()
+        try:
+            if not self.path.exists() or self.journal.exists():
+                self.compact(modules)
+        except BaseException:
+            self._disown()
+            raise
+
+    def _own(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)  # as the state file's first save would
+        fd = os.open(owner_path(self.path), os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                record = json.loads(os.pread(fd, 4096, 0))
+                holder = f"pid {record['pid']}, since {record['since']}"
+            except (OSError, ValueError, KeyError, TypeError):
+                holder = "starting"
+            finally:
+                os.close(fd)
+            raise UserError(f"{self.path}: the state file is in use by another emulator ({holder}) — stop that "
+                            "emulator first, or give this one another state file") from None  # fmt: skip
+        record = {"pid": os.getpid(), "since": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        with contextlib.suppress(OSError):  # the details only name the owner to a second emulator
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(record).encode(), 0)
+        self._owner = fd
+
+    def _disown(self) -> None:
+        if self._owner is not None:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._owner, 0)
+            os.close(self._owner)  # the lock goes with the last descriptor
+            self._owner = None
 
     def record(self, writes: list[tuple[int, bytes]], modules: Mapping[int, ModuleState]) -> None:
         """Make accepted writes durable — (address, message) per module changed — before they
@@ -307,13 +356,16 @@ class Store:
         the state file cannot be written; the journal is then kept for the next start. A write
         that comes later (a connection that outlived the emulator's close) is refused."""
         self._closed = True
-        if self._fd is None and not self.journal.exists():
-            return
-        if self._fd is None or self._entries or not self._unchanged():  # after a failed append the journal holds lines
-            save_state(self.path, modules)
-        self._close_journal()
-        self.journal.unlink(missing_ok=True)
-        _sync_folder(self.path.parent)
+        try:
+            if self._fd is None and not self.journal.exists():
+                return
+            if self._fd is None or self._entries or not self._unchanged():  # after a failed append the journal holds lines
+                save_state(self.path, modules)
+            self._close_journal()
+            self.journal.unlink(missing_ok=True)
+            _sync_folder(self.path.parent)
+        finally:
+            self._disown()
 
     def _unchanged(self) -> bool:
         """Whether the state file and the journal are the files this store last wrote."""
