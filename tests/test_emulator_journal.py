@@ -417,3 +417,23 @@ def test_a_damaged_state_file_or_journal_is_replayed_whole_or_refused_in_one_lin
     assert outcome == "replays", f"{case}: started with {started}"
     assert started == held, f"{case}: acknowledged writes lost"
     assert load_state(state) == held
+
+
+def test_a_journal_the_state_file_took_in_is_gone_before_the_next_save(tmp_path, killed):
+    """Killed inside a compaction, then again inside the next start's: the journal two saves back
+    must not be left beside a state file that no longer names it."""
+    source, held = killed
+    state = tmp_path / "bus.json"
+    journal_text = journal_path(source).read_text()
+    journal_path(state).write_text(journal_text)
+    state.write_text(json.dumps(state_document(held, "next", replaces=journal_text.split()[1])))
+    with Emulator(load_state(state), state_path=state) as restarted:
+        assert not journal_path(state).exists()  # the state file holds it all: the first write begins a journal
+        assert restarted.modules() == held
+        client = client_of(restarted)
+        try:
+            assert client.send(1, write(7, 77)) == ACCEPTED
+        finally:
+            client.close()
+        assert json.loads(state.read_text())["replaces"] == "next"
+        assert journal_path(state).read_text().split()[1] == json.loads(state.read_text())["generation"]

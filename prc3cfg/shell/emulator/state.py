@@ -326,11 +326,24 @@ class Store:
         self._own()
         self._generation = _generation(self.path)
         try:
+            if self._taken_in():  # removed first: the next save's "replaces" will no longer name it
+                self.journal.unlink()
+                _sync_folder(self.path.parent)
             if not self.path.exists() or self.journal.exists():
                 self.compact(modules)
         except BaseException:
             self._disown()
             raise
+
+    def _taken_in(self) -> bool:
+        """Whether the journal is one the state file took in (its generation is the one the state file replaces)."""
+        try:
+            data = read_json(self.path)
+            lines = _journal_lines(self.path)
+        except (FileProblem, UserError):
+            return False
+        replaces = data.get("replaces") if isinstance(data, dict) else None
+        return bool(lines) and replaces is not None and lines[0] == f"{JOURNAL_FORMAT} {replaces}".encode()
 
     def _own(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)  # as the state file's first save would
