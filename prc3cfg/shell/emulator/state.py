@@ -343,7 +343,7 @@ class Store:
         except (FileProblem, UserError):
             return False
         replaces = data.get("replaces") if isinstance(data, dict) else None
-        return bool(lines) and replaces is not None and lines[0] == f"{JOURNAL_FORMAT} {replaces}".encode()
+        return lines is not None and lines[:1] == [f"{JOURNAL_FORMAT} {replaces}".encode()] and replaces is not None
 
     def _own(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)  # as the state file's first save would
