@@ -47,6 +47,7 @@ USAGE = {
     "scan's baud 0": (["scan", "--port", "socket://127.0.0.1:9", "--baud", "0"], "error: prc3cfg scan: Invalid value for '--baud': Input should be greater than or equal to 1 — see prc3cfg scan --help"),
     "scan's parity": (["scan", "--port", "socket://127.0.0.1:9", "--parity", "x"], "error: prc3cfg scan: Invalid value for '--parity': 'x' is not one of none, odd, even — see prc3cfg scan --help"),
     "import's framing": (["import", "--port", "socket://127.0.0.1:9", "--framing", "modbus"], "error: prc3cfg import: Invalid value for '--framing': 'modbus' is not one of crc16, open-driver, stx — see prc3cfg import --help"),
+    "import's empty address": (["import", "--port", "socket://127.0.0.1:9", "--modules", "1,,2"], "error: prc3cfg import: Invalid value for '--modules': '1,,2' has an empty entry — write addresses and ranges between commas, e.g. 1,3-5 — see prc3cfg import --help"),
     "scan's stop bits": (["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"], "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 — see prc3cfg scan --help"),
     "refresh-only with --json": (["plan", "p.yaml", "--refresh-only", "--json"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --out, --json, --markdown and --plot — see prc3cfg plan --help"),
     "refresh-only with --out": (["plan", "p.yaml", "--refresh-only", "--out", "p.json"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --out, --json, --markdown and --plot — see prc3cfg plan --help"),

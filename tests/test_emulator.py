@@ -193,9 +193,6 @@ def busy_port() -> socket.socket:
 @pytest.mark.parametrize(
     ("options", "says"),
     [
-        (["--modules", "0-40"], "--modules: '0-40' is outside 1..30"),
-        (["--listen", "nonsense"], "--listen: 'nonsense' is not HOST:PORT"),
-        (["--listen", "127.0.0.1:70000"], "is not HOST:PORT"),
         (["--listen", "127.0.0.1:{busy}"], "cannot listen (Address already in use) — choose a free port"),
         (["--state", "{tmp}"], "is a directory — give an emulator state file, or a path where none is yet"),
         (["--state", "{tmp}/broken.json"], "broken.json:1:43: not valid JSON (Expecting value) — fix or delete it"),
@@ -229,6 +226,13 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
         (["--turnaround", "nan"], "Invalid value for '--turnaround'"),
         (["--line-speed", "0"], "Invalid value for '--line-speed': Input should be greater than or equal to 1"),
         (["--data-bits", "9"], "Invalid value for '--data-bits': 9 is not one of 5, 6, 7, 8"),
+        (["--modules", "0-40"], "Invalid value for '--modules': '0-40' is outside 1..30 — module addresses are 1..30"),
+        (["--modules", "1,,2"], "Invalid value for '--modules': '1,,2' has an empty entry — write addresses and ranges between commas, e.g. 1,3-5"),
+        (["--modules", "1,2,"], "Invalid value for '--modules': '1,2,' has an empty entry"),
+        (["--modules", ""], "Invalid value for '--modules': '' has an empty entry"),
+        (["--listen", "nonsense"], "Invalid value for '--listen': 'nonsense' is not HOST:PORT — for example 127.0.0.1:7001"),
+        (["--listen", "127.0.0.1:70000"], "Invalid value for '--listen': '127.0.0.1:70000' is not HOST:PORT"),
+        (["--listen", ""], "Invalid value for '--listen': '' is not HOST:PORT — for example 127.0.0.1:7001"),
     ],
 )
 def test_a_bad_option_value_is_a_usage_error(options, says):
@@ -410,7 +414,7 @@ def test_a_connection_beyond_the_limit_is_closed_at_once_and_a_freed_slot_serves
         with socket.create_connection(address, timeout=10) as fourth:
             assert is_factory_system(fourth, 1)
         hang_up(holders[1])
-    assert "refused — 2 connections are open, the most allowed" in caplog.text
+    assert "refused — the most connections allowed (2) are open" in caplog.text
 
 
 def test_closed_connections_leave_no_threads_or_sockets_behind():

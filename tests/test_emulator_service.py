@@ -17,6 +17,8 @@ import json
 import random
 import resource
 import socket
+import subprocess
+import sys
 import threading
 from collections.abc import Iterator
 
@@ -179,7 +181,7 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
 
 
 def test_running_out_of_file_descriptors_only_pauses_accepting(tmp_path):
-    with serve(tmp_path, "--modules", "1") as served:
+    with serve(tmp_path, "--modules", "1", "--max-connections", "16") as served:
         spare = 3
         _, hard = resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE)
         resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE, (served.open_fds() + spare, hard))
@@ -222,3 +224,37 @@ def test_a_write_that_cannot_be_saved_is_neither_answered_nor_applied(tmp_path):
     assert sorted(saved) == [1, 2, 3]
     assert saved[2]["programs"][3] == first.program.to_json()
     assert saved[2]["programs"][5] == last.program.to_json()
+
+
+ONE_MODULE_PLANT = """\
+plant: busy
+buses:
+  - name: booth-a
+    port: socket://127.0.0.1:{port}
+    framing: crc16
+    timeout: 0.2
+    modules:
+      - address: 1
+        name: left
+"""
+
+
+def test_one_client_per_line_by_default_and_the_next_is_told_the_gateway_is_busy(tmp_path):
+    """As ser2net's one connection per port: a second client is closed at once, and prc3cfg says
+    why in one line; once the first hangs up, the next is served."""
+    plant = tmp_path / "plant.yaml"
+    read_system = codec.ReadSystem().encode()
+    with serve(tmp_path, "--modules", "1") as served:
+        plant.write_text(ONE_MODULE_PLANT.format(port=served.port))
+        with connect(served) as holder:
+            assert codec.decode_reply(codec.ReadSystem(), answered(holder, 1, read_system)).system == DEFAULT_SYSTEM
+            with connect(served) as second:
+                assert second.recv(1) == b""  # closed at once
+            result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True, text=True)
+            assert result.returncode == 1, result
+            assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: bus booth-a: the gateway is busy: another client holds the line"), result.stderr
+            hang_up(holder)
+        result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True, text=True)
+        assert result.returncode == 0, result.stderr
+        log = served.log.read_text()
+    assert log.count("refused — the most connections allowed (1) are open") == 2

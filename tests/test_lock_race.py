@@ -16,6 +16,12 @@ write are caught even when both verify. In every race exactly one child writes, 
 other was refused ("locked by") or found nothing to do. Against the old lock file (create,
 then write the holder; a file read empty taken for stale and deleted) both wrote in 16 of
 200 races on one spelling, and in 147 of 200 on two spellings.
+
+Two addresses of one gateway (issue 18: an emulator listening on 0.0.0.0, planted as
+127.0.0.1 and 127.0.0.2) are two locks — no client can know they are one host — so there the
+gateway itself keeps one client per line: the other apply is told "the gateway is busy".
+With 64 connections allowed, both wrote in 20 of 20 races. A short version runs always, 200
+races under `soak`.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import traceback
 from pathlib import Path
 
@@ -71,6 +78,10 @@ def _child(plant: Path, release: int) -> None:
     os.dup2(out, 1)
     os.dup2(err, 2)
     code = 70
+    if os.environ.get("RACE_OWN_TMPDIR"):  # each apply in a shell of its own: its own TMPDIR, no PRC3CFG_LOCK_DIR
+        os.environ["TMPDIR"] = str(plant.parent)
+        os.environ.pop("PRC3CFG_LOCK_DIR", None)
+        tempfile.tempdir = None
     try:
         os.read(release, 1)  # EOF when the parent closes the write end: both children at once
         from prc3cfg.cli import main
@@ -134,18 +145,17 @@ def drive(lines: list[tuple[str, str]], waves: int, first: int, workdir: Path) -
     return results
 
 
-@pytest.fixture(scope="module")
-def lines(tmp_path_factory):
-    """`LINES` emulator server processes with module 1 each; yields their ports."""
+def _servers(tmp_path_factory, host: str):
+    """`LINES` emulator server processes with module 1 each, listening on `host`; yields their ports."""
     servers = []
     try:
         for _ in range(LINES):
             state = tmp_path_factory.mktemp("line") / "state.json"
-            command = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
+            command = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", f"{host}:0",
                        "--state", str(state), "--modules", "1"]  # fmt: skip
             servers.append(subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
         banners = [server.stdout.readline() for server in servers]
-        assert all(b.startswith("listening on 127.0.0.1:") for b in banners), banners
+        assert all(b.startswith(f"listening on {host}:") for b in banners), banners
         yield [int(b.split()[2].rpartition(":")[2]) for b in banners]
     finally:
         for server in servers:
@@ -153,25 +163,37 @@ def lines(tmp_path_factory):
             server.wait()
 
 
-def _race(tmp_path: Path, lines: list[tuple[str, str]], first: int) -> list[dict]:
-    """Run the driver in a process of its own (no thread of pytest's, no BLAS threads)."""
-    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    command = [sys.executable, __file__, str(tmp_path), str(first), json.dumps(lines)]
+@pytest.fixture(scope="module")
+def lines(tmp_path_factory):
+    yield from _servers(tmp_path_factory, "127.0.0.1")
+
+
+@pytest.fixture(scope="module")
+def lines_on_every_address(tmp_path_factory):
+    yield from _servers(tmp_path_factory, "0.0.0.0")
+
+
+def _race(tmp_path: Path, lines: list[tuple[str, str]], first: int, waves: int = WAVES, own_tmpdir: bool = False) -> list[dict]:
+    """Run the driver in a process of its own (no thread of pytest's, no BLAS threads); with
+    `own_tmpdir` every apply has its own TMPDIR and the machine's lock folder."""
+    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           **({"RACE_OWN_TMPDIR": "1"} if own_tmpdir else {})}  # fmt: skip
+    command = [sys.executable, __file__, str(tmp_path), str(first), json.dumps(lines), str(waves)]
     driver = subprocess.run(command, env=env, capture_output=True, text=True)
     assert driver.returncode == 0, driver.stderr
     return json.loads(driver.stdout)
 
 
-def _judge(results: list[dict]) -> None:
-    assert len(results) == ROUNDS
+def _judge(results: list[dict], rounds: int = ROUNDS, refusal: str = "the line is locked by") -> None:
+    assert len(results) == rounds
     both = [r for r in results if all(r["writes"])]
-    assert not both, f"both applies wrote in {len(both)} of {ROUNDS} races, e.g. {both[0]}"
+    assert not both, f"both applies wrote in {len(both)} of {rounds} races, e.g. {both[0]}"
     for r in results:
         writer = [i for i in (0, 1) if r["writes"][i]]
         assert len(writer) == 1, f"{r['race']}: no apply wrote: {r}"
         other = 1 - writer[0]
         assert r["codes"][writer[0]] == 0 and "Apply complete" in r["out"][writer[0]], r
-        refused = r["codes"][other] == 1 and "the line is locked by" in r["err"][other]
+        refused = r["codes"][other] == 1 and refusal in r["err"][other]
         idle = r["codes"][other] == 0 and "Nothing to do" in r["out"][other]
         assert refused or idle, f"{r['race']}: the other apply neither was refused nor found nothing to do: {r}"
 
@@ -185,5 +207,27 @@ def test_two_spellings_of_one_address_never_both_write(tmp_path, lines):
     _judge(_race(tmp_path, spellings, first=WAVES))
 
 
-if __name__ == "__main__":  # the driver: WORKDIR FIRST_WAVE LINES (JSON: [[port, port], …])
-    json.dump(drive(json.loads(sys.argv[3]), WAVES, int(sys.argv[2]), Path(sys.argv[1])), sys.stdout)
+def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines):
+    """Two shells with another TMPDIR and no PRC3CFG_LOCK_DIR: both wrote in 4 of 5 races when the
+    lock folder followed TMPDIR."""
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], first=3 * WAVES, waves=5, own_tmpdir=True),
+           rounds=5 * LINES)  # fmt: skip
+
+
+def _two_addresses(tmp_path: Path, ports: list[int], waves: int) -> None:
+    spellings = [(f"socket://127.0.0.1:{p}", f"socket://127.0.0.2:{p}") for p in ports]
+    _judge(_race(tmp_path, spellings, first=2 * WAVES, waves=waves), rounds=waves * LINES,
+           refusal="the gateway is busy: another client holds the line")  # fmt: skip
+
+
+def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_address):
+    _two_addresses(tmp_path, lines_on_every_address, waves=5)
+
+
+@pytest.mark.soak
+def test_two_addresses_of_one_gateway_never_both_write_soak(tmp_path, lines_on_every_address):
+    _two_addresses(tmp_path, lines_on_every_address, waves=WAVES)
+
+
+if __name__ == "__main__":  # the driver: WORKDIR FIRST_WAVE LINES (JSON: [[port, port], …]) WAVES
+    json.dump(drive(json.loads(sys.argv[3]), int(sys.argv[4]), int(sys.argv[2]), Path(sys.argv[1])), sys.stdout)

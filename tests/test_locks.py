@@ -14,10 +14,13 @@ import socket
 import stat
 import subprocess
 import sys
+import uuid
+from pathlib import Path
 
 import pytest
 
 from prc3cfg.errors import UserError
+from prc3cfg.shell import locks
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock, lock_dir, lock_path
 
 HOLDER = """
@@ -43,9 +46,9 @@ KEY = "tcp/127.0.0.1/7001"
 
 
 @contextlib.contextmanager
-def holding(*argv: str, script: str = HOLDER):
+def holding(*argv: str, script: str = HOLDER, env: dict[str, str] | None = None):
     """A process that holds a lock until its stdin gets a line (or closes)."""
-    process = subprocess.Popen([sys.executable, "-c", script, *argv], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    process = subprocess.Popen([sys.executable, "-c", script, *argv], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     try:
         assert process.stdout.readline() == "locked\n"
         yield process
@@ -169,6 +172,60 @@ def test_shared_directory_and_files_whatever_the_umask(tmp_path, monkeypatch):
         os.umask(previous)
     assert stat.S_IMODE(path.parent.stat().st_mode) == 0o1777
     assert stat.S_IMODE(path.stat().st_mode) == 0o666
+
+
+# A process trying a lock, at once: prints "took" or the refusal.
+TRIER = """
+import json, sys
+from prc3cfg.shell.locks import LineBusy, line_lock
+try:
+    with line_lock(json.loads(sys.argv[1]), "bus a"):
+        print("took")
+except LineBusy as busy:
+    print(busy)
+"""
+
+
+def without_lock_dir(tmpdir) -> dict[str, str]:
+    """This environment without PRC3CFG_LOCK_DIR, with its own TMPDIR (and user and home)."""
+    env = {k: v for k, v in os.environ.items() if k != "PRC3CFG_LOCK_DIR"}
+    tmpdir.mkdir()
+    return {**env, "TMPDIR": str(tmpdir), "TMP": str(tmpdir), "TEMP": str(tmpdir), "HOME": str(tmpdir), "USER": tmpdir.name}
+
+
+def test_the_lock_is_one_place_for_the_machine_whatever_the_environment(tmp_path):
+    """Two processes with different TMPDIR, HOME and USER and no PRC3CFG_LOCK_DIR meet at one lock
+    (they both took it when it followed TMPDIR); the folder is shared: sticky and open to all."""
+    key = f"test/{uuid.uuid4()}"  # machine-wide: a key no other run uses
+    first, second = without_lock_dir(tmp_path / "alice"), without_lock_dir(tmp_path / "bob")
+    with holding(json.dumps([key]), env=first) as holder:
+        tried = subprocess.run([sys.executable, "-c", TRIER, json.dumps([key])], env=second, capture_output=True, text=True)
+    assert tried.stdout.startswith("bus a: the line is locked by ") and f"(pid {holder.pid}, " in tried.stdout, tried
+    folder = Path(subprocess.run([sys.executable, "-c", "from prc3cfg.shell.locks import lock_dir; print(lock_dir())"],
+                                 env=first, capture_output=True, text=True, check=True).stdout.strip())  # fmt: skip
+    assert folder in (Path("/run/lock/prc3cfg"), Path("/var/lock/prc3cfg"), Path("/tmp/prc3cfg-locks"))
+    assert stat.S_IMODE(folder.stat().st_mode) == 0o1777
+    assert stat.S_IMODE((folder / lock_path(key).name).stat().st_mode) & 0o444 == 0o444
+
+
+@pytest.mark.parametrize(
+    ("shared", "chosen"),
+    [
+        ({"run/lock": 0o1777, "var/lock": 0o1777, "tmp": 0o1777}, "run/lock/prc3cfg"),
+        ({"run/lock": 0o755, "var/lock": 0o1777, "tmp": 0o1777}, "var/lock/prc3cfg"),  # a lock folder only root writes
+        ({"run/lock": 0o755, "tmp": 0o1777}, "tmp/prc3cfg-locks"),
+        ({"run/lock": 0o755, "run/lock/prc3cfg": 0o1777, "tmp": 0o1777}, "run/lock/prc3cfg"),  # made by an administrator
+        ({"tmp": 0o1777, "tmp/prc3cfg-locks": 0o1777}, "tmp/prc3cfg-locks"),
+        ({}, "tmp/prc3cfg-locks"),
+    ],
+)
+def test_the_lock_folder_is_chosen_by_the_machine_not_by_who_asks(tmp_path, monkeypatch, shared, chosen):
+    for folder, mode in shared.items():
+        (tmp_path / folder).mkdir(parents=True, exist_ok=True)
+        (tmp_path / folder).chmod(mode)
+    monkeypatch.delenv("PRC3CFG_LOCK_DIR")
+    monkeypatch.setattr(locks, "LOCK_FOLDERS", tuple((tmp_path / base.relative_to("/"), name) for base, name in locks.LOCK_FOLDERS))
+    assert lock_dir() == tmp_path / chosen
 
 
 def test_a_symlink_in_place_of_a_lock_file_is_not_followed(tmp_path):

@@ -19,6 +19,7 @@ from prc3cfg.cli.common import (
     check_output,
     line_options,
     one_of,
+    addresses_option,
     parse_addresses,
     stderr_console,
     stdout_console,
@@ -96,7 +97,7 @@ def import_plant(
     retries: RetriesOpt = 5,
     plant_name: Annotated[str, typer.Option(help="The plant's name in the file.")] = "imported",
     bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
-    modules: Annotated[Optional[str], typer.Option(help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
+    modules: Annotated[Optional[str], typer.Option(callback=addresses_option, help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
 ) -> None:
@@ -107,7 +108,7 @@ def import_plant(
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
     with line_options(trace, retries, lock_timeout) as options:
-        text, count = api.import_plant(bare, parse_addresses(modules) if modules else None, options,
+        text, count = api.import_plant(bare, parse_addresses(modules) if modules is not None else None, options,
                                        plant_name=plant_name, bus_name=bus_name)  # fmt: skip
     print(text, end="")
     stderr_console().print(f"imported {plural(count, 'module')} from {port}")

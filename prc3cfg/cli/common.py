@@ -159,18 +159,31 @@ Key = tuple[str, int]  # (bus name, module address)
 
 
 def parse_addresses(text: str) -> list[int]:
-    """"1,3-5" → [1, 3, 4, 5]; every address must lie in 1..30."""
+    """"1,3-5" → [1, 3, 4, 5]; every address must lie in 1..30. ValueError, saying what to write,
+    for anything else — an empty entry too ("1,,2", "1,2,", ""): a slip, not "all modules"."""
     addresses: set[int] = set()
-    for part in filter(None, (p.strip() for p in text.split(","))):
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            raise ValueError(f"'{text}' has an empty entry — write addresses and ranges between commas, e.g. 1,3-5")
         low, _, high = part.partition("-")
         try:
             first, last = int(low), int(high or low)
         except ValueError:
-            raise UserError(f"--modules: '{part}' is not an address or a range like 3-5") from None
+            raise ValueError(f"'{part}' is not an address or a range like 3-5") from None
         if first not in ADDRESSES or last not in ADDRESSES or first > last:
-            raise UserError(f"--modules: '{part}' is outside 1..{ADDRESSES[-1]} — module addresses are 1..{ADDRESSES[-1]}")
+            raise ValueError(f"'{part}' is outside 1..{ADDRESSES[-1]} — module addresses are 1..{ADDRESSES[-1]}")
         addresses.update(range(first, last + 1))
     return sorted(addresses)
+
+
+def addresses_option(value: str | None) -> str | None:
+    """`--modules`'s callback: addresses `parse_addresses` cannot read are a usage error (exit 64)."""
+    if value is not None:
+        try:
+            parse_addresses(value)
+        except ValueError as error:
+            raise typer.BadParameter(str(error)) from None
+    return value
 
 
 class TerminalProgress:

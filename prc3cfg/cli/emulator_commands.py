@@ -11,23 +11,36 @@ from typing import Annotated, Optional
 import typer
 
 from prc3cfg.cli import emulator_app
-from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, one_of, parse_addresses
+from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, addresses_option, one_of, parse_addresses
 from prc3cfg.errors import UserError
+
+DEFAULT_LISTEN = "127.0.0.1:7001"
 
 
 def parse_listen(text: str) -> tuple[str, int]:
+    """HOST:PORT (":PORT": 127.0.0.1); ValueError, with an example, for anything else — "" too."""
     host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise UserError(f"--listen: '{text}' is not HOST:PORT — for example 127.0.0.1:7001")
+    if not sep or not port.isascii() or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"'{text}' is not HOST:PORT — for example {DEFAULT_LISTEN}")
     return host or "127.0.0.1", int(port)
+
+
+def listen_option(value: str | None) -> str | None:
+    """`--listen`'s callback: what `parse_listen` cannot read is a usage error (exit 64)."""
+    if value is not None:
+        try:
+            parse_listen(value)
+        except ValueError as error:
+            raise typer.BadParameter(str(error)) from None
+    return value
 
 
 @emulator_app.command("serve")
 def serve(
-    listen: Annotated[Optional[str], typer.Option(help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
+    listen: Annotated[Optional[str], typer.Option(callback=listen_option, help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
     state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
-    modules: Annotated[Optional[str], typer.Option(help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
+    modules: Annotated[Optional[str], typer.Option(callback=addresses_option, help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
     line_speed: Annotated[Optional[int], typer.Option("--line-speed", min=1, max=10_000_000, help="Make every exchange take as long as on a line of this baud rate.")] = None,
     parity: Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs).")] = "even",
@@ -38,7 +51,7 @@ def serve(
     drop_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges with one bit flipped.")] = 0.0,
     seed: Annotated[Optional[int], typer.Option(help="Seed for fault injection.")] = None,
-    max_connections: Annotated[Optional[int], typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 64); one more is closed at once (logged).")] = None,
+    max_connections: Annotated[Optional[int], typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
     idle_timeout: Annotated[Optional[float], typer.Option("--idle-timeout", min=0.001, max=10_000_000, help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
@@ -47,8 +60,8 @@ def serve(
     Serves the modules of --modules, else those of the state file, else
     1-30. The state file keeps the modules it holds that are not served.
 
-    At most --max-connections TCP clients are served at once; one more is
-    closed at once. A client that sends nothing for --idle-timeout seconds
+    One TCP client is served at a time (--max-connections raises it), as a
+    gateway serves one client per serial line; one more is closed at once. A client that sends nothing for --idle-timeout seconds
     is disconnected. Running out of file descriptors only pauses accepting.
 
     A write is answered only once it is saved: appended to the journal
@@ -64,7 +77,7 @@ def serve(
     from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
-    bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules else None)
+    bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules is not None else None)
     try:
         emulator = Emulator(
             bus, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed is not None,
@@ -81,7 +94,7 @@ def serve(
         signal.signal(signum, lambda *_: stop.set())
     with emulator:
         if listen is not None or not pty:
-            address = listen or "127.0.0.1:7001"
+            address = DEFAULT_LISTEN if listen is None else listen
             try:
                 host, port = emulator.listen(*parse_listen(address))
             except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds

@@ -2,8 +2,16 @@
 
 Owns the identities of a line (`line_keys`: each address a `socket://` or `rfc2217://` host
 resolves to, a device's real path, an emulator's state file — so two spellings of one line
-share a key), the lock files in a directory every user of the machine shares, and the wait
-for a busy line. The lock is the kernel's: it dies with the process that holds it, so there
+share a key), the lock files in a folder every user of the machine shares, and the wait
+for a busy line.
+
+The folder is the machine's, whatever the environment or the user of the process
+(`lock_dir`): `PRC3CFG_LOCK_DIR` when set, else `/run/lock/prc3cfg` (the system's lock
+folder, as for serial tools' `LCK..` files), `/var/lock/prc3cfg`, then `/tmp/prc3cfg-locks` —
+the first that exists, or else whose parent every user may make folders in (sticky and
+writable by all), so every user's prc3cfg picks the same one. It is made sticky and writable
+by all, its lock files readable and writable by all: another user's prc3cfg sees a lock,
+names its holder and waits for it, and never removes it. The lock is the kernel's: it dies with the process that holds it, so there
 is no stale lock to guess at, and a lock file is never deleted (a process could be holding
 the deleted file while a third locks a new one of the same name). The holder's details
 written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) only name the holder to
@@ -24,7 +32,7 @@ import ipaddress
 import json
 import os
 import socket
-import tempfile
+import stat
 import time
 from collections.abc import Callable, Iterable, Iterator
 from datetime import datetime, timezone
@@ -35,6 +43,8 @@ from prc3cfg.core.line import TCP_SCHEMES
 from prc3cfg.errors import UserError
 
 POLL = 0.1  # s between attempts on a busy line
+#: Where the lock folder may be, in order: (parent, name) — `lock_dir`.
+LOCK_FOLDERS = ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"), (Path("/tmp"), "prc3cfg-locks"))
 _OPEN_FLAGS = os.O_NOFOLLOW | os.O_CLOEXEC
 
 
@@ -99,7 +109,25 @@ def _reached(address: str) -> str:
 
 
 def lock_dir() -> Path:
-    return Path(os.environ.get("PRC3CFG_LOCK_DIR") or Path(tempfile.gettempdir()) / "prc3cfg-locks")
+    """`PRC3CFG_LOCK_DIR`, else the first of `LOCK_FOLDERS` that exists or that any user may
+    make (its parent sticky and writable by all); the last when none."""
+    if override := os.environ.get("PRC3CFG_LOCK_DIR"):
+        return Path(override)
+    for parent, name in LOCK_FOLDERS:
+        folder = parent / name
+        if folder.is_dir() or _shared(parent):
+            return folder
+    return folder
+
+
+def _shared(folder: Path) -> bool:
+    """Whether every user may make files in `folder` and none may remove another's: a sticky
+    folder writable by all (/tmp, and /run/lock on most distributions)."""
+    try:
+        mode = os.stat(folder).st_mode
+    except OSError:
+        return False
+    return stat.S_ISDIR(mode) and mode & (stat.S_ISVTX | stat.S_IWOTH) == stat.S_ISVTX | stat.S_IWOTH
 
 
 def lock_path(key: str) -> Path:

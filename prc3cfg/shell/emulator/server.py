@@ -14,10 +14,14 @@ Frames from the pty are decoded as a UART's, with the framing's time-outs.
 
 A long-running service that survives its clients:
 
-- **At most `max_connections` TCP connections** (default 64), each served by its own
+- **At most `max_connections` TCP connections** (default 1: one client per line, as a
+  gateway such as ser2net keeps by default — a client cannot always tell that two
+  addresses are one gateway, so the gateway refuses the second), each served by its own
   thread. One more is accepted and closed at once, with a logged warning, never given a
   thread. A connection's slot is free again before its socket is closed, so a client that
-  sees its connection end can connect again at once. The pty is one more stream.
+  sees its connection end can connect again at once; and a connection whose client has
+  already hung up (its end of stream waiting to be read) holds no slot, so the client that
+  follows it at once is not refused. The pty is one more stream.
 - **An idle time-out** (default 300 s): a connection that sends nothing for that long —
   connected and silent, or stopped in the middle of a frame — is closed. A client that
   does not take its replies is closed when a reply cannot be sent within the poll time.
@@ -64,7 +68,7 @@ log = logging.getLogger(__name__)
 POLL = 0.1  # s: how often an idle stream looks whether the emulator is closing
 RECV_SIZE = 4096  # bytes read from a stream at a time
 ACCEPT_BACKOFF = 0.1  # s: the pause before accepting again after accept() failed (EMFILE, ENFILE, …)
-MAX_CONNECTIONS = 64
+MAX_CONNECTIONS = 1
 IDLE_TIMEOUT = 300.0  # s
 
 
@@ -352,11 +356,13 @@ class Emulator:
     def _admit(self, conn: socket.socket, name: str) -> None:
         """Serve a new connection in its own thread, or close it at once when all slots are taken."""
         with self._guard:
+            if len(self._connections) >= self.max_connections:
+                self._connections -= {held for held in self._connections if _hung_up(held)}
             full = len(self._connections) >= self.max_connections
             if not full:
                 self._connections.add(conn)
         if full:
-            log.warning("%s: refused — %d connections are open, the most allowed", name, self.max_connections)
+            log.warning("%s: refused — the most connections allowed (%d) are open", name, self.max_connections)
             conn.close()
             return
         log.info("%s: connected", name)
@@ -439,3 +445,10 @@ class Emulator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _hung_up(conn: socket.socket) -> bool:
+    """Whether the client of `conn` has closed or reset it (its thread is about to free its slot)."""
+    poll = select.poll()
+    poll.register(conn, select.POLLRDHUP)
+    return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL) for _, events in poll.poll(0))

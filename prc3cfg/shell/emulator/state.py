@@ -10,21 +10,39 @@ so a running emulator (`Store`) appends every write it accepts to a journal besi
 state file, `NAME.json.journal`, and flushes it to disk (fdatasync) before the write is
 answered — microseconds of CPU and one disk flush:
 
-    prc3-emulator-journal/1 SHA256        the state file it follows: sha256 of its bytes
+    prc3-emulator-journal/2 GENERATION    the state file it follows: its "generation"
     ADDRESS MESSAGE                       a write a module accepted: its address 1..30 and
     …                                     the PRC 3 message in lower-case hex
 
+The bond between the two is an identifier inside the state file, not its bytes: every save
+gives the state file a new `"generation"` (a random hex string) and names the one it
+replaces, `"replaces"` — extension keys of interfaces.md §3's file — so a state file that
+was reformatted, pretty-printed or given a byte-order mark or a final newline still bonds
+with its journal (CRLF line ends and a byte-order mark in the journal, blank lines and a
+last line cut by a kill — never acknowledged — are read past too).
+
 `load_state` reads the state file and replays the journal on it with the device model, so
 a killed emulator loses no write it acknowledged. A broadcast is one line per module it
-changed. A last line cut short by a kill (no newline) was never acknowledged: ignored. A
-journal that does not follow the state file beside it (its SHA256 is another file's) is
-ignored: the emulator was killed after its state file took everything in, or the file was
-replaced by hand. The journal is **compacted** — every module written into the state file,
-a fresh journal begun — when the emulator starts with no state file or a journal left
-behind, after every `COMPACT_EVERY` journal lines, on changes through the Python API (mode,
-fault, Teach In: no message says them), and on exit, which then removes the journal:
-**after a clean exit the state file holds everything; while an emulator runs, the journal
-holds the tail.**
+changed. A journal of the generation the state file replaces is one the state file took in
+(an emulator killed between saving the state file and beginning a fresh journal):
+nothing to replay. Any other journal is refused, the emulator not started, in one line
+naming both files and what to do — its header damaged, the state file of another
+generation or of none (replaced, or rewritten by a tool that drops the extension keys),
+missing or unreadable — never dropped in silence. (A journal of the older format
+`prc3-emulator-journal/1 SHA256` is replayed when SHA256 is that of the state file's
+bytes, and refused otherwise.) The journal is **compacted** — every module written into
+the state file, a fresh journal begun — when the emulator starts with no state file or a
+journal left behind, after every `COMPACT_EVERY` journal lines, on changes through the
+Python API (mode, fault, Teach In: no message says them), and on exit, which then removes
+the journal: **after a clean exit the state file holds everything; while an emulator runs,
+the journal holds the tail.**
+
+An emulator **owns** its state file while it runs: a kernel lock (`flock`) on `NAME.json.lock`
+beside it, which names the owner (pid, since when) and dies with its process. A second
+emulator of the same file — `emulator serve --state`, or the `emulator://` port of a plant
+file — is refused at its start, naming the first: two would each keep their own modules
+and the last to exit would overwrite the other's acknowledged writes. The lock file stays
+(an empty one after a clean exit), as line locks do (`prc3cfg.shell.locks`).
 
 A write is appended only while the state file and the journal are the very files the
 store last wrote; when either was removed, replaced or changed meanwhile, or an append
@@ -45,11 +63,14 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import hashlib
 import json
 import logging
 import os
 import stat
+import uuid
+from datetime import datetime, timezone
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -65,7 +86,8 @@ from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json, read_re
 log = logging.getLogger(__name__)
 
 FORMAT = "prc3-emulator/1"
-JOURNAL_FORMAT = "prc3-emulator-journal/1"
+JOURNAL_FORMAT = "prc3-emulator-journal/2"
+_OLD_JOURNAL_FORMAT = "prc3-emulator-journal/1"  # bonded by a hash of the state file's bytes
 COMPACT_EVERY = 1000  # journal lines between compactions: a restart replays at most this many
 
 #: System parameters under which P and V may take every value any module allows.
@@ -75,11 +97,40 @@ _RANGES = {key: value_range(key, _WIDEST)[:2] for key in (*SYSTEM_KEYS, *PROGRAM
 
 
 def load_state(path: Path) -> dict[int, ModuleState]:
-    """The modules stored in `path` and its journal, by address; {} when neither exists yet."""
-    modules = _load_file(path)
-    for number, (address, message) in enumerate(_journal(path), 2):
+    """The modules stored in `path` and its journal, by address; {} when neither exists yet.
+    UserError, naming both files and what to do, when a journal cannot be replayed onto the
+    state file beside it."""
+    journal = journal_path(path)
+    lines = _journal_lines(path)
+    if lines is None:
+        return _load_file(path)
+    keep = f"{journal} holds writes acknowledged since {path} was saved"
+    try:
+        data = read_json(path)
+    except FileProblem as problem:
+        if problem.why is Why.MISSING:
+            raise UserError(f"{path}: missing, but its journal {keep} — put the state file back, or move the journal "
+                            "aside to start from factory modules") from None  # fmt: skip
+        raise UserError(f"{problem.where(path)}: {problem}, and its journal {keep} — fix the state file (the journal "
+                        "replays onto it)") from None  # fmt: skip
+    modules = _modules(path, data)
+    header, writes = (lines[0].split(b" ") + [b""])[:2], lines[1:]
+    generation, replaces = (data.get(key) for key in ("generation", "replaces"))
+    if header[0] == JOURNAL_FORMAT.encode() and generation is not None and header[1] == str(generation).encode():
+        pass
+    elif header[0] == JOURNAL_FORMAT.encode() and replaces is not None and header[1] == str(replaces).encode():
+        return modules  # the state file took this journal in
+    elif header[0] == _OLD_JOURNAL_FORMAT.encode() and header[1] == hashlib.sha256(read_regular(path, JSON_LIMIT)).hexdigest().encode():
+        pass
+    else:
+        found = f"generation {header[1].decode('ascii', 'replace')}" if header[0] == JOURNAL_FORMAT.encode() else "a damaged header"
+        held = f"generation {generation}" if generation is not None else "no generation"
+        raise UserError(f"{journal}: {found}, and {path} beside it has {held} — the journal cannot be replayed onto it. "
+                        f"Put back the state file it follows, or move the journal aside to start from {path} alone "
+                        "(its writes are then lost)")  # fmt: skip
+    for number, (address, message) in enumerate(_writes(journal, writes), 2):
         if not 1 <= address <= MAX_MODULE_ADDRESS:
-            raise UserError(f"{journal_path(path)}:{number}: address {address} is outside 1..{MAX_MODULE_ADDRESS} — fix or delete the line")
+            raise UserError(f"{journal}:{number}: address {address} is outside 1..{MAX_MODULE_ADDRESS} — fix or delete the line")
         state = modules.get(address) or ModuleState.factory(address)  # a module the file lacks was served from factory defaults
         modules[address] = device.process(state, message).state
     return modules
@@ -118,27 +169,34 @@ def journal_path(path: Path) -> Path:
     return path.with_name(f"{path.name}.journal")
 
 
-def _journal(path: Path) -> list[tuple[int, bytes]]:
-    """The writes of the journal beside the state file `path`, if it follows that file; [] otherwise."""
+def owner_path(path: Path) -> Path:
+    """The lock file by which a running emulator owns the state file `path`."""
+    return path.with_name(f"{path.name}.lock")
+
+
+def _journal_lines(path: Path) -> list[bytes] | None:
+    """The lines of the journal beside the state file `path` — a byte-order mark, CR line ends
+    and trailing blanks taken off, blank lines and a last line cut short (never acknowledged)
+    left out; None when there is no journal."""
     try:
-        lines = read_regular(journal_path(path), JSON_LIMIT).split(b"\n")[:-1]  # the last: b"" or a torn line
+        text = read_regular(journal_path(path), JSON_LIMIT)
     except FileProblem as problem:
         if problem.why is Why.MISSING:
-            return []
-        raise UserError(f"{journal_path(path)}: {problem} — delete it to start from the state file alone") from None
-    try:
-        base = hashlib.sha256(read_regular(path, JSON_LIMIT)).hexdigest()
-    except FileProblem:
-        return []
-    if not lines or lines[0] != f"{JOURNAL_FORMAT} {base}".encode():
-        return []
+            return None
+        raise UserError(f"{journal_path(path)}: {problem} — it holds writes acknowledged since {path} was saved: make it readable") from None
+    lines = [line.rstrip() for line in text.removeprefix(b"\xef\xbb\xbf").split(b"\n")[:-1]]  # the last: b"" or a torn line
+    return [line for line in lines if line]
+
+
+def _writes(journal: Path, lines: list[bytes]) -> list[tuple[int, bytes]]:
+    """The writes of journal lines (after the header); UserError naming the first that is not one."""
     writes = []
-    for number, line in enumerate(lines[1:], 2):
+    for number, line in enumerate(lines, 2):
         address, _, message = line.partition(b" ")
         try:
             writes.append((int(address.decode("ascii")), bytes.fromhex(message.decode("ascii"))))
         except ValueError:
-            raise UserError(f"{journal_path(path)}:{number}: not an address and a message in hex — fix or delete the line") from None
+            raise UserError(f"{journal}:{number}: not an address and a message in hex — fix or delete the line") from None
     return writes
 
 
@@ -151,6 +209,11 @@ def _load_file(path: Path) -> dict[int, ModuleState]:
             return {}
         remedy = "fix or delete it" if problem.why is Why.NOT_JSON else "give an emulator state file, or a path where none is yet"
         raise UserError(f"{problem.where(path)}: {problem} — {remedy}") from None
+    return _modules(path, data)
+
+
+def _modules(path: Path, data: object) -> dict[int, ModuleState]:
+    """The modules of the state file `path` as read (`data`), checked."""
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise UserError(f"{path}: not an emulator state file — expected \"format\": \"{FORMAT}\"")
     entries = data.get("modules", [])
@@ -171,6 +234,16 @@ def _load_file(path: Path) -> dict[int, ModuleState]:
             raise UserError(f"{path}: module address {address} appears twice — keep one entry")
         modules[address] = state
     return modules
+
+
+def _generation(path: Path) -> str | None:
+    """The "generation" of the state file `path`, if it has one (for the next save's "replaces")."""
+    try:
+        data = read_json(path)
+    except FileProblem:
+        return None
+    generation = data.get("generation") if isinstance(data, dict) else None
+    return str(generation) if generation is not None else None
 
 
 def _module(entry: dict[str, Any]) -> ModuleState:
@@ -216,17 +289,18 @@ def _whole(data: dict[str, Any], key: str, low: int, high: int, *, name: str) ->
     return value
 
 
-def state_document(modules: Mapping[int, ModuleState]) -> dict:
-    return {"format": FORMAT, "modules": [modules[a].to_json() for a in sorted(modules)]}
+def state_document(modules: Mapping[int, ModuleState], generation: str | None = None, replaces: str | None = None) -> dict:
+    """The state file of `modules`; with the `generation` its journal names, and the one it `replaces`."""
+    bond = {"generation": generation, **({"replaces": replaces} if replaces is not None else {})} if generation is not None else {}
+    return {"format": FORMAT, **bond, "modules": [modules[a].to_json() for a in sorted(modules)]}
 
 
-def save_state(path: Path, modules: Mapping[int, ModuleState]) -> None:
-    """Write the state file atomically; OSError when it cannot be written."""
-    write_atomically(path, _text(modules))
-
-
-def _text(modules: Mapping[int, ModuleState]) -> str:
-    return json.dumps(state_document(modules), indent=1)
+def save_state(path: Path, modules: Mapping[int, ModuleState], *, replaces: str | None = None) -> str:
+    """Write the state file atomically, of a new generation (returned) that replaces `replaces`;
+    OSError when it cannot be written."""
+    generation = uuid.uuid4().hex
+    write_atomically(path, json.dumps(state_document(modules, generation, replaces), indent=1))
+    return generation
 
 
 class Store:
@@ -243,12 +317,62 @@ class Store:
         self._size = 0  # bytes in the journal
         self._without_journal = False  # a journal could not be begun (logged once)
         self._closed = False  # after `close`, nothing more is saved
+        self._owner: int | None = None  # the locked `owner_path`, while this store owns the state file
+        self._generation: str | None = None  # of the state file as this store last saved it (or found it)
 
     def start(self, modules: Mapping[int, ModuleState]) -> None:
-        """Compact when there is no state file yet or a journal was left behind (a killed
-        emulator's, replayed by `load_state`); OSError when the state file cannot be written."""
-        if not self.path.exists() or self.journal.exists():
-            self.compact(modules)
+        """Own the state file (UserError naming the emulator that does), then compact when there
+        is no state file yet or a journal was left behind (a killed emulator's, replayed by
+        `load_state`); OSError when the state file cannot be written."""
+        self._own()
+        self._generation = _generation(self.path)
+        try:
+            if self._taken_in():  # removed first: the next save's "replaces" will no longer name it
+                self.journal.unlink()
+                _sync_folder(self.path.parent)
+            if not self.path.exists() or self.journal.exists():
+                self.compact(modules)
+        except BaseException:
+            self._disown()
+            raise
+
+    def _taken_in(self) -> bool:
+        """Whether the journal is one the state file took in (its generation is the one the state file replaces)."""
+        try:
+            data = read_json(self.path)
+            lines = _journal_lines(self.path)
+        except (FileProblem, UserError):
+            return False
+        replaces = data.get("replaces") if isinstance(data, dict) else None
+        return lines is not None and lines[:1] == [f"{JOURNAL_FORMAT} {replaces}".encode()] and replaces is not None
+
+    def _own(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)  # as the state file's first save would
+        fd = os.open(owner_path(self.path), os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                record = json.loads(os.pread(fd, 4096, 0))
+                holder = f"pid {record['pid']}, since {record['since']}"
+            except (OSError, ValueError, KeyError, TypeError):
+                holder = "starting"
+            finally:
+                os.close(fd)
+            raise UserError(f"{self.path}: the state file is in use by another emulator ({holder}) — stop that "
+                            "emulator first, or give this one another state file") from None  # fmt: skip
+        record = {"pid": os.getpid(), "since": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        with contextlib.suppress(OSError):  # the details only name the owner to a second emulator
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(record).encode(), 0)
+        self._owner = fd
+
+    def _disown(self) -> None:
+        if self._owner is not None:
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._owner, 0)
+            os.close(self._owner)  # the lock goes with the last descriptor
+            self._owner = None
 
     def record(self, writes: list[tuple[int, bytes]], modules: Mapping[int, ModuleState]) -> None:
         """Make accepted writes durable — (address, message) per module changed — before they
@@ -277,10 +401,9 @@ class Store:
         compaction (logged), the state file holding them."""
         if self._closed:
             raise OSError(errno.ESHUTDOWN, "the emulator has closed its state file")
-        text = _text(modules)
-        write_atomically(self.path, text)
+        self._generation = save_state(self.path, modules, replaces=self._generation)
         self._close_journal()
-        header = f"{JOURNAL_FORMAT} {hashlib.sha256(text.encode()).hexdigest()}\n".encode()
+        header = f"{JOURNAL_FORMAT} {self._generation}\n".encode()
         try:
             fd = os.open(self.journal, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND | os.O_CLOEXEC, 0o644)
             try:
@@ -308,13 +431,16 @@ class Store:
         the state file cannot be written; the journal is then kept for the next start. A write
         that comes later (a connection that outlived the emulator's close) is refused."""
         self._closed = True
-        if self._fd is None and not self.journal.exists():
-            return
-        if self._fd is None or self._entries or not self._unchanged():  # after a failed append the journal holds lines
-            save_state(self.path, modules)
-        self._close_journal()
-        self.journal.unlink(missing_ok=True)
-        _sync_folder(self.path.parent)
+        try:
+            if self._fd is None and not self.journal.exists():
+                return
+            if self._fd is None or self._entries or not self._unchanged():  # after a failed append the journal holds lines
+                self._generation = save_state(self.path, modules, replaces=self._generation)
+            self._close_journal()
+            self.journal.unlink(missing_ok=True)
+            _sync_folder(self.path.parent)
+        finally:
+            self._disown()
 
     def _unchanged(self) -> bool:
         """Whether the state file and the journal are the files this store last wrote."""

@@ -20,6 +20,10 @@ deadline, so a line that never goes quiet ends in a time-out, not a hang. Before
 attempt the link looks at its `cancel` event (Ctrl-C, SIGTERM: `prc3cfg.shell.cancel`) and
 stops with `Interrupted` — so work stops after the exchange in flight, never inside one.
 
+A TCP gateway that ends the connection before a byte came back has refused this client —
+a gateway serves one client per serial line (ser2net's default, and `prc3cfg emulator
+serve`'s): the link says "the gateway is busy: another client holds the line".
+
 Does not own what the messages mean (`prc3cfg.core.codec`), how frames look
 (`prc3cfg.core.framing`) or which port to open (`prc3cfg.shell.link.ports`).
 """
@@ -139,6 +143,7 @@ class Link:
         port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
         #: Once a reply started, the longest it can take to end; past it the line is not quiet.
         self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
+        self._heard = False  # whether a byte ever came back on this port
         self.exchanges = 0  # attempts made, for benchmarks and summaries
         self.repeated = 0  # attempts that failed (lost, damaged, unconfirmed) and were made again
 
@@ -255,9 +260,17 @@ class Link:
             self.port.write(frame)
             self.port.flush()
         except Exception as error:  # noqa: BLE001 — pyserial's URL handlers (alt://…) fail in ways of their own
-            raise PortFailed(f"bus {self.bus}: cannot write to the port ({_said(error)}) — check the adapter and cable") from None
+            raise self._failed("write to", error) from None
         if self.trace:
             self.trace.sent(self.bus, frame)
+
+    def _failed(self, doing: str, error: Exception) -> PortFailed:
+        """The port failed `doing` ("read from", "write to"): a TCP gateway that ended the
+        connection before any byte came back refused this client, another holding the line."""
+        if not self.uart and not self._heard:
+            return PortFailed(f"bus {self.bus}: the gateway is busy: another client holds the line (it ended the connection "
+                              f"before any reply: {_said(error)}) — wait for that client to finish, then try again")  # fmt: skip
+        return PortFailed(f"bus {self.bus}: cannot {doing} the port ({_said(error)}) — check the adapter and cable")
 
     def _exchange(self, address: int, data: bytes, timeout: float | None = None) -> bytes | None:
         """One attempt: the reply message from `address`, or None (nothing valid within `timeout`,
@@ -271,9 +284,10 @@ class Link:
             try:
                 chunk = self.port.read(max(1, self.port.in_waiting))
             except Exception as error:  # noqa: BLE001 — as in _send
-                raise PortFailed(f"bus {self.bus}: cannot read from the port ({_said(error)}) — check the adapter and cable") from None
+                raise self._failed("read from", error) from None
             now = time.monotonic()
             if chunk:
+                self._heard = True
                 decoder.receive_data(chunk, now)
                 pending = self._gap_ends_frame
             elif pending:
