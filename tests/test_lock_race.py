@@ -1,6 +1,7 @@
 """The acceptance race of the line lock (issue 9): two real `prc3cfg apply` processes started
 at the same instant on one line never both write — 200 races on one spelling of the line,
-200 on two spellings of one address (`socket://localhost:P` and `socket://127.0.0.1:P`).
+200 on two spellings of one address (`socket://localhost:P` and `socket://127.0.0.1:P`): the
+soak tier's count; the fast tier runs 4 of each (one wave).
 
 A line is an emulator server process (`prc3cfg emulator serve`); `LINES` of them are raced
 side by side. A driver process — this file run as a script — imports the CLI and has no
@@ -20,18 +21,20 @@ then write the holder; a file read empty taken for stale and deleted) both wrote
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
 import sys
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-ROUNDS = 200  # races per test
 LINES = 4  # raced side by side, each with its own emulator and lock
-WAVES = ROUNDS // LINES
+#: Races per test: a few in the fast tier, the acceptance's 200 in the soak tier.
+ROUNDS = [4, pytest.param(200, marks=pytest.mark.soak)]
 READS = {0x50, 0x51, 0x52}
 APPLY = ["apply", "--auto-approve", "--allow-axis-release"]
 
@@ -153,19 +156,26 @@ def lines(tmp_path_factory):
             server.wait()
 
 
-def _race(tmp_path: Path, lines: list[tuple[str, str]], first: int) -> list[dict]:
+@pytest.fixture(scope="module")
+def waves() -> Iterator[int]:
+    """Wave numbers the lines have not raced yet: each wave's plants ask them for a new position."""
+    return itertools.count()
+
+
+def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iterator[int]) -> list[dict]:
     """Run the driver in a process of its own (no thread of pytest's, no BLAS threads)."""
+    numbers = [next(waves) for _ in range(rounds // LINES)]
     env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    command = [sys.executable, __file__, str(tmp_path), str(first), json.dumps(lines)]
+    command = [sys.executable, __file__, str(tmp_path), str(len(numbers)), str(numbers[0]), json.dumps(lines)]
     driver = subprocess.run(command, env=env, capture_output=True, text=True)
     assert driver.returncode == 0, driver.stderr
     return json.loads(driver.stdout)
 
 
-def _judge(results: list[dict]) -> None:
-    assert len(results) == ROUNDS
+def _judge(results: list[dict], rounds: int) -> None:
+    assert len(results) == rounds
     both = [r for r in results if all(r["writes"])]
-    assert not both, f"both applies wrote in {len(both)} of {ROUNDS} races, e.g. {both[0]}"
+    assert not both, f"both applies wrote in {len(both)} of {rounds} races, e.g. {both[0]}"
     for r in results:
         writer = [i for i in (0, 1) if r["writes"][i]]
         assert len(writer) == 1, f"{r['race']}: no apply wrote: {r}"
@@ -176,14 +186,16 @@ def _judge(results: list[dict]) -> None:
         assert refused or idle, f"{r['race']}: the other apply neither was refused nor found nothing to do: {r}"
 
 
-def test_two_applies_on_one_line_never_both_write(tmp_path, lines):
-    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], first=0))
+@pytest.mark.parametrize("rounds", ROUNDS)
+def test_two_applies_on_one_line_never_both_write(tmp_path, lines, waves, rounds):
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], rounds, waves), rounds)
 
 
-def test_two_spellings_of_one_address_never_both_write(tmp_path, lines):
+@pytest.mark.parametrize("rounds", ROUNDS)
+def test_two_spellings_of_one_address_never_both_write(tmp_path, lines, waves, rounds):
     spellings = [(f"socket://localhost:{p}", f"socket://127.0.0.1:{p}") for p in lines]
-    _judge(_race(tmp_path, spellings, first=WAVES))
+    _judge(_race(tmp_path, spellings, rounds, waves), rounds)
 
 
-if __name__ == "__main__":  # the driver: WORKDIR FIRST_WAVE LINES (JSON: [[port, port], …])
-    json.dump(drive(json.loads(sys.argv[3]), WAVES, int(sys.argv[2]), Path(sys.argv[1])), sys.stdout)
+if __name__ == "__main__":  # the driver: WORKDIR WAVES FIRST_WAVE LINES (JSON: [[port, port], …])
+    json.dump(drive(json.loads(sys.argv[4]), int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[1])), sys.stdout)
