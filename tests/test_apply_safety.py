@@ -165,8 +165,10 @@ def hide_the_release(document):
 
 TAMPERING = {
     "init all programs inserted": (insert(1, codec.InitAllPrograms()), "step 2 (1100) writes programs 4..64, which the plant file does not manage"),
-    "an unmanaged program's dwell": (insert(4, codec.WriteDwellTimes(((7, 50),))), "step 5 (430107000032) writes program 7, which the plant file does not manage"),
-    "20,000 steps appended": (insert(4, *[codec.ReadSystem()] * 20_000), "bus booth-a, module 1: 20004 steps, more than any plan of one module needs (128)"),
+    "an unmanaged program's dwell": (insert(4, codec.WriteDwellTimes(((7, 50),))),
+                                     "step 5 (430107000032) writes program 7, which the plant file does not manage"),
+    "20,000 steps appended": (insert(4, *[codec.ReadSystem()] * 20_000),
+                              "bus booth-a, module 1: 20004 steps, more than any plan of one module needs (128)"),
     "a read as a step": (insert(4, codec.ReadSystem()), "step 5 (5000) is a read (50h), not a write"),
     "a second axis release": (insert(4, codec.InitSystem()), "step 5 (1000) releases the axes a second time"),
     "the release hidden": (hide_the_release, "step 1 (20000898"),

@@ -128,7 +128,8 @@ def test_a_line_not_known_to_be_complete_gets_no_broadcast(tmp_path, capsys):
 
 def test_a_line_declared_complete_gets_broadcasts_with_fewer_than_30_modules(tmp_path, capsys):
     source = full_line(tmp_path, modules=12)
-    source.write_text(source.read_text().replace("    port: socket://127.0.0.1:1\n", "    port: socket://127.0.0.1:1\n    only_these_modules: true\n"))
+    port = "    port: socket://127.0.0.1:1\n"
+    source.write_text(source.read_text().replace(port, port + "    only_these_modules: true\n"))
     with emulated_plant(tmp_path, source=source) as plant:
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, result.err

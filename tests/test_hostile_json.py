@@ -96,7 +96,7 @@ def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsy
 
 IMAGES = {
     "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', 'a module image has no "system"'),
-    "a program that is a list": ('[{"bus": "booth-a", "address": 1, "system": %s, "programs": [[1]]}]' % json.dumps(DEFAULT_SYSTEM.to_json()),
+    "a program that is a list": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": [[1]]}}]',
                                  "a program is a list, not an object"),
     "programs that are an object": ('[{"bus": "booth-a", "address": 1, "system": {}, "programs": {}}]', "programs is an object, not a list of 64"),
     "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', 'the system block has no "S2"'),

@@ -82,7 +82,7 @@ def _child(plant: Path, release: int) -> None:
         code = 0
     except SystemExit as exit:
         code = exit.code if isinstance(exit.code, int) else (0 if exit.code is None else 1)
-    except BaseException:
+    except BaseException:  # noqa: BLE001 — a forked child must reach os._exit, whatever it met
         traceback.print_exc()
     finally:
         sys.stdout.flush()
