@@ -135,8 +135,9 @@ def main() -> None:
         reader.join()
     counts = json.loads(output)
     emulator_discards = sum("discarded" in line for line in server_log)
-    print(f"{args.framing}{' (client decoding as from a UART)' if args.uart_timeouts else ''}: {counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} busy "
-          f"processes and {pauses[0] if pauses else 0} SIGSTOP/SIGCONT pauses of the client or the emulator")  # fmt: skip
+    print(f"{args.framing}{' (client decoding as from a UART)' if args.uart_timeouts else ''}: "
+          f"{counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} busy processes and "
+          f"{pauses[0] if pauses else 0} SIGSTOP/SIGCONT pauses of the client or the emulator")  # fmt: skip
     print(f"  good frames discarded by the client {counts['discarded']}, link retries {counts['retries']}, "
           f"discarded by the emulator {emulator_discards}   (acceptance: all 0)")  # fmt: skip
 

@@ -1,9 +1,27 @@
-"""What every test shares: a lock directory of its own, and the demo plant on emulators."""
+"""What every test shares: a lock directory of its own, the demo plant on emulators, and the
+hypothesis profile of its tier.
+
+The suite has two tiers: `pytest` runs the fast one (the README's command), `pytest -m soak`
+the tests marked `soak` — many races, seeds or examples of behaviours the fast tier tests with
+a few. `PRC3CFG_HYPOTHESIS_PROFILE` names the hypothesis profile: "fast" (the default) or
+"soak" (`.ci/run` sets it for the soak tier). A property of the fast tier names its own small
+count; its soak sibling names none and tries the profile's: 2,000 examples under "soak" (the
+most any acceptance asked for), hypothesis's 100 under "fast" — a quick look at the soak tier.
+Both profiles are derandomised: a run tries the examples the run before tried, and a failure
+found once is found again.
+"""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 from emulated import emulated_plant
+from hypothesis import settings
+
+settings.register_profile("fast", derandomize=True, deadline=None, print_blob=True)
+settings.register_profile("soak", parent=settings.get_profile("fast"), max_examples=2_000)
+settings.load_profile(os.environ.get("PRC3CFG_HYPOTHESIS_PROFILE", "fast"))
 
 
 @pytest.fixture(autouse=True)

@@ -12,6 +12,7 @@ stop (a line that never goes quiet).
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import socket
 import threading
@@ -156,10 +157,8 @@ class LossyProxy:
     def close(self) -> None:
         self._closing.set()
         for sock in self._sockets:
-            try:
+            with contextlib.suppress(OSError):
                 sock.close()
-            except OSError:
-                pass
         for thread in self._threads:
             thread.join(timeout=2)
 

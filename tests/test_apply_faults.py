@@ -1,4 +1,5 @@
-"""The acceptance run of `apply` under line faults: every framing, 40 seeds each.
+"""The acceptance run of `apply` under line faults: every framing, 40 seeds each in the soak tier
+(4 in the fast tier).
 
 Emulators start from seeded, non-factory modules — programs the plant does not manage
 among them, some of which the plant's lower upper reversing point makes the module clamp —
@@ -27,7 +28,8 @@ from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program
 from prc3cfg.plant import load_plant
 from prc3cfg.shell.emulator import FaultInjection
 
-SEEDS = range(40)
+#: Seeds per framing: a few in the fast tier, the acceptance's 40 in the soak tier.
+SEEDS = [4, pytest.param(40, marks=pytest.mark.soak)]
 TRAVEL = "Travel to reference point required before production on:"
 
 
@@ -68,14 +70,15 @@ def check(plant, initial, returncode: int, out: str, err: str) -> list[str]:
     return [f"{p}:\n{out}\n{err}" for p in problems]
 
 
+@pytest.mark.parametrize("seeds", SEEDS)
 @pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
-def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, framing):
-    """40 seeded runs of real `prc3cfg apply` processes, eight at a time, each on its own emulated plant."""
+def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, framing, seeds):
+    """Seeded runs of real `prc3cfg apply` processes, eight at a time, each on its own emulated plant."""
     # loopback answers within a millisecond: short time-outs keep the runs quick
     timeout, zvz = (0.05, 0.005) if framing == "open-driver" else (0.02, 0.020)
     with contextlib.ExitStack() as stack:
         runs = []
-        for seed in SEEDS:
+        for seed in range(seeds):
             chooser = random.Random(f"{framing}/{seed}")
             faults = FaultInjection(drop_rate=chooser.uniform(0.05, 0.40), corrupt_rate=chooser.uniform(0.05, 0.10), seed=seed)
             directory = tmp_path / str(seed)
@@ -102,4 +105,4 @@ def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, fra
         ]
         verified = sum(result.returncode == 0 for result in results)
     assert not failures, "\n\n".join(failures)
-    assert verified >= len(SEEDS) // 4, f"only {verified} of {len(SEEDS)} runs got through: the faults are too heavy to test anything"
+    assert verified >= seeds // 4, f"only {verified} of {seeds} runs got through: the faults are too heavy to test anything"

@@ -165,8 +165,10 @@ def hide_the_release(document):
 
 TAMPERING = {
     "init all programs inserted": (insert(1, codec.InitAllPrograms()), "step 2 (1100) writes programs 4..64, which the plant file does not manage"),
-    "an unmanaged program's dwell": (insert(4, codec.WriteDwellTimes(((7, 50),))), "step 5 (430107000032) writes program 7, which the plant file does not manage"),
-    "20,000 steps appended": (insert(4, *[codec.ReadSystem()] * 20_000), "bus booth-a, module 1: 20004 steps, more than any plan of one module needs (128)"),
+    "an unmanaged program's dwell": (insert(4, codec.WriteDwellTimes(((7, 50),))),
+                                     "step 5 (430107000032) writes program 7, which the plant file does not manage"),
+    "20,000 steps appended": (insert(4, *[codec.ReadSystem()] * 20_000),
+                              "bus booth-a, module 1: 20004 steps, more than any plan of one module needs (128)"),
     "a read as a step": (insert(4, codec.ReadSystem()), "step 5 (5000) is a read (50h), not a write"),
     "a second axis release": (insert(4, codec.InitSystem()), "step 5 (1000) releases the axes a second time"),
     "the release hidden": (hide_the_release, "step 1 (20000898"),
@@ -326,20 +328,29 @@ def test_values_out_of_range_on_a_module_are_shown_raw_and_fixed(plant, capsys):
 # -- 8. records survive being killed ---------------------------------------------------------
 
 
-def test_snapshots_are_whole_whenever_an_apply_is_killed(tmp_path):
-    """Real applies SIGKILLed at seeded random moments: every snapshot left behind is a whole one."""
+@pytest.mark.parametrize("kills", [4, pytest.param(12, marks=pytest.mark.soak)])
+def test_snapshots_are_whole_whenever_an_apply_is_killed(tmp_path, kills):
+    """Real applies SIGKILLed at seeded points of their frame trace — late in the reads, as the last
+    reply comes (the snapshot is written then), among the writes: every snapshot left behind is whole."""
     chooser = random.Random(8)
+    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
     with emulated_plant(tmp_path) as plant:
-        command = [sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve", "--allow-axis-release"]
-        env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
-        for _ in range(12):
-            process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
-            try:
-                process.wait(timeout=chooser.uniform(0.3, 1.2))
-            except subprocess.TimeoutExpired:
-                process.send_signal(signal.SIGKILL)
-                process.wait()
-            process.stdout.close()
+        planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant.path, "--trace", tmp_path / "plan.trace"], env=env)
+        assert planned.returncode == 0
+        reads = len((tmp_path / "plan.trace").read_text().splitlines())  # an apply's trace, up to its snapshot
+        command = [sys.executable, "-m", "prc3cfg", "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo]
+        for _ in range(kills):
+            point = chooser.randrange(reads - 8, reads + 40)
+            process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+            with fifo.open() as trace:
+                for seen, _line in enumerate(trace, start=1):
+                    if seen == point:
+                        process.send_signal(signal.SIGKILL)
+                        break
+                trace.read()  # to the end: the process has ended
+            process.wait()
     snapshots = list((tmp_path / ".prc3cfg" / "snapshots").glob("*"))
     assert snapshots, "no apply got as far as its snapshot"
     for path in snapshots:

@@ -127,7 +127,8 @@ def test_a_line_not_known_to_be_complete_gets_no_broadcast(tmp_path, capsys):
 
 
 def declared(source: Path) -> Path:
-    source.write_text(source.read_text().replace("    port: socket://127.0.0.1:1\n", "    port: socket://127.0.0.1:1\n    only_these_modules: true\n"))
+    port = "    port: socket://127.0.0.1:1\n"
+    source.write_text(source.read_text().replace(port, port + "    only_these_modules: true\n"))
     return source
 
 

@@ -144,10 +144,10 @@ ERROR_CASES = [
             ("S10", 0, 117), ("S10", 10000, 118), ("S11", 0, 119), ("S11", 1501, 120),
             ("S12", 4, 121), ("S12", 51, 122),
         ]
-    ),  # fmt: skip
+    ),
     case("109-S5-601", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S4=600, S5=601)), 109),
     case("110-S4-below-S5", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S4=10, S5=20)), 110),
-]
+]  # fmt: skip
 
 
 def test_every_error_code_is_produced_by_a_real_message():

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -12,8 +13,9 @@ from prc3cfg.core import codec, device, error_codes
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import DEFAULT_SYSTEM, ModuleImage, Program, SystemParameters
 
+#: The fast tier's count; `test_every_property_holds_in_many_more_cases` tries the soak profile's.
 PROPERTY = settings(
-    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
 )
 
 #: The fixed ranges of prc3-protocol.md §1 (P and V depend on S1, S4, S5).
@@ -214,3 +216,13 @@ def test_in_run_the_active_program_is_never_written(case):
     number = state.active_program
     assert outcome.state.image.programs[number - 1] == state.image.programs[number - 1]
     assert outcome.state.image.system == state.image.system
+
+
+@pytest.mark.soak
+@settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])  # the soak profile's count
+@given(cases(), st.booleans())
+def test_every_property_holds_in_many_more_cases(case, broadcast):
+    test_process_never_raises_and_replies_in_shape.hypothesis.inner_test(case, broadcast)
+    for check in (test_a_broadcast_does_what_an_addressed_message_does, test_only_an_accepted_write_changes_the_state,
+                  test_an_accepted_write_keeps_every_invariant, test_in_run_the_active_program_is_never_written):  # fmt: skip
+        check.hypothesis.inner_test(case)

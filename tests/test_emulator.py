@@ -72,7 +72,7 @@ def test_broadcast_is_processed_by_all_and_answered_by_none(bus):
 
 
 def test_rejected_write_answers_its_code_and_saves_nothing(bus):
-    emulator, client, state_path = bus
+    _, client, state_path = bus
     before = state_path.read_bytes()
     bad = codec.WriteProgram(10, replace(WRITE_P10.program, P=5000))  # P > S1 = 400
     assert client.send(1, bad.encode()) == bytes.fromhex("2000")

@@ -3,8 +3,8 @@
 Acceptance (issue 10 item 7): it keeps answering correct replies during and after 1,100
 connections at once, 100 MB of garbage and 20,000 connect/close cycles, and its RSS comes
 back within 20 MB of where it stood after a warm-up; running out of file descriptors only
-pauses it; a write it cannot save is neither answered nor applied. Heavy: these tests take
-most of a minute.
+pauses it; a write it cannot save is neither answered nor applied. The acceptance's load is
+the soak tier's; the fast tier's is a tenth of it, against a server with fewer files.
 
 Nothing here waits by sleeping: a client knows the server has let go of a connection when,
 after shutting down its own sending side, it reads the end of the stream — the server frees
@@ -21,6 +21,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Iterator
+from typing import NamedTuple
 
 import pytest
 from emulator_client import Client, Served, answered, hang_up, serve
@@ -30,13 +31,22 @@ from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.image import DEFAULT_SYSTEM, Program
 
 MAX_CONNECTIONS = 64
-FLOOD = 1_100
-GARBAGE = 100_000_000  # bytes
 GARBAGE_CONNECTIONS = 4
-CHURN = 20_000
 CHURN_WORKERS = 8
 RSS_SLACK_KIB = 20_000_000 // 1024  # 20 MB
-SERVER_FILES = 1024  # the server's RLIMIT_NOFILE: a common default, below the flood
+
+
+class Load(NamedTuple):
+    flood: int  # connections at once
+    garbage: int  # bytes
+    churn: int  # connect/close cycles
+    server_files: int  # the server's RLIMIT_NOFILE: below the flood
+
+
+LOADS = [
+    pytest.param(Load(flood=300, garbage=10_000_000, churn=2_000, server_files=256), id="fast"),
+    pytest.param(Load(flood=1_100, garbage=100_000_000, churn=20_000, server_files=1024), id="acceptance", marks=pytest.mark.soak),
+]  # fmt: skip
 REPLY_TIMEOUT = 10.0  # s a client waits for a reply that must come: only a failing test waits it out
 
 
@@ -113,10 +123,10 @@ def churn(served: Served, cycles: int) -> None:
 
 
 @pytest.fixture
-def many_files() -> Iterator[None]:
+def many_files(load: Load) -> Iterator[None]:
     """This process may hold the flood's sockets: the soft RLIMIT_NOFILE raised to the hard one if need be."""
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    needed = FLOOD + 256
+    needed = load.flood + 256
     if soft != resource.RLIM_INFINITY and soft < needed:
         if hard != resource.RLIM_INFINITY and hard < needed:
             pytest.skip(f"RLIMIT_NOFILE hard limit {hard} is below the {needed} this test needs")
@@ -125,10 +135,11 @@ def many_files() -> Iterator[None]:
     resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
 
 
-def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_back(tmp_path, many_files):
+@pytest.mark.parametrize("load", LOADS)
+def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_back(tmp_path, load, many_files):
     with serve(tmp_path, "--modules", "1-30", "--max-connections", str(MAX_CONNECTIONS)) as served:
         _, hard = resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE)
-        resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE, (SERVER_FILES, hard))
+        resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE, (load.server_files, hard))
         good = Client(served.url, timeout=REPLY_TIMEOUT)  # before the flood: a low fd, which pyserial's select() needs
         try:
             # warm-up: every kind of work once, so the baseline holds what the server keeps for it
@@ -140,22 +151,22 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
             assert factory_reply(good, 1)
             baseline = served.rss_kib()
 
-            # 1,100 connections at once: the first 63 are served (the good client holds a slot), the rest closed at once
-            flood(served, FLOOD, good)
+            # the flood, all at once: the first 63 are served (the good client holds a slot), the rest closed at once
+            flood(served, load.flood, good)
             fresh = Client(served.url, timeout=REPLY_TIMEOUT)
             try:
                 assert factory_reply(fresh, 9)
             finally:
                 fresh.close()
 
-            # 100 MB of garbage in a few connections, and a crc16 frame that never ends
+            # garbage in a few connections, and a crc16 frame that never ends
             never_ends = connect(served)
             never_ends.sendall(b"\xa5\x05\xff" + bytes(100))  # announces 256 bytes, sends 100
             block = garbage_block(1)
 
             def send_garbage() -> None:
                 conn = connect(served)
-                for _ in range(GARBAGE // GARBAGE_CONNECTIONS // len(block)):
+                for _ in range(load.garbage // GARBAGE_CONNECTIONS // len(block)):
                     conn.sendall(block)
                 hang_up(conn)  # the server has read every byte
 
@@ -164,8 +175,8 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
             assert is_open(never_ends)
             hang_up(never_ends)
 
-            # 20,000 connect/close cycles
-            workers = [threading.Thread(target=churn, args=(served, CHURN // CHURN_WORKERS)) for _ in range(CHURN_WORKERS)]
+            # connect/close cycles
+            workers = [threading.Thread(target=churn, args=(served, load.churn // CHURN_WORKERS)) for _ in range(CHURN_WORKERS)]
             reads = while_running(workers, good)
             assert reads > 0
 
@@ -176,7 +187,7 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
             good.close()
         log = served.log.read_text()
     assert after - baseline <= RSS_SLACK_KIB, f"RSS {baseline} KiB after the warm-up, {after} KiB at the end"
-    assert log.count("refused") >= FLOOD - MAX_CONNECTIONS + 1
+    assert log.count("refused") >= load.flood - MAX_CONNECTIONS + 1
     assert "Traceback" not in log and "cannot accept" not in log  # it never ran out of file descriptors
 
 

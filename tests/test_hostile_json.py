@@ -96,7 +96,7 @@ def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsy
 
 IMAGES = {
     "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', 'a module image has no "system"'),
-    "a program that is a list": ('[{"bus": "booth-a", "address": 1, "system": %s, "programs": [[1]]}]' % json.dumps(DEFAULT_SYSTEM.to_json()),
+    "a program that is a list": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": [[1]]}}]',
                                  "a program is a list, not an object"),
     "programs that are an object": ('[{"bus": "booth-a", "address": 1, "system": {}, "programs": {}}]', "programs is an object, not a list of 64"),
     "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', 'the system block has no "S2"'),
@@ -251,7 +251,7 @@ def paths(value, at: tuple = ()) -> list[tuple]:
 OTHERS = [None, True, False, 0, -1, 2.5, 1e300, "", "x", "20", [], {}, [None], {"a": 1}, [[]], "ff" * 40]
 
 
-@settings(max_examples=200, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_path, capsys, data):
     """Drop a key or an item, or give a value of another type, anywhere: `show` and `apply --plan`
@@ -278,6 +278,13 @@ def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_pat
         one_line(shown, f"error: {path}: ")
     applied = run_cli(capsys, "apply", plant, "--plan", path, "--auto-approve")
     assert " — " in one_line(applied, "error: ")  # what is wrong — what to do (or what was expected)
+
+
+@pytest.mark.soak
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture])  # the soak profile's count
+@given(data=st.data())
+def test_a_plan_file_of_many_more_mangled_structures_is_refused_in_words(made_plan, tmp_path, capsys, data):
+    test_a_plan_file_of_mangled_structure_is_refused_in_words.hypothesis.inner_test(made_plan, tmp_path, capsys, data=data)
 
 
 # -- the emulator's state file ----------------------------------------------------------------------

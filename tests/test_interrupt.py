@@ -135,7 +135,7 @@ def test_a_wait_for_the_lock_stops_on_ctrl_c(tmp_path):
                 waiting = process.stderr.readline()
                 assert "waiting for the line lock held by" in waiting and f"(pid {os.getpid()}, apply since" in waiting
                 process.send_signal(signal.SIGINT)
-                out, err = process.communicate(timeout=60)
+                _, err = process.communicate(timeout=60)
         finally:
             del os.environ["PRC3CFG_LOCK_DIR"]
     assert process.returncode == 130

@@ -1,6 +1,7 @@
 """The acceptance race of the line lock (issue 9): two real `prc3cfg apply` processes started
 at the same instant on one line never both write — 200 races on one spelling of the line,
-200 on two spellings of one address (`socket://localhost:P` and `socket://127.0.0.1:P`).
+200 on two spellings of one address (`socket://localhost:P` and `socket://127.0.0.1:P`): the
+soak tier's count; the fast tier runs 4 of each (one wave).
 
 A line is an emulator server process (`prc3cfg emulator serve`); `LINES` of them are raced
 side by side. A driver process — this file run as a script — imports the CLI and has no
@@ -26,19 +27,21 @@ races under `soak`.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
 import sys
 import tempfile
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-ROUNDS = 200  # races per test
 LINES = 4  # raced side by side, each with its own emulator and lock
-WAVES = ROUNDS // LINES
+#: Races per test: a few in the fast tier, the acceptance's 200 in the soak tier.
+ROUNDS = [4, pytest.param(200, marks=pytest.mark.soak)]
 READS = {0x50, 0x51, 0x52}
 APPLY = ["apply", "--auto-approve", "--allow-axis-release"]
 
@@ -90,7 +93,7 @@ def _child(plant: Path, release: int) -> None:
         code = 0
     except SystemExit as exit:
         code = exit.code if isinstance(exit.code, int) else (0 if exit.code is None else 1)
-    except BaseException:
+    except BaseException:  # noqa: BLE001 — a forked child must reach os._exit, whatever it met
         traceback.print_exc()
     finally:
         sys.stdout.flush()
@@ -173,18 +176,25 @@ def lines_on_every_address(tmp_path_factory):
     yield from _servers(tmp_path_factory, "0.0.0.0")
 
 
-def _race(tmp_path: Path, lines: list[tuple[str, str]], first: int, waves: int = WAVES, own_tmpdir: bool = False) -> list[dict]:
+@pytest.fixture(scope="module")
+def waves() -> Iterator[int]:
+    """Wave numbers the lines have not raced yet: each wave's plants ask them for a new position."""
+    return itertools.count()
+
+
+def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iterator[int], own_tmpdir: bool = False) -> list[dict]:
     """Run the driver in a process of its own (no thread of pytest's, no BLAS threads); with
     `own_tmpdir` every apply has its own TMPDIR and the machine's lock folder."""
+    numbers = [next(waves) for _ in range(rounds // LINES)]
     env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
            **({"RACE_OWN_TMPDIR": "1"} if own_tmpdir else {})}  # fmt: skip
-    command = [sys.executable, __file__, str(tmp_path), str(first), json.dumps(lines), str(waves)]
+    command = [sys.executable, __file__, str(tmp_path), str(len(numbers)), str(numbers[0]), json.dumps(lines)]
     driver = subprocess.run(command, env=env, capture_output=True, text=True)
     assert driver.returncode == 0, driver.stderr
     return json.loads(driver.stdout)
 
 
-def _judge(results: list[dict], rounds: int = ROUNDS, refusal: str = "the line is locked by") -> None:
+def _judge(results: list[dict], rounds: int, refusal: str = "the line is locked by") -> None:
     assert len(results) == rounds
     both = [r for r in results if all(r["writes"])]
     assert not both, f"both applies wrote in {len(both)} of {rounds} races, e.g. {both[0]}"
@@ -198,36 +208,28 @@ def _judge(results: list[dict], rounds: int = ROUNDS, refusal: str = "the line i
         assert refused or idle, f"{r['race']}: the other apply neither was refused nor found nothing to do: {r}"
 
 
-def test_two_applies_on_one_line_never_both_write(tmp_path, lines):
-    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], first=0))
+@pytest.mark.parametrize("rounds", ROUNDS)
+def test_two_applies_on_one_line_never_both_write(tmp_path, lines, waves, rounds):
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], rounds, waves), rounds)
 
 
-def test_two_spellings_of_one_address_never_both_write(tmp_path, lines):
+@pytest.mark.parametrize("rounds", ROUNDS)
+def test_two_spellings_of_one_address_never_both_write(tmp_path, lines, waves, rounds):
     spellings = [(f"socket://localhost:{p}", f"socket://127.0.0.1:{p}") for p in lines]
-    _judge(_race(tmp_path, spellings, first=WAVES))
+    _judge(_race(tmp_path, spellings, rounds, waves), rounds)
 
 
-def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines):
+def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines, waves):
     """Two shells with another TMPDIR and no PRC3CFG_LOCK_DIR: both wrote in 4 of 5 races when the
     lock folder followed TMPDIR."""
-    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], first=3 * WAVES, waves=5, own_tmpdir=True),
-           rounds=5 * LINES)  # fmt: skip
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], 5 * LINES, waves, own_tmpdir=True), 5 * LINES)
 
 
-def _two_addresses(tmp_path: Path, ports: list[int], waves: int) -> None:
-    spellings = [(f"socket://127.0.0.1:{p}", f"socket://127.0.0.2:{p}") for p in ports]
-    _judge(_race(tmp_path, spellings, first=2 * WAVES, waves=waves), rounds=waves * LINES,
-           refusal="the gateway is busy: another client holds the line")  # fmt: skip
+@pytest.mark.parametrize("rounds", [5 * LINES, pytest.param(50 * LINES, marks=pytest.mark.soak)])
+def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_address, waves, rounds):
+    spellings = [(f"socket://127.0.0.1:{p}", f"socket://127.0.0.2:{p}") for p in lines_on_every_address]
+    _judge(_race(tmp_path, spellings, rounds, waves), rounds, refusal="the gateway is busy: another client holds the line")
 
 
-def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_address):
-    _two_addresses(tmp_path, lines_on_every_address, waves=5)
-
-
-@pytest.mark.soak
-def test_two_addresses_of_one_gateway_never_both_write_soak(tmp_path, lines_on_every_address):
-    _two_addresses(tmp_path, lines_on_every_address, waves=WAVES)
-
-
-if __name__ == "__main__":  # the driver: WORKDIR FIRST_WAVE LINES (JSON: [[port, port], …]) WAVES
-    json.dump(drive(json.loads(sys.argv[3]), int(sys.argv[4]), int(sys.argv[2]), Path(sys.argv[1])), sys.stdout)
+if __name__ == "__main__":  # the driver: WORKDIR WAVES FIRST_WAVE LINES (JSON: [[port, port], …])
+    json.dump(drive(json.loads(sys.argv[4]), int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[1])), sys.stdout)

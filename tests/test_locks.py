@@ -131,7 +131,8 @@ def test_waiting_is_told_once_naming_the_holder_and_the_lock_follows_its_release
 def test_a_wait_that_runs_out_is_refused_and_told_once():
     told = []
     with held(KEY):
-        with pytest.raises(LineBusy, match=r"^bus a: the line is locked by .* after waiting 0.3 s — wait for it to finish, or pass a longer --lock-timeout$"):
+        refusal = r"^bus a: the line is locked by .* after waiting 0.3 s — wait for it to finish, or pass a longer --lock-timeout$"
+        with pytest.raises(LineBusy, match=refusal):
             with line_lock((KEY,), "bus a", timeout=0.3, waiting=told.append):
                 pass
     assert len(told) == 1

@@ -23,6 +23,7 @@ The known chain (issue 13's acceptance case), worked out by hand with S6 = 1.2 m
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import replace
 from fractions import Fraction
@@ -222,7 +223,7 @@ def test_the_motion_keeps_to_the_axis_and_to_the_programs(case):
     for output in ("F1", "F2"):
         intervals = [i for i in motion.outputs if i.output == output]
         assert all(0 <= i.start < i.end <= motion.duration for i in intervals)
-        assert all(a.end <= b.start for a, b in zip(intervals, intervals[1:]))
+        assert all(a.end <= b.start for a, b in itertools.pairwise(intervals))
     if loop:
         # in production the loop comes round from the last P: a pass that starts there takes the cycle time
         from_last = image({n: img.program(n) for n in numbers}, **{**img.system.to_json(), "S2": img.program(numbers[-1]).P})

@@ -1,9 +1,10 @@
 """The folders are the layers, and the pure core imports no `serial` and no `socket`
 (style.md §"A pure core, a thin shell").
 
-Each layer imports only the layers below it (read from the source). Each core module is imported in a fresh interpreter whose import system refuses `serial` and
-`socket` (and their submodules), so a core module that reaches for the outside — directly or
-through anything it imports — fails here.
+Each layer imports only the layers below it (read from the source). Each core module is
+imported in a fresh interpreter whose import system refuses `serial` and `socket` (and their
+submodules), so a core module that reaches for the outside — directly or through anything it
+imports — fails here.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ Arguments, prompts and output only: the work is `prc3cfg.api`'s.
 from __future__ import annotations
 
 import sys
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -31,7 +31,7 @@ from prc3cfg.cli.plan_commands import EXIT_CHANGES, ApproveOpt
 from prc3cfg.errors import UserError
 
 ProgramOpt = Annotated[
-    Optional[list[int]],
+    list[int] | None,
     typer.Option("--program", min=1, max=64, help="Only this program (number); repeatable. System parameters are then left alone."),
 ]
 CheckOpt = Annotated[bool, typer.Option("--check", help="Show the diff; exit 2 if there is drift to adopt, 0 if none; write nothing.")]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -97,7 +97,7 @@ def import_plant(
     retries: RetriesOpt = 5,
     plant_name: Annotated[str, typer.Option(help="The plant's name in the file.")] = "imported",
     bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
-    modules: Annotated[Optional[str], typer.Option(callback=addresses_option, help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
+    modules: Annotated[str | None, typer.Option(callback=addresses_option, help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
 ) -> None:

@@ -11,7 +11,7 @@ import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Optional
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -46,7 +46,7 @@ def one_of(allowed: tuple) -> Callable[[Any], Any]:
     return check
 
 
-class Verify(str, enum.Enum):
+class Verify(enum.StrEnum):
     """`--verify`: the values of `prc3cfg.shell.apply.Verify` (checked by the same test)."""
 
     FLOOR = "floor"
@@ -142,14 +142,14 @@ def write_output(path: Path, text: str, option: str) -> None:
         raise UserError(f"{option} {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
 
 
-def _output_option(option: str) -> Callable[[Optional[Path]], Optional[Path]]:
+def _output_option(option: str) -> Callable[[Path | None], Path | None]:
     return lambda value: check_output(value, option)
 
 
 PlantArg = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
-ModuleOpt = Annotated[Optional[list[str]], typer.Option("--module", help="Only this module (name); repeatable.")]
+ModuleOpt = Annotated[list[str] | None, typer.Option("--module", help="Only this module (name); repeatable.")]
 TraceOpt = Annotated[
-    Optional[Path],
+    Path | None,
     typer.Option(callback=_output_option("--trace"), help="Write every frame, both directions, with timestamps, in hex."),
 ]
 RetriesOpt = Annotated[int, typer.Option(min=0, max=100, help="Retries of a lost or damaged reply, per message.")]

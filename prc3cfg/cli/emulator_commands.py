@@ -6,7 +6,7 @@ import logging
 import signal
 import threading
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -37,12 +37,12 @@ def listen_option(value: str | None) -> str | None:
 
 @emulator_app.command("serve")
 def serve(
-    listen: Annotated[Optional[str], typer.Option(callback=listen_option, help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
+    listen: Annotated[str | None, typer.Option(callback=listen_option, help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
-    state: Annotated[Optional[Path], typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
-    modules: Annotated[Optional[str], typer.Option(callback=addresses_option, help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
+    state: Annotated[Path | None, typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
+    modules: Annotated[str | None, typer.Option(callback=addresses_option, help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
-    line_speed: Annotated[Optional[int], typer.Option("--line-speed", min=1, max=10_000_000, help="Make every exchange take as long as on a line of this baud rate.")] = None,
+    line_speed: Annotated[int | None, typer.Option("--line-speed", min=1, max=10_000_000, help="Make every exchange take as long as on a line of this baud rate.")] = None,
     parity: Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs).")] = "even",
     data_bits: Annotated[int, typer.Option(callback=one_of(DATA_BITS), help=" | ".join(map(str, DATA_BITS)))] = 8,
     stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), help=" | ".join(map(str, STOP_BITS)))] = 1,
@@ -50,9 +50,9 @@ def serve(
     turnaround: Annotated[float, typer.Option(min=0, max=10, help="Module turnaround, s (with --line-speed).")] = 0.010,
     drop_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges with one bit flipped.")] = 0.0,
-    seed: Annotated[Optional[int], typer.Option(help="Seed for fault injection.")] = None,
-    max_connections: Annotated[Optional[int], typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
-    idle_timeout: Annotated[Optional[float], typer.Option("--idle-timeout", min=0.001, max=10_000_000, help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
+    seed: Annotated[int | None, typer.Option(help="Seed for fault injection.")] = None,
+    max_connections: Annotated[int | None, typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
+    idle_timeout: Annotated[float | None, typer.Option("--idle-timeout", min=0.001, max=10_000_000, help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
     """Run a PRC 3 bus emulator until SIGINT or SIGTERM (exit 0).

@@ -6,7 +6,7 @@ Arguments, prompts and output only: the work is `prc3cfg.api`'s.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -55,15 +55,15 @@ def read(
 def plan(
     ctx: typer.Context,
     plant: PlantArg,
-    out: Annotated[Optional[Path], typer.Option(callback=lambda v: check_output(v, "--out"), help="Write the plan file (prc3cfg-plan/1).")] = None,
-    actual: Annotated[Optional[Path], typer.Option(help="Plan against module images saved by `read --json`.")] = None,
+    out: Annotated[Path | None, typer.Option(callback=lambda v: check_output(v, "--out"), help="Write the plan file (prc3cfg-plan/1).")] = None,
+    actual: Annotated[Path | None, typer.Option(help="Plan against module images saved by `read --json`.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan as markdown (PR comments).")] = False,
     max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
-    plot: Annotated[Optional[Path], typer.Option("--plot", help="With one --module: draw its chains before (dashed) and after the plan to this .svg or .png file.")] = None,
-    previous: Annotated[Optional[Path], typer.Option("--previous", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", help="With one --module: draw its chains before (dashed) and after the plan to this .svg or .png file.")] = None,
+    previous: Annotated[Path | None, typer.Option("--previous", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
@@ -114,8 +114,8 @@ VerifyOpt = Annotated[Verify, typer.Option(help="floor: read back what the steps
 @app.command()
 def apply(
     ctx: typer.Context,
-    plant: Annotated[Optional[Path], typer.Argument(help="The plant file (YAML).", show_default=False)] = None,
-    plan_file: Annotated[Optional[Path], typer.Option("--plan", help="Apply this plan file as reviewed (refused if stale or edited).")] = None,
+    plant: Annotated[Path | None, typer.Argument(help="The plant file (YAML).", show_default=False)] = None,
+    plan_file: Annotated[Path | None, typer.Option("--plan", help="Apply this plan file as reviewed (refused if stale or edited).")] = None,
     auto_approve: ApproveOpt = False,
     allow_axis_release: AxesOpt = False,
     lock_timeout: LockOpt = 0.0,

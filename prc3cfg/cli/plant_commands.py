@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Optional
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -49,13 +49,13 @@ def validate(plant: PlantPath) -> None:
 @app.command()
 def show(
     plant: Annotated[Path, typer.Argument(help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
-    module: Annotated[Optional[str], typer.Option("--module", "-m", help="The module to show, by name.")] = None,
+    module: Annotated[str | None, typer.Option("--module", "-m", help="The module to show, by name.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="A plan file: print it as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="A plan file: print it as markdown (PR comments).")] = False,
     max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters.")] = 65_000,
-    plot: Annotated[Optional[Path], typer.Option(
+    plot: Annotated[Path | None, typer.Option(
         help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
-    actual: Annotated[Optional[Path], typer.Option(
+    actual: Annotated[Path | None, typer.Option(
         help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
 ) -> None:
     """Print a module's effective configuration and where each value came from, or draw its chains;
@@ -181,7 +181,6 @@ def _plot_module(plant: Plant, module: Module, path: Path, fmt: str, actual: Pat
     """Draw the module's chains as the plant file says them; with `actual`, what it holds now as
     before and what the plan leaves it holding as after (`prc3cfg.api.picture`)."""
     from prc3cfg import api
-
     from prc3cfg.cli.output import write_picture
 
     images = None if actual is None else api.load_images(actual, plant, [module.name])

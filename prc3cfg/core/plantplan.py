@@ -154,12 +154,12 @@ class PlantPlan:
                     for step in self.broadcasts(bus)
                 ]} if self.broadcasts(bus) else {})
                 for bus, modules in self.buses().items()
-            ],  # fmt: skip
+            ],
             "estimated_bus_time_s": round(self.bus_time, 4),
             "naive_bus_time_s": round(self.naive_bus_time, 4),
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
-        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})
+        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,9 +23,9 @@ Its failures are `PydanticCustomError`s whose type names the problem (`not_numbe
 port) and whose context carries the words; `messages` turns them into sentences.
 
 Decisions about the bus (link.md): `port` any non-empty text (a device path, a pyserial
-URL, `emulator://NAME`) without control characters (a NUL would cut a device path), except that a `socket://` or `rfc2217://` URL must end its host in a
-TCP port 1..65535 (pyserial would fail later, or compare None with 0), and an emulator name
-must be plain — letters, digits, `-`, `_`, `.` not first — because it names the file
+URL, `emulator://NAME`) without control characters (a NUL would cut a device path), except
+that a `socket://` or `rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial
+would fail later, or compare None with 0), and an emulator name must be plain — letters, digits, `-`, `_`, `.` not first — because it names the file
 `.prc3cfg/emulators/NAME.json` (`emulator://../../etc` would write elsewhere); the schema's
 `PORT_PATTERN` says the same, loosely enough never to refuse a port the validator takes.
 `baud` any positive whole number (with a gateway, `rules` asks the Open Driver's own list);

@@ -11,6 +11,7 @@ from __future__ import annotations
 import random
 from dataclasses import replace
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from planner_helpers import FRAMINGS, check_plan, line
@@ -136,10 +137,17 @@ def scenarios(draw: st.DrawFn) -> tuple[ModuleImage, ModuleImage, dict[int, Prog
     return actual, desired, unread, framing, turnaround
 
 
-@settings(max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(scenarios())
 def test_plan_reaches_the_desired_image(scenario) -> None:
     actual, desired, unread, framing, turnaround = scenario
     cost = line(framing, turnaround)
     plan = plan_module(actual, desired, cost)
     check_plan(plan, actual, desired, cost, unread)
+
+
+@pytest.mark.soak
+@settings(suppress_health_check=[HealthCheck.too_slow])  # the soak profile's 2,000 examples
+@given(scenarios())
+def test_plan_reaches_the_desired_image_in_many_more_scenarios(scenario) -> None:
+    test_plan_reaches_the_desired_image.hypothesis.inner_test(scenario)

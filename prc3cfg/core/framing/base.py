@@ -137,7 +137,7 @@ class Decoder(abc.ABC):
             return float("inf")
         return now - self._last - n_bytes * self.line.char_time
 
-    def _emit(self, address: int, message: bytes) -> None:
+    def _emit(self, address: int, message: bytes | bytearray) -> None:
         self._events.append(Frame(self.direction, address, bytes(message)))
 
     def _discard(self, reason: str, data: bytes | bytearray) -> None:

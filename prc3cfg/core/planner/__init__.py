@@ -110,4 +110,7 @@ def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) ->
     return sum(cost.message_time(desired.address, m) for m in messages)
 
 
-__all__ = ["ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "plan_from_steps", "plan_module", "run_steps", "summarise"]
+__all__ = [
+    "ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "plan_from_steps", "plan_module", "run_steps",
+    "summarise",
+]  # fmt: skip

@@ -425,10 +425,8 @@ class Emulator:
     def close(self) -> None:
         self._closing.set()
         for close in reversed(self._closers):
-            try:
+            with contextlib.suppress(OSError):
                 close()
-            except OSError:
-                pass
         with self._guard:
             threads = list(self._threads)
         for thread in threads:

@@ -13,7 +13,7 @@ One line per event, tab-separated, so it greps and diffs well:
 from __future__ import annotations
 
 import threading
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import TextIO
 
 
@@ -23,7 +23,7 @@ class Trace:
         self._lock = threading.Lock()
 
     def write(self, bus: str, direction: str, text: str) -> None:
-        stamp = datetime.now(timezone.utc).isoformat(timespec="microseconds")
+        stamp = datetime.now(UTC).isoformat(timespec="microseconds")
         with self._lock:
             self._stream.write(f"{stamp}\t{bus}\t{direction}\t{text}\n")
             self._stream.flush()
