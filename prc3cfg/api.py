@@ -56,13 +56,13 @@ from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import module_entry, plant_yaml
 from prc3cfg.plant.messages import port_error
+from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
-from prc3cfg.shell import releases
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, save_applied
 

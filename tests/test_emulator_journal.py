@@ -5,7 +5,6 @@ acknowledged — checked by SIGKILL of a real `prc3cfg emulator serve` at random
 from __future__ import annotations
 
 import errno
-import hashlib
 import json
 import os
 import random
@@ -325,7 +324,8 @@ def test_an_emulator_owns_its_state_file_while_it_runs(tmp_path):
     for refused in (apply, second):
         assert refused.returncode == 1 and refused.stdout in ("", None), refused
         assert refused.stderr.count("\n") == 1, refused.stderr
-        assert refused.stderr.startswith(f"error: {state}: the state file is in use by another emulator (pid {served.process.pid}, since 20"), refused.stderr
+        in_use = f"error: {state}: the state file is in use by another emulator (pid {served.process.pid}, since 20"
+        assert refused.stderr.startswith(in_use), refused.stderr
     assert "Apply complete" in subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve", "--allow-axis-release"],
                                               capture_output=True, text=True).stdout  # fmt: skip
     assert written(state)[(1, 1)] == 200
@@ -365,7 +365,8 @@ DAMAGE = {  # name: (what is done to the state file's text, to the journal's tex
     "state: deleted": ("delete", None, "refuses"),
     "state: emptied": (lambda t: "", None, "refuses"),
     "state: another emulator's": (lambda t: json.dumps({**json.loads(t), "generation": "another"}), None, "refuses"),
-    "state: the extension keys dropped by a tool": (lambda t: json.dumps({k: v for k, v in json.loads(t).items() if k in ("format", "modules")}), None, "refuses"),
+    "state: the extension keys dropped by a tool": (
+        lambda t: json.dumps({k: v for k, v in json.loads(t).items() if k in ("format", "modules")}), None, "refuses"),
     "state: took the journal in, killed before a fresh one": ("compacted", None, "replays"),
 }
 

@@ -263,7 +263,8 @@ def test_one_client_per_line_by_default_and_the_next_is_told_the_gateway_is_busy
                 assert second.recv(1) == b""  # closed at once
             result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True, text=True)
             assert result.returncode == 1, result
-            assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: bus booth-a: the gateway is busy: another client holds the line"), result.stderr
+            busy = "error: bus booth-a: the gateway is busy: another client holds the line"
+            assert result.stderr.count("\n") == 1 and result.stderr.startswith(busy), result.stderr
             hang_up(holder)
         result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True, text=True)
         assert result.returncode == 0, result.stderr

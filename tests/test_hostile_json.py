@@ -292,7 +292,8 @@ def test_a_plan_file_of_many_more_mangled_structures_is_refused_in_words(made_pl
 
 def test_a_state_file_in_a_missing_folder_is_refused_before_the_emulator_starts(tmp_path, capsys):
     state = tmp_path / "new" / "a" / "b.json"
-    result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "192.0.2.1:7001")  # an address of no host here: refused if it came first
+    # an address of no host here: refused if it came first
+    result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "192.0.2.1:7001")
     assert (result.code, result.err) == (1, f"error: --state {state}: the folder {tmp_path}/new/a does not exist — create it first\n")
     assert not (tmp_path / "new").exists()
 
@@ -300,5 +301,6 @@ def test_a_state_file_in_a_missing_folder_is_refused_before_the_emulator_starts(
 def test_a_state_file_whose_folder_is_a_file_is_refused(tmp_path, capsys):
     (tmp_path / "file").write_text("")
     state = tmp_path / "file" / "b.json"
-    result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "192.0.2.1:7001")  # an address of no host here: refused if it came first
+    # an address of no host here: refused if it came first
+    result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "192.0.2.1:7001")
     assert (result.code, result.err) == (1, f"error: --state {state}: {tmp_path}/file is not a folder — name a state file in a folder\n")

@@ -144,7 +144,8 @@ def report(result: ApplyResult) -> None:
             print(f"Bus {proof.bus}: broadcast after {render.address_ranges(proof.silent)} answered no probe — only the plan's modules heard it")
     for record in result.earlier:
         print(f"⚠ Travel to reference point required before production on: {record.bus}/{record.name} (possibly: an "
-              f"earlier apply, pid {record.pid} at {record.time}, sent a 10h/20h and ended before its account; journal {record.journal})")  # fmt: skip
+              f"earlier prc3cfg {record.command}, pid {record.pid} at {record.time}, sent a 10h/20h and ended before its account"
+              + (f"; journal {record.journal})" if record.journal else ")"))  # fmt: skip
     if result.runs:
         print(f"Journal: {result.journal}", flush=True)
     result.told()

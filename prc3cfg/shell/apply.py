@@ -31,6 +31,7 @@ Gating, snapshots and locks are the caller's.
 
 from __future__ import annotations
 
+import contextlib
 import enum
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -321,10 +322,8 @@ def stopped(link: Link, runs: list[ModuleRun], error: PossibleWrite) -> None:
     for run in runs:
         if run.address == error.address:
             run.possibly_written = True
-            try:
+            with contextlib.suppress(LinkError, UserError):  # not read back: `released` says "possibly"
                 run.final = replace(run.final or run.before, system=read_system(link, run.address, name=run.name))
-            except (LinkError, UserError):
-                pass  # not read back: `released` says "possibly"
         if not run.verified:
             run.refused, run.failure = True, str(error)
 

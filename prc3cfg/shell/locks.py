@@ -35,7 +35,7 @@ import socket
 import stat
 import time
 from collections.abc import Callable, Iterable, Iterator
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -161,7 +161,8 @@ def _open(path: Path, description: str) -> tuple[int, bool]:
         except PermissionError:
             return os.open(path, os.O_RDONLY | _OPEN_FLAGS), False
     except OSError as error:
-        raise UserError(f"{description}: cannot open the line lock {path} ({error.strerror}) — check the lock directory or set PRC3CFG_LOCK_DIR") from None
+        raise UserError(f"{description}: cannot open the line lock {path} ({error.strerror}) — "
+                        "check the lock directory or set PRC3CFG_LOCK_DIR") from None
 
 
 def _user() -> str:
@@ -248,7 +249,7 @@ def line_lock(
         "holder": f"{_user()}@{socket.gethostname()}",
         "host": socket.gethostname(),
         "pid": os.getpid(),
-        "since": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "since": datetime.now(UTC).isoformat(timespec="seconds"),
         "purpose": purpose,
         "line": description,
     }).encode()  # fmt: skip

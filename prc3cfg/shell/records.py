@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import threading
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -32,7 +32,7 @@ SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
 
 
 def _stamp() -> str:
-    return datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
+    return datetime.now(UTC).strftime("%Y%m%dT%H%M%S.%fZ")
 
 
 def records_dir(plant_path: Path, kind: str) -> Path:
@@ -129,7 +129,7 @@ class Journal:
         self._lock = threading.Lock()
 
     def record(self, event: str, **fields: Any) -> None:
-        line = json.dumps({"time": datetime.now(timezone.utc).isoformat(), "event": event, **fields})
+        line = json.dumps({"time": datetime.now(UTC).isoformat(), "event": event, **fields})
         with self._lock:
             if self._handle is None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -26,7 +26,7 @@ import os
 import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 from prc3cfg.errors import UserError
@@ -144,7 +144,7 @@ class Releases:
         with self._lock:
             if (kind, bus, address) in self._recorded:
                 return
-            stamp = datetime.now(timezone.utc)
+            stamp = datetime.now(UTC)
             if self._path is None:
                 self._path = _folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
             line = json.dumps({"kind": kind, "keys": list(keys), "bus": bus, "address": address, "name": name,
@@ -172,7 +172,7 @@ def cleared(records: Iterable[Pending]) -> None:
     for record in records:
         gone.setdefault(record.file, set()).add((record.kind, record.bus, record.address))
     for path, which in gone.items():
-        _keep(path, lambda entry: (entry.get("kind", RELEASE), entry.get("bus"), entry.get("address")) not in which)
+        _keep(path, lambda entry, which=which: (entry.get("kind", RELEASE), entry.get("bus"), entry.get("address")) not in which)
 
 
 def _keep(path: Path, keep: Callable[[dict], bool]) -> None:

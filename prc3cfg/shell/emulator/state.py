@@ -70,9 +70,9 @@ import logging
 import os
 import stat
 import uuid
-from datetime import datetime, timezone
 from collections.abc import Mapping
 from dataclasses import replace
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -160,7 +160,8 @@ def _check_folder(path: Path) -> None:
     except (FileNotFoundError, NotADirectoryError):
         raise UserError(f"--state {path}: the folder {folder} does not exist — create it first") from None
     except OSError as error:
-        raise UserError(f"--state {path}: cannot reach the folder {folder} ({error.strerror}) — name a state file in a folder you can write to") from None
+        raise UserError(f"--state {path}: cannot reach the folder {folder} ({error.strerror}) — "
+                        "name a state file in a folder you can write to") from None
     if not stat.S_ISDIR(found.st_mode):
         raise UserError(f"--state {path}: {folder} is not a folder — name a state file in a folder")
 
@@ -361,7 +362,7 @@ class Store:
                 os.close(fd)
             raise UserError(f"{self.path}: the state file is in use by another emulator ({holder}) — stop that "
                             "emulator first, or give this one another state file") from None  # fmt: skip
-        record = {"pid": os.getpid(), "since": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+        record = {"pid": os.getpid(), "since": datetime.now(UTC).isoformat(timespec="seconds")}
         with contextlib.suppress(OSError):  # the details only name the owner to a second emulator
             os.ftruncate(fd, 0)
             os.pwrite(fd, json.dumps(record).encode(), 0)
