@@ -232,6 +232,58 @@ def test_a_file_with_crlf_line_ends_and_no_final_newline_keeps_both():
     assert adoption.text == text + "\r\n        programs:\r\n          1: {position: 0.250}"
 
 
+#: A plant file with what editors write into one: non-ASCII names before a changed value on its
+#: line, tabs in comments; each `FORMS` case saves it another way (a test of each splice's offsets).
+ODD = "\n".join([
+    "plant: Anlage Süd", "profiles:", "  r:\t# a tab\tbefore and inside a comment", "    programs:",
+    "      1: {position: 0.300, speed: 0.100}\t# 塗装 läuft", "buses:", "  - name: Kabine-Süd", "    port: emulator://tiny",
+    "    modules:", "      - {address: 1, name: 塗装, profiles: r, programs: {2: {position: 0.350, speed: 0.100}}}  # 塗装",
+    "      - address: 2", '        name: "Kabine Süd 2"\t# über', "        profiles: r", "",
+])  # fmt: skip
+ADOPTED = ODD.replace("{2: {position: 0.350,", "{2: {position: 0.320,") + "        programs:\n          1: {position: 0.250}\n"
+FORMS = {
+    "as written": lambda text: text,
+    "byte order mark": lambda text: "\ufeff" + text,
+    "crlf": lambda text: text.replace("\n", "\r\n"),
+    "byte order mark and crlf": lambda text: "\ufeff" + text.replace("\n", "\r\n"),
+    "no final newline": lambda text: text.removesuffix("\n"),
+}
+
+
+def taught_odd(text: str, tmp_path: Path) -> tuple[Path, dict]:
+    """`text` saved as a plant file, and its modules as taught: 塗装's program 2 at 0.320 m, module 2's program 1 at 0.250 m."""
+    path = tmp_path / "plant.yaml"
+    path.write_bytes(text.encode())
+    plant = load_plant(path)
+    images = {(bus.name, m.address): m.desired_image() for bus, m in plant.modules()}
+    for address, number, position in ((1, 2, 320), (2, 1, 250)):
+        image = images[("Kabine-Süd", address)]
+        images[("Kabine-Süd", address)] = image.with_programs({number: replace(image.program(number), P=position)})
+    return path, images
+
+
+@pytest.mark.parametrize("form", FORMS)
+def test_every_splice_lands_in_files_saved_by_any_editor(tmp_path, form):
+    path, images = taught_odd(FORMS[form](ODD), tmp_path)
+    adoption = adopt.adopt(load_plant(path), images, path.read_bytes().decode())
+    assert adoption.text == FORMS[form](ADOPTED)
+    path.write_bytes(adoption.text.encode())
+    assert not api.plan(load_plant(path), images=images).changes
+
+
+def test_a_rewrite_that_does_not_describe_the_modules_is_refused_and_nothing_is_written(tmp_path, monkeypatch, capsys):
+    path, images = taught_odd(ODD, tmp_path)
+    plant = load_plant(path)
+    monkeypatch.setattr(adopt._Rewrite, "apply", lambda self, wanted: self.text.replace("0.350", "0.380"))  # a splice gone wrong
+    with pytest.raises(adopt.AdoptRefused) as refused:
+        adopt.adopt(plant, images, ODD)
+    assert str(refused.value) == (
+        f"{path}: the rewritten plant file would not describe what the modules hold — bus Kabine-Süd, module 1 (塗装): "
+        "program 2 position 0.320 m → 0.380 m (held → written); nothing was adopted: this is a bug in prc3cfg, "
+        "please report it with the plant file")
+    assert path.read_text() == ODD
+
+
 @st.composite
 def teach_ins(draw):
     """Positions taught in on the demo plant's modules, as applied: (module index, program, mm)."""

@@ -220,10 +220,10 @@ class Document:
         return reader.positions
 
 
-def read_document(path: Path) -> Document:
-    """Read and parse `path`; `PlantError` if it is not a YAML mapping at all."""
+def read_document(path: Path, data: bytes | None = None) -> Document:
+    """Read and parse `path` — or `data`, as if `path` held it; `PlantError` if it is not a YAML mapping at all."""
     name = str(path)
-    data = _read_bytes(path, name)
+    data = _read_bytes(path, name) if data is None else data
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
