@@ -58,7 +58,7 @@ from prc3cfg.plant.importer import module_entry, plant_yaml
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
+from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Link, LinkError, PortFailed, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
@@ -801,16 +801,15 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
 
 def write_adoption(adoption: Adoption) -> None:
     """Write the adopted plant file in place of the one read, atomically and with its permissions
-    (through a link, to the file linked to) — refused if the file changed since it was read."""
-    if _plant_text(adoption.path) != adoption.before:
-        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+    (through a link, to the file linked to) — refused if the file changed since it was read, which is
+    checked once the new text is on disk, around the rename (`replace_unless_changed`)."""
     target = adoption.path.resolve()
     try:
-        mode = stat.S_IMODE(os.stat(target).st_mode)
-        write_atomically(target, adoption.after)
-        os.chmod(target, mode)
+        written = replace_unless_changed(target, adoption.after, adoption.before.encode("utf-8"), stat.S_IMODE(os.stat(target).st_mode))
     except OSError as error:
         raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+    if not written:
+        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
 
 
 def _plant_text(path: Path) -> str:

@@ -16,7 +16,8 @@ Python's recursion. Its size is bounded by `JSON_LIMIT`.
 `write_atomically` writes a temporary file beside the target, flushes it to disk, renames
 it over the target and flushes the directory: a process killed at any point leaves either
 the previous file (or none) or the complete new one, never a truncated one. Snapshots,
-plan files (`plan --out`) and the emulator's state file are written this way.
+plan files (`plan --out`) and the emulator's state file are written this way; adopted plant
+files by `replace_unless_changed`, which keeps a file another writer (an editor) saved meanwhile.
 """
 
 from __future__ import annotations
@@ -137,18 +138,66 @@ def _size(limit: int) -> str:
 def write_atomically(path: Path, text: str) -> None:
     """Replace `path` with `text` atomically (temporary file, fsync, rename, fsync of the folder)."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _written_beside(path, text, None)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    _sync_folder(path.parent)
+
+
+def replace_unless_changed(path: Path, text: str, expected: bytes, mode: int) -> bool:
+    """Replace `path` with `text` (permissions `mode`) atomically, as `write_atomically` does, unless
+    `path` no longer holds `expected`: then False, and `path` is as the other writer left it.
+
+    Checked as late as can be: once `text` is on disk, the file is linked to a second name and
+    compared, then the new file renamed over it, then the file it replaced compared once more through
+    that name — a save in place that came between the two puts that file back. What this cannot see
+    (README, adopt): a save that renames its own file into place between the first comparison and the
+    rename, and one that keeps writing into the file it opened before the rename after the second.
+    """
+    tmp = _written_beside(path, text, mode)
+    was = path.with_name(f"{tmp.name.removesuffix('.tmp')}.was")
+    try:
+        try:
+            os.link(path, was)
+            linked = True
+        except OSError:  # a file system without hard links: compared before the rename only
+            linked = False
+        seen = was if linked else path
+        same = os.stat(path).st_ino == os.stat(seen).st_ino and seen.read_bytes() == expected
+        if same:
+            os.replace(tmp, path)
+            if linked and was.read_bytes() != expected:  # written into in place around the rename: it goes back
+                os.replace(was, path)
+                same = False
+    finally:
+        tmp.unlink(missing_ok=True)
+        was.unlink(missing_ok=True)
+    _sync_folder(path.parent)
+    return same
+
+
+def _written_beside(path: Path, text: str, mode: int | None) -> Path:
+    """A temporary file beside `path` holding `text` (permissions `mode`, if given), on disk."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
             handle.flush()
+            if mode is not None:
+                os.fchmod(handle.fileno(), mode)
             os.fsync(handle.fileno())
-        os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    folder = os.open(path.parent, os.O_RDONLY)
+    return Path(tmp)
+
+
+def _sync_folder(folder: Path) -> None:
+    handle = os.open(folder, os.O_RDONLY)
     try:
-        os.fsync(folder)
+        os.fsync(handle)
     finally:
-        os.close(folder)
+        os.close(handle)
