@@ -465,7 +465,6 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     checkout). What is applied is then that plan.
     """
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
-    chosen = []
     for entry in planned.modules:
         where = f"bus {entry.bus}, module {entry.address}"
         if (entry.bus, entry.address) not in modules:
@@ -478,8 +477,8 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                 f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
                 "(teach-in or another apply?); nothing was written — plan again"
             )
-        chosen.append((bus, module))
-    ours = make_plan(plant, chosen, images)
+    _in_plant_order(path, planned, [(bus.name, m.address) for bus, m in pairs])
+    ours = make_plan(plant, [modules[(entry.bus, entry.address)] for entry in planned.modules], images)
     for entry, change in zip(planned.modules, ours.modules):
         edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
                   "after it was made; nothing was written: plan again and review it")  # fmt: skip
@@ -503,6 +502,18 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
     return ours
+
+
+def _in_plant_order(path: Path, planned: PlanFile, order: list[Key]) -> None:
+    """Refused unless the plan file lists its modules in the plant file's order, as prc3cfg writes
+    them: they are written in the order listed."""
+    place = {key: index for index, key in enumerate(order)}
+    entries = planned.modules
+    for first, then in zip(entries, entries[1:]):
+        if place[(then.bus, then.address)] < place[(first.bus, first.address)]:
+            raise UserError(f"{path}: bus {first.bus}, module {first.address} ({first.name}) is listed before bus {then.bus}, "
+                            f"module {then.address} ({then.name}), where prc3cfg writes the modules in the plant file's "
+                            "order — the plan file was changed after it was made; nothing was written: plan again and review it")  # fmt: skip
 
 
 def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:

@@ -62,6 +62,37 @@ def test_a_plan_file_alone_finds_its_plant(plant, capsys, tmp_path):
     assert result.code == 0, result.err
 
 
+def test_a_plan_file_with_a_key_given_twice_is_refused_naming_it(plant, capsys, tmp_path):
+    """JSON keeps the last of two keys: a reviewer reading the first "steps" would approve others."""
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    text = (tmp_path / "plan.json").read_text()
+    (tmp_path / "plan.json").write_text(text.replace('"steps": [', '"steps": [], "steps": [', 1))
+    before = plant.images()
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert (result.code, result.problems) == (1, [
+        f'error: {tmp_path / "plan.json"}: the key "steps" is given twice in one object — make the plan again'])
+    assert plant.images() == before
+
+
+def test_a_plan_file_with_its_modules_reordered_is_refused_as_edited(plant, capsys, tmp_path):
+    """The order of the modules is the order of the writes: a plan file is applied in the order
+    prc3cfg wrote it (the plant file's), and one listing them otherwise was edited."""
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    document = json.loads((tmp_path / "plan.json").read_text())
+    modules = document["buses"][0]["modules"]
+    modules[0], modules[1] = modules[1], modules[0]
+    releasing = set(document["axis_releases"])  # listed in the modules' order: edited alike
+    document["axis_releases"] = [n for n in (f"{b['name']}/{m['name']}" for b in document["buses"] for m in b["modules"]) if n in releasing]
+    (tmp_path / "plan.json").write_text(json.dumps(document, indent=1))
+    before = plant.images()
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert (result.code, result.problems) == (1, [
+        f"error: {tmp_path / 'plan.json'}: bus booth-a, module 2 (booth-a-right) is listed before bus booth-a, module 1 "
+        "(booth-a-left), where prc3cfg writes the modules in the plant file's order — the plan file was changed after it "
+        "was made; nothing was written: plan again and review it"])  # fmt: skip
+    assert plant.images() == before
+
+
 def test_stale_plan_refused_after_teach_in(plant, capsys, tmp_path):
     run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     plant.emulators["booth-a"].teach_in(2, 1, 123)

@@ -6,7 +6,9 @@ device such as `/dev/zero` that never ends, a directory) and at most `limit` byt
 plan files, snapshots and saved images are read this way.
 
 `read_json` reads a JSON document so, and refuses — in a `FileProblem`, never a Python
-error — what would cost far more to parse than any file prc3cfg writes: more than
+error — a key given twice in one object (JSON readers keep one of the two, most the last: a
+reviewer reading the other would approve what is not applied), and what would cost far more to
+parse than any file prc3cfg writes: more than
 `MAX_CONTAINERS` objects and lists (counted as the `{` and `[` bytes, an upper bound found
 before parsing: 63 MB of `[{},{},…]` took 1.6 GB and seconds to parse), more than
 `MAX_VALUES` values (counted as its `,` bytes: 64 MiB of `[1e1,1e1,…]` took 0.8 GB), an integer
@@ -105,7 +107,9 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
     if data.count(b",") >= MAX_VALUES:
         raise FileProblem(Why.TOO_LARGE, f"more than {MAX_VALUES:,} values (counting ','), more than any file prc3cfg writes holds")
     try:
-        return json.loads(data, parse_int=_integer)
+        return json.loads(data, parse_int=_integer, object_pairs_hook=_object)
+    except _KeyTwice as twice:
+        raise FileProblem(Why.NOT_JSON, f"the key {json.dumps(twice.key)} is given twice in one object") from None
     except json.JSONDecodeError as error:
         raise FileProblem(Why.NOT_JSON, f"not valid JSON ({error.msg})", (error.lineno, error.colno)) from None
     except UnicodeDecodeError:
@@ -114,6 +118,21 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
         raise FileProblem(Why.NOT_JSON, "nested too deeply for any file prc3cfg writes") from None
     except ValueError:  # the only other ValueError: an integer longer than `_integer` converts
         raise FileProblem(Why.NOT_JSON, f"a number of more than {MAX_DIGITS} digits, which no file prc3cfg writes holds") from None
+
+
+class _KeyTwice(Exception):
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object, refused (`_KeyTwice`) when it gives a key twice."""
+    result = dict(pairs)
+    if len(result) != len(pairs):
+        seen: set[str] = set()
+        raise _KeyTwice(next(key for key, _ in pairs if key in seen or seen.add(key)))  # type: ignore[func-returns-value]
+    return result
 
 
 def _integer(text: str) -> int:
