@@ -63,7 +63,7 @@ from prc3cfg.shell.link import Link, LinkError, PortFailed, Trace, open_plant_li
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.readback import Target, read_all, read_module
-from prc3cfg.shell.records import Journal, Snapshot, applied_copy, save_applied
+from prc3cfg.shell.records import Journal, Snapshot, applied_copy, check_writable, save_applied
 
 __all__ = [
     "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "Gates", "LineBusy",
@@ -591,6 +591,7 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
 def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key, ModuleImage] | None,
            plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in pairs}
+    check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
     try:
         with lines(plant, buses, options, purpose="apply", observer=journal.exchange) as links:
