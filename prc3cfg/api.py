@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import itertools
 import os
 import stat
 import threading
@@ -59,12 +60,12 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.files import FileProblem, Why, read_json, write_atomically
+from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.readback import Target, read_all, read_module
-from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, save_applied
+from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
 __all__ = [
     "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "Gates", "LineBusy",
@@ -594,12 +595,11 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     checkout). What is applied is then that plan.
     """
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
-    chosen = []
     for entry in planned.modules:
         where = f"bus {entry.bus}, module {entry.address}"
         if (entry.bus, entry.address) not in modules:
             raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
-        bus, module = modules[(entry.bus, entry.address)]
+        module = modules[(entry.bus, entry.address)][1]
         if entry.name != module.name:
             raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {module.name!r} in the plant file — plan again")
         if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
@@ -607,7 +607,8 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                 f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
                 "(teach-in or another apply?); nothing was written — plan again"
             )
-        chosen.append((bus, module))
+    _in_plant_order(path, planned, [(bus.name, m.address) for bus, m in pairs])
+    chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()))
     for proof in ours.proofs:
         if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in planned.modules):
@@ -637,6 +638,18 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
     return ours
+
+
+def _in_plant_order(path: Path, planned: PlanFile, order: list[Key]) -> None:
+    """Refused unless the plan file lists its modules in the plant file's order, as prc3cfg writes
+    them: they are written in the order listed."""
+    place = {key: index for index, key in enumerate(order)}
+    entries = planned.modules
+    for first, then in itertools.pairwise(entries):
+        if place[(then.bus, then.address)] < place[(first.bus, first.address)]:
+            raise UserError(f"{path}: bus {first.bus}, module {first.address} ({first.name}) is listed before bus {then.bus}, "
+                            f"module {then.address} ({then.name}), where prc3cfg writes the modules in the plant file's "
+                            "order — the plan file was changed after it was made; nothing was written: plan again and review it")  # fmt: skip
 
 
 def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:
@@ -727,6 +740,7 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
                             "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
                             "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
+    check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
     records = releases.Releases("restore" if desired is not None else "apply", journal.path)
     announce = _announcer(plant, buses, journal, records)
@@ -979,16 +993,15 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
 
 def write_adoption(adoption: Adoption) -> None:
     """Write the adopted plant file in place of the one read, atomically and with its permissions
-    (through a link, to the file linked to) — refused if the file changed since it was read."""
-    if _plant_text(adoption.path) != adoption.before:
-        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+    (through a link, to the file linked to) — refused if the file changed since it was read, which is
+    checked once the new text is on disk, around the rename (`replace_unless_changed`)."""
     target = adoption.path.resolve()
     try:
-        mode = stat.S_IMODE(os.stat(target).st_mode)
-        write_atomically(target, adoption.after)
-        os.chmod(target, mode)
+        written = replace_unless_changed(target, adoption.after, adoption.before.encode("utf-8"), stat.S_IMODE(os.stat(target).st_mode))
     except OSError as error:
         raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+    if not written:
+        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
 
 
 def _plant_text(path: Path) -> str:

@@ -232,6 +232,138 @@ def test_a_file_with_crlf_line_ends_and_no_final_newline_keeps_both():
     assert adoption.text == text + "\r\n        programs:\r\n          1: {position: 0.250}"
 
 
+#: A plant file with what editors write into one: non-ASCII names before a changed value on its
+#: line, tabs in comments; each `FORMS` case saves it another way (a test of each splice's offsets).
+ODD = "\n".join([
+    "plant: Anlage Süd", "profiles:", "  r:\t# a tab\tbefore and inside a comment", "    programs:",
+    "      1: {position: 0.300, speed: 0.100}\t# 塗装 läuft", "buses:", "  - name: Kabine-Süd", "    port: emulator://tiny",
+    "    modules:", "      - {address: 1, name: 塗装, profiles: r, programs: {2: {position: 0.350, speed: 0.100}}}  # 塗装",
+    "      - address: 2", '        name: "Kabine Süd 2"\t# über', "        profiles: r", "",
+])  # fmt: skip
+ADOPTED = ODD.replace("{2: {position: 0.350,", "{2: {position: 0.320,") + "        programs:\n          1: {position: 0.250}\n"
+FORMS = {
+    "as written": lambda text: text,
+    "byte order mark": lambda text: "\ufeff" + text,
+    "crlf": lambda text: text.replace("\n", "\r\n"),
+    "byte order mark and crlf": lambda text: "\ufeff" + text.replace("\n", "\r\n"),
+    "no final newline": lambda text: text.removesuffix("\n"),
+}
+
+
+def taught_odd(text: str, tmp_path: Path) -> tuple[Path, dict]:
+    """`text` saved as a plant file, and its modules as taught: 塗装's program 2 at 0.320 m, module 2's program 1 at 0.250 m."""
+    path = tmp_path / "plant.yaml"
+    path.write_bytes(text.encode())
+    plant = load_plant(path)
+    images = {(bus.name, m.address): m.desired_image() for bus, m in plant.modules()}
+    for address, number, position in ((1, 2, 320), (2, 1, 250)):
+        image = images[("Kabine-Süd", address)]
+        images[("Kabine-Süd", address)] = image.with_programs({number: replace(image.program(number), P=position)})
+    return path, images
+
+
+@pytest.mark.parametrize("form", FORMS)
+def test_every_splice_lands_in_files_saved_by_any_editor(tmp_path, form):
+    path, images = taught_odd(FORMS[form](ODD), tmp_path)
+    adoption = adopt.adopt(load_plant(path), images, path.read_bytes().decode())
+    assert adoption.text == FORMS[form](ADOPTED)
+    path.write_bytes(adoption.text.encode())
+    assert not api.plan(load_plant(path), images=images).changes
+
+
+def test_a_rewrite_that_does_not_describe_the_modules_is_refused_and_nothing_is_written(tmp_path, monkeypatch, capsys):
+    path, images = taught_odd(ODD, tmp_path)
+    plant = load_plant(path)
+    monkeypatch.setattr(adopt._Rewrite, "apply", lambda self, wanted: self.text.replace("0.350", "0.380"))  # a splice gone wrong
+    with pytest.raises(adopt.AdoptRefused) as refused:
+        adopt.adopt(plant, images, ODD)
+    assert str(refused.value) == (
+        f"{path}: the rewritten plant file would not describe what the modules hold — bus Kabine-Süd, module 1 (塗装): "
+        "program 2 position 0.320 m → 0.380 m (held → written); nothing was adopted: this is a bug in prc3cfg, "
+        "please report it with the plant file")
+    assert path.read_text() == ODD
+
+
+#: An editor saving the plant file while adopt runs (argv: the file, what it waits for, the text it
+#: adds). It passes adopt's output on, and saves — reads the file, writes it back with a line
+#: added, in place as most editors do — when adopt prints its first value ("value"), the last line
+#: of its diff ("diff"), or when adopt's temporary file appears beside the plant file ("temporary");
+#: after adopt, if it missed that moment (a temporary file on tmpfs lives for microseconds).
+EDITOR = """
+import os, select, sys
+path, trigger, mark = sys.argv[1:]
+folder, name = os.path.split(path)
+def save():
+    with open(path) as file:
+        text = file.read()
+    with open(path, "w") as file:
+        file.write(text + mark)
+    print("edited", flush=True)
+out, pending, done = "", True, False
+while not done:
+    if pending and trigger == "temporary":
+        if any(n.startswith("." + name + ".") and n.endswith(".tmp") for n in os.listdir(folder)):
+            save()
+            pending = False
+        if not select.select([0], [], [], 0)[0]:
+            continue
+    chunk = os.read(0, 65536).decode()
+    done = not chunk
+    out += chunk
+    lines = out.split("\\n")
+    if pending and trigger == "value" and any(l[:2] in ("~ ", "+ ") for l in lines[:-1]):
+        save()
+        pending = False
+    if pending and trigger == "diff" and any(l.startswith("Write") or l.startswith("Adopted") for l in lines):
+        save()
+        pending = False
+if pending:  # adopt was done before the editor saw its moment: it saves after adopt
+    save()
+sys.stdout.write(out)
+"""
+
+
+def race_an_editor(plant: Path, emulators: dict, trials: int) -> list[str]:
+    """Each trial teaches a position in and runs adopt while an editor saves the plant file
+    (`EDITOR`, at each point in turn): the trials whose edit is not in the file afterwards."""
+    lost = []
+    for trial in range(trials):
+        emulators["line-a"].teach_in(2, 1, 1900 + trial)
+        trigger = ("value", "diff", "temporary")[trial % 3]
+        mark = f"# edit {trial}\n"
+        output, into = os.pipe()  # adopt → editor; the editor runs first, so that it sees the temporary file
+        editor = subprocess.Popen([sys.executable, "-c", EDITOR, str(plant), trigger, mark], stdin=output,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        adopting = subprocess.Popen([sys.executable, "-m", "prc3cfg", "adopt", plant, "--auto-approve"], stdout=into,
+                                    stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
+        os.close(output)
+        os.close(into)
+        err = adopting.stderr.read()
+        edited, _ = editor.communicate(timeout=120)
+        assert adopting.wait(timeout=60) in (0, 1) and "Traceback" not in err, err
+        assert adopting.returncode == 0 or "the plant file changed while adopting" in err, err
+        assert "edited" in edited, (trigger, edited)
+        if mark not in plant.read_text():
+            lost.append(f"trial {trial} ({trigger}): {err or 'adopted'}")
+    return lost
+
+
+def test_adopt_racing_an_editor_keeps_every_edit(repository):
+    plant, emulators = repository
+    assert race_an_editor(plant, emulators, 6) == []
+    assert run_cli_process("validate", plant).returncode == 0
+
+
+@pytest.mark.soak
+def test_adopt_racing_an_editor_60_times_keeps_every_edit(repository):
+    plant, emulators = repository
+    assert race_an_editor(plant, emulators, 60) == []
+
+
+def run_cli_process(*args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True, text=True, timeout=60)
+
+
 @st.composite
 def teach_ins(draw):
     """Positions taught in on the demo plant's modules, as applied: (module index, program, mm)."""

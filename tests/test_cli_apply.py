@@ -10,7 +10,7 @@ import sys
 
 import pytest
 import yaml
-from emulated import emulated_plant, run_cli
+from emulated import DEMO, emulated_plant, run_cli
 
 from prc3cfg.shell.emulator import FaultInjection
 from prc3cfg.shell.locks import line_keys, line_lock
@@ -60,6 +60,69 @@ def test_a_plan_file_alone_finds_its_plant(plant, capsys, tmp_path):
     run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     result = run_cli(capsys, "apply", "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
     assert result.code == 0, result.err
+
+
+def test_a_plan_file_with_a_key_given_twice_is_refused_naming_it(plant, capsys, tmp_path):
+    """JSON keeps the last of two keys: a reviewer reading the first "steps" would approve others."""
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    text = (tmp_path / "plan.json").read_text()
+    (tmp_path / "plan.json").write_text(text.replace('"steps": [', '"steps": [], "steps": [', 1))
+    before = plant.images()
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert (result.code, result.problems) == (1, [
+        f'error: {tmp_path / "plan.json"}: the key "steps" is given twice in one object — make the plan again'])
+    assert plant.images() == before
+
+
+def test_a_plan_file_with_its_modules_reordered_is_refused_as_edited(plant, capsys, tmp_path):
+    """The order of the modules is the order of the writes: a plan file is applied in the order
+    prc3cfg wrote it (the plant file's), and one listing them otherwise was edited."""
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    document = json.loads((tmp_path / "plan.json").read_text())
+    modules = document["buses"][0]["modules"]
+    modules[0], modules[1] = modules[1], modules[0]
+    releasing = set(document["axis_releases"])  # listed in the modules' order: edited alike
+    document["axis_releases"] = [n for n in (f"{b['name']}/{m['name']}" for b in document["buses"] for m in b["modules"]) if n in releasing]
+    (tmp_path / "plan.json").write_text(json.dumps(document, indent=1))
+    before = plant.images()
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert (result.code, result.problems) == (1, [
+        f"error: {tmp_path / 'plan.json'}: bus booth-a, module 2 (booth-a-right) is listed before bus booth-a, module 1 "
+        "(booth-a-left), where prc3cfg writes the modules in the plant file's order — the plan file was changed after it "
+        "was made; nothing was written: plan again and review it"])  # fmt: skip
+    assert plant.images() == before
+
+
+def unwritable_records(tmp_path, how: str):
+    """A plant file (on ports where nothing listens) whose `.prc3cfg/` cannot be made or written."""
+    folder = tmp_path / "checkout"
+    folder.mkdir()
+    plant = folder / "plant.yaml"
+    plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9").replace("emulator://demo-b", "socket://127.0.0.1:19"))
+    if how == "a file where the folder belongs":
+        (folder / ".prc3cfg").write_text("")
+    else:
+        folder.chmod(0o555)
+        if os.access(folder, os.W_OK):  # root writes anyway: the case above is this one's test there
+            folder.chmod(0o755)
+            pytest.skip("a read-only folder is writable to this user (root)")
+    return plant
+
+
+@pytest.mark.parametrize("how", ["a file where the folder belongs", "a read-only checkout"])
+def test_apply_where_its_records_cannot_be_written_is_refused_before_the_line(tmp_path, capsys, how):
+    plant = unwritable_records(tmp_path, how)
+    try:
+        result = run_cli(capsys, "apply", plant, "--auto-approve", "--allow-axis-release")
+    finally:
+        plant.parent.chmod(0o755)
+    records = plant.parent / ".prc3cfg"
+    assert result.code == 1, result.err
+    (line,) = result.err.splitlines()  # about the folder, not the line: nothing listens on its ports
+    where = records if how == "a file where the folder belongs" else plant.parent
+    assert line.startswith(f"error: {where}: cannot write there (") and line.endswith(
+        f"— apply keeps its snapshots and journal in {records}: make that a writable folder (or free space), then apply again"), line
+    assert "Traceback" not in result.err
 
 
 def test_stale_plan_refused_after_teach_in(plant, capsys, tmp_path):

@@ -126,3 +126,16 @@ def test_an_absent_address_costs_one_short_try(capsys, tmp_path, command):
     sent = [line for line in trace.read_text().splitlines() if "\t>\t" in line]
     assert len(sent) == 30 + (0 if command == "scan" else 1 + 16)  # import then reads module 5 whole
     assert "retrying" not in result.err and "warning" not in result.err.lower()
+
+
+@pytest.mark.parametrize("command", [["validate"], ["link", "init-db", "--bus", "line-1"]])
+def test_a_zvz_not_longer_than_one_character_is_refused_at_its_line(tmp_path, capsys, command):
+    """1200 baud, 8E1: a character is 11 bits, 9.17 ms — with ZVZ 4 ms a CP 524 ends a frame after every byte."""
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(GATEWAY_PLANT.format(zvz=0.004).replace("baud: 9600", "baud: 1200"))
+    result = run_cli(capsys, *command[:-2], plant, *command[-2:]) if len(command) > 1 else run_cli(capsys, "validate", plant)
+    assert result.code == 1
+    assert result.problems == [
+        f"{'error: ' if len(command) > 1 else ''}{plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
+        "8E1 (11 bits: 9.17 ms), so the gateway would end a frame after every byte — the character delay time must be "
+        "greater than the time between two characters (seed 004 §5.2.8; its guide at 1200 baud: 30..800 ms): raise zvz"]

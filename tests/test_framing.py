@@ -477,3 +477,15 @@ def test_an_open_driver_frame_that_never_ends_is_discarded_in_pieces():
 
 def test_only_open_driver_lacks_a_checksum():
     assert {name: f.checked for name, f in FRAMINGS.items()} == {"crc16": True, "open-driver": False, "stx": True}
+
+
+def test_an_open_driver_zvz_not_longer_than_a_character_ends_a_frame_after_every_byte():
+    """As a CP 524 does (seed 004 §5.2.8): the character delay time runs out before the next byte is in."""
+    slow = LineSettings(baud=1200)  # 8E1: 9.17 ms a character
+    events = []
+    for zvz in (0.004, 0.030):
+        decoder = get_framing("open-driver").decoder(REQUEST, slow, zvz=zvz)
+        decoder.receive_data(b"\x01\x02\x03", 0.0)
+        decoder.line_idle()
+        events.append(list(iter(decoder.next_event, NEED_DATA)))
+    assert events == [[Frame(REQUEST, 1, b""), Frame(REQUEST, 2, b""), Frame(REQUEST, 3, b"")], [Frame(REQUEST, 1, b"\x02\x03")]]

@@ -18,7 +18,7 @@ START_CODE = {
     ("stx", Direction.REQUEST): 0x7E, ("stx", Direction.REPLY): 0x7E,
 }
 STX_TYPE = {Direction.REQUEST: 0x20, Direction.REPLY: 0x40}
-ZVZ = 0.020
+ZVZ = 0.050  # longer than one character on every line drawn (300 baud, 8E2: 40 ms), as it must be
 EXAMPLES = settings(max_examples=250, deadline=None)
 
 lines = st.builds(

@@ -251,12 +251,27 @@ def paths(value, at: tuple = ()) -> list[tuple]:
 OTHERS = [None, True, False, 0, -1, 2.5, 1e300, "", "x", "20", [], {}, [None], {"a": 1}, [[]], "ff" * 40]
 
 
+#: Keys a mangled plan file may give twice (`"KEY": null, "KEY": …`, the first one added).
+TWICE = ["format", "plant_sha256", "buses", "modules", "address", "steps", "message", "broadcast"]
+
+
 @settings(max_examples=25, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_path, capsys, data):
-    """Drop a key or an item, or give a value of another type, anywhere: `show` and `apply --plan`
-    refuse it in one line that says where, in words — or, where the file still makes sense to
-    show, show it; never a traceback."""
+    """Drop a key or an item, give a value of another type, or a key twice, anywhere: `show` and
+    `apply --plan` refuse it in one line that says where, in words — or, where the file still
+    makes sense to show, show it; never a traceback."""
+    mangled_plan_is_said_in_words(made_plan, tmp_path, capsys, data)
+
+
+@pytest.mark.soak
+@settings(max_examples=1000, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_1000_mangled_plan_files_are_refused_in_words(made_plan, tmp_path, capsys, data):
+    mangled_plan_is_said_in_words(made_plan, tmp_path, capsys, data)
+
+
+def mangled_plan_is_said_in_words(made_plan, tmp_path, capsys, data) -> None:
     plant, document = made_plan
     mangled = copy.deepcopy(document)
     for _ in range(data.draw(st.integers(1, 3))):
@@ -271,8 +286,12 @@ def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_pat
             del parent[place[-1]]
         else:
             parent[place[-1]] = data.draw(st.sampled_from(OTHERS))
+    text = json.dumps(mangled)
+    twice = data.draw(st.sampled_from([None, *TWICE]))
+    if twice is not None:
+        text = text.replace(f'"{twice}": ', f'"{twice}": null, "{twice}": ', 1)
     path = tmp_path / "mangled.json"
-    path.write_text(json.dumps(mangled))
+    path.write_text(text)
     shown = run_cli(capsys, "show", path)
     if shown.code != 0:
         one_line(shown, f"error: {path}: ")

@@ -140,3 +140,51 @@ def test_a_wait_for_the_lock_stops_on_ctrl_c(tmp_path):
             del os.environ["PRC3CFG_LOCK_DIR"]
     assert process.returncode == 130
     assert err == "error: interrupted\n"
+
+
+DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
+
+
+def signalled_while_starting(tmp_path: Path, signum: int, module: str, *args: object) -> tuple[int, str, list[str]]:
+    """`prc3cfg ARGS`, run with -X importtime (which says on stderr each module as its import ends),
+    sent `signum` as soon as `module` is imported: its exit code, stdout, and the lines of its
+    stderr that are not import times."""
+    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "PYTHONUNBUFFERED": "1"}
+    process = subprocess.Popen([sys.executable, "-X", "importtime", "-m", "prc3cfg", *map(str, args)], env=env, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    said = []
+    for line in process.stderr:
+        said.append(line)
+        if line.startswith("import time:") and line.rsplit("|", 1)[-1].strip() == module:
+            process.send_signal(signum)
+            break
+    else:
+        pytest.fail(f"{module} was never imported: {''.join(said)[-2000:]}")
+    out, rest = process.communicate(timeout=60)
+    lines = [line.rstrip("\n") for line in [*said, *rest.splitlines(keepends=True)] if not line.startswith("import time:")]
+    return process.returncode, out, lines
+
+
+#: Points on the way in, each as the module whose import it follows — the command line's toolkit,
+#: the YAML reader the plant commands import, the emulator's server, which `emulator serve` imports
+#: as it starts — and the command run.
+STARTS = {
+    "typer": ("typer", "validate", DEMO),
+    "yaml": ("yaml", "validate", DEMO),
+    "the emulator's server": ("prc3cfg.shell.emulator.server", "emulator", "serve", "--listen", "127.0.0.1:0"),
+}
+
+
+@pytest.mark.parametrize("point", STARTS)
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_while_starting_is_one_line_and_exit_130(tmp_path, signum, point):
+    """Before Python runs prc3cfg's first line, a signal ends it as Python's default does (README) —
+    not tested: no process says when that is. From then on, one line and exit 130; the emulator,
+    once it said "listening on", stops as it does at any time then (exit 0)."""
+    module, *args = STARTS[point]
+    for _ in range(3):  # the same point again: what happens there does not depend on luck
+        code, out, lines = signalled_while_starting(tmp_path, signum, module, *args)
+        if "listening on" in out:
+            assert (code, lines) == (0, []), lines
+        else:
+            assert (code, lines) == (130, ["error: interrupted"])

@@ -90,8 +90,6 @@ def serve(
     except ValueError as error:
         raise UserError(f"emulator: {error}") from None
     stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
     with emulator:
         if listen is not None or not pty:
             address = DEFAULT_LISTEN if listen is None else listen
@@ -107,4 +105,6 @@ def serve(
             except OSError as error:
                 raise UserError(f"--pty: cannot open a pseudo-terminal ({error.strerror or error})") from None
             print(f"pty: {path}", flush=True)
+        for signum in (signal.SIGINT, signal.SIGTERM):  # started: a signal stops it (until now, it was interrupted)
+            signal.signal(signum, lambda *_: stop.set())
         stop.wait()

@@ -58,6 +58,9 @@ INTERFACE_NAMES = {"rs422": "RS422", "v24": "V.24", "tty": "TTY (20 mA)"}
 CP_TOTAL_BAUD = 19200      # §5.4: total baud rate of a CP 525, maximum speed of a CP 524
 
 MIN_ZVZ_MS = 4
+#: The manual's guide to ZVZ by baud rate, ms, for a partner that sends its characters back to
+#: back (seed 004 §5.2.8).
+ZVZ_GUIDE_MS = {9600: (5, 100), 4800: (10, 200), 1200: (30, 800), 110: (200, 3000)}
 MIN_XOFF_MS = 4
 MIN_RECEIVE_DB = 3
 MAX_CPU = 4
@@ -283,3 +286,19 @@ def format_data_block(words: Sequence[int]) -> list[tuple[str, str, str]]:
             notation = "KH"
         rows.append((f"DW {dw}", _NOTATIONS[notation](word), f"{word:04X}h"))
     return rows
+
+
+def zvz_too_short(zvz: float, line: LineSettings) -> str | None:
+    """Why a character delay time of `zvz` seconds cannot end frames on `line`: it is not longer
+    than one character, so the driver's time runs out between any two characters, back to back
+    as they are, and it ends a frame after every byte (seed 004 §5.2.8: "ZVZ must be greater than
+    the time between two characters"; link.md, framing open-driver). None when it is longer."""
+    if zvz > line.char_time:
+        return None
+    guide = ZVZ_GUIDE_MS.get(line.baud)
+    said = (f"its guide at {line.baud} baud: {guide[0]}..{guide[1]} ms" if guide else
+            "its guide: " + ", ".join(f"{baud} baud {low}..{high} ms" for baud, (low, high) in ZVZ_GUIDE_MS.items()))
+    form = f"{line.data_bits}{line.parity[0].upper()}{line.stop_bits:g}"
+    return (f"zvz {zvz:g} s is not longer than one character at {line.baud} baud, {form} ({line.bits_per_char:g} bits: "
+            f"{line.char_time * 1000:.2f} ms), so the gateway would end a frame after every byte — the character delay "
+            f"time must be greater than the time between two characters (seed 004 §5.2.8; {said}): raise zvz")

@@ -32,7 +32,12 @@ needs them; quotes and case kept), and a new override is inserted as text in the
 the file: into a flow mapping as `, key: value`, into a block mapping as lines at its
 indentation after the entry it follows (program numbers and fields in their usual order),
 nested mappings flow or block as the file writes them (`_Conventions`). Every other byte —
-comments, quoting, layout, line ends — stays as it was. Pure: text and images in, text out.
+comments, quoting, layout, line ends — stays as it was. Offsets are those of the text after a
+byte order mark, which is taken off before parsing and put back after: libyaml does not count
+it, the pure parser does. The new text is then loaded as a plant (`load_plant` of the text, as
+if it were the file) and must describe exactly what the modules hold — the adopted values in
+the chosen modules, every other module, bus and setting as before — or nothing is adopted
+(`AdoptRefused`: a bug of the rewriter, said as one). Pure: text and images in, text out.
 """
 
 from __future__ import annotations
@@ -50,13 +55,14 @@ from yaml.events import MappingEndEvent, MappingStartEvent, ScalarEvent, Sequenc
 
 from prc3cfg.core.device import value_range
 from prc3cfg.core.image import SYSTEM_KEYS, ModuleImage, SystemParameters, default_program
-from prc3cfg.core.render import FieldChange, field_name, format_value
+from prc3cfg.core.render import FieldChange, differences, field_name, format_value
 from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, split_function_output
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Module, Plant
 from prc3cfg.plant.document import DECIMAL_NUMBER, LOADER, core_schema
+from prc3cfg.plant.loader import load_plant
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
-from prc3cfg.plant.problems import Path_
+from prc3cfg.plant.problems import Path_, PlantError
 from prc3cfg.plant.profiles import DEFAULT, MODULE, Sourced
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -74,6 +80,7 @@ DEFAULT_INDENT = 2
 _ALIGNED_COMMENT = re.compile(r"[]},]*( {2,})#")
 #: How `profiles` names a profile as a source: "profile NAME".
 PROFILE = "profile "
+BYTE_ORDER_MARK = "\ufeff"
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,7 +160,46 @@ def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Ite
         layer = MODULE if target[0] == "buses" else first.sourced.source
         source = DEFAULT if first.sourced is None else first.sourced.source
         adopted.append(Adopted(tuple(d.name for d in found), first.what, layer, layer == MODULE and source != MODULE, source))
-    return Adoption(tuple(adopted), _Rewrite(text).apply(wanted) if wanted else text)
+    if not wanted:
+        return Adoption((), text)
+    rewritten = _Rewrite(text).apply(wanted)
+    _check_rewritten(plant, {key: _adopted_image(module, images.get(key), scope) for key, module in _keyed(plant)}, rewritten)
+    return Adoption(tuple(adopted), rewritten)
+
+
+def _keyed(plant: Plant) -> Iterator[tuple[Key, Module]]:
+    return (((bus.name, module.address), module) for bus, module in plant.modules())
+
+
+def _adopted_image(module: Module, have: ModuleImage | None, scope: frozenset[int] | None) -> ModuleImage:
+    """What the plant file says of `module` once what it holds (`have`, if it was read) is adopted
+    within `scope`: its managed programs as held, and its system parameters too without a scope."""
+    desired = module.desired_image()
+    if have is None:
+        return desired
+    numbers = [n for n in module.managed_programs() if (scope is None or n in scope) and have.program(n) is not None]
+    return replace(desired.with_programs({n: have.program(n) for n in numbers}), system=have.system if scope is None else desired.system)
+
+
+def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -> None:
+    """`AdoptRefused` unless `text`, loaded as the plant file, has the same buses, modules and
+    settings as `plant`, and each module's image is the one `adopted` names."""
+    try:
+        after = load_plant(plant.path, text)
+    except PlantError as error:
+        raise _rewriter_bug(plant, f"it would not load: {error.problems[0]}") from None
+    same = [bus.model_dump(exclude={"modules"}) for bus in plant.buses] == [bus.model_dump(exclude={"modules"}) for bus in after.buses]
+    if after.name != plant.name or not same or [(k, m.name) for k, m in _keyed(plant)] != [(k, m.name) for k, m in _keyed(after)]:
+        raise _rewriter_bug(plant, "its plant, buses or modules would differ")
+    for (bus, address), module in _keyed(after):
+        if (said := module.desired_image()) != (held := adopted[(bus, address)]):
+            found = "; ".join(differences(held, said)) or "the programs it manages"
+            raise _rewriter_bug(plant, f"bus {bus}, module {address} ({module.name}): {found} (held → written)")
+
+
+def _rewriter_bug(plant: Plant, what: str) -> AdoptRefused:
+    return AdoptRefused(f"{plant.path}: the rewritten plant file would not describe what the modules hold — {what}; "
+                        "nothing was adopted: this is a bug in prc3cfg, please report it with the plant file")
 
 
 def _modules(plant: Plant) -> Iterator[tuple[Bus, Module, Path_]]:
@@ -179,7 +225,7 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
                                f"file says {said or 'no program'} — adopt leaves jumps (chains, next:) alone: edit them "
                                "in the plant file by hand, or apply it to set the jump back, then adopt again")  # fmt: skip
     system = have.system if scope is None else desired.system
-    _check(replace(desired.with_programs({n: have.program(n) for n in numbers}), system=system), numbers, where)
+    _check(_adopted_image(module, have, scope), numbers, where)
     drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), _human(c.symbol, c.after), f"system {c.text}",
                      settings.system[BY_SYMBOL[c.symbol].key]) for c in _changes(desired.system, system, SYSTEM_KEYS)]  # fmt: skip
     for number in numbers:
@@ -396,19 +442,21 @@ def _number(value: Any, places: int) -> str:
 
 
 class _Rewrite:
-    """The splices that set values in the text: each (start, end, order, new text)."""
+    """The splices that set values in the text (after its byte order mark, if it has one): each
+    (start, end, order, new text)."""
 
     def __init__(self, text: str) -> None:
-        self.text = text
-        self.root = _tree(text)
-        self.conventions = _Conventions(text, self.root)
+        self.bom = BYTE_ORDER_MARK if text.startswith(BYTE_ORDER_MARK) else ""
+        self.text = text[len(self.bom):]
+        self.root = _tree(self.text)
+        self.conventions = _Conventions(self.text, self.root)
         self.newline = "\r\n" if "\r\n" in text else "\n"
         self.splices: list[tuple[int, int, int, str]] = []
 
     def apply(self, wanted: dict[Any, Any]) -> str:
         self._set(self.root, (), wanted)
         self._keep_comments_aligned()
-        parts, at = [], 0
+        parts, at = [self.bom], 0
         for start, end, _, new in sorted(self.splices):
             parts += [self.text[at:start], new]
             at = end

@@ -16,10 +16,13 @@ about a second to get there (`_REREAD_EVENTS`). This module builds the data itse
   8 to one and 10 to the other, `on` true or text, `1:30` 90 or text, `1e3` text or 1000,
   `0b101`, `1_000`, `2024-01-01`, `=`. The 1.2 side is `core_schema`, the YAML 1.2.2 core
   schema's table (§10.3.2); the 1.1 side is PyYAML's resolver, and the 1.1 type repository's
-  `y`, `Y`, `n`, `N` as booleans (PyYAML reads them as text, other 1.1 readers as true and false). Quoted scalars and explicit tags are
+  `y`, `Y`, `n`, `N` as booleans (PyYAML reads them as text, other 1.1 readers as true and false). Quoted scalars are
   never ambiguous. The value kept is the YAML 1.2 reading, what editors and schema tools
-  see; the models' objection to it, if any, says what the key wants. A tag on a scalar that
-  it cannot be read as, or any tag on a mapping or a list (`!!set`, `!!omap`), is refused;
+  see; the models' objection to it, if any, says what the key wants;
+- a tag (`!!bool x`, `!!str` on a key, `!!omap` on a list, `!env`, `!`) is refused wherever it
+  is written: a plant file uses none, and PyYAML's constructors, which would read a tagged
+  scalar, fail on many (`!!int ""`, `!!timestamp x`) with Python errors. A tagged scalar
+  keeps its text, so that the tag is the only problem said there;
 - a number has at most `MAX_DIGITS` digits written out in full (`1e30` has 31): decimal
   arithmetic is exact to that precision, and reading `1e999999` as an integer would take
   seconds, `1.0e+400` as a float would be infinite;
@@ -165,9 +168,8 @@ _SYNTAX_HINTS = {
 #: What PyYAML refuses as not printable, and a byte order mark after the start, which PyYAML
 #: reads as part of a key and libyaml does not.
 _NOT_TEXT = re.compile(f"{yaml.reader.Reader.NON_PRINTABLE.pattern}|(?!\\A)\ufeff")
-#: The tag of a mapping or a list that has none written, and what a message calls it.
-_COLLECTIONS = {MappingStartEvent: ("tag:yaml.org,2002:map", "mapping"),
-                SequenceStartEvent: ("tag:yaml.org,2002:seq", "list")}
+#: The tag of a mapping or a list that has none written.
+_COLLECTIONS = {MappingStartEvent: "tag:yaml.org,2002:map", SequenceStartEvent: "tag:yaml.org,2002:seq"}
 Position = tuple[int, int]  # 1-based line and column
 
 
@@ -218,10 +220,10 @@ class Document:
         return reader.positions
 
 
-def read_document(path: Path) -> Document:
-    """Read and parse `path`; `PlantError` if it is not a YAML mapping at all."""
+def read_document(path: Path, data: bytes | None = None) -> Document:
+    """Read and parse `path` — or `data`, as if `path` held it; `PlantError` if it is not a YAML mapping at all."""
     name = str(path)
-    data = _read_bytes(path, name)
+    data = _read_bytes(path, name) if data is None else data
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -381,9 +383,9 @@ class _Reader:
         self.value: Any = None
         self.constructor = yaml.SafeLoader("")
         self.tags: dict[tuple[str, tuple[bool, bool]], str] = {}  # YAML 1.1's tag of a plain or quoted text
-        #: How a scalar reads, by its text, tag and plainness (`reading`): a plant file says the
+        #: How an untagged scalar reads, by its text and plainness (`reading`): a plant file says the
         #: same few things many times.
-        self.scalars: dict[tuple[str, str | None, bool], tuple[Any, Callable[[str], str] | None, bool]] = {}
+        self.scalars: dict[tuple[str, bool], tuple[Any, Callable[[str], str] | None, bool]] = {}
 
     def read(self) -> None:
         self.next()  # the stream's start
@@ -407,9 +409,8 @@ class _Reader:
             return self.scalar(event, path, path[-1] if path and isinstance(path[-1], str) else "")
         if kind is AliasEvent:
             return None  # refused once the whole file is read (`_Events.refuse_aliases`)
-        if (tag := self.tag(event)) != _COLLECTIONS[kind][0]:  # !!set, !!omap, !!float
-            self.problem(Problem(path, f"a {_COLLECTIONS[kind][1]} cannot be read as {_written(tag)} "
-                                 "— remove the tag; a plant file needs none", at=_position(event)))
+        if event.tag is not None:  # !!set, !!omap, !!float
+            self.problem(_tagged(event, path))
         if kind is MappingStartEvent:
             return self.mapping(event, path, wanted)
         items = []
@@ -488,7 +489,7 @@ class _Reader:
             return event.tag
         if kind is ScalarEvent:
             return self.resolve(event.value, event.implicit)
-        return _COLLECTIONS[kind][0]
+        return _COLLECTIONS[kind]
 
     def merge_key(self, event: yaml.Event) -> bool:
         """`<<`, or any key tagged `!!merge`."""
@@ -515,8 +516,12 @@ class _Reader:
                     and key.start_mark.index == number.end_mark.index + 1)
 
     def scalar(self, event: yaml.Event, path: Path_, key: str) -> Any:
-        """The value of a scalar (under `key`, for messages); a problem when it is not one value to every reader."""
-        seen = (event.value, event.tag, not event.style)
+        """The value of a scalar (under `key`, for messages); a problem when it is not one value to every
+        reader, or when it has a tag (its text is kept)."""
+        if event.tag is not None:
+            self.problem(_tagged(event, path))
+            return event.value
+        seen = (event.value, not event.style)
         if (known := self.scalars.get(seen)) is None:
             known = self.reading(event.value, self.tag(event), not event.style)
             _remember(self.scalars, seen, known)
@@ -526,27 +531,23 @@ class _Reader:
         return value
 
     def reading(self, text: str, tag: str, unstyled: bool) -> tuple[Any, Callable[[str], str] | None, bool]:
-        """How a scalar reads: its value; None, or what is wrong with it, worded for the key it is
-        under; whether the models' fix is better than that message's."""
-        plain = unstyled and tag == self.resolve(text, (True, False))
-        core_tag, core_value = _core_rule(text) if plain else (None, None)
+        """How an untagged scalar reads: its value; None, or what is wrong with it, worded for the key
+        it is under; whether the models' fix is better than that message's."""
+        if not unstyled:
+            return text, None, False  # quoted: text to every reader
+        core_tag, core_value = _core_rule(text)
         if (tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
             return text, lambda key: (f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, written out "
                                       f"— a plant file's numbers are read exactly: write at most {MAX_DIGITS} digits"), False
-        if plain:
-            # a tag the core schema does not have (a date, `=`) differs without building a value
-            yaml11 = (tag, self.construct(tag, text) if tag in _CORE_TAGS else None)
-            if tag == _STR_TAG and text in _YES_NO:  # the 1.1 type repository's y and n, which PyYAML leaves out
-                yaml11 = (_BOOL_TAG, text in "yY")
-            yaml12 = (core_tag, core_value(text))
-            if (yaml11[0], str(yaml11[1])) != (yaml12[0], str(yaml12[1])):  # str: NaN is not equal to NaN
-                quoted = _STR_TAG in (yaml11[0], yaml12[0])
-                return yaml12[1], lambda key: _ambiguity(_subject(key, text, quoted), yaml11, yaml12), True
-            return yaml11[1], None, False
-        try:
-            return self.construct(tag, text), None, False
-        except (yaml.YAMLError, ValueError, TypeError, ArithmeticError):
-            return text, lambda key: f"'{text}' cannot be read as {_written(tag)} — remove the tag; a plant file needs none", False
+        # a tag the core schema does not have (a date, `=`) differs without building a value
+        yaml11 = (tag, self.construct(tag, text) if tag in _CORE_TAGS else None)
+        if tag == _STR_TAG and text in _YES_NO:  # the 1.1 type repository's y and n, which PyYAML leaves out
+            yaml11 = (_BOOL_TAG, text in "yY")
+        yaml12 = (core_tag, core_value(text))
+        if (yaml11[0], str(yaml11[1])) != (yaml12[0], str(yaml12[1])):  # str: NaN is not equal to NaN
+            quoted = _STR_TAG in (yaml11[0], yaml12[0])
+            return yaml12[1], lambda key: _ambiguity(_subject(key, text, quoted), yaml11, yaml12), True
+        return yaml11[1], None, False
 
     def construct(self, tag: str, text: str) -> Any:
         """The YAML 1.1 value of a scalar; a float as an exact `Decimal`."""
@@ -666,6 +667,11 @@ def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]
     for index, item in enumerate(items if isinstance(items, list) else ()):
         if isinstance(item, dict):
             yield path + (index,), item
+
+
+def _tagged(event: yaml.Event, path: Path_) -> Problem:
+    """The problem of a node with a tag written on it, at the tag."""
+    return Problem(path, f"tags are not used in plant files — remove {_written(event.tag)}", at=_position(event))
 
 
 def _written(tag: str) -> str:

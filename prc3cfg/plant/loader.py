@@ -47,10 +47,11 @@ _MODULE_STAND_IN = {"address": 1, "name": "-"}
 _PROFILE_STAND_IN: dict[str, Any] = {}
 
 
-def load_plant(path: str | Path) -> Plant:
-    """The plant in `path`; `PlantError` with its problems ("file:line:column: …") otherwise."""
+def load_plant(path: str | Path, text: str | None = None) -> Plant:
+    """The plant in `path` — or in `text`, as if `path` held it (a file before it is written);
+    `PlantError` with its problems ("file:line:column: …") otherwise."""
     path = Path(path)
-    document = read_document(path)
+    document = read_document(path, None if text is None else text.encode("utf-8"))
     _check_sizes(document)
     problems = _Problems(MAX_PROBLEMS - len(document.problems))
     try:

@@ -113,7 +113,8 @@ _ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0, i
 
 
 def check_bus(path: Path_, bus: BusLine) -> list[Problem]:
-    """What the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any open-driver line."""
+    """What the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any
+    open-driver line — and a ZVZ not longer than one character, which it takes but ends frames by after every byte."""
     if bus.gateway is None and bus.framing != "open-driver":
         return []
     words = bus.gateway or _ANY_GATEWAY
@@ -134,6 +135,9 @@ def check_bus(path: Path_, bus: BusLine) -> list[Problem]:
         problems.append(Problem(at if given else path + ("gateway",), f"{refusal.reason} — the gateway's Open "
                                 f"Driver refuses it (SYSTAT {refusal.systat:02X}h): change {key}",
                                 at_key=not given))
+    if bus.framing == "open-driver" and (reason := gateway.zvz_too_short(bus.zvz, settings.line)) is not None:
+        given = "zvz" in bus.model_fields_set
+        problems.append(Problem(path + ("zvz",), reason, at_key=not given))
     return problems
 
 

@@ -12,13 +12,17 @@ after the exchange in flight with `Interrupted`. What else happens depends on th
   once, so a long plan or a question stops on the spot.
 
 `Interrupted` is a `UserError` (exit 130): the CLI prints its one line, `error: interrupted`.
-Owns the signal handling. Does not own what is said about the work that stopped (`apply`,
+Before a command handles signals, and after, `exit_on_signal` (installed by the entry point
+before it imports anything else) ends the process with that line and exit 130 at once: a
+Ctrl-C while Python imports the command line is not a `KeyboardInterrupt` traceback, a SIGTERM
+not a death by signal. Owns the signal handling. Does not own what is said about the work that stopped (`apply`,
 the CLI).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
 from collections.abc import Iterator
@@ -26,6 +30,18 @@ from collections.abc import Iterator
 from prc3cfg.errors import Interrupted
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def exit_on_signal() -> None:
+    """From now on, until a command handles them, SIGINT and SIGTERM end the process at once:
+    `error: interrupted` on stderr, exit 130 (`Interrupted.exit_code`)."""
+    for signum in SIGNALS:
+        signal.signal(signum, _exit_interrupted)
+
+
+def _exit_interrupted(signum: int, frame: object) -> None:
+    os.write(2, f"error: {Interrupted()}\n".encode())  # as the CLI says it
+    os._exit(Interrupted.exit_code)
 
 
 class Cancellation:

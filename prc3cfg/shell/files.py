@@ -6,7 +6,9 @@ device such as `/dev/zero` that never ends, a directory) and at most `limit` byt
 plan files, snapshots and saved images are read this way.
 
 `read_json` reads a JSON document so, and refuses — in a `FileProblem`, never a Python
-error — what would cost far more to parse than any file prc3cfg writes: more than
+error — a key given twice in one object (JSON readers keep one of the two, most the last: a
+reviewer reading the other would approve what is not applied), and what would cost far more to
+parse than any file prc3cfg writes: more than
 `MAX_CONTAINERS` objects and lists (counted as the `{` and `[` bytes, an upper bound found
 before parsing: 63 MB of `[{},{},…]` took 1.6 GB and seconds to parse), more than
 `MAX_VALUES` values (counted as its `,` bytes: 64 MiB of `[1e1,1e1,…]` took 0.8 GB), an integer
@@ -16,7 +18,8 @@ Python's recursion. Its size is bounded by `JSON_LIMIT`.
 `write_atomically` writes a temporary file beside the target, flushes it to disk, renames
 it over the target and flushes the directory: a process killed at any point leaves either
 the previous file (or none) or the complete new one, never a truncated one. Snapshots,
-plan files (`plan --out`) and the emulator's state file are written this way.
+plan files (`plan --out`) and the emulator's state file are written this way; adopted plant
+files by `replace_unless_changed`, which keeps a file another writer (an editor) saved meanwhile.
 """
 
 from __future__ import annotations
@@ -104,7 +107,9 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
     if data.count(b",") >= MAX_VALUES:
         raise FileProblem(Why.TOO_LARGE, f"more than {MAX_VALUES:,} values (counting ','), more than any file prc3cfg writes holds")
     try:
-        return json.loads(data, parse_int=_integer)
+        return json.loads(data, parse_int=_integer, object_pairs_hook=_object)
+    except _KeyTwice as twice:
+        raise FileProblem(Why.NOT_JSON, f"the key {json.dumps(twice.key)} is given twice in one object") from None
     except json.JSONDecodeError as error:
         raise FileProblem(Why.NOT_JSON, f"not valid JSON ({error.msg})", (error.lineno, error.colno)) from None
     except UnicodeDecodeError:
@@ -113,6 +118,21 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
         raise FileProblem(Why.NOT_JSON, "nested too deeply for any file prc3cfg writes") from None
     except ValueError:  # the only other ValueError: an integer longer than `_integer` converts
         raise FileProblem(Why.NOT_JSON, f"a number of more than {MAX_DIGITS} digits, which no file prc3cfg writes holds") from None
+
+
+class _KeyTwice(Exception):
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+def _object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object, refused (`_KeyTwice`) when it gives a key twice."""
+    result = dict(pairs)
+    if len(result) != len(pairs):
+        seen: set[str] = set()
+        raise _KeyTwice(next(key for key, _ in pairs if key in seen or seen.add(key)))  # type: ignore[func-returns-value]
+    return result
 
 
 def _integer(text: str) -> int:
@@ -137,18 +157,66 @@ def _size(limit: int) -> str:
 def write_atomically(path: Path, text: str) -> None:
     """Replace `path` with `text` atomically (temporary file, fsync, rename, fsync of the folder)."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _written_beside(path, text, None)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    _sync_folder(path.parent)
+
+
+def replace_unless_changed(path: Path, text: str, expected: bytes, mode: int) -> bool:
+    """Replace `path` with `text` (permissions `mode`) atomically, as `write_atomically` does, unless
+    `path` no longer holds `expected`: then False, and `path` is as the other writer left it.
+
+    Checked as late as can be: once `text` is on disk, the file is linked to a second name and
+    compared, then the new file renamed over it, then the file it replaced compared once more through
+    that name — a save in place that came between the two puts that file back. What this cannot see
+    (README, adopt): a save that renames its own file into place between the first comparison and the
+    rename, and one that keeps writing into the file it opened before the rename after the second.
+    """
+    tmp = _written_beside(path, text, mode)
+    was = path.with_name(f"{tmp.name.removesuffix('.tmp')}.was")
+    try:
+        try:
+            os.link(path, was)
+            linked = True
+        except OSError:  # a file system without hard links: compared before the rename only
+            linked = False
+        seen = was if linked else path
+        same = os.stat(path).st_ino == os.stat(seen).st_ino and seen.read_bytes() == expected
+        if same:
+            os.replace(tmp, path)
+            if linked and was.read_bytes() != expected:  # written into in place around the rename: it goes back
+                os.replace(was, path)
+                same = False
+    finally:
+        tmp.unlink(missing_ok=True)
+        was.unlink(missing_ok=True)
+    _sync_folder(path.parent)
+    return same
+
+
+def _written_beside(path: Path, text: str, mode: int | None) -> Path:
+    """A temporary file beside `path` holding `text` (permissions `mode`, if given), on disk."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
             handle.flush()
+            if mode is not None:
+                os.fchmod(handle.fileno(), mode)
             os.fsync(handle.fileno())
-        os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    folder = os.open(path.parent, os.O_RDONLY)
+    return Path(tmp)
+
+
+def _sync_folder(folder: Path) -> None:
+    handle = os.open(folder, os.O_RDONLY)
     try:
-        os.fsync(folder)
+        os.fsync(handle)
     finally:
-        os.close(folder)
+        os.close(handle)

@@ -12,11 +12,18 @@
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
   modules and programs left the plant file — they stay on the hardware as they are.
+
+`check_writable` tells, before an apply opens a line, whether these can be written at all (a
+read-only checkout, a full disk, a file where `.prc3cfg` belongs): an apply that could not keep
+its snapshot and journal must not start writing modules.
 """
 
 from __future__ import annotations
 
+import errno
 import json
+import os
+import tempfile
 import threading
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -29,6 +36,8 @@ from prc3cfg.shell.files import FileProblem, read_json, write_atomically
 from prc3cfg.shell.link import Exchange
 
 SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
+#: The folders under `.prc3cfg/` an apply writes.
+KINDS = ("snapshots", "journal", "applied")
 
 
 def _stamp() -> str:
@@ -37,6 +46,30 @@ def _stamp() -> str:
 
 def records_dir(plant_path: Path, kind: str) -> Path:
     return plant_path.parent / ".prc3cfg" / kind
+
+
+def check_writable(plant_path: Path) -> None:
+    """`UserError` naming `.prc3cfg/` beside the plant file, and what to do, unless each folder an
+    apply writes there can be made (or is a folder) and written: a nameless file of a few KiB is
+    written and flushed in the nearest folder of each that exists, and leaves nothing behind."""
+    records = plant_path.parent / ".prc3cfg"
+    probed: set[Path] = set()
+    try:
+        for kind in KINDS:
+            folder = records_dir(plant_path, kind)
+            while not folder.exists() and not folder.is_symlink():
+                folder = folder.parent
+            if not folder.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, "a file, not a folder", str(folder))
+            if folder not in probed:
+                probed.add(folder)
+                with tempfile.TemporaryFile(dir=folder) as probe:
+                    probe.write(bytes(4096))
+                    probe.flush()
+                    os.fsync(probe.fileno())
+    except OSError as error:
+        raise UserError(f"{error.filename or records}: cannot write there ({error.strerror}) — apply keeps its snapshots and "
+                        f"journal in {records}: make that a writable folder (or free space), then apply again") from None
 
 
 @dataclass(frozen=True, slots=True)

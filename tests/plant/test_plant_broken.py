@@ -290,7 +290,11 @@ DEBRIS = [":", "- ", "[", "]", "{", "}", "'", '"', "\t", "&a ", "*a", "<<: ", "!
           "0", "-0.1", "0.0005", "yes", "null", ".inf", "1_000", "2:30", "2024-01-01", "x", "\n", "  ",
           "010", "08", "on", "0b1", "0o17", "1e3", "+.5", "=", "2,000", ",", "#", "|", ">", "%", "@", "`", "!",
           "---\n", "...", "~", "é", "\ufeff", "\x07", "\r", "[" * 150, "{a: " * 120, "9" * 40, "1.0e+400",
-          "1e-400", "0x" + "f" * 40, "socket://h", "emulator://../x"]
+          "1e-400", "0x" + "f" * 40, "socket://h", "emulator://../x",
+          "!!bool x ", "!!timestamp x ", '!!int "" ', '!!float "_" ', "!!str ", "!foo ", "! ", "!!map ", "!!binary "]
+#: How the whole file was saved: as written, with a byte order mark, with CRLF line ends, both, without a final newline.
+SAVED = [lambda t: t, lambda t: "\ufeff" + t, lambda t: t.replace("\n", "\r\n"),
+         lambda t: "\ufeff" + t.replace("\n", "\r\n"), lambda t: t.rstrip("\n")]
 SOURCES = [(PLANTS / "demo-line.yaml").read_text().splitlines(keepends=True),
            (PLANTS / "examples" / "coating-line.yaml").read_text().splitlines(keepends=True)]
 VALIDATOR = jsonschema.Draft7Validator(plant_schema())
@@ -313,7 +317,7 @@ def mangled_plant(draw: st.DrawFn) -> str:
             del lines[at]
         else:
             lines.insert(at, draw(st.sampled_from(lines)))
-    return "".join(lines)
+    return draw(st.sampled_from(SAVED))("".join(lines))
 
 
 def _problems(path: Path, loader: type, monkeypatch: pytest.MonkeyPatch) -> list[str] | None:
@@ -336,12 +340,24 @@ def _valid_yaml(text: str, loader: type) -> bool:
     return True
 
 
-@settings(max_examples=300, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=100, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(mangled_plant())
 def test_any_mistake_is_a_plant_error_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
     """Every problem is one line, "file:line:column: what — what to do" or "file: what — what to do"."""
+    said_once(tmp_path, monkeypatch, text)
+
+
+@pytest.mark.soak
+@settings(max_examples=2000, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(mangled_plant())
+def test_2000_mistakes_are_plant_errors_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
+    said_once(tmp_path, monkeypatch, text)
+
+
+def said_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
+    """`text` loaded by each parser: each problem one line, the same lines from both where both read the YAML."""
     path = tmp_path / "plant.yaml"
-    path.write_text(text)
+    path.write_bytes(text.encode("utf-8", "surrogatepass"))
     line = re.compile(rf"{re.escape(str(path))}(:\d+:\d+)?: [^\n]+ — [^\n]+")
     said = {name: _problems(path, loader, monkeypatch) for name, loader in LOADERS.items()}
     for problems in said.values():

@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
@@ -71,3 +72,27 @@ def test_schema_prints_the_schema() -> None:
     result = runner.invoke(app, ["schema"])
     assert result.exit_code == 0
     assert result.stdout == plant_schema_text()
+
+
+TAGGED = "plant: demo\nbuses:\n  - name: a\n    port: socket://127.0.0.1:9\n    {key}: {value}\n    modules:\n      - {{address: 1, name: m1}}\n"
+
+
+@pytest.mark.parametrize(("key", "value", "at", "tag"), [
+    ("timeout", "!!bool x", "5:14", "!!bool"),
+    ("timeout", "!!timestamp x", "5:14", "!!timestamp"),
+    ("timeout", '!!int ""', "5:14", "!!int"),
+    ("timeout", '!!float "_"', "5:14", "!!float"),
+    ("timeout", "!!float 0.3", "5:14", "!!float"),
+    ("timeout", "! 0.3", "5:14", "!"),
+    ("!!str timeout", "0.3", "5:5", "!!str"),
+    ("timeout", "!foo 0.3", "5:14", "!foo"),
+    ("gateway", "!!map {receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}", "5:14", "!!map"),
+])  # fmt: skip
+@pytest.mark.parametrize("command", ["validate", "plan"])
+def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, command: str, key: str, value: str, at: str, tag: str) -> None:
+    path = tmp_path / "plant.yaml"
+    path.write_text(TAGGED.format(key=key, value=value))
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", command, str(path)], capture_output=True, text=True, cwd=tmp_path)
+    assert (done.returncode, done.stdout) == (1, "")
+    said = done.stderr.removeprefix("error: ") if command == "plan" else done.stderr  # plan prefixes its one line
+    assert said == f"{path}:{at}: tags are not used in plant files — remove {tag}\n"

@@ -11,7 +11,9 @@ verified by reading back (not this module's job).
 
 A frame ends on `line_idle()`, or on a `now` (of `receive_data` or `next_event`) that
 finds the line silent for at least `zvz` since the last byte (see `base` for how the
-silence before a chunk is measured).
+silence before a chunk is measured). A `zvz` not longer than one character time ends a frame
+after every byte, as the driver does: its time runs out before the next byte is in (seed 004
+§5.2.8; plant files refuse such a ZVZ, `prc3cfg.core.gateway.zvz_too_short`).
 
 Readings (where link.md is silent):
 - A frame of only the address byte is a `Frame` with message b"": the module answers it
@@ -63,6 +65,7 @@ class OpenDriverDecoder(Decoder):
     def __init__(self, direction: Direction, line: LineSettings, zvz: float) -> None:
         super().__init__(direction, line)
         self.zvz = zvz
+        self._every_byte = zvz <= line.char_time  # a frame of each byte, as the driver makes
         self._frame = bytearray()
         self._too_long = False  # the frame being received has passed MAX_FRAME bytes
 
@@ -78,6 +81,11 @@ class OpenDriverDecoder(Decoder):
             self.line_idle()
 
     def _take(self, data: bytes, now: float) -> None:
+        if self._every_byte:
+            for byte in data:
+                self._frame.append(byte)
+                self.line_idle()
+            return
         i, n = 0, len(data)
         while i < n:
             if len(self._frame) == MAX_FRAME:
