@@ -60,7 +60,9 @@ def lose_replies_to(
 
 
 class LossyProxy:
-    """Listens on loopback; every connection is forwarded to `upstream` through the rule."""
+    """Listens on loopback and forwards each client's frames through the rule over ONE connection to
+    `upstream`, held for the proxy's life — as a gateway holds its serial line whoever its client is
+    (an emulator takes one client per line: a connection per client would race the last one's close)."""
 
     def __init__(self, upstream: tuple[str, int], rule: Rule, *, framing: str = "crc16",
                  line: LineSettings = LineSettings(), zvz: float = 0.020) -> None:  # fmt: skip
@@ -74,6 +76,9 @@ class LossyProxy:
         self._closing = threading.Event()
         self._sockets: list[socket.socket] = []
         self._threads: list[threading.Thread] = []
+        self._line: socket.socket | None = None  # the one connection upstream
+        self._client: socket.socket | None = None  # who the replies go to
+        self._swallow, self._flooding = threading.Event(), threading.Event()
 
     def listen(self) -> str:
         server = socket.create_server(("127.0.0.1", 0))
@@ -96,12 +101,16 @@ class LossyProxy:
                 continue
             except OSError:
                 return
-            upstream = socket.create_connection(self.upstream)
-            self._sockets += [client, upstream]
-            swallow, flood = threading.Event(), threading.Event()
-            self._start(self._requests, client, upstream, swallow, flood)
-            self._start(self._replies, upstream, client, swallow)
-            self._start(self._flood, client, flood)
+            if self._line is None:
+                self._line = socket.create_connection(self.upstream)
+                self._sockets.append(self._line)
+                self._start(self._replies, self._line)
+            self._sockets.append(client)
+            self._client = client
+            self._swallow.clear()
+            self._flooding.clear()
+            self._start(self._requests, client, self._line, self._swallow, self._flooding)
+            self._start(self._flood, client, self._flooding)
 
     def _requests(self, client: socket.socket, upstream: socket.socket, swallow: threading.Event,
                   flood: threading.Event) -> None:  # fmt: skip
@@ -133,7 +142,7 @@ class LossyProxy:
                 if Loss.REFUSAL in losses:
                     client.sendall(self.framing.encode(Direction.REPLY, event.address, bytes([FAKE_CODE, 0])))
 
-    def _replies(self, upstream: socket.socket, client: socket.socket, swallow: threading.Event) -> None:
+    def _replies(self, upstream: socket.socket) -> None:
         while not self._closing.is_set():
             try:
                 data = upstream.recv(4096)
@@ -141,8 +150,9 @@ class LossyProxy:
                 return
             if not data:
                 return
-            if not swallow.is_set():
-                client.sendall(data)
+            if not self._swallow.is_set() and self._client is not None:
+                with contextlib.suppress(OSError):  # a client gone: its reply is lost, as on a line
+                    self._client.sendall(data)
 
     def _flood(self, client: socket.socket, flood: threading.Event) -> None:
         while not self._closing.is_set():
