@@ -22,7 +22,8 @@ Two addresses of one gateway (issue 18: an emulator listening on 0.0.0.0, plante
 127.0.0.1 and 127.0.0.2) are two locks — no client can know they are one host — so there the
 gateway itself keeps one client per line: the other apply is told "the gateway is busy".
 With 64 connections allowed, both wrote in 20 of 20 races. A short version runs always, 200
-races under `soak`.
+races under `soak`. And 2–6 applies at once, through six spellings of such a gateway, each in a
+shell of its own (TMPDIR, no PRC3CFG_LOCK_DIR): one writer in every race (100 under `soak`).
 """
 
 from __future__ import annotations
@@ -115,8 +116,8 @@ def drive(lines: list[tuple[str, str]], waves: int, first: int, workdir: Path) -
     for wave in range(first, first + waves):
         plants = []
         for line, ports in enumerate(lines):
-            for side, port in zip("ab", ports):
-                directory = workdir / f"{wave}-{line}{side}"
+            for side, port in enumerate(ports):
+                directory = workdir / f"{wave}-{line}-{side}"
                 directory.mkdir()
                 plant = directory / "plant.yaml"
                 plant.write_text(PLANT.format(port=port, position=_position(wave)))
@@ -136,14 +137,16 @@ def drive(lines: list[tuple[str, str]], waves: int, first: int, workdir: Path) -
         os.close(release)
         os.close(go)  # every child's read returns at once
         codes = [os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) for pid in children]
-        for line in range(len(lines)):
-            pair = plants[2 * line : 2 * line + 2]
+        start = 0
+        for line, ports in enumerate(lines):
+            racers, codes_ = plants[start : start + len(ports)], codes[start : start + len(ports)]
+            start += len(ports)
             results.append({
                 "race": f"wave {wave}, line {line}",
-                "codes": codes[2 * line : 2 * line + 2],
-                "writes": [_writes(p.parent) for p in pair],
-                "out": [(p.parent / "stdout").read_text() for p in pair],
-                "err": [(p.parent / "stderr").read_text() for p in pair],
+                "codes": codes_,
+                "writes": [_writes(p.parent) for p in racers],
+                "out": [(p.parent / "stdout").read_text() for p in racers],
+                "err": [(p.parent / "stderr").read_text() for p in racers],
             })  # fmt: skip
     return results
 
@@ -194,18 +197,21 @@ def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iter
     return json.loads(driver.stdout)
 
 
-def _judge(results: list[dict], rounds: int, refusal: str = "the line is locked by") -> None:
+def _judge(results: list[dict], rounds: int, refusal: str | tuple[str, ...] = "the line is locked by") -> None:
+    """In every race exactly one apply wrote, and completed; each other one was refused (`refusal`)
+    or found nothing left to do."""
+    refusals = (refusal,) if isinstance(refusal, str) else refusal
     assert len(results) == rounds
-    both = [r for r in results if all(r["writes"])]
-    assert not both, f"both applies wrote in {len(both)} of {rounds} races, e.g. {both[0]}"
+    overlaps = [r for r in results if sum(map(bool, r["writes"])) > 1]
+    assert not overlaps, f"two applies wrote in {len(overlaps)} of {rounds} races, e.g. {overlaps[0]}"
     for r in results:
-        writer = [i for i in (0, 1) if r["writes"][i]]
+        writer = [i for i, writes in enumerate(r["writes"]) if writes]
         assert len(writer) == 1, f"{r['race']}: no apply wrote: {r}"
-        other = 1 - writer[0]
         assert r["codes"][writer[0]] == 0 and "Apply complete" in r["out"][writer[0]], r
-        refused = r["codes"][other] == 1 and refusal in r["err"][other]
-        idle = r["codes"][other] == 0 and "Nothing to do" in r["out"][other]
-        assert refused or idle, f"{r['race']}: the other apply neither was refused nor found nothing to do: {r}"
+        for other in set(range(len(r["writes"]))) - set(writer):
+            refused = r["codes"][other] == 1 and any(text in r["err"][other] for text in refusals)
+            idle = r["codes"][other] == 0 and "Nothing to do" in r["out"][other]
+            assert refused or idle, f"{r['race']}: apply {other} neither was refused nor found nothing to do: {r}"
 
 
 @pytest.mark.parametrize("rounds", ROUNDS)
@@ -229,6 +235,22 @@ def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines, wav
 def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_address, waves, rounds):
     spellings = [(f"socket://127.0.0.1:{p}", f"socket://127.0.0.2:{p}") for p in lines_on_every_address]
     _judge(_race(tmp_path, spellings, rounds, waves), rounds, refusal="the gateway is busy: another client holds the line")
+
+
+#: Every spelling of one gateway listening on 0.0.0.0 a client can use: each resolves to a lock key of
+#: its own or shares one — either way the gateway, or the lock, lets one writer through.
+SPELLINGS = ["socket://127.0.0.1:{p}", "socket://localhost:{p}", "socket://127.0.0.2:{p}", "socket://0.0.0.0:{p}",
+             "socket://127.0.0.3:{p}", "socket://[::ffff:127.0.0.1]:{p}"]  # fmt: skip
+
+
+@pytest.mark.parametrize(("racers", "rounds"), [(3, LINES), (6, LINES), *[pytest.param(k, 5 * LINES, marks=pytest.mark.soak) for k in range(2, 7)]])
+def test_two_to_six_applies_with_every_spelling_and_environment_never_overlap(tmp_path, lines_on_every_address, waves, racers, rounds):
+    """2–6 applies at once on one line, each through another spelling of the gateway and in a shell of
+    its own (its own TMPDIR, no PRC3CFG_LOCK_DIR: the machine's lock folder): one writes, the others are
+    refused by the lock or by the gateway, or find nothing left to do. Soak: 100 races."""
+    spellings = [tuple(SPELLINGS[i].format(p=p) for i in range(racers)) for p in lines_on_every_address]
+    _judge(_race(tmp_path, spellings, rounds, waves, own_tmpdir=True), rounds,
+           refusal=("the line is locked by", "the gateway is busy: another client holds the line"))  # fmt: skip
 
 
 if __name__ == "__main__":  # the driver: WORKDIR WAVES FIRST_WAVE LINES (JSON: [[port, port], …])
