@@ -14,14 +14,17 @@ import threading
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
 from emulated import emulated_plant, run_cli
 from lossy import Loss
 from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import Frame
 from prc3cfg.plant import load_plant
 from prc3cfg.shell.emulator import Emulator
 from prc3cfg.shell.locks import line_keys, line_lock
+from prc3cfg.shell.testing import EmulatedPlant
 
 TRAVEL = "Travel to reference point required before production on:"
 
@@ -60,9 +63,7 @@ def test_a_repair_never_releases_the_axes_of_a_module_the_operator_was_not_asked
         return set()
 
     with emulated_plant(tmp_path, lossy={"booth-a": floor}) as plant:
-        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-        for address in (1, 2, 5):
-            plant.emulators["booth-a"].update(address, referenced=True)  # travelled to the reference point
+        commissioned(plant, capsys)
         edit(plant.path, "name: booth-a-left\n", "name: booth-a-left\n    system: {upper_reversing_point: 2.3}\n")
         edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
         before, armed = len(sent(tmp_path)), True
@@ -155,6 +156,27 @@ def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does
 UNCHECKED = {"framing": "open-driver", "parity": "none", "accept_undetected_damage": True}
 
 
+class Once:
+    """A `LossyProxy` rule: once `armed`, the next request with message ID `message_id` to `address`
+    suffers `loss` — then nothing more."""
+
+    def __init__(self, address: int, message_id: int, loss: Loss) -> None:
+        self.address, self.message_id, self.loss, self.armed = address, message_id, loss, False
+
+    def __call__(self, frame: Frame, _: int) -> set[Loss]:
+        if self.armed and frame.address == self.address and frame.message[0] == self.message_id:
+            self.armed = False
+            return {self.loss}
+        return set()
+
+
+def commissioned(plant: EmulatedPlant, capsys: pytest.CaptureFixture) -> None:
+    """The plant applied from factory modules, and every module of booth-a travelled to its reference point."""
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    for address in (1, 2, 5):
+        plant.emulators["booth-a"].update(address, referenced=True)
+
+
 def test_apply_on_a_line_without_error_detection_needs_the_risk_accepted_in_the_plant_file(tmp_path, capsys):
     with emulated_plant(tmp_path, framing="open-driver", parity="none") as plant:
         refused = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
@@ -168,20 +190,10 @@ def test_apply_on_a_line_without_error_detection_needs_the_risk_accepted_in_the_
 def test_a_read_the_module_executes_as_a_10h_is_a_possible_release_never_accepted(tmp_path, capsys):
     """The first 50h to booth-a-right arrives as 10h: the module goes to factory defaults and answers
     "accepted". The plan stops in one line; every later command says the module may be released."""
-    armed = False
-
-    def flip(frame, _):
-        nonlocal armed
-        if armed and frame.address == 2 and frame.message[:1] == b"\x50":
-            armed = False
-            return {Loss.AS_INIT}
-        return set()
-
+    flip = Once(2, 0x50, Loss.AS_INIT)
     with emulated_plant(tmp_path, lossy={"booth-a": flip}, **UNCHECKED) as plant:
-        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-        for address in (1, 2, 5):
-            plant.emulators["booth-a"].update(address, referenced=True)
-        armed = True
+        commissioned(plant, capsys)
+        flip.armed = True
         planned = run_cli(capsys, "plan", plant.path)
         assert planned.code == 1
         assert "bus booth-a, module 2: a read (50h) was answered as a write is" in planned.err
@@ -196,21 +208,11 @@ def test_a_read_the_module_executes_as_a_10h_is_a_possible_release_never_accepte
 def test_a_write_whose_address_became_the_broadcast_is_found_on_every_module_of_the_line(tmp_path, capsys):
     """Booth-a-left's 20h arrives at address 0: booth-a-right and booth-a-top take its system block and
     release their axes. Their own steps never touched the system: they are read all the same, and named."""
-    armed = False
-
-    def flip(frame, _):
-        nonlocal armed
-        if armed and frame.address == 1 and frame.message[:1] == b"\x20":
-            armed = False
-            return {Loss.TO_BROADCAST}
-        return set()
-
+    flip = Once(1, 0x20, Loss.TO_BROADCAST)
     with emulated_plant(tmp_path, lossy={"booth-a": flip}, **UNCHECKED) as plant:
-        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-        for address in (1, 2, 5):
-            plant.emulators["booth-a"].update(address, referenced=True)
+        commissioned(plant, capsys)
         edit(plant.path, "name: booth-a-left\n", "name: booth-a-left\n    system: {circuit_gain: 900}\n")
-        armed = True
+        flip.armed = True
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert not plant.emulators["booth-a"].module(2).referenced and not plant.emulators["booth-a"].module(5).referenced
         assert result.code == 1, result.out
@@ -240,9 +242,7 @@ def test_a_verifying_read_executed_as_a_10h_stops_the_line_and_names_the_module(
         return set()
 
     with emulated_plant(tmp_path, lossy={"booth-a": flip}, **UNCHECKED) as plant:
-        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-        for address in (1, 2, 5):
-            plant.emulators["booth-a"].update(address, referenced=True)
+        commissioned(plant, capsys)
         edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
         armed = True
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
@@ -276,10 +276,8 @@ def test_a_running_module_is_told_to_stop_and_left_out_never_written_in_a_loop(t
 
 def test_a_module_in_e12_is_given_its_system_parameters_by_the_next_plan_gated_and_saying_why(tmp_path, capsys):
     with emulated_plant(tmp_path) as plant:
-        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        commissioned(plant, capsys)
         emulator = plant.emulators["booth-a"]
-        for address in (1, 2, 5):
-            emulator.update(address, referenced=True)
         emulator.update(2, fault="E12")  # its system parameters read back as the plant file's, yet it is in E12
         edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
         first = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
