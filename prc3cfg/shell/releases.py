@@ -52,7 +52,8 @@ def _folder() -> Path:
         folder = directory / "releases"
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            os.chmod(folder, 0o1777) if directory == SYSTEM_STATE_DIR else None
+            if directory == SYSTEM_STATE_DIR and folder.stat().st_uid == os.getuid():
+                os.chmod(folder, 0o1777)  # every user's prc3cfg records there; none removes another's
             if os.access(folder, os.W_OK):
                 return folder
             problems.append(f"{folder}: not writable")
