@@ -21,6 +21,7 @@ Does not own when a release happens (`prc3cfg.shell.apply`) nor what is said of 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
@@ -177,9 +178,12 @@ def cleared(records: Iterable[Pending]) -> None:
 
 
 def _keep(path: Path, keep: Callable[[dict], bool]) -> None:
-    """Only the records of `path` that `keep` says; the file goes when none is left."""
+    """Only the records of `path` that `keep` says; the file goes when none is left. Where this user
+    may not change it (another user's record in the machine's sticky folder) it stays as it is: the
+    next command warns once more, which errs the safe way."""
     kept = [entry for entry in _entries(path) if keep(entry)]
-    if kept:
-        write_atomically(path, "".join(json.dumps(entry) + "\n" for entry in kept))
-    else:
-        path.unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        if kept:
+            write_atomically(path, "".join(json.dumps(entry) + "\n" for entry in kept))
+        else:
+            path.unlink(missing_ok=True)
