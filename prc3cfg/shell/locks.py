@@ -3,7 +3,8 @@
 Owns the identities of a line (`line_keys`: each address a `socket://` or `rfc2217://` host
 resolves to, a device's real path, an emulator's state file — so two spellings of one line
 share a key), the lock files in a folder every user of the machine shares, and the wait
-for a busy line.
+for a busy line — also for a local device that another serial program holds (the device is
+locked the way every serial program locks it, `prc3cfg.shell.serial_lock`).
 
 The folder is the machine's, whatever the environment or the user of the process
 (`lock_dir`): `PRC3CFG_LOCK_DIR` when set, else `/run/lock/prc3cfg` (the system's lock
