@@ -138,6 +138,17 @@ def test_a_lock_file_of_a_live_process_refuses_naming_it_and_is_left(tmp_path, s
     assert sorted(p.name for p in serial_lock.uucp_lock_dir().iterdir()) == [held.name]
 
 
+def test_a_plant_bus_on_a_device_another_program_holds_is_refused(tmp_path, sleeper):
+    with emulator_pty() as pty:
+        plant = tmp_path / "plant.yaml"
+        plant.write_text(f"plant: t\nbuses:\n  - name: booth-a\n    port: {pty}\n    parity: none\n"
+                         "    modules:\n      - {address: 1, name: left}\n")  # fmt: skip
+        lock_file(Path(pty).name).write_bytes(hdb(sleeper.pid))
+        refused = prc3cfg("plan", str(plant))
+    assert refused.returncode != 0
+    assert refused.stderr == f"error: bus booth-a ({pty}): the serial port {pty} is in use by sleep (pid {sleeper.pid}) — close it and run again\n"
+
+
 @pytest.mark.parametrize("left", ["dead pid", "old garbage"])
 def test_a_stale_lock_file_is_taken_over(tmp_path, left):
     with emulator_pty() as pty:
