@@ -255,7 +255,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     with contextlib.ExitStack() as stack:
         for bus in plant.buses:
             if bus.name in names:
-                stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", timeout=options.lock_timeout,
+                stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", port=bus.port, timeout=options.lock_timeout,
                                               purpose=purpose, waiting=options.waiting))  # fmt: skip
         if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
             raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
@@ -892,7 +892,7 @@ def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[L
         raise UserError(problem)
     with contextlib.ExitStack() as stack:
         keys = line_keys(bare.port)
-        stack.enter_context(line_lock(keys, bare.port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting))
+        stack.enter_context(line_lock(keys, bare.port, port=bare.port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting))
         for record in releases.pending(keys):
             options.tell(record.said())
         port = open_port(bare.port, bare.line, bus=bare.port)

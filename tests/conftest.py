@@ -26,10 +26,13 @@ settings.load_profile(os.environ.get("PRC3CFG_HYPOTHESIS_PROFILE", "fast"))
 
 @pytest.fixture(autouse=True)
 def private_locks(tmp_path, monkeypatch):
-    """Line locks and records of untold axis releases in the test's own folder: tests running at
-    once never wait for each other, and a test that kills an apply leaves nothing to the next."""
+    """Line locks, serial devices' lock files and records of untold axis releases in the test's
+    own folder: tests running at once never wait for each other, and a test that kills an apply
+    leaves nothing to the next."""
     monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
     monkeypatch.setenv("PRC3CFG_STATE_DIR", str(tmp_path / "state"))
+    (tmp_path / "uucp").mkdir()  # the serial devices' LCK.. files: machine state, left to the tests that mean it
+    monkeypatch.setenv("PRC3CFG_UUCP_LOCK_DIR", str(tmp_path / "uucp"))
 
 
 @pytest.fixture

@@ -3,7 +3,8 @@
 Owns the identities of a line (`line_keys`: each address a `socket://` or `rfc2217://` host
 resolves to, a device's real path, an emulator's state file — so two spellings of one line
 share a key), the lock files in a folder every user of the machine shares, and the wait
-for a busy line.
+for a busy line — also for a local device that another serial program holds (the device is
+locked the way every serial program locks it, `prc3cfg.shell.serial_lock`).
 
 The folder is the machine's, whatever the environment or the user of the process
 (`lock_dir`): `PRC3CFG_LOCK_DIR` when set, else `/run/lock/prc3cfg` (the system's lock
@@ -41,6 +42,7 @@ from urllib.parse import urlsplit
 
 from prc3cfg.core.line import TCP_SCHEMES
 from prc3cfg.errors import UserError
+from prc3cfg.shell import serial_lock
 
 POLL = 0.1  # s between attempts on a busy line
 #: Where the lock folder may be, in order: (parent, name) — `lock_dir`.
@@ -80,10 +82,22 @@ def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ..
         except (OSError, UnicodeError):  # does not resolve: the open fails with its own message
             return (f"tcp/{host}/{tcp_port}",)
         return tuple(sorted({f"tcp/{_reached(sockaddr[0])}/{tcp_port}" for *_, sockaddr in addresses}))
-    path = urlsplit(port).path
-    if path.startswith("/"):  # a pyserial wrapper of a device (spy:///dev/ttyUSB0?file=…): the device's line too
+    path = device_path(port)
+    if path is not None:  # a pyserial wrapper of a device (spy:///dev/ttyUSB0?file=…): the device's line too
         return (port, _device_key(path))
     return (port,)
+
+
+def device_path(port: str) -> str | None:
+    """The local device `port` names, as written: the port itself when it is a path, the absolute
+    path of a pyserial URL wrapping one (`spy:///dev/ttyUSB0?file=…`); None for any other."""
+    scheme, sep, _ = port.partition("://")
+    if not sep:
+        return port
+    if scheme == "emulator" or scheme in TCP_SCHEMES:
+        return None
+    path = urlsplit(port).path
+    return path if path.startswith("/") else None
 
 
 def _device_key(path: str) -> str:
@@ -215,34 +229,51 @@ def line_lock(
     keys: Iterable[str],
     description: str,
     *,
+    port: str | None = None,
     timeout: float = 0.0,
     purpose: str = "apply",
     waiting: Callable[[str], None] | None = None,
 ) -> Iterator[tuple[Path, ...]]:
     """Hold the lock of one line (all of its `keys`, from `line_keys`) for the block; yields the lock files.
 
+    When `port` names a local device (`device_path`), the device is locked as other serial
+    programs lock it too, once the line lock is held (`prc3cfg.shell.serial_lock`).
     A busy line is tried again every `POLL` s for up to `timeout` s, then refused with
     `LineBusy` naming the holder; `waiting` is told once, with the holder, when a wait begins.
     (Ctrl-C while waiting: the CLI's signal handler interrupts the sleep, `prc3cfg.shell.cancel`.)"""
     if isinstance(keys, str):
         raise TypeError("line_lock takes the keys of a line (line_keys(port)), not one string")
     paths = sorted({lock_path(key) for key in keys})
+    device = device_path(port) if port is not None else None
     _make_lock_dir(description)
     deadline = time.monotonic() + timeout
     told = False
     while True:
         taken, holder = _take_all(paths, description)
         if holder is None:
-            break
+            try:
+                serial_taken, in_use = serial_lock.take([device] if device is not None else [])
+            except BaseException:
+                _release(taken)
+                raise
+            if in_use is None:
+                break
+            _release(taken)
+            busy = f"the serial port {in_use.device} is in use by {in_use.holder}"
+            advice = wait_advice = "close it and run again"
+            waited_for = f"the serial port {in_use.device}, in use by {in_use.holder}"
+        else:
+            busy = f"the line is locked by {holder}"
+            advice = "wait for it to finish, or pass --lock-timeout SECONDS to wait"
+            wait_advice = "wait for it to finish, or pass a longer --lock-timeout"
+            waited_for = f"the line lock held by {holder}"
         left = deadline - time.monotonic()
         if left <= 0:
             if timeout > 0:
-                raise LineBusy(f"{description}: the line is locked by {holder} after waiting {timeout:g} s — "
-                               "wait for it to finish, or pass a longer --lock-timeout")  # fmt: skip
-            raise LineBusy(f"{description}: the line is locked by {holder} — wait for it to finish, "
-                           "or pass --lock-timeout SECONDS to wait")  # fmt: skip
+                raise LineBusy(f"{description}: {busy} after waiting {timeout:g} s — {wait_advice}")
+            raise LineBusy(f"{description}: {busy} — {advice}")
         if waiting is not None and not told:
-            waiting(f"{description}: waiting for the line lock held by {holder} — up to {timeout:g} s")
+            waiting(f"{description}: waiting for {waited_for} — up to {timeout:g} s")
             told = True
         time.sleep(min(POLL, left))
     record = json.dumps({
@@ -261,4 +292,5 @@ def line_lock(
                     os.pwrite(fd, record, 0)
         yield tuple(paths)
     finally:
+        serial_lock.release(serial_taken)
         _release(taken)

@@ -1,0 +1,200 @@
+"""A local serial device as every program on the machine locks it, not only prc3cfg.
+
+Owns two conventions of Linux serial programs. The UUCP lock file: `LCK..NAME` in the system's
+lock folder (`uucp_lock_dir`: `PRC3CFG_UUCP_LOCK_DIR` when set, else /var/lock), NAME the last
+part of the device path, holding its owner's pid in HDB form (ASCII, right-aligned in 10
+characters, a newline) — minicom, cu, and picocom built with UUCP locks write it; picocom names it
+after the path it was given, so a symlink (/dev/serial/by-id/…) and its real path are two names,
+and both are checked and taken. And the kernel lock (`flock`) on the device itself, which
+picocom as Debian builds it and pyserial's `exclusive=True` take: its holder is found in
+/proc/locks by the device's inode, to be named.
+
+`take` refuses a device another live process holds either way (`InUse`, naming the program
+and its pid), takes over a lock file whose pid is dead — or, holding no pid, that has not been
+written for `GARBAGE_AGE` s (younger, its owner may still be writing it) — and writes ours;
+`release` removes only a lock file that still holds our pid. A lock folder that is missing or
+that this user cannot write (not root, not in the group that owns it) is passed over in
+silence: the line lock (`prc3cfg.shell.locks`) and the exclusive open still hold, and a foreign
+lock file is still honoured.
+
+Does not own which port names a device (`prc3cfg.shell.locks.device_path`), nor the wait for a
+busy line (`prc3cfg.shell.locks.line_lock`), nor opening the device (`prc3cfg.shell.link.ports`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+SYSTEM_LOCK_DIR = Path("/var/lock")
+GARBAGE_AGE = 5.0  # s a lock file holding no pid is left to its writer
+TAKE_ATTEMPTS = 3  # tries at a lock file that other programs keep taking and dropping
+
+
+@dataclass(frozen=True)
+class InUse:
+    """A device another program holds: the path as it is named, and the holder in words."""
+
+    device: str
+    holder: str
+
+
+def uucp_lock_dir() -> Path:
+    return Path(os.environ.get("PRC3CFG_UUCP_LOCK_DIR") or SYSTEM_LOCK_DIR)
+
+
+def lock_names(device: str) -> tuple[str, ...]:
+    """`LCK..NAME` for the device as given and for its real path (one name when they agree)."""
+    names = [f"LCK..{os.path.basename(device)}", f"LCK..{os.path.basename(os.path.realpath(device))}"]
+    return tuple(dict.fromkeys(names))
+
+
+def _is_device(path: str) -> bool:
+    try:
+        return stat.S_ISCHR(os.stat(path).st_mode)
+    except (OSError, ValueError):  # missing, or no path at all: the open says so
+        return False
+
+
+def take(devices: Iterable[str]) -> tuple[list[Path], InUse | None]:
+    """Take the lock files of every device, or none: the files written, or none and who holds
+    the first device in use."""
+    taken: list[Path] = []
+    try:
+        for device in devices:
+            if not _is_device(device):
+                continue
+            if (holder := _flock_holder(device)) is not None:
+                release(taken)
+                return [], InUse(device, holder)
+            for name in lock_names(device):
+                path, holder = _take_file(uucp_lock_dir() / name)
+                if holder is not None:
+                    release(taken)
+                    return [], InUse(device, holder)
+                if path is not None:
+                    taken.append(path)
+    except BaseException:
+        release(taken)
+        raise
+    return taken, None
+
+
+def release(paths: Iterable[Path]) -> None:
+    """Remove the lock files that still hold our pid; leave any other program's."""
+    for path in paths:
+        if _pid_in(path) == os.getpid():
+            with contextlib.suppress(OSError):
+                path.unlink()
+
+
+def _take_file(path: Path) -> tuple[Path | None, str | None]:
+    """Our lock file at `path` (None where the folder cannot be written), or the live holder."""
+    record = f"{os.getpid():10d}\n".encode()
+    for _ in range(TAKE_ATTEMPTS):
+        try:
+            os.link(_written(path.parent, record), path)  # whole, at once: no one reads it half-written
+            return path, None
+        except FileExistsError:
+            pass
+        except OSError:  # no lock folder, or not ours to write: rely on the line lock and the exclusive open
+            return None, _live_holder(path)
+        finally:
+            with contextlib.suppress(OSError):
+                (path.parent / f"LTMP.{os.getpid()}").unlink()
+        if (holder := _live_holder(path)) is not None:
+            return None, holder
+        with contextlib.suppress(OSError):  # stale: its owner is gone
+            path.unlink()
+    return None, _live_holder(path) or f"another program (it keeps taking {path})"
+
+
+def _written(folder: Path, record: bytes) -> Path:
+    """A file in `folder` holding `record`, readable by every user, to be linked to a lock name."""
+    temporary = folder / f"LTMP.{os.getpid()}"
+    fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    try:
+        os.fchmod(fd, 0o644)  # umask aside: other programs read the pid
+        os.write(fd, record)
+    finally:
+        os.close(fd)
+    return temporary
+
+
+def _pid_in(path: Path) -> int | None:
+    """The pid a lock file holds (HDB's ASCII form, any spacing), None when it holds none."""
+    try:
+        text = path.read_bytes()[:64].decode("ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return int(text) if text.isdigit() and int(text) > 0 else None
+
+
+def _live_holder(path: Path) -> str | None:
+    """Who holds the lock file at `path` in words, or None when it is stale or absent.
+
+    Stale: its pid is dead or ours (left by an earlier process that had our pid); or it holds
+    no pid and was last written `GARBAGE_AGE` s ago or more."""
+    try:
+        written = path.stat().st_mtime
+    except OSError:
+        return None
+    pid = _pid_in(path)
+    if pid is None:
+        if time.time() - written >= GARBAGE_AGE:
+            return None
+        return f"another program (its lock file {path} names no process yet)"
+    if pid == os.getpid() or not _alive(pid):
+        return None
+    return _named(pid)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's: alive
+        return True
+    except OverflowError:  # no pid can be that large
+        return False
+    return True
+
+
+def _named(pid: int) -> str:
+    """"picocom (pid 1234)", or "a process (pid 1234)" where /proc does not say its program."""
+    try:
+        program = Path(f"/proc/{pid}/comm").read_text().strip()
+    except OSError:
+        program = ""
+    return f"{program or 'a process'} (pid {pid})"
+
+
+def _flock_holder(device: str) -> str | None:
+    """Who else holds a kernel lock on the device (from /proc/locks), or None."""
+    try:
+        info = os.stat(device)
+        locks = Path("/proc/locks").read_text().splitlines()
+    except OSError:
+        return None
+    for line in locks:
+        fields = line.split()
+        if len(fields) < 6 or fields[1] == "->":  # a waiter, not a holder
+            continue
+        pid, where = fields[4], fields[5].split(":")
+        try:
+            major, minor, inode = int(where[0], 16), int(where[1], 16), int(where[2])
+        except (ValueError, IndexError):
+            continue
+        if (major, minor, inode) != (os.major(info.st_dev), os.minor(info.st_dev), info.st_ino):
+            continue
+        if not pid.lstrip("-").isdigit() or int(pid) <= 0:
+            return "another program"  # an open-file-description lock names no process
+        if int(pid) != os.getpid():
+            return _named(int(pid))
+    return None

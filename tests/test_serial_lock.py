@@ -1,0 +1,257 @@
+"""A serial device is one line for every program: prc3cfg against other serial programs' locks.
+
+The ports are real pseudo-terminals (`os.openpty`, or socat's `pty` joined to an emulator over
+TCP) and the other programs real ones: picocom (Debian's holds a `flock` on the device),
+minicom (writes `LCK..NAME` in /var/lock), `sleep` as the live pid of a lock file written by
+hand. Every test but the last keeps its lock files in its own folder (`PRC3CFG_UUCP_LOCK_DIR`,
+tests/conftest.py); the last uses the machine's /var/lock, as a user meets it. Processes are
+followed by what they print, never by sleeping.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+
+from prc3cfg.shell import serial_lock
+from prc3cfg.shell.locks import device_path, line_keys, line_lock
+
+SOCAT, PICOCOM, MINICOM = shutil.which("socat"), shutil.which("picocom"), shutil.which("minicom")
+
+
+def prc3cfg(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "prc3cfg", *args], capture_output=True, text=True)
+
+
+def scan(port: str) -> subprocess.CompletedProcess:
+    return prc3cfg("scan", "--port", port, "--parity", "none")
+
+
+@contextlib.contextmanager
+def started(argv: list[str], ready: str, *, stream: str = "stdout"):
+    """A process, once it has printed a line containing `ready` on `stream`; the line with it."""
+    process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        while not lines or ready not in lines[-1]:
+            line = getattr(process, stream).readline()
+            assert line, f"{argv[0]} ended before saying {ready!r}: {''.join(lines)}"
+            lines.append(line)
+        yield process, lines[-1]
+    finally:
+        process.terminate()
+        process.communicate()
+
+
+@contextlib.contextmanager
+def emulator_pty():
+    """`prc3cfg emulator serve --pty` (modules 1 and 2): the path of its pty."""
+    argv = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--parity", "none", "--modules", "1,2"]
+    with started(argv, "pty: ") as (_, line):
+        yield line.removeprefix("pty: ").strip()
+
+
+@contextlib.contextmanager
+def socat_port(link: Path):
+    """A pty made by socat at `link` (a symlink to /dev/pts/N), joined to an emulator over TCP."""
+    argv = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--parity", "none", "--modules", "1,2"]
+    with started(argv, "listening on ") as (_, line):
+        address = line.split()[2]
+        with started([SOCAT, "-d", "-d", f"pty,raw,echo=0,link={link}", f"tcp:{address}"], "starting data transfer loop", stream="stderr"):
+            yield str(link)
+
+
+@contextlib.contextmanager
+def on_a_terminal(argv: list[str], ready: bytes):
+    """A terminal program (picocom, minicom) with a pty as its terminal, once it has shown `ready`."""
+    master, terminal = os.openpty()
+    process = subprocess.Popen(argv, stdin=terminal, stdout=terminal, stderr=terminal, start_new_session=True)
+    os.close(terminal)
+    try:
+        shown = b""
+        while ready not in shown:
+            chunk = os.read(master, 4096)
+            assert chunk, f"{argv[0]} ended before showing {ready!r}: {shown!r}"
+            shown += chunk
+        yield process
+    finally:
+        process.kill()
+        process.wait()
+        os.close(master)
+
+
+@pytest.fixture
+def sleeper():
+    """A live process that is no serial program."""
+    process = subprocess.Popen(["sleep", "infinity"])
+    yield process
+    process.kill()
+    process.wait()
+
+
+def lock_file(name: str) -> Path:
+    return serial_lock.uucp_lock_dir() / f"LCK..{name}"
+
+
+def hdb(pid: int) -> bytes:
+    return f"{pid:10d}\n".encode()
+
+
+def dead_pid() -> int:
+    process = subprocess.Popen(["true"])
+    process.wait()
+    return process.pid
+
+
+@pytest.mark.parametrize(("port", "device"), [
+    ("/dev/ttyUSB0", "/dev/ttyUSB0"),
+    ("spy:///dev/ttyUSB0?file=trace.txt", "/dev/ttyUSB0"),
+    ("socket://gateway:7001", None),
+    ("rfc2217://gateway:7001", None),
+    ("emulator://booth-a", None),
+    ("loop://", None),
+])  # fmt: skip
+def test_the_device_a_port_names(port, device):
+    assert device_path(port) == device
+
+
+@pytest.mark.parametrize("named", ["given", "real"])
+def test_a_lock_file_of_a_live_process_refuses_naming_it_and_is_left(tmp_path, sleeper, named):
+    with emulator_pty() as pty:
+        link = tmp_path / "booth-a"
+        link.symlink_to(pty)
+        held = lock_file(link.name if named == "given" else Path(pty).name)
+        held.write_bytes(hdb(sleeper.pid))
+        refused = scan(str(link))
+    assert refused.returncode != 0
+    assert refused.stderr == f"error: {link}: the serial port {link} is in use by sleep (pid {sleeper.pid}) — close it and run again\n"
+    assert held.read_bytes() == hdb(sleeper.pid)
+    assert sorted(p.name for p in serial_lock.uucp_lock_dir().iterdir()) == [held.name]
+
+
+def test_a_plant_bus_on_a_device_another_program_holds_is_refused(tmp_path, sleeper):
+    with emulator_pty() as pty:
+        plant = tmp_path / "plant.yaml"
+        plant.write_text(f"plant: t\nbuses:\n  - name: booth-a\n    port: {pty}\n    parity: none\n"
+                         "    modules:\n      - {address: 1, name: left}\n")  # fmt: skip
+        lock_file(Path(pty).name).write_bytes(hdb(sleeper.pid))
+        refused = prc3cfg("plan", str(plant))
+    assert refused.returncode != 0
+    assert refused.stderr == f"error: bus booth-a ({pty}): the serial port {pty} is in use by sleep (pid {sleeper.pid}) — close it and run again\n"
+
+
+@pytest.mark.parametrize("left", ["dead pid", "old garbage"])
+def test_a_stale_lock_file_is_taken_over(tmp_path, left):
+    with emulator_pty() as pty:
+        link = tmp_path / "booth-a"
+        link.symlink_to(pty)
+        stale = lock_file(Path(pty).name)
+        stale.write_bytes(hdb(dead_pid()) if left == "dead pid" else b"\x00garbage")
+        if left == "old garbage":
+            os.utime(stale, (0, os.stat(stale).st_mtime - serial_lock.GARBAGE_AGE))
+        scanned = scan(str(link))
+    assert scanned.returncode == 0, scanned.stderr
+    assert "2 modules answered" in scanned.stdout
+    assert list(serial_lock.uucp_lock_dir().iterdir()) == []
+
+
+def test_a_lock_file_without_a_pid_is_left_to_its_writer_while_young(tmp_path):
+    with emulator_pty() as pty:
+        young = lock_file(Path(pty).name)
+        young.write_bytes(b"")  # another program between making its lock file and writing its pid
+        refused = scan(pty)
+    assert refused.returncode != 0
+    assert f"the serial port {pty} is in use by another program (its lock file {young} names no process yet)" in refused.stderr
+    assert young.exists()
+
+
+def test_its_own_lock_files_hold_its_pid_while_it_runs_and_go_after(tmp_path):
+    master, terminal = os.openpty()
+    try:
+        link = tmp_path / "booth-a"
+        link.symlink_to(os.ttyname(terminal))
+        argv = [sys.executable, "-m", "prc3cfg", "scan", "--port", str(link), "--parity", "none", "--timeout", "0.5", "--retries", "0"]
+        process = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+        while not select.select([master], [], [], 1)[0]:  # its first request: the line is held
+            assert process.poll() is None, process.stderr.read()
+        os.read(master, 4096)
+        names = {link.name, Path(os.ttyname(terminal)).name}
+        assert {name: lock_file(name).read_bytes() for name in names} == dict.fromkeys(names, hdb(process.pid))
+        process.send_signal(signal.SIGINT)  # stopped mid-scan: the lock files go all the same
+        process.communicate()
+    finally:
+        os.close(master)
+        os.close(terminal)
+    assert list(serial_lock.uucp_lock_dir().iterdir()) == []
+
+
+def test_a_lock_file_another_program_wrote_over_ours_is_never_removed(tmp_path, sleeper):
+    master, terminal = os.openpty()
+    try:
+        link = tmp_path / "booth-a"
+        link.symlink_to(os.ttyname(terminal))
+        given, real = lock_file(link.name), lock_file(Path(os.ttyname(terminal)).name)
+        with line_lock(line_keys(str(link)), "bus a", port=str(link)):
+            assert given.read_bytes() == real.read_bytes() == hdb(os.getpid())
+            given.write_bytes(hdb(sleeper.pid))
+    finally:
+        os.close(master)
+        os.close(terminal)
+    assert given.read_bytes() == hdb(sleeper.pid)
+    assert not real.exists()
+
+
+def test_a_lock_folder_that_is_missing_is_passed_over_in_silence(tmp_path, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_UUCP_LOCK_DIR", str(tmp_path / "no-such-folder"))
+    master, terminal = os.openpty()
+    try:
+        with line_lock(line_keys(os.ttyname(terminal)), "bus a", port=os.ttyname(terminal)):
+            assert not (tmp_path / "no-such-folder").exists()
+    finally:
+        os.close(master)
+        os.close(terminal)
+
+
+@pytest.mark.skipif(SOCAT is None or PICOCOM is None, reason="socat and picocom are not installed (.ci/run installs them)")
+def test_picocom_holding_the_port_is_named(tmp_path):
+    with socat_port(tmp_path / "booth-a") as port, on_a_terminal([PICOCOM, "-b", "9600", port], b"Terminal ready") as picocom:
+        refused = {spelling: scan(spelling) for spelling in (port, os.path.realpath(port))}
+    for spelling, result in refused.items():
+        assert result.returncode != 0
+        assert result.stderr == f"error: {spelling}: the serial port {spelling} is in use by picocom (pid {picocom.pid}) — close it and run again\n"
+
+
+def writable_system_lock_dir() -> bool:
+    return os.access(serial_lock.SYSTEM_LOCK_DIR, os.W_OK)
+
+
+@pytest.mark.skipif(SOCAT is None or MINICOM is None, reason="socat and minicom are not installed (.ci/run installs them)")
+@pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
+def test_minicom_in_the_system_lock_folder_is_honoured_and_its_stale_lock_taken_over(tmp_path, monkeypatch):
+    monkeypatch.delenv("PRC3CFG_UUCP_LOCK_DIR")
+    link = tmp_path / f"prc3cfg-test-{uuid.uuid4().hex[:12]}"  # /var/lock is the machine's: a name no one else has
+    held, pid = serial_lock.SYSTEM_LOCK_DIR / f"LCK..{link.name}", None
+    try:
+        with socat_port(link) as port:
+            with on_a_terminal([MINICOM, "-D", port], b"Press CTRL-A Z") as minicom:
+                pid = minicom.pid
+                assert held.read_bytes() == hdb(pid)
+                refused = scan(port)
+            assert refused.returncode != 0
+            assert f"the serial port {port} is in use by minicom (pid {pid}) — close it and run again" in refused.stderr
+            assert held.read_bytes() == hdb(pid)  # killed: its lock file is left, stale
+            scanned = scan(port)
+        assert scanned.returncode == 0, scanned.stderr
+        assert not held.exists()
+    finally:
+        if pid is not None and held.exists() and held.read_bytes() == hdb(pid):  # a failure above: not left to the machine
+            held.unlink()
