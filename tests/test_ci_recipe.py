@@ -115,7 +115,7 @@ class Repository:
         bin_dir.mkdir()
         (bin_dir / "gh").write_text(GH.replace("PYTHON", sys.executable))
         (bin_dir / "gh").chmod(0o755)
-        self.env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "GH_STATE": str(self.state),
+        self.env = {**os.environ, "PATH": f"{bin_dir}:{Path(sys.executable).parent}:{os.environ['PATH']}", "GH_STATE": str(self.state),
                     "GITHUB_REPOSITORY": "plant-org/plant", "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"),
                     "GITHUB_BASE_REF": "main", "RUNNER_TEMP": str(tmp_path / "runner-temp")}  # fmt: skip
 
@@ -206,3 +206,15 @@ def test_the_apply_job_refuses_a_plan_made_for_another_plant_file(tmp_path):
     assert steps[-1].returncode == 1
     assert "stale plan — the plant file" in steps[-1].stderr and "plant.yaml changed since the plan was made" in steps[-1].stderr
     assert not (repository.path / ".prc3cfg" / "journal").exists()  # nothing reached the line
+
+
+def test_a_broken_plant_file_is_annotated_at_its_line_and_not_planned(tmp_path):
+    repository = Repository(tmp_path)
+    plant = repository.path / "plant.yaml"
+    text = plant.read_text()
+    plant.write_text(text.replace("dwell: 0.5", "dwel: 0.5", 1))
+    line = text[: text.index("dwell: 0.5")].count("\n") + 1
+    steps = repository.run_job("plan", pull_request("eee555"))
+    assert steps[-1].returncode == 1 and not repository.comments()
+    assert steps[-1].stdout.startswith(f"::error file=plant.yaml,line={line},col=")
+    assert "title=prc3cfg::unknown key 'dwel'" in steps[-1].stdout

@@ -136,6 +136,6 @@ def test_a_zvz_not_longer_than_one_character_is_refused_at_its_line(tmp_path, ca
     result = run_cli(capsys, *command[:-2], plant, *command[-2:]) if len(command) > 1 else run_cli(capsys, "validate", plant)
     assert result.code == 1
     assert result.problems == [
-        f"{'error: ' if len(command) > 1 else ''}{plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
+        f"error: {plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
         "8E1 (11 bits: 9.17 ms), so the gateway would end a frame after every byte — the character delay time must be "
         "greater than the time between two characters (seed 004 §5.2.8; its guide at 1200 baud: 30..800 ms): raise zvz"]
