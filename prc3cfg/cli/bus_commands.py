@@ -12,12 +12,14 @@ from prc3cfg.cli.common import (
     FRAMING_NAMES,
     PARITY_NAMES,
     STOP_BITS,
+    TIMES,
     LockOpt,
     PlantArg,
     RetriesOpt,
     TraceOpt,
     addresses_option,
     check_output,
+    duration,
     line_options,
     one_of,
     parse_addresses,
@@ -29,14 +31,15 @@ from prc3cfg.errors import UserError
 if TYPE_CHECKING:
     from prc3cfg import api
 
-PortOpt = Annotated[str, typer.Option("--port", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
-FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
-BaudOpt = Annotated[int, typer.Option(min=1, max=10_000_000, help="Baud rate.")]
-ParityOpt = Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=" | ".join(PARITY_NAMES))]
-DataBitsOpt = Annotated[int, typer.Option(callback=one_of(DATA_BITS), help=" | ".join(map(str, DATA_BITS)))]
-StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), help=" | ".join(map(str, STOP_BITS)))]
-TimeoutOpt = Annotated[float, typer.Option(min=0.001, max=3600, help="Seconds to wait for a reply.")]
-ZvzOpt = Annotated[float, typer.Option(min=0.004, max=65.535, help="open-driver: the character delay time ZVZ that ends a frame, s.")]
+PortOpt = Annotated[str, typer.Option("--port", metavar="PORT", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
+FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
+BaudOpt = Annotated[int, typer.Option(min=1, max=10_000_000, metavar="BAUD", help="Baud rate.")]
+ParityOpt = Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", help=" | ".join(PARITY_NAMES))]
+DataBitsOpt = Annotated[int, typer.Option(callback=one_of(DATA_BITS), metavar="BITS", help=" | ".join(map(str, DATA_BITS)))]
+StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))]
+TimeoutOpt = Annotated[float, typer.Option(parser=duration(0.001, 3600), metavar="TIME", help=f"How long to wait for a reply ({TIMES}).")]
+ZvzOpt = Annotated[float, typer.Option(parser=duration(0.004, 65.535), metavar="TIME",
+                                       help=f"open-driver: the character delay time ZVZ that ends a frame ({TIMES}).")]
 
 
 def _bare_line(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
@@ -95,9 +98,9 @@ def import_plant(
     timeout: TimeoutOpt = 0.5,
     zvz: ZvzOpt = 0.020,
     retries: RetriesOpt = 5,
-    plant_name: Annotated[str, typer.Option(help="The plant's name in the file.")] = "imported",
-    bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
-    modules: Annotated[str | None, typer.Option(callback=addresses_option, help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
+    plant_name: Annotated[str, typer.Option(metavar="NAME", help="The plant's name in the file.")] = "imported",
+    bus_name: Annotated[str, typer.Option(metavar="NAME", help="The bus's name in the file.")] = "bus-1",
+    modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
 ) -> None:
@@ -117,7 +120,7 @@ def import_plant(
 @link_app.command("init-db")
 def init_db(
     plant: PlantArg,
-    bus: Annotated[str, typer.Option("--bus", help="The bus whose gateway to parameterise.")],
+    bus: Annotated[str, typer.Option("--bus", metavar="NAME", help="The bus whose gateway to parameterise.")],
 ) -> None:
     """The CP 524/525 Open Driver INIT data block (eight data words) for a bus's gateway."""
     from prc3cfg import api

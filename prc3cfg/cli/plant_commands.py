@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
     from prc3cfg.plant.models import ChainSpec
     from prc3cfg.plant.problems import Finding
 
-PlantPath = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
+PlantPath = Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML).", show_default=False)]
 
 
 class Format(enum.StrEnum):
@@ -48,7 +48,7 @@ class Format(enum.StrEnum):
 @app.command()
 def validate(
     plant: PlantPath,
-    fmt: Annotated[Format, typer.Option("--format", help=(
+    fmt: Annotated[Format, typer.Option("--format", metavar="text|github|json", help=(
         "text: one line per problem on stderr; github: workflow-command annotations at file:line:col (CI); "
         "json: a list of {file, line, column, message}."))] = Format.TEXT,
 ) -> None:
@@ -91,14 +91,14 @@ def github_annotation(finding: Finding) -> str:
 
 @app.command()
 def show(
-    plant: Annotated[Path, typer.Argument(help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
-    module: Annotated[str | None, typer.Option("--module", "-m", help="The module to show, by name.")] = None,
+    plant: Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
+    module: Annotated[str | None, typer.Option("--module", "-m", metavar="NAME", help="The module to show, by name.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="A plan file: print it as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="A plan file: print it as markdown (PR comments).")] = False,
-    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters.")] = 65_000,
-    plot: Annotated[Path | None, typer.Option(
+    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, metavar="N", help="--markdown: at most this many characters.")] = 65_000,
+    plot: Annotated[Path | None, typer.Option(metavar="FILE",
         help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
-    actual: Annotated[Path | None, typer.Option(
+    actual: Annotated[Path | None, typer.Option(metavar="FILE",
         help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
 ) -> None:
     """Print a module's effective configuration and where each value came from, or draw its chains;
