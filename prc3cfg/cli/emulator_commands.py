@@ -43,7 +43,8 @@ def serve(
     modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
     line_speed: Annotated[int | None, typer.Option("--line-speed", min=1, max=10_000_000, metavar="BAUD", help="Make every exchange take as long as on a line of this baud rate.")] = None,
-    parity: Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs).")] = "even",
+    parity: Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", show_default="even; none with --pty",
+                                               help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs; a pseudo-terminal carries none).")] = None,
     data_bits: Annotated[int, typer.Option(callback=one_of(DATA_BITS), metavar="BITS", help=" | ".join(map(str, DATA_BITS)))] = 8,
     stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))] = 1,
     zvz: Annotated[float, typer.Option(parser=duration(0.001, 65.535), metavar="TIME", help=f"open-driver end-of-frame gap ({TIMES}).")] = 0.020,
@@ -78,6 +79,8 @@ def serve(
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules is not None else None)
+    if parity is None:  # as scan and import take a pseudo-terminal: without parity
+        parity = "none" if pty else "even"
     try:
         emulator = Emulator(
             bus, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed is not None,
