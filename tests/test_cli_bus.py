@@ -115,6 +115,60 @@ def test_import_then_plan_is_empty(tmp_path_factory, capsys, states):
         assert planned.code == 0, planned.out + planned.err
 
 
+@st.composite
+def alike_states(draw) -> list[ModuleState]:
+    """Three modules made from one: a few system parameters and program fields changed in each."""
+    base = draw(module_states(1))
+    states = []
+    for address in (4, 5, 6):
+        image = replace(base.image, address=address)
+        system = image.system
+        if draw(st.booleans()):
+            system = replace(system, S2=draw(st.integers(50, 500)), S7=draw(st.integers(800, 1500)))
+        programs = list(image.programs)
+        for number in draw(st.lists(st.integers(1, PROGRAM_COUNT), max_size=3, unique=True)):
+            program = programs[number - 1]
+            programs[number - 1] = replace(program, P=draw(st.integers(0, system.S1)), T=draw(st.integers(0, 600)))
+        states.append(ModuleState(replace(image, system=system, programs=tuple(programs))))
+    return states
+
+
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(alike_states())
+def test_modules_alike_import_into_one_profile_and_plan_to_no_changes(tmp_path_factory, capsys, states):
+    directory = tmp_path_factory.mktemp("import")
+    with Emulator({s.address: s for s in states}) as emulator:
+        host, port = emulator.listen()
+        imported = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "4-6", "--timeout", "0.2")
+        assert imported.code == 0, imported.err
+        plant = directory / "imported.yaml"
+        plant.write_text(imported.out)
+        assert run_cli(capsys, "validate", plant).code == 0
+        planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
+        assert planned.code == 0, imported.out + planned.out + planned.err
+
+
+def test_three_identical_modules_are_one_profile_and_three_lines(tmp_path, capsys):
+    image = ModuleImage.factory(1)
+    programs = list(image.programs)
+    programs[:3] = [Program(P=1500, V=200, T=5, A=2), Program(P=300, V=200, F1=1100, A=1), Program(P=900, V=100)]
+    image = replace(image, system=replace(image.system, S1=1800, S4=500), programs=tuple(programs))
+    with Emulator({a: ModuleState(replace(image, address=a)) for a in (1, 2, 3)}) as emulator:
+        host, port = emulator.listen()
+        imported = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "1-3", "--timeout", "0.2")
+        assert imported.code == 0, imported.err
+        lines = imported.out.splitlines()
+        assert lines[0] == "# yaml-language-server: $schema=plant.schema.json"
+        assert lines[-3:] == ["  - {address: 1, name: bus-1-1, profiles: [common]}", "  - {address: 2, name: bus-1-2, profiles: [common]}",
+                              "  - {address: 3, name: bus-1-3, profiles: [common]}"]  # fmt: skip
+        assert "profiles:\n  common:\n    system: {upper_reversing_point: 1.800, max_speed: 0.500}\n" in imported.out
+        assert len(lines) < 30, imported.out
+        plant = tmp_path / "imported.yaml"
+        plant.write_text(imported.out)
+        assert run_cli(capsys, "validate", plant).code == 0
+        assert run_cli(capsys, "plan", plant, "--detailed-exitcode").code == 0
+
+
 @pytest.mark.parametrize("command", ["scan", "import"])
 def test_an_absent_address_costs_one_short_try(capsys, tmp_path, command):
     """An empty line: one 50h per address, none asked again, and no warning lines."""
@@ -136,6 +190,6 @@ def test_a_zvz_not_longer_than_one_character_is_refused_at_its_line(tmp_path, ca
     result = run_cli(capsys, *command[:-2], plant, *command[-2:]) if len(command) > 1 else run_cli(capsys, "validate", plant)
     assert result.code == 1
     assert result.problems == [
-        f"{'error: ' if len(command) > 1 else ''}{plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
+        f"error: {plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
         "8E1 (11 bits: 9.17 ms), so the gateway would end a frame after every byte — the character delay time must be "
         "greater than the time between two characters (seed 004 §5.2.8; its guide at 1200 baud: 30..800 ms): raise zvz"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -121,3 +122,64 @@ def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsy
     made.write_text(json.dumps(document))
     refused = run_cli(capsys, "show", made)
     assert refused.code == 1 and "says releases_axes: false, but 20h releases the axes" in refused.err
+
+
+def test_times_are_taken_as_durations(plant, capsys):
+    from prc3cfg.cli.common import parse_duration
+
+    assert [parse_duration(t) for t in ("5s", "2m", "1h", "30", "0.5", "500ms", "1.5m")] == [5, 120, 3600, 30, 0.5, 0.5, 90]
+    assert run_cli(capsys, "plan", plant.path, "--lock-timeout", "2m").code == 0
+
+
+def every_command(command=None, path=("prc3cfg",)):
+    """(path, click command) of every command, sub-commands of groups included."""
+    import typer
+
+    from prc3cfg.cli import _register_commands, app
+
+    _register_commands()
+    command = command or typer.main.get_command(app)
+    for name, sub in getattr(command, "commands", {}).items():
+        if hasattr(sub, "commands"):
+            yield from every_command(sub, (*path, name))
+        else:
+            yield (*path, name), sub
+
+
+def test_the_help_names_what_to_give_in_words():
+    """`--module NAME`, `--trace FILE`, `PLANT`: never `<list[str]>`, `<path>`, `<float range>`, `{plant}`
+    (typer braces a required argument in the usage line and writes its type after it in the list:
+    `{PLANT}`, `PLANT <path>`)."""
+    helps = {" ".join(path): command.get_help(command.context_class(command, info_name=" ".join(path))) for path, command in every_command()}
+    for path, text in helps.items():
+        options = text.split("\nOptions:\n", 1)[-1]
+        assert not re.search(r"<[a-z]", options) and "plant" not in text.split("\n", 1)[0], text
+        metavars = re.findall(r"^\s+(?:-\w, )?--[\w-]+ (\S+)", options, re.M)
+        assert all(m == m.upper() or "|" in m for m in metavars), (path, metavars)
+    assert "Usage: prc3cfg plan [OPTIONS] {PLANT}" in helps["prc3cfg plan"]
+    for option in ("--module NAME", "--trace FILE", "--lock-timeout TIME", "--out FILE"):
+        assert option in helps["prc3cfg plan"], option
+
+
+BLOCK_MATPLOTLIB = """\
+import sys
+class _Blocked:
+    def find_spec(self, name, path=None, target=None):
+        if name == "matplotlib" or name.startswith("matplotlib."):
+            raise ModuleNotFoundError(f"No module named {name!r}")
+sys.meta_path.insert(0, _Blocked())
+"""
+
+
+def test_plot_without_the_plot_extra_fails_before_the_line_is_read(plant, tmp_path):
+    hidden = tmp_path / "no-matplotlib"
+    hidden.mkdir()
+    (hidden / "sitecustomize.py").write_text(BLOCK_MATPLOTLIB)
+    env = {**os.environ, "PYTHONPATH": str(hidden)}
+    trace = tmp_path / "trace.txt"
+    for args in (["plan", plant.path, "--module", "booth-a-top", "--plot", tmp_path / "a.svg", "--trace", trace],
+                 ["show", plant.path, "--module", "booth-a-top", "--plot", tmp_path / "a.svg"]):
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True, text=True, env=env)
+        assert (done.returncode, done.stdout) == (1, "")
+        assert done.stderr == "error: plotting needs the plot extra: pip install 'prc3cfg[plot]'\n"
+        assert not trace.exists() or trace.read_text() == ""  # not one frame on the line

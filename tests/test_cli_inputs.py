@@ -38,11 +38,14 @@ def nowhere(tmp_path) -> Path:
 
 USAGE = {
     "apply without a plant": (["apply"], "error: prc3cfg apply: name the plant file, or a plan file with --plan — see prc3cfg apply --help"),
-    "plan without a plant": (["plan"], "error: prc3cfg plan: Missing argument 'plant' — see prc3cfg plan --help"),
+    "plan without a plant": (["plan"], "error: prc3cfg plan: Missing argument 'PLANT' — see prc3cfg plan --help"),
     "an unknown command": (["nosuch"], "error: prc3cfg: No such command 'nosuch' — see prc3cfg --help"),
     "an unknown option": (["plan", "p.yaml", "--outt", "x"], "error: prc3cfg plan: No such option: --outt (Possible options: --out, --plot) — see prc3cfg plan --help"),
     "negative retries": (["plan", "p.yaml", "--retries", "-1"], "error: prc3cfg plan: Invalid value for '--retries': Input should be greater than or equal to 0 — see prc3cfg plan --help"),
-    "a negative lock time-out": (["apply", "p.yaml", "--lock-timeout", "-5"], "error: prc3cfg apply: Invalid value for '--lock-timeout': Input should be greater than or equal to 0 — see prc3cfg apply --help"),
+    "a negative lock time-out": (["apply", "p.yaml", "--lock-timeout", "-5"], "error: prc3cfg apply: Invalid value for '--lock-timeout': '-5' is not a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h — see prc3cfg apply --help"),
+    "a lock time-out in parsecs": (["apply", "p.yaml", "--lock-timeout", "5pc"], "error: prc3cfg apply: Invalid value for '--lock-timeout': '5pc' is not a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h — see prc3cfg apply --help"),
+    "a reply time-out of two hours": (["scan", "--port", "socket://127.0.0.1:9", "--timeout", "2h"], "error: prc3cfg scan: Invalid value for '--timeout': 2h is more than 1h — see prc3cfg scan --help"),
+    "a zvz below the open driver's": (["import", "--port", "socket://127.0.0.1:9", "--zvz", "1ms"], "error: prc3cfg import: Invalid value for '--zvz': 1ms is less than 4ms — see prc3cfg import --help"),
     "retries as text": (["read", "p.yaml", "--retries", "many"], "error: prc3cfg read: Invalid value for '--retries': Input should be a valid integer, unable to parse string as an integer — see prc3cfg read --help"),
     "scan's baud 0": (["scan", "--port", "socket://127.0.0.1:9", "--baud", "0"], "error: prc3cfg scan: Invalid value for '--baud': Input should be greater than or equal to 1 — see prc3cfg scan --help"),
     "scan's parity": (["scan", "--port", "socket://127.0.0.1:9", "--parity", "x"], "error: prc3cfg scan: Invalid value for '--parity': 'x' is not one of none, odd, even — see prc3cfg scan --help"),
@@ -54,6 +57,10 @@ USAGE = {
     "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
     "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),
     "terraform's -lock-timeout=": (["apply", "p.yaml", "-lock-timeout=10"], "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?"),
+    "terraform's -target=": (["plan", "p.yaml", "-target=booth-a-top"], "error: -target=booth-a-top: prc3cfg names a module with --module — did you mean --module booth-a-top?"),
+    "terraform's -target NAME": (["apply", "p.yaml", "-target", "booth-a-top"], "error: -target booth-a-top: prc3cfg names a module with --module — did you mean --module booth-a-top?"),
+    "terraform's -out FILE": (["plan", "p.yaml", "-out", "plan.json"], "error: -out plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
+    "terraform's apply PLAN": (["apply", "plan.json"], "error: prc3cfg apply: plan.json is a plan file — did you mean prc3cfg apply PLANT --plan plan.json? — see prc3cfg apply --help"),
 }
 
 
@@ -144,17 +151,19 @@ def test_a_plan_file_to_a_device_is_written_as_it_is(tmp_path, capsys):
     assert result.code == 0, result.err
 
 
-def test_a_closed_stdout_pipe_ends_quietly(tmp_path, capsys):
+@pytest.mark.parametrize("command", ["plan", "read"])
+def test_a_closed_stdout_pipe_ends_quietly_as_git_does(tmp_path, capsys, command):
+    """`prc3cfg read … | head -1`: no traceback, no message, exit 141 (128 + SIGPIPE), as git and coreutils."""
     with emulated_plant(tmp_path) as plant:
         saved = tmp_path / "images.json"
         saved.write_text(run_cli(capsys, "read", plant.path, "--json").out)
         env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
         gone, stdout = os.pipe()
         os.close(gone)  # the reader has gone, as `| head` does once it has its lines
-        done = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant.path, "--actual", saved],
-                              stdout=stdout, stderr=subprocess.PIPE, text=True, env=env)  # fmt: skip
+        args = ["plan", plant.path, "--actual", saved] if command == "plan" else ["read", plant.path]
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", *args], stdout=stdout, stderr=subprocess.PIPE, text=True, env=env)
         os.close(stdout)
-    assert (done.returncode, done.stderr) == (1, "")
+    assert (done.returncode, done.stderr) == (141, "")
 
 
 # -- plan files and other JSON inputs ------------------------------------------------------------

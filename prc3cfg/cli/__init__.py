@@ -6,9 +6,9 @@ can end into one line on stderr and an exit code:
 
 - a `UserError`: `error: …` (one line per problem), its `exit_code` (1; 130 interrupted);
 - a command line prc3cfg does not understand: `error: prc3cfg CMD: … — see prc3cfg CMD --help`,
-  exit 64 (`EXIT_USAGE`) — never a boxed panel; a Terraform habit (`-out=p.json`,
-  `-auto-approve`) gets "did you mean --out p.json";
-- stdout closed by its reader (`prc3cfg plan … | head`): quietly, exit 1 (as typer does).
+  exit 64 (`EXIT_USAGE`) — never a boxed panel; a Terraform habit (`-out=p.json`, `-out p.json`,
+  `-auto-approve`, `-target=NAME`) gets "did you mean --out p.json" (`--module NAME`);
+- stdout closed by its reader (`prc3cfg read … | head -1`): quietly, exit 141 (`EXIT_BROKEN_PIPE`).
 """
 
 from __future__ import annotations
@@ -22,8 +22,10 @@ import typer
 
 try:  # typer 0.2x carries its own copy of click, and raises that copy's exceptions
     from typer._click import exceptions as click_errors
+    from typer._click.utils import PacifyFlushWrapper
 except ImportError:  # pragma: no cover - older typer uses click itself
     from click import exceptions as click_errors
+    from click.utils import PacifyFlushWrapper  # type: ignore[import-not-found,no-redef]
 
 from prc3cfg import __version__
 from prc3cfg.errors import UserError
@@ -66,8 +68,13 @@ def _root(
 #: A command line prc3cfg does not understand. click exits 2 for it, which `plan
 #: --detailed-exitcode` uses for "changes": a CI job must never read a typo as changes.
 EXIT_USAGE = 64
+#: Stdout closed by its reader: 128 + SIGPIPE, what git, coreutils and a shell report for a
+#: process that writes into a pipe nobody reads any more (prc3cfg says nothing, as they do).
+EXIT_BROKEN_PIPE = 141
 #: A single-dash word option, as Terraform spells its options: -out=plan.json, -auto-approve.
 _SINGLE_DASH = re.compile(r"-([a-z][a-z0-9]*(?:-[a-z0-9]+)+|[a-z]{2,})(?:=(.*))?")
+#: Terraform's options that prc3cfg names otherwise: its option, and why it is another.
+_TERRAFORM = {"target": ("--module", "prc3cfg names a module with --module")}
 
 
 class Outcome(Exception):
@@ -78,24 +85,32 @@ class Outcome(Exception):
         self.code = code
 
 
-def _options(command) -> set[str]:
-    """Every long option of a command and of the commands under it."""
-    names = {name for param in command.params for name in param.opts if name.startswith("--")}
+def _options(command) -> dict[str, bool]:
+    """Every long option of a command and of the commands under it: whether it takes a value."""
+    names = {name: not getattr(param, "is_flag", False) for param in command.params for name in param.opts if name.startswith("--")}
     for sub in getattr(command, "commands", {}).values():
         names |= _options(sub)
     return names
 
 
 def _single_dash_habit(args: list[str]) -> str | None:
-    """ "-out=p.json: prc3cfg options take two dashes — did you mean --out p.json?", or None."""
+    """ "-out=p.json: prc3cfg options take two dashes — did you mean --out p.json?" (`-out p.json`
+    too), "-target=x: prc3cfg names a module with --module — did you mean --module x?", or None."""
     known = _options(typer.main.get_command(app))
-    for arg in args:
+    for at, arg in enumerate(args):
         if arg == "--":
             return None
         match = _SINGLE_DASH.fullmatch(arg)
-        if match and f"--{match.group(1)}" in known:
-            value = f" {match.group(2)}" if match.group(2) is not None else ""
-            return f"{arg}: prc3cfg options take two dashes — did you mean --{match.group(1)}{value}?"
+        if match is None:
+            continue
+        option, why = _TERRAFORM.get(match.group(1), (f"--{match.group(1)}", "prc3cfg options take two dashes"))
+        if option not in known:
+            continue
+        written, value = arg, match.group(2)
+        if value is None and known[option] and at + 1 < len(args):  # -out plan.json
+            value = args[at + 1]
+            written = f"{arg} {value}"
+        return f"{written}: {why} — did you mean {option}{'' if value is None else ' ' + value}?"
     return None
 
 
@@ -139,5 +154,9 @@ def main(argv: list[str] | None = None) -> None:
     except BrokenPipeError:
         # the reader went away (`| head`): nothing more to say, and nothing more to flush
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        sys.exit(1)
+        sys.exit(EXIT_BROKEN_PIPE)
+    except SystemExit:
+        if isinstance(sys.stdout, PacifyFlushWrapper):  # typer met the closed pipe in a command: it wraps
+            sys.exit(EXIT_BROKEN_PIPE)                  # stdout so nothing is said at exit, and exits 1
+        raise
     sys.exit(code if isinstance(code, int) else 0)

@@ -32,7 +32,7 @@ from prc3cfg.errors import UserError
 
 ProgramOpt = Annotated[
     list[int] | None,
-    typer.Option("--program", min=1, max=64, help="Only this program (number); repeatable. System parameters are then left alone."),
+    typer.Option("--program", min=1, max=64, metavar="N", help="Only this program (number); repeatable. System parameters are then left alone."),
 ]
 CheckOpt = Annotated[bool, typer.Option("--check", help="Show the diff; exit 2 if there is drift to adopt, 0 if none; write nothing.")]
 

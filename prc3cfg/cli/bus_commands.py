@@ -1,7 +1,13 @@
-"""`prc3cfg scan`, `prc3cfg import` and `prc3cfg link init-db`: a bus without a plant file, and its gateway."""
+"""`prc3cfg scan`, `prc3cfg import` and `prc3cfg link init-db`: a bus without a plant file, and its gateway.
+
+Without `--parity`, scan and import use even parity (a PRC 3 line's), and none on a
+pseudo-terminal, which carries no parity (`emulator serve --pty` defaults to none as well).
+"""
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Annotated
 
 import typer
@@ -12,12 +18,14 @@ from prc3cfg.cli.common import (
     FRAMING_NAMES,
     PARITY_NAMES,
     STOP_BITS,
+    TIMES,
     LockOpt,
     PlantArg,
     RetriesOpt,
     TraceOpt,
     addresses_option,
     check_output,
+    duration,
     line_options,
     one_of,
     parse_addresses,
@@ -29,22 +37,38 @@ from prc3cfg.errors import UserError
 if TYPE_CHECKING:
     from prc3cfg import api
 
-PortOpt = Annotated[str, typer.Option("--port", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
-FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
-BaudOpt = Annotated[int, typer.Option(min=1, max=10_000_000, help="Baud rate.")]
-ParityOpt = Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=" | ".join(PARITY_NAMES))]
-DataBitsOpt = Annotated[int, typer.Option(callback=one_of(DATA_BITS), help=" | ".join(map(str, DATA_BITS)))]
-StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), help=" | ".join(map(str, STOP_BITS)))]
-TimeoutOpt = Annotated[float, typer.Option(min=0.001, max=3600, help="Seconds to wait for a reply.")]
-ZvzOpt = Annotated[float, typer.Option(min=0.004, max=65.535, help="open-driver: the character delay time ZVZ that ends a frame, s.")]
+PortOpt = Annotated[str, typer.Option("--port", metavar="PORT", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
+FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
+BaudOpt = Annotated[int, typer.Option(min=1, max=10_000_000, metavar="BAUD", help="Baud rate.")]
+ParityOpt = Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", show_default="even; none on a pseudo-terminal",
+                                               help=" | ".join(PARITY_NAMES))]
+DataBitsOpt = Annotated[int, typer.Option(callback=one_of(DATA_BITS), metavar="BITS", help=" | ".join(map(str, DATA_BITS)))]
+StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))]
+TimeoutOpt = Annotated[float, typer.Option(parser=duration(0.001, 3600), metavar="TIME", help=f"How long to wait for a reply ({TIMES}).")]
+ZvzOpt = Annotated[float, typer.Option(parser=duration(0.004, 65.535), metavar="TIME",
+                                       help=f"open-driver: the character delay time ZVZ that ends a frame ({TIMES}).")]
 
 
-def _bare_line(port: str, framing: str, baud: int, parity: str, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
+def _bare_line(port: str, framing: str, baud: int, parity: str | None, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
     from prc3cfg import api
     from prc3cfg.core.line import LineSettings
+    from prc3cfg.shell.link.ports import is_pseudo_terminal
 
+    if parity is None:
+        parity = "none" if is_pseudo_terminal(port) else "even"
     line = LineSettings(baud=baud, data_bits=data_bits, parity=parity, stop_bits=stop_bits)  # the options' callbacks checked them
     return api.BareLine(port, framing, line, timeout, zvz)
+
+
+@contextlib.contextmanager
+def _said_as_options() -> Iterator[None]:
+    """A port's refusal of the character format, with the fix as an option (`--parity none`), not as a plant file's key."""
+    from prc3cfg.shell.link.ports import FormatRefused
+
+    try:
+        yield
+    except FormatRefused as refused:
+        raise UserError(f"{refused.refusal}: give --parity none") from None
 
 
 @app.command()
@@ -52,7 +76,7 @@ def scan(
     port: PortOpt,
     framing: FramingOpt = "crc16",
     baud: BaudOpt = 9600,
-    parity: ParityOpt = "even",
+    parity: ParityOpt = None,
     data_bits: DataBitsOpt = 8,
     stop_bits: StopBitsOpt = 1,
     timeout: TimeoutOpt = 0.2,
@@ -70,7 +94,7 @@ def scan(
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
-    with line_options(trace, retries, lock_timeout) as options:
+    with line_options(trace, retries, lock_timeout) as options, _said_as_options():
         found = api.scan(bare, options)
     if not found:
         raise UserError(f"{port}: no module answered at any address 1..30 — check the framing ({framing}), line settings and wiring")
@@ -89,15 +113,15 @@ def import_plant(
     port: PortOpt,
     framing: FramingOpt = "crc16",
     baud: BaudOpt = 9600,
-    parity: ParityOpt = "even",
+    parity: ParityOpt = None,
     data_bits: DataBitsOpt = 8,
     stop_bits: StopBitsOpt = 1,
     timeout: TimeoutOpt = 0.5,
     zvz: ZvzOpt = 0.020,
     retries: RetriesOpt = 5,
-    plant_name: Annotated[str, typer.Option(help="The plant's name in the file.")] = "imported",
-    bus_name: Annotated[str, typer.Option(help="The bus's name in the file.")] = "bus-1",
-    modules: Annotated[str | None, typer.Option(callback=addresses_option, help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
+    plant_name: Annotated[str, typer.Option(metavar="NAME", help="The plant's name in the file.")] = "imported",
+    bus_name: Annotated[str, typer.Option(metavar="NAME", help="The bus's name in the file.")] = "bus-1",
+    modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
 ) -> None:
@@ -107,7 +131,7 @@ def import_plant(
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
-    with line_options(trace, retries, lock_timeout) as options:
+    with line_options(trace, retries, lock_timeout) as options, _said_as_options():
         text, count = api.import_plant(bare, parse_addresses(modules) if modules is not None else None, options,
                                        plant_name=plant_name, bus_name=bus_name)  # fmt: skip
     print(text, end="")
@@ -117,7 +141,7 @@ def import_plant(
 @link_app.command("init-db")
 def init_db(
     plant: PlantArg,
-    bus: Annotated[str, typer.Option("--bus", help="The bus whose gateway to parameterise.")],
+    bus: Annotated[str, typer.Option("--bus", metavar="NAME", help="The bus whose gateway to parameterise.")],
 ) -> None:
     """The CP 524/525 Open Driver INIT data block (eight data words) for a bus's gateway."""
     from prc3cfg import api

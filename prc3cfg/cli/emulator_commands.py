@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from prc3cfg.cli import emulator_app
-from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, addresses_option, one_of, parse_addresses
+from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, TIMES, addresses_option, duration, one_of, parse_addresses
 from prc3cfg.errors import UserError
 
 DEFAULT_LISTEN = "127.0.0.1:7001"
@@ -37,22 +37,23 @@ def listen_option(value: str | None) -> str | None:
 
 @emulator_app.command("serve")
 def serve(
-    listen: Annotated[str | None, typer.Option(callback=listen_option, help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
+    listen: Annotated[str | None, typer.Option(callback=listen_option, metavar="HOST:PORT", help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
-    state: Annotated[Path | None, typer.Option(help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
-    modules: Annotated[str | None, typer.Option(callback=addresses_option, help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
-    framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
-    line_speed: Annotated[int | None, typer.Option("--line-speed", min=1, max=10_000_000, help="Make every exchange take as long as on a line of this baud rate.")] = None,
-    parity: Annotated[str, typer.Option(callback=one_of(PARITY_NAMES), help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs).")] = "even",
-    data_bits: Annotated[int, typer.Option(callback=one_of(DATA_BITS), help=" | ".join(map(str, DATA_BITS)))] = 8,
-    stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), help=" | ".join(map(str, STOP_BITS)))] = 1,
-    zvz: Annotated[float, typer.Option(min=0.001, max=65.535, help="open-driver end-of-frame gap, s.")] = 0.020,
-    turnaround: Annotated[float, typer.Option(min=0, max=10, help="Module turnaround, s (with --line-speed).")] = 0.010,
-    drop_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges lost (request or reply).")] = 0.0,
-    corrupt_rate: Annotated[float, typer.Option(min=0, max=1, help="Fraction of exchanges with one bit flipped.")] = 0.0,
-    seed: Annotated[int | None, typer.Option(help="Seed for fault injection.")] = None,
-    max_connections: Annotated[int | None, typer.Option("--max-connections", min=1, max=100_000, help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
-    idle_timeout: Annotated[float | None, typer.Option("--idle-timeout", min=0.001, max=10_000_000, help="Close a TCP connection that sends nothing for this many seconds (default 300).")] = None,
+    state: Annotated[Path | None, typer.Option(metavar="FILE", help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
+    modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
+    framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
+    line_speed: Annotated[int | None, typer.Option("--line-speed", min=1, max=10_000_000, metavar="BAUD", help="Make every exchange take as long as on a line of this baud rate.")] = None,
+    parity: Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", show_default="even; none with --pty",
+                                               help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs; a pseudo-terminal carries none).")] = None,
+    data_bits: Annotated[int, typer.Option(callback=one_of(DATA_BITS), metavar="BITS", help=" | ".join(map(str, DATA_BITS)))] = 8,
+    stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))] = 1,
+    zvz: Annotated[float, typer.Option(parser=duration(0.001, 65.535), metavar="TIME", help=f"open-driver end-of-frame gap ({TIMES}).")] = 0.020,
+    turnaround: Annotated[float, typer.Option(parser=duration(0, 10), metavar="TIME", help=f"Module turnaround, with --line-speed ({TIMES}).")] = 0.010,
+    drop_rate: Annotated[float, typer.Option(min=0, max=1, metavar="FRACTION", help="Fraction of exchanges lost (request or reply).")] = 0.0,
+    corrupt_rate: Annotated[float, typer.Option(min=0, max=1, metavar="FRACTION", help="Fraction of exchanges with one bit flipped.")] = 0.0,
+    seed: Annotated[int | None, typer.Option(metavar="N", help="Seed for fault injection.")] = None,
+    max_connections: Annotated[int | None, typer.Option("--max-connections", min=1, max=100_000, metavar="N", help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
+    idle_timeout: Annotated[float | None, typer.Option("--idle-timeout", parser=duration(0.001, 10_000_000), metavar="TIME", help=f"Close a TCP connection that sends nothing for this long ({TIMES}; default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
 ) -> None:
     """Run a PRC 3 bus emulator until SIGINT or SIGTERM (exit 0).
@@ -78,6 +79,8 @@ def serve(
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules is not None else None)
+    if parity is None:  # as scan and import take a pseudo-terminal: without parity
+        parity = "none" if pty else "even"
     try:
         emulator = Emulator(
             bus, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed is not None,

@@ -55,15 +55,15 @@ def read(
 def plan(
     ctx: typer.Context,
     plant: PlantArg,
-    out: Annotated[Path | None, typer.Option(callback=lambda v: check_output(v, "--out"), help="Write the plan file (prc3cfg-plan/1).")] = None,
-    actual: Annotated[Path | None, typer.Option(help="Plan against module images saved by `read --json`.")] = None,
+    out: Annotated[Path | None, typer.Option(callback=lambda v: check_output(v, "--out"), metavar="FILE", help="Write the plan file (prc3cfg-plan/1).")] = None,
+    actual: Annotated[Path | None, typer.Option(metavar="FILE", help="Plan against module images saved by `read --json`.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan as markdown (PR comments).")] = False,
-    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
+    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, metavar="N", help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
-    plot: Annotated[Path | None, typer.Option("--plot", help="With one --module: draw its chains before (dashed) and after the plan to this .svg or .png file.")] = None,
-    previous: Annotated[Path | None, typer.Option("--previous", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", metavar="FILE", help="With one --module: draw its chains before (dashed) and after the plan to this .svg or .png file.")] = None,
+    previous: Annotated[Path | None, typer.Option("--previous", metavar="PLANT", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
@@ -108,14 +108,14 @@ def plan(
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
-VerifyOpt = Annotated[Verify, typer.Option(help="floor: read back what the steps could have changed; full: the system and every program read before.")]
+VerifyOpt = Annotated[Verify, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
 
 @app.command()
 def apply(
     ctx: typer.Context,
-    plant: Annotated[Path | None, typer.Argument(help="The plant file (YAML).", show_default=False)] = None,
-    plan_file: Annotated[Path | None, typer.Option("--plan", help="Apply this plan file as reviewed (refused if stale or edited).")] = None,
+    plant: Annotated[Path | None, typer.Argument(metavar="PLANT", help="The plant file (YAML).", show_default=False)] = None,
+    plan_file: Annotated[Path | None, typer.Option("--plan", metavar="FILE", help="Apply this plan file as reviewed (refused if stale or edited).")] = None,
     auto_approve: ApproveOpt = False,
     allow_axis_release: AxesOpt = False,
     lock_timeout: LockOpt = 0.0,
@@ -130,6 +130,8 @@ def apply(
 
     if plant is None and plan_file is None:
         raise click_errors.UsageError("name the plant file, or a plan file with --plan", ctx=ctx)
+    if plant is not None and plant.suffix.lower() == ".json":  # Terraform's `apply PLAN`
+        raise click_errors.UsageError(f"{plant} is a plan file — did you mean prc3cfg apply PLANT --plan {plant}?", ctx=ctx)
     plant = plant if plant is not None else api.plan_file_plant(plan_file)
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
@@ -142,7 +144,7 @@ def apply(
 
 @app.command()
 def restore(
-    snapshot: Annotated[Path, typer.Argument(help="A snapshot under .prc3cfg/snapshots/.", show_default=False)],
+    snapshot: Annotated[Path, typer.Argument(metavar="SNAPSHOT", help="A snapshot under .prc3cfg/snapshots/.", show_default=False)],
     auto_approve: ApproveOpt = False,
     allow_axis_release: AxesOpt = False,
     lock_timeout: LockOpt = 0.0,

@@ -1,7 +1,10 @@
 """`prc3cfg validate`, `show` and `schema`: plant files checked, explained and described.
 
 - `validate PLANT`: "PLANT: valid (N buses, M modules)", exit 0; or every problem on
-  stderr, one line each, exit 1.
+  stderr, one `error: file:line:column: …` line each, exit 1. `--format github` says the
+  problems as GitHub workflow-command annotations (`::error file=…,line=…,col=…::…`, on stdout),
+  `--format json` as a JSON list of {file, line, column, message} (line and column null for
+  a problem of the whole file; `[]` when valid): the exit codes are the same.
 - `show PLANT [--module NAME]`: a module's effective configuration in human units, each
   value with its device value and where it came from (default, profile NAME, module);
   without `--module`, the plant's modules. `--plot FILE.svg|png` draws the module's chains
@@ -12,6 +15,7 @@
 
 from __future__ import annotations
 
+import enum
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -28,34 +32,73 @@ if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
 
     from prc3cfg.plant import Module, Plant
     from prc3cfg.plant.models import ChainSpec
+    from prc3cfg.plant.problems import Finding
 
-PlantPath = Annotated[Path, typer.Argument(help="The plant file (YAML).", show_default=False)]
+PlantPath = Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML).", show_default=False)]
+
+
+class Format(enum.StrEnum):
+    """How `validate` says the problems: for a person, for GitHub Actions, for a program."""
+
+    TEXT = "text"
+    GITHUB = "github"
+    JSON = "json"
 
 
 @app.command()
-def validate(plant: PlantPath) -> None:
+def validate(
+    plant: PlantPath,
+    fmt: Annotated[Format, typer.Option("--format", metavar="text|github|json", help=(
+        "text: one line per problem on stderr; github: workflow-command annotations at file:line:col (CI); "
+        "json: a list of {file, line, column, message}."))] = Format.TEXT,
+) -> None:
     """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
+    import json
+
     from prc3cfg.plant import PlantError, load_plant
 
     try:
         loaded = load_plant(plant)
     except PlantError as error:
-        print(error, file=sys.stderr)
+        if fmt is Format.TEXT:
+            raise  # one `error:` line per problem, as every error
+        findings = error.findings(str(plant))
+        if fmt is Format.JSON:
+            print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in findings], indent=1))
+        else:
+            print("\n".join(github_annotation(f) for f in findings))
         raise typer.Exit(1) from None
+    if fmt is Format.JSON:
+        print("[]")
+        return
     modules = len(loaded.modules())
     print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, {_count(modules, 'module', 'modules')})")
 
 
+def github_annotation(finding: Finding) -> str:
+    """A problem as GitHub's `::error` workflow command: `%`, CR and LF escaped in the message, and
+    `:` and `,` too in a property (docs.github.com, "Workflow commands for GitHub Actions")."""
+
+    def data(text: str) -> str:
+        return text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+
+    def prop(text: str) -> str:
+        return data(text).replace(":", "%3A").replace(",", "%2C")
+
+    place = "" if finding.line is None else f",line={finding.line},col={finding.column}"
+    return f"::error file={prop(finding.file)}{place},title=prc3cfg::{data(finding.message)}"
+
+
 @app.command()
 def show(
-    plant: Annotated[Path, typer.Argument(help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
-    module: Annotated[str | None, typer.Option("--module", "-m", help="The module to show, by name.")] = None,
+    plant: Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
+    module: Annotated[str | None, typer.Option("--module", "-m", metavar="NAME", help="The module to show, by name.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="A plan file: print it as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown", help="A plan file: print it as markdown (PR comments).")] = False,
-    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, help="--markdown: at most this many characters.")] = 65_000,
-    plot: Annotated[Path | None, typer.Option(
+    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, metavar="N", help="--markdown: at most this many characters.")] = 65_000,
+    plot: Annotated[Path | None, typer.Option(metavar="FILE",
         help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
-    actual: Annotated[Path | None, typer.Option(
+    actual: Annotated[Path | None, typer.Option(metavar="FILE",
         help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
 ) -> None:
     """Print a module's effective configuration and where each value came from, or draw its chains;

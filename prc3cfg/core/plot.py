@@ -9,8 +9,9 @@
 - `mermaid(before, after)`: one chain, before and after, as a ```mermaid xychart-beta``` block
   that GitHub renders, small enough for a pull request comment (`MERMAID_POINTS` per line).
 
-matplotlib (the `plot` extra: pip install 'prc3cfg[plot]') is imported only by `picture`, so
-this module, and `mermaid`, work without it. Pure: images in, bytes or text out; the caller
+matplotlib (the `plot` extra: pip install 'prc3cfg[plot]') is imported only by `plot_format`
+(which a command asking for a picture calls before it reads anything: without it, it says so
+then) and `picture`, so this module, and `mermaid`, work without it. Pure: images in, bytes or text out; the caller
 writes the file.
 """
 
@@ -44,10 +45,14 @@ class PlotError(UserError):
 
 
 def plot_format(path: Path) -> str:
-    """"svg" or "png", by the file's suffix; PlotError for any other."""
+    """"svg" or "png", by the file's suffix; PlotError for any other, and when matplotlib is missing."""
     fmt = FORMATS.get(path.suffix.lower())
     if fmt is None:
         raise PlotError(f"{path}: a plot is drawn as SVG or PNG — name a file ending in .svg or .png")
+    try:
+        import matplotlib  # noqa: F401 — drawing will need it: say so before any time is spent
+    except ImportError:
+        raise PlotError(MISSING) from None
     return fmt
 
 

@@ -5,6 +5,10 @@ Human units from `prc3cfg.core.units`; only non-default system parameters and pr
 the written file against the same bus is empty. Jumps become chains where a chain can say
 them — a path that ends in A = 0, or a loop — and `next:` on the program otherwise (a
 program that two others continue with, a path running into a loop or into another chain).
+What every module holds alike (a system parameter, a program's field, the chains) goes once
+into the profile `common` (`shared_profile`), and each module keeps only what differs: each
+module's effective settings are exactly its own entry's. The file starts with the schema line
+for editors (`plant.schema.json` beside it: `prc3cfg schema > plant.schema.json`).
 Pure: images in, YAML text out.
 """
 
@@ -38,6 +42,12 @@ def _program_entry(program: Program, next_program: int | None) -> dict[str, Any]
     return entry
 
 
+#: The name of the profile of what every imported module holds alike.
+SHARED = "common"
+#: The schema the written file names for editors, beside it (`prc3cfg schema` prints it).
+SCHEMA = "plant.schema.json"
+
+
 def module_entry(image: ModuleImage, name: str) -> dict[str, Any]:
     """One module of a plant file, from its complete image."""
     system = {
@@ -63,15 +73,58 @@ def module_entry(image: ModuleImage, name: str) -> dict[str, Any]:
     return entry
 
 
+def _alike(mappings: list[dict[Any, Any]]) -> dict[Any, Any]:
+    """The keys every mapping has with the same value, in the first's order."""
+    first, *rest = mappings
+    return {key: value for key, value in first.items() if all(key in other and other[key] == value for other in rest)}
+
+
+def shared_profile(entries: list[dict[str, Any]]) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
+    """What every module entry (`module_entry`) holds alike, as a profile, and the entries using it with
+    only what differs; with fewer than two modules, no profile and the entries as they are."""
+    if len(entries) < 2:
+        return None, entries
+    profile: dict[str, Any] = {}
+    if system := _alike([entry.get("system", {}) for entry in entries]):
+        profile["system"] = system
+    listed = [entry.get("programs", {}) for entry in entries]
+    programs = {number: fields for number in listed[0] if all(number in other for other in listed[1:])
+                and (fields := _alike([other[number] for other in listed]))}  # fmt: skip
+    if programs:
+        profile["programs"] = programs
+    profile |= {key: value for key, value in _alike(entries).items() if key in ("chains", "unmanaged_programs")}
+    modules = []
+    for entry in entries:
+        module: dict[str, Any] = {"address": entry["address"], "name": entry["name"], "profiles": [SHARED]}
+        if own := {key: value for key, value in entry.get("system", {}).items() if key not in system}:
+            module["system"] = own
+        own = {number: rest for number, fields in entry.get("programs", {}).items()
+               if (rest := {key: value for key, value in fields.items() if key not in programs.get(number, {})})}  # fmt: skip
+        if own:
+            module["programs"] = own
+        module |= {key: entry[key] for key in ("chains", "unmanaged_programs") if key in entry and key not in profile}
+        modules.append(module)
+    return profile, modules
+
+
 class _Dumper(yaml.SafeDumper):
     pass
 
 
+class _OneLine(dict):
+    """A mapping written on one line: a module with nothing of its own but its profile."""
+
+
 _Dumper.add_representer(Decimal, lambda dumper, value: dumper.represent_scalar("tag:yaml.org,2002:float", str(value)))
+_Dumper.add_representer(_OneLine, lambda dumper, value: dumper.represent_mapping("tag:yaml.org,2002:map", value, flow_style=True))
 
 
-def plant_yaml(plant: str, bus: dict[str, Any], modules: list[dict[str, Any]], schema: str | None = None) -> str:
-    """The YAML text of a one-bus plant file."""
-    document = {"plant": plant, "buses": [{**bus, "modules": modules}]}
-    head = f"# yaml-language-server: $schema={schema}\n" if schema else ""
+def plant_yaml(plant: str, bus: dict[str, Any], modules: list[dict[str, Any]], schema: str = SCHEMA) -> str:
+    """The YAML text of a one-bus plant file of `module_entry`s: what they hold alike in one profile."""
+    profile, modules = shared_profile(modules)
+    document: dict[str, Any] = {"plant": plant}
+    if profile is not None:
+        document["profiles"] = {SHARED: profile}
+    document["buses"] = [{**bus, "modules": [_OneLine(m) if m.keys() <= {"address", "name", "profiles"} else m for m in modules]}]
+    head = f"# yaml-language-server: $schema={schema}\n"
     return head + yaml.dump(document, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=110)

@@ -3,11 +3,12 @@
 A `Problem` names its place as a path of keys and indexes from the top of the document
 (`("buses", 0, "modules", 2, "programs", 3, "speed")`); the loader turns the path into
 `file:line:column`. `PlantError` carries the problems of one file, one line each: every one,
-up to `MAX_PROBLEMS`.
+up to `MAX_PROBLEMS`; `PlantError.findings` the same problems as `Finding`s, for tools.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -43,9 +44,36 @@ class Problem:
     models_fix: bool = False
 
 
+@dataclass(frozen=True, slots=True)
+class Finding:
+    """One problem of a plant file at its place: line and column (1-based), or None for the whole file."""
+
+    file: str
+    line: int | None
+    column: int | None
+    message: str
+
+
+#: The place a problem line starts with, after its file: ":line:column: ", or ": " for the whole file.
+_PLACE = re.compile(r":(?:(\d+):(\d+):)? ")
+
+
 class PlantError(UserError):
     """A plant file that cannot be used; `str()` is every problem, one line each, sorted by line."""
 
     def __init__(self, problems: Sequence[str]) -> None:
         self.problems = list(problems)
         super().__init__("\n".join(self.problems))
+
+    def findings(self, file: str) -> list[Finding]:
+        """The problems of the plant file read as `file` (the path `load_plant` was given, as text)."""
+        found = []
+        for problem in self.problems:
+            place = _PLACE.match(problem, len(file)) if problem.startswith(f"{file}:") else None
+            if place is None:  # not "file:…": said whole, of the file
+                found.append(Finding(file, None, None, problem))
+            elif place.group(1) is None:
+                found.append(Finding(file, None, None, problem[place.end():]))
+            else:
+                found.append(Finding(file, int(place.group(1)), int(place.group(2)), problem[place.end():]))
+        return found

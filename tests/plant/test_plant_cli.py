@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +12,9 @@ from typer.testing import CliRunner
 
 import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
 from prc3cfg.cli import app
+from prc3cfg.cli.plant_commands import github_annotation
 from prc3cfg.plant import plant_schema_text
+from prc3cfg.plant.problems import Finding
 
 ROOT = Path(__file__).parents[2]
 DEMO = ROOT / "plants" / "demo-line.yaml"
@@ -25,13 +28,52 @@ def test_validate_a_good_plant() -> None:
     assert result.stdout == f"{DEMO}: valid (2 buses, 6 modules)\n"
 
 
-def test_validate_a_broken_plant_prints_the_problems_on_stderr() -> None:
+def validate(*args: str | Path, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "prc3cfg", "validate", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+
+
+def test_validate_a_broken_plant_prints_the_problems_on_stderr_as_every_error_is() -> None:
     path = BROKEN / "unknown-key-program.yaml"
-    result = runner.invoke(app, ["validate", str(path)])
-    assert result.exit_code == 1
-    assert result.stdout == ""
-    assert result.stderr == (f"{path}:13:13: unknown key 'sped' in program 3 — expected one of position, "
-                             "speed, relative_speed, dwell, f1, f2, next\n")
+    done = validate(path)
+    assert (done.returncode, done.stdout) == (1, "")
+    assert done.stderr == (f"error: {path}:13:13: unknown key 'sped' in program 3 — expected one of position, "
+                           "speed, relative_speed, dwell, f1, f2, next\n")
+
+
+def test_validate_format_json_lists_every_problem_at_its_place(tmp_path: Path) -> None:
+    path = BROKEN / "many-problems.yaml"
+    done = validate(path, "--format", "json")
+    assert (done.returncode, done.stderr) == (1, "")
+    expected = [line.split(":", 2) for line in path.with_suffix(".expected").read_text().splitlines()]
+    assert json.loads(done.stdout) == [{"file": str(path), "line": int(line), "column": int(column), "message": message.strip()}
+                                       for line, column, message in expected]  # fmt: skip
+    missing = tmp_path / "missing.yaml"
+    assert json.loads(validate(missing, "--format", "json").stdout) == [
+        {"file": str(missing), "line": None, "column": None, "message": "no such file — check the path"}]
+    done = validate(DEMO, "--format", "json")
+    assert (done.returncode, done.stdout) == (0, "[]\n")
+
+
+def test_validate_format_github_annotates_each_problem_where_it_is(tmp_path: Path) -> None:
+    """GitHub's workflow commands: `%`, CR and LF escaped in the message, and `:` and `,` as well in a property."""
+    odd = tmp_path / "a,b:c%d"
+    odd.mkdir()
+    path = odd / "plant.yaml"
+    path.write_text("plant: demo\nbuses:\n  - name: a\n    port: emulator://a\n    modules:\n"
+                    "      - {address: 1, name: m1, programs: {3: {position: 0.2, sped: 0.3}}}\n")
+    done = validate("a,b:c%d/plant.yaml", "--format", "github", cwd=tmp_path)
+    assert (done.returncode, done.stderr) == (1, "")
+    assert done.stdout == ("::error file=a%2Cb%3Ac%25d/plant.yaml,line=6,col=62,title=prc3cfg::unknown key 'sped' in program 3 "
+                           "— expected one of position, speed, relative_speed, dwell, f1, f2, next\n")
+    assert validate("missing.yaml", "--format", "github", cwd=tmp_path).stdout == (
+        "::error file=missing.yaml,title=prc3cfg::no such file — check the path\n")
+    done = validate(DEMO, "--format", "github")
+    assert (done.returncode, done.stdout) == (0, f"{DEMO}: valid (2 buses, 6 modules)\n")
+
+
+def test_github_escaping_is_githubs() -> None:
+    assert github_annotation(Finding("x%y:z,w.yaml", 1, 2, "100% sure\r\nnext: a, b")) == (
+        "::error file=x%25y%3Az%2Cw.yaml,line=1,col=2,title=prc3cfg::100%25 sure%0D%0Anext: a, b")
 
 
 def test_validate_as_a_process_never_shows_a_traceback(tmp_path: Path) -> None:
@@ -41,7 +83,7 @@ def test_validate_as_a_process_never_shows_a_traceback(tmp_path: Path) -> None:
                               capture_output=True, text=True, cwd=ROOT)
         assert done.returncode == code, done.stderr
         assert "Traceback" not in done.stderr
-        assert (done.stdout if code == 0 else done.stderr).startswith(str(path))
+        assert done.stdout.startswith(str(path)) if code == 0 else done.stderr.startswith(f"error: {path}")
 
 
 def test_show_a_module_names_every_source() -> None:
@@ -94,5 +136,4 @@ def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, command: str, key:
     path.write_text(TAGGED.format(key=key, value=value))
     done = subprocess.run([sys.executable, "-m", "prc3cfg", command, str(path)], capture_output=True, text=True, cwd=tmp_path)
     assert (done.returncode, done.stdout) == (1, "")
-    said = done.stderr.removeprefix("error: ") if command == "plan" else done.stderr  # plan prefixes its one line
-    assert said == f"{path}:{at}: tags are not used in plant files — remove {tag}\n"
+    assert done.stderr == f"error: {path}:{at}: tags are not used in plant files — remove {tag}\n"

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import os
+import stat
 import sys
 import termios
 import threading
@@ -41,6 +43,31 @@ from prc3cfg.shell.link.trace import Trace
 
 PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.PARITY_EVEN}
 STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
+#: Linux's pseudo-terminals (/dev/pts/N): character devices of majors 136..143.
+PTY_MAJORS = range(136, 144)
+
+
+def is_pseudo_terminal(port: str) -> bool:
+    """Whether `port` is a device path of a pseudo-terminal (`emulator serve --pty`, socat's pty), which carries no parity."""
+    if "://" in port:
+        return False
+    try:
+        found = os.stat(port)
+    except (OSError, ValueError):
+        return False
+    return stat.S_ISCHR(found.st_mode) and os.major(found.st_rdev) in PTY_MAJORS
+
+
+class FormatRefused(UserError):
+    """A port that does not keep the line's character format — a pseudo-terminal takes no parity.
+    `str()` says the fix as a plant file's bus is written (`parity: none`); `refusal` is the rest,
+    for a command line to say its own (`--parity none`)."""
+
+    def __init__(self, bus: str, url: str, line: LineSettings) -> None:
+        self.refusal = (f"port {url} refuses {line.data_bits} data bits, parity {line.parity}, {line.stop_bits:g} stop bits "
+                        "— a pseudo-terminal carries no parity")  # fmt: skip
+        super().__init__(f"bus {bus}: {self.refusal}: set parity: none")
+
 
 
 class TcpPort(protocol_socket.Serial):
@@ -89,10 +116,7 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
     then refuses the next change with a bare `termios.error`) is refused here, at once.
     """
     is_url = "://" in url
-    refused = UserError(
-        f"bus {bus}: port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
-        f"{line.stop_bits:g} stop bits — a pseudo-terminal carries no parity: set parity: none"
-    )
+    refused = FormatRefused(bus, url, line)
     settings = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
                 "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}  # fmt: skip
     try:
@@ -105,6 +129,9 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
     except termios.error:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
+        if url.lower().startswith("rfc2217://") and "option 'control'" in str(error):  # pyserial waits for SET_CONTROL's answer
+            raise UserError(f"bus {bus}: cannot open port {url} ({error}) — a port without modem lines (ser2net's local) does "
+                            "not answer it: add ?ign_set_control to the rfc2217:// URL") from None  # fmt: skip
         raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path or the URL") from None
     except Exception as error:  # noqa: BLE001 — a pyserial URL handler (alt://, spy://, …) failing its own way
         raise UserError(f"bus {bus}: cannot open port {url} (pyserial's {url.partition('://')[0]}:// handler failed: "
