@@ -510,3 +510,15 @@ def test_the_install_step_puts_prc3cfg_from_a_virtual_environment_on_the_path(pl
     venv = plant.tmp / "runner" / "_temp" / str(plant.runs) / "venv"
     assert (venv / "bin" / "prc3cfg").exists()
     assert "prc3cfg plan" in plant.comments()[0]["body"]
+
+
+def test_a_broken_plant_file_is_annotated_at_its_line_in_the_repository_and_not_planned(plant):
+    def misspelt(document: dict) -> None:
+        document["profiles"]["reciprocator"]["programs"][3]["dwel"] = document["profiles"]["reciprocator"]["programs"][3].pop("dwell", 0.5)
+
+    job = plant.run("plan", plant.pull_request(misspelt))
+    assert not job.ok and not plant.comments()
+    text = plant.plant_text("change")
+    line = text[: text.index("dwel:")].count("\n") + 1
+    (annotation,) = [out for out in job.output().splitlines() if out.startswith("::error ")]
+    assert annotation.startswith(f"::error file=plant.yaml,line={line},col=") and "unknown key 'dwel'" in annotation
