@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from decimal import Decimal
+from typing import Literal, get_args
 
 MM = Decimal("0.001")
 
@@ -103,7 +104,8 @@ PROGRAM_QUANTITIES = tuple(QUANTITIES[k] for k in ("position", "speed", "relativ
 SYSTEM_QUANTITIES = tuple(q for q in QUANTITIES.values() if q.symbol.startswith("S"))
 
 #: F1/F2: action × 1000 + distance in mm (prc3-protocol.md §1.1).
-ACTIONS = {"reset": 0, "set": 1}
+Action = Literal["reset", "set"]
+ACTIONS: dict[str, int] = {name: code for code, name in enumerate(get_args(Action))}  # reset 0, set 1
 DISTANCE = QUANTITIES["distance"]
 
 

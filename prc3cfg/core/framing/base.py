@@ -45,7 +45,7 @@ import abc
 import enum
 from collections import deque
 from dataclasses import dataclass
-from typing import ClassVar, Final
+from typing import ClassVar, Final, Literal
 
 from prc3cfg.core.line import LineSettings
 
@@ -159,10 +159,14 @@ class Decoder(abc.ABC):
             self._skipped = bytearray()
 
 
+#: The framings' names, as a plant file's `framing` takes them (`FRAMINGS` holds one of each).
+FramingName = Literal["crc16", "open-driver", "stx"]
+
+
 class Framing(abc.ABC):
     """One way to put a message and its module address on the line (link.md "Framing …")."""
 
-    name: ClassVar[str]
+    name: ClassVar[FramingName]
     checked: ClassVar[bool]  # a checksum protects the frame: a damaged one is discarded, never delivered
     addresses: ClassVar[range]  # addresses `encode` accepts
     lengths: ClassVar[range]  # message lengths `encode` accepts
