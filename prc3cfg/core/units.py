@@ -64,6 +64,10 @@ class Quantity:
             return bool(device)
         if self.integer:
             return device
+        return self.in_unit(device)
+
+    def in_unit(self, device: int) -> Decimal:
+        """The device value in the quantity's unit (m, m/s, s): for a quantity that has one."""
         return device * self.step
 
     def format(self, device: int) -> str:
@@ -117,7 +121,7 @@ def function_output(action: str, distance: Decimal) -> int:
 def split_function_output(device: int) -> tuple[str, Decimal]:
     """1010 → ("set", Decimal("0.010")); 50 → ("reset", Decimal("0.050"))."""
     action = {code: name for name, code in ACTIONS.items()}[device // 1000]
-    return action, DISTANCE.to_human(device % 1000)
+    return action, DISTANCE.in_unit(device % 1000)
 
 
 def format_function_output(device: int) -> str:
