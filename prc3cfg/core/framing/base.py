@@ -72,14 +72,16 @@ class Discarded:
     data: bytes
 
 
-class _NeedData:
-    __slots__ = ()
+class _NeedData(enum.Enum):
+    """An enum of one member, so that `event is not NEED_DATA` narrows (the pattern of h11's sentinels)."""
+
+    NEED_DATA = enum.auto()
 
     def __repr__(self) -> str:
         return "NEED_DATA"
 
 
-NEED_DATA: Final = _NeedData()
+NEED_DATA: Final = _NeedData.NEED_DATA
 """`next_event` returns this when no complete frame or discard is ready yet."""
 
 
@@ -113,7 +115,7 @@ class Decoder(abc.ABC):
         if data:
             self._last = now
 
-    def next_event(self, now: float | None = None) -> Frame | Discarded | _NeedData:
+    def next_event(self, now: float | None = None) -> Frame | Discarded | Literal[_NeedData.NEED_DATA]:
         """The next event in arrival order, or NEED_DATA; `now` first lets time-outs expire."""
         if now is not None:
             self._clock(now, 0)
