@@ -23,7 +23,7 @@ import typer
 try:  # typer 0.2x carries its own copy of click, and raises that copy's exceptions
     from typer._click import exceptions as click_errors
 except ImportError:  # pragma: no cover - older typer uses click itself
-    from click import exceptions as click_errors
+    from click import exceptions as click_errors  # type: ignore[import-not-found, no-redef]  # only there, where typer has no copy
 
 from prc3cfg import __version__
 from prc3cfg.errors import UserError
