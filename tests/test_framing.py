@@ -489,3 +489,11 @@ def test_an_open_driver_zvz_not_longer_than_a_character_ends_a_frame_after_every
         decoder.line_idle()
         events.append(list(iter(decoder.next_event, NEED_DATA)))
     assert events == [[Frame(REQUEST, 1, b""), Frame(REQUEST, 2, b""), Frame(REQUEST, 3, b"")], [Frame(REQUEST, 1, b"\x02\x03")]]
+
+
+def test_the_framing_names_a_plant_file_takes_are_the_framings() -> None:
+    from typing import get_args
+
+    from prc3cfg.core.framing import FramingName
+
+    assert get_args(FramingName) == tuple(FRAMINGS)

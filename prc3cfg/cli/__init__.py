@@ -24,8 +24,9 @@ try:  # typer 0.2x carries its own copy of click, and raises that copy's excepti
     from typer._click import exceptions as click_errors
     from typer._click.utils import PacifyFlushWrapper
 except ImportError:  # pragma: no cover - older typer uses click itself
-    from click import exceptions as click_errors
-    from click.utils import PacifyFlushWrapper  # type: ignore[import-not-found,no-redef]
+    # click is installed only where typer has no copy of it (or where another package wants it)
+    from click import exceptions as click_errors  # type: ignore[import-not-found, no-redef, unused-ignore]
+    from click.utils import PacifyFlushWrapper  # type: ignore[import-not-found, no-redef, assignment, unused-ignore]
 
 from prc3cfg import __version__
 from prc3cfg.errors import UserError

@@ -24,6 +24,7 @@ from prc3cfg.shell.files import write_atomically
 
 if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3cfg --help` stays quick
     from rich.console import Console
+    from rich.progress import Progress, TaskID
 
     from prc3cfg.api import LineOptions
     from prc3cfg.shell.link import Link
@@ -235,8 +236,8 @@ class TerminalProgress:
 
     def __init__(self, stack: contextlib.ExitStack) -> None:
         self._stack = stack
-        self._bar = None
-        self._task = None
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
 
     def start(self, what: str, total: int) -> None:
         from rich.progress import (

@@ -100,7 +100,7 @@ def plan(
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options)
     output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes)
-    if plot is not None:
+    if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
     if detailed_exitcode and result.changes:
         raise Outcome(EXIT_CHANGES)
@@ -128,11 +128,12 @@ def apply(
     from prc3cfg import api
     from prc3cfg.cli import output
 
-    if plant is None and plan_file is None:
+    if plant is None and plan_file is not None:
+        plant = api.plan_file_plant(plan_file)
+    if plant is None:
         raise click_errors.UsageError("name the plant file, or a plan file with --plan", ctx=ctx)
-    if plant is not None and plant.suffix.lower() == ".json":  # Terraform's `apply PLAN`
+    if plant.suffix.lower() == ".json":  # Terraform's `apply PLAN`
         raise click_errors.UsageError(f"{plant} is a plan file — did you mean prc3cfg apply PLANT --plan {plant}?", ctx=ctx)
-    plant = plant if plant is not None else api.plan_file_plant(plan_file)
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
     output.targeting(module)

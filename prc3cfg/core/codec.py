@@ -218,7 +218,7 @@ class _ProgramRange(Message):
     def programs(self) -> range:
         return range(self.first, self.last + 1)
 
-    def touched_programs(self) -> range:
+    def touched_programs(self) -> range | tuple[int, ...]:
         return self.programs
 
     @classmethod
@@ -313,7 +313,8 @@ def _program_words(program: Program) -> list[int]:
 
 def _program_from_words(data: bytes, start: int) -> Program:
     """The seven fields P V Vr T F1 F2 [A xx] from data word `start` on."""
-    return Program(*(_kf(data, start + i) for i in range(6)), A=_hi(data, start + 6))
+    P, V, Vr, T, F1, F2 = (_kf(data, start + i) for i in range(6))
+    return Program(P, V, Vr, T, F1, F2, A=_hi(data, start + 6))
 
 
 @dataclass(frozen=True, slots=True)
@@ -450,6 +451,10 @@ class _WriteItems(Message):
             _check_byte("PN", pn)
             self.check_value(value)
         Message.__post_init__(self)
+
+    def check_value(self, value: int) -> None:
+        """MessageError for a value an item cannot carry."""
+        raise NotImplementedError
 
     @classmethod
     def check_header(cls, data: bytes) -> None:
@@ -696,7 +701,7 @@ def decode_reply(message: Message, data: bytes) -> int | SystemReply | ProgramsR
     """
     if len(data) == 2:
         return data[0]
-    if not message.IS_READ or len(data) != reply_length(message):
+    if not isinstance(message, ReadSystem | ReadProgram | ReadPrograms) or len(data) != reply_length(message):  # the reads (IS_READ)
         raise BadReply(f"{len(data)} bytes in reply to {message.ID:02X}h, expected {reply_length(message)}")
     if isinstance(message, ReadSystem):
         return SystemReply.decode(data)

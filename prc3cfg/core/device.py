@@ -139,7 +139,7 @@ def can_clamp(before: SystemParameters, after: SystemParameters) -> bool:
 
 def _set_system(state: ModuleState, system: SystemParameters) -> ModuleState:
     """10h/20h: store, clamp every program, release the axes; an E12 fault is cleared (§4.3, §4.4)."""
-    image = replace(state.image, system=system, programs=_clamped(system, state.image.programs))
+    image = replace(state.image, system=system, programs=_clamped(system, state.image.complete()))
     return replace(state, image=image, referenced=False, fault=None)
 
 
@@ -152,7 +152,7 @@ def _set_fields(state: ModuleState, field: str, items: tuple[tuple[int, int], ..
     image = state.image
     changes: dict[int, Program] = {}
     for number, value in items:
-        current = changes.get(number) or image.programs[number - 1]
+        current = changes.get(number) or image.known(number)
         changes[number] = current.with_field(field, value)
     return replace(state, image=image.with_programs(changes))
 
@@ -160,7 +160,7 @@ def _set_fields(state: ModuleState, field: str, items: tuple[tuple[int, int], ..
 def _set_positions_and_speeds(state: ModuleState, first: int, items: tuple[tuple[int, int], ...]) -> ModuleState:
     image = state.image
     changes = {
-        first + i: replace(image.programs[first + i - 1], P=position, V=speed)
+        first + i: replace(image.known(first + i), P=position, V=speed)
         for i, (position, speed) in enumerate(items)
     }
     return replace(state, image=image.with_programs(changes))
@@ -168,7 +168,7 @@ def _set_positions_and_speeds(state: ModuleState, first: int, items: tuple[tuple
 
 def _link(state: ModuleState, first: int, last: int) -> ModuleState:
     image = state.image
-    changes = {n: image.programs[n - 1].with_field("A", n + 1 if n < last else 0) for n in range(first, last + 1)}
+    changes = {n: image.known(n).with_field("A", n + 1 if n < last else 0) for n in range(first, last + 1)}
     return replace(state, image=image.with_programs(changes))
 
 
@@ -235,8 +235,10 @@ def read(state: ModuleState, message: Message) -> bytes:
     """The data block a decoded read (50h..52h) is answered with."""
     if isinstance(message, codec.ReadSystem):
         return codec.SystemReply(state.image.system, state.address).encode()
+    if not isinstance(message, codec.ReadProgram | codec.ReadPrograms):
+        raise TypeError(f"{message.ID:02X}h is not a read")
     first = message.programs.start
-    return codec.ProgramsReply(first, state.image.programs[first - 1 : message.programs.stop - 1]).encode()
+    return codec.ProgramsReply(first, state.image.complete()[first - 1 : message.programs.stop - 1]).encode()
 
 
 @dataclass(frozen=True, slots=True)

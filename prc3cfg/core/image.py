@@ -133,6 +133,21 @@ class ModuleImage:
     def program(self, number: int) -> Program | None:
         return self.programs[number - 1]
 
+    def known(self, number: int) -> Program:
+        """Program `number` where the image is known to hold it (read, managed, a module's own);
+        ValueError if it is None here."""
+        if (program := self.programs[number - 1]) is None:
+            raise ValueError(f"program {number} is not in this image (not read, or not managed)")
+        return program
+
+    def complete(self) -> tuple[Program, ...]:
+        """The 64 programs of an image that holds them all (a module's own, the emulator's, one read
+        whole); ValueError if one is None."""
+        programs = tuple(p for p in self.programs if p is not None)
+        if len(programs) != PROGRAM_COUNT:
+            raise ValueError(f"program {self.programs.index(None) + 1} is not in this image (not read, or not managed)")
+        return programs
+
     def with_programs(self, changes: dict[int, Program]) -> ModuleImage:
         """This image with the given programs (by number) replaced."""
         programs = list(self.programs)

@@ -8,12 +8,14 @@ UARTs (TCP, the emulator). Does not own framing (see
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 #: Ports whose bytes come over TCP (pyserial URLs): `HOST:PORT`, no UART between (link.md).
 TCP_SCHEMES = ("socket", "rfc2217")
 #: The in-process emulator a plant file can name as its port: `emulator://NAME`.
 EMULATOR_SCHEME = "emulator://"
-PARITIES = ("none", "odd", "even")
+Parity = Literal["none", "odd", "even"]
+PARITIES: tuple[Parity, ...] = get_args(Parity)
 DATA_BITS = (5, 6, 7, 8)
 STOP_BITS = (1, 1.5, 2)
 

@@ -211,7 +211,7 @@ def _action(move: Segment, output: str, value: int, travel: Decimal) -> tuple[fl
         if distance > travel:
             return None
         return move.time_at(float(distance)), action == "set"
-    return move.time_at(float(max(travel - distance, 0))), action == "set"
+    return move.time_at(float(max(travel - distance, Decimal(0)))), action == "set"
 
 
 @dataclass(slots=True)
@@ -228,7 +228,7 @@ def _run(numbers: Iterable[int], programs: dict[int, Program], start_position: i
     for number in numbers:
         program = programs[number]
         move = _move(number, time, position, acceleration, program)
-        travel = BY_SYMBOL["P"].to_human(abs(program.P - position))
+        travel = BY_SYMBOL["P"].in_unit(abs(program.P - position))
         for output in OUTPUTS:
             if (action := _action(move, output, getattr(program, output), travel)) is not None:
                 run.actions[output].append(action)

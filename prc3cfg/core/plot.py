@@ -112,11 +112,12 @@ def _caption(was: ChainMotion | None, will: ChainMotion | None, *, overlay: bool
         cycle = f", cycle {motion.cycle_time:.2f} s" if motion.cycle_time is not None else ""
         return f"pass {motion.duration:.2f} s{cycle}"
 
+    motion = will or was
+    if motion is None:
+        raise ValueError("a caption of no motion, before or after")
     if not overlay or was == will:
-        motion = will or was
         return f"{motion.label}{' (unchanged)' if overlay else ''}: {times(motion)}"
     if was is None or will is None:
-        motion = will or was
         return f"{motion.label} ({'new' if was is None else 'removed'}): {times(motion)}"
     if was.label == will.label:
         return f"{will.label}: before {times(was)} · after {times(will)}"

@@ -93,7 +93,7 @@ def _program_changes(before: tuple[Program | None, ...], after: tuple[Program | 
 
 def jumps(image: ModuleImage, within: set[int]) -> set[str]:
     """The jumps among the programs in `within` as people read them: chains, loops, single jumps."""
-    chain_list, nexts = jumps_as_chains({n: image.programs[n - 1] for n in within})
+    chain_list, nexts = jumps_as_chains({n: image.known(n) for n in within})
     lines = {f"jump {n} → {a}" for n, a in nexts.items()}
     for chain in chain_list:
         if isinstance(chain, dict):  # a loop: back to its first program

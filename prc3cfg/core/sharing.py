@@ -128,8 +128,9 @@ def _candidates(modules: Sequence[Module]) -> list[tuple[Step, ...]]:
     for field in PROGRAM_FIELDS:
         items = []
         for number in PROGRAM_NUMBERS:
-            values = {None if m.desired.program(number) is None else getattr(m.desired.program(number), field) for m in modules}
-            if len(values) != 1 or None in values:
+            desired = [p for m in modules if (p := m.desired.program(number)) is not None]
+            values = {getattr(p, field) for p in desired}
+            if len(values) != 1 or len(desired) != len(modules):
                 continue
             (value,) = values
             differing = sum(m.actual.program(number) is None or getattr(m.actual.program(number), field) != value for m in modules)

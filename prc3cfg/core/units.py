@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from decimal import Decimal
+from typing import Literal, get_args
 
 MM = Decimal("0.001")
 
@@ -63,6 +64,10 @@ class Quantity:
             return bool(device)
         if self.integer:
             return device
+        return self.in_unit(device)
+
+    def in_unit(self, device: int) -> Decimal:
+        """The device value in the quantity's unit (m, m/s, s): for a quantity that has one."""
         return device * self.step
 
     def format(self, device: int) -> str:
@@ -103,7 +108,8 @@ PROGRAM_QUANTITIES = tuple(QUANTITIES[k] for k in ("position", "speed", "relativ
 SYSTEM_QUANTITIES = tuple(q for q in QUANTITIES.values() if q.symbol.startswith("S"))
 
 #: F1/F2: action × 1000 + distance in mm (prc3-protocol.md §1.1).
-ACTIONS = {"reset": 0, "set": 1}
+Action = Literal["reset", "set"]
+ACTIONS: dict[str, int] = {name: code for code, name in enumerate(get_args(Action))}  # reset 0, set 1
 DISTANCE = QUANTITIES["distance"]
 
 
@@ -115,7 +121,7 @@ def function_output(action: str, distance: Decimal) -> int:
 def split_function_output(device: int) -> tuple[str, Decimal]:
     """1010 → ("set", Decimal("0.010")); 50 → ("reset", Decimal("0.050"))."""
     action = {code: name for name, code in ACTIONS.items()}[device // 1000]
-    return action, DISTANCE.to_human(device % 1000)
+    return action, DISTANCE.in_unit(device % 1000)
 
 
 def format_function_output(device: int) -> str:

@@ -51,7 +51,7 @@ from decimal import Decimal
 from typing import Any
 
 import yaml
-from yaml.events import MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent, SequenceStartEvent
+from yaml.events import CollectionStartEvent, MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent, SequenceStartEvent
 
 from prc3cfg.core.device import value_range
 from prc3cfg.core.image import SYSTEM_KEYS, ModuleImage, SystemParameters, default_program
@@ -59,7 +59,7 @@ from prc3cfg.core.render import FieldChange, differences, field_name, format_val
 from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, split_function_output
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Module, Plant
-from prc3cfg.plant.document import DECIMAL_NUMBER, LOADER, core_schema
+from prc3cfg.plant.document import DECIMAL_NUMBER, LOADER, core_schema, marked
 from prc3cfg.plant.loader import load_plant
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 from prc3cfg.plant.problems import Path_, PlantError
@@ -137,8 +137,7 @@ class _Drift:
     @property
     def profile(self) -> Path_ | None:
         """Where the value is in its profile, if it came from one."""
-        from_profile = self.sourced is not None and self.sourced.source.startswith(PROFILE)
-        return self.sourced.path if from_profile else None
+        return self.sourced.path if self.sourced is not None and self.sourced.source.startswith(PROFILE) else None
 
 
 def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Iterable[int] | None = None) -> Adoption:
@@ -157,8 +156,8 @@ def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Ite
     for target, found in _placed(plant, drifts).items():
         first = found[0]
         _want(wanted, target, first.value)
-        layer = MODULE if target[0] == "buses" else first.sourced.source
         source = DEFAULT if first.sourced is None else first.sourced.source
+        layer = MODULE if target[0] == "buses" else source
         adopted.append(Adopted(tuple(d.name for d in found), first.what, layer, layer == MODULE and source != MODULE, source))
     if not wanted:
         return Adoption((), text)
@@ -178,7 +177,7 @@ def _adopted_image(module: Module, have: ModuleImage | None, scope: frozenset[in
     if have is None:
         return desired
     numbers = [n for n in module.managed_programs() if (scope is None or n in scope) and have.program(n) is not None]
-    return replace(desired.with_programs({n: have.program(n) for n in numbers}), system=have.system if scope is None else desired.system)
+    return replace(desired.with_programs({n: have.known(n) for n in numbers}), system=have.system if scope is None else desired.system)
 
 
 def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -> None:
@@ -219,10 +218,10 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
     desired, settings = module.desired_image(), module.settings
     numbers = [n for n in module.managed_programs() if (scope is None or n in scope) and have.program(n) is not None]
     for number in numbers:
-        held, said = have.program(number).A, desired.program(number).A
-        if held != said:
-            raise AdoptRefused(f"{where}: program {number} jumps to {held or 'no program'} on the module where the plant "
-                               f"file says {said or 'no program'} — adopt leaves jumps (chains, next:) alone: edit them "
+        jumps, said_jumps = have.known(number).A, desired.known(number).A
+        if jumps != said_jumps:
+            raise AdoptRefused(f"{where}: program {number} jumps to {jumps or 'no program'} on the module where the plant "
+                               f"file says {said_jumps or 'no program'} — adopt leaves jumps (chains, next:) alone: edit them "
                                "in the plant file by hand, or apply it to set the jump back, then adopt again")  # fmt: skip
     system = have.system if scope is None else desired.system
     _check(_adopted_image(module, have, scope), numbers, where)
@@ -291,9 +290,10 @@ def _placed(plant: Plant, drifts: list[_Drift]) -> dict[Path_, list[_Drift]]:
             alike.setdefault(drift.profile, []).append(drift)
     placed: dict[Path_, list[_Drift]] = {}
     for drift in drifts:
-        shared = alike.get(drift.profile, [])
-        together = bool(shared) and len(shared) == users[drift.profile] and all(d.value == drift.value for d in shared)
-        placed.setdefault(drift.profile if together else drift.path + drift.within, []).append(drift)
+        place, profile = drift.path + drift.within, drift.profile
+        if profile is not None and (shared := alike[profile]) and len(shared) == users[profile] and all(d.value == drift.value for d in shared):
+            place = profile
+        placed.setdefault(place, []).append(drift)
     return placed
 
 
@@ -336,22 +336,26 @@ def _tree(text: str) -> _Node:
 
 
 def _node(event: yaml.Event, events: Iterator[yaml.Event]) -> _Node:
+    start, end_mark = marked(event.start_mark).index, marked(event.end_mark).index
     if isinstance(event, ScalarEvent):
-        return _Node(event.start_mark.index, event.end_mark.index, value=event.value, plain=not event.style)
-    node = _Node(event.start_mark.index, event.end_mark.index, flow=bool(event.flow_style))
+        return _Node(start, end_mark, value=event.value, plain=not event.style)
+    node = _Node(start, end_mark, flow=isinstance(event, CollectionStartEvent) and bool(event.flow_style))
+    end: yaml.Event
     if isinstance(event, SequenceStartEvent):
         node.children = []
         while not isinstance(item := next(events), SequenceEndEvent):
             node.children.append(_node(item, events))
         end = item
     else:
+        node.children = mapping = dict[Any, _Node]()
         while not isinstance(key := next(events), MappingEndEvent):
+            assert isinstance(key, ScalarEvent)  # the loader has read the file: its keys are scalars
             name = core_schema(key.value)[1] if not key.style else key.value
-            node.keys[name] = key.start_mark.index
-            node.children[name] = _node(next(events), events)
+            node.keys[name] = marked(key.start_mark).index
+            mapping[name] = _node(next(events), events)
         end = key
     children = list(node.children.values()) if isinstance(node.children, dict) else node.children
-    node.end = end.end_mark.index if node.flow or not children else children[-1].end
+    node.end = marked(end.end_mark).index if node.flow or not children else children[-1].end
     return node
 
 
@@ -406,7 +410,7 @@ class _Conventions:
         """Decimals for a new value of `key`: as the file writes most of them, else as its step needs."""
         if key in self.decimals:
             return self.decimals[key].most_common(1)[0][0]
-        return max(0, -QUANTITIES[key].step.as_tuple().exponent)
+        return max(0, -int(QUANTITIES[key].step.as_tuple().exponent))  # a finite step: its exponent is a number
 
     def flow_style(self, kind: str) -> bool:
         return self.flow[kind].most_common(1)[0][0] if kind in self.flow else DEFAULT_FLOW[kind]
@@ -493,6 +497,7 @@ class _Rewrite:
     def _replace(self, scalar: _Node, value: Any) -> None:
         """A scalar's text replaced by `value`, written like it: decimals, quotes, case."""
         written = scalar.value
+        assert written is not None  # `wanted` holds a value only where the file has a scalar
         if (core_schema(written)[1] if scalar.plain else written) == value:
             return  # the half of an F1/F2 that did not change
         if isinstance(value, str):
@@ -553,7 +558,7 @@ class _Rewrite:
 
     def _block(self, path: Path_, value: Any, column: int) -> list[str]:
         pad = " " * column
-        if not isinstance(value, dict) or self.conventions.flow_style(_kind(path)):
+        if not isinstance(value, dict) or self.conventions.flow_style(_kind(path) or ""):
             return [f"{pad}{path[-1]}: {self._flow(path, value)}"]
         inner = column + self.conventions.indent
         return [f"{pad}{path[-1]}:", *(line for k in sorted(value, key=_rank) for line in self._block(path + (k,), value[k], inner))]

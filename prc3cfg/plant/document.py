@@ -66,6 +66,7 @@ import yaml
 from yaml.composer import ComposerError
 from yaml.events import (
     AliasEvent,
+    CollectionStartEvent,
     DocumentStartEvent,
     MappingEndEvent,
     MappingStartEvent,
@@ -169,7 +170,7 @@ _SYNTAX_HINTS = {
 #: reads as part of a key and libyaml does not.
 _NOT_TEXT = re.compile(f"{yaml.reader.Reader.NON_PRINTABLE.pattern}|(?!\\A)\ufeff")
 #: The tag of a mapping or a list that has none written.
-_COLLECTIONS = {MappingStartEvent: "tag:yaml.org,2002:map", SequenceStartEvent: "tag:yaml.org,2002:seq"}
+_COLLECTIONS: dict[type[CollectionStartEvent], str] = {MappingStartEvent: "tag:yaml.org,2002:map", SequenceStartEvent: "tag:yaml.org,2002:seq"}
 Position = tuple[int, int]  # 1-based line and column
 
 
@@ -241,7 +242,7 @@ def read_document(path: Path, data: bytes | None = None) -> Document:
         raise PlantError([f"{name}:1:1: the file is empty — a plant file starts with 'plant: NAME' and 'buses:'"])
     if type(root) is not MappingStartEvent:
         line, column = _position(root)
-        kind = "a list" if type(root) is SequenceStartEvent else f"the value {root.value!r}"
+        kind = f"the value {root.value!r}" if isinstance(root, ScalarEvent) else "a list"
         raise PlantError([f"{name}:{line}:{column}: the top level is {kind}, not a mapping "
                           "— a plant file is a mapping with 'plant:' and 'buses:'"])
     return Document(name, text, value, hashlib.sha256(data).hexdigest(), reader.problems)
@@ -404,16 +405,15 @@ class _Reader:
 
     def node(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
         """The value of the node that `event` begins, read to its end."""
-        kind = type(event)
-        if kind is ScalarEvent:
+        if type(event) is ScalarEvent:
             return self.scalar(event, path, path[-1] if path and isinstance(path[-1], str) else "")
-        if kind is AliasEvent:
-            return None  # refused once the whole file is read (`_Events.refuse_aliases`)
+        if not isinstance(event, CollectionStartEvent):
+            return None  # an alias: refused once the whole file is read (`_Events.refuse_aliases`)
         if event.tag is not None:  # !!set, !!omap, !!float
-            self.problem(_tagged(event, path))
-        if kind is MappingStartEvent:
+            self.problem(_tagged(event.tag, event, path))
+        if type(event) is MappingStartEvent:
             return self.mapping(event, path, wanted)
-        items = []
+        items: list[Any] = []
         while type(item := self.next()) is not SequenceEndEvent:
             items.append(self.entry(path + (len(items),), None, item, wanted))
         return items
@@ -430,7 +430,7 @@ class _Reader:
             return None
         return self.node(event, path, below)
 
-    def mapping(self, start: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> dict[Any, Any]:
+    def mapping(self, start: MappingStartEvent, path: Path_, wanted: Mapping[Any, Any] | None) -> dict[Any, Any]:
         result: dict[Any, Any] = {}
         keys: dict[Any, Position] = {}  # where each key read here is
         before: tuple[Any, yaml.Event] | None = None  # the key read last and its value's first event
@@ -444,8 +444,7 @@ class _Reader:
                                      "profiles: and a module's profiles: [NAME] instead", at=key_at))
                 self.skip(value_event)
                 continue
-            if before is not None and start.flow_style and self.split_number(before[1], key_event, value_event):
-                written = f"{before[1].value},{key_event.value}"
+            if before is not None and start.flow_style and (written := self.split_number(before[1], key_event, value_event)):
                 point = written.replace(",", ".")
                 result[before[0]] = Decimal(point)  # what was meant, for the models to judge
                 self.problem(Problem(path, DECIMAL_COMMA.format(what=before[0], written=written, point=point),
@@ -481,20 +480,20 @@ class _Reader:
             event = self.next()
 
     def tag(self, event: yaml.Event) -> str | None:
-        """A node's tag as PyYAML's composer gives it: the one written, else YAML 1.1's reading."""
-        kind = type(event)
-        if kind is AliasEvent:
+        """A node's tag as PyYAML's composer gives it: the one written, else YAML 1.1's reading; None for an alias."""
+        if type(event) is ScalarEvent:
+            return self.scalar_tag(event)
+        if not isinstance(event, CollectionStartEvent):
             return None
-        if event.tag not in (None, "!"):
-            return event.tag
-        if kind is ScalarEvent:
-            return self.resolve(event.value, event.implicit)
-        return _COLLECTIONS[kind]
+        return event.tag if event.tag is not None and event.tag != "!" else _COLLECTIONS[type(event)]
+
+    def scalar_tag(self, event: ScalarEvent) -> str:
+        return event.tag if event.tag is not None and event.tag != "!" else self.resolve(event.value, event.implicit)
 
     def merge_key(self, event: yaml.Event) -> bool:
         """`<<`, or any key tagged `!!merge`."""
-        if type(event) is AliasEvent:
-            return False
+        if not isinstance(event, ScalarEvent | CollectionStartEvent):
+            return False  # an alias
         maybe = event.tag not in (None, "!") or (type(event) is ScalarEvent and event.value == "<<")
         return maybe and self.tag(event) == _MERGE_TAG
 
@@ -508,22 +507,25 @@ class _Reader:
         """An empty value (`key:` alone), which YAML reads as null."""
         return type(event) is ScalarEvent and not event.value and self.tag(event) == _NULL_TAG
 
-    def split_number(self, number: yaml.Event, key: yaml.Event, value: yaml.Event) -> bool:
-        """`{position: 2,000}`: a whole number, a comma and digits that became a key without a value."""
-        return bool(type(value) is ScalarEvent and not value.value and self.empty(value)
-                    and type(number) is ScalarEvent and not number.style and _WHOLE.fullmatch(number.value)
-                    and type(key) is ScalarEvent and not key.style and _DIGITS.fullmatch(key.value)
-                    and key.start_mark.index == number.end_mark.index + 1)
+    def split_number(self, number: yaml.Event, key: yaml.Event, value: yaml.Event) -> str | None:
+        """`{position: 2,000}`: a whole number, a comma and digits that became a key without a value;
+        the number as written ("2,000"), or None."""
+        if (type(value) is ScalarEvent and not value.value and self.empty(value)
+                and type(number) is ScalarEvent and not number.style and _WHOLE.fullmatch(number.value)
+                and type(key) is ScalarEvent and not key.style and _DIGITS.fullmatch(key.value)
+                and marked(key.start_mark).index == marked(number.end_mark).index + 1):
+            return f"{number.value},{key.value}"
+        return None
 
-    def scalar(self, event: yaml.Event, path: Path_, key: str) -> Any:
+    def scalar(self, event: ScalarEvent, path: Path_, key: str) -> Any:
         """The value of a scalar (under `key`, for messages); a problem when it is not one value to every
         reader, or when it has a tag (its text is kept)."""
         if event.tag is not None:
-            self.problem(_tagged(event, path))
+            self.problem(_tagged(event.tag, event, path))
             return event.value
         seen = (event.value, not event.style)
         if (known := self.scalars.get(seen)) is None:
-            known = self.reading(event.value, self.tag(event), not event.style)
+            known = self.reading(event.value, self.scalar_tag(event), not event.style)
             _remember(self.scalars, seen, known)
         value, problem, models_fix = known
         if problem is not None:
@@ -593,15 +595,16 @@ def _in_file(data: Any, path: Path_) -> Path_:
     """The parts of `path` that the file has, in order: those it does not have are skipped."""
     found: Path_ = ()
     for part in path:
+        key: Any = part  # the file's own key (a Decimal, a float) where pydantic wrote its repr
         if isinstance(data, dict):
             if isinstance(part, str) and part not in data:  # pydantic writes a key that is no str or int as its repr
-                part = next((key for key in data if isinstance(key, Decimal | float) and part in (str(key), repr(key))), part)
-            present = _hashable(part) and part in data
+                key = next((k for k in data if isinstance(k, Decimal | float) and part in (str(k), repr(k))), part)
+            present = _hashable(key) and key in data
         else:
             present = isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data)
         if present:
-            data = data[part]
-            found += (part,)
+            data = data[key]
+            found += (key,)
     return found
 
 
@@ -615,7 +618,9 @@ def _core_rule(text: str) -> tuple[str, Callable[[str], Any]]:
     """The core schema's tag for `text`, and how to build its value (not built yet: it may be long)."""
     if (found := _CORE_PATTERN.fullmatch(text)) is None:
         return _STR_TAG, str
-    tag, _, value = _CORE_SCHEMA[int(found.lastgroup[1:])]
+    rule = found.lastgroup  # every alternative is a group named r<index>
+    assert rule is not None
+    tag, _, value = _CORE_SCHEMA[int(rule[1:])]
     return tag, value
 
 
@@ -669,9 +674,9 @@ def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]
             yield path + (index,), item
 
 
-def _tagged(event: yaml.Event, path: Path_) -> Problem:
+def _tagged(tag: str, event: yaml.Event, path: Path_) -> Problem:
     """The problem of a node with a tag written on it, at the tag."""
-    return Problem(path, f"tags are not used in plant files — remove {_written(event.tag)}", at=_position(event))
+    return Problem(path, f"tags are not used in plant files — remove {_written(tag)}", at=_position(event))
 
 
 def _written(tag: str) -> str:
@@ -680,7 +685,14 @@ def _written(tag: str) -> str:
 
 
 def _position(event: yaml.Event) -> Position:
-    return event.start_mark.line + 1, event.start_mark.column + 1
+    start = marked(event.start_mark)
+    return start.line + 1, start.column + 1
+
+
+def marked(mark: yaml.error.Mark | yaml._yaml.Mark | None) -> yaml.error.Mark | yaml._yaml.Mark:
+    """An event's start or end: the parser marks every event (the stubs allow None, for events made by hand)."""
+    assert mark is not None
+    return mark
 
 
 def _line_column(text: str, offset: int) -> Position:
@@ -703,5 +715,5 @@ def _syntax_error(name: str, error: yaml.MarkedYAMLError) -> str:
     if hint is None:
         where = f" ({error.context} at line {error.context_mark.line + 1})" if error.context and error.context_mark else ""
         hint = f"not valid YAML: {problem}{where} — check the indentation, colons, quotes and brackets here"
-    mark = (error.context_mark if at_start else error.problem_mark) or error.problem_mark or error.context_mark
+    mark = marked((error.context_mark if at_start else error.problem_mark) or error.problem_mark or error.context_mark)
     return f"{name}:{mark.line + 1}:{mark.column + 1}: {hint}"

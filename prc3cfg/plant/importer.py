@@ -55,7 +55,7 @@ def module_entry(image: ModuleImage, name: str) -> dict[str, Any]:
         for key in SYSTEM_KEYS
         if getattr(image.system, key) != getattr(DEFAULT_SYSTEM, key)
     }
-    programs = {n: p for n, p in enumerate(image.programs, start=1)}
+    programs = dict(enumerate(image.complete(), start=1))
     chains, nexts = jumps_as_chains(programs)
     jumping = set(nexts) | set(nexts.values()) | {
         n for c in chains for n in (c["programs"] if isinstance(c, dict) else c)

@@ -86,7 +86,7 @@ class _Problems(list[Problem]):
             raise _Enough
 
 
-def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine | None, list[Module]]]:
+def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, list[Module]]]:
     """Every bus's line and its modules that have no problem; the problems go to `problems`."""
     problems.add(())  # the reading may have found enough already
     spec, found = _validated(PlantSpec, _with_stand_ins(data), (), data)
@@ -100,7 +100,7 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine | 
             profiles[profile_path[1]] = profile
     buses = []
     for bus_path, raw_bus in mappings_in(data, ("buses",)):
-        line = spec.buses[bus_path[1]] if spec is not None else _valid(BusLine, {k: v for k, v in raw_bus.items() if k != "modules"})
+        line = spec.buses[int(bus_path[1])] if spec is not None else _valid(BusLine, {k: v for k, v in raw_bus.items() if k != "modules"})
         problems.add(rules.check_bus(bus_path, line) if line else ())
         modules = []
         for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
@@ -109,8 +109,9 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine | 
             if module is not None:
                 found, built = _module(module, module_path, profiles)
                 problems.add(found)
-                modules.append(built)
-        buses.append((line, modules))
+                modules += [built] if built is not None else []
+        if line is not None:
+            buses.append((line, modules))
     return buses
 
 
@@ -220,7 +221,7 @@ def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec 
     ]
     if unknown or any(profiles[name] is None for name in module.profiles):
         return unknown, None
-    settings = resolve(module_layers(module, path, profiles))
+    settings = resolve(module_layers(module, path, {name: p for name, p in profiles.items() if p is not None}))
     problems = rules.check_module(module.name, path, settings)
     built = Module(address=module.address, name=module.name, profiles=module.profiles,
                    unmanaged_programs=settings.unmanaged_programs.value, settings=settings)

@@ -41,7 +41,7 @@ ITEMS: dict[str, tuple[str, type[BaseModel]]] = {
     "programs": ("program", ProgramSpec), "chains": ("chain", ChainSpec),
 }
 #: What a list item or a mapping key is called, by the key of its list or mapping.
-ENTRY_NAMES = {"programs": "program number", "profiles": "profile name"}
+ENTRY_NAMES: dict[str | int, str] = {"programs": "program number", "profiles": "profile name"}
 
 TEMPLATES = {
     "extra_forbidden": "unknown key '{key}' in {container} — expected one of {expected}",
@@ -74,7 +74,7 @@ TEMPLATES = {
     "program_key": "{what} {input} is written with a decimal point — {fix}",
     "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
 }
-_LIST_ITEMS = {"buses": "bus", "modules": "module", "programs": "program"}
+_LIST_ITEMS: dict[str | int, str] = {"buses": "bus", "modules": "module", "programs": "program"}
 _DECIMAL_COMMA = re.compile(r"[-+]?[0-9]+,[0-9]+")
 
 
@@ -153,7 +153,7 @@ def what(path: Path_, data: Any) -> str:
         if isinstance(name, str) and name:
             return f"{label} {name}"
         return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
-    return {"gateway": "the gateway"}.get(last, str(last))
+    return "the gateway" if last == "gateway" else str(last)
 
 
 def shown(value: Any) -> str:

@@ -40,10 +40,13 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from decimal import Decimal
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 from urllib.parse import urlsplit
 
+from annotated_types import GroupedMetadata
 from pydantic import (
     AfterValidator,
     BaseModel,
@@ -52,24 +55,28 @@ from pydantic import (
     Field,
     GetJsonSchemaHandler,
     PlainValidator,
+    StrictBool,
     WithJsonSchema,
     model_validator,
 )
-from pydantic.json_schema import GenerateJsonSchema, JsonSchemaValue
+from pydantic.config import JsonDict
+from pydantic.json_schema import GenerateJsonSchema, JsonSchemaMode, JsonSchemaValue
 from pydantic_core import PydanticCustomError, core_schema
 
 from prc3cfg.core import gateway
-from prc3cfg.core.framing import FRAMINGS
+from prc3cfg.core.framing import FramingName
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
-from prc3cfg.core.line import DATA_BITS, EMULATOR_SCHEME, PARITIES, STOP_BITS, TCP_SCHEMES
-from prc3cfg.core.units import ACTIONS, DISTANCE, QUANTITIES, Quantity
+from prc3cfg.core.line import DATA_BITS, EMULATOR_SCHEME, STOP_BITS, TCP_SCHEMES, Parity
+from prc3cfg.core.units import DISTANCE, QUANTITIES, Action, Quantity
+
+T = TypeVar("T")
 
 SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
 #: The schema's `$id`: the same for every version, since plant files only gain keys.
 SCHEMA_ID = "urn:prc3cfg:plant-file"
 #: A program number key: "1".."64" where keys are strings (JSON), 1..64 where a YAML editor
 #: keeps them integers. A quoted "7" passes here; the loader asks for it without quotes.
-PROGRAM_KEY = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5][0-9]|6[0-4])$", "minimum": 1, "maximum": 64}
+PROGRAM_KEY: JsonDict = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5][0-9]|6[0-4])$", "minimum": 1, "maximum": 64}
 #: An emulator's name: it names the file of its state.
 EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 #: `?line-speed=9600` and the like, which the link reads (and names what it does not know).
@@ -86,7 +93,21 @@ def _plain(number: Decimal) -> int | float:
     return int(number) if number == number.to_integral_value() else float(number)
 
 
-def _number_type(
+@dataclass(frozen=True)
+class _Number(GroupedMetadata):
+    """The metadata of a number field, `Annotated[int | None, _number(...)]`: its validator and its
+    schema. `out` is the type the validator hands back, which the field's annotation names."""
+
+    out: type[int | float | Decimal]
+    validator: PlainValidator
+    schema: WithJsonSchema
+
+    def __iter__(self) -> Iterator[object]:
+        yield self.validator
+        yield self.schema
+
+
+def _number(
     lo: Decimal | int,
     hi: Decimal | int | None = None,
     *,
@@ -95,26 +116,25 @@ def _number_type(
     step_name: str = "",
     what: str = "",
     note: str = "",
-    out: type = Decimal,
+    out: type[int | float | Decimal] = Decimal,
     description: str = "",
     default: Decimal | int | None = None,
     example: Decimal | int | None = None,
-) -> Any:
-    """An annotated number type: at least `lo`, at most `hi` (if any), whole `step`s (if any), as `out`.
+) -> _Number:
+    """A number: at least `lo`, at most `hi` (if any), whole `step`s (if any), as `out`.
 
     The schema names what an editor completes the key with: `default` (what a key left out stands
     for, where the model's own default is None), else an example: `example`, else `lo`. Not both:
     given both, yaml-language-server completes with neither.
     """
     lo_, hi_, step_ = Decimal(lo), None if hi is None else Decimal(hi), None if step is None else Decimal(step)
-    with_unit = (lambda x: f"{x} {unit}") if unit else str
+    with_unit: Callable[[object], str] = (lambda x: f"{x} {unit}") if unit else str
     allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
 
     def validate(value: Any) -> Any:
-        kind = type(value)
-        if kind is bool or not isinstance(value, (int, float, Decimal)):
+        if type(value) is bool or not isinstance(value, (int, float, Decimal)):
             raise PydanticCustomError("not_number", "not a number", {"whole": out is int, "unit": unit})
-        number = value if kind is Decimal else Decimal(repr(value)) if kind is float else Decimal(value)
+        number = value if isinstance(value, Decimal) else Decimal(repr(value)) if isinstance(value, float) else Decimal(value)
         if not number.is_finite():
             raise PydanticCustomError("not_finite", "not a finite number", {"value": str(value)})
         out_of_range = number < lo_ or (hi_ is not None and number > hi_)
@@ -133,25 +153,26 @@ def _number_type(
         schema["default"] = _plain(Decimal(default))
     else:
         schema["examples"] = [_plain(Decimal(lo_ if example is None else example))]
-    return Annotated[out, PlainValidator(validate), WithJsonSchema(schema)]
+    return _Number(out, PlainValidator(validate), WithJsonSchema(schema))
 
 
-def _quantity_type(q: Quantity, description: str, **schema: Decimal | int) -> Any:
-    return _number_type(
+def _quantity(q: Quantity, description: str, *, default: Decimal | int | None = None, example: Decimal | int | None = None) -> _Number:
+    """A value of `QUANTITIES`: an `int` if it is a plain count, else a `Decimal` (the field's annotation says which)."""
+    return _number(
         q.human_lo, q.human_hi, step=q.step, unit=q.unit, step_name=q.step_name, what=q.what,
         out=int if q.integer else Decimal,
-        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}", **schema,
+        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}", default=default, example=example,
     )
 
 
-def _system_type(key: str, description: str) -> Any:
+def _system(key: str, description: str) -> _Number:
     """S1..S12 (not S8, S9): a key left out is the factory default, which the schema names."""
     q = QUANTITIES[key]
     factory = q.to_human(getattr(DEFAULT_SYSTEM, q.symbol))
-    return _quantity_type(q, f"{description} (factory {q.format(getattr(DEFAULT_SYSTEM, q.symbol))})", default=factory)
+    return _quantity(q, f"{description} (factory {q.format(getattr(DEFAULT_SYSTEM, q.symbol))})", default=factory)
 
 
-def _one_of_type(allowed: tuple[int | float, ...], description: str) -> Any:
+def _one_of(allowed: tuple[int | float, ...], description: str) -> _Number:
     """A number that must be one of `allowed` (stop bits: 1, 1.5, 2); returned as float."""
 
     def validate(value: Any) -> float:
@@ -159,9 +180,19 @@ def _one_of_type(allowed: tuple[int | float, ...], description: str) -> Any:
             raise PydanticCustomError("not_allowed", "not allowed", {"expected": ", ".join(map(str, allowed))})
         return float(value)
 
-    schema = {"enum": list(allowed), "description": description}
-    return Annotated[float, PlainValidator(validate), WithJsonSchema(schema)]
+    return _Number(float, PlainValidator(validate), WithJsonSchema({"enum": list(allowed), "description": description}))
 
+
+def _given(value: T | None) -> T:
+    if value is None:  # `key:` with no value, which YAML reads as null: `messages` says it is empty
+        raise PydanticCustomError("empty", "no value")
+    return value
+
+
+#: A key a file may leave out: None on the model is "not given here" (profiles are layered over
+#: it), never a value a file writes; the schema shows the value alone (`Draft07.nullable_schema`).
+#: (A number field's own validator refuses None: `Annotated[Decimal | None, _number(...)]`.)
+Omittable = Annotated[T | None, BeforeValidator(_given)]
 
 Name = Annotated[str, Field(min_length=1, strict=True)]
 
@@ -191,7 +222,7 @@ Port = Annotated[
     Field(description="a device path, any pyserial URL, or emulator://NAME", json_schema_extra={"pattern": PORT_PATTERN},
           examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
 ]
-ProgramNumber = _number_type(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")
+ProgramNumber = Annotated[int, _number(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")]
 
 
 class FileModel(BaseModel):
@@ -203,45 +234,45 @@ class FileModel(BaseModel):
 class SystemSpec(FileModel):
     """System parameters S1..S12 (not S9) in human units; a key left out is the factory default."""
 
-    upper_reversing_point: _system_type("upper_reversing_point", "upper reversing point") = None
-    reference_point: _system_type("reference_point", "reference point") = None
-    increment_pulses: _system_type("increment_pulses", "increment pulse generator, pulses/dm") = None
-    max_speed: _system_type("max_speed", "maximum speed") = None
-    min_speed: _system_type("min_speed", "minimum speed") = None
-    acceleration: _system_type("acceleration", "acceleration") = None
-    circuit_gain: _system_type("circuit_gain", "circuit amplification") = None
-    alarm: Annotated[bool, Field(strict=True), WithJsonSchema({
+    upper_reversing_point: Annotated[Decimal | None, _system("upper_reversing_point", "upper reversing point")] = None
+    reference_point: Annotated[Decimal | None, _system("reference_point", "reference point")] = None
+    increment_pulses: Annotated[int | None, _system("increment_pulses", "increment pulse generator, pulses/dm")] = None
+    max_speed: Annotated[Decimal | None, _system("max_speed", "maximum speed")] = None
+    min_speed: Annotated[Decimal | None, _system("min_speed", "minimum speed")] = None
+    acceleration: Annotated[Decimal | None, _system("acceleration", "acceleration")] = None
+    circuit_gain: Annotated[int | None, _system("circuit_gain", "circuit amplification")] = None
+    alarm: Annotated[Omittable[StrictBool], WithJsonSchema({
         "type": "boolean", "description": "S8: alarm (factory false)", "default": False})] = None
-    sync_increment: _system_type("sync_increment", "sync increment") = None
-    sync_circuit_gain: _system_type("sync_circuit_gain", "sync circuit amplification") = None
-    sync_conveyor_sequence: _system_type("sync_conveyor_sequence", "sync conveyor sequence") = None
+    sync_increment: Annotated[int | None, _system("sync_increment", "sync increment")] = None
+    sync_circuit_gain: Annotated[int | None, _system("sync_circuit_gain", "sync circuit amplification")] = None
+    sync_conveyor_sequence: Annotated[Decimal | None, _system("sync_conveyor_sequence", "sync conveyor sequence")] = None
 
 
 class FunctionOutputSpec(FileModel):
     """F1 or F2: set or reset the output at a distance after START (F1) or before the reversing point (F2)."""
 
-    action: Literal[tuple(ACTIONS)] = Field(description="set or reset the output", examples=["set"])
-    distance: _quantity_type(DISTANCE, "where the output switches, 0.000..0.999")
+    action: Action = Field(description="set or reset the output", examples=["set"])
+    distance: Annotated[Decimal, _quantity(DISTANCE, "where the output switches, 0.000..0.999")]
 
 
 _FACTORY_PROGRAM = default_program(DEFAULT_SYSTEM)
-_RESET_AT_ZERO = {"action": "reset", "distance": 0}
+_RESET_AT_ZERO: JsonDict = {"action": "reset", "distance": 0}
 
 
 class ProgramSpec(FileModel):
     """One program in human units; every field may come from a profile instead."""
 
-    position: _quantity_type(QUANTITIES["position"], "position, at most the upper reversing point",
-                             example=QUANTITIES["position"].to_human(_FACTORY_PROGRAM.P)) = None
-    speed: _quantity_type(QUANTITIES["speed"], "speed, between min_speed and max_speed",
-                          example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V)) = None
-    relative_speed: _quantity_type(QUANTITIES["relative_speed"], "relative speed (default 0)", default=0) = None
-    dwell: _quantity_type(QUANTITIES["dwell"], "dwell time (default 0)", default=0) = None
-    f1: FunctionOutputSpec = Field(None, description="F1, counted after START (default: reset at 0)",
+    position: Annotated[Decimal | None, _quantity(QUANTITIES["position"], "position, at most the upper reversing point",
+                                                  example=QUANTITIES["position"].to_human(_FACTORY_PROGRAM.P))] = None
+    speed: Annotated[Decimal | None, _quantity(QUANTITIES["speed"], "speed, between min_speed and max_speed",
+                                               example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V))] = None
+    relative_speed: Annotated[Decimal | None, _quantity(QUANTITIES["relative_speed"], "relative speed (default 0)", default=0)] = None
+    dwell: Annotated[Decimal | None, _quantity(QUANTITIES["dwell"], "dwell time (default 0)", default=0)] = None
+    f1: Omittable[FunctionOutputSpec] = Field(None, description="F1, counted after START (default: reset at 0)",
                                    json_schema_extra={"default": _RESET_AT_ZERO})
-    f2: FunctionOutputSpec = Field(None, description="F2, counted before the reversing point (default: reset at 0)",
+    f2: Omittable[FunctionOutputSpec] = Field(None, description="F2, counted before the reversing point (default: reset at 0)",
                                    json_schema_extra={"default": _RESET_AT_ZERO})
-    next: _number_type(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to jump to next") = None
+    next: Annotated[int | None, _number(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to jump to next")] = None
 
 
 class ChainSpec(FileModel):
@@ -267,7 +298,7 @@ class ChainSpec(FileModel):
     def __get_pydantic_json_schema__(cls, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler) -> JsonSchemaValue:
         as_object = handler.resolve_ref_schema(handler(schema))
         as_list = {"type": "array", "items": as_object["properties"]["programs"]["items"], "minItems": 1}
-        return {"anyOf": [as_list, dict(as_object)], "description": cls.__doc__.split("\n")[0]}
+        return {"anyOf": [as_list, dict(as_object)], "description": (cls.__doc__ or "").split("\n")[0]}
 
 
 UnmanagedPrograms = Literal["keep", "reset"]
@@ -281,20 +312,17 @@ def _program_key(value: Any) -> Any:
 
 
 ProgramKey = Annotated[ProgramNumber, BeforeValidator(_program_key)]
-Programs = Annotated[
-    dict[ProgramKey, ProgramSpec],
-    Field(json_schema_extra={"propertyNames": PROGRAM_KEY}, description="programs by number 1..64"),
-]
+Programs = dict[ProgramKey, ProgramSpec]
 
 
 class ProfileSpec(FileModel):
     """What modules share: system parameters, programs, chains, the unmanaged-program policy."""
 
-    system: SystemSpec = Field(None, description="system parameters S1..S12 (not S9); a key left out is the factory default")
-    programs: Programs = None
-    chains: tuple[ChainSpec, ...] = Field(None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop",
-                                          examples=[[[1, 2, 3]], [{"programs": [1, 2], "loop": True}]])
-    unmanaged_programs: UnmanagedPrograms = Field(
+    system: Omittable[SystemSpec] = Field(None, description="system parameters S1..S12 (not S9); a key left out is the factory default")
+    programs: Omittable[Programs] = Field(None, json_schema_extra={"propertyNames": PROGRAM_KEY}, description="programs by number 1..64")
+    chains: Omittable[tuple[ChainSpec, ...]] = Field(None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop",
+                                                     examples=[[[1, 2, 3]], [{"programs": [1, 2], "loop": True}]])
+    unmanaged_programs: Omittable[UnmanagedPrograms] = Field(
         None, description="keep (default): programs not listed are neither read nor written; "
         "reset: they must hold factory defaults", json_schema_extra={"default": "keep"},
     )
@@ -307,7 +335,7 @@ def _names(value: Any) -> Any:
 class ModuleSpec(ProfileSpec):
     """One PRC 3 module: its address (S9), its name, the profiles it uses, its own settings."""
 
-    address: _number_type(1, MAX_MODULE_ADDRESS, step=1, out=int, description="S9, 1..30, set by Address Init on the module")
+    address: Annotated[int, _number(1, MAX_MODULE_ADDRESS, step=1, out=int, description="S9, 1..30, set by Address Init on the module")]
     name: Name = Field(description="unique in the plant", examples=["booth-1-left"])
     profiles: Annotated[
         tuple[Name, ...],
@@ -323,20 +351,20 @@ class ModuleSpec(ProfileSpec):
 class Gateway(FileModel):
     """The CP 524/525 running the Open Driver that this line ends in (link.md, INIT-DB words 1 and 2)."""
 
-    receive_db: _number_type(
+    receive_db: Annotated[int, _number(
         gateway.MIN_RECEIVE_DB, 255, step=1, out=int, description="EMPFDB, the receive data block",
         note=f" (the Open Driver refuses a receive DB below {gateway.MIN_RECEIVE_DB}: SYSTAT 8Fh)",
-    )
-    receive_dw: _number_type(0, 255, step=1, out=int, description="EMPFDW, the first data word")
-    cpu: _number_type(
+    )]
+    receive_dw: Annotated[int, _number(0, 255, step=1, out=int, description="EMPFDW, the first data word")]
+    cpu: Annotated[int, _number(
         0, gateway.MAX_CPU, step=1, out=int, description="ECPUNR, the CPU number",
         note=f" (the Open Driver refuses a CPU number above {gateway.MAX_CPU}: SYSTAT 90h)",
-    )
-    identifier: _number_type(
+    )]
+    identifier: Annotated[int, _number(
         gateway.IDENTIFIERS.start, gateway.IDENTIFIERS.stop - 1, step=1, out=int,
         description="EKENN, the receive identifier",
         note=" (the Open Driver refuses any other EKENN: SYSTAT 91h)",
-    )
+    )]
 
 
 class BusLine(FileModel):
@@ -344,18 +372,18 @@ class BusLine(FileModel):
 
     name: Name = Field(description="unique in the plant", examples=["line-1"])
     port: Port
-    framing: Literal[tuple(FRAMINGS)] = Field("crc16", description="how messages are framed on the line (link.md)")
-    baud: _number_type(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud") = 9600
-    parity: Literal[PARITIES] = Field("even", description="the parity bit of each character")
-    data_bits: _number_type(DATA_BITS[0], DATA_BITS[-1], step=1, out=int, description="5..8") = 8
-    stop_bits: _one_of_type(STOP_BITS, "1, 1.5 or 2") = 1.0
-    timeout: _number_type(Decimal("0.001"), unit="s", out=float, description="s to wait for a reply") = 0.5
-    turnaround: _number_type(0, unit="s", out=float, description="s, the module's turnaround, for the bus-time estimate") = 0.010
-    zvz: _number_type(
+    framing: FramingName = Field("crc16", description="how messages are framed on the line (link.md)")
+    baud: Annotated[int, _number(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud")] = 9600
+    parity: Parity = Field("even", description="the parity bit of each character")
+    data_bits: Annotated[int, _number(DATA_BITS[0], DATA_BITS[-1], step=1, out=int, description="5..8")] = 8
+    stop_bits: Annotated[float, _one_of(STOP_BITS, "1, 1.5 or 2")] = 1.0
+    timeout: Annotated[float, _number(Decimal("0.001"), unit="s", out=float, description="s to wait for a reply")] = 0.5
+    turnaround: Annotated[float, _number(0, unit="s", out=float, description="s, the module's turnaround, for the bus-time estimate")] = 0.010
+    zvz: Annotated[float, _number(
         Decimal("0.001"), Decimal("65.535"), step=Decimal("0.001"), unit="s", step_name="milliseconds",
         what="character delay times are", out=float, description="s, character delay time ZVZ (open-driver)",
-    ) = 0.020
-    gateway: Gateway = Field(None, description="the Siemens CP 524/525 (Open Driver) the line ends in, if any")
+    )] = 0.020
+    gateway: Omittable[Gateway] = Field(None, description="the Siemens CP 524/525 (Open Driver) the line ends in, if any")
     only_these_modules: Annotated[bool, Field(strict=True, description=(
         "true: the modules listed are every module on this line — prc3cfg may then send what they all need "
         "alike once, as a broadcast to address 0 (a full line of 30 modules needs no saying)"))] = False
@@ -376,14 +404,14 @@ class PlantSpec(FileModel):
     model_config = ConfigDict(title="PRC 3 plant")
 
     plant: Name = Field(description="the plant's name", examples=["paint-shop"])
-    profiles: dict[Name, ProfileSpec] = Field(None, description="named settings that modules use and override")
+    profiles: Omittable[dict[Name, ProfileSpec]] = Field(None, description="named settings that modules use and override")
     buses: tuple[BusSpec, ...] = Field(min_length=1, description="the RS-422 lines, each with its modules")
 
 
 class Draft07(GenerateJsonSchema):
     """pydantic's schema, made draft-07: `definitions`, no `default: null` for "not given", no field titles."""
 
-    def generate(self, schema: core_schema.CoreSchema, mode: str = "validation") -> JsonSchemaValue:
+    def generate(self, schema: core_schema.CoreSchema, mode: JsonSchemaMode = "validation") -> JsonSchemaValue:
         result = super().generate(schema, mode)
         definitions = result.pop("$defs", {})
         return {"$schema": SCHEMA_DIALECT, "$id": SCHEMA_ID, **result, "definitions": definitions}
@@ -398,6 +426,10 @@ class Draft07(GenerateJsonSchema):
         result = super().default_schema(schema)
         unwanted = "default" if result["default"] == [] else "examples"
         return {k: v for k, v in result.items() if k != unwanted}
+
+    def nullable_schema(self, schema: core_schema.NullableSchema) -> JsonSchemaValue:
+        """None is "not given" (`Omittable`), never a value a file writes: the value's own schema."""
+        return self.generate_inner(schema["schema"])
 
     def field_title_should_be_set(self, schema: Any) -> bool:
         return False

@@ -44,7 +44,7 @@ class Module(BaseModel):
     def desired_programs(self) -> dict[int, Program]:
         """The listed programs in device units, A from chains and `next` (0 if neither)."""
         image = self.desired_image()
-        return {number: image.programs[number - 1] for number in self.settings.programs}
+        return {number: image.known(number) for number in self.settings.programs}
 
     def desired_image(self) -> ModuleImage:
         """What the module should hold. Unlisted programs: `None` with keep, factory defaults with reset."""

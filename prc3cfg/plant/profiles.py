@@ -44,6 +44,13 @@ class Sourced:
     source: str = DEFAULT
     path: Path_ | None = None
 
+    @property
+    def place(self) -> Path_:
+        """Where a value the file gives is (a default is nowhere: ValueError)."""
+        if self.path is None:
+            raise ValueError(f"a default ({self.value!r}) has no place in the file")
+        return self.path
+
 
 _RESET_AT_ZERO = FunctionOutputSpec(action="reset", distance=Decimal(0))
 #: The program fields an omitted key stands for (position and speed have none).

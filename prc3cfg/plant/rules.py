@@ -57,19 +57,19 @@ def _speeds_and_positions(settings: Effective) -> Iterator[Problem]:
     s1, s4, s5 = system["upper_reversing_point"], system["max_speed"], system["min_speed"]
     if s4.value < s5.value:
         at = s5 if s5.source != DEFAULT else s4
-        yield Problem(at.path, f"max_speed {_said(s4, 'max_speed', at)} is below min_speed "
+        yield Problem(at.place, f"max_speed {_said(s4, 'max_speed', at)} is below min_speed "
                       f"{_said(s5, 'min_speed', at)} "
                       "— max_speed (S4) must be at least min_speed (S5)")
         return
     for fields in settings.programs.values():
         if (position := fields.get("position")) and position.value > s1.value:
-            yield Problem(position.path, f"position {_said(position, 'position')} is above upper_reversing_point "
+            yield Problem(position.place, f"position {_said(position, 'position')} is above upper_reversing_point "
                           f"{_said(s1, 'upper_reversing_point', position)} — a position must be at most the upper reversing point "
                           "(P ≤ S1): lower it or raise upper_reversing_point")
         if (speed := fields.get("speed")) and not s5.value <= speed.value <= s4.value:
             limit, word = (s4, "max_speed") if speed.value > s4.value else (s5, "min_speed")
             side = "above" if limit is s4 else "below"
-            yield Problem(speed.path, f"speed {_said(speed, 'speed')} is {side} {word} {_said(limit, word, speed)} "
+            yield Problem(speed.place, f"speed {_said(speed, 'speed')} is {side} {word} {_said(limit, word, speed)} "
                           f"— a speed must be min_speed..max_speed (S5 ≤ V ≤ S4), here {s5.value}..{s4.value} m/s")
 
 
@@ -77,7 +77,7 @@ def _jumps(settings: Effective) -> Iterator[Problem]:
     listed = settings.programs
     chained: dict[int, int] = {}  # program → chain number (1-based)
     for k, chain in enumerate(settings.chains.value):
-        at = settings.chains.path + (k,)
+        at = settings.chains.place + (k,)
         if len(chain.programs) == 1 and not chain.loop:
             yield Problem(at, f"a chain of one program does nothing — add loop: true to make program "
                           f"{chain.programs[0]} jump to itself, or drop the chain")
@@ -95,10 +95,10 @@ def _jumps(settings: Effective) -> Iterator[Problem]:
         if (target := fields.get("next")) is None:
             continue
         if target.value not in listed:
-            yield Problem(target.path, f"next: {target.value} is not a listed program — list program "
+            yield Problem(target.place, f"next: {target.value} is not a listed program — list program "
                           f"{target.value} under programs, or jump to a listed one")
         if number in chained:
-            yield Problem(target.path, f"program {number} has next: {target.value} and is in chain "
+            yield Problem(target.place, f"program {number} has next: {target.value} and is in chain "
                           f"{chained[number]} — its jump is set by the chain or by next, not both: drop one")
 
 

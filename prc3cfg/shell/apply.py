@@ -191,7 +191,8 @@ class ModuleRun:
                 self.refused = True
                 self.failure = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
                 return False
-            if reply != 0:  # a write is answered with a code word only (decode_reply sees to it)
+            assert isinstance(reply, int)  # a write is answered with a code word only (decode_reply sees to it)
+            if reply != 0:
                 # Final — unless a broadcast before it may have been lost (none answers one): then
                 # the read-back and an addressed repair get their chance first.
                 self.refused = not (self.broadcasts and self.repairs == 0)
@@ -209,7 +210,7 @@ class ModuleRun:
 
         def once() -> ModuleImage:
             read = read_system(link, self.address, name=self.name) if system else known.system
-            found: dict[int, Program | None] = dict(read_programs(link, self.address, programs, name=self.name))
+            found: dict[int, Program] = dict(read_programs(link, self.address, programs, name=self.name))
             return replace(known, system=read).with_programs(found)
 
         previous = once()

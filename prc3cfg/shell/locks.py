@@ -81,7 +81,7 @@ def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ..
             addresses = socket.getaddrinfo(host, tcp_port, type=socket.SOCK_STREAM, proto=socket.IPPROTO_TCP)
         except (OSError, UnicodeError):  # does not resolve: the open fails with its own message
             return (f"tcp/{host}/{tcp_port}",)
-        return tuple(sorted({f"tcp/{_reached(sockaddr[0])}/{tcp_port}" for *_, sockaddr in addresses}))
+        return tuple(sorted({f"tcp/{_reached(str(sockaddr[0]))}/{tcp_port}" for *_, sockaddr in addresses}))
     path = device_path(port)
     if path is not None:  # a pyserial wrapper of a device (spy:///dev/ttyUSB0?file=…): the device's line too
         return (port, _device_key(path))

@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 from prc3cfg.core import codec
 from prc3cfg.core.device import can_clamp
@@ -49,17 +50,23 @@ def read_module(
     return ModuleImage(address=address, system=system, programs=tuple(slots))
 
 
-def _request(link: Link, address: int, message: codec.Message, name: str) -> codec.SystemReply | codec.ProgramsReply:
+Reply = TypeVar("Reply", codec.SystemReply, codec.ProgramsReply)
+
+
+def _request(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
+    """The data block of a read, of `kind` (the reply `codec.decode_reply` gives to `message`)."""
     reply = link.request(address, message)
     if isinstance(reply, int):
         where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")
         raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — {remedy(reply)}")
+    if not isinstance(reply, kind):
+        raise TypeError(f"a {type(reply).__name__} in reply to {message.ID:02X}h")
     return reply
 
 
 def read_system(link: Link, address: int, *, name: str = "") -> SystemParameters:
     """One 50h: the system parameters; S9 must be `address`."""
-    reply = _request(link, address, codec.ReadSystem(), name)
+    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply)
     if reply.address != address:
         raise ReadBackError(
             f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering at address "
@@ -73,7 +80,7 @@ def read_programs(link: Link, address: int, programs: Iterable[int], *, name: st
     wanted = set(programs)
     found: dict[int, Program] = {}
     for message in read_messages(wanted)[1:]:
-        reply = _request(link, address, message, name)
+        reply = _request(link, address, message, name, codec.ProgramsReply)
         for offset, program in enumerate(reply.programs):
             if reply.first + offset in wanted:
                 found[reply.first + offset] = program

@@ -29,6 +29,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import write_atomically
@@ -174,7 +175,10 @@ def cleared(records: Iterable[Pending]) -> None:
     for record in records:
         gone.setdefault(record.file, set()).add((record.kind, record.bus, record.address))
     for path, which in gone.items():
-        _keep(path, lambda entry, which=which: (entry.get("kind", RELEASE), entry.get("bus"), entry.get("address")) not in which)
+        def keep(entry: dict[str, Any], which: set[tuple[str, str, int]] = which) -> bool:
+            return (entry.get("kind", RELEASE), entry.get("bus"), entry.get("address")) not in which
+
+        _keep(path, keep)
 
 
 def _keep(path: Path, keep: Callable[[dict], bool]) -> None:

@@ -76,3 +76,24 @@ def test_manual_examples_of_function_outputs() -> None:
 def test_no_rounding(key: str, text: str) -> None:
     with pytest.raises(ValueError, match="not a whole number"):
         QUANTITIES[key].to_device(Decimal(text))
+
+
+def test_every_number_field_is_annotated_with_the_type_its_validator_hands_back() -> None:
+    """mypy reads a number field's annotation (`Annotated[int | None, _number(...)]`); the validator
+    decides what the value is (a quantity's `integer` for `_quantity`): the two must agree."""
+    from typing import get_args, get_type_hints
+
+    from prc3cfg.plant import models
+
+    checked = 0
+    for model in vars(models).values():
+        if not (isinstance(model, type) and issubclass(model, models.FileModel)):
+            continue
+        for name, hint in get_type_hints(model, include_extras=True).items():
+            numbers = [m for m in getattr(hint, "__metadata__", ()) if isinstance(m, models._Number)]
+            annotated = get_args(hint)[0]  # `int | None`, or `int`
+            types = set(get_args(annotated)) - {type(None)} if get_args(annotated) else {annotated}
+            for number in numbers:
+                assert types == {number.out}, f"{model.__name__}.{name} is annotated {annotated}, its validator gives {number.out}"
+                checked += 1
+    assert checked > 20

@@ -45,7 +45,7 @@ import abc
 import enum
 from collections import deque
 from dataclasses import dataclass
-from typing import ClassVar, Final
+from typing import ClassVar, Final, Literal
 
 from prc3cfg.core.line import LineSettings
 
@@ -72,14 +72,16 @@ class Discarded:
     data: bytes
 
 
-class _NeedData:
-    __slots__ = ()
+class _NeedData(enum.Enum):
+    """An enum of one member, so that `event is not NEED_DATA` narrows (the pattern of h11's sentinels)."""
+
+    NEED_DATA = enum.auto()
 
     def __repr__(self) -> str:
         return "NEED_DATA"
 
 
-NEED_DATA: Final = _NeedData()
+NEED_DATA: Final = _NeedData.NEED_DATA
 """`next_event` returns this when no complete frame or discard is ready yet."""
 
 
@@ -113,7 +115,7 @@ class Decoder(abc.ABC):
         if data:
             self._last = now
 
-    def next_event(self, now: float | None = None) -> Frame | Discarded | _NeedData:
+    def next_event(self, now: float | None = None) -> Frame | Discarded | Literal[_NeedData.NEED_DATA]:
         """The next event in arrival order, or NEED_DATA; `now` first lets time-outs expire."""
         if now is not None:
             self._clock(now, 0)
@@ -159,10 +161,14 @@ class Decoder(abc.ABC):
             self._skipped = bytearray()
 
 
+#: The framings' names, as a plant file's `framing` takes them (`FRAMINGS` holds one of each).
+FramingName = Literal["crc16", "open-driver", "stx"]
+
+
 class Framing(abc.ABC):
     """One way to put a message and its module address on the line (link.md "Framing …")."""
 
-    name: ClassVar[str]
+    name: ClassVar[FramingName]
     checked: ClassVar[bool]  # a checksum protects the frame: a damaged one is discarded, never delivered
     addresses: ClassVar[range]  # addresses `encode` accepts
     lengths: ClassVar[range]  # message lengths `encode` accepts

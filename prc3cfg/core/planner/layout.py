@@ -76,7 +76,7 @@ class Layout:
     estimate: float  # the whole plan's price by `Prices`
 
     def messages(self, problem: Problem) -> list[codec.Message]:
-        desired = problem.desired.programs
+        desired = problem.desired.known  # the programs written are managed: known
         w = self.writes
         out = [init_message(a, b) for a, b in runs_of(self.kinds, INIT_BEFORE)]
         if problem.system_step is not None:
@@ -86,17 +86,17 @@ class Layout:
             (codec.LinkPrograms if link else codec.UnlinkPrograms)(first + 1, last + 1)
             for link, first, last in w.ranges
         ]
-        out += [codec.WriteProgram(i + 1, desired[i]) for i in members(w.whole)]
+        out += [codec.WriteProgram(i + 1, desired(i + 1)) for i in members(w.whole)]
         for first, last in w.part_runs:
             if first == last:
-                out.append(codec.WritePartProgram(first + 1, desired[first].P, desired[first].V))
+                out.append(codec.WritePartProgram(first + 1, desired(first + 1).P, desired(first + 1).V))
             else:
-                pairs = tuple((desired[i].P, desired[i].V) for i in range(first, last + 1))
+                pairs = tuple((desired(i + 1).P, desired(i + 1).V) for i in range(first, last + 1))
                 out.append(codec.WritePartPrograms(first + 1, pairs))
         for name, mask in zip(ITEM_FIELDS, w.items):
-            items = [(i + 1, getattr(desired[i], name)) for i in members(mask)]
+            items = [(i + 1, getattr(desired(i + 1), name)) for i in members(mask)]
             out += _chunked(codec.FIELD_MESSAGES[name], items, codec.MAX_FIELD_ITEMS)
-        items = [(i + 1, desired[i].A) for i in members(w.addresses)]
+        items = [(i + 1, desired(i + 1).A) for i in members(w.addresses)]
         out += _chunked(codec.WriteAddresses, items, codec.MAX_ADDRESS_ITEMS)
         return out
 

@@ -302,7 +302,7 @@ class WritePhase:
             moves.sort()
             # The best quick move; and, with the DPs run again (the 33h runs they leave may regroup
             # and save an exchange), the few in runs that come within an exchange of paying off.
-            tries = [self._moved(writes, moves[0][1])] if moves and moves[0][0] < -1e-12 else []
+            tries: list[Writes | None] = [self._moved(writes, moves[0][1])] if moves and moves[0][0] < -1e-12 else []
             tries += [self.evaluate(channels, whole=writes.whole | 1 << j)
                       for delta, j in moves[:REGROUPED] if delta < prices.exchange and j in run_of]  # fmt: skip
             better = [moved for moved in tries if moved is not None and moved.estimate < writes.estimate - 1e-12]
@@ -389,14 +389,14 @@ class WritePhase:
         runs, positions, speeds, whole, runs_cost = [], 0, 0, 0, 0.0
         j = PROGRAM_COUNT
         while j > 0:
-            i, how = back[j]
-            if how == "run":
+            i, chosen = back[j]
+            if chosen == "run":
                 runs.append((i, j - 1))
                 runs_cost += price[j - i]
-            elif how == "items":
+            elif chosen == "items":
                 positions |= (masks[i] & P_BIT and 1) << i
                 speeds |= (masks[i] & V_BIT and 1) << i
-            elif how == "whole":
+            elif chosen == "whole":
                 whole |= 1 << i
             j = i
         return tuple(reversed(runs)), positions, speeds, whole, runs_cost
@@ -763,18 +763,18 @@ def _harmless_inits(problem: Problem, layout: Layout, goals: list[tuple[int, int
                           and not problem.masks[k][i] & ~problem.masks[KEEP][i]), None)
                     if kind == KEEP and problem.managed[i] and counted >> i & 1 else None
                     for i, kind in enumerate(layout.kinds)]  # fmt: skip
-        runs: list[list[int]] = []
+        runs: list[list[tuple[int, int]]] = []  # (program index, its harmless init)
         for i, kind in enumerate(harmless):
-            if kind is not None and runs and runs[-1][-1] == i - 1:
-                runs[-1].append(i)
+            if kind is not None and runs and runs[-1][-1][0] == i - 1:
+                runs[-1].append((i, kind))
             elif kind is not None:
-                runs.append([i])
+                runs.append([(i, kind)])
         changed, left = list(layout.kinds), over
         for run in sorted(runs, key=len, reverse=True):
             if left <= 0:
                 break
-            for i in run:
-                changed[i] = harmless[i]
+            for i, kind in run:
+                changed[i] = kind
             left -= len(run)
         if left <= 0:
             out.append(tuple(changed))

@@ -96,11 +96,11 @@ class Problem:
                                    f"with code {rejected.code}") from None  # fmt: skip
         init_all = codec.InitAllPrograms()
         bases = {
-            KEEP: after_system.image.programs,
-            INIT_AFTER: device.execute(after_system, init_all).image.programs,
+            KEEP: after_system.image.complete(),
+            INIT_AFTER: device.execute(after_system, init_all).image.complete(),
         }
         kinds = [KEEP, INIT_AFTER]
-        before = _run(device.execute(start, init_all), step).image.programs
+        before = _run(device.execute(start, init_all), step).image.complete()
         if before != bases[INIT_AFTER]:
             bases[INIT_BEFORE] = before
             kinds.insert(1, INIT_BEFORE)

@@ -35,9 +35,9 @@ class Bus:
     def deliver(self, address: int, message: bytes) -> Delivery:
         if address == BROADCAST:
             changed = False
-            for addr, state in self.modules.items():
-                outcome = device.process(state, message, broadcast=True)
-                changed |= outcome.state is not state
+            for addr, each in self.modules.items():
+                outcome = device.process(each, message, broadcast=True)
+                changed |= outcome.state is not each
                 self.modules[addr] = outcome.state
             return Delivery(None, changed)
         state = self.modules.get(address)

@@ -144,7 +144,7 @@ class Emulator:
             try:
                 self._store.start(self._all())
             except OSError as error:
-                raise UserError(f"{cannot_save(state_path, error)} — check the path, its folder and the disk") from None
+                raise UserError(f"{cannot_save(self._store.path, error)} — check the path, its folder and the disk") from None
 
     # -- the Python API ----------------------------------------------------------------
 
@@ -169,7 +169,7 @@ class Emulator:
         Raises OSError, and changes nothing, when the state file cannot be saved."""
         with self._lock:
             state = self._bus.modules[address]
-            taught = replace(state.image.program(program), P=position)
+            taught = replace(state.image.known(program), P=position)
             state = replace(state, image=state.image.with_programs({program: taught}))
             self._change(address, state)
             return state
@@ -242,8 +242,9 @@ class Emulator:
                 try:
                     self._saved_or_rolled_back(before, lambda store: store.record(writes, self._all()))
                 except OSError as error:
+                    assert self._store is not None  # only a store fails to save
                     to = "all modules (broadcast)" if address == BROADCAST else f"module {address}"
-                    log.error("%s — the write to %s is not answered and not applied", cannot_save(self.state_path, error), to)
+                    log.error("%s — the write to %s is not answered and not applied", cannot_save(self._store.path, error), to)
                     return None
             if delivery.reply is None or address == BROADCAST:
                 return None
@@ -404,7 +405,12 @@ class Emulator:
         """Serve a pseudo-terminal; returns the path any serial program can open."""
         master, slave = os.openpty()
         tty.setraw(slave)
-        self._closers.append(lambda: (os.close(master), os.close(slave)))
+
+        def close_pty() -> None:
+            os.close(master)
+            os.close(slave)
+
+        self._closers.append(close_pty)
 
         def recv(timeout: float) -> bytes | None:
             try:
@@ -436,7 +442,7 @@ class Emulator:
                 try:
                     self._store.close(self._all())
                 except OSError as error:
-                    log.error("%s — its journal keeps every write for the next start", cannot_save(self.state_path, error))
+                    log.error("%s — its journal keeps every write for the next start", cannot_save(self._store.path, error))
 
     def __enter__(self) -> Emulator:
         return self

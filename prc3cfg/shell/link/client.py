@@ -35,6 +35,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 from urllib.parse import urlsplit
 
 import serial
@@ -55,6 +56,24 @@ DAMAGED_CODES = frozenset(range(10, 16))
 UNKNOWN_ID = 10  # to a read: damage — or firmware before PRC 3.03.1, which has no read messages
 #: The longest reply frame any framing makes of a PRC 3 reply (64 bytes, stx stuffing doubled).
 LONGEST_REPLY_FRAME = 2 * (codec.MAX_MESSAGE_BYTES + 8)
+
+
+class Port(Protocol):
+    """A port as a link uses it: what every port pyserial opens has (its `SerialBase` alone has
+    no `in_waiting` or `reset_input_buffer`: each platform's class and URL handler gives them)."""
+
+    @property
+    def port(self) -> str | None: ...
+    @property
+    def timeout(self) -> float | None: ...
+    @timeout.setter
+    def timeout(self, timeout: float | None) -> None: ...
+    @property
+    def in_waiting(self) -> int: ...
+    def read(self, size: int = 1, /) -> bytes: ...
+    def write(self, b: bytes, /) -> int | None: ...
+    def flush(self) -> None: ...
+    def reset_input_buffer(self) -> None: ...
 
 
 class LinkError(UserError):
@@ -108,7 +127,7 @@ class Link:
 
     def __init__(
         self,
-        port: serial.SerialBase,
+        port: Port,
         framing: Framing,
         *,
         bus: str,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import socket
 import stat
 import sys
 import termios
@@ -28,6 +29,7 @@ import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 import serial
@@ -73,9 +75,11 @@ class FormatRefused(UserError):
 class TcpPort(protocol_socket.Serial):
     """pyserial's `socket://` port that tells how many bytes have arrived and closes at once."""
 
+    _socket: socket.socket | None  # pyserial's, which its stubs leave out
+
     @property
     def in_waiting(self) -> int:
-        if not self.is_open:
+        if not self.is_open or self._socket is None:
             raise serial.PortNotOpenError()
         return int.from_bytes(fcntl.ioctl(self._socket, termios.FIONREAD, bytes(4)), sys.byteorder)
 
@@ -109,7 +113,7 @@ def emulator_line_speed(port: str) -> int | None:
     return int(value)
 
 
-def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
+def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpPort:
     """Open a device path (exclusively) or a pyserial URL with the line's settings.
 
     A device that silently drops a setting (a pseudo-terminal takes parity without a word,
@@ -117,15 +121,16 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.SerialBase:
     """
     is_url = "://" in url
     refused = FormatRefused(bus, url, line)
-    settings = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
-                "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}  # fmt: skip
+    settings: dict[str, Any] = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
+                                "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}  # fmt: skip
+    port: serial.Serial | TcpPort
     try:
         if url.partition("://")[0].lower() == "socket":
             port = TcpPort(None, **settings)
             port.port = url
             port.open()
         else:
-            port = serial.serial_for_url(url, **settings, **({} if is_url else {"exclusive": True}))
+            port = serial.serial_for_url(url, **(settings if is_url else settings | {"exclusive": True}))
     except termios.error:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
@@ -180,8 +185,8 @@ def open_link(
                 Emulator(modules, framing=bus.framing, zvz=bus.zvz, turnaround=bus.turnaround, state_path=state_path,
                          line=replace(bus.line, baud=line_speed or bus.line.baud), line_speed=line_speed is not None)
             )  # fmt: skip
-            host, port = emulator.listen("127.0.0.1", 0)
-            url, takes_line_time = f"socket://{host}:{port}", line_speed is not None
+            host, tcp_port = emulator.listen("127.0.0.1", 0)
+            url, takes_line_time = f"socket://{host}:{tcp_port}", line_speed is not None
         port = open_port(url, bus.line, bus=bus.name)
         stack.callback(port.close)
         yield Link(
