@@ -50,7 +50,7 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBE
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
 from prc3cfg.core.plantplan import LineProof, ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
-from prc3cfg.core.render import differences, plan_json, plural
+from prc3cfg.core.render import drifted, plan_json, plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plant.adopt import Adopted
@@ -948,7 +948,8 @@ def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, optio
 @dataclass(frozen=True)
 class Drift:
     """A module that holds something other than the plant file says (Teach In, work on the
-    floor): each difference one line in human units, "program 3 position 1.200 m → 1.150 m"."""
+    floor): each difference one line in human units, what the file says → what the module holds,
+    "program 3 position 1.200 m → 1.150 m" (as `adopt` shows it)."""
 
     bus: str
     address: int
@@ -963,7 +964,7 @@ def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Ke
     images = read(plant, modules, options) if images is None else images
     found = []
     for bus, module in select(plant, modules):
-        said = differences(images[(bus.name, module.address)], module.desired_image())
+        said = drifted(module.desired_image(), images[(bus.name, module.address)])
         if said:
             found.append(Drift(bus.name, module.address, module.name, tuple(said)))
     return found

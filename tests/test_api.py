@@ -78,7 +78,7 @@ def test_drift_and_adopt_are_api_values(tmp_path):
         bus, module = emulated.plant.modules()[0]
         emulated.emulators[bus.name].teach_in(module.address, 1, 1234)
         assert prc3cfg.api.drift(emulated.plant) == [prc3cfg.api.Drift(
-            bus.name, module.address, module.name, ("program 1 position 1.234 m → 2.100 m",))]  # holds → says
+            bus.name, module.address, module.name, ("program 1 position 2.100 m → 1.234 m",))]  # says → holds, as adopt
         adoption = prc3cfg.api.adopt(emulated.plant)
         assert [value.text for value in adoption.adopted] == [
             f"+ {bus.name}/{module.name}: program 1 position 2.100 m → 1.234 m (new in the module: profile reciprocator keeps its value)"]

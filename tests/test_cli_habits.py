@@ -53,8 +53,8 @@ def test_refresh_only_reports_drift_not_a_plan(plant, capsys):
     result = run_cli(capsys, "plan", plant.path, "--refresh-only", "--detailed-exitcode")
     assert result.code == 2
     assert result.out.splitlines() == [
-        "~ bus booth-a, module 2 (booth-a-right) differs from the plant file:",
-        "    program 1 position 1.987 m → 2.000 m",
+        "~ bus booth-a, module 2 (booth-a-right) drifted from the plant file (file → module):",
+        "    program 1 position 2.000 m → 1.987 m",
         "Drift: 1 of 6 modules holds something other than the plant file says.",
     ]
     assert "steps" not in result.out

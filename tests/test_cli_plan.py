@@ -6,7 +6,7 @@ import json
 
 from emulated import run_cli
 
-from prc3cfg.core import codec
+from prc3cfg.core import codec, render
 from prc3cfg.core.plantplan import image_sha256
 
 WARNING = "travel to reference point required"
@@ -108,3 +108,17 @@ def test_a_silent_bus_is_one_line_naming_bus_and_module(plant, capsys):
     assert result.code == 1
     assert result.err.startswith("error: bus booth-b, module 3: no reply within 0.1 s")
     assert result.err.count("\n") == 1
+
+
+def test_a_saved_plan_shows_what_the_live_plan_showed_charts_and_marks_included(plant, capsys, tmp_path):
+    """One vocabulary for a change: the human plan ends with what its marks mean; `show PLAN.json
+    --markdown` shows the stroke charts `plan --markdown` showed, from the plan file alone."""
+    saved = tmp_path / "plan.json"
+    live = run_cli(capsys, "plan", plant.path, "--markdown", "--out", saved)
+    assert live.code == 0 and live.out.count("```mermaid") >= 1
+    shown = run_cli(capsys, "show", saved, "--markdown")
+    assert shown.code == 0
+    assert shown.out == live.out
+    human = run_cli(capsys, "plan", plant.path)
+    assert human.out.splitlines()[-1] == render.LEGEND
+    assert "No changes" not in human.out and render.LEGEND.startswith("Marks: ~ changed")

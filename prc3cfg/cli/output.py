@@ -51,7 +51,7 @@ def drift(drifted: list[Drift], modules: int) -> None:
     """Drift (Teach In, work on the floor) as drift, not as a plan: each module that drifted, its
     differences, and how many of the `modules` read drifted."""
     for found in drifted:
-        print(f"~ bus {found.bus}, module {found.address} ({found.name}) differs from the plant file:")
+        print(f"~ bus {found.bus}, module {found.address} ({found.name}) drifted from the plant file (file → module):")
         print("\n".join(f"    {text}" for text in found.differences))
     if drifted:
         print(f"Drift: {len(drifted)} of {render.plural(modules, 'module')} hold{'s' if len(drifted) == 1 else ''} "

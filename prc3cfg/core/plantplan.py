@@ -218,7 +218,7 @@ PLAN_FILE = {
 # the figures, each bus's broadcasts.
 _CHANGES = {
     "fields": [{"program": WHOLE_OR_NULL, "field": TEXT, "text": TEXT}], "symbols": Maybe(OBJECT),
-    "chains_removed": [TEXT], "chains_added": [TEXT], "clamped": [{"program": WHOLE, "text": TEXT}],
+    "chains_removed": [TEXT], "chains_added": [TEXT], "clamped": [{"program": WHOLE, "text": TEXT}], "charts": Maybe([TEXT]),
 }  # fmt: skip
 _BROADCAST = {"message": TEXT, "releases_axes": FLAG, "modules": [WHOLE]}
 SHOWN_PLAN_FILE = PLAN_FILE | {

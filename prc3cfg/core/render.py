@@ -122,6 +122,14 @@ def clamped_changes(change: ModuleChange) -> list[FieldChange]:
     return _program_changes(change.actual.programs, change.plan.predicted.programs, unmanaged)
 
 
+def drifted(said: ModuleImage, held: ModuleImage) -> list[str]:
+    """Where a module holds something else than the plant file says, as a change made on the floor —
+    "what the file says → what the module holds", the direction `adopt` shows it in."""
+    fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text}" for f in field_changes(said, held)]
+    in_module, in_file = chain_changes(held, said)
+    return fields + [f"{c}: in the module only" for c in in_module] + [f"{c}: in the plant file only" for c in in_file]
+
+
 def differences(have: ModuleImage, want: ModuleImage) -> list[str]:
     """Where a module holds something else than the plant file says, "what it holds → what it should"."""
     fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text}" for f in field_changes(have, want)]
@@ -208,6 +216,7 @@ def changes_json(change: ModuleChange) -> dict:
         "chains_added": list(diff.chains_added),
         "clamped": [{**f.to_json(), "reason": CLAMPED} for f in diff.clamped],
         "warning": AXIS_WARNING if change.releases_axes else None,
+        "charts": _charts(change),
     }
 
 
@@ -321,7 +330,14 @@ def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out.append(summary_line(document))
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
+    if any(module["steps"] for _, module in _modules(document)):
+        out.append(LEGEND)
     return "\n".join(out)
+
+
+#: What the marks of a plan mean — one vocabulary for a change, in every output that shows one.
+LEGEND = ("Marks: ~ changed · + set up from factory defaults (a jump: made) · - put back to factory defaults "
+          "(a jump: no longer made) · ⚠ releases the axes")
 
 
 #: Marks the pull-request comment a plan is posted as, so that CI updates it instead of adding one.
@@ -384,19 +400,19 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
 
 
 def _details(bus: str, m: dict, live: dict[tuple[str, int], ModuleChange]) -> str:
-    change = live.get((bus, m["address"]))
+    changes = _changes(bus, m, live)
     return "\n".join([
         f"<details><summary>{html.escape(bus)} / {html.escape(m['name'])} (address {m['address']})"
         + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
         "",
         "```diff",
-        *module_lines(_changes(bus, m, live)),
+        *module_lines(changes),
         "```",
         "",
         "```",
         *_step_lines(m),
         "```",
-        *(_charts(change) if change is not None else []),
+        *changes.get("charts", []),
         "</details>",
         "",
         "",
