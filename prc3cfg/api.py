@@ -62,15 +62,15 @@ from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
-from prc3cfg.shell.link.ports import emulator_state_path
+from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "Gates", "LineBusy",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "FormatRefused", "Gates", "LineBusy",
     "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "adopt",
-    "apply", "drift", "import_modules", "import_plant", "init_data_block", "left_alone", "load", "load_images", "picture", "plan",
+    "apply", "default_parity", "drift", "import_modules", "import_plant", "init_data_block", "left_alone", "load", "load_images", "picture", "plan",
     "read", "restore", "scan", "select", "write_adoption",
 ]  # fmt: skip
 
@@ -880,6 +880,12 @@ class BareLine:
     line: LineSettings = LineSettings()
     timeout: float = 0.5
     zvz: float = 0.020
+
+
+def default_parity(port: str) -> str:
+    """The parity of a bare line whose parity is not given: none on a pseudo-terminal, which carries
+    none, else even (a PRC 3 line's)."""
+    return "none" if is_pseudo_terminal(port) else "even"
 
 
 @contextlib.contextmanager

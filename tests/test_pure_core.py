@@ -77,6 +77,7 @@ CLI_MAY_IMPORT = (
     # plant files: loading one is validating it; showing one shows where each value came from
     "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError", "prc3cfg.plant.load_plant",
     "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.models.ChainSpec", "prc3cfg.plant.profiles.Sourced",
+    "prc3cfg.plant.problems.Finding",
     # the terminal: Ctrl-C, output files
     "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically",
     # `prc3cfg emulator serve` is the emulator's own front end

@@ -52,10 +52,9 @@ ZvzOpt = Annotated[float, typer.Option(parser=duration(0.004, 65.535), metavar="
 def _bare_line(port: str, framing: str, baud: int, parity: str | None, data_bits: int, stop_bits: float, timeout: float, zvz: float) -> api.BareLine:
     from prc3cfg import api
     from prc3cfg.core.line import LineSettings
-    from prc3cfg.shell.link.ports import is_pseudo_terminal
 
     if parity is None:
-        parity = "none" if is_pseudo_terminal(port) else "even"
+        parity = api.default_parity(port)
     line = LineSettings(baud=baud, data_bits=data_bits, parity=parity, stop_bits=stop_bits)  # the options' callbacks checked them
     return api.BareLine(port, framing, line, timeout, zvz)
 
@@ -63,11 +62,11 @@ def _bare_line(port: str, framing: str, baud: int, parity: str | None, data_bits
 @contextlib.contextmanager
 def _said_as_options() -> Iterator[None]:
     """A port's refusal of the character format, with the fix as an option (`--parity none`), not as a plant file's key."""
-    from prc3cfg.shell.link.ports import FormatRefused
+    from prc3cfg import api
 
     try:
         yield
-    except FormatRefused as refused:
+    except api.FormatRefused as refused:
         raise UserError(f"{refused.refusal}: give --parity none") from None
 
 
