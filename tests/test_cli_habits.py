@@ -70,9 +70,12 @@ def test_tables_are_never_cut_when_piped(tmp_path):
 
 
 def test_shell_completion_is_offered():
-    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "--show-completion", "bash"], capture_output=True, text=True,
-                           env={**os.environ, "SHELL": "/bin/bash"})  # fmt: skip
-    assert shown.returncode == 0 and "_PRC3CFG_COMPLETE" in shown.stdout
+    # a user's shell: no completion request of a shell already under way in the environment (a whole test
+    # run once left one there, and click took the command for a completion request: "Shell  not supported")
+    env = {key: value for key, value in os.environ.items() if "COMPLETE" not in key} | {"SHELL": "/bin/bash"}
+    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "--show-completion", "bash"], capture_output=True, text=True, env=env)
+    leftover = {key: value for key, value in os.environ.items() if "COMPLETE" in key}
+    assert shown.returncode == 0 and "_PRC3CFG_COMPLETE" in shown.stdout, (shown.stderr, leftover)
 
 
 def on_a_terminal(args: list, env: dict) -> bytes:
