@@ -176,6 +176,7 @@ def applied(result: ApplyResult) -> None:
         report(result)
     if result.runs:
         print(f"Apply complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
+        print(render.timing(result.plan.phases(), result.took))
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:
