@@ -35,6 +35,7 @@ import itertools
 import os
 import stat
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
@@ -64,6 +65,7 @@ from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_chan
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
+from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
@@ -174,6 +176,8 @@ class ApplyResult:
     #: apply's account lists them too
     earlier: tuple[releases.Pending, ...] = ()
     records: releases.Releases | None = None
+    #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
+    took: dict[str, float] = field(default_factory=dict)
 
     def told(self) -> None:
         """The account — `released` and `earlier` — has been shown to the operator: the records of
@@ -411,7 +415,8 @@ class Planner:
                     module_plan = _plan_alike(actual[key], target, line_cost(bus), self._memo, key in self.unset)
                 except UnreachableImage as error:
                     raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
-                changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan, system_unset=key in self.unset))
+                changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan, system_unset=key in self.unset,
+                                            cost=line_cost(bus)))  # fmt: skip
             bus = self._bus(bus_name)
         others = unlisted_addresses(bus)
         if not changes or not receivers_declared(bus, changes) or (others and probe is None):
@@ -747,11 +752,13 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
     try:
         with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
             earlier = tuple(releases.pending(key for bus in buses.values() for key in bus_line_keys(plant, bus)))
+            started = time.monotonic()
             if plan_file is None:
                 images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired)
             else:
                 images = _read(to_read, links, options)
                 the_plan = prove(*plan_file, plant, pairs, images, {name: prober(links[name], bus) for name, bus in buses.items()})
+            reading = time.monotonic() - started
             if gates.show is not None:
                 gates.show(the_plan)
             if not the_plan.changes:
@@ -768,6 +775,7 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
                 raise NotApproved("not applied — nothing was written")
             with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
                 result = _run(plant, the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
+                result = replace(result, took={"reading": reading} | result.took)
                 if desired is None and len(pairs) == len(plant.modules()):
                     _keep_applied(plant)
                 return result
@@ -806,12 +814,12 @@ def _run(plant: Plant, the_plan: PlantPlan, images: dict[Key, ModuleImage], link
     options.progress.note(f"Snapshot of the modules before writing: {snapshot_path}")
     journal.record("apply", plant=the_plan.plant, plant_sha256=the_plan.plant_sha256, snapshot=str(snapshot_path),
                    modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
-    options.progress.start("applying", the_plan.message_count)
+    phases = Phases(options.progress.start, options.progress.advance, the_plan.message_count, len(runs), len({r.bus for r in runs}))
     # consent is per module: the releases of the plan shown, and no other (a repair may not add one)
     consented = frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allow_axis_release else frozenset()
-    execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=options.progress.advance,
-            consented=consented, verify=verify)  # fmt: skip
-    result = ApplyResult(the_plan, runs, snapshot_path, journal.path, earlier, records)
+    execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=phases.wrote, written=phases.line_written,
+            verified=phases.verified, consented=consented, verify=verify)  # fmt: skip
+    result = ApplyResult(the_plan, runs, snapshot_path, journal.path, earlier, records, phases.took())
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}
     for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
         if run.system_unset:

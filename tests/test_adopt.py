@@ -10,6 +10,7 @@ the end adopts random teach-ins on the demo plant without a line (`prc3cfg.plant
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import os
 import subprocess
@@ -189,16 +190,22 @@ def test_without_a_terminal_adopt_asks_for_auto_approve_and_writes_nothing(repos
 
 
 def answered(args: list, answer: str) -> str:
-    """What `prc3cfg ARGS` prints when its input is a terminal on which the user types `answer`."""
+    """What `prc3cfg ARGS` prints when its input is a terminal on which the user types `answer`:
+    stdout, stderr, and what it wrote on that terminal (its questions)."""
     master, terminal = os.openpty()
     try:
         os.write(master, answer.encode())
         done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], stdin=terminal, capture_output=True,
                               text=True, timeout=60)  # fmt: skip
+        os.set_blocking(master, False)
+        shown = b""
+        with contextlib.suppress(BlockingIOError):
+            while chunk := os.read(master, 65536):
+                shown += chunk
     finally:
         os.close(terminal)
         os.close(master)
-    return done.stdout + done.stderr
+    return done.stdout + done.stderr + shown.decode()
 
 
 def test_on_a_terminal_adopt_asks_before_it_writes_and_keeps_the_file_mode(repository):

@@ -25,6 +25,7 @@ from prc3cfg.core.render import (
     module_lines,
     plan_json,
 )
+from prc3cfg.core.verification import read_messages, verification_time
 
 
 def image_with(jumps_: dict[int, int]) -> ModuleImage:
@@ -160,3 +161,28 @@ def test_the_budget_is_kept_for_any_size(tmp_path):
         text = render.markdown(plan, max_chars=budget)
         assert len(text) <= max(budget, len(render.markdown(plan, max_chars=1)))  # the table and warnings always
     assert "left out" not in render.markdown(plan, max_chars=10_000_000)
+
+
+def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None:
+    """Reading back what the plan was made from, writing, verifying: priced by the bus-time model,
+    the longest line's each (lines run at once), their sum the headline of the human plan and the
+    markdown, with the writes' bus time beside the naive download."""
+    change = replace(a_change(), cost=COST)
+    other = replace(change, bus="b", name="n")  # a second line, alike: it runs at the same time
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (change, other))
+    reading = sum(COST.message_time(1, m) for m in read_messages(range(1, 65)))  # its read-back holds every program: 1 + 16 reads
+    verifying = verification_time(change.actual, change.plan.predicted, change.steps, COST)
+    assert plan.phases() == {"reading": reading, "writing": change.plan.bus_time, "verifying": verifying}
+    document = plan_json(plan)
+    assert document["estimated_phases_s"] == {phase: round(seconds, 3) for phase, seconds in plan.phases().items()}
+    assert document["estimated_time_s"] == round(reading + change.plan.bus_time + verifying, 3)
+    said = (f"estimated time {document['estimated_time_s']:.1f} s: reading back {reading:.1f} s, writing {change.plan.bus_time:.1f} s "
+            f"(bus time {plan.bus_time:.3f} s, naive download {plan.naive_bus_time:.3f} s), verifying {verifying:.1f} s; "
+            "⚠ 2 modules release the axes")  # fmt: skip
+    assert human(plan).splitlines()[-1] == f"Plan: 2 of 2 modules change, {plan.message_count} messages, {said}"
+    assert f"\n\nPlan: 2 of 2 modules change, {plan.message_count} messages, {said}\n" in markdown(plan)
+
+
+def test_an_apply_says_its_time_by_phase_against_the_estimate_in_one_line() -> None:
+    assert render.timing({"reading": 4.9, "writing": 0.61, "verifying": 0.5}, {"reading": 5.04, "writing": 0.66, "verifying": 0.52}) == (
+        "Time: 6.2 s (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.5 s (0.5 s)")

@@ -23,6 +23,7 @@ from prc3cfg.cli.common import (
     PlantArg,
     RetriesOpt,
     TraceOpt,
+    ask,
     check_output,
     line_options,
     print_lines,
@@ -71,7 +72,7 @@ def adopt(
         if not sys.stdin.isatty():
             raise UserError(f"{question} — no terminal to ask: pass --auto-approve to write it without asking, "
                             "or --check to see the diff only")  # fmt: skip
-        if not typer.confirm(question, default=False):
+        if not ask(question):
             raise UserError("not adopted — the plant file was not changed")
     api.write_adoption(adoption)
     print(f"Adopted {_count(len(adoption.adopted))} into {plant}: it describes what the modules hold now "

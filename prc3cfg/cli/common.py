@@ -232,12 +232,13 @@ def addresses_option(value: str | None) -> str | None:
 
 class TerminalProgress:
     """`api.Progress` on the terminal: a rich progress bar on stderr (when it is a terminal),
-    notes on stdout."""
+    notes on stdout. `stop` takes the bar off the screen — before the plan and before a question
+    (`ask`) — and the next phase's `start` shows it again."""
 
     def __init__(self, stack: contextlib.ExitStack) -> None:
-        self._stack = stack
         self._bar: Progress | None = None
         self._task: TaskID | None = None
+        stack.callback(self.stop)
 
     def start(self, what: str, total: int) -> None:
         from rich.progress import (
@@ -250,10 +251,11 @@ class TerminalProgress:
 
         if self._bar is None:
             stderr = stderr_console()
-            self._bar = self._stack.enter_context(Progress(
+            self._bar = Progress(
                 TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                 console=stderr, transient=True, disable=not stderr.is_terminal,
-            ))  # fmt: skip
+            )  # fmt: skip
+            self._bar.start()
         if self._task is not None:
             self._bar.remove_task(self._task)
         self._task = self._bar.add_task(what, total=total)
@@ -264,6 +266,39 @@ class TerminalProgress:
 
     def note(self, text: str) -> None:
         print(text, flush=True)
+
+    def stop(self) -> None:
+        """The bar off the screen, its lines cleared (nothing drawn until the next `start`)."""
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = self._task = None
+
+
+#: What `ask` takes for yes and for no (as click's confirm); an empty answer is no.
+YES, NO = ("y", "yes"), ("n", "no", "")
+
+
+def ask(question: str, options: LineOptions | None = None) -> bool:
+    """A yes/no question, default no, asked whole where the operator sees it: every question goes
+    through here. The progress display of `options` is taken off the screen first (a bar redrawn
+    below or over the question hid it), what was printed is flushed, and the question is written to
+    the terminal the answer comes from (stdin's) — not to stdout, which may be a file. An answer
+    that is neither yes nor no is asked again; the end of input is no."""
+    if options is not None and isinstance(options.progress, TerminalProgress):
+        options.progress.stop()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with open(os.ttyname(sys.stdin.fileno()), "w") as terminal:
+        while True:
+            terminal.write(f"{question} [y/N]: ")
+            terminal.flush()
+            line = sys.stdin.readline()
+            answer = line.strip().lower()
+            if not line or answer in NO:
+                return False
+            if answer in YES:
+                return True
+            terminal.write("Answer y or n.\n")
 
 
 @contextlib.contextmanager

@@ -13,10 +13,8 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-import typer
-
-from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates
-from prc3cfg.cli.common import print_lines, write_output
+from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
+from prc3cfg.cli.common import TerminalProgress, ask, print_lines, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.errors import UserError
@@ -60,10 +58,13 @@ def drift(drifted: list[Drift], modules: int) -> None:
         print("No drift: every module holds what the plant file says.")
 
 
-def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) -> Gates:
-    """Show the plan; ask about axis releases and the apply itself on a terminal, unless told not to."""
+def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions) -> Gates:
+    """Show the plan — the read-back's progress taken off the screen first — and ask about axis
+    releases and the apply itself on a terminal (`ask`), unless told not to."""
 
     def show(the_plan: PlantPlan) -> None:
+        if isinstance(options.progress, TerminalProgress):
+            options.progress.stop()
         if plan_file is not None:
             print(f"Applying {plan_file}, proved against the modules as read back now:")
         print_lines(render.human(the_plan))
@@ -74,7 +75,7 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) 
         listed = ", ".join(names)
         if auto_approve or not sys.stdin.isatty():
             return False  # refused, naming the flag
-        if not typer.confirm(f"⚠ The axes of {listed} will be released and must travel to their reference point. Allow?", default=False):
+        if not ask(f"⚠ The axes of {listed} will be released and must travel to their reference point. Allow?", options):
             raise UserError(f"axis release of {listed} not allowed — nothing was written")
         return True
 
@@ -84,8 +85,8 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool) 
             return True
         if not sys.stdin.isatty():
             raise UserError(f"{question} — no terminal to ask: pass --auto-approve to apply without asking")
-        return typer.confirm(f"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next "
-                             f"move. {question}", default=False)  # fmt: skip
+        return ask(f"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move. {question}",
+                   options)  # fmt: skip
 
     return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=approve)
 
@@ -175,6 +176,7 @@ def applied(result: ApplyResult) -> None:
         report(result)
     if result.runs:
         print(f"Apply complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
+        print(render.timing(result.plan.phases(), result.took))
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:

@@ -138,7 +138,7 @@ def apply(
     loaded = api.load(plant)
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
-        result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release),
+        result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options),
                            verify=api.Verify(verify.value), options=options)  # fmt: skip
     output.applied(result)
 
@@ -160,6 +160,6 @@ def restore(
     from prc3cfg.cli import output
 
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
-        result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release), verify=api.Verify(verify.value),
+        result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options), verify=api.Verify(verify.value),
                              options=options, onto_current_lines=onto_current_lines)  # fmt: skip
     output.applied(result)

@@ -22,10 +22,12 @@ from typing import Any
 
 from prc3cfg import __version__
 from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import ModulePlan, Step
 from prc3cfg.core.planner.check import MAX_STEPS
+from prc3cfg.core.verification import read_messages, verification_time
 
 FORMAT = "prc3cfg-plan/1"
 
@@ -40,7 +42,8 @@ def image_sha256(image: ModuleImage) -> str:
 class ModuleChange:
     """One module of a plant plan: where it is, what it holds, what it should hold, the steps.
 
-    The first `broadcasts` steps are its bus's broadcasts; `plan.bus_time` counts its own steps only."""
+    The first `broadcasts` steps are its bus's broadcasts; `plan.bus_time` counts its own steps only.
+    `cost` prices its line's exchanges: what reading it back and verifying it take."""
 
     bus: str
     name: str
@@ -49,6 +52,18 @@ class ModuleChange:
     plan: ModulePlan
     broadcasts: int = 0
     system_unset: bool = False  # the module reported E12: its plan writes the system parameters first
+    cost: LineCost | None = None
+
+    @property
+    def reading_time(self) -> float:
+        """Seconds the read-back it was planned from took on the line: a 50h and the fewest 51h/52h."""
+        read = [n for n, program in enumerate(self.actual.programs, 1) if program is not None]
+        return 0.0 if self.cost is None else sum(self.cost.message_time(self.address, m) for m in read_messages(read))
+
+    @property
+    def verifying_time(self) -> float:
+        """Seconds the verifying read-back takes on the line (`Verify.FLOOR`: what the steps can change)."""
+        return 0.0 if self.cost is None else verification_time(self.actual, self.plan.predicted, self.steps, self.cost)
 
     @property
     def address(self) -> int:
@@ -115,6 +130,27 @@ class PlantPlan:
     def bus_time(self) -> float:
         return sum(m.plan.bus_time for m in self.modules) + self.broadcast_time
 
+    def phases(self) -> dict[str, float]:
+        """The time the operator waits for an apply of this plan, by phase — reading back, writing,
+        verifying — each the longest of its lines' (the lines run at once, each line's modules one
+        after another), by the bus-time model. Writing counts each line's broadcasts once; the
+        probes that proved them are not counted."""
+        lines = self.buses()
+
+        def longest(seconds: Callable[[str, list[ModuleChange]], float]) -> float:
+            return max((seconds(bus, modules) for bus, modules in lines.items()), default=0.0)
+
+        def writing(bus: str, modules: list[ModuleChange]) -> float:
+            cost = modules[0].cost
+            shared = sum(cost.broadcast_time(step.message) for step in self.broadcasts(bus)) if cost is not None else 0.0
+            return sum(m.plan.bus_time for m in modules) + shared
+
+        return {
+            "reading": longest(lambda _, modules: sum(m.reading_time for m in modules)),
+            "writing": longest(writing),
+            "verifying": longest(lambda _, modules: sum(m.verifying_time for m in modules)),
+        }
+
     def broadcasts(self, bus: str) -> tuple[Step, ...]:
         """The steps sent once to address 0 on `bus`, before any module's own steps."""
         return next((m.steps[: m.broadcasts] for m in self.modules if m.bus == bus and m.broadcasts), ())
@@ -139,6 +175,7 @@ class PlantPlan:
         return grouped
 
     def to_json(self) -> dict[str, Any]:
+        phases = self.phases()
         return {
             "format": FORMAT,
             "prc3cfg_version": __version__,
@@ -157,6 +194,8 @@ class PlantPlan:
             ],
             "estimated_bus_time_s": round(self.bus_time, 4),
             "naive_bus_time_s": round(self.naive_bus_time, 4),
+            "estimated_phases_s": {phase: round(seconds, 3) for phase, seconds in phases.items()},
+            "estimated_time_s": round(sum(phases.values()), 3),
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
         } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})  # fmt: skip
@@ -225,7 +264,8 @@ SHOWN_PLAN_FILE = PLAN_FILE | {
     "buses": [{"name": TEXT, "broadcasts": Maybe([_BROADCAST]), "proven_silent": Maybe([WHOLE]), "unlisted_modules": Maybe([WHOLE]),
                "modules": [_MODULE | {"estimated_bus_time_s": Maybe(NUMBER), "changes": _CHANGES}]}],
     "axis_releases": [TEXT], "message_count": WHOLE, "estimated_bus_time_s": NUMBER, "naive_bus_time_s": NUMBER,
-    "left_alone": Maybe([TEXT]),
+    "left_alone": Maybe([TEXT]), "estimated_time_s": Maybe(NUMBER),
+    "estimated_phases_s": Maybe({"reading": NUMBER, "writing": NUMBER, "verifying": NUMBER}),
 }  # fmt: skip
 
 

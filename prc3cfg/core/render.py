@@ -299,6 +299,10 @@ def _broadcast_lines(bus: dict) -> list[str]:
             *([f"    {proof}"] if proof else []), ""]
 
 
+#: The phases of an apply as the operator reads them (`PlantPlan.phases`).
+PHASES = {"reading": "reading back", "writing": "writing", "verifying": "verifying"}
+
+
 def summary_line(document: dict) -> str:
     modules = _modules(document)
     changed = sum(1 for _, m in modules if m["steps"])
@@ -307,10 +311,28 @@ def summary_line(document: dict) -> str:
     releases = len(document["axis_releases"])
     return (
         f"Plan: {changed} of {plural(len(modules), 'module')} change{'s' if changed == 1 else ''}, "
-        f"{plural(document['message_count'], 'message')}, "
-        f"estimated bus time {document['estimated_bus_time_s']:.3f} s (naive download {document['naive_bus_time_s']:.3f} s)"
+        f"{plural(document['message_count'], 'message')}, " + estimate(document)
         + (f"; ⚠ {plural(releases, 'module')} release{'s' if releases == 1 else ''} the axes" if releases else "")
     )
+
+
+def estimate(document: dict) -> str:
+    """The time an apply of the plan takes, the total first, then by phase, with the writes' bus time
+    beside the naive download's: "estimated time 9.6 s: reading back 4.1 s, writing 1.1 s (bus time
+    1.099 s, naive download 1.149 s), verifying 4.4 s" (a plan file without phases: the bus times)."""
+    bus_times = f"bus time {document['estimated_bus_time_s']:.3f} s, naive download {document['naive_bus_time_s']:.3f} s"
+    phases = document.get("estimated_phases_s")
+    if not isinstance(phases, dict):
+        return f"estimated {bus_times}"
+    return (f"estimated time {document['estimated_time_s']:.1f} s: {PHASES['reading']} {phases['reading']:.1f} s, "
+            f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
+
+
+def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
+    """An apply's time, estimated against taken, in total and by phase, in one line: "Time: 6.4 s
+    (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.7 s (0.5 s)"."""
+    phases = ", ".join(f"{words} {took[phase]:.1f} s ({estimated[phase]:.1f} s)" for phase, words in PHASES.items())
+    return f"Time: {sum(took.values()):.1f} s (estimated {sum(estimated.values()):.1f} s) — {phases}"
 
 
 def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:

@@ -335,10 +335,15 @@ def execute(
     costs: dict[str, LineCost],
     *,
     tick: Callable[[], None] = lambda: None,
+    written: Callable[[], None] = lambda: None,
+    verified: Callable[[], None] = lambda: None,
     consented: frozenset[tuple[str, int]] = frozenset(),
     verify: Verify = Verify.FLOOR,
 ) -> None:
     """Run every module's steps, then verify and repair; results are left in `runs`.
+
+    `tick` is called at each write acknowledged, `written` when a line's writes ended, `verified`
+    when a module's verification ended (`prc3cfg.shell.phases`).
 
     `consented`: the (bus, address) of every module whose axes the operator agreed to release —
     a repair may send a 10h/20h to those only.
@@ -353,15 +358,19 @@ def execute(
     def on_bus(bus: str, bus_runs: list[ModuleRun]) -> None:
         link = links[bus]
         try:
-            broadcast(link, costs[bus].turnaround, bus_runs, tick)
-            for run in bus_runs:
-                if not run.interrupted:
-                    run.run(link, run.steps[run.broadcasts :], tick)
+            try:
+                broadcast(link, costs[bus].turnaround, bus_runs, tick)
+                for run in bus_runs:
+                    if not run.interrupted:
+                        run.run(link, run.steps[run.broadcasts :], tick)
+            finally:
+                written()
             # where a damaged frame can become a release of any module, every module's system block is read
             with_system = any(run.exposed for run in bus_runs) and any(run.release_sent for run in bus_runs)
             for run in bus_runs:
                 if not run.interrupted:
                     run.converge(link, costs[bus], tick, consented, verify, with_system)
+                verified()
         except PossibleWrite as error:
             stopped(link, bus_runs, error)
 

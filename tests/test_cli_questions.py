@@ -1,0 +1,94 @@
+"""The questions of apply, restore and adopt in a real terminal (tmux): each on the screen whole, after
+the plan, while its answer is awaited — no progress display drawn over it or below it — and on
+the terminal the answer comes from when stdout goes to a file. Each run on an emulated 9600-baud
+line (`line_speed`), so the read-back shows its progress before the question."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from emulated import emulated_plant
+from terminal import PROGRESS_LINE, Pane, environment, needs_tmux, prc3cfg
+
+from prc3cfg import api
+
+pytestmark = needs_tmux
+
+ALLOW = "⚠ The axes of booth-a/booth-a-left will be released and must travel to their reference point. Allow? [y/N]:"
+APPROVE = re.compile(r"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move\. "
+                     r"Apply \d+ messages? to 1 module\? \[y/N\]:")  # fmt: skip
+#: Screens watched while a question waits: well over one redraw of a progress display (rich: 10 a second).
+WATCHED = 8
+
+
+def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> None:
+    """The pane waits for an answer to `question`: it is the last line of the screen, whole, below
+    `after` (what was printed last before it, if it is on this terminal), and stays so with no progress display anywhere on the screen."""
+
+    def last_line(screen: str) -> str:
+        return (screen.rstrip().splitlines() or [""])[-1].rstrip()  # a terminal shows no trailing blank
+
+    def shows(screen: str) -> bool:
+        line = last_line(screen)
+        return line == question if isinstance(question, str) else question.fullmatch(line) is not None
+
+    first = pane.wait(shows, f"the question {question!r}")
+    for screen in [first, *pane.watch(WATCHED)]:
+        assert shows(screen), f"the question is not the last line of the screen, whole:\n{screen}"
+        assert after is None or any(after in line for line in screen.rstrip().splitlines()[:-1]), screen
+        drawn = [line for line in screen.splitlines() if PROGRESS_LINE.search(line)]
+        assert not drawn, f"a progress display is on the screen while the question waits: {drawn}"
+
+
+def test_apply_asks_both_questions_whole_with_no_progress_on_screen(tmp_path):
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment())
+        try:
+            asked(pane, ALLOW, "Plan: 1 of 1 module changes")
+            pane.type("y")
+            asked(pane, APPROVE, ALLOW + " y")
+            pane.type("y")
+            assert pane.exit_status() == 0, pane.screen()
+            assert "Apply complete: 1 module written and verified." in pane.screen()
+        finally:
+            pane.close()
+        assert plant.matches_plant() is False  # the other modules were left out
+        assert not api.plan(plant.plant, ["booth-a-left"]).changes
+
+
+def test_restore_asks_its_questions_whole_with_no_progress_on_screen(tmp_path):
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)).told()
+        snapshot, = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
+        pane = Pane(tmp_path, prc3cfg("restore", snapshot), environment())
+        try:
+            asked(pane, ALLOW, "Plan: 1 of 1 module changes")
+            pane.type("y")
+            asked(pane, APPROVE, ALLOW + " y")
+            pane.type("y")
+            assert pane.exit_status() == 0, pane.screen()
+            assert "Apply complete: 1 module written and verified." in pane.screen()
+        finally:
+            pane.close()
+
+
+@pytest.mark.parametrize("stdout", ["terminal", "file"])
+def test_adopt_asks_on_the_terminal_the_answer_comes_from(tmp_path, stdout):
+    """With stdout in a file (`prc3cfg adopt plant.yaml > adopt.log`) the question is still asked
+    on the terminal that answers it — the diff goes to the file."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)).told()
+        plant.emulators["booth-a"].teach_in(1, 1, 2080)
+        log = tmp_path / "adopt.log" if stdout == "file" else None
+        pane = Pane(tmp_path, prc3cfg("adopt", plant.path, "--module", "booth-a-left"), environment(), stdout=log)
+        question = f"Write 1 value into {plant.path}? [y/N]:"
+        try:
+            asked(pane, question, None if log else f"+++ {plant.path} (adopted)")
+            pane.type("y")
+            assert pane.exit_status() == 0, pane.screen()
+            said = log.read_text() if log else pane.screen()
+        finally:
+            pane.close()
+        assert f"Adopted 1 value into {plant.path}" in said
+        assert "position: 2.08\n" in plant.path.read_text()
