@@ -70,12 +70,14 @@ def test_tables_are_never_cut_when_piped(tmp_path):
 
 
 def test_shell_completion_is_offered():
-    # a user's shell: no completion request of a shell already under way in the environment (a whole test
-    # run once left one there, and click took the command for a completion request: "Shell  not supported")
-    env = {key: value for key, value in os.environ.items() if "COMPLETE" not in key} | {"SHELL": "/bin/bash"}
-    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "--show-completion", "bash"], capture_output=True, text=True, env=env)
-    leftover = {key: value for key, value in os.environ.items() if "COMPLETE" in key}
-    assert shown.returncode == 0 and "_PRC3CFG_COMPLETE" in shown.stdout, (shown.stderr, leftover)
+    """What bash asks of the script `--install-completion` installs (the same `--show-completion`
+    prints, for the shell it finds running it): its script, then the words that complete a line."""
+    env = {key: value for key, value in os.environ.items() if "COMP" not in key}
+    script = subprocess.run([sys.executable, "-m", "prc3cfg"], capture_output=True, text=True, env=env | {"_PRC3CFG_COMPLETE": "source_bash"})
+    assert script.returncode == 0 and "_prc3cfg_completion" in script.stdout and "complete_bash" in script.stdout
+    asked = env | {"_PRC3CFG_COMPLETE": "complete_bash", "COMP_WORDS": "prc3cfg pl", "COMP_CWORD": "1"}
+    completed = subprocess.run([sys.executable, "-m", "prc3cfg"], capture_output=True, text=True, env=asked)
+    assert completed.stdout.split() == ["plan"], completed.stderr
 
 
 def on_a_terminal(args: list, env: dict) -> bytes:

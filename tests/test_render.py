@@ -15,6 +15,7 @@ from prc3cfg.core.planner import plan_module
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
 from prc3cfg.core.render import (
     CLAMPED,
+    LEGEND,
     FieldChange,
     changes_json,
     field_changes,
@@ -179,7 +180,7 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
     said = (f"estimated time {document['estimated_time_s']:.1f} s: reading back {reading:.1f} s, writing {change.plan.bus_time:.1f} s "
             f"(bus time {plan.bus_time:.3f} s, naive download {plan.naive_bus_time:.3f} s), verifying {verifying:.1f} s; "
             "⚠ 2 modules release the axes")  # fmt: skip
-    assert human(plan).splitlines()[-1] == f"Plan: 2 of 2 modules change, {plan.message_count} messages, {said}"
+    assert human(plan).splitlines()[-2:] == [f"Plan: 2 of 2 modules change, {plan.message_count} messages, {said}", LEGEND]
     assert f"\n\nPlan: 2 of 2 modules change, {plan.message_count} messages, {said}\n" in markdown(plan)
 
 
