@@ -122,3 +122,15 @@ def test_a_saved_plan_shows_what_the_live_plan_showed_charts_and_marks_included(
     human = run_cli(capsys, "plan", plant.path)
     assert human.out.splitlines()[-1] == render.LEGEND
     assert "No changes" not in human.out and render.LEGEND.startswith("Marks: ~ changed")
+
+
+def test_a_saved_plan_without_its_total_time_is_shown_with_the_sum_of_its_phases(plant, capsys, tmp_path):
+    saved = tmp_path / "plan.json"
+    assert run_cli(capsys, "plan", plant.path, "--out", saved).code == 0
+    document = json.loads(saved.read_text())
+    phases = document["estimated_phases_s"]
+    del document["estimated_time_s"]  # an older or a hand-trimmed file: show shows it all the same (apply --plan refuses it)
+    saved.write_text(json.dumps(document))
+    shown = run_cli(capsys, "show", saved)
+    assert shown.code == 0, shown.err
+    assert f"estimated time {sum(phases.values()):.1f} s" in shown.out

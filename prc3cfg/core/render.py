@@ -324,7 +324,8 @@ def estimate(document: dict) -> str:
     phases = document.get("estimated_phases_s")
     if not isinstance(phases, dict):
         return f"estimated {bus_times}"
-    return (f"estimated time {document['estimated_time_s']:.1f} s: {PHASES['reading']} {phases['reading']:.1f} s, "
+    total = document.get("estimated_time_s", sum(phases[phase] for phase in PHASES))  # a plan file may lack either
+    return (f"estimated time {total:.1f} s: {PHASES['reading']} {phases['reading']:.1f} s, "
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
 
 
