@@ -748,10 +748,11 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
     check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
     records = releases.Releases("restore" if desired is not None else "apply", journal.path)
-    announce = _announcer(plant, buses, journal, records)
+    keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once
+    announce = _announcer(plant, buses, keys, journal, records)
     try:
         with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
-            earlier = tuple(releases.pending(key for bus in buses.values() for key in bus_line_keys(plant, bus)))
+            earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
             started = time.monotonic()
             if plan_file is None:
                 images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired)
@@ -774,7 +775,7 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             if gates.approve is not None and not gates.approve(the_plan):
                 raise NotApproved("not applied — nothing was written")
             with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
-                result = _run(plant, the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
+                result = _run(keys, the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
                 result = replace(result, took={"reading": reading} | result.took)
                 if desired is None and len(pairs) == len(plant.modules()):
                     _keep_applied(plant)
@@ -783,10 +784,10 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
         journal.close()
 
 
-def _announcer(plant: Plant, buses: dict[str, Bus], journal: Journal, records: releases.Releases) -> Callable[[Exchange], None]:
+def _announcer(plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
+               records: releases.Releases) -> Callable[[Exchange], None]:  # fmt: skip
     """What is done before an apply's frame leaves: the attempt journalled, and a 10h/20h recorded
     durably as an axis release not yet told (a broadcast's for every module on the line)."""
-    keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}
     names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
 
     def announce(exchange: Exchange) -> None:
@@ -799,15 +800,15 @@ def _announcer(plant: Plant, buses: dict[str, Bus], journal: Journal, records: r
     return announce
 
 
-def _run(plant: Plant, the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link], buses: dict[str, Bus],
-         journal: Journal, allow_axis_release: bool, verify: Verify, options: LineOptions, earlier: tuple[releases.Pending, ...],
-         records: releases.Releases) -> ApplyResult:  # fmt: skip
+def _run(keys: dict[str, tuple[str, ...]], the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link],
+         buses: dict[str, Bus], journal: Journal, allow_axis_release: bool, verify: Verify, options: LineOptions,
+         earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:  # fmt: skip
     exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
     # on a line without error detection every module is watched, the unchanged ones too: a damaged
     # frame meant for another can release its axes
     runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in exposed)
                  for c in the_plan.modules if c.steps or c.bus in exposed)  # fmt: skip
-    taken_on = {name: LineTaken(bus.port, bus.framing, bus_line_keys(plant, bus)) for name, bus in buses.items()}
+    taken_on = {name: LineTaken(bus.port, bus.framing, keys[name]) for name, bus in buses.items()}
     snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs},
                              taken_on)  # fmt: skip
     snapshot_path = snapshot.save()
@@ -820,7 +821,6 @@ def _run(plant: Plant, the_plan: PlantPlan, images: dict[Key, ModuleImage], link
     execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=phases.wrote, written=phases.line_written,
             verified=phases.verified, consented=consented, verify=verify)  # fmt: skip
     result = ApplyResult(the_plan, runs, snapshot_path, journal.path, earlier, records, phases.took())
-    keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}
     for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
         if run.system_unset:
             records.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
