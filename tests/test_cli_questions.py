@@ -41,18 +41,23 @@ def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> Non
         assert not drawn, f"a progress display is on the screen while the question waits: {drawn}"
 
 
+def answers_both_questions(pane: Pane) -> None:
+    """The axis question, then the confirmation, each asked whole with no progress on screen; yes to
+    both; the one module written and verified."""
+    try:
+        asked(pane, ALLOW, "Plan: 1 of 1 module changes")
+        pane.type("y")
+        asked(pane, APPROVE, ALLOW + " y")
+        pane.type("y")
+        assert pane.exit_status() == 0, pane.screen()
+        assert "Apply complete: 1 module written and verified." in pane.screen()
+    finally:
+        pane.close()
+
+
 def test_apply_asks_both_questions_whole_with_no_progress_on_screen(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment())
-        try:
-            asked(pane, ALLOW, "Plan: 1 of 1 module changes")
-            pane.type("y")
-            asked(pane, APPROVE, ALLOW + " y")
-            pane.type("y")
-            assert pane.exit_status() == 0, pane.screen()
-            assert "Apply complete: 1 module written and verified." in pane.screen()
-        finally:
-            pane.close()
+        answers_both_questions(Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment()))
         assert plant.matches_plant() is False  # the other modules were left out
         assert not api.plan(plant.plant, ["booth-a-left"]).changes
 
@@ -61,16 +66,7 @@ def test_restore_asks_its_questions_whole_with_no_progress_on_screen(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)).told()
         snapshot, = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
-        pane = Pane(tmp_path, prc3cfg("restore", snapshot), environment())
-        try:
-            asked(pane, ALLOW, "Plan: 1 of 1 module changes")
-            pane.type("y")
-            asked(pane, APPROVE, ALLOW + " y")
-            pane.type("y")
-            assert pane.exit_status() == 0, pane.screen()
-            assert "Apply complete: 1 module written and verified." in pane.screen()
-        finally:
-            pane.close()
+        answers_both_questions(Pane(tmp_path, prc3cfg("restore", snapshot), environment()))
 
 
 @pytest.mark.parametrize("stdout", ["terminal", "file"])

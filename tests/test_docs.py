@@ -14,6 +14,8 @@ import re
 from pathlib import Path
 
 from emulated import emulated_plant, run_cli
+from test_broadcast import declared as declared_line
+from test_broadcast import full_line
 
 from prc3cfg.cli import EXIT_USAGE
 from prc3cfg.cli.plan_commands import EXIT_CHANGES
@@ -71,20 +73,6 @@ def paths(value: object, at: str = "", maps: dict[str, str | None] | None = None
 
 SYMBOLS = {"buses[].modules[].changes.symbols": None}  # keyed by program number
 
-DECLARED_LINE = """\
-plant: full-line
-profiles:
-  booth:
-    system: {upper_reversing_point: 2.000, max_speed: 0.500}
-    programs:
-      1: {position: 1.500, speed: 0.300}
-buses:
-  - name: line
-    port: socket://127.0.0.1:1
-    only_these_modules: true
-    modules:
-""" + "".join(f"      - {{address: {a}, name: m{a}, profiles: [booth]}}\n" for a in range(1, 29))
-
 CLAMPING = """\
 plant: short
 buses:
@@ -110,8 +98,7 @@ def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, **emu
 def test_a_plan_file_has_exactly_the_keys_docs_files_lists(tmp_path, capsys):
     (rows,) = tables(section("files.md", "Plan file"))
     documented = {key(row[0]): row[2] for row in rows}
-    declared, clamping = tmp_path / "declared.yaml", tmp_path / "clamping.yaml"
-    declared.write_text(DECLARED_LINE)
+    declared, clamping = declared_line(full_line(tmp_path, modules=28)), tmp_path / "clamping.yaml"
     clamping.write_text(CLAMPING)
     plain = paths(planned(tmp_path, capsys, "plain"), maps=SYMBOLS)
     assert plain - set(documented) == set()
