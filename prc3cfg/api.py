@@ -34,7 +34,6 @@ import hashlib
 import itertools
 import os
 import stat
-import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -43,14 +42,15 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 
 from prc3cfg import __version__
-from prc3cfg.core import codec, gateway, plot, sharing
+from prc3cfg.core import codec, gateway, plot
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import detects_damage, get_framing
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
-from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps, plan_module, summarise
-from prc3cfg.core.plantplan import LineProof, ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
+from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
+from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
+from prc3cfg.core.plantplan import PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.core.render import drifted, plan_json, plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
@@ -314,9 +314,10 @@ def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dic
     """Read back and plan, each line planned as soon as it is read — while the other lines are
     still being read: the lines never wait for all of the planning."""
     buses = {bus.name: bus for bus, _ in pairs}
-    planner = Planner(plant, desired, unset_systems(plant, buses.values()))
-    images = _read(to_read, links, options, then=lambda bus, read: planner.plan_bus(bus, pairs, read, prober(links[bus], buses[bus])))
-    return images, planner.plan(pairs, images)
+    planner = _planner(plant, pairs, unset_systems(plant, buses.values()))
+    wanted = _wanted(pairs, desired)
+    images = _read(to_read, links, options, then=lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus])))
+    return images, planner.plan(wanted, images)
 
 
 def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None) -> dict[Key, ModuleImage]:
@@ -383,95 +384,28 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
               probers: dict[str, Prober] | None = None, unset: frozenset[Key] = frozenset()) -> PlantPlan:  # fmt: skip
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
-    line's `probers` (`Planner.plan_bus`)."""
-    return Planner(plant, desired, unset).plan(pairs, actual, probers)
+    line's `probers` (`Planner.plan_line`)."""
+    return _planner(plant, pairs, unset).plan(_wanted(pairs, desired), actual, probers)
 
 
-class Planner:
-    """The plan of a plant, made line by line — each line as soon as its modules are read, in the
-    line's own thread (one at a time: the memo of plans is shared, so modules alike on any line
-    are planned once, `sharing.alike`)."""
-
-    def __init__(self, plant: Plant, desired: dict[Key, ModuleImage] | None, unset: frozenset[Key] = frozenset()) -> None:
-        self.plant, self.desired, self.unset = plant, desired, unset
-        self._memo: dict = {}
-        self._lock = threading.Lock()
-        self._buses: dict[str, tuple[list[ModuleChange], float, LineProof | None]] = {}
-
-    def plan_bus(self, bus_name: str, pairs: Pairs, actual: dict[Key, ModuleImage], probe: Prober | None = None) -> None:
-        """Plan the chosen modules of one bus, and its broadcasts — where the plant lists every module
-        of the line and the plan covers them all, and then only once `probe` (the line's, in this run,
-        under its lock) has found every other address silent: a declaration in a file is no proof.
-        The probes cost line time, which the broadcasts must save; without `probe` (planning from
-        saved images) a line whose every address the plant does not list gets no broadcast."""
-        with self._lock:
-            changes = []
-            for bus, module in pairs:
-                if bus.name != bus_name:
-                    continue
-                key = (bus.name, module.address)
-                target = self.desired[key] if self.desired is not None else module.desired_image()
-                try:
-                    module_plan = _plan_alike(actual[key], target, line_cost(bus), self._memo, key in self.unset)
-                except UnreachableImage as error:
-                    raise UserError(f"bus {bus.name}, module {module.address} ({module.name}): {error}") from None
-                changes.append(ModuleChange(bus.name, module.name, actual[key], target, module_plan, system_unset=key in self.unset,
-                                            cost=line_cost(bus)))  # fmt: skip
-            bus = self._bus(bus_name)
-        others = unlisted_addresses(bus)
-        if not changes or not receivers_declared(bus, changes) or (others and probe is None):
-            self._keep(bus_name, changes, 0.0, None)
-            return
-        cost = line_cost(bus)
-        proof_time = len(others) * PROOF_PROBES * cost.silence_time(codec.ReadSystem(), probe_timeout(bus))
-        with self._lock:
-            shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], cost, self._memo, proof_time)
-        if not shared.broadcasts:
-            self._keep(bus_name, changes, 0.0, None)
-            return
-        answered = probe(others) if probe is not None and others else ()
-        if answered:  # the plant file is wrong about its line: no broadcast, and the modules named
-            self._keep(bus_name, changes, 0.0, LineProof(bus_name, answered=tuple(answered)))
-            return
-        changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
-        seconds = sum(cost.broadcast_time(step.message) for step in shared.broadcasts) + (proof_time if others else 0.0)
-        self._keep(bus_name, changes, seconds, LineProof(bus_name, silent=tuple(others)) if others else None)
-
-    def _keep(self, bus_name: str, changes: list[ModuleChange], broadcast_time: float, proof: LineProof | None) -> None:
-        with self._lock:
-            self._buses[bus_name] = (changes, broadcast_time, proof)
-
-    def plan(self, pairs: Pairs, actual: dict[Key, ModuleImage], probers: dict[str, Prober] | None = None) -> PlantPlan:
-        """The plant's plan, in the order of `pairs`: buses not planned yet are planned now."""
-        for bus_name in dict.fromkeys(bus.name for bus, _ in pairs):
-            if bus_name not in self._buses:
-                self.plan_bus(bus_name, pairs, actual, (probers or {}).get(bus_name))
-        changes = {(c.bus, c.address): c for changes, _, _ in self._buses.values() for c in changes}
-        ordered = tuple(changes[(bus.name, module.address)] for bus, module in pairs)
-        broadcast_time = sum(seconds for _, seconds, _ in self._buses.values())
-        proofs = tuple(proof for name in dict.fromkeys(bus.name for bus, _ in pairs) if (proof := self._buses[name][2]) is not None)
-        return PlantPlan(self.plant.name, str(self.plant.path.resolve()), self.plant.sha256, ordered, broadcast_time,
-                         None if not broadcast_time else self._unshared(ordered), proofs)  # fmt: skip
-
-    def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
-        """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
-        return sum(self._memo[("plan", sharing.alike(c.actual, c.desired, line_cost(self._bus(c.bus))), c.system_unset)].bus_time
-                   for c in ordered)  # fmt: skip
-
-    def _bus(self, name: str) -> Bus:
-        return next(b for b in self.plant.buses if b.name == name)
+def _planner(plant: Plant, pairs: Pairs, unset: frozenset[Key]) -> Planner:
+    """A `Planner` of the lines of these modules' buses."""
+    buses = {bus.name: bus for bus, _ in pairs}
+    return Planner(plant.name, str(plant.path.resolve()), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset)
 
 
-def _plan_alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost, memo: dict, system_unset: bool = False):
-    """`plan_module`, once for modules alike but for their address (a plant commissioned from factory
-    defaults is one plan per line profile)."""
-    key = ("plan", sharing.alike(actual, desired, cost), system_unset)
-    if key not in memo:
-        memo[key] = plan_module(actual, desired, cost, system_unset=system_unset)
-    found = memo[key]
-    if found.address == actual.address:
-        return found
-    return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))
+def _line(bus: Bus) -> Line:
+    """A bus as the planning sees its line: complete when the plant lists all 30 addresses, or says
+    it lists every module there (`only_these_modules: true`)."""
+    listed = frozenset(m.address for m in bus.modules)
+    complete = len(listed) == MAX_MODULE_ADDRESS or bus.only_these_modules
+    return Line(bus.name, line_cost(bus), listed, complete, probe_timeout(bus))
+
+
+def _wanted(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted]:
+    """The modules to plan, each with its desired image: of `desired`, else the plant file's."""
+    return [Wanted(bus.name, m.address, m.name, desired[(bus.name, m.address)] if desired is not None else m.desired_image())
+            for bus, m in pairs]  # fmt: skip
 
 
 def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
@@ -479,34 +413,10 @@ def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
     return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12))
 
 
-def receivers_declared(bus: Bus, changes: list[ModuleChange]) -> bool:
-    """Whether the plant says it lists every module on the bus's line (all 30 addresses, or
-    `only_these_modules: true`) and the plan covers each of them — to be proven by probing the rest."""
-    listed = {m.address for m in bus.modules}
-    complete = len(listed) == MAX_MODULE_ADDRESS or bus.only_these_modules
-    return complete and {c.address for c in changes} == listed
-
-
 def _addresses(addresses: Iterable[int]) -> str:
     """"address 5", "addresses 5, 7"."""
     listed = list(addresses)
     return f"address{'es' if len(listed) > 1 else ''} {', '.join(map(str, listed))}"
-
-
-def unlisted_addresses(bus: Bus) -> list[int]:
-    """The addresses of the bus's line where the plant lists no module."""
-    listed = {m.address for m in bus.modules}
-    return [a for a in range(1, MAX_MODULE_ADDRESS + 1) if a not in listed]
-
-
-#: The longest a probe waits at an address (or the line's time-out, if shorter) — a scan's, a
-#: broadcast's proof: a module answers a 50h within tens of milliseconds even at 9600 baud.
-PROBE_TIMEOUT = 0.2
-#: Probes of each address the plant does not list before a broadcast: a reply lost once on a noisy
-#: line must not pass for an empty address.
-PROOF_PROBES = 2
-
-Prober = Callable[[list[int]], list[int]]
 
 
 def probe_timeout(bus: Bus) -> float:

@@ -1,0 +1,186 @@
+"""A plant's plan, made line by line: each line planned as soon as its modules are read.
+
+- `Line`: a line as the planning sees it — what its exchanges cost, which addresses the plant
+  lists there and whether it says it lists every module of the line, how long a probe waits.
+- `Wanted`: one module to plan, with the image it should hold.
+- `PlanCache`: the module plans of a plant by what they depend on (`sharing.alike`), so that
+  modules alike on any line are planned once (a plant commissioned from factory defaults is one
+  plan per line profile), and the broadcast search's memo; with the lock the lines' threads
+  take in turn to use them.
+- `Planner`: the plan of each line — its modules' own plans, then its broadcasts where every
+  receiver is known — and the plant's plan from them (`PlantPlan`).
+
+A broadcast reaches every module on the line, so it needs proof that nobody else is there:
+the caller hands `Planner.plan_line` a `Prober` (the line's, under its lock, in this run) that
+says which of the addresses the plant does not list answer. Reading the modules, locking and
+probing the lines is the caller's (`prc3cfg.api`); what a plant file says, the plant's
+(`prc3cfg.plant`). Pure: the lock is a thread lock, nothing here reads or writes outside.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+from prc3cfg.core import codec, sharing
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage
+from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
+from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
+from prc3cfg.errors import UserError
+
+Key = tuple[str, int]  # (bus name, module address)
+#: Which of the addresses given answer a 50h (`PROOF_PROBES` tries each): the line's, under its lock.
+Prober = Callable[[list[int]], list[int]]
+
+#: The longest a probe waits at an address (or the line's time-out, if shorter) — a scan's, a
+#: broadcast's proof: a module answers a 50h within tens of milliseconds even at 9600 baud.
+PROBE_TIMEOUT = 0.2
+#: Probes of each address the plant does not list before a broadcast: a reply lost once on a noisy
+#: line must not pass for an empty address.
+PROOF_PROBES = 2
+
+
+@dataclass(frozen=True, slots=True)
+class Line:
+    """A bus's line as the planning sees it. `complete`: the plant says it lists every module of
+    the line (all 30 addresses, or `only_these_modules: true`) — to be proven by probing the rest."""
+
+    bus: str
+    cost: LineCost
+    listed: frozenset[int]
+    complete: bool
+    probe_timeout: float
+
+    def unlisted(self) -> list[int]:
+        """The addresses of the line where the plant lists no module."""
+        return [a for a in range(1, MAX_MODULE_ADDRESS + 1) if a not in self.listed]
+
+    def proof_time(self) -> float:
+        """The line time of proving every unlisted address silent (`PROOF_PROBES` probes each)."""
+        return len(self.unlisted()) * PROOF_PROBES * self.cost.silence_time(codec.ReadSystem(), self.probe_timeout)
+
+
+@dataclass(frozen=True, slots=True)
+class Wanted:
+    """One module to plan: where it is, its name, and the image it should hold."""
+
+    bus: str
+    address: int
+    name: str
+    desired: ModuleImage
+
+    @property
+    def key(self) -> Key:
+        return (self.bus, self.address)
+
+
+@dataclass(frozen=True, slots=True)
+class _PlanKey:
+    """What a module's own plan depends on: `sharing.alike`, and whether it reported E12."""
+
+    alike: tuple[object, ...]
+    system_unset: bool
+
+
+class PlanCache:
+    """The plans of modules alike but for their address, made once; the broadcast search's memo
+    (`sharing.share`); and `lock`, which whoever uses them holds — the lines are planned in their
+    own threads."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self._plans: dict[_PlanKey, ModulePlan] = {}
+        #: `sharing.share`'s memo, shared by the lines of a plant: its keys and values are sharing's own
+        self.sharing: dict[Any, Any] = {}
+
+    def plan(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost, system_unset: bool = False) -> ModulePlan:
+        """`plan_module`, once for modules alike but for their address."""
+        key = _PlanKey(sharing.alike(actual, desired, cost), system_unset)
+        found = self._plans.get(key)
+        if found is None:
+            found = self._plans[key] = plan_module(actual, desired, cost, system_unset=system_unset)
+        if found.address == actual.address:
+            return found
+        return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))
+
+
+@dataclass(frozen=True, slots=True)
+class _Planned:
+    """One line's part of the plan: its modules' changes, its broadcasts' line time, its proof."""
+
+    changes: list[ModuleChange]
+    broadcast_time: float = 0.0
+    proof: LineProof | None = None
+
+
+class Planner:
+    """The plan of a plant, made line by line — each line as soon as its modules are read, in the
+    line's own thread (one at a time: the `PlanCache` is shared, so modules alike on any line are
+    planned once)."""
+
+    def __init__(self, plant: str, plant_path: str, plant_sha256: str, lines: Mapping[str, Line],
+                 unset: frozenset[Key] = frozenset()) -> None:  # fmt: skip
+        self.plant, self.plant_path, self.plant_sha256 = plant, plant_path, plant_sha256
+        self.lines, self.unset = lines, unset
+        self._cache = PlanCache()
+        self._planned: dict[str, _Planned] = {}
+
+    def plan_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], probe: Prober | None = None) -> None:
+        """Plan the modules of one line among `modules`, and its broadcasts — where the plant lists
+        every module of the line and the plan covers them all, and then only once `probe` (the line's,
+        in this run, under its lock) has found every other address silent: a declaration in a file is
+        no proof. The probes cost line time, which the broadcasts must save; without `probe` (planning
+        from saved images) a line whose every address the plant does not list gets no broadcast."""
+        line = self.lines[bus]
+        with self._cache.lock:
+            changes = [self._change(line, wanted, actual[wanted.key]) for wanted in modules if wanted.bus == bus]
+        others = line.unlisted()
+        covered = line.complete and {c.address for c in changes} == line.listed
+        if not changes or not covered or (others and probe is None):
+            self._keep(bus, _Planned(changes))
+            return
+        proof_time = line.proof_time()
+        with self._cache.lock:
+            shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing, proof_time)
+        if not shared.broadcasts:
+            self._keep(bus, _Planned(changes))
+            return
+        answered = probe(others) if probe is not None and others else ()
+        if answered:  # the plant file is wrong about its line: no broadcast, and the modules named
+            self._keep(bus, _Planned(changes, proof=LineProof(bus, answered=tuple(answered))))
+            return
+        changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
+        seconds = sum(line.cost.broadcast_time(step.message) for step in shared.broadcasts) + (proof_time if others else 0.0)
+        self._keep(bus, _Planned(changes, seconds, LineProof(bus, silent=tuple(others)) if others else None))
+
+    def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
+        unset = wanted.key in self.unset
+        try:
+            module_plan = self._cache.plan(actual, wanted.desired, line.cost, unset)
+        except UnreachableImage as error:
+            raise UserError(f"bus {wanted.bus}, module {wanted.address} ({wanted.name}): {error}") from None
+        return ModuleChange(wanted.bus, wanted.name, actual, wanted.desired, module_plan, system_unset=unset, cost=line.cost)
+
+    def _keep(self, bus: str, planned: _Planned) -> None:
+        with self._cache.lock:
+            self._planned[bus] = planned
+
+    def plan(self, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], probers: Mapping[str, Prober] | None = None) -> PlantPlan:
+        """The plant's plan, in the order of `modules`: lines not planned yet are planned now."""
+        buses = list(dict.fromkeys(wanted.bus for wanted in modules))
+        for bus in buses:
+            if bus not in self._planned:
+                self.plan_line(bus, modules, actual, (probers or {}).get(bus))
+        changes = {(c.bus, c.address): c for planned in self._planned.values() for c in planned.changes}
+        ordered = tuple(changes[wanted.key] for wanted in modules)
+        broadcast_time = sum(planned.broadcast_time for planned in self._planned.values())
+        proofs = tuple(proof for bus in buses if (proof := self._planned[bus].proof) is not None)
+        return PlantPlan(self.plant, self.plant_path, self.plant_sha256, ordered, broadcast_time,
+                         None if not broadcast_time else self._unshared(ordered), proofs)  # fmt: skip
+
+    def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
+        """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
+        return sum(self._cache.plan(c.actual, c.desired, self.lines[c.bus].cost, c.system_unset).bus_time for c in ordered)
