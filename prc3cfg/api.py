@@ -78,6 +78,8 @@ __all__ = [
 
 Key = tuple[str, int]  # (bus name, module address)
 Pairs = list[tuple[Bus, Module]]
+#: Called with each exchange on a line: before its frame leaves (`announce`), or once it is done.
+Observer = Callable[[Exchange], None]
 
 
 class StalePlan(UserError):
@@ -239,8 +241,8 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
 
 
 @contextlib.contextmanager
-def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer=None, announce=None,
-          records: releases.Releases | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
+def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
+          announce: Observer | None = None, records: releases.Releases | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
     Every axis release on these lines that no account has named yet is told (`LineOptions.tell`),
     and a read a module answers as a write is recorded as one in `records` (`PossibleWrite`).
@@ -298,7 +300,8 @@ def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], reco
     return watch
 
 
-def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, then=None) -> dict[Key, ModuleImage]:
+def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions,
+          then: Callable[[str, dict[Key, ModuleImage]], None] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
     """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`) — also
     one that came during the last exchanges, when the read ended anyway: it is not forgotten."""
     options.progress.start("reading modules", len(targets_))
@@ -459,11 +462,11 @@ def read_plan(path: Path, plant: Plant) -> PlanFile:
     return planned
 
 
-def plan_document(path: Path) -> dict:
+def plan_document(path: Path) -> dict[str, Any]:
     """A plan file to show (`prc3cfg show PLAN.json`): checked as `apply --plan` checks it before
     the line (damaged, edited flags, a module twice, not prc3cfg's bytes: one line), and every
     step's summary worked out again from its bytes — what is shown is what would be sent."""
-    document = read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again")
+    document: dict[str, Any] = read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again")
     try:
         planned = read_plan_file(document, shown=True)
     except PlanFileError as error:
@@ -577,7 +580,7 @@ def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:
     return None if type(theirs) is type(ours) and theirs == ours else at
 
 
-def _first_difference(theirs: list, ours: list) -> str:
+def _first_difference(theirs: list[codec.Message], ours: list[codec.Message]) -> str:
     """Where a plan file's steps part from the plan made from the same read-back."""
     index = next(i for i, (a, b) in enumerate(zip([*theirs, None], [*ours, None]), 1) if a != b)
     said = theirs[index - 1].hex() if index <= len(theirs) else "missing"

@@ -26,6 +26,7 @@ from prc3cfg.core.motion import DWELL, ChainMotion, chain_motions, paired_chains
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
 
 #: Output formats by file suffix.
@@ -124,7 +125,7 @@ def _caption(was: ChainMotion | None, will: ChainMotion | None, *, overlay: bool
     return f"before {was.label}: {times(was)} · after {will.label}: {times(will)}"
 
 
-def _legend(overlay: bool) -> list:
+def _legend(overlay: bool) -> list[Artist]:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 

@@ -17,6 +17,7 @@ import re
 import shlex
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
@@ -67,7 +68,7 @@ class FieldChange:
         text = f"{field_name(symbol)} {format_value(symbol, before)} → {format_value(symbol, after)}"
         return cls(program, symbol, before, after, text)
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return {"program": self.program, "field": self.symbol, "before": self.before, "after": self.after, "text": self.text}
 
 
@@ -164,7 +165,7 @@ def module_diff(change: ModuleChange) -> ModuleDiff:
     )
 
 
-def module_lines(changes: dict) -> list[str]:
+def module_lines(changes: dict[str, Any]) -> list[str]:
     """The diff of one module, one change per line, from its `changes` (`changes_json`, or a plan file's)."""
     lines: list[str] = []
     system = [f["text"] for f in changes["fields"] if f["program"] is None]
@@ -205,7 +206,7 @@ def step_line(index: int, message_hex: str, summary: str, releases: bool, broadc
             + ("  ⚠ RELEASES AXES" if releases else ""))  # fmt: skip
 
 
-def changes_json(change: ModuleChange) -> dict:
+def changes_json(change: ModuleChange) -> dict[str, Any]:
     """What people read of one module's change: its fields, the symbol of each changed program,
     its jumps, what the module's clamping does, the axis warning (a plan file keeps it beside the steps)."""
     diff = module_diff(change)
@@ -220,7 +221,7 @@ def changes_json(change: ModuleChange) -> dict:
     }
 
 
-def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict:
+def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict[str, Any]:
     """The plan file `prc3cfg-plan/1` (interfaces.md §4) with what people read beside the steps:
     each module's `changes` and `warning`, and what stays on the hardware (`left_alone`). Every
     output of a plan — human, markdown — is made from this document, and so is that of a saved
@@ -233,7 +234,7 @@ def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict:
     return document
 
 
-def _outline(plan: PlantPlan | dict, notes: Iterable[str]) -> tuple[dict, dict[tuple[str, int], ModuleChange]]:
+def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
     """What the human and markdown outputs are made from: a plan file's document as it is, or a live
     plan's without the modules' `changes`, each worked out by `_changes` as its module is shown (all
     of them at once, for 8 × 30 modules with every program changed, hold 35 MB), with the changes by
@@ -243,22 +244,22 @@ def _outline(plan: PlantPlan | dict, notes: Iterable[str]) -> tuple[dict, dict[t
     return plan.to_json() | {"left_alone": list(notes)}, {(c.bus, c.address): c for c in plan.changes}
 
 
-def _changes(bus: str, module: dict, live: dict[tuple[str, int], ModuleChange]) -> dict:
+def _changes(bus: str, module: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> dict[str, Any]:
     """A module's `changes` (`changes_json`): the plan file's, or worked out now from the live plan."""
     return changes_json(live[(bus, module["address"])]) if live else module["changes"]
 
 
-def _modules(document: dict) -> list[tuple[str, dict]]:
+def _modules(document: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
     return [(bus["name"], module) for bus in document["buses"] for module in bus["modules"]]
 
 
-def _header(bus: str, module: dict) -> str:
+def _header(bus: str, module: dict[str, Any]) -> str:
     steps = module["steps"]
     return header_line(bus, module["address"], module["name"], len(steps), sum(bool(s.get("broadcast")) for s in steps),
                        module.get("estimated_bus_time_s", 0.0), module["releases_axes"])  # fmt: skip
 
 
-def _step_lines(module: dict) -> list[str]:
+def _step_lines(module: dict[str, Any]) -> list[str]:
     return [step_line(i, s["message"], s["summary"], s["releases_axes"], bool(s.get("broadcast")))
             for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
 
@@ -276,7 +277,7 @@ def address_ranges(addresses: Iterable[int]) -> str:
     return f"address{'es' if len(listed) > 1 else ''} {text}"
 
 
-def line_proof(bus: dict) -> str | None:
+def line_proof(bus: dict[str, Any]) -> str | None:
     """What the probes of a bus's line found at the addresses its plant file does not list, in one line."""
     if bus.get("unlisted_modules"):
         return (f"⚠ bus {bus['name']}: a module answers at {address_ranges(bus['unlisted_modules'])}, which the plant file does not "
@@ -287,7 +288,7 @@ def line_proof(bus: dict) -> str | None:
     return None
 
 
-def _broadcast_lines(bus: dict) -> list[str]:
+def _broadcast_lines(bus: dict[str, Any]) -> list[str]:
     """A bus's broadcasts, once: one step for all of its modules — and what proved nobody else hears them."""
     steps = bus.get("broadcasts", [])
     proof = line_proof(bus)
@@ -303,7 +304,7 @@ def _broadcast_lines(bus: dict) -> list[str]:
 PHASES = {"reading": "reading back", "writing": "writing", "verifying": "verifying"}
 
 
-def summary_line(document: dict) -> str:
+def summary_line(document: dict[str, Any]) -> str:
     modules = _modules(document)
     changed = sum(1 for _, m in modules if m["steps"])
     if not changed:
@@ -316,7 +317,7 @@ def summary_line(document: dict) -> str:
     )
 
 
-def estimate(document: dict) -> str:
+def estimate(document: dict[str, Any]) -> str:
     """The time an apply of the plan takes, the total first, then by phase, with the writes' bus time
     beside the naive download's: "estimated time 9.6 s: reading back 4.1 s, writing 1.1 s (bus time
     1.099 s, naive download 1.149 s), verifying 4.4 s" (a plan file without phases: the bus times)."""
@@ -336,7 +337,7 @@ def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
     return f"Time: {sum(took.values()):.1f} s (estimated {sum(estimated.values()):.1f} s) — {phases}"
 
 
-def human(plan: PlantPlan | dict, *, notes: Iterable[str] = ()) -> str:
+def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str:
     """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
     each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary."""
     document, live = _outline(plan, notes)
@@ -384,7 +385,7 @@ def code(text: str) -> str:
     return f"{fence}{pad}{text}{pad}{fence}"
 
 
-def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
+def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
              full_plan: str = "the plan file") -> str:  # fmt: skip
     """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
     the marker, the summary, every axis-release warning and the table of changed modules always;
@@ -422,7 +423,7 @@ def markdown(plan: PlantPlan | dict, *, max_chars: int = COMMENT_BUDGET, notes: 
     return text
 
 
-def _details(bus: str, m: dict, live: dict[tuple[str, int], ModuleChange]) -> str:
+def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str:
     changes = _changes(bus, m, live)
     return "\n".join([
         f"<details><summary>{html.escape(bus)} / {html.escape(m['name'])} (address {m['address']})"

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from prc3cfg.core import codec
-from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, SystemParameters
+from prc3cfg.core.image import PROGRAM_COUNT, SYSTEM_KEYS, ModuleImage, SystemParameters
 
 
 class UnreachableImage(ValueError):
@@ -96,7 +96,7 @@ def summarise(message: codec.Message, system_before: SystemParameters) -> str:
     """One line in device terms, e.g. "write P of programs 3, 7, 9 (40h)"."""
     if isinstance(message, codec.WriteSystem):
         changed = [key for key, old, new in zip(
-            codec.SYSTEM_KEYS, system_before.values(), message.system.values()) if old != new]  # fmt: skip
+            SYSTEM_KEYS, system_before.values(), message.system.values()) if old != new]  # fmt: skip
         text = f"write system parameters {', '.join(changed)}"
     else:
         text = _SUMMARIES[type(message)](message)
