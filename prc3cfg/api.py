@@ -32,8 +32,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import itertools
-import os
-import stat
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -56,7 +54,7 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
-from prc3cfg.plant.importer import module_entry, plant_yaml
+from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
@@ -925,7 +923,7 @@ def write_adoption(adoption: Adoption) -> None:
     checked once the new text is on disk, around the rename (`replace_unless_changed`)."""
     target = adoption.path.resolve()
     try:
-        written = replace_unless_changed(target, adoption.after, adoption.before.encode("utf-8"), stat.S_IMODE(os.stat(target).st_mode))
+        written = replace_unless_changed(target, adoption.after, adoption.before.encode("utf-8"))
     except OSError as error:
         raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
     if not written:
@@ -986,10 +984,5 @@ def import_plant(bare: BareLine, addresses: Iterable[int] | None = None, options
     """A plant file (its text) describing the live modules of one bus (`import_modules`), and how
     many modules it describes: `unmanaged_programs: reset`, so planning it against that bus is empty."""
     images = import_modules(bare, addresses, options)
-    bus = {"name": bus_name, "port": bare.port, "framing": bare.framing, "baud": bare.line.baud,
-           "parity": bare.line.parity, "data_bits": bare.line.data_bits, "stop_bits": bare.line.stop_bits,
-           "timeout": Decimal(str(bare.timeout))}  # fmt: skip
-    if bare.framing == "open-driver":
-        bus["zvz"] = Decimal(str(bare.zvz))
-    entries = [module_entry(image, f"{bus_name}-{image.address}") for image in images]
-    return plant_yaml(plant_name, bus, entries), len(images)
+    bus = bus_entry(bus_name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz)
+    return imported_plant(plant_name, bus, images), len(images)

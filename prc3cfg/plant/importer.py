@@ -14,6 +14,7 @@ Pure: images in, YAML text out.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from decimal import Decimal
 from typing import Any
 
@@ -21,6 +22,7 @@ import yaml
 
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.image import DEFAULT_SYSTEM, SYSTEM_KEYS, ModuleImage, Program, default_program
+from prc3cfg.core.line import LineSettings
 from prc3cfg.core.units import BY_SYMBOL, split_function_output
 
 PROGRAM_KEYS = {"P": "position", "V": "speed", "Vr": "relative_speed", "T": "dwell"}
@@ -117,6 +119,21 @@ class _OneLine(dict):
 
 _Dumper.add_representer(Decimal, lambda dumper, value: dumper.represent_scalar("tag:yaml.org,2002:float", str(value)))
 _Dumper.add_representer(_OneLine, lambda dumper, value: dumper.represent_mapping("tag:yaml.org,2002:map", value, flow_style=True))
+
+
+def bus_entry(name: str, port: str, framing: str, line: LineSettings, timeout: float, zvz: float) -> dict[str, Any]:
+    """A bus of a plant file, without its modules: the line the modules were read on (its `zvz` on
+    open-driver only, where it counts)."""
+    bus: dict[str, Any] = {"name": name, "port": port, "framing": framing, "baud": line.baud, "parity": line.parity,
+                           "data_bits": line.data_bits, "stop_bits": line.stop_bits, "timeout": Decimal(str(timeout))}  # fmt: skip
+    if framing == "open-driver":
+        bus["zvz"] = Decimal(str(zvz))
+    return bus
+
+
+def imported_plant(plant: str, bus: dict[str, Any], images: Iterable[ModuleImage]) -> str:
+    """The plant file of one bus (`bus_entry`) holding these modules, each named BUS-ADDRESS."""
+    return plant_yaml(plant, bus, [module_entry(image, f"{bus['name']}-{image.address}") for image in images])
 
 
 def plant_yaml(plant: str, bus: dict[str, Any], modules: list[dict[str, Any]], schema: str = SCHEMA) -> str:

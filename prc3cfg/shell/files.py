@@ -166,8 +166,8 @@ def write_atomically(path: Path, text: str) -> None:
     _sync_folder(path.parent)
 
 
-def replace_unless_changed(path: Path, text: str, expected: bytes, mode: int) -> bool:
-    """Replace `path` with `text` (permissions `mode`) atomically, as `write_atomically` does, unless
+def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
+    """Replace `path` with `text` atomically, as `write_atomically` does, keeping its permissions, unless
     `path` no longer holds `expected`: then False, and `path` is as the other writer left it.
 
     Checked as late as can be: once `text` is on disk, the file is linked to a second name and
@@ -176,7 +176,7 @@ def replace_unless_changed(path: Path, text: str, expected: bytes, mode: int) ->
     (README, adopt): a save that renames its own file into place between the first comparison and the
     rename, and one that keeps writing into the file it opened before the rename after the second.
     """
-    tmp = _written_beside(path, text, mode)
+    tmp = _written_beside(path, text, stat.S_IMODE(os.stat(path).st_mode))
     was = path.with_name(f"{tmp.name.removesuffix('.tmp')}.was")
     try:
         try:
