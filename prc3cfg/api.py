@@ -59,6 +59,8 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
+from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
@@ -986,3 +988,42 @@ def import_plant(bare: BareLine, addresses: Iterable[int] | None = None, options
     images = import_modules(bare, addresses, options)
     bus = bus_entry(bus_name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz)
     return imported_plant(plant_name, bus, images), len(images)
+
+
+# -- an emulated bus -------------------------------------------------------------------------
+
+
+def emulator(modules: Iterable[int] | None = None, *, state: Path | None = None, framing: str = "crc16",
+             line: LineSettings = LineSettings(), line_speed: bool = False, zvz: float = 0.020, turnaround: float = 0.010,
+             drop_rate: float = 0.0, corrupt_rate: float = 0.0, seed: int | None = None, max_connections: int | None = None,
+             idle_timeout: float | None = None) -> Emulator:  # fmt: skip
+    """A bus emulator (`prc3cfg emulator serve`), serving nothing yet (`listen`, `open_pty`): the
+    modules at `modules` — else those of the `state` file, else 1-30 — as `state` holds them, every
+    write it accepts saved there; closed on leaving its `with`. Settings it refuses: `UserError`."""
+    served, unserved = modules_to_serve(state, sorted(modules) if modules is not None else None)
+    try:
+        return Emulator(
+            served, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed, line=line,
+            faults=FaultInjection(drop_rate, corrupt_rate, seed), state_path=state, unserved=unserved,
+            max_connections=MAX_CONNECTIONS if max_connections is None else max_connections,
+            idle_timeout=IDLE_TIMEOUT if idle_timeout is None else idle_timeout,
+        )  # fmt: skip
+    except ValueError as error:
+        raise UserError(f"emulator: {error}") from None
+
+
+def listen(running: Emulator, host: str, port: int) -> tuple[str, int]:
+    """Serve `running` to TCP clients at HOST:PORT (0: any free port); the address it listens at."""
+    try:
+        return running.listen(host, port)
+    except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds
+        reason = str(error.strerror or error).partition(" (while attempting")[0]
+        raise UserError(f"--listen {host}:{port}: cannot listen ({reason}) — choose a free port on an address of this host") from None
+
+
+def open_pty(running: Emulator) -> str:
+    """Serve `running` on a new pseudo-terminal too; its path."""
+    try:
+        return running.open_pty()
+    except OSError as error:
+        raise UserError(f"--pty: cannot open a pseudo-terminal ({error.strerror or error})") from None

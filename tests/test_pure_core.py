@@ -80,8 +80,6 @@ CLI_MAY_IMPORT = (
     "prc3cfg.plant.problems.Finding",
     # the terminal: Ctrl-C, output files
     "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically",
-    # `prc3cfg emulator serve` is the emulator's own front end
-    "prc3cfg.shell.emulator",
 )  # fmt: skip
 
 

@@ -1,4 +1,5 @@
-"""`prc3cfg emulator serve`: run a bus emulator until SIGINT/SIGTERM (interfaces.md §5)."""
+"""`prc3cfg emulator serve`: run a bus emulator until SIGINT/SIGTERM (interfaces.md §5) — made and
+served by the API (`prc3cfg.api.emulator`); here, its options and what it prints."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ import typer
 
 from prc3cfg.cli import emulator_app
 from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, TIMES, addresses_option, duration, one_of, parse_addresses
-from prc3cfg.errors import UserError
 
 DEFAULT_LISTEN = "127.0.0.1:7001"
 
@@ -73,41 +73,24 @@ def serve(
     keeps its state and the write gets no reply: the master repeats it.
     Warnings and errors are logged on stderr.
     """
+    from prc3cfg import api
     from prc3cfg.core.line import LineSettings
-    from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
-    from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
-    bus, unserved = modules_to_serve(state, parse_addresses(modules) if modules is not None else None)
     if parity is None:  # as scan and import take a pseudo-terminal: without parity
         parity = "none" if pty else "even"
-    try:
-        emulator = Emulator(
-            bus, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed is not None,
-            line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
-            faults=FaultInjection(drop_rate, corrupt_rate, seed), state_path=state,
-            unserved=unserved,
-            max_connections=MAX_CONNECTIONS if max_connections is None else max_connections,
-            idle_timeout=IDLE_TIMEOUT if idle_timeout is None else idle_timeout,
-        )  # fmt: skip
-    except ValueError as error:
-        raise UserError(f"emulator: {error}") from None
+    emulator = api.emulator(
+        parse_addresses(modules) if modules is not None else None, state=state, framing=framing, zvz=zvz, turnaround=turnaround,
+        line_speed=line_speed is not None, line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
+        drop_rate=drop_rate, corrupt_rate=corrupt_rate, seed=seed, max_connections=max_connections, idle_timeout=idle_timeout,
+    )  # fmt: skip
     stop = threading.Event()
     with emulator:
         if listen is not None or not pty:
-            address = DEFAULT_LISTEN if listen is None else listen
-            try:
-                host, port = emulator.listen(*parse_listen(address))
-            except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds
-                reason = str(error.strerror or error).partition(" (while attempting")[0]
-                raise UserError(f"--listen {address}: cannot listen ({reason}) — choose a free port on an address of this host") from None
-            print(f"listening on {host}:{port} ({framing}, modules {', '.join(map(str, sorted(bus)))})", flush=True)
+            host, port = api.listen(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen))
+            print(f"listening on {host}:{port} ({framing}, modules {', '.join(map(str, sorted(emulator.modules())))})", flush=True)
         if pty:
-            try:
-                path = emulator.open_pty()
-            except OSError as error:
-                raise UserError(f"--pty: cannot open a pseudo-terminal ({error.strerror or error})") from None
-            print(f"pty: {path}", flush=True)
+            print(f"pty: {api.open_pty(emulator)}", flush=True)
         for signum in (signal.SIGINT, signal.SIGTERM):  # started: a signal stops it (until now, it was interrupted)
             signal.signal(signum, lambda *_: stop.set())
         stop.wait()
