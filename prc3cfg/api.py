@@ -69,11 +69,13 @@ from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
+#: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "FormatRefused", "Gates", "LineBusy",
-    "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "adopt",
-    "apply", "default_parity", "drift", "import_modules", "import_plant", "init_data_block", "left_alone", "load", "load_images", "picture", "plan",
-    "read", "restore", "scan", "select", "write_adoption",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "FormatRefused", "Gates",
+    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify",
+    "adopt", "apply", "default_parity", "drift", "emulator", "import_modules", "import_plant", "init_data_block", "left_alone", "listen",
+    "load", "load_images", "open_pty", "picture", "plan", "plan_document", "plan_file_plant", "read", "restore", "scan", "select",
+    "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)

@@ -151,3 +151,22 @@ def test_the_blocker_blocks(module):
     result = run(BLOCKING_IMPORT, module)
     assert result.returncode != 0
     assert "is blocked: the pure core must not import it" in result.stderr
+
+
+def api_names_used(path: Path) -> set[str]:
+    """The names a file takes from `prc3cfg.api`: `api.NAME`, and `from prc3cfg.api import NAME`."""
+    tree = ast.parse(path.read_text())
+    used = {node.attr for node in ast.walk(tree)
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "api"}
+    used |= {a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module == "prc3cfg.api" for a in node.names}
+    return used  # fmt: skip
+
+
+def test_the_command_line_calls_only_what_the_api_exports():
+    """`prc3cfg.api.__all__` is what the CLI (and a user's script) calls: the CLI reaches nothing else of it."""
+    import prc3cfg.api
+
+    used = {name: path.relative_to(ROOT) for path in (PACKAGE / "cli").rglob("*.py") for name in api_names_used(path)}
+    assert used.keys() >= {"apply", "plan", "LineOptions"}  # the check sees what the CLI uses
+    assert not {f"{path} uses api.{name}" for name, path in used.items() if name not in prc3cfg.api.__all__}
+    assert all(hasattr(prc3cfg.api, name) for name in prc3cfg.api.__all__)
