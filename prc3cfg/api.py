@@ -49,7 +49,8 @@ from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
 from prc3cfg.core.plantplan import PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
-from prc3cfg.core.render import drifted, plan_json, plural
+from prc3cfg.core.render import Drift, drifted, plan_json, plural
+from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
 from prc3cfg.plant.adopt import Adopted
@@ -57,7 +58,7 @@ from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
-from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
+from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
 from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
@@ -872,18 +873,6 @@ def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, optio
 
 
 # -- drift and Teach In ----------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Drift:
-    """A module that holds something other than the plant file says (Teach In, work on the
-    floor): each difference one line in human units, what the file says → what the module holds,
-    "program 3 position 1.200 m → 1.150 m" (as `adopt` shows it)."""
-
-    bus: str
-    address: int
-    name: str
-    differences: tuple[str, ...]
 
 
 def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,

@@ -72,8 +72,7 @@ CLI_MAY_IMPORT = (
     "prc3cfg.api", "prc3cfg.cli", "prc3cfg.errors",
     # rendering, and the values it shows
     "prc3cfg.core.render", "prc3cfg.core.units", "prc3cfg.core.plot.plot_format", "prc3cfg.core.line.LineSettings",
-    "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.apply.ModuleRun", "prc3cfg.shell.apply.Release",
-    "prc3cfg.shell.link.Link",
+    "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.link.Link",
     # plant files: loading one is validating it; showing one shows where each value came from
     "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError", "prc3cfg.plant.load_plant",
     "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.models.ChainSpec", "prc3cfg.plant.profiles.Sourced",

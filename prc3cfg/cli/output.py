@@ -1,7 +1,8 @@
 """What `read`, `plan`, `apply` and `restore` print and ask: plans, drift, gates, the account of an apply.
 
 Imported by the commands when they run (not when `prc3cfg --help` lists them). Rendering is
-`prc3cfg.core.render`'s; this module arranges it for the terminal and asks the questions.
+`prc3cfg.core.render`'s — plans, drift, each module's account; this module arranges it for the
+terminal (which stream, in what order) and asks the questions.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ from prc3cfg.cli.common import TerminalProgress, ask, print_lines, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.errors import UserError
-from prc3cfg.shell.apply import ModuleRun, Release
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str]) -> None:
@@ -46,16 +46,8 @@ def targeting(modules: list[str] | None) -> None:
 
 
 def drift(drifted: list[Drift], modules: int) -> None:
-    """Drift (Teach In, work on the floor) as drift, not as a plan: each module that drifted, its
-    differences, and how many of the `modules` read drifted."""
-    for found in drifted:
-        print(f"~ bus {found.bus}, module {found.address} ({found.name}) drifted from the plant file (file → module):")
-        print("\n".join(f"    {text}" for text in found.differences))
-    if drifted:
-        print(f"Drift: {len(drifted)} of {render.plural(modules, 'module')} hold{'s' if len(drifted) == 1 else ''} "
-              "something other than the plant file says.")  # fmt: skip
-    else:
-        print("No drift: every module holds what the plant file says.")
+    """Drift (Teach In, work on the floor) as drift, not as a plan (`render.drift_lines`)."""
+    print("\n".join(render.drift_lines(drifted, modules)))
 
 
 def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions) -> Gates:
@@ -91,54 +83,13 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
     return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=approve)
 
 
-def account(run: ModuleRun) -> str | None:
-    """What was and was not written to one module, and what a read-back says it holds now (None: a
-    module not in the plan that was not looked at — nothing to say)."""
-    head = f"bus {run.bus}, module {run.address} ({run.name})"
-    if run.verified and not run.steps:
-        if not run.watched:
-            return None
-        return f"✓ {head}: not in the plan; its system parameters read back as they were (a release went out on a line without error detection)"
-    if run.verified:
-        repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
-        received = f" and {run.broadcasts} broadcast{'s' if run.broadcasts != 1 else ''} received" if run.broadcasts else ""
-        return f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} written{received}, verified{repaired}"
-    lines = [f"✗ {head}: {run.failure}"]
-    if not run.sent:
-        lines.append("    nothing was sent to it")
-    else:
-        lines.append("    written: " + ("; ".join(s.summary for s in run.written) or "nothing acknowledged"))
-        if run.unacknowledged:
-            lines.append("    sent, not acknowledged: " + "; ".join(s.summary for s in run.unacknowledged))
-        if run.unsent:
-            lines.append("    not sent: " + "; ".join(s.summary for s in run.unsent))
-    if run.final is None:
-        lines.append("    not read back: what the module holds is not known")
-    elif run.unchanged:
-        lines.append("    read back: unchanged, as before the apply")
-    else:
-        lines.append("    read back, it differs from the plant file: " + "; ".join(render.differences(run.final, run.desired)))
-    return "\n".join(lines)
-
-
-def travel_list(runs: list[ModuleRun]) -> str | None:
-    released = [r for r in runs if r.released is not Release.NO]
-    if not released:
-        return None
-    names = ", ".join(
-        f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
-        for r in released
-    )
-    return f"⚠ Travel to reference point required before production on: {names}"
-
-
 def report(result: ApplyResult) -> None:
     """The account of every module, the reference-travel list (with the releases earlier applies
     left untold), where the records are — and then those releases count as told."""
     for run in result.runs:
-        if (said := account(run)) is not None:
+        if (said := render.account(run)) is not None:
             print(said, file=sys.stdout if run.verified else sys.stderr)
-    if (travel := travel_list(list(result.runs))) is not None:
+    if (travel := render.travel_list(result.runs)) is not None:
         print(travel)
     for proof in result.plan.proofs:
         if proof.silent and any(run.bus == proof.bus and run.broadcasts for run in result.runs):

@@ -41,14 +41,7 @@ def read(
         print(json.dumps([{"bus": bus.name, **images[(bus.name, m.address)].to_json()} for bus, m in pairs], indent=1))
         return
     for bus, m in pairs:
-        image = images[(bus.name, m.address)]
-        print(f"bus {bus.name}, module {m.address} ({m.name})")
-        print("  system: " + ", ".join(
-            f"{render.field_name(k)} {render.format_value(k, v)}" for k, v in image.system.to_json().items()))  # fmt: skip
-        for number, program in enumerate(image.programs, start=1):
-            if program is not None:
-                values = ", ".join(f"{render.field_name(k)} {render.format_value(k, v)}" for k, v in program.to_json().items() if k != "A")
-                print(f"  program {number}: {values}" + (f", next {program.A}" if program.A else ""))
+        print("\n".join(render.image_lines(bus.name, m.name, images[(bus.name, m.address)])))
 
 
 @app.command()

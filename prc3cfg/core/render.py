@@ -2,7 +2,8 @@
 
 Owns the words and layout of `plan` output — human (Terraform-like), markdown for pull
 request comments (within a comment's size, with a stroke chart per changed chain), and the
-`changes` list of the JSON output. Reasons shown here never
+`changes` list of the JSON output — and of what `read`, drift and the account of an apply
+say of each module (`image_lines`, `drift_lines`, `account`, `travel_list`). Reasons shown here never
 steer an apply (the plan's steps do). A module's diff (`ModuleDiff`: its fields, its jumps,
 the programs it clamps) is worked out by comparing the two images field by field, once
 per output and module, as the module is shown (kept for all 240 modules of a large plant, the
@@ -15,16 +16,18 @@ import functools
 import html
 import re
 import shlex
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
 from prc3cfg.core.motion import MotionError, paired_chains
+from prc3cfg.core.planner import Step
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import mermaid
 from prc3cfg.core.units import BY_SYMBOL, format_function_output
+from prc3cfg.core.verification import Release
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"
@@ -454,3 +457,125 @@ def _charts(m: ModuleChange) -> list[str]:
         command = code(f"prc3cfg show PLANT --module {shlex.quote(m.name)} --plot FILE.svg")
         charts.append(f"\n_{plural(len(pairs) - CHARTS, 'more chain')} changed: {command} draws them all._")
     return charts if pairs else []
+
+
+# -- what `read`, drift and the account of an apply say of modules ----------------------------
+
+
+def image_lines(bus: str, name: str, image: ModuleImage) -> list[str]:
+    """A module as `prc3cfg read` shows it: where it is, its system parameters, each program read."""
+    lines = [f"bus {bus}, module {image.address} ({name})",
+             "  system: " + ", ".join(f"{field_name(k)} {format_value(k, v)}" for k, v in image.system.to_json().items())]  # fmt: skip
+    for number, program in enumerate(image.programs, start=1):
+        if program is not None:
+            values = ", ".join(f"{field_name(k)} {format_value(k, v)}" for k, v in program.to_json().items() if k != "A")
+            lines.append(f"  program {number}: {values}" + (f", next {program.A}" if program.A else ""))
+    return lines
+
+
+@dataclass(frozen=True)
+class Drift:
+    """A module that holds something other than the plant file says (Teach In, work on the
+    floor): each difference one line in human units, what the file says → what the module holds,
+    "program 3 position 1.200 m → 1.150 m" (as `adopt` shows it)."""
+
+    bus: str
+    address: int
+    name: str
+    differences: tuple[str, ...]
+
+
+def drift_lines(drifts: Sequence[Drift], modules: int) -> list[str]:
+    """Drift as drift, not as a plan: each module that drifted, its differences, and how many of the
+    `modules` read drifted."""
+    lines = []
+    for found in drifts:
+        lines.append(f"~ bus {found.bus}, module {found.address} ({found.name}) drifted from the plant file (file → module):")
+        lines.extend(f"    {text}" for text in found.differences)
+    if drifts:
+        lines.append(f"Drift: {len(drifts)} of {plural(modules, 'module')} hold{'s' if len(drifts) == 1 else ''} "
+                     "something other than the plant file says.")  # fmt: skip
+    else:
+        lines.append("No drift: every module holds what the plant file says.")
+    return lines
+
+
+class Run(Protocol):
+    """What the account of an apply reads of one module's run (`prc3cfg.shell.apply.ModuleRun`)."""
+
+    @property
+    def bus(self) -> str: ...
+    @property
+    def address(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def desired(self) -> ModuleImage: ...
+    @property
+    def steps(self) -> tuple[Step, ...]: ...
+    @property
+    def sent(self) -> list[Step]: ...
+    @property
+    def written(self) -> list[Step]: ...
+    @property
+    def unacknowledged(self) -> tuple[Step, ...]: ...
+    @property
+    def unsent(self) -> tuple[Step, ...]: ...
+    @property
+    def broadcasts(self) -> int: ...
+    @property
+    def watched(self) -> bool: ...
+    @property
+    def final(self) -> ModuleImage | None: ...
+    @property
+    def unchanged(self) -> bool: ...
+    @property
+    def failure(self) -> str | None: ...
+    @property
+    def verified(self) -> bool: ...
+    @property
+    def repairs(self) -> int: ...
+    @property
+    def released(self) -> Release: ...
+
+
+def account(run: Run) -> str | None:
+    """What was and was not written to one module, and what a read-back says it holds now (None: a
+    module not in the plan that was not looked at — nothing to say)."""
+    head = f"bus {run.bus}, module {run.address} ({run.name})"
+    if run.verified and not run.steps:
+        if not run.watched:
+            return None
+        return f"✓ {head}: not in the plan; its system parameters read back as they were (a release went out on a line without error detection)"
+    if run.verified:
+        repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
+        received = f" and {run.broadcasts} broadcast{'s' if run.broadcasts != 1 else ''} received" if run.broadcasts else ""
+        return f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} written{received}, verified{repaired}"
+    lines = [f"✗ {head}: {run.failure}"]
+    if not run.sent:
+        lines.append("    nothing was sent to it")
+    else:
+        lines.append("    written: " + ("; ".join(s.summary for s in run.written) or "nothing acknowledged"))
+        if run.unacknowledged:
+            lines.append("    sent, not acknowledged: " + "; ".join(s.summary for s in run.unacknowledged))
+        if run.unsent:
+            lines.append("    not sent: " + "; ".join(s.summary for s in run.unsent))
+    if run.final is None:
+        lines.append("    not read back: what the module holds is not known")
+    elif run.unchanged:
+        lines.append("    read back: unchanged, as before the apply")
+    else:
+        lines.append("    read back, it differs from the plant file: " + "; ".join(differences(run.final, run.desired)))
+    return "\n".join(lines)
+
+
+def travel_list(runs: Sequence[Run]) -> str | None:
+    """The modules whose axes were — or may have been — released: they must travel to their reference point."""
+    released = [r for r in runs if r.released is not Release.NO]
+    if not released:
+        return None
+    names = ", ".join(
+        f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
+        for r in released
+    )
+    return f"⚠ Travel to reference point required before production on: {names}"

@@ -10,17 +10,27 @@
 - `verification_time`: the bus time of reading that reach back (the floor of a verification).
 
 Used by the read-back, by `apply`'s verification and by the planning of broadcasts, which
-must pay for reading back every module a broadcast reaches. Pure.
+must pay for reading back every module a broadcast reaches. `Release`: what the verification
+concludes of a module's axes. Pure.
 """
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Iterable, Sequence
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import Step
+
+
+class Release(enum.Enum):
+    """Whether a module's axes were released (10h/20h) and it must travel to its reference point."""
+
+    NO = "no"
+    YES = "yes"
+    POSSIBLY = "possibly"  # a 10h/20h went out unacknowledged, and no read-back settles it
 
 
 def read_messages(programs: Iterable[int]) -> list[codec.Message]:

@@ -42,7 +42,7 @@ from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.planner import Step, plan_module
 from prc3cfg.core.render import plural
-from prc3cfg.core.verification import reach
+from prc3cfg.core.verification import Release, reach
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.shell.link import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
@@ -62,14 +62,6 @@ class Verify(enum.Enum):
 
     FLOOR = "floor"  # what the steps could have changed
     FULL = "full"  # the system and every program known from the first read-back
-
-
-class Release(enum.Enum):
-    """Whether a module's axes were released (10h/20h) and it must travel to its reference point."""
-
-    NO = "no"
-    YES = "yes"
-    POSSIBLY = "possibly"  # a 10h/20h went out unacknowledged, and no read-back settles it
 
 
 @dataclass(slots=True)
