@@ -20,11 +20,13 @@ Every function that talks on a line takes `LineOptions`: retries, the lock time-
 trace, a cancel event (Ctrl-C, `prc3cfg.shell.cancel`) and a `Progress` to report to.
 
 Owns the workflows: which modules, what to read, locking the lines, reading back, planning
-(and broadcasts), proving a plan file, gating, the snapshot and the journal, running and
-verifying, restoring, drift, adopting Teach In into the plant file, scanning, importing, a
-gateway's INIT block and the pictures of a module's motion. Does not own what they are made
-of (the pure core, `prc3cfg.core`; plant files, `prc3cfg.plant`; the shell: links, locks,
-records, apply, `prc3cfg.shell`), nor arguments, prompts and output (`prc3cfg.cli`).
+each line as it is read (and probing it before broadcasts), proving a plan file, gating, the
+snapshot and the journal, running and verifying, restoring, drift, adopting Teach In into the
+plant file, scanning, importing, a gateway's INIT block, the pictures of a module's motion and
+serving an emulated bus. Does not own what they are made of (the pure core, `prc3cfg.core` —
+the planner and its cache, `prc3cfg.core.planning`; plant files, `prc3cfg.plant`; the shell:
+links, locks, records, apply, files, the emulator, `prc3cfg.shell`), nor arguments, prompts
+and output (`prc3cfg.cli`). `__all__` is what the CLI and users' scripts call.
 """
 
 from __future__ import annotations
