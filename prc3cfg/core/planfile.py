@@ -17,9 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pydantic import BaseModel, Field, ValidationError
+
 from prc3cfg import __version__
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.contract import Flag, Number, Text, Whole, json_path, said
 from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import DEFAULT_SYSTEM, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
@@ -56,86 +59,92 @@ class PlanFileError(ValueError):
 AGAIN = "make the plan again with prc3cfg plan --out"
 
 
-@dataclass(frozen=True)
-class Kind:
-    """A JSON value a plan file holds at some place: `words` as the error message says it."""
-
-    words: str
-    holds: Callable[[Any], bool]
+class _Step(BaseModel):
+    message: Text
+    releases_axes: Flag
+    broadcast: Flag = False
 
 
-@dataclass(frozen=True)
-class Maybe:
-    """A key an object may lack."""
-
-    shape: Any
-
-
-TEXT = Kind("text", lambda v: isinstance(v, str))
-WHOLE = Kind("a whole number", lambda v: type(v) is int)
-WHOLE_OR_NULL = Kind("a whole number or null", lambda v: v is None or type(v) is int)
-NUMBER = Kind("a number", lambda v: type(v) in (int, float))
-FLAG = Kind("true or false", lambda v: type(v) is bool)
-OBJECT = Kind("an object", lambda v: isinstance(v, dict))
-
-# The plan file, as `apply --plan` reads it (a key → its shape; [shape]: a list of them). The
-# rest of it — summaries, figures, the review — is held against what prc3cfg writes for the
-# plan it proves (`check_plan`), as any JSON.
-_STEP = {"message": TEXT, "releases_axes": FLAG, "broadcast": Maybe(FLAG)}
-_MODULE = {"address": WHOLE, "name": TEXT, "state_sha256": TEXT, "releases_axes": FLAG, "steps": [_STEP]}
-PLAN_FILE = {
-    "plant": TEXT, "plant_path": TEXT, "plant_sha256": TEXT, "prc3cfg_version": Maybe(TEXT),
-    "buses": [{"name": TEXT, "modules": [_MODULE]}],
-}  # fmt: skip
-# ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`),
-# the figures, each bus's broadcasts.
-_CHANGES = {
-    "fields": [{"program": WHOLE_OR_NULL, "field": TEXT, "text": TEXT}], "symbols": Maybe(OBJECT),
-    "chains_removed": [TEXT], "chains_added": [TEXT], "clamped": [{"program": WHOLE, "text": TEXT}], "charts": Maybe([TEXT]),
-}  # fmt: skip
-_BROADCAST = {"message": TEXT, "releases_axes": FLAG, "modules": [WHOLE]}
-SHOWN_PLAN_FILE = PLAN_FILE | {
-    "buses": [{"name": TEXT, "broadcasts": Maybe([_BROADCAST]), "proven_silent": Maybe([WHOLE]), "unlisted_modules": Maybe([WHOLE]),
-               "modules": [_MODULE | {"estimated_bus_time_s": Maybe(NUMBER), "changes": _CHANGES}]}],
-    "axis_releases": [TEXT], "message_count": WHOLE, "estimated_bus_time_s": NUMBER, "naive_bus_time_s": NUMBER,
-    "left_alone": Maybe([TEXT]), "estimated_time_s": Maybe(NUMBER),
-    "estimated_phases_s": Maybe({"reading": NUMBER, "writing": NUMBER, "verifying": NUMBER}),
-}  # fmt: skip
+class _Module(BaseModel):
+    address: Whole
+    name: Text
+    state_sha256: Text
+    releases_axes: Flag
+    steps: list[_Step]
 
 
-def shape_problem(value: Any, shape: Any, at: str = "") -> str | None:
-    """Where and how `value` is not of `shape` (a `Kind`, [shape] or {key: shape}), in words —
-    'buses[0].modules[2] has no "steps"', "buses[1].name is null, where text belongs" — or None."""
-    if isinstance(shape, dict):
-        if not isinstance(value, dict):
-            return _wrong(value, OBJECT.words, at)
-        for key, inner in shape.items():
-            if key not in value:
-                if isinstance(inner, Maybe):
-                    continue
-                return f'{at or "the plan"} has no "{key}"'
-            if problem := shape_problem(value[key], inner.shape if isinstance(inner, Maybe) else inner, f"{at}.{key}".lstrip(".")):
-                return problem
-        return None
-    if isinstance(shape, list):
-        if not isinstance(value, list):
-            return _wrong(value, "a list", at)
-        return next((p for i, item in enumerate(value) if (p := shape_problem(item, shape[0], f"{at}[{i}]")) is not None), None)
-    return None if shape.holds(value) else _wrong(value, shape.words, at)
+class _Bus(BaseModel):
+    name: Text
+    modules: list[_Module]
 
 
-def _wrong(value: Any, wanted: str, at: str) -> str:
-    return f"{at or 'the plan'} is {_described(value)}, where {wanted} belongs"
+class PlanDocument(BaseModel):
+    """The plan file, as `apply --plan` reads it. The rest of it — summaries, figures, the review —
+    is held against what prc3cfg writes for the plan it proves (`check_plan`), as any JSON."""
+
+    plant: Text
+    plant_path: Text
+    plant_sha256: Text
+    prc3cfg_version: Text = "before 0.1.0"
+    buses: list[_Bus]
 
 
-def _described(value: Any) -> str:
-    """A JSON value in a few words: null, true, 2.7, the text "2", a list, an object."""
-    if value is None or isinstance(value, bool | int | float):
-        text = json.dumps(value)
-        return text if len(text) <= 20 else f"a number of {len(text)} characters"
-    if isinstance(value, str):
-        return f"the text {json.dumps(value[:20])}" + ("…" if len(value) > 20 else "")
-    return "a list" if isinstance(value, list) else "an object"
+# ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`), the
+# figures, each bus's broadcasts. A key with a default may be left out (the default is never
+# read: what is shown is the document), never null.
+class _Field(BaseModel):
+    program: Whole | None
+    field: Text
+    text: Text
+
+
+class _Clamped(BaseModel):
+    program: Whole
+    text: Text
+
+
+class _Changes(BaseModel):
+    fields: list[_Field]
+    symbols: dict[str, Any] = Field(default_factory=dict)
+    chains_removed: list[Text]
+    chains_added: list[Text]
+    clamped: list[_Clamped]
+    charts: list[Text] = Field(default_factory=list)
+
+
+class _ShownModule(_Module):
+    estimated_bus_time_s: Number = 0.0
+    changes: _Changes
+
+
+class _Broadcast(BaseModel):
+    message: Text
+    releases_axes: Flag
+    modules: list[Whole]
+
+
+class _ShownBus(_Bus):
+    broadcasts: list[_Broadcast] = Field(default_factory=list)
+    proven_silent: list[Whole] = Field(default_factory=list)
+    unlisted_modules: list[Whole] = Field(default_factory=list)
+    modules: list[_ShownModule]  # type: ignore[assignment]  # a module as shown is a module
+
+
+class _Phases(BaseModel):
+    reading: Number
+    writing: Number
+    verifying: Number
+
+
+class ShownPlanDocument(PlanDocument):
+    buses: list[_ShownBus]  # type: ignore[assignment]  # a bus as shown is a bus
+    axis_releases: list[Text]
+    message_count: Whole
+    estimated_bus_time_s: Number
+    naive_bus_time_s: Number
+    left_alone: list[Text] = Field(default_factory=list)
+    estimated_time_s: Number = 0.0
+    estimated_phases_s: _Phases = _Phases(reading=0.0, writing=0.0, verifying=0.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,54 +163,53 @@ def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
     """A parsed plan file; raises PlanFileError.
 
     Refused here, before the line is touched: a damaged file — a key missing, a value of
-    another kind (`PLAN_FILE`; with `shown`, all that `show` shows, `SHOWN_PLAN_FILE`) — a
+    another kind (`PlanDocument`; with `shown`, all that `show` shows, `ShownPlanDocument`) — a
     module listed twice, more steps than any plan needs (`MAX_STEPS`), a message that is not
     in the bytes prc3cfg sends for it (a "don't care" byte changed), and `releases_axes` flags
     that are not what the steps' bytes say.
     """
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
-    if (problem := shape_problem(data, SHOWN_PLAN_FILE if shown else PLAN_FILE)) is not None:
-        raise PlanFileError(f"damaged plan file: {problem} — {AGAIN}")
+    try:
+        document = (ShownPlanDocument if shown else PlanDocument).model_validate(data)
+    except ValidationError as error:
+        raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'))} — {AGAIN}") from None
     modules = []
     seen: set[tuple[str, int]] = set()
-    for b, bus in enumerate(data["buses"]):
-        for m, module in enumerate(bus["modules"]):
-            entry = _planned_module(bus["name"], module, f"buses[{b}].modules[{m}]")
+    for b, bus in enumerate(document.buses):
+        for m, module in enumerate(bus.modules):
+            entry = _planned_module(bus.name, module, f"buses[{b}].modules[{m}]")
             if (entry.bus, entry.address) in seen:
                 raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
             seen.add((entry.bus, entry.address))
             modules.append(entry)
-        if shown:
-            for index, step in enumerate(bus.get("broadcasts", [])):
-                _message(step["message"], f"buses[{b}].broadcasts[{index}]", f"bus {bus['name']}: broadcast {index + 1}")
-    fields = (data["plant"], data["plant_path"], data["plant_sha256"], data.get("prc3cfg_version", "before 0.1.0"))
-    return PlanFile(*fields, tuple(modules), data)
+        if isinstance(bus, _ShownBus):
+            for index, step in enumerate(bus.broadcasts):
+                _message(step.message, f"buses[{b}].broadcasts[{index}]", f"bus {bus.name}: broadcast {index + 1}")
+    return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data)
 
 
-def _planned_module(bus: str, module: dict[str, Any], at: str) -> PlannedModule:
-    """A module's entry, of the shape `PLAN_FILE` gives it, at `at` ("buses[0].modules[2]")."""
-    address = module["address"]
-    where = f"bus {bus}, module {address}"
-    steps = module["steps"]
-    if len(steps) > MAX_STEPS:
-        raise PlanFileError(f"{where}: {len(steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
+def _planned_module(bus: str, module: _Module, at: str) -> PlannedModule:
+    """A module's entry, at `at` ("buses[0].modules[2]")."""
+    where = f"bus {bus}, module {module.address}"
+    if len(module.steps) > MAX_STEPS:
+        raise PlanFileError(f"{where}: {len(module.steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
     messages, flags = [], []
-    for index, step in enumerate(steps, start=1):
-        flags.append(step.get("broadcast", False))
+    for index, step in enumerate(module.steps, start=1):
+        flags.append(step.broadcast)
         if flags[-1] and not all(flags):
-            raise PlanFileError(f"{where}: step {index} ({step['message'][:128]}) is marked broadcast after a step that is not — "
+            raise PlanFileError(f"{where}: step {index} ({step.message[:128]}) is marked broadcast after a step that is not — "
                                 f"broadcasts lead a module's steps: {AGAIN}")  # fmt: skip
-        message = _message(step["message"], f"{at}.steps[{index - 1}]", f"{where}: step {index}")
-        if step["releases_axes"] is not message.RELEASES_AXES:
+        message = _message(step.message, f"{at}.steps[{index - 1}]", f"{where}: step {index}")
+        if step.releases_axes is not message.RELEASES_AXES:
             raise PlanFileError(
-                f"{where}: step {index} ({step['message']}) says releases_axes: {json.dumps(step['releases_axes'])}, "
+                f"{where}: step {index} ({step.message}) says releases_axes: {json.dumps(step.releases_axes)}, "
                 f"but {message.ID:02X}h {'releases' if message.RELEASES_AXES else 'does not release'} the axes — {AGAIN}"
             )
         messages.append(message)
-    if module["releases_axes"] is not any(m.RELEASES_AXES for m in messages):
-        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module['releases_axes'])} is not what its steps do — {AGAIN}")
-    return PlannedModule(bus, address, module["name"], module["state_sha256"], tuple(messages), sum(flags))
+    if module.releases_axes is not any(m.RELEASES_AXES for m in messages):
+        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module.releases_axes)} is not what its steps do — {AGAIN}")
+    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags))
 
 
 def _message(text: str, at: str, where: str) -> codec.Message:

@@ -1,0 +1,91 @@
+"""The JSON files prc3cfg writes and reads back — plan files, module images, snapshots, an
+emulator's state — as pydantic models, and a refusal of one said in words.
+
+Owns the kinds of value those models hold (`Whole`, `Text`, `Flag`, `Number`, `within` a
+range: never "2", 2.7 or true for a whole number) and the wording of pydantic's first error
+about a document: where in it, what is there, what belongs there — 'buses[0].modules[2] has no
+"steps"', "buses[1].name is null, where text belongs", "module 3: program 7: P = 12000 is
+outside 0..9999". Each contract's own module names its file, words its places when a JSON path
+is not the best name for them, and says what to do. Plant files (YAML, positions) are
+`prc3cfg.plant.messages`. Pure.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from typing import Annotated, Any
+
+from annotated_types import Len
+from pydantic import AfterValidator, Strict, ValidationError
+from pydantic_core import ErrorDetails, PydanticCustomError
+
+Whole = Annotated[int, Strict()]
+Text = Annotated[str, Strict()]
+Flag = Annotated[bool, Strict()]
+Number = Annotated[float, Strict()]  # a whole number too, never true or "2"
+
+#: What belongs where pydantic found something else, by its error type.
+WANTED = {
+    "int_type": "a whole number", "string_type": "text", "bool_type": "true or false", "float_type": "a number",
+    "model_type": "an object", "model_attributes_type": "an object", "dataclass_type": "an object", "dict_type": "an object",
+    "list_type": "a list", "tuple_type": "a list",
+}  # fmt: skip
+
+Place = Callable[[Sequence[str | int]], str]
+
+
+def within(low: int, high: int) -> Any:
+    """A whole number within low..high (its error names both ends, as pydantic's `ge`/`le` do not)."""
+
+    def check(value: int) -> int:
+        if not low <= value <= high:
+            raise PydanticCustomError("outside", "outside {low}..{high}", {"low": low, "high": high})
+        return value
+
+    return Annotated[int, Strict(), AfterValidator(check)]
+
+
+def exactly(count: int) -> Len:
+    """A list of exactly `count` items."""
+    return Len(count, count)
+
+
+def json_path(loc: Sequence[str | int], root: str = "the document") -> str:
+    """A place in a JSON document as a path, "buses[0].modules[2].steps"; `root` for the document itself."""
+    path = "".join(f"[{part}]" if isinstance(part, int) else f".{part}" for part in loc).lstrip(".")
+    return path or root
+
+
+def said(error: ValidationError, place: Place) -> str:
+    """The first problem pydantic found, in words, at the place `place` names ("buses[0].name")."""
+    return worded(error.errors(include_url=False)[0], place)
+
+
+def worded(detail: ErrorDetails, place: Place) -> str:
+    """One pydantic error about a JSON document in words."""
+    loc, kind, value = detail["loc"], detail["type"], detail["input"]
+    at = place(loc)
+    ctx = detail.get("ctx", {})
+    if kind == "missing":
+        return f'{place(loc[:-1])} has no "{loc[-1]}"'
+    if kind == "outside":
+        return f"{at} = {described(value)} is outside {ctx['low']}..{ctx['high']}"
+    if kind in ("too_short", "too_long") and isinstance(value, list | tuple):
+        return f"{at} is a list of {len(value)}, where a list of {ctx.get('min_length', ctx.get('max_length'))} belongs"
+    if kind == "literal_error":
+        return f"{at} is {described(value)}, where {ctx['expected'].replace(chr(39), chr(34))} belongs"
+    wanted = WANTED.get(kind)
+    if wanted is None:  # a rule of the model's own (a value error): its words
+        return f"{at} is {described(value)}: {detail['msg'].removeprefix('Value error, ')}"
+    return f"{at} is {described(value)}, where {wanted} belongs"
+
+
+def described(value: Any) -> str:
+    """A JSON value in a few words: null, true, 2.7, the text "2", a list, an object."""
+    if value is None or isinstance(value, bool | int | float):
+        text = json.dumps(value)
+        return text if len(text) <= 20 else f"a number of {len(text)} characters"
+    if isinstance(value, str):
+        return f"the text {json.dumps(value[:20])}" + ("…" if len(value) > 20 else "")
+    return "a list" if isinstance(value, list | tuple) else "an object"
