@@ -45,7 +45,7 @@ from prc3cfg.core import codec, gateway, planfile, plot, sharing
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import detects_damage, get_framing
-from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage, images_from_json
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planner import UnreachableImage, plan_module
@@ -328,8 +328,8 @@ def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) 
     remedy = "save the images again with prc3cfg read --json"
     entries = read_input(path, "the file prc3cfg read --json wrote", remedy)
     try:
-        saved = [(entry.get("bus"), ModuleImage.from_json(entry)) for entry in entries]
-    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        saved = [(entry.get("bus"), image) for entry, image in zip(entries, images_from_json(entries))]
+    except ValueError as error:
         raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
     images: dict[Key, ModuleImage] = {}
     for bus, module in select(plant, modules):

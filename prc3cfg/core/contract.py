@@ -1,8 +1,8 @@
 """The JSON files prc3cfg writes and reads back — plan files, module images, snapshots, an
 emulator's state — as pydantic models, and a refusal of one said in words.
 
-Owns the kinds of value those models hold (`Whole`, `Text`, `Flag`, `Number`, `within` a
-range: never "2", 2.7 or true for a whole number) and the wording of pydantic's first error
+Owns the kinds of value those models hold (`Whole`, `Text`, `Flag`, `Number`; `within` a
+range, `one_of` some texts: never "2", 2.7 or true for a whole number) and the wording of pydantic's first error
 about a document: where in it, what is there, what belongs there — 'buses[0].modules[2] has no
 "steps"', "buses[1].name is null, where text belongs", "module 3: program 7: P = 12000 is
 outside 0..9999". Each contract's own module names its file, words its places when a JSON path
@@ -13,11 +13,11 @@ is not the best name for them, and says what to do. Plant files (YAML, positions
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Annotated, Any
 
 from annotated_types import Len
-from pydantic import AfterValidator, Strict, ValidationError
+from pydantic import AfterValidator, BeforeValidator, Strict, ValidationError
 from pydantic_core import ErrorDetails, PydanticCustomError
 
 Whole = Annotated[int, Strict()]
@@ -35,15 +35,42 @@ WANTED = {
 Place = Callable[[Sequence[str | int]], str]
 
 
-def within(low: int, high: int) -> Any:
-    """A whole number within low..high (its error names both ends, as pydantic's `ge`/`le` do not)."""
+def within(low: int, high: int) -> AfterValidator:
+    """A number within low..high, as metadata of `Whole` (its error names both ends, as pydantic's
+    `ge`/`le` do not): `Annotated[int, Strict(), within(1, 30)]`."""
 
     def check(value: int) -> int:
         if not low <= value <= high:
             raise PydanticCustomError("outside", "outside {low}..{high}", {"low": low, "high": high})
         return value
 
-    return Annotated[int, Strict(), AfterValidator(check)]
+    return AfterValidator(check)
+
+
+def one_of(values: Iterable[str]) -> AfterValidator:
+    """Text that is one of `values`, as metadata of `Text`."""
+    allowed = tuple(values)
+    expected = ", ".join(json.dumps(v) for v in allowed[:-1]) + f" or {json.dumps(allowed[-1])}"
+
+    def check(value: str) -> str:
+        if value not in allowed:
+            raise PydanticCustomError("literal_error", "not one of {expected}", {"expected": expected})
+        return value
+
+    return AfterValidator(check)
+
+
+def every_key(keys: Iterable[str]) -> BeforeValidator:
+    """An object that gives each of `keys`, as metadata of a model whose fields have defaults
+    (a default serves code, not a file, which says every value)."""
+    required = tuple(keys)
+
+    def check(value: Any) -> Any:
+        if isinstance(value, dict) and (missing := next((key for key in required if key not in value), None)) is not None:
+            raise PydanticCustomError("missing_key", "no {key}", {"key": missing})
+        return value
+
+    return BeforeValidator(check)
 
 
 def exactly(count: int) -> Len:
@@ -69,12 +96,14 @@ def worded(detail: ErrorDetails, place: Place) -> str:
     ctx = detail.get("ctx", {})
     if kind == "missing":
         return f'{place(loc[:-1])} has no "{loc[-1]}"'
+    if kind == "missing_key":
+        return f'{at} has no "{ctx["key"]}"'
     if kind == "outside":
         return f"{at} = {described(value)} is outside {ctx['low']}..{ctx['high']}"
     if kind in ("too_short", "too_long") and isinstance(value, list | tuple):
         return f"{at} is a list of {len(value)}, where a list of {ctx.get('min_length', ctx.get('max_length'))} belongs"
     if kind == "literal_error":
-        return f"{at} is {described(value)}, where {ctx['expected'].replace(chr(39), chr(34))} belongs"
+        return f"{at} is {described(value)}, where {ctx['expected']} belongs"
     wanted = WANTED.get(kind)
     if wanted is None:  # a rule of the model's own (a value error): its words
         return f"{at} is {described(value)}: {detail['msg'].removeprefix('Value error, ')}"
