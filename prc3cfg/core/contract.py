@@ -17,8 +17,13 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Annotated, Any
 
 from annotated_types import Len
-from pydantic import AfterValidator, BeforeValidator, Strict, ValidationError
+from pydantic import AfterValidator, BeforeValidator, ConfigDict, Strict, ValidationError
 from pydantic_core import ErrorDetails, PydanticCustomError
+
+#: The config of every model of a contract in the core: its validator is built at the first reading,
+#: not at import — building one loads pydantic's plugins, which import `socket` (through
+#: importlib.metadata), and the core imports no `socket` (tests/test_pure_core.py).
+LATER = ConfigDict(defer_build=True)
 
 Whole = Annotated[int, Strict()]
 Text = Annotated[str, Strict()]

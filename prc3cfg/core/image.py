@@ -14,7 +14,7 @@ from typing import Annotated, Any
 
 from pydantic import TypeAdapter, ValidationError
 
-from prc3cfg.core.contract import Whole, every_key, exactly, json_path, said
+from prc3cfg.core.contract import LATER, Whole, every_key, exactly, json_path, said
 
 PROGRAM_COUNT = 64
 PROGRAM_NUMBERS = range(1, PROGRAM_COUNT + 1)
@@ -141,9 +141,9 @@ class ModuleImage:
     def from_json(cls, data: Any) -> ModuleImage:
         """The image a JSON object holds (interfaces.md §2); ValueError saying where and what in words."""
         try:
-            return _IMAGE.validate_python(data)
+            return _IMAGES.validate_python([data])[0]
         except ValidationError as error:
-            raise ValueError(said(error, lambda loc: json_path(loc, "the image"))) from None
+            raise ValueError(said(error, lambda loc: json_path(loc[1:], "the image"))) from None
 
     @classmethod
     def factory(cls, address: int) -> ModuleImage:
@@ -155,8 +155,7 @@ class ModuleImage:
 assert tuple(f.name for f in fields(SystemParameters)) == SYSTEM_KEYS
 assert tuple(f.name for f in fields(Program)) == PROGRAM_FIELDS
 
-_IMAGE = TypeAdapter(ModuleImage)
-_IMAGES = TypeAdapter(list[ModuleImage])
+_IMAGES = TypeAdapter(list[ModuleImage], config=LATER)
 
 
 def images_from_json(data: Any, at: str = "") -> list[ModuleImage]:

@@ -22,7 +22,7 @@ from pydantic import BaseModel, Field, ValidationError
 from prc3cfg import __version__
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.contract import Flag, Number, Text, Whole, json_path, said
+from prc3cfg.core.contract import LATER, Flag, Number, Text, Whole, json_path, said
 from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import DEFAULT_SYSTEM, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
@@ -60,12 +60,16 @@ AGAIN = "make the plan again with prc3cfg plan --out"
 
 
 class _Step(BaseModel):
+    model_config = LATER
+
     message: Text
     releases_axes: Flag
     broadcast: Flag = False
 
 
 class _Module(BaseModel):
+    model_config = LATER
+
     address: Whole
     name: Text
     state_sha256: Text
@@ -74,11 +78,15 @@ class _Module(BaseModel):
 
 
 class _Bus(BaseModel):
+    model_config = LATER
+
     name: Text
     modules: list[_Module]
 
 
 class PlanDocument(BaseModel):
+    model_config = LATER
+
     """The plan file, as `apply --plan` reads it. The rest of it — summaries, figures, the review —
     is held against what prc3cfg writes for the plan it proves (`check_plan`), as any JSON."""
 
@@ -93,17 +101,23 @@ class PlanDocument(BaseModel):
 # figures, each bus's broadcasts. A key with a default may be left out (the default is never
 # read: what is shown is the document), never null.
 class _Field(BaseModel):
+    model_config = LATER
+
     program: Whole | None
     field: Text
     text: Text
 
 
 class _Clamped(BaseModel):
+    model_config = LATER
+
     program: Whole
     text: Text
 
 
 class _Changes(BaseModel):
+    model_config = LATER
+
     fields: list[_Field]
     symbols: dict[str, Any] = Field(default_factory=dict)
     chains_removed: list[Text]
@@ -118,6 +132,8 @@ class _ShownModule(_Module):
 
 
 class _Broadcast(BaseModel):
+    model_config = LATER
+
     message: Text
     releases_axes: Flag
     modules: list[Whole]
@@ -131,6 +147,8 @@ class _ShownBus(_Bus):
 
 
 class _Phases(BaseModel):
+    model_config = LATER
+
     reading: Number
     writing: Number
     verifying: Number
@@ -144,7 +162,7 @@ class ShownPlanDocument(PlanDocument):
     naive_bus_time_s: Number
     left_alone: list[Text] = Field(default_factory=list)
     estimated_time_s: Number = 0.0
-    estimated_phases_s: _Phases = _Phases(reading=0.0, writing=0.0, verifying=0.0)
+    estimated_phases_s: _Phases = Field(default_factory=lambda: _Phases(reading=0.0, writing=0.0, verifying=0.0))
 
 
 @dataclass(frozen=True, slots=True)
