@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import itertools
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -41,17 +40,16 @@ from decimal import Decimal
 from pathlib import Path
 from typing import Any, Protocol, TextIO
 
-from prc3cfg import __version__
-from prc3cfg.core import codec, gateway, plot
+from prc3cfg.core import codec, gateway, planfile, plot
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import detects_damage, get_framing
-from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage, images_from_json
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
-from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
+from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
-from prc3cfg.core.plantplan import PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
-from prc3cfg.core.render import Drift, drifted, plan_json, plural
+from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.render import Drift, drifted, plural
 from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
@@ -85,10 +83,6 @@ Key = tuple[str, int]  # (bus name, module address)
 Pairs = list[tuple[Bus, Module]]
 #: Called with each exchange on a line: before its frame leaves (`announce`), or once it is done.
 Observer = Callable[[Exchange], None]
-
-
-class StalePlan(UserError):
-    """A plan file made from another plant file, another read-back, or another prc3cfg."""
 
 
 class AxisReleaseRefused(UserError):
@@ -342,8 +336,8 @@ def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) 
     remedy = "save the images again with prc3cfg read --json"
     entries = read_input(path, "the file prc3cfg read --json wrote", remedy)
     try:
-        saved = [(entry.get("bus"), ModuleImage.from_json(entry)) for entry in entries]
-    except (ValueError, KeyError, TypeError, AttributeError) as error:
+        saved = [(entry.get("bus"), image) for entry, image in zip(entries, images_from_json(entries))]
+    except ValueError as error:
         raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
     images: dict[Key, ModuleImage] = {}
     for bus, module in select(plant, modules):
@@ -421,10 +415,6 @@ def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
     return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12))
 
 
-def _addresses(addresses: Iterable[int]) -> str:
-    """"address 5", "addresses 5, 7"."""
-    listed = list(addresses)
-    return f"address{'es' if len(listed) > 1 else ''} {', '.join(map(str, listed))}"
 
 
 def probe_timeout(bus: Bus) -> float:
@@ -455,43 +445,12 @@ def prober(link: Link, bus: Bus) -> Prober:
 
 def read_plan(path: Path, plant: Plant) -> PlanFile:
     """A plan file, refused (one line) when damaged, made by another prc3cfg or for another plant file."""
-    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
-    try:
-        planned = read_plan_file(document)
-    except PlanFileError as error:
-        raise UserError(f"{path}: {error}") from None
-    if planned.version != __version__:
-        raise StalePlan(f"{path}: made by prc3cfg {planned.version}, this is {__version__} — plan again with this version")
-    if planned.plant_sha256 != plant.sha256:
-        raise StalePlan(f"{path}: stale plan — the plant file {plant.path} changed since the plan was made; plan again")
-    return planned
+    return planfile.to_apply(read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again"), path, plant.path, plant.sha256)
 
 
 def plan_document(path: Path) -> dict[str, Any]:
-    """A plan file to show (`prc3cfg show PLAN.json`): checked as `apply --plan` checks it before
-    the line (damaged, edited flags, a module twice, not prc3cfg's bytes: one line), and every
-    step's summary worked out again from its bytes — what is shown is what would be sent."""
-    document: dict[str, Any] = read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again")
-    try:
-        planned = read_plan_file(document, shown=True)
-    except PlanFileError as error:
-        raise UserError(f"{path}: {error}") from None
-    entries = iter(planned.modules)  # in the file's order
-    for bus in document["buses"]:
-        for module, entry in zip(bus["modules"], entries):
-            system_keys = [f["field"] for f in module["changes"]["fields"] if f["program"] is None]
-            for step, message in zip(module["steps"], entry.steps):
-                step["summary"] = _summary(message, system_keys)
-        for broadcast in bus.get("broadcasts", []):
-            broadcast["summary"] = _summary(codec.decode_message(bytes.fromhex(broadcast["message"])), [])
-    return document
-
-
-def _summary(message: codec.Message, system_keys: list[str]) -> str:
-    """A step's summary from its bytes (a 20h names the system parameters the plan says it changes)."""
-    if isinstance(message, codec.WriteSystem):
-        return f"write system parameters {', '.join(system_keys) or '(all)'} (20h)"
-    return summarise(message, DEFAULT_SYSTEM)
+    """A plan file to show (`prc3cfg show PLAN.json`), checked, its summaries worked out again from its bytes."""
+    return planfile.to_show(read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again"), path)
 
 
 def plan_file_plant(path: Path) -> Path:
@@ -506,91 +465,14 @@ def plan_file_plant(path: Path) -> Path:
 
 def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage],
           probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
-    """The plan file's plan, proved before anything is written.
-
-    Refused when a module changed since the plan was made; when a module's steps do anything
-    but turn its read-back into the plant file's image (`run_steps` names the rule they
-    break); and when they are not exactly the steps — broadcasts included — that prc3cfg
-    plans from this read-back: the plant file and the read-back are the same as when the file
-    was made, so any difference is an edit. Then anything else in it — a summary, a figure, a
-    name, an axis warning — that is not what prc3cfg writes for that plan is an edit too, since
-    people review what the file says (only `plant_path` may differ: a plan made in another
-    checkout). What is applied is then that plan.
-    """
+    """The plan file's plan, proved before anything is written (`prc3cfg.core.planfile`): what is
+    applied is then the plan prc3cfg makes from this read-back."""
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
-    for entry in planned.modules:
-        where = f"bus {entry.bus}, module {entry.address}"
-        if (entry.bus, entry.address) not in modules:
-            raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
-        module = modules[(entry.bus, entry.address)][1]
-        if entry.name != module.name:
-            raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {module.name!r} in the plant file — plan again")
-        if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
-            raise StalePlan(
-                f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
-                "(teach-in or another apply?); nothing was written — plan again"
-            )
-    _in_plant_order(path, planned, [(bus.name, m.address) for bus, m in pairs])
+    planfile.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()))
-    for proof in ours.proofs:
-        if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in planned.modules):
-            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {_addresses(proof.answered)}, which the "
-                            "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
-    for entry, change in zip(planned.modules, ours.modules):
-        edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
-                  "after it was made; nothing was written: plan again and review it")  # fmt: skip
-        theirs, steps = list(entry.steps), [step.message for step in change.steps]
-        try:
-            plan_from_steps(change.actual, change.desired, theirs, line_cost(modules[(entry.bus, entry.address)][0]),
-                            system_unset=change.system_unset)  # fmt: skip
-        except StepProblem as problem:
-            if problem.index:  # the step that breaks a rule
-                raise UserError(edited.format(problem)) from None
-            raise UserError(edited.format(f"{_first_difference(theirs, steps)}, and {problem}")) from None
-        if theirs != steps:
-            raise UserError(edited.format(_first_difference(theirs, steps)))
-        if entry.broadcasts != change.broadcasts:
-            raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
-    # what stays on the hardware is what the plan's maker compared with (`plan --previous`, or the copy last
-    # applied there): words only, which send nothing — any list of them stands
-    said = planned.document.get("left_alone")
-    notes = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else left_alone(plant)
-    written = plan_json(ours, notes) | {"plant_path": planned.plant_path}
-    if (at := _edited_at(planned.document, written)) is not None:
-        raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
-                        "made; nothing was written: plan again and review it")  # fmt: skip
+    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant))
     return ours
-
-
-def _in_plant_order(path: Path, planned: PlanFile, order: list[Key]) -> None:
-    """Refused unless the plan file lists its modules in the plant file's order, as prc3cfg writes
-    them: they are written in the order listed."""
-    place = {key: index for index, key in enumerate(order)}
-    entries = planned.modules
-    for first, then in itertools.pairwise(entries):
-        if place[(then.bus, then.address)] < place[(first.bus, first.address)]:
-            raise UserError(f"{path}: bus {first.bus}, module {first.address} ({first.name}) is listed before bus {then.bus}, "
-                            f"module {then.address} ({then.name}), where prc3cfg writes the modules in the plant file's "
-                            "order — the plan file was changed after it was made; nothing was written: plan again and review it")  # fmt: skip
-
-
-def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:
-    """Where a plan file differs from the one prc3cfg writes for the plan proved — its texts and
-    figures, which reach no module but a reviewer — as a JSON path; None where it does not."""
-    if isinstance(theirs, dict) and isinstance(ours, dict) and theirs.keys() == ours.keys():
-        return next((f for k in ours if (f := _edited_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
-    if isinstance(theirs, list) and isinstance(ours, list) and len(theirs) == len(ours):
-        return next((f for i, (a, b) in enumerate(zip(theirs, ours)) if (f := _edited_at(a, b, f"{at}[{i}]")) is not None), None)
-    return None if type(theirs) is type(ours) and theirs == ours else at
-
-
-def _first_difference(theirs: list[codec.Message], ours: list[codec.Message]) -> str:
-    """Where a plan file's steps part from the plan made from the same read-back."""
-    index = next(i for i, (a, b) in enumerate(zip([*theirs, None], [*ours, None]), 1) if a != b)
-    said = theirs[index - 1].hex() if index <= len(theirs) else "missing"
-    planned = ours[index - 1].hex() if index <= len(ours) else "nothing"
-    return f"step {index} is {said}, where the plan made from this read-back has {planned}"
 
 
 # -- applying ---------------------------------------------------------------------------

@@ -199,7 +199,7 @@ def json_inputs(tmp_path: Path, plant: Path) -> dict[str, tuple[list[str], str]]
                                            f"error: {tmp_path}/images.json:1:1: not valid JSON (Expecting value) — save the images again with prc3cfg read --json"),
         "saved images with text for numbers": (
             ["plan", plant, "--actual", write("texts.json", json.dumps([{"address": "1", "system": {}, "programs": []}]))],
-            f"error: {tmp_path}/texts.json: not a list of module images as `prc3cfg read --json` writes (address = '1' is not a whole number) "
+            f"error: {tmp_path}/texts.json: not a list of module images as `prc3cfg read --json` writes ([0].address is the text \"1\", where a whole number belongs) "
             "— save the images again with prc3cfg read --json"),
         "a snapshot that is a directory": (["restore", tmp_path], f"error: {tmp_path}: is a directory — name a file under .prc3cfg/snapshots/"),
     }

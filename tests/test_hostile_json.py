@@ -95,11 +95,12 @@ def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsy
 # -- module images and snapshots whose structure is damaged -----------------------------------------
 
 IMAGES = {
-    "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', 'a module image has no "system"'),
+    "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', '[0] has no "system"'),
     "a program that is a list": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": [[1]]}}]',
-                                 "a program is a list, not an object"),
-    "programs that are an object": ('[{"bus": "booth-a", "address": 1, "system": {}, "programs": {}}]', "programs is an object, not a list of 64"),
-    "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', 'the system block has no "S2"'),
+                                 "[0].programs[0] is a list, where an object belongs"),
+    "programs that are an object": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": {{}}}}]',
+                                    "[0].programs is an object, where a list belongs"),
+    "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', '[0].system has no "S2"'),
 }
 
 
@@ -114,9 +115,10 @@ def test_a_damaged_images_file_says_what_is_missing_in_words(nowhere, tmp_path, 
 
 SNAPSHOTS = {
     "no modules": ('{"format": "prc3cfg-snapshot/1", "plant": "/p.yaml"}', 'the snapshot has no "modules"'),
-    "a module without its bus": ('{"format": "prc3cfg-snapshot/1", "modules": [{"address": 1}]}', 'a module has no "bus"'),
-    "an image without programs": ('{"format": "prc3cfg-snapshot/1", "modules": [{"bus": "a", "address": 1}]}',
-                                  'a module image has no "programs"'),
+    "a module without its bus": ('{"format": "prc3cfg-snapshot/1", "modules": [{"address": 1}]}', 'modules[0] has no "bus"'),
+    "an image without programs": ('{"format": "prc3cfg-snapshot/1", "plant": "/p.yaml", "plant_sha256": "0", "taken": "t", '
+                                  '"modules": [{"bus": "a", "address": 1}]}',
+                                  'modules[0] has no "system"'),
 }
 
 

@@ -2,14 +2,19 @@
 
 Owns the value types shared by the codec, the device model, plant files, read-back and the
 planner, their factory defaults (prc3-protocol.md §4.1) and the module image JSON
-(interfaces.md §2). Owns no behaviour of a module: what a module *does* with a message is
+(interfaces.md §2), which the dataclasses' own fields check as it is read (pydantic,
+`images_from_json`). Owns no behaviour of a module: what a module *does* with a message is
 `prc3cfg.core.device`. Pure: no I/O.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import TypeAdapter, ValidationError
+
+from prc3cfg.core.contract import LATER, Whole, every_key, exactly, json_path, said
 
 PROGRAM_COUNT = 64
 PROGRAM_NUMBERS = range(1, PROGRAM_COUNT + 1)
@@ -21,43 +26,21 @@ SYSTEM_KEYS = ("S1", "S2", "S3", "S4", "S5", "S6", "S7", "S8", "S10", "S11", "S1
 PROGRAM_FIELDS = ("P", "V", "Vr", "T", "F1", "F2", "A")
 
 
-def whole(value: Any, name: str) -> int:
-    """A value read from JSON that must be a whole number of device units (never "2", 2.7 or true)."""
-    if type(value) is not int:
-        raise ValueError(f"{name} = {value!r} is not a whole number")
-    return value
-
-
-def member(data: Any, key: str, within: str) -> Any:
-    """`data[key]` of a JSON object read from a file, or a ValueError that says in words what is
-    missing where: 'the image has no "system"', 'a program is a list, not an object'."""
-    if not isinstance(data, dict):
-        raise ValueError(f"{within} is {_json_kind(data)}, not an object")
-    if key not in data:
-        raise ValueError(f'{within} has no "{key}"')
-    return data[key]
-
-
-def _json_kind(value: Any) -> str:
-    kinds = {dict: "an object", list: "a list", str: "text", bool: "true or false", type(None): "null"}
-    return kinds.get(type(value), "a number")
-
-
 @dataclass(frozen=True, slots=True)
 class SystemParameters:
     """S1..S12 without S9, in device units (mm, mm/s, mm/s², 0.001 m/s², …)."""
 
-    S1: int
-    S2: int
-    S3: int
-    S4: int
-    S5: int
-    S6: int
-    S7: int
-    S8: int
-    S10: int
-    S11: int
-    S12: int
+    S1: Whole
+    S2: Whole
+    S3: Whole
+    S4: Whole
+    S5: Whole
+    S6: Whole
+    S7: Whole
+    S8: Whole
+    S10: Whole
+    S11: Whole
+    S12: Whole
 
     def values(self) -> tuple[int, ...]:
         return tuple(getattr(self, key) for key in SYSTEM_KEYS)
@@ -65,22 +48,18 @@ class SystemParameters:
     def to_json(self) -> dict[str, int]:
         return dict(zip(SYSTEM_KEYS, self.values()))
 
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> SystemParameters:
-        return cls(**{key: whole(member(data, key, "the system block"), key) for key in SYSTEM_KEYS})
-
 
 @dataclass(frozen=True, slots=True)
 class Program:
     """One program: position, speed, relative speed, dwell, function outputs, jump address."""
 
-    P: int
-    V: int
-    Vr: int = 0
-    T: int = 0
-    F1: int = 0
-    F2: int = 0
-    A: int = 0
+    P: Whole
+    V: Whole
+    Vr: Whole = 0
+    T: Whole = 0
+    F1: Whole = 0
+    F2: Whole = 0
+    A: Whole = 0
 
     def values(self) -> tuple[int, ...]:
         return (self.P, self.V, self.Vr, self.T, self.F1, self.F2, self.A)
@@ -90,10 +69,6 @@ class Program:
 
     def to_json(self) -> dict[str, int]:
         return dict(zip(PROGRAM_FIELDS, self.values()))
-
-    @classmethod
-    def from_json(cls, data: dict[str, Any]) -> Program:
-        return cls(**{key: whole(member(data, key, "a program"), key) for key in PROGRAM_FIELDS})
 
 
 #: Factory defaults after 10h (prc3-protocol.md §4.1). (reading) S2 = 50, not the
@@ -122,9 +97,9 @@ class ModuleImage:
     desired image, is not managed).
     """
 
-    address: int
+    address: Whole
     system: SystemParameters
-    programs: tuple[Program | None, ...]
+    programs: Annotated[tuple[Annotated[Program, every_key(PROGRAM_FIELDS)] | None, ...], exactly(PROGRAM_COUNT)]
 
     def __post_init__(self) -> None:
         if len(self.programs) != PROGRAM_COUNT:
@@ -163,15 +138,12 @@ class ModuleImage:
         }
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> ModuleImage:
-        programs = member(data, "programs", "a module image")
-        if not isinstance(programs, list):
-            raise ValueError(f"programs is {_json_kind(programs)}, not a list of {PROGRAM_COUNT}")
-        return cls(
-            address=whole(member(data, "address", "a module image"), "address"),
-            system=SystemParameters.from_json(member(data, "system", "a module image")),
-            programs=tuple(None if p is None else Program.from_json(p) for p in programs),
-        )
+    def from_json(cls, data: Any) -> ModuleImage:
+        """The image a JSON object holds (interfaces.md §2); ValueError saying where and what in words."""
+        try:
+            return _IMAGES.validate_python([data])[0]
+        except ValidationError as error:
+            raise ValueError(said(error, lambda loc: json_path(loc[1:], "the image"))) from None
 
     @classmethod
     def factory(cls, address: int) -> ModuleImage:
@@ -182,3 +154,16 @@ class ModuleImage:
 
 assert tuple(f.name for f in fields(SystemParameters)) == SYSTEM_KEYS
 assert tuple(f.name for f in fields(Program)) == PROGRAM_FIELDS
+
+_IMAGES = TypeAdapter(list[ModuleImage], config=LATER)
+
+
+def images_from_json(data: Any, at: str = "") -> list[ModuleImage]:
+    """The module images a JSON list holds — `read --json`'s file, a snapshot's modules (their other
+    keys, such as "bus", are not the image's) — the list at `at` in its document ("modules"), or
+    the document; ValueError saying where and what in words: 'modules[0].system has no "S2"',
+    "[0].programs[3] is a list, where an object belongs"."""
+    try:
+        return _IMAGES.validate_python(data)
+    except ValidationError as error:
+        raise ValueError(said(error, lambda loc: json_path([at, *loc], "the list"))) from None

@@ -9,7 +9,8 @@ A bus may start with broadcasts (`prc3cfg.core.sharing`): steps sent once to add
 every module of the line processes. In the plan file they are the leading steps of every
 module of that bus, marked `"broadcast": true` — so each module's steps still say, in
 order, everything that reaches it (a reader that sent them addressed would do the same,
-only slower) — and the bus lists them once under `"broadcasts"`. Pure.
+only slower) — and the bus lists them once under `"broadcasts"`. A plan file read back, checked
+and proved is `prc3cfg.core.planfile`. Pure.
 """
 
 from __future__ import annotations
@@ -21,12 +22,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from prc3cfg import __version__
-from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import ModulePlan, Step
-from prc3cfg.core.planner.check import MAX_STEPS
 from prc3cfg.core.verification import read_messages, verification_time
 
 FORMAT = "prc3cfg-plan/1"
@@ -199,188 +197,3 @@ class PlantPlan:
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
         } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})  # fmt: skip
-
-
-@dataclass(frozen=True, slots=True)
-class PlannedModule:
-    """A module's entry of a plan file, as `apply --plan` reads it back (not yet proved:
-    `prc3cfg.core.planner.plan_from_steps` runs the steps on the device model from the read-back)."""
-
-    bus: str
-    address: int
-    name: str
-    state_sha256: str
-    steps: tuple[codec.Message, ...]
-    broadcasts: int  # how many of the leading steps are the bus's broadcasts
-
-
-class PlanFileError(ValueError):
-    """A plan file prc3cfg cannot take: `str()` says where and what, in words, and what to do."""
-
-
-#: What to do about a damaged or edited plan file.
-AGAIN = "make the plan again with prc3cfg plan --out"
-
-
-@dataclass(frozen=True)
-class Kind:
-    """A JSON value a plan file holds at some place: `words` as the error message says it."""
-
-    words: str
-    holds: Callable[[Any], bool]
-
-
-@dataclass(frozen=True)
-class Maybe:
-    """A key an object may lack."""
-
-    shape: Any
-
-
-TEXT = Kind("text", lambda v: isinstance(v, str))
-WHOLE = Kind("a whole number", lambda v: type(v) is int)
-WHOLE_OR_NULL = Kind("a whole number or null", lambda v: v is None or type(v) is int)
-NUMBER = Kind("a number", lambda v: type(v) in (int, float))
-FLAG = Kind("true or false", lambda v: type(v) is bool)
-OBJECT = Kind("an object", lambda v: isinstance(v, dict))
-
-# The plan file, as `apply --plan` reads it (a key → its shape; [shape]: a list of them). The
-# rest of it — summaries, figures, the review — is held against what prc3cfg writes for the
-# plan it proves (`prc3cfg.api.prove`), as any JSON.
-_STEP = {"message": TEXT, "releases_axes": FLAG, "broadcast": Maybe(FLAG)}
-_MODULE = {"address": WHOLE, "name": TEXT, "state_sha256": TEXT, "releases_axes": FLAG, "steps": [_STEP]}
-PLAN_FILE = {
-    "plant": TEXT, "plant_path": TEXT, "plant_sha256": TEXT, "prc3cfg_version": Maybe(TEXT),
-    "buses": [{"name": TEXT, "modules": [_MODULE]}],
-}  # fmt: skip
-# ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`),
-# the figures, each bus's broadcasts.
-_CHANGES = {
-    "fields": [{"program": WHOLE_OR_NULL, "field": TEXT, "text": TEXT}], "symbols": Maybe(OBJECT),
-    "chains_removed": [TEXT], "chains_added": [TEXT], "clamped": [{"program": WHOLE, "text": TEXT}], "charts": Maybe([TEXT]),
-}  # fmt: skip
-_BROADCAST = {"message": TEXT, "releases_axes": FLAG, "modules": [WHOLE]}
-SHOWN_PLAN_FILE = PLAN_FILE | {
-    "buses": [{"name": TEXT, "broadcasts": Maybe([_BROADCAST]), "proven_silent": Maybe([WHOLE]), "unlisted_modules": Maybe([WHOLE]),
-               "modules": [_MODULE | {"estimated_bus_time_s": Maybe(NUMBER), "changes": _CHANGES}]}],
-    "axis_releases": [TEXT], "message_count": WHOLE, "estimated_bus_time_s": NUMBER, "naive_bus_time_s": NUMBER,
-    "left_alone": Maybe([TEXT]), "estimated_time_s": Maybe(NUMBER),
-    "estimated_phases_s": Maybe({"reading": NUMBER, "writing": NUMBER, "verifying": NUMBER}),
-}  # fmt: skip
-
-
-def shape_problem(value: Any, shape: Any, at: str = "") -> str | None:
-    """Where and how `value` is not of `shape` (a `Kind`, [shape] or {key: shape}), in words —
-    'buses[0].modules[2] has no "steps"', "buses[1].name is null, where text belongs" — or None."""
-    if isinstance(shape, dict):
-        if not isinstance(value, dict):
-            return _wrong(value, OBJECT.words, at)
-        for key, inner in shape.items():
-            if key not in value:
-                if isinstance(inner, Maybe):
-                    continue
-                return f'{at or "the plan"} has no "{key}"'
-            if problem := shape_problem(value[key], inner.shape if isinstance(inner, Maybe) else inner, f"{at}.{key}".lstrip(".")):
-                return problem
-        return None
-    if isinstance(shape, list):
-        if not isinstance(value, list):
-            return _wrong(value, "a list", at)
-        return next((p for i, item in enumerate(value) if (p := shape_problem(item, shape[0], f"{at}[{i}]")) is not None), None)
-    return None if shape.holds(value) else _wrong(value, shape.words, at)
-
-
-def _wrong(value: Any, wanted: str, at: str) -> str:
-    return f"{at or 'the plan'} is {_described(value)}, where {wanted} belongs"
-
-
-def _described(value: Any) -> str:
-    """A JSON value in a few words: null, true, 2.7, the text "2", a list, an object."""
-    if value is None or isinstance(value, bool | int | float):
-        text = json.dumps(value)
-        return text if len(text) <= 20 else f"a number of {len(text)} characters"
-    if isinstance(value, str):
-        return f"the text {json.dumps(value[:20])}" + ("…" if len(value) > 20 else "")
-    return "a list" if isinstance(value, list) else "an object"
-
-
-@dataclass(frozen=True, slots=True)
-class PlanFile:
-    """A plan file as read: what it was made from, by which prc3cfg, and its modules."""
-
-    plant: str
-    plant_path: str
-    plant_sha256: str
-    version: str
-    modules: tuple[PlannedModule, ...]
-    document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
-
-
-def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
-    """A parsed plan file; raises PlanFileError.
-
-    Refused here, before the line is touched: a damaged file — a key missing, a value of
-    another kind (`PLAN_FILE`; with `shown`, all that `show` shows, `SHOWN_PLAN_FILE`) — a
-    module listed twice, more steps than any plan needs (`MAX_STEPS`), a message that is not
-    in the bytes prc3cfg sends for it (a "don't care" byte changed), and `releases_axes` flags
-    that are not what the steps' bytes say.
-    """
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
-    if (problem := shape_problem(data, SHOWN_PLAN_FILE if shown else PLAN_FILE)) is not None:
-        raise PlanFileError(f"damaged plan file: {problem} — {AGAIN}")
-    modules = []
-    seen: set[tuple[str, int]] = set()
-    for b, bus in enumerate(data["buses"]):
-        for m, module in enumerate(bus["modules"]):
-            entry = _planned_module(bus["name"], module, f"buses[{b}].modules[{m}]")
-            if (entry.bus, entry.address) in seen:
-                raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
-            seen.add((entry.bus, entry.address))
-            modules.append(entry)
-        if shown:
-            for index, step in enumerate(bus.get("broadcasts", [])):
-                _message(step["message"], f"buses[{b}].broadcasts[{index}]", f"bus {bus['name']}: broadcast {index + 1}")
-    fields = (data["plant"], data["plant_path"], data["plant_sha256"], data.get("prc3cfg_version", "before 0.1.0"))
-    return PlanFile(*fields, tuple(modules), data)
-
-
-def _planned_module(bus: str, module: dict[str, Any], at: str) -> PlannedModule:
-    """A module's entry, of the shape `PLAN_FILE` gives it, at `at` ("buses[0].modules[2]")."""
-    address = module["address"]
-    where = f"bus {bus}, module {address}"
-    steps = module["steps"]
-    if len(steps) > MAX_STEPS:
-        raise PlanFileError(f"{where}: {len(steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
-    messages, flags = [], []
-    for index, step in enumerate(steps, start=1):
-        flags.append(step.get("broadcast", False))
-        if flags[-1] and not all(flags):
-            raise PlanFileError(f"{where}: step {index} ({step['message'][:128]}) is marked broadcast after a step that is not — "
-                                f"broadcasts lead a module's steps: {AGAIN}")  # fmt: skip
-        message = _message(step["message"], f"{at}.steps[{index - 1}]", f"{where}: step {index}")
-        if step["releases_axes"] is not message.RELEASES_AXES:
-            raise PlanFileError(
-                f"{where}: step {index} ({step['message']}) says releases_axes: {json.dumps(step['releases_axes'])}, "
-                f"but {message.ID:02X}h {'releases' if message.RELEASES_AXES else 'does not release'} the axes — {AGAIN}"
-            )
-        messages.append(message)
-    if module["releases_axes"] is not any(m.RELEASES_AXES for m in messages):
-        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module['releases_axes'])} is not what its steps do — {AGAIN}")
-    return PlannedModule(bus, address, module["name"], module["state_sha256"], tuple(messages), sum(flags))
-
-
-def _message(text: str, at: str, where: str) -> codec.Message:
-    """The message a step's `message` (at `at`) writes in hex, exactly as prc3cfg writes it."""
-    try:
-        data = bytes.fromhex(text)
-    except ValueError:
-        raise PlanFileError(f"damaged plan file: {at}.message is not a PRC 3 message in hex — {AGAIN}") from None
-    try:
-        message = codec.decode_message(data)
-    except codec.Rejected as rejected:
-        raise PlanFileError(f"{where} ({text[:64]}) is not a message prc3cfg sends: a module would answer it with "
-                            f"{describe(rejected.code)} — {AGAIN}") from None  # fmt: skip
-    if message.hex() != text:  # "don't care" bytes that are not 00h, upper-case digits
-        raise PlanFileError(f"{where} ({text}) is not written as prc3cfg writes that message ({message.hex()}) — {AGAIN}")
-    return message

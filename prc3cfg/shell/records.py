@@ -30,7 +30,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
-from prc3cfg.core.image import ModuleImage, member, whole
+from pydantic import BaseModel, Field, ValidationError
+
+from prc3cfg.core.contract import Text, json_path, said
+from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
 from prc3cfg.shell.link import Exchange
@@ -125,20 +128,41 @@ class Snapshot:
         try:
             if not isinstance(data, dict) or data.get("format") != SNAPSHOT_FORMAT:
                 raise ValueError(f'expected "format": "{SNAPSHOT_FORMAT}"')
-            modules = member(data, "modules", "the snapshot")
-            if not isinstance(modules, list):
-                raise ValueError("its modules are no list")
-            images = {(member(m, "bus", "a module"), whole(member(m, "address", "a module"), "address")): ModuleImage.from_json(m)
-                      for m in modules}  # fmt: skip
-            plant = Path(member(data, "plant", "the snapshot"))
+            try:
+                document = _SnapshotDocument.model_validate(data)
+            except ValidationError as error:
+                raise ValueError(said(error, lambda loc: json_path(loc, "the snapshot"))) from None
+            images = {(m.bus, image.address): image for m, image in zip(document.modules, images_from_json(data["modules"], "modules"))}
+            plant = Path(document.plant)
             beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
-            lines = {bus: LineTaken(member(line, "port", "a line"), member(line, "framing", "a line"), tuple(member(line, "keys", "a line")))
-                     for bus, line in data.get("lines", {}).items()}  # fmt: skip
-            return cls(plant, member(data, "plant_sha256", "the snapshot"), member(data, "taken", "the snapshot"), images, lines)
-        except (ValueError, KeyError, TypeError, AttributeError) as error:
+            lines = {bus: LineTaken(line.port, line.framing, tuple(line.keys)) for bus, line in document.lines.items()}
+            return cls(plant, document.plant_sha256, document.taken, images, lines)
+        except ValueError as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
+
+
+class _Placed(BaseModel):
+    """A snapshot's module: the bus it was read on (the rest of it is its image, `images_from_json`)."""
+
+    bus: Text
+
+
+class _Line(BaseModel):
+    port: Text
+    framing: Text
+    keys: list[Text]
+
+
+class _SnapshotDocument(BaseModel):
+    """A snapshot as `Snapshot.load` reads it."""
+
+    modules: list[_Placed]
+    plant: Text
+    plant_sha256: Text
+    taken: Text
+    lines: dict[str, _Line] = Field(default_factory=dict)  # none in snapshots before 0.1.0's
 
 
 def applied_copy(plant_path: Path) -> Path:

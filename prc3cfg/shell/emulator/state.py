@@ -70,16 +70,18 @@ import logging
 import os
 import stat
 import uuid
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import BaseModel, Field, Strict, ValidationError, create_model
 
 from prc3cfg.core import device
+from prc3cfg.core.contract import Flag, exactly, one_of, within, worded
 from prc3cfg.core.device import VALUE_RANGES, ModuleState, value_range
-from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, PROGRAM_FIELDS, SYSTEM_KEYS, whole
-from prc3cfg.core.render import plural
+from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, PROGRAM_FIELDS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json, read_regular, write_atomically
 
@@ -214,27 +216,69 @@ def _load_file(path: Path) -> dict[int, ModuleState]:
 
 
 def _modules(path: Path, data: object) -> dict[int, ModuleState]:
-    """The modules of the state file `path` as read (`data`), checked."""
+    """The modules of the state file `path` as read (`data`), checked (`_StateFile`)."""
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise UserError(f"{path}: not an emulator state file — expected \"format\": \"{FORMAT}\"")
-    entries = data.get("modules", [])
-    if not isinstance(entries, list):
-        raise UserError(f"{path}: \"modules\" must be a list of modules — fix or delete it")
+    try:
+        checked = _StateFile.model_validate(data)
+    except ValidationError as error:
+        detail = error.errors(include_url=False)[0]
+        remedy = "fix or delete the entry" if len(detail["loc"]) > 1 else "fix or delete it"
+        raise UserError(f"{path}: {worded(detail, lambda loc: _place(data, loc))} — {remedy}") from None
     modules: dict[int, ModuleState] = {}
-    for index, entry in enumerate(entries):
-        where = f"module entry {index}"
-        try:
-            if not isinstance(entry, dict):
-                raise ValueError("is not an object")
-            address = _whole(entry, "address", 1, MAX_MODULE_ADDRESS, name="address S9")
-            where = f"module {address}"
-            state = _module(entry)
-        except ValueError as error:
-            raise UserError(f"{path}: {where}: {error} — fix or delete the entry") from None
-        if address in modules:
-            raise UserError(f"{path}: module address {address} appears twice — keep one entry")
-        modules[address] = state
+    for entry in checked.modules:
+        if entry.address in modules:
+            raise UserError(f"{path}: module address {entry.address} appears twice — keep one entry")
+        modules[entry.address] = entry.state()
     return modules
+
+
+def _place(data: dict[str, Any], loc: Sequence[str | int]) -> str:
+    """A place in a state file as its modules are named: "module 3: program 7: P", "module entry 0: address S9"."""
+    if len(loc) < 2:
+        return "modules"
+    entry = data["modules"][loc[1]]
+    address = entry.get("address") if isinstance(entry, dict) else None
+    named = type(address) is int and 1 <= address <= MAX_MODULE_ADDRESS and loc[2:3] != ("address",)
+    words = [f"module {address}" if named else f"module entry {loc[1]}"]
+    for part in loc[2:]:
+        if isinstance(part, int):  # a program's number, not its index
+            words[-1] = f"program {part + 1}"
+        else:
+            words.append("address S9" if part == "address" else part)
+    return ": ".join(words)
+
+
+def _ranged(name: str, keys: tuple[str, ...]) -> type[BaseModel]:
+    """A model of `keys`, each a whole number within its range (`_RANGES`), every one required."""
+    fields: dict[str, Any] = {key: (Annotated[int, Strict(), within(*_RANGES[key])], ...) for key in keys}
+    return create_model(name, **fields)
+
+
+_System = _ranged("_System", SYSTEM_KEYS)
+_Program = _ranged("_Program", PROGRAM_FIELDS)
+
+
+class _Module(BaseModel):
+    """A module of the state file: a value no message can carry is refused (the module docstring)."""
+
+    address: Annotated[int, Strict(), within(1, MAX_MODULE_ADDRESS)]
+    system: _System  # type: ignore[valid-type]
+    programs: Annotated[list[_Program], exactly(PROGRAM_COUNT)]  # type: ignore[valid-type]
+    mode: Annotated[str, Strict(), one_of(device.MODES)] = "stop"
+    active_program: Annotated[int, Strict(), within(1, PROGRAM_COUNT)] | None = None
+    fault: Annotated[str, Strict(), one_of(device.FAULT_CODES)] | None = None
+    referenced: Flag = True
+    read_messages: Flag = True
+
+    def state(self) -> ModuleState:
+        image = ModuleImage(self.address, SystemParameters(**vars(self.system)),
+                            tuple(Program(**vars(program)) for program in self.programs))  # fmt: skip
+        return ModuleState(image, self.mode, self.active_program, self.fault, self.referenced, self.read_messages)
+
+
+class _StateFile(BaseModel):
+    modules: list[_Module] = Field(default_factory=list)
 
 
 def _generation(path: Path) -> str | None:
@@ -245,49 +289,6 @@ def _generation(path: Path) -> str | None:
         return None
     generation = data.get("generation") if isinstance(data, dict) else None
     return str(generation) if generation is not None else None
-
-
-def _module(entry: dict[str, Any]) -> ModuleState:
-    """A module from its checked state-file entry; ValueError names the field and what is wrong."""
-    system = entry.get("system")
-    if not isinstance(system, dict):
-        raise ValueError("system: missing, or not an object")
-    _values(system, SYSTEM_KEYS, "system")
-    programs = entry.get("programs")
-    if not isinstance(programs, list) or len(programs) != PROGRAM_COUNT:
-        held = plural(len(programs), "program") if isinstance(programs, list) else repr(programs)
-        raise ValueError(f"programs: a list of all {PROGRAM_COUNT} programs is needed, not {held}")
-    for number, program in enumerate(programs, 1):
-        if not isinstance(program, dict):
-            raise ValueError(f"program {number}: {program!r} is not a program")
-        _values(program, PROGRAM_FIELDS, f"program {number}")
-    if entry.get("active_program") is not None:
-        _whole(entry, "active_program", 1, PROGRAM_COUNT, name="active_program")
-    if not isinstance(entry.get("fault"), str | None):
-        raise ValueError(f"fault = {entry['fault']!r} must be null or the name of a fault")
-    for flag in ("referenced", "read_messages"):
-        if not isinstance(entry.get(flag, True), bool):
-            raise ValueError(f"{flag} = {entry[flag]!r} must be true or false")
-    return ModuleState.from_json(entry)  # mode and fault: the device model's own checks
-
-
-def _values(data: dict[str, Any], keys: tuple[str, ...], where: str) -> None:
-    """Each of `keys` in `data` a whole number within its range; ValueError naming the first that is not."""
-    for key in keys:
-        value = data.get(key)
-        low, high = _RANGES[key]
-        if type(value) is not int or not low <= value <= high:
-            _whole(data, key, low, high, name=f"{where}: {key}")
-
-
-def _whole(data: dict[str, Any], key: str, low: int, high: int, *, name: str) -> int:
-    """`data[key]`, a whole number within low..high; ValueError saying what it is otherwise."""
-    if key not in data:
-        raise ValueError(f"{name} is missing")
-    value = whole(data[key], name)
-    if not low <= value <= high:
-        raise ValueError(f"{name} = {value} is outside {low}..{high}")
-    return value
 
 
 def state_document(modules: Mapping[int, ModuleState], generation: str | None = None, replaces: str | None = None) -> dict:

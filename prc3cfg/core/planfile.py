@@ -1,0 +1,384 @@
+"""The plan file `prc3cfg-plan/1` as it comes back (interfaces.md §4): read, checked, shown, proved.
+
+Owns what `apply --plan` and `prc3cfg show PLAN.json` do with a plan file once its bytes are
+parsed (the shell reads them bounded, `prc3cfg.shell.files.read_json`): its structure and
+steps checked (`read_plan_file`), whether it was made for this plant file by this prc3cfg
+(`to_apply`), the document `show` shows (`to_show`), and the proof that it is the plan prc3cfg
+makes from the read-back now (`check_modules`, then `check_plan`). Writing one is
+`PlantPlan.to_json` with `prc3cfg.core.render.plan_json`. Pure: the path is only named.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, Field, ValidationError
+
+from prc3cfg import __version__
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.contract import LATER, Flag, Number, Text, Whole, json_path, said
+from prc3cfg.core.error_codes import describe
+from prc3cfg.core.image import DEFAULT_SYSTEM, ModuleImage
+from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
+from prc3cfg.core.planner.check import MAX_STEPS
+from prc3cfg.core.plantplan import FORMAT, PlantPlan, image_sha256
+from prc3cfg.core.render import plan_json
+from prc3cfg.errors import UserError
+
+Key = tuple[str, int]  # (bus name, module address)
+
+
+class StalePlan(UserError):
+    """A plan file made from another plant file, another read-back, or another prc3cfg."""
+
+
+@dataclass(frozen=True, slots=True)
+class PlannedModule:
+    """A module's entry of a plan file, as `apply --plan` reads it back (not yet proved:
+    `prc3cfg.core.planner.plan_from_steps` runs the steps on the device model from the read-back)."""
+
+    bus: str
+    address: int
+    name: str
+    state_sha256: str
+    steps: tuple[codec.Message, ...]
+    broadcasts: int  # how many of the leading steps are the bus's broadcasts
+
+
+class PlanFileError(ValueError):
+    """A plan file prc3cfg cannot take: `str()` says where and what, in words, and what to do."""
+
+
+#: What to do about a damaged or edited plan file.
+AGAIN = "make the plan again with prc3cfg plan --out"
+
+
+class _Step(BaseModel):
+    model_config = LATER
+
+    message: Text
+    releases_axes: Flag
+    broadcast: Flag = False
+
+
+class _Module(BaseModel):
+    model_config = LATER
+
+    address: Whole
+    name: Text
+    state_sha256: Text
+    releases_axes: Flag
+    steps: list[_Step]
+
+
+class _Bus(BaseModel):
+    model_config = LATER
+
+    name: Text
+    modules: list[_Module]
+
+
+class PlanDocument(BaseModel):
+    model_config = LATER
+
+    """The plan file, as `apply --plan` reads it. The rest of it — summaries, figures, the review —
+    is held against what prc3cfg writes for the plan it proves (`check_plan`), as any JSON."""
+
+    plant: Text
+    plant_path: Text
+    plant_sha256: Text
+    prc3cfg_version: Text = "before 0.1.0"
+    buses: list[_Bus]
+
+
+# ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`), the
+# figures, each bus's broadcasts. A key with a default may be left out (the default is never
+# read: what is shown is the document), never null.
+class _Field(BaseModel):
+    model_config = LATER
+
+    program: Whole | None
+    field: Text
+    text: Text
+
+
+class _Clamped(BaseModel):
+    model_config = LATER
+
+    program: Whole
+    text: Text
+
+
+class _Changes(BaseModel):
+    model_config = LATER
+
+    fields: list[_Field]
+    symbols: dict[str, Any] = Field(default_factory=dict)
+    chains_removed: list[Text]
+    chains_added: list[Text]
+    clamped: list[_Clamped]
+    charts: list[Text] = Field(default_factory=list)
+
+
+class _ShownModule(_Module):
+    estimated_bus_time_s: Number = 0.0
+    changes: _Changes
+
+
+class _Broadcast(BaseModel):
+    model_config = LATER
+
+    message: Text
+    releases_axes: Flag
+    modules: list[Whole]
+
+
+class _ShownBus(_Bus):
+    broadcasts: list[_Broadcast] = Field(default_factory=list)
+    proven_silent: list[Whole] = Field(default_factory=list)
+    unlisted_modules: list[Whole] = Field(default_factory=list)
+    modules: list[_ShownModule]  # type: ignore[assignment]  # a module as shown is a module
+
+
+class _Phases(BaseModel):
+    model_config = LATER
+
+    reading: Number
+    writing: Number
+    verifying: Number
+
+
+class ShownPlanDocument(PlanDocument):
+    buses: list[_ShownBus]  # type: ignore[assignment]  # a bus as shown is a bus
+    axis_releases: list[Text]
+    message_count: Whole
+    estimated_bus_time_s: Number
+    naive_bus_time_s: Number
+    left_alone: list[Text] = Field(default_factory=list)
+    estimated_time_s: Number = 0.0
+    estimated_phases_s: _Phases = Field(default_factory=lambda: _Phases(reading=0.0, writing=0.0, verifying=0.0))
+
+
+@dataclass(frozen=True, slots=True)
+class PlanFile:
+    """A plan file as read: what it was made from, by which prc3cfg, and its modules."""
+
+    plant: str
+    plant_path: str
+    plant_sha256: str
+    version: str
+    modules: tuple[PlannedModule, ...]
+    document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
+
+
+def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
+    """A parsed plan file; raises PlanFileError.
+
+    Refused here, before the line is touched: a damaged file — a key missing, a value of
+    another kind (`PlanDocument`; with `shown`, all that `show` shows, `ShownPlanDocument`) — a
+    module listed twice, more steps than any plan needs (`MAX_STEPS`), a message that is not
+    in the bytes prc3cfg sends for it (a "don't care" byte changed), and `releases_axes` flags
+    that are not what the steps' bytes say.
+    """
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
+    try:
+        document = (ShownPlanDocument if shown else PlanDocument).model_validate(data)
+    except ValidationError as error:
+        raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'))} — {AGAIN}") from None
+    modules = []
+    seen: set[tuple[str, int]] = set()
+    for b, bus in enumerate(document.buses):
+        for m, module in enumerate(bus.modules):
+            entry = _planned_module(bus.name, module, f"buses[{b}].modules[{m}]")
+            if (entry.bus, entry.address) in seen:
+                raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
+            seen.add((entry.bus, entry.address))
+            modules.append(entry)
+        if isinstance(bus, _ShownBus):
+            for index, step in enumerate(bus.broadcasts):
+                _message(step.message, f"buses[{b}].broadcasts[{index}]", f"bus {bus.name}: broadcast {index + 1}")
+    return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data)
+
+
+def _planned_module(bus: str, module: _Module, at: str) -> PlannedModule:
+    """A module's entry, at `at` ("buses[0].modules[2]")."""
+    where = f"bus {bus}, module {module.address}"
+    if len(module.steps) > MAX_STEPS:
+        raise PlanFileError(f"{where}: {len(module.steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
+    messages, flags = [], []
+    for index, step in enumerate(module.steps, start=1):
+        flags.append(step.broadcast)
+        if flags[-1] and not all(flags):
+            raise PlanFileError(f"{where}: step {index} ({step.message[:128]}) is marked broadcast after a step that is not — "
+                                f"broadcasts lead a module's steps: {AGAIN}")  # fmt: skip
+        message = _message(step.message, f"{at}.steps[{index - 1}]", f"{where}: step {index}")
+        if step.releases_axes is not message.RELEASES_AXES:
+            raise PlanFileError(
+                f"{where}: step {index} ({step.message}) says releases_axes: {json.dumps(step.releases_axes)}, "
+                f"but {message.ID:02X}h {'releases' if message.RELEASES_AXES else 'does not release'} the axes — {AGAIN}"
+            )
+        messages.append(message)
+    if module.releases_axes is not any(m.RELEASES_AXES for m in messages):
+        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module.releases_axes)} is not what its steps do — {AGAIN}")
+    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags))
+
+
+def _message(text: str, at: str, where: str) -> codec.Message:
+    """The message a step's `message` (at `at`) writes in hex, exactly as prc3cfg writes it."""
+    try:
+        data = bytes.fromhex(text)
+    except ValueError:
+        raise PlanFileError(f"damaged plan file: {at}.message is not a PRC 3 message in hex — {AGAIN}") from None
+    try:
+        message = codec.decode_message(data)
+    except codec.Rejected as rejected:
+        raise PlanFileError(f"{where} ({text[:64]}) is not a message prc3cfg sends: a module would answer it with "
+                            f"{describe(rejected.code)} — {AGAIN}") from None  # fmt: skip
+    if message.hex() != text:  # "don't care" bytes that are not 00h, upper-case digits
+        raise PlanFileError(f"{where} ({text}) is not written as prc3cfg writes that message ({message.hex()}) — {AGAIN}")
+    return message
+
+
+def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str) -> PlanFile:
+    """The plan file at `path` (as parsed) for `apply --plan` of the plant file at `plant_path`:
+    refused (one line) when damaged, made by another prc3cfg or for another plant file (`StalePlan`)."""
+    try:
+        plan_file = read_plan_file(document)
+    except PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
+    if plan_file.version != __version__:
+        raise StalePlan(f"{path}: made by prc3cfg {plan_file.version}, this is {__version__} — plan again with this version")
+    if plan_file.plant_sha256 != plant_sha256:
+        raise StalePlan(f"{path}: stale plan — the plant file {plant_path} changed since the plan was made; plan again")
+    return plan_file
+
+
+def to_show(document: Any, path: Path) -> dict[str, Any]:
+    """The plan file at `path` (as parsed) to show (`prc3cfg show PLAN.json`): checked as `apply
+    --plan` checks it before the line (damaged, edited flags, a module twice, not prc3cfg's bytes:
+    one line), and every step's summary worked out again from its bytes — what is shown is what
+    would be sent."""
+    try:
+        plan_file = read_plan_file(document, shown=True)
+    except PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
+    entries = iter(plan_file.modules)  # in the file's order
+    for bus in plan_file.document["buses"]:
+        for module, entry in zip(bus["modules"], entries):
+            system_keys = [f["field"] for f in module["changes"]["fields"] if f["program"] is None]
+            for step, message in zip(module["steps"], entry.steps):
+                step["summary"] = _summary(message, system_keys)
+        for broadcast in bus.get("broadcasts", []):
+            broadcast["summary"] = _summary(codec.decode_message(bytes.fromhex(broadcast["message"])), [])
+    return plan_file.document
+
+
+def _summary(message: codec.Message, system_keys: list[str]) -> str:
+    """A step's summary from its bytes (a 20h names the system parameters the plan says it changes)."""
+    if isinstance(message, codec.WriteSystem):
+        return f"write system parameters {', '.join(system_keys) or '(all)'} (20h)"
+    return summarise(message, DEFAULT_SYSTEM)
+
+
+def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images: dict[Key, ModuleImage]) -> None:
+    """The first part of the proof of a plan file (`check_plan` is the rest), before prc3cfg plans
+    from the read-back `images`: refused when a module is not among those to apply (`names`, in the
+    plant file's order) or is called otherwise, when a module changed since the plan was made
+    (`StalePlan`), and when the modules are not listed in the plant file's order."""
+    for entry in plan_file.modules:
+        where = f"bus {entry.bus}, module {entry.address}"
+        if (entry.bus, entry.address) not in names:
+            raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
+        name = names[(entry.bus, entry.address)]
+        if entry.name != name:
+            raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {name!r} in the plant file — plan again")
+        if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
+            raise StalePlan(
+                f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
+                "(teach-in or another apply?); nothing was written — plan again"
+            )
+    _in_plant_order(path, plan_file, list(names))
+
+
+def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str, LineCost], notes: Callable[[], list[str]]) -> None:
+    """The plan file proved against `ours`, the plan prc3cfg makes of its modules from the read-back
+    now (each line priced by `costs`).
+
+    Refused when its steps do anything but turn a module's read-back into the plant file's image
+    (`plan_from_steps` names the rule they break); and when they are not exactly the steps —
+    broadcasts included — of `ours`: the plant file and the read-back are the same as when the
+    file was made (`check_modules`), so any difference is an edit. Then anything else in it — a
+    summary, a figure, a name, an axis warning — that is not what prc3cfg writes for that plan is
+    an edit too, since people review what the file says (only `plant_path` may differ: a plan
+    made in another checkout). What stays on the hardware is what the plan's maker compared with:
+    the file's own `left_alone`, else `notes()`.
+    """
+    for proof in ours.proofs:
+        if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {_addresses(proof.answered)}, which the "
+                            "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
+    for entry, change in zip(plan_file.modules, ours.modules):
+        edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
+                  "after it was made; nothing was written: plan again and review it")  # fmt: skip
+        theirs, steps = list(entry.steps), [step.message for step in change.steps]
+        try:
+            plan_from_steps(change.actual, change.desired, theirs, costs[entry.bus], system_unset=change.system_unset)
+        except StepProblem as problem:
+            if problem.index:  # the step that breaks a rule
+                raise UserError(edited.format(problem)) from None
+            raise UserError(edited.format(f"{_first_difference(theirs, steps)}, and {problem}")) from None
+        if theirs != steps:
+            raise UserError(edited.format(_first_difference(theirs, steps)))
+        if entry.broadcasts != change.broadcasts:
+            raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
+    # what stays on the hardware is what the plan's maker compared with (`plan --previous`, or the copy last
+    # applied there): words only, which send nothing — any list of them stands
+    said = plan_file.document.get("left_alone")
+    kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
+    written = plan_json(ours, kept) | {"plant_path": plan_file.plant_path}
+    if (at := _edited_at(plan_file.document, written)) is not None:
+        raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
+                        "made; nothing was written: plan again and review it")  # fmt: skip
+
+
+def _addresses(addresses: Iterable[int]) -> str:
+    """"address 5", "addresses 5, 7"."""
+    listed = list(addresses)
+    return f"address{'es' if len(listed) > 1 else ''} {', '.join(map(str, listed))}"
+
+
+def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:
+    """Refused unless the plan file lists its modules in the plant file's order, as prc3cfg writes
+    them: they are written in the order listed."""
+    place = {key: index for index, key in enumerate(order)}
+    entries = plan_file.modules
+    for first, then in itertools.pairwise(entries):
+        if place[(then.bus, then.address)] < place[(first.bus, first.address)]:
+            raise UserError(f"{path}: bus {first.bus}, module {first.address} ({first.name}) is listed before bus {then.bus}, "
+                            f"module {then.address} ({then.name}), where prc3cfg writes the modules in the plant file's "
+                            "order — the plan file was changed after it was made; nothing was written: plan again and review it")  # fmt: skip
+
+
+def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:
+    """Where a plan file differs from the one prc3cfg writes for the plan proved — its texts and
+    figures, which reach no module but a reviewer — as a JSON path; None where it does not."""
+    if isinstance(theirs, dict) and isinstance(ours, dict) and theirs.keys() == ours.keys():
+        return next((f for k in ours if (f := _edited_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
+    if isinstance(theirs, list) and isinstance(ours, list) and len(theirs) == len(ours):
+        return next((f for i, (a, b) in enumerate(zip(theirs, ours)) if (f := _edited_at(a, b, f"{at}[{i}]")) is not None), None)
+    return None if type(theirs) is type(ours) and theirs == ours else at
+
+
+def _first_difference(theirs: list[codec.Message], ours: list[codec.Message]) -> str:
+    """Where a plan file's steps part from the plan made from the same read-back."""
+    index = next(i for i, (a, b) in enumerate(zip([*theirs, None], [*ours, None]), 1) if a != b)
+    said = theirs[index - 1].hex() if index <= len(theirs) else "missing"
+    planned = ours[index - 1].hex() if index <= len(ours) else "nothing"
+    return f"step {index} is {said}, where the plan made from this read-back has {planned}"

@@ -1,0 +1,85 @@
+"""The JSON files prc3cfg writes are read back as they were written, and written again byte for
+byte: a plan file made by the code before its contracts were pydantic models
+(`contracts/plan.json`, from `contracts/plant.yaml` at factory defaults, its version and plant path
+left as VERSION and PLANT_PATH) is the file written now, and is read, shown and proved; module
+images, snapshots and emulator state files read and written again are the same bytes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from emulated import run_cli
+
+from prc3cfg import __version__, api
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.image import ModuleImage, images_from_json
+from prc3cfg.plant import load_plant
+from prc3cfg.shell.emulator.state import load_state, save_state
+from prc3cfg.shell.records import LineTaken, Snapshot
+
+CONTRACTS = Path(__file__).resolve().parent / "contracts"
+
+
+def plant_here(tmp_path: Path) -> Path:
+    plant = tmp_path / "plant.yaml"
+    plant.write_bytes((CONTRACTS / "plant.yaml").read_bytes())
+    return plant
+
+
+def factory_images(plant: Path, out: Path) -> Path:
+    """A `read --json` file of the plant's modules at factory defaults, as `read --json` writes it."""
+    entries = [{"bus": bus.name, **ModuleState.factory(m.address).image.to_json()} for bus, m in load_plant(plant).modules()]
+    out.write_text(json.dumps(entries, indent=1))
+    return out
+
+
+def made_before(plant: Path) -> str:
+    """The plan file the code before wrote for `plant` at factory defaults, as if made there by this version."""
+    text = (CONTRACTS / "plan.json").read_text()
+    return text.replace('"VERSION"', json.dumps(__version__)).replace('"PLANT_PATH"', json.dumps(str(plant.resolve())))
+
+
+def test_a_plan_file_is_written_byte_for_byte_as_before(tmp_path, capsys):
+    plant = plant_here(tmp_path)
+    out = tmp_path / "plan.json"
+    assert run_cli(capsys, "plan", plant, "--actual", factory_images(plant, tmp_path / "images.json"), "--out", out).code == 0
+    assert out.read_text() == made_before(plant)
+
+
+def test_a_plan_file_written_before_is_read_shown_and_proved(tmp_path, capsys):
+    plant = plant_here(tmp_path)
+    path = tmp_path / "before.json"
+    path.write_text(made_before(plant))
+    shown = run_cli(capsys, "show", path)
+    assert shown.code == 0 and "booth-b-pretreat" in shown.out
+    loaded = load_plant(plant)
+    pairs = api.select(loaded)
+    images = api.load_images(factory_images(plant, tmp_path / "images.json"), loaded)
+    proved = api.prove(path, api.read_plan(path, loaded), loaded, pairs, images)
+    assert proved.message_count == 26 and len(proved.changes) == 6
+
+
+def test_module_images_and_snapshots_read_back_are_written_the_same(tmp_path):
+    images_file = factory_images(plant_here(tmp_path), tmp_path / "images.json")
+    entries = json.loads(images_file.read_text())
+    images = images_from_json(entries)
+    assert json.dumps([{"bus": e["bus"], **image.to_json()} for e, image in zip(entries, images)], indent=1) == images_file.read_text()
+    assert all(ModuleImage.from_json(image.to_json()) == image for image in images)
+    taken = Snapshot.take(tmp_path / "plant.yaml", "0" * 64, {(e["bus"], image.address): image for e, image in zip(entries, images)},
+                          {"booth-a": LineTaken("socket://127.0.0.1:9", "crc16", ("tcp:127.0.0.1:9",))})  # fmt: skip
+    written = taken.save()
+    again = Snapshot.load(written)
+    assert again == taken and json.dumps(again.to_json(), indent=1) == written.read_text()
+
+
+def test_an_emulator_state_file_read_back_is_written_the_same(tmp_path):
+    path = tmp_path / "state.json"
+    modules = {3: ModuleState.factory(3), 7: ModuleState(ModuleImage.factory(7), mode="run", active_program=4, fault="E12", referenced=False,
+                                                          read_messages=False)}  # fmt: skip
+    save_state(path, modules)
+    assert load_state(path) == modules
+    first = json.loads(path.read_text())
+    save_state(path, load_state(path), replaces=first["generation"])
+    second = json.loads(path.read_text())
+    assert {k: v for k, v in second.items() if k not in ("generation", "replaces")} == {k: v for k, v in first.items() if k != "generation"}
