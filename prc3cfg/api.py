@@ -53,7 +53,7 @@ from prc3cfg.core.planner import StepProblem, UnreachableImage, plan_from_steps,
 from prc3cfg.core.plantplan import LineProof, ModuleChange, PlanFile, PlanFileError, PlantPlan, image_sha256, read_plan_file
 from prc3cfg.core.render import drifted, plan_json, plural
 from prc3cfg.errors import Interrupted, UserError
-from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
+from prc3cfg.plant import Bus, Module, Plant, PlantError
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import module_entry, plant_yaml
@@ -66,6 +66,7 @@ from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFa
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
+from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 

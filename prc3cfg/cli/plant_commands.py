@@ -55,10 +55,11 @@ def validate(
     """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
     import json
 
-    from prc3cfg.plant import PlantError, load_plant
+    from prc3cfg import api
+    from prc3cfg.plant import PlantError
 
     try:
-        loaded = load_plant(plant)
+        loaded = api.load(plant)
     except PlantError as error:
         if fmt is Format.TEXT:
             raise  # one `error:` line per problem, as every error
@@ -115,9 +116,9 @@ def show(
         check_output(plot, "--plot", plant=plant)
     elif actual is not None:
         raise UserError("--actual is what --plot overlays — give --plot FILE.svg or FILE.png too")
-    from prc3cfg.plant import load_plant
+    from prc3cfg import api
 
-    loaded = load_plant(plant)
+    loaded = api.load(plant)
     if module is None:
         stdout_console().print(_modules_table(loaded))
         return

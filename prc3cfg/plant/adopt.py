@@ -34,7 +34,7 @@ indentation after the entry it follows (program numbers and fields in their usua
 nested mappings flow or block as the file writes them (`_Conventions`). Every other byte —
 comments, quoting, layout, line ends — stays as it was. Offsets are those of the text after a
 byte order mark, which is taken off before parsing and put back after: libyaml does not count
-it, the pure parser does. The new text is then loaded as a plant (`load_plant` of the text, as
+it, the pure parser does. The new text is then loaded as a plant (`parse_plant` of the text, as
 if it were the file) and must describe exactly what the modules hold — the adopted values in
 the chosen modules, every other module, bus and setting as before — or nothing is adopted
 (`AdoptRefused`: a bug of the rewriter, said as one). Pure: text and images in, text out.
@@ -60,7 +60,7 @@ from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, split_
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Module, Plant
 from prc3cfg.plant.document import DECIMAL_NUMBER, LOADER, core_schema, marked
-from prc3cfg.plant.loader import load_plant
+from prc3cfg.plant.loader import parse_plant
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 from prc3cfg.plant.problems import Path_, PlantError
 from prc3cfg.plant.profiles import DEFAULT, MODULE, Sourced
@@ -184,7 +184,7 @@ def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -
     """`AdoptRefused` unless `text`, loaded as the plant file, has the same buses, modules and
     settings as `plant`, and each module's image is the one `adopted` names."""
     try:
-        after = load_plant(plant.path, text)
+        after = parse_plant(plant.path, text.encode("utf-8"))
     except PlantError as error:
         raise _rewriter_bug(plant, f"it would not load: {error.problems[0]}") from None
     same = [bus.model_dump(exclude={"modules"}) for bus in plant.buses] == [bus.model_dump(exclude={"modules"}) for bus in after.buses]

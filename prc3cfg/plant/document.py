@@ -37,17 +37,17 @@ about a second to get there (`_REREAD_EVENTS`). This module builds the data itse
 - a problem names its place by path, `("buses", 0, "modules", 2, "name")`, or by the line
   and column it was found at.
 
-Reading is bounded in time and memory: only a regular file is read (a FIFO could block,
-`/dev/zero` never ends), at most `MAX_BYTES` of it; more than `MAX_NODES` keys, values, lists
-and mappings, or nesting deeper than `MAX_DEPTH`, is refused on the event stream where it is
+Reading is bounded in time and memory: the bytes are handed over, read by the shell within
+its bounds (`prc3cfg.shell.plant_files`); more than `MAX_NODES` keys, values, lists and
+mappings, or nesting deeper than `MAX_DEPTH`, is refused on the event stream where it is
 reached; a scalar's reading is worked out once per text (a plant file says the same few
 things many times); at most `MAX_PROBLEMS` problems are kept, and one more to show that
 there are more.
 
-Problems that stop reading altogether (no such file, not a regular file, too large, not UTF-8,
-a control character or a byte order mark after the start, a YAML syntax error, a limit, an
-alias, an empty file, a top level that is not a mapping) raise `PlantError` at once; the
-others are collected in `Document.problems`. Does not know what a plant file contains.
+Problems that stop reading altogether (not UTF-8, a control character or a byte order mark
+after the start, a YAML syntax error, a limit, an alias, an empty file, a top level that is
+not a mapping) raise `PlantError` at once; the others are collected in `Document.problems`.
+Does not know what a plant file contains. Pure: bytes in.
 """
 
 from __future__ import annotations
@@ -58,7 +58,6 @@ import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
-from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -78,13 +77,9 @@ from yaml.events import (
 from yaml.nodes import ScalarNode
 
 from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, MAX_PROBLEMS, Path_, PlantError, Problem
-from prc3cfg.shell.files import FileProblem, Why, read_regular
 
 #: The parser: libyaml's when PyYAML was built with it (issue 11 wants its speed).
 LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-#: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
-#: comments, long names and every field, a few MB. Bytes cost little: nodes are what is bounded.
-MAX_BYTES = 16 * 2**20
 #: Keys, values, lists and mappings: 8 buses × 30 modules managing all 64 programs, each program
 #: a flow mapping of position, speed, dwell and relative speed, have 157,000; with f1, f2 and
 #: next on every program, 372,000. The worst a file of this many can do (every one wrong) is
@@ -221,10 +216,8 @@ class Document:
         return reader.positions
 
 
-def read_document(path: Path, data: bytes | None = None) -> Document:
-    """Read and parse `path` — or `data`, as if `path` held it; `PlantError` if it is not a YAML mapping at all."""
-    name = str(path)
-    data = _read_bytes(path, name) if data is None else data
+def parse_document(name: str, data: bytes) -> Document:
+    """Parse `data`, the bytes of the file `name`; `PlantError` if it is not a YAML mapping at all."""
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -246,24 +239,6 @@ def read_document(path: Path, data: bytes | None = None) -> Document:
         raise PlantError([f"{name}:{line}:{column}: the top level is {kind}, not a mapping "
                           "— a plant file is a mapping with 'plant:' and 'buses:'"])
     return Document(name, text, value, hashlib.sha256(data).hexdigest(), reader.problems)
-
-
-#: What to do about a plant path that cannot be read, by why.
-_REMEDIES = {
-    Why.MISSING: "check the path",
-    Why.DIRECTORY: "give the plant file (*.yaml) in it",
-    Why.NOT_A_FILE: "give the plant file (*.yaml) itself",
-    Why.UNREADABLE: "check the path and its permissions",
-    Why.TOO_LARGE: "a plant file is far smaller: check that this is the plant file",
-}
-
-
-def _read_bytes(path: Path, name: str) -> bytes:
-    """The bytes of the plant file, at most `MAX_BYTES` (`prc3cfg.shell.files.read_regular`)."""
-    try:
-        return read_regular(path, MAX_BYTES)
-    except FileProblem as problem:
-        raise PlantError([f"{name}: {problem} — {_REMEDIES[problem.why]}"]) from None
 
 
 def _read(name: str, text: str) -> _Reader:

@@ -12,7 +12,8 @@ from pydantic import ValidationError
 
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, Program, default_program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
+from prc3cfg.plant import Bus, Module, Plant, PlantError
+from prc3cfg.shell.plant_files import load_plant
 
 ROOT = Path(__file__).parents[2]
 PLANTS = sorted((ROOT / "plants").rglob("*.yaml"))
