@@ -25,8 +25,8 @@ Refused in one line, with nothing adopted: a jump address (A) that drifted — j
 value the plant file cannot hold — a position above the module's upper reversing point, a
 speed outside min_speed..max_speed, anything outside its range — naming module and program.
 
-How the file is rewritten: spliced, never dumped. The text is parsed once more (the loader's
-parser, `document.LOADER`) for the exact span of every scalar and collection, a changed value
+How the file is rewritten: spliced, never dumped. The text is read once more by the loader's
+own reader (`document.spans`) for the exact span of every scalar and collection, a changed value
 replaces the text of its scalar (with as many decimals as it had, more only where the value
 needs them; quotes and case kept), and a new override is inserted as text in the style of
 the file: into a flow mapping as `, key: value`, into a block mapping as lines at its
@@ -46,12 +46,9 @@ import hashlib
 import re
 from collections import Counter
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from decimal import Decimal
 from typing import Any
-
-import yaml
-from yaml.events import CollectionStartEvent, MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent, SequenceStartEvent
 
 from prc3cfg.core.device import value_range
 from prc3cfg.core.image import SYSTEM_KEYS, ModuleImage, SystemParameters, default_program
@@ -59,7 +56,7 @@ from prc3cfg.core.render import FieldChange, differences, field_name, format_val
 from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, split_function_output
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Module, Plant
-from prc3cfg.plant.document import DECIMAL_NUMBER, LOADER, core_schema, marked
+from prc3cfg.plant.document import DECIMAL_NUMBER, Span, core_schema, spans
 from prc3cfg.plant.loader import parse_plant
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 from prc3cfg.plant.problems import Path_, PlantError
@@ -315,54 +312,6 @@ def _want(trie: dict[Any, Any], path: Path_, value: Any) -> None:
 # -- the file as text: its nodes' spans, its conventions, the splices ---------------------
 
 
-@dataclass(slots=True)
-class _Node:
-    """A scalar, mapping or list of the file and its span: `end` is after its text (after the
-    last child's, for a block collection). A scalar has `value` (as written, unquoted)."""
-
-    start: int
-    end: int
-    flow: bool = False
-    value: str | None = None
-    plain: bool = True
-    children: dict[Any, _Node] | list[_Node] = field(default_factory=dict)
-    keys: dict[Any, int] = field(default_factory=dict)  # a mapping's keys: where each starts
-
-
-def _tree(text: str) -> _Node:
-    """The top node of `text`, parsed by the loader's parser (keys read as the loader reads them)."""
-    events = iter(yaml.parse(text, Loader=LOADER))
-    return _node(next(e for e in events if isinstance(e, (MappingStartEvent, SequenceStartEvent, ScalarEvent))), events)
-
-
-def _node(event: yaml.Event, events: Iterator[yaml.Event]) -> _Node:
-    start, end_mark = marked(event.start_mark).index, marked(event.end_mark).index
-    if isinstance(event, ScalarEvent):
-        return _Node(start, end_mark, value=event.value, plain=not event.style)
-    node = _Node(start, end_mark, flow=isinstance(event, CollectionStartEvent) and bool(event.flow_style))
-    end: yaml.Event
-    if isinstance(event, SequenceStartEvent):
-        node.children = []
-        while not isinstance(item := next(events), SequenceEndEvent):
-            node.children.append(_node(item, events))
-        end = item
-    else:
-        node.children = mapping = dict[Any, _Node]()
-        while not isinstance(key := next(events), MappingEndEvent):
-            assert isinstance(key, ScalarEvent)  # the loader has read the file: its keys are scalars
-            name = core_schema(key.value)[1] if not key.style else key.value
-            node.keys[name] = marked(key.start_mark).index
-            mapping[name] = _node(next(events), events)
-        end = key
-    children = list(node.children.values()) if isinstance(node.children, dict) else node.children
-    node.end = marked(end.end_mark).index if node.flow or not children else children[-1].end
-    return node
-
-
-def _items(node: _Node) -> Iterator[tuple[Any, _Node]]:
-    return iter(node.children.items()) if isinstance(node.children, dict) else enumerate(node.children)
-
-
 def _kind(path: Path_) -> str | None:
     """What a mapping at `path` is within a profile or module: system, programs, program, output."""
     if path[:1] == ("profiles",):
@@ -387,17 +336,17 @@ def _decimals(written: str) -> int:
 class _Conventions:
     """How the file writes things: decimals by key, flow or block by kind of mapping, the indentation step."""
 
-    def __init__(self, text: str, root: _Node) -> None:
+    def __init__(self, text: str, root: Span) -> None:
         self.decimals: dict[Any, Counter[int]] = {}
         self.flow: dict[str, Counter[bool]] = {}
         self.steps: Counter[int] = Counter()
         self._walk(text, root, ())
 
-    def _walk(self, text: str, node: _Node, path: Path_) -> None:
-        for key, child in _items(node):
-            if child.value is not None:
-                if child.plain and DECIMAL_NUMBER.fullmatch(child.value):
-                    self.decimals.setdefault(key, Counter())[_decimals(child.value)] += 1
+    def _walk(self, text: str, node: Span, path: Path_) -> None:
+        for key, child in node.items():
+            if child.written is not None:
+                if child.plain and DECIMAL_NUMBER.fullmatch(child.written):
+                    self.decimals.setdefault(key, Counter())[_decimals(child.written)] += 1
                 continue
             if isinstance(child.children, dict):
                 if (kind := _kind(path + (key,))) is not None:
@@ -452,7 +401,7 @@ class _Rewrite:
     def __init__(self, text: str) -> None:
         self.bom = BYTE_ORDER_MARK if text.startswith(BYTE_ORDER_MARK) else ""
         self.text = text[len(self.bom):]
-        self.root = _tree(self.text)
+        self.root = spans(self.text)
         self.conventions = _Conventions(self.text, self.root)
         self.newline = "\r\n" if "\r\n" in text else "\n"
         self.splices: list[tuple[int, int, int, str]] = []
@@ -481,7 +430,7 @@ class _Rewrite:
                 spaces = tail.end(1) - tail.start(1)
                 self.splices.append((tail.start(1), tail.end(1), len(self.splices), " " * max(2, spaces - growth)))
 
-    def _set(self, node: _Node, path: Path_, wanted: dict[Any, Any]) -> None:
+    def _set(self, node: Span, path: Path_, wanted: dict[Any, Any]) -> None:
         missing = []
         for key, value in wanted.items():
             child = node.children.get(key) if isinstance(node.children, dict) else node.children[key]
@@ -494,9 +443,9 @@ class _Rewrite:
         if missing:
             self._insert(node, path, sorted(missing, key=_rank), wanted)
 
-    def _replace(self, scalar: _Node, value: Any) -> None:
+    def _replace(self, scalar: Span, value: Any) -> None:
         """A scalar's text replaced by `value`, written like it: decimals, quotes, case."""
-        written = scalar.value
+        written = scalar.written
         assert written is not None  # `wanted` holds a value only where the file has a scalar
         if (core_schema(written)[1] if scalar.plain else written) == value:
             return  # the half of an F1/F2 that did not change
@@ -510,7 +459,7 @@ class _Rewrite:
             new = _number(value, _decimals(written) if DECIMAL_NUMBER.fullmatch(written) else 0)
         self.splices.append((scalar.start, scalar.end, len(self.splices), new))
 
-    def _insert(self, node: _Node, path: Path_, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert(self, node: Span, path: Path_, keys: list[Any], wanted: dict[Any, Any]) -> None:
         """New keys into the mapping `node` at `path`, each after the key it follows in `_rank` order."""
         groups: dict[Any, list[Any]] = {}
         for key in keys:
@@ -522,7 +471,7 @@ class _Rewrite:
             else:
                 self._insert_block(node, path, after, group, wanted)
 
-    def _insert_flow(self, node: _Node, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert_flow(self, node: Span, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
         items = ", ".join(f"{key}: {self._flow(path + (key,), wanted[key])}" for key in keys)
         if after is not None:
             self._add(node.children[after].end, f", {items}")
@@ -531,7 +480,7 @@ class _Rewrite:
         else:
             self._add(node.start + 1, items)
 
-    def _insert_block(self, node: _Node, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert_block(self, node: Span, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
         first = min(node.keys, key=node.keys.__getitem__)
         column = _column(self.text, node.keys[first])
         lines = [line for key in keys for line in self._block(path + (key,), wanted[key], column)]

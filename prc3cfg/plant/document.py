@@ -216,6 +216,35 @@ class Document:
         return reader.positions
 
 
+@dataclass(slots=True)
+class Span:
+    """Where a scalar, mapping or list of a file is in its text (`spans`): from `start` to `end`,
+    offsets in the text (a block collection ends after its last child's text). A scalar has its
+    text as `written` (unquoted) and whether it is `plain`; a collection whether it is `flow`, its
+    `children` (by key, read as `parse_document` reads keys, or in order) and its `keys`' offsets."""
+
+    start: int
+    end: int
+    flow: bool = False
+    written: str | None = None
+    plain: bool = True
+    children: dict[Any, Span] | list[Span] = field(default_factory=dict)
+    keys: dict[Any, int] = field(default_factory=dict)
+
+    def items(self) -> Iterator[tuple[Any, Span]]:
+        """Each child with its key or index."""
+        return iter(self.children.items()) if isinstance(self.children, dict) else enumerate(self.children)
+
+
+def spans(text: str) -> Span:
+    """The span of every node of `text`, a YAML text `parse_document` took: read again by the same
+    reader (`_Reader` with `spans`), so that its keys are the data's. The top node's span."""
+    reader = _Reader(_Events("", text, LOADER), spans=True)
+    reader.read()
+    assert reader.top is not None  # a text that was read has a top node
+    return reader.top
+
+
 def parse_document(name: str, data: bytes) -> Document:
     """Parse `data`, the bytes of the file `name`; `PlantError` if it is not a YAML mapping at all."""
     try:
@@ -347,11 +376,20 @@ class _Reader:
     Without `wanted`, it builds the data and collects the problems found on the way (at most
     `MAX_PROBLEMS` + 1: enough to know that there are more). With `wanted`, a trie of paths
     (`_want`), it records `positions` of those paths and of the paths on the way to them, and
-    only passes over the rest. The same code reads keys both times, so paths match.
+    only passes over the rest. The same code reads keys both times, so paths match. With
+    `spans`, it also records the `Span` of every node it builds (`top`, the top node's), for
+    `spans`: only then does it keep the last event it was given and go through `spanned`.
     """
 
-    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None) -> None:
-        self.next = iter(events).__next__
+    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None, spans: bool = False) -> None:
+        self.next: Callable[[], yaml.Event] = iter(events).__next__
+        #: The value of the node that an event begins, read to its end: `read_node`, or `spanned`.
+        self.node: Callable[[yaml.Event, Path_, Mapping[Any, Any] | None], Any] = self.read_node
+        self.open: list[Span] | None = None  # with `spans`: the collections being read, innermost last
+        self.top: Span | None = None
+        self.last: yaml.Event | None = None  # with `spans`: the event given last
+        if spans:
+            self.open, self.next, self.node = [], self._kept(self.next), self.spanned
         self.wanted = wanted
         self.positions: dict[Path_, tuple[Position | None, Position]] = {}
         self.problems: list[Problem] = []
@@ -374,11 +412,44 @@ class _Reader:
         while type(self.next()) is not StreamEndEvent:  # the end of the document, or more of them
             pass
 
+    def _kept(self, given: Callable[[], yaml.Event]) -> Callable[[], yaml.Event]:
+        """`given`, each event it gives kept as `last`."""
+
+        def next_event() -> yaml.Event:
+            self.last = given()
+            return self.last
+
+        return next_event
+
+    def spanned(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
+        """`node`, with the node's `Span` put in the collection it is in (`open`), or as `top`."""
+        assert self.open is not None
+        span = Span(marked(event.start_mark).index, marked(event.end_mark).index)
+        if type(event) is ScalarEvent:
+            span.written, span.plain = event.value, not event.style
+        elif isinstance(event, CollectionStartEvent):
+            span.flow = bool(event.flow_style)
+            span.children = [] if type(event) is SequenceStartEvent else {}
+        if not self.open:
+            self.top = span
+        elif isinstance(children := self.open[-1].children, list):
+            children.append(span)
+        else:
+            children[path[-1]] = span
+        self.open.append(span)
+        value = self.read_node(event, path, wanted)
+        self.open.pop()
+        if isinstance(event, CollectionStartEvent):
+            assert self.last is not None  # the collection's end
+            children = list(span.children.values()) if isinstance(span.children, dict) else span.children
+            span.end = children[-1].end if children and not span.flow else marked(self.last.end_mark).index
+        return value
+
     def problem(self, problem: Problem) -> None:
         if len(self.problems) <= MAX_PROBLEMS:
             self.problems.append(problem)
 
-    def node(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
+    def read_node(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
         """The value of the node that `event` begins, read to its end."""
         if type(event) is ScalarEvent:
             return self.scalar(event, path, path[-1] if path and isinstance(path[-1], str) else "")
@@ -437,6 +508,8 @@ class _Reader:
                 self.skip(value_event)
                 continue
             keys[key] = key_at
+            if self.open is not None:
+                self.open[-1].keys[key] = marked(key_event.start_mark).index
             result[key] = self.entry(path + (key,), key_at, value_event, wanted)
             before = (key, value_event)
         return result
