@@ -4,7 +4,8 @@ PyYAML parses — with libyaml (`yaml.CSafeLoader`) when it is installed, else t
 `SafeLoader`. Its events are read in one pass that builds the data directly: no node tree (a
 PyYAML node and its two marks cost several hundred bytes; a large plant has 160,000 of them),
 and no position kept for a key or value that nothing is wrong with (`Document.lines` finds the
-places of the problems it is given). Where libyaml stops (a syntax error, a limit), the file is
+places of the problems it is given); only `spans`, which `adopt` splices by, keeps each node's
+offsets in the text, read by the same pass. Where libyaml stops (a syntax error, a limit), the file is
 parsed again by the pure parser and its first stop is said, so that messages do not depend on
 which one ran; they differ only where the two disagree on what is valid YAML (libyaml takes a
 tab inside a plain scalar, PyYAML does not), and where the pure parser would take more than
