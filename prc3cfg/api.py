@@ -426,7 +426,7 @@ class Planner:
         cost = line_cost(bus)
         proof_time = len(others) * PROOF_PROBES * cost.silence_time(codec.ReadSystem(), probe_timeout(bus))
         with self._lock:
-            shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], cost, self._memo, proof_time)
+            shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], cost, self._memo, proof_time)
         if not shared.broadcasts:
             self._keep(bus_name, changes, 0.0, None)
             return

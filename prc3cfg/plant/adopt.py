@@ -109,7 +109,7 @@ class Adopted:
 
 
 @dataclass(frozen=True, slots=True)
-class Adoption:
+class AdoptedText:
     """What `adopt` found: the values adopted, in the order of their modules in the file, and the new text."""
 
     adopted: tuple[Adopted, ...]
@@ -137,7 +137,7 @@ class _Drift:
         return self.sourced.path if self.sourced is not None and self.sourced.source.startswith(PROFILE) else None
 
 
-def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Iterable[int] | None = None) -> Adoption:
+def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Iterable[int] | None = None) -> AdoptedText:
     """The plant file `text` (of `plant`, as loaded) rewritten to describe what the modules in
     `images` hold — only `programs` of them, if given; `AdoptRefused` for what it cannot say."""
     if hashlib.sha256(text.encode("utf-8")).hexdigest() != plant.sha256:
@@ -157,10 +157,10 @@ def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Ite
         layer = MODULE if target[0] == "buses" else source
         adopted.append(Adopted(tuple(d.name for d in found), first.what, layer, layer == MODULE and source != MODULE, source))
     if not wanted:
-        return Adoption((), text)
+        return AdoptedText((), text)
     rewritten = _Rewrite(text).apply(wanted)
     _check_rewritten(plant, {key: _adopted_image(module, images.get(key), scope) for key, module in _keyed(plant)}, rewritten)
-    return Adoption(tuple(adopted), rewritten)
+    return AdoptedText(tuple(adopted), rewritten)
 
 
 def _keyed(plant: Plant) -> Iterator[tuple[Key, Module]]:
