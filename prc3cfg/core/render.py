@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from prc3cfg.core.chains import jumps_as_chains
+from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
@@ -36,15 +37,11 @@ def field_name(symbol: str) -> str:
     return BY_SYMBOL[symbol].key.replace("_", " ") if symbol in BY_SYMBOL else symbol
 
 
-#: Device ranges of the fields whose range does not depend on the system parameters;
-#: a read-back outside them (a damaged or foreign module) is shown raw, never decoded.
-_RANGES = {**{q.symbol: (q.lo, q.hi) for q in BY_SYMBOL.values()}, "F1": (0, 1999), "F2": (0, 1999)}
-
-
 @functools.lru_cache(maxsize=4096)
 def format_value(symbol: str, device: int) -> str:
-    """A device value in human units: "1.050 m", "set at 0.010 m"; raw when it is out of range."""
-    low, high = _RANGES[symbol]
+    """A device value in human units: "1.050 m", "set at 0.010 m"; raw when no module holds it
+    (`device.widest_range`: a damaged or foreign module's read-back is shown, never decoded)."""
+    low, high = widest_range(symbol)
     if not low <= device <= high:
         return f"{device} (raw, outside {low}..{high})"
     if symbol in ("F1", "F2"):

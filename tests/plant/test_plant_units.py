@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from prc3cfg.core.device import VALUE_RANGES, widest_range
 from prc3cfg.core.image import SYSTEM_KEYS
 from prc3cfg.core.units import (
     DISTANCE,
@@ -19,6 +20,7 @@ from prc3cfg.core.units import (
     function_output,
     split_function_output,
 )
+from prc3cfg.plant import plant_schema
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 
 #: Which model validates each quantity's key, so the round trip goes through the plant file's rules too.
@@ -63,6 +65,27 @@ def test_the_table() -> None:
     assert QUANTITIES["acceleration"].format(1500) == "1.500 m/s²"
     assert QUANTITIES["alarm"].format(1) == "true"
     assert QUANTITIES["increment_pulses"].format(754) == "754"
+
+
+def test_every_plant_file_bound_is_the_device_range_converted() -> None:
+    """One table of ranges, the device model's: the plant file's bounds (its JSON Schema, which the
+    models check) are each field's range on a module — P and V on the widest S1, S4 and S5 — in
+    human units; a distance spans F1's range from "reset at the least" to "set at the most"."""
+    assert widest_range("P") == (0, VALUE_RANGES["S1"][1])
+    assert widest_range("V") == (VALUE_RANGES["S5"][0], VALUE_RANGES["S4"][1])
+    definitions = plant_schema()["definitions"]
+    fields = {"SystemSpec": SYSTEM_QUANTITIES, "ProgramSpec": PROGRAM_QUANTITIES, "FunctionOutputSpec": (DISTANCE,)}
+    for model, quantities in fields.items():
+        for quantity in quantities:
+            schema = definitions[model]["properties"][quantity.key]
+            if quantity.boolean:  # S8: false and true
+                assert schema["type"] == "boolean" and widest_range(quantity.symbol) == (0, 1)
+                continue
+            low, high = (quantity.lo, quantity.hi) if quantity is DISTANCE else widest_range(quantity.symbol)
+            bounds = (Decimal(str(schema["minimum"])), Decimal(str(schema["maximum"])))
+            assert bounds == (low * quantity.step, high * quantity.step), quantity.key
+    assert widest_range("F1") == widest_range("F2") == (
+        function_output("reset", DISTANCE.human_lo), function_output("set", DISTANCE.human_hi))
 
 
 def test_manual_examples_of_function_outputs() -> None:
