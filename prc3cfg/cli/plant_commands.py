@@ -182,7 +182,7 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     from prc3cfg.core.units import (
         PROGRAM_QUANTITIES,
         SYSTEM_QUANTITIES,
-        format_function_output,
+        human_text,
     )
     from prc3cfg.plant.profiles import Sourced
 
@@ -197,7 +197,7 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     device = module.desired_system()
     for q in SYSTEM_QUANTITIES:
         value = getattr(device, q.symbol)
-        system.add_row(f"{q.key} ({q.symbol})", q.format(value), str(value), settings.system[q.key].source)
+        system.add_row(f"{q.key} ({q.symbol})", human_text(q.symbol, value), str(value), settings.system[q.key].source)
     console.print(system)
 
     programs = Table(title="programs", title_justify="left", box=box.SIMPLE_HEAD)
@@ -206,9 +206,9 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     jumps = settings.jumps()
     for number, program in module.desired_programs().items():
         fields = settings.programs[number]
-        rows = [(q.key, q.symbol, q.format(getattr(program, q.symbol)), getattr(program, q.symbol), fields[q.key])
+        rows = [(q.key, q.symbol, human_text(q.symbol, getattr(program, q.symbol)), getattr(program, q.symbol), fields[q.key])
                 for q in PROGRAM_QUANTITIES]
-        rows += [(key, key.upper(), format_function_output(getattr(program, key.upper())),
+        rows += [(key, key.upper(), human_text(key.upper(), getattr(program, key.upper())),
                   getattr(program, key.upper()), fields[key]) for key in ("f1", "f2")]
         jump = jumps.get(number, Sourced(0))
         rows.append(("jump", "A", f"program {program.A}" if program.A else "stop", program.A, jump))

@@ -24,7 +24,7 @@ from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, Mod
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import mermaid
-from prc3cfg.core.units import BY_SYMBOL, format_function_output
+from prc3cfg.core.units import BY_SYMBOL, human_text
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"
@@ -44,9 +44,7 @@ def format_value(symbol: str, device: int) -> str:
     low, high = widest_range(symbol)
     if not low <= device <= high:
         return f"{device} (raw, outside {low}..{high})"
-    if symbol in ("F1", "F2"):
-        return format_function_output(device)
-    return BY_SYMBOL[symbol].format(device)
+    return human_text(symbol, device)
 
 
 @dataclass(frozen=True, slots=True)

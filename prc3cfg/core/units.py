@@ -6,7 +6,8 @@ number as written: `step` is the size of one device unit in human units, a human
 must be a whole number of steps (0.0005 m is an error, never rounded), and device → human
 is `device × step` (1050 → Decimal("1.050")). F1/F2 are `{action, distance}` ↔
 `action × 1000 + mm` (§1.1). S9 (the module address) is not here: a plant file sets it as
-`address`.
+`address`. Device → human is `plant_value` (what a plant file writes) and `human_text` (what
+people read): rendering, `show`, `import` and `adopt` all convert through them.
 
 Owns the table and the arithmetic. Not the ranges: a value's device range is the device
 model's (`prc3cfg.core.device.widest_range`), converted here. Does not own validation messages
@@ -17,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from decimal import Decimal
-from typing import Literal, get_args
+from typing import Any, Literal, get_args
 
 from prc3cfg.core.device import widest_range
 
@@ -82,13 +83,6 @@ class Quantity:
         """The device value in the quantity's unit (m, m/s, s): for a quantity that has one."""
         return device * self.step
 
-    def format(self, device: int) -> str:
-        """The human value with its unit, as a plant file would say it: "1.050 m", "true"."""
-        human = self.to_human(device)
-        if self.boolean:
-            return str(human).lower()
-        return f"{human} {self.unit}".rstrip()
-
 
 #: Every value a plant file sets, keyed by the plant-file key; order: programs, then system.
 QUANTITIES: dict[str, Quantity] = {
@@ -133,6 +127,8 @@ SYSTEM_QUANTITIES = tuple(q for q in QUANTITIES.values() if q.symbol.startswith(
 Action = Literal["reset", "set"]
 ACTIONS: dict[str, int] = {name: code for code, name in enumerate(get_args(Action))}  # reset 0, set 1
 DISTANCE = QUANTITIES["distance"]
+#: The program fields that hold an action and a distance.
+FUNCTION_OUTPUTS = ("F1", "F2")
 
 
 def function_output(action: str, distance: Decimal) -> int:
@@ -146,6 +142,20 @@ def split_function_output(device: int) -> tuple[str, Decimal]:
     return action, DISTANCE.in_unit(device % PER_ACTION)
 
 
-def format_function_output(device: int) -> str:
-    action, distance = split_function_output(device)
-    return f"{action} at {distance} m"
+def plant_value(symbol: str, device: int) -> Decimal | int | bool | dict[str, Any]:
+    """A device value as a plant file writes it: P 1050 → Decimal("1.050"), S8 1 → True, S3 754 → 754,
+    F1 1010 → {"action": "set", "distance": Decimal("0.010")}."""
+    if symbol in FUNCTION_OUTPUTS:
+        action, distance = split_function_output(device)
+        return {"action": action, DISTANCE.key: distance}
+    return BY_SYMBOL[symbol].to_human(device)
+
+
+def human_text(symbol: str, device: int) -> str:
+    """A device value as people read it, with its unit: "1.050 m", "true", "754", "set at 0.010 m"."""
+    value = plant_value(symbol, device)
+    if isinstance(value, dict):
+        return f"{value['action']} at {value[DISTANCE.key]} {DISTANCE.unit}"
+    if isinstance(value, bool):
+        return str(value).lower()
+    return f"{value} {BY_SYMBOL[symbol].unit}".rstrip()

@@ -53,7 +53,7 @@ from typing import Any
 from prc3cfg.core.device import value_range
 from prc3cfg.core.image import SYSTEM_KEYS, ModuleImage, SystemParameters, default_program
 from prc3cfg.core.render import FieldChange, differences, field_name, format_value
-from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, split_function_output
+from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, plant_value
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Module, Plant
 from prc3cfg.plant.document import DECIMAL_NUMBER, Span, core_schema, spans
@@ -222,18 +222,18 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
                                "in the plant file by hand, or apply it to set the jump back, then adopt again")  # fmt: skip
     system = have.system if scope is None else desired.system
     _check(_adopted_image(module, have, scope), numbers, where)
-    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), _human(c.symbol, c.after), f"system {c.text}",
+    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), plant_value(c.symbol, c.after), f"system {c.text}",
                      settings.system[BY_SYMBOL[c.symbol].key]) for c in _changes(desired.system, system, SYSTEM_KEYS)]  # fmt: skip
     for number in numbers:
         held = have.program(number)
         if number in settings.programs:
-            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]), _human(c.symbol, c.after),
+            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]), plant_value(c.symbol, c.after),
                               f"program {number} {c.text}", settings.programs[number][FIELD_KEYS[c.symbol]])
                        for c in _changes(desired.program(number), held, FIELD_KEYS)]  # fmt: skip
         elif held != default_program(system):  # unlisted under reset: listed now, with all it holds
             symbols = [s for s in FIELD_KEYS if s in ("P", "V") or getattr(held, s)]
             said = ", ".join(f"{field_name(s)} {format_value(s, getattr(held, s))}" for s in symbols)
-            value = {FIELD_KEYS[s]: _human(s, getattr(held, s)) for s in symbols}
+            value = {FIELD_KEYS[s]: plant_value(s, getattr(held, s)) for s in symbols}
             drifts.append(_Drift(name, path, ("programs", number), value, f"program {number} {said}", None))
     return drifts
 
@@ -241,13 +241,6 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
 def _changes(said: Any, held: Any, symbols: Iterable[str]) -> list[FieldChange]:
     """The fields `symbols` of two programs, or of two sets of system parameters, that differ."""
     return [FieldChange.of(None, s, getattr(said, s), getattr(held, s)) for s in symbols if getattr(said, s) != getattr(held, s)]
-
-
-def _human(symbol: str, device: int) -> Any:
-    """A device value as the plant file says it: 1050 → Decimal("1.050"), F1 1010 → {action: set, distance: 0.010}."""
-    if symbol in ("F1", "F2"):
-        return dict(zip(FunctionOutputSpec.model_fields, split_function_output(device)))
-    return BY_SYMBOL[symbol].to_human(device)
 
 
 def _check(after: ModuleImage, numbers: list[int], where: str) -> None:
