@@ -17,7 +17,7 @@ A message of n bytes costs `exchange + byte × n` (`Prices`, measured on the lin
 of the values it writes, never a stuffed checksum). Every plan has the same system step
 (a 10h for factory parameters, else a 20h; none if they match). Take any plan and look at each managed program after its last init
 (before or after the system step, or none: the bases and difference masks of
-`Problem`, predicted on the device model): every field that still differs from the plant
+`PlanningProblem`, predicted on the device model): every field that still differs from the plant
 file has a last writer after that init, and R is what those last writers must cost:
 
 - inits: the programs whose last init comes after the system step form runs, each at least
@@ -80,7 +80,7 @@ from prc3cfg.core.framing.stx import START
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import plan_module
-from prc3cfg.core.planner.problem import FIELD_BIT, INIT_AFTER, INIT_BEFORE, KEEP, Problem
+from prc3cfg.core.planner.problem import FIELD_BIT, INIT_AFTER, INIT_BEFORE, KEEP, PlanningProblem
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S2=120, S4=500, S5=20)
 USED = 40  # programs a recipe uses; the rest are at their defaults (plant files with `reset`)
@@ -248,7 +248,7 @@ class Relaxation:
     """R for one module: what the last writers of every difference must cost (module docstring)."""
 
     def __init__(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> None:
-        problem = Problem.build(actual, desired, cost)
+        problem = PlanningProblem.build(actual, desired, cost)
         self.prices = prices = problem.prices
         self.fixed = 0.0 if problem.system_step is None else cost.message_time(problem.address, problem.system_step)
         self.kinds = problem.kinds

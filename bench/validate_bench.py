@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from prc3cfg.plant import load_plant
+from prc3cfg.shell.plant_files import load_plant
 
 EXAMPLE = Path(__file__).parents[1] / "plants" / "examples" / "coating-line.yaml"
 

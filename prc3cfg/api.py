@@ -52,7 +52,7 @@ from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.core.render import Drift, drifted, plural
 from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
-from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
+from prc3cfg.plant import Bus, Module, Plant, PlantError
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import bus_entry, imported_plant
@@ -67,6 +67,7 @@ from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFa
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
+from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 

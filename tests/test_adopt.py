@@ -26,7 +26,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
-from prc3cfg.plant import adopt, load_plant
+from prc3cfg.plant import adopt
+from prc3cfg.shell.plant_files import load_plant
 
 REPOSITORY = Path(__file__).resolve().parent / "adopt" / "plant.yaml"
 

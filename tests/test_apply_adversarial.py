@@ -25,8 +25,8 @@ from emulated import emulated_plant, run_cli
 from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
-from prc3cfg.plant import load_plant
 from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.plant_files import load_plant
 
 TRAVEL = "Travel to reference point required before production on:"
 FAST = 2  # seeds in the fast tier

@@ -19,18 +19,18 @@ from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import plan_module
-from prc3cfg.core.sharing import Module, share
+from prc3cfg.core.sharing import SharingModule, share
 
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
 
 
-def line(changes: dict[int, dict[int, Program | None]], *, count: int = 30, actual_changes=None) -> list[Module]:
+def line(changes: dict[int, dict[int, Program | None]], *, count: int = 30, actual_changes=None) -> list[SharingModule]:
     """`count` factory modules; module a's desired image has `changes.get(a, changes[0])` programs."""
     modules = []
     for address in range(1, count + 1):
         actual = ModuleImage.factory(address).with_programs((actual_changes or {}).get(address, {}))
         desired = actual.with_programs(changes.get(address, changes[0]))
-        modules.append(Module(actual, desired, plan_module(actual, desired, COST)))
+        modules.append(SharingModule(actual, desired, plan_module(actual, desired, COST)))
     return modules
 
 
@@ -56,14 +56,14 @@ def test_values_that_differ_between_modules_are_sent_to_each():
 def test_a_broadcast_may_not_write_a_program_a_module_leaves_alone():
     modules = line({0: {5: Program(P=150, V=300)}})
     keep = modules[4].desired.with_programs({n: None for n in range(1, 65) if n != 6})  # module 5 manages only program 6
-    modules[4] = Module(modules[4].actual, keep, plan_module(modules[4].actual, keep, COST))
+    modules[4] = SharingModule(modules[4].actual, keep, plan_module(modules[4].actual, keep, COST))
     assert share(modules, COST).broadcasts == ()
 
 
 def test_a_system_block_is_broadcast_only_when_every_module_needs_it():
     new_system = replace(ModuleImage.factory(1).system, S1=2000)
     everyone = line({0: {}}, count=30)
-    everyone = [Module(m.actual, replace(m.desired, system=new_system), plan_module(m.actual, replace(m.desired, system=new_system), COST))
+    everyone = [SharingModule(m.actual, replace(m.desired, system=new_system), plan_module(m.actual, replace(m.desired, system=new_system), COST))
                 for m in everyone]  # fmt: skip
     assert [s.message.ID for s in share(everyone, COST).broadcasts] == [0x20]
     but_one = everyone[:29] + [line({0: {}}, count=30)[29]]

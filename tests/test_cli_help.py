@@ -6,7 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from prc3cfg.cli.common import ADDRESSES, DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, Verify
+from prc3cfg.cli.common import ADDRESSES, DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, VerifyChoice
 from prc3cfg.core import line
 from prc3cfg.core.framing import FRAMINGS
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
@@ -35,4 +35,4 @@ def test_the_names_the_help_uses_are_the_real_ones():
     assert FRAMING_NAMES == tuple(FRAMINGS)
     assert ADDRESSES == range(1, MAX_MODULE_ADDRESS + 1)
     assert (PARITY_NAMES, DATA_BITS, STOP_BITS) == (line.PARITIES, line.DATA_BITS, line.STOP_BITS)
-    assert [v.value for v in Verify] == [v.value for v in ApplyVerify]
+    assert [v.value for v in VerifyChoice] == [v.value for v in ApplyVerify]

@@ -24,8 +24,8 @@ from hypothesis import strategies as st
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import DEFAULT_SYSTEM
-from prc3cfg.plant import load_plant
 from prc3cfg.shell import files
+from prc3cfg.shell.plant_files import load_plant
 
 #: What a message a person reads must never show: Python's own words for what went wrong.
 PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no len|not subscriptable|\bdict\b|\bstr\b|\bint\b")

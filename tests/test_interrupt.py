@@ -20,8 +20,8 @@ import pytest
 from emulated import emulated_plant
 
 from prc3cfg.core.device import ModuleState
-from prc3cfg.plant import load_plant
 from prc3cfg.shell.locks import line_keys, line_lock
+from prc3cfg.shell.plant_files import load_plant
 
 TRAVEL = "Travel to reference point required before production on:"
 #: What an interrupted module's account line may say became of it — always in words.

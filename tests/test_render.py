@@ -9,7 +9,8 @@ import pytest
 
 from prc3cfg.core import render
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.device import widest_range
+from prc3cfg.core.image import PROGRAM_FIELDS, SYSTEM_KEYS, ModuleImage, Program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import plan_module
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
@@ -55,6 +56,15 @@ def test_jumps(jumps_, within, expected):
 )
 def test_field_name(symbol, name):
     assert field_name(symbol) == name
+
+
+@pytest.mark.parametrize("symbol", [*SYSTEM_KEYS, *(f for f in PROGRAM_FIELDS if f != "A")])
+def test_a_value_is_shown_raw_exactly_outside_the_devices_range(symbol):
+    """The rendering's range is the device model's (`device.widest_range`), not a table of its own."""
+    low, high = widest_range(symbol)
+    assert "raw" not in render.format_value(symbol, low) and "raw" not in render.format_value(symbol, high)
+    assert render.format_value(symbol, low - 1) == f"{low - 1} (raw, outside {low}..{high})"
+    assert render.format_value(symbol, high + 1) == f"{high + 1} (raw, outside {low}..{high})"
 
 
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)

@@ -78,7 +78,7 @@ _SINGLE_DASH = re.compile(r"-([a-z][a-z0-9]*(?:-[a-z0-9]+)+|[a-z]{2,})(?:=(.*))?
 _TERRAFORM = {"target": ("--module", "prc3cfg names a module with --module")}
 
 
-class Outcome(Exception):
+class ExitStatus(Exception):
     """A command's result that is not an error but needs its own exit code (plan: 2 = changes)."""
 
     def __init__(self, code: int) -> None:
@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> None:
         with CANCEL.handling():
             code = app(args=args, prog_name="prc3cfg", standalone_mode=False)
         sys.stdout.flush()
-    except Outcome as outcome:
+    except ExitStatus as outcome:
         sys.exit(outcome.code)
     except click_errors.NoArgsIsHelpError as error:  # `prc3cfg`, `prc3cfg emulator`: what there is to run
         print(error.ctx.get_help() if error.ctx is not None else "see prc3cfg --help")

@@ -16,7 +16,7 @@ from typing import Annotated
 
 import typer
 
-from prc3cfg.cli import Outcome, app
+from prc3cfg.cli import ExitStatus, app
 from prc3cfg.cli.common import (
     LockOpt,
     ModuleOpt,
@@ -66,7 +66,7 @@ def adopt(
     diff = difflib.unified_diff(adoption.before.splitlines(), adoption.after.splitlines(), str(plant), f"{plant} (adopted)", lineterm="")
     print("\n".join(diff))
     if check:
-        raise Outcome(EXIT_CHANGES)
+        raise ExitStatus(EXIT_CHANGES)
     question = f"Write {_count(len(adoption.adopted))} into {plant}?"
     if not auto_approve:
         if not sys.stdin.isatty():

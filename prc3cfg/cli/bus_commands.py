@@ -89,7 +89,7 @@ def scan(
 
     from prc3cfg import api
     from prc3cfg.core.render import plural
-    from prc3cfg.core.units import BY_SYMBOL
+    from prc3cfg.core.units import BY_SYMBOL, human_text
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
@@ -100,9 +100,9 @@ def scan(
     table = Table("address", "S9", *(f"{k} {BY_SYMBOL[k].key}" for k in ("S1", "S2", "S4", "S5", "S6")), "others")
     for address, reply in found.items():
         s = reply.system
-        others = ", ".join(f"{k}={BY_SYMBOL[k].format(getattr(s, k))}" for k in ("S3", "S7", "S8", "S10", "S11", "S12"))
+        others = ", ".join(f"{k}={human_text(k, getattr(s, k))}" for k in ("S3", "S7", "S8", "S10", "S11", "S12"))
         warn = "" if reply.address == address else " ⚠"
-        table.add_row(str(address), f"{reply.address}{warn}", *(BY_SYMBOL[k].format(getattr(s, k)) for k in ("S1", "S2", "S4", "S5", "S6")), others)
+        table.add_row(str(address), f"{reply.address}{warn}", *(human_text(k, getattr(s, k)) for k in ("S1", "S2", "S4", "S5", "S6")), others)
     stdout_console().print(table)
     print(f"{plural(len(found), 'module')} answered on {port}.")
 

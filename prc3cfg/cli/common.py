@@ -50,7 +50,7 @@ def one_of(allowed: tuple) -> Callable[[Any], Any]:
     return check
 
 
-class Verify(enum.StrEnum):
+class VerifyChoice(enum.StrEnum):
     """`--verify`: the values of `prc3cfg.shell.apply.Verify` (checked by the same test)."""
 
     FLOOR = "floor"

@@ -10,8 +10,8 @@ from typing import Annotated
 
 import typer
 
-from prc3cfg.cli import Outcome, app, click_errors
-from prc3cfg.cli.common import LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, Verify, check_output, line_options
+from prc3cfg.cli import ExitStatus, app, click_errors
+from prc3cfg.cli.common import LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, VerifyChoice, check_output, line_options
 
 EXIT_CHANGES = 2
 
@@ -87,7 +87,7 @@ def plan(
             drifted = api.drift(loaded, module, images=images)
         output.drift(drifted, len(api.select(loaded, module)))
         if drifted and detailed_exitcode:
-            raise Outcome(EXIT_CHANGES)
+            raise ExitStatus(EXIT_CHANGES)
         return
     notes = [] if module else api.left_alone(loaded, previous)  # a bad --previous is said before the line is used
     with line_options(trace, retries, lock_timeout) as options:
@@ -96,12 +96,12 @@ def plan(
     if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
     if detailed_exitcode and result.changes:
-        raise Outcome(EXIT_CHANGES)
+        raise ExitStatus(EXIT_CHANGES)
 
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
-VerifyOpt = Annotated[Verify, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
+VerifyOpt = Annotated[VerifyChoice, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
 
 @app.command()
@@ -115,7 +115,7 @@ def apply(
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
-    verify: VerifyOpt = Verify.FLOOR,
+    verify: VerifyOpt = VerifyChoice.FLOOR,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
@@ -144,7 +144,7 @@ def restore(
     lock_timeout: LockOpt = 0.0,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
-    verify: VerifyOpt = Verify.FLOOR,
+    verify: VerifyOpt = VerifyChoice.FLOOR,
     onto_current_lines: Annotated[bool, typer.Option("--onto-current-lines", help=(
         "Restore onto the lines the plant file names now, though they are not those the snapshot was taken on."))] = False,
 ) -> None:

@@ -55,10 +55,11 @@ def validate(
     """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
     import json
 
-    from prc3cfg.plant import PlantError, load_plant
+    from prc3cfg import api
+    from prc3cfg.plant import PlantError
 
     try:
-        loaded = load_plant(plant)
+        loaded = api.load(plant)
     except PlantError as error:
         if fmt is Format.TEXT:
             raise  # one `error:` line per problem, as every error
@@ -115,9 +116,9 @@ def show(
         check_output(plot, "--plot", plant=plant)
     elif actual is not None:
         raise UserError("--actual is what --plot overlays — give --plot FILE.svg or FILE.png too")
-    from prc3cfg.plant import load_plant
+    from prc3cfg import api
 
-    loaded = load_plant(plant)
+    loaded = api.load(plant)
     if module is None:
         stdout_console().print(_modules_table(loaded))
         return
@@ -181,7 +182,7 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     from prc3cfg.core.units import (
         PROGRAM_QUANTITIES,
         SYSTEM_QUANTITIES,
-        format_function_output,
+        human_text,
     )
     from prc3cfg.plant.profiles import Sourced
 
@@ -196,7 +197,7 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     device = module.desired_system()
     for q in SYSTEM_QUANTITIES:
         value = getattr(device, q.symbol)
-        system.add_row(f"{q.key} ({q.symbol})", q.format(value), str(value), settings.system[q.key].source)
+        system.add_row(f"{q.key} ({q.symbol})", human_text(q.symbol, value), str(value), settings.system[q.key].source)
     console.print(system)
 
     programs = Table(title="programs", title_justify="left", box=box.SIMPLE_HEAD)
@@ -205,9 +206,9 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
     jumps = settings.jumps()
     for number, program in module.desired_programs().items():
         fields = settings.programs[number]
-        rows = [(q.key, q.symbol, q.format(getattr(program, q.symbol)), getattr(program, q.symbol), fields[q.key])
+        rows = [(q.key, q.symbol, human_text(q.symbol, getattr(program, q.symbol)), getattr(program, q.symbol), fields[q.key])
                 for q in PROGRAM_QUANTITIES]
-        rows += [(key, key.upper(), format_function_output(getattr(program, key.upper())),
+        rows += [(key, key.upper(), human_text(key.upper(), getattr(program, key.upper())),
                   getattr(program, key.upper()), fields[key]) for key in ("f1", "f2")]
         jump = jumps.get(number, Sourced(0))
         rows.append(("jump", "A", f"program {program.A}" if program.A else "stop", program.A, jump))

@@ -30,7 +30,9 @@ FAULT_CODES: dict[str, int] = {
     "E22": 26, "E23": 27, "E24": 28, "E25": 29, "fault": 30,
 }  # fmt: skip
 
-#: Fixed value ranges, kind → (lowest, highest, code below, code above) (§4.5 step 9).
+#: Fixed value ranges, kind → (lowest, highest, code below, code above) (§4.5 step 9): the one
+#: table of the device's ranges. The plant file's bounds (`prc3cfg.core.units`), the emulator's
+#: state file and the rendering of read-backs all derive theirs from it (`widest_range`).
 #: A and S8 travel as unsigned bytes, so they are never below their lowest.
 VALUE_RANGES: dict[str, tuple[int, int, int, int]] = {
     "Vr": (-600, 600, 50, 51),
@@ -63,6 +65,17 @@ def value_range(kind: str, system: SystemParameters) -> tuple[int, int, int, int
     if kind == "V":
         return system.S5, system.S4, 40, 41
     return VALUE_RANGES[kind]
+
+
+#: The system parameters under which P and V may take every value any module allows: the highest
+#: S1 and S4, the lowest S5.
+WIDEST_SYSTEM = replace(DEFAULT_SYSTEM, S1=VALUE_RANGES["S1"][1], S4=VALUE_RANGES["S4"][1], S5=VALUE_RANGES["S5"][0])
+
+
+def widest_range(kind: str) -> tuple[int, int]:
+    """The lowest and highest value of `kind` that some module holds: P 0..9999, V 1..600, the rest their fixed range."""
+    low, high, _, _ = value_range(kind, WIDEST_SYSTEM)
+    return low, high
 
 
 @dataclass(frozen=True, slots=True)

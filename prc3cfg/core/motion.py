@@ -45,6 +45,7 @@ from dataclasses import dataclass
 from decimal import Decimal
 
 from prc3cfg.core.chains import jumps_as_chains
+from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.units import BY_SYMBOL, split_function_output
 from prc3cfg.errors import UserError
@@ -52,8 +53,8 @@ from prc3cfg.errors import UserError
 MOVE = "move"
 DWELL = "dwell"
 OUTPUTS = ("F1", "F2")
-#: Function output values the motion can read (prc3-protocol.md §1.1).
-OUTPUT_RANGE = range(0, 2000)
+#: Function output values the motion can read (prc3-protocol.md §1.1): those a module holds.
+OUTPUT_RANGE = range(widest_range("F1")[0], widest_range("F1")[1] + 1)
 
 
 class MotionError(UserError):

@@ -144,7 +144,7 @@ class Planner:
             return
         proof_time = line.proof_time()
         with self._cache.lock:
-            shared = sharing.share([sharing.Module(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing, proof_time)
+            shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing, proof_time)
         if not shared.broadcasts:
             self._keep(bus, _Planned(changes))
             return

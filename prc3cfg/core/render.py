@@ -21,12 +21,13 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from prc3cfg.core.chains import jumps_as_chains
+from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Step
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import mermaid
-from prc3cfg.core.units import BY_SYMBOL, format_function_output
+from prc3cfg.core.units import BY_SYMBOL, human_text
 from prc3cfg.core.verification import Release
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
@@ -40,20 +41,14 @@ def field_name(symbol: str) -> str:
     return BY_SYMBOL[symbol].key.replace("_", " ") if symbol in BY_SYMBOL else symbol
 
 
-#: Device ranges of the fields whose range does not depend on the system parameters;
-#: a read-back outside them (a damaged or foreign module) is shown raw, never decoded.
-_RANGES = {**{q.symbol: (q.lo, q.hi) for q in BY_SYMBOL.values()}, "F1": (0, 1999), "F2": (0, 1999)}
-
-
 @functools.lru_cache(maxsize=4096)
 def format_value(symbol: str, device: int) -> str:
-    """A device value in human units: "1.050 m", "set at 0.010 m"; raw when it is out of range."""
-    low, high = _RANGES[symbol]
+    """A device value in human units: "1.050 m", "set at 0.010 m"; raw when no module holds it
+    (`device.widest_range`: a damaged or foreign module's read-back is shown, never decoded)."""
+    low, high = widest_range(symbol)
     if not low <= device <= high:
         return f"{device} (raw, outside {low}..{high})"
-    if symbol in ("F1", "F2"):
-        return format_function_output(device)
-    return BY_SYMBOL[symbol].format(device)
+    return human_text(symbol, device)
 
 
 @dataclass(frozen=True, slots=True)

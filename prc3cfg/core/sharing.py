@@ -53,7 +53,7 @@ FIELD_ITEMS = codec.MAX_FIELD_ITEMS
 
 
 @dataclass(frozen=True, slots=True)
-class Module:
+class SharingModule:
     """One module of the line as the sharing sees it: read-back, desired image, its own plan."""
 
     actual: ModuleImage
@@ -69,7 +69,7 @@ def alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple:
     return (actual.system, actual.programs, desired.system, desired.programs, address, cost)
 
 
-def _kind(module: Module, cost: LineCost, memo: dict) -> int:
+def _kind(module: SharingModule, cost: LineCost, memo: dict) -> int:
     return memo.setdefault(("kind", alike(module.actual, module.desired, cost)), len(memo))
 
 
@@ -82,7 +82,7 @@ class Shared:
     bus_time: float  # the broadcasts once, plus every module's own steps
 
 
-def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None, proof_time: float = 0.0) -> Shared:
+def share(modules: Sequence[SharingModule], cost: LineCost, memo: dict | None = None, proof_time: float = 0.0) -> Shared:
     """The cheapest broadcasts found for a line whose every module is in `modules`: groups added
     one by one while they pay, or all of them with those dropped that do not — the cheaper.
     `proof_time` is what any broadcast costs besides: proving that nobody else is on the line
@@ -117,7 +117,7 @@ def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None, p
     return Shared(broadcasts, tuple(plans), bus_time)
 
 
-def _candidates(modules: Sequence[Module]) -> list[tuple[Step, ...]]:
+def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     """Groups of broadcast steps: the system block, then per field the items every module shares."""
     first = modules[0]
     groups: list[tuple[Step, ...]] = []
@@ -144,7 +144,7 @@ def _candidates(modules: Sequence[Module]) -> list[tuple[Step, ...]]:
     return groups
 
 
-def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[Module], cost: LineCost, memo: dict):
+def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: dict):
     """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
     verifying read-back); None where a module cannot take the broadcasts."""
     total = sum(cost.broadcast_time(step.message) for step in broadcasts)
@@ -161,7 +161,7 @@ def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[Module], cost: Line
     return broadcasts, tuple(owns), total
 
 
-def _priced(broadcasts: tuple[Step, ...], module: Module, cost: LineCost) -> tuple[tuple[Step, ...], float] | None:
+def _priced(broadcasts: tuple[Step, ...], module: SharingModule, cost: LineCost) -> tuple[tuple[Step, ...], float] | None:
     """A module's own steps after the broadcasts, and their bus time with the verifying read-back of
     everything that reaches it; None when the module cannot take the broadcasts."""
     try:

@@ -25,8 +25,8 @@ Refused in one line, with nothing adopted: a jump address (A) that drifted — j
 value the plant file cannot hold — a position above the module's upper reversing point, a
 speed outside min_speed..max_speed, anything outside its range — naming module and program.
 
-How the file is rewritten: spliced, never dumped. The text is parsed once more (the loader's
-parser, `document.LOADER`) for the exact span of every scalar and collection, a changed value
+How the file is rewritten: spliced, never dumped. The text is read once more by the loader's
+own reader (`document.spans`) for the exact span of every scalar and collection, a changed value
 replaces the text of its scalar (with as many decimals as it had, more only where the value
 needs them; quotes and case kept), and a new override is inserted as text in the style of
 the file: into a flow mapping as `, key: value`, into a block mapping as lines at its
@@ -34,7 +34,7 @@ indentation after the entry it follows (program numbers and fields in their usua
 nested mappings flow or block as the file writes them (`_Conventions`). Every other byte —
 comments, quoting, layout, line ends — stays as it was. Offsets are those of the text after a
 byte order mark, which is taken off before parsing and put back after: libyaml does not count
-it, the pure parser does. The new text is then loaded as a plant (`load_plant` of the text, as
+it, the pure parser does. The new text is then loaded as a plant (`parse_plant` of the text, as
 if it were the file) and must describe exactly what the modules hold — the adopted values in
 the chosen modules, every other module, bus and setting as before — or nothing is adopted
 (`AdoptRefused`: a bug of the rewriter, said as one). Pure: text and images in, text out.
@@ -46,21 +46,18 @@ import hashlib
 import re
 from collections import Counter
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from decimal import Decimal
 from typing import Any
-
-import yaml
-from yaml.events import CollectionStartEvent, MappingEndEvent, MappingStartEvent, ScalarEvent, SequenceEndEvent, SequenceStartEvent
 
 from prc3cfg.core.device import value_range
 from prc3cfg.core.image import SYSTEM_KEYS, ModuleImage, SystemParameters, default_program
 from prc3cfg.core.render import FieldChange, differences, field_name, format_value
-from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, split_function_output
+from prc3cfg.core.units import BY_SYMBOL, PROGRAM_QUANTITIES, QUANTITIES, plant_value
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Module, Plant
-from prc3cfg.plant.document import DECIMAL_NUMBER, LOADER, core_schema, marked
-from prc3cfg.plant.loader import load_plant
+from prc3cfg.plant.document import DECIMAL_NUMBER, Span, core_schema, spans
+from prc3cfg.plant.loader import parse_plant
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 from prc3cfg.plant.problems import Path_, PlantError
 from prc3cfg.plant.profiles import DEFAULT, MODULE, Sourced
@@ -112,7 +109,7 @@ class Adopted:
 
 
 @dataclass(frozen=True, slots=True)
-class Adoption:
+class AdoptedText:
     """What `adopt` found: the values adopted, in the order of their modules in the file, and the new text."""
 
     adopted: tuple[Adopted, ...]
@@ -140,7 +137,7 @@ class _Drift:
         return self.sourced.path if self.sourced is not None and self.sourced.source.startswith(PROFILE) else None
 
 
-def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Iterable[int] | None = None) -> Adoption:
+def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Iterable[int] | None = None) -> AdoptedText:
     """The plant file `text` (of `plant`, as loaded) rewritten to describe what the modules in
     `images` hold — only `programs` of them, if given; `AdoptRefused` for what it cannot say."""
     if hashlib.sha256(text.encode("utf-8")).hexdigest() != plant.sha256:
@@ -160,10 +157,10 @@ def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Ite
         layer = MODULE if target[0] == "buses" else source
         adopted.append(Adopted(tuple(d.name for d in found), first.what, layer, layer == MODULE and source != MODULE, source))
     if not wanted:
-        return Adoption((), text)
+        return AdoptedText((), text)
     rewritten = _Rewrite(text).apply(wanted)
     _check_rewritten(plant, {key: _adopted_image(module, images.get(key), scope) for key, module in _keyed(plant)}, rewritten)
-    return Adoption(tuple(adopted), rewritten)
+    return AdoptedText(tuple(adopted), rewritten)
 
 
 def _keyed(plant: Plant) -> Iterator[tuple[Key, Module]]:
@@ -184,7 +181,7 @@ def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -
     """`AdoptRefused` unless `text`, loaded as the plant file, has the same buses, modules and
     settings as `plant`, and each module's image is the one `adopted` names."""
     try:
-        after = load_plant(plant.path, text)
+        after = parse_plant(plant.path, text.encode("utf-8"))
     except PlantError as error:
         raise _rewriter_bug(plant, f"it would not load: {error.problems[0]}") from None
     same = [bus.model_dump(exclude={"modules"}) for bus in plant.buses] == [bus.model_dump(exclude={"modules"}) for bus in after.buses]
@@ -225,18 +222,18 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
                                "in the plant file by hand, or apply it to set the jump back, then adopt again")  # fmt: skip
     system = have.system if scope is None else desired.system
     _check(_adopted_image(module, have, scope), numbers, where)
-    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), _human(c.symbol, c.after), f"system {c.text}",
+    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), plant_value(c.symbol, c.after), f"system {c.text}",
                      settings.system[BY_SYMBOL[c.symbol].key]) for c in _changes(desired.system, system, SYSTEM_KEYS)]  # fmt: skip
     for number in numbers:
         held = have.program(number)
         if number in settings.programs:
-            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]), _human(c.symbol, c.after),
+            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]), plant_value(c.symbol, c.after),
                               f"program {number} {c.text}", settings.programs[number][FIELD_KEYS[c.symbol]])
                        for c in _changes(desired.program(number), held, FIELD_KEYS)]  # fmt: skip
         elif held != default_program(system):  # unlisted under reset: listed now, with all it holds
             symbols = [s for s in FIELD_KEYS if s in ("P", "V") or getattr(held, s)]
             said = ", ".join(f"{field_name(s)} {format_value(s, getattr(held, s))}" for s in symbols)
-            value = {FIELD_KEYS[s]: _human(s, getattr(held, s)) for s in symbols}
+            value = {FIELD_KEYS[s]: plant_value(s, getattr(held, s)) for s in symbols}
             drifts.append(_Drift(name, path, ("programs", number), value, f"program {number} {said}", None))
     return drifts
 
@@ -244,13 +241,6 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
 def _changes(said: Any, held: Any, symbols: Iterable[str]) -> list[FieldChange]:
     """The fields `symbols` of two programs, or of two sets of system parameters, that differ."""
     return [FieldChange.of(None, s, getattr(said, s), getattr(held, s)) for s in symbols if getattr(said, s) != getattr(held, s)]
-
-
-def _human(symbol: str, device: int) -> Any:
-    """A device value as the plant file says it: 1050 → Decimal("1.050"), F1 1010 → {action: set, distance: 0.010}."""
-    if symbol in ("F1", "F2"):
-        return dict(zip(FunctionOutputSpec.model_fields, split_function_output(device)))
-    return BY_SYMBOL[symbol].to_human(device)
 
 
 def _check(after: ModuleImage, numbers: list[int], where: str) -> None:
@@ -315,54 +305,6 @@ def _want(trie: dict[Any, Any], path: Path_, value: Any) -> None:
 # -- the file as text: its nodes' spans, its conventions, the splices ---------------------
 
 
-@dataclass(slots=True)
-class _Node:
-    """A scalar, mapping or list of the file and its span: `end` is after its text (after the
-    last child's, for a block collection). A scalar has `value` (as written, unquoted)."""
-
-    start: int
-    end: int
-    flow: bool = False
-    value: str | None = None
-    plain: bool = True
-    children: dict[Any, _Node] | list[_Node] = field(default_factory=dict)
-    keys: dict[Any, int] = field(default_factory=dict)  # a mapping's keys: where each starts
-
-
-def _tree(text: str) -> _Node:
-    """The top node of `text`, parsed by the loader's parser (keys read as the loader reads them)."""
-    events = iter(yaml.parse(text, Loader=LOADER))
-    return _node(next(e for e in events if isinstance(e, (MappingStartEvent, SequenceStartEvent, ScalarEvent))), events)
-
-
-def _node(event: yaml.Event, events: Iterator[yaml.Event]) -> _Node:
-    start, end_mark = marked(event.start_mark).index, marked(event.end_mark).index
-    if isinstance(event, ScalarEvent):
-        return _Node(start, end_mark, value=event.value, plain=not event.style)
-    node = _Node(start, end_mark, flow=isinstance(event, CollectionStartEvent) and bool(event.flow_style))
-    end: yaml.Event
-    if isinstance(event, SequenceStartEvent):
-        node.children = []
-        while not isinstance(item := next(events), SequenceEndEvent):
-            node.children.append(_node(item, events))
-        end = item
-    else:
-        node.children = mapping = dict[Any, _Node]()
-        while not isinstance(key := next(events), MappingEndEvent):
-            assert isinstance(key, ScalarEvent)  # the loader has read the file: its keys are scalars
-            name = core_schema(key.value)[1] if not key.style else key.value
-            node.keys[name] = marked(key.start_mark).index
-            mapping[name] = _node(next(events), events)
-        end = key
-    children = list(node.children.values()) if isinstance(node.children, dict) else node.children
-    node.end = marked(end.end_mark).index if node.flow or not children else children[-1].end
-    return node
-
-
-def _items(node: _Node) -> Iterator[tuple[Any, _Node]]:
-    return iter(node.children.items()) if isinstance(node.children, dict) else enumerate(node.children)
-
-
 def _kind(path: Path_) -> str | None:
     """What a mapping at `path` is within a profile or module: system, programs, program, output."""
     if path[:1] == ("profiles",):
@@ -387,17 +329,17 @@ def _decimals(written: str) -> int:
 class _Conventions:
     """How the file writes things: decimals by key, flow or block by kind of mapping, the indentation step."""
 
-    def __init__(self, text: str, root: _Node) -> None:
+    def __init__(self, text: str, root: Span) -> None:
         self.decimals: dict[Any, Counter[int]] = {}
         self.flow: dict[str, Counter[bool]] = {}
         self.steps: Counter[int] = Counter()
         self._walk(text, root, ())
 
-    def _walk(self, text: str, node: _Node, path: Path_) -> None:
-        for key, child in _items(node):
-            if child.value is not None:
-                if child.plain and DECIMAL_NUMBER.fullmatch(child.value):
-                    self.decimals.setdefault(key, Counter())[_decimals(child.value)] += 1
+    def _walk(self, text: str, node: Span, path: Path_) -> None:
+        for key, child in node.items():
+            if child.written is not None:
+                if child.plain and DECIMAL_NUMBER.fullmatch(child.written):
+                    self.decimals.setdefault(key, Counter())[_decimals(child.written)] += 1
                 continue
             if isinstance(child.children, dict):
                 if (kind := _kind(path + (key,))) is not None:
@@ -452,7 +394,7 @@ class _Rewrite:
     def __init__(self, text: str) -> None:
         self.bom = BYTE_ORDER_MARK if text.startswith(BYTE_ORDER_MARK) else ""
         self.text = text[len(self.bom):]
-        self.root = _tree(self.text)
+        self.root = spans(self.text)
         self.conventions = _Conventions(self.text, self.root)
         self.newline = "\r\n" if "\r\n" in text else "\n"
         self.splices: list[tuple[int, int, int, str]] = []
@@ -481,7 +423,7 @@ class _Rewrite:
                 spaces = tail.end(1) - tail.start(1)
                 self.splices.append((tail.start(1), tail.end(1), len(self.splices), " " * max(2, spaces - growth)))
 
-    def _set(self, node: _Node, path: Path_, wanted: dict[Any, Any]) -> None:
+    def _set(self, node: Span, path: Path_, wanted: dict[Any, Any]) -> None:
         missing = []
         for key, value in wanted.items():
             child = node.children.get(key) if isinstance(node.children, dict) else node.children[key]
@@ -494,9 +436,9 @@ class _Rewrite:
         if missing:
             self._insert(node, path, sorted(missing, key=_rank), wanted)
 
-    def _replace(self, scalar: _Node, value: Any) -> None:
+    def _replace(self, scalar: Span, value: Any) -> None:
         """A scalar's text replaced by `value`, written like it: decimals, quotes, case."""
-        written = scalar.value
+        written = scalar.written
         assert written is not None  # `wanted` holds a value only where the file has a scalar
         if (core_schema(written)[1] if scalar.plain else written) == value:
             return  # the half of an F1/F2 that did not change
@@ -510,7 +452,7 @@ class _Rewrite:
             new = _number(value, _decimals(written) if DECIMAL_NUMBER.fullmatch(written) else 0)
         self.splices.append((scalar.start, scalar.end, len(self.splices), new))
 
-    def _insert(self, node: _Node, path: Path_, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert(self, node: Span, path: Path_, keys: list[Any], wanted: dict[Any, Any]) -> None:
         """New keys into the mapping `node` at `path`, each after the key it follows in `_rank` order."""
         groups: dict[Any, list[Any]] = {}
         for key in keys:
@@ -522,7 +464,7 @@ class _Rewrite:
             else:
                 self._insert_block(node, path, after, group, wanted)
 
-    def _insert_flow(self, node: _Node, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert_flow(self, node: Span, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
         items = ", ".join(f"{key}: {self._flow(path + (key,), wanted[key])}" for key in keys)
         if after is not None:
             self._add(node.children[after].end, f", {items}")
@@ -531,7 +473,7 @@ class _Rewrite:
         else:
             self._add(node.start + 1, items)
 
-    def _insert_block(self, node: _Node, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert_block(self, node: Span, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
         first = min(node.keys, key=node.keys.__getitem__)
         column = _column(self.text, node.keys[first])
         lines = [line for key in keys for line in self._block(path + (key,), wanted[key], column)]

@@ -4,7 +4,8 @@ PyYAML parses — with libyaml (`yaml.CSafeLoader`) when it is installed, else t
 `SafeLoader`. Its events are read in one pass that builds the data directly: no node tree (a
 PyYAML node and its two marks cost several hundred bytes; a large plant has 160,000 of them),
 and no position kept for a key or value that nothing is wrong with (`Document.lines` finds the
-places of the problems it is given). Where libyaml stops (a syntax error, a limit), the file is
+places of the problems it is given); only `spans`, which `adopt` splices by, keeps each node's
+offsets in the text, read by the same pass. Where libyaml stops (a syntax error, a limit), the file is
 parsed again by the pure parser and its first stop is said, so that messages do not depend on
 which one ran; they differ only where the two disagree on what is valid YAML (libyaml takes a
 tab inside a plain scalar, PyYAML does not), and where the pure parser would take more than
@@ -37,17 +38,17 @@ about a second to get there (`_REREAD_EVENTS`). This module builds the data itse
 - a problem names its place by path, `("buses", 0, "modules", 2, "name")`, or by the line
   and column it was found at.
 
-Reading is bounded in time and memory: only a regular file is read (a FIFO could block,
-`/dev/zero` never ends), at most `MAX_BYTES` of it; more than `MAX_NODES` keys, values, lists
-and mappings, or nesting deeper than `MAX_DEPTH`, is refused on the event stream where it is
+Reading is bounded in time and memory: the bytes are handed over, read by the shell within
+its bounds (`prc3cfg.shell.plant_files`); more than `MAX_NODES` keys, values, lists and
+mappings, or nesting deeper than `MAX_DEPTH`, is refused on the event stream where it is
 reached; a scalar's reading is worked out once per text (a plant file says the same few
 things many times); at most `MAX_PROBLEMS` problems are kept, and one more to show that
 there are more.
 
-Problems that stop reading altogether (no such file, not a regular file, too large, not UTF-8,
-a control character or a byte order mark after the start, a YAML syntax error, a limit, an
-alias, an empty file, a top level that is not a mapping) raise `PlantError` at once; the
-others are collected in `Document.problems`. Does not know what a plant file contains.
+Problems that stop reading altogether (not UTF-8, a control character or a byte order mark
+after the start, a YAML syntax error, a limit, an alias, an empty file, a top level that is
+not a mapping) raise `PlantError` at once; the others are collected in `Document.problems`.
+Does not know what a plant file contains. Pure: bytes in.
 """
 
 from __future__ import annotations
@@ -58,7 +59,6 @@ import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal, InvalidOperation
-from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -78,13 +78,9 @@ from yaml.events import (
 from yaml.nodes import ScalarNode
 
 from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, MAX_PROBLEMS, Path_, PlantError, Problem
-from prc3cfg.shell.files import FileProblem, Why, read_regular
 
 #: The parser: libyaml's when PyYAML was built with it (issue 11 wants its speed).
 LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-#: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
-#: comments, long names and every field, a few MB. Bytes cost little: nodes are what is bounded.
-MAX_BYTES = 16 * 2**20
 #: Keys, values, lists and mappings: 8 buses × 30 modules managing all 64 programs, each program
 #: a flow mapping of position, speed, dwell and relative speed, have 157,000; with f1, f2 and
 #: next on every program, 372,000. The worst a file of this many can do (every one wrong) is
@@ -221,10 +217,37 @@ class Document:
         return reader.positions
 
 
-def read_document(path: Path, data: bytes | None = None) -> Document:
-    """Read and parse `path` — or `data`, as if `path` held it; `PlantError` if it is not a YAML mapping at all."""
-    name = str(path)
-    data = _read_bytes(path, name) if data is None else data
+@dataclass(slots=True)
+class Span:
+    """Where a scalar, mapping or list of a file is in its text (`spans`): from `start` to `end`,
+    offsets in the text (a block collection ends after its last child's text). A scalar has its
+    text as `written` (unquoted) and whether it is `plain`; a collection whether it is `flow`, its
+    `children` (by key, read as `parse_document` reads keys, or in order) and its `keys`' offsets."""
+
+    start: int
+    end: int
+    flow: bool = False
+    written: str | None = None
+    plain: bool = True
+    children: dict[Any, Span] | list[Span] = field(default_factory=dict)
+    keys: dict[Any, int] = field(default_factory=dict)
+
+    def items(self) -> Iterator[tuple[Any, Span]]:
+        """Each child with its key or index."""
+        return iter(self.children.items()) if isinstance(self.children, dict) else enumerate(self.children)
+
+
+def spans(text: str) -> Span:
+    """The span of every node of `text`, a YAML text `parse_document` took: read again by the same
+    reader (`_Reader` with `spans`), so that its keys are the data's. The top node's span."""
+    reader = _Reader(_Events("", text, LOADER), spans=True)
+    reader.read()
+    assert reader.top is not None  # a text that was read has a top node
+    return reader.top
+
+
+def parse_document(name: str, data: bytes) -> Document:
+    """Parse `data`, the bytes of the file `name`; `PlantError` if it is not a YAML mapping at all."""
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -246,24 +269,6 @@ def read_document(path: Path, data: bytes | None = None) -> Document:
         raise PlantError([f"{name}:{line}:{column}: the top level is {kind}, not a mapping "
                           "— a plant file is a mapping with 'plant:' and 'buses:'"])
     return Document(name, text, value, hashlib.sha256(data).hexdigest(), reader.problems)
-
-
-#: What to do about a plant path that cannot be read, by why.
-_REMEDIES = {
-    Why.MISSING: "check the path",
-    Why.DIRECTORY: "give the plant file (*.yaml) in it",
-    Why.NOT_A_FILE: "give the plant file (*.yaml) itself",
-    Why.UNREADABLE: "check the path and its permissions",
-    Why.TOO_LARGE: "a plant file is far smaller: check that this is the plant file",
-}
-
-
-def _read_bytes(path: Path, name: str) -> bytes:
-    """The bytes of the plant file, at most `MAX_BYTES` (`prc3cfg.shell.files.read_regular`)."""
-    try:
-        return read_regular(path, MAX_BYTES)
-    except FileProblem as problem:
-        raise PlantError([f"{name}: {problem} — {_REMEDIES[problem.why]}"]) from None
 
 
 def _read(name: str, text: str) -> _Reader:
@@ -372,11 +377,20 @@ class _Reader:
     Without `wanted`, it builds the data and collects the problems found on the way (at most
     `MAX_PROBLEMS` + 1: enough to know that there are more). With `wanted`, a trie of paths
     (`_want`), it records `positions` of those paths and of the paths on the way to them, and
-    only passes over the rest. The same code reads keys both times, so paths match.
+    only passes over the rest. The same code reads keys both times, so paths match. With
+    `spans`, it also records the `Span` of every node it builds (`top`, the top node's), for
+    `spans`: only then does it keep the last event it was given and go through `spanned`.
     """
 
-    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None) -> None:
-        self.next = iter(events).__next__
+    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None, spans: bool = False) -> None:
+        self.next: Callable[[], yaml.Event] = iter(events).__next__
+        #: The value of the node that an event begins, read to its end: `read_node`, or `spanned`.
+        self.node: Callable[[yaml.Event, Path_, Mapping[Any, Any] | None], Any] = self.read_node
+        self.open: list[Span] | None = None  # with `spans`: the collections being read, innermost last
+        self.top: Span | None = None
+        self.last: yaml.Event | None = None  # with `spans`: the event given last
+        if spans:
+            self.open, self.next, self.node = [], self._kept(self.next), self.spanned
         self.wanted = wanted
         self.positions: dict[Path_, tuple[Position | None, Position]] = {}
         self.problems: list[Problem] = []
@@ -399,11 +413,44 @@ class _Reader:
         while type(self.next()) is not StreamEndEvent:  # the end of the document, or more of them
             pass
 
+    def _kept(self, given: Callable[[], yaml.Event]) -> Callable[[], yaml.Event]:
+        """`given`, each event it gives kept as `last`."""
+
+        def next_event() -> yaml.Event:
+            self.last = given()
+            return self.last
+
+        return next_event
+
+    def spanned(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
+        """`node`, with the node's `Span` put in the collection it is in (`open`), or as `top`."""
+        assert self.open is not None
+        span = Span(marked(event.start_mark).index, marked(event.end_mark).index)
+        if type(event) is ScalarEvent:
+            span.written, span.plain = event.value, not event.style
+        elif isinstance(event, CollectionStartEvent):
+            span.flow = bool(event.flow_style)
+            span.children = [] if type(event) is SequenceStartEvent else {}
+        if not self.open:
+            self.top = span
+        elif isinstance(children := self.open[-1].children, list):
+            children.append(span)
+        else:
+            children[path[-1]] = span
+        self.open.append(span)
+        value = self.read_node(event, path, wanted)
+        self.open.pop()
+        if isinstance(event, CollectionStartEvent):
+            assert self.last is not None  # the collection's end
+            children = list(span.children.values()) if isinstance(span.children, dict) else span.children
+            span.end = children[-1].end if children and not span.flow else marked(self.last.end_mark).index
+        return value
+
     def problem(self, problem: Problem) -> None:
         if len(self.problems) <= MAX_PROBLEMS:
             self.problems.append(problem)
 
-    def node(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
+    def read_node(self, event: yaml.Event, path: Path_, wanted: Mapping[Any, Any] | None) -> Any:
         """The value of the node that `event` begins, read to its end."""
         if type(event) is ScalarEvent:
             return self.scalar(event, path, path[-1] if path and isinstance(path[-1], str) else "")
@@ -462,6 +509,8 @@ class _Reader:
                 self.skip(value_event)
                 continue
             keys[key] = key_at
+            if self.open is not None:
+                self.open[-1].keys[key] = marked(key_event.start_mark).index
             result[key] = self.entry(path + (key,), key_at, value_event, wanted)
             before = (key, value_event)
         return result

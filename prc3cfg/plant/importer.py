@@ -23,22 +23,17 @@ import yaml
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.image import DEFAULT_SYSTEM, SYSTEM_KEYS, ModuleImage, Program, default_program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.units import BY_SYMBOL, split_function_output
+from prc3cfg.core.units import BY_SYMBOL, plant_value
 
 PROGRAM_KEYS = {"P": "position", "V": "speed", "Vr": "relative_speed", "T": "dwell"}
 
 
-def _human(symbol: str, device: int) -> Decimal | int | bool:
-    return BY_SYMBOL[symbol].to_human(device)
-
-
 def _program_entry(program: Program, next_program: int | None) -> dict[str, Any]:
-    entry: dict[str, Any] = {PROGRAM_KEYS[k]: _human(k, getattr(program, k)) for k in ("P", "V")}
-    entry.update({PROGRAM_KEYS[k]: _human(k, getattr(program, k)) for k in ("Vr", "T") if getattr(program, k)})
+    entry: dict[str, Any] = {PROGRAM_KEYS[k]: plant_value(k, getattr(program, k)) for k in ("P", "V")}
+    entry.update({PROGRAM_KEYS[k]: plant_value(k, getattr(program, k)) for k in ("Vr", "T") if getattr(program, k)})
     for key in ("F1", "F2"):
         if value := getattr(program, key):
-            action, distance = split_function_output(value)
-            entry[key.lower()] = {"action": action, "distance": distance}
+            entry[key.lower()] = plant_value(key, value)
     if next_program is not None:
         entry["next"] = next_program
     return entry
@@ -53,7 +48,7 @@ SCHEMA = "plant.schema.json"
 def module_entry(image: ModuleImage, name: str) -> dict[str, Any]:
     """One module of a plant file, from its complete image."""
     system = {
-        BY_SYMBOL[key].key: _human(key, getattr(image.system, key))
+        BY_SYMBOL[key].key: plant_value(key, getattr(image.system, key))
         for key in SYSTEM_KEYS
         if getattr(image.system, key) != getattr(DEFAULT_SYSTEM, key)
     }

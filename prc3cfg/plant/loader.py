@@ -1,4 +1,4 @@
-"""`load_plant`: read a plant file, find its problems at once, or build the `Plant`.
+"""`parse_plant`: read a plant file's bytes, find its problems at once, or build the `Plant`.
 
     read YAML (`document`)  →  pydantic, part by part (`models`, worded by `messages`)
                             →  rules on every part that is valid on its own (`rules`,
@@ -30,7 +30,7 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from prc3cfg.plant import rules
-from prc3cfg.plant.document import Document, Position, mappings_in, read_document
+from prc3cfg.plant.document import Document, Position, mappings_in, parse_document
 from prc3cfg.plant.messages import from_pydantic, what
 from prc3cfg.plant.models import BusLine, ModuleSpec, PlantSpec, ProfileSpec
 from prc3cfg.plant.plant import Bus, Module, Plant
@@ -47,11 +47,11 @@ _MODULE_STAND_IN = {"address": 1, "name": "-"}
 _PROFILE_STAND_IN: dict[str, Any] = {}
 
 
-def load_plant(path: str | Path, text: str | None = None) -> Plant:
-    """The plant in `path` — or in `text`, as if `path` held it (a file before it is written);
-    `PlantError` with its problems ("file:line:column: …") otherwise."""
+def parse_plant(path: str | Path, data: bytes) -> Plant:
+    """The plant in `data`, the bytes of the file `path` (read by the shell, `prc3cfg.shell.plant_files`,
+    or a file before it is written); `PlantError` with its problems ("file:line:column: …") otherwise."""
     path = Path(path)
-    document = read_document(path, None if text is None else text.encode("utf-8"))
+    document = parse_document(str(path), data)
     _check_sizes(document)
     problems = _Problems(MAX_PROBLEMS - len(document.problems))
     try:

@@ -67,7 +67,7 @@ from prc3cfg.core import gateway
 from prc3cfg.core.framing import FramingName
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
 from prc3cfg.core.line import DATA_BITS, EMULATOR_SCHEME, STOP_BITS, TCP_SCHEMES, Parity
-from prc3cfg.core.units import DISTANCE, QUANTITIES, Action, Quantity
+from prc3cfg.core.units import DISTANCE, QUANTITIES, Action, Quantity, human_text
 
 T = TypeVar("T")
 
@@ -169,7 +169,7 @@ def _system(key: str, description: str) -> _Number:
     """S1..S12 (not S8, S9): a key left out is the factory default, which the schema names."""
     q = QUANTITIES[key]
     factory = q.to_human(getattr(DEFAULT_SYSTEM, q.symbol))
-    return _quantity(q, f"{description} (factory {q.format(getattr(DEFAULT_SYSTEM, q.symbol))})", default=factory)
+    return _quantity(q, f"{description} (factory {human_text(q.symbol, getattr(DEFAULT_SYSTEM, q.symbol))})", default=factory)
 
 
 def _one_of(allowed: tuple[int | float, ...], description: str) -> _Number:

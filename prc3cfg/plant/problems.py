@@ -66,7 +66,7 @@ class PlantError(UserError):
         super().__init__("\n".join(self.problems))
 
     def findings(self, file: str) -> list[Finding]:
-        """The problems of the plant file read as `file` (the path `load_plant` was given, as text)."""
+        """The problems of the plant file read as `file` (the path `parse_plant` was given, as text)."""
         found = []
         for problem in self.problems:
             place = _PLACE.match(problem, len(file)) if problem.startswith(f"{file}:") else None

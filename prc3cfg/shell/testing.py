@@ -29,9 +29,10 @@ import yaml
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, default_program
 from prc3cfg.errors import UserError
-from prc3cfg.plant import Plant, load_plant
+from prc3cfg.plant import Plant
 from prc3cfg.shell.emulator import Emulator, FaultInjection
 from prc3cfg.shell.files import FileProblem, read_json
+from prc3cfg.shell.plant_files import load_plant
 
 
 @dataclass

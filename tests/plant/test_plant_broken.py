@@ -25,8 +25,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg.errors import UserError
-from prc3cfg.plant import PlantError, document, load_plant, loader, plant_schema
+from prc3cfg.plant import PlantError, document, loader, plant_schema
 from prc3cfg.plant.problems import MAX_PROBLEMS
+from prc3cfg.shell import plant_files
+from prc3cfg.shell.plant_files import load_plant
 
 BROKEN = sorted((Path(__file__).parent / "broken").glob("*.yaml"))
 PLANTS = Path(__file__).parents[2] / "plants"
@@ -112,9 +114,9 @@ def test_only_a_regular_file_is_read_and_only_its_first_16_mebibytes(tmp_path: P
 def test_a_plant_file_may_be_16_mebibytes(tmp_path: Path) -> None:
     demo = (PLANTS / "demo-line.yaml").read_bytes()
     path = tmp_path / "plant.yaml"
-    path.write_bytes(demo + b"#" * (document.MAX_BYTES - len(demo) - 1) + b"\n")
+    path.write_bytes(demo + b"#" * (plant_files.MAX_BYTES - len(demo) - 1) + b"\n")
     assert load_plant(path).name == "demo-line"
-    path.write_bytes(demo + b"#" * (document.MAX_BYTES - len(demo)) + b"\n")
+    path.write_bytes(demo + b"#" * (plant_files.MAX_BYTES - len(demo)) + b"\n")
     with pytest.raises(PlantError, match="larger than 16 MiB"):
         load_plant(path)
 

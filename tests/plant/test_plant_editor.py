@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from prc3cfg.plant import PlantError, load_plant
+from prc3cfg.plant import PlantError
+from prc3cfg.shell.plant_files import load_plant
 
 SCHEMA = Path(__file__).parents[2] / "schemas" / "plant.schema.json"
 SERVER = shutil.which("yaml-language-server")

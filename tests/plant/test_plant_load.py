@@ -12,7 +12,8 @@ from pydantic import ValidationError
 
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, Program, default_program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.plant import Bus, Module, Plant, PlantError, load_plant
+from prc3cfg.plant import Bus, Module, Plant, PlantError, document
+from prc3cfg.shell.plant_files import load_plant
 
 ROOT = Path(__file__).parents[2]
 PLANTS = sorted((ROOT / "plants").rglob("*.yaml"))
@@ -48,6 +49,39 @@ def test_every_plant_in_plants_validates(path: Path) -> None:
         assert image.address == module.address
         assert [n for n in range(1, PROGRAM_COUNT + 1) if image.program(n) is not None] == list(module.managed_programs())
 
+
+SPANNED = """\
+plant: p   # a comment
+buses:
+  - name: 'a'
+    port: emulator://a
+    modules: [{address: 1, name: "x y", programs: {1: {position: 0.100, speed: 0.050}}}]
+    timeout: 1.0
+"""
+
+
+@pytest.mark.parametrize("text", [SPANNED, *(p.read_text() for p in PLANTS)], ids=["quotes-flow", *(p.name for p in PLANTS)])
+def test_the_spans_adopt_splices_are_the_data_the_loader_read(text: str) -> None:
+    """One reader: `document.spans` has the keys, items and scalars of the data `parse_document`
+    built from the same text, each scalar's span holding its text (quotes included)."""
+    data = document.parse_document("p.yaml", text.encode()).data
+
+    def same(span: document.Span, value: object) -> None:
+        if isinstance(value, dict):
+            assert list(span.keys) == list(span.children) == list(value)
+            assert all(text[span.keys[k]:].startswith(str(k)) for k in value)
+            for key, child in span.items():
+                same(child, value[key])
+        elif isinstance(value, list):
+            assert isinstance(span.children, list) and len(span.children) == len(value)
+            for (_, child), item in zip(span.items(), value):
+                same(child, item)
+        else:
+            assert span.written is not None
+            quote = "" if span.plain else text[span.start]
+            assert text[span.start:span.end] == f"{quote}{span.written}{quote}"
+
+    same(document.spans(text), data)
 
 def test_demo_line() -> None:
     plant = load_plant(ROOT / "plants" / "demo-line.yaml")

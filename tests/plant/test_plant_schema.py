@@ -12,8 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from prc3cfg.plant import load_plant, plant_schema, plant_schema_text
+from prc3cfg.plant import plant_schema, plant_schema_text
 from prc3cfg.plant.models import BusLine
+from prc3cfg.shell.plant_files import load_plant
 
 ROOT = Path(__file__).parents[2]
 SCHEMA_FILE = ROOT / "schemas" / "plant.schema.json"

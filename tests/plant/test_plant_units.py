@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from prc3cfg.core.device import VALUE_RANGES, widest_range
 from prc3cfg.core.image import SYSTEM_KEYS
 from prc3cfg.core.units import (
     DISTANCE,
@@ -15,10 +16,12 @@ from prc3cfg.core.units import (
     QUANTITIES,
     SYSTEM_QUANTITIES,
     Quantity,
-    format_function_output,
     function_output,
+    human_text,
+    plant_value,
     split_function_output,
 )
+from prc3cfg.plant import plant_schema
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 
 #: Which model validates each quantity's key, so the round trip goes through the plant file's rules too.
@@ -42,7 +45,7 @@ def test_device_to_human_to_device_is_the_identity(case: tuple[Quantity, int]) -
 def test_the_human_text_read_by_the_plant_models_gives_the_device_value_back(case: tuple[Quantity, int]) -> None:
     """What `show` prints, read back as a plant file reads a number (Decimal of its text)."""
     quantity, device = case
-    text = quantity.format(device).split(" ")[0]
+    text = human_text(quantity.symbol, device).split(" ")[0]
     value = text == "true" if quantity.boolean else Decimal(text)
     extra = {"action": "set"} if quantity is DISTANCE else {}
     validated = getattr(MODEL_OF[quantity.key].model_validate({quantity.key: value, **extra}), quantity.key)
@@ -55,21 +58,51 @@ def test_function_outputs_round_trip(device: int) -> None:
     assert function_output(action, distance) == device
 
 
+@given(st.sampled_from(["F1", "F2"]), st.integers(*widest_range("F1")))
+def test_a_function_output_as_a_plant_file_writes_it_gives_the_device_value_back(symbol: str, device: int) -> None:
+    """`plant_value`, what import and adopt write, read back as the plant file's F1/F2 mapping."""
+    written = plant_value(symbol, device)
+    assert isinstance(written, dict)
+    spec = FunctionOutputSpec.model_validate(written)
+    assert function_output(spec.action, spec.distance) == device
+
+
 def test_the_table() -> None:
     assert tuple(q.symbol for q in SYSTEM_QUANTITIES) == SYSTEM_KEYS
     assert tuple(q.symbol for q in PROGRAM_QUANTITIES) == ("P", "V", "Vr", "T")
     assert QUANTITIES["position"].human_hi == Decimal("9.999")
     assert QUANTITIES["dwell"].to_human(20) == Decimal("2.0")
-    assert QUANTITIES["acceleration"].format(1500) == "1.500 m/s²"
-    assert QUANTITIES["alarm"].format(1) == "true"
-    assert QUANTITIES["increment_pulses"].format(754) == "754"
+    assert human_text("S6", 1500) == "1.500 m/s²"
+    assert human_text("S8", 1) == "true"
+    assert human_text("S3", 754) == "754"
+
+
+def test_every_plant_file_bound_is_the_device_range_converted() -> None:
+    """One table of ranges, the device model's: the plant file's bounds (its JSON Schema, which the
+    models check) are each field's range on a module — P and V on the widest S1, S4 and S5 — in
+    human units; a distance spans F1's range from "reset at the least" to "set at the most"."""
+    assert widest_range("P") == (0, VALUE_RANGES["S1"][1])
+    assert widest_range("V") == (VALUE_RANGES["S5"][0], VALUE_RANGES["S4"][1])
+    definitions = plant_schema()["definitions"]
+    fields = {"SystemSpec": SYSTEM_QUANTITIES, "ProgramSpec": PROGRAM_QUANTITIES, "FunctionOutputSpec": (DISTANCE,)}
+    for model, quantities in fields.items():
+        for quantity in quantities:
+            schema = definitions[model]["properties"][quantity.key]
+            if quantity.boolean:  # S8: false and true
+                assert schema["type"] == "boolean" and widest_range(quantity.symbol) == (0, 1)
+                continue
+            low, high = (quantity.lo, quantity.hi) if quantity is DISTANCE else widest_range(quantity.symbol)
+            bounds = (Decimal(str(schema["minimum"])), Decimal(str(schema["maximum"])))
+            assert bounds == (low * quantity.step, high * quantity.step), quantity.key
+    assert widest_range("F1") == widest_range("F2") == (
+        function_output("reset", DISTANCE.human_lo), function_output("set", DISTANCE.human_hi))
 
 
 def test_manual_examples_of_function_outputs() -> None:
     """prc3-protocol.md §1.1: F1 = 1010 sets 0.010 m after START, 50 resets at 0.050 m."""
     assert function_output("set", Decimal("0.010")) == 1010
     assert function_output("reset", Decimal("0.050")) == 50
-    assert format_function_output(1050) == "set at 0.050 m"
+    assert human_text("F1", 1050) == "set at 0.050 m"
 
 
 @pytest.mark.parametrize(("key", "text"), [("position", "0.0005"), ("dwell", "2.05"), ("speed", "0.1001")])

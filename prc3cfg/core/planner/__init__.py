@@ -23,7 +23,7 @@ from prc3cfg.core.planner.check import StepProblem, run_steps
 from prc3cfg.core.planner.layout import Layout
 from prc3cfg.core.planner.optimise import search, whole_programs
 from prc3cfg.core.planner.plan import ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
-from prc3cfg.core.planner.problem import Problem
+from prc3cfg.core.planner.problem import PlanningProblem
 
 #: What a 20h that writes the system parameters a module already holds is for.
 E12_SUMMARY = "write the system parameters it holds: it reported E12 (system parameters not set), which only this clears"
@@ -45,7 +45,7 @@ def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, sy
         first = codec.WriteSystem(desired.system)
         rest = plan_module(after(actual, [first]), desired, cost)
         return plan_from_steps(actual, desired, [first, *(s.message for s in rest.steps)], cost, system_unset=True)
-    problem = Problem.build(actual, desired, cost)
+    problem = PlanningProblem.build(actual, desired, cost)
     layouts = search(problem)
     # The estimates are exact but for stx stuffing: price exactly only the layouts that could win.
     close = [layout for layout in layouts if layout.estimate <= layouts[0].estimate * (1 + STUFFING_MARGIN)]
@@ -89,7 +89,7 @@ def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[co
     )
 
 
-def _cheapest(problem: Problem, cost: LineCost, layouts: list[Layout]) -> tuple[list[codec.Message], float]:
+def _cheapest(problem: PlanningProblem, cost: LineCost, layouts: list[Layout]) -> tuple[list[codec.Message], float]:
     """The messages of the layout that is cheapest on the line, and their bus time."""
     priced = []
     for layout in layouts:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT, PROGRAM_FIELDS
-from prc3cfg.core.planner.problem import INIT_AFTER, INIT_BEFORE, Problem
+from prc3cfg.core.planner.problem import INIT_AFTER, INIT_BEFORE, PlanningProblem
 
 #: The fields 40h..45h write, in message order.
 ITEM_FIELDS = PROGRAM_FIELDS[:-1]
@@ -75,7 +75,7 @@ class Layout:
     writes: Writes
     estimate: float  # the whole plan's price by `Prices`
 
-    def messages(self, problem: Problem) -> list[codec.Message]:
+    def messages(self, problem: PlanningProblem) -> list[codec.Message]:
         desired = problem.desired.known  # the programs written are managed: known
         w = self.writes
         out = [init_message(a, b) for a, b in runs_of(self.kinds, INIT_BEFORE)]

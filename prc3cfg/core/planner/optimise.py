@@ -77,7 +77,7 @@ from prc3cfg.core.planner.problem import (
     PLAIN_FIELDS,
     PV_BITS,
     V_BIT,
-    Problem,
+    PlanningProblem,
 )
 
 INF = float("inf")
@@ -123,7 +123,7 @@ class Channels:
 class WritePhase:
     """The write phase for one choice of init kinds: its bases, masks and the exact DPs over them."""
 
-    def __init__(self, problem: Problem, kinds: tuple[int, ...]) -> None:
+    def __init__(self, problem: PlanningProblem, kinds: tuple[int, ...]) -> None:
         self.prices = problem.prices
         self.managed = problem.managed
         self.masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
@@ -600,7 +600,7 @@ def _all_of(masks: tuple[int, ...]) -> int:
 # -- inits -----------------------------------------------------------------------------------
 
 
-def init_cost(problem: Problem, kinds: tuple[int, ...]) -> float:
+def init_cost(problem: PlanningProblem, kinds: tuple[int, ...]) -> float:
     prices = problem.prices
     total = 0.0
     for kind in problem.kinds[1:]:
@@ -609,7 +609,7 @@ def init_cost(problem: Problem, kinds: tuple[int, ...]) -> float:
     return total
 
 
-def choose_inits(problem: Problem, residual: list[dict[int, float]]) -> tuple[int, ...]:
+def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> tuple[int, ...]:
     """The init kind of every program minimising init messages + `residual[i][kind]`.
 
     A run of programs of one kind costs one 14h, or a 12h/13h/11h when it is one program
@@ -645,7 +645,7 @@ def choose_inits(problem: Problem, residual: list[dict[int, float]]) -> tuple[in
     return tuple(kinds)
 
 
-def _table(problem: Problem, residual: Residual) -> list[dict[int, float]]:
+def _table(problem: PlanningProblem, residual: Residual) -> list[dict[int, float]]:
     """Residuals per program and init kind; on a tie the init wins, so runs grow over programs they do not harm."""
     return [
         {kind: residual(i, problem.masks[kind][i]) - (TIE if kind != KEEP else 0.0) for kind in problem.kinds}
@@ -656,7 +656,7 @@ def _table(problem: Problem, residual: Residual) -> list[dict[int, float]]:
 # -- the whole search ------------------------------------------------------------------------
 
 
-def search(problem: Problem) -> list[Layout]:
+def search(problem: PlanningProblem) -> list[Layout]:
     """Candidate layouts, cheapest estimate first."""
     fixed = problem.system_cost
     keep = (KEEP,) * PROGRAM_COUNT
@@ -706,7 +706,7 @@ def _item_channels(writes: Writes) -> list[tuple[int, int, int]]:
     return [*channels, (A_BIT, writes.addresses, codec.MAX_ADDRESS_ITEMS)]
 
 
-def _overflows(problem: Problem, layout: Layout) -> list[tuple[int, int, int, int]]:
+def _overflows(problem: PlanningProblem, layout: Layout) -> list[tuple[int, int, int, int]]:
     """The fields whose 40h..46h items in `layout` overflow into one more message and whose
     programs could lose the overflow to an init: (field bit, the items that fit one message
     less, the overflow, the programs counted). P and V count only outside the layout's
@@ -722,7 +722,7 @@ def _overflows(problem: Problem, layout: Layout) -> list[tuple[int, int, int, in
     return goals
 
 
-def _header_targets(problem: Problem, phase: WritePhase, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
+def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
     """Init choices that take the overflow of the `goals` fields out, to save whole messages.
 
     For every set of those fields, header shares per field are bisected until the init DP
@@ -753,7 +753,7 @@ def _header_targets(problem: Problem, phase: WritePhase, goals: list[tuple[int, 
     return list(found)
 
 
-def _harmless_inits(problem: Problem, layout: Layout, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
+def _harmless_inits(problem: PlanningProblem, layout: Layout, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
     """Per overflowing field, `layout` with init runs added that take its items out and add no
     difference, the runs taking out most first, until the overflow is out (where runs alike
     tie, the init DP takes all of them or none)."""
@@ -781,7 +781,7 @@ def _harmless_inits(problem: Problem, layout: Layout, goals: list[tuple[int, int
     return out
 
 
-def _neighbours(problem: Problem, layout: Layout) -> list[tuple[int, ...]]:
+def _neighbours(problem: PlanningProblem, layout: Layout) -> list[tuple[int, ...]]:
     """The init choice of `layout` changed where the init DP, charging programs one by one,
     cannot see the change pay: one init run left out; the shortest runs left out whose
     programs then differ in one set of fields only, as many as one message of items takes
@@ -817,7 +817,7 @@ def _neighbours(problem: Problem, layout: Layout) -> list[tuple[int, ...]]:
     return out
 
 
-def _moved_across(problem: Problem, kinds: tuple[int, ...]) -> list[tuple[int, ...]]:
+def _moved_across(problem: PlanningProblem, kinds: tuple[int, ...]) -> list[tuple[int, ...]]:
     """`kinds` with one init run moved to the other side of the system step (the residuals may tie)."""
     if INIT_BEFORE not in problem.kinds:
         return []
@@ -828,7 +828,7 @@ def _moved_across(problem: Problem, kinds: tuple[int, ...]) -> list[tuple[int, .
     return out
 
 
-def whole_programs(problem: Problem) -> Layout:
+def whole_programs(problem: PlanningProblem) -> Layout:
     """The system step, then a 21h for every program that still differs (a link or unlink range
     where only a jump address does and that is cheaper): never dearer than the naive download."""
     keep = (KEEP,) * PROGRAM_COUNT

@@ -61,7 +61,7 @@ def _run(state: device.ModuleState, message: codec.Message | None) -> device.Mod
 
 
 @dataclass(frozen=True, slots=True)
-class Problem:
+class PlanningProblem:
     """One module: where it starts, where it must go, and the bases the search chooses from."""
 
     address: int
@@ -76,7 +76,7 @@ class Problem:
     prices: Prices
 
     @classmethod
-    def build(cls, actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> Problem:
+    def build(cls, actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> PlanningProblem:
         if actual.address != desired.address:
             raise ValueError(f"read-back of module {actual.address} planned against module {desired.address}")
         managed = tuple(p is not None for p in desired.programs)

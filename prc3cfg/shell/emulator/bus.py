@@ -23,7 +23,7 @@ class Delivery:
     changed: bool  # some module's state changed
 
 
-class Bus:
+class EmulatedBus:
     """The modules of one line, by address. Not thread-safe: the server serialises access."""
 
     def __init__(self, modules: dict[int, ModuleState]) -> None:

@@ -1,11 +1,11 @@
-"""The bus emulator as a server: a `Bus` behind a framing, over TCP and pseudo-terminals.
+"""The bus emulator as a server: an `EmulatedBus` behind a framing, over TCP and pseudo-terminals.
 
 Owns the outside of the emulator: byte streams (TCP connections, a pty), request frames in
 and reply frames out through `prc3cfg.core.framing`, one exchange at a time on the line (half
 duplex), line-speed timing, fault injection, making every accepted write durable before it
 is answered, and the Python API tests use to change a module while it runs (mode, fault,
 active program, teach-in). What a message does is `prc3cfg.core.device`; who gets it,
-`bus.Bus`; how the state is kept on disk (a journal beside the state file, compacted into
+`bus.EmulatedBus`; how the state is kept on disk (a journal beside the state file, compacted into
 it), `state.Store`.
 
 Frames from a TCP connection are decoded with `uart=False` (`prc3cfg.core.framing.base`): a
@@ -60,7 +60,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Frame, get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.errors import UserError
-from prc3cfg.shell.emulator.bus import BROADCAST, Bus
+from prc3cfg.shell.emulator.bus import BROADCAST, EmulatedBus
 from prc3cfg.shell.emulator.state import COMPACT_EVERY, Store, cannot_save
 
 log = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ class Emulator:
         self.state_path = state_path
         self.max_connections = max_connections
         self.idle_timeout = idle_timeout
-        self._bus = Bus(modules)
+        self._bus = EmulatedBus(modules)
         self._unserved = dict(unserved or {})
         self._random = random.Random(faults.seed)
         self._lock = threading.Lock()  # the line: one exchange at a time

@@ -51,7 +51,7 @@ emulator then puts the modules back and does not answer the write.
 
 Loading refuses, naming the module and the field, every value a module could not hold
 because no message can carry it: each system parameter and program field must be a whole
-number within the device's range for its kind (`prc3cfg.core.device.VALUE_RANGES`; P within
+number within the device's range for its kind (`prc3cfg.core.device.widest_range`; P within
 0..9999 and V within 1..600, the widest S1, S4 and S5 allow — all well inside a 16-bit
 data word), the address S9 within 1..30, a program list of exactly 64, `mode`, `fault`,
 `active_program` and `referenced` as interfaces.md §3 lists them. Relations between
@@ -71,7 +71,6 @@ import os
 import stat
 import uuid
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Annotated, Any
@@ -80,8 +79,16 @@ from pydantic import BaseModel, Field, Strict, ValidationError, create_model
 
 from prc3cfg.core import device
 from prc3cfg.core.contract import Flag, exactly, one_of, within, worded
-from prc3cfg.core.device import VALUE_RANGES, ModuleState, value_range
-from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, PROGRAM_FIELDS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
+from prc3cfg.core.device import ModuleState, widest_range
+from prc3cfg.core.image import (
+    MAX_MODULE_ADDRESS,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    SYSTEM_KEYS,
+    ModuleImage,
+    Program,
+    SystemParameters,
+)
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json, read_regular, write_atomically
 
@@ -92,10 +99,8 @@ JOURNAL_FORMAT = "prc3-emulator-journal/2"
 _OLD_JOURNAL_FORMAT = "prc3-emulator-journal/1"  # bonded by a hash of the state file's bytes
 COMPACT_EVERY = 1000  # journal lines between compactions: a restart replays at most this many
 
-#: System parameters under which P and V may take every value any module allows.
-_WIDEST = replace(DEFAULT_SYSTEM, S1=VALUE_RANGES["S1"][1], S4=VALUE_RANGES["S4"][1], S5=VALUE_RANGES["S5"][0])
 #: The range a state file may hold, for each system parameter and program field.
-_RANGES = {key: value_range(key, _WIDEST)[:2] for key in (*SYSTEM_KEYS, *PROGRAM_FIELDS)}
+_RANGES = {key: widest_range(key) for key in (*SYSTEM_KEYS, *PROGRAM_FIELDS)}
 
 
 def load_state(path: Path) -> dict[int, ModuleState]:

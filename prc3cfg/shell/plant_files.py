@@ -1,0 +1,36 @@
+"""Plant files on disk: `load_plant(path)` reads one's bytes and hands them to the plant layer.
+
+Only a regular file is read (a FIFO could block, `/dev/zero` never ends), at most `MAX_BYTES`
+of it (`prc3cfg.shell.files.read_regular`); a path that cannot be read is a `PlantError` that
+says what to do. What the bytes say — YAML, models, rules — is `prc3cfg.plant.parse_plant`'s.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from prc3cfg.plant import Plant, PlantError, parse_plant
+from prc3cfg.shell.files import FileProblem, Why, read_regular
+
+#: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
+#: comments, long names and every field, a few MB. Bytes cost little: nodes are what is bounded
+#: (`prc3cfg.plant.document.MAX_NODES`).
+MAX_BYTES = 16 * 2**20
+
+#: What to do about a plant path that cannot be read, by why.
+_REMEDIES = {
+    Why.MISSING: "check the path",
+    Why.DIRECTORY: "give the plant file (*.yaml) in it",
+    Why.NOT_A_FILE: "give the plant file (*.yaml) itself",
+    Why.UNREADABLE: "check the path and its permissions",
+    Why.TOO_LARGE: "a plant file is far smaller: check that this is the plant file",
+}
+
+
+def load_plant(path: str | Path) -> Plant:
+    """The plant in the file `path`; `PlantError` with its problems ("file:line:column: …") otherwise."""
+    try:
+        data = read_regular(Path(path), MAX_BYTES)
+    except FileProblem as problem:
+        raise PlantError([f"{path}: {problem} — {_REMEDIES[problem.why]}"]) from None
+    return parse_plant(path, data)
