@@ -99,6 +99,11 @@ class Emulator:
     `unserved` are modules of the state file this emulator does not serve: every save
     writes them back unchanged, so serving a few modules of a state file loses no others.
     `compact_every`: journal lines between compactions of the state file (`state.Store`).
+
+    With `line_speed`, a module answers after its turnaround: `turnarounds[address]`, else
+    `turnaround`, each exchange shifted by up to ± `jitter` (uniform, never below 0; seeded by
+    the fault injection's seed, so a test run is repeatable) — a line that is not ideal, for
+    `prc3cfg doctor` and the bus-time estimates to be measured against.
     """
 
     def __init__(
@@ -109,6 +114,8 @@ class Emulator:
         line: LineSettings = LineSettings(),
         zvz: float = 0.020,
         turnaround: float = 0.010,
+        turnarounds: Mapping[int, float] | None = None,
+        jitter: float = 0.0,
         line_speed: bool = False,
         faults: FaultInjection = FaultInjection(),
         state_path: Path | None = None,
@@ -121,10 +128,14 @@ class Emulator:
             raise ValueError(f"max-connections must be at least 1, not {max_connections}")
         if not idle_timeout > 0:
             raise ValueError(f"idle-timeout must be more than 0 s, not {idle_timeout}")
+        if jitter < 0 or turnaround < 0 or any(t < 0 for t in (turnarounds or {}).values()):
+            raise ValueError("a turnaround and the jitter are at least 0 s")
         self.framing = get_framing(framing)
         self.line = line
         self.zvz = zvz
         self.turnaround = turnaround
+        self.turnarounds = dict(turnarounds or {})
+        self.jitter = jitter
         self.line_speed = line_speed
         self.faults = faults
         self.state_path = state_path
@@ -133,6 +144,7 @@ class Emulator:
         self._bus = Bus(modules)
         self._unserved = dict(unserved or {})
         self._random = random.Random(faults.seed)
+        self._jitter = random.Random(faults.seed)  # its own, so jitter leaves the faults' sequence as it was
         self._lock = threading.Lock()  # the line: one exchange at a time
         self._closing = threading.Event()
         self._guard = threading.Lock()  # the two sets below
@@ -200,6 +212,13 @@ class Emulator:
     def _chance(self, rate: float) -> bool:
         return rate > 0 and self._random.random() < rate
 
+    def turnaround_of(self, address: int) -> float:
+        """The time module `address` takes to answer this exchange: its turnaround ± the jitter."""
+        turnaround = self.turnarounds.get(address, self.turnaround)
+        if self.jitter:
+            turnaround = max(0.0, turnaround + self._jitter.uniform(-self.jitter, self.jitter))
+        return turnaround
+
     def _damage(self, frame: bytes) -> bytes:
         """`frame` with one bit flipped on the line, as the receiving UART hands it on."""
         i = self._random.randrange(len(frame))
@@ -251,7 +270,7 @@ class Emulator:
             reply = self.framing.encode(Direction.REPLY, address, delivery.reply)
             if self.line_speed:
                 request_bytes = len(self.framing.encode(Direction.REQUEST, frame.address, frame.message))
-                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround
+                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround_of(address)
                 time.sleep(max(0.0, received_at + line_time - time.monotonic()))
             if not damage_request and drop:
                 log.info("fault injection: reply from %d lost", address)
