@@ -71,6 +71,7 @@ def listen_option(value: str | None) -> str | None:
 def serve(
     listen: Annotated[str | None, typer.Option(callback=listen_option, metavar="HOST:PORT", help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
+    rfc2217: Annotated[bool, typer.Option("--rfc2217", help="The TCP port speaks RFC 2217 (rfc2217://HOST:PORT), as ser2net's telnet(rfc2217): frames at the client's other baud or character format arrive as a UART receives them.")] = False,
     state: Annotated[Path | None, typer.Option(metavar="FILE", help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
     modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
@@ -135,11 +136,11 @@ def serve(
         if listen is not None or not pty:
             address = DEFAULT_LISTEN if listen is None else listen
             try:
-                host, port = emulator.listen(*parse_listen(address))
+                host, port = emulator.listen(*parse_listen(address), rfc2217=rfc2217)
             except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds
                 reason = str(error.strerror or error).partition(" (while attempting")[0]
                 raise UserError(f"--listen {address}: cannot listen ({reason}) — choose a free port on an address of this host") from None
-            print(f"listening on {host}:{port} ({framing}, modules {', '.join(map(str, sorted(bus)))})", flush=True)
+            print(f"listening on {host}:{port} ({framing}{', rfc2217' if rfc2217 else ''}, modules {', '.join(map(str, sorted(bus)))})", flush=True)
         if pty:
             try:
                 path = emulator.open_pty()
