@@ -41,6 +41,7 @@ from dataclasses import dataclass, field, replace
 from decimal import Decimal
 from pathlib import Path
 from typing import Any, Protocol, TextIO
+from urllib.parse import urlsplit
 
 from prc3cfg import __version__
 from prc3cfg.core import codec, gateway, plot, sharing
@@ -61,8 +62,10 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Release, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.doctor import Candidate, Diagnosis, Search, diagnose
 from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
+from prc3cfg.shell.link.client import Port
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
@@ -70,10 +73,10 @@ from prc3cfg.shell.readback import Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "FormatRefused", "Gates", "LineBusy",
-    "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify", "adopt",
-    "apply", "default_parity", "drift", "import_modules", "import_plant", "init_data_block", "left_alone", "load", "load_images", "picture", "plan",
-    "read", "restore", "scan", "select", "write_adoption",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused", "Gates",
+    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "StalePlan", "UserError", "Verify",
+    "adopt", "apply", "default_parity", "doctor", "drift", "import_modules", "import_plant", "init_data_block", "left_alone", "load",
+    "load_images", "picture", "plan", "read", "restore", "scan", "select", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -897,18 +900,25 @@ def default_parity(port: str) -> str:
 
 
 @contextlib.contextmanager
-def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
-    problem = port_error("port", bare.port)
-    if problem is None and bare.port.startswith(EMULATOR_SCHEME):
-        problem = (f"port {bare.port} is a plant file's emulator (its state is kept beside the plant file) — for a "
+def _bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[str, ...]]:
+    """The line of a port without a plant file, locked; its identities."""
+    problem = port_error("port", port)
+    if problem is None and port.startswith(EMULATOR_SCHEME):
+        problem = (f"port {port} is a plant file's emulator (its state is kept beside the plant file) — for a "
                    "bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT")  # fmt: skip
     if problem is not None:
         raise UserError(problem)
-    with contextlib.ExitStack() as stack:
-        keys = line_keys(bare.port)
-        stack.enter_context(line_lock(keys, bare.port, port=bare.port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting))
+    keys = line_keys(port)
+    with line_lock(keys, port, port=port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting):
         for record in releases.pending(keys):
             options.tell(record.said())
+        yield keys
+
+
+@contextlib.contextmanager
+def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
+    with contextlib.ExitStack() as stack:
+        keys = stack.enter_context(_bare_lock(bare.port, options, purpose))
         port = open_port(bare.port, bare.line, bus=bare.port)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
@@ -939,6 +949,34 @@ def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
             found[address] = reply
         options.progress.advance()
     return found
+
+
+def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *, addresses: Iterable[int] | None = None,
+           exchanges: int = 10, allow_unchecked: Callable[[], bool] = lambda: False) -> Diagnosis:  # fmt: skip
+    """Which of `search`'s framings, bauds and parities the line of `bare.port` speaks, and each
+    answering module's turnaround over `exchanges` timed 50h (`prc3cfg.shell.doctor`). Over
+    `socket://` the gateway fixes baud and character format: only framings are tried, at `bare.line`.
+    A probe in a framing without a checksum waits for `allow_unchecked()` (asked once)."""
+    options = options or LineOptions()
+    settable = urlsplit(bare.port).scheme.lower() != "socket"
+    if not settable:
+        search = replace(search, bauds=(bare.line.baud,), parities=(bare.line.parity,))
+
+    @contextlib.contextmanager
+    def open_line(line: LineSettings) -> Iterator[Port]:
+        port = open_port(bare.port, line, bus=bare.port)
+        try:
+            yield port
+        finally:
+            port.close()
+
+    def probing(candidate: Candidate) -> None:
+        options.progress.note(f"probing {candidate.said()}")
+
+    with _bare_lock(bare.port, options, "doctor"):
+        return diagnose(bare.port, search, open_line, addresses=range(1, MAX_MODULE_ADDRESS + 1) if addresses is None else addresses,
+                        zvz=bare.zvz, settings_found=settable, exchanges=exchanges, allow_unchecked=allow_unchecked,
+                        progress=probing)  # fmt: skip
 
 
 def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None) -> list[ModuleImage]:

@@ -7,6 +7,8 @@ from __future__ import annotations
 import time
 from types import SimpleNamespace
 
+import pytest
+from emulated import Result, run_cli
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -91,3 +93,79 @@ def test_each_module_answers_after_its_own_turnaround(tmp_path):
         started = time.monotonic()
         assert isinstance(link.request(2, codec.ReadSystem()), codec.SystemReply)
         assert time.monotonic() - started >= cost.message_time(2, codec.ReadSystem())  # 80 ms and the line: never sooner
+
+
+def doctor_line(capsys, emulator: Emulator, *options: str) -> tuple[Result, dict[str, str]]:
+    """`prc3cfg doctor` on the emulator's RFC 2217 port: the result and the plant-file keys it printed."""
+    host, tcp = emulator.listen(rfc2217=True)
+    result = run_cli(capsys, "doctor", "--port", f"rfc2217://{host}:{tcp}", *options)
+    keys = result.out.partition("The plant file's keys for this bus:\n")[2]
+    return result, dict(line.strip().split(": ", 1) for line in keys.splitlines())
+
+
+def turnarounds(out: str) -> dict[int, tuple[float, float]]:
+    """address → (median, worst) in s, from doctor's table."""
+    rows = [line.split("│") for line in out.splitlines() if line.startswith("│") and "ms" in line]
+    return {int(r[1]): (float(r[2].split()[0]) / 1000, float(r[3].split()[0]) / 1000) for r in rows}
+
+
+def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
+    line = LineSettings(19200, 8, "odd", 1)
+    modules = {1: ModuleState.factory(1), 2: ModuleState.factory(2)}
+    with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.020, turnarounds={2: 0.040}, jitter=0.002,
+                  faults=FaultInjection(seed=1)) as emulator:  # fmt: skip
+        result, keys = doctor_line(capsys, emulator, "--baud", "19200", "--modules", "1-2")
+    assert result.code == 0, result.err
+    assert keys == {"framing": "stx", "baud": "19200", "parity": "odd", "data_bits": "8", "stop_bits": "1",
+                    "turnaround": keys["turnaround"]}  # fmt: skip
+    measured = turnarounds(result.out)
+    assert set(measured) == {1, 2}
+    for address, turnaround in ((1, 0.020), (2, 0.040)):
+        median, worst = measured[address]
+        assert abs(median - turnaround) <= 0.1 * turnaround, (address, median)
+        assert worst >= median
+    assert float(keys["turnaround"]) >= measured[2][1]  # a broadcast waits for the slowest module
+
+
+def test_doctor_asks_before_probing_in_a_framing_without_a_checksum(capsys):
+    with Emulator({1: ModuleState.factory(1)}, framing="open-driver", line=LineSettings(9600, 8, "even", 1)) as emulator:
+        refused, _ = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1")
+        assert refused.code == 1 and refused.err.count("\n") == 1
+        assert "(2 probes); 1 probe in open-driver, which has no checksum, was not made — give --allow-unchecked-probes" in refused.err
+        found, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1", "--allow-unchecked-probes")
+    assert found.code == 0, found.err
+    assert keys["framing"] == "open-driver" and keys["zvz"] == "0.02"
+
+
+def test_doctor_finds_the_baud_of_a_pty(capsys):
+    with Emulator({1: ModuleState.factory(1)}, line=LineSettings(4800, 8, "none", 1)) as emulator:
+        pty = emulator.open_pty()
+        result = run_cli(capsys, "doctor", "--port", pty, "--framing", "crc16", "--modules", "1", "--exchanges", "2")
+    assert result.code == 0, result.err
+    assert f"{pty} speaks crc16, 4800 baud, 8N1" in result.out
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
+@pytest.mark.parametrize("parity", ["none", "odd", "even"])
+@pytest.mark.parametrize("baud", [4800, 19200])
+def test_doctor_finds_every_framing_and_character_format(capsys, framing, parity, baud):
+    with Emulator({7: ModuleState.factory(7)}, framing=framing, line=LineSettings(baud, 8, parity, 1)) as emulator:
+        result, keys = doctor_line(capsys, emulator, "--modules", "7", "--exchanges", "2", "--allow-unchecked-probes")
+    assert result.code == 0, result.err
+    assert (keys["framing"], keys["baud"], keys["parity"]) == (framing, str(baud), parity)
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
+def test_doctor_measures_turnarounds_within_ten_percent_on_every_framing(capsys, framing):
+    given = {1: 0.015, 2: 0.030, 3: 0.060}
+    with Emulator({a: ModuleState.factory(a) for a in given}, framing=framing, line=LineSettings(9600, 8, "even", 1), line_speed=True,
+                  turnarounds=given, jitter=0.003, faults=FaultInjection(seed=3)) as emulator:  # fmt: skip
+        result, _ = doctor_line(capsys, emulator, "--framing", framing, "--baud", "9600", "--parity", "even", "--modules", "1-4",
+                                "--exchanges", "15", "--allow-unchecked-probes")  # fmt: skip
+    assert result.code == 0, result.err
+    measured = turnarounds(result.out)
+    assert set(measured) == set(given)
+    for address, turnaround in given.items():
+        assert abs(measured[address][0] - turnaround) <= 0.1 * turnaround, (address, measured[address])
