@@ -34,11 +34,12 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
 from pathlib import Path
 from typing import Any, Protocol, TextIO
+from urllib.parse import urlsplit
 
 from prc3cfg.core import codec, gateway, planfile, plot
 from prc3cfg.core.bustime import LineCost
@@ -60,10 +61,12 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.doctor import Candidate, Diagnosis, Search, diagnose
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
 from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
+from prc3cfg.shell.link.client import Port
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
@@ -73,11 +76,11 @@ from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, ch
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Drift", "FormatRefused", "Gates",
-    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "StalePlan", "UserError", "Verify",
-    "adopt", "apply", "default_parity", "drift", "emulator", "import_modules", "import_plant", "init_data_block", "left_alone", "listen",
-    "load", "load_images", "open_pty", "picture", "plan", "plan_document", "plan_file_plant", "read", "restore", "scan", "select",
-    "write_adoption",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused",
+    "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "StalePlan", "UserError",
+    "Verify", "adopt", "apply", "default_parity", "doctor", "drift", "emulator", "import_modules", "import_plant", "init_data_block",
+    "left_alone", "listen", "load", "load_images", "open_pty", "picture", "plan", "plan_document", "plan_file_plant", "read", "restore",
+    "scan", "select", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -698,18 +701,25 @@ def default_parity(port: str) -> str:
 
 
 @contextlib.contextmanager
-def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
-    problem = port_error("port", bare.port)
-    if problem is None and bare.port.startswith(EMULATOR_SCHEME):
-        problem = (f"port {bare.port} is a plant file's emulator (its state is kept beside the plant file) — for a "
+def _bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[str, ...]]:
+    """The line of a port without a plant file, locked; its identities."""
+    problem = port_error("port", port)
+    if problem is None and port.startswith(EMULATOR_SCHEME):
+        problem = (f"port {port} is a plant file's emulator (its state is kept beside the plant file) — for a "
                    "bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT")  # fmt: skip
     if problem is not None:
         raise UserError(problem)
-    with contextlib.ExitStack() as stack:
-        keys = line_keys(bare.port)
-        stack.enter_context(line_lock(keys, bare.port, port=bare.port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting))
+    keys = line_keys(port)
+    with line_lock(keys, port, port=port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting):
         for record in releases.pending(keys):
             options.tell(record.said())
+        yield keys
+
+
+@contextlib.contextmanager
+def _bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
+    with contextlib.ExitStack() as stack:
+        keys = stack.enter_context(_bare_lock(bare.port, options, purpose))
         port = open_port(bare.port, bare.line, bus=bare.port)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
@@ -740,6 +750,34 @@ def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
             found[address] = reply
         options.progress.advance()
     return found
+
+
+def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *, addresses: Iterable[int] | None = None,
+           exchanges: int = 10, allow_unchecked: Callable[[], bool] = lambda: False) -> Diagnosis:  # fmt: skip
+    """Which of `search`'s framings, bauds and parities the line of `bare.port` speaks, and each
+    answering module's turnaround over `exchanges` timed 50h (`prc3cfg.shell.doctor`). Over
+    `socket://` the gateway fixes baud and character format: only framings are tried, at `bare.line`.
+    A probe in a framing without a checksum waits for `allow_unchecked()` (asked once)."""
+    options = options or LineOptions()
+    settable = urlsplit(bare.port).scheme.lower() != "socket"
+    if not settable:
+        search = replace(search, bauds=(bare.line.baud,), parities=(bare.line.parity,))
+
+    @contextlib.contextmanager
+    def open_line(line: LineSettings) -> Iterator[Port]:
+        port = open_port(bare.port, line, bus=bare.port)
+        try:
+            yield port
+        finally:
+            port.close()
+
+    def probing(candidate: Candidate) -> None:
+        options.progress.note(f"probing {candidate.said()}")
+
+    with _bare_lock(bare.port, options, "doctor"):
+        return diagnose(bare.port, search, open_line, addresses=range(1, MAX_MODULE_ADDRESS + 1) if addresses is None else addresses,
+                        zvz=bare.zvz, settings_found=settable, exchanges=exchanges, allow_unchecked=allow_unchecked,
+                        progress=probing)  # fmt: skip
 
 
 def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None) -> list[ModuleImage]:
@@ -871,15 +909,18 @@ def import_plant(bare: BareLine, addresses: Iterable[int] | None = None, options
 
 def emulator(modules: Iterable[int] | None = None, *, state: Path | None = None, framing: str = "crc16",
              line: LineSettings = LineSettings(), line_speed: bool = False, zvz: float = 0.020, turnaround: float = 0.010,
-             drop_rate: float = 0.0, corrupt_rate: float = 0.0, seed: int | None = None, max_connections: int | None = None,
+             turnarounds: Mapping[int, float] | None = None, jitter: float = 0.0, drop_rate: float = 0.0, corrupt_rate: float = 0.0,
+             seed: int | None = None, max_connections: int | None = None,
              idle_timeout: float | None = None) -> Emulator:  # fmt: skip
     """A bus emulator (`prc3cfg emulator serve`), serving nothing yet (`listen`, `open_pty`): the
     modules at `modules` — else those of the `state` file, else 1-30 — as `state` holds them, every
-    write it accepts saved there; closed on leaving its `with`. Settings it refuses: `UserError`."""
+    write it accepts saved there; closed on leaving its `with`. `turnarounds`: some modules' own
+    turnaround instead of `turnaround`; `jitter`: each turnaround shifted by up to ± this (seeded by
+    `seed`). Settings it refuses: `UserError`."""
     served, unserved = modules_to_serve(state, sorted(modules) if modules is not None else None)
     try:
         return Emulator(
-            served, framing=framing, zvz=zvz, turnaround=turnaround, line_speed=line_speed, line=line,
+            served, framing=framing, zvz=zvz, turnaround=turnaround, turnarounds=turnarounds, jitter=jitter, line_speed=line_speed, line=line,
             faults=FaultInjection(drop_rate, corrupt_rate, seed), state_path=state, unserved=unserved,
             max_connections=MAX_CONNECTIONS if max_connections is None else max_connections,
             idle_timeout=IDLE_TIMEOUT if idle_timeout is None else idle_timeout,
@@ -888,10 +929,11 @@ def emulator(modules: Iterable[int] | None = None, *, state: Path | None = None,
         raise UserError(f"emulator: {error}") from None
 
 
-def listen(running: Emulator, host: str, port: int) -> tuple[str, int]:
-    """Serve `running` to TCP clients at HOST:PORT (0: any free port); the address it listens at."""
+def listen(running: Emulator, host: str, port: int, *, rfc2217: bool = False) -> tuple[str, int]:
+    """Serve `running` to TCP clients at HOST:PORT (0: any free port) — speaking RFC 2217 if asked (a
+    client at other line settings then gets what a UART would make of its bytes); the address it listens at."""
     try:
-        return running.listen(host, port)
+        return running.listen(host, port, rfc2217=rfc2217)
     except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds
         reason = str(error.strerror or error).partition(" (while attempting")[0]
         raise UserError(f"--listen {host}:{port}: cannot listen ({reason}) — choose a free port on an address of this host") from None

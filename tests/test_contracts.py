@@ -14,8 +14,8 @@ from emulated import run_cli
 from prc3cfg import __version__, api
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage, images_from_json
-from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.emulator.state import load_state, save_state
+from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.records import LineTaken, Snapshot
 
 CONTRACTS = Path(__file__).resolve().parent / "contracts"

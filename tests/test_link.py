@@ -23,6 +23,7 @@ from prc3cfg.core.verification import read_messages
 from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator import Emulator, FaultInjection
 from prc3cfg.shell.link import Link, LinkError, Trace, open_link, open_port
+from prc3cfg.shell.link.ports import EMULATOR_KEYS
 from prc3cfg.shell.readback import ReadBackError, read_module
 
 FRAMINGS = ["crc16", "open-driver", "stx"]
@@ -253,15 +254,19 @@ def test_an_emulator_takes_frames_at_once_so_a_broadcast_waits_for_nothing(tmp_p
 @pytest.mark.parametrize(
     ("query", "says"),
     [
-        ("?speed=9600", "unknown option 'speed' — emulator:// takes only ?line-speed=BAUD"),
-        ("?line-speed=9600&trace=1", "unknown option 'trace' — emulator:// takes only ?line-speed=BAUD"),
+        ("?speed=9600", f"unknown option 'speed' — emulator:// takes {EMULATOR_KEYS}"),
+        ("?line-speed=9600&trace=1", f"unknown option 'trace' — emulator:// takes {EMULATOR_KEYS}"),
         ("?line-speed=fast", "line-speed 'fast' is not a baud rate — write a whole number, e.g. line-speed=9600"),
         ("?line-speed=0", "line-speed '0' is not a baud rate — write a whole number, e.g. line-speed=9600"),
         ("?line-speed", "line-speed '' is not a baud rate — write a whole number, e.g. line-speed=9600"),
         ("?line-speed=9600&line-speed=1200", "line-speed is given more than once — give it once"),
+        ("?turnaround=10ms", "turnaround '10ms' is not a time of 0..10 s — write seconds, e.g. turnaround=0.010"),
+        ("?jitter=-1", "jitter '-1' is not a time of 0..10 s — write seconds, e.g. jitter=0.010"),
+        ("?module-turnaround=31:0.01", "module-turnaround '31:0.01' is not ADDRESS:SECONDS — write e.g. module-turnaround=3:0.040"),
+        ("?seed=x", "seed 'x' is not a seed — write a whole number, e.g. seed=1"),
     ],
 )
-def test_an_emulator_port_takes_only_a_line_speed_and_says_so_in_one_line(tmp_path, query, says):
+def test_an_emulator_port_takes_only_its_keys_and_says_so_in_one_line(tmp_path, query, says):
     port = f"emulator://rehearsal{query}"
     with pytest.raises(UserError) as refused, open_link(emulator_bus(port), tmp_path / "plant.yaml"):
         pass

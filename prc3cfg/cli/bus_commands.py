@@ -1,4 +1,4 @@
-"""`prc3cfg scan`, `prc3cfg import` and `prc3cfg link init-db`: a bus without a plant file, and its gateway.
+"""`prc3cfg scan`, `prc3cfg import`, `prc3cfg doctor` and `prc3cfg link init-db`: a bus without a plant file, and its gateway.
 
 Without `--parity`, scan and import use even parity (a PRC 3 line's), and none on a
 pseudo-terminal, which carries no parity (`emulator serve --pty` defaults to none as well).
@@ -151,3 +151,66 @@ def init_db(
     print(f"INIT data block for bus {bus} (CP 524/525 Open Driver S5D004, interface for {port}):")
     for label, notation, hex_value in words:
         print(f"  {label:<5} {notation:<26} {hex_value}")
+
+
+@app.command()
+def doctor(
+    port: PortOpt,
+    framing: Annotated[str | None, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", show_default="tried: crc16, stx, open-driver",
+                                                help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = None,
+    baud: Annotated[int | None, typer.Option(min=1, max=10_000_000, metavar="BAUD", show_default="tried: 9600, 19200, 4800, … 300",
+                                             help="Baud rate.")] = None,
+    parity: Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", show_default="tried: even, none, odd; none on a pseudo-terminal",
+                                               help=" | ".join(PARITY_NAMES))] = None,
+    stop_bits: StopBitsOpt = 1,
+    zvz: ZvzOpt = 0.020,
+    modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Addresses to probe, e.g. 1,3-5 (default 1..30).")] = None,
+    exchanges: Annotated[int, typer.Option(min=1, max=1000, metavar="N", help="Timed exchanges with each module that answers.")] = 10,
+    allow_unchecked_probes: Annotated[bool, typer.Option("--allow-unchecked-probes",
+                                                         help="Probe in framings without a checksum (open-driver) without asking (see README).")] = False,
+    lock_timeout: LockOpt = 0.0,
+) -> None:
+    """Which framing, baud and parity a line speaks, and each module's turnaround, measured."""
+    import sys
+
+    from rich.table import Table
+
+    from prc3cfg import api
+    from prc3cfg.cli.common import ask
+    from prc3cfg.core.line import LineSettings
+    from prc3cfg.core.render import plural
+
+    if parity is None and api.default_parity(port) == "none":
+        parity = "none"  # a pseudo-terminal carries no other
+    tried = api.Search()
+    search = api.Search(framings=(framing,) if framing else tried.framings, bauds=(baud,) if baud else tried.bauds,
+                        parities=(parity,) if parity else tried.parities, stop_bits=stop_bits)  # fmt: skip
+    bare = api.BareLine(port, "crc16", LineSettings(baud or 9600, 8, parity or "even", stop_bits), zvz=zvz)
+    with line_options(None, 0, lock_timeout) as options, _said_as_options():
+
+        def allow() -> bool:
+            question = ("No module answered in a framing with a checksum. Probe in open-driver, which has none? A probe at the "
+                        "wrong baud or parity arrives as other bytes, which a module there could take for a write")  # fmt: skip
+            return allow_unchecked_probes or (sys.stdin.isatty() and ask(question, options))
+
+        found = api.doctor(bare, search, options, addresses=parse_addresses(modules) if modules is not None else None,
+                           exchanges=exchanges, allow_unchecked=allow)  # fmt: skip
+    if found.found is None:
+        were = "was" if found.skipped_unchecked == 1 else "were"
+        skipped = (f"; {plural(found.skipped_unchecked, 'probe')} in open-driver, which has no checksum, {were} not made — "
+                   "give --allow-unchecked-probes to make them") if found.skipped_unchecked else ""  # fmt: skip
+        raise UserError(f"{port}: no module answered at any framing, baud and parity tried ({plural(found.probes, 'probe')}){skipped} "
+                        "— check the wiring, the power and the addresses (--modules)")  # fmt: skip
+    print(f"{port} speaks {found.found.said()} ({plural(len(found.modules), 'module')} answered, after {plural(found.probes, 'probe')}).")
+    if not found.settings_found:
+        print("socket://: the gateway fixes the baud rate and character format, so only the framing was probed; the baud, "
+              "parity and turnarounds shown take --baud and --parity as given.")  # fmt: skip
+    print("Stop bits cannot be probed (a UART checks one): give the gateway's.")
+    table = Table("address", "turnaround median", "worst", "answered", "damaged", "lost")
+    for timing in found.modules:
+        table.add_row(str(timing.address), f"{timing.median * 1000:.1f} ms", f"{timing.worst * 1000:.1f} ms",
+                      f"{len(timing.turnarounds)}/{exchanges}", str(timing.damaged), str(timing.lost))  # fmt: skip
+    stdout_console().print(table)
+    print("The plant file's keys for this bus:")
+    for key, value in found.plant_keys().items():
+        print(f"    {key}: {value:g}" if isinstance(value, float) else f"    {key}: {value}")

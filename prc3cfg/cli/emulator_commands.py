@@ -12,7 +12,18 @@ from typing import Annotated
 import typer
 
 from prc3cfg.cli import emulator_app
-from prc3cfg.cli.common import DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, TIMES, addresses_option, duration, one_of, parse_addresses
+from prc3cfg.cli.common import (
+    DATA_BITS,
+    FRAMING_NAMES,
+    PARITY_NAMES,
+    STOP_BITS,
+    TIMES,
+    addresses_option,
+    duration,
+    one_of,
+    parse_addresses,
+    parse_duration,
+)
 
 DEFAULT_LISTEN = "127.0.0.1:7001"
 
@@ -23,6 +34,27 @@ def parse_listen(text: str) -> tuple[str, int]:
     if not sep or not port.isascii() or not port.isdigit() or not 0 <= int(port) <= 65535:
         raise ValueError(f"'{text}' is not HOST:PORT — for example {DEFAULT_LISTEN}")
     return host or "127.0.0.1", int(port)
+
+
+def parse_module_turnaround(text: str) -> tuple[list[int], float]:
+    """ADDRESSES=TIME ("3-5=40ms") → ([3, 4, 5], 0.04); ValueError, with an example, for anything else."""
+    addresses, sep, time = text.partition("=")
+    if not sep:
+        raise ValueError(f"'{text}' is not ADDRESSES=TIME — for example 3-5=40ms")
+    seconds = parse_duration(time)
+    if not 0 <= seconds <= 10:
+        raise ValueError(f"'{time}' is not a turnaround of 0..10 s")
+    return parse_addresses(addresses), seconds
+
+
+def module_turnarounds_option(values: list[str] | None) -> list[str] | None:
+    """`--module-turnaround`'s callback: what `parse_module_turnaround` cannot read is a usage error (exit 64)."""
+    for value in values or ():
+        try:
+            parse_module_turnaround(value)
+        except ValueError as error:
+            raise typer.BadParameter(str(error)) from None
+    return values
 
 
 def listen_option(value: str | None) -> str | None:
@@ -39,6 +71,7 @@ def listen_option(value: str | None) -> str | None:
 def serve(
     listen: Annotated[str | None, typer.Option(callback=listen_option, metavar="HOST:PORT", help="HOST:PORT to accept TCP connections on (socket://HOST:PORT).")] = None,
     pty: Annotated[bool, typer.Option("--pty", help="Also serve a pseudo-terminal and print its path.")] = False,
+    rfc2217: Annotated[bool, typer.Option("--rfc2217", help="The TCP port speaks RFC 2217 (rfc2217://HOST:PORT), as ser2net's telnet(rfc2217): frames at the client's other baud or character format arrive as a UART receives them.")] = False,
     state: Annotated[Path | None, typer.Option(metavar="FILE", help="State file (prc3-emulator/1): loaded, every accepted write saved before it is answered (in its journal FILE.journal while running), all of it on exit.")] = None,
     modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Module addresses to serve, e.g. 1,3-5 (default: the state file's, else 1-30).")] = None,
     framing: Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")] = "crc16",
@@ -49,9 +82,13 @@ def serve(
     stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))] = 1,
     zvz: Annotated[float, typer.Option(parser=duration(0.001, 65.535), metavar="TIME", help=f"open-driver end-of-frame gap ({TIMES}).")] = 0.020,
     turnaround: Annotated[float, typer.Option(parser=duration(0, 10), metavar="TIME", help=f"Module turnaround, with --line-speed ({TIMES}).")] = 0.010,
+    module_turnaround: Annotated[list[str] | None, typer.Option("--module-turnaround", callback=module_turnarounds_option, metavar="ADDRESSES=TIME",
+                                                                help="These modules' turnaround instead, e.g. 3-5=40ms; repeatable.")] = None,
+    jitter: Annotated[float, typer.Option(parser=duration(0, 10), metavar="TIME",
+                                          help=f"Each exchange's turnaround shifted by up to ± this, with --line-speed ({TIMES}; seeded by --seed).")] = 0.0,
     drop_rate: Annotated[float, typer.Option(min=0, max=1, metavar="FRACTION", help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(min=0, max=1, metavar="FRACTION", help="Fraction of exchanges with one bit flipped.")] = 0.0,
-    seed: Annotated[int | None, typer.Option(metavar="N", help="Seed for fault injection.")] = None,
+    seed: Annotated[int | None, typer.Option(metavar="N", help="Seed for fault injection and jitter.")] = None,
     max_connections: Annotated[int | None, typer.Option("--max-connections", min=1, max=100_000, metavar="N", help="TCP clients served at once (default 1: one client per line, as ser2net); one more is closed at once (logged).")] = None,
     idle_timeout: Annotated[float | None, typer.Option("--idle-timeout", parser=duration(0.001, 10_000_000), metavar="TIME", help=f"Close a TCP connection that sends nothing for this long ({TIMES}; default 300).")] = None,
     verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
@@ -79,16 +116,20 @@ def serve(
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     if parity is None:  # as scan and import take a pseudo-terminal: without parity
         parity = "none" if pty else "even"
+    turnarounds = {address: seconds for value in module_turnaround or () for addresses, seconds in [parse_module_turnaround(value)]
+                   for address in addresses}  # fmt: skip
     emulator = api.emulator(
         parse_addresses(modules) if modules is not None else None, state=state, framing=framing, zvz=zvz, turnaround=turnaround,
-        line_speed=line_speed is not None, line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
+        turnarounds=turnarounds, jitter=jitter, line_speed=line_speed is not None,
+        line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
         drop_rate=drop_rate, corrupt_rate=corrupt_rate, seed=seed, max_connections=max_connections, idle_timeout=idle_timeout,
     )  # fmt: skip
     stop = threading.Event()
     with emulator:
         if listen is not None or not pty:
-            host, port = api.listen(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen))
-            print(f"listening on {host}:{port} ({framing}, modules {', '.join(map(str, sorted(emulator.modules())))})", flush=True)
+            host, port = api.listen(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen), rfc2217=rfc2217)
+            print(f"listening on {host}:{port} ({framing}{', rfc2217' if rfc2217 else ''}, modules {', '.join(map(str, sorted(emulator.modules())))})",
+                  flush=True)  # fmt: skip
         if pty:
             print(f"pty: {api.open_pty(emulator)}", flush=True)
         for signum in (signal.SIGINT, signal.SIGTERM):  # started: a signal stops it (until now, it was interrupted)

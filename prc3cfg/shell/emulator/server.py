@@ -49,16 +49,23 @@ import os
 import random
 import select
 import socket
+import termios
 import threading
 import time
 import tty
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import cast
+
+import serial
+from serial import rfc2217
+from serial.rfc2217 import PortManager
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Frame, get_framing
 from prc3cfg.core.line import LineSettings
+from prc3cfg.core.uart import received as uart_received
 from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator.bus import BROADCAST, EmulatedBus
 from prc3cfg.shell.emulator.state import COMPACT_EVERY, Store, cannot_save
@@ -99,6 +106,11 @@ class Emulator:
     `unserved` are modules of the state file this emulator does not serve: every save
     writes them back unchanged, so serving a few modules of a state file loses no others.
     `compact_every`: journal lines between compactions of the state file (`state.Store`).
+
+    With `line_speed`, a module answers after its turnaround: `turnarounds[address]`, else
+    `turnaround`, each exchange shifted by up to ± `jitter` (uniform, never below 0; seeded by
+    the fault injection's seed, so a test run is repeatable) — a line that is not ideal, for
+    `prc3cfg doctor` and the bus-time estimates to be measured against.
     """
 
     def __init__(
@@ -109,6 +121,8 @@ class Emulator:
         line: LineSettings = LineSettings(),
         zvz: float = 0.020,
         turnaround: float = 0.010,
+        turnarounds: Mapping[int, float] | None = None,
+        jitter: float = 0.0,
         line_speed: bool = False,
         faults: FaultInjection = FaultInjection(),
         state_path: Path | None = None,
@@ -121,10 +135,14 @@ class Emulator:
             raise ValueError(f"max-connections must be at least 1, not {max_connections}")
         if not idle_timeout > 0:
             raise ValueError(f"idle-timeout must be more than 0 s, not {idle_timeout}")
+        if jitter < 0 or turnaround < 0 or any(t < 0 for t in (turnarounds or {}).values()):
+            raise ValueError("a turnaround and the jitter are at least 0 s")
         self.framing = get_framing(framing)
         self.line = line
         self.zvz = zvz
         self.turnaround = turnaround
+        self.turnarounds = dict(turnarounds or {})
+        self.jitter = jitter
         self.line_speed = line_speed
         self.faults = faults
         self.state_path = state_path
@@ -133,6 +151,7 @@ class Emulator:
         self._bus = EmulatedBus(modules)
         self._unserved = dict(unserved or {})
         self._random = random.Random(faults.seed)
+        self._jitter = random.Random(faults.seed)  # its own, so jitter leaves the faults' sequence as it was
         self._lock = threading.Lock()  # the line: one exchange at a time
         self._closing = threading.Event()
         self._guard = threading.Lock()  # the two sets below
@@ -200,6 +219,13 @@ class Emulator:
     def _chance(self, rate: float) -> bool:
         return rate > 0 and self._random.random() < rate
 
+    def turnaround_of(self, address: int) -> float:
+        """The time module `address` takes to answer this exchange: its turnaround ± the jitter."""
+        turnaround = self.turnarounds.get(address, self.turnaround)
+        if self.jitter:
+            turnaround = max(0.0, turnaround + self._jitter.uniform(-self.jitter, self.jitter))
+        return turnaround
+
     def _damage(self, frame: bytes) -> bytes:
         """`frame` with one bit flipped on the line, as the receiving UART hands it on."""
         i = self._random.randrange(len(frame))
@@ -251,7 +277,7 @@ class Emulator:
             reply = self.framing.encode(Direction.REPLY, address, delivery.reply)
             if self.line_speed:
                 request_bytes = len(self.framing.encode(Direction.REQUEST, frame.address, frame.message))
-                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround
+                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround_of(address)
                 time.sleep(max(0.0, received_at + line_time - time.monotonic()))
             if not damage_request and drop:
                 log.info("fault injection: reply from %d lost", address)
@@ -269,9 +295,13 @@ class Emulator:
         name: str,
         uart: bool,
         idle_timeout: float | None = None,
+        client_line: Callable[[], LineSettings | None] = lambda: None,
     ) -> None:
         """Decode request frames from one byte stream — a UART's, or TCP's (`uart=False`) — and
-        answer them until it ends, the emulator closes, or nothing arrives for `idle_timeout` seconds."""
+        answer them until it ends, the emulator closes, or nothing arrives for `idle_timeout` seconds.
+        `client_line` says the settings the client set on its end (a pty's, RFC 2217's), if any: what
+        it sends at others than the emulator's arrives as a UART receives it, and so do the replies
+        at its end (`prc3cfg.core.uart`)."""
         decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz, uart=uart)
         gap = self.zvz if self.framing.name == "open-driver" else POLL
         heard = time.monotonic()
@@ -280,9 +310,10 @@ class Emulator:
             now = time.monotonic()
             if data is None:
                 return
+            client = client_line()
             if data:
                 heard = now
-                decoder.receive_data(data, now)
+                decoder.receive_data(data if client is None else uart_received(data, client, self.line), now)
             elif idle_timeout is not None and now - heard >= idle_timeout:
                 log.warning("%s: nothing received for %g s — closed (idle time-out)", name, idle_timeout)
                 return
@@ -295,7 +326,7 @@ class Emulator:
                     continue
                 reply = self.exchange(event, now)
                 if reply is not None:
-                    send(reply)
+                    send(reply if client is None else uart_received(reply, self.line, client))
 
     def _start(self, target: Callable[[], None], name: str) -> None:
         """Run `target` in a thread that is forgotten when it ends; RuntimeError if none can start."""
@@ -319,8 +350,10 @@ class Emulator:
 
     # -- TCP ---------------------------------------------------------------------------
 
-    def listen(self, host: str = "127.0.0.1", port: int = 0) -> tuple[str, int]:
-        """Accept TCP connections (pyserial `socket://HOST:PORT`); returns the bound address."""
+    def listen(self, host: str = "127.0.0.1", port: int = 0, *, rfc2217: bool = False) -> tuple[str, int]:
+        """Accept TCP connections (pyserial `socket://HOST:PORT`); returns the bound address.
+        `rfc2217`: they speak RFC 2217 (`rfc2217://HOST:PORT`), as ser2net's `telnet(rfc2217)`
+        accepter: the client sets the baud rate and character format of its end of the line."""
         server = socket.create_server((host, port), backlog=socket.SOMAXCONN)  # a burst of connections waits in the kernel
         server.settimeout(POLL)
 
@@ -330,11 +363,11 @@ class Emulator:
             server.close()
 
         self._closers.append(stop_listening)
-        self._start(lambda: self._accept(server), "emulator-accept")
+        self._start(lambda: self._accept(server, rfc2217), "emulator-accept")
         bound = server.getsockname()
         return bound[0], bound[1]
 
-    def _accept(self, server: socket.socket) -> None:
+    def _accept(self, server: socket.socket, rfc2217: bool) -> None:
         failing = False
         while not self._closing.is_set():
             try:
@@ -352,9 +385,9 @@ class Emulator:
             if failing:
                 log.warning("accepting connections again")
                 failing = False
-            self._admit(conn, f"{peer[0]}:{peer[1]}")
+            self._admit(conn, f"{peer[0]}:{peer[1]}", rfc2217)
 
-    def _admit(self, conn: socket.socket, name: str) -> None:
+    def _admit(self, conn: socket.socket, name: str, rfc2217: bool) -> None:
         """Serve a new connection in its own thread, or close it at once when all slots are taken."""
         with self._guard:
             if len(self._connections) >= self.max_connections:
@@ -368,7 +401,7 @@ class Emulator:
             return
         log.info("%s: connected", name)
         try:
-            self._start(lambda: self._serve_socket(conn, name), "emulator-conn")
+            self._start(lambda: self._serve_socket(conn, name, rfc2217), "emulator-conn")
         except RuntimeError as error:
             log.error("%s: refused — cannot start a thread (%s)", name, error)
             self._release(conn)
@@ -379,8 +412,8 @@ class Emulator:
             self._connections.discard(conn)
         conn.close()
 
-    def _serve_socket(self, conn: socket.socket, name: str) -> None:
-        def recv(timeout: float) -> bytes | None:
+    def _serve_socket(self, conn: socket.socket, name: str, rfc2217: bool = False) -> None:
+        def receive(timeout: float) -> bytes | None:
             conn.settimeout(timeout)  # also bounds `sendall` to a client that takes no replies
             try:
                 data = conn.recv(RECV_SIZE)
@@ -390,9 +423,17 @@ class Emulator:
                 return None
             return data or None
 
+        def send(data: bytes) -> None:
+            conn.sendall(data)
+
+        def no_settings() -> LineSettings | None:
+            return None  # a raw TCP stream: the gateway's side fixes the line's settings
+
+        streams = _rfc2217(receive, send) if rfc2217 else (receive, send, no_settings)
+        recv, send_on, client_line = streams
         try:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._serve_stream(recv, conn.sendall, name=name, uart=False, idle_timeout=self.idle_timeout)
+            self._serve_stream(recv, send_on, name=name, uart=False, idle_timeout=self.idle_timeout, client_line=client_line)
         except OSError as error:
             log.info("%s: %s", name, error.strerror or error)
         finally:
@@ -422,8 +463,18 @@ class Emulator:
         def send(data: bytes) -> None:
             os.write(master, data)
 
+        def client_line() -> LineSettings | None:
+            """The baud rate and stop bits the client set on the pty; a pty keeps no data bits or
+            parity (always 8N): those are the emulator's, as if the client had set them."""
+            with contextlib.suppress(termios.error, ValueError):
+                attributes = termios.tcgetattr(master)  # the slave's, on Linux
+                baud = BAUDS.get(attributes[5])
+                if baud is not None:
+                    return replace(self.line, baud=baud, stop_bits=2 if attributes[2] & termios.CSTOPB else 1)
+            return None
+
         path = os.ttyname(slave)
-        self._start(lambda: self._serve_stream(recv, send, name=path, uart=True), "emulator-pty")
+        self._start(lambda: self._serve_stream(recv, send, name=path, uart=True, client_line=client_line), "emulator-pty")
         return path
 
     # -- lifetime ----------------------------------------------------------------------
@@ -449,6 +500,60 @@ class Emulator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+#: termios speed codes → baud rates
+BAUDS = {getattr(termios, f"B{baud}"): baud for baud in (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400,
+                                                          57600, 115200, 230400) if hasattr(termios, f"B{baud}")}  # fmt: skip
+
+
+class _RemoteEnd:
+    """The settings an RFC 2217 client gave its end of the line, as `serial.rfc2217.PortManager`
+    sets and reads a port's (None until the client set them). No modem lines to report."""
+
+    baudrate: int | None = None
+    bytesize: int | None = None
+    parity: str | None = None
+    stopbits: float | None = None
+    xonxoff = rtscts = break_condition = dtr = rts = False
+    cts = dsr = cd = True
+    ri = False
+
+    def reset_input_buffer(self) -> None:
+        pass
+
+    def reset_output_buffer(self) -> None:
+        pass
+
+    def line(self) -> LineSettings | None:
+        if self.baudrate is None or self.bytesize is None or self.parity is None or self.stopbits is None:
+            return None
+        try:
+            return LineSettings(self.baudrate, self.bytesize, PARITIES[self.parity], self.stopbits)
+        except (KeyError, ValueError):
+            return None  # a setting no PRC 3 line has (mark, space): as if unknown
+
+
+PARITIES = {serial.PARITY_NONE: "none", serial.PARITY_EVEN: "even", serial.PARITY_ODD: "odd"}
+
+
+def _rfc2217(
+    recv: Callable[[float], bytes | None], send: Callable[[bytes], None]
+) -> tuple[Callable[[float], bytes | None], Callable[[bytes], None], Callable[[], LineSettings | None]]:
+    """A TCP stream that speaks RFC 2217: the data in it, the data sent escaped, and the client's settings."""
+    end = _RemoteEnd()
+
+    class Connection:
+        def write(self, data: bytes) -> None:
+            send(data)
+
+    manager = PortManager(cast(rfc2217.Serial, end), cast(rfc2217.Serial, Connection()))  # what it uses of a port, and a writer
+
+    def receive(timeout: float) -> bytes | None:
+        data = recv(timeout)
+        return data if not data else b"".join(manager.filter(data))
+
+    return receive, lambda data: send(b"".join(manager.escape(data))), end.line
 
 
 def _hung_up(conn: socket.socket) -> bool:

@@ -165,6 +165,10 @@ class Link:
         self._heard = False  # whether a byte ever came back on this port
         self.exchanges = 0  # attempts made, for benchmarks and summaries
         self.repeated = 0  # attempts that failed (lost, damaged, unconfirmed) and were made again
+        self.discarded = 0  # pieces of bytes the framing threw away (damaged frames, garbage), for `prc3cfg doctor`
+        #: time.monotonic() when the last frame had left, and when the last reply had come: the line's part
+        #: of an exchange, without what the port adds before sending (RFC 2217's purge waits 50 ms)
+        self.sent_at = self.replied_at = 0.0
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
@@ -280,6 +284,7 @@ class Link:
             self.port.flush()
         except Exception as error:  # noqa: BLE001 — pyserial's URL handlers (alt://…) fail in ways of their own
             raise self._failed("write to", error) from None
+        self.sent_at = time.monotonic()
         if self.trace:
             self.trace.sent(self.bus, frame)
 
@@ -314,12 +319,14 @@ class Link:
                 pending = False
             while (event := decoder.next_event(now)) is not NEED_DATA:
                 if isinstance(event, Discarded):
+                    self.discarded += 1
                     if self.trace:
                         self.trace.discarded(self.bus, event.data, event.reason)
                     continue
                 if self.trace:
                     self.trace.received(self.bus, self.framing.encode(Direction.REPLY, event.address, event.message))
                 if event.address == address:
+                    self.replied_at = now
                     return event.message
                 if self.trace:
                     self.trace.remark(self.bus, f"reply from address {event.address}, expected {address}: ignored")

@@ -7,7 +7,9 @@ file (with its journal beside it while it runs, `prc3cfg.shell.emulator.state`),
 factory-default modules at the plant's addresses. It takes every frame at once and in order,
 so the link waits no line time after a broadcast. `emulator://NAME?line-speed=BAUD` makes
 every exchange take as long as on a line of BAUD baud with the bus's character format, to
-rehearse real timings without hardware (broadcasts then wait as on a line); the query
+rehearse real timings without hardware (broadcasts then wait as on a line); with it,
+`turnaround=S` (else the bus's), `module-turnaround=ADDRESS:S` (repeatable) and `jitter=S`
+(`seed=N`) make the modules answer as a line that is not ideal would (`Emulator`); the query
 takes no other key.
 
 `socket://` ports are pyserial's with two changes (`TcpPort`): `in_waiting` says how many
@@ -27,7 +29,7 @@ import sys
 import termios
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl, urlsplit
@@ -37,9 +39,10 @@ from serial.urlhandler import protocol_socket
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import get_framing
+from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
-from prc3cfg.shell.emulator import Emulator, load_state
+from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.link.trace import Trace
 
@@ -96,21 +99,63 @@ def emulator_state_path(plant_path: Path, port: str) -> Path:
     return plant_path.parent / ".prc3cfg" / "emulators" / f"{name}.json"
 
 
-def emulator_line_speed(port: str) -> int | None:
-    """The baud rate of `emulator://NAME?line-speed=BAUD`, None without a query; ValueError,
-    in words that say what to write, for any other query."""
+@dataclass(frozen=True)
+class EmulatorQuery:
+    """What `emulator://NAME?…` asks of its emulator: a line speed, the modules' turnarounds, jitter."""
+
+    line_speed: int | None = None
+    turnaround: float | None = None  # s; None: the bus's
+    turnarounds: dict[int, float] = field(default_factory=dict)  # s, by module address
+    jitter: float = 0.0  # s
+    seed: int | None = None
+
+
+#: The keys of an `emulator://` query, as the README and the refusal of any other key say them.
+EMULATOR_KEYS = "line-speed=BAUD, turnaround=S, module-turnaround=ADDRESS:S, jitter=S, seed=N"
+
+
+def emulator_query(port: str) -> EmulatorQuery:
+    """The query of `emulator://NAME?line-speed=BAUD&turnaround=S&module-turnaround=ADDRESS:S&jitter=S&seed=N`
+    (times in seconds, as a plant file writes them; `module-turnaround` repeatable, the others once);
+    ValueError, in words that say what to write, for anything else."""
     options = parse_qsl(urlsplit(port).query, keep_blank_values=True)
-    for key, _ in options:
-        if key != "line-speed":
-            raise ValueError(f"unknown option '{key}' — emulator:// takes only ?line-speed=BAUD")
-    if len(options) > 1:
-        raise ValueError("line-speed is given more than once — give it once")
-    if not options:
-        return None
-    value = options[0][1]
-    if not value.isascii() or not value.isdigit() or int(value) == 0:
-        raise ValueError(f"line-speed '{value}' is not a baud rate — write a whole number, e.g. line-speed=9600")
+    given: dict[str, str] = {}
+    turnarounds: dict[int, float] = {}
+    for key, value in options:
+        if key == "module-turnaround":
+            address, _, seconds = value.partition(":")
+            if not (address.isascii() and address.isdigit() and 1 <= int(address) <= MAX_MODULE_ADDRESS):
+                raise ValueError(f"module-turnaround '{value}' is not ADDRESS:SECONDS — write e.g. module-turnaround=3:0.040")
+            turnarounds[int(address)] = _seconds(key, seconds)
+        elif key not in ("line-speed", "turnaround", "jitter", "seed"):
+            raise ValueError(f"unknown option '{key}' — emulator:// takes {EMULATOR_KEYS}")
+        elif key in given:
+            raise ValueError(f"{key} is given more than once — give it once")
+        else:
+            given[key] = value
+    return EmulatorQuery(
+        line_speed=_whole(given["line-speed"], "a baud rate", "line-speed=9600") if "line-speed" in given else None,
+        turnaround=_seconds("turnaround", given["turnaround"]) if "turnaround" in given else None,
+        turnarounds=turnarounds,
+        jitter=_seconds("jitter", given["jitter"]) if "jitter" in given else 0.0,
+        seed=_whole(given["seed"], "a seed", "seed=1", least=0) if "seed" in given else None,
+    )
+
+
+def _whole(value: str, what: str, example: str, least: int = 1) -> int:
+    if not value.isascii() or not value.isdigit() or int(value) < least:
+        raise ValueError(f"{example.partition('=')[0]} '{value}' is not {what} — write a whole number, e.g. {example}")
     return int(value)
+
+
+def _seconds(key: str, value: str) -> float:
+    try:
+        seconds = float(value)
+    except ValueError:
+        seconds = -1.0
+    if not 0 <= seconds <= 10 or not value.isascii():
+        raise ValueError(f"{key} '{value}' is not a time of 0..10 s — write seconds, e.g. {key}=0.010")
+    return seconds
 
 
 def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpPort:
@@ -174,15 +219,18 @@ def open_link(
         url, takes_line_time = bus.port, True
         if url.startswith(EMULATOR_SCHEME):
             try:
-                line_speed = emulator_line_speed(url)
+                query = emulator_query(url)
             except ValueError as error:
                 raise UserError(f"bus {bus.name}: port {url}: {error}") from None
+            line_speed = query.line_speed
             state_path = emulator_state_path(plant_path, url)
             modules = load_state(state_path)
             for module in bus.modules:
                 modules.setdefault(module.address, ModuleState.factory(module.address))
             emulator = stack.enter_context(
-                Emulator(modules, framing=bus.framing, zvz=bus.zvz, turnaround=bus.turnaround, state_path=state_path,
+                Emulator(modules, framing=bus.framing, zvz=bus.zvz, state_path=state_path,
+                         turnaround=bus.turnaround if query.turnaround is None else query.turnaround, turnarounds=query.turnarounds,
+                         jitter=query.jitter, faults=FaultInjection(seed=query.seed),
                          line=replace(bus.line, baud=line_speed or bus.line.baud), line_speed=line_speed is not None)
             )  # fmt: skip
             host, tcp_port = emulator.listen("127.0.0.1", 0)

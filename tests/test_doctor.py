@@ -1,0 +1,171 @@
+"""The line measured, not assumed: emulators whose modules answer after turnarounds of their own,
+with seeded jitter, and `prc3cfg doctor` finding the framing, baud and character format they speak
+and measuring those turnarounds — across the real emulator and the real pyserial client."""
+
+from __future__ import annotations
+
+import time
+from types import SimpleNamespace
+
+import pytest
+from emulated import Result, run_cli
+from hypothesis import given
+from hypothesis import strategies as st
+
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import Direction, get_framing
+from prc3cfg.core.line import LineSettings
+from prc3cfg.core.uart import received
+from prc3cfg.shell.emulator import Emulator, FaultInjection
+from prc3cfg.shell.link import Link, open_link, open_port
+
+lines = st.builds(LineSettings, st.sampled_from([1200, 2400, 4800, 9600, 19200]), st.just(8),
+                  st.sampled_from(["none", "odd", "even"]), st.sampled_from([1, 1.5, 2]))  # fmt: skip
+
+
+@given(st.binary(max_size=80), lines)
+def test_a_uart_at_the_senders_settings_receives_what_was_sent(data, line):
+    assert received(data, line, line) == data
+
+
+@given(st.binary(max_size=80), lines, st.sampled_from([1, 1.5, 2]))
+def test_a_uart_checks_one_stop_bit_so_stop_bits_cannot_be_told_apart(data, line, stop_bits):
+    assert received(data, line, LineSettings(line.baud, 8, line.parity, stop_bits)) == data
+
+
+def test_a_frame_at_other_settings_arrives_as_other_bytes():
+    frame = get_framing("crc16").encode(Direction.REQUEST, 1, codec.ReadSystem().encode())
+    at = LineSettings(9600, 8, "even", 1)
+    for other in (LineSettings(19200, 8, "even", 1), LineSettings(4800, 8, "even", 1), LineSettings(9600, 8, "none", 1),
+                  LineSettings(9600, 8, "odd", 1)):  # fmt: skip
+        assert received(frame, other, at) != frame
+    assert received(frame, at, LineSettings(9600, 7, "even", 1)) != frame  # a character of 7 bits loses the top bit
+    assert received(b"\xa5", LineSettings(9600, 7, "odd", 1), LineSettings(9600, 7, "odd", 1)) == b"\x25"
+
+
+def answers(url: str, line: LineSettings, framing: str = "crc16") -> bool:
+    """Whether module 1 answers a 50h sent with `line`'s settings from the real pyserial client."""
+    port = open_port(url, line, bus="b")
+    try:
+        link = Link(port, get_framing(framing), bus="b", line=line, timeout=0.2, retries=0)
+        return link.probe(1, codec.ReadSystem(), 0.2) is not None
+    finally:
+        port.close()
+
+
+def test_over_rfc2217_the_emulator_answers_only_a_client_at_its_settings():
+    at = LineSettings(4800, 8, "odd", 2)
+    with Emulator({1: ModuleState.factory(1)}, line=at) as emulator:
+        host, tcp = emulator.listen(rfc2217=True)
+        url = f"rfc2217://{host}:{tcp}"
+        assert answers(url, at) and answers(url, LineSettings(4800, 8, "odd", 1))  # one stop bit checked
+        assert not answers(url, LineSettings(9600, 8, "odd", 2))
+        assert not answers(url, LineSettings(4800, 8, "even", 2))
+        assert not answers(url, LineSettings(4800, 7, "odd", 2))
+
+
+def test_on_a_pty_the_emulator_answers_only_a_client_at_its_baud():
+    with Emulator({1: ModuleState.factory(1)}, line=LineSettings(19200, 8, "none", 1)) as emulator:
+        pty = emulator.open_pty()
+        assert answers(pty, LineSettings(19200, 8, "none", 1))
+        assert not answers(pty, LineSettings(9600, 8, "none", 1))
+
+
+def test_jitter_is_seeded_and_within_its_bounds():
+    def draws(seed: int) -> list[float]:
+        with Emulator({1: ModuleState.factory(1)}, turnaround=0.020, jitter=0.004, faults=FaultInjection(seed=seed)) as emulator:
+            return [emulator.turnaround_of(1) for _ in range(50)]
+
+    first = draws(7)
+    assert first == draws(7)  # a test run is repeatable
+    assert first != draws(8)
+    assert all(0.016 <= t <= 0.024 for t in first) and len(set(first)) > 1
+
+
+def test_each_module_answers_after_its_own_turnaround(tmp_path):
+    bus = SimpleNamespace(name="b1", port="emulator://slow?line-speed=9600&turnaround=0.002&module-turnaround=2:0.080",
+                          framing="crc16", line=LineSettings(), zvz=0.020, turnaround=0.010, timeout=5.0,
+                          modules=[SimpleNamespace(address=1), SimpleNamespace(address=2)])  # fmt: skip
+    cost = LineCost.of("crc16", LineSettings(), 0.080, 0.020)
+    with open_link(bus, tmp_path / "plant.yaml") as link:
+        started = time.monotonic()
+        assert isinstance(link.request(2, codec.ReadSystem()), codec.SystemReply)
+        assert time.monotonic() - started >= cost.message_time(2, codec.ReadSystem())  # 80 ms and the line: never sooner
+
+
+def doctor_line(capsys, emulator: Emulator, *options: str) -> tuple[Result, dict[str, str]]:
+    """`prc3cfg doctor` on the emulator's RFC 2217 port: the result and the plant-file keys it printed."""
+    host, tcp = emulator.listen(rfc2217=True)
+    result = run_cli(capsys, "doctor", "--port", f"rfc2217://{host}:{tcp}", *options)
+    keys = result.out.partition("The plant file's keys for this bus:\n")[2]
+    return result, dict(line.strip().split(": ", 1) for line in keys.splitlines())
+
+
+def turnarounds(out: str) -> dict[int, tuple[float, float]]:
+    """address → (median, worst) in s, from doctor's table."""
+    rows = [line.split("│") for line in out.splitlines() if line.startswith("│") and "ms" in line]
+    return {int(r[1]): (float(r[2].split()[0]) / 1000, float(r[3].split()[0]) / 1000) for r in rows}
+
+
+def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
+    line = LineSettings(19200, 8, "odd", 1)
+    modules = {1: ModuleState.factory(1), 2: ModuleState.factory(2)}
+    with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.020, turnarounds={2: 0.040}, jitter=0.002,
+                  faults=FaultInjection(seed=1)) as emulator:  # fmt: skip
+        result, keys = doctor_line(capsys, emulator, "--baud", "19200", "--modules", "1-2")
+    assert result.code == 0, result.err
+    assert keys == {"framing": "stx", "baud": "19200", "parity": "odd", "data_bits": "8", "stop_bits": "1",
+                    "turnaround": keys["turnaround"]}  # fmt: skip
+    measured = turnarounds(result.out)
+    assert set(measured) == {1, 2}
+    for address, turnaround in ((1, 0.020), (2, 0.040)):
+        median, worst = measured[address]
+        assert abs(median - turnaround) <= 0.1 * turnaround, (address, median)
+        assert worst >= median
+    assert float(keys["turnaround"]) >= measured[2][1]  # a broadcast waits for the slowest module
+
+
+def test_doctor_asks_before_probing_in_a_framing_without_a_checksum(capsys):
+    with Emulator({1: ModuleState.factory(1)}, framing="open-driver", line=LineSettings(9600, 8, "even", 1)) as emulator:
+        refused, _ = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1")
+        assert refused.code == 1 and refused.err.count("\n") == 1
+        assert "(2 probes); 1 probe in open-driver, which has no checksum, was not made — give --allow-unchecked-probes" in refused.err
+        found, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1", "--allow-unchecked-probes")
+    assert found.code == 0, found.err
+    assert keys["framing"] == "open-driver" and keys["zvz"] == "0.02"
+
+
+def test_doctor_finds_the_baud_of_a_pty(capsys):
+    with Emulator({1: ModuleState.factory(1)}, line=LineSettings(4800, 8, "none", 1)) as emulator:
+        pty = emulator.open_pty()
+        result = run_cli(capsys, "doctor", "--port", pty, "--framing", "crc16", "--modules", "1", "--exchanges", "2")
+    assert result.code == 0, result.err
+    assert f"{pty} speaks crc16, 4800 baud, 8N1" in result.out
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
+@pytest.mark.parametrize("parity", ["none", "odd", "even"])
+@pytest.mark.parametrize("baud", [4800, 19200])
+def test_doctor_finds_every_framing_and_character_format(capsys, framing, parity, baud):
+    with Emulator({7: ModuleState.factory(7)}, framing=framing, line=LineSettings(baud, 8, parity, 1)) as emulator:
+        result, keys = doctor_line(capsys, emulator, "--modules", "7", "--exchanges", "2", "--allow-unchecked-probes")
+    assert result.code == 0, result.err
+    assert (keys["framing"], keys["baud"], keys["parity"]) == (framing, str(baud), parity)
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
+def test_doctor_measures_turnarounds_within_ten_percent_on_every_framing(capsys, framing):
+    given = {1: 0.015, 2: 0.030, 3: 0.060}
+    with Emulator({a: ModuleState.factory(a) for a in given}, framing=framing, line=LineSettings(9600, 8, "even", 1), line_speed=True,
+                  turnarounds=given, jitter=0.003, faults=FaultInjection(seed=3)) as emulator:  # fmt: skip
+        result, _ = doctor_line(capsys, emulator, "--framing", framing, "--baud", "9600", "--parity", "even", "--modules", "1-4",
+                                "--exchanges", "15", "--allow-unchecked-probes")  # fmt: skip
+    assert result.code == 0, result.err
+    measured = turnarounds(result.out)
+    assert set(measured) == set(given)
+    for address, turnaround in given.items():
+        assert abs(measured[address][0] - turnaround) <= 0.1 * turnaround, (address, measured[address])
