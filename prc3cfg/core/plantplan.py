@@ -24,7 +24,7 @@ from prc3cfg import __version__
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe
-from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import ModulePlan, Step
 from prc3cfg.core.planner.check import MAX_STEPS
 from prc3cfg.core.verification import read_messages, verification_time
@@ -108,6 +108,24 @@ class LineProof:
 
 
 @dataclass(frozen=True, slots=True)
+class Reading:
+    """How a plan's read-back was targeted (`prc3cfg.core.targeting`): the base it was compared with,
+    in words, the modules not read at all, and per module read the managed programs not read — all
+    taken as last verified. A plan without one read every chosen module in full."""
+
+    base: str
+    modules_not_read: tuple[str, ...]  # "bus/name"
+    programs_not_read: dict[tuple[str, int], tuple[int, ...]]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"base": self.base, "modules_not_read": list(self.modules_not_read)}
+
+    def module_json(self, change: ModuleChange) -> dict[str, Any]:
+        read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]
+        return {"programs": read, "programs_not_read": list(self.programs_not_read.get((change.bus, change.address), ()))}
+
+
+@dataclass(frozen=True, slots=True)
 class PlantPlan:
     """Every module's change, the broadcasts of each bus, and what they cost on the line."""
 
@@ -118,6 +136,7 @@ class PlantPlan:
     broadcast_time: float = 0.0  # every bus's broadcasts, once each, and the probes that proved them safe
     unshared_bus_time: float | None = None  # the same changes without broadcasts, where some were shared
     proofs: tuple[LineProof, ...] = ()  # per line probed: what answered at the addresses the plant does not list
+    reading: Reading | None = None  # a targeted read-back: what was read, what was taken as last verified
 
     def proof(self, bus: str) -> LineProof | None:
         return next((p for p in self.proofs if p.bus == bus), None)
@@ -183,7 +202,7 @@ class PlantPlan:
             "plant_path": self.plant_path,
             "plant_sha256": self.plant_sha256,
             "buses": [
-                {"name": bus, "modules": [m.to_json() for m in modules]}
+                {"name": bus, "modules": [m.to_json() | ({"read": self.reading.module_json(m)} if self.reading else {}) for m in modules]}
                 | (proof.to_json() if (proof := self.proof(bus)) is not None else {})
                 | ({"broadcasts": [
                     {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
@@ -198,7 +217,8 @@ class PlantPlan:
             "estimated_time_s": round(sum(phases.values()), 3),
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
-        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})  # fmt: skip
+        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {}) | (
+            {"read": self.reading.to_json()} if self.reading is not None else {})  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -212,6 +232,7 @@ class PlannedModule:
     state_sha256: str
     steps: tuple[codec.Message, ...]
     broadcasts: int  # how many of the leading steps are the bus's broadcasts
+    programs_read: tuple[int, ...] | None = None  # a targeted plan's: exactly what to read again
 
 
 class PlanFileError(ValueError):
@@ -248,10 +269,11 @@ OBJECT = Kind("an object", lambda v: isinstance(v, dict))
 # rest of it — summaries, figures, the review — is held against what prc3cfg writes for the
 # plan it proves (`prc3cfg.api.prove`), as any JSON.
 _STEP = {"message": TEXT, "releases_axes": FLAG, "broadcast": Maybe(FLAG)}
-_MODULE = {"address": WHOLE, "name": TEXT, "state_sha256": TEXT, "releases_axes": FLAG, "steps": [_STEP]}
+_MODULE = {"address": WHOLE, "name": TEXT, "state_sha256": TEXT, "releases_axes": FLAG, "steps": [_STEP],
+           "read": Maybe({"programs": [WHOLE], "programs_not_read": [WHOLE]})}  # fmt: skip
 PLAN_FILE = {
     "plant": TEXT, "plant_path": TEXT, "plant_sha256": TEXT, "prc3cfg_version": Maybe(TEXT),
-    "buses": [{"name": TEXT, "modules": [_MODULE]}],
+    "buses": [{"name": TEXT, "modules": [_MODULE]}], "read": Maybe({"base": TEXT, "modules_not_read": [TEXT]}),
 }  # fmt: skip
 # ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`),
 # the figures, each bus's broadcasts.
@@ -334,6 +356,9 @@ def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
     for b, bus in enumerate(data["buses"]):
         for m, module in enumerate(bus["modules"]):
             entry = _planned_module(bus["name"], module, f"buses[{b}].modules[{m}]")
+            if ("read" in data) != (entry.programs_read is not None):
+                raise PlanFileError(f"damaged plan file: buses[{b}].modules[{m}] {'lacks' if 'read' in data else 'has'} the \"read\" "
+                                    f"of a plan made from a {'targeted' if 'read' in data else 'full'} read-back — {AGAIN}")  # fmt: skip
             if (entry.bus, entry.address) in seen:
                 raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
             seen.add((entry.bus, entry.address))
@@ -367,7 +392,13 @@ def _planned_module(bus: str, module: dict[str, Any], at: str) -> PlannedModule:
         messages.append(message)
     if module["releases_axes"] is not any(m.RELEASES_AXES for m in messages):
         raise PlanFileError(f"{where}: releases_axes: {json.dumps(module['releases_axes'])} is not what its steps do — {AGAIN}")
-    return PlannedModule(bus, address, module["name"], module["state_sha256"], tuple(messages), sum(flags))
+    read = None
+    if "read" in module:
+        read = tuple(module["read"]["programs"])
+        if list(read) != sorted(set(read)) or not all(1 <= n <= PROGRAM_COUNT for n in read):
+            raise PlanFileError(f"damaged plan file: {at}.read.programs is not a list of program numbers 1..{PROGRAM_COUNT}, "
+                                f"each once, in order — {AGAIN}")  # fmt: skip
+    return PlannedModule(bus, address, module["name"], module["state_sha256"], tuple(messages), sum(flags), read)
 
 
 def _message(text: str, at: str, where: str) -> codec.Message:

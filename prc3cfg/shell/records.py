@@ -20,6 +20,7 @@ its snapshot and journal must not start writing modules.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
@@ -146,9 +147,34 @@ def applied_copy(plant_path: Path) -> Path:
     return records_dir(plant_path, "applied") / plant_path.name
 
 
-def save_applied(plant_path: Path, text: bytes) -> None:
-    """Keep the plant file just applied in full (atomically: a killed apply leaves the old copy)."""
+def save_applied(plant_path: Path, text: bytes, lines: dict[str, LineTaken]) -> None:
+    """Keep the plant file just applied in full and verified, and the lines it was applied to (each
+    atomically; the lines last: they make the copy a base for a targeted read-back)."""
     write_atomically(applied_copy(plant_path), text.decode("utf-8"))
+    write_atomically(_applied_lines(plant_path), json.dumps(
+        {bus: {"port": line.port, "framing": line.framing, "keys": list(line.keys)} for bus, line in sorted(lines.items())}, indent=1))
+
+
+def _applied_lines(plant_path: Path) -> Path:
+    return records_dir(plant_path, "applied") / f"{plant_path.name}.lines.json"
+
+
+def applied_lines(plant_path: Path) -> dict[str, LineTaken]:
+    """The lines the copy of the plant file last applied in full was applied to and verified on —
+    none once an apply or restore has written to them since (`forget_applied`), or if never kept."""
+    try:
+        data = read_json(_applied_lines(plant_path))
+        return {bus: LineTaken(member(line, "port", "a line"), member(line, "framing", "a line"), tuple(member(line, "keys", "a line")))
+                for bus, line in data.items()}  # fmt: skip
+    except (FileProblem, ValueError, KeyError, TypeError, AttributeError):
+        return {}  # never kept, or not a record this prc3cfg can read: no base, a full read
+
+
+def forget_applied(plant_path: Path) -> None:
+    """Before an apply's or restore's first write: the modules will no longer be known to hold the
+    copy last applied (it stays, for `left_alone`; its lines go until an apply verifies in full again)."""
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(_applied_lines(plant_path))
 
 
 class Journal:
