@@ -11,7 +11,9 @@
   `exchange` with time, bus, address, request and reply in hex, attempt, duration.
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
-  modules and programs left the plant file — they stay on the hardware as they are.
+  modules and programs left the plant file — they stay on the hardware as they are — and,
+  with the lines it was applied to (`<plant>.yaml.lines.json`, removed before any write), the
+  base of a targeted read-back (`prc3cfg.api.base`).
 
 `check_writable` tells, before an apply opens a line, whether these can be written at all (a
 read-only checkout, a full disk, a file where `.prc3cfg` belongs): an apply that could not keep
