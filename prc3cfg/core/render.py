@@ -342,9 +342,9 @@ def reading_line(document: dict) -> str | None:
     unread = said["modules_not_read"]
     taken = [f"{plural(skipped, 'program')} of those modules"] if skipped else []
     taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
-    return (f"Read back what the change touches (base: {said['base']}): the system parameters of {plural(len(modules), 'module')} "
-            f"and {plural(programs, 'program')}" + (f"; taken as last verified, not read: {' and '.join(taken)}" if taken else "")
-            + " — --full-read reads everything")  # fmt: skip
+    read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
+    return (f"Read back what the change touches (base: {said['base']}): {read}"
+            + (f"; taken as last verified, not read: {' and '.join(taken)}" if taken else "") + " — --full-read reads everything")  # fmt: skip
 
 
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
