@@ -1,6 +1,6 @@
 """Bus time on a real-speed line: measured read-back and apply against their estimates.
 
-    python bench/line_bench.py [--modules 30] [--baud 9600] [--framing crc16] [--changed 2] [--skip-read] [--skip-apply]
+    python bench/line_bench.py [--modules 30] [--baud 9600] [--framing crc16] [--changed 2] [--skip-read] [--skip-apply] [--full-read]
 
 Starts `prc3cfg emulator serve --line-speed BAUD` (a separate process, so the emulator
 and the client do not share an interpreter), then
@@ -16,7 +16,13 @@ and the client do not share an interpreter), then
   line and the verification exchanges against the floor; acceptance: at most 1.10, and
   verification exchanges = the floor. A third apply changes one program alike on every
   module: with a full line (30 modules) that is one broadcast and a verifying read per
-  module; it prints the writes' bus time against the same change as addressed writes.
+  module; it prints the writes' bus time against the same change as addressed writes. A
+  fourth changes one system parameter on every module (the acceleration: a change that can
+  clamp no program, so no program is read for it).
+
+After commissioning, `plan` and `apply` read back only what each change touches (the base is
+the plant file just applied in full); `--full-read` measures the same with every module read in
+full, as every apply did before targeted read-backs.
 
 Wall times include each command's start-up (imports, about 0.3 s), reported separately.
 """
@@ -65,7 +71,7 @@ MODULE = """\
       - address: {address}
         name: m{address}
         unmanaged_programs: reset
-        system: {{upper_reversing_point: 2.000, max_speed: 0.500}}
+        system: {{upper_reversing_point: 2.000, max_speed: 0.500, acceleration: {acceleration}}}
         programs:
 {programs}
         chains: [[1, 2, 3, 4], {{programs: [10, 11], loop: true}}]
@@ -110,13 +116,17 @@ def verification_floor(plan: dict, cost: LineCost) -> tuple[int, float]:
     return exchanges, seconds
 
 
-def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost: LineCost, read_estimate: float) -> None:
-    _, plan_json = run([*prc3cfg, "plan", str(plant), "--json"])
+def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost: LineCost, read_estimate: float, read: list[str]) -> None:
+    _, plan_json = run([*prc3cfg, "plan", str(plant), "--json", *read])
     plan = json.loads(plan_json)
     floor, floor_time = verification_floor(plan, cost)
     journals = work / ".prc3cfg" / "journal"
     before = set(journals.iterdir()) if journals.exists() else set()
-    wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release"])
+    wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release", *read])
+    if "read" in plan:  # a targeted read-back: what the plan says it reads
+        read_estimate = plan["estimated_phases_s"]["reading"]
+        exchanges = sum(len(read_messages(m["read"]["programs"])) for bus in plan["buses"] for m in bus["modules"])
+        print(f"  targeted read-back: {exchanges} exchanges for {sum(len(b['modules']) for b in plan['buses'])} modules read")
     estimate = read_estimate + plan["estimated_bus_time_s"] + floor_time
     print(f"  apply, {title}: wall {wall:7.2f} s   estimate {estimate:7.2f} s   ratio {wall / estimate:.3f}"
           f"   (read-back {read_estimate:.2f} s, writes {plan['estimated_bus_time_s']:.2f} s, minimal verification {floor_time:.2f} s)")  # fmt: skip
@@ -139,7 +149,9 @@ def main() -> None:
     parser.add_argument("--skip-read", action="store_true")
     parser.add_argument("--skip-apply", action="store_true")
     parser.add_argument("--changed", type=int, default=2, help="programs changed per module in the second apply")
+    parser.add_argument("--full-read", action="store_true", help="plan and apply with --full-read (every module read in full)")
     args = parser.parse_args()
+    read = ["--full-read"] if args.full_read else []
     prc3cfg = [sys.executable, "-m", "prc3cfg"]
     startup, _ = run([*prc3cfg, "--help"])
     cost = LineCost.of(args.framing, LineSettings(baud=args.baud, parity="none"), 0.010, 0.020)
@@ -153,7 +165,7 @@ def main() -> None:
         try:
             port = emulator.stdout.readline().split()[2]
             plant = Path(work) / "plant.yaml"
-            modules = "".join(MODULE.format(address=a, programs=PROGRAMS) for a in range(1, args.modules + 1))
+            modules = "".join(MODULE.format(address=a, programs=PROGRAMS, acceleration="1.500") for a in range(1, args.modules + 1))
             plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=modules))
             read_estimate = args.modules * sum(cost.message_time(1, m) for m in read_messages(range(1, 65)))
             print(f"{args.modules} modules, {args.framing}, {args.baud} baud 8N1, turnaround 10 ms; "
@@ -162,16 +174,19 @@ def main() -> None:
                 wall, _ = run([*prc3cfg, "read", str(plant), "--json"])
                 print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio {wall / read_estimate:.3f}")
             if not args.skip_apply:
-                measure_apply("commissioning from factory defaults", prc3cfg, plant, Path(work), cost, read_estimate)
-                for title, programs in (
+                measure_apply("commissioning from factory defaults", prc3cfg, plant, Path(work), cost, read_estimate, read)
+                for title, programs, acceleration in (
                     (f"{args.changed} changed programs per module, other ones on each",
-                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)})),
+                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}), "1.500"),
                     ("the same speed of program 32 on every module",
-                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}, {32})),
+                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}, {32}), "1.500"),
+                    ("one system change on every module (acceleration)",
+                     lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}, {32}), "1.200"),
                 ):  # fmt: skip
-                    changed = "".join(MODULE.format(address=a, programs=programs(a)) for a in range(1, args.modules + 1))
+                    changed = "".join(MODULE.format(address=a, programs=programs(a), acceleration=acceleration)
+                                      for a in range(1, args.modules + 1))  # fmt: skip
                     plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=changed))
-                    measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate)
+                    measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate, read)
         finally:
             emulator.terminate()
             emulator.wait()

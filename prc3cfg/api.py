@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 from urllib.parse import urlsplit
 
-from prc3cfg.core import codec, gateway, planfile, plot
+from prc3cfg.core import codec, gateway, planfile, plot, targeting
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import detects_damage, get_framing
@@ -49,7 +49,7 @@ from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage,
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
-from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.plantplan import PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted, plural
 from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
@@ -72,7 +72,7 @@ from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.readback import Target, read_all, read_module
-from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
+from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, applied_lines, check_writable, forget_applied, save_applied
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
@@ -234,6 +234,79 @@ def targets(pairs: Pairs) -> list[Target]:
     return [Target(bus.name, m.address, m.name, tuple(m.managed_programs()), m.desired_system()) for bus, m in pairs]
 
 
+@dataclass(frozen=True)
+class Base:
+    """A plant file the modules are taken to hold, for a targeted read-back (`prc3cfg.core.targeting`):
+    what it is in words, and its desired image of each module on the buses it covers — those it
+    puts on the same line as the plant file does, where a damaged frame is detected (on a line
+    without, every apply reads every module: a frame meant for one can change another)."""
+
+    said: str
+    images: dict[Key, ModuleImage]
+
+
+def base(plant: Plant, previous: Path | None = None) -> Base | None:
+    """The base of a targeted read-back: `previous` (the plant file as it was, e.g. on the main
+    branch: its problems are said), else the copy of the plant file last applied in full and
+    verified from here, on the lines it was applied to; None without one (a full read)."""
+    if previous is not None:
+        before = load_plant(previous)
+        said = str(previous)
+        lines_ = {bus.name: LineTaken(bus.port, bus.framing, ()) for bus in before.buses}
+    else:
+        lines_ = applied_lines(plant.path)
+        if not lines_:
+            return None
+        try:
+            before = load_plant(applied_copy(plant.path))
+        except UserError:
+            return None  # a copy this prc3cfg cannot read: no base
+        said = "the plant file last applied in full here"
+    images = {}
+    for bus in plant.buses:
+        line, old = lines_.get(bus.name), next((b for b in before.buses if b.name == bus.name), None)
+        if line is None or old is None or not detects_damage(bus.framing, bus.line.parity):
+            continue
+        if line.same_line(bus.port, bus.framing, bus_line_keys(plant, bus) if line.keys else ()):
+            images.update({(bus.name, m.address): m.desired_image() for m in old.modules})
+    return Base(said, images)
+
+
+@dataclass(frozen=True)
+class Reads:
+    """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
+    read-back the base it was compared with, in words (None: every chosen module in full)."""
+
+    pairs: Pairs
+    targets: list[Target]
+    base: str | None = None
+
+    def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
+        """What the plan says it read and took as last verified, once `images` are read."""
+        if self.base is None:
+            return None
+        unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
+        skipped = {key: targeting.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
+        return Reading(self.base, unread, skipped)
+
+
+def reads(plant: Plant, pairs: Pairs, the_base: Base | None) -> Reads:
+    """What to read of the chosen modules: everything (`targets`) without a base; with one, what the
+    change from the base touches (`targeting.touched`) — a module untouched is not read; one the base
+    does not cover, or that reported E12 since, in full."""
+    if the_base is None:
+        return Reads(pairs, targets(pairs))
+    unset = unset_systems(plant, {bus.name: bus for bus, _ in pairs}.values())
+    chosen, to_read = [], []
+    for bus, m in pairs:
+        key = (bus.name, m.address)
+        programs = targeting.touched(None if key in unset else the_base.images.get(key), m.desired_image())
+        if programs is not None:
+            chosen.append((bus, m))
+            to_read.append(Target(bus.name, m.address, m.name, programs, m.desired_system()))
+    return Reads(chosen, to_read, the_base.said)
+
+
 # -- the lines --------------------------------------------------------------------------
 
 
@@ -316,11 +389,12 @@ def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions,
 
 
 def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
-                   desired: dict[Key, ModuleImage] | None = None) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
+                   desired: dict[Key, ModuleImage] | None = None, *,
+                   only_read: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
     """Read back and plan, each line planned as soon as it is read — while the other lines are
-    still being read: the lines never wait for all of the planning."""
+    still being read: the lines never wait for all of the planning. `only_read`: see `Planner`."""
     buses = {bus.name: bus for bus, _ in pairs}
-    planner = _planner(plant, pairs, unset_systems(plant, buses.values()))
+    planner = _planner(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read)
     wanted = _wanted(pairs, desired)
     images = _read(to_read, links, options, then=lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus])))
     return images, planner.plan(wanted, images)
@@ -375,29 +449,34 @@ def read_input(path: Path, what: str, remedy: str) -> Any:
 
 
 def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
-         options: LineOptions | None = None) -> PlantPlan:  # fmt: skip
+         options: LineOptions | None = None, previous: Path | None = None, full_read: bool = False) -> PlantPlan:  # fmt: skip
     """The cheapest plan from what the modules hold (read back now, or `images` as `read` or
-    `load_images` gave them) to the plant file."""
+    `load_images` gave them) to the plant file. Read back now: only what the change from a base
+    touches (`previous`, else the plant file last applied in full here: `base`, `reads`) — every
+    chosen module in full without a base, or with `full_read`."""
     options = options or LineOptions()
     pairs = select(plant, modules)
     if images is not None:
         return make_plan(plant, pairs, images)
-    with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan") as links:
-        return _read_and_plan(plant, pairs, targets(pairs), links, options)[1]
+    wanted = reads(plant, pairs, None if full_read else base(plant, previous))
+    with lines(plant, {bus.name for bus, _ in wanted.pairs}, options, purpose="plan") as links:
+        read_, planned = _read_and_plan(plant, wanted.pairs, wanted.targets, links, options, only_read=wanted.base is not None)
+    return replace(planned, reading=wanted.reading(pairs, read_))
 
 
 def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,
-              probers: dict[str, Prober] | None = None, unset: frozenset[Key] = frozenset()) -> PlantPlan:  # fmt: skip
+              probers: dict[str, Prober] | None = None, unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> PlantPlan:  # fmt: skip
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
-    line's `probers` (`Planner.plan_line`)."""
-    return _planner(plant, pairs, unset).plan(_wanted(pairs, desired), actual, probers)
+    line's `probers` (`Planner.plan_line`). `only_read`: see `Planner`."""
+    return _planner(plant, pairs, unset, only_read=only_read).plan(_wanted(pairs, desired), actual, probers)
 
 
-def _planner(plant: Plant, pairs: Pairs, unset: frozenset[Key]) -> Planner:
+def _planner(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False) -> Planner:
     """A `Planner` of the lines of these modules' buses."""
     buses = {bus.name: bus for bus, _ in pairs}
-    return Planner(plant.name, str(plant.path.resolve()), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset)
+    return Planner(plant.name, str(plant.path.resolve()), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset,
+                   only_read=only_read)  # fmt: skip
 
 
 def _line(bus: Bus) -> Line:
@@ -474,7 +553,12 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     planfile.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
-    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()))
+    said = planned.document.get("read")  # a targeted read-back's base, in words: it sends nothing
+    targeted = Reads(chosen, [], said["base"]) if isinstance(said, dict) else None
+    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()),
+                     only_read=targeted is not None)  # fmt: skip
+    if targeted is not None:
+        ours = replace(ours, reading=targeted.reading(pairs, images))
     planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant))
     return ours
 
@@ -506,15 +590,32 @@ def apply(
     gates: Gates = Gates(),
     verify: Verify = Verify.FLOOR,
     options: LineOptions | None = None,
+    previous: Path | None = None,
+    full_read: bool = False,
 ) -> ApplyResult:
     """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
 
-    Returns the result when every module verified; raises `ApplyFailed` or `ApplyInterrupted`,
-    each with the result, otherwise; before anything is written, any other `UserError`.
+    What is read back is what `plan` reads (`previous`, `full_read`); for `plan_file`, exactly
+    what its plan read. Returns the result when every module verified; raises `ApplyFailed` or
+    `ApplyInterrupted`, each with the result, otherwise; before anything is written, any other `UserError`.
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
-    return _apply(plant, pairs, targets(pairs), None, planned, gates, verify, options or LineOptions())
+    the_base = None if full_read or planned is not None else base(plant, previous)
+    wanted = _plan_file_reads(planned[1], pairs) if planned is not None else reads(plant, pairs, the_base)
+    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions())
+
+
+def _plan_file_reads(planned: PlanFile, pairs: Pairs) -> Reads:
+    """What to read for a plan file: every chosen module in full, or — for a plan made from a
+    targeted read-back — exactly the modules and programs its plan read."""
+    said = planned.document.get("read")
+    if not isinstance(said, dict):
+        return Reads(pairs, targets(pairs))
+    names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
+    entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
+    return Reads([names[(e.bus, e.address)] for e in entries], [Target(e.bus, e.address, e.name, e.programs_read or ()) for e in entries],
+                 said["base"])  # fmt: skip
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
@@ -538,11 +639,12 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
         for bus, m in pairs
         for image in [taken.images[(bus.name, m.address)]]
     ]
-    return _apply(plant, pairs, to_read, taken.images, None, gates, verify, options or LineOptions())
+    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options or LineOptions())
 
 
-def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key, ModuleImage] | None,
+def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
            plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
+    pairs, to_read = wanted.pairs, wanted.targets
     buses = {bus.name: bus for bus, _ in pairs}
     for bus in buses.values():
         if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
@@ -559,10 +661,11 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
             started = time.monotonic()
             if plan_file is None:
-                images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired)
+                images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired, only_read=wanted.base is not None)
+                the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
             else:
                 images = _read(to_read, links, options)
-                the_plan = prove(*plan_file, plant, pairs, images, {name: prober(links[name], bus) for name, bus in buses.items()})
+                the_plan = prove(*plan_file, plant, chosen, images, {name: prober(links[name], bus) for name, bus in buses.items()})
             reading = time.monotonic() - started
             if gates.show is not None:
                 gates.show(the_plan)
@@ -579,9 +682,10 @@ def _apply(plant: Plant, pairs: Pairs, to_read: list[Target], desired: dict[Key,
             if gates.approve is not None and not gates.approve(the_plan):
                 raise NotApproved("not applied — nothing was written")
             with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
+                forget_applied(plant.path)  # until this apply verifies in full, the modules are not known to hold any plant file
                 result = _run(keys, the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
                 result = replace(result, took={"reading": reading} | result.took)
-                if desired is None and len(pairs) == len(plant.modules()):
+                if desired is None and len(chosen) == len(plant.modules()):
                     _keep_applied(plant)
                 return result
     finally:
@@ -647,10 +751,12 @@ def _run(keys: dict[str, tuple[str, ...]], the_plan: PlantPlan, images: dict[Key
 
 
 def _keep_applied(plant: Plant) -> None:
-    """The plant file just applied in full, kept for `left_alone` — if it is still the one applied."""
+    """The plant file just applied in full and verified on every module, kept for `left_alone` and
+    as the base of the next targeted read-back (`base`), with the lines it was applied to — if it
+    is still the one applied."""
     text = plant.path.read_bytes()
     if hashlib.sha256(text).hexdigest() == plant.sha256:
-        save_applied(plant.path, text)
+        save_applied(plant.path, text, {bus.name: LineTaken(bus.port, bus.framing, bus_line_keys(plant, bus)) for bus in plant.buses})
 
 
 def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
@@ -802,13 +908,23 @@ def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Ke
           options: LineOptions | None = None) -> list[Drift]:  # fmt: skip
     """The chosen modules that drifted from the plant file — read back now, or as `images` —
     reported as drift, not as a plan (`prc3cfg plan --refresh-only`)."""
-    images = read(plant, modules, options) if images is None else images
+    if images is None:
+        images = read(plant, modules, options)
+        _drift_seen(plant, modules, images)
     found = []
     for bus, module in select(plant, modules):
         said = drifted(module.desired_image(), images[(bus.name, module.address)])
         if said:
             found.append(Drift(bus.name, module.address, module.name, tuple(said)))
     return found
+
+
+def _drift_seen(plant: Plant, modules: Iterable[str] | None, images: dict[Key, ModuleImage]) -> None:
+    """A full read that found a module holding other than the plant file says: the modules are no
+    longer known to hold the plant file last applied here, which is no longer a base (`base`) — the
+    next plan reads everything, and sees it too."""
+    if any(drifted(m.desired_image(), images[(bus.name, m.address)]) for bus, m in select(plant, modules)):
+        forget_applied(plant.path)
 
 
 @dataclass(frozen=True)
@@ -829,6 +945,7 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
     writes it."""
     before = _plant_text(plant.path)
     images = read(plant, modules, options)
+    _drift_seen(plant, modules, images)
     found = adopt_text(plant, images, before, programs)
     return Adoption(plant.path, before, found.text, found.adopted)
 

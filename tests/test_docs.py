@@ -85,12 +85,12 @@ buses:
 """
 
 
-def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, **emulated) -> dict:
+def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object, **emulated) -> dict:
     directory = tmp_path / name
     directory.mkdir()
     with emulated_plant(directory, **({"source": source} if source else {}), **emulated) as plant:
         out = directory / "plan.json"
-        result = run_cli(capsys, "plan", plant.path, "--out", out)
+        result = run_cli(capsys, "plan", plant.path, "--out", out, *args)
         assert result.code == 0, result.err
         return json.loads(out.read_text())
 
@@ -106,6 +106,7 @@ def test_a_plan_file_has_exactly_the_keys_docs_files_lists(tmp_path, capsys):
     seen = plain | paths(planned(tmp_path, capsys, "broadcast", declared), maps=SYMBOLS)
     seen |= paths(planned(tmp_path, capsys, "unlisted", declared, unlisted={"line": [29]}), maps=SYMBOLS)
     seen |= paths(planned(tmp_path, capsys, "clamping", clamping), maps=SYMBOLS)
+    seen |= paths(planned(tmp_path, capsys, "targeted", None, "--previous", tmp_path / "clamping.yaml"), maps=SYMBOLS)
     assert seen == set(documented)
 
 
@@ -145,7 +146,7 @@ def test_the_error_codes_are_the_codes_with_their_meanings():
 
 def test_every_reading_in_the_code_is_listed():
     readings = section("protocol.md", "Readings")
-    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py") if "(reading" in path.read_text()}
+    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py") if re.search(r"\(reading\b(?!=)", path.read_text())}
     assert marked and {name for name in marked if name not in readings} == set()
 
 

@@ -15,6 +15,12 @@ from prc3cfg.cli.common import LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOp
 
 EXIT_CHANGES = 2
 
+PreviousOpt = Annotated[Path | None, typer.Option("--previous", metavar="PLANT", help=(
+    "The plant file as it was (e.g. on the main branch), taken as what the modules hold: only what the change from it touches is "
+    "read, and what it described and this one no longer does is said to stay on the hardware. Default: the plant file last "
+    "applied in full from here."))]  # fmt: skip
+FullReadOpt = Annotated[bool, typer.Option("--full-read", help="Read back every module in full, not only what the change touches.")]
+
 
 @app.command()
 def read(
@@ -56,7 +62,8 @@ def plan(
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
     plot: Annotated[Path | None, typer.Option("--plot", metavar="FILE", help="With one --module: draw its chains before (dashed) and after the plan to this .svg or .png file.")] = None,
-    previous: Annotated[Path | None, typer.Option("--previous", metavar="PLANT", help="The plant file as it was (e.g. on the main branch): what it described and this one no longer does is said to stay on the hardware. Default: the plant file last applied in full from here.")] = None,
+    previous: PreviousOpt = None,
+    full_read: FullReadOpt = False,
     module: ModuleOpt = None,
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
@@ -91,7 +98,7 @@ def plan(
         return
     notes = [] if module else api.left_alone(loaded, previous)  # a bad --previous is said before the line is used
     with line_options(trace, retries, lock_timeout) as options:
-        result = api.plan(loaded, module, images=images, options=options)
+        result = api.plan(loaded, module, images=images, options=options, previous=previous, full_read=full_read)
     output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes)
     if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
@@ -116,11 +123,15 @@ def apply(
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
     verify: VerifyOpt = VerifyChoice.FLOOR,
+    previous: PreviousOpt = None,
+    full_read: FullReadOpt = False,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
     from prc3cfg.cli import output
 
+    if plan_file is not None and (previous is not None or full_read):
+        raise click_errors.UsageError("--plan reads back exactly what its plan read — leave out --previous and --full-read", ctx=ctx)
     if plant is None and plan_file is not None:
         plant = api.plan_file_plant(plan_file)
     if plant is None:
@@ -132,7 +143,7 @@ def apply(
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options),
-                           verify=api.Verify(verify.value), options=options)  # fmt: skip
+                           verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read)  # fmt: skip
     output.applied(result)
 
 

@@ -24,7 +24,7 @@ from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.contract import LATER, Flag, Number, Text, Whole, json_path, said
 from prc3cfg.core.error_codes import describe
-from prc3cfg.core.image import DEFAULT_SYSTEM, ModuleImage
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planner.check import MAX_STEPS
 from prc3cfg.core.plantplan import FORMAT, PlantPlan, image_sha256
@@ -49,6 +49,7 @@ class PlannedModule:
     state_sha256: str
     steps: tuple[codec.Message, ...]
     broadcasts: int  # how many of the leading steps are the bus's broadcasts
+    programs_read: tuple[int, ...] | None = None  # a targeted plan's: exactly what to read again
 
 
 class PlanFileError(ValueError):
@@ -67,6 +68,15 @@ class _Step(BaseModel):
     broadcast: Flag = False
 
 
+class _ModuleRead(BaseModel):
+    """A targeted plan's read-back of a module: the programs read, the managed ones taken as last verified."""
+
+    model_config = LATER
+
+    programs: list[Whole]
+    programs_not_read: list[Whole]
+
+
 class _Module(BaseModel):
     model_config = LATER
 
@@ -75,6 +85,7 @@ class _Module(BaseModel):
     state_sha256: Text
     releases_axes: Flag
     steps: list[_Step]
+    read: _ModuleRead | None = None
 
 
 class _Bus(BaseModel):
@@ -82,6 +93,15 @@ class _Bus(BaseModel):
 
     name: Text
     modules: list[_Module]
+
+
+class _Read(BaseModel):
+    """A targeted plan's read-back: the base it compared with, in words, and the modules not read."""
+
+    model_config = LATER
+
+    base: Text
+    modules_not_read: list[Text]
 
 
 class PlanDocument(BaseModel):
@@ -95,6 +115,7 @@ class PlanDocument(BaseModel):
     plant_sha256: Text
     prc3cfg_version: Text = "before 0.1.0"
     buses: list[_Bus]
+    read: _Read | None = None
 
 
 # ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`), the
@@ -197,6 +218,10 @@ def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
     for b, bus in enumerate(document.buses):
         for m, module in enumerate(bus.modules):
             entry = _planned_module(bus.name, module, f"buses[{b}].modules[{m}]")
+            targeted = document.read is not None
+            if targeted != (entry.programs_read is not None):
+                raise PlanFileError(f"damaged plan file: buses[{b}].modules[{m}] {'lacks' if targeted else 'has'} the \"read\" "
+                                    f"of a plan made from a {'targeted' if targeted else 'full'} read-back — {AGAIN}")  # fmt: skip
             if (entry.bus, entry.address) in seen:
                 raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
             seen.add((entry.bus, entry.address))
@@ -227,7 +252,13 @@ def _planned_module(bus: str, module: _Module, at: str) -> PlannedModule:
         messages.append(message)
     if module.releases_axes is not any(m.RELEASES_AXES for m in messages):
         raise PlanFileError(f"{where}: releases_axes: {json.dumps(module.releases_axes)} is not what its steps do — {AGAIN}")
-    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags))
+    read = None
+    if module.read is not None:
+        read = tuple(module.read.programs)
+        if list(read) != sorted(set(read)) or not all(1 <= n <= PROGRAM_COUNT for n in read):
+            raise PlanFileError(f"damaged plan file: {at}.read.programs is not a list of program numbers 1..{PROGRAM_COUNT}, "
+                                f"each once, in order — {AGAIN}")  # fmt: skip
+    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags), read)
 
 
 def _message(text: str, at: str, where: str) -> codec.Message:

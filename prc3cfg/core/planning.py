@@ -24,7 +24,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from prc3cfg.core import codec, sharing
+from prc3cfg.core import codec, sharing, targeting
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
@@ -119,12 +119,15 @@ class _Planned:
 class Planner:
     """The plan of a plant, made line by line — each line as soon as its modules are read, in the
     line's own thread (one at a time: the `PlanCache` is shared, so modules alike on any line are
-    planned once)."""
+    planned once).
+
+    `only_read`: a targeted read-back — each module's desired image is cut to the programs read
+    (`targeting.within_read`): what was not read is not written."""
 
     def __init__(self, plant: str, plant_path: str, plant_sha256: str, lines: Mapping[str, Line],
-                 unset: frozenset[Key] = frozenset()) -> None:  # fmt: skip
+                 unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> None:  # fmt: skip
         self.plant, self.plant_path, self.plant_sha256 = plant, plant_path, plant_sha256
-        self.lines, self.unset = lines, unset
+        self.lines, self.unset, self.only_read = lines, unset, only_read
         self._cache = PlanCache()
         self._planned: dict[str, _Planned] = {}
 
@@ -158,11 +161,12 @@ class Planner:
 
     def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
         unset = wanted.key in self.unset
+        desired = targeting.within_read(wanted.desired, actual) if self.only_read else wanted.desired
         try:
-            module_plan = self._cache.plan(actual, wanted.desired, line.cost, unset)
+            module_plan = self._cache.plan(actual, desired, line.cost, unset)
         except UnreachableImage as error:
             raise UserError(f"bus {wanted.bus}, module {wanted.address} ({wanted.name}): {error}") from None
-        return ModuleChange(wanted.bus, wanted.name, actual, wanted.desired, module_plan, system_unset=unset, cost=line.cost)
+        return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset, cost=line.cost)
 
     def _keep(self, bus: str, planned: _Planned) -> None:
         with self._cache.lock:

@@ -106,6 +106,24 @@ class LineProof:
 
 
 @dataclass(frozen=True, slots=True)
+class Reading:
+    """How a plan's read-back was targeted (`prc3cfg.core.targeting`): the base it was compared with,
+    in words, the modules not read at all, and per module read the managed programs not read — all
+    taken as last verified. A plan without one read every chosen module in full."""
+
+    base: str
+    modules_not_read: tuple[str, ...]  # "bus/name"
+    programs_not_read: dict[tuple[str, int], tuple[int, ...]]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"base": self.base, "modules_not_read": list(self.modules_not_read)}
+
+    def module_json(self, change: ModuleChange) -> dict[str, Any]:
+        read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]
+        return {"programs": read, "programs_not_read": list(self.programs_not_read.get((change.bus, change.address), ()))}
+
+
+@dataclass(frozen=True, slots=True)
 class PlantPlan:
     """Every module's change, the broadcasts of each bus, and what they cost on the line."""
 
@@ -116,6 +134,7 @@ class PlantPlan:
     broadcast_time: float = 0.0  # every bus's broadcasts, once each, and the probes that proved them safe
     unshared_bus_time: float | None = None  # the same changes without broadcasts, where some were shared
     proofs: tuple[LineProof, ...] = ()  # per line probed: what answered at the addresses the plant does not list
+    reading: Reading | None = None  # a targeted read-back: what was read, what was taken as last verified
 
     def proof(self, bus: str) -> LineProof | None:
         return next((p for p in self.proofs if p.bus == bus), None)
@@ -181,7 +200,7 @@ class PlantPlan:
             "plant_path": self.plant_path,
             "plant_sha256": self.plant_sha256,
             "buses": [
-                {"name": bus, "modules": [m.to_json() for m in modules]}
+                {"name": bus, "modules": [m.to_json() | ({"read": self.reading.module_json(m)} if self.reading else {}) for m in modules]}
                 | (proof.to_json() if (proof := self.proof(bus)) is not None else {})
                 | ({"broadcasts": [
                     {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
@@ -196,4 +215,5 @@ class PlantPlan:
             "estimated_time_s": round(sum(phases.values()), 3),
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
-        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {})  # fmt: skip
+        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {}) | (
+            {"read": self.reading.to_json()} if self.reading is not None else {})  # fmt: skip

@@ -328,6 +328,24 @@ def estimate(document: dict[str, Any]) -> str:
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
 
 
+def reading_line(document: dict[str, Any]) -> str | None:
+    """What a targeted plan read and what it took as last verified, in one line; None for a full read.
+    "Read back what the change touches (base: …): the system parameters of 30 modules and 60 of their
+    programs; taken as last verified, not read: 900 programs of those modules and 2 modules (…)"."""
+    said = document.get("read")
+    if not isinstance(said, dict):
+        return None
+    modules = _modules(document)
+    programs = sum(len(m["read"]["programs"]) for _, m in modules)
+    skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
+    unread = said["modules_not_read"]
+    taken = [f"{plural(skipped, 'program')} of those modules"] if skipped else []
+    taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
+    read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
+    return (f"Read back what the change touches (base: {said['base']}): {read}"
+            + (f"; taken as last verified, not read: {' and '.join(taken)}" if taken else "") + " — --full-read reads everything")  # fmt: skip
+
+
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
     """An apply's time, estimated against taken, in total and by phase, in one line: "Time: 6.4 s
     (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.7 s (0.5 s)"."""
@@ -351,6 +369,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out.append(summary_line(document))
+    out += [line for line in [reading_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in _modules(document)):
         out.append(LEGEND)
@@ -392,6 +411,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), ""]
+    head += [f"> {cell(line)}", ""] if (line := reading_line(document)) else []
     if document["axis_releases"]:
         head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                  + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip

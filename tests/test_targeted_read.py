@@ -1,0 +1,183 @@
+"""A targeted read-back (`prc3cfg.core.targeting`): plan and apply read only what the change from a
+base touches — and end where a full read would, on the real emulator; what was not read is never
+written, and Teach In on the floor is found where it was read, and left (and said) where it was not."""
+
+from __future__ import annotations
+
+import json
+import random
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from emulated import emulated_plant, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prc3cfg import api
+from prc3cfg.core import targeting
+from prc3cfg.core.device import can_clamp
+from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage
+from prc3cfg.core.planner import plan_module
+from prc3cfg.plant.importer import module_entry, plant_yaml
+from prc3cfg.shell.testing import emulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parent / "planner"))
+from planner_helpers import line
+from test_planner_property import plant_file, read_back
+
+# -- the core: what a change touches, and a plan that never writes what it did not read ------------
+
+
+@st.composite
+def changes(draw: st.DrawFn) -> tuple[ModuleImage, ModuleImage]:
+    """A module as it holds the base, and the plant file's change of it (the planner property tests' scenarios)."""
+    rnd = random.Random(draw(st.integers(0, 2**32)))
+    actual = replace(read_back(rnd), address=1)
+    return actual, plant_file(rnd, actual, draw(st.lists(st.integers(0, 6), max_size=4)))
+
+
+def test_a_module_the_change_does_not_touch_is_not_read_and_one_it_touches_reads_the_programs_that_differ():
+    rnd = random.Random(3)
+    before = replace(read_back(rnd), address=1)
+    assert targeting.touched(before, before) is None
+    after = before.with_programs({5: replace(before.known(5), P=before.known(5).P // 2 + 1), 9: replace(before.known(9), T=7)})
+    assert targeting.touched(before, after) == (5, 9)
+    assert targeting.touched(None, after) == tuple(range(1, PROGRAM_COUNT + 1))  # no base: every managed program
+    assert targeting.touched(before, replace(before, system=replace(before.system, S6=1001 if before.system.S6 != 1001 else 1002))) == ()
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(changes(), st.sets(st.integers(1, PROGRAM_COUNT), max_size=20))
+def test_a_plan_from_a_partial_read_writes_initialises_and_rewrites_no_program_it_did_not_read(change, read):
+    actual, desired = change
+    if can_clamp(actual.system, desired.system):
+        read = set(range(1, PROGRAM_COUNT + 1))  # the read-back reads every program then (readback.Target.clamped_by)
+    cut = actual.with_programs({n: None for n in range(1, PROGRAM_COUNT + 1) if n not in read})
+    plan = plan_module(cut, targeting.within_read(desired, cut), line())
+    for step in plan.steps:  # an 11h/13h/14h across an unread program included
+        assert set(step.message.touched_programs()) <= read, f"{step.summary} touches a program not read"
+    for number in read:  # what was read reaches the plant file's value
+        assert plan.predicted.program(number) == desired.program(number)
+
+
+# -- across the emulator: a targeted apply ends where a full one does ------------------------------
+
+BUS = {"name": "line", "framing": "crc16", "parity": "even", "timeout": 0.1}
+
+
+def write_plant(path: Path, port: str, images: list[ModuleImage]) -> Path:
+    path.write_text(plant_yaml("targeted", BUS | {"port": port}, [module_entry(image, f"m{image.address}") for image in images]))
+    return path
+
+
+def test_equivalence_across_the_emulator(tmp_path):
+    """One scenario of each kind, fast; `test_a_targeted_apply_ends_where_a_full_one_does` draws many."""
+    for seed in range(3):
+        rnd = random.Random(seed)
+        actual = replace(read_back(rnd), address=1)
+        targeted_equals_full(tmp_path / str(seed), actual, plant_file(rnd, actual, [seed % 7, (seed * 3) % 7]))
+
+
+@pytest.mark.soak
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(changes())
+def test_a_targeted_apply_ends_where_a_full_one_does(tmp_path_factory, change):
+    targeted_equals_full(tmp_path_factory.mktemp("scenario"), *change)
+
+
+def targeted_equals_full(directory: Path, actual: ModuleImage, desired: ModuleImage) -> None:
+    """Modules holding the base (module 1 the scenario's `actual`, module 2 untouched): the plant file
+    applied from the base as `--previous`, and again with a full read from the same start, end alike."""
+    directory.mkdir(parents=True, exist_ok=True)
+    other = replace(read_back(random.Random(actual.system.S3)), address=2)
+    write_plant(directory / "source.yaml", "socket://127.0.0.1:1", [desired, other])
+    ended = {}
+    (directory / "run").mkdir()
+    with emulate(directory / "source.yaml", directory / "run", timeout=0.1) as emulated:
+        port = emulated.plant.buses[0].port
+        base = write_plant(directory / "base.yaml", port, [actual, other])
+        plant = api.load(write_plant(emulated.path, port, [desired, other]))
+        emulator = emulated.emulators["line"]
+        for full in (False, True):
+            emulator.update(1, image=actual)
+            emulator.update(2, image=other)
+            result = api.apply(plant, gates=api.Gates(allow_axis_release=True), previous=None if full else base, full_read=full)
+            result.told()
+            if not full:
+                reading = api.plan(plant, previous=base).reading
+                untouched = ("line/m1", "line/m2") if actual == desired else ("line/m2",)
+                assert reading is not None and reading.modules_not_read == untouched
+            ended[full] = {a: s.image for a, s in emulator.modules().items()}
+    assert ended[False] == ended[True]
+    assert ended[False][1].system == desired.system and ended[False][1].programs == desired.programs
+
+
+# -- Teach In: found where the change reads, left (and said) where it does not ---------------------
+
+
+@pytest.fixture
+def applied(tmp_path, capsys):
+    """The demo plant applied in full on emulators: the plant file last applied here is the base."""
+    with emulated_plant(tmp_path) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        assert (plant.path.parent / ".prc3cfg" / "applied" / "plant.yaml.lines.json").exists()
+        yield plant
+
+
+def edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+
+
+def test_a_value_taught_in_a_program_the_change_touches_is_found_and_shown_never_silently_overwritten(applied, capsys, tmp_path):
+    left = applied.emulators["booth-a"]
+    left.teach_in(1, 1, 1777)  # booth-a-left, program 1, on the floor
+    edit(applied.path, "position: 2.1", "position: 2.0")  # the change touches program 1
+    shown = run_cli(capsys, "plan", applied.path, "--module", "booth-a-left", "--out", tmp_path / "p.json")
+    assert shown.code == 0, shown.err
+    assert "program 1: position 1.777 m → 2.000 m" in shown.out  # what the module holds, as read
+    # taught again after the plan was made: the reviewed plan is stale, nothing is written
+    left.teach_in(1, 1, 1666)
+    refused = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve", "--module", "booth-a-left")
+    assert refused.code == 1 and "stale plan" in refused.err
+    assert left.module(1).image.known(1).P == 1666
+
+
+def test_a_value_taught_in_a_program_the_change_does_not_touch_is_left_and_the_plan_says_it_was_not_read(applied, capsys, tmp_path):
+    booth = applied.emulators["booth-a"]
+    booth.teach_in(1, 2, 180)  # program 2 of booth-a-left: the change below does not touch it
+    edit(applied.path, "position: 2.1", "position: 2.0")
+    planned = run_cli(capsys, "plan", applied.path, "--out", tmp_path / "p.json")
+    assert "taken as last verified, not read:" in planned.out and "--full-read reads everything" in planned.out
+    document = json.loads((tmp_path / "p.json").read_text())
+    assert document["read"]["base"] == "the plant file last applied in full here"
+    left = next(m for bus in document["buses"] for m in bus["modules"] if m["name"] == "booth-a-left")
+    assert left["read"]["programs"] == [1] and 2 in left["read"]["programs_not_read"]
+    applied_ = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve")
+    assert applied_.code == 0, applied_.err
+    assert booth.module(1).image.known(2).P == 180 and booth.module(1).image.known(1).P == 2000  # left as taught
+    full = run_cli(capsys, "plan", applied.path, "--full-read", "--module", "booth-a-left")
+    assert "program 2: position 0.180 m → 0.150 m" in full.out  # one option away
+
+
+def test_a_plan_file_whose_read_programs_are_edited_is_refused(applied, capsys, tmp_path):
+    edit(applied.path, "position: 2.1", "position: 2.0")
+    assert run_cli(capsys, "plan", applied.path, "--out", tmp_path / "p.json").code == 0
+    document = json.loads((tmp_path / "p.json").read_text())
+    document["buses"][0]["modules"][0]["read"]["programs"] = [1, 2]
+    (tmp_path / "p.json").write_text(json.dumps(document))
+    refused = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve")
+    assert refused.code == 1 and ("stale plan" in refused.err or "changed after it was made" in refused.err), refused.err
+
+
+def test_any_write_forgets_the_base_until_an_apply_verifies_in_full(applied, capsys):
+    lines = applied.path.parent / ".prc3cfg" / "applied" / "plant.yaml.lines.json"
+    edit(applied.path, "position: 2.1", "position: 2.0")
+    assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--module", "booth-a-left").code == 0
+    assert not lines.exists()  # some modules written, the plant not verified in full: no base
+    assert "Read back what the change touches" not in run_cli(capsys, "plan", applied.path).out
+    assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
+    assert lines.exists()
