@@ -35,7 +35,7 @@ from math import inf
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, SystemParameters
 from prc3cfg.core.planner import (
     ModulePlan,
     PlanVerificationError,
@@ -114,17 +114,21 @@ def share(modules: Sequence[Module], cost: LineCost, memo: dict | None = None, p
         if trial[2] < dropped[2] - 1e-9:
             kept, dropped = rest, trial
     broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2] + (proof_time if priced[0] else 0.0))
-    plans = tuple(_plan(module, own) for module, own in zip(modules, owns)) if broadcasts else tuple(m.plan for m in modules)
+    received: dict[SystemParameters, tuple[Step, ...]] = {}  # the broadcasts, summarised as each module sees them
+    plans = tuple(_plan(module, own, received, broadcasts) for module, own in zip(modules, owns)) if broadcasts else tuple(m.plan for m in modules)
     bus_time = sum(cost.broadcast_time(step.message) for step in broadcasts) + sum(p.bus_time for p in plans)
     return Shared(broadcasts, plans, bus_time)
 
 
-def _plan(module: Module, own: _Own) -> ModulePlan:
+def _plan(module: Module, own: _Own, received: dict[SystemParameters, tuple[Step, ...]], broadcasts: tuple[Step, ...]) -> ModulePlan:
     """A module's plan behind the broadcasts: the steps that reach it, its own bus time."""
     actual = module.actual
+    if actual.system not in received:
+        received[actual.system] = tuple(Step(s.message, summarise(s.message, actual.system), s.message.RELEASES_AXES) for s in broadcasts)
+    steps = (*received[actual.system], *own.steps)
     predicted = own.predicted if own.predicted.address == actual.address else replace(own.predicted, address=actual.address)
-    return ModulePlan(module.desired.address, own.steps, own.bus_time, module.plan.naive_bus_time,
-                      any(step.releases_axes for step in own.steps), predicted)  # fmt: skip
+    return ModulePlan(module.desired.address, steps, own.bus_time, module.plan.naive_bus_time,
+                      any(step.releases_axes for step in steps), predicted)  # fmt: skip
 
 
 def _candidates(modules: Sequence[Module]) -> list[tuple[Step, ...]]:
@@ -180,10 +184,10 @@ def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[Module], cost: Line
 class _Own:
     """What reaches a module behind a set of broadcasts, proved on the device model with them."""
 
-    steps: tuple[Step, ...]  # the broadcasts, then its own steps
+    steps: tuple[Step, ...]  # its own steps, after the broadcasts
     bus_time: float  # its own steps'
     seconds: float  # its own steps' and the verifying read-back of everything that reaches it
-    predicted: ModuleImage
+    predicted: ModuleImage  # its programs those of the desired image where they are equal: the memo holds many
 
 
 def _priced(broadcasts: tuple[Step, ...], module: Module, cost: LineCost) -> _Own | None:
@@ -207,5 +211,7 @@ def _priced(broadcasts: tuple[Step, ...], module: Module, cost: LineCost) -> _Ow
             if 0 < found.index <= len(broadcasts):
                 return None  # a broadcast this module cannot take
             raise PlanVerificationError(f"module {actual.address}: {found}; steps: {[m.hex() for m in messages]}") from None
-        steps = tuple(Step(m, summarise(m, actual.system), m.RELEASES_AXES) for m in messages)
-    return _Own(steps, bus_time, bus_time + verification_time(actual, predicted, steps, cost), predicted)
+        steps = tuple(Step(m, summarise(m, actual.system), m.RELEASES_AXES) for m in own)
+        programs = tuple(want if want == have else have for have, want in zip(predicted.programs, module.desired.programs))
+        predicted = replace(predicted, programs=programs)
+    return _Own(steps, bus_time, bus_time + verification_time(actual, predicted, (*broadcasts, *steps), cost), predicted)
