@@ -1,6 +1,6 @@
 """`plan --actual` of the largest plant: 8 buses × 30 fully managed modules, every program changed.
 
-    python bench/plan_time_bench.py [--runs 3] [--keep DIR] [--worst]
+    python bench/plan_time_bench.py [--runs 3] [--keep DIR] [--worst] [--one-profile]
 
 Writes, in a temporary folder (or DIR), a plant file of 8 buses × 30 modules, each with
 `unmanaged_programs: reset`, a system block and 64 programs of position, speed, dwell and
@@ -12,6 +12,12 @@ relative_speed in flow mappings, every module's values its own (about 1.3 MB), a
   and `prc3cfg --help` as the installed script (acceptance: ≤ 150 ms);
 - where the time of `plan` goes, in this process after a warm-up that pays for imports:
   loading the plant, loading the images, planning, and rendering each output.
+
+`--one-profile` also plans, with `plan --actual` in a fresh process (CPU time and max RSS: the
+machine may be shared, so CPU, not wall, is the figure), 32 buses × 30 modules that all take one
+profile (a system block and 64 programs): commissioned from factory images — modules alike, one
+search per line — and from images in which every module holds programs of its own (issue 21:
+under 10 s CPU and 150 MiB). Every line is full, so broadcasts are searched for on each.
 
 `--worst` also validates files at the plant file's limits (`prc3cfg.plant.document`,
 `loader`): the largest valid plant (every field of every program written out), and hostile
@@ -69,6 +75,32 @@ def write_plant(folder: Path, program: str = PROGRAM) -> tuple[Path, Path]:
     plant.write_text("".join(text))
     actual.write_text(json.dumps(images))
     return plant, actual
+
+
+ONE_PROFILE_BUSES = 32
+
+
+def write_one_profile_plant(folder: Path) -> tuple[Path, Path, Path]:
+    """A plant of 32 × 30 modules taking one profile, factory images, images of programs of their own."""
+    rnd = random.Random(2)
+    programs = "".join(f"      {n}: " + PROGRAM.format(P=rnd.randrange(100, 1900) / 1000, V=rnd.randrange(20, 480) / 1000,
+                                                      T=rnd.randrange(0, 50) / 10, Vr=0) + "\n"
+                       for n in PROGRAM_NUMBERS)  # fmt: skip
+    text = ["plant: one-profile\nprofiles:\n  line:\n    unmanaged_programs: reset\n",
+            f"    system: {{upper_reversing_point: 2.000, max_speed: 0.500}}\n    programs:\n{programs}buses:\n"]
+    factory, own = [], []
+    for b in range(ONE_PROFILE_BUSES):
+        text.append(f"  - name: bus{b}\n    port: socket://127.0.0.1:{7000 + b}\n    modules:\n")
+        for address in range(1, MODULES + 1):
+            text.append(f"      - {{address: {address}, name: b{b}m{address}, profiles: line}}\n")
+            factory.append({"bus": f"bus{b}", **ModuleImage.factory(address).to_json()})
+            held = tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(0, 50)) for _ in PROGRAM_NUMBERS)
+            own.append({"bus": f"bus{b}", **replace(ModuleImage.factory(address), programs=held).to_json()})
+    plant, commissioning, drifted = folder / "one-profile.yaml", folder / "factory.json", folder / "own.json"
+    plant.write_text("".join(text))
+    commissioning.write_text(json.dumps(factory))
+    drifted.write_text(json.dumps(own))
+    return plant, commissioning, drifted
 
 
 @dataclass(frozen=True)
@@ -166,6 +198,7 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--keep", type=Path, help="write the files into this folder and keep them")
     parser.add_argument("--worst", action="store_true", help="also validate files at the plant file's limits")
+    parser.add_argument("--one-profile", action="store_true", help="also plan 32 × 30 modules that take one profile")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as temporary:
         folder = args.keep or Path(temporary)
@@ -187,6 +220,14 @@ def main() -> None:
         print("  in process:")
         for name in parts[0]:
             print(f"    {name:<24} {statistics.median(p[name] for p in parts):6.2f} s")
+        if args.one_profile:
+            one = folder / "one-profile"
+            one.mkdir(exist_ok=True)
+            plant, commissioning, drifted = write_one_profile_plant(one)
+            print(f"{ONE_PROFILE_BUSES} buses × {MODULES} modules from one profile, plan --actual:")
+            for name, images in (("commissioning (factory images)", commissioning), ("programs of their own", drifted)):
+                run = median_run([*prc3cfg, "plan", str(plant), "--actual", str(images)], args.runs)
+                print(f"  {name:<32} {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS  ({run.wall:.2f} s wall)")
         if args.worst:
             print("validate at the limits:")
             for name, path in worst_files(folder).items():

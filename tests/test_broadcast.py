@@ -14,7 +14,7 @@ from pathlib import Path
 from emulated import emulated_plant, run_cli
 from lossy import Loss
 
-from prc3cfg.core import codec
+from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.line import LineSettings
@@ -68,6 +68,34 @@ def test_a_system_block_is_broadcast_only_when_every_module_needs_it():
     assert [s.message.ID for s in share(everyone, COST).broadcasts] == [0x20]
     but_one = everyone[:29] + [line({0: {}}, count=30)[29]]
     assert all(s.message.ID != 0x20 for s in share(but_one, COST).broadcasts)  # module 30 would release its axes for nothing
+
+
+def device_runs(monkeypatch) -> list[codec.Message]:
+    """Every message the device model runs from here on (each plan's proof, each prediction)."""
+    ran: list[codec.Message] = []
+    execute = device.execute
+    monkeypatch.setattr(device, "execute", lambda state, message: ran.append(message) or execute(state, message))
+    return ran
+
+
+def test_a_line_of_modules_alike_is_planned_and_proved_once_per_set_of_broadcasts(monkeypatch):
+    change = {0: {5: Program(P=150, V=300), 9: Program(P=350, V=200)}}
+    few, thirty = line(change, count=3), line(change)
+    ran = device_runs(monkeypatch)
+    assert share(few, COST).broadcasts
+    on_three = len(ran)
+    ran.clear()
+    shared = share(thirty, COST)
+    assert shared.broadcasts and shared.plans[29].steps == shared.broadcasts
+    assert len(ran) == on_three  # not once more per module
+
+
+def test_plans_that_take_no_broadcast_are_not_proved_again(monkeypatch):
+    modules = line({a: {5: Program(P=100 + a, V=200 + a)} for a in range(31)})  # the same program, its own values on each
+    ran = device_runs(monkeypatch)
+    shared = share(modules, COST)
+    assert shared.broadcasts == () and shared.plans == tuple(m.plan for m in modules)
+    assert ran == []  # each was proved when it was planned
 
 
 # -- a full line of 30 modules on a real emulator ------------------------------------------

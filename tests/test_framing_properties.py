@@ -1,13 +1,18 @@
 """The framings under hypothesis: round trips through random splits and garbage, frames back to
-back, and decoders that never raise and account for every byte they are fed."""
+back, decoders that never raise and account for every byte they are fed, and frame lengths
+said without encoding (what a plan is priced by) that are the encoded frames' lengths."""
 
 from __future__ import annotations
 
 import binascii
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_codec_properties import MESSAGE_STRATEGIES
 
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing import FRAMINGS, NEED_DATA, Decoder, Direction, Discarded, Frame, Framing
 from prc3cfg.core.line import LineSettings
 
@@ -177,3 +182,46 @@ def test_decoders_never_raise_and_account_for_every_byte(combo, line, data):
         assert event.reason and event.data if isinstance(event, Discarded) else event.direction is direction
     assert b"".join(wire(name, e) for e in events) == fed
 
+
+
+def assert_frame_length(framing: Framing, direction: Direction, address: int, message: bytes) -> None:
+    frame = framing.encode(direction, address, message)
+    assert framing.frame_length(len(message)) + framing.stuffing(direction, address, message) == len(frame)
+    assert framing.stuffs or framing.stuffing(direction, address, message) == 0
+
+
+@EXAMPLES
+@given(combo=st.sampled_from(COMBOS), data=st.data())
+def test_frame_length_is_the_length_of_the_encoded_frame(combo, data):
+    name, direction = combo
+    address, message = data.draw(frame_contents(FRAMINGS[name]))
+    assert_frame_length(FRAMINGS[name], direction, address, message)
+
+
+@pytest.mark.parametrize(("address", "message"), [(1, bytes([0x7E - 0x21 - 1])), (0, bytes(0x7E)), (2, bytes([0x7E] * 3))],
+                         ids=["checksum 7Eh", "N = 7Eh", "data 7Eh"])  # fmt: skip  # 21h + 01h + 5Ch = 7Eh
+def test_stx_frame_length_counts_every_stuffed_byte(address, message):
+    assert_frame_length(FRAMINGS["stx"], Direction.REQUEST, address, message)
+
+
+def encoded_time(cost: LineCost, address: int, message: codec.Message) -> float:
+    """What an exchange costs by its encoded frames (link.md "Bus time"), as bustime priced it before."""
+    request = cost.framing.encode(Direction.REQUEST, address, message.encode())
+    reply = cost.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message)))
+    gaps = 2 * cost.zvz if cost.framing.name == "open-driver" else 0.0
+    return (len(request) + len(reply)) * cost.line.char_time + cost.turnaround + gaps
+
+
+@pytest.mark.parametrize("kind", list(MESSAGE_STRATEGIES), ids=lambda kind: kind.__name__)
+@settings(max_examples=40, deadline=None)
+@given(framing=st.sampled_from(list(FRAMINGS)), line=lines, address=st.integers(0, 30), data=st.data())
+def test_a_message_is_priced_by_the_length_of_its_frames(kind, framing, line, address, data):
+    message = data.draw(MESSAGE_STRATEGIES[kind])
+    cost = LineCost.of(framing, line, 0.010, 0.020)
+    assert message.size() == len(message.encode())
+    assert cost.message_time(address, message) == encoded_time(cost, address, message)
+    request = len(cost.framing.encode(Direction.REQUEST, 0, message.encode()))
+    gap = cost.zvz if framing == "open-driver" else 0.0
+    assert cost.broadcast_time(message) == request * line.char_time + cost.turnaround + gap
+    request = len(cost.framing.encode(Direction.REQUEST, 1, message.encode()))
+    assert cost.silence_time(message, 0.1) == request * line.char_time + 0.1 + gap

@@ -2,10 +2,12 @@
 
     t = (bytes_request + bytes_reply) × bits_per_char / baud + turnaround (+ 2 × ZVZ for open-driver)
 
-Bytes are whole frames (framing overhead and stx stuffing included). A broadcast (address
-0, the manual's ring call) has no reply frame. (reading) It still costs the turnaround
-(and an open-driver line's gap after the request): the master cannot send the next frame
-sooner, and gets no reply that would say the modules are ready.
+Bytes are whole frames (framing overhead and stx stuffing included), counted from the
+message's length (`Framing.frame_length`), never by encoding the frame: only the stuffing of
+a framing that stuffs looks at the bytes. A broadcast (address 0, the manual's ring call) has
+no reply frame. (reading) It still costs the turnaround (and an open-driver line's gap after
+the request): the master cannot send the next frame sooner, and gets no reply that would say
+the modules are ready.
 
 Owns the cost of exchanges. Does not own which exchanges a plan makes (`prc3cfg.core.planner`).
 Pure.
@@ -36,20 +38,26 @@ class LineCost:
     def message_time(self, address: int, message: codec.Message) -> float:
         """Seconds an exchange of `message` holds the line: request frame, turnaround, reply frame
         (a read's data block, a write's code word)."""
-        request = self.framing.encode(Direction.REQUEST, address, message.encode())
-        reply = self.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message)))
-        gaps = 2 * self.zvz if self.framing.name == "open-driver" else 0.0
-        return (len(request) + len(reply)) * self.line.char_time + self.turnaround + gaps
+        framing, reply = self.framing, codec.reply_length(message)
+        chars = self._request(address, message) + framing.frame_length(reply)
+        if framing.stuffs:
+            chars += framing.stuffing(Direction.REPLY, address, bytes(reply))
+        gaps = 2 * self.zvz if framing.name == "open-driver" else 0.0
+        return chars * self.line.char_time + self.turnaround + gaps
+
+    def _request(self, address: int, message: codec.Message) -> int:
+        """Bytes of the request frame of `message` to `address`."""
+        framing = self.framing
+        chars = framing.frame_length(message.size())
+        return chars + framing.stuffing(Direction.REQUEST, address, message.encode()) if framing.stuffs else chars
 
     def silence_time(self, message: codec.Message, timeout: float) -> float:
         """Seconds an exchange with an address where nobody answers holds the line: the request
         frame, then the wait of `timeout` for a reply that never comes (and on open-driver the gap)."""
-        request = self.framing.encode(Direction.REQUEST, 1, message.encode())
         gap = self.zvz if self.framing.name == "open-driver" else 0.0
-        return len(request) * self.line.char_time + timeout + gap
+        return self._request(1, message) * self.line.char_time + timeout + gap
 
     def broadcast_time(self, message: codec.Message) -> float:
         """Seconds a broadcast of `message` holds the line: request frame and turnaround."""
-        request = self.framing.encode(Direction.REQUEST, 0, message.encode())
         gap = self.zvz if self.framing.name == "open-driver" else 0.0
-        return len(request) * self.line.char_time + self.turnaround + gap
+        return self._request(0, message) * self.line.char_time + self.turnaround + gap

@@ -109,6 +109,10 @@ class Message:
     def encode(self) -> bytes:
         return _pack(self.words())
 
+    def size(self) -> int:
+        """Bytes of the message, without encoding it (what its bus time is priced by)."""
+        return 2 * len(self.words())
+
     def hex(self) -> str:
         return self.encode().hex()
 

@@ -77,7 +77,7 @@ class _ModuleRead(BaseModel):
     programs_not_read: list[Whole]
 
 
-class _Module(BaseModel):
+class _ModuleEntry(BaseModel):
     model_config = LATER
 
     address: Whole
@@ -92,7 +92,7 @@ class _Bus(BaseModel):
     model_config = LATER
 
     name: Text
-    modules: list[_Module]
+    modules: list[_ModuleEntry]
 
 
 class _Read(BaseModel):
@@ -147,7 +147,7 @@ class _Changes(BaseModel):
     charts: list[Text] = Field(default_factory=list)
 
 
-class _ShownModule(_Module):
+class _ShownModule(_ModuleEntry):
     estimated_bus_time_s: Number = 0.0
     changes: _Changes
 
@@ -232,7 +232,7 @@ def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
     return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data)
 
 
-def _planned_module(bus: str, module: _Module, at: str) -> PlannedModule:
+def _planned_module(bus: str, module: _ModuleEntry, at: str) -> PlannedModule:
     """A module's entry, at `at` ("buses[0].modules[2]")."""
     where = f"bus {bus}, module {module.address}"
     if len(module.steps) > MAX_STEPS:

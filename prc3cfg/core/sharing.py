@@ -31,18 +31,19 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from math import inf
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, SystemParameters
 from prc3cfg.core.planner import (
     ModulePlan,
+    PlanVerificationError,
     Step,
     StepProblem,
     UnreachableImage,
     after,
-    plan_from_steps,
-    plan_module,
+    cheapest_messages,
     run_steps,
     summarise,
 )
@@ -88,9 +89,11 @@ def share(modules: Sequence[SharingModule], cost: LineCost, memo: dict | None = 
     `proof_time` is what any broadcast costs besides: proving that nobody else is on the line
     (every address outside `modules` probed, and silent), so broadcasts must save more than it.
 
-    `memo` (shared by the lines of a plant) prices each module once per set of broadcasts and
-    what it holds and should hold: modules alike but for their address cost the same (the
-    address counts only on stx, where it can change a frame's stuffing)."""
+    `memo` (shared by the lines of a plant) plans, proves and prices each kind of module once per
+    set of broadcasts: modules alike but for their address cost the same (the address counts only
+    on stx, where it can change a frame's stuffing), so a line of modules alike costs one module's
+    search. A set of broadcasts that cannot beat the best found is dropped at the first module
+    that makes it dearer."""
     memo = {} if memo is None else memo
     groups = _candidates(modules)
     modules = [replace(m, kind=_kind(m, cost, memo)) for m in modules]
@@ -98,23 +101,34 @@ def share(modules: Sequence[SharingModule], cost: LineCost, memo: dict | None = 
     assert nothing is not None  # without broadcasts, every module's own plan stands
     added = nothing
     for group in groups:  # add while it pays
-        trial = _attempt(added[0] + group, modules, cost, memo)
+        trial = _attempt(added[0] + group, modules, cost, memo, bound=added[2] - 1e-9)
         if trial is not None and trial[2] < added[2] - 1e-9:
             added = trial
     kept = list(groups)
     dropped = _attempt(tuple(step for group in kept for step in group), modules, cost, memo) or nothing
     for group in groups:  # from all of them, drop while that pays
         rest = [g for g in kept if g is not group]
-        trial = _attempt(tuple(step for g in rest for step in g), modules, cost, memo) or nothing
+        # a bound only where a set the modules cannot take (`nothing` in its place) could not win either
+        bound = dropped[2] - 1e-9 if nothing[2] >= dropped[2] - 1e-9 else inf
+        trial = _attempt(tuple(step for g in rest for step in g), modules, cost, memo, bound) or nothing
         if trial[2] < dropped[2] - 1e-9:
             kept, dropped = rest, trial
     broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2] + (proof_time if priced[0] else 0.0))
-    plans = []
-    for module, own in zip(modules, owns):
-        proved = plan_from_steps(module.actual, module.desired, [s.message for s in (*broadcasts, *own)], cost)
-        plans.append(replace(proved, bus_time=sum(cost.message_time(module.actual.address, s.message) for s in own)))
+    received: dict[SystemParameters, tuple[Step, ...]] = {}  # the broadcasts, summarised as each module sees them
+    plans = tuple(_plan(module, own, received, broadcasts) for module, own in zip(modules, owns)) if broadcasts else tuple(m.plan for m in modules)
     bus_time = sum(cost.broadcast_time(step.message) for step in broadcasts) + sum(p.bus_time for p in plans)
-    return Shared(broadcasts, tuple(plans), bus_time)
+    return Shared(broadcasts, plans, bus_time)
+
+
+def _plan(module: SharingModule, own: _Own, received: dict[SystemParameters, tuple[Step, ...]], broadcasts: tuple[Step, ...]) -> ModulePlan:
+    """A module's plan behind the broadcasts: the steps that reach it, its own bus time."""
+    actual = module.actual
+    if actual.system not in received:
+        received[actual.system] = tuple(Step(s.message, summarise(s.message, actual.system), s.message.RELEASES_AXES) for s in broadcasts)
+    steps = (*received[actual.system], *own.steps)
+    predicted = own.predicted if own.predicted.address == actual.address else replace(own.predicted, address=actual.address)
+    return ModulePlan(module.desired.address, steps, own.bus_time, module.plan.naive_bus_time,
+                      any(step.releases_axes for step in steps), predicted)  # fmt: skip
 
 
 def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
@@ -144,31 +158,60 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     return groups
 
 
-def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: dict):
+def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: dict, bound: float = inf):
     """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
-    verifying read-back); None where a module cannot take the broadcasts."""
-    total = sum(cost.broadcast_time(step.message) for step in broadcasts)
+    verifying read-back); None where a module cannot take the broadcasts. Each kind of module is
+    priced once (`memo`); where the bus time reaches `bound` the rest is not priced: the bus time is
+    then infinite."""
+    messages = tuple(step.message for step in broadcasts)
+    total = sum(cost.broadcast_time(message) for message in messages)
     owns = []
     for module in modules:
-        key = (tuple(s.message for s in broadcasts), module.kind)
+        key = (messages, module.kind)
         if key not in memo:
             memo[key] = _priced(broadcasts, module, cost)
-        if memo[key] is None:
+        own = memo[key]
+        if own is None:
             return None
-        own, seconds = memo[key]
         owns.append(own)
-        total += seconds
+        total += own.seconds
+        if total >= bound:
+            return broadcasts, (), inf
     return broadcasts, tuple(owns), total
 
 
-def _priced(broadcasts: tuple[Step, ...], module: SharingModule, cost: LineCost) -> tuple[tuple[Step, ...], float] | None:
-    """A module's own steps after the broadcasts, and their bus time with the verifying read-back of
-    everything that reaches it; None when the module cannot take the broadcasts."""
-    try:
-        own = plan_module(after(module.actual, [s.message for s in broadcasts]), module.desired, cost).steps if broadcasts else module.plan.steps
-        steps = (*broadcasts, *own)
-        predicted = run_steps(module.actual, module.desired, [s.message for s in steps])
-    except (codec.Rejected, StepProblem, UnreachableImage):
-        return None
-    seconds = sum(cost.message_time(module.actual.address, s.message) for s in own)
-    return own, seconds + verification_time(module.actual, predicted, steps, cost)
+@dataclass(frozen=True, slots=True)
+class _Own:
+    """What reaches a module behind a set of broadcasts, proved on the device model with them."""
+
+    steps: tuple[Step, ...]  # its own steps, after the broadcasts
+    bus_time: float  # its own steps'
+    seconds: float  # its own steps' and the verifying read-back of everything that reaches it
+    predicted: ModuleImage  # its programs those of the desired image where they are equal: the memo holds many
+
+
+def _priced(broadcasts: tuple[Step, ...], module: SharingModule, cost: LineCost) -> _Own | None:
+    """A module's own steps after the broadcasts, proved once — the broadcasts and they, from its
+    read-back — and their bus time with the verifying read-back of everything that reaches it;
+    None when the module cannot take the broadcasts."""
+    actual = module.actual
+    if not broadcasts:
+        plan = module.plan
+        steps, bus_time, predicted = plan.steps, plan.bus_time, plan.predicted
+    else:
+        try:
+            before = after(actual, [s.message for s in broadcasts])
+            own, bus_time, _ = cheapest_messages(before, module.desired, cost)
+        except (codec.Rejected, UnreachableImage):
+            return None
+        messages = [*(s.message for s in broadcasts), *own]
+        try:
+            predicted = run_steps(actual, module.desired, messages)
+        except StepProblem as found:
+            if 0 < found.index <= len(broadcasts):
+                return None  # a broadcast this module cannot take
+            raise PlanVerificationError(f"module {actual.address}: {found}; steps: {[m.hex() for m in messages]}") from None
+        steps = tuple(Step(m, summarise(m, actual.system), m.RELEASES_AXES) for m in own)
+        programs = tuple(want if want == have else have for have, want in zip(predicted.programs, module.desired.programs))
+        predicted = replace(predicted, programs=programs)
+    return _Own(steps, bus_time, bus_time + verification_time(actual, predicted, (*broadcasts, *steps), cost), predicted)

@@ -1,7 +1,9 @@
 """What every framing shares: directions, the events a decoder hands back, and the decoder model.
 
 A `Framing` turns (direction, module address, PRC 3 message) into the bytes of one frame
-(`encode`) and makes `Decoder`s, which work like h11's connection: `receive_data(bytes, now)`
+(`encode`), says how long that frame is without building it (`frame_length`, and `stuffing`
+where its bytes count: what the bus time of a plan is priced by, `prc3cfg.core.bustime`), and
+makes `Decoder`s, which work like h11's connection: `receive_data(bytes, now)`
 only stores and parses, `next_event(now)` hands back a `Frame`, a `Discarded` or `NEED_DATA`.
 Nothing here reads a port, sleeps or reads a clock: every time is given by the caller,
 in seconds on a monotonic clock.
@@ -172,6 +174,16 @@ class Framing(abc.ABC):
     checked: ClassVar[bool]  # a checksum protects the frame: a damaged one is discarded, never delivered
     addresses: ClassVar[range]  # addresses `encode` accepts
     lengths: ClassVar[range]  # message lengths `encode` accepts
+    overhead: ClassVar[int]  # bytes a frame adds to its message, stuffing aside
+    stuffs: ClassVar[bool] = False  # a frame's length depends on its bytes (`stuffing`)
+
+    def frame_length(self, size: int) -> int:
+        """Bytes of a frame that carries a message of `size` bytes, stuffing aside."""
+        return size + self.overhead
+
+    def stuffing(self, direction: Direction, address: int, message: bytes) -> int:
+        """Bytes the stuffing adds to the frame of `message` (none where the framing does not stuff)."""
+        return 0
 
     def encode(self, direction: Direction, address: int, message: bytes) -> bytes:
         """The bytes of one frame; `FramingError` if the framing cannot carry it."""

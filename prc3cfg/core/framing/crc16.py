@@ -50,6 +50,7 @@ class Crc16Framing(Framing):
     checked = True
     addresses = range(0, 31)
     lengths = range(1, 257)
+    overhead = HEADER + TRAILER
 
     def _encode(self, direction: Direction, address: int, message: bytes) -> bytes:
         covered = bytes([START_CODES[direction], address, len(message) - 1]) + message

@@ -43,6 +43,7 @@ class OpenDriverFraming(Framing):
     checked = False
     addresses = range(0, 32)
     lengths = range(0, 1025)
+    overhead = 1  # the address byte
 
     def _encode(self, direction: Direction, address: int, message: bytes) -> bytes:
         return bytes([address]) + message

@@ -67,10 +67,17 @@ class StxFraming(Framing):
     checked = True
     addresses = range(0, 32)
     lengths = range(1, 256)
+    overhead = 4  # 7Eh, CMD|ADDR, N, CHK
+    stuffs = True
 
     def _encode(self, direction: Direction, address: int, message: bytes) -> bytes:
         body = bytes([TYPES[direction] << 5 | address, len(message)]) + message
         return bytes([START]) + (body + bytes([checksum(body)])).replace(bytes([START]), STUFFED)
+
+    def stuffing(self, direction: Direction, address: int, message: bytes) -> int:
+        """A 00h after every 7Eh of CMD|ADDR, N, the data and CHK."""
+        header = (TYPES[direction] << 5 | address, len(message))
+        return message.count(START) + header.count(START) + ((sum(header) + sum(message)) & 0xFF == START)
 
     def decoder(
         self,

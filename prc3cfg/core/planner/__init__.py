@@ -2,10 +2,10 @@
 
 `plan_module(actual, desired, cost)` derives the module's problem (`problem`), searches
 for cheap layouts (`optimise`), builds their messages (`layout`), prices them exactly
-with the line's `LineCost`, keeps the cheapest, and proves it on the device model from the
-read-back (`check.run_steps`, the same proof a plan file passes before `apply --plan`
-sends it): every step accepted, the desired image on the system and every managed
-program, no unmanaged program written. A plan that fails this is a planner bug
+with the line's `LineCost`, keeps the cheapest (`cheapest_messages`), and proves it, once, on
+the device model from the read-back (`check.run_steps`, the same proof a plan file passes
+before `apply --plan` sends it): every step accepted, the desired image on the system and
+every managed program, no unmanaged program written. A plan that fails this is a planner bug
 (`PlanVerificationError`), never returned.
 
 Owns: the module plan. Does not own the diff shown to people, rendering, the plan file
@@ -45,17 +45,26 @@ def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, sy
         first = codec.WriteSystem(desired.system)
         rest = plan_module(after(actual, [first]), desired, cost)
         return plan_from_steps(actual, desired, [first, *(s.message for s in rest.steps)], cost, system_unset=True)
+    best, best_time, naive = cheapest_messages(actual, desired, cost)
+    try:
+        return plan_from_steps(actual, desired, best, cost, bus_time=best_time, naive=naive)
+    except StepProblem as found:
+        raise PlanVerificationError(f"module {desired.address}: {found}; steps: {[m.hex() for m in best]}") from None
+
+
+def cheapest_messages(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple[list[codec.Message], float, float]:
+    """The cheapest messages found from `actual` to `desired`, not yet proved on the device model
+    (`plan_module` proves them; the sharing proves them behind its broadcasts), their bus time and
+    the naive download's. Raises `UnreachableImage`."""
     problem = PlanningProblem.build(actual, desired, cost)
     layouts = search(problem)
     # The estimates are exact but for stx stuffing: price exactly only the layouts that could win.
     close = [layout for layout in layouts if layout.estimate <= layouts[0].estimate * (1 + STUFFING_MARGIN)]
     best, best_time = _cheapest(problem, cost, close[:EXACTLY_PRICED])
-    if best_time > naive_bus_time(actual, desired, cost):
+    naive = naive_bus_time(actual, desired, cost)
+    if best_time > naive:
         best, best_time = _cheapest(problem, cost, [whole_programs(problem)])
-    try:
-        return plan_from_steps(actual, desired, best, cost)
-    except StepProblem as found:
-        raise PlanVerificationError(f"module {desired.address}: {found}; steps: {[m.hex() for m in best]}") from None
+    return best, best_time, naive
 
 
 def after(actual: ModuleImage, messages: list[codec.Message]) -> ModuleImage:
@@ -69,9 +78,10 @@ def after(actual: ModuleImage, messages: list[codec.Message]) -> ModuleImage:
 
 
 def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[codec.Message], cost: LineCost, *,
-                    system_unset: bool = False) -> ModulePlan:  # fmt: skip
+                    system_unset: bool = False, bus_time: float | None = None, naive: float | None = None) -> ModulePlan:  # fmt: skip
     """A plan of given steps (the planner's, or a plan file's), proved on the device model
-    (`system_unset`: see `plan_module`).
+    (`system_unset`: see `plan_module`); `bus_time` and `naive`: the steps' bus time and the naive
+    download's, where the caller has priced them.
 
     Raises `StepProblem` naming the first step that breaks a rule of `check.run_steps`.
     """
@@ -82,8 +92,8 @@ def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[co
     return ModulePlan(
         address=desired.address,
         steps=steps,
-        bus_time=sum(cost.message_time(desired.address, m) for m in messages),
-        naive_bus_time=naive_bus_time(actual, desired, cost),
+        bus_time=sum(cost.message_time(desired.address, m) for m in messages) if bus_time is None else bus_time,
+        naive_bus_time=naive_bus_time(actual, desired, cost) if naive is None else naive,
         releases_axes=any(step.releases_axes for step in steps),
         predicted=predicted,
     )
@@ -111,6 +121,6 @@ def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) ->
 
 
 __all__ = [
-    "ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "plan_from_steps", "plan_module", "run_steps",
-    "summarise",
+    "ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "cheapest_messages", "plan_from_steps",
+    "plan_module", "run_steps", "summarise",
 ]  # fmt: skip

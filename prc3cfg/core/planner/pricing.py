@@ -22,7 +22,7 @@ from prc3cfg.core.image import PROGRAM_COUNT, Program
 
 
 def _size(message: codec.Message) -> int:
-    return len(message.encode())
+    return message.size()
 
 
 _ITEM = ((1, 0),)
