@@ -1,5 +1,6 @@
-"""Test support: a master on an emulated line (real framing, real pyserial), plain sockets
-for clients that misbehave, and a real `prc3cfg emulator serve` process to point them at."""
+"""Test support: a master on an emulated line (real framing; real pyserial, or the in-memory
+line of `pair`), plain sockets for clients that misbehave, and a real `prc3cfg emulator serve`
+process to point them at."""
 
 from __future__ import annotations
 
@@ -12,17 +13,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import serial
+from pair import PairPort
 
 from prc3cfg.core.framing import NEED_DATA, Direction, Frame, get_framing
 from prc3cfg.core.line import LineSettings
 
 
 class Client:
-    """A master on the line, built from the real framing and pyserial."""
+    """A master on the line, built from the real framing and pyserial — or on an in-memory line
+    (`PairPort`), where silence is known at once."""
 
-    def __init__(self, url: str, framing: str = "crc16", *, timeout: float = 0.3, **settings) -> None:
+    def __init__(self, url: str | PairPort, framing: str = "crc16", *, timeout: float = 0.3, **settings) -> None:
         self.framing = get_framing(framing)
-        self.port = serial.serial_for_url(url, timeout=timeout, **settings)
+        self.port = url if isinstance(url, PairPort) else serial.serial_for_url(url, timeout=timeout, **settings)
         self.line = LineSettings(parity="none") if settings.get("parity") == "N" else LineSettings()
 
     def send_raw(self, frame: bytes) -> bytes | None:

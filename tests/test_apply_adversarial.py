@@ -106,7 +106,8 @@ def test_an_apply_killed_anywhere_leaves_every_possibly_released_module_named_by
 def test_open_driver_without_parity_damaging_exchanges_hides_no_release_and_verifies_no_wrong_system(tmp_path, capsys, seed):
     chooser = random.Random(seed)
     faults = FaultInjection(corrupt_rate=chooser.uniform(0.05, 0.30), seed=seed)
-    with emulated_plant(tmp_path, faults=faults, framing="open-driver", parity="none", accept_undetected_damage=True) as plant:
+    # ZVZ, the gap that ends an open-driver frame and is waited after each: 8 ms (over seven characters at 9600 8N1), not 20
+    with emulated_plant(tmp_path, faults=faults, framing="open-driver", parity="none", accept_undetected_damage=True, zvz=0.008) as plant:
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--retries", "8")
         after = run_cli(capsys, "plan", plant.path)
         assert "Traceback" not in result.err + after.err

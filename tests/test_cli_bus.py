@@ -175,7 +175,7 @@ def test_an_absent_address_costs_one_short_try(capsys, tmp_path, command):
     trace = tmp_path / "trace.txt"
     with Emulator({5: ModuleState.factory(5)}) as emulator:
         host, port = emulator.listen()
-        result = run_cli(capsys, command, "--port", f"socket://{host}:{port}", "--trace", trace)
+        result = run_cli(capsys, command, "--port", f"socket://{host}:{port}", "--trace", trace, "--timeout", "0.05")
     assert result.code == 0, result.err
     sent = [line for line in trace.read_text().splitlines() if "\t>\t" in line]
     assert len(sent) == 30 + (0 if command == "scan" else 1 + 16)  # import then reads module 5 whole

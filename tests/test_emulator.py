@@ -1,4 +1,5 @@
-"""The emulator end to end: real server threads, real pyserial clients over socket:// and a pty."""
+"""The emulator end to end: what modules answer over an in-memory line (`pair.PairPort`, where a
+silence costs no time-out), and real server threads, real pyserial clients over socket:// and a pty."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from types import SimpleNamespace
 
 import pytest
 from emulator_client import Client, answered, hang_up, serve
+from pair import PairPort
 
 from prc3cfg.core import codec, device
 from prc3cfg.core.device import ModuleState
@@ -35,8 +37,7 @@ def modules(*addresses: int) -> dict[int, ModuleState]:
 @pytest.fixture
 def bus(tmp_path):
     emulator = Emulator(modules(1, 3), state_path=tmp_path / "state.json")
-    host, port = emulator.listen()
-    client = Client(f"socket://{host}:{port}")
+    client = Client(PairPort(emulator))
     yield emulator, client, tmp_path / "state.json"
     client.close()
     emulator.close()
@@ -130,8 +131,7 @@ def test_pty_serves_any_serial_program():
 def test_fault_injection_is_seeded_and_repeatable():
     def answered(seed: int) -> list[bool]:
         with Emulator(modules(1), faults=FaultInjection(drop_rate=0.5, seed=seed)) as emulator:
-            host, port = emulator.listen()
-            client = Client(f"socket://{host}:{port}")
+            client = Client(PairPort(emulator))
             try:
                 return [client.send(1, b"\x50\x00") is not None for _ in range(12)]
             finally:
@@ -144,8 +144,7 @@ def test_fault_injection_is_seeded_and_repeatable():
 
 def test_corrupted_replies_fail_their_crc():
     with Emulator(modules(1), faults=FaultInjection(corrupt_rate=1.0, seed=1)) as emulator:
-        host, port = emulator.listen()
-        client = Client(f"socket://{host}:{port}")
+        client = Client(PairPort(emulator))
         try:
             replies = [client.send(1, b"\x50\x00") for _ in range(6)]
         finally:

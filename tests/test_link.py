@@ -1,4 +1,5 @@
-"""The link client and read-back against the real emulator, over socket:// and a pty."""
+"""The link client and read-back against the real emulator: their logic over an in-memory line
+(`pair.PairPort`), and the link over socket:// and a pty where the test is about them."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from dataclasses import replace
 from types import SimpleNamespace
 
 import pytest
+from pair import PairPort
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
@@ -34,10 +36,23 @@ def teach(state: ModuleState, changes: dict[int, Program]) -> ModuleState:
 
 
 def connect(emulator: Emulator, framing: str = "crc16", *, retries: int = 3, timeout: float = 0.3, **kw) -> Link:
-    host, port = emulator.listen()
-    line = LineSettings()
-    serial_port = open_port(f"socket://{host}:{port}", line, bus="test")
-    return Link(serial_port, get_framing(framing), bus="test", line=line, timeout=timeout, retries=retries, **kw)
+    """A link to `emulator` over an in-memory line."""
+    return Link(PairPort(emulator), get_framing(framing), bus="test", line=LineSettings(), timeout=timeout, retries=retries, **kw)
+
+
+def test_a_link_reads_back_over_socket():
+    """The link over pyserial's socket:// to the emulator's TCP server: what `connect` does in memory."""
+    programs = {n: Program(P=100 + n, V=200, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1) for n in range(1, 9)}
+    state = teach(ModuleState.factory(7), programs)
+    with Emulator({7: state}) as emulator:
+        host, port = emulator.listen()
+        link = Link(open_port(f"socket://{host}:{port}", LineSettings(), bus="test"), get_framing("crc16"), bus="test")
+        try:
+            image = read_module(link, 7, range(1, 9))
+        finally:
+            link.port.close()
+    assert image.system == state.image.system and image.programs[:8] == state.image.programs[:8]
+    assert link.exchanges == 3
 
 
 @pytest.mark.parametrize("framing", FRAMINGS)
@@ -80,7 +95,7 @@ def test_read_messages_are_the_fewest(programs, expected):
 def test_retries_survive_lost_and_damaged_frames():
     with Emulator({1: ModuleState.factory(1)}, faults=FaultInjection(0.3, 0.2, seed=3)) as emulator:
         trace_text = io.StringIO()
-        link = connect(emulator, retries=8, timeout=0.15, trace=Trace(trace_text))
+        link = connect(emulator, retries=8, timeout=0.02, trace=Trace(trace_text))  # in memory: every reply is there at once
         for n in range(1, 21):
             assert link.request(1, codec.WriteSpeeds(((n, 100 + n),))) == 0
         link.port.close()

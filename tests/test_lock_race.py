@@ -21,9 +21,10 @@ then write the holder; a file read empty taken for stale and deleted) both wrote
 Two addresses of one gateway (issue 18: an emulator listening on 0.0.0.0, planted as
 127.0.0.1 and 127.0.0.2) are two locks — no client can know they are one host — so there the
 gateway itself keeps one client per line: the other apply is told "the gateway is busy".
-With 64 connections allowed, both wrote in 20 of 20 races. A short version runs always, 200
-races under `soak`. And 2–6 applies at once, through six spellings of such a gateway, each in a
-shell of its own (TMPDIR, no PRC3CFG_LOCK_DIR): one writer in every race (100 under `soak`).
+With 64 connections allowed, both wrote in 20 of 20 races. One wave runs always, 200 races under
+`soak`. And 2–6 applies at once, through six spellings of such a gateway, each in a shell of its
+own (TMPDIR, no PRC3CFG_LOCK_DIR): one writer in every race — one wave of six in the fast tier,
+100 races of every count under `soak`.
 """
 
 from __future__ import annotations
@@ -225,13 +226,14 @@ def test_two_spellings_of_one_address_never_both_write(tmp_path, lines, waves, r
     _judge(_race(tmp_path, spellings, rounds, waves), rounds)
 
 
-def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines, waves):
+@pytest.mark.parametrize("rounds", [LINES, pytest.param(5 * LINES, marks=pytest.mark.soak)])
+def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines, waves, rounds):
     """Two shells with another TMPDIR and no PRC3CFG_LOCK_DIR: both wrote in 4 of 5 races when the
     lock folder followed TMPDIR."""
-    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], 5 * LINES, waves, own_tmpdir=True), 5 * LINES)
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], rounds, waves, own_tmpdir=True), rounds)
 
 
-@pytest.mark.parametrize("rounds", [5 * LINES, pytest.param(50 * LINES, marks=pytest.mark.soak)])
+@pytest.mark.parametrize("rounds", [LINES, pytest.param(50 * LINES, marks=pytest.mark.soak)])
 def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_address, waves, rounds):
     spellings = [(f"socket://127.0.0.1:{p}", f"socket://127.0.0.2:{p}") for p in lines_on_every_address]
     _judge(_race(tmp_path, spellings, rounds, waves), rounds, refusal="the gateway is busy: another client holds the line")
@@ -243,7 +245,7 @@ SPELLINGS = ["socket://127.0.0.1:{p}", "socket://localhost:{p}", "socket://127.0
              "socket://127.0.0.3:{p}", "socket://[::ffff:127.0.0.1]:{p}"]  # fmt: skip
 
 
-@pytest.mark.parametrize(("racers", "rounds"), [(3, LINES), (6, LINES), *[pytest.param(k, 5 * LINES, marks=pytest.mark.soak) for k in range(2, 7)]])
+@pytest.mark.parametrize(("racers", "rounds"), [(6, LINES), *[pytest.param(k, 5 * LINES, marks=pytest.mark.soak) for k in range(2, 7)]])
 def test_two_to_six_applies_with_every_spelling_and_environment_never_overlap(tmp_path, lines_on_every_address, waves, racers, rounds):
     """2–6 applies at once on one line, each through another spelling of the gateway and in a shell of
     its own (its own TMPDIR, no PRC3CFG_LOCK_DIR: the machine's lock folder): one writes, the others are

@@ -38,7 +38,7 @@ def served_pty(*options: str) -> Iterator[str]:
 
 def test_a_served_pty_is_scanned_and_imported_with_the_defaults(tmp_path, capsys):
     with served_pty() as pty:
-        scanned = run_cli(capsys, "scan", "--port", pty, "--timeout", "0.2")
+        scanned = run_cli(capsys, "scan", "--port", pty, "--timeout", "0.1")
         assert scanned.code == 0, scanned.err
         assert "3 modules answered" in scanned.out
         imported = run_cli(capsys, "import", "--port", pty, "--modules", "1-3", "--timeout", "0.2")
