@@ -61,7 +61,7 @@ from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.doctor import Candidate, Diagnosis, Search, diagnose
+from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
 from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
@@ -877,7 +877,7 @@ def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *
         finally:
             port.close()
 
-    def probing(candidate: Candidate) -> None:
+    def probing(candidate: LineCandidate) -> None:
         options.progress.note(f"probing {candidate.said()}")
 
     with _bare_lock(bare.port, options, "doctor"):

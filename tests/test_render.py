@@ -12,7 +12,7 @@ from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, SYSTEM_KEYS, ModuleImage, Program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.planner import plan_module
+from prc3cfg.core.planner import Action, plan_module
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
 from prc3cfg.core.render import (
     CLAMPED,
@@ -21,9 +21,11 @@ from prc3cfg.core.render import (
     changes_json,
     field_changes,
     field_name,
+    header_line,
     human,
     jumps,
     markdown,
+    module_diff,
     module_lines,
     plan_json,
 )
@@ -94,6 +96,20 @@ def test_a_module_diff_compares_the_images_field_by_field() -> None:
     assert changes["clamped"] == [{"program": 5, "field": "P", "before": 390, "after": 380,
                                    "text": "position 0.390 m → 0.380 m", "reason": CLAMPED}]
     assert (changes["chains_removed"], changes["chains_added"]) == (["jump 2 → 3"], ["chain 1 → 2 → 1"])
+
+
+def test_each_change_carries_the_action_whose_mark_the_plan_shows() -> None:
+    """Terraform's vocabulary on each change: the module's, each program's (also in the plan file's
+    JSON, as plain marks), and the legend says what every mark means."""
+    change = a_change()
+    assert change.plan.action is Action.UPDATE and Action.of_module(0) is Action.NO_OP
+    diff = module_diff(change)
+    assert diff.actions == {1: Action.CREATE}
+    assert type(changes_json(change)["symbols"]["1"]) is str
+    assert header_line("a", 1, "m", 0, 0, 0.0, False) == f"{Action.NO_OP} bus a, module 1 (m): no changes"
+    for action, meaning in ((Action.UPDATE, "changed"), (Action.CREATE, "set up from factory defaults"),
+                            (Action.DELETE, "put back to factory defaults")):  # fmt: skip
+        assert f" {action} {meaning}" in LEGEND
 
 
 def test_a_program_either_image_lacks_has_no_field_changes() -> None:

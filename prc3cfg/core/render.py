@@ -22,9 +22,9 @@ from typing import Any, Protocol
 
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
-from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, default_program
+from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program
 from prc3cfg.core.motion import MotionError, paired_chains
-from prc3cfg.core.planner import Step
+from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import mermaid
 from prc3cfg.core.units import BY_SYMBOL, human_text
@@ -109,12 +109,6 @@ def chain_changes(actual: ModuleImage, desired: ModuleImage) -> tuple[list[str],
     return sorted(before - after), sorted(after - before)
 
 
-def program_symbols(actual: ModuleImage, desired: ModuleImage, numbers: Iterable[int]) -> dict[int, str]:
-    """`+` a program set up from factory defaults, `-` one put back to them, `~` otherwise."""
-    was, will = default_program(actual.system), default_program(desired.system)
-    return {n: "+" if actual.programs[n - 1] == was else "-" if desired.programs[n - 1] == will else "~" for n in numbers}
-
-
 def clamped_changes(change: ModuleChange) -> list[FieldChange]:
     """What the module's own clamping does to programs the plant does not manage (§4.2)."""
     unmanaged = [n for n, p in enumerate(change.desired.programs, start=1) if p is None]
@@ -139,12 +133,12 @@ def differences(have: ModuleImage, want: ModuleImage) -> list[str]:
 @dataclass(frozen=True, slots=True)
 class ModuleDiff:
     """What one module's plan changes, as every output shows it: the differing fields (their
-    texts made once: a plan of 240 changed modules has 60,000), each changed program's symbol
-    (`program_symbols`), the jumps removed and added, and what the module's clamping does to
-    programs the plant does not manage."""
+    texts made once: a plan of 240 changed modules has 60,000), each changed program's `Action`,
+    the jumps removed and added, and what the module's clamping does to programs the plant does
+    not manage."""
 
     fields: tuple[FieldChange, ...]
-    symbols: dict[int, str]
+    actions: dict[int, Action]
     chains_removed: tuple[str, ...]
     chains_added: tuple[str, ...]
     clamped: tuple[FieldChange, ...]
@@ -156,7 +150,7 @@ def module_diff(change: ModuleChange) -> ModuleDiff:
     removed, added = chain_changes(change.actual, change.desired)
     return ModuleDiff(
         fields=tuple(fields),
-        symbols=program_symbols(change.actual, change.desired, {f.program for f in fields if f.program is not None}),
+        actions=Action.of_programs(change.actual, change.desired, {f.program for f in fields if f.program is not None}),
         chains_removed=tuple(removed),
         chains_added=tuple(added),
         clamped=tuple(clamped_changes(change)),
@@ -168,18 +162,19 @@ def module_lines(changes: dict[str, Any]) -> list[str]:
     lines: list[str] = []
     system = [f["text"] for f in changes["fields"] if f["program"] is None]
     if system:
-        lines.append(f"~ system: {', '.join(system)}")
+        lines.append(f"{Action.UPDATE} system: {', '.join(system)}")
     programs: dict[int, list[str]] = {}
     for f in changes["fields"]:
         if f["program"] is not None:
             programs.setdefault(f["program"], []).append(f["text"])
     symbols = changes.get("symbols", {})
-    lines += [f"{symbols.get(str(number), '~')} program {number}: {', '.join(texts)}" for number, texts in programs.items()]
-    lines += [f"- {c}" for c in changes["chains_removed"]] + [f"+ {c}" for c in changes["chains_added"]]
+    lines += [f"{symbols.get(str(number), Action.UPDATE)} program {number}: {', '.join(texts)}"
+              for number, texts in programs.items()]  # fmt: skip
+    lines += [f"{Action.DELETE} {c}" for c in changes["chains_removed"]] + [f"{Action.CREATE} {c}" for c in changes["chains_added"]]
     clamped: dict[int, list[str]] = {}
     for f in changes["clamped"]:
         clamped.setdefault(f["program"], []).append(f["text"])
-    lines += [f"~ program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}" for n, texts in clamped.items()]
+    lines += [f"{Action.UPDATE} program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}" for n, texts in clamped.items()]
     return lines
 
 
@@ -190,12 +185,12 @@ def plural(count: int, one: str, many: str | None = None) -> str:
 
 def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float, releases: bool) -> str:
     """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
-    head = f"bus {bus}, module {address} ({name})"
+    head = f"{Action.of_module(steps)} bus {bus}, module {address} ({name})"
     if not steps:
-        return f"  {head}: no changes"
+        return f"{head}: no changes"
     received = f" ({broadcasts} by broadcast)" if broadcasts else ""
     warn = f"  ⚠ {AXIS_WARNING}" if releases else ""
-    return f"~ {head}: {plural(steps, 'step')}{received}, {seconds:.3f} s{warn}"
+    return f"{head}: {plural(steps, 'step')}{received}, {seconds:.3f} s{warn}"
 
 
 def step_line(index: int, message_hex: str, summary: str, releases: bool, broadcast: bool) -> str:
@@ -210,7 +205,7 @@ def changes_json(change: ModuleChange) -> dict[str, Any]:
     diff = module_diff(change)
     return {
         "fields": [f.to_json() for f in diff.fields],
-        "symbols": {str(number): symbol for number, symbol in diff.symbols.items()},
+        "symbols": {str(number): action.value for number, action in diff.actions.items()},
         "chains_removed": list(diff.chains_removed),
         "chains_added": list(diff.chains_added),
         "clamped": [{**f.to_json(), "reason": CLAMPED} for f in diff.clamped],
@@ -376,9 +371,9 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str
     return "\n".join(out)
 
 
-#: What the marks of a plan mean — one vocabulary for a change, in every output that shows one.
-LEGEND = ("Marks: ~ changed · + set up from factory defaults (a jump: made) · - put back to factory defaults "
-          "(a jump: no longer made) · ⚠ releases the axes")
+#: What the marks of a plan mean (`Action`) — one vocabulary for a change, in every output that shows one.
+LEGEND = (f"Marks: {Action.UPDATE} changed · {Action.CREATE} set up from factory defaults (a jump: made) · "
+          f"{Action.DELETE} put back to factory defaults (a jump: no longer made) · ⚠ releases the axes")
 
 
 #: Marks the pull-request comment a plan is posted as, so that CI updates it instead of adding one.

@@ -43,7 +43,7 @@ PROBE_ALLOWANCE = 0.2
 
 
 @dataclass(frozen=True)
-class Candidate:
+class LineCandidate:
     framing: str
     line: LineSettings
 
@@ -66,14 +66,14 @@ class Search:
     parities: tuple[str, ...] = ("even", "none", "odd")
     stop_bits: float = 1
 
-    def candidates(self) -> Iterator[Candidate]:
+    def candidates(self) -> Iterator[LineCandidate]:
         """Line settings outer, framings inner: at the right settings a frame of the wrong framing
         arrives whole, and is no frame at all to the modules."""
         for baud in self.bauds:
             for parity in self.parities:
                 line = LineSettings(baud, 8, parity, self.stop_bits)
                 for framing in self.framings:
-                    yield Candidate(framing, line)
+                    yield LineCandidate(framing, line)
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,7 @@ class Diagnosis:
     (False over `socket://`, where the gateway fixes them and the probes could try framings only)."""
 
     port: str
-    found: Candidate | None
+    found: LineCandidate | None
     zvz: float
     settings_found: bool
     modules: tuple[Timing, ...] = ()
@@ -143,14 +143,14 @@ def diagnose(
     settings_found: bool,
     exchanges: int,
     allow_unchecked: Callable[[], bool],
-    progress: Callable[[Candidate], None] = lambda _: None,
+    progress: Callable[[LineCandidate], None] = lambda _: None,
 ) -> Diagnosis:
     """Probe `search`'s candidates in order until a module answers; then measure every module that
     answers there (`exchanges` timed 50h each). `open_line` opens the port at a line's settings."""
     wanted = list(addresses)
     probes = skipped = 0
     consent: bool | None = None
-    by_line: dict[LineSettings, list[Candidate]] = {}
+    by_line: dict[LineSettings, list[LineCandidate]] = {}
     for candidate in search.candidates():
         by_line.setdefault(candidate.line, []).append(candidate)
     for line, candidates in by_line.items():
@@ -173,7 +173,7 @@ def diagnose(
     return Diagnosis(port_name, None, zvz, settings_found, (), probes, skipped)
 
 
-def _wait(candidate: Candidate, zvz: float) -> float:
+def _wait(candidate: LineCandidate, zvz: float) -> float:
     """How long a probe waits for an answer: the exchange's own time at these settings and an allowance."""
     return LineCost.of(candidate.framing, candidate.line, PROBE_ALLOWANCE, zvz).message_time(1, codec.ReadSystem())
 
@@ -187,7 +187,7 @@ def _answers(link: Link, address: int) -> bool:
         return False  # heard, but nothing a module at these settings would answer
 
 
-def _measure(link: Link, candidate: Candidate, address: int, zvz: float, exchanges: int) -> Timing:
+def _measure(link: Link, candidate: LineCandidate, address: int, zvz: float, exchanges: int) -> Timing:
     """`exchanges` single attempts of a 50h: each one answered gives a turnaround, each without a
     valid reply counts as damaged (bytes came back, or a frame was discarded) or lost (silence)."""
     counts = _Counts()

@@ -22,7 +22,7 @@ from prc3cfg.core.image import ModuleImage, default_program
 from prc3cfg.core.planner.check import StepProblem, run_steps
 from prc3cfg.core.planner.layout import Layout
 from prc3cfg.core.planner.optimise import search, whole_programs
-from prc3cfg.core.planner.plan import ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
+from prc3cfg.core.planner.plan import Action, ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
 from prc3cfg.core.planner.problem import PlanningProblem
 
 #: What a 20h that writes the system parameters a module already holds is for.
@@ -121,6 +121,6 @@ def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) ->
 
 
 __all__ = [
-    "ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "cheapest_messages", "plan_from_steps",
-    "plan_module", "run_steps", "summarise",
+    "Action", "ModulePlan", "PlanVerificationError", "Step", "StepProblem", "UnreachableImage", "after", "cheapest_messages",
+    "plan_from_steps", "plan_module", "run_steps", "summarise",
 ]  # fmt: skip

@@ -61,8 +61,10 @@ from __future__ import annotations
 import itertools
 import operator
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from enum import Enum
+from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
@@ -83,6 +85,12 @@ from prc3cfg.core.planner.problem import (
 INF = float("inf")
 #: What a program (index) with a difference mask costs to fix, in seconds.
 Residual = Callable[[int, int], float]
+#: An init kind (`problem` KEEP, INIT_BEFORE, INIT_AFTER) per program.
+Kinds = tuple[int, ...]
+#: First and last index of consecutive programs (a 33h run).
+Run = tuple[int, int]
+#: A link (True) or unlink range: (link?, first, last index), a 30h or 31h.
+Range = tuple[bool, int, int]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
 #: The fields of 40h..45h, in `Writes.items` order.
 ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)
@@ -120,10 +128,85 @@ class Channels:
         return cls(sum(PLAIN_BITS) if open_ else 0, open_, open_, open_, open_)
 
 
+class Candidate(NamedTuple):
+    """A write phase the channel search found, and the channels it was found with."""
+
+    writes: Writes
+    channels: Channels
+
+
+def _writes_estimate(candidate: Candidate) -> float:
+    return candidate.writes.estimate
+
+
+class PartsMove(Enum):
+    """How the P and V DP (`WritePhase._solve_parts`) covers a program: its backtracking's actions.
+
+    The DPs bind the members they use to locals: looking a member up on its class costs more
+    than the rest of a DP step (the class's metaclass has a `__getattr__`).
+    """
+
+    NOTHING = "no P or V to write"
+    ITEMS = "40h/41h items"
+    WHOLE = "a 21h"
+    RUN = "the last program of a 33h run (a 32h alone)"
+
+
+class Parts(NamedTuple):
+    """P and V of the programs left, as the DP writes them (`WritePhase.parts`)."""
+
+    runs: tuple[Run, ...]  # 33h/32h
+    positions: int  # 40h items
+    speeds: int  # 41h items
+    whole: int  # programs better off with a 21h
+    runs_cost: float
+
+
+class RangeMove(Enum):
+    """What the jump-address DP (`WritePhase._solve_addresses`) does at a program: its backtracking's actions.
+
+    A link range gives a program the address of the next (i+2 by number), an unlink range 0;
+    the last program of a link range is unlinked by it (0).
+    """
+
+    NONE = "no way to get here"
+    KEEP = "outside every range: the base's address"
+    LINK = "a link range starts"
+    LINK_ON = "a link range goes on"
+    END = "a link range ends"
+    UNLINK = "an unlink range starts"
+    UNLINK_ON = "an unlink range goes on"
+
+
+class Addresses(NamedTuple):
+    """Jump addresses of the programs left, as the DP writes them (`WritePhase.addresses`)."""
+
+    ranges: tuple[Range, ...]
+    items: int  # 46h items
+    whole: int  # programs whose A only a 21h can write (46h shut)
+
+
+class ItemChannel(NamedTuple):
+    """One 40h..46h field of a write phase."""
+
+    bit: int  # FIELD_BIT
+    mask: int  # the programs with an item
+    capacity: int  # items per message
+
+
+class Overflow(NamedTuple):
+    """A field whose items overflow into one more message, which inits could take out (`_overflows`)."""
+
+    bit: int  # FIELD_BIT
+    goal: int  # the items that fit one message less
+    over: int  # items above the goal
+    counted: int  # the programs counted (P and V: those outside 33h runs)
+
+
 class WritePhase:
     """The write phase for one choice of init kinds: its bases, masks and the exact DPs over them."""
 
-    def __init__(self, problem: PlanningProblem, kinds: tuple[int, ...]) -> None:
+    def __init__(self, problem: PlanningProblem, kinds: Kinds) -> None:
         self.prices = problem.prices
         self.managed = problem.managed
         self.masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
@@ -137,8 +220,8 @@ class WritePhase:
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
         # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
-        self._parts_cache: dict[tuple, tuple] = {}
-        self._address_cache: dict[tuple, tuple] = {}
+        self._parts_cache: dict[tuple[int, int, bool, bool, bool, tuple[float, float]], Parts] = {}
+        self._address_cache: dict[tuple[int, bool, float], Addresses] = {}
 
     # -- the channel subsets ---------------------------------------------------------------
 
@@ -147,7 +230,7 @@ class WritePhase:
         rel = self.relevant
         plain = [bit for bit in PLAIN_BITS if rel & bit]
         options = (True, False)
-        out = []
+        out: list[Channels] = []
         for opened in itertools.product(options, repeat=len(plain)):
             for positions, speeds, parts, addresses in itertools.product(
                 options if rel & P_BIT else (False,),
@@ -159,10 +242,10 @@ class WritePhase:
                 out.append(Channels(mask, positions, speeds, parts, addresses))
         return out
 
-    def solve(self, bound: float = INF) -> list[tuple[Writes, Channels]]:
+    def solve(self, bound: float = INF) -> list[Candidate]:
         """The KEPT cheapest write phases found over every channel subset, cheapest first."""
-        found: list[tuple[Writes, Channels]] = []
-        seen = set()
+        found: list[Candidate] = []
+        seen: set[tuple[int, bool, bool, bool, bool]] = set()
         for channels in self.subsets():
             # A subset acts only through the 21h it forces and the messages left with work to do.
             whole = self.forced(channels)
@@ -179,10 +262,10 @@ class WritePhase:
             writes = self.evaluate(channels, bound)
             if writes is None:
                 continue
-            found.append((writes, channels))
+            found.append(Candidate(writes, channels))
             bound = min(bound, writes.estimate)
-        found.sort(key=lambda pair: pair[0].estimate)
-        return sorted(((self.refine(w, c), c) for w, c in found[:KEPT]), key=lambda pair: pair[0].estimate)
+        found.sort(key=_writes_estimate)
+        return sorted((Candidate(self.refine(w, c), c) for w, c in found[:KEPT]), key=_writes_estimate)
 
     def forced(self, channels: Channels) -> int:
         """Programs that differ in a field no open message writes: they take a 21h."""
@@ -247,7 +330,8 @@ class WritePhase:
                 low = middle
         return min(tried, key=ESTIMATE)
 
-    def _with_parts(self, whole: int, ranges: tuple, addresses: int, channels: Channels, share: tuple) -> Writes:
+    def _with_parts(self, whole: int, ranges: tuple[Range, ...], addresses: int, channels: Channels,
+                    share: tuple[float, float]) -> Writes:  # fmt: skip
         runs, positions, speeds, more, runs_cost = self.parts(whole, addresses, channels, share)
         whole |= more
         items = (positions, speeds, *(self.changed[bit] & ~whole for bit in PLAIN_BITS))
@@ -265,8 +349,8 @@ class WritePhase:
         need = (self.pv_changed & ~whole).bit_count()
         return whole.bit_count() * prices.program + (plain + need) * prices.field_item
 
-    def _priced(self, whole: int, runs: tuple, runs_cost: float, items: tuple[int, ...], ranges: tuple,
-                addresses: int) -> Writes:  # fmt: skip
+    def _priced(self, whole: int, runs: tuple[Run, ...], runs_cost: float, items: tuple[int, ...],
+                ranges: tuple[Range, ...], addresses: int) -> Writes:  # fmt: skip
         prices = self.prices
         estimate = (
             whole.bit_count() * prices.program
@@ -283,32 +367,40 @@ class WritePhase:
         A program that takes a 21h leaves its items; a 33h run shrinks to the programs that
         still need it (or goes); link ranges stay, its 21h comes after them.
         """
-        prices = self.prices
         while True:
-            saving = [prices.fields(n) - prices.fields(n - 1) if n else 0.0 for n in map(int.bit_count, writes.items)]
-            n = writes.addresses.bit_count()
-            address_saving = prices.addresses(n) - prices.addresses(n - 1) if n else 0.0
-            run_of = {j: run for run in writes.part_runs for j in range(run[0], run[1] + 1)}
-            moves = []
-            for j in members((_all_of(writes.items) | writes.addresses | _all_runs(writes.part_runs)) & ~writes.whole):
-                delta = prices.program - sum(s for s, mask in zip(saving, writes.items) if mask >> j & 1)
-                if writes.addresses >> j & 1:
-                    delta -= address_saving
-                if j in run_of:
-                    run = run_of[j]
-                    rest = self._trimmed((run,), self.pv_changed & ~(writes.whole | 1 << j))
-                    delta += self._runs_cost(rest) - self._runs_cost((run,))
-                moves.append((delta, j))
-            moves.sort()
+            moves = self._refinements(writes)
+            in_runs = _all_runs(writes.part_runs)
             # The best quick move; and, with the DPs run again (the 33h runs they leave may regroup
             # and save an exchange), the few in runs that come within an exchange of paying off.
             tries: list[Writes | None] = [self._moved(writes, moves[0][1])] if moves and moves[0][0] < -1e-12 else []
             tries += [self.evaluate(channels, whole=writes.whole | 1 << j)
-                      for delta, j in moves[:REGROUPED] if delta < prices.exchange and j in run_of]  # fmt: skip
+                      for delta, j in moves[:REGROUPED] if delta < self.prices.exchange and in_runs >> j & 1]  # fmt: skip
             better = [moved for moved in tries if moved is not None and moved.estimate < writes.estimate - 1e-12]
             if not better:
                 return writes
-            writes = min(better, key=lambda moved: moved.estimate)
+            writes = min(better, key=ESTIMATE)
+
+    def _refinements(self, writes: Writes) -> list[tuple[float, int]]:
+        """Every program with an item or in a 33h run given a 21h instead: (what that changes, in
+        seconds, items priced one by one; the program), most saving first. Plain tuples: a plan
+        makes tens of thousands."""
+        prices = self.prices
+        saving = [prices.fields(n) - prices.fields(n - 1) if n else 0.0 for n in map(int.bit_count, writes.items)]
+        n = writes.addresses.bit_count()
+        address_saving = prices.addresses(n) - prices.addresses(n - 1) if n else 0.0
+        run_of = {j: run for run in writes.part_runs for j in range(run[0], run[1] + 1)}
+        moves = []
+        for j in members((_all_of(writes.items) | writes.addresses | _all_runs(writes.part_runs)) & ~writes.whole):
+            delta = prices.program - sum(s for s, mask in zip(saving, writes.items) if mask >> j & 1)
+            if writes.addresses >> j & 1:
+                delta -= address_saving
+            if j in run_of:
+                run = run_of[j]
+                rest = self._trimmed((run,), self.pv_changed & ~(writes.whole | 1 << j))
+                delta += self._runs_cost(rest) - self._runs_cost((run,))
+            moves.append((delta, j))
+        moves.sort()
+        return moves
 
     def _moved(self, writes: Writes, j: int) -> Writes:
         """`writes` with program j given a 21h instead of its items."""
@@ -319,26 +411,26 @@ class WritePhase:
         return self._priced(whole, runs, self._runs_cost(runs), items, writes.ranges, writes.addresses & ~bit)
 
     @staticmethod
-    def _trimmed(runs: tuple[tuple[int, int], ...], need: int) -> tuple[tuple[int, int], ...]:
+    def _trimmed(runs: tuple[Run, ...], need: int) -> tuple[Run, ...]:
         """The runs cut down to their first and last program in `need`; runs needing none dropped."""
-        out = []
+        out: list[Run] = []
         for first, last in runs:
             inside = need & ((1 << (last + 1)) - (1 << first))
             if inside:
                 out.append(((inside & -inside).bit_length() - 1, inside.bit_length() - 1))
         return tuple(out)
 
-    def _runs_cost(self, runs: tuple[tuple[int, int], ...]) -> float:
+    def _runs_cost(self, runs: tuple[Run, ...]) -> float:
         return sum(self.parts_price[last - first + 1] for first, last in runs)
 
     # -- P and V: 33h/32h runs against 40h/41h items (or a 21h) ---------------------------------
 
-    def parts(self, whole: int, addresses: int, channels: Channels, share: tuple[float, float] = (0.0, 0.0)) -> tuple:
-        """(runs, 40h programs, 41h programs, programs better off with a 21h, cost of the runs).
+    def parts(self, whole: int, addresses: int, channels: Channels, share: tuple[float, float] = (0.0, 0.0)) -> Parts:
+        """P and V of the programs not in `whole` that differ in P or V.
 
-        For the programs not in `whole` that differ in P or V. A program may take a 21h instead
-        when that costs less than its P and V writes plus its other items (`addresses`: its 46h item).
-        Items are priced one by one, plus `share` (40h, 41h) of their messages' headers.
+        A program may take a 21h instead when that costs less than its P and V writes plus its
+        other items (`addresses`: its 46h item). Items are priced one by one, plus `share` (40h,
+        41h) of their messages' headers.
         """
         need = self.pv_changed & ~whole
         key = (need, addresses & need, channels.positions, channels.speeds, channels.parts, share)
@@ -347,32 +439,33 @@ class WritePhase:
             cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels, share)
         return cached
 
-    def _solve_parts(self, need: int, addresses: int, channels: Channels, share: tuple[float, float]) -> tuple:
+    def _solve_parts(self, need: int, addresses: int, channels: Channels, share: tuple[float, float]) -> Parts:
         if not need:
-            return (), 0, 0, 0, 0.0
+            return Parts((), 0, 0, 0, 0.0)
         prices, masks, managed, price = self.prices, self.masks, self.managed, self.parts_price
         p_item = prices.field_item + share[0] if channels.positions else INF
         v_item = prices.field_item + share[1] if channels.speeds else INF
         program, address_item, runs_allowed = prices.program, prices.address_item, channels.parts
+        nothing, items, whole_, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
         # best[j]: the cheapest way to write P and V of the programs before j. A 33h run i..j
         # costs head + per × (j - i + 1), so the best run ending at j starts at the i that
         # minimises best[i] - per × i over the last 15 managed programs: a sliding-window minimum.
         head, per = prices.parts_header, prices.parts_item
         best = [0.0] * (PROGRAM_COUNT + 1)
-        back: list[tuple[int, str]] = [(0, "")] * (PROGRAM_COUNT + 1)
+        back: list[tuple[int, PartsMove]] = [(0, nothing)] * (PROGRAM_COUNT + 1)
         starts: deque[tuple[float, int]] = deque()  # (best[i] - per × i, i), keys increasing
         for j in range(PROGRAM_COUNT):
             b = best[j]
             if not managed[j]:
                 starts.clear()
             if not need >> j & 1:
-                best[j + 1], back[j + 1] = b, (j, "")
+                best[j + 1], back[j + 1] = b, (j, nothing)
                 continue
             m = masks[j]
-            c, how = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0), (j, "items")
-            whole = b + program - self.plain_items[j] - (address_item if addresses >> j & 1 else 0.0)
-            if whole < c:
-                c, how = whole, (j, "whole")
+            c, how = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0), (j, items)
+            alone = b + program - self.plain_items[j] - (address_item if addresses >> j & 1 else 0.0)
+            if alone < c:
+                c, how = alone, (j, whole_)
             if runs_allowed:
                 key = b - per * j
                 while starts and starts[-1][0] >= key:
@@ -381,55 +474,62 @@ class WritePhase:
                 while starts[0][1] <= j - codec.MAX_FIELD_ITEMS:
                     starts.popleft()
                 if b + price[1] < c:
-                    c, how = b + price[1], (j, "run")
+                    c, how = b + price[1], (j, run)
                 key, first = starts[0]
                 if key + head + per * (j + 1) < c:
-                    c, how = key + head + per * (j + 1), (first, "run")
+                    c, how = key + head + per * (j + 1), (first, run)
             best[j + 1], back[j + 1] = c, how
-        runs, positions, speeds, whole, runs_cost = [], 0, 0, 0, 0.0
+        return self._traced_parts(back)
+
+    def _traced_parts(self, back: list[tuple[int, PartsMove]]) -> Parts:
+        """The P and V writes of `_solve_parts`, followed back from the last program."""
+        runs: list[Run] = []
+        positions = speeds = whole = 0
+        runs_cost = 0.0
+        run, items, whole_ = PartsMove.RUN, PartsMove.ITEMS, PartsMove.WHOLE  # locals: fast
         j = PROGRAM_COUNT
         while j > 0:
-            i, chosen = back[j]
-            if chosen == "run":
+            i, move = back[j]
+            if move is run:
                 runs.append((i, j - 1))
-                runs_cost += price[j - i]
-            elif chosen == "items":
-                positions |= (masks[i] & P_BIT and 1) << i
-                speeds |= (masks[i] & V_BIT and 1) << i
-            elif chosen == "whole":
+                runs_cost += self.parts_price[j - i]
+            elif move is items:
+                positions |= (self.masks[i] & P_BIT and 1) << i
+                speeds |= (self.masks[i] & V_BIT and 1) << i
+            elif move is whole_:
                 whole |= 1 << i
             j = i
-        return tuple(reversed(runs)), positions, speeds, whole, runs_cost
+        return Parts(tuple(reversed(runs)), positions, speeds, whole, runs_cost)
 
     # -- A: link/unlink ranges against 46h items -----------------------------------------------
 
-    def addresses(self, whole: int, open46: bool, share: float = 0.0) -> tuple:
-        """(ranges, 46h programs, programs that need a 21h for their A) for the programs not in `whole`.
-
-        46h items are priced one by one plus `share` for their share of the 46h messages.
-        """
+    def addresses(self, whole: int, open46: bool, share: float = 0.0) -> Addresses:
+        """The jump addresses of the programs not in `whole`: link and unlink ranges, 46h items
+        (when `open46`) or a 21h. 46h items are priced one by one plus `share` for their share of
+        the 46h messages."""
         key = (whole, open46, share)
         cached = self._address_cache.get(key)
         if cached is None:
             cached = self._address_cache[key] = self._solve_addresses(whole, open46, share)
         return cached
 
-    def _solve_addresses(self, whole: int, open46: bool, share: float) -> tuple:
+    def _solve_addresses(self, whole: int, open46: bool, share: float) -> Addresses:
         if not self.changed[A_BIT] & ~whole:
-            return (), 0, 0
+            return Addresses((), 0, 0)
         managed, target, base = self.managed, self.target_a, self.base_a
         miss = self.prices.address_item + share if open46 else self.prices.program
         link = self.prices.link
+        none, keep, end = RangeMove.NONE, RangeMove.KEEP, RangeMove.END  # locals: fast
+        link_, link_on, unlink, unlink_on = RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK, RangeMove.UNLINK_ON
         # States after program i: 0 no range open, 1 a link range goes on to i+1, 2 an unlink range
-        # may go on. Actions give program i its A: kept, 0 (unlink, end of a link) or i+2 (link goes on).
+        # may go on. Moves give program i its A: kept, 0 (unlink, end of a link) or i+2 (link goes on).
         cost = [0.0, INF, INF]
-        back: list[tuple[tuple[int, str], ...]] = []
+        back: list[tuple[tuple[int, RangeMove], ...]] = []
         for i in range(PROGRAM_COUNT):
             c0, c1, c2 = cost
             if not managed[i]:
-                step = ((0, "keep") if c0 <= c2 else (2, "keep"), (0, ""), (0, ""))
+                back.append(((0, keep) if c0 <= c2 else (2, keep), (0, none), (0, none)))
                 cost = [min(c0, c2), INF, INF]
-                back.append(step)
                 continue
             free = whole >> i & 1
             t = target[i]
@@ -438,43 +538,45 @@ class WritePhase:
             m_next = 0.0 if free or t == i + 2 else miss
             goes_on = i + 1 < PROGRAM_COUNT and managed[i + 1]
             open_prev, open_cost = (0, c0) if c0 <= c2 else (2, c2)
-            n0, b0 = open_cost + m_keep, (open_prev, "keep")
+            n0, b0 = open_cost + m_keep, (open_prev, keep)
             if c1 + m_zero < n0:
-                n0, b0 = c1 + m_zero, (1, "end")
-            n1, b1 = INF, (0, "")
+                n0, b0 = c1 + m_zero, (1, end)
+            n1, b1 = INF, (0, none)
             if goes_on:
-                n1, b1 = open_cost + link + m_next, (open_prev, "link")
+                n1, b1 = open_cost + link + m_next, (open_prev, link_)
                 if c1 + m_next < n1:
-                    n1, b1 = c1 + m_next, (1, "link+")
-            n2, b2 = c0 + link + m_zero, (0, "unlink")
+                    n1, b1 = c1 + m_next, (1, link_on)
+            n2, b2 = c0 + link + m_zero, (0, unlink)
             if c2 + m_zero < n2:
-                n2, b2 = c2 + m_zero, (2, "unlink+")
+                n2, b2 = c2 + m_zero, (2, unlink_on)
             cost = [n0, n1, n2]
             back.append((b0, b1, b2))
         state = 0 if cost[0] <= cost[2] else 2
-        actions = [""] * PROGRAM_COUNT
+        moves = [none] * PROGRAM_COUNT
         for i in range(PROGRAM_COUNT - 1, -1, -1):
-            state, actions[i] = back[i][state]
-        return self._ranges_and_misses(whole, open46, actions)
+            state, moves[i] = back[i][state]
+        return self._ranges_and_misses(whole, open46, moves)
 
-    def _ranges_and_misses(self, whole: int, open46: bool, actions: list[str]) -> tuple:
-        ranges: list[tuple[bool, int, int]] = []
+    def _ranges_and_misses(self, whole: int, open46: bool, moves: list[RangeMove]) -> Addresses:
+        """The ranges the DP's moves draw, and the programs whose address they leave wrong."""
+        ranges: list[Range] = []
         items = extra = 0
-        for i, action in enumerate(actions):
+        keep, link_, link_on, unlink = RangeMove.KEEP, RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK  # locals: fast
+        for i, move in enumerate(moves):
             if not self.managed[i]:
                 continue
-            if action in ("link", "unlink"):
-                ranges.append((action == "link", i, i))
-            elif action in ("link+", "unlink+", "end"):
+            if move is link_ or move is unlink:
+                ranges.append((move is link_, i, i))
+            elif move is not keep:  # a range goes on or ends here
                 link, first, _ = ranges[-1]
                 ranges[-1] = (link, first, i)
-            value = self.base_a[i] if action == "keep" else i + 2 if action in ("link", "link+") else 0
+            value = self.base_a[i] if move is keep else i + 2 if move is link_ or move is link_on else 0
             if not whole >> i & 1 and value != self.target_a[i]:
                 if open46:
                     items |= 1 << i
                 else:
                     extra |= 1 << i
-        return tuple(ranges), items, extra
+        return Addresses(tuple(ranges), items, extra)
 
     # -- what a program's differences cost, for the init DP ------------------------------------
 
@@ -549,25 +651,11 @@ class WritePhase:
 
         def parts(i: int, mask: int) -> float:
             alone = min(self.parts_price[1], sum(items(k, i) for k, bit in enumerate((P_BIT, V_BIT)) if mask & bit))
-            if i not in run_of:
-                return alone
-            first, last = run_of[i]
-            others = need & ((1 << (last + 1)) - (1 << first)) & ~(1 << i)
-            if not others:
-                return alone
-            low, high = (others & -others).bit_length() - 1, others.bit_length() - 1
-            span = max(high, i) - min(low, i) + 1
-            if span > codec.MAX_FIELD_ITEMS:
-                return alone
-            return min(alone, self.parts_price[span] - self.parts_price[high - low + 1])
+            return min(alone, self._joining(i, run_of[i], need)) if i in run_of else alone
 
         def jump(i: int, mask: int) -> float:
             if i in ranged:
-                return (
-                    0.0
-                    if ranged[i] == self.target_a[i]
-                    else prices.addresses(addresses + 1) - prices.addresses(addresses)
-                )
+                return 0.0 if ranged[i] == self.target_a[i] else prices.addresses(addresses + 1) - prices.addresses(addresses)
             if not mask & A_BIT:
                 return 0.0
             n = addresses - (writes.addresses >> i & 1)
@@ -585,8 +673,21 @@ class WritePhase:
 
         return cost
 
+    def _joining(self, i: int, run: Run, need: int) -> float:
+        """What P and V of program i add to the 33h run `run` as it is over the other programs in
+        `need` (INF when there are none, or it would grow over 15 programs)."""
+        first, last = run
+        others = need & ((1 << (last + 1)) - (1 << first)) & ~(1 << i)
+        if not others:
+            return INF
+        low, high = (others & -others).bit_length() - 1, others.bit_length() - 1
+        span = max(high, i) - min(low, i) + 1
+        if span > codec.MAX_FIELD_ITEMS:
+            return INF
+        return self.parts_price[span] - self.parts_price[high - low + 1]
 
-def _all_runs(runs: tuple[tuple[int, int], ...]) -> int:
+
+def _all_runs(runs: tuple[Run, ...]) -> int:
     return sum((1 << (last + 1)) - (1 << first) for first, last in runs)
 
 
@@ -600,7 +701,8 @@ def _all_of(masks: tuple[int, ...]) -> int:
 # -- inits -----------------------------------------------------------------------------------
 
 
-def init_cost(problem: PlanningProblem, kinds: tuple[int, ...]) -> float:
+def init_cost(problem: PlanningProblem, kinds: Kinds) -> float:
+    """What the init messages of `kinds` cost: one 14h per run, a 12h/13h/11h for one program or a run to 64."""
     prices = problem.prices
     total = 0.0
     for kind in problem.kinds[1:]:
@@ -609,7 +711,7 @@ def init_cost(problem: PlanningProblem, kinds: tuple[int, ...]) -> float:
     return total
 
 
-def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> tuple[int, ...]:
+def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> Kinds:
     """The init kind of every program minimising init messages + `residual[i][kind]`.
 
     A run of programs of one kind costs one 14h, or a 12h/13h/11h when it is one program
@@ -658,58 +760,91 @@ def _table(problem: PlanningProblem, residual: Residual) -> list[dict[int, float
 
 def search(problem: PlanningProblem) -> list[Layout]:
     """Candidate layouts, cheapest estimate first."""
-    fixed = problem.system_cost
     keep = (KEEP,) * PROGRAM_COUNT
     phase = WritePhase(problem, keep)
     found = phase.solve()
-    layouts = [Layout(keep, writes, fixed + writes.estimate) for writes, _ in found]
+    layouts = [Layout(keep, writes, problem.system_cost + writes.estimate) for writes, _ in found]
     if problem.init_useful():
-        best = layouts[0]
-        tried, targeted = {keep}, set()
+        layouts = InitSearch(problem, phase, layouts).run(found[0].writes)
+    unique = {(layout.kinds, layout.writes): layout for layout in layouts}
+    return sorted(unique.values(), key=ESTIMATE)
+
+
+class InitSearch:
+    """The search over init choices (module docstring, 2.): a queue of init choices, each given
+    its own channel search; when it runs dry, the neighbours of the best plan, then the inits
+    that save whole messages, until none improves."""
+
+    def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout]) -> None:
+        self.problem = problem
+        self.phase = phase  # the write phase without inits
+        self.layouts = layouts  # every candidate found, the plans without inits first
+        self.best = layouts[0]
+        self.tried = {layouts[0].kinds}
+        self.targeted: set[Kinds] = set()  # the init choices `_targets` started from
+
+    def run(self, writes: Writes) -> list[Layout]:
+        """Every candidate found, starting from `writes`, the best write phase without inits."""
+        queue = self._first(writes)
+        while queue:
+            kinds = queue.pop(0)
+            if kinds not in self.tried:
+                queue += self._try(kinds)
+            if not queue:
+                queue = [kinds for kinds in _neighbours(self.problem, self.best) if kinds not in self.tried]
+            if not queue:
+                queue = self._targets()
+        return self.layouts
+
+    def _first(self, writes: Writes) -> list[Kinds]:
+        """The init DP with a program's charge estimated four ways (module docstring, 2.)."""
+        phase, problem = self.phase, self.problem
         everything = Channels.everything(True)
         residuals = [
-            phase.marginal(found[0][0]),
+            phase.marginal(writes),
             phase.linear(everything),
             phase.linear(everything, problem.prices.field_header / INIT_SHARE),
             phase.linear(Channels.everything(False)),
         ]
-        queue = [choose_inits(problem, _table(problem, residual)) for residual in residuals]
-        while queue:
-            kinds = queue.pop(0)
-            if kinds not in tried:
-                tried.add(kinds)
-                base = fixed + init_cost(problem, kinds)
-                with_inits = WritePhase(problem, kinds)
-                found = with_inits.solve(bound=best.estimate - base + problem.prices.exchange)  # refine may still gain
-                layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
-                if found and base + found[0][0].estimate < best.estimate:
-                    best = Layout(kinds, found[0][0], base + found[0][0].estimate)
-                    queue.append(choose_inits(problem, _table(problem, with_inits.marginal(found[0][0]))))
-                    queue += _moved_across(problem, kinds)
-            if not queue:
-                queue = [kinds for kinds in _neighbours(problem, best) if kinds not in tried]
-            if not queue:  # inits that save whole messages, from the plans closest to the best
-                close = sorted({layout.kinds: layout for layout in layouts if layout.kinds not in targeted
-                                and layout.estimate < best.estimate + problem.prices.exchange}.values(), key=ESTIMATE)
-                for layout in close[:TARGETED]:
-                    targeted.add(layout.kinds)
-                    goals = _overflows(problem, layout)
-                    candidates = _header_targets(problem, phase, goals) + _harmless_inits(problem, layout, goals)
-                    queue += [kinds for kinds in candidates if kinds not in tried]
-    unique = {(layout.kinds, layout.writes): layout for layout in layouts}
-    return sorted(unique.values(), key=lambda layout: layout.estimate)
+        return [choose_inits(problem, _table(problem, residual)) for residual in residuals]
+
+    def _try(self, kinds: Kinds) -> list[Kinds]:
+        """Search the write phases of `kinds`; when that gives a better plan, the init choices to try from it."""
+        problem = self.problem
+        self.tried.add(kinds)
+        base = problem.system_cost + init_cost(problem, kinds)
+        with_inits = WritePhase(problem, kinds)
+        found = with_inits.solve(bound=self.best.estimate - base + problem.prices.exchange)  # refine may still gain
+        self.layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
+        if not found or base + found[0].writes.estimate >= self.best.estimate:
+            return []
+        self.best = Layout(kinds, found[0].writes, base + found[0].writes.estimate)
+        return [choose_inits(problem, _table(problem, with_inits.marginal(found[0].writes))),
+                *_moved_across(problem, kinds)]  # fmt: skip
+
+    def _targets(self) -> list[Kinds]:
+        """Inits that save whole messages, from the plans closest to the best (within an exchange)."""
+        problem, best = self.problem, self.best
+        close = sorted({layout.kinds: layout for layout in self.layouts if layout.kinds not in self.targeted
+                        and layout.estimate < best.estimate + problem.prices.exchange}.values(), key=ESTIMATE)  # fmt: skip
+        queue: list[Kinds] = []
+        for layout in close[:TARGETED]:
+            self.targeted.add(layout.kinds)
+            goals = _overflows(problem, layout)
+            candidates = _header_targets(problem, self.phase, goals) + _harmless_inits(problem, layout, goals)
+            queue += [kinds for kinds in candidates if kinds not in self.tried]
+        return queue
 
 
-def _item_channels(writes: Writes) -> list[tuple[int, int, int]]:
-    """(field bit, programs with an item, items per message) of every 40h..46h field."""
-    channels = [(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, writes.items)]
-    return [*channels, (A_BIT, writes.addresses, codec.MAX_ADDRESS_ITEMS)]
+def _item_channels(writes: Writes) -> list[ItemChannel]:
+    """Every 40h..46h field of `writes`."""
+    channels = [ItemChannel(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, writes.items)]
+    return [*channels, ItemChannel(A_BIT, writes.addresses, codec.MAX_ADDRESS_ITEMS)]
 
 
-def _overflows(problem: PlanningProblem, layout: Layout) -> list[tuple[int, int, int, int]]:
+def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
     """The fields whose 40h..46h items in `layout` overflow into one more message and whose
-    programs could lose the overflow to an init: (field bit, the items that fit one message
-    less, the overflow, the programs counted). P and V count only outside the layout's
+    programs could lose the overflow to an init. P and V count only outside the layout's
     33h runs."""
     outside = ~_all_runs(layout.writes.part_runs)
     goals = []
@@ -718,11 +853,11 @@ def _overflows(problem: PlanningProblem, layout: Layout) -> list[tuple[int, int,
         goal = capacity * ((n - 1) // capacity)
         reducible = sum(1 for i in members(mask) if any(not problem.masks[k][i] & bit for k in problem.kinds))
         if goal and n - reducible <= goal:
-            goals.append((bit, goal, n - goal, outside if bit & PV_BITS else ~0))
+            goals.append(Overflow(bit, goal, n - goal, outside if bit & PV_BITS else ~0))
     return goals
 
 
-def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
+def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[Overflow]) -> list[Kinds]:
     """Init choices that take the overflow of the `goals` fields out, to save whole messages.
 
     For every set of those fields, header shares per field are bisected until the init DP
@@ -730,7 +865,7 @@ def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[tup
     init choice met on the way that leaves at most SLACK_ITEMS of the overflow is a candidate
     (a 21h the search adds may take out the last items).
     """
-    found: dict[tuple[int, ...], None] = {}
+    found: dict[Kinds, None] = {}  # a set in the order found
     for size in range(len(goals), 0, -1):
         for chosen in itertools.combinations(goals, size):
             # removing the overflow saves a header: start from that header spread over the overflow
@@ -753,24 +888,14 @@ def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[tup
     return list(found)
 
 
-def _harmless_inits(problem: PlanningProblem, layout: Layout, goals: list[tuple[int, int, int, int]]) -> list[tuple[int, ...]]:
+def _harmless_inits(problem: PlanningProblem, layout: Layout, goals: list[Overflow]) -> list[Kinds]:
     """Per overflowing field, `layout` with init runs added that take its items out and add no
     difference, the runs taking out most first, until the overflow is out (where runs alike
     tie, the init DP takes all of them or none)."""
     out = []
-    for bit, _goal, over, counted in goals:
-        harmless = [next((k for k in problem.kinds[1:] if problem.masks[k][i] & bit < problem.masks[KEEP][i] & bit
-                          and not problem.masks[k][i] & ~problem.masks[KEEP][i]), None)
-                    if kind == KEEP and problem.managed[i] and counted >> i & 1 else None
-                    for i, kind in enumerate(layout.kinds)]  # fmt: skip
-        runs: list[list[tuple[int, int]]] = []  # (program index, its harmless init)
-        for i, kind in enumerate(harmless):
-            if kind is not None and runs and runs[-1][-1][0] == i - 1:
-                runs[-1].append((i, kind))
-            elif kind is not None:
-                runs.append([(i, kind)])
-        changed, left = list(layout.kinds), over
-        for run in sorted(runs, key=len, reverse=True):
+    for goal in goals:
+        changed, left = list(layout.kinds), goal.over
+        for run in sorted(_harmless_runs(problem, layout.kinds, goal), key=len, reverse=True):
             if left <= 0:
                 break
             for i, kind in run:
@@ -781,7 +906,24 @@ def _harmless_inits(problem: PlanningProblem, layout: Layout, goals: list[tuple[
     return out
 
 
-def _neighbours(problem: PlanningProblem, layout: Layout) -> list[tuple[int, ...]]:
+def _harmless_runs(problem: PlanningProblem, kinds: Kinds, goal: Overflow) -> list[list[tuple[int, int]]]:
+    """Runs of the programs counted in `goal` that an init (the first kind that does) would take
+    out of its field without adding a difference: per run, (program index, its init kind)."""
+    masks, keep = problem.masks, problem.masks[KEEP]
+    harmless = [next((k for k in problem.kinds[1:] if masks[k][i] & goal.bit < keep[i] & goal.bit
+                      and not masks[k][i] & ~keep[i]), None)
+                if kind == KEEP and problem.managed[i] and goal.counted >> i & 1 else None
+                for i, kind in enumerate(kinds)]  # fmt: skip
+    runs: list[list[tuple[int, int]]] = []
+    for i, init in enumerate(harmless):
+        if init is not None and runs and runs[-1][-1][0] == i - 1:
+            runs[-1].append((i, init))
+        elif init is not None:
+            runs.append([(i, init)])
+    return runs
+
+
+def _neighbours(problem: PlanningProblem, layout: Layout) -> list[Kinds]:
     """The init choice of `layout` changed where the init DP, charging programs one by one,
     cannot see the change pay: one init run left out; the shortest runs left out whose
     programs then differ in one set of fields only, as many as one message of items takes
@@ -791,8 +933,17 @@ def _neighbours(problem: PlanningProblem, layout: Layout) -> list[tuple[int, ...
     kinds = layout.kinds
     runs = [(first, last) for kind in problem.kinds[1:] for first, last in runs_of(kinds, kind)]
     out = [kinds[:first] + (KEEP,) * (last - first + 1) + kinds[last + 1 :] for first, last in runs]
-    # the shortest runs left out whose programs then differ only in fields of one set, as many
-    # as one message of items takes (those items share their headers; no run alone pays them)
+    out += _short_runs_out(problem, kinds, runs)
+    out += [kinds[:i] + (kind,) + kinds[i + 1 :] for i in members(layout.writes.whole) if kinds[i] == KEEP
+            for kind in problem.kinds[1:]]  # fmt: skip
+    out += _message_initialised(problem, layout)
+    return out
+
+
+def _short_runs_out(problem: PlanningProblem, kinds: Kinds, runs: list[Run]) -> Iterator[Kinds]:
+    """Per set of fields, the shortest init runs left out whose programs then differ only in those
+    fields, as many as one message of items takes (those items share their headers; no run alone
+    pays them)."""
     adds = [_all_of(tuple(problem.masks[KEEP][i] for i in range(first, last + 1))) for first, last in runs]
     for fields in set(adds):
         changed, room = list(kinds), codec.MAX_FIELD_ITEMS
@@ -802,9 +953,13 @@ def _neighbours(problem: PlanningProblem, layout: Layout) -> list[tuple[int, ...
             if room < 0:
                 break
             changed[first : last + 1] = [KEEP] * (last - first + 1)
-        out.append(tuple(changed))
-    out += [kinds[:i] + (kind,) + kinds[i + 1 :] for i in members(layout.writes.whole) if kinds[i] == KEEP
-            for kind in problem.kinds[1:]]  # fmt: skip
+        yield tuple(changed)
+
+
+def _message_initialised(problem: PlanningProblem, layout: Layout) -> Iterator[Kinds]:
+    """Per 40h..46h message of `layout` (a field that fits one) and per 33h run, its programs
+    initialised where that takes their item out (together they save the message)."""
+    kinds = layout.kinds
     one_message = [(bit, mask) for bit, mask, capacity in _item_channels(layout.writes) if mask.bit_count() <= capacity]
     runs33 = [(PV_BITS, (1 << (last + 1)) - (1 << first)) for first, last in layout.writes.part_runs]
     for bits, mask in one_message + runs33:
@@ -813,11 +968,10 @@ def _neighbours(problem: PlanningProblem, layout: Layout) -> list[tuple[int, ...
             fixing = [k for k in problem.kinds[1:] if not problem.masks[k][i] & bits]
             if kinds[i] == KEEP and fixing:
                 changed[i] = fixing[0]
-        out.append(tuple(changed))
-    return out
+        yield tuple(changed)
 
 
-def _moved_across(problem: PlanningProblem, kinds: tuple[int, ...]) -> list[tuple[int, ...]]:
+def _moved_across(problem: PlanningProblem, kinds: Kinds) -> list[Kinds]:
     """`kinds` with one init run moved to the other side of the system step (the residuals may tie)."""
     if INIT_BEFORE not in problem.kinds:
         return []

@@ -1,18 +1,19 @@
 """A module's plan as data: the steps to send, what they cost, what they are predicted to do.
 
-Owns `Step`, `ModulePlan`, the one-line device-terms summary of a step, and the planner's
-errors. Does not own how a plan is found (`prc3cfg.core.planner.optimise`), how it is rendered
+Owns `Step`, `ModulePlan`, the `Action` of each change, the one-line device-terms summary of
+a step, and the planner's errors. Does not own how a plan is found (`prc3cfg.core.planner.optimise`), how it is rendered
 for people (`prc3cfg.core.render`) or the plant-wide plan file (`prc3cfg.core.plantplan`). Pure.
 """
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
 from prc3cfg.core import codec
-from prc3cfg.core.image import PROGRAM_COUNT, SYSTEM_KEYS, ModuleImage, SystemParameters
+from prc3cfg.core.image import PROGRAM_COUNT, SYSTEM_KEYS, ModuleImage, SystemParameters, default_program
 
 
 class UnreachableImage(ValueError):
@@ -21,6 +22,30 @@ class UnreachableImage(ValueError):
 
 class PlanVerificationError(AssertionError):
     """A bug in the planner: the plan it made, run on the device model, does not give the desired image."""
+
+
+class Action(enum.StrEnum):
+    """What a change does, as Terraform's plans say it (`plans.Action`): to a module, to one of its
+    programs or to a jump. The value is the mark a plan shows beside the change (`render.LEGEND`)."""
+
+    NO_OP = " "  # a module the plan leaves as it is
+    UPDATE = "~"  # changed
+    CREATE = "+"  # a program set up from factory defaults; a jump made
+    DELETE = "-"  # a program put back to factory defaults; a jump no longer made
+
+    @classmethod
+    def of_module(cls, steps: int) -> Action:
+        """A module's: it changes when its plan has steps."""
+        return cls.UPDATE if steps else cls.NO_OP
+
+    @classmethod
+    def of_programs(cls, actual: ModuleImage, desired: ModuleImage, numbers: Iterable[int]) -> dict[int, Action]:
+        """Each changed program's (by number): CREATE when it holds the factory defaults, DELETE
+        when it is to hold them (of the system parameters before, and after), UPDATE otherwise."""
+        was, will = default_program(actual.system), default_program(desired.system)
+        create, delete, update = cls.CREATE, cls.DELETE, cls.UPDATE  # locals: a plan shows thousands
+        return {n: create if actual.programs[n - 1] == was else delete if desired.programs[n - 1] == will else update
+                for n in numbers}  # fmt: skip
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,6 +73,10 @@ class ModulePlan:
     naive_bus_time: float
     releases_axes: bool
     predicted: ModuleImage
+
+    @property
+    def action(self) -> Action:
+        return Action.of_module(len(self.steps))
 
 
 def program_list(numbers: Iterable[int]) -> str:
