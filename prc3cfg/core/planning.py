@@ -22,7 +22,6 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
 
 from prc3cfg.core import codec, sharing, targeting
 from prc3cfg.core.bustime import LineCost
@@ -93,8 +92,7 @@ class PlanCache:
     def __init__(self) -> None:
         self.lock = threading.Lock()
         self._plans: dict[_PlanKey, ModulePlan] = {}
-        #: `sharing.share`'s memo, shared by the lines of a plant: its keys and values are sharing's own
-        self.sharing: dict[Any, Any] = {}
+        self.sharing = sharing.SharingMemo()
 
     def plan(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost, system_unset: bool = False) -> ModulePlan:
         """`plan_module`, once for modules alike but for their address."""

@@ -32,6 +32,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from math import inf
+from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
@@ -63,15 +64,31 @@ class SharingModule:
     kind: int | None = None  # modules of one kind cost alike (`alike`)
 
 
-def alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple:
+def alike(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple[object, ...]:
     """What a module's plan depends on: what it holds and should hold, and the line — its address
     only on stx, where it can change a frame's stuffing."""
     address = actual.address if cost.framing.name == "stx" else None
     return (actual.system, actual.programs, desired.system, desired.programs, address, cost)
 
 
-def _kind(module: SharingModule, cost: LineCost, memo: dict) -> int:
-    return memo.setdefault(("kind", alike(module.actual, module.desired, cost)), len(memo))
+class SharingMemo:
+    """The broadcast search's memo, shared by the lines of a plant: each kind of module (`alike`)
+    numbered once, and what reaches a kind behind each set of broadcasts (`_priced`)."""
+
+    def __init__(self) -> None:
+        self._kinds: dict[tuple[object, ...], int] = {}
+        self.owns: dict[tuple[tuple[codec.Message, ...], int | None], _Own | None] = {}
+
+    def kind(self, module: SharingModule, cost: LineCost) -> int:
+        return self._kinds.setdefault(alike(module.actual, module.desired, cost), len(self._kinds))
+
+
+class _Attempt(NamedTuple):
+    """A set of broadcasts priced (`_attempt`): each module's own steps, the line's bus time."""
+
+    broadcasts: tuple[Step, ...]
+    owns: tuple[_Own, ...]
+    seconds: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,7 +100,7 @@ class Shared:
     bus_time: float  # the broadcasts once, plus every module's own steps
 
 
-def share(modules: Sequence[SharingModule], cost: LineCost, memo: dict | None = None, proof_time: float = 0.0) -> Shared:
+def share(modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo | None = None, proof_time: float = 0.0) -> Shared:
     """The cheapest broadcasts found for a line whose every module is in `modules`: groups added
     one by one while they pay, or all of them with those dropped that do not — the cheaper.
     `proof_time` is what any broadcast costs besides: proving that nobody else is on the line
@@ -94,9 +111,9 @@ def share(modules: Sequence[SharingModule], cost: LineCost, memo: dict | None = 
     on stx, where it can change a frame's stuffing), so a line of modules alike costs one module's
     search. A set of broadcasts that cannot beat the best found is dropped at the first module
     that makes it dearer."""
-    memo = {} if memo is None else memo
+    memo = SharingMemo() if memo is None else memo
     groups = _candidates(modules)
-    modules = [replace(m, kind=_kind(m, cost, memo)) for m in modules]
+    modules = [replace(m, kind=memo.kind(m, cost)) for m in modules]
     nothing = _attempt((), modules, cost, memo)
     assert nothing is not None  # without broadcasts, every module's own plan stands
     added = nothing
@@ -158,7 +175,8 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     return groups
 
 
-def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: dict, bound: float = inf):
+def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo,
+             bound: float = inf) -> _Attempt | None:  # fmt: skip
     """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
     verifying read-back); None where a module cannot take the broadcasts. Each kind of module is
     priced once (`memo`); where the bus time reaches `bound` the rest is not priced: the bus time is
@@ -168,16 +186,16 @@ def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cos
     owns = []
     for module in modules:
         key = (messages, module.kind)
-        if key not in memo:
-            memo[key] = _priced(broadcasts, module, cost)
-        own = memo[key]
+        if key not in memo.owns:
+            memo.owns[key] = _priced(broadcasts, module, cost)
+        own = memo.owns[key]
         if own is None:
             return None
         owns.append(own)
         total += own.seconds
         if total >= bound:
-            return broadcasts, (), inf
-    return broadcasts, tuple(owns), total
+            return _Attempt(broadcasts, (), inf)
+    return _Attempt(broadcasts, tuple(owns), total)
 
 
 @dataclass(frozen=True, slots=True)
