@@ -280,6 +280,8 @@ class Reads:
     pairs: Pairs
     targets: list[Target]
     base: str | None = None
+    #: the modules whose system parameters were not the base's (read in full): as a plan file says, else from `targets`
+    not_as_verified: tuple[str, ...] | None = None
 
     def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
         """What the plan says it read and took as last verified, once `images` are read."""
@@ -287,7 +289,12 @@ class Reads:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
         skipped = {key: targeting.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
-        return Reading(self.base, unread, skipped)
+        verified = {(t.bus, t.address): t.verified[0] for t in self.targets if t.verified is not None}
+        other = self.not_as_verified
+        if other is None:
+            other = tuple(f"{bus.name}/{m.name}" for bus, m in chosen
+                          if (key := (bus.name, m.address)) in verified and key in images and images[key].system != verified[key])  # fmt: skip
+        return Reading(self.base, unread, skipped, other)
 
 
 def reads(plant: Plant, pairs: Pairs, the_base: Base | None) -> Reads:
@@ -300,10 +307,12 @@ def reads(plant: Plant, pairs: Pairs, the_base: Base | None) -> Reads:
     chosen, to_read = [], []
     for bus, m in pairs:
         key = (bus.name, m.address)
-        programs = targeting.touched(None if key in unset else the_base.images.get(key), m.desired_image())
-        if programs is not None:
+        before = None if key in unset else the_base.images.get(key)
+        programs = targeting.touched(before, m.desired_image())
+        if programs is not None:  # read in full if its system parameters are not the base's: not as last verified
             chosen.append((bus, m))
-            to_read.append(Target(bus.name, m.address, m.name, programs, m.desired_system()))
+            verified = None if before is None else (before.system, m.managed_programs())
+            to_read.append(Target(bus.name, m.address, m.name, programs, m.desired_system(), verified))
     return Reads(chosen, to_read, the_base.said)
 
 
@@ -554,7 +563,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     planfile.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     said = planned.document.get("read")  # a targeted read-back's base, in words: it sends nothing
-    targeted = Reads(chosen, [], said["base"]) if isinstance(said, dict) else None
+    targeted = Reads(chosen, [], said["base"], tuple(said["not_as_verified"])) if isinstance(said, dict) else None
     ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()),
                      only_read=targeted is not None)  # fmt: skip
     if targeted is not None:
@@ -615,7 +624,7 @@ def _plan_file_reads(planned: PlanFile, pairs: Pairs) -> Reads:
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
     return Reads([names[(e.bus, e.address)] for e in entries], [Target(e.bus, e.address, e.name, e.programs_read or ()) for e in entries],
-                 said["base"])  # fmt: skip
+                 said["base"], tuple(said["not_as_verified"]))  # fmt: skip
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,

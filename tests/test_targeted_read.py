@@ -181,3 +181,23 @@ def test_any_write_forgets_the_base_until_an_apply_verifies_in_full(applied, cap
     assert "Read back what the change touches" not in run_cli(capsys, "plan", applied.path).out
     assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
     assert lines.exists()
+
+
+def test_a_module_whose_system_block_is_not_the_bases_is_read_in_full(applied, capsys, tmp_path):
+    """A module changed by another tool since the last verified apply (or a spare fitted and set up
+    by hand): its one 50h shows a system block other than the base's, so nothing of it is taken as
+    last verified — every managed program is read and brought to the plant file."""
+    booth = applied.emulators["booth-a"]
+    held = booth.module(1).image  # booth-a-left, as last verified
+    other = replace(held, system=replace(held.system, S6=held.system.S6 + 1)).with_programs({2: replace(held.known(2), T=held.known(2).T + 3)})
+    booth.update(1, image=other)  # an acceleration that clamps nothing, and program 2, which the change below does not touch
+    edit(applied.path, "position: 2.1", "position: 2.0")  # the change touches program 1 only
+    planned = run_cli(capsys, "plan", applied.path, "--module", "booth-a-left", "--out", tmp_path / "p.json")
+    assert planned.code == 0, planned.err
+    left = next(m for bus in json.loads((tmp_path / "p.json").read_text())["buses"] for m in bus["modules"] if m["name"] == "booth-a-left")
+    module = next(m for _, m in api.load(applied.path).modules() if m.name == "booth-a-left")
+    assert left["read"] == {"programs": list(module.managed_programs()), "programs_not_read": []}
+    assert "read in full, their system parameters not those last verified: booth-a/booth-a-left" in planned.out
+    assert run_cli(capsys, "apply", applied.path, "--module", "booth-a-left", "--auto-approve", "--allow-axis-release").code == 0
+    held, wanted = booth.module(1).image, module.desired_image()
+    assert held.system == wanted.system and all(held.program(n) == wanted.program(n) for n in module.managed_programs())

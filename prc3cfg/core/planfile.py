@@ -102,6 +102,7 @@ class _Read(BaseModel):
 
     base: Text
     modules_not_read: list[Text]
+    not_as_verified: list[Text]
 
 
 class PlanDocument(BaseModel):

@@ -114,9 +114,10 @@ class Reading:
     base: str
     modules_not_read: tuple[str, ...]  # "bus/name"
     programs_not_read: dict[tuple[str, int], tuple[int, ...]]
+    not_as_verified: tuple[str, ...] = ()  # "bus/name": other system parameters than the base's, read in full
 
     def to_json(self) -> dict[str, Any]:
-        return {"base": self.base, "modules_not_read": list(self.modules_not_read)}
+        return {"base": self.base, "modules_not_read": list(self.modules_not_read), "not_as_verified": list(self.not_as_verified)}
 
     def module_json(self, change: ModuleChange) -> dict[str, Any]:
         read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]

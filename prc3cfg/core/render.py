@@ -337,8 +337,11 @@ def reading_line(document: dict[str, Any]) -> str | None:
     taken = [f"{plural(skipped, 'program')} of those modules"] if skipped else []
     taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
+    other = said["not_as_verified"]
     return (f"Read back what the change touches (base: {said['base']}): {read}"
-            + (f"; taken as last verified, not read: {' and '.join(taken)}" if taken else "") + " — --full-read reads everything")  # fmt: skip
+            + (f"; taken as last verified, not read: {' and '.join(taken)}" if taken else "")
+            + (f"; read in full, their system parameters not those last verified: {', '.join(other)}" if other else "")
+            + " — --full-read reads everything")  # fmt: skip
 
 
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:

@@ -35,15 +35,20 @@ class ReadBackError(UserError):
 
 
 def read_module(
-    link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None
-) -> ModuleImage:
+    link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None,
+    verified: tuple[SystemParameters, Iterable[int]] | None = None,
+) -> ModuleImage:  # fmt: skip
     """The image of the module at `address`: system parameters and the given programs (others None).
 
     With `clamped_by` (the system parameters a plan will write), every program is read when
-    writing them can clamp programs on this module.
+    writing them can clamp programs on this module. With `verified` (the system parameters a
+    targeted read takes the module to hold, and its managed programs), those programs are read
+    too when the module reports other system parameters: it is not as last verified.
     """
     system = read_system(link, address, name=name)
     wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
+    if verified is not None and system != verified[0]:
+        wanted |= set(verified[1])
     slots: list[Program | None] = [None] * PROGRAM_COUNT
     for number, program in read_programs(link, address, wanted, name=name).items():
         slots[number - 1] = program
@@ -97,6 +102,7 @@ class Target:
     name: str
     programs: tuple[int, ...]
     clamped_by: SystemParameters | None = None
+    verified: tuple[SystemParameters, tuple[int, ...]] | None = None  # a targeted read's: see `read_module`
 
 
 def read_all(
@@ -120,7 +126,7 @@ def read_all(
     def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
         for t in bus_targets:
-            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by)
+            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by, verified=t.verified)
             if progress:
                 progress()
         if then is not None and bus_targets:
