@@ -499,14 +499,12 @@ class Relaxation:
                     else:
                         ceiling[name] = shares[name]
         # then channels counted exactly: one at a time, the one with the most room first; then two at
-        # once, of those where a vector left below needs fewer messages than `top`, the pairs of the
-        # channels that bounded highest alone first (the pair that bounds the rest is most often those)
+        # once, the channels that bounded highest alone first (the pair that bounds the rest is most
+        # often those: a channel at its `top` counts too, as counting another exactly may push it over)
         alone = {}
         for name in sorted(order, key=lambda name: capacity[name] * top[name] - counts[name]):
             best, alone[name] = self._exact((name,), opened, vectors, low, best)
-        live = [k for k in vectors if low[k] < best]
-        tight = sorted((name for j, name in enumerate(order) if any(k[j] < top[name] for k in live)), key=alone.get, reverse=True)
-        for names in itertools.combinations(tight, EXACT_TOGETHER):
+        for names in itertools.combinations(sorted(order, key=alone.__getitem__, reverse=True), EXACT_TOGETHER):
             best, _ = self._exact(names, opened, vectors, low, best)
         return best, [low[k] for k in vectors if low[k] < best]
 
