@@ -47,8 +47,10 @@ solution needing ceil(n/15) messages per channel (a value of R) and bounds every
 message count vector of that set; those are bounded higher with a share of a header on
 each item of the channels over their capacity (a Lagrangian relaxation of n <= 15 k: the
 shares are bisected), then with one channel's headers counted exactly in the state (its
-item count modulo 15). Whatever stays below the best value of R found is the bound; "="
-marks a bound that is R's optimum (nothing stayed below). The plan's bus time is the first
+item count modulo 15), then two channels' at once (the Lagrangian leaves a gap where three
+channels overflow together, as a full rewrite's 43h..45h do: only counting two exactly
+closes it). Whatever stays below the best value of R found is the bound; "=" marks a bound
+that is R's optimum (nothing stayed below). The plan's bus time is the first
 "best value": it only lets the search stop early — a vector bounded above the plan can hold
 no plan cheaper than the plan, so the bound stays below every plan either way.
 
@@ -200,6 +202,8 @@ SCENARIOS = {
 }
 #: Probes of the header shares that bound one message count vector (`Relaxation._vectors`).
 SHARE_PROBES = 6
+#: Channels counted exactly at once, after one at a time, where vectors stay below (`Relaxation._vectors`).
+EXACT_TOGETHER = 2
 #: Line profiles: framing and ZVZ (used by open-driver only).
 PROFILES = {
     "crc16": ("crc16", 0.020),
@@ -302,9 +306,9 @@ class Relaxation:
     def kind(sides: tuple[int, int]) -> int:
         return INIT_AFTER if sides[1] else INIT_BEFORE if sides[0] else KEEP
 
-    def _options(self, i: int, price: dict[str, float], exact: str | None) -> dict:
-        """Per init kind, [in a 33h run][address right]: (cost, uses an item of `exact`) per way to
-        write the program's differences (items, or a 21h)."""
+    def _options(self, i: int, price: dict[str, float], exact: tuple[str, ...]) -> dict:
+        """Per init kind, [in a 33h run][address right]: (cost, per channel of `exact` whether it
+        uses an item there) per way to write the program's differences (items, or a 21h)."""
         stuffing = self.stuffing[i]
         whole = self.prices.program + sum(stuffing.values())
         pair = stuffing["P"] + stuffing["V"]
@@ -324,26 +328,28 @@ class Relaxation:
                 for right in (False, True):
                     items = plain + (0.0 if in_run else pv) + (0.0 if right else price["A"])
                     extra = pair if in_run else 0.0
-                    if exact is None:
-                        row.append(((min(items, whole) + extra, False),))
+                    if not exact:
+                        row.append(((min(items, whole) + extra, ()),))
                     else:
-                        uses = (not right) if exact == "A" else bool(mask & FIELD_BIT[exact]) and not (in_run and exact in PV)
-                        row.append(((items + extra, uses), (whole + extra, False)))
+                        uses = tuple((not right) if name == "A" else bool(mask & FIELD_BIT[name]) and not (in_run and name in PV)
+                                     for name in exact)  # fmt: skip
+                        row.append(((items + extra, uses), (whole + extra, (False,) * len(exact))))
                 rows.append(row)
             out[kind] = rows
         return out
 
     def solve(self, opened: frozenset, shares: dict[str, float], limit: float = INF,
-              exact: str | None = None) -> tuple[float, dict[str, int] | None]:  # fmt: skip
-        """The cheapest R without the headers of 40h..46h (but those of `exact`, counted in the state),
-        items only in the `opened` channels and priced with their `shares` of a header; and its item
-        counts. (INF, None) when nothing is cheaper than `limit`."""
+              exact: tuple[str, ...] = ()) -> tuple[float, dict[str, int] | None]:  # fmt: skip
+        """The cheapest R without the headers of 40h..46h (but those of the `exact` channels, their
+        item counts modulo their capacity in the state), items only in the `opened` channels and
+        priced with their `shares` of a header; and its item counts. (INF, None) when nothing is
+        cheaper than `limit`."""
         prices = self.prices
         head, per, link = prices.parts_header, prices.parts_item, prices.link
         price = {name: self.item[name] + shares.get(name, 0.0) if name in opened else INF for name in CHANNELS}
-        capacity = header = 0
-        if exact is not None:
-            price[exact], capacity, header = self.item[exact], CAPACITY[exact], self.header[exact]
+        for name in exact:
+            price[name] = self.item[name]
+        capacity, header = [CAPACITY[name] for name in exact], [self.header[name] for name in exact]
         options = [self._options(i, price, exact) if self.managed[i] else None for i in range(PROGRAM_COUNT)]
         # the least programs i.. can add, to drop states that cannot get below `limit`
         rest = [0.0] * (PROGRAM_COUNT + 1)
@@ -354,7 +360,7 @@ class Relaxation:
                             for rows in options[i].values())  # fmt: skip
             rest[i] = rest[i + 1] + least
         slack = limit + 2 * self.end_refund + self.run_refund  # refunds still to come
-        states = {((OUT, OUT), 0, NO_RANGE, FREE, 0): 0.0}
+        states = {((OUT, OUT), 0, NO_RANGE, FREE, (0,) * len(exact)): 0.0}
         steps = []
         for i in range(PROGRAM_COUNT):
             managed = self.managed[i]
@@ -402,9 +408,9 @@ class Relaxation:
                     for ok, how in ways:
                         for cost, uses in row[ok]:
                             total, new_count = c + opens * link + cost, count
-                            if uses:
-                                total += header if count == 0 else 0.0
-                                new_count = (count + 1) % capacity
+                            if any(uses):
+                                total += sum(h for h, n, u in zip(header, count, uses) if u and n == 0)
+                                new_count = tuple((n + 1) % m if u else n for n, m, u in zip(count, capacity, uses))
                             key = (sides, run, new_rng, how if goes_on else FREE, new_count)
                             if total < cut and total < done.get(key, INF):
                                 done[key], back_done[key] = total, (state, ok)
@@ -492,18 +498,32 @@ class Relaxation:
                         floor[name] = shares[name]
                     else:
                         ceiling[name] = shares[name]
+        # then channels counted exactly: one at a time, the one with the most room first; then two at
+        # once, the channels that bounded highest alone first (the pair that bounds the rest is most
+        # often those: a channel at its `top` counts too, as counting another exactly may push it over)
+        alone = {}
         for name in sorted(order, key=lambda name: capacity[name] * top[name] - counts[name]):
-            live = [k for k in vectors if low[k] < best]
-            if not live:
-                break
-            others = [(j, other) for j, other in enumerate(order) if other != name]
-            least = min(sum(k[j] * head[other] for j, other in others) for k in live)
-            value, n = self.solve(opened, {}, best - least, exact=name)
-            for k in live:
-                low[k] = max(low[k], value + sum(k[j] * head[other] for j, other in others))
-            if n is not None:
-                best = min(best, value + sum(max(1, ceil(n[other] / capacity[other])) * head[other] for _, other in others))
+            best, alone[name] = self._exact((name,), opened, vectors, low, best)
+        for names in itertools.combinations(sorted(order, key=alone.__getitem__, reverse=True), EXACT_TOGETHER):
+            best, _ = self._exact(names, opened, vectors, low, best)
         return best, [low[k] for k in vectors if low[k] < best]
+
+    def _exact(self, names: tuple[str, ...], opened: frozenset, vectors: list, low: dict, best: float) -> tuple[float, float]:
+        """Raise `low` of the vectors still below `best` by R with the channels `names` counted
+        exactly; the best value found and the bound (-INF when nothing was left to bound)."""
+        order = sorted(opened)
+        head, capacity = self.header, CAPACITY
+        live = [k for k in vectors if low[k] < best]
+        if not live:
+            return best, -INF
+        others = [(j, other) for j, other in enumerate(order) if other not in names]
+        least = min(sum(k[j] * head[other] for j, other in others) for k in live)
+        value, n = self.solve(opened, {}, best - least, exact=names)
+        for k in live:
+            low[k] = max(low[k], value + sum(k[j] * head[other] for j, other in others))
+        if n is not None:
+            best = min(best, value + sum(max(1, ceil(n[other] / capacity[other])) * head[other] for _, other in others))
+        return best, value
 
 
 # -- running ------------------------------------------------------------------------------------
