@@ -90,6 +90,12 @@ def test_the_command_line_reaches_the_workflow_only_through_the_api():
     assert not allowed("prc3cfg.plant.adopt.adopt", CLI_MAY_IMPORT)  # the check can fail
 
 
+def test_the_api_never_reaches_into_the_command_line():
+    """The API sits between the layers and the CLI: it may import every layer, never the CLI."""
+    assert prc3cfg_imports(PACKAGE / "api.py")  # the check reads something
+    assert not {name for name in prc3cfg_imports(PACKAGE / "api.py") if allowed(name, ("prc3cfg.cli",))}
+
+
 def test_the_layer_check_can_fail():
     """A core module that reached for the shell would be caught."""
     assert not allowed("prc3cfg.shell.link.client.Link", MAY_IMPORT["core"])
