@@ -4,6 +4,7 @@ and measuring those turnarounds — across the real emulator and the real pyseri
 
 from __future__ import annotations
 
+import logging
 import time
 from types import SimpleNamespace
 
@@ -169,3 +170,21 @@ def test_doctor_measures_turnarounds_within_ten_percent_on_every_framing(capsys,
     assert set(measured) == set(given)
     for address, turnaround in given.items():
         assert abs(measured[address][0] - turnaround) <= 0.1 * turnaround, (address, measured[address])
+
+
+def test_over_rfc2217_an_exchange_does_not_ask_the_gateway_to_purge(caplog):
+    """pyserial's reset_input_buffer on rfc2217:// asks the gateway to purge and waits for its answer,
+    polling in 50 ms steps — more than a whole exchange at 9600 baud, on every frame: the link drops
+    what reached this end instead, and the gateway hears no purge."""
+    line = LineSettings(9600, 8, "even", 1)
+    with Emulator({1: ModuleState.factory(1)}, line=line) as emulator:
+        host, tcp = emulator.listen(rfc2217=True)
+        port = open_port(f"rfc2217://{host}:{tcp}", line, bus="b")
+        try:
+            link = Link(port, get_framing("crc16"), bus="b", line=line, timeout=0.5, retries=0)
+            with caplog.at_level(logging.INFO, logger="prc3cfg.shell.emulator.server"):
+                replies = [link.request(1, codec.ReadSystem()) for _ in range(5)]
+        finally:
+            port.close()
+    assert all(isinstance(reply, codec.SystemReply) for reply in replies)
+    assert not [r for r in caplog.records if "purge" in r.getMessage()]

@@ -519,11 +519,11 @@ class _RemoteEnd:
     cts = dsr = cd = True
     ri = False
 
-    def reset_input_buffer(self) -> None:
-        pass
+    def reset_input_buffer(self) -> None:  # a purge asked for: a gateway has nothing to purge here
+        log.info("the RFC 2217 client asked the gateway to purge its receive buffer")
 
     def reset_output_buffer(self) -> None:
-        pass
+        log.info("the RFC 2217 client asked the gateway to purge its send buffer")
 
     def line(self) -> LineSettings | None:
         if self.baudrate is None or self.bytesize is None or self.parity is None or self.stopbits is None:

@@ -39,6 +39,7 @@ from typing import Protocol
 from urllib.parse import urlsplit
 
 import serial
+from serial import rfc2217
 
 from prc3cfg.core import codec
 from prc3cfg.core.error_codes import describe
@@ -279,7 +280,7 @@ class Link:
 
     def _send(self, frame: bytes) -> None:
         try:
-            self.port.reset_input_buffer()
+            self._discard()
             self.port.write(frame)
             self.port.flush()
         except Exception as error:  # noqa: BLE001 — pyserial's URL handlers (alt://…) fail in ways of their own
@@ -287,6 +288,19 @@ class Link:
         self.sent_at = time.monotonic()
         if self.trace:
             self.trace.sent(self.bus, frame)
+
+    def _discard(self) -> None:
+        """What arrived since the last exchange is dropped before a frame leaves: pyserial's
+        `reset_input_buffer` — but on rfc2217:// that asks the gateway to purge and waits for its
+        answer, polling in 50 ms steps (more than a whole exchange at 9600 baud, on every frame):
+        there what reached this end is read and dropped. Either way a byte still on its way is not,
+        as on any port: the framing hunts past a partial frame, and a reply is taken only from the
+        module asked and of the kind asked."""
+        if isinstance(self.port, rfc2217.Serial):
+            if waiting := self.port.in_waiting:
+                self.port.read(waiting)
+        else:
+            self.port.reset_input_buffer()
 
     def _failed(self, doing: str, error: Exception) -> PortFailed:
         """The port failed `doing` ("read from", "write to"): a TCP gateway that ended the
