@@ -277,10 +277,11 @@ def module_3(change) -> dict:
         (lambda m: m["system"].pop("S12"), 'module 3: system has no "S12"'),
         (lambda m: m.update(address=40), "module entry 0: address S9 = 40 is outside 1..30"),
         (lambda m: m.update(mode="flying"), 'module 3: mode is the text "flying", where "stop", "run" or "manual" belongs'),
-        (lambda m: m.update(fault=["E09"]), "module 3: fault is a list, where text belongs"),
+        (lambda m: m.update(fault=["E09"]), "module 3: fault is a list, where text or null belongs"),
         (lambda m: m.update(fault="E99"), 'module 3: fault is the text "E99", where "E09", "E10", "E12", "E20", "E21", "E22", "E23", "E24", '
-                                          '"E25" or "fault" belongs'),
+                                          '"E25", "fault" or null belongs'),
         (lambda m: m.update(active_program=65), "module 3: active_program = 65 is outside 1..64"),
+        (lambda m: m.update(active_program="3"), 'module 3: active_program is the text "3", where a whole number or null belongs'),
         (lambda m: m.update(referenced="yes"), 'module 3: referenced is the text "yes", where true or false belongs'),
     ],
 )

@@ -97,7 +97,7 @@ def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsy
 IMAGES = {
     "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', '[0] has no "system"'),
     "a program that is a list": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": [[1]]}}]',
-                                 "[0].programs[0] is a list, where an object belongs"),
+                                 "[0].programs[0] is a list, where an object or null belongs"),
     "programs that are an object": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": {{}}}}]',
                                     "[0].programs is an object, where a list belongs"),
     "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', '[0].system has no "S2"'),
@@ -236,6 +236,16 @@ def test_a_damaged_plan_file_says_where_and_what_in_words(made_plan, tmp_path, c
     line = one_line(run_cli(capsys, *args), f"error: {path}: ")
     assert expected in line, line
     assert line.endswith(" — make the plan again with prc3cfg plan --out"), line
+
+
+def test_a_shown_plan_file_says_where_null_may_stand(made_plan, tmp_path, capsys):
+    """A changed field's program is a program's number, or null for a system parameter: a value that
+    may be null says so."""
+    _, document = made_plan
+    path = tmp_path / "damaged.json"
+    path.write_text(json.dumps(damage(document, lambda d: first_module(d)["changes"]["fields"][0].update(program="3"))))
+    line = one_line(run_cli(capsys, "show", path), f"error: {path}: ")
+    assert 'buses[0].modules[0].changes.fields[0].program is the text "3", where a whole number or null belongs' in line, line
 
 
 def paths(value, at: tuple = ()) -> list[tuple]:

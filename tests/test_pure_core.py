@@ -75,7 +75,7 @@ CLI_MAY_IMPORT = (
     "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.link.Link",
     # plant files: loading one is validating it; showing one shows where each value came from
     "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError",
-    "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.models.ChainSpec", "prc3cfg.plant.profiles.Sourced",
+    "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.profiles.Sourced",
     "prc3cfg.plant.problems.Finding",
     # the terminal: Ctrl-C, output files
     "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically",

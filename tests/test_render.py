@@ -213,3 +213,44 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
 def test_an_apply_says_its_time_by_phase_against_the_estimate_in_one_line() -> None:
     assert render.timing({"reading": 4.9, "writing": 0.61, "verifying": 0.5}, {"reading": 5.04, "writing": 0.66, "verifying": 0.52}) == (
         "Time: 6.2 s (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.5 s (0.5 s)")
+
+
+def test_show_says_each_value_in_both_units_with_its_source_from_plain_values() -> None:
+    """`show`'s words come from plain values — no plant file, no terminal."""
+    factory = ModuleImage.factory(4)
+    program = Program(P=1750, V=350, F1=1020, A=0)
+    sources = {"unmanaged_programs": "default", "chains": "module"} | {key: "default" for key in (
+        "upper_reversing_point", "reference_point", "increment_pulses", "max_speed", "min_speed", "acceleration",
+        "circuit_gain", "alarm", "sync_increment", "sync_circuit_gain", "sync_conveyor_sequence")}  # fmt: skip
+    shown = render.shown_module(render.Settings(
+        name="left", bus="booth-a", address=4, profiles=(), unmanaged_programs="keep", system=factory.system,
+        programs={3: program}, sources=sources | {"upper_reversing_point": "profile fast"},
+        program_sources={3: dict.fromkeys(("position", "speed", "relative_speed", "dwell", "f1", "f2", "jump"), "module")},
+        chains=(((3, 5), True),),
+    ))  # fmt: skip
+    assert shown.heading == ("module ", "left", " — bus booth-a, address 4, profiles: none")
+    unmanaged, system, programs, chains = shown.blocks
+    assert unmanaged == "unmanaged_programs: keep (default)"
+    assert isinstance(system, render.Table) and isinstance(programs, render.Table)
+    assert system.sections[0][0] == ("upper_reversing_point (S1)", "0.400 m", "400", "profile fast")
+    assert programs.sections[0][0] == ("3", "position (P)", "1.750 m", "1750", "module")
+    assert ("", "f1 (F1)", "set at 0.020 m", "1020", "module") in programs.sections[0]
+    assert programs.sections[0][-1] == ("", "jump (A)", "stop", "0", "module")
+    assert chains == "chains (module): 3 → 5 → 3 (loop)"
+
+
+def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broadcasts_proved_heard() -> None:
+    from types import SimpleNamespace
+
+    from prc3cfg.core.plantplan import LineProof
+
+    killed = SimpleNamespace(bus="booth-a", name="left", command="apply", pid=41, time="2024-05-01T10:00:00", journal=None)
+    assert render.earlier_releases([killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"})]) == [
+        "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier prc3cfg apply, "
+        "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)",
+        "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier prc3cfg apply, "
+        "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account; journal j.jsonl)"]
+    runs = [SimpleNamespace(bus="line", broadcasts=1), SimpleNamespace(bus="other", broadcasts=0)]
+    proofs = [LineProof("line", silent=(3, 4, 5)), LineProof("other", silent=(9,)), LineProof("quiet")]
+    assert render.broadcasts_heard(proofs, runs) == [
+        "Bus line: broadcast after addresses 3–5 answered no probe — only the plan's modules heard it"]

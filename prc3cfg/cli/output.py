@@ -91,13 +91,8 @@ def report(result: ApplyResult) -> None:
             print(said, file=sys.stdout if run.verified else sys.stderr)
     if (travel := render.travel_list(result.runs)) is not None:
         print(travel)
-    for proof in result.plan.proofs:
-        if proof.silent and any(run.bus == proof.bus and run.broadcasts for run in result.runs):
-            print(f"Bus {proof.bus}: broadcast after {render.address_ranges(proof.silent)} answered no probe — only the plan's modules heard it")
-    for record in result.earlier:
-        print(f"⚠ Travel to reference point required before production on: {record.bus}/{record.name} (possibly: an "
-              f"earlier prc3cfg {record.command}, pid {record.pid} at {record.time}, sent a 10h/20h and ended before its account"
-              + (f"; journal {record.journal})" if record.journal else ")"))  # fmt: skip
+    for line in [*render.broadcasts_heard(result.plan.proofs, result.runs), *render.earlier_releases(result.earlier)]:
+        print(line)
     if result.runs:
         print(f"Journal: {result.journal}", flush=True)
     result.told()

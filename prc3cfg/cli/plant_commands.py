@@ -30,8 +30,8 @@ if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
     from rich.console import Console
     from rich.table import Table
 
+    from prc3cfg.core import render
     from prc3cfg.plant import Module, Plant
-    from prc3cfg.plant.models import ChainSpec
     from prc3cfg.plant.problems import Finding
 
 PlantPath = Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML).", show_default=False)]
@@ -162,63 +162,47 @@ def _count(n: int, one: str, many: str) -> str:
 
 
 def _modules_table(plant: Plant) -> Table:
-    from rich import box
-    from rich.table import Table
+    from prc3cfg.core import render
 
-    table = Table(title=f"plant {plant.name}", title_justify="left", box=box.SIMPLE_HEAD)
-    for column in ("bus", "address", "module", "profiles", "programs", "unmanaged"):
-        table.add_column(column)
-    for bus, module in plant.modules():
-        programs = ", ".join(map(str, module.settings.programs)) or "-"
-        table.add_row(bus.name, str(module.address), module.name, ", ".join(module.profiles) or "-",
-                      programs, module.unmanaged_programs)
-    return table
+    return _drawn(render.modules_table(plant.name, (
+        render.ModuleRow(bus.name, m.address, m.name, m.profiles, tuple(m.settings.programs), m.unmanaged_programs)
+        for bus, m in plant.modules())))  # fmt: skip
 
 
 def _show_module(console: Console, bus: str, module: Module) -> None:
-    from rich import box
-    from rich.table import Table
-
-    from prc3cfg.core.units import (
-        PROGRAM_QUANTITIES,
-        SYSTEM_QUANTITIES,
-        human_text,
-    )
+    """What `render.shown_module` says of the module, from the values of its plant file and where each came from."""
+    from prc3cfg.core import render
     from prc3cfg.plant.profiles import Sourced
 
     settings = module.settings
-    console.print(f"module [bold]{module.name}[/] — bus {bus}, address {module.address}, "
-                  f"profiles: {', '.join(module.profiles) or 'none'}")
-    console.print(f"unmanaged_programs: {module.unmanaged_programs} ({settings.unmanaged_programs.source})")
-
-    system = Table(title="system", title_justify="left", box=box.SIMPLE_HEAD)
-    for column in ("key", "value", "device", "from"):
-        system.add_column(column, no_wrap=True)
-    device = module.desired_system()
-    for q in SYSTEM_QUANTITIES:
-        value = getattr(device, q.symbol)
-        system.add_row(f"{q.key} ({q.symbol})", human_text(q.symbol, value), str(value), settings.system[q.key].source)
-    console.print(system)
-
-    programs = Table(title="programs", title_justify="left", box=box.SIMPLE_HEAD)
-    for column in ("#", "key", "value", "device", "from"):
-        programs.add_column(column, no_wrap=True)
     jumps = settings.jumps()
-    for number, program in module.desired_programs().items():
-        fields = settings.programs[number]
-        rows = [(q.key, q.symbol, human_text(q.symbol, getattr(program, q.symbol)), getattr(program, q.symbol), fields[q.key])
-                for q in PROGRAM_QUANTITIES]
-        rows += [(key, key.upper(), human_text(key.upper(), getattr(program, key.upper())),
-                  getattr(program, key.upper()), fields[key]) for key in ("f1", "f2")]
-        jump = jumps.get(number, Sourced(0))
-        rows.append(("jump", "A", f"program {program.A}" if program.A else "stop", program.A, jump))
-        for i, (key, symbol, human, raw, sourced) in enumerate(rows):
-            programs.add_row(str(number) if i == 0 else "", f"{key} ({symbol})", human, str(raw), sourced.source,
-                             end_section=i == len(rows) - 1)
-    console.print(programs)
-    if settings.chains.value:
-        chains = "; ".join(_chain_text(chain) for chain in settings.chains.value)
-        console.print(f"chains ({settings.chains.source}): {chains}")
+    shown = render.shown_module(render.Settings(
+        name=module.name, bus=bus, address=module.address, profiles=module.profiles, unmanaged_programs=module.unmanaged_programs,
+        system=module.desired_system(), programs=module.desired_programs(),
+        sources={"unmanaged_programs": settings.unmanaged_programs.source, "chains": settings.chains.source,
+                 **{key: value.source for key, value in settings.system.items()}},
+        program_sources={number: {**{key: fields[key].source for key in fields}, "jump": jumps.get(number, Sourced(0)).source}
+                         for number, fields in settings.programs.items()},
+        chains=tuple((chain.programs, chain.loop) for chain in settings.chains.value),
+    ))  # fmt: skip
+    before, name, after = shown.heading
+    console.print(f"{before}[bold]{name}[/]{after}")
+    for block in shown.blocks:
+        console.print(block if isinstance(block, str) else _drawn(block, no_wrap=True))
+
+
+def _drawn(table: render.Table, *, no_wrap: bool = False) -> Table:
+    """A table of `show` drawn for the terminal: a line under the head and between its sections."""
+    from rich import box
+    from rich.table import Table
+
+    drawn = Table(title=table.title, title_justify="left", box=box.SIMPLE_HEAD)
+    for column in table.columns:
+        drawn.add_column(column, no_wrap=no_wrap)
+    for section in table.sections:
+        for i, row in enumerate(section):
+            drawn.add_row(*row, end_section=i == len(section) - 1)
+    return drawn
 
 
 def _plot_module(plant: Plant, module: Module, path: Path, fmt: str, actual: Path | None) -> None:
@@ -230,7 +214,3 @@ def _plot_module(plant: Plant, module: Module, path: Path, fmt: str, actual: Pat
     images = None if actual is None else api.load_images(actual, plant, [module.name])
     write_picture(path, api.picture(plant, module.name, fmt=fmt, images=images), module.name)
 
-
-def _chain_text(chain: ChainSpec) -> str:
-    steps = [*map(str, chain.programs), str(chain.programs[0]) if chain.loop else "stop"]
-    return " → ".join(steps) + (" (loop)" if chain.loop else "")

@@ -143,7 +143,7 @@ class ModuleImage:
         try:
             return _IMAGES.validate_python([data])[0]
         except ValidationError as error:
-            raise ValueError(said(error, lambda loc: json_path(loc[1:], "the image"))) from None
+            raise ValueError(said(error, lambda loc: json_path(loc[1:], "the image"), _Images)) from None
 
     @classmethod
     def factory(cls, address: int) -> ModuleImage:
@@ -155,15 +155,16 @@ class ModuleImage:
 assert tuple(f.name for f in fields(SystemParameters)) == SYSTEM_KEYS
 assert tuple(f.name for f in fields(Program)) == PROGRAM_FIELDS
 
-_IMAGES = TypeAdapter(list[ModuleImage], config=LATER)
+_Images = list[ModuleImage]
+_IMAGES = TypeAdapter(_Images, config=LATER)
 
 
 def images_from_json(data: Any, at: str = "") -> list[ModuleImage]:
     """The module images a JSON list holds — `read --json`'s file, a snapshot's modules (their other
     keys, such as "bus", are not the image's) — the list at `at` in its document ("modules"), or
     the document; ValueError saying where and what in words: 'modules[0].system has no "S2"',
-    "[0].programs[3] is a list, where an object belongs"."""
+    "[0].programs[3] is a list, where an object or null belongs"."""
     try:
         return _IMAGES.validate_python(data)
     except ValidationError as error:
-        raise ValueError(said(error, lambda loc: json_path([at, *loc], "the list"))) from None
+        raise ValueError(said(error, lambda loc: json_path([at, *loc], "the list"), _Images)) from None

@@ -211,9 +211,10 @@ def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
     try:
-        document = (ShownPlanDocument if shown else PlanDocument).model_validate(data)
+        contract = ShownPlanDocument if shown else PlanDocument
+        document = contract.model_validate(data)
     except ValidationError as error:
-        raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'))} — {AGAIN}") from None
+        raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'), contract)} — {AGAIN}") from None
     modules = []
     seen: set[tuple[str, int]] = set()
     for b, bus in enumerate(document.buses):

@@ -3,7 +3,8 @@
 Owns the words and layout of `plan` output — human (Terraform-like), markdown for pull
 request comments (within a comment's size, with a stroke chart per changed chain), and the
 `changes` list of the JSON output — and of what `read`, drift and the account of an apply
-say of each module (`image_lines`, `drift_lines`, `account`, `travel_list`). Reasons shown here never
+say of each module (`image_lines`, `drift_lines`, `account`, `travel_list`), and what `show` says of a
+plant file's modules (`modules_table`, `shown_module`: words and rows; the CLI draws). Reasons shown here never
 steer an apply (the plan's steps do). A module's diff (`ModuleDiff`: its fields, its jumps,
 the programs it clamps) is worked out by comparing the two images field by field, once
 per output and module, as the module is shown (kept for all 240 modules of a large plant, the
@@ -16,18 +17,18 @@ import functools
 import html
 import re
 import shlex
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
-from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program
+from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action, Step
-from prc3cfg.core.plantplan import ModuleChange, PlantPlan
+from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import mermaid
-from prc3cfg.core.units import BY_SYMBOL, human_text
+from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
 from prc3cfg.core.verification import Release
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
@@ -582,6 +583,10 @@ def account(run: Run) -> str | None:
     return "\n".join(lines)
 
 
+#: What the account says of modules whose axes were, or may have been, released.
+TRAVEL = "⚠ Travel to reference point required before production on:"
+
+
 def travel_list(runs: Sequence[Run]) -> str | None:
     """The modules whose axes were — or may have been — released: they must travel to their reference point."""
     released = [r for r in runs if r.released is not Release.NO]
@@ -591,4 +596,128 @@ def travel_list(runs: Sequence[Run]) -> str | None:
         f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
         for r in released
     )
-    return f"⚠ Travel to reference point required before production on: {names}"
+    return f"{TRAVEL} {names}"
+
+
+class Untold(Protocol):
+    """What the account reads of an axis release an earlier apply sent and never told of — it was
+    killed after its 10h/20h (`prc3cfg.shell.releases.Pending`)."""
+
+    @property
+    def bus(self) -> str: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def command(self) -> str: ...
+    @property
+    def pid(self) -> int: ...
+    @property
+    def time(self) -> str: ...
+    @property
+    def journal(self) -> str | None: ...
+
+
+def earlier_releases(records: Iterable[Untold]) -> list[str]:
+    """The modules whose axes an earlier apply may have released and ended before saying so: they must travel too."""
+    return [f"{TRAVEL} {r.bus}/{r.name} (possibly: an earlier prc3cfg {r.command}, pid {r.pid} at {r.time}, sent a 10h/20h "
+            "and ended before its account" + (f"; journal {r.journal})" if r.journal else ")") for r in records]  # fmt: skip
+
+
+def broadcasts_heard(proofs: Iterable[LineProof], runs: Sequence[Run]) -> list[str]:
+    """After an apply, each line that took a broadcast where the probes had found every address the
+    plant file does not list silent: only the plan's modules heard it."""
+    return [f"Bus {proof.bus}: broadcast after {address_ranges(proof.silent)} answered no probe — only the plan's modules heard it"
+            for proof in proofs if proof.silent and any(run.bus == proof.bus and run.broadcasts for run in runs)]  # fmt: skip
+
+
+# -- what `show` says of a plant file's modules -------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Table:
+    """A table as `show` lays it out: its title, its columns, and its rows in sections (a line
+    between two sections); the terminal draws it."""
+
+    title: str
+    columns: tuple[str, ...]
+    sections: tuple[tuple[tuple[str, ...], ...], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ModuleRow:
+    """A module as `show PLANT` lists it: where it is, the profiles it takes, the programs it lists."""
+
+    bus: str
+    address: int
+    name: str
+    profiles: tuple[str, ...]
+    programs: tuple[int, ...]
+    unmanaged_programs: str
+
+
+def modules_table(plant: str, modules: Iterable[ModuleRow]) -> Table:
+    """The modules of a plant, one row each ("-" for no profile, no program listed)."""
+    rows = tuple((m.bus, str(m.address), m.name, ", ".join(m.profiles) or "-", ", ".join(map(str, m.programs)) or "-",
+                  m.unmanaged_programs) for m in modules)  # fmt: skip
+    return Table(f"plant {plant}", ("bus", "address", "module", "profiles", "programs", "unmanaged"), (rows,))
+
+
+@dataclass(frozen=True, slots=True)
+class Settings:
+    """What `show PLANT --module NAME` is given of a module: who and where it is, what it should hold
+    in device units (`programs`: the listed ones), and where each value came from ("default",
+    "profile NAME", "module") — `sources` by plant-file key (system parameters, `unmanaged_programs`,
+    `chains`), `program_sources` by program and key (`jump` for A). `chains`: each chain's programs
+    and whether it loops."""
+
+    name: str
+    bus: str
+    address: int
+    profiles: tuple[str, ...]
+    unmanaged_programs: str
+    system: SystemParameters
+    programs: Mapping[int, Program]
+    sources: Mapping[str, str]
+    program_sources: Mapping[int, Mapping[str, str]]
+    chains: tuple[tuple[tuple[int, ...], bool], ...]
+
+
+class Shown(NamedTuple):
+    """A module as `show PLANT --module NAME` shows it: its heading — before the name, the name (the
+    terminal sets it off), after it — then lines and tables, in order."""
+
+    heading: tuple[str, str, str]
+    blocks: list[str | Table]
+
+
+def _setting(key: str, symbol: str, device: int, source: str) -> tuple[str, str, str, str]:
+    """A value's row: its key and symbol, in human units, as the device holds it, where it came from."""
+    return f"{key} ({symbol})", human_text(symbol, device), str(device), source
+
+
+def shown_module(settings: Settings) -> Shown:
+    """A module's effective configuration: each value in human units and device units, and where it came from."""
+    where = f" — bus {settings.bus}, address {settings.address}, profiles: {', '.join(settings.profiles) or 'none'}"
+    unmanaged = f"unmanaged_programs: {settings.unmanaged_programs} ({settings.sources['unmanaged_programs']})"
+    system = tuple(_setting(q.key, q.symbol, getattr(settings.system, q.symbol), settings.sources[q.key]) for q in SYSTEM_QUANTITIES)
+    sections = []
+    for number, program in settings.programs.items():
+        sources = settings.program_sources[number]
+        rows = [_setting(q.key, q.symbol, getattr(program, q.symbol), sources[q.key]) for q in PROGRAM_QUANTITIES]
+        rows += [_setting(symbol.lower(), symbol, getattr(program, symbol), sources[symbol.lower()]) for symbol in FUNCTION_OUTPUTS]
+        rows.append(("jump (A)", f"program {program.A}" if program.A else "stop", str(program.A), sources["jump"]))
+        sections.append(tuple((str(number) if i == 0 else "", *row) for i, row in enumerate(rows)))
+    blocks: list[str | Table] = [
+        unmanaged,
+        Table("system", ("key", "value", "device", "from"), (system,)),
+        Table("programs", ("#", "key", "value", "device", "from"), tuple(sections)),
+    ]
+    if settings.chains:
+        blocks.append(f"chains ({settings.sources['chains']}): {'; '.join(chain_text(*chain) for chain in settings.chains)}")
+    return Shown(("module ", settings.name, where), blocks)
+
+
+def chain_text(programs: Sequence[int], loop: bool) -> str:
+    """A chain as a plant file's reader follows it: "1 → 2 → 1 (loop)", "10 → 11 → stop"."""
+    steps = [*map(str, programs), str(programs[0]) if loop else "stop"]
+    return " → ".join(steps) + (" (loop)" if loop else "")

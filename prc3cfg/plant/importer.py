@@ -23,17 +23,16 @@ import yaml
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.image import DEFAULT_SYSTEM, SYSTEM_KEYS, ModuleImage, Program, default_program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.units import BY_SYMBOL, plant_value
-
-PROGRAM_KEYS = {"P": "position", "V": "speed", "Vr": "relative_speed", "T": "dwell"}
+from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, plant_value
+from prc3cfg.plant.profiles import PROGRAM_DEFAULTS
 
 
 def _program_entry(program: Program, next_program: int | None) -> dict[str, Any]:
-    entry: dict[str, Any] = {PROGRAM_KEYS[k]: plant_value(k, getattr(program, k)) for k in ("P", "V")}
-    entry.update({PROGRAM_KEYS[k]: plant_value(k, getattr(program, k)) for k in ("Vr", "T") if getattr(program, k)})
-    for key in ("F1", "F2"):
-        if value := getattr(program, key):
-            entry[key.lower()] = plant_value(key, value)
+    entry: dict[str, Any] = {q.key: plant_value(q.symbol, getattr(program, q.symbol)) for q in PROGRAM_QUANTITIES
+                             if q.key not in PROGRAM_DEFAULTS or getattr(program, q.symbol)}  # an omitted key means 0
+    for symbol in FUNCTION_OUTPUTS:
+        if value := getattr(program, symbol):
+            entry[symbol.lower()] = plant_value(symbol, value)
     if next_program is not None:
         entry["next"] = next_program
     return entry

@@ -134,7 +134,7 @@ class Snapshot:
             try:
                 document = _SnapshotDocument.model_validate(data)
             except ValidationError as error:
-                raise ValueError(said(error, lambda loc: json_path(loc, "the snapshot"))) from None
+                raise ValueError(said(error, lambda loc: json_path(loc, "the snapshot"), _SnapshotDocument)) from None
             images = {(m.bus, image.address): image for m, image in zip(document.modules, images_from_json(data["modules"], "modules"))}
             plant = Path(document.plant)
             beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…

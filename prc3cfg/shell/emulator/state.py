@@ -229,7 +229,7 @@ def _modules(path: Path, data: object) -> dict[int, ModuleState]:
     except ValidationError as error:
         detail = error.errors(include_url=False)[0]
         remedy = "fix or delete the entry" if len(detail["loc"]) > 1 else "fix or delete it"
-        raise UserError(f"{path}: {worded(detail, lambda loc: _place(data, loc))} — {remedy}") from None
+        raise UserError(f"{path}: {worded(detail, lambda loc: _place(data, loc), _StateFile)} — {remedy}") from None
     modules: dict[int, ModuleState] = {}
     for entry in checked.modules:
         if entry.address in modules:
