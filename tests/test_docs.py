@@ -159,3 +159,12 @@ def test_the_readme_points_at_docs_and_at_no_folder_outside_the_repository():
     for document in DOCS.glob("*.md"):
         for target in re.findall(r"\]\(([a-z]+\.md)\)", document.read_text()):
             assert (DOCS / target).is_file(), f"{document.name} → {target}"
+
+
+def test_the_readme_names_everything_the_api_exports():
+    """`api.__all__` is what users' scripts call: the README's Python API names each of it."""
+    from prc3cfg import api
+
+    readme = (ROOT / "README.md").read_text()
+    text = readme[readme.index("\n## Python API") : readme.index("\n## ", readme.index("\n## Python API") + 1)]
+    assert api.__all__ and [name for name in api.__all__ if not re.search(rf"\b{name}\b", text)] == []
