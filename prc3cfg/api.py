@@ -36,6 +36,7 @@ import hashlib
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
 from pathlib import Path
@@ -755,12 +756,13 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
             images.update(read)
             planned.append(bus)
             whole = len(planned) == len(reading)
-        if whole:
-            writing.whole(the_plan(), gates.show)
+        if whole:  # shown beside the writes: the line does not wait for the plan's rendering
+            shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show)))
         writing.write(planner.line_changes(bus), read, True)
 
     unread: tuple[str, ...] = ()
-    with options.deferred():  # from the first read to the end of the records, a signal waits its turn
+    shown: list[Future[None]] = []
+    with options.deferred(), ThreadPoolExecutor(max_workers=1) as showing:  # from the first read to the end of the records, a signal waits its turn
         writing.phases.reading(len(wanted.targets))
         try:
             read_all(wanted.targets, links, progress=writing.phases.read, each=_planning_each(planner, want), then=line)
@@ -771,6 +773,8 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
             if not writing.runs:
                 raise
             unread = tuple(str(error).splitlines())
+        for future in shown:
+            future.result()
         if options.cancel is not None and not writing.runs:
             options.cancel.check()
         planned_plan = the_plan()

@@ -46,13 +46,13 @@ class Phases:
 
     def writing(self, messages: int, modules: int, lines: int, during: Callable[[], None] = lambda: None) -> None:
         """The plan is whole — `messages` to write to `modules` on `lines` — and the writes begin (or
-        go on: those some line made already are counted); `during()` is run first, with the display
-        held still (to show the plan)."""
+        go on: those some line made already are counted); `during()` is run first (to show the plan:
+        the lines' events go on meanwhile, never waiting for it)."""
+        now = time.monotonic()
+        during()
         with self._lock:
-            now = time.monotonic()
             if self._phase == "reading":
                 self._read_at = now
-            during()
             self._phase, self._writing_at, self._modules, self._lines = "writing", now, modules, lines
             self._start("writing", messages)
             for _ in range(self._wrote):
