@@ -109,9 +109,9 @@ def journal_phases(path: Path) -> tuple[dict[str, float], int]:
 GAP_LIMIT = 0.050  # seconds a line may stand idle between two exchanges
 
 
-def idle_gaps(trace: Path) -> dict[str, tuple[float, float, float]]:
-    """Per bus of an apply's frame trace: the largest idle gap, their sum, and the gap from the last
-    read before the first write to that write — from the end of an exchange (its last frame heard or
+def idle_gaps(trace: Path) -> dict[str, tuple[float, str, float, float]]:
+    """Per bus of an apply's frame trace: the largest idle gap (and between which requests), their
+    sum, and the gap before the first write — from the end of an exchange (its last frame heard or
     sent) to the next request on the line."""
     events: dict[str, list[tuple[float, str, int]]] = {}
     for line in trace.read_text().splitlines():
@@ -121,10 +121,14 @@ def idle_gaps(trace: Path) -> dict[str, tuple[float, float, float]]:
             events.setdefault(bus, []).append((datetime.fromisoformat(stamp).timestamp(), direction, message))
     found = {}
     for bus, seen in events.items():
-        gaps = [(after[0] - before[0], after[2]) for before, after in pairwise(seen) if after[1] == ">"]
-        first_write = next((i for i, (_, message) in enumerate(gaps) if 0 <= message < 0x50), None)
-        to_write = gaps[first_write][0] if first_write is not None else 0.0
-        found[bus] = (max(g for g, _ in gaps), sum(g for g, _ in gaps), to_write)
+        gaps, asked = [], -1
+        for before, after in pairwise(seen):
+            asked = before[2] if before[1] == ">" else asked
+            if after[1] == ">":
+                gaps.append((after[0] - before[0], f"{asked:02X}h → {after[2]:02X}h", after[2]))
+        to_write = next((gap for gap, _, message in gaps if message < 0x50), 0.0)
+        largest = max(gaps)
+        found[bus] = (largest[0], largest[1], sum(gap for gap, _, _ in gaps), to_write)
     return found
 
 
@@ -152,6 +156,7 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
     journals = work / ".prc3cfg" / "journal"
     before = set(journals.iterdir()) if journals.exists() else set()
     trace = work / "apply.trace"
+    trace.unlink(missing_ok=True)  # --trace appends
     wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release", *read, *(["--trace", str(trace)] if gaps else [])])
     if "read" in plan:  # a targeted read-back: what the plan says it reads
         read_estimate = plan["estimated_phases_s"]["reading"]
@@ -166,8 +171,8 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
         print(f"    {name:<10} on the line {phases[name]:7.2f} s   estimate {part:7.2f} s   ratio {phases[name] / part:.3f}")
     print(f"    verification exchanges {verifying}, floor {floor}{'' if verifying == floor else '   ✗ above the floor'}")
     if gaps:
-        for bus, (largest, total, to_write) in idle_gaps(trace).items():
-            print(f"    idle gaps on {bus}: largest {largest * 1000:6.1f} ms   sum {total:6.2f} s   reading → writing "
+        for bus, (largest, where, total, to_write) in idle_gaps(trace).items():
+            print(f"    idle gaps on {bus}: largest {largest * 1000:6.1f} ms ({where})   sum {total:6.2f} s   reading → writing "
                   f"{to_write * 1000:6.1f} ms{'' if largest < GAP_LIMIT else '   ✗ over 50 ms'}")  # fmt: skip
     broadcasts = [b for bus in plan["buses"] for b in bus.get("broadcasts", [])]
     if broadcasts:
