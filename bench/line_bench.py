@@ -1,6 +1,6 @@
 """Bus time on a real-speed line: measured read-back and apply against their estimates.
 
-    python bench/line_bench.py [--modules 30] [--baud 9600] [--framing crc16] [--changed 2] [--skip-read] [--skip-apply] [--full-read]
+    python bench/line_bench.py [--modules 30] [--baud 9600] [--framing crc16] [--changed 2] [--skip-read] [--skip-apply] [--full-read] [--gaps]
 
 Starts `prc3cfg emulator serve --line-speed BAUD` (a separate process, so the emulator
 and the client do not share an interpreter), then
@@ -24,6 +24,11 @@ After commissioning, `plan` and `apply` read back only what each change touches 
 the plant file just applied in full); `--full-read` measures the same with every module read in
 full, as every apply did before targeted read-backs.
 
+`--gaps`: each apply's frame trace (`--trace`) shows where its line stood idle — the time from
+the end of one exchange (its reply, or a broadcast's frame) to the next request on the same line:
+the largest, the sum, and the one from the read-back's last reply to the first write (the line
+waiting for the plan); acceptance: every gap under 50 ms.
+
 Wall times include each command's start-up (imports, about 0.3 s), reported separately.
 """
 
@@ -36,6 +41,7 @@ import sys
 import tempfile
 import time
 from datetime import datetime
+from itertools import pairwise
 from pathlib import Path
 
 from prc3cfg.core import codec
@@ -100,6 +106,32 @@ def journal_phases(path: Path) -> tuple[dict[str, float], int]:
     return seconds, len(spans["verify"])
 
 
+GAP_LIMIT = 0.050  # seconds a line may stand idle between two exchanges
+
+
+def idle_gaps(trace: Path) -> dict[str, tuple[float, str, float, float]]:
+    """Per bus of an apply's frame trace: the largest idle gap (and between which requests), their
+    sum, and the gap before the first write — from the end of an exchange (its last frame heard or
+    sent) to the next request on the line."""
+    events: dict[str, list[tuple[float, str, int]]] = {}
+    for line in trace.read_text().splitlines():
+        stamp, bus, direction, frame = line.split("\t")[:4]
+        if direction in "<>":
+            message = int(frame[6:8], 16) if direction == ">" else -1  # crc16: A5h, address, length, ID
+            events.setdefault(bus, []).append((datetime.fromisoformat(stamp).timestamp(), direction, message))
+    found = {}
+    for bus, seen in events.items():
+        gaps, asked = [], -1
+        for before, after in pairwise(seen):
+            asked = before[2] if before[1] == ">" else asked
+            if after[1] == ">":
+                gaps.append((after[0] - before[0], f"{asked:02X}h → {after[2]:02X}h", after[2]))
+        to_write = next((gap for gap, _, message in gaps if message < 0x50), 0.0)
+        largest = max(gaps)
+        found[bus] = (largest[0], largest[1], sum(gap for gap, _, _ in gaps), to_write)
+    return found
+
+
 def verification_floor(plan: dict, cost: LineCost) -> tuple[int, float]:
     """The fewest exchanges, and their bus time, that read what a plan's steps can change."""
     exchanges, seconds = 0, 0.0
@@ -116,13 +148,16 @@ def verification_floor(plan: dict, cost: LineCost) -> tuple[int, float]:
     return exchanges, seconds
 
 
-def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost: LineCost, read_estimate: float, read: list[str]) -> None:
+def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost: LineCost, read_estimate: float, read: list[str],
+                  gaps: bool = False) -> None:  # fmt: skip
     _, plan_json = run([*prc3cfg, "plan", str(plant), "--json", *read])
     plan = json.loads(plan_json)
     floor, floor_time = verification_floor(plan, cost)
     journals = work / ".prc3cfg" / "journal"
     before = set(journals.iterdir()) if journals.exists() else set()
-    wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release", *read])
+    trace = work / "apply.trace"
+    trace.unlink(missing_ok=True)  # --trace appends
+    wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release", *read, *(["--trace", str(trace)] if gaps else [])])
     if "read" in plan:  # a targeted read-back: what the plan says it reads
         read_estimate = plan["estimated_phases_s"]["reading"]
         exchanges = sum(len(read_messages(m["read"]["programs"])) for bus in plan["buses"] for m in bus["modules"])
@@ -135,6 +170,10 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
     for name, part in (("read-back", read_estimate), ("writes", plan["estimated_bus_time_s"]), ("verify", floor_time)):
         print(f"    {name:<10} on the line {phases[name]:7.2f} s   estimate {part:7.2f} s   ratio {phases[name] / part:.3f}")
     print(f"    verification exchanges {verifying}, floor {floor}{'' if verifying == floor else '   ✗ above the floor'}")
+    if gaps:
+        for bus, (largest, where, total, to_write) in idle_gaps(trace).items():
+            print(f"    idle gaps on {bus}: largest {largest * 1000:6.1f} ms ({where})   sum {total:6.2f} s   reading → writing "
+                  f"{to_write * 1000:6.1f} ms{'' if largest < GAP_LIMIT else '   ✗ over 50 ms'}")  # fmt: skip
     broadcasts = [b for bus in plan["buses"] for b in bus.get("broadcasts", [])]
     if broadcasts:
         print(f"    {len(broadcasts)} broadcast{'s' if len(broadcasts) != 1 else ''} to {len(broadcasts[0]['modules'])} modules: "
@@ -150,6 +189,7 @@ def main() -> None:
     parser.add_argument("--skip-apply", action="store_true")
     parser.add_argument("--changed", type=int, default=2, help="programs changed per module in the second apply")
     parser.add_argument("--full-read", action="store_true", help="plan and apply with --full-read (every module read in full)")
+    parser.add_argument("--gaps", action="store_true", help="each apply's idle gaps on the line, from its frame trace")
     args = parser.parse_args()
     read = ["--full-read"] if args.full_read else []
     prc3cfg = [sys.executable, "-m", "prc3cfg"]
@@ -174,7 +214,7 @@ def main() -> None:
                 wall, _ = run([*prc3cfg, "read", str(plant), "--json"])
                 print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio {wall / read_estimate:.3f}")
             if not args.skip_apply:
-                measure_apply("commissioning from factory defaults", prc3cfg, plant, Path(work), cost, read_estimate, read)
+                measure_apply("commissioning from factory defaults", prc3cfg, plant, Path(work), cost, read_estimate, read, args.gaps)
                 for title, programs, acceleration in (
                     (f"{args.changed} changed programs per module, other ones on each",
                      lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}), "1.500"),
@@ -186,7 +226,7 @@ def main() -> None:
                     changed = "".join(MODULE.format(address=a, programs=programs(a), acceleration=acceleration)
                                       for a in range(1, args.modules + 1))  # fmt: skip
                     plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=changed))
-                    measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate, read)
+                    measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate, read, args.gaps)
         finally:
             emulator.terminate()
             emulator.wait()

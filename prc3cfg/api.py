@@ -33,8 +33,10 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from decimal import Decimal
 from pathlib import Path
@@ -49,7 +51,7 @@ from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage,
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
-from prc3cfg.core.plantplan import PlantPlan, Reading
+from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted, plural
 from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
@@ -102,10 +104,14 @@ class ApplyFailed(UserError):
 
     def __init__(self, result: ApplyResult) -> None:
         failed = [r for r in result.runs if not r.verified]
-        super().__init__(
-            f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
-            f"prc3cfg restore {result.snapshot}"
-        )
+        said = [*result.unread]  # lines not written: what stopped their read-back or plan, one line each
+        if failed or not said:
+            said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
+                        f"prc3cfg restore {result.snapshot}")  # fmt: skip
+        else:
+            said.append(f"nothing was written on the lines above; the other {plural(len(result.runs), 'module')} were written "
+                        f"and verified (see above) — restore them with: prc3cfg restore {result.snapshot}")  # fmt: skip
+        super().__init__("\n".join(said))
         self.result = result
 
 
@@ -183,6 +189,9 @@ class ApplyResult:
     records: releases.Releases | None = None
     #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
     took: dict[str, float] = field(default_factory=dict)
+    #: lines written as soon as their own plan was whole, while another's read-back or plan failed:
+    #: what stopped that one, one line each (nothing was written there)
+    unread: tuple[str, ...] = ()
 
     def told(self) -> None:
         """The account — `released` and `earlier` — has been shown to the operator: the records of
@@ -193,7 +202,7 @@ class ApplyResult:
 
     @property
     def verified(self) -> bool:
-        return all(run.verified for run in self.runs)
+        return not self.unread and all(run.verified for run in self.runs)
 
     @property
     def released(self) -> tuple[ModuleRun, ...]:
@@ -385,13 +394,13 @@ def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], reco
     return watch
 
 
-def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions,
+def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, each: Callable[[Target, ModuleImage], None] | None = None,
           then: Callable[[str, dict[Key, ModuleImage]], None] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
     """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`) — also
     one that came during the last exchanges, when the read ended anyway: it is not forgotten."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
-        images = read_all(targets_, links, progress=options.progress.advance, then=then)
+        images = read_all(targets_, links, progress=options.progress.advance, each=each, then=then)
     if options.cancel is not None:
         options.cancel.check()
     return images
@@ -400,13 +409,21 @@ def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions,
 def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
                    desired: dict[Key, ModuleImage] | None = None, *,
                    only_read: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
-    """Read back and plan, each line planned as soon as it is read — while the other lines are
-    still being read: the lines never wait for all of the planning. `only_read`: see `Planner`."""
+    """Read back and plan, each module planned as soon as it is read and each line as soon as its
+    last module is — while the other lines are still being read: the lines never wait for all of
+    the planning. `only_read`: see `Planner`."""
     buses = {bus.name: bus for bus, _ in pairs}
     planner = _planner(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read)
     wanted = _wanted(pairs, desired)
-    images = _read(to_read, links, options, then=lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus])))
+    images = _read(to_read, links, options, each=_planning_each(planner, wanted),
+                   then=lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus])))  # fmt: skip
     return images, planner.plan(wanted, images)
+
+
+def _planning_each(planner: Planner, wanted: list[Wanted]) -> Callable[[Target, ModuleImage], None]:
+    """Each module planned as soon as it is read (`Planner.plan_module`)."""
+    by_key = {w.key: w for w in wanted}
+    return lambda target, image: planner.plan_module(by_key[(target.bus, target.address)], image)
 
 
 def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None) -> dict[Key, ModuleImage]:
@@ -584,11 +601,20 @@ class Gates:
       the plan releases, True to allow — else `AxisReleaseRefused`; the answer also decides
       whether a repair may release axes;
     - `approve(plan)`: False stops with `NotApproved`.
+
+    Without a question (`asks`) each line is written as soon as its own plan is whole, while the
+    other lines are still read; `show` sees the plant's plan once it is whole, writes going on.
     """
 
     show: Callable[[PlantPlan], None] | None = None
     allow_axis_release: bool | Callable[[list[str]], bool] = False
     approve: Callable[[PlantPlan], bool] | None = None
+
+    @property
+    def asks(self) -> bool:
+        """Whether a question may stand between the plan and the writes — a confirmation, or an axis
+        release not allowed up front — so that a person reviews the plan of the whole plant first."""
+        return self.approve is not None or self.allow_axis_release is not True
 
 
 def apply(
@@ -653,8 +679,7 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
 
 def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
            plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
-    pairs, to_read = wanted.pairs, wanted.targets
-    buses = {bus.name: bus for bus, _ in pairs}
+    buses = {bus.name: bus for bus, _ in wanted.pairs}
     for bus in buses.values():
         if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
             raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
@@ -668,37 +693,103 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     try:
         with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            started = time.monotonic()
-            if plan_file is None:
-                images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired, only_read=wanted.base is not None)
-                the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
+            writing = _Writing(plant, keys, buses, links, journal, verify, options)
+            if plan_file is None and not gates.asks:
+                result = _apply_by_line(plant, chosen, wanted, desired, gates, writing, options, earlier, records)
             else:
-                images = _read(to_read, links, options)
-                the_plan = prove(*plan_file, plant, chosen, images, {name: prober(links[name], bus) for name, bus in buses.items()})
-            reading = time.monotonic() - started
-            if gates.show is not None:
-                gates.show(the_plan)
-            if not the_plan.changes:
-                return ApplyResult(the_plan, (), None, journal.path, earlier, records)
-            releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
-            allow = gates.allow_axis_release
-            allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
-            if releasing and not allow_axis_release:
-                raise AxisReleaseRefused(
-                    f"the plan releases the axes of {', '.join(releasing)} (10h/20h: they must travel to their "
-                    "reference point before production) — nothing was written; apply again with --allow-axis-release"
-                )
-            if gates.approve is not None and not gates.approve(the_plan):
-                raise NotApproved("not applied — nothing was written")
-            with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
-                forget_applied(plant.path)  # until this apply verifies in full, the modules are not known to hold any plant file
-                result = _run(keys, the_plan, images, links, buses, journal, allow_axis_release, verify, options, earlier, records)
-                result = replace(result, took={"reading": reading} | result.took)
-                if desired is None and len(chosen) == len(plant.modules()):
-                    _keep_applied(plant)
-                return result
+                result = _apply_whole(plant, chosen, wanted, desired, plan_file, gates, writing, options, earlier, records)
+            if result.runs and desired is None and len(chosen) == len(plant.modules()):
+                _keep_applied(plant)
+            return result
     finally:
         journal.close()
+
+
+def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
+                 plan_file: tuple[Path, PlanFile] | None, gates: Gates, writing: _Writing, options: LineOptions,
+                 earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:  # fmt: skip
+    """Read back and plan the whole plant (or prove the plan file), show it and pass the gates, then write every line."""
+    pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
+    started = time.monotonic()
+    if plan_file is None:
+        images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired, only_read=wanted.base is not None)
+        the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
+    else:
+        images = _read(to_read, links, options)
+        the_plan = prove(*plan_file, plant, chosen, images, {name: prober(links[name], bus) for name, bus in writing.buses.items()})
+    reading = time.monotonic() - started
+    if gates.show is not None:
+        gates.show(the_plan)
+    if not the_plan.changes:
+        return ApplyResult(the_plan, (), None, writing.journal.path, earlier, records)
+    releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
+    allow = gates.allow_axis_release
+    allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
+    if releasing and not allow_axis_release:
+        raise AxisReleaseRefused(
+            f"the plan releases the axes of {', '.join(releasing)} (10h/20h: they must travel to their "
+            "reference point before production) — nothing was written; apply again with --allow-axis-release"
+        )
+    if gates.approve is not None and not gates.approve(the_plan):
+        raise NotApproved("not applied — nothing was written")
+    with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
+        writing.whole(the_plan)
+        writing.write(the_plan.modules, images, allow_axis_release)
+        return writing.account(the_plan, earlier, records, {"reading": reading})
+
+
+def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates,
+                   writing: _Writing, options: LineOptions, earlier: tuple[releases.Pending, ...],
+                   records: releases.Releases) -> ApplyResult:  # fmt: skip
+    """No question stands between the plan and the writes (`Gates.asks`): each module is planned as
+    soon as it is read, and each line — its broadcasts decided once its last module is read — written
+    as soon as its own plan is whole, while the other lines are still read and planned: no line
+    waits for another. The plant's plan is shown once whole, the writes going on. A line whose
+    read-back or plan fails is not written; the others are, and the result says both (`ApplyFailed`)."""
+    pairs, links, buses = wanted.pairs, writing.links, writing.buses
+    planner = _planner(plant, pairs, unset_systems(plant, buses.values()), only_read=wanted.base is not None)
+    want = _wanted(pairs, desired)
+    lock = threading.Lock()
+    images: dict[Key, ModuleImage] = {}
+    planned: list[str] = []
+    reading = {target.bus for target in wanted.targets}
+
+    def the_plan() -> PlantPlan:
+        with lock:
+            read, done = dict(images), set(planned)
+        return replace(planner.plan([w for w in want if w.bus in done], read), reading=wanted.reading(chosen, read))
+
+    def line(bus: str, read: dict[Key, ModuleImage]) -> None:
+        planner.plan_line(bus, want, read, prober(links[bus], buses[bus]))
+        with lock:
+            images.update(read)
+            planned.append(bus)
+            whole = len(planned) == len(reading)
+        if whole:  # shown beside the writes: the line does not wait for the plan's rendering
+            shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show)))
+        writing.write(planner.line_changes(bus), read, True)
+
+    unread: tuple[str, ...] = ()
+    shown: list[Future[None]] = []
+    with options.deferred(), ThreadPoolExecutor(max_workers=1) as showing:  # from the first read to the end of the records, a signal waits its turn
+        writing.phases.reading(len(wanted.targets))
+        try:
+            read_all(wanted.targets, links, progress=writing.phases.read, each=_planning_each(planner, want), then=line)
+        except Interrupted:
+            if not writing.runs:
+                raise
+        except UserError as error:
+            if not writing.runs:
+                raise
+            unread = tuple(str(error).splitlines())
+        for future in shown:
+            future.result()
+        if options.cancel is not None and not writing.runs:
+            options.cancel.check()
+        planned_plan = the_plan()
+        if not writing.runs:
+            return ApplyResult(planned_plan, (), None, writing.journal.path, earlier, records)
+        return writing.account(planned_plan, earlier, records, unread=unread)
 
 
 def _announcer(plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
@@ -717,46 +808,93 @@ def _announcer(plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, .
     return announce
 
 
-def _run(keys: dict[str, tuple[str, ...]], the_plan: PlantPlan, images: dict[Key, ModuleImage], links: dict[str, Link],
-         buses: dict[str, Bus], journal: Journal, allow_axis_release: bool, verify: Verify, options: LineOptions,
-         earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:  # fmt: skip
-    exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
-    # on a line without error detection every module is watched, the unchanged ones too: a damaged
-    # frame meant for another can release its axes
-    runs = tuple(ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in exposed)
-                 for c in the_plan.modules if c.steps or c.bus in exposed)  # fmt: skip
-    taken_on = {name: LineTaken(bus.port, bus.framing, keys[name]) for name, bus in buses.items()}
-    snapshot = Snapshot.take(Path(the_plan.plant_path), the_plan.plant_sha256, {(r.bus, r.address): images[(r.bus, r.address)] for r in runs},
-                             taken_on)  # fmt: skip
-    snapshot_path = snapshot.save()
-    options.progress.note(f"Snapshot of the modules before writing: {snapshot_path}")
-    journal.record("apply", plant=the_plan.plant, plant_sha256=the_plan.plant_sha256, snapshot=str(snapshot_path),
-                   modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
-    phases = Phases(options.progress.start, options.progress.advance, the_plan.message_count, len(runs), len({r.bus for r in runs}))
-    # consent is per module: the releases of the plan shown, and no other (a repair may not add one)
-    consented = frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allow_axis_release else frozenset()
-    execute(list(runs), links, {name: line_cost(bus) for name, bus in buses.items()}, tick=phases.wrote, written=phases.line_written,
-            verified=phases.verified, consented=consented, verify=verify)  # fmt: skip
-    result = ApplyResult(the_plan, runs, snapshot_path, journal.path, earlier, records, phases.took())
-    for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
-        if run.system_unset:
-            records.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
-    releases.cleared(r for r in releases.pending((k for ks in keys.values() for k in ks), releases.E12)
-                     if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
-    for run in runs:
-        journal.record(
-            "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
-            released_axes=run.released.value, written=[s.message.hex() for s in run.written],
-            interrupted=run.interrupted,
-        )  # fmt: skip
-    if result.released:
-        journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
-    if options.cancel is not None and options.cancel.requested:
-        journal.record("interrupted")
-        raise ApplyInterrupted(result)
-    if not result.verified:
-        raise ApplyFailed(result)
-    return result
+class _Writing:
+    """An apply's writes, a line or the whole plan at a time, from any line's thread: the runs of
+    the modules a plan changes, the snapshot of those modules saved before the first write on
+    their line — added to the apply's one snapshot file, written whole and atomically each time —
+    and journalled, then written and verified (`execute`); then the account of every run."""
+
+    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], journal: Journal,
+                 verify: Verify, options: LineOptions) -> None:  # fmt: skip
+        self.plant, self.keys, self.buses, self.links, self.journal = plant, keys, buses, links, journal
+        self.verify, self.options = verify, options
+        self.phases = Phases(options.progress.start, options.progress.advance)
+        self.runs: list[ModuleRun] = []
+        self.snapshot: Path | None = None
+        self._taken: Snapshot | None = None
+        self._whole = False
+        self._lock = threading.Lock()
+        # on a line without error detection every module is watched, the unchanged ones too: a damaged
+        # frame meant for another can release its axes
+        self._exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
+
+    def _runs(self, changes: Iterable[ModuleChange]) -> list[ModuleRun]:
+        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed)
+                for c in changes if c.steps or c.bus in self._exposed]  # fmt: skip
+
+    def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None) -> None:
+        """The plant's plan is whole (`show`n, the display held still): the writing phase, and the
+        snapshot's path told once it holds every module the plan writes."""
+        runs = self._runs(the_plan.modules)
+        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), lambda: show(the_plan) if show else None)
+        with self._lock:
+            self._whole = True
+            self._tell_snapshot(len(runs))
+
+    def _tell_snapshot(self, modules: int) -> None:
+        if self._whole and self._taken is not None and len(self._taken.images) == modules:
+            self.options.progress.note(f"Snapshot of the modules before writing: {self.snapshot}")
+
+    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], allow_axis_release: bool) -> None:
+        """Write and verify these changes — one line's, or every line's — once their modules are in
+        the snapshot and the journal. Consent is per module: the releases of these changes, if allowed
+        (a repair may not add one)."""
+        runs = self._runs(changes)
+        if not runs:
+            return
+        with self._lock:
+            if self._taken is None:
+                forget_applied(self.plant.path)  # until this apply verifies in full, the modules are not known to hold any plant file
+                taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
+                self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on)
+            self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+            self.snapshot = self._taken.save()
+            self.runs.extend(runs)
+            if self._whole:
+                self._tell_snapshot(len(self._taken.images))
+        self.journal.record("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
+                            modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+        consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
+        execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=self.phases.wrote,
+                written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
+
+    def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
+                took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> ApplyResult:  # fmt: skip
+        """The result, every run in the plan's order: recorded, journalled; `ApplyInterrupted` or
+        `ApplyFailed` unless every module verified."""
+        order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
+        runs = tuple(sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
+        result = ApplyResult(the_plan, runs, self.snapshot, self.journal.path, earlier, records, (took or {}) | self.phases.took(), unread)
+        keys, journal = self.keys, self.journal
+        for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
+            if run.system_unset:
+                records.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
+        releases.cleared(r for r in releases.pending((k for ks in keys.values() for k in ks), releases.E12)
+                         if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
+        for run in runs:
+            journal.record(
+                "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
+                released_axes=run.released.value, written=[s.message.hex() for s in run.written],
+                interrupted=run.interrupted,
+            )  # fmt: skip
+        if result.released:
+            journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
+        if self.options.cancel is not None and self.options.cancel.requested:
+            journal.record("interrupted")
+            raise ApplyInterrupted(result)
+        if not result.verified:
+            raise ApplyFailed(result)
+        return result
 
 
 def _keep_applied(plant: Plant) -> None:

@@ -146,7 +146,7 @@ def test_the_error_codes_are_the_codes_with_their_meanings():
 
 def test_every_reading_in_the_code_is_listed():
     readings = section("protocol.md", "Readings")
-    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py") if re.search(r"\(reading\b(?!=)", path.read_text())}
+    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py") if re.search(r"(?<!\w)\(reading\)", path.read_text())}
     assert marked and {name for name in marked if name not in readings} == set()
 
 

@@ -261,8 +261,9 @@ class TerminalProgress:
         self._task = self._bar.add_task(what, total=total)
 
     def advance(self) -> None:
-        if self._bar is not None and self._task is not None:
-            self._bar.advance(self._task)
+        bar, task = self._bar, self._task  # another thread may `stop` it meanwhile: a stopped bar takes the step unseen
+        if bar is not None and task is not None:
+            bar.advance(task)
 
     def note(self, text: str) -> None:
         print(text, flush=True)

@@ -73,14 +73,13 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
 
     def approve(the_plan: PlantPlan) -> bool:
         question = f"Apply {render.plural(the_plan.message_count, 'message')} to {render.plural(len(the_plan.changes), 'module')}?"
-        if auto_approve:
-            return True
         if not sys.stdin.isatty():
             raise UserError(f"{question} — no terminal to ask: pass --auto-approve to apply without asking")
         return ask(f"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move. {question}",
                    options)  # fmt: skip
 
-    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=approve)
+    # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan is whole (`Gates.asks`)
+    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None if auto_approve else approve)
 
 
 def report(result: ApplyResult) -> None:

@@ -7,8 +7,9 @@
   modules alike on any line are planned once (a plant commissioned from factory defaults is one
   plan per line profile), and the broadcast search's memo; with the lock the lines' threads
   take in turn to use them.
-- `Planner`: the plan of each line — its modules' own plans, then its broadcasts where every
-  receiver is known — and the plant's plan from them (`PlantPlan`).
+- `Planner`: the plan of each line — its modules' own plans (each as soon as its module is
+  read: `plan_module`), then its broadcasts where every receiver is known — and the plant's plan
+  from them (`PlantPlan`).
 
 A broadcast reaches every module on the line, so it needs proof that nobody else is there:
 the caller hands `Planner.plan_line` a `Prober` (the line's, under its lock, in this run) that
@@ -128,6 +129,17 @@ class Planner:
         self.lines, self.unset, self.only_read = lines, unset, only_read
         self._cache = PlanCache()
         self._planned: dict[str, _Planned] = {}
+
+    def plan_module(self, wanted: Wanted, actual: ModuleImage) -> None:
+        """Plan one module as soon as it is read, while the rest of its line is read: its own plan is
+        kept (`PlanCache`) for `plan_line`, which then only decides the line's broadcasts."""
+        with self._cache.lock:
+            self._change(self.lines[wanted.bus], wanted, actual)
+
+    def line_changes(self, bus: str) -> list[ModuleChange]:
+        """The changes of a line `plan_line` planned, in the order of its modules."""
+        with self._cache.lock:
+            return list(self._planned[bus].changes)
 
     def plan_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], probe: Prober | None = None) -> None:
         """Plan the modules of one line among `modules`, and its broadcasts — where the plant lists

@@ -110,12 +110,15 @@ def read_all(
     links: dict[str, Link],
     *,
     progress: Callable[[], None] | None = None,
+    each: Callable[[Target, ModuleImage], None] | None = None,
     then: Callable[[str, dict[tuple[str, int], ModuleImage]], None] | None = None,
 ) -> dict[tuple[str, int], ModuleImage]:
     """Read every target, buses in parallel, the modules of one bus one after another.
 
-    `progress()` is called after each module; `then(bus, images)` in the bus's thread as soon as
-    its modules are read (to plan them while other lines are still being read). The first error
+    `progress()` is called after each module; `each(target, image)` in the bus's thread as soon as
+    a module is read (to plan it while the rest of its line is read); `then(bus, images)` as soon as
+    the bus's modules are read (to plan the line, and write it, while other lines are still being
+    read: it may take as long as it needs — the other buses go on). The first error
     on a bus stops that bus; the errors of all buses are raised together (one line each) once
     every bus has finished; an interruption (Ctrl-C) wins over them.
     """
@@ -126,9 +129,12 @@ def read_all(
     def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
         for t in bus_targets:
-            images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by, verified=t.verified)
+            image = images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by,
+                                                             verified=t.verified)  # fmt: skip
             if progress:
                 progress()
+            if each is not None:
+                each(t, image)
         if then is not None and bus_targets:
             then(bus_targets[0].bus, images)
         return images
