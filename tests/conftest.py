@@ -1,5 +1,5 @@
-"""What every test shares: a lock directory of its own, the demo plant on emulators, and the
-hypothesis profile of its tier.
+"""What every test shares: a lock directory of its own, the demo plant on emulators, the
+worktree's wheel, and the hypothesis profile of its tier.
 
 The suite has two tiers: `pytest` runs the fast one (the README's command), `pytest -m soak`
 the tests marked `soak` — many races, seeds or examples of behaviours the fast tier tests with
@@ -14,6 +14,10 @@ found once is found again.
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 from emulated import emulated_plant
@@ -22,6 +26,8 @@ from hypothesis import settings
 settings.register_profile("fast", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("soak", parent=settings.get_profile("fast"), max_examples=2_000)
 settings.load_profile(os.environ.get("PRC3CFG_HYPOTHESIS_PROFILE", "fast"))
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(autouse=True)
@@ -40,3 +46,21 @@ def plant(tmp_path):
     """The demo plant (`plants/demo-line.yaml`) with every bus on an emulator, factory modules."""
     with emulated_plant(tmp_path) as emulated:
         yield emulated
+
+
+#: What a build of the worktree leaves out (.gitignore's): caches, records, and other builds.
+NOT_SOURCES = shutil.ignore_patterns(".git", "__pycache__", "*.egg-info", "build", "dist", ".hypothesis", ".pytest_cache", ".prc3cfg", ".venv")
+
+
+@pytest.fixture(scope="session")
+def wheel(tmp_path_factory) -> Path:
+    """The worktree's wheel, built once a session from a copy of its sources: no build meets
+    another (or an old one's files) in the worktree's build/. Tests using it are in the xdist group
+    "wheel", so one worker builds it once."""
+    sources = tmp_path_factory.mktemp("sources") / "prc3cfg"
+    shutil.copytree(ROOT, sources, ignore=NOT_SOURCES)
+    wheels = tmp_path_factory.mktemp("wheels")
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", wheels, sources], capture_output=True, text=True)
+    assert built.returncode == 0, built.stderr
+    (path,) = wheels.glob("prc3cfg-*.whl")
+    return path

@@ -44,13 +44,10 @@ def test_the_readme_api_example_runs(tmp_path, monkeypatch, capsys):
     assert "6 modules to change" in capsys.readouterr().out
 
 
-def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel(tmp_path):
-    """Build the wheel, install it (with pytest) into a new virtual environment, make a plant
-    repository of the demo plant and the README's test, and run pytest there."""
-    wheels = tmp_path / "wheels"
-    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", wheels, ROOT], capture_output=True, text=True)
-    assert built.returncode == 0, built.stderr
-    (wheel,) = wheels.glob("prc3cfg-*.whl")
+@pytest.mark.xdist_group("wheel")
+def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel(tmp_path, wheel):
+    """Install the wheel (with pytest) into a new virtual environment, make a plant repository of
+    the demo plant and the README's test, and run pytest there."""
     assert "prc3cfg/py.typed" in zipfile.ZipFile(wheel).namelist()  # type checkers read the API's annotations
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", venv], check=True)

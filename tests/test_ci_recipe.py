@@ -10,7 +10,7 @@ one part not here: a small `gh` stands in for it (comments, pull requests, artif
 contents in a folder, `--jq` answered by jq); `actions/checkout` is a clone of the origin and
 `actions/upload-artifact` a copy that keeps the action's rules (an existing name without
 `overwrite`, hidden files without `include-hidden-files`). The install step is run for real once,
-into a virtual environment, with this worktree in place of the pinned release.
+into a virtual environment, with this worktree's wheel in place of the pinned release.
 """
 
 from __future__ import annotations
@@ -502,10 +502,11 @@ def test_drift_on_the_timer_opens_one_pull_request_and_its_merge_applies_nothing
     assert plant.plan_exit() == 0
 
 
-def test_the_install_step_puts_prc3cfg_from_a_virtual_environment_on_the_path(plant):
-    """The one step that needs the network on a runner: here the worktree stands in for the release."""
+@pytest.mark.xdist_group("wheel")
+def test_the_install_step_puts_prc3cfg_from_a_virtual_environment_on_the_path(plant, wheel):
+    """The one step that needs the network on a runner: here the worktree's wheel stands in for the release."""
     event = plant.pull_request()
-    job = plant.run("plan", event, install=str(ROOT))
+    job = plant.run("plan", event, install=str(wheel))
     assert job.ok, job.output()
     venv = plant.tmp / "runner" / "_temp" / str(plant.runs) / "venv"
     assert (venv / "bin" / "prc3cfg").exists()
