@@ -19,3 +19,15 @@ class Interrupted(UserError):
 
     def __init__(self) -> None:
         super().__init__("interrupted")
+
+
+def interruption_within(error: BaseException) -> bool:
+    """Whether `error` is an interruption Python wrapped on its way up: a signal handler's
+    `Interrupted` raised while a class was being made comes out as a RuntimeError ("Error calling
+    __set_name__ …") whose cause it is — still Ctrl-C, not a fault to show as a traceback."""
+    seen: BaseException | None = error
+    while seen is not None:
+        if isinstance(seen, Interrupted | KeyboardInterrupt):
+            return True
+        seen = seen.__cause__
+    return False

@@ -113,7 +113,8 @@ def turnarounds(out: str) -> dict[int, tuple[float, float]]:
 def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
     line = LineSettings(19200, 8, "odd", 1)
     modules = {1: ModuleState.factory(1), 2: ModuleState.factory(2)}
-    with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.020, turnarounds={2: 0.040}, jitter=0.002,
+    # turnarounds of tens of ms, as a PRC 3's: 10 % of them is more than a loaded machine's scheduling delay
+    with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.050, turnarounds={2: 0.100}, jitter=0.004,
                   faults=FaultInjection(seed=1)) as emulator:  # fmt: skip
         result, keys = doctor_line(capsys, emulator, "--baud", "19200", "--modules", "1-2")
     assert result.code == 0, result.err
@@ -121,7 +122,7 @@ def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
                     "turnaround": keys["turnaround"]}  # fmt: skip
     measured = turnarounds(result.out)
     assert set(measured) == {1, 2}
-    for address, turnaround in ((1, 0.020), (2, 0.040)):
+    for address, turnaround in ((1, 0.050), (2, 0.100)):
         median, worst = measured[address]
         assert abs(median - turnaround) <= 0.1 * turnaround, (address, median)
         assert worst >= median
@@ -160,9 +161,9 @@ def test_doctor_finds_every_framing_and_character_format(capsys, framing, parity
 @pytest.mark.soak
 @pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
 def test_doctor_measures_turnarounds_within_ten_percent_on_every_framing(capsys, framing):
-    given = {1: 0.015, 2: 0.030, 3: 0.060}
+    given = {1: 0.080, 2: 0.120, 3: 0.160}  # 10 % of them is more than the gap detection an open-driver line adds (a few ms)
     with Emulator({a: ModuleState.factory(a) for a in given}, framing=framing, line=LineSettings(9600, 8, "even", 1), line_speed=True,
-                  turnarounds=given, jitter=0.003, faults=FaultInjection(seed=3)) as emulator:  # fmt: skip
+                  turnarounds=given, jitter=0.004, faults=FaultInjection(seed=3)) as emulator:  # fmt: skip
         result, _ = doctor_line(capsys, emulator, "--framing", framing, "--baud", "9600", "--parity", "even", "--modules", "1-4",
                                 "--exchanges", "15", "--allow-unchecked-probes")  # fmt: skip
     assert result.code == 0, result.err

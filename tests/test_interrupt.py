@@ -20,6 +20,7 @@ import pytest
 from emulated import emulated_plant
 
 from prc3cfg.core.device import ModuleState
+from prc3cfg.errors import Interrupted, interruption_within
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.plant_files import load_plant
 
@@ -173,6 +174,21 @@ STARTS = {
     "yaml": ("yaml", "validate", DEMO),
     "the emulator's server": ("prc3cfg.shell.emulator.server", "emulator", "serve", "--listen", "127.0.0.1:0"),
 }
+
+
+def test_an_interruption_python_wraps_while_a_class_is_made_is_still_an_interruption():
+    """Ctrl-C while `emulator serve` imported the API once came out as a traceback, exit 1: the
+    handler's `Interrupted`, raised while a dataclass field was set on its class, reached the CLI
+    as a RuntimeError ("Error calling __set_name__"), caught under load by the test below."""
+
+    class Field:
+        def __set_name__(self, owner: type, name: str) -> None:
+            raise Interrupted()  # as the signal handler does, at whatever line runs
+
+    with pytest.raises(RuntimeError) as wrapped:
+        type("Made", (), {"field": Field()})
+    assert interruption_within(wrapped.value)
+    assert not interruption_within(RuntimeError("a fault")) and not interruption_within(ValueError())
 
 
 @pytest.mark.parametrize("point", STARTS)

@@ -29,7 +29,7 @@ except ImportError:  # pragma: no cover - older typer uses click itself
     from click.utils import PacifyFlushWrapper  # type: ignore[import-not-found, no-redef, assignment, unused-ignore]
 
 from prc3cfg import __version__
-from prc3cfg.errors import UserError
+from prc3cfg.errors import UserError, interruption_within
 
 app = typer.Typer(
     no_args_is_help=True,
@@ -150,6 +150,11 @@ def main(argv: list[str] | None = None) -> None:
             print(f"error: {line}", file=sys.stderr)
         sys.exit(error.exit_code)
     except (KeyboardInterrupt, typer.Abort):
+        print("error: interrupted", file=sys.stderr)
+        sys.exit(130)
+    except RuntimeError as error:
+        if not interruption_within(error):
+            raise
         print("error: interrupted", file=sys.stderr)
         sys.exit(130)
     except BrokenPipeError:

@@ -126,12 +126,16 @@ def serve(
     )  # fmt: skip
     stop = threading.Event()
     with emulator:
-        if listen is not None or not pty:
-            host, port = api.listen(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen), rfc2217=rfc2217)
-            print(f"listening on {host}:{port} ({framing}{', rfc2217' if rfc2217 else ''}, modules {', '.join(map(str, sorted(emulator.modules())))})",
-                  flush=True)  # fmt: skip
-        if pty:
-            print(f"pty: {api.open_pty(emulator)}", flush=True)
-        for signum in (signal.SIGINT, signal.SIGTERM):  # started: a signal stops it (until now, it was interrupted)
+        address = api.listen(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen), rfc2217=rfc2217) \
+            if listen is not None or not pty else None  # fmt: skip
+        path = api.open_pty(emulator) if pty else None
+        # started: a signal stops it (until now, it was interrupted) — from before it says so, which
+        # is what a script waits for before it may stop it
+        for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: stop.set())
+        if address is not None:
+            print(f"listening on {address[0]}:{address[1]} ({framing}{', rfc2217' if rfc2217 else ''}, modules "
+                  f"{', '.join(map(str, sorted(emulator.modules())))})", flush=True)  # fmt: skip
+        if path is not None:
+            print(f"pty: {path}", flush=True)
         stop.wait()
