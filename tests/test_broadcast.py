@@ -8,18 +8,22 @@ back, a lost broadcast repaired with addressed writes, and a plan file with broa
 from __future__ import annotations
 
 import json
+import random
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
 from emulated import emulated_plant, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from lossy import Loss
 
-from prc3cfg.core import codec, device
+from prc3cfg.core import codec, device, sharing
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters, default_program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import plan_module
-from prc3cfg.core.sharing import SharingModule, share
+from prc3cfg.core.sharing import SharingMemo, SharingModule, share
 
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
 
@@ -96,6 +100,152 @@ def test_plans_that_take_no_broadcast_are_not_proved_again(monkeypatch):
     shared = share(modules, COST)
     assert shared.broadcasts == () and shared.plans == tuple(m.plan for m in modules)
     assert ran == []  # each was proved when it was planned
+
+
+# -- the search's floors: a set of broadcasts dropped unplanned could never have won --------
+
+FRAMINGS = ("crc16", "open-driver", "stx")
+
+
+def unpruned(modules: list[SharingModule], cost: LineCost, proof_time: float) -> tuple[tuple, tuple]:
+    """The broadcasts and each module's own steps as the search chose them before it had floors
+    (and as it must still choose them): every set it tries priced in full, no bound, no order."""
+    memo = SharingMemo()
+    groups = sharing._candidates(modules)
+    modules = [replace(m, kind=memo.kind(m, cost)) for m in modules]
+
+    def attempt(chosen: list) -> sharing._Attempt | None:
+        return sharing._attempt(tuple(step for group in chosen for step in group), modules, cost, memo)
+
+    nothing = attempt([])
+    added, chosen = nothing, []
+    for group in groups:
+        trial = attempt([*chosen, group])
+        if trial is not None and trial.seconds < added.seconds - 1e-9:
+            added, chosen = trial, [*chosen, group]
+    kept = list(groups)
+    dropped = attempt(kept) or nothing
+    for group in groups:
+        rest = [g for g in kept if g is not group]
+        trial = attempt(rest) or nothing
+        if trial.seconds < dropped.seconds - 1e-9:
+            kept, dropped = rest, trial
+    best = min((nothing, added, dropped), key=lambda priced: priced.seconds + (proof_time if priced.broadcasts else 0.0))
+    return best.broadcasts, tuple(own.steps for own in best.owns) if best.broadcasts else ()
+
+
+def valid_under(program: Program, system: SystemParameters) -> Program:
+    return replace(program, P=min(program.P, system.S1), V=max(min(program.V, system.S4), system.S5))
+
+
+def a_program(rnd: random.Random, system: SystemParameters) -> Program:
+    """A program `system` accepts, its values now and then ones an init or a clamping leaves."""
+    if rnd.random() < 0.2:
+        return default_program(system)
+    return Program(P=rnd.choice([system.S1, default_program(system).P, rnd.randint(0, system.S1)]),
+                   V=rnd.choice([system.S4, system.S5, rnd.randint(system.S5, system.S4)]),
+                   Vr=rnd.choice([0, rnd.randint(-600, 600)]), T=rnd.choice([0, rnd.randint(0, 600)]),
+                   F1=rnd.choice([0, 1010]), F2=rnd.choice([0, rnd.randint(0, 1999)]), A=rnd.choice([0, 0, rnd.randint(0, 64)]))  # fmt: skip
+
+
+@st.composite
+def lines_to_share(draw: st.DrawFn) -> tuple[list[SharingModule], LineCost, float]:
+    """A few modules that take one profile — some with values of their own, some holding it
+    already, some factory-fresh or holding programs of their own — on any framing. (A seed, not
+    hypothesis's own random: its draws lean to the first of each choice, and these lines need all.)"""
+    rnd = random.Random(draw(st.integers(0, 2**32)))
+    cost = LineCost.of(draw(st.sampled_from(FRAMINGS)), LineSettings(), rnd.choice([0.0, 0.010, 0.050]), rnd.choice([0.020, 0.100]))
+    systems = [DEFAULT_SYSTEM, replace(DEFAULT_SYSTEM, S1=2000, S4=500), replace(DEFAULT_SYSTEM, S1=1500, S2=200, S5=40)]
+    system = rnd.choice(systems)
+    size = rnd.choice([1, 4, 12, 30])
+    first = rnd.randint(1, 65 - size)
+    managed = range(first, first + size) if rnd.random() < 0.5 else rnd.sample(range(1, 65), size)
+    cleared = rnd.choice([0, 0, size // 2, size])  # programs back to what an init leaves
+    profile = {n: default_program(system) if i < cleared else a_program(rnd, system) for i, n in enumerate(managed)}
+    modules = []
+    for address in rnd.sample(range(1, 31), rnd.randint(2, 5)):
+        wanted = system if rnd.random() < 0.8 else rnd.choice(systems)
+        desired = {}
+        for n, p in profile.items():
+            field = rnd.choice(PROGRAM_FIELDS)
+            desired[n] = valid_under(p if rnd.random() < 0.8 else p.with_field(field, getattr(a_program(rnd, wanted), field)), wanted)
+        held = rnd.choice([DEFAULT_SYSTEM, wanted, rnd.choice(systems)])
+        kind = rnd.choice(["factory", "desired", "own", "drifted"])
+        actual = []
+        for n in range(1, 65):
+            if n not in desired:
+                actual.append(None if rnd.random() < 0.3 else valid_under(a_program(rnd, held), held))
+            elif kind == "factory":
+                actual.append(default_program(held))
+            elif kind == "own" or (kind == "drifted" and rnd.random() < 0.3):
+                actual.append(valid_under(a_program(rnd, held), held))
+            else:
+                actual.append(valid_under(desired[n], held))
+        actual_image = ModuleImage(address, held, tuple(actual))
+        desired_image = ModuleImage(address, wanted, tuple(desired.get(n) for n in range(1, 65)))
+        modules.append(SharingModule(actual_image, desired_image, plan_module(actual_image, desired_image, cost)))
+    return modules, cost, rnd.choice([0.0, 0.5, 5.0])
+
+
+def check_floors_and_choice(modules: list[SharingModule], cost: LineCost, proof_time: float) -> None:
+    """Behind the sets of candidate groups a search tries (none, each, all, all but each, the first
+    few), no module's floor of its own steps or of its verification is above what they cost there;
+    and the search with floors and bounds chooses what the unpruned one does."""
+    memo = SharingMemo()
+    groups = sharing._candidates(modules)
+    kinds = [replace(m, kind=memo.kind(m, cost)) for m in modules]
+    floors = sharing._Floors(groups, kinds, cost)
+    every = (1 << len(groups)) - 1
+    each = range(len(groups))
+    tried = {0, every} | {1 << i for i in each} | {every & ~(1 << i) for i in each} | {(1 << i) - 1 for i in each}
+    for chosen in sorted(tried):
+        priced = sharing._attempt(tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g), kinds, cost, memo)
+        if priced is not None:
+            for floor, own in zip(floors.modules, priced.owns, strict=True):
+                steps, verification = floor.parts(floors.chosen(chosen))
+                assert steps <= own.bus_time + 1e-12 and verification <= own.seconds - own.bus_time + 1e-12
+            assert floors.total(chosen) <= priced.seconds + 1e-9
+    shared = share(modules, cost, proof_time=proof_time)
+    broadcasts, owns = unpruned(modules, cost, proof_time)
+    assert shared.broadcasts == broadcasts
+    assert tuple(p.steps[len(broadcasts) :] for p in shared.plans) == (owns or tuple(m.plan.steps for m in modules))
+
+
+@settings(max_examples=30, suppress_health_check=[HealthCheck.too_slow])
+@given(lines_to_share())
+def test_no_set_of_broadcasts_is_dropped_that_would_have_won(line_: tuple) -> None:
+    check_floors_and_choice(*line_)
+
+
+@pytest.mark.soak
+@settings(suppress_health_check=[HealthCheck.too_slow])
+@given(lines_to_share())
+def test_no_set_of_broadcasts_is_dropped_that_would_have_won_soak(line_: tuple) -> None:
+    check_floors_and_choice(*line_)
+
+
+def test_a_line_of_modules_with_programs_of_their_own_is_not_planned_behind_sets_that_cannot_win(monkeypatch):
+    """A profile's system block, P, V and T of 16 programs for 30 modules that each hold programs
+    of their own: every module is its own kind. Sets of broadcasts that leave a field to write on
+    every module cannot beat all four groups — known from their floors, without planning them."""
+    rnd = random.Random(3)
+    system = replace(DEFAULT_SYSTEM, S1=2000, S4=500)
+    profile = {n: Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(1, 50)) for n in range(1, 17)}
+    modules = []
+    for address in range(1, 31):
+        actual = ModuleImage.factory(address).with_programs({n: Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(1, 50))
+                                                             for n in profile})  # fmt: skip
+        desired = replace(actual, system=system).with_programs(profile)
+        desired = replace(desired, programs=tuple(p if n in profile else None for n, p in enumerate(desired.programs, 1)))
+        modules.append(SharingModule(actual, desired, plan_module(actual, desired, COST)))
+    planned: list[int] = []
+    cheapest = sharing.cheapest_messages
+    monkeypatch.setattr(sharing, "cheapest_messages", lambda *args: planned.append(1) or cheapest(*args))
+    shared = share(modules, COST)
+    assert [s.message.ID for s in shared.broadcasts] == [0x20, 0x40, 0x40, 0x41, 0x41, 0x43, 0x43]
+    assert len(planned) == 30  # the four groups; no other set is planned on any module
+    monkeypatch.setattr(sharing, "cheapest_messages", cheapest)
+    assert unpruned(modules, COST, 0.0)[0] == shared.broadcasts
 
 
 # -- a full line of 30 modules on a real emulator ------------------------------------------

@@ -100,7 +100,10 @@ class PlanCache:
         key = _PlanKey(sharing.alike(actual, desired, cost), system_unset)
         found = self._plans.get(key)
         if found is None:
-            found = self._plans[key] = plan_module(actual, desired, cost, system_unset=system_unset)
+            found = plan_module(actual, desired, cost, system_unset=system_unset)
+            # the desired programs themselves where predicted alike: the cache holds a plan of every module
+            programs = tuple(want if want == have else have for have, want in zip(found.predicted.programs, desired.programs))
+            found = self._plans[key] = replace(found, predicted=replace(found.predicted, programs=programs))
         if found.address == actual.address:
             return found
         return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))

@@ -24,19 +24,24 @@ Candidates are the values every module of the line is to hold alike: the system 
 then per field (P, V, Vr, T, F1, F2, A) the programs whose desired value is the same on every
 module and differs on at least two of them — sent as 40h..46h items. Groups that pay only
 together (P and V, which one 33h run writes per module) are found by starting from all of
-them and dropping what does not pay, beside adding them one by one; the cheaper wins. Pure.
+them and dropping what does not pay, beside adding them one by one; the cheaper wins. A set
+of broadcasts is planned on every module only where it could win: what each module must cost
+behind it whatever its own steps (`_Floor`: the words of the values it must still send, the
+verification it must pay) drops the others unplanned — a line of modules that each hold
+programs of their own is planned behind the set that wins, and hardly another. Pure.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
+from itertools import accumulate
 from math import inf
 from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, SystemParameters
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
 from prc3cfg.core.planner import (
     ModulePlan,
     PlanVerificationError,
@@ -48,10 +53,21 @@ from prc3cfg.core.planner import (
     run_steps,
     summarise,
 )
-from prc3cfg.core.verification import verification_time
+from prc3cfg.core.verification import read_messages, verification_time
 
 #: Items per message of the per-field messages (40h..45h; 46h carries 31).
 FIELD_ITEMS = codec.MAX_FIELD_ITEMS
+#: A set of broadcasts wins by more than this; a floor drops one unplanned only where it is above
+#: the bound by more than this (floors and prices add the same figures in other orders).
+_WINS_BY = 1e-9
+_FLOOR_MARGIN = 1e-7
+#: The program fields a message carries as one word each (all but A), and the most words of them
+#: one message carries (64 bytes, its ID word among them).
+_WORD_FIELDS = ("P", "V", "Vr", "T", "F1", "F2")
+_WORDS_PER_MESSAGE = codec.MAX_MESSAGE_BYTES // 2 - 1
+#: The additions are checked for being out of reach (`_Search.add`) only where at most this many
+#: sets are left to them: beyond, the check costs more than it saves.
+_REACH_LIMIT = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,27 +125,19 @@ def share(modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo | 
     `memo` (shared by the lines of a plant) plans, proves and prices each kind of module once per
     set of broadcasts: modules alike but for their address cost the same (the address counts only
     on stx, where it can change a frame's stuffing), so a line of modules alike costs one module's
-    search. A set of broadcasts that cannot beat the best found is dropped at the first module
-    that makes it dearer."""
+    search. A set of broadcasts that cannot beat the best found is dropped unplanned where what
+    its modules must cost at least (`_Floors`) says so, else at the first module that makes it
+    dearer; the drops are searched first, so that the additions stop as soon as nothing they can
+    still reach could beat what the drops found."""
     memo = SharingMemo() if memo is None else memo
     groups = _candidates(modules)
     modules = [replace(m, kind=memo.kind(m, cost)) for m in modules]
-    nothing = _attempt((), modules, cost, memo)
+    search = _Search(groups, modules, cost, memo)
+    nothing = search.attempt(0)
     assert nothing is not None  # without broadcasts, every module's own plan stands
-    added = nothing
-    for group in groups:  # add while it pays
-        trial = _attempt(added[0] + group, modules, cost, memo, bound=added[2] - 1e-9)
-        if trial is not None and trial[2] < added[2] - 1e-9:
-            added = trial
-    kept = list(groups)
-    dropped = _attempt(tuple(step for group in kept for step in group), modules, cost, memo) or nothing
-    for group in groups:  # from all of them, drop while that pays
-        rest = [g for g in kept if g is not group]
-        # a bound only where a set the modules cannot take (`nothing` in its place) could not win either
-        bound = dropped[2] - 1e-9 if nothing[2] >= dropped[2] - 1e-9 else inf
-        trial = _attempt(tuple(step for g in rest for step in g), modules, cost, memo, bound) or nothing
-        if trial[2] < dropped[2] - 1e-9:
-            kept, dropped = rest, trial
+    dropped, dropped_set = search.drop(nothing)
+    best = min(nothing.seconds, dropped.seconds + (proof_time if dropped.broadcasts else 0.0))
+    added = search.add(nothing, best, dropped_set, proof_time)
     broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2] + (proof_time if priced[0] else 0.0))
     received: dict[SystemParameters, tuple[Step, ...]] = {}  # the broadcasts, summarised as each module sees them
     plans = tuple(_plan(module, own, received, broadcasts) for module, own in zip(modules, owns)) if broadcasts else tuple(m.plan for m in modules)
@@ -175,16 +183,249 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     return groups
 
 
+class _Search:
+    """The broadcast search of one line. A set of broadcasts is a set of candidate groups: a bit per
+    group, in `groups`' order, and its steps theirs in that order."""
+
+    def __init__(self, groups: list[tuple[Step, ...]], modules: list[SharingModule], cost: LineCost, memo: SharingMemo) -> None:
+        self.groups, self.modules, self.cost, self.memo = groups, modules, cost, memo
+        self.floors = _Floors(groups, modules, cost)
+
+    def attempt(self, chosen: int, bound: float = inf) -> _Attempt | None:
+        steps = tuple(step for i, group in enumerate(self.groups) if chosen >> i & 1 for step in group)
+        return _attempt(steps, self.modules, self.cost, self.memo, bound, self.floors.of(chosen) if bound < inf else ())
+
+    def drop(self, nothing: _Attempt) -> tuple[_Attempt, int]:
+        """From all the groups, drop while that pays: the cheapest set found, priced, and its bits."""
+        kept = every = (1 << len(self.groups)) - 1
+        found = self.attempt(every)
+        dropped, dropped_set = (nothing, 0) if found is None else (found, every)
+        for i in range(len(self.groups)):
+            rest = kept & ~(1 << i)
+            # a bound only where a set the modules cannot take (`nothing` in its place) could not win either
+            bound = dropped.seconds - _WINS_BY if nothing.seconds >= dropped.seconds - _WINS_BY else inf
+            trial = self.attempt(rest, bound)
+            trial, trial_set = (nothing, 0) if trial is None else (trial, rest)
+            if trial.seconds < dropped.seconds - _WINS_BY:
+                kept, dropped, dropped_set = rest, trial, trial_set
+        return dropped, dropped_set
+
+    def add(self, nothing: _Attempt, best: float, dropped_set: int, proof_time: float) -> _Attempt:
+        """Add the groups one by one while they pay — or `nothing`, as soon as no set the additions
+        can still end at could be chosen: none can cost `best` or less (what no broadcast or the
+        drops cost, the proof included), but the drops' own set, which is then chosen alike."""
+        added, chosen = nothing, 0
+        for i in range(len(self.groups)):
+            if self._out_of_reach(chosen, added.seconds, i, best, dropped_set, proof_time):
+                return nothing
+            trial = self.attempt(chosen | 1 << i, bound=added.seconds - _WINS_BY)
+            if trial is not None and trial.seconds < added.seconds - _WINS_BY:
+                added, chosen = trial, chosen | 1 << i
+        return added
+
+    def _out_of_reach(self, chosen: int, seconds: float, first: int, best: float, dropped_set: int, proof_time: float) -> bool:
+        """Whether the additions, at `chosen` (priced: `seconds`) with the groups from `first` on
+        still to try, can only end at a set that is not chosen: one dearer than `best` — by its
+        floor, where it is not priced — or the drops' own."""
+        if chosen not in (0, dropped_set) and seconds + proof_time <= best:
+            return False
+        rest = len(self.groups) - first
+        if 1 << rest > _REACH_LIMIT:
+            return False
+        for more in range(1, 1 << rest):
+            reached = chosen | more << first
+            if reached != dropped_set and self.floors.total(reached) + proof_time <= best + _FLOOR_MARGIN:
+                return False
+        return True
+
+
+class _Group(NamedTuple):
+    """A candidate group as the floors see it: whether it writes the system block, and the word
+    field and programs its items write (`field` None: the system block, or 46h's jump addresses)."""
+
+    system: bool
+    field: str | None
+    programs: int  # a bit per program, program 1 the lowest
+
+    @classmethod
+    def of(cls, steps: tuple[Step, ...]) -> _Group:
+        messages = [step.message for step in steps]
+        field = messages[0].FIELD if isinstance(messages[0], codec.WriteField) else None
+        return cls(any(m.RELEASES_AXES for m in messages), field, _bits(n for m in messages for n in m.touched_programs()))
+
+
+class _Chosen(NamedTuple):
+    """A set of groups as the floors see it: the system block among them, what each word field's
+    group writes, and every program they write."""
+
+    system: bool
+    fields: dict[str, int]
+    programs: int
+
+
+class _Floors:
+    """What each module of a line must cost at least behind a set of broadcasts, its plan not made
+    (`_Floor`), by set; the line's total with the broadcasts. Made when first asked: a line
+    whose search needs no bound needs no floor."""
+
+    def __init__(self, groups: list[tuple[Step, ...]], modules: list[SharingModule], cost: LineCost) -> None:
+        self._groups = [_Group.of(group) for group in groups]
+        self._broadcast = [sum(cost.broadcast_time(step.message) for step in group) for group in groups]
+        self._line, self._cost = modules, cost
+        self._modules: list[_Floor] = []
+        self._of: dict[int, tuple[float, ...]] = {}
+
+    @property
+    def modules(self) -> list[_Floor]:
+        """Each module's floor, in order; modules alike share one."""
+        if not self._modules:
+            floors: dict[int | None, _Floor] = {}
+            for module in self._line:
+                if module.kind not in floors:
+                    floors[module.kind] = _Floor(module, self._cost)
+            self._modules = [floors[module.kind] for module in self._line]
+        return self._modules
+
+    def chosen(self, chosen: int) -> _Chosen:
+        """The groups `chosen` as the floors see them."""
+        groups = [g for i, g in enumerate(self._groups) if chosen >> i & 1]
+        programs = 0
+        for g in groups:
+            programs |= g.programs
+        return _Chosen(any(g.system for g in groups), {g.field: g.programs for g in groups if g.field is not None}, programs)
+
+    def of(self, chosen: int) -> tuple[float, ...]:
+        """Each module's floor behind the groups `chosen`."""
+        if chosen not in self._of:
+            seen = self.chosen(chosen)
+            by_kind: dict[int, float] = {}  # modules alike have one floor
+            for floor in self.modules:
+                if id(floor) not in by_kind:
+                    by_kind[id(floor)] = floor.seconds(seen)
+            self._of[chosen] = tuple(by_kind[id(floor)] for floor in self.modules)
+        return self._of[chosen]
+
+    def total(self, chosen: int) -> float:
+        """The line's floor behind the groups `chosen`: their broadcasts, and every module's floor."""
+        return sum(t for i, t in enumerate(self._broadcast) if chosen >> i & 1) + sum(self.of(chosen))
+
+
+class _Floor:
+    """What a module must cost at least behind broadcasts, whatever its own steps: every plan the
+    proof passes (`run_steps`) ends at its desired image, with at most one 10h/20h, and writes no
+    program it does not manage — so, proven without planning:
+
+    - each program field a word carries (all but the jump address: one word in 21h, 32h, 33h and
+      40h..45h alike) that differs after the broadcasts, and whose desired value no init,
+      clamping or link can leave, costs a word of a message of its own steps — and each message
+      its ID word and the line's turnaround;
+    - a desired system block the broadcasts do not write costs the cheapest 10h/20h to it;
+    - the verifying read-back (`verification.reach`) reads the system block where one is written
+      — and then every program whose prediction differs from its read-back: each managed one
+      that differs, each other one that the new system block clamps — and what the broadcasts
+      write, and what the own steps write: at least what they must, at most what is managed.
+      Where the first already come to every program managed, what it reads is known exactly;
+      else only its 50h is.
+    """
+
+    __slots__ = ("_address", "_changed", "_cost", "_managed", "_needs", "_reads", "_system_differs", "_system_write")
+
+    def __init__(self, module: SharingModule, cost: LineCost) -> None:
+        actual, desired = module.actual, module.desired
+        system = desired.system
+        defaults = [default_program(s) for s in (actual.system, system)]
+        free = {"P": {p.P for p in defaults} | {system.S1}, "V": {p.V for p in defaults} | {system.S4, system.S5}}
+        differing = [(n, have, want) for n, (have, want) in enumerate(zip(actual.programs, desired.programs), 1)
+                     if have is not None and want is not None and have != want]  # fmt: skip
+        needs = []
+        for field in _WORD_FIELDS:
+            left = free.get(field, {0})
+            bits = _bits(n for n, have, want in differing if getattr(have, field) != getattr(want, field) and getattr(want, field) not in left)
+            if bits:
+                needs.append((field, bits))
+        self._needs: tuple[tuple[str, int], ...] = tuple(needs)  # (field, the programs whose value there takes a word)
+        self._managed = _bits(n for n, p in enumerate(desired.programs, 1) if p is not None)
+        self._system_differs = actual.system != system
+        self._changed = self._predicted_changes(module) if self._system_differs else 0  # what differs from the read-back after a system step
+        writes = [codec.WriteSystem(system), *((codec.InitSystem(),) if system == DEFAULT_SYSTEM else ())] if self._system_differs else []
+        self._system_write = min((cost.message_time(desired.address, m) for m in writes), default=0.0)
+        self._address, self._cost = actual.address, cost
+        self._reads: dict[tuple[int, bool], float] = {}
+
+    @staticmethod
+    def _predicted_changes(module: SharingModule) -> int | None:
+        """The programs whose prediction differs from the read-back where a system step goes: the
+        managed ones that differ, the others as the desired system block clamps them (None: the
+        module refuses it)."""
+        actual, desired = module.actual, module.desired
+        try:
+            clamped = after(actual, [codec.WriteSystem(desired.system)])
+        except codec.Rejected:
+            return None
+        return _bits(n for n, (have, want, then) in enumerate(zip(actual.programs, desired.programs, clamped.programs), 1)
+                     if have is not None and (want if want is not None else then) != have)  # fmt: skip
+
+    def seconds(self, chosen: _Chosen) -> float:
+        """The floor behind the groups `chosen`."""
+        own, verification = self.parts(chosen)
+        return own + verification
+
+    def parts(self, chosen: _Chosen) -> tuple[float, float]:
+        """The floor behind the groups `chosen`: of the own steps' bus time, of the verification's."""
+        cost = self._cost
+        words, written = 0, chosen.programs
+        for field, bits in self._needs:
+            left = bits & ~chosen.fields.get(field, 0)
+            words += left.bit_count()
+            written |= left
+        messages = -(-words // _WORDS_PER_MESSAGE)
+        own = (words + messages) * 2 * cost.line.char_time + messages * cost.turnaround
+        if self._system_differs and not chosen.system:
+            own += self._system_write
+        system = chosen.system or self._system_differs
+        if system:
+            if self._changed is None:
+                return own, self._read(0, True)
+            written |= self._changed
+        if written & self._managed != self._managed:
+            return own, self._read(0, True) if system else 0.0
+        return own, self._read(written, system)
+
+    def _read(self, programs: int, system: bool) -> float:
+        """What reading back `programs` (and the system block) costs, as `verification_time` prices it."""
+        key = (programs, system)
+        if key not in self._reads:
+            reads = read_messages(_numbers(programs))[0 if system else 1 :]
+            self._reads[key] = sum(self._cost.message_time(self._address, m) for m in reads)
+        return self._reads[key]
+
+
+def _bits(numbers: Iterable[int]) -> int:
+    """A set of program numbers as bits, program 1 the lowest."""
+    bits = 0
+    for n in numbers:
+        bits |= 1 << (n - 1)
+    return bits
+
+
+def _numbers(bits: int) -> list[int]:
+    return [n for n in PROGRAM_NUMBERS if bits >> (n - 1) & 1]
+
+
 def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo,
-             bound: float = inf) -> _Attempt | None:  # fmt: skip
+             bound: float = inf, floors: Sequence[float] = ()) -> _Attempt | None:  # fmt: skip
     """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
     verifying read-back); None where a module cannot take the broadcasts. Each kind of module is
-    priced once (`memo`); where the bus time reaches `bound` the rest is not priced: the bus time is
-    then infinite."""
+    priced once (`memo`); where the bus time reaches `bound` — or would, with what the modules not
+    priced yet cost at least (`floors`, one per module, if given) — the rest is not priced: the
+    bus time is then infinite."""
     messages = tuple(step.message for step in broadcasts)
     total = sum(cost.broadcast_time(message) for message in messages)
+    left = list(accumulate(reversed(floors), initial=0.0))[::-1] if floors else [0.0] * (len(modules) + 1)
+    if total + left[0] > bound + _FLOOR_MARGIN:
+        return _Attempt(broadcasts, (), inf)
     owns = []
-    for module in modules:
+    for index, module in enumerate(modules, start=1):
         key = (messages, module.kind)
         if key not in memo.owns:
             memo.owns[key] = _priced(broadcasts, module, cost)
@@ -193,7 +434,7 @@ def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cos
             return None
         owns.append(own)
         total += own.seconds
-        if total >= bound:
+        if total >= bound or total + left[index] > bound + _FLOOR_MARGIN:
             return _Attempt(broadcasts, (), inf)
     return _Attempt(broadcasts, tuple(owns), total)
 

@@ -32,3 +32,13 @@ def test_a_module_that_reported_e12_is_planned_apart():
     plain = cache.plan(*wanting_a_new_position(1), cost)
     unset = cache.plan(*wanting_a_new_position(2), cost, system_unset=True)
     assert unset.steps is not plain.steps
+
+
+def test_a_cached_plan_holds_the_desired_image_s_programs_not_copies_of_them():
+    """The cache keeps a plan of every module of the plant (32 × 30 modules holding programs of
+    their own: 960 predictions of 64 programs): each predicted program that is the desired one is
+    the desired image's own object, not another copy of it."""
+    actual, desired = wanting_a_new_position(1)
+    plan = PlanCache().plan(actual, desired, LineCost.of("crc16", LineSettings(), 0.010, 0.020))
+    assert plan.predicted.programs == desired.programs
+    assert all(p is w for p, w in zip(plan.predicted.programs, desired.programs, strict=True))
