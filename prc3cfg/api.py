@@ -62,7 +62,7 @@ from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
-from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.cancel import Cancellation, main_thread_only
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
 from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
@@ -771,7 +771,8 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
 
     unread: tuple[str, ...] = ()
     shown: list[Future[None]] = []
-    with options.deferred(), ThreadPoolExecutor(max_workers=1) as showing:  # from the first read to the end of the records, a signal waits its turn
+    # from the first read to the end of the records, a signal waits its turn
+    with options.deferred(), ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as showing:
         writing.phases.reading(len(wanted.targets))
         try:
             read_all(wanted.targets, links, progress=writing.phases.read, each=_planning_each(planner, want), then=line)

@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 from emulated import emulated_plant
 
+from prc3cfg import api
 from prc3cfg.core.device import ModuleState
 from prc3cfg.errors import Interrupted, interruption_within
 from prc3cfg.shell.locks import line_keys, line_lock
@@ -47,17 +48,19 @@ def prc3cfg(tmp_path: Path, *args: object, **popen) -> subprocess.Popen:
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_for_every_module(tmp_path, signum):
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release",
+        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
-        out = []
-        for line in process.stdout:
-            out.append(line)
-            if line.startswith("Snapshot of the modules before writing"):
-                process.send_signal(signum)  # the first writes are on the line
-                break
-        rest, err = process.communicate(timeout=60)
-        out = "".join(out) + rest
+        with fifo.open() as trace:
+            for line in trace:
+                _, _, direction, frame = line.rstrip("\n").split("\t")[:4]
+                if direction == ">" and int(frame[6:8], 16) < 0x50:  # a crc16 request (A5h, address, length, ID): a write
+                    process.send_signal(signum)  # the first write is on the line: the lines write on their own now
+                    break
+            drain(trace)
+            out, err = process.communicate(timeout=60)
         assert process.returncode == 130
         assert err.splitlines()[-1] == "error: interrupted"
         assert sum(line.startswith("error:") for line in err.splitlines()) == 1
@@ -204,3 +207,35 @@ def test_a_signal_while_starting_is_one_line_and_exit_130(tmp_path, signum, poin
             assert (code, lines) == (0, []), lines
         else:
             assert (code, lines) == (130, ["error: interrupted"])
+
+
+class Masks:
+    """A `Progress` that notes, at every step reported, whether the reporting thread could be the
+    one a SIGINT or SIGTERM is delivered to."""
+
+    def __init__(self) -> None:
+        self.workers: list[bool] = []  # per step reported from a thread other than the main one: it takes signals
+
+    def start(self, what: str, total: int) -> None:
+        pass
+
+    def advance(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            self.workers.append(not {signal.SIGINT, signal.SIGTERM} <= signal.pthread_sigmask(signal.SIG_BLOCK, []))
+
+    def note(self, text: str) -> None:
+        pass
+
+
+@pytest.mark.parametrize("how", ["a line at a time", "the whole plan"])
+def test_only_the_main_thread_takes_a_signal(tmp_path, how):
+    """Python runs a signal handler in the main thread only, and only once it runs again: a signal
+    the kernel gave a thread that reads or writes a line left the main thread asleep in its wait
+    for them — Ctrl-C did nothing until every line was written (an apply that "stopped after the
+    exchange in flight" wrote all of it). Every thread that works a line blocks both signals, so
+    the kernel gives them to the main thread, whose wait they end at once."""
+    with emulated_plant(tmp_path) as plant:
+        masks = Masks()
+        gates = api.Gates(allow_axis_release=True, approve=(lambda _: True) if how == "the whole plan" else None)
+        api.apply(api.load(plant.path), gates=gates, options=api.LineOptions(progress=masks)).told()
+    assert masks.workers and not any(masks.workers)  # steps were reported from worker threads, none of which takes a signal

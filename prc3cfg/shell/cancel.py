@@ -44,6 +44,14 @@ def _exit_interrupted(signum: int, frame: object) -> None:
     os._exit(Interrupted.exit_code)
 
 
+def main_thread_only() -> None:
+    """A worker thread's first call: SIGINT and SIGTERM are not delivered to it. Python runs a
+    handler in the main thread only, once that runs again — a signal the kernel gave a thread that
+    reads or writes a line left the main thread asleep in its wait for them, and Ctrl-C did nothing
+    until they were done; blocked here, the kernel gives it to the main thread, whose wait it ends."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+
+
 class Cancellation:
     """The cancel event of one command and the phase that decides what a signal does."""
 

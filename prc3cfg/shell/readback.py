@@ -27,6 +27,7 @@ from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import PROGRAM_COUNT, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters
 from prc3cfg.core.verification import read_messages
 from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Link
 
 
@@ -142,7 +143,7 @@ def read_all(
     result: dict[tuple[str, int], ModuleImage] = {}
     errors = []
     interrupted = False
-    with ThreadPoolExecutor(max_workers=max(1, len(per_bus))) as pool:
+    with ThreadPoolExecutor(max_workers=max(1, len(per_bus)), initializer=main_thread_only) as pool:
         for future in [pool.submit(read_bus, bus_targets) for bus_targets in per_bus.values()]:
             try:
                 result.update(future.result())

@@ -67,6 +67,7 @@ from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Frame, get_fra
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received as uart_received
 from prc3cfg.errors import UserError
+from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.emulator.bus import BROADCAST, EmulatedBus
 from prc3cfg.shell.emulator.state import COMPACT_EVERY, Store, cannot_save
 
@@ -332,6 +333,7 @@ class Emulator:
         """Run `target` in a thread that is forgotten when it ends; RuntimeError if none can start."""
 
         def run() -> None:
+            main_thread_only()  # an emulator in a command's process (emulator://) takes none of its signals
             try:
                 target()
             finally:
