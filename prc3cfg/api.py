@@ -73,7 +73,7 @@ from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseu
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.readback import Target, read_all, read_module
+from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, applied_lines, check_writable, forget_applied, save_applied
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
@@ -109,8 +109,9 @@ class ApplyFailed(UserError):
             said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
                         f"prc3cfg restore {result.snapshot}")  # fmt: skip
         else:
-            said.append(f"nothing was written on the lines above; the other {plural(len(result.runs), 'module')} were written "
-                        f"and verified (see above) — restore them with: prc3cfg restore {result.snapshot}")  # fmt: skip
+            written = len(result.runs)
+            said[-1] += (f"; the {plural(written, 'module')} of the other lines {'was' if written == 1 else 'were'} written and "
+                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: prc3cfg restore {result.snapshot}")  # fmt: skip
         super().__init__("\n".join(said))
         self.result = result
 
@@ -189,8 +190,8 @@ class ApplyResult:
     records: releases.Releases | None = None
     #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
     took: dict[str, float] = field(default_factory=dict)
-    #: lines written as soon as their own plan was whole, while another's read-back or plan failed:
-    #: what stopped that one, one line each (nothing was written there)
+    #: lines written as soon as their own plan was whole, while another's read-back or plan failed (or
+    #: Ctrl-C stopped it): what stopped that one, one line each, saying nothing was written there
     unread: tuple[str, ...] = ()
 
     def told(self) -> None:
@@ -778,10 +779,12 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
         except Interrupted:
             if not writing.runs:
                 raise
-        except UserError as error:
+            unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
+                           for bus in sorted(reading - set(planned)))  # fmt: skip
+        except LinesFailed as error:
             if not writing.runs:
                 raise
-            unread = tuple(str(error).splitlines())
+            unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
         for future in shown:
             future.result()
         if options.cancel is not None and not writing.runs:
