@@ -760,15 +760,20 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
             read, done = dict(images), set(planned)
         return replace(planner.plan([w for w in want if w.bus in done], read), reading=wanted.reading(chosen, read))
 
+    def show() -> None:
+        """The plant's plan shown (once), beside the writes."""
+        with lock:
+            if not shown:
+                shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show)))
+
     def line(bus: str, read: dict[Key, ModuleImage]) -> None:
         planner.plan_line(bus, want, read, prober(links[bus], buses[bus]))
         with lock:
             images.update(read)
             planned.append(bus)
             whole = len(planned) == len(reading)
-        if whole:  # shown beside the writes: the line does not wait for the plan's rendering
-            shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show)))
-        writing.write(planner.line_changes(bus), read, True)
+        # the plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
+        writing.write(planner.line_changes(bus), read, True, started=show if whole else None)
 
     unread: tuple[str, ...] = ()
     shown: list[Future[None]] = []
@@ -785,6 +790,8 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
             if not writing.runs:
                 raise
             unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
+        if len(planned) == len(reading):
+            show()  # not yet, when no write of the last line was acknowledged
         for future in shown:
             future.result()
         if options.cancel is not None and not writing.runs:
@@ -848,12 +855,15 @@ class _Writing:
         if self._whole and self._taken is not None and len(self._taken.images) == modules:
             self.options.progress.note(f"Snapshot of the modules before writing: {self.snapshot}")
 
-    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], allow_axis_release: bool) -> None:
+    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], allow_axis_release: bool,
+              started: Callable[[], None] | None = None) -> None:  # fmt: skip
         """Write and verify these changes — one line's, or every line's — once their modules are in
         the snapshot and the journal. Consent is per module: the releases of these changes, if allowed
-        (a repair may not add one)."""
+        (a repair may not add one). `started()` at each write acknowledged, or at once with none to make."""
         runs = self._runs(changes)
         if not runs:
+            if started is not None:
+                started()
             return
         with self._lock:
             if self._taken is None:
@@ -868,7 +878,12 @@ class _Writing:
         self.journal.record("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
                             modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
         consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
-        execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=self.phases.wrote,
+        def wrote() -> None:
+            self.phases.wrote()
+            if started is not None:
+                started()
+
+        execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=wrote,
                 written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
 
     def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
