@@ -754,6 +754,7 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
     images: dict[Key, ModuleImage] = {}
     planned: list[str] = []
     reading = {target.bus for target in wanted.targets}
+    whole_at: float | None = None  # when the last line's plan was whole
 
     def the_plan() -> PlantPlan:
         with lock:
@@ -761,17 +762,20 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
         return replace(planner.plan([w for w in want if w.bus in done], read), reading=wanted.reading(chosen, read))
 
     def show() -> None:
-        """The plant's plan shown (once), beside the writes."""
+        """The plant's plan shown (once), beside the writes; the writing phase began when it became whole."""
         with lock:
             if not shown:
-                shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show)))
+                shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show, whole_at)))
 
     def line(bus: str, read: dict[Key, ModuleImage]) -> None:
+        nonlocal whole_at
         planner.plan_line(bus, want, read, prober(links[bus], buses[bus]))
         with lock:
             images.update(read)
             planned.append(bus)
             whole = len(planned) == len(reading)
+            if whole:
+                whole_at = time.monotonic()
         # the plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
         writing.write(planner.line_changes(bus), read, True, started=show if whole else None)
 
@@ -842,11 +846,11 @@ class _Writing:
         return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed)
                 for c in changes if c.steps or c.bus in self._exposed]  # fmt: skip
 
-    def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None) -> None:
-        """The plant's plan is whole (`show`n, the display held still): the writing phase, and the
-        snapshot's path told once it holds every module the plan writes."""
+    def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None, at: float | None = None) -> None:
+        """The plant's plan is whole (`show`n, the display held still) — since `at`, if not now: the
+        writing phase, and the snapshot's path told once it holds every module the plan writes."""
         runs = self._runs(the_plan.modules)
-        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), lambda: show(the_plan) if show else None)
+        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), lambda: show(the_plan) if show else None, at)
         with self._lock:
             self._whole = True
             self._tell_snapshot(len(runs))
