@@ -25,7 +25,7 @@ the plant file just applied in full); `--full-read` measures the same with every
 full, as every apply did before targeted read-backs.
 
 `--gaps`: each apply's frame trace (`--trace`) shows where its line stood idle — the time from
-the end of one exchange (its reply, or a broadcast's frame) to the next request on the same line:
+the end of one exchange (its reply; a broadcast's frame sent and its turnaround passed) to the next request on the same line:
 the largest, the sum, and the one from the read-back's last reply to the first write (the line
 waiting for the plan); acceptance: every gap under 50 ms.
 
@@ -109,23 +109,27 @@ def journal_phases(path: Path) -> tuple[dict[str, float], int]:
 GAP_LIMIT = 0.050  # seconds a line may stand idle between two exchanges
 
 
-def idle_gaps(trace: Path) -> dict[str, tuple[float, str, float, float]]:
+def idle_gaps(trace: Path, cost: LineCost) -> dict[str, tuple[float, str, float, float]]:
     """Per bus of an apply's frame trace: the largest idle gap (and between which requests), their
-    sum, and the gap before the first write — from the end of an exchange (its last frame heard or
-    sent) to the next request on the line."""
-    events: dict[str, list[tuple[float, str, int]]] = {}
+    sum, and the gap before the first write — from the end of an exchange to the next request on the
+    line. An exchange ends with its reply heard; a broadcast (no reply) once its frame has gone out at
+    the line's speed (the trace stamps it as it is handed over) and the turnaround every module takes
+    to execute it (`LineCost.broadcast_time`) has passed — the line is busy, not idle, until then."""
+    events: dict[str, list[tuple[float, str, int, float]]] = {}
     for line in trace.read_text().splitlines():
         stamp, bus, direction, frame = line.split("\t")[:4]
         if direction in "<>":
             message = int(frame[6:8], 16) if direction == ">" else -1  # crc16: A5h, address, length, ID
-            events.setdefault(bus, []).append((datetime.fromisoformat(stamp).timestamp(), direction, message))
+            sending = len(frame) // 2 * cost.line.char_time + cost.turnaround if direction == ">" else 0.0  # the line busy after the stamp
+            events.setdefault(bus, []).append((datetime.fromisoformat(stamp).timestamp(), direction, message, sending))
     found = {}
     for bus, seen in events.items():
         gaps, asked = [], -1
         for before, after in pairwise(seen):
             asked = before[2] if before[1] == ">" else asked
             if after[1] == ">":
-                gaps.append((after[0] - before[0], f"{asked:02X}h → {after[2]:02X}h", after[2]))
+                ended = before[0] + before[3]  # a reply's stamp; a broadcast's, its frame and turnaround later
+                gaps.append((max(0.0, after[0] - ended), f"{asked:02X}h → {after[2]:02X}h", after[2]))
         to_write = next((gap for gap, _, message in gaps if message < 0x50), 0.0)
         largest = max(gaps)
         found[bus] = (largest[0], largest[1], sum(gap for gap, _, _ in gaps), to_write)
@@ -171,7 +175,7 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
         print(f"    {name:<10} on the line {phases[name]:7.2f} s   estimate {part:7.2f} s   ratio {phases[name] / part:.3f}")
     print(f"    verification exchanges {verifying}, floor {floor}{'' if verifying == floor else '   ✗ above the floor'}")
     if gaps:
-        for bus, (largest, where, total, to_write) in idle_gaps(trace).items():
+        for bus, (largest, where, total, to_write) in idle_gaps(trace, cost).items():
             print(f"    idle gaps on {bus}: largest {largest * 1000:6.1f} ms ({where})   sum {total:6.2f} s   reading → writing "
                   f"{to_write * 1000:6.1f} ms{'' if largest < GAP_LIMIT else '   ✗ over 50 ms'}")  # fmt: skip
     broadcasts = [b for bus in plan["buses"] for b in bus.get("broadcasts", [])]

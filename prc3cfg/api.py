@@ -73,7 +73,7 @@ from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseu
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.readback import Target, read_all, read_module
+from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, applied_lines, check_writable, forget_applied, save_applied
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
@@ -109,8 +109,9 @@ class ApplyFailed(UserError):
             said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
                         f"prc3cfg restore {result.snapshot}")  # fmt: skip
         else:
-            said.append(f"nothing was written on the lines above; the other {plural(len(result.runs), 'module')} were written "
-                        f"and verified (see above) — restore them with: prc3cfg restore {result.snapshot}")  # fmt: skip
+            written = len(result.runs)
+            said[-1] += (f"; the {plural(written, 'module')} of the other lines {'was' if written == 1 else 'were'} written and "
+                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: prc3cfg restore {result.snapshot}")  # fmt: skip
         super().__init__("\n".join(said))
         self.result = result
 
@@ -189,8 +190,8 @@ class ApplyResult:
     records: releases.Releases | None = None
     #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
     took: dict[str, float] = field(default_factory=dict)
-    #: lines written as soon as their own plan was whole, while another's read-back or plan failed:
-    #: what stopped that one, one line each (nothing was written there)
+    #: lines written as soon as their own plan was whole, while another's read-back or plan failed (or
+    #: Ctrl-C stopped it): what stopped that one, one line each, saying nothing was written there
     unread: tuple[str, ...] = ()
 
     def told(self) -> None:
@@ -753,21 +754,30 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
     images: dict[Key, ModuleImage] = {}
     planned: list[str] = []
     reading = {target.bus for target in wanted.targets}
+    whole_at: float | None = None  # when the last line's plan was whole
 
     def the_plan() -> PlantPlan:
         with lock:
             read, done = dict(images), set(planned)
         return replace(planner.plan([w for w in want if w.bus in done], read), reading=wanted.reading(chosen, read))
 
+    def show() -> None:
+        """The plant's plan shown (once), beside the writes; the writing phase began when it became whole."""
+        with lock:
+            if not shown:
+                shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show, whole_at)))
+
     def line(bus: str, read: dict[Key, ModuleImage]) -> None:
+        nonlocal whole_at
         planner.plan_line(bus, want, read, prober(links[bus], buses[bus]))
         with lock:
             images.update(read)
             planned.append(bus)
             whole = len(planned) == len(reading)
-        if whole:  # shown beside the writes: the line does not wait for the plan's rendering
-            shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show)))
-        writing.write(planner.line_changes(bus), read, True)
+            if whole:
+                whole_at = time.monotonic()
+        # the plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
+        writing.write(planner.line_changes(bus), read, True, started=show if whole else None)
 
     unread: tuple[str, ...] = ()
     shown: list[Future[None]] = []
@@ -779,10 +789,14 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
         except Interrupted:
             if not writing.runs:
                 raise
-        except UserError as error:
+            unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
+                           for bus in sorted(reading - set(planned)))  # fmt: skip
+        except LinesFailed as error:
             if not writing.runs:
                 raise
-            unread = tuple(str(error).splitlines())
+            unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
+        if len(planned) == len(reading):
+            show()  # not yet, when no write of the last line was acknowledged
         for future in shown:
             future.result()
         if options.cancel is not None and not writing.runs:
@@ -833,11 +847,11 @@ class _Writing:
         return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed)
                 for c in changes if c.steps or c.bus in self._exposed]  # fmt: skip
 
-    def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None) -> None:
-        """The plant's plan is whole (`show`n, the display held still): the writing phase, and the
-        snapshot's path told once it holds every module the plan writes."""
+    def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None, at: float | None = None) -> None:
+        """The plant's plan is whole (`show`n, the display held still) — since `at`, if not now: the
+        writing phase, and the snapshot's path told once it holds every module the plan writes."""
         runs = self._runs(the_plan.modules)
-        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), lambda: show(the_plan) if show else None)
+        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), lambda: show(the_plan) if show else None, at)
         with self._lock:
             self._whole = True
             self._tell_snapshot(len(runs))
@@ -846,12 +860,15 @@ class _Writing:
         if self._whole and self._taken is not None and len(self._taken.images) == modules:
             self.options.progress.note(f"Snapshot of the modules before writing: {self.snapshot}")
 
-    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], allow_axis_release: bool) -> None:
+    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], allow_axis_release: bool,
+              started: Callable[[], None] | None = None) -> None:  # fmt: skip
         """Write and verify these changes — one line's, or every line's — once their modules are in
         the snapshot and the journal. Consent is per module: the releases of these changes, if allowed
-        (a repair may not add one)."""
+        (a repair may not add one). `started()` at each write acknowledged, or at once with none to make."""
         runs = self._runs(changes)
         if not runs:
+            if started is not None:
+                started()
             return
         with self._lock:
             if self._taken is None:
@@ -866,7 +883,12 @@ class _Writing:
         self.journal.record("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
                             modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
         consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
-        execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=self.phases.wrote,
+        def wrote() -> None:
+            self.phases.wrote()
+            if started is not None:
+                started()
+
+        execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=wrote,
                 written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
 
     def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,

@@ -5,11 +5,24 @@ whole plant is read and planned first, for a person to review."""
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
 from pathlib import Path
 
+import pytest
 from emulated import emulated_plant, run_cli
+from lossy import Loss, Rule
 
 from prc3cfg import api
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import Frame
+from prc3cfg.shell import releases
+from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.testing import EmulatedPlant
 
 MODULE = """\
       - address: {address}
@@ -78,3 +91,122 @@ def test_with_a_question_every_line_is_read_and_planned_before_the_first_write(t
     first_write = next(i for i, (_, write) in enumerate(sent) if write)
     assert all(not write for _, write in sent[:first_write]) and {bus for bus, _ in sent[:first_write]} == {"long", "short"}
     assert sum(not write for bus, write in sent[:first_write] if bus == "long") >= 6  # every module of the long line read first
+
+
+# -- a line whose read-back fails while another is written ------------------------------------
+
+SYSTEM = "name: {bus}-{address}\n        system: {{upper_reversing_point: 2.3}}\n"
+
+
+def releasing_lines(directory: Path) -> Path:
+    """`two_lines`, every module given a system change: each plan releases axes (a 20h)."""
+    source = two_lines(directory)
+    text = source.read_text()
+    for bus, addresses in (("long", range(1, 7)), ("short", [1])):
+        for address in addresses:
+            text = text.replace(f"name: {bus}-{address}\n", SYSTEM.format(bus=bus, address=address))
+    source.write_text(text)
+    return source
+
+
+def refused_after_the_short_line_wrote() -> tuple[dict[str, Rule], threading.Event]:
+    """Lossy rules: the long line's read of its last module (a 50h to address 6) is answered with an
+    error code — once the short line's first write has left, which the read waits for."""
+    writing = threading.Event()
+
+    def short(frame: Frame, _: int) -> set[Loss]:
+        if frame.message[0] < 0x50:
+            writing.set()
+        return set()
+
+    def long(frame: Frame, _: int) -> set[Loss]:
+        if frame.address == 6 and frame.message[:1] == b"\x50":
+            writing.wait(60)  # the short line's write is on its way: never a race with the long line's read-back
+            return {Loss.REFUSAL}
+        return set()
+
+    return {"short": short, "long": long}, writing
+
+
+def written_and_untouched(plant: EmulatedPlant) -> None:
+    """The short line's module holds the plant file; the long line's modules their factory images."""
+    desired = load_plant(plant.path)
+    (short,) = [m for bus, m in desired.modules() if bus.name == "short"]
+    held = plant.emulators["short"].module(1).image
+    assert held.system == short.desired_image().system and held.programs[:2] == short.desired_image().programs[:2]
+    for address in range(1, 7):
+        assert plant.emulators["long"].module(address).image == ModuleState.factory(address).image, f"long/{address} was written"
+
+
+def test_a_line_whose_read_back_fails_is_not_written_and_the_other_is_written_and_verified(tmp_path, capsys):
+    rules, writing = refused_after_the_short_line_wrote()
+    with emulated_plant(tmp_path, source=releasing_lines(tmp_path), line_speed=True, timeout=0.5, lossy=rules) as plant:
+        applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert writing.is_set()
+        written_and_untouched(plant)
+    assert applied.code == 1, applied.out + applied.err
+    errors = [line for line in applied.err.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, applied.err
+    assert "bus long, module 6 (long-6): read 50h refused with code 32" in errors[0]
+    assert "nothing was written on bus long" in errors[0] and "prc3cfg restore" in errors[0]
+    assert "✓ bus short, module 1 (short-1)" in applied.out
+    events = [json.loads(line) for path in (tmp_path / ".prc3cfg" / "journal").iterdir() for line in path.read_text().splitlines()]
+    assert [e["modules"] for e in events if e["event"] == "apply"] == [["short/1"]]
+    assert [(e["bus"], e["address"], e["verified"]) for e in events if e["event"] == "result"] == [("short", 1, True)]
+    writes = {(e["bus"], e["address"]) for e in events if e["event"] == "exchange" and int(e["request"][:2], 16) < 0x50}
+    assert writes == {("short", 1)}
+    (snapshot,) = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
+    assert [(m["bus"], m["address"]) for m in json.loads(snapshot.read_text())["modules"]] == [("short", 1)]
+
+
+def test_the_release_records_of_a_line_read_back_in_part_hold_exactly_the_releases_sent(tmp_path):
+    rules, _ = refused_after_the_short_line_wrote()
+    with emulated_plant(tmp_path, source=releasing_lines(tmp_path), line_speed=True, timeout=0.5, lossy=rules) as plant:
+        with pytest.raises(api.ApplyFailed) as failed:
+            api.apply(plant.plant, gates=api.Gates(allow_axis_release=True))
+        written_and_untouched(plant)
+        keys = {bus.name: api.bus_line_keys(plant.plant, bus) for bus in plant.plant.buses}
+        result = failed.value.result
+        assert [(r.bus, r.address) for r in result.runs] == [("short", 1)] and result.runs[0].verified
+        assert len(result.unread) == 1 and result.unread[0].startswith("bus long, module 6 (long-6): read 50h refused")
+        assert [(r.bus, r.address) for r in releases.pending(keys["short"])] == [("short", 1)]
+        assert releases.pending(keys["long"]) == []
+        result.told()
+        assert releases.pending(keys["short"]) == []
+
+
+def test_ctrl_c_while_one_line_writes_and_the_other_still_reads_says_which_line_was_not_written(tmp_path):
+    """SIGINT as the short line's first write leaves, the long line held at its last module's read
+    until the signal is sent: the apply stops, the account names the long line as not written."""
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    signalled = threading.Event()
+
+    def long(frame: Frame, _: int) -> set[Loss]:
+        if frame.address == 6 and frame.message[:1] == b"\x50":
+            signalled.wait(60)  # the long line is still reading when the signal comes
+        return set()
+
+    with emulated_plant(tmp_path, source=two_lines(tmp_path), line_speed=True, timeout=0.5, lossy={"long": long}) as plant:
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve", "--allow-axis-release",
+                                    "--trace", str(fifo)], env=env, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+        with fifo.open() as trace:
+            for line in trace:
+                _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
+                if (bus, direction) == ("short", ">") and int(frame[6:8], 16) < 0x50:  # crc16: A5h, address, length, ID
+                    process.send_signal(signal.SIGINT)
+                    signalled.set()
+                    break
+            threading.Thread(target=trace.read, daemon=True).start()
+            out, err = process.communicate()
+        for address in range(1, 7):
+            assert plant.emulators["long"].module(address).image == ModuleState.factory(address).image, f"long/{address} was written"
+    assert process.returncode == 130, err
+    assert err.splitlines()[-1] == "error: interrupted"
+    assert "bus long: interrupted before its read-back and plan were whole — nothing was written on it" in err.splitlines()
+    assert next(line for line in (out + err).splitlines() if line.startswith(("✓ bus", "✗ bus"))).startswith(("✓ bus short", "✗ bus short"))
+    assert "Interrupted: " in out
+    events = [json.loads(line) for path in (tmp_path / ".prc3cfg" / "journal").iterdir() for line in path.read_text().splitlines()]
+    assert events[-1]["event"] == "interrupted"
+    assert {e["bus"] for e in events if e["event"] == "exchange" and int(e["request"][:2], 16) < 0x50} == {"short"}

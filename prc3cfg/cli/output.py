@@ -104,6 +104,8 @@ def accounted() -> Iterator[None]:
         yield
     except ApplyInterrupted as stopped:
         report(stopped.result)
+        for line in stopped.result.unread:  # a line Ctrl-C stopped before it was read and planned
+            print(line, file=sys.stderr)
         failed = [r for r in stopped.result.runs if not r.verified]
         touched = sum(1 for r in failed if r.sent)
         print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of {render.plural(len(stopped.result.runs), 'module')} "

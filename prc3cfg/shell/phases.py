@@ -44,11 +44,12 @@ class Phases:
             if self._phase == "reading":
                 self._advance()
 
-    def writing(self, messages: int, modules: int, lines: int, during: Callable[[], None] = lambda: None) -> None:
+    def writing(self, messages: int, modules: int, lines: int, during: Callable[[], None] = lambda: None, at: float | None = None) -> None:
         """The plan is whole — `messages` to write to `modules` on `lines` — and the writes begin (or
         go on: those some line made already are counted); `during()` is run first (to show the plan:
-        the lines' events go on meanwhile, never waiting for it)."""
-        now = time.monotonic()
+        the lines' events go on meanwhile, never waiting for it). `at`: when the plan became whole
+        (`time.monotonic`), if that was before now."""
+        now = time.monotonic() if at is None else at
         during()
         with self._lock:
             if self._phase == "reading":

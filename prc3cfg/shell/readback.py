@@ -35,6 +35,14 @@ class ReadBackError(UserError):
     """A module answered a read with an error code, or is not the module the plant says."""
 
 
+class LinesFailed(UserError):
+    """The read-back (or what `read_all` ran after it) failed on some lines: one line each, by bus."""
+
+    def __init__(self, failed: dict[str, str]) -> None:
+        super().__init__("\n".join(failed.values()))
+        self.failed = failed
+
+
 def read_module(
     link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None,
     verified: tuple[SystemParameters, Iterable[int]] | None = None,
@@ -121,7 +129,7 @@ def read_all(
     the bus's modules are read (to plan the line, and write it, while other lines are still being
     read: it may take as long as it needs — the other buses go on). The first error
     on a bus stops that bus; the errors of all buses are raised together (one line each) once
-    every bus has finished; an interruption (Ctrl-C) wins over them.
+    every bus has finished (`LinesFailed`); an interruption (Ctrl-C) wins over them.
     """
     per_bus: dict[str, list[Target]] = {}
     for target in targets:
@@ -141,18 +149,18 @@ def read_all(
         return images
 
     result: dict[tuple[str, int], ModuleImage] = {}
-    errors = []
+    errors: dict[str, str] = {}
     interrupted = False
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus)), initializer=main_thread_only) as pool:
-        for future in [pool.submit(read_bus, bus_targets) for bus_targets in per_bus.values()]:
+        for bus, future in [(bus, pool.submit(read_bus, bus_targets)) for bus, bus_targets in per_bus.items()]:
             try:
                 result.update(future.result())
             except Interrupted:
                 interrupted = True
             except UserError as error:
-                errors.append(str(error))
+                errors[bus] = str(error)
     if interrupted:
         raise Interrupted()
     if errors:
-        raise UserError("\n".join(errors))
+        raise LinesFailed(errors)
     return result
