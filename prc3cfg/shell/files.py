@@ -15,9 +15,10 @@ before parsing: 63 MB of `[{},{},…]` took 1.6 GB and seconds to parse), more t
 of more than `MAX_DIGITS` digits (whatever PYTHONINTMAXSTRDIGITS says), nesting deeper than
 Python's recursion. Its size is bounded by `JSON_LIMIT`.
 
-`write_atomically` writes a temporary file beside the target, flushes it to disk, renames
-it over the target and flushes the directory: a process killed at any point leaves either
-the previous file (or none) or the complete new one, never a truncated one. Snapshots,
+`write_atomically` writes a file without a name beside the target, flushes it to disk, links it
+in (over the target through a temporary name) and flushes the directory: a process killed at any
+point leaves either the previous file (or none) or the complete new one, never a truncated one,
+and — where the file is new — no temporary file either. Snapshots,
 plan files (`plan --out`) and the emulator's state file are written this way; adopted plant
 files by `replace_unless_changed`, which keeps a file another writer (an editor) saved meanwhile.
 """
@@ -27,6 +28,7 @@ from __future__ import annotations
 import enum
 import json
 import os
+import secrets
 import stat
 import tempfile
 from pathlib import Path
@@ -155,15 +157,71 @@ def _size(limit: int) -> str:
 
 
 def write_atomically(path: Path, text: str) -> None:
-    """Replace `path` with `text` atomically (temporary file, fsync, rename, fsync of the folder)."""
+    """Replace `path` with `text` atomically (a file with no name yet, fsync, linked in, fsync of
+    the folder).
+
+    The text goes into a file without a name (Linux's O_TMPFILE), which the kernel removes if the
+    process dies before it is linked: a new file (a snapshot) appears whole or not at all, and a
+    killed writer leaves nothing else behind. An existing file is replaced by linking the new one
+    to a temporary name and renaming that over it — a kill between those two calls leaves that
+    one name. Where the folder's file system has no unnamed files (or /proc is not mounted),
+    a named temporary file is written and renamed, as before."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _written_beside(path, text, None)
+    if not _linked_unnamed(path, text):
+        tmp = _written_beside(path, text, None)
+        try:
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+    _sync_folder(path.parent)
+
+
+def _linked_unnamed(path: Path, text: str) -> bool:
+    """Write `text` to an unnamed file in `path`'s folder, on disk, and link it in as `path`;
+    False (nothing written) where the folder cannot hold an unnamed file or it cannot be linked."""
+    try:
+        fd = os.open(path.parent, os.O_TMPFILE | os.O_WRONLY, 0o600)
+    except (AttributeError, OSError):  # no O_TMPFILE here, or not on this file system
+        return False
+    with os.fdopen(fd, "w", encoding="utf-8") as handle:
+        handle.write(text)
+        handle.flush()
+        os.fsync(fd)
+        # A directory handle given makes Python call linkat(…, AT_SYMLINK_FOLLOW) — without one it
+        # calls link(), which links the /proc entry itself and fails (EXDEV).
+        folder = os.open(path.parent, os.O_RDONLY)
+        try:
+            tmp = _linked(f"/proc/self/fd/{fd}", folder, path)
+        except OSError:  # no /proc: the text is written again, to a named file
+            return False
+        finally:
+            os.close(folder)
+    if tmp is None:
+        return True
     try:
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    _sync_folder(path.parent)
+    return True
+
+
+def _linked(unnamed: str, folder: int, path: Path) -> Path | None:
+    """Link the file `unnamed` names as `path` — None — or, where `path` exists, as a new
+    temporary name beside it, returned."""
+    try:
+        os.link(unnamed, path, src_dir_fd=folder)
+        return None
+    except FileExistsError:
+        pass
+    while True:
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            os.link(unnamed, tmp, src_dir_fd=folder)
+            return tmp
+        except FileExistsError:
+            continue
 
 
 def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
