@@ -173,7 +173,7 @@ def _set_fields(state: ModuleState, field: str, items: tuple[tuple[int, int], ..
 def _set_positions_and_speeds(state: ModuleState, first: int, items: tuple[tuple[int, int], ...]) -> ModuleState:
     image = state.image
     changes = {
-        first + i: replace(image.known(first + i), P=position, V=speed)
+        first + i: image.known(first + i).with_position_and_speed(position, speed)
         for i, (position, speed) in enumerate(items)
     }
     return replace(state, image=image.with_programs(changes))

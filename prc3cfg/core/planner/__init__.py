@@ -111,13 +111,14 @@ def _cheapest(problem: PlanningProblem, cost: LineCost, layouts: list[Layout]) -
 
 def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> float:
     """The naive download: a 20h if the system parameters differ, one 21h per changed managed program."""
-    messages: list[codec.Message] = []
-    if actual.system != desired.system:
-        messages.append(codec.WriteSystem(desired.system))
+    total = cost.message_time(desired.address, codec.WriteSystem(desired.system)) if actual.system != desired.system else 0
+    each = None  # a 21h's time, where the framing does not stuff: the same for every program
     for number, (have, want) in enumerate(zip(actual.programs, desired.programs), start=1):
         if want is not None and have != want:
-            messages.append(codec.WriteProgram(number, want))
-    return sum(cost.message_time(desired.address, m) for m in messages)
+            if each is None or cost.framing.stuffs:
+                each = cost.message_time(desired.address, codec.WriteProgram(number, want))
+            total += each
+    return total
 
 
 __all__ = [

@@ -388,16 +388,26 @@ class WritePhase:
         saving = [prices.fields(n) - prices.fields(n - 1) if n else 0.0 for n in map(int.bit_count, writes.items)]
         n = writes.addresses.bit_count()
         address_saving = prices.addresses(n) - prices.addresses(n - 1) if n else 0.0
-        run_of = {j: run for run in writes.part_runs for j in range(run[0], run[1] + 1)}
+        # the P and V a run still needs, and its cost, by each program in it
+        run_of = {j: (need & ((1 << (last + 1)) - (1 << first)), self.parts_price[last - first + 1])
+                  for need in (self.pv_changed & ~writes.whole,)
+                  for first, last in writes.part_runs for j in range(first, last + 1)}  # fmt: skip
+        savings = list(zip(saving, writes.items))
+        parts_price, program, addresses = self.parts_price, prices.program, writes.addresses
         moves = []
-        for j in members((_all_of(writes.items) | writes.addresses | _all_runs(writes.part_runs)) & ~writes.whole):
-            delta = prices.program - sum(s for s, mask in zip(saving, writes.items) if mask >> j & 1)
-            if writes.addresses >> j & 1:
+        for j in members((_all_of(writes.items) | addresses | _all_runs(writes.part_runs)) & ~writes.whole):
+            saved = 0  # summed as sum() would, in the same order: the same float
+            for s, mask in savings:
+                if mask >> j & 1:
+                    saved += s
+            delta = program - saved
+            if addresses >> j & 1:
                 delta -= address_saving
-            if j in run_of:
-                run = run_of[j]
-                rest = self._trimmed((run,), self.pv_changed & ~(writes.whole | 1 << j))
-                delta += self._runs_cost(rest) - self._runs_cost((run,))
+            if j in run_of:  # the run cut down to the programs that still need it without j
+                inside, price = run_of[j]
+                inside &= ~(1 << j)
+                rest = parts_price[inside.bit_length() - (inside & -inside).bit_length() + 1] if inside else 0
+                delta += rest - price
             moves.append((delta, j))
         moves.sort()
         return moves
@@ -718,25 +728,31 @@ def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> 
     or ends at 64. Unmanaged programs are always KEEP, so no run covers them.
     """
     prices = problem.prices
-    refund = prices.init_range - prices.init
-    # state: (kind of the previous program, whether its run is a single program so far)
-    cost: dict[tuple[int, bool], float] = {(KEEP, False): 0.0}
+    refund, init_range = prices.init_range - prices.init, prices.init_range
+    # state: (kind of the previous program, whether its run is a single program so far) — made once
+    kept = (KEEP, False)
+    begun = {kind: (kind, True) for kind in problem.kinds}
+    going = {kind: (kind, False) for kind in problem.kinds}
+    cost: dict[tuple[int, bool], float] = {kept: 0.0}
     back: list[dict[tuple[int, bool], tuple[int, bool]]] = []
     for i in range(PROGRAM_COUNT):
         allowed = problem.kinds if problem.managed[i] else (KEEP,)
+        row = residual[i]
         new: dict[tuple[int, bool], float] = {}
         step: dict[tuple[int, bool], tuple[int, bool]] = {}
-        for (prev, single), c in cost.items():
-            closing = c - (refund if prev != KEEP and single else 0.0)
+        best = new.get
+        for before, c in cost.items():
+            prev, single = before
+            closing = c - refund if prev != KEEP and single else c
             for kind in allowed:
                 if kind == KEEP:
-                    state, value = (KEEP, False), closing + residual[i][KEEP]
+                    state, value = kept, closing + row[KEEP]
                 elif kind == prev:
-                    state, value = (kind, False), c + residual[i][kind]
+                    state, value = going[kind], c + row[kind]
                 else:
-                    state, value = (kind, True), closing + prices.init_range + residual[i][kind]
-                if value < new.get(state, INF):
-                    new[state], step[state] = value, (prev, single)
+                    state, value = begun[kind], closing + init_range + row[kind]
+                if value < best(state, INF):
+                    new[state], step[state] = value, before
         cost = new
         back.append(step)
     state = min(cost, key=lambda s: cost[s] - (refund if s[0] != KEEP else 0.0))
