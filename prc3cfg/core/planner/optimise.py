@@ -396,7 +396,7 @@ class WritePhase:
         parts_price, program, addresses = self.parts_price, prices.program, writes.addresses
         moves = []
         for j in members((_all_of(writes.items) | addresses | _all_runs(writes.part_runs)) & ~writes.whole):
-            saved = 0  # summed as sum() would, in the same order: the same float
+            saved: float = 0  # summed as sum() would, in the same order: the same float
             for s, mask in savings:
                 if mask >> j & 1:
                     saved += s
