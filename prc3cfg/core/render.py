@@ -37,6 +37,7 @@ CLAMPED = "clamped by the module itself when its system parameters change"
 _DIFF_FIELDS = tuple(f for f in PROGRAM_FIELDS if f != "A")
 
 
+@functools.cache
 def field_name(symbol: str) -> str:
     """The plant-file key in words: S1 → "upper reversing point", Vr → "relative speed"."""
     return BY_SYMBOL[symbol].key.replace("_", " ") if symbol in BY_SYMBOL else symbol

@@ -465,12 +465,13 @@ class _Reader:
             items.append(self.entry(path + (len(items),), None, item, wanted))
         return items
 
-    def entry(self, path: Path_, key_at: Position | None, event: yaml.Event, wanted: Mapping[Any, Any] | None) -> Any:
+    def entry(self, path: Path_, key: yaml.Event | None, event: yaml.Event, wanted: Mapping[Any, Any] | None) -> Any:
         """The value of a list item or mapping value at `path`; passed over when locating another path."""
         if wanted is None:
             return self.node(event, path, None)
         below = wanted.get(path[-1])
         if below is not None:
+            key_at = None if key is None else _position(key)
             self.positions[path] = (key_at, key_at if key_at is not None and self.empty(event) else _position(event))
         if below is None or below is _LEAF:
             self.skip(event)
@@ -479,16 +480,15 @@ class _Reader:
 
     def mapping(self, start: MappingStartEvent, path: Path_, wanted: Mapping[Any, Any] | None) -> dict[Any, Any]:
         result: dict[Any, Any] = {}
-        keys: dict[Any, Position] = {}  # where each key read here is
+        keys: dict[Any, yaml.Event] = {}  # each key read here, by its event
         before: tuple[Any, yaml.Event] | None = None  # the key read last and its value's first event
         while type(key_event := self.next()) is not MappingEndEvent:
-            key_at = _position(key_event)
             if type(key_event) is not ScalarEvent:
                 self.skip(key_event)
             value_event = self.next()
             if self.merge_key(key_event):
                 self.problem(Problem(path, "a YAML merge key (<<) — share settings with "
-                                     "profiles: and a module's profiles: [NAME] instead", at=key_at))
+                                     "profiles: and a module's profiles: [NAME] instead", at=_position(key_event)))
                 self.skip(value_event)
                 continue
             if before is not None and start.flow_style and (written := self.split_number(before[1], key_event, value_event)):
@@ -498,20 +498,20 @@ class _Reader:
                                      at=_position(before[1]), models_fix=True))
                 continue
             key = self.scalar(key_event, path, "key") if type(key_event) is ScalarEvent else None
-            if key is None or not _hashable(key):
-                self.problem(Problem(path, "a key that is not a name or a number — write a plain key", at=key_at))
+            if key is None or (type(key) is not str and not _hashable(key)):
+                self.problem(Problem(path, "a key that is not a name or a number — write a plain key", at=_position(key_event)))
                 self.skip(value_event)
                 continue
             if key in keys:
-                first = keys[key]
+                first = _position(keys[key])
                 self.problem(Problem(path, f"duplicate key '{key}' — it is already given at "
-                                     f"{first[0]}:{first[1]}; give each key once", at=key_at))
+                                     f"{first[0]}:{first[1]}; give each key once", at=_position(key_event)))
                 self.skip(value_event)
                 continue
-            keys[key] = key_at
+            keys[key] = key_event
             if self.open is not None:
                 self.open[-1].keys[key] = marked(key_event.start_mark).index
-            result[key] = self.entry(path + (key,), key_at, value_event, wanted)
+            result[key] = self.entry(path + (key,), key_event, value_event, wanted)
             before = (key, value_event)
         return result
 
@@ -541,9 +541,14 @@ class _Reader:
 
     def merge_key(self, event: yaml.Event) -> bool:
         """`<<`, or any key tagged `!!merge`."""
-        if not isinstance(event, ScalarEvent | CollectionStartEvent):
+        if type(event) is ScalarEvent:
+            if event.tag is None and event.value != "<<":
+                return False  # most keys: no tag to resolve
+            maybe = event.tag not in (None, "!") or event.value == "<<"
+        elif isinstance(event, CollectionStartEvent):
+            maybe = event.tag not in (None, "!")
+        else:
             return False  # an alias
-        maybe = event.tag not in (None, "!") or (type(event) is ScalarEvent and event.value == "<<")
         return maybe and self.tag(event) == _MERGE_TAG
 
     def resolve(self, text: str, implicit: tuple[bool, bool]) -> str:

@@ -86,6 +86,15 @@ class ProgramFields(Mapping[str, Sourced]):
                 return Sourced(given[key], source, path + (key,))
         return PROGRAM_DEFAULTS[key]
 
+    def __contains__(self, key: object) -> bool:  # Mapping's would build the Sourced and catch a KeyError
+        return key in PROGRAM_DEFAULTS or any(key in given for _, _, given in self._layers)
+
+    def get(self, key: str, default: Any = None) -> Any:  # likewise: 46,000 calls for 8 × 30 modules
+        for source, path, given in reversed(self._layers):
+            if key in given:
+                return Sourced(given[key], source, path + (key,))
+        return PROGRAM_DEFAULTS.get(key, default)
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._keys())
 

@@ -35,6 +35,16 @@ from prc3cfg.core.planner.plan import program_list
 MAX_STEPS = 128
 
 
+class _Step:
+    """"step 3 (2100…)", as a message names it — encoded only when a problem is said."""
+
+    def __init__(self, index: int, message: codec.Message) -> None:
+        self.index, self.message = index, message
+
+    def __str__(self) -> str:
+        return f"step {self.index} ({self.message.hex()})"
+
+
 class StepProblem(ValueError):
     """Step `index` (1-based; 0: the steps as a whole) breaks a rule; `str()` says which."""
 
@@ -53,7 +63,7 @@ def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[code
     unmanaged = {n for n, p in enumerate(desired.programs, start=1) if p is None}
     releases = 0
     for index, message in enumerate(messages, start=1):
-        step = f"step {index} ({message.hex()})"
+        step = _Step(index, message)
         if message.IS_READ:
             raise StepProblem(index, f"{step} is a read ({message.ID:02X}h), not a write")
         trespass = unmanaged.intersection(message.touched_programs())

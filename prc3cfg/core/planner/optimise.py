@@ -456,6 +456,7 @@ class WritePhase:
         p_item = prices.field_item + share[0] if channels.positions else INF
         v_item = prices.field_item + share[1] if channels.speeds else INF
         program, address_item, runs_allowed = prices.program, prices.address_item, channels.parts
+        plain_items, window = self.plain_items, codec.MAX_FIELD_ITEMS
         nothing, items, whole_, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
         # best[j]: the cheapest way to write P and V of the programs before j. A 33h run i..j
         # costs head + per × (j - i + 1), so the best run ending at j starts at the i that
@@ -473,7 +474,7 @@ class WritePhase:
                 continue
             m = masks[j]
             c, how = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0), (j, items)
-            alone = b + program - self.plain_items[j] - (address_item if addresses >> j & 1 else 0.0)
+            alone = b + program - plain_items[j] - (address_item if addresses >> j & 1 else 0.0)
             if alone < c:
                 c, how = alone, (j, whole_)
             if runs_allowed:
@@ -481,13 +482,13 @@ class WritePhase:
                 while starts and starts[-1][0] >= key:
                     starts.pop()
                 starts.append((key, j))
-                while starts[0][1] <= j - codec.MAX_FIELD_ITEMS:
+                while starts[0][1] <= j - window:
                     starts.popleft()
                 if b + price[1] < c:
                     c, how = b + price[1], (j, run)
                 key, first = starts[0]
-                if key + head + per * (j + 1) < c:
-                    c, how = key + head + per * (j + 1), (first, run)
+                if (through := key + head + per * (j + 1)) < c:
+                    c, how = through, (first, run)
             best[j + 1], back[j + 1] = c, how
         return self._traced_parts(back)
 
@@ -764,11 +765,19 @@ def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> 
 
 
 def _table(problem: PlanningProblem, residual: Residual) -> list[dict[int, float]]:
-    """Residuals per program and init kind; on a tie the init wins, so runs grow over programs they do not harm."""
-    return [
-        {kind: residual(i, problem.masks[kind][i]) - (TIE if kind != KEEP else 0.0) for kind in problem.kinds}
-        for i in range(PROGRAM_COUNT)
-    ]
+    """Residuals per program and init kind; on a tie the init wins, so runs grow over programs they do not harm.
+    A program's kinds often leave it the same differences: each is priced once."""
+    table = []
+    for i in range(PROGRAM_COUNT):
+        priced: dict[int, float] = {}  # by mask
+        row = {}
+        for kind in problem.kinds:
+            mask = problem.masks[kind][i]
+            if (value := priced.get(mask)) is None:
+                value = priced[mask] = residual(i, mask)
+            row[kind] = value - (TIE if kind != KEEP else 0.0)
+        table.append(row)
+    return table
 
 
 # -- the whole search ------------------------------------------------------------------------
