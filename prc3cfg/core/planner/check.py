@@ -35,7 +35,7 @@ from prc3cfg.core.planner.plan import program_list
 MAX_STEPS = 128
 
 
-class _Step:
+class _StepName:
     """"step 3 (2100…)", as a message names it — encoded only when a problem is said."""
 
     def __init__(self, index: int, message: codec.Message) -> None:
@@ -63,7 +63,7 @@ def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[code
     unmanaged = {n for n, p in enumerate(desired.programs, start=1) if p is None}
     releases = 0
     for index, message in enumerate(messages, start=1):
-        step = _Step(index, message)
+        step = _StepName(index, message)
         if message.IS_READ:
             raise StepProblem(index, f"{step} is a read ({message.ID:02X}h), not a write")
         trespass = unmanaged.intersection(message.touched_programs())

@@ -132,11 +132,11 @@ class PlanningProblem:
 
 def _check_reachable(desired: ModuleImage) -> None:
     """Every managed desired value must be one the module accepts under the desired system parameters."""
+    ranges = [device.value_range(name, desired.system)[:2] for name in PROGRAM_FIELDS]
     for number, program in enumerate(desired.programs, start=1):
         if program is None:
             continue
-        for name, value in zip(PROGRAM_FIELDS, program.values()):
-            low, high, _, _ = device.value_range(name, desired.system)
+        for name, (low, high), value in zip(PROGRAM_FIELDS, ranges, program.values()):
             if not low <= value <= high:
                 raise UnreachableImage(
                     f"module {desired.address}: program {number}: {name} = {value} is outside "
