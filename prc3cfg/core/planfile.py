@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,7 +28,7 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planner.check import MAX_STEPS
 from prc3cfg.core.plantplan import FORMAT, PlantPlan, image_sha256
-from prc3cfg.core.render import plan_json
+from prc3cfg.core.render import address_ranges, plan_json
 from prc3cfg.errors import UserError
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -355,7 +355,7 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     """
     for proof in ours.proofs:
         if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
-            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {_addresses(proof.answered)}, which the "
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {address_ranges(proof.answered)}, which the "
                             "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
     for entry, change in zip(plan_file.modules, ours.modules):
         edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
@@ -379,12 +379,6 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     if (at := _edited_at(plan_file.document, written)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
-
-
-def _addresses(addresses: Iterable[int]) -> str:
-    """"address 5", "addresses 5, 7"."""
-    listed = list(addresses)
-    return f"address{'es' if len(listed) > 1 else ''} {', '.join(map(str, listed))}"
 
 
 def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:
