@@ -4,6 +4,7 @@ temporary files by applies killed mid-write is a folder an engineer must clean b
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -38,13 +39,34 @@ def folder(tmp_path):
     return made
 
 
+@pytest.fixture
+def unnamed(folder):
+    """`folder`, where its file system holds files without a name that can be linked in (else
+    `write_atomically` falls back to a named temporary file, and these tests do not apply)."""
+    try:
+        fd = os.open(folder, os.O_TMPFILE | os.O_WRONLY, 0o600)
+    except (AttributeError, OSError) as error:
+        pytest.skip(f"no unnamed files here ({error}): write_atomically writes a named temporary file")
+    directory = os.open(folder, os.O_RDONLY)
+    try:
+        os.link(f"/proc/self/fd/{fd}", folder / "probe", src_dir_fd=directory)
+    except OSError as error:
+        pytest.skip(f"an unnamed file cannot be linked in here ({error}): write_atomically writes a named temporary file")
+    finally:
+        os.close(fd)
+        os.close(directory)
+    (folder / "probe").unlink()
+    return folder
+
+
 def killed_writing(target, text, point, nth=1):
     done = subprocess.run([sys.executable, "-c", KILLED_AT, point, str(nth), str(target), text])
     return done.returncode
 
 
 @pytest.mark.parametrize("point", ["fsync", "link", "replace"])
-def test_a_new_file_killed_mid_write_leaves_no_name_behind(folder, point):
+def test_a_new_file_killed_mid_write_leaves_no_name_behind(unnamed, point):
+    folder = unnamed
     target = folder / "20261124T033258.352875Z-plant.json"
     code = killed_writing(target, '{"whole": true}', point)
     left = sorted(path.name for path in folder.iterdir())
@@ -54,7 +76,8 @@ def test_a_new_file_killed_mid_write_leaves_no_name_behind(folder, point):
 
 
 @pytest.mark.parametrize("point", ["fsync", "link", "replace"])
-def test_a_replaced_file_killed_mid_write_is_the_old_or_the_new(folder, point):
+def test_a_replaced_file_killed_mid_write_is_the_old_or_the_new(unnamed, point):
+    folder = unnamed
     target = folder / "state.json"
     target.write_text("old")
     killed_writing(target, "new", point)
