@@ -700,7 +700,7 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
             else:
                 result = _apply_whole(plant, chosen, wanted, desired, plan_file, gates, writing, options, earlier, records)
             if result.runs and desired is None and len(chosen) == len(plant.modules()):
-                _keep_applied(plant)
+                _keep_applied(plant, keys)
             return result
     finally:
         journal.close()
@@ -920,13 +920,15 @@ class _Writing:
         return result
 
 
-def _keep_applied(plant: Plant) -> None:
+def _keep_applied(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
     """The plant file just applied in full and verified on every module, kept for `left_alone` and
-    as the base of the next targeted read-back (`base`), with the lines it was applied to — if it
-    is still the one applied."""
+    as the base of the next targeted read-back (`base`), with the lines it was applied to (`keys`:
+    the identities the apply resolved; a line it did not open is resolved now) — if it is still
+    the one applied."""
     text = plant.path.read_bytes()
     if hashlib.sha256(text).hexdigest() == plant.sha256:
-        save_applied(plant.path, text, {bus.name: LineTaken(bus.port, bus.framing, bus_line_keys(plant, bus)) for bus in plant.buses})
+        save_applied(plant.path, text, {bus.name: LineTaken(bus.port, bus.framing, keys[bus.name] if bus.name in keys
+                                                            else bus_line_keys(plant, bus)) for bus in plant.buses})  # fmt: skip
 
 
 def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
