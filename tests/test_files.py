@@ -1,6 +1,7 @@
-"""Atomic writes: a process killed at any point of `write_atomically` leaves the old file or the
-new one — and, where the file is new, no other name in its folder (a snapshot folder filled with
-temporary files by applies killed mid-write is a folder an engineer must clean by hand)."""
+"""Atomic writes: a process killed at any point of `write_atomically` (or of
+`replace_unless_changed`, adopt's) leaves the old file or the new one — and, where the file is
+new, no other name in its folder (a snapshot folder filled with temporary files by applies killed
+mid-write is a folder an engineer must clean by hand)."""
 
 from __future__ import annotations
 
@@ -11,14 +12,15 @@ import sys
 
 import pytest
 
-#: Runs `write_atomically(target, text)` in a fresh process that SIGKILLs itself at the n-th call
-#: of `os.<point>` — after the text is written into a file, before (fsync) or after (link, rename)
-#: it is put in place. Patched is the standard library, not prc3cfg: the kill lands exactly there.
+#: Runs `write_atomically(target, text)` (or, with a fifth argument, `replace_unless_changed(target,
+#: text, expected)`) in a fresh process that SIGKILLs itself at the n-th call of `os.<point>` —
+#: after the text is written into a file, before (fsync) or after (link, rename) it is put in place.
+#: Patched is the standard library, not prc3cfg: the kill lands exactly there.
 KILLED_AT = """
 import os, signal, sys
 from pathlib import Path
-from prc3cfg.shell.files import write_atomically
-point, nth, target, text = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), sys.argv[4]
+from prc3cfg.shell.files import replace_unless_changed, write_atomically
+point, nth, target, text, *expected = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), sys.argv[4], *sys.argv[5:]
 real, calls = getattr(os, point), 0
 def dying(*args, **kwargs):
     global calls
@@ -27,7 +29,10 @@ def dying(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGKILL)
     return real(*args, **kwargs)
 setattr(os, point, dying)
-write_atomically(target, text)
+if expected:
+    replace_unless_changed(target, text, expected[0].encode())
+else:
+    write_atomically(target, text)
 """
 
 
@@ -59,8 +64,8 @@ def unnamed(folder):
     return folder
 
 
-def killed_writing(target, text, point, nth=1):
-    done = subprocess.run([sys.executable, "-c", KILLED_AT, point, str(nth), str(target), text])
+def killed_writing(target, text, point, nth=1, expected=None):
+    done = subprocess.run([sys.executable, "-c", KILLED_AT, point, str(nth), str(target), text, *([expected] if expected else [])])
     return done.returncode
 
 
@@ -85,6 +90,18 @@ def test_a_replaced_file_killed_mid_write_is_the_old_or_the_new(unnamed, point):
     stray = [path.name for path in folder.iterdir() if path != target]
     # The one window left: between the link to a temporary name and the rename over the target.
     assert len(stray) <= (1 if point == "replace" else 0), stray
+
+
+@pytest.mark.parametrize("point", ["fsync", "link"])
+def test_an_adopted_file_killed_mid_write_leaves_no_temporary_name(unnamed, point):
+    """`replace_unless_changed` writes its text as `write_atomically` does: killed before the text
+    has a name (at its fsync, at the link that names it), the plant file is untouched and alone."""
+    folder = unnamed
+    target = folder / "plant.yaml"
+    target.write_text("old")
+    assert killed_writing(target, "new", point, expected="old") == -signal.SIGKILL
+    assert target.read_text() == "old"
+    assert [path.name for path in folder.iterdir()] == ["plant.yaml"]
 
 
 def test_a_write_that_completes_leaves_the_file_alone_with_its_text(folder):

@@ -32,7 +32,7 @@ import secrets
 import stat
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 #: The largest JSON file prc3cfg reads: a plan file, a snapshot, saved images (a plan of
 #: 8 buses × 30 fully changed modules is 11–17 MB).
@@ -157,71 +157,18 @@ def _size(limit: int) -> str:
 
 
 def write_atomically(path: Path, text: str) -> None:
-    """Replace `path` with `text` atomically (a file with no name yet, fsync, linked in, fsync of
-    the folder).
-
-    The text goes into a file without a name (Linux's O_TMPFILE), which the kernel removes if the
-    process dies before it is linked: a new file (a snapshot) appears whole or not at all, and a
-    killed writer leaves nothing else behind. An existing file is replaced by linking the new one
-    to a temporary name and renaming that over it — a kill between those two calls leaves that
-    one name. Where the folder's file system has no unnamed files (or /proc is not mounted),
-    a named temporary file is written and renamed, as before."""
+    """Replace `path` with `text` atomically (written beside it, fsync, put in place, fsync of the
+    folder): a new file (a snapshot) is linked in as itself, an existing one replaced by a rename
+    (`_written_beside` says what a process killed on the way leaves)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    if not _linked_unnamed(path, text):
-        tmp = _written_beside(path, text, None)
+    tmp = _written_beside(path, text, None, new=True)
+    if tmp is not None:
         try:
             os.replace(tmp, path)
         except BaseException:
             tmp.unlink(missing_ok=True)
             raise
     _sync_folder(path.parent)
-
-
-def _linked_unnamed(path: Path, text: str) -> bool:
-    """Write `text` to an unnamed file in `path`'s folder, on disk, and link it in as `path`;
-    False (nothing written) where the folder cannot hold an unnamed file or it cannot be linked."""
-    try:
-        fd = os.open(path.parent, os.O_TMPFILE | os.O_WRONLY, 0o600)
-    except (AttributeError, OSError):  # no O_TMPFILE here, or not on this file system
-        return False
-    with os.fdopen(fd, "w", encoding="utf-8") as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(fd)
-        # A directory handle given makes Python call linkat(…, AT_SYMLINK_FOLLOW) — without one it
-        # calls link(), which links the /proc entry itself and fails (EXDEV).
-        folder = os.open(path.parent, os.O_RDONLY)
-        try:
-            tmp = _linked(f"/proc/self/fd/{fd}", folder, path)
-        except OSError:  # no /proc: the text is written again, to a named file
-            return False
-        finally:
-            os.close(folder)
-    if tmp is None:
-        return True
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return True
-
-
-def _linked(unnamed: str, folder: int, path: Path) -> Path | None:
-    """Link the file `unnamed` names as `path` — None — or, where `path` exists, as a new
-    temporary name beside it, returned."""
-    try:
-        os.link(unnamed, path, src_dir_fd=folder)
-        return None
-    except FileExistsError:
-        pass
-    while True:
-        tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-        try:
-            os.link(unnamed, tmp, src_dir_fd=folder)
-            return tmp
-        except FileExistsError:
-            continue
 
 
 def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
@@ -235,6 +182,7 @@ def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
     rename, and one that keeps writing into the file it opened before the rename after the second.
     """
     tmp = _written_beside(path, text, stat.S_IMODE(os.stat(path).st_mode))
+    assert tmp is not None  # not `new`: always a name to rename
     was = path.with_name(f"{tmp.name.removesuffix('.tmp')}.was")
     try:
         try:
@@ -256,20 +204,69 @@ def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
     return same
 
 
-def _written_beside(path: Path, text: str, mode: int | None) -> Path:
-    """A temporary file beside `path` holding `text` (permissions `mode`, if given), on disk."""
+def _written_beside(path: Path, text: str, mode: int | None, *, new: bool = False) -> Path | None:
+    """A temporary name beside `path` for a file holding `text` (permissions `mode`, if given), on
+    disk; with `new`, where `path` does not exist yet, the file is linked in as `path` itself: None.
+
+    The text goes into a file without a name (Linux's O_TMPFILE), which the kernel removes if the
+    process dies before it is linked: a name appears only once the text is on disk, so a killed
+    writer leaves no temporary file — but for one between the link to the temporary name and its
+    caller's rename. Where the folder's file system has no unnamed files (or /proc is not
+    mounted), a named temporary file is written (a kill while writing leaves it)."""
+    try:
+        fd = os.open(path.parent, os.O_TMPFILE | os.O_WRONLY, 0o600)
+    except (AttributeError, OSError):  # no O_TMPFILE here, or not on this file system
+        return _named_beside(path, text, mode)
+    with os.fdopen(fd, "w", encoding="utf-8") as handle:
+        _put_on_disk(handle, text, mode)
+        # A directory handle given makes Python call linkat(…, AT_SYMLINK_FOLLOW) — without one it
+        # calls link(), which links the /proc entry itself and fails (EXDEV).
+        folder = os.open(path.parent, os.O_RDONLY)
+        try:
+            return _linked(f"/proc/self/fd/{fd}", folder, path, new)
+        except OSError:  # no /proc: the text is written again, to a named file
+            pass
+        finally:
+            os.close(folder)
+    return _named_beside(path, text, mode)
+
+
+def _linked(unnamed: str, folder: int, path: Path, new: bool) -> Path | None:
+    """Link the file `unnamed` names as `path` where `new` and `path` does not exist — None — or
+    as a new temporary name beside it, returned."""
+    if new:
+        try:
+            os.link(unnamed, path, src_dir_fd=folder)
+            return None
+        except FileExistsError:
+            pass
+    while True:
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            os.link(unnamed, tmp, src_dir_fd=folder)
+            return tmp
+        except FileExistsError:
+            continue
+
+
+def _named_beside(path: Path, text: str, mode: int | None) -> Path:
+    """`_written_beside` where there are no unnamed files: a named temporary file, removed if writing fails."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            if mode is not None:
-                os.fchmod(handle.fileno(), mode)
-            os.fsync(handle.fileno())
+            _put_on_disk(handle, text, mode)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return Path(tmp)
+
+
+def _put_on_disk(handle: TextIO, text: str, mode: int | None) -> None:
+    handle.write(text)
+    handle.flush()
+    if mode is not None:
+        os.fchmod(handle.fileno(), mode)
+    os.fsync(handle.fileno())
 
 
 def _sync_folder(folder: Path) -> None:
