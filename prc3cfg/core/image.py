@@ -68,7 +68,7 @@ class Program:
     def with_field(self, name: str, value: int) -> Program:
         """This program with one field changed — built from its values, not by `dataclasses.replace`,
         which costs three times as much (the device model runs it for every item a plan writes)."""
-        values = [self.P, self.V, self.Vr, self.T, self.F1, self.F2, self.A]
+        values = list(self.values())
         values[FIELD_INDEX[name]] = value
         return Program(*values)
 

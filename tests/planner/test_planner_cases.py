@@ -9,9 +9,10 @@ import pytest
 from planner_helpers import FRAMINGS, check_plan, line, with_programs
 
 from prc3cfg.core import codec
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
 from prc3cfg.core.planner.plan import program_list, summarise
+from prc3cfg.core.planner.problem import FIELD_BIT, diff_mask
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
 
@@ -324,3 +325,11 @@ def test_a_33h_run_is_replaced_by_an_init_when_its_programs_want_the_defaults() 
     check_plan(plan, actual, desired, cost)
     assert [step.message.ID for step in plan.steps] == [0x14, 0x40, 0x41]
     assert plan.steps[0].message == codec.InitPrograms(18, 29)
+
+
+@pytest.mark.parametrize("fields", [(), *((name,) for name in PROGRAM_FIELDS), PROGRAM_FIELDS, ("P", "T", "A")])
+def test_the_field_mask_has_the_bit_of_each_field_that_differs(fields):
+    """`diff_mask` is written out field by field: its bits are FIELD_BIT's, whatever the fields."""
+    have = recipe(5)
+    want = replace(have, **{name: getattr(have, name) + 1 for name in fields})
+    assert diff_mask(have, want) == sum(FIELD_BIT[name] for name in fields)

@@ -388,9 +388,9 @@ class WritePhase:
         saving = [prices.fields(n) - prices.fields(n - 1) if n else 0.0 for n in map(int.bit_count, writes.items)]
         n = writes.addresses.bit_count()
         address_saving = prices.addresses(n) - prices.addresses(n - 1) if n else 0.0
-        # the P and V a run still needs, and its cost, by each program in it
+        # by each program in a run: the programs of that run that still need their P and V, and its cost
+        need = self.pv_changed & ~writes.whole
         run_of = {j: (need & ((1 << (last + 1)) - (1 << first)), self.parts_price[last - first + 1])
-                  for need in (self.pv_changed & ~writes.whole,)
                   for first, last in writes.part_runs for j in range(first, last + 1)}  # fmt: skip
         savings = list(zip(saving, writes.items))
         parts_price, program, addresses = self.parts_price, prices.program, writes.addresses
@@ -403,7 +403,7 @@ class WritePhase:
             delta = program - saved
             if addresses >> j & 1:
                 delta -= address_saving
-            if j in run_of:  # the run cut down to the programs that still need it without j
+            if j in run_of:  # the run cut down to the programs that still need it without j: `_trimmed`, `_runs_cost` of one run
                 inside, price = run_of[j]
                 inside &= ~(1 << j)
                 rest = parts_price[inside.bit_length() - (inside & -inside).bit_length() + 1] if inside else 0
