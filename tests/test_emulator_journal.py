@@ -364,6 +364,8 @@ DAMAGE = {  # name: (what is done to the state file's text, to the journal's tex
     "journal: a damaged header": (None, lambda t: t.replace("-journal/2 ", "-journal/2 x", 1), "refuses"),
     "journal: no header": (None, lambda t: t.partition("\n")[2], "refuses"),
     "journal: a header of an unknown format": (None, lambda t: t.replace("journal/2", "journal/9", 1), "refuses"),
+    "journal: emptied": (None, lambda t: "", "refuses"),
+    "journal: only a header cut short": (None, lambda t: t[:12], "refuses"),
     "state: deleted": ("delete", None, "refuses"),
     "state: emptied": (lambda t: "", None, "refuses"),
     "state: another emulator's": (lambda t: json.dumps({**json.loads(t), "generation": "another"}), None, "refuses"),

@@ -121,7 +121,7 @@ def load_state(path: Path) -> dict[int, ModuleState]:
         raise UserError(f"{problem.where(path)}: {problem}, and its journal {keep} — fix the state file (the journal "
                         "replays onto it)") from None  # fmt: skip
     modules = _modules(path, data)
-    header, writes = (lines[0].split(b" ") + [b""])[:2], lines[1:]
+    header, writes = ((lines[0] if lines else b"").split(b" ") + [b""])[:2], lines[1:]
     generation, replaces = (data.get(key) for key in ("generation", "replaces"))
     if header[0] == JOURNAL_FORMAT.encode() and generation is not None and header[1] == str(generation).encode():
         pass
@@ -130,7 +130,8 @@ def load_state(path: Path) -> dict[int, ModuleState]:
     elif header[0] == _OLD_JOURNAL_FORMAT.encode() and header[1] == hashlib.sha256(read_regular(path, JSON_LIMIT)).hexdigest().encode():
         pass
     else:
-        found = f"generation {header[1].decode('ascii', 'replace')}" if header[0] == JOURNAL_FORMAT.encode() else "a damaged header"
+        found = (f"generation {header[1].decode('ascii', 'replace')}" if header[0] == JOURNAL_FORMAT.encode()
+                 else "a damaged header" if lines else "no header (it is empty)")
         held = f"generation {generation}" if generation is not None else "no generation"
         raise UserError(f"{journal}: {found}, and {path} beside it has {held} — the journal cannot be replayed onto it. "
                         f"Put back the state file it follows, or move the journal aside to start from {path} alone "
@@ -410,13 +411,13 @@ class Store:
             raise OSError(errno.ESHUTDOWN, "the emulator has closed its state file")
         self._generation = save_state(self.path, modules, replaces=self._generation)
         self._close_journal()
-        header = f"{JOURNAL_FORMAT} {self._generation}\n".encode()
+        header = f"{JOURNAL_FORMAT} {self._generation}\n"
         try:
-            fd = os.open(self.journal, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND | os.O_CLOEXEC, 0o644)
+            # The fresh journal takes the old one's place whole, header and all: killed before, the old
+            # journal is the one the state file replaces (nothing to replay); never an empty journal.
+            write_atomically(self.journal, header)
+            fd = os.open(self.journal, os.O_WRONLY | os.O_APPEND | os.O_CLOEXEC)
             try:
-                os.write(fd, header)
-                os.fdatasync(fd)
-                _sync_folder(self.path.parent)
                 self._files = (_identity(os.stat(self.path)), _identity(os.fstat(fd))[:2])
             except OSError:
                 os.close(fd)
@@ -431,7 +432,7 @@ class Store:
         if self._without_journal:
             log.warning("%s: keeping a journal again", self.journal)
             self._without_journal = False
-        self._fd, self._entries, self._size = fd, 0, len(header)
+        self._fd, self._entries, self._size = fd, 0, len(header.encode())
 
     def close(self, modules: Mapping[int, ModuleState]) -> None:
         """On exit: the state file takes everything, and the journal is removed. OSError when
