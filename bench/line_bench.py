@@ -20,9 +20,10 @@ and the client do not share an interpreter), then
   fourth changes one system parameter on every module (the acceleration: a change that can
   clamp no program, so no program is read for it).
 
-After commissioning, `plan` and `apply` read back only what each change touches (the base is
-the plant file just applied in full); `--full-read` measures the same with every module read in
-full, as every apply did before targeted read-backs.
+After commissioning, `plan` and `apply` read back every module's system block (the evidence) and
+of the programs only those the line's record does not show holding the plant file's values
+(`prc3cfg.core.targeting`; the record is the bench's own, in its temporary folder); `--full-read`
+measures the same with every module read in full, as every apply did before targeted read-backs.
 
 `--gaps`: each apply's frame trace (`--trace`) shows where its line stood idle — the time from
 the end of one exchange (its reply; a broadcast's frame sent and its turnaround passed) to the next request on the same line:
@@ -36,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -201,6 +203,7 @@ def main() -> None:
     cost = LineCost.of(args.framing, LineSettings(baud=args.baud, parity="none"), 0.010, 0.020)
 
     with tempfile.TemporaryDirectory() as work:
+        os.environ["PRC3CFG_STATE_DIR"] = str(Path(work) / "state")  # the lines' records: this run's, not the machine's
         emulator = subprocess.Popen(
             [*prc3cfg, "emulator", "serve", "--listen", "127.0.0.1:0", "--modules", f"1-{args.modules}",
              "--framing", args.framing, "--line-speed", str(args.baud), "--parity", "none"],

@@ -38,6 +38,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
 from decimal import Decimal
 from pathlib import Path
 from typing import Any, Protocol, TextIO
@@ -53,6 +54,7 @@ from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted, plural
+from prc3cfg.core.targeting import Known
 from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError
@@ -60,7 +62,7 @@ from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import releases
+from prc3cfg.shell import bases, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import Cancellation, main_thread_only
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
@@ -74,7 +76,7 @@ from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
-from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, applied_lines, check_writable, forget_applied, save_applied
+from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
@@ -244,86 +246,67 @@ def targets(pairs: Pairs) -> list[Target]:
     return [Target(bus.name, m.address, m.name, tuple(m.managed_programs()), m.desired_system()) for bus, m in pairs]
 
 
-@dataclass(frozen=True)
-class Base:
-    """A plant file the modules are taken to hold, for a targeted read-back (`prc3cfg.core.targeting`):
-    what it is in words, and its desired image of each module on the buses it covers — those it
-    puts on the same line as the plant file does, where a damaged frame is detected (on a line
-    without, every apply reads every module: a frame meant for one can change another)."""
-
-    said: str
-    images: dict[Key, ModuleImage]
+#: What a targeted read-back compares with, in words (`prc3cfg.shell.bases`).
+RECORD = "the line's record of what prc3cfg last read or verified"
 
 
-def base(plant: Plant, previous: Path | None = None) -> Base | None:
-    """The base of a targeted read-back: `previous` (the plant file as it was, e.g. on the main
-    branch: its problems are said), else the copy of the plant file last applied in full and
-    verified from here, on the lines it was applied to; None without one (a full read)."""
-    if previous is not None:
-        before = load_plant(previous)
-        said = str(previous)
-        lines_ = {bus.name: LineTaken(bus.port, bus.framing, ()) for bus in before.buses}
-    else:
-        lines_ = applied_lines(plant.path)
-        if not lines_:
-            return None
-        try:
-            before = load_plant(applied_copy(plant.path))
-        except UserError:
-            return None  # a copy this prc3cfg cannot read: no base
-        said = "the plant file last applied in full here"
-    images = {}
-    for bus in plant.buses:
-        line, old = lines_.get(bus.name), next((b for b in before.buses if b.name == bus.name), None)
-        if line is None or old is None or not detects_damage(bus.framing, bus.line.parity):
-            continue
-        if line.same_line(bus.port, bus.framing, bus_line_keys(plant, bus) if line.keys else ()):
-            images.update({(bus.name, m.address): m.desired_image() for m in old.modules})
-    return Base(said, images)
+def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
+    """What the records of these buses' lines say their modules hold, by (bus, address)."""
+    return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
 
 
 @dataclass(frozen=True)
 class Reads:
     """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
-    read-back the base it was compared with, in words (None: every chosen module in full)."""
+    read-back the record it was compared with, in words (None: every chosen module in full), the
+    modules read in full with why ("bus/name (why)": as a plan file says, else worked out from the
+    targets and the read-back) and whose verification the programs not read rest on."""
 
     pairs: Pairs
     targets: list[Target]
     base: str | None = None
-    #: the modules whose system parameters were not the base's (read in full): as a plan file says, else from `targets`
     not_as_verified: tuple[str, ...] | None = None
+    why: dict[Key, str] = field(default_factory=dict)  # read in full before any evidence: not on record, too old, E12
+    taken: dict[str, str] | None = None  # "bus/name" → `Known.said()`: as a plan file says, else from `known`
+    known: dict[Key, Known] = field(default_factory=dict)
 
     def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
-        """What the plan says it read and took as last verified, once `images` are read."""
+        """What the plan says it read now and took as known, once `images` are read."""
         if self.base is None:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
         skipped = {key: targeting.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
-        verified = {(t.bus, t.address): t.verified[0] for t in self.targets if t.verified is not None}
         other = self.not_as_verified
         if other is None:
-            other = tuple(f"{bus.name}/{m.name}" for bus, m in chosen
-                          if (key := (bus.name, m.address)) in verified and key in images and images[key].system != verified[key])  # fmt: skip
-        return Reading(self.base, unread, skipped, other)
+            evidence = {(t.bus, t.address): said for t in self.targets if t.known is not None and (t.bus, t.address) in images
+                        and (said := targeting.contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
+            other = tuple(f"{bus.name}/{m.name} ({why})" for bus, m in chosen
+                          if (why := self.why.get(key := (bus.name, m.address)) or evidence.get(key)) is not None)  # fmt: skip
+        taken = self.taken
+        if taken is None:
+            taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen if skipped.get(key := (bus.name, m.address))}
+        return Reading(self.base, unread, skipped, other, taken)
 
 
-def reads(plant: Plant, pairs: Pairs, the_base: Base | None) -> Reads:
-    """What to read of the chosen modules: everything (`targets`) without a base; with one, what the
-    change from the base touches (`targeting.touched`) — a module untouched is not read; one the base
-    does not cover, or that reported E12 since, in full."""
-    if the_base is None:
+def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
+    """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
+    records know none of them; else of each module its system block and the managed programs the
+    record does not show holding the plant file's values (`targeting.to_read`) — every managed
+    program of one the record does not know, knows from too long ago, or that reported E12 since."""
+    buses = {bus.name: bus for bus, _ in pairs}
+    known = {} if full_read else record(plant, buses.values())
+    if not any((bus.name, m.address) in known for bus, m in pairs):
         return Reads(pairs, targets(pairs))
-    unset = unset_systems(plant, {bus.name: bus for bus, _ in pairs}.values())
-    chosen, to_read = [], []
+    unset = unset_systems(plant, buses.values())
+    now = datetime.now(UTC)
+    to_read, why = [], {}
     for bus, m in pairs:
         key = (bus.name, m.address)
-        before = None if key in unset else the_base.images.get(key)
-        programs = targeting.touched(before, m.desired_image())
-        if programs is not None:  # read in full if its system parameters are not the base's: not as last verified
-            chosen.append((bus, m))
-            verified = None if before is None else (before.system, m.managed_programs())
-            to_read.append(Target(bus.name, m.address, m.name, programs, m.desired_system(), verified))
-    return Reads(chosen, to_read, the_base.said)
+        decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
+        to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
+        if decision.why is not None:
+            why[key] = "it reported E12 (system parameters not set)" if key in unset else decision.why
+    return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
 # -- the lines --------------------------------------------------------------------------
@@ -395,10 +378,30 @@ def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], reco
     return watch
 
 
+#: Called with a bus and its modules' images as soon as the bus is read.
+LineRead = Callable[[str, dict[Key, ModuleImage]], None]
+
+
+def seen(plant: Plant, command: str, then: LineRead | None = None) -> LineRead:
+    """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.bases`):
+    what `command` saw — drift included, so the next plan writes it back — then `then`."""
+    by, buses = bases.who(command, plant.path), {bus.name: bus for bus in plant.buses}
+
+    def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
+        keys = bus_line_keys(plant, buses[bus])
+        known, when = bases.load(keys), bases.now()
+        bases.update(keys, {a: targeting.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
+        if then is not None:
+            then(bus, images)
+
+    return record_and_then
+
+
 def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, each: Callable[[Target, ModuleImage], None] | None = None,
-          then: Callable[[str, dict[Key, ModuleImage]], None] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
+          then: LineRead | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
     """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`) — also
-    one that came during the last exchanges, when the read ended anyway: it is not forgotten."""
+    one that came during the last exchanges, when the read ended anyway: it is not forgotten. Each
+    line's read goes into its record by `then` (`seen`)."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
         images = read_all(targets_, links, progress=options.progress.advance, each=each, then=then)
@@ -408,7 +411,7 @@ def _read(targets_: list[Target], links: dict[str, Link], options: LineOptions, 
 
 
 def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
-                   desired: dict[Key, ModuleImage] | None = None, *,
+                   desired: dict[Key, ModuleImage] | None = None, *, command: str,
                    only_read: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
     """Read back and plan, each module planned as soon as it is read and each line as soon as its
     last module is — while the other lines are still being read: the lines never wait for all of
@@ -417,7 +420,7 @@ def _read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dic
     planner = _planner(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read)
     wanted = _wanted(pairs, desired)
     images = _read(to_read, links, options, each=_planning_each(planner, wanted),
-                   then=lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus])))  # fmt: skip
+                   then=seen(plant, command, lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus]))))  # fmt: skip
     return images, planner.plan(wanted, images)
 
 
@@ -427,13 +430,15 @@ def _planning_each(planner: Planner, wanted: list[Wanted]) -> Callable[[Target, 
     return lambda target, image: planner.plan_module(by_key[(target.bus, target.address)], image)
 
 
-def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None) -> dict[Key, ModuleImage]:
+def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None, *,
+         command: str = "read") -> dict[Key, ModuleImage]:  # fmt: skip
     """Read back the chosen modules: system parameters, managed programs, and every program the
-    plant's system parameters could clamp — by (bus, address)."""
+    plant's system parameters could clamp — by (bus, address); what was read goes into the lines'
+    records as `command`'s."""
     options = options or LineOptions()
     pairs = select(plant, modules)
     with lines(plant, {bus.name for bus, _ in pairs}, options) as links:
-        return _read(targets(pairs), links, options)
+        return _read(targets(pairs), links, options, then=seen(plant, command))
 
 
 def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
@@ -485,9 +490,10 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
     pairs = select(plant, modules)
     if images is not None:
         return make_plan(plant, pairs, images)
-    wanted = reads(plant, pairs, None if full_read else base(plant, previous))
+    wanted = reads(plant, pairs, full_read)
     with lines(plant, {bus.name for bus, _ in wanted.pairs}, options, purpose="plan") as links:
-        read_, planned = _read_and_plan(plant, wanted.pairs, wanted.targets, links, options, only_read=wanted.base is not None)
+        read_, planned = _read_and_plan(plant, wanted.pairs, wanted.targets, links, options, command="plan",
+                                        only_read=wanted.base is not None)  # fmt: skip
     return replace(planned, reading=wanted.reading(pairs, read_))
 
 
@@ -581,7 +587,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     planfile.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     said = planned.document.get("read")  # a targeted read-back's base, in words: it sends nothing
-    targeted = Reads(chosen, [], said["base"], tuple(said["not_as_verified"])) if isinstance(said, dict) else None
+    targeted = Reads(chosen, [], said["base"], tuple(said["not_as_verified"]), taken=dict(said.get("taken", {}))) if isinstance(said, dict) else None
     ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()),
                      only_read=targeted is not None)  # fmt: skip
     if targeted is not None:
@@ -637,21 +643,32 @@ def apply(
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
-    the_base = None if full_read or planned is not None else base(plant, previous)
-    wanted = _plan_file_reads(planned[1], pairs) if planned is not None else reads(plant, pairs, the_base)
+    wanted = _plan_file_reads(plant, *planned, pairs) if planned is not None else reads(plant, pairs, full_read)
     return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions())
 
 
-def _plan_file_reads(planned: PlanFile, pairs: Pairs) -> Reads:
+def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:
     """What to read for a plan file: every chosen module in full, or — for a plan made from a
-    targeted read-back — exactly the modules and programs its plan read."""
+    targeted read-back — exactly the modules and programs its plan read, with the line's record as
+    evidence; refused as stale when the record no longer shows a module holding what the plan took
+    as known without reading it (another apply or read since, or the record outgrew its age)."""
     said = planned.document.get("read")
     if not isinstance(said, dict):
         return Reads(pairs, targets(pairs))
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
-    return Reads([names[(e.bus, e.address)] for e in entries], [Target(e.bus, e.address, e.name, e.programs_read or ()) for e in entries],
-                 said["base"], tuple(said["not_as_verified"]))  # fmt: skip
+    known, now, to_read = record(plant, {names[(e.bus, e.address)][0].name: names[(e.bus, e.address)][0] for e in entries}.values()), \
+        datetime.now(UTC), []  # fmt: skip
+    for e in entries:
+        bus, m = names[(e.bus, e.address)]
+        decision = targeting.to_read(known.get((e.bus, e.address)), m.desired_image(), now, bus.record_max_age)
+        if not set(decision.programs) <= set(e.programs_read or ()):
+            raise StalePlan(f"{path}: stale plan — bus {e.bus}, module {e.address} ({e.name}): the line's record no longer shows it "
+                            "holding what the plan took as known without reading it (written or read by another run since, or "
+                            "older than record_max_age); nothing was written — plan again")  # fmt: skip
+        to_read.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known, m.managed_programs()))
+    return Reads([names[(e.bus, e.address)] for e in entries], to_read, said["base"], tuple(said["not_as_verified"]),
+                 taken=dict(said.get("taken", {})))  # fmt: skip
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
@@ -694,13 +711,13 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     try:
         with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            writing = _Writing(plant, keys, buses, links, journal, verify, options)
+            writing = _Writing(plant, keys, buses, links, journal, verify, options, records.command)
             if plan_file is None and not gates.asks:
                 result = _apply_by_line(plant, chosen, wanted, desired, gates, writing, options, earlier, records)
             else:
                 result = _apply_whole(plant, chosen, wanted, desired, plan_file, gates, writing, options, earlier, records)
             if result.runs and desired is None and len(chosen) == len(plant.modules()):
-                _keep_applied(plant, keys)
+                _keep_applied(plant)
             return result
     finally:
         journal.close()
@@ -713,10 +730,11 @@ def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, 
     pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
     started = time.monotonic()
     if plan_file is None:
-        images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired, only_read=wanted.base is not None)
+        images, the_plan = _read_and_plan(plant, pairs, to_read, links, options, desired, command=writing.command,
+                                          only_read=wanted.base is not None)  # fmt: skip
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
-        images = _read(to_read, links, options)
+        images = _read(to_read, links, options, then=seen(plant, writing.command))
         the_plan = prove(*plan_file, plant, chosen, images, {name: prober(links[name], bus) for name, bus in writing.buses.items()})
     reading = time.monotonic() - started
     if gates.show is not None:
@@ -785,7 +803,7 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
     with options.deferred(), ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as showing:
         writing.phases.reading(len(wanted.targets))
         try:
-            read_all(wanted.targets, links, progress=writing.phases.read, each=_planning_each(planner, want), then=line)
+            read_all(wanted.targets, links, progress=writing.phases.read, each=_planning_each(planner, want), then=seen(plant, writing.command, line))
         except Interrupted:
             if not writing.runs:
                 raise
@@ -830,9 +848,9 @@ class _Writing:
     and journalled, then written and verified (`execute`); then the account of every run."""
 
     def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], journal: Journal,
-                 verify: Verify, options: LineOptions) -> None:  # fmt: skip
+                 verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
         self.plant, self.keys, self.buses, self.links, self.journal = plant, keys, buses, links, journal
-        self.verify, self.options = verify, options
+        self.verify, self.options, self.command = verify, options, command
         self.phases = Phases(options.progress.start, options.progress.advance)
         self.runs: list[ModuleRun] = []
         self.snapshot: Path | None = None
@@ -870,9 +888,12 @@ class _Writing:
             if started is not None:
                 started()
             return
+        # not known until verified: dropped from the lines' records before the first frame (what was known kept for then)
+        known = {bus: bases.load(self.keys[bus]) for bus in {r.bus for r in runs}}
+        for bus in known:
+            bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
         with self._lock:
             if self._taken is None:
-                forget_applied(self.plant.path)  # until this apply verifies in full, the modules are not known to hold any plant file
                 taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
                 self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on)
             self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
@@ -888,8 +909,19 @@ class _Writing:
             if started is not None:
                 started()
 
-        execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=wrote,
-                written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
+        try:
+            execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=wrote,
+                    written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
+        finally:
+            self._verified(runs, known)
+
+    def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
+        """What the modules that verified hold, back into their lines' records: the read-back with the
+        steps' effect, and what the record knew of the rest (`targeting.merged`)."""
+        when, by = bases.now(), bases.who(self.command, self.plant.path)
+        for bus, held in known.items():
+            done = {r.address: r for r in runs if r.bus == bus and r.verified}
+            bases.update(self.keys[bus], {a: targeting.merged(held.get(a), _holds(run), when, by) for a, run in done.items()})
 
     def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
                 took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> ApplyResult:  # fmt: skip
@@ -920,15 +952,18 @@ class _Writing:
         return result
 
 
-def _keep_applied(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
-    """The plant file just applied in full and verified on every module, kept for `left_alone` and
-    as the base of the next targeted read-back (`base`), with the lines it was applied to (`keys`:
-    the identities the apply resolved; a line it did not open is resolved now) — if it is still
-    the one applied."""
+def _holds(run: ModuleRun) -> ModuleImage:
+    """What a verified module holds: its last read-back, and the device model's prediction where that read nothing."""
+    final = run.final or run.predicted
+    return replace(final, programs=tuple(f if f is not None else p for f, p in zip(final.programs, run.predicted.programs)))
+
+
+def _keep_applied(plant: Plant) -> None:
+    """The plant file just applied in full and verified on every module, kept for `left_alone` — if
+    it is still the one applied."""
     text = plant.path.read_bytes()
     if hashlib.sha256(text).hexdigest() == plant.sha256:
-        save_applied(plant.path, text, {bus.name: LineTaken(bus.port, bus.framing, keys[bus.name] if bus.name in keys
-                                                            else bus_line_keys(plant, bus)) for bus in plant.buses})  # fmt: skip
+        save_applied(plant.path, text)
 
 
 def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
@@ -1081,22 +1116,13 @@ def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Ke
     """The chosen modules that drifted from the plant file — read back now, or as `images` —
     reported as drift, not as a plan (`prc3cfg plan --refresh-only`)."""
     if images is None:
-        images = read(plant, modules, options)
-        _drift_seen(plant, modules, images)
+        images = read(plant, modules, options, command="plan --refresh-only")
     found = []
     for bus, module in select(plant, modules):
         said = drifted(module.desired_image(), images[(bus.name, module.address)])
         if said:
             found.append(Drift(bus.name, module.address, module.name, tuple(said)))
     return found
-
-
-def _drift_seen(plant: Plant, modules: Iterable[str] | None, images: dict[Key, ModuleImage]) -> None:
-    """A full read that found a module holding other than the plant file says: the modules are no
-    longer known to hold the plant file last applied here, which is no longer a base (`base`) — the
-    next plan reads everything, and sees it too."""
-    if any(drifted(m.desired_image(), images[(bus.name, m.address)]) for bus, m in select(plant, modules)):
-        forget_applied(plant.path)
 
 
 @dataclass(frozen=True)
@@ -1116,8 +1142,7 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
     values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
     writes it."""
     before = _plant_text(plant.path)
-    images = read(plant, modules, options)
-    _drift_seen(plant, modules, images)
+    images = read(plant, modules, options, command="adopt")
     found = adopt_text(plant, images, before, programs)
     return Adoption(plant.path, before, found.text, found.adopted)
 

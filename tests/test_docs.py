@@ -71,7 +71,7 @@ def paths(value: object, at: str = "", maps: dict[str, str | None] | None = None
     return found
 
 
-SYMBOLS = {"buses[].modules[].changes.symbols": None}  # keyed by program number
+SYMBOLS = {"buses[].modules[].changes.symbols": None, "read.taken": None}  # keyed by program number; by "bus/module"
 
 CLAMPING = """\
 plant: short
@@ -85,10 +85,12 @@ buses:
 """
 
 
-def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object, **emulated) -> dict:
+def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object, read_first: bool = False, **emulated) -> dict:
+    """The plan file of `source` on emulators; `read_first`: after a `read`, which the line's record then holds (a targeted plan)."""
     directory = tmp_path / name
     directory.mkdir()
     with emulated_plant(directory, **({"source": source} if source else {}), **emulated) as plant:
+        assert not read_first or run_cli(capsys, "read", plant.path).code == 0
         out = directory / "plan.json"
         result = run_cli(capsys, "plan", plant.path, "--out", out, *args)
         assert result.code == 0, result.err
@@ -106,7 +108,7 @@ def test_a_plan_file_has_exactly_the_keys_docs_files_lists(tmp_path, capsys):
     seen = plain | paths(planned(tmp_path, capsys, "broadcast", declared), maps=SYMBOLS)
     seen |= paths(planned(tmp_path, capsys, "unlisted", declared, unlisted={"line": [29]}), maps=SYMBOLS)
     seen |= paths(planned(tmp_path, capsys, "clamping", clamping), maps=SYMBOLS)
-    seen |= paths(planned(tmp_path, capsys, "targeted", None, "--previous", tmp_path / "clamping.yaml"), maps=SYMBOLS)
+    seen |= paths(planned(tmp_path, capsys, "targeted", None, read_first=True), maps=SYMBOLS)
     assert seen == set(documented)
 
 

@@ -8,6 +8,7 @@ import json
 import random
 import sys
 from dataclasses import replace
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
@@ -38,14 +39,50 @@ def changes(draw: st.DrawFn) -> tuple[ModuleImage, ModuleImage]:
     return actual, plant_file(rnd, actual, draw(st.lists(st.integers(0, 6), max_size=4)))
 
 
-def test_a_module_the_change_does_not_touch_is_not_read_and_one_it_touches_reads_the_programs_that_differ():
+NOW = datetime(2026, 11, 26, 12, 0, tzinfo=UTC)
+
+
+def known(image: ModuleImage, hours: float = 1) -> targeting.Known:
+    return targeting.Known(image, (NOW - timedelta(hours=hours)).isoformat(), "apply of a.yaml by ana@pc")
+
+
+def test_what_to_read_from_the_lines_record_is_a_table():
     rnd = random.Random(3)
-    before = replace(read_back(rnd), address=1)
-    assert targeting.touched(before, before) is None
-    after = before.with_programs({5: replace(before.known(5), P=before.known(5).P // 2 + 1), 9: replace(before.known(9), T=7)})
-    assert targeting.touched(before, after) == (5, 9)
-    assert targeting.touched(None, after) == tuple(range(1, PROGRAM_COUNT + 1))  # no base: every managed program
-    assert targeting.touched(before, replace(before, system=replace(before.system, S6=1001 if before.system.S6 != 1001 else 1002))) == ()
+    held = replace(read_back(rnd), address=1)
+    managed = tuple(n for n, p in enumerate(held.programs, 1) if p is not None)
+    changed = held.with_programs({5: replace(held.known(5), P=held.known(5).P // 2 + 1), 9: replace(held.known(9), T=7)})
+    other_system = replace(held, system=replace(held.system, S6=1001 if held.system.S6 != 1001 else 1002))
+    cases = [  # (the record, the plant file) → (programs read besides the 50h, evidence kept, read in full because)
+        (None, held, managed, False, "not on the line's record"),
+        (known(held), held, (), True, None),  # untouched: its system block only
+        (known(held), changed, (5, 9), True, None),
+        (known(held), other_system, (), True, None),  # a system change: the read-back adds what it can clamp
+        (known(held.with_programs({9: None})), held, (9,), True, None),  # a program the record does not know
+        (known(held, hours=9), held, managed, False, "older than record_max_age (28800 s)"),
+    ]
+    for record, desired, programs, evidence, why in cases:
+        decided = targeting.to_read(record, desired, NOW, 28_800)
+        assert decided.programs == programs
+        assert (decided.known is not None) == evidence
+        assert (decided.why is None) if why is None else why in decided.why
+
+
+def test_a_read_back_that_contradicts_the_record_drops_it_whole():
+    rnd = random.Random(4)
+    held = replace(read_back(rnd), address=1)
+    cut = held.with_programs({n: None for n in range(10, PROGRAM_COUNT + 1)})  # what a targeted read read: programs 1..9
+    assert targeting.contradiction(held, cut) is None
+    other_program = cut.with_programs({3: replace(held.known(3), T=held.known(3).T + 1)})
+    assert targeting.contradiction(held, other_program) == "program 3 is not as on record"
+    other_system = replace(cut, system=replace(cut.system, S7=cut.system.S7 + 1))
+    assert targeting.contradiction(held, other_system) == "its system parameters are not those on record"
+    record = known(held)
+    kept = targeting.merged(record, cut, NOW.isoformat(), "plan of b.yaml by bo@pc")
+    assert kept.image == held and kept.since == record.since and kept.by == record.by  # the rest still rests on the old record
+    whole = targeting.merged(record, held, NOW.isoformat(), "plan of b.yaml by bo@pc")
+    assert whole.since == NOW.isoformat() and whole.by == "plan of b.yaml by bo@pc"  # every value read now
+    dropped = targeting.merged(record, other_program, NOW.isoformat(), "read")
+    assert dropped.image == other_program  # nothing of the contradicted record is kept
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -88,8 +125,9 @@ def test_a_targeted_apply_ends_where_a_full_one_does(tmp_path_factory, change):
 
 
 def targeted_equals_full(directory: Path, actual: ModuleImage, desired: ModuleImage) -> None:
-    """Modules holding the base (module 1 the scenario's `actual`, module 2 untouched): the plant file
-    applied from the base as `--previous`, and again with a full read from the same start, end alike."""
+    """Modules holding the scenario's `actual` (module 1) and an untouched one (module 2), each read
+    once so that the line's record knows them: the plant file applied targeted from that record,
+    and again with a full read from the same start, end alike."""
     directory.mkdir(parents=True, exist_ok=True)
     other = replace(read_back(random.Random(actual.system.S3)), address=2)
     write_plant(directory / "source.yaml", "socket://127.0.0.1:1", [desired, other])
@@ -97,18 +135,19 @@ def targeted_equals_full(directory: Path, actual: ModuleImage, desired: ModuleIm
     (directory / "run").mkdir()
     with emulate(directory / "source.yaml", directory / "run", timeout=0.1) as emulated:
         port = emulated.plant.buses[0].port
-        base = write_plant(directory / "base.yaml", port, [actual, other])
         plant = api.load(write_plant(emulated.path, port, [desired, other]))
         emulator = emulated.emulators["line"]
         for full in (False, True):
             emulator.update(1, image=actual)
             emulator.update(2, image=other)
-            result = api.apply(plant, gates=api.Gates(allow_axis_release=True), previous=None if full else base, full_read=full)
-            result.told()
+            api.read(plant)  # the line's record: what the modules hold
             if not full:
-                reading = api.plan(plant, previous=base).reading
-                untouched = ("line/m1", "line/m2") if actual == desired else ("line/m2",)
-                assert reading is not None and reading.modules_not_read == untouched
+                reading = api.plan(plant).reading
+                assert reading is not None and reading.modules_not_read == ()  # every module's system block is read
+                managed = tuple(n for n, p in enumerate(other.programs, 1) if p is not None)
+                assert reading.programs_not_read[("line", 2)] == managed  # the untouched module: its 50h only
+            result = api.apply(plant, gates=api.Gates(allow_axis_release=True), full_read=full)
+            result.told()
             ended[full] = {a: s.image for a, s in emulator.modules().items()}
     assert ended[False] == ended[True]
     assert ended[False][1].system == desired.system and ended[False][1].programs == desired.programs
@@ -119,10 +158,10 @@ def targeted_equals_full(directory: Path, actual: ModuleImage, desired: ModuleIm
 
 @pytest.fixture
 def applied(tmp_path, capsys):
-    """The demo plant applied in full on emulators: the plant file last applied here is the base."""
+    """The demo plant applied in full on emulators: the lines' records know every module."""
     with emulated_plant(tmp_path) as plant:
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-        assert (plant.path.parent / ".prc3cfg" / "applied" / "plant.yaml.lines.json").exists()
+        assert len(list((tmp_path / "state" / "lines").glob("*.json"))) >= 2  # one a line (and one more a spelling of it)
         yield plant
 
 
@@ -151,9 +190,10 @@ def test_a_value_taught_in_a_program_the_change_does_not_touch_is_left_and_the_p
     booth.teach_in(1, 2, 180)  # program 2 of booth-a-left: the change below does not touch it
     edit(applied.path, "position: 2.1", "position: 2.0")
     planned = run_cli(capsys, "plan", applied.path, "--out", tmp_path / "p.json")
-    assert "taken as last verified, not read:" in planned.out and "--full-read reads everything" in planned.out
+    assert "taken as known from the line's record" in planned.out and "plan --refresh-only (or --full-read) reads everything" in planned.out
     document = json.loads((tmp_path / "p.json").read_text())
-    assert document["read"]["base"] == "the plant file last applied in full here"
+    assert document["read"]["base"] == api.RECORD
+    assert all(said.startswith(f"apply of {applied.path} by ") for said in document["read"]["taken"].values())
     left = next(m for bus in document["buses"] for m in bus["modules"] if m["name"] == "booth-a-left")
     assert left["read"]["programs"] == [1] and 2 in left["read"]["programs_not_read"]
     applied_ = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve")
@@ -173,16 +213,6 @@ def test_a_plan_file_whose_read_programs_are_edited_is_refused(applied, capsys, 
     assert refused.code == 1 and ("stale plan" in refused.err or "changed after it was made" in refused.err), refused.err
 
 
-def test_any_write_forgets_the_base_until_an_apply_verifies_in_full(applied, capsys):
-    lines = applied.path.parent / ".prc3cfg" / "applied" / "plant.yaml.lines.json"
-    edit(applied.path, "position: 2.1", "position: 2.0")
-    assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--module", "booth-a-left").code == 0
-    assert not lines.exists()  # some modules written, the plant not verified in full: no base
-    assert "Read back what the change touches" not in run_cli(capsys, "plan", applied.path).out
-    assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
-    assert lines.exists()
-
-
 def test_a_module_whose_system_block_is_not_the_bases_is_read_in_full(applied, capsys, tmp_path):
     """A module changed by another tool since the last verified apply (or a spare fitted and set up
     by hand): its one 50h shows a system block other than the base's, so nothing of it is taken as
@@ -197,7 +227,7 @@ def test_a_module_whose_system_block_is_not_the_bases_is_read_in_full(applied, c
     left = next(m for bus in json.loads((tmp_path / "p.json").read_text())["buses"] for m in bus["modules"] if m["name"] == "booth-a-left")
     module = next(m for _, m in api.load(applied.path).modules() if m.name == "booth-a-left")
     assert left["read"] == {"programs": list(module.managed_programs()), "programs_not_read": []}
-    assert "read in full, their system parameters not those last verified: booth-a/booth-a-left" in planned.out
+    assert "read in full: booth-a/booth-a-left (its system parameters are not those on record)" in planned.out
     assert run_cli(capsys, "apply", applied.path, "--module", "booth-a-left", "--auto-approve", "--allow-axis-release").code == 0
     held, wanted = booth.module(1).image, module.desired_image()
     assert held.system == wanted.system and all(held.program(n) == wanted.program(n) for n in module.managed_programs())

@@ -103,6 +103,7 @@ class _Read(BaseModel):
     base: Text
     modules_not_read: list[Text]
     not_as_verified: list[Text]
+    taken: dict[str, Text] = Field(default_factory=dict)  # none in plan files before the line's record
 
 
 class PlanDocument(BaseModel):

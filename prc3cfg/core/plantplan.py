@@ -18,7 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from prc3cfg import __version__
@@ -107,17 +107,21 @@ class LineProof:
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """How a plan's read-back was targeted (`prc3cfg.core.targeting`): the base it was compared with,
-    in words, the modules not read at all, and per module read the managed programs not read — all
-    taken as last verified. A plan without one read every chosen module in full."""
+    """How a plan's read-back was targeted (`prc3cfg.core.targeting`): the record it was compared with,
+    in words, the modules not read at all (none: every module's system block is read), per module read
+    the managed programs not read — taken as known from the record, with who verified them when
+    (`taken`, "bus/name" → words) — and the modules read in full, each with why. A plan without one
+    read every chosen module in full."""
 
     base: str
     modules_not_read: tuple[str, ...]  # "bus/name"
     programs_not_read: dict[tuple[str, int], tuple[int, ...]]
-    not_as_verified: tuple[str, ...] = ()  # "bus/name": other system parameters than the base's, read in full
+    not_as_verified: tuple[str, ...] = ()  # "bus/name (why)": read in full, not taken from the record
+    taken: dict[str, str] = field(default_factory=dict)  # "bus/name" → whose read or verification its unread programs rest on, when
 
     def to_json(self) -> dict[str, Any]:
-        return {"base": self.base, "modules_not_read": list(self.modules_not_read), "not_as_verified": list(self.not_as_verified)}
+        return {"base": self.base, "modules_not_read": list(self.modules_not_read), "not_as_verified": list(self.not_as_verified),
+                "taken": dict(self.taken)}  # fmt: skip
 
     def module_json(self, change: ModuleChange) -> dict[str, Any]:
         read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]

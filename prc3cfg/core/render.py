@@ -326,9 +326,10 @@ def estimate(document: dict[str, Any]) -> str:
 
 
 def reading_line(document: dict[str, Any]) -> str | None:
-    """What a targeted plan read and what it took as last verified, in one line; None for a full read.
-    "Read back what the change touches (base: …): the system parameters of 30 modules and 60 of their
-    programs; taken as last verified, not read: 900 programs of those modules and 2 modules (…)"."""
+    """What a targeted plan read now and what it took as known from the line's record, in one line;
+    None for a full read. "Read now: the system parameters of all 30 modules and 60 of their programs;
+    taken as known, not read: 900 programs of 30 modules, as apply of /p/a.yaml by ana@pc verified
+    them (2026-…); read in full: line/m2 (program 3 is not as on record) — what no read sees: …"."""
     said = document.get("read")
     if not isinstance(said, dict):
         return None
@@ -336,14 +337,18 @@ def reading_line(document: dict[str, Any]) -> str | None:
     programs = sum(len(m["read"]["programs"]) for _, m in modules)
     skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
     unread = said["modules_not_read"]
-    taken = [f"{plural(skipped, 'program')} of those modules"] if skipped else []
+    sources = sorted(set(said.get("taken", {}).values()))
+    taken = ([f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"
+             + (f", as {'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else "")]
+             if skipped else [])  # fmt: skip
     taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
     other = said["not_as_verified"]
-    return (f"Read back what the change touches (base: {said['base']}): {read}"
-            + (f"; taken as last verified, not read: {' and '.join(taken)}" if taken else "")
-            + (f"; read in full, their system parameters not those last verified: {', '.join(other)}" if other else "")
-            + " — --full-read reads everything")  # fmt: skip
+    return (f"Read now: {read}"
+            + (f"; taken as known from {said['base']}, not read: {' and '.join(taken)}" if taken else "")
+            + (f"; read in full: {', '.join(other)}" if other else "")
+            + (" — a program not read that another tool changed on a module whose system parameters did not change is not seen: "
+               "plan --refresh-only (or --full-read) reads everything" if taken else ""))  # fmt: skip
 
 
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:

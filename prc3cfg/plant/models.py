@@ -387,6 +387,9 @@ class BusLine(FileModel):
     only_these_modules: Annotated[bool, Field(strict=True, description=(
         "true: the modules listed are every module on this line — prc3cfg may then send what they all need "
         "alike once, as a broadcast to address 0 (a full line of 30 modules needs no saying)"))] = False
+    record_max_age: Annotated[float, _number(0, unit="s", out=float, description=(
+        "s: how long what prc3cfg last read or verified on this line is taken as known without reading it "
+        "again — past it, a plan reads every module in full (0: always)"))] = 28_800.0
     accept_undetected_damage: Annotated[bool, Field(strict=True, description=(
         "true: apply on this line although it has no error detection (open-driver with parity none), knowing "
         "that a damaged frame can become another write, a read a write, an address the broadcast — prefer parity"))] = False

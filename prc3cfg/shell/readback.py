@@ -45,21 +45,25 @@ class LinesFailed(UserError):
 
 def read_module(
     link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None,
-    verified: tuple[SystemParameters, Iterable[int]] | None = None,
+    known: ModuleImage | None = None, managed: Iterable[int] = (),
 ) -> ModuleImage:  # fmt: skip
     """The image of the module at `address`: system parameters and the given programs (others None).
 
     With `clamped_by` (the system parameters a plan will write), every program is read when
-    writing them can clamp programs on this module. With `verified` (the system parameters a
-    targeted read takes the module to hold, and its managed programs), those programs are read
-    too when the module reports other system parameters: it is not as last verified.
+    writing them can clamp programs on this module. With `known` (what the line's record says the
+    module holds, `prc3cfg.core.targeting`), what is read is evidence: a system block or a program
+    other than the record's means the module was changed by another hand, and every `managed`
+    program is read too — nothing of the record is taken then.
     """
     system = read_system(link, address, name=name)
     wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
-    if verified is not None and system != verified[0]:
-        wanted |= set(verified[1])
+    if known is not None and system != known.system:
+        wanted |= set(managed)
+    found = read_programs(link, address, wanted, name=name)
+    if known is not None and any(known.program(n) not in (None, program) for n, program in found.items()):
+        found |= read_programs(link, address, set(managed) - set(found), name=name)
     slots: list[Program | None] = [None] * PROGRAM_COUNT
-    for number, program in read_programs(link, address, wanted, name=name).items():
+    for number, program in found.items():
         slots[number - 1] = program
     return ModuleImage(address=address, system=system, programs=tuple(slots))
 
@@ -111,7 +115,8 @@ class Target:
     name: str
     programs: tuple[int, ...]
     clamped_by: SystemParameters | None = None
-    verified: tuple[SystemParameters, tuple[int, ...]] | None = None  # a targeted read's: see `read_module`
+    known: ModuleImage | None = None  # a targeted read's evidence, and the programs it reads in full then: see `read_module`
+    managed: tuple[int, ...] = ()
 
 
 def read_all(
@@ -139,7 +144,7 @@ def read_all(
         images = {}
         for t in bus_targets:
             image = images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by,
-                                                             verified=t.verified)  # fmt: skip
+                                                             known=t.known, managed=t.managed)  # fmt: skip
             if progress:
                 progress()
             if each is not None:

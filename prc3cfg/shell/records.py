@@ -11,9 +11,8 @@
   `exchange` with time, bus, address, request and reply in hex, attempt, duration.
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
-  modules and programs left the plant file — they stay on the hardware as they are — and,
-  with the lines it was applied to (`<plant>.yaml.lines.json`, removed before any write), the
-  base of a targeted read-back (`prc3cfg.api.base`).
+  modules and programs left the plant file — they stay on the hardware as they are. (What the
+  modules hold is the line's record's: `prc3cfg.shell.bases`.)
 
 `check_writable` tells, before an apply opens a line, whether these can be written at all (a
 read-only checkout, a full disk, a file where `.prc3cfg` belongs): an apply that could not keep
@@ -22,7 +21,6 @@ its snapshot and journal must not start writing modules.
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import json
 import os
@@ -33,7 +31,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
-from pydantic import BaseModel, Field, RootModel, ValidationError
+from pydantic import BaseModel, Field, ValidationError
 
 from prc3cfg.core.contract import Text, json_path, said
 from prc3cfg.core.image import ModuleImage, images_from_json
@@ -167,10 +165,6 @@ class _Line(BaseModel):
     keys: list[Text]
 
 
-#: The lines a plant file last applied in full was applied to (`save_applied`), bus → line.
-_AppliedLines = RootModel[dict[str, _Line]]
-
-
 class _SnapshotDocument(BaseModel):
     """A snapshot as `Snapshot.load` reads it."""
 
@@ -186,33 +180,9 @@ def applied_copy(plant_path: Path) -> Path:
     return records_dir(plant_path, "applied") / plant_path.name
 
 
-def save_applied(plant_path: Path, text: bytes, lines: dict[str, LineTaken]) -> None:
-    """Keep the plant file just applied in full and verified, and the lines it was applied to (each
-    atomically; the lines last: they make the copy a base for a targeted read-back)."""
+def save_applied(plant_path: Path, text: bytes) -> None:
+    """Keep the plant file just applied in full and verified (atomically)."""
     write_atomically(applied_copy(plant_path), text.decode("utf-8"))
-    write_atomically(_applied_lines(plant_path), json.dumps(
-        {bus: {"port": line.port, "framing": line.framing, "keys": list(line.keys)} for bus, line in sorted(lines.items())}, indent=1))
-
-
-def _applied_lines(plant_path: Path) -> Path:
-    return records_dir(plant_path, "applied") / f"{plant_path.name}.lines.json"
-
-
-def applied_lines(plant_path: Path) -> dict[str, LineTaken]:
-    """The lines the copy of the plant file last applied in full was applied to and verified on —
-    none once an apply or restore has written to them since (`forget_applied`), or if never kept."""
-    try:
-        lines = _AppliedLines.model_validate(read_json(_applied_lines(plant_path))).root
-        return {bus: LineTaken(line.port, line.framing, tuple(line.keys)) for bus, line in lines.items()}
-    except (FileProblem, ValidationError):
-        return {}  # never kept, or not a record this prc3cfg can read: no base, a full read
-
-
-def forget_applied(plant_path: Path) -> None:
-    """Before an apply's or restore's first write: the modules will no longer be known to hold the
-    copy last applied (it stays, for `left_alone`; its lines go until an apply verifies in full again)."""
-    with contextlib.suppress(FileNotFoundError):
-        os.unlink(_applied_lines(plant_path))
 
 
 class Journal:

@@ -47,11 +47,11 @@ def state_dirs() -> list[Path]:
     return [SYSTEM_STATE_DIR, home]
 
 
-def _folder() -> Path:
-    """The folder this process writes its records into: the first of `state_dirs` it can write."""
+def folder(kind: str = "releases", what: str = "the record of an axis release") -> Path:
+    """The folder this process writes its records of `kind` into: the first of `state_dirs` it can write."""
     problems = []
     for directory in state_dirs():
-        folder = directory / "releases"
+        folder = directory / kind
         try:
             folder.mkdir(parents=True, exist_ok=True)
             if directory == SYSTEM_STATE_DIR and folder.stat().st_uid == os.getuid():
@@ -61,7 +61,7 @@ def _folder() -> Path:
             problems.append(f"{folder}: not writable")
         except OSError as error:
             problems.append(f"{folder}: {error.strerror}")
-    raise UserError(f"cannot keep the record of an axis release ({'; '.join(problems)}) — nothing was written; "
+    raise UserError(f"cannot keep {what} ({'; '.join(problems)}) — nothing was written; "
                     "set PRC3CFG_STATE_DIR to a folder this user can write")  # fmt: skip
 
 
@@ -149,7 +149,7 @@ class Releases:
                 return
             stamp = datetime.now(UTC)
             if self._path is None:
-                self._path = _folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
+                self._path = folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
             line = json.dumps({"kind": kind, "keys": list(keys), "bus": bus, "address": address, "name": name,
                                "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "command": self.command,
                                "journal": None if self.journal is None else str(self.journal)})  # fmt: skip

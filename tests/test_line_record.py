@@ -1,0 +1,174 @@
+"""The line's record (`prc3cfg.shell.bases`): one base per line, shared by every plant file, checkout
+and user of it, and checked by evidence at every plan — each test a way something other than this
+plant file's last apply touched the line, across the real emulator and link client: another plant
+file or checkout, a module reset or replaced by a spare, two modules swapped, drift a full read
+found, a run killed after its 20h. None may end in "No changes", "Nothing to do" or "verified" with
+a module holding other values than the plant file, nor with an axis release untold."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from emulated import emulated_plant, run_cli
+
+from prc3cfg import api
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.shell.testing import EmulatedPlant
+
+
+def edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new, 1))
+
+
+@pytest.fixture
+def applied(tmp_path, capsys):
+    """The demo plant (plant file A) applied in full on emulators: the lines' records know every module."""
+    with emulated_plant(tmp_path) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        yield plant
+
+
+def second_checkout(plant: EmulatedPlant, tmp_path: Path) -> Path:
+    """The same plant file in another folder (another checkout, or plant file B on the same lines)."""
+    other = tmp_path / "checkout-b" / "plant.yaml"
+    other.parent.mkdir()
+    other.write_text(plant.path.read_text())
+    return other
+
+
+def holds_the_plant_file(plant: EmulatedPlant, bus: str, name: str) -> bool:
+    module = next(m for b, m in api.load(plant.path).modules() if b.name == bus and m.name == name)
+    held, wanted = plant.emulators[bus].module(module.address).image, module.desired_image()
+    return held.system == wanted.system and all(held.program(n) == wanted.program(n) for n in module.managed_programs())
+
+
+def test_another_plant_file_on_the_same_line_is_seen_and_written_back(applied, capsys, tmp_path):
+    other = second_checkout(applied, tmp_path)
+    edit(other, "position: 2.0\n", "position: 1.9\n")  # B: booth-a-right's program 1
+    assert run_cli(capsys, "apply", other, "--auto-approve").code == 0
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 2, planned.out  # not "No changes"
+    assert "program 1: position 1.900 m → 2.000 m" in planned.out
+    assert "Plan: 1 of 6 modules changes" in planned.out  # the headline counts every module of the plant
+    applied_a = run_cli(capsys, "apply", applied.path, "--auto-approve")
+    assert applied_a.code == 0 and "Nothing to do" not in applied_a.out
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
+    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0
+
+
+def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(applied, capsys):
+    """What deleting an emulator's state file (or Initialise on the panel) does to a module."""
+    applied.emulators["booth-a"].update(2, image=ModuleImage.factory(2))
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 2
+    assert "read in full: booth-a/booth-a-right (its system parameters are not those on record)" in planned.out
+    assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release").code == 0
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
+
+
+def test_a_spare_with_the_same_system_block_is_found_by_the_program_the_change_reads_and_set_up_whole(applied, capsys):
+    booth = applied.emulators["booth-a"]
+    held = booth.module(2).image
+    booth.update(2, image=replace(ModuleImage.factory(2), system=held.system))  # a spare, its system block set by hand
+    edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # the change reads program 1 only
+    planned = run_cli(capsys, "plan", applied.path)
+    assert "read in full: booth-a/booth-a-right (program 1 is not as on record)" in planned.out
+    assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-right")  # programs 2 and 3 too, not only program 1
+
+
+def test_two_modules_swapped_are_each_read_in_full_and_put_right(applied, capsys):
+    booth = applied.emulators["booth-a"]
+    left, top = booth.module(1).image, booth.module(5).image
+    booth.update(1, image=replace(top, address=1))
+    booth.update(5, image=replace(left, address=5))
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 2
+    assert "booth-a/booth-a-left (its system parameters are not those on record)" in planned.out
+    assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release").code == 0
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-left") and holds_the_plant_file(applied, "booth-a", "booth-a-top")
+
+
+def test_drift_a_full_read_found_is_written_back_by_the_next_apply(applied, capsys):
+    applied.emulators["booth-a"].teach_in(1, 2, 180)  # booth-a-left, program 2, taught on the floor
+    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # not read: the stated limit
+    full = run_cli(capsys, "plan", applied.path, "--full-read", "--detailed-exitcode")
+    assert full.code == 2 and "program 2: position 0.180 m → 0.150 m" in full.out
+    again = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")  # a targeted plan: the record holds what was seen
+    assert again.code == 2 and "program 2: position 0.180 m → 0.150 m" in again.out
+    result = run_cli(capsys, "apply", applied.path, "--auto-approve")
+    assert result.code == 0 and "verified" in result.out
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-left")
+
+
+def test_refresh_only_and_read_update_the_record_too(applied, capsys):
+    applied.emulators["booth-a"].teach_in(1, 2, 180)
+    assert run_cli(capsys, "plan", applied.path, "--refresh-only", "--detailed-exitcode").code == 2
+    assert "program 2: position 0.180 m → 0.150 m" in run_cli(capsys, "plan", applied.path).out
+    applied.emulators["booth-a"].teach_in(1, 3, 1100)
+    assert run_cli(capsys, "read", applied.path, "--json").code == 0
+    assert "program 3: position 1.100 m → 1.200 m" in run_cli(capsys, "plan", applied.path).out
+
+
+def test_a_reviewed_plan_is_stale_once_the_record_no_longer_vouches_for_what_it_did_not_read(applied, capsys, tmp_path):
+    other = second_checkout(applied, tmp_path)
+    edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # plan A reads booth-a-right's program 1
+    assert run_cli(capsys, "plan", applied.path, "--out", tmp_path / "p.json").code == 0
+    edit(other, "position: 0.15\n", "position: 0.14\n")  # B changes program 2 everywhere: A's plan did not read it
+    assert run_cli(capsys, "apply", other, "--auto-approve").code == 0
+    refused = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve")
+    assert refused.code == 1 and "stale plan" in refused.err and "the line's record no longer shows it" in refused.err
+    assert applied.emulators["booth-a"].module(2).image.known(1).P == 2000  # nothing was written
+
+
+def test_the_record_is_shared_by_every_plant_file_and_names_who_verified_what_was_not_read(applied, capsys, tmp_path):
+    other = second_checkout(applied, tmp_path)
+    planned = run_cli(capsys, "plan", other, "--json")
+    document = json.loads(planned.out)
+    assert document["read"]["base"] == api.RECORD  # B never applied here: A's verification is B's record too
+    assert all(said.startswith(f"apply of {applied.path} by ") and "(since " in said for said in document["read"]["taken"].values())
+    assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"])
+
+
+def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_told_to_every_plant_file(applied, capsys, tmp_path):
+    other = second_checkout(applied, tmp_path)
+    edit(other, "upper_reversing_point: 1.8\n", "upper_reversing_point: 1.9\n")  # B: booth-a-top's system block
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    for emulator in applied.emulators.values():
+        emulator.line_speed = True
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(other), "--auto-approve", "--allow-axis-release",
+                                "--trace", str(fifo)], text=True, stdout=subprocess.DEVNULL, stderr=(tmp_path / "stderr").open("w"))  # fmt: skip
+    def unblock() -> None:  # a process that ends before it opens the trace must not leave the test waiting
+        process.wait()
+        with fifo.open("w"):
+            pass
+
+    threading.Thread(target=unblock, daemon=True).start()
+    with fifo.open() as trace:
+        for line in trace:
+            _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
+            if (bus, direction) == ("booth-a", ">") and frame[6:8] == "20":  # crc16: A5h, address, length, message ID
+                process.kill()  # the 20h is on the line: no account will ever be printed
+                break
+        threading.Thread(target=trace.read, daemon=True).start()
+        process.wait()
+    assert process.returncode == -9, (tmp_path / "stderr").read_text()
+    for emulator in applied.emulators.values():
+        emulator.line_speed = False
+    assert not applied.emulators["booth-a"].module(5).referenced  # it did release the axes
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert "bus booth-a, module 5 (booth-a-top)" in planned.err and "may be released" in planned.err  # told, to plant file A
+    assert planned.code == 2 and "booth-a/booth-a-top (not on the line's record)" in planned.out
+    result = run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release")
+    assert result.code == 0 and "booth-a/booth-a-top" in result.out
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-top")
