@@ -73,6 +73,9 @@ TEMPLATES = {
     "too_short": "{what} is empty — list at least one {item}",
     "program_key": "{what} {input} is written with a decimal point — {fix}",
     "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
+    "name_control": "{what} {input} holds a control character — a name is printable text: write it without line breaks, "
+    "escapes or other control characters",
+    "data_bits": "{what} {value} cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: write {bits}",
 }
 _LIST_ITEMS: dict[str | int, str] = {"buses": "bus", "modules": "module", "programs": "program"}
 _DECIMAL_COMMA = re.compile(r"[-+]?[0-9]+,[0-9]+")
