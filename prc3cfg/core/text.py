@@ -10,10 +10,11 @@ prints such text in:
 - `github_data`, `github_property` — a GitHub workflow command (`::error file=…::message`):
   `%`, CR and LF as `%25`, `%0D`, `%0A`, and in a property `:` and `,` too (docs.github.com,
   "Workflow commands for GitHub Actions"), so that nothing from a file starts a command line;
-- `markdown` — a pull-request comment's paragraph, table cell or HTML `<summary>`: markdown's and
-  HTML's metacharacters as entities, an `@` followed by a zero-width joiner and the `:` of a URL
-  and the `.` of `www.` as entities, so that no text from a file makes a mention, a link, an image,
-  emphasis, a table cell or HTML.
+- `markdown` — a pull-request comment's paragraph or table cell: markdown's and HTML's
+  metacharacters as entities, an `@` followed by a zero-width joiner and the `:` of a URL and the
+  `.` of `www.` as entities, so that no text from a file makes a mention, a link, an image,
+  emphasis, a table cell or HTML; `markdown_html` — the same inside HTML (`<summary>`), where
+  markdown is not read: `<`, `>`, `&` as entities, `@` and URLs broken alike.
 
 Names in a plant file are refused when they hold a `CONTROL` character (`prc3cfg.plant.models`);
 a plan file is data that anyone may have edited, so everything shown of it goes through these.
@@ -22,6 +23,7 @@ Pure.
 
 from __future__ import annotations
 
+import html
 import re
 
 #: What is not printable text: C0 and DEL, C1, U+2028 LINE SEPARATOR, U+2029 PARAGRAPH SEPARATOR
@@ -62,7 +64,17 @@ _LIVE = re.compile(r"@|:(?=//)|(?<=www)\.", re.IGNORECASE)
 
 
 def markdown(text: str) -> str:
-    """`text` for a markdown paragraph, table cell or `<summary>`: shown as written, with nothing live in it."""
+    """`text` for a markdown paragraph or table cell: shown as written, with nothing live in it."""
     text = plain(text)
     text = "".join(_MARKDOWN.get(c, c) for c in text) if any(c in _MARKDOWN for c in text) else text
-    return _LIVE.sub(lambda m: "@\u200d" if m.group() == "@" else f"&#{ord(m.group())};", text)
+    return _LIVE.sub(_dead, text)
+
+
+def markdown_html(text: str) -> str:
+    """`text` inside HTML in a markdown comment (`<summary>…</summary>`): shown as written, nothing in it live."""
+    return _LIVE.sub(_dead, html.escape(plain(text), quote=False))
+
+
+def _dead(match: re.Match[str]) -> str:
+    """What GitHub would make live, made text: "@" with a zero-width joiner after it, ":" or "." as an entity."""
+    return "@\u200d" if match.group() == "@" else f"&#{ord(match.group())};"
