@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import json
 import re
+from dataclasses import replace
 
 from emulated import run_cli
 
@@ -168,3 +169,29 @@ def test_the_texts_of_a_plan_file_are_shown_escaped_by_show_and_apply(plant, cap
     assert applied.code == 0, applied.err
     assert CONTROL.search(applied.out + applied.err) is None
     assert f"(base: the plant file last applied in full here{said})" in applied.out
+
+
+def test_a_comment_cut_to_its_budget_still_counts_the_clamped_programs_and_the_releases(tmp_path, capsys):
+    """4 modules lower S1 under 60 programs the plant does not manage each: 240 programs clamped. A comment of
+    3,000 characters has no room for the details; its head still says how many are clamped, and on how many modules."""
+    import yaml
+
+    from prc3cfg.core.image import ModuleImage, Program
+
+    plant = tmp_path / "plant.yaml"
+    modules = [{"address": a, "name": f"m{a}", "system": {"upper_reversing_point": 1.0}} for a in range(1, 5)]
+    plant.write_text(yaml.safe_dump({"plant": "p", "buses": [{"name": "b", "port": "socket://127.0.0.1:9", "modules": modules}]}))
+    held = [ModuleImage.factory(a) for a in range(1, 5)]
+    held = [replace(image, system=replace(image.system, S1=2500)).with_programs({n: Program(P=2000, V=50) for n in range(1, 61)})
+            for image in held]  # fmt: skip
+    saved = tmp_path / "actual.json"
+    saved.write_text(json.dumps([{"bus": "b", **image.to_json()} for image in held]))
+    for made in ("plan", "show"):
+        args = ["plan", plant, "--actual", saved, "--out", tmp_path / "plan.json"] if made == "plan" else ["show", tmp_path / "plan.json"]
+        cut = run_cli(capsys, *args, "--markdown", "--max-chars", "3000")
+        assert cut.code == 0, cut.err
+        assert "are left out to keep this comment under 3,000 characters" in cut.out and "<details>" not in cut.out
+        assert "> ⚠ 240 programs the plant does not manage are clamped by 4 modules as their system parameters change" in cut.out
+        assert "⚠ 4 modules release the axes" in cut.out
+    human = run_cli(capsys, "show", tmp_path / "plan.json")
+    assert "⚠ 240 programs the plant does not manage are clamped by 4 modules" in human.out

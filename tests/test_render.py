@@ -324,3 +324,15 @@ def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
     shown.encode()  # no lone surrogate: a terminal can be written this
     assert "\\u2028\\x85\\ud800" in shown
     assert f"Left as it is: {escaped(hostile)}" in shown.splitlines()
+
+
+def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released_and_not_read():
+    """The head is never cut: the releases, the programs clamped, the modules taken as last verified."""
+    document = plan_json(PlantPlan("p", "p.yaml", "0" * 64, (a_change(), replace(a_change(), bus="b"))))
+    document["read"] = {"base": "the plant file last applied in full here", "modules_not_read": ["a/x", "a/y"], "not_as_verified": []}
+    for module in [m for bus in document["buses"] for m in bus["modules"]]:
+        module["read"] = {"programs": [1, 2], "programs_not_read": []}
+    text = markdown(document, max_chars=1)
+    assert "left out" in text and "<details>" not in text
+    assert "⚠ 2 modules release the axes" in text and "2 modules (a/x, a/y)" in text
+    assert "> ⚠ 2 programs the plant does not manage are clamped by 2 modules as their system parameters change" in text

@@ -341,6 +341,21 @@ def summary_line(document: dict[str, Any]) -> str:
     )
 
 
+def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str | None:
+    """How many programs the plant does not manage the modules' own clamping changes, and on how many modules,
+    in one line — said by every output whatever it leaves out of the details; None where there are none."""
+    if live:
+        counts = [len({f.program for f in clamped_changes(change)}) for change in live.values()]
+    else:
+        counts = [len({f["program"] for f in m.get("changes", {}).get("clamped", [])}) for _, m in _modules(document)]
+    programs, modules = sum(counts), sum(1 for count in counts if count)
+    if not programs:
+        return None
+    return (f"⚠ {plural(programs, 'program')} the plant does not manage {'is' if programs == 1 else 'are'} clamped by "
+            f"{plural(modules, 'module')} as {'its' if modules == 1 else 'their'} system parameters change "
+            "(unmanaged_programs: keep) — each module's diff lists them")  # fmt: skip
+
+
 def estimate(document: dict[str, Any]) -> str:
     """The time an apply of the plan takes, the total first, then by phase, with the writes' bus time
     beside the naive download's: "estimated time 9.6 s: reading back 4.1 s, writing 1.1 s (bus time
@@ -398,6 +413,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str
         out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+    out += [line for line in [clamped_line(document, live)] if line]
     out.append(summary_line(document))
     out += [line for line in [reading_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
@@ -443,7 +459,8 @@ def fenced(lines: Sequence[str], info: str = "") -> list[str]:
 def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
              full_plan: str = "the plan file") -> str:  # fmt: skip
     """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
-    the marker, the summary, every axis-release warning and the table of changed modules always;
+    the marker, the summary, every axis-release warning, how many programs are clamped, what was not
+    read, what is left as it is and the table of changed modules always;
     then each module's details (with a stroke chart per changed chain, for a live plan) while they
     fit, and a last line saying how many were left out and where the full plan is."""
     document, live = _outline(plan, notes)
@@ -453,6 +470,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     if document["axis_releases"]:
         head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                  + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
+    head += [f"> {line}", ""] if (line := clamped_line(document, live)) else []
     left_alone = document.get("left_alone", [])
     head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
     proofs = [proof for bus in document["buses"] if (proof := line_proof(bus, cell))]
