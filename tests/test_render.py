@@ -316,7 +316,10 @@ def test_text_from_a_plan_file_is_never_live_in_a_comment(case):
 def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
     """The human plan shows every text of a plan file with its control characters escaped: one line stays one line."""
     hostile = HOSTILE[case] + "\u2028\x85\ud800"
-    document = plan_json(PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),)), [hostile])
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),))
+    live = human(plan, notes=[hostile])  # names a script gave the API, and notes, as a plan file's
+    assert CONTROL.search(live.replace("\n", "")) is None and f"Left as it is: {escaped(hostile)}" in live.splitlines()
+    document = plan_json(plan, [hostile])
     document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": []}
     document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
     shown = human(document)
@@ -336,3 +339,18 @@ def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released
     assert "left out" in text and "<details>" not in text
     assert "⚠ 2 modules release the axes" in text and "2 modules (a/x, a/y)" in text
     assert "> ⚠ 2 programs the plant does not manage are clamped by 2 modules as their system parameters change" in text
+
+
+def test_a_plan_files_charts_are_shown_only_as_prc3cfg_draws_them():
+    """A stroke chart is markdown of prc3cfg's own making, and the plan file keeps it: one of another
+    shape — a fence closed early, HTML after it — is left out, never shown."""
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (a_change(),))
+    document = plan_json(plan)
+    charts = document["buses"][0]["modules"][0]["changes"]["charts"]
+    assert len(charts) == 3 and charts[1].startswith("```mermaid\n")  # ours: shown
+    hostile = [charts[1].replace("xychart-beta", "```\n<img src=x onerror=alert(1)>\n```mermaid"),
+               "<script>alert(1)</script>", "\n_1 more chain changed: [see](https://evil.example) draws them all._"]
+    document["buses"][0]["modules"][0]["changes"]["charts"] = [*charts, *hostile]
+    text = markdown(document)
+    assert charts[1] in text and not any(chart in text for chart in hostile)
+    assert "<img" not in text and "<script" not in text and "evil.example" not in text

@@ -238,10 +238,25 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     """What the human and markdown outputs are made from, every text in it `plain`: a plan file's
     document, or a live plan's without the modules' `changes`, each worked out by `_changes` as its
     module is shown (all of them at once, for 8 × 30 modules with every program changed, hold 35 MB),
-    with the changes by (bus, address)."""
+    with the changes by (bus, address) — the bus's name as the document has it."""
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
-    return _plain_texts(plan.to_json() | {"left_alone": list(notes)}), {(c.bus, c.address): c for c in plan.changes}
+    return _plain_names(plan.to_json() | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+
+
+def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
+    """A live plan's document with the texts files gave it `plain`: its names, its base, its notes (the words of
+    its steps are prc3cfg's own; a plan file's are not: `_plain_texts`)."""
+    document["plant"] = escape.plain(document["plant"])
+    for key in ("axis_releases", "left_alone"):
+        document[key] = [escape.plain(text) for text in document[key]]
+    if isinstance(said := document.get("read"), dict):
+        document["read"] = _plain_texts(said)
+    for bus in document["buses"]:
+        bus["name"] = escape.plain(bus["name"])
+        for module in bus["modules"]:
+            module["name"] = escape.plain(module["name"])
+    return document
 
 
 #: A stroke chart as `plot.mermaid` writes it, or the line that says how many more there are: what a
