@@ -16,6 +16,7 @@ from typing import Any
 from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic_core import ErrorDetails
 
+from prc3cfg.core.text import has_control
 from prc3cfg.plant.document import DECIMAL_NUMBER
 from prc3cfg.plant.models import (
     BusSpec,
@@ -153,7 +154,7 @@ def what(path: Path_, data: Any) -> str:
     if parent in ITEMS and (isinstance(last, int) or len(head) == 1 or parent == "programs"):
         label = ITEMS[parent][0]
         name = _lookup(data, path + ("name",)) if parent in ("buses", "modules") else None
-        if isinstance(name, str) and name:
+        if isinstance(name, str) and name and not has_control(name):  # a name that is not printable text is not one
             return f"{label} {name}"
         return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
     return "the gateway" if last == "gateway" else str(last)
