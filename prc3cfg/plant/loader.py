@@ -104,7 +104,7 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, l
             profiles[profile_path[1]] = (profile, frozenset()) if profile is not None else _salvaged(ProfileSpec, raw)
     buses = []
     for bus_path, raw_bus in mappings_in(data, ("buses",)):
-        line = spec.buses[int(bus_path[1])] if spec is not None else _valid(BusLine, {k: v for k, v in raw_bus.items() if k != "modules"})
+        line = spec.buses[int(bus_path[1])] if spec is not None else _line(raw_bus)
         problems.add(rules.check_bus(bus_path, line) if line else ())
         modules = []
         for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
@@ -235,6 +235,19 @@ def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[Profil
     built = Module(address=module.address, name=module.name, profiles=module.profiles,
                    unmanaged_programs=settings.unmanaged_programs.value, settings=settings)
     return problems, built
+
+
+def _line(raw_bus: dict[Any, Any]) -> BusLine | None:
+    """A bus's line, for its rules (`rules.check_bus`): valid whole, or without the keys that are not, where the
+    rules need none of them (a wrong `timeout` does not hide a ZVZ the Open Driver refuses)."""
+    raw = {key: value for key, value in raw_bus.items() if key != "modules"}
+    try:
+        return BusLine.model_validate(raw)
+    except ValidationError as error:
+        wrong = {e["loc"][0] for e in error.errors(include_url=False) if e["loc"]}
+    if wrong & rules.LINE_KEYS:
+        return None
+    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-", "port": "-"})
 
 
 def _salvaged(model: type[M], raw: dict[Any, Any]) -> tuple[M | None, rules.Unknown]:

@@ -130,6 +130,10 @@ def _said(value: Sourced, key: str, beside: Sourced | None = None) -> str:
 _ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0, identifier=gateway.IDENTIFIERS.start)
 
 
+#: The keys of a bus `check_bus` reads.
+LINE_KEYS = frozenset({"framing", "baud", "parity", "data_bits", "stop_bits", "zvz", "gateway"})
+
+
 def check_bus(path: Path_, bus: BusLine) -> list[Problem]:
     """What the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any
     open-driver line — and a ZVZ not longer than one character, which it takes but ends frames by after every byte."""
