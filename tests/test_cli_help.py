@@ -34,5 +34,5 @@ def test_listing_the_commands_loads_nothing_heavy():
 def test_the_names_the_help_uses_are_the_real_ones():
     assert FRAMING_NAMES == tuple(FRAMINGS)
     assert ADDRESSES == range(1, MAX_MODULE_ADDRESS + 1)
-    assert (PARITY_NAMES, DATA_BITS, STOP_BITS) == (line.PARITIES, line.DATA_BITS, line.STOP_BITS)
+    assert (PARITY_NAMES, DATA_BITS, STOP_BITS) == (line.PARITIES, (line.FRAME_DATA_BITS,), line.STOP_BITS)
     assert [v.value for v in VerifyChoice] == [v.value for v in ApplyVerify]

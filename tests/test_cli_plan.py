@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import html
 import json
+import re
+from dataclasses import replace
 
 from emulated import run_cli
 
@@ -134,3 +137,61 @@ def test_a_saved_plan_without_its_total_time_is_shown_with_the_sum_of_its_phases
     shown = run_cli(capsys, "show", saved)
     assert shown.code == 0, shown.err
     assert f"estimated time {sum(phases.values()):.1f} s" in shown.out
+
+
+#: Not printable text (C0, DEL, C1, the line and paragraph separators, lone surrogates).
+CONTROL = re.compile("[\x00-\x09\x0b-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")  # a new line (\x0a) apart: outputs have lines
+HOSTILE = "\x1b]0;owned\x07\x1b[2J\u2028\ud800"
+
+
+def test_the_texts_of_a_plan_file_are_shown_escaped_by_show_and_apply(plant, capsys, tmp_path):
+    """A plan file is data anyone may have edited: its base and its notes — with a terminal's title and
+    clear-screen escapes, a bell, a line separator and a lone surrogate — are shown by `show` (text and
+    markdown) and the base by `apply --plan` escaped, each on its line, and never as a traceback."""
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    plant.path.write_text(plant.path.read_text().replace("position: 2.1", "position: 2.0", 1))
+    made = tmp_path / "plan.json"
+    assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
+    document = json.loads(made.read_text())
+    assert document["read"]["base"] == "the line's record of what prc3cfg last read or verified"  # a targeted plan: it says its base
+    document["read"]["base"] += HOSTILE
+    document["left_alone"] = [f"a note{HOSTILE}"]
+    edited = tmp_path / "edited.json"
+    edited.write_text(json.dumps(document))
+    said = "\\x1b]0;owned\\x07\\x1b[2J\\u2028\\ud800"
+    for options in ([], ["--markdown"]):
+        shown = run_cli(capsys, "show", edited, *options)
+        assert (shown.code, shown.err) == (0, ""), shown.err
+        assert CONTROL.search(shown.out) is None
+        text = html.unescape(shown.out)  # markdown: as GitHub shows it
+        assert f"the line's record of what prc3cfg last read or verified{said}" in text and f"a note{said}" in text
+    applied = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve")  # words that send nothing: taken as written
+    assert applied.code == 0, applied.err
+    assert CONTROL.search(applied.out + applied.err) is None
+    assert f"taken as known from the line's record of what prc3cfg last read or verified{said}, not read" in applied.out
+
+
+def test_a_comment_cut_to_its_budget_still_counts_the_clamped_programs_and_the_releases(tmp_path, capsys):
+    """4 modules lower S1 under 60 programs the plant does not manage each: 240 programs clamped. A comment of
+    3,000 characters has no room for the details; its head still says how many are clamped, and on how many modules."""
+    import yaml
+
+    from prc3cfg.core.image import ModuleImage, Program
+
+    plant = tmp_path / "plant.yaml"
+    modules = [{"address": a, "name": f"m{a}", "system": {"upper_reversing_point": 1.0}} for a in range(1, 5)]
+    plant.write_text(yaml.safe_dump({"plant": "p", "buses": [{"name": "b", "port": "socket://127.0.0.1:9", "modules": modules}]}))
+    held = [ModuleImage.factory(a) for a in range(1, 5)]
+    held = [replace(image, system=replace(image.system, S1=2500)).with_programs({n: Program(P=2000, V=50) for n in range(1, 61)})
+            for image in held]  # fmt: skip
+    saved = tmp_path / "actual.json"
+    saved.write_text(json.dumps([{"bus": "b", **image.to_json()} for image in held]))
+    for made in ("plan", "show"):
+        args = ["plan", plant, "--actual", saved, "--out", tmp_path / "plan.json"] if made == "plan" else ["show", tmp_path / "plan.json"]
+        cut = run_cli(capsys, *args, "--markdown", "--max-chars", "3000")
+        assert cut.code == 0, cut.err
+        assert "are left out to keep this comment under 3,000 characters" in cut.out and "<details>" not in cut.out
+        assert "> ⚠ 240 programs the plant does not manage are clamped by 4 modules as their system parameters change" in cut.out
+        assert "⚠ 4 modules release the axes" in cut.out
+    human = run_cli(capsys, "show", tmp_path / "plan.json")
+    assert "⚠ 240 programs the plant does not manage are clamped by 4 modules" in human.out

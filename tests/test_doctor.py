@@ -19,6 +19,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received
+from prc3cfg.shell.doctor import Search
 from prc3cfg.shell.emulator import Emulator, FaultInjection
 from prc3cfg.shell.link import Link, open_link, open_port
 
@@ -145,6 +146,15 @@ def test_doctor_finds_the_baud_of_a_pty(capsys):
         result = run_cli(capsys, "doctor", "--port", pty, "--framing", "crc16", "--modules", "1", "--exchanges", "2")
     assert result.code == 0, result.err
     assert f"{pty} speaks crc16, 4800 baud, 8N1" in result.out
+
+
+def test_doctor_tries_and_proposes_8_data_bits_only(capsys):
+    """A PRC 3 frame is binary: every setting doctor tries has 8 data bits, and so has every bus it proposes —
+    a line whose UART is set to 7 answers none of its probes, and no 7 is proposed for it."""
+    assert {c.line.data_bits for c in Search().candidates()} == {8}
+    with Emulator({1: ModuleState.factory(1)}, framing="crc16", line=LineSettings(9600, 7, "even", 1)) as emulator:
+        result, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1", "--exchanges", "1")
+    assert result.code == 1 and keys == {}, (result.out, result.err)
 
 
 @pytest.mark.soak

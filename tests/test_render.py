@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import html
+import re
 from dataclasses import replace
 
 import pytest
@@ -254,3 +255,102 @@ def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broad
     proofs = [LineProof("line", silent=(3, 4, 5)), LineProof("other", silent=(9,)), LineProof("quiet")]
     assert render.broadcasts_heard(proofs, runs) == [
         "Bus line: broadcast after addresses 3–5 answered no probe — only the plan's modules heard it"]
+
+
+#: Texts a plant or plan file could bring into a pull-request comment, meant to do more than be read.
+HOSTILE = {
+    "a mention": "@octocat",
+    "a team": "@org/plant-floor",
+    "an e-mail": "ops@evil.example",
+    "a link": "[release notes](https://evil.example)",
+    "an image": "![x](https://evil.example/a.png)",
+    "a reference link": "[x][1]",
+    "an autolink": "<https://evil.example>",
+    "a bare URL": "see https://evil.example/a",
+    "a www link": "www.evil.example",
+    "HTML": "<img src=x onerror=alert(1)>",
+    "a closing summary": "</summary></details><script>x</script>",
+    "emphasis": "**bold** _it_ ~~gone~~",
+    "a table cell": "a|b",
+    "a code span": "`x`",
+    "a fence": "```",
+    "an entity": "&lt;b&gt;",
+    "a backslash": "\\[x\\](y)",
+    "a new line and a heading": "m\n# heading",
+    "a terminal escape": "m\x1b[2J\x07",
+}
+#: Not printable text, and how a terminal is shown it: as Python's repr escapes it, without the quotes.
+CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+
+
+def escaped(text: str) -> str:
+    return CONTROL.sub(lambda m: repr(m.group())[1:-1], text)
+
+
+#: What a comment may hold as HTML: what prc3cfg writes itself.
+OUR_TAGS = {"h3", "p", "blockquote", "table", "thead", "tbody", "tr", "th", "td", "details", "summary", "pre", "code", "em", "strong"}
+
+
+@pytest.mark.parametrize("case", HOSTILE, ids=list(HOSTILE))
+def test_text_from_a_plan_file_is_never_live_in_a_comment(case):
+    """A name, a bus, a note, the base: each shown as written — no mention, link, image, HTML, cell or line of its own."""
+    import cmarkgfm
+
+    hostile = HOSTILE[case]
+    document = plan_json(PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),)), [hostile])
+    document["plant"] = hostile
+    document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": [hostile]}
+    document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
+    text = markdown(document)
+    page = cmarkgfm.github_flavored_markdown_to_html(text, options=cmarkgfm.cmark.Options.CMARK_OPT_UNSAFE)  # as GitHub: HTML kept
+    assert set(re.findall(r"<([a-z0-9]+)", page)) <= OUR_TAGS, page
+    outside_code = re.sub(r"<(code|pre)>.*?</\1>", "", page, flags=re.S)
+    assert re.search(r"@[A-Za-z0-9]", html.unescape(outside_code)) is None  # GitHub makes a mention of any text but code
+    assert not any(c in text for c in "\x1b\x07")
+    cells = re.findall(r"<td[^>]*>(.*?)</td>", page, re.S)
+    assert html.unescape(cells[0]).replace("\u200d", "") == escaped(hostile)  # the bus, as written
+    assert len(cells) == 6  # one row: bus, module, address, steps, bus time, axes
+
+
+@pytest.mark.parametrize("case", HOSTILE, ids=list(HOSTILE))
+def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
+    """The human plan shows every text of a plan file with its control characters escaped: one line stays one line."""
+    hostile = HOSTILE[case] + "\u2028\x85\ud800"
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),))
+    live = human(plan, notes=[hostile])  # names a script gave the API, and notes, as a plan file's
+    assert CONTROL.search(live.replace("\n", "")) is None and f"Left as it is: {escaped(hostile)}" in live.splitlines()
+    document = plan_json(plan, [hostile])
+    document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": []}
+    document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
+    shown = human(document)
+    assert CONTROL.search(shown.replace("\n", "")) is None
+    shown.encode()  # no lone surrogate: a terminal can be written this
+    assert "\\u2028\\x85\\ud800" in shown
+    assert f"Left as it is: {escaped(hostile)}" in shown.splitlines()
+
+
+def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released_and_not_read():
+    """The head is never cut: the releases, the programs clamped, the modules taken as last verified."""
+    document = plan_json(PlantPlan("p", "p.yaml", "0" * 64, (a_change(), replace(a_change(), bus="b"))))
+    document["read"] = {"base": "the plant file last applied in full here", "modules_not_read": ["a/x", "a/y"], "not_as_verified": []}
+    for module in [m for bus in document["buses"] for m in bus["modules"]]:
+        module["read"] = {"programs": [1, 2], "programs_not_read": []}
+    text = markdown(document, max_chars=1)
+    assert "left out" in text and "<details>" not in text
+    assert "⚠ 2 modules release the axes" in text and "2 modules (a/x, a/y)" in text
+    assert "> ⚠ 2 programs the plant does not manage are clamped by 2 modules as their system parameters change" in text
+
+
+def test_a_plan_files_charts_are_shown_only_as_prc3cfg_draws_them():
+    """A stroke chart is markdown of prc3cfg's own making, and the plan file keeps it: one of another
+    shape — a fence closed early, HTML after it — is left out, never shown."""
+    plan = PlantPlan("p", "p.yaml", "0" * 64, (a_change(),))
+    document = plan_json(plan)
+    charts = document["buses"][0]["modules"][0]["changes"]["charts"]
+    assert len(charts) == 3 and charts[1].startswith("```mermaid\n")  # ours: shown
+    hostile = [charts[1].replace("xychart-beta", "```\n<img src=x onerror=alert(1)>\n```mermaid"),
+               "<script>alert(1)</script>", "\n_1 more chain changed: [see](https://evil.example) draws them all._"]
+    document["buses"][0]["modules"][0]["changes"]["charts"] = [*charts, *hostile]
+    text = markdown(document)
+    assert charts[1] in text and not any(chart in text for chart in hostile)
+    assert "<img" not in text and "<script" not in text and "evil.example" not in text

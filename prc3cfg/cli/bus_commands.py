@@ -14,7 +14,6 @@ import typer
 
 from prc3cfg.cli import app, link_app
 from prc3cfg.cli.common import (
-    DATA_BITS,
     FRAMING_NAMES,
     PARITY_NAMES,
     STOP_BITS,
@@ -26,6 +25,7 @@ from prc3cfg.cli.common import (
     addresses_option,
     check_output,
     duration,
+    frame_data_bits,
     line_options,
     one_of,
     parse_addresses,
@@ -42,7 +42,7 @@ FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar
 BaudOpt = Annotated[int, typer.Option(min=1, max=10_000_000, metavar="BAUD", help="Baud rate.")]
 ParityOpt = Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", show_default="even; none on a pseudo-terminal",
                                                help=" | ".join(PARITY_NAMES))]
-DataBitsOpt = Annotated[int, typer.Option(callback=one_of(DATA_BITS), metavar="BITS", help=" | ".join(map(str, DATA_BITS)))]
+DataBitsOpt = Annotated[int, typer.Option(callback=frame_data_bits, metavar="BITS", help="8: a PRC 3 frame is binary")]
 StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))]
 TimeoutOpt = Annotated[float, typer.Option(parser=duration(0.001, 3600), metavar="TIME", help=f"How long to wait for a reply ({TIMES}).")]
 ZvzOpt = Annotated[float, typer.Option(parser=duration(0.004, 65.535), metavar="TIME",

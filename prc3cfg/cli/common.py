@@ -35,7 +35,8 @@ FRAMING_NAMES = ("crc16", "open-driver", "stx")
 ADDRESSES = range(1, 31)
 #: Character formats (`prc3cfg.core.line`, checked by the same test).
 PARITY_NAMES = ("none", "odd", "even")
-DATA_BITS = (5, 6, 7, 8)
+#: A PRC 3 line's data bits: always 8 (`prc3cfg.core.line.FRAME_DATA_BITS`, checked by the same test).
+DATA_BITS = (8,)
 STOP_BITS = (1, 1.5, 2)
 
 
@@ -48,6 +49,14 @@ def one_of(allowed: tuple) -> Callable[[Any], Any]:
         return value
 
     return check
+
+
+def frame_data_bits(value: Any) -> Any:
+    """`--data-bits`'s callback: anything but 8 is a usage error, in the words a plant file's `data_bits` gets."""
+    if value is not None and value not in DATA_BITS:
+        raise typer.BadParameter(f"{value} data bits cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: "
+                                 "give 8 or leave the option out")
+    return value
 
 
 class VerifyChoice(enum.StrEnum):

@@ -13,13 +13,13 @@ import typer
 
 from prc3cfg.cli import emulator_app
 from prc3cfg.cli.common import (
-    DATA_BITS,
     FRAMING_NAMES,
     PARITY_NAMES,
     STOP_BITS,
     TIMES,
     addresses_option,
     duration,
+    frame_data_bits,
     one_of,
     parse_addresses,
     parse_duration,
@@ -78,7 +78,7 @@ def serve(
     line_speed: Annotated[int | None, typer.Option("--line-speed", min=1, max=10_000_000, metavar="BAUD", help="Make every exchange take as long as on a line of this baud rate.")] = None,
     parity: Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), metavar="PARITY", show_default="even; none with --pty",
                                                help=f"{' | '.join(PARITY_NAMES)} (character time, and framing time-outs; a pseudo-terminal carries none).")] = None,
-    data_bits: Annotated[int, typer.Option(callback=one_of(DATA_BITS), metavar="BITS", help=" | ".join(map(str, DATA_BITS)))] = 8,
+    data_bits: Annotated[int, typer.Option(callback=frame_data_bits, metavar="BITS", help="8: a PRC 3 frame is binary")] = 8,
     stop_bits: Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))] = 1,
     zvz: Annotated[float, typer.Option(parser=duration(0.001, 65.535), metavar="TIME", help=f"open-driver end-of-frame gap ({TIMES}).")] = 0.020,
     turnaround: Annotated[float, typer.Option(parser=duration(0, 10), metavar="TIME", help=f"Module turnaround, with --line-speed ({TIMES}).")] = 0.010,

@@ -77,17 +77,11 @@ def validate(
 
 
 def github_annotation(finding: Finding) -> str:
-    """A problem as GitHub's `::error` workflow command: `%`, CR and LF escaped in the message, and
-    `:` and `,` too in a property (docs.github.com, "Workflow commands for GitHub Actions")."""
-
-    def data(text: str) -> str:
-        return text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
-
-    def prop(text: str) -> str:
-        return data(text).replace(":", "%3A").replace(",", "%2C")
+    """A problem as GitHub's `::error` workflow command, escaped as its rules want (`prc3cfg.core.text`)."""
+    from prc3cfg.core.text import github_data, github_property
 
     place = "" if finding.line is None else f",line={finding.line},col={finding.column}"
-    return f"::error file={prop(finding.file)}{place},title=prc3cfg::{data(finding.message)}"
+    return f"::error file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}"
 
 
 @app.command()

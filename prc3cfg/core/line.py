@@ -16,7 +16,10 @@ TCP_SCHEMES = ("socket", "rfc2217")
 EMULATOR_SCHEME = "emulator://"
 Parity = Literal["none", "odd", "even"]
 PARITIES: tuple[Parity, ...] = get_args(Parity)
+#: What a UART can be set to (the emulator's RFC 2217 gateway receives a client at any of them as a UART would).
 DATA_BITS = (5, 6, 7, 8)
+#: What a PRC 3 line takes: its frames are binary, and fewer bits lose the top of each byte.
+FRAME_DATA_BITS = 8
 STOP_BITS = (1, 1.5, 2)
 
 

@@ -9,25 +9,30 @@ steer an apply (the plan's steps do). A module's diff (`ModuleDiff`: its fields,
 the programs it clamps) is worked out by comparing the two images field by field, once
 per output and module, as the module is shown (kept for all 240 modules of a large plant, the
 diffs would hold 20 MB). The units are `prc3cfg.core.units`. Pure: returns strings.
+
+Every text a plan or plan file brings (names, the base, notes, a field's words) is shown escaped for
+its medium by `prc3cfg.core.text` — `plain` in every output, `markdown` in a comment — and a plan
+file's stroke charts only in the shape prc3cfg writes them (`CHART`): a plan file is data that
+anyone may have edited.
 """
 
 from __future__ import annotations
 
 import functools
-import html
 import re
 import shlex
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
+from prc3cfg.core import text as escape
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
-from prc3cfg.core.plot import mermaid
+from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
 from prc3cfg.core.verification import Release
 
@@ -230,13 +235,51 @@ def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict[str, Any]:
 
 
 def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
-    """What the human and markdown outputs are made from: a plan file's document as it is, or a live
-    plan's without the modules' `changes`, each worked out by `_changes` as its module is shown (all
-    of them at once, for 8 × 30 modules with every program changed, hold 35 MB), with the changes by
-    (bus, address)."""
+    """What the human and markdown outputs are made from, every text in it `plain`: a plan file's
+    document, or a live plan's without the modules' `changes`, each worked out by `_changes` as its
+    module is shown (all of them at once, for 8 × 30 modules with every program changed, hold 35 MB),
+    with the changes by (bus, address) — the bus's name as the document has it."""
     if isinstance(plan, dict):
-        return plan, {}
-    return plan.to_json() | {"left_alone": list(notes)}, {(c.bus, c.address): c for c in plan.changes}
+        return _plain_texts(plan), {}
+    return _plain_names(plan.to_json() | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+
+
+def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
+    """A live plan's document with the texts files gave it `plain`: its names, its base, its notes (the words of
+    its steps are prc3cfg's own; a plan file's are not: `_plain_texts`)."""
+    document["plant"] = escape.plain(document["plant"])
+    for key in ("axis_releases", "left_alone"):
+        document[key] = [escape.plain(text) for text in document[key]]
+    if isinstance(said := document.get("read"), dict):
+        document["read"] = _plain_texts(said)
+    for bus in document["buses"]:
+        bus["name"] = escape.plain(bus["name"])
+        for module in bus["modules"]:
+            module["name"] = escape.plain(module["name"])
+    return document
+
+
+#: A stroke chart as `plot.mermaid` writes it, or the line that says how many more there are: what a
+#: plan file's `charts` may hold to be shown (anything else in a fenced block could close it).
+CHART = re.compile(
+    r"```mermaid\n%%\{init: \{\"themeVariables\": \{\"xyChart\": \{\"plotColorPalette\": "
+    rf"\"({AFTER}|{BEFORE}, {AFTER}|{BEFORE})\"\}}\}}\}}\}}%%\n"
+    r"xychart-beta\n    title \"[0-9a-z →·:.,() ]*\"\n    x-axis \"time \(s\)\" 0 --> [0-9.]+\n"
+    r"    y-axis \"position \(m\)\" 0 --> [0-9.]+\n(    line \[[0-9., -]*\]\n){1,2}```"
+    r"|\n_[0-9]+ more chains? changed: `prc3cfg show PLANT --module [^`\n]* --plot FILE\.svg` draws them all\._|"
+)
+
+
+def _plain_texts(value: Any) -> Any:
+    """`value` with every text in it `plain`, and of `charts` only what `CHART` matches."""
+    if isinstance(value, str):
+        return escape.plain(value)
+    if isinstance(value, list):
+        return [_plain_texts(item) for item in value]
+    if isinstance(value, dict):
+        return {key: [c for c in item if isinstance(c, str) and CHART.fullmatch(c)]
+                if key == "charts" and isinstance(item, list) else _plain_texts(item) for key, item in value.items()}  # fmt: skip
+    return value
 
 
 def _changes(bus: str, module: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> dict[str, Any]:
@@ -272,14 +315,15 @@ def address_ranges(addresses: Iterable[int]) -> str:
     return f"address{'es' if len(listed) > 1 else ''} {text}"
 
 
-def line_proof(bus: dict[str, Any]) -> str | None:
-    """What the probes of a bus's line found at the addresses its plant file does not list, in one line."""
+def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.plain) -> str | None:
+    """What the probes of a bus's line found at the addresses its plant file does not list, in one line
+    (the bus's name `shown` as the medium needs)."""
     if bus.get("unlisted_modules"):
-        return (f"⚠ bus {bus['name']}: a module answers at {address_ranges(bus['unlisted_modules'])}, which the plant file does not "
+        return (f"⚠ bus {shown(bus['name'])}: a module answers at {address_ranges(bus['unlisted_modules'])}, which the plant file does not "
                 "list — the line has modules the plant does not know, so it gets no broadcast: add them to the plant file, "
                 "or drop only_these_modules")  # fmt: skip
     if bus.get("proven_silent"):
-        return f"bus {bus['name']}: {address_ranges(bus['proven_silent'])} answered no probe — the broadcasts reach the plan's modules only"
+        return f"bus {shown(bus['name'])}: {address_ranges(bus['proven_silent'])} answered no probe — the broadcasts reach the plan's modules only"
     return None
 
 
@@ -312,6 +356,21 @@ def summary_line(document: dict[str, Any]) -> str:
     )
 
 
+def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str | None:
+    """How many programs the plant does not manage the modules' own clamping changes, and on how many modules,
+    in one line — said by every output whatever it leaves out of the details; None where there are none."""
+    if live:
+        counts = [len({f.program for f in clamped_changes(change)}) for change in live.values()]
+    else:
+        counts = [len({f["program"] for f in m.get("changes", {}).get("clamped", [])}) for _, m in _modules(document)]
+    programs, modules = sum(counts), sum(1 for count in counts if count)
+    if not programs:
+        return None
+    return (f"⚠ {plural(programs, 'program')} the plant does not manage {'is' if programs == 1 else 'are'} clamped by "
+            f"{plural(modules, 'module')} as {'its' if modules == 1 else 'their'} system parameters change "
+            "(unmanaged_programs: keep) — each module's diff lists them")  # fmt: skip
+
+
 def estimate(document: dict[str, Any]) -> str:
     """The time an apply of the plan takes, the total first, then by phase, with the writes' bus time
     beside the naive download's: "estimated time 9.6 s: reading back 4.1 s, writing 1.1 s (bus time
@@ -325,27 +384,28 @@ def estimate(document: dict[str, Any]) -> str:
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
 
 
-def reading_line(document: dict[str, Any]) -> str | None:
-    """What a targeted plan read now and what it took as known from the line's record, in one line;
-    None for a full read. "Read now: the system parameters of all 30 modules and 60 of their programs;
-    taken as known, not read: 900 programs of 30 modules, as apply of /p/a.yaml by ana@pc verified
-    them (2026-…); read in full: line/m2 (program 3 is not as on record) — what no read sees: …"."""
+def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.plain) -> str | None:
+    """What a targeted plan read now and what it took as known from the line's record, in one line,
+    its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
+    30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
+    modules, as apply of /p/a.yaml by ana@pc (since …) read or verified them; read in full: line/m2
+    (program 3 is not as on record) — what no read sees: …"."""
     said = document.get("read")
     if not isinstance(said, dict):
         return None
     modules = _modules(document)
     programs = sum(len(m["read"]["programs"]) for _, m in modules)
     skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
-    unread = said["modules_not_read"]
-    sources = sorted(set(said.get("taken", {}).values()))
+    unread = [shown(name) for name in said["modules_not_read"]]
+    sources = sorted({shown(source) for source in said.get("taken", {}).values()})
     taken = ([f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"
              + (f", as {'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else "")]
              if skipped else [])  # fmt: skip
     taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
-    other = said["not_as_verified"]
+    other = [shown(name) for name in said["not_as_verified"]]
     return (f"Read now: {read}"
-            + (f"; taken as known from {said['base']}, not read: {' and '.join(taken)}" if taken else "")
+            + (f"; taken as known from {shown(said['base'])}, not read: {' and '.join(taken)}" if taken else "")
             + (f"; read in full: {', '.join(other)}" if other else "")
             + (" — a program not read that another tool changed on a module whose system parameters did not change is not seen: "
                "plan --refresh-only (or --full-read) reads everything" if taken else ""))  # fmt: skip
@@ -373,6 +433,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str
         out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+    out += [line for line in [clamped_line(document, live)] if line]
     out.append(summary_line(document))
     out += [line for line in [reading_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
@@ -395,35 +456,45 @@ CHARTS = 3
 
 
 def cell(text: str) -> str:
-    """Text for a markdown table cell or paragraph: `|` escaped, `<`, `>` and `&` as entities."""
-    return html.escape(text, quote=False).replace("|", "\\|")
+    """Text from a file for a markdown table cell or paragraph: shown as written, nothing in it live (`text.markdown`)."""
+    return escape.markdown(text)
 
 
 def code(text: str) -> str:
-    """Text as a markdown code span outside a table: shown exactly as written — inside one, an
-    entity or a backslash would show as typed. Its fence is longer than any run of backticks in it."""
+    """Text as a markdown code span outside a table: shown exactly as written (control characters
+    `plain`) — inside one, an entity or a backslash would show as typed. Its fence is longer than any
+    run of backticks in it."""
+    text = escape.plain(text)
     fence = "`" * (max(map(len, re.findall("`+", text)), default=0) + 1)
     pad = " " if text[:1] == "`" or text[-1:] == "`" else ""
     return f"{fence}{pad}{text}{pad}{fence}"
 
 
+def fenced(lines: Sequence[str], info: str = "") -> list[str]:
+    """`lines` as a markdown fenced block: its fence longer than any run of backticks in them, so no line closes it."""
+    fence = "`" * max(3, max((len(run) + 1 for line in lines for run in re.findall("`+", line)), default=0))
+    return [fence + info, *lines, fence]
+
+
 def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
              full_plan: str = "the plan file") -> str:  # fmt: skip
     """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
-    the marker, the summary, every axis-release warning and the table of changed modules always;
+    the marker, the summary, every axis-release warning, how many programs are clamped, what was not
+    read, what is left as it is and the table of changed modules always;
     then each module's details (with a stroke chart per changed chain, for a live plan) while they
     fit, and a last line saying how many were left out and where the full plan is."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), ""]
-    head += [f"> {cell(line)}", ""] if (line := reading_line(document)) else []
+    head += [f"> {line}", ""] if (line := reading_line(document, cell)) else []
     if document["axis_releases"]:
         head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                  + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
+    head += [f"> {line}", ""] if (line := clamped_line(document, live)) else []
     left_alone = document.get("left_alone", [])
     head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
-    proofs = [proof for bus in document["buses"] if (proof := line_proof(bus))]
-    head += [f"> {cell(proof)}" for proof in proofs] + ([""] if proofs else [])
+    proofs = [proof for bus in document["buses"] if (proof := line_proof(bus, cell))]
+    head += [f"> {proof}" for proof in proofs] + ([""] if proofs else [])
     if changed:
         head += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
         for bus, m in changed:
@@ -433,7 +504,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
         head.append("")
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):
-            head += ["```", *lines[:-1], "```", ""]
+            head += [*fenced(lines[:-1]), ""]
     text = "\n".join(head)
     for shown, (bus, m) in enumerate(changed):
         block = _details(bus, m, live)
@@ -449,16 +520,12 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
 def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str:
     changes = _changes(bus, m, live)
     return "\n".join([
-        f"<details><summary>{html.escape(bus)} / {html.escape(m['name'])} (address {m['address']})"
+        f"<details><summary>{escape.markdown_html(bus)} / {escape.markdown_html(m['name'])} (address {m['address']})"
         + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
         "",
-        "```diff",
-        *module_lines(changes),
-        "```",
+        *fenced(module_lines(changes), "diff"),
         "",
-        "```",
-        *_step_lines(m),
-        "```",
+        *fenced(_step_lines(m)),
         *changes.get("charts", []),
         "</details>",
         "",

@@ -7,8 +7,11 @@
 Each part of a plant file is validated once, on its own: every profile, every module, and the
 rest of the file with a valid stand-in for each of those. The rules run on the parts that
 validated even when others did not, so that one unknown key does not hide a P > S1 three
-modules further down. A module whose profiles are unknown or invalid is not checked further
-(its profile's problems are reported already).
+modules further down — and within a part that did not, on what is valid in it (`_salvaged`:
+the part without the values its problems are about), each rule only where every value it needs
+is valid (`rules.Unknown`): a speed out of range in program 1 does not hide a P > S1 in program
+2, nor an S4 below S5 a position above S1. A module whose profiles are unknown, or whose
+`profiles:` list itself is wrong, is not checked further.
 
 pydantic keeps every error of one call (some 400 bytes each, and a mapping that lacks three
 required keys has three), so what one call costs is bounded: a part of more than
@@ -23,6 +26,7 @@ and as text by YAML 1.2 — give a number in m").
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
@@ -92,22 +96,23 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, l
     spec, found = _validated(PlantSpec, _with_stand_ins(data), (), data)
     problems.add(found)
     problems.add(rules.check_unique(data))
-    profiles: dict[str, ProfileSpec | None] = {}
+    profiles: dict[str, tuple[ProfileSpec | None, rules.Unknown]] = {}
     for profile_path, raw in _profiles(data):
         profile, found = _validated(ProfileSpec, raw, profile_path, data)
         problems.add(found)
         if isinstance(profile_path[1], str):
-            profiles[profile_path[1]] = profile
+            profiles[profile_path[1]] = (profile, frozenset()) if profile is not None else _salvaged(ProfileSpec, raw)
     buses = []
     for bus_path, raw_bus in mappings_in(data, ("buses",)):
-        line = spec.buses[int(bus_path[1])] if spec is not None else _valid(BusLine, {k: v for k, v in raw_bus.items() if k != "modules"})
+        line = spec.buses[int(bus_path[1])] if spec is not None else _line(raw_bus)
         problems.add(rules.check_bus(bus_path, line) if line else ())
         modules = []
         for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
             module, found = _validated(ModuleSpec, raw_module, module_path, data)
             problems.add(found)
-            if module is not None:
-                found, built = _module(module, module_path, profiles)
+            checked, unknown = (module, frozenset()) if module is not None else _salvaged(ModuleSpec, raw_module)
+            if checked is not None:
+                found, built = _module(checked, module_path, profiles, unknown)
                 problems.add(found)
                 modules += [built] if built is not None else []
         if line is not None:
@@ -212,20 +217,79 @@ def _modules(data: dict[Any, Any]) -> Iterator[tuple[Path_, dict[Any, Any]]]:
         yield from mappings_in(bus, bus_path + ("modules",))
 
 
-def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, ProfileSpec | None]) -> tuple[list[Problem], Module | None]:
-    """The problems of one module, and the module when it has none."""
-    unknown = [
+def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[ProfileSpec | None, rules.Unknown]],
+            unknown: rules.Unknown) -> tuple[list[Problem], Module | None]:
+    """The problems of one module, and the module when it has none (`unknown`: what its problems took out of it)."""
+    not_found = [
         Problem(path + ("profiles", k), f"unknown profile '{name}' — "
                 + (f"the profiles are {', '.join(profiles)}" if profiles else "the file has no profiles: section"))
         for k, name in enumerate(module.profiles) if name not in profiles
     ]
-    if unknown or any(profiles[name] is None for name in module.profiles):
-        return unknown, None
-    settings = resolve(module_layers(module, path, {name: p for name, p in profiles.items() if p is not None}))
-    problems = rules.check_module(module.name, path, settings)
+    if not_found or any(profiles[name][0] is None for name in module.profiles):
+        return not_found, None
+    unknown = unknown.union(*(profiles[name][1] for name in module.profiles))
+    settings = resolve(module_layers(module, path, {name: p for name, (p, _) in profiles.items() if p is not None}))
+    problems = rules.check_module(module.name, path, settings, unknown)
+    if unknown:
+        return problems, None
     built = Module(address=module.address, name=module.name, profiles=module.profiles,
                    unmanaged_programs=settings.unmanaged_programs.value, settings=settings)
     return problems, built
+
+
+def _line(raw_bus: dict[Any, Any]) -> BusLine | None:
+    """A bus's line, for its rules (`rules.check_bus`): valid whole, or without the keys that are not, where the
+    rules need none of them (a wrong `timeout` does not hide a ZVZ the Open Driver refuses)."""
+    raw = {key: value for key, value in raw_bus.items() if key != "modules"}
+    try:
+        return BusLine.model_validate(raw)
+    except ValidationError as error:
+        wrong = {e["loc"][0] for e in error.errors(include_url=False) if e["loc"]}
+    if wrong & rules.LINE_KEYS:
+        return None
+    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-", "port": "-"})
+
+
+def _salvaged(model: type[M], raw: dict[Any, Any]) -> tuple[M | None, rules.Unknown]:
+    """A module or profile that has problems, without the values they are about — as `model`, with what was
+    taken out (`rules.Unknown`) — so that the rules check what is valid in it; None where nothing can be
+    taken out for them (its `profiles:` list) or what is left still fails."""
+    data, unknown = copy.deepcopy(raw), set[tuple[Any, ...]]()
+    for _ in range(3):  # a value taken out can leave its mapping empty or a required key missing: a round each
+        try:
+            return model.model_validate(data), frozenset(unknown)
+        except ValidationError as error:
+            for loc in {tuple(e["loc"]) for e in error.errors(include_url=False)}:
+                if not _take_out(data, loc, unknown):
+                    return None, frozenset()
+    return None, frozenset()
+
+
+def _take_out(data: dict[Any, Any], loc: tuple[Any, ...], unknown: set[tuple[Any, ...]]) -> bool:
+    """Take the value at `loc` (a pydantic error's) out of a module or profile, and say in `unknown` what the
+    rules cannot know now; False where the part cannot be checked without it."""
+    head, rest = (loc[0], loc[1:]) if loc else (None, ())
+    if head in _MODULE_STAND_IN:  # address, name: the rules need neither's value
+        data[head] = _MODULE_STAND_IN[head]
+    elif head == "system" and rest and rest[0] != "[key]" and isinstance(data.get("system"), dict):
+        data["system"].pop(rest[0], None)
+        unknown.add(("system", rest[0]))
+    elif head == "programs" and rest and isinstance(data.get("programs"), dict) and rest[0] in data["programs"]:
+        program = data["programs"][rest[0]]
+        if len(rest) > 1 and rest[1] != "[key]" and isinstance(program, dict):
+            program.pop(rest[1], None)
+            unknown.add((rest[0], rest[1]))
+        else:  # the program itself, or its number: every jump to it, and what it lists, unknown
+            del data["programs"][rest[0]]
+            unknown.update({(rest[0], "*"), ("programs", "*")})
+    elif head in ("system", "programs", "chains", "unmanaged_programs"):
+        data.pop(head, None)
+        unknown.add((head, "*"))
+    elif head == "profiles" or head not in data:
+        return False
+    else:  # a key the part may not have
+        data.pop(head, None)
+    return True
 
 
 def _validated(model: type[M], data: Any, path: Path_, document: Any) -> tuple[M | None, list[Problem]]:

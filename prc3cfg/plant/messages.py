@@ -16,6 +16,7 @@ from typing import Any
 from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic_core import ErrorDetails
 
+from prc3cfg.core.text import has_control
 from prc3cfg.plant.document import DECIMAL_NUMBER
 from prc3cfg.plant.models import (
     BusSpec,
@@ -73,6 +74,9 @@ TEMPLATES = {
     "too_short": "{what} is empty — list at least one {item}",
     "program_key": "{what} {input} is written with a decimal point — {fix}",
     "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
+    "name_control": "{what} {input} holds a control character — a name is printable text: write it without line breaks, "
+    "escapes or other control characters",
+    "data_bits": "{what} {value} cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: write {bits}",
 }
 _LIST_ITEMS: dict[str | int, str] = {"buses": "bus", "modules": "module", "programs": "program"}
 _DECIMAL_COMMA = re.compile(r"[-+]?[0-9]+,[0-9]+")
@@ -150,7 +154,7 @@ def what(path: Path_, data: Any) -> str:
     if parent in ITEMS and (isinstance(last, int) or len(head) == 1 or parent == "programs"):
         label = ITEMS[parent][0]
         name = _lookup(data, path + ("name",)) if parent in ("buses", "modules") else None
-        if isinstance(name, str) and name:
+        if isinstance(name, str) and name and not has_control(name):  # a name that is not printable text is not one
             return f"{label} {name}"
         return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
     return "the gateway" if last == "gateway" else str(last)

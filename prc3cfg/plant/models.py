@@ -66,7 +66,8 @@ from pydantic_core import PydanticCustomError, core_schema
 from prc3cfg.core import gateway
 from prc3cfg.core.framing import FramingName
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
-from prc3cfg.core.line import DATA_BITS, EMULATOR_SCHEME, STOP_BITS, TCP_SCHEMES, Parity
+from prc3cfg.core.line import EMULATOR_SCHEME, FRAME_DATA_BITS, STOP_BITS, TCP_SCHEMES, Parity
+from prc3cfg.core.text import has_control
 from prc3cfg.core.units import DISTANCE, QUANTITIES, Action, Quantity, human_text
 
 T = TypeVar("T")
@@ -183,6 +184,21 @@ def _one_of(allowed: tuple[int | float, ...], description: str) -> _Number:
     return _Number(float, PlainValidator(validate), WithJsonSchema({"enum": list(allowed), "description": description}))
 
 
+def _data_bits() -> _Number:
+    """Data bits: always 8 — a PRC 3 frame is binary, and fewer bits lose the top of each byte."""
+
+    def validate(value: Any) -> int:
+        if isinstance(value, bool) or not isinstance(value, (int, Decimal)):
+            raise PydanticCustomError("not_number", "not a number", {"whole": True, "unit": ""})
+        if value != FRAME_DATA_BITS:
+            raise PydanticCustomError("data_bits", "not 8 data bits", {"value": str(value), "bits": FRAME_DATA_BITS})
+        return FRAME_DATA_BITS
+
+    description = f"always {FRAME_DATA_BITS}: a PRC 3 frame is binary"
+    return _Number(int, PlainValidator(validate), WithJsonSchema({"enum": [FRAME_DATA_BITS], "description": description,
+                                                                  "default": FRAME_DATA_BITS}))
+
+
 def _given(value: T | None) -> T:
     if value is None:  # `key:` with no value, which YAML reads as null: `messages` says it is empty
         raise PydanticCustomError("empty", "no value")
@@ -194,11 +210,21 @@ def _given(value: T | None) -> T:
 #: (A number field's own validator refuses None: `Annotated[Decimal | None, _number(...)]`.)
 Omittable = Annotated[T | None, BeforeValidator(_given)]
 
-Name = Annotated[str, Field(min_length=1, strict=True)]
+Text = Annotated[str, Field(min_length=1, strict=True)]
+
+
+def _printable(name: str) -> str:
+    """A name is printable text: every output shows it, a terminal, a CI log, a pull request (`core.text`)."""
+    if has_control(name):
+        raise PydanticCustomError("name_control", "a control character")
+    return name
+
+
+Name = Annotated[Text, AfterValidator(_printable)]
 
 
 def _port(url: str) -> str:
-    if any(ord(c) < 32 or ord(c) == 127 for c in url):
+    if has_control(url):
         raise PydanticCustomError("port_control", "a control character")
     scheme = url.partition("://")[0]
     if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
@@ -218,7 +244,7 @@ def _tcp_port(url: str) -> bool:
 
 
 Port = Annotated[
-    Name, AfterValidator(_port),
+    Text, AfterValidator(_port),
     Field(description="a device path, any pyserial URL, or emulator://NAME", json_schema_extra={"pattern": PORT_PATTERN},
           examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
 ]
@@ -375,7 +401,7 @@ class BusLine(FileModel):
     framing: FramingName = Field("crc16", description="how messages are framed on the line (link.md)")
     baud: Annotated[int, _number(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud")] = 9600
     parity: Parity = Field("even", description="the parity bit of each character")
-    data_bits: Annotated[int, _number(DATA_BITS[0], DATA_BITS[-1], step=1, out=int, description="5..8")] = 8
+    data_bits: Annotated[int, _data_bits()] = FRAME_DATA_BITS
     stop_bits: Annotated[float, _one_of(STOP_BITS, "1, 1.5 or 2")] = 1.0
     timeout: Annotated[float, _number(Decimal("0.001"), unit="s", out=float, description="s to wait for a reply")] = 0.5
     turnaround: Annotated[float, _number(0, unit="s", out=float, description="s, the module's turnaround, for the bus-time estimate")] = 0.010

@@ -2,7 +2,7 @@
 
 A `Problem` names its place as a path of keys and indexes from the top of the document
 (`("buses", 0, "modules", 2, "programs", 3, "speed")`); the loader turns the path into
-`file:line:column`. `PlantError` carries the problems of one file, one line each: every one,
+`file:line:column`. `PlantError` carries the problems of one file, one printable line each (`plain`): every one,
 up to `MAX_PROBLEMS`; `PlantError.findings` the same problems as `Finding`s, for tools.
 """
 
@@ -12,6 +12,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from prc3cfg.core.text import plain
 from prc3cfg.errors import UserError
 
 Path_ = tuple[str | int, ...]
@@ -62,14 +63,14 @@ class PlantError(UserError):
     """A plant file that cannot be used; `str()` is every problem, one line each, sorted by line."""
 
     def __init__(self, problems: Sequence[str]) -> None:
-        self.problems = list(problems)
+        self.problems = [plain(problem) for problem in problems]  # what the file holds: one line each, printable
         super().__init__("\n".join(self.problems))
 
     def findings(self, file: str) -> list[Finding]:
         """The problems of the plant file read as `file` (the path `parse_plant` was given, as text)."""
-        found = []
+        found, shown = [], plain(file)
         for problem in self.problems:
-            place = _PLACE.match(problem, len(file)) if problem.startswith(f"{file}:") else None
+            place = _PLACE.match(problem, len(shown)) if problem.startswith(f"{shown}:") else None
             if place is None:  # not "file:…": said whole, of the file
                 found.append(Finding(file, None, None, problem))
             elif place.group(1) is None:

@@ -20,7 +20,9 @@ problems): bus names, ports and module names are unique in the plant; module add
 are unique on their bus.
 
 A value that came from a profile is reported where the profile gives it, with the
-module's name in front. Does not check single values (`models`). Pure.
+module's name in front. A rule runs wherever the values it needs are valid: a module or profile
+with problems of its own is checked without the values they are about (`Unknown`), and S4 < S5
+still lets P ≤ S1 be checked. Does not check single values (`models`). Pure.
 """
 
 from __future__ import annotations
@@ -36,47 +38,62 @@ from prc3cfg.plant.models import BusLine, Gateway
 from prc3cfg.plant.problems import FIRST, Path_, Problem
 from prc3cfg.plant.profiles import DEFAULT, Effective, Sourced
 
+#: What a module's or its profiles' own problems took out of its settings, so that no rule judges
+#: what stands in for it: ("system", KEY), (PROGRAM, FIELD), and (…, "*") for all of a section or
+#: program — ("programs", "*"): a program is missing, so what is listed is not known.
+Unknown = frozenset[tuple[Any, ...]]
 
-def check_module(name: str, path: Path_, settings: Effective) -> list[Problem]:
-    """The problems of one module's effective settings (module `name` at `path`)."""
-    problems = [*_missing_fields(settings), *_speeds_and_positions(settings), *_jumps(settings)]
+
+def check_module(name: str, path: Path_, settings: Effective, unknown: Unknown = frozenset()) -> list[Problem]:
+    """The problems of one module's effective settings (module `name` at `path`), but of what is `unknown`."""
+    problems = [*_missing_fields(settings, unknown), *_speeds_and_positions(settings, unknown), *_jumps(settings, unknown)]
     return [p if p.path[: len(path)] == path else Problem(p.path, f"in module {name}, {p.message}", p.at_key)
             for p in problems]
 
 
-def _missing_fields(settings: Effective) -> Iterator[Problem]:
+def _known(unknown: Unknown, section: Any, key: Any) -> bool:
+    return (section, key) not in unknown and (section, "*") not in unknown
+
+
+def _missing_fields(settings: Effective, unknown: Unknown) -> Iterator[Problem]:
+    taken_out = {program for program, _ in unknown}  # a key taken out of a program may be the one missing, mistyped
     for number, fields in settings.programs.items():
         for key in ("position", "speed"):
-            if key not in fields:
+            if key not in fields and number not in taken_out:
                 yield Problem(settings.program_paths[number], f"program {number} has no {key} "
                               f"— give {key}: in the module or in one of its profiles", at_key=True)
 
 
-def _speeds_and_positions(settings: Effective) -> Iterator[Problem]:
+def _speeds_and_positions(settings: Effective, unknown: Unknown) -> Iterator[Problem]:
     system = settings.system
     s1, s4, s5 = system["upper_reversing_point"], system["max_speed"], system["min_speed"]
-    if s4.value < s5.value:
+    known_s1, known_speeds = _known(unknown, "system", "upper_reversing_point"), all(
+        _known(unknown, "system", key) for key in ("max_speed", "min_speed"))
+    if known_speeds and s4.value < s5.value:
         at = s5 if s5.source != DEFAULT else s4
         yield Problem(at.place, f"max_speed {_said(s4, 'max_speed', at)} is below min_speed "
                       f"{_said(s5, 'min_speed', at)} "
                       "— max_speed (S4) must be at least min_speed (S5)")
-        return
-    for fields in settings.programs.values():
-        if (position := fields.get("position")) and position.value > s1.value:
+        known_speeds = False  # no speed is between them
+    for number, fields in settings.programs.items():
+        position = fields.get("position") if known_s1 and _known(unknown, number, "position") else None
+        speed = fields.get("speed") if known_speeds and _known(unknown, number, "speed") else None
+        if position and position.value > s1.value:
             yield Problem(position.place, f"position {_said(position, 'position')} is above upper_reversing_point "
                           f"{_said(s1, 'upper_reversing_point', position)} — a position must be at most the upper reversing point "
                           "(P ≤ S1): lower it or raise upper_reversing_point")
-        if (speed := fields.get("speed")) and not s5.value <= speed.value <= s4.value:
+        if speed and not s5.value <= speed.value <= s4.value:
             limit, word = (s4, "max_speed") if speed.value > s4.value else (s5, "min_speed")
             side = "above" if limit is s4 else "below"
             yield Problem(speed.place, f"speed {_said(speed, 'speed')} is {side} {word} {_said(limit, word, speed)} "
                           f"— a speed must be min_speed..max_speed (S5 ≤ V ≤ S4), here {s5.value}..{s4.value} m/s")
 
 
-def _jumps(settings: Effective) -> Iterator[Problem]:
+def _jumps(settings: Effective, unknown: Unknown) -> Iterator[Problem]:
     listed = settings.programs
+    all_listed = ("programs", "*") not in unknown  # else a jump to a program taken out is not known to be wrong
     chained: dict[int, int] = {}  # program → chain number (1-based)
-    for k, chain in enumerate(settings.chains.value):
+    for k, chain in enumerate(settings.chains.value if ("chains", "*") not in unknown else ()):
         at = settings.chains.place + (k,)
         if len(chain.programs) == 1 and not chain.loop:
             yield Problem(at, f"a chain of one program does nothing — add loop: true to make program "
@@ -84,17 +101,18 @@ def _jumps(settings: Effective) -> Iterator[Problem]:
         for i, number in enumerate(chain.programs):
             item = at + ("programs", i)
             if number not in listed:
-                yield Problem(item, f"program {number} is not listed under programs — a chain may only "
-                              f"name listed programs: list program {number} or drop it from the chain")
+                if all_listed:
+                    yield Problem(item, f"program {number} is not listed under programs — a chain may only "
+                                  f"name listed programs: list program {number} or drop it from the chain")
             elif number in chained:
                 where = "this chain" if chained[number] == k + 1 else f"chain {chained[number]}"
                 yield Problem(item, f"program {number} is already in {where} — a program may be in one chain, once")
             else:
                 chained[number] = k + 1
     for number, fields in listed.items():
-        if (target := fields.get("next")) is None:
+        if (target := fields.get("next")) is None or not _known(unknown, number, "next"):
             continue
-        if target.value not in listed:
+        if target.value not in listed and all_listed:
             yield Problem(target.place, f"next: {target.value} is not a listed program — list program "
                           f"{target.value} under programs, or jump to a listed one")
         if number in chained:
@@ -110,6 +128,10 @@ def _said(value: Sourced, key: str, beside: Sourced | None = None) -> str:
 
 #: Gateway words the Open Driver accepts, to check an `open-driver` line that has no `gateway:`.
 _ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0, identifier=gateway.IDENTIFIERS.start)
+
+
+#: The keys of a bus `check_bus` reads.
+LINE_KEYS = frozenset({"framing", "baud", "parity", "data_bits", "stop_bits", "zvz", "gateway"})
 
 
 def check_bus(path: Path_, bus: BusLine) -> list[Problem]:

@@ -76,6 +76,29 @@ def test_github_escaping_is_githubs() -> None:
         "::error file=x%25y%3Az%2Cw.yaml,line=1,col=2,title=prc3cfg::100%25 sure%0D%0Anext: a, b")
 
 
+def test_a_name_that_could_start_a_workflow_command_is_refused_and_every_annotation_is_one_line() -> None:
+    """`name: "m1\\n::error::injected"` would start a command of its own in a CI log: each name with a control
+    character is one problem, each problem one `::error` line, its text escaped."""
+    path = BROKEN / "names-control.yaml"
+    done = validate(path.name, "--format", "github", cwd=BROKEN)
+    assert (done.returncode, done.stderr) == (1, "")
+    lines = done.stdout.splitlines()
+    assert len(lines) == len(path.with_suffix(".expected").read_text().splitlines()) == 11
+    assert all(line.startswith("::error file=names-control.yaml,line=") for line in lines), lines
+    assert "name 'm1\\n::error::injected' holds a control character" in done.stdout
+    assert "::module 8 has no address" in done.stdout  # another problem of that module names it by its place
+
+
+@pytest.mark.parametrize("name", ["bell\a.yaml", "clear\x1b[2J.yaml", "line\u2028sep.yaml", "c1\x9b31m.yaml"])
+def test_a_file_name_with_control_characters_is_shown_escaped(tmp_path: Path, name: str) -> None:
+    """What prc3cfg says of a file names it as printable text, in every format: nothing it prints rings, moves, colours."""
+    text = validate(tmp_path / name)
+    github = validate(tmp_path / name, "--format", "github")
+    assert text.returncode == github.returncode == 1
+    assert text.stderr == f"error: {str(tmp_path / name).encode('unicode_escape').decode()}: no such file — check the path\n"
+    assert github.stdout.count("\n") == 1 and not any(c in github.stdout[:-1] for c in "\a\x1b\u2028\x9b\r\n")
+
+
 def test_validate_as_a_process_never_shows_a_traceback(tmp_path: Path) -> None:
     for path, code in [(DEMO, 0), (BROKEN / "tab-indent.yaml", 1), (BROKEN / "empty.yaml", 1),
                        (BROKEN / "not-utf8.yaml", 1), (tmp_path / "missing.yaml", 1), (tmp_path, 1)]:

@@ -161,4 +161,7 @@ def test_a_program_number_out_of_range_is_marked_where_it_is_written(opened, tmp
     (tmp_path / "plant.yaml").write_text(PLANT)
     with pytest.raises(PlantError) as refused:  # prc3cfg says the same of the same lines
         load_plant(tmp_path / "plant.yaml")
-    assert sorted(int(line.split(":")[1]) - 1 for line in str(refused.value).splitlines()) == sorted(marked)
+    problems = str(refused.value).splitlines()
+    assert sorted(int(line.split(":")[1]) - 1 for line in problems if "out of range" in line) == sorted(marked)
+    assert [line.split(": ", 1)[1] for line in problems if "out of range" not in line] == [  # checked beside them: one pass
+        "in module m1, program 1 has no speed — give speed: in the module or in one of its profiles"]
