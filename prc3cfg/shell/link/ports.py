@@ -21,12 +21,7 @@ reconnect, which prc3cfg never makes: it closes a line when a command is done wi
 from __future__ import annotations
 
 import contextlib
-import fcntl
-import os
 import socket
-import stat
-import sys
-import termios
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -42,25 +37,20 @@ from prc3cfg.core.framing import get_framing
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.link.trace import Trace
 
 PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.PARITY_EVEN}
 STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
-#: Linux's pseudo-terminals (/dev/pts/N): character devices of majors 136..143.
-PTY_MAJORS = range(136, 144)
 
 
 def is_pseudo_terminal(port: str) -> bool:
     """Whether `port` is a device path of a pseudo-terminal (`emulator serve --pty`, socat's pty), which carries no parity."""
     if "://" in port:
         return False
-    try:
-        found = os.stat(port)
-    except (OSError, ValueError):
-        return False
-    return stat.S_ISCHR(found.st_mode) and os.major(found.st_rdev) in PTY_MAJORS
+    return platform.is_pseudo_terminal(port)
 
 
 class FormatRefused(UserError):
@@ -84,7 +74,7 @@ class TcpPort(protocol_socket.Serial):
     def in_waiting(self) -> int:
         if not self.is_open or self._socket is None:
             raise serial.PortNotOpenError()
-        return int.from_bytes(fcntl.ioctl(self._socket, termios.FIONREAD, bytes(4)), sys.byteorder)
+        return platform.bytes_waiting(self._socket)
 
     def close(self) -> None:
         if self.is_open and self._socket:
@@ -176,7 +166,7 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpP
             port.open()
         else:
             port = serial.serial_for_url(url, **(settings if is_url else settings | {"exclusive": True}))
-    except termios.error:
+    except platform.TERMINAL_ERRORS:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
         if url.lower().startswith("rfc2217://") and "option 'control'" in str(error):  # pyserial waits for SET_CONTROL's answer
@@ -194,13 +184,11 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpP
 
 def _holds(port: serial.SerialBase, line: LineSettings) -> bool:
     """Whether the device kept the character format it was given (parity, data bits, stop bits)."""
-    try:
-        cflag = termios.tcgetattr(port.fileno())[2]
-    except (termios.error, OSError, AttributeError):
+    kept = platform.character_format(port)
+    if kept is None:
         return True  # not a terminal: nothing to read back
-    parity = "none" if not cflag & termios.PARENB else "odd" if cflag & termios.PARODD else "even"
-    sizes = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
-    return parity == line.parity and sizes[cflag & termios.CSIZE] == line.data_bits and bool(cflag & termios.CSTOPB) == (line.stop_bits != 1)
+    parity, data_bits, two_stop_bits = kept
+    return parity == line.parity and data_bits == line.data_bits and two_stop_bits == (line.stop_bits != 1)
 
 
 @contextlib.contextmanager
