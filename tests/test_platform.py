@@ -181,3 +181,49 @@ def test_a_pseudo_terminal_is_known_by_its_device():
         os.close(master)
         os.close(slave)
 
+
+# -- Windows' serial ports: COM3, COM10, \\.\COM10 -----------------------------------------
+
+COM_PORTS = [("COM3", "COM3"), ("COM10", "COM10"), ("com10", "COM10"), (r"\\.\COM10", "COM10"), (r"\\.\com255", "COM255"),
+             ("COM0", None), ("COM", None), ("/dev/ttyUSB0", None), ("socket://localhost:4001", None), ("COM3:", None)]  # fmt: skip
+
+
+@pytest.mark.parametrize(("port", "name"), COM_PORTS)
+def test_a_com_port_is_known_by_its_name(port, name):
+    assert platform.com_port_name(port) == name
+
+
+@pytest.mark.parametrize("port", ["COM3", "COM10", r"\\.\COM10"])
+def test_a_com_port_is_a_valid_port(port):
+    from prc3cfg.plant.messages import port_error
+
+    assert port_error("--port", port) is None
+
+
+def test_a_plant_on_com_ports_validates(tmp_path):
+    """A plant file written for a Windows laptop validates anywhere (here: on Linux)."""
+    text = (ROOT / "plants" / "demo-line.yaml").read_text()
+    assert "emulator://demo-a" in text and "emulator://demo-b" in text
+    plant = tmp_path / "demo-line.yaml"
+    plant.write_text(text.replace("emulator://demo-a", "COM3").replace("emulator://demo-b", "'\\\\.\\COM10'"))
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "validate", str(plant)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout + done.stderr
+
+
+@pytest.mark.parametrize("port", ["COM3", r"\\.\COM10"])
+def test_a_com_port_is_a_local_device_for_its_lock(port):
+    """Locked as a local serial device (one key, `dev/…`; the serial-port lock applies to it), not as a TCP line."""
+    from prc3cfg.shell.locks import device_path, line_keys
+
+    assert device_path(port) == port
+    keys = line_keys(port)
+    assert len(keys) == 1 and keys[0].startswith("dev/")
+    assert line_keys("socket://127.0.0.1:4001") == ("tcp/127.0.0.1/4001",)  # a TCP line keeps the machine-wide key
+
+
+def test_on_windows_two_spellings_of_a_com_port_are_one_line(monkeypatch):
+    """`device_identity` asks sys.platform when it is called: here it is told it runs on Windows."""
+    from prc3cfg.shell.locks import line_keys
+
+    monkeypatch.setattr(sys, "platform", "win32")
+    assert line_keys("COM10") == line_keys("com10") == line_keys(r"\\.\COM10") == ("dev/COM10",)
