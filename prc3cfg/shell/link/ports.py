@@ -16,6 +16,10 @@ takes no other key.
 bytes have arrived (pyserial says 1 whenever there are any, so a reply would be read a
 byte at a time), and closing does not sleep 0.3 s (pyserial's pause for a quick
 reconnect, which prc3cfg never makes: it closes a line when a command is done with it).
+
+`serial_ports` lists the machine's serial ports as pyserial's `serial.tools.list_ports` finds
+them (Windows' COM ports from the registry, Linux's /dev/ttyS*, ttyUSB*, ttyACM*, … from sysfs, macOS'
+/dev/cu.*): the port a plant file names, a description, a USB adapter's VID:PID.
 """
 
 from __future__ import annotations
@@ -51,6 +55,25 @@ def is_pseudo_terminal(port: str) -> bool:
     if "://" in port:
         return False
     return platform.is_pseudo_terminal(port)
+
+
+@dataclass(frozen=True)
+class SerialPort:
+    """A serial port of this machine: the `device` a plant file's `port` names (COM3, /dev/ttyUSB0),
+    the system's `description` of it ("" when it has none), and a USB adapter's `usb` VID:PID ("0403:6001")."""
+
+    device: str
+    description: str
+    usb: str | None
+
+
+def serial_ports() -> list[SerialPort]:
+    """The machine's serial ports in pyserial's order (COM2 before COM10); pseudo-terminals are not among them."""
+    from serial.tools import list_ports
+
+    return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
+                       f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None else None)
+            for info in sorted(list_ports.comports())]  # fmt: skip
 
 
 class FormatRefused(UserError):
