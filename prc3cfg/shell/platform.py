@@ -1,4 +1,4 @@
-"""What differs between POSIX and Windows, in one place: every other module calls this one.
+r"""What differs between POSIX and Windows, in one place: every other module calls this one.
 
 Owns the calls that exist on one system only, each behind a function or a constant that
 means the same everywhere:
@@ -15,16 +15,17 @@ means the same everywhere:
   so the holder's details at the start stay readable) — both released with the last descriptor;
 - the machine's folders: `LOCK_FOLDERS` (the lock folder's candidates, `prc3cfg.shell.locks`),
   `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases, `prc3cfg.shell.releases`) — POSIX's
-  /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows' %ProgramData%\\prc3cfg and %LOCALAPPDATA%;
+  /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows' %ProgramData%\prc3cfg and %LOCALAPPDATA%;
 - who and what: `user_name` (a login name, else `uid N`), `owned_by_this_user`,
-  `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is not a test, it
-  ends the process or sends a console Ctrl-C), `program_name` (Linux's /proc/PID/comm);
+  `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
+  CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
 - terminals and serial devices: `TERMINAL_ERRORS`, `character_format` (termios), `is_pseudo_terminal`
   (Linux's pty majors), `device_number` (major and minor of a device), `terminal_path` (ttyname;
   Windows: the console, CONOUT$), `open_pty` (POSIX only: `HAS_PTY`), `pty_line` (the baud rate and
   stop bits a client set on a pty), `kernel_lock_holders` (Linux's /proc/locks), `UUCP_LOCKS`
   (whether the `LCK..` convention exists here: not on Windows, where a COM port is exclusive),
-  `device_identity` (the name two spellings of one device share: Windows' `COM10`, `\\\\.\\COM10`);
+  `device_identity` (the name two spellings of one device share: on Windows a COM port's,
+  `com_port_name`: `COM10`, `com10`, `\\.\COM10`);
 - sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
   main thread anyway: nothing).
@@ -54,9 +55,6 @@ else:
     import fcntl
     import termios
     import tty
-
-#: Whether this is Windows (the one branch most callers need to know of).
-WINDOWS = sys.platform == "win32"
 
 # -- open flags ------------------------------------------------------------------------
 
@@ -288,7 +286,7 @@ def is_pseudo_terminal(path: str) -> bool:
 
 
 def com_port_name(port: str) -> str | None:
-    """The Windows serial port `port` names, in capitals (`com10`, `\\\\.\\COM10`: COM10); None for any other port."""
+    r"""The Windows serial port `port` names, in capitals (`com10`, `\\.\COM10`: COM10); None for any other port."""
     named = COM_PORT.fullmatch(port)
     return named.group(1).upper() if named else None
 
