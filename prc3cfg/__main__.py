@@ -10,9 +10,15 @@ same reason the process ends without freeing them one by one (0.1 s more; mypy d
 once the command line has returned and flushed its output, and only when nothing else runs —
 no other thread (a line's worker would be cut off), no profiler, tracer or debugger (which
 write what they found as Python shuts down).
+
+stdout and stderr write UTF-8 whatever the console's code page says (`utf8_output`): the output
+says ✓, ⚠, → and —, which a Windows console redirected to a file or a pipe (cp1252), or
+PYTHONIOENCODING, could not encode — that was a UnicodeEncodeError half-way through the output.
 """
 
+import codecs
 import gc
+import io
 import os
 import sys
 import threading
@@ -25,6 +31,7 @@ YOUNG = 50_000
 
 def main() -> None:
     exit_on_signal()
+    utf8_output()
     gc.set_threshold(YOUNG, *gc.get_threshold()[1:])
     from prc3cfg.cli import main as run
 
@@ -33,6 +40,15 @@ def main() -> None:
     except SystemExit as ended:
         _leave(ended.code)
     _leave(0)
+
+
+def utf8_output() -> None:
+    """Make stdout and stderr write UTF-8 where they write another encoding; a character that
+    UTF-8 cannot hold either (a lone surrogate of an undecodable file name) is written as its
+    escape. A stream already writing UTF-8 (a terminal on Linux, the Windows console) is left as it is."""
+    for stream in (sys.stdout, sys.stderr):
+        if isinstance(stream, io.TextIOWrapper) and codecs.lookup(stream.encoding).name != "utf-8":
+            stream.reconfigure(encoding="utf-8", errors="backslashreplace")
 
 
 def _leave(code: str | int | None) -> None:

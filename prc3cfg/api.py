@@ -72,19 +72,24 @@ from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_chan
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.client import Port
 from prc3cfg.shell.link.ports import FormatRefused, emulator_state_path, is_pseudo_terminal
+from prc3cfg.shell.link.ports import SerialPort as SerialPort
+from prc3cfg.shell.link.ports import serial_ports as serial_ports
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.platform import HAS_PTY
+from prc3cfg.shell.platform import device_number as device_number
+from prc3cfg.shell.platform import terminal_path as terminal_path
 from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
     "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused",
-    "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "StalePlan", "UserError",
-    "Verify", "adopt", "apply", "default_parity", "doctor", "drift", "emulator", "import_modules", "import_plant", "init_data_block",
-    "left_alone", "listen", "load", "load_images", "open_pty", "picture", "plan", "plan_document", "plan_file_plant", "read", "restore",
-    "scan", "select", "write_adoption",
+    "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
+    "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
+    "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "open_pty", "picture", "plan",
+    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "terminal_path", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -1255,6 +1260,8 @@ def listen(running: Emulator, host: str, port: int, *, rfc2217: bool = False) ->
 
 def open_pty(running: Emulator) -> str:
     """Serve `running` on a new pseudo-terminal too; its path."""
+    if not HAS_PTY:
+        raise UserError("--pty: Windows has no pseudo-terminals — serve over TCP (--listen HOST:PORT) and use socket://HOST:PORT")
     try:
         return running.open_pty()
     except OSError as error:

@@ -1,4 +1,5 @@
-"""`prc3cfg scan`, `prc3cfg import`, `prc3cfg doctor` and `prc3cfg link init-db`: a bus without a plant file, and its gateway.
+"""`prc3cfg ports`, `prc3cfg scan`, `prc3cfg import`, `prc3cfg doctor` and `prc3cfg link init-db`: the machine's serial
+ports, a bus without a plant file, and its gateway.
 
 Without `--parity`, scan and import use even parity (a PRC 3 line's), and none on a
 pseudo-terminal, which carries no parity (`emulator serve --pty` defaults to none as well).
@@ -68,6 +69,29 @@ def _said_as_options() -> Iterator[None]:
         yield
     except api.FormatRefused as refused:
         raise UserError(f"{refused.refusal}: give --parity none") from None
+
+
+@app.command()
+def ports(
+    json_out: Annotated[bool, typer.Option("--json", help="Print the ports as JSON: a list of {device, description, usb}.")] = False,
+) -> None:
+    """The machine's serial ports: the name a plant file's port takes, a description, a USB adapter's VID:PID."""
+    import json
+    import sys
+    from dataclasses import asdict
+
+    from prc3cfg import api
+
+    found = api.serial_ports()
+    if json_out:
+        print(json.dumps([asdict(port) for port in found], indent=2))
+    else:
+        width = max((len(port.device) for port in found), default=0)
+        for port in found:
+            print(f"{port.device:<{width}}  {port.usb or '-':<9}  {port.description}".rstrip())
+    if not found:
+        print("no serial ports found — plug the adapter in (a pseudo-terminal is not listed: emulator serve --pty prints its path)",
+              file=sys.stderr)  # fmt: skip
 
 
 @app.command()

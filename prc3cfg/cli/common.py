@@ -111,6 +111,8 @@ def check_output(path: Path | None, option: str, *, plant: Path | None = None) -
     a directory, a missing folder, a read-only or full one, /dev/full, the plant file itself."""
     if path is None:
         return None
+    from prc3cfg.api import device_number as _device_number
+
     where = f"{option} {path}"
     try:
         found = os.stat(path)
@@ -123,7 +125,7 @@ def check_output(path: Path | None, option: str, *, plant: Path | None = None) -
             raise UserError(f"{where} is a directory — name a file in it")
         if plant is not None and plant.exists() and os.path.samefile(path, plant):
             raise UserError(f"{where} is the plant file itself — name another file")
-        if stat.S_ISCHR(found.st_mode) and (os.major(found.st_rdev), os.minor(found.st_rdev)) == DEV_FULL:
+        if stat.S_ISCHR(found.st_mode) and _device_number(found) == DEV_FULL:
             raise UserError(f"{where}: no space left on device — name a file on a disk with space")
         if not stat.S_ISREG(found.st_mode):
             return path  # a device or a FIFO (/dev/stdout, a pipe): written as it is
@@ -298,7 +300,9 @@ def ask(question: str, options: LineOptions | None = None) -> bool:
         options.progress.stop()
     sys.stdout.flush()
     sys.stderr.flush()
-    with open(os.ttyname(sys.stdin.fileno()), "w") as terminal:
+    from prc3cfg.api import terminal_path
+
+    with open(terminal_path(sys.stdin.fileno()), "w") as terminal:
         while True:
             terminal.write(f"{question} [y/N]: ")
             terminal.flush()

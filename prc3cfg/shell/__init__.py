@@ -3,7 +3,8 @@
 Bounded reads and atomic writes (`files`), plant files read for `prc3cfg.plant`
 (`plant_files`), the link client and ports (`link`), the emulator and its server
 (`emulator`), line locks (`locks`), snapshots and journals (`records`), Ctrl-C (`cancel`),
-read-back and apply over live lines (`readback`, `apply`), and the emulated buses for tests
+read-back and apply over live lines (`readback`, `apply`), what differs between POSIX and
+Windows (`platform`: every other module calls it), and the emulated buses for tests
 (`testing`, `pytest_plugin`). `prc3cfg.api` composes it
 with the core; the CLI only parses arguments and renders.
 """

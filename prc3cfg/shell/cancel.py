@@ -28,6 +28,7 @@ import threading
 from collections.abc import Iterator
 
 from prc3cfg.errors import Interrupted
+from prc3cfg.shell import platform
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -49,7 +50,7 @@ def main_thread_only() -> None:
     handler in the main thread only, once that runs again — a signal the kernel gave a thread that
     reads or writes a line left the main thread asleep in its wait for them, and Ctrl-C did nothing
     until they were done; blocked here, the kernel gives it to the main thread, whose wait it ends."""
-    signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+    platform.block_signals(SIGNALS)
 
 
 class Cancellation:

@@ -34,6 +34,8 @@ import tempfile
 from pathlib import Path
 from typing import Any, TextIO
 
+from prc3cfg.shell import platform
+
 #: The largest JSON file prc3cfg reads: a plan file, a snapshot, saved images (a plan of
 #: 8 buses × 30 fully changed modules is 11–17 MB).
 JSON_LIMIT = 64 * 2**20
@@ -86,7 +88,7 @@ def read_regular(path: Path, limit: int) -> bytes:
     """The bytes of the regular file `path`, at most `limit`; opened so that a FIFO cannot block."""
     try:
         _regular(os.stat(path).st_mode)
-        with open(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as file:
+        with open(os.open(path, os.O_RDONLY | platform.NON_BLOCKING), "rb") as file:
             _regular(os.fstat(file.fileno()).st_mode)  # it may have changed since
             data = file.read(limit + 1)
     except FileNotFoundError:
@@ -213,17 +215,17 @@ def _written_beside(path: Path, text: str, mode: int | None, *, new: bool = Fals
     writer leaves no temporary file — but for one between the link to the temporary name and its
     caller's rename. Where the folder's file system has no unnamed files (or /proc is not
     mounted), a named temporary file is written (a kill while writing leaves it)."""
-    try:
-        fd = os.open(path.parent, os.O_TMPFILE | os.O_WRONLY, 0o600)
-    except (AttributeError, OSError):  # no O_TMPFILE here, or not on this file system
+    unnamed = platform.unnamed_file(path.parent)
+    if unnamed is None:  # no O_TMPFILE here, or not on this file system
         return _named_beside(path, text, mode)
+    fd, link_path = unnamed
     with os.fdopen(fd, "w", encoding="utf-8") as handle:
         _put_on_disk(handle, text, mode)
         # A directory handle given makes Python call linkat(…, AT_SYMLINK_FOLLOW) — without one it
         # calls link(), which links the /proc entry itself and fails (EXDEV).
         folder = os.open(path.parent, os.O_RDONLY)
         try:
-            return _linked(f"/proc/self/fd/{fd}", folder, path, new)
+            return _linked(link_path, folder, path, new)
         except OSError:  # no /proc: the text is written again, to a named file
             pass
         finally:
@@ -265,13 +267,9 @@ def _put_on_disk(handle: TextIO, text: str, mode: int | None) -> None:
     handle.write(text)
     handle.flush()
     if mode is not None:
-        os.fchmod(handle.fileno(), mode)
+        platform.set_mode(handle.fileno(), mode)
     os.fsync(handle.fileno())
 
 
 def _sync_folder(folder: Path) -> None:
-    handle = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(handle)
-    finally:
-        os.close(handle)
+    platform.sync_folder(folder)

@@ -10,7 +10,8 @@ The folder is the machine's, whatever the environment or the user of the process
 (`lock_dir`): `PRC3CFG_LOCK_DIR` when set, else `/run/lock/prc3cfg` (the system's lock
 folder, as for serial tools' `LCK..` files), `/var/lock/prc3cfg`, then `/tmp/prc3cfg-locks` —
 the first that exists, or else whose parent every user may make folders in (sticky and
-writable by all), so every user's prc3cfg picks the same one. It is made sticky and writable
+writable by all), so every user's prc3cfg picks the same one; on Windows
+`%ProgramData%\\prc3cfg\\locks` (`prc3cfg.shell.platform.LOCK_FOLDERS`). It is made sticky and writable
 by all, its lock files readable and writable by all: another user's prc3cfg sees a lock,
 names its holder and waits for it, and never removes it. The lock is the kernel's: it dies with the process that holds it, so there
 is no stale lock to guess at, and a lock file is never deleted (a process could be holding
@@ -26,8 +27,6 @@ state file) nor where a message goes (`waiting` is the caller's).
 from __future__ import annotations
 
 import contextlib
-import fcntl
-import getpass
 import hashlib
 import ipaddress
 import json
@@ -42,12 +41,12 @@ from urllib.parse import urlsplit
 
 from prc3cfg.core.line import TCP_SCHEMES
 from prc3cfg.errors import UserError
-from prc3cfg.shell import serial_lock
+from prc3cfg.shell import platform, serial_lock
 
 POLL = 0.1  # s between attempts on a busy line
 #: Where the lock folder may be, in order: (parent, name) — `lock_dir`.
-LOCK_FOLDERS = ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"), (Path("/tmp"), "prc3cfg-locks"))
-_OPEN_FLAGS = os.O_NOFOLLOW | os.O_CLOEXEC
+LOCK_FOLDERS = platform.LOCK_FOLDERS
+_OPEN_FLAGS = platform.NO_FOLLOW | platform.NO_INHERIT
 
 
 class LineBusy(UserError):
@@ -102,7 +101,7 @@ def device_path(port: str) -> str | None:
 
 def _device_key(path: str) -> str:
     try:
-        return f"dev/{os.path.realpath(path)}"
+        return f"dev/{platform.device_identity(path)}"
     except ValueError:  # a NUL in the path: no device has it, and the open says so
         return f"dev/{path!r}"
 
@@ -166,7 +165,7 @@ def _open(path: Path, description: str) -> tuple[int, bool]:
     try:
         try:
             fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _OPEN_FLAGS, 0o666)
-            os.fchmod(fd, 0o666)  # umask aside
+            platform.set_mode(fd, 0o666)  # umask aside
             return fd, True
         except FileExistsError:
             pass
@@ -179,17 +178,10 @@ def _open(path: Path, description: str) -> tuple[int, bool]:
                         "check the lock directory or set PRC3CFG_LOCK_DIR") from None
 
 
-def _user() -> str:
-    try:
-        return getpass.getuser()
-    except (KeyError, OSError):  # no login name and no passwd entry (a container)
-        return f"uid {os.getuid()}"
-
-
 def _holder(fd: int) -> str:
     """Who holds the lock, as its file says: "alice@host (pid 123, apply since …)", or "another process"."""
     try:
-        record = json.loads(os.pread(fd, 4096, 0))
+        record = json.loads(platform.read_at(fd, 4096, 0))
         return f"{record['holder']} (pid {record['pid']}, {record['purpose']} since {record['since']})"
     except (OSError, ValueError, KeyError, TypeError):
         return "another process"
@@ -201,9 +193,7 @@ def _take_all(paths: list[Path], description: str) -> tuple[list[tuple[int, bool
     try:
         for path in paths:
             fd, writable = _open(path, description)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
+            if not platform.try_lock(fd):
                 holder = _holder(fd)
                 os.close(fd)
                 _release(taken)
@@ -220,7 +210,7 @@ def _release(taken: list[tuple[int, bool]]) -> None:
         if writable:
             with contextlib.suppress(OSError):
                 os.ftruncate(fd, 0)  # no details of a holder that is gone
-        fcntl.flock(fd, fcntl.LOCK_UN)  # also for a child forked while the lock was held
+        platform.unlock(fd)  # also for a child forked while the lock was held
         os.close(fd)
 
 
@@ -277,7 +267,7 @@ def line_lock(
             told = True
         time.sleep(min(POLL, left))
     record = json.dumps({
-        "holder": f"{_user()}@{socket.gethostname()}",
+        "holder": f"{platform.user_name()}@{socket.gethostname()}",
         "host": socket.gethostname(),
         "pid": os.getpid(),
         "since": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -289,7 +279,7 @@ def line_lock(
             if writable:
                 with contextlib.suppress(OSError):  # the details only name the holder to others
                     os.ftruncate(fd, 0)
-                    os.pwrite(fd, record, 0)
+                    platform.write_at(fd, record, 0)
         yield tuple(paths)
     finally:
         serial_lock.release(serial_taken)

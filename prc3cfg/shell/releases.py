@@ -32,19 +32,19 @@ from pathlib import Path
 from typing import Any
 
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.files import write_atomically
 
 #: The folder for the machine when `PRC3CFG_STATE_DIR` does not say otherwise (it lasts across a
-#: reboot, unlike /run); a user who cannot write there keeps the records in their own state folder.
-SYSTEM_STATE_DIR = Path("/var/lib/prc3cfg")
+#: reboot, unlike /run: /var/lib/prc3cfg; Windows: %ProgramData%\prc3cfg); a user who cannot write there keeps the records in their own state folder.
+SYSTEM_STATE_DIR = platform.SYSTEM_STATE_DIR
 
 
 def state_dirs() -> list[Path]:
     """Where records are looked for: `PRC3CFG_STATE_DIR` alone, else the machine's folder and the user's."""
     if (chosen := os.environ.get("PRC3CFG_STATE_DIR")):
         return [Path(chosen)]
-    home = Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state") / "prc3cfg"
-    return [SYSTEM_STATE_DIR, home]
+    return [SYSTEM_STATE_DIR, platform.user_state_dir()]
 
 
 def folder(kind: str = "releases", what: str = "the record of an axis release") -> Path:
@@ -54,7 +54,7 @@ def folder(kind: str = "releases", what: str = "the record of an axis release") 
         folder = directory / kind
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            if directory == SYSTEM_STATE_DIR and folder.stat().st_uid == os.getuid():
+            if directory == SYSTEM_STATE_DIR and platform.owned_by_this_user(folder):
                 os.chmod(folder, 0o1777)  # every user's prc3cfg records there; none removes another's
             if os.access(folder, os.W_OK):
                 return folder
@@ -153,7 +153,7 @@ class Releases:
             line = json.dumps({"kind": kind, "keys": list(keys), "bus": bus, "address": address, "name": name,
                                "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "command": self.command,
                                "journal": None if self.journal is None else str(self.journal)})  # fmt: skip
-            fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | platform.NO_INHERIT, 0o644)
             try:
                 os.write(fd, (line + "\n").encode())
                 os.fsync(fd)

@@ -7,7 +7,9 @@ characters, a newline) — minicom, cu, and picocom built with UUCP locks write 
 after the path it was given, so a symlink (/dev/serial/by-id/…) and its real path are two names,
 and both are checked and taken. And the kernel lock (`flock`) on the device itself, which
 picocom as Debian builds it and pyserial's `exclusive=True` take: its holder is found in
-/proc/locks by the device's inode, to be named.
+/proc/locks by the device's inode, to be named. Windows has neither convention — it opens a COM port
+for one program at a time — and there `take` takes nothing (`platform.UUCP_LOCKS`); what differs
+between the systems (pids, /proc) is asked of `prc3cfg.shell.platform`.
 
 `take` refuses a device another live process holds either way (`InUse`, naming the program
 and its pid), takes over a lock file whose pid is dead — or, holding no pid, that has not been
@@ -30,6 +32,8 @@ import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+
+from prc3cfg.shell import platform
 
 SYSTEM_LOCK_DIR = Path("/var/lock")
 GARBAGE_AGE = 5.0  # s a lock file holding no pid is left to its writer
@@ -65,6 +69,8 @@ def take(devices: Iterable[str]) -> tuple[list[Path], InUse | None]:
     """Take the lock files of every device, or none: the files written, or none and who holds
     the first device in use."""
     taken: list[Path] = []
+    if not platform.UUCP_LOCKS:  # Windows: the system opens a COM port for one program only
+        return taken, None
     try:
         for device in devices:
             if not _is_device(device):
@@ -117,9 +123,9 @@ def _take_file(path: Path) -> tuple[Path | None, str | None]:
 def _written(folder: Path, record: bytes) -> Path:
     """A file in `folder` holding `record`, readable by every user, to be linked to a lock name."""
     temporary = folder / f"LTMP.{os.getpid()}"
-    fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | platform.NO_FOLLOW | platform.NO_INHERIT, 0o644)
     try:
-        os.fchmod(fd, 0o644)  # umask aside: other programs read the pid
+        platform.set_mode(fd, 0o644)  # umask aside: other programs read the pid
         os.write(fd, record)
     finally:
         os.close(fd)
@@ -149,52 +155,22 @@ def _live_holder(path: Path) -> str | None:
         if time.time() - written >= GARBAGE_AGE:
             return None
         return f"another program (its lock file {path} names no process yet)"
-    if pid == os.getpid() or not _alive(pid):
+    if pid == os.getpid() or not platform.process_alive(pid):
         return None
     return _named(pid)
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's: alive
-        return True
-    except OverflowError:  # no pid can be that large
-        return False
-    return True
-
-
 def _named(pid: int) -> str:
     """"picocom (pid 1234)", or "a process (pid 1234)" where /proc does not say its program."""
-    try:
-        program = Path(f"/proc/{pid}/comm").read_text().strip()
-    except OSError:
-        program = ""
+    program = platform.program_name(pid)
     return f"{program or 'a process'} (pid {pid})"
 
 
 def _flock_holder(device: str) -> str | None:
     """Who else holds a kernel lock on the device (from /proc/locks), or None."""
-    try:
-        info = os.stat(device)
-        locks = Path("/proc/locks").read_text().splitlines()
-    except OSError:
-        return None
-    for line in locks:
-        fields = line.split()
-        if len(fields) < 6 or fields[1] == "->":  # a waiter, not a holder
-            continue
-        pid, where = fields[4], fields[5].split(":")
-        try:
-            major, minor, inode = int(where[0], 16), int(where[1], 16), int(where[2])
-        except (ValueError, IndexError):
-            continue
-        if (major, minor, inode) != (os.major(info.st_dev), os.minor(info.st_dev), info.st_ino):
-            continue
-        if not pid.lstrip("-").isdigit() or int(pid) <= 0:
+    for pid in platform.kernel_lock_holders(device):
+        if pid is None:
             return "another program"  # an open-file-description lock names no process
-        if int(pid) != os.getpid():
-            return _named(int(pid))
+        if pid != os.getpid():
+            return _named(pid)
     return None

@@ -49,10 +49,8 @@ import os
 import random
 import select
 import socket
-import termios
 import threading
 import time
-import tty
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -67,6 +65,7 @@ from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Frame, get_fra
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received as uart_received
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.emulator.bus import BROADCAST, EmulatedBus
 from prc3cfg.shell.emulator.state import COMPACT_EVERY, Store, cannot_save
@@ -446,8 +445,7 @@ class Emulator:
 
     def open_pty(self) -> str:
         """Serve a pseudo-terminal; returns the path any serial program can open."""
-        master, slave = os.openpty()
-        tty.setraw(slave)
+        master, slave, path = platform.open_pty()
 
         def close_pty() -> None:
             os.close(master)
@@ -468,14 +466,12 @@ class Emulator:
         def client_line() -> LineSettings | None:
             """The baud rate and stop bits the client set on the pty; a pty keeps no data bits or
             parity (always 8N): those are the emulator's, as if the client had set them."""
-            with contextlib.suppress(termios.error, ValueError):
-                attributes = termios.tcgetattr(master)  # the slave's, on Linux
-                baud = BAUDS.get(attributes[5])
-                if baud is not None:
-                    return replace(self.line, baud=baud, stop_bits=2 if attributes[2] & termios.CSTOPB else 1)
-            return None
+            found = platform.pty_line(master)
+            if found is None:
+                return None
+            baud, two_stop_bits = found
+            return replace(self.line, baud=baud, stop_bits=2 if two_stop_bits else 1)
 
-        path = os.ttyname(slave)
         self._start(lambda: self._serve_stream(recv, send, name=path, uart=True, client_line=client_line), "emulator-pty")
         return path
 
@@ -502,11 +498,6 @@ class Emulator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-#: termios speed codes → baud rates
-BAUDS = {getattr(termios, f"B{baud}"): baud for baud in (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400,
-                                                          57600, 115200, 230400) if hasattr(termios, f"B{baud}")}  # fmt: skip
 
 
 class _RemoteEnd:
@@ -560,6 +551,4 @@ def _rfc2217(
 
 def _hung_up(conn: socket.socket) -> bool:
     """Whether the client of `conn` has closed or reset it (its thread is about to free its slot)."""
-    poll = select.poll()
-    poll.register(conn, select.POLLRDHUP)
-    return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL) for _, events in poll.poll(0))
+    return platform.hung_up(conn)

@@ -63,7 +63,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import fcntl
 import hashlib
 import json
 import logging
@@ -90,6 +89,7 @@ from prc3cfg.core.image import (
     SystemParameters,
 )
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json, read_regular, write_atomically
 
 log = logging.getLogger(__name__)
@@ -356,12 +356,10 @@ class Store:
 
     def _own(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)  # as the state file's first save would
-        fd = os.open(owner_path(self.path), os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
+        fd = os.open(owner_path(self.path), os.O_RDWR | os.O_CREAT | platform.NO_INHERIT | platform.NO_FOLLOW, 0o644)
+        if not platform.try_lock(fd):
             try:
-                record = json.loads(os.pread(fd, 4096, 0))
+                record = json.loads(platform.read_at(fd, 4096, 0))
                 holder = f"pid {record['pid']}, since {record['since']}"
             except (OSError, ValueError, KeyError, TypeError):
                 holder = "starting"
@@ -372,7 +370,7 @@ class Store:
         record = {"pid": os.getpid(), "since": datetime.now(UTC).isoformat(timespec="seconds")}
         with contextlib.suppress(OSError):  # the details only name the owner to a second emulator
             os.ftruncate(fd, 0)
-            os.pwrite(fd, json.dumps(record).encode(), 0)
+            platform.write_at(fd, json.dumps(record).encode(), 0)
         self._owner = fd
 
     def _disown(self) -> None:
@@ -394,7 +392,7 @@ class Store:
         try:
             if os.write(self._fd, lines) != len(lines):
                 raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.journal))
-            os.fdatasync(self._fd)
+            platform.sync_data(self._fd)
         except OSError:
             with contextlib.suppress(OSError):  # take back what reached the file, as the modules are put back
                 os.ftruncate(self._fd, self._size)
@@ -416,7 +414,7 @@ class Store:
             # The fresh journal takes the old one's place whole, header and all: killed before, the old
             # journal is the one the state file replaces (nothing to replay); never an empty journal.
             write_atomically(self.journal, header)
-            fd = os.open(self.journal, os.O_WRONLY | os.O_APPEND | os.O_CLOEXEC)
+            fd = os.open(self.journal, os.O_WRONLY | os.O_APPEND | platform.NO_INHERIT)
             try:
                 self._files = (_identity(os.stat(self.path)), _identity(os.fstat(fd))[:2])
             except OSError:
@@ -469,11 +467,7 @@ def _identity(status: os.stat_result) -> tuple[int, ...]:
 
 
 def _sync_folder(folder: Path) -> None:
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+    platform.sync_folder(folder)
 
 
 def cannot_save(path: Path, error: OSError) -> str:

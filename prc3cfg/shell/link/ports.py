@@ -16,17 +16,16 @@ takes no other key.
 bytes have arrived (pyserial says 1 whenever there are any, so a reply would be read a
 byte at a time), and closing does not sleep 0.3 s (pyserial's pause for a quick
 reconnect, which prc3cfg never makes: it closes a line when a command is done with it).
+
+`serial_ports` lists the machine's serial ports as pyserial's `serial.tools.list_ports` finds
+them (Windows' COM ports from the registry, Linux's /dev/ttyS*, ttyUSB*, ttyACM*, … from sysfs, macOS'
+/dev/cu.*): the port a plant file names, a description, a USB adapter's VID:PID.
 """
 
 from __future__ import annotations
 
 import contextlib
-import fcntl
-import os
 import socket
-import stat
-import sys
-import termios
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -42,25 +41,39 @@ from prc3cfg.core.framing import get_framing
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.link.trace import Trace
 
 PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.PARITY_EVEN}
 STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
-#: Linux's pseudo-terminals (/dev/pts/N): character devices of majors 136..143.
-PTY_MAJORS = range(136, 144)
 
 
 def is_pseudo_terminal(port: str) -> bool:
     """Whether `port` is a device path of a pseudo-terminal (`emulator serve --pty`, socat's pty), which carries no parity."""
     if "://" in port:
         return False
-    try:
-        found = os.stat(port)
-    except (OSError, ValueError):
-        return False
-    return stat.S_ISCHR(found.st_mode) and os.major(found.st_rdev) in PTY_MAJORS
+    return platform.is_pseudo_terminal(port)
+
+
+@dataclass(frozen=True)
+class SerialPort:
+    """A serial port of this machine: the `device` a plant file's `port` names (COM3, /dev/ttyUSB0),
+    the system's `description` of it ("" when it has none), and a USB adapter's `usb` VID:PID ("0403:6001")."""
+
+    device: str
+    description: str
+    usb: str | None
+
+
+def serial_ports() -> list[SerialPort]:
+    """The machine's serial ports in pyserial's order (COM2 before COM10); pseudo-terminals are not among them."""
+    from serial.tools import list_ports
+
+    return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
+                       f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None else None)
+            for info in sorted(list_ports.comports())]  # fmt: skip
 
 
 class FormatRefused(UserError):
@@ -84,7 +97,7 @@ class TcpPort(protocol_socket.Serial):
     def in_waiting(self) -> int:
         if not self.is_open or self._socket is None:
             raise serial.PortNotOpenError()
-        return int.from_bytes(fcntl.ioctl(self._socket, termios.FIONREAD, bytes(4)), sys.byteorder)
+        return platform.bytes_waiting(self._socket)
 
     def close(self) -> None:
         if self.is_open and self._socket:
@@ -176,7 +189,7 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpP
             port.open()
         else:
             port = serial.serial_for_url(url, **(settings if is_url else settings | {"exclusive": True}))
-    except termios.error:
+    except platform.TERMINAL_ERRORS:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
         if url.lower().startswith("rfc2217://") and "option 'control'" in str(error):  # pyserial waits for SET_CONTROL's answer
@@ -194,13 +207,11 @@ def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpP
 
 def _holds(port: serial.SerialBase, line: LineSettings) -> bool:
     """Whether the device kept the character format it was given (parity, data bits, stop bits)."""
-    try:
-        cflag = termios.tcgetattr(port.fileno())[2]
-    except (termios.error, OSError, AttributeError):
+    kept = platform.character_format(port)
+    if kept is None:
         return True  # not a terminal: nothing to read back
-    parity = "none" if not cflag & termios.PARENB else "odd" if cflag & termios.PARODD else "even"
-    sizes = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
-    return parity == line.parity and sizes[cflag & termios.CSIZE] == line.data_bits and bool(cflag & termios.CSTOPB) == (line.stop_bits != 1)
+    parity, data_bits, two_stop_bits = kept
+    return parity == line.parity and data_bits == line.data_bits and two_stop_bits == (line.stop_bits != 1)
 
 
 @contextlib.contextmanager

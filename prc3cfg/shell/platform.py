@@ -1,0 +1,387 @@
+r"""What differs between POSIX and Windows, in one place: every other module calls this one.
+
+Owns the calls that exist on one system only, each behind a function or a constant that
+means the same everywhere:
+
+- open flags: `NO_INHERIT` (O_CLOEXEC; Windows: O_NOINHERIT | O_BINARY), `NO_FOLLOW`
+  (O_NOFOLLOW; Windows has no symbolic-link open flag: 0), `NON_BLOCKING` (O_NONBLOCK, so a FIFO
+  cannot block an open; Windows: 0), `unnamed_file` (Linux's O_TMPFILE and the /proc link that
+  names it later; elsewhere None: a named temporary file is written instead);
+- file contents and durability: `read_at`/`write_at` (pread/pwrite; Windows: seek, then read or
+  write), `set_mode` (fchmod; Windows keeps no POSIX permissions: nothing), `sync_data`
+  (fdatasync; fsync where there is none), `sync_folder` (fsync of a directory; Windows cannot
+  open one: nothing);
+- file locks: `try_lock`/`unlock` (flock; Windows: msvcrt.locking of one byte far past the end,
+  so the holder's details at the start stay readable) — both released with the last descriptor;
+- the machine's folders: `LOCK_FOLDERS` (the lock folder's candidates, `prc3cfg.shell.locks`),
+  `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases, `prc3cfg.shell.releases`) — POSIX's
+  /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows' %ProgramData%\prc3cfg and %LOCALAPPDATA%;
+- who and what: `user_name` (a login name, else `uid N`), `owned_by_this_user`,
+  `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
+  CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
+- terminals and serial devices: `TERMINAL_ERRORS`, `character_format` (termios), `is_pseudo_terminal`
+  (Linux's pty majors), `device_number` (major and minor of a device), `terminal_path` (ttyname;
+  Windows: the console, CONOUT$), `open_pty` (POSIX only: `HAS_PTY`), `pty_line` (the baud rate and
+  stop bits a client set on a pty), `kernel_lock_holders` (Linux's /proc/locks), `UUCP_LOCKS`
+  (whether the `LCK..` convention exists here: not on Windows, where a COM port is exclusive),
+  `device_identity` (the name two spellings of one device share: on Windows a COM port's,
+  `com_port_name`: `COM10`, `com10`, `\\.\COM10`);
+- sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
+  there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
+  main thread anyway: nothing).
+
+Branches are `sys.platform` tests, which mypy follows: `mypy --platform win32` and `--platform
+darwin` check the other systems' branches. Does not own what any of it is used for.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import getpass
+import os
+import re
+import select
+import signal
+import socket
+import stat
+import sys
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+if sys.platform == "win32":
+    import ctypes
+    import msvcrt
+else:
+    import fcntl
+    import termios
+    import tty
+
+# -- open flags ------------------------------------------------------------------------
+
+if sys.platform == "win32":
+    NO_INHERIT = os.O_NOINHERIT | os.O_BINARY
+    NO_FOLLOW = 0
+    NON_BLOCKING = 0
+else:
+    NO_INHERIT = os.O_CLOEXEC
+    NO_FOLLOW = os.O_NOFOLLOW
+    NON_BLOCKING = os.O_NONBLOCK
+
+
+def unnamed_file(folder: Path) -> tuple[int, str] | None:
+    """A file without a name in `folder`, open for writing (mode 0600), and the path that links it
+    in (`os.link(path, name, src_dir_fd=…)`); None where the system or its file system has none."""
+    if sys.platform == "linux":
+        try:
+            fd = os.open(folder, os.O_TMPFILE | os.O_WRONLY, 0o600)
+        except OSError:  # not on this file system
+            return None
+        return fd, f"/proc/self/fd/{fd}"
+    return None
+
+
+# -- file contents and durability --------------------------------------------------------
+
+
+def read_at(fd: int, size: int, offset: int) -> bytes:
+    if sys.platform == "win32":
+        os.lseek(fd, offset, os.SEEK_SET)
+        return os.read(fd, size)
+    return os.pread(fd, size, offset)
+
+
+def write_at(fd: int, data: bytes, offset: int) -> int:
+    if sys.platform == "win32":
+        os.lseek(fd, offset, os.SEEK_SET)
+        return os.write(fd, data)
+    return os.pwrite(fd, data, offset)
+
+
+def set_mode(fd: int, mode: int) -> None:
+    """The permissions of an open file, whatever the umask (Windows: no POSIX permissions)."""
+    if sys.platform != "win32":
+        os.fchmod(fd, mode)
+
+
+def sync_data(fd: int) -> None:
+    """A file's data on disk (fdatasync: its size too, not its times)."""
+    if sys.platform == "win32" or sys.platform == "darwin":
+        os.fsync(fd)
+    else:
+        os.fdatasync(fd)
+
+
+def sync_folder(folder: Path) -> None:
+    """A folder's entries on disk (a name just linked or renamed). Windows cannot open a folder
+    as a file; its file system writes a rename's metadata through its own log."""
+    if sys.platform == "win32":
+        return
+    handle = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(handle)
+    finally:
+        os.close(handle)
+
+
+# -- file locks --------------------------------------------------------------------------
+
+#: Windows: the byte locked, far past any text a lock file holds (reads of the holder's details
+#: at the start would fail on a locked byte).
+_LOCKED_BYTE = 2**31 - 2
+
+
+def try_lock(fd: int) -> bool:
+    """Take the exclusive lock of the open file `fd` without waiting: whether it was taken."""
+    if sys.platform == "win32":
+        os.lseek(fd, _LOCKED_BYTE, os.SEEK_SET)
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        except OSError:
+            return False
+        return True
+    else:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False
+        return True
+
+
+def unlock(fd: int) -> None:
+    if sys.platform == "win32":
+        os.lseek(fd, _LOCKED_BYTE, os.SEEK_SET)
+        with contextlib.suppress(OSError):
+            msvcrt.locking(fd, msvcrt.LK_UNLCK, 1)
+    else:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+
+
+# -- the machine's folders ---------------------------------------------------------------
+
+if sys.platform == "win32":
+    _PROGRAM_DATA = Path(os.environ.get("PROGRAMDATA") or r"C:\ProgramData") / "prc3cfg"
+    #: Where the lock folder may be, in order: (parent, name).
+    LOCK_FOLDERS = ((_PROGRAM_DATA, "locks"),)
+    #: The machine's folder of records that last across a restart.
+    SYSTEM_STATE_DIR = _PROGRAM_DATA
+else:
+    LOCK_FOLDERS = ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"), (Path("/tmp"), "prc3cfg-locks"))
+    SYSTEM_STATE_DIR = Path("/var/lib/prc3cfg")
+
+
+def user_state_dir() -> Path:
+    """This user's own folder of records (XDG_STATE_HOME; Windows: %LOCALAPPDATA%)."""
+    if sys.platform == "win32":
+        return Path(os.environ.get("LOCALAPPDATA") or Path.home() / "AppData" / "Local") / "prc3cfg"
+    return Path(os.environ.get("XDG_STATE_HOME") or Path.home() / ".local" / "state") / "prc3cfg"
+
+
+# -- who and what ------------------------------------------------------------------------
+
+
+def user_name() -> str:
+    """The login name of this process's user, else `uid N` (no login name and no passwd entry: a container)."""
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        if sys.platform == "win32":
+            return "an unnamed user"
+        return f"uid {os.getuid()}"
+
+
+def owned_by_this_user(path: Path) -> bool:
+    """Whether this process's user owns `path` (Windows: never said — its owners are not uids)."""
+    if sys.platform == "win32":
+        return False
+    return path.stat().st_uid == os.getuid()
+
+
+def process_alive(pid: int) -> bool:
+    """Whether a process `pid` runs (another user's included)."""
+    if sys.platform == "win32":
+        if not 0 < pid < 2**32:
+            return False
+        kernel32 = ctypes.windll.kernel32
+        handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
+        if not handle:
+            return ctypes.GetLastError() == 5  # ERROR_ACCESS_DENIED: another user's, alive
+        try:
+            code = ctypes.c_ulong()
+            if not kernel32.GetExitCodeProcess(handle, ctypes.byref(code)):
+                return True
+            return code.value == 259  # STILL_ACTIVE
+        finally:
+            kernel32.CloseHandle(handle)
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's: alive
+        return True
+    except OverflowError:  # no pid can be that large
+        return False
+    return True
+
+
+def program_name(pid: int) -> str:
+    """The program a process runs ("picocom"), or "" where the system does not say (Linux's /proc)."""
+    try:
+        return Path(f"/proc/{pid}/comm").read_text().strip() if sys.platform == "linux" else ""
+    except OSError:
+        return ""
+
+
+# -- terminals and serial devices --------------------------------------------------------
+
+#: What a terminal's settings raise when a device refuses them (POSIX: termios.error).
+TERMINAL_ERRORS: tuple[type[Exception], ...]
+#: termios speed codes → baud rates
+BAUDS: dict[int, int]
+if sys.platform == "win32":
+    TERMINAL_ERRORS, BAUDS = (), {}
+else:
+    TERMINAL_ERRORS = (termios.error,)
+    BAUDS = {getattr(termios, f"B{baud}"): baud for baud in (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200,
+                                                             38400, 57600, 115200, 230400) if hasattr(termios, f"B{baud}")}  # fmt: skip
+#: Whether this system has pseudo-terminals (`emulator serve --pty`).
+HAS_PTY = sys.platform != "win32"
+#: Whether serial programs here lock a device with a `LCK..NAME` file (`prc3cfg.shell.serial_lock`):
+#: POSIX; on Windows the system opens a COM port for one program only.
+UUCP_LOCKS = sys.platform != "win32"
+#: Linux's pseudo-terminals (/dev/pts/N): character devices of majors 136..143.
+PTY_MAJORS = range(136, 144)
+#: A Windows serial port's names: COM10, com10, \\.\COM10 — one device.
+COM_PORT = re.compile(r"(?:\\\\\.\\)?(COM[1-9][0-9]*)", re.IGNORECASE)
+
+
+def character_format(port: object) -> tuple[str, int, bool] | None:
+    """The parity, data bits and whether two stop bits, as the terminal device open in `port` (a
+    pyserial port) keeps them now; None where there is nothing to read back (not a terminal, Windows)."""
+    if sys.platform == "win32":
+        return None
+    else:
+        try:
+            cflag = termios.tcgetattr(port.fileno())[2]  # type: ignore[attr-defined]
+        except (termios.error, OSError, AttributeError):
+            return None
+        parity = "none" if not cflag & termios.PARENB else "odd" if cflag & termios.PARODD else "even"
+        sizes = {termios.CS5: 5, termios.CS6: 6, termios.CS7: 7, termios.CS8: 8}
+        return parity, sizes[cflag & termios.CSIZE], bool(cflag & termios.CSTOPB)
+
+
+def device_number(status: os.stat_result) -> tuple[int, int] | None:
+    """A character device's major and minor numbers; None for anything else or where there are none."""
+    if sys.platform == "win32" or not stat.S_ISCHR(status.st_mode):
+        return None
+    return os.major(status.st_rdev), os.minor(status.st_rdev)
+
+
+def is_pseudo_terminal(path: str) -> bool:
+    """Whether the device path `path` is Linux's pseudo-terminal (/dev/pts/N)."""
+    try:
+        number = device_number(os.stat(path))
+    except (OSError, ValueError):
+        return False
+    return number is not None and number[0] in PTY_MAJORS
+
+
+def com_port_name(port: str) -> str | None:
+    r"""The Windows serial port `port` names, in capitals (`com10`, `\\.\COM10`: COM10); None for any other port."""
+    named = COM_PORT.fullmatch(port)
+    return named.group(1).upper() if named else None
+
+
+def device_identity(path: str) -> str:
+    """What two spellings of one local device share: its real path; on Windows a COM port's
+    name (`com_port_name`)."""
+    if sys.platform == "win32" and (name := com_port_name(path)) is not None:
+        return name
+    return os.path.realpath(path)
+
+
+def terminal_path(fd: int) -> str:
+    """The terminal `fd` reads from, to be opened for writing (Windows: the console's output)."""
+    if sys.platform == "win32":
+        return "CONOUT$"
+    return os.ttyname(fd)
+
+
+def open_pty() -> tuple[int, int, str]:
+    """A new pseudo-terminal in raw mode: its master and slave descriptors and the slave's path."""
+    if sys.platform == "win32":
+        raise OSError("Windows has no pseudo-terminals")
+    else:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        return master, slave, os.ttyname(slave)
+
+
+def pty_line(master: int) -> tuple[int, bool] | None:
+    """The baud rate a client set on the pty of `master` and whether two stop bits; None when unknown."""
+    if sys.platform != "win32":
+        with contextlib.suppress(termios.error, ValueError):
+            attributes = termios.tcgetattr(master)  # the slave's, on Linux
+            baud = BAUDS.get(attributes[5])
+            if baud is not None:
+                return baud, bool(attributes[2] & termios.CSTOPB)
+    return None
+
+
+def kernel_lock_holders(device: str) -> Iterator[int | None]:
+    """The pids holding a kernel lock (flock, fcntl) on `device` (Linux's /proc/locks), in its order;
+    None for a lock that names no process (open-file-description locks). Nothing where unknown."""
+    if sys.platform != "linux":
+        return
+    try:
+        info = os.stat(device)
+        locks = Path("/proc/locks").read_text().splitlines()
+    except OSError:
+        return
+    for line in locks:
+        fields = line.split()
+        if len(fields) < 6 or fields[1] == "->":  # a waiter, not a holder
+            continue
+        pid, where = fields[4], fields[5].split(":")
+        try:
+            major, minor, inode = int(where[0], 16), int(where[1], 16), int(where[2])
+        except (ValueError, IndexError):
+            continue
+        if (major, minor, inode) != (os.major(info.st_dev), os.minor(info.st_dev), info.st_ino):
+            continue
+        yield int(pid) if pid.lstrip("-").isdigit() and int(pid) > 0 else None
+
+
+# -- sockets and threads -----------------------------------------------------------------
+
+
+def bytes_waiting(sock: socket.socket) -> int:
+    """How many bytes have arrived on `sock` and not been read (Windows: as many as one peek sees)."""
+    if sys.platform == "win32":
+        try:
+            return len(sock.recv(65536, socket.MSG_PEEK))
+        except BlockingIOError:
+            return 0
+    else:
+        return int.from_bytes(fcntl.ioctl(sock, termios.FIONREAD, bytes(4)), sys.byteorder)
+
+
+def hung_up(conn: socket.socket) -> bool:
+    """Whether the peer of `conn` has closed or reset it."""
+    if sys.platform == "linux":
+        poll = select.poll()
+        poll.register(conn, select.POLLRDHUP)
+        return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL) for _, events in poll.poll(0))
+    try:
+        readable, _, _ = select.select([conn], [], [], 0)
+        return bool(readable) and conn.recv(1, socket.MSG_PEEK) == b""
+    except (BlockingIOError, InterruptedError):
+        return False
+    except (OSError, ValueError):  # reset, or closed here
+        return True
+
+
+def block_signals(signals: Iterable[signal.Signals]) -> None:
+    """Signals `signals` are not delivered to the calling thread (Windows gives every signal to
+    the main thread anyway: nothing to do)."""
+    if sys.platform != "win32":
+        signal.pthread_sigmask(signal.SIG_BLOCK, signals)
