@@ -87,21 +87,27 @@ def load(keys: Iterable[str]) -> dict[int, Known]:
 
 
 def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:
-    """Set these modules' entries (None: the module is no longer known) in every file of the line,
-    in the first state folder this user can write; `UserError` when none can be."""
+    """Set these modules' entries (None: the module is no longer known) in every file of the line, in
+    the first state folder where this user can write them all (in the machine's sticky folder
+    another user's file cannot be replaced: then the user's own, whose newer entries win for this
+    user); `UserError` when none can be."""
     if not changes:
         return
-    at = now()
+    keys, at = tuple(keys), now()
     entries = {str(address): {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()})
                for address, k in changes.items()}  # fmt: skip
-    directory = folder(KIND, WHAT).parent
-    for key in keys:
-        path = _file(directory, key)
-        modules = _entries(path) | entries
+    problems = []
+    for directory in state_dirs():
         try:
-            write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": dict(sorted(modules.items(), key=lambda e: int(e[0])))}))
+            for key in keys:
+                path = _file(directory, key)
+                modules = dict(sorted((_entries(path) | entries).items(), key=lambda entry: int(entry[0])))
+                write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}))
+            return
         except OSError as error:
-            raise UserError(f"{path}: cannot keep {WHAT} ({error.strerror}) — set PRC3CFG_STATE_DIR to a folder this user can write") from None
+            problems.append(f"{error.filename or directory}: {error.strerror}")
+    folder(KIND, WHAT)  # says why no folder can be written
+    raise UserError(f"cannot keep {WHAT} ({'; '.join(problems)}) — set PRC3CFG_STATE_DIR to a folder this user can write")
 
 
 def forget(keys: Iterable[str], addresses: Iterable[int]) -> None:
