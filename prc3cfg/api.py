@@ -709,6 +709,8 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
                             "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
                             "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
     check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
+    releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
+    releases.folder(bases.KIND, bases.WHAT)
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
     records = releases.Releases("restore" if desired is not None else "apply", journal.path)
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once

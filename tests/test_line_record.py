@@ -172,3 +172,16 @@ def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_to
     result = run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release")
     assert result.code == 0 and "booth-a/booth-a-top" in result.out
     assert holds_the_plant_file(applied, "booth-a", "booth-a-top")
+
+
+def test_an_apply_whose_state_folder_cannot_be_written_writes_nothing(applied, capsys, tmp_path, monkeypatch):
+    """Release records and the line's record are proven writable before the first frame, not at the first 10h/20h."""
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("a file where the state folder should be")
+    monkeypatch.setenv("PRC3CFG_STATE_DIR", str(blocked))
+    edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program, written first
+    edit(applied.path, "upper_reversing_point: 1.8\n", "upper_reversing_point: 1.9\n")  # booth-a-top: a 20h after it
+    refused = run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release")
+    assert refused.code == 1 and "cannot keep" in refused.err and "nothing was written" in refused.err
+    assert applied.emulators["booth-a"].module(2).image.known(1).P == 2000
+    assert applied.emulators["booth-a"].module(5).image.system.S1 == 1800
