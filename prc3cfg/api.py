@@ -1210,7 +1210,8 @@ def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, Modul
         return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
     planned = planned or plan(plant, [module.name], images=images)
     change = next(c for c in planned.modules if (c.bus, c.address) == (bus.name, module.address))
-    return plot.picture(change.plan.predicted, change.actual, fmt=fmt, title=f"{title}: before (dashed) and after the plan")
+    return plot.picture(change.as_known(change.plan.predicted), change.as_known(change.actual), fmt=fmt,
+                        title=f"{title}: before (dashed) and after the plan")  # fmt: skip
 
 
 # -- a plant file from a bus -----------------------------------------------------------------

@@ -185,3 +185,14 @@ def test_an_apply_whose_state_folder_cannot_be_written_writes_nothing(applied, c
     assert refused.code == 1 and "cannot keep" in refused.err and "nothing was written" in refused.err
     assert applied.emulators["booth-a"].module(2).image.known(1).P == 2000
     assert applied.emulators["booth-a"].module(5).image.system.S1 == 1800
+
+
+def test_a_chart_of_a_targeted_plan_draws_the_chain_with_the_programs_taken_as_known(applied, capsys, tmp_path):
+    """Program 1 of booth-a-right changes; program 2, its loop's other half, is taken as known, not read:
+    the chart draws the loop 1 → 2 → 1 from the record's value, never a chain cut where it was not read."""
+    edit(applied.path, "position: 2.0\n", "position: 1.99\n")
+    shown = run_cli(capsys, "plan", applied.path, "--markdown", "--out", tmp_path / "p.json")
+    document = json.loads((tmp_path / "p.json").read_text())
+    right = next(m for bus in document["buses"] for m in bus["modules"] if m["name"] == "booth-a-right")
+    assert right["read"]["programs"] == [1] and 2 in right["read"]["programs_not_read"]  # a targeted plan
+    assert 'title "chain 1 → 2 → 1 · pass: before' in shown.out and "(not held)" not in shown.out

@@ -179,7 +179,8 @@ class Planner:
             module_plan = self._cache.plan(actual, desired, line.cost, unset)
         except UnreachableImage as error:
             raise UserError(f"bus {wanted.bus}, module {wanted.address} ({wanted.name}): {error}") from None
-        return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset, cost=line.cost)
+        return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset, cost=line.cost,
+                            wanted=wanted.desired if self.only_read else None)  # fmt: skip
 
     def _keep(self, bus: str, planned: _Planned) -> None:
         with self._cache.lock:

@@ -25,6 +25,7 @@ from prc3cfg import __version__
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import ModulePlan, Step
+from prc3cfg.core.targeting import with_known
 from prc3cfg.core.verification import read_messages, verification_time
 
 FORMAT = "prc3cfg-plan/1"
@@ -51,6 +52,14 @@ class ModuleChange:
     broadcasts: int = 0
     system_unset: bool = False  # the module reported E12: its plan writes the system parameters first
     cost: LineCost | None = None
+    #: a targeted read's: the plant file's whole image, `desired` being cut to what was read — its other
+    #: programs the line's record showed held (`prc3cfg.core.targeting`)
+    wanted: ModuleImage | None = None
+
+    def as_known(self, image: ModuleImage) -> ModuleImage:
+        """`image` (the read-back, or what the plan leaves) with the programs taken as known filled in:
+        what a picture of the module's chains shows, never a chain cut where a program was not read."""
+        return image if self.wanted is None else with_known(image, self.wanted)
 
     @property
     def reading_time(self) -> float:

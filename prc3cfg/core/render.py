@@ -536,7 +536,7 @@ def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChan
 def _charts(m: ModuleChange) -> list[str]:
     """The stroke of each changed chain, before and after, as GitHub draws it (`plot.mermaid`)."""
     try:
-        pairs = paired_chains(m.actual, m.plan.predicted, changed_only=True)
+        pairs = paired_chains(m.as_known(m.actual), m.as_known(m.plan.predicted), changed_only=True)
     except MotionError:  # a damaged read-back: the diff above still shows it
         return []
     charts = ["", *(mermaid(before, after) for before, after in pairs[:CHARTS])]

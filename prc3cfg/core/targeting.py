@@ -92,3 +92,11 @@ def within_read(desired: ModuleImage, actual: ModuleImage) -> ModuleImage:
 def not_read(desired: ModuleImage, actual: ModuleImage) -> tuple[int, ...]:
     """The programs `desired` manages that the read-back `actual` does not hold: taken as last verified."""
     return tuple(n for n, (d, a) in enumerate(zip(desired.programs, actual.programs), start=1) if d is not None and a is None)
+
+
+def with_known(image: ModuleImage, desired: ModuleImage) -> ModuleImage:
+    """`image` (a read-back, or what a plan leaves of one) with the managed programs it did not read
+    filled in with the plant file's values — what the line's record showed them holding, which is why
+    they were not read (`to_read`): the values a picture of the module's chains must use, never a
+    chain cut where a program was not read."""
+    return image.with_programs({n: d for n, (d, a) in enumerate(zip(desired.programs, image.programs), start=1) if d is not None and a is None})

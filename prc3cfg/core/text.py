@@ -56,8 +56,9 @@ def github_property(text: str) -> str:
 
 
 #: Markdown's and HTML's metacharacters, as entities: they mean the character in a paragraph, a
-#: table cell and HTML alike (a backslash escape would show as typed inside HTML).
-_MARKDOWN = {c: f"&#{ord(c)};" for c in "\\`*_[]()!|~#<>&\"'"}
+#: table cell and HTML alike (a backslash escape would show as typed inside HTML). Parentheses and
+#: quotes stay as written: without `[`, `]` and `!` they make no link or image, and outside a tag no HTML.
+_MARKDOWN = {c: f"&#{ord(c)};" for c in "\\`*_[]!|~#<>&"}
 #: What GitHub would make live from plain text: a mention or team (`@name`), an autolinked URL
 #: (`https://…`, `www.…`) or e-mail address.
 _LIVE = re.compile(r"@|:(?=//)|(?<=www)\.", re.IGNORECASE)
