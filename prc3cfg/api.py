@@ -615,12 +615,15 @@ class Gates:
     - `approve(plan)`: False stops with `NotApproved`.
 
     Without a question (`asks`) each line is written as soon as its own plan is whole, while the
-    other lines are still read; `show` sees the plant's plan once it is whole, writes going on.
+    other lines are still read — `show_line` sees that line's plan before its first write — and
+    `show` sees the plant's plan once it is whole, writes going on.
     """
 
     show: Callable[[PlantPlan], None] | None = None
     allow_axis_release: bool | Callable[[list[str]], bool] = False
     approve: Callable[[PlantPlan], bool] | None = None
+    #: without a question: each line's own plan, before that line's first write (from its thread)
+    show_line: Callable[[PlantPlan], None] | None = None
 
     @property
     def asks(self) -> bool:
@@ -801,8 +804,11 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
             whole = len(planned) == len(reading)
             if whole:
                 whole_at = time.monotonic()
-        # the plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
-        writing.write(planner.line_changes(bus), read, True, started=show if whole else None)
+        changes = planner.line_changes(bus)
+        if gates.show_line is not None and any(c.steps for c in changes):  # what a line's writes follow is shown before them
+            gates.show_line(planner.plan([w for w in want if w.bus == bus], read))
+        # the plant's plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
+        writing.write(changes, read, True, started=show if whole else None)
 
     unread: tuple[str, ...] = ()
     shown: list[Future[None]] = []

@@ -210,3 +210,37 @@ def test_ctrl_c_while_one_line_writes_and_the_other_still_reads_says_which_line_
     events = [json.loads(line) for path in (tmp_path / ".prc3cfg" / "journal").iterdir() for line in path.read_text().splitlines()]
     assert events[-1]["event"] == "interrupted"
     assert {e["bus"] for e in events if e["event"] == "exchange" and int(e["request"][:2], 16) < 0x50} == {"short"}
+
+
+class _Events:
+    """A frame trace (`LineOptions.trace`) that keeps every line beside the plans shown, in the order they came."""
+
+    def __init__(self) -> None:
+        self.events: list[tuple[str, ...]] = []
+
+    def write(self, text: str) -> int:
+        for line in text.splitlines():
+            _, bus, direction, frame = line.split("\t")[:4]
+            if direction == ">":
+                self.events.append(("frame", bus, frame[6:8]))  # crc16: A5h, address, length, message ID
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def test_each_lines_plan_is_shown_before_its_first_write_also_without_a_question(tmp_path):
+    """`--auto-approve --allow-axis-release`: a line is written as soon as its own plan is whole, and that
+    plan — its 20h marked — is shown before the line's first write, not once every line is planned."""
+    trace = _Events()
+    with emulated_plant(tmp_path) as plant:
+        shown = lambda line_plan: trace.events.append(("shown", line_plan.modules[0].bus, *(c.bus for c in line_plan.modules)))  # noqa: E731
+        gates = api.Gates(show=lambda _: None, allow_axis_release=True, show_line=shown)
+        result = api.apply(api.load(plant.path), gates=gates, options=api.LineOptions(trace=trace))  # type: ignore[arg-type]
+        result.told()
+    events = trace.events
+    for bus in ("booth-a", "booth-b"):
+        showing = [i for i, e in enumerate(events) if e[0] == "shown" and e[1] == bus]
+        writes = [i for i, e in enumerate(events) if e[0] == "frame" and e[1] == bus and e[2] not in ("50", "51", "52")]
+        assert len(showing) == 1 and writes and showing[0] < writes[0], events
+        assert set(events[showing[0]][1:]) == {bus}  # that line's modules only

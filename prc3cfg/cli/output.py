@@ -54,12 +54,18 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
     """Show the plan — the read-back's progress taken off the screen first — and ask about axis
     releases and the apply itself on a terminal (`ask`), unless told not to."""
 
+    shown: set[str] = set()  # the lines whose plan was shown as their writes began
+
+    def show_line(line_plan: PlantPlan) -> None:
+        shown.update(change.bus for change in line_plan.modules)
+        options.progress.note(render.line_part(line_plan))
+
     def show(the_plan: PlantPlan) -> None:
         if isinstance(options.progress, TerminalProgress):
             options.progress.stop()
         if plan_file is not None:
             print(f"Applying {plan_file}, proved against the modules as read back now:")
-        print_lines(render.human(the_plan))
+        print_lines(render.human(the_plan, shown=shown))
         if not the_plan.changes:
             print("Nothing to do: every module matches the plant file.")
 
@@ -79,7 +85,8 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
                    options)  # fmt: skip
 
     # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan is whole (`Gates.asks`)
-    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None if auto_approve else approve)
+    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None if auto_approve else approve,
+                 show_line=show_line)  # fmt: skip
 
 
 def report(result: ApplyResult) -> None:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import functools
 import re
 import shlex
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
@@ -418,19 +418,15 @@ def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
     return f"Time: {sum(took.values()):.1f} s (estimated {sum(estimated.values()):.1f} s) — {phases}"
 
 
-def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str:
+def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown: Collection[str] = ()) -> str:
     """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
-    each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary."""
+    each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary. The
+    buses `shown` already (`line_part`, as their writes began) are named, not shown again."""
     document, live = _outline(plan, notes)
     out = [f"Plant {document['plant']}", ""]
     for bus in document["buses"]:
-        out += _broadcast_lines(bus)
-    for bus, module in _modules(document):
-        if not module["steps"]:
-            out.append(_header(bus, module))
-            continue
-        lines = [_header(bus, module), *module_lines(_changes(bus, module, live)), "steps:", *_step_lines(module)]
-        out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
+        out += _broadcast_lines(bus) if bus["name"] not in shown else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""]
+    out += _module_sections(document, live, shown)
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
@@ -440,6 +436,33 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = ()) -> str
     if any(module["steps"] for _, module in _modules(document)):
         out.append(LEGEND)
     return "\n".join(out)
+
+
+def line_part(plan: PlantPlan) -> str:
+    """One line's plan (`plan` holds its modules only), shown as its writes begin while the other lines
+    are still read (`apply --auto-approve --allow-axis-release`): its broadcasts, its modules, its axis releases."""
+    document, live = _outline(plan, ())
+    out = [f"Writing bus {', '.join(bus['name'] for bus in document['buses'])} now, as planned:", ""]
+    for bus in document["buses"]:
+        out += _broadcast_lines(bus)
+    out += _module_sections(document, live)
+    if document["axis_releases"]:
+        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+    return "\n".join(out)
+
+
+def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], shown: Collection[str] = ()) -> list[str]:
+    """Each module's diff and steps (a line for one without changes), those of the buses `shown` left out."""
+    out = []
+    for bus, module in _modules(document):
+        if bus in shown:
+            continue
+        if not module["steps"]:
+            out.append(_header(bus, module))
+            continue
+        lines = [_header(bus, module), *module_lines(_changes(bus, module, live)), "steps:", *_step_lines(module)]
+        out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
+    return out
 
 
 #: What the marks of a plan mean (`Action`) — one vocabulary for a change, in every output that shows one.
