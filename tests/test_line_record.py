@@ -200,6 +200,30 @@ def test_a_chart_of_a_targeted_plan_draws_the_chain_with_the_programs_taken_as_k
     assert 'title "chain 1 → 2 → 1 · pass: before' in shown.out and "(not held)" not in shown.out
 
 
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="giving a file to another user takes root")
+def test_a_record_another_user_made_or_linked_is_not_believed(applied, capsys, tmp_path):
+    """In the machine's folder anyone may make a file: a record that vouches for the modules, planted by
+    another (non-root) user or as a link, is read as no record — every module is read in full."""
+    applied.emulators["booth-a"].teach_in(2, 2, 180)  # booth-a-right's program 2: a plan taking the record would not read it
+    records = sorted((tmp_path / "state" / "lines").glob("*.json"))
+    vouching = {path: path.read_bytes() for path in records}  # as the apply wrote them: every module as planned
+    for path in records:
+        os.chown(path, 4242, 4242)  # the same bytes, but another user's
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out
+    for path, text in vouching.items():
+        planted = path.with_name(f"planted-{path.name}")
+        planted.write_bytes(text)  # root's bytes that vouch for program 2 ...
+        path.unlink()
+        path.symlink_to(planted)  # ... behind a link in the record's place
+    linked = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert linked.code == 2 and "program 2: position 0.180 m → 0.150 m" in linked.out
+    for path, text in vouching.items():  # the control: the same bytes as a file of root's are believed
+        path.unlink()
+        path.write_bytes(text)
+    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # program 2 not read: the stated limit
+
+
 # -- adversarial: seeded scenario families, the claims held against what the modules hold ---------
 
 #: What touched the line after plant file A was applied: prc3cfg through another plant file (its

@@ -13,14 +13,14 @@ back.
 One file per identity of the line (`prc3cfg.shell.locks.line_keys`: two spellings of one line share
 a record) in `lines/` of the machine's state folder (`prc3cfg.shell.releases.state_dirs`), written
 atomically under the line's lock; the newest entry of a module across the files is the one taken.
-A file another tool damaged is read as no record (the modules are then read in full).
+A file another tool damaged, a link, or a file another user (not root) owns is read as no record
+(the modules are then read in full).
 
 Does not own what is read (`prc3cfg.core.targeting`) nor when (`prc3cfg.api`).
 """
 
 from __future__ import annotations
 
-import getpass
 import hashlib
 import json
 import socket
@@ -31,6 +31,7 @@ from pathlib import Path
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.targeting import Known
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
 from prc3cfg.shell.releases import folder, state_dirs
 
@@ -46,11 +47,7 @@ def now() -> str:
 
 def who(command: str, plant_path: Path) -> str:
     """`by` of a record: "apply of /plants/a.yaml by ana@laptop-3"."""
-    try:
-        user = getpass.getuser()
-    except (OSError, KeyError, ImportError):
-        user = "an unknown user"
-    return f"{command} of {plant_path.resolve()} by {user}@{socket.gethostname()}"
+    return f"{command} of {plant_path.resolve()} by {platform.user_name()}@{socket.gethostname()}"
 
 
 def _file(directory: Path, key: str) -> Path:
@@ -58,7 +55,10 @@ def _file(directory: Path, key: str) -> Path:
 
 
 def _entries(path: Path) -> dict[str, dict]:
-    """The entries of one record file by address; none where it is missing or not a record."""
+    """The entries of one record file by address; none where it is missing, not a record, a link, or
+    another user's (in the machine's folder anyone may make a file: it is not believed)."""
+    if not platform.trusted_file(path):
+        return {}
     try:
         data = read_json(path)
     except FileProblem:

@@ -196,6 +196,20 @@ def owned_by_this_user(path: Path) -> bool:
     return path.stat().st_uid == os.getuid()
 
 
+def trusted_file(path: Path) -> bool:
+    """Whether `path` may be believed: a regular file, not a link, owned by this user or by root (Windows:
+    a regular file — its owners are not uids, and its folders' ACLs decide who writes them)."""
+    try:
+        status = path.lstat()
+    except OSError:
+        return False
+    if not stat.S_ISREG(status.st_mode):
+        return False
+    if sys.platform == "win32":
+        return True
+    return status.st_uid in (0, os.getuid())
+
+
 def process_alive(pid: int) -> bool:
     """Whether a process `pid` runs (another user's included)."""
     if sys.platform == "win32":
