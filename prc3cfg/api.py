@@ -930,11 +930,11 @@ class _Writing:
 
     def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
         """What the modules that verified hold, back into their lines' records: the read-back with the
-        steps' effect, and what the record knew of the rest (`targeting.merged`)."""
+        steps' effect, and what the record knew of the rest (`targeting.verified`)."""
         when, by = bases.now(), bases.who(self.command, self.plant.path)
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
-            bases.update(self.keys[bus], {a: targeting.merged(held.get(a), _holds(run), when, by) for a, run in done.items()})
+            bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
 
     def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
                 took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> ApplyResult:  # fmt: skip

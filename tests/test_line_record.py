@@ -67,6 +67,18 @@ def test_another_plant_file_on_the_same_line_is_seen_and_written_back(applied, c
     assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0
 
 
+def test_what_an_apply_wrote_and_verified_is_known_to_the_next_plan(applied, capsys, tmp_path):
+    """The writes of a verified apply are no contradiction of the record: the next plan reads the system
+    blocks only, not every program of the modules it wrote (the bench's third apply read them all)."""
+    edit(applied.path, "position: 2.0\n", "position: 1.99\n")
+    assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
+    planned = run_cli(capsys, "plan", applied.path, "--json", "--detailed-exitcode")
+    document = json.loads(planned.out)
+    assert planned.code == 0
+    assert document["read"]["not_as_verified"] == []
+    assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"])
+
+
 def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(applied, capsys):
     """What deleting an emulator's state file (or Initialise on the panel) does to a module."""
     applied.emulators["booth-a"].update(2, image=ModuleImage.factory(2))

@@ -83,6 +83,9 @@ def test_a_read_back_that_contradicts_the_record_drops_it_whole():
     assert whole.since == NOW.isoformat() and whole.by == "plan of b.yaml by bo@pc"  # every value read now
     dropped = targeting.merged(record, other_program, NOW.isoformat(), "read")
     assert dropped.image == other_program  # nothing of the contradicted record is kept
+    written = targeting.verified(record, other_program, NOW.isoformat(), "apply of a.yaml by ana@pc")
+    assert written.image == held.with_programs({3: other_program.known(3)})  # what prc3cfg wrote is no contradiction
+    assert written.since == record.since  # programs 10.. still rest on the record
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])

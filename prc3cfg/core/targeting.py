@@ -94,6 +94,17 @@ def not_read(desired: ModuleImage, actual: ModuleImage) -> tuple[int, ...]:
     return tuple(n for n, (d, a) in enumerate(zip(desired.programs, actual.programs), start=1) if d is not None and a is None)
 
 
+def verified(known: Known | None, held: ModuleImage, when: str, by: str) -> Known:
+    """The record of a module prc3cfg wrote and verified `when`, by `by`, to hold `held` (what it read
+    back, and what its steps wrote): that, with the values of the record it neither wrote nor read —
+    what the writes changed is no contradiction. Its `since` stays the record's while any of those is kept."""
+    if known is None:
+        return Known(held, when, by)
+    programs = tuple(now if now is not None else was for was, now in zip(known.image.programs, held.programs))
+    kept = any(now is None and was is not None for was, now in zip(known.image.programs, held.programs))
+    return Known(replace(held, programs=programs), known.since if kept else when, known.by if kept else by)
+
+
 def with_known(image: ModuleImage, desired: ModuleImage) -> ModuleImage:
     """`image` (a read-back, or what a plan leaves of one) with the managed programs it did not read
     filled in with the plant file's values — what the line's record showed them holding, which is why
