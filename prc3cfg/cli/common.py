@@ -288,14 +288,17 @@ class TerminalProgress:
 
 #: What `ask` takes for yes and for no (as click's confirm); an empty answer is no.
 YES, NO = ("y", "yes"), ("n", "no", "")
+#: The one answer a question about the machine takes (`ask(..., typed=True)`), as Terraform's apply: anything else is no.
+TYPED_YES = "yes"
 
 
-def ask(question: str, options: LineOptions | None = None) -> bool:
+def ask(question: str, options: LineOptions | None = None, *, typed: bool = False) -> bool:
     """A yes/no question, default no, asked whole where the operator sees it: every question goes
     through here. The progress display of `options` is taken off the screen first (a bar redrawn
     below or over the question hid it), what was printed is flushed, and the question is written to
     the terminal the answer comes from (stdin's) — not to stdout, which may be a file. An answer
-    that is neither yes nor no is asked again; the end of input is no."""
+    that is neither yes nor no is asked again; the end of input is no. `typed`: a question whose yes
+    sends frames that can change a module — only `yes` typed out is yes, anything else no at once."""
     if options is not None and isinstance(options.progress, TerminalProgress):
         options.progress.stop()
     sys.stdout.flush()
@@ -303,6 +306,10 @@ def ask(question: str, options: LineOptions | None = None) -> bool:
     from prc3cfg.api import terminal_path
 
     with open(terminal_path(sys.stdin.fileno()), "w") as terminal:
+        if typed:
+            terminal.write(f"{question} Only '{TYPED_YES}' will be accepted: ")
+            terminal.flush()
+            return sys.stdin.readline().strip() == TYPED_YES
         while True:
             terminal.write(f"{question} [y/N]: ")
             terminal.flush()
