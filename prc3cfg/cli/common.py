@@ -325,7 +325,8 @@ def ask(question: str, options: LineOptions | None = None, *, typed: bool = Fals
 @contextlib.contextmanager
 def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Iterator[LineOptions]:
     """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal;
-    after a command that succeeded, a note for every line that had to repeat exchanges."""
+    after a command that succeeded, a note for every line that had to repeat exchanges, and one if a
+    line was slower than its settings."""
     from prc3cfg.api import LineOptions
 
     with contextlib.ExitStack() as stack:
@@ -337,6 +338,7 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
         )  # fmt: skip
         yield options
         note_repeats(options.links_used)
+        note_slow(options.links_used)
 
 
 def note_repeats(links: Iterable[Link]) -> None:
@@ -349,3 +351,30 @@ def note_repeats(links: Iterable[Link]) -> None:
             print(f"note: bus {link.bus}: {link.repeated} of {plural(link.exchanges, 'exchange')} {were} lost or damaged and "
                   "made again — check the cabling if this is not a test line (--trace shows every frame)",
                   file=sys.stderr)  # fmt: skip
+
+
+def note_slow(links: Iterable[Link]) -> None:
+    """One line if any line's answered exchanges took clearly longer than the plant file's line settings
+    price them (`prc3cfg.core.bustime.slower_than_priced`): the figures, the turnaround they amount to,
+    and how to measure the line — estimates, and waits that depend on the turnaround, are that far off."""
+    from prc3cfg.core.bustime import slower_than_priced
+    from prc3cfg.core.line import EMULATOR_SCHEME
+    from prc3cfg.core.render import plural
+    from prc3cfg.core.text import plain
+
+    said, ports = [], []
+    for link in links:
+        if link.cost is None or not link.answered or not slower_than_priced(link.answered_time, link.priced_time):
+            continue
+        answer = link.cost.turnaround + (link.answered_time - link.priced_time) / link.answered
+        said.append(f"bus {link.bus}: {plural(link.answered, 'exchange')} took {link.answered_time:.1f} s, its settings price them at "
+                    f"{link.priced_time:.1f} s (the modules answered after {answer * 1000:.0f} ms on average, turnaround: "
+                    f"{link.cost.turnaround:g} in the plant file)")  # fmt: skip
+        ports.append(plain(link.port_name))
+    if not said:
+        return
+    measured = [f"prc3cfg doctor --port {port}" for port in ports if not port.startswith(EMULATOR_SCHEME)]
+    remedies = [f"measure the line with {' and '.join(measured)} and put the bus keys it prints into the plant file"] if measured else []
+    if len(measured) < len(ports):  # an emulator:// port answers as its URL says: doctor cannot reach it
+        remedies.append("an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same")
+    print(f"note: the line is slower than the plant file's line settings say — {'; '.join(said)}: {'; '.join(remedies)}", file=sys.stderr)
