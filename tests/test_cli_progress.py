@@ -49,6 +49,41 @@ def test_verification_shows_its_progress_on_a_terminal(tmp_path):
             pane.close()
 
 
+#: A phase on the progress display: its name, steps done of all, time taken, time left at the rate so far.
+SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+):(\d\d):(\d\d) +(?:(\d+):(\d\d):(\d\d)|-:--:--) left$",
+                   re.MULTILINE)  # fmt: skip
+
+
+@needs_tmux
+def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
+    """On a terminal, reading and verifying each say how long is left — before any module is done
+    "-:--:--", then the modules to go at the time a module has taken so far (9600 baud, `--verify full`:
+    seconds a module), counting down: never more than that rate gives for the modules still to go."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"), environment())
+        try:
+            seen: dict[str, list[tuple[int, int, int, int | None]]] = {}
+
+            def verifying_half_done(screen: str) -> bool:
+                for found in SHOWN.finditer(screen):
+                    phase, done, total, h, m, s, *left = found.groups()
+                    took = int(h) * 3600 + int(m) * 60 + int(s)
+                    to_go = None if left[0] is None else int(left[0]) * 3600 + int(left[1]) * 60 + int(left[2])
+                    seen.setdefault(phase, []).append((int(done), int(total), took, to_go))
+                return any(done >= 3 and to_go is not None for done, _, _, to_go in seen.get("verifying", []))
+
+            pane.wait(verifying_half_done, "verifying 3/6 or more with the time left")
+            assert pane.exit_status() == 0, pane.screen()
+        finally:
+            pane.close()
+    for phase in ("reading modules", "verifying"):
+        assert phase in seen, seen
+        for done, total, took, to_go in seen[phase]:
+            assert (to_go is None) == (done == 0), (phase, seen[phase])  # a time left once a module is done, not before
+            if to_go is not None:  # the rate so far, counted down: at most the time per module so far for those to go (whole seconds)
+                assert to_go <= (took + 1) / done * (total - done) + 1, (phase, seen[phase])
+
+
 SLOW = re.compile(r"note: the line is slower than the plant file's line settings say — bus booth-a: (\d+) exchanges took (\S+) s, its "
                   r"settings price them at (\S+) s \(the modules answered after (\d+) ms on average, turnaround: 0\.01 in the plant "
                   r"file\): (.*)")  # fmt: skip

@@ -241,10 +241,31 @@ def addresses_option(value: str | None) -> str | None:
     return value
 
 
+def _time_left() -> Any:
+    """A rich column: the time left in the phase at its rate so far — the steps to go at the seconds a
+    step has taken on average since the phase began, counting down between steps ("0:00:12 left");
+    "-:--:-- left" until a step is done. Measured on this line, so a line slower than its settings
+    shows here what the plan's estimate did not; steps of unequal size (a module with 64 programs to
+    read beside one with none) make it a rate, not a promise."""
+    from rich.progress import ProgressColumn, Task
+    from rich.text import Text
+
+    class TimeLeft(ProgressColumn):
+        def render(self, task: Task) -> Text:
+            stepped = task.fields.get("stepped")
+            if not task.completed or stepped is None or task.start_time is None or task.total is None:
+                return Text("-:--:-- left", style="progress.remaining")
+            per_step = (stepped - task.start_time) / task.completed
+            left = max(0, round(per_step * (task.total - task.completed) - (task.get_time() - stepped)))
+            return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d} left", style="progress.remaining")
+
+    return TimeLeft()
+
+
 class TerminalProgress:
-    """`api.Progress` on the terminal: a rich progress bar on stderr (when it is a terminal),
-    notes on stdout. `stop` takes the bar off the screen — before the plan and before a question
-    (`ask`) — and the next phase's `start` shows it again."""
+    """`api.Progress` on the terminal: a rich progress bar on stderr (when it is a terminal) with the
+    phase's steps, time taken and time left (`_time_left`), notes on stdout. `stop` takes the bar off
+    the screen — before the plan and before a question (`ask`) — and the next phase's `start` shows it again."""
 
     def __init__(self, stack: contextlib.ExitStack) -> None:
         self._bar: Progress | None = None
@@ -263,7 +284,7 @@ class TerminalProgress:
         if self._bar is None:
             stderr = stderr_console()
             self._bar = Progress(
-                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), _time_left(),
                 console=stderr, transient=True, disable=not stderr.is_terminal,
             )  # fmt: skip
             self._bar.start()
@@ -274,7 +295,7 @@ class TerminalProgress:
     def advance(self) -> None:
         bar, task = self._bar, self._task  # another thread may `stop` it meanwhile: a stopped bar takes the step unseen
         if bar is not None and task is not None:
-            bar.advance(task)
+            bar.update(task, advance=1, stepped=bar.get_time())
 
     def note(self, text: str) -> None:
         print(text, flush=True)
