@@ -1,14 +1,19 @@
 """The time an apply takes, told before (the plan's estimate by phase) and after (estimated against
 taken, in one line), and its progress through every phase on a terminal (tmux) — on emulated
-9600-baud lines (`line_speed`), where the phases take the time a real line takes."""
+9600-baud lines (`line_speed`), where the phases take the time a real line takes; and a line slower
+than its settings, noted once."""
 
 from __future__ import annotations
 
 import json
 import re
 
-from emulated import emulated_plant, run_cli
+import pytest
+import yaml
+from emulated import DEMO, emulated_plant, run_cli
 from terminal import Pane, environment, needs_tmux, prc3cfg
+
+from prc3cfg.core.bustime import slower_than_priced
 
 TIME = re.compile(r"Time: (\S+) s \(estimated (\S+) s\) — reading back (\S+) s \((\S+) s\), writing (\S+) s \((\S+) s\), "
                   r"verifying (\S+) s \((\S+) s\)")  # fmt: skip
@@ -42,3 +47,101 @@ def test_verification_shows_its_progress_on_a_terminal(tmp_path):
             assert TIME.search(pane.screen()) is not None
         finally:
             pane.close()
+
+
+#: A phase on the progress display: its name, steps done of all, time taken, time left at the rate so far.
+SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+):(\d\d):(\d\d) +(?:(\d+):(\d\d):(\d\d)|-:--:--) left$",
+                   re.MULTILINE)  # fmt: skip
+
+
+@needs_tmux
+def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
+    """On a terminal, reading and verifying each say how long is left — before any module is done
+    "-:--:--", then the modules to go at the time a module has taken so far (9600 baud, `--verify full`:
+    seconds a module), counting down: never more than that rate gives for the modules still to go."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"), environment())
+        try:
+            seen: dict[str, list[tuple[int, int, int, int | None]]] = {}
+
+            def verifying_half_done(screen: str) -> bool:
+                for found in SHOWN.finditer(screen):
+                    phase, done, total, h, m, s, *left = found.groups()
+                    took = int(h) * 3600 + int(m) * 60 + int(s)
+                    to_go = None if left[0] is None else int(left[0]) * 3600 + int(left[1]) * 60 + int(left[2])
+                    seen.setdefault(phase, []).append((int(done), int(total), took, to_go))
+                return any(done >= 3 and to_go is not None for done, _, _, to_go in seen.get("verifying", []))
+
+            pane.wait(verifying_half_done, "verifying 3/6 or more with the time left")
+            assert pane.exit_status() == 0, pane.screen()
+        finally:
+            pane.close()
+    for phase in ("reading modules", "verifying"):
+        assert phase in seen, seen
+        for done, total, took, to_go in seen[phase]:
+            assert (to_go is None) == (done == 0), (phase, seen[phase])  # a time left once a module is done, not before
+            if to_go is not None:  # the rate so far, counted down: at most the time per module so far for those to go (whole seconds)
+                assert to_go <= (took + 1) / done * (total - done) + 1, (phase, seen[phase])
+
+
+SLOW = re.compile(r"note: the line is slower than the plant file's line settings say — bus booth-a: (\d+) exchanges took (\S+) s, its "
+                  r"settings price them at (\S+) s \(the modules answered after (\d+) ms on average, turnaround: 0\.01 in the plant "
+                  r"file\): (.*)")  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("measured", "priced", "slow"),
+    [
+        (1.0, 1.0, False),  # as priced
+        (0.9, 1.0, False),  # faster: an emulator that answers at once
+        (1.24, 0.2, True),  # a short command on a line six times slower
+        (0.6, 0.2, False),  # three times slower, but not half a second over: a few exchanges say little
+        (12.4, 10.0, False),  # 24 % over: a busy machine, an adapter's latency
+        (12.6, 10.0, True),  # 26 % and 2.6 s over
+    ],
+)
+def test_a_line_is_slower_than_its_settings_when_clearly_over_its_price(measured, priced, slow):
+    assert slower_than_priced(measured, priced) is slow
+
+
+def slow_notes(err: str) -> list[re.Match[str]]:
+    """The slow-line notes of a command's stderr (any other line saying the line is slower fails)."""
+    notes = [line for line in err.splitlines() if "slower than" in line]
+    found = [SLOW.fullmatch(line) for line in notes]
+    assert all(found), notes
+    return [f for f in found if f is not None]
+
+
+@pytest.mark.parametrize(("query", "noted"), [("?line-speed=9600&turnaround=0.060", True), ("?line-speed=9600", False)])
+def test_a_line_slower_than_its_settings_is_noted_once_per_command(tmp_path, capsys, query, noted):
+    """Modules that answer after 60 ms on a bus whose plant file says turnaround: 0.010: plan and
+    apply (reading, writing, verifying) each end with one note giving the figures; with the emulator
+    answering as the bus's keys say, none."""
+    document = yaml.safe_load(DEMO.read_text())
+    for bus in document["buses"]:
+        bus["port"] += query
+        bus["turnaround"] = 0.010
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(yaml.safe_dump(document, sort_keys=False))
+    planned = run_cli(capsys, "plan", plant, "--module", "booth-a-left")
+    applied = run_cli(capsys, "apply", plant, "--module", "booth-a-left", "--auto-approve", "--allow-axis-release")
+    assert planned.code == applied.code == 0, applied.err
+    for result in (planned, applied):
+        notes = slow_notes(result.err)
+        assert len(notes) == noted, result.err
+        for note in notes:
+            _, took, priced, answered, remedy = note.groups()
+            assert float(took) > 1.25 * float(priced) and int(answered) >= 55
+            assert remedy == "an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same"
+
+
+def test_a_slow_line_points_at_doctor_with_its_port(tmp_path, capsys):
+    """A real port (here the emulator behind socket://) whose module answers after 60 ms: the note
+    says which command measures it."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        plant.emulators["booth-a"].turnarounds[1] = 0.060  # booth-a-left, as emulator serve --module-turnaround 1=60ms
+        planned = run_cli(capsys, "plan", plant.path, "--module", "booth-a-left")
+        port = plant.plant.buses[0].port
+    assert planned.code == 0, planned.err
+    note, = slow_notes(planned.err)
+    assert note.group(5) == f"measure the line with prc3cfg doctor --port {port} and put the bus keys it prints into the plant file"

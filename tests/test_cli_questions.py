@@ -15,14 +15,16 @@ from prc3cfg import api
 
 pytestmark = needs_tmux
 
-ALLOW = "⚠ The axes of booth-a/booth-a-left will be released and must travel to their reference point. Allow? [y/N]:"
+SUMMARY = ["⚠ 1 module will release its axes (10h/20h): booth-a/booth-a-left",
+           "  It loses its reference point and must travel to it before production."]
+ALLOW = "Release the axes of 1 module? Only 'yes' will be accepted:"
 APPROVE = re.compile(r"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move\. "
-                     r"Apply \d+ messages? to 1 module\? \[y/N\]:")  # fmt: skip
+                     r"Apply \d+ messages? to 1 module\? Only 'yes' will be accepted:")  # fmt: skip
 #: Screens watched while a question waits: well over one redraw of a progress display (rich: 10 a second).
 WATCHED = 8
 
 
-def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> None:
+def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> str:
     """The pane waits for an answer to `question`: it is the last line of the screen, whole, below
     `after` (what was printed last before it, if it is on this terminal), and stays so with no progress display anywhere on the screen."""
 
@@ -39,16 +41,18 @@ def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> Non
         assert after is None or any(after in line for line in screen.rstrip().splitlines()[:-1]), screen
         drawn = [line for line in screen.splitlines() if PROGRESS_LINE.search(line)]
         assert not drawn, f"a progress display is on the screen while the question waits: {drawn}"
+    return first
 
 
 def answers_both_questions(pane: Pane) -> None:
     """The axis question, then the confirmation, each asked whole with no progress on screen; yes to
     both; the one module written and verified."""
     try:
-        asked(pane, ALLOW, "Plan: 1 of 1 module changes")
-        pane.type("y")
-        asked(pane, APPROVE, ALLOW + " y")
-        pane.type("y")
+        shown = asked(pane, ALLOW, "Plan: 1 of 1 module changes")
+        assert shown.rstrip().splitlines()[-3:-1] == SUMMARY, shown
+        pane.type("yes")
+        asked(pane, APPROVE, ALLOW + " yes")
+        pane.type("yes")
         assert pane.exit_status() == 0, pane.screen()
         assert "Apply complete: 1 module written and verified." in pane.screen()
     finally:
@@ -67,6 +71,28 @@ def test_restore_asks_its_questions_whole_with_no_progress_on_screen(tmp_path):
         api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)).told()
         snapshot, = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
         answers_both_questions(Pane(tmp_path, prc3cfg("restore", snapshot), environment()))
+
+
+@pytest.mark.parametrize("question", ["axis release", "apply"])
+def test_only_yes_typed_out_answers_a_question_that_writes(tmp_path, question):
+    """'y' — click's yes, and every yes before — is no to the axis question and to the apply's
+    confirmation: refused in one line, nothing written."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        before = plant.images()
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment())
+        try:
+            asked(pane, ALLOW, "Plan: 1 of 1 module changes")
+            if question == "apply":
+                pane.type("yes")
+                asked(pane, APPROVE, ALLOW + " yes")
+            pane.type("y")
+            assert pane.exit_status() == 1, pane.screen()
+            refused = ("error: axis release of booth-a/booth-a-left not allowed (only 'yes' allows it) — nothing was written"
+                       if question == "axis release" else "error: not applied — nothing was written")  # fmt: skip
+            assert refused in pane.screen()
+        finally:
+            pane.close()
+        assert plant.images() == before
 
 
 @pytest.mark.parametrize("stdout", ["terminal", "file"])

@@ -354,3 +354,28 @@ def test_a_plan_files_charts_are_shown_only_as_prc3cfg_draws_them():
     text = markdown(document)
     assert charts[1] in text and not any(chart in text for chart in hostile)
     assert "<img" not in text and "<script" not in text and "evil.example" not in text
+
+
+THIRTY = [f"booth-{bus}/booth-{bus}-reciprocator-{n:02d}" for bus in "ab" for n in range(1, 16)]
+
+
+@pytest.mark.parametrize(
+    ("names", "said"),
+    [
+        (["booth-a/left"], "booth-a/left"),
+        (["booth-a/left", "booth-a/right"], "booth-a/left, booth-a/right"),
+        (THIRTY, ", ".join(THIRTY[:4]) + " and 26 more"),
+        (["x" * 400, "y"], "x" * 400 + " and 1 more"),  # the first name is always shown
+    ],
+)
+def test_the_axis_question_names_what_fits_and_counts_the_rest(names, said):
+    assert render.some_of(names) == said
+
+
+def test_the_axis_summary_stays_two_lines_for_a_full_line():
+    """Thirty modules: the count, the first names and 'and N more', then what a release means — two
+    lines of at most two terminal rows each, so the question stays on the screen with the plan's end."""
+    summary = render.release_summary(THIRTY)
+    assert summary[0].startswith("⚠ 30 modules will release their axes (10h/20h): booth-a/booth-a-reciprocator-01, ")
+    assert summary[1] == "  Each loses its reference point and must travel to it before production."
+    assert len(summary) == 2 and all(len(line) <= 2 * 100 for line in summary)

@@ -215,7 +215,7 @@ def doctor(
         def allow() -> bool:
             question = ("No module answered in a framing with a checksum. Probe in open-driver, which has none? A probe at the "
                         "wrong baud or parity arrives as other bytes, which a module there could take for a write")  # fmt: skip
-            return allow_unchecked_probes or (sys.stdin.isatty() and ask(question, options))
+            return allow_unchecked_probes or (sys.stdin.isatty() and ask(question, options, typed=True))
 
         found = api.doctor(bare, search, options, addresses=parse_addresses(modules) if modules is not None else None,
                            exchanges=exchanges, allow_unchecked=allow)  # fmt: skip

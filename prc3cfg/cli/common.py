@@ -241,10 +241,31 @@ def addresses_option(value: str | None) -> str | None:
     return value
 
 
+def _time_left() -> Any:
+    """A rich column: the time left in the phase at its rate so far — the steps to go at the seconds a
+    step has taken on average since the phase began, counting down between steps ("0:00:12 left");
+    "-:--:-- left" until a step is done. Measured on this line, so a line slower than its settings
+    shows here what the plan's estimate did not; steps of unequal size (a module with 64 programs to
+    read beside one with none) make it a rate, not a promise."""
+    from rich.progress import ProgressColumn, Task
+    from rich.text import Text
+
+    class TimeLeft(ProgressColumn):
+        def render(self, task: Task) -> Text:
+            stepped = task.fields.get("stepped")
+            if not task.completed or stepped is None or task.start_time is None or task.total is None:
+                return Text("-:--:-- left", style="progress.remaining")
+            per_step = (stepped - task.start_time) / task.completed
+            left = max(0, round(per_step * (task.total - task.completed) - (task.get_time() - stepped)))
+            return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d} left", style="progress.remaining")
+
+    return TimeLeft()
+
+
 class TerminalProgress:
-    """`api.Progress` on the terminal: a rich progress bar on stderr (when it is a terminal),
-    notes on stdout. `stop` takes the bar off the screen — before the plan and before a question
-    (`ask`) — and the next phase's `start` shows it again."""
+    """`api.Progress` on the terminal: a rich progress bar on stderr (when it is a terminal) with the
+    phase's steps, time taken and time left (`_time_left`), notes on stdout. `stop` takes the bar off
+    the screen — before the plan and before a question (`ask`) — and the next phase's `start` shows it again."""
 
     def __init__(self, stack: contextlib.ExitStack) -> None:
         self._bar: Progress | None = None
@@ -263,7 +284,7 @@ class TerminalProgress:
         if self._bar is None:
             stderr = stderr_console()
             self._bar = Progress(
-                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), _time_left(),
                 console=stderr, transient=True, disable=not stderr.is_terminal,
             )  # fmt: skip
             self._bar.start()
@@ -274,7 +295,7 @@ class TerminalProgress:
     def advance(self) -> None:
         bar, task = self._bar, self._task  # another thread may `stop` it meanwhile: a stopped bar takes the step unseen
         if bar is not None and task is not None:
-            bar.advance(task)
+            bar.update(task, advance=1, stepped=bar.get_time())
 
     def note(self, text: str) -> None:
         print(text, flush=True)
@@ -288,14 +309,17 @@ class TerminalProgress:
 
 #: What `ask` takes for yes and for no (as click's confirm); an empty answer is no.
 YES, NO = ("y", "yes"), ("n", "no", "")
+#: The one answer a question about the machine takes (`ask(..., typed=True)`), as Terraform's apply: anything else is no.
+TYPED_YES = "yes"
 
 
-def ask(question: str, options: LineOptions | None = None) -> bool:
+def ask(question: str, options: LineOptions | None = None, *, typed: bool = False) -> bool:
     """A yes/no question, default no, asked whole where the operator sees it: every question goes
     through here. The progress display of `options` is taken off the screen first (a bar redrawn
     below or over the question hid it), what was printed is flushed, and the question is written to
     the terminal the answer comes from (stdin's) — not to stdout, which may be a file. An answer
-    that is neither yes nor no is asked again; the end of input is no."""
+    that is neither yes nor no is asked again; the end of input is no. `typed`: a question whose yes
+    sends frames that can change a module — only `yes` typed out is yes, anything else no at once."""
     if options is not None and isinstance(options.progress, TerminalProgress):
         options.progress.stop()
     sys.stdout.flush()
@@ -303,6 +327,10 @@ def ask(question: str, options: LineOptions | None = None) -> bool:
     from prc3cfg.api import terminal_path
 
     with open(terminal_path(sys.stdin.fileno()), "w") as terminal:
+        if typed:
+            terminal.write(f"{question} Only '{TYPED_YES}' will be accepted: ")
+            terminal.flush()
+            return sys.stdin.readline().strip() == TYPED_YES
         while True:
             terminal.write(f"{question} [y/N]: ")
             terminal.flush()
@@ -318,7 +346,8 @@ def ask(question: str, options: LineOptions | None = None) -> bool:
 @contextlib.contextmanager
 def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Iterator[LineOptions]:
     """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal;
-    after a command that succeeded, a note for every line that had to repeat exchanges."""
+    after a command that succeeded, a note for every line that had to repeat exchanges, and one if a
+    line was slower than its settings."""
     from prc3cfg.api import LineOptions
 
     with contextlib.ExitStack() as stack:
@@ -330,6 +359,7 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
         )  # fmt: skip
         yield options
         note_repeats(options.links_used)
+        note_slow(options.links_used)
 
 
 def note_repeats(links: Iterable[Link]) -> None:
@@ -342,3 +372,30 @@ def note_repeats(links: Iterable[Link]) -> None:
             print(f"note: bus {link.bus}: {link.repeated} of {plural(link.exchanges, 'exchange')} {were} lost or damaged and "
                   "made again — check the cabling if this is not a test line (--trace shows every frame)",
                   file=sys.stderr)  # fmt: skip
+
+
+def note_slow(links: Iterable[Link]) -> None:
+    """One line if any line's answered exchanges took clearly longer than the plant file's line settings
+    price them (`prc3cfg.core.bustime.slower_than_priced`): the figures, the turnaround they amount to,
+    and how to measure the line — estimates, and waits that depend on the turnaround, are that far off."""
+    from prc3cfg.core.bustime import slower_than_priced
+    from prc3cfg.core.line import EMULATOR_SCHEME
+    from prc3cfg.core.render import plural
+    from prc3cfg.core.text import plain
+
+    said, ports = [], []
+    for link in links:
+        if link.cost is None or not link.answered or not slower_than_priced(link.answered_time, link.priced_time):
+            continue
+        answer = link.cost.turnaround + (link.answered_time - link.priced_time) / link.answered
+        said.append(f"bus {link.bus}: {plural(link.answered, 'exchange')} took {link.answered_time:.1f} s, its settings price them at "
+                    f"{link.priced_time:.1f} s (the modules answered after {answer * 1000:.0f} ms on average, turnaround: "
+                    f"{link.cost.turnaround:g} in the plant file)")  # fmt: skip
+        ports.append(plain(link.port_name))
+    if not said:
+        return
+    measured = [f"prc3cfg doctor --port {port}" for port in ports if not port.startswith(EMULATOR_SCHEME)]
+    remedies = [f"measure the line with {' and '.join(measured)} and put the bus keys it prints into the plant file"] if measured else []
+    if len(measured) < len(ports):  # an emulator:// port answers as its URL says: doctor cannot reach it
+        remedies.append("an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same")
+    print(f"note: the line is slower than the plant file's line settings say — {'; '.join(said)}: {'; '.join(remedies)}", file=sys.stderr)

@@ -70,11 +70,11 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
             print("Nothing to do: every module matches the plant file.")
 
     def allow(names: list[str]) -> bool:
-        listed = ", ".join(names)
         if auto_approve or not sys.stdin.isatty():
             return False  # refused, naming the flag
-        if not ask(f"⚠ The axes of {listed} will be released and must travel to their reference point. Allow?", options):
-            raise UserError(f"axis release of {listed} not allowed — nothing was written")
+        summary = "\n".join(render.release_summary(names))
+        if not ask(f"{summary}\nRelease the axes of {render.plural(len(names), 'module')}?", options, typed=True):
+            raise UserError(f"axis release of {render.some_of(names)} not allowed (only 'yes' allows it) — nothing was written")
         return True
 
     def approve(the_plan: PlantPlan) -> bool:
@@ -82,7 +82,7 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
         if not sys.stdin.isatty():
             raise UserError(f"{question} — no terminal to ask: pass --auto-approve to apply without asking")
         return ask(f"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move. {question}",
-                   options)  # fmt: skip
+                   options, typed=True)  # fmt: skip
 
     # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan is whole (`Gates.asks`)
     return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None if auto_approve else approve,

@@ -9,8 +9,9 @@ no reply frame. (reading) It still costs the turnaround (and an open-driver line
 the request): the master cannot send the next frame sooner, and gets no reply that would say
 the modules are ready.
 
-Owns the cost of exchanges. Does not own which exchanges a plan makes (`prc3cfg.core.planner`).
-Pure.
+Owns the cost of exchanges, and when exchanges that took longer than priced say the line is
+slower than its settings (`slower_than_priced`). Does not own which exchanges a plan makes
+(`prc3cfg.core.planner`). Pure.
 """
 
 from __future__ import annotations
@@ -61,3 +62,16 @@ class LineCost:
         """Seconds a broadcast of `message` holds the line: request frame and turnaround."""
         gap = self.zvz if self.framing.name == "open-driver" else 0.0
         return self._request(0, message) * self.line.char_time + self.turnaround + gap
+
+
+#: A line is slower than its settings when its exchanges took more than this many times their price …
+SLOW_FACTOR = 1.25
+#: … and more than this many seconds over it: a short command's few exchanges say nothing of the line.
+SLOW_MARGIN = 0.5
+
+
+def slower_than_priced(measured: float, priced: float) -> bool:
+    """Whether exchanges that took `measured` seconds, priced at `priced` by the line's settings,
+    show a line clearly slower than those settings (a longer turnaround, a lower baud, a gateway's
+    delay): both more than `SLOW_FACTOR` times and more than `SLOW_MARGIN` over the price."""
+    return measured > SLOW_FACTOR * priced and measured - priced > SLOW_MARGIN

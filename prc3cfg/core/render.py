@@ -190,6 +190,32 @@ def plural(count: int, one: str, many: str | None = None) -> str:
     return f"{count} {one if count == 1 else many or one + 's'}"
 
 
+#: Characters of module names the axis question lists before "and N more": about two lines of a terminal.
+RELEASE_NAMES_BUDGET = 150
+
+
+def some_of(names: Sequence[str], budget: int = RELEASE_NAMES_BUDGET) -> str:
+    """Names joined by commas while they fit in `budget` characters, the rest counted: "a, b and 28 more"
+    (the first name always shown) — a list that stays a few lines however many modules it names."""
+    shown: list[str] = []
+    for index, name in enumerate(names):
+        rest = len(names) - index
+        if shown and len(", ".join([*shown, name])) + (len(f" and {rest - 1} more") if rest > 1 else 0) > budget:
+            return f"{', '.join(shown)} and {rest} more"
+        shown.append(name)
+    return ", ".join(shown)
+
+
+def release_summary(names: Sequence[str]) -> list[str]:
+    """What the axis question says before it asks, in a few lines whatever the count: how many modules
+    release their axes and which (`some_of`), and what that means for production."""
+    count = len(names)
+    return [
+        f"⚠ {plural(count, 'module')} will release {'its' if count == 1 else 'their'} axes (10h/20h): {some_of(names)}",
+        f"  {'It loses its' if count == 1 else 'Each loses its'} reference point and must travel to it before production.",
+    ]
+
+
 def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float, releases: bool) -> str:
     """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
     head = f"{Action.of_module(steps)} bus {bus}, module {address} ({name})"

@@ -42,6 +42,7 @@ import serial
 from serial import rfc2217
 
 from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
@@ -141,6 +142,8 @@ class Link:
         announce: Callable[[Exchange], None] | None = None,
         cancel: threading.Event | None = None,
         takes_line_time: bool = True,
+        cost: LineCost | None = None,
+        port_name: str | None = None,
     ) -> None:
         self.port = port
         self.framing = framing
@@ -170,6 +173,13 @@ class Link:
         #: time.monotonic() when the last frame had left, and when the last reply had come: the line's part
         #: of an exchange, without what the port adds before sending (RFC 2217's purge waits 50 ms)
         self.sent_at = self.replied_at = 0.0
+        #: the line's settings as a plant file gives them, pricing each exchange (`prc3cfg.core.bustime`)
+        self.cost = cost
+        #: the port as the operator names it (a plant file's `port`), for what is said about the line
+        self.port_name = port_name or str(port.port)
+        #: exchanges answered, the seconds they took (frame out to reply in) and what `cost` priced them at
+        self.answered = 0
+        self.answered_time = self.priced_time = 0.0
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
@@ -194,6 +204,7 @@ class Link:
             self._announce(address, data, attempt, started)
             raw = self._exchange(address, data)
             self._observe(address, data, raw, attempt, started)
+            self._timed(address, message, raw)
             heard, unconfirmed = unconfirmed, None
             if raw is None:
                 problem = f"no reply within {self.timeout:g} s"
@@ -240,6 +251,7 @@ class Link:
         self._announce(address, data, 1, started)
         raw = self._exchange(address, data, timeout)
         self._observe(address, data, raw, 1, started)
+        self._timed(address, message, raw)
         if raw is None:
             return None
         try:
@@ -277,6 +289,13 @@ class Link:
         self.exchanges += 1
         if self.observer:
             self.observer(Exchange(self.bus, address, data, raw, attempt, started, time.time() - started))
+
+    def _timed(self, address: int, message: codec.Message, raw: bytes | None) -> None:
+        """An answered exchange's time on the line, beside its price (an unanswered one is a repeat, said apart)."""
+        if raw is not None and self.cost is not None:
+            self.answered += 1
+            self.answered_time += self.replied_at - self.sent_at
+            self.priced_time += self.cost.message_time(address, message)
 
     def _send(self, frame: bytes) -> None:
         try:

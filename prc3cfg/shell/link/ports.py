@@ -36,6 +36,7 @@ from urllib.parse import parse_qsl, urlsplit
 import serial
 from serial.urlhandler import protocol_socket
 
+from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
@@ -261,6 +262,8 @@ def open_link(
             announce=announce,
             cancel=cancel,
             takes_line_time=takes_line_time,
+            cost=LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz),
+            port_name=bus.port,
         )
 
 
