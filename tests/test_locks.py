@@ -176,7 +176,7 @@ def test_shared_directory_and_files_whatever_the_umask(tmp_path, monkeypatch):
     finally:
         os.umask(previous)
     assert stat.S_IMODE(path.parent.stat().st_mode) == 0o1777
-    assert stat.S_IMODE(path.stat().st_mode) == 0o666
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644  # every user reads who holds it; only its owner writes it
 
 
 # A process trying a lock, at once: prints "took" or the refusal.
@@ -394,6 +394,81 @@ def test_another_user_can_neither_remove_a_held_lock_nor_take_the_line(shared_lo
         assert path.exists()
     assert tried.stdout.splitlines()[0] == "Operation not permitted", tried
     assert tried.stdout.splitlines()[1].startswith("bus a: the line is locked by ") and f"(pid {os.getpid()}, apply since " in tried.stdout
+
+
+# Another user's prc3cfg: takes and lets go of the line once, then removes every file of its own in
+# the lock folder — as its owner may, sticky folder or not — and tries the line.
+REMOVER_THEN_TRIER = """
+import json, os, sys
+from prc3cfg.shell.locks import line_lock, lock_dir
+with line_lock(json.loads(sys.argv[1]), "bus a"):
+    pass
+print("made", flush=True)
+sys.stdin.readline()
+for name in os.listdir(lock_dir()):
+    try:
+        os.unlink(lock_dir() / name)
+        print("removed", name, flush=True)
+    except OSError:
+        pass
+""" + TRIER
+
+
+def test_a_lock_file_another_user_made_is_never_the_one_held(shared_locks):
+    """Another user made the line's lock file the first time it took the line. This process took the
+    line after — on that file, which its owner may remove whoever holds it: then the owner's next prc3cfg
+    made a new file of that name and held the line too. Each user now holds a file of its own and sees
+    every other user's."""
+    user = other_user()
+    shared_locks.mkdir(mode=0o1777)
+    shared_locks.chmod(0o1777)
+    other = subprocess.Popen(as_other(user, REMOVER_THEN_TRIER, json.dumps([KEY])), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             text=True, cwd=ROOT)  # fmt: skip
+    try:
+        assert other.stdout.readline() == "made\n"  # its lock file, made and let go of
+        with line_lock((KEY,), "bus a"):
+            out, _ = other.communicate("go\n", timeout=60)  # it removes what it may, and tries the line
+    finally:
+        other.kill()
+        other.wait()
+    *removed, tried = out.splitlines()
+    assert removed and tried.startswith("bus a: the line is locked by ") and f"(pid {os.getpid()}, apply since 20" in tried, out
+
+
+def test_a_lock_file_in_this_users_name_that_another_user_owns_is_refused():
+    """Another user could make this user's lock file first, then remove it while this user holds it."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root: to give a file to another user")
+    lock_dir().mkdir()
+    lock_path(KEY).write_text("")
+    os.chown(lock_path(KEY), 54321, 54321)
+    with pytest.raises(UserError) as refused:
+        with line_lock((KEY,), "bus a"):
+            pass
+    assert str(refused.value) == (f"bus a: the line lock {lock_path(KEY)} belongs to uid 54321, who could remove it while this process "
+                                  "holds it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")  # fmt: skip
+
+
+def test_an_older_prc3cfgs_lock_file_is_seen():
+    """prc3cfg before lock files of their own per user locked HASH.lock, every user's: still a holder."""
+    lock_dir().mkdir()
+    shared = lock_dir() / f"{locks._stem(KEY)}.lock"
+    with holding(str(shared), "", script=RAW_HOLDER):
+        with pytest.raises(LineBusy, match=r"^bus a: the line is locked by another process — wait for it"):
+            with line_lock((KEY,), "bus a"):
+                pass
+    with line_lock((KEY,), "bus a") as (path,):
+        assert path != shared
+
+
+def test_a_lock_file_another_user_cannot_read_counts_as_held(shared_locks):
+    user = other_user()
+    with line_lock((KEY,), "bus a") as (path,):
+        pass
+    path.chmod(0)
+    tried = subprocess.run(as_other(user, TRIER, json.dumps([KEY])), capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert tried.stdout == f"bus a: the line is locked by a process of root (uid 0) (its lock file {path} cannot be read) — " \
+                           "wait for it to finish, or pass --lock-timeout SECONDS to wait\n", tried
 
 
 def test_holder_details_are_shown_as_claims_with_the_file_owner():

@@ -12,8 +12,13 @@ folder, as for serial tools' `LCK..` files), `/var/lock/prc3cfg`, then `/tmp/prc
 the first that exists, or else whose parent every user may make folders in (sticky and
 writable by all), so every user's prc3cfg picks the same one; on Windows
 `%ProgramData%\\prc3cfg\\locks` (`prc3cfg.shell.platform.LOCK_FOLDERS`). It is made sticky and writable
-by all, its lock files readable and writable by all: another user's prc3cfg sees a lock,
-names its holder and waits for it, and never removes it. The lock is the kernel's: it dies with
+by all. Each user locks a lock file of its own per key, `HASH.UID.lock`, readable by all (`lock_path`),
+and looks at every other user's of that key (`_others_holder`): one another user holds is a
+busy line. A user never holds another's file — its owner may remove it from the sticky folder
+while someone else holds it, and the owner's next prc3cfg would lock a new file of that name —
+so another user's prc3cfg sees a lock, names its holder and waits for it, and cannot remove it.
+Two users taking one line at the same instant may both see the other and both be refused, never
+both hold it. (Windows: every user locks `HASH.lock`; there are no uids.) The lock is the kernel's: it dies with
 the process that holds it, so there is no stale lock to guess at, and prc3cfg never deletes a
 lock file (a process could be holding the deleted file while a third locks a new one of the same
 name); a lock taken on a file that was removed or replaced between its open and its lock is let
@@ -24,7 +29,7 @@ have prc3cfg write elsewhere (`_make_lock_dir`, `_open`): the folder must be a f
 symbolic link — of root or of this user (its owner may remove any lock in it, even in a sticky
 folder), else it is refused in one line and an administrator removes it; a lock file is opened
 without following a symbolic link, made with O_EXCL, and must be a plain file with one name (a
-hard link to another file, a FIFO: refused). On Windows owners are ACLs and are not checked.
+hard link to another file, a FIFO: refused) of this user. On Windows owners are ACLs and are not checked.
 The holder's details written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) are
 what anyone who may write the file says: the holder is named "as its lock file says", with whose
 file it is where that is another user than the one it names; an empty or half-written file, as a
@@ -37,6 +42,7 @@ state file) nor where a message goes (`waiting` is the caller's).
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import ipaddress
 import json
@@ -157,7 +163,13 @@ def _shared(folder: Path) -> bool:
 
 
 def lock_path(key: str) -> Path:
-    return lock_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:24]}.lock"
+    """This user's lock file of `key`: `HASH.UID.lock` (Windows: `HASH.lock`, every user's)."""
+    uid = platform.user_id()
+    return lock_dir() / f"{_stem(key)}{'' if uid is None else f'.{uid}'}.lock"
+
+
+def _stem(key: str) -> str:
+    return hashlib.sha256(key.encode()).hexdigest()[:24]
 
 
 def _make_lock_dir(description: str) -> Path:
@@ -195,15 +207,16 @@ def _trusted_owner(uid: int) -> bool:
 
 
 def _open(path: Path, description: str) -> tuple[int, bool]:
-    """A descriptor of the lock file (made readable and writable by all if this call makes it),
-    and whether it is open for writing — another user's read-only lock is locked all the same.
+    """A descriptor of this user's lock file (made readable by all if this call makes it), and
+    whether it is open for writing — a read-only lock is locked all the same.
 
     Never through a symbolic link, and never anything but a plain file with one name (a hard link
-    to another file would have prc3cfg write its details into that file): refused, one line."""
+    to another file would have prc3cfg write its details into that file) of this user (another
+    could remove it while this process holds it): refused, one line."""
     try:
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _OPEN_FLAGS, 0o666)
-            platform.set_mode(fd, 0o666)  # umask aside
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _OPEN_FLAGS, 0o644)
+            platform.set_mode(fd, 0o644)  # umask aside: every user reads who holds it
             return fd, True
         except FileExistsError:
             pass
@@ -220,7 +233,45 @@ def _open(path: Path, description: str) -> tuple[int, bool]:
         what = "a second name of another file" if stat.S_ISREG(status.st_mode) else "no plain file"
         raise UserError(f"{description}: the line lock {path} is {what}, not used — "
                         "an administrator removes it, or set PRC3CFG_LOCK_DIR")
+    if platform.OWNERS and status.st_uid != platform.user_id():
+        os.close(fd)
+        raise UserError(f"{description}: the line lock {path} belongs to {platform.uid_name(status.st_uid)}, who could remove it "
+                        "while this process holds it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")
     return fd, writable
+
+
+def _others_holder(path: Path) -> str | None:
+    """Who holds the line in another user's lock file of it (`HASH.UID.lock` beside this user's
+    `path`, or an older prc3cfg's `HASH.lock`), or None. Such a file is only looked at — its owner
+    may remove it whoever holds it — and one this user may not read counts as held.
+    Windows: every user locks one file (`lock_path`), there is no other."""
+    if not platform.OWNERS:
+        return None
+    stem = path.name.partition(".")[0]
+    try:
+        names = sorted(os.listdir(path.parent))
+    except OSError:
+        return "another process (the lock directory cannot be read)"
+    for name in names:
+        if name == path.name or not (name.startswith(f"{stem}.") and name.endswith(".lock")):
+            continue
+        other = path.parent / name
+        try:
+            fd = os.open(other, os.O_RDONLY | _OPEN_FLAGS)
+        except (FileNotFoundError, IsADirectoryError):
+            continue
+        except OSError as error:
+            if error.errno == errno.ELOOP:  # a symbolic link: no prc3cfg locks one
+                continue
+            with contextlib.suppress(OSError):
+                return f"a process of {platform.uid_name(os.lstat(other).st_uid)} (its lock file {other} cannot be read)"
+            continue
+        try:
+            if stat.S_ISREG(os.fstat(fd).st_mode) and platform.is_locked(fd):
+                return _holder(fd)
+        finally:
+            os.close(fd)
+    return None
 
 
 def _same_file(fd: int, path: Path) -> bool:
@@ -269,6 +320,9 @@ def _take_all(paths: list[Path], description: str) -> tuple[list[tuple[int, bool
                     return [], holder
                 if _same_file(fd, path):
                     taken.append((fd, writable))
+                    if (other := _others_holder(path)) is not None:
+                        _release(taken)
+                        return [], other
                     break
                 platform.unlock(fd)
                 os.close(fd)

@@ -14,7 +14,8 @@ means the same everywhere:
   (fdatasync; fsync where there is none), `sync_folder` (fsync of a directory; Windows cannot
   open one: nothing);
 - file locks: `try_lock`/`unlock` (flock; Windows: msvcrt.locking of one byte far past the end,
-  so the holder's details at the start stay readable) — both released with the last descriptor;
+  so the holder's details at the start stay readable) — both released with the last descriptor —
+  and `is_locked` (a lock someone else holds, seen without holding it);
 - the machine's folders: `LOCK_FOLDERS` (the lock folder's candidates, `prc3cfg.shell.locks`),
   `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases, `prc3cfg.shell.releases`) — POSIX's
   /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows' %ProgramData%\prc3cfg and %LOCALAPPDATA%;
@@ -161,6 +162,23 @@ def try_lock(fd: int) -> bool:
         except BlockingIOError:
             return False
         return True
+
+
+def is_locked(fd: int) -> bool:
+    """Whether another open file holds the exclusive lock of the file open in `fd` now (POSIX: a shared
+    lock tried and let go at once; Windows, no shared locks: the exclusive one)."""
+    if sys.platform == "win32":
+        if not try_lock(fd):
+            return True
+        unlock(fd)
+        return False
+    else:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
 
 
 def unlock(fd: int) -> None:
