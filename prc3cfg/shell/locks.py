@@ -17,8 +17,8 @@ and looks at every other user's of that key (`_others_holder`): one another user
 busy line. A user never holds another's file — its owner may remove it from the sticky folder
 while someone else holds it, and the owner's next prc3cfg would lock a new file of that name —
 so another user's prc3cfg sees a lock, names its holder and waits for it, and cannot remove it.
-Two users taking one line at the same instant may both see the other and both be refused, never
-both hold it. (Windows: every user locks `HASH.lock`; there are no uids.) The lock is the kernel's: it dies with
+Two users taking one line at the same instant both see the other: the higher uid lets go
+(`_others_holder`), and never both hold it. (Windows: every user locks `HASH.lock`; there are no uids.) The lock is the kernel's: it dies with
 the process that holds it, so there is no stale lock to guess at, and prc3cfg never deletes a
 lock file (a process could be holding the deleted file while a third locks a new one of the same
 name); a lock taken on a file that was removed or replaced between its open and its lock is let
@@ -62,6 +62,7 @@ from prc3cfg.shell import platform, serial_lock
 
 POLL = 0.1  # s between attempts on a busy line
 REOPENS = 10  # opens of a lock file removed or replaced between its open and its lock
+RACE_WAIT = 0.05  # s the lower uid of two users taking a line at one instant waits for the other to let go
 #: Where the lock folder may be, in order: (parent, name) — `lock_dir`.
 LOCK_FOLDERS = platform.LOCK_FOLDERS
 #: Never through a symbolic link; a FIFO planted in place of a lock file cannot block the open.
@@ -242,16 +243,31 @@ def _open(path: Path, description: str) -> tuple[int, bool]:
 
 def _others_holder(path: Path) -> str | None:
     """Who holds the line in another user's lock file of it (`HASH.UID.lock` beside this user's
-    `path`, or an older prc3cfg's `HASH.lock`), or None. Such a file is only looked at — its owner
-    may remove it whoever holds it — and one this user may not read counts as held.
-    Windows: every user locks one file (`lock_path`), there is no other."""
+    `path`, or an older prc3cfg's `HASH.lock`), or None; this user's `path` is held. Such a file is
+    only looked at — its owner may remove it whoever holds it — and one this user may not read
+    counts as held. Two users taking the line at one instant each hold their own and see the
+    other's: the lower uid waits up to `RACE_WAIT` s for the other to let go, the higher lets go at
+    once, so one of them takes the line. Windows: every user locks one file (`lock_path`), there is no other."""
     if not platform.OWNERS:
         return None
+    deadline = time.monotonic() + RACE_WAIT
+    while True:
+        found = _other_holder_now(path)
+        if found is None:
+            return None
+        holder, uid = found
+        if uid <= (platform.user_id() or 0) or time.monotonic() >= deadline:
+            return holder
+        time.sleep(RACE_WAIT / 10)
+
+
+def _other_holder_now(path: Path) -> tuple[str, int] | None:
+    """The first other user's lock file of `path`'s key held now: its holder and its owner's uid."""
     stem = path.name.partition(".")[0]
     try:
         names = sorted(os.listdir(path.parent))
     except OSError:
-        return "another process (the lock directory cannot be read)"
+        return "another process (the lock directory cannot be read)", 0
     for name in names:
         if name == path.name or not (name.startswith(f"{stem}.") and name.endswith(".lock")):
             continue
@@ -264,11 +280,13 @@ def _others_holder(path: Path) -> str | None:
             if error.errno == errno.ELOOP:  # a symbolic link: no prc3cfg locks one
                 continue
             with contextlib.suppress(OSError):
-                return f"a process of {platform.uid_name(os.lstat(other).st_uid)} (its lock file {other} cannot be read)"
+                owner = os.lstat(other).st_uid
+                return f"a process of {platform.uid_name(owner)} (its lock file {other} cannot be read)", owner
             continue
         try:
-            if stat.S_ISREG(os.fstat(fd).st_mode) and platform.is_locked(fd):
-                return _holder(fd)
+            status = os.fstat(fd)
+            if stat.S_ISREG(status.st_mode) and platform.is_locked(fd):
+                return _holder(fd), status.st_uid
         finally:
             os.close(fd)
     return None
