@@ -11,26 +11,27 @@ The folder is the machine's, whatever the environment or the user of the process
 folder, as for serial tools' `LCK..` files), `/var/lock/prc3cfg`, then `/tmp/prc3cfg-locks` —
 the first that exists, or else whose parent every user may make folders in (sticky and
 writable by all), so every user's prc3cfg picks the same one; on Windows
-`%ProgramData%\\prc3cfg\\locks` (`prc3cfg.shell.platform.LOCK_FOLDERS`). It is made sticky and writable
-by all. Each user locks a lock file of its own per key, `HASH.UID.lock`, readable by all (`lock_path`),
-and looks at every other user's of that key (`_others_holder`): one another user holds is a
-busy line. A user never holds another's file — its owner may remove it from the sticky folder
-while someone else holds it, and the owner's next prc3cfg would lock a new file of that name —
-so another user's prc3cfg sees a lock, names its holder and waits for it, and cannot remove it.
-Two users taking one line at the same instant both see the other: the higher uid lets go
-(`_others_holder`), and never both hold it. (Windows: every user locks `HASH.lock`; there are no uids.) The lock is the kernel's: it dies with
-the process that holds it, so there is no stale lock to guess at, and prc3cfg never deletes a
-lock file (a process could be holding the deleted file while a third locks a new one of the same
-name); a lock taken on a file that was removed or replaced between its open and its lock is let
-go and the path opened again (`_same_file`).
+`%ProgramData%\\prc3cfg\\locks` (`prc3cfg.shell.platform.LOCK_FOLDERS`). It is made sticky and
+writable by all. Each user locks a lock file of its own per key, `HASH.UID.lock`, readable by all
+(`lock_path`), and looks at every other user's of that key (`_others_holder`): one another user
+holds is a busy line. A user never holds another's file — its owner may remove it from the
+sticky folder while someone else holds it, and the owner's next prc3cfg would lock a new file of
+that name — so another user's prc3cfg sees a lock, names its holder and waits for it, and cannot
+remove it. Two users taking one line at the same instant both see the other: the higher uid
+lets go, and never both hold it. (Windows: every user locks `HASH.lock`; there are no uids.)
+
+The lock is the kernel's: it dies with the process that holds it, so there is no stale lock to
+guess at, and prc3cfg never deletes a lock file (a process could be holding the deleted file
+while a third locks a new one of the same name); a lock taken on a file that was removed or
+replaced between its open and its lock is let go and the path opened again (`_same_file`).
 
 Nothing in the folder is trusted that another user could have put there to take the line or to
 have prc3cfg write elsewhere (`_make_lock_dir`, `_open`): the folder must be a folder — not a
 symbolic link — of root or of this user (its owner may remove any lock in it, even in a sticky
 folder), else it is refused in one line and an administrator removes it; a lock file is opened
 without following a symbolic link, made with O_EXCL, and must be a plain file with one name (a
-hard link to another file, a FIFO: refused) of this user. On Windows owners are ACLs and are not checked.
-The holder's details written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) are
+hard link to another file, a FIFO: refused) of this user. On Windows owners are ACLs and are not
+checked. The holder's details written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) are
 what anyone who may write the file says: the holder is named "as its lock file says", with whose
 file it is where that is another user than the one it names; an empty or half-written file, as a
 holder leaves it between taking the lock and writing, names "another process".
