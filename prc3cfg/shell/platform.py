@@ -217,7 +217,7 @@ def user_name() -> str:
     """The login name of this process's user, else `uid N` (no login name and no passwd entry: a container)."""
     try:
         return getpass.getuser()
-    except (KeyError, OSError):
+    except (KeyError, OSError, ImportError):  # ImportError: Windows without USERNAME, before Python 3.13 (getpass imports pwd)
         if sys.platform == "win32":
             return "an unnamed user"
         return f"uid {os.getuid()}"
