@@ -9,18 +9,21 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import pwd
+import shutil
 import signal
 import socket
 import stat
 import subprocess
 import sys
+import tempfile
 import uuid
 from pathlib import Path
 
 import pytest
 
 from prc3cfg.errors import UserError
-from prc3cfg.shell import locks
+from prc3cfg.shell import locks, platform
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock, lock_dir, lock_path
 
 HOLDER = """
@@ -46,9 +49,10 @@ KEY = "tcp/127.0.0.1/7001"
 
 
 @contextlib.contextmanager
-def holding(*argv: str, script: str = HOLDER, env: dict[str, str] | None = None):
-    """A process that holds a lock until its stdin gets a line (or closes)."""
-    process = subprocess.Popen([sys.executable, "-c", script, *argv], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+def holding(*argv: str, script: str = HOLDER, env: dict[str, str] | None = None, command: list[str] | None = None):
+    """A process that holds a lock until its stdin gets a line (or closes); `command` runs it otherwise (as another user)."""
+    command = command or [sys.executable, "-c", script, *argv]
+    process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env, cwd=Path(__file__).resolve().parents[1])
     try:
         assert process.stdout.readline() == "locked\n"
         yield process
@@ -69,7 +73,7 @@ def test_a_held_line_is_refused_naming_the_holder():
                 pass
     assert str(refused.value).startswith("bus a (socket://127.0.0.1:7001): the line is locked by ")
     assert f"@{socket.gethostname()} (pid {holder.pid}, apply since 20" in str(refused.value)
-    assert str(refused.value).endswith(") — wait for it to finish, or pass --lock-timeout SECONDS to wait")
+    assert str(refused.value).endswith(") as its lock file says — wait for it to finish, or pass --lock-timeout SECONDS to wait")
 
 
 def test_the_lock_file_names_the_holder_while_held_and_stays():
@@ -125,7 +129,7 @@ def test_waiting_is_told_once_naming_the_holder_and_the_lock_follows_its_release
             assert json.loads(path.read_text())["pid"] == os.getpid()
     (text,) = told
     assert text.startswith("bus a (socket://127.0.0.1:7001): waiting for the line lock held by ")
-    assert f"(pid {holder.pid}, apply since 20" in text and text.endswith(") — up to 600 s")
+    assert f"(pid {holder.pid}, apply since 20" in text and text.endswith(") as its lock file says — up to 600 s")
 
 
 def test_a_wait_that_runs_out_is_refused_and_told_once():
@@ -172,7 +176,7 @@ def test_shared_directory_and_files_whatever_the_umask(tmp_path, monkeypatch):
     finally:
         os.umask(previous)
     assert stat.S_IMODE(path.parent.stat().st_mode) == 0o1777
-    assert stat.S_IMODE(path.stat().st_mode) == 0o666
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644  # every user reads who holds it; only its owner writes it
 
 
 # A process trying a lock, at once: prints "took" or the refusal.
@@ -247,6 +251,291 @@ def test_a_read_only_lock_file_is_still_locked():
         with pytest.raises(LineBusy, match="locked by another process"):
             with line_lock((KEY,), "bus a"):
                 pass
+
+
+# -- a lock folder no other user can take over ------------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[1]
+OTHER = "prc3cfg-other"
+
+
+def other_user() -> pwd.struct_passwd:
+    """The user prc3cfg-other, made when absent (and left for the next run); skip where that cannot be."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root: to run a process as another user")
+    try:
+        return pwd.getpwnam(OTHER)
+    except KeyError:
+        pass
+    if shutil.which("useradd") is None:
+        pytest.skip(f"no useradd to make the user {OTHER}")
+    made = subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", OTHER], capture_output=True, text=True)
+    try:
+        return pwd.getpwnam(OTHER)
+    except KeyError:
+        pytest.skip(f"cannot make the user {OTHER}: {made.stderr.strip()}")
+
+
+@pytest.fixture
+def shared_locks(monkeypatch):
+    """A lock folder as the machine's: root's, sticky and writable by all, in a folder every user can
+    reach (the test's own tmp_path is root's alone); removed after the test."""
+    outer = Path(tempfile.mkdtemp(prefix="prc3cfg-test-"))
+    try:
+        outer.chmod(0o755)
+        monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(outer / "locks"))
+        yield outer / "locks"
+    finally:
+        shutil.rmtree(outer)
+
+
+def as_other(user: pwd.struct_passwd, script: str, *argv: str) -> list[str]:
+    """The command that runs `script` as `user`, with this worktree's prc3cfg."""
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        pytest.skip("no setpriv to run a process as another user")
+    return [setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups", sys.executable, "-c", script, *argv]
+
+
+@pytest.mark.parametrize("owner", [OTHER, "uid 54321"])
+def test_a_lock_folder_another_user_owns_is_refused(owner):
+    """The first user to make /run/lock/prc3cfg after a boot owns it and could remove root's locks in it
+    (a second plan ran while an apply held the line): such a folder is never used."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root: to give a folder to another user")
+    uid = other_user().pw_uid if owner == OTHER else 54321
+    folder = lock_dir()
+    folder.mkdir(mode=0o1777)
+    os.chown(folder, uid, uid)
+    name = f"{OTHER} (uid {uid})" if owner == OTHER else "uid 54321"
+    with pytest.raises(UserError) as refused:
+        with line_lock((KEY,), "bus a"):
+            pass
+    assert str(refused.value) == (f"bus a: the lock directory {folder} belongs to {name}, who could remove the locks in it, "
+                                  "so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")  # fmt: skip
+    assert list(folder.iterdir()) == []
+
+
+@pytest.mark.parametrize("target", ["a folder", "nothing"])
+def test_a_symlink_in_place_of_the_lock_folder_is_not_followed(tmp_path, target):
+    """A symlink someone put where the lock folder goes made root make world-writable files where it points."""
+    elsewhere = tmp_path / "elsewhere"
+    if target == "a folder":
+        elsewhere.mkdir()
+    lock_dir().symlink_to(elsewhere)
+    refusal = r"^bus a: the lock directory .*/locks is a symbolic link, not used — an administrator removes it, or set PRC3CFG_LOCK_DIR$"
+    with pytest.raises(UserError, match=refusal):
+        with line_lock((KEY,), "bus a"):
+            pass
+    assert (list(elsewhere.iterdir()) == []) if target == "a folder" else not elsewhere.exists()
+
+
+def test_a_second_name_of_another_file_is_not_a_lock_file(tmp_path):
+    """A hard link planted as a lock file's name: prc3cfg wrote its details into the file it names,
+    then emptied it."""
+    precious = tmp_path / "shadow"
+    precious.write_text("root:secret\n")
+    lock_dir().mkdir()
+    os.link(precious, lock_path(KEY))
+    with pytest.raises(UserError, match=r"^bus a: the line lock .* is a second name of another file, not used — an administrator"):
+        with line_lock((KEY,), "bus a"):
+            pass
+    assert precious.read_text() == "root:secret\n"
+
+
+def test_a_fifo_in_place_of_a_lock_file_is_refused_not_waited_on():
+    lock_dir().mkdir()
+    os.mkfifo(lock_path(KEY))
+    with pytest.raises(UserError, match=r"^bus a: the line lock .* is no plain file, not used — an administrator"):
+        with line_lock((KEY,), "bus a"):
+            pass
+
+
+@pytest.mark.parametrize("holder", ["this user", OTHER])
+def test_a_lock_file_replaced_between_its_open_and_its_lock_is_not_taken(shared_locks, monkeypatch, holder):
+    """Between this process's open of the lock file and its lock, the file is removed and another
+    process — another user's where it can run — makes a new one and holds it: this process must not
+    hold the line too (it locked the removed file, and both held the line)."""
+    user = other_user() if holder == OTHER else None
+    shared_locks.mkdir(mode=0o1777)
+    shared_locks.chmod(0o1777)
+    lock_path(KEY).write_text("")
+    lock_path(KEY).chmod(0o666)
+    try_lock = platform.try_lock
+    holders: list[subprocess.Popen] = []
+    with contextlib.ExitStack() as stack:
+
+        def replaced_first(fd: int) -> bool:
+            if not holders:  # the first lock: the file is replaced before it
+                lock_path(KEY).unlink()
+                command = as_other(user, HOLDER, json.dumps([KEY])) if user is not None else None
+                claims_root = {**os.environ, "USER": "root", "LOGNAME": "root"}  # getpass believes them
+                holders.append(stack.enter_context(holding(json.dumps([KEY]), command=command, env=claims_root)))
+            return try_lock(fd)
+
+        monkeypatch.setattr(platform, "try_lock", replaced_first)
+        with pytest.raises(LineBusy) as refused:
+            with line_lock((KEY,), "bus a"):
+                pass
+    (holder_process,) = holders
+    assert str(refused.value).startswith("bus a: the line is locked by ")
+    assert f"(pid {holder_process.pid}, apply since 20" in str(refused.value)
+    if user is not None:  # it claims to be root, as $USER says; whose file it is, the kernel says
+        assert str(refused.value).startswith("bus a: the line is locked by root@")
+        assert f") as its lock file says, a file of {OTHER} (uid {user.pw_uid}) — " in str(refused.value)
+
+
+def test_another_user_can_neither_remove_a_held_lock_nor_take_the_line(shared_locks):
+    """The folder is sticky: another user's prc3cfg sees root's lock and waits, and cannot remove it."""
+    user = other_user()
+    with line_lock((KEY,), "bus a") as (path,):
+        remover = "import os, sys\ntry:\n    os.unlink(sys.argv[2])\nexcept OSError as e:\n    print(e.strerror)\n" + TRIER
+        tried = subprocess.run(as_other(user, remover, json.dumps([KEY]), str(path)), capture_output=True, text=True, cwd=ROOT, timeout=60)
+        assert path.exists()
+    assert tried.stdout.splitlines()[0] == "Operation not permitted", tried
+    assert tried.stdout.splitlines()[1].startswith("bus a: the line is locked by ") and f"(pid {os.getpid()}, apply since " in tried.stdout
+
+
+# Another user's prc3cfg: takes and lets go of the line once, then removes every file of its own in
+# the lock folder — as its owner may, sticky folder or not — and tries the line.
+REMOVER_THEN_TRIER = """
+import json, os, sys
+from prc3cfg.shell.locks import line_lock, lock_dir
+with line_lock(json.loads(sys.argv[1]), "bus a"):
+    pass
+print("made", flush=True)
+sys.stdin.readline()
+for name in os.listdir(lock_dir()):
+    try:
+        os.unlink(lock_dir() / name)
+        print("removed", name, flush=True)
+    except OSError:
+        pass
+""" + TRIER
+
+
+def test_a_lock_file_another_user_made_is_never_the_one_held(shared_locks):
+    """Another user made the line's lock file the first time it took the line. This process took the
+    line after — on that file, which its owner may remove whoever holds it: then the owner's next prc3cfg
+    made a new file of that name and held the line too. Each user now holds a file of its own and sees
+    every other user's."""
+    user = other_user()
+    shared_locks.mkdir(mode=0o1777)
+    shared_locks.chmod(0o1777)
+    other = subprocess.Popen(as_other(user, REMOVER_THEN_TRIER, json.dumps([KEY])), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             text=True, cwd=ROOT)  # fmt: skip
+    try:
+        assert other.stdout.readline() == "made\n"  # its lock file, made and let go of
+        with line_lock((KEY,), "bus a"):
+            out, _ = other.communicate("go\n", timeout=60)  # it removes what it may, and tries the line
+    finally:
+        other.kill()
+        other.wait()
+    *removed, tried = out.splitlines()
+    assert removed and tried.startswith("bus a: the line is locked by ") and f"(pid {os.getpid()}, apply since 20" in tried, out
+
+
+def test_a_lock_file_in_this_users_name_that_another_user_owns_is_refused():
+    """Another user could make this user's lock file first, then remove it while this user holds it."""
+    if os.geteuid() != 0:
+        pytest.skip("needs root: to give a file to another user")
+    lock_dir().mkdir()
+    lock_path(KEY).write_text("")
+    os.chown(lock_path(KEY), 54321, 54321)
+    with pytest.raises(UserError) as refused:
+        with line_lock((KEY,), "bus a"):
+            pass
+    assert str(refused.value) == (f"bus a: the line lock {lock_path(KEY)} belongs to uid 54321, who could remove it while this process "
+                                  "holds it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")  # fmt: skip
+
+
+def test_an_older_prc3cfgs_lock_file_is_seen():
+    """prc3cfg before lock files of their own per user locked HASH.lock, every user's: still a holder."""
+    lock_dir().mkdir()
+    shared = lock_dir() / f"{locks._stem(KEY)}.lock"
+    with holding(str(shared), "", script=RAW_HOLDER):
+        with pytest.raises(LineBusy, match=r"^bus a: the line is locked by another process — wait for it"):
+            with line_lock((KEY,), "bus a"):
+                pass
+    with line_lock((KEY,), "bus a") as (path,):
+        assert path != shared
+
+
+def test_a_lock_file_another_user_cannot_read_counts_as_held(shared_locks):
+    user = other_user()
+    with line_lock((KEY,), "bus a") as (path,):
+        pass
+    path.chmod(0)
+    tried = subprocess.run(as_other(user, TRIER, json.dumps([KEY])), capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert tried.stdout == f"bus a: the line is locked by a process of root (uid 0) (its lock file {path} cannot be read) — " \
+                           "wait for it to finish, or pass --lock-timeout SECONDS to wait\n", tried
+
+
+# A racer: at every line on stdin it tries the line at once; holding it, it makes the file argv[2]
+# (O_EXCL: it fails while the other racer holds the line too), keeps it 20 ms and removes it.
+RACER = """
+import json, os, sys, time
+from prc3cfg.shell.locks import LineBusy, line_lock
+for _ in sys.stdin:
+    try:
+        with line_lock(json.loads(sys.argv[1]), "bus a"):
+            try:
+                fd = os.open(sys.argv[2], os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            except FileExistsError:
+                print("both", flush=True)
+                continue
+            time.sleep(0.02)
+            os.close(fd)
+            os.unlink(sys.argv[2])
+            print("took", flush=True)
+    except LineBusy:
+        print("busy", flush=True)
+"""
+
+
+def test_two_users_racing_for_a_line_never_both_hold_it(shared_locks):
+    """Root and prc3cfg-other try one line at the same instant, 40 times: each holds a file of its own
+    and looks at the other's; the higher uid lets go, the lower waits for it a moment. Never both hold
+    the line, and one of them takes it (both were refused in 73 of 200 races before the wait; after,
+    in none: 169 one, 31 both one after the other). Half of the races is the bound: the wait is 50 ms,
+    and CI's cores are shared."""
+    user = other_user()
+    shared_locks.mkdir(mode=0o1777)
+    shared_locks.chmod(0o1777)
+    (shared_locks.parent / "marks").mkdir(mode=0o1777)
+    (shared_locks.parent / "marks").chmod(0o1777)
+    inside = shared_locks.parent / "marks" / "inside"
+    racers = [subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
+              for command in ([sys.executable, "-c", RACER, json.dumps([KEY]), str(inside)],
+                              as_other(user, RACER, json.dumps([KEY]), str(inside)))]  # fmt: skip
+    rounds = []
+    try:
+        for _ in range(40):
+            for racer in racers:
+                racer.stdin.write("go\n")
+            for racer in racers:
+                racer.stdin.flush()
+            rounds.append(tuple(racer.stdout.readline().strip() for racer in racers))
+    finally:
+        for racer in racers:
+            racer.stdin.close()
+            racer.wait(timeout=60)
+    assert all(set(r) <= {"took", "busy"} for r in rounds), rounds  # "both": one made its file while the other held the line
+    assert sum("took" in r for r in rounds) >= len(rounds) // 2, rounds
+
+
+def test_holder_details_are_shown_as_claims_with_the_file_owner():
+    """Anyone who may write a lock file may write any holder into it: the message says whose claim it
+    is, and whose file it is where that is not the user it claims."""
+    lock_dir().mkdir()
+    forged = json.dumps({"holder": "alice@floor", "pid": 1, "purpose": "apply", "since": "2026-01-01T00:00:00+00:00"})
+    with holding(str(lock_path(KEY)), forged, script=RAW_HOLDER):
+        with pytest.raises(LineBusy) as refused:
+            with line_lock((KEY,), "bus a"):
+                pass
+    owner = platform.uid_name(os.getuid())
+    assert str(refused.value) == (f"bus a: the line is locked by alice@floor (pid 1, apply since 2026-01-01T00:00:00+00:00) as its lock "
+                                  f"file says, a file of {owner} — wait for it to finish, or pass --lock-timeout SECONDS to wait")  # fmt: skip
 
 
 # -- the identities of a line --------------------------------------------------------------

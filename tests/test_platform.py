@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import ast
 import os
+import re
 import socket
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -63,6 +65,9 @@ for file in sorted(root.rglob("*.py")):
     except Exception as error:
         failed.append(f"{name}: {type(error).__name__}: {error}")
 print("\\n".join(failed) or "imported", flush=True)
+from prc3cfg.shell import locks
+with locks.line_lock(locks.line_keys("COM3"), "bus a") as (path,):  # no owners to check, one file for every user
+    print("locked", path.name, flush=True)
 sys.argv = ["prc3cfg", "validate", sys.argv[1]]
 from prc3cfg.cli import main
 main()
@@ -99,6 +104,7 @@ def test_every_module_imports_and_a_plant_validates_as_on_windows():
     done = subprocess.run([sys.executable, "-c", AS_ON_WINDOWS, str(ROOT / "plants" / "demo-line.yaml")],
                           capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert done.stdout.splitlines()[:1] == ["imported"], done.stdout + done.stderr
+    assert re.fullmatch(r"locked [0-9a-f]{24}\.lock", done.stdout.splitlines()[1]), done.stdout + done.stderr
     assert done.returncode == 0, done.stdout + done.stderr
     assert "Traceback" not in done.stderr
 
@@ -180,6 +186,35 @@ def test_a_pseudo_terminal_is_known_by_its_device():
     finally:
         os.close(master)
         os.close(slave)
+
+
+def test_a_lock_held_elsewhere_is_seen_without_being_taken(tmp_path):
+    path = tmp_path / "x.lock"
+    path.write_text("")
+    holder, looker = os.open(path, os.O_RDWR), os.open(path, os.O_RDONLY)
+    try:
+        assert not platform.is_locked(looker)
+        assert platform.try_lock(holder)  # the look let go of what it tried
+        assert platform.is_locked(looker)
+        platform.unlock(holder)
+        assert not platform.is_locked(looker)
+    finally:
+        os.close(holder)
+        os.close(looker)
+
+
+def test_a_shared_folder_is_made_sticky_whatever_the_umask_and_never_through_a_link(tmp_path):
+    previous = os.umask(0o077)
+    try:
+        platform.make_shared_folder(tmp_path / "locks", 0o1777)
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE((tmp_path / "locks").stat().st_mode) == 0o1777
+    (tmp_path / "elsewhere").mkdir(mode=0o700)
+    (tmp_path / "link").symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(FileExistsError):
+        platform.make_shared_folder(tmp_path / "link", 0o1777)
+    assert stat.S_IMODE((tmp_path / "elsewhere").stat().st_mode) == 0o700
 
 
 # -- Windows' serial ports: COM3, COM10, \\.\COM10 -----------------------------------------

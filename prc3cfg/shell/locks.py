@@ -11,14 +11,30 @@ The folder is the machine's, whatever the environment or the user of the process
 folder, as for serial tools' `LCK..` files), `/var/lock/prc3cfg`, then `/tmp/prc3cfg-locks` —
 the first that exists, or else whose parent every user may make folders in (sticky and
 writable by all), so every user's prc3cfg picks the same one; on Windows
-`%ProgramData%\\prc3cfg\\locks` (`prc3cfg.shell.platform.LOCK_FOLDERS`). It is made sticky and writable
-by all, its lock files readable and writable by all: another user's prc3cfg sees a lock,
-names its holder and waits for it, and never removes it. The lock is the kernel's: it dies with the process that holds it, so there
-is no stale lock to guess at, and a lock file is never deleted (a process could be holding
-the deleted file while a third locks a new one of the same name). The holder's details
-written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) only name the holder to
-whoever waits; an empty or half-written file, as a holder leaves it between taking the lock
-and writing, names "another process".
+`%ProgramData%\\prc3cfg\\locks` (`prc3cfg.shell.platform.LOCK_FOLDERS`). It is made sticky and
+writable by all. Each user locks a lock file of its own per key, `HASH.UID.lock`, readable by all
+(`lock_path`), and looks at every other user's of that key (`_others_holder`): one another user
+holds is a busy line. A user never holds another's file — its owner may remove it from the
+sticky folder while someone else holds it, and the owner's next prc3cfg would lock a new file of
+that name — so another user's prc3cfg sees a lock, names its holder and waits for it, and cannot
+remove it. Two users taking one line at the same instant both see the other: the higher uid
+lets go, and never both hold it. (Windows: every user locks `HASH.lock`; there are no uids.)
+
+The lock is the kernel's: it dies with the process that holds it, so there is no stale lock to
+guess at, and prc3cfg never deletes a lock file (a process could be holding the deleted file
+while a third locks a new one of the same name); a lock taken on a file that was removed or
+replaced between its open and its lock is let go and the path opened again (`_same_file`).
+
+Nothing in the folder is trusted that another user could have put there to take the line or to
+have prc3cfg write elsewhere (`_make_lock_dir`, `_open`): the folder must be a folder — not a
+symbolic link — of root or of this user (its owner may remove any lock in it, even in a sticky
+folder), else it is refused in one line and an administrator removes it; a lock file is opened
+without following a symbolic link, made with O_EXCL, and must be a plain file with one name (a
+hard link to another file, a FIFO: refused) of this user. On Windows owners are ACLs and are not
+checked. The holder's details written inside (`holder`, `host`, `pid`, `since`, `purpose`, `line`) are
+what anyone who may write the file says: the holder is named "as its lock file says", with whose
+file it is where that is another user than the one it names; an empty or half-written file, as a
+holder leaves it between taking the lock and writing, names "another process".
 
 Does not own what a bus's line is (the caller passes its port and, for `emulator://`, the
 state file) nor where a message goes (`waiting` is the caller's).
@@ -27,6 +43,7 @@ state file) nor where a message goes (`waiting` is the caller's).
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import ipaddress
 import json
@@ -39,14 +56,18 @@ from datetime import UTC, datetime
 from pathlib import Path
 from urllib.parse import urlsplit
 
+from prc3cfg.core import text
 from prc3cfg.core.line import TCP_SCHEMES
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform, serial_lock
 
 POLL = 0.1  # s between attempts on a busy line
+REOPENS = 10  # opens of a lock file removed or replaced between its open and its lock
+RACE_WAIT = 0.05  # s the lower uid of two users taking a line at one instant waits for the other to let go
 #: Where the lock folder may be, in order: (parent, name) — `lock_dir`.
 LOCK_FOLDERS = platform.LOCK_FOLDERS
-_OPEN_FLAGS = platform.NO_FOLLOW | platform.NO_INHERIT
+#: Never through a symbolic link; a FIFO planted in place of a lock file cannot block the open.
+_OPEN_FLAGS = platform.NO_FOLLOW | platform.NO_INHERIT | platform.NON_BLOCKING
 
 
 class LineBusy(UserError):
@@ -144,61 +165,189 @@ def _shared(folder: Path) -> bool:
 
 
 def lock_path(key: str) -> Path:
-    return lock_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:24]}.lock"
+    """This user's lock file of `key`: `HASH.UID.lock` (Windows: `HASH.lock`, every user's)."""
+    uid = platform.user_id()
+    return lock_dir() / f"{_stem(key)}{'' if uid is None else f'.{uid}'}.lock"
 
 
-def _make_lock_dir(description: str) -> None:
-    """The lock directory, made sticky and writable by every user when this process makes it."""
+def _stem(key: str) -> str:
+    return hashlib.sha256(key.encode()).hexdigest()[:24]
+
+
+def _make_lock_dir(description: str) -> Path:
+    """The lock folder, made sticky and writable by every user when this process makes it; refused
+    (`UserError`, one line) when it is a symbolic link, no folder, or another non-root user's — its
+    owner could remove the locks in it, whoever made them."""
     directory = lock_dir()
     try:
-        directory.mkdir(mode=0o1777, parents=True)
-        os.chmod(directory, 0o1777)  # umask aside
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        platform.make_shared_folder(directory, 0o1777)
     except FileExistsError:
         pass
     except OSError as error:
         raise UserError(f"{description}: cannot make the lock directory {directory} ({error.strerror}) — set PRC3CFG_LOCK_DIR") from None
+    try:
+        status = os.lstat(directory)
+    except OSError as error:
+        raise UserError(f"{description}: cannot read the lock directory {directory} ({error.strerror}) — set PRC3CFG_LOCK_DIR") from None
+    if stat.S_ISLNK(status.st_mode):
+        raise UserError(f"{description}: the lock directory {directory} is a symbolic link, not used — "
+                        "an administrator removes it, or set PRC3CFG_LOCK_DIR")
+    if not stat.S_ISDIR(status.st_mode):
+        raise UserError(f"{description}: the lock directory {directory} is no directory — "
+                        "an administrator removes it, or set PRC3CFG_LOCK_DIR")
+    if not _trusted_owner(status.st_uid):
+        raise UserError(f"{description}: the lock directory {directory} belongs to {platform.uid_name(status.st_uid)}, "
+                        "who could remove the locks in it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")
+    return directory
+
+
+def _trusted_owner(uid: int) -> bool:
+    """Whether a folder of that owner may hold the line's locks: root's or this user's. Windows: not
+    checked — its owners and rights are ACLs (`platform.OWNERS`)."""
+    return not platform.OWNERS or uid in (0, platform.user_id())
 
 
 def _open(path: Path, description: str) -> tuple[int, bool]:
-    """A descriptor of the lock file (made readable and writable by all if this call makes it),
-    and whether it is open for writing — another user's read-only lock is locked all the same."""
+    """A descriptor of this user's lock file (made readable by all if this call makes it), and
+    whether it is open for writing — a read-only lock is locked all the same.
+
+    Never through a symbolic link, and never anything but a plain file with one name (a hard link
+    to another file would have prc3cfg write its details into that file) of this user (another
+    could remove it while this process holds it): refused, one line."""
     try:
         try:
-            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _OPEN_FLAGS, 0o666)
-            platform.set_mode(fd, 0o666)  # umask aside
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _OPEN_FLAGS, 0o644)
+            platform.set_mode(fd, 0o644)  # umask aside: every user reads who holds it
             return fd, True
         except FileExistsError:
             pass
         try:
-            return os.open(path, os.O_RDWR | _OPEN_FLAGS), True
+            fd, writable = os.open(path, os.O_RDWR | _OPEN_FLAGS), True
         except PermissionError:
-            return os.open(path, os.O_RDONLY | _OPEN_FLAGS), False
+            fd, writable = os.open(path, os.O_RDONLY | _OPEN_FLAGS), False
     except OSError as error:
         raise UserError(f"{description}: cannot open the line lock {path} ({error.strerror}) — "
                         "check the lock directory or set PRC3CFG_LOCK_DIR") from None
+    status = os.fstat(fd)
+    if not stat.S_ISREG(status.st_mode) or status.st_nlink != 1:
+        os.close(fd)
+        what = "a second name of another file" if stat.S_ISREG(status.st_mode) else "no plain file"
+        raise UserError(f"{description}: the line lock {path} is {what}, not used — "
+                        "an administrator removes it, or set PRC3CFG_LOCK_DIR")
+    if platform.OWNERS and status.st_uid != platform.user_id():
+        os.close(fd)
+        raise UserError(f"{description}: the line lock {path} belongs to {platform.uid_name(status.st_uid)}, who could remove it "
+                        "while this process holds it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")
+    return fd, writable
+
+
+def _others_holder(path: Path) -> str | None:
+    """Who holds the line in another user's lock file of it (`HASH.UID.lock` beside this user's
+    `path`, or an older prc3cfg's `HASH.lock`), or None; this user's `path` is held. Such a file is
+    only looked at — its owner may remove it whoever holds it — and one this user may not read
+    counts as held. Two users taking the line at one instant each hold their own and see the
+    other's: the lower uid waits up to `RACE_WAIT` s for the other to let go, the higher lets go at
+    once, so one of them takes the line. Windows: every user locks one file (`lock_path`), there is no other."""
+    if not platform.OWNERS:
+        return None
+    deadline = time.monotonic() + RACE_WAIT
+    while True:
+        found = _other_holder_now(path)
+        if found is None:
+            return None
+        holder, uid = found
+        if uid <= (platform.user_id() or 0) or time.monotonic() >= deadline:
+            return holder
+        time.sleep(RACE_WAIT / 10)
+
+
+def _other_holder_now(path: Path) -> tuple[str, int] | None:
+    """The first other user's lock file of `path`'s key held now: its holder and its owner's uid."""
+    stem = path.name.partition(".")[0]
+    try:
+        names = sorted(os.listdir(path.parent))
+    except OSError:
+        return "another process (the lock directory cannot be read)", 0
+    for name in names:
+        if name == path.name or not (name.startswith(f"{stem}.") and name.endswith(".lock")):
+            continue
+        other = path.parent / name
+        try:
+            fd = os.open(other, os.O_RDONLY | _OPEN_FLAGS)
+        except (FileNotFoundError, IsADirectoryError):
+            continue
+        except OSError as error:
+            if error.errno == errno.ELOOP:  # a symbolic link: no prc3cfg locks one
+                continue
+            with contextlib.suppress(OSError):
+                owner = os.lstat(other).st_uid
+                return f"a process of {platform.uid_name(owner)} (its lock file {other} cannot be read)", owner
+            continue
+        try:
+            status = os.fstat(fd)
+            if stat.S_ISREG(status.st_mode) and platform.is_locked(fd):
+                return _holder(fd), status.st_uid
+        finally:
+            os.close(fd)
+    return None
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether `path` still names the file open in `fd` — not removed, nor replaced, since it was
+    opened (a lock taken on a file no longer there locks nothing)."""
+    try:
+        named, held = os.lstat(path), os.fstat(fd)
+    except OSError:
+        return False
+    return (named.st_dev, named.st_ino) == (held.st_dev, held.st_ino)
 
 
 def _holder(fd: int) -> str:
-    """Who holds the lock, as its file says: "alice@host (pid 123, apply since …)", or "another process"."""
+    """Who holds the lock, as its file says, "alice@host (pid 123, apply since …) as its lock file
+    says" — anyone who may write the file may write that — and, where its owner is not the user it
+    names, whose file it is: the uid the kernel keeps ("…, a file of mallory (uid 1002)");
+    "another process" when it names no one (a holder between its lock and its details)."""
     try:
         record = json.loads(platform.read_at(fd, 4096, 0))
-        return f"{record['holder']} (pid {record['pid']}, {record['purpose']} since {record['since']})"
-    except (OSError, ValueError, KeyError, TypeError):
+        claim = f"{record['holder']} (pid {record['pid']}, {record['purpose']} since {record['since']}) as its lock file says"
+        claimed_user = str(record["holder"]).rpartition("@")[0]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return "another process"
+    if platform.OWNERS:
+        with contextlib.suppress(OSError):
+            owner = platform.uid_name(os.fstat(fd).st_uid)
+            if owner.partition(" (uid")[0] != claimed_user:
+                claim += f", a file of {owner}"
+    return text.plain(claim)
 
 
 def _take_all(paths: list[Path], description: str) -> tuple[list[tuple[int, bool]], str | None]:
-    """Lock every path or none: the descriptors taken, or none and the holder of the first busy one."""
+    """Lock every path or none: the descriptors taken, or none and the holder of the first busy one.
+
+    A file locked is kept only if its path still names it (`_same_file`): one removed or replaced
+    between the open and the lock is let go and the path opened again, up to `REOPENS` times."""
     taken: list[tuple[int, bool]] = []
     try:
         for path in paths:
-            fd, writable = _open(path, description)
-            if not platform.try_lock(fd):
-                holder = _holder(fd)
+            for _ in range(REOPENS):
+                fd, writable = _open(path, description)
+                if not platform.try_lock(fd):
+                    holder = _holder(fd)
+                    os.close(fd)
+                    _release(taken)
+                    return [], holder
+                if _same_file(fd, path):
+                    taken.append((fd, writable))
+                    if (other := _others_holder(path)) is not None:
+                        _release(taken)
+                        return [], other
+                    break
+                platform.unlock(fd)
                 os.close(fd)
-                _release(taken)
-                return [], holder
-            taken.append((fd, writable))
+            else:
+                raise UserError(f"{description}: the line lock {path} keeps being removed or replaced — "
+                                "find what removes it, or set PRC3CFG_LOCK_DIR")
     except BaseException:
         _release(taken)
         raise

@@ -7,16 +7,20 @@ means the same everywhere:
   (O_NOFOLLOW; Windows has no symbolic-link open flag: 0), `NON_BLOCKING` (O_NONBLOCK, so a FIFO
   cannot block an open; Windows: 0), `unnamed_file` (Linux's O_TMPFILE and the /proc link that
   names it later; elsewhere None: a named temporary file is written instead);
+- folders: `make_shared_folder` (mkdir, then the mode set on the folder opened without following a
+  symbolic link; Windows: mkdir);
 - file contents and durability: `read_at`/`write_at` (pread/pwrite; Windows: seek, then read or
   write), `set_mode` (fchmod; Windows keeps no POSIX permissions: nothing), `sync_data`
   (fdatasync; fsync where there is none), `sync_folder` (fsync of a directory; Windows cannot
   open one: nothing);
 - file locks: `try_lock`/`unlock` (flock; Windows: msvcrt.locking of one byte far past the end,
-  so the holder's details at the start stay readable) — both released with the last descriptor;
+  so the holder's details at the start stay readable) — both released with the last descriptor —
+  and `is_locked` (a lock someone else holds, seen without holding it);
 - the machine's folders: `LOCK_FOLDERS` (the lock folder's candidates, `prc3cfg.shell.locks`),
   `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases, `prc3cfg.shell.releases`) — POSIX's
   /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows' %ProgramData%\prc3cfg and %LOCALAPPDATA%;
-- who and what: `user_name` (a login name, else `uid N`), `owned_by_this_user`,
+- who and what: `user_name` (a login name, else `uid N`), `owned_by_this_user`, `OWNERS` and
+  `user_id`/`uid_name` (whether files have a uid owner: POSIX; Windows has ACLs instead),
   `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
   CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
 - terminals and serial devices: `TERMINAL_ERRORS`, `character_format` (termios), `is_pseudo_terminal`
@@ -53,6 +57,7 @@ if sys.platform == "win32":
     import msvcrt
 else:
     import fcntl
+    import pwd
     import termios
     import tty
 
@@ -78,6 +83,18 @@ def unnamed_file(folder: Path) -> tuple[int, str] | None:
             return None
         return fd, f"/proc/self/fd/{fd}"
     return None
+
+
+def make_shared_folder(folder: Path, mode: int) -> None:
+    """Make `folder` (FileExistsError when there is one) and set its `mode` whatever the umask, on
+    the folder made — never through a symbolic link put in its place meanwhile (Windows: mkdir)."""
+    folder.mkdir(mode=mode)
+    if sys.platform != "win32":
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
+        try:
+            os.fchmod(fd, mode)
+        finally:
+            os.close(fd)
 
 
 # -- file contents and durability --------------------------------------------------------
@@ -147,6 +164,23 @@ def try_lock(fd: int) -> bool:
         return True
 
 
+def is_locked(fd: int) -> bool:
+    """Whether another open file holds the exclusive lock of the file open in `fd` now (POSIX: a shared
+    lock tried and let go at once; Windows, no shared locks: the exclusive one)."""
+    if sys.platform == "win32":
+        if not try_lock(fd):
+            return True
+        unlock(fd)
+        return False
+    else:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return True
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+
+
 def unlock(fd: int) -> None:
     if sys.platform == "win32":
         os.lseek(fd, _LOCKED_BYTE, os.SEEK_SET)
@@ -183,10 +217,30 @@ def user_name() -> str:
     """The login name of this process's user, else `uid N` (no login name and no passwd entry: a container)."""
     try:
         return getpass.getuser()
-    except (KeyError, OSError):
+    except (KeyError, OSError, ImportError):  # ImportError: Windows without USERNAME, before Python 3.13 (getpass imports pwd)
         if sys.platform == "win32":
             return "an unnamed user"
         return f"uid {os.getuid()}"
+
+
+#: Whether files have an owner uid the kernel keeps (POSIX). Windows keeps owners and rights in ACLs,
+#: which prc3cfg does not read: there `user_id` is None and no ownership is checked.
+OWNERS = sys.platform != "win32"
+
+
+def user_id() -> int | None:
+    """This process's uid (Windows: None — see `OWNERS`)."""
+    if sys.platform == "win32":
+        return None
+    return os.getuid()
+
+
+def uid_name(uid: int) -> str:
+    """"alice (uid 1001)", or "uid 1001" where the uid has no passwd entry."""
+    if sys.platform != "win32":
+        with contextlib.suppress(KeyError):
+            return f"{pwd.getpwuid(uid).pw_name} (uid {uid})"
+    return f"uid {uid}"
 
 
 def owned_by_this_user(path: Path) -> bool:
