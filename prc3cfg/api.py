@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 from urllib.parse import urlsplit
 
-from prc3cfg.core import codec, gateway, planfile, plot, targeting
+from prc3cfg.core import bustime, codec, gateway, planfile, plot, targeting
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import detects_damage, get_framing
@@ -88,8 +88,8 @@ __all__ = [
     "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused",
     "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
     "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
-    "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "terminal_path", "write_adoption",
+    "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
+    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "slower_than_priced", "terminal_path", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -315,6 +315,17 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
 
 
 # -- the lines --------------------------------------------------------------------------
+
+
+def slower_than_priced(links: Iterable[Link]) -> list[Link]:
+    """The links whose answered exchanges took clearly longer than their line settings price them
+    (`prc3cfg.core.bustime.slower_than_priced`): the plant file's line settings are off."""
+    return [link for link in links if link.cost is not None and link.answered and bustime.slower_than_priced(link.answered_time, link.priced_time)]
+
+
+def measurable(port: str) -> bool:
+    """Whether `prc3cfg doctor` can measure the line at `port` (an `emulator://` port it cannot: its URL says how it answers)."""
+    return not port.startswith(EMULATOR_SCHEME)
 
 
 def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:

@@ -378,15 +378,13 @@ def note_slow(links: Iterable[Link]) -> None:
     """One line if any line's answered exchanges took clearly longer than the plant file's line settings
     price them (`prc3cfg.core.bustime.slower_than_priced`): the figures, the turnaround they amount to,
     and how to measure the line — estimates, and waits that depend on the turnaround, are that far off."""
-    from prc3cfg.core.bustime import slower_than_priced
-    from prc3cfg.core.line import EMULATOR_SCHEME
+    from prc3cfg.api import measurable, slower_than_priced
     from prc3cfg.core.render import plural
     from prc3cfg.core.text import plain
 
     said, ports = [], []
-    for link in links:
-        if link.cost is None or not link.answered or not slower_than_priced(link.answered_time, link.priced_time):
-            continue
+    for link in slower_than_priced(links):
+        assert link.cost is not None  # (priced: `slower_than_priced` says so)
         answer = link.cost.turnaround + (link.answered_time - link.priced_time) / link.answered
         said.append(f"bus {link.bus}: {plural(link.answered, 'exchange')} took {link.answered_time:.1f} s, its settings price them at "
                     f"{link.priced_time:.1f} s (the modules answered after {answer * 1000:.0f} ms on average, turnaround: "
@@ -394,7 +392,7 @@ def note_slow(links: Iterable[Link]) -> None:
         ports.append(plain(link.port_name))
     if not said:
         return
-    measured = [f"prc3cfg doctor --port {port}" for port in ports if not port.startswith(EMULATOR_SCHEME)]
+    measured = [f"prc3cfg doctor --port {port}" for port in ports if measurable(port)]
     remedies = [f"measure the line with {' and '.join(measured)} and put the bus keys it prints into the plant file"] if measured else []
     if len(measured) < len(ports):  # an emulator:// port answers as its URL says: doctor cannot reach it
         remedies.append("an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same")
