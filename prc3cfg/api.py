@@ -676,8 +676,8 @@ def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) 
         return Reads(pairs, targets(pairs))
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
-    known, now, to_read = record(plant, {names[(e.bus, e.address)][0].name: names[(e.bus, e.address)][0] for e in entries}.values()), \
-        datetime.now(UTC), []  # fmt: skip
+    buses = {bus.name: bus for bus, _ in (names[(e.bus, e.address)] for e in entries)}
+    known, now, to_read = record(plant, buses.values()), datetime.now(UTC), []
     for e in entries:
         bus, m = names[(e.bus, e.address)]
         decision = targeting.to_read(known.get((e.bus, e.address)), m.desired_image(), now, bus.record_max_age)

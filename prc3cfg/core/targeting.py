@@ -77,11 +77,7 @@ def merged(known: Known | None, read: ModuleImage, when: str, by: str) -> Known:
     """The record of a module after `read` was read (or verified) `when` by `by`: what was read,
     with the values of the record it did not read again — unless it contradicts the record, which
     then goes whole. Its `since` stays the record's while any value of the record is kept."""
-    if known is None or contradiction(known.image, read) is not None:
-        return Known(read, when, by)
-    programs = tuple(now if now is not None else was for was, now in zip(known.image.programs, read.programs))
-    kept = any(now is None and was is not None for was, now in zip(known.image.programs, read.programs))
-    return Known(replace(read, programs=programs), known.since, known.by) if kept else Known(replace(read, programs=programs), when, by)
+    return verified(None if known is None or contradiction(known.image, read) is not None else known, read, when, by)
 
 
 def within_read(desired: ModuleImage, actual: ModuleImage) -> ModuleImage:
