@@ -236,6 +236,35 @@ def test_a_record_another_user_made_or_linked_is_not_believed(applied, capsys, t
     assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # program 2 not read: the stated limit
 
 
+def test_a_record_another_tool_wrote_or_damaged_is_no_record(applied, capsys, tmp_path):
+    """A record file rewritten by another tool — a time without its zone, an image that is no image, an
+    address that is no number, bytes that are no JSON — is read as no record, never as a traceback:
+    the modules are read in full and the drift found."""
+    applied.emulators["booth-a"].teach_in(2, 2, 180)  # booth-a-right's program 2: a plan taking the record would not read it
+    records = sorted((tmp_path / "state" / "lines").glob("*.json"))
+    kept = {path: json.loads(path.read_text()) for path in records}
+
+    def naive(entry: dict) -> None:
+        entry["since"] = entry["since"][:19]  # 2026-11-26T03:27:02, no zone
+
+    def no_image(entry: dict) -> None:
+        entry["image"] = {"address": "two"}
+
+    for damage in (naive, no_image):
+        for path, document in kept.items():
+            changed = json.loads(json.dumps(document))
+            for entry in changed["modules"].values():
+                damage(entry)
+            path.write_text(json.dumps(changed, indent=2).replace("\n", "\r\n"))  # pretty-printed, CRLF
+        planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+        assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, (damage.__name__, planned.err)
+        assert "taken as known" not in planned.out  # nothing on record: every module read in full
+    for path in records:
+        path.write_bytes(b"\xef\xbb\xbf{not json")
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out
+
+
 # -- adversarial: seeded scenario families, the claims held against what the modules hold ---------
 
 #: What touched the line after plant file A was applied: prc3cfg through another plant file (its

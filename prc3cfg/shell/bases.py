@@ -79,7 +79,8 @@ def load(keys: Iterable[str]) -> dict[int, Known]:
     for address, entry in newest.items():
         try:
             if entry.get("image") is not None and isinstance(entry.get("since"), str) and isinstance(entry.get("by"), str):
-                datetime.fromisoformat(entry["since"])
+                if datetime.fromisoformat(entry["since"]).tzinfo is None:
+                    continue  # a time without its zone (another tool's): its age cannot be told
                 known[int(address)] = Known(ModuleImage.from_json(entry["image"]), entry["since"], entry["by"])
         except ValueError:
             continue  # an entry this prc3cfg cannot read: the module is not known
