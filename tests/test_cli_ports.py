@@ -59,6 +59,25 @@ def test_a_port_without_a_description_has_none(monkeypatch, capsys):
     assert run_cli(capsys, "ports").out.splitlines() == ["/dev/ttyS0    -", "/dev/ttyUSB0  -"]
 
 
+def test_where_pyserial_s_listing_cannot_load_the_registry_s_com_ports_are_listed(monkeypatch, capsys):
+    """Wine 8's cfgmgr32 lacks a function pyserial's Windows listing binds at import (AttributeError from
+    ctypes): the ports Windows' registry names are listed, in number order, without description."""
+    monkeypatch.setattr(platform, "registered_serial_ports", lambda: ["COM10", "COM7", "COM1"])
+    monkeypatch.setattr("builtins.__import__", failing_import(__import__, "serial.tools", AttributeError("function 'CM_MapCrToWin32Err' not found")))
+    result = run_cli(capsys, "ports")
+    assert result.code == 0, result.err
+    assert result.out.splitlines() == ["COM1   -", "COM7   -", "COM10  -"]
+
+
+def failing_import(real, name, error):
+    def imported(module, globals=None, locals=None, fromlist=(), level=0):
+        if module == name and fromlist and "list_ports" in fromlist:
+            raise error
+        return real(module, globals, locals, fromlist, level)
+
+    return imported
+
+
 def test_no_port_is_said_on_stderr(monkeypatch, capsys):
     monkeypatch.setattr(list_ports, "comports", lambda include_links=False: [])
     result = run_cli(capsys, "ports")

@@ -262,3 +262,19 @@ def test_on_windows_two_spellings_of_a_com_port_are_one_line(monkeypatch):
 
     monkeypatch.setattr(sys, "platform", "win32")
     assert line_keys("COM10") == line_keys("com10") == line_keys(r"\\.\COM10") == ("dev/COM10",)
+
+
+@pytest.mark.parametrize(("parity", "byte_size", "stop_bits", "said"), [
+    (0, 8, 0, ("none", 8, False)),
+    (2, 8, 0, ("even", 8, False)),
+    (1, 7, 2, ("odd", 7, True)),
+    (154, 8, 0, ("code 154", 8, False)),  # Wine 8 on a pty asked for odd parity: no line's parity
+])
+def test_a_com_port_s_dcb_is_read_as_a_character_format(parity, byte_size, stop_bits, said):
+    """Windows' read-back of the format a COM port keeps (GetCommState): a port that dropped the
+    parity it was given (Wine's COMn on a pty, given even) is refused as a pty is on Linux."""
+    assert platform.dcb_format(parity, byte_size, stop_bits) == said
+
+
+def test_the_registry_s_com_ports_are_windows_only():
+    assert platform.registered_serial_ports() == []

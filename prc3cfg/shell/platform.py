@@ -23,10 +23,11 @@ means the same everywhere:
   `user_id`/`uid_name` (whether files have a uid owner: POSIX; Windows has ACLs instead),
   `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
   CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
-- terminals and serial devices: `TERMINAL_ERRORS`, `character_format` (termios), `is_pseudo_terminal`
-  (Linux's pty majors), `device_number` (major and minor of a device), `terminal_path` (ttyname;
+- terminals and serial devices: `TERMINAL_ERRORS`, `character_format` (termios; Windows: the port's DCB,
+  `dcb_format`), `is_pseudo_terminal` (Linux's pty majors), `device_number` (major and minor of a device), `terminal_path` (ttyname;
   Windows: the console, CONOUT$), `open_pty` (POSIX only: `HAS_PTY`), `pty_line` (the baud rate and
-  stop bits a client set on a pty), `kernel_lock_holders` (Linux's /proc/locks), `UUCP_LOCKS`
+  stop bits a client set on a pty), `kernel_lock_holders` (Linux's /proc/locks),
+  `registered_serial_ports` (Windows' registry of COM ports), `UUCP_LOCKS`
   (whether the `LCK..` convention exists here: not on Windows, where a COM port is exclusive),
   `device_identity` (the name two spellings of one device share: on Windows a COM port's,
   `com_port_name`: `COM10`, `com10`, `\\.\COM10`);
@@ -322,11 +323,30 @@ PTY_MAJORS = range(136, 144)
 COM_PORT = re.compile(r"(?:\\\\\.\\)?(COM[1-9][0-9]*)", re.IGNORECASE)
 
 
+#: A Windows DCB's Parity codes (NOPARITY, ODDPARITY, EVENPARITY, MARKPARITY, SPACEPARITY).
+DCB_PARITY = {0: "none", 1: "odd", 2: "even", 3: "mark", 4: "space"}
+
+
+def dcb_format(parity: int, byte_size: int, stop_bits: int) -> tuple[str, int, bool]:
+    """A Windows DCB's character format as `character_format` says it (stop-bit code 2 is TWOSTOPBITS;
+    a parity code of none of the five is said as `code N`, which no line's parity matches)."""
+    return DCB_PARITY.get(parity, f"code {parity}"), byte_size, stop_bits == 2
+
+
 def character_format(port: object) -> tuple[str, int, bool] | None:
-    """The parity, data bits and whether two stop bits, as the terminal device open in `port` (a
-    pyserial port) keeps them now; None where there is nothing to read back (not a terminal, Windows)."""
+    """The parity, data bits and whether two stop bits, as the serial device open in `port` (a
+    pyserial port) keeps them now — termios; Windows: the port's DCB (GetCommState), as the driver kept
+    it — None where there is nothing to read back (not a terminal or COM port)."""
     if sys.platform == "win32":
-        return None
+        handle = getattr(port, "_port_handle", None)
+        if handle is None:
+            return None
+        from serial import win32
+
+        dcb = win32.DCB()
+        if not win32.GetCommState(handle, ctypes.byref(dcb)):
+            return None
+        return dcb_format(dcb.Parity, dcb.ByteSize, dcb.StopBits)
     else:
         try:
             cflag = termios.tcgetattr(port.fileno())[2]  # type: ignore[attr-defined]
@@ -393,6 +413,26 @@ def pty_line(master: int) -> tuple[int, bool] | None:
             if baud is not None:
                 return baud, bool(attributes[2] & termios.CSTOPB)
     return None
+
+
+def registered_serial_ports() -> list[str]:
+    r"""Windows' serial ports as its registry names them (HKLM\HARDWARE\DEVICEMAP\SERIALCOMM: COM3, COM10),
+    in no order; nothing elsewhere. What is left where pyserial's listing, which asks SetupAPI and
+    cfgmgr32, cannot load (Wine 8's cfgmgr32 has no CM_MapCrToWin32Err)."""
+    if sys.platform != "win32":
+        return []
+    import winreg
+
+    try:
+        key = winreg.OpenKey(winreg.HKEY_LOCAL_MACHINE, r"HARDWARE\DEVICEMAP\SERIALCOMM")
+    except OSError:
+        return []
+    names: list[str] = []
+    with key:
+        for index in range(winreg.QueryInfoKey(key)[1]):
+            with contextlib.suppress(OSError):
+                names.append(str(winreg.EnumValue(key, index)[1]))
+    return names
 
 
 def kernel_lock_holders(device: str) -> Iterator[int | None]:

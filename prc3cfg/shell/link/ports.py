@@ -19,7 +19,8 @@ reconnect, which prc3cfg never makes: it closes a line when a command is done wi
 
 `serial_ports` lists the machine's serial ports as pyserial's `serial.tools.list_ports` finds
 them (Windows' COM ports from the registry, Linux's /dev/ttyS*, ttyUSB*, ttyACM*, … from sysfs, macOS'
-/dev/cu.*): the port a plant file names, a description, a USB adapter's VID:PID.
+/dev/cu.*): the port a plant file names, a description, a USB adapter's VID:PID — else, where that
+listing cannot load (Wine 8), the COM ports Windows' registry names.
 """
 
 from __future__ import annotations
@@ -69,8 +70,13 @@ class SerialPort:
 
 
 def serial_ports() -> list[SerialPort]:
-    """The machine's serial ports in pyserial's order (COM2 before COM10); pseudo-terminals are not among them."""
-    from serial.tools import list_ports
+    """The machine's serial ports in pyserial's order (COM2 before COM10); pseudo-terminals are not among them.
+    Where pyserial's listing cannot load (Windows' cfgmgr32 without a function it needs: Wine 8), the
+    registry's COM ports, without description or VID:PID."""
+    try:
+        from serial.tools import list_ports
+    except (AttributeError, OSError):  # ctypes: a system DLL without the function pyserial binds at import
+        return [SerialPort(name, "", None) for name in sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))]
 
     return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
                        f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None else None)
