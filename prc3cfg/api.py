@@ -77,9 +77,10 @@ from prc3cfg.shell.link.ports import serial_ports as serial_ports
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.platform import HAS_PTY
+from prc3cfg.shell.platform import HAS_PTY, result_of
 from prc3cfg.shell.platform import device_number as device_number
 from prc3cfg.shell.platform import terminal_path as terminal_path
+from prc3cfg.shell.platform import wait_for as wait_for
 from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
 
@@ -89,7 +90,8 @@ __all__ = [
     "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
     "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "slower_than_priced", "terminal_path", "write_adoption",
+    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "slower_than_priced", "terminal_path", "wait_for",
+    "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -840,7 +842,7 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
         if len(planned) == len(reading):
             show()  # not yet, when no write of the last line was acknowledged
         for future in shown:
-            future.result()
+            result_of(future)
         if options.cancel is not None and not writing.runs:
             options.cancel.check()
         planned_plan = the_plan()

@@ -278,3 +278,29 @@ def test_a_com_port_s_dcb_is_read_as_a_character_format(parity, byte_size, stop_
 
 def test_the_registry_s_com_ports_are_windows_only():
     assert platform.registered_serial_ports() == []
+
+
+def test_no_wait_without_a_timeout_outside_the_seam():
+    """`Event.wait()`, `Future.result()`, `Thread.join()` without a timeout: on Windows no Ctrl-C handler
+    runs inside them (an apply answered Ctrl-C only when its lines were done; `emulator serve` never).
+    They are `platform.wait_for` and `platform.result_of`."""
+    wrong = {f"{path.relative_to(ROOT)}:{node.lineno}: .{node.func.attr}()"
+             for path in PACKAGE.rglob("*.py") if path != SEAM
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("wait", "result", "join")
+             and not node.args and not node.keywords and not (isinstance(node.func.value, ast.Name) and node.func.value.id in ("os", "str"))}
+    assert not wrong, sorted(wrong)
+
+
+def test_a_wait_ends_when_its_event_is_set_and_a_result_is_the_future_s():
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    event = threading.Event()
+    threading.Timer(0.05, event.set).start()
+    platform.wait_for(event)
+    assert event.is_set()
+    with ThreadPoolExecutor(1) as pool:
+        assert platform.result_of(pool.submit(lambda: 42)) == 42
+        with pytest.raises(ZeroDivisionError):
+            platform.result_of(pool.submit(lambda: 1 / 0))

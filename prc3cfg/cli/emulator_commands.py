@@ -138,4 +138,4 @@ def serve(
                   f"{', '.join(map(str, sorted(emulator.modules())))})", flush=True)  # fmt: skip
         if path is not None:
             print(f"pty: {path}", flush=True)
-        stop.wait()
+        api.wait_for(stop)  # a signal's handler runs meanwhile, on Windows too

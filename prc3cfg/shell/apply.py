@@ -44,6 +44,7 @@ from prc3cfg.core.planner import Step, plan_module
 from prc3cfg.core.render import plural
 from prc3cfg.core.verification import Release, reach
 from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
@@ -369,4 +370,4 @@ def execute(
 
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus)), initializer=main_thread_only) as pool:
         for future in [pool.submit(on_bus, bus, bus_runs) for bus, bus_runs in per_bus.items()]:
-            future.result()
+            platform.result_of(future)

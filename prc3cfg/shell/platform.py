@@ -33,7 +33,8 @@ means the same everywhere:
   `com_port_name`: `COM10`, `com10`, `\\.\COM10`);
 - sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
-  main thread anyway: nothing).
+  main thread anyway: nothing), `wait_for` and `result_of` (an event's wait and a future's result
+  that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout).
 
 Branches are `sys.platform` tests, which mypy follows: `mypy --platform win32` and `--platform
 darwin` check the other systems' branches. Does not own what any of it is used for.
@@ -50,8 +51,13 @@ import signal
 import socket
 import stat
 import sys
+import threading
 from collections.abc import Iterable, Iterator
+from concurrent.futures import Future
 from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
 
 if sys.platform == "win32":
     import ctypes
@@ -486,6 +492,31 @@ def hung_up(conn: socket.socket) -> bool:
         return False
     except (OSError, ValueError):  # reset, or closed here
         return True
+
+
+#: s: the longest a wait lasts before a signal handler may run (Windows).
+SIGNAL_SLICE = 0.1
+
+
+def wait_for(event: threading.Event) -> None:
+    """Wait until `event` is set, a signal handler running meanwhile. Windows runs a Python handler
+    (Ctrl-C's) only between the main thread's bytecodes, never inside a wait on a lock without a
+    timeout — which every `Event.wait()`, `Future.result()` and `Thread.join()` is: there the wait is
+    taken in slices of `SIGNAL_SLICE`."""
+    if sys.platform == "win32":
+        while not event.wait(SIGNAL_SLICE):
+            pass
+    else:
+        event.wait()
+
+
+def result_of(future: Future[T]) -> T:
+    """`future.result()`, a signal handler running meanwhile (Windows: in slices, as `wait_for`)."""
+    if sys.platform == "win32":
+        while True:
+            with contextlib.suppress(TimeoutError):
+                return future.result(timeout=SIGNAL_SLICE)
+    return future.result()
 
 
 def block_signals(signals: Iterable[signal.Signals]) -> None:

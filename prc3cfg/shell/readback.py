@@ -27,6 +27,7 @@ from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import PROGRAM_COUNT, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters
 from prc3cfg.core.verification import read_messages
 from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Link
 
@@ -159,7 +160,8 @@ def read_all(
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus)), initializer=main_thread_only) as pool:
         for bus, future in [(bus, pool.submit(read_bus, bus_targets)) for bus, bus_targets in per_bus.items()]:
             try:
-                result.update(future.result())
+                images = platform.result_of(future)
+                result.update(images)
             except Interrupted:
                 interrupted = True
             except UserError as error:
