@@ -304,3 +304,24 @@ def test_a_wait_ends_when_its_event_is_set_and_a_result_is_the_future_s():
         assert platform.result_of(pool.submit(lambda: 42)) == 42
         with pytest.raises(ZeroDivisionError):
             platform.result_of(pool.submit(lambda: 1 / 0))
+
+
+def test_text_is_written_as_given_in_utf_8(tmp_path):
+    """A CRLF plant file rewritten by adopt keeps its CRLF (Windows' text mode made it \\r\\r\\n), and
+    ✓ ⚠ → are written in UTF-8 (not the locale's code page)."""
+    path = tmp_path / "plant.yaml"
+    with platform.open_text(path) as handle:
+        handle.write("a: 1\r\nb: 2 ✓\n")
+    with platform.open_text(path, "a") as handle:
+        handle.write("c: ⚠ →\r\n")
+    assert path.read_bytes() == "a: 1\r\nb: 2 ✓\nc: ⚠ →\r\n".encode()
+
+
+def test_text_files_are_opened_through_the_seam():
+    """Writing text with `open(…, "w"/"a")` outside the seam takes Windows' newline translation and code page."""
+    wrong = {f"{path.relative_to(ROOT)}:{node.lineno}"
+             for path in PACKAGE.rglob("*.py") if path != SEAM
+             for node in ast.walk(ast.parse(path.read_text()))
+             if isinstance(node, ast.Call) and (getattr(node.func, "id", None) == "open" or getattr(node.func, "attr", None) in ("open", "fdopen"))
+             and any(isinstance(a, ast.Constant) and a.value in ("w", "a", "wt", "at") for a in [*node.args, *(k.value for k in node.keywords)])}
+    assert not wrong, sorted(wrong)

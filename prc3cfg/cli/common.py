@@ -21,6 +21,7 @@ import typer
 from prc3cfg.errors import UserError
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import write_atomically
+from prc3cfg.shell.platform import open_text
 
 if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3cfg --help` stays quick
     from rich.console import Console
@@ -149,7 +150,7 @@ def write_output(path: Path, text: str, option: str) -> None:
     """Write an output file: a regular file atomically, a device or FIFO as it is; one line if it fails."""
     try:
         if path.exists() and not path.is_file():
-            with path.open("w") as handle:
+            with open_text(path) as handle:
                 handle.write(text)
         else:
             write_atomically(path, text)
@@ -326,7 +327,7 @@ def ask(question: str, options: LineOptions | None = None, *, typed: bool = Fals
     sys.stderr.flush()
     from prc3cfg.api import terminal_path
 
-    with open(terminal_path(sys.stdin.fileno()), "w") as terminal:
+    with open_text(terminal_path(sys.stdin.fileno())) as terminal:
         if typed:
             terminal.write(f"{question} Only '{TYPED_YES}' will be accepted: ")
             terminal.flush()
@@ -353,7 +354,7 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
     with contextlib.ExitStack() as stack:
         options = LineOptions(
             retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=TerminalProgress(stack),
-            trace=stack.enter_context(trace.open("a")) if trace else None,
+            trace=stack.enter_context(open_text(trace, "a")) if trace else None,
             waiting=lambda text: print(text, file=sys.stderr, flush=True),
             notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),
         )  # fmt: skip

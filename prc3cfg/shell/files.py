@@ -219,7 +219,7 @@ def _written_beside(path: Path, text: str, mode: int | None, *, new: bool = Fals
     if unnamed is None:  # no O_TMPFILE here, or not on this file system
         return _named_beside(path, text, mode)
     fd, link_path = unnamed
-    with os.fdopen(fd, "w", encoding="utf-8") as handle:
+    with platform.open_text(fd) as handle:
         _put_on_disk(handle, text, mode)
         # A directory handle given makes Python call linkat(…, AT_SYMLINK_FOLLOW) — without one it
         # calls link(), which links the /proc entry itself and fails (EXDEV).
@@ -255,7 +255,7 @@ def _named_beside(path: Path, text: str, mode: int | None) -> Path:
     """`_written_beside` where there are no unnamed files: a named temporary file, removed if writing fails."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+        with platform.open_text(fd) as handle:
             _put_on_disk(handle, text, mode)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -9,8 +9,9 @@ means the same everywhere:
   names it later; elsewhere None: a named temporary file is written instead);
 - folders: `make_shared_folder` (mkdir, then the mode set on the folder opened without following a
   symbolic link; Windows: mkdir);
-- file contents and durability: `read_at`/`write_at` (pread/pwrite; Windows: seek, then read or
-  write), `set_mode` (fchmod; Windows keeps no POSIX permissions: nothing), `sync_data`
+- file contents and durability: `open_text` (UTF-8, no newline translation: Windows' text mode
+  makes \n \r\n), `read_at`/`write_at` (pread/pwrite; Windows: seek, then read or write),
+  `set_mode` (fchmod; Windows keeps no POSIX permissions: nothing), `sync_data`
   (fdatasync; fsync where there is none), `sync_folder` (fsync of a directory; Windows cannot
   open one: nothing);
 - file locks: `try_lock`/`unlock` (flock; Windows: msvcrt.locking of one byte far past the end,
@@ -55,7 +56,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from concurrent.futures import Future
 from pathlib import Path
-from typing import TypeVar
+from typing import Literal, TextIO, TypeVar
 
 T = TypeVar("T")
 
@@ -119,6 +120,13 @@ def write_at(fd: int, data: bytes, offset: int) -> int:
         os.lseek(fd, offset, os.SEEK_SET)
         return os.write(fd, data)
     return os.pwrite(fd, data, offset)
+
+
+def open_text(file: int | str | Path, mode: Literal["w", "a"] = "w") -> TextIO:
+    r"""A file (a path, or an open descriptor it takes over) for writing text as given, on every system:
+    UTF-8, and its own line endings — Windows' text mode writes each \n as \r\n (a CRLF plant file
+    rewritten came out \r\r\n) and in the locale's code page (cp1252 has no ✓ ⚠ →)."""
+    return open(file, mode, encoding="utf-8", newline="")
 
 
 def set_mode(fd: int, mode: int) -> None:

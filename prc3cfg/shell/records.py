@@ -38,6 +38,7 @@ from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
 from prc3cfg.shell.link import Exchange
+from prc3cfg.shell.platform import open_text
 
 SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
 #: The folders under `.prc3cfg/` an apply writes.
@@ -200,7 +201,7 @@ class Journal:
         with self._lock:
             if self._handle is None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
-                self._handle = self.path.open("a")
+                self._handle = open_text(self.path, "a")
             self._handle.write(line + "\n")
             self._handle.flush()
 
