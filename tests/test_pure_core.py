@@ -78,7 +78,7 @@ CLI_MAY_IMPORT = (
     "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.profiles.Sourced",
     "prc3cfg.plant.problems.Finding",
     # the terminal: Ctrl-C, output files
-    "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically",
+    "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically", "prc3cfg.shell.platform.open_text",
 )  # fmt: skip
 
 
