@@ -366,8 +366,12 @@ def test_ctrl_c_stops_an_apply_after_the_exchange_in_flight_with_exit_130(wine, 
     with linux_emulator(demo, "1,2,5", "--line-speed", "1200") as port_a, linux_emulator(demo, "1,3,4", "--line-speed", "1200") as port_b:
         plant = socket_plant(demo, port_a, port_b)
         process = wine.start("apply", plant, "--auto-approve", "--allow-axis-release", "--full-read", cwd=demo, module=True)
-        time.sleep(8)  # Python started and reading the modules back (some 30 s at 1200 baud)
-        assert process.poll() is None, finished(process)
+        journal = demo / "plants" / ".prc3cfg" / "journal"
+        deadline = time.monotonic() + 60
+        while not any('"request"' in path.read_text() for path in journal.glob("*.jsonl")):  # reading back: some 30 s at 1200 baud
+            assert process.poll() is None and time.monotonic() < deadline, finished(process)
+            time.sleep(0.2)
+        time.sleep(1)
         started = time.monotonic()
         process.send_signal(signal.SIGINT)
         result = finished(process, timeout=60)
@@ -375,3 +379,18 @@ def test_ctrl_c_stops_an_apply_after_the_exchange_in_flight_with_exit_130(wine, 
     assert result.code == 130, result
     assert result.err.splitlines()[-1] == "error: interrupted", result
     assert took < 15, f"Ctrl-C answered after {took:.1f} s"
+
+
+@pytest.mark.xfail(strict=True, reason="not yet: a plan file names the plant file's sha256 of its bytes, and a CRLF checkout's differ — "
+                   "refused in one line, but as 'changed since the plan was made', not as line endings")
+def test_a_plan_made_on_linux_applies_from_a_crlf_checkout(wine, demo):
+    """CI plans on Linux; the person at the line applies that plan file from a Git for Windows checkout (CRLF)."""
+    with linux_emulator(demo, "1,2,5") as port_a, linux_emulator(demo, "1,3,4") as port_b:
+        plant = socket_plant(demo, port_a, port_b)
+        planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", str(plant.relative_to(demo)), "--out", "plan.json"], cwd=demo,
+                                 capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert planned.returncode == 0, planned.stderr
+        plant.write_bytes(plant.read_bytes().replace(b"\n", b"\r\n"))
+        applied = wine.run("apply", plant.relative_to(demo), "--plan", "plan.json", "--auto-approve", "--allow-axis-release", cwd=demo)
+        assert len(applied.err.splitlines()) <= 1, applied  # at worst refused in one line
+        assert applied.code == 0, applied
