@@ -128,13 +128,14 @@ def finished(process: subprocess.Popen[bytes], timeout: float = 120) -> Result:
 
 
 @pytest.fixture(scope="session")
-def wine(wheel) -> Wine:
+def wine(request) -> Wine:
     """The Windows Python `.ci/windows` set up, with this tree's prc3cfg installed by pip run from its wheel."""
     if not ENV_FILE.is_file():
         reason = f"the Windows tier needs .ci/windows run first (no {ENV_FILE})"
         if os.environ.get("PRC3CFG_WINDOWS_TIER") == "required":
             pytest.fail(reason)
         pytest.skip(reason)
+    wheel = request.getfixturevalue("wheel")
     settings = dict(line.split("=", 1) for line in ENV_FILE.read_text().splitlines() if "=" in line)
     found = Wine(settings["WINE"], Path(settings["WINEPREFIX"]), settings["WINE_PYTHON"], Path(settings["WINE_PYTHON_DIR"]),
                  Path(settings["WINE_WHEELS"]))  # fmt: skip
