@@ -5,7 +5,7 @@ tree's wheel is installed there at the start; each command then runs as a Window
 
 What runs: the README's first commands against the embedded emulator (plan, apply, plan = no
 changes), validate, plan/apply/restore/adopt against emulators over TCP (one on Linux, one served by
-the Windows Python), scan/read/plan/apply on a COM port (Wine's COMn, a link to the pty of a
+the Windows Python), scan/doctor/read/plan/apply on a COM port (Wine's COMn, a link to the pty of a
 Linux `emulator serve --pty`, registered in Wine's registry so that `prc3cfg ports` lists it), two
 applies racing on one line, output redirected to a file by `cmd /c … > file`, and Ctrl-C as Wine
 delivers it (SIGINT to the Unix process: Windows' CTRL_C_EVENT to the console handler). No command
@@ -335,6 +335,10 @@ def test_ports_scan_read_plan_and_apply_on_a_com_port(wine, demo, com_port):
     assert scanned.code == 0, scanned
     assert f"3 modules answered on {com_port}." in scanned.out
 
+    diagnosed = wine.run("doctor", "--port", com_port, "--parity", "none", "--exchanges", "3", cwd=demo)
+    assert diagnosed.code == 0, diagnosed
+    assert "    parity: none" in diagnosed.out and "    framing: crc16" in diagnosed.out, diagnosed
+
     plant = com_plant(demo, com_port.lower())  # any spelling of the port
     read = wine.run("read", plant, "--json", cwd=demo)
     assert read.code == 0, read
@@ -346,6 +350,12 @@ def test_ports_scan_read_plan_and_apply_on_a_com_port(wine, demo, com_port):
 
 
 # -- output to a file, Ctrl-C --------------------------------------------------------------
+
+
+def test_emulator_serve_pty_is_refused_in_one_line(wine, demo):
+    refused = wine.run("emulator", "serve", "--pty", cwd=demo)
+    assert refused.code == 1, refused
+    assert refused.err.strip().splitlines() == ["error: --pty: Windows has no pseudo-terminals — serve over TCP (--listen HOST:PORT) and use socket://HOST:PORT"]
 
 
 def test_output_redirected_to_a_file_is_whole_utf_8(wine, demo):
