@@ -89,7 +89,8 @@ __all__ = [
     "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
     "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "slower_than_priced", "terminal_path", "write_adoption",
+    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "setup_machine", "slower_than_priced", "terminal_path",
+    "unshared_records", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -272,6 +273,17 @@ def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
     return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
 
 
+def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
+    """Make (or put right) the machine's folder of axis-release records and line records that every user
+    of its lines shares — run once by an administrator; the folder and the serial ports' group it gave it."""
+    return releases.setup_machine(group)
+
+
+def unshared_records() -> str | None:
+    """The one-line hint for a user whose records no other user of the machine sees (None: they do)."""
+    return releases.unshared()
+
+
 @dataclass(frozen=True)
 class Reads:
     """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
@@ -312,7 +324,9 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     program of one the record does not know, knows from too long ago, or that reported E12 since."""
     buses = {bus.name: bus for bus, _ in pairs}
     known = {} if full_read else record(plant, buses.values())
-    if not any((bus.name, m.address) in known for bus, m in pairs):
+    overruled = {} if full_read else {(bus.name, address): said for bus in buses.values()
+                                      for address, said in bases.overruled(bus_line_keys(plant, bus)).items()}  # fmt: skip
+    if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
         return Reads(pairs, targets(pairs))
     unset = unset_systems(plant, buses.values())
     now = datetime.now(UTC)
@@ -322,7 +336,7 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
         to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
         if decision.why is not None:
-            why[key] = "it reported E12 (system parameters not set)" if key in unset else decision.why
+            why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
