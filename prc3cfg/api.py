@@ -1334,13 +1334,22 @@ def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, Modul
 # -- a plant file from a bus -----------------------------------------------------------------
 
 
-def import_plant(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
-                 plant_name: str = "imported", bus_name: str = "bus-1") -> tuple[str, int]:  # fmt: skip
-    """A plant file (its text) describing the live modules of one bus (`import_modules`), and how
-    many modules it describes: `unmanaged_programs: reset`, so planning it against that bus is empty."""
-    images = import_modules(bare, addresses, options)
-    bus = bus_entry(bus_name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz)
-    return imported_plant(plant_name, bus, images), len(images)
+def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
+                 plant_name: str = "imported") -> tuple[str, int]:  # fmt: skip
+    """A plant file (its text) describing the live modules of these buses, by name (`import_modules`,
+    one line after another), and how many modules it describes: what they all hold alike once, in one
+    profile; `unmanaged_programs: reset`, so planning it against those lines is empty. Two names for
+    one line are refused before any is read."""
+    owner: dict[str, str] = {}
+    for name, bare in buses.items():
+        for key in line_keys(bare.port):
+            if key in owner:
+                raise UserError(f"--port {buses[owner[key]].port} and --port {bare.port} are one line ({key}) — give each line once")
+            owner[key] = name
+    wanted = None if addresses is None else list(addresses)
+    read = [(bus_entry(name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz), import_modules(bare, wanted, options))
+            for name, bare in buses.items()]  # fmt: skip
+    return imported_plant(plant_name, read), sum(len(images) for _, images in read)
 
 
 # -- an emulated bus -------------------------------------------------------------------------
