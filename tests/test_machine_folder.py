@@ -100,18 +100,41 @@ def test_a_machine_folder_another_user_could_subvert_is_not_used(machine, capsys
     assert not list((machine / "elsewhere").glob("*")) if taken == "a link" else not list(lines.glob("*"))
 
 
-def as_user(user: pwd.struct_passwd, machine: Path, *argv: str) -> subprocess.CompletedProcess[str]:
+@pytest.fixture(scope="session")
+def packages(tmp_path_factory) -> Path:
+    """prc3cfg's dependencies where another user can import them: a world-readable copy of every
+    third-party package the command line loads — this Python's own may lie in root's home, mode 700
+    (CI's pyenv does), where another user's interpreter does not find them."""
+    import prc3cfg.cli  # noqa: F401  (everything a command imports)
+
+    folder = Path(tempfile.mkdtemp(prefix="prc3cfg-packages-"))
+    for module in list(sys.modules.values()):
+        file = Path(getattr(module, "__file__", None) or "/")
+        if "site-packages" not in file.parts or ROOT in file.parents:
+            continue
+        site = Path(*file.parts[: file.parts.index("site-packages") + 1])
+        top = site / file.relative_to(site).parts[0]
+        if not (folder / top.name).exists():
+            (shutil.copytree if top.is_dir() else shutil.copy2)(top, folder / top.name)
+    for path in [folder, *folder.rglob("*")]:
+        path.chmod(0o755 if path.is_dir() else 0o644)
+    yield folder
+    shutil.rmtree(folder)
+
+
+def as_user(user: pwd.struct_passwd, machine: Path, packages: Path, *argv: str) -> subprocess.CompletedProcess[str]:
     """`prc3cfg ARGV` run as `user`, on this machine's folders, with this worktree's prc3cfg."""
     setpriv = shutil.which("setpriv")
     if setpriv is None:
         pytest.skip("no setpriv to run a process as another user")
-    env = {**os.environ, "HOME": str(machine / "home"), "XDG_STATE_HOME": str(machine / "home" / "state"), "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "HOME": str(machine / "home"), "XDG_STATE_HOME": str(machine / "home" / "state"),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), str(packages)])}  # fmt: skip
     return subprocess.run([setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups", sys.executable, *argv],
                           capture_output=True, text=True, env=env, cwd=machine, timeout=120)  # fmt: skip
 
 
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="running a process as another user takes root")
-def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_for_nothing(machine, capsys):
+def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_for_nothing(machine, packages, capsys):
     """Root applied plant file A; the user prc3cfg-other applies plant file B, which sets module 2's
     program 2 otherwise. Root's next plan of A must not take its own older record for the truth: it
     reads the modules B's run read or wrote in full, says whose claim made it, and plans A's value back. An axis release
@@ -127,7 +150,7 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         b = home / "b.yaml"
         b.write_text(plant.path.read_text().replace("position: 2.0\n", "position: 1.9\n", 1))  # booth-a-right's program 1
         os.chown(b, user.pw_uid, user.pw_gid)
-        theirs = as_user(user, machine, "-m", "prc3cfg", "apply", str(b), "--auto-approve", "--allow-axis-release")
+        theirs = as_user(user, machine, packages, "-m", "prc3cfg", "apply", str(b), "--auto-approve", "--allow-axis-release")
         assert theirs.returncode == 0, theirs.stderr
         assert not unshared_note(theirs.stderr)
         assert {p.stat().st_uid for p in (machine / "machine" / "lines").glob("*.json")} == {0, user.pw_uid}
@@ -139,7 +162,7 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         keys = api.bus_line_keys(plant.plant, plant.plant.buses[0])
         script = ("import sys; from prc3cfg.shell.releases import Releases; "
                   "Releases('apply').record(tuple(sys.argv[1:]), 'booth-a', 2, 'booth-a-right')")  # fmt: skip
-        recorded = as_user(user, machine, "-c", script, *keys)
+        recorded = as_user(user, machine, packages, "-c", script, *keys)
         assert recorded.returncode == 0, recorded.stderr
         told = run_cli(capsys, "plan", plant.path)
         assert any("bus booth-a, module 2 (booth-a-right): prc3cfg apply" in line and "its axes may be released" in line
