@@ -56,7 +56,7 @@ from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted, plural
 from prc3cfg.core.targeting import Known
 from prc3cfg.core.verification import Release
-from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
@@ -89,8 +89,8 @@ __all__ = [
     "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
     "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "plot_format", "read", "restore", "scan", "select", "serial_ports", "slower_than_priced", "terminal_path",
-    "write_adoption",
+    "plan_document", "plan_file_plant", "plot_format", "read", "restore", "scan", "select", "serial_ports", "setup_machine", "slower_than_priced",
+    "terminal_path", "unshared_records", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -122,6 +122,18 @@ class ApplyFailed(UserError):
                          f"verified (see above) — restore {'it' if written == 1 else 'them'} with: prc3cfg restore {result.snapshot}")  # fmt: skip
         super().__init__("\n".join(said))
         self.result = result
+
+
+class RecordsFailed(ApplyFailed):
+    """A record the apply keeps as it writes — its journal, the record of an axis release, its
+    snapshot — could not be written midway (a full disk): every line stopped before its next frame;
+    `result` says what each module was sent."""
+
+    def __init__(self, result: ApplyResult, trouble: str) -> None:
+        super().__init__(result)
+        then = "plan and apply again" + (f", or restore: prc3cfg restore {result.snapshot}" if result.snapshot else "")
+        self.args = (f"{trouble}: every line stopped before its next frame — the account above says what each module "
+                     f"was sent; free the space (or fix the folder), then {then}",)  # fmt: skip
 
 
 class ApplyInterrupted(Interrupted):
@@ -261,6 +273,17 @@ def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
     return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
 
 
+def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
+    """Make (or put right) the machine's folder of axis-release records and line records that every user
+    of its lines shares — run once by an administrator; the folder and the serial ports' group it gave it."""
+    return releases.setup_machine(group)
+
+
+def unshared_records() -> str | None:
+    """The one-line hint for a user whose records no other user of the machine sees (None: they do)."""
+    return releases.unshared()
+
+
 @dataclass(frozen=True)
 class Reads:
     """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
@@ -301,7 +324,9 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     program of one the record does not know, knows from too long ago, or that reported E12 since."""
     buses = {bus.name: bus for bus, _ in pairs}
     known = {} if full_read else record(plant, buses.values())
-    if not any((bus.name, m.address) in known for bus, m in pairs):
+    overruled = {} if full_read else {(bus.name, address): said for bus in buses.values()
+                                      for address, said in bases.overruled(bus_line_keys(plant, bus)).items()}  # fmt: skip
+    if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
         return Reads(pairs, targets(pairs))
     unset = unset_systems(plant, buses.values())
     now = datetime.now(UTC)
@@ -311,7 +336,7 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
         to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
         if decision.why is not None:
-            why[key] = "it reported E12 (system parameters not set)" if key in unset else decision.why
+            why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
@@ -335,9 +360,15 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
     return line_keys(bus.port, emulator_state=state)
 
 
+class _Records(Protocol):
+    """Where an axis release is recorded: `releases.Releases`, or an apply's `_Keeping` of it."""
+
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ...) -> None: ...
+
+
 @contextlib.contextmanager
 def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
-          announce: Observer | None = None, records: releases.Releases | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
+          announce: Observer | None = None, records: _Records | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
     Every axis release on these lines that no account has named yet is told (`LineOptions.tell`),
     and a read a module answers as a write is recorded as one in `records` (`PossibleWrite`).
@@ -380,7 +411,7 @@ def _sha256_of(path: Path) -> str | None:
         return None
 
 
-def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: releases.Releases,
+def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: _Records,
                    observer: Callable[[Exchange], None] | None = None) -> Callable[[Exchange], None]:  # fmt: skip
     """`observer`, and a read answered with an acknowledgement recorded as an axis release: the
     module executed a damaged frame as a write, a 10h as likely as any (`PossibleWrite`)."""
@@ -729,11 +760,14 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
     records = releases.Releases("restore" if desired is not None else "apply", journal.path)
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once
-    announce = _announcer(plant, buses, keys, journal, records)
+    if options.cancel is None:  # the event that stops the lines when a record cannot be kept
+        options = replace(options, cancel=Cancellation())
+    assert options.cancel is not None
+    keeping = _Keeping(plant, buses, keys, journal, records, options.cancel.event)
     try:
-        with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
+        with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping) as links:
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            writing = _Writing(plant, keys, buses, links, journal, verify, options, records.command)
+            writing = _Writing(plant, keys, buses, links, keeping, verify, options, records.command)
             if plan_file is None and not gates.asks:
                 result = _apply_by_line(plant, chosen, wanted, desired, gates, writing, options, earlier, records)
             else:
@@ -742,7 +776,7 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
                 _keep_applied(plant)
             return result
     finally:
-        journal.close()
+        keeping.close()
 
 
 def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
@@ -850,20 +884,70 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
         return writing.account(planned_plan, earlier, records, unread=unread)
 
 
-def _announcer(plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
-               records: releases.Releases) -> Callable[[Exchange], None]:  # fmt: skip
-    """What is done before an apply's frame leaves: the attempt journalled, and a 10h/20h recorded
-    durably as an axis release not yet told (a broadcast's for every module on the line)."""
-    names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+class _Keeping:
+    """What an apply keeps as it writes — its journal and its records of axis releases (and E12) —
+    and what becomes of it when the disk refuses one of them midway (full, read-only, over a
+    quota, gone): the first failure is kept (`trouble`), every line stops before its next frame
+    (`stop`, the links' cancel event), and the account that follows says what each module was
+    sent. A record that belongs before a frame keeps that frame back (`announce` raises `NotSent`)."""
 
-    def announce(exchange: Exchange) -> None:
-        journal.request(exchange)
+    def __init__(self, plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
+                 records: releases.Releases, stop: threading.Event) -> None:  # fmt: skip
+        self.journal, self.records, self._keys, self._stop = journal, records, keys, stop
+        self._names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+        self._buses = buses
+        self._lock = threading.Lock()
+        self.trouble: str | None = None
+
+    def failed(self, what: str, error: OSError | UserError) -> None:
+        """`what` could not be kept: the lines stop before their next frame."""
+        said = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else \
+            (error.strerror if isinstance(error, OSError) and error.strerror else str(error))  # fmt: skip
+        with self._lock:
+            if self.trouble is None:
+                self.trouble = f"could not keep {what} ({said})"
+        self._stop.set()
+
+    def announce(self, exchange: Exchange) -> None:
+        """Before a frame leaves: the attempt journalled, and a 10h/20h recorded durably as an axis
+        release not yet told (a broadcast's for every module on the line) — else it stays back."""
+        try:
+            self.journal.request(exchange)
+        except OSError as error:
+            self.failed(f"the journal {self.journal.path}", error)
+            raise NotSent() from None
         if codec.MESSAGE_TYPES[exchange.request[0]].RELEASES_AXES:
-            name = names.get((exchange.bus, exchange.address)) if exchange.address else \
-                ", ".join(m.name for m in buses[exchange.bus].modules)  # fmt: skip
-            records.record(keys[exchange.bus], exchange.bus, exchange.address, name or f"address {exchange.address}")
+            name = self._names.get((exchange.bus, exchange.address)) if exchange.address else \
+                ", ".join(m.name for m in self._buses[exchange.bus].modules)  # fmt: skip
+            self.record(self._keys[exchange.bus], exchange.bus, exchange.address, name or f"address {exchange.address}")
+            if self.trouble is not None:
+                raise NotSent()
 
-    return announce
+    def observe(self, exchange: Exchange) -> None:
+        """An exchange that happened, journalled (a failure stops the lines before their next frame)."""
+        try:
+            self.journal.exchange(exchange)
+        except OSError as error:
+            self.failed(f"the journal {self.journal.path}", error)
+
+    def note(self, event: str, **fields: Any) -> None:
+        """A record of the apply (not of an exchange) in the journal, once it can still be written."""
+        if self.trouble is None:
+            try:
+                self.journal.record(event, **fields)
+            except OSError as error:
+                self.failed(f"the journal {self.journal.path}", error)
+
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = releases.RELEASE) -> None:
+        """`releases.Releases.record`, a failure kept as the apply's trouble."""
+        try:
+            self.records.record(keys, bus, address, name, kind)
+        except (OSError, UserError) as error:
+            self.failed("the record of an axis release" if kind == releases.RELEASE else "the record of a module in E12", error)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):  # already kept as the trouble, or the journal was whole
+            self.journal.close()
 
 
 class _Writing:
@@ -872,9 +956,10 @@ class _Writing:
     their line — added to the apply's one snapshot file, written whole and atomically each time —
     and journalled, then written and verified (`execute`); then the account of every run."""
 
-    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], journal: Journal,
+    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], keeping: _Keeping,
                  verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
-        self.plant, self.keys, self.buses, self.links, self.journal = plant, keys, buses, links, journal
+        self.plant, self.keys, self.buses, self.links, self.keeping = plant, keys, buses, links, keeping
+        self.journal = keeping.journal
         self.verify, self.options, self.command = verify, options, command
         self.phases = Phases(options.progress.start, options.progress.advance)
         self.runs: list[ModuleRun] = []
@@ -915,19 +1000,28 @@ class _Writing:
             return
         # not known until verified: dropped from the lines' records before the first frame (what was known kept for then)
         known = {bus: bases.load(self.keys[bus]) for bus in {r.bus for r in runs}}
-        for bus in known:
-            bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
         with self._lock:
-            if self._taken is None:
-                taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
-                self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on)
-            self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
-            self.snapshot = self._taken.save()
             self.runs.extend(runs)
+            try:
+                for bus in known:
+                    bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
+                if self._taken is None:
+                    taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
+                    self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on)
+                self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+                self.snapshot = self._taken.save()
+            except (OSError, UserError) as error:  # another line's writes began: this one's stay back
+                self.keeping.failed("the snapshot and the line's record before writing", error)
             if self._whole:
-                self._tell_snapshot(len(self._taken.images))
-        self.journal.record("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
-                            modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+                self._tell_snapshot(len(self._taken.images) if self._taken is not None else 0)
+        self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
+                          modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+        if self.keeping.trouble is not None:
+            for run in runs:
+                run.interrupted, run.failure = True, "nothing was sent to it"
+            if started is not None:
+                started()
+            return
         consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
         def wrote() -> None:
             self.phases.wrote()
@@ -946,7 +1040,10 @@ class _Writing:
         when, by = bases.now(), bases.who(self.command, self.plant.path)
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
-            bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+            try:
+                bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+            except UserError as error:  # they stay unknown: the next plan reads them in full
+                self.options.tell(f"bus {bus}: {error} — the next plan reads its modules in full")
 
     def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
                 took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> ApplyResult:  # fmt: skip
@@ -955,22 +1052,24 @@ class _Writing:
         order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
         runs = tuple(sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
         result = ApplyResult(the_plan, runs, self.snapshot, self.journal.path, earlier, records, (took or {}) | self.phases.took(), unread)
-        keys, journal = self.keys, self.journal
+        keys, keeping = self.keys, self.keeping
         for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
             if run.system_unset:
-                records.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
+                keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
         releases.cleared(r for r in releases.pending((k for ks in keys.values() for k in ks), releases.E12)
                          if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
         for run in runs:
-            journal.record(
+            keeping.note(
                 "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
                 released_axes=run.released.value, written=[s.message.hex() for s in run.written],
                 interrupted=run.interrupted,
             )  # fmt: skip
         if result.released:
-            journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
+            keeping.note("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
+        if keeping.trouble is not None:
+            raise RecordsFailed(result, keeping.trouble)
         if self.options.cancel is not None and self.options.cancel.requested:
-            journal.record("interrupted")
+            keeping.note("interrupted")
             raise ApplyInterrupted(result)
         if not result.verified:
             raise ApplyFailed(result)

@@ -94,6 +94,18 @@ def ports(
               file=sys.stderr)  # fmt: skip
 
 
+@app.command("setup-machine")
+def setup_machine(
+    group: Annotated[str | None, typer.Option(metavar="GROUP", help="The group of the lines' users (default: dialout, else uucp — the serial ports' group).")] = None,
+) -> None:
+    """Make the machine's folder of axis-release records and line records that every user of its lines shares (once, as an administrator)."""
+    from prc3cfg import api
+
+    folder, owner = api.setup_machine(group)
+    shared = f"the group {owner}" if owner else "every user (the folder's rights)"
+    print(f"{folder}: the records of axis releases and of what the modules hold, shared by {shared} — each user's files their own")
+
+
 @app.command()
 def scan(
     port: PortOpt,

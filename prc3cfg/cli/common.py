@@ -360,6 +360,16 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
         yield options
         note_repeats(options.links_used)
         note_slow(options.links_used)
+        note_unshared(options.links_used)
+
+
+def note_unshared(links: Iterable[Link]) -> None:
+    """One line after a command on a real line (not an `emulator://` one) whose records no other user of
+    this machine sees: where they are, and the administrator's one command that shares them."""
+    from prc3cfg.api import measurable, unshared_records
+
+    if any(measurable(link.port_name) for link in links) and (hint := unshared_records()) is not None:
+        print(f"note: {hint}", file=sys.stderr)
 
 
 def note_repeats(links: Iterable[Link]) -> None:
