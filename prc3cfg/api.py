@@ -77,7 +77,7 @@ from prc3cfg.shell.link.ports import serial_ports as serial_ports
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.platform import HAS_PTY
+from prc3cfg.shell.platform import HAS_PTY, python_command
 from prc3cfg.shell.platform import device_number as device_number
 from prc3cfg.shell.platform import terminal_path as terminal_path
 from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
@@ -89,8 +89,8 @@ __all__ = [
     "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
     "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "setup_machine", "slower_than_priced", "terminal_path",
-    "unshared_records", "write_adoption",
+    "plan_document", "plan_file_plant", "plot_format", "read", "restore", "scan", "select", "serial_ports", "setup_machine", "slower_than_priced",
+    "terminal_path", "unshared_records", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -1324,11 +1324,17 @@ def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, Modul
     (bus, module), = select(plant, [module_name])
     title = f"module {module.name} — bus {bus.name}, address {module.address}"
     if images is None and planned is None:
-        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
+        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file", python=python_command())
     planned = planned or plan(plant, [module.name], images=images)
     change = next(c for c in planned.modules if (c.bus, c.address) == (bus.name, module.address))
     return plot.picture(change.as_known(change.plan.predicted), change.as_known(change.actual), fmt=fmt,
-                        title=f"{title}: before (dashed) and after the plan")  # fmt: skip
+                        title=f"{title}: before (dashed) and after the plan", python=python_command())  # fmt: skip
+
+
+def plot_format(path: Path) -> str:
+    """"svg" or "png", the format of a picture to write to `path` (by its suffix) — a PlotError for any
+    other, and when matplotlib is missing, naming the command that installs it into this Python."""
+    return plot.plot_format(path, python=python_command())
 
 
 # -- a plant file from a bus -----------------------------------------------------------------

@@ -262,3 +262,16 @@ def test_on_windows_two_spellings_of_a_com_port_are_one_line(monkeypatch):
 
     monkeypatch.setattr(sys, "platform", "win32")
     assert line_keys("COM10") == line_keys("com10") == line_keys(r"\\.\COM10") == ("dev/COM10",)
+
+
+@pytest.mark.parametrize(("system", "executable", "command"), [
+    ("linux", "/usr/bin/python3", "/usr/bin/python3"),
+    ("linux", "/opt/my python/bin/python3", "'/opt/my python/bin/python3'"),
+    ("win32", r"C:\Python311\python.exe", r"C:\Python311\python.exe"),
+    ("win32", r"C:\Program Files\Python311\python.exe", r'"C:\Program Files\Python311\python.exe"'),
+])  # fmt: skip
+def test_this_python_is_a_command_to_paste_into_the_system_s_shell(monkeypatch, system, executable, command):
+    """What the plot hint names (`python -m pip install matplotlib` into the Python that runs prc3cfg)."""
+    monkeypatch.setattr(sys, "platform", system)
+    monkeypatch.setattr(sys, "executable", executable)
+    assert platform.python_command() == command

@@ -72,13 +72,12 @@ def plan(
     """Read back, diff against the plant file and print the cheapest plan."""
     from prc3cfg import api
     from prc3cfg.cli import output
-    from prc3cfg.core.plot import plot_format
 
     if refresh_only and (out is not None or json_out or markdown or plot is not None):
         raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --out, --json, --markdown and --plot", ctx=ctx)
     if plot is not None and len(module or []) != 1:
         raise click_errors.UsageError("--plot draws one module — name it with --module NAME", ctx=ctx)
-    fmt = plot_format(plot) if plot is not None else None
+    fmt = api.plot_format(plot) if plot is not None else None
     check_output(out, "--out", plant=plant)
     check_output(plot, "--plot", plant=plant)
     check_output(trace, "--trace", plant=plant)

@@ -35,7 +35,9 @@ means the same everywhere:
   `com_port_name`: `COM10`, `com10`, `\\.\COM10`);
 - sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
-  main thread anyway: nothing).
+  main thread anyway: nothing);
+- this Python as a command a person pastes into the system's shell: `python_command` (POSIX
+  shell quoting; Windows: cmd's double quotes).
 
 Branches are `sys.platform` tests, which mypy follows: `mypy --platform win32` and `--platform
 darwin` check the other systems' branches. Does not own what any of it is used for.
@@ -49,9 +51,11 @@ import hashlib
 import os
 import re
 import select
+import shlex
 import signal
 import socket
 import stat
+import subprocess
 import sys
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -497,3 +501,15 @@ def block_signals(signals: Iterable[signal.Signals]) -> None:
     the main thread anyway: nothing to do)."""
     if sys.platform != "win32":
         signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+
+
+# -- this Python -------------------------------------------------------------------------
+
+
+def python_command() -> str:
+    """The Python running prc3cfg, as a command to paste into this system's shell (a hint to install
+    something into it): its path quoted as the shell needs — POSIX: shlex's quoting; Windows: cmd's
+    double quotes around a path with a space (PowerShell runs a quoted command after `&`)."""
+    if sys.platform == "win32":
+        return subprocess.list2cmdline([sys.executable or "python"])
+    return shlex.quote(sys.executable or "python3")
