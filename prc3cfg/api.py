@@ -1348,7 +1348,11 @@ def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None 
     one line are refused before any is read."""
     owner: dict[str, str] = {}
     for name, bare in buses.items():
-        for key in line_keys(bare.port):
+        try:
+            keys = line_keys(bare.port) if len(buses) > 1 else ()
+        except ValueError:  # a port that names no line: opening it says so, in its turn
+            keys = ()
+        for key in keys:
             if key in owner:
                 raise UserError(f"--port {buses[owner[key]].port} and --port {bare.port} are one line ({key}) — give each line once")
             owner[key] = name
