@@ -106,6 +106,8 @@ def plan(
 
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
+ReasonOpt = Annotated[str | None, typer.Option("--reason", metavar="TEXT", help=(
+    "Why: kept in the journal's and the snapshot's header (default: $PRC3CFG_REASON); a bus with require_reason: true needs one."))]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
 VerifyOpt = Annotated[VerifyChoice, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
@@ -124,6 +126,7 @@ def apply(
     verify: VerifyOpt = VerifyChoice.FLOOR,
     previous: PreviousOpt = None,
     full_read: FullReadOpt = False,
+    reason: ReasonOpt = None,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
@@ -142,7 +145,8 @@ def apply(
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options),
-                           verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read)  # fmt: skip
+                           verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read,
+                           reason=reason)  # fmt: skip
     output.applied(result)
 
 
@@ -157,6 +161,7 @@ def restore(
     verify: VerifyOpt = VerifyChoice.FLOOR,
     onto_current_lines: Annotated[bool, typer.Option("--onto-current-lines", help=(
         "Restore onto the lines the plant file names now, though they are not those the snapshot was taken on."))] = False,
+    reason: ReasonOpt = None,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
@@ -164,5 +169,5 @@ def restore(
 
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options), verify=api.Verify(verify.value),
-                             options=options, onto_current_lines=onto_current_lines)  # fmt: skip
+                             options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip
     output.applied(result)
