@@ -210,6 +210,22 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     assert run_cli(capsys, "records", "verify", plant.path).code == 0  # what prune leaves verifies
 
 
+def test_refresh_only_writes_json_markdown_and_a_file(plant, capsys, tmp_path):
+    out = tmp_path / "drift.json"
+    as_json = run_cli(capsys, "plan", plant.path, "--refresh-only", "--json", "--out", out)
+    assert as_json.code == 0, as_json.err
+    document = json.loads(as_json.out)
+    assert document == json.loads(out.read_text())
+    assert document["format"] == "prc3cfg-drift/1" and document["plant"] == "demo-line" and document["modules"] == 6
+    assert {(d["bus"], d["name"]) for d in document["drifted"]} >= {("booth-a", "booth-a-left")}
+    assert all(d["differences"] for d in document["drifted"])
+    markdown = run_cli(capsys, "plan", plant.path, "--refresh-only", "--markdown")
+    assert markdown.code == 0 and markdown.out.startswith("<!-- prc3cfg-drift -->") and "booth-a-left" in markdown.out
+    plain = run_cli(capsys, "plan", plant.path, "--refresh-only", "--out", out, "--detailed-exitcode")
+    assert plain.code == 2 and "drifted from the plant file" in plain.out and f"Drift written to {out}" in plain.out
+    assert json.loads(out.read_text()) == document
+
+
 def test_git_absent_is_said(plant, capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path / "no-bin"))
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
@@ -254,3 +270,15 @@ def test_a_run_follows_the_last_line_of_the_journal_before_it(plant, capsys, tmp
     first.write_bytes(b"".join(lines))
     found = run_cli(capsys, "records", "verify", plant.path)
     assert found.code == 1 and f"{first}:{len(lines)}:" in found.err, found.err
+
+
+def test_drift_in_markdown_is_inert_and_fits():
+    """A hostile module name in the drift comment: no mention, link or HTML is live; a long drift is cut with a count."""
+    from prc3cfg.core.render import Drift, drift_json, drift_markdown
+
+    hostile = Drift("bus-<b>", 1, "@someone [x](https://evil.example) <img src=x>", ("program 1 position 1.000 m → 1.100 m",))
+    text = drift_markdown(drift_json("p`lant", [hostile], 1))
+    assert "@someone" not in text and "](https" not in text and "<img" not in text and "<b>" not in text
+    many = [Drift("b", n % 30 + 1, f"m{n}", tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 65))) for n in range(60)]
+    cut = drift_markdown(drift_json("plant", many, 60), max_chars=5000)
+    assert len(cut) <= 5000 and cut.rstrip().endswith("that drifted: see the drift file.")
