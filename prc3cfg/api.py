@@ -1355,9 +1355,13 @@ def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: flo
     an E12) nobody was told of names."""
     if keep is None and older_than_days is None:
         raise UserError("say what to prune: --keep N (the newest N runs stay) or --older-than DAYS, or both")
-    keys = [key for bus in plant.buses for key in bus_line_keys(plant, bus)]
-    protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(keys, kind) if r.journal]
-    return audit.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
+    with contextlib.ExitStack() as held:  # no apply of these lines writes its records meanwhile
+        for bus in plant.buses:
+            held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
+        every = [key for identities in keys.values() for key in identities]
+        protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(every, kind) if r.journal]
+        return audit.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
 
 
 def _plant_text(path: Path) -> str:

@@ -187,10 +187,11 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-b-left", *APPLY).code == 0
     edit_plant(plant.path, lambda d: d["buses"][0]["modules"][0].setdefault("programs", {}).update({7: {"position": 1.0, "speed": 0.3}}))
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
-    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # no changes: no snapshot
+    for _ in range(2):
+        assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # no changes: no snapshot
     runs = journals(tmp_path)
     taken = snapshots(tmp_path)
-    assert len(runs) == 4 and len(taken) == 3
+    assert len(runs) == 5 and len(taken) == 3
 
     assert json.loads(run_cli(capsys, "records", "prune", plant.path, "--older-than", "1", "--json").out)["removed"] == []
     # an untold axis release recorded by the first run (as an apply killed after its 10h leaves it)
@@ -199,7 +200,9 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     kept_back = json.loads(run_cli(capsys, "records", "prune", plant.path, "--keep", "0", "--json").out)
     assert [r["journal"] for r in kept_back["removed"]] == [str(runs[3])]
     assert not runs[3].exists() and runs[0].exists() and taken[0].exists()
-    assert any(k["journal"] == str(runs[0]) and "axis release" in k["why"] for k in kept_back["kept"])
+    why = {k["journal"]: k["why"] for k in kept_back["kept"]}
+    assert "axis release" in why[str(runs[0])] and "newest run" in why[str(runs[4])]
+    assert "newest snapshot" in why[str(runs[1])] and "newest snapshot" in why[str(runs[2])]
 
     releases.cleared(releases.pending(line_keys(bus.port)))
     pruned = run_cli(capsys, "records", "prune", plant.path, "--keep", "0", "--json")
@@ -207,6 +210,7 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     assert [r["journal"] for r in json.loads(pruned.out)["removed"]] == [str(runs[0])]
     assert not runs[0].exists() and not taken[0].exists()
     assert runs[1].exists() and taken[1].exists() and runs[2].exists() and taken[2].exists()  # newest of booth-b, of booth-a
+    assert runs[4].exists()
     assert run_cli(capsys, "records", "verify", plant.path).code == 0  # what prune leaves verifies
 
 
@@ -282,3 +286,62 @@ def test_drift_in_markdown_is_inert_and_fits():
     many = [Drift("b", n % 30 + 1, f"m{n}", tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 65))) for n in range(60)]
     cut = drift_markdown(drift_json("plant", many, 60), max_chars=5000)
     assert len(cut) <= 5000 and cut.rstrip().endswith("that drifted: see the drift file.")
+
+
+def chained(*records: dict) -> bytes:
+    """Records as a journal writes them: each line's `prev` the SHA-256 of the line before."""
+    lines, prev = [], None
+    for record in records:
+        line = json.dumps({**record, "prev": prev}).encode()
+        lines.append(line)
+        prev = hashlib.sha256(line).hexdigest()
+    return b"".join(line + b"\n" for line in lines)
+
+
+GOOD = chained({"event": "header"}, {"event": "request", "n": 1}, {"event": "exchange", "n": 2}, {"event": "result", "n": 3})
+LINES = GOOD.splitlines(keepends=True)
+
+
+@pytest.mark.parametrize(("data", "problem"), [
+    (GOOD, None),
+    (LINES[0] + LINES[1] + LINES[2].replace(b'"n": 2', b'"n": 5') + LINES[3], 3),  # an edited record
+    (LINES[0] + LINES[1] + LINES[3], 2),  # a record removed
+    (LINES[0] + LINES[1] + LINES[1] + LINES[2] + LINES[3], 2),  # a record inserted (a copy)
+    (LINES[0] + LINES[1] + b"not json\n" + LINES[3], 3),
+    (GOOD[:-1], 4),  # cut short
+    (LINES[1] + LINES[2], 1),  # no header
+    (b"", None),  # empty: no line, the file itself
+    (b'{"event": "apply"}\n{"event": "request"}\n', None),  # before headers: unchained, not refused
+], ids=["good", "edited", "removed", "inserted", "not-json", "cut-short", "no-header", "empty", "before-headers"])
+def test_the_chain_names_the_first_record_that_does_not_match(tmp_path, data, problem):
+    from prc3cfg.shell.audit import check_journal
+
+    journal = tmp_path / "j.jsonl"
+    journal.write_bytes(data)
+    checked = check_journal(journal)
+    if data == b"":
+        assert checked.problem is not None and checked.problem.where == str(journal)
+    elif problem is None:
+        assert checked.problem is None and checked.chained == data.startswith(b'{"event": "header"')
+    else:
+        assert checked.problem is not None and checked.problem.where == f"{journal}:{problem}", checked.problem
+
+
+@pytest.mark.parametrize("name", ["../plant.yaml", "/etc/passwd", "a/b.json", "..", "", None, 7, "a\\b.json"])
+def test_a_record_that_names_a_path_is_not_followed_by_prune(plant, capsys, tmp_path, name):
+    """prune removes what records name: a journal edited to name a file outside snapshots/ (and
+    its chain made whole again) removes nothing but the run's own files."""
+    from prc3cfg.shell.audit import file_name
+
+    assert file_name(name) is None
+    victim = tmp_path / "plant.yaml"
+    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
+    journal, = journals(tmp_path)
+    records = [{k: v for k, v in r.items() if k != "prev"} for r in records_of(journal)]
+    for record in records:
+        if record["event"] == "snapshot":
+            record["path"] = name
+    journal.write_bytes(chained(*records))
+    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # the newest run: not this one
+    run_cli(capsys, "records", "prune", plant.path, "--keep", "0")
+    assert victim.exists() and not journal.exists()

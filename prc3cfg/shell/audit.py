@@ -74,6 +74,14 @@ class Checked:
         return found[-1] if found else None
 
 
+def file_name(value: Any) -> str | None:
+    """`value` when a record names a file beside it by it — a bare name, no folder, not `..` — else
+    None: a record is data anyone may have edited, and prune removes what records name."""
+    if not isinstance(value, str) or value in ("", ".", "..") or "/" in value or "\\" in value or "\0" in value:
+        return None
+    return value
+
+
 def check_journal(path: Path, *, growing: bool = False) -> Checked:
     """The chain of the journal at `path`; `growing`: it may be written as it is read (another
     run's), so a last line without its newline yet is left out rather than refused."""
@@ -142,7 +150,9 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     not verify; a note when it was written before records had headers (it cannot be checked)."""
     if snapshot.header is None:
         return f"{path}: written before records had headers — its integrity cannot be checked"
-    name = str(snapshot.header.get("journal"))
+    name = file_name(snapshot.header.get("journal"))
+    if name is None:
+        raise UserError(f"{path}: its header names no journal file — the snapshot cannot be checked, nothing was written; {EVIDENCE}")
     candidates = [path.resolve().parent.parent / "journal" / name, records_dir(snapshot.plant_path, "journal") / name]
     journal = next((c for c in candidates if c.is_file()), None)
     if journal is None:
@@ -199,7 +209,10 @@ def check(paths: Iterable[Path]) -> Verified:
     result = Verified()
     for path in paths:
         folder = _records_folder(path)
-        if folder is not None:
+        if path.suffix.lower() in (".yaml", ".yml") and not path.is_dir():  # a plant file: its own records
+            wanted_journals.update(dict.fromkeys(journals(path)))
+            wanted_snapshots.update(dict.fromkeys(_of_plant(records_dir(path, "snapshots"), path.stem, ".json")))
+        elif folder is not None:
             for kind, into, suffix in (("journal", wanted_journals, ".jsonl"), ("snapshots", wanted_snapshots, ".json")):
                 with contextlib.suppress(OSError):
                     into.update(dict.fromkeys(sorted(p for p in (folder / kind).iterdir() if p.suffix == suffix)))
@@ -224,7 +237,10 @@ def check(paths: Iterable[Path]) -> Verified:
         if (problem := _link_problem(path, header.get("previous"), result.notes)) is not None:
             result.problems.append(problem)
         if (found := journal.snapshot_record()) is not None:
-            snapshot = path.resolve().parent.parent / "snapshots" / str(found[1].get("path"))
+            if (name := file_name(found[1].get("path"))) is None:
+                result.problems.append(Problem(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)"))
+                continue
+            snapshot = path.resolve().parent.parent / "snapshots" / name
             done.add(snapshot)
             if not snapshot.exists():
                 result.problems.append(Problem(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
@@ -243,7 +259,10 @@ def check(paths: Iterable[Path]) -> Verified:
         if taken.header is None:
             result.unchained += 1
             continue
-        journal_path = path.resolve().parent.parent / "journal" / str(taken.header.get("journal"))
+        if (name := file_name(taken.header.get("journal"))) is None:
+            result.problems.append(Problem(str(path), "its header names no journal file"))
+            continue
+        journal_path = path.resolve().parent.parent / "journal" / name
         if not journal_path.is_file():
             result.problems.append(Problem(str(path), f"its journal {journal_path} is not there"))
             continue
@@ -258,21 +277,21 @@ def check(paths: Iterable[Path]) -> Verified:
 
 
 def _records_folder(path: Path) -> Path | None:
-    """The `.prc3cfg` folder `path` names: itself, its journal/ or snapshots/, or a plant file's."""
-    if path.is_dir():
-        if path.name in ("journal", "snapshots"):
-            return path.parent
-        return path / ".prc3cfg" if (path / ".prc3cfg").is_dir() and not (path / "journal").is_dir() else path
-    if path.suffix.lower() in (".yaml", ".yml"):
-        return path.parent / ".prc3cfg"
-    return None
+    """The `.prc3cfg` folder `path` names: itself, its journal/ or snapshots/, or the one in it."""
+    if not path.is_dir():
+        return None
+    if path.name in ("journal", "snapshots"):
+        return path.parent
+    return path / ".prc3cfg" if (path / ".prc3cfg").is_dir() and not (path / "journal").is_dir() else path
 
 
 def _link_problem(path: Path, previous: Any, notes: list[str]) -> Problem | None:
     """A journal's link to the plant's journal before it: that one's line as it was when this run began."""
     if not isinstance(previous, dict):
         return None
-    before = path.resolve().parent / str(previous.get("journal"))
+    if (name := file_name(previous.get("journal"))) is None:
+        return Problem(f"{path}:1", "its link to the run before names no journal file")
+    before = path.resolve().parent / name
     if not before.is_file():
         notes.append(f"{path}:1: follows {before.name}, which is not there (pruned, or removed)")
         return None
@@ -336,11 +355,12 @@ def _journal_run(path: Path, snapshots_dir: Path) -> Run:
     """A run as its journal tells it (one before headers: what its records say)."""
     checked = check_journal(path)
     records, header = checked.records, checked.header or {}
-    snapshot = None
+    named = None
     if (record := checked.snapshot_record()) is not None:
-        snapshot = snapshots_dir / str(record[1].get("path"))
-    elif applied := [r for r in records if r.get("event") == "apply" and r.get("snapshot")]:
-        snapshot = snapshots_dir / Path(str(applied[-1]["snapshot"])).name  # before headers: the apply record named it
+        named = file_name(record[1].get("path"))
+    elif applied := [r for r in records if r.get("event") == "apply" and isinstance(r.get("snapshot"), str)]:
+        named = file_name(Path(applied[-1]["snapshot"]).name)  # before headers: the apply record named it by its path
+    snapshot = None if named is None else snapshots_dir / named
     plant = header.get("plant")
     name = plant.get("name") if isinstance(plant, dict) else next((r.get("plant") for r in records if r.get("event") == "apply"), None)
     buses = {str(r["bus"]) for r in records if r.get("event") in ("request", "exchange") and "bus" in r}
@@ -376,7 +396,9 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
           dry_run: bool = False, now: datetime | None = None) -> Pruned:  # fmt: skip
     """Remove whole runs — journal and snapshot — beyond the newest `keep` and older than
     `older_than_days` (each only when given, both when both are): never the newest snapshot of a
-    line, never a run whose journal is in `protected` (an axis release nobody was told of names it)."""
+    line, never a run whose journal is in `protected` (an axis release nobody was told of names it),
+    never the plant's newest run (the next one follows it). The caller holds the plant's lines: no
+    run of them is being written meanwhile."""
     every = runs(plant_path)
     now = now or datetime.now(UTC)
     cut = None if older_than_days is None else now - timedelta(days=older_than_days)
@@ -390,6 +412,8 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
             newest[line] = index  # `every` is oldest first: the last one seen is the newest
     for line, index in newest.items():
         why.setdefault(index, f"the newest snapshot of {line}")
+    if every and every[-1].journal is not None:
+        why.setdefault(len(every) - 1, "the plant's newest run: the next run's journal follows it")
     for index, run in enumerate(every):
         if run.journal is not None and run.journal.name in guarded:
             why[index] = "an axis release nobody was told of names this run (prc3cfg.shell.releases): kept until an apply's account names it"
