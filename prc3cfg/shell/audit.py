@@ -33,13 +33,15 @@ from pathlib import Path
 from typing import Any
 
 from prc3cfg.errors import UserError
-from prc3cfg.shell.files import FileProblem, read_regular
+from prc3cfg.shell.files import FileProblem, Why, read_regular
 from prc3cfg.shell.records import STAMP_LENGTH, Snapshot, line_hash, records_dir
 
 #: The largest journal read: 30 modules × 8 buses, every program written and verified, is a few MB.
 JOURNAL_LIMIT = 1024 * 2**20
 #: What to do about a record that does not verify.
 EVIDENCE = "keep the file as it is for whoever investigates, and compare it with your backup copy (docs/security.md)"
+#: What to do about a path that names no records.
+NAME_ONE = "name a plant file, a .prc3cfg folder, a journal (.jsonl) or a snapshot (.json)"
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,7 @@ class Problem:
 
     where: str
     what: str
+    remedy: str = EVIDENCE
 
     def said(self) -> str:
         return f"{self.where}: {self.what}"
@@ -88,7 +91,7 @@ def check_journal(path: Path, *, growing: bool = False) -> Checked:
     try:
         data = read_regular(path, JOURNAL_LIMIT)
     except FileProblem as problem:
-        return Checked(path, [], False, Problem(str(path), str(problem)))
+        return Checked(path, [], False, Problem(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
     lines = data.split(b"\n")
     cut = lines.pop()  # what follows the last newline: nothing, in a whole journal
     if cut and not growing:
@@ -193,7 +196,7 @@ class Verified:
 
     def said(self) -> list[str]:
         """Each problem in one line, with what to do."""
-        return [f"{problem.said()} — {EVIDENCE}" for problem in self.problems]
+        return [f"{problem.said()} — {problem.remedy}" for problem in self.problems]
 
     def summary(self) -> str:
         """What was checked, in one line."""
@@ -221,7 +224,7 @@ def check(paths: Iterable[Path]) -> Verified:
         elif path.suffix == ".json":
             wanted_snapshots[path] = None
         else:
-            result.problems.append(Problem(str(path), "not a plant file, records folder, journal (.jsonl) or snapshot (.json)"))
+            result.problems.append(Problem(str(path), "not a plant file, records folder, journal (.jsonl) or snapshot (.json)", NAME_ONE))
     checked: dict[Path, Checked] = {}
     done: set[Path] = set()  # snapshots checked with their journal
     for path in wanted_journals:
@@ -242,6 +245,7 @@ def check(paths: Iterable[Path]) -> Verified:
                 continue
             snapshot = path.resolve().parent.parent / "snapshots" / name
             done.add(snapshot)
+            result.snapshots += 1
             if not snapshot.exists():
                 result.problems.append(Problem(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
                                                "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
@@ -272,7 +276,8 @@ def check(paths: Iterable[Path]) -> Verified:
         elif journal.problem is not None and journal_path not in checked:
             result.problems.append(journal.problem)
     if not wanted_journals and not wanted_snapshots and not result.problems:
-        result.problems.extend(Problem(str(p), "no records there") for p in paths)
+        result.problems.extend(Problem(str(p), "no records there", "an apply, restore or adopt keeps them in .prc3cfg/ beside the plant file")
+                               for p in paths)  # fmt: skip
     return result
 
 
@@ -405,13 +410,15 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
     beyond = set(range(len(every) - keep)) if keep is not None else set(range(len(every)))
     candidates = [i for i in sorted(beyond) if cut is None or (every[i].time and datetime.fromisoformat(every[i].time) < cut)]
     guarded = {p.name for p in protected}  # by name: a record may name the journal by a path relative to another folder
-    why: dict[int, str] = {}
-    newest: dict[str, int] = {}
+    newest: dict[str, tuple[int, str]] = {}
     for index, run in enumerate(every):
-        for line in _line_identities(run):
-            newest[line] = index  # `every` is oldest first: the last one seen is the newest
-    for line, index in newest.items():
-        why.setdefault(index, f"the newest snapshot of {line}")
+        for identity, said in _lines(run).items():
+            newest[identity] = (index, said)  # `every` is oldest first: the last one seen is the newest
+    lines: dict[int, list[str]] = {}
+    for index, said in newest.values():
+        if said not in lines.setdefault(index, []):
+            lines[index].append(said)
+    why = {index: "the newest snapshot of " + " and of ".join(said) for index, said in lines.items()}
     if every and every[-1].journal is not None:
         why.setdefault(len(every) - 1, "the plant's newest run: the next run's journal follows it")
     for index, run in enumerate(every):
@@ -431,17 +438,18 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
     return Pruned(tuple(removed), tuple(kept))
 
 
-def _line_identities(run: Run) -> list[str]:
-    """The lines whose modules a run's snapshot holds, as "the line of bus NAME (KEY)" for each of
-    the line's identities — a line one plant file names by another bus name is still that line."""
+def _lines(run: Run) -> dict[str, str]:
+    """The lines whose modules a run's snapshot holds: each of a line's identities (`LineTaken.keys`:
+    a line named by another bus name since is still that line), with the line in words."""
     if run.snapshot is None or not run.snapshot.exists():
-        return []
+        return {}
     try:
         snapshot = Snapshot.load(run.snapshot)
     except UserError:
-        return [f"an unreadable snapshot ({run.snapshot.name})"]
-    found: list[str] = []
+        return {f"unreadable {run.snapshot.name}": f"a snapshot prc3cfg cannot read ({run.snapshot.name})"}
+    found: dict[str, str] = {}
     for bus in sorted({bus for bus, _ in snapshot.images}):
         line = snapshot.lines.get(bus)
-        found += [f"the line {key}" for key in line.keys] if line is not None and line.keys else [f"bus {bus}"]
+        said = f"bus {bus}'s line" + (f" ({line.port})" if line is not None else "")
+        found |= {key: said for key in line.keys} if line is not None and line.keys else {f"bus {bus}": said}
     return found
