@@ -166,6 +166,20 @@ def test_an_edited_snapshot_is_found_and_not_restored(plant, capsys, tmp_path):
     assert restore.code == 1 and str(snapshot) in restore.err and "nothing was written" in restore.err
 
 
+def test_a_snapshot_stripped_of_its_header_is_not_restored_as_one_from_before_headers(plant, capsys, tmp_path):
+    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
+    (snapshot,) = snapshots(tmp_path)
+    document = json.loads(snapshot.read_text())
+    del document["header"]
+    snapshot.write_text(json.dumps(document))
+    refused = run_cli(capsys, "restore", snapshot, *APPLY)
+    assert refused.code == 1 and "has no header, but" in refused.err and "nothing was written" in refused.err
+    journals(tmp_path)[0].unlink()  # with its journal gone too, it is one from before headers: restored, and said
+    restored = run_cli(capsys, "restore", snapshot, *APPLY)
+    assert restored.code == 0, restored.err
+    assert "written before records had headers — its integrity cannot be checked" in restored.err
+
+
 def test_records_list_says_who_what_where_and_the_result(plant, capsys, tmp_path):
     assert run_cli(capsys, "apply", plant.path, *APPLY, "--reason", "first").code == 0
     assert run_cli(capsys, "apply", plant.path, *APPLY).code == 0  # nothing to do

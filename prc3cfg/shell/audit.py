@@ -152,6 +152,11 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     """A snapshot about to be restored, checked against its journal: `UserError` when either does
     not verify; a note when it was written before records had headers (it cannot be checked)."""
     if snapshot.header is None:
+        for beside in _of_plant(path.resolve().parent.parent / "journal", snapshot.plant_path.stem, ".jsonl"):
+            with contextlib.suppress(FileProblem):
+                if f'"event": "snapshot", "path": {json.dumps(path.name)}'.encode() in read_regular(beside, JOURNAL_LIMIT):
+                    raise UserError(f"{path}: has no header, but {beside} records it as written with one — edited since; "
+                                    f"nothing was written; {EVIDENCE}")  # fmt: skip
         return f"{path}: written before records had headers — its integrity cannot be checked"
     name = file_name(snapshot.header.get("journal"))
     if name is None:
