@@ -322,7 +322,7 @@ LINES = GOOD.splitlines(keepends=True)
     (LINES[0] + LINES[1] + LINES[3], 2),  # a record removed
     (LINES[0] + LINES[1] + LINES[1] + LINES[2] + LINES[3], 2),  # a record inserted (a copy)
     (LINES[0] + LINES[1] + b"not json\n" + LINES[3], 3),
-    (GOOD[:-1], 4),  # cut short
+    (GOOD[:-1], None),  # cut short (a full disk, a kill): the last record left out, the rest whole
     (LINES[1] + LINES[2], 1),  # no header
     (b"", None),  # empty: no line, the file itself
     (b'{"event": "apply"}\n{"event": "request"}\n', None),  # before headers: unchained, not refused
@@ -337,6 +337,7 @@ def test_the_chain_names_the_first_record_that_does_not_match(tmp_path, data, pr
         assert checked.problem is not None and checked.problem.where == str(journal)
     elif problem is None:
         assert checked.problem is None and checked.chained == data.startswith(b'{"event": "header"')
+        assert checked.cut == (not data.endswith(b"\n")) and len(checked.records) == data.count(b"\n")
     else:
         assert checked.problem is not None and checked.problem.where == f"{journal}:{problem}", checked.problem
 
@@ -359,3 +360,16 @@ def test_a_record_that_names_a_path_is_not_followed_by_prune(plant, capsys, tmp_
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # the newest run: not this one
     run_cli(capsys, "records", "prune", plant.path, "--keep", "0")
     assert victim.exists() and not journal.exists()
+
+
+def test_a_journal_the_disk_cut_short_still_verifies_and_restores(plant, capsys, tmp_path):
+    """A full disk (or a kill) leaves a journal whose last record has no end of line: the records
+    before it stand — verify says so in a note, and its snapshot restores (what the error of such an
+    apply tells the operator to do)."""
+    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
+    (journal,) = journals(tmp_path)
+    journal.write_bytes(journal.read_bytes() + b'{"time": "2026-')
+    checked = run_cli(capsys, "records", "verify", plant.path)
+    assert checked.code == 0 and f"note: {journal}:" in checked.err and "cut short" in checked.err
+    restored = run_cli(capsys, "restore", snapshots(tmp_path)[0], *APPLY)
+    assert restored.code == 0, restored.err

@@ -66,6 +66,7 @@ class Checked:
     chained: bool
     problem: Problem | None
     last: str | None = None
+    cut: bool = False  # a last line without its end of line, left out
 
     @property
     def header(self) -> dict[str, Any] | None:
@@ -85,19 +86,19 @@ def file_name(value: Any) -> str | None:
     return value
 
 
-def check_journal(path: Path, *, growing: bool = False) -> Checked:
-    """The chain of the journal at `path`; `growing`: it may be written as it is read (another
-    run's), so a last line without its newline yet is left out rather than refused."""
+def check_journal(path: Path) -> Checked:
+    """The chain of the journal at `path`. A last line without its end of line is left out and said
+    (`cut`): a run the disk refused midway (full), or killed as it wrote, leaves one — and so does
+    another run still writing it — and the records before it are whole."""
     try:
         data = read_regular(path, JOURNAL_LIMIT)
     except FileProblem as problem:
         return Checked(path, [], False, Problem(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
     lines = data.split(b"\n")
-    cut = lines.pop()  # what follows the last newline: nothing, in a whole journal
-    if cut and not growing:
-        return Checked(path, [], False, Problem(f"{path}:{len(lines) + 1}", "cut short: its last record has no end of line"))
+    cut = bool(lines.pop())  # what follows the last newline: nothing, in a whole journal
     if not lines:
-        return Checked(path, [], False, Problem(str(path), "empty: a journal begins with its header"))
+        said = "cut short before its header was whole" if cut else "empty: a journal begins with its header"
+        return Checked(path, [], False, Problem(str(path), said))
     records: list[dict[str, Any]] = []
     for number, line in enumerate(lines, 1):
         try:
@@ -109,7 +110,7 @@ def check_journal(path: Path, *, growing: bool = False) -> Checked:
         records.append(record)
     if records[0].get("event") != "header":
         if not any("prev" in record for record in records):
-            return Checked(path, records, False, None, line_hash(lines[-1]))  # before headers
+            return Checked(path, records, False, None, line_hash(lines[-1]), cut)  # before headers
         return Checked(path, records, True, Problem(f"{path}:1", "no header: a journal begins with who, where, what and why"))
     if records[0].get("prev") is not None:
         return Checked(path, records, True, Problem(f"{path}:1", "a header that follows another record"))
@@ -118,7 +119,7 @@ def check_journal(path: Path, *, growing: bool = False) -> Checked:
             return Checked(path, records, True, Problem(
                 f"{path}:{number}", f"not the record the next one (line {number + 1}) was written after — this one edited, "
                 "or records removed or inserted here"))  # fmt: skip
-    return Checked(path, records, True, None, line_hash(lines[-1]))
+    return Checked(path, records, True, None, line_hash(lines[-1]), cut)
 
 
 def journals(plant_path: Path) -> list[Path]:
@@ -140,7 +141,7 @@ def follow(plant_path: Path) -> dict[str, Any] | None:
     found = journals(plant_path)
     if not found:
         return None
-    checked = check_journal(found[-1], growing=True)
+    checked = check_journal(found[-1])
     if checked.problem is not None:
         raise UserError(f"{checked.problem.said()} — the plant's newest journal does not verify, and this run's journal "
                         f"would follow it: nothing was written; {EVIDENCE}, then move it (and its snapshot) out of "
@@ -238,6 +239,9 @@ def check(paths: Iterable[Path]) -> Verified:
         if journal.problem is not None:
             result.problems.append(journal.problem)
             continue
+        if journal.cut:
+            result.notes.append(f"{path}:{len(journal.records) + 1}: its last record was cut short — the disk refused it, or the "
+                                "run was killed as it wrote it — and is left out")  # fmt: skip
         if not journal.chained:
             result.unchained += 1
             continue
