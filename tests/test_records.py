@@ -373,3 +373,17 @@ def test_a_journal_the_disk_cut_short_still_verifies_and_restores(plant, capsys,
     assert checked.code == 0 and f"note: {journal}:" in checked.err and "cut short" in checked.err
     restored = run_cli(capsys, "restore", snapshots(tmp_path)[0], *APPLY)
     assert restored.code == 0, restored.err
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="needs root to give the folder to another user")
+def test_git_refusing_a_repository_of_another_owner_is_said(tmp_path):
+    """git's safe.directory: a work tree another user owns is not read — the header says git's reason."""
+    from prc3cfg.shell.records import git_state
+
+    repo = tmp_path / "theirs"
+    repo.mkdir()
+    (repo / "plant.yaml").write_text("plant: x\n")
+    git(repo, "init", "-q")
+    subprocess.run(["chown", "-R", "1001:1001", str(repo)], check=True)
+    said = git_state(repo / "plant.yaml")
+    assert said["commit"] is None and said["clean"] is None and "dubious ownership" in said["said"], said

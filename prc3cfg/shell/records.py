@@ -98,7 +98,7 @@ def git_state(plant_path: Path) -> dict[str, Any]:
         done = subprocess.run(["git", "-c", "core.fsmonitor=false", "-C", str(folder), *args], capture_output=True, text=True,
                               timeout=GIT_TIMEOUT, env=env, stdin=subprocess.DEVNULL)  # fmt: skip
         if done.returncode != 0:
-            raise LookupError((done.stderr.strip().splitlines() or [f"git {args[0]} failed"])[-1])
+            raise LookupError((done.stderr.strip().splitlines() or [f"git {args[0]} failed"])[0].removeprefix("fatal: "))
         return done.stdout
 
     try:
