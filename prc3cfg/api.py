@@ -64,7 +64,7 @@ from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
-from prc3cfg.shell.audit import Pruned, Run, Verified
+from prc3cfg.shell.audit import Pruned, RecordedRun, Verified
 from prc3cfg.shell.cancel import Cancellation, main_thread_only
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
@@ -87,8 +87,8 @@ from prc3cfg.shell.records import header as run_header
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused",
-    "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Pruned", "Release", "Run", "Search", "SerialPort",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused", "Gates",
+    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Pruned", "RecordedRun", "Release", "Search", "SerialPort",
     "StalePlan", "UserError", "Verified", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "list_records", "listen", "load", "load_images", "measurable", "open_pty",
     "picture", "plan", "plan_document", "plan_file_plant", "plot_format", "prune_records", "read", "restore", "scan", "select", "serial_ports",
@@ -1344,7 +1344,7 @@ def verify_records(paths: Iterable[Path]) -> Verified:
     return audit.check(list(paths))
 
 
-def list_records(plant_path: Path) -> list[Run]:
+def list_records(plant_path: Path) -> list[RecordedRun]:
     """Every apply, restore and adopt beside the plant file, oldest first, as its records tell it."""
     return audit.runs(Path(plant_path))
 

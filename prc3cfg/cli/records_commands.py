@@ -24,7 +24,7 @@ from prc3cfg.cli.common import PlantArg
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:
-    from prc3cfg.api import Run
+    from prc3cfg.api import RecordedRun
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print it as JSON.")]
 
@@ -88,7 +88,7 @@ def prune(
     print(f"{verb} {len(done.removed)} run{'s' if len(done.removed) != 1 else ''}; kept {len(done.kept)} of those old enough.")
 
 
-def _line(run: Run) -> str:
+def _line(run: RecordedRun) -> str:
     """A run in one line, everything from the files shown `plain`."""
     from prc3cfg.core.text import plain
 

@@ -45,7 +45,7 @@ NAME_ONE = "name a plant file, a .prc3cfg folder, a journal (.jsonl) or a snapsh
 
 
 @dataclass(frozen=True)
-class Problem:
+class Mismatch:
     """A record that does not verify: where (`file:line`, or the file) and what is wrong."""
 
     where: str
@@ -64,7 +64,7 @@ class Checked:
     path: Path
     records: list[dict[str, Any]]
     chained: bool
-    problem: Problem | None
+    problem: Mismatch | None
     last: str | None = None
     cut: bool = False  # a last line without its end of line, left out
 
@@ -93,12 +93,12 @@ def check_journal(path: Path) -> Checked:
     try:
         data = read_regular(path, JOURNAL_LIMIT)
     except FileProblem as problem:
-        return Checked(path, [], False, Problem(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
+        return Checked(path, [], False, Mismatch(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
     lines = data.split(b"\n")
     cut = bool(lines.pop())  # what follows the last newline: nothing, in a whole journal
     if not lines:
         said = "cut short before its header was whole" if cut else "empty: a journal begins with its header"
-        return Checked(path, [], False, Problem(str(path), said))
+        return Checked(path, [], False, Mismatch(str(path), said))
     records: list[dict[str, Any]] = []
     for number, line in enumerate(lines, 1):
         try:
@@ -106,17 +106,17 @@ def check_journal(path: Path) -> Checked:
         except ValueError:
             record = None
         if not isinstance(record, dict):
-            return Checked(path, records, True, Problem(f"{path}:{number}", "not a JSON record as prc3cfg writes it"))
+            return Checked(path, records, True, Mismatch(f"{path}:{number}", "not a JSON record as prc3cfg writes it"))
         records.append(record)
     if records[0].get("event") != "header":
         if not any("prev" in record for record in records):
             return Checked(path, records, False, None, line_hash(lines[-1]), cut)  # before headers
-        return Checked(path, records, True, Problem(f"{path}:1", "no header: a journal begins with who, where, what and why"))
+        return Checked(path, records, True, Mismatch(f"{path}:1", "no header: a journal begins with who, where, what and why"))
     if records[0].get("prev") is not None:
-        return Checked(path, records, True, Problem(f"{path}:1", "a header that follows another record"))
+        return Checked(path, records, True, Mismatch(f"{path}:1", "a header that follows another record"))
     for number in range(1, len(lines)):
         if records[number].get("prev") != line_hash(lines[number - 1]):
-            return Checked(path, records, True, Problem(
+            return Checked(path, records, True, Mismatch(
                 f"{path}:{number}", f"not the record the next one (line {number + 1}) was written after — this one edited, "
                 "or records removed or inserted here"))  # fmt: skip
     return Checked(path, records, True, None, line_hash(lines[-1]), cut)
@@ -173,20 +173,20 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     return None
 
 
-def _snapshot_problem(checked: Checked, snapshot: Path) -> Problem | None:
+def _snapshot_problem(checked: Checked, snapshot: Path) -> Mismatch | None:
     """Whatever keeps `snapshot` from being the one its journal recorded last."""
     if checked.problem is not None:
         return checked.problem
     found = checked.snapshot_record(snapshot.name)
     if found is None:
-        return Problem(str(snapshot), f"not recorded in its journal {checked.path}")
+        return Mismatch(str(snapshot), f"not recorded in its journal {checked.path}")
     line, record = found
     try:
         written = line_hash(read_regular(snapshot, JOURNAL_LIMIT))
     except FileProblem as problem:
-        return Problem(str(snapshot), str(problem))
+        return Mismatch(str(snapshot), str(problem))
     if written != record.get("sha256"):
-        return Problem(str(snapshot), f"does not match its SHA-256 in {checked.path}:{line} — edited or replaced since it was written")
+        return Mismatch(str(snapshot), f"does not match its SHA-256 in {checked.path}:{line} — edited or replaced since it was written")
     return None
 
 
@@ -194,7 +194,7 @@ def _snapshot_problem(checked: Checked, snapshot: Path) -> Problem | None:
 class Verified:
     """What `check` found: problems, one line each (the first of each file), and how many files it checked."""
 
-    problems: list[Problem] = field(default_factory=list)
+    problems: list[Mismatch] = field(default_factory=list)
     journals: int = 0
     snapshots: int = 0
     unchained: int = 0
@@ -230,7 +230,7 @@ def check(paths: Iterable[Path]) -> Verified:
         elif path.suffix == ".json":
             wanted_snapshots[path] = None
         else:
-            result.problems.append(Problem(str(path), "not a plant file, records folder, journal (.jsonl) or snapshot (.json)", NAME_ONE))
+            result.problems.append(Mismatch(str(path), "not a plant file, records folder, journal (.jsonl) or snapshot (.json)", NAME_ONE))
     checked: dict[Path, Checked] = {}
     done: set[Path] = set()  # snapshots checked with their journal
     for path in wanted_journals:
@@ -250,13 +250,13 @@ def check(paths: Iterable[Path]) -> Verified:
             result.problems.append(problem)
         if (found := journal.snapshot_record()) is not None:
             if (name := file_name(found[1].get("path"))) is None:
-                result.problems.append(Problem(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)"))
+                result.problems.append(Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)"))
                 continue
             snapshot = path.resolve().parent.parent / "snapshots" / name
             done.add(snapshot)
             result.snapshots += 1
             if not snapshot.exists():
-                result.problems.append(Problem(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
+                result.problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
                                                "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
             elif (problem := _snapshot_problem(journal, snapshot)) is not None:
                 result.problems.append(problem)
@@ -267,17 +267,17 @@ def check(paths: Iterable[Path]) -> Verified:
         try:
             taken = Snapshot.load(path)
         except UserError as error:
-            result.problems.append(Problem(str(path), str(error).partition(": ")[2] or str(error)))
+            result.problems.append(Mismatch(str(path), str(error).partition(": ")[2] or str(error)))
             continue
         if taken.header is None:
             result.unchained += 1
             continue
         if (name := file_name(taken.header.get("journal"))) is None:
-            result.problems.append(Problem(str(path), "its header names no journal file"))
+            result.problems.append(Mismatch(str(path), "its header names no journal file"))
             continue
         journal_path = path.resolve().parent.parent / "journal" / name
         if not journal_path.is_file():
-            result.problems.append(Problem(str(path), f"its journal {journal_path} is not there"))
+            result.problems.append(Mismatch(str(path), f"its journal {journal_path} is not there"))
             continue
         journal = checked.get(journal_path) or check_journal(journal_path)
         if journal.problem is None and (problem := _snapshot_problem(journal, path)) is not None:
@@ -285,7 +285,7 @@ def check(paths: Iterable[Path]) -> Verified:
         elif journal.problem is not None and journal_path not in checked:
             result.problems.append(journal.problem)
     if not wanted_journals and not wanted_snapshots and not result.problems:
-        result.problems.extend(Problem(str(p), "no records there", "an apply, restore or adopt keeps them in .prc3cfg/ beside the plant file")
+        result.problems.extend(Mismatch(str(p), "no records there", "an apply, restore or adopt keeps them in .prc3cfg/ beside the plant file")
                                for p in paths)  # fmt: skip
     return result
 
@@ -299,12 +299,12 @@ def _records_folder(path: Path) -> Path | None:
     return path / ".prc3cfg" if (path / ".prc3cfg").is_dir() and not (path / "journal").is_dir() else path
 
 
-def _link_problem(path: Path, previous: Any, notes: list[str]) -> Problem | None:
+def _link_problem(path: Path, previous: Any, notes: list[str]) -> Mismatch | None:
     """A journal's link to the plant's journal before it: that one's line as it was when this run began."""
     if not isinstance(previous, dict):
         return None
     if (name := file_name(previous.get("journal"))) is None:
-        return Problem(f"{path}:1", "its link to the run before names no journal file")
+        return Mismatch(f"{path}:1", "its link to the run before names no journal file")
     before = path.resolve().parent / name
     if not before.is_file():
         notes.append(f"{path}:1: follows {before.name}, which is not there (pruned, or removed)")
@@ -312,7 +312,7 @@ def _link_problem(path: Path, previous: Any, notes: list[str]) -> Problem | None
     lines = before.read_bytes().split(b"\n")
     count = previous.get("lines")
     if not isinstance(count, int) or not 0 < count <= len(lines) or line_hash(lines[count - 1]) != previous.get("sha256"):
-        return Problem(f"{before}:{count}", f"not the record {path}:1 follows — edited since that run began")
+        return Mismatch(f"{before}:{count}", f"not the record {path}:1 follows — edited since that run began")
     return None
 
 
@@ -320,7 +320,7 @@ def _link_problem(path: Path, previous: Any, notes: list[str]) -> Problem | None
 
 
 @dataclass(frozen=True)
-class Run:
+class RecordedRun:
     """One apply, restore or adopt as its records tell it."""
 
     time: str
@@ -356,7 +356,7 @@ def _result(records: list[dict[str, Any]]) -> str:
     return "unfinished" if "snapshot" in events or "apply" in events else "nothing written"
 
 
-def runs(plant_path: Path) -> list[Run]:
+def runs(plant_path: Path) -> list[RecordedRun]:
     """Every run beside the plant file, oldest first: each journal, and each snapshot without one."""
     snapshots_dir = records_dir(plant_path, "snapshots")
     found = [_journal_run(path, snapshots_dir) for path in journals(plant_path)]
@@ -365,7 +365,7 @@ def runs(plant_path: Path) -> list[Run]:
     return sorted(found, key=lambda run: run.time)
 
 
-def _journal_run(path: Path, snapshots_dir: Path) -> Run:
+def _journal_run(path: Path, snapshots_dir: Path) -> RecordedRun:
     """A run as its journal tells it (one before headers: what its records say)."""
     checked = check_journal(path)
     records, header = checked.records, checked.header or {}
@@ -382,12 +382,12 @@ def _journal_run(path: Path, snapshots_dir: Path) -> Run:
     chain = "intact" if checked.chained else "unchained"
     if checked.problem is not None:
         chain = f"broken at {checked.problem.where}"
-    return Run(str(records[0].get("time", "")) if records else "", header.get("command") or ("apply" if records else None),
+    return RecordedRun(str(records[0].get("time", "")) if records else "", header.get("command") or ("apply" if records else None),
                header.get("user"), header.get("host"), name, tuple(sorted(buses)), _result(records), header.get("reason"), path,
                snapshot, chain)  # fmt: skip
 
 
-def _snapshot_run(path: Path) -> Run:
+def _snapshot_run(path: Path) -> RecordedRun:
     """A run of which only the snapshot is left (written before journals named it)."""
     try:
         snapshot = Snapshot.load(path)
@@ -395,15 +395,15 @@ def _snapshot_run(path: Path) -> Run:
         lines: tuple[str, ...] = tuple(sorted({bus for bus, _ in snapshot.images}))
     except (UserError, ValueError):
         taken, lines = "", ()
-    return Run(taken, None, None, None, None, lines, "unknown (no journal)", None, None, path, "unchained")
+    return RecordedRun(taken, None, None, None, None, lines, "unknown (no journal)", None, None, path, "unchained")
 
 
 @dataclass(frozen=True)
 class Pruned:
     """What `prune` removed, and what it kept although asked to remove it, with why."""
 
-    removed: tuple[Run, ...]
-    kept: tuple[tuple[Run, str], ...]
+    removed: tuple[RecordedRun, ...]
+    kept: tuple[tuple[RecordedRun, str], ...]
 
 
 def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, protected: Iterable[Path] = (),
@@ -447,7 +447,7 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
     return Pruned(tuple(removed), tuple(kept))
 
 
-def _lines(run: Run) -> dict[str, str]:
+def _lines(run: RecordedRun) -> dict[str, str]:
     """The lines whose modules a run's snapshot holds: each of a line's identities (`LineTaken.keys`:
     a line named by another bus name since is still that line), with the line in words."""
     if run.snapshot is None or not run.snapshot.exists():
