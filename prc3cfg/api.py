@@ -62,8 +62,9 @@ from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import bases, releases
+from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
+from prc3cfg.shell.audit import Pruned, RecordedRun, Verified
 from prc3cfg.shell.cancel import Cancellation, main_thread_only
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
@@ -81,16 +82,17 @@ from prc3cfg.shell.platform import HAS_PTY, python_command
 from prc3cfg.shell.platform import device_number as device_number
 from prc3cfg.shell.platform import terminal_path as terminal_path
 from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
-from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
+from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, reason_given, save_applied
+from prc3cfg.shell.records import header as run_header
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused",
-    "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
-    "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
-    "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "plot_format", "read", "restore", "scan", "select", "serial_ports", "setup_machine", "slower_than_priced",
-    "terminal_path", "unshared_records", "write_adoption",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused", "Gates",
+    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Pruned", "RecordedRun", "Release", "Search", "SerialPort",
+    "StalePlan", "UserError", "Verified", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
+    "import_modules", "import_plant", "init_data_block", "left_alone", "list_records", "listen", "load", "load_images", "measurable", "open_pty",
+    "picture", "plan", "plan_document", "plan_file_plant", "plot_format", "prune_records", "read", "restore", "scan", "select", "serial_ports",
+    "setup_machine", "slower_than_priced", "terminal_path", "unshared_records", "verify_records", "write_adoption",
 ]  # fmt: skip
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -185,6 +187,8 @@ class LineOptions:
     #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
     notice: Callable[[str], None] | None = None
     notices: list[str] = field(default_factory=list)
+    #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
+    command_line: tuple[str, ...] | None = None
 
     def tell(self, text: str) -> None:
         self.notices.append(text)
@@ -685,17 +689,20 @@ def apply(
     options: LineOptions | None = None,
     previous: Path | None = None,
     full_read: bool = False,
+    reason: str | None = None,
 ) -> ApplyResult:
     """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
 
     What is read back is what `plan` reads (`previous`, `full_read`); for `plan_file`, exactly
-    what its plan read. Returns the result when every module verified; raises `ApplyFailed` or
-    `ApplyInterrupted`, each with the result, otherwise; before anything is written, any other `UserError`.
+    what its plan read. `reason` (else `PRC3CFG_REASON`) goes into the records' header — a bus
+    with `require_reason` refuses to start without one. Returns the result when every module
+    verified; raises `ApplyFailed` or `ApplyInterrupted`, each with the result, otherwise; before
+    anything is written, any other `UserError`.
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
     wanted = _plan_file_reads(plant, *planned, pairs) if planned is not None else reads(plant, pairs, full_read)
-    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions())
+    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason)
 
 
 def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:
@@ -723,11 +730,15 @@ def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) 
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
-            onto_current_lines: bool = False) -> ApplyResult:  # fmt: skip
+            onto_current_lines: bool = False, reason: str | None = None) -> ApplyResult:  # fmt: skip
     """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
     onto the lines it was taken on: a bus of the plant file that now names another line (port or
-    framing) is refused, unless `onto_current_lines`."""
+    framing) is refused, unless `onto_current_lines`; and a snapshot that its journal does not
+    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused."""
+    options = options or LineOptions()
     taken = Snapshot.load(snapshot)
+    if (note := audit.snapshot_checked(snapshot, taken)) is not None:
+        options.tell(note)
     plant = load_plant(taken.plant_path)
     pairs = [(bus, m) for bus, m in plant.modules() if (bus.name, m.address) in taken.images]
     if len(pairs) != len(taken.images):
@@ -743,12 +754,15 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
         for bus, m in pairs
         for image in [taken.images[(bus.name, m.address)]]
     ]
-    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options or LineOptions())
+    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason)
 
 
 def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
-           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
+           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions, *,
+           reason: str | None = None) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in wanted.pairs}
+    command = "restore" if desired is not None else "apply"
+    reason = _reason(plant, buses.values(), reason, command)
     for bus in buses.values():
         if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
             raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
@@ -757,8 +771,10 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
     releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
     releases.folder(bases.KIND, bases.WHAT)
-    journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
-    records = releases.Releases("restore" if desired is not None else "apply", journal.path)
+    said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
+                      argv=options.command_line)  # fmt: skip
+    journal = Journal(plant.path, said, audit.follow(plant.path))  # its file is made at the first record: not for a busy line
+    records = releases.Releases(command, journal.path)
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once
     if options.cancel is None:  # the event that stops the lines when a record cannot be kept
         options = replace(options, cancel=Cancellation())
@@ -1007,11 +1023,13 @@ class _Writing:
                     bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
                 if self._taken is None:
                     taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
-                    self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on)
+                    self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
                 self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
-                self.snapshot = self._taken.save()
+                self.snapshot, written = self._taken.saved()
             except (OSError, UserError) as error:  # another line's writes began: this one's stay back
                 self.keeping.failed("the snapshot and the line's record before writing", error)
+            else:  # under the lock: the last snapshot record is the file's
+                self.keeping.note("snapshot", path=self.snapshot.name, sha256=written)
             if self._whole:
                 self._tell_snapshot(len(self._taken.images) if self._taken is not None else 0)
         self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
@@ -1258,30 +1276,92 @@ class Adoption:
     before: str
     after: str
     adopted: tuple[Adopted, ...]
+    #: why it is adopted (`--reason`, `PRC3CFG_REASON`), and the plant's name: for the journal's header
+    reason: str | None = None
+    plant: str = ""
+    command_line: tuple[str, ...] | None = None
 
 
 def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
-          options: LineOptions | None = None) -> Adoption:  # fmt: skip
+          options: LineOptions | None = None, *, reason: str | None = None, check: bool = False) -> Adoption:  # fmt: skip
     """Read the chosen modules and work out the plant file that describes what they hold: only the
     values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
-    writes it."""
+    writes it. Unless it is only a `check`, a bus with `require_reason` refuses before its line is
+    opened when neither `reason` nor `PRC3CFG_REASON` gives one."""
+    options = options or LineOptions()
+    given = None if check else _reason(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason, "adopt")
     before = _plant_text(plant.path)
     images = read(plant, modules, options, command="adopt")
     found = adopt_text(plant, images, before, programs)
-    return Adoption(plant.path, before, found.text, found.adopted)
+    return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
 
 
 def write_adoption(adoption: Adoption) -> None:
     """Write the adopted plant file in place of the one read, atomically and with its permissions
     (through a link, to the file linked to) — refused if the file changed since it was read, which is
-    checked once the new text is on disk, around the rename (`replace_unless_changed`)."""
+    checked once the new text is on disk, around the rename (`replace_unless_changed`). A journal
+    says who adopted what and why, before and after (`prc3cfg.shell.records`)."""
     target = adoption.path.resolve()
+    before = adoption.before.encode("utf-8")
+    said = run_header("adopt", adoption.path, adoption.plant, hashlib.sha256(before).hexdigest(), reason=adoption.reason,
+                      argv=adoption.command_line)  # fmt: skip
+    journal = Journal(adoption.path, said, audit.follow(adoption.path))
     try:
-        written = replace_unless_changed(target, adoption.after, adoption.before.encode("utf-8"))
+        journal.record("adopt", buses=sorted({name.partition("/")[0] for value in adoption.adopted for name in value.modules}),
+                       values=[value.text for value in adoption.adopted])  # fmt: skip
     except OSError as error:
-        raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+        raise UserError(f"{journal.path}: cannot write the journal ({error.strerror}) — the plant file was not changed") from None
+    try:
+        try:
+            written = replace_unless_changed(target, adoption.after, before)
+        except OSError as error:
+            raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+        journal.record("adopted", written=written, sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written else None)
+    finally:
+        journal.close()
     if not written:
         raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+
+
+def _reason(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str) -> str | None:
+    """Why `command` writes (`reason`, else `PRC3CFG_REASON`) — refused in one line, before any line
+    is opened, where a bus says `require_reason: true` and nothing says why."""
+    given = reason_given(reason)
+    requiring = [bus.name for bus in buses if bus.require_reason]
+    if given is None and requiring:
+        raise UserError(f"{plant.path}: {'bus' if len(requiring) == 1 else 'buses'} {', '.join(requiring)} "
+                        f"{'requires' if len(requiring) == 1 else 'require'} a reason for every {command} (require_reason: true) "
+                        "— nothing was written: give --reason TEXT or set PRC3CFG_REASON")  # fmt: skip
+    return given
+
+
+# -- the records beside a plant file ---------------------------------------------------------
+
+
+def verify_records(paths: Iterable[Path]) -> Verified:
+    """Check the records under `paths` — plant files (their records), records folders, journals,
+    snapshots (`prc3cfg.shell.audit.check`): the first record of each file that does not match."""
+    return audit.check(list(paths))
+
+
+def list_records(plant_path: Path) -> list[RecordedRun]:
+    """Every apply, restore and adopt beside the plant file, oldest first, as its records tell it."""
+    return audit.runs(Path(plant_path))
+
+
+def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: float | None = None, dry_run: bool = False) -> Pruned:
+    """Remove the plant's runs (journal and snapshot together) beyond the newest `keep` and older
+    than `older_than_days` — never the newest snapshot of a line, never a run an axis release (or
+    an E12) nobody was told of names."""
+    if keep is None and older_than_days is None:
+        raise UserError("say what to prune: --keep N (the newest N runs stay) or --older-than DAYS, or both")
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
+    with contextlib.ExitStack() as held:  # no apply of these lines writes its records meanwhile
+        for bus in plant.buses:
+            held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
+        every = [key for identities in keys.values() for key in identities]
+        protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(every, kind) if r.journal]
+        return audit.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
 
 
 def _plant_text(path: Path) -> str:

@@ -343,6 +343,10 @@ def ask(question: str, options: LineOptions | None = None, *, typed: bool = Fals
             terminal.write("Answer y or n.\n")
 
 
+#: The command line `main` runs (`prc3cfg` and its arguments), for the records' header.
+COMMAND_LINE: list[str] = []
+
+
 @contextlib.contextmanager
 def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Iterator[LineOptions]:
     """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal;
@@ -356,6 +360,7 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
             trace=stack.enter_context(trace.open("a")) if trace else None,
             waiting=lambda text: print(text, file=sys.stderr, flush=True),
             notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),
+            command_line=tuple(COMMAND_LINE) or None,
         )  # fmt: skip
         yield options
         note_repeats(options.links_used)
