@@ -449,6 +449,7 @@ class Plant:
         temp = self.tmp / "runner" / "_temp" / str(self.runs)
         temp.mkdir(parents=True)
         values: dict[str, object] = {"github.repository": "plant-org/plant", "github.token": "a-token", "runner.temp": str(temp),
+                                     "github.server_url": "https://github.com",
                                      "github.run_id": 9000 + self.runs, "inputs.task": "", **event}  # fmt: skip
         done = Job()
         if not evaluate(definition["if"], values):
@@ -556,6 +557,9 @@ def test_a_pull_request_is_planned_from_its_plant_file_as_data_and_the_merge_app
     assert "Apply complete: 6 modules written and verified." in job.output()
     records = plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}"
     assert sorted(p.name for p in records.iterdir()) == ["applied", "journal", "snapshots"]
+    (journal,) = (records / "journal").iterdir()
+    header = json.loads(journal.read_text().splitlines()[0])  # the records say why: which event, commit and run
+    assert header["reason"] == f"push of {merged['github.sha']}, run https://github.com/plant-org/plant/actions/runs/{9000 + plant.runs}"
     assert plant.plan_exit() == 0
 
 
