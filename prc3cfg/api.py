@@ -56,14 +56,15 @@ from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted, plural
 from prc3cfg.core.targeting import Known
 from prc3cfg.core.verification import Release
-from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import bases, releases
+from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
+from prc3cfg.shell.audit import Pruned, RecordedRun, Verified
 from prc3cfg.shell.cancel import Cancellation, main_thread_only
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
@@ -77,20 +78,22 @@ from prc3cfg.shell.link.ports import serial_ports as serial_ports
 from prc3cfg.shell.locks import LineBusy, line_keys, line_lock
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.platform import HAS_PTY, result_of
+from prc3cfg.shell.platform import HAS_PTY, python_command, result_of
 from prc3cfg.shell.platform import device_number as device_number
 from prc3cfg.shell.platform import terminal_path as terminal_path
 from prc3cfg.shell.platform import wait_for as wait_for
 from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
-from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, save_applied
+from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, reason_given, save_applied
+from prc3cfg.shell.records import header as run_header
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused",
-    "Gates", "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Release", "Search", "SerialPort",
-    "StalePlan", "UserError", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
-    "import_modules", "import_plant", "init_data_block", "left_alone", "listen", "load", "load_images", "measurable", "open_pty", "picture", "plan",
-    "plan_document", "plan_file_plant", "read", "restore", "scan", "select", "serial_ports", "slower_than_priced", "terminal_path", "wait_for",
+    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused", "Gates",
+    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Pruned", "RecordedRun", "Release", "Search", "SerialPort",
+    "StalePlan", "UserError", "Verified", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
+    "import_modules", "import_plant", "init_data_block", "left_alone", "list_records", "listen", "load", "load_images", "measurable", "open_pty",
+    "picture", "plan", "plan_document", "plan_file_plant", "plot_format", "prune_records", "read", "restore", "scan", "select", "serial_ports",
+    "setup_machine", "slower_than_priced", "terminal_path", "unshared_records", "verify_records", "wait_for",
     "write_adoption",
 ]  # fmt: skip
 
@@ -123,6 +126,18 @@ class ApplyFailed(UserError):
                          f"verified (see above) — restore {'it' if written == 1 else 'them'} with: prc3cfg restore {result.snapshot}")  # fmt: skip
         super().__init__("\n".join(said))
         self.result = result
+
+
+class RecordsFailed(ApplyFailed):
+    """A record the apply keeps as it writes — its journal, the record of an axis release, its
+    snapshot — could not be written midway (a full disk): every line stopped before its next frame;
+    `result` says what each module was sent."""
+
+    def __init__(self, result: ApplyResult, trouble: str) -> None:
+        super().__init__(result)
+        then = "plan and apply again" + (f", or restore: prc3cfg restore {result.snapshot}" if result.snapshot else "")
+        self.args = (f"{trouble}: every line stopped before its next frame — the account above says what each module "
+                     f"was sent; free the space (or fix the folder), then {then}",)  # fmt: skip
 
 
 class ApplyInterrupted(Interrupted):
@@ -174,6 +189,8 @@ class LineOptions:
     #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
     notice: Callable[[str], None] | None = None
     notices: list[str] = field(default_factory=list)
+    #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
+    command_line: tuple[str, ...] | None = None
 
     def tell(self, text: str) -> None:
         self.notices.append(text)
@@ -262,6 +279,17 @@ def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
     return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
 
 
+def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
+    """Make (or put right) the machine's folder of axis-release records and line records that every user
+    of its lines shares — run once by an administrator; the folder and the serial ports' group it gave it."""
+    return releases.setup_machine(group)
+
+
+def unshared_records() -> str | None:
+    """The one-line hint for a user whose records no other user of the machine sees (None: they do)."""
+    return releases.unshared()
+
+
 @dataclass(frozen=True)
 class Reads:
     """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
@@ -302,7 +330,9 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     program of one the record does not know, knows from too long ago, or that reported E12 since."""
     buses = {bus.name: bus for bus, _ in pairs}
     known = {} if full_read else record(plant, buses.values())
-    if not any((bus.name, m.address) in known for bus, m in pairs):
+    overruled = {} if full_read else {(bus.name, address): said for bus in buses.values()
+                                      for address, said in bases.overruled(bus_line_keys(plant, bus)).items()}  # fmt: skip
+    if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
         return Reads(pairs, targets(pairs))
     unset = unset_systems(plant, buses.values())
     now = datetime.now(UTC)
@@ -312,7 +342,7 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
         to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
         if decision.why is not None:
-            why[key] = "it reported E12 (system parameters not set)" if key in unset else decision.why
+            why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
@@ -336,9 +366,15 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
     return line_keys(bus.port, emulator_state=state)
 
 
+class _Records(Protocol):
+    """Where an axis release is recorded: `releases.Releases`, or an apply's `_Keeping` of it."""
+
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ...) -> None: ...
+
+
 @contextlib.contextmanager
 def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
-          announce: Observer | None = None, records: releases.Releases | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
+          announce: Observer | None = None, records: _Records | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
     Every axis release on these lines that no account has named yet is told (`LineOptions.tell`),
     and a read a module answers as a write is recorded as one in `records` (`PossibleWrite`).
@@ -381,7 +417,7 @@ def _sha256_of(path: Path) -> str | None:
         return None
 
 
-def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: releases.Releases,
+def _written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: _Records,
                    observer: Callable[[Exchange], None] | None = None) -> Callable[[Exchange], None]:  # fmt: skip
     """`observer`, and a read answered with an acknowledgement recorded as an axis release: the
     module executed a damaged frame as a write, a 10h as likely as any (`PossibleWrite`)."""
@@ -655,17 +691,20 @@ def apply(
     options: LineOptions | None = None,
     previous: Path | None = None,
     full_read: bool = False,
+    reason: str | None = None,
 ) -> ApplyResult:
     """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
 
     What is read back is what `plan` reads (`previous`, `full_read`); for `plan_file`, exactly
-    what its plan read. Returns the result when every module verified; raises `ApplyFailed` or
-    `ApplyInterrupted`, each with the result, otherwise; before anything is written, any other `UserError`.
+    what its plan read. `reason` (else `PRC3CFG_REASON`) goes into the records' header — a bus
+    with `require_reason` refuses to start without one. Returns the result when every module
+    verified; raises `ApplyFailed` or `ApplyInterrupted`, each with the result, otherwise; before
+    anything is written, any other `UserError`.
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
     wanted = _plan_file_reads(plant, *planned, pairs) if planned is not None else reads(plant, pairs, full_read)
-    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions())
+    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason)
 
 
 def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:
@@ -693,11 +732,15 @@ def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) 
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
-            onto_current_lines: bool = False) -> ApplyResult:  # fmt: skip
+            onto_current_lines: bool = False, reason: str | None = None) -> ApplyResult:  # fmt: skip
     """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
     onto the lines it was taken on: a bus of the plant file that now names another line (port or
-    framing) is refused, unless `onto_current_lines`."""
+    framing) is refused, unless `onto_current_lines`; and a snapshot that its journal does not
+    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused."""
+    options = options or LineOptions()
     taken = Snapshot.load(snapshot)
+    if (note := audit.snapshot_checked(snapshot, taken)) is not None:
+        options.tell(note)
     plant = load_plant(taken.plant_path)
     pairs = [(bus, m) for bus, m in plant.modules() if (bus.name, m.address) in taken.images]
     if len(pairs) != len(taken.images):
@@ -713,12 +756,15 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
         for bus, m in pairs
         for image in [taken.images[(bus.name, m.address)]]
     ]
-    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options or LineOptions())
+    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason)
 
 
 def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
-           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions) -> ApplyResult:  # fmt: skip
+           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions, *,
+           reason: str | None = None) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in wanted.pairs}
+    command = "restore" if desired is not None else "apply"
+    reason = _reason(plant, buses.values(), reason, command)
     for bus in buses.values():
         if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
             raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
@@ -727,14 +773,19 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
     releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
     releases.folder(bases.KIND, bases.WHAT)
-    journal = Journal(plant.path)  # its file is made at the first record: not for a busy line
-    records = releases.Releases("restore" if desired is not None else "apply", journal.path)
+    said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
+                      argv=options.command_line)  # fmt: skip
+    journal = Journal(plant.path, said, audit.follow(plant.path))  # its file is made at the first record: not for a busy line
+    records = releases.Releases(command, journal.path)
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once
-    announce = _announcer(plant, buses, keys, journal, records)
+    if options.cancel is None:  # the event that stops the lines when a record cannot be kept
+        options = replace(options, cancel=Cancellation())
+    assert options.cancel is not None
+    keeping = _Keeping(plant, buses, keys, journal, records, options.cancel.event)
     try:
-        with lines(plant, buses, options, purpose="apply", observer=journal.exchange, announce=announce, records=records) as links:
+        with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping) as links:
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            writing = _Writing(plant, keys, buses, links, journal, verify, options, records.command)
+            writing = _Writing(plant, keys, buses, links, keeping, verify, options, records.command)
             if plan_file is None and not gates.asks:
                 result = _apply_by_line(plant, chosen, wanted, desired, gates, writing, options, earlier, records)
             else:
@@ -743,7 +794,7 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
                 _keep_applied(plant)
             return result
     finally:
-        journal.close()
+        keeping.close()
 
 
 def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
@@ -851,20 +902,70 @@ def _apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key
         return writing.account(planned_plan, earlier, records, unread=unread)
 
 
-def _announcer(plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
-               records: releases.Releases) -> Callable[[Exchange], None]:  # fmt: skip
-    """What is done before an apply's frame leaves: the attempt journalled, and a 10h/20h recorded
-    durably as an axis release not yet told (a broadcast's for every module on the line)."""
-    names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+class _Keeping:
+    """What an apply keeps as it writes — its journal and its records of axis releases (and E12) —
+    and what becomes of it when the disk refuses one of them midway (full, read-only, over a
+    quota, gone): the first failure is kept (`trouble`), every line stops before its next frame
+    (`stop`, the links' cancel event), and the account that follows says what each module was
+    sent. A record that belongs before a frame keeps that frame back (`announce` raises `NotSent`)."""
 
-    def announce(exchange: Exchange) -> None:
-        journal.request(exchange)
+    def __init__(self, plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
+                 records: releases.Releases, stop: threading.Event) -> None:  # fmt: skip
+        self.journal, self.records, self._keys, self._stop = journal, records, keys, stop
+        self._names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+        self._buses = buses
+        self._lock = threading.Lock()
+        self.trouble: str | None = None
+
+    def failed(self, what: str, error: OSError | UserError) -> None:
+        """`what` could not be kept: the lines stop before their next frame."""
+        said = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else \
+            (error.strerror if isinstance(error, OSError) and error.strerror else str(error))  # fmt: skip
+        with self._lock:
+            if self.trouble is None:
+                self.trouble = f"could not keep {what} ({said})"
+        self._stop.set()
+
+    def announce(self, exchange: Exchange) -> None:
+        """Before a frame leaves: the attempt journalled, and a 10h/20h recorded durably as an axis
+        release not yet told (a broadcast's for every module on the line) — else it stays back."""
+        try:
+            self.journal.request(exchange)
+        except OSError as error:
+            self.failed(f"the journal {self.journal.path}", error)
+            raise NotSent() from None
         if codec.MESSAGE_TYPES[exchange.request[0]].RELEASES_AXES:
-            name = names.get((exchange.bus, exchange.address)) if exchange.address else \
-                ", ".join(m.name for m in buses[exchange.bus].modules)  # fmt: skip
-            records.record(keys[exchange.bus], exchange.bus, exchange.address, name or f"address {exchange.address}")
+            name = self._names.get((exchange.bus, exchange.address)) if exchange.address else \
+                ", ".join(m.name for m in self._buses[exchange.bus].modules)  # fmt: skip
+            self.record(self._keys[exchange.bus], exchange.bus, exchange.address, name or f"address {exchange.address}")
+            if self.trouble is not None:
+                raise NotSent()
 
-    return announce
+    def observe(self, exchange: Exchange) -> None:
+        """An exchange that happened, journalled (a failure stops the lines before their next frame)."""
+        try:
+            self.journal.exchange(exchange)
+        except OSError as error:
+            self.failed(f"the journal {self.journal.path}", error)
+
+    def note(self, event: str, **fields: Any) -> None:
+        """A record of the apply (not of an exchange) in the journal, once it can still be written."""
+        if self.trouble is None:
+            try:
+                self.journal.record(event, **fields)
+            except OSError as error:
+                self.failed(f"the journal {self.journal.path}", error)
+
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = releases.RELEASE) -> None:
+        """`releases.Releases.record`, a failure kept as the apply's trouble."""
+        try:
+            self.records.record(keys, bus, address, name, kind)
+        except (OSError, UserError) as error:
+            self.failed("the record of an axis release" if kind == releases.RELEASE else "the record of a module in E12", error)
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):  # already kept as the trouble, or the journal was whole
+            self.journal.close()
 
 
 class _Writing:
@@ -873,9 +974,10 @@ class _Writing:
     their line — added to the apply's one snapshot file, written whole and atomically each time —
     and journalled, then written and verified (`execute`); then the account of every run."""
 
-    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], journal: Journal,
+    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], keeping: _Keeping,
                  verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
-        self.plant, self.keys, self.buses, self.links, self.journal = plant, keys, buses, links, journal
+        self.plant, self.keys, self.buses, self.links, self.keeping = plant, keys, buses, links, keeping
+        self.journal = keeping.journal
         self.verify, self.options, self.command = verify, options, command
         self.phases = Phases(options.progress.start, options.progress.advance)
         self.runs: list[ModuleRun] = []
@@ -916,19 +1018,30 @@ class _Writing:
             return
         # not known until verified: dropped from the lines' records before the first frame (what was known kept for then)
         known = {bus: bases.load(self.keys[bus]) for bus in {r.bus for r in runs}}
-        for bus in known:
-            bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
         with self._lock:
-            if self._taken is None:
-                taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
-                self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on)
-            self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
-            self.snapshot = self._taken.save()
             self.runs.extend(runs)
+            try:
+                for bus in known:
+                    bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
+                if self._taken is None:
+                    taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
+                    self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
+                self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+                self.snapshot, written = self._taken.saved()
+            except (OSError, UserError) as error:  # another line's writes began: this one's stay back
+                self.keeping.failed("the snapshot and the line's record before writing", error)
+            else:  # under the lock: the last snapshot record is the file's
+                self.keeping.note("snapshot", path=self.snapshot.name, sha256=written)
             if self._whole:
-                self._tell_snapshot(len(self._taken.images))
-        self.journal.record("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
-                            modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+                self._tell_snapshot(len(self._taken.images) if self._taken is not None else 0)
+        self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
+                          modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+        if self.keeping.trouble is not None:
+            for run in runs:
+                run.interrupted, run.failure = True, "nothing was sent to it"
+            if started is not None:
+                started()
+            return
         consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
         def wrote() -> None:
             self.phases.wrote()
@@ -947,7 +1060,10 @@ class _Writing:
         when, by = bases.now(), bases.who(self.command, self.plant.path)
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
-            bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+            try:
+                bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+            except UserError as error:  # they stay unknown: the next plan reads them in full
+                self.options.tell(f"bus {bus}: {error} — the next plan reads its modules in full")
 
     def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
                 took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> ApplyResult:  # fmt: skip
@@ -956,22 +1072,24 @@ class _Writing:
         order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
         runs = tuple(sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
         result = ApplyResult(the_plan, runs, self.snapshot, self.journal.path, earlier, records, (took or {}) | self.phases.took(), unread)
-        keys, journal = self.keys, self.journal
+        keys, keeping = self.keys, self.keeping
         for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
             if run.system_unset:
-                records.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
+                keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
         releases.cleared(r for r in releases.pending((k for ks in keys.values() for k in ks), releases.E12)
                          if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
         for run in runs:
-            journal.record(
+            keeping.note(
                 "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
                 released_axes=run.released.value, written=[s.message.hex() for s in run.written],
                 interrupted=run.interrupted,
             )  # fmt: skip
         if result.released:
-            journal.record("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
+            keeping.note("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
+        if keeping.trouble is not None:
+            raise RecordsFailed(result, keeping.trouble)
         if self.options.cancel is not None and self.options.cancel.requested:
-            journal.record("interrupted")
+            keeping.note("interrupted")
             raise ApplyInterrupted(result)
         if not result.verified:
             raise ApplyFailed(result)
@@ -1160,30 +1278,92 @@ class Adoption:
     before: str
     after: str
     adopted: tuple[Adopted, ...]
+    #: why it is adopted (`--reason`, `PRC3CFG_REASON`), and the plant's name: for the journal's header
+    reason: str | None = None
+    plant: str = ""
+    command_line: tuple[str, ...] | None = None
 
 
 def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
-          options: LineOptions | None = None) -> Adoption:  # fmt: skip
+          options: LineOptions | None = None, *, reason: str | None = None, check: bool = False) -> Adoption:  # fmt: skip
     """Read the chosen modules and work out the plant file that describes what they hold: only the
     values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
-    writes it."""
+    writes it. Unless it is only a `check`, a bus with `require_reason` refuses before its line is
+    opened when neither `reason` nor `PRC3CFG_REASON` gives one."""
+    options = options or LineOptions()
+    given = None if check else _reason(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason, "adopt")
     before = _plant_text(plant.path)
     images = read(plant, modules, options, command="adopt")
     found = adopt_text(plant, images, before, programs)
-    return Adoption(plant.path, before, found.text, found.adopted)
+    return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
 
 
 def write_adoption(adoption: Adoption) -> None:
     """Write the adopted plant file in place of the one read, atomically and with its permissions
     (through a link, to the file linked to) — refused if the file changed since it was read, which is
-    checked once the new text is on disk, around the rename (`replace_unless_changed`)."""
+    checked once the new text is on disk, around the rename (`replace_unless_changed`). A journal
+    says who adopted what and why, before and after (`prc3cfg.shell.records`)."""
     target = adoption.path.resolve()
+    before = adoption.before.encode("utf-8")
+    said = run_header("adopt", adoption.path, adoption.plant, hashlib.sha256(before).hexdigest(), reason=adoption.reason,
+                      argv=adoption.command_line)  # fmt: skip
+    journal = Journal(adoption.path, said, audit.follow(adoption.path))
     try:
-        written = replace_unless_changed(target, adoption.after, adoption.before.encode("utf-8"))
+        journal.record("adopt", buses=sorted({name.partition("/")[0] for value in adoption.adopted for name in value.modules}),
+                       values=[value.text for value in adoption.adopted])  # fmt: skip
     except OSError as error:
-        raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+        raise UserError(f"{journal.path}: cannot write the journal ({error.strerror}) — the plant file was not changed") from None
+    try:
+        try:
+            written = replace_unless_changed(target, adoption.after, before)
+        except OSError as error:
+            raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+        journal.record("adopted", written=written, sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written else None)
+    finally:
+        journal.close()
     if not written:
         raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+
+
+def _reason(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str) -> str | None:
+    """Why `command` writes (`reason`, else `PRC3CFG_REASON`) — refused in one line, before any line
+    is opened, where a bus says `require_reason: true` and nothing says why."""
+    given = reason_given(reason)
+    requiring = [bus.name for bus in buses if bus.require_reason]
+    if given is None and requiring:
+        raise UserError(f"{plant.path}: {'bus' if len(requiring) == 1 else 'buses'} {', '.join(requiring)} "
+                        f"{'requires' if len(requiring) == 1 else 'require'} a reason for every {command} (require_reason: true) "
+                        "— nothing was written: give --reason TEXT or set PRC3CFG_REASON")  # fmt: skip
+    return given
+
+
+# -- the records beside a plant file ---------------------------------------------------------
+
+
+def verify_records(paths: Iterable[Path]) -> Verified:
+    """Check the records under `paths` — plant files (their records), records folders, journals,
+    snapshots (`prc3cfg.shell.audit.check`): the first record of each file that does not match."""
+    return audit.check(list(paths))
+
+
+def list_records(plant_path: Path) -> list[RecordedRun]:
+    """Every apply, restore and adopt beside the plant file, oldest first, as its records tell it."""
+    return audit.runs(Path(plant_path))
+
+
+def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: float | None = None, dry_run: bool = False) -> Pruned:
+    """Remove the plant's runs (journal and snapshot together) beyond the newest `keep` and older
+    than `older_than_days` — never the newest snapshot of a line, never a run an axis release (or
+    an E12) nobody was told of names."""
+    if keep is None and older_than_days is None:
+        raise UserError("say what to prune: --keep N (the newest N runs stay) or --older-than DAYS, or both")
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
+    with contextlib.ExitStack() as held:  # no apply of these lines writes its records meanwhile
+        for bus in plant.buses:
+            held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
+        every = [key for identities in keys.values() for key in identities]
+        protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(every, kind) if r.journal]
+        return audit.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
 
 
 def _plant_text(path: Path) -> str:
@@ -1226,23 +1406,42 @@ def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, Modul
     (bus, module), = select(plant, [module_name])
     title = f"module {module.name} — bus {bus.name}, address {module.address}"
     if images is None and planned is None:
-        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file")
+        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file", python=python_command())
     planned = planned or plan(plant, [module.name], images=images)
     change = next(c for c in planned.modules if (c.bus, c.address) == (bus.name, module.address))
     return plot.picture(change.as_known(change.plan.predicted), change.as_known(change.actual), fmt=fmt,
-                        title=f"{title}: before (dashed) and after the plan")  # fmt: skip
+                        title=f"{title}: before (dashed) and after the plan", python=python_command())  # fmt: skip
+
+
+def plot_format(path: Path) -> str:
+    """"svg" or "png", the format of a picture to write to `path` (by its suffix) — a PlotError for any
+    other, and when matplotlib is missing, naming the command that installs it into this Python."""
+    return plot.plot_format(path, python=python_command())
 
 
 # -- a plant file from a bus -----------------------------------------------------------------
 
 
-def import_plant(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
-                 plant_name: str = "imported", bus_name: str = "bus-1") -> tuple[str, int]:  # fmt: skip
-    """A plant file (its text) describing the live modules of one bus (`import_modules`), and how
-    many modules it describes: `unmanaged_programs: reset`, so planning it against that bus is empty."""
-    images = import_modules(bare, addresses, options)
-    bus = bus_entry(bus_name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz)
-    return imported_plant(plant_name, bus, images), len(images)
+def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
+                 plant_name: str = "imported") -> tuple[str, int]:  # fmt: skip
+    """A plant file (its text) describing the live modules of these buses, by name (`import_modules`,
+    one line after another), and how many modules it describes: what they all hold alike once, in one
+    profile; `unmanaged_programs: reset`, so planning it against those lines is empty. Two names for
+    one line are refused before any is read."""
+    owner: dict[str, str] = {}
+    for name, bare in buses.items():
+        try:
+            keys = line_keys(bare.port) if len(buses) > 1 else ()
+        except ValueError:  # a port that names no line: opening it says so, in its turn
+            keys = ()
+        for key in keys:
+            if key in owner:
+                raise UserError(f"--port {buses[owner[key]].port} and --port {bare.port} are one line ({key}) — give each line once")
+            owner[key] = name
+    wanted = None if addresses is None else list(addresses)
+    read = [(bus_entry(name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz), import_modules(bare, wanted, options))
+            for name, bare in buses.items()]  # fmt: skip
+    return imported_plant(plant_name, read), sum(len(images) for _, images in read)
 
 
 # -- an emulated bus -------------------------------------------------------------------------

@@ -21,6 +21,11 @@ class Interrupted(UserError):
         super().__init__("interrupted")
 
 
+class NotSent(Interrupted):
+    """Stopped before a frame's first attempt left: it reached no module (a link whose cancel event
+    was set, or an apply that could not keep the record that goes before the frame)."""
+
+
 def interruption_within(error: BaseException) -> bool:
     """Whether `error` is an interruption Python wrapped on its way up: a signal handler's
     `Interrupted` raised while a class was being made comes out as a RuntimeError ("Error calling

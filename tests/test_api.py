@@ -102,7 +102,7 @@ def test_an_adoption_is_not_written_over_a_file_edited_meanwhile(tmp_path):
 def test_import_plant_gives_a_plant_file_that_plans_to_no_changes(tmp_path):
     with emulated_plant(tmp_path) as emulated:
         bus = emulated.plant.buses[0]
-        text, count = prc3cfg.api.import_plant(prc3cfg.api.BareLine(bus.port, timeout=0.1), plant_name="again", bus_name="b")
+        text, count = prc3cfg.api.import_plant({"b": prc3cfg.api.BareLine(bus.port, timeout=0.1)}, plant_name="again")
         assert count == len(bus.modules)
         (tmp_path / "imported.yaml").write_text(text)
         imported = prc3cfg.api.load(tmp_path / "imported.yaml")

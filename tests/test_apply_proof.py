@@ -88,11 +88,15 @@ def test_an_apply_killed_after_its_20h_leaves_every_later_command_saying_so_unti
                                     "--allow-axis-release", "--trace", str(fifo)], text=True,
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
         with fifo.open() as trace:
+            release: str | None = None
             for line in trace:
                 _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
                 # a crc16 request: A5h, address, length, message ID
                 if (bus, direction) == ("booth-a", ">") and frame[6:8] == "20":
-                    process.kill()  # the 20h is on the line: no account will ever be printed
+                    release = frame
+                elif release is not None and (bus, direction) == ("booth-a", "<"):
+                    process.kill()  # the 20h was answered, so executed: no account will ever be printed
+                    frame = release
                     break
             threading.Thread(target=trace.read, daemon=True).start()
             process.wait()

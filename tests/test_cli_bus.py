@@ -5,13 +5,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
-from emulated import run_cli
+from emulated import emulated_plant, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
 from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.plant_files import load_plant
 
 GATEWAY_PLANT = """\
 plant: gateway-test
@@ -193,3 +194,29 @@ def test_a_zvz_not_longer_than_one_character_is_refused_at_its_line(tmp_path, ca
         f"error: {plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
         "8E1 (11 bits: 9.17 ms), so the gateway would end a frame after every byte — the character delay time must be "
         "greater than the time between two characters (seed 004 §5.2.8; its guide at 1200 baud: 30..800 ms): raise zvz"]
+
+
+def test_import_reads_every_line_given_into_one_plant_file_that_plans_to_no_changes(tmp_path, capsys):
+    """A laptop's first day: both lines of the demo plant, commissioned, into one plant file — a bus each,
+    named as asked, what every module of both holds alike once."""
+    with emulated_plant(tmp_path) as emulated:
+        assert run_cli(capsys, "apply", emulated.path, "--auto-approve", "--allow-axis-release").code == 0
+        ports = [bus.port for bus in emulated.plant.buses]
+        imported = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left", "--bus-name", "right",
+                           "--timeout", "0.2")  # fmt: skip
+        assert imported.code == 0, imported.err
+        assert imported.err.strip() == f"imported 6 modules from {ports[0]}, {ports[1]}"
+        plant = tmp_path / "imported.yaml"
+        plant.write_text(imported.out)
+        loaded = load_plant(plant)
+        assert [(b.name, b.port, [m.address for m in b.modules]) for b in loaded.buses] == [
+            ("left", ports[0], [1, 2, 5]), ("right", ports[1], [1, 3, 4])]
+        assert "profiles:\n  common:" in imported.out and imported.out.count("unmanaged_programs") == 1  # alike: once, for both buses
+        assert run_cli(capsys, "validate", plant).code == 0
+        planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
+        assert planned.code == 0, planned.out + planned.err
+        twice = run_cli(capsys, "import", "--port", ports[0], "--port", ports[0].replace("127.0.0.1", "localhost"), "--timeout", "0.2")
+        assert twice.code == 1 and twice.err.startswith(f"error: --port {ports[0]} and --port ")
+        assert "are one line" in twice.err
+        unnamed = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left")
+        assert unnamed.code == 1 and unnamed.err.strip() == "error: 1 --bus-name for 2 --port: give one name per port, in their order (or none)"

@@ -128,7 +128,8 @@ def test_the_records_of_an_apply_have_exactly_the_keys_docs_files_lists(tmp_path
     documented = {key(row[0]): set(re.findall(r"`([a-z_0-9]+)`", row[1])) for row in journal_rows}
     assert {event: documented[event] for event in events} == events
     api = (ROOT / "prc3cfg" / "api.py").read_text()
-    assert all(event in events or f'journal.record("{event}"' in api for event in documented)  # interrupted: on Ctrl-C
+    # interrupted: on Ctrl-C (the apply's `_Keeping.note`); adopt, adopted: an adopt's (`write_adoption`)
+    assert all(event in events or f'keeping.note("{event}"' in api or f'journal.record("{event}"' in api for event in documented)
 
 
 def test_the_exit_codes_are_the_codes_of_the_command_line():

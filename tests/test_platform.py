@@ -325,3 +325,14 @@ def test_text_files_are_opened_through_the_seam():
              if isinstance(node, ast.Call) and (getattr(node.func, "id", None) == "open" or getattr(node.func, "attr", None) in ("open", "fdopen"))
              and any(isinstance(a, ast.Constant) and a.value in ("w", "a", "wt", "at") for a in [*node.args, *(k.value for k in node.keywords)])}
     assert not wrong, sorted(wrong)
+@pytest.mark.parametrize(("system", "executable", "command"), [
+    ("linux", "/usr/bin/python3", "/usr/bin/python3"),
+    ("linux", "/opt/my python/bin/python3", "'/opt/my python/bin/python3'"),
+    ("win32", r"C:\Python311\python.exe", r"C:\Python311\python.exe"),
+    ("win32", r"C:\Program Files\Python311\python.exe", r'"C:\Program Files\Python311\python.exe"'),
+])  # fmt: skip
+def test_this_python_is_a_command_to_paste_into_the_system_s_shell(monkeypatch, system, executable, command):
+    """What the plot hint names (`python -m pip install matplotlib` into the Python that runs prc3cfg)."""
+    monkeypatch.setattr(sys, "platform", system)
+    monkeypatch.setattr(sys, "executable", executable)
+    assert platform.python_command() == command

@@ -8,21 +8,27 @@ them those tests are skipped, saying what to install.
 from __future__ import annotations
 
 import json
+import re
+import shlex
 import shutil
 import subprocess
 import sys
+import tomllib
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 from test_motion import TWO_PROGRAMS, image
 from typer.testing import CliRunner
 
 import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
+from prc3cfg import api
 from prc3cfg.cli import app
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.motion import chain_motions, paired_chains
-from prc3cfg.core.plot import MERMAID_POINTS, MISSING, PlotError, mermaid, picture, plot_format
+from prc3cfg.core.plot import MERMAID_POINTS, PlotError, mermaid, picture, plot_format
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "plants" / "demo-line.yaml"
@@ -39,7 +45,7 @@ SIX_PROGRAMS = image(
 
 @pytest.fixture
 def matplotlib():
-    return pytest.importorskip("matplotlib", reason="matplotlib is not installed: pip install 'prc3cfg[plot]'")
+    return pytest.importorskip("matplotlib", reason="matplotlib is not installed: python -m pip install matplotlib")
 
 
 def mermaid_values(text: str) -> list[list[float]]:
@@ -89,11 +95,47 @@ def test_svg_and_png_are_drawn_and_the_same_every_time(matplotlib, tmp_path):
     (tmp_path / "chains.png").write_bytes(png)
 
 
-def test_without_matplotlib_plotting_says_which_extra_to_install(monkeypatch):
+def test_without_matplotlib_plotting_says_to_install_matplotlib_into_the_python_that_runs_prc3cfg(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib → ImportError
+    for draw in (lambda python: picture(TWO_PROGRAMS, fmt="svg", title="module test", python=python),
+                 lambda python: plot_format(Path("a.svg"), python=python)):
+        with pytest.raises(PlotError) as raised:
+            draw("'/opt/python 3/bin/python3'")
+        assert str(raised.value) == ("plotting needs matplotlib, which the Python running prc3cfg does not have — "
+                                     "install it there: '/opt/python 3/bin/python3' -m pip install matplotlib")  # fmt: skip
+
+
+def hinted_packages(hint: str) -> tuple[list[str], list[Requirement]]:
+    """The command a hint says to run — `PYTHON -m pip install PACKAGE…` — as (the Python's argv, the packages)."""
+    python, _, packages = hint.split("install it there: ", 1)[1].partition(" -m pip install ")
+    return shlex.split(python), [Requirement(package) for package in shlex.split(packages)]
+
+
+def test_the_hint_names_on_the_package_index_only_what_the_plot_extra_names_there(monkeypatch):
+    """Never an extra of prc3cfg itself (`prc3cfg[plot]`): prc3cfg is not on the package index, and
+    whoever registered that name there would be installed by everyone who followed the hint. Only
+    the names the `plot` extra lists (each its own project's), into this very Python."""
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    extra = {canonicalize_name(Requirement(text).name) for text in pyproject["project"]["optional-dependencies"]["plot"]}
+    assert extra == {"matplotlib"}
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(PlotError) as raised:
-        picture(TWO_PROGRAMS, fmt="svg", title="module test")
-    assert str(raised.value) == MISSING == "plotting needs the plot extra: pip install 'prc3cfg[plot]'"
+        api.plot_format(Path("a.svg"))  # as the command line asks
+    python, packages = hinted_packages(str(raised.value))
+    assert python == [sys.executable]
+    assert packages and {canonicalize_name(p.name) for p in packages} <= extra and not any(p.extras or p.url for p in packages)
+    assert "prc3cfg" not in str(raised.value).split(" -m pip install ", 1)[1]
+
+
+def test_no_text_of_prc3cfg_says_to_install_prc3cfg_by_its_name_from_the_index():
+    """The README, docs/ and the code: `pip install prc3cfg…` (with or without an extra) would fetch
+    whatever holds that name on the index; a checkout (`-e '.[plot]'`) or a commit (`prc3cfg @ git+…`) is ours."""
+    texts = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "prc3cfg").rglob("*.py")]
+    by_name = re.compile(r"pip install[^\n`&;|]*?\s['\"]?prc3cfg(\[|['\"\s`]|$)", re.M)  # in one command
+    assert not [f"{path.relative_to(ROOT)}: {m.group(0)}" for path in texts for m in by_name.finditer(path.read_text())]
+    assert by_name.search("python -m pip install 'prc3cfg[plot]'") and by_name.search("pip install prc3cfg")  # it can fail
+    assert not by_name.search("pip install -e '.[plot]'") and not by_name.search('pip install --no-deps "$PRC3CFG"')
+    assert not by_name.search("pip install . && prc3cfg plan")
 
 
 def test_a_module_without_chains_and_an_unknown_format_are_one_line(matplotlib):

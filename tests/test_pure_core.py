@@ -71,7 +71,7 @@ def test_each_layer_imports_only_the_layers_below_it(layer):
 CLI_MAY_IMPORT = (
     "prc3cfg.api", "prc3cfg.cli", "prc3cfg.errors",
     # rendering, and the values it shows
-    "prc3cfg.core.render", "prc3cfg.core.text", "prc3cfg.core.units", "prc3cfg.core.plot.plot_format", "prc3cfg.core.line.LineSettings",
+    "prc3cfg.core.render", "prc3cfg.core.text", "prc3cfg.core.units", "prc3cfg.core.line.LineSettings",
     "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.link.Link",
     # plant files: loading one is validating it; showing one shows where each value came from
     "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError",

@@ -108,7 +108,7 @@ BUS = {"name": "line", "framing": "crc16", "parity": "even", "timeout": 0.1}
 
 
 def write_plant(path: Path, port: str, images: list[ModuleImage]) -> Path:
-    path.write_text(plant_yaml("targeted", BUS | {"port": port}, [module_entry(image, f"m{image.address}") for image in images]))
+    path.write_text(plant_yaml("targeted", [(BUS | {"port": port}, [module_entry(image, f"m{image.address}") for image in images])]))
     return path
 
 

@@ -42,9 +42,12 @@ app = typer.Typer(
 emulator_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="A software PRC 3 bus.")
 link_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Gateway and line settings.")
 app.add_typer(emulator_app, name="emulator")
+records_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="The journals and snapshots beside a plant file.")
 app.add_typer(link_app, name="link")
+app.add_typer(records_app, name="records")
 
-COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands", "adopt_commands")
+COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands", "adopt_commands",
+                                    "records_commands")
 
 
 def _register_commands() -> None:
@@ -125,9 +128,10 @@ def _usage(error: click_errors.UsageError) -> str:
 def main(argv: list[str] | None = None) -> None:
     """The console script; `argv` (default: sys.argv) lets tests run a command in-process."""
     _register_commands()
-    from prc3cfg.cli.common import CANCEL
+    from prc3cfg.cli.common import CANCEL, COMMAND_LINE
 
     args = sys.argv[1:] if argv is None else list(argv)
+    COMMAND_LINE[:] = ["prc3cfg", *args]
     try:
         if (habit := _single_dash_habit(args)) is not None:
             print(f"error: {habit}", file=sys.stderr)

@@ -28,7 +28,7 @@ from prc3cfg.cli.common import (
     line_options,
     print_lines,
 )
-from prc3cfg.cli.plan_commands import EXIT_CHANGES, ApproveOpt
+from prc3cfg.cli.plan_commands import EXIT_CHANGES, ApproveOpt, ReasonOpt
 from prc3cfg.errors import UserError
 
 ProgramOpt = Annotated[
@@ -48,6 +48,7 @@ def adopt(
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
     lock_timeout: LockOpt = 0.0,
+    reason: ReasonOpt = None,
 ) -> None:
     """Rewrite the plant file in place to describe what the modules hold (positions taught on the
     floor): only the values that drifted, in the layer they came from; comments and layout kept."""
@@ -58,7 +59,7 @@ def adopt(
     check_output(trace, "--trace", plant=plant)
     loaded = api.load(plant)
     with line_options(trace, retries, lock_timeout) as options:
-        adoption = api.adopt(loaded, module, program, options)
+        adoption = api.adopt(loaded, module, program, options, reason=reason, check=check)
     if not adoption.adopted:
         print("No drift to adopt: the modules hold what the plant file says.")
         return

@@ -94,6 +94,18 @@ def ports(
               file=sys.stderr)  # fmt: skip
 
 
+@app.command("setup-machine")
+def setup_machine(
+    group: Annotated[str | None, typer.Option(metavar="GROUP", help="The group of the lines' users (default: dialout, else uucp — the serial ports' group).")] = None,
+) -> None:
+    """Make the machine's folder of axis-release records and line records that every user of its lines shares (once, as an administrator)."""
+    from prc3cfg import api
+
+    folder, owner = api.setup_machine(group)
+    shared = f"the group {owner}" if owner else "every user (the folder's rights)"
+    print(f"{folder}: the records of axis releases and of what the modules hold, shared by {shared} — each user's files their own")
+
+
 @app.command()
 def scan(
     port: PortOpt,
@@ -133,7 +145,7 @@ def scan(
 
 @app.command("import")
 def import_plant(
-    port: PortOpt,
+    ports: Annotated[list[str], typer.Option("--port", metavar="PORT", help="Device path or pyserial URL of a line (e.g. COM3, /dev/ttyUSB0, socket://host:7001); repeatable: one bus each.")],
     framing: FramingOpt = "crc16",
     baud: BaudOpt = 9600,
     parity: ParityOpt = None,
@@ -143,22 +155,26 @@ def import_plant(
     zvz: ZvzOpt = 0.020,
     retries: RetriesOpt = 5,
     plant_name: Annotated[str, typer.Option(metavar="NAME", help="The plant's name in the file.")] = "imported",
-    bus_name: Annotated[str, typer.Option(metavar="NAME", help="The bus's name in the file.")] = "bus-1",
+    bus_names: Annotated[list[str] | None, typer.Option("--bus-name", metavar="NAME", help="The bus's name in the file; repeatable, one per --port in their order (default: bus-1, bus-2, …).")] = None,
     modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
 ) -> None:
-    """Write a plant file (to stdout) from the live modules of one bus."""
+    """Write a plant file (to stdout) from the live modules of one bus or more (a --port each, with the same line settings)."""
     from prc3cfg import api
     from prc3cfg.core.render import plural
 
     check_output(trace, "--trace")
-    bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
+    names = bus_names or [f"bus-{number}" for number in range(1, len(ports) + 1)]
+    if len(names) != len(ports):
+        raise UserError(f"{len(names)} --bus-name for {len(ports)} --port: give one name per port, in their order (or none)")
+    if len(set(names)) != len(names):
+        raise UserError(f"--bus-name {next(n for n in names if names.count(n) > 1)} is given twice: each bus needs a name of its own")
+    buses = {name: _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz) for name, port in zip(names, ports)}
     with line_options(trace, retries, lock_timeout) as options, _said_as_options():
-        text, count = api.import_plant(bare, parse_addresses(modules) if modules is not None else None, options,
-                                       plant_name=plant_name, bus_name=bus_name)  # fmt: skip
+        text, count = api.import_plant(buses, parse_addresses(modules) if modules is not None else None, options, plant_name=plant_name)
     print(text, end="")
-    stderr_console().print(f"imported {plural(count, 'module')} from {port}")
+    stderr_console().print(f"imported {plural(count, 'module')} from {', '.join(ports)}")
 
 
 @link_app.command("init-db")

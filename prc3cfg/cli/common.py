@@ -344,6 +344,10 @@ def ask(question: str, options: LineOptions | None = None, *, typed: bool = Fals
             terminal.write("Answer y or n.\n")
 
 
+#: The command line `main` runs (`prc3cfg` and its arguments), for the records' header.
+COMMAND_LINE: list[str] = []
+
+
 @contextlib.contextmanager
 def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Iterator[LineOptions]:
     """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal;
@@ -357,10 +361,21 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
             trace=stack.enter_context(open_text(trace, "a")) if trace else None,
             waiting=lambda text: print(text, file=sys.stderr, flush=True),
             notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),
+            command_line=tuple(COMMAND_LINE) or None,
         )  # fmt: skip
         yield options
         note_repeats(options.links_used)
         note_slow(options.links_used)
+        note_unshared(options.links_used)
+
+
+def note_unshared(links: Iterable[Link]) -> None:
+    """One line after a command on a real line (not an `emulator://` one) whose records no other user of
+    this machine sees: where they are, and the administrator's one command that shares them."""
+    from prc3cfg.api import measurable, unshared_records
+
+    if any(measurable(link.port_name) for link in links) and (hint := unshared_records()) is not None:
+        print(f"note: {hint}", file=sys.stderr)
 
 
 def note_repeats(links: Iterable[Link]) -> None:

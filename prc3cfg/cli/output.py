@@ -45,9 +45,20 @@ def targeting(modules: list[str] | None) -> None:
               "plan — run without --module to see everything it would change")  # fmt: skip
 
 
-def drift(drifted: list[Drift], modules: int) -> None:
-    """Drift (Teach In, work on the floor) as drift, not as a plan (`render.drift_lines`)."""
-    print("\n".join(render.drift_lines(drifted, modules)))
+def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int) -> None:
+    """Drift (Teach In, work on the floor) as drift, not as a plan: for people (`render.drift_lines`),
+    as JSON or markdown (`render.drift_json`, `drift_markdown`), and into `out` as JSON."""
+    document = render.drift_json(plant, drifted, modules)
+    if out is not None:
+        write_output(out, json.dumps(document, indent=1) + "\n", "--out")
+    if json_out:
+        print(json.dumps(document, indent=1))
+    elif markdown:
+        print(render.drift_markdown(document, max_chars=max_chars, full_drift=f"`{out.name}`" if out else "the drift file"))
+    else:
+        print("\n".join(render.drift_lines(drifted, modules)))
+        if out is not None:
+            print(f"Drift written to {out}")
 
 
 def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions) -> Gates:

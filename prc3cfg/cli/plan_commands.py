@@ -54,10 +54,11 @@ def read(
 def plan(
     ctx: typer.Context,
     plant: PlantArg,
-    out: Annotated[Path | None, typer.Option(callback=lambda v: check_output(v, "--out"), metavar="FILE", help="Write the plan file (prc3cfg-plan/1).")] = None,
+    out: Annotated[Path | None, typer.Option(callback=lambda v: check_output(v, "--out"), metavar="FILE", help=(
+        "Write the plan file (prc3cfg-plan/1); with --refresh-only, the drift (prc3cfg-drift/1)."))] = None,
     actual: Annotated[Path | None, typer.Option(metavar="FILE", help="Plan against module images saved by `read --json`.")] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print the plan as JSON.")] = False,
-    markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan as markdown (PR comments).")] = False,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the plan (or with --refresh-only the drift) as JSON.")] = False,
+    markdown: Annotated[bool, typer.Option("--markdown", help="Print the plan (or the drift) as markdown (PR comments).")] = False,
     max_chars: Annotated[int, typer.Option("--max-chars", min=1000, metavar="N", help="--markdown: at most this many characters (a GitHub comment holds 65,536).")] = 65_000,
     detailed_exitcode: Annotated[bool, typer.Option("--detailed-exitcode", help="Exit 0 no changes, 2 changes, 1 error.")] = False,
     refresh_only: Annotated[bool, typer.Option("--refresh-only", help="Report drift (what the modules hold other than the plant file says), no plan.")] = False,
@@ -72,13 +73,12 @@ def plan(
     """Read back, diff against the plant file and print the cheapest plan."""
     from prc3cfg import api
     from prc3cfg.cli import output
-    from prc3cfg.core.plot import plot_format
 
-    if refresh_only and (out is not None or json_out or markdown or plot is not None):
-        raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --out, --json, --markdown and --plot", ctx=ctx)
+    if refresh_only and plot is not None:
+        raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --plot", ctx=ctx)
     if plot is not None and len(module or []) != 1:
         raise click_errors.UsageError("--plot draws one module — name it with --module NAME", ctx=ctx)
-    fmt = plot_format(plot) if plot is not None else None
+    fmt = api.plot_format(plot) if plot is not None else None
     check_output(out, "--out", plant=plant)
     check_output(plot, "--plot", plant=plant)
     check_output(trace, "--trace", plant=plant)
@@ -92,7 +92,8 @@ def plan(
                 drifted = api.drift(loaded, module, options=options)
         else:
             drifted = api.drift(loaded, module, images=images)
-        output.drift(drifted, len(api.select(loaded, module)))
+        output.emit_drift(drifted, loaded.name, len(api.select(loaded, module)), out=out, json_out=json_out, markdown=markdown,
+                          max_chars=max_chars)  # fmt: skip
         if drifted and detailed_exitcode:
             raise ExitStatus(EXIT_CHANGES)
         return
@@ -107,6 +108,8 @@ def plan(
 
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
+ReasonOpt = Annotated[str | None, typer.Option("--reason", metavar="TEXT", help=(
+    "Why: kept in the journal's and the snapshot's header (default: $PRC3CFG_REASON); a bus with require_reason: true needs one."))]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
 VerifyOpt = Annotated[VerifyChoice, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
@@ -125,6 +128,7 @@ def apply(
     verify: VerifyOpt = VerifyChoice.FLOOR,
     previous: PreviousOpt = None,
     full_read: FullReadOpt = False,
+    reason: ReasonOpt = None,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
@@ -143,7 +147,8 @@ def apply(
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options),
-                           verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read)  # fmt: skip
+                           verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read,
+                           reason=reason)  # fmt: skip
     output.applied(result)
 
 
@@ -158,6 +163,7 @@ def restore(
     verify: VerifyOpt = VerifyChoice.FLOOR,
     onto_current_lines: Annotated[bool, typer.Option("--onto-current-lines", help=(
         "Restore onto the lines the plant file names now, though they are not those the snapshot was taken on."))] = False,
+    reason: ReasonOpt = None,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
@@ -165,5 +171,5 @@ def restore(
 
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options), verify=api.Verify(verify.value),
-                             options=options, onto_current_lines=onto_current_lines)  # fmt: skip
+                             options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip
     output.applied(result)

@@ -101,17 +101,15 @@ def show(
     if plant.suffix == ".json":
         _show_plan_file(plant, json_out=json_out, markdown=markdown, max_chars=max_chars)
         return
-    if plot is not None:
-        from prc3cfg.core.plot import plot_format
+    from prc3cfg import api
 
-        fmt = plot_format(plot)
+    if plot is not None:
+        fmt = api.plot_format(plot)
         if module is None:
             raise UserError("--plot draws one module — name it with --module NAME")
         check_output(plot, "--plot", plant=plant)
     elif actual is not None:
         raise UserError("--actual is what --plot overlays — give --plot FILE.svg or FILE.png too")
-    from prc3cfg import api
-
     loaded = api.load(plant)
     if module is None:
         stdout_console().print(_modules_table(loaded))

@@ -9,9 +9,12 @@
 - `mermaid(before, after)`: one chain, before and after, as a ```mermaid xychart-beta``` block
   that GitHub renders, small enough for a pull request comment (`MERMAID_POINTS` per line).
 
-matplotlib (the `plot` extra: pip install 'prc3cfg[plot]') is imported only by `plot_format`
-(which a command asking for a picture calls before it reads anything: without it, it says so
-then) and `picture`, so this module, and `mermaid`, work without it. Pure: images in, bytes or text out; the caller
+matplotlib (prc3cfg's `plot` extra) is imported only by `plot_format` (which a command asking
+for a picture calls before it reads anything: without it, it says so then) and `picture`, so this
+module, and `mermaid`, work without it. What it says to install is matplotlib by its own name,
+into the Python that runs prc3cfg (`missing_matplotlib`) — never `prc3cfg[plot]`: prc3cfg is not
+on the package index, and whoever registers that name there would be installed by everyone who
+followed the hint. Pure: images in, bytes or text out; the caller
 writes the file.
 """
 
@@ -31,7 +34,8 @@ if TYPE_CHECKING:
 
 #: Output formats by file suffix.
 FORMATS = {".svg": "svg", ".png": "png"}
-MISSING = "plotting needs the plot extra: pip install 'prc3cfg[plot]'"
+#: What the `plot` extra installs, by its own name on the package index (pyproject.toml).
+PLOT_PACKAGE = "matplotlib"
 #: Fixed sizes: inches per subplot, and pixels per inch of a PNG.
 WIDTH, CHAIN_HEIGHT, DPI = 9.0, 2.6, 100
 AFTER, BEFORE = "#1f77b4", "#9e9e9e"
@@ -45,25 +49,33 @@ class PlotError(UserError):
     """A picture that cannot be made: no plotting library, an unknown format, nothing to draw."""
 
 
-def plot_format(path: Path) -> str:
-    """"svg" or "png", by the file's suffix; PlotError for any other, and when matplotlib is missing."""
+def missing_matplotlib(python: str) -> str:
+    """What to do without matplotlib: install it into `python` (the Python that runs prc3cfg, as a
+    command to paste into this system's shell) — matplotlib itself, never an extra of prc3cfg."""
+    return f"plotting needs {PLOT_PACKAGE}, which the Python running prc3cfg does not have — install it there: {python} -m pip install {PLOT_PACKAGE}"
+
+
+def plot_format(path: Path, *, python: str = "python") -> str:
+    """"svg" or "png", by the file's suffix; PlotError for any other, and when matplotlib is missing
+    (saying how to install it into `python`: see `missing_matplotlib`)."""
     fmt = FORMATS.get(path.suffix.lower())
     if fmt is None:
         raise PlotError(f"{path}: a plot is drawn as SVG or PNG — name a file ending in .svg or .png")
     try:
         import matplotlib  # noqa: F401 — drawing will need it: say so before any time is spent
     except ImportError:
-        raise PlotError(MISSING) from None
+        raise PlotError(missing_matplotlib(python)) from None
     return fmt
 
 
-def picture(after: ModuleImage, before: ModuleImage | None = None, *, fmt: str, title: str) -> bytes:
-    """The chains of `after` (and, overlaid, of `before`) drawn as `fmt` ("svg" or "png")."""
+def picture(after: ModuleImage, before: ModuleImage | None = None, *, fmt: str, title: str, python: str = "python") -> bytes:
+    """The chains of `after` (and, overlaid, of `before`) drawn as `fmt` ("svg" or "png"); without
+    matplotlib, a PlotError that says how to install it into `python`."""
     try:
         import matplotlib
         from matplotlib.figure import Figure
     except ImportError:
-        raise PlotError(MISSING) from None
+        raise PlotError(missing_matplotlib(python)) from None
     pairs = tuple((None, m) for m in chain_motions(after)) if before is None else paired_chains(before, after)
     if not pairs:
         raise PlotError(f"{title}: no chain to draw — a chain is programs linked by their jumps (chains: or next: in the plant file)")

@@ -636,6 +636,39 @@ def drift_lines(drifts: Sequence[Drift], modules: int) -> list[str]:
     return lines
 
 
+#: Marks the pull-request comment drift is posted as (`plan --refresh-only --markdown`).
+DRIFT_MARKER = "<!-- prc3cfg-drift -->"
+DRIFT_FORMAT = "prc3cfg-drift/1"
+
+
+def drift_json(plant: str, drifts: Sequence[Drift], modules: int) -> dict[str, Any]:
+    """Drift as a document (`plan --refresh-only --json`, `--out`): the plant, how many modules were
+    read, and each module that drifted with its differences (file → module, in human units)."""
+    return {"format": DRIFT_FORMAT, "plant": plant, "modules": modules,
+            "drifted": [{"bus": d.bus, "address": d.address, "name": d.name, "differences": list(d.differences)} for d in drifts]}  # fmt: skip
+
+
+def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET, full_drift: str = "the drift file") -> str:
+    """Drift as a pull-request comment of at most `max_chars` characters: the marker, the summary,
+    then each module's differences while they fit, and how many were left out. Every text from the
+    plant file or the modules is escaped (`cell`): nothing in it is live."""
+    drifted, modules = document["drifted"], document["modules"]
+    summary = (f"**Drift:** {len(drifted)} of {plural(modules, 'module')} hold{'s' if len(drifted) == 1 else ''} something other "
+               "than the plant file says (file → module)." if drifted else "**No drift:** every module holds what the plant file says.")  # fmt: skip
+    out = [DRIFT_MARKER, f"### prc3cfg drift — {code(document['plant'])}", "", summary, ""]
+    used = sum(len(line) + 1 for line in out)
+    for shown, found in enumerate(drifted):
+        part = [f"- **{cell(found['bus'])} / {cell(found['name'])}** (address {found['address']})",
+                *(f"  - {cell(text)}" for text in found["differences"])]  # fmt: skip
+        size = sum(len(line) + 1 for line in part)
+        if used + size + 200 > max_chars:
+            out += ["", f"… and {plural(len(drifted) - shown, 'more module')} that drifted: see {full_drift}."]
+            break
+        out += part
+        used += size
+    return "\n".join(out)
+
+
 class Run(Protocol):
     """What the account of an apply reads of one module's run (`prc3cfg.shell.apply.ModuleRun`)."""
 

@@ -14,7 +14,7 @@ Pure: images in, YAML text out.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from decimal import Decimal
 from typing import Any
 
@@ -125,17 +125,21 @@ def bus_entry(name: str, port: str, framing: str, line: LineSettings, timeout: f
     return bus
 
 
-def imported_plant(plant: str, bus: dict[str, Any], images: Iterable[ModuleImage]) -> str:
-    """The plant file of one bus (`bus_entry`) holding these modules, each named BUS-ADDRESS."""
-    return plant_yaml(plant, bus, [module_entry(image, f"{bus['name']}-{image.address}") for image in images])
+def imported_plant(plant: str, buses: Sequence[tuple[dict[str, Any], Iterable[ModuleImage]]]) -> str:
+    """The plant file of these buses (`bus_entry`) holding these modules, each named BUS-ADDRESS."""
+    return plant_yaml(plant, [(bus, [module_entry(image, f"{bus['name']}-{image.address}") for image in images]) for bus, images in buses])
 
 
-def plant_yaml(plant: str, bus: dict[str, Any], modules: list[dict[str, Any]], schema: str = SCHEMA) -> str:
-    """The YAML text of a one-bus plant file of `module_entry`s: what they hold alike in one profile."""
-    profile, modules = shared_profile(modules)
+def plant_yaml(plant: str, buses: Sequence[tuple[dict[str, Any], list[dict[str, Any]]]], schema: str = SCHEMA) -> str:
+    """The YAML text of a plant file of buses with their `module_entry`s: what every module of every bus
+    holds alike in one profile."""
+    profile, modules = shared_profile([module for _, entries in buses for module in entries])
     document: dict[str, Any] = {"plant": plant}
     if profile is not None:
         document["profiles"] = {SHARED: profile}
-    document["buses"] = [{**bus, "modules": [_OneLine(m) if m.keys() <= {"address", "name", "profiles"} else m for m in modules]}]
+    document["buses"] = []
+    for bus, entries in buses:
+        own, modules = modules[: len(entries)], modules[len(entries) :]
+        document["buses"].append({**bus, "modules": [_OneLine(m) if m.keys() <= {"address", "name", "profiles"} else m for m in own]})
     head = f"# yaml-language-server: $schema={schema}\n"
     return head + yaml.dump(document, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=110)

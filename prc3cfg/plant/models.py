@@ -419,6 +419,9 @@ class BusLine(FileModel):
     accept_undetected_damage: Annotated[bool, Field(strict=True, description=(
         "true: apply on this line although it has no error detection (open-driver with parity none), knowing "
         "that a damaged frame can become another write, a read a write, an address the broadcast — prefer parity"))] = False
+    require_reason: Annotated[bool, Field(strict=True, description=(
+        "true: every apply, restore and adopt of this line's modules must say why (--reason TEXT or PRC3CFG_REASON) — "
+        "refused before the line is opened otherwise; the reason is kept in the journal and the snapshot"))] = False
 
 
 class BusSpec(BusLine):

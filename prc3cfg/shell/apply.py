@@ -43,7 +43,7 @@ from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.planner import Step, plan_module
 from prc3cfg.core.render import plural
 from prc3cfg.core.verification import Release, reach
-from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link import Link, LinkError, PossibleWrite
@@ -169,7 +169,10 @@ class ModuleRun:
                 self.sent.append(step)  # from here on it may have reached the module
                 self.release_sent |= message.RELEASES_AXES
                 reply = link.request(self.address, message)
-            except Interrupted:  # before this step, or between its attempts (then it counts as sent)
+            except Interrupted as stop:  # before this step, or between its attempts (then it counts as sent)
+                if isinstance(stop, NotSent):  # its frame never left
+                    self.sent.pop()
+                    self.release_sent = any(s.releases_axes for s in self.sent)
                 self.interrupted = True
                 self.failure = f"interrupted before {where}"
                 return False

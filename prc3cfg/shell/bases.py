@@ -11,19 +11,24 @@ written; a dropped module's entry holds no image, so that an older copy elsewher
 back.
 
 One file per identity of the line (`prc3cfg.shell.locks.line_keys`: two spellings of one line share
-a record) in `lines/` of the machine's state folder (`prc3cfg.shell.releases.state_dirs`), written
-atomically under the line's lock; the newest entry of a module across the files is the one taken.
-A file another tool damaged, a link, or a file another user (not root) owns is read as no record
-(the modules are then read in full).
+a record) and user (`platform.user_tag`: in the machine's folder, which every user of the line
+writes, none may replace another's file) in `lines/` of the state folder
+(`prc3cfg.shell.releases.state_dirs`), written atomically under the line's lock. The newest entry
+of a module across the files is the one taken — if it is this user's or root's: another user's
+file vouches for nothing (it could say anything), but its newer entry still means the module
+changed since, so it is not known (`load`; `overruled` says by whose claim). A file another tool
+damaged, or a link, is read as no record (the modules are then read in full).
 
 Does not own what is read (`prc3cfg.core.targeting`) nor when (`prc3cfg.api`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import socket
+import stat
 from collections.abc import Iterable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
@@ -33,10 +38,10 @@ from prc3cfg.core.targeting import Known
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
-from prc3cfg.shell.releases import folder, state_dirs
+from prc3cfg.shell.releases import LINES, folder, state_dirs
 
 FORMAT = "prc3cfg-line-record/1"
-KIND = "lines"
+KIND = LINES
 WHAT = "the line's record of what its modules hold"
 
 
@@ -50,33 +55,53 @@ def who(command: str, plant_path: Path) -> str:
     return f"{command} of {plant_path.resolve()} by {platform.user_name()}@{socket.gethostname()}"
 
 
-def _file(directory: Path, key: str) -> Path:
-    return directory / KIND / f"{hashlib.sha256(key.encode()).hexdigest()[:32]}.json"
+def _stem(key: str) -> str:
+    return hashlib.sha256(key.encode()).hexdigest()[:32]
+
+
+def _own_file(directory: Path, key: str) -> Path:
+    return directory / KIND / f"{_stem(key)}.{platform.user_tag()}.json"
 
 
 def _entries(path: Path) -> dict[str, dict]:
-    """The entries of one record file by address; none where it is missing, not a record, a link, or
-    another user's (in the machine's folder anyone may make a file: it is not believed)."""
-    if not platform.trusted_file(path):
-        return {}
+    """The entries of one record file by address; none where it is missing, not a record, or a link."""
     try:
+        if not stat.S_ISREG(path.lstat().st_mode):
+            return {}
         data = read_json(path)
-    except FileProblem:
+    except (OSError, FileProblem):
         return {}
     modules = data.get("modules") if isinstance(data, dict) and data.get("format") == FORMAT else None
     return {a: e for a, e in modules.items() if isinstance(e, dict) and isinstance(e.get("at"), str)} if isinstance(modules, dict) else {}
 
 
-def load(keys: Iterable[str]) -> dict[int, Known]:
-    """What the record of the line with these identities says of each module it knows."""
-    newest: dict[str, dict] = {}
+def _newest(keys: Iterable[str]) -> tuple[dict[str, dict], dict[str, dict]]:
+    """Per module, the newest entry of a file this user may believe (its own, root's) and the newest of
+    any other user's, across the line's files in every state folder."""
+    trusted: dict[str, dict] = {}
+    claimed: dict[str, dict] = {}
     for directory in state_dirs():
         for key in keys:
-            for address, entry in _entries(_file(directory, key)).items():
-                if address not in newest or entry["at"] > newest[address]["at"]:
-                    newest[address] = entry
+            try:
+                paths = sorted((directory / KIND).glob(f"{_stem(key)}*.json"))
+            except OSError:
+                continue
+            for path in paths:
+                newest = trusted if platform.trusted_file(path) else claimed
+                for address, entry in _entries(path).items():
+                    if address not in newest or entry["at"] > newest[address]["at"]:
+                        newest[address] = entry
+    return trusted, claimed
+
+
+def load(keys: Iterable[str]) -> dict[int, Known]:
+    """What the record of the line with these identities says of each module it knows — not of one
+    another user's file says changed since (`overruled`)."""
+    trusted, claimed = _newest(keys)
     known = {}
-    for address, entry in newest.items():
+    for address, entry in trusted.items():
+        if address in claimed and claimed[address]["at"] > entry["at"]:
+            continue
         try:
             if entry.get("image") is not None and isinstance(entry.get("since"), str) and isinstance(entry.get("by"), str):
                 if datetime.fromisoformat(entry["since"]).tzinfo is None:
@@ -87,28 +112,36 @@ def load(keys: Iterable[str]) -> dict[int, Known]:
     return known
 
 
+def overruled(keys: Iterable[str]) -> dict[int, str]:
+    """The modules another user's file has a newer entry for than this user's and root's, with what that
+    entry claims — why each is read in full."""
+    trusted, claimed = _newest(keys)
+    said = {}
+    for address, entry in claimed.items():
+        if address not in trusted or entry["at"] > trusted[address]["at"]:
+            by = entry.get("by") if isinstance(entry.get("by"), str) else "a command"
+            with contextlib.suppress(ValueError):
+                said[int(address)] = f"another user's record is newer (it claims: {by}, {entry['at']})"
+    return said
+
+
 def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:
-    """Set these modules' entries (None: the module is no longer known) in every file of the line, in
-    the first state folder where this user can write them all (in the machine's sticky folder
-    another user's file cannot be replaced: then the user's own, whose newer entries win for this
-    user); `UserError` when none can be."""
+    """Set these modules' entries (None: the module is no longer known) in this user's file of each of the
+    line's identities, in the state folder it writes (`releases.folder`); `UserError` when it cannot."""
     if not changes:
         return
     keys, at = tuple(keys), now()
     entries = {str(address): {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()})
                for address, k in changes.items()}  # fmt: skip
-    problems = []
-    for directory in state_dirs():
-        try:
-            for key in keys:
-                path = _file(directory, key)
-                modules = dict(sorted((_entries(path) | entries).items(), key=lambda entry: int(entry[0])))
-                write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}))
-            return
-        except OSError as error:
-            problems.append(f"{error.filename or directory}: {error.strerror}")
-    folder(KIND, WHAT)  # says why no folder can be written
-    raise UserError(f"cannot keep {WHAT} ({'; '.join(problems)}) — set PRC3CFG_STATE_DIR to a folder this user can write")
+    directory = folder(KIND, WHAT).parent  # the machine's, once an administrator made it; else this user's
+    try:
+        for key in keys:
+            path = _own_file(directory, key)
+            modules = dict(sorted((_entries(path) | entries).items(), key=lambda entry: int(entry[0])))
+            write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}))
+    except OSError as error:
+        raise UserError(f"cannot keep {WHAT} ({error.filename or directory}: {error.strerror}) — set PRC3CFG_STATE_DIR to a "
+                        "folder this user can write") from None  # fmt: skip
 
 
 def forget(keys: Iterable[str], addresses: Iterable[int]) -> None:

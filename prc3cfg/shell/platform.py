@@ -18,8 +18,11 @@ means the same everywhere:
   so the holder's details at the start stay readable) — both released with the last descriptor —
   and `is_locked` (a lock someone else holds, seen without holding it);
 - the machine's folders: `LOCK_FOLDERS` (the lock folder's candidates, `prc3cfg.shell.locks`),
-  `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases, `prc3cfg.shell.releases`) — POSIX's
-  /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows' %ProgramData%\prc3cfg and %LOCALAPPDATA%;
+  `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases and the lines' records,
+  `prc3cfg.shell.releases`) — POSIX's /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows'
+  %ProgramData%\prc3cfg and %LOCALAPPDATA%; `serial_group` and `make_group_folder` (the machine's
+  folder an administrator makes once for the users of the lines: POSIX's dialout or uucp group, mode
+  3775), `user_tag` (this user's files in it);
 - who and what: `user_name` (a login name, else `uid N`), `owned_by_this_user`, `OWNERS` and
   `user_id`/`uid_name` (whether files have a uid owner: POSIX; Windows has ACLs instead),
   `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
@@ -35,7 +38,9 @@ means the same everywhere:
 - sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
   main thread anyway: nothing), `wait_for` and `result_of` (an event's wait and a future's result
-  that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout).
+  that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
+- this Python as a command a person pastes into the system's shell: `python_command` (POSIX
+  shell quoting; Windows: cmd's double quotes).
 
 Branches are `sys.platform` tests, which mypy follows: `mypy --platform win32` and `--platform
 darwin` check the other systems' branches. Does not own what any of it is used for.
@@ -45,12 +50,15 @@ from __future__ import annotations
 
 import contextlib
 import getpass
+import hashlib
 import os
 import re
 import select
+import shlex
 import signal
 import socket
 import stat
+import subprocess
 import sys
 import threading
 from collections.abc import Iterable, Iterator
@@ -65,6 +73,7 @@ if sys.platform == "win32":
     import msvcrt
 else:
     import fcntl
+    import grp
     import pwd
     import termios
     import tty
@@ -216,6 +225,45 @@ if sys.platform == "win32":
 else:
     LOCK_FOLDERS = ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"), (Path("/tmp"), "prc3cfg-locks"))
     SYSTEM_STATE_DIR = Path("/var/lib/prc3cfg")
+
+
+#: The groups that own serial ports, by distribution (Debian's dialout, Arch's and Fedora's uucp): the
+#: users of a line are in one, so the machine's folder is theirs.
+SERIAL_GROUPS = ("dialout", "uucp")
+
+
+def serial_group(name: str | None = None) -> tuple[str, int] | None:
+    """The group `name`, else the first of `SERIAL_GROUPS` this machine has, with its gid; None where
+    there is none (Windows: its folders' rights are ACLs — None)."""
+    if sys.platform != "win32":
+        for candidate in [name] if name else SERIAL_GROUPS:
+            with contextlib.suppress(KeyError):
+                return candidate, grp.getgrnam(candidate).gr_gid
+    return None
+
+
+def make_group_folder(folder: Path, gid: int | None) -> None:
+    """`folder` (made if missing) owned by this user and group `gid`, mode 3775: the group writes in it,
+    files made there take its group, and none removes or replaces another user's (the sticky bit) —
+    set on the folder opened without following a symbolic link (Windows: mkdir; %ProgramData%'s
+    rights let every user make files there that only their maker may change)."""
+    folder.mkdir(exist_ok=True)
+    if sys.platform != "win32":
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
+        try:
+            if gid is not None:
+                os.fchown(fd, os.getuid(), gid)
+            os.fchmod(fd, 0o3775)
+        finally:
+            os.close(fd)
+
+
+def user_tag() -> str:
+    """What tells this user's files from others' in a folder all users share: the uid (Windows: a
+    digest of the user name)."""
+    if sys.platform == "win32":
+        return hashlib.sha256(user_name().encode()).hexdigest()[:12]
+    return str(os.getuid())
 
 
 def user_state_dir() -> Path:
@@ -532,3 +580,15 @@ def block_signals(signals: Iterable[signal.Signals]) -> None:
     the main thread anyway: nothing to do)."""
     if sys.platform != "win32":
         signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+
+
+# -- this Python -------------------------------------------------------------------------
+
+
+def python_command() -> str:
+    """The Python running prc3cfg, as a command to paste into this system's shell (a hint to install
+    something into it): its path quoted as the shell needs — POSIX: shlex's quoting; Windows: cmd's
+    double quotes around a path with a space (PowerShell runs a quoted command after `&`)."""
+    if sys.platform == "win32":
+        return subprocess.list2cmdline([sys.executable or "python"])
+    return shlex.quote(sys.executable or "python3")

@@ -9,6 +9,16 @@
 - A journal (`.prc3cfg/journal/<time>-<plant>.jsonl`) records every exchange of an apply,
   one JSON object per line: each attempt as a `request` before its frame leaves, then as an
   `exchange` with time, bus, address, request and reply in hex, attempt, duration.
+- Who, where, what and why (`header`): the first record of every journal, and a copy in every
+  snapshot — the command, user, host, prc3cfg's version, the command line, the plant file (path,
+  SHA-256, and its git commit and whether the work tree was clean), the plan file's SHA-256 and
+  the reason given.
+- A hash chain: every journal record after the header carries `prev`, the SHA-256 of the line
+  before it (its bytes, without the newline); each time the snapshot is written a `snapshot`
+  record carries the snapshot file's SHA-256 — the journal begins with the read-back, before the
+  snapshot exists, so the header cannot; and the header of a journal carries `previous`, the
+  name, line count and last line's SHA-256 of the plant's newest journal when it began (that
+  journal is checked first: `prc3cfg.shell.audit`, which also checks, lists and prunes records).
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
   modules and programs left the plant file — they stay on the hardware as they are. (What the
@@ -22,10 +32,15 @@ its snapshot and journal must not start writing modules.
 from __future__ import annotations
 
 import errno
+import hashlib
 import json
 import os
+import socket
+import subprocess
+import sys
 import tempfile
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -33,9 +48,11 @@ from typing import Any, TextIO
 
 from pydantic import BaseModel, Field, ValidationError
 
+from prc3cfg import __version__
 from prc3cfg.core.contract import Text, json_path, said
 from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.errors import UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
 from prc3cfg.shell.link import Exchange
 from prc3cfg.shell.platform import open_text
@@ -45,8 +62,91 @@ SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
 KINDS = ("snapshots", "journal", "applied")
 
 
+#: The length of `_stamp()`, which begins every record file's name: "20261126T061428.123456Z".
+STAMP_LENGTH = 23
+#: The environment variable a reason is taken from when none is given (`--reason`).
+REASON_VARIABLE = "PRC3CFG_REASON"
+#: How long `git` may take to say a plant file's commit and whether its work tree is clean.
+GIT_TIMEOUT = 3.0
+
+
 def _stamp() -> str:
     return datetime.now(UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+
+
+def line_hash(line: bytes) -> str:
+    """What the next record's `prev` says of a journal line: the SHA-256 of its bytes, without the newline."""
+    return hashlib.sha256(line).hexdigest()
+
+
+def reason_given(reason: str | None) -> str | None:
+    """The reason of a write: `reason`, else `PRC3CFG_REASON`; None when neither says anything."""
+    chosen = reason if reason is not None else os.environ.get(REASON_VARIABLE)
+    return (chosen.strip() or None) if chosen is not None else None
+
+
+def git_state(plant_path: Path) -> dict[str, Any]:
+    """The plant file in git: `commit` (HEAD), `clean` (no tracked file changed in the work tree),
+    `plant_file` ("committed", "changed", "untracked" or "ignored") — or, where git cannot say,
+    each None and `said` why (not in a git work tree, git not found, timed out, refused). git runs
+    with a time-out, without the repository's file-system monitor (a program its config names) and
+    without taking the index's lock."""
+    unknown = {"commit": None, "clean": None, "plant_file": None}
+    folder = plant_path.resolve().parent
+    env = os.environ | {"GIT_OPTIONAL_LOCKS": "0", "LC_ALL": "C"}
+
+    def git(*args: str) -> str:
+        done = subprocess.run(["git", "-c", "core.fsmonitor=false", "-C", str(folder), *args], capture_output=True, text=True,
+                              timeout=GIT_TIMEOUT, env=env, stdin=subprocess.DEVNULL)  # fmt: skip
+        if done.returncode != 0:
+            raise LookupError((done.stderr.strip().splitlines() or [f"git {args[0]} failed"])[0].removeprefix("fatal: "))
+        return done.stdout
+
+    try:
+        if git("rev-parse", "--is-inside-work-tree").strip() != "true":
+            return unknown | {"said": "not in a git work tree"}
+        try:
+            commit: str | None = git("rev-parse", "--verify", "-q", "HEAD").strip()
+        except LookupError:
+            commit = None  # a repository without a commit yet
+        clean = git("status", "--porcelain=v1", "--untracked-files=no") == ""
+        mark = git("status", "--porcelain=v1", "--untracked-files=all", "--ignored", "--", plant_path.resolve().name)[:2]
+        state = {"": "committed", "??": "untracked", "!!": "ignored"}.get(mark, "changed")
+        return {"commit": commit, "clean": clean, "plant_file": state, "said": None if commit else "no commit yet"}
+    except FileNotFoundError:
+        return unknown | {"said": "git not found on PATH"}
+    except subprocess.TimeoutExpired:
+        return unknown | {"said": f"git did not answer within {GIT_TIMEOUT:g} s"}
+    except (LookupError, OSError) as error:
+        said = str(error)
+        if "not a git repository" in said:
+            return unknown | {"said": "not in a git work tree"}
+        return unknown | {"said": f"git: {said}"}
+
+
+def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *, reason: str | None,
+           plan_file: Path | None = None, argv: Sequence[str] | None = None) -> dict[str, Any]:  # fmt: skip
+    """Who runs `command` on the plant file, where, with what and why — the first record of a
+    journal and the `header` of its snapshot (`Journal` adds the journal's name and its link to the
+    plant's journal before)."""
+    plan = None
+    if plan_file is not None:
+        try:
+            plan = {"path": str(plan_file.resolve()), "sha256": hashlib.sha256(plan_file.read_bytes()).hexdigest()}
+        except OSError as error:
+            raise UserError(f"{plan_file}: cannot read it ({error.strerror}) — nothing was written") from None
+    return {
+        "command": command,
+        "user": platform.user_name(),
+        "uid": platform.user_id(),
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+        "prc3cfg": __version__,
+        "argv": list(sys.argv if argv is None else argv),
+        "plant": {"name": plant_name, "path": str(plant_path.resolve()), "sha256": plant_sha256, "git": git_state(plant_path)},
+        "plan_file": plan,
+        "reason": reason_given(reason),
+    }
 
 
 def records_dir(plant_path: Path, kind: str) -> Path:
@@ -97,10 +197,12 @@ class Snapshot:
     taken: str
     images: dict[tuple[str, int], ModuleImage]  # (bus, address) → image
     lines: dict[str, LineTaken] = field(default_factory=dict)  # bus → its line (empty in snapshots before 0.1.0's)
+    header: dict[str, Any] | None = None  # who, where, what and why (`header`; none in snapshots written before records had headers)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "format": SNAPSHOT_FORMAT,
+            **({} if self.header is None else {"header": self.header}),
             "plant": str(self.plant_path),
             "plant_sha256": self.plant_sha256,
             "taken": self.taken,
@@ -109,11 +211,17 @@ class Snapshot:
         }
 
     def save(self) -> Path:
+        path, _ = self.saved()
+        return path
+
+    def saved(self) -> tuple[Path, str]:
+        """Written (atomically): where, and the SHA-256 of what was written there."""
         directory = records_dir(self.plant_path, "snapshots")
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / f"{self.taken}-{self.plant_path.stem}.json"
-        write_atomically(path, self._text())
-        return path
+        text = self._text()
+        write_atomically(path, text)
+        return path, hashlib.sha256(text.encode("utf-8")).hexdigest()
 
     def _text(self) -> str:
         """The snapshot as JSON, one module a line: it is written before the first write on its line,
@@ -126,8 +234,8 @@ class Snapshot:
 
     @classmethod
     def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage],
-             lines: dict[str, LineTaken]) -> Snapshot:  # fmt: skip
-        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images), dict(lines))
+             lines: dict[str, LineTaken], header: dict[str, Any] | None = None) -> Snapshot:  # fmt: skip
+        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images), dict(lines), header)
 
     @classmethod
     def load(cls, path: Path) -> Snapshot:
@@ -149,7 +257,7 @@ class Snapshot:
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
             lines = {bus: LineTaken(line.port, line.framing, tuple(line.keys)) for bus, line in document.lines.items()}
-            return cls(plant, document.plant_sha256, document.taken, images, lines)
+            return cls(plant, document.plant_sha256, document.taken, images, lines, document.header)
         except ValueError as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
 
@@ -174,6 +282,7 @@ class _SnapshotDocument(BaseModel):
     plant_sha256: Text
     taken: Text
     lines: dict[str, _Line] = Field(default_factory=dict)  # none in snapshots before 0.1.0's
+    header: dict[str, Any] | None = None  # none in snapshots written before records had headers
 
 
 def applied_copy(plant_path: Path) -> Path:
@@ -187,23 +296,34 @@ def save_applied(plant_path: Path, text: bytes) -> None:
 
 
 class Journal:
-    """Every exchange of one apply, appended as JSON lines; thread-safe (buses run in parallel).
+    """Every exchange of one run, appended as JSON lines, each chained to the one before (`prev`);
+    thread-safe (buses run in parallel).
 
-    The file is made at the first record, so an apply that never reached the line leaves none."""
+    The file is made at the first record, after the `header`, so a run that never reached the line
+    leaves none. `previous` is the plant's journal this one follows (`prc3cfg.shell.audit.follow`)."""
 
-    def __init__(self, plant_path: Path) -> None:
+    def __init__(self, plant_path: Path, header: dict[str, Any] | None = None, previous: dict[str, Any] | None = None) -> None:
         self.path = records_dir(plant_path, "journal") / f"{_stamp()}-{plant_path.stem}.jsonl"
+        self.header = None if header is None else header | {"journal": self.path.name, "previous": previous}
         self._handle: TextIO | None = None
+        self._prev: str | None = None
         self._lock = threading.Lock()
 
     def record(self, event: str, **fields: Any) -> None:
-        line = json.dumps({"time": datetime.now(UTC).isoformat(), "event": event, **fields})
         with self._lock:
             if self._handle is None:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
                 self._handle = open_text(self.path, "a")
-            self._handle.write(line + "\n")
-            self._handle.flush()
+                if self.header is not None:
+                    self._write("header", self.header)
+            self._write(event, fields)
+
+    def _write(self, event: str, fields: dict[str, Any]) -> None:
+        assert self._handle is not None
+        line = json.dumps({"time": datetime.now(UTC).isoformat(), "event": event, **fields, "prev": self._prev})
+        self._handle.write(line + "\n")
+        self._handle.flush()
+        self._prev = line_hash(line.encode("utf-8"))
 
     def request(self, exchange: Exchange) -> None:
         """An attempt about to go out (before its frame leaves: a port that fails after sending

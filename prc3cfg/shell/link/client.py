@@ -46,7 +46,7 @@ from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
-from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell.link.trace import Trace
 
 log = logging.getLogger(__name__)
@@ -191,7 +191,8 @@ class Link:
         damaged) are retried — but a read answered with an acknowledgement is `PossibleWrite`, and
         one answered as unknown is `NoReadMessages` (on a line without a checksum once heard twice).
         On a framing without a checksum an error code is asked for again until two agree. After the last attempt a `LinkError` names the bus and
-        module. `Interrupted` when the link's `cancel` event is set before an attempt.
+        module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent` before the
+        first: the frame never left; `announce` may raise it too, to keep a frame back).
         """
         data = message.encode()
         attempts = 1 + self.retries
@@ -199,7 +200,7 @@ class Link:
         unconfirmed: int | None = None  # an error code heard once on a line without a checksum
         for attempt in range(1, attempts + 1):
             if self.cancel is not None and self.cancel.is_set():
-                raise Interrupted()
+                raise NotSent() if attempt == 1 else Interrupted()
             started = time.time()
             self._announce(address, data, attempt, started)
             raw = self._exchange(address, data)

@@ -1,0 +1,102 @@
+"""`prc3cfg records verify`, `list` and `prune`: the journals and snapshots beside a plant file.
+
+- `verify PATH…`: plant files (their records), records folders, journals, snapshots — each file's
+  first record that does not match, one `error: file:line: …` line each, exit 1; else what was
+  checked, exit 0 (`prc3cfg.api.verify_records`).
+- `list PLANT [--json]`: every apply, restore and adopt — time, command, who, plant, lines,
+  result, snapshot, reason — oldest first.
+- `prune PLANT --keep N | --older-than DAYS [--dry-run] [--json]`: whole runs removed, and those
+  kept although asked for, with why.
+
+Arguments and output only: the work is `prc3cfg.api`'s.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from prc3cfg.cli import records_app
+from prc3cfg.cli.common import PlantArg
+from prc3cfg.errors import UserError
+
+if TYPE_CHECKING:
+    from prc3cfg.api import RecordedRun
+
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print it as JSON.")]
+
+
+@records_app.command()
+def verify(
+    paths: Annotated[list[Path], typer.Argument(metavar="PATH...", help=(
+        "Plant files (their records), .prc3cfg folders, journals (.jsonl) or snapshots (.json).", ), show_default=False)],
+) -> None:
+    """Check the hash chain of journals and each snapshot against its journal: name the first record that does not match."""
+    import sys
+
+    from prc3cfg import api
+    from prc3cfg.core.text import plain
+
+    result = api.verify_records(paths)
+    for note in result.notes:
+        print(f"note: {plain(note)}", file=sys.stderr)
+    if result.problems:
+        raise UserError("\n".join(result.said()))
+    print(f"Records verified: {result.summary()}.")
+
+
+@records_app.command("list")
+def list_(plant: PlantArg, json_out: JsonOpt = False) -> None:
+    """Each apply, restore and adopt beside the plant file: time, who, plant, lines, result, snapshot."""
+    from prc3cfg import api
+
+    found = api.list_records(plant)
+    if json_out:
+        print(json.dumps([run.to_json() for run in found], indent=1))
+        return
+    if not found:
+        print(f"No records beside {plant}.")
+    for run in found:
+        print(_line(run))
+
+
+@records_app.command()
+def prune(
+    plant: PlantArg,
+    keep: Annotated[int | None, typer.Option("--keep", min=0, metavar="N", help="Keep the newest N runs.")] = None,
+    older_than: Annotated[float | None, typer.Option("--older-than", min=0, metavar="DAYS", help="Remove only runs older than this.")] = None,
+    dry_run: Annotated[bool, typer.Option("--dry-run", help="Say what would go; remove nothing.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Remove old runs, journal and snapshot together — never the newest snapshot of a line, never a
+    run an axis release nobody was told of names."""
+    from prc3cfg import api
+
+    done = api.prune_records(api.load(plant), keep=keep, older_than_days=older_than, dry_run=dry_run)
+    if json_out:
+        print(json.dumps({"removed": [run.to_json() for run in done.removed],
+                          "kept": [run.to_json() | {"why": why} for run, why in done.kept]}, indent=1))  # fmt: skip
+        return
+    verb = "Would remove" if dry_run else "Removed"
+    for run in done.removed:
+        print(f"{verb}: {_line(run)}")
+    for run, why in done.kept:
+        print(f"Kept: {_line(run)} — {why}")
+    print(f"{verb} {len(done.removed)} run{'s' if len(done.removed) != 1 else ''}; kept {len(done.kept)} of those old enough.")
+
+
+def _line(run: RecordedRun) -> str:
+    """A run in one line, everything from the files shown `plain`."""
+    from prc3cfg.core.text import plain
+
+    who = f"{run.user}@{run.host}" if run.user else "(who: not recorded)"
+    parts = [run.time or "(no time)", run.command or "?", who, run.plant or "?", ", ".join(run.lines) or "-", run.result,
+             f"snapshot {run.snapshot.name}" if run.snapshot is not None else "no snapshot"]  # fmt: skip
+    if run.reason:
+        parts.append(f"reason: {run.reason}")
+    if run.chain != "intact":
+        parts.append(f"chain {run.chain}")
+    return plain("  ".join(parts))

@@ -1,0 +1,119 @@
+"""A disk that refuses the apply's records midway (full, over a quota): the apply stops before its
+next frame on every line and says exactly what each module was sent — never a traceback, never a
+frame that left without its record.
+
+The refusal is real: the apply runs as its own process with a file-size limit (RLIMIT_FSIZE, the
+kernel's EFBIG — what a full disk's ENOSPC is to the code: an OSError from a write) set between
+the journal's size when the first write goes out and its size at the end of a whole apply,
+measured on a twin line first.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from emulated import emulated_plant, run_cli
+
+from prc3cfg.core.image import ModuleImage
+
+pytestmark = pytest.mark.skipif(not hasattr(resource, "RLIMIT_FSIZE"), reason="no file-size limit on this system")
+
+
+def journal_of(directory: Path) -> Path:
+    (journal,) = (directory / ".prc3cfg" / "journal").glob("*.jsonl")
+    return journal
+
+
+def limit_within_the_writes(tmp_path: Path, capsys: pytest.CaptureFixture) -> int:
+    """A size the journal passes after the first write went out and before the last result: between the
+    offset of its first `apply` record and that of its first `result`, on a whole apply of a twin line."""
+    twin = tmp_path / "twin"
+    twin.mkdir()
+    with emulated_plant(twin) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    text = journal_of(twin).read_bytes()
+    first_write, first_result = text.index(b'"event": "apply"'), text.index(b'"event": "result"')
+    assert first_write < first_result
+    return (first_write + first_result) // 2
+
+
+def limited_apply(path: Path, size: int) -> subprocess.CompletedProcess[str]:
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (size, size))
+
+    return subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(path), "--auto-approve", "--allow-axis-release"],
+                          preexec_fn=limit, capture_output=True, text=True, timeout=120)  # fmt: skip
+
+
+def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_frame_with_an_exact_account(tmp_path, capsys):
+    size = limit_within_the_writes(tmp_path, capsys)
+    line = tmp_path / "line"
+    line.mkdir()
+    with emulated_plant(line) as plant:
+        factory = plant.images()
+        result = limited_apply(plant.path, size)
+        assert result.returncode == 1, result.stderr
+        assert "Traceback" not in result.stdout + result.stderr
+        error = result.stderr.strip().splitlines()[-1]
+        assert error.startswith("error: could not keep the journal ") and journal_of(line).name in error, error
+        assert "every line stopped before its next frame" in error and "prc3cfg restore " in error
+        held = plant.images()
+        # what each module was told to have been sent is what it holds
+        accounts = {block.split(" (", 1)[0]: block for block in result.stderr.split("✗ ")[1:]}
+        assert accounts, result.stderr
+        desired = {(bus.name, m.address): m.desired_image() for bus, m in plant.plant.modules()}
+        nothing_sent, all_acknowledged = set(), set()
+        for (bus, address), image in held.items():
+            account = accounts.get(f"bus {bus}, module {address}")
+            if f"✓ bus {bus}, module {address} " in result.stdout:  # verified before the refusal
+                assert matches(image, desired[(bus, address)])
+                continue
+            if account is None:  # not in the account: it must not have been touched
+                assert image == factory[(bus, address)]
+                continue
+            if "nothing was sent to it" in account or "interrupted before step 1 of" in account:
+                nothing_sent.add((bus, address))
+                assert image == factory[(bus, address)], account
+            elif (done := re.search(r"verifying: (\d+) of (\d+) steps? acknowledged", account)) and done[1] == done[2]:
+                all_acknowledged.add((bus, address))
+                assert matches(image, desired[(bus, address)]), account
+        assert nothing_sent, "the limit stopped no module before its first frame"
+        # the travel list names exactly the modules whose system block a 20h changed
+        travel = next(line for line in result.stdout.splitlines() if line.startswith("⚠ Travel to reference point required before"))
+        released = {key for key, image in held.items() if image.system != factory[key].system}
+        names = {(bus.name, m.address): f"{bus.name}/{m.name}" for bus, m in plant.plant.modules()}
+        assert sorted(travel.split(": ", 1)[1].split(", ")) == sorted(names[key] for key in released)
+        # the journal holds every frame that left: each module that holds anything new has its requests in it
+        requested = set()
+        for raw in journal_of(line).read_bytes().splitlines():
+            try:
+                entry = json.loads(raw)
+            except ValueError:
+                continue  # the record the limit cut
+            if entry.get("event") == "request" and not entry["request"].startswith(("50", "51", "52")):
+                requested.add((entry["bus"], entry["address"]))
+        assert {key for key, image in held.items() if image != factory[key]} <= requested
+        # nothing stays vouched for: with room on the disk, the next apply finds the rest and finishes
+        again = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert again.code == 0, again.err
+        assert "Apply complete" in again.out and plant.matches_plant()
+
+
+def matches(held: ModuleImage, desired: ModuleImage) -> bool:
+    return held.system == desired.system and all(w is None or h == w for h, w in zip(held.programs, desired.programs))
+
+
+def test_an_apply_with_a_whole_disk_is_not_stopped(tmp_path, capsys):
+    """The same limit, far above what an apply writes: the check can pass."""
+    with emulated_plant(tmp_path) as plant:
+        result = limited_apply(plant.path, 50 * 1024 * 1024)
+        assert result.returncode == 0, result.stderr
+        assert "Apply complete" in result.stdout and plant.matches_plant()
+        assert os.path.getsize(journal_of(tmp_path)) < 50 * 1024 * 1024
