@@ -615,7 +615,11 @@ def prober(link: Link, bus: Bus) -> Prober:
 
 def read_plan(path: Path, plant: Plant) -> PlanFile:
     """A plan file, refused (one line) when damaged, made by another prc3cfg or for another plant file."""
-    return planfile.to_apply(read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again"), path, plant.path, plant.sha256)
+    try:
+        alike = planfile.same_text(plant.path.read_bytes())
+    except OSError:  # gone since it was loaded: the plant file's own digest alone, which the lines' check then finds changed
+        alike = frozenset()
+    return planfile.to_apply(read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again"), path, plant.path, plant.sha256, alike)
 
 
 def plan_document(path: Path) -> dict[str, Any]:

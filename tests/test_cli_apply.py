@@ -56,6 +56,23 @@ def test_a_plan_file_is_applied_as_reviewed(plant, capsys, tmp_path):
     assert plant.matches_plant()
 
 
+@pytest.mark.parametrize("endings", [(b"\n", b"\r\n"), (b"\r\n", b"\n")], ids=["made on Linux, applied from Windows", "the other way"])
+def test_a_plan_file_applies_from_a_checkout_with_other_line_endings(plant, capsys, tmp_path, endings):
+    """CI plans on Linux, the person at the line applies from a Git for Windows checkout (CRLF), and back:
+    the same text is the same plant file; one changed byte besides still makes the plan stale."""
+    made, applied = endings
+    text = plant.path.read_bytes().replace(b"\r\n", b"\n")
+    plant.path.write_bytes(text.replace(b"\n", made))
+    assert run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json").code == 0
+    plant.path.write_bytes(text.replace(b"dwell: 0.5", b"dwell: 0.6", 1).replace(b"\n", applied))
+    stale = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert stale.code == 1 and "stale plan — the plant file" in stale.err
+    plant.path.write_bytes(text.replace(b"\n", applied))
+    result = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert result.code == 0, result.err
+    assert plant.matches_plant()
+
+
 def test_a_plan_file_alone_finds_its_plant(plant, capsys, tmp_path):
     run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     result = run_cli(capsys, "apply", "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import html
+import math
 import re
 from dataclasses import replace
 
@@ -198,7 +199,7 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
     change = replace(a_change(), cost=COST)
     other = replace(change, bus="b", name="n")  # a second line, alike: it runs at the same time
     plan = PlantPlan("p", "p.yaml", "0" * 64, (change, other))
-    reading = sum(COST.message_time(1, m) for m in read_messages(range(1, 65)))  # its read-back holds every program: 1 + 16 reads
+    reading = math.fsum(COST.message_time(1, m) for m in read_messages(range(1, 65)))  # its read-back holds every program: 1 + 16 reads
     verifying = verification_time(change.actual, change.plan.predicted, change.steps, COST)
     assert plan.phases() == {"reading": reading, "writing": change.plan.bus_time, "verifying": verifying}
     document = plan_json(plan)

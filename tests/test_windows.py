@@ -392,8 +392,6 @@ def test_ctrl_c_stops_an_apply_after_the_exchange_in_flight_with_exit_130(wine, 
     assert took < 15, f"Ctrl-C answered after {took:.1f} s"
 
 
-@pytest.mark.xfail(strict=True, reason="not yet: a plan file names the plant file's sha256 of its bytes, and a CRLF checkout's differ — "
-                   "refused in one line, but as 'changed since the plan was made', not as line endings")
 def test_a_plan_made_on_linux_applies_from_a_crlf_checkout(wine, demo):
     """CI plans on Linux; the person at the line applies that plan file from a Git for Windows checkout (CRLF)."""
     with linux_emulator(demo, "1,2,5") as port_a, linux_emulator(demo, "1,3,4") as port_b:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
+from math import fsum
 
 from prc3cfg.core import codec, sharing, targeting
 from prc3cfg.core.bustime import LineCost
@@ -169,7 +170,7 @@ class Planner:
             self._keep(bus, _Planned(changes, proof=LineProof(bus, answered=tuple(answered))))
             return
         changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
-        seconds = sum(line.cost.broadcast_time(step.message) for step in shared.broadcasts) + (proof_time if others else 0.0)
+        seconds = fsum(line.cost.broadcast_time(step.message) for step in shared.broadcasts) + (proof_time if others else 0.0)
         self._keep(bus, _Planned(changes, seconds, LineProof(bus, silent=tuple(others)) if others else None))
 
     def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
@@ -194,11 +195,11 @@ class Planner:
                 self.plan_line(bus, modules, actual, (probers or {}).get(bus))
         changes = {(c.bus, c.address): c for planned in self._planned.values() for c in planned.changes}
         ordered = tuple(changes[wanted.key] for wanted in modules)
-        broadcast_time = sum(planned.broadcast_time for planned in self._planned.values())
+        broadcast_time = fsum(planned.broadcast_time for planned in self._planned.values())
         proofs = tuple(proof for bus in buses if (proof := self._planned[bus].proof) is not None)
         return PlantPlan(self.plant, self.plant_path, self.plant_sha256, ordered, broadcast_time,
                          None if not broadcast_time else self._unshared(ordered), proofs)  # fmt: skip
 
     def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
         """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
-        return sum(self._cache.plan(c.actual, c.desired, self.lines[c.bus].cost, c.system_unset).bus_time for c in ordered)
+        return fsum(self._cache.plan(c.actual, c.desired, self.lines[c.bus].cost, c.system_unset).bus_time for c in ordered)

@@ -19,6 +19,7 @@ import hashlib
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from math import fsum
 from typing import Any
 
 from prc3cfg import __version__
@@ -65,7 +66,7 @@ class ModuleChange:
     def reading_time(self) -> float:
         """Seconds the read-back it was planned from took on the line: a 50h and the fewest 51h/52h."""
         read = [n for n, program in enumerate(self.actual.programs, 1) if program is not None]
-        return 0.0 if self.cost is None else sum(self.cost.message_time(self.address, m) for m in read_messages(read))
+        return 0.0 if self.cost is None else fsum(self.cost.message_time(self.address, m) for m in read_messages(read))
 
     @property
     def verifying_time(self) -> float:
@@ -159,7 +160,7 @@ class PlantPlan:
 
     @property
     def bus_time(self) -> float:
-        return sum(m.plan.bus_time for m in self.modules) + self.broadcast_time
+        return fsum(m.plan.bus_time for m in self.modules) + self.broadcast_time
 
     def phases(self) -> dict[str, float]:
         """The time the operator waits for an apply of this plan, by phase — reading back, writing,
@@ -173,13 +174,13 @@ class PlantPlan:
 
         def writing(bus: str, modules: list[ModuleChange]) -> float:
             cost = modules[0].cost
-            shared = sum(cost.broadcast_time(step.message) for step in self.broadcasts(bus)) if cost is not None else 0.0
-            return sum(m.plan.bus_time for m in modules) + shared
+            shared = fsum(cost.broadcast_time(step.message) for step in self.broadcasts(bus)) if cost is not None else 0.0
+            return fsum(m.plan.bus_time for m in modules) + shared
 
         return {
-            "reading": longest(lambda _, modules: sum(m.reading_time for m in modules)),
+            "reading": longest(lambda _, modules: fsum(m.reading_time for m in modules)),
             "writing": longest(writing),
-            "verifying": longest(lambda _, modules: sum(m.verifying_time for m in modules)),
+            "verifying": longest(lambda _, modules: fsum(m.verifying_time for m in modules)),
         }
 
     def broadcasts(self, bus: str) -> tuple[Step, ...]:
@@ -188,7 +189,7 @@ class PlantPlan:
 
     @property
     def naive_bus_time(self) -> float:
-        return sum(m.plan.naive_bus_time for m in self.modules)
+        return fsum(m.plan.naive_bus_time for m in self.modules)
 
     @property
     def message_count(self) -> int:
@@ -226,7 +227,7 @@ class PlantPlan:
             "estimated_bus_time_s": round(self.bus_time, 4),
             "naive_bus_time_s": round(self.naive_bus_time, 4),
             "estimated_phases_s": {phase: round(seconds, 3) for phase, seconds in phases.items()},
-            "estimated_time_s": round(sum(phases.values()), 3),
+            "estimated_time_s": round(fsum(phases.values()), 3),
             "message_count": self.message_count,
             "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
         } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {}) | (

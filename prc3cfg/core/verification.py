@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Iterable, Sequence
+from math import fsum
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
@@ -62,4 +63,4 @@ def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequen
     """Seconds the fewest reads of what `steps` can change take on the line."""
     system, programs = reach(before, predicted, steps)
     reads = read_messages(programs)[0 if system else 1 :]
-    return sum(cost.message_time(before.address, m) for m in reads)
+    return fsum(cost.message_time(before.address, m) for m in reads)

@@ -9,6 +9,7 @@ programs, and leave every unmanaged program as the module's own clamping leaves 
 from __future__ import annotations
 
 import importlib
+import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -76,7 +77,7 @@ def check_plan(
             assert predicted == clamped.image.programs[number - 1]
         else:
             assert predicted is None
-    assert plan.bus_time == sum(cost.message_time(desired.address, s.message) for s in plan.steps)
+    assert plan.bus_time == math.fsum(cost.message_time(desired.address, s.message) for s in plan.steps)
     assert plan.bus_time <= plan.naive_bus_time + 1e-12
     system_steps = [s for s in plan.steps if s.message.RELEASES_AXES]
     assert len(system_steps) == (actual.system != desired.system)

@@ -15,6 +15,7 @@ Owns: the module plan. Does not own the diff shown to people, rendering, the pla
 from __future__ import annotations
 
 from dataclasses import replace
+from math import fsum
 
 from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
@@ -92,7 +93,7 @@ def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[co
     return ModulePlan(
         address=desired.address,
         steps=steps,
-        bus_time=sum(cost.message_time(desired.address, m) for m in messages) if bus_time is None else bus_time,
+        bus_time=fsum(cost.message_time(desired.address, m) for m in messages) if bus_time is None else bus_time,
         naive_bus_time=naive_bus_time(actual, desired, cost) if naive is None else naive,
         releases_axes=any(step.releases_axes for step in steps),
         predicted=predicted,
@@ -104,7 +105,7 @@ def _cheapest(problem: PlanningProblem, cost: LineCost, layouts: list[Layout]) -
     priced = []
     for layout in layouts:
         messages = layout.messages(problem)
-        priced.append((sum(cost.message_time(problem.address, m) for m in messages), messages))
+        priced.append((fsum(cost.message_time(problem.address, m) for m in messages), messages))
     time, messages = min(priced, key=lambda pair: pair[0])
     return messages, time
 
