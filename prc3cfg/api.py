@@ -67,7 +67,7 @@ from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.audit import Pruned, RecordedRun, Verified
 from prc3cfg.shell.cancel import Cancellation, main_thread_only
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
-from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve
+from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve, ptys
 from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
 from prc3cfg.shell.files import FileProblem, Why, read_json, replace_unless_changed
 from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, Trace, open_plant_links, open_port
@@ -93,7 +93,7 @@ __all__ = [
     "StalePlan", "UserError", "Verified", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "list_records", "listen", "load", "load_images", "measurable", "open_pty",
     "picture", "plan", "plan_document", "plan_file_plant", "plot_format", "prune_records", "read", "restore", "scan", "select", "serial_ports",
-    "setup_machine", "slower_than_priced", "terminal_path", "unshared_records", "verify_records", "wait_for",
+    "served_pty", "setup_machine", "slower_than_priced", "terminal_path", "unshared_records", "verify_records", "wait_for",
     "write_adoption",
 ]  # fmt: skip
 
@@ -1481,6 +1481,11 @@ def listen(running: Emulator, host: str, port: int, *, rfc2217: bool = False) ->
     except OSError as error:  # the reason, without the "(while attempting to bind …)" Python adds
         reason = str(error.strerror or error).partition(" (while attempting")[0]
         raise UserError(f"--listen {host}:{port}: cannot listen ({reason}) — choose a free port on an address of this host") from None
+
+
+def served_pty(path: str, modules: Iterable[int]) -> contextlib.AbstractContextManager[None]:
+    """While it runs, `prc3cfg ports` lists the pseudo-terminal at `path` as this process's emulator of `modules`."""
+    return ptys.served(path, modules)
 
 
 def open_pty(running: Emulator) -> str:

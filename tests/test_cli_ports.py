@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 
@@ -102,3 +103,21 @@ def test_a_pseudo_terminal_is_not_listed():
     finally:
         os.close(master)
         os.close(slave)
+
+
+@pytest.mark.skipif(not platform.HAS_PTY, reason="no pseudo-terminals on this system")
+def test_an_emulator_s_pty_is_listed_while_it_serves_and_not_after(capsys):
+    """The port a person tries prc3cfg on without hardware: `emulator serve --pty`'s, which the system
+    lists among no serial ports — listed with its process and modules while it serves."""
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--modules", "1,3-5"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        assert process.stdout is not None
+        pty = process.stdout.readline().strip().removeprefix("pty: ")  # printed once it serves
+        listed = run_cli(capsys, "ports", "--json")
+        assert {"device": pty, "description": f"prc3cfg emulator serve --pty (pid {process.pid}), addresses 1, 3–5", "usb": None} \
+            in json.loads(listed.out), listed.out  # fmt: skip
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=30)
+    assert pty not in run_cli(capsys, "ports").out  # gone with its emulator

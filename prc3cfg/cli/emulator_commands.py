@@ -3,6 +3,7 @@ served by the API (`prc3cfg.api.emulator`); here, its options and what it prints
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
 import threading
@@ -138,4 +139,5 @@ def serve(
                   f"{', '.join(map(str, sorted(emulator.modules())))})", flush=True)  # fmt: skip
         if path is not None:
             print(f"pty: {path}", flush=True)
-        api.wait_for(stop)  # a signal's handler runs meanwhile, on Windows too
+        with api.served_pty(path, emulator.modules()) if path is not None else contextlib.nullcontext():  # prc3cfg ports lists it
+            api.wait_for(stop)  # a signal's handler runs meanwhile, on Windows too

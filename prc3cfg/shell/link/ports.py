@@ -42,9 +42,10 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
+from prc3cfg.core.render import address_ranges
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
-from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state
+from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state, ptys
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.link.trace import Trace
 
@@ -70,17 +71,20 @@ class SerialPort:
 
 
 def serial_ports() -> list[SerialPort]:
-    """The machine's serial ports in pyserial's order (COM2 before COM10); pseudo-terminals are not among them.
-    Where pyserial's listing cannot load (Windows' cfgmgr32 without a function it needs: Wine 8), the
-    registry's COM ports, without description or VID:PID."""
+    """The machine's serial ports in pyserial's order (COM2 before COM10), then the pseudo-terminals this
+    user's `prc3cfg emulator serve --pty` serve (the system lists none). Where pyserial's listing cannot
+    load (Windows' cfgmgr32 without a function it needs: Wine 8), the registry's COM ports, without
+    description or VID:PID."""
+    emulated = [SerialPort(path, f"prc3cfg emulator serve --pty (pid {pid}), {address_ranges(modules)}", None)
+                for path, pid, modules in ptys.serving()]  # fmt: skip
     try:
         from serial.tools import list_ports
     except (AttributeError, OSError):  # ctypes: a system DLL without the function pyserial binds at import
-        return [SerialPort(name, "", None) for name in sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))]
+        return [SerialPort(name, "", None) for name in sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))] + emulated
 
     return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
                        f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None else None)
-            for info in sorted(list_ports.comports())]  # fmt: skip
+            for info in sorted(list_ports.comports())] + emulated  # fmt: skip
 
 
 class FormatRefused(UserError):
