@@ -6,7 +6,8 @@ the tests marked `soak` — many races, seeds or examples of behaviours the fast
 a few. `PRC3CFG_HYPOTHESIS_PROFILE` names the hypothesis profile: "fast" (the default) or
 "soak" (`.ci/run` sets it for the soak tier). A property of the fast tier names its own small
 count; its soak sibling names none and tries the profile's: 2,000 examples under "soak" (the
-most any acceptance asked for), hypothesis's 100 under "fast" — a quick look at the soak tier.
+most any acceptance asked for), hypothesis's 100 under "fast" — a quick look at the soak tier —
+unless one example takes about a second (the choice of broadcasts: 600, some 9 minutes).
 Both profiles are derandomised: a run tries the examples the run before tried, and a failure
 found once is found again.
 """
