@@ -26,6 +26,11 @@ from prc3cfg.core.image import ModuleImage
 pytestmark = pytest.mark.skipif(not hasattr(resource, "RLIMIT_FSIZE"), reason="no file-size limit on this system")
 
 
+#: The link's reply time-out: long enough that a busy machine repeats no exchange — a repeat makes one
+#: journal longer than its twin's, and the limit measured on one would fall outside the other's writes.
+UNHURRIED = 2.0
+
+
 def journal_of(directory: Path) -> Path:
     (journal,) = (directory / ".prc3cfg" / "journal").glob("*.jsonl")
     return journal
@@ -36,7 +41,7 @@ def limit_within_the_writes(tmp_path: Path, capsys: pytest.CaptureFixture) -> in
     offset of its first `apply` record and that of its first `result`, on a whole apply of a twin line."""
     twin = tmp_path / "twin"
     twin.mkdir()
-    with emulated_plant(twin) as plant:
+    with emulated_plant(twin, timeout=UNHURRIED) as plant:
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
     text = journal_of(twin).read_bytes()
     first_write, first_result = text.index(b'"event": "apply"'), text.index(b'"event": "result"')
@@ -56,7 +61,7 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
     size = limit_within_the_writes(tmp_path, capsys)
     line = tmp_path / "line"
     line.mkdir()
-    with emulated_plant(line) as plant:
+    with emulated_plant(line, timeout=UNHURRIED) as plant:
         factory = plant.images()
         result = limited_apply(plant.path, size)
         assert result.returncode == 1, result.stderr
