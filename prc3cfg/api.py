@@ -329,9 +329,12 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     record does not show holding the plant file's values (`targeting.to_read`) — every managed
     program of one the record does not know, knows from too long ago, or that reported E12 since."""
     buses = {bus.name: bus for bus, _ in pairs}
-    known = {} if full_read else record(plant, buses.values())
-    overruled = {} if full_read else {(bus.name, address): said for bus in buses.values()
-                                      for address, said in bases.overruled(bus_line_keys(plant, bus)).items()}  # fmt: skip
+    known: dict[Key, Known] = {}
+    overruled: dict[Key, str] = {}
+    for bus in [] if full_read else buses.values():
+        on_record, newer = bases.read(bus_line_keys(plant, bus))
+        known |= {(bus.name, address): k for address, k in on_record.items()}
+        overruled |= {(bus.name, address): said for address, said in newer.items()}
     if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
         return Reads(pairs, targets(pairs))
     unset = unset_systems(plant, buses.values())

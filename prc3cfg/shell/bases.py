@@ -16,7 +16,7 @@ writes, none may replace another's file) in `lines/` of the state folder
 (`prc3cfg.shell.releases.state_dirs`), written atomically under the line's lock. The newest entry
 of a module across the files is the one taken — if it is this user's or root's: another user's
 file vouches for nothing (it could say anything), but its newer entry still means the module
-changed since, so it is not known (`load`; `overruled` says by whose claim). A file another tool
+changed since, so it is not known (`read` says by whose claim). A file another tool
 damaged, or a link, is read as no record (the modules are then read in full).
 
 Does not own what is read (`prc3cfg.core.targeting`) nor when (`prc3cfg.api`).
@@ -95,10 +95,21 @@ def _newest(keys: Iterable[str]) -> tuple[dict[str, dict], dict[str, dict]]:
 
 
 def load(keys: Iterable[str]) -> dict[int, Known]:
-    """What the record of the line with these identities says of each module it knows — not of one
-    another user's file says changed since (`overruled`)."""
+    """What the record of the line with these identities says of each module it knows (`read`)."""
+    return read(keys)[0]
+
+
+def read(keys: Iterable[str]) -> tuple[dict[int, Known], dict[int, str]]:
+    """What the record of the line with these identities says of each module it knows — and the
+    modules another user's file has a newer entry for than this user's and root's, with what that
+    entry claims: not known (it changed since), and why each is read in full."""
     trusted, claimed = _newest(keys)
-    known = {}
+    known, overruled = {}, {}
+    for address, entry in claimed.items():
+        if address not in trusted or entry["at"] > trusted[address]["at"]:
+            by = entry.get("by") if isinstance(entry.get("by"), str) else "a command"
+            with contextlib.suppress(ValueError):
+                overruled[int(address)] = f"another user's record is newer (it claims: {by}, {entry['at']})"
     for address, entry in trusted.items():
         if address in claimed and claimed[address]["at"] > entry["at"]:
             continue
@@ -109,20 +120,7 @@ def load(keys: Iterable[str]) -> dict[int, Known]:
                 known[int(address)] = Known(ModuleImage.from_json(entry["image"]), entry["since"], entry["by"])
         except ValueError:
             continue  # an entry this prc3cfg cannot read: the module is not known
-    return known
-
-
-def overruled(keys: Iterable[str]) -> dict[int, str]:
-    """The modules another user's file has a newer entry for than this user's and root's, with what that
-    entry claims — why each is read in full."""
-    trusted, claimed = _newest(keys)
-    said = {}
-    for address, entry in claimed.items():
-        if address not in trusted or entry["at"] > trusted[address]["at"]:
-            by = entry.get("by") if isinstance(entry.get("by"), str) else "a command"
-            with contextlib.suppress(ValueError):
-                said[int(address)] = f"another user's record is newer (it claims: {by}, {entry['at']})"
-    return said
+    return known, overruled
 
 
 def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:

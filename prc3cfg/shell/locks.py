@@ -196,16 +196,10 @@ def _make_lock_dir(description: str) -> Path:
     if not stat.S_ISDIR(status.st_mode):
         raise UserError(f"{description}: the lock directory {directory} is no directory — "
                         "an administrator removes it, or set PRC3CFG_LOCK_DIR")
-    if not _trusted_owner(status.st_uid):
+    if not platform.trusted_owner(status.st_uid):
         raise UserError(f"{description}: the lock directory {directory} belongs to {platform.uid_name(status.st_uid)}, "
                         "who could remove the locks in it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")
     return directory
-
-
-def _trusted_owner(uid: int) -> bool:
-    """Whether a folder of that owner may hold the line's locks: root's or this user's. Windows: not
-    checked — its owners and rights are ACLs (`platform.OWNERS`)."""
-    return not platform.OWNERS or uid in (0, platform.user_id())
 
 
 def _open(path: Path, description: str) -> tuple[int, bool]:

@@ -23,7 +23,7 @@ means the same everywhere:
   %ProgramData%\prc3cfg and %LOCALAPPDATA%; `serial_group` and `make_group_folder` (the machine's
   folder an administrator makes once for the users of the lines: POSIX's dialout or uucp group, mode
   3775), `user_tag` (this user's files in it);
-- who and what: `user_name` (a login name, else `uid N`), `owned_by_this_user`, `OWNERS` and
+- who and what: `user_name` (a login name, else `uid N`), `trusted_owner`, `OWNERS` and
   `user_id`/`uid_name` (whether files have a uid owner: POSIX; Windows has ACLs instead),
   `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
   CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
@@ -306,11 +306,12 @@ def uid_name(uid: int) -> str:
     return f"uid {uid}"
 
 
-def owned_by_this_user(path: Path) -> bool:
-    """Whether this process's user owns `path` (Windows: never said — its owners are not uids)."""
+def trusted_owner(uid: int) -> bool:
+    """Whether a file or folder of owner `uid` may be believed: root's or this user's (Windows: not
+    checked — its owners and rights are ACLs, `OWNERS`)."""
     if sys.platform == "win32":
-        return False
-    return path.stat().st_uid == os.getuid()
+        return True
+    return uid in (0, os.getuid())
 
 
 def trusted_file(path: Path) -> bool:
@@ -320,11 +321,7 @@ def trusted_file(path: Path) -> bool:
         status = path.lstat()
     except OSError:
         return False
-    if not stat.S_ISREG(status.st_mode):
-        return False
-    if sys.platform == "win32":
-        return True
-    return status.st_uid in (0, os.getuid())
+    return stat.S_ISREG(status.st_mode) and trusted_owner(status.st_uid)
 
 
 def process_alive(pid: int) -> bool:

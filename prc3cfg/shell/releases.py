@@ -73,7 +73,7 @@ def _machine_problem(kind: str) -> str | None:
             return f"{folder}: {error.strerror}"
         if not stat.S_ISDIR(status.st_mode):
             return f"{folder} is not a folder"
-        if platform.OWNERS and status.st_uid not in (0, platform.user_id()):
+        if not platform.trusted_owner(status.st_uid):
             return f"{folder} belongs to {platform.uid_name(status.st_uid)}, not to root"
     if not os.access(machine_dir() / kind, os.W_OK):
         return f"{machine_dir() / kind} is not writable by {platform.user_name()}"

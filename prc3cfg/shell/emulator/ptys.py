@@ -19,11 +19,11 @@ from pathlib import Path
 
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
+from prc3cfg.shell.releases import state_dirs
 
 
 def folder() -> Path:
-    chosen = os.environ.get("PRC3CFG_STATE_DIR")
-    return (Path(chosen) if chosen else platform.user_state_dir()) / "ptys"
+    return state_dirs()[-1] / "ptys"  # the user's own, or the one PRC3CFG_STATE_DIR chose
 
 
 @contextlib.contextmanager
