@@ -209,7 +209,7 @@ def main() -> None:
         plant, actual = write_plant(folder)
         print(f"{BUSES} buses × {MODULES} modules, 64 programs each: plant file {plant.stat().st_size / 1e6:.2f} MB, "
               f"images {actual.stat().st_size / 1e6:.2f} MB; median of {args.runs} runs")
-        compileall.compile_dir(Path(api.__file__).parent, quiet=1)  # the tool as installed (module docstring)
+        compileall.compile_dir(Path(api.__file__).parents[1], quiet=1)  # the tool as installed (module docstring)
         prc3cfg = [sys.executable, "-m", "prc3cfg"]
         plan = [*prc3cfg, "plan", str(plant), "--actual", str(actual)]
         script = Path(sys.executable).with_name("prc3cfg")  # what a user runs: the script pip installed beside python

@@ -18,6 +18,7 @@ from emulated import emulated_plant, run_cli
 from lossy import Loss, Rule
 
 from prc3cfg import api
+from prc3cfg.api._sessions import bus_line_keys
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Frame
 from prc3cfg.shell import releases
@@ -165,7 +166,7 @@ def test_the_release_records_of_a_line_read_back_in_part_hold_exactly_the_releas
         with pytest.raises(api.ApplyFailed) as failed:
             api.apply(plant.plant, gates=api.Gates(allow_axis_release=True))
         written_and_untouched(plant)
-        keys = {bus.name: api.bus_line_keys(plant.plant, bus) for bus in plant.plant.buses}
+        keys = {bus.name: bus_line_keys(plant.plant, bus) for bus in plant.plant.buses}
         result = failed.value.result
         assert [(r.bus, r.address) for r in result.runs] == [("short", 1)] and result.runs[0].verified
         assert len(result.unread) == 1 and result.unread[0].startswith("bus long, module 6 (long-6): read 50h refused")

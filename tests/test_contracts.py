@@ -12,6 +12,7 @@ from pathlib import Path
 from emulated import run_cli
 
 from prc3cfg import __version__, api
+from prc3cfg.api._apply import prove, read_plan
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.shell.emulator.state import load_state, save_state
@@ -56,7 +57,7 @@ def test_a_plan_file_written_before_is_read_shown_and_proved(tmp_path, capsys):
     loaded = load_plant(plant)
     pairs = api.select(loaded)
     images = api.load_images(factory_images(plant, tmp_path / "images.json"), loaded)
-    proved = api.prove(path, api.read_plan(path, loaded), loaded, pairs, images)
+    proved = prove(path, read_plan(path, loaded), loaded, pairs, images)
     assert proved.message_count == 26 and len(proved.changes) == 6
 
 

@@ -21,6 +21,7 @@ import yaml
 from emulated import emulated_plant, run_cli
 
 from prc3cfg import api
+from prc3cfg.api._plan import RECORD
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.shell.testing import EmulatedPlant
 
@@ -148,7 +149,7 @@ def test_the_record_is_shared_by_every_plant_file_and_names_who_verified_what_wa
     other = second_checkout(applied, tmp_path)
     planned = run_cli(capsys, "plan", other, "--json")
     document = json.loads(planned.out)
-    assert document["read"]["base"] == api.RECORD  # B never applied here: A's verification is B's record too
+    assert document["read"]["base"] == RECORD  # B never applied here: A's verification is B's record too
     assert all(said.startswith(f"apply of {applied.path} by ") and "(since " in said for said in document["read"]["taken"].values())
     assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"])
 

@@ -23,7 +23,7 @@ import pytest
 from emulated import emulated_plant, run_cli
 from test_locks import ROOT, other_user
 
-from prc3cfg import api
+from prc3cfg.api._sessions import bus_line_keys
 
 
 @pytest.fixture
@@ -159,7 +159,7 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         assert "another user's record is newer (it claims: apply of " in again.out and f"by {user.pw_name}@" in again.out
         assert "program 1: position 1.900 m → 2.000 m" in again.out
         # a release their run recorded and never told (killed after its 20h) is told to root's plan
-        keys = api.bus_line_keys(plant.plant, plant.plant.buses[0])
+        keys = bus_line_keys(plant.plant, plant.plant.buses[0])
         script = ("import sys; from prc3cfg.shell.releases import Releases; "
                   "Releases('apply').record(tuple(sys.argv[1:]), 'booth-a', 2, 'booth-a-right')")  # fmt: skip
         recorded = as_user(user, machine, packages, "-c", script, *keys)

@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
+from prc3cfg.api._plan import RECORD
 from prc3cfg.core import targeting
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage
@@ -195,7 +196,7 @@ def test_a_value_taught_in_a_program_the_change_does_not_touch_is_left_and_the_p
     planned = run_cli(capsys, "plan", applied.path, "--out", tmp_path / "p.json")
     assert "taken as known from the line's record" in planned.out and "plan --refresh-only (or --full-read) reads everything" in planned.out
     document = json.loads((tmp_path / "p.json").read_text())
-    assert document["read"]["base"] == api.RECORD
+    assert document["read"]["base"] == RECORD
     assert all(said.startswith(f"apply of {applied.path} by ") for said in document["read"]["taken"].values())
     left = next(m for bus in document["buses"] for m in bus["modules"] if m["name"] == "booth-a-left")
     assert left["read"]["programs"] == [1] and 2 in left["read"]["programs_not_read"]

@@ -1,0 +1,227 @@
+"""Apply and restore: the workflow from the read-back (or a plan file, proved) to the written modules.
+
+`apply` and `restore` check what must hold before a line is opened (a reason, parity, records that
+can be kept), read back and plan the whole plant and pass the `Gates` (`apply_whole`), or — with no
+question to ask — write each line as soon as its plan is whole (`prc3cfg.api._engine`). Plan files:
+`read_plan`, `prove`, `plan_document`, `plan_file_plant`. Does not own the writes, the snapshot and
+the journal (`prc3cfg.api._engine`), nor what a plan file is (`prc3cfg.core.planfile`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Iterable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from prc3cfg.api._bus import prober
+from prc3cfg.api._engine import Keeping, Writing, apply_by_line
+from prc3cfg.api._plan import (
+    Reads,
+    left_alone,
+    line_cost,
+    make_plan,
+    plan_file_reads,
+    read_and_plan,
+    read_input,
+    read_targets,
+    reads,
+    seen,
+    select,
+    unset_systems,
+)
+from prc3cfg.api._plant import reason_for
+from prc3cfg.api._sessions import bus_line_keys, lines
+from prc3cfg.api._types import ApplyResult, AxisReleaseRefused, Gates, Key, LineOptions, NotApproved, Pairs
+from prc3cfg.core import planfile
+from prc3cfg.core.framing import detects_damage
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.planfile import PlanFile
+from prc3cfg.core.planning import Prober
+from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Plant
+from prc3cfg.shell import audit, bases, releases
+from prc3cfg.shell.apply import Verify
+from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.readback import Target
+from prc3cfg.shell.records import Journal, Snapshot, check_writable, save_applied
+from prc3cfg.shell.records import header as run_header
+
+
+def read_plan(path: Path, plant: Plant) -> PlanFile:
+    """A plan file, refused (one line) when damaged, made by another prc3cfg or for another plant file."""
+    try:
+        alike = planfile.same_text(plant.path.read_bytes())
+    except OSError:  # gone since it was loaded: the plant file's own digest alone, which the lines' check then finds changed
+        alike = frozenset()
+    return planfile.to_apply(read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again"), path, plant.path, plant.sha256, alike)
+
+
+def plan_document(path: Path) -> dict[str, Any]:
+    """A plan file to show (`prc3cfg show PLAN.json`), checked, its summaries worked out again from its bytes."""
+    return planfile.to_show(read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again"), path)
+
+
+def plan_file_plant(path: Path) -> Path:
+    """The plant file a plan file was made from, where it says it is."""
+    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
+    recorded = document.get("plant_path") if isinstance(document, dict) else None
+    if not isinstance(recorded, str) or not Path(recorded).is_file():
+        raise UserError(f"{path}: the plant file it was made from is not at {recorded!r} — name it: "
+                        f"prc3cfg apply PLANT --plan {path}")  # fmt: skip
+    return Path(recorded)
+
+
+def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage],
+          probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
+    """The plan file's plan, proved before anything is written (`prc3cfg.core.planfile`): what is
+    applied is then the plan prc3cfg makes from this read-back."""
+    modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
+    planfile.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
+    chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
+    said = planned.document.get("read")  # a targeted read-back's base, in words: it sends nothing
+    targeted = Reads(chosen, [], said["base"], tuple(said["not_as_verified"]), taken=dict(said.get("taken", {}))) if isinstance(said, dict) else None
+    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()),
+                     only_read=targeted is not None)  # fmt: skip
+    if targeted is not None:
+        ours = replace(ours, reading=targeted.reading(pairs, images))
+    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant))
+    return ours
+
+
+def apply(
+    plant: Plant,
+    modules: Iterable[str] | None = None,
+    *,
+    plan_file: Path | None = None,
+    gates: Gates = Gates(),
+    verify: Verify = Verify.FLOOR,
+    options: LineOptions | None = None,
+    previous: Path | None = None,
+    full_read: bool = False,
+    reason: str | None = None,
+) -> ApplyResult:
+    """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
+
+    What is read back is what `plan` reads (`previous`, `full_read`); for `plan_file`, exactly
+    what its plan read. `reason` (else `PRC3CFG_REASON`) goes into the records' header — a bus
+    with `require_reason` refuses to start without one. Returns the result when every module
+    verified; raises `ApplyFailed` or `ApplyInterrupted`, each with the result, otherwise; before
+    anything is written, any other `UserError`.
+    """
+    planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
+    pairs = select(plant, modules)
+    wanted = plan_file_reads(plant, *planned, pairs) if planned is not None else reads(plant, pairs, full_read)
+    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason)
+
+
+def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
+            onto_current_lines: bool = False, reason: str | None = None) -> ApplyResult:  # fmt: skip
+    """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
+    onto the lines it was taken on: a bus of the plant file that now names another line (port or
+    framing) is refused, unless `onto_current_lines`; and a snapshot that its journal does not
+    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused."""
+    options = options or LineOptions()
+    taken = Snapshot.load(snapshot)
+    if (note := audit.snapshot_checked(snapshot, taken)) is not None:
+        options.tell(note)
+    plant = load_plant(taken.plant_path)
+    pairs = [(bus, m) for bus, m in plant.modules() if (bus.name, m.address) in taken.images]
+    if len(pairs) != len(taken.images):
+        raise UserError(f"{snapshot}: the plant file {taken.plant_path} no longer has every module of the snapshot — nothing was written")
+    for bus in {bus.name: bus for bus, _ in pairs}.values():
+        line = taken.lines.get(bus.name)
+        if line is not None and not onto_current_lines and not line.same_line(bus.port, bus.framing, bus_line_keys(plant, bus)):
+            raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
+                            f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
+                            "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
+    to_read = [
+        Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(image.programs, 1) if p is not None), image.system)
+        for bus, m in pairs
+        for image in [taken.images[(bus.name, m.address)]]
+    ]
+    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason)
+
+
+def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
+           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions, *,
+           reason: str | None = None) -> ApplyResult:  # fmt: skip
+    buses = {bus.name: bus for bus, _ in wanted.pairs}
+    command = "restore" if desired is not None else "apply"
+    reason = reason_for(plant, buses.values(), reason, command)
+    for bus in buses.values():
+        if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
+            raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
+                            "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
+                            "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
+    check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
+    releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
+    releases.folder(bases.KIND, bases.WHAT)
+    said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
+                      argv=options.command_line)  # fmt: skip
+    journal = Journal(plant.path, said, audit.follow(plant.path))  # its file is made at the first record: not for a busy line
+    records = releases.Releases(command, journal.path)
+    keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once
+    if options.cancel is None:  # the event that stops the lines when a record cannot be kept
+        options = replace(options, cancel=Cancellation())
+    assert options.cancel is not None
+    keeping = Keeping(plant, buses, keys, journal, records, options.cancel.event)
+    try:
+        with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping) as links:
+            earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
+            writing = Writing(plant, keys, buses, links, keeping, verify, options, records.command)
+            if plan_file is None and not gates.asks:
+                result = apply_by_line(plant, chosen, wanted, desired, gates, writing, options, earlier, records)
+            else:
+                result = _apply_whole(plant, chosen, wanted, desired, plan_file, gates, writing, options, earlier, records)
+            if result.runs and desired is None and len(chosen) == len(plant.modules()):
+                _keep_applied(plant)
+            return result
+    finally:
+        keeping.close()
+
+
+def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
+                 plan_file: tuple[Path, PlanFile] | None, gates: Gates, writing: Writing, options: LineOptions,
+                 earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:  # fmt: skip
+    """Read back and plan the whole plant (or prove the plan file), show it and pass the gates, then write every line."""
+    pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
+    started = time.monotonic()
+    if plan_file is None:
+        images, the_plan = read_and_plan(plant, pairs, to_read, links, options, desired, command=writing.command,
+                                          only_read=wanted.base is not None)  # fmt: skip
+        the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
+    else:
+        images = read_targets(to_read, links, options, then=seen(plant, writing.command))
+        the_plan = prove(*plan_file, plant, chosen, images, {name: prober(links[name], bus) for name, bus in writing.buses.items()})
+    reading = time.monotonic() - started
+    if gates.show is not None:
+        gates.show(the_plan)
+    if not the_plan.changes:
+        return ApplyResult(the_plan, (), None, writing.journal.path, earlier, records)
+    releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
+    allow = gates.allow_axis_release
+    allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
+    if releasing and not allow_axis_release:
+        raise AxisReleaseRefused(
+            f"the plan releases the axes of {', '.join(releasing)} (10h/20h: they must travel to their "
+            "reference point before production) — nothing was written; apply again with --allow-axis-release"
+        )
+    if gates.approve is not None and not gates.approve(the_plan):
+        raise NotApproved("not applied — nothing was written")
+    with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
+        writing.whole(the_plan)
+        writing.write(the_plan.modules, images, allow_axis_release)
+        return writing.account(the_plan, earlier, records, {"reading": reading})
+
+
+def _keep_applied(plant: Plant) -> None:
+    """The plant file just applied in full and verified on every module, kept for `left_alone` — if
+    it is still the one applied."""
+    text = plant.path.read_bytes()
+    if hashlib.sha256(text).hexdigest() == plant.sha256:
+        save_applied(plant.path, text)

@@ -1,0 +1,354 @@
+"""Read and plan: the plant file, its modules, what to read of them, and the plan.
+
+`load` and `select` the plant's modules; what to read (`targets`, `reads`, `Reads`, the reads of
+a plan file, `plan_file_reads`) and the line's record it rests on; `read` them back, each line's
+read-back into its record (`seen`); `plan` from the read-back, or `make_plan` from images at hand,
+each module planned as soon as it is read (`read_and_plan`); `drift`, and what the plant file
+leaves alone (`left_alone`). Does not own proving a plan file and writing (`prc3cfg.api._apply`),
+nor the planner itself (`prc3cfg.core.planning`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from prc3cfg.api._bus import probe_timeout, prober
+from prc3cfg.api._sessions import bus_line_keys, lines
+from prc3cfg.api._types import Key, LineOptions, Pairs
+from prc3cfg.core import targeting
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.device import can_clamp
+from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
+from prc3cfg.core.planfile import PlanFile, StalePlan
+from prc3cfg.core.planning import Line, Planner, Prober, Wanted
+from prc3cfg.core.plantplan import PlantPlan, Reading
+from prc3cfg.core.render import Drift, drifted
+from prc3cfg.core.targeting import Known
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Bus, Plant
+from prc3cfg.shell import bases, releases
+from prc3cfg.shell.files import FileProblem, Why, read_json
+from prc3cfg.shell.link import Link
+from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.readback import Target, read_all
+from prc3cfg.shell.records import applied_copy
+
+
+def load(path: str | Path) -> Plant:
+    """The plant file at `path`; `PlantError` with every problem, one line each."""
+    return load_plant(path)
+
+
+def select(plant: Plant, names: Iterable[str] | None = None) -> Pairs:
+    """(bus, module) pairs of the plant, limited to the named modules; unknown names are an error."""
+    pairs = list(plant.modules())
+    if not names:
+        return pairs
+    wanted = set(names)
+    unknown = wanted - {module.name for _, module in pairs}
+    if unknown:
+        raise UserError(
+            f"{plant.path}: no module named {', '.join(sorted(unknown))} — the plant's modules are "
+            + ", ".join(module.name for _, module in pairs)
+        )
+    return [(bus, module) for bus, module in pairs if module.name in wanted]
+
+
+def line_cost(bus: Bus) -> LineCost:
+    return LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz)
+
+
+def targets(pairs: Pairs) -> list[Target]:
+    """What to read of each module: its managed programs, and every program its plant system
+    parameters could clamp."""
+    return [Target(bus.name, m.address, m.name, tuple(m.managed_programs()), m.desired_system()) for bus, m in pairs]
+
+
+#: What a targeted read-back compares with, in words (`prc3cfg.shell.bases`).
+RECORD = "the line's record of what prc3cfg last read or verified"
+
+
+def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
+    """What the records of these buses' lines say their modules hold, by (bus, address)."""
+    return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
+
+
+@dataclass(frozen=True)
+class Reads:
+    """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
+    read-back the record it was compared with, in words (None: every chosen module in full), the
+    modules read in full with why ("bus/name (why)": as a plan file says, else worked out from the
+    targets and the read-back) and whose verification the programs not read rest on."""
+
+    pairs: Pairs
+    targets: list[Target]
+    base: str | None = None
+    not_as_verified: tuple[str, ...] | None = None
+    why: dict[Key, str] = field(default_factory=dict)  # read in full before any evidence: not on record, too old, E12
+    taken: dict[str, str] | None = None  # "bus/name" → `Known.said()`: as a plan file says, else from `known`
+    known: dict[Key, Known] = field(default_factory=dict)
+
+    def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
+        """What the plan says it read now and took as known, once `images` are read."""
+        if self.base is None:
+            return None
+        unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
+        skipped = {key: targeting.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
+        other = self.not_as_verified
+        if other is None:
+            evidence = {(t.bus, t.address): said for t in self.targets if t.known is not None and (t.bus, t.address) in images
+                        and (said := targeting.contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
+            other = tuple(f"{bus.name}/{m.name} ({why})" for bus, m in chosen
+                          if (why := self.why.get(key := (bus.name, m.address)) or evidence.get(key)) is not None)  # fmt: skip
+        taken = self.taken
+        if taken is None:
+            taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen if skipped.get(key := (bus.name, m.address))}
+        return Reading(self.base, unread, skipped, other, taken)
+
+
+def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
+    """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
+    records know none of them; else of each module its system block and the managed programs the
+    record does not show holding the plant file's values (`targeting.to_read`) — every managed
+    program of one the record does not know, knows from too long ago, or that reported E12 since."""
+    buses = {bus.name: bus for bus, _ in pairs}
+    known: dict[Key, Known] = {}
+    overruled: dict[Key, str] = {}
+    for bus in [] if full_read else buses.values():
+        on_record, newer = bases.read(bus_line_keys(plant, bus))
+        known |= {(bus.name, address): k for address, k in on_record.items()}
+        overruled |= {(bus.name, address): said for address, said in newer.items()}
+    if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
+        return Reads(pairs, targets(pairs))
+    unset = unset_systems(plant, buses.values())
+    now = datetime.now(UTC)
+    to_read, why = [], {}
+    for bus, m in pairs:
+        key = (bus.name, m.address)
+        decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
+        to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
+        if decision.why is not None:
+            why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
+    return Reads(pairs, to_read, RECORD, why=why, known=known)
+
+
+#: Called with a bus and its modules' images as soon as the bus is read.
+LineRead = Callable[[str, dict[Key, ModuleImage]], None]
+
+
+def seen(plant: Plant, command: str, then: LineRead | None = None) -> LineRead:
+    """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.bases`):
+    what `command` saw — drift included, so the next plan writes it back — then `then`."""
+    by, buses = bases.who(command, plant.path), {bus.name: bus for bus in plant.buses}
+
+    def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
+        keys = bus_line_keys(plant, buses[bus])
+        known, when = bases.load(keys), bases.now()
+        bases.update(keys, {a: targeting.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
+        if then is not None:
+            then(bus, images)
+
+    return record_and_then
+
+
+def read_targets(targets_: list[Target], links: dict[str, Link], options: LineOptions, each: Callable[[Target, ModuleImage], None] | None = None,
+          then: LineRead | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
+    """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`) — also
+    one that came during the last exchanges, when the read ended anyway: it is not forgotten. Each
+    line's read goes into its record by `then` (`seen`)."""
+    options.progress.start("reading modules", len(targets_))
+    with options.deferred():
+        images = read_all(targets_, links, progress=options.progress.advance, each=each, then=then)
+    if options.cancel is not None:
+        options.cancel.check()
+    return images
+
+
+def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
+                   desired: dict[Key, ModuleImage] | None = None, *, command: str,
+                   only_read: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
+    """Read back and plan, each module planned as soon as it is read and each line as soon as its
+    last module is — while the other lines are still being read: the lines never wait for all of
+    the planning. `only_read`: see `Planner`."""
+    buses = {bus.name: bus for bus, _ in pairs}
+    planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read)
+    wanted = to_plan(pairs, desired)
+    images = read_targets(to_read, links, options, each=planning_each(planner, wanted),
+                   then=seen(plant, command, lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus]))))  # fmt: skip
+    return images, planner.plan(wanted, images)
+
+
+def planning_each(planner: Planner, wanted: list[Wanted]) -> Callable[[Target, ModuleImage], None]:
+    """Each module planned as soon as it is read (`Planner.plan_module`)."""
+    by_key = {w.key: w for w in wanted}
+    return lambda target, image: planner.plan_module(by_key[(target.bus, target.address)], image)
+
+
+def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None, *,
+         command: str = "read") -> dict[Key, ModuleImage]:  # fmt: skip
+    """Read back the chosen modules: system parameters, managed programs, and every program the
+    plant's system parameters could clamp — by (bus, address); what was read goes into the lines'
+    records as `command`'s."""
+    options = options or LineOptions()
+    pairs = select(plant, modules)
+    with lines(plant, {bus.name for bus, _ in pairs}, options) as links:
+        return read_targets(targets(pairs), links, options, then=seen(plant, command))
+
+
+def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
+    """Module images saved by `prc3cfg read --json`, matched to the plant's modules by bus and address."""
+    remedy = "save the images again with prc3cfg read --json"
+    entries = read_input(path, "the file prc3cfg read --json wrote", remedy)
+    try:
+        saved = [(entry.get("bus"), image) for entry, image in zip(entries, images_from_json(entries))]
+    except ValueError as error:
+        raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
+    images: dict[Key, ModuleImage] = {}
+    for bus, module in select(plant, modules):
+        found = [img for b, img in saved if img.address == module.address and b in (None, bus.name)]
+        if len(found) != 1:
+            raise UserError(
+                f"{path}: {'no' if not found else 'more than one'} image for bus {bus.name}, module "
+                f"{module.address} ({module.name}) — {remedy}"
+            )
+        missing = [n for n in module.managed_programs() if found[0].programs[n - 1] is None]
+        if missing:
+            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program {missing[0]}, "
+                            f"which the plant manages — {remedy}")  # fmt: skip
+        unread = [n for n, p in enumerate(found[0].programs, start=1) if p is None]
+        if unread and can_clamp(found[0].system, module.desired_system()):
+            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program {unread[0]}, "
+                            f"which the plant's system parameters would clamp — {remedy}")  # fmt: skip
+        images[(bus.name, module.address)] = found[0]
+    return images
+
+
+def read_input(path: Path, what: str, remedy: str) -> Any:
+    """A JSON file prc3cfg wrote (`what`: "the plan file …"), within `files.JSON_LIMIT`; one line otherwise."""
+    try:
+        return read_json(path)
+    except FileProblem as problem:
+        raise UserError(f"{problem.where(path)}: {problem} — {remedy if problem.why is Why.NOT_JSON else f'name {what}'}") from None
+
+
+def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
+         options: LineOptions | None = None, previous: Path | None = None, full_read: bool = False) -> PlantPlan:  # fmt: skip
+    """The cheapest plan from what the modules hold (read back now, or `images` as `read` or
+    `load_images` gave them) to the plant file. Read back now: only what the change from a base
+    touches (`previous`, else the plant file last applied in full here: `base`, `reads`) — every
+    chosen module in full without a base, or with `full_read`."""
+    options = options or LineOptions()
+    pairs = select(plant, modules)
+    if images is not None:
+        return make_plan(plant, pairs, images)
+    wanted = reads(plant, pairs, full_read)
+    with lines(plant, {bus.name for bus, _ in wanted.pairs}, options, purpose="plan") as links:
+        read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, links, options, command="plan",
+                                        only_read=wanted.base is not None)  # fmt: skip
+    return replace(planned, reading=wanted.reading(pairs, read_))
+
+
+def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,
+              probers: dict[str, Prober] | None = None, unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> PlantPlan:  # fmt: skip
+    """Plan every chosen module from its read-back to its desired image (the plant file's by default),
+    then broadcast what the modules of a line share, where every receiver is known — proven by the
+    line's `probers` (`Planner.plan_line`). `only_read`: see `Planner`."""
+    return planner_for(plant, pairs, unset, only_read=only_read).plan(to_plan(pairs, desired), actual, probers)
+
+
+def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False) -> Planner:
+    """A `Planner` of the lines of these modules' buses."""
+    buses = {bus.name: bus for bus, _ in pairs}
+    return Planner(plant.name, str(plant.path.resolve()), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset,
+                   only_read=only_read)  # fmt: skip
+
+
+def _line(bus: Bus) -> Line:
+    """A bus as the planning sees its line: complete when the plant lists all 30 addresses, or says
+    it lists every module there (`only_these_modules: true`)."""
+    listed = frozenset(m.address for m in bus.modules)
+    complete = len(listed) == MAX_MODULE_ADDRESS or bus.only_these_modules
+    return Line(bus.name, line_cost(bus), listed, complete, probe_timeout(bus))
+
+
+def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted]:
+    """The modules to plan, each with its desired image: of `desired`, else the plant file's."""
+    return [Wanted(bus.name, m.address, m.name, desired[(bus.name, m.address)] if desired is not None else m.desired_image())
+            for bus, m in pairs]  # fmt: skip
+
+
+def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
+    """The modules of these buses that reported E12 to an earlier apply and were not cleared since."""
+    return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12))
+
+
+
+
+
+def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:
+    """What to read for a plan file: every chosen module in full, or — for a plan made from a
+    targeted read-back — exactly the modules and programs its plan read, with the line's record as
+    evidence; refused as stale when the record no longer shows a module holding what the plan took
+    as known without reading it (another apply or read since, or the record outgrew its age)."""
+    said = planned.document.get("read")
+    if not isinstance(said, dict):
+        return Reads(pairs, targets(pairs))
+    names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
+    entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
+    buses = {bus.name: bus for bus, _ in (names[(e.bus, e.address)] for e in entries)}
+    known, now, to_read = record(plant, buses.values()), datetime.now(UTC), []
+    for e in entries:
+        bus, m = names[(e.bus, e.address)]
+        decision = targeting.to_read(known.get((e.bus, e.address)), m.desired_image(), now, bus.record_max_age)
+        if not set(decision.programs) <= set(e.programs_read or ()):
+            raise StalePlan(f"{path}: stale plan — bus {e.bus}, module {e.address} ({e.name}): the line's record no longer shows it "
+                            "holding what the plan took as known without reading it (written or read by another run since, or "
+                            "older than record_max_age); nothing was written — plan again")  # fmt: skip
+        to_read.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known, m.managed_programs()))
+    return Reads([names[(e.bus, e.address)] for e in entries], to_read, said["base"], tuple(said["not_as_verified"]),
+                 taken=dict(said.get("taken", {})))  # fmt: skip
+
+
+def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
+    """What the plant file no longer describes — modules, and programs under `unmanaged_programs:
+    keep` — which stays on the hardware as it is: against `previous` (the plant file as it was, e.g.
+    on the main branch), else against the copy last applied in full from here (`.prc3cfg/applied/`)."""
+    if previous is not None:
+        before = load_plant(previous)  # named by the caller: its problems are said
+    else:
+        try:
+            before = load_plant(applied_copy(plant.path))
+        except UserError:
+            return []  # never applied in full here, or a copy this prc3cfg cannot read: nothing to compare
+    now = {(bus.name, m.address): m for bus, m in plant.modules()}
+    notes = []
+    for bus, old in before.modules():
+        new = now.get((bus.name, old.address))
+        if new is None:
+            notes.append(f"{bus.name}/{old.name} (address {old.address}) is no longer in the plant file: "
+                         "it stays on the hardware as it is, no longer managed")  # fmt: skip
+        elif new.unmanaged_programs == "keep":
+            gone = sorted(set(old.managed_programs()) - set(new.managed_programs()))
+            if gone:
+                which = f"program {gone[0]}" if len(gone) == 1 else f"programs {', '.join(map(str, gone))}"
+                notes.append(f"{bus.name}/{new.name}: {which} no longer in the plant file (unmanaged_programs: keep): "
+                             "it stays on the module as it is")  # fmt: skip
+    return notes
+
+
+def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
+          options: LineOptions | None = None) -> list[Drift]:  # fmt: skip
+    """The chosen modules that drifted from the plant file — read back now, or as `images` —
+    reported as drift, not as a plan (`prc3cfg plan --refresh-only`)."""
+    if images is None:
+        images = read(plant, modules, options, command="plan --refresh-only")
+    found = []
+    for bus, module in select(plant, modules):
+        said = drifted(module.desired_image(), images[(bus.name, module.address)])
+        if said:
+            found.append(Drift(bus.name, module.address, module.name, tuple(said)))
+    return found

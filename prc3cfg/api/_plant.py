@@ -1,0 +1,178 @@
+"""What a plant file says and keeps: adopting Teach In into it, its records, its gateways and pictures.
+
+`adopt` and `write_adoption` (and `reason_for`, the reason a bus with `require_reason` needs);
+`verify_records`, `list_records`, `prune_records`; `init_data_block` of a gateway; `picture` and
+`plot_format`. Does not own rewriting the file (`prc3cfg.plant.adopt`) nor checking records
+(`prc3cfg.shell.audit`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+from collections.abc import Iterable
+from dataclasses import dataclass
+from decimal import Decimal
+from pathlib import Path
+
+from prc3cfg.api._plan import plan, read, select
+from prc3cfg.api._sessions import bus_line_keys
+from prc3cfg.api._types import Key, LineOptions
+from prc3cfg.core import gateway, plot
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Bus, Plant
+from prc3cfg.plant.adopt import Adopted
+from prc3cfg.plant.adopt import adopt as adopt_text
+from prc3cfg.shell import audit, releases
+from prc3cfg.shell.audit import Pruned, RecordedRun, Verified
+from prc3cfg.shell.files import replace_unless_changed
+from prc3cfg.shell.locks import line_lock
+from prc3cfg.shell.platform import python_command
+from prc3cfg.shell.records import Journal, reason_given
+from prc3cfg.shell.records import header as run_header
+
+
+@dataclass(frozen=True)
+class Adoption:
+    """The plant file rewritten to describe what the modules hold (`adopt`), not written yet:
+    `before` is the file as read, `after` the new text, `adopted` each value with its one-line `text`."""
+
+    path: Path
+    before: str
+    after: str
+    adopted: tuple[Adopted, ...]
+    #: why it is adopted (`--reason`, `PRC3CFG_REASON`), and the plant's name: for the journal's header
+    reason: str | None = None
+    plant: str = ""
+    command_line: tuple[str, ...] | None = None
+
+
+def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
+          options: LineOptions | None = None, *, reason: str | None = None, check: bool = False) -> Adoption:  # fmt: skip
+    """Read the chosen modules and work out the plant file that describes what they hold: only the
+    values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
+    writes it. Unless it is only a `check`, a bus with `require_reason` refuses before its line is
+    opened when neither `reason` nor `PRC3CFG_REASON` gives one."""
+    options = options or LineOptions()
+    given = None if check else reason_for(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason, "adopt")
+    before = _plant_text(plant.path)
+    images = read(plant, modules, options, command="adopt")
+    found = adopt_text(plant, images, before, programs)
+    return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
+
+
+def write_adoption(adoption: Adoption) -> None:
+    """Write the adopted plant file in place of the one read, atomically and with its permissions
+    (through a link, to the file linked to) — refused if the file changed since it was read, which is
+    checked once the new text is on disk, around the rename (`replace_unless_changed`). A journal
+    says who adopted what and why, before and after (`prc3cfg.shell.records`)."""
+    target = adoption.path.resolve()
+    before = adoption.before.encode("utf-8")
+    said = run_header("adopt", adoption.path, adoption.plant, hashlib.sha256(before).hexdigest(), reason=adoption.reason,
+                      argv=adoption.command_line)  # fmt: skip
+    journal = Journal(adoption.path, said, audit.follow(adoption.path))
+    try:
+        journal.record("adopt", buses=sorted({name.partition("/")[0] for value in adoption.adopted for name in value.modules}),
+                       values=[value.text for value in adoption.adopted])  # fmt: skip
+    except OSError as error:
+        raise UserError(f"{journal.path}: cannot write the journal ({error.strerror}) — the plant file was not changed") from None
+    try:
+        try:
+            written = replace_unless_changed(target, adoption.after, before)
+        except OSError as error:
+            raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+        journal.record("adopted", written=written, sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written else None)
+    finally:
+        journal.close()
+    if not written:
+        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+
+
+def reason_for(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str) -> str | None:
+    """Why `command` writes (`reason`, else `PRC3CFG_REASON`) — refused in one line, before any line
+    is opened, where a bus says `require_reason: true` and nothing says why."""
+    given = reason_given(reason)
+    requiring = [bus.name for bus in buses if bus.require_reason]
+    if given is None and requiring:
+        raise UserError(f"{plant.path}: {'bus' if len(requiring) == 1 else 'buses'} {', '.join(requiring)} "
+                        f"{'requires' if len(requiring) == 1 else 'require'} a reason for every {command} (require_reason: true) "
+                        "— nothing was written: give --reason TEXT or set PRC3CFG_REASON")  # fmt: skip
+    return given
+
+
+def verify_records(paths: Iterable[Path]) -> Verified:
+    """Check the records under `paths` — plant files (their records), records folders, journals,
+    snapshots (`prc3cfg.shell.audit.check`): the first record of each file that does not match."""
+    return audit.check(list(paths))
+
+
+def list_records(plant_path: Path) -> list[RecordedRun]:
+    """Every apply, restore and adopt beside the plant file, oldest first, as its records tell it."""
+    return audit.runs(Path(plant_path))
+
+
+def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: float | None = None, dry_run: bool = False) -> Pruned:
+    """Remove the plant's runs (journal and snapshot together) beyond the newest `keep` and older
+    than `older_than_days` — never the newest snapshot of a line, never a run an axis release (or
+    an E12) nobody was told of names."""
+    if keep is None and older_than_days is None:
+        raise UserError("say what to prune: --keep N (the newest N runs stay) or --older-than DAYS, or both")
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
+    with contextlib.ExitStack() as held:  # no apply of these lines writes its records meanwhile
+        for bus in plant.buses:
+            held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
+        every = [key for identities in keys.values() for key in identities]
+        protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(every, kind) if r.journal]
+        return audit.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
+
+
+def _plant_text(path: Path) -> str:
+    try:
+        return path.read_bytes().decode("utf-8", "replace")
+    except OSError as error:
+        raise UserError(f"{path}: cannot read it ({error.strerror}) — nothing was adopted") from None
+
+
+def init_data_block(plant: Plant, bus_name: str) -> list[tuple[str, str, str]]:
+    """The CP 524/525 Open Driver INIT data block of a bus's gateway: (label, notation, hex) per
+    data word — refused in one line where the bus has no gateway or the driver would refuse it."""
+    found = [b for b in plant.buses if b.name == bus_name]
+    if not found:
+        raise UserError(f"{plant.path}: no bus named {bus_name} — the plant's buses are {', '.join(b.name for b in plant.buses)}")
+    bus = found[0]
+    if bus.gateway is None:
+        raise UserError(f"{plant.path}: bus {bus_name} has no gateway block — add gateway: {{receive_db, receive_dw, cpu, identifier}}")
+    zvz_ms = Decimal(str(bus.zvz)) * 1000
+    if zvz_ms != zvz_ms.to_integral_value():
+        raise UserError(f"{plant.path}: bus {bus_name}: zvz {bus.zvz} s is not a whole number of milliseconds — ZVZTIM is set in ms")
+    settings = gateway.GatewaySettings(
+        receive_db=bus.gateway.receive_db, receive_dw=bus.gateway.receive_dw, cpu=bus.gateway.cpu,
+        identifier=bus.gateway.identifier, line=bus.line, zvz_ms=int(zvz_ms),
+    )  # fmt: skip
+    problems = gateway.refusals(settings)
+    if problems:
+        raise UserError(f"bus {bus_name}: the CP 524/525 Open Driver would refuse these settings: " + "; ".join(map(str, problems)))
+    return gateway.format_data_block(gateway.init_data_block(settings))
+
+
+def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, ModuleImage] | None = None,
+            planned: PlantPlan | None = None) -> bytes:  # fmt: skip
+    """The chains of a module drawn (`prc3cfg.core.plot`, the plot extra): the plant file's, or what
+    the module holds as before and what the plan leaves it holding as after — of `planned`, or of a
+    plan from `images` (as `read` or `load_images` gave them)."""
+    (bus, module), = select(plant, [module_name])
+    title = f"module {module.name} — bus {bus.name}, address {module.address}"
+    if images is None and planned is None:
+        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file", python=python_command())
+    planned = planned or plan(plant, [module.name], images=images)
+    change = next(c for c in planned.modules if (c.bus, c.address) == (bus.name, module.address))
+    return plot.picture(change.as_known(change.plan.predicted), change.as_known(change.actual), fmt=fmt,
+                        title=f"{title}: before (dashed) and after the plan", python=python_command())  # fmt: skip
+
+
+def plot_format(path: Path) -> str:
+    """"svg" or "png", the format of a picture to write to `path` (by its suffix) — a PlotError for any
+    other, and when matplotlib is missing, naming the command that installs it into this Python."""
+    return plot.plot_format(path, python=python_command())

@@ -1,0 +1,145 @@
+"""Line sessions: the lines of a plant, or a bare port, locked and opened for one command.
+
+`lines` locks every named bus's line (refusing two buses that are one line), tells the axis
+releases no account has named yet, and opens a `Link` per bus; `bare_lock` and `bare_link` do the
+same for a port without a plant file (`BareLine`). A read a module answers as a write is recorded
+as an axis release (`written_reads`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from prc3cfg.api._types import Key, LineOptions, Observer
+from prc3cfg.core import codec
+from prc3cfg.core.framing import get_framing
+from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Bus, Plant
+from prc3cfg.plant.messages import port_error
+from prc3cfg.shell import releases
+from prc3cfg.shell.link import Exchange, Link, Trace, open_plant_links, open_port
+from prc3cfg.shell.link.ports import emulator_state_path, is_pseudo_terminal
+from prc3cfg.shell.locks import line_keys, line_lock
+
+
+def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
+    """The identities of a bus's line: its port, or for `emulator://` the emulator's state file."""
+    state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
+    return line_keys(bus.port, emulator_state=state)
+
+
+class Records(Protocol):
+    """Where an axis release is recorded: `releases.Releases`, or an apply's `Keeping` of it."""
+
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ...) -> None: ...
+
+
+@contextlib.contextmanager
+def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
+          announce: Observer | None = None, records: Records | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
+    """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
+    Every axis release on these lines that no account has named yet is told (`LineOptions.tell`),
+    and a read a module answers as a write is recorded as one in `records` (`PossibleWrite`).
+
+    Two buses that are one line (two spellings of one address) are refused: they would wait
+    for each other's lock."""
+    names = set(buses)
+    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
+    owner: dict[str, str] = {}
+    for name, identities in keys.items():
+        for key in identities:
+            if key in owner:
+                raise UserError(f"{plant.path}: buses {owner[key]} and {name} are one line ({key}) — "
+                                "describe each line once, as one bus")  # fmt: skip
+            owner[key] = name
+    with contextlib.ExitStack() as stack:
+        for bus in plant.buses:
+            if bus.name in names:
+                stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", port=bus.port, timeout=options.lock_timeout,
+                                              purpose=purpose, waiting=options.waiting))  # fmt: skip
+        if sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
+            raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
+                            "read or written: run it again, with the file as it is now")  # fmt: skip
+        for record in releases.pending(owner):
+            options.tell(record.said())
+        trace = Trace(options.trace) if options.trace is not None else None
+        cancel = options.cancel.event if options.cancel is not None else None
+        module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
+        watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
+        links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=watch,
+                                                     announce=announce, cancel=cancel))  # fmt: skip
+        yield links
+        options.links_used.extend(links.values())
+
+
+def sha256_of(path: Path) -> str | None:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], records: Records,
+                   observer: Callable[[Exchange], None] | None = None) -> Callable[[Exchange], None]:  # fmt: skip
+    """`observer`, and a read answered with an acknowledgement recorded as an axis release: the
+    module executed a damaged frame as a write, a 10h as likely as any (`PossibleWrite`)."""
+
+    def watch(exchange: Exchange) -> None:
+        if observer is not None:
+            observer(exchange)
+        if exchange.reply == codec.encode_code(0) and codec.MESSAGE_TYPES[exchange.request[0]].IS_READ:
+            name = names.get((exchange.bus, exchange.address), f"address {exchange.address}")
+            records.record(keys[exchange.bus], exchange.bus, exchange.address, name)
+
+    return watch
+
+
+@dataclass(frozen=True)
+class BareLine:
+    """A line named by its port alone (`scan`, `import`): framing, character format, times."""
+
+    port: str
+    framing: str = "crc16"
+    line: LineSettings = LineSettings()
+    timeout: float = 0.5
+    zvz: float = 0.020
+
+
+def default_parity(port: str) -> str:
+    """The parity of a bare line whose parity is not given: none on a pseudo-terminal, which carries
+    none, else even (a PRC 3 line's)."""
+    return "none" if is_pseudo_terminal(port) else "even"
+
+
+@contextlib.contextmanager
+def bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[str, ...]]:
+    """The line of a port without a plant file, locked; its identities."""
+    problem = port_error("port", port)
+    if problem is None and port.startswith(EMULATOR_SCHEME):
+        problem = (f"port {port} is a plant file's emulator (its state is kept beside the plant file) — for a "
+                   "bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT")  # fmt: skip
+    if problem is not None:
+        raise UserError(problem)
+    keys = line_keys(port)
+    with line_lock(keys, port, port=port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting):
+        for record in releases.pending(keys):
+            options.tell(record.said())
+        yield keys
+
+
+@contextlib.contextmanager
+def bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
+    with contextlib.ExitStack() as stack:
+        keys = stack.enter_context(bare_lock(bare.port, options, purpose))
+        port = open_port(bare.port, bare.line, bus=bare.port)
+        stack.callback(port.close)
+        yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
+                   retries=options.retries, trace=Trace(options.trace) if options.trace is not None else None,
+                   observer=written_reads({}, {bare.port: keys}, releases.Releases(purpose)),
+                   cancel=options.cancel.event if options.cancel is not None else None)  # fmt: skip

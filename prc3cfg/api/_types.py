@@ -1,0 +1,192 @@
+"""The API's values: what its functions take and give back, and the errors they raise.
+
+`LineOptions` (how the lines are used), `Gates` (what an apply asks before it writes), `ApplyResult`
+(what an apply did), `Progress` (where long work reports, `Quiet` reports nothing) and the errors
+an apply raises. Owns no workflow: the functions that fill these are in the other modules of
+`prc3cfg.api`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol, TextIO
+
+from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.render import plural
+from prc3cfg.core.verification import Release
+from prc3cfg.errors import Interrupted, UserError
+from prc3cfg.plant import Bus, Module
+from prc3cfg.shell import releases
+from prc3cfg.shell.apply import ModuleRun
+from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.link import Exchange, Link
+
+Key = tuple[str, int]  # (bus name, module address)
+Pairs = list[tuple[Bus, Module]]
+#: Called with each exchange on a line: before its frame leaves (`announce`), or once it is done.
+Observer = Callable[[Exchange], None]
+
+
+class AxisReleaseRefused(UserError):
+    """The plan releases axes and `allow_axis_release` was not given: nothing was written."""
+
+
+class NotApproved(UserError):
+    """`approve` said no: nothing was written."""
+
+
+class ApplyFailed(UserError):
+    """Some module did not verify; `result` has the account of every module."""
+
+    def __init__(self, result: ApplyResult) -> None:
+        failed = [r for r in result.runs if not r.verified]
+        said = [*result.unread]  # lines not written: what stopped their read-back or plan, one line each
+        if failed or not said:
+            said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
+                        f"prc3cfg restore {result.snapshot}")  # fmt: skip
+        else:
+            written = len(result.runs)
+            said[-1] += (f"; the {plural(written, 'module')} of the other lines {'was' if written == 1 else 'were'} written and "
+                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: prc3cfg restore {result.snapshot}")  # fmt: skip
+        super().__init__("\n".join(said))
+        self.result = result
+
+
+class RecordsFailed(ApplyFailed):
+    """A record the apply keeps as it writes — its journal, the record of an axis release, its
+    snapshot — could not be written midway (a full disk): every line stopped before its next frame;
+    `result` says what each module was sent."""
+
+    def __init__(self, result: ApplyResult, trouble: str) -> None:
+        super().__init__(result)
+        then = "plan and apply again" + (f", or restore: prc3cfg restore {result.snapshot}" if result.snapshot else "")
+        self.args = (f"{trouble}: every line stopped before its next frame — the account above says what each module "
+                     f"was sent; free the space (or fix the folder), then {then}",)  # fmt: skip
+
+
+class ApplyInterrupted(Interrupted):
+    """Ctrl-C or SIGTERM stopped the apply after the exchange in flight; `result` has the account."""
+
+    def __init__(self, result: ApplyResult) -> None:
+        super().__init__()
+        self.result = result
+
+
+class Progress(Protocol):
+    """Where long work reports: a phase with its total, each step done, a line to show."""
+
+    def start(self, what: str, total: int) -> None: ...
+
+    def advance(self) -> None: ...
+
+    def note(self, text: str) -> None: ...
+
+
+class Quiet:
+    """A `Progress` that reports nothing."""
+
+    def start(self, what: str, total: int) -> None:
+        pass
+
+    def advance(self) -> None:
+        pass
+
+    def note(self, text: str) -> None:
+        pass
+
+
+@dataclass
+class LineOptions:
+    """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
+    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports."""
+
+    retries: int = 5
+    lock_timeout: float = 0.0
+    trace: TextIO | None = None
+    cancel: Cancellation | None = None
+    progress: Progress = field(default_factory=Quiet)
+    #: called with the text when a line is busy and a wait for its lock begins
+    waiting: Callable[[str], None] | None = None
+    #: after a command that succeeded: the links used, with their `repeated` exchanges
+    links_used: list[Link] = field(default_factory=list)
+    #: called with each warning a command has for the operator (an axis release nobody was told
+    #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
+    notice: Callable[[str], None] | None = None
+    notices: list[str] = field(default_factory=list)
+    #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
+    command_line: tuple[str, ...] | None = None
+
+    def tell(self, text: str) -> None:
+        self.notices.append(text)
+        if self.notice is not None:
+            self.notice(text)
+
+    def deferred(self) -> contextlib.AbstractContextManager[None]:
+        """A phase a signal must not cut (`Cancellation.deferred`), when there is a cancellation."""
+        return self.cancel.deferred() if self.cancel is not None else contextlib.nullcontext()
+
+
+@dataclass(frozen=True)
+class ApplyResult:
+    """What an apply did: the plan it ran, every module's run, the snapshot and journal it left."""
+
+    plan: PlantPlan
+    runs: tuple[ModuleRun, ...]
+    snapshot: Path | None
+    journal: Path
+    #: axis releases earlier applies on these lines left untold (killed after a 10h/20h): this
+    #: apply's account lists them too
+    earlier: tuple[releases.Pending, ...] = ()
+    records: releases.Releases | None = None
+    #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
+    took: dict[str, float] = field(default_factory=dict)
+    #: lines written as soon as their own plan was whole, while another's read-back or plan failed (or
+    #: Ctrl-C stopped it): what stopped that one, one line each, saying nothing was written there
+    unread: tuple[str, ...] = ()
+
+    def told(self) -> None:
+        """The account — `released` and `earlier` — has been shown to the operator: the records of
+        those releases, kept on disk since before their frames left, can go (`prc3cfg.shell.releases`).
+        Until this is called, every command on these lines warns of them."""
+        if self.records is not None:
+            self.records.told(self.earlier)
+
+    @property
+    def verified(self) -> bool:
+        return not self.unread and all(run.verified for run in self.runs)
+
+    @property
+    def released(self) -> tuple[ModuleRun, ...]:
+        """Every module whose axes were — or may have been — released: it must travel to its reference point."""
+        return tuple(run for run in self.runs if run.released is not Release.NO)
+
+
+@dataclass(frozen=True)
+class Gates:
+    """What an apply asks before it writes, in this order, each seeing the plan:
+
+    - `show(plan)`: the plan is ready (to print it);
+    - `allow_axis_release`: True, False, or a question — called with the modules whose axes
+      the plan releases, True to allow — else `AxisReleaseRefused`; the answer also decides
+      whether a repair may release axes;
+    - `approve(plan)`: False stops with `NotApproved`.
+
+    Without a question (`asks`) each line is written as soon as its own plan is whole, while the
+    other lines are still read — `show_line` sees that line's plan before its first write — and
+    `show` sees the plant's plan once it is whole, writes going on.
+    """
+
+    show: Callable[[PlantPlan], None] | None = None
+    allow_axis_release: bool | Callable[[list[str]], bool] = False
+    approve: Callable[[PlantPlan], bool] | None = None
+    #: without a question: each line's own plan, before that line's first write (from its thread)
+    show_line: Callable[[PlantPlan], None] | None = None
+
+    @property
+    def asks(self) -> bool:
+        """Whether a question may stand between the plan and the writes — a confirmation, or an axis
+        release not allowed up front — so that a person reviews the plan of the whole plant first."""
+        return self.approve is not None or self.allow_axis_release is not True
