@@ -18,11 +18,11 @@ from emulated import emulated_plant, run_cli
 from lossy import Loss, Rule
 
 from prc3cfg import api
-from prc3cfg.api._sessions import bus_line_keys
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Frame
 from prc3cfg.shell import releases
 from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.sessions import bus_line_keys
 from prc3cfg.shell.testing import EmulatedPlant
 
 MODULE = """\

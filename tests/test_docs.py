@@ -127,8 +127,8 @@ def test_the_records_of_an_apply_have_exactly_the_keys_docs_files_lists(tmp_path
         events.setdefault(entry.pop("event"), set()).update(set(entry) - {"time"})
     documented = {key(row[0]): set(re.findall(r"`([a-z_0-9]+)`", row[1])) for row in journal_rows}
     assert {event: documented[event] for event in events} == events
-    api = "".join(path.read_text() for path in (ROOT / "prc3cfg" / "api").glob("*.py"))
-    # interrupted: on Ctrl-C (the apply's `Keeping.note`); adopt, adopted: an adopt's (`write_adoption`)
+    api = "".join(path.read_text() for path in [*(ROOT / "prc3cfg" / "api").glob("*.py"), ROOT / "prc3cfg" / "shell" / "engine.py"])
+    # interrupted: on Ctrl-C (the apply engine's `Keeping.note`); adopt, adopted: an adopt's (`write_adoption`)
     assert all(event in events or f'keeping.note("{event}"' in api or f'journal.record("{event}"' in api for event in documented)
 
 

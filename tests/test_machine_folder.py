@@ -23,7 +23,7 @@ import pytest
 from emulated import emulated_plant, run_cli
 from test_locks import ROOT, other_user
 
-from prc3cfg.api._sessions import bus_line_keys
+from prc3cfg.shell.sessions import bus_line_keys
 
 
 @pytest.fixture

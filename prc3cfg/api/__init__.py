@@ -71,16 +71,12 @@ from prc3cfg.api._plant import plot_format as plot_format
 from prc3cfg.api._plant import prune_records as prune_records
 from prc3cfg.api._plant import verify_records as verify_records
 from prc3cfg.api._plant import write_adoption as write_adoption
-from prc3cfg.api._sessions import BareLine as BareLine
-from prc3cfg.api._sessions import default_parity as default_parity
 from prc3cfg.api._types import ApplyFailed as ApplyFailed
 from prc3cfg.api._types import ApplyInterrupted as ApplyInterrupted
 from prc3cfg.api._types import ApplyResult as ApplyResult
 from prc3cfg.api._types import AxisReleaseRefused as AxisReleaseRefused
 from prc3cfg.api._types import Gates as Gates
-from prc3cfg.api._types import LineOptions as LineOptions
 from prc3cfg.api._types import NotApproved as NotApproved
-from prc3cfg.api._types import Progress as Progress
 from prc3cfg.core.planfile import StalePlan as StalePlan
 from prc3cfg.core.render import Drift as Drift
 from prc3cfg.core.verification import Release as Release
@@ -95,6 +91,10 @@ from prc3cfg.shell.doctor import Search as Search
 from prc3cfg.shell.link import LinkError as LinkError
 from prc3cfg.shell.link.ports import FormatRefused as FormatRefused
 from prc3cfg.shell.locks import LineBusy as LineBusy
+from prc3cfg.shell.phases import Progress as Progress
+from prc3cfg.shell.sessions import BareLine as BareLine
+from prc3cfg.shell.sessions import LineOptions as LineOptions
+from prc3cfg.shell.sessions import default_parity as default_parity
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = [

@@ -1,10 +1,10 @@
 """Apply and restore: the workflow from the read-back (or a plan file, proved) to the written modules.
 
 `apply` and `restore` check what must hold before a line is opened (a reason, parity, records that
-can be kept), read back and plan the whole plant and pass the `Gates` (`apply_whole`), or — with no
-question to ask — write each line as soon as its plan is whole (`prc3cfg.api._engine`). Plan files:
+can be kept), read back and plan the whole plant and pass the `Gates`, or — with no
+question to ask — write each line as soon as its plan is whole (`prc3cfg.shell.engine`). Plan files:
 `read_plan`, `prove`, `plan_document`, `plan_file_plant`. Does not own the writes, the snapshot and
-the journal (`prc3cfg.api._engine`), nor what a plan file is (`prc3cfg.core.planfile`).
+the journal (`prc3cfg.shell.engine`), nor what a plan file is (`prc3cfg.core.planfile`).
 """
 
 from __future__ import annotations
@@ -17,39 +17,41 @@ from pathlib import Path
 from typing import Any
 
 from prc3cfg.api._bus import prober
-from prc3cfg.api._engine import Keeping, Writing, apply_by_line
 from prc3cfg.api._plan import (
     Reads,
     left_alone,
-    line_cost,
     make_plan,
     plan_file_reads,
+    planner_for,
+    planning_each,
     read_and_plan,
     read_input,
     read_targets,
     reads,
     seen,
     select,
+    to_plan,
     unset_systems,
 )
 from prc3cfg.api._plant import reason_for
-from prc3cfg.api._sessions import bus_line_keys, lines
-from prc3cfg.api._types import ApplyResult, AxisReleaseRefused, Gates, Key, LineOptions, NotApproved, Pairs
+from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
 from prc3cfg.core import planfile
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planfile import PlanFile
-from prc3cfg.core.planning import Prober
+from prc3cfg.core.planning import Key, Prober
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.errors import UserError
-from prc3cfg.plant import Plant
+from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.engine import ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.readback import Target
+from prc3cfg.shell.readback import Target, read_all
 from prc3cfg.shell.records import Journal, Snapshot, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
+from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
 
 
 def read_plan(path: Path, plant: Plant) -> PlanFile:
@@ -152,15 +154,7 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
            reason: str | None = None) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in wanted.pairs}
     command = "restore" if desired is not None else "apply"
-    reason = reason_for(plant, buses.values(), reason, command)
-    for bus in buses.values():
-        if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
-            raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
-                            "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
-                            "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
-    check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
-    releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
-    releases.folder(bases.KIND, bases.WHAT)
+    reason = _ready(plant, buses.values(), reason, command)
     said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
                       argv=options.command_line)  # fmt: skip
     journal = Journal(plant.path, said, audit.follow(plant.path))  # its file is made at the first record: not for a busy line
@@ -174,10 +168,12 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping) as links:
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
             writing = Writing(plant, keys, buses, links, keeping, verify, options, records.command)
-            if plan_file is None and not gates.asks:
-                result = apply_by_line(plant, chosen, wanted, desired, gates, writing, options, earlier, records)
-            else:
-                result = _apply_whole(plant, chosen, wanted, desired, plan_file, gates, writing, options, earlier, records)
+            whole = None if plan_file is None and not gates.asks else _whole_plan(plant, chosen, wanted, desired, plan_file, gates, writing, options)
+            # from the first read when each line is written as soon as its plan is whole, else from the snapshot, to the end
+            # of the account, a signal waits its turn
+            with options.deferred():
+                written = _by_line(plant, chosen, wanted, desired, gates, writing) if whole is None else _write_whole(writing, *whole)
+                result = _judged(written, journal.path, earlier, records)
             if result.runs and desired is None and len(chosen) == len(plant.modules()):
                 _keep_applied(plant)
             return result
@@ -185,10 +181,49 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
         keeping.close()
 
 
-def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
-                 plan_file: tuple[Path, PlanFile] | None, gates: Gates, writing: Writing, options: LineOptions,
-                 earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:  # fmt: skip
-    """Read back and plan the whole plant (or prove the plan file), show it and pass the gates, then write every line."""
+def _ready(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str) -> str | None:
+    """What must hold before an apply opens a line: a reason where a bus requires one (`reason_for`,
+    given back), error detection or its risk accepted, and records that can be kept."""
+    reason = reason_for(plant, buses, reason, command)
+    for bus in buses:
+        if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
+            raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
+                            "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
+                            "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
+    check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
+    releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
+    releases.folder(bases.KIND, bases.WHAT)
+    return reason
+
+
+def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:
+    """The result of what the writes came to: `RecordsFailed`, `ApplyInterrupted` or `ApplyFailed`
+    unless every module verified."""
+    result = ApplyResult(written.plan, written.runs, written.snapshot, journal, earlier, records, written.took, written.unread)
+    if written.trouble is not None:
+        raise RecordsFailed(result, written.trouble)
+    if written.interrupted:
+        raise ApplyInterrupted(result)
+    if not result.verified:
+        raise ApplyFailed(result)
+    return result
+
+
+def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
+    """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
+    as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
+    planner = planner_for(plant, wanted.pairs, unset_systems(plant, writing.buses.values()), only_read=wanted.base is not None)
+    want = to_plan(wanted.pairs, desired)
+    by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(writing.links[name], bus) for name, bus in writing.buses.items()},
+                     reading=lambda read: wanted.reading(chosen, read), show=gates.show, show_line=gates.show_line)  # fmt: skip
+    return by_line.run(lambda line: read_all(wanted.targets, writing.links, progress=writing.phases.read, each=planning_each(planner, want),
+                                             then=seen(plant, writing.command, line)))  # fmt: skip
+
+
+def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None,
+                gates: Gates, writing: Writing, options: LineOptions) -> tuple[PlantPlan, dict[Key, ModuleImage], bool, float]:  # fmt: skip
+    """Read back and plan the whole plant (or prove the plan file), show it and pass the gates: the
+    plan, what was read, whether its axis releases are allowed, and the seconds the reading took."""
     pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
     started = time.monotonic()
     if plan_file is None:
@@ -202,7 +237,7 @@ def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, 
     if gates.show is not None:
         gates.show(the_plan)
     if not the_plan.changes:
-        return ApplyResult(the_plan, (), None, writing.journal.path, earlier, records)
+        return the_plan, images, False, reading
     releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
     allow = gates.allow_axis_release
     allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
@@ -213,10 +248,16 @@ def _apply_whole(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, 
         )
     if gates.approve is not None and not gates.approve(the_plan):
         raise NotApproved("not applied — nothing was written")
-    with options.deferred():  # from the snapshot to the end of the records, a signal waits its turn
-        writing.whole(the_plan)
-        writing.write(the_plan.modules, images, allow_axis_release)
-        return writing.account(the_plan, earlier, records, {"reading": reading})
+    return the_plan, images, allow_axis_release, reading
+
+
+def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, ModuleImage], allow_axis_release: bool, reading: float) -> Written:
+    """The whole plan written, every line at once: the snapshot, the writes, the account."""
+    if not the_plan.changes:
+        return Written(the_plan)
+    writing.whole(the_plan)
+    writing.write(the_plan.modules, images, allow_axis_release)
+    return writing.account(the_plan, {"reading": reading})
 
 
 def _keep_applied(plant: Plant) -> None:

@@ -12,8 +12,6 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import replace
 from urllib.parse import urlsplit
 
-from prc3cfg.api._sessions import BareLine, bare_link, bare_lock
-from prc3cfg.api._types import LineOptions
 from prc3cfg.core import bustime, codec
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
@@ -26,6 +24,7 @@ from prc3cfg.shell.link import Link, LinkError, NoReadMessages, PortFailed, Poss
 from prc3cfg.shell.link.client import Port
 from prc3cfg.shell.locks import line_keys
 from prc3cfg.shell.readback import read_module
+from prc3cfg.shell.sessions import BareLine, LineOptions, bare_link, bare_lock
 
 
 def slower_than_priced(links: Iterable[Link]) -> list[Link]:

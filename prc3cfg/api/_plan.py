@@ -17,14 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from prc3cfg.api._bus import probe_timeout, prober
-from prc3cfg.api._sessions import bus_line_keys, lines
-from prc3cfg.api._types import Key, LineOptions, Pairs
+from prc3cfg.api._types import Pairs
 from prc3cfg.core import targeting
-from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
 from prc3cfg.core.planfile import PlanFile, StalePlan
-from prc3cfg.core.planning import Line, Planner, Prober, Wanted
+from prc3cfg.core.planning import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.plantplan import PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted
 from prc3cfg.core.targeting import Known
@@ -34,8 +32,9 @@ from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import FileProblem, Why, read_json
 from prc3cfg.shell.link import Link
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.readback import Target, read_all
+from prc3cfg.shell.readback import LineRead, Target, read_all
 from prc3cfg.shell.records import applied_copy
+from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
 
 
 def load(path: str | Path) -> Plant:
@@ -56,10 +55,6 @@ def select(plant: Plant, names: Iterable[str] | None = None) -> Pairs:
             + ", ".join(module.name for _, module in pairs)
         )
     return [(bus, module) for bus, module in pairs if module.name in wanted]
-
-
-def line_cost(bus: Bus) -> LineCost:
-    return LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz)
 
 
 def targets(pairs: Pairs) -> list[Target]:
@@ -134,10 +129,6 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         if decision.why is not None:
             why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
     return Reads(pairs, to_read, RECORD, why=why, known=known)
-
-
-#: Called with a bus and its modules' images as soon as the bus is read.
-LineRead = Callable[[str, dict[Key, ModuleImage]], None]
 
 
 def seen(plant: Plant, command: str, then: LineRead | None = None) -> LineRead:

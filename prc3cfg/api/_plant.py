@@ -16,10 +16,9 @@ from decimal import Decimal
 from pathlib import Path
 
 from prc3cfg.api._plan import plan, read, select
-from prc3cfg.api._sessions import bus_line_keys
-from prc3cfg.api._types import Key, LineOptions
 from prc3cfg.core import gateway, plot
 from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.planning import Key
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
@@ -32,6 +31,7 @@ from prc3cfg.shell.locks import line_lock
 from prc3cfg.shell.platform import python_command
 from prc3cfg.shell.records import Journal, reason_given
 from prc3cfg.shell.records import header as run_header
+from prc3cfg.shell.sessions import LineOptions, bus_line_keys
 
 
 @dataclass(frozen=True)

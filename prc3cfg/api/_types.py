@@ -8,11 +8,9 @@ an apply raises. Owns no workflow: the functions that fill these are in the othe
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol, TextIO
 
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.core.render import plural
@@ -21,13 +19,9 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module
 from prc3cfg.shell import releases
 from prc3cfg.shell.apply import ModuleRun
-from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.link import Exchange, Link
 
-Key = tuple[str, int]  # (bus name, module address)
+#: (bus, module) pairs of a plant, as `select` gives them
 Pairs = list[tuple[Bus, Module]]
-#: Called with each exchange on a line: before its frame leaves (`announce`), or once it is done.
-Observer = Callable[[Exchange], None]
 
 
 class AxisReleaseRefused(UserError):
@@ -73,60 +67,6 @@ class ApplyInterrupted(Interrupted):
     def __init__(self, result: ApplyResult) -> None:
         super().__init__()
         self.result = result
-
-
-class Progress(Protocol):
-    """Where long work reports: a phase with its total, each step done, a line to show."""
-
-    def start(self, what: str, total: int) -> None: ...
-
-    def advance(self) -> None: ...
-
-    def note(self, text: str) -> None: ...
-
-
-class Quiet:
-    """A `Progress` that reports nothing."""
-
-    def start(self, what: str, total: int) -> None:
-        pass
-
-    def advance(self) -> None:
-        pass
-
-    def note(self, text: str) -> None:
-        pass
-
-
-@dataclass
-class LineOptions:
-    """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
-    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports."""
-
-    retries: int = 5
-    lock_timeout: float = 0.0
-    trace: TextIO | None = None
-    cancel: Cancellation | None = None
-    progress: Progress = field(default_factory=Quiet)
-    #: called with the text when a line is busy and a wait for its lock begins
-    waiting: Callable[[str], None] | None = None
-    #: after a command that succeeded: the links used, with their `repeated` exchanges
-    links_used: list[Link] = field(default_factory=list)
-    #: called with each warning a command has for the operator (an axis release nobody was told
-    #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
-    notice: Callable[[str], None] | None = None
-    notices: list[str] = field(default_factory=list)
-    #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
-    command_line: tuple[str, ...] | None = None
-
-    def tell(self, text: str) -> None:
-        self.notices.append(text)
-        if self.notice is not None:
-            self.notice(text)
-
-    def deferred(self) -> contextlib.AbstractContextManager[None]:
-        """A phase a signal must not cut (`Cancellation.deferred`), when there is a cancellation."""
-        return self.cancel.deferred() if self.cancel is not None else contextlib.nullcontext()
 
 
 @dataclass(frozen=True)

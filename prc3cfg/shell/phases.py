@@ -5,9 +5,9 @@ verifying them; `Phases` takes its events from every line's thread — a module 
 acknowledged, a line's writes ended, a module verified — and shows one phase at a time:
 "reading modules" until every line is read and the plan is whole, "writing" until every line has
 written, then "verifying" — each with what some line did already counted (a line is written as
-soon as its own plan is whole when no question stands between: `prc3cfg.api`). It measures each
+soon as its own plan is whole when no question stands between: `prc3cfg.shell.engine`). It measures each
 phase with `time.monotonic`, as the plan's estimate (`PlantPlan.phases`) prices it: the wait for
-the slowest line.
+the slowest line. `Progress` is what a progress display implements (`Quiet`: none).
 """
 
 from __future__ import annotations
@@ -15,11 +15,35 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from typing import Protocol
+
+
+class Progress(Protocol):
+    """Where long work reports: a phase with its total, each step done, a line to show."""
+
+    def start(self, what: str, total: int) -> None: ...
+
+    def advance(self) -> None: ...
+
+    def note(self, text: str) -> None: ...
+
+
+class Quiet:
+    """A `Progress` that reports nothing."""
+
+    def start(self, what: str, total: int) -> None:
+        pass
+
+    def advance(self) -> None:
+        pass
+
+    def note(self, text: str) -> None:
+        pass
 
 
 class Phases:
     """The phases of one apply: `start(what, total)` and `advance()` are the progress display's
-    (`prc3cfg.api.Progress`). `reading(total)` first when the reading is measured here; `writing`
+    (`Progress`). `reading(total)` first when the reading is measured here; `writing`
     once the plan is whole (after its questions, if any)."""
 
     def __init__(self, start: Callable[[str, int], None], advance: Callable[[], None]) -> None:

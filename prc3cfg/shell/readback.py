@@ -31,6 +31,9 @@ from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Link
 
+#: Called with a bus and its modules' images as soon as the bus is read (`read_all`'s `then`).
+LineRead = Callable[[str, dict[tuple[str, int], ModuleImage]], None]
+
 
 class ReadBackError(UserError):
     """A module answered a read with an error code, or is not the module the plant says."""
@@ -126,7 +129,7 @@ def read_all(
     *,
     progress: Callable[[], None] | None = None,
     each: Callable[[Target, ModuleImage], None] | None = None,
-    then: Callable[[str, dict[tuple[str, int], ModuleImage]], None] | None = None,
+    then: LineRead | None = None,
 ) -> dict[tuple[str, int], ModuleImage]:
     """Read every target, buses in parallel, the modules of one bus one after another.
 

@@ -1,8 +1,12 @@
-"""The apply engine: the writes of an apply, from the lines' threads, and what it keeps of them.
+"""The apply engine: an apply's writes, from the lines' threads, and what it keeps of them.
 
-`apply_by_line` reads, plans and writes each line as soon as its own plan is whole; `Keeping` is the
-journal and the records of axis releases (and E12), and stops every line when one cannot be kept;
-`Writing` is the snapshot, the runs and the account. Does not own what is planned, nor the gates.
+`Keeping` is the journal and the records of axis releases (and E12), and stops every line when
+one of them cannot be kept; `Writing` takes the snapshot, writes and verifies (`execute`) a line's
+or the whole plan's changes, and keeps the account (`Written`); `ByLine` plans and writes each
+line as soon as its own read-back is in, while the other lines are still read.
+
+Does not own what is read and planned, nor the questions asked before writing and what an apply's
+outcome means (`prc3cfg.api`), nor how a module is written and verified (`prc3cfg.shell.apply`).
 """
 
 from __future__ import annotations
@@ -12,18 +16,17 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from prc3cfg.api._bus import prober
-from prc3cfg.api._plan import Reads, line_cost, planner_for, planning_each, seen, to_plan, unset_systems
-from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, Gates, Key, LineOptions, Pairs, RecordsFailed
 from prc3cfg.core import codec, targeting
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.plantplan import ModuleChange, PlantPlan
+from prc3cfg.core.planning import Key, Planner, Prober, Wanted
+from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.targeting import Known
+from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import bases, releases
@@ -32,79 +35,24 @@ from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link import Exchange, Link
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.platform import result_of
-from prc3cfg.shell.readback import LinesFailed, read_all
+from prc3cfg.shell.readback import LineRead, LinesFailed, Target
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot
+from prc3cfg.shell.sessions import LineOptions, line_cost
 
 
-def apply_by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates,
-                   writing: Writing, options: LineOptions, earlier: tuple[releases.Pending, ...],
-                   records: releases.Releases) -> ApplyResult:  # fmt: skip
-    """No question stands between the plan and the writes (`Gates.asks`): each module is planned as
-    soon as it is read, and each line — its broadcasts decided once its last module is read — written
-    as soon as its own plan is whole, while the other lines are still read and planned: no line
-    waits for another. The plant's plan is shown once whole, the writes going on. A line whose
-    read-back or plan fails is not written; the others are, and the result says both (`ApplyFailed`)."""
-    pairs, links, buses = wanted.pairs, writing.links, writing.buses
-    planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=wanted.base is not None)
-    want = to_plan(pairs, desired)
-    lock = threading.Lock()
-    images: dict[Key, ModuleImage] = {}
-    planned: list[str] = []
-    reading = {target.bus for target in wanted.targets}
-    whole_at: float | None = None  # when the last line's plan was whole
+@dataclass(frozen=True)
+class Written:
+    """What an apply's writes came to: the plan, every run in the plan's order, the snapshot, the
+    seconds of each phase — and why it stopped short: lines not written (`unread`, one line each),
+    a record that could not be kept midway (`trouble`), Ctrl-C or SIGTERM (`interrupted`)."""
 
-    def the_plan() -> PlantPlan:
-        with lock:
-            read, done = dict(images), set(planned)
-        return replace(planner.plan([w for w in want if w.bus in done], read), reading=wanted.reading(chosen, read))
-
-    def show() -> None:
-        """The plant's plan shown (once), beside the writes; the writing phase began when it became whole."""
-        with lock:
-            if not shown:
-                shown.append(showing.submit(lambda: writing.whole(the_plan(), gates.show, whole_at)))
-
-    def line(bus: str, read: dict[Key, ModuleImage]) -> None:
-        nonlocal whole_at
-        planner.plan_line(bus, want, read, prober(links[bus], buses[bus]))
-        with lock:
-            images.update(read)
-            planned.append(bus)
-            whole = len(planned) == len(reading)
-            if whole:
-                whole_at = time.monotonic()
-        changes = planner.line_changes(bus)
-        if gates.show_line is not None and any(c.steps for c in changes):  # what a line's writes follow is shown before them
-            gates.show_line(planner.plan([w for w in want if w.bus == bus], read))
-        # the plant's plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
-        writing.write(changes, read, True, started=show if whole else None)
-
+    plan: PlantPlan
+    runs: tuple[ModuleRun, ...] = ()
+    snapshot: Path | None = None
+    took: dict[str, float] = field(default_factory=dict)
     unread: tuple[str, ...] = ()
-    shown: list[Future[None]] = []
-    # from the first read to the end of the records, a signal waits its turn
-    with options.deferred(), ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as showing:
-        writing.phases.reading(len(wanted.targets))
-        try:
-            read_all(wanted.targets, links, progress=writing.phases.read, each=planning_each(planner, want), then=seen(plant, writing.command, line))
-        except Interrupted:
-            if not writing.runs:
-                raise
-            unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
-                           for bus in sorted(reading - set(planned)))  # fmt: skip
-        except LinesFailed as error:
-            if not writing.runs:
-                raise
-            unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
-        if len(planned) == len(reading):
-            show()  # not yet, when no write of the last line was acknowledged
-        for future in shown:
-            result_of(future)
-        if options.cancel is not None and not writing.runs:
-            options.cancel.check()
-        planned_plan = the_plan()
-        if not writing.runs:
-            return ApplyResult(planned_plan, (), None, writing.journal.path, earlier, records)
-        return writing.account(planned_plan, earlier, records, unread=unread)
+    trouble: str | None = None
+    interrupted: bool = False
 
 
 class Keeping:
@@ -193,6 +141,7 @@ class Writing:
         # on a line without error detection every module is watched, the unchanged ones too: a damaged
         # frame meant for another can release its axes
         self._exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
+        self._costs = {name: line_cost(bus) for name, bus in buses.items()}
 
     def _runs(self, changes: Iterable[ModuleChange]) -> list[ModuleRun]:
         return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed)
@@ -216,23 +165,41 @@ class Writing:
         """Write and verify these changes — one line's, or every line's — once their modules are in
         the snapshot and the journal. Consent is per module: the releases of these changes, if allowed
         (a repair may not add one). `started()` at each write acknowledged, or at once with none to make."""
+        started = started or _nothing
         runs = self._runs(changes)
         if not runs:
-            if started is not None:
-                started()
+            started()
             return
-        # not known until verified: dropped from the lines' records before the first frame (what was known kept for then)
+        known = self._before_writing(runs, images)
+        if self.keeping.trouble is not None:
+            for run in runs:
+                run.interrupted, run.failure = True, "nothing was sent to it"
+            started()
+            return
+        consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
+
+        def wrote() -> None:
+            self.phases.wrote()
+            started()
+
+        try:
+            execute(runs, self.links, self._costs, tick=wrote,
+                    written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
+        finally:
+            self._verified(runs, known)
+
+    def _before_writing(self, runs: list[ModuleRun], images: Mapping[Key, ModuleImage]) -> dict[str, dict[int, Known]]:
+        """The runs' modules dropped from their lines' records — not known until verified; what was
+        known is given back, for then — and added to the snapshot, journalled. When either cannot be
+        kept, that is the apply's trouble (`Keeping.failed`): these writes stay back, as do every
+        other line's next frames."""
         known = {bus: bases.load(self.keys[bus]) for bus in {r.bus for r in runs}}
         with self._lock:
             self.runs.extend(runs)
             try:
                 for bus in known:
                     bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
-                if self._taken is None:
-                    taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
-                    self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
-                self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
-                self.snapshot, written = self._taken.saved()
+                self.snapshot, written = self._snapshot_with(runs, images)
             except (OSError, UserError) as error:  # another line's writes began: this one's stay back
                 self.keeping.failed("the snapshot and the line's record before writing", error)
             else:  # under the lock: the last snapshot record is the file's
@@ -241,23 +208,15 @@ class Writing:
                 self._tell_snapshot(len(self._taken.images) if self._taken is not None else 0)
         self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
                           modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
-        if self.keeping.trouble is not None:
-            for run in runs:
-                run.interrupted, run.failure = True, "nothing was sent to it"
-            if started is not None:
-                started()
-            return
-        consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
-        def wrote() -> None:
-            self.phases.wrote()
-            if started is not None:
-                started()
+        return known
 
-        try:
-            execute(runs, self.links, {name: line_cost(bus) for name, bus in self.buses.items()}, tick=wrote,
-                    written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
-        finally:
-            self._verified(runs, known)
+    def _snapshot_with(self, runs: list[ModuleRun], images: Mapping[Key, ModuleImage]) -> tuple[Path, str]:
+        """The apply's one snapshot, with the runs' modules as read before writing, saved whole: its path and digest."""
+        if self._taken is None:
+            taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
+            self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
+        self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+        return self._taken.saved()
 
     def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
         """What the modules that verified hold, back into their lines' records: the read-back with the
@@ -270,13 +229,12 @@ class Writing:
             except UserError as error:  # they stay unknown: the next plan reads them in full
                 self.options.tell(f"bus {bus}: {error} — the next plan reads its modules in full")
 
-    def account(self, the_plan: PlantPlan, earlier: tuple[releases.Pending, ...], records: releases.Releases,
-                took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> ApplyResult:  # fmt: skip
-        """The result, every run in the plan's order: recorded, journalled; `ApplyInterrupted` or
-        `ApplyFailed` unless every module verified."""
+    def account(self, the_plan: PlantPlan, took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> Written:
+        """What the writes came to, every run in the plan's order — recorded (E12 kept for the next
+        plan, cleared once verified) and journalled, with the travel to the reference point and, when
+        a signal stopped the lines, that it did."""
         order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
         runs = tuple(sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
-        result = ApplyResult(the_plan, runs, self.snapshot, self.journal.path, earlier, records, (took or {}) | self.phases.took(), unread)
         keys, keeping = self.keys, self.keeping
         for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
             if run.system_unset:
@@ -289,16 +247,97 @@ class Writing:
                 released_axes=run.released.value, written=[s.message.hex() for s in run.written],
                 interrupted=run.interrupted,
             )  # fmt: skip
-        if result.released:
-            keeping.note("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in result.released])
-        if keeping.trouble is not None:
-            raise RecordsFailed(result, keeping.trouble)
-        if self.options.cancel is not None and self.options.cancel.requested:
+        if released := [r for r in runs if r.released is not Release.NO]:
+            keeping.note("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in released])
+        interrupted = keeping.trouble is None and self.options.cancel is not None and self.options.cancel.requested
+        if interrupted:
             keeping.note("interrupted")
-            raise ApplyInterrupted(result)
-        if not result.verified:
-            raise ApplyFailed(result)
-        return result
+        return Written(the_plan, runs, self.snapshot, (took or {}) | self.phases.took(), unread, keeping.trouble, interrupted)
+
+
+class ByLine:
+    """An apply with no question between the plan and the writes: each module planned as soon as it
+    is read, and each line — its broadcasts decided once its last module is read — written as soon as
+    its own plan is whole, while the other lines are still read and planned: no line waits for
+    another. The plant's plan is shown once whole, the writes going on. A line whose read-back or
+    plan fails is not written; the others are, and the account says both (`Written.unread`).
+
+    `line` is called from each line's thread with its read-back; what the lines have read and
+    planned so far is shared under one lock."""
+
+    def __init__(self, writing: Writing, planner: Planner, want: list[Wanted], targets: Sequence[Target], *,
+                 probers: Mapping[str, Prober], reading: Callable[[dict[Key, ModuleImage]], Reading | None],
+                 show: Callable[[PlantPlan], None] | None = None, show_line: Callable[[PlantPlan], None] | None = None) -> None:  # fmt: skip
+        self.writing, self.planner, self.want, self._probers, self._reading = writing, planner, want, probers, reading
+        self._show, self._show_line = show, show_line
+        self._modules = len(targets)
+        self._lines = {target.bus for target in targets}  # the lines to read
+        self._lock = threading.Lock()
+        self._images: dict[Key, ModuleImage] = {}
+        self._planned: list[str] = []
+        self._whole_at: float | None = None  # when the last line's plan was whole
+        self._shown: list[Future[None]] = []
+        self._showing: ThreadPoolExecutor | None = None
+
+    def plan(self) -> PlantPlan:
+        """The plan of the lines planned so far, with what they read."""
+        with self._lock:
+            read, done = dict(self._images), set(self._planned)
+        return replace(self.planner.plan([w for w in self.want if w.bus in done], read), reading=self._reading(read))
+
+    def line(self, bus: str, read: dict[Key, ModuleImage]) -> None:
+        """A line's read-back is in: plan it, then write it."""
+        self.planner.plan_line(bus, self.want, read, self._probers[bus])
+        with self._lock:
+            self._images.update(read)
+            self._planned.append(bus)
+            whole = len(self._planned) == len(self._lines)
+            if whole:
+                self._whole_at = time.monotonic()
+        changes = self.planner.line_changes(bus)
+        if self._show_line is not None and any(c.steps for c in changes):  # what a line's writes follow is shown before them
+            self._show_line(self.planner.plan([w for w in self.want if w.bus == bus], read))
+        # the plant's plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
+        self.writing.write(changes, read, True, started=self._whole if whole else None)
+
+    def _whole(self) -> None:
+        """The plant's plan shown (once), beside the writes; the writing phase began when it became whole."""
+        with self._lock:
+            if not self._shown and self._showing is not None:
+                self._shown.append(self._showing.submit(lambda: self.writing.whole(self.plan(), self._show, self._whole_at)))
+
+    def run(self, read: Callable[[LineRead], object]) -> Written:
+        """`read(line)` reads every line back, calling `line` with each line's read-back as soon as it is
+        in; then the account. A signal must wait its turn meanwhile (`LineOptions.deferred`, the caller's)."""
+        writing = self.writing
+        unread: tuple[str, ...] = ()
+        with ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as self._showing:
+            writing.phases.reading(self._modules)
+            try:
+                read(self.line)
+            except Interrupted:
+                if not writing.runs:
+                    raise
+                unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
+                               for bus in sorted(self._lines - set(self._planned)))  # fmt: skip
+            except LinesFailed as error:
+                if not writing.runs:
+                    raise
+                unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
+            if len(self._planned) == len(self._lines):
+                self._whole()  # not yet, when no write of the last line was acknowledged
+            for future in self._shown:
+                result_of(future)
+            if writing.options.cancel is not None and not writing.runs:
+                writing.options.cancel.check()
+            planned = self.plan()
+            if not writing.runs:
+                return Written(planned)
+            return writing.account(planned, unread=unread)
+
+
+def _nothing() -> None:
+    pass
 
 
 def _holds(run: ModuleRun) -> ModuleImage:

@@ -3,7 +3,11 @@
 `lines` locks every named bus's line (refusing two buses that are one line), tells the axis
 releases no account has named yet, and opens a `Link` per bus; `bare_lock` and `bare_link` do the
 same for a port without a plant file (`BareLine`). A read a module answers as a write is recorded
-as an axis release (`written_reads`).
+as an axis release (`written_reads`). `LineOptions` says how a command uses its lines;
+`bus_line_keys` are the identities of a bus's line (its lock, its records).
+
+Does not own what is read or written on the lines (`prc3cfg.api`, `prc3cfg.shell.engine`), nor
+the locks and the links themselves (`prc3cfg.shell.locks`, `prc3cfg.shell.link`).
 """
 
 from __future__ import annotations
@@ -11,27 +15,70 @@ from __future__ import annotations
 import contextlib
 import hashlib
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, TextIO
 
-from prc3cfg.api._types import Key, LineOptions, Observer
 from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
+from prc3cfg.core.planning import Key
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
+from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.link import Exchange, Link, Trace, open_plant_links, open_port
 from prc3cfg.shell.link.ports import emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import line_keys, line_lock
+from prc3cfg.shell.phases import Progress, Quiet
+
+#: Called with each exchange on a line: before its frame leaves (`announce`), or once it is done.
+Observer = Callable[[Exchange], None]
+
+
+@dataclass
+class LineOptions:
+    """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
+    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports."""
+
+    retries: int = 5
+    lock_timeout: float = 0.0
+    trace: TextIO | None = None
+    cancel: Cancellation | None = None
+    progress: Progress = field(default_factory=Quiet)
+    #: called with the text when a line is busy and a wait for its lock begins
+    waiting: Callable[[str], None] | None = None
+    #: after a command that succeeded: the links used, with their `repeated` exchanges
+    links_used: list[Link] = field(default_factory=list)
+    #: called with each warning a command has for the operator (an axis release nobody was told
+    #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
+    notice: Callable[[str], None] | None = None
+    notices: list[str] = field(default_factory=list)
+    #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
+    command_line: tuple[str, ...] | None = None
+
+    def tell(self, text: str) -> None:
+        self.notices.append(text)
+        if self.notice is not None:
+            self.notice(text)
+
+    def deferred(self) -> contextlib.AbstractContextManager[None]:
+        """A phase a signal must not cut (`Cancellation.deferred`), when there is a cancellation."""
+        return self.cancel.deferred() if self.cancel is not None else contextlib.nullcontext()
 
 
 def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
     """The identities of a bus's line: its port, or for `emulator://` the emulator's state file."""
     state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
     return line_keys(bus.port, emulator_state=state)
+
+
+
+def line_cost(bus: Bus) -> LineCost:
+    """What an exchange costs on a bus's line, by its settings (`prc3cfg.core.bustime`)."""
+    return LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz)
 
 
 class Records(Protocol):
