@@ -172,7 +172,7 @@ def test_the_release_records_of_a_line_read_back_in_part_hold_exactly_the_releas
         assert len(result.unread) == 1 and result.unread[0].startswith("bus long, module 6 (long-6): read 50h refused")
         assert [(r.bus, r.address) for r in releases.pending(keys["short"])] == [("short", 1)]
         assert releases.pending(keys["long"]) == []
-        result.told()
+        api.told(result)
         assert releases.pending(keys["short"]) == []
 
 
@@ -238,7 +238,7 @@ def test_each_lines_plan_is_shown_before_its_first_write_also_without_a_question
         shown = lambda line_plan: trace.events.append(("shown", line_plan.modules[0].bus, *(c.bus for c in line_plan.modules)))  # noqa: E731
         gates = api.Gates(show=lambda _: None, allow_axis_release=True, show_line=shown)
         result = api.apply(api.load(plant.path), gates=gates, options=api.LineOptions(trace=trace))  # type: ignore[arg-type]
-        result.told()
+        api.told(result)
     events = trace.events
     for bus in ("booth-a", "booth-b"):
         showing = [i for i, e in enumerate(events) if e[0] == "shown" and e[1] == bus]

@@ -68,7 +68,7 @@ def test_apply_asks_both_questions_whole_with_no_progress_on_screen(tmp_path):
 
 def test_restore_asks_its_questions_whole_with_no_progress_on_screen(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)).told()
+        api.told(api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)))
         snapshot, = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
         answers_both_questions(Pane(tmp_path, prc3cfg("restore", snapshot), environment()))
 
@@ -100,7 +100,7 @@ def test_adopt_asks_on_the_terminal_the_answer_comes_from(tmp_path, stdout):
     """With stdout in a file (`prc3cfg adopt plant.yaml > adopt.log`) the question is still asked
     on the terminal that answers it — the diff goes to the file."""
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)).told()
+        api.told(api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)))
         plant.emulators["booth-a"].teach_in(1, 1, 2080)
         log = tmp_path / "adopt.log" if stdout == "file" else None
         pane = Pane(tmp_path, prc3cfg("adopt", plant.path, "--module", "booth-a-left"), environment(), stdout=log)

@@ -237,5 +237,5 @@ def test_only_the_main_thread_takes_a_signal(tmp_path, how):
     with emulated_plant(tmp_path) as plant:
         masks = Masks()
         gates = api.Gates(allow_axis_release=True, approve=(lambda _: True) if how == "the whole plan" else None)
-        api.apply(api.load(plant.path), gates=gates, options=api.LineOptions(progress=masks)).told()
+        api.told(api.apply(api.load(plant.path), gates=gates, options=api.LineOptions(progress=masks)))
     assert masks.workers and not any(masks.workers)  # steps were reported from worker threads, none of which takes a signal

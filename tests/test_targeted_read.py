@@ -151,7 +151,7 @@ def targeted_equals_full(directory: Path, actual: ModuleImage, desired: ModuleIm
                 managed = tuple(n for n, p in enumerate(other.programs, 1) if p is not None)
                 assert reading.programs_not_read[("line", 2)] == managed  # the untouched module: its 50h only
             result = api.apply(plant, gates=api.Gates(allow_axis_release=True), full_read=full)
-            result.told()
+            api.told(result)
             ended[full] = {a: s.image for a, s in emulator.modules().items()}
     assert ended[False] == ended[True]
     assert ended[False][1].system == desired.system and ended[False][1].programs == desired.programs

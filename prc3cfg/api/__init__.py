@@ -38,6 +38,7 @@ from prc3cfg.api._apply import apply as apply
 from prc3cfg.api._apply import plan_document as plan_document
 from prc3cfg.api._apply import plan_file_plant as plan_file_plant
 from prc3cfg.api._apply import restore as restore
+from prc3cfg.api._apply import told as told
 from prc3cfg.api._bus import doctor as doctor
 from prc3cfg.api._bus import import_modules as import_modules
 from prc3cfg.api._bus import import_plant as import_plant
@@ -103,6 +104,6 @@ __all__ = [
     "StalePlan", "UserError", "Verified", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
     "import_modules", "import_plant", "init_data_block", "left_alone", "list_records", "listen", "load", "load_images", "measurable", "open_pty",
     "picture", "plan", "plan_document", "plan_file_plant", "plot_format", "prune_records", "read", "restore", "scan", "select", "serial_ports",
-    "served_pty", "setup_machine", "slower_than_priced", "terminal_path", "unshared_records", "verify_records", "wait_for",
+    "served_pty", "setup_machine", "slower_than_priced", "terminal_path", "told", "unshared_records", "verify_records", "wait_for",
     "write_adoption",
 ]  # fmt: skip

@@ -199,7 +199,7 @@ def _ready(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str)
 def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:
     """The result of what the writes came to: `RecordsFailed`, `ApplyInterrupted` or `ApplyFailed`
     unless every module verified."""
-    result = ApplyResult(written.plan, written.runs, written.snapshot, journal, earlier, records, written.took, written.unread)
+    result = ApplyResult(written.plan, written.runs, written.snapshot, journal, earlier, records.path, written.took, written.unread)
     if written.trouble is not None:
         raise RecordsFailed(result, written.trouble)
     if written.interrupted:
@@ -258,6 +258,13 @@ def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, Module
     writing.whole(the_plan)
     writing.write(the_plan.modules, images, allow_axis_release)
     return writing.account(the_plan, {"reading": reading})
+
+
+def told(result: ApplyResult) -> None:
+    """The account of `result` — `released` and `earlier` — has been shown to the operator: the
+    records of those releases, kept on disk since before their frames left, can go
+    (`prc3cfg.shell.releases`). Until this is called, every command on these lines warns of them."""
+    releases.told(result.records, result.earlier)
 
 
 def _keep_applied(plant: Plant) -> None:

@@ -80,19 +80,13 @@ class ApplyResult:
     #: axis releases earlier applies on these lines left untold (killed after a 10h/20h): this
     #: apply's account lists them too
     earlier: tuple[releases.Pending, ...] = ()
-    records: releases.Releases | None = None
+    #: the file of this apply's records of axis releases, not yet told (None: it made none) — `prc3cfg.api.told`
+    records: Path | None = None
     #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
     took: dict[str, float] = field(default_factory=dict)
     #: lines written as soon as their own plan was whole, while another's read-back or plan failed (or
     #: Ctrl-C stopped it): what stopped that one, one line each, saying nothing was written there
     unread: tuple[str, ...] = ()
-
-    def told(self) -> None:
-        """The account — `released` and `earlier` — has been shown to the operator: the records of
-        those releases, kept on disk since before their frames left, can go (`prc3cfg.shell.releases`).
-        Until this is called, every command on these lines warns of them."""
-        if self.records is not None:
-            self.records.told(self.earlier)
 
     @property
     def verified(self) -> bool:

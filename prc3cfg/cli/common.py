@@ -355,18 +355,19 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
     line was slower than its settings."""
     from prc3cfg.api import LineOptions
 
+    used: list[Link] = []
     with contextlib.ExitStack() as stack:
         options = LineOptions(
             retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=TerminalProgress(stack),
             trace=stack.enter_context(open_text(trace, "a")) if trace else None,
-            waiting=lambda text: print(text, file=sys.stderr, flush=True),
+            waiting=lambda text: print(text, file=sys.stderr, flush=True), used=used.extend,
             notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),
             command_line=tuple(COMMAND_LINE) or None,
         )  # fmt: skip
         yield options
-        note_repeats(options.links_used)
-        note_slow(options.links_used)
-        note_unshared(options.links_used)
+        note_repeats(used)
+        note_slow(used)
+        note_unshared(used)
 
 
 def note_unshared(links: Iterable[Link]) -> None:

@@ -207,7 +207,7 @@ def _entries(path: Path) -> list[dict]:
 
 
 class Releases:
-    """The records of one apply: `record` before a release frame leaves, `told` once the account is out."""
+    """The records of one apply: `record` before a release frame leaves; `told` once the account is out."""
 
     def __init__(self, command: str, journal: Path | None = None) -> None:
         self.command, self.journal = command, journal
@@ -234,12 +234,18 @@ class Releases:
                 os.close(fd)
             self._recorded.add((kind, bus, address))
 
-    def told(self, earlier: Iterable[Pending] = ()) -> None:
-        """The account naming this apply's releases, and the `earlier` ones it listed, has been
-        printed: those records go (others — another line's, an E12 — stay)."""
-        cleared(earlier)
-        if self._path is not None:
-            _keep(self._path, lambda entry: entry.get("kind", RELEASE) != RELEASE)
+    @property
+    def path(self) -> Path | None:
+        """The file of these records, once there is one: what `told` names."""
+        return self._path
+
+
+def told(path: Path | None, earlier: Iterable[Pending] = ()) -> None:
+    """The account naming an apply's releases — those of its records' file at `path` — and the
+    `earlier` ones it listed has been printed: those records go (others — another line's, an E12 — stay)."""
+    cleared(earlier)
+    if path is not None:
+        _keep(path, lambda entry: entry.get("kind", RELEASE) != RELEASE)
 
 
 def cleared(records: Iterable[Pending]) -> None:

@@ -38,10 +38,12 @@ from prc3cfg.shell.phases import Progress, Quiet
 Observer = Callable[[Exchange], None]
 
 
-@dataclass
+@dataclass(frozen=True)
 class LineOptions:
     """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
-    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports."""
+    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports — and
+    where a command reports what its caller may want to say after it: the links it used, the
+    warnings it has for the operator. A value: no call fills it in."""
 
     retries: int = 5
     lock_timeout: float = 0.0
@@ -50,17 +52,15 @@ class LineOptions:
     progress: Progress = field(default_factory=Quiet)
     #: called with the text when a line is busy and a wait for its lock begins
     waiting: Callable[[str], None] | None = None
-    #: after a command that succeeded: the links used, with their `repeated` exchanges
-    links_used: list[Link] = field(default_factory=list)
+    #: called after a command that succeeded with the links it used: their `repeated` exchanges, their times
+    used: Callable[[list[Link]], None] | None = None
     #: called with each warning a command has for the operator (an axis release nobody was told
-    #: of, `prc3cfg.shell.releases`); every one is also kept in `notices`
+    #: of, `prc3cfg.shell.releases`)
     notice: Callable[[str], None] | None = None
-    notices: list[str] = field(default_factory=list)
     #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
     command_line: tuple[str, ...] | None = None
 
     def tell(self, text: str) -> None:
-        self.notices.append(text)
         if self.notice is not None:
             self.notice(text)
 
@@ -122,7 +122,8 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=watch,
                                                      announce=announce, cancel=cancel))  # fmt: skip
         yield links
-        options.links_used.extend(links.values())
+        if options.used is not None:
+            options.used(list(links.values()))
 
 
 def sha256_of(path: Path) -> str | None:
