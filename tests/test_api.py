@@ -1,8 +1,10 @@
 """The API's examples run as written: its docstring's, the README's, and the README's plugin test
-in a plant repository made of nothing but the built wheel."""
+in a plant repository made of nothing but the built wheel; its values; and links handed to it
+already open — the in-memory pair as a real port would be."""
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import os
 import re
@@ -14,9 +16,16 @@ import zipfile
 from pathlib import Path
 
 import pytest
+import yaml
 from emulated import DEMO, emulated_plant
+from pair import PairPort
 
 import prc3cfg.api
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.framing import get_framing
+from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.link.client import Link
+from prc3cfg.shell.testing import EmulatedPlant
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
@@ -108,3 +117,50 @@ def test_import_plant_gives_a_plant_file_that_plans_to_no_changes(tmp_path):
         imported = prc3cfg.api.load(tmp_path / "imported.yaml")
         assert imported.name == "again" and [b.name for b in imported.buses] == ["b"]
         assert not prc3cfg.api.plan(imported).changes
+
+
+def paired(tmp_path: Path, stack: contextlib.ExitStack) -> tuple[EmulatedPlant, dict[str, Link]]:
+    """The demo plant with ports no link is opened from (TCP ports nothing listens at: an open would
+    fail at once), and for each bus a `Link` over the in-memory pair to an emulator of its modules."""
+    document = yaml.safe_load(DEMO.read_text())
+    for number, bus in enumerate(document["buses"]):
+        bus["port"] = f"socket://127.0.0.1:{9 + number}"
+    path = tmp_path / "plant.yaml"
+    path.write_text(yaml.safe_dump(document, sort_keys=False))
+    plant = prc3cfg.api.load(path)
+    emulators = {bus.name: stack.enter_context(Emulator({m.address: ModuleState.factory(m.address) for m in bus.modules}, framing=bus.framing,
+                                                        zvz=bus.zvz, turnaround=bus.turnaround)) for bus in plant.buses}  # fmt: skip
+    links = {bus.name: Link(PairPort(emulators[bus.name]), get_framing(bus.framing), bus=bus.name, line=bus.line, timeout=bus.timeout,
+                            zvz=bus.zvz) for bus in plant.buses}  # fmt: skip
+    return EmulatedPlant(path, plant, emulators), links
+
+
+def test_plan_and_apply_through_the_api_over_links_handed_to_it(tmp_path):
+    """napalm's driver contract: the API takes links already open — here each a real `Link` over the
+    in-memory pair, the same door a real port goes through. No URL is opened, yet the plan reads, the
+    apply writes, verifies and keeps its records, and each link is handed back as it was lent."""
+    with contextlib.ExitStack() as stack:
+        emulated, links = paired(tmp_path, stack)
+        plant = emulated.plant
+        planned = prc3cfg.api.plan(plant, links=links)
+        assert {c.bus for c in planned.changes} == {bus.name for bus in plant.buses}
+        result = prc3cfg.api.apply(plant, gates=prc3cfg.api.Gates(allow_axis_release=True), links=links)
+        assert result.verified and len(result.runs) == len(planned.changes) and emulated.matches_plant()
+        journal = [line for line in result.journal.read_text().splitlines() if '"event": "exchange"' in line]
+        assert all(any(f'"bus": "{bus.name}"' in line for line in journal) for bus in plant.buses)  # every line's exchanges journalled
+        prc3cfg.api.told(result)
+        assert not prc3cfg.api.plan(plant, links=links).changes
+        assert not prc3cfg.api.drift(plant, links=links)
+        assert all(link.observer is None and link.announce is None and link.cancel is None for link in links.values())
+
+
+def test_links_handed_to_the_api_are_one_per_bus_each_for_its_bus(tmp_path):
+    with contextlib.ExitStack() as stack:
+        emulated, links = paired(tmp_path, stack)
+        plant = emulated.plant
+        first, second = (bus.name for bus in plant.buses)
+        with pytest.raises(prc3cfg.api.UserError, match=f"no link given for bus {second} — give an open link for every bus"):
+            prc3cfg.api.read(plant, links={first: links[first]})
+        with pytest.raises(prc3cfg.api.UserError, match=f"the link given for bus {first} speaks for bus {second}"):
+            prc3cfg.api.plan(plant, links={first: links[second], second: links[first]})
+        assert not any(link.exchanges for link in links.values())  # refused before a frame left

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import hashlib
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from prc3cfg.api._bus import prober
 from prc3cfg.api._plan import (
     Reads,
     left_alone,
@@ -48,10 +47,14 @@ from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.probe import prober
 from prc3cfg.shell.readback import Target, read_all
 from prc3cfg.shell.records import Journal, Snapshot, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
+
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Link
 
 
 def read_plan(path: Path, plant: Plant) -> PlanFile:
@@ -106,6 +109,7 @@ def apply(
     previous: Path | None = None,
     full_read: bool = False,
     reason: str | None = None,
+    links: Mapping[str, Link] | None = None,
 ) -> ApplyResult:
     """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
 
@@ -118,11 +122,11 @@ def apply(
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
     wanted = plan_file_reads(plant, *planned, pairs) if planned is not None else reads(plant, pairs, full_read)
-    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason)
+    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links)
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
-            onto_current_lines: bool = False, reason: str | None = None) -> ApplyResult:  # fmt: skip
+            onto_current_lines: bool = False, reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
     """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
     onto the lines it was taken on: a bus of the plant file that now names another line (port or
     framing) is refused, unless `onto_current_lines`; and a snapshot that its journal does not
@@ -146,12 +150,12 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
         for bus, m in pairs
         for image in [taken.images[(bus.name, m.address)]]
     ]
-    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason)
+    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason, links=links)
 
 
 def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
            plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions, *,
-           reason: str | None = None) -> ApplyResult:  # fmt: skip
+           reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
     buses = {bus.name: bus for bus, _ in wanted.pairs}
     command = "restore" if desired is not None else "apply"
     reason = _ready(plant, buses.values(), reason, command)
@@ -165,9 +169,10 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     assert options.cancel is not None
     keeping = Keeping(plant, buses, keys, journal, records, options.cancel.event)
     try:
-        with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping) as links:
+        with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
+                   given=links) as open_links:  # fmt: skip
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            writing = Writing(plant, keys, buses, links, keeping, verify, options, records.command)
+            writing = Writing(plant, keys, buses, open_links, keeping, verify, options, records.command)
             whole = None if plan_file is None and not gates.asks else _whole_plan(plant, chosen, wanted, desired, plan_file, gates, writing, options)
             # from the first read when each line is written as soon as its plan is whole, else from the snapshot, to the end
             # of the account, a signal waits its turn
@@ -214,7 +219,7 @@ def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Modu
     as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
     planner = planner_for(plant, wanted.pairs, unset_systems(plant, writing.buses.values()), only_read=wanted.base is not None)
     want = to_plan(wanted.pairs, desired)
-    by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(writing.links[name], bus) for name, bus in writing.buses.items()},
+    by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(link) for name, link in writing.links.items()},
                      reading=lambda read: wanted.reading(chosen, read), show=gates.show, show_line=gates.show_line)  # fmt: skip
     return by_line.run(lambda line: read_all(wanted.targets, writing.links, progress=writing.phases.read, each=planning_each(planner, want),
                                              then=seen(plant, writing.command, line)))  # fmt: skip
@@ -232,7 +237,7 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
         images = read_targets(to_read, links, options, then=seen(plant, writing.command))
-        the_plan = prove(*plan_file, plant, chosen, images, {name: prober(links[name], bus) for name, bus in writing.buses.items()})
+        the_plan = prove(*plan_file, plant, chosen, images, {name: prober(link) for name, link in links.items()})
     reading = time.monotonic() - started
     if gates.show is not None:
         gates.show(the_plan)

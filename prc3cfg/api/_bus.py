@@ -1,4 +1,4 @@
-"""A bus as the modules on it answer: probing, `scan`, `import_modules`, `import_plant`, `doctor`.
+"""A bus as the modules on it answer: `scan`, `import_modules`, `import_plant`, `doctor`.
 
 Also how a line's own speed compares with what its settings price (`slower_than_priced`) and
 whether `doctor` can measure a port (`measurable`). Does not own the search of framings and
@@ -15,14 +15,13 @@ from urllib.parse import urlsplit
 from prc3cfg.core import bustime, codec
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
-from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Prober
 from prc3cfg.errors import UserError
-from prc3cfg.plant import Bus
 from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
-from prc3cfg.shell.link import Link, LinkError, NoReadMessages, PortFailed, PossibleWrite, open_port
+from prc3cfg.shell.link import Link, open_port
 from prc3cfg.shell.link.client import Port
 from prc3cfg.shell.locks import line_keys
+from prc3cfg.shell.probe import probe, probe_timeout
 from prc3cfg.shell.readback import read_module
 from prc3cfg.shell.sessions import BareLine, LineOptions, bare_link, bare_lock
 
@@ -38,52 +37,22 @@ def measurable(port: str) -> bool:
     return not port.startswith(EMULATOR_SCHEME)
 
 
-def probe_timeout(bus: Bus) -> float:
-    """How long a probe waits at an address: the line's time-out, at most `PROBE_TIMEOUT`."""
-    return min(bus.timeout, PROBE_TIMEOUT)
-
-
-def prober(link: Link, bus: Bus) -> Prober:
-    """The addresses among those given where something answers a 50h (`PROOF_PROBES` tries each)."""
-
-    def probe(addresses: list[int]) -> list[int]:
-        found = []
-        for address in addresses:
-            for _ in range(PROOF_PROBES):
-                try:
-                    heard = link.probe(address, codec.ReadSystem(), probe_timeout(bus)) is not None
-                except (PortFailed, PossibleWrite, NoReadMessages):
-                    raise
-                except LinkError:
-                    heard = True  # something answered, if garbled: not an empty address
-                if heard:
-                    found.append(address)
-                    break
-        return found
-
-    return probe
-
-
-def scan(bare: BareLine, options: LineOptions | None = None) -> dict[int, codec.SystemReply]:
-    """Which addresses 1..30 answer a 50h, with what they answer (S9 and the system parameters)."""
+def scan(bare: BareLine, options: LineOptions | None = None, *, link: Link | None = None) -> dict[int, codec.SystemReply]:
+    """Which addresses 1..30 answer a 50h, with what they answer (S9 and the system parameters) —
+    over `bare.port`, or the `link` given, already open (`import_modules` takes one too)."""
     options = options or LineOptions()
-    with bare_link(bare, options, "scan") as link:
-        return _scan(link, options)
+    with bare_link(bare, options, "scan", link) as open_link:
+        return _scan(open_link, options)
 
 
 def _scan(link: Link, options: LineOptions) -> dict[int, codec.SystemReply]:
-    """One short try of a 50h at every address 1..30 (`Link.probe`); the replies of those that answer."""
+    """One short try of a 50h at every address 1..30 (`probe`); the replies of those that answer."""
     found = {}
     options.progress.start("scanning addresses", MAX_MODULE_ADDRESS)
     for address in range(1, MAX_MODULE_ADDRESS + 1):
-        try:
-            reply = link.probe(address, codec.ReadSystem(), min(link.timeout, PROBE_TIMEOUT))
-        except (PortFailed, PossibleWrite, NoReadMessages):
-            raise  # the port, not an absent module; a read a module executed as a write
-        except LinkError:
-            reply = None  # heard, but never usable: not a module this scan can report
-        if isinstance(reply, codec.SystemReply):
-            found[address] = reply
+        heard = probe(link, address, probe_timeout(link.timeout))
+        if heard is not None and isinstance(heard.reply, codec.SystemReply):  # heard but never usable: not a module to report
+            found[address] = heard.reply
         options.progress.advance()
     return found
 
@@ -116,27 +85,28 @@ def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *
                         progress=probing)  # fmt: skip
 
 
-def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None) -> list[ModuleImage]:
+def import_modules(bare: BareLine, addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
+                   link: Link | None = None) -> list[ModuleImage]:  # fmt: skip
     """The complete images of the modules at `addresses` (default: those a scan finds)."""
     options = options or LineOptions()
-    with bare_link(bare, options, "import") as link:
-        wanted = sorted(addresses) if addresses is not None else sorted(_scan(link, options))
+    with bare_link(bare, options, "import", link) as open_link:
+        wanted = sorted(addresses) if addresses is not None else sorted(_scan(open_link, options))
         if not wanted:
             raise UserError(f"{bare.port}: no module answered — nothing to import")
         options.progress.start("reading modules", len(wanted))
         images = []
         for address in wanted:
-            images.append(read_module(link, address, PROGRAM_NUMBERS))
+            images.append(read_module(open_link, address, PROGRAM_NUMBERS))
             options.progress.advance()
         return images
 
 
 def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None = None, options: LineOptions | None = None, *,
-                 plant_name: str = "imported") -> tuple[str, int]:  # fmt: skip
+                 plant_name: str = "imported", links: Mapping[str, Link] | None = None) -> tuple[str, int]:  # fmt: skip
     """A plant file (its text) describing the live modules of these buses, by name (`import_modules`,
-    one line after another), and how many modules it describes: what they all hold alike once, in one
-    profile; `unmanaged_programs: reset`, so planning it against those lines is empty. Two names for
-    one line are refused before any is read."""
+    one line after another — over their ports, or the `links` given by name), and how many modules it
+    describes: what they all hold alike once, in one profile; `unmanaged_programs: reset`, so planning
+    it against those lines is empty. Two names for one line are refused before any is read."""
     owner: dict[str, str] = {}
     for name, bare in buses.items():
         try:
@@ -147,7 +117,10 @@ def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None 
             if key in owner:
                 raise UserError(f"--port {buses[owner[key]].port} and --port {bare.port} are one line ({key}) — give each line once")
             owner[key] = name
+        if links is not None and name not in links:
+            raise UserError(f"no link given for {name} ({bare.port}) — give an open link for every line, or none")
     wanted = None if addresses is None else list(addresses)
-    read = [(bus_entry(name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz), import_modules(bare, wanted, options))
+    read = [(bus_entry(name, bare.port, bare.framing, bare.line, bare.timeout, bare.zvz),
+             import_modules(bare, wanted, options, link=None if links is None else links[name]))
             for name, bare in buses.items()]  # fmt: skip
     return imported_plant(plant_name, read), sum(len(images) for _, images in read)

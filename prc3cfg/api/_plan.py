@@ -10,13 +10,12 @@ nor the planner itself (`prc3cfg.core.planning`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from prc3cfg.api._bus import probe_timeout, prober
 from prc3cfg.api._types import Pairs
 from prc3cfg.core import targeting
 from prc3cfg.core.device import can_clamp
@@ -32,6 +31,7 @@ from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import FileProblem, Why, read_json
 from prc3cfg.shell.link import Link
 from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, Target, read_all
 from prc3cfg.shell.records import applied_copy
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
@@ -169,7 +169,7 @@ def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict
     planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read)
     wanted = to_plan(pairs, desired)
     images = read_targets(to_read, links, options, each=planning_each(planner, wanted),
-                   then=seen(plant, command, lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus], buses[bus]))))  # fmt: skip
+                   then=seen(plant, command, lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus]))))  # fmt: skip
     return images, planner.plan(wanted, images)
 
 
@@ -180,14 +180,15 @@ def planning_each(planner: Planner, wanted: list[Wanted]) -> Callable[[Target, M
 
 
 def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None, *,
-         command: str = "read") -> dict[Key, ModuleImage]:  # fmt: skip
+         command: str = "read", links: Mapping[str, Link] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
     """Read back the chosen modules: system parameters, managed programs, and every program the
     plant's system parameters could clamp — by (bus, address); what was read goes into the lines'
-    records as `command`'s."""
+    records as `command`'s. Over the plant file's ports, or the `links` given by bus, already open
+    (every function that reads takes them)."""
     options = options or LineOptions()
     pairs = select(plant, modules)
-    with lines(plant, {bus.name for bus, _ in pairs}, options) as links:
-        return read_targets(targets(pairs), links, options, then=seen(plant, command))
+    with lines(plant, {bus.name for bus, _ in pairs}, options, given=links) as open_links:
+        return read_targets(targets(pairs), open_links, options, then=seen(plant, command))
 
 
 def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
@@ -227,7 +228,8 @@ def read_input(path: Path, what: str, remedy: str) -> Any:
 
 
 def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
-         options: LineOptions | None = None, previous: Path | None = None, full_read: bool = False) -> PlantPlan:  # fmt: skip
+         options: LineOptions | None = None, previous: Path | None = None, full_read: bool = False,
+         links: Mapping[str, Link] | None = None) -> PlantPlan:  # fmt: skip
     """The cheapest plan from what the modules hold (read back now, or `images` as `read` or
     `load_images` gave them) to the plant file. Read back now: only what the change from a base
     touches (`previous`, else the plant file last applied in full here: `base`, `reads`) — every
@@ -237,8 +239,8 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
     if images is not None:
         return make_plan(plant, pairs, images)
     wanted = reads(plant, pairs, full_read)
-    with lines(plant, {bus.name for bus, _ in wanted.pairs}, options, purpose="plan") as links:
-        read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, links, options, command="plan",
+    with lines(plant, {bus.name for bus, _ in wanted.pairs}, options, purpose="plan", given=links) as open_links:
+        read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, open_links, options, command="plan",
                                         only_read=wanted.base is not None)  # fmt: skip
     return replace(planned, reading=wanted.reading(pairs, read_))
 
@@ -263,7 +265,7 @@ def _line(bus: Bus) -> Line:
     it lists every module there (`only_these_modules: true`)."""
     listed = frozenset(m.address for m in bus.modules)
     complete = len(listed) == MAX_MODULE_ADDRESS or bus.only_these_modules
-    return Line(bus.name, line_cost(bus), listed, complete, probe_timeout(bus))
+    return Line(bus.name, line_cost(bus), listed, complete, probe_timeout(bus.timeout))
 
 
 def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted]:
@@ -332,11 +334,11 @@ def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
 
 
 def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
-          options: LineOptions | None = None) -> list[Drift]:  # fmt: skip
+          options: LineOptions | None = None, links: Mapping[str, Link] | None = None) -> list[Drift]:  # fmt: skip
     """The chosen modules that drifted from the plant file — read back now, or as `images` —
     reported as drift, not as a plan (`prc3cfg plan --refresh-only`)."""
     if images is None:
-        images = read(plant, modules, options, command="plan --refresh-only")
+        images = read(plant, modules, options, command="plan --refresh-only", links=links)
     found = []
     for bus, module in select(plant, modules):
         said = drifted(module.desired_image(), images[(bus.name, module.address)])

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from decimal import Decimal
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from prc3cfg.api._plan import plan, read, select
 from prc3cfg.core import gateway, plot
@@ -33,6 +34,9 @@ from prc3cfg.shell.records import Journal, reason_given
 from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys
 
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Link
+
 
 @dataclass(frozen=True)
 class Adoption:
@@ -50,7 +54,8 @@ class Adoption:
 
 
 def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
-          options: LineOptions | None = None, *, reason: str | None = None, check: bool = False) -> Adoption:  # fmt: skip
+          options: LineOptions | None = None, *, reason: str | None = None, check: bool = False,
+          links: Mapping[str, Link] | None = None) -> Adoption:  # fmt: skip
     """Read the chosen modules and work out the plant file that describes what they hold: only the
     values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
     writes it. Unless it is only a `check`, a bus with `require_reason` refuses before its line is
@@ -58,7 +63,7 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
     options = options or LineOptions()
     given = None if check else reason_for(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason, "adopt")
     before = _plant_text(plant.path)
-    images = read(plant, modules, options, command="adopt")
+    images = read(plant, modules, options, command="adopt", links=links)
     found = adopt_text(plant, images, before, programs)
     return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
 

@@ -31,8 +31,9 @@ from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import LineSettings
-from prc3cfg.shell.link import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite
+from prc3cfg.shell.link import Exchange, Link
 from prc3cfg.shell.link.client import Port
+from prc3cfg.shell.probe import probe
 
 #: Baud rates in the order they are tried after the first: PRC 3 lines run 9600; a CP 524 19200 at most.
 BAUDS = (9600, 19200, 4800, 2400, 1200, 38400, 57600, 600, 300)
@@ -179,12 +180,9 @@ def _wait(candidate: LineCandidate, zvz: float) -> float:
 
 
 def _answers(link: Link, address: int) -> bool:
-    try:
-        return isinstance(link.probe(address, codec.ReadSystem(), link.timeout), codec.SystemReply)
-    except (PortFailed, PossibleWrite, NoReadMessages):
-        raise  # the port; a read taken for a write; a module that cannot be read at all
-    except LinkError:
-        return False  # heard, but nothing a module at these settings would answer
+    """Whether a module at these settings answers at `address` (heard but garbled: nothing such a module would answer)."""
+    heard = probe(link, address, link.timeout)
+    return heard is not None and isinstance(heard.reply, codec.SystemReply)
 
 
 def _measure(link: Link, candidate: LineCandidate, address: int, zvz: float, exchanges: int) -> Timing:
@@ -196,12 +194,8 @@ def _measure(link: Link, candidate: LineCandidate, address: int, zvz: float, exc
     turnarounds, damaged, lost = [], 0, 0
     for _ in range(exchanges):
         discarded, before = link.discarded, len(counts.attempts)
-        try:
-            reply = link.probe(address, codec.ReadSystem(), link.timeout)
-        except (PortFailed, PossibleWrite, NoReadMessages):
-            raise
-        except LinkError:
-            reply = None
+        heard = probe(link, address, link.timeout)
+        reply = heard.reply if heard is not None else None
         attempts = counts.attempts[before:]
         if isinstance(reply, codec.SystemReply):
             attempts.pop()

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-from collections.abc import Callable, Iterable, Iterator
+import threading
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol, TextIO
@@ -89,10 +90,12 @@ class Records(Protocol):
 
 @contextlib.contextmanager
 def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
-          announce: Observer | None = None, records: Records | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
-    """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time.
-    Every axis release on these lines that no account has named yet is told (`LineOptions.tell`),
-    and a read a module answers as a write is recorded as one in `records` (`PossibleWrite`).
+          announce: Observer | None = None, records: Records | None = None,
+          given: Mapping[str, Link] | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
+    """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time —
+    opened from the plant file's ports, or those `given`, already open (`lent`). Every axis release
+    on these lines that no account has named yet is told (`LineOptions.tell`), and a read a module
+    answers as a write is recorded as one in `records` (`PossibleWrite`).
 
     Two buses that are one line (two spellings of one address) are refused: they would wait
     for each other's lock."""
@@ -119,11 +122,56 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         cancel = options.cancel.event if options.cancel is not None else None
         module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
-        links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=watch,
-                                                     announce=announce, cancel=cancel))  # fmt: skip
+        if given is None:
+            links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=watch,
+                                                         announce=announce, cancel=cancel))  # fmt: skip
+        else:
+            lending = {bus.name: _given(given, bus.name) for bus in plant.buses if bus.name in names}  # in the plant's order
+            links = stack.enter_context(lent(lending, watch, announce, cancel))
         yield links
         if options.used is not None:
             options.used(list(links.values()))
+
+
+def _given(given: Mapping[str, Link], bus: str) -> Link:
+    """The link given for `bus`: one for every bus the command uses, speaking for that bus."""
+    link = given.get(bus)
+    if link is None:
+        raise UserError(f"no link given for bus {bus} — give an open link for every bus the command uses, or none")
+    if link.bus != bus:
+        raise UserError(f"the link given for bus {bus} speaks for bus {link.bus} — open it with bus={bus!r}: the journal and "
+                        "the records name each exchange by its link's bus")  # fmt: skip
+    return link
+
+
+@contextlib.contextmanager
+def lent(links: dict[str, Link], observer: Observer | None, announce: Observer | None,
+         cancel: threading.Event | None) -> Iterator[dict[str, Link]]:  # fmt: skip
+    """Links a caller opened (over any `Port`: a serial port, a socket, an in-memory pair) used for
+    one session as the links a session opens are: its `observer` and `announce` (the journal, the
+    records of releases) before each link's own, its `cancel` event in place of the link's — each
+    as it was again afterwards. Their retries, time-out and trace stay the caller's."""
+    kept = {name: (link.observer, link.announce, link.cancel) for name, link in links.items()}
+    try:
+        for link in links.values():
+            link.observer, link.announce = _then(observer, link.observer), _then(announce, link.announce)
+            link.cancel = cancel if cancel is not None else link.cancel
+        yield links
+    finally:
+        for name, (own_observer, own_announce, own_cancel) in kept.items():
+            links[name].observer, links[name].announce, links[name].cancel = own_observer, own_announce, own_cancel
+
+
+def _then(first: Observer | None, then: Observer | None) -> Observer | None:
+    """`first`, then `then`, with each exchange."""
+    if first is None or then is None:
+        return first or then
+
+    def both(exchange: Exchange) -> None:
+        first(exchange)
+        then(exchange)
+
+    return both
 
 
 def sha256_of(path: Path) -> str | None:
@@ -182,12 +230,18 @@ def bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[s
 
 
 @contextlib.contextmanager
-def bare_link(bare: BareLine, options: LineOptions, purpose: str) -> Iterator[Link]:
+def bare_link(bare: BareLine, options: LineOptions, purpose: str, given: Link | None = None) -> Iterator[Link]:
+    """The link of a port without a plant file, its line locked: opened from `bare`, or `given`,
+    already open (`lent`; it speaks for the port: its `bus` is `bare.port`)."""
+    cancel = options.cancel.event if options.cancel is not None else None
     with contextlib.ExitStack() as stack:
         keys = stack.enter_context(bare_lock(bare.port, options, purpose))
+        watch = written_reads({}, {bare.port: keys}, releases.Releases(purpose))
+        if given is not None:
+            yield stack.enter_context(lent({bare.port: _given({bare.port: given}, bare.port)}, watch, None, cancel))[bare.port]
+            return
         port = open_port(bare.port, bare.line, bus=bare.port)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
-                   retries=options.retries, trace=Trace(options.trace) if options.trace is not None else None,
-                   observer=written_reads({}, {bare.port: keys}, releases.Releases(purpose)),
-                   cancel=options.cancel.event if options.cancel is not None else None)  # fmt: skip
+                   retries=options.retries, trace=Trace(options.trace) if options.trace is not None else None, observer=watch,
+                   cancel=cancel)  # fmt: skip
