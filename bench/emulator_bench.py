@@ -41,7 +41,7 @@ from line_bench import run  # the wall time and output of a command that must su
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.line import LineSettings
-from prc3cfg.shell.emulator import BROADCAST
+from prc3cfg.shell.emulator.bus import BROADCAST
 
 PLANT = """\
 plant: emulator-bench

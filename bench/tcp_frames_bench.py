@@ -48,7 +48,9 @@ def client(url: str, framing: str, exchanges: int, uart: bool) -> None:
     from prc3cfg.core.framing import get_framing
     from prc3cfg.core.image import Program
     from prc3cfg.core.line import LineSettings
-    from prc3cfg.shell.link import Link, Trace, open_port
+    from prc3cfg.shell.link.client import Link
+    from prc3cfg.shell.link.ports import open_port
+    from prc3cfg.shell.link.trace import Trace
 
     line = LineSettings()
     stream = CountingTrace()

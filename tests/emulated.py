@@ -12,7 +12,7 @@ import pytest
 from lossy import LossyProxy, Rule
 
 from prc3cfg.cli import main
-from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.testing import EmulatedPlant, emulate
 
 DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"

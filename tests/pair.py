@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 
 from prc3cfg.core.framing import NEED_DATA, Direction, Frame
-from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.emulator.server import Emulator
 
 
 class PairPort:

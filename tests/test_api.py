@@ -23,7 +23,7 @@ from pair import PairPort
 import prc3cfg.api
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import get_framing
-from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.emulator.server import Emulator
 from prc3cfg.shell.link.client import Link
 from prc3cfg.shell.testing import EmulatedPlant
 

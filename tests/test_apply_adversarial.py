@@ -25,7 +25,7 @@ from emulated import emulated_plant, run_cli
 from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
-from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.plant_files import load_plant
 
 TRAVEL = "Travel to reference point required before production on:"

@@ -25,7 +25,7 @@ from emulated import emulated_plant
 
 from prc3cfg.core import codec, device
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program
-from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.plant_files import load_plant
 
 #: Seeds per framing: a few in the fast tier, the acceptance's 40 in the soak tier.

@@ -21,7 +21,7 @@ from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Frame
-from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.emulator.server import Emulator
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.testing import EmulatedPlant

@@ -12,7 +12,7 @@ import pytest
 import yaml
 from emulated import DEMO, emulated_plant, run_cli
 
-from prc3cfg.shell.emulator import FaultInjection
+from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.locks import line_keys, line_lock
 
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
-from prc3cfg.shell.emulator import Emulator
+from prc3cfg.shell.emulator.server import Emulator
 from prc3cfg.shell.plant_files import load_plant
 
 GATEWAY_PLANT = """\

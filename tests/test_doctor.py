@@ -20,8 +20,9 @@ from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received
 from prc3cfg.shell.doctor import Search
-from prc3cfg.shell.emulator import Emulator, FaultInjection
-from prc3cfg.shell.link import Link, open_link, open_port
+from prc3cfg.shell.emulator.server import Emulator, FaultInjection
+from prc3cfg.shell.link.client import Link
+from prc3cfg.shell.link.ports import open_link, open_port
 
 lines = st.builds(LineSettings, st.sampled_from([1200, 2400, 4800, 9600, 19200]), st.just(8),
                   st.sampled_from(["none", "odd", "even"]), st.sampled_from([1, 1.5, 2]))  # fmt: skip

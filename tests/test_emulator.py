@@ -24,8 +24,9 @@ from prc3cfg.core.framing import Direction, Frame, get_framing
 from prc3cfg.core.image import DEFAULT_SYSTEM, Program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.errors import UserError
-from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state, server
-from prc3cfg.shell.emulator.state import journal_path, state_document
+from prc3cfg.shell.emulator import server
+from prc3cfg.shell.emulator.server import Emulator, FaultInjection
+from prc3cfg.shell.emulator.state import journal_path, load_state, state_document
 
 WRITE_P10 = codec.WriteProgram(10, Program(P=150, V=300, Vr=53, T=20, F1=1010, F2=50, A=5))
 

@@ -26,9 +26,10 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Direction
 from prc3cfg.core.image import Program
 from prc3cfg.errors import UserError
-from prc3cfg.shell.emulator import BROADCAST, Emulator, load_state
 from prc3cfg.shell.emulator import state as store
-from prc3cfg.shell.emulator.state import JOURNAL_FORMAT, journal_path, state_document
+from prc3cfg.shell.emulator.bus import BROADCAST
+from prc3cfg.shell.emulator.server import Emulator
+from prc3cfg.shell.emulator.state import JOURNAL_FORMAT, journal_path, load_state, state_document
 
 ACCEPTED = b"\x00\x00"
 

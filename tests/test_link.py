@@ -23,9 +23,10 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, Program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.verification import read_messages
 from prc3cfg.errors import UserError
-from prc3cfg.shell.emulator import Emulator, FaultInjection
-from prc3cfg.shell.link import Link, LinkError, Trace, open_link, open_port
-from prc3cfg.shell.link.ports import EMULATOR_KEYS
+from prc3cfg.shell.emulator.server import Emulator, FaultInjection
+from prc3cfg.shell.link.client import Link, LinkError
+from prc3cfg.shell.link.ports import EMULATOR_KEYS, open_link, open_port
+from prc3cfg.shell.link.trace import Trace
 from prc3cfg.shell.readback import ReadBackError, read_module
 
 FRAMINGS = ["crc16", "open-driver", "stx"]

@@ -74,7 +74,7 @@ CLI_MAY_IMPORT = (
     "prc3cfg.api", "prc3cfg.cli", "prc3cfg.errors",
     # rendering, and the values it shows
     "prc3cfg.core.render", "prc3cfg.core.text", "prc3cfg.core.units", "prc3cfg.core.line.LineSettings",
-    "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.link.Link",
+    "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.link.client.Link",
     # plant files: loading one is validating it; showing one shows where each value came from
     "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError",
     "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.profiles.Sourced",
@@ -201,3 +201,17 @@ def test_the_command_line_calls_only_what_the_api_exports():
     assert used.keys() >= {"apply", "plan", "LineOptions"}  # the check sees what the CLI uses
     assert not {f"{path} uses api.{name}" for name, path in used.items() if name not in prc3cfg.api.__all__}
     assert all(hasattr(prc3cfg.api, name) for name in prc3cfg.api.__all__)
+
+
+def test_the_api_imports_each_name_from_where_the_type_checker_finds_it():
+    """`prc3cfg.api` imports each name when first asked for, from its module in `_HOMES`; the type
+    checker reads the imports under TYPE_CHECKING: the two say the same, name for name."""
+    import prc3cfg.api
+
+    tree = ast.parse((PACKAGE / "api" / "__init__.py").read_text())
+    (checking,) = [node for node in tree.body if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING"]
+    imported = {(node.module, a.name) for node in checking.body if isinstance(node, ast.ImportFrom) for a in node.names if a.asname == a.name}
+    homes = {(module, name) for module, names in prc3cfg.api._HOMES.items() for name in names}
+    assert len(imported) == len(checking.body) == len(prc3cfg.api.__all__) and imported == homes
+    with pytest.raises(AttributeError, match="has no attribute 'nothing_of_this_name'"):
+        prc3cfg.api.nothing_of_this_name  # noqa: B018 — a name outside the API is no name of it

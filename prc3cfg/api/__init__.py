@@ -31,79 +31,118 @@ and output (`prc3cfg.cli`). `__all__` is what the CLI and users' scripts call.
 Its modules, one workflow each: `_types` (the values and errors), `_plan` (load, select, what to
 read, read, plan, drift), `_apply` (apply, restore, plan files), `_bus` (scan, import, doctor),
 `_plant` (adopt, records, gateways, pictures), `_emulator` (an emulated bus) and `_machine` (the
-machine's folders, ports and terminal).
+machine's folders, ports and terminal). Each name is imported from its module when it is first
+asked for (`__getattr__`): a script, or a command, loads what it uses — a plan from saved images no
+link, no pyserial.
 """
 
-from prc3cfg.api._apply import apply as apply
-from prc3cfg.api._apply import plan_document as plan_document
-from prc3cfg.api._apply import plan_file_plant as plan_file_plant
-from prc3cfg.api._apply import restore as restore
-from prc3cfg.api._apply import told as told
-from prc3cfg.api._bus import doctor as doctor
-from prc3cfg.api._bus import import_modules as import_modules
-from prc3cfg.api._bus import import_plant as import_plant
-from prc3cfg.api._bus import measurable as measurable
-from prc3cfg.api._bus import scan as scan
-from prc3cfg.api._bus import slower_than_priced as slower_than_priced
-from prc3cfg.api._emulator import emulator as emulator
-from prc3cfg.api._emulator import listen as listen
-from prc3cfg.api._emulator import open_pty as open_pty
-from prc3cfg.api._emulator import served_pty as served_pty
-from prc3cfg.api._machine import SerialPort as SerialPort
-from prc3cfg.api._machine import device_number as device_number
-from prc3cfg.api._machine import serial_ports as serial_ports
-from prc3cfg.api._machine import setup_machine as setup_machine
-from prc3cfg.api._machine import terminal_path as terminal_path
-from prc3cfg.api._machine import unshared_records as unshared_records
-from prc3cfg.api._machine import wait_for as wait_for
-from prc3cfg.api._plan import drift as drift
-from prc3cfg.api._plan import left_alone as left_alone
-from prc3cfg.api._plan import load as load
-from prc3cfg.api._plan import load_images as load_images
-from prc3cfg.api._plan import plan as plan
-from prc3cfg.api._plan import read as read
-from prc3cfg.api._plan import select as select
-from prc3cfg.api._plant import Adoption as Adoption
-from prc3cfg.api._plant import adopt as adopt
-from prc3cfg.api._plant import init_data_block as init_data_block
-from prc3cfg.api._plant import list_records as list_records
-from prc3cfg.api._plant import picture as picture
-from prc3cfg.api._plant import plot_format as plot_format
-from prc3cfg.api._plant import prune_records as prune_records
-from prc3cfg.api._plant import verify_records as verify_records
-from prc3cfg.api._plant import write_adoption as write_adoption
-from prc3cfg.api._types import ApplyFailed as ApplyFailed
-from prc3cfg.api._types import ApplyInterrupted as ApplyInterrupted
-from prc3cfg.api._types import ApplyResult as ApplyResult
-from prc3cfg.api._types import AxisReleaseRefused as AxisReleaseRefused
-from prc3cfg.api._types import Gates as Gates
-from prc3cfg.api._types import NotApproved as NotApproved
-from prc3cfg.core.planfile import StalePlan as StalePlan
-from prc3cfg.core.render import Drift as Drift
-from prc3cfg.core.verification import Release as Release
-from prc3cfg.errors import UserError as UserError
-from prc3cfg.plant import PlantError as PlantError
-from prc3cfg.shell.apply import Verify as Verify
-from prc3cfg.shell.audit import Pruned as Pruned
-from prc3cfg.shell.audit import RecordedRun as RecordedRun
-from prc3cfg.shell.audit import Verified as Verified
-from prc3cfg.shell.doctor import Diagnosis as Diagnosis
-from prc3cfg.shell.doctor import Search as Search
-from prc3cfg.shell.link import LinkError as LinkError
-from prc3cfg.shell.link.ports import FormatRefused as FormatRefused
-from prc3cfg.shell.locks import LineBusy as LineBusy
-from prc3cfg.shell.phases import Progress as Progress
-from prc3cfg.shell.sessions import BareLine as BareLine
-from prc3cfg.shell.sessions import LineOptions as LineOptions
-from prc3cfg.shell.sessions import default_parity as default_parity
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the names as the type checker sees them; at run time each is imported when asked for
+    from prc3cfg.api._apply import apply as apply
+    from prc3cfg.api._apply import plan_document as plan_document
+    from prc3cfg.api._apply import plan_file_plant as plan_file_plant
+    from prc3cfg.api._apply import restore as restore
+    from prc3cfg.api._apply import told as told
+    from prc3cfg.api._bus import doctor as doctor
+    from prc3cfg.api._bus import import_modules as import_modules
+    from prc3cfg.api._bus import import_plant as import_plant
+    from prc3cfg.api._bus import measurable as measurable
+    from prc3cfg.api._bus import scan as scan
+    from prc3cfg.api._bus import slower_than_priced as slower_than_priced
+    from prc3cfg.api._emulator import emulator as emulator
+    from prc3cfg.api._emulator import listen as listen
+    from prc3cfg.api._emulator import open_pty as open_pty
+    from prc3cfg.api._emulator import served_pty as served_pty
+    from prc3cfg.api._machine import SerialPort as SerialPort
+    from prc3cfg.api._machine import device_number as device_number
+    from prc3cfg.api._machine import serial_ports as serial_ports
+    from prc3cfg.api._machine import setup_machine as setup_machine
+    from prc3cfg.api._machine import terminal_path as terminal_path
+    from prc3cfg.api._machine import unshared_records as unshared_records
+    from prc3cfg.api._machine import wait_for as wait_for
+    from prc3cfg.api._plan import drift as drift
+    from prc3cfg.api._plan import left_alone as left_alone
+    from prc3cfg.api._plan import load as load
+    from prc3cfg.api._plan import load_images as load_images
+    from prc3cfg.api._plan import plan as plan
+    from prc3cfg.api._plan import read as read
+    from prc3cfg.api._plan import select as select
+    from prc3cfg.api._plant import Adoption as Adoption
+    from prc3cfg.api._plant import adopt as adopt
+    from prc3cfg.api._plant import init_data_block as init_data_block
+    from prc3cfg.api._plant import list_records as list_records
+    from prc3cfg.api._plant import picture as picture
+    from prc3cfg.api._plant import plot_format as plot_format
+    from prc3cfg.api._plant import prune_records as prune_records
+    from prc3cfg.api._plant import verify_records as verify_records
+    from prc3cfg.api._plant import write_adoption as write_adoption
+    from prc3cfg.api._types import ApplyFailed as ApplyFailed
+    from prc3cfg.api._types import ApplyInterrupted as ApplyInterrupted
+    from prc3cfg.api._types import ApplyResult as ApplyResult
+    from prc3cfg.api._types import AxisReleaseRefused as AxisReleaseRefused
+    from prc3cfg.api._types import Gates as Gates
+    from prc3cfg.api._types import NotApproved as NotApproved
+    from prc3cfg.core.planfile import StalePlan as StalePlan
+    from prc3cfg.core.render import Drift as Drift
+    from prc3cfg.core.verification import Release as Release
+    from prc3cfg.errors import UserError as UserError
+    from prc3cfg.plant import PlantError as PlantError
+    from prc3cfg.shell.apply import Verify as Verify
+    from prc3cfg.shell.audit import Pruned as Pruned
+    from prc3cfg.shell.audit import RecordedRun as RecordedRun
+    from prc3cfg.shell.audit import Verified as Verified
+    from prc3cfg.shell.doctor import Diagnosis as Diagnosis
+    from prc3cfg.shell.doctor import Search as Search
+    from prc3cfg.shell.link.client import LinkError as LinkError
+    from prc3cfg.shell.link.ports import FormatRefused as FormatRefused
+    from prc3cfg.shell.locks import LineBusy as LineBusy
+    from prc3cfg.shell.phases import Progress as Progress
+    from prc3cfg.shell.sessions import BareLine as BareLine
+    from prc3cfg.shell.sessions import LineOptions as LineOptions
+    from prc3cfg.shell.sessions import default_parity as default_parity
+
+#: Where each name of the API lives (a test checks it against the imports above).
+_HOMES: dict[str, tuple[str, ...]] = {
+    "prc3cfg.api._apply": ("apply", "plan_document", "plan_file_plant", "restore", "told"),
+    "prc3cfg.api._bus": ("doctor", "import_modules", "import_plant", "measurable", "scan", "slower_than_priced"),
+    "prc3cfg.api._emulator": ("emulator", "listen", "open_pty", "served_pty"),
+    "prc3cfg.api._machine": ("SerialPort", "device_number", "serial_ports", "setup_machine", "terminal_path", "unshared_records", "wait_for"),
+    "prc3cfg.api._plan": ("drift", "left_alone", "load", "load_images", "plan", "read", "select"),
+    "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records", "verify_records",
+                           "write_adoption"),
+    "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
+    "prc3cfg.core.planfile": ("StalePlan",),
+    "prc3cfg.core.render": ("Drift",),
+    "prc3cfg.core.verification": ("Release",),
+    "prc3cfg.errors": ("UserError",),
+    "prc3cfg.plant": ("PlantError",),
+    "prc3cfg.shell.apply": ("Verify",),
+    "prc3cfg.shell.audit": ("Pruned", "RecordedRun", "Verified"),
+    "prc3cfg.shell.doctor": ("Diagnosis", "Search"),
+    "prc3cfg.shell.link.client": ("LinkError",),
+    "prc3cfg.shell.link.ports": ("FormatRefused",),
+    "prc3cfg.shell.locks": ("LineBusy",),
+    "prc3cfg.shell.phases": ("Progress",),
+    "prc3cfg.shell.sessions": ("BareLine", "LineOptions", "default_parity"),
+}  # fmt: skip
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
-__all__ = [
-    "Adoption", "ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "BareLine", "Diagnosis", "Drift", "FormatRefused", "Gates",
-    "LineBusy", "LineOptions", "LinkError", "NotApproved", "PlantError", "Progress", "Pruned", "RecordedRun", "Release", "Search", "SerialPort",
-    "StalePlan", "UserError", "Verified", "Verify", "adopt", "apply", "default_parity", "device_number", "doctor", "drift", "emulator",
-    "import_modules", "import_plant", "init_data_block", "left_alone", "list_records", "listen", "load", "load_images", "measurable", "open_pty",
-    "picture", "plan", "plan_document", "plan_file_plant", "plot_format", "prune_records", "read", "restore", "scan", "select", "serial_ports",
-    "served_pty", "setup_machine", "slower_than_priced", "terminal_path", "told", "unshared_records", "verify_records", "wait_for",
-    "write_adoption",
-]  # fmt: skip
+__all__ = sorted(name for names in _HOMES.values() for name in names)
+
+
+def __getattr__(name: str) -> object:
+    """A name of the API, imported from the module that holds it the first time it is asked for (PEP 562)."""
+    for module, names in _HOMES.items():
+        if name in names:
+            value = getattr(importlib.import_module(module), name)
+            globals()[name] = value
+            return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

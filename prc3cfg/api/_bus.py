@@ -18,8 +18,8 @@ from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
 from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
-from prc3cfg.shell.link import Link, open_port
-from prc3cfg.shell.link.client import Port
+from prc3cfg.shell.link.client import Link, Port
+from prc3cfg.shell.link.ports import open_port
 from prc3cfg.shell.locks import line_keys
 from prc3cfg.shell.probe import probe, probe_timeout
 from prc3cfg.shell.readback import read_module

@@ -12,8 +12,9 @@ from pathlib import Path
 
 from prc3cfg.core.line import LineSettings
 from prc3cfg.errors import UserError
-from prc3cfg.shell.emulator import Emulator, FaultInjection, modules_to_serve, ptys
-from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS
+from prc3cfg.shell.emulator import ptys
+from prc3cfg.shell.emulator.server import IDLE_TIMEOUT, MAX_CONNECTIONS, Emulator, FaultInjection
+from prc3cfg.shell.emulator.state import modules_to_serve
 from prc3cfg.shell.platform import HAS_PTY
 
 

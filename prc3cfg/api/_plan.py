@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from prc3cfg.api._types import Pairs
 from prc3cfg.core import targeting
@@ -29,12 +29,14 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import FileProblem, Why, read_json
-from prc3cfg.shell.link import Link
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, Target, read_all
 from prc3cfg.shell.records import applied_copy
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
+
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Link
 
 
 def load(path: str | Path) -> Plant:

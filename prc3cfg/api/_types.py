@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.core.render import plural
@@ -18,7 +19,9 @@ from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module
 from prc3cfg.shell import releases
-from prc3cfg.shell.apply import ModuleRun
+
+if TYPE_CHECKING:
+    from prc3cfg.shell.apply import ModuleRun
 
 #: (bus, module) pairs of a plant, as `select` gives them
 Pairs = list[tuple[Bus, Module]]

@@ -28,7 +28,7 @@ if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3
     from rich.progress import Progress, TaskID
 
     from prc3cfg.api import LineOptions
-    from prc3cfg.shell.link import Link
+    from prc3cfg.shell.link.client import Link
 
 #: The framings, as option help names them (a test checks them against `prc3cfg.core.framing.FRAMINGS`).
 FRAMING_NAMES = ("crc16", "open-driver", "stx")
@@ -365,9 +365,10 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
             command_line=tuple(COMMAND_LINE) or None,
         )  # fmt: skip
         yield options
-        note_repeats(used)
-        note_slow(used)
-        note_unshared(used)
+        if used:  # a command that talked on no line (`plan --actual`) has nothing to note, and loads nothing for it
+            note_repeats(used)
+            note_slow(used)
+            note_unshared(used)
 
 
 def note_unshared(links: Iterable[Link]) -> None:

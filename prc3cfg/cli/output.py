@@ -14,7 +14,7 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions, told
+from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
 from prc3cfg.cli.common import TerminalProgress, ask, print_lines, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plantplan import PlantPlan
@@ -112,6 +112,8 @@ def report(result: ApplyResult) -> None:
         print(line)
     if result.runs:
         print(f"Journal: {result.journal}", flush=True)
+    from prc3cfg.api import told  # the apply's: what only an apply needs is loaded when one ran
+
     told(result)
 
 

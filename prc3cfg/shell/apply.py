@@ -46,7 +46,7 @@ from prc3cfg.core.verification import Release, reach
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
-from prc3cfg.shell.link import Link, LinkError, PossibleWrite
+from prc3cfg.shell.link.client import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
 
 REPAIRS = 2

@@ -31,8 +31,7 @@ from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import LineSettings
-from prc3cfg.shell.link import Exchange, Link
-from prc3cfg.shell.link.client import Port
+from prc3cfg.shell.link.client import Exchange, Link, Port
 from prc3cfg.shell.probe import probe
 
 #: Baud rates in the order they are tried after the first: PRC 3 lines run 9600; a CP 524 19200 at most.

@@ -32,7 +32,7 @@ from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import main_thread_only
-from prc3cfg.shell.link import Exchange, Link
+from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.platform import result_of
 from prc3cfg.shell.readback import LineRead, LinesFailed, Target

@@ -12,10 +12,13 @@ Does not own the exchange itself (`Link.probe`) nor how long a probe may take on
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from prc3cfg.core import codec
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Prober
-from prc3cfg.shell.link.client import Link, LinkError, NoReadMessages, PortFailed, PossibleWrite
+
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Link
 
 
 @dataclass(frozen=True)
@@ -28,6 +31,8 @@ class Heard:
 def probe(link: Link, address: int, timeout: float, tries: int = 1) -> Heard | None:
     """A 50h at `address`, waiting `timeout` (`Link.probe`), made up to `tries` times while nothing
     answers: what was heard, or None when nothing was."""
+    from prc3cfg.shell.link.client import LinkError, NoReadMessages, PortFailed, PossibleWrite  # a plan made from images probes nothing
+
     for _ in range(tries):
         try:
             reply = link.probe(address, codec.ReadSystem(), timeout)

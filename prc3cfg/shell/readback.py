@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from prc3cfg.core import codec
 from prc3cfg.core.device import can_clamp
@@ -29,7 +29,9 @@ from prc3cfg.core.verification import read_messages
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
-from prc3cfg.shell.link.client import Link
+
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Link
 
 #: Called with a bus and its modules' images as soon as the bus is read (`read_all`'s `then`).
 LineRead = Callable[[str, dict[tuple[str, int], ModuleImage]], None]

@@ -44,7 +44,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from pydantic import BaseModel, Field, ValidationError
 
@@ -54,8 +54,10 @@ from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
-from prc3cfg.shell.link import Exchange
 from prc3cfg.shell.platform import open_text
+
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Exchange
 
 SNAPSHOT_FORMAT = "prc3cfg-snapshot/1"
 #: The folders under `.prc3cfg/` an apply writes.

@@ -6,6 +6,8 @@ same for a port without a plant file (`BareLine`). A read a module answers as a 
 as an axis release (`written_reads`). `LineOptions` says how a command uses its lines;
 `bus_line_keys` are the identities of a bus's line (its lock, its records).
 
+The link (pyserial, the emulator behind `emulator://`) is imported where a line is opened: a
+command that opens none (`plan --actual`) loads none of it, and `LineOptions` costs nothing.
 Does not own what is read or written on the lines (`prc3cfg.api`, `prc3cfg.shell.engine`), nor
 the locks and the links themselves (`prc3cfg.shell.locks`, `prc3cfg.shell.link`).
 """
@@ -18,7 +20,7 @@ import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol, TextIO
+from typing import TYPE_CHECKING, Protocol, TextIO, TypeAlias
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
@@ -30,13 +32,15 @@ from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import releases
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.link import Exchange, Link, Trace, open_plant_links, open_port
-from prc3cfg.shell.link.ports import emulator_state_path, is_pseudo_terminal
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.phases import Progress, Quiet
 
+if TYPE_CHECKING:
+    from prc3cfg.shell.link.client import Exchange, Link
+    from prc3cfg.shell.link.trace import Trace
+
 #: Called with each exchange on a line: before its frame leaves (`announce`), or once it is done.
-Observer = Callable[[Exchange], None]
+Observer: TypeAlias = "Callable[[Exchange], None]"
 
 
 @dataclass(frozen=True)
@@ -72,6 +76,8 @@ class LineOptions:
 
 def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
     """The identities of a bus's line: its port, or for `emulator://` the emulator's state file."""
+    from prc3cfg.shell.link.ports import emulator_state_path
+
     state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
     return line_keys(bus.port, emulator_state=state)
 
@@ -118,12 +124,13 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
                             "read or written: run it again, with the file as it is now")  # fmt: skip
         for record in releases.pending(owner):
             options.tell(record.said())
-        trace = Trace(options.trace) if options.trace is not None else None
         cancel = options.cancel.event if options.cancel is not None else None
         module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
         if given is None:
-            links = stack.enter_context(open_plant_links(plant, names, trace=trace, retries=options.retries, observer=watch,
+            from prc3cfg.shell.link.ports import open_plant_links
+
+            links = stack.enter_context(open_plant_links(plant, names, trace=_trace(options), retries=options.retries, observer=watch,
                                                          announce=announce, cancel=cancel))  # fmt: skip
         else:
             lending = {bus.name: _given(given, bus.name) for bus in plant.buses if bus.name in names}  # in the plant's order
@@ -174,6 +181,13 @@ def _then(first: Observer | None, then: Observer | None) -> Observer | None:
     return both
 
 
+def _trace(options: LineOptions) -> Trace | None:
+    """The frame trace of links a session opens, when there is one."""
+    from prc3cfg.shell.link.trace import Trace
+
+    return Trace(options.trace) if options.trace is not None else None
+
+
 def sha256_of(path: Path) -> str | None:
     try:
         return hashlib.sha256(path.read_bytes()).hexdigest()
@@ -210,6 +224,8 @@ class BareLine:
 def default_parity(port: str) -> str:
     """The parity of a bare line whose parity is not given: none on a pseudo-terminal, which carries
     none, else even (a PRC 3 line's)."""
+    from prc3cfg.shell.link.ports import is_pseudo_terminal
+
     return "none" if is_pseudo_terminal(port) else "even"
 
 
@@ -240,8 +256,11 @@ def bare_link(bare: BareLine, options: LineOptions, purpose: str, given: Link | 
         if given is not None:
             yield stack.enter_context(lent({bare.port: _given({bare.port: given}, bare.port)}, watch, None, cancel))[bare.port]
             return
+        from prc3cfg.shell.link.client import Link
+        from prc3cfg.shell.link.ports import open_port
+
         port = open_port(bare.port, bare.line, bus=bare.port)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
-                   retries=options.retries, trace=Trace(options.trace) if options.trace is not None else None, observer=watch,
+                   retries=options.retries, trace=_trace(options), observer=watch,
                    cancel=cancel)  # fmt: skip

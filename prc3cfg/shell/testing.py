@@ -5,7 +5,7 @@
         api.apply(emulated.plant, gates=api.Gates(allow_axis_release=True))
         assert not api.plan(emulated.plant).changes
 
-`emulate(plant_path, directory)` starts one emulator (`prc3cfg.shell.emulator.Emulator`, the same code
+`emulate(plant_path, directory)` starts one emulator (`prc3cfg.shell.emulator.server.Emulator`, the same code
 as `prc3cfg emulator serve`) per bus of the plant file, its modules at factory defaults or as a
 module-image file (`prc3cfg read --json`) says, and writes a copy of the plant file into
 `directory` (as `plant.yaml`) whose buses' ports point at the emulators (`socket://127.0.0.1:PORT`); the
@@ -30,7 +30,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, default_program
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
-from prc3cfg.shell.emulator import Emulator, FaultInjection
+from prc3cfg.shell.emulator.server import Emulator, FaultInjection
 from prc3cfg.shell.files import FileProblem, read_json
 from prc3cfg.shell.plant_files import load_plant
 

@@ -2,11 +2,7 @@
 
 `bus` is pure (who gets a message); `state` is the state file and, while an emulator
 runs, the journal beside it; `server` is the running emulator over TCP and
-pseudo-terminals, with the Python API tests use while it runs.
+pseudo-terminals, with the Python API tests use while it runs; `ptys` lists the
+pseudo-terminals this user's emulators serve. Import from the module that holds a name: this
+package imports none of them, so what needs only the state file loads no server.
 """
-
-from prc3cfg.shell.emulator.bus import BROADCAST, EmulatedBus
-from prc3cfg.shell.emulator.server import Emulator, FaultInjection
-from prc3cfg.shell.emulator.state import load_state, modules_to_serve, save_state
-
-__all__ = ["BROADCAST", "EmulatedBus", "Emulator", "FaultInjection", "load_state", "modules_to_serve", "save_state"]

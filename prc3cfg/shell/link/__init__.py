@@ -1,7 +1,8 @@
-"""The link: PRC 3 messages over a real line (device path, pyserial URL or `emulator://`)."""
+"""The link: PRC 3 messages over a real line (device path, pyserial URL or `emulator://`).
 
-from prc3cfg.shell.link.client import Exchange, Link, LinkError, NoReadMessages, PortFailed, PossibleWrite
-from prc3cfg.shell.link.ports import open_link, open_plant_links, open_port
-from prc3cfg.shell.link.trace import Trace
-
-__all__ = ["Exchange", "Link", "LinkError", "NoReadMessages", "PortFailed", "PossibleWrite", "Trace", "open_link", "open_plant_links", "open_port"]
+`client` is the link itself (`Link`, its errors, `Exchange`, and `Port`: what it needs of a port);
+`ports` opens a plant bus's line — a device, a URL, or an emulator in this process — and lists the
+machine's serial ports; `trace` writes a frame trace. Import from the module that holds a name:
+this package imports none of them, so what needs only one (a record of an exchange, a trace) loads
+neither pyserial nor the emulator.
+"""

@@ -45,7 +45,9 @@ from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.render import address_ranges
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
-from prc3cfg.shell.emulator import Emulator, FaultInjection, load_state, ptys
+from prc3cfg.shell.emulator import ptys
+from prc3cfg.shell.emulator.server import Emulator, FaultInjection
+from prc3cfg.shell.emulator.state import load_state
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.link.trace import Trace
 
