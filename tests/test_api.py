@@ -142,8 +142,10 @@ def test_plan_and_apply_through_the_api_over_links_handed_to_it(tmp_path):
     with contextlib.ExitStack() as stack:
         emulated, links = paired(tmp_path, stack)
         plant = emulated.plant
-        planned = prc3cfg.api.plan(plant, links=links)
+        used: list[Link] = []
+        planned = prc3cfg.api.plan(plant, options=prc3cfg.api.LineOptions(used=used.extend), links=links)
         assert {c.bus for c in planned.changes} == {bus.name for bus in plant.buses}
+        assert used == list(links.values())  # the links it used, told to the caller: nothing filled into the options
         result = prc3cfg.api.apply(plant, gates=prc3cfg.api.Gates(allow_axis_release=True), links=links)
         assert result.verified and len(result.runs) == len(planned.changes) and emulated.matches_plant()
         journal = [line for line in result.journal.read_text().splitlines() if '"event": "exchange"' in line]
@@ -164,3 +166,13 @@ def test_links_handed_to_the_api_are_one_per_bus_each_for_its_bus(tmp_path):
         with pytest.raises(prc3cfg.api.UserError, match=f"the link given for bus {first} speaks for bus {second}"):
             prc3cfg.api.plan(plant, links={first: links[second], second: links[first]})
         assert not any(link.exchanges for link in links.values())  # refused before a frame left
+
+
+def test_a_scan_through_the_api_over_a_link_handed_to_it(tmp_path):
+    """A bare line's scan over a link already open (the in-memory pair): the port is locked, never opened."""
+    port = "socket://127.0.0.1:9"  # nothing listens: an open would fail at once
+    with Emulator({3: ModuleState.factory(3), 7: ModuleState.factory(7)}) as emulator:
+        link = Link(PairPort(emulator), get_framing("crc16"), bus=port, timeout=0.02)  # a short wait at each silent address
+        found = prc3cfg.api.scan(prc3cfg.api.BareLine(port), link=link)
+    assert sorted(found) == [3, 7] and found[7].system == ModuleState.factory(7).image.system
+    assert link.observer is None and link.cancel is None

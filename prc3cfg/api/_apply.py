@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -186,7 +186,7 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
         keeping.close()
 
 
-def _ready(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str) -> str | None:
+def _ready(plant: Plant, buses: Collection[Bus], reason: str | None, command: str) -> str | None:
     """What must hold before an apply opens a line: a reason where a bus requires one (`reason_for`,
     given back), error detection or its risk accepted, and records that can be kept."""
     reason = reason_for(plant, buses, reason, command)

@@ -1,9 +1,9 @@
 """The API's values: what its functions take and give back, and the errors they raise.
 
-`LineOptions` (how the lines are used), `Gates` (what an apply asks before it writes), `ApplyResult`
-(what an apply did), `Progress` (where long work reports, `Quiet` reports nothing) and the errors
-an apply raises. Owns no workflow: the functions that fill these are in the other modules of
-`prc3cfg.api`.
+`Gates` (what an apply asks before it writes), `ApplyResult` (what an apply did), `Pairs` (the
+modules chosen) and the errors an apply raises. Owns no workflow: the functions that fill these
+are in the other modules of `prc3cfg.api`. `LineOptions` (how a command uses its lines) and
+`Progress` are the line sessions' (`prc3cfg.shell.sessions`, `prc3cfg.shell.phases`), which take them.
 """
 
 from __future__ import annotations

@@ -45,10 +45,11 @@ Observer: TypeAlias = "Callable[[Exchange], None]"
 
 @dataclass(frozen=True)
 class LineOptions:
-    """How to use the lines: retries per message, seconds to wait for another prc3cfg's lock, a
-    frame trace, Ctrl-C handling (`prc3cfg.shell.cancel.Cancellation`) and progress reports — and
-    where a command reports what its caller may want to say after it: the links it used, the
-    warnings it has for the operator. A value: no call fills it in."""
+    """How to use the lines: retries per message and a frame trace (of the links a session opens: a
+    link handed to it keeps its own), seconds to wait for another prc3cfg's lock, Ctrl-C handling
+    (`prc3cfg.shell.cancel.Cancellation`) and progress reports — and where a command reports what
+    its caller may want to say after it: the links it used, the warnings it has for the operator.
+    A value: no call fills it in."""
 
     retries: int = 5
     lock_timeout: float = 0.0
@@ -80,7 +81,6 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
 
     state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
     return line_keys(bus.port, emulator_state=state)
-
 
 
 def line_cost(bus: Bus) -> LineCost:
