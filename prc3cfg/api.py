@@ -44,7 +44,8 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 from urllib.parse import urlsplit
 
-from prc3cfg.core import bustime, codec, gateway, planfile, plot, targeting
+from prc3cfg.core import bustime, codec, gateway, planfile, plot, what_to_read
+from prc3cfg.core.axes import Release
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.framing import detects_damage, get_framing
@@ -54,8 +55,7 @@ from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Line, Planner, Prober, Wanted
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted, plural
-from prc3cfg.core.targeting import Known
-from prc3cfg.core.verification import Release
+from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Module, Plant, PlantError
 from prc3cfg.plant.adopt import Adopted
@@ -82,7 +82,7 @@ from prc3cfg.shell.platform import HAS_PTY, python_command, result_of
 from prc3cfg.shell.platform import device_number as device_number
 from prc3cfg.shell.platform import terminal_path as terminal_path
 from prc3cfg.shell.platform import wait_for as wait_for
-from prc3cfg.shell.readback import LinesFailed, Target, read_all, read_module
+from prc3cfg.shell.readback import LinesFailed, read_all, read_module
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot, applied_copy, check_writable, reason_given, save_applied
 from prc3cfg.shell.records import header as run_header
 
@@ -267,7 +267,7 @@ def line_cost(bus: Bus) -> LineCost:
 def targets(pairs: Pairs) -> list[Target]:
     """What to read of each module: its managed programs, and every program its plant system
     parameters could clamp."""
-    return [Target(bus.name, m.address, m.name, tuple(m.managed_programs()), m.desired_system()) for bus, m in pairs]
+    return what_to_read.in_full(_wanted(pairs, None))
 
 
 #: What a targeted read-back compares with, in words (`prc3cfg.shell.bases`).
@@ -310,13 +310,10 @@ class Reads:
         if self.base is None:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
-        skipped = {key: targeting.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
+        skipped = {key: what_to_read.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
         other = self.not_as_verified
         if other is None:
-            evidence = {(t.bus, t.address): said for t in self.targets if t.known is not None and (t.bus, t.address) in images
-                        and (said := targeting.contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
-            other = tuple(f"{bus.name}/{m.name} ({why})" for bus, m in chosen
-                          if (why := self.why.get(key := (bus.name, m.address)) or evidence.get(key)) is not None)  # fmt: skip
+            other = what_to_read.read_in_full(_wanted(chosen, None), self.targets, images, self.why)
         taken = self.taken
         if taken is None:
             taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen if skipped.get(key := (bus.name, m.address))}
@@ -326,7 +323,7 @@ class Reads:
 def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
     records know none of them; else of each module its system block and the managed programs the
-    record does not show holding the plant file's values (`targeting.to_read`) — every managed
+    record does not show holding the plant file's values (`what_to_read.for_plan`) — every managed
     program of one the record does not know, knows from too long ago, or that reported E12 since."""
     buses = {bus.name: bus for bus, _ in pairs}
     known: dict[Key, Known] = {}
@@ -335,17 +332,12 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         on_record, newer = bases.read(bus_line_keys(plant, bus))
         known |= {(bus.name, address): k for address, k in on_record.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
-    if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
+    unset = unset_systems(plant, buses.values()) if known or overruled else frozenset()  # of no use without a record
+    max_age = {name: bus.record_max_age for name, bus in buses.items()}
+    targeted = what_to_read.for_plan(_wanted(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
+    if targeted is None:
         return Reads(pairs, targets(pairs))
-    unset = unset_systems(plant, buses.values())
-    now = datetime.now(UTC)
-    to_read, why = [], {}
-    for bus, m in pairs:
-        key = (bus.name, m.address)
-        decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
-        to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
-        if decision.why is not None:
-            why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
+    to_read, why = targeted
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
@@ -447,7 +439,7 @@ def seen(plant: Plant, command: str, then: LineRead | None = None) -> LineRead:
     def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
         keys = bus_line_keys(plant, buses[bus])
         known, when = bases.load(keys), bases.now()
-        bases.update(keys, {a: targeting.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
+        bases.update(keys, {a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
         if then is not None:
             then(bus, images)
 
@@ -725,15 +717,12 @@ def _plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) 
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
     buses = {bus.name: bus for bus, _ in (names[(e.bus, e.address)] for e in entries)}
-    known, now, to_read = record(plant, buses.values()), datetime.now(UTC), []
-    for e in entries:
-        bus, m = names[(e.bus, e.address)]
-        decision = targeting.to_read(known.get((e.bus, e.address)), m.desired_image(), now, bus.record_max_age)
-        if not set(decision.programs) <= set(e.programs_read or ()):
-            raise StalePlan(f"{path}: stale plan — bus {e.bus}, module {e.address} ({e.name}): the line's record no longer shows it "
-                            "holding what the plan took as known without reading it (written or read by another run since, or "
-                            "older than record_max_age); nothing was written — plan again")  # fmt: skip
-        to_read.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known, m.managed_programs()))
+    desired, max_age = {key: m.desired_image() for key, (_, m) in names.items()}, {name: bus.record_max_age for name, bus in buses.items()}
+    to_read, stale = what_to_read.for_plan_file(entries, desired, record(plant, buses.values()), max_age, datetime.now(UTC))
+    if stale is not None:
+        raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
+                        "holding what the plan took as known without reading it (written or read by another run since, or "
+                        "older than record_max_age); nothing was written — plan again")  # fmt: skip
     return Reads([names[(e.bus, e.address)] for e in entries], to_read, said["base"], tuple(said["not_as_verified"]),
                  taken=dict(said.get("taken", {})))  # fmt: skip
 
@@ -758,11 +747,7 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
             raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
                             f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
                             "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
-    to_read = [
-        Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(image.programs, 1) if p is not None), image.system)
-        for bus, m in pairs
-        for image in [taken.images[(bus.name, m.address)]]
-    ]
+    to_read = what_to_read.in_full(_wanted(pairs, taken.images))  # every program the snapshot holds
     return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason)
 
 
@@ -1063,12 +1048,12 @@ class _Writing:
 
     def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
         """What the modules that verified hold, back into their lines' records: the read-back with the
-        steps' effect, and what the record knew of the rest (`targeting.verified`)."""
+        steps' effect, and what the record knew of the rest (`what_to_read.verified`)."""
         when, by = bases.now(), bases.who(self.command, self.plant.path)
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
             try:
-                bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+                bases.update(self.keys[bus], {a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
             except UserError as error:  # they stay unknown: the next plan reads them in full
                 self.options.tell(f"bus {bus}: {error} — the next plan reads its modules in full")
 

@@ -31,7 +31,7 @@ from prc3cfg.core.render import (
     module_lines,
     plan_json,
 )
-from prc3cfg.core.verification import read_messages, verification_time
+from prc3cfg.core.what_to_read import read_messages, verification_time
 
 
 def image_with(jumps_: dict[int, int]) -> ModuleImage:

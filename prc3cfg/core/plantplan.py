@@ -26,8 +26,7 @@ from prc3cfg import __version__
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import ModulePlan, Step
-from prc3cfg.core.targeting import with_known
-from prc3cfg.core.verification import read_messages, verification_time
+from prc3cfg.core.what_to_read import read_messages, verification_time, with_known
 
 FORMAT = "prc3cfg-plan/1"
 
@@ -54,7 +53,7 @@ class ModuleChange:
     system_unset: bool = False  # the module reported E12: its plan writes the system parameters first
     cost: LineCost | None = None
     #: a targeted read's: the plant file's whole image, `desired` being cut to what was read — its other
-    #: programs the line's record showed held (`prc3cfg.core.targeting`)
+    #: programs the line's record showed held (`prc3cfg.core.what_to_read`)
     wanted: ModuleImage | None = None
 
     def as_known(self, image: ModuleImage) -> ModuleImage:
@@ -117,7 +116,7 @@ class LineProof:
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """How a plan's read-back was targeted (`prc3cfg.core.targeting`): the record it was compared with,
+    """How a plan's read-back was targeted (`prc3cfg.core.what_to_read`): the record it was compared with,
     in words, the modules not read at all (none: every module's system block is read), per module read
     the managed programs not read — taken as known from the record, with who verified them when
     (`taken`, "bus/name" → words) — and the modules read in full, each with why. A plan without one

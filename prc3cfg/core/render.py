@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
 from prc3cfg.core import text as escape
+from prc3cfg.core.axes import Release
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
@@ -34,7 +35,6 @@ from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
-from prc3cfg.core.verification import Release
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"

@@ -53,7 +53,7 @@ from prc3cfg.core.planner import (
     run_steps,
     summarise,
 )
-from prc3cfg.core.verification import read_messages, verification_time
+from prc3cfg.core.what_to_read import read_messages, verification_time
 
 #: Items per message of the per-field messages (40h..45h; 46h carries 31).
 FIELD_ITEMS = codec.MAX_FIELD_ITEMS
@@ -320,7 +320,7 @@ class _Floor:
       clamping or link can leave, costs a word of a message of its own steps — and each message
       its ID word and the line's turnaround;
     - a desired system block the broadcasts do not write costs the cheapest 10h/20h to it;
-    - the verifying read-back (`verification.reach`) reads the system block where one is written
+    - the verifying read-back (`what_to_read.reach`) reads the system block where one is written
       — and then every program whose prediction differs from its read-back: each managed one
       that differs, each other one that the new system block clamps — and what the broadcasts
       write, and what the own steps write: at least what they must, at most what is managed.

@@ -8,7 +8,7 @@ reply carries no checksum). A difference (a lost or damaged exchange, a module c
 the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
 
 Verification reads exactly what the steps that went out could have changed
-(`prc3cfg.core.verification.reach`): the system block if a system step went out, the programs
+(`prc3cfg.core.what_to_read.verification_reads`): the system block if a system step went out, the programs
 the steps write and the programs the module's own clamping changes — in the fewest
 50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
 read-back instead, for the paranoid. A difference counts only when two reads agree on it.
@@ -37,12 +37,13 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
+from prc3cfg.core.axes import Release
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.planner import Step, plan_module
 from prc3cfg.core.render import plural
-from prc3cfg.core.verification import Release, reach
+from prc3cfg.core.what_to_read import verification_reads
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
@@ -232,11 +233,9 @@ class ModuleRun:
         expected, sent_before = self.predicted, 0
         known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
         for _ in range(REPAIRS + 1):
-            system, programs = reach(self.final or self.before, expected, self.sent[sent_before:])
-            system |= with_system
+            system, programs = verification_reads(self.before, self.final or self.before, expected, self.sent[sent_before:],
+                                                  full=verify is Verify.FULL, watch_system=with_system)  # fmt: skip
             self.watched |= with_system
-            if verify is Verify.FULL:
-                system, programs = True, known_programs
             try:
                 self.final = self.verify_read(link, system, programs, expected)
             except Interrupted:
