@@ -8,7 +8,7 @@ is wrong — what would be right`. Pure: the shell reads the file (`prc3cfg.shel
 The parts: `models` (the file's structure and the JSON Schema), `document` (YAML with
 positions), `messages` (wording), `profiles` (layering), `rules` (cross-value checks), `plant`
 (the loaded plant), `loader`; and the two writers, `importer` (a plant file from modules) and
-`adopt` (a plant file rewritten in place). Units are `prc3cfg.core.units`.
+`adopt` (a plant file rewritten in place, its values spliced into the text by `splice`). Units are `prc3cfg.core.units`.
 """
 
 from prc3cfg.plant.loader import parse_plant
