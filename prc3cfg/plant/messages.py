@@ -17,7 +17,6 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic_core import ErrorDetails
 
 from prc3cfg.core.text import has_control
-from prc3cfg.plant.document import DECIMAL_NUMBER
 from prc3cfg.plant.models import (
     BusSpec,
     ChainSpec,
@@ -32,6 +31,7 @@ from prc3cfg.plant.models import (
     SystemSpec,
 )
 from prc3cfg.plant.problems import DECIMAL_COMMA, Path_, Problem
+from prc3cfg.plant.scalars import DECIMAL_NUMBER
 
 #: The model of a mapping, by the key that holds it (a section) or holds a collection of them.
 SECTIONS: dict[str, type[BaseModel]] = {

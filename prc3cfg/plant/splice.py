@@ -24,9 +24,10 @@ from decimal import Decimal
 from typing import Any
 
 from prc3cfg.core.units import QUANTITIES
-from prc3cfg.plant.document import DECIMAL_NUMBER, Span, core_schema, spans
+from prc3cfg.plant.document import Span, spans
 from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 from prc3cfg.plant.problems import Path_
+from prc3cfg.plant.scalars import DECIMAL_NUMBER, core_schema
 
 #: The order keys are written in where a key is added: a module's own keys as the README's
 #: plant files write them, then the models' order of system, program and F1/F2 keys.
