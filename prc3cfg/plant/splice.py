@@ -11,9 +11,9 @@ it does not have is a new key, inserted as text in the style of the file: into a
 the file writes them (`_Conventions`). A comment lined up after a value that changed length stays
 in its column. Every other byte — comments, quoting, layout, line ends — stays as it was. Offsets
 are those of the text after a byte order mark, which is taken off before parsing and put back
-after: libyaml does not count it, the pure parser does. Values are in human units, as a plant
-file writes them (numbers as `Decimal`, F1/F2 as mappings). Does not know what a value means nor
-whether the new text still loads: `adopt` checks that. Pure: text in, text out.
+after: libyaml does not count it, the pure parser does. Values are as a plant file holds them
+(`units.plant_value`): numbers, text, and mappings for a new program or an F1/F2. Does not know
+what a value means nor whether the new text still loads: `adopt` checks that. Pure: text in, text out.
 """
 
 from __future__ import annotations
