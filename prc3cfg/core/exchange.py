@@ -1,0 +1,148 @@
+"""One exchange on the line, as data: what the link makes of what came back to a message.
+
+Every decision is in the tables at the top of this file, as h11's `_state.py` keeps its
+transitions: `VERDICTS` — what came back to one attempt, to a read or to a write, believed or
+heard once, and what the link does next (take the answer, ask again, or stop). The link client
+(`Link.request`, `Link.probe`) only sends, reads and acts on what it says.
+
+The rules the verdicts keep:
+- every PRC 3 message is idempotent (an absolute write or a read): a lost reply, one that does
+  not decode, and a structural error code (11..15, and 10 to a write: we only send messages the
+  codec built, so the module saw ours damaged on the line) are asked for again;
+- a read answered with an acknowledgement was taken by the module for a write — a damaged frame
+  it executed, any write: nothing more may be sent on the line, and it is never asked again;
+- a read answered as an unknown message (10) is firmware before PRC 3.03.1, which has no reads;
+- on a framing without a checksum (open-driver) a damaged reply can look like any code: an
+  error code there is believed only when the module gives the same one twice in a row (asking
+  again is harmless: the message is idempotent);
+- a step that asks again gives up on the last attempt (`GIVE_UP`), naming what went wrong last.
+
+Does not own what the messages and the codes mean (`codec`, `error_codes`), how frames look or
+what is left of a damaged one (`framing`), nor the port or the clock: the shell's.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Final, NamedTuple
+
+from prc3cfg.core import codec
+from prc3cfg.core.error_codes import ACCEPTED, describe
+
+#: Codes of the structural checks (prc3-protocol.md §4.5 steps 1–5): to us, damage on the line.
+DAMAGED_CODES: Final = frozenset(range(10, 16))
+UNKNOWN_ID: Final = 10  # to a read: damage — or firmware before PRC 3.03.1, which has no read messages
+
+
+class Arrival(enum.Enum):
+    """What came back to one attempt, as the link sorts it."""
+
+    NOTHING = "nothing"  # no reply from the module asked within the time-out (others' replies, damaged frames: ignored)
+    GARBLED = "garbled"  # a reply that is not one to what was asked (`codec.BadReply`)
+    ACCEPTED = "accepted"  # code 0
+    UNKNOWN_ID = "unknown ID"  # code 10
+    DAMAGED = "damaged"  # codes 11..15: the module reports our message damaged
+    REFUSED = "refused"  # any other code: the module will not do it (not in STOP, a fault, …)
+    DATA = "data"  # a data block: what a read asks for
+
+
+class Asked(enum.Enum):
+    READ = "read"  # 50h..52h
+    WRITE = "write"  # every other message
+
+
+class Step(enum.Enum):
+    """What the link does next."""
+
+    ANSWER = "answer"  # the reply is the module's answer
+    RETRY = "retry"  # lost or damaged: ask again
+    CONFIRM = "confirm"  # a code heard once on a line without a checksum: ask again, believe it heard twice
+    POSSIBLE_WRITE = "possible write"  # stop the line (`PossibleWrite`)
+    NO_READ_MESSAGES = "no read messages"  # stop: the firmware has no reads (`NoReadMessages`)
+    GIVE_UP = "give up"  # a retry or a confirmation with no attempt left (`LinkError`)
+
+
+class Steps(NamedTuple):
+    believed: Step  # on a framing with a checksum, or the code the attempt before asked to confirm
+    heard_once: Step  # on a framing without one, not (yet) given twice in a row
+
+
+#: What the link does with what came back to one attempt, by what it was, whether the message
+#: was a read, and whether what came is believed (`Steps`).
+VERDICTS: Final[dict[tuple[Arrival, Asked], Steps]] = {
+    # what came back           to a           believed                  heard once, no checksum
+    (Arrival.NOTHING,    Asked.READ):  Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.NOTHING,    Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.GARBLED,    Asked.READ):  Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.GARBLED,    Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.ACCEPTED,   Asked.READ):  Steps(Step.POSSIBLE_WRITE,   Step.POSSIBLE_WRITE),
+    (Arrival.ACCEPTED,   Asked.WRITE): Steps(Step.ANSWER,           Step.ANSWER),
+    (Arrival.UNKNOWN_ID, Asked.READ):  Steps(Step.NO_READ_MESSAGES, Step.CONFIRM),
+    (Arrival.UNKNOWN_ID, Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.DAMAGED,    Asked.READ):  Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.DAMAGED,    Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
+    (Arrival.REFUSED,    Asked.READ):  Steps(Step.ANSWER,           Step.CONFIRM),
+    (Arrival.REFUSED,    Asked.WRITE): Steps(Step.ANSWER,           Step.CONFIRM),
+    (Arrival.DATA,       Asked.READ):  Steps(Step.ANSWER,           Step.ANSWER),
+    # a data block to a write does not decode (a write's reply is a code): GARBLED
+}  # fmt: skip
+#: The steps that ask again: on the last attempt, the link gives up instead (`Step.GIVE_UP`).
+ASK_AGAIN: Final = frozenset({Step.RETRY, Step.CONFIRM})
+#: What is wrong with a code the link asks again about, by why it asks.
+CODE_PROBLEMS: Final = {
+    Step.RETRY: "the module reports a damaged message ({code})",
+    Step.CONFIRM: "{code} on a line without a checksum, asking again to confirm it",
+}
+
+
+Reply = int | codec.SystemReply | codec.ProgramsReply
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """What came back to one attempt, and what the link does next."""
+
+    arrival: Arrival
+    step: Step
+    reply: Reply | None = None  # the reply decoded (None: nothing came, or it did not decode)
+    problem: str = ""  # what went wrong, when the link asks again or gives up: for the log and the error
+
+    @property
+    def unconfirmed(self) -> int | None:
+        """The code the next attempt is to confirm (heard once on a line without a checksum)."""
+        return self.reply if self.step is Step.CONFIRM and isinstance(self.reply, int) else None
+
+
+def arrival(reply: Reply) -> Arrival:
+    """What a decoded reply is, to the verdicts."""
+    if not isinstance(reply, int):
+        return Arrival.DATA
+    if reply == ACCEPTED:
+        return Arrival.ACCEPTED
+    if reply == UNKNOWN_ID:
+        return Arrival.UNKNOWN_ID
+    return Arrival.DAMAGED if reply in DAMAGED_CODES else Arrival.REFUSED
+
+
+def judge(message: codec.Message, raw: bytes | None, *, checked: bool, heard: int | None, attempts_left: int, timeout: float) -> Verdict:
+    """The verdict on one attempt of `message`, whose reply message was `raw` (None: nothing
+    within `timeout` seconds). `checked`: the framing has a checksum; `heard`: the code the attempt
+    before asks to confirm (`Verdict.unconfirmed`); `attempts_left`: how many may follow this one."""
+    reply: Reply | None = None
+    if raw is None:
+        came, problem = Arrival.NOTHING, f"no reply within {timeout:g} s"
+    else:
+        try:
+            reply = codec.decode_reply(message, raw)
+        except codec.BadReply as error:
+            came, problem = Arrival.GARBLED, f"bad reply ({error})"
+        else:
+            came, problem = arrival(reply), ""
+    steps = VERDICTS[came, Asked.READ if message.IS_READ else Asked.WRITE]
+    step = steps.believed if checked or (heard is not None and reply == heard) else steps.heard_once
+    if isinstance(reply, int) and step in CODE_PROBLEMS:
+        problem = CODE_PROBLEMS[step].format(code=describe(reply))
+    if step in ASK_AGAIN and attempts_left <= 0:
+        step = Step.GIVE_UP
+    return Verdict(came, step, reply, problem)
