@@ -1,9 +1,10 @@
 """The decisions of one exchange as tables of cases (`prc3cfg.core.exchange`): what came back to
 an attempt, to a read or a write, on a line with or without a checksum, with attempts left or
-none → what the link does next, and what it says.
+none → what the link does next, and what it says; the fault injection's draws → the fault.
 
-The link client acts on these verdicts; its I/O is tested in tests/test_link.py. Each case here
-reaches a row (and column) of the table, and a test checks that every row is reached.
+The link client and the emulator act on these verdicts; their I/O is tested in tests/test_link.py
+and tests/test_emulator.py. Each case here reaches a row (and column) of the tables, and a test
+checks that every row is reached.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from prc3cfg.core import codec
-from prc3cfg.core.exchange import VERDICTS, Arrival, Asked, Step, judge
+from prc3cfg.core.exchange import FAULTS, VERDICTS, Arrival, Asked, Fault, Step, judge
 from prc3cfg.core.image import DEFAULT_SYSTEM
 
 READ, WRITE = codec.ReadSystem(), codec.InitSystem()  # 50h, 10h
@@ -135,3 +136,26 @@ def test_a_code_heard_once_is_confirmed_by_the_next_attempt_alone():
         heard = verdict.unconfirmed
     assert steps == [Step.CONFIRM, Step.CONFIRM, Step.ANSWER]
     assert verdict.reply == 21
+
+
+# the fault injection's draws: lost, damaged, on the request's side → the fault
+FAULT_CASES = [
+    pytest.param(False, False, False, Fault.NONE, id="clean"),
+    pytest.param(True, False, True, Fault.REQUEST_LOST, id="request lost"),
+    pytest.param(True, True, True, Fault.REQUEST_LOST, id="request lost and damaged: lost"),
+    pytest.param(False, True, True, Fault.REQUEST_DAMAGED, id="request damaged"),
+    pytest.param(True, False, False, Fault.REPLY_LOST, id="reply lost"),
+    pytest.param(True, True, False, Fault.REPLY_LOST, id="reply lost and damaged: lost"),
+    pytest.param(False, True, False, Fault.REPLY_DAMAGED, id="reply damaged"),
+]
+
+
+@pytest.mark.parametrize(("lost", "damaged", "request_side", "fault"), FAULT_CASES)
+def test_the_fault_an_exchange_meets(lost, damaged, request_side, fault):
+    assert FAULTS[lost, damaged, request_side] is fault
+
+
+def test_the_fault_cases_are_every_row_and_every_fault():
+    assert {case.values[:3] for case in FAULT_CASES} == set(FAULTS)
+    assert {case.values[3] for case in FAULT_CASES} == set(Fault)
+    assert (False, False, True) not in FAULTS  # no side is drawn when nothing is due

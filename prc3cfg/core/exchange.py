@@ -1,9 +1,11 @@
-"""One exchange on the line, as data: what the link makes of what came back to a message.
+"""One exchange on the line, as data: what the link makes of what came back to a message, and
+what the emulator's fault injection does to an exchange on its way.
 
 Every decision is in the tables at the top of this file, as h11's `_state.py` keeps its
 transitions: `VERDICTS` — what came back to one attempt, to a read or to a write, believed or
-heard once, and what the link does next (take the answer, ask again, or stop). The link client
-(`Link.request`, `Link.probe`) only sends, reads and acts on what it says.
+heard once, and what the link does next (take the answer, ask again, or stop); `FAULTS` — which
+frame of an exchange the emulator loses or damages. The link client (`Link.request`, `Link.probe`)
+and the emulator server (`Emulator.exchange`) only send, read, wait and act on what these say.
 
 The rules the verdicts keep:
 - every PRC 3 message is idempotent (an absolute write or a read): a lost reply, one that does
@@ -18,7 +20,8 @@ The rules the verdicts keep:
 - a step that asks again gives up on the last attempt (`GIVE_UP`), naming what went wrong last.
 
 Does not own what the messages and the codes mean (`codec`, `error_codes`), how frames look or
-what is left of a damaged one (`framing`), nor the port or the clock: the shell's.
+what is left of a damaged one (`framing`), nor the port, the clock or the random draws: the
+shell's.
 """
 
 from __future__ import annotations
@@ -94,6 +97,31 @@ CODE_PROBLEMS: Final = {
     Step.RETRY: "the module reports a damaged message ({code})",
     Step.CONFIRM: "{code} on a line without a checksum, asking again to confirm it",
 }
+
+
+class Fault(enum.Enum):
+    """What the line does to one exchange, as the emulator's fault injection plays it."""
+
+    NONE = "none"
+    REQUEST_LOST = "request lost"  # no module hears it: silence
+    REQUEST_DAMAGED = "request damaged"  # a bit flipped: what the modules' receivers make of it
+    REPLY_LOST = "reply lost"  # the module did it, the master hears nothing
+    REPLY_DAMAGED = "reply damaged"  # the module did it, its reply has a bit flipped
+
+
+#: The fault an exchange meets, by the fault injection's draws: lost (the drop rate's), damaged
+#: (the corrupt rate's), and — drawn only when either is due — on the request's side rather than
+#: the reply's. Both due: lost, as a frame that never arrives cannot arrive damaged.
+FAULTS: Final[dict[tuple[bool, bool, bool], Fault]] = {
+    # lost   damaged  the request's
+    (False, False, False): Fault.NONE,
+    (True, False, True): Fault.REQUEST_LOST,
+    (True, True, True): Fault.REQUEST_LOST,
+    (False, True, True): Fault.REQUEST_DAMAGED,
+    (True, False, False): Fault.REPLY_LOST,
+    (True, True, False): Fault.REPLY_LOST,
+    (False, True, False): Fault.REPLY_DAMAGED,
+}  # fmt: skip
 
 
 Reply = int | codec.SystemReply | codec.ProgramsReply
