@@ -55,7 +55,7 @@ class Asked(enum.Enum):
     WRITE = "write"  # every other message
 
 
-class Step(enum.Enum):
+class LinkStep(enum.Enum):
     """What the link does next."""
 
     ANSWER = "answer"  # the reply is the module's answer
@@ -67,35 +67,35 @@ class Step(enum.Enum):
 
 
 class Steps(NamedTuple):
-    believed: Step  # on a framing with a checksum, or the code the attempt before asked to confirm
-    heard_once: Step  # on a framing without one, not (yet) given twice in a row
+    believed: LinkStep  # on a framing with a checksum, or the code the attempt before asked to confirm
+    heard_once: LinkStep  # on a framing without one, not (yet) given twice in a row
 
 
 #: What the link does with what came back to one attempt, by what it was, whether the message
 #: was a read, and whether what came is believed (`Steps`).
 VERDICTS: Final[dict[tuple[Arrival, Asked], Steps]] = {
-    # what came back           to a           believed                  heard once, no checksum
-    (Arrival.NOTHING,    Asked.READ):  Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.NOTHING,    Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.GARBLED,    Asked.READ):  Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.GARBLED,    Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.ACCEPTED,   Asked.READ):  Steps(Step.POSSIBLE_WRITE,   Step.POSSIBLE_WRITE),
-    (Arrival.ACCEPTED,   Asked.WRITE): Steps(Step.ANSWER,           Step.ANSWER),
-    (Arrival.UNKNOWN_ID, Asked.READ):  Steps(Step.NO_READ_MESSAGES, Step.CONFIRM),
-    (Arrival.UNKNOWN_ID, Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.DAMAGED,    Asked.READ):  Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.DAMAGED,    Asked.WRITE): Steps(Step.RETRY,            Step.RETRY),
-    (Arrival.REFUSED,    Asked.READ):  Steps(Step.ANSWER,           Step.CONFIRM),
-    (Arrival.REFUSED,    Asked.WRITE): Steps(Step.ANSWER,           Step.CONFIRM),
-    (Arrival.DATA,       Asked.READ):  Steps(Step.ANSWER,           Step.ANSWER),
+    # what came back     to a                believed                   heard once, no checksum
+    (Arrival.NOTHING,    Asked.READ):  Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.NOTHING,    Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.GARBLED,    Asked.READ):  Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.GARBLED,    Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.ACCEPTED,   Asked.READ):  Steps(LinkStep.POSSIBLE_WRITE,   LinkStep.POSSIBLE_WRITE),
+    (Arrival.ACCEPTED,   Asked.WRITE): Steps(LinkStep.ANSWER,           LinkStep.ANSWER),
+    (Arrival.UNKNOWN_ID, Asked.READ):  Steps(LinkStep.NO_READ_MESSAGES, LinkStep.CONFIRM),
+    (Arrival.UNKNOWN_ID, Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.DAMAGED,    Asked.READ):  Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.DAMAGED,    Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.REFUSED,    Asked.READ):  Steps(LinkStep.ANSWER,           LinkStep.CONFIRM),
+    (Arrival.REFUSED,    Asked.WRITE): Steps(LinkStep.ANSWER,           LinkStep.CONFIRM),
+    (Arrival.DATA,       Asked.READ):  Steps(LinkStep.ANSWER,           LinkStep.ANSWER),
     # a data block to a write does not decode (a write's reply is a code): GARBLED
 }  # fmt: skip
-#: The steps that ask again: on the last attempt, the link gives up instead (`Step.GIVE_UP`).
-ASK_AGAIN: Final = frozenset({Step.RETRY, Step.CONFIRM})
+#: The steps that ask again: on the last attempt, the link gives up instead (`LinkStep.GIVE_UP`).
+ASK_AGAIN: Final = frozenset({LinkStep.RETRY, LinkStep.CONFIRM})
 #: What is wrong with a code the link asks again about, by why it asks.
 CODE_PROBLEMS: Final = {
-    Step.RETRY: "the module reports a damaged message ({code})",
-    Step.CONFIRM: "{code} on a line without a checksum, asking again to confirm it",
+    LinkStep.RETRY: "the module reports a damaged message ({code})",
+    LinkStep.CONFIRM: "{code} on a line without a checksum, asking again to confirm it",
 }
 
 
@@ -132,14 +132,14 @@ class Verdict:
     """What came back to one attempt, and what the link does next."""
 
     arrival: Arrival
-    step: Step
+    step: LinkStep
     reply: Reply | None = None  # the reply decoded (None: nothing came, or it did not decode)
     problem: str = ""  # what went wrong, when the link asks again or gives up: for the log and the error
 
     @property
     def unconfirmed(self) -> int | None:
         """The code the next attempt is to confirm (heard once on a line without a checksum)."""
-        return self.reply if self.step is Step.CONFIRM and isinstance(self.reply, int) else None
+        return self.reply if self.step is LinkStep.CONFIRM and isinstance(self.reply, int) else None
 
 
 def arrival(reply: Reply) -> Arrival:
@@ -172,5 +172,5 @@ def judge(message: codec.Message, raw: bytes | None, *, checked: bool, heard: in
     if isinstance(reply, int) and step in CODE_PROBLEMS:
         problem = CODE_PROBLEMS[step].format(code=describe(reply))
     if step in ASK_AGAIN and attempts_left <= 0:
-        step = Step.GIVE_UP
+        step = LinkStep.GIVE_UP
     return Verdict(came, step, reply, problem)

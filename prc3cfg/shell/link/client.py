@@ -43,7 +43,7 @@ from serial import rfc2217
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.exchange import Step, judge
+from prc3cfg.core.exchange import LinkStep, judge
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
 from prc3cfg.errors import Interrupted, NotSent, UserError
@@ -108,7 +108,7 @@ class PossibleWrite(LinkError):
 
 
 #: The verdicts that stop the line, and what they raise.
-STOPS: dict[Step, type[PossibleWrite | NoReadMessages]] = {Step.POSSIBLE_WRITE: PossibleWrite, Step.NO_READ_MESSAGES: NoReadMessages}
+STOPS: dict[LinkStep, type[PossibleWrite | NoReadMessages]] = {LinkStep.POSSIBLE_WRITE: PossibleWrite, LinkStep.NO_READ_MESSAGES: NoReadMessages}
 
 
 @dataclass(frozen=True, slots=True)
@@ -202,12 +202,12 @@ class Link:
                 raise NotSent() if attempt == 1 else Interrupted()
             raw = self._attempt(address, message, data, attempt)
             verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=self.timeout)
-            if verdict.step is Step.ANSWER:
+            if verdict.step is LinkStep.ANSWER:
                 assert verdict.reply is not None  # an answer is a reply decoded
                 return verdict.reply
             if stop := STOPS.get(verdict.step):
                 raise stop(self.bus, address, message)
-            if verdict.step is Step.GIVE_UP:
+            if verdict.step is LinkStep.GIVE_UP:
                 break
             heard = verdict.unconfirmed
             note = f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
@@ -232,9 +232,9 @@ class Link:
         if raw is None:
             return None
         verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=timeout)
-        if verdict.step is Step.POSSIBLE_WRITE:
+        if verdict.step is LinkStep.POSSIBLE_WRITE:
             raise PossibleWrite(self.bus, address, message)
-        if verdict.step is Step.ANSWER:
+        if verdict.step is LinkStep.ANSWER:
             return verdict.reply
         return self.request(address, message)  # heard, not usable (even a read answered as unknown): the usual retries
 
