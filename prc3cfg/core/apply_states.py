@@ -58,13 +58,13 @@ class Event(enum.Enum):
     REPAIR_PLANNED = "repair planned"
     #: the repair would release the axes (10h/20h) of a module whose release the plan agreed to did not
     REPAIR_UNCONSENTED = "repair unconsented"
-    NO_ROUND_LEFT = "no round left"  # the budgets' own events, given by `Progress.after`
+    NO_ROUND_LEFT = "no round left"  # the budgets' own events, given by `Course.after`
     NO_REPAIR_LEFT = "no repair left"
     CANCELLED = "cancelled"  # Ctrl-C, before an exchange or between its attempts
     LINE_STOPPED = "line stopped"  # a module of the line executed a damaged frame: nothing more is sent on it
 
 
-class Action(enum.Enum):
+class Next(enum.Enum):
     """What the shell does next."""
 
     SEND = "send"  # the next step (the plan's own, or the repair's)
@@ -75,63 +75,63 @@ class Action(enum.Enum):
 
 
 #: Every transition: state → event → (next state, action). A pair not here cannot happen (`NoTransition`).
-TRANSITIONS: dict[State, dict[Event, tuple[State, Action]]] = {
+TRANSITIONS: dict[State, dict[Event, tuple[State, Next]]] = {
     State.WRITING: {
-        Event.ACKNOWLEDGED: (State.WRITING, Action.SEND),
-        Event.ALL_SENT: (State.VERIFYING, Action.READ),
+        Event.ACKNOWLEDGED: (State.WRITING, Next.SEND),
+        Event.ALL_SENT: (State.VERIFYING, Next.READ),
         # every PRC 3 message is idempotent: read back, and send again whatever still differs
-        Event.NO_REPLY: (State.VERIFYING, Action.READ),
+        Event.NO_REPLY: (State.VERIFYING, Next.READ),
         # final, unless a lost broadcast explains it: the read-back and an addressed repair get their chance first
-        Event.ERROR_CODE_AFTER_BROADCAST: (State.VERIFYING, Action.READ),
-        Event.ERROR_CODE: (State.REFUSED, Action.READ),
+        Event.ERROR_CODE_AFTER_BROADCAST: (State.VERIFYING, Next.READ),
+        Event.ERROR_CODE: (State.REFUSED, Next.READ),
         # only a 10h/20h clears E12, and this plan has none for it: the next plan writes the system first
-        Event.E12: (State.REFUSED, Action.READ),
+        Event.E12: (State.REFUSED, Next.READ),
         # it moves: none of its steps may go now, nor be repeated in a loop
-        Event.RUNNING: (State.REFUSED, Action.READ),
-        Event.CANCELLED: (State.INTERRUPTED, Action.STOP),
-        Event.LINE_STOPPED: (State.FAILED, Action.STOP),
+        Event.RUNNING: (State.REFUSED, Next.READ),
+        Event.CANCELLED: (State.INTERRUPTED, Next.STOP),
+        Event.LINE_STOPPED: (State.FAILED, Next.STOP),
     },
     State.VERIFYING: {
-        Event.AGREES: (State.VERIFIED, Action.STOP),
-        Event.TRESPASSED: (State.FAILED, Action.STOP),  # no plan may write those programs: nothing to repair
-        Event.DIFFERS: (State.VERIFYING, Action.PLAN_REPAIR),
-        Event.REPAIR_PLANNED: (State.REPAIRING, Action.SEND),
-        Event.REPAIR_UNCONSENTED: (State.FAILED, Action.STOP),  # it needs a plan of its own, shown and agreed to
-        Event.NO_REPLY: (State.VERIFYING, Action.READ),  # the next round reads again
-        Event.READ_REFUSED: (State.FAILED, Action.STOP),
-        Event.NO_ROUND_LEFT: (State.FAILED, Action.GIVE_UP),
-        Event.NO_REPAIR_LEFT: (State.FAILED, Action.GIVE_UP),
-        Event.CANCELLED: (State.INTERRUPTED, Action.STOP),
-        Event.LINE_STOPPED: (State.FAILED, Action.STOP),
+        Event.AGREES: (State.VERIFIED, Next.STOP),
+        Event.TRESPASSED: (State.FAILED, Next.STOP),  # no plan may write those programs: nothing to repair
+        Event.DIFFERS: (State.VERIFYING, Next.PLAN_REPAIR),
+        Event.REPAIR_PLANNED: (State.REPAIRING, Next.SEND),
+        Event.REPAIR_UNCONSENTED: (State.FAILED, Next.STOP),  # it needs a plan of its own, shown and agreed to
+        Event.NO_REPLY: (State.VERIFYING, Next.READ),  # the next round reads again
+        Event.READ_REFUSED: (State.FAILED, Next.STOP),
+        Event.NO_ROUND_LEFT: (State.FAILED, Next.GIVE_UP),
+        Event.NO_REPAIR_LEFT: (State.FAILED, Next.GIVE_UP),
+        Event.CANCELLED: (State.INTERRUPTED, Next.STOP),
+        Event.LINE_STOPPED: (State.FAILED, Next.STOP),
     },
     State.REPAIRING: {
-        Event.ACKNOWLEDGED: (State.REPAIRING, Action.SEND),
-        Event.ALL_SENT: (State.VERIFYING, Action.READ),
-        Event.NO_REPLY: (State.VERIFYING, Action.READ),
+        Event.ACKNOWLEDGED: (State.REPAIRING, Next.SEND),
+        Event.ALL_SENT: (State.VERIFYING, Next.READ),
+        Event.NO_REPLY: (State.VERIFYING, Next.READ),
         # a repair is addressed: no lost broadcast explains its refusal
-        Event.ERROR_CODE_AFTER_BROADCAST: (State.REFUSED, Action.READ),
-        Event.ERROR_CODE: (State.REFUSED, Action.READ),
-        Event.E12: (State.REFUSED, Action.READ),
-        Event.RUNNING: (State.REFUSED, Action.READ),
-        Event.CANCELLED: (State.INTERRUPTED, Action.STOP),
-        Event.LINE_STOPPED: (State.FAILED, Action.STOP),
+        Event.ERROR_CODE_AFTER_BROADCAST: (State.REFUSED, Next.READ),
+        Event.ERROR_CODE: (State.REFUSED, Next.READ),
+        Event.E12: (State.REFUSED, Next.READ),
+        Event.RUNNING: (State.REFUSED, Next.READ),
+        Event.CANCELLED: (State.INTERRUPTED, Next.STOP),
+        Event.LINE_STOPPED: (State.FAILED, Next.STOP),
     },
     State.REFUSED: {
-        Event.AGREES: (State.VERIFIED, Action.STOP),  # the read-back shows the plant file's image all the same
-        Event.TRESPASSED: (State.FAILED, Action.STOP),
-        Event.DIFFERS: (State.FAILED, Action.STOP),  # the refusal stands: the failure names it
-        Event.NO_REPLY: (State.REFUSED, Action.READ),
-        Event.READ_REFUSED: (State.FAILED, Action.STOP),
-        Event.NO_ROUND_LEFT: (State.FAILED, Action.STOP),
-        Event.CANCELLED: (State.INTERRUPTED, Action.STOP),
-        Event.LINE_STOPPED: (State.FAILED, Action.STOP),
+        Event.AGREES: (State.VERIFIED, Next.STOP),  # the read-back shows the plant file's image all the same
+        Event.TRESPASSED: (State.FAILED, Next.STOP),
+        Event.DIFFERS: (State.FAILED, Next.STOP),  # the refusal stands: the failure names it
+        Event.NO_REPLY: (State.REFUSED, Next.READ),
+        Event.READ_REFUSED: (State.FAILED, Next.STOP),
+        Event.NO_ROUND_LEFT: (State.FAILED, Next.STOP),
+        Event.CANCELLED: (State.INTERRUPTED, Next.STOP),
+        Event.LINE_STOPPED: (State.FAILED, Next.STOP),
     },
     State.VERIFIED: {},
     State.FAILED: {
-        Event.LINE_STOPPED: (State.FAILED, Action.STOP),  # the line's stop is what the account says of it
+        Event.LINE_STOPPED: (State.FAILED, Next.STOP),  # the line's stop is what the account says of it
     },
     State.INTERRUPTED: {
-        Event.LINE_STOPPED: (State.INTERRUPTED, Action.STOP),
+        Event.LINE_STOPPED: (State.INTERRUPTED, Next.STOP),
     },
 }
 
@@ -158,16 +158,16 @@ class NoTransition(ValueError):
 
 
 @dataclass(frozen=True, slots=True)
-class Progress:
+class Course:
     """One module's apply so far: its state, what the shell does next, and the verifying rounds and
     repairs it has had."""
 
     state: State = State.WRITING
-    action: Action = Action.SEND
+    action: Next = Next.SEND
     rounds: int = 0
     repairs: int = 0
 
-    def after(self, event: Event) -> Progress:
+    def after(self, event: Event) -> Course:
         """The table's transition for `event`; then, where the next action would take a round or a
         repair more than the budget allows, the budget's (`NO_ROUND_LEFT`, `NO_REPAIR_LEFT`)."""
         try:
@@ -175,11 +175,11 @@ class Progress:
         except KeyError:
             raise NoTransition(self.state, event) from None
         repairs = self.repairs + (event is Event.REPAIR_PLANNED)
-        if action is Action.READ and self.rounds == ROUNDS:
-            return Progress(state, action, self.rounds, repairs).after(Event.NO_ROUND_LEFT)
-        if action is Action.PLAN_REPAIR and repairs == REPAIRS:
-            return Progress(state, action, self.rounds, repairs).after(Event.NO_REPAIR_LEFT)
-        return Progress(state, action, self.rounds + (action is Action.READ), repairs)
+        if action is Next.READ and self.rounds == ROUNDS:
+            return Course(state, action, self.rounds, repairs).after(Event.NO_ROUND_LEFT)
+        if action is Next.PLAN_REPAIR and repairs == REPAIRS:
+            return Course(state, action, self.rounds, repairs).after(Event.NO_REPAIR_LEFT)
+        return Course(state, action, self.rounds + (action is Next.READ), repairs)
 
 
 def reply_event(code: int, *, after_broadcast: bool) -> Event:

@@ -40,7 +40,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
-from prc3cfg.core.apply_states import REPAIRS, Action, Event, Progress, State, repair_event, reply_event
+from prc3cfg.core.apply_states import REPAIRS, Course, Event, Next, State, repair_event, reply_event
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
@@ -87,7 +87,7 @@ class ModuleRun:
     system_unset: bool = False  # it answered E12 (system parameters not set): the next plan writes them first
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     failure: str | None = None
-    progress: Progress = field(default_factory=Progress)  # where the table has it, and what it does next
+    course: Course = field(default_factory=Course)  # where the table has it, and what it does next
 
     @property
     def where(self) -> str:
@@ -95,15 +95,15 @@ class ModuleRun:
 
     def process(self, event: Event) -> None:
         """What happened to the module, told to the table (`prc3cfg.core.apply_states`)."""
-        self.progress = self.progress.after(event)
+        self.course = self.course.after(event)
 
     @property
     def verified(self) -> bool:
-        return self.progress.state is State.VERIFIED
+        return self.course.state is State.VERIFIED
 
     @property
     def interrupted(self) -> bool:
-        return self.progress.state is State.INTERRUPTED
+        return self.course.state is State.INTERRUPTED
 
     @interrupted.setter
     def interrupted(self, stop: bool) -> None:
@@ -113,7 +113,7 @@ class ModuleRun:
 
     @property
     def repairs(self) -> int:
-        return self.progress.repairs
+        return self.course.repairs
 
     @property
     def release_sent(self) -> bool:
@@ -185,10 +185,10 @@ class ModuleRun:
     def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> None:
         """Send steps in order — the plan's own, or a repair's (the state says which) — while the
         table says to send the next (`failure` says why it stopped, naming the step)."""
-        what = "repair step" if self.progress.state is State.REPAIRING else "step"
+        what = "repair step" if self.course.state is State.REPAIRING else "step"
         for index, step in enumerate(steps, start=1):
             self.process(self._send(link, step, f"{what} {index} of {len(steps)} ({step.summary})"))
-            if self.progress.action is not Action.SEND:
+            if self.course.action is not Next.SEND:
                 return
             tick()
         self.process(Event.ALL_SENT)
@@ -254,24 +254,24 @@ class ModuleRun:
         expected, sent_before, repair = self.predicted, 0, None
         known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
         while True:
-            action = self.progress.action
-            if action is Action.READ:
+            action = self.course.action
+            if action is Next.READ:
                 system, programs = reach(self.final or self.before, expected, self.sent[sent_before:])
                 system |= with_system
                 self.watched |= with_system
                 if verify is Verify.FULL:
                     system, programs = True, known_programs
                 self.process(self._verify(link, system, programs, expected, known_programs))
-            elif action is Action.PLAN_REPAIR:
+            elif action is Next.PLAN_REPAIR:
                 assert self.final is not None  # a difference was read
                 repair = plan_module(self.final, self.desired, cost)
                 self.process(self._consent(repair, consented))
-            elif action is Action.SEND:
+            elif action is Next.SEND:
                 assert repair is not None  # the table sends a repair once planned
                 expected, sent_before = repair.predicted, len(self.sent)
                 self.run(link, repair.steps, tick)
             else:
-                if action is Action.GIVE_UP:
+                if action is Next.GIVE_UP:
                     self.failure = self._gave_up()
                 return
 
