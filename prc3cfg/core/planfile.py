@@ -442,6 +442,9 @@ def _summary(message: codec.Message, system_keys: list[str]) -> str:
     return summarise(message, DEFAULT_SYSTEM)
 
 
+# -- proving ---------------------------------------------------------------------------------
+
+
 def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images: dict[Key, ModuleImage]) -> None:
     """The first part of the proof of a plan file (`check_plan` is the rest), before prc3cfg plans
     from the read-back `images`: refused when a module is not among those to apply (`names`, in the
