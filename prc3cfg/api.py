@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any, Protocol, TextIO
 from urllib.parse import urlsplit
 
-from prc3cfg.core import bustime, codec, gateway, planfile, plot, what_to_read
+from prc3cfg.core import bustime, codec, gateway, planfile, plot, render, what_to_read
 from prc3cfg.core.axes import Release
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
@@ -645,7 +645,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                      only_read=targeted is not None)  # fmt: skip
     if targeted is not None:
         ours = replace(ours, reading=targeted.reading(pairs, images))
-    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant))
+    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
     return ours
 
 

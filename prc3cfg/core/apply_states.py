@@ -15,7 +15,7 @@ it — and never repaired. It ends `VERIFIED`, `FAILED` or `INTERRUPTED`.
 Two budgets bound the rounds, and take a transition of their own when spent (h11's
 "state-triggered" transitions): `ROUNDS` verifying reads (a `NO_REPLY` one counts), `REPAIRS` repairs.
 
-Does not own what is read (`prc3cfg.core.verification`), what a repair writes (`prc3cfg.core.planner`)
+Does not own what is read (`prc3cfg.core.what_to_read`), what a repair writes (`prc3cfg.core.planner`)
 nor what the account says (`prc3cfg.core.render`); the failure's words are the shell's, from the
 event. Pure.
 """

@@ -32,6 +32,7 @@ from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
+from prc3cfg.core import planfile
 from prc3cfg.core import text as escape
 from prc3cfg.core.axes import Release
 from prc3cfg.core.chains import jumps_as_chains
@@ -254,17 +255,10 @@ def changes_json(change: ModuleChange) -> dict[str, Any]:
     }
 
 
-def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict[str, Any]:
-    """The plan file `prc3cfg-plan/1` (interfaces.md §4) with what people read beside the steps:
-    each module's `changes` and `warning`, and what stays on the hardware (`left_alone`). Every
-    output of a plan — human, markdown — is made from this document, and so is that of a saved
-    plan file (`prc3cfg show PLAN.json`)."""
-    document = plan.to_json() | {"left_alone": list(notes)}
-    for bus in document["buses"]:
-        for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
-            entry["changes"] = changes_json(change)
-            entry["warning"] = AXIS_WARNING if change.releases_axes else None
-    return document
+def review(change: ModuleChange) -> dict[str, Any]:
+    """What a plan file holds beside a module's steps for people to read (`prc3cfg.core.planfile.write`,
+    which is given this module as its `Words`): the module's `changes` and its axis `warning`."""
+    return {"changes": changes_json(change), "warning": AXIS_WARNING if change.releases_axes else None}
 
 
 def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
@@ -274,7 +268,7 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     with the changes by (bus, address) — the bus's name as the document has it."""
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
-    return _plain_names(plan.to_json() | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    return _plain_names(planfile.to_json(plan) | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
