@@ -53,10 +53,6 @@ COMPLEX_MARK = re.compile(r"\bcomplex because\b", re.IGNORECASE)
 PENDING = [
     "prc3cfg/api.py",
     "prc3cfg/api.py::_Writing.write",
-    "prc3cfg/shell/apply.py::ModuleRun.converge",
-    "prc3cfg/shell/link/client.py::Link.request",
-    "prc3cfg/shell/emulator/server.py",
-    "prc3cfg/shell/emulator/server.py::Emulator.exchange",
     "prc3cfg/core/planner/optimise.py",
     "prc3cfg/core/planner/check.py::run_steps",
 ]

@@ -18,7 +18,7 @@ values — figures, names, hashes, the review — against the value `write` writ
 makes now. The words are `prc3cfg.core.render`'s, handed in (`Words`): the rendering reads plan files
 and so sits above this module, and its words decide nothing that is sent. Pure: the path is only named.
 
-Long (over 500 lines) because the format is one thing: the writer, the two contracts it is read by
+Long because the format is one thing (over 500 lines): the writer, the two contracts it is read by
 (`PlanDocument`; `ShownPlanDocument` for `show`) and the proof name the same keys, and apart they would
 drift.
 """

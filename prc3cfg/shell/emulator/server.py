@@ -40,7 +40,7 @@ A long-running service that survives its clients:
   repeats it, and reports it. Reads go on being answered; the next write is saved once the
   file can be written again. On exit the state file takes everything.
 
-Over 500 lines, in one file: every part of the server (exchanges, streams, TCP, the pty, its
+Long because one file (over 500 lines): every part of the server (exchanges, streams, TCP, the pty, its
 lifetime) works on one `Emulator`'s lock, closing event and sets of threads and connections.
 """
 
