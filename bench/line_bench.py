@@ -22,7 +22,7 @@ and the client do not share an interpreter), then
 
 After commissioning, `plan` and `apply` read back every module's system block (the evidence) and
 of the programs only those the line's record does not show holding the plant file's values
-(`prc3cfg.core.targeting`; the record is the bench's own, in its temporary folder); `--full-read`
+(`prc3cfg.core.what_to_read`; the record is the bench's own, in its temporary folder); `--full-read`
 measures the same with every module read in full, as every apply did before targeted read-backs.
 
 `--gaps`: each apply's frame trace (`--trace`) shows where its line stood idle — the time from
@@ -49,7 +49,7 @@ from pathlib import Path
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.verification import read_messages
+from prc3cfg.core.what_to_read import read_messages
 
 
 def changed_programs(changed: set[int] = frozenset(), faster: set[int] = frozenset()) -> str:

@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
-from prc3cfg.plant import adopt
+from prc3cfg.plant import adopt, splice
 from prc3cfg.shell.plant_files import load_plant
 
 REPOSITORY = Path(__file__).resolve().parent / "adopt" / "plant.yaml"
@@ -282,7 +282,7 @@ def test_every_splice_lands_in_files_saved_by_any_editor(tmp_path, form):
 def test_a_rewrite_that_does_not_describe_the_modules_is_refused_and_nothing_is_written(tmp_path, monkeypatch, capsys):
     path, images = taught_odd(ODD, tmp_path)
     plant = load_plant(path)
-    monkeypatch.setattr(adopt._Rewrite, "apply", lambda self, wanted: self.text.replace("0.350", "0.380"))  # a splice gone wrong
+    monkeypatch.setattr(splice, "rewrite", lambda text, wanted: text.replace("0.350", "0.380"))  # a splice gone wrong
     with pytest.raises(adopt.AdoptRefused) as refused:
         adopt.adopt(plant, images, ODD)
     assert str(refused.value) == (

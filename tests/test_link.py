@@ -21,7 +21,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.image import DEFAULT_SYSTEM, Program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.verification import read_messages
+from prc3cfg.core.what_to_read import read_messages
 from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
 from prc3cfg.shell.link.client import Link, LinkError

@@ -1,4 +1,4 @@
-"""A targeted read-back (`prc3cfg.core.targeting`): plan and apply read only what the change from a
+"""A targeted read-back (`prc3cfg.core.what_to_read`): plan and apply read only what the change from a
 base touches — and end where a full read would, on the real emulator; what was not read is never
 written, and Teach In on the floor is found where it was read, and left (and said) where it was not."""
 
@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from prc3cfg import api
 from prc3cfg.api._plan import RECORD
-from prc3cfg.core import targeting
+from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import plan_module
@@ -43,8 +43,8 @@ def changes(draw: st.DrawFn) -> tuple[ModuleImage, ModuleImage]:
 NOW = datetime(2026, 11, 26, 12, 0, tzinfo=UTC)
 
 
-def known(image: ModuleImage, hours: float = 1) -> targeting.Known:
-    return targeting.Known(image, (NOW - timedelta(hours=hours)).isoformat(), "apply of a.yaml by ana@pc")
+def known(image: ModuleImage, hours: float = 1) -> what_to_read.Known:
+    return what_to_read.Known(image, (NOW - timedelta(hours=hours)).isoformat(), "apply of a.yaml by ana@pc")
 
 
 def test_what_to_read_from_the_lines_record_is_a_table():
@@ -62,7 +62,7 @@ def test_what_to_read_from_the_lines_record_is_a_table():
         (known(held, hours=9), held, managed, False, "older than record_max_age (28800 s)"),
     ]
     for record, desired, programs, evidence, why in cases:
-        decided = targeting.to_read(record, desired, NOW, 28_800)
+        decided = what_to_read.to_read(record, desired, NOW, 28_800)
         assert decided.programs == programs
         assert (decided.known is not None) == evidence
         assert (decided.why is None) if why is None else why in decided.why
@@ -72,19 +72,19 @@ def test_a_read_back_that_contradicts_the_record_drops_it_whole():
     rnd = random.Random(4)
     held = replace(read_back(rnd), address=1)
     cut = held.with_programs({n: None for n in range(10, PROGRAM_COUNT + 1)})  # what a targeted read read: programs 1..9
-    assert targeting.contradiction(held, cut) is None
+    assert what_to_read.contradiction(held, cut) is None
     other_program = cut.with_programs({3: replace(held.known(3), T=held.known(3).T + 1)})
-    assert targeting.contradiction(held, other_program) == "program 3 is not as on record"
+    assert what_to_read.contradiction(held, other_program) == "program 3 is not as on record"
     other_system = replace(cut, system=replace(cut.system, S7=cut.system.S7 + 1))
-    assert targeting.contradiction(held, other_system) == "its system parameters are not those on record"
+    assert what_to_read.contradiction(held, other_system) == "its system parameters are not those on record"
     record = known(held)
-    kept = targeting.merged(record, cut, NOW.isoformat(), "plan of b.yaml by bo@pc")
+    kept = what_to_read.merged(record, cut, NOW.isoformat(), "plan of b.yaml by bo@pc")
     assert kept.image == held and kept.since == record.since and kept.by == record.by  # the rest still rests on the old record
-    whole = targeting.merged(record, held, NOW.isoformat(), "plan of b.yaml by bo@pc")
+    whole = what_to_read.merged(record, held, NOW.isoformat(), "plan of b.yaml by bo@pc")
     assert whole.since == NOW.isoformat() and whole.by == "plan of b.yaml by bo@pc"  # every value read now
-    dropped = targeting.merged(record, other_program, NOW.isoformat(), "read")
+    dropped = what_to_read.merged(record, other_program, NOW.isoformat(), "read")
     assert dropped.image == other_program  # nothing of the contradicted record is kept
-    written = targeting.verified(record, other_program, NOW.isoformat(), "apply of a.yaml by ana@pc")
+    written = what_to_read.verified(record, other_program, NOW.isoformat(), "apply of a.yaml by ana@pc")
     assert written.image == held.with_programs({3: other_program.known(3)})  # what prc3cfg wrote is no contradiction
     assert written.since == record.since  # programs 10.. still rest on the record
 
@@ -94,9 +94,9 @@ def test_a_read_back_that_contradicts_the_record_drops_it_whole():
 def test_a_plan_from_a_partial_read_writes_initialises_and_rewrites_no_program_it_did_not_read(change, read):
     actual, desired = change
     if can_clamp(actual.system, desired.system):
-        read = set(range(1, PROGRAM_COUNT + 1))  # the read-back reads every program then (readback.Target.clamped_by)
+        read = set(range(1, PROGRAM_COUNT + 1))  # the read-back reads every program then (what_to_read.after_system)
     cut = actual.with_programs({n: None for n in range(1, PROGRAM_COUNT + 1) if n not in read})
-    plan = plan_module(cut, targeting.within_read(desired, cut), line())
+    plan = plan_module(cut, what_to_read.within_read(desired, cut), line())
     for step in plan.steps:  # an 11h/13h/14h across an unread program included
         assert set(step.message.touched_programs()) <= read, f"{step.summary} touches a program not read"
     for number in read:  # what was read reaches the plant file's value

@@ -86,9 +86,9 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._types import AxisReleaseRefused as AxisReleaseRefused
     from prc3cfg.api._types import Gates as Gates
     from prc3cfg.api._types import NotApproved as NotApproved
+    from prc3cfg.core.axes import Release as Release
     from prc3cfg.core.planfile import StalePlan as StalePlan
     from prc3cfg.core.render import Drift as Drift
-    from prc3cfg.core.verification import Release as Release
     from prc3cfg.errors import UserError as UserError
     from prc3cfg.plant import PlantError as PlantError
     from prc3cfg.shell.apply import Verify as Verify
@@ -117,7 +117,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
     "prc3cfg.core.planfile": ("StalePlan",),
     "prc3cfg.core.render": ("Drift",),
-    "prc3cfg.core.verification": ("Release",),
+    "prc3cfg.core.axes": ("Release",),
     "prc3cfg.errors": ("UserError",),
     "prc3cfg.plant": ("PlantError",),
     "prc3cfg.shell.apply": ("Verify",),

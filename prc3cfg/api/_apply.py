@@ -34,7 +34,7 @@ from prc3cfg.api._plan import (
 )
 from prc3cfg.api._plant import reason_for
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
-from prc3cfg.core import planfile
+from prc3cfg.core import planfile, render, what_to_read
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planfile import PlanFile
@@ -48,7 +48,7 @@ from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.probe import prober
-from prc3cfg.shell.readback import Target, read_all
+from prc3cfg.shell.readback import read_all
 from prc3cfg.shell.records import Journal, Snapshot, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
@@ -94,7 +94,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                      only_read=targeted is not None)  # fmt: skip
     if targeted is not None:
         ours = replace(ours, reading=targeted.reading(pairs, images))
-    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant))
+    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
     return ours
 
 
@@ -145,11 +145,7 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
             raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
                             f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
                             "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
-    to_read = [
-        Target(bus.name, m.address, m.name, tuple(n for n, p in enumerate(image.programs, 1) if p is not None), image.system)
-        for bus, m in pairs
-        for image in [taken.images[(bus.name, m.address)]]
-    ]
+    to_read = what_to_read.in_full(to_plan(pairs, taken.images))  # every program the snapshot holds
     return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason, links=links)
 
 

@@ -17,21 +17,21 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from prc3cfg.api._types import Pairs
-from prc3cfg.core import targeting
+from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
 from prc3cfg.core.planfile import PlanFile, StalePlan
 from prc3cfg.core.planning import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.plantplan import PlantPlan, Reading
 from prc3cfg.core.render import Drift, drifted
-from prc3cfg.core.targeting import Known
+from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import FileProblem, Why, read_json
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.probe import probe_timeout, prober
-from prc3cfg.shell.readback import LineRead, Target, read_all
+from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
 
@@ -62,7 +62,7 @@ def select(plant: Plant, names: Iterable[str] | None = None) -> Pairs:
 def targets(pairs: Pairs) -> list[Target]:
     """What to read of each module: its managed programs, and every program its plant system
     parameters could clamp."""
-    return [Target(bus.name, m.address, m.name, tuple(m.managed_programs()), m.desired_system()) for bus, m in pairs]
+    return what_to_read.in_full(to_plan(pairs, None))
 
 
 #: What a targeted read-back compares with, in words (`prc3cfg.shell.bases`).
@@ -94,13 +94,10 @@ class Reads:
         if self.base is None:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
-        skipped = {key: targeting.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
+        skipped = {key: what_to_read.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
         other = self.not_as_verified
         if other is None:
-            evidence = {(t.bus, t.address): said for t in self.targets if t.known is not None and (t.bus, t.address) in images
-                        and (said := targeting.contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
-            other = tuple(f"{bus.name}/{m.name} ({why})" for bus, m in chosen
-                          if (why := self.why.get(key := (bus.name, m.address)) or evidence.get(key)) is not None)  # fmt: skip
+            other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
         taken = self.taken
         if taken is None:
             taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen if skipped.get(key := (bus.name, m.address))}
@@ -110,7 +107,7 @@ class Reads:
 def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
     records know none of them; else of each module its system block and the managed programs the
-    record does not show holding the plant file's values (`targeting.to_read`) — every managed
+    record does not show holding the plant file's values (`what_to_read.for_plan`) — every managed
     program of one the record does not know, knows from too long ago, or that reported E12 since."""
     buses = {bus.name: bus for bus, _ in pairs}
     known: dict[Key, Known] = {}
@@ -119,17 +116,12 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         on_record, newer = bases.read(bus_line_keys(plant, bus))
         known |= {(bus.name, address): k for address, k in on_record.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
-    if not any((bus.name, m.address) in known or (bus.name, m.address) in overruled for bus, m in pairs):
+    unset = unset_systems(plant, buses.values()) if known or overruled else frozenset()  # of no use without a record
+    max_age = {name: bus.record_max_age for name, bus in buses.items()}
+    targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
+    if targeted is None:
         return Reads(pairs, targets(pairs))
-    unset = unset_systems(plant, buses.values())
-    now = datetime.now(UTC)
-    to_read, why = [], {}
-    for bus, m in pairs:
-        key = (bus.name, m.address)
-        decision = targeting.to_read(None if key in unset else known.get(key), m.desired_image(), now, bus.record_max_age)
-        to_read.append(Target(bus.name, m.address, m.name, decision.programs, m.desired_system(), decision.known, m.managed_programs()))
-        if decision.why is not None:
-            why[key] = "it reported E12 (system parameters not set)" if key in unset else overruled.get(key, decision.why)
+    to_read, why = targeted
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
@@ -141,7 +133,7 @@ def seen(plant: Plant, command: str, then: LineRead | None = None) -> LineRead:
     def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
         keys = bus_line_keys(plant, buses[bus])
         known, when = bases.load(keys), bases.now()
-        bases.update(keys, {a: targeting.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
+        bases.update(keys, {a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
         if then is not None:
             then(bus, images)
 
@@ -295,15 +287,12 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
     buses = {bus.name: bus for bus, _ in (names[(e.bus, e.address)] for e in entries)}
-    known, now, to_read = record(plant, buses.values()), datetime.now(UTC), []
-    for e in entries:
-        bus, m = names[(e.bus, e.address)]
-        decision = targeting.to_read(known.get((e.bus, e.address)), m.desired_image(), now, bus.record_max_age)
-        if not set(decision.programs) <= set(e.programs_read or ()):
-            raise StalePlan(f"{path}: stale plan — bus {e.bus}, module {e.address} ({e.name}): the line's record no longer shows it "
-                            "holding what the plan took as known without reading it (written or read by another run since, or "
-                            "older than record_max_age); nothing was written — plan again")  # fmt: skip
-        to_read.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known, m.managed_programs()))
+    desired, max_age = {key: m.desired_image() for key, (_, m) in names.items()}, {name: bus.record_max_age for name, bus in buses.items()}
+    to_read, stale = what_to_read.for_plan_file(entries, desired, record(plant, buses.values()), max_age, datetime.now(UTC))
+    if stale is not None:
+        raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
+                        "holding what the plan took as known without reading it (written or read by another run since, or "
+                        "older than record_max_age); nothing was written — plan again")  # fmt: skip
     return Reads([names[(e.bus, e.address)] for e in entries], to_read, said["base"], tuple(said["not_as_verified"]),
                  taken=dict(said.get("taken", {})))  # fmt: skip
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from prc3cfg.core.axes import Release
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.core.render import plural
-from prc3cfg.core.verification import Release
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module
 from prc3cfg.shell import releases

@@ -17,12 +17,13 @@ from pathlib import Path
 from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
 from prc3cfg.cli.common import TerminalProgress, ask, print_lines, write_output
 from prc3cfg.core import render
+from prc3cfg.core.planfile import write as plan_file
 from prc3cfg.core.plantplan import PlantPlan
 from prc3cfg.errors import UserError
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str]) -> None:
-    document = render.plan_json(plan, notes) if out is not None or json_out else None
+    document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
     if json_out:  # streamed, 10,000 pieces a write: one string of 8 × 30 × 64 is 80 MB of pieces, one write a piece 2 s

@@ -26,6 +26,14 @@ def jumps_as_chains(programs: dict[int, Program]) -> tuple[list[Any], dict[int, 
         preds.setdefault(a, []).append(n)
     # A jump can be a chain link only into a given program that no other program jumps to.
     link = {n: a for n, a in succ.items() if len(preds[a]) == 1 and a in programs}
+    chains, placed = _plain_chains(programs, link, succ)
+    chains += [{"programs": cycle, "loop": True} for cycle in _loops(link, placed)]
+    nexts = {n: a for n, a in succ.items() if n not in placed}
+    return chains, nexts
+
+
+def _plain_chains(programs: dict[int, Program], link: dict[int, int], succ: dict[int, int]) -> tuple[list[Any], set[int]]:
+    """The paths of links from a program nothing links to that end in A = 0, and the programs on them."""
     linked_to = set(link.values())
     chains: list[Any] = []
     placed: set[int] = set()
@@ -36,14 +44,19 @@ def jumps_as_chains(programs: dict[int, Program]) -> tuple[list[Any], dict[int, 
         if path[-1] not in succ:  # ends in A = 0: a plain chain
             chains.append(path)
             placed.update(path)
-    for start in sorted(link):  # what is left of the linked programs: loops
+    return chains, placed
+
+
+def _loops(link: dict[int, int], placed: set[int]) -> list[list[int]]:
+    """The cycles among the linked programs not `placed` yet, each from its lowest program, added to `placed`."""
+    loops = []
+    for start in sorted(link):
         if start in placed:
             continue
         cycle = [start]
         while link.get(cycle[-1]) not in (None, start) and link[cycle[-1]] not in cycle:
             cycle.append(link[cycle[-1]])
         if link.get(cycle[-1]) == start and not placed.intersection(cycle):
-            chains.append({"programs": cycle, "loop": True})
+            loops.append(cycle)
             placed.update(cycle)
-    nexts = {n: a for n, a in succ.items() if n not in placed}
-    return chains, nexts
+    return loops

@@ -21,6 +21,12 @@ a bug in our code), and the structural checks 1–5 of §4.5 when a message is *
 module does with a message (`prc3cfg.core.device`) nor the frame around it (`prc3cfg.core.framing`).
 Item program numbers (40h..46h) and values are not range-checked here: the module checks
 them (§4.5 steps 7 and 9), after the operating state. Pure: no I/O.
+
+It is long because it holds every layout drawn above, once: two dozen message classes built on a
+few shared shapes (`_Bare`, `_OneProgram`, `_ProgramRange`, `_WriteItems`) and word checks, the
+table that decodes each by its ID (`MESSAGE_TYPES`), and the replies that answer them. Split by
+family, the shapes and the table would be imported across the parts, and a message's bytes would no
+longer be read beside their drawing. The `# --` rulers mark words, messages and replies.
 """
 
 from __future__ import annotations

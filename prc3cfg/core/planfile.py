@@ -1,11 +1,26 @@
-"""The plan file `prc3cfg-plan/1` as it comes back (interfaces.md §4): read, checked, shown, proved.
+"""The plan file `prc3cfg-plan/1` (interfaces.md §4): written, read back, checked, shown and proved.
 
-Owns what `apply --plan` and `prc3cfg show PLAN.json` do with a plan file once its bytes are
-parsed (the shell reads them bounded, `prc3cfg.shell.files.read_json`): its structure and
-steps checked (`read_plan_file`), whether it was made for this plant file by this prc3cfg
-(`to_apply`), the document `show` shows (`to_show`), and the proof that it is the plan prc3cfg
-makes from the read-back now (`check_modules`, then `check_plan`). Writing one is
-`PlantPlan.to_json` with `prc3cfg.core.render.plan_json`. Pure: the path is only named.
+Owns the format, its writer beside its reader (as Terraform keeps its planfile's): a plan's data as
+the file holds it (`to_json`: per bus, per module, the steps as sent, the hashes they were planned
+from, the figures) and the file `plan --out` writes (`write`: that, what stays on the hardware, and
+beside each module's steps the words people review); then, once the shell has read its bytes (bounded,
+`prc3cfg.shell.files.read_json`), its structure and steps checked (`read`), whether it was made for
+this plant file by this prc3cfg (`to_apply`), the document `show` shows (`to_show`), and the proof that
+it is the plan prc3cfg makes from the read-back now (`check_modules`, then `check_plan`).
+
+A bus's broadcasts (`prc3cfg.core.sharing`) are the leading steps of every module of that bus, marked
+`"broadcast": true` — so each module's steps still say, in order, everything that reaches it (a reader
+that sent them addressed would do the same, only slower) — and the bus lists them once under
+`"broadcasts"`.
+
+A plan file is judged by its data, never by its spelling: its steps as messages, then each of its
+values — figures, names, hashes, the review — against the value `write` writes for the plan prc3cfg
+makes now. The words are `prc3cfg.core.render`'s, handed in (`Words`): the rendering reads plan files
+and so sits above this module, and its words decide nothing that is sent. Pure: the path is only named.
+
+Long because the format is one thing (over 500 lines): the writer, the two contracts it is read by
+(`PlanDocument`; `ShownPlanDocument` for `show`) and the proof name the same keys, and apart they would
+drift.
 """
 
 from __future__ import annotations
@@ -13,10 +28,11 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from math import fsum
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from pydantic import BaseModel, Field, ValidationError
 
@@ -28,11 +44,106 @@ from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planner.check import MAX_STEPS
-from prc3cfg.core.plantplan import FORMAT, PlantPlan, image_sha256
-from prc3cfg.core.render import address_ranges, plan_json
+from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan, Reading
 from prc3cfg.errors import UserError
 
 Key = tuple[str, int]  # (bus name, module address)
+
+FORMAT = "prc3cfg-plan/1"
+
+
+class Words(Protocol):
+    """What a plan file says to people, and how its refusals name addresses: the module `prc3cfg.core.render`,
+    passed as it (it imports this one: a plan is shown from its `to_json`)."""
+
+    def review(self, change: ModuleChange) -> dict[str, Any]:
+        """What the file holds beside a module's steps for people to review (its `changes`, its `warning`)."""
+
+    def address_ranges(self, addresses: Iterable[int]) -> str:
+        """Addresses as a refusal names them: "address 5", "addresses 7–30"."""
+
+
+def image_sha256(image: ModuleImage) -> str:
+    """The hash of a read-back, over its canonical JSON: what a module held when its plan was made."""
+    text = json.dumps(image.to_json(), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+# -- writing ---------------------------------------------------------------------------------
+
+
+def to_json(plan: PlantPlan) -> dict[str, Any]:
+    """A plan's data as its plan file holds it: what was planned from (the plant file's hash, each
+    module's read-back hash), each module's steps, each bus's broadcasts and probes, the figures.
+    Every output of a plan — the file, human, markdown — is made from it."""
+    phases = plan.phases()
+    return {
+        "format": FORMAT,
+        "prc3cfg_version": __version__,
+        "plant": plan.plant,
+        "plant_path": plan.plant_path,
+        "plant_sha256": plan.plant_sha256,
+        "buses": [
+            {"name": bus, "modules": [_module_json(m) | ({"read": _module_read(plan.reading, m)} if plan.reading else {}) for m in modules]}
+            | (_proof_json(proof) if (proof := plan.proof(bus)) is not None else {})
+            | ({"broadcasts": [
+                {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
+                 "modules": [m.address for m in modules if m.broadcasts]}
+                for step in plan.broadcasts(bus)
+            ]} if plan.broadcasts(bus) else {})
+            for bus, modules in plan.buses().items()
+        ],
+        "estimated_bus_time_s": round(plan.bus_time, 4),
+        "naive_bus_time_s": round(plan.naive_bus_time, 4),
+        "estimated_phases_s": {phase: round(seconds, 3) for phase, seconds in phases.items()},
+        "estimated_time_s": round(fsum(phases.values()), 3),
+        "message_count": plan.message_count,
+        "axis_releases": [f"{m.bus}/{m.name}" for m in plan.axis_releases],
+    } | ({"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)} if plan.unshared_bus_time is not None else {}) | (
+        {"read": _reading_json(plan.reading)} if plan.reading is not None else {})  # fmt: skip
+
+
+def write(plan: PlantPlan, notes: Iterable[str], words: Words) -> dict[str, Any]:
+    """The plan file `plan --out` writes (and `plan --json` prints): the plan's data, what stays on the
+    hardware (`notes`, as `left_alone`), and beside each module's steps what people review (`words`)."""
+    document = to_json(plan) | {"left_alone": list(notes)}
+    for bus in document["buses"]:
+        for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
+            entry.update(words.review(change))
+    return document
+
+
+def _module_json(change: ModuleChange) -> dict[str, Any]:
+    return {
+        "address": change.address,
+        "name": change.name,
+        "state_sha256": image_sha256(change.actual),
+        "releases_axes": change.releases_axes,
+        "estimated_bus_time_s": round(change.plan.bus_time, 4),
+        "steps": [
+            {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes}
+            | ({"broadcast": True} if index < change.broadcasts else {})
+            for index, step in enumerate(change.steps)
+        ],
+    }
+
+
+def _proof_json(proof: LineProof) -> dict[str, Any]:
+    return ({"proven_silent": list(proof.silent)} if proof.silent else {}) | (
+        {"unlisted_modules": list(proof.answered)} if proof.answered else {})
+
+
+def _reading_json(reading: Reading) -> dict[str, Any]:
+    return {"base": reading.base, "modules_not_read": list(reading.modules_not_read), "not_as_verified": list(reading.not_as_verified),
+            "taken": dict(reading.taken)}  # fmt: skip
+
+
+def _module_read(reading: Reading, change: ModuleChange) -> dict[str, Any]:
+    read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]
+    return {"programs": read, "programs_not_read": list(reading.programs_not_read.get((change.bus, change.address), ()))}
+
+
+# -- reading ---------------------------------------------------------------------------------
 
 
 class StalePlan(UserError):
@@ -201,7 +312,7 @@ class PlanFile:
     document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
 
 
-def read_plan_file(data: Any, *, shown: bool = False) -> PlanFile:
+def read(data: Any, *, shown: bool = False) -> PlanFile:
     """A parsed plan file; raises PlanFileError.
 
     Refused here, before the line is touched: a damaged file — a key missing, a value of
@@ -294,7 +405,7 @@ def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, ali
     A plan made from the same text with other line endings (`alike`, of `same_text`) is the plan of this
     plant file: a plan made on Linux applies from a Windows checkout, and the other way round."""
     try:
-        plan_file = read_plan_file(document)
+        plan_file = read(document)
     except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
     if plan_file.version != __version__:
@@ -310,7 +421,7 @@ def to_show(document: Any, path: Path) -> dict[str, Any]:
     one line), and every step's summary worked out again from its bytes — what is shown is what
     would be sent."""
     try:
-        plan_file = read_plan_file(document, shown=True)
+        plan_file = read(document, shown=True)
     except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
     entries = iter(plan_file.modules)  # in the file's order
@@ -329,6 +440,9 @@ def _summary(message: codec.Message, system_keys: list[str]) -> str:
     if isinstance(message, codec.WriteSystem):
         return f"write system parameters {', '.join(system_keys) or '(all)'} (20h)"
     return summarise(message, DEFAULT_SYSTEM)
+
+
+# -- proving ---------------------------------------------------------------------------------
 
 
 def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images: dict[Key, ModuleImage]) -> None:
@@ -351,25 +465,29 @@ def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images
     _in_plant_order(path, plan_file, list(names))
 
 
-def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str, LineCost], notes: Callable[[], list[str]]) -> None:
+def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str, LineCost], notes: Callable[[], list[str]],
+               words: Words) -> None:  # fmt: skip
     """The plan file proved against `ours`, the plan prc3cfg makes of its modules from the read-back
     now (each line priced by `costs`).
 
     Refused when its steps do anything but turn a module's read-back into the plant file's image
     (`plan_from_steps` names the rule they break); and when they are not exactly the steps —
     broadcasts included — of `ours`: the plant file and the read-back are the same as when the
-    file was made (`check_modules`), so any difference is an edit. Then anything else in it — a
-    summary, a figure, a name, an axis warning — that is not what prc3cfg writes for that plan is
-    an edit too, since people review what the file says (only `plant_path` and `plant_sha256` may
-    differ: a plan made in another checkout, whose line endings `to_apply` checked). Its figures
-    come out the same on every system and Python: the times are summed with `math.fsum`, correctly
-    rounded (`sum` of floats is compensated from Python 3.12 on, plain addition before: a plan made
-    by 3.11 on Linux showed 1.0988 s where 3.13 on Windows proved 1.0987 s). What stays on the
-    hardware is what the plan's maker compared with: the file's own `left_alone`, else `notes()`.
+    file was made (`check_modules`), so any difference is an edit. Then any other value in it — a
+    summary, a figure, a name, an axis warning — that is not the value `write` writes for that plan
+    (with `words`) is an edit too, since people review what the file says (only `plant_path` and
+    `plant_sha256` may differ: a plan made in another checkout, whose line endings `to_apply`
+    checked). Values, not their spelling (`_differs_at`): a file another tool wrote again —
+    indented otherwise, its keys in another order, CRLF, a byte-order mark, 0 for 0.0 — is the
+    same plan file. Its figures come out the same on every system and Python: the times are summed
+    with `math.fsum`, correctly rounded (`sum` of floats is compensated from Python 3.12 on, plain
+    addition before: a plan made by 3.11 on Linux showed 1.0988 s where 3.13 on Windows proved
+    1.0987 s). What stays on the hardware is what the plan's maker compared with: the file's own
+    `left_alone`, else `notes()`.
     """
     for proof in ours.proofs:
         if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
-            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {address_ranges(proof.answered)}, which the "
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {words.address_ranges(proof.answered)}, which the "
                             "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
     for entry, change in zip(plan_file.modules, ours.modules):
         edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
@@ -390,8 +508,8 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     said = plan_file.document.get("left_alone")
     kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
     # a plan made in another checkout: its path, and its line endings (`to_apply` found the text the same)
-    written = plan_json(ours, kept) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
-    if (at := _edited_at(plan_file.document, written)) is not None:
+    written = write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
+    if (at := _differs_at(plan_file.document, written)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
 
@@ -408,14 +526,21 @@ def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:
                             "order — the plan file was changed after it was made; nothing was written: plan again and review it")  # fmt: skip
 
 
-def _edited_at(theirs: object, ours: object, at: str = "") -> str | None:
-    """Where a plan file differs from the one prc3cfg writes for the plan proved — its texts and
-    figures, which reach no module but a reviewer — as a JSON path; None where it does not."""
+def _differs_at(theirs: object, ours: object, at: str = "") -> str | None:
+    """Where the values of a plan file (`theirs`, as parsed) differ from those of the file prc3cfg
+    writes for the plan proved — its texts and figures, which reach no module but a reviewer — as a
+    JSON path ("" for the list of keys at the top); None where they are the same values.
+
+    Compared as data, not as text: an object's keys in any order, and a figure prc3cfg writes as a
+    float the same figure written without its ".0" (JavaScript's `JSON.stringify` and jq 1.6 write
+    0.0 as 0); whitespace, line endings, a byte-order mark and escapes are gone once parsed. A text, a
+    flag, a count or a null is the value prc3cfg writes or another: `true` is no 1, 2.0 no count."""
     if isinstance(theirs, dict) and isinstance(ours, dict) and theirs.keys() == ours.keys():
-        return next((f for k in ours if (f := _edited_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
+        return next((f for k in ours if (f := _differs_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
     if isinstance(theirs, list) and isinstance(ours, list) and len(theirs) == len(ours):
-        return next((f for i, (a, b) in enumerate(zip(theirs, ours)) if (f := _edited_at(a, b, f"{at}[{i}]")) is not None), None)
-    return None if type(theirs) is type(ours) and theirs == ours else at
+        return next((f for i, (a, b) in enumerate(zip(theirs, ours)) if (f := _differs_at(a, b, f"{at}[{i}]")) is not None), None)
+    same_kind = type(theirs) is type(ours) or (type(ours) is float and type(theirs) is int)
+    return None if same_kind and theirs == ours else at
 
 
 def _first_difference(theirs: list[codec.Message], ours: list[codec.Message]) -> str:

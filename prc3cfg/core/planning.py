@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from math import fsum
 
-from prc3cfg.core import codec, sharing, targeting
+from prc3cfg.core import codec, sharing, what_to_read
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
@@ -125,7 +125,7 @@ class Planner:
     planned once).
 
     `only_read`: a targeted read-back — each module's desired image is cut to the programs read
-    (`targeting.within_read`): what was not read is not written."""
+    (`what_to_read.within_read`): what was not read is not written."""
 
     def __init__(self, plant: str, plant_path: str, plant_sha256: str, lines: Mapping[str, Line],
                  unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> None:  # fmt: skip
@@ -175,7 +175,7 @@ class Planner:
 
     def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
         unset = wanted.key in self.unset
-        desired = targeting.within_read(wanted.desired, actual) if self.only_read else wanted.desired
+        desired = what_to_read.within_read(wanted.desired, actual) if self.only_read else wanted.desired
         try:
             module_plan = self._cache.plan(actual, desired, line.cost, unset)
         except UnreachableImage as error:

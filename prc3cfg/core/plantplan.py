@@ -1,41 +1,25 @@
-"""A plan for a whole plant, and the plan file `prc3cfg-plan/1` (interfaces.md §4).
+"""A plan for a whole plant: per bus, per module, the steps to send and what they were planned from.
 
 A plan is data: per bus, per module, the steps to send (the PRC 3 message, exactly as it
-goes on the line), what they were planned from (the plant file's hash and each module's
-read-back hash, so a stale plan can be refused) and what they are predicted to do. The
-optimiser that makes a module's steps is `prc3cfg.core.planner`; rendering is `prc3cfg.core.render`.
+goes on the line), what they were planned from (each module's read-back, and the plant file's hash,
+so a stale plan can be refused) and what they are predicted to do. The optimiser that makes a
+module's steps is `prc3cfg.core.planner`; rendering is `prc3cfg.core.render`; the plan file
+`prc3cfg-plan/1`, written and read back, is `prc3cfg.core.planfile`.
 
 A bus may start with broadcasts (`prc3cfg.core.sharing`): steps sent once to address 0 that
-every module of the line processes. In the plan file they are the leading steps of every
-module of that bus, marked `"broadcast": true` — so each module's steps still say, in
-order, everything that reaches it (a reader that sent them addressed would do the same,
-only slower) — and the bus lists them once under `"broadcasts"`. A plan file read back, checked
-and proved is `prc3cfg.core.planfile`. Pure.
+every module of the line processes — the leading `broadcasts` steps of each module of that bus. Pure.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from math import fsum
-from typing import Any
 
-from prc3cfg import __version__
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import ModulePlan, Step
-from prc3cfg.core.targeting import with_known
-from prc3cfg.core.verification import read_messages, verification_time
-
-FORMAT = "prc3cfg-plan/1"
-
-
-def image_sha256(image: ModuleImage) -> str:
-    """The hash of a read-back, over its canonical JSON."""
-    text = json.dumps(image.to_json(), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
+from prc3cfg.core.what_to_read import read_messages, verification_time, with_known
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +38,7 @@ class ModuleChange:
     system_unset: bool = False  # the module reported E12: its plan writes the system parameters first
     cost: LineCost | None = None
     #: a targeted read's: the plant file's whole image, `desired` being cut to what was read — its other
-    #: programs the line's record showed held (`prc3cfg.core.targeting`)
+    #: programs the line's record showed held (`prc3cfg.core.what_to_read`)
     wanted: ModuleImage | None = None
 
     def as_known(self, image: ModuleImage) -> ModuleImage:
@@ -85,20 +69,6 @@ class ModuleChange:
     def releases_axes(self) -> bool:
         return self.plan.releases_axes
 
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "address": self.address,
-            "name": self.name,
-            "state_sha256": image_sha256(self.actual),
-            "releases_axes": self.releases_axes,
-            "estimated_bus_time_s": round(self.plan.bus_time, 4),
-            "steps": [
-                {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes}
-                | ({"broadcast": True} if index < self.broadcasts else {})
-                for index, step in enumerate(self.steps)
-            ],
-        }
-
 
 @dataclass(frozen=True, slots=True)
 class LineProof:
@@ -110,14 +80,10 @@ class LineProof:
     silent: tuple[int, ...] = ()
     answered: tuple[int, ...] = ()
 
-    def to_json(self) -> dict[str, Any]:
-        return ({"proven_silent": list(self.silent)} if self.silent else {}) | (
-            {"unlisted_modules": list(self.answered)} if self.answered else {})
-
 
 @dataclass(frozen=True, slots=True)
 class Reading:
-    """How a plan's read-back was targeted (`prc3cfg.core.targeting`): the record it was compared with,
+    """How a plan's read-back was targeted (`prc3cfg.core.what_to_read`): the record it was compared with,
     in words, the modules not read at all (none: every module's system block is read), per module read
     the managed programs not read — taken as known from the record, with who verified them when
     (`taken`, "bus/name" → words) — and the modules read in full, each with why. A plan without one
@@ -128,14 +94,6 @@ class Reading:
     programs_not_read: dict[tuple[str, int], tuple[int, ...]]
     not_as_verified: tuple[str, ...] = ()  # "bus/name (why)": read in full, not taken from the record
     taken: dict[str, str] = field(default_factory=dict)  # "bus/name" → whose read or verification its unread programs rest on, when
-
-    def to_json(self) -> dict[str, Any]:
-        return {"base": self.base, "modules_not_read": list(self.modules_not_read), "not_as_verified": list(self.not_as_verified),
-                "taken": dict(self.taken)}  # fmt: skip
-
-    def module_json(self, change: ModuleChange) -> dict[str, Any]:
-        read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]
-        return {"programs": read, "programs_not_read": list(self.programs_not_read.get((change.bus, change.address), ()))}
 
 
 @dataclass(frozen=True, slots=True)
@@ -205,30 +163,3 @@ class PlantPlan:
         for module in self.modules:
             grouped.setdefault(module.bus, []).append(module)
         return grouped
-
-    def to_json(self) -> dict[str, Any]:
-        phases = self.phases()
-        return {
-            "format": FORMAT,
-            "prc3cfg_version": __version__,
-            "plant": self.plant,
-            "plant_path": self.plant_path,
-            "plant_sha256": self.plant_sha256,
-            "buses": [
-                {"name": bus, "modules": [m.to_json() | ({"read": self.reading.module_json(m)} if self.reading else {}) for m in modules]}
-                | (proof.to_json() if (proof := self.proof(bus)) is not None else {})
-                | ({"broadcasts": [
-                    {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
-                     "modules": [m.address for m in modules if m.broadcasts]}
-                    for step in self.broadcasts(bus)
-                ]} if self.broadcasts(bus) else {})
-                for bus, modules in self.buses().items()
-            ],
-            "estimated_bus_time_s": round(self.bus_time, 4),
-            "naive_bus_time_s": round(self.naive_bus_time, 4),
-            "estimated_phases_s": {phase: round(seconds, 3) for phase, seconds in phases.items()},
-            "estimated_time_s": round(fsum(phases.values()), 3),
-            "message_count": self.message_count,
-            "axis_releases": [f"{m.bus}/{m.name}" for m in self.axis_releases],
-        } | ({"without_broadcasts_bus_time_s": round(self.unshared_bus_time, 4)} if self.unshared_bus_time is not None else {}) | (
-            {"read": self.reading.to_json()} if self.reading is not None else {})  # fmt: skip

@@ -14,6 +14,13 @@ Every text a plan or plan file brings (names, the base, notes, a field's words) 
 its medium by `prc3cfg.core.text` — `plain` in every output, `markdown` in a comment — and a plan
 file's stroke charts only in the shape prc3cfg writes them (`CHART`): a plan file is data that
 anyone may have edited.
+
+It is long because it is the one home of the words people read of a module: a field's name and
+value in human units (`field_name`, `format_value`), two images' differences (`differences`,
+`drifted`), a comment's escaping and budget (`cell`, `code`, `COMMENT_BUDGET`) serve the plan's
+three outputs, drift, the account of an apply and `show` alike; split by output, each module would
+import the others' pieces. Plans come first; `# --` rulers mark the other two parts: `read`, drift
+and the account, then `show`.
 """
 
 from __future__ import annotations
@@ -25,7 +32,9 @@ from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
+from prc3cfg.core import planfile
 from prc3cfg.core import text as escape
+from prc3cfg.core.axes import Release
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
@@ -34,7 +43,6 @@ from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
-from prc3cfg.core.verification import Release
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"
@@ -247,17 +255,10 @@ def changes_json(change: ModuleChange) -> dict[str, Any]:
     }
 
 
-def plan_json(plan: PlantPlan, notes: Iterable[str] = ()) -> dict[str, Any]:
-    """The plan file `prc3cfg-plan/1` (interfaces.md §4) with what people read beside the steps:
-    each module's `changes` and `warning`, and what stays on the hardware (`left_alone`). Every
-    output of a plan — human, markdown — is made from this document, and so is that of a saved
-    plan file (`prc3cfg show PLAN.json`)."""
-    document = plan.to_json() | {"left_alone": list(notes)}
-    for bus in document["buses"]:
-        for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
-            entry["changes"] = changes_json(change)
-            entry["warning"] = AXIS_WARNING if change.releases_axes else None
-    return document
+def review(change: ModuleChange) -> dict[str, Any]:
+    """What a plan file holds beside a module's steps for people to read (`prc3cfg.core.planfile.write`,
+    which is given this module as its `Words`): the module's `changes` and its axis `warning`."""
+    return {"changes": changes_json(change), "warning": AXIS_WARNING if change.releases_axes else None}
 
 
 def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
@@ -267,7 +268,7 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     with the changes by (bus, address) — the bus's name as the document has it."""
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
-    return _plain_names(plan.to_json() | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    return _plain_names(planfile.to_json(plan) | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
@@ -534,23 +535,8 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     fit, and a last line saying how many were left out and where the full plan is."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
-    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), ""]
-    head += [f"> {line}", ""] if (line := reading_line(document, cell)) else []
-    if document["axis_releases"]:
-        head += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
-                 + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
-    head += [f"> {line}", ""] if (line := clamped_line(document, live)) else []
-    left_alone = document.get("left_alone", [])
-    head += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
-    proofs = [proof for bus in document["buses"] if (proof := line_proof(bus, cell))]
-    head += [f"> {proof}" for proof in proofs] + ([""] if proofs else [])
-    if changed:
-        head += ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
-        for bus, m in changed:
-            axes = "⚠ released: travel to reference point required" if m["releases_axes"] else ""
-            head.append(f"| {cell(bus)} | {cell(m['name'])} | {m['address']} | {len(m['steps'])} | "
-                        f"{m.get('estimated_bus_time_s', 0.0):.3f} s | {axes} |")  # fmt: skip
-        head.append("")
+    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), "",
+            *_callouts(document, live), *_changed_table(changed)]  # fmt: skip
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):
             head += [*fenced(lines[:-1]), ""]
@@ -564,6 +550,32 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
             return text + closing
         text += block
     return text
+
+
+def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> list[str]:
+    """A comment's quoted paragraphs under its summary, each only when it has something to say: what was
+    not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
+    out = [f"> {line}", ""] if (line := reading_line(document, cell)) else []
+    if document["axis_releases"]:
+        out += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
+                + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
+    out += [f"> {line}", ""] if (line := clamped_line(document, live)) else []
+    left_alone = document.get("left_alone", [])
+    out += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
+    proofs = [proof for bus in document["buses"] if (proof := line_proof(bus, cell))]
+    return out + [f"> {proof}" for proof in proofs] + ([""] if proofs else [])
+
+
+def _changed_table(changed: list[tuple[str, dict[str, Any]]]) -> list[str]:
+    """The table of changed modules (none without one): bus, module, address, steps, bus time, axes."""
+    if not changed:
+        return []
+    out = ["| bus | module | address | steps | bus time | axes |", "|---|---|---:|---:|---:|---|"]
+    for bus, m in changed:
+        axes = "⚠ released: travel to reference point required" if m["releases_axes"] else ""
+        out.append(f"| {cell(bus)} | {cell(m['name'])} | {m['address']} | {len(m['steps'])} | "
+                   f"{m.get('estimated_bus_time_s', 0.0):.3f} s | {axes} |")  # fmt: skip
+    return [*out, ""]
 
 
 def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str:

@@ -53,7 +53,7 @@ from prc3cfg.core.planner import (
     run_steps,
     summarise,
 )
-from prc3cfg.core.verification import read_messages, verification_time
+from prc3cfg.core.what_to_read import read_messages, verification_time
 
 #: Items per message of the per-field messages (40h..45h; 46h carries 31).
 FIELD_ITEMS = codec.MAX_FIELD_ITEMS
@@ -165,22 +165,28 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
         message = codec.InitSystem() if wanted == DEFAULT_SYSTEM else codec.WriteSystem(wanted)
         groups.append((Step(message, summarise(message, first.actual.system), True),))
     for field in PROGRAM_FIELDS:
-        items = []
-        for number in PROGRAM_NUMBERS:
-            desired = [p for m in modules if (p := m.desired.program(number)) is not None]
-            values = {getattr(p, field) for p in desired}
-            if len(values) != 1 or len(desired) != len(modules):
-                continue
-            (value,) = values
-            differing = sum(m.actual.program(number) is None or getattr(m.actual.program(number), field) != value for m in modules)
-            if differing >= 2:
-                items.append((number, value))
+        items = _shared_items(field, modules)
         kind = codec.WriteAddresses if field == "A" else codec.FIELD_MESSAGES[field]
         size = codec.MAX_ADDRESS_ITEMS if field == "A" else FIELD_ITEMS
         messages = [kind(tuple(items[i : i + size])) for i in range(0, len(items), size)]
         if messages:
             groups.append(tuple(Step(m, summarise(m, first.actual.system), False) for m in messages))
     return groups
+
+
+def _shared_items(field: str, modules: Sequence[SharingModule]) -> list[tuple[int, int]]:
+    """(program, value) of `field` for each program every module wants alike and two or more do not hold yet."""
+    items = []
+    for number in PROGRAM_NUMBERS:
+        desired = [p for m in modules if (p := m.desired.program(number)) is not None]
+        values = {getattr(p, field) for p in desired}
+        if len(values) != 1 or len(desired) != len(modules):
+            continue
+        (value,) = values
+        differing = sum(m.actual.program(number) is None or getattr(m.actual.program(number), field) != value for m in modules)
+        if differing >= 2:
+            items.append((number, value))
+    return items
 
 
 class _Search:
@@ -320,7 +326,7 @@ class _Floor:
       clamping or link can leave, costs a word of a message of its own steps — and each message
       its ID word and the line's turnaround;
     - a desired system block the broadcasts do not write costs the cheapest 10h/20h to it;
-    - the verifying read-back (`verification.reach`) reads the system block where one is written
+    - the verifying read-back (`what_to_read.reach`) reads the system block where one is written
       — and then every program whose prediction differs from its read-back: each managed one
       that differs, each other one that the new system block clamps — and what the broadcasts
       write, and what the own steps write: at least what they must, at most what is managed.

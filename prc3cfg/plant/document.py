@@ -10,23 +10,13 @@ parsed again by the pure parser and its first stop is said, so that messages do 
 which one ran; they differ only where the two disagree on what is valid YAML (libyaml takes a
 tab inside a plain scalar, PyYAML does not), and where the pure parser would take more than
 about a second to get there (`_REREAD_EVENTS`). This module builds the data itself so that
-- a float keeps the text it was written with: `0.1` becomes `Decimal("0.1")`, never the
-  binary 0.1000000000000000055…; integers, booleans, strings are what both YAML versions read;
-- a plain scalar that YAML 1.1 (PyYAML) and YAML 1.2 (yaml-language-server, JSON Schema
-  tools, most other readers) read differently is a problem that says what to write: `010` is
-  8 to one and 10 to the other, `on` true or text, `1:30` 90 or text, `1e3` text or 1000,
-  `0b101`, `1_000`, `2024-01-01`, `=`. The 1.2 side is `core_schema`, the YAML 1.2.2 core
-  schema's table (§10.3.2); the 1.1 side is PyYAML's resolver, and the 1.1 type repository's
-  `y`, `Y`, `n`, `N` as booleans (PyYAML reads them as text, other 1.1 readers as true and false). Quoted scalars are
-  never ambiguous. The value kept is the YAML 1.2 reading, what editors and schema tools
-  see; the models' objection to it, if any, says what the key wants;
+- every untagged scalar is read as `prc3cfg.plant.scalars` reads it: exact numbers (`0.1` is
+  `Decimal("0.1")`), the YAML 1.2 reading, and a problem where YAML 1.1 reads it otherwise or
+  where it has more digits than decimal arithmetic keeps exact;
 - a tag (`!!bool x`, `!!str` on a key, `!!omap` on a list, `!env`, `!`) is refused wherever it
   is written: a plant file uses none, and PyYAML's constructors, which would read a tagged
   scalar, fail on many (`!!int ""`, `!!timestamp x`) with Python errors. A tagged scalar
   keeps its text, so that the tag is the only problem said there;
-- a number has at most `MAX_DIGITS` digits written out in full (`1e30` has 31): decimal
-  arithmetic is exact to that precision, and reading `1e999999` as an integer would take
-  seconds, `1.0e+400` as a float would be infinite;
 - `{position: 2,000}` is a decimal comma, not a position of 2 and a key `000`: a problem, and
   the number meant (2.000) is kept;
 - a duplicate key is a problem at the second key's line and column (the first value stays);
@@ -41,14 +31,18 @@ about a second to get there (`_REREAD_EVENTS`). This module builds the data itse
 Reading is bounded in time and memory: the bytes are handed over, read by the shell within
 its bounds (`prc3cfg.shell.plant_files`); more than `MAX_NODES` keys, values, lists and
 mappings, or nesting deeper than `MAX_DEPTH`, is refused on the event stream where it is
-reached; a scalar's reading is worked out once per text (a plant file says the same few
-things many times); at most `MAX_PROBLEMS` problems are kept, and one more to show that
-there are more.
+reached; a scalar's reading is worked out once per text (`scalars.Readings`); at most
+`MAX_PROBLEMS` problems are kept, and one more to show that there are more.
 
 Problems that stop reading altogether (not UTF-8, a control character or a byte order mark
 after the start, a YAML syntax error, a limit, an alias, an empty file, a top level that is
 not a mapping) raise `PlantError` at once; the others are collected in `Document.problems`.
-Does not know what a plant file contains. Pure: bytes in.
+Does not know what a plant file contains, nor what a scalar's text means (`scalars`). Pure: bytes in.
+
+It is long because it is one reader: the same pass over the events builds the data, finds the
+places of problems (`wanted`) and records spans, so that paths and offsets always match the data;
+and what stops it — the event stream's limits, the pure parser's re-read, a syntax error in words —
+is raised from inside that pass. The meaning of a scalar's text, which needs none of this, is `scalars`.
 """
 
 from __future__ import annotations
@@ -58,7 +52,7 @@ import itertools
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from decimal import Decimal, InvalidOperation
+from decimal import Decimal
 from types import MappingProxyType
 from typing import Any
 
@@ -75,9 +69,9 @@ from yaml.events import (
     SequenceStartEvent,
     StreamEndEvent,
 )
-from yaml.nodes import ScalarNode
 
 from prc3cfg.plant.problems import DECIMAL_COMMA, FIRST, MAX_PROBLEMS, Path_, PlantError, Problem
+from prc3cfg.plant.scalars import MERGE_TAG, NULL_TAG, Readings
 
 #: The parser: libyaml's when PyYAML was built with it (issue 11 wants its speed).
 LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
@@ -88,60 +82,15 @@ LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 MAX_NODES = 400_000
 #: A plant file nests 8 deep (plant → buses → bus → modules → module → programs → program → f1).
 MAX_DEPTH = 100
-#: Python's decimal precision: arithmetic on numbers of more digits would round.
-MAX_DIGITS = 28
-#: Entries of each of `_Reader`'s caches before it starts again.
-_CACHE_SIZE = 4096
 #: Events the pure parser re-reads where libyaml stopped (about a second of it): its first stop
 #: there is said. Beyond, libyaml's stop stands, in libyaml's words.
 _REREAD_EVENTS = 50_000
 
-_BOOL_TAG = "tag:yaml.org,2002:bool"
-_FLOAT_TAG = "tag:yaml.org,2002:float"
-_INT_TAG = "tag:yaml.org,2002:int"
-_MERGE_TAG = "tag:yaml.org,2002:merge"
-_NULL_TAG = "tag:yaml.org,2002:null"
-_STR_TAG = "tag:yaml.org,2002:str"
-_NUMBER_TAGS = (_INT_TAG, _FLOAT_TAG)
-_SPECIAL_FLOATS = {".inf": "Infinity", "+.inf": "Infinity", "-.inf": "-Infinity", ".nan": "NaN"}
 _NODE_EVENTS = frozenset({ScalarEvent, AliasEvent, MappingStartEvent, SequenceStartEvent})
 
-#: A number in the YAML 1.2 core schema's decimal or exponent notation: "0.300", "-5", "1e3".
-DECIMAL_NUMBER = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?")
-#: The YAML 1.2 core schema (YAML 1.2.2 §10.3.2): a plain scalar's tag by the first pattern it
-#: matches, and its value; anything else is a string.
-_CORE_SCHEMA: tuple[tuple[str, re.Pattern[str], Callable[[str], Any]], ...] = tuple(
-    (tag, re.compile(pattern), value)
-    for tag, pattern, value in (
-        (_NULL_TAG, r"null|Null|NULL|~|", lambda text: None),
-        (_BOOL_TAG, r"true|True|TRUE|false|False|FALSE", lambda text: text.lower() == "true"),
-        (_INT_TAG, r"[-+]?[0-9]+", int),
-        (_INT_TAG, r"0o[0-7]+", lambda text: int(text[2:], 8)),
-        (_INT_TAG, r"0x[0-9a-fA-F]+", lambda text: int(text[2:], 16)),
-        (_FLOAT_TAG, DECIMAL_NUMBER.pattern, Decimal),
-        (_FLOAT_TAG, r"[-+]?(\.inf|\.Inf|\.INF)|\.nan|\.NaN|\.NAN", lambda text: Decimal(_SPECIAL_FLOATS[text.lower()])),
-    )
-)
-_CORE_TAGS = {tag for tag, _, _ in _CORE_SCHEMA} | {_STR_TAG}  # every tag YAML 1.2 can give a plain scalar
-#: The table as one pattern: the name of the group that matches is the rule's index.
-_CORE_PATTERN = re.compile("|".join(f"(?P<r{index}>{pattern.pattern})" for index, (_, pattern, _) in enumerate(_CORE_SCHEMA)))
-#: How a message says what a reader takes a plain scalar for, by its tag (and value).
-_READINGS: dict[str, Callable[[Any], str]] = {
-    _INT_TAG: lambda value: _as_written(value),
-    _FLOAT_TAG: lambda value: _as_written(value),
-    _BOOL_TAG: lambda value: f"the boolean {str(value).lower()}",
-    _STR_TAG: lambda value: "text",
-    "tag:yaml.org,2002:timestamp": lambda value: "a date",
-    "tag:yaml.org,2002:value": lambda value: "the default-value key",
-    _MERGE_TAG: lambda value: "a merge key",
-}
 #: The two sides of a decimal comma that a flow mapping split: `{position: 2,000}`.
 _WHOLE = re.compile(r"[-+]?[0-9]+")
 _DIGITS = re.compile(r"[0-9]+")
-#: A number in decimal or exponent notation, with YAML 1.1's underscores: whole digits, fraction
-#: digits, exponent — to count its digits without building it.
-_DECIMAL_FORM = re.compile(r"[-+]?([0-9_]*)(?:\.([0-9_]*))?(?:[eE]([-+]?[0-9]+))?")
-
 #: What to do about a YAML syntax error, by a piece of PyYAML's wording of it (of libyaml's too
 #: where it differs: libyaml's stop is said as it is when the pure parser does not re-read the
 #: file, see `_REREAD_EVENTS`); the flag says the error is best shown where the construct
@@ -261,7 +210,7 @@ def parse_document(name: str, data: bytes) -> Document:
                           "a plant file is plain text"])
     reader = _read(name, text)
     root, value = reader.root, reader.value
-    if root is None or (type(root) is ScalarEvent and reader.tag(root) == _NULL_TAG):
+    if root is None or (type(root) is ScalarEvent and reader.tag(root) == NULL_TAG):
         raise PlantError([f"{name}:1:1: the file is empty — a plant file starts with 'plant: NAME' and 'buses:'"])
     if type(root) is not MappingStartEvent:
         line, column = _position(root)
@@ -396,11 +345,7 @@ class _Reader:
         self.problems: list[Problem] = []
         self.root: yaml.Event | None = None  # the top node's first event; None for an empty stream
         self.value: Any = None
-        self.constructor = yaml.SafeLoader("")
-        self.tags: dict[tuple[str, tuple[bool, bool]], str] = {}  # YAML 1.1's tag of a plain or quoted text
-        #: How an untagged scalar reads, by its text and plainness (`reading`): a plant file says the
-        #: same few things many times.
-        self.scalars: dict[tuple[str, bool], tuple[Any, Callable[[str], str] | None, bool]] = {}
+        self.readings = Readings()  # how each scalar's text reads
 
     def read(self) -> None:
         self.next()  # the stream's start
@@ -537,7 +482,7 @@ class _Reader:
         return event.tag if event.tag is not None and event.tag != "!" else _COLLECTIONS[type(event)]
 
     def scalar_tag(self, event: ScalarEvent) -> str:
-        return event.tag if event.tag is not None and event.tag != "!" else self.resolve(event.value, event.implicit)
+        return event.tag if event.tag is not None and event.tag != "!" else self.readings.tag(event.value, event.implicit)
 
     def merge_key(self, event: yaml.Event) -> bool:
         """`<<`, or any key tagged `!!merge`."""
@@ -549,17 +494,11 @@ class _Reader:
             maybe = event.tag not in (None, "!")
         else:
             return False  # an alias
-        return maybe and self.tag(event) == _MERGE_TAG
-
-    def resolve(self, text: str, implicit: tuple[bool, bool]) -> str:
-        if (tag := self.tags.get((text, implicit))) is None:
-            tag = self.constructor.resolve(ScalarNode, text, implicit)
-            _remember(self.tags, (text, implicit), tag)
-        return tag
+        return maybe and self.tag(event) == MERGE_TAG
 
     def empty(self, event: yaml.Event) -> bool:
         """An empty value (`key:` alone), which YAML reads as null."""
-        return type(event) is ScalarEvent and not event.value and self.tag(event) == _NULL_TAG
+        return type(event) is ScalarEvent and not event.value and self.tag(event) == NULL_TAG
 
     def split_number(self, number: yaml.Event, key: yaml.Event, value: yaml.Event) -> str | None:
         """`{position: 2,000}`: a whole number, a comma and digits that became a key without a value;
@@ -577,59 +516,10 @@ class _Reader:
         if event.tag is not None:
             self.problem(_tagged(event.tag, event, path))
             return event.value
-        seen = (event.value, not event.style)
-        if (known := self.scalars.get(seen)) is None:
-            known = self.reading(event.value, self.scalar_tag(event), not event.style)
-            _remember(self.scalars, seen, known)
-        value, problem, models_fix = known
+        value, problem, models_fix = self.readings.of(event)
         if problem is not None:
             self.problem(Problem(path, problem(key), at=_position(event), models_fix=models_fix))
         return value
-
-    def reading(self, text: str, tag: str, unstyled: bool) -> tuple[Any, Callable[[str], str] | None, bool]:
-        """How an untagged scalar reads: its value; None, or what is wrong with it, worded for the key
-        it is under; whether the models' fix is better than that message's."""
-        if not unstyled:
-            return text, None, False  # quoted: text to every reader
-        core_tag, core_value = _core_rule(text)
-        if (tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
-            return text, lambda key: (f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, written out "
-                                      f"— a plant file's numbers are read exactly: write at most {MAX_DIGITS} digits"), False
-        # a tag the core schema does not have (a date, `=`) differs without building a value
-        yaml11 = (tag, self.construct(tag, text) if tag in _CORE_TAGS else None)
-        if tag == _STR_TAG and text in _YES_NO:  # the 1.1 type repository's y and n, which PyYAML leaves out
-            yaml11 = (_BOOL_TAG, text in "yY")
-        yaml12 = (core_tag, core_value(text))
-        if (yaml11[0], str(yaml11[1])) != (yaml12[0], str(yaml12[1])):  # str: NaN is not equal to NaN
-            quoted = _STR_TAG in (yaml11[0], yaml12[0])
-            return yaml12[1], lambda key: _ambiguity(_subject(key, text, quoted), yaml11, yaml12), True
-        return yaml11[1], None, False
-
-    def construct(self, tag: str, text: str) -> Any:
-        """The YAML 1.1 value of a scalar; a float as an exact `Decimal`."""
-        if tag == _STR_TAG:
-            return text
-        node = ScalarNode(tag, text)
-        try:
-            return self.decimal(node) if tag == _FLOAT_TAG else self.constructor.construct_object(node)
-        finally:
-            self.constructor.constructed_objects.clear()  # it would keep every node it built
-
-    def decimal(self, node: ScalarNode) -> Decimal:
-        """A float exactly as written: "0.1" is Decimal("0.1")."""
-        text = node.value.replace("_", "")
-        try:
-            return Decimal(_SPECIAL_FLOATS.get(text.lower(), text))
-        except InvalidOperation:  # YAML 1.1 sexagesimal "1:30.5"
-            return Decimal(repr(self.constructor.construct_object(node)))
-
-
-def _remember(cache: dict[Any, Any], key: Any, value: Any) -> None:
-    """`cache[key] = value`, the cache emptied first when it is full: a file of all different values gains nothing."""
-    if len(cache) >= _CACHE_SIZE:
-        cache.clear()
-    cache[key] = value
-
 
 def _want(wanted: dict[Any, Any], path: Path_) -> None:
     """Add `path` to the trie `wanted`."""
@@ -660,64 +550,6 @@ def _in_file(data: Any, path: Path_) -> Path_:
             data = data[key]
             found += (key,)
     return found
-
-
-def core_schema(text: str) -> tuple[str, Any]:
-    """The tag and value the YAML 1.2 core schema gives the plain scalar `text`."""
-    tag, value = _core_rule(text)
-    return tag, value(text)
-
-
-def _core_rule(text: str) -> tuple[str, Callable[[str], Any]]:
-    """The core schema's tag for `text`, and how to build its value (not built yet: it may be long)."""
-    if (found := _CORE_PATTERN.fullmatch(text)) is None:
-        return _STR_TAG, str
-    rule = found.lastgroup  # every alternative is a group named r<index>
-    assert rule is not None
-    tag, _, value = _CORE_SCHEMA[int(rule[1:])]
-    return tag, value
-
-
-#: Plain scalars the YAML 1.1 type repository reads as booleans and PyYAML's resolver as text.
-_YES_NO = frozenset({"y", "Y", "n", "N"})
-
-
-def _ambiguity(subject: str, yaml11: tuple[str, Any], yaml12: tuple[str, Any]) -> str:
-    """How YAML 1.1 and 1.2 read `subject`, and what to write so that both read one thing."""
-    said = (f"{subject} is read as {_READINGS[yaml11[0]](yaml11[1])} by YAML 1.1 "
-            f"and as {_READINGS[yaml12[0]](yaml12[1])} by YAML 1.2")
-    if yaml11[0] in _NUMBER_TAGS and yaml12[0] in _NUMBER_TAGS:  # only a leading zero does that: 010
-        return f"{said} — write {_as_written(yaml12[1])} (or {_as_written(yaml11[1])}), without the leading zero"
-    tag, value = yaml11 if yaml12[0] == _STR_TAG else yaml12
-    if tag in _NUMBER_TAGS:
-        return f"{said} — write {_as_written(value)}, or quote it"
-    if tag == _BOOL_TAG:
-        return f"{said} — write true or false, or quote it"
-    return f"{said} — quote it"
-
-
-def _as_written(number: int | Decimal) -> str:
-    """A number as both YAML versions read it: 90, 0.001, 1000 (not 1E+3)."""
-    return format(number, "f") if isinstance(number, Decimal) and number.is_finite() else str(number)
-
-
-def _too_long(text: str) -> bool:
-    """More than `MAX_DIGITS` digits written out: 1e30 has 31, 1.0e-400 has 402; 0x1F, 1:30 their own."""
-    form = _DECIMAL_FORM.fullmatch(text)
-    if form is None:
-        return sum(c.isalnum() for c in text) > MAX_DIGITS
-    whole, fraction = (form[1] or "").replace("_", ""), (form[2] or "").replace("_", "")
-    exponent = (form[3] or "0").lstrip("+")
-    if len(exponent.lstrip("-0")) > 2:  # 100 or more: more than MAX_DIGITS either way, and not worth an int
-        return True
-    shift = int(exponent)
-    return max(len(whole) + shift, 1) + max(len(fraction) - shift, 0) > MAX_DIGITS
-
-
-def _subject(key: str, text: str, quoted: bool) -> str:
-    """A scalar as a message names it: "address 010", "alarm 'on'"; shortened when long."""
-    short = text if len(text) <= 24 else text[:20] + "…"
-    return f"{key} {repr(short) if quoted else short}".lstrip()
 
 
 def mappings_in(data: Any, path: Path_) -> Iterator[tuple[Path_, dict[Any, Any]]]:

@@ -80,6 +80,13 @@ def shared_profile(entries: list[dict[str, Any]]) -> tuple[dict[str, Any] | None
     only what differs; with fewer than two modules, no profile and the entries as they are."""
     if len(entries) < 2:
         return None, entries
+    profile = _common(entries)
+    return profile, [_own(entry, profile) for entry in entries]
+
+
+def _common(entries: list[dict[str, Any]]) -> dict[str, Any]:
+    """The profile of what every module entry holds alike: system parameters, each program's fields
+    (of a program every entry lists), the chains and `unmanaged_programs`."""
     profile: dict[str, Any] = {}
     if system := _alike([entry.get("system", {}) for entry in entries]):
         profile["system"] = system
@@ -89,18 +96,21 @@ def shared_profile(entries: list[dict[str, Any]]) -> tuple[dict[str, Any] | None
     if programs:
         profile["programs"] = programs
     profile |= {key: value for key, value in _alike(entries).items() if key in ("chains", "unmanaged_programs")}
-    modules = []
-    for entry in entries:
-        module: dict[str, Any] = {"address": entry["address"], "name": entry["name"], "profiles": [SHARED]}
-        if own := {key: value for key, value in entry.get("system", {}).items() if key not in system}:
-            module["system"] = own
-        own = {number: rest for number, fields in entry.get("programs", {}).items()
-               if (rest := {key: value for key, value in fields.items() if key not in programs.get(number, {})})}  # fmt: skip
-        if own:
-            module["programs"] = own
-        module |= {key: entry[key] for key in ("chains", "unmanaged_programs") if key in entry and key not in profile}
-        modules.append(module)
-    return profile, modules
+    return profile
+
+
+def _own(entry: dict[str, Any], profile: dict[str, Any]) -> dict[str, Any]:
+    """A module entry that uses `profile`: what it holds that the profile does not."""
+    system, programs = profile.get("system", {}), profile.get("programs", {})
+    module: dict[str, Any] = {"address": entry["address"], "name": entry["name"], "profiles": [SHARED]}
+    if own := {key: value for key, value in entry.get("system", {}).items() if key not in system}:
+        module["system"] = own
+    own = {number: rest for number, fields in entry.get("programs", {}).items()
+           if (rest := {key: value for key, value in fields.items() if key not in programs.get(number, {})})}  # fmt: skip
+    if own:
+        module["programs"] = own
+    module |= {key: entry[key] for key in ("chains", "unmanaged_programs") if key in entry and key not in profile}
+    return module
 
 
 class _Dumper(yaml.SafeDumper):

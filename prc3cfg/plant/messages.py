@@ -17,7 +17,6 @@ from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic_core import ErrorDetails
 
 from prc3cfg.core.text import has_control
-from prc3cfg.plant.document import DECIMAL_NUMBER
 from prc3cfg.plant.models import (
     BusSpec,
     ChainSpec,
@@ -32,6 +31,7 @@ from prc3cfg.plant.models import (
     SystemSpec,
 )
 from prc3cfg.plant.problems import DECIMAL_COMMA, Path_, Problem
+from prc3cfg.plant.scalars import DECIMAL_NUMBER
 
 #: The model of a mapping, by the key that holds it (a section) or holds a collection of them.
 SECTIONS: dict[str, type[BaseModel]] = {
@@ -89,23 +89,37 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
     own errors say what is wrong.
     """
     loc = tuple(error["loc"])
-    kind = error["type"]
     ctx = error.get("ctx", {})
-    if kind == "too_short" and ctx.get("actual_length") == 0 and error["input"]:
+    if error["type"] == "too_short" and ctx.get("actual_length") == 0 and error["input"]:
         return None
-    if error["input"] is None and kind != "missing":
-        kind = "empty_required" if _required(loc) else "empty"
-    if kind == "not_number" and isinstance(error["input"], str) and _DECIMAL_COMMA.fullmatch(error["input"]):
-        kind = "decimal_comma"
-    elif kind == "not_number" and _is_number_text(error["input"]):
-        kind = "quoted_number"
-    if kind == "not_whole" and not ctx.get("step_name"):
-        kind = "not_whole_count"
+    kind = _kind(error, loc, ctx)
     template = TEMPLATES.get(kind)
     if template is None:
         return Problem(loc, f"{what(loc, data)} is not valid: {error['msg']} — see schemas/plant.schema.json")
+    at_key = kind in ("extra_forbidden", "invalid_key", "missing") or (loc and loc[-1] == "[key]")
+    return Problem(loc, template.format(**_words(kind, error, loc, ctx, data)), at_key=bool(at_key))
+
+
+def _kind(error: ErrorDetails, loc: Path_, ctx: dict[str, Any]) -> str:
+    """The template an error is said with: pydantic's type, or one closer to what was written (nothing,
+    a decimal comma, a number in quotes, a count that is not whole)."""
+    kind, written = error["type"], error["input"]
+    if written is None and kind != "missing":
+        return "empty_required" if _required(loc) else "empty"
+    if kind == "not_number" and isinstance(written, str) and _DECIMAL_COMMA.fullmatch(written):
+        return "decimal_comma"
+    if kind == "not_number" and _is_number_text(written):
+        return "quoted_number"
+    if kind == "not_whole" and not ctx.get("step_name"):
+        return "not_whole_count"
+    return kind
+
+
+def _words(kind: str, error: ErrorDetails, loc: Path_, ctx: dict[str, Any], data: Any) -> dict[str, Any]:
+    """What the templates fill in, for this error: the names of its place and container, the value as
+    written, what was expected, and pydantic's or the models' context."""
     container = loc[:-1]
-    words = {
+    return {
         "what": what(loc, data),
         "key": loc[-1] if loc else "",
         "container": what(container, data) if container else "the plant file",
@@ -120,8 +134,6 @@ def from_pydantic(error: ErrorDetails, data: Any) -> Problem | None:
         "item": _LIST_ITEMS.get(loc[-1] if loc else "", "item"),
         **{k: v for k, v in ctx.items() if k not in ("unit", "what", "expected")},
     }
-    at_key = kind in ("extra_forbidden", "invalid_key", "missing") or (loc and loc[-1] == "[key]")
-    return Problem(loc, template.format(**words), at_key=bool(at_key))
 
 
 def port_error(what_: str, port: str) -> str | None:
@@ -152,12 +164,18 @@ def what(path: Path_, data: Any) -> str:
     if parent == "profiles" and isinstance(last, int):
         return "profile name"
     if parent in ITEMS and (isinstance(last, int) or len(head) == 1 or parent == "programs"):
-        label = ITEMS[parent][0]
-        name = _lookup(data, path + ("name",)) if parent in ("buses", "modules") else None
-        if isinstance(name, str) and name and not has_control(name):  # a name that is not printable text is not one
-            return f"{label} {name}"
-        return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
+        return _item(parent, last, path, data)
     return "the gateway" if last == "gateway" else str(last)
+
+
+def _item(parent: str, last: Any, path: Path_, data: Any) -> str:
+    """An item of a collection (`parent`): a bus or module by its name where it has a printable one,
+    else by its place counted from 1; a program by its number."""
+    label = ITEMS[parent][0]
+    name = _lookup(data, path + ("name",)) if parent in ("buses", "modules") else None
+    if isinstance(name, str) and name and not has_control(name):  # a name that is not printable text is not one
+        return f"{label} {name}"
+    return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
 
 
 def shown(value: Any) -> str:

@@ -15,7 +15,7 @@ Every model is frozen and forbids unknown keys. A key left out is `None` ("not g
 here"), so profiles can be layered: "given" and "given as the default" differ.
 
 Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`, of at most 28
-digits written out (`document.MAX_DIGITS`), so that no conversion here is slow or infinite.
+digits written out (`scalars.MAX_DIGITS`), so that no conversion here is slow or infinite.
 A number field rejects booleans and strings, checks its range and its step, and hands back
 an `int`, an exact `Decimal` (human units) or, for the bus's times, a `float` of seconds.
 Its failures are `PydanticCustomError`s whose type names the problem (`not_number`,

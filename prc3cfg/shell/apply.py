@@ -8,7 +8,7 @@ reply carries no checksum). A difference (a lost or damaged exchange, a module c
 the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
 
 Verification reads exactly what the steps that went out could have changed
-(`prc3cfg.core.verification.reach`): the system block if a system step went out, the programs
+(`prc3cfg.core.what_to_read.verification_reads`): the system block if a system step went out, the programs
 the steps write and the programs the module's own clamping changes — in the fewest
 50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
 read-back instead, for the paranoid. A difference counts only when two reads agree on it.
@@ -26,7 +26,10 @@ every PRC 3 message is idempotent, so it is read back and whatever still differs
 again. Ctrl-C (`prc3cfg.shell.cancel`) stops every module after the exchange in flight, and
 its `failure` says where in words: before which step, broadcast or repair step, or while
 verifying (how many of its steps were acknowledged).
-Gating, snapshots and locks are the caller's.
+
+What a module does next — its next step, a read-back, a repair, giving up — is the table's
+(`prc3cfg.core.apply_states`): `ModuleRun` sends, reads and plans as it says, tells it what
+happened, and keeps the account. Gating, snapshots and locks are the caller's.
 """
 
 from __future__ import annotations
@@ -37,23 +40,20 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
+from prc3cfg.core.apply_states import REPAIRS, Course, Event, Next, State, repair_event, reply_event
+from prc3cfg.core.axes import Release
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
-from prc3cfg.core.planner import Step, plan_module
+from prc3cfg.core.planner import ModulePlan, Step, plan_module
 from prc3cfg.core.render import plural
-from prc3cfg.core.verification import Release, reach
+from prc3cfg.core.what_to_read import programs_in, verification_reads
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
 
-REPAIRS = 2
-#: The codes of a module that is not in STOP (program active, not in STOP: §4.4): it takes writes to
-#: its other programs, so an apply would change the stroke of a moving machine — it is left alone.
-RUNNING = frozenset({16, 20})
-SYSTEM_UNSET = 23  # E12: every write but 10h/20h refused
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
 #: one, so a difference counts only when two reads in a row agree on it.
 CONFIRMING_READS = 4
@@ -83,21 +83,47 @@ class ModuleRun:
     exposed: bool = False
     sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
     written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
-    release_sent: bool = False  # a 10h/20h went out on the line
-    release_acknowledged: bool = False
     possibly_written: bool = False  # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
     watched: bool = False  # its system block was read because a release went out on its unprotected line
     system_unset: bool = False  # it answered E12 (system parameters not set): the next plan writes them first
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     failure: str | None = None
-    refused: bool = False  # the module answered an error code: stop for good
-    interrupted: bool = False
-    verified: bool = False
-    repairs: int = 0
+    course: Course = field(default_factory=Course)  # where the table has it, and what it does next
 
     @property
     def where(self) -> str:
         return f"bus {self.bus}, module {self.address} ({self.name})"
+
+    def process(self, event: Event) -> None:
+        """What happened to the module, told to the table (`prc3cfg.core.apply_states`)."""
+        self.course = self.course.after(event)
+
+    @property
+    def verified(self) -> bool:
+        return self.course.state is State.VERIFIED
+
+    @property
+    def interrupted(self) -> bool:
+        return self.course.state is State.INTERRUPTED
+
+    @interrupted.setter
+    def interrupted(self, stop: bool) -> None:
+        # the caller stops a module before anything was sent to it (`prc3cfg.api`); an apply resumes none
+        assert stop, "a module's apply is stopped, never resumed"
+        self.process(Event.CANCELLED)
+
+    @property
+    def repairs(self) -> int:
+        return self.course.repairs
+
+    @property
+    def release_sent(self) -> bool:
+        """Whether a 10h/20h went out on the line (a broadcast one counts)."""
+        return any(step.releases_axes for step in self.sent)
+
+    @property
+    def release_acknowledged(self) -> bool:
+        return any(step.releases_axes for step in self.written)
 
     @property
     def released(self) -> Release:
@@ -147,7 +173,7 @@ class ModuleRun:
 
     def stopped_verifying(self) -> None:
         """Ctrl-C during the verifying read-back: `failure` says what was acknowledged, and that it
-        was not verified (and what went wrong before, if anything did)."""
+        was not verified (and what went wrong before, if anything did); the table is told by the caller."""
         written, sent = {step.message for step in self.written}, {step.message for step in self.sent}
         own = self.steps[self.broadcasts :]
         said = f"interrupted while verifying: {sum(s.message in written for s in own)} of {plural(len(own), 'step')} acknowledged"
@@ -155,50 +181,47 @@ class ModuleRun:
             said += f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent"
         if self.repairs:
             said += f", after {plural(self.repairs, 'repair round')}"
-        self.interrupted, self.failure = True, f"{said}, not verified" + (f" (before that: {self.failure})" if self.failure else "")
+        self.failure = f"{said}, not verified" + (f" (before that: {self.failure})" if self.failure else "")
 
-    def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None], what: str = "step") -> bool:
-        """Send steps in order; False at the first one not accepted (`failure` says why, naming
-        the step as `what`: "step", "repair step")."""
+    def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> None:
+        """Send steps in order — the plan's own, or a repair's (the state says which) — while the
+        table says to send the next (`failure` says why it stopped, naming the step)."""
+        what = "repair step" if self.course.state is State.REPAIRING else "step"
         for index, step in enumerate(steps, start=1):
-            message = step.message
-            where = f"{what} {index} of {len(steps)} ({step.summary})"
-            try:
-                if link.cancel is not None and link.cancel.is_set():
-                    raise Interrupted()
-                self.sent.append(step)  # from here on it may have reached the module
-                self.release_sent |= message.RELEASES_AXES
-                reply = link.request(self.address, message)
-            except Interrupted as stop:  # before this step, or between its attempts (then it counts as sent)
-                if isinstance(stop, NotSent):  # its frame never left
-                    self.sent.pop()
-                    self.release_sent = any(s.releases_axes for s in self.sent)
-                self.interrupted = True
-                self.failure = f"interrupted before {where}"
-                return False
-            except LinkError as error:
-                self.failure = f"{where}: {error}"
-                return False
-            if reply == SYSTEM_UNSET:  # only a 10h/20h clears E12, and this plan has none for it
-                self.refused = self.system_unset = True
-                self.failure = (f"{where} was refused: the module is in E12 (system parameters not set), which only a 10h/20h "
-                                "clears — plan again: the new plan writes its system parameters first (20h, releasing its axes)")  # fmt: skip
-                return False
-            if reply in RUNNING:  # it moves: none of its steps may go now, nor be repeated in a loop
-                self.refused = True
-                self.failure = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
-                return False
-            assert isinstance(reply, int)  # a write is answered with a code word only (decode_reply sees to it)
-            if reply != 0:
-                # Final — unless a broadcast before it may have been lost (none answers one): then
-                # the read-back and an addressed repair get their chance first.
-                self.refused = not (self.broadcasts and self.repairs == 0)
-                self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
-                return False
-            self.written.append(step)
-            self.release_acknowledged |= message.RELEASES_AXES
+            self.process(self._send(link, step, f"{what} {index} of {len(steps)} ({step.summary})"))
+            if self.course.action is not Next.SEND:
+                return
             tick()
-        return True
+        self.process(Event.ALL_SENT)
+
+    def _send(self, link: Link, step: Step, where: str) -> Event:
+        """One step on the line, and what came of it (`failure` says what went wrong)."""
+        try:
+            if link.cancel is not None and link.cancel.is_set():
+                raise Interrupted()
+            self.sent.append(step)  # from here on it may have reached the module
+            reply = link.request(self.address, step.message)
+        except Interrupted as stop:  # before this step, or between its attempts (then it counts as sent)
+            if isinstance(stop, NotSent):  # its frame never left
+                self.sent.pop()
+            self.failure = f"interrupted before {where}"
+            return Event.CANCELLED
+        except LinkError as error:
+            self.failure = f"{where}: {error}"
+            return Event.NO_REPLY
+        assert isinstance(reply, int)  # a write is answered with a code word only (decode_reply sees to it)
+        event = reply_event(reply, after_broadcast=self.broadcasts > 0)
+        if event is Event.ACKNOWLEDGED:
+            self.written.append(step)
+        elif event is Event.E12:
+            self.system_unset = True
+            self.failure = (f"{where} was refused: the module is in E12 (system parameters not set), which only a 10h/20h "
+                            "clears — plan again: the new plan writes its system parameters first (20h, releasing its axes)")  # fmt: skip
+        elif event is Event.RUNNING:
+            self.failure = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
+        else:
+            self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
+        return event
 
     def verify_read(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage) -> ModuleImage:
         """`known` with what the module holds now in `system`/`programs`: as soon as a read shows
@@ -225,62 +248,76 @@ class ModuleRun:
         """Read back what the steps could have changed; while the module differs from the desired
         image and may be repaired, plan, repair, and read back what the repair could have changed.
 
-        A refused module is read back once, for the account, and not repaired. A repair that would
+        A refused module is read back, for the account, and not repaired. A repair that would
         release the axes (10h/20h) is sent only to a module in `consented` — the modules whose
         release the operator agreed to with the plan shown; any other needs a plan of its own.
         """
-        expected, sent_before = self.predicted, 0
-        known_programs = frozenset(n for n, p in enumerate(self.before.programs, 1) if p is not None)
-        for _ in range(REPAIRS + 1):
-            system, programs = reach(self.final or self.before, expected, self.sent[sent_before:])
-            system |= with_system
-            self.watched |= with_system
-            if verify is Verify.FULL:
-                system, programs = True, known_programs
-            try:
-                self.final = self.verify_read(link, system, programs, expected)
-            except Interrupted:
-                self.stopped_verifying()
+        expected, sent_before, repair = self.predicted, 0, None
+        known_programs = frozenset(programs_in(self.before))
+        while True:
+            action = self.course.action
+            if action is Next.READ:
+                system, programs = verification_reads(self.before, self.final or self.before, expected, self.sent[sent_before:],
+                                                      full=verify is Verify.FULL, watch_system=with_system)  # fmt: skip
+                self.watched |= with_system
+                self.process(self._verify(link, system, programs, expected, known_programs))
+            elif action is Next.PLAN_REPAIR:
+                assert self.final is not None  # a difference was read
+                repair = plan_module(self.final, self.desired, cost)
+                self.process(self._consent(repair, consented))
+            elif action is Next.SEND:
+                assert repair is not None  # the table sends a repair once planned
+                expected, sent_before = repair.predicted, len(self.sent)
+                self.run(link, repair.steps, tick)
+            else:
+                if action is Next.GIVE_UP:
+                    self.failure = self._gave_up()
                 return
-            except PossibleWrite:
-                raise  # the line stops: `execute` says so for every module on it
-            except LinkError as error:
-                self.failure = f"verification: {error}"
-                continue
-            except UserError as error:
-                self.failure = f"verification: {error}"
-                return
-            if _agree(self.final, self.desired, True, known_programs):
-                if trespass := self.trespassed():
-                    self.failure = trespass  # no plan may write those programs: nothing to repair
-                    return
-                self.verified, self.failure, self.refused = True, None, False
-                return
-            if self.refused or self.repairs == REPAIRS:
-                break
-            repair = plan_module(self.final, self.desired, cost)
-            if repair.releases_axes and (self.bus, self.address) not in consented:
-                self.failure = (
-                    "the read-back shows other system parameters than the plan expected (changed on the floor "
-                    "meanwhile" + (", or by a damaged frame meant for another module" if self.exposed else "") + "?); writing "
-                    "them would release the axes, which the plan agreed to did not — nothing more was sent to it: plan "
-                    "again and review the new plan"
-                )
-                return
-            self.repairs += 1
-            expected, sent_before = repair.predicted, len(self.sent)
-            if not self.run(link, repair.steps, tick, "repair step") and self.interrupted:
-                return
-        if self.refused:
-            return
-        if self.final is None:
-            self.failure = f"could not be read back to verify it ({self.failure}) — check the line and the module, then apply again"
-        else:
+
+    def _verify(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage, known_programs: frozenset[int]) -> Event:
+        """One verifying read-back, and what it found (`failure` says what went wrong)."""
+        try:
+            self.final = self.verify_read(link, system, programs, expected)
+        except Interrupted:
+            self.stopped_verifying()
+            return Event.CANCELLED
+        except PossibleWrite:
+            raise  # the line stops: `execute` says so for every module on it
+        except LinkError as error:
+            self.failure = f"verification: {error}"
+            return Event.NO_REPLY
+        except UserError as error:
+            self.failure = f"verification: {error}"
+            return Event.READ_REFUSED
+        if not _agree(self.final, self.desired, True, known_programs):
+            return Event.DIFFERS
+        if trespass := self.trespassed():
+            self.failure = trespass
+            return Event.TRESPASSED
+        self.failure = None
+        return Event.AGREES
+
+    def _consent(self, repair: ModulePlan, consented: frozenset[tuple[str, int]]) -> Event:
+        """Whether the repair may go (`failure` says why not)."""
+        event = repair_event(repair.releases_axes, (self.bus, self.address) in consented)
+        if event is Event.REPAIR_UNCONSENTED:
             self.failure = (
-                f"still differs from the plant file after {REPAIRS} repairs"
-                + (f" (last problem: {self.failure})" if self.failure else "")
-                + " — check the line (damaged frames?) and the module, then apply again"
+                "the read-back shows other system parameters than the plan expected (changed on the floor "
+                "meanwhile" + (", or by a damaged frame meant for another module" if self.exposed else "") + "?); writing "
+                "them would release the axes, which the plan agreed to did not — nothing more was sent to it: plan "
+                "again and review the new plan"
             )
+        return event
+
+    def _gave_up(self) -> str:
+        """Why a module that had every round is not verified."""
+        if self.final is None:
+            return f"could not be read back to verify it ({self.failure}) — check the line and the module, then apply again"
+        return (
+            f"still differs from the plant file after {REPAIRS} repairs"
+            + (f" (last problem: {self.failure})" if self.failure else "")
+            + " — check the line (damaged frames?) and the module, then apply again"
+        )
 
 
 def _agree(image: ModuleImage, other: ModuleImage, system: bool, programs: frozenset[int]) -> bool:
@@ -301,7 +338,8 @@ def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callab
             link.broadcast(step.message, turnaround)
         except Interrupted:
             for run in receivers:
-                run.interrupted, run.failure = True, f"interrupted before broadcast {index} of {len(steps)} ({step.summary})"
+                run.failure = f"interrupted before broadcast {index} of {len(steps)} ({step.summary})"
+                run.process(Event.CANCELLED)
             return
         except LinkError as error:
             for run in receivers:
@@ -309,7 +347,6 @@ def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callab
             return
         for run in receivers:
             run.sent.append(step)  # it may have reached every module: they count it as sent
-            run.release_sent |= step.releases_axes
         tick()
 
 
@@ -323,7 +360,8 @@ def stopped(link: Link, runs: list[ModuleRun], error: PossibleWrite) -> None:
             with contextlib.suppress(LinkError, UserError):  # not read back: `released` says "possibly"
                 run.final = replace(run.final or run.before, system=read_system(link, run.address, name=run.name))
         if not run.verified:
-            run.refused, run.failure = True, str(error)
+            run.failure = str(error)
+            run.process(Event.LINE_STOPPED)
 
 
 def execute(

@@ -213,9 +213,25 @@ class Verified:
 
 def check(paths: Iterable[Path]) -> Verified:
     """Every record under `paths` checked: a plant file (its records), a records folder, journals, snapshots."""
+    result = Verified()
+    wanted_journals, wanted_snapshots = _wanted(paths, result)
+    checked: dict[Path, Checked] = {}
+    done: set[Path] = set()  # snapshots checked with their journal
+    for path in wanted_journals:
+        checked[path.resolve()] = _check_chained(path, result, done)
+    for path in wanted_snapshots:
+        if path.resolve() not in done:
+            _check_alone(path, result, checked)
+    if not wanted_journals and not wanted_snapshots and not result.problems:
+        result.problems.extend(Mismatch(str(p), "no records there", "an apply, restore or adopt keeps them in .prc3cfg/ beside the plant file")
+                               for p in paths)  # fmt: skip
+    return result
+
+
+def _wanted(paths: Iterable[Path], result: Verified) -> tuple[dict[Path, None], dict[Path, None]]:
+    """The journals and the snapshots `paths` name, each once, in order; a problem for a path that names no records."""
     wanted_journals: dict[Path, None] = {}
     wanted_snapshots: dict[Path, None] = {}
-    result = Verified()
     for path in paths:
         folder = _records_folder(path)
         if path.suffix.lower() in (".yaml", ".yml") and not path.is_dir():  # a plant file: its own records
@@ -231,63 +247,66 @@ def check(paths: Iterable[Path]) -> Verified:
             wanted_snapshots[path] = None
         else:
             result.problems.append(Mismatch(str(path), "not a plant file, records folder, journal (.jsonl) or snapshot (.json)", NAME_ONE))
-    checked: dict[Path, Checked] = {}
-    done: set[Path] = set()  # snapshots checked with their journal
-    for path in wanted_journals:
-        journal = checked[path.resolve()] = check_journal(path)
-        result.journals += 1
-        if journal.problem is not None:
-            result.problems.append(journal.problem)
-            continue
-        if journal.cut:
-            result.notes.append(f"{path}:{len(journal.records) + 1}: its last record was cut short — the disk refused it, or the "
-                                "run was killed as it wrote it — and is left out")  # fmt: skip
-        if not journal.chained:
-            result.unchained += 1
-            continue
-        header = journal.header or {}
-        if (problem := _link_problem(path, header.get("previous"), result.notes)) is not None:
-            result.problems.append(problem)
-        if (found := journal.snapshot_record()) is not None:
-            if (name := file_name(found[1].get("path"))) is None:
-                result.problems.append(Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)"))
-                continue
-            snapshot = path.resolve().parent.parent / "snapshots" / name
-            done.add(snapshot)
-            result.snapshots += 1
-            if not snapshot.exists():
-                result.problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
-                                               "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
-            elif (problem := _snapshot_problem(journal, snapshot)) is not None:
-                result.problems.append(problem)
-    for path in wanted_snapshots:
-        if path.resolve() in done:
-            continue
-        result.snapshots += 1
-        try:
-            taken = Snapshot.load(path)
-        except UserError as error:
-            result.problems.append(Mismatch(str(path), str(error).partition(": ")[2] or str(error)))
-            continue
-        if taken.header is None:
-            result.unchained += 1
-            continue
-        if (name := file_name(taken.header.get("journal"))) is None:
-            result.problems.append(Mismatch(str(path), "its header names no journal file"))
-            continue
-        journal_path = path.resolve().parent.parent / "journal" / name
-        if not journal_path.is_file():
-            result.problems.append(Mismatch(str(path), f"its journal {journal_path} is not there"))
-            continue
-        journal = checked.get(journal_path) or check_journal(journal_path)
-        if journal.problem is None and (problem := _snapshot_problem(journal, path)) is not None:
-            result.problems.append(problem)
-        elif journal.problem is not None and journal_path not in checked:
-            result.problems.append(journal.problem)
-    if not wanted_journals and not wanted_snapshots and not result.problems:
-        result.problems.extend(Mismatch(str(p), "no records there", "an apply, restore or adopt keeps them in .prc3cfg/ beside the plant file")
-                               for p in paths)  # fmt: skip
-    return result
+    return wanted_journals, wanted_snapshots
+
+
+def _check_chained(path: Path, result: Verified, done: set[Path]) -> Checked:
+    """A journal checked into `result`: its chain, its link to the run before and the snapshot it
+    records last (added to `done`, so that it is not checked again on its own)."""
+    journal = check_journal(path)
+    result.journals += 1
+    if journal.problem is not None:
+        result.problems.append(journal.problem)
+        return journal
+    if journal.cut:
+        result.notes.append(f"{path}:{len(journal.records) + 1}: its last record was cut short — the disk refused it, or the "
+                            "run was killed as it wrote it — and is left out")  # fmt: skip
+    if not journal.chained:
+        result.unchained += 1
+        return journal
+    header = journal.header or {}
+    if (problem := _link_problem(path, header.get("previous"), result.notes)) is not None:
+        result.problems.append(problem)
+    if (found := journal.snapshot_record()) is None:
+        return journal
+    if (name := file_name(found[1].get("path"))) is None:
+        result.problems.append(Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)"))
+        return journal
+    snapshot = path.resolve().parent.parent / "snapshots" / name
+    done.add(snapshot)
+    result.snapshots += 1
+    if not snapshot.exists():
+        result.problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
+                                       "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
+    elif (problem := _snapshot_problem(journal, snapshot)) is not None:
+        result.problems.append(problem)
+    return journal
+
+
+def _check_alone(path: Path, result: Verified, checked: dict[Path, Checked]) -> None:
+    """A snapshot no journal given recorded, checked into `result` against the journal its header
+    names (from `checked`, when that journal was given too: its problem is said there already)."""
+    result.snapshots += 1
+    try:
+        taken = Snapshot.load(path)
+    except UserError as error:
+        result.problems.append(Mismatch(str(path), str(error).partition(": ")[2] or str(error)))
+        return
+    if taken.header is None:
+        result.unchained += 1
+        return
+    if (name := file_name(taken.header.get("journal"))) is None:
+        result.problems.append(Mismatch(str(path), "its header names no journal file"))
+        return
+    journal_path = path.resolve().parent.parent / "journal" / name
+    if not journal_path.is_file():
+        result.problems.append(Mismatch(str(path), f"its journal {journal_path} is not there"))
+        return
+    journal = checked.get(journal_path) or check_journal(journal_path)
+    if journal.problem is None and (problem := _snapshot_problem(journal, path)) is not None:
+        result.problems.append(problem)
+    elif journal.problem is not None and journal_path not in checked:
+        result.problems.append(journal.problem)
 
 
 def _records_folder(path: Path) -> Path | None:
@@ -369,22 +388,32 @@ def _journal_run(path: Path, snapshots_dir: Path) -> RecordedRun:
     """A run as its journal tells it (one before headers: what its records say)."""
     checked = check_journal(path)
     records, header = checked.records, checked.header or {}
-    named = None
-    if (record := checked.snapshot_record()) is not None:
-        named = file_name(record[1].get("path"))
-    elif applied := [r for r in records if r.get("event") == "apply" and isinstance(r.get("snapshot"), str)]:
-        named = file_name(Path(applied[-1]["snapshot"]).name)  # before headers: the apply record named it by its path
+    named = _snapshot_named(checked)
     snapshot = None if named is None else snapshots_dir / named
     plant = header.get("plant")
     name = plant.get("name") if isinstance(plant, dict) else next((r.get("plant") for r in records if r.get("event") == "apply"), None)
-    buses = {str(r["bus"]) for r in records if r.get("event") in ("request", "exchange") and "bus" in r}
-    buses |= {str(bus) for r in records if r.get("event") == "adopt" for bus in r.get("buses") or ()}
     chain = "intact" if checked.chained else "unchained"
     if checked.problem is not None:
         chain = f"broken at {checked.problem.where}"
     return RecordedRun(str(records[0].get("time", "")) if records else "", header.get("command") or ("apply" if records else None),
-               header.get("user"), header.get("host"), name, tuple(sorted(buses)), _result(records), header.get("reason"), path,
+               header.get("user"), header.get("host"), name, _buses(records), _result(records), header.get("reason"), path,
                snapshot, chain)  # fmt: skip
+
+
+def _snapshot_named(checked: Checked) -> str | None:
+    """The file name of the snapshot a journal records last."""
+    if (record := checked.snapshot_record()) is not None:
+        return file_name(record[1].get("path"))
+    if applied := [r for r in checked.records if r.get("event") == "apply" and isinstance(r.get("snapshot"), str)]:
+        return file_name(Path(applied[-1]["snapshot"]).name)  # before headers: the apply record named it by its path
+    return None
+
+
+def _buses(records: list[dict[str, Any]]) -> tuple[str, ...]:
+    """The buses a run spoke on, from its records: its exchanges', and an adopt's."""
+    buses = {str(r["bus"]) for r in records if r.get("event") in ("request", "exchange") and "bus" in r}
+    buses |= {str(bus) for r in records if r.get("event") == "adopt" for bus in r.get("buses") or ()}
+    return tuple(sorted(buses))
 
 
 def _snapshot_run(path: Path) -> RecordedRun:
@@ -418,6 +447,24 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
     cut = None if older_than_days is None else now - timedelta(days=older_than_days)
     beyond = set(range(len(every) - keep)) if keep is not None else set(range(len(every)))
     candidates = [i for i in sorted(beyond) if cut is None or (every[i].time and datetime.fromisoformat(every[i].time) < cut)]
+    why = _kept(every, protected)
+    removed, kept = [], []
+    for index in candidates:
+        run = every[index]
+        if index in why:
+            kept.append((run, why[index]))
+            continue
+        if not dry_run:
+            for path in (run.snapshot, run.journal):
+                if path is not None:
+                    path.unlink(missing_ok=True)
+        removed.append(run)
+    return Pruned(tuple(removed), tuple(kept))
+
+
+def _kept(every: list[RecordedRun], protected: Iterable[Path]) -> dict[int, str]:
+    """Why each run that prune must keep is kept, by its index in `every` (oldest first): the newest
+    snapshot of a line, the plant's newest run, a run an axis release nobody was told of names."""
     guarded = {p.name for p in protected}  # by name: a record may name the journal by a path relative to another folder
     newest: dict[str, tuple[int, str]] = {}
     for index, run in enumerate(every):
@@ -433,18 +480,7 @@ def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, 
     for index, run in enumerate(every):
         if run.journal is not None and run.journal.name in guarded:
             why[index] = "an axis release nobody was told of names this run (prc3cfg.shell.releases): kept until an apply's account names it"
-    removed, kept = [], []
-    for index in candidates:
-        run = every[index]
-        if index in why:
-            kept.append((run, why[index]))
-            continue
-        if not dry_run:
-            for path in (run.snapshot, run.journal):
-                if path is not None:
-                    path.unlink(missing_ok=True)
-        removed.append(run)
-    return Pruned(tuple(removed), tuple(kept))
+    return why
 
 
 def _lines(run: RecordedRun) -> dict[str, str]:

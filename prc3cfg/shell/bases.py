@@ -1,6 +1,6 @@
 """The record of each line: what prc3cfg last read or verified its modules to hold, for every plant
 file, checkout and user of the line on this machine — the base of a targeted read-back
-(`prc3cfg.core.targeting`).
+(`prc3cfg.core.what_to_read`).
 
 Every read updates it with what it saw (`saw`: drift included, so the next plan writes it back);
 before an apply's first write on a line the modules it writes are dropped from it (`forget`,
@@ -19,7 +19,7 @@ file vouches for nothing (it could say anything), but its newer entry still mean
 changed since, so it is not known (`read` says by whose claim). A file another tool
 damaged, or a link, is read as no record (the modules are then read in full).
 
-Does not own what is read (`prc3cfg.core.targeting`) nor when (`prc3cfg.api`).
+Does not own what is read (`prc3cfg.core.what_to_read`) nor when (`prc3cfg.api`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.targeting import Known
+from prc3cfg.core.what_to_read import Known
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically

@@ -20,13 +20,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from prc3cfg.core import codec, targeting
+from prc3cfg.core import codec, what_to_read
+from prc3cfg.core.axes import Release
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planning import Key, Planner, Prober, Wanted
 from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
-from prc3cfg.core.targeting import Known
-from prc3cfg.core.verification import Release
+from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import bases, releases
@@ -35,7 +35,7 @@ from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.platform import result_of
-from prc3cfg.shell.readback import LineRead, LinesFailed, Target
+from prc3cfg.shell.readback import LineRead, LinesFailed
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot
 from prc3cfg.shell.sessions import LineOptions, line_cost
 
@@ -220,12 +220,12 @@ class Writing:
 
     def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
         """What the modules that verified hold, back into their lines' records: the read-back with the
-        steps' effect, and what the record knew of the rest (`targeting.verified`)."""
+        steps' effect, and what the record knew of the rest (`what_to_read.verified`)."""
         when, by = bases.now(), bases.who(self.command, self.plant.path)
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
             try:
-                bases.update(self.keys[bus], {a: targeting.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+                bases.update(self.keys[bus], {a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
             except UserError as error:  # they stay unknown: the next plan reads them in full
                 self.options.tell(f"bus {bus}: {error} — the next plan reads its modules in full")
 

@@ -44,6 +44,10 @@ means the same everywhere:
 
 Branches are `sys.platform` tests, which mypy follows: `mypy --platform win32` and `--platform
 darwin` check the other systems' branches. Does not own what any of it is used for.
+
+It is long because it is the one seam (tests/test_platform.py checks that no other module imports
+a module one system lacks): each function is short, but every difference between the systems is
+here, where a reader porting prc3cfg finds them all. The `# --` rulers group it as the list above.
 """
 
 from __future__ import annotations

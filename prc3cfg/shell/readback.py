@@ -1,13 +1,15 @@
 """Read-back: what every module holds, in the fewest exchanges.
 
-A module image is one 50h (system parameters, S9) and, for the managed programs only,
-the fewest 52h/51h reads (`prc3cfg.core.verification.read_messages`): a fully managed module
+A module image is one 50h (system parameters, S9) and, for the programs a `Target` names, the
+fewest 52h/51h reads (`prc3cfg.core.what_to_read.read_messages`): a fully managed module
 takes 1 + 16 exchanges.
 
-When the system parameters a plan will write can clamp programs (a lower S1 or S4, a
-higher S5: prc3-protocol.md §4.2), every program is read, not only the managed ones: the
-module's own clamping reaches programs the plant does not manage, and what it does to
-them must be shown in the plan and kept in the snapshot (`Target.clamped_by`).
+What to read is decided in `prc3cfg.core.what_to_read`, also where a read widens on what it finds:
+when the system parameters a plan will write can clamp programs (a lower S1 or S4, a higher S5:
+prc3-protocol.md §4.2), every program is read, not only the managed ones — the module's own
+clamping reaches programs the plant does not manage, and what it does to them must be shown in
+the plan and kept in the snapshot (`after_system`); and what contradicts the line's record is
+read in full (`after_programs`). This module only reads.
 
 S9 must equal the configured address, else the wiring or the plant file is wrong.
 Buses are read in parallel (one thread per line), the modules of one line one after
@@ -18,14 +20,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypeVar
 
-from prc3cfg.core import codec
-from prc3cfg.core.device import can_clamp
+from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.error_codes import describe, remedy
-from prc3cfg.core.image import PROGRAM_COUNT, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters
-from prc3cfg.core.verification import read_messages
+from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
+from prc3cfg.core.what_to_read import Target, read_messages
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
@@ -57,21 +57,14 @@ def read_module(
 
     With `clamped_by` (the system parameters a plan will write), every program is read when
     writing them can clamp programs on this module. With `known` (what the line's record says the
-    module holds, `prc3cfg.core.targeting`), what is read is evidence: a system block or a program
-    other than the record's means the module was changed by another hand, and every `managed`
-    program is read too — nothing of the record is taken then.
+    module holds), what is read is evidence: a system block or a program other than the record's
+    means the module was changed by another hand, and every `managed` program is read too —
+    nothing of the record is taken then (`prc3cfg.core.what_to_read.after_system`, `after_programs`).
     """
     system = read_system(link, address, name=name)
-    wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
-    if known is not None and system != known.system:
-        wanted |= set(managed)
-    found = read_programs(link, address, wanted, name=name)
-    if known is not None and any(known.program(n) not in (None, program) for n, program in found.items()):
-        found |= read_programs(link, address, set(managed) - set(found), name=name)
-    slots: list[Program | None] = [None] * PROGRAM_COUNT
-    for number, program in found.items():
-        slots[number - 1] = program
-    return ModuleImage(address=address, system=system, programs=tuple(slots))
+    image = ModuleImage(address=address, system=system, programs=(None,) * PROGRAM_COUNT)
+    image = image.with_programs(read_programs(link, address, what_to_read.after_system(system, programs, clamped_by, known, managed), name=name))
+    return image.with_programs(read_programs(link, address, what_to_read.after_programs(image, known, managed), name=name))
 
 
 Reply = TypeVar("Reply", codec.SystemReply, codec.ProgramsReply)
@@ -109,20 +102,6 @@ def read_programs(link: Link, address: int, programs: Iterable[int], *, name: st
             if reply.first + offset in wanted:
                 found[reply.first + offset] = program
     return found
-
-
-@dataclass(frozen=True, slots=True)
-class Target:
-    """A module to read: where it is, what it is called, which programs, and the system
-    parameters a plan may write there (every program is read when they can clamp)."""
-
-    bus: str
-    address: int
-    name: str
-    programs: tuple[int, ...]
-    clamped_by: SystemParameters | None = None
-    known: ModuleImage | None = None  # a targeted read's evidence, and the programs it reads in full then: see `read_module`
-    managed: tuple[int, ...] = ()
 
 
 def read_all(

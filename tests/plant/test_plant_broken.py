@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg.errors import UserError
-from prc3cfg.plant import PlantError, document, loader, plant_schema
+from prc3cfg.plant import PlantError, document, loader, plant_schema, scalars
 from prc3cfg.plant.problems import MAX_PROBLEMS
 from prc3cfg.shell import plant_files
 from prc3cfg.shell.plant_files import load_plant
@@ -283,8 +283,8 @@ def test_past_the_reread_libyaml_words_the_syntax_error(tmp_path: Path, monkeypa
     ("-0x1F", "str", "-0x1F"), ("0o17", "int", 15), ("1e3", "float", 1000), ("~", "null", None),
 ])
 def test_the_yaml_1_2_core_schema(text: str, tag: str, value) -> None:
-    assert document.core_schema(text) == (f"tag:yaml.org,2002:{tag}", value)
-    assert document.core_schema(".NaN")[1].is_nan()
+    assert scalars.core_schema(text) == (f"tag:yaml.org,2002:{tag}", value)
+    assert scalars.core_schema(".NaN")[1].is_nan()
 
 
 # What a hurried edit leaves: YAML debris, YAML 1.1 forms, bombs in miniature, huge numbers.

@@ -16,7 +16,7 @@ The planner runs its own plans through this (a failure there is a planner bug), 
 `apply --plan` runs a plan file's steps through it from the fresh read-back, so a plan file
 edited to do anything else is refused before the first write. Programs that were not read
 are filled with defaults to run the model; rule 2 keeps them untouched, and the read-back
-reads every program a system step could clamp (`prc3cfg.shell.readback`). The predicted image
+reads every program a system step could clamp (`prc3cfg.core.what_to_read.after_system`). The predicted image
 has every program that was read — an unmanaged one as the module's own clamping leaves
 it — and `None` for the others. Pure.
 """

@@ -2,11 +2,11 @@
 
 Owns the outside of the emulator: byte streams (TCP connections, a pty), request frames in
 and reply frames out through `prc3cfg.core.framing`, one exchange at a time on the line (half
-duplex), line-speed timing, fault injection, making every accepted write durable before it
-is answered, and the Python API tests use to change a module while it runs (mode, fault,
-active program, teach-in). What a message does is `prc3cfg.core.device`; who gets it,
-`bus.EmulatedBus`; how the state is kept on disk (a journal beside the state file, compacted into
-it), `state.Store`.
+duplex), line-speed timing, fault injection (its seeded draws), making every accepted write
+durable before it is answered, and the Python API tests use to change a module while it runs
+(mode, fault, active program, teach-in). What a message does is `prc3cfg.core.device`; who gets
+it, `bus.EmulatedBus`; what the drawn faults do to an exchange, `prc3cfg.core.exchange.FAULTS`;
+how the state is kept on disk (a journal beside the state file, compacted into it), `state.Store`.
 
 Frames from a TCP connection are decoded with `uart=False` (`prc3cfg.core.framing.base`): a
 request split and delayed by the network or a paused client is taken whole by its length.
@@ -39,6 +39,9 @@ A long-running service that survives its clients:
   disk — and the write is not answered, as if it never arrived: the master sees no reply,
   repeats it, and reports it. Reads go on being answered; the next write is saved once the
   file can be written again. On exit the state file takes everything.
+
+Long because one file (over 500 lines): every part of the server (exchanges, streams, TCP, the pty, its
+lifetime) works on one `Emulator`'s lock, closing event and sets of threads and connections.
 """
 
 from __future__ import annotations
@@ -61,6 +64,7 @@ from serial import rfc2217
 from serial.rfc2217 import PortManager
 
 from prc3cfg.core.device import ModuleState
+from prc3cfg.core.exchange import FAULTS, Fault
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Frame, get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received as uart_received
@@ -244,48 +248,66 @@ class Emulator:
         return None
 
     def exchange(self, frame: Frame, received_at: float) -> bytes | None:
-        """Serve one request frame; the reply frame to send, or None for silence."""
+        """Serve one request frame; the reply frame to send, or None for silence. What the line
+        does to it is `prc3cfg.core.exchange.FAULTS`; what a module does, `EmulatedBus`."""
         with self._lock:
-            drop = self._chance(self.faults.drop_rate)
-            corrupt = self._chance(self.faults.corrupt_rate)
-            damage_request = self._random.random() < 0.5 if (drop or corrupt) else False
-            if damage_request and drop:
+            fault = self._fault()
+            if fault is Fault.REQUEST_LOST:
                 log.info("fault injection: request to %d lost", frame.address)
                 return None
-            if damage_request and corrupt:
-                sent = self.framing.encode(Direction.REQUEST, frame.address, frame.message)
-                damaged = self._received(self._damage(sent))
+            if fault is Fault.REQUEST_DAMAGED:
+                damaged = self._damaged_request(frame)
                 if damaged is None:
-                    log.info("fault injection: request to %d damaged and discarded", frame.address)
                     return None
-                log.info("fault injection: request damaged, delivered to %d as %s", damaged.address, damaged.message.hex())
                 frame = damaged
-            address, message = frame.address, frame.message
-            before = dict(self._bus.modules)
-            delivery = self._bus.deliver(address, message)
-            if delivery.changed:
-                writes = [(a, message) for a, state in self._bus.modules.items() if state is not before[a]]
-                try:
-                    self._saved_or_rolled_back(before, lambda store: store.record(writes, self._all()))
-                except OSError as error:
-                    assert self._store is not None  # only a store fails to save
-                    to = "all modules (broadcast)" if address == BROADCAST else f"module {address}"
-                    log.error("%s — the write to %s is not answered and not applied", cannot_save(self._store.path, error), to)
-                    return None
-            if delivery.reply is None or address == BROADCAST:
+            answer = self._deliver(frame.address, frame.message)
+            if answer is None:
                 return None
-            reply = self.framing.encode(Direction.REPLY, address, delivery.reply)
+            reply = self.framing.encode(Direction.REPLY, frame.address, answer)
             if self.line_speed:
                 request_bytes = len(self.framing.encode(Direction.REQUEST, frame.address, frame.message))
-                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround_of(address)
+                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround_of(frame.address)
                 time.sleep(max(0.0, received_at + line_time - time.monotonic()))
-            if not damage_request and drop:
-                log.info("fault injection: reply from %d lost", address)
+            if fault is Fault.REPLY_LOST:
+                log.info("fault injection: reply from %d lost", frame.address)
                 return None
-            if not damage_request and corrupt:
-                log.info("fault injection: reply from %d damaged", address)
+            if fault is Fault.REPLY_DAMAGED:
+                log.info("fault injection: reply from %d damaged", frame.address)
                 reply = self._damage(reply)
             return reply
+
+    def _fault(self) -> Fault:
+        """The fault this exchange meets, drawn (drop, corrupt, then the side) in the seeded sequence."""
+        drop = self._chance(self.faults.drop_rate)
+        corrupt = self._chance(self.faults.corrupt_rate)
+        on_request = self._random.random() < 0.5 if (drop or corrupt) else False
+        return FAULTS[drop, corrupt, on_request]
+
+    def _damaged_request(self, frame: Frame) -> Frame | None:
+        """What the modules' receivers find in `frame` with one bit flipped on the line, if anything."""
+        sent = self.framing.encode(Direction.REQUEST, frame.address, frame.message)
+        damaged = self._received(self._damage(sent))
+        if damaged is None:
+            log.info("fault injection: request to %d damaged and discarded", frame.address)
+        else:
+            log.info("fault injection: request damaged, delivered to %d as %s", damaged.address, damaged.message.hex())
+        return damaged
+
+    def _deliver(self, address: int, message: bytes) -> bytes | None:
+        """`message` to the module at `address` (or every module), the writes saved: the module's
+        reply message, or None when none is sent — a broadcast, no reply, or a write not saved."""
+        before = dict(self._bus.modules)
+        delivery = self._bus.deliver(address, message)
+        if delivery.changed:
+            writes = [(a, message) for a, state in self._bus.modules.items() if state is not before[a]]
+            try:
+                self._saved_or_rolled_back(before, lambda store: store.record(writes, self._all()))
+            except OSError as error:
+                assert self._store is not None  # only a store fails to save
+                to = "all modules (broadcast)" if address == BROADCAST else f"module {address}"
+                log.error("%s — the write to %s is not answered and not applied", cannot_save(self._store.path, error), to)
+                return None
+        return None if address == BROADCAST else delivery.reply
 
     def _serve_stream(
         self,

@@ -2,9 +2,10 @@
 
 A `Link` *holds* a pyserial port, a framing and a retry policy (composition, not
 inheritance). `request()` sends one message to one module and returns its decoded reply;
-a lost or damaged reply is retried — every PRC 3 message is idempotent (an absolute write
-or a read) — and every retry is logged and traced. The reply's address and length are
-checked. Time-outs are detected here, with the port's timeout fixed at the framing's gap
+what came back to each attempt is judged by `prc3cfg.core.exchange` (an answer, a lost or
+damaged reply to ask for again, a code to confirm, a line to stop) and the link does what
+the verdict says; every retry is logged and traced. The reply's address is checked here, its
+length by the codec. Time-outs are detected here, with the port's timeout fixed at the framing's gap
 (link.md: `inter_byte_timeout` does nothing on Linux).
 
 The link decodes replies as the port delivers them: from a UART (a device path, a pty)
@@ -13,9 +14,7 @@ with the framing's inter-character or message time-out; over TCP (a `socket://` 
 reply split and delayed by the network or a paused process is taken whole by its length,
 never discarded and asked for again.
 
-On a framing without a checksum (`open-driver`) a damaged reply can look like any code:
-an error code there is believed only when the module gives the same one twice in a row
-(asking again is harmless: the message is idempotent). Every attempt has an overall
+Every attempt has an overall
 deadline, so a line that never goes quiet ends in a time-out, not a hang. Before each
 attempt the link looks at its `cancel` event (Ctrl-C, SIGTERM: `prc3cfg.shell.cancel`) and
 stops with `Interrupted` — so work stops after the exchange in flight, never inside one.
@@ -24,8 +23,9 @@ A TCP gateway that ends the connection before a byte came back has refused this 
 a gateway serves one client per serial line (ser2net's default, and `prc3cfg emulator
 serve`'s): the link says "the gateway is busy: another client holds the line".
 
-Does not own what the messages mean (`prc3cfg.core.codec`), how frames look
-(`prc3cfg.core.framing`) or which port to open (`prc3cfg.shell.link.ports`).
+Does not own what the messages mean (`prc3cfg.core.codec`), what a reply means and whether
+to ask again (`prc3cfg.core.exchange`), how frames look (`prc3cfg.core.framing`) or which port
+to open (`prc3cfg.shell.link.ports`).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from serial import rfc2217
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.error_codes import describe
+from prc3cfg.core.exchange import LinkStep, judge
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
 from prc3cfg.errors import Interrupted, NotSent, UserError
@@ -52,10 +52,6 @@ from prc3cfg.shell.link.trace import Trace
 log = logging.getLogger(__name__)
 
 READ_SLICE = 0.05  # s: longest single read on framings that do not end frames by a gap
-#: Codes of the structural checks (§4.5 steps 1–5). We only send messages the codec built,
-#: so the module saw a message damaged on the line (open-driver has no checksum): retry.
-DAMAGED_CODES = frozenset(range(10, 16))
-UNKNOWN_ID = 10  # to a read: damage — or firmware before PRC 3.03.1, which has no read messages
 #: The longest reply frame any framing makes of a PRC 3 reply (64 bytes, stx stuffing doubled).
 LONGEST_REPLY_FRAME = 2 * (codec.MAX_MESSAGE_BYTES + 8)
 
@@ -109,6 +105,10 @@ class PossibleWrite(LinkError):
             "nothing more is sent on this line; travel the module to its reference point, read it back, and use parity on the line"
         )
         self.bus, self.address = bus, address
+
+
+#: The verdicts that stop the line, and what they raise.
+STOPS: dict[LinkStep, type[PossibleWrite | NoReadMessages]] = {LinkStep.POSSIBLE_WRITE: PossibleWrite, LinkStep.NO_READ_MESSAGES: NoReadMessages}
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,56 +187,36 @@ class Link:
     def request(self, address: int, message: codec.Message) -> int | codec.SystemReply | codec.ProgramsReply:
         """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
 
-        A lost reply, a damaged one, and a structural error code (the module got our message
-        damaged) are retried — but a read answered with an acknowledgement is `PossibleWrite`, and
-        one answered as unknown is `NoReadMessages` (on a line without a checksum once heard twice).
-        On a framing without a checksum an error code is asked for again until two agree. After the last attempt a `LinkError` names the bus and
-        module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent` before the
+        Each attempt's reply goes by `prc3cfg.core.exchange.VERDICTS`: a lost reply, a damaged one,
+        and a structural error code (the module got our message damaged) are retried — but a read
+        answered with an acknowledgement is `PossibleWrite`, and one answered as unknown is
+        `NoReadMessages` (on a line without a checksum once heard twice). On a framing without a
+        checksum an error code is asked for again until two agree. After the last attempt a
+        `LinkError` names the bus and module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent` before the
         first: the frame never left; `announce` may raise it too, to keep a frame back).
         """
-        data = message.encode()
-        attempts = 1 + self.retries
-        problem = ""
-        unconfirmed: int | None = None  # an error code heard once on a line without a checksum
+        data, attempts = message.encode(), 1 + self.retries
+        heard: int | None = None  # a code heard once on a line without a checksum, for the next attempt to confirm
         for attempt in range(1, attempts + 1):
             if self.cancel is not None and self.cancel.is_set():
                 raise NotSent() if attempt == 1 else Interrupted()
-            started = time.time()
-            self._announce(address, data, attempt, started)
-            raw = self._exchange(address, data)
-            self._observe(address, data, raw, attempt, started)
-            self._timed(address, message, raw)
-            heard, unconfirmed = unconfirmed, None
-            if raw is None:
-                problem = f"no reply within {self.timeout:g} s"
-            else:
-                try:
-                    reply = codec.decode_reply(message, raw)
-                except codec.BadReply as error:
-                    problem = f"bad reply ({error})"
-                else:
-                    if reply == 0 and message.IS_READ:
-                        raise PossibleWrite(self.bus, address, message)
-                    if reply == UNKNOWN_ID and message.IS_READ and (self.framing.checked or heard == reply):
-                        raise NoReadMessages(self.bus, address, message)  # a checksum passed, or heard twice: not damage
-                    if reply == UNKNOWN_ID and message.IS_READ:
-                        unconfirmed = reply
-                        problem = f"{describe(reply)} on a line without a checksum, asking again to confirm it"
-                    elif reply in DAMAGED_CODES:
-                        problem = f"the module reports a damaged message ({describe(reply)})"
-                    elif not isinstance(reply, int) or reply == 0 or self.framing.checked or reply == heard:
-                        return reply
-                    else:
-                        unconfirmed = reply
-                        problem = f"{describe(reply)} on a line without a checksum, asking again to confirm it"
-            if attempt < attempts:
-                note = f"{self._where(address)}: {problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
-                self.repeated += 1
-                log.info(note)
-                if self.trace:
-                    self.trace.remark(self.bus, note)
+            raw = self._attempt(address, message, data, attempt)
+            verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=self.timeout)
+            if verdict.step is LinkStep.ANSWER:
+                assert verdict.reply is not None  # an answer is a reply decoded
+                return verdict.reply
+            if stop := STOPS.get(verdict.step):
+                raise stop(self.bus, address, message)
+            if verdict.step is LinkStep.GIVE_UP:
+                break
+            heard = verdict.unconfirmed
+            note = f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
+            self.repeated += 1
+            log.info(note)
+            if self.trace:
+                self.trace.remark(self.bus, note)
         raise LinkError(
-            f"{self._where(address)}: {problem} to {message.ID:02X}h after {attempts} attempts — check that "
+            f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h after {attempts} attempts — check that "
             f"the module is powered, in STOP and AUTOMATIC, at address {address}, and that the bus's framing "
             f"({self.framing.name}) and line settings ({self.line.baud} baud, {self.line.data_bits}"
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
@@ -248,22 +228,15 @@ class Link:
         usable (a damaged reply) gets the usual retries (`request`)."""
         if self.cancel is not None and self.cancel.is_set():
             raise Interrupted()
-        data, started = message.encode(), time.time()
-        self._announce(address, data, 1, started)
-        raw = self._exchange(address, data, timeout)
-        self._observe(address, data, raw, 1, started)
-        self._timed(address, message, raw)
+        raw = self._attempt(address, message, message.encode(), 1, timeout)
         if raw is None:
             return None
-        try:
-            reply = codec.decode_reply(message, raw)
-        except codec.BadReply:
-            return self.request(address, message)
-        if reply == 0 and message.IS_READ:
+        verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=timeout)
+        if verdict.step is LinkStep.POSSIBLE_WRITE:
             raise PossibleWrite(self.bus, address, message)
-        if reply in DAMAGED_CODES or (isinstance(reply, int) and reply and not self.framing.checked):
-            return self.request(address, message)
-        return reply
+        if verdict.step is LinkStep.ANSWER:
+            return verdict.reply
+        return self.request(address, message)  # heard, not usable (even a read answered as unknown): the usual retries
 
     def broadcast(self, message: codec.Message, turnaround: float) -> None:
         """Send `message` to address 0: every module processes it, none answers. Where frames take
@@ -281,6 +254,16 @@ class Link:
             gap = self.zvz if self._gap_ends_frame else 0.0
             time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
         self._observe(0, data, None, 1, started)
+
+    def _attempt(self, address: int, message: codec.Message, data: bytes, attempt: int, timeout: float | None = None) -> bytes | None:
+        """One attempt, told to `announce` before its frame leaves and to `observer` after: the reply
+        message, or None (`_exchange`)."""
+        started = time.time()
+        self._announce(address, data, attempt, started)
+        raw = self._exchange(address, data, timeout)
+        self._observe(address, data, raw, attempt, started)
+        self._timed(address, message, raw)
+        return raw
 
     def _announce(self, address: int, data: bytes, attempt: int, started: float) -> None:
         if self.announce:

@@ -1,0 +1,282 @@
+"""What to read of the modules — for a plan, a plan file, a restore and a verification — and what the
+line's record of them becomes from what was read: the one answer, from the record, the change and the
+evidence. Pure: the callers read the record and the lines (`prc3cfg.api`, `prc3cfg.shell.readback`,
+`prc3cfg.shell.apply`) and hand over plain values.
+
+The *record* of a line (`prc3cfg.shell.bases`) says what prc3cfg last read or verified each of its
+modules to hold — whichever plant file, checkout or user it was — with when and by whom (`Known`).
+
+- A full read (`in_full`: `read`, a plan with `--full-read` or with no record, a plan file made from
+  one, a restore) reads every program the plant file manages — for a restore, every program the
+  snapshot holds — and its system block.
+- A plan (`for_plan`) reads every module's system block (one 50h: it proves the module is there and
+  the one expected, S9, and catches a 10h from another tool and most spares), and of the managed
+  programs those whose desired values the record does not show the module holding (`to_read`): a
+  program the record shows as the plant file wants it is taken as known, not read. A module the record
+  does not know, knows only from longer ago than the bus's `record_max_age`, or that reported E12
+  since, is read in full.
+- A plan file (`for_plan_file`) reads again exactly what its plan read — and is stale when the record
+  no longer shows a module holding what the plan took as known without reading it.
+- Each read widens on what it finds (`after_system`, `after_programs`): every program a system change
+  could clamp (decided on the system block just read: the module's own clamping reaches programs the
+  plant does not manage), and what is read is evidence (`contradiction`) — a system block or a program
+  other than the record's means someone else changed the module, and it is read in full and planned
+  in full. What no read can see: a program the change does not read, changed by another tool on a
+  module whose system block is unchanged, within the record's age.
+- A verification (`verification_reads`) reads what the steps that went out could have changed
+  (`reach`), or with `Verify.FULL` everything the first read-back held; `read_messages` is the fewest
+  50h/51h/52h for any of these, `verification_time` what reading back the reach costs (the floor of a
+  verification, which the planning of broadcasts must pay for every module a broadcast reaches).
+
+What is not read is not written: the desired image a targeted plan aims at is cut to the programs
+the read-back holds (`within_read`), so the planner — which never writes a program its desired
+image leaves `None` (`prc3cfg.core.planner.check`, rule 2), and so never sends an 11h/13h/14h across
+one — cannot write, initialise or rely on a program it did not read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime, timedelta
+from math import fsum
+from typing import TYPE_CHECKING
+
+from prc3cfg.core import codec
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.device import can_clamp
+from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, SystemParameters
+from prc3cfg.core.planner import Step
+
+if TYPE_CHECKING:  # they import this module: what is read decides what they plan
+    from prc3cfg.core.planfile import PlannedModule
+    from prc3cfg.core.planning import Key, Wanted
+
+#: Why a module that reported E12 (system parameters not set) is read in full: its record says nothing.
+UNSET = "it reported E12 (system parameters not set)"
+
+
+@dataclass(frozen=True, slots=True)
+class Known:
+    """What a line's record says a module holds: its image (a program not known: None), since when
+    the oldest value in it was read or verified (ISO 8601, UTC), and by which command, file and user."""
+
+    image: ModuleImage
+    since: str
+    by: str
+
+    def said(self) -> str:
+        """"apply of /p/a.yaml by ana@pc-3 (since 2026-11-26 03:27 UTC)": whose read or verification, to the minute."""
+        return f"{self.by} (since {datetime.fromisoformat(self.since).astimezone(UTC):%Y-%m-%d %H:%M} UTC)"
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    """A module to read: where it is, what it is called, which programs, and the system
+    parameters a plan may write there (every program is read when they can clamp: `after_system`)."""
+
+    bus: str
+    address: int
+    name: str
+    programs: tuple[int, ...]
+    clamped_by: SystemParameters | None = None
+    known: ModuleImage | None = None  # a targeted read's evidence, and the programs it reads in full then: `after_programs`
+    managed: tuple[int, ...] = ()
+
+
+def programs_in(image: ModuleImage) -> tuple[int, ...]:
+    """The programs `image` holds: of a desired image those the plant manages, of a read-back those read."""
+    return tuple(n for n, p in enumerate(image.programs, start=1) if p is not None)
+
+
+# -- what a command reads -----------------------------------------------------------------------
+
+
+def in_full(modules: Iterable[Wanted]) -> list[Target]:
+    """Every module read in full: each program its desired image holds (managed, or a snapshot's), and
+    every program its desired system parameters could clamp."""
+    return [Target(m.bus, m.address, m.name, programs_in(m.desired), m.desired.system) for m in modules]
+
+
+@dataclass(frozen=True, slots=True)
+class ToRead:
+    """A module's read: the programs beyond its system block, the record the read must agree with
+    (None: read in full), and why it is read in full (None: it is not)."""
+
+    programs: tuple[int, ...]
+    known: ModuleImage | None
+    why: str | None
+
+
+def to_read(known: Known | None, desired: ModuleImage, now: datetime, max_age: float) -> ToRead:
+    """What to read of a module the plant file wants as `desired`, given the line's record of it."""
+    managed = programs_in(desired)
+    if known is None:
+        return ToRead(managed, None, "not on the line's record")
+    if now - datetime.fromisoformat(known.since) > timedelta(seconds=max_age):
+        return ToRead(managed, None, f"its record ({known.since}) is older than record_max_age ({max_age:g} s)")
+    return ToRead(tuple(n for n in managed if known.image.program(n) != desired.program(n)), known.image, None)
+
+
+def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: Mapping[Key, str], unset: frozenset[Key],
+             max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], dict[Key, str]] | None:  # fmt: skip
+    """What a plan reads of `modules` (each with the plant file's image), given the lines' record
+    (`known`), the modules another user's newer entry took off it (`overruled`, with whose claim), those
+    that reported E12 since (`unset`) and each bus's `record_max_age`: the targets, and why each module
+    read in full before any evidence is — None when the record knows none of them: read `in_full`."""
+    if not any(m.key in known or m.key in overruled for m in modules):
+        return None
+    targets, why = [], {}
+    for m in modules:
+        decision = to_read(None if m.key in unset else known.get(m.key), m.desired, now, max_age[m.bus])
+        targets.append(Target(m.bus, m.address, m.name, decision.programs, m.desired.system, decision.known, programs_in(m.desired)))
+        if decision.why is not None:
+            why[m.key] = UNSET if m.key in unset else overruled.get(m.key, decision.why)
+    return targets, why
+
+
+def for_plan_file(entries: Sequence[PlannedModule], desired: Mapping[Key, ModuleImage], known: Mapping[Key, Known],
+                  max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], PlannedModule | None]:  # fmt: skip
+    """What `apply --plan` reads for the modules of a plan made from a targeted read-back: exactly the
+    programs its plan read, with the record as evidence — and the first module the record no longer shows
+    holding what the plan took as known without reading it (None: none): the plan is stale then."""
+    targets: list[Target] = []
+    for e in entries:
+        key = (e.bus, e.address)
+        decision = to_read(known.get(key), desired[key], now, max_age[e.bus])
+        if not set(decision.programs) <= set(e.programs_read or ()):
+            return targets, e
+        targets.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known, programs_in(desired[key])))
+    return targets, None
+
+
+# -- what a read widens to, on what it finds ------------------------------------------------------
+
+
+def after_system(system: SystemParameters, programs: Iterable[int], clamped_by: SystemParameters | None,
+                 known: ModuleImage | None, managed: Iterable[int]) -> frozenset[int]:  # fmt: skip
+    """The programs to read once the 50h answered `system`: `programs` — every program, when writing
+    `clamped_by` (the system parameters a plan will write) can clamp programs here; and every `managed`
+    program too when `system` is not the record's (`known`): the module was changed by another hand."""
+    wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
+    if known is not None and system != known.system:
+        wanted |= set(managed)
+    return frozenset(wanted)
+
+
+def after_programs(read: ModuleImage, known: ModuleImage | None, managed: Iterable[int]) -> frozenset[int]:
+    """The programs still to read once `read` holds what was read: where it contradicts the record
+    (`known`), every `managed` program not read yet — nothing of the record is taken then; else none."""
+    if known is None or contradiction(known, read) is None:
+        return frozenset()
+    return frozenset(managed) - set(programs_in(read))
+
+
+def contradiction(known: ModuleImage, read: ModuleImage) -> str | None:
+    """How a read-back contradicts the record of its module (None: it does not): the module was
+    changed by something other than prc3cfg since, or is another module."""
+    if read.system != known.system:
+        return "its system parameters are not those on record"
+    for number, (was, now) in enumerate(zip(known.programs, read.programs), start=1):
+        if was is not None and now is not None and was != now:
+            return f"program {number} is not as on record"
+    return None
+
+
+def read_in_full(modules: Iterable[Wanted], targets: Iterable[Target], images: Mapping[Key, ModuleImage],
+                 why: Mapping[Key, str]) -> tuple[str, ...]:  # fmt: skip
+    """"bus/name (why)" of each of `modules` a targeted read read in full: for `why` (before any
+    evidence: not on record, too old, E12), or for what its read-back contradicted of the record."""
+    evidence = {(t.bus, t.address): said for t in targets if t.known is not None and (t.bus, t.address) in images
+                and (said := contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
+    return tuple(f"{m.bus}/{m.name} ({said})" for m in modules if (said := why.get(m.key) or evidence.get(m.key)) is not None)
+
+
+# -- what is read decides what is planned, and what the record becomes ------------------------------
+
+
+def within_read(desired: ModuleImage, actual: ModuleImage) -> ModuleImage:
+    """`desired` cut to the programs `actual` (a read-back) holds: the others are not the plan's."""
+    return replace(desired, programs=tuple(None if a is None else d for d, a in zip(desired.programs, actual.programs)))
+
+
+def not_read(desired: ModuleImage, actual: ModuleImage) -> tuple[int, ...]:
+    """The programs `desired` manages that the read-back `actual` does not hold: taken as last verified."""
+    return tuple(n for n, (d, a) in enumerate(zip(desired.programs, actual.programs), start=1) if d is not None and a is None)
+
+
+def with_known(image: ModuleImage, desired: ModuleImage) -> ModuleImage:
+    """`image` (a read-back, or what a plan leaves of one) with the managed programs it did not read
+    filled in with the plant file's values — what the line's record showed them holding, which is why
+    they were not read (`to_read`): the values a picture of the module's chains must use, never a
+    chain cut where a program was not read."""
+    return image.with_programs({n: d for n, (d, a) in enumerate(zip(desired.programs, image.programs), start=1) if d is not None and a is None})
+
+
+def merged(known: Known | None, read: ModuleImage, when: str, by: str) -> Known:
+    """The record of a module after `read` was read (or verified) `when` by `by`: what was read,
+    with the values of the record it did not read again — unless it contradicts the record, which
+    then goes whole. Its `since` stays the record's while any value of the record is kept."""
+    return verified(None if known is None or contradiction(known.image, read) is not None else known, read, when, by)
+
+
+def verified(known: Known | None, held: ModuleImage, when: str, by: str) -> Known:
+    """The record of a module prc3cfg wrote and verified `when`, by `by`, to hold `held` (what it read
+    back, and what its steps wrote): that, with the values of the record it neither wrote nor read —
+    what the writes changed is no contradiction. Its `since` stays the record's while any of those is kept."""
+    if known is None:
+        return Known(held, when, by)
+    programs = tuple(now if now is not None else was for was, now in zip(known.image.programs, held.programs))
+    kept = any(now is None and was is not None for was, now in zip(known.image.programs, held.programs))
+    return Known(replace(held, programs=programs), known.since if kept else when, known.by if kept else by)
+
+
+# -- what a verification reads, and what it costs ---------------------------------------------------
+
+
+def read_messages(programs: Iterable[int]) -> list[codec.Message]:
+    """50h, then the fewest 51h/52h that read exactly the programs wanted (and between them): a greedy
+    cover from the lowest unread program, which is the fewest exchanges for any set of programs; each
+    read ends at the last wanted program of its window, so no byte is read for nothing at the end of a
+    run. A fully managed module takes 1 + 16."""
+    wanted = sorted(set(programs))
+    messages: list[codec.Message] = [codec.ReadSystem()]
+    i = 0
+    while i < len(wanted):
+        first = wanted[i]
+        while i < len(wanted) and wanted[i] <= first + codec.MAX_READ_PROGRAMS - 1:
+            i += 1
+        last = wanted[i - 1]
+        messages.append(codec.ReadProgram(first) if first == last else codec.ReadPrograms(first, last))
+    return messages
+
+
+def reach(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step]) -> tuple[bool, frozenset[int]]:
+    """What `steps` (those that went out) could have changed on a module: whether the system
+    parameters, and which programs — those they write, and, after a system step, those whose
+    prediction differs from the read-back (the module's own clamping)."""
+    system = any(step.releases_axes for step in steps)
+    programs = {n for step in steps for n in step.message.touched_programs()}
+    if system:
+        programs |= {n for n, (b, p) in enumerate(zip(before.programs, predicted.programs), 1) if b is not None and p != b}
+    return system, frozenset(programs)
+
+
+def verification_reads(first: ModuleImage, last: ModuleImage, predicted: ModuleImage, sent: Sequence[Step], *,
+                       full: bool, watch_system: bool) -> tuple[bool, frozenset[int]]:  # fmt: skip
+    """What a verifying read-back reads — whether the system block, and which programs: with `full`
+    (`Verify.FULL`) the system and every program the first read-back (`first`) held; else what the steps
+    `sent` since the module read as `last` could have changed (`reach`), and the system block where a
+    release went out on a line without error detection (`watch_system`: a damaged frame can release any
+    module's axes)."""
+    if full:
+        return True, frozenset(programs_in(first))
+    system, programs = reach(last, predicted, sent)
+    return system or watch_system, programs
+
+
+def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step], cost: LineCost) -> float:
+    """Seconds the fewest reads of what `steps` can change take on the line."""
+    system, programs = reach(before, predicted, steps)
+    reads = read_messages(programs)[0 if system else 1 :]
+    return fsum(cost.message_time(before.address, m) for m in reads)

@@ -1,0 +1,269 @@
+"""A plan file is written and read back by one module (`prc3cfg.core.planfile`) and judged by its
+data, never by its spelling: the file another tool wrote again — indented otherwise, its keys in
+another order, CRLF, a byte-order mark, without escapes, 0 for 0.0 — is the plan file prc3cfg
+wrote, and `apply --plan` proves it; one whose any single value was changed, a key added or one
+left out is refused before anything is written.
+
+The plant is the contracts' (`contracts/plant.yaml`), planned without a line (`plan --actual`) from
+factory modules but one, which already holds what its plan would leave: its figures are 0.0, which
+JavaScript's `JSON.stringify` and jq 1.6 write as 0. The proof is the API's (`_apply.read_plan`, then
+`_apply.prove` from the same images), as `apply --plan` makes it before the first write.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import shutil
+import subprocess
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prc3cfg import api
+from prc3cfg.api import _apply
+from prc3cfg.core import planfile, render
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Plant
+
+CONTRACTS = Path(__file__).resolve().parent / "contracts"
+
+
+@dataclass(frozen=True)
+class Made:
+    """The plant, the images its plan was made from, and the plan file (not shown: a failing example shows the document)."""
+
+    plant: Plant = field(repr=False)
+    images: dict[tuple[str, int], ModuleImage] = field(repr=False)
+    text: str = field(repr=False)  # the plan file as `plan --out` wrote it
+    message_count: int
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory) -> Made:
+    """The contracts' plant, its images (booth-a-right as its plan would leave it), and the plan file `plan --out` wrote."""
+    folder = tmp_path_factory.mktemp("made")
+    (folder / "plant.yaml").write_bytes((CONTRACTS / "plant.yaml").read_bytes())
+    plant = api.load(folder / "plant.yaml")
+    images = {(bus.name, m.address): ModuleState.factory(m.address).image for bus, m in api.select(plant)}
+    right = next(change for change in api.plan(plant, images=images).modules if change.name == "booth-a-right")
+    images[(right.bus, right.address)] = right.plan.predicted
+    (folder / "images.json").write_text(json.dumps([{"bus": bus, **image.to_json()} for (bus, _), image in images.items()]))
+    out = folder / "plan.json"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("PRC3CFG_LOCK_DIR", str(folder / "locks"))
+        patch.setenv("PRC3CFG_STATE_DIR", str(folder / "state"))
+        from prc3cfg.cli import main
+
+        with pytest.raises(SystemExit) as done:
+            main(["plan", str(folder / "plant.yaml"), "--actual", str(folder / "images.json"), "--out", str(out)])
+    assert done.value.code in (0, None)
+    return Made(plant, images, out.read_text(), json.loads(out.read_text())["message_count"])
+
+
+def prove(made: Made, path: Path) -> PlantPlan:
+    """What `apply --plan` does with the plan file at `path` before its first write: read it, prove it."""
+    return _apply.prove(path, _apply.read_plan(path, made.plant), made.plant, api.select(made.plant), made.images)
+
+
+def test_a_plan_file_is_read_back_as_the_plan_written(made):
+    """The writer and the reader agree: each module's steps as messages, its broadcasts, its read-back's hash."""
+    plan = api.plan(made.plant, images=made.images)
+    read = planfile.read(json.loads(json.dumps(planfile.write(plan, [], render))))
+    assert [(e.bus, e.address, e.name, e.state_sha256, e.steps, e.broadcasts) for e in read.modules] == [
+        (c.bus, c.address, c.name, planfile.image_sha256(c.actual), tuple(s.message for s in c.steps), c.broadcasts) for c in plan.modules]
+    assert json.loads(made.text) == json.loads(json.dumps(planfile.write(plan, api.left_alone(made.plant), render)))  # what plan --out wrote
+
+
+def reordered(value: Any) -> Any:
+    """Every object's keys in reverse order."""
+    if isinstance(value, dict):
+        return {key: reordered(value[key]) for key in reversed(value)}
+    return [reordered(item) for item in value] if isinstance(value, list) else value
+
+
+def whole_as_int(value: Any) -> Any:
+    """Every float that is a whole number written as an integer, as JavaScript's `JSON.stringify` writes it."""
+    if isinstance(value, dict):
+        return {key: whole_as_int(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [whole_as_int(item) for item in value]
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+#: How other tools write a plan file again: the same data, spelt otherwise (bytes).
+RESPELT = {
+    "indented by 4": lambda d: json.dumps(d, indent=4).encode(),
+    "every object's keys reversed": lambda d: json.dumps(reordered(d)).encode(),
+    "CRLF line endings": lambda d: json.dumps(d, indent=1).replace("\n", "\r\n").encode(),
+    "a byte-order mark and CRLF": lambda d: ("\ufeff" + json.dumps(d, indent=2).replace("\n", "\r\n")).encode(),
+    "UTF-8 instead of escapes": lambda d: json.dumps(d, ensure_ascii=False).encode(),
+    "0 for 0.0": lambda d: json.dumps(whole_as_int(d), separators=(",", ":")).encode(),
+    "all of them at once": lambda d: ("\ufeff" + json.dumps(whole_as_int(reordered(d)), indent=4, ensure_ascii=False)).replace("\n", "\r\n").encode(),
+}
+
+
+@pytest.mark.parametrize("case", RESPELT, ids=list(RESPELT))
+def test_a_plan_file_written_again_by_another_tool_is_the_plan_file(made, tmp_path, case):
+    path = tmp_path / "plan.json"
+    path.write_bytes(RESPELT[case](json.loads(made.text)))
+    assert path.read_bytes() != made.text.encode()  # spelt otherwise
+    assert '"estimated_bus_time_s": 0.0' in made.text  # a figure that "0 for 0.0" spells otherwise
+    proved = prove(made, path)
+    assert proved.message_count == made.message_count
+    assert api.plan_document(path)["message_count"] == made.message_count  # and `show` shows it
+
+
+#: Tools found on the machine that read JSON and write it again, as a CI step may.
+TOOLS = {
+    "jq": ["jq", "."],
+    "node": ["node", "-e", "process.stdout.write(JSON.stringify(JSON.parse(require('fs').readFileSync(0, 'utf8')), null, 2))"],
+}
+
+
+@pytest.mark.parametrize("tool", TOOLS)
+def test_a_plan_file_passed_through_jq_or_node_is_the_plan_file(made, tmp_path, tool):
+    if shutil.which(TOOLS[tool][0]) is None:
+        pytest.skip(f"{tool} is not installed")
+    path = tmp_path / "plan.json"
+    path.write_bytes(subprocess.run(TOOLS[tool], input=made.text.encode(), capture_output=True, check=True, timeout=60).stdout)
+    assert path.read_bytes() != made.text.encode()
+    assert prove(made, path).message_count == made.message_count
+
+
+def places(value: Any, at: tuple = ()) -> list[tuple]:
+    """Every place in a JSON document, as the keys and indexes leading there, the document's own first."""
+    if isinstance(value, dict):
+        return [at] + [p for key, item in value.items() for p in places(item, (*at, key))]
+    if isinstance(value, list):
+        return [at] + [p for index, item in enumerate(value) for p in places(item, (*at, index))]
+    return [at]
+
+
+def at(document: Any, place: tuple) -> Any:
+    for key in place:
+        document = document[key]
+    return document
+
+
+def by_field(document: Any, holding: Callable[[Any], bool]) -> dict[str, list[tuple]]:
+    """The places whose value `holding` takes, by field: the JSON path with its indexes left out
+    ("buses[].modules[].steps[].summary"), so that a key of one place counts as much as one of 200."""
+    found: dict[str, list[tuple]] = {}
+    for place in places(document):
+        if holding(at(document, place)):
+            found.setdefault("".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip("."), []).append(place)
+    return found
+
+
+def is_value(value: Any) -> bool:
+    return not isinstance(value, dict | list)
+
+
+#: The one value the proof leaves to the file: where the plant file was when the plan was made
+#: (a plan made in another checkout applies in this one).
+ANYWHERE = "plant_path"
+
+
+def refusal(made: Made, tmp_path: Path, document: dict[str, Any]) -> str | None:
+    """The one line `apply --plan` refuses the plan file `document` with, before the first write; None if it proves it."""
+    path = tmp_path / "changed.json"
+    path.write_text(json.dumps(document, indent=1))
+    try:
+        prove(made, path)
+    except UserError as refused:
+        assert str(refused).startswith(f"{path}: ") and "\n" not in str(refused), str(refused)
+        return str(refused)
+    return None
+
+
+def changed(document: dict[str, Any], place: tuple, value: Any) -> dict[str, Any]:
+    copied = copy.deepcopy(document)
+    at(copied, place[:-1])[place[-1]] = value
+    return copied
+
+
+def test_each_field_of_a_plan_file_changed_is_refused(made, tmp_path):
+    """Every field, at its first place: a flag flipped, a number or a text changed, a null given a value."""
+    document = json.loads(made.text)
+    fields = {field: found[0] for field, found in by_field(document, is_value).items() if field != ANYWHERE}
+    assert len(fields) > 30 and "estimated_phases_s.reading" in fields and "buses[].modules[].changes.fields[].text" in fields
+    accepted = [field for field, place in fields.items() if refusal(made, tmp_path, changed(document, place, other(at(document, place)))) is None]
+    assert accepted == []
+
+
+def other(value: Any) -> Any:
+    """Another value of the kind of `value` (a null becomes a text)."""
+    return {bool: lambda: not value, int: lambda: value + 1, float: lambda: value + 0.001, str: lambda: value + "0"}.get(type(value), lambda: "")()
+
+
+def same_value(a: Any, b: Any) -> bool:
+    """The same JSON value: 0 and 0.0 are one number; true is no number."""
+    numbers = all(type(v) in (int, float) for v in (a, b))
+    return a == b and (type(a) is type(b) or numbers)
+
+
+OTHERS = [None, True, False, 0, -1, 2.5, "", "x", [], {}, ["x"], {"note": "reviewed"}]
+
+
+def another(value: Any) -> st.SearchStrategy[Any]:
+    """A value that is not `value`: of its kind, or of another."""
+    kind = {bool: st.just(not value), int: st.integers(-(10**6), 10**6), float: st.floats(-1e6, 1e6, allow_nan=False),
+            str: st.text(max_size=12)}.get(type(value), st.nothing())  # fmt: skip
+    return st.one_of(kind, st.sampled_from(OTHERS)).filter(lambda other: not same_value(other, value))
+
+
+def one_value_changed(data: st.DataObject, document: dict[str, Any]) -> dict[str, Any]:
+    """`document` with the value of one field, at one of its places, replaced."""
+    fields = by_field(document, is_value)
+    place = data.draw(st.sampled_from(fields[data.draw(st.sampled_from(sorted(set(fields) - {ANYWHERE})))]))
+    return changed(document, place, copy.deepcopy(data.draw(another(at(document, place)))))
+
+
+def one_key_changed(data: st.DataObject, document: dict[str, Any]) -> dict[str, Any]:
+    """`document` with a key left out of one object, or one added to it."""
+    objects = by_field(document, lambda value: isinstance(value, dict))
+    place = data.draw(st.sampled_from(objects[data.draw(st.sampled_from(sorted(objects)))]))
+    copied = copy.deepcopy(document)
+    keys = at(copied, place)
+    if keys and data.draw(st.booleans()):
+        del keys[data.draw(st.sampled_from(sorted(keys)))]
+    else:
+        keys[data.draw(st.sampled_from(["note", "reviewed_by", "summary"]).filter(lambda key: key not in keys))] = "ok"
+    return copied
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_plan_file_with_any_one_value_changed_is_refused(made, tmp_path, data):
+    assert refusal(made, tmp_path, one_value_changed(data, json.loads(made.text))) is not None
+
+
+@settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_plan_file_with_a_key_added_or_left_out_is_refused(made, tmp_path, data):
+    assert refusal(made, tmp_path, one_key_changed(data, json.loads(made.text))) is not None
+
+
+@pytest.mark.soak
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture])  # the soak profile's count
+@given(data=st.data())
+def test_a_plan_file_with_any_one_of_many_more_values_or_keys_changed_is_refused(made, tmp_path, data):
+    document = json.loads(made.text)
+    assert refusal(made, tmp_path, data.draw(st.sampled_from([one_value_changed, one_key_changed]))(data, document)) is not None
+
+
+def test_the_one_value_left_to_the_file_is_where_the_plant_file_was(made, tmp_path):
+    """The check above leaves `plant_path` out: a plan made in another checkout names the plant file there."""
+    document = json.loads(made.text) | {"plant_path": "/elsewhere/plant.yaml"}
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(document))
+    assert prove(made, path).message_count == made.message_count
