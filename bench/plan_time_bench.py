@@ -44,7 +44,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from prc3cfg import api
-from prc3cfg.core import planfile, render
+from prc3cfg.core import plan_file, render
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program
 from prc3cfg.plant.document import MAX_NODES
 from prc3cfg.plant.loader import MAX_PART_NODES
@@ -153,7 +153,7 @@ def timed(run: Callable[[], object]) -> tuple[float, object]:
 
 def json_output(plan) -> str:
     """The document `plan --json` prints: the plan file with each module's `changes`."""
-    document = planfile.write(plan, (), render)
+    document = plan_file.write(plan, (), render)
     return json.dumps(document, indent=1)
 
 

@@ -10,7 +10,7 @@ from dataclasses import replace
 from emulated import run_cli
 
 from prc3cfg.core import codec, render
-from prc3cfg.core.planfile import image_sha256
+from prc3cfg.core.plan_file import image_sha256
 
 WARNING = "travel to reference point required"
 

@@ -1,4 +1,4 @@
-"""A plan file is written and read back by one module (`prc3cfg.core.planfile`) and judged by its
+"""A plan file is written and read back by one module (`prc3cfg.core.plan_file`) and judged by its
 data, never by its spelling: the file another tool wrote again — indented otherwise, its keys in
 another order, CRLF, a byte-order mark, without escapes, 0 for 0.0 — is the plan file prc3cfg
 wrote, and `apply --plan` proves it; one whose any single value was changed, a key added or one
@@ -27,10 +27,10 @@ from hypothesis import strategies as st
 
 from prc3cfg import api
 from prc3cfg.api import _apply
-from prc3cfg.core import planfile, render
+from prc3cfg.core import plan_file, render
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
 
@@ -77,10 +77,10 @@ def prove(made: Made, path: Path) -> PlantPlan:
 def test_a_plan_file_is_read_back_as_the_plan_written(made):
     """The writer and the reader agree: each module's steps as messages, its broadcasts, its read-back's hash."""
     plan = api.plan(made.plant, images=made.images)
-    read = planfile.read(json.loads(json.dumps(planfile.write(plan, [], render))))
+    read = plan_file.read(json.loads(json.dumps(plan_file.write(plan, [], render))))
     assert [(e.bus, e.address, e.name, e.state_sha256, e.steps, e.broadcasts) for e in read.modules] == [
-        (c.bus, c.address, c.name, planfile.image_sha256(c.actual), tuple(s.message for s in c.steps), c.broadcasts) for c in plan.modules]
-    assert json.loads(made.text) == json.loads(json.dumps(planfile.write(plan, api.left_alone(made.plant), render)))  # what plan --out wrote
+        (c.bus, c.address, c.name, plan_file.image_sha256(c.actual), tuple(s.message for s in c.steps), c.broadcasts) for c in plan.modules]
+    assert json.loads(made.text) == json.loads(json.dumps(plan_file.write(plan, api.left_alone(made.plant), render)))  # what plan --out wrote
 
 
 def reordered(value: Any) -> Any:

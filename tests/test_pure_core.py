@@ -74,9 +74,9 @@ CLI_MAY_IMPORT = (
     "prc3cfg.api", "prc3cfg.cli", "prc3cfg.errors",
     # rendering, and the values it shows
     "prc3cfg.core.render", "prc3cfg.core.text", "prc3cfg.core.units", "prc3cfg.core.line.LineSettings",
-    "prc3cfg.core.plantplan.PlantPlan", "prc3cfg.shell.link.client.Link",
+    "prc3cfg.core.plant_plan.PlantPlan", "prc3cfg.shell.link.client.Link",
     # the plan file `plan --out` writes (reading one back is the workflow's: `api.read_plan`)
-    "prc3cfg.core.planfile.write",
+    "prc3cfg.core.plan_file.write",
     # plant files: loading one is validating it; showing one shows where each value came from
     "prc3cfg.plant.Module", "prc3cfg.plant.Plant", "prc3cfg.plant.PlantError",
     "prc3cfg.plant.plant_schema_text", "prc3cfg.plant.profiles.Sourced",

@@ -9,13 +9,13 @@ from dataclasses import replace
 
 import pytest
 
-from prc3cfg.core import planfile, render
+from prc3cfg.core import plan_file, render
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, SYSTEM_KEYS, ModuleImage, Program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import Action, plan_module
-from prc3cfg.core.plantplan import ModuleChange, PlantPlan
+from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.render import (
     CLAMPED,
     LEGEND,
@@ -123,7 +123,7 @@ def test_a_live_plan_shows_what_its_plan_file_shows() -> None:
     """The human and markdown outputs of a live plan work each module's diff out as they show it;
     the plan file's document carries them all: both must read the same."""
     plan = PlantPlan("p", "p.yaml", "0" * 64, (a_change(),))
-    document = planfile.write(plan, ["module x left the plant file: it stays on the hardware"], render)
+    document = plan_file.write(plan, ["module x left the plant file: it stays on the hardware"], render)
     assert human(plan, notes=document["left_alone"]) == human(document)
     assert module_lines(changes_json(plan.changes[0]))[0] in markdown(plan)
     assert "```diff\n" + "\n".join(module_lines(document["buses"][0]["modules"][0]["changes"])) in markdown(document)
@@ -201,7 +201,7 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
     reading = math.fsum(COST.message_time(1, m) for m in read_messages(range(1, 65)))  # its read-back holds every program: 1 + 16 reads
     verifying = verification_time(change.actual, change.plan.predicted, change.steps, COST)
     assert plan.phases() == {"reading": reading, "writing": change.plan.bus_time, "verifying": verifying}
-    document = planfile.write(plan, (), render)
+    document = plan_file.write(plan, (), render)
     assert document["estimated_phases_s"] == {phase: round(seconds, 3) for phase, seconds in plan.phases().items()}
     assert document["estimated_time_s"] == round(reading + change.plan.bus_time + verifying, 3)
     said = (f"estimated time {document['estimated_time_s']:.1f} s: reading back {reading:.1f} s, writing {change.plan.bus_time:.1f} s "
@@ -243,7 +243,7 @@ def test_show_says_each_value_in_both_units_with_its_source_from_plain_values() 
 def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broadcasts_proved_heard() -> None:
     from types import SimpleNamespace
 
-    from prc3cfg.core.plantplan import LineProof
+    from prc3cfg.core.plant_plan import LineProof
 
     killed = SimpleNamespace(bus="booth-a", name="left", command="apply", pid=41, time="2024-05-01T10:00:00", journal=None)
     assert render.earlier_releases([killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"})]) == [
@@ -297,7 +297,7 @@ def test_text_from_a_plan_file_is_never_live_in_a_comment(case):
     import cmarkgfm
 
     hostile = HOSTILE[case]
-    document = planfile.write(PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),)), [hostile], render)
+    document = plan_file.write(PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),)), [hostile], render)
     document["plant"] = hostile
     document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": [hostile]}
     document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
@@ -319,7 +319,7 @@ def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
     plan = PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),))
     live = human(plan, notes=[hostile])  # names a script gave the API, and notes, as a plan file's
     assert CONTROL.search(live.replace("\n", "")) is None and f"Left as it is: {escaped(hostile)}" in live.splitlines()
-    document = planfile.write(plan, [hostile], render)
+    document = plan_file.write(plan, [hostile], render)
     document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": []}
     document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
     shown = human(document)
@@ -331,7 +331,7 @@ def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
 
 def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released_and_not_read():
     """The head is never cut: the releases, the programs clamped, the modules taken as last verified."""
-    document = planfile.write(PlantPlan("p", "p.yaml", "0" * 64, (a_change(), replace(a_change(), bus="b"))), (), render)
+    document = plan_file.write(PlantPlan("p", "p.yaml", "0" * 64, (a_change(), replace(a_change(), bus="b"))), (), render)
     document["read"] = {"base": "the plant file last applied in full here", "modules_not_read": ["a/x", "a/y"], "not_as_verified": []}
     for module in [m for bus in document["buses"] for m in bus["modules"]]:
         module["read"] = {"programs": [1, 2], "programs_not_read": []}
@@ -345,7 +345,7 @@ def test_a_plan_files_charts_are_shown_only_as_prc3cfg_draws_them():
     """A stroke chart is markdown of prc3cfg's own making, and the plan file keeps it: one of another
     shape — a fence closed early, HTML after it — is left out, never shown."""
     plan = PlantPlan("p", "p.yaml", "0" * 64, (a_change(),))
-    document = planfile.write(plan, (), render)
+    document = plan_file.write(plan, (), render)
     charts = document["buses"][0]["modules"][0]["changes"]["charts"]
     assert len(charts) == 3 and charts[1].startswith("```mermaid\n")  # ours: shown
     hostile = [charts[1].replace("xychart-beta", "```\n<img src=x onerror=alert(1)>\n```mermaid"),

@@ -24,7 +24,7 @@ each line as it is read (and probing it before broadcasts), proving a plan file,
 snapshot and the journal, running and verifying, restoring, drift, adopting Teach In into the
 plant file, scanning, importing, a gateway's INIT block, the pictures of a module's motion and
 serving an emulated bus. Does not own what they are made of (the pure core, `prc3cfg.core` —
-the planner and its cache, `prc3cfg.core.planning`; plant files, `prc3cfg.plant`; the shell:
+the planner and its cache, `prc3cfg.core.plant_planner`; plant files, `prc3cfg.plant`; the shell:
 links, locks, records, apply, files, the emulator, `prc3cfg.shell`), nor arguments, prompts
 and output (`prc3cfg.cli`). `__all__` is what the CLI and users' scripts call.
 
@@ -87,7 +87,7 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._types import Gates as Gates
     from prc3cfg.api._types import NotApproved as NotApproved
     from prc3cfg.core.axes import Release as Release
-    from prc3cfg.core.planfile import StalePlan as StalePlan
+    from prc3cfg.core.plan_file import StalePlan as StalePlan
     from prc3cfg.core.render import Drift as Drift
     from prc3cfg.errors import UserError as UserError
     from prc3cfg.plant import PlantError as PlantError
@@ -115,7 +115,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records", "verify_records",
                            "write_adoption"),
     "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
-    "prc3cfg.core.planfile": ("StalePlan",),
+    "prc3cfg.core.plan_file": ("StalePlan",),
     "prc3cfg.core.render": ("Drift",),
     "prc3cfg.core.axes": ("Release",),
     "prc3cfg.errors": ("UserError",),

@@ -4,7 +4,7 @@
 can be kept), read back and plan the whole plant and pass the `Gates`, or — with no
 question to ask — write each line as soon as its plan is whole (`prc3cfg.shell.engine`). Plan files:
 `read_plan`, `prove`, `plan_document`, `plan_file_plant`. Does not own the writes, the snapshot and
-the journal (`prc3cfg.shell.engine`), nor what a plan file is (`prc3cfg.core.planfile`).
+the journal (`prc3cfg.shell.engine`), nor what a plan file is (`prc3cfg.core.plan_file`).
 """
 
 from __future__ import annotations
@@ -34,12 +34,12 @@ from prc3cfg.api._plan import (
 )
 from prc3cfg.api._plant import reason_for
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
-from prc3cfg.core import planfile, render, what_to_read
+from prc3cfg.core import plan_file, render, what_to_read
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.planfile import PlanFile
-from prc3cfg.core.planning import Key, Prober
-from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.plan_file import PlanFile
+from prc3cfg.core.plant_plan import PlantPlan
+from prc3cfg.core.plant_planner import Key, Prober
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases
@@ -60,15 +60,16 @@ if TYPE_CHECKING:
 def read_plan(path: Path, plant: Plant) -> PlanFile:
     """A plan file, refused (one line) when damaged, made by another prc3cfg or for another plant file."""
     try:
-        alike = planfile.same_text(plant.path.read_bytes())
+        alike = plan_file.same_text(plant.path.read_bytes())
     except OSError:  # gone since it was loaded: the plant file's own digest alone, which the lines' check then finds changed
         alike = frozenset()
-    return planfile.to_apply(read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again"), path, plant.path, plant.sha256, alike)
+    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
+    return plan_file.to_apply(document, path, plant.path, plant.sha256, alike)
 
 
 def plan_document(path: Path) -> dict[str, Any]:
     """A plan file to show (`prc3cfg show PLAN.json`), checked, its summaries worked out again from its bytes."""
-    return planfile.to_show(read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again"), path)
+    return plan_file.to_show(read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again"), path)
 
 
 def plan_file_plant(path: Path) -> Path:
@@ -83,10 +84,10 @@ def plan_file_plant(path: Path) -> Path:
 
 def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage],
           probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
-    """The plan file's plan, proved before anything is written (`prc3cfg.core.planfile`): what is
+    """The plan file's plan, proved before anything is written (`prc3cfg.core.plan_file`): what is
     applied is then the plan prc3cfg makes from this read-back."""
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
-    planfile.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
+    plan_file.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     said = planned.document.get("read")  # a targeted read-back's base, in words: it sends nothing
     targeted = Reads(chosen, [], said["base"], tuple(said["not_as_verified"]), taken=dict(said.get("taken", {}))) if isinstance(said, dict) else None
@@ -94,7 +95,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
                      only_read=targeted is not None)  # fmt: skip
     if targeted is not None:
         ours = replace(ours, reading=targeted.reading(pairs, images))
-    planfile.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
+    plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
     return ours
 
 

@@ -5,7 +5,7 @@ a plan file, `plan_file_reads`) and the line's record it rests on; `read` them b
 read-back into its record (`seen`); `plan` from the read-back, or `make_plan` from images at hand,
 each module planned as soon as it is read (`read_and_plan`); `drift`, and what the plant file
 leaves alone (`left_alone`). Does not own proving a plan file and writing (`prc3cfg.api._apply`),
-nor the planner itself (`prc3cfg.core.planning`).
+nor the planner itself (`prc3cfg.core.plant_planner`).
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from prc3cfg.api._types import Pairs
 from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
-from prc3cfg.core.planfile import PlanFile, StalePlan
-from prc3cfg.core.planning import Key, Line, Planner, Prober, Wanted
-from prc3cfg.core.plantplan import PlantPlan, Reading
+from prc3cfg.core.plan_file import PlanFile, StalePlan
+from prc3cfg.core.plant_plan import PlantPlan, Reading
+from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.render import Drift, drifted
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError

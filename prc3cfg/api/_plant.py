@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 from prc3cfg.api._plan import plan, read, select
 from prc3cfg.core import gateway, plot
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.planning import Key
-from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.plant_plan import PlantPlan
+from prc3cfg.core.plant_planner import Key
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.adopt import Adopted

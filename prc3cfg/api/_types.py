@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from prc3cfg.core.axes import Release
-from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.render import plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module

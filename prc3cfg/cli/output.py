@@ -17,8 +17,8 @@ from pathlib import Path
 from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
 from prc3cfg.cli.common import TerminalProgress, ask, print_lines, write_output
 from prc3cfg.core import render
-from prc3cfg.core.planfile import write as plan_file
-from prc3cfg.core.plantplan import PlantPlan
+from prc3cfg.core.plan_file import write as plan_file
+from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
 
 

@@ -32,7 +32,7 @@ from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
-from prc3cfg.core import planfile
+from prc3cfg.core import plan_file
 from prc3cfg.core import text as escape
 from prc3cfg.core.axes import Release
 from prc3cfg.core.chains import jumps_as_chains
@@ -40,7 +40,7 @@ from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action, Step
-from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
+from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
 
@@ -256,7 +256,7 @@ def changes_json(change: ModuleChange) -> dict[str, Any]:
 
 
 def review(change: ModuleChange) -> dict[str, Any]:
-    """What a plan file holds beside a module's steps for people to read (`prc3cfg.core.planfile.write`,
+    """What a plan file holds beside a module's steps for people to read (`prc3cfg.core.plan_file.write`,
     which is given this module as its `Words`): the module's `changes` and its axis `warning`."""
     return {"changes": changes_json(change), "warning": AXIS_WARNING if change.releases_axes else None}
 
@@ -268,7 +268,7 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     with the changes by (bus, address) — the bus's name as the document has it."""
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
-    return _plain_names(planfile.to_json(plan) | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    return _plain_names(plan_file.to_json(plan) | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:

@@ -49,8 +49,8 @@ from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, SystemParameters
 from prc3cfg.core.planner import Step
 
 if TYPE_CHECKING:  # they import this module: what is read decides what they plan
-    from prc3cfg.core.planfile import PlannedModule
-    from prc3cfg.core.planning import Key, Wanted
+    from prc3cfg.core.plan_file import PlannedModule
+    from prc3cfg.core.plant_planner import Key, Wanted
 
 #: Why a module that reported E12 (system parameters not set) is read in full: its record says nothing.
 UNSET = "it reported E12 (system parameters not set)"

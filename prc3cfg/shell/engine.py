@@ -24,8 +24,8 @@ from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.axes import Release
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.planning import Key, Planner, Prober, Wanted
-from prc3cfg.core.plantplan import ModuleChange, PlantPlan, Reading
+from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
+from prc3cfg.core.plant_planner import Key, Planner, Prober, Wanted
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant

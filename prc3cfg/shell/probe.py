@@ -6,7 +6,7 @@ Silence is an empty address (None); something heard that never became a usable r
 damaged on every retry — is not (`Heard` with no reply). A failing port, a read a module took for
 a write and a module without read messages are raised: none of them says the address is empty.
 Does not own the exchange itself (`Link.probe`) nor how long a probe may take on a line's budget
-(`prc3cfg.core.planning`).
+(`prc3cfg.core.plant_planner`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from prc3cfg.core import codec
-from prc3cfg.core.planning import PROBE_TIMEOUT, PROOF_PROBES, Prober
+from prc3cfg.core.plant_planner import PROBE_TIMEOUT, PROOF_PROBES, Prober
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link

@@ -1,4 +1,4 @@
-"""The plan cache of `prc3cfg.core.planning`: modules alike but for their address are planned once."""
+"""The plan cache of `prc3cfg.core.plant_planner`: modules alike but for their address are planned once."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import replace
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.planning import PlanCache
+from prc3cfg.core.plant_planner import PlanCache
 
 
 def wanting_a_new_position(address: int) -> tuple[ModuleImage, ModuleImage]:

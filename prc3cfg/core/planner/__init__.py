@@ -9,7 +9,7 @@ every managed program, no unmanaged program written. A plan that fails this is a
 (`PlanVerificationError`), never returned.
 
 Owns: the module plan. Does not own the diff shown to people, rendering, the plan file
-(`prc3cfg.core.plantplan`) or sending anything. Pure: no I/O.
+(`prc3cfg.core.plant_plan`) or sending anything. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage, default_program
 from prc3cfg.core.planner.check import StepProblem, run_steps
 from prc3cfg.core.planner.layout import Layout
+from prc3cfg.core.planner.module_plan import Action, ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
 from prc3cfg.core.planner.optimise import search, whole_programs
-from prc3cfg.core.planner.plan import Action, ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
 from prc3cfg.core.planner.problem import PlanningProblem
 
 #: What a 20h that writes the system parameters a module already holds is for.

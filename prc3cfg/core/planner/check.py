@@ -29,7 +29,7 @@ from dataclasses import replace
 from prc3cfg.core import codec, device
 from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import ModuleImage, default_program
-from prc3cfg.core.planner.plan import program_list
+from prc3cfg.core.planner.module_plan import program_list
 
 #: More steps than any plan of one module needs (a full download is at most 65 messages).
 MAX_STEPS = 128

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
-from prc3cfg.core.planner.plan import UnreachableImage
+from prc3cfg.core.planner.module_plan import UnreachableImage
 from prc3cfg.core.planner.pricing import Prices
 
 KEEP, INIT_BEFORE, INIT_AFTER = 0, 1, 2

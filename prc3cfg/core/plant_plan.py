@@ -4,7 +4,7 @@ A plan is data: per bus, per module, the steps to send (the PRC 3 message, exact
 goes on the line), what they were planned from (each module's read-back, and the plant file's hash,
 so a stale plan can be refused) and what they are predicted to do. The optimiser that makes a
 module's steps is `prc3cfg.core.planner`; rendering is `prc3cfg.core.render`; the plan file
-`prc3cfg-plan/1`, written and read back, is `prc3cfg.core.planfile`.
+`prc3cfg-plan/1`, written and read back, is `prc3cfg.core.plan_file`.
 
 A bus may start with broadcasts (`prc3cfg.core.sharing`): steps sent once to address 0 that
 every module of the line processes — the leading `broadcasts` steps of each module of that bus. Pure.

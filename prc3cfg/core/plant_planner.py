@@ -29,7 +29,7 @@ from prc3cfg.core import codec, sharing, what_to_read
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
-from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan
+from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.errors import UserError
 
 Key = tuple[str, int]  # (bus name, module address)

@@ -44,7 +44,7 @@ from prc3cfg.core.error_codes import describe
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planner.check import MAX_STEPS
-from prc3cfg.core.plantplan import LineProof, ModuleChange, PlantPlan, Reading
+from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan, Reading
 from prc3cfg.errors import UserError
 
 Key = tuple[str, int]  # (bus name, module address)

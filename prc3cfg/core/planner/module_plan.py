@@ -2,7 +2,7 @@
 
 Owns `Step`, `ModulePlan`, the `Action` of each change, the one-line device-terms summary of
 a step, and the planner's errors. Does not own how a plan is found (`prc3cfg.core.planner.optimise`), how it is rendered
-for people (`prc3cfg.core.render`) or the plant-wide plan file (`prc3cfg.core.plantplan`). Pure.
+for people (`prc3cfg.core.render`) or the plant-wide plan file (`prc3cfg.core.plant_plan`). Pure.
 """
 
 from __future__ import annotations
