@@ -306,10 +306,11 @@ class _Programme:
             drawn = self.column(extra, integral=False)
             if extra > 0:  # forced up where the run first..last is drawn
                 self.row({start[first]: 1.0, end[last]: 1.0, **_minus(between), drawn: -1.0}, -np.inf, 1.0)
-            else:  # held down where it is not
+            else:  # held down where it is not: no start at first, no end at last, or an end between
                 self.row({drawn: 1.0, start[first]: -1.0}, -np.inf, 0.0)
                 self.row({drawn: 1.0, end[last]: -1.0}, -np.inf, 0.0)
-                self.row({drawn: 1.0, **between}, -np.inf, 1.0)
+                for column in between:
+                    self.row({drawn: 1.0, column: 1.0}, -np.inf, 1.0)
         return _Segments(on, start, end, message)
 
     def _cover(self, columns: dict[tuple[int, int], int]) -> dict[int, int]:
