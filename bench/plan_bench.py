@@ -55,12 +55,11 @@ shares are bisected), then with one channel's headers counted exactly in the sta
 item count modulo 15), then two channels' at once (the Lagrangian leaves a gap where three
 channels overflow together, as a full rewrite's 43h..45h do: only counting two exactly
 closes it). Whatever stays below the best value of R found is the bound; `bound` also says
-whether it is R's optimum (nothing stayed below) — R's, not the plans': a plan at R's optimum
-may still be above the cheapest plan, because R misses moves a plan can make (issue 29:
-commissioning every field of 64 programs, four of them written whole by 21h let the other 60
-fit one message fewer of each field — the planner sent 28 messages and read as optimal by R,
-where 27 suffice). So the table compares plans with the exact optimum, and shows R only as a
-bound. The plan's bus time is the first
+whether it is R's optimum (nothing stayed below). The table no longer marks that beside the
+plan ("=", read as "the plan is optimal"): R misses moves a plan can make (issue 29: four
+programs written whole by 21h so that 60 others fit one message fewer of each field), and
+where it does, its optimum says nothing of the plan's. The table compares plans with the exact
+optimum, and shows R (--bound) as a bound only. The plan's bus time is the first
 "best value": it only lets the search stop early — a vector bounded above the plan can hold
 no plan cheaper than the plan, so the bound stays below every plan either way.
 
@@ -663,7 +662,8 @@ def exact_summary(compared: list[Compared]) -> None:
     for (family, profile), cases in groups.items():
         total = sum(c.plan.bus_time for c in cases) / (sum(c.reference.bus_time for c in cases) or 1.0)
         worst = max(cases, key=lambda c: c.ratio)
-        print(f"{family:<16} {profile:<18} {len(cases):9d} {total:16.4f}  {worst.ratio:.4f} ({worst.scenario})")
+        above = f"{worst.ratio:.4f} ({worst.scenario})" if worst.ratio > 1 + 1e-9 else "every plan at the optimum"
+        print(f"{family:<16} {profile:<18} {len(cases):9d} {total:16.4f}  {above}")
     worst = max(compared, key=lambda c: c.ratio)
     print(f"\nworst: {worst.scenario} on {worst.profile}, plan/exact {worst.ratio:.4f}")
     plans = (("prc3cfg", [s.message for s in worst.plan.steps]), ("exact", list(worst.reference.messages)))
