@@ -1,14 +1,19 @@
-"""The planner on realistic plant changes: plan bus time against the naive download and a lower bound.
+"""The planner on realistic plant changes: plan bus time against the exact optimum and the naive download.
 
-    python bench/plan_bench.py [--profile crc16] [--profile open-driver/100ms] [--modules 30] [--no-bound]
+    python bench/plan_bench.py [--profile crc16] [--profile stx] [--seeds 2] [--bound] [--modules 30]
 
-For each scenario and line profile (9600 baud 8E1, turnaround 10 ms; crc16, stx, and
-open-driver with a ZVZ of 20 and of 100 ms) it prints the plan's estimated bus time, the
-naive download's (20h if the system differs, one 21h per changed program), a lower bound
-on the bus time of *any* plan, plan/bound, the plan's message count and the planning CPU
-time. Then it plans whole plants — N modules × 64 programs, fully managed, each with one of
-the scenarios' changes ("mixed"), or each commissioned or changed a lot ("heavy") — from
-images saved as JSON, and prints the total CPU time (acceptance: under 1 s for 30 modules).
+For each scenario family (commissioning, full rewrites, partial rewrites, clamps, chains,
+inits; `FAMILIES`) and line profile (9600 baud 8E1, turnaround 10 ms; crc16, open-driver with
+a ZVZ of 100 ms and stx, or those named) it prints, per scenario, the plan's estimated bus time
+and messages, the exact optimum's (bench/exact_reference.py: an integer programme solved by
+HiGHS, its plan replayed on the device model; `pip install -e '.[bench]'` for scipy),
+plan/exact, the naive download's bus time (20h if the system differs, one 21h per changed
+program) and the planning CPU time; then per family and profile the plans' total over the
+optima's and the worst scenario; then the worst scenario of all with both plans' messages.
+`--bound` adds a lower bound R on the bus time of *any* plan (below). Last, it plans whole
+plants — N modules × 64 programs, fully managed, each with one of the scenarios' changes
+("mixed"), or each commissioned or changed a lot ("heavy") — from images saved as JSON, and
+prints the total CPU time (acceptance: under 1 s for 30 modules).
 
 The lower bound is the optimum of a relaxation R: a problem every plan maps into at no
 more than its bus time, solved exactly, or bounded from below where the search below stops.
@@ -49,8 +54,12 @@ each item of the channels over their capacity (a Lagrangian relaxation of n <= 1
 shares are bisected), then with one channel's headers counted exactly in the state (its
 item count modulo 15), then two channels' at once (the Lagrangian leaves a gap where three
 channels overflow together, as a full rewrite's 43h..45h do: only counting two exactly
-closes it). Whatever stays below the best value of R found is the bound; "=" marks a bound
-that is R's optimum (nothing stayed below). The plan's bus time is the first
+closes it). Whatever stays below the best value of R found is the bound; `bound` also says
+whether it is R's optimum (nothing stayed below). The table no longer marks that beside the
+plan ("=", read as "the plan is optimal"): R misses moves a plan can make (issue 29: four
+programs written whole by 21h so that 60 others fit one message fewer of each field), and
+where it does, its optimum says nothing of the plan's. The table compares plans with the exact
+optimum, and shows R (--bound) as a bound only. The plan's bus time is the first
 "best value": it only lets the search stop early — a vector bounded above the plan can hold
 no plan cheaper than the plan, so the bound stays below every plan either way.
 
@@ -75,14 +84,18 @@ import time
 from dataclasses import replace
 from math import ceil
 from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing.stx import START
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.planner import plan_module
+from prc3cfg.core.planner import ModulePlan, plan_module, summarise
 from prc3cfg.core.planner.problem import FIELD_BIT, INIT_AFTER, INIT_BEFORE, KEEP, PlanningProblem
+
+if TYPE_CHECKING:  # scipy, which exact_reference needs, is the bench extra: imported where the table runs
+    from exact_reference import ReferencePlan
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S2=120, S4=500, S5=20)
 USED = 40  # programs a recipe uses; the rest are at their defaults (plant files with `reset`)
@@ -189,6 +202,45 @@ def large_mixed(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, Modu
     return actual, replace(actual, system=system, programs=tuple(programs))
 
 
+def full_program(rnd: random.Random, number: int, system=SYSTEM) -> Program:
+    """A program that differs from the defaults in every field: relative speed, dwell and both outputs set, chains of four."""
+    return Program(
+        P=rnd.randrange(300, system.S1, 5), V=rnd.randrange(max(system.S5, 50), system.S4, 10),
+        Vr=rnd.choice([-1, 1]) * rnd.randrange(5, 100, 5), T=rnd.randrange(1, 100), F1=rnd.choice([20, 1010, 1050]),
+        F2=rnd.choice([30, 1050]), A=number + 1 if number % 4 else 0,
+    )  # fmt: skip
+
+
+def full_module(rnd: random.Random, address: int = 1) -> ModuleImage:
+    return ModuleImage(address, SYSTEM, tuple(full_program(rnd, n) for n in range(1, PROGRAM_COUNT + 1)))
+
+
+def commissioning_every_field(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
+    """Every field of all 64 programs from factory defaults (issue 29: four programs written whole let the
+    other 60 fit four messages of each field, not five)."""
+    return ModuleImage.factory(address), full_module(rnd, address)
+
+
+def full_rewrite_every_field(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
+    """New values in every field of all 64 programs."""
+    return full_module(rnd, address), full_module(rnd, address)
+
+
+def half_rewrite(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
+    """32 programs, anywhere, rewritten in every field."""
+    actual = full_module(rnd, address)
+    return actual, changed(actual, {n: full_program(rnd, n) for n in rnd.sample(range(1, PROGRAM_COUNT + 1), 32)})
+
+
+def narrower_speeds(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
+    """S4 and S5 narrowed: the module clamps the speeds outside, and the plant file sets six speeds otherwise."""
+    actual = plant(rnd, address)
+    s4, s5 = 300, 60
+    programs: dict[int, Program | None] = {n: replace(p, V=max(min(p.V, s4), s5)) for n, p in enumerate(actual.programs, start=1)}
+    programs |= {n: replace(actual.programs[n - 1], V=rnd.randrange(100, s4, 10)) for n in rnd.sample(range(1, USED + 1), 6)}
+    return actual, changed(actual, programs, S4=s4, S5=s5)
+
+
 SCENARIOS = {
     "recipe tweak": recipe_tweak,
     "teach-in revert": teach_in_revert,
@@ -199,6 +251,23 @@ SCENARIOS = {
     "factory reset": factory_reset,
     "large mixed change": large_mixed,
     "full rewrite": full_rewrite,
+}
+#: Scenarios of the exact comparison only: the plant runs keep the nine above, so that their CPU
+#: times compare with earlier runs.
+MORE_SCENARIOS = {
+    "commissioning, every field": commissioning_every_field,
+    "full rewrite, every field": full_rewrite_every_field,
+    "half rewrite, every field": half_rewrite,
+    "narrower speeds": narrower_speeds,
+}
+#: The families the comparison with the exact optimum is reported by, and their scenarios.
+FAMILIES = {
+    "commissioning": ("commissioning", "commissioning, every field"),
+    "full rewrite": ("full rewrite", "full rewrite, every field"),
+    "partial rewrite": ("recipe tweak", "teach-in revert", "half rewrite, every field", "large mixed change"),
+    "clamps": ("lower S1, clamping", "narrower speeds"),
+    "chains": ("rechaining",),
+    "inits": ("cleanup (reset)", "factory reset"),
 }
 #: Probes of the header shares that bound one message count vector (`Relaxation._vectors`).
 SHARE_PROBES = 6
@@ -211,6 +280,8 @@ PROFILES = {
     "open-driver/20ms": ("open-driver", 0.020),
     "open-driver/100ms": ("open-driver", 0.100),
 }
+#: The profiles of issue 29's acceptance: the comparison with the exact optimum runs on these unless told.
+EXACT_PROFILES = ("crc16", "open-driver/100ms", "stx")
 
 
 # -- the bound: the relaxation R (see the module docstring) -------------------------------------
@@ -534,25 +605,74 @@ def line_cost(profile: str) -> LineCost:
     return LineCost.of(framing, LineSettings(), 0.010, zvz)
 
 
-def scenarios_table(profiles: list[str], with_bound: bool) -> None:
-    print(f"{'scenario':<20} {'profile':<18} {'plan ms':>9} {'naive ms':>9} {'bound ms':>10} "
-          f"{'plan/bound':>10} {'msgs':>5} {'cpu ms':>7} {'bound s':>7}")  # fmt: skip
+class Compared(NamedTuple):
+    """One scenario on one line: the plan and the exact optimum."""
+
+    family: str
+    scenario: str
+    profile: str
+    actual: ModuleImage
+    plan: ModulePlan
+    reference: ReferencePlan
+
+    @property
+    def ratio(self) -> float:
+        return self.plan.bus_time / self.reference.bus_time if self.reference.bus_time else 1.0
+
+
+def exact_table(profiles: list[str], seeds: int, with_bound: bool) -> list[Compared]:
+    """Every scenario of `FAMILIES` (each with `seeds` seeds) on every profile: the plan against the exact
+    optimum. "+" after the optimum: on stx a checksum of 7Eh costs the optimum's plan a byte the
+    programme does not count — the true optimum lies between the programme's value and this."""
+    from exact_reference import exact_plan  # scipy: the bench extra, needed here only
+
+    scenarios = SCENARIOS | MORE_SCENARIOS
+    print(f"{'family':<16} {'scenario':<29} {'profile':<18} {'plan ms':>9} {'msgs':>4} {'exact ms':>10} {'msgs':>4} "
+          f"{'plan/exact':>10} {'naive ms':>9} {'cpu ms':>7} {'exact s':>7}" + (f" {'R bound ms':>10}" if with_bound else ""))  # fmt: skip
+    compared = []
     for profile in profiles:
         cost = line_cost(profile)
-        for name, make in SCENARIOS.items():
-            actual, desired = make(random.Random(name))
-            start = time.process_time()
-            plan = plan_module(actual, desired, cost)
-            cpu = time.process_time() - start
-            bound, optimum, bound_cpu = 0.0, False, 0.0
-            if with_bound:
+        for family, names in FAMILIES.items():
+            for name, seed in itertools.product(names, range(seeds)):
+                label = name if seed == 0 else f"{name} #{seed + 1}"
+                actual, desired = scenarios[name](random.Random(label))
                 start = time.process_time()
-                bound, optimum = Relaxation(actual, desired, cost).bound(plan.bus_time)
-                bound_cpu = time.process_time() - start
-            ratio = f"{plan.bus_time / bound:10.4f}" if bound else f"{'':10}"
-            print(f"{name:<20} {profile:<18} {plan.bus_time * 1e3:9.1f} {plan.naive_bus_time * 1e3:9.1f} "
-                  f"{bound * 1e3:9.1f}{'=' if optimum else ' '} {ratio} {len(plan.steps):5d} {cpu * 1e3:7.1f} "
-                  f"{bound_cpu:7.1f}")  # fmt: skip
+                plan = plan_module(actual, desired, cost)
+                cpu = time.process_time() - start
+                start = time.process_time()
+                reference = exact_plan(actual, desired, cost)
+                exact_cpu = time.process_time() - start
+                case = Compared(family, label, profile, actual, plan, reference)
+                compared.append(case)
+                mark = "+" if reference.bus_time > reference.bound + 1e-9 else " "
+                bound = f" {Relaxation(actual, desired, cost).bound(plan.bus_time)[0] * 1e3:10.1f}" if with_bound else ""
+                print(f"{family:<16} {label:<29} {profile:<18} {plan.bus_time * 1e3:9.1f} {len(plan.steps):4d} "
+                      f"{reference.bus_time * 1e3:9.1f}{mark} {len(reference.messages):4d} {case.ratio:10.4f} "
+                      f"{plan.naive_bus_time * 1e3:9.1f} {cpu * 1e3:7.1f} {exact_cpu:7.1f}{bound}", flush=True)  # fmt: skip
+    return compared
+
+
+def exact_summary(compared: list[Compared]) -> None:
+    """Per family and profile: the plans' total bus time over the optima's, and the worst scenario; then
+    the worst scenario of all, with both plans' messages."""
+    print(f"\n{'family':<16} {'profile':<18} {'scenarios':>9} {'total plan/exact':>16}  worst")
+    groups: dict[tuple[str, str], list[Compared]] = {}
+    for case in compared:
+        groups.setdefault((case.family, case.profile), []).append(case)
+    for (family, profile), cases in groups.items():
+        total = sum(c.plan.bus_time for c in cases) / (sum(c.reference.bus_time for c in cases) or 1.0)
+        worst = max(cases, key=lambda c: c.ratio)
+        above = f"{worst.ratio:.4f} ({worst.scenario})" if worst.ratio > 1 + 1e-9 else "every plan at the optimum"
+        print(f"{family:<16} {profile:<18} {len(cases):9d} {total:16.4f}  {above}")
+    worst = max(compared, key=lambda c: c.ratio)
+    print(f"\nworst: {worst.scenario} on {worst.profile}, plan/exact {worst.ratio:.4f}")
+    plans = (("prc3cfg", [s.message for s in worst.plan.steps]), ("exact", list(worst.reference.messages)))
+    cost = line_cost(worst.profile)
+    for name, messages in plans:
+        total = sum(cost.message_time(worst.actual.address, m) for m in messages)
+        print(f"  {name}: {len(messages)} messages, {total * 1e3:.1f} ms")
+        for message in messages:
+            print(f"    {cost.message_time(worst.actual.address, message) * 1e3:7.1f} ms  {summarise(message, worst.actual.system)}")
 
 
 def plant_run(profile: str, modules: int, scenarios: list[str], label: str) -> None:
@@ -577,12 +697,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--profile", action="append", choices=list(PROFILES))
     parser.add_argument("--modules", type=int, default=30)
-    parser.add_argument("--no-bound", action="store_true", help="skip the lower bound (the slow part)")
+    parser.add_argument("--seeds", type=int, default=1, help="seeds of each scenario compared with the exact optimum")
+    parser.add_argument("--bound", action="store_true", help="show the lower bound R too (slow)")
     args = parser.parse_args()
-    profiles = args.profile or list(PROFILES)
-    scenarios_table(profiles, not args.no_bound)
+    exact_summary(exact_table(args.profile or list(EXACT_PROFILES), args.seeds, args.bound))
     print()
-    for profile in profiles:
+    for profile in args.profile or list(PROFILES):
         plant_run(profile, args.modules, list(SCENARIOS), "mixed")
         plant_run(profile, args.modules, ["commissioning", "large mixed change"], "heavy")
 
