@@ -241,6 +241,13 @@ def narrower_speeds(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, 
     return actual, changed(actual, programs, S4=s4, S5=s5)
 
 
+def unlinking_around_a_chain(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
+    """Programs 1..24 unlinked but for one chain 9 → … → 16: a link range inside an unlink range."""
+    actual = plant(rnd, address)
+    jumps = {n: n + 1 if 9 <= n < 16 else 0 for n in range(1, 25)}
+    return actual, changed(actual, {n: replace(actual.programs[n - 1], A=a) for n, a in jumps.items()})
+
+
 SCENARIOS = {
     "recipe tweak": recipe_tweak,
     "teach-in revert": teach_in_revert,
@@ -259,6 +266,7 @@ MORE_SCENARIOS = {
     "full rewrite, every field": full_rewrite_every_field,
     "half rewrite, every field": half_rewrite,
     "narrower speeds": narrower_speeds,
+    "unlinking around a chain": unlinking_around_a_chain,
 }
 #: The families the comparison with the exact optimum is reported by, and their scenarios.
 FAMILIES = {
@@ -266,7 +274,7 @@ FAMILIES = {
     "full rewrite": ("full rewrite", "full rewrite, every field"),
     "partial rewrite": ("recipe tweak", "teach-in revert", "half rewrite, every field", "large mixed change"),
     "clamps": ("lower S1, clamping", "narrower speeds"),
-    "chains": ("rechaining",),
+    "chains": ("rechaining", "unlinking around a chain"),
     "inits": ("cleanup (reset)", "factory reset"),
 }
 #: Probes of the header shares that bound one message count vector (`Relaxation._vectors`).

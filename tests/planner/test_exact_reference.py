@@ -73,6 +73,16 @@ def test_programs_apart_put_back_to_their_defaults_take_an_init_each() -> None:
     assert reference.messages == (codec.InitProgram(1), codec.InitProgram(5))
 
 
+def test_a_chain_among_unlinked_programs_is_a_link_range_inside_an_unlink_range() -> None:
+    """Programs 1..20 unlinked but for a chain 5 → … → 10: 31h 1..20, then 30h 5..10 (the inner layer of
+    ranges), where ranges side by side take three messages and a 46h more bytes."""
+    actual = ModuleImage(3, DEFAULT_SYSTEM, tuple(Program(P=100 + n, V=60, A=n * 7 % PROGRAM_COUNT + 1) for n in range(1, PROGRAM_COUNT + 1)))
+    jumps = {n: n + 1 if 5 <= n < 10 else 0 for n in range(1, 21)}
+    desired = replace(actual, programs=tuple(p.with_field("A", jumps[n]) if n in jumps else p for n, p in enumerate(actual.programs, 1)))
+    reference = reference_replayed(actual, desired, line("crc16"))
+    assert reference.messages == (codec.UnlinkPrograms(1, 20), codec.LinkPrograms(5, 10))
+
+
 def test_commissioning_every_field_takes_27_messages() -> None:
     """Issue 29's case: all 64 programs from factory defaults, every field, on crc16 at 9600 baud, 10 ms:
     four programs written whole (21h) let the other 60 fit four 33h and four each of 42h..45h, not five."""
