@@ -1,6 +1,6 @@
 """`plan --actual` of the largest plant: 8 buses × 30 fully managed modules, every program changed.
 
-    python bench/plan_time_bench.py [--runs 3] [--keep DIR] [--worst] [--one-profile]
+    python bench/plan_time_bench.py [--runs 3] [--keep DIR] [--worst] [--one-profile] [--mixes]
 
 Writes, in a temporary folder (or DIR), a plant file of 8 buses × 30 modules, each with
 `unmanaged_programs: reset`, a system block and 64 programs of position, speed, dwell and
@@ -20,6 +20,15 @@ machine may be shared, so CPU, not wall, is the figure), 32 buses × 30 modules 
 profile (a system block and 64 programs): commissioned from factory images — modules alike, one
 search per line — and from images in which every module holds programs of its own (issue 21:
 under 10 s CPU and 150 MiB). Every line is full, so broadcasts are searched for on each.
+
+`--mixes` also plans, the same way, 8 × 30 modules for each kind of change (`MIXES`): the bench's
+plant, then plants as `prc3cfg import` writes them — every module a recipe of its own, with dwells,
+relative speeds and outputs on some programs and chains — against read-backs that differ in the
+relative speed, the outputs F1 and F2, the jump addresses, the system parameters (a longer stroke
+held: programs clamped), some of each, or a seeded random subset of the fields on a random share
+of the programs. Each prints `plan --actual`'s CPU time and max RSS, and the CPU time of planning
+alone (in this process, from loaded files), in all and per module: the planner's cost per module
+should not depend on the kind of change (issue 29: `plan --actual` ≤ 2 s CPU for every mix).
 
 `--worst` also validates files at the plant file's limits (`prc3cfg.plant.document`,
 `loader`): the largest valid plant (every field of every program written out), and hostile
@@ -45,8 +54,9 @@ from pathlib import Path
 
 from prc3cfg import api
 from prc3cfg.core import plan_file, render
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, Program
 from prc3cfg.plant.document import MAX_NODES
+from prc3cfg.plant.importer import module_entry, plant_yaml
 from prc3cfg.plant.loader import MAX_PART_NODES
 
 BUSES, MODULES = 8, 30
@@ -78,6 +88,107 @@ def write_plant(folder: Path, program: str = PROGRAM) -> tuple[Path, Path]:
     plant.write_text("".join(text))
     actual.write_text(json.dumps(images))
     return plant, actual
+
+
+@dataclass(frozen=True)
+class Mix:
+    """A kind of change: the fields in which the read-back differs from the plant file, on a share
+    of the programs, and a share of the modules whose system parameters differ. `random_fields`:
+    each module changes a random subset of the fields (seeded), on a random share of its programs."""
+
+    fields: tuple[str, ...]
+    share: float = 1.0
+    system: float = 0.0
+    random_fields: bool = False
+
+
+#: The change mixes of `--mixes`, besides the bench's own plant (P, V, T, Vr of every program).
+MIXES = {
+    "relative speed": Mix(("Vr",)),
+    "function outputs F1, F2": Mix(("F1", "F2")),
+    "jump addresses (chains)": Mix(("A",)),
+    "system differences": Mix((), system=0.5),
+    "Vr, F1, chains, system": Mix(("Vr", "F1", "A"), system=0.3),
+    "half of P, V; T": Mix(("P", "V", "T"), share=0.5),
+    "random fields (seeded)": Mix(PROGRAM_FIELDS, system=0.3, random_fields=True),
+}
+#: The system parameters a module of a mix with a system difference holds: a longer stroke (its
+#: programs beyond the plant's S1 are clamped by the plan's 20h), another S2 (another default
+#: position, so an init before the 20h differs from one after it) and S4.
+OTHER_SYSTEM = replace(SYSTEM, S1=2400, S2=120, S4=600)
+
+
+def chained(rnd: random.Random) -> list[int]:
+    """Jump addresses of chains of 1..8 programs, a third of them loops (a chain of one: A = 0)."""
+    jumps, first = [0] * PROGRAM_COUNT, 1
+    while first <= PROGRAM_COUNT:
+        last = min(first + rnd.randrange(8), PROGRAM_COUNT)
+        for n in range(first, last):
+            jumps[n - 1] = n + 1
+        jumps[last - 1] = first if last > first and rnd.random() < 1 / 3 else 0
+        first = last + 1
+    return jumps
+
+
+def recipe(rnd: random.Random) -> tuple[Program, ...]:
+    """64 programs as a recipe sets them: a position and a speed each, a dwell on half of them, a
+    relative speed on a quarter, outputs switched at a distance on a third, programs in chains."""
+    def sometimes(share: float, value: int) -> int:
+        return value if rnd.random() < share else 0
+
+    return tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), Vr=sometimes(0.25, rnd.randrange(1, 50)),
+                         T=sometimes(0.5, rnd.randrange(1, 50)), F1=sometimes(1 / 3, rnd.randrange(1, 2000)),
+                         F2=sometimes(1 / 3, rnd.randrange(1, 2000)), A=a)
+                 for a in chained(rnd))  # fmt: skip
+
+
+def mixed_module(rnd: random.Random, address: int, mix: Mix) -> tuple[ModuleImage, ModuleImage]:
+    """A module of `mix`: the plant file's image, and the read-back — the plant's programs with the
+    mix's fields taken from another recipe (its chains, where the jump addresses change)."""
+    desired = ModuleImage(address, SYSTEM, recipe(rnd))
+    fields, share = mix.fields, mix.share
+    if mix.random_fields:
+        fields = tuple(rnd.sample(fields, rnd.randrange(1, len(fields) + 1)))
+        share = rnd.choice([0.1, 0.3, 0.6, 1.0])
+    held = []
+    for program, other in zip(desired.complete(), recipe(rnd)):
+        changed = [name for name in fields if name == "A" or rnd.random() < share]
+        for name in changed:
+            program = program.with_field(name, getattr(other, name))
+        held.append(program)
+    system = SYSTEM
+    if rnd.random() < mix.system:
+        system = OTHER_SYSTEM
+        held = [p.with_field("P", p.P + 500) if p.P > 1500 and rnd.random() < 0.5 else p for p in held]
+    return desired, ModuleImage(address, system, tuple(held))
+
+
+def write_mix(folder: Path, name: str) -> tuple[Path, Path]:
+    """The plant file (as `prc3cfg import` writes one) and the images file of the change mix `name`
+    (`MIXES`): 8 buses × 30 modules, each with programs of its own."""
+    rnd = random.Random(name)
+    buses, images = [], []
+    for b in range(BUSES):
+        entries = []
+        for address in range(1, MODULES + 1):
+            desired, held = mixed_module(rnd, address, MIXES[name])
+            entries.append(module_entry(desired, f"b{b}m{address}"))
+            images.append({"bus": f"bus{b}", **held.to_json()})
+        buses.append(({"name": f"bus{b}", "port": f"socket://127.0.0.1:{7000 + b}"}, entries))
+    slug = "".join(c if c.isalnum() else "-" for c in name)
+    plant, actual = folder / f"mix-{slug}.yaml", folder / f"mix-{slug}.json"
+    plant.write_text(plant_yaml("mix", buses))
+    actual.write_text(json.dumps(images))
+    return plant, actual
+
+
+def planning_cpu(plant: Path, actual: Path) -> float:
+    """CPU seconds of planning alone (`api.plan` from loaded images), in this process."""
+    loaded = api.load(plant)
+    images = api.load_images(actual, loaded)
+    start = time.process_time()
+    api.plan(loaded, images=images)
+    return time.process_time() - start
 
 
 ONE_PROFILE_BUSES = 32
@@ -199,6 +310,7 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, help="write the files into this folder and keep them")
     parser.add_argument("--worst", action="store_true", help="also validate files at the plant file's limits")
     parser.add_argument("--one-profile", action="store_true", help="also plan 32 × 30 modules that take one profile")
+    parser.add_argument("--mixes", action="store_true", help="also plan every change mix (MIXES)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as temporary:
         folder = args.keep or Path(temporary)
@@ -221,6 +333,17 @@ def main() -> None:
         print("  in process:")
         for name in parts[0]:
             print(f"    {name:<24} {statistics.median(p[name] for p in parts):6.2f} s")
+        if args.mixes:
+            print(f"change mixes, {BUSES} × {MODULES} modules: plan --actual in a fresh process, and planning alone in "
+                  f"this one (issue 29: ≤ 2 s CPU each)")
+            mixes = folder / "mixes"
+            mixes.mkdir(exist_ok=True)
+            files = {"P, V, T, Vr (the bench's plant)": (plant, actual)} | {name: write_mix(mixes, name) for name in MIXES}
+            for name, (mix_plant, images) in files.items():
+                run = median_run([*prc3cfg, "plan", str(mix_plant), "--actual", str(images)], args.runs)
+                alone = statistics.median(planning_cpu(mix_plant, images) for _ in range(args.runs))
+                print(f"  {name:<34} {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS  planning {alone:5.2f} s CPU, "
+                      f"{alone / (BUSES * MODULES) * 1e3:5.1f} ms a module")
         if args.one_profile:
             one = folder / "one-profile"
             one.mkdir(exist_ok=True)
