@@ -20,8 +20,6 @@ alone: radon is no dependency of prc3cfg. A function starts at 1 and adds (`_DEC
 `with`, `return`, `break`, `raise`, decorators and default values add nothing. A lambda's body
 counts in the function it is written in; a function or class defined inside one counts only in
 itself (radon lists no nested function; here each is measured).
-
-`PENDING` lists the files and functions other branches of issue 28 reshape as this test lands.
 """
 
 from __future__ import annotations
@@ -46,14 +44,6 @@ COMPLEX = 20
 #: What a long file's module docstring and a complex function's docstring or top comment say.
 LONG_MARK = re.compile(r"\blong because\b", re.IGNORECASE)
 COMPLEX_MARK = re.compile(r"\bcomplex because\b", re.IGNORECASE)
-
-#: Known exceptions: what other branches of issue 28 reshape or explain as this test lands — the
-#: lead empties this list after merging them. An entry that no longer offends fails the test, so
-#: the list only shrinks. A file as its path, a function as PATH::QUALNAME.
-PENDING = [
-    "prc3cfg/core/planner/optimise.py",
-    "prc3cfg/core/planner/check.py::run_steps",
-]
 
 Function = ast.FunctionDef | ast.AsyncFunctionDef
 
@@ -123,7 +113,7 @@ def _sources() -> Iterator[tuple[str, str]]:
 
 
 def offenders() -> list[tuple[str, str]]:
-    """(what, why) of every long file and complex function that does not say why, PENDING or not."""
+    """(what, why) of every long file and complex function that does not say why."""
     found = []
     for name, source in _sources():
         tree = ast.parse(source)
@@ -138,15 +128,10 @@ def offenders() -> list[tuple[str, str]]:
 
 
 def test_long_files_and_complex_functions_say_why() -> None:
-    unexplained = [f"{what} ({why})" for what, why in offenders() if what not in PENDING]
+    unexplained = [f"{what} ({why})" for what, why in offenders()]
     assert not unexplained, (
         f"over {LONG_FILE} lines or complexity {COMPLEX} without saying why — split or simplify it, or say why "
         f"at its top ('long because' in the module docstring, 'complex because' in the function's): {unexplained}")
-
-
-def test_pending_only_holds_what_still_offends() -> None:
-    offending = {what for what, _ in offenders()}
-    assert [entry for entry in PENDING if entry not in offending] == [], "no longer needed here: take it out of PENDING"
 
 
 @pytest.mark.parametrize(("source", "expected"), [

@@ -55,7 +55,9 @@ class StepProblem(ValueError):
 
 def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[codec.Message], *, system_unset: bool = False) -> ModuleImage:
     """The image the steps leave on the module (programs read or managed), or `StepProblem`.
-    `system_unset`: the module is in E12, which only a 10h/20h clears — one may go for it, first."""
+    `system_unset`: the module is in E12, which only a 10h/20h clears — one may go for it, first.
+    Complex because it is the proof as the module docstring numbers it, rule by rule in that order, each
+    refusal with its own words: split, the rules a plan file must pass would no longer read as one list."""
     if len(messages) > MAX_STEPS:
         raise StepProblem(MAX_STEPS + 1, f"{len(messages)} steps for one module, more than any plan needs ({MAX_STEPS})")
     filler = default_program(actual.system)

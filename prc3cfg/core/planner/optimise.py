@@ -54,6 +54,10 @@ to send. The search is built around that:
 Prices come from `prc3cfg.core.planner.pricing`, bases and masks from `prc3cfg.core.planner.problem`.
 Owns the search. Does not own building messages (`layout`) or checking the result (the
 caller runs it on `prc3cfg.core.device`).
+
+Long because it is one search: the channel DP (`WritePhase`), the init DP (`InitSearch`) and the
+neighbours and header targets that feed it share the priced masks of `problem` and each other's
+candidates; split, each part would need the others' reasons. Issue 29's exact search reshapes it.
 """
 
 from __future__ import annotations
