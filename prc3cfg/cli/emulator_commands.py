@@ -125,11 +125,14 @@ def serve(
         line=LineSettings(baud=line_speed or 9600, data_bits=data_bits, parity=parity, stop_bits=stop_bits),
         drop_rate=drop_rate, corrupt_rate=corrupt_rate, seed=seed, max_connections=max_connections, idle_timeout=idle_timeout,
     )  # fmt: skip
+    # The API imports each name the first time it is asked for: the ones serving uses are taken now,
+    # as a server that later runs out of file descriptors could not import them then.
+    listen_on, open_pty, served_pty, wait_for = api.listen, api.open_pty, api.served_pty, api.wait_for
     stop = threading.Event()
     with emulator:
-        address = api.listen(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen), rfc2217=rfc2217) \
+        address = listen_on(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen), rfc2217=rfc2217) \
             if listen is not None or not pty else None  # fmt: skip
-        path = api.open_pty(emulator) if pty else None
+        path = open_pty(emulator) if pty else None
         # started: a signal stops it (until now, it was interrupted) — from before it says so, which
         # is what a script waits for before it may stop it
         for signum in (signal.SIGINT, signal.SIGTERM):
@@ -139,5 +142,5 @@ def serve(
                   f"{', '.join(map(str, sorted(emulator.modules())))})", flush=True)  # fmt: skip
         if path is not None:
             print(f"pty: {path}", flush=True)
-        with api.served_pty(path, emulator.modules()) if path is not None else contextlib.nullcontext():  # prc3cfg ports lists it
-            api.wait_for(stop)  # a signal's handler runs meanwhile, on Windows too
+        with served_pty(path, emulator.modules()) if path is not None else contextlib.nullcontext():  # prc3cfg ports lists it
+            wait_for(stop)  # a signal's handler runs meanwhile, on Windows too

@@ -507,7 +507,8 @@ class Emulator:
         with self._guard:
             threads = list(self._threads)
         for thread in threads:
-            thread.join(timeout=2)
+            if thread.ident is not None:  # one `_start` added but a signal kept from starting never will
+                thread.join(timeout=2)
         with self._lock:
             if self._store is not None:
                 try:
