@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from prc3cfg.core.axes import Release
+from prc3cfg.core.axes import to_travel
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.render import plural
 from prc3cfg.errors import Interrupted, UserError
@@ -98,7 +98,7 @@ class ApplyResult:
     @property
     def released(self) -> tuple[ModuleRun, ...]:
         """Every module whose axes were — or may have been — released: it must travel to its reference point."""
-        return tuple(run for run in self.runs if run.released is not Release.NO)
+        return tuple(to_travel(self.runs))
 
 
 @dataclass(frozen=True)

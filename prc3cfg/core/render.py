@@ -34,7 +34,7 @@ from typing import Any, NamedTuple, Protocol
 
 from prc3cfg.core import plan_file
 from prc3cfg.core import text as escape
-from prc3cfg.core.axes import Release
+from prc3cfg.core.axes import Release, to_travel
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
@@ -756,7 +756,7 @@ TRAVEL = "⚠ Travel to reference point required before production on:"
 
 def travel_list(runs: Sequence[Run]) -> str | None:
     """The modules whose axes were — or may have been — released: they must travel to their reference point."""
-    released = [r for r in runs if r.released is not Release.NO]
+    released = to_travel(runs)
     if not released:
         return None
     names = ", ".join(

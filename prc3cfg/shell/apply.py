@@ -106,12 +106,6 @@ class ModuleRun:
     def interrupted(self) -> bool:
         return self.course.state is State.INTERRUPTED
 
-    @interrupted.setter
-    def interrupted(self, stop: bool) -> None:
-        # the caller stops a module before anything was sent to it (`prc3cfg.api`); an apply resumes none
-        assert stop, "a module's apply is stopped, never resumed"
-        self.process(Event.CANCELLED)
-
     @property
     def repairs(self) -> int:
         return self.course.repairs

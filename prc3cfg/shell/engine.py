@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from prc3cfg.core import codec, what_to_read
-from prc3cfg.core.axes import Release
+from prc3cfg.core.apply_states import Event
+from prc3cfg.core.axes import to_travel
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
@@ -173,7 +174,8 @@ class Writing:
         known = self._before_writing(runs, images)
         if self.keeping.trouble is not None:
             for run in runs:
-                run.interrupted, run.failure = True, "nothing was sent to it"
+                run.process(Event.CANCELLED)
+                run.failure = "nothing was sent to it"
             started()
             return
         consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
@@ -247,7 +249,7 @@ class Writing:
                 released_axes=run.released.value, written=[s.message.hex() for s in run.written],
                 interrupted=run.interrupted,
             )  # fmt: skip
-        if released := [r for r in runs if r.released is not Release.NO]:
+        if released := to_travel(runs):
             keeping.note("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in released])
         interrupted = keeping.trouble is None and self.options.cancel is not None and self.options.cancel.requested
         if interrupted:

@@ -119,7 +119,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
             if bus.name in names:
                 stack.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", port=bus.port, timeout=options.lock_timeout,
                                               purpose=purpose, waiting=options.waiting))  # fmt: skip
-        if sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
+        if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
             raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
                             "read or written: run it again, with the file as it is now")  # fmt: skip
         for record in releases.pending(owner):
@@ -188,7 +188,7 @@ def _trace(options: LineOptions) -> Trace | None:
     return Trace(options.trace) if options.trace is not None else None
 
 
-def sha256_of(path: Path) -> str | None:
+def _sha256_of(path: Path) -> str | None:
     try:
         return hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError:
