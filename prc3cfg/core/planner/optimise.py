@@ -661,7 +661,7 @@ class PartsDP:
 
     def solve(self) -> tuple[list[dict[int, Back]], int]:
         """The back pointers of every program and the cheapest state after the last."""
-        managed, masks, need = self.phase.managed, self.phase.masks, self.need
+        managed, need = self.phase.managed, self.need
         best: dict[int, float] = {0: 0.0}
         back: list[dict[int, Back]] = []
         for j in range(PROGRAM_COUNT):
@@ -671,12 +671,9 @@ class PartsDP:
             if (out or alone < 0) and self.windows:  # a 21h that changes nothing only costs
                 self.carry(j, out, alone)
             new, step = self.moves(j, best, out, alone)
-            needs, m = need >> j & 1, masks[j]
-            if needs and self.runs_allowed:
+            if need >> j & 1 and self.runs_allowed:
                 self.ends(j, new, step)
             if len(new) > 1:
-                if needs and m & PV_BITS:  # where the items left fall: room beyond them is no room
-                    new, step = _capped(new, step, self.more_p[j + 1], self.more_v[j + 1])
                 new = self.states.undominated(new)
             best = new
             back.append(step)
@@ -744,16 +741,18 @@ class PartsDP:
                 after = state & rooms | min(room_p, left_p) | min(room_v, left_v) << STATE_BITS
                 if c < new.get(after, INF):
                     new[after], step[after] = c, (state, items, j, 0)
+            # the other moves leave the state as it was, but for room no item left could use
+            kept = state & rooms | min(state & FIELD, left_p) | min(state >> STATE_BITS & FIELD, left_v) << STATE_BITS
             if runs:
-                if state not in windows:
-                    windows[state] = Window()
-                windows[state].push(b - per * j, j, state, 0)
-                if b + single < new.get(state, INF):
-                    new[state], step[state] = b + single, (state, run, j, 0)
-            elif not needs and b < new.get(state, INF):
-                new[state], step[state] = b, (state, nothing, j, 0)
+                if kept not in windows:
+                    windows[kept] = Window()
+                windows[kept].push(b - per * j, j, state, 0)
+                if b + single < new.get(kept, INF):
+                    new[kept], step[kept] = b + single, (state, run, j, 0)
+            elif not needs and b < new.get(kept, INF):
+                new[kept], step[kept] = b, (state, nothing, j, 0)
             if alone < INF:
-                after = self._after(state, out) if out else state
+                after = self._after(kept, out) if out else kept
                 if b + alone < new.get(after, INF):
                     new[after], step[after] = b + alone, (state, whole, j, 0)
         return new, step
@@ -881,19 +880,6 @@ class States:
         return dict(kept)
 
 
-def _capped(states: dict[int, float], steps: dict[int, Back], left_p: int, left_v: int) -> tuple[dict[int, float], dict[int, Back]]:
-    """`states` (and their back pointers) with no more room in 40h and 41h than `left_p` and
-    `left_v` items could use: states that differ only beyond that are one, the cheapest."""
-    rooms = ~(FIELD | FIELD << STATE_BITS)
-    merged: dict[int, float] = {}
-    kept: dict[int, Back] = {}
-    for state, c in states.items():
-        capped = state & rooms | min(state & FIELD, left_p) | min(state >> STATE_BITS & FIELD, left_v) << STATE_BITS
-        if c < merged.get(capped, INF):
-            merged[capped], kept[capped] = c, steps[state]
-    return merged, kept
-
-
 def _suffix_counts(mask: int) -> list[int]:
     """For each index 0..64, how many of the programs from it on are in `mask`."""
     counts = [0] * (PROGRAM_COUNT + 1)
@@ -929,20 +915,34 @@ def floor_of(prices: Prices, target_a: list[int], changed: dict[int, int]) -> Re
 
 
 def inits_floor(problem: PlanningProblem) -> float:
-    """No plan with an init costs less: an init message, each program's differences at their
-    cheapest under any init kind (`floor_of`, every field's items counted over every kind), and
-    what an init costs one program more than that at least."""
-    changed = {bit: sum(1 << i for i in range(PROGRAM_COUNT) if any(problem.masks[k][i] & bit for k in problem.kinds))
-               for bit in FIELD_BIT.values()}  # fmt: skip
+    """No plan with an init costs less: its init messages and each program's differences at their
+    cheapest under its init kind (`floor_of`, every field's items counted over every kind), for
+    the init choice with at least one init where that is least (`choose_inits`' DP, with whether
+    an init has been sent yet in the state)."""
+    union = [0] * PROGRAM_COUNT
+    for masks in problem.masks.values():
+        union = [u | m for u, m in zip(union, masks)]
+    changed = {bit: sum(1 << i for i, u in enumerate(union) if u & bit) for bit in FIELD_BIT.values()}
     target_a = [0 if p is None else p.A for p in problem.desired.programs]
     at_least = floor_of(problem.prices, target_a, changed)
-    cheapest, initialised = [], INF  # and what initialising one program adds to that at least
+    prices, inits = problem.prices, problem.kinds[1:]
+    refund, init_range = prices.init_range - prices.init, prices.init_range
+    # states once an init has been sent: 0 kept; 2n - 1 after the first program of a run of the
+    # n-th init kind, 2n further on; `before`: no init sent yet (every program so far kept)
+    size = 1 + 2 * len(inits)
+    before, cost = 0.0, [INF] * size
     for i in range(PROGRAM_COUNT):
-        each = [at_least(i, problem.masks[k][i]) for k in problem.kinds]
-        cheapest.append(min(each))
+        floors = {kind: at_least(i, problem.masks[kind][i]) for kind in problem.kinds}
+        new = [min(c - refund if state % 2 else c for state, c in enumerate(cost)) + floors[KEEP], *[INF] * (size - 1)]
         if problem.managed[i]:
-            initialised = min(initialised, min(each[1:]) - cheapest[-1])
-    return problem.system_cost + problem.prices.init + fsum(cheapest) + initialised
+            for n, kind in enumerate(inits, start=1):
+                first, further = 2 * n - 1, 2 * n
+                closed = [c - refund if state % 2 else c for state, c in enumerate(cost) if state not in (first, further)]
+                new[first] = min(before, *closed) + init_range + floors[kind]
+                new[further] = min(cost[first], cost[further]) + floors[kind]
+        before += floors[KEEP]
+        cost = new
+    return problem.system_cost + min(c - (refund if state else 0.0) for state, c in enumerate(cost))
 
 
 def _all_runs(runs: tuple[Run, ...]) -> int:
