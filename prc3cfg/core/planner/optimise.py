@@ -22,9 +22,10 @@ to send. The search is built around that:
 2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
    step) is a second DP over program numbers (`choose_inits`): runs of initialised programs
    cost one message each and never cover an unmanaged program; each program is charged what
-   its remaining differences would cost. That charge is estimated four ways — what they add
+   its remaining differences would cost. That charge is estimated five ways — what they add
    to the best plan without inits (headers included), item by item with every channel open,
-   the same with a share of a header per item, and as 21h — and again from each better plan
+   the same with a share of a header per item, as 21h, and at the least they could cost
+   (`floor_of`) — and again from each better plan
    found (and with each of its init runs moved across the system step); each init choice
    gets its own write phase. When that finds nothing better, two more sources:
    - neighbours of the best plan (`_neighbours`): each of its init runs left out; the
@@ -914,17 +915,21 @@ def floor_of(prices: Prices, target_a: list[int], changed: dict[int, int]) -> Re
     return cost
 
 
+def _over_every_kind(problem: PlanningProblem) -> dict[int, int]:
+    """Per FIELD_BIT, the programs that differ in it under some init kind."""
+    union = [0] * PROGRAM_COUNT
+    for masks in problem.masks.values():
+        union = [u | m for u, m in zip(union, masks)]
+    return {bit: sum(1 << i for i, u in enumerate(union) if u & bit) for bit in FIELD_BIT.values()}
+
+
 def inits_floor(problem: PlanningProblem) -> float:
     """No plan with an init costs less: its init messages and each program's differences at their
     cheapest under its init kind (`floor_of`, every field's items counted over every kind), for
     the init choice with at least one init where that is least (`choose_inits`' DP, with whether
     an init has been sent yet in the state)."""
-    union = [0] * PROGRAM_COUNT
-    for masks in problem.masks.values():
-        union = [u | m for u, m in zip(union, masks)]
-    changed = {bit: sum(1 << i for i, u in enumerate(union) if u & bit) for bit in FIELD_BIT.values()}
     target_a = [0 if p is None else p.A for p in problem.desired.programs]
-    at_least = floor_of(problem.prices, target_a, changed)
+    at_least = floor_of(problem.prices, target_a, _over_every_kind(problem))
     prices, inits = problem.prices, problem.kinds[1:]
     refund, init_range = prices.init_range - prices.init, prices.init_range
     # states once an init has been sent: 0 kept; 2n - 1 after the first program of a run of the
@@ -1101,7 +1106,7 @@ class InitSearch:
         return phase
 
     def _first(self, writes: Writes) -> list[Kinds]:
-        """The init DP with a program's charge estimated four ways (module docstring, 2.)."""
+        """The init DP with a program's charge estimated five ways (module docstring, 2.)."""
         phase, problem = self.phase, self.problem
         everything = Channels.everything(True)
         residuals = [
@@ -1109,6 +1114,7 @@ class InitSearch:
             (phase.linear(everything), phase.alike),
             (phase.linear(everything, problem.prices.field_header / INIT_SHARE), phase.alike),
             (phase.linear(Channels.everything(False)), phase.alike),
+            (floor_of(problem.prices, phase.target_a, _over_every_kind(problem)), None),
         ]
         return [choose_inits(problem, _table(problem, residual, alike)) for residual, alike in residuals]
 
