@@ -58,8 +58,10 @@ Prices are added with `math.fsum` wherever they are compared (Python 3.12's `sum
 rounds otherwise than 3.11's: a near-tie must be decided alike on every version, or a plan made
 on one is refused as edited on the other).
 
-One module, though long: the write phase's DPs, the init search that drives them and their
-bounds share their state types and prices; split up, each part would import the others'.
+Long because it is one search: the write phase's DP (`WritePhase`, `PartsDP`), the init DP and
+the init search that feeds it (`InitSearch`: neighbours, header targets) and the bounds that prune
+both share the priced masks of `problem`, the state types and each other's candidates; split, each
+part would need the others' reasons.
 Prices come from `prc3cfg.core.planner.pricing`, bases and masks from `prc3cfg.core.planner.problem`.
 Owns the search. Does not own building messages (`layout`) or checking the result (the
 caller runs it on `prc3cfg.core.device`).
@@ -716,8 +718,9 @@ class PartsDP:
 
     def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float], dict[int, Back]]:
         """The states after program j by its own moves (items, a 32h, a 21h, nothing), and the
-        runs that may start at it. (One loop over the states with every move in it: this is the
-        DP's inner loop, run for each state of each program — split, it would cost a call each.)"""
+        runs that may start at it. Complex because it is the DP's inner loop, one pass over the
+        states with every move in it, run for each state of each program: split, each move would
+        cost a call per state."""
         phase, windows = self.phase, self.windows
         prices, m, needs = phase.prices, phase.masks[j], self.need >> j & 1
         header, item, capacity = prices.field_header, prices.field_item, codec.MAX_FIELD_ITEMS
