@@ -327,6 +327,29 @@ def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> N
 
 
 @pytest.mark.parametrize("framing", FRAMINGS)
+def test_a_chain_inside_an_unlinked_stretch_is_a_link_range_inside_an_unlink_range(framing: str) -> None:
+    """Programs 1..40 all jump to 60; the plant file unlinks them but for a chain 17..24: an
+    unlink range over 1..40 and a link range over 17..24 sent after it, two messages — side by
+    side the ranges take three, 46h items two messages and 40 items."""
+    held = with_programs(PLANT, {n: replace(recipe(n), A=60) for n in range(1, 41)})
+    wanted = {n: replace(recipe(n), A=n + 1 if 17 <= n < 24 else 0) for n in range(1, 41)}
+    plan = planned(held, with_programs(PLANT, wanted), framing)
+    assert [step.message for step in plan.steps] == [codec.UnlinkPrograms(1, 40), codec.LinkPrograms(17, 24)]
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_break_in_a_chain_is_an_unlink_range_inside_a_link_range(framing: str) -> None:
+    """Programs 1..20 all jump to 60; the plant file chains them, but for 10..12, which end
+    (program 9 still jumps to 10): a link range over 1..20 and an unlink range over 10..12
+    sent after it — a link range ending at 9 would leave 9 unlinked. (On open-driver, where an
+    exchange costs most, one 46h of 20 items is cheaper.)"""
+    held = with_programs(PLANT, {n: replace(recipe(n), A=60) for n in range(1, 21)})
+    wanted = {n: replace(recipe(n), A=0 if n in (10, 11, 12, 20) else n + 1) for n in range(1, 21)}
+    plan = planned(held, with_programs(PLANT, wanted), framing)
+    assert [step.message for step in plan.steps] == [codec.LinkPrograms(1, 20), codec.UnlinkPrograms(10, 12)]
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
 def test_an_init_takes_out_the_overflow_of_items_where_runs_alike_tie(framing: str) -> None:
     """48 programs (every fourth unmanaged) are the defaults but for P: 48 P items need four
     40h, sixteen 14h cost more; one 14h takes out the three that overflow three full 40h."""

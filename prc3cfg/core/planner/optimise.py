@@ -186,7 +186,10 @@ class RangeMove(Enum):
     """What the jump-address DP (`WritePhase._solve_addresses`) does at a program: its backtracking's actions.
 
     A link range gives a program the address of the next (i+2 by number), an unlink range 0;
-    the last program of a link range is unlinked by it (0).
+    the last program of a link range is unlinked by it (0). A range may hold one of the other
+    kind inside it, sent after it: an unlink range with a link range inside (two messages where
+    side by side they take three), a link range with an unlink range inside (the program before
+    the unlink range still jumps to its first, which no link range ending there can give).
     """
 
     NONE = "no way to get here"
@@ -196,6 +199,22 @@ class RangeMove(Enum):
     END = "a link range ends"
     UNLINK = "an unlink range starts"
     UNLINK_ON = "an unlink range goes on"
+    INNER_LINK = "a link range starts inside an unlink range"
+    INNER_LINK_ON = "a link range inside an unlink range goes on"
+    INNER_END = "a link range inside an unlink range ends (the unlink range may go on)"
+    INNER_UNLINK = "an unlink range starts inside a link range (which goes on)"
+    INNER_UNLINK_ON = "an unlink range inside a link range goes on"
+    INNER_UNLINK_END = "an unlink range inside a link range ends (the link range goes on)"
+    INNER_UNLINK_ONE = "an unlink range of one program inside a link range (which goes on)"
+
+
+#: The moves of `RangeMove` that give a program the address of the next.
+NEXT_MOVES = frozenset((RangeMove.LINK, RangeMove.LINK_ON, RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON))
+#: The moves that start a range inside another, and those that start an outer one.
+INNER_STARTS = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_UNLINK, RangeMove.INNER_UNLINK_ONE))
+OUTER_STARTS = frozenset((RangeMove.LINK, RangeMove.UNLINK))
+#: The moves where an inner range goes on past the program.
+INNER_GOING = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON, RangeMove.INNER_UNLINK, RangeMove.INNER_UNLINK_ON))
 
 
 class Addresses(NamedTuple):
@@ -452,6 +471,12 @@ class WritePhase:
         return cached
 
     def _solve_addresses(self, whole: int, open46: bool, share: float) -> Addresses:
+        """The DP over program numbers behind `addresses`. States after program i: 0 no range
+        open; 1 a link range goes on to i+1; 2 an unlink range covers i (and may go on); 3 a link
+        range inside an unlink range goes on to i+1; 4 an unlink range inside a link range covers
+        i and goes on, the link range too. Complex because each of the five states has its own
+        ways in, and each way gives program i its address (kept, 0 or i+2) — a table of moves
+        would hide which address each gives."""
         if not self.changed[A_BIT] & ~whole:
             return Addresses((), 0, 0)
         managed, target, base = self.managed, self.target_a, self.base_a
@@ -459,15 +484,14 @@ class WritePhase:
         link = self.prices.link
         none, keep, end = RangeMove.NONE, RangeMove.KEEP, RangeMove.END  # locals: fast
         link_, link_on, unlink, unlink_on = RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK, RangeMove.UNLINK_ON
-        # States after program i: 0 no range open, 1 a link range goes on to i+1, 2 an unlink range
-        # may go on. Moves give program i its A: kept, 0 (unlink, end of a link) or i+2 (link goes on).
-        cost = [0.0, INF, INF]
+        cost = [0.0, INF, INF, INF, INF]
         back: list[tuple[tuple[int, RangeMove], ...]] = []
+        nowhere = (0, none)
         for i in range(PROGRAM_COUNT):
-            c0, c1, c2 = cost
+            c0, c1, c2, c3, c4 = cost
             if not managed[i]:
-                back.append(((0, keep) if c0 <= c2 else (2, keep), (0, none), (0, none)))
-                cost = [min(c0, c2), INF, INF]
+                back.append(((0, keep) if c0 <= c2 else (2, keep), nowhere, nowhere, nowhere, nowhere))
+                cost = [min(c0, c2), INF, INF, INF, INF]
                 continue
             free = whole >> i & 1
             t = target[i]
@@ -479,16 +503,26 @@ class WritePhase:
             n0, b0 = open_cost + m_keep, (open_prev, keep)
             if c1 + m_zero < n0:
                 n0, b0 = c1 + m_zero, (1, end)
-            n1, b1 = INF, (0, none)
+            n1 = n3 = n4 = INF
+            b1 = b3 = b4 = nowhere
             if goes_on:
                 n1, b1 = open_cost + link + m_next, (open_prev, link_)
-                if c1 + m_next < n1:
-                    n1, b1 = c1 + m_next, (1, link_on)
+                for c, how in ((c1 + m_next, (1, link_on)), (c1 + link + m_zero, (1, RangeMove.INNER_UNLINK_ONE)),
+                               (c4 + m_zero, (4, RangeMove.INNER_UNLINK_END))):  # fmt: skip
+                    if c < n1:
+                        n1, b1 = c, how
+                n3, b3 = c2 + link + m_next, (2, RangeMove.INNER_LINK)
+                if c3 + m_next < n3:
+                    n3, b3 = c3 + m_next, (3, RangeMove.INNER_LINK_ON)
+                n4, b4 = c1 + link + m_zero, (1, RangeMove.INNER_UNLINK)
+                if c4 + m_zero < n4:
+                    n4, b4 = c4 + m_zero, (4, RangeMove.INNER_UNLINK_ON)
             n2, b2 = c0 + link + m_zero, (0, unlink)
-            if c2 + m_zero < n2:
-                n2, b2 = c2 + m_zero, (2, unlink_on)
-            cost = [n0, n1, n2]
-            back.append((b0, b1, b2))
+            for c, how in ((c2 + m_zero, (2, unlink_on)), (c3 + m_zero, (3, RangeMove.INNER_END))):
+                if c < n2:
+                    n2, b2 = c, how
+            cost = [n0, n1, n2, n3, n4]
+            back.append((b0, b1, b2, b3, b4))
         state = 0 if cost[0] <= cost[2] else 2
         moves = [none] * PROGRAM_COUNT
         for i in range(PROGRAM_COUNT - 1, -1, -1):
@@ -496,25 +530,30 @@ class WritePhase:
         return self._ranges_and_misses(whole, open46, moves)
 
     def _ranges_and_misses(self, whole: int, open46: bool, moves: list[RangeMove]) -> Addresses:
-        """The ranges the DP's moves draw, and the programs whose address they leave wrong."""
-        ranges: list[Range] = []
+        """The ranges the DP's moves draw — the outer ones, then those inside them, sent after
+        them — and the programs whose address they leave wrong."""
+        outer: list[Range] = []
+        inner: list[Range] = []
         items = extra = 0
-        keep, link_, link_on, unlink = RangeMove.KEEP, RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK  # locals: fast
+        keep = RangeMove.KEEP  # locals: fast
         for i, move in enumerate(moves):
             if not self.managed[i]:
                 continue
-            if move is link_ or move is unlink:
-                ranges.append((move is link_, i, i))
-            elif move is not keep:  # a range goes on or ends here
-                link, first, _ = ranges[-1]
-                ranges[-1] = (link, first, i)
-            value = self.base_a[i] if move is keep else i + 2 if move is link_ or move is link_on else 0
+            if move in OUTER_STARTS:
+                outer.append((move is RangeMove.LINK, i, i))
+            elif move is not keep:  # the outer range goes on or ends here
+                outer[-1] = (*outer[-1][:2], i)
+                if move in INNER_STARTS:
+                    inner.append((move is RangeMove.INNER_LINK, i, i))
+                elif move in INNER_GOING or move in (RangeMove.INNER_END, RangeMove.INNER_UNLINK_END):
+                    inner[-1] = (*inner[-1][:2], i)
+            value = self.base_a[i] if move is keep else i + 2 if move in NEXT_MOVES else 0
             if not whole >> i & 1 and value != self.target_a[i]:
                 if open46:
                     items |= 1 << i
                 else:
                     extra |= 1 << i
-        return Addresses(tuple(ranges), items, extra)
+        return Addresses((*outer, *inner), items, extra)
 
     # -- what a program's differences cost, for the init DP ------------------------------------
 
