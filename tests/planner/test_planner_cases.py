@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import operator
 import random
 from dataclasses import replace
 
@@ -12,7 +14,8 @@ from prc3cfg.core import codec
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
 from prc3cfg.core.planner.module_plan import program_list, summarise
-from prc3cfg.core.planner.problem import FIELD_BIT, diff_mask
+from prc3cfg.core.planner.optimise import WritePhase
+from prc3cfg.core.planner.problem import FIELD_BIT, KEEP, PlanningProblem, diff_mask
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
 
@@ -70,6 +73,44 @@ def test_commissioning_from_factory_defaults_batches(framing: str) -> None:
     assert ids(plan)[0] == 0x20
     assert 0x33 in ids(plan), "P and V of consecutive programs go in 33h"
     assert plan.bus_time < 0.8 * plan.naive_bus_time
+
+
+def every_field(number: int) -> Program:
+    """A program with every field set (and chained in fours): a commissioning writes all of them."""
+    return Program(P=300 + 31 * number, V=40 + 7 * number, Vr=1 + number % 40, T=1 + number % 49, F1=1 + 29 * number,
+                   F2=1 + 23 * number, A=number + 1 if number % 4 and number < PROGRAM_COUNT else 0)  # fmt: skip
+
+
+#: The exact optimum of commissioning all 64 programs of `every_field` (bench/exact_reference.py,
+#: an integer programme whose plan replays to the desired image), by framing: 27 messages.
+OPTIMUM = {"crc16": 2.2064583333333334, "open-driver": 3.038958333333333, "stx": 2.1445833333333333}
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_commissioning_every_field_is_at_the_optimum(framing: str) -> None:
+    """Issue 29: a 20h and a 30h, then four programs written whole, placed so that the other 60
+    fit exactly four 33h runs of 15 and four messages of each of 42h..45h, not five: one 21h costs
+    less than the messages it saves, but only the fourth saves any (one 21h at a time, the
+    planner wrote 28 messages, 2,269 ms on crc16). The 46h is what the 30h leaves."""
+    desired = ModuleImage(3, SYSTEM, tuple(every_field(n) for n in range(1, PROGRAM_COUNT + 1)))
+    plan = planned(ModuleImage.factory(3), desired, framing)
+    assert ids(plan) == [0x20, 0x30, *[0x21] * 4, *[0x33] * 4, *[0x42] * 4, *[0x43] * 4, *[0x44] * 4, *[0x45] * 4, 0x46]
+    assert plan.bus_time == pytest.approx(OPTIMUM[framing], abs=1e-9)
+
+
+def test_a_tie_between_write_phases_is_a_tie_on_every_python() -> None:
+    """Two write phases with the same messages in other fields cost exactly the same; their
+    estimates are summed with math.fsum, so they tie — a sum from left to right (Python 3.11's
+    sum() of floats; 3.12's compensates) makes one of them an ulp dearer, and which one the
+    search then takes would differ between Python versions (a plan made on one refused as
+    edited on the other)."""
+    problem = PlanningProblem.build(PLANT, PLANT, line())
+    phase = WritePhase(problem, (KEEP,) * PROGRAM_COUNT)
+    first, second = ((0, 0, 0, 6, 6, 12), (0, 0, 12, 6, 6, 0))
+    one, other = (phase._priced(0, (), 0.0, tuple((1 << n) - 1 for n in counts), (), 0) for counts in (first, second))
+    assert one.estimate == other.estimate
+    prices = problem.prices
+    assert functools.reduce(operator.add, map(prices.fields, first)) != functools.reduce(operator.add, map(prices.fields, second))
 
 
 def test_lowering_s1_lets_the_module_clamp_the_positions() -> None:
@@ -263,11 +304,14 @@ def test_a_program_written_whole_is_initialised_when_its_items_join_open_message
 
 def test_init_runs_are_left_out_when_items_and_a_21h_do_better() -> None:
     """Initialising programs 2..5 and 23..24 costs two 14h and a 46h for the chains they break;
-    a 12h of program 24 and a 21h of program 13 leave the rest to the messages that go anyway."""
+    a 12h of program 24 and a 21h of program 13 leave the rest to the messages that go anyway —
+    or of program 9, which costs the same (either splits P and V of 1..24 into two 33h runs)."""
     actual, desired = rewritten_recipe(25, 24)
     plan = planned(actual, desired)
-    assert [step.message for step in plan.steps[:2]] == [codec.InitProgram(24), codec.WriteProgram(13, desired.programs[12])]
+    assert plan.steps[0].message == codec.InitProgram(24)
+    assert plan.steps[1].message in [codec.WriteProgram(n, desired.programs[n - 1]) for n in (9, 13)]
     assert ids(plan) == [0x12, 0x21, 0x33, 0x33, 0x43, 0x44, 0x45]
+    assert plan.bus_time == pytest.approx(0.49166667, abs=1e-8)  # 491.7 ms, as with program 13
 
 
 def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> None:
@@ -280,6 +324,29 @@ def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> N
     assert plan.steps[0].message == codec.LinkPrograms(41, 49)
     assert ids(plan) == [0x30, 0x46]
     assert set(plan.steps[1].message.touched_programs()) == set(range(1, 25)) | {44}
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+def test_a_chain_inside_an_unlinked_stretch_is_a_link_range_inside_an_unlink_range(framing: str) -> None:
+    """Programs 1..40 all jump to 60; the plant file unlinks them but for a chain 17..24: an
+    unlink range over 1..40 and a link range over 17..24 sent after it, two messages — side by
+    side the ranges take three, 46h items two messages and 40 items."""
+    held = with_programs(PLANT, {n: replace(recipe(n), A=60) for n in range(1, 41)})
+    wanted = {n: replace(recipe(n), A=n + 1 if 17 <= n < 24 else 0) for n in range(1, 41)}
+    plan = planned(held, with_programs(PLANT, wanted), framing)
+    assert [step.message for step in plan.steps] == [codec.UnlinkPrograms(1, 40), codec.LinkPrograms(17, 24)]
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_break_in_a_chain_is_an_unlink_range_inside_a_link_range(framing: str) -> None:
+    """Programs 1..20 all jump to 60; the plant file chains them, but for 10..12, which end
+    (program 9 still jumps to 10): a link range over 1..20 and an unlink range over 10..12
+    sent after it — a link range ending at 9 would leave 9 unlinked. (On open-driver, where an
+    exchange costs most, one 46h of 20 items is cheaper.)"""
+    held = with_programs(PLANT, {n: replace(recipe(n), A=60) for n in range(1, 21)})
+    wanted = {n: replace(recipe(n), A=0 if n in (10, 11, 12, 20) else n + 1) for n in range(1, 21)}
+    plan = planned(held, with_programs(PLANT, wanted), framing)
+    assert [step.message for step in plan.steps] == [codec.LinkPrograms(1, 20), codec.UnlinkPrograms(10, 12)]
 
 
 @pytest.mark.parametrize("framing", FRAMINGS)

@@ -4,32 +4,30 @@ Bus time is dominated by the fixed cost of an exchange (turnaround, frame overhe
 reply, open-driver gaps), so the question is which *messages* to open, not which bytes
 to send. The search is built around that:
 
-1. **Channels** (`WritePhase`). A candidate opens a subset of the per-field messages:
-   40h..45h per field, 33h/32h (P and V of consecutive programs) and 46h. A program that
-   still differs in a field none of its open messages can write takes a 21h. For a fixed
-   subset the rest is dynamic programming over program numbers 1..64:
-   - P and V: 33h runs (at most 15 consecutive managed programs, which may include
-     programs that need no change: their desired P, V are rewritten; a run of one is a
-     32h) against 40h/41h items, or a 21h where that is cheaper;
-   - A: link (30h) and unlink (31h) ranges against 46h items (or a 21h when 46h is shut);
-   - Vr, T, F1, F2: their items, counted.
-   The DPs price an item on its own; the result is priced by its exact message count
-   (ceil(n/15), ceil(n/31)). When items overflow a message, the DP runs again with a share
-   of a header on each item (for 46h, 40h and 41h the least share that saves the message,
-   found by bisection: a Lagrangian relaxation of the ceiling). Every subset of the
-   channels that matter is tried, most open first; subsets that force the same 21h are
-   tried once, and a subset whose lower bound (its forced 21h and items) cannot beat the
-   best so far is skipped.
-   The best few are then refined: programs take a 21h while that saves messages (an
-   overflowing 40h..46h, a 33h run that regroups).
+1. **The write phase** (`WritePhase`), for one choice of init kinds, is dynamic programming
+   over program numbers 1..64 (`PartsDP`) that decides, per program, a 21h,
+   or its P and V in a 33h run (at most 15 consecutive managed programs, which may include
+   programs that need no change: their desired P, V are rewritten; a run of one is a 32h) or
+   as 40h/41h items — with the headers in the state, not priced item by item: the room left
+   in the last 40h and 41h (the item that opens one pays its header, so a 40h is opened, or
+   not, where that pays), and, per 42h..46h field where more 21h could save a message
+   (`_live`), the programs a 21h took out of it, up to those that save it one. So 21h that
+   save messages only together are found: four programs written whole so that the other 60
+   fit four messages of each field, not five, and four 33h runs of 15 — and a 42h..45h with
+   a few items is shut where 21h cost less than its header. States that cannot win whatever
+   follows are dropped (`States`), a few at most go on. Jump addresses come first, from a
+   DP of their own: link (30h) and unlink (31h) ranges against 46h items, with the 46h open
+   and shut (its misses a 21h); where 46h items overflow a message, that DP runs again with
+   a share of a header on each item, bisected (a Lagrangian relaxation of ceil(n/31)).
 2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
-   step) is a second DP over program numbers: runs of initialised programs cost one
-   message each and never cover an unmanaged program; each program is charged what its
-   remaining differences would cost. That charge is estimated four ways — what they add to
-   the best plan without inits (headers included), item by item with every channel open,
-   the same with a share of a header per item, and as 21h — and again from each better
-   plan found (and with each of its init runs moved across the system step); each init
-   choice gets its own channel search. When that finds nothing better, two more sources:
+   step) is a second DP over program numbers (`choose_inits`): runs of initialised programs
+   cost one message each and never cover an unmanaged program; each program is charged what
+   its remaining differences would cost. That charge is estimated five ways — what they add
+   to the best plan without inits (headers included), item by item with every channel open,
+   the same with a share of a header per item, as 21h, and at the least they could cost
+   (`floor_of`) — and again from each better plan
+   found (and with each of its init runs moved across the system step); each init choice
+   gets its own write phase. When that finds nothing better, two more sources:
    - neighbours of the best plan (`_neighbours`): each of its init runs left out; the
      shortest runs left out whose programs then differ in one set of fields only (as many
      as one message of items takes); each program it writes whole (21h) initialised; the
@@ -39,40 +37,53 @@ to send. The search is built around that:
    - inits that pay only by saving whole messages (`_header_targets`): the charges price
      items one by one, so when a field's items overflow into one more 40h..46h message and
      inits could take the overflow out, header shares per field are bisected until the init
-     DP just takes it out (for every set of such fields); each init choice met on the way
-     that leaves at most an item or two (a 21h may take those) is searched, and so are, per
-     field, init runs that take its items out and add no difference, most items first,
-     until the overflow is out (`_harmless_inits`: where runs alike tie, the DP takes all
-     or none). This starts from the two plans closest to the best within an exchange (one
-     that overflows may be one init away from the best); 40h and 41h count the programs
+     DP just takes it out (all such fields together, and each alone); each init choice met
+     on the way that leaves at most an item or two (a 21h may take those) is searched, and
+     so are, per field, init runs that take its items out and add no difference, most items
+     first, until the overflow is out (`_harmless_inits`: where runs alike tie, the DP takes
+     all or none). This starts from the two plans closest to the best within an exchange
+     (one that overflows may be one init away from the best); 40h and 41h count the programs
      outside 33h runs.
-   Both start again from each better plan, until none improves.
+   The init choices waiting are searched cheapest lower bound first (`floor_of`: each
+   program's differences at their cheapest, every item with its share of a header), those
+   whose bound cannot beat the best plan not at all, and only so many (SEARCHED, more after
+   each better plan), so that planning costs about the same for every kind of change; no
+   init choice is searched where no plan with an init could beat the best without
+   (`inits_floor`).
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
    never dearer than the naive download.
 
+Prices are added with `math.fsum` wherever they are compared (Python 3.12's `sum()` of floats
+rounds otherwise than 3.11's: a near-tie must be decided alike on every version, or a plan made
+on one is refused as edited on the other).
+
+Long because it is one search: the write phase's DP (`WritePhase`, `PartsDP`), the init DP and
+the init search that feeds it (`InitSearch`: neighbours, header targets) and the bounds that prune
+both share the priced masks of `problem`, the state types and each other's candidates; split, each
+part would need the others' reasons.
 Prices come from `prc3cfg.core.planner.pricing`, bases and masks from `prc3cfg.core.planner.problem`.
 Owns the search. Does not own building messages (`layout`) or checking the result (the
 caller runs it on `prc3cfg.core.device`).
-
-Long because it is one search: the channel DP (`WritePhase`), the init DP (`InitSearch`) and the
-neighbours and header targets that feed it share the priced masks of `problem` and each other's
-candidates; split, each part would need the others' reasons. Issue 29's exact search reshapes it.
 """
 
 from __future__ import annotations
 
+import functools
+import heapq
 import itertools
 import operator
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from enum import Enum
+from math import fsum
 from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
 from prc3cfg.core.planner.layout import Layout, Writes, members, runs_of
+from prc3cfg.core.planner.pricing import Prices
 from prc3cfg.core.planner.problem import (
     A_BIT,
     FIELD_BIT,
@@ -99,18 +110,26 @@ PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
 #: The fields of 40h..45h, in `Writes.items` order.
 ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)
 ESTIMATE = operator.attrgetter("estimate")
-#: How many of the best write phases of each init choice are refined and kept as candidates.
-KEPT = 3
+_second = operator.itemgetter(1)
+_rho = operator.attrgetter("rho")
 #: A bias far below any price (seconds): ties between keeping and initialising go to initialising.
 TIE = 1e-9
 #: Items per message assumed by one of the init choices (few items: headers matter).
 INIT_SHARE = 4
-#: Probes of the header share that makes overflowing 40h/41h items fit one message less.
-BISECTIONS = 6
-#: How many promising 21h moves `WritePhase.refine` re-plans with the DPs in each round.
-REGROUPED = 4
+#: Probes of the header share that makes overflowing 46h items fit one message less.
+BISECTIONS = 3
+#: How many init choices' write phases one module's `InitSearch` searches, and half as many more
+#: after each better plan, up to three times as many (the CPU of a plan must not depend on the kind of
+#: change; improvements come from the first few and from near the better plans).
+SEARCHED = 8
+#: The most 42h..46h fields (alike ones as one) `PartsDP` counts removals of:
+#: those that need fewest.
+LIVE = 4
+#: The most states `PartsDP` keeps after each program (`States`), and twice as many
+#: runs going on.
+BEAM = 24
 #: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
-TARGET_PROBES = 6
+TARGET_PROBES = 4
 #: Items of the overflow an init choice of `_header_targets` may leave for a 21h to take out.
 SLACK_ITEMS = 2
 #: How many init choices closest to the best (within an exchange) `_header_targets` starts from in each round.
@@ -132,19 +151,16 @@ class Channels:
         return cls(sum(PLAIN_BITS) if open_ else 0, open_, open_, open_, open_)
 
 
-class Candidate(NamedTuple):
-    """A write phase the channel search found, and the channels it was found with."""
-
-    writes: Writes
-    channels: Channels
-
-
-def _writes_estimate(candidate: Candidate) -> float:
-    return candidate.writes.estimate
+#: Bits of a field of a `States` state (values up to 31, and a guard bit) and the mask of one.
+STATE_BITS = 6
+FIELD = (1 << (STATE_BITS - 1)) - 1
+#: A back pointer of `PartsDP`: the state before, the move, the program it starts
+#: at, and the programs a run it ends passes over with a 21h.
+Back = tuple[int, "PartsMove", int, int]
 
 
 class PartsMove(Enum):
-    """How the P and V DP (`WritePhase._solve_parts`) covers a program: its backtracking's actions.
+    """How the P and V DP (`PartsDP`) covers a program: its backtracking's actions.
 
     The DPs bind the members they use to locals: looking a member up on its class costs more
     than the rest of a DP step (the class's metaclass has a `__getattr__`).
@@ -153,7 +169,7 @@ class PartsMove(Enum):
     NOTHING = "no P or V to write"
     ITEMS = "40h/41h items"
     WHOLE = "a 21h"
-    RUN = "the last program of a 33h run (a 32h alone)"
+    RUN = "a 33h run (a 32h alone) from the program in the back pointer to this one"
 
 
 class Parts(NamedTuple):
@@ -170,7 +186,10 @@ class RangeMove(Enum):
     """What the jump-address DP (`WritePhase._solve_addresses`) does at a program: its backtracking's actions.
 
     A link range gives a program the address of the next (i+2 by number), an unlink range 0;
-    the last program of a link range is unlinked by it (0).
+    the last program of a link range is unlinked by it (0). A range may hold one of the other
+    kind inside it, sent after it: an unlink range with a link range inside (two messages where
+    side by side they take three), a link range with an unlink range inside (the program before
+    the unlink range still jumps to its first, which no link range ending there can give).
     """
 
     NONE = "no way to get here"
@@ -180,6 +199,22 @@ class RangeMove(Enum):
     END = "a link range ends"
     UNLINK = "an unlink range starts"
     UNLINK_ON = "an unlink range goes on"
+    INNER_LINK = "a link range starts inside an unlink range"
+    INNER_LINK_ON = "a link range inside an unlink range goes on"
+    INNER_END = "a link range inside an unlink range ends (the unlink range may go on)"
+    INNER_UNLINK = "an unlink range starts inside a link range (which goes on)"
+    INNER_UNLINK_ON = "an unlink range inside a link range goes on"
+    INNER_UNLINK_END = "an unlink range inside a link range ends (the link range goes on)"
+    INNER_UNLINK_ONE = "an unlink range of one program inside a link range (which goes on)"
+
+
+#: The moves of `RangeMove` that give a program the address of the next.
+NEXT_MOVES = frozenset((RangeMove.LINK, RangeMove.LINK_ON, RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON))
+#: The moves that start a range inside another, and those that start an outer one.
+INNER_STARTS = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_UNLINK, RangeMove.INNER_UNLINK_ONE))
+OUTER_STARTS = frozenset((RangeMove.LINK, RangeMove.UNLINK))
+#: The moves where an inner range goes on past the program.
+INNER_GOING = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON, RangeMove.INNER_UNLINK, RangeMove.INNER_UNLINK_ON))
 
 
 class Addresses(NamedTuple):
@@ -196,6 +231,16 @@ class ItemChannel(NamedTuple):
     bit: int  # FIELD_BIT
     mask: int  # the programs with an item
     capacity: int  # items per message
+
+
+class LiveChannel(NamedTuple):
+    """42h..46h fields with the same items, whose removals by 21h `PartsDP` counts."""
+
+    mask: int  # the programs with an item
+    n: int  # how many
+    rho: int  # removals that save a message
+    capacity: int  # items per message
+    header: float  # the headers of those fields, together
 
 
 class Overflow(NamedTuple):
@@ -221,55 +266,31 @@ class WritePhase:
         for m in self.masks:
             self.relevant |= m
         self.pv_changed = self.changed[P_BIT] | self.changed[V_BIT]
+        self.relevant_programs = sum(1 << i for i, m in enumerate(self.masks) if m)
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
         # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
-        self._parts_cache: dict[tuple[int, int, bool, bool, bool, tuple[float, float]], Parts] = {}
+        self._parts_cache: dict[tuple[int, int, bool, bool, bool], Parts] = {}
         self._address_cache: dict[tuple[int, bool, float], Addresses] = {}
 
     # -- the channel subsets ---------------------------------------------------------------
 
     def subsets(self) -> list[Channels]:
-        """Every subset of the channels some program differs in, most open first."""
-        rel = self.relevant
-        plain = [bit for bit in PLAIN_BITS if rel & bit]
-        options = (True, False)
-        out: list[Channels] = []
-        for opened in itertools.product(options, repeat=len(plain)):
-            for positions, speeds, parts, addresses in itertools.product(
-                options if rel & P_BIT else (False,),
-                options if rel & V_BIT else (False,),
-                options if rel & PV_BITS else (False,),
-                options if rel & A_BIT else (False,),
-            ):
-                mask = sum(bit for bit, o in zip(plain, opened) if o)
-                out.append(Channels(mask, positions, speeds, parts, addresses))
-        return out
+        """46h open, then shut (where some program differs in A): every other choice of messages
+        is the DP's (`PartsDP`)."""
+        plain = sum(bit for bit in PLAIN_BITS if self.relevant & bit)
+        return [Channels(plain, True, True, True, addresses) for addresses in ((True, False) if self.relevant & A_BIT else (False,))]
 
-    def solve(self, bound: float = INF) -> list[Candidate]:
-        """The KEPT cheapest write phases found over every channel subset, cheapest first."""
-        found: list[Candidate] = []
-        seen: set[tuple[int, bool, bool, bool, bool]] = set()
+    def solve(self, bound: float = INF) -> list[Writes]:
+        """The cheapest write phases found, with the 46h open and shut, cheapest first; none that
+        cannot beat `bound`."""
+        found: list[Writes] = []
         for channels in self.subsets():
-            # A subset acts only through the 21h it forces and the messages left with work to do.
-            whole = self.forced(channels)
-            key = (
-                whole,
-                channels.positions and bool(self.changed[P_BIT] & ~whole),
-                channels.speeds and bool(self.changed[V_BIT] & ~whole),
-                channels.parts and bool(self.pv_changed & ~whole),
-                channels.addresses and bool(self.changed[A_BIT] & ~whole),
-            )
-            if key in seen:
-                continue
-            seen.add(key)
             writes = self.evaluate(channels, bound)
-            if writes is None:
-                continue
-            found.append(Candidate(writes, channels))
-            bound = min(bound, writes.estimate)
-        found.sort(key=_writes_estimate)
-        return sorted((Candidate(self.refine(w, c), c) for w, c in found[:KEPT]), key=_writes_estimate)
+            if writes is not None:
+                found.append(writes)
+                bound = min(bound, writes.estimate)
+        return sorted(found, key=ESTIMATE)
 
     def forced(self, channels: Channels) -> int:
         """Programs that differ in a field no open message writes: they take a 21h."""
@@ -289,10 +310,10 @@ class WritePhase:
         whole |= self.forced(channels)
         if self.lower_bound(whole) >= bound:
             return None
-        # The DPs price items one by one. When the items of a 46h overflow into one more message,
-        # find by bisection the least share of a header on each item that makes the DP save the
-        # message (as for 40h/41h in `_with_addresses`); the shares that matter are small beside
-        # the header, so the bisection is geometric.
+        # The jump-address DP prices 46h items one by one against link and unlink ranges. When they
+        # overflow into one more message, find by bisection the least share of a header on each item
+        # that makes the DP save the message (a Lagrangian relaxation of ceil(n/31)); the shares that
+        # matter are small beside the header, so the bisection is geometric.
         first = self._with_addresses(whole, channels, 0.0)
         n = first.addresses.bit_count()
         if n <= codec.MAX_ADDRESS_ITEMS:
@@ -312,34 +333,16 @@ class WritePhase:
     def _with_addresses(self, whole: int, channels: Channels, share: float) -> Writes:
         ranges, addresses, extra = self.addresses(whole, channels.addresses, share)
         whole |= extra
-        first = self._with_parts(whole, ranges, addresses, channels, (0.0, 0.0))
-        counts = [mask.bit_count() for mask in first.items[:2]]
-        over = [n > codec.MAX_FIELD_ITEMS for n in counts]
-        if not any(over):
-            return first
-        # 40h/41h items overflow: find by bisection the least share of a header on each of their
-        # items that makes the DP save a message (a Lagrangian relaxation of ceil(n/15)).
-        # The shares that matter are small beside the header, so the bisection is geometric.
-        goal = [codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS) for n in counts]
-        tried = [first]
-        low, high = self.prices.field_item / 16, self.prices.field_header
-        for _ in range(BISECTIONS):
-            middle = (low * high) ** 0.5
-            pair = (middle if over[0] else 0.0, middle if over[1] else 0.0)
-            tried.append(self._with_parts(whole, ranges, addresses, channels, pair))
-            n = [mask.bit_count() for mask in tried[-1].items[:2]]
-            if all(n[k] <= goal[k] for k in (0, 1) if over[k]):
-                high = middle
-            else:
-                low = middle
-        return min(tried, key=ESTIMATE)
-
-    def _with_parts(self, whole: int, ranges: tuple[Range, ...], addresses: int, channels: Channels,
-                    share: tuple[float, float]) -> Writes:  # fmt: skip
-        runs, positions, speeds, more, runs_cost = self.parts(whole, addresses, channels, share)
+        runs, positions, speeds, more, runs_cost = self.parts(whole, addresses, channels)
         whole |= more
         items = (positions, speeds, *(self.changed[bit] & ~whole for bit in PLAIN_BITS))
         return self._priced(whole, runs, runs_cost, items, ranges, addresses & ~whole)
+
+    @functools.cached_property
+    def floor(self) -> float:
+        """No write phase of these init kinds costs less (`floor_of`)."""
+        at_least = floor_of(self.prices, self.target_a, self.changed)
+        return fsum(at_least(i, m) for i, m in enumerate(self.masks) if m)
 
     def lower_bound(self, whole: int) -> float:
         """No write phase that gives at least `whole` a 21h costs less.
@@ -356,165 +359,104 @@ class WritePhase:
     def _priced(self, whole: int, runs: tuple[Run, ...], runs_cost: float, items: tuple[int, ...],
                 ranges: tuple[Range, ...], addresses: int) -> Writes:  # fmt: skip
         prices = self.prices
-        estimate = (
-            whole.bit_count() * prices.program
-            + runs_cost
-            + sum(prices.fields(mask.bit_count()) for mask in items)
-            + len(ranges) * prices.link
-            + prices.addresses(addresses.bit_count())
-        )
+        estimate = fsum((
+            whole.bit_count() * prices.program,
+            runs_cost,
+            *(prices.fields(mask.bit_count()) for mask in items),
+            len(ranges) * prices.link,
+            prices.addresses(addresses.bit_count()),
+        ))  # fmt: skip
         return Writes(whole, runs, items, ranges, addresses, estimate)
 
-    def refine(self, writes: Writes, channels: Channels) -> Writes:
-        """Give programs a 21h while that saves messages (the DPs price items one by one).
+    # -- P and V (33h/32h runs, 40h/41h items) and the 21h: one DP ------------------------------
 
-        A program that takes a 21h leaves its items; a 33h run shrinks to the programs that
-        still need it (or goes); link ranges stay, its 21h comes after them.
+    def parts(self, whole: int, addresses: int, channels: Channels) -> Parts:
+        """P and V of the programs not in `whole` that differ in P or V, and which programs take a 21h.
+
+        `addresses`: the programs with a 46h item (a 21h saves it). The DP (`PartsDP`)
+        charges every 40h/41h header as its items open it, and the headers of 42h..46h that
+        21h save where a few more could save one (`_live`).
         """
-        while True:
-            moves = self._refinements(writes)
-            in_runs = _all_runs(writes.part_runs)
-            # The best quick move; and, with the DPs run again (the 33h runs they leave may regroup
-            # and save an exchange), the few in runs that come within an exchange of paying off.
-            tries: list[Writes | None] = [self._moved(writes, moves[0][1])] if moves and moves[0][0] < -1e-12 else []
-            tries += [self.evaluate(channels, whole=writes.whole | 1 << j)
-                      for delta, j in moves[:REGROUPED] if delta < self.prices.exchange and in_runs >> j & 1]  # fmt: skip
-            better = [moved for moved in tries if moved is not None and moved.estimate < writes.estimate - 1e-12]
-            if not better:
-                return writes
-            writes = min(better, key=ESTIMATE)
-
-    def _refinements(self, writes: Writes) -> list[tuple[float, int]]:
-        """Every program with an item or in a 33h run given a 21h instead: (what that changes, in
-        seconds, items priced one by one; the program), most saving first. Plain tuples: a plan
-        makes tens of thousands."""
-        prices = self.prices
-        saving = [prices.fields(n) - prices.fields(n - 1) if n else 0.0 for n in map(int.bit_count, writes.items)]
-        n = writes.addresses.bit_count()
-        address_saving = prices.addresses(n) - prices.addresses(n - 1) if n else 0.0
-        # by each program in a run: the programs of that run that still need their P and V, and its cost
-        need = self.pv_changed & ~writes.whole
-        run_of = {j: (need & ((1 << (last + 1)) - (1 << first)), self.parts_price[last - first + 1])
-                  for first, last in writes.part_runs for j in range(first, last + 1)}  # fmt: skip
-        savings = list(zip(saving, writes.items))
-        parts_price, program, addresses = self.parts_price, prices.program, writes.addresses
-        moves = []
-        for j in members((_all_of(writes.items) | addresses | _all_runs(writes.part_runs)) & ~writes.whole):
-            saved: float = 0  # summed as sum() would, in the same order: the same float
-            for s, mask in savings:
-                if mask >> j & 1:
-                    saved += s
-            delta = program - saved
-            if addresses >> j & 1:
-                delta -= address_saving
-            if j in run_of:  # the run cut down to the programs that still need it without j: `_trimmed`, `_runs_cost` of one run
-                inside, price = run_of[j]
-                inside &= ~(1 << j)
-                rest = parts_price[inside.bit_length() - (inside & -inside).bit_length() + 1] if inside else 0
-                delta += rest - price
-            moves.append((delta, j))
-        moves.sort()
-        return moves
-
-    def _moved(self, writes: Writes, j: int) -> Writes:
-        """`writes` with program j given a 21h instead of its items."""
-        bit = 1 << j
-        whole = writes.whole | bit
-        runs = self._trimmed(writes.part_runs, self.pv_changed & ~whole)
-        items = tuple(mask & ~bit for mask in writes.items)
-        return self._priced(whole, runs, self._runs_cost(runs), items, writes.ranges, writes.addresses & ~bit)
-
-    @staticmethod
-    def _trimmed(runs: tuple[Run, ...], need: int) -> tuple[Run, ...]:
-        """The runs cut down to their first and last program in `need`; runs needing none dropped."""
-        out: list[Run] = []
-        for first, last in runs:
-            inside = need & ((1 << (last + 1)) - (1 << first))
-            if inside:
-                out.append(((inside & -inside).bit_length() - 1, inside.bit_length() - 1))
-        return tuple(out)
-
-    def _runs_cost(self, runs: tuple[Run, ...]) -> float:
-        return sum(self.parts_price[last - first + 1] for first, last in runs)
-
-    # -- P and V: 33h/32h runs against 40h/41h items (or a 21h) ---------------------------------
-
-    def parts(self, whole: int, addresses: int, channels: Channels, share: tuple[float, float] = (0.0, 0.0)) -> Parts:
-        """P and V of the programs not in `whole` that differ in P or V.
-
-        A program may take a 21h instead when that costs less than its P and V writes plus its
-        other items (`addresses`: its 46h item). Items are priced one by one, plus `share` (40h,
-        41h) of their messages' headers.
-        """
-        need = self.pv_changed & ~whole
-        key = (need, addresses & need, channels.positions, channels.speeds, channels.parts, share)
+        key = (whole, addresses, channels.positions, channels.speeds, channels.parts)
         cached = self._parts_cache.get(key)
         if cached is None:
-            cached = self._parts_cache[key] = self._solve_parts(need, addresses, channels, share)
+            cached = self._parts_cache[key] = self._solve_parts(whole, addresses, channels)
         return cached
 
-    def _solve_parts(self, need: int, addresses: int, channels: Channels, share: tuple[float, float]) -> Parts:
-        if not need:
-            return Parts((), 0, 0, 0, 0.0)
-        prices, masks, managed, price = self.prices, self.masks, self.managed, self.parts_price
-        p_item = prices.field_item + share[0] if channels.positions else INF
-        v_item = prices.field_item + share[1] if channels.speeds else INF
-        program, address_item, runs_allowed = prices.program, prices.address_item, channels.parts
-        plain_items, window = self.plain_items, codec.MAX_FIELD_ITEMS
-        nothing, items, whole_, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
-        # best[j]: the cheapest way to write P and V of the programs before j. A 33h run i..j
-        # costs head + per × (j - i + 1), so the best run ending at j starts at the i that
-        # minimises best[i] - per × i over the last 15 managed programs: a sliding-window minimum.
-        head, per = prices.parts_header, prices.parts_item
-        best = [0.0] * (PROGRAM_COUNT + 1)
-        back: list[tuple[int, PartsMove]] = [(0, nothing)] * (PROGRAM_COUNT + 1)
-        starts: deque[tuple[float, int]] = deque()  # (best[i] - per × i, i), keys increasing
-        for j in range(PROGRAM_COUNT):
-            b = best[j]
-            if not managed[j]:
-                starts.clear()
-            if not need >> j & 1:
-                best[j + 1], back[j + 1] = b, (j, nothing)
-                continue
-            m = masks[j]
-            c, how = b + (p_item if m & P_BIT else 0.0) + (v_item if m & V_BIT else 0.0), (j, items)
-            alone = b + program - plain_items[j] - (address_item if addresses >> j & 1 else 0.0)
-            if alone < c:
-                c, how = alone, (j, whole_)
-            if runs_allowed:
-                key = b - per * j
-                while starts and starts[-1][0] >= key:
-                    starts.pop()
-                starts.append((key, j))
-                while starts[0][1] <= j - window:
-                    starts.popleft()
-                if b + price[1] < c:
-                    c, how = b + price[1], (j, run)
-                key, first = starts[0]
-                if (through := key + head + per * (j + 1)) < c:
-                    c, how = through, (first, run)
-            best[j + 1], back[j + 1] = c, how
-        return self._traced_parts(back)
+    def _live(self, whole: int, addresses: int, need: int) -> list[LiveChannel]:
+        """The 42h..46h fields whose message count more 21h could lower with profit, fields with
+        the same programs as one (their headers summed: full rewrites differ in every field).
 
-    def _traced_parts(self, back: list[tuple[int, PartsMove]]) -> Parts:
-        """The P and V writes of `_solve_parts`, followed back from the last program."""
+        A field saves its header once `rho` of its programs take a 21h, each costing at least
+        `_extra_cost` beyond the items it saves. Its best candidates are the `rho` programs whose
+        21h costs least less a share of the headers of the other fields it is in (the header over
+        the removals that save it); they pay where their cost is below the headers they save
+        together — the field's, each other field's whose removals they reach, and a 33h's where
+        they take the programs that need P or V down by as many as fill the last run. A
+        field where they do not is left out: its items are priced one by one (its header count
+        is that of the programs left to it). Of the rest, the LIVE that need fewest removals."""
+        prices = self.prices
+        fields = [(self.changed[bit] & ~whole, codec.MAX_FIELD_ITEMS, prices.field_header) for bit in PLAIN_BITS]
+        fields.append((addresses & ~whole, codec.MAX_ADDRESS_ITEMS, prices.address_header))
+        grouped: dict[tuple[int, int], list[float]] = {}
+        for mask, capacity, header in fields:
+            if mask:
+                grouped.setdefault((mask, capacity), []).append(header)
+        channels = []
+        for (mask, capacity), headers in grouped.items():
+            n = mask.bit_count()
+            channels.append(LiveChannel(mask, n, n - capacity * ((n - 1) // capacity), capacity, fsum(headers)))
+        n = need.bit_count()  # a 33h saved too where the removals take the P and V left down a run
+        runs_out = n - codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS) if n else PROGRAM_COUNT + 1
+        live = []
+        for c in channels:
+            others = [o for o in channels if o is not c]
+            ranked = sorted(members(c.mask), key=lambda i: self._extra_cost(i, need, addresses)
+                            - fsum(o.header / o.rho for o in others if o.mask >> i & 1))  # fmt: skip
+            chosen = ranked[: c.rho]
+            spent = fsum(self._extra_cost(i, need, addresses) for i in chosen)
+            taken = sum(1 << i for i in chosen)
+            saved = fsum((c.header, prices.parts_header if (need & taken).bit_count() >= runs_out else 0.0,
+                          *(o.header for o in others if (o.mask & taken).bit_count() >= o.rho)))  # fmt: skip
+            if spent < saved:
+                live.append(c)
+        return sorted(live, key=_rho)[:LIVE]
+
+    def _extra_cost(self, i: int, need: int, addresses: int) -> float:
+        """What a 21h of program i costs at least beyond the items it saves."""
+        prices, m = self.prices, self.masks[i]
+        pv = (prices.field_item if m & P_BIT else 0.0) + (prices.field_item if m & V_BIT else 0.0) if need >> i & 1 else 0.0
+        return prices.program - self.plain_items[i] - (prices.address_item if addresses >> i & 1 else 0.0) - pv
+
+    def _solve_parts(self, whole: int, addresses: int, channels: Channels) -> Parts:
+        """The DP over program numbers behind `parts` (`PartsDP`)."""
+        need = self.pv_changed & ~whole
+        movable = (self.relevant_programs | addresses) & ~whole  # programs a 21h could help
+        if not need and not movable:
+            return Parts((), 0, 0, 0, 0.0)
+        dp = PartsDP(self, need, movable, addresses, channels, self._live(whole, addresses, need))
+        return self._traced(*dp.solve())
+
+    def _traced(self, back: list[dict[int, Back]], state: int) -> Parts:
+        """The writes of a `PartsDP`, followed back from the last program in `state`."""
         runs: list[Run] = []
         positions = speeds = whole = 0
-        runs_cost = 0.0
-        run, items, whole_ = PartsMove.RUN, PartsMove.ITEMS, PartsMove.WHOLE  # locals: fast
         j = PROGRAM_COUNT
         while j > 0:
-            i, move = back[j]
-            if move is run:
+            state, move, i, inside = back[j - 1][state]
+            if move is PartsMove.RUN:
                 runs.append((i, j - 1))
-                runs_cost += self.parts_price[j - i]
-            elif move is items:
+                whole |= inside
+                j = i
+                continue
+            if move is PartsMove.ITEMS:
                 positions |= (self.masks[i] & P_BIT and 1) << i
                 speeds |= (self.masks[i] & V_BIT and 1) << i
-            elif move is whole_:
+            elif move is PartsMove.WHOLE:
                 whole |= 1 << i
-            j = i
-        return Parts(tuple(reversed(runs)), positions, speeds, whole, runs_cost)
+            j -= 1
+        runs.reverse()
+        return Parts(tuple(runs), positions, speeds, whole, fsum(self.parts_price[last - first + 1] for first, last in runs))
 
     # -- A: link/unlink ranges against 46h items -----------------------------------------------
 
@@ -529,6 +471,12 @@ class WritePhase:
         return cached
 
     def _solve_addresses(self, whole: int, open46: bool, share: float) -> Addresses:
+        """The DP over program numbers behind `addresses`. States after program i: 0 no range
+        open; 1 a link range goes on to i+1; 2 an unlink range covers i (and may go on); 3 a link
+        range inside an unlink range goes on to i+1; 4 an unlink range inside a link range covers
+        i and goes on, the link range too. Complex because each of the five states has its own
+        ways in, and each way gives program i its address (kept, 0 or i+2) — a table of moves
+        would hide which address each gives."""
         if not self.changed[A_BIT] & ~whole:
             return Addresses((), 0, 0)
         managed, target, base = self.managed, self.target_a, self.base_a
@@ -536,15 +484,14 @@ class WritePhase:
         link = self.prices.link
         none, keep, end = RangeMove.NONE, RangeMove.KEEP, RangeMove.END  # locals: fast
         link_, link_on, unlink, unlink_on = RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK, RangeMove.UNLINK_ON
-        # States after program i: 0 no range open, 1 a link range goes on to i+1, 2 an unlink range
-        # may go on. Moves give program i its A: kept, 0 (unlink, end of a link) or i+2 (link goes on).
-        cost = [0.0, INF, INF]
+        cost = [0.0, INF, INF, INF, INF]
         back: list[tuple[tuple[int, RangeMove], ...]] = []
+        nowhere = (0, none)
         for i in range(PROGRAM_COUNT):
-            c0, c1, c2 = cost
+            c0, c1, c2, c3, c4 = cost
             if not managed[i]:
-                back.append(((0, keep) if c0 <= c2 else (2, keep), (0, none), (0, none)))
-                cost = [min(c0, c2), INF, INF]
+                back.append(((0, keep) if c0 <= c2 else (2, keep), nowhere, nowhere, nowhere, nowhere))
+                cost = [min(c0, c2), INF, INF, INF, INF]
                 continue
             free = whole >> i & 1
             t = target[i]
@@ -556,16 +503,26 @@ class WritePhase:
             n0, b0 = open_cost + m_keep, (open_prev, keep)
             if c1 + m_zero < n0:
                 n0, b0 = c1 + m_zero, (1, end)
-            n1, b1 = INF, (0, none)
+            n1 = n3 = n4 = INF
+            b1 = b3 = b4 = nowhere
             if goes_on:
                 n1, b1 = open_cost + link + m_next, (open_prev, link_)
-                if c1 + m_next < n1:
-                    n1, b1 = c1 + m_next, (1, link_on)
+                for c, how in ((c1 + m_next, (1, link_on)), (c1 + link + m_zero, (1, RangeMove.INNER_UNLINK_ONE)),
+                               (c4 + m_zero, (4, RangeMove.INNER_UNLINK_END))):  # fmt: skip
+                    if c < n1:
+                        n1, b1 = c, how
+                n3, b3 = c2 + link + m_next, (2, RangeMove.INNER_LINK)
+                if c3 + m_next < n3:
+                    n3, b3 = c3 + m_next, (3, RangeMove.INNER_LINK_ON)
+                n4, b4 = c1 + link + m_zero, (1, RangeMove.INNER_UNLINK)
+                if c4 + m_zero < n4:
+                    n4, b4 = c4 + m_zero, (4, RangeMove.INNER_UNLINK_ON)
             n2, b2 = c0 + link + m_zero, (0, unlink)
-            if c2 + m_zero < n2:
-                n2, b2 = c2 + m_zero, (2, unlink_on)
-            cost = [n0, n1, n2]
-            back.append((b0, b1, b2))
+            for c, how in ((c2 + m_zero, (2, unlink_on)), (c3 + m_zero, (3, RangeMove.INNER_END))):
+                if c < n2:
+                    n2, b2 = c, how
+            cost = [n0, n1, n2, n3, n4]
+            back.append((b0, b1, b2, b3, b4))
         state = 0 if cost[0] <= cost[2] else 2
         moves = [none] * PROGRAM_COUNT
         for i in range(PROGRAM_COUNT - 1, -1, -1):
@@ -573,27 +530,37 @@ class WritePhase:
         return self._ranges_and_misses(whole, open46, moves)
 
     def _ranges_and_misses(self, whole: int, open46: bool, moves: list[RangeMove]) -> Addresses:
-        """The ranges the DP's moves draw, and the programs whose address they leave wrong."""
-        ranges: list[Range] = []
+        """The ranges the DP's moves draw — the outer ones, then those inside them, sent after
+        them — and the programs whose address they leave wrong."""
+        outer: list[Range] = []
+        inner: list[Range] = []
         items = extra = 0
-        keep, link_, link_on, unlink = RangeMove.KEEP, RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK  # locals: fast
+        keep = RangeMove.KEEP  # locals: fast
         for i, move in enumerate(moves):
             if not self.managed[i]:
                 continue
-            if move is link_ or move is unlink:
-                ranges.append((move is link_, i, i))
-            elif move is not keep:  # a range goes on or ends here
-                link, first, _ = ranges[-1]
-                ranges[-1] = (link, first, i)
-            value = self.base_a[i] if move is keep else i + 2 if move is link_ or move is link_on else 0
+            if move in OUTER_STARTS:
+                outer.append((move is RangeMove.LINK, i, i))
+            elif move is not keep:  # the outer range goes on or ends here
+                outer[-1] = (*outer[-1][:2], i)
+                if move in INNER_STARTS:
+                    inner.append((move is RangeMove.INNER_LINK, i, i))
+                elif move in INNER_GOING or move in (RangeMove.INNER_END, RangeMove.INNER_UNLINK_END):
+                    inner[-1] = (*inner[-1][:2], i)
+            value = self.base_a[i] if move is keep else i + 2 if move in NEXT_MOVES else 0
             if not whole >> i & 1 and value != self.target_a[i]:
                 if open46:
                     items |= 1 << i
                 else:
                     extra |= 1 << i
-        return Addresses(tuple(ranges), items, extra)
+        return Addresses((*outer, *inner), items, extra)
 
     # -- what a program's differences cost, for the init DP ------------------------------------
+
+    def alike(self, i: int, mask: int) -> object:
+        """What `linear` and `shared` see of program i with differences `mask`: the mask, and
+        whether a link or unlink range could give its jump address."""
+        return (mask, self.target_a[i] in (0, i + 2)) if mask & A_BIT else mask
 
     def linear(self, channels: Channels, share: float = 0.0) -> Residual:
         """A program's differences priced item by item under `channels`, each item with `share` of a header."""
@@ -636,9 +603,9 @@ class WritePhase:
         pv_items = any(bit & PV_BITS for bit in shares)
 
         def cost(i: int, mask: int) -> float:
-            total = sum(prices.field_item + shares.get(bit, 0.0) for bit in PLAIN_BITS if mask & bit)
+            total = fsum(prices.field_item + shares.get(bit, 0.0) for bit in PLAIN_BITS if mask & bit)
             if mask & PV_BITS:
-                total += (sum(prices.field_item + shares.get(bit, 0.0) for bit in (P_BIT, V_BIT) if mask & bit)
+                total += (fsum(prices.field_item + shares.get(bit, 0.0) for bit in (P_BIT, V_BIT) if mask & bit)
                           if pv_items else prices.parts_item)  # fmt: skip
             if mask & A_BIT and self.target_a[i] not in (0, i + 2):
                 total += prices.address_item + shares.get(A_BIT, 0.0)
@@ -665,7 +632,7 @@ class WritePhase:
             return prices.fields(n + 1) - prices.fields(n)
 
         def parts(i: int, mask: int) -> float:
-            alone = min(self.parts_price[1], sum(items(k, i) for k, bit in enumerate((P_BIT, V_BIT)) if mask & bit))
+            alone = min(self.parts_price[1], fsum(items(k, i) for k, bit in enumerate((P_BIT, V_BIT)) if mask & bit))
             return min(alone, self._joining(i, run_of[i], need)) if i in run_of else alone
 
         def jump(i: int, mask: int) -> float:
@@ -702,6 +669,329 @@ class WritePhase:
         return self.parts_price[span] - self.parts_price[high - low + 1]
 
 
+class PartsDP:
+    """One run of the DP behind `WritePhase.parts`, over program numbers.
+
+    best[j]: the cheapest way to write P and V of the programs before j, per state: the room
+    left in the last 40h and in the last 41h (0: none open, the next item opens one and pays
+    its header) and the programs taken out of each live 42h..46h field (`WritePhase._live`) by
+    a 21h, up to those that save it a message (their headers are counted at the end; the items
+    of 42h..46h are priced outside: a 21h is credited with those it saves). A state ahead of
+    another — more room, more taken out — is never worse and worth at most a header for each
+    such field, so a state that costs that much more than another is dropped (`States`); room
+    beyond the items the programs left could use is no room.
+
+    A 33h run i..j costs head + per × (j - i + 1), so the best run ending at j starts at the i
+    that minimises best[i] - per × i over the last 15 managed programs: a sliding-window
+    minimum (`Window`), one per state the run is in at j. A run leaves the state as it was, but
+    for the programs inside it that take a 21h as well (their P and V written twice, a 33h
+    spared a split): the window of a state moves, each start dearer by that 21h, to the state
+    the 21h leads to (`carry`).
+    """
+
+    def __init__(self, phase: WritePhase, need: int, movable: int, addresses: int, channels: Channels,
+                 live: list[LiveChannel]) -> None:  # fmt: skip
+        prices = phase.prices
+        self.phase, self.need, self.movable, self.addresses, self.live = phase, need, movable, addresses, live
+        self.positions, self.speeds, self.runs_allowed = channels.positions, channels.speeds, channels.parts
+        self.states = States((prices.field_header, prices.field_header, *(c.header for c in live)),
+                             (codec.MAX_FIELD_ITEMS, codec.MAX_FIELD_ITEMS, *(c.rho for c in live)))  # fmt: skip
+        self.more_p = _suffix_counts(need & phase.changed[P_BIT])
+        self.more_v = _suffix_counts(need & phase.changed[V_BIT])
+        self.windows: dict[int, Window] = {}  # per state a run may end in: its starts
+        self.taken: dict[tuple[int, int], int] = {}
+
+    def solve(self) -> tuple[list[dict[int, Back]], int]:
+        """The back pointers of every program and the cheapest state after the last."""
+        managed, need = self.phase.managed, self.need
+        best: dict[int, float] = {0: 0.0}
+        back: list[dict[int, Back]] = []
+        for j in range(PROGRAM_COUNT):
+            if not managed[j]:
+                self.windows.clear()
+            out, alone = self._whole(j)
+            if (out or alone < 0) and self.windows:  # a 21h that changes nothing only costs
+                self.carry(j, out, alone)
+            new, step = self.moves(j, best, out, alone)
+            if need >> j & 1 and self.runs_allowed:
+                self.ends(j, new, step)
+            if len(new) > 1:
+                new = self.states.undominated(new)
+            best = new
+            back.append(step)
+        return back, self.final(best)
+
+    def _whole(self, j: int) -> tuple[int, float]:
+        """The live fields a 21h of j takes it out of (a bit each), and what it costs beyond the
+        items it saves (INF where it could only cost)."""
+        if not self.movable >> j & 1:
+            return 0, INF
+        phase = self.phase
+        out = sum(1 << k for k, c in enumerate(self.live) if c.mask >> j & 1)
+        alone = phase.prices.program - phase.plain_items[j] - (phase.prices.address_item if self.addresses >> j & 1 else 0.0)
+        return out, alone if self.need >> j & 1 or out or alone < 0 else INF
+
+    def _after(self, state: int, out: int) -> int:
+        after = self.taken.get((state, out))
+        if after is None:
+            after = self.taken[(state, out)] = States.taken_out(state, out, self.live)
+        return after
+
+    def carry(self, j: int, out: int, alone: float) -> None:
+        """Runs going on over a 21h of program j: of those that come to the same state, the
+        cheapest started, each start dearer by the 21h."""
+        windows = self.windows
+        moved: dict[int, Window] = {}
+        for state, window in windows.items():
+            after = self._after(state, out)
+            if (after == state and alone >= 0) or not window.starts:
+                continue  # the same runs, dearer
+            if after not in moved or window.starts[0][0] < moved[after].starts[0][0]:
+                moved[after] = window
+        for state, window in moved.items():
+            dearer = window.dearer(alone, j)
+            windows[state] = dearer.merge(windows[state]) if state in windows else dearer
+        if len(windows) > 2 * BEAM:  # runs going on: twice as many as states, the cheapest started
+            fronts = {state: window.starts[0][0] for state, window in windows.items() if window.starts}
+            self.windows = {state: windows[state] for state in self.states.undominated(fronts, 2 * BEAM)}
+
+    def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float], dict[int, Back]]:
+        """The states after program j by its own moves (items, a 32h, a 21h, nothing), and the
+        runs that may start at it. Complex because it is the DP's inner loop, one pass over the
+        states with every move in it, run for each state of each program: split, each move would
+        cost a call per state."""
+        phase, windows = self.phase, self.windows
+        prices, m, needs = phase.prices, phase.masks[j], self.need >> j & 1
+        header, item, capacity = prices.field_header, prices.field_item, codec.MAX_FIELD_ITEMS
+        p, v = m & P_BIT, m & V_BIT
+        as_items = needs and (self.positions or not p) and (self.speeds or not v)
+        runs = needs and self.runs_allowed
+        left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
+        single, per = phase.parts_price[1], prices.parts_item
+        rooms = ~(FIELD | FIELD << STATE_BITS)
+        nothing, items, whole, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
+        new: dict[int, float] = {}
+        step: dict[int, Back] = {}
+        for state, b in best.items():
+            if as_items:
+                c, room_p, room_v = b, state & FIELD, state >> STATE_BITS & FIELD
+                if p:
+                    c += item if room_p else item + header
+                    room_p = (room_p or capacity) - 1
+                if v:
+                    c += item if room_v else item + header
+                    room_v = (room_v or capacity) - 1
+                after = state & rooms | min(room_p, left_p) | min(room_v, left_v) << STATE_BITS
+                if c < new.get(after, INF):
+                    new[after], step[after] = c, (state, items, j, 0)
+            # the other moves leave the state as it was, but for room no item left could use
+            kept = state & rooms | min(state & FIELD, left_p) | min(state >> STATE_BITS & FIELD, left_v) << STATE_BITS
+            if runs:
+                if kept not in windows:
+                    windows[kept] = Window()
+                windows[kept].push(b - per * j, j, state, 0)
+                if b + single < new.get(kept, INF):
+                    new[kept], step[kept] = b + single, (state, run, j, 0)
+            elif not needs and b < new.get(kept, INF):
+                new[kept], step[kept] = b, (state, nothing, j, 0)
+            if alone < INF:
+                after = self._after(kept, out) if out else kept
+                if b + alone < new.get(after, INF):
+                    new[after], step[after] = b + alone, (state, whole, j, 0)
+        return new, step
+
+    def ends(self, j: int, new: dict[int, float], step: dict[int, Back]) -> None:
+        """The 33h runs that end at program j, the cheapest start in each state's window."""
+        prices, windows = self.phase.prices, self.windows
+        head, per, run = prices.parts_header, prices.parts_item, PartsMove.RUN
+        for state, window in list(windows.items()):
+            first = window.first(j - codec.MAX_FIELD_ITEMS)
+            if first is None:
+                del windows[state]
+                continue
+            key, i, began, inside = first
+            if (through := key + head + per * (j + 1)) < new.get(state, INF):
+                new[state], step[state] = through, (began, run, i, inside)
+
+    def final(self, best: dict[int, float]) -> int:
+        """The cheapest state after the last program, the live fields' headers counted."""
+        final, total = 0, INF
+        for state, b in best.items():
+            value = b + fsum(c.header * -((States.field(state, k + 2) - c.n) // c.capacity) for k, c in enumerate(self.live))
+            if value < total:
+                final, total = state, value
+        return final
+
+
+class Window:
+    """The starts of the 33h runs that may end at the next program, for one state of
+    `PartsDP`: (best[i] - per × i, i, the state at i, the programs inside the run
+    that take a 21h as well), by i, keys increasing — the front is the cheapest start."""
+
+    def __init__(self, starts: list[tuple[float, int, int, int]] | None = None) -> None:
+        self.starts: deque[tuple[float, int, int, int]] = deque(starts or ())
+
+    def push(self, key: float, i: int, state: int, inside: int) -> None:
+        starts = self.starts
+        while starts and starts[-1][0] >= key:
+            starts.pop()
+        starts.append((key, i, state, inside))
+
+    def first(self, gone: int) -> tuple[float, int, int, int] | None:
+        """The cheapest start after program `gone` (a run is at most 15 programs long)."""
+        starts = self.starts
+        while starts and starts[0][1] <= gone:
+            starts.popleft()
+        return starts[0] if starts else None
+
+    def dearer(self, cost: float, j: int) -> Window:
+        """These starts for runs that go on over a 21h of program j, costing `cost`."""
+        return Window([(key + cost, i, state, inside | 1 << j) for key, i, state, inside in self.starts])
+
+    def merge(self, other: Window) -> Window:
+        """This window with the starts of `other` (both by i, keys increasing)."""
+        merged = Window()
+        mine, theirs = self.starts, other.starts
+        a = b = 0
+        while a < len(mine) or b < len(theirs):
+            if b == len(theirs) or (a < len(mine) and mine[a][1] <= theirs[b][1]):
+                merged.push(*mine[a])
+                a += 1
+            else:
+                merged.push(*theirs[b])
+                b += 1
+        return merged
+
+
+class States:
+    """The states of `PartsDP` as ints of 6-bit fields — field 0 the room left in
+    the last 40h, 1 in the last 41h, 2 + k the programs taken out of live field k — and which of
+    them may go: a state ahead of another in some fields (more room, more taken out) can gain at
+    most those fields' headers (`worth`) over it whatever follows, so it goes when it costs that
+    much more than the other. Which fields one state is ahead in is found for all fields at once:
+    with a guard bit above each field, 31 + x - y reaches it exactly where x > y.
+
+    Of the states left, at most BEAM go on: the cheapest once each is credited with what it is
+    ahead of nothing — a header's share per room left (header / 15 a slot), and a live field's
+    headers in the share of the removals that save them it has made — so that states that have
+    paid for 21h that save headers only together are not crowded out by cheaper ones that have not.
+    """
+
+    def __init__(self, worth: tuple[float, ...], needed: tuple[int, ...]) -> None:
+        fields = range(len(worth))
+        self.guards = sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in fields)
+        self.ones = sum(1 << (STATE_BITS * f) for f in fields)
+        # what being ahead in each set of fields is worth, by the guard bits of those fields
+        self.ahead = {sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen): fsum(worth[f] for f in chosen)
+                      for size in range(len(worth) + 1) for chosen in itertools.combinations(fields, size)}  # fmt: skip
+        self.ceiling = fsum(worth)
+        self.credit = [(STATE_BITS * f, worth[f] / count) for f, count in enumerate(needed)]
+
+    @staticmethod
+    def field(state: int, f: int) -> int:
+        return state >> (STATE_BITS * f) & FIELD
+
+    @staticmethod
+    def taken_out(state: int, out: int, live: list[LiveChannel]) -> int:
+        """`state` with one more program taken out of each live field in the bit mask `out`."""
+        for k, c in enumerate(live):
+            shift = STATE_BITS * (k + 2)
+            if out >> k & 1 and (state >> shift & FIELD) < c.rho:
+                state += 1 << shift
+        return state
+
+    def undominated(self, states: dict[int, float], most: int = 0) -> dict[int, float]:
+        """The states no other beats whatever follows, at most `most` (BEAM) of them (class docstring)."""
+        most = most or BEAM
+        guards, ones, ahead = self.guards, self.ones, self.ahead
+        kept: list[tuple[int, float]] = []
+        ceiling = INF
+        for state, c in sorted(states.items(), key=_second):
+            if c >= ceiling:  # more than every header above the cheapest: beaten by the cheapest
+                break
+            raised = (state | guards) - ones
+            for other, c2 in kept:
+                if c - c2 >= ahead[(raised - other) & guards]:
+                    break
+            else:
+                if not kept:
+                    ceiling = c + self.ceiling
+                kept.append((state, c))
+        if len(kept) > most:
+            credit = self.credit
+            kept = sorted(kept, key=lambda pair: pair[1] - fsum((pair[0] >> shift & FIELD) * each for shift, each in credit))[:most]
+        return dict(kept)
+
+
+def _suffix_counts(mask: int) -> list[int]:
+    """For each index 0..64, how many of the programs from it on are in `mask`."""
+    counts = [0] * (PROGRAM_COUNT + 1)
+    for i in range(PROGRAM_COUNT - 1, -1, -1):
+        counts[i] = counts[i + 1] + (mask >> i & 1)
+    return counts
+
+
+def floor_of(prices: Prices, target_a: list[int], changed: dict[int, int]) -> Residual:
+    """What the differences `mask` of program i cost at least, in any write phase where at most
+    the programs in `changed` (per FIELD_BIT) have an item of each field: each at its cheapest,
+    every item with its share of a header. A field of n <= N items needs ceil(n/15) headers: at
+    least n/15 of one, and one at least n/N of one — so header / min(N, 15) an item (31 for 46h;
+    a 33h run carries its header over at most 15 programs, and at most all that need P or V)."""
+
+    def share(bit: int, header: float, capacity: int) -> float:
+        return header / max(min(changed[bit].bit_count(), capacity), 1)
+
+    field = {bit: prices.field_item + share(bit, prices.field_header, codec.MAX_FIELD_ITEMS) for bit in (P_BIT, V_BIT, *PLAIN_BITS)}
+    address = prices.address_item + share(A_BIT, prices.address_header, codec.MAX_ADDRESS_ITEMS)
+    needers = max(min((changed[P_BIT] | changed[V_BIT]).bit_count(), codec.MAX_FIELD_ITEMS), 1)
+    pair = prices.parts_item + prices.parts_header / needers
+
+    def cost(i: int, mask: int) -> float:
+        total = fsum(field[bit] for bit in PLAIN_BITS if mask & bit)
+        if mask & PV_BITS:
+            total += min(pair, fsum(field[bit] for bit in (P_BIT, V_BIT) if mask & bit))
+        if mask & A_BIT and target_a[i] not in (0, i + 2):
+            total += address
+        return min(total, prices.program)
+
+    return cost
+
+
+def _over_every_kind(problem: PlanningProblem) -> dict[int, int]:
+    """Per FIELD_BIT, the programs that differ in it under some init kind."""
+    union = [0] * PROGRAM_COUNT
+    for masks in problem.masks.values():
+        union = [u | m for u, m in zip(union, masks)]
+    return {bit: sum(1 << i for i, u in enumerate(union) if u & bit) for bit in FIELD_BIT.values()}
+
+
+def inits_floor(problem: PlanningProblem) -> float:
+    """No plan with an init costs less: its init messages and each program's differences at their
+    cheapest under its init kind (`floor_of`, every field's items counted over every kind), for
+    the init choice with at least one init where that is least (`choose_inits`' DP, with whether
+    an init has been sent yet in the state)."""
+    target_a = [0 if p is None else p.A for p in problem.desired.programs]
+    at_least = floor_of(problem.prices, target_a, _over_every_kind(problem))
+    prices, inits = problem.prices, problem.kinds[1:]
+    refund, init_range = prices.init_range - prices.init, prices.init_range
+    # states once an init has been sent: 0 kept; 2n - 1 after the first program of a run of the
+    # n-th init kind, 2n further on; `before`: no init sent yet (every program so far kept)
+    size = 1 + 2 * len(inits)
+    before, cost = 0.0, [INF] * size
+    for i in range(PROGRAM_COUNT):
+        floors = {kind: at_least(i, problem.masks[kind][i]) for kind in problem.kinds}
+        new = [min(c - refund if state % 2 else c for state, c in enumerate(cost)) + floors[KEEP], *[INF] * (size - 1)]
+        if problem.managed[i]:
+            for n, kind in enumerate(inits, start=1):
+                first, further = 2 * n - 1, 2 * n
+                closed = [c - refund if state % 2 else c for state, c in enumerate(cost) if state not in (first, further)]
+                new[first] = min(before, *closed) + init_range + floors[kind]
+                new[further] = min(cost[first], cost[further]) + floors[kind]
+        before += floors[KEEP]
+        cost = new
+    return problem.system_cost + min(c - (refund if state else 0.0) for state, c in enumerate(cost))
+
+
 def _all_runs(runs: tuple[Run, ...]) -> int:
     return sum((1 << (last + 1)) - (1 << first) for first, last in runs)
 
@@ -730,55 +1020,64 @@ def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> 
     """The init kind of every program minimising init messages + `residual[i][kind]`.
 
     A run of programs of one kind costs one 14h, or a 12h/13h/11h when it is one program
-    or ends at 64. Unmanaged programs are always KEEP, so no run covers them.
+    or ends at 64. Unmanaged programs are always KEEP, so no run covers them. States: 0, kept;
+    for the n-th init kind, 2n - 1 after the first program of its run and 2n further on.
     """
     prices = problem.prices
     refund, init_range = prices.init_range - prices.init, prices.init_range
-    # state: (kind of the previous program, whether its run is a single program so far) — made once
-    kept = (KEEP, False)
-    begun = {kind: (kind, True) for kind in problem.kinds}
-    going = {kind: (kind, False) for kind in problem.kinds}
-    cost: dict[tuple[int, bool], float] = {kept: 0.0}
-    back: list[dict[tuple[int, bool], tuple[int, bool]]] = []
+    inits = problem.kinds[1:]
+    size = 1 + 2 * len(inits)
+    cost = [0.0] + [INF] * (size - 1)
+    back: list[list[int]] = []
     for i in range(PROGRAM_COUNT):
-        allowed = problem.kinds if problem.managed[i] else (KEEP,)
         row = residual[i]
-        new: dict[tuple[int, bool], float] = {}
-        step: dict[tuple[int, bool], tuple[int, bool]] = {}
-        best = new.get
-        for before, c in cost.items():
-            prev, single = before
-            closing = c - refund if prev != KEEP and single else c
-            for kind in allowed:
-                if kind == KEEP:
-                    state, value = kept, closing + row[KEEP]
-                elif kind == prev:
-                    state, value = going[kind], c + row[kind]
-                else:
-                    state, value = begun[kind], closing + init_range + row[kind]
-                if value < best(state, INF):
-                    new[state], step[state] = value, before
+        new, step = [INF] * size, [0] * size
+        # kept: from any state, a run of one program refunded (a 12h, not a 14h)
+        keep = row[KEEP]
+        for state, c in enumerate(cost):
+            closing = c - refund if state % 2 else c
+            if closing + keep < new[0]:
+                new[0], step[0] = closing + keep, state
+        if problem.managed[i]:
+            for n, kind in enumerate(inits, start=1):
+                value = row[kind]
+                first, further = 2 * n - 1, 2 * n
+                for state, c in enumerate(cost):  # a run of this kind begins here
+                    if state in (first, further):
+                        continue
+                    closing = c - refund if state % 2 else c
+                    if closing + init_range + value < new[first]:
+                        new[first], step[first] = closing + init_range + value, state
+                for state in (first, further):  # or goes on
+                    if cost[state] + value < new[further]:
+                        new[further], step[further] = cost[state] + value, state
         cost = new
         back.append(step)
-    state = min(cost, key=lambda s: cost[s] - (refund if s[0] != KEEP else 0.0))
+    state = min(range(size), key=lambda s: cost[s] - (refund if s else 0.0))
     kinds = [KEEP] * PROGRAM_COUNT
     for i in range(PROGRAM_COUNT - 1, -1, -1):
-        kinds[i] = state[0]
+        kinds[i] = inits[(state - 1) // 2] if state else KEEP
         state = back[i][state]
     return tuple(kinds)
 
 
-def _table(problem: PlanningProblem, residual: Residual) -> list[dict[int, float]]:
+def _table(problem: PlanningProblem, residual: Residual, alike: Callable[[int, int], object] | None = None) -> list[dict[int, float]]:
     """Residuals per program and init kind; on a tie the init wins, so runs grow over programs they do not harm.
-    A program's kinds often leave it the same differences: each is priced once."""
+    A program's kinds often leave it the same differences: each is priced once — and, where the
+    residual depends on the program only through `alike(i, mask)`, once for all programs alike."""
     table = []
+    shared: dict[object, float] = {}
     for i in range(PROGRAM_COUNT):
         priced: dict[int, float] = {}  # by mask
         row = {}
         for kind in problem.kinds:
             mask = problem.masks[kind][i]
             if (value := priced.get(mask)) is None:
-                value = priced[mask] = residual(i, mask)
+                if alike is None:
+                    value = residual(i, mask)
+                elif (value := shared.get(key := alike(i, mask))) is None:
+                    value = shared[key] = residual(i, mask)
+                priced[mask] = value
             row[kind] = value - (TIE if kind != KEEP else 0.0)
         table.append(row)
     return table
@@ -792,17 +1091,17 @@ def search(problem: PlanningProblem) -> list[Layout]:
     keep = (KEEP,) * PROGRAM_COUNT
     phase = WritePhase(problem, keep)
     found = phase.solve()
-    layouts = [Layout(keep, writes, problem.system_cost + writes.estimate) for writes, _ in found]
-    if problem.init_useful():
-        layouts = InitSearch(problem, phase, layouts).run(found[0].writes)
+    layouts = [Layout(keep, writes, problem.system_cost + writes.estimate) for writes in found]
+    if problem.init_useful() and inits_floor(problem) < layouts[0].estimate:
+        layouts = InitSearch(problem, phase, layouts).run(found[0])
     unique = {(layout.kinds, layout.writes): layout for layout in layouts}
     return sorted(unique.values(), key=ESTIMATE)
 
 
 class InitSearch:
-    """The search over init choices (module docstring, 2.): a queue of init choices, each given
-    its own channel search; when it runs dry, the neighbours of the best plan, then the inits
-    that save whole messages, until none improves."""
+    """The search over init choices (module docstring, 2.): a queue of init choices, cheapest lower
+    bound first, each given its own write phase; when it runs dry, the neighbours of the best plan
+    and the inits that save whole messages — until none is left or the budget is spent."""
 
     def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout]) -> None:
         self.problem = problem
@@ -811,44 +1110,73 @@ class InitSearch:
         self.best = layouts[0]
         self.tried = {layouts[0].kinds}
         self.targeted: set[Kinds] = set()  # the init choices `_targets` started from
+        self.searched = 0  # init choices whose write phases were searched
+        self.budget = SEARCHED  # how many may be
+        self.order = 0  # init choices queued: ties in `_queued` go to the first
+        self.improved = 0  # better plans found
+        self.phases: dict[Kinds, WritePhase] = {}
 
     def run(self, writes: Writes) -> list[Layout]:
-        """Every candidate found, starting from `writes`, the best write phase without inits."""
-        queue = self._first(writes)
-        while queue:
-            kinds = queue.pop(0)
-            if kinds not in self.tried:
-                queue += self._try(kinds)
+        """Every candidate found, starting from `writes`, the best write phase without inits. The
+        init choices waiting are searched those from the latest better plan first, then lowest
+        `floor` first, as many as the budget allows."""
+        queue = self._queued(self._first(writes))
+        while self.searched < self.budget:
+            if not queue:  # the neighbours of the best plan and the inits that save whole messages, alike
+                queue = self._queued([*_neighbours(self.problem, self.best), *self._targets()])
             if not queue:
-                queue = [kinds for kinds in _neighbours(self.problem, self.best) if kinds not in self.tried]
-            if not queue:
-                queue = self._targets()
+                break
+            *_, kinds = heapq.heappop(queue)
+            for found in self._queued(self._try(kinds)):
+                heapq.heappush(queue, found)
         return self.layouts
 
+    def _queued(self, choices: list[Kinds]) -> list[tuple[int, float, int, Kinds]]:
+        """Init choices not tried yet, as a heap: those from the latest better plan first, then by
+        what their plans cost at least."""
+        problem, out = self.problem, []
+        for kinds in dict.fromkeys(choices):
+            if kinds not in self.tried:
+                self.order += 1
+                out.append((-self.improved, init_cost(problem, kinds) + self._phase(kinds).floor, self.order, kinds))
+        heapq.heapify(out)
+        return out
+
+    def _phase(self, kinds: Kinds) -> WritePhase:
+        if (phase := self.phases.get(kinds)) is None:
+            phase = self.phases[kinds] = WritePhase(self.problem, kinds)
+        return phase
+
     def _first(self, writes: Writes) -> list[Kinds]:
-        """The init DP with a program's charge estimated four ways (module docstring, 2.)."""
+        """The init DP with a program's charge estimated five ways (module docstring, 2.)."""
         phase, problem = self.phase, self.problem
         everything = Channels.everything(True)
         residuals = [
-            phase.marginal(writes),
-            phase.linear(everything),
-            phase.linear(everything, problem.prices.field_header / INIT_SHARE),
-            phase.linear(Channels.everything(False)),
+            (phase.marginal(writes), None),
+            (phase.linear(everything), phase.alike),
+            (phase.linear(everything, problem.prices.field_header / INIT_SHARE), phase.alike),
+            (phase.linear(Channels.everything(False)), phase.alike),
+            (floor_of(problem.prices, phase.target_a, _over_every_kind(problem)), None),
         ]
-        return [choose_inits(problem, _table(problem, residual)) for residual in residuals]
+        return [choose_inits(problem, _table(problem, residual, alike)) for residual, alike in residuals]
 
     def _try(self, kinds: Kinds) -> list[Kinds]:
         """Search the write phases of `kinds`; when that gives a better plan, the init choices to try from it."""
         problem = self.problem
         self.tried.add(kinds)
         base = problem.system_cost + init_cost(problem, kinds)
-        with_inits = WritePhase(problem, kinds)
-        found = with_inits.solve(bound=self.best.estimate - base + problem.prices.exchange)  # refine may still gain
-        self.layouts += [Layout(kinds, writes, base + writes.estimate) for writes, _ in found]
-        if not found or base + found[0].writes.estimate >= self.best.estimate:
+        with_inits = self._phase(kinds)
+        if base + with_inits.floor >= self.best.estimate:
             return []
-        self.best = Layout(kinds, found[0].writes, base + found[0].writes.estimate)
-        return [choose_inits(problem, _table(problem, with_inits.marginal(found[0].writes))),
+        self.searched += 1
+        found = with_inits.solve(self.best.estimate - base)
+        self.layouts += [Layout(kinds, writes, base + writes.estimate) for writes in found]
+        if not found or base + found[0].estimate >= self.best.estimate:
+            return []
+        self.best = Layout(kinds, found[0], base + found[0].estimate)
+        self.budget = min(self.budget + SEARCHED // 2, 3 * SEARCHED)  # a better plan: its neighbourhood too
+        self.improved += 1
+        return [choose_inits(problem, _table(problem, with_inits.marginal(found[0]))),
                 *_moved_across(problem, kinds)]  # fmt: skip
 
     def _targets(self) -> list[Kinds]:
@@ -889,31 +1217,30 @@ def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
 def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[Overflow]) -> list[Kinds]:
     """Init choices that take the overflow of the `goals` fields out, to save whole messages.
 
-    For every set of those fields, header shares per field are bisected until the init DP
-    just removes the overflow of each (a Lagrangian relaxation of the message count); every
-    init choice met on the way that leaves at most SLACK_ITEMS of the overflow is a candidate
-    (a 21h the search adds may take out the last items).
+    For all of those fields together, and for each alone, header shares per field are bisected
+    until the init DP just removes the overflow of each (a Lagrangian relaxation of the message
+    count); every init choice met on the way that leaves at most SLACK_ITEMS of the overflow is a
+    candidate (a 21h the search adds may take out the last items).
     """
     found: dict[Kinds, None] = {}  # a set in the order found
-    for size in range(len(goals), 0, -1):
-        for chosen in itertools.combinations(goals, size):
-            # removing the overflow saves a header: start from that header spread over the overflow
-            shares = {bit: (problem.prices.address_header if bit == A_BIT else problem.prices.field_header) / over
-                      for bit, _, over, _ in chosen}  # fmt: skip
-            low, high = dict.fromkeys(shares, 0.0), dict.fromkeys(shares, INF)
-            for _ in range(TARGET_PROBES):
-                kinds = choose_inits(problem, _table(problem, phase.shared(shares)))
-                left = 0
-                for bit, goal, _, counted in chosen:
-                    over = sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit and counted >> i & 1) - goal
-                    left += max(over, 0)
-                    if over > 0:
-                        low[bit] = shares[bit]
-                    else:
-                        high[bit] = shares[bit]
-                    shares[bit] = 2 * shares[bit] if high[bit] == INF else (low[bit] + high[bit]) / 2
-                if left <= SLACK_ITEMS:
-                    found[kinds] = None
+    for chosen in dict.fromkeys([tuple(goals), *((goal,) for goal in goals)]) if goals else ():
+        # removing the overflow saves a header: start from that header spread over the overflow
+        shares = {bit: (problem.prices.address_header if bit == A_BIT else problem.prices.field_header) / over
+                  for bit, _, over, _ in chosen}  # fmt: skip
+        low, high = dict.fromkeys(shares, 0.0), dict.fromkeys(shares, INF)
+        for _ in range(TARGET_PROBES):
+            kinds = choose_inits(problem, _table(problem, phase.shared(shares), phase.alike))
+            left = 0
+            for bit, goal, _, counted in chosen:
+                over = sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit and counted >> i & 1) - goal
+                left += max(over, 0)
+                if over > 0:
+                    low[bit] = shares[bit]
+                else:
+                    high[bit] = shares[bit]
+                shares[bit] = 2 * shares[bit] if high[bit] == INF else (low[bit] + high[bit]) / 2
+            if left <= SLACK_ITEMS:
+                found[kinds] = None
     return list(found)
 
 
