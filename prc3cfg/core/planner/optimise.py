@@ -17,8 +17,9 @@ to send. The search is built around that:
    a few items is shut where 21h cost less than its header. States that cannot win whatever
    follows are dropped (`States`), a few at most go on. Jump addresses come first, from a
    DP of their own: link (30h) and unlink (31h) ranges against 46h items, with the 46h open
-   and shut (its misses a 21h); where 46h items overflow a message, that DP runs again with
-   a share of a header on each item, bisected (a Lagrangian relaxation of ceil(n/31)).
+   and shut (its misses a 21h), a table of moves (`ADDRESS_MOVES`); where 46h items overflow
+   a message, the same DP with the items counted in its states gives the cheapest addresses in
+   each fewer message, exactly (`_fewer_messages`).
 2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
    step) is a second DP over program numbers (`choose_inits`): runs of initialised programs
    cost one message each and never cover an unmanaged program; each program is charged what
@@ -76,7 +77,7 @@ import operator
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from enum import Enum
+from enum import Enum, IntEnum
 from math import fsum
 from typing import NamedTuple
 
@@ -116,8 +117,6 @@ _rho = operator.attrgetter("rho")
 TIE = 1e-9
 #: Items per message assumed by one of the init choices (few items: headers matter).
 INIT_SHARE = 4
-#: Probes of the header share that makes overflowing 46h items fit one message less.
-BISECTIONS = 3
 #: How many init choices' write phases one module's `InitSearch` searches, and half as many more
 #: after each better plan, up to three times as many (the CPU of a plan must not depend on the kind of
 #: change; improvements come from the first few and from near the better plans).
@@ -130,7 +129,8 @@ LIVE = 4
 BEAM = 24
 #: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
 TARGET_PROBES = 4
-#: Items of the overflow an init choice of `_header_targets` may leave for a 21h to take out.
+#: Items of an overflow left for 21h to take out: by an init choice of `_header_targets`, and by the
+#: jump addresses in fewer 46h messages (`WritePhase._fewer_messages`).
 SLACK_ITEMS = 2
 #: How many init choices closest to the best (within an exchange) `_header_targets` starts from in each round.
 TARGETED = 2
@@ -208,6 +208,39 @@ class RangeMove(Enum):
     INNER_UNLINK_ONE = "an unlink range of one program inside a link range (which goes on)"
 
 
+class Gives(IntEnum):
+    """The address a move of the jump-address DP gives its program."""
+
+    KEEP = 0  # the base's
+    ZERO = 1  # 0: an unlink range, or a link range's last program
+    NEXT = 2  # the next program's number: a link range
+
+
+#: The jump-address DP's moves (`WritePhase._solve_addresses`), in the order its ties go to the
+#: first: (state after program i, state after i-1, the move, whether it starts a range (one 30h
+#: or 31h more), the address it gives program i, whether a range goes on past i, so program i+1
+#: must be managed). States: 0 no range open; 1 a link range goes on to i+1; 2 an unlink range
+#: covers i (and may go on); 3 a link range inside an unlink range goes on to i+1; 4 an unlink
+#: range inside a link range covers i and goes on, the link range too.
+ADDRESS_MOVES: tuple[tuple[int, int, RangeMove, bool, Gives, bool], ...] = (
+    (0, 0, RangeMove.KEEP, False, Gives.KEEP, False),
+    (0, 2, RangeMove.KEEP, False, Gives.KEEP, False),
+    (0, 1, RangeMove.END, False, Gives.ZERO, False),
+    (1, 0, RangeMove.LINK, True, Gives.NEXT, True),
+    (1, 2, RangeMove.LINK, True, Gives.NEXT, True),
+    (1, 1, RangeMove.LINK_ON, False, Gives.NEXT, True),
+    (1, 1, RangeMove.INNER_UNLINK_ONE, True, Gives.ZERO, True),
+    (1, 4, RangeMove.INNER_UNLINK_END, False, Gives.ZERO, True),
+    (2, 0, RangeMove.UNLINK, True, Gives.ZERO, False),
+    (2, 2, RangeMove.UNLINK_ON, False, Gives.ZERO, False),
+    (2, 3, RangeMove.INNER_END, False, Gives.ZERO, False),
+    (3, 2, RangeMove.INNER_LINK, True, Gives.NEXT, True),
+    (3, 3, RangeMove.INNER_LINK_ON, False, Gives.NEXT, True),
+    (4, 1, RangeMove.INNER_UNLINK, True, Gives.ZERO, True),
+    (4, 4, RangeMove.INNER_UNLINK_ON, False, Gives.ZERO, True),
+)
+#: The states a program outside the plan file leaves (no range goes on over it): 0, from 0 or 2.
+ADDRESS_STATES = 5
 #: The moves of `RangeMove` that give a program the address of the next.
 NEXT_MOVES = frozenset((RangeMove.LINK, RangeMove.LINK_ON, RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON))
 #: The moves that start a range inside another, and those that start an outer one.
@@ -271,7 +304,7 @@ class WritePhase:
         # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
         self._parts_cache: dict[tuple[int, int, bool, bool, bool], Parts] = {}
-        self._address_cache: dict[tuple[int, bool, float], Addresses] = {}
+        self._address_cache: dict[tuple[int, bool], tuple[Addresses, ...]] = {}
 
     # -- the channel subsets ---------------------------------------------------------------
 
@@ -310,28 +343,14 @@ class WritePhase:
         whole |= self.forced(channels)
         if self.lower_bound(whole) >= bound:
             return None
-        # The jump-address DP prices 46h items one by one against link and unlink ranges. When they
-        # overflow into one more message, find by bisection the least share of a header on each item
-        # that makes the DP save the message (a Lagrangian relaxation of ceil(n/31)); the shares that
-        # matter are small beside the header, so the bisection is geometric.
-        first = self._with_addresses(whole, channels, 0.0)
-        n = first.addresses.bit_count()
-        if n <= codec.MAX_ADDRESS_ITEMS:
-            return first
-        goal = codec.MAX_ADDRESS_ITEMS * ((n - 1) // codec.MAX_ADDRESS_ITEMS)
-        tried = [first]
-        low, high = self.prices.address_item / 16, self.prices.address_header
-        for _ in range(BISECTIONS):
-            middle = (low * high) ** 0.5
-            tried.append(self._with_addresses(whole, channels, middle))
-            if tried[-1].addresses.bit_count() <= goal:
-                high = middle
-            else:
-                low = middle
-        return min(tried, key=ESTIMATE)
+        # The jump-address DP prices 46h items one by one against link and unlink ranges; where they
+        # overflow into one more message, it also gives the cheapest addresses in each fewer message
+        # (`addresses`): each is tried with the rest of the write phase.
+        return min((self._with_addresses(whole, channels, found) for found in self.addresses(whole, channels.addresses)),
+                   key=ESTIMATE)  # fmt: skip
 
-    def _with_addresses(self, whole: int, channels: Channels, share: float) -> Writes:
-        ranges, addresses, extra = self.addresses(whole, channels.addresses, share)
+    def _with_addresses(self, whole: int, channels: Channels, found: Addresses) -> Writes:
+        ranges, addresses, extra = found
         whole |= extra
         runs, positions, speeds, more, runs_cost = self.parts(whole, addresses, channels)
         whole |= more
@@ -460,74 +479,128 @@ class WritePhase:
 
     # -- A: link/unlink ranges against 46h items -----------------------------------------------
 
-    def addresses(self, whole: int, open46: bool, share: float = 0.0) -> Addresses:
+    def addresses(self, whole: int, open46: bool) -> tuple[Addresses, ...]:
         """The jump addresses of the programs not in `whole`: link and unlink ranges, 46h items
-        (when `open46`) or a 21h. 46h items are priced one by one plus `share` for their share of
-        the 46h messages."""
-        key = (whole, open46, share)
+        (when `open46`) or a 21h — the cheapest with 46h items priced one by one, and where those
+        overflow a message, the cheapest in each fewer 46h message (`_fewer_messages`)."""
+        key = (whole, open46)
         cached = self._address_cache.get(key)
         if cached is None:
-            cached = self._address_cache[key] = self._solve_addresses(whole, open46, share)
+            cached = self._address_cache[key] = self._solve_addresses(whole, open46)
         return cached
 
-    def _solve_addresses(self, whole: int, open46: bool, share: float) -> Addresses:
-        """The DP over program numbers behind `addresses`. States after program i: 0 no range
-        open; 1 a link range goes on to i+1; 2 an unlink range covers i (and may go on); 3 a link
-        range inside an unlink range goes on to i+1; 4 an unlink range inside a link range covers
-        i and goes on, the link range too. Complex because each of the five states has its own
-        ways in, and each way gives program i its address (kept, 0 or i+2) — a table of moves
-        would hide which address each gives."""
+    def _solve_addresses(self, whole: int, open46: bool) -> tuple[Addresses, ...]:
         if not self.changed[A_BIT] & ~whole:
-            return Addresses((), 0, 0)
+            return (Addresses((), 0, 0),)
+        steps = self._address_steps(whole)
+        cheapest = self._ranges_and_misses(whole, open46, self._cheapest_moves(steps, open46))
+        messages = -(-cheapest.items.bit_count() // codec.MAX_ADDRESS_ITEMS)
+        if messages <= 1:
+            return (cheapest,)
+        return (cheapest, *(self._ranges_and_misses(whole, True, moves) for moves in self._fewer_messages(steps, messages)))
+
+    def _address_steps(self, whole: int) -> list[tuple[bool, tuple[bool, bool, bool]] | None]:
+        """What the jump-address DP sees of each program: None outside the plan file; else whether
+        a range may go on past it (the next program is managed), and per `Gives` whether that
+        address would be wrong (a 46h item or a 21h; never for a program a 21h writes anyway)."""
         managed, target, base = self.managed, self.target_a, self.base_a
-        miss = self.prices.address_item + share if open46 else self.prices.program
-        link = self.prices.link
-        none, keep, end = RangeMove.NONE, RangeMove.KEEP, RangeMove.END  # locals: fast
-        link_, link_on, unlink, unlink_on = RangeMove.LINK, RangeMove.LINK_ON, RangeMove.UNLINK, RangeMove.UNLINK_ON
-        cost = [0.0, INF, INF, INF, INF]
-        back: list[tuple[tuple[int, RangeMove], ...]] = []
-        nowhere = (0, none)
+        steps: list[tuple[bool, tuple[bool, bool, bool]] | None] = []
         for i in range(PROGRAM_COUNT):
-            c0, c1, c2, c3, c4 = cost
             if not managed[i]:
-                back.append(((0, keep) if c0 <= c2 else (2, keep), nowhere, nowhere, nowhere, nowhere))
-                cost = [min(c0, c2), INF, INF, INF, INF]
+                steps.append(None)
                 continue
-            free = whole >> i & 1
-            t = target[i]
-            m_keep = 0.0 if free or base[i] == t else miss
-            m_zero = 0.0 if free or t == 0 else miss
-            m_next = 0.0 if free or t == i + 2 else miss
+            free, t = whole >> i & 1, target[i]
             goes_on = i + 1 < PROGRAM_COUNT and managed[i + 1]
-            open_prev, open_cost = (0, c0) if c0 <= c2 else (2, c2)
-            n0, b0 = open_cost + m_keep, (open_prev, keep)
-            if c1 + m_zero < n0:
-                n0, b0 = c1 + m_zero, (1, end)
-            n1 = n3 = n4 = INF
-            b1 = b3 = b4 = nowhere
-            if goes_on:
-                n1, b1 = open_cost + link + m_next, (open_prev, link_)
-                for c, how in ((c1 + m_next, (1, link_on)), (c1 + link + m_zero, (1, RangeMove.INNER_UNLINK_ONE)),
-                               (c4 + m_zero, (4, RangeMove.INNER_UNLINK_END))):  # fmt: skip
-                    if c < n1:
-                        n1, b1 = c, how
-                n3, b3 = c2 + link + m_next, (2, RangeMove.INNER_LINK)
-                if c3 + m_next < n3:
-                    n3, b3 = c3 + m_next, (3, RangeMove.INNER_LINK_ON)
-                n4, b4 = c1 + link + m_zero, (1, RangeMove.INNER_UNLINK)
-                if c4 + m_zero < n4:
-                    n4, b4 = c4 + m_zero, (4, RangeMove.INNER_UNLINK_ON)
-            n2, b2 = c0 + link + m_zero, (0, unlink)
-            for c, how in ((c2 + m_zero, (2, unlink_on)), (c3 + m_zero, (3, RangeMove.INNER_END))):
-                if c < n2:
-                    n2, b2 = c, how
-            cost = [n0, n1, n2, n3, n4]
-            back.append((b0, b1, b2, b3, b4))
+            steps.append((goes_on, (not free and base[i] != t, not free and t != 0, not free and t != i + 2)))
+        return steps
+
+    def _cheapest_moves(self, steps: list[tuple[bool, tuple[bool, bool, bool]] | None], open46: bool) -> list[RangeMove]:
+        """The DP over program numbers (`ADDRESS_MOVES`) behind `addresses`: each wrong address
+        costs a 46h item (when `open46`) or a 21h, each range its message."""
+        miss = self.prices.address_item if open46 else self.prices.program
+        link = self.prices.link
+        cost = [0.0, INF, INF, INF, INF]
+        back: list[dict[int, tuple[int, RangeMove]]] = []
+        for step in steps:
+            if step is None:
+                came = 0 if cost[0] <= cost[2] else 2
+                back.append({0: (came, RangeMove.KEEP)})
+                cost = [cost[came], INF, INF, INF, INF]
+                continue
+            goes_on, wrong = step
+            priced = [miss if w else 0.0 for w in wrong]
+            new = [INF] * ADDRESS_STATES
+            moves: dict[int, tuple[int, RangeMove]] = {}
+            for to, came, move, starts, gives, on in ADDRESS_MOVES:
+                if on and not goes_on:
+                    continue
+                c = cost[came] + link + priced[gives] if starts else cost[came] + priced[gives]
+                if c < new[to]:
+                    new[to], moves[to] = c, (came, move)
+            cost = new
+            back.append(moves)
         state = 0 if cost[0] <= cost[2] else 2
-        moves = [none] * PROGRAM_COUNT
+        found = [RangeMove.NONE] * PROGRAM_COUNT
         for i in range(PROGRAM_COUNT - 1, -1, -1):
-            state, moves[i] = back[i][state]
-        return self._ranges_and_misses(whole, open46, moves)
+            state, found[i] = back[i][state]
+        return found
+
+    def _fewer_messages(self, steps: list[tuple[bool, tuple[bool, bool, bool]] | None], messages: int) -> list[list[RangeMove]]:
+        """The cheapest moves with each fewer 46h message than `messages`, where one exists: the DP of
+        `_cheapest_moves` whose states also count the items so far — exact where pricing items one
+        by one is not (one header saved may pay for ranges that no share of it on each item would
+        draw) — and with up to SLACK_ITEMS more, which 21h may take out (`PartsDP` counts them).
+        Each state keeps the counts that cost less than every smaller count (a Pareto front), and
+        none above what fewer messages hold with that slack."""
+        link, item, most = self.prices.link, self.prices.address_item, codec.MAX_ADDRESS_ITEMS * (messages - 1) + SLACK_ITEMS
+        fronts: list[dict[int, float]] = [{0: 0.0}, {}, {}, {}, {}]
+        back: list[list[dict[int, tuple[int, RangeMove, int]]]] = []
+        for step in steps:
+            if step is None:
+                came: dict[int, tuple[int, RangeMove, int]] = {}
+                kept: dict[int, float] = {}
+                for state in (0, 2):
+                    for n, c in fronts[state].items():
+                        if c < kept.get(n, INF):
+                            kept[n], came[n] = c, (state, RangeMove.KEEP, n)
+                fronts = [_pareto(kept), {}, {}, {}, {}]
+                back.append([came, {}, {}, {}, {}])
+                continue
+            goes_on, wrong = step
+            new: list[dict[int, float]] = [{} for _ in range(ADDRESS_STATES)]
+            moves: list[dict[int, tuple[int, RangeMove, int]]] = [{} for _ in range(ADDRESS_STATES)]
+            for to, came_from, move, starts, gives, on in ADDRESS_MOVES:
+                if on and not goes_on:
+                    continue
+                more = 1 if wrong[gives] else 0
+                into, how = new[to], moves[to]
+                for n, c in fronts[came_from].items():
+                    if n + more > most:
+                        continue
+                    c = c + link + (item if more else 0.0) if starts else c + (item if more else 0.0)
+                    if c < into.get(n + more, INF):
+                        into[n + more], how[n + more] = c, (came_from, move, n)
+            fronts = [_pareto(front) for front in new]
+            back.append(moves)
+        last: dict[int, tuple[int, float]] = {}
+        for state in (0, 2):
+            for n, c in fronts[state].items():
+                if c < last.get(n, (0, INF))[1]:
+                    last[n] = (state, c)
+        chosen: list[int] = []
+        for fewer in range(messages - 1, -1, -1):
+            for slack in range(SLACK_ITEMS + 1):
+                fit = [n for n in last if n <= codec.MAX_ADDRESS_ITEMS * fewer + slack]
+                if fit and (n := min(fit, key=lambda n: last[n][1])) not in chosen:
+                    chosen.append(n)
+        found = []
+        for n in chosen:
+            state = last[n][0]
+            moves_found = [RangeMove.NONE] * PROGRAM_COUNT
+            for i in range(PROGRAM_COUNT - 1, -1, -1):
+                state, moves_found[i], n = back[i][state][n]
+            found.append(moves_found)
+        return found
 
     def _ranges_and_misses(self, whole: int, open46: bool, moves: list[RangeMove]) -> Addresses:
         """The ranges the DP's moves draw — the outer ones, then those inside them, sent after
@@ -921,6 +994,15 @@ class States:
             credit = self.credit
             kept = sorted(kept, key=lambda pair: pair[1] - fsum((pair[0] >> shift & FIELD) * each for shift, each in credit))[:most]
         return dict(kept)
+
+
+def _pareto(front: dict[int, float]) -> dict[int, float]:
+    """The counts of `front` that cost less than every smaller count."""
+    kept, least = {}, INF
+    for n in sorted(front):
+        if front[n] < least:
+            kept[n] = least = front[n]
+    return kept
 
 
 def _suffix_counts(mask: int) -> list[int]:
