@@ -21,6 +21,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 from planner_helpers import FRAMINGS, check_plan, line, plan_bench
+from test_planner_cases import FOUND_CASES
 from test_planner_property import random_system, read_back, scenarios, valid_under
 
 from prc3cfg.core import codec
@@ -93,6 +94,13 @@ def test_commissioning_every_field_takes_27_messages() -> None:
     assert len(reference.messages) == 27
     assert sum(m.ID == 0x21 for m in reference.messages) == 4
     assert [sum(m.ID == kind for m in reference.messages) for kind in (0x33, 0x42, 0x43, 0x44, 0x45)] == [4] * 5
+
+
+@pytest.mark.parametrize("case", FOUND_CASES, ids=lambda case: case["found"].split(":")[0])
+def test_the_found_cases_optimum_is_the_exact_references(case: dict) -> None:
+    """The optimum test_planner_cases holds the planner to on each case the soak properties found."""
+    actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
+    assert reference_replayed(actual, desired, line(case["framing"], case["turnaround"])).bus_time == pytest.approx(case["optimum"], abs=1e-9)
 
 
 def busy_program(rnd: random.Random, system: SystemParameters, number: int) -> Program:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import functools
+import json
 import operator
 import random
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 from planner_helpers import FRAMINGS, check_plan, line, with_programs
@@ -324,6 +326,36 @@ def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> N
     assert plan.steps[0].message == codec.LinkPrograms(41, 49)
     assert ids(plan) == [0x30, 0x46]
     assert set(plan.steps[1].message.touched_programs()) == set(range(1, 25)) | {44}
+
+
+@pytest.mark.parametrize("framing", ["crc16", "open-driver"])
+def test_of_two_link_ranges_that_pay_alike_one_saves_a_46h(framing: str) -> None:
+    """Chains 1..13 and 41..53 and ten programs jumping to 60: 34 jump addresses, two 46h. Either
+    link range alone leaves 22 items, one 46h; both cost a 30h more than that saves, and neither
+    pays item by item — they pay at the same share of a header on each item, so no share draws
+    one without the other: the items are counted, not shared."""
+    unchained = replace(PLANT, programs=tuple(replace(p, A=0) for p in PLANT.programs))
+    chains = {n: replace(unchained.programs[n - 1], A=n + 1) for n in [*range(1, 13), *range(41, 53)]}
+    desired = with_programs(unchained, chains | {n: replace(unchained.programs[n - 1], A=60) for n in range(21, 31)})
+    plan = planned(unchained, desired, framing)
+    assert plan.steps[0].message == codec.LinkPrograms(1, 13)
+    assert ids(plan) == [0x30, 0x46]
+    assert set(plan.steps[1].message.touched_programs()) == {*range(21, 31), *range(41, 53)}
+
+
+#: Modules on which the planner once missed the exact optimum (tests/planner/test_exact_reference.py's
+#: soak properties found them; its `test_the_found_cases_optimum_is_the_exact_references` proves each
+#: `optimum` again): the read-back, the plant file's image, the line, and the optimum's bus time in seconds.
+FOUND_CASES = json.loads((Path(__file__).parent / "found_cases.json").read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize("case", FOUND_CASES, ids=[case["found"].split(":")[0] + f"-{n}" for n, case in enumerate(FOUND_CASES)])
+def test_the_plan_of_a_found_case_is_at_the_exact_optimum(case: dict) -> None:
+    actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
+    cost = line(case["framing"], case["turnaround"])
+    plan = plan_module(actual, desired, cost)
+    check_plan(plan, actual, desired, cost)
+    assert plan.bus_time == pytest.approx(case["optimum"], abs=1e-9), case["found"]
 
 
 @pytest.mark.parametrize("framing", FRAMINGS)
