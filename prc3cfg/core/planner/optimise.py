@@ -129,9 +129,12 @@ LIVE = 4
 BEAM = 24
 #: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
 TARGET_PROBES = 4
-#: Items of an overflow left for 21h to take out: by an init choice of `_header_targets`, and by the
-#: jump addresses in fewer 46h messages (`WritePhase._fewer_messages`).
+#: Items of the overflow an init choice of `_header_targets` may leave for a 21h to take out.
 SLACK_ITEMS = 2
+#: Jump addresses above what fewer 46h messages hold that `WritePhase._fewer_messages` leaves for
+#: 21h to take out (`PartsDP` counts them: a program written whole for its other fields takes its
+#: address item out too).
+ADDRESS_SLACK = 5
 #: How many init choices closest to the best (within an exchange) `_header_targets` starts from in each round.
 TARGETED = 2
 
@@ -549,10 +552,10 @@ class WritePhase:
         """The cheapest moves with each fewer 46h message than `messages`, where one exists: the DP of
         `_cheapest_moves` whose states also count the items so far — exact where pricing items one
         by one is not (one header saved may pay for ranges that no share of it on each item would
-        draw) — and with up to SLACK_ITEMS more, which 21h may take out (`PartsDP` counts them).
+        draw) — and with up to ADDRESS_SLACK more, which 21h may take out (`PartsDP` counts them).
         Each state keeps the counts that cost less than every smaller count (a Pareto front), and
         none above what fewer messages hold with that slack."""
-        link, item, most = self.prices.link, self.prices.address_item, codec.MAX_ADDRESS_ITEMS * (messages - 1) + SLACK_ITEMS
+        link, item, most = self.prices.link, self.prices.address_item, codec.MAX_ADDRESS_ITEMS * (messages - 1) + ADDRESS_SLACK
         fronts: list[dict[int, float]] = [{0: 0.0}, {}, {}, {}, {}]
         back: list[list[dict[int, tuple[int, RangeMove, int]]]] = []
         for step in steps:
@@ -589,7 +592,7 @@ class WritePhase:
                     last[n] = (state, c)
         chosen: list[int] = []
         for fewer in range(messages - 1, -1, -1):
-            for slack in range(SLACK_ITEMS + 1):
+            for slack in range(ADDRESS_SLACK + 1):
                 fit = [n for n in last if n <= codec.MAX_ADDRESS_ITEMS * fewer + slack]
                 if fit and (n := min(fit, key=lambda n: last[n][1])) not in chosen:
                     chosen.append(n)
