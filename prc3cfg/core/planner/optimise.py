@@ -555,55 +555,43 @@ class WritePhase:
         draw) — and with up to ADDRESS_SLACK more, which 21h may take out (`PartsDP` counts them).
         Each state keeps the counts that cost less than every smaller count (a Pareto front), and
         none above what fewer messages hold with that slack."""
-        link, item, most = self.prices.link, self.prices.address_item, codec.MAX_ADDRESS_ITEMS * (messages - 1) + ADDRESS_SLACK
+        most = codec.MAX_ADDRESS_ITEMS * (messages - 1) + ADDRESS_SLACK
         fronts: list[dict[int, float]] = [{0: 0.0}, {}, {}, {}, {}]
         back: list[list[dict[int, tuple[int, RangeMove, int]]]] = []
         for step in steps:
-            if step is None:
-                came: dict[int, tuple[int, RangeMove, int]] = {}
-                kept: dict[int, float] = {}
-                for state in (0, 2):
-                    for n, c in fronts[state].items():
-                        if c < kept.get(n, INF):
-                            kept[n], came[n] = c, (state, RangeMove.KEEP, n)
-                fronts = [_pareto(kept), {}, {}, {}, {}]
-                back.append([came, {}, {}, {}, {}])
-                continue
-            goes_on, wrong = step
-            new: list[dict[int, float]] = [{} for _ in range(ADDRESS_STATES)]
-            moves: list[dict[int, tuple[int, RangeMove, int]]] = [{} for _ in range(ADDRESS_STATES)]
-            for to, came_from, move, starts, gives, on in ADDRESS_MOVES:
-                if on and not goes_on:
-                    continue
-                more = 1 if wrong[gives] else 0
-                into, how = new[to], moves[to]
-                for n, c in fronts[came_from].items():
-                    if n + more > most:
-                        continue
-                    c = c + link + (item if more else 0.0) if starts else c + (item if more else 0.0)
-                    if c < into.get(n + more, INF):
-                        into[n + more], how[n + more] = c, (came_from, move, n)
-            fronts = [_pareto(front) for front in new]
+            fronts, moves = _outside(fronts) if step is None else self._counted_step(fronts, step, most)
             back.append(moves)
-        last: dict[int, tuple[int, float]] = {}
+        last: dict[int, tuple[int, float]] = {}  # by count: the state after the last program (0 or 2), the cost
         for state in (0, 2):
             for n, c in fronts[state].items():
                 if c < last.get(n, (0, INF))[1]:
                     last[n] = (state, c)
-        chosen: list[int] = []
-        for fewer in range(messages - 1, -1, -1):
-            for slack in range(ADDRESS_SLACK + 1):
-                fit = [n for n in last if n <= codec.MAX_ADDRESS_ITEMS * fewer + slack]
-                if fit and (n := min(fit, key=lambda n: last[n][1])) not in chosen:
-                    chosen.append(n)
         found = []
-        for n in chosen:
+        for n in _fewer_counts(last, messages):
             state = last[n][0]
             moves_found = [RangeMove.NONE] * PROGRAM_COUNT
             for i in range(PROGRAM_COUNT - 1, -1, -1):
                 state, moves_found[i], n = back[i][state][n]
             found.append(moves_found)
         return found
+
+    def _counted_step(self, fronts: list[dict[int, float]], step: tuple[bool, tuple[bool, bool, bool]],
+                      most: int) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:  # fmt: skip
+        """One managed program of `_fewer_messages`: each state's front after it, and how each count came."""
+        link, item = self.prices.link, self.prices.address_item
+        goes_on, wrong = step
+        new: list[dict[int, float]] = [{} for _ in range(ADDRESS_STATES)]
+        moves: list[dict[int, tuple[int, RangeMove, int]]] = [{} for _ in range(ADDRESS_STATES)]
+        for to, came_from, move, starts, gives, on in ADDRESS_MOVES:
+            if on and not goes_on:
+                continue
+            more = 1 if wrong[gives] else 0
+            added = (link if starts else 0.0) + (item if more else 0.0)
+            into, how = new[to], moves[to]
+            for n, c in fronts[came_from].items():
+                if n + more <= most and c + added < into.get(n + more, INF):
+                    into[n + more], how[n + more] = c + added, (came_from, move, n)
+        return [_pareto(front) for front in new], moves
 
     def _ranges_and_misses(self, whole: int, open46: bool, moves: list[RangeMove]) -> Addresses:
         """The ranges the DP's moves draw — the outer ones, then those inside them, sent after
@@ -997,6 +985,30 @@ class States:
             credit = self.credit
             kept = sorted(kept, key=lambda pair: pair[1] - fsum((pair[0] >> shift & FIELD) * each for shift, each in credit))[:most]
         return dict(kept)
+
+
+def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:
+    """A program outside the plan file in `WritePhase._fewer_messages`: no range goes on over it, so
+    every count comes to state 0, from 0 or 2."""
+    came: dict[int, tuple[int, RangeMove, int]] = {}
+    kept: dict[int, float] = {}
+    for state in (0, 2):
+        for n, c in fronts[state].items():
+            if c < kept.get(n, INF):
+                kept[n], came[n] = c, (state, RangeMove.KEEP, n)
+    return [_pareto(kept), {}, {}, {}, {}], [came, {}, {}, {}, {}]
+
+
+def _fewer_counts(last: dict[int, tuple[int, float]], messages: int) -> list[int]:
+    """The item counts `WritePhase._fewer_messages` draws: per fewer 46h message and slack, the
+    cheapest count that fits."""
+    chosen: list[int] = []
+    for fewer in range(messages - 1, -1, -1):
+        for slack in range(ADDRESS_SLACK + 1):
+            fit = [n for n in last if n <= codec.MAX_ADDRESS_ITEMS * fewer + slack]
+            if fit and (n := min(fit, key=lambda n: last[n][1])) not in chosen:
+                chosen.append(n)
+    return chosen
 
 
 def _pareto(front: dict[int, float]) -> dict[int, float]:
