@@ -193,9 +193,12 @@ def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) 
         saved = [(entry.get("bus"), image) for entry, image in zip(entries, images_from_json(entries))]
     except ValueError as error:
         raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
+    by_address: dict[int, list[tuple[Any, ModuleImage]]] = {}  # 32 × 30 modules: not every image for every module
+    for bus_name, image in saved:
+        by_address.setdefault(image.address, []).append((bus_name, image))
     images: dict[Key, ModuleImage] = {}
     for bus, module in select(plant, modules):
-        found = [img for b, img in saved if img.address == module.address and b in (None, bus.name)]
+        found = [img for b, img in by_address.get(module.address, ()) if b in (None, bus.name)]
         if len(found) != 1:
             raise UserError(
                 f"{path}: {'no' if not found else 'more than one'} image for bus {bus.name}, module "

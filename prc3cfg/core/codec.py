@@ -31,6 +31,7 @@ longer be read beside their drawing. The `# --` rulers mark words, messages and 
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import ClassVar
@@ -81,7 +82,8 @@ def _check_range(first: int, last: int) -> None:
 
 
 def _pack(words: list[int]) -> bytes:
-    return b"".join((w & 0xFFFF).to_bytes(2, "big") for w in words)
+    """Words as big-endian 16-bit, negative values in two's complement."""
+    return struct.pack(f">{len(words)}H", *[w & 0xFFFF for w in words])
 
 
 def _kf(data: bytes, word: int) -> int:

@@ -9,7 +9,7 @@ planner, their factory defaults (prc3-protocol.md §4.1) and the module image JS
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Annotated, Any
 
 from pydantic import TypeAdapter, ValidationError
@@ -136,7 +136,7 @@ class ModuleImage:
         programs = list(self.programs)
         for number, program in changes.items():
             programs[number - 1] = program
-        return replace(self, programs=tuple(programs))
+        return ModuleImage(self.address, self.system, tuple(programs))
 
     def to_json(self) -> dict[str, Any]:
         return {

@@ -39,15 +39,15 @@ The manual gives the numbers, not the kinematics; these are the project's readin
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
-from decimal import Decimal
 
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
 from prc3cfg.core.image import ModuleImage, Program
-from prc3cfg.core.units import BY_SYMBOL, split_function_output
+from prc3cfg.core.units import BY_SYMBOL, function_output_parts
 from prc3cfg.errors import UserError
 
 MOVE = "move"
@@ -62,8 +62,10 @@ class MotionError(UserError):
     output outside 0..1999): only a damaged or foreign read-back holds one."""
 
 
+@functools.lru_cache(maxsize=4096)
 def _si(symbol: str, device: int) -> float:
-    """A device value in metres, m/s, seconds or m/s² (`prc3cfg.core.units`)."""
+    """A device value in metres, m/s, seconds or m/s² (`prc3cfg.core.units`): kept, as a module's values
+    repeat (a plan's charts of 8 × 30 modules convert 200,000 of them, some 3,000 different)."""
     return float(BY_SYMBOL[symbol].to_human(device))
 
 
@@ -205,14 +207,15 @@ def _move(number: int, start: float, start_position: int, acceleration: float, t
     return Segment(MOVE, number, start, start + duration, begin, end_position, distance, peak / acceleration, peak)
 
 
-def _action(move: Segment, output: str, value: int, travel: Decimal) -> tuple[float, bool] | None:
-    """(when, set?) of an output's action on a move of `travel` m; None: it does not act on it."""
-    action, distance = split_function_output(value)
+def _action(move: Segment, output: str, value: int, travel: int) -> tuple[float, bool] | None:
+    """(when, set?) of an output's action on a move of `travel` mm; None: it does not act on it.
+    In whole mm until the time is worked out, as the module counts them."""
+    action, distance = function_output_parts(value)
     if output == "F1":
         if distance > travel:
             return None
-        return move.time_at(float(distance)), action == "set"
-    return move.time_at(float(max(travel - distance, Decimal(0)))), action == "set"
+        return move.time_at(_si("F", distance)), action == "set"
+    return move.time_at(_si("F", max(travel - distance, 0))), action == "set"
 
 
 @dataclass(slots=True)
@@ -229,7 +232,7 @@ def _run(numbers: Iterable[int], programs: dict[int, Program], start_position: i
     for number in numbers:
         program = programs[number]
         move = _move(number, time, position, acceleration, program)
-        travel = BY_SYMBOL["P"].in_unit(abs(program.P - position))
+        travel = abs(program.P - position)
         for output in OUTPUTS:
             if (action := _action(move, output, getattr(program, output), travel)) is not None:
                 run.actions[output].append(action)
@@ -287,18 +290,27 @@ def _chains(programs: dict[int, Program]) -> list[tuple[tuple[int, ...], int]]:
 def chain_motions(image: ModuleImage) -> tuple[ChainMotion, ...]:
     """The motion of every chain of the image, by its first program."""
     programs = {n: p for n, p in enumerate(image.programs, start=1) if p is not None}
-    reference, upper = _si("S2", image.system.S2), _si("S1", image.system.S1)
+    system = image.system
     motions = []
     for numbers, then in _chains(programs):
         _check(image, numbers, programs)
-        acceleration = _si("S6", image.system.S6)
-        run = _run(numbers, programs, image.system.S2, acceleration)
-        cycle_time = None
-        if then in numbers:
-            loop = numbers[numbers.index(then) :]
-            cycle_time = _run(loop, programs, programs[numbers[-1]].P, acceleration).segments[-1].end
-        motions.append(ChainMotion(numbers, then, tuple(run.segments), _intervals(run), cycle_time, reference, upper))
+        motions.append(_chain_motion(numbers, then, tuple(programs[n] for n in numbers), system.S1, system.S2, system.S6))
     return tuple(motions)
+
+
+@functools.lru_cache(maxsize=1024)
+def _chain_motion(numbers: tuple[int, ...], then: int, chained: tuple[Program, ...], s1: int, s2: int, s6: int) -> ChainMotion:
+    """The motion of one chain, the programs `numbers` (`chained`) then `then`, on a module of
+    these S1, S2 and S6: all it depends on. Kept, as a chain a plan does not change is drawn
+    before and after it (and modules of one profile hold the same chains)."""
+    programs = dict(zip(numbers, chained))
+    acceleration = _si("S6", s6)
+    run = _run(numbers, programs, s2, acceleration)
+    cycle_time = None
+    if then in numbers:
+        loop = numbers[numbers.index(then) :]
+        cycle_time = _run(loop, programs, programs[numbers[-1]].P, acceleration).segments[-1].end
+    return ChainMotion(numbers, then, tuple(run.segments), _intervals(run), cycle_time, _si("S2", s2), _si("S1", s1))
 
 
 def paired_chains(before: ModuleImage, after: ModuleImage, *, changed_only: bool = False

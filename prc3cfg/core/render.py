@@ -240,9 +240,11 @@ def step_line(index: int, message_hex: str, summary: str, releases: bool, broadc
             + ("  ⚠ RELEASES AXES" if releases else ""))  # fmt: skip
 
 
-def changes_json(change: ModuleChange) -> dict[str, Any]:
+def changes_json(change: ModuleChange, *, charts: bool = True) -> dict[str, Any]:
     """What people read of one module's change: its fields, the symbol of each changed program,
-    its jumps, what the module's clamping does, the axis warning (a plan file keeps it beside the steps)."""
+    its jumps, what the module's clamping does, the axis warning (a plan file keeps it beside the steps),
+    and unless told not to (the terminal shows none) the stroke charts of its changed chains: working
+    out the motions takes most of the time of rendering 8 × 30 modules whose chains change."""
     diff = module_diff(change)
     return {
         "fields": [f.to_json() for f in diff.fields],
@@ -251,8 +253,7 @@ def changes_json(change: ModuleChange) -> dict[str, Any]:
         "chains_added": list(diff.chains_added),
         "clamped": [{**f.to_json(), "reason": CLAMPED} for f in diff.clamped],
         "warning": AXIS_WARNING if change.releases_axes else None,
-        "charts": _charts(change),
-    }
+    } | ({"charts": _charts(change)} if charts else {})
 
 
 def review(change: ModuleChange) -> dict[str, Any]:
@@ -309,9 +310,10 @@ def _plain_texts(value: Any) -> Any:
     return value
 
 
-def _changes(bus: str, module: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> dict[str, Any]:
-    """A module's `changes` (`changes_json`): the plan file's, or worked out now from the live plan."""
-    return changes_json(live[(bus, module["address"])]) if live else module["changes"]
+def _changes(bus: str, module: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *, charts: bool = True) -> dict[str, Any]:
+    """A module's `changes` (`changes_json`): the plan file's, or worked out now from the live plan (without
+    its `charts` when not asked for)."""
+    return changes_json(live[(bus, module["address"])], charts=charts) if live else module["changes"]
 
 
 def _modules(document: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
@@ -487,7 +489,7 @@ def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], Modul
         if not module["steps"]:
             out.append(_header(bus, module))
             continue
-        lines = [_header(bus, module), *module_lines(_changes(bus, module, live)), "steps:", *_step_lines(module)]
+        lines = [_header(bus, module), *module_lines(_changes(bus, module, live, charts=False)), "steps:", *_step_lines(module)]
         out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
     return out
 

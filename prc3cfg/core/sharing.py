@@ -41,7 +41,7 @@ from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
 from prc3cfg.core.planner import (
     ModulePlan,
     PlanVerificationError,
@@ -164,8 +164,10 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     if all(m.desired.system == wanted for m in modules) and sum(m.actual.system != wanted for m in modules) >= 2:
         message = codec.InitSystem() if wanted == DEFAULT_SYSTEM else codec.WriteSystem(wanted)
         groups.append((Step(message, summarise(message, first.actual.system), True),))
+    desired = [[m.desired.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]  # by program, then module
+    actual = [[m.actual.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]
     for field in PROGRAM_FIELDS:
-        items = _shared_items(field, modules)
+        items = _shared_items(field, desired, actual)
         kind = codec.WriteAddresses if field == "A" else codec.FIELD_MESSAGES[field]
         size = codec.MAX_ADDRESS_ITEMS if field == "A" else FIELD_ITEMS
         messages = [kind(tuple(items[i : i + size])) for i in range(0, len(items), size)]
@@ -174,16 +176,18 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     return groups
 
 
-def _shared_items(field: str, modules: Sequence[SharingModule]) -> list[tuple[int, int]]:
-    """(program, value) of `field` for each program every module wants alike and two or more do not hold yet."""
+def _shared_items(field: str, desired: list[list[Program | None]], actual: list[list[Program | None]]) -> list[tuple[int, int]]:
+    """(program, value) of `field` for each program every module wants alike and two or more do not hold yet
+    (`desired`, `actual`: each program's, module by module)."""
     items = []
-    for number in PROGRAM_NUMBERS:
-        desired = [p for m in modules if (p := m.desired.program(number)) is not None]
-        values = {getattr(p, field) for p in desired}
-        if len(values) != 1 or len(desired) != len(modules):
+    for number, wanted, held in zip(PROGRAM_NUMBERS, desired, actual):
+        if not all(wanted):  # a module that does not manage it (a Program is always true)
+            continue
+        values = {getattr(p, field) for p in wanted if p is not None}
+        if len(values) != 1:
             continue
         (value,) = values
-        differing = sum(m.actual.program(number) is None or getattr(m.actual.program(number), field) != value for m in modules)
+        differing = sum(p is None or getattr(p, field) != value for p in held)
         if differing >= 2:
             items.append((number, value))
     return items

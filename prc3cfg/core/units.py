@@ -126,6 +126,7 @@ SYSTEM_QUANTITIES = tuple(q for q in QUANTITIES.values() if q.symbol.startswith(
 #: F1/F2's action (`PER_ACTION`).
 Action = Literal["reset", "set"]
 ACTIONS: dict[str, int] = {name: code for code, name in enumerate(get_args(Action))}  # reset 0, set 1
+_ACTION_NAMES: dict[int, str] = {code: name for name, code in ACTIONS.items()}
 DISTANCE = QUANTITIES["distance"]
 #: The program fields that hold an action and a distance.
 FUNCTION_OUTPUTS = ("F1", "F2")
@@ -136,10 +137,15 @@ def function_output(action: str, distance: Decimal) -> int:
     return ACTIONS[action] * PER_ACTION + DISTANCE.to_device(distance)
 
 
+def function_output_parts(device: int) -> tuple[str, int]:
+    """1010 → ("set", 10): the action and the distance in device units (mm)."""
+    return _ACTION_NAMES[device // PER_ACTION], device % PER_ACTION
+
+
 def split_function_output(device: int) -> tuple[str, Decimal]:
     """1010 → ("set", Decimal("0.010")); 50 → ("reset", Decimal("0.050"))."""
-    action = {code: name for name, code in ACTIONS.items()}[device // PER_ACTION]
-    return action, DISTANCE.in_unit(device % PER_ACTION)
+    action, distance = function_output_parts(device)
+    return action, DISTANCE.in_unit(distance)
 
 
 def plant_value(symbol: str, device: int) -> Decimal | int | bool | dict[str, Any]:

@@ -39,7 +39,7 @@ from prc3cfg.plant.messages import from_pydantic, what
 from prc3cfg.plant.models import BusLine, ModuleSpec, PlantSpec, ProfileSpec
 from prc3cfg.plant.plant import Bus, Module, Plant
 from prc3cfg.plant.problems import MAX_PROBLEMS, Path_, PlantError, Problem
-from prc3cfg.plant.profiles import module_layers, resolve
+from prc3cfg.plant.profiles import Effective, module_layers, resolve
 
 M = TypeVar("M", bound=BaseModel)
 #: Keys, values, lists and mappings in one part: a module or profile with every field of all
@@ -48,6 +48,8 @@ M = TypeVar("M", bound=BaseModel)
 MAX_PART_NODES = 10_000
 #: What stands for a module or a profile while the rest of the file is validated.
 _MODULE_STAND_IN = {"address": 1, "name": "-"}
+#: A module's own settings, each laid over its profiles' (`profiles.resolve`): a module that gives none has theirs.
+_SETTINGS = ("system", "programs", "chains", "unmanaged_programs")
 _PROFILE_STAND_IN: dict[str, Any] = {}
 
 
@@ -103,6 +105,7 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, l
         if isinstance(profile_path[1], str):
             profiles[profile_path[1]] = (profile, frozenset()) if profile is not None else _salvaged(ProfileSpec, raw)
     buses = []
+    alike: dict[tuple[str, ...], Effective] = {}  # the settings of modules that add nothing to their profiles, checked
     for bus_path, raw_bus in mappings_in(data, ("buses",)):
         line = spec.buses[int(bus_path[1])] if spec is not None else _line(raw_bus)
         problems.add(rules.check_bus(bus_path, line) if line else ())
@@ -112,7 +115,7 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, l
             problems.add(found)
             checked, unknown = (module, frozenset()) if module is not None else _salvaged(ModuleSpec, raw_module)
             if checked is not None:
-                found, built = _module(checked, module_path, profiles, unknown)
+                found, built = _module(checked, module_path, profiles, unknown, alike)
                 problems.add(found)
                 modules += [built] if built is not None else []
         if line is not None:
@@ -218,8 +221,12 @@ def _modules(data: dict[Any, Any]) -> Iterator[tuple[Path_, dict[Any, Any]]]:
 
 
 def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[ProfileSpec | None, rules.Unknown]],
-            unknown: rules.Unknown) -> tuple[list[Problem], Module | None]:
-    """The problems of one module, and the module when it has none (`unknown`: what its problems took out of it)."""
+            unknown: rules.Unknown, alike: dict[tuple[str, ...], Effective]) -> tuple[list[Problem], Module | None]:
+    """The problems of one module, and the module when it has none (`unknown`: what its problems took out of it).
+
+    A module that adds nothing to its profiles has their settings, and their problems: its profiles'
+    settings are resolved and checked once for all such modules (`alike`, by profiles) — where they
+    have none; where they have some, each module says them in its own name."""
     not_found = [
         Problem(path + ("profiles", k), f"unknown profile '{name}' — "
                 + (f"the profiles are {', '.join(profiles)}" if profiles else "the file has no profiles: section"))
@@ -228,8 +235,14 @@ def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[Profil
     if not_found or any(profiles[name][0] is None for name in module.profiles):
         return not_found, None
     unknown = unknown.union(*(profiles[name][1] for name in module.profiles))
-    settings = resolve(module_layers(module, path, {name: p for name, (p, _) in profiles.items() if p is not None}))
-    problems = rules.check_module(module.name, path, settings, unknown)
+    adds_nothing = not unknown and all(getattr(module, key) is None for key in _SETTINGS)
+    if adds_nothing and module.profiles in alike:
+        settings, problems = alike[module.profiles], []
+    else:
+        settings = resolve(module_layers(module, path, {name: p for name, (p, _) in profiles.items() if p is not None}))
+        problems = rules.check_module(module.name, path, settings, unknown)
+        if adds_nothing and not problems:
+            alike[module.profiles] = settings
     if unknown:
         return problems, None
     built = Module(address=module.address, name=module.name, profiles=module.profiles,

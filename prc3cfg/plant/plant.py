@@ -52,25 +52,31 @@ class Module(BaseModel):
 
     @functools.cached_property
     def _desired_image(self) -> ModuleImage:
-        system = SystemParameters(**{q.symbol: q.to_device(self.settings.system[q.key].value) for q in SYSTEM_QUANTITIES})
-        jumps = self.settings.jumps()
-        programs = {}
-        for number, fields in self.settings.programs.items():
-            values = {q.symbol: q.to_device(fields[q.key].value) for q in PROGRAM_QUANTITIES}
-            f1, f2 = fields["f1"].value, fields["f2"].value
-            jump = jumps.get(number)
-            programs[number] = Program(
-                **values,
-                F1=function_output(f1.action, f1.distance),
-                F2=function_output(f2.action, f2.distance),
-                A=0 if jump is None else jump.value,
-            )
-        unlisted = default_program(system) if self.unmanaged_programs == "reset" else None
-        return ModuleImage(
-            address=self.address,
-            system=system,
-            programs=tuple(programs.get(number, unlisted) for number in PROGRAM_NUMBERS),
+        derived = self.settings.derived
+        if "desired" not in derived:
+            derived["desired"] = _in_device_units(self.settings)
+        system, programs = derived["desired"]
+        return ModuleImage(address=self.address, system=system, programs=programs)
+
+
+def _in_device_units(settings: Effective) -> tuple[SystemParameters, tuple[Program | None, ...]]:
+    """The system parameters and the 64 programs that `settings` describe, in device units: unlisted
+    programs `None` with keep, factory defaults with reset."""
+    system = SystemParameters(**{q.symbol: q.to_device(settings.system[q.key].value) for q in SYSTEM_QUANTITIES})
+    jumps = settings.jumps()
+    programs = {}
+    for number, fields in settings.programs.items():
+        values = {q.symbol: q.to_device(fields.value(q.key)) for q in PROGRAM_QUANTITIES}
+        f1, f2 = fields.value("f1"), fields.value("f2")
+        jump = jumps.get(number)
+        programs[number] = Program(
+            **values,
+            F1=function_output(f1.action, f1.distance),
+            F2=function_output(f2.action, f2.distance),
+            A=0 if jump is None else jump.value,
         )
+    unlisted = default_program(system) if settings.unmanaged_programs.value == "reset" else None
+    return system, tuple(programs.get(number, unlisted) for number in PROGRAM_NUMBERS)
 
 
 class Bus(BusLine):

@@ -23,7 +23,7 @@ convert to device units (`plant`). Pure.
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from decimal import Decimal
 from typing import Any
 
@@ -91,11 +91,24 @@ class ProgramFields(Mapping[str, Sourced]):
         found = self._given(key)
         return PROGRAM_DEFAULTS.get(key, default) if found is None else found
 
+    def value(self, key: str) -> Any:
+        """The field's value alone, its `Sourced` not made (a module's image in device units needs only values)."""
+        layer = self._layer(key)
+        return PROGRAM_DEFAULTS[key].value if layer is None else layer[2][key]
+
     def _given(self, key: str) -> Sourced | None:
         """The field as the highest layer that gives it has it; None where none does."""
-        for source, path, given in reversed(self._layers):
-            if key in given:
-                return Sourced(given[key], source, path + (key,))
+        layer = self._layer(key)
+        if layer is None:
+            return None
+        source, path, given = layer
+        return Sourced(given[key], source, path + (key,))
+
+    def _layer(self, key: str) -> tuple[str, Path_, Mapping[str, Any]] | None:
+        """The highest layer that gives the field; None where none does."""
+        for layer in reversed(self._layers):
+            if key in layer[2]:
+                return layer
         return None
 
     def __iter__(self) -> Iterator[str]:
@@ -117,6 +130,10 @@ class Effective:
     program_paths: Mapping[int, Path_]  # each program's key in the last layer that lists it
     chains: Sourced                     # tuple[ChainSpec, ...]
     unmanaged_programs: Sourced         # "keep" | "reset"
+    #: What is worked out from these settings once for every module that has them (`plant.Module`'s
+    #: image in device units): the loader gives the modules that add nothing to their profiles one
+    #: `Effective` (32 × 30 modules of one profile would convert 60,000 programs alike).
+    derived: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
 
     def jumps(self) -> dict[int, Sourced]:
         """The jump address A of each program that jumps: from its chain, or from its `next`."""

@@ -320,6 +320,40 @@ def test_next_sets_a_jump_chains_cannot_say(tmp_path: Path) -> None:
     assert [module.desired_image().program(n).A for n in (1, 2, 3)] == [3, 3, 0]
 
 
+def test_modules_that_add_nothing_to_a_profile_take_its_settings_each_at_its_own_address(tmp_path: Path) -> None:
+    plant = load_text(tmp_path, "plant: p\nprofiles:\n" + textwrap.indent(textwrap.dedent(PROFILES), "  ") + textwrap.dedent("""\
+        buses:
+          - name: a
+            port: emulator://a
+            modules:
+              - {address: 1, name: m, profiles: a}
+              - {address: 2, name: "n", profiles: a}
+              - {address: 3, name: o, profiles: [a, b]}
+              - {address: 4, name: q, profiles: a, programs: {2: {position: 0.600}}}
+        """))
+    m, n, o, q = plant.buses[0].modules
+    assert [x.desired_image().address for x in (m, n, o, q)] == [1, 2, 3, 4]
+    assert n.desired_image().programs == m.desired_image().programs
+    assert o.desired_image().program(1).V == 400 and m.desired_image().program(1).V == 300
+    assert q.desired_image().program(2).P == 600 and m.desired_image().program(2).P == 500
+    assert n.settings.programs[1]["position"].source == "profile a"
+
+
+def test_a_profile_problem_is_said_in_the_name_of_every_module_that_takes_it(tmp_path: Path) -> None:
+    with pytest.raises(PlantError) as raised:
+        with_profiles(tmp_path, """\
+            a:
+              programs:
+                1: {position: 0.300}
+            """, """\
+            - {address: 1, name: m, profiles: a}
+            - {address: 2, name: "n", profiles: a}
+            """)
+    assert [line.partition(": ")[2] for line in raised.value.problems] == [
+        f"in module {name}, program 1 has no speed — give speed: in the module or in one of its profiles" for name in ("m", "n")
+    ]
+
+
 def test_a_profile_problem_names_the_module_and_points_into_the_profile(tmp_path: Path) -> None:
     with pytest.raises(PlantError) as raised:
         with_profiles(tmp_path, PROFILES, """\
