@@ -49,7 +49,7 @@ MAX_PART_NODES = 10_000
 #: What stands for a module or a profile while the rest of the file is validated.
 _MODULE_STAND_IN = {"address": 1, "name": "-"}
 #: A module's own settings, each laid over its profiles' (`profiles.resolve`): a module that gives none has theirs.
-_SETTINGS = ("system", "programs", "chains", "unmanaged_programs")
+_SETTINGS = tuple(ProfileSpec.model_fields)
 _PROFILE_STAND_IN: dict[str, Any] = {}
 
 
