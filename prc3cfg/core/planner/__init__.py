@@ -21,16 +21,18 @@ from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage, default_program
 from prc3cfg.core.planner.check import StepProblem, run_steps
-from prc3cfg.core.planner.layout import Layout
+from prc3cfg.core.planner.layout import Layout, init_message, runs_of
 from prc3cfg.core.planner.module_plan import Action, ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
 from prc3cfg.core.planner.optimise import search, whole_programs
-from prc3cfg.core.planner.problem import PlanningProblem
+from prc3cfg.core.planner.problem import KEEP, PlanningProblem
 
 #: What a 20h that writes the system parameters a module already holds is for.
 E12_SUMMARY = "write the system parameters it holds: it reported E12 (system parameters not set), which only this clears"
 #: Layouts within this fraction of the best estimate are priced exactly (stx stuffing adds bytes).
 STUFFING_MARGIN = 0.03
 EXACTLY_PRICED = 4
+#: Programs an init run's message may leave out at each end, where that is cheaper on the line (`_trimmed`).
+TRIMS = 6
 
 
 def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, system_unset: bool = False) -> ModulePlan:
@@ -104,10 +106,36 @@ def _cheapest(problem: PlanningProblem, cost: LineCost, layouts: list[Layout]) -
     """The messages of the layout that is cheapest on the line, and their bus time."""
     priced = []
     for layout in layouts:
-        messages = layout.messages(problem)
+        messages = _trimmed(problem, cost, layout).messages(problem)
         priced.append((fsum(cost.message_time(problem.address, m) for m in messages), messages))
     time, messages = min(priced, key=lambda pair: pair[0])
     return messages, time
+
+
+def _trimmed(problem: PlanningProblem, cost: LineCost, layout: Layout) -> Layout:
+    """`layout` with each init run's message the cheapest on the line of those without some of the
+    programs at its ends that hold the plant file's values initialised or not (the search grows runs
+    over them on a tie: `optimise.TIE`) — on stx a run's bounds and check byte may be stuffed, and a
+    shorter run not. At most TRIMS programs an end are tried; the rest of the plan is the same either
+    way (those programs take no write)."""
+    kinds = list(layout.kinds)
+    for kind in problem.kinds[1:]:
+        for first, last in runs_of(layout.kinds, kind):
+            def alike(i: int, kind: int = kind) -> bool:
+                return problem.masks[KEEP][i] == 0 and problem.masks[kind][i] == 0
+
+            starts, ends = [first], [last]
+            while len(starts) <= TRIMS and starts[-1] < last and alike(starts[-1]):
+                starts.append(starts[-1] + 1)
+            while len(ends) <= TRIMS and ends[-1] > first and alike(ends[-1]):
+                ends.append(ends[-1] - 1)
+            if len(starts) == len(ends) == 1:
+                continue
+            a, b = min(((a, b) for a in starts for b in ends if a <= b),
+                       key=lambda run: cost.message_time(problem.address, init_message(*run)))  # fmt: skip
+            kinds[first:a] = [KEEP] * (a - first)
+            kinds[b + 1 : last + 1] = [KEEP] * (last - b)
+    return layout if kinds == list(layout.kinds) else replace(layout, kinds=tuple(kinds))
 
 
 def naive_bus_time(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> float:
