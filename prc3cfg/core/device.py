@@ -15,7 +15,7 @@ a new one.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from prc3cfg.core import codec
@@ -160,6 +160,10 @@ def _with_image(state: ModuleState, image: ModuleImage) -> ModuleState:
     """`state` holding `image`: what most writes do — built directly, as `dataclasses.replace` costs
     three times as much (a plan's proof and the broadcast search run 100,000 writes for 32 × 30 modules)."""
     return ModuleState(image, state.mode, state.active_program, state.fault, state.referenced, state.read_messages)
+
+
+# `_with_image` names every field of a state: one added would otherwise fall back to its default on each write.
+assert [f.name for f in fields(ModuleState)] == ["image", "mode", "active_program", "fault", "referenced", "read_messages"]
 
 
 def _init_programs(state: ModuleState, numbers: range | tuple[int, ...]) -> ModuleState:
