@@ -561,14 +561,11 @@ class WritePhase:
         for step in steps:
             fronts, moves = _outside(fronts) if step is None else self._counted_step(fronts, step, most)
             back.append(moves)
-        last: dict[int, tuple[int, float]] = {}  # by count: the state after the last program (0 or 2), the cost
-        for state in (0, 2):
-            for n, c in fronts[state].items():
-                if c < last.get(n, (0, INF))[1]:
-                    last[n] = (state, c)
+        # after the last program no range goes on, as after one outside the plan file: each count ends in 0 or 2
+        (last, *_), (ends, *_) = _outside(fronts)
         found = []
         for n in _fewer_counts(last, messages):
-            state = last[n][0]
+            state = ends[n][0]
             moves_found = [RangeMove.NONE] * PROGRAM_COUNT
             for i in range(PROGRAM_COUNT - 1, -1, -1):
                 state, moves_found[i], n = back[i][state][n]
@@ -988,8 +985,8 @@ class States:
 
 
 def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:
-    """A program outside the plan file in `WritePhase._fewer_messages`: no range goes on over it, so
-    every count comes to state 0, from 0 or 2."""
+    """A program outside the plan file in `WritePhase._fewer_messages` (and the end of its programs):
+    no range goes on over it, so every count comes to state 0, from 0 or 2."""
     came: dict[int, tuple[int, RangeMove, int]] = {}
     kept: dict[int, float] = {}
     for state in (0, 2):
@@ -999,14 +996,14 @@ def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], li
     return [_pareto(kept), {}, {}, {}, {}], [came, {}, {}, {}, {}]
 
 
-def _fewer_counts(last: dict[int, tuple[int, float]], messages: int) -> list[int]:
-    """The item counts `WritePhase._fewer_messages` draws: per fewer 46h message and slack, the
-    cheapest count that fits."""
+def _fewer_counts(last: dict[int, float], messages: int) -> list[int]:
+    """The item counts `WritePhase._fewer_messages` draws from the front after the last program (by
+    count, the cost): per fewer 46h message and slack, the cheapest count that fits."""
     chosen: list[int] = []
     for fewer in range(messages - 1, -1, -1):
         for slack in range(ADDRESS_SLACK + 1):
             fit = [n for n in last if n <= codec.MAX_ADDRESS_ITEMS * fewer + slack]
-            if fit and (n := min(fit, key=lambda n: last[n][1])) not in chosen:
+            if fit and (n := min(fit, key=last.__getitem__)) not in chosen:
                 chosen.append(n)
     return chosen
 
