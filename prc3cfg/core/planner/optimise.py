@@ -124,9 +124,11 @@ SEARCHED = 8
 #: The most 42h..46h fields (alike ones as one) `PartsDP` counts removals of:
 #: those that need fewest.
 LIVE = 4
-#: The most states `PartsDP` keeps after each program (`States`), and twice as many
-#: runs going on.
+#: The most states `PartsDP` keeps after each program (`States`); runs going on are cut to as
+#: many once they are twice as many.
 BEAM = 24
+#: Runs going on kept by their cheapest start alone, beside the BEAM kept once credited (`States.windows_kept`).
+UNCREDITED = 8
 #: Probes of the header shares that make the init DP take a field's overflow out (`_header_targets`).
 TARGET_PROBES = 4
 #: Items of the overflow an init choice of `_header_targets` may leave for a 21h to take out.
@@ -812,9 +814,8 @@ class PartsDP:
         for state, window in moved.items():
             dearer = window.dearer(alone, j)
             windows[state] = dearer.merge(windows[state]) if state in windows else dearer
-        if len(windows) > 2 * BEAM:  # runs going on: twice as many as states, the cheapest started
-            fronts = {state: window.starts[0][0] for state, window in windows.items() if window.starts}
-            self.windows = {state: windows[state] for state in self.states.undominated(fronts, 2 * BEAM)}
+        if len(windows) > 2 * BEAM:  # runs going on: up to twice as many as states, then as many
+            self.windows = self.states.windows_kept(windows)
 
     def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float], dict[int, Back]]:
         """The states after program j by its own moves (items, a 32h, a 21h, nothing), and the
@@ -961,9 +962,8 @@ class States:
                 state += 1 << shift
         return state
 
-    def undominated(self, states: dict[int, float], most: int = 0) -> dict[int, float]:
-        """The states no other beats whatever follows, at most `most` (BEAM) of them (class docstring)."""
-        most = most or BEAM
+    def undominated(self, states: dict[int, float]) -> dict[int, float]:
+        """The states no other beats whatever follows, at most BEAM of them (class docstring)."""
         guards, ones, ahead = self.guards, self.ones, self.ahead
         kept: list[tuple[int, float]] = []
         ceiling = INF
@@ -978,10 +978,44 @@ class States:
                 if not kept:
                     ceiling = c + self.ceiling
                 kept.append((state, c))
-        if len(kept) > most:
-            credit = self.credit
-            kept = sorted(kept, key=lambda pair: pair[1] - fsum((pair[0] >> shift & FIELD) * each for shift, each in credit))[:most]
+        if len(kept) > BEAM:
+            kept = sorted(kept, key=lambda pair: self.credited(*pair))[:BEAM]
         return dict(kept)
+
+    def windows_kept(self, windows: dict[int, Window]) -> dict[int, Window]:
+        """The windows of `PartsDP`'s runs going on that no other beats wherever a run may end, at most BEAM.
+
+        Not by their cheapest starts: a start leaves its window 15 programs on, so a window whose
+        cheapest start is early may be the dearer one by the time a run ends. One window beats
+        another when its dearest start is no earlier than every start of the other and cheaper
+        than the other's cheapest by what its state may gain (`undominated`). Of the windows left,
+        the BEAM cheapest once credited as states are, and the UNCREDITED cheapest as they are: a
+        run over programs none of which a 21h took out may be the cheapest to end (its state has
+        no credit, but the states ahead of it paid for 21h whose headers are not saved yet).
+        """
+        guards, ones, ahead = self.guards, self.ones, self.ahead
+        kept: list[tuple[int, Window]] = []
+        for state, window in sorted((pair for pair in windows.items() if pair[1].starts), key=_cheapest_start):
+            cheapest, latest = window.starts[0][0], window.starts[-1][1]
+            raised = (state | guards) - ones
+            for other, beating in kept:
+                dearest, last = beating.starts[-1][:2]
+                if last >= latest and cheapest - dearest >= ahead[(raised - other) & guards]:
+                    break
+            else:
+                kept.append((state, window))
+        if len(kept) > BEAM:  # kept is by cheapest start: the first few, and those first once credited
+            credited = sorted(kept, key=lambda pair: self.credited(pair[0], pair[1].starts[0][0]))
+            kept = [*kept[:UNCREDITED], *credited[:BEAM]]
+        return dict(kept)
+
+    def credited(self, state: int, cost: float) -> float:
+        """`cost` less what `state` is ahead of nothing (class docstring)."""
+        return cost - fsum((state >> shift & FIELD) * each for shift, each in self.credit)
+
+
+def _cheapest_start(pair: tuple[int, Window]) -> float:
+    return pair[1].starts[0][0]
 
 
 def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:
