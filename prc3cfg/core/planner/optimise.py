@@ -75,7 +75,7 @@ import heapq
 import itertools
 import operator
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 from math import fsum
@@ -350,9 +350,17 @@ class WritePhase:
             return None
         # The jump-address DP prices 46h items one by one against link and unlink ranges; where they
         # overflow into one more message, it also gives the cheapest addresses in each fewer message
-        # (`addresses`): each is tried with the rest of the write phase.
-        return min((self._with_addresses(whole, channels, found) for found in self.addresses(whole, channels.addresses)),
-                   key=ESTIMATE)  # fmt: skip
+        # (`addresses`): each is tried with the rest of the write phase, where its ranges and the 21h
+        # it needs could beat the cheapest so far.
+        cheapest: Writes | None = None
+        for found in self.addresses(whole, channels.addresses):
+            limit = bound if cheapest is None else min(bound, cheapest.estimate)
+            if len(found.ranges) * self.prices.link + self.lower_bound(whole | found.whole) >= limit:
+                continue
+            writes = self._with_addresses(whole, channels, found)
+            if cheapest is None or writes.estimate < cheapest.estimate:
+                cheapest = writes
+        return cheapest
 
     def _with_addresses(self, whole: int, channels: Channels, found: Addresses) -> Writes:
         ranges, addresses, extra = found
@@ -811,9 +819,10 @@ class PartsDP:
                 continue  # the same runs, dearer
             if after not in moved or window.starts[0][0] < moved[after].starts[0][0]:
                 moved[after] = window
+        taken = 1 << j
         for state, window in moved.items():
-            dearer = window.dearer(alone, j)
-            windows[state] = dearer.merge(windows[state]) if state in windows else dearer
+            dearer = [(key + alone, i, began, inside | taken) for key, i, began, inside in window.starts]
+            windows[state] = Window.merged(dearer, windows[state].starts) if state in windows else Window(dearer)
         if len(windows) > 2 * BEAM:  # runs going on: up to twice as many as states, then as many
             self.windows = self.states.windows_kept(windows)
 
@@ -835,23 +844,27 @@ class PartsDP:
         new: dict[int, float] = {}
         step: dict[int, Back] = {}
         for state, b in best.items():
+            was_p, was_v = state & FIELD, state >> STATE_BITS & FIELD
             if as_items:
-                c, room_p, room_v = b, state & FIELD, state >> STATE_BITS & FIELD
+                c, room_p, room_v = b, was_p, was_v
                 if p:
                     c += item if room_p else item + header
                     room_p = (room_p or capacity) - 1
                 if v:
                     c += item if room_v else item + header
                     room_v = (room_v or capacity) - 1
-                after = state & rooms | min(room_p, left_p) | min(room_v, left_v) << STATE_BITS
+                after = state & rooms | (room_p if room_p < left_p else left_p) | (room_v if room_v < left_v else left_v) << STATE_BITS
                 if c < new.get(after, INF):
                     new[after], step[after] = c, (state, items, j, 0)
             # the other moves leave the state as it was, but for room no item left could use
-            kept = state & rooms | min(state & FIELD, left_p) | min(state >> STATE_BITS & FIELD, left_v) << STATE_BITS
-            if runs:
-                if kept not in windows:
-                    windows[kept] = Window()
-                windows[kept].push(b - per * j, j, state, 0)
+            kept = state & rooms | (was_p if was_p < left_p else left_p) | (was_v if was_v < left_v else left_v) << STATE_BITS
+            if runs:  # a run may start here: pushed onto its state's window (`Window`)
+                if (window := windows.get(kept)) is None:
+                    window = windows[kept] = Window()
+                starts, key = window.starts, b - per * j
+                while starts and starts[-1][0] >= key:
+                    starts.pop()
+                starts.append((key, j, state, 0))
                 if b + single < new.get(kept, INF):
                     new[kept], step[kept] = b + single, (state, run, j, 0)
             elif not needs and b < new.get(kept, INF):
@@ -866,12 +879,15 @@ class PartsDP:
         """The 33h runs that end at program j, the cheapest start in each state's window."""
         prices, windows = self.phase.prices, self.windows
         head, per, run = prices.parts_header, prices.parts_item, PartsMove.RUN
+        gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
         for state, window in list(windows.items()):
-            first = window.first(j - codec.MAX_FIELD_ITEMS)
-            if first is None:
+            starts = window.starts
+            while starts and starts[0][1] <= gone:
+                starts.popleft()
+            if not starts:
                 del windows[state]
                 continue
-            key, i, began, inside = first
+            key, i, began, inside = starts[0]
             if (through := key + head + per * (j + 1)) < new.get(state, INF):
                 new[state], step[state] = through, (began, run, i, inside)
 
@@ -888,40 +904,21 @@ class PartsDP:
 class Window:
     """The starts of the 33h runs that may end at the next program, for one state of
     `PartsDP`: (best[i] - per × i, i, the state at i, the programs inside the run
-    that take a 21h as well), by i, keys increasing — the front is the cheapest start."""
+    that take a 21h as well), by i, keys increasing — the front is the cheapest start. A start
+    added drops those before it that cost as much or more: it lasts longer."""
 
     def __init__(self, starts: list[tuple[float, int, int, int]] | None = None) -> None:
         self.starts: deque[tuple[float, int, int, int]] = deque(starts or ())
 
-    def push(self, key: float, i: int, state: int, inside: int) -> None:
-        starts = self.starts
-        while starts and starts[-1][0] >= key:
-            starts.pop()
-        starts.append((key, i, state, inside))
-
-    def first(self, gone: int) -> tuple[float, int, int, int] | None:
-        """The cheapest start after program `gone` (a run is at most 15 programs long)."""
-        starts = self.starts
-        while starts and starts[0][1] <= gone:
-            starts.popleft()
-        return starts[0] if starts else None
-
-    def dearer(self, cost: float, j: int) -> Window:
-        """These starts for runs that go on over a 21h of program j, costing `cost`."""
-        return Window([(key + cost, i, state, inside | 1 << j) for key, i, state, inside in self.starts])
-
-    def merge(self, other: Window) -> Window:
-        """This window with the starts of `other` (both by i, keys increasing)."""
+    @staticmethod
+    def merged(mine: Iterable[tuple[float, int, int, int]], theirs: Iterable[tuple[float, int, int, int]]) -> Window:
+        """A window of the starts of two (each by i, keys increasing)."""
         merged = Window()
-        mine, theirs = self.starts, other.starts
-        a = b = 0
-        while a < len(mine) or b < len(theirs):
-            if b == len(theirs) or (a < len(mine) and mine[a][1] <= theirs[b][1]):
-                merged.push(*mine[a])
-                a += 1
-            else:
-                merged.push(*theirs[b])
-                b += 1
+        starts = merged.starts
+        for start in sorted((*mine, *theirs), key=_second):  # stable: `mine` first on a tie
+            while starts and starts[-1][0] >= start[0]:
+                starts.pop()
+            starts.append(start)
         return merged
 
 
@@ -948,6 +945,7 @@ class States:
                       for size in range(len(worth) + 1) for chosen in itertools.combinations(fields, size)}  # fmt: skip
         self.ceiling = fsum(worth)
         self.credit = [(STATE_BITS * f, worth[f] / count) for f, count in enumerate(needed)]
+        self.credits: dict[int, float] = {}  # by state: what `credited` takes off
 
     @staticmethod
     def field(state: int, f: int) -> int:
@@ -994,28 +992,25 @@ class States:
         no credit, but the states ahead of it paid for 21h whose headers are not saved yet).
         """
         guards, ones, ahead = self.guards, self.ones, self.ahead
-        kept: list[tuple[int, Window]] = []
-        for state, window in sorted((pair for pair in windows.items() if pair[1].starts), key=_cheapest_start):
-            cheapest, latest = window.starts[0][0], window.starts[-1][1]
+        # (cheapest start, state, dearest start, its program, the window), by cheapest start
+        kept: list[tuple[float, int, float, int, Window]] = []
+        for cheapest, state, window in sorted((w.starts[0][0], s, w) for s, w in windows.items() if w.starts):
+            dear, latest = window.starts[-1][:2]
             raised = (state | guards) - ones
-            for other, beating in kept:
-                dearest, last = beating.starts[-1][:2]
+            for _, other, dearest, last, _ in kept:
                 if last >= latest and cheapest - dearest >= ahead[(raised - other) & guards]:
                     break
             else:
-                kept.append((state, window))
-        if len(kept) > BEAM:  # kept is by cheapest start: the first few, and those first once credited
-            credited = sorted(kept, key=lambda pair: self.credited(pair[0], pair[1].starts[0][0]))
-            kept = [*kept[:UNCREDITED], *credited[:BEAM]]
-        return dict(kept)
+                kept.append((cheapest, state, dear, latest, window))
+        if len(kept) > BEAM:  # the first few, and those first once credited
+            kept = [*kept[:UNCREDITED], *sorted(kept, key=lambda row: self.credited(row[1], row[0]))[:BEAM]]
+        return {state: window for _, state, _, _, window in kept}
 
     def credited(self, state: int, cost: float) -> float:
         """`cost` less what `state` is ahead of nothing (class docstring)."""
-        return cost - fsum((state >> shift & FIELD) * each for shift, each in self.credit)
-
-
-def _cheapest_start(pair: tuple[int, Window]) -> float:
-    return pair[1].starts[0][0]
+        if (credit := self.credits.get(state)) is None:
+            credit = self.credits[state] = fsum((state >> shift & FIELD) * each for shift, each in self.credit)
+        return cost - credit
 
 
 def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:
