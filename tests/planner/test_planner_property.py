@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import random
 from dataclasses import replace
+from math import fsum
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from planner_helpers import FRAMINGS, check_plan, line
 
@@ -26,6 +27,8 @@ from prc3cfg.core.image import (
     default_program,
 )
 from prc3cfg.core.planner import plan_module
+from prc3cfg.core.planner.optimise import search
+from prc3cfg.core.planner.problem import PlanningProblem
 
 
 def random_system(rnd: random.Random) -> SystemParameters:
@@ -151,3 +154,17 @@ def test_plan_reaches_the_desired_image(scenario) -> None:
 @given(scenarios())
 def test_plan_reaches_the_desired_image_in_many_more_scenarios(scenario) -> None:
     test_plan_reaches_the_desired_image.hypothesis.inner_test(scenario)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenarios())
+def test_where_no_byte_is_stuffed_every_candidates_estimate_is_its_bus_time(scenario) -> None:
+    """`plan_module` prices only the cheapest candidate where the framing stuffs no byte: it takes
+    the search's estimates for the bus time of their messages."""
+    actual, desired, _, framing, turnaround = scenario
+    cost = line(framing, turnaround)
+    assume(not cost.framing.stuffs)
+    problem = PlanningProblem.build(actual, desired, cost)
+    for layout in search(problem):
+        priced = fsum(cost.message_time(problem.address, message) for message in layout.messages(problem))
+        assert layout.estimate == pytest.approx(priced, abs=1e-9)

@@ -61,9 +61,11 @@ def cheapest_messages(actual: ModuleImage, desired: ModuleImage, cost: LineCost)
     the naive download's. Raises `UnreachableImage`."""
     problem = PlanningProblem.build(actual, desired, cost)
     layouts = search(problem)
-    # The estimates are exact but for stx stuffing: price exactly only the layouts that could win.
-    close = [layout for layout in layouts if layout.estimate <= layouts[0].estimate * (1 + STUFFING_MARGIN)]
-    best, best_time = _cheapest(problem, cost, close[:EXACTLY_PRICED])
+    if cost.framing.stuffs:  # stx stuffing adds bytes the estimates leave out: price the layouts that could win
+        close = [layout for layout in layouts if layout.estimate <= layouts[0].estimate * (1 + STUFFING_MARGIN)]
+        best, best_time = _cheapest(problem, cost, close[:EXACTLY_PRICED])
+    else:  # the estimates are exact
+        best, best_time = _cheapest(problem, cost, layouts[:1])
     naive = naive_bus_time(actual, desired, cost)
     if best_time > naive:
         best, best_time = _cheapest(problem, cost, [whole_programs(problem)])

@@ -1279,7 +1279,7 @@ class InitSearch:
             (phase.linear(everything), phase.alike),
             (phase.linear(everything, problem.prices.field_header / INIT_SHARE), phase.alike),
             (phase.linear(Channels.everything(False)), phase.alike),
-            (floor_of(problem.prices, phase.target_a, _over_every_kind(problem)), None),
+            (floor_of(problem.prices, phase.target_a, _over_every_kind(problem)), phase.alike),
         ]
         return [choose_inits(problem, _table(problem, residual, alike)) for residual, alike in residuals]
 
