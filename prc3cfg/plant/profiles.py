@@ -86,7 +86,7 @@ class ProgramFields(Mapping[str, Sourced]):
         return PROGRAM_DEFAULTS[key] if found is None else found
 
     def __contains__(self, key: object) -> bool:  # Mapping's would build the Sourced and catch a KeyError
-        return key in PROGRAM_DEFAULTS or any(key in given for _, _, given in self._layers)
+        return key in PROGRAM_DEFAULTS or self._layer(key) is not None
 
     def get(self, key: str, default: Any = None) -> Any:  # likewise: 46,000 calls for 8 × 30 modules
         found = self._given(key)
