@@ -272,7 +272,8 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     bus's name as the document has it."""
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
-    return _plain_names(plan_file.to_json(plan, hashes=False) | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    document = plan_file.to_json(plan, hashes=False) | {"left_alone": list(notes)}
+    return _plain_names(document), {(escape.plain(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:

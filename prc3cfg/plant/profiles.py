@@ -108,7 +108,7 @@ class ProgramFields(Mapping[str, Sourced]):
         source, path, given = layer
         return Sourced(given[key], source, path + (key,))
 
-    def _layer(self, key: str) -> tuple[str, Path_, Mapping[str, Any]] | None:
+    def _layer(self, key: object) -> tuple[str, Path_, Mapping[str, Any]] | None:
         """The highest layer that gives the field; None where none does."""
         for layer in reversed(self._layers):
             if key in layer[2]:
