@@ -47,6 +47,19 @@ def test_modules_and_kept_programs_that_leave_the_plant_file_stay_on_the_hardwar
     assert plant.emulators["booth-b"].module(3).image.program(4).T == 120  # still there, untouched
 
 
+def test_a_previous_plant_file_says_what_left_it_and_a_broken_one_is_said(plant, capsys, tmp_path):
+    previous = tmp_path / "main.yaml"
+    previous.write_bytes(plant.path.read_bytes())  # the plant file as it is: nothing has left it
+    unchanged = run_cli(capsys, "plan", plant.path, "--previous", previous)
+    assert unchanged.code == 0 and "Left as it is" not in unchanged.out
+    edit(plant, lambda document: document["buses"][1].update(modules=document["buses"][1]["modules"][:-1]))
+    edited = run_cli(capsys, "plan", plant.path, "--previous", previous)
+    assert "Left as it is: booth-b/booth-b-pretreat (address 4) is no longer in the plant file" in edited.out
+    previous.write_text("plant: [\n")
+    broken = run_cli(capsys, "plan", plant.path, "--previous", previous)
+    assert broken.code == 1 and broken.err.startswith(f"error: {previous}:"), broken.err
+
+
 def test_refresh_only_reports_drift_not_a_plan(plant, capsys):
     assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
     assert run_cli(capsys, "plan", plant.path, "--refresh-only", "--detailed-exitcode").out.startswith("No drift")

@@ -10,6 +10,7 @@ nor the planner itself (`prc3cfg.core.plant_planner`).
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
@@ -26,10 +27,10 @@ from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.render import Drift, drifted
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
-from prc3cfg.plant import Bus, Plant
+from prc3cfg.plant import Bus, Plant, parse_plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import FileProblem, Why, read_json
-from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
@@ -303,14 +304,19 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -
 def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
     """What the plant file no longer describes — modules, and programs under `unmanaged_programs:
     keep` — which stays on the hardware as it is: against `previous` (the plant file as it was, e.g.
-    on the main branch), else against the copy last applied in full from here (`.prc3cfg/applied/`)."""
-    if previous is not None:
-        before = load_plant(previous)  # named by the caller: its problems are said
-    else:
-        try:
-            before = load_plant(applied_copy(plant.path))
-        except UserError:
-            return []  # never applied in full here, or a copy this prc3cfg cannot read: nothing to compare
+    on the main branch), else against the copy last applied in full from here (`.prc3cfg/applied/`).
+    A file of the plant file's own bytes — the copy after an apply, the file not edited since — leaves
+    nothing out, and is not read as a plant again (8 × 30 modules: 0.5 s)."""
+    path = applied_copy(plant.path) if previous is None else previous
+    try:
+        data = plant_bytes(path)
+        before = None if hashlib.sha256(data).hexdigest() == plant.sha256 else parse_plant(path, data)
+    except UserError:
+        if previous is not None:
+            raise  # named by the caller: its problems are said
+        return []  # never applied in full here, or a copy this prc3cfg cannot read: nothing to compare
+    if before is None:
+        return []
     now = {(bus.name, m.address): m for bus, m in plant.modules()}
     notes = []
     for bus, old in before.modules():

@@ -101,13 +101,14 @@ def _options(command) -> dict[str, bool]:
 def _single_dash_habit(args: list[str]) -> str | None:
     """ "-out=p.json: prc3cfg options take two dashes — did you mean --out p.json?" (`-out p.json`
     too), "-target=x: prc3cfg names a module with --module — did you mean --module x?", or None."""
-    known = _options(typer.main.get_command(app))
+    known: dict[str, bool] = {}
     for at, arg in enumerate(args):
         if arg == "--":
             return None
         match = _SINGLE_DASH.fullmatch(arg)
         if match is None:
             continue
+        known = known or _options(typer.main.get_command(app))  # the whole command tree: only for a word that needs it
         option, why = _TERRAFORM.get(match.group(1), (f"--{match.group(1)}", "prc3cfg options take two dashes"))
         if option not in known:
             continue

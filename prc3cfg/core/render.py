@@ -120,6 +120,8 @@ def jumps(image: ModuleImage, within: set[int]) -> set[str]:
 def chain_changes(actual: ModuleImage, desired: ModuleImage) -> tuple[list[str], list[str]]:
     """(jumps removed, jumps added) among the managed programs."""
     managed = {n for n, p in enumerate(desired.programs, start=1) if p is not None}
+    if all(actual.known(n).A == desired.known(n).A for n in managed):
+        return [], []  # the same jump addresses, the same jumps (`jumps` reads A alone): most plans change none
     before, after = jumps(actual, managed), jumps(desired, managed)
     return sorted(before - after), sorted(after - before)
 
@@ -264,12 +266,14 @@ def review(change: ModuleChange) -> dict[str, Any]:
 
 def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
     """What the human and markdown outputs are made from, every text in it `plain`: a plan file's
-    document, or a live plan's without the modules' `changes`, each worked out by `_changes` as its
-    module is shown (all of them at once, for 8 × 30 modules with every program changed, hold 35 MB),
-    with the changes by (bus, address) — the bus's name as the document has it."""
+    document, or a live plan's without its read-backs' hashes (neither output shows one) and without the
+    modules' `changes`, each worked out by `_changes` as its module is shown (all of them at once, for
+    8 × 30 modules with every program changed, hold 35 MB), with the changes by (bus, address) — the
+    bus's name as the document has it."""
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
-    return _plain_names(plan_file.to_json(plan) | {"left_alone": list(notes)}), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    document = plan_file.to_json(plan, hashes=False) | {"left_alone": list(notes)}
+    return _plain_names(document), {(escape.plain(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:

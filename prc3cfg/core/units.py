@@ -67,10 +67,11 @@ class Quantity:
 
     def to_device(self, human: Decimal | int | bool) -> int:
         """The device value of an in-range human value; ValueError if not a whole number of steps."""
-        units = Decimal(int(human) if isinstance(human, bool) else human) / self.step
-        if units != units.to_integral_value():
+        units = human / self.step  # exact: a Decimal of at most 28 digits, an int or a bool, by a power of ten
+        whole = int(units)
+        if units != whole:
             raise ValueError(f"{human} {self.unit} is not a whole number of {self.step_name}")
-        return int(units)
+        return whole
 
     def to_human(self, device: int) -> Decimal | int | bool:
         if self.boolean:

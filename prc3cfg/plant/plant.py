@@ -66,11 +66,11 @@ def _in_device_units(settings: Effective) -> tuple[SystemParameters, tuple[Progr
     jumps = settings.jumps()
     programs = {}
     for number, fields in settings.programs.items():
-        values = {q.symbol: q.to_device(fields.value(q.key)) for q in PROGRAM_QUANTITIES}
-        f1, f2 = fields.value("f1"), fields.value("f2")
+        values = fields.plain_values()
+        f1, f2 = values["f1"], values["f2"]
         jump = jumps.get(number)
         programs[number] = Program(
-            **values,
+            **{q.symbol: q.to_device(values[q.key]) for q in PROGRAM_QUANTITIES},
             F1=function_output(f1.action, f1.distance),
             F2=function_output(f2.action, f2.distance),
             A=0 if jump is None else jump.value,

@@ -60,6 +60,7 @@ PROGRAM_DEFAULTS = {
     "f1": Sourced(_RESET_AT_ZERO),
     "f2": Sourced(_RESET_AT_ZERO),
 }
+_DEFAULT_VALUES = {key: default.value for key, default in PROGRAM_DEFAULTS.items()}
 SYSTEM_DEFAULTS = {q.key: Sourced(q.to_human(getattr(DEFAULT_SYSTEM, q.symbol))) for q in SYSTEM_QUANTITIES}
 
 
@@ -85,16 +86,19 @@ class ProgramFields(Mapping[str, Sourced]):
         return PROGRAM_DEFAULTS[key] if found is None else found
 
     def __contains__(self, key: object) -> bool:  # Mapping's would build the Sourced and catch a KeyError
-        return key in PROGRAM_DEFAULTS or any(key in given for _, _, given in self._layers)
+        return key in PROGRAM_DEFAULTS or self._layer(key) is not None
 
     def get(self, key: str, default: Any = None) -> Any:  # likewise: 46,000 calls for 8 × 30 modules
         found = self._given(key)
         return PROGRAM_DEFAULTS.get(key, default) if found is None else found
 
-    def value(self, key: str) -> Any:
-        """The field's value alone, its `Sourced` not made (a module's image in device units needs only values)."""
-        layer = self._layer(key)
-        return PROGRAM_DEFAULTS[key].value if layer is None else layer[2][key]
+    def plain_values(self) -> dict[str, Any]:
+        """Every field's value alone, the highest layer's, else its default — their `Sourced` not made (a
+        module's image in device units needs only values), the layers gone through once for all of them."""
+        found = dict(_DEFAULT_VALUES)
+        for _, _, given in self._layers:
+            found.update(given)
+        return found
 
     def _given(self, key: str) -> Sourced | None:
         """The field as the highest layer that gives it has it; None where none does."""
@@ -104,7 +108,7 @@ class ProgramFields(Mapping[str, Sourced]):
         source, path, given = layer
         return Sourced(given[key], source, path + (key,))
 
-    def _layer(self, key: str) -> tuple[str, Path_, Mapping[str, Any]] | None:
+    def _layer(self, key: object) -> tuple[str, Path_, Mapping[str, Any]] | None:
         """The highest layer that gives the field; None where none does."""
         for layer in reversed(self._layers):
             if key in layer[2]:

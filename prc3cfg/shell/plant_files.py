@@ -1,4 +1,4 @@
-"""Plant files on disk: `load_plant(path)` reads one's bytes and hands them to the plant layer.
+"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant layer.
 
 Only a regular file is read (a FIFO could block, `/dev/zero` never ends), at most `MAX_BYTES`
 of it (`prc3cfg.shell.files.read_regular`); a path that cannot be read is a `PlantError` that
@@ -29,8 +29,12 @@ _REMEDIES = {
 
 def load_plant(path: str | Path) -> Plant:
     """The plant in the file `path`; `PlantError` with its problems ("file:line:column: …") otherwise."""
+    return parse_plant(path, plant_bytes(path))
+
+
+def plant_bytes(path: str | Path) -> bytes:
+    """The bytes of the plant file `path`; `PlantError` saying what to do where it cannot be read."""
     try:
-        data = read_regular(Path(path), MAX_BYTES)
+        return read_regular(Path(path), MAX_BYTES)
     except FileProblem as problem:
         raise PlantError([f"{path}: {problem} — {_REMEDIES[problem.why]}"]) from None
-    return parse_plant(path, data)
