@@ -880,16 +880,25 @@ class PartsDP:
         prices, windows = self.phase.prices, self.windows
         head, per, run = prices.parts_header, prices.parts_item, PartsMove.RUN
         gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
+        left_p, left_v, rooms = self.more_p[j + 1], self.more_v[j + 1], ~(FIELD | FIELD << STATE_BITS)
         for state, window in list(windows.items()):
+            if windows.get(state) is not window:
+                continue  # merged into another at this program
+            # the state the runs end in, but for room no item left could use (as `moves` leaves it)
+            was_p, was_v = state & FIELD, state >> STATE_BITS & FIELD
+            after = state & rooms | (was_p if was_p < left_p else left_p) | (was_v if was_v < left_v else left_v) << STATE_BITS
+            if after != state:
+                del windows[state]
+                window = windows[after] = Window.merged(window.starts, windows[after].starts) if after in windows else window
             starts = window.starts
             while starts and starts[0][1] <= gone:
                 starts.popleft()
             if not starts:
-                del windows[state]
+                del windows[after]
                 continue
             key, i, began, inside = starts[0]
-            if (through := key + head + per * (j + 1)) < new.get(state, INF):
-                new[state], step[state] = through, (began, run, i, inside)
+            if (through := key + head + per * (j + 1)) < new.get(after, INF):
+                new[after], step[after] = through, (began, run, i, inside)
 
     def final(self, best: dict[int, float]) -> int:
         """The cheapest state after the last program, the live fields' headers counted."""
