@@ -44,7 +44,12 @@ to send. The search is built around that:
      first, until the overflow is out (`_harmless_inits`: where runs alike tie, the DP takes
      all or none). This starts from the two plans closest to the best within an exchange
      (one that overflows may be one init away from the best); 40h and 41h count the programs
-     outside 33h runs.
+     outside 33h runs. Each field's shares are bisected alone only once some init choice was
+     worth searching (its lower bound below the best plan): before, only all fields' together.
+     Where none of the init DP's own choices was worth it, no choice that one field's shares
+     drew was ever better — on every change mix of `bench/plan_time_bench.py` and every
+     scenario of `bench/plan_bench.py` — and bisecting them was most of planning's CPU (the
+     F1/F2 mix's: a third).
    The init choices waiting are searched cheapest lower bound first (`floor_of`: each
    program's differences at their cheapest, every item with its share of a header), those
    whose bound cannot beat the best plan not at all, and only so many (SEARCHED, more after
@@ -1320,7 +1325,7 @@ class InitSearch:
         for layout in close[:TARGETED]:
             self.targeted.add(layout.kinds)
             goals = _overflows(problem, layout)
-            candidates = _header_targets(problem, self.phase, goals) + _harmless_inits(problem, layout, goals)
+            candidates = _header_targets(problem, self.phase, goals, alone=self.searched > 0) + _harmless_inits(problem, layout, goals)
             queue += [kinds for kinds in candidates if kinds not in self.tried]
         return queue
 
@@ -1346,16 +1351,16 @@ def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
     return goals
 
 
-def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[Overflow]) -> list[Kinds]:
+def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[Overflow], alone: bool) -> list[Kinds]:
     """Init choices that take the overflow of the `goals` fields out, to save whole messages.
 
-    For all of those fields together, and for each alone, header shares per field are bisected
+    For all of those fields together, and (`alone`) for each alone, header shares per field are bisected
     until the init DP just removes the overflow of each (a Lagrangian relaxation of the message
     count); every init choice met on the way that leaves at most SLACK_ITEMS of the overflow is a
     candidate (a 21h the search adds may take out the last items).
     """
     found: dict[Kinds, None] = {}  # a set in the order found
-    for chosen in dict.fromkeys([tuple(goals), *((goal,) for goal in goals)]) if goals else ():
+    for chosen in dict.fromkeys([tuple(goals), *((goal,) for goal in goals if alone)]) if goals else ():
         # removing the overflow saves a header: start from that header spread over the overflow
         shares = {bit: (problem.prices.address_header if bit == A_BIT else problem.prices.field_header) / over
                   for bit, _, over, _ in chosen}  # fmt: skip
