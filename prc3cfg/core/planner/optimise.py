@@ -129,8 +129,8 @@ SEARCHED = 8
 #: The most 42h..46h fields (alike ones as one) `PartsDP` counts removals of:
 #: those that need fewest.
 LIVE = 4
-#: The most states `PartsDP` keeps after each program (`States`); runs going on are cut to as
-#: many once they are twice as many.
+#: The most states `PartsDP` keeps after each program (`States`); runs going on, once twice as
+#: many, are cut to as many and UNCREDITED more.
 BEAM = 24
 #: Runs going on kept by their cheapest start alone, beside the BEAM kept once credited (`States.windows_kept`).
 UNCREDITED = 8
@@ -995,7 +995,8 @@ class States:
         return dict(kept)
 
     def windows_kept(self, windows: dict[int, Window]) -> dict[int, Window]:
-        """The windows of `PartsDP`'s runs going on that no other beats wherever a run may end, at most BEAM.
+        """The windows of `PartsDP`'s runs going on that no other beats wherever a run may end, at most
+        BEAM + UNCREDITED.
 
         Not by their cheapest starts: a start leaves its window 15 programs on, so a window whose
         cheapest start is early may be the dearer one by the time a run ends. One window beats
