@@ -164,6 +164,8 @@ class Channels:
 #: Bits of a field of a `States` state (values up to 31, and a guard bit) and the mask of one.
 STATE_BITS = 6
 FIELD = (1 << (STATE_BITS - 1)) - 1
+#: A state's fields but its rooms (the live fields' removals).
+NOT_ROOMS = ~(FIELD | FIELD << STATE_BITS)
 #: A back pointer of `PartsDP`: the state before, the move, the program it starts
 #: at, and the programs a run it ends passes over with a 21h.
 Back = tuple[int, "PartsMove", int, int]
@@ -844,7 +846,6 @@ class PartsDP:
         runs = needs and self.runs_allowed
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
         single, per = phase.parts_price[1], prices.parts_item
-        rooms = ~(FIELD | FIELD << STATE_BITS)
         nothing, items, whole, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
         new: dict[int, float] = {}
         step: dict[int, Back] = {}
@@ -858,11 +859,11 @@ class PartsDP:
                 if v:
                     c += item if room_v else item + header
                     room_v = (room_v or capacity) - 1
-                after = state & rooms | (room_p if room_p < left_p else left_p) | (room_v if room_v < left_v else left_v) << STATE_BITS
+                after = _with_rooms(state, room_p, room_v, left_p, left_v)
                 if c < new.get(after, INF):
                     new[after], step[after] = c, (state, items, j, 0)
             # the other moves leave the state as it was, but for room no item left could use
-            kept = state & rooms | (was_p if was_p < left_p else left_p) | (was_v if was_v < left_v else left_v) << STATE_BITS
+            kept = _with_rooms(state, was_p, was_v, left_p, left_v)
             if runs:  # a run may start here: pushed onto its state's window (`Window`)
                 if (window := windows.get(kept)) is None:
                     window = windows[kept] = Window()
@@ -885,13 +886,12 @@ class PartsDP:
         prices, windows = self.phase.prices, self.windows
         head, per, run = prices.parts_header, prices.parts_item, PartsMove.RUN
         gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
-        left_p, left_v, rooms = self.more_p[j + 1], self.more_v[j + 1], ~(FIELD | FIELD << STATE_BITS)
+        left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
         for state, window in list(windows.items()):
             if windows.get(state) is not window:
                 continue  # merged into another at this program
             # the state the runs end in, but for room no item left could use (as `moves` leaves it)
-            was_p, was_v = state & FIELD, state >> STATE_BITS & FIELD
-            after = state & rooms | (was_p if was_p < left_p else left_p) | (was_v if was_v < left_v else left_v) << STATE_BITS
+            after = _with_rooms(state, state & FIELD, state >> STATE_BITS & FIELD, left_p, left_v)
             if after != state:
                 del windows[state]
                 window = windows[after] = Window.merged(window.starts, windows[after].starts) if after in windows else window
@@ -1026,6 +1026,12 @@ class States:
         if (credit := self.credits.get(state)) is None:
             credit = self.credits[state] = fsum((state >> shift & FIELD) * each for shift, each in self.credit)
         return cost - credit
+
+
+def _with_rooms(state: int, room_p: int, room_v: int, left_p: int, left_v: int) -> int:
+    """`state` with these rooms in the last 40h and 41h, but for room no item left could use (`PartsDP`:
+    `left_p`, `left_v` programs from the next on need a P, a V item at most)."""
+    return state & NOT_ROOMS | (room_p if room_p < left_p else left_p) | (room_v if room_v < left_v else left_v) << STATE_BITS
 
 
 def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:
