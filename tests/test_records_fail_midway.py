@@ -111,6 +111,30 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
         assert "Apply complete" in again.out and plant.matches_plant()
 
 
+def test_a_journal_the_disk_refuses_while_the_modules_are_read_back_is_said_so_not_an_interruption(tmp_path, capsys):
+    """The limit half way through the read-back's records (the twin's, before its first `apply`
+    record): the read whose record was refused stays back, nothing is written, and the apply says
+    it could not keep its journal — it said "error: interrupted", exit 130, as if Ctrl-C."""
+    twin = tmp_path / "twin"
+    twin.mkdir()
+    with emulated_plant(twin, timeout=UNHURRIED) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    text = journal_of(twin).read_bytes()
+    size = text.index(b'"event": "apply"') // 2
+    assert size > text.index(b"\n")  # past the journal's header: within the read-back
+    line = tmp_path / "line"
+    line.mkdir()
+    with emulated_plant(line, timeout=UNHURRIED) as plant:
+        factory = plant.images()
+        result = limited_apply(plant.path, size)
+        assert result.returncode == 1, result.stderr
+        assert "Traceback" not in result.stdout + result.stderr
+        error = result.stderr.strip().splitlines()[-1]
+        assert error.startswith("error: could not keep the journal ") and journal_of(line).name in error, error
+        assert "while the modules were read back — nothing was written to any module" in error, error
+        assert plant.images() == factory
+
+
 def matches(held: ModuleImage, desired: ModuleImage) -> bool:
     return held.system == desired.system and all(w is None or h == w for h, w in zip(held.programs, desired.programs))
 

@@ -319,11 +319,13 @@ class ByLine:
                 read(self.line)
             except Interrupted:
                 if not writing.runs:
+                    _refused_while_reading(writing.keeping)
                     raise
                 unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
                                for bus in sorted(self._lines - set(self._planned)))  # fmt: skip
             except LinesFailed as error:
                 if not writing.runs:
+                    _refused_while_reading(writing.keeping)
                     raise
                 unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
             if len(self._planned) == len(self._lines):
@@ -336,6 +338,14 @@ class ByLine:
             if not writing.runs:
                 return Written(planned)
             return writing.account(planned, unread=unread)
+
+
+def _refused_while_reading(keeping: Keeping) -> None:
+    """Where the disk refused the journal a read-back's record (that read stayed back, `Keeping.announce`)
+    before any write began: that is what stopped the apply, not an interruption — a `UserError` saying so."""
+    if keeping.trouble is not None:
+        raise UserError(f"{keeping.trouble} while the modules were read back — nothing was written to any module; "
+                        "free the space (or fix the folder), then apply again") from None
 
 
 def _nothing() -> None:
