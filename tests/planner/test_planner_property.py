@@ -27,7 +27,7 @@ from prc3cfg.core.image import (
     default_program,
 )
 from prc3cfg.core.planner import plan_module
-from prc3cfg.core.planner.optimise import search
+from prc3cfg.core.planner.optimise import WritePhase, search
 from prc3cfg.core.planner.problem import PlanningProblem
 
 
@@ -168,3 +168,17 @@ def test_where_no_byte_is_stuffed_every_candidates_estimate_is_its_bus_time(scen
     for layout in search(problem):
         priced = fsum(cost.message_time(problem.address, message) for message in layout.messages(problem))
         assert layout.estimate == pytest.approx(priced, abs=1e-9)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenarios())
+def test_no_candidates_write_phase_costs_less_than_the_bounds_the_search_prunes_by(scenario) -> None:
+    """The search drops an init choice, a set of 21h or a jump-address alternative whose lower bound
+    (`WritePhase.floor`, `WritePhase.at_least`, headers counted whole) is not below the best plan: each
+    bound is below every write phase it is the bound of — here, each candidate's, with the 21h it took."""
+    actual, desired, _, framing, turnaround = scenario
+    problem = PlanningProblem.build(actual, desired, line(framing, turnaround))
+    for layout in search(problem):
+        phase, writes = WritePhase(problem, layout.kinds), layout.writes
+        assert phase.floor <= writes.estimate + 1e-9
+        assert phase.at_least(writes.whole) <= writes.estimate + 1e-9

@@ -52,7 +52,8 @@ to send. The search is built around that:
      F1/F2 mix's: a third).
    The init choices waiting are searched cheapest lower bound first (`floor_of`: each
    program's differences at their cheapest, every item with its share of a header), those
-   whose bound cannot beat the best plan not at all, and only so many (SEARCHED, more after
+   whose bound — or `WritePhase.at_least`, the same with headers counted in whole messages —
+   cannot beat the best plan not at all, and only so many (SEARCHED, more after
    each better plan), so that planning costs about the same for every kind of change; no
    init choice is searched where no plan with an init could beat the best without
    (`inits_floor`).
@@ -315,6 +316,7 @@ class WritePhase:
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
         # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
+        self._at_least: dict[int, float] = {}
         self._parts_cache: dict[tuple[int, int, bool, bool, bool], Parts] = {}
         self._address_cache: dict[tuple[int, bool], tuple[Addresses, ...]] = {}
 
@@ -353,7 +355,7 @@ class WritePhase:
     def evaluate(self, channels: Channels, bound: float = INF, whole: int = 0) -> Writes | None:
         """The cheapest write phase with these channels (and 21h for `whole`); None when it cannot beat `bound`."""
         whole |= self.forced(channels)
-        if self.lower_bound(whole) >= bound:
+        if bound < INF and self.at_least(whole) >= bound:
             return None
         # The jump-address DP prices 46h items one by one against link and unlink ranges; where they
         # overflow into one more message, it also gives the cheapest addresses in each fewer message
@@ -362,7 +364,7 @@ class WritePhase:
         cheapest: Writes | None = None
         for found in self.addresses(whole, channels.addresses):
             limit = bound if cheapest is None else min(bound, cheapest.estimate)
-            if len(found.ranges) * self.prices.link + self.lower_bound(whole | found.whole) >= limit:
+            if limit < INF and len(found.ranges) * self.prices.link + self.at_least(whole | found.whole) >= limit:
                 continue
             writes = self._with_addresses(whole, channels, found)
             if cheapest is None or writes.estimate < cheapest.estimate:
@@ -379,21 +381,75 @@ class WritePhase:
 
     @functools.cached_property
     def floor(self) -> float:
-        """No write phase of these init kinds costs less (`floor_of`)."""
+        """No write phase of these init kinds costs less (`floor_of`: quicker than `at_least`, less tight)."""
         at_least = floor_of(self.prices, self.target_a, self.changed)
         return fsum(at_least(i, m) for i, m in enumerate(self.masks) if m)
 
-    def lower_bound(self, whole: int) -> float:
-        """No write phase that gives at least `whole` a 21h costs less.
+    @functools.cached_property
+    def _items(self) -> tuple[int, list[float]]:
+        """The programs whose jump address takes a 46h item (or a 21h), and each program's
+        differences as items at their cheapest (`at_least`)."""
+        prices, target_a = self.prices, self.target_a
+        itemised = sum(1 << i for i, m in enumerate(self.masks) if m & A_BIT and target_a[i] not in (0, i + 2))
+        by_mask: dict[int, float] = {}
+        costs = []
+        for i, mask in enumerate(self.masks):
+            key = mask | (itemised >> i & 1) << len(FIELD_BIT)
+            if (cost := by_mask.get(key)) is None:
+                total = [prices.field_item for bit in PLAIN_BITS if mask & bit]
+                if mask & PV_BITS:
+                    total.append(min(prices.parts_item, prices.field_item * (mask & PV_BITS).bit_count()))
+                if itemised >> i & 1:
+                    total.append(prices.address_item)
+                cost = by_mask[key] = fsum(total)
+            costs.append(cost)
+        return itemised, costs
 
-        Each of those 21h, and at least an item for each remaining plain difference and each
-        program left differing in P or V. Giving one more program a 21h never lowers this:
-        a 21h (16 bytes and an exchange) costs more than the five items it can save.
+    def at_least(self, whole: int) -> float:
+        """No write phase that gives at least `whole` a 21h costs less, its headers counted whole.
+
+        Each of those 21h; each other program's differences as items at their cheapest (P and V
+        as a 33h's share or 40h/41h items, a jump address a link or unlink range can give as
+        free) or as a 21h of its own; and the headers that the items left need, in whole
+        messages: w more 21h take at most w items out of each field, so a field of n items
+        needs ceil((n - w) / 15) messages (46h: 31) — and P and V, with R 33h runs of at most
+        15 programs, the 40h and 41h for the rest (`_pv_headers`). The least over w, the w
+        programs whose 21h cost least beyond their items.
         """
-        prices = self.prices
-        plain = sum((self.changed[bit] & ~whole).bit_count() for bit in PLAIN_BITS)
-        need = (self.pv_changed & ~whole).bit_count()
-        return whole.bit_count() * prices.program + (plain + need) * prices.field_item
+        if (known := self._at_least.get(whole)) is not None:
+            return known
+        prices, (itemised, items) = self.prices, self._items
+        rest = self.relevant_programs & ~whole
+        spent = [items[i] for i in members(rest)]
+        extra = sorted(prices.program - c for c in spent)
+        plain = [(self.changed[bit] & ~whole).bit_count() for bit in PLAIN_BITS]
+        addresses = (itemised & ~whole).bit_count()
+        p, v = (self.changed[P_BIT] & ~whole).bit_count(), (self.changed[V_BIT] & ~whole).bit_count()
+        both = (self.pv_changed & ~whole).bit_count()
+        least, paid = INF, 0.0
+        for w in range(len(extra) + 1):
+            if w:
+                paid += extra[w - 1]
+            if paid >= least and (w == len(extra) or extra[w] >= 0):
+                break  # more 21h, each costing more than its items: no fewer headers pay for them
+            headers = fsum((
+                *(prices.field_header * _messages(n - w, codec.MAX_FIELD_ITEMS) for n in plain),
+                prices.address_header * _messages(addresses - w, codec.MAX_ADDRESS_ITEMS),
+                self._pv_headers(p - w, v - w, both - w),
+            ))  # fmt: skip
+            least = min(least, fsum((paid, headers)))
+        known = self._at_least[whole] = fsum((whole.bit_count() * prices.program, *spent, least))
+        return known
+
+    def _pv_headers(self, p: int, v: int, both: int) -> float:
+        """The headers of P and V at least, for `p` programs that differ in P, `v` in V, `both` in either:
+        with R 33h (or 32h), each over at most 15 of them, the rest need 40h for P and 41h for V."""
+        prices, capacity = self.prices, codec.MAX_FIELD_ITEMS
+        run = min(prices.parts_header, self.parts_price[1] - prices.parts_item)
+        return min(fsum((r * run, prices.field_header * max(_messages(p - capacity * r, capacity)
+                                                            + _messages(v - capacity * r, capacity),
+                                                            _messages(both - capacity * r, capacity))))
+                   for r in range(_messages(both, capacity) + 1))  # fmt: skip
 
     def _priced(self, whole: int, runs: tuple[Run, ...], runs_cost: float, items: tuple[int, ...],
                 ranges: tuple[Range, ...], addresses: int) -> Writes:  # fmt: skip
@@ -1067,6 +1123,11 @@ def _pareto(front: dict[int, float]) -> dict[int, float]:
     return kept
 
 
+def _messages(n: int, capacity: int) -> int:
+    """How many messages n items need (none for none or fewer)."""
+    return -(-n // capacity) if n > 0 else 0
+
+
 def _suffix_counts(mask: int) -> list[int]:
     """For each index 0..64, how many of the programs from it on are in `mask`."""
     counts = [0] * (PROGRAM_COUNT + 1)
@@ -1310,7 +1371,7 @@ class InitSearch:
         self.tried.add(kinds)
         base = problem.system_cost + init_cost(problem, kinds)
         with_inits = self._phase(kinds)
-        if base + with_inits.floor >= self.best.estimate:
+        if base + with_inits.floor >= self.best.estimate or base + with_inits.at_least(0) >= self.best.estimate:
             return []
         self.searched += 1
         found = with_inits.solve(self.best.estimate - base)
