@@ -1221,41 +1221,40 @@ def init_cost(problem: PlanningProblem, kinds: Kinds) -> float:
     return total
 
 
-def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> Kinds:
-    """The init kind of every program minimising init messages + `residual[i][kind]`.
+def choose_inits(problem: PlanningProblem, charges: list[list[float]]) -> Kinds:
+    """The init kind of every program minimising init messages + `charges[i][n]` (n: the kind's
+    place in `problem.kinds`, KEEP first).
 
     A run of programs of one kind costs one 14h, or a 12h/13h/11h when it is one program
     or ends at 64. Unmanaged programs are always KEEP, so no run covers them. States: 0, kept;
-    for the n-th init kind, 2n - 1 after the first program of its run and 2n further on.
+    for the n-th init kind, 2n - 1 after the first program of its run and 2n further on. A run
+    begins from the cheapest state of another kind once closed (a run of one refunded: a 12h,
+    not a 14h); on a tie the lowest state.
     """
     prices = problem.prices
     refund, init_range = prices.init_range - prices.init, prices.init_range
     inits = problem.kinds[1:]
-    size = 1 + 2 * len(inits)
+    count = len(inits)
+    if all(_best_run(problem.managed, charges, n) < prices.init - TIE for n in range(1, count + 1)):
+        return (KEEP,) * PROGRAM_COUNT  # no run of any kind saves what its message costs
+    size = 1 + 2 * count
     cost = [0.0] + [INF] * (size - 1)
     back: list[list[int]] = []
-    for i in range(PROGRAM_COUNT):
-        row = residual[i]
-        new, step = [INF] * size, [0] * size
-        # kept: from any state, a run of one program refunded (a 12h, not a 14h)
-        keep = row[KEEP]
-        for state, c in enumerate(cost):
-            closing = c - refund if state % 2 else c
-            if closing + keep < new[0]:
-                new[0], step[0] = closing + keep, state
+    for i, row in enumerate(charges):
+        # per kind (KEEP: state 0), its cheapest state closed here
+        closed = [(cost[0], 0)]
+        for n in range(1, count + 1):
+            one, more = cost[2 * n - 1] - refund, cost[2 * n]
+            closed.append((one, 2 * n - 1) if one <= more else (more, 2 * n))
+        c, state = min(closed)
+        new, step = [c + row[0], *[INF] * (size - 1)], [state, *[0] * (size - 1)]
         if problem.managed[i]:
-            for n, kind in enumerate(inits, start=1):
-                value = row[kind]
-                first, further = 2 * n - 1, 2 * n
-                for state, c in enumerate(cost):  # a run of this kind begins here
-                    if state in (first, further):
-                        continue
-                    closing = c - refund if state % 2 else c
-                    if closing + init_range + value < new[first]:
-                        new[first], step[first] = closing + init_range + value, state
-                for state in (first, further):  # or goes on
-                    if cost[state] + value < new[further]:
-                        new[further], step[further] = cost[state] + value, state
+            for n in range(1, count + 1):
+                value = row[n]
+                c, state = min(pair for k, pair in enumerate(closed) if k != n)
+                new[2 * n - 1], step[2 * n - 1] = c + init_range + value, state
+                one, more = cost[2 * n - 1], cost[2 * n]
+                new[2 * n], step[2 * n] = (one + value, 2 * n - 1) if one <= more else (more + value, 2 * n)
         cost = new
         back.append(step)
     state = min(range(size), key=lambda s: cost[s] - (refund if s else 0.0))
@@ -1266,26 +1265,59 @@ def choose_inits(problem: PlanningProblem, residual: list[dict[int, float]]) -> 
     return tuple(kinds)
 
 
-def _table(problem: PlanningProblem, residual: Residual, alike: Callable[[int, int], object] | None = None) -> list[dict[int, float]]:
-    """Residuals per program and init kind; on a tie the init wins, so runs grow over programs they do not harm.
-    A program's kinds often leave it the same differences: each is priced once — and, where the
-    residual depends on the program only through `alike(i, mask)`, once for all programs alike."""
-    table = []
-    shared: dict[object, float] = {}
-    for i in range(PROGRAM_COUNT):
-        priced: dict[int, float] = {}  # by mask
-        row = {}
-        for kind in problem.kinds:
-            mask = problem.masks[kind][i]
-            if (value := priced.get(mask)) is None:
-                if alike is None:
-                    value = residual(i, mask)
-                elif (value := shared.get(key := alike(i, mask))) is None:
-                    value = shared[key] = residual(i, mask)
-                priced[mask] = value
-            row[kind] = value - (TIE if kind != KEEP else 0.0)
-        table.append(row)
-    return table
+def _best_run(managed: tuple[bool, ...], charges: list[list[float]], n: int) -> float:
+    """The most a run of the n-th kind could save on `charges` (the maximum subarray, over managed programs)."""
+    best = run = 0.0
+    for i, row in enumerate(charges):
+        run = run + row[0] - row[n] if managed[i] else 0.0
+        if run < 0.0:
+            run = 0.0
+        elif run > best:
+            best = run
+    return best
+
+
+class Charges:
+    """What `choose_inits` charges each program for each init kind, by a residual: per program the
+    differences each kind leaves it priced — where kinds leave it the same differences, once; and
+    where the residual depends on the program only through `alike(i, mask)`, once for all programs
+    alike. On a tie the init wins, so runs grow over programs they do not harm."""
+
+    def __init__(self, problem: PlanningProblem, alike: Callable[[int, int], object]) -> None:
+        kinds = problem.kinds
+        self.masks = [[problem.masks[k][i] for k in kinds] for i in range(PROGRAM_COUNT)]
+        self.ties = [0.0, *[TIE] * (len(kinds) - 1)]
+        # the programs' distinct masks (with their first program), and by `alike` (by index)
+        self.own: list[list[int]] = []  # per program and kind: its mask's place among the program's distinct masks
+        self.distinct: list[list[int]] = []
+        alikes: dict[object, int] = {}
+        self.first: list[tuple[int, int]] = []  # per key of `alike`: the first program and mask with it
+        self.shared: list[list[int]] = []  # per program and kind: its key's place in `first`
+        for i, masks in enumerate(self.masks):
+            distinct = list(dict.fromkeys(masks))
+            self.distinct.append(distinct)
+            self.own.append([distinct.index(mask) for mask in masks])
+            places = []
+            for mask in masks:
+                if (place := alikes.get(key := alike(i, mask))) is None:
+                    place = alikes[key] = len(self.first)
+                    self.first.append((i, mask))
+                places.append(place)
+            self.shared.append(places)
+
+    def each(self, residual: Residual) -> list[list[float]]:
+        """Charges priced program by program."""
+        ties, table = self.ties, []
+        for i, (distinct, own) in enumerate(zip(self.distinct, self.own)):
+            values = [residual(i, mask) for mask in distinct]
+            table.append([values[k] - tie for k, tie in zip(own, ties)])
+        return table
+
+    def alike(self, residual: Residual) -> list[list[float]]:
+        """Charges of a residual that sees a program only through `alike`."""
+        values = [residual(i, mask) for i, mask in self.first]
+        ties = self.ties
+        return [[values[k] - tie for k, tie in zip(places, ties)] for places in self.shared]
 
 
 # -- the whole search ------------------------------------------------------------------------
@@ -1320,6 +1352,7 @@ class InitSearch:
         self.order = 0  # init choices queued: ties in `_queued` go to the first
         self.improved = 0  # better plans found
         self.phases: dict[Kinds, WritePhase] = {}
+        self.charges = Charges(problem, phase.alike)
 
     def run(self, writes: Writes) -> list[Layout]:
         """Every candidate found, starting from `writes`, the best write phase without inits. The
@@ -1356,14 +1389,15 @@ class InitSearch:
         """The init DP with a program's charge estimated five ways (module docstring, 2.)."""
         phase, problem = self.phase, self.problem
         everything = Channels.everything(True)
-        residuals = [
-            (phase.marginal(writes), None),
-            (phase.linear(everything), phase.alike),
-            (phase.linear(everything, problem.prices.field_header / INIT_SHARE), phase.alike),
-            (phase.linear(Channels.everything(False)), phase.alike),
-            (floor_of(problem.prices, phase.target_a, _over_every_kind(problem)), phase.alike),
+        charges = self.charges
+        tables = [
+            charges.each(phase.marginal(writes)),
+            charges.alike(phase.linear(everything)),
+            charges.alike(phase.linear(everything, problem.prices.field_header / INIT_SHARE)),
+            charges.alike(phase.linear(Channels.everything(False))),
+            charges.alike(floor_of(problem.prices, phase.target_a, _over_every_kind(problem))),
         ]
-        return [choose_inits(problem, _table(problem, residual, alike)) for residual, alike in residuals]
+        return [choose_inits(problem, table) for table in tables]
 
     def _try(self, kinds: Kinds) -> list[Kinds]:
         """Search the write phases of `kinds`; when that gives a better plan, the init choices to try from it."""
@@ -1381,7 +1415,7 @@ class InitSearch:
         self.best = Layout(kinds, found[0], base + found[0].estimate)
         self.budget = min(self.budget + SEARCHED // 2, 3 * SEARCHED)  # a better plan: its neighbourhood too
         self.improved += 1
-        return [choose_inits(problem, _table(problem, with_inits.marginal(found[0]))),
+        return [choose_inits(problem, self.charges.each(with_inits.marginal(found[0]))),
                 *_moved_across(problem, kinds)]  # fmt: skip
 
     def _targets(self) -> list[Kinds]:
@@ -1393,7 +1427,7 @@ class InitSearch:
         for layout in close[:TARGETED]:
             self.targeted.add(layout.kinds)
             goals = _overflows(problem, layout)
-            candidates = _header_targets(problem, self.phase, goals, alone=self.searched > 0) + _harmless_inits(problem, layout, goals)
+            candidates = _header_targets(problem, self.phase, self.charges, goals, alone=self.searched > 0) + _harmless_inits(problem, layout, goals)
             queue += [kinds for kinds in candidates if kinds not in self.tried]
         return queue
 
@@ -1419,7 +1453,7 @@ def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
     return goals
 
 
-def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[Overflow], alone: bool) -> list[Kinds]:
+def _header_targets(problem: PlanningProblem, phase: WritePhase, charges: Charges, goals: list[Overflow], alone: bool) -> list[Kinds]:
     """Init choices that take the overflow of the `goals` fields out, to save whole messages.
 
     For all of those fields together, and (`alone`) for each alone, header shares per field are bisected
@@ -1434,7 +1468,7 @@ def _header_targets(problem: PlanningProblem, phase: WritePhase, goals: list[Ove
                   for bit, _, over, _ in chosen}  # fmt: skip
         low, high = dict.fromkeys(shares, 0.0), dict.fromkeys(shares, INF)
         for _ in range(TARGET_PROBES):
-            kinds = choose_inits(problem, _table(problem, phase.shared(shares), phase.alike))
+            kinds = choose_inits(problem, charges.alike(phase.shared(shares)))
             left = 0
             for bit, goal, _, counted in chosen:
                 over = sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit and counted >> i & 1) - goal
