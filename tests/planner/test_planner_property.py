@@ -181,4 +181,11 @@ def test_no_candidates_write_phase_costs_less_than_the_bounds_the_search_prunes_
     for layout in search(problem):
         phase, writes = WritePhase(problem, layout.kinds), layout.writes
         assert phase.floor <= writes.estimate + 1e-9
-        assert phase.at_least(writes.whole) <= writes.estimate + 1e-9
+        assert phase.at_least(writes.whole, len(writes.ranges)) <= writes.estimate + 1e-9
+
+
+@pytest.mark.soak
+@settings(suppress_health_check=[HealthCheck.too_slow])  # the soak profile's 2,000 examples
+@given(scenarios())
+def test_no_candidates_write_phase_costs_less_than_the_bounds_in_many_more_scenarios(scenario) -> None:
+    test_no_candidates_write_phase_costs_less_than_the_bounds_the_search_prunes_by.hypothesis.inner_test(scenario)

@@ -316,7 +316,7 @@ class WritePhase:
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
         # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
-        self._at_least: dict[int, float] = {}
+        self._at_least: dict[tuple[int, int], float] = {}
         self._parts_cache: dict[tuple[int, int, bool, bool, bool], Parts] = {}
         self._address_cache: dict[tuple[int, bool], tuple[Addresses, ...]] = {}
 
@@ -364,7 +364,7 @@ class WritePhase:
         cheapest: Writes | None = None
         for found in self.addresses(whole, channels.addresses):
             limit = bound if cheapest is None else min(bound, cheapest.estimate)
-            if limit < INF and len(found.ranges) * self.prices.link + self.at_least(whole | found.whole) >= limit:
+            if limit < INF and self.at_least(whole | found.whole, len(found.ranges)) >= limit:
                 continue
             writes = self._with_addresses(whole, channels, found)
             if cheapest is None or writes.estimate < cheapest.estimate:
@@ -405,18 +405,19 @@ class WritePhase:
             costs.append(cost)
         return itemised, costs
 
-    def at_least(self, whole: int) -> float:
-        """No write phase that gives at least `whole` a 21h costs less, its headers counted whole.
+    def at_least(self, whole: int, ranges: int = 0) -> float:
+        """No write phase that gives at least `whole` a 21h (and has `ranges` link and unlink
+        ranges) costs less, its headers counted whole.
 
         Each of those 21h; each other program's differences as items at their cheapest (P and V
-        as a 33h's share or 40h/41h items, a jump address a link or unlink range can give as
-        free) or as a 21h of its own; and the headers that the items left need, in whole
-        messages: w more 21h take at most w items out of each field, so a field of n items
-        needs ceil((n - w) / 15) messages (46h: 31) — and P and V, with R 33h runs of at most
-        15 programs, the 40h and 41h for the rest (`_pv_headers`). The least over w, the w
-        programs whose 21h cost least beyond their items.
+        as a 33h's share or 40h/41h items) or as a 21h of its own; and the headers that the
+        items left need, in whole messages: w more 21h take at most w items out of each field,
+        so a field of n items needs ceil((n - w) / 15) messages (46h: 31) — and P and V, with R
+        33h runs of at most 15 programs, the 40h and 41h for the rest (`_pv_headers`). A jump
+        address a link or unlink range can give costs a range, or an item each, or its 21h.
+        The least over w, the w programs whose 21h cost least beyond their items.
         """
-        if (known := self._at_least.get(whole)) is not None:
+        if (known := self._at_least.get((whole, ranges))) is not None:
             return known
         prices, (itemised, items) = self.prices, self._items
         rest = self.relevant_programs & ~whole
@@ -424,6 +425,7 @@ class WritePhase:
         extra = sorted(prices.program - c for c in spent)
         plain = [(self.changed[bit] & ~whole).bit_count() for bit in PLAIN_BITS]
         addresses = (itemised & ~whole).bit_count()
+        ranged = (self.changed[A_BIT] & ~itemised & ~whole).bit_count()
         p, v = (self.changed[P_BIT] & ~whole).bit_count(), (self.changed[V_BIT] & ~whole).bit_count()
         both = (self.pv_changed & ~whole).bit_count()
         least, paid = INF, 0.0
@@ -436,9 +438,10 @@ class WritePhase:
                 *(prices.field_header * _messages(n - w, codec.MAX_FIELD_ITEMS) for n in plain),
                 prices.address_header * _messages(addresses - w, codec.MAX_ADDRESS_ITEMS),
                 self._pv_headers(p - w, v - w, both - w),
+                max(ranges * prices.link, min(prices.link, (ranged - w) * prices.address_item) if ranged > w else 0.0),
             ))  # fmt: skip
             least = min(least, fsum((paid, headers)))
-        known = self._at_least[whole] = fsum((whole.bit_count() * prices.program, *spent, least))
+        known = self._at_least[whole, ranges] = fsum((whole.bit_count() * prices.program, *spent, least))
         return known
 
     def _pv_headers(self, p: int, v: int, both: int) -> float:
@@ -1141,7 +1144,8 @@ def floor_of(prices: Prices, target_a: list[int], changed: dict[int, int]) -> Re
     the programs in `changed` (per FIELD_BIT) have an item of each field: each at its cheapest,
     every item with its share of a header. A field of n <= N items needs ceil(n/15) headers: at
     least n/15 of one, and one at least n/N of one — so header / min(N, 15) an item (31 for 46h;
-    a 33h run carries its header over at most 15 programs, and at most all that need P or V)."""
+    a 33h run carries its header over at most 15 programs, and at most all that need P or V; a
+    32h writes one program's P and V alone)."""
 
     def share(bit: int, header: float, capacity: int) -> float:
         return header / max(min(changed[bit].bit_count(), capacity), 1)
@@ -1149,12 +1153,12 @@ def floor_of(prices: Prices, target_a: list[int], changed: dict[int, int]) -> Re
     field = {bit: prices.field_item + share(bit, prices.field_header, codec.MAX_FIELD_ITEMS) for bit in (P_BIT, V_BIT, *PLAIN_BITS)}
     address = prices.address_item + share(A_BIT, prices.address_header, codec.MAX_ADDRESS_ITEMS)
     needers = max(min((changed[P_BIT] | changed[V_BIT]).bit_count(), codec.MAX_FIELD_ITEMS), 1)
-    pair = prices.parts_item + prices.parts_header / needers
+    pair, single = prices.parts_item + prices.parts_header / needers, prices.parts(1)  # a 33h's share, a 32h
 
     def cost(i: int, mask: int) -> float:
         total = fsum(field[bit] for bit in PLAIN_BITS if mask & bit)
         if mask & PV_BITS:
-            total += min(pair, fsum(field[bit] for bit in (P_BIT, V_BIT) if mask & bit))
+            total += min(pair, single, fsum(field[bit] for bit in (P_BIT, V_BIT) if mask & bit))
         if mask & A_BIT and target_a[i] not in (0, i + 2):
             total += address
         return min(total, prices.program)
