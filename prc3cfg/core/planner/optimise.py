@@ -904,6 +904,7 @@ class PartsDP:
         as_items = needs and (self.positions or not p) and (self.speeds or not v)
         runs = needs and self.runs_allowed
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
+        capped = left_p < capacity or left_v < capacity  # else no room is beyond what the programs left could use
         single, per = phase.parts_price[1], prices.parts_item
         nothing, items, whole, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
         new: dict[int, float] = {}
@@ -922,7 +923,7 @@ class PartsDP:
                 if c < new.get(after, INF):
                     new[after], step[after] = c, (state, items, j, 0)
             # the other moves leave the state as it was, but for room no item left could use
-            kept = _with_rooms(state, was_p, was_v, left_p, left_v)
+            kept = _with_rooms(state, was_p, was_v, left_p, left_v) if capped else state
             if runs:  # a run may start here: pushed onto its state's window (`Window`)
                 if (window := windows.get(kept)) is None:
                     window = windows[kept] = Window()
@@ -946,11 +947,12 @@ class PartsDP:
         head, per, run = prices.parts_header, prices.parts_item, PartsMove.RUN
         gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
+        capped = left_p < codec.MAX_FIELD_ITEMS or left_v < codec.MAX_FIELD_ITEMS  # as in `moves`
         for state, window in list(windows.items()):
             if windows.get(state) is not window:
                 continue  # merged into another at this program
             # the state the runs end in, but for room no item left could use (as `moves` leaves it)
-            after = _with_rooms(state, state & FIELD, state >> STATE_BITS & FIELD, left_p, left_v)
+            after = _with_rooms(state, state & FIELD, state >> STATE_BITS & FIELD, left_p, left_v) if capped else state
             if after != state:
                 del windows[state]
                 window = windows[after] = Window.merged(window.starts, windows[after].starts) if after in windows else window
