@@ -307,12 +307,16 @@ class WritePhase:
         self.masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
         self.base_a = [problem.bases[k][i].A for i, k in enumerate(kinds)]
         self.target_a = [0 if p is None else p.A for p in problem.desired.programs]
-        self.changed = {bit: sum(1 << i for i, m in enumerate(self.masks) if m & bit) for bit in FIELD_BIT.values()}
-        self.relevant = 0
-        for m in self.masks:
-            self.relevant |= m
-        self.pv_changed = self.changed[P_BIT] | self.changed[V_BIT]
-        self.relevant_programs = sum(1 << i for i, m in enumerate(self.masks) if m)
+        changed = dict.fromkeys(FIELD_BIT.values(), 0)  # per field, the programs that differ in it
+        self.relevant = self.relevant_programs = 0
+        for i, m in enumerate(self.masks):
+            if m:
+                self.relevant |= m
+                self.relevant_programs |= 1 << i
+                for bit in members(m):
+                    changed[1 << bit] |= 1 << i
+        self.changed = changed
+        self.pv_changed = changed[P_BIT] | changed[V_BIT]
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
         # What a 21h saves in plain items.
         self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
@@ -382,8 +386,11 @@ class WritePhase:
     @functools.cached_property
     def floor(self) -> float:
         """No write phase of these init kinds costs less (`floor_of`: quicker than `at_least`, less tight)."""
-        at_least = floor_of(self.prices, self.target_a, self.changed)
-        return fsum(at_least(i, m) for i, m in enumerate(self.masks) if m)
+        at_least, priced = floor_of(self.prices, self.target_a, self.changed), {}
+        for i, m in enumerate(self.masks):
+            if m and (key := self.alike(i, m)) not in priced:
+                priced[key] = at_least(i, m)
+        return fsum(priced[self.alike(i, m)] for i, m in enumerate(self.masks) if m)
 
     @functools.cached_property
     def _items(self) -> tuple[int, list[float]]:
@@ -1176,29 +1183,25 @@ def _over_every_kind(problem: PlanningProblem) -> dict[int, int]:
     return {bit: sum(1 << i for i, u in enumerate(union) if u & bit) for bit in FIELD_BIT.values()}
 
 
-def inits_floor(problem: PlanningProblem) -> float:
+def inits_floor(problem: PlanningProblem, floors: list[list[float]]) -> float:
     """No plan with an init costs less: its init messages and each program's differences at their
-    cheapest under its init kind (`floor_of`, every field's items counted over every kind), for
-    the init choice with at least one init where that is least (`choose_inits`' DP, with whether
-    an init has been sent yet in the state)."""
-    target_a = [0 if p is None else p.A for p in problem.desired.programs]
-    at_least = floor_of(problem.prices, target_a, _over_every_kind(problem))
-    prices, inits = problem.prices, problem.kinds[1:]
+    cheapest under its init kind (`floors`: `floor_of`, every field's items counted over every
+    kind, as `Charges`), for the init choice with at least one init where that is least
+    (`choose_inits`' DP, with whether an init has been sent yet in the state)."""
+    prices, count = problem.prices, len(problem.kinds) - 1
     refund, init_range = prices.init_range - prices.init, prices.init_range
     # states once an init has been sent: 0 kept; 2n - 1 after the first program of a run of the
     # n-th init kind, 2n further on; `before`: no init sent yet (every program so far kept)
-    size = 1 + 2 * len(inits)
+    size = 1 + 2 * count
     before, cost = 0.0, [INF] * size
-    for i in range(PROGRAM_COUNT):
-        floors = {kind: at_least(i, problem.masks[kind][i]) for kind in problem.kinds}
-        new = [min(c - refund if state % 2 else c for state, c in enumerate(cost)) + floors[KEEP], *[INF] * (size - 1)]
+    for i, row in enumerate(floors):
+        closed = [cost[0], *(min(cost[2 * n - 1] - refund, cost[2 * n]) for n in range(1, count + 1))]  # per kind
+        new = [min(closed) + row[0], *[INF] * (size - 1)]
         if problem.managed[i]:
-            for n, kind in enumerate(inits, start=1):
-                first, further = 2 * n - 1, 2 * n
-                closed = [c - refund if state % 2 else c for state, c in enumerate(cost) if state not in (first, further)]
-                new[first] = min(before, *closed) + init_range + floors[kind]
-                new[further] = min(cost[first], cost[further]) + floors[kind]
-        before += floors[KEEP]
+            for n in range(1, count + 1):
+                new[2 * n - 1] = min(before, *(c for k, c in enumerate(closed) if k != n)) + init_range + row[n]
+                new[2 * n] = min(cost[2 * n - 1], cost[2 * n]) + row[n]
+        before += row[0]
         cost = new
     return problem.system_cost + min(c - (refund if state else 0.0) for state, c in enumerate(cost))
 
@@ -1335,8 +1338,11 @@ def search(problem: PlanningProblem) -> list[Layout]:
     phase = WritePhase(problem, keep)
     found = phase.solve()
     layouts = [Layout(keep, writes, problem.system_cost + writes.estimate) for writes in found]
-    if problem.init_useful() and inits_floor(problem) < layouts[0].estimate:
-        layouts = InitSearch(problem, phase, layouts).run(found[0])
+    if problem.init_useful():
+        charges = Charges(problem, phase.alike)
+        floors = charges.alike(floor_of(problem.prices, phase.target_a, _over_every_kind(problem)))
+        if inits_floor(problem, floors) < layouts[0].estimate:
+            layouts = InitSearch(problem, phase, layouts, charges).run(found[0], floors)
     unique = {(layout.kinds, layout.writes): layout for layout in layouts}
     return sorted(unique.values(), key=ESTIMATE)
 
@@ -1346,7 +1352,7 @@ class InitSearch:
     bound first, each given its own write phase; when it runs dry, the neighbours of the best plan
     and the inits that save whole messages — until none is left or the budget is spent."""
 
-    def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout]) -> None:
+    def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout], charges: Charges) -> None:
         self.problem = problem
         self.phase = phase  # the write phase without inits
         self.layouts = layouts  # every candidate found, the plans without inits first
@@ -1358,13 +1364,14 @@ class InitSearch:
         self.order = 0  # init choices queued: ties in `_queued` go to the first
         self.improved = 0  # better plans found
         self.phases: dict[Kinds, WritePhase] = {}
-        self.charges = Charges(problem, phase.alike)
+        self.charges = charges  # the init DP's, by residual
 
-    def run(self, writes: Writes) -> list[Layout]:
-        """Every candidate found, starting from `writes`, the best write phase without inits. The
+    def run(self, writes: Writes, floors: list[list[float]]) -> list[Layout]:
+        """Every candidate found, starting from `writes`, the best write phase without inits, and
+        `floors`, the init DP's charges at the least they could be (`floor_of`). The
         init choices waiting are searched those from the latest better plan first, then lowest
         `floor` first, as many as the budget allows."""
-        queue = self._queued(self._first(writes))
+        queue = self._queued(self._first(writes, floors))
         while self.searched < self.budget:
             if not queue:  # the neighbours of the best plan and the inits that save whole messages, alike
                 queue = self._queued([*_neighbours(self.problem, self.best), *self._targets()])
@@ -1391,7 +1398,7 @@ class InitSearch:
             phase = self.phases[kinds] = WritePhase(self.problem, kinds)
         return phase
 
-    def _first(self, writes: Writes) -> list[Kinds]:
+    def _first(self, writes: Writes, floors: list[list[float]]) -> list[Kinds]:
         """The init DP with a program's charge estimated five ways (module docstring, 2.)."""
         phase, problem = self.phase, self.problem
         everything = Channels.everything(True)
@@ -1401,7 +1408,7 @@ class InitSearch:
             charges.alike(phase.linear(everything)),
             charges.alike(phase.linear(everything, problem.prices.field_header / INIT_SHARE)),
             charges.alike(phase.linear(Channels.everything(False))),
-            charges.alike(floor_of(problem.prices, phase.target_a, _over_every_kind(problem))),
+            floors,
         ]
         return [choose_inits(problem, table) for table in tables]
 
