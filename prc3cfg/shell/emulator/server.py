@@ -78,6 +78,10 @@ log = logging.getLogger(__name__)
 
 POLL = 0.1  # s: how often an idle stream looks whether the emulator is closing
 RECV_SIZE = 4096  # bytes read from a stream at a time
+#: Bytes of replies a TCP client may leave unread before a reply waits (and, after POLL, the client is cut
+#: off): a line holds no backlog, a client waits for each reply; the kernel's own would grow to megabytes,
+#: which a client that takes no replies fills only after seconds of the emulator's work.
+REPLY_BUFFER = 64 * 1024
 ACCEPT_BACKOFF = 0.1  # s: the pause before accepting again after accept() failed (EMFILE, ENFILE, …)
 MAX_CONNECTIONS = 1
 IDLE_TIMEOUT = 300.0  # s
@@ -456,6 +460,7 @@ class Emulator:
         recv, send_on, client_line = streams
         try:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, REPLY_BUFFER)
             self._serve_stream(recv, send_on, name=name, uart=False, idle_timeout=self.idle_timeout, client_line=client_line)
         except OSError as error:
             log.info("%s: %s", name, error.strerror or error)
