@@ -387,10 +387,11 @@ class WritePhase:
     def floor(self) -> float:
         """No write phase of these init kinds costs less (`floor_of`: quicker than `at_least`, less tight)."""
         at_least, priced = floor_of(self.prices, self.target_a, self.changed), {}
-        for i, m in enumerate(self.masks):
-            if m and (key := self.alike(i, m)) not in priced:
+        keys = [(i, m, self.alike(i, m)) for i, m in enumerate(self.masks) if m]
+        for i, m, key in keys:
+            if key not in priced:
                 priced[key] = at_least(i, m)
-        return fsum(priced[self.alike(i, m)] for i, m in enumerate(self.masks) if m)
+        return fsum(priced[key] for _, _, key in keys)
 
     @functools.cached_property
     def _items(self) -> tuple[int, list[float]]:
@@ -1294,15 +1295,15 @@ class Charges:
 
     def __init__(self, problem: PlanningProblem, alike: Callable[[int, int], object]) -> None:
         kinds = problem.kinds
-        self.masks = [[problem.masks[k][i] for k in kinds] for i in range(PROGRAM_COUNT)]
         self.ties = [0.0, *[TIE] * (len(kinds) - 1)]
-        # the programs' distinct masks (with their first program), and by `alike` (by index)
+        # per program its distinct masks; over all programs the keys of `alike` (by place)
         self.own: list[list[int]] = []  # per program and kind: its mask's place among the program's distinct masks
         self.distinct: list[list[int]] = []
         alikes: dict[object, int] = {}
         self.first: list[tuple[int, int]] = []  # per key of `alike`: the first program and mask with it
         self.shared: list[list[int]] = []  # per program and kind: its key's place in `first`
-        for i, masks in enumerate(self.masks):
+        for i in range(PROGRAM_COUNT):
+            masks = [problem.masks[k][i] for k in kinds]
             distinct = list(dict.fromkeys(masks))
             self.distinct.append(distinct)
             self.own.append([distinct.index(mask) for mask in masks])
