@@ -337,9 +337,10 @@ def test_proving_a_line_of_12_declared_modules_costs_more_than_its_broadcasts_sa
 def test_a_lost_broadcast_is_repaired_with_addressed_writes(tmp_path, capsys):
     lost: list = []
     rule = lambda frame, number: (lost.append(frame) or {Loss.REQUEST}) if frame.address == 0 and not lost else set()  # noqa: E731
-    # A broadcast has no reply to wait for, so nothing here waits out the link's time-out: a long one costs
-    # nothing, and a reply a busy machine delays past the default 0.1 s is not heard late, as the answer to
-    # the next request (which the apply rightly takes for a module that executed a damaged frame, and stops).
+    # A broadcast has no reply to wait for, and the lost one is found by the read-back, so no exchange here
+    # waits out the link's time-out: a long one costs little (0.2 s), and a reply a busy machine delays past
+    # the default 0.1 s is not heard late, as the answer to the next request (which the apply rightly takes
+    # for a module that executed a damaged frame, and stops).
     with emulated_plant(tmp_path, source=full_line(tmp_path), lossy={"line": rule}, timeout=2.0) as plant:
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, result.err

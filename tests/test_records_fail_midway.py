@@ -10,18 +10,21 @@ measured on a twin line first.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
 import resource
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from emulated import emulated_plant, run_cli
 
 from prc3cfg.core.image import ModuleImage
+from prc3cfg.shell.testing import EmulatedPlant
 
 pytestmark = pytest.mark.skipif(not hasattr(resource, "RLIMIT_FSIZE"), reason="no file-size limit on this system")
 
@@ -80,8 +83,11 @@ def limited_apply(path: Path, size: int) -> subprocess.CompletedProcess[str]:
                           preexec_fn=limit, capture_output=True, text=True, timeout=120)  # fmt: skip
 
 
-def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_frame_with_an_exact_account(tmp_path, capsys):
-    size = limit_within_the_writes(tmp_path, capsys)
+@contextlib.contextmanager
+def refused_apply(tmp_path: Path, size: int) -> Iterator[tuple[EmulatedPlant, dict, subprocess.CompletedProcess[str], str]]:
+    """An apply of a fresh line (its folder `line`) whose journal the disk refuses past `size` bytes: it
+    ended with exit 1, no traceback, and an error naming the journal it could not keep. The plant (still
+    emulated), its images before, the apply's result and its last line."""
     line = tmp_path / "line"
     line.mkdir()
     with emulated_plant(line, timeout=UNHURRIED) as plant:
@@ -91,6 +97,11 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
         assert "Traceback" not in result.stdout + result.stderr
         error = result.stderr.strip().splitlines()[-1]
         assert error.startswith("error: could not keep the journal ") and journal_of(line).name in error, error
+        yield plant, factory, result, error
+
+
+def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_frame_with_an_exact_account(tmp_path, capsys):
+    with refused_apply(tmp_path, limit_within_the_writes(tmp_path, capsys)) as (plant, factory, result, error):
         assert "every line stopped before its next frame" in error and "prc3cfg restore " in error
         held = plant.images()
         # what each module was told to have been sent is what it holds
@@ -122,7 +133,7 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
         assert [sorted(line.split(": ", 1)[1].split(", ")) for line in travel] == ([sorted(names[key] for key in released)] if released else [])
         # the journal holds every frame that left: each module that holds anything new has its requests in it
         requested = set()
-        for raw in journal_of(line).read_bytes().splitlines():
+        for raw in journal_of(tmp_path / "line").read_bytes().splitlines():
             try:
                 entry = json.loads(raw)
             except ValueError:
@@ -142,15 +153,7 @@ def test_a_journal_the_disk_refuses_while_the_modules_are_read_back_is_said_so_n
     it could not keep its journal — it said "error: interrupted", exit 130, as if Ctrl-C."""
     header, lines, _ = read_backs(twin_journal(tmp_path, capsys))
     size = header + min(lines.values()) // 2  # before any line's first write, whichever line reads back first
-    line = tmp_path / "line"
-    line.mkdir()
-    with emulated_plant(line, timeout=UNHURRIED) as plant:
-        factory = plant.images()
-        result = limited_apply(plant.path, size)
-        assert result.returncode == 1, result.stderr
-        assert "Traceback" not in result.stdout + result.stderr
-        error = result.stderr.strip().splitlines()[-1]
-        assert error.startswith("error: could not keep the journal ") and journal_of(line).name in error, error
+    with refused_apply(tmp_path, size) as (plant, factory, _, error):
         assert "while the modules were read back — nothing was written to any module" in error, error
         assert plant.images() == factory
 
