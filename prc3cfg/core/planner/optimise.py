@@ -53,8 +53,8 @@ to send. The search is built around that:
    The init choices waiting are searched cheapest lower bound first (`floor_of`: each
    program's differences at their cheapest, every item with its share of a header), those
    whose bound — or `WritePhase.at_least`, the same with headers counted in whole messages —
-   cannot beat the best plan not at all, and only so many (SEARCHED, more after
-   each better plan), so that planning costs about the same for every kind of change; no
+   cannot beat the best plan not at all, and only so many (SEARCHED), so that planning
+   costs about the same for every kind of change; no
    init choice is searched where no plan with an init could beat the best without
    (`inits_floor`).
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
@@ -123,9 +123,10 @@ _rho = operator.attrgetter("rho")
 TIE = 1e-9
 #: Items per message assumed by one of the init choices (few items: headers matter).
 INIT_SHARE = 4
-#: How many init choices' write phases one module's `InitSearch` searches, and half as many more
-#: after each better plan, up to three times as many (the CPU of a plan must not depend on the kind of
-#: change; improvements come from the first few and from near the better plans).
+#: How many init choices' write phases one module's `InitSearch` searches (the CPU of a plan must not
+#: depend on the kind of change). Better plans come from the first few: searching half as many more
+#: after each better plan, up to three times as many, changed no message of 1,680 plans of the change
+#: mixes of `bench/plan_time_bench.py` or of `bench/plan_bench.py`'s, and cost the random mix a fifth of its CPU.
 SEARCHED = 8
 #: The most 42h..46h fields (alike ones as one) `PartsDP` counts removals of:
 #: those that need fewest.
@@ -1351,7 +1352,7 @@ def search(problem: PlanningProblem) -> list[Layout]:
 class InitSearch:
     """The search over init choices (module docstring, 2.): a queue of init choices, cheapest lower
     bound first, each given its own write phase; when it runs dry, the neighbours of the best plan
-    and the inits that save whole messages — until none is left or the budget is spent."""
+    and the inits that save whole messages — until none is left or SEARCHED were."""
 
     def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout], charges: Charges) -> None:
         self.problem = problem
@@ -1361,7 +1362,6 @@ class InitSearch:
         self.tried = {layouts[0].kinds}
         self.targeted: set[Kinds] = set()  # the init choices `_targets` started from
         self.searched = 0  # init choices whose write phases were searched
-        self.budget = SEARCHED  # how many may be
         self.order = 0  # init choices queued: ties in `_queued` go to the first
         self.improved = 0  # better plans found
         self.phases: dict[Kinds, WritePhase] = {}
@@ -1371,9 +1371,9 @@ class InitSearch:
         """Every candidate found, starting from `writes`, the best write phase without inits, and
         `floors`, the init DP's charges at the least they could be (`floor_of`). The
         init choices waiting are searched those from the latest better plan first, then lowest
-        `floor` first, as many as the budget allows."""
+        `floor` first, SEARCHED at most."""
         queue = self._queued(self._first(writes, floors))
-        while self.searched < self.budget:
+        while self.searched < SEARCHED:
             if not queue:  # the neighbours of the best plan and the inits that save whole messages, alike
                 queue = self._queued([*_neighbours(self.problem, self.best), *self._targets()])
             if not queue:
@@ -1427,7 +1427,6 @@ class InitSearch:
         if not found or base + found[0].estimate >= self.best.estimate:
             return []
         self.best = Layout(kinds, found[0], base + found[0].estimate)
-        self.budget = min(self.budget + SEARCHED // 2, 3 * SEARCHED)  # a better plan: its neighbourhood too
         self.improved += 1
         return [choose_inits(problem, self.charges.each(with_inits.marginal(found[0]))),
                 *_moved_across(problem, kinds)]  # fmt: skip
