@@ -121,6 +121,10 @@ _second = operator.itemgetter(1)
 _rho = operator.attrgetter("rho")
 #: A bias far below any price (seconds): ties between keeping and initialising go to initialising.
 TIE = 1e-9
+#: Costs closer than this (seconds) are the same cost, the difference rounding's (the DP's sums of the
+#: same prices in another order): a state the same cost as one ahead of it is beaten (`States`).
+NEAR_DIGITS = 12
+NEAR = 10.0**-NEAR_DIGITS
 #: Items per message assumed by one of the init choices (few items: headers matter).
 INIT_SHARE = 4
 #: How many init choices' write phases one module's `InitSearch` searches (the CPU of a plan must not
@@ -1011,8 +1015,10 @@ class States:
     the last 40h, 1 in the last 41h, 2 + k the programs taken out of live field k — and which of
     them may go: a state ahead of another in some fields (more room, more taken out) can gain at
     most those fields' headers (`worth`) over it whatever follows, so it goes when it costs that
-    much more than the other. Which fields one state is ahead in is found for all fields at once:
-    with a guard bit above each field, 31 + x - y reaches it exactly where x > y.
+    much more than the other (to NEAR: a state that costs the same as one ahead of it in every field
+    goes — the two are met in that order, by cost to NEAR and then ahead first, the larger int).
+    Which fields one state is ahead in is found for all fields at once: with a guard bit above
+    each field, 31 + x - y reaches it exactly where x > y.
 
     Of the states left, at most BEAM go on: the cheapest once each is credited with what it is
     ahead of nothing — a header's share per room left (header / 15 a slot), and a live field's
@@ -1024,8 +1030,8 @@ class States:
         fields = range(len(worth))
         self.guards = sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in fields)
         self.ones = sum(1 << (STATE_BITS * f) for f in fields)
-        # what being ahead in each set of fields is worth, by the guard bits of those fields
-        self.ahead = {sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen): fsum(worth[f] for f in chosen)
+        # what being ahead in each set of fields is worth, by the guard bits of those fields, less NEAR
+        self.ahead = {sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen): fsum(worth[f] for f in chosen) - NEAR
                       for size in range(len(worth) + 1) for chosen in itertools.combinations(fields, size)}  # fmt: skip
         self.ceiling = fsum(worth)
         self.credit = [(STATE_BITS * f, worth[f] / count) for f, count in enumerate(needed)]
@@ -1049,7 +1055,8 @@ class States:
         guards, ones, ahead = self.guards, self.ones, self.ahead
         kept: list[tuple[int, float]] = []
         ceiling = INF
-        for state, c in sorted(states.items(), key=_second):
+        for _, state, c in sorted([(round(c, NEAR_DIGITS), -state, c) for state, c in states.items()]):
+            state = -state
             if c >= ceiling:  # more than every header above the cheapest: beaten by the cheapest
                 break
             raised = (state | guards) - ones
@@ -1077,9 +1084,10 @@ class States:
         no credit, but the states ahead of it paid for 21h whose headers are not saved yet).
         """
         guards, ones, ahead = self.guards, self.ones, self.ahead
-        # (cheapest start, state, dearest start, its program, the window), by cheapest start
+        # (cheapest start, state, dearest start, its program, the window), by cheapest start (as `undominated`)
         kept: list[tuple[float, int, float, int, Window]] = []
-        for cheapest, state, window in sorted((w.starts[0][0], s, w) for s, w in windows.items() if w.starts):
+        for _, state, window in sorted((round(w.starts[0][0], NEAR_DIGITS), -s, w) for s, w in windows.items() if w.starts):
+            state, cheapest = -state, window.starts[0][0]
             dear, latest = window.starts[-1][:2]
             raised = (state | guards) - ones
             for _, other, dearest, last, _ in kept:
