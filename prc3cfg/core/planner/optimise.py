@@ -54,9 +54,8 @@ to send. The search is built around that:
    program's differences at their cheapest, every item with its share of a header), those
    whose bound — or `WritePhase.at_least`, the same with headers counted in whole messages —
    cannot beat the best plan not at all, and only so many (SEARCHED), so that planning
-   costs about the same for every kind of change; no
-   init choice is searched where no plan with an init could beat the best without
-   (`inits_floor`).
+   costs about the same for every kind of change; no init choice is searched where no plan
+   with an init could beat the best without (`inits_floor`).
 3. The candidate layouts go back to the caller, cheapest estimate first, which prices the
    close ones exactly and keeps the cheapest. `whole_programs` is the fallback that is
    never dearer than the naive download.
@@ -130,7 +129,8 @@ INIT_SHARE = 4
 #: How many init choices' write phases one module's `InitSearch` searches (the CPU of a plan must not
 #: depend on the kind of change). Better plans come from the first few: searching half as many more
 #: after each better plan, up to three times as many, changed no message of 1,680 plans of the change
-#: mixes of `bench/plan_time_bench.py` or of `bench/plan_bench.py`'s, and cost the random mix a fifth of its CPU.
+#: mixes of `bench/plan_time_bench.py` or of `bench/plan_bench.py`'s, and cost planning the random mix a
+#: tenth of its CPU where the turnaround is short (0 ms), a few per cent at 10 ms.
 SEARCHED = 8
 #: The most 42h..46h fields (alike ones as one) `PartsDP` counts removals of:
 #: those that need fewest.
