@@ -1016,7 +1016,8 @@ class States:
     them may go: a state ahead of another in some fields (more room, more taken out) can gain at
     most those fields' headers (`worth`) over it whatever follows, so it goes when it costs that
     much more than the other (to NEAR: a state that costs the same as one ahead of it in every field
-    goes — the two are met in that order, by cost to NEAR and then ahead first, the larger int).
+    goes — met by cost, the one ahead first at the same cost, the larger int; one that costs a hair
+    less, a rounding, goes when the one ahead comes next).
     Which fields one state is ahead in is found for all fields at once: with a guard bit above
     each field, 31 + x - y reaches it exactly where x > y.
 
@@ -1055,7 +1056,7 @@ class States:
         guards, ones, ahead = self.guards, self.ones, self.ahead
         kept: list[tuple[int, float]] = []
         ceiling = INF
-        for _, state, c in sorted([(round(c, NEAR_DIGITS), -state, c) for state, c in states.items()]):
+        for c, state in sorted([(c, -state) for state, c in states.items()]):  # at the same cost, ahead first
             state = -state
             if c >= ceiling:  # more than every header above the cheapest: beaten by the cheapest
                 break
@@ -1066,6 +1067,9 @@ class States:
             else:
                 if not kept:
                     ceiling = c + self.ceiling
+                # those met just before it that cost the same to NEAR (a hair less) and it beats go
+                while kept and c - kept[-1][1] < NEAR and kept[-1][1] - c >= ahead[((kept[-1][0] | guards) - ones - state) & guards]:
+                    kept.pop()
                 kept.append((state, c))
         if len(kept) > BEAM:
             kept = sorted(kept, key=lambda pair: self.credited(*pair))[:BEAM]
