@@ -122,6 +122,7 @@ _rho = operator.attrgetter("rho")
 TIE = 1e-9
 #: Costs closer than this (seconds) are the same cost, the difference rounding's (the DP's sums of the
 #: same prices in another order): a state the same cost as one ahead of it is beaten (`States`).
+#: `States.windows_kept` rounds its starts' costs to NEAR_DIGITS to sort them.
 NEAR_DIGITS = 12
 NEAR = 10.0**-NEAR_DIGITS
 #: Items per message assumed by one of the init choices (few items: headers matter).
@@ -1088,7 +1089,9 @@ class States:
         no credit, but the states ahead of it paid for 21h whose headers are not saved yet).
         """
         guards, ones, ahead = self.guards, self.ones, self.ahead
-        # (cheapest start, state, dearest start, its program, the window), by cheapest start (as `undominated`)
+        # (cheapest start, state, dearest start, its program, the window), by cheapest start to NEAR_DIGITS,
+        # the state ahead first at the same start (`undominated` sorts exactly and drops the one a rounding
+        # cheaper after; here, run only past 2 × BEAM windows, rounding costs little)
         kept: list[tuple[float, int, float, int, Window]] = []
         for _, state, window in sorted((round(w.starts[0][0], NEAR_DIGITS), -s, w) for s, w in windows.items() if w.starts):
             state, cheapest = -state, window.starts[0][0]
