@@ -140,7 +140,8 @@ def serve(
         if address is not None:
             print(f"listening on {address[0]}:{address[1]} ({framing}{', rfc2217' if rfc2217 else ''}, modules "
                   f"{', '.join(map(str, sorted(emulator.modules())))})", flush=True)  # fmt: skip
-        if path is not None:
-            print(f"pty: {path}", flush=True)
-        with served_pty(path, emulator.modules()) if path is not None else contextlib.nullcontext():  # prc3cfg ports lists it
+        # prc3cfg ports lists the pty from before its path is printed, which is what a script waits for
+        with served_pty(path, emulator.modules()) if path is not None else contextlib.nullcontext():
+            if path is not None:
+                print(f"pty: {path}", flush=True)
             wait_for(stop)  # a signal's handler runs meanwhile, on Windows too
