@@ -24,7 +24,7 @@ from prc3cfg.core.line import LineSettings
 from prc3cfg.core.what_to_read import read_messages
 from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
-from prc3cfg.shell.link.client import Link, LinkError
+from prc3cfg.shell.link.client import Link, LinkError, PossibleWrite
 from prc3cfg.shell.link.ports import EMULATOR_KEYS, open_link, open_port
 from prc3cfg.shell.link.trace import Trace
 from prc3cfg.shell.readback import ReadBackError, read_module
@@ -111,6 +111,59 @@ def test_a_silent_module_names_bus_and_address():
         with pytest.raises(LinkError, match=r"^bus test, module 4: no reply within 0.1 s to 50h after 2 attempts"):
             link.request(4, codec.ReadSystem())
         link.port.close()
+
+
+class LatePort(PairPort):
+    """An in-memory line whose module answers the first `late` frames after the link stopped waiting:
+    each of those replies arrives with the reply to the next frame, ahead of it (the input dropped
+    before a frame leaves is what came before it)."""
+
+    def __init__(self, emulator: Emulator, late: int) -> None:
+        super().__init__(emulator)
+        self.late, self.held = late, b""
+
+    def write(self, data: bytes, /) -> int:
+        waiting, self._replies = self._replies, bytearray(self.held)
+        written = super().write(data)
+        if self.late:
+            self.late -= 1
+            self.held, self._replies = bytes(self._replies), waiting
+        else:
+            self.held = b""
+        return written
+
+
+def test_a_read_answered_as_a_write_after_an_unanswered_write_names_the_late_reply_too():
+    """A write whose acknowledgement comes after the time-out, and the next read answered by it: the
+    line stops as for a damaged frame executed as a write (`PossibleWrite`), and the error says that
+    it may be the late reply as well — a slow line, whose time-out is to be raised."""
+    with Emulator({1: ModuleState.factory(1)}) as emulator:
+        link = Link(LatePort(emulator, late=1), get_framing("crc16"), bus="test", timeout=0.01, retries=0)
+        with pytest.raises(LinkError, match="no reply within"):
+            link.request(1, codec.WriteSpeeds(((1, 100),)))
+        with pytest.raises(PossibleWrite) as stopped:
+            link.request(1, codec.ReadSystem())
+        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — the late reply to "
+                                             "a write before it that went unanswered (raise the bus's timeout if the line is slow), "
+                                             "or the module took a damaged frame for a write and executed it")  # fmt: skip
+        assert "travel the module to its reference point" in str(stopped.value)
+
+
+def test_a_read_answered_as_a_write_with_no_write_owed_blames_a_damaged_frame_alone():
+    """A read answered with data settles every acknowledgement owed: a read answered as a write after
+    it is a damaged frame the module executed — here another master's write, acknowledged late."""
+    with Emulator({1: ModuleState.factory(1)}) as emulator:
+        port = LatePort(emulator, late=1)
+        link = Link(port, get_framing("crc16"), bus="test", timeout=0.01, retries=0)
+        with pytest.raises(LinkError, match="no reply within"):
+            link.request(1, codec.WriteSpeeds(((1, 100),)))
+        assert link.request(1, codec.WriteSpeeds(((2, 100),))) == 0  # the first one's acknowledgement
+        assert isinstance(link.request(1, codec.ReadSystem()), codec.SystemReply)
+        port.late = 1
+        port.write(get_framing("crc16").encode(Direction.REQUEST, 1, codec.WriteSpeeds(((3, 100),)).encode()))
+        with pytest.raises(PossibleWrite) as stopped:
+            link.request(1, codec.ReadSystem())
+        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — the module took a damaged frame")
 
 
 def test_a_wrong_framing_is_a_silent_line():

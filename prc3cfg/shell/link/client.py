@@ -95,20 +95,23 @@ class NoReadMessages(LinkError):
 
 class PossibleWrite(LinkError):
     """A read was answered with an acknowledgement: the module received a damaged frame as a write
-    and executed it — any write, 10h and 20h among them. Nothing more may be sent on the line
-    until a person has looked; never retried."""
+    and executed it — any write, 10h and 20h among them — or, where writes before it went
+    unanswered (`owed` attempts), the acknowledgement is the late reply to one of them. Either way nothing
+    more may be sent on the line until a person has looked; never retried."""
 
-    def __init__(self, bus: str, address: int, message: codec.Message) -> None:
+    def __init__(self, bus: str, address: int, message: codec.Message, owed: int = 0) -> None:
+        late = (f"the late reply to {'a write' if owed == 1 else f'one of {owed} writes'} before it that went "
+                "unanswered (raise the bus's timeout if the line is slow), or " if owed else "")  # fmt: skip
         super().__init__(
-            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — the module took a damaged "
+            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — {late}the module took a damaged "
             "frame for a write and executed it, which may have changed any value or released its axes (10h/20h): "
             "nothing more is sent on this line; travel the module to its reference point, read it back, and use parity on the line"
         )
         self.bus, self.address = bus, address
 
 
-#: The verdicts that stop the line, and what they raise.
-STOPS: dict[LinkStep, type[PossibleWrite | NoReadMessages]] = {LinkStep.POSSIBLE_WRITE: PossibleWrite, LinkStep.NO_READ_MESSAGES: NoReadMessages}
+#: What a module answers: an error code (0: accepted) or a read's data block.
+Reply = int | codec.SystemReply | codec.ProgramsReply
 
 
 @dataclass(frozen=True, slots=True)
@@ -180,11 +183,14 @@ class Link:
         #: exchanges answered, the seconds they took (frame out to reply in) and what `cost` priced them at
         self.answered = 0
         self.answered_time = self.priced_time = 0.0
+        #: write attempts that went unanswered since a reply last carried data (a read's): their
+        #: acknowledgements may still come, late, as the reply to a later frame (`PossibleWrite` says so)
+        self.owed = 0
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
 
-    def request(self, address: int, message: codec.Message) -> int | codec.SystemReply | codec.ProgramsReply:
+    def request(self, address: int, message: codec.Message) -> Reply:
         """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
 
         Each attempt's reply goes by `prc3cfg.core.exchange.VERDICTS`: a lost reply, a damaged one,
@@ -204,9 +210,11 @@ class Link:
             verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=self.timeout)
             if verdict.step is LinkStep.ANSWER:
                 assert verdict.reply is not None  # an answer is a reply decoded
-                return verdict.reply
-            if stop := STOPS.get(verdict.step):
-                raise stop(self.bus, address, message)
+                return self._answered(verdict.reply)
+            if verdict.step is LinkStep.POSSIBLE_WRITE:  # the verdicts that stop the line
+                raise PossibleWrite(self.bus, address, message, self.owed)
+            if verdict.step is LinkStep.NO_READ_MESSAGES:
+                raise NoReadMessages(self.bus, address, message)
             if verdict.step is LinkStep.GIVE_UP:
                 break
             heard = verdict.unconfirmed
@@ -222,7 +230,7 @@ class Link:
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
         )
 
-    def probe(self, address: int, message: codec.Message, timeout: float) -> int | codec.SystemReply | codec.ProgramsReply | None:
+    def probe(self, address: int, message: codec.Message, timeout: float) -> Reply | None:
         """Whether a module answers at `address`: one attempt, waiting `timeout`; silence is None —
         an absent address is normal on a scan, and is not asked again. Something heard but not
         usable (a damaged reply) gets the usual retries (`request`)."""
@@ -233,9 +241,10 @@ class Link:
             return None
         verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=timeout)
         if verdict.step is LinkStep.POSSIBLE_WRITE:
-            raise PossibleWrite(self.bus, address, message)
+            raise PossibleWrite(self.bus, address, message, self.owed)
         if verdict.step is LinkStep.ANSWER:
-            return verdict.reply
+            assert verdict.reply is not None  # an answer is a reply decoded
+            return self._answered(verdict.reply)
         return self.request(address, message)  # heard, not usable (even a read answered as unknown): the usual retries
 
     def broadcast(self, message: codec.Message, turnaround: float) -> None:
@@ -261,9 +270,15 @@ class Link:
         started = time.time()
         self._announce(address, data, attempt, started)
         raw = self._exchange(address, data, timeout)
+        self.owed += raw is None and not message.IS_READ
         self._observe(address, data, raw, attempt, started)
         self._timed(address, message, raw)
         return raw
+
+    def _answered(self, reply: Reply) -> Reply:
+        if not isinstance(reply, int):  # a data block: no reply still owed was taken for it
+            self.owed = 0
+        return reply
 
     def _announce(self, address: int, data: bytes, attempt: int, started: float) -> None:
         if self.announce:
