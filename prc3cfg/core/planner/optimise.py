@@ -113,6 +113,7 @@ Run = tuple[int, int]
 #: A link (True) or unlink range: (link?, first, last index), a 30h or 31h.
 Range = tuple[bool, int, int]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
+PLAIN_MASK = sum(PLAIN_BITS)
 #: The fields of 40h..45h, in `Writes.items` order.
 ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)
 ESTIMATE = operator.attrgetter("estimate")
@@ -165,7 +166,7 @@ class Channels:
 
     @classmethod
     def everything(cls, open_: bool) -> Channels:
-        return cls(sum(PLAIN_BITS) if open_ else 0, open_, open_, open_, open_)
+        return cls(PLAIN_MASK if open_ else 0, open_, open_, open_, open_)
 
 
 #: Bits of a field of a `States` state (values up to 31, and a guard bit) and the mask of one.
@@ -325,7 +326,7 @@ class WritePhase:
         self.pv_changed = changed[P_BIT] | changed[V_BIT]
         self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
         # What a 21h saves in plain items.
-        self.plain_items = [sum(1 for bit in PLAIN_BITS if m & bit) * self.prices.field_item for m in self.masks]
+        self.plain_items = [(m & PLAIN_MASK).bit_count() * self.prices.field_item for m in self.masks]
         self._at_least: dict[tuple[int, int], float] = {}
         self._parts_cache: dict[tuple[int, int, bool, bool, bool], Parts] = {}
         self._address_cache: dict[tuple[int, bool], tuple[Addresses, ...]] = {}
@@ -335,7 +336,7 @@ class WritePhase:
     def subsets(self) -> list[Channels]:
         """46h open, then shut (where some program differs in A): every other choice of messages
         is the DP's (`PartsDP`)."""
-        plain = sum(bit for bit in PLAIN_BITS if self.relevant & bit)
+        plain = self.relevant & PLAIN_MASK
         return [Channels(plain, True, True, True, addresses) for addresses in ((True, False) if self.relevant & A_BIT else (False,))]
 
     def solve(self, bound: float = INF) -> list[Writes]:
@@ -752,14 +753,15 @@ class WritePhase:
         programs restores their chain), any other as a 46h item."""
         prices = self.prices
         pv_items = any(bit & PV_BITS for bit in shares)
+        item = {bit: prices.field_item + shares.get(bit, 0.0) for bit in ITEM_BITS}
+        address = prices.address_item + shares.get(A_BIT, 0.0)
 
         def cost(i: int, mask: int) -> float:
-            total = fsum(prices.field_item + shares.get(bit, 0.0) for bit in PLAIN_BITS if mask & bit)
+            total = fsum(item[bit] for bit in PLAIN_BITS if mask & bit)
             if mask & PV_BITS:
-                total += (fsum(prices.field_item + shares.get(bit, 0.0) for bit in (P_BIT, V_BIT) if mask & bit)
-                          if pv_items else prices.parts_item)  # fmt: skip
+                total += fsum(item[bit] for bit in (P_BIT, V_BIT) if mask & bit) if pv_items else prices.parts_item
             if mask & A_BIT and self.target_a[i] not in (0, i + 2):
-                total += prices.address_item + shares.get(A_BIT, 0.0)
+                total += address
             return min(total, prices.program)
 
         return cost
@@ -771,7 +773,9 @@ class WritePhase:
         joins an open one pays its item, one inside a 33h run or a fitting link range nothing.
         """
         prices = self.prices
-        counts = [mask.bit_count() for mask in writes.items]
+        # per field, what program i's item adds to the others' — by whether i is among its n items
+        added = [(prices.fields(n + 1) - prices.fields(n) if n < PROGRAM_COUNT else INF, prices.fields(n) - prices.fields(n - 1) if n else INF)
+                 for n in (mask.bit_count() for mask in writes.items)]  # fmt: skip
         addresses = writes.addresses.bit_count()
         need = self.pv_changed & ~writes.whole
         run_of = {i: (first, last) for first, last in writes.part_runs for i in range(first, last + 1)}
@@ -779,8 +783,7 @@ class WritePhase:
                   for i in range(first, last + 1)}  # fmt: skip
 
         def items(k: int, i: int) -> float:
-            n = counts[k] - (writes.items[k] >> i & 1)
-            return prices.fields(n + 1) - prices.fields(n)
+            return added[k][writes.items[k] >> i & 1]
 
         def parts(i: int, mask: int) -> float:
             alone = min(self.parts_price[1], fsum(items(k, i) for k, bit in enumerate((P_BIT, V_BIT)) if mask & bit))
@@ -1213,10 +1216,11 @@ def inits_floor(problem: PlanningProblem, floors: list[list[float]]) -> float:
     before, cost = 0.0, [INF] * size
     for i, row in enumerate(floors):
         closed = [cost[0], *(min(cost[2 * n - 1] - refund, cost[2 * n]) for n in range(1, count + 1))]  # per kind
-        new = [min(closed) + row[0], *[INF] * (size - 1)]
+        least, then = sorted(closed)[:2]  # the least of the others' is `then` where it is `least`
+        new = [least + row[0], *[INF] * (size - 1)]
         if problem.managed[i]:
             for n in range(1, count + 1):
-                new[2 * n - 1] = min(before, *(c for k, c in enumerate(closed) if k != n)) + init_range + row[n]
+                new[2 * n - 1] = min(before, then if closed[n] == least else least) + init_range + row[n]
                 new[2 * n] = min(cost[2 * n - 1], cost[2 * n]) + row[n]
         before += row[0]
         cost = new
@@ -1272,12 +1276,12 @@ def choose_inits(problem: PlanningProblem, charges: list[list[float]]) -> Kinds:
         for n in range(1, count + 1):
             one, more = cost[2 * n - 1] - refund, cost[2 * n]
             closed.append((one, 2 * n - 1) if one <= more else (more, 2 * n))
-        c, state = min(closed)
-        new, step = [c + row[0], *[INF] * (size - 1)], [state, *[0] * (size - 1)]
+        best = min(closed)
+        new, step = [best[0] + row[0], *[INF] * (size - 1)], [best[1], *[0] * (size - 1)]
         if problem.managed[i]:
             for n in range(1, count + 1):
                 value = row[n]
-                c, state = min(pair for k, pair in enumerate(closed) if k != n)
+                c, state = best if best is not closed[n] else min(closed[:n] + closed[n + 1 :])
                 new[2 * n - 1], step[2 * n - 1] = c + init_range + value, state
                 one, more = cost[2 * n - 1], cost[2 * n]
                 new[2 * n], step[2 * n] = (one + value, 2 * n - 1) if one <= more else (more + value, 2 * n)
