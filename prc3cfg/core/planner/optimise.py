@@ -23,10 +23,10 @@ to send. The search is built around that:
 2. **Inits.** Which programs to initialise first (11h..14h, before or after the system
    step) is a second DP over program numbers (`choose_inits`): runs of initialised programs
    cost one message each and never cover an unmanaged program; each program is charged what
-   its remaining differences would cost. That charge is estimated five ways — what they add
-   to the best plan without inits (headers included), item by item with every channel open,
-   the same with a share of a header per item, as 21h, and at the least they could cost
-   (`floor_of`) — and again from each better plan
+   its remaining differences would cost. That charge is estimated three ways — what they add
+   to the best plan without inits (headers included), item by item with every channel open
+   and a share of a header per item, and at the least they could cost (`floor_of`) — and
+   again from each better plan
    found (and with each of its init runs moved across the system step); each init choice
    gets its own write phase. When that finds nothing better, two more sources:
    - neighbours of the best plan (`_neighbours`): each of its init runs left out; the
@@ -714,10 +714,11 @@ class WritePhase:
         whether a link or unlink range could give its jump address."""
         return (mask, self.target_a[i] in (0, i + 2)) if mask & A_BIT else mask
 
-    def linear(self, channels: Channels, share: float = 0.0) -> Residual:
-        """A program's differences priced item by item under `channels`, each item with `share` of a header."""
+    def linear(self, share: float) -> Residual:
+        """A program's differences priced item by item with every channel open, each item with `share`
+        of a header (P and V one item: a 33h's)."""
         prices = self.prices
-        item = prices.field_item + share
+        item, address = prices.field_item + share, prices.address_item + share
 
         def cost(i: int, mask: int) -> float:
             if not mask:
@@ -725,23 +726,11 @@ class WritePhase:
             total = 0.0
             for bit in PLAIN_BITS:
                 if mask & bit:
-                    if not channels.plain & bit:
-                        return prices.program
                     total += item
             if mask & PV_BITS:
-                if channels.parts:
-                    total += item
-                elif (mask & P_BIT and not channels.positions) or (mask & V_BIT and not channels.speeds):
-                    return prices.program
-                else:
-                    total += item * (mask & PV_BITS).bit_count()
+                total += item
             if mask & A_BIT:
-                if channels.addresses:
-                    total += prices.address_item + share
-                elif self.target_a[i] in (0, i + 2):
-                    total += prices.link
-                else:
-                    return prices.program
+                total += address
             return min(total, prices.program)
 
         return cost
@@ -1419,17 +1408,9 @@ class InitSearch:
         return phase
 
     def _first(self, writes: Writes, floors: list[list[float]]) -> list[Kinds]:
-        """The init DP with a program's charge estimated five ways (module docstring, 2.)."""
-        phase, problem = self.phase, self.problem
-        everything = Channels.everything(True)
-        charges = self.charges
-        tables = [
-            charges.each(phase.marginal(writes)),
-            charges.alike(phase.linear(everything)),
-            charges.alike(phase.linear(everything, problem.prices.field_header / INIT_SHARE)),
-            charges.alike(phase.linear(Channels.everything(False))),
-            floors,
-        ]
+        """The init DP with a program's charge estimated three ways (module docstring, 2.)."""
+        phase, problem, charges = self.phase, self.problem, self.charges
+        tables = [charges.each(phase.marginal(writes)), charges.alike(phase.linear(problem.prices.field_header / INIT_SHARE)), floors]
         return [choose_inits(problem, table) for table in tables]
 
     def _try(self, kinds: Kinds) -> list[Kinds]:
