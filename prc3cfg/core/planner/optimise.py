@@ -771,11 +771,14 @@ class WritePhase:
         ranged = {i: (i + 2 if link and i < last else 0) for link, first, last in writes.ranges
                   for i in range(first, last + 1)}  # fmt: skip
 
-        def items(k: int, i: int) -> float:
-            return added[k][writes.items[k] >> i & 1]
+        (p_added, v_added, *_), (p_items, v_items, *_) = added, writes.items
+        plain = list(zip(PLAIN_BITS, added[2:], writes.items[2:]))
+        single = self.parts_price[1]
 
         def parts(i: int, mask: int) -> float:
-            alone = min(self.parts_price[1], fsum(items(k, i) for k, bit in enumerate((P_BIT, V_BIT)) if mask & bit))
+            p = p_added[p_items >> i & 1] if mask & P_BIT else 0.0
+            v = v_added[v_items >> i & 1] if mask & V_BIT else 0.0
+            alone = min(single, p + v)  # one addition, rounded once as fsum's is
             return min(alone, self._joining(i, run_of[i], need)) if i in run_of else alone
 
         def jump(i: int, mask: int) -> float:
@@ -789,9 +792,9 @@ class WritePhase:
 
         def cost(i: int, mask: int) -> float:
             total = jump(i, mask)
-            for k, bit in enumerate(PLAIN_BITS, start=2):
+            for bit, each, among in plain:
                 if mask & bit:
-                    total += items(k, i)
+                    total += each[among >> i & 1]
             if mask & PV_BITS:
                 total += parts(i, mask)
             return min(total, prices.program) if mask else total
