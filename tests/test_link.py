@@ -166,6 +166,21 @@ def test_a_read_answered_as_a_write_with_no_write_owed_blames_a_damaged_frame_al
         assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — the module took a damaged frame")
 
 
+def test_an_unanswered_write_to_another_module_does_not_explain_an_acknowledged_read():
+    """A link takes a reply only from the module asked: a write to module 2 that went unanswered owes
+    module 1 nothing, so module 1's read answered as a write is blamed on a damaged frame alone."""
+    with Emulator({1: ModuleState.factory(1), 2: ModuleState.factory(2)}) as emulator:
+        port = LatePort(emulator, late=1)
+        link = Link(port, get_framing("crc16"), bus="test", timeout=0.01, retries=0)
+        with pytest.raises(LinkError, match="no reply within"):
+            link.request(2, codec.WriteSpeeds(((1, 100),)))
+        port.late = 1
+        port.write(get_framing("crc16").encode(Direction.REQUEST, 1, codec.WriteSpeeds(((3, 100),)).encode()))  # another master's
+        with pytest.raises(PossibleWrite) as stopped:
+            link.request(1, codec.ReadSystem())  # answered by module 2's late acknowledgement (ignored), then module 1's
+        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — the module took a damaged frame")
+
+
 def test_a_wrong_framing_is_a_silent_line():
     with Emulator({1: ModuleState.factory(1)}, framing="stx") as emulator:
         link = connect(emulator, "crc16", retries=0, timeout=0.1)

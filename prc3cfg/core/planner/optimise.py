@@ -113,6 +113,7 @@ Run = tuple[int, int]
 #: A link (True) or unlink range: (link?, first, last index), a 30h or 31h.
 Range = tuple[bool, int, int]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
+#: The bits of `PLAIN_FIELDS` as one mask.
 PLAIN_MASK = sum(PLAIN_BITS)
 #: The fields of 40h..45h, in `Writes.items` order.
 ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)

@@ -43,7 +43,7 @@ from serial import rfc2217
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.exchange import LinkStep, judge
+from prc3cfg.core.exchange import LinkStep, Reply, judge
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
 from prc3cfg.errors import Interrupted, NotSent, UserError
@@ -95,8 +95,8 @@ class NoReadMessages(LinkError):
 
 class PossibleWrite(LinkError):
     """A read was answered with an acknowledgement: the module received a damaged frame as a write
-    and executed it — any write, 10h and 20h among them — or, where writes before it went
-    unanswered (`owed` attempts), the acknowledgement is the late reply to one of them. Either way nothing
+    and executed it — any write, 10h and 20h among them — or, where writes to that module before
+    it went unanswered (`owed` attempts), the acknowledgement is the late reply to one of them. Either way nothing
     more may be sent on the line until a person has looked; never retried."""
 
     def __init__(self, bus: str, address: int, message: codec.Message, owed: int = 0) -> None:
@@ -108,10 +108,6 @@ class PossibleWrite(LinkError):
             "nothing more is sent on this line; travel the module to its reference point, read it back, and use parity on the line"
         )
         self.bus, self.address = bus, address
-
-
-#: What a module answers: an error code (0: accepted) or a read's data block.
-Reply = int | codec.SystemReply | codec.ProgramsReply
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,9 +179,10 @@ class Link:
         #: exchanges answered, the seconds they took (frame out to reply in) and what `cost` priced them at
         self.answered = 0
         self.answered_time = self.priced_time = 0.0
-        #: write attempts that went unanswered since a reply last carried data (a read's): their
-        #: acknowledgements may still come, late, as the reply to a later frame (`PossibleWrite` says so)
-        self.owed = 0
+        #: per module, write attempts that went unanswered since its reply last carried data (a read's):
+        #: their acknowledgements may still come, late, as the reply to a later frame to it (a reply
+        #: from another address is never taken: `PossibleWrite` says so)
+        self.owed: dict[int, int] = {}
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
@@ -210,9 +207,9 @@ class Link:
             verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=self.timeout)
             if verdict.step is LinkStep.ANSWER:
                 assert verdict.reply is not None  # an answer is a reply decoded
-                return self._answered(verdict.reply)
+                return self._answered(address, verdict.reply)
             if verdict.step is LinkStep.POSSIBLE_WRITE:  # the verdicts that stop the line
-                raise PossibleWrite(self.bus, address, message, self.owed)
+                raise PossibleWrite(self.bus, address, message, self.owed.get(address, 0))
             if verdict.step is LinkStep.NO_READ_MESSAGES:
                 raise NoReadMessages(self.bus, address, message)
             if verdict.step is LinkStep.GIVE_UP:
@@ -241,10 +238,10 @@ class Link:
             return None
         verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=timeout)
         if verdict.step is LinkStep.POSSIBLE_WRITE:
-            raise PossibleWrite(self.bus, address, message, self.owed)
+            raise PossibleWrite(self.bus, address, message, self.owed.get(address, 0))
         if verdict.step is LinkStep.ANSWER:
             assert verdict.reply is not None  # an answer is a reply decoded
-            return self._answered(verdict.reply)
+            return self._answered(address, verdict.reply)
         return self.request(address, message)  # heard, not usable (even a read answered as unknown): the usual retries
 
     def broadcast(self, message: codec.Message, turnaround: float) -> None:
@@ -270,14 +267,15 @@ class Link:
         started = time.time()
         self._announce(address, data, attempt, started)
         raw = self._exchange(address, data, timeout)
-        self.owed += raw is None and not message.IS_READ
+        if raw is None and not message.IS_READ:
+            self.owed[address] = self.owed.get(address, 0) + 1
         self._observe(address, data, raw, attempt, started)
         self._timed(address, message, raw)
         return raw
 
-    def _answered(self, reply: Reply) -> Reply:
-        if not isinstance(reply, int):  # a data block: no reply still owed was taken for it
-            self.owed = 0
+    def _answered(self, address: int, reply: Reply) -> Reply:
+        if not isinstance(reply, int):  # a data block: no reply still owed by `address` was taken for it
+            self.owed.pop(address, None)
         return reply
 
     def _announce(self, address: int, data: bytes, attempt: int, started: float) -> None:
