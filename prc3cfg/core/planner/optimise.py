@@ -80,7 +80,7 @@ import heapq
 import itertools
 import operator
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 from math import fsum
@@ -108,6 +108,8 @@ INF = float("inf")
 Residual = Callable[[int, int], float]
 #: An init kind (`problem` KEEP, INIT_BEFORE, INIT_AFTER) per program.
 Kinds = tuple[int, ...]
+#: Per program, a charge (seconds) per init kind, in the order of `problem.kinds` (`Charges`).
+Table = list[Sequence[float]]
 #: First and last index of consecutive programs (a 33h run).
 Run = tuple[int, int]
 #: A link (True) or unlink range: (link?, first, last index), a 30h or 31h.
@@ -954,27 +956,36 @@ class PartsDP:
     def ends(self, j: int, new: dict[int, float], step: dict[int, Back]) -> None:
         """The 33h runs that end at program j, the cheapest start in each state's window."""
         prices, windows = self.phase.prices, self.windows
-        head, per, run = prices.parts_header, prices.parts_item, PartsMove.RUN
+        head, run, to_j = prices.parts_header, PartsMove.RUN, prices.parts_item * (j + 1)
         gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
         capped = left_p < codec.MAX_FIELD_ITEMS or left_v < codec.MAX_FIELD_ITEMS  # as in `moves`
-        for state, window in list(windows.items()):
-            if windows.get(state) is not window:
-                continue  # merged into another at this program
-            # the state the runs end in, but for room no item left could use (as `moves` leaves it)
-            after = _with_rooms(state, state & FIELD, state >> STATE_BITS & FIELD, left_p, left_v) if capped else state
-            if after != state:
-                del windows[state]
-                window = windows[after] = Window.merged(window.starts, windows[after].starts) if after in windows else window
+        emptied = []
+        for state, window in list(windows.items()) if capped else windows.items():
+            after = state
+            if capped:
+                if windows.get(state) is not window:
+                    continue  # merged into another at this program
+                # the state the runs end in, but for room no item left could use (as `moves` leaves it)
+                room_p, room_v = state & FIELD, state >> STATE_BITS & FIELD
+                if room_p > left_p or room_v > left_v:
+                    after = _with_rooms(state, room_p, room_v, left_p, left_v)
+                    del windows[state]
+                    window = windows[after] = Window.merged(window.starts, windows[after].starts) if after in windows else window
             starts = window.starts
             while starts and starts[0][1] <= gone:
                 starts.popleft()
             if not starts:
-                del windows[after]
+                if capped:
+                    del windows[after]  # a snapshot is walked: another window may still come to this state
+                else:
+                    emptied.append(state)
                 continue
             key, i, began, inside = starts[0]
-            if (through := key + head + per * (j + 1)) < new.get(after, INF):
+            if (through := key + head + to_j) < new.get(after, INF):
                 new[after], step[after] = through, (began, run, i, inside)
+        for state in emptied:
+            del windows[state]
 
     def final(self, best: dict[int, float]) -> int:
         """The cheapest state after the last program, the live fields' headers counted."""
@@ -1196,7 +1207,7 @@ def _over_every_kind(problem: PlanningProblem) -> dict[int, int]:
     return {bit: sum(1 << i for i, u in enumerate(union) if u & bit) for bit in FIELD_BIT.values()}
 
 
-def inits_floor(problem: PlanningProblem, floors: list[list[float]]) -> float:
+def inits_floor(problem: PlanningProblem, floors: Table) -> float:
     """No plan with an init costs less: its init messages and each program's differences at their
     cheapest under its init kind (`floors`: `floor_of`, every field's items counted over every
     kind, as `Charges`), for the init choice with at least one init where that is least
@@ -1244,7 +1255,7 @@ def init_cost(problem: PlanningProblem, kinds: Kinds) -> float:
     return total
 
 
-def choose_inits(problem: PlanningProblem, charges: list[list[float]]) -> Kinds:
+def choose_inits(problem: PlanningProblem, charges: Table) -> Kinds:
     """The init kind of every program minimising init messages + `charges[i][n]` (n: the kind's
     place in `problem.kinds`, KEEP first).
 
@@ -1252,7 +1263,8 @@ def choose_inits(problem: PlanningProblem, charges: list[list[float]]) -> Kinds:
     or ends at 64. Unmanaged programs are always KEEP, so no run covers them. States: 0, kept;
     for the n-th init kind, 2n - 1 after the first program of its run and 2n further on. A run
     begins from the cheapest state of another kind once closed (a run of one refunded: a 12h,
-    not a 14h); on a tie the lowest state.
+    not a 14h); on a tie the lowest state. With one init kind (the system step leaves the
+    defaults as they were), the DP is `_one_kind`'s.
     """
     prices = problem.prices
     refund, init_range = prices.init_range - prices.init, prices.init_range
@@ -1260,27 +1272,11 @@ def choose_inits(problem: PlanningProblem, charges: list[list[float]]) -> Kinds:
     count = len(inits)
     if all(_best_run(problem.managed, charges, n) < prices.init - TIE for n in range(1, count + 1)):
         return (KEEP,) * PROGRAM_COUNT  # no run of any kind saves what its message costs
-    size = 1 + 2 * count
-    cost = [0.0] + [INF] * (size - 1)
-    back: list[list[int]] = []
-    for i, row in enumerate(charges):
-        # per kind (KEEP: state 0), its cheapest state closed here
-        closed = [(cost[0], 0)]
-        for n in range(1, count + 1):
-            one, more = cost[2 * n - 1] - refund, cost[2 * n]
-            closed.append((one, 2 * n - 1) if one <= more else (more, 2 * n))
-        best = min(closed)
-        new, step = [best[0] + row[0], *[INF] * (size - 1)], [best[1], *[0] * (size - 1)]
-        if problem.managed[i]:
-            for n in range(1, count + 1):
-                value = row[n]
-                c, state = best if best is not closed[n] else min(closed[:n] + closed[n + 1 :])
-                new[2 * n - 1], step[2 * n - 1] = c + init_range + value, state
-                one, more = cost[2 * n - 1], cost[2 * n]
-                new[2 * n], step[2 * n] = (one + value, 2 * n - 1) if one <= more else (more + value, 2 * n)
-        cost = new
-        back.append(step)
-    state = min(range(size), key=lambda s: cost[s] - (refund if s else 0.0))
+    if count == 1:
+        back, cost = _one_kind(problem.managed, charges, refund, init_range)
+    else:
+        back, cost = _kinds(problem.managed, charges, count, refund, init_range)
+    state = min(range(len(cost)), key=lambda s: cost[s] - (refund if s else 0.0))
     kinds = [KEEP] * PROGRAM_COUNT
     for i in range(PROGRAM_COUNT - 1, -1, -1):
         kinds[i] = inits[(state - 1) // 2] if state else KEEP
@@ -1288,7 +1284,56 @@ def choose_inits(problem: PlanningProblem, charges: list[list[float]]) -> Kinds:
     return tuple(kinds)
 
 
-def _best_run(managed: tuple[bool, ...], charges: list[list[float]], n: int) -> float:
+def _kinds(managed: tuple[bool, ...], charges: Table, count: int, refund: float,
+           init_range: float) -> tuple[list[Sequence[int]], list[float]]:  # fmt: skip
+    """`choose_inits`' DP: per program the state each state came from, and the cost of each state after the last."""
+    ends = [(2 * n - 1, 2 * n) for n in range(1, count + 1)]  # per init kind: its run's first state, further on
+    no_cost, no_step = [INF] * (2 * count), [0] * (2 * count)
+    cost = [0.0, *no_cost]
+    back: list[Sequence[int]] = []
+    for i, row in enumerate(charges):
+        # per kind (KEEP: state 0), its cheapest state closed here; the cheapest of all, and the next
+        closed = [(cost[0], 0)]
+        for first, further in ends:
+            one, more = cost[first] - refund, cost[further]
+            closed.append((one, first) if one <= more else (more, further))
+        best, *others = sorted(closed)
+        new, step = [best[0] + row[0], *no_cost], [best[1], *no_step]
+        if managed[i]:
+            for n, (first, further) in enumerate(ends, start=1):
+                value = row[n]
+                c, state = best if best is not closed[n] else others[0]
+                new[first], step[first] = c + init_range + value, state
+                one, more = cost[first], cost[further]
+                new[further], step[further] = (one + value, first) if one <= more else (more + value, further)
+        cost = new
+        back.append(step)
+    return back, cost
+
+
+def _one_kind(managed: tuple[bool, ...], charges: Table, refund: float,
+              init_range: float) -> tuple[list[Sequence[int]], list[float]]:  # fmt: skip
+    """`_kinds` with one init kind, the same sums in the same order: a run of it can only begin
+    from a kept program (state 0), and the cheapest closed state is kept or the kind's."""
+    keep, first, further = 0.0, INF, INF
+    back: list[Sequence[int]] = []
+    for i, (kept, initialised) in enumerate(charges):
+        one = first - refund
+        closed, came = (one, 1) if one <= further else (further, 2)
+        if keep <= closed:
+            closed, came = keep, 0
+        if managed[i]:
+            step = (came, 0, 1) if first <= further else (came, 0, 2)
+            keep, first, further = (closed + kept, keep + init_range + initialised,
+                                    (first if first <= further else further) + initialised)  # fmt: skip
+        else:
+            step = (came, 0, 0)
+            keep, first, further = closed + kept, INF, INF
+        back.append(step)
+    return back, [keep, first, further]
+
+
+def _best_run(managed: tuple[bool, ...], charges: Table, n: int) -> float:
     """The most a run of the n-th kind could save on `charges` (the maximum subarray, over managed programs)."""
     best = run = 0.0
     for i, row in enumerate(charges):
@@ -1314,7 +1359,7 @@ class Charges:
         self.distinct: list[list[int]] = []
         alikes: dict[object, int] = {}
         self.first: list[tuple[int, int]] = []  # per key of `alike`: the first program and mask with it
-        self.shared: list[list[int]] = []  # per program and kind: its key's place in `first`
+        shared: list[list[int]] = []  # per program and kind: its key's place in `first`
         for i in range(PROGRAM_COUNT):
             masks = [problem.masks[k][i] for k in kinds]
             distinct = list(dict.fromkeys(masks))
@@ -1326,21 +1371,25 @@ class Charges:
                     place = alikes[key] = len(self.first)
                     self.first.append((i, mask))
                 places.append(place)
-            self.shared.append(places)
+            shared.append(places)
+        # per program, its row of `alike` from the keys' values and then the same less TIE (the inits')
+        keys = len(self.first)
+        self.rows = [operator.itemgetter(keep, *(place + keys for place in inits)) for keep, *inits in shared]
 
-    def each(self, residual: Residual) -> list[list[float]]:
+    def each(self, residual: Residual) -> Table:
         """Charges priced program by program."""
-        ties, table = self.ties, []
+        ties = self.ties
+        table: Table = []
         for i, (distinct, own) in enumerate(zip(self.distinct, self.own)):
             values = [residual(i, mask) for mask in distinct]
             table.append([values[k] - tie for k, tie in zip(own, ties)])
         return table
 
-    def alike(self, residual: Residual) -> list[list[float]]:
+    def alike(self, residual: Residual) -> Table:
         """Charges of a residual that sees a program only through `alike`."""
         values = [residual(i, mask) for i, mask in self.first]
-        ties = self.ties
-        return [[values[k] - tie for k, tie in zip(places, ties)] for places in self.shared]
+        values += [value - TIE for value in values]
+        return [row(values) for row in self.rows]
 
 
 # -- the whole search ------------------------------------------------------------------------
@@ -1379,7 +1428,7 @@ class InitSearch:
         self.phases: dict[Kinds, WritePhase] = {}
         self.charges = charges  # the init DP's, by residual
 
-    def run(self, writes: Writes, floors: list[list[float]]) -> list[Layout]:
+    def run(self, writes: Writes, floors: Table) -> list[Layout]:
         """Every candidate found, starting from `writes`, the best write phase without inits, and
         `floors`, the init DP's charges at the least they could be (`floor_of`). The
         init choices waiting are searched those from the latest better plan first, then lowest
@@ -1411,7 +1460,7 @@ class InitSearch:
             phase = self.phases[kinds] = WritePhase(self.problem, kinds)
         return phase
 
-    def _first(self, writes: Writes, floors: list[list[float]]) -> list[Kinds]:
+    def _first(self, writes: Writes, floors: Table) -> list[Kinds]:
         """The init DP with a program's charge estimated three ways (module docstring, 2.)."""
         phase, problem, charges = self.phase, self.problem, self.charges
         tables = [charges.each(phase.marginal(writes)), charges.alike(phase.linear(problem.prices.field_header / INIT_SHARE)), floors]
