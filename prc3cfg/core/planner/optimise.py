@@ -117,6 +117,8 @@ Range = tuple[bool, int, int]
 PLAIN_BITS = tuple(FIELD_BIT[name] for name in PLAIN_FIELDS)
 #: The bits of `PLAIN_FIELDS` as one mask.
 PLAIN_MASK = sum(PLAIN_BITS)
+#: The field bits of each difference mask.
+_FIELDS_OF = [tuple(bit for bit in FIELD_BIT.values() if mask & bit) for mask in range(1 << len(FIELD_BIT))]
 #: The fields of 40h..45h, in `Writes.items` order.
 ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)
 ESTIMATE = operator.attrgetter("estimate")
@@ -262,6 +264,8 @@ ADDRESS_MOVES: tuple[tuple[int, int, RangeMove, bool, Gives, bool], ...] = (
     (4, 1, RangeMove.INNER_UNLINK, True, Gives.ZERO, True),
     (4, 4, RangeMove.INNER_UNLINK_ON, False, Gives.ZERO, True),
 )
+#: The moves where no range goes on past program i (i is the last managed program of a run of them).
+ENDING_MOVES = tuple(move for move in ADDRESS_MOVES if not move[5])
 #: The states a program outside the plan file leaves (no range goes on over it): 0, from 0 or 2.
 ADDRESS_STATES = 5
 #: The moves of `RangeMove` that give a program the address of the next.
@@ -312,27 +316,43 @@ class WritePhase:
     """The write phase for one choice of init kinds: its bases, masks and the exact DPs over them."""
 
     def __init__(self, problem: PlanningProblem, kinds: Kinds) -> None:
+        self.problem, self.kinds = problem, kinds
         self.prices = problem.prices
         self.managed = problem.managed
-        self.masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
-        self.base_a = [problem.bases[k][i].A for i, k in enumerate(kinds)]
-        self.target_a = [0 if p is None else p.A for p in problem.desired.programs]
+        self.masks = masks = [problem.masks[k][i] for i, k in enumerate(kinds)]
+        self.target_a = problem.target_a
         changed = dict.fromkeys(FIELD_BIT.values(), 0)  # per field, the programs that differ in it
-        self.relevant = self.relevant_programs = 0
-        for i, m in enumerate(self.masks):
+        relevant = relevant_programs = 0
+        for i, m in enumerate(masks):
             if m:
-                self.relevant |= m
-                self.relevant_programs |= 1 << i
-                for bit in members(m):
-                    changed[1 << bit] |= 1 << i
+                relevant |= m
+                relevant_programs |= 1 << i
+                for bit in _FIELDS_OF[m]:
+                    changed[bit] |= 1 << i
+        self.relevant, self.relevant_programs = relevant, relevant_programs
         self.changed = changed
         self.pv_changed = changed[P_BIT] | changed[V_BIT]
-        self.parts_price = [INF] + [self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1)]
-        # What a 21h saves in plain items.
-        self.plain_items = [(m & PLAIN_MASK).bit_count() * self.prices.field_item for m in self.masks]
         self._at_least: dict[tuple[int, int], float] = {}
         self._parts_cache: dict[tuple[int, int, bool, bool, bool], Parts] = {}
         self._address_cache: dict[tuple[int, bool], tuple[Addresses, ...]] = {}
+
+    # Worked out when first asked: most init choices' phases are only bounded (`floor`), never searched.
+
+    @functools.cached_property
+    def base_a(self) -> list[int]:
+        """Each program's jump address after its init kind (and the system step)."""
+        bases = self.problem.bases
+        return [bases[k][i].A for i, k in enumerate(self.kinds)]
+
+    @functools.cached_property
+    def parts_price(self) -> list[float]:
+        """P and V of n programs (a 32h, a 33h) by n; INF for none."""
+        return [INF, *(self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1))]
+
+    @functools.cached_property
+    def plain_items(self) -> list[float]:
+        """What a 21h of each program saves in plain items."""
+        return [(m & PLAIN_MASK).bit_count() * self.prices.field_item for m in self.masks]
 
     # -- the channel subsets ---------------------------------------------------------------
 
@@ -628,9 +648,7 @@ class WritePhase:
             priced = [miss if w else 0.0 for w in wrong]
             new = [INF] * ADDRESS_STATES
             moves: dict[int, tuple[int, RangeMove]] = {}
-            for to, came, move, starts, gives, on in ADDRESS_MOVES:
-                if on and not goes_on:
-                    continue
+            for to, came, move, starts, gives, _ in ADDRESS_MOVES if goes_on else ENDING_MOVES:
                 c = cost[came] + link + priced[gives] if starts else cost[came] + priced[gives]
                 if c < new[to]:
                     new[to], moves[to] = c, (came, move)
@@ -673,9 +691,7 @@ class WritePhase:
         goes_on, wrong = step
         new: list[dict[int, float]] = [{} for _ in range(ADDRESS_STATES)]
         moves: list[dict[int, tuple[int, RangeMove, int]]] = [{} for _ in range(ADDRESS_STATES)]
-        for to, came_from, move, starts, gives, on in ADDRESS_MOVES:
-            if on and not goes_on:
-                continue
+        for to, came_from, move, starts, gives, _ in ADDRESS_MOVES if goes_on else ENDING_MOVES:
             more = 1 if wrong[gives] else 0
             added = (link if starts else 0.0) + (item if more else 0.0)
             into, how = new[to], moves[to]
@@ -1172,7 +1188,7 @@ def _suffix_counts(mask: int) -> list[int]:
     return counts
 
 
-def floor_of(prices: Prices, target_a: list[int], changed: dict[int, int]) -> Residual:
+def floor_of(prices: Prices, target_a: Sequence[int], changed: dict[int, int]) -> Residual:
     """What the differences `mask` of program i cost at least, in any write phase where at most
     the programs in `changed` (per FIELD_BIT) have an item of each field: each at its cheapest,
     every item with its share of a header. A field of n <= N items needs ceil(n/15) headers: at

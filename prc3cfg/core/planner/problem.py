@@ -71,6 +71,7 @@ class PlanningProblem:
     kinds: tuple[int, ...]  # the init kinds on offer, KEEP first
     bases: dict[int, tuple[Program, ...]]
     masks: dict[int, tuple[int, ...]]  # 0 for unmanaged programs
+    target_a: tuple[int, ...]  # the desired jump addresses, 0 for unmanaged programs
     prices: Prices
 
     @classmethod
@@ -117,6 +118,7 @@ class PlanningProblem:
             kinds=tuple(kinds),
             bases=bases,
             masks=masks,
+            target_a=tuple(0 if w is None else w.A for w in wanted),
             prices=Prices.measure(cost, desired.address),
         )
 
