@@ -638,18 +638,25 @@ class WritePhase:
         link = self.prices.link
         cost = [0.0, INF, INF, INF, INF]
         back: list[dict[int, tuple[int, RangeMove]]] = []
+        # per step as the DP sees it (a few kinds in all): each move's state after and before, and
+        # what it adds in the order the sum is taken — a range's message, then the address's price
+        priced_moves: dict[tuple[bool, tuple[bool, bool, bool]], list[tuple[int, int, RangeMove, float, float]]] = {}
         for step in steps:
             if step is None:
                 came = 0 if cost[0] <= cost[2] else 2
                 back.append({0: (came, RangeMove.KEEP)})
                 cost = [cost[came], INF, INF, INF, INF]
                 continue
-            goes_on, wrong = step
-            priced = [miss if w else 0.0 for w in wrong]
+            if (allowed := priced_moves.get(step)) is None:
+                goes_on, wrong = step
+                allowed = priced_moves[step] = [
+                    (to, came, move, link, miss if wrong[gives] else 0.0) if starts else (to, came, move, miss if wrong[gives] else 0.0, 0.0)
+                    for to, came, move, starts, gives, _ in (ADDRESS_MOVES if goes_on else ENDING_MOVES)
+                ]  # fmt: skip
             new = [INF] * ADDRESS_STATES
             moves: dict[int, tuple[int, RangeMove]] = {}
-            for to, came, move, starts, gives, _ in ADDRESS_MOVES if goes_on else ENDING_MOVES:
-                c = cost[came] + link + priced[gives] if starts else cost[came] + priced[gives]
+            for to, came, move, first, then in allowed:
+                c = cost[came] + first + then  # + 0.0 leaves a sum as it is
                 if c < new[to]:
                     new[to], moves[to] = c, (came, move)
             cost = new
