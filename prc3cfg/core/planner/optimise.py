@@ -478,7 +478,7 @@ class WritePhase:
                 self._pv_headers(p - w, v - w, both - w),
                 max(ranges * prices.link, min(prices.link, (ranged - w) * prices.address_item) if ranged > w else 0.0),
             ))  # fmt: skip
-            least = min(least, fsum((paid, headers)))
+            least = min(least, paid + headers)  # two floats: rounded once, as fsum's sum is
         known = self._at_least[whole, ranges] = fsum((whole.bit_count() * prices.program, *spent, least))
         return known
 
@@ -486,11 +486,14 @@ class WritePhase:
         """The headers of P and V at least, for `p` programs that differ in P, `v` in V, `both` in either:
         with R 33h (or 32h), each over at most 15 of them, the rest need 40h for P and 41h for V."""
         prices, capacity = self.prices, codec.MAX_FIELD_ITEMS
-        run = min(prices.parts_header, self.parts_price[1] - prices.parts_item)
-        return min(fsum((r * run, prices.field_header * max(_messages(p - capacity * r, capacity)
-                                                            + _messages(v - capacity * r, capacity),
-                                                            _messages(both - capacity * r, capacity))))
-                   for r in range(_messages(both, capacity) + 1))  # fmt: skip
+        run, header, least = min(prices.parts_header, self.parts_price[1] - prices.parts_item), prices.field_header, INF
+        for r in range(_messages(both, capacity) + 1):
+            covered = capacity * r  # a sum of two floats is rounded once, as fsum's is
+            value = r * run + header * max(_messages(p - covered, capacity) + _messages(v - covered, capacity),
+                                           _messages(both - covered, capacity))  # fmt: skip
+            if value < least:
+                least = value
+        return least
 
     def _priced(self, whole: int, runs: tuple[Run, ...], runs_cost: float, items: tuple[int, ...],
                 ranges: tuple[Range, ...], addresses: int) -> Writes:  # fmt: skip
