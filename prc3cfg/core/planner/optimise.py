@@ -548,12 +548,12 @@ class WritePhase:
         n = need.bit_count()  # a 33h saved too where the removals take the P and V left down a run
         runs_out = n - codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS) if n else PROGRAM_COUNT + 1
         live = []
+        extra = {i: self._extra_cost(i, need, addresses) for i in members(_all_of(tuple(c.mask for c in channels)))}
         for c in channels:
             others = [o for o in channels if o is not c]
-            ranked = sorted(members(c.mask), key=lambda i: self._extra_cost(i, need, addresses)
-                            - fsum(o.header / o.rho for o in others if o.mask >> i & 1))  # fmt: skip
+            ranked = sorted(members(c.mask), key=lambda i: extra[i] - fsum(o.header / o.rho for o in others if o.mask >> i & 1))
             chosen = ranked[: c.rho]
-            spent = fsum(self._extra_cost(i, need, addresses) for i in chosen)
+            spent = fsum(extra[i] for i in chosen)
             taken = sum(1 << i for i in chosen)
             saved = fsum((c.header, prices.parts_header if (need & taken).bit_count() >= runs_out else 0.0,
                           *(o.header for o in others if (o.mask & taken).bit_count() >= o.rho)))  # fmt: skip
