@@ -108,6 +108,13 @@ INF = float("inf")
 Residual = Callable[[int, int], float]
 #: An init kind (`problem` KEEP, INIT_BEFORE, INIT_AFTER) per program.
 Kinds = tuple[int, ...]
+#: A start of a 33h run in `PartsDP`: best[i] - per × i, i, the state at i, the programs inside the run
+#: that take a 21h as well.
+Start = tuple[float, int, int, int]
+#: The starts of the 33h runs that may end at the next program, for one state of `PartsDP`, by i,
+#: keys increasing — the front is the cheapest start. A start added drops those before it that cost
+#: as much or more: it lasts longer.
+Window = deque[Start]
 #: Per program, a charge (seconds) per init kind, in the order of `problem.kinds` (`Charges`).
 Table = list[Sequence[float]]
 #: First and last index of consecutive programs (a 33h run).
@@ -919,14 +926,14 @@ class PartsDP:
         moved: dict[int, Window] = {}
         for state, window in windows.items():
             after = self._after(state, out)
-            if (after == state and alone >= 0) or not window.starts:
+            if (after == state and alone >= 0) or not window:
                 continue  # the same runs, dearer
-            if after not in moved or window.starts[0][0] < moved[after].starts[0][0]:
+            if after not in moved or window[0][0] < moved[after][0][0]:
                 moved[after] = window
         taken = 1 << j
         for state, window in moved.items():
-            dearer = [(key + alone, i, began, inside | taken) for key, i, began, inside in window.starts]
-            windows[state] = Window.merged(dearer, windows[state].starts) if state in windows else Window(dearer)
+            dearer = [(key + alone, i, began, inside | taken) for key, i, began, inside in window]
+            windows[state] = merged(dearer, windows[state]) if state in windows else deque(dearer)
         if len(windows) > 2 * BEAM:  # runs going on: up to twice as many as states, then as many
             self.windows = self.states.windows_kept(windows)
 
@@ -963,9 +970,9 @@ class PartsDP:
             # the other moves leave the state as it was, but for room no item left could use
             kept = _with_rooms(state, was_p, was_v, left_p, left_v) if capped else state
             if runs:  # a run may start here: pushed onto its state's window (`Window`)
-                if (window := windows.get(kept)) is None:
-                    window = windows[kept] = Window()
-                starts, key = window.starts, b - per * j
+                if (starts := windows.get(kept)) is None:
+                    starts = windows[kept] = deque()
+                key = b - per * j
                 while starts and starts[-1][0] >= key:
                     starts.pop()
                 starts.append((key, j, state, 0))
@@ -997,17 +1004,16 @@ class PartsDP:
                 if room_p > left_p or room_v > left_v:
                     after = _with_rooms(state, room_p, room_v, left_p, left_v)
                     del windows[state]
-                    window = windows[after] = Window.merged(window.starts, windows[after].starts) if after in windows else window
-            starts = window.starts
-            while starts and starts[0][1] <= gone:
-                starts.popleft()
-            if not starts:
+                    window = windows[after] = merged(window, windows[after]) if after in windows else window
+            while window and window[0][1] <= gone:
+                window.popleft()
+            if not window:
                 if capped:
                     del windows[after]  # a snapshot is walked: another window may still come to this state
                 else:
                     emptied.append(state)
                 continue
-            key, i, began, inside = starts[0]
+            key, i, began, inside = window[0]
             if (through := key + head + to_j) < new.get(after, INF):
                 new[after], step[after] = through, (began, run, i, inside)
         for state in emptied:
@@ -1023,25 +1029,14 @@ class PartsDP:
         return final
 
 
-class Window:
-    """The starts of the 33h runs that may end at the next program, for one state of
-    `PartsDP`: (best[i] - per × i, i, the state at i, the programs inside the run
-    that take a 21h as well), by i, keys increasing — the front is the cheapest start. A start
-    added drops those before it that cost as much or more: it lasts longer."""
-
-    def __init__(self, starts: list[tuple[float, int, int, int]] | None = None) -> None:
-        self.starts: deque[tuple[float, int, int, int]] = deque(starts or ())
-
-    @staticmethod
-    def merged(mine: Iterable[tuple[float, int, int, int]], theirs: Iterable[tuple[float, int, int, int]]) -> Window:
-        """A window of the starts of two (each by i, keys increasing)."""
-        merged = Window()
-        starts = merged.starts
-        for start in sorted((*mine, *theirs), key=_second):  # stable: `mine` first on a tie
-            while starts and starts[-1][0] >= start[0]:
-                starts.pop()
-            starts.append(start)
-        return merged
+def merged(mine: Iterable[Start], theirs: Iterable[Start]) -> Window:
+    """A window of the starts of two (each by i, keys increasing)."""
+    starts: Window = deque()
+    for start in sorted((*mine, *theirs), key=_second):  # stable: `mine` first on a tie
+        while starts and starts[-1][0] >= start[0]:
+            starts.pop()
+        starts.append(start)
+    return starts
 
 
 class States:
@@ -1126,9 +1121,9 @@ class States:
         # the state ahead first at the same start (`undominated` sorts exactly and drops the one a rounding
         # cheaper after; here, run only past 2 × BEAM windows, rounding costs little)
         kept: list[tuple[float, int, float, int, Window]] = []
-        for _, state, window in sorted((round(w.starts[0][0], NEAR_DIGITS), -s, w) for s, w in windows.items() if w.starts):
-            state, cheapest = -state, window.starts[0][0]
-            dear, latest = window.starts[-1][:2]
+        for _, state, window in sorted((round(w[0][0], NEAR_DIGITS), -s, w) for s, w in windows.items() if w):
+            state, cheapest = -state, window[0][0]
+            dear, latest = window[-1][:2]
             raised = (state | guards) - ones
             for _, other, dearest, last, _ in kept:
                 if last >= latest and cheapest - dearest >= ahead[(raised - other) & guards]:
