@@ -944,7 +944,8 @@ class PartsDP:
         cost a call per state."""
         phase, windows = self.phase, self.windows
         prices, m, needs = phase.prices, phase.masks[j], self.need >> j & 1
-        header, item, capacity = prices.field_header, prices.field_item, codec.MAX_FIELD_ITEMS
+        item, capacity = prices.field_item, codec.MAX_FIELD_ITEMS
+        opened = item + prices.field_header  # an item that opens a 40h/41h
         p, v = m & P_BIT, m & V_BIT
         as_items = needs and (self.positions or not p) and (self.speeds or not v)
         runs = needs and self.runs_allowed
@@ -959,12 +960,14 @@ class PartsDP:
             if as_items:
                 c, room_p, room_v = b, was_p, was_v
                 if p:
-                    c += item if room_p else item + header
+                    c += item if room_p else opened
                     room_p = (room_p or capacity) - 1
                 if v:
-                    c += item if room_v else item + header
+                    c += item if room_v else opened
                     room_v = (room_v or capacity) - 1
-                after = _with_rooms(state, room_p, room_v, left_p, left_v)
+                # `_with_rooms`, written out: the DP's inner loop
+                after = (state & NOT_ROOMS | (room_p if room_p < left_p else left_p)
+                         | (room_v if room_v < left_v else left_v) << STATE_BITS)  # fmt: skip
                 if c < new.get(after, INF):
                     new[after], step[after] = c, (state, items, j, 0)
             # the other moves leave the state as it was, but for room no item left could use
