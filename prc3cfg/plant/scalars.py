@@ -92,7 +92,7 @@ class Readings:
     def __init__(self) -> None:
         self.constructor = yaml.SafeLoader("")
         self.tags: dict[tuple[str, tuple[bool, bool]], str] = {}  # YAML 1.1's tag of a plain or quoted text
-        self.known: dict[tuple[str, bool], Reading] = {}  # by its text and plainness
+        self.known: dict[str, Reading] = {}  # a plain scalar's, by its text
 
     def tag(self, text: str, implicit: tuple[bool, bool]) -> str:
         """YAML 1.1's tag of `text`, as PyYAML's resolver gives it (`implicit`: the event's, plain or quoted)."""
@@ -103,16 +103,15 @@ class Readings:
 
     def of(self, event: ScalarEvent) -> Reading:
         """How the scalar `event`, which has no tag written, reads."""
-        seen = (event.value, not event.style)
-        if (known := self.known.get(seen)) is None:
-            known = self.reading(event.value, self.tag(event.value, event.implicit), not event.style)
-            _remember(self.known, seen, known)
+        if event.style:  # quoted, or a literal or folded block: text to every reader
+            return event.value, None, False
+        if (known := self.known.get(event.value)) is None:
+            known = self.reading(event.value, self.tag(event.value, event.implicit))
+            _remember(self.known, event.value, known)
         return known
 
-    def reading(self, text: str, tag: str, unstyled: bool) -> Reading:
-        """How an untagged scalar reads, its YAML 1.1 tag given (`Reading`)."""
-        if not unstyled:
-            return text, None, False  # quoted: text to every reader
+    def reading(self, text: str, tag: str) -> Reading:
+        """How an untagged plain scalar reads, its YAML 1.1 tag given (`Reading`)."""
         core_tag, core_value = _core_rule(text)
         if (tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
             return text, lambda key: (f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, written out "
