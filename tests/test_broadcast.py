@@ -217,7 +217,7 @@ def test_no_set_of_broadcasts_is_dropped_that_would_have_won(line_: tuple) -> No
     check_floors_and_choice(*line_)
 
 
-@pytest.mark.soak  # about 0.7 s an example: the profile's 2,000 took 31 of the soak tier's 40 minutes alone
+@pytest.mark.soak  # about 0.7 s an example: the profile's 2,000 took 31 minutes of the soak tier alone
 @settings(max_examples=600, suppress_health_check=[HealthCheck.too_slow])
 @given(lines_to_share())
 def test_no_set_of_broadcasts_is_dropped_that_would_have_won_soak(line_: tuple) -> None:
