@@ -996,8 +996,7 @@ class PartsDP:
         gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
         capped = left_p < codec.MAX_FIELD_ITEMS or left_v < codec.MAX_FIELD_ITEMS  # as in `moves`
-        emptied = []
-        for state, window in list(windows.items()) if capped else windows.items():
+        for state, window in list(windows.items()):
             after = state
             if capped:
                 if windows.get(state) is not window:
@@ -1011,16 +1010,11 @@ class PartsDP:
             while window and window[0][1] <= gone:
                 window.popleft()
             if not window:
-                if capped:
-                    del windows[after]  # a snapshot is walked: another window may still come to this state
-                else:
-                    emptied.append(state)
+                del windows[after]
                 continue
             key, i, began, inside = window[0]
             if (through := key + head + to_j) < new.get(after, INF):
                 new[after], step[after] = through, (began, run, i, inside)
-        for state in emptied:
-            del windows[state]
 
     def final(self, best: dict[int, float]) -> int:
         """The cheapest state after the last program, the live fields' headers counted."""
