@@ -132,10 +132,10 @@ def _number(
     lo_, hi_, step_ = Decimal(lo), None if hi is None else Decimal(hi), None if step is None else Decimal(step)
     with_unit: Callable[[object], str] = (lambda x: f"{x} {unit}") if unit else str
     allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
-    #: The whole numbers that pass, where they are a range (an `int` out, a step of 1 or none, a top): an
-    #: `int` is looked up there, not worked out in decimals. Program numbers (keys, chains) are a third of the
-    #: numbers of 8 × 30 modules as `prc3cfg import` writes them; with a `Decimal` taken as it is, without the
-    #: checks for other types, those modules validate in 0.08 s, not 0.11 (bench/plan_time_bench.py --mixes).
+    # The whole numbers that pass, where they are a range (an `int` out, a step of 1 or none, a top): an
+    # `int` is looked up there, not worked out in decimals. Program numbers (keys, chains) are a third of the
+    # numbers of 8 × 30 modules as `prc3cfg import` writes them; with a `Decimal` taken as it is, without the
+    # checks for other types, those modules validate in 0.08 s, not 0.11 (bench/plan_time_bench.py --mixes).
     whole = range(math.ceil(lo_), math.floor(hi_) + 1) if out is int and hi_ is not None and step_ in (None, 1) else range(0)
 
     def validate(value: Any) -> Any:
