@@ -183,7 +183,6 @@ def test_decoders_never_raise_and_account_for_every_byte(combo, line, data):
     assert b"".join(wire(name, e) for e in events) == fed
 
 
-
 def assert_frame_length(framing: Framing, direction: Direction, address: int, message: bytes) -> None:
     frame = framing.encode(direction, address, message)
     assert framing.frame_length(len(message)) + framing.stuffing(direction, address, message) == len(frame)

@@ -103,7 +103,6 @@ def test_the_api_never_reaches_into_the_command_line():
     assert not {name for path in (PACKAGE / "api").rglob("*.py") for name in prc3cfg_imports(path) if allowed(name, ("prc3cfg.cli",))}
 
 
-
 def test_the_layer_check_can_fail():
     """A core module that reached for the shell would be caught."""
     assert not allowed("prc3cfg.shell.link.client.Link", MAY_IMPORT["core"])
@@ -156,7 +155,6 @@ for name in sys.argv[2:]:
     importlib.import_module(name)
 print("ok")
 """
-
 
 
 def run(script: str, *modules: str) -> subprocess.CompletedProcess[str]:

@@ -277,9 +277,6 @@ def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
     return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12))
 
 
-
-
-
 def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:
     """What to read for a plan file: every chosen module in full, or — for a plan made from a
     targeted read-back — exactly the modules and programs its plan read, with the line's record as

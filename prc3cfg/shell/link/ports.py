@@ -100,7 +100,6 @@ class FormatRefused(UserError):
         super().__init__(f"bus {bus}: {self.refusal}: set parity: none")
 
 
-
 class TcpPort(protocol_socket.Serial):
     """pyserial's `socket://` port that tells how many bytes have arrived and closes at once."""
 
