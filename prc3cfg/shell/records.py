@@ -217,7 +217,10 @@ class Snapshot:
         return path
 
     def saved(self) -> tuple[Path, str]:
-        """Written (atomically): where, and the SHA-256 of what was written there."""
+        """Written (atomically): where, and the SHA-256 of what was written there. An apply saves its
+        snapshot again as each further line's reads end: then it goes in place through a hidden
+        temporary name (`write_atomically`), which a kill between the two leaves beside it — a whole
+        snapshot too, no .json to the commands that read snapshots."""
         directory = records_dir(self.plant_path, "snapshots")
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / f"{self.taken}-{self.plant_path.stem}.json"
