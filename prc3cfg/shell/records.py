@@ -219,8 +219,9 @@ class Snapshot:
     def saved(self) -> tuple[Path, str]:
         """Written (atomically): where, and the SHA-256 of what was written there. An apply saves its
         snapshot again as each further line's reads end: then it goes in place through a hidden
-        temporary name (`write_atomically`), which a kill between the two leaves beside it — a whole
-        snapshot too, no .json to the commands that read snapshots."""
+        temporary name (`write_atomically`), which a kill before the rename leaves beside it — whole
+        where the file system has unnamed files, else perhaps cut short; either way not a .json, which
+        is all the commands that read snapshots look at."""
         directory = records_dir(self.plant_path, "snapshots")
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / f"{self.taken}-{self.plant_path.stem}.json"
