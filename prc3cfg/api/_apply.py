@@ -40,16 +40,16 @@ from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.plan_file import PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.plant_planner import Key, Prober
-from prc3cfg.errors import UserError
+from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.engine import ByLine, Keeping, Writing, Written
+from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.probe import prober
 from prc3cfg.shell.readback import read_all
-from prc3cfg.shell.records import Journal, Snapshot, check_writable, save_applied
+from prc3cfg.shell.records import Journal, Snapshot, applied_copy, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
 
@@ -170,15 +170,20 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
                    given=links) as open_links:  # fmt: skip
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
             writing = Writing(plant, keys, buses, open_links, keeping, verify, options, records.command)
-            whole = None if plan_file is None and not gates.asks else _whole_plan(plant, chosen, wanted, desired, plan_file, gates, writing, options)
+            whole = None
+            if plan_file is not None or gates.asks:
+                try:
+                    whole = _whole_plan(plant, chosen, wanted, desired, plan_file, gates, writing, options)
+                except Interrupted:
+                    keeping.stopped_reading()
+                    raise
             # from the first read when each line is written as soon as its plan is whole, else from the snapshot, to the end
             # of the account, a signal waits its turn
             with options.deferred():
                 written = _by_line(plant, chosen, wanted, desired, gates, writing) if whole is None else _write_whole(writing, *whole)
-                result = _judged(written, journal.path, earlier, records)
-            if result.runs and desired is None and len(chosen) == len(plant.modules()):
-                _keep_applied(plant)
-            return result
+                if written.verified and desired is None and len(chosen) == len(plant.modules()):
+                    written = _keep_applied(plant, written, keeping)
+                return _judged(written, journal.path, earlier, records)
     finally:
         keeping.close()
 
@@ -203,7 +208,7 @@ def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ..
     unless every module verified."""
     result = ApplyResult(written.plan, written.runs, written.snapshot, journal, earlier, records.path, written.took, written.unread)
     if written.trouble is not None:
-        raise RecordsFailed(result, written.trouble)
+        raise RecordsFailed(result, written.trouble, written.lost)
     if written.interrupted:
         raise ApplyInterrupted(result)
     if not result.verified:
@@ -269,9 +274,19 @@ def told(result: ApplyResult) -> None:
     releases.told(result.records, result.earlier)
 
 
-def _keep_applied(plant: Plant) -> None:
+def _keep_applied(plant: Plant, written: Written, keeping: Keeping) -> Written:
     """The plant file just applied in full and verified on every module, kept for `left_alone` — if
-    it is still the one applied."""
-    text = plant.path.read_bytes()
-    if hashlib.sha256(text).hexdigest() == plant.sha256:
+    it is still the one applied (gone or changed: `left_alone` goes on comparing with the copy an
+    earlier apply kept). A copy the disk refuses is the apply's trouble: the account says so."""
+    try:
+        text = plant.path.read_bytes()
+    except OSError:
+        return written
+    if hashlib.sha256(text).hexdigest() != plant.sha256:
+        return written
+    try:
         save_applied(plant.path, text)
+    except OSError as error:
+        keeping.failed(APPLIED, error, applied_copy(plant.path))
+        return replace(written, trouble=keeping.trouble, lost=tuple(keeping.lost))
+    return written

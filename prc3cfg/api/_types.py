@@ -53,15 +53,29 @@ class ApplyFailed(UserError):
 
 
 class RecordsFailed(ApplyFailed):
-    """A record the apply keeps as it writes — its journal, the record of an axis release, its
-    snapshot — could not be written midway (a full disk): every line stopped before its next frame;
-    `result` says what each module was sent."""
+    """A record the apply keeps — its journal, the record of an axis release, its snapshot, a line's
+    record, the copy of the plant file applied in full — could not be written (a full disk): every
+    line stopped before its next frame; `result` says what each module was sent and holds. The one
+    line says which record (`trouble`: its file and the OS error), that the records on disk are
+    incomplete (`lost`: each record not kept) and how to go on."""
 
-    def __init__(self, result: ApplyResult, trouble: str) -> None:
+    def __init__(self, result: ApplyResult, trouble: str, lost: tuple[str, ...] = ()) -> None:
         super().__init__(result)
-        then = "plan and apply again" + (f", or restore: prc3cfg restore {result.snapshot}" if result.snapshot else "")
-        self.args = (f"{trouble}: every line stopped before its next frame — the account above says what each module "
-                     f"was sent; free the space (or fix the folder), then {then}",)  # fmt: skip
+        incomplete = f"the records on disk are incomplete ({_listed(lost)} not kept)"
+        if not any(run.sent for run in result.runs) and not result.verified:
+            said = "nothing was written to any module — free the space (or fix the folder), then apply again"
+        elif result.verified:
+            said = f"every module was written and verified (see above), but {incomplete} — free the space (or fix the folder)"
+        else:
+            then = "plan and apply again" + (f", or restore: prc3cfg restore {result.snapshot}" if result.snapshot else "")
+            said = (f"every line stopped before its next frame — the account above says what each module was sent and holds; "
+                    f"{incomplete}; free the space (or fix the folder), then {then}")  # fmt: skip
+        self.args = (f"{trouble}: {said}",)
+
+
+def _listed(names: tuple[str, ...]) -> str:
+    """"a", "a and b", "a, b and c"."""
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else list(names))
 
 
 class ApplyInterrupted(Interrupted):

@@ -54,6 +54,9 @@ from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
 
+#: How a module's `failure` begins when the lines were stopped — by Ctrl-C, SIGTERM, or (`ModuleRun.stopped_by`)
+#: another reason.
+INTERRUPTED = "interrupted"
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
 #: one, so a difference counts only when two reads in a row agree on it.
 CONFIRMING_READS = 4
@@ -170,12 +173,17 @@ class ModuleRun:
         was not verified (and what went wrong before, if anything did); the table is told by the caller."""
         written, sent = {step.message for step in self.written}, {step.message for step in self.sent}
         own = self.steps[self.broadcasts :]
-        said = f"interrupted while verifying: {sum(s.message in written for s in own)} of {plural(len(own), 'step')} acknowledged"
+        said = f"{INTERRUPTED} while verifying: {sum(s.message in written for s in own)} of {plural(len(own), 'step')} acknowledged"
         if self.broadcasts:
             said += f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent"
         if self.repairs:
             said += f", after {plural(self.repairs, 'repair round')}"
         self.failure = f"{said}, not verified" + (f" (before that: {self.failure})" if self.failure else "")
+
+    def stopped_by(self, why: str) -> None:
+        """The lines were stopped for `why`, not by a signal: `failure` says so where it says "interrupted"."""
+        if self.interrupted and self.failure is not None and self.failure.startswith(INTERRUPTED):
+            self.failure = f"stopped ({why}){self.failure.removeprefix(INTERRUPTED)}"
 
     def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> None:
         """Send steps in order — the plan's own, or a repair's (the state says which) — while the
@@ -198,7 +206,7 @@ class ModuleRun:
         except Interrupted as stop:  # before this step, or between its attempts (then it counts as sent)
             if isinstance(stop, NotSent):  # its frame never left
                 self.sent.pop()
-            self.failure = f"interrupted before {where}"
+            self.failure = f"{INTERRUPTED} before {where}"
             return Event.CANCELLED
         except LinkError as error:
             self.failure = f"{where}: {error}"
@@ -332,7 +340,7 @@ def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callab
             link.broadcast(step.message, turnaround)
         except Interrupted:
             for run in receivers:
-                run.failure = f"interrupted before broadcast {index} of {len(steps)} ({step.summary})"
+                run.failure = f"{INTERRUPTED} before broadcast {index} of {len(steps)} ({step.summary})"
                 run.process(Event.CANCELLED)
             return
         except LinkError as error:

@@ -12,6 +12,7 @@ outcome means (`prc3cfg.api`), nor how a module is written and verified (`prc3cf
 from __future__ import annotations
 
 import contextlib
+import re
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -45,7 +46,8 @@ from prc3cfg.shell.sessions import LineOptions, line_cost
 class Written:
     """What an apply's writes came to: the plan, every run in the plan's order, the snapshot, the
     seconds of each phase — and why it stopped short: lines not written (`unread`, one line each),
-    a record that could not be kept midway (`trouble`), Ctrl-C or SIGTERM (`interrupted`)."""
+    a record that could not be kept midway (`trouble`, the first; `lost`, every one), Ctrl-C or
+    SIGTERM (`interrupted`)."""
 
     plan: PlantPlan
     runs: tuple[ModuleRun, ...] = ()
@@ -54,14 +56,23 @@ class Written:
     unread: tuple[str, ...] = ()
     trouble: str | None = None
     interrupted: bool = False
+    lost: tuple[str, ...] = ()
+
+    @property
+    def verified(self) -> bool:
+        """Every module the plan changes written and verified, and every record kept: nothing stopped short."""
+        return bool(self.runs) and all(run.verified for run in self.runs) and not (self.unread or self.trouble or self.interrupted)
 
 
 class Keeping:
-    """What an apply keeps as it writes — its journal and its records of axis releases (and E12) —
-    and what becomes of it when the disk refuses one of them midway (full, read-only, over a
-    quota, gone): the first failure is kept (`trouble`), every line stops before its next frame
-    (`stop`, the links' cancel event), and the account that follows says what each module was
-    sent. A record that belongs before a frame keeps that frame back (`announce` raises `NotSent`)."""
+    """What an apply keeps as it writes — its journal, its records of axis releases (and E12), its
+    snapshot, the lines' records and the copy of the plant file applied in full — and what becomes of
+    it when the disk refuses one of them midway (full, read-only, over a quota or the file-size limit,
+    gone): the first failure is kept (`trouble`: the record, its file and the OS error), every record
+    not kept is listed (`lost`), every line stops before its next frame (`stop`, the links' cancel
+    event), and the account that follows says what each module was sent. A record that belongs before
+    a frame keeps that frame back (`announce` raises `NotSent`); a journal that refused a record is
+    written no more (a later record would follow a cut one), the others go on being kept."""
 
     def __init__(self, plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
                  records: releases.Releases, stop: threading.Event) -> None:  # fmt: skip
@@ -70,23 +81,33 @@ class Keeping:
         self._buses = buses
         self._lock = threading.Lock()
         self.trouble: str | None = None
+        self.lost: list[str] = []
+        self._journal_lost = False
 
-    def failed(self, what: str, error: OSError | UserError) -> None:
-        """`what` could not be kept: the lines stop before their next frame."""
-        said = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else \
-            (error.strerror if isinstance(error, OSError) and error.strerror else str(error))  # fmt: skip
+    def failed(self, what: str, error: OSError | UserError, path: Path | None = None) -> None:
+        """`what` (its file at `path`, where the error does not name it) could not be kept: the lines
+        stop before their next frame."""
         with self._lock:
             if self.trouble is None:
-                self.trouble = f"could not keep {what} ({said})"
+                self.trouble = f"could not keep {what} ({_refusal(error, path)})"
+            if what not in self.lost:
+                self.lost.append(what)
         self._stop.set()
+
+    def _journal_failed(self, error: OSError) -> None:
+        self._journal_lost = True
+        self.failed(JOURNAL, error, self.journal.path)
 
     def announce(self, exchange: Exchange) -> None:
         """Before a frame leaves: the attempt journalled, and a 10h/20h recorded durably as an axis
-        release not yet told (a broadcast's for every module on the line) — else it stays back."""
+        release not yet told (a broadcast's for every module on the line) — else it stays back, as
+        does every frame once a record could not be kept."""
+        if self.trouble is not None:
+            raise NotSent()
         try:
             self.journal.request(exchange)
         except OSError as error:
-            self.failed(f"the journal {self.journal.path}", error)
+            self._journal_failed(error)
             raise NotSent() from None
         if codec.MESSAGE_TYPES[exchange.request[0]].RELEASES_AXES:
             name = self._names.get((exchange.bus, exchange.address)) if exchange.address else \
@@ -97,29 +118,56 @@ class Keeping:
 
     def observe(self, exchange: Exchange) -> None:
         """An exchange that happened, journalled (a failure stops the lines before their next frame)."""
-        try:
-            self.journal.exchange(exchange)
-        except OSError as error:
-            self.failed(f"the journal {self.journal.path}", error)
+        if not self._journal_lost:
+            try:
+                self.journal.exchange(exchange)
+            except OSError as error:
+                self._journal_failed(error)
 
     def note(self, event: str, **fields: Any) -> None:
-        """A record of the apply (not of an exchange) in the journal, once it can still be written."""
-        if self.trouble is None:
+        """A record of the apply (not of an exchange) in the journal, while the journal is kept."""
+        if not self._journal_lost:
             try:
                 self.journal.record(event, **fields)
             except OSError as error:
-                self.failed(f"the journal {self.journal.path}", error)
+                self._journal_failed(error)
 
     def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = releases.RELEASE) -> None:
         """`releases.Releases.record`, a failure kept as the apply's trouble."""
         try:
             self.records.record(keys, bus, address, name, kind)
         except (OSError, UserError) as error:
-            self.failed("the record of an axis release" if kind == releases.RELEASE else "the record of a module in E12", error)
+            self.failed(RELEASE_RECORD if kind == releases.RELEASE else E12_RECORD, error, self.records.path)
+
+    def stopped_reading(self) -> None:
+        """Where the disk refused the journal a read-back's record (that read stayed back, `announce`)
+        before any write began: that is what stopped the apply, not an interruption — a `UserError` saying so."""
+        if self.trouble is not None:
+            raise UserError(f"{self.trouble} while the modules were read back — nothing was written to any module; "
+                            "free the space (or fix the folder), then apply again") from None
 
     def close(self) -> None:
         with contextlib.suppress(OSError):  # already kept as the trouble, or the journal was whole
             self.journal.close()
+
+
+#: The records an apply keeps, as its account names one it could not keep.
+JOURNAL, SNAPSHOT, LINE_RECORD = "the journal", "the snapshot", "the line's record of what its modules hold"
+RELEASE_RECORD, E12_RECORD, APPLIED = "the record of an axis release", "the record of a module in E12", "the copy of the plant file applied in full"
+
+
+def _refusal(error: OSError | UserError, path: Path | None) -> str:
+    """What the disk said, and of which file: "PATH: No space left on device". The file is the record's
+    own, not the temporary name an atomic write refused; a `UserError` of the lines' and releases'
+    records ("cannot keep … (WHAT) — what to do") gives its WHAT."""
+    if isinstance(error, UserError):
+        cause = error.__context__
+        if not isinstance(cause, OSError):
+            said = str(error)
+            return inner[1] if (inner := re.fullmatch(r"cannot keep .*? \((.*)\) — .*", said)) else said
+        error = cause
+    where = path or error.filename
+    return f"{where}: {error.strerror}" if where and error.strerror else (error.strerror or str(error))
 
 
 class Writing:
@@ -201,11 +249,16 @@ class Writing:
             try:
                 for bus in known:
                     bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
+            except UserError as error:  # another line's writes may have begun: this one's stay back
+                self.keeping.failed(LINE_RECORD, error)
+                return known
+            try:
                 self.snapshot, written = self._snapshot_with(runs, images)
-            except (OSError, UserError) as error:  # another line's writes began: this one's stay back
-                self.keeping.failed("the snapshot and the line's record before writing", error)
-            else:  # under the lock: the last snapshot record is the file's
-                self.keeping.note("snapshot", path=self.snapshot.name, sha256=written)
+            except OSError as error:  # the snapshot on disk, if any, holds the modules of the lines written before
+                self.keeping.failed(SNAPSHOT, error, self._taken.path if self._taken is not None else None)
+                return known
+            # under the lock: the last snapshot record is the file's
+            self.keeping.note("snapshot", path=self.snapshot.name, sha256=written)
             if self._whole:
                 self._tell_snapshot(len(self._taken.images) if self._taken is not None else 0)
         self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
@@ -228,8 +281,8 @@ class Writing:
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
             try:
                 bases.update(self.keys[bus], {a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
-            except UserError as error:  # they stay unknown: the next plan reads them in full
-                self.options.tell(f"bus {bus}: {error} — the next plan reads its modules in full")
+            except UserError as error:  # they stay unknown (forgotten before the writes): the next plan reads them in full
+                self.keeping.failed(LINE_RECORD, error)
 
     def account(self, the_plan: PlantPlan, took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> Written:
         """What the writes came to, every run in the plan's order — recorded (E12 kept for the next
@@ -238,6 +291,9 @@ class Writing:
         order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
         runs = tuple(sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
         keys, keeping = self.keys, self.keeping
+        if keeping.trouble is not None:
+            for run in runs:
+                run.stopped_by("a record could not be kept")
         for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
             if run.system_unset:
                 keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
@@ -254,7 +310,8 @@ class Writing:
         interrupted = keeping.trouble is None and self.options.cancel is not None and self.options.cancel.requested
         if interrupted:
             keeping.note("interrupted")
-        return Written(the_plan, runs, self.snapshot, (took or {}) | self.phases.took(), unread, keeping.trouble, interrupted)
+        return Written(the_plan, runs, self.snapshot, (took or {}) | self.phases.took(), unread, keeping.trouble, interrupted,
+                       tuple(keeping.lost))
 
 
 class ByLine:
@@ -319,13 +376,13 @@ class ByLine:
                 read(self.line)
             except Interrupted:
                 if not writing.runs:
-                    _refused_while_reading(writing.keeping)
+                    writing.keeping.stopped_reading()
                     raise
                 unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
                                for bus in sorted(self._lines - set(self._planned)))  # fmt: skip
             except LinesFailed as error:
                 if not writing.runs:
-                    _refused_while_reading(writing.keeping)
+                    writing.keeping.stopped_reading()
                     raise
                 unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
             if len(self._planned) == len(self._lines):
@@ -338,14 +395,6 @@ class ByLine:
             if not writing.runs:
                 return Written(planned)
             return writing.account(planned, unread=unread)
-
-
-def _refused_while_reading(keeping: Keeping) -> None:
-    """Where the disk refused the journal a read-back's record (that read stayed back, `Keeping.announce`)
-    before any write began: that is what stopped the apply, not an interruption — a `UserError` saying so."""
-    if keeping.trouble is not None:
-        raise UserError(f"{keeping.trouble} while the modules were read back — nothing was written to any module; "
-                        "free the space (or fix the folder), then apply again") from None
 
 
 def _nothing() -> None:

@@ -222,12 +222,16 @@ class Snapshot:
         temporary name (`write_atomically`), which a kill before the rename leaves beside it — whole
         where the file system has unnamed files, else perhaps cut short; either way not a .json, which
         is all the commands that read snapshots look at."""
-        directory = records_dir(self.plant_path, "snapshots")
-        directory.mkdir(parents=True, exist_ok=True)
-        path = directory / f"{self.taken}-{self.plant_path.stem}.json"
+        path = self.path
+        path.parent.mkdir(parents=True, exist_ok=True)
         text = self._text()
         write_atomically(path, text)
         return path, hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+    @property
+    def path(self) -> Path:
+        """Where `saved` writes it."""
+        return records_dir(self.plant_path, "snapshots") / f"{self.taken}-{self.plant_path.stem}.json"
 
     def _text(self) -> str:
         """The snapshot as JSON, one module a line: it is written before the first write on its line,

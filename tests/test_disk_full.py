@@ -1,0 +1,286 @@
+"""A disk that refuses one of an apply's records after its first write — full, read-only or over the
+file-size limit — at each kind of record: the journal, the snapshot (saved again as a further line's
+writes begin), the line's record of what its modules hold, the record of an axis release and the
+copy of the plant file applied in full. Whatever the record, the apply ends in its account — what
+each module was sent and holds, which axes may be released, how to restore — and one line naming
+the record it could not keep and the OS error: never a traceback, never exit 0, never a frame that
+left without the record that belongs before it. A refusal before the first write writes nothing.
+
+The refusals are real and come at a chosen point: every kind of record is kept on a small file
+system of its own (a tmpfs, mounted for the test: root only), which the test fills (ENOSPC) or
+remounts read-only (EROFS) from the emulator's side of the line when a chosen frame of the apply
+arrives there — the apply, a process of its own, cannot go on before that frame's reply, so nothing
+waits on the clock. The file-size limit (RLIMIT_FSIZE, EFBIG; SIGXFSZ is ignored by Python) cuts the
+k-th record of a file instead, for the sweep of the soak tier.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import re
+import subprocess
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+import yaml
+from emulated import DEMO, emulated_plant
+from lossy import Loss
+
+from prc3cfg.core.framing import Frame
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.shell.testing import EmulatedPlant
+
+pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="tmpfs, mount and RLIMIT_FSIZE are Linux's")
+AS_ROOT = pytest.mark.skipif(sys.platform != "linux" or os.geteuid() != 0, reason="mounting a small tmpfs needs root")
+
+#: The link's reply time-out: long enough that a busy machine repeats no exchange, so that a frame's
+#: number in a clean run is its number in every run.
+UNHURRIED = 2.0
+TRAVEL = "⚠ Travel to reference point required before production on:"
+READS = (0x50, 0x51, 0x52)
+RELEASES = (0x10, 0x20)
+#: Where each kind of record is kept: beside the plant file (`.prc3cfg/`) or in the state folder.
+KINDS = {"journal": ".prc3cfg/journal", "snapshots": ".prc3cfg/snapshots", "applied": ".prc3cfg/applied",
+         "lines": "state/lines", "releases": "state/releases"}  # fmt: skip
+#: What the apply's closing error says it could not keep, for each kind.
+NAMED = {"journal": "the journal", "snapshots": "the snapshot", "applied": "the copy of the plant file applied in full",
+         "lines": "the line's record", "releases": "the record of an axis release"}  # fmt: skip
+
+
+def one_line(tmp_path: Path) -> Path:
+    """The demo plant's first bus alone: three modules on one line, written one after another."""
+    document = yaml.safe_load(DEMO.read_text())
+    document["buses"] = document["buses"][:1]
+    source = tmp_path / "source"
+    source.mkdir(exist_ok=True)
+    (source / "one-line.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
+    return source / "one-line.yaml"
+
+
+@contextlib.contextmanager
+def small_disks(folders: list[Path], size: int = 4 * 2**20) -> Iterator[None]:
+    """A tmpfs of `size` bytes mounted on each folder (made first), unmounted afterwards."""
+    mounted: list[Path] = []
+    try:
+        for folder in folders:
+            folder.mkdir(parents=True, exist_ok=True)
+            done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size},mode=0755", "tmpfs", str(folder)],
+                                  capture_output=True, text=True)  # fmt: skip
+            if done.returncode != 0:
+                pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
+            mounted.append(folder)
+        yield
+    finally:
+        for folder in reversed(mounted):
+            subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+def fill(folder: Path, leave: int = 0) -> None:
+    """The file system of `folder` full but for `leave` bytes (whole pages): the next page any file
+    there needs is refused with ENOSPC."""
+    status = os.statvfs(folder)
+    free = status.f_bavail * status.f_frsize - leave
+    fd = os.open(folder / "filler", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+    try:
+        chunk = 2**16
+        while free > 0:
+            try:
+                free -= os.write(fd, bytes(min(chunk, free)))
+            except OSError as error:
+                assert error.errno == errno.ENOSPC and leave == 0, error
+                if chunk == 1:
+                    break
+                chunk //= 2
+    finally:
+        os.close(fd)
+
+
+def read_only(folder: Path) -> None:
+    """The file system of `folder` remounted read-only: every write there is refused with EROFS."""
+    subprocess.run(["mount", "-o", "remount,ro", str(folder)], check=True, capture_output=True)
+
+
+@dataclass
+class Line:
+    """What reached the modules of a line, frame by frame, and a refusal to make when a frame arrives."""
+
+    trigger: Callable[[Frame, int], bool] = lambda frame, number: False
+    action: Callable[[], None] = lambda: None
+    frames: list[tuple[int, bytes]] = field(default_factory=list)  # (address, message) of each request forwarded
+    acted_at: int | None = None
+    wait: threading.Event | None = None  # held at the frame `held_at` until set
+    held_at: Callable[[Frame, int], bool] = lambda frame, number: False
+
+    def rule(self, frame: Frame, number: int) -> set[Loss]:
+        if self.wait is not None and self.held_at(frame, number):
+            assert self.wait.wait(30), "the other line never came to its chosen frame"
+        if self.acted_at is None and self.trigger(frame, number):
+            self.acted_at = number
+            self.action()
+        self.frames.append((frame.address, frame.message))
+        return set()
+
+    def writes(self, address: int) -> list[bytes]:
+        return [message for to, message in self.frames if to in (address, 0) and message[0] not in READS]
+
+
+def first_write(frame: Frame, _: int) -> bool:
+    return frame.message[0] not in READS
+
+
+def apply(plant: EmulatedPlant, *, limit: int | None = None, command: str = "apply", target: Path | None = None,
+          plan: Path | None = None) -> subprocess.CompletedProcess[str]:  # fmt: skip
+    """`prc3cfg apply` (or `restore` of `target`) of the plant as a process of its own — of a plan file, if given — with a
+    file-size limit, if given."""
+
+    def limited() -> None:
+        if limit is not None:
+            import resource
+
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    planned = [] if plan is None else ["--plan", str(plan)]
+    return subprocess.run([sys.executable, "-m", "prc3cfg", command, str(target or plant.path), *planned, "--auto-approve", "--allow-axis-release"],
+                          preexec_fn=limited, capture_output=True, text=True, timeout=120)  # fmt: skip
+
+
+def matches(held: ModuleImage, desired: ModuleImage) -> bool:
+    return held.system == desired.system and all(w is None or h == w for h, w in zip(held.programs, desired.programs))
+
+
+def account_problems(plant: EmulatedPlant, before: dict[tuple[str, int], ModuleImage], lines: dict[str, Line],
+                     result: subprocess.CompletedProcess[str]) -> list[str]:  # fmt: skip
+    """Where the apply's output is not the whole truth of what the modules hold, by the emulators —
+    or is not one line per problem without a traceback."""
+    out, err = result.stdout, result.stderr
+    if "Traceback" in out + err:
+        return [f"a traceback (exit {result.returncode})"]
+    problems = []
+    if not all(line.startswith(("✗", "    ", "error: ", "note: ")) for line in err.splitlines()):
+        problems.append("stderr is not one line per problem")
+    blocks = {block.split(" (", 1)[0]: block for block in err.split("✗ ")[1:]}
+    travel = next((line for line in out.splitlines() if line.startswith(TRAVEL)), "")
+    for bus, module in plant.plant.modules():
+        where, key = f"bus {bus.name}, module {module.address}", (bus.name, module.address)
+        state = plant.emulators[bus.name].module(module.address)
+        held, was, sent = state.image, before[key], lines[bus.name].writes(module.address)
+        verified = f"✓ {where} " in out
+        block = blocks.get(where)
+        if verified:
+            if not matches(held, module.desired_image()):
+                problems.append(f"{where}: said verified, holds other than the plant file")
+            if f"{len(sent)} message{'s' if len(sent) != 1 else ''} written" not in out.split(f"✓ {where} ", 1)[1].splitlines()[0]:
+                problems.append(f"{where}: said verified with another count of messages than the {len(sent)} it was sent")
+        elif block is None:
+            if held != was or sent:
+                problems.append(f"{where}: was sent {len(sent)} messages and is not in the account")
+        elif "nothing was sent to it" in block:
+            if held != was or sent:
+                problems.append(f"{where}: said to have been sent nothing, was sent {len(sent)} messages")
+        else:
+            told = re.search(r"^    written: (.*)$", block, re.MULTILINE)
+            unacknowledged = re.search(r"^    sent, not acknowledged: (.*)$", block, re.MULTILINE)
+            count = sum(len(found[1].split("; ")) for found in (told, unacknowledged) if found and found[1] != "nothing acknowledged")
+            if count != len(sent):
+                problems.append(f"{where}: said to have been sent {count} messages, was sent {len(sent)}")
+            if "read back: unchanged" in block and held != was:
+                problems.append(f"{where}: said unchanged, holds other than before")
+        if not state.referenced and f"{bus.name}/{module.name}" not in travel:
+            problems.append(f"{where}: its axes were released and it is not on the reference-travel list")
+        if any(message[0] in RELEASES for message in sent) and f"{bus.name}/{module.name}" not in travel:
+            problems.append(f"{where}: was sent a 10h/20h and is not on the reference-travel list")
+    return problems
+
+
+def refused_problems(result: subprocess.CompletedProcess[str], kind: str, folder: Path) -> list[str]:
+    """Where the apply's end is not exit 1 and one line naming the record of `kind` (under `folder`) and the OS error."""
+    problems = []
+    if result.returncode != 1:
+        problems.append(f"exit {result.returncode}, not 1")
+    error = (result.stderr.strip().splitlines() or [""])[-1]
+    if not error.startswith(f"error: could not keep {NAMED[kind]} ") or str(folder) not in error:
+        problems.append(f"the last line does not name {NAMED[kind]} under {folder}: {error!r}")
+    elif not re.search(r"(No space left on device|Read-only file system|File too large|not writable)\)", error):
+        problems.append(f"the last line does not give the OS error: {error!r}")
+    return problems
+
+
+@dataclass
+class Refused:
+    plant: EmulatedPlant
+    before: dict[tuple[str, int], ModuleImage]
+    lines: dict[str, Line]
+    result: subprocess.CompletedProcess[str]
+    folders: dict[str, Path]
+
+    def check(self, kind: str) -> None:
+        problems = account_problems(self.plant, self.before, self.lines, self.result) + refused_problems(self.result, kind, self.folders[kind])
+        assert not problems, "\n".join(problems) + f"\n--- stdout\n{self.result.stdout}\n--- stderr\n{self.result.stderr}"
+
+
+def folder_of(tmp_path: Path, kind: str) -> Path:
+    """The folder of a test's records of `kind`: its plant file's in `line`, its state folder (`conftest`)."""
+    where = KINDS[kind]
+    return tmp_path / where if where.startswith("state/") else tmp_path / "line" / where
+
+
+@contextlib.contextmanager
+def refusing(tmp_path: Path, source: Path, lines: dict[str, Line], *, kinds: tuple[str, ...] = tuple(KINDS),
+             limit: int | None = None) -> Iterator[Callable[..., Refused]]:  # fmt: skip
+    """An emulated plant in `tmp_path/line` whose records of `kinds` each lie on a small disk of their own,
+    its lines' frames watched (and refused at) as `lines` say; gives the apply to run."""
+    directory = tmp_path / "line"
+    directory.mkdir()
+    folders = {kind: folder_of(tmp_path, kind) for kind in KINDS}
+    assert os.environ["PRC3CFG_STATE_DIR"] == str(tmp_path / "state")
+    with small_disks([folders[kind] for kind in kinds]), emulated_plant(directory, source=source, timeout=UNHURRIED,
+                                                                         lossy={bus: line.rule for bus, line in lines.items()}) as plant:  # fmt: skip
+        before = plant.images()
+
+        def run(**options: object) -> Refused:
+            return Refused(plant, before, lines, apply(plant, limit=limit, **options), folders)  # type: ignore[arg-type]
+
+        yield run
+
+
+@AS_ROOT
+@pytest.mark.parametrize("kind", ["journal", "lines", "releases", "applied"])
+def test_a_record_the_disk_refuses_after_the_first_write_ends_in_the_whole_account_and_one_line_naming_it(tmp_path, kind):
+    """One line of three modules; the chosen kind's disk refused as the first write (module 1's 20h)
+    reaches the line — filled (the journal's file, open, grows into a page the disk no longer has) or
+    remounted read-only (the others, each written afresh)."""
+    folder = folder_of(tmp_path, kind)
+    line = Line(first_write, lambda: (fill if kind == "journal" else read_only)(folder))
+    with refusing(tmp_path, one_line(tmp_path), {"booth-a": line}) as run:
+        refused = run()
+        refused.check(kind)
+        assert line.acted_at is not None
+        if kind == "releases":  # module 2's 20h stays back: its record could not be kept
+            assert refused.lines["booth-a"].writes(2) == []
+        if kind in ("lines", "applied"):  # refused after the writes: every module written and verified all the same
+            assert refused.plant.matches_plant() and refused.result.stdout.count("✓ ") == 3
+
+
+@AS_ROOT
+def test_a_journal_the_disk_refuses_while_a_plan_file_is_proved_is_said_so_and_writes_nothing(tmp_path, capsys):
+    """`apply --plan` reads the whole plant back before its first write: the disk filled at its first
+    read refuses the journal a later read's record (the next page of its file) — that read stays back,
+    nothing is written, and the apply says which record it could not keep (it said "error: interrupted",
+    exit 130, as if Ctrl-C)."""
+    line = Line(action=lambda: fill(folder_of(tmp_path, "journal")))
+    with refusing(tmp_path, one_line(tmp_path), {"booth-a": line}, kinds=("journal",)) as run:
+        plan = tmp_path / "plan.json"
+        made = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", str(tmp_path / "line" / "plant.yaml"), "--out", str(plan)],
+                              capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert made.returncode in (0, 2), made.stderr
+        line.trigger, line.frames[:] = lambda frame, number: True, []  # the apply's first frame
+        refused = run(plan=plan)
+        refused.check("journal")
+        assert "while the modules were read back — nothing was written to any module" in refused.result.stderr
+        assert all(message[0] in READS for _, message in line.frames) and refused.plant.images() == refused.before
