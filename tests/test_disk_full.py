@@ -284,3 +284,37 @@ def test_a_journal_the_disk_refuses_while_a_plan_file_is_proved_is_said_so_and_w
         refused.check("journal")
         assert "while the modules were read back — nothing was written to any module" in refused.result.stderr
         assert all(message[0] in READS for _, message in line.frames) and refused.plant.images() == refused.before
+
+
+@AS_ROOT
+def test_a_snapshot_the_disk_refuses_as_a_further_line_begins_stops_every_line_and_the_one_saved_restores(tmp_path):
+    """The demo plant's two lines, each written as soon as its own plan is whole: booth-b's first frame
+    is held at the line until booth-a's first write arrives, when the snapshots' disk is filled — so
+    booth-b's modules, added to the snapshot, cannot be saved: its writes stay back, booth-a stops
+    before its next frame, and the snapshot named (booth-a's modules, saved before its first write)
+    restores them once there is room."""
+    first = threading.Event()
+    a = Line(first_write, lambda: (fill(folder_of(tmp_path, "snapshots")), first.set()))
+    b = Line(wait=first, held_at=lambda frame, number: number == 1)
+    with refusing(tmp_path, DEMO, {"booth-a": a, "booth-b": b}, kinds=("snapshots",)) as run:
+        refused = run()
+        refused.check("snapshots")
+        assert b.writes(1) == b.writes(3) == b.writes(4) == [] and a.writes(1), "the refusal came elsewhere than chosen"
+        snapshot = re.search(r"prc3cfg restore (\S+\.json)$", refused.result.stderr.strip())
+        assert snapshot, refused.result.stderr
+        (folder_of(tmp_path, "snapshots") / "filler").unlink()
+        restored = apply(refused.plant, command="restore", target=Path(snapshot[1]))
+        assert restored.returncode == 0, restored.stderr
+        assert refused.plant.images() == refused.before
+
+
+@AS_ROOT
+def test_a_snapshot_the_disk_refuses_before_the_first_write_writes_nothing_and_says_so(tmp_path):
+    """One page left on the snapshots' disk: enough for the check before the line is opened (a page's
+    worth written and flushed), not for the snapshot of three modules — nothing is sent to any module."""
+    with refusing(tmp_path, one_line(tmp_path), {"booth-a": (line := Line())}, kinds=("snapshots",)) as run:
+        fill(folder_of(tmp_path, "snapshots"), leave=4096)
+        refused = run()
+        refused.check("snapshots")
+        assert "nothing was written to any module" in refused.result.stderr.strip().splitlines()[-1]
+        assert all(message[0] in READS for _, message in line.frames) and refused.plant.images() == refused.before
