@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import random
 import re
 import subprocess
 import sys
@@ -44,6 +45,8 @@ AS_ROOT = pytest.mark.skipif(sys.platform != "linux" or os.geteuid() != 0, reaso
 UNHURRIED = 2.0
 TRAVEL = "⚠ Travel to reference point required before production on:"
 READS = (0x50, 0x51, 0x52)
+#: What the disk says when it refuses (ENOSPC, EROFS, EFBIG), or what prc3cfg says of a state folder it cannot write.
+OS_ERRORS = r"(No space left on device|Read-only file system|File too large|not writable)"
 RELEASES = (0x10, 0x20)
 #: Where each kind of record is kept: beside the plant file (`.prc3cfg/`) or in the state folder.
 KINDS = {"journal": ".prc3cfg/journal", "snapshots": ".prc3cfg/snapshots", "applied": ".prc3cfg/applied",
@@ -135,7 +138,7 @@ def first_write(frame: Frame, _: int) -> bool:
 
 
 def apply(plant: EmulatedPlant, *, limit: int | None = None, command: str = "apply", target: Path | None = None,
-          plan: Path | None = None) -> subprocess.CompletedProcess[str]:  # fmt: skip
+          plan: Path | None = None, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:  # fmt: skip
     """`prc3cfg apply` (or `restore` of `target`) of the plant as a process of its own — of a plan file, if given — with a
     file-size limit, if given."""
 
@@ -147,7 +150,7 @@ def apply(plant: EmulatedPlant, *, limit: int | None = None, command: str = "app
 
     planned = [] if plan is None else ["--plan", str(plan)]
     return subprocess.run([sys.executable, "-m", "prc3cfg", command, str(target or plant.path), *planned, "--auto-approve", "--allow-axis-release"],
-                          preexec_fn=limited, capture_output=True, text=True, timeout=120)  # fmt: skip
+                          preexec_fn=limited, capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
 
 
 def matches(held: ModuleImage, desired: ModuleImage) -> bool:
@@ -198,15 +201,17 @@ def account_problems(plant: EmulatedPlant, before: dict[tuple[str, int], ModuleI
     return problems
 
 
-def refused_problems(result: subprocess.CompletedProcess[str], kind: str, folder: Path) -> list[str]:
-    """Where the apply's end is not exit 1 and one line naming the record of `kind` (under `folder`) and the OS error."""
+def refused_problems(result: subprocess.CompletedProcess[str], kind: str | None, folder: Path | None) -> list[str]:
+    """Where the apply's end is not exit 1 and one line naming the record of `kind` (under `folder`) — any
+    record, where None — and the OS error."""
     problems = []
     if result.returncode != 1:
         problems.append(f"exit {result.returncode}, not 1")
     error = (result.stderr.strip().splitlines() or [""])[-1]
-    if not error.startswith(f"error: could not keep {NAMED[kind]} ") or str(folder) not in error:
-        problems.append(f"the last line does not name {NAMED[kind]} under {folder}: {error!r}")
-    elif not re.search(r"(No space left on device|Read-only file system|File too large|not writable)\)", error):
+    named = [NAMED[kind]] if kind is not None else list(NAMED.values())
+    if not any(error.startswith(f"error: could not keep {what} ") for what in named) or str(folder or "") not in error:
+        problems.append(f"the last line does not name {' or '.join(named)} under {folder}: {error!r}")
+    elif not re.search(OS_ERRORS + r"\)", error):
         problems.append(f"the last line does not give the OS error: {error!r}")
     return problems
 
@@ -219,8 +224,11 @@ class Refused:
     result: subprocess.CompletedProcess[str]
     folders: dict[str, Path]
 
-    def check(self, kind: str) -> None:
-        problems = account_problems(self.plant, self.before, self.lines, self.result) + refused_problems(self.result, kind, self.folders[kind])
+    def check(self, kind: str | None) -> None:
+        """The account is exact, and the last line names the record of `kind` (any, where None) and the OS error."""
+        # the line's record is named by its state folder where the disk refused its nameless file (`prc3cfg.shell.bases`)
+        folder = None if kind is None else self.folders[kind].parent if kind == "lines" else self.folders[kind]
+        problems = account_problems(self.plant, self.before, self.lines, self.result) + refused_problems(self.result, kind, folder)
         assert not problems, "\n".join(problems) + f"\n--- stdout\n{self.result.stdout}\n--- stderr\n{self.result.stderr}"
 
 
@@ -318,3 +326,69 @@ def test_a_snapshot_the_disk_refuses_before_the_first_write_writes_nothing_and_s
         refused.check("snapshots")
         assert "nothing was written to any module" in refused.result.stderr.strip().splitlines()[-1]
         assert all(message[0] in READS for _, message in line.frames) and refused.plant.images() == refused.before
+
+
+#: A clean apply of `one_line`, traced once per process: the frames that reached the line, and the journal's
+#: size after each of its records.
+_CLEAN: dict[str, list[int]] = {}
+
+
+def clean_run(tmp_path: Path) -> tuple[int, list[int]]:
+    """How many frames a clean apply of `one_line` sends, and its journal's size after each record."""
+    if not _CLEAN:
+        twin = tmp_path / "twin"
+        twin.mkdir()
+        line = Line()
+        with emulated_plant(twin, source=one_line(tmp_path), timeout=UNHURRIED, lossy={"booth-a": line.rule}) as plant:
+            result = apply(plant, env=os.environ | {"PRC3CFG_STATE_DIR": str(twin / "state")})
+        assert result.returncode == 0, result.stderr
+        (journal,) = (twin / ".prc3cfg" / "journal").glob("*.jsonl")
+        sizes = [len(record) for record in journal.read_bytes().splitlines(keepends=True)]
+        _CLEAN.update(frames=[len(line.frames)], ends=[sum(sizes[: index + 1]) for index in range(len(sizes))])
+    return _CLEAN["frames"][0], _CLEAN["ends"]
+
+
+def sweep(count: int, seed: str) -> list[tuple[str, str, float]]:
+    """`count` points where the disk refuses: a kind of record and how (filled, read-only), or the file-size
+    limit; and where, as a fraction of the frames (of the journal's records, for the limit) of a clean run."""
+    chooser = random.Random(seed)
+    points = []
+    for _ in range(count):
+        kind = chooser.choice([*KINDS, "limit"])
+        how = "limit" if kind == "limit" else "fill" if kind == "journal" else chooser.choice(["fill", "read-only"])
+        points.append((kind, how, round(chooser.random(), 3)))
+    return points
+
+
+#: Two points in the fast tier (the limit; a release record's disk read-only midway), 20 in the soak tier (about 40 s on two cores).
+POINTS = [("limit", "limit", 0.5), ("releases", "read-only", 0.6),
+          *(pytest.param(*point, marks=pytest.mark.soak) for point in sweep(20, "issue 39, soak"))]  # fmt: skip
+
+
+@pytest.mark.parametrize("kind, how, at", POINTS)
+def test_a_disk_that_refuses_anywhere_in_an_apply_leaves_an_exact_account_and_no_untold_release(tmp_path, kind, how, at):
+    """One line of three modules; the disk refuses a kind of record from a chosen frame on (filled or
+    remounted read-only when that frame reaches the line), or every file past a size at which the journal
+    has a chosen number of records (RLIMIT_FSIZE; then any record may be the first refused). Whatever
+    the point: no traceback, the account is what the modules hold (the emulator's state), every module
+    whose axes were released is on the travel list; exit 0 only for a whole, verified apply; else one
+    line naming the record (or, before the first write, what stopped it) and nothing written then."""
+    if kind != "limit" and (sys.platform != "linux" or os.geteuid() != 0):
+        pytest.skip("mounting a small tmpfs needs root")
+    frames, ends = clean_run(tmp_path)
+    refuse = fill if how == "fill" else read_only
+    line = Line() if kind == "limit" else Line(lambda frame, number: number == 1 + int(at * frames), lambda: refuse(folder_of(tmp_path, kind)))
+    limit = ends[int(at * len(ends))] if kind == "limit" else None
+    with refusing(tmp_path, one_line(tmp_path), {"booth-a": line}, kinds=() if kind == "limit" else (kind,), limit=limit) as run:
+        refused = run()
+        result = refused.result
+        wrote = any(message[0] not in READS for _, message in line.frames)
+        if result.returncode == 0:  # the refusal came after the last record of its kind that mattered
+            assert "Apply complete" in result.stdout and refused.plant.matches_plant(), result.stdout + result.stderr
+        elif not wrote:  # before the first write: one line, and nothing written
+            assert result.returncode == 1 and "Traceback" not in result.stderr, result.stderr
+            error = result.stderr.strip().splitlines()[-1]
+            assert error.startswith("error: ") and re.search(OS_ERRORS, error), error
+            assert refused.plant.images() == refused.before
+        else:
+            refused.check(None if kind == "limit" else kind)

@@ -159,13 +159,10 @@ RELEASE_RECORD, E12_RECORD, APPLIED = "the record of an axis release", "the reco
 def _refusal(error: OSError | UserError, path: Path | None) -> str:
     """What the disk said, and of which file: "PATH: No space left on device". The file is the record's
     own, not the temporary name an atomic write refused; a `UserError` of the lines' and releases'
-    records ("cannot keep … (WHAT) — what to do") gives its WHAT."""
+    records ("cannot keep … (WHERE: WHY) — what to do") gives its WHERE: WHY."""
     if isinstance(error, UserError):
-        cause = error.__context__
-        if not isinstance(cause, OSError):
-            said = str(error)
-            return inner[1] if (inner := re.fullmatch(r"cannot keep .*? \((.*)\) — .*", said)) else said
-        error = cause
+        said = str(error)
+        return inner[1] if (inner := re.fullmatch(r"cannot keep .*? \((.*)\) — .*", said)) else said
     where = path or error.filename
     return f"{where}: {error.strerror}" if where and error.strerror else (error.strerror or str(error))
 
