@@ -392,3 +392,41 @@ def test_a_disk_that_refuses_anywhere_in_an_apply_leaves_an_exact_account_and_no
             assert refused.plant.images() == refused.before
         else:
             refused.check(None if kind == "limit" else kind)
+
+
+def adopt(plant: EmulatedPlant, reason: str, limit: int | None = None, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    def limited() -> None:
+        if limit is not None:
+            import resource
+
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return subprocess.run([sys.executable, "-m", "prc3cfg", "adopt", str(plant.path), "--auto-approve", "--reason", reason],
+                          preexec_fn=limited, capture_output=True, text=True, timeout=120, env=env)  # fmt: skip
+
+
+def test_a_journal_the_disk_refuses_after_an_adopt_wrote_the_plant_file_says_so_in_one_line(tmp_path):
+    """`adopt` journals what it adopts, writes the plant file, then journals that it did. The file-size
+    limit set just past the journal's first two records (measured on a twin; a long reason makes the
+    journal the largest file written) refuses the last: the plant file is written all the same, and
+    one line says so and names the journal — it was a traceback."""
+    reason = "a reason long enough that the journal outgrows every other file adopt writes " * 250
+
+    def adopted_line(directory: Path, limit: int | None, state: Path) -> tuple[subprocess.CompletedProcess[str], bytes]:
+        with emulated_plant(directory, source=one_line(tmp_path), timeout=UNHURRIED) as plant:
+            env = os.environ | {"PRC3CFG_STATE_DIR": str(state)}
+            assert apply(plant, env=env).returncode == 0
+            plant.emulators["booth-a"].teach_in(1, 2, 160)
+            return adopt(plant, reason, limit, env), plant.path.read_bytes()
+
+    (tmp_path / "twin").mkdir()
+    (tmp_path / "line").mkdir()
+    clean, _ = adopted_line(tmp_path / "twin", None, tmp_path / "twin-state")
+    assert clean.returncode == 0, clean.stderr
+    (journal,) = sorted((tmp_path / "twin" / ".prc3cfg" / "journal").glob("*.jsonl"))[-1:]
+    header, adopt_record, _ = (len(record) for record in journal.read_bytes().splitlines(keepends=True))
+    refused, written = adopted_line(tmp_path / "line", header + adopt_record + 40, tmp_path / "state")
+    assert refused.returncode == 1 and "Traceback" not in refused.stderr, refused.stderr
+    error = refused.stderr.strip().splitlines()[-1]
+    assert error.startswith("error: could not keep the journal (") and "File too large" in error and "was adopted and written" in error, error
+    assert b"position: 0.16\n" in written  # the taught value, adopted

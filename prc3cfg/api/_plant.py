@@ -88,9 +88,15 @@ def write_adoption(adoption: Adoption) -> None:
             written = replace_unless_changed(target, adoption.after, before)
         except OSError as error:
             raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
-        journal.record("adopted", written=written, sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written else None)
+        try:
+            journal.record("adopted", written=written, sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written else None)
+        except OSError as error:  # after the write: it is told, and the journal named as lacking its last record
+            done = "was adopted and written" if written else "changed while adopting — it was not written: adopt again"
+            raise UserError(f"could not keep the journal ({journal.path}: {error.strerror}): the plant file {adoption.path} {done}; "
+                            "the records on disk are incomplete (the journal lacks the record that says so) — free the space") from None  # fmt: skip
     finally:
-        journal.close()
+        with contextlib.suppress(OSError):  # a journal the disk refused: said above
+            journal.close()
     if not written:
         raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
 
