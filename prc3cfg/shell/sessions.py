@@ -212,7 +212,8 @@ def written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], recor
 
 @dataclass(frozen=True)
 class BareLine:
-    """A line named by its port alone (`scan`, `import`): framing, character format, times."""
+    """A line named by its port alone (`scan`, `import`): framing, character format, times. Its port is
+    the operator's own choice, not a reviewed file's: any port pyserial opens, its URL handlers too."""
 
     port: str
     framing: str = "crc16"
@@ -232,7 +233,7 @@ def default_parity(port: str) -> str:
 @contextlib.contextmanager
 def bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[str, ...]]:
     """The line of a port without a plant file, locked; its identities."""
-    problem = port_error("port", port)
+    problem = port_error("port", port, operators=True)
     if problem is None and port.startswith(EMULATOR_SCHEME):
         problem = (f"port {port} is a plant file's emulator (its state is kept beside the plant file) — for a "
                    "bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT")  # fmt: skip
@@ -259,7 +260,7 @@ def bare_link(bare: BareLine, options: LineOptions, purpose: str, given: Link | 
         from prc3cfg.shell.link.client import Link
         from prc3cfg.shell.link.ports import open_port
 
-        port = open_port(bare.port, bare.line, bus=bare.port)
+        port = open_port(bare.port, bare.line, bus=bare.port, operators=True)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
                    retries=options.retries, trace=_trace(options), observer=watch,
