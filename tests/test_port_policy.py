@@ -246,3 +246,18 @@ def _allowed(port: str) -> bool:
     if re.fullmatch(r"(\\\\\.\\)?COM[1-9][0-9]*", port, re.IGNORECASE):
         return True
     return port.startswith("/dev/") and len(port) > 5 and ".." not in port.split("/")
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_plan_across_a_real_process_refuses_every_handler_and_writes_nothing(tmp_path, scheme):
+    """Each of pyserial's handlers (and others, and prc3cfg's own with no TCP port or a path for a name), as `plan`
+    of a plant file naming it would open it: one line at the port, and no file."""
+    folder = tmp_path / "repository"
+    folder.mkdir()
+    path = plant_with(folder, f"{scheme}:///dev/ptmx?file=victim.txt&class=PosixPollSerial&logging=debug")
+    ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", path.name], cwd=folder, env=os.environ | {"PYTHONPATH": str(ROOT)},
+                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    (line,) = ran.stderr.splitlines()
+    assert (ran.returncode, ran.stdout) == (1, "") and line.startswith(f"error: {path.name}:{AT}: port "), ran
+    assert sorted(p.name for p in folder.iterdir()) == ["plant.yaml"]
