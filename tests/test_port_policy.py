@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -182,6 +183,63 @@ def test_the_schema_refuses_the_handlers_and_paths_validate_refuses():
         assert not takes(_unquoted(port)), port
     for port in ALLOWED.values():
         assert takes(_unquoted(port)), port
+
+
+# -- the machine at the line: PRC3CFG_PORTS --------------------------------------------------------
+
+#: The refusal of a bus whose port the machine does not list, after "bus NAME: port PORT".
+NOT_LISTED = (" is not a line of this machine — PRC3CFG_PORTS, the machine's own list, names {listed}: name one of those in "
+              "the plant file, or add the port to PRC3CFG_PORTS in the machine's configuration")  # fmt: skip
+
+
+def test_where_the_machine_lists_its_ports_a_plant_file_opens_only_those(plant, capsys, monkeypatch):
+    ports = {bus.name: bus.port for bus in plant.plant.buses}
+    monkeypatch.setenv("PRC3CFG_PORTS", ports["booth-a"])
+    refused = run_cli(capsys, "plan", plant.path)
+    assert (refused.code, refused.out) == (1, "")
+    assert refused.err == f"error: {plant.path}: bus booth-b: port {ports['booth-b']}{NOT_LISTED.format(listed=ports['booth-a'])}\n"
+    monkeypatch.setenv("PRC3CFG_PORTS", "")
+    assert run_cli(capsys, "read", plant.path).err.endswith(NOT_LISTED.format(listed="none") + "\n")
+    # another spelling of a listed line is that line (`line_keys`): 0.0.0.0 is the loopback a connection reaches
+    monkeypatch.setenv("PRC3CFG_PORTS", f" {ports['booth-a']} ;{ports['booth-b'].replace('127.0.0.1', '0.0.0.0')}; ")
+    planned = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
+    assert planned.code == 2, planned
+
+
+def test_the_emulator_inside_prc3cfg_is_no_port_of_the_machine(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_PORTS", "/dev/ttyUSB0")
+    result = run_cli(capsys, "read", plant_with(tmp_path, "emulator://a"))
+    assert result.code == 0, result
+
+
+def test_a_machine_list_with_a_control_character_is_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("PRC3CFG_PORTS", "/dev/ttyUSB0\x1b[2K")
+    result = run_cli(capsys, "read", plant_with(tmp_path, "/dev/ttyUSB1"))
+    assert (result.code, result.err) == (1, "error: PRC3CFG_PORTS: port '/dev/ttyUSB0\\x1b[2K' holds a control character — write "
+                                            "the device path or URL as plain text\n")  # fmt: skip
+
+
+def test_a_pull_requests_plant_file_cannot_make_the_runner_open_another_port(plant, tmp_path):
+    """The recipe's plan job, across a real process: the runner lists its lines, the pull request's plant file
+    names another port (a host of the runner's network) — refused before anything connects to it."""
+    ports = {bus.name: bus.port for bus in plant.plant.buses}
+    with socket.create_server(("127.0.0.1", 0)) as other:
+        other.setblocking(False)
+        elsewhere = f"socket://127.0.0.1:{other.getsockname()[1]}"
+        pull_request = tmp_path / "pr" / "plant.yaml"
+        pull_request.parent.mkdir()
+        pull_request.write_text(plant.path.read_text().replace(ports["booth-b"], elsewhere))
+        env = os.environ | {"PYTHONPATH": str(ROOT)}
+        for listed, connected in ((";".join(ports.values()), False), (None, True)):  # and without the list, as a control
+            ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", pull_request, "--detailed-exitcode"], capture_output=True,
+                                 text=True, timeout=120, env=env | ({"PRC3CFG_PORTS": listed} if listed else {}))  # fmt: skip
+            assert ran.returncode == 1, ran
+            if not connected:
+                assert ran.stderr == f"error: {pull_request}: bus booth-b: port {elsewhere}{NOT_LISTED.format(listed=', '.join(ports.values()))}\n"
+                with pytest.raises(BlockingIOError):
+                    other.accept()  # the process has ended: a connection it made would be waiting here
+            else:
+                other.accept()[0].close()
 
 
 # -- soak: random URL-ish ports --------------------------------------------------------------------

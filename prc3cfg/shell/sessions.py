@@ -4,7 +4,8 @@
 releases no account has named yet, and opens a `Link` per bus; `bare_lock` and `bare_link` do the
 same for a port without a plant file (`BareLine`). A read a module answers as a write is recorded
 as an axis release (`written_reads`). `LineOptions` says how a command uses its lines;
-`bus_line_keys` are the identities of a bus's line (its lock, its records).
+`bus_line_keys` are the identities of a bus's line (its lock, its records); where the machine lists
+its lines (`PORTS_VARIABLE`), a plant's bus opens only one of them (`machine_lines`).
 
 The link (pyserial, the emulator behind `emulator://`) is imported where a line is opened: a
 command that opens none (`plan --actual`) loads none of it, and `LineOptions` costs nothing.
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -83,6 +85,31 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
     return line_keys(bus.port, emulator_state=state)
 
 
+#: The ports of this machine's lines, `;` between them: where it is set (the runner wired to a line, in its own
+#: configuration), a plant file's bus opens only a line it names — a pull request's plant file, planned there,
+#: cannot make it open another device or connect to another host. `emulator://` opens none, and is not listed.
+PORTS_VARIABLE = "PRC3CFG_PORTS"
+
+
+def machine_lines(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
+    """Refuse, before any line is opened, a bus (by its line's identities, `keys`) that `PORTS_VARIABLE` does not
+    name where it is set: one of its ports must be that line, as any spelling of it (`line_keys`)."""
+    listed = os.environ.get(PORTS_VARIABLE)
+    if listed is None:
+        return
+    ports = [port.strip() for port in listed.split(";") if port.strip()]
+    machine: set[str] = set()
+    for port in ports:
+        if (problem := port_error("port", port, operators=True)) is not None:
+            raise UserError(f"{PORTS_VARIABLE}: {problem}")
+        machine.update(line_keys(port) if not port.startswith(EMULATOR_SCHEME) else ())
+    for bus in plant.buses:
+        if bus.name in keys and not bus.port.startswith(EMULATOR_SCHEME) and not machine.intersection(keys[bus.name]):
+            raise UserError(f"{plant.path}: bus {bus.name}: port {bus.port} is not a line of this machine — {PORTS_VARIABLE}, the "
+                            f"machine's own list, names {', '.join(ports) or 'none'}: name one of those in the plant file, or add "
+                            f"the port to {PORTS_VARIABLE} in the machine's configuration")  # fmt: skip
+
+
 def line_cost(bus: Bus) -> LineCost:
     """What an exchange costs on a bus's line, by its settings (`prc3cfg.core.bustime`)."""
     return LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz)
@@ -107,6 +134,8 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     for each other's lock."""
     names = set(buses)
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
+    if given is None:
+        machine_lines(plant, keys)
     owner: dict[str, str] = {}
     for name, identities in keys.items():
         for key in identities:
