@@ -185,6 +185,20 @@ def test_the_schema_refuses_the_handlers_and_paths_validate_refuses():
         assert takes(_unquoted(port)), port
 
 
+def test_an_emulators_name_and_query_select_no_path_a_plant_file_chooses(tmp_path, capsys):
+    """`emulator://NAME` keeps its state in .prc3cfg/emulators/NAME.json beside the plant file; its query only tunes
+    the emulator (`emulator_query`), so a key naming a path is refused in one line and nothing is made there."""
+    elsewhere = tmp_path / "elsewhere.json"
+    (tmp_path / "repository").mkdir()
+    path = plant_with(tmp_path / "repository", f"emulator://a?state={elsewhere}")
+    result = run_cli(capsys, "read", path)
+    assert (result.code, result.out) == (1, "")
+    assert result.err.startswith(f"error: bus a: port emulator://a?state={elsewhere}: unknown option 'state' — emulator:// takes ")
+    assert not elsewhere.exists() and not (path.parent / ".prc3cfg").exists()
+    assert run_cli(capsys, "read", plant_with(path.parent, "emulator://a?line-speed=9600")).code == 0
+    assert {p.name.partition(".")[0] for p in (path.parent / ".prc3cfg" / "emulators").iterdir()} == {"a"}  # a.json, its lock
+
+
 # -- the machine at the line: PRC3CFG_PORTS --------------------------------------------------------
 
 #: The refusal of a bus whose port the machine does not list, after "bus NAME: port PORT".

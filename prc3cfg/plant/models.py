@@ -84,6 +84,8 @@ PROGRAM_KEY: JsonDict = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5
 EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 #: `?line-speed=9600` and the like, which the link reads (and names what it does not know).
 EMULATOR_QUERY = r"(\?[^#\s]*)?"
+
+
 def _either_case(word: str) -> str:
     """`word` as an ECMA 262 pattern without the `i` flag finds it in either case: `[cC][oO][mM]`."""
     return "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else re.escape(c) for c in word)
@@ -247,10 +249,11 @@ def _port(url: str) -> str:
         raise PydanticCustomError("port_control", "a control character")
     refusal = port_refusal(url)
     if refusal is not None:
-        kind, scheme = refusal
-        raise PydanticCustomError(kind, "not a port a plant file may name", {"scheme": scheme})
-    if url.partition("://")[0].lower() in TCP_SCHEMES and not _tcp_port(url):
-        raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": url.partition("://")[0]})
+        kind, handler = refusal
+        raise PydanticCustomError(kind, "not a port a plant file may name", {"scheme": handler})
+    scheme = url.partition("://")[0]
+    if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
+        raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": scheme})
     if url.startswith(EMULATOR_SCHEME) and not re.fullmatch(EMULATOR_NAME + EMULATOR_QUERY, url.removeprefix(EMULATOR_SCHEME)):
         raise PydanticCustomError("emulator_name", "not a plain emulator name")
     return url

@@ -5,7 +5,7 @@ releases no account has named yet, and opens a `Link` per bus; `bare_lock` and `
 same for a port without a plant file (`BareLine`). A read a module answers as a write is recorded
 as an axis release (`written_reads`). `LineOptions` says how a command uses its lines;
 `bus_line_keys` are the identities of a bus's line (its lock, its records); where the machine lists
-its lines (`PORTS_VARIABLE`), a plant's bus opens only one of them (`machine_lines`).
+its lines (`PORTS_VARIABLE`), a plant's bus opens only one of them (`refuse_other_lines`).
 
 The link (pyserial, the emulator behind `emulator://`) is imported where a line is opened: a
 command that opens none (`plan --actual`) loads none of it, and `LineOptions` costs nothing.
@@ -91,7 +91,7 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
 PORTS_VARIABLE = "PRC3CFG_PORTS"
 
 
-def machine_lines(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
+def refuse_other_lines(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
     """Refuse, before any line is opened, a bus (by its line's identities, `keys`) that `PORTS_VARIABLE` does not
     name where it is set: one of its ports must be that line, as any spelling of it (`line_keys`)."""
     listed = os.environ.get(PORTS_VARIABLE)
@@ -135,7 +135,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     names = set(buses)
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
     if given is None:
-        machine_lines(plant, keys)
+        refuse_other_lines(plant, keys)
     owner: dict[str, str] = {}
     for name, identities in keys.items():
         for key in identities:
