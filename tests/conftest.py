@@ -40,6 +40,7 @@ def private_locks(tmp_path, monkeypatch):
     monkeypatch.setenv("PRC3CFG_STATE_DIR", str(tmp_path / "state"))
     (tmp_path / "uucp").mkdir()  # the serial devices' LCK.. files: machine state, left to the tests that mean it
     monkeypatch.setenv("PRC3CFG_UUCP_LOCK_DIR", str(tmp_path / "uucp"))
+    monkeypatch.delenv("PRC3CFG_PORTS", raising=False)  # a machine's list of its lines: the tests' emulators are none of them
 
 
 @pytest.fixture

@@ -17,6 +17,7 @@ from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
 from prc3cfg.plant.importer import bus_entry, imported_plant
+from prc3cfg.plant.messages import port_error
 from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.link.client import Link, Port
 from prc3cfg.shell.link.ports import open_port
@@ -70,7 +71,7 @@ def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *
 
     @contextlib.contextmanager
     def open_line(line: LineSettings) -> Iterator[Port]:
-        port = open_port(bare.port, line, bus=bare.port)
+        port = open_port(bare.port, line, bus=bare.port, operators=True)
         try:
             yield port
         finally:
@@ -106,9 +107,12 @@ def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None 
     """A plant file (its text) describing the live modules of these buses, by name (`import_modules`,
     one line after another — over their ports, or the `links` given by name), and how many modules it
     describes: what they all hold alike once, in one profile; `unmanaged_programs: reset`, so planning
-    it against those lines is empty. Two names for one line are refused before any is read."""
+    it against those lines is empty. Two names for one line, and a port no plant file may name (a
+    pyserial handler's URL: `core.line.port_refusal`), are refused before any is read."""
     owner: dict[str, str] = {}
     for name, bare in buses.items():
+        if port_error("port", bare.port, operators=True) is None and (problem := port_error("--port", bare.port)) is not None:
+            raise UserError(f"{problem}: import writes it into the plant file")  # fine to read, but no plant file may name it
         try:
             keys = line_keys(bare.port) if len(buses) > 1 else ()
         except ValueError:  # a port that names no line: opening it says so, in its turn

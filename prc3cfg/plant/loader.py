@@ -260,7 +260,7 @@ def _line(raw_bus: dict[Any, Any]) -> BusLine | None:
         wrong = {e["loc"][0] for e in error.errors(include_url=False) if e["loc"]}
     if wrong & rules.LINE_KEYS:
         return None
-    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-", "port": "-"})
+    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-", "port": "emulator://-"})
 
 
 def _salvaged(model: type[M], raw: dict[Any, Any]) -> tuple[M | None, rules.Unknown]:

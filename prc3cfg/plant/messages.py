@@ -11,11 +11,12 @@ from __future__ import annotations
 import functools
 import re
 from decimal import Decimal
-from typing import Any
+from typing import Any, get_args
 
 from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic_core import ErrorDetails
 
+from prc3cfg.core.line import PortRefusal
 from prc3cfg.core.text import has_control
 from prc3cfg.plant.models import (
     BusSpec,
@@ -74,6 +75,12 @@ TEMPLATES = {
     "too_short": "{what} is empty — list at least one {item}",
     "program_key": "{what} {input} is written with a decimal point — {fix}",
     "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
+    "port_handler": "{what} {input} uses pyserial's {scheme}:// handler, which a plant file may not name — write a device path, "
+    "socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME (trace a line with prc3cfg's --trace)",
+    "port_not_device": "{what} {input} is not a serial device's full path — write the device's path under /dev (/dev/ttyUSB0, "
+    "/dev/serial/by-id/…), COMn or \\\\.\\COMn, socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME",
+    "port_not_a_line": "{what} {input} is this machine's own terminal, console or files, not a serial line — write the path "
+    "of the line's adapter, e.g. /dev/ttyUSB0",
     "name_control": "{what} {input} holds a control character — a name is printable text: write it without line breaks, "
     "escapes or other control characters",
     "data_bits": "{what} {value} cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: write {bits}",
@@ -136,12 +143,20 @@ def _words(kind: str, error: ErrorDetails, loc: Path_, ctx: dict[str, Any], data
     }
 
 
-def port_error(what_: str, port: str) -> str | None:
-    """What is wrong with `port` as a plant file's bus would say it, about `what_` ("--port"); None if nothing."""
+#: The errors of a port a plant file may not name, though a command line may (`port_error`).
+PLANT_FILE_ONLY = frozenset(get_args(PortRefusal))
+
+
+def port_error(what_: str, port: str, *, operators: bool = False) -> str | None:
+    """What is wrong with `port` as a plant file's bus would say it, about `what_` ("--port"); None if nothing.
+    `operators`: the port is the operator's own choice (a command line's), which may name any of
+    pyserial's handlers and any path (`core.line.port_refusal` is for reviewed files)."""
     try:
         TypeAdapter(Port).validate_python(port)
     except ValidationError as error:
         details = error.errors()[0]
+        if operators and details["type"] in PLANT_FILE_ONLY:
+            return None
         template = TEMPLATES.get(details["type"])
         if template is None:
             return f"{what_} {shown(port)} is not a port: {details['msg']}"

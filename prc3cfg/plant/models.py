@@ -22,12 +22,13 @@ Its failures are `PydanticCustomError`s whose type names the problem (`not_numbe
 `not_finite`, `out_of_range`, `not_whole`, `not_allowed`; `tcp_port`, `emulator_name` for a
 port) and whose context carries the words; `messages` turns them into sentences.
 
-Decisions about the bus (link.md): `port` any non-empty text (a device path, a pyserial
-URL, `emulator://NAME`) without control characters (a NUL would cut a device path), except
-that a `socket://` or `rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial
+Decisions about the bus (link.md): `port` is a port a plant file may name (`core.line.port_refusal`:
+a serial device's path, `socket://`, `rfc2217://`, `emulator://NAME` — never another of pyserial's
+URL handlers, which a reviewed file must not choose) without control characters (a NUL would cut a
+device path); a `socket://` or `rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial
 would fail later, or compare None with 0), and an emulator name must be plain — letters, digits, `-`, `_`, `.` not first — because it names the file
-`.prc3cfg/emulators/NAME.json` (`emulator://../../etc` would write elsewhere); the schema's
-`PORT_PATTERN` says the same, loosely enough never to refuse a port the validator takes.
+`.prc3cfg/emulators/NAME.json` (`emulator://../../etc` would write elsewhere; its query only tunes
+the emulator, `prc3cfg.shell.link.ports.emulator_query`); the schema's `PORT_PATTERN` says the same.
 `baud` any positive whole number (with a gateway, `rules` asks the Open Driver's own list);
 `timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz` whole milliseconds,
 0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms on an open-driver line is a `rules` check,
@@ -67,7 +68,7 @@ from pydantic_core import PydanticCustomError, core_schema
 from prc3cfg.core import gateway
 from prc3cfg.core.framing import FramingName
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
-from prc3cfg.core.line import EMULATOR_SCHEME, FRAME_DATA_BITS, STOP_BITS, TCP_SCHEMES, Parity
+from prc3cfg.core.line import DEVICE_FOLDER, EMULATOR_SCHEME, FRAME_DATA_BITS, NOT_A_LINE, STOP_BITS, TCP_SCHEMES, Parity, port_refusal
 from prc3cfg.core.text import has_control
 from prc3cfg.core.units import DISTANCE, QUANTITIES, Action, Quantity, human_text
 
@@ -83,11 +84,20 @@ PROGRAM_KEY: JsonDict = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5
 EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 #: `?line-speed=9600` and the like, which the link reads (and names what it does not know).
 EMULATOR_QUERY = r"(\?[^#\s]*)?"
-#: A port as the schema checks it: not a TCP or emulator URL, or one with HOST:DIGITS, or a
-#: plain emulator name. Draft-07 `pattern` is an ECMA 262 search; the end is a lookahead, not
-#: `$`, which Python (but not ECMA) also finds before a final newline.
-PORT_PATTERN = (f"^(?!({'|'.join(TCP_SCHEMES)}|{EMULATOR_SCHEME.removesuffix('://')})://)"
-                f"|^({'|'.join(TCP_SCHEMES)})://[^/?#]*:[0-9]+(?![^/?#])"
+
+
+def _either_case(word: str) -> str:
+    """`word` as an ECMA 262 pattern without the `i` flag finds it in either case: `[cC][oO][mM]`."""
+    return "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else re.escape(c) for c in word)
+
+
+#: A port as the schema checks it (`core.line.port_refusal`, `_port`): a path under /dev, without `://` or a `..`,
+#: not the machine's own terminal; a COM port; a TCP URL with HOST:DIGITS; a plain emulator name. Draft-07
+#: `pattern` is an ECMA 262 search, without flags (a scheme pyserial lowercases is spelt in either case); the end
+#: is a lookahead, not `$`, which Python (but not ECMA) also finds before a final newline.
+PORT_PATTERN = (rf"^(?![\s\S]*://)(?![\s\S]*/\.\.(?![^/])){DEVICE_FOLDER}(?!{NOT_A_LINE})[\s\S]"
+                rf"|^(\\\\\.\\)?{_either_case('COM')}[1-9][0-9]*(?![\s\S])"
+                f"|^({'|'.join(map(_either_case, TCP_SCHEMES))})://[^/?#]*:[0-9]+(?![^/?#])"
                 rf"|^{EMULATOR_SCHEME}{EMULATOR_NAME}{EMULATOR_QUERY}(?![\s\S])")
 
 
@@ -237,6 +247,10 @@ Name = Annotated[Text, AfterValidator(_printable)]
 def _port(url: str) -> str:
     if has_control(url):
         raise PydanticCustomError("port_control", "a control character")
+    refusal = port_refusal(url)
+    if refusal is not None:
+        kind, handler = refusal
+        raise PydanticCustomError(kind, "not a port a plant file may name", {"scheme": handler})
     scheme = url.partition("://")[0]
     if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
         raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": scheme})
@@ -256,8 +270,8 @@ def _tcp_port(url: str) -> bool:
 
 Port = Annotated[
     Text, AfterValidator(_port),
-    Field(description="a device path, any pyserial URL, or emulator://NAME", json_schema_extra={"pattern": PORT_PATTERN},
-          examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
+    Field(description="a serial device (/dev/ttyUSB0, COM3), socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME",
+          json_schema_extra={"pattern": PORT_PATTERN}, examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
 ]
 ProgramNumber = Annotated[int, _number(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")]
 

@@ -56,7 +56,6 @@ import contextlib
 import getpass
 import hashlib
 import os
-import re
 import select
 import shlex
 import signal
@@ -69,6 +68,8 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import Future
 from pathlib import Path
 from typing import Literal, TextIO, TypeVar
+
+from prc3cfg.core.line import COM_PORT
 
 T = TypeVar("T")
 
@@ -382,8 +383,6 @@ HAS_PTY = sys.platform != "win32"
 UUCP_LOCKS = sys.platform != "win32"
 #: Linux's pseudo-terminals (/dev/pts/N): character devices of majors 136..143.
 PTY_MAJORS = range(136, 144)
-#: A Windows serial port's names: COM10, com10, \\.\COM10 — one device.
-COM_PORT = re.compile(r"(?:\\\\\.\\)?(COM[1-9][0-9]*)", re.IGNORECASE)
 
 
 #: A Windows DCB's Parity codes (NOPARITY, ODDPARITY, EVENPARITY, MARKPARITY, SPACEPARITY).

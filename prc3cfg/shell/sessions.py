@@ -4,7 +4,8 @@
 releases no account has named yet, and opens a `Link` per bus; `bare_lock` and `bare_link` do the
 same for a port without a plant file (`BareLine`). A read a module answers as a write is recorded
 as an axis release (`written_reads`). `LineOptions` says how a command uses its lines;
-`bus_line_keys` are the identities of a bus's line (its lock, its records).
+`bus_line_keys` are the identities of a bus's line (its lock, its records); where the machine lists
+its lines (`PORTS_VARIABLE`), a plant's bus opens only one of them (`refuse_other_lines`).
 
 The link (pyserial, the emulator behind `emulator://`) is imported where a line is opened: a
 command that opens none (`plan --actual`) loads none of it, and `LineOptions` costs nothing.
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import os
 import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -83,6 +85,31 @@ def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
     return line_keys(bus.port, emulator_state=state)
 
 
+#: The ports of this machine's lines, `;` between them: where it is set (the runner wired to a line, in its own
+#: configuration), a plant file's bus opens only a line it names — a pull request's plant file, planned there,
+#: cannot make it open another device or connect to another host. `emulator://` opens none, and is not listed.
+PORTS_VARIABLE = "PRC3CFG_PORTS"
+
+
+def refuse_other_lines(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
+    """Refuse, before any line is opened, a bus (by its line's identities, `keys`) that `PORTS_VARIABLE` does not
+    name where it is set: one of its ports must be that line, as any spelling of it (`line_keys`)."""
+    listed = os.environ.get(PORTS_VARIABLE)
+    if listed is None:
+        return
+    ports = [port.strip() for port in listed.split(";") if port.strip()]
+    machine: set[str] = set()
+    for port in ports:
+        if (problem := port_error("port", port, operators=True)) is not None:
+            raise UserError(f"{PORTS_VARIABLE}: {problem}")
+        machine.update(line_keys(port) if not port.startswith(EMULATOR_SCHEME) else ())
+    for bus in plant.buses:
+        if bus.name in keys and not bus.port.startswith(EMULATOR_SCHEME) and not machine.intersection(keys[bus.name]):
+            raise UserError(f"{plant.path}: bus {bus.name}: port {bus.port} is not a line of this machine — {PORTS_VARIABLE}, the "
+                            f"machine's own list, names {', '.join(ports) or 'none'}: name one of those in the plant file, or add "
+                            f"the port to {PORTS_VARIABLE} in the machine's configuration")  # fmt: skip
+
+
 def line_cost(bus: Bus) -> LineCost:
     """What an exchange costs on a bus's line, by its settings (`prc3cfg.core.bustime`)."""
     return LineCost.of(bus.framing, bus.line, bus.turnaround, bus.zvz)
@@ -107,6 +134,8 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     for each other's lock."""
     names = set(buses)
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
+    if given is None:
+        refuse_other_lines(plant, keys)
     owner: dict[str, str] = {}
     for name, identities in keys.items():
         for key in identities:
@@ -212,7 +241,8 @@ def written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], recor
 
 @dataclass(frozen=True)
 class BareLine:
-    """A line named by its port alone (`scan`, `import`): framing, character format, times."""
+    """A line named by its port alone (`scan`, `import`): framing, character format, times. Its port is
+    the operator's own choice, not a reviewed file's: any port pyserial opens, its URL handlers too."""
 
     port: str
     framing: str = "crc16"
@@ -232,7 +262,7 @@ def default_parity(port: str) -> str:
 @contextlib.contextmanager
 def bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[str, ...]]:
     """The line of a port without a plant file, locked; its identities."""
-    problem = port_error("port", port)
+    problem = port_error("port", port, operators=True)
     if problem is None and port.startswith(EMULATOR_SCHEME):
         problem = (f"port {port} is a plant file's emulator (its state is kept beside the plant file) — for a "
                    "bus without a plant file run prc3cfg emulator serve and give its socket://HOST:PORT")  # fmt: skip
@@ -259,7 +289,7 @@ def bare_link(bare: BareLine, options: LineOptions, purpose: str, given: Link | 
         from prc3cfg.shell.link.client import Link
         from prc3cfg.shell.link.ports import open_port
 
-        port = open_port(bare.port, bare.line, bus=bare.port)
+        port = open_port(bare.port, bare.line, bus=bare.port, operators=True)
         stack.callback(port.close)
         yield Link(port, get_framing(bare.framing), bus=bare.port, line=bare.line, timeout=bare.timeout, zvz=bare.zvz,
                    retries=options.retries, trace=_trace(options), observer=watch,

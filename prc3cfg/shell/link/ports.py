@@ -1,4 +1,6 @@
-"""Opening a plant bus's line: a device path, any pyserial URL, or `emulator://NAME`.
+"""Opening a plant bus's line: a serial device, `socket://`, `rfc2217://` or `emulator://NAME` — the
+ports a plant file may name (`prc3cfg.core.line.port_refusal`), checked again by `open_port` — and a
+port the operator names on the command line, which may be any pyserial URL.
 
 `emulator://NAME` runs the bus emulator in this process (the same code as `prc3cfg
 emulator serve`) on a loopback port and connects to it through `socket://`, so the whole
@@ -44,6 +46,7 @@ from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.render import address_ranges
 from prc3cfg.errors import UserError
+from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import platform
 from prc3cfg.shell.emulator import ptys
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
@@ -183,12 +186,18 @@ def _seconds(key: str, value: str) -> float:
     return seconds
 
 
-def open_port(url: str, line: LineSettings, *, bus: str) -> serial.Serial | TcpPort:
-    """Open a device path (exclusively) or a pyserial URL with the line's settings.
+def open_port(url: str, line: LineSettings, *, bus: str, operators: bool = False) -> serial.Serial | TcpPort:
+    """Open a device path (exclusively) or a TCP URL with the line's settings — a port a plant file may
+    name, checked again here, before pyserial sees it, whichever way it came (a bus an API user made
+    in code skips the plant file's validation); or, where `operators` (a port the operator gave on
+    the command line, a `BareLine`), any port pyserial opens, its URL handlers too.
 
     A device that silently drops a setting (a pseudo-terminal takes parity without a word,
     then refuses the next change with a bare `termios.error`) is refused here, at once.
     """
+    problem = port_error("port", url, operators=operators)
+    if problem is not None:
+        raise UserError(f"bus {bus}: {problem}")
     is_url = "://" in url
     refused = FormatRefused(bus, url, line)
     settings: dict[str, Any] = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
