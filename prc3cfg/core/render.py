@@ -11,7 +11,7 @@ per output and module, as the module is shown (kept for all 240 modules of a lar
 diffs would hold 20 MB). The units are `prc3cfg.core.units`. Pure: returns strings.
 
 Every text a plan or plan file brings (names, the base, notes, a field's words) is shown escaped for
-its medium by `prc3cfg.core.text` — `plain` in every output, `markdown` in a comment — and a plan
+its medium by `prc3cfg.core.text` — `shown` in every output, `markdown` in a comment — and a plan
 file's stroke charts only in the shape prc3cfg writes them (`CHART`): a plan file is data that
 anyone may have edited.
 
@@ -265,7 +265,7 @@ def review(change: ModuleChange) -> dict[str, Any]:
 
 
 def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
-    """What the human and markdown outputs are made from, every text in it `plain`: a plan file's
+    """What the human and markdown outputs are made from, every text in it `shown`: a plan file's
     document, or a live plan's without its read-backs' hashes (neither output shows one) and without the
     modules' `changes`, each worked out by `_changes` as its module is shown (all of them at once, for
     8 × 30 modules with every program changed, hold 35 MB), with the changes by (bus, address) — the
@@ -273,21 +273,21 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
     document = plan_file.to_json(plan, hashes=False) | {"left_alone": list(notes)}
-    return _plain_names(document), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    return _plain_names(document), {(escape.shown(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
-    """A live plan's document with the texts files gave it `plain`: its names, its base, its notes (the words of
+    """A live plan's document with the texts files gave it `shown`: its names, its base, its notes (the words of
     its steps are prc3cfg's own; a plan file's are not: `_plain_texts`)."""
-    document["plant"] = escape.plain(document["plant"])
+    document["plant"] = escape.shown(document["plant"])
     for key in ("axis_releases", "left_alone"):
-        document[key] = [escape.plain(text) for text in document[key]]
+        document[key] = [escape.shown(text) for text in document[key]]
     if isinstance(said := document.get("read"), dict):
         document["read"] = _plain_texts(said)
     for bus in document["buses"]:
-        bus["name"] = escape.plain(bus["name"])
+        bus["name"] = escape.shown(bus["name"])
         for module in bus["modules"]:
-            module["name"] = escape.plain(module["name"])
+            module["name"] = escape.shown(module["name"])
     return document
 
 
@@ -303,9 +303,9 @@ CHART = re.compile(
 
 
 def _plain_texts(value: Any) -> Any:
-    """`value` with every text in it `plain`, and of `charts` only what `CHART` matches."""
+    """`value` with every text in it `shown`, and of `charts` only what `CHART` matches."""
     if isinstance(value, str):
-        return escape.plain(value)
+        return escape.shown(value)
     if isinstance(value, list):
         return [_plain_texts(item) for item in value]
     if isinstance(value, dict):
@@ -348,7 +348,7 @@ def address_ranges(addresses: Iterable[int]) -> str:
     return f"address{'es' if len(listed) > 1 else ''} {text}"
 
 
-def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.plain) -> str | None:
+def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
     """What the probes of a bus's line found at the addresses its plant file does not list, in one line
     (the bus's name `shown` as the medium needs)."""
     if bus.get("unlisted_modules"):
@@ -417,7 +417,7 @@ def estimate(document: dict[str, Any]) -> str:
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
 
 
-def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.plain) -> str | None:
+def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
     """What a targeted plan read now and what it took as known from the line's record, in one line,
     its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
     30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
@@ -518,9 +518,9 @@ def cell(text: str) -> str:
 
 def code(text: str) -> str:
     """Text as a markdown code span outside a table: shown exactly as written (control characters
-    `plain`) — inside one, an entity or a backslash would show as typed. Its fence is longer than any
+    `shown`) — inside one, an entity or a backslash would show as typed. Its fence is longer than any
     run of backticks in it."""
-    text = escape.plain(text)
+    text = escape.shown(text)
     fence = "`" * (max(map(len, re.findall("`+", text)), default=0) + 1)
     pad = " " if text[:1] == "`" or text[-1:] == "`" else ""
     return f"{fence}{pad}{text}{pad}{fence}"
