@@ -417,12 +417,14 @@ def estimate(document: dict[str, Any]) -> str:
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
 
 
-def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
+def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown, *, claimed: bool = False) -> str | None:
     """What a targeted plan read now and what it took as known from the line's record, in one line,
     its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
     30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
     modules, as apply of /p/a.yaml by ana@pc (since …) read or verified them; read in full: line/m2
-    (program 3 is not as on record) — what no read sees: …"."""
+    (program 3 is not as on record) — what no read sees: …". `claimed`: the document is a plan file's,
+    whose words of whose verification was taken and of what was read in full and why are its own claim
+    (`prc3cfg.core.plan_file`): said after "the plan file says", never as prc3cfg's."""
     said = document.get("read")
     if not isinstance(said, dict):
         return None
@@ -431,15 +433,17 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
     skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
     unread = [shown(name) for name in said["modules_not_read"]]
     sources = sorted({shown(source) for source in said.get("taken", {}).values()})
+    whose = f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources and skipped else ""
     taken = ([f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"
-             + (f", as {'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else "")]
-             if skipped else [])  # fmt: skip
+             + (f", as {whose}" if whose and not claimed else "")] if skipped else [])  # fmt: skip
     taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
-    other = [shown(name) for name in said["not_as_verified"]]
+    other = f"read in full: {', '.join(shown(name) for name in said['not_as_verified'])}" if said["not_as_verified"] else ""
+    claims = "; ".join(c for c in (whose, other) if c) if claimed else ""
     return (f"Read now: {read}"
             + (f"; taken as known from {shown(said['base'])}, not read: {' and '.join(taken)}" if taken else "")
-            + (f"; read in full: {', '.join(other)}" if other else "")
+            + (f"; {other}" if other and not claimed else "")
+            + (f"; the plan file says: {claims} (apply --plan proves whose, not why)" if claims else "")
             + (" — a program not read that another tool changed on a module whose system parameters did not change is not seen: "
                "plan --refresh-only (or --full-read) reads everything" if taken else ""))  # fmt: skip
 
@@ -464,7 +468,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
     out.append(summary_line(document))
-    out += [line for line in [reading_line(document)] if line]
+    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict))] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in _modules(document)):
         out.append(LEGEND)
@@ -542,7 +546,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), "",
-            *_callouts(document, live), *_changed_table(changed)]  # fmt: skip
+            *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]  # fmt: skip
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):
             head += [*fenced(lines[:-1]), ""]
@@ -558,10 +562,10 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     return text
 
 
-def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> list[str]:
+def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *, claimed: bool) -> list[str]:
     """A comment's quoted paragraphs under its summary, each only when it has something to say: what was
     not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
-    out = [f"> {line}", ""] if (line := reading_line(document, cell)) else []
+    out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed)) else []
     if document["axis_releases"]:
         out += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                 + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
