@@ -289,7 +289,7 @@ SAFETY_OFFICER = "verified by the safety officer"
 
 @dataclass(frozen=True)
 class Targeted:
-    emulated: EmulatedPlant
+    emulated: EmulatedPlant = field(repr=False)
     plan: Path  # as plan --out wrote it
     document: dict[str, Any] = field(repr=False)
 
@@ -373,6 +373,9 @@ HOSTILE = "\u202eevil\u2066\u2028\x1b[2J\u200d\ufeff"
 
 
 def raw(output: str) -> list[str]:
+    """The characters of `output` no output may hold raw — but the zero-width joiner markdown puts after an
+    "@" of its own making (`text.markdown`: no mention)."""
+    output = output.replace("@\u200d", "@")
     return sorted({f"U+{ord(c):04X}" for c in output if c != "\n" and unicodedata.category(c) in UNPRINTABLE})
 
 
@@ -408,3 +411,88 @@ def test_a_plan_file_of_hostile_texts_reaches_the_terminal_as_escapes(made, tmp_
         assert done.returncode == 0, done.stderr
         assert "\\u202eevil\\u2066\\u2028" in done.stdout.decode() or "\\\\u202eevil" in done.stdout.decode()
         assert raw(done.stdout.decode()) == [] and not any(c.encode() in done.stdout for c in HOSTILE if raw(c)), output
+
+
+# -- mutations of a real plan file, shown and applied on the emulators ---------------------------------------
+
+#: The values that are the file's words (docs/files.md): an edit there may be applied; anywhere else it
+#: never writes.
+WORDS = ("plant_path", "left_alone", "read.not_as_verified")
+#: What a mutation puts in: hostile text, values of other kinds, deep, long and wide values.
+MUTANTS = st.one_of(
+    st.sampled_from([None, True, 0, -1, 2.5, "", [], {}, SAFETY_OFFICER, HOSTILE, "\u202e", "\u2028", "\x1b[2J", "\u200d"]),
+    st.text(st.characters(whitelist_categories=["Cc", "Cf", "Zl", "Zp", "Ll"]), max_size=12),
+    st.integers(8, 100_000).map(lambda n: Deep(n)),
+    st.sampled_from([65_537, 2_000_000]).map(lambda n: "x" * n),
+    st.sampled_from([100_001, 300_000]).map(lambda n: [0] * n),
+)
+
+
+@dataclass(frozen=True)
+class Deep:
+    """Lists in lists, `levels` deep: written as text (`as_text`), as Python's own JSON would recurse that deep."""
+
+    levels: int
+
+
+def as_text(document: dict[str, Any]) -> str:
+    deep: list[int] = []
+    text = json.dumps(document, default=lambda value: f"Deep-{len(deep)}" if deep.append(value.levels) is None else "")
+    for index, levels in enumerate(deep):
+        text = text.replace(json.dumps(f"Deep-{index}"), "[" * levels + "]" * levels)
+    return text
+
+
+def mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """`document` with a value replaced, a key left out or one added, at a place drawn from all of them; and
+    that place's field ("buses[].modules[].name")."""
+    copied = copy.deepcopy(document)
+    place = data.draw(st.sampled_from(places(copied)[1:]))
+    parent, key = at(copied, place[:-1]), place[-1]
+    how = data.draw(st.sampled_from(["replace", "drop", "add"] if isinstance(parent, dict) else ["replace"]))
+    if how == "drop":
+        del parent[key]
+    elif how == "add":
+        parent[data.draw(st.sampled_from(["note", "reviewed_by", "\u202ereviewed"]).filter(lambda k: k not in parent))] = SAFETY_OFFICER
+    else:
+        parent[key] = data.draw(MUTANTS.filter(lambda value: not same_value(value, at(document, place))))
+    return copied, "".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip(".")
+
+
+def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: st.DataObject) -> None:
+    document, where = mutated(data, targeted.document)
+    path = targeted.plan.with_name("mutated.json")
+    path.write_text(as_text(document))
+    before, state = targeted.emulated.images(), targeted.plan.parent / "state"
+    kept = targeted.plan.parent / "state-before"
+    shutil.rmtree(kept, ignore_errors=True)
+    shutil.copytree(state, kept)
+    try:
+        for args in (["show", path], ["show", path, "--markdown"],
+                     ["apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release"]):  # fmt: skip
+            done = run_cli(capsys, *args)
+            assert done.code in (0, 1) and raw(done.out + done.err) == [], (where, args, done)
+            assert done.code == 0 or len(done.problems) == 1, (where, args, done.err)
+        if targeted.emulated.images() != before:  # written: only where the file's words changed
+            assert where.startswith(WORDS) and targeted.emulated.matches_plant(), where
+    finally:  # the modules and the line's record as the plan found them, for the next example
+        for (bus, address), image in before.items():
+            targeted.emulated.emulators[bus].update(address, image=image)
+        shutil.rmtree(state)
+        shutil.copytree(kept, state)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_a_mutated_plan_file_is_shown_escaped_and_writes_only_where_its_words_changed(targeted, capsys, data):
+    """A value replaced (hostile text, another kind, 3,000 deep, 2 MB long, 300,000 wide), a key left out or
+    added, anywhere: `show` and `apply --plan` on the emulators answer in words — no traceback, no raw
+    control or bidirectional character — and nothing is written unless the change was to the file's words."""
+    shown_and_applied(targeted, capsys, data)
+
+
+@pytest.mark.soak
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_words_changed(targeted, capsys, data):
+    shown_and_applied(targeted, capsys, data)
