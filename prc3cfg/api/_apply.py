@@ -78,8 +78,13 @@ def _plan_input(path: Path) -> Any:
 
 def plan_file_plant(path: Path) -> Path:
     """The plant file a plan file was made from, where it says it is."""
-    recorded = plan_file.checked(_plan_input(path), path).plant_path
-    if not Path(recorded).is_file():
+    document = _plan_input(path)
+    try:
+        plan_file.within_bounds(document)  # what it says is shown: a name of 10 MB is not
+    except plan_file.PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
+    recorded = document.get("plant_path") if isinstance(document, dict) else None
+    if not isinstance(recorded, str) or not Path(recorded).is_file():
         raise UserError(f"{path}: the plant file it was made from is not at {recorded!r} — name it: "
                         f"prc3cfg apply PLANT --plan {path}")  # fmt: skip
     return Path(recorded)

@@ -430,22 +430,33 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
         return None
     modules = _modules(document)
     programs = sum(len(m["read"]["programs"]) for _, m in modules)
-    skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
-    unread = [shown(name) for name in said["modules_not_read"]]
-    sources = sorted({shown(source) for source in said.get("taken", {}).values()})
-    whose = f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources and skipped else ""
-    taken = ([f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"
-             + (f", as {whose}" if whose and not claimed else "")] if skipped else [])  # fmt: skip
-    taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
+    whose, not_read = _not_read(said, modules, shown)
     other = f"read in full: {', '.join(shown(name) for name in said['not_as_verified'])}" if said["not_as_verified"] else ""
-    claims = "; ".join(c for c in (whose, other) if c) if claimed else ""
-    return (f"Read now: {read}"
-            + (f"; taken as known from {shown(said['base'])}, not read: {' and '.join(taken)}" if taken else "")
-            + (f"; {other}" if other and not claimed else "")
-            + (f"; the plan file says: {claims} (apply --plan proves whose, not why)" if claims else "")
-            + (" — a program not read that another tool changed on a module whose system parameters did not change is not seen: "
-               "plan --refresh-only (or --full-read) reads everything" if taken else ""))  # fmt: skip
+    claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
+    if whose and not claimed:
+        not_read[0] += f", as {whose}"
+    parts = [f"Read now: {read}"]
+    parts += [f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"] if not_read else []
+    parts += [other] if other and not claimed else []
+    parts += [f"the plan file says: {claims} (apply --plan proves whose, not why)"] if claims else []
+    return "; ".join(parts) + (" — a program not read that another tool changed on a module whose system parameters did not "
+                               "change is not seen: plan --refresh-only (or --full-read) reads everything" if not_read else "")  # fmt: skip
+
+
+def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]], shown: Callable[[str], str]) -> tuple[str, list[str]]:
+    """Whose reads or verifications the programs not read rest on ("" when none was taken), and what was not
+    read: "79 programs of 6 modules", "2 modules (line/a, line/b)"."""
+    skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
+    if not skipped:
+        whose, parts = "", []
+    else:
+        sources = sorted({shown(source) for source in said.get("taken", {}).values()})
+        whose = f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else ""
+        parts = [f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"]
+    unread = [shown(name) for name in said["modules_not_read"]]
+    parts += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
+    return whose, parts
 
 
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
