@@ -188,7 +188,7 @@ def json_inputs(tmp_path: Path, plant: Path) -> dict[str, tuple[list[str], str]]
                              f"error: {tmp_path}/cut.json:1:40: not valid JSON (Expecting value) — make the plan again"),
         "a plan nested 10,000 deep": (["apply", plant, "--plan", write("deep.json", "[" * 10_000 + "]" * 10_000)],
                                       f"error: {tmp_path}/deep.json: nested too deeply for any file prc3cfg writes — make the plan again"),
-        "a 300 MB plan": (["apply", plant, "--plan", huge], f"error: {huge}: larger than 64 MiB — name {plan}"),
+        "a 300 MB plan": (["apply", plant, "--plan", huge], f"error: {huge}: larger than 32 MiB — name {plan}"),  # plan_file.PLAN_LIMIT
         "a plan that is a FIFO": (["apply", plant, "--plan", fifo], f"error: {fifo}: is a named pipe (FIFO), not a file — name {plan}"),
         "a plan that is a directory": (["apply", plant, "--plan", tmp_path], f"error: {tmp_path}: is a directory — name {plan}"),
         "a missing plan": (["apply", plant, "--plan", tmp_path / "none.json"], f"error: {tmp_path}/none.json: no such file — name {plan}"),

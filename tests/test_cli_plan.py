@@ -145,16 +145,18 @@ HOSTILE = "\x1b]0;owned\x07\x1b[2J\u2028\ud800"
 
 
 def test_the_texts_of_a_plan_file_are_shown_escaped_by_show_and_apply(plant, capsys, tmp_path):
-    """A plan file is data anyone may have edited: its base and its notes — with a terminal's title and
-    clear-screen escapes, a bell, a line separator and a lone surrogate — are shown by `show` (text and
-    markdown) and the base by `apply --plan` escaped, each on its line, and never as a traceback."""
+    """A plan file is data anyone may have edited: whose verification it says it took as known and its
+    notes — with a terminal's title and clear-screen escapes, a bell, a line separator and a lone
+    surrogate — are shown by `show` (text and markdown) escaped, each on its line, and never as a
+    traceback; `apply --plan`, which works `taken` out again, refuses the edit in one escaped line."""
     assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
     plant.path.write_text(plant.path.read_text().replace("position: 2.1", "position: 2.0", 1))
     made = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
     document = json.loads(made.read_text())
     assert document["read"]["base"] == "the line's record of what prc3cfg last read or verified"  # a targeted plan: it says its base
-    document["read"]["base"] += HOSTILE
+    first = next(iter(document["read"]["taken"]))
+    document["read"]["taken"][first] += HOSTILE
     document["left_alone"] = [f"a note{HOSTILE}"]
     edited = tmp_path / "edited.json"
     edited.write_text(json.dumps(document))
@@ -164,11 +166,10 @@ def test_the_texts_of_a_plan_file_are_shown_escaped_by_show_and_apply(plant, cap
         assert (shown.code, shown.err) == (0, ""), shown.err
         assert CONTROL.search(shown.out) is None
         text = html.unescape(shown.out)  # markdown: as GitHub shows it
-        assert f"the line's record of what prc3cfg last read or verified{said}" in text and f"a note{said}" in text
-    applied = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve")  # words that send nothing: taken as written
-    assert applied.code == 0, applied.err
+        assert f"UTC){said} read or verified them" in text and f"a note{said}" in text
+    applied = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve")
+    assert applied.code == 1 and f"read.taken.{first} is not what this apply read" in applied.err
     assert CONTROL.search(applied.out + applied.err) is None
-    assert f"taken as known from the line's record of what prc3cfg last read or verified{said}, not read" in applied.out
 
 
 def test_a_comment_cut_to_its_budget_still_counts_the_clamped_programs_and_the_releases(tmp_path, capsys):

@@ -318,6 +318,58 @@ def test_a_plan_file_of_many_more_mangled_structures_is_refused_in_words(made_pl
     test_a_plan_file_of_mangled_structure_is_refused_in_words.hypothesis.inner_test(made_plan, tmp_path, capsys, data=data)
 
 
+# -- plan files beyond any plan prc3cfg writes: nesting, size, texts, lists ---------------------------
+
+
+def deep(levels: int) -> str:
+    return "[" * levels + "]" * levels
+
+
+def with_text(document: dict, change) -> str:
+    return json.dumps(damage(document, change))
+
+
+#: A plan file beyond what prc3cfg writes (as text, from the plan file made), and what its one line says.
+BEYOND = {
+    "nested 900 deep": (lambda d: with_text(d, lambda d: first_module(d)["changes"].update(symbols={"1": json.loads(deep(900))})),
+                        "buses[0].modules[0].changes.symbols.1"),
+    "nested 100,000 deep": (lambda d: json.dumps(d)[:-1] + ', "x": ' + deep(100_000) + "}", "nested too deeply"),
+    "a text of 10 MB": (lambda d: with_text(d, lambda d: first_module(d).update(name="a" * 10_000_000)),
+                        "buses[0].modules[0].name is a text of 10,000,000 characters"),
+    "a file of 50 MB": (lambda d: json.dumps(d) + " " * 50_000_000, "larger than 32 MiB"),
+    "a list of 200,000 items": (lambda d: with_text(d, lambda d: d.update(left_alone=[""] * 200_000)), "left_alone is a list of 200,000 items"),
+    "an object of 200,000 keys": (lambda d: with_text(d, lambda d: first_module(d)["changes"].update(symbols={str(n): "~" for n in range(200_000)})),
+                                  "buses[0].modules[0].changes.symbols is an object of 200,000 keys"),
+}
+
+
+@pytest.mark.parametrize("case", BEYOND, ids=list(BEYOND))
+@pytest.mark.parametrize("command", ["show", "apply"])
+def test_a_plan_file_beyond_any_prc3cfg_writes_is_refused_in_one_line(made_plan, tmp_path, capsys, case, command):
+    """Deeper, larger, longer than any plan prc3cfg writes: one line naming where and the bound, before the line is used."""
+    plant, document = made_plan
+    make, expected = BEYOND[case]
+    path = tmp_path / "beyond.json"
+    path.write_text(make(document))
+    args = ["show", path] if command == "show" else ["apply", plant, "--plan", path, "--auto-approve"]
+    line = one_line(run_cli(capsys, *args), f"error: {path}: ")
+    assert expected in line and line.endswith(("make the plan again", "make the plan again with prc3cfg plan --out",
+                                               "name the plan file prc3cfg plan --out wrote")), line
+
+
+@pytest.mark.parametrize("case", ["nested 900 deep", "a text of 10 MB"])
+def test_a_plan_file_beyond_any_prc3cfg_writes_is_one_line_from_the_console_script(made_plan, tmp_path, case):
+    """The same from a process of its own (Python's own recursion limit and stack, not pytest's)."""
+    _, document = made_plan
+    make, expected = BEYOND[case]
+    path = tmp_path / "beyond.json"
+    path.write_text(make(document))
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(path)], capture_output=True, timeout=120)
+    assert (done.returncode, done.stdout) == (1, b"")
+    (line,) = done.stderr.decode().splitlines()
+    assert line.startswith(f"error: {path}: ") and expected in line and not PYTHON.search(line), line
+
+
 # -- the emulator's state file ----------------------------------------------------------------------
 
 

@@ -16,23 +16,28 @@ import copy
 import json
 import shutil
 import subprocess
-from collections.abc import Callable
+import sys
+import unicodedata
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pytest
+from emulated import emulated_plant, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
 from prc3cfg.api import _apply
+from prc3cfg.api._plan import RECORD
 from prc3cfg.core import plan_file, render
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
+from prc3cfg.shell.testing import EmulatedPlant
 
 CONTRACTS = Path(__file__).resolve().parent / "contracts"
 
@@ -267,3 +272,227 @@ def test_the_one_value_left_to_the_file_is_where_the_plant_file_was(made, tmp_pa
     path = tmp_path / "plan.json"
     path.write_text(json.dumps(document))
     assert prove(made, path).message_count == made.message_count
+
+
+# -- a targeted plan's `read`: proved by the apply, or shown as what the file says --------------------------
+#
+# A plan made from a targeted read-back (plan --out after an apply on emulators) holds a `read` section:
+# the base it compared with, the modules not read, what it took as known and whose verification that rests
+# on (`taken`), and the modules read in full with why (`not_as_verified`). `base`, `modules_not_read` and
+# `taken` are worked out again by `apply --plan` from what it reads and the line's record, and a file that
+# says otherwise is refused naming the field; `not_as_verified` rests on the record as it was before the
+# plan's own read and cannot be: `show` prints it (and `taken`, which only an apply can prove) as what the
+# plan file says, and the apply never shows it as its own.
+
+SAFETY_OFFICER = "verified by the safety officer"
+
+
+@dataclass(frozen=True)
+class Targeted:
+    emulated: EmulatedPlant = field(repr=False)
+    plan: Path  # as plan --out wrote it
+    document: dict[str, Any] = field(repr=False)
+
+
+@pytest.fixture
+def targeted(tmp_path, capsys) -> Iterator[Targeted]:
+    """The demo plant applied on emulators, then program 1 of three modules changed in the plant file and
+    planned with --out: a plan from a targeted read-back, which took 79 programs as known from the record."""
+    with emulated_plant(tmp_path) as emulated:
+        assert run_cli(capsys, "apply", emulated.path, "--auto-approve", "--allow-axis-release").code == 0
+        emulated.path.write_text(emulated.path.read_text().replace("position: 2.1", "position: 2.0", 1))
+        out = tmp_path / "plan.json"
+        assert run_cli(capsys, "plan", emulated.path, "--out", out).code == 0
+        document = json.loads(out.read_text())
+        assert document["read"]["taken"] and document["read"]["base"] == RECORD
+        yield Targeted(emulated, out, document)
+
+
+def edited_read(targeted: Targeted, key: str, value: Any) -> Path:
+    document = copy.deepcopy(targeted.document)
+    if key == "taken":
+        document["read"]["taken"][next(iter(document["read"]["taken"]))] = value
+    else:
+        document["read"][key] = value
+    path = targeted.plan.with_name("edited.json")
+    path.write_text(json.dumps(document, indent=1))
+    return path
+
+
+def claimed(out: str, words: str) -> None:
+    """`words` are on one line of `out`, after "the plan file says", never as prc3cfg's own."""
+    lines = [line for line in out.splitlines() if words in line]
+    assert lines and all("the plan file says: " in line and line.index("the plan file says: ") < line.index(words) for line in lines), out
+
+
+def test_show_says_who_a_plan_file_claims_verified_what_it_did_not_read_as_the_files_words(targeted, capsys):
+    said = run_cli(capsys, "show", edited_read(targeted, "taken", SAFETY_OFFICER))
+    assert said.code == 0, said.err
+    claimed(said.out, SAFETY_OFFICER)
+    said = run_cli(capsys, "show", edited_read(targeted, "not_as_verified", [f"booth-a/booth-a-top ({SAFETY_OFFICER})"]))
+    assert said.code == 0, said.err
+    claimed(said.out, SAFETY_OFFICER)
+    claimed(run_cli(capsys, "show", "--markdown", targeted.plan).out, "read or verified them")  # its path and user as markdown escapes them
+
+
+#: An edit of a proved field of `read`: what `apply --plan` then names.
+PROVED_READ = {
+    "taken": (SAFETY_OFFICER, "read.taken.booth-a/booth-a-left"),
+    "base": (f"the records of the safety officer ({SAFETY_OFFICER})", "read.base"),
+    "modules_not_read": (["booth-b/booth-b-pretreat"], "read.modules_not_read"),
+}
+
+
+@pytest.mark.parametrize("key", PROVED_READ)
+def test_apply_of_a_plan_file_whose_read_was_edited_names_the_field_and_writes_nothing(targeted, capsys, key):
+    value, named = PROVED_READ[key]
+    before = targeted.emulated.images()
+    refused = run_cli(capsys, "apply", targeted.emulated.path, "--plan", edited_read(targeted, key, value), "--auto-approve")
+    assert refused.code == 1, refused.out
+    (line,) = refused.problems
+    assert named in line and ("nothing was written" in line or line.endswith(plan_file.AGAIN)), line
+    assert targeted.emulated.images() == before
+
+
+def test_what_a_plan_file_says_it_read_in_full_and_why_steers_nothing_and_is_not_said_by_the_apply(targeted, capsys):
+    """The reasons rest on the record before the plan's own read: the apply cannot work them out again, so it
+    applies the proved steps and says only what it saw itself."""
+    path = edited_read(targeted, "not_as_verified", [f"booth-a/booth-a-top ({SAFETY_OFFICER})"])
+    applied = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve")
+    assert applied.code == 0, applied.err
+    assert SAFETY_OFFICER not in applied.out + applied.err
+    assert targeted.emulated.matches_plant()
+
+
+# -- every text of a plan file is shown escaped ---------------------------------------------------------------
+
+#: What no output may hold raw (the test's own account, by Unicode category): control, format — bidirectional
+#: overrides and isolates, zero-width joiners —, surrogates, line and paragraph separators; a new line apart.
+UNPRINTABLE = {"Cc", "Cf", "Cs", "Zl", "Zp"}
+HOSTILE = "\u202eevil\u2066\u2028\x1b[2J\u200d\ufeff"
+
+
+def raw(output: str) -> list[str]:
+    """The characters of `output` no output may hold raw — but the zero-width joiner markdown puts after an
+    "@" of its own making (`text.markdown`: no mention)."""
+    output = output.replace("@\u200d", "@")
+    return sorted({f"U+{ord(c):04X}" for c in output if c != "\n" and unicodedata.category(c) in UNPRINTABLE})
+
+
+def test_every_text_of_a_plan_file_is_shown_escaped(made, tmp_path, capsys):
+    """Each text of the file, in turn, given bidirectional overrides, a line separator, an escape sequence and
+    zero-width characters: `show` (human, markdown, JSON) shows the file or refuses it, in words with none of them raw."""
+    document = json.loads(made.text)
+    texts = by_field(document, lambda value: isinstance(value, str))
+    assert len(texts) > 15 and "buses[].modules[].changes.fields[].text" in texts
+    path = tmp_path / "hostile.json"
+    for field_, places_ in texts.items():
+        path.write_text(json.dumps(changed(document, places_[0], at(document, places_[0]) + HOSTILE)))
+        for output in ([], ["--markdown"], ["--json"]):
+            said = run_cli(capsys, "show", path, *output)
+            assert said.code in (0, 1) and raw(said.out + said.err) == [], (field_, output, said)
+
+
+def test_a_plan_file_of_hostile_texts_reaches_the_terminal_as_escapes(made, tmp_path):
+    """Every text `show` shows at once, from a process of its own: its bytes hold no override, separator or escape."""
+    document = json.loads(made.text)
+    document["plant"] += HOSTILE
+    document["left_alone"] = [f"booth-a/old{HOSTILE} is no longer in the plant file"]
+    document["axis_releases"] = [name + HOSTILE for name in document["axis_releases"]]
+    for bus in document["buses"]:
+        for module in bus["modules"]:
+            module["name"] += HOSTILE
+            for f in module["changes"]["fields"]:
+                f["text"] += HOSTILE
+    path = tmp_path / "hostile.json"
+    path.write_text(json.dumps(document, ensure_ascii=False))
+    for output in ([], ["--markdown"], ["--json"]):
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(path), *output], capture_output=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        assert "\\u202eevil\\u2066\\u2028" in done.stdout.decode() or "\\\\u202eevil" in done.stdout.decode()
+        assert raw(done.stdout.decode()) == [] and not any(c.encode() in done.stdout for c in HOSTILE if raw(c)), output
+
+
+# -- mutations of a real plan file, shown and applied on the emulators ---------------------------------------
+
+#: The values that are the file's words (docs/files.md): an edit there may be applied; anywhere else it
+#: never writes.
+WORDS = ("plant_path", "left_alone", "read.not_as_verified")
+#: What a mutation puts in: hostile text, values of other kinds, deep, long and wide values.
+MUTANTS = st.one_of(
+    st.sampled_from([None, True, 0, -1, 2.5, "", [], {}, SAFETY_OFFICER, HOSTILE, "\u202e", "\u2028", "\x1b[2J", "\u200d"]),
+    st.text(st.characters(whitelist_categories=["Cc", "Cf", "Zl", "Zp", "Ll"]), max_size=12),
+    st.integers(8, 100_000).map(lambda n: Deep(n)),
+    st.sampled_from([65_537, 2_000_000]).map(lambda n: "x" * n),
+    st.sampled_from([100_001, 300_000]).map(lambda n: [0] * n),
+)
+
+
+@dataclass(frozen=True)
+class Deep:
+    """Lists in lists, `levels` deep: written as text (`as_text`), as Python's own JSON would recurse that deep."""
+
+    levels: int
+
+
+def as_text(document: dict[str, Any]) -> str:
+    deep: list[int] = []
+    text = json.dumps(document, default=lambda value: f"Deep-{len(deep)}" if deep.append(value.levels) is None else "")
+    for index, levels in enumerate(deep):
+        text = text.replace(json.dumps(f"Deep-{index}"), "[" * levels + "]" * levels)
+    return text
+
+
+def mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """`document` with a value replaced, a key left out or one added, at a place drawn from all of them; and
+    that place's field ("buses[].modules[].name")."""
+    copied = copy.deepcopy(document)
+    place = data.draw(st.sampled_from(places(copied)[1:]))
+    parent, key = at(copied, place[:-1]), place[-1]
+    how = data.draw(st.sampled_from(["replace", "drop", "add"] if isinstance(parent, dict) else ["replace"]))
+    if how == "drop":
+        del parent[key]
+    elif how == "add":
+        parent[data.draw(st.sampled_from(["note", "reviewed_by", "\u202ereviewed"]).filter(lambda k: k not in parent))] = SAFETY_OFFICER
+    else:
+        parent[key] = data.draw(MUTANTS.filter(lambda value: not same_value(value, at(document, place))))
+    return copied, "".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip(".")
+
+
+def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: st.DataObject) -> None:
+    document, where = mutated(data, targeted.document)
+    path = targeted.plan.with_name("mutated.json")
+    path.write_text(as_text(document))
+    before, state = targeted.emulated.images(), targeted.plan.parent / "state"
+    kept = targeted.plan.parent / "state-before"
+    shutil.rmtree(kept, ignore_errors=True)
+    shutil.copytree(state, kept)
+    try:
+        for args in (["show", path], ["show", path, "--markdown"],
+                     ["apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release"]):  # fmt: skip
+            done = run_cli(capsys, *args)
+            assert done.code in (0, 1) and raw(done.out + done.err) == [], (where, args, done)
+            assert done.code == 0 or len(done.problems) == 1, (where, args, done.err)
+        if targeted.emulated.images() != before:  # written: only where the file's words changed
+            assert where.startswith(WORDS) and targeted.emulated.matches_plant(), where
+    finally:  # the modules and the line's record as the plan found them, for the next example
+        for (bus, address), image in before.items():
+            targeted.emulated.emulators[bus].update(address, image=image)
+        shutil.rmtree(state)
+        shutil.copytree(kept, state)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_a_mutated_plan_file_is_shown_escaped_and_writes_only_where_its_words_changed(targeted, capsys, data):
+    """A value replaced (hostile text, another kind, 3,000 deep, 2 MB long, 300,000 wide), a key left out or
+    added, anywhere: `show` and `apply --plan` on the emulators answer in words — no traceback, no raw
+    control or bidirectional character — and nothing is written unless the change was to the file's words."""
+    shown_and_applied(targeted, capsys, data)
+
+
+@pytest.mark.soak
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_words_changed(targeted, capsys, data):
+    shown_and_applied(targeted, capsys, data)

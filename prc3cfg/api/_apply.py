@@ -27,6 +27,7 @@ from prc3cfg.api._plan import (
     read_input,
     read_targets,
     reads,
+    record,
     seen,
     select,
     to_plan,
@@ -37,7 +38,7 @@ from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisR
 from prc3cfg.core import plan_file, render, what_to_read
 from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
-from prc3cfg.core.plan_file import PlanFile
+from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.plant_planner import Key, Prober
 from prc3cfg.errors import Interrupted, UserError
@@ -63,18 +64,25 @@ def read_plan(path: Path, plant: Plant) -> PlanFile:
         alike = plan_file.same_text(plant.path.read_bytes())
     except OSError:  # gone since it was loaded: the plant file's own digest alone, which the lines' check then finds changed
         alike = frozenset()
-    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
-    return plan_file.to_apply(document, path, plant.path, plant.sha256, alike)
+    return plan_file.to_apply(_plan_input(path), path, plant.path, plant.sha256, alike)
 
 
 def plan_document(path: Path) -> dict[str, Any]:
     """A plan file to show (`prc3cfg show PLAN.json`), checked, its summaries worked out again from its bytes."""
-    return plan_file.to_show(read_input(path, "a plan file prc3cfg plan --out wrote", "make the plan again"), path)
+    return plan_file.to_show(_plan_input(path), path)
+
+
+def _plan_input(path: Path) -> Any:
+    return read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again", plan_file.PLAN_LIMIT)
 
 
 def plan_file_plant(path: Path) -> Path:
     """The plant file a plan file was made from, where it says it is."""
-    document = read_input(path, "the plan file prc3cfg plan --out wrote", "make the plan again")
+    document = _plan_input(path)
+    try:
+        plan_file.within_bounds(document)  # what it says is shown: a name of 10 MB is not
+    except plan_file.PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
     recorded = document.get("plant_path") if isinstance(document, dict) else None
     if not isinstance(recorded, str) or not Path(recorded).is_file():
         raise UserError(f"{path}: the plant file it was made from is not at {recorded!r} — name it: "
@@ -89,12 +97,10 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     plan_file.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
-    said = planned.document.get("read")  # a targeted read-back's base, in words: it sends nothing
-    targeted = Reads(chosen, [], said["base"], tuple(said["not_as_verified"]), taken=dict(said.get("taken", {}))) if isinstance(said, dict) else None
-    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, {bus.name: bus for bus, _ in chosen}.values()),
-                     only_read=targeted is not None)  # fmt: skip
-    if targeted is not None:
-        ours = replace(ours, reading=targeted.reading(pairs, images))
+    buses = {bus.name: bus for bus, _ in chosen}.values()
+    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, buses), only_read=planned.targeted)
+    if planned.targeted:  # what this apply read, and whose verification what it did not read rests on: its line's record now
+        ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(plant, buses)).reading(pairs, images))
     plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
     return ours
 

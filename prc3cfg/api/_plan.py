@@ -21,7 +21,7 @@ from prc3cfg.api._types import Pairs
 from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
-from prc3cfg.core.plan_file import PlanFile, StalePlan
+from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
 from prc3cfg.core.plant_plan import PlantPlan, Reading
 from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.render import Drift, drifted
@@ -29,7 +29,7 @@ from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
 from prc3cfg.shell import bases, releases
-from prc3cfg.shell.files import FileProblem, Why, read_json
+from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, read_all
@@ -66,10 +66,6 @@ def targets(pairs: Pairs) -> list[Target]:
     return what_to_read.in_full(to_plan(pairs, None))
 
 
-#: What a targeted read-back compares with, in words (`prc3cfg.shell.bases`).
-RECORD = "the line's record of what prc3cfg last read or verified"
-
-
 def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
     """What the records of these buses' lines say their modules hold, by (bus, address)."""
     return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
@@ -79,15 +75,14 @@ def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
 class Reads:
     """What a plan reads: the modules (of those chosen) and their targets, and for a targeted
     read-back the record it was compared with, in words (None: every chosen module in full), the
-    modules read in full with why ("bus/name (why)": as a plan file says, else worked out from the
-    targets and the read-back) and whose verification the programs not read rest on."""
+    modules read in full with why ("bus/name (why)", worked out from the targets and the
+    read-back) and whose verification the programs not read rest on (`known`). Nothing of it is
+    taken from a plan file."""
 
     pairs: Pairs
     targets: list[Target]
     base: str | None = None
-    not_as_verified: tuple[str, ...] | None = None
     why: dict[Key, str] = field(default_factory=dict)  # read in full before any evidence: not on record, too old, E12
-    taken: dict[str, str] | None = None  # "bus/name" → `Known.said()`: as a plan file says, else from `known`
     known: dict[Key, Known] = field(default_factory=dict)
 
     def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
@@ -96,12 +91,11 @@ class Reads:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
         skipped = {key: what_to_read.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
-        other = self.not_as_verified
-        if other is None:
-            other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
-        taken = self.taken
-        if taken is None:
-            taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen if skipped.get(key := (bus.name, m.address))}
+        other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
+        # a module whose programs were not read is on the record (`to_read`), but for an apply of a plan file whose
+        # record changed since: left out, and the plan file's `taken` then refused (`plan_file.check_plan`)
+        taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen
+                 if skipped.get(key := (bus.name, m.address)) and key in self.known}  # fmt: skip
         return Reading(self.base, unread, skipped, other, taken)
 
 
@@ -217,10 +211,10 @@ def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) 
     return images
 
 
-def read_input(path: Path, what: str, remedy: str) -> Any:
-    """A JSON file prc3cfg wrote (`what`: "the plan file …"), within `files.JSON_LIMIT`; one line otherwise."""
+def read_input(path: Path, what: str, remedy: str, limit: int = JSON_LIMIT) -> Any:
+    """A JSON file prc3cfg wrote (`what`: "the plan file …"), within `limit` bytes; one line otherwise."""
     try:
-        return read_json(path)
+        return read_json(path, limit)
     except FileProblem as problem:
         raise UserError(f"{problem.where(path)}: {problem} — {remedy if problem.why is Why.NOT_JSON else f'name {what}'}") from None
 
@@ -282,8 +276,7 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -
     targeted read-back — exactly the modules and programs its plan read, with the line's record as
     evidence; refused as stale when the record no longer shows a module holding what the plan took
     as known without reading it (another apply or read since, or the record outgrew its age)."""
-    said = planned.document.get("read")
-    if not isinstance(said, dict):
+    if not planned.targeted:
         return Reads(pairs, targets(pairs))
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
@@ -294,8 +287,7 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -
         raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
                         "holding what the plan took as known without reading it (written or read by another run since, or "
                         "older than record_max_age); nothing was written — plan again")  # fmt: skip
-    return Reads([names[(e.bus, e.address)] for e in entries], to_read, said["base"], tuple(said["not_as_verified"]),
-                 taken=dict(said.get("taken", {})))  # fmt: skip
+    return Reads([names[(e.bus, e.address)] for e in entries], to_read, RECORD)
 
 
 def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:

@@ -29,7 +29,7 @@ except ImportError:  # pragma: no cover - older typer uses click itself
     from click.utils import PacifyFlushWrapper  # type: ignore[import-not-found, no-redef, assignment, unused-ignore]
 
 from prc3cfg import __version__
-from prc3cfg.core.text import plain
+from prc3cfg.core.text import shown
 from prc3cfg.errors import UserError, interruption_within
 
 app = typer.Typer(
@@ -122,7 +122,7 @@ def _single_dash_habit(args: list[str]) -> str | None:
 
 def _usage(error: click_errors.UsageError) -> str:
     command = error.ctx.command_path if error.ctx is not None else "prc3cfg"
-    message = plain(" ".join(error.format_message().split()).rstrip("."))
+    message = shown(" ".join(error.format_message().split()).rstrip("."))
     return f"error: {command}: {message} — see {command} --help"
 
 
@@ -149,11 +149,11 @@ def main(argv: list[str] | None = None) -> None:
         print(_usage(error), file=sys.stderr)
         sys.exit(EXIT_USAGE)
     except click_errors.ClickException as error:
-        print(f"error: {plain(' '.join(error.format_message().split()))}", file=sys.stderr)
+        print(f"error: {shown(' '.join(error.format_message().split()))}", file=sys.stderr)
         sys.exit(1)
     except UserError as error:
-        for line in str(error).split("\n"):  # several problems: one line each, what a file holds `plain`
-            print(f"error: {plain(line)}", file=sys.stderr)
+        for line in str(error).split("\n"):  # several problems: one line each, what a file holds `shown`
+            print(f"error: {shown(line)}", file=sys.stderr)
         sys.exit(error.exit_code)
     except (KeyboardInterrupt, typer.Abort):
         print("error: interrupted", file=sys.stderr)

@@ -404,7 +404,7 @@ def note_slow(links: Iterable[Link]) -> None:
     and how to measure the line — estimates, and waits that depend on the turnaround, are that far off."""
     from prc3cfg.api import measurable, slower_than_priced
     from prc3cfg.core.render import plural
-    from prc3cfg.core.text import plain
+    from prc3cfg.core.text import shown
 
     said, ports = [], []
     for link in slower_than_priced(links):
@@ -413,7 +413,7 @@ def note_slow(links: Iterable[Link]) -> None:
         said.append(f"bus {link.bus}: {plural(link.answered, 'exchange')} took {link.answered_time:.1f} s, its settings price them at "
                     f"{link.priced_time:.1f} s (the modules answered after {answer * 1000:.0f} ms on average, turnaround: "
                     f"{link.cost.turnaround:g} in the plant file)")  # fmt: skip
-        ports.append(plain(link.port_name))
+        ports.append(shown(link.port_name))
     if not said:
         return
     measured = [f"prc3cfg doctor --port {port}" for port in ports if measurable(port)]

@@ -34,7 +34,7 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
     elif markdown:
         print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=f"`{out.name}`" if out else "the plan file"))
     else:
-        print_lines(render.human(document or plan, notes=notes))
+        print_lines(render.human(plan, notes=notes))  # the plan made now: its words are prc3cfg's, not a file's
         if out is not None:
             print(f"Plan written to {out}; apply it with: prc3cfg apply --plan {out}")
 

@@ -38,11 +38,11 @@ def verify(
     import sys
 
     from prc3cfg import api
-    from prc3cfg.core.text import plain
+    from prc3cfg.core.text import shown
 
     result = api.verify_records(paths)
     for note in result.notes:
-        print(f"note: {plain(note)}", file=sys.stderr)
+        print(f"note: {shown(note)}", file=sys.stderr)
     if result.problems:
         raise UserError("\n".join(result.said()))
     print(f"Records verified: {result.summary()}.")
@@ -89,8 +89,8 @@ def prune(
 
 
 def _line(run: RecordedRun) -> str:
-    """A run in one line, everything from the files shown `plain`."""
-    from prc3cfg.core.text import plain
+    """A run in one line, everything from the files `shown`."""
+    from prc3cfg.core.text import shown
 
     who = f"{run.user}@{run.host}" if run.user else "(who: not recorded)"
     parts = [run.time or "(no time)", run.command or "?", who, run.plant or "?", ", ".join(run.lines) or "-", run.result,
@@ -99,4 +99,4 @@ def _line(run: RecordedRun) -> str:
         parts.append(f"reason: {run.reason}")
     if run.chain != "intact":
         parts.append(f"chain {run.chain}")
-    return plain("  ".join(parts))
+    return shown("  ".join(parts))

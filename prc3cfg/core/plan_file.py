@@ -3,10 +3,19 @@
 Owns the format, its writer beside its reader (as Terraform keeps its planfile's): a plan's data as
 the file holds it (`to_json`: per bus, per module, the steps as sent, the hashes they were planned
 from, the figures) and the file `plan --out` writes (`write`: that, what stays on the hardware, and
-beside each module's steps the words people review); then, once the shell has read its bytes (bounded,
-`prc3cfg.shell.files.read_json`), its structure and steps checked (`read`), whether it was made for
-this plant file by this prc3cfg (`to_apply`), the document `show` shows (`to_show`), and the proof that
-it is the plan prc3cfg makes from the read-back now (`check_modules`, then `check_plan`).
+beside each module's steps the words people review); then, once the shell has read its bytes (at most
+`PLAN_LIMIT`, `prc3cfg.shell.files.read_json`), its bounds — nesting, texts, lists: `MAX_DEPTH`,
+`MAX_TEXT`, `MAX_ITEMS` — its structure and steps checked (`read`), whether it was made for this plant
+file by this prc3cfg (`to_apply`), the document `show` shows (`to_show`), and the proof that it is the
+plan prc3cfg makes from the read-back now (`check_modules`, then `check_plan`).
+
+A plan file is data anyone may have edited. Every value of it is proved against what prc3cfg works
+out again, or is the file's claim: of a targeted plan's `read`, the `base` (always `RECORD`), the
+modules and programs not read and `taken` (whose verification the programs not read rest on) are
+worked out again by the apply from its read-back and the line's record; `not_as_verified` (which
+modules were read in full, and why) rests on the record as it was before the plan's own read, cannot
+be, and — like `left_alone` — is words only: shown by `show` as what the plan file says, never by the
+apply as its own, and never consulted for what is read or sent.
 
 A bus's broadcasts (`prc3cfg.core.sharing`) are the leading steps of every module of that bus, marked
 `"broadcast": true` — so each module's steps still say, in order, everything that reaches it (a reader
@@ -50,6 +59,23 @@ from prc3cfg.errors import UserError
 Key = tuple[str, int]  # (bus name, module address)
 
 FORMAT = "prc3cfg-plan/1"
+
+#: What a targeted read-back compares with, in words: a plan file's `read.base` (`prc3cfg.shell.bases`).
+RECORD = "the line's record of what prc3cfg last read or verified"
+
+#: The largest plan file prc3cfg reads: the largest it writes, of the largest plant (8 buses × 30 modules,
+#: every field of every program changed, bench/plan_time_bench.py), is 17.4 MB.
+PLAN_LIMIT = 32 * 2**20
+#: How deep a plan file may nest: prc3cfg's nest 9 deep (the document, `buses`, a bus, `modules`, a
+#: module, `changes`, `fields`, a field, its value); deeper, rendering and checking it would recurse
+#: without end (900 deep was a RecursionError in `show`).
+MAX_DEPTH = 16
+#: The longest text (or key) of a plan file: prc3cfg's longest are a stroke chart (about 1,000
+#: characters) and a path (4,096 at most on Linux).
+MAX_TEXT = 65_536
+#: The most items of a list, or keys of an object: prc3cfg writes at most MAX_STEPS steps and about 650
+#: changed fields a module, 30 modules a bus, one axis release, one `taken` a module of the plant.
+MAX_ITEMS = 100_000
 
 
 class Words(Protocol):
@@ -312,17 +338,20 @@ class PlanFile:
     version: str
     modules: tuple[PlannedModule, ...]
     document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
+    targeted: bool  # made from a targeted read-back (it has a `read`): read exactly what its plan read
 
 
 def read(data: Any, *, shown: bool = False) -> PlanFile:
     """A parsed plan file; raises PlanFileError.
 
-    Refused here, before the line is touched: a damaged file — a key missing, a value of
-    another kind (`PlanDocument`; with `shown`, all that `show` shows, `ShownPlanDocument`) — a
+    Refused here, before the line is touched: a file beyond any plan file prc3cfg writes
+    (`within_bounds`), a damaged file — a key missing, a value of another kind (`PlanDocument`;
+    with `shown`, all that `show` shows, `ShownPlanDocument`) — a base other than `RECORD`, a
     module listed twice, more steps than any plan needs (`MAX_STEPS`), a message that is not
     in the bytes prc3cfg sends for it (a "don't care" byte changed), and `releases_axes` flags
     that are not what the steps' bytes say.
     """
+    within_bounds(data)
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
     try:
@@ -330,6 +359,9 @@ def read(data: Any, *, shown: bool = False) -> PlanFile:
         document = contract.model_validate(data)
     except ValidationError as error:
         raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'), contract)} — {AGAIN}") from None
+    if document.read is not None and document.read.base != RECORD:
+        raise PlanFileError(f"read.base is not {json.dumps(RECORD)}, the only base prc3cfg compares a read-back with — the plan "
+                            f"file was changed after it was made: {AGAIN}")  # fmt: skip
     modules = []
     seen: set[tuple[str, int]] = set()
     for b, bus in enumerate(document.buses):
@@ -346,7 +378,49 @@ def read(data: Any, *, shown: bool = False) -> PlanFile:
         if isinstance(bus, _ShownBus):
             for index, step in enumerate(bus.broadcasts):
                 _message(step.message, f"buses[{b}].broadcasts[{index}]", f"bus {bus.name}: broadcast {index + 1}")
-    return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data)
+    return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data,
+                    document.read is not None)  # fmt: skip
+
+
+def within_bounds(data: Any) -> None:
+    """Refused (`PlanFileError`, naming the place) unless `data` nests at most `MAX_DEPTH` deep, holds no
+    text or key longer than `MAX_TEXT` and no list or object of more than `MAX_ITEMS`: what no plan
+    file prc3cfg writes does, and what would cost rendering and checking it a recursion without end, or
+    the reader a screen of one name. Walked without recursion, each value once."""
+    stack: list[tuple[Any, int, tuple[Any, ...]]] = [(data, 1, ())]
+    while stack:
+        value, depth, at = stack.pop()
+        if isinstance(value, str):
+            if len(value) > MAX_TEXT:
+                raise PlanFileError(f"{_place(at)} is a text of {len(value):,} characters, longer than any prc3cfg writes in a plan "
+                                    f"file ({MAX_TEXT:,}) — {AGAIN}")  # fmt: skip
+            continue
+        if not isinstance(value, dict | list):
+            continue
+        if depth > MAX_DEPTH:
+            raise PlanFileError(f"{_place(at)} is nested deeper than {MAX_DEPTH} levels, which no plan file prc3cfg writes is — {AGAIN}")
+        if len(value) > MAX_ITEMS:
+            kind = "an object of" if isinstance(value, dict) else "a list of"
+            raise PlanFileError(f"{_place(at)} is {kind} {len(value):,} {'keys' if isinstance(value, dict) else 'items'}, more than "
+                                f"any plan file prc3cfg writes holds ({MAX_ITEMS:,}) — {AGAIN}")  # fmt: skip
+        if isinstance(value, dict):
+            for key, item in value.items():
+                if len(key) > MAX_TEXT:
+                    raise PlanFileError(f"{_place(at)} has a key of {len(key):,} characters, longer than any prc3cfg writes in a plan "
+                                        f"file ({MAX_TEXT:,}) — {AGAIN}")  # fmt: skip
+                stack.append((item, depth + 1, (at, key)))
+        else:
+            stack.extend((item, depth + 1, (at, index)) for index, item in enumerate(value))
+
+
+def _place(at: tuple[Any, ...]) -> str:
+    """The JSON path of a place `within_bounds` walked to ((((), "buses"), 0), "name") → "buses[0].name"),
+    each key cut to 40 characters: a path is said in one line."""
+    loc: list[str | int] = []
+    while at:
+        at, key = at
+        loc.append(key if isinstance(key, int) or len(key) <= 40 else f"{key[:40]}…")
+    return json_path(loc[::-1], "the plan")
 
 
 def _planned_module(bus: str, module: _ModuleEntry, at: str) -> PlannedModule:
@@ -401,15 +475,20 @@ def same_text(data: bytes) -> frozenset[str]:
     return frozenset(hashlib.sha256(form).hexdigest() for form in (text, text.replace(b"\n", b"\r\n")))
 
 
+def checked(document: Any, path: Path, *, shown: bool = False) -> PlanFile:
+    """The plan file at `path` (as parsed), `read`; a `UserError` of one line naming `path` otherwise."""
+    try:
+        return read(document, shown=shown)
+    except PlanFileError as error:
+        raise UserError(f"{path}: {error}") from None
+
+
 def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, alike: frozenset[str] = frozenset()) -> PlanFile:
     """The plan file at `path` (as parsed) for `apply --plan` of the plant file at `plant_path`:
     refused (one line) when damaged, made by another prc3cfg or for another plant file (`StalePlan`).
     A plan made from the same text with other line endings (`alike`, of `same_text`) is the plan of this
     plant file: a plan made on Linux applies from a Windows checkout, and the other way round."""
-    try:
-        plan_file = read(document)
-    except PlanFileError as error:
-        raise UserError(f"{path}: {error}") from None
+    plan_file = checked(document, path)
     if plan_file.version != __version__:
         raise StalePlan(f"{path}: made by prc3cfg {plan_file.version}, this is {__version__} — plan again with this version")
     if plan_file.plant_sha256 != plant_sha256 and plan_file.plant_sha256 not in alike:
@@ -422,10 +501,7 @@ def to_show(document: Any, path: Path) -> dict[str, Any]:
     --plan` checks it before the line (damaged, edited flags, a module twice, not prc3cfg's bytes:
     one line), and every step's summary worked out again from its bytes — what is shown is what
     would be sent."""
-    try:
-        plan_file = read(document, shown=True)
-    except PlanFileError as error:
-        raise UserError(f"{path}: {error}") from None
+    plan_file = checked(document, path, shown=True)
     entries = iter(plan_file.modules)  # in the file's order
     for bus in plan_file.document["buses"]:
         for module, entry in zip(bus["modules"], entries):
@@ -479,7 +555,9 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     summary, a figure, a name, an axis warning — that is not the value `write` writes for that plan
     (with `words`) is an edit too, since people review what the file says (only `plant_path` and
     `plant_sha256` may differ: a plan made in another checkout, whose line endings `to_apply`
-    checked). Values, not their spelling (`_differs_at`): a file another tool wrote again —
+    checked). A targeted plan's `read` is what the apply read and the line's record says now (`ours`'s
+    reading), said apart — the record may have changed since, as well as the file — but for its
+    `not_as_verified`, the file's words (the module docstring says why). Values, not their spelling (`_differs_at`): a file another tool wrote again —
     indented otherwise, its keys in another order, CRLF, a byte-order mark, 0 for 0.0 — is the
     same plan file. Its figures come out the same on every system and Python: the times are summed
     with `math.fsum`, correctly rounded (`sum` of floats is compensated from Python 3.12 on, plain
@@ -511,6 +589,11 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
     # a plan made in another checkout: its path, and its line endings (`to_apply` found the text the same)
     written = write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
+    if isinstance(said := plan_file.document.get("read"), dict) and "read" in written:
+        written["read"]["not_as_verified"] = said.get("not_as_verified")
+        if (at := _differs_at(said, written["read"], "read")) is not None:
+            raise UserError(f"{path}: {at} is not what this apply read and the line's record says — the plan file, or the record, was "
+                            "changed after the plan was made; nothing was written: plan again and review it")  # fmt: skip
     if (at := _differs_at(plan_file.document, written)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip

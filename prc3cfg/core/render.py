@@ -11,7 +11,7 @@ per output and module, as the module is shown (kept for all 240 modules of a lar
 diffs would hold 20 MB). The units are `prc3cfg.core.units`. Pure: returns strings.
 
 Every text a plan or plan file brings (names, the base, notes, a field's words) is shown escaped for
-its medium by `prc3cfg.core.text` — `plain` in every output, `markdown` in a comment — and a plan
+its medium by `prc3cfg.core.text` — `shown` in every output, `markdown` in a comment — and a plan
 file's stroke charts only in the shape prc3cfg writes them (`CHART`): a plan file is data that
 anyone may have edited.
 
@@ -265,7 +265,7 @@ def review(change: ModuleChange) -> dict[str, Any]:
 
 
 def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
-    """What the human and markdown outputs are made from, every text in it `plain`: a plan file's
+    """What the human and markdown outputs are made from, every text in it `shown`: a plan file's
     document, or a live plan's without its read-backs' hashes (neither output shows one) and without the
     modules' `changes`, each worked out by `_changes` as its module is shown (all of them at once, for
     8 × 30 modules with every program changed, hold 35 MB), with the changes by (bus, address) — the
@@ -273,21 +273,21 @@ def _outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[di
     if isinstance(plan, dict):
         return _plain_texts(plan), {}
     document = plan_file.to_json(plan, hashes=False) | {"left_alone": list(notes)}
-    return _plain_names(document), {(escape.plain(c.bus), c.address): c for c in plan.changes}
+    return _plain_names(document), {(escape.shown(c.bus), c.address): c for c in plan.changes}
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
-    """A live plan's document with the texts files gave it `plain`: its names, its base, its notes (the words of
+    """A live plan's document with the texts files gave it `shown`: its names, its base, its notes (the words of
     its steps are prc3cfg's own; a plan file's are not: `_plain_texts`)."""
-    document["plant"] = escape.plain(document["plant"])
+    document["plant"] = escape.shown(document["plant"])
     for key in ("axis_releases", "left_alone"):
-        document[key] = [escape.plain(text) for text in document[key]]
+        document[key] = [escape.shown(text) for text in document[key]]
     if isinstance(said := document.get("read"), dict):
         document["read"] = _plain_texts(said)
     for bus in document["buses"]:
-        bus["name"] = escape.plain(bus["name"])
+        bus["name"] = escape.shown(bus["name"])
         for module in bus["modules"]:
-            module["name"] = escape.plain(module["name"])
+            module["name"] = escape.shown(module["name"])
     return document
 
 
@@ -303,9 +303,9 @@ CHART = re.compile(
 
 
 def _plain_texts(value: Any) -> Any:
-    """`value` with every text in it `plain`, and of `charts` only what `CHART` matches."""
+    """`value` with every text in it `shown`, and of `charts` only what `CHART` matches."""
     if isinstance(value, str):
-        return escape.plain(value)
+        return escape.shown(value)
     if isinstance(value, list):
         return [_plain_texts(item) for item in value]
     if isinstance(value, dict):
@@ -348,7 +348,7 @@ def address_ranges(addresses: Iterable[int]) -> str:
     return f"address{'es' if len(listed) > 1 else ''} {text}"
 
 
-def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.plain) -> str | None:
+def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
     """What the probes of a bus's line found at the addresses its plant file does not list, in one line
     (the bus's name `shown` as the medium needs)."""
     if bus.get("unlisted_modules"):
@@ -417,31 +417,46 @@ def estimate(document: dict[str, Any]) -> str:
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
 
 
-def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.plain) -> str | None:
+def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown, *, claimed: bool = False) -> str | None:
     """What a targeted plan read now and what it took as known from the line's record, in one line,
     its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
     30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
     modules, as apply of /p/a.yaml by ana@pc (since …) read or verified them; read in full: line/m2
-    (program 3 is not as on record) — what no read sees: …"."""
+    (program 3 is not as on record) — what no read sees: …". `claimed`: the document is a plan file's,
+    whose words of whose verification was taken and of what was read in full and why are its own claim
+    (`prc3cfg.core.plan_file`): said after "the plan file says", never as prc3cfg's."""
     said = document.get("read")
     if not isinstance(said, dict):
         return None
     modules = _modules(document)
     programs = sum(len(m["read"]["programs"]) for _, m in modules)
-    skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
-    unread = [shown(name) for name in said["modules_not_read"]]
-    sources = sorted({shown(source) for source in said.get("taken", {}).values()})
-    taken = ([f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"
-             + (f", as {'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else "")]
-             if skipped else [])  # fmt: skip
-    taken += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
-    other = [shown(name) for name in said["not_as_verified"]]
-    return (f"Read now: {read}"
-            + (f"; taken as known from {shown(said['base'])}, not read: {' and '.join(taken)}" if taken else "")
-            + (f"; read in full: {', '.join(other)}" if other else "")
-            + (" — a program not read that another tool changed on a module whose system parameters did not change is not seen: "
-               "plan --refresh-only (or --full-read) reads everything" if taken else ""))  # fmt: skip
+    whose, not_read = _not_read(said, modules, shown)
+    other = f"read in full: {', '.join(shown(name) for name in said['not_as_verified'])}" if said["not_as_verified"] else ""
+    claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
+    if whose and not claimed:
+        not_read[0] += f", as {whose}"
+    parts = [f"Read now: {read}"]
+    parts += [f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"] if not_read else []
+    parts += [other] if other and not claimed else []
+    parts += [f"the plan file says: {claims} (apply --plan proves whose, not why)"] if claims else []
+    return "; ".join(parts) + (" — a program not read that another tool changed on a module whose system parameters did not "
+                               "change is not seen: plan --refresh-only (or --full-read) reads everything" if not_read else "")  # fmt: skip
+
+
+def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]], shown: Callable[[str], str]) -> tuple[str, list[str]]:
+    """Whose reads or verifications the programs not read rest on ("" when none was taken), and what was not
+    read: "79 programs of 6 modules", "2 modules (line/a, line/b)"."""
+    skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
+    if not skipped:
+        whose, parts = "", []
+    else:
+        sources = sorted({shown(source) for source in said.get("taken", {}).values()})
+        whose = f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else ""
+        parts = [f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"]
+    unread = [shown(name) for name in said["modules_not_read"]]
+    parts += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
+    return whose, parts
 
 
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
@@ -464,7 +479,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
     out.append(summary_line(document))
-    out += [line for line in [reading_line(document)] if line]
+    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict))] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in _modules(document)):
         out.append(LEGEND)
@@ -518,9 +533,9 @@ def cell(text: str) -> str:
 
 def code(text: str) -> str:
     """Text as a markdown code span outside a table: shown exactly as written (control characters
-    `plain`) — inside one, an entity or a backslash would show as typed. Its fence is longer than any
+    `shown`) — inside one, an entity or a backslash would show as typed. Its fence is longer than any
     run of backticks in it."""
-    text = escape.plain(text)
+    text = escape.shown(text)
     fence = "`" * (max(map(len, re.findall("`+", text)), default=0) + 1)
     pad = " " if text[:1] == "`" or text[-1:] == "`" else ""
     return f"{fence}{pad}{text}{pad}{fence}"
@@ -542,7 +557,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), "",
-            *_callouts(document, live), *_changed_table(changed)]  # fmt: skip
+            *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]  # fmt: skip
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):
             head += [*fenced(lines[:-1]), ""]
@@ -558,10 +573,10 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     return text
 
 
-def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> list[str]:
+def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *, claimed: bool) -> list[str]:
     """A comment's quoted paragraphs under its summary, each only when it has something to say: what was
     not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
-    out = [f"> {line}", ""] if (line := reading_line(document, cell)) else []
+    out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed)) else []
     if document["axis_releases"]:
         out += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                 + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip

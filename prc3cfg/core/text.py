@@ -1,12 +1,15 @@
 """Text from files is data: what a name may hold, and how text from a plant or plan file is shown.
 
-Owns the characters that are not printable text (`CONTROL`: C0, DEL, C1, the line and
+Owns the characters that are not printable text (`UNPRINTABLE`: the Unicode general categories
+of control characters — C0, DEL, C1 —, format characters — bidirectional overrides, isolates and
+marks, zero-width spaces and joiners, the byte order mark, soft hyphens, tags —, the line and
 paragraph separators U+2028/2029 and lone surrogates) and one escaping per medium that prc3cfg
 prints such text in:
 
-- `plain` — a terminal or a log: each such character as Python's repr writes it (`\\x1b`,
-  `\\n`, `\\u2028`, `\\ud800`), without the quotes, so that nothing from a file moves the cursor,
-  rings, sets a colour, starts a line of its own or cannot be encoded;
+- `shown` — a terminal or a log: each such character as Python's repr writes it (`\\x1b`,
+  `\\n`, `\\u202e`, `\\u2028`, `\\ud800`), without the quotes, so that nothing from a file moves
+  the cursor, rings, sets a colour, starts a line of its own, reorders or hides what a reader
+  sees, or cannot be encoded;
 - `github_data`, `github_property` — a GitHub workflow command (`::error file=…::message`):
   `%`, CR and LF as `%25`, `%0D`, `%0A`, and in a property `:` and `,` too (docs.github.com,
   "Workflow commands for GitHub Actions"), so that nothing from a file starts a command line;
@@ -16,7 +19,7 @@ prints such text in:
   emphasis, a table cell or HTML; `markdown_html` — the same inside HTML (`<summary>`), where
   markdown is not read: `<`, `>`, `&` as entities, `@` and URLs broken alike.
 
-Names in a plant file are refused when they hold a `CONTROL` character (`prc3cfg.plant.models`);
+Names in a plant file are refused when they hold an `UNPRINTABLE` character (`prc3cfg.plant.models`);
 a plan file is data that anyone may have edited, so everything shown of it goes through these.
 Pure.
 """
@@ -25,29 +28,36 @@ from __future__ import annotations
 
 import html
 import re
+import unicodedata
 
-#: What is not printable text: C0 and DEL, C1, U+2028 LINE SEPARATOR, U+2029 PARAGRAPH SEPARATOR
-#: (a new line to JavaScript and to some terminals), and lone surrogates (no encoding can write them).
-CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+#: What is not printable text, by Unicode general category: Cc (C0, DEL, C1), Cf (format: the
+#: bidirectional overrides U+202A–202E, isolates U+2066–2069 and marks U+200E/200F/061C that
+#: reorder what is shown, zero-width spaces and joiners, U+FEFF, soft hyphens, tags, which hide
+#: text), Cs (lone surrogates: no encoding can write them), Zl and Zp (U+2028/2029: a new line to
+#: JavaScript and to some terminals). The categories, not a list, so that a newer Python's Unicode
+#: database adds the format characters it knows.
+UNPRINTABLE = frozenset({"Cc", "Cf", "Cs", "Zl", "Zp"})
+
+
+def _unprintable(c: str) -> bool:
+    return unicodedata.category(c) in UNPRINTABLE
 
 
 def has_control(text: str) -> bool:
-    """Whether `text` holds a character that is not printable text (`CONTROL`)."""
-    return CONTROL.search(text) is not None
+    """Whether `text` holds a character that is not printable text (`UNPRINTABLE`)."""
+    return not text.isprintable() and any(map(_unprintable, text))  # isprintable is False for every such character
 
 
-def _escaped(match: re.Match[str]) -> str:
-    return repr(match.group())[1:-1]
-
-
-def plain(text: str) -> str:
-    """`text` for a terminal or a log: every `CONTROL` character as repr escapes it, "m1\\x1b[2J" → "m1\\\\x1b[2J"."""
-    return CONTROL.sub(_escaped, text) if CONTROL.search(text) else text
+def shown(text: str) -> str:
+    """`text` for a terminal or a log: every `UNPRINTABLE` character as repr escapes it, "m1\\x1b[2J" → "m1\\\\x1b[2J"."""
+    if text.isprintable():
+        return text
+    return "".join(repr(c)[1:-1] if _unprintable(c) else c for c in text)
 
 
 def github_data(text: str) -> str:
-    """`text` as the message of a GitHub workflow command: `%`, CR, LF escaped; other control characters as `plain`."""
-    return plain(text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A"))
+    """`text` as the message of a GitHub workflow command: `%`, CR, LF escaped; other unprintable characters as `shown`."""
+    return shown(text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A"))
 
 
 def github_property(text: str) -> str:
@@ -66,14 +76,14 @@ _LIVE = re.compile(r"@|:(?=//)|(?<=www)\.", re.IGNORECASE)
 
 def markdown(text: str) -> str:
     """`text` for a markdown paragraph or table cell: shown as written, with nothing live in it."""
-    text = plain(text)
+    text = shown(text)
     text = "".join(_MARKDOWN.get(c, c) for c in text) if any(c in _MARKDOWN for c in text) else text
     return _LIVE.sub(_dead, text)
 
 
 def markdown_html(text: str) -> str:
     """`text` inside HTML in a markdown comment (`<summary>…</summary>`): shown as written, nothing in it live."""
-    return _LIVE.sub(_dead, html.escape(plain(text), quote=False))
+    return _LIVE.sub(_dead, html.escape(shown(text), quote=False))
 
 
 def _dead(match: re.Match[str]) -> str:

@@ -2,7 +2,7 @@
 
 A `Problem` names its place as a path of keys and indexes from the top of the document
 (`("buses", 0, "modules", 2, "programs", 3, "speed")`); the loader turns the path into
-`file:line:column`. `PlantError` carries the problems of one file, one printable line each (`plain`): every one,
+`file:line:column`. `PlantError` carries the problems of one file, one printable line each (`shown`): every one,
 up to `MAX_PROBLEMS`; `PlantError.findings` the same problems as `Finding`s, for tools.
 """
 
@@ -12,7 +12,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from prc3cfg.core.text import plain
+from prc3cfg.core.text import shown
 from prc3cfg.errors import UserError
 
 Path_ = tuple[str | int, ...]
@@ -63,14 +63,14 @@ class PlantError(UserError):
     """A plant file that cannot be used; `str()` is every problem, one line each, sorted by line."""
 
     def __init__(self, problems: Sequence[str]) -> None:
-        self.problems = [plain(problem) for problem in problems]  # what the file holds: one line each, printable
+        self.problems = [shown(problem) for problem in problems]  # what the file holds: one line each, printable
         super().__init__("\n".join(self.problems))
 
     def findings(self, file: str) -> list[Finding]:
         """The problems of the plant file read as `file` (the path `parse_plant` was given, as text)."""
-        found, shown = [], plain(file)
+        found, name = [], shown(file)
         for problem in self.problems:
-            place = _PLACE.match(problem, len(shown)) if problem.startswith(f"{shown}:") else None
+            place = _PLACE.match(problem, len(name)) if problem.startswith(f"{name}:") else None
             if place is None:  # not "file:…": said whole, of the file
                 found.append(Finding(file, None, None, problem))
             elif place.group(1) is None:

@@ -313,7 +313,7 @@ def _holder(fd: int) -> str:
             owner = platform.uid_name(os.fstat(fd).st_uid)
             if owner.partition(" (uid")[0] != claimed_user:
                 claim += f", a file of {owner}"
-    return text.plain(claim)
+    return text.shown(claim)
 
 
 def _take_all(paths: list[Path], description: str) -> tuple[list[tuple[int, bool]], str | None]:
