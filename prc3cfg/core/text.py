@@ -7,6 +7,9 @@ prints such text in:
 - `plain` — a terminal or a log: each such character as Python's repr writes it (`\\x1b`,
   `\\n`, `\\u2028`, `\\ud800`), without the quotes, so that nothing from a file moves the cursor,
   rings, sets a colour, starts a line of its own or cannot be encoded;
+- `shown` — text another user wrote (their records in the machine's folder), for a terminal: as
+  `plain`, and the bidirectional formatting characters (`BIDI`) too, so that none can reorder
+  what is printed after it;
 - `github_data`, `github_property` — a GitHub workflow command (`::error file=…::message`):
   `%`, CR and LF as `%25`, `%0D`, `%0A`, and in a property `:` and `,` too (docs.github.com,
   "Workflow commands for GitHub Actions"), so that nothing from a file starts a command line;
@@ -31,6 +34,12 @@ import re
 CONTROL = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
 
 
+#: The bidirectional formatting characters: embeddings and overrides U+202A–202E, isolates
+#: U+2066–2069, the marks U+200E/200F and U+061C — each can reorder the rest of a terminal's line.
+BIDI = re.compile("[\u202a-\u202e\u2066-\u2069\u200e\u200f\u061c]")
+_SHOWN = re.compile(f"{CONTROL.pattern}|{BIDI.pattern}")
+
+
 def has_control(text: str) -> bool:
     """Whether `text` holds a character that is not printable text (`CONTROL`)."""
     return CONTROL.search(text) is not None
@@ -43,6 +52,12 @@ def _escaped(match: re.Match[str]) -> str:
 def plain(text: str) -> str:
     """`text` for a terminal or a log: every `CONTROL` character as repr escapes it, "m1\\x1b[2J" → "m1\\\\x1b[2J"."""
     return CONTROL.sub(_escaped, text) if CONTROL.search(text) else text
+
+
+def shown(text: str) -> str:
+    """`text` for a terminal, whoever wrote it: every `CONTROL` and `BIDI` character as repr escapes it
+    ("\\x1b", "\\u202e"), the rest as written."""
+    return _SHOWN.sub(_escaped, text) if _SHOWN.search(text) else text
 
 
 def github_data(text: str) -> str:
