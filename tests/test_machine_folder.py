@@ -345,3 +345,30 @@ def test_a_planted_file_in_the_records_folders_neither_hangs_nor_breaks_a_comman
         assert planned.returncode == 0, planned.stdout + planned.stderr
         assert "taken as known" in planned.stdout  # this user's own record still counts
         assert any(str(planted[0]) in line for line in planned.stderr.splitlines())  # passed over, and said so
+
+
+@needs_root
+def test_a_file_planted_at_a_user_s_record_name_in_the_shared_folder_does_not_lock_them_out(machine, packages, capsys):
+    """In the sticky machine's folder user A cannot move another user's file away: where one stands at A's
+    record name, A's record goes to the next free name — said in one line — and A's plans go on using it."""
+    a = other_user()
+    assert run_cli(capsys, "setup-machine", "--group", grp.getgrgid(a.pw_gid).gr_name).code == 0
+    (machine / "locks").mkdir()
+    (machine / "locks").chmod(0o1777)
+    with emulated_plant(made(machine / "plant")) as plant:
+        mine = plant_of(a, machine, plant.path.read_text())
+        assert run_as(a, machine, packages, "-m", "prc3cfg", "apply", mine, "--auto-approve", "--allow-axis-release").returncode == 0
+        names = sorted((machine / "machine" / "lines").glob(f"*.{a.pw_uid}.json"))
+        for path in names:  # the names stand empty a moment (a record not kept yet): another user's FIFO takes them
+            path.unlink()
+            os.mkfifo(path)
+            os.lchown(path, 4242, 4242)
+        planned = run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode", timeout=60)
+        assert planned.returncode == 0, planned.stdout + planned.stderr
+        notes = [line for line in planned.stderr.splitlines() if "cannot be moved aside" in line]
+        assert len(notes) == len(names) and all(".tmp" not in line and "instead" in line for line in notes), planned.stderr
+        for path in names:
+            fresh = path.with_name(path.name.replace(".json", ".1.json"))
+            assert fresh.is_file() and fresh.stat().st_uid == a.pw_uid and stat.S_ISFIFO(path.lstat().st_mode)
+        again = run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode", timeout=60)
+        assert again.returncode == 0 and "taken as known" in again.stdout, again.stdout + again.stderr

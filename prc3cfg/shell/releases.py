@@ -19,6 +19,12 @@ user's own state folder, which no other user sees (`unshared` is the hint that s
 per apply (`<time>-<pid>.jsonl`), whatever the plant file's folder: `scan`, which has no plant
 file, finds them by the line's identities (`prc3cfg.shell.locks.line_keys`).
 
+Another user's file there is a claim (`Pending.owner`): read as another user may have made it — a
+regular file only, never through a link, never blocking, at most `LIMIT` bytes, each field of its
+type (`passed_over` names what is none) — and told as their claim, every field escaped. It may make
+prc3cfg read (an E12 claim: the module is read in full, `prc3cfg.api`), never write: only this
+user's or root's E12 record, or the module's own refusal, makes a plan send a 10h/20h.
+
 Does not own when a release happens (`prc3cfg.shell.apply`) nor what is said of it (`prc3cfg.cli`).
 """
 
