@@ -266,6 +266,48 @@ def test_a_record_another_tool_wrote_or_damaged_is_no_record(applied, capsys, tm
     assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out
 
 
+def test_another_line_s_record_under_this_line_s_name_is_no_record(applied, capsys, tmp_path):
+    """A record whose line key is another line's — copied, or renamed, under this line's file name — vouches
+    for nothing here: the modules are read in full and the drift found."""
+    applied.emulators["booth-a"].teach_in(2, 2, 180)  # booth-a-right's program 2: a plan taking the record would not read it
+    for path in (tmp_path / "state" / "lines").glob("*.json"):
+        document = json.loads(path.read_text())
+        path.write_text(json.dumps(document | {"key": "tcp/127.0.0.1/9"}))  # another line's, same bytes otherwise
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, planned.out + planned.err
+    assert "taken as known" not in planned.out
+
+
+@pytest.mark.parametrize("kind", ["file", "link", "folder", "fifo"])
+def test_a_file_planted_at_this_user_s_record_name_is_moved_aside_and_the_record_written_afresh(applied, capsys, tmp_path, kind):
+    """Whatever stands at this user's own record name — a file of another owner, a link, a folder, a FIFO —
+    does not lock the user out: it is moved aside (said in one line), the record written afresh and used."""
+    lines = tmp_path / "state" / "lines"
+    records = sorted(lines.glob("*.json"))
+    for path in records:
+        path.unlink()
+        if kind == "file":
+            path.write_text("{}")
+            if os.geteuid() == 0:
+                os.chown(path, 4242, 4242)
+        elif kind == "link":
+            path.symlink_to(tmp_path / "elsewhere.json")
+        elif kind == "folder":
+            path.mkdir()
+        else:
+            os.mkfifo(path)
+    planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
+    assert planned.code == 0, planned.out + planned.err
+    notes = [line for line in planned.err.splitlines() if "moved aside" in line]
+    assert len(notes) == len(records) and all(".tmp" not in line for line in notes), planned.err
+    for path in records:
+        assert path.is_file() and not path.is_symlink() and json.loads(path.read_text())["format"] == "prc3cfg-line-record/1"
+        (aside,) = lines.glob(f"{path.name}.planted-*")
+        assert aside.is_symlink() if kind == "link" else aside.is_dir() if kind == "folder" else aside.exists()
+        assert any(str(path) in line and aside.name in line for line in notes)
+    assert "taken as known" in run_cli(capsys, "plan", applied.path).out  # the record written afresh is this user's again
+    assert not (tmp_path / "elsewhere.json").exists()
+
 # -- adversarial: seeded scenario families, the claims held against what the modules hold ---------
 
 #: What touched the line after plant file A was applied: prc3cfg through another plant file (its

@@ -9,9 +9,11 @@ one emulated line, through socket://.
 
 from __future__ import annotations
 
+import contextlib
 import grp
 import os
 import pwd
+import re
 import shutil
 import stat
 import subprocess
@@ -105,6 +107,8 @@ def packages(tmp_path_factory) -> Path:
     """prc3cfg's dependencies where another user can import them: a world-readable copy of every
     third-party package the command line loads — this Python's own may lie in root's home, mode 700
     (CI's pyenv does), where another user's interpreter does not find them."""
+    import rich.progress  # noqa: F401  (imported by a command only once it shows progress)
+
     import prc3cfg.cli  # noqa: F401  (everything a command imports)
 
     folder = Path(tempfile.mkdtemp(prefix="prc3cfg-packages-"))
@@ -156,7 +160,8 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         assert {p.stat().st_uid for p in (machine / "machine" / "lines").glob("*.json")} == {0, user.pw_uid}
         again = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
         assert again.code == 2, again.out + again.err
-        assert "another user's record is newer (it claims: apply of " in again.out and f"by {user.pw_name}@" in again.out
+        assert "another user's record is newer (it claims: apply of " in again.out  # whose apply its values rest on ...
+        assert f"written by {user.pw_name} (uid {user.pw_uid})" in again.out  # ... and whose file says so
         assert "program 1: position 1.900 m → 2.000 m" in again.out
         # a release their run recorded and never told (killed after its 20h) is told to root's plan
         keys = bus_line_keys(plant.plant, plant.plant.buses[0])
@@ -167,3 +172,203 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         told = run_cli(capsys, "plan", plant.path)
         assert any("bus booth-a, module 2 (booth-a-right): prc3cfg apply" in line and "its axes may be released" in line
                    for line in told.err.splitlines())  # fmt: skip
+
+
+# -- other users' records are claims: shared for reading, never trusted, never a reason to write ----------
+
+#: A user besides prc3cfg-other, in its group: two users of one line, neither of them root.
+THIRD = "prc3cfg-third"
+needs_root = pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="running a process as another user takes root")
+
+
+def third_user(group: int) -> pwd.struct_passwd:
+    """The user prc3cfg-third in the group `group`, made when absent (and left for the next run, as prc3cfg-other is)."""
+    with contextlib.suppress(KeyError):
+        return pwd.getpwnam(THIRD)
+    if shutil.which("useradd") is None:
+        pytest.skip(f"no useradd to make the user {THIRD}")
+    made = subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", "--gid", str(group), THIRD],
+                          capture_output=True, text=True)  # fmt: skip
+    try:
+        return pwd.getpwnam(THIRD)
+    except KeyError:
+        pytest.skip(f"cannot make the user {THIRD}: {made.stderr.strip()}")
+
+
+def home_of(user: pwd.struct_passwd, machine: Path) -> Path:
+    """The user's own folder on this machine (their HOME and state folder), made on first use."""
+    home = machine / f"home-{user.pw_name}"
+    if not home.exists():
+        home.mkdir()
+        os.chown(home, user.pw_uid, user.pw_gid)
+    return home
+
+
+def run_as(user: pwd.struct_passwd, machine: Path, packages: Path, *argv: object, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    """`python ARGV` run as `user` with their own HOME and state folder, on this machine's shared folders."""
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        pytest.skip("no setpriv to run a process as another user")
+    home = home_of(user, machine)
+    env = {**os.environ, "HOME": str(home), "XDG_STATE_HOME": str(home / "state"), "PYTHONPATH": os.pathsep.join([str(ROOT), str(packages)])}
+    return subprocess.run([setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups", sys.executable, *map(str, argv)],
+                          capture_output=True, text=True, env=env, cwd=home, timeout=timeout)  # fmt: skip
+
+
+def plant_of(user: pwd.struct_passwd, machine: Path, text: str, name: str = "plant.yaml") -> Path:
+    """A plant file of `user`'s, in their folder (its records go beside it)."""
+    path = home_of(user, machine) / name
+    path.write_text(text)
+    os.chown(path, user.pw_uid, user.pw_gid)
+    return path
+
+
+def record(user: pwd.struct_passwd, machine: Path, packages: Path, keys: tuple[str, ...], bus: str, address: int, name: str,
+           kind: str = "release") -> None:  # fmt: skip
+    """A record of `kind` (an axis release, an E12) that `user` writes through prc3cfg into the machine's folder."""
+    script = ("import sys; from prc3cfg.shell.releases import Releases; "
+              "Releases('apply').record(tuple(sys.argv[5:]), sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4])")  # fmt: skip
+    recorded = run_as(user, machine, packages, "-c", script, bus, address, name, kind, *keys)
+    assert recorded.returncode == 0, recorded.stderr
+
+
+#: What a terminal would take for a command: C0/C1 controls, bidi overrides, line separators.
+RAW = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\u200e\u200f\u061c]")
+
+
+@needs_root
+@pytest.mark.parametrize("writer", ["root", THIRD])
+def test_a_user_sees_the_newer_apply_another_user_of_the_line_made(machine, packages, capsys, writer):
+    """User A (prc3cfg-other) applied plant file A; then root, or another user of A's group, applies plant
+    file B to module 2 of the same line. A's next plan must see it — their line record is readable by every
+    user of the line — and plan A's value back; their apply must write it."""
+    a = other_user()
+    assert run_cli(capsys, "setup-machine", "--group", grp.getgrgid(a.pw_gid).gr_name).code == 0
+    (machine / "locks").mkdir()
+    (machine / "locks").chmod(0o1777)  # the lock folder as a boot leaves it, for whoever runs first
+    with emulated_plant(made(machine / "plant")) as plant:
+        text = plant.path.read_text()
+        mine = plant_of(a, machine, text)
+        applied = run_as(a, machine, packages, "-m", "prc3cfg", "apply", mine, "--auto-approve", "--allow-axis-release")
+        assert applied.returncode == 0, applied.stderr
+        assert run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode").returncode == 0
+        theirs_text = text.replace("position: 2.0\n", "position: 1.9\n", 1)  # booth-a-right's program 1
+        if writer == "root":
+            (machine / "b").mkdir()
+            (machine / "b" / "plant.yaml").write_text(theirs_text)
+            assert run_cli(capsys, "apply", machine / "b" / "plant.yaml", "--auto-approve", "--allow-axis-release").code == 0
+        else:
+            b = third_user(a.pw_gid)
+            theirs = run_as(b, machine, packages, "-m", "prc3cfg", "apply", plant_of(b, machine, theirs_text), "--auto-approve",
+                            "--allow-axis-release")  # fmt: skip
+            assert theirs.returncode == 0, theirs.stderr
+        again = run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode")
+        assert again.returncode == 2, again.stdout + again.stderr
+        for path in (machine / "machine" / "lines").glob("*.json"):  # readable by the group, written by their maker alone
+            assert stat.S_IMODE(path.stat().st_mode) == 0o640 and path.stat().st_gid == a.pw_gid, path
+        assert "program 1: position 1.900 m → 2.000 m" in again.stdout
+        if writer != "root":  # a claim: it makes A read, and the plan says whose
+            assert "another user's record is newer (it claims: apply of " in again.stdout and f"written by {THIRD} (uid" in again.stdout
+        back = run_as(a, machine, packages, "-m", "prc3cfg", "apply", mine, "--auto-approve", "--allow-axis-release")
+        assert back.returncode == 0 and "Nothing to do" not in back.stdout, back.stdout + back.stderr
+        assert plant.matches_plant()
+
+
+@needs_root
+def test_another_user_s_release_record_is_told_as_their_claim_escaped(machine, packages, capsys):
+    """prc3cfg-other's release record for module 2 whose fields hold terminal commands (erase the line
+    above) must not erase root's own warning of its real release: it is told escaped, as their claim."""
+    user = other_user()
+    assert run_cli(capsys, "setup-machine", "--group", grp.getgrgid(user.pw_gid).gr_name).code == 0
+    with emulated_plant(made(machine / "a")) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        keys = bus_line_keys(plant.plant, plant.plant.buses[0])
+        from prc3cfg.shell.releases import Releases
+
+        Releases("apply").record(keys, "booth-a", 2, "booth-a-right")  # root's own, real: a run killed after its 20h
+        record(user, machine, packages, keys, "\x1b[1A\x1b[2K\x1b[1A\x1b[2Kbooth-a\u202e", 1, "all good\u2028\x9b2J")
+        told = run_cli(capsys, "plan", plant.path)
+        assert told.code == 0, told.err
+        assert not RAW.search(told.err + told.out)
+        warnings = [line for line in told.err.splitlines() if "its axes may be released" in line]
+        assert any(line.startswith("⚠ warning: bus booth-a, module 2 (booth-a-right): prc3cfg apply") for line in warnings), told.err
+        (claim,) = [line for line in warnings if "\\x1b[1A" in line]
+        assert f"{user.pw_name} (uid {user.pw_uid})'s record says: " in claim and "\\u202e" in claim and "\\u2028\\x9b2J" in claim
+
+
+@needs_root
+def test_another_user_s_e12_record_makes_prc3cfg_read_never_write(machine, packages, capsys):
+    """A forged E12 record for module 2 from prc3cfg-other: root's plan reads the module in full, saying
+    whose claim made it, and plans no 10h/20h for it — nor does any apply release its axes."""
+    user = other_user()
+    assert run_cli(capsys, "setup-machine", "--group", grp.getgrgid(user.pw_gid).gr_name).code == 0
+    with emulated_plant(made(machine / "a")) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        plant.emulators["booth-a"].update(2, referenced=True)  # travelled to the reference point since
+        record(user, machine, packages, bus_line_keys(plant.plant, plant.plant.buses[0]), "booth-a", 2, "booth-a-right", "e12")
+        for _ in range(2):  # on every run
+            planned = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
+            assert planned.code == 0, planned.out + planned.err
+            assert f"booth-a/booth-a-right ({user.pw_name} (uid {user.pw_uid})'s record says it reported E12" in planned.out
+            applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+            assert applied.code == 0 and "Nothing to do" in applied.out, applied.out + applied.err
+            assert plant.emulators["booth-a"].module(2).referenced
+
+
+@pytest.mark.parametrize("kind", ["fifo", "zero", "sparse", "folder"])
+def test_a_planted_file_in_the_records_folders_neither_hangs_nor_breaks_a_command(machine, kind):
+    """A FIFO, a link to /dev/zero, a 3 GB sparse file or a folder among the axis-release records and
+    line records: every command on every line still runs to its end, with no traceback — the file is
+    passed over, and said so."""
+    state = machine / "root-state" / "prc3cfg"
+    with emulated_plant(made(machine / "a")) as plant:
+        def cli(*argv: str) -> subprocess.CompletedProcess[str]:
+            done = subprocess.run([sys.executable, "-m", "prc3cfg", *argv], capture_output=True, text=True, timeout=120, cwd=machine,
+                                  env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+            assert "Traceback" not in done.stderr, done.stderr
+            return done
+
+        assert cli("apply", str(plant.path), "--auto-approve", "--allow-axis-release").returncode == 0
+        stem = sorted(path.name.split(".")[0] for path in (state / "lines").glob("*.json"))[0]
+        planted = [state / "releases" / "20990101T000000.000000Z-1.jsonl", state / "lines" / f"{stem}.4242.json"]
+        for path in planted:
+            if kind == "fifo":
+                os.mkfifo(path)
+            elif kind == "zero":
+                path.symlink_to("/dev/zero")
+            elif kind == "sparse":
+                with open(path, "wb") as file:
+                    file.truncate(2**28)  # 256 MiB of nothing: read whole, a 3 GB one ended in MemoryError
+            else:
+                path.mkdir()
+        planned = cli("plan", str(plant.path), "--detailed-exitcode")
+        assert planned.returncode == 0, planned.stdout + planned.stderr
+        assert "taken as known" in planned.stdout  # this user's own record still counts
+        assert any(str(planted[0]) in line for line in planned.stderr.splitlines())  # passed over, and said so
+
+
+@needs_root
+def test_a_file_planted_at_a_user_s_record_name_in_the_shared_folder_does_not_lock_them_out(machine, packages, capsys):
+    """In the sticky machine's folder user A cannot move another user's file away: where one stands at A's
+    record name, A's record goes to the next free name — said in one line — and A's plans go on using it."""
+    a = other_user()
+    assert run_cli(capsys, "setup-machine", "--group", grp.getgrgid(a.pw_gid).gr_name).code == 0
+    (machine / "locks").mkdir()
+    (machine / "locks").chmod(0o1777)
+    with emulated_plant(made(machine / "plant")) as plant:
+        mine = plant_of(a, machine, plant.path.read_text())
+        assert run_as(a, machine, packages, "-m", "prc3cfg", "apply", mine, "--auto-approve", "--allow-axis-release").returncode == 0
+        names = sorted((machine / "machine" / "lines").glob(f"*.{a.pw_uid}.json"))
+        for path in names:  # the names stand empty a moment (a record not kept yet): another user's FIFO takes them
+            path.unlink()
+            os.mkfifo(path)
+            os.lchown(path, 4242, 4242)
+        planned = run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode", timeout=60)
+        assert planned.returncode == 0, planned.stdout + planned.stderr
+        notes = [line for line in planned.stderr.splitlines() if "cannot be moved aside" in line]
+        assert len(notes) == len(names) and all(".tmp" not in line and "instead" in line for line in notes), planned.stderr
+        for path in names:
+            fresh = path.with_name(path.name.replace(".json", ".1.json"))
+            assert fresh.is_file() and fresh.stat().st_uid == a.pw_uid and stat.S_ISFIFO(path.lstat().st_mode)
+        again = run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode", timeout=60)
+        assert again.returncode == 0 and "taken as known" in again.stdout, again.stdout + again.stderr

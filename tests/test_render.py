@@ -245,12 +245,15 @@ def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broad
 
     from prc3cfg.core.plant_plan import LineProof
 
-    killed = SimpleNamespace(bus="booth-a", name="left", command="apply", pid=41, time="2024-05-01T10:00:00", journal=None)
-    assert render.earlier_releases([killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"})]) == [
+    killed = SimpleNamespace(bus="booth-a", name="left", command="apply", pid=41, time="2024-05-01T10:00:00", journal=None, owner=None)
+    claimed = SimpleNamespace(**vars(killed) | {"bus": "booth-a\x1b[1A\x1b[2K", "name": "left\u202e", "owner": "bob (uid 1002)"})
+    assert render.earlier_releases([killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"}), claimed]) == [
         "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier prc3cfg apply, "
         "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)",
         "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier prc3cfg apply, "
-        "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account; journal j.jsonl)"]
+        "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account; journal j.jsonl)",
+        "⚠ Travel to reference point required before production on: booth-a\\x1b[1A\\x1b[2K/left\\u202e (possibly: bob (uid 1002)'s "
+        "record says an earlier prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)"]
     runs = [SimpleNamespace(bus="line", broadcasts=1), SimpleNamespace(bus="other", broadcasts=0)]
     proofs = [LineProof("line", silent=(3, 4, 5)), LineProof("other", silent=(9,)), LineProof("quiet")]
     assert render.broadcasts_heard(proofs, runs) == [

@@ -25,6 +25,7 @@ from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
 from prc3cfg.core.plant_plan import PlantPlan, Reading
 from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.render import Drift, drifted
+from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
@@ -111,6 +112,9 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
         on_record, newer = bases.read(bus_line_keys(plant, bus))
         known |= {(bus.name, address): k for address, k in on_record.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
+    for key, said in e12_claims(plant, buses.values()).items():  # another user's E12: read the module in full, never write for it
+        known.pop(key, None)
+        overruled.setdefault(key, said)
     unset = unset_systems(plant, buses.values()) if known or overruled else frozenset()  # of no use without a record
     max_age = {name: bus.record_max_age for name, bus in buses.items()}
     targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
@@ -267,8 +271,22 @@ def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted
 
 
 def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
-    """The modules of these buses that reported E12 to an earlier apply and were not cleared since."""
-    return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12))
+    """The modules of these buses that reported E12 to an earlier apply of this user's or root's and were
+    not cleared since: their plan writes the system parameters first (a 10h/20h)."""
+    return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12)
+                     if r.owner is None)  # fmt: skip
+
+
+def e12_claims(plant: Plant, buses: Iterable[Bus]) -> dict[Key, str]:
+    """The modules of these buses another user's record says reported E12, with whose claim: a reason to
+    read them in full, never to release their axes — only the module's own refusal (code 23, to a write
+    of this run) or this user's or root's record makes a plan write the system parameters."""
+    said = {}
+    for bus in buses:
+        for r in releases.pending(bus_line_keys(plant, bus), releases.E12):
+            if r.owner is not None:  # keyed by the plant's bus: the record's own bus name is part of the claim
+                said[(bus.name, r.address)] = f"{r.owner}'s record says it reported E12 (system parameters not set), from {shown(r.time)}"
+    return said
 
 
 def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:

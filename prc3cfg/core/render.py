@@ -803,12 +803,17 @@ class Untold(Protocol):
     def time(self) -> str: ...
     @property
     def journal(self) -> str | None: ...
+    @property
+    def owner(self) -> str | None: ...
 
 
 def earlier_releases(records: Iterable[Untold]) -> list[str]:
-    """The modules whose axes an earlier apply may have released and ended before saying so: they must travel too."""
-    return [f"{TRAVEL} {r.bus}/{r.name} (possibly: an earlier prc3cfg {r.command}, pid {r.pid} at {r.time}, sent a 10h/20h "
-            "and ended before its account" + (f"; journal {r.journal})" if r.journal else ")") for r in records]  # fmt: skip
+    """The modules whose axes an earlier apply may have released and ended before saying so: they must travel too
+    — another user's record told as their claim; every field escaped, as the file says it (`escape.shown`)."""
+    shown = escape.shown
+    return [f"{TRAVEL} {shown(r.bus)}/{shown(r.name)} (possibly: " + ("" if r.owner is None else f"{r.owner}'s record says ")
+            + f"an earlier prc3cfg {shown(r.command)}, pid {r.pid} at {shown(r.time)}, sent a 10h/20h and ended before its account"
+            + (f"; journal {shown(r.journal)})" if r.journal else ")") for r in records]  # fmt: skip
 
 
 def broadcasts_heard(proofs: Iterable[LineProof], runs: Sequence[Run]) -> list[str]:

@@ -13,11 +13,17 @@ back.
 One file per identity of the line (`prc3cfg.shell.locks.line_keys`: two spellings of one line share
 a record) and user (`platform.user_tag`: in the machine's folder, which every user of the line
 writes, none may replace another's file) in `lines/` of the state folder
-(`prc3cfg.shell.releases.state_dirs`), written atomically under the line's lock. The newest entry
-of a module across the files is the one taken — if it is this user's or root's: another user's
-file vouches for nothing (it could say anything), but its newer entry still means the module
-changed since, so it is not known (`read` says by whose claim). A file another tool
-damaged, or a link, is read as no record (the modules are then read in full).
+(`prc3cfg.shell.releases.state_dirs`), written atomically under the line's lock, readable by every
+user of the line (`platform.SHARED_READ`) and written by its maker alone. The newest entry of a
+module across the files is the one taken — if it is this user's or root's: another user's file
+vouches for nothing (it could say anything), but its newer entry still means the module changed
+since, so it is not known (`read` says by whose claim, its words escaped). Every file is read as
+another user may have made it: a regular file only, never through a link, never blocking, at most
+`LIMIT` bytes, of this line (its `key`), each entry checked — what is not so is passed over
+(`passed_over` says which, once per command) and the modules are read in full. Whatever stands at
+this user's own name and is not this user's file (a link, a folder, a FIFO, another owner's file)
+is moved aside, or where the folder does not allow it this user's record goes to the next free
+name (`settle`): nobody can lock a user out of their record.
 
 Does not own what is read (`prc3cfg.core.what_to_read`) nor when (`prc3cfg.api`).
 """
@@ -27,22 +33,31 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import os
 import socket
 import stat
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
 from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
-from prc3cfg.shell.files import FileProblem, read_json, write_atomically
+from prc3cfg.shell.files import NOT_FILES, FileProblem, Why, parse_json, read_owned, write_atomically
 from prc3cfg.shell.releases import LINES, folder, state_dirs
 
 FORMAT = "prc3cfg-line-record/1"
 KIND = LINES
 WHAT = "the line's record of what its modules hold"
+#: The largest record file read: one entry of a module with all 64 programs is about 5 KB, a line of
+#: 30 such modules 150 KB — a tenth of this.
+LIMIT = 2 * 2**20
+#: The most names one user's record of a line may take: its own, then one free name after each that
+#: another user's file holds (`_own_file`).
+NAMES = 8
 
 
 def now() -> str:
@@ -59,39 +74,98 @@ def _stem(key: str) -> str:
     return hashlib.sha256(key.encode()).hexdigest()[:32]
 
 
+def _names(directory: Path, key: str) -> Iterator[Path]:
+    """This user's names for the record of line `key`, in the order taken (`_own_file`)."""
+    base = f"{_stem(key)}.{platform.user_tag()}"
+    yield directory / KIND / f"{base}.json"
+    for n in range(1, NAMES):
+        yield directory / KIND / f"{base}.{n}.json"
+
+
 def _own_file(directory: Path, key: str) -> Path:
-    return directory / KIND / f"{_stem(key)}.{platform.user_tag()}.json"
+    """Where this user keeps the record of line `key`: the first of its names where nothing stands or
+    this user's own file does — never a name another user's file, a link or a folder holds."""
+    for path in _names(directory, key):
+        if not os.path.lexists(path) or platform.own_file(path):
+            return path
+    raise UserError(f"{directory / KIND}: every name this user may keep the record of line {shown(key)} under holds another "
+                    "user's file — remove them, or set PRC3CFG_STATE_DIR to a folder this user can write")  # fmt: skip
 
 
-def _entries(path: Path) -> dict[str, dict]:
-    """The entries of one record file by address; none where it is missing, not a record, or a link."""
-    try:
-        if not stat.S_ISREG(path.lstat().st_mode):
-            return {}
-        data = read_json(path)
-    except (OSError, FileProblem):
-        return {}
-    modules = data.get("modules") if isinstance(data, dict) and data.get("format") == FORMAT else None
-    return {a: e for a, e in modules.items() if isinstance(e, dict) and isinstance(e.get("at"), str)} if isinstance(modules, dict) else {}
+@dataclass(frozen=True, slots=True)
+class _Entry:
+    """A module's entry as a record file says it: when it was written, and the rest as written."""
+
+    at: datetime
+    fields: dict
 
 
-def _newest(keys: Iterable[str]) -> tuple[dict[str, dict], dict[str, dict]]:
-    """Per module, the newest entry of a file this user may believe (its own, root's) and the newest of
-    any other user's, across the line's files in every state folder."""
-    trusted: dict[str, dict] = {}
-    claimed: dict[str, dict] = {}
+def _parsed(key: str, data: bytes) -> dict[str, _Entry]:
+    """The entries of a record file of line `key` by address: `FileProblem` where it is not one — not
+    JSON, not a line record, another line's — and an entry whose address or time is no such is left out."""
+    document = parse_json(data)
+    if not isinstance(document, dict) or document.get("format") != FORMAT or not isinstance(document.get("modules"), dict):
+        raise FileProblem(Why.NOT_JSON, "not a line record prc3cfg wrote")
+    if document.get("key") != key:
+        raise FileProblem(Why.NOT_JSON, "the record of another line (its key is not this line's)")
+    entries = {}
+    for address, entry in document["modules"].items():
+        with contextlib.suppress(TypeError, ValueError):
+            if isinstance(entry, dict) and address.isdigit() and 1 <= int(address) <= 30 and (at := datetime.fromisoformat(entry["at"])).tzinfo:
+                entries[str(int(address))] = _Entry(at, entry)
+    return entries
+
+
+def _read(path: Path, key: str) -> tuple[dict[str, _Entry], int]:
+    """The entries of the record file `path` of line `key`, and its owner; `FileProblem` where it is none."""
+    data, owner = read_owned(path, LIMIT)
+    return _parsed(key, data), owner
+
+
+def _files(keys: Iterable[str]) -> Iterator[tuple[Path, str]]:
+    """Every record file of the line with these identities, in every state folder, with its key."""
     for directory in state_dirs():
         for key in keys:
-            try:
-                paths = sorted((directory / KIND).glob(f"{_stem(key)}*.json"))
-            except OSError:
-                continue
-            for path in paths:
-                newest = trusted if platform.trusted_file(path) else claimed
-                for address, entry in _entries(path).items():
-                    if address not in newest or entry["at"] > newest[address]["at"]:
-                        newest[address] = entry
+            with contextlib.suppress(OSError):
+                yield from ((path, key) for path in sorted((directory / KIND).glob(f"{_stem(key)}.*.json")))
+
+
+def _newest(keys: Iterable[str]) -> tuple[dict[str, _Entry], dict[str, tuple[_Entry, int]]]:
+    """Per module, the newest entry of a file this user may believe (its own, root's) and the newest of
+    any other user's with its owner, across the line's files in every state folder."""
+    trusted: dict[str, _Entry] = {}
+    claimed: dict[str, tuple[_Entry, int]] = {}
+    for path, key in _files(keys):
+        try:
+            entries, owner = _read(path, key)
+        except FileProblem:
+            continue  # `passed_over` says so
+        for address, entry in entries.items():
+            if platform.trusted_owner(owner):
+                if address not in trusted or entry.at > trusted[address].at:
+                    trusted[address] = entry
+            elif address not in claimed or entry.at > claimed[address][0].at:
+                claimed[address] = (entry, owner)
     return trusted, claimed
+
+
+def passed_over(keys: Iterable[str]) -> list[str]:
+    """One line for each file among the line's records that is not one: what it is, and that it was passed over."""
+    said = []
+    for path, key in _files(keys):
+        try:
+            _read(path, key)
+        except FileProblem as problem:
+            if problem.why is not Why.MISSING:
+                said.append(f"{shown(str(path))}: {problem}{_of_whom(path)} — passed over as no record of the line (its modules are "
+                            "read in full); remove it")  # fmt: skip
+    return said
+
+
+def _of_whom(path: Path) -> str:
+    with contextlib.suppress(OSError):
+        return f", made by {platform.uid_name(path.lstat().st_uid)}" if platform.OWNERS else ""
+    return ""
 
 
 def load(keys: Iterable[str]) -> dict[int, Known]:
@@ -102,25 +176,64 @@ def load(keys: Iterable[str]) -> dict[int, Known]:
 def read(keys: Iterable[str]) -> tuple[dict[int, Known], dict[int, str]]:
     """What the record of the line with these identities says of each module it knows — and the
     modules another user's file has a newer entry for than this user's and root's, with what that
-    entry claims: not known (it changed since), and why each is read in full."""
+    entry claims (escaped): not known (it changed since), and why each is read in full."""
     trusted, claimed = _newest(keys)
     known, overruled = {}, {}
-    for address, entry in claimed.items():
-        if address not in trusted or entry["at"] > trusted[address]["at"]:
-            by = entry.get("by") if isinstance(entry.get("by"), str) else "a command"
-            with contextlib.suppress(ValueError):
-                overruled[int(address)] = f"another user's record is newer (it claims: {by}, {entry['at']})"
+    for address, (entry, owner) in claimed.items():
+        if address not in trusted or entry.at > trusted[address].at:
+            by = entry.fields.get("by")
+            overruled[int(address)] = (f"another user's record is newer (it claims: {shown(by) if isinstance(by, str) else 'a command'}, "
+                                       f"{entry.at.isoformat()}; written by {platform.uid_name(owner)})")  # fmt: skip
     for address, entry in trusted.items():
-        if address in claimed and claimed[address]["at"] > entry["at"]:
+        if int(address) in overruled:
             continue
+        fields = entry.fields
         try:
-            if entry.get("image") is not None and isinstance(entry.get("since"), str) and isinstance(entry.get("by"), str):
-                if datetime.fromisoformat(entry["since"]).tzinfo is None:
+            if fields.get("image") is not None and isinstance(fields.get("since"), str) and isinstance(fields.get("by"), str):
+                if datetime.fromisoformat(fields["since"]).tzinfo is None:
                     continue  # a time without its zone (another tool's): its age cannot be told
-                known[int(address)] = Known(ModuleImage.from_json(entry["image"]), entry["since"], entry["by"])
-        except ValueError:
+                known[int(address)] = Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"])
+        except (TypeError, ValueError, KeyError, AttributeError):
             continue  # an entry this prc3cfg cannot read: the module is not known
     return known, overruled
+
+
+def settle(keys: Iterable[str]) -> list[str]:
+    """This user's record names of the line with these identities made theirs again, under the line's lock:
+    whatever stands at one and is not this user's file is moved aside (renamed `NAME.planted-TIME`) —
+    where the folder does not let this user do that, the record goes to the next free name
+    (`_own_file`). One line for each, naming both."""
+    try:
+        directory = folder(KIND, WHAT).parent
+    except UserError:
+        return []  # no record is kept: `update` says so
+    said = []
+    for key in keys:
+        path = next(_names(directory, key))
+        if not os.path.lexists(path) or platform.own_file(path):
+            continue
+        what = _what(path)
+        aside = path.with_name(f"{path.name}.planted-{datetime.now(UTC):%Y%m%dT%H%M%S.%fZ}")
+        try:
+            os.rename(path, aside)
+            said.append(f"{shown(str(path))} was not this user's record of the line ({what}) — moved aside to {shown(aside.name)}; "
+                        "the record is written afresh")  # fmt: skip
+        except OSError as error:
+            with contextlib.suppress(UserError):
+                said.append(f"{shown(str(path))} is not this user's record of the line ({what}) and cannot be moved aside "
+                            f"({error.strerror}) — this user's record is kept in {shown(_own_file(directory, key).name)} instead")  # fmt: skip
+    return said
+
+
+def _what(path: Path) -> str:
+    """What stands at `path`: "a symbolic link", "a folder", "a named pipe (FIFO)", "a file of alice (uid 1001)"."""
+    status = path.lstat()
+    if stat.S_ISLNK(status.st_mode):
+        return "a symbolic link"
+    if stat.S_ISDIR(status.st_mode):
+        return "a folder"
+    kind = NOT_FILES.get(stat.S_IFMT(status.st_mode), "a file")
+    return f"{kind} of {platform.uid_name(status.st_uid)}" if platform.OWNERS else kind
 
 
 def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:
@@ -135,11 +248,19 @@ def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:
     try:
         for key in keys:
             path = _own_file(directory, key)
-            modules = dict(sorted((_entries(path) | entries).items(), key=lambda entry: int(entry[0])))
-            write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}))
+            modules = dict(sorted((_kept(path, key) | entries).items(), key=lambda entry: int(entry[0])))
+            write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}), platform.SHARED_READ)
     except OSError as error:
         raise UserError(f"cannot keep {WHAT} ({error.filename or directory}: {error.strerror}) — set PRC3CFG_STATE_DIR to a "
                         "folder this user can write") from None  # fmt: skip
+
+
+def _kept(path: Path, key: str) -> dict[str, dict]:
+    """The entries of this user's own record file to keep as they are (none where it is missing or no record)."""
+    try:
+        return {address: entry.fields for address, entry in _read(path, key)[0].items()}
+    except FileProblem:
+        return {}
 
 
 def forget(keys: Iterable[str], addresses: Iterable[int]) -> None:

@@ -3,7 +3,9 @@
 `read_regular` reads a file that must be a regular file (never a FIFO that would block, a
 device such as `/dev/zero` that never ends, a directory) and at most `limit` bytes of it;
 `FileProblem` says why not, in words the caller completes with what to do. Plant files,
-plan files, snapshots and saved images are read this way.
+plan files, snapshots and saved images are read this way. `read_owned` reads so what another
+user may have put in a folder all users share (the machine's records): never through a link, and
+with the owner of the very file read. `parse_json` is `read_json`'s parsing of bytes already read.
 
 `read_json` reads a JSON document so, and refuses — in a `FileProblem`, never a Python
 error — a key given twice in one object (JSON readers keep one of the two, most the last: a
@@ -26,6 +28,7 @@ files by `replace_unless_changed`, which keeps a file another writer (an editor)
 from __future__ import annotations
 
 import enum
+import errno
 import json
 import os
 import secrets
@@ -89,23 +92,52 @@ def read_regular(path: Path, limit: int) -> bytes:
     """The bytes of the regular file `path`, at most `limit`; opened so that a FIFO cannot block."""
     try:
         _regular(os.stat(path).st_mode)
-        with open(os.open(path, os.O_RDONLY | platform.NON_BLOCKING), "rb") as file:
-            _regular(os.fstat(file.fileno()).st_mode)  # it may have changed since
-            data = file.read(limit + 1)
+        return _bounded(os.open(path, os.O_RDONLY | platform.NON_BLOCKING), limit)[0]
     except FileNotFoundError:
         raise FileProblem(Why.MISSING, "no such file") from None
     except (OSError, ValueError) as error:  # ValueError: a NUL in the path
-        reason = getattr(error, "strerror", None) or str(error)
-        raise FileProblem(Why.UNREADABLE, f"cannot read it ({reason})") from None
+        raise _unreadable(error) from None
+
+
+def read_owned(path: Path, limit: int) -> tuple[bytes, int]:
+    """The bytes of the regular file `path` — not a link, opened without blocking (`platform.open_unfollowed`),
+    at most `limit` — and its owner's uid as the open file says (Windows: 0): what another user may have
+    put in a folder all users share is read so, and its owner judged on the very file read."""
+    try:
+        return _bounded(platform.open_unfollowed(path), limit)
+    except FileNotFoundError:
+        raise FileProblem(Why.MISSING, "no such file") from None
+    except IsADirectoryError:
+        raise FileProblem(Why.DIRECTORY, "is a directory") from None
+    except OSError as error:
+        if error.errno == errno.ELOOP:
+            raise FileProblem(Why.NOT_A_FILE, "is a symbolic link, not a file") from None
+        raise _unreadable(error) from None
+
+
+def _bounded(fd: int, limit: int) -> tuple[bytes, int]:
+    """At most `limit` bytes of the regular file open in `fd` (closed after), and its owner; `FileProblem` for more, or for no regular file."""
+    with open(fd, "rb") as file:
+        status = os.fstat(file.fileno())
+        _regular(status.st_mode)  # checked on the file opened: it may have changed since any look by name
+        data = file.read(limit + 1)
     if len(data) > limit:
         raise FileProblem(Why.TOO_LARGE, f"larger than {_size(limit)}")
-    return data
+    return data, status.st_uid
+
+
+def _unreadable(error: OSError | ValueError) -> FileProblem:
+    return FileProblem(Why.UNREADABLE, f"cannot read it ({getattr(error, 'strerror', None) or error})")
 
 
 def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
     """The JSON document in the regular file `path` (at most `limit` bytes); `FileProblem` otherwise,
     with line and column where the JSON breaks."""
-    data = read_regular(path, limit)
+    return parse_json(read_regular(path, limit))
+
+
+def parse_json(data: bytes) -> Any:
+    """The JSON document `data` holds, within the bounds above; `FileProblem` otherwise."""
     if data.count(b"{") + data.count(b"[") > MAX_CONTAINERS:
         raise FileProblem(Why.TOO_LARGE, f"more than {MAX_CONTAINERS:,} objects and lists (counting '{{' and '['), "
                                          "more than any file prc3cfg writes holds")  # fmt: skip
@@ -162,12 +194,12 @@ def _size(limit: int) -> str:
     return f"{limit // 2**20} MiB" if limit % 2**20 == 0 else f"{limit} bytes"
 
 
-def write_atomically(path: Path, text: str) -> None:
+def write_atomically(path: Path, text: str, mode: int | None = None) -> None:
     """Replace `path` with `text` atomically (written beside it, fsync, put in place, fsync of the
     folder): a new file (a snapshot) is linked in as itself, an existing one replaced by a rename
-    (`_written_beside` says what a process killed on the way leaves)."""
+    (`_written_beside` says what a process killed on the way leaves). Its permissions `mode`, else 0600."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _written_beside(path, text, None, new=True)
+    tmp = _written_beside(path, text, mode, new=True)
     if tmp is not None:
         try:
             os.replace(tmp, path)

@@ -5,7 +5,8 @@ means the same everywhere:
 
 - open flags: `NO_INHERIT` (O_CLOEXEC; Windows: O_NOINHERIT | O_BINARY), `NO_FOLLOW`
   (O_NOFOLLOW; Windows has no symbolic-link open flag: 0), `NON_BLOCKING` (O_NONBLOCK, so a FIFO
-  cannot block an open; Windows: 0), `unnamed_file` (Linux's O_TMPFILE and the /proc link that
+  cannot block an open; Windows: 0), `open_unfollowed` (a file opened neither through a link nor
+  blocking: O_NOFOLLOW | O_NONBLOCK; Windows: a reparse point refused), `unnamed_file` (Linux's O_TMPFILE and the /proc link that
   names it later; elsewhere None: a named temporary file is written instead);
 - folders: `make_shared_folder` (mkdir, then the mode set on the folder opened without following a
   symbolic link; Windows: mkdir);
@@ -22,8 +23,8 @@ means the same everywhere:
   `prc3cfg.shell.releases`) — POSIX's /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows'
   %ProgramData%\prc3cfg and %LOCALAPPDATA%; `serial_group` and `make_group_folder` (the machine's
   folder an administrator makes once for the users of the lines: POSIX's dialout or uucp group, mode
-  3775), `user_tag` (this user's files in it);
-- who and what: `user_name` (a login name, else `uid N`), `trusted_owner`, `OWNERS` and
+  3775; `SHARED_READ`, its records' mode), `user_tag` (this user's files in it);
+- who and what: `user_name` (a login name, else `uid N`), `trusted_owner`, `own_file`, `OWNERS` and
   `user_id`/`uid_name` (whether files have a uid owner: POSIX; Windows has ACLs instead),
   `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
   CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
@@ -53,6 +54,7 @@ here, where a reader porting prc3cfg finds them all. The `# --` rulers group it 
 from __future__ import annotations
 
 import contextlib
+import errno
 import getpass
 import hashlib
 import os
@@ -93,6 +95,18 @@ else:
     NO_INHERIT = os.O_CLOEXEC
     NO_FOLLOW = os.O_NOFOLLOW
     NON_BLOCKING = os.O_NONBLOCK
+
+
+def open_unfollowed(path: Path) -> int:
+    """`path` opened for reading where it is not a symbolic link, without blocking on a FIFO (POSIX:
+    O_NOFOLLOW | O_NONBLOCK — a link fails with ELOOP; Windows, which has no such open flag: a reparse
+    point, a link or a junction, is refused before the open — another user there cannot swap one in
+    between, since %ProgramData%'s ACL lets only a file's maker change it)."""
+    if sys.platform == "win32":
+        if os.lstat(path).st_file_attributes & stat.FILE_ATTRIBUTE_REPARSE_POINT:
+            raise OSError(errno.ELOOP, "is a link", str(path))
+        return os.open(path, os.O_RDONLY | NO_INHERIT)
+    return os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC)
 
 
 def unnamed_file(folder: Path) -> tuple[int, str] | None:
@@ -247,11 +261,19 @@ def serial_group(name: str | None = None) -> tuple[str, int] | None:
     return None
 
 
+#: The permissions of a record in the machine's folder that every user of the line reads and only its
+#: maker writes (a line's record, `prc3cfg.shell.bases`): 0640, its group the folder's (`make_group_folder`:
+#: setgid) — the serial ports' group. Windows keeps no POSIX permissions: the ACL a file inherits from
+#: %ProgramData%\prc3cfg gives every user read and its maker (CREATOR OWNER) alone the right to change it.
+SHARED_READ = 0o640
+
+
 def make_group_folder(folder: Path, gid: int | None) -> None:
     """`folder` (made if missing) owned by this user and group `gid`, mode 3775: the group writes in it,
-    files made there take its group, and none removes or replaces another user's (the sticky bit) —
-    set on the folder opened without following a symbolic link (Windows: mkdir; %ProgramData%'s
-    rights let every user make files there that only their maker may change)."""
+    files made there take its group (every user of the line reads them, `SHARED_READ`), and none removes
+    or replaces another user's (the sticky bit) — set on the folder opened without following a symbolic
+    link (Windows: mkdir; %ProgramData%'s rights let every user make files there that every user reads
+    and only their maker may change)."""
     folder.mkdir(exist_ok=True)
     if sys.platform != "win32":
         fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
@@ -319,14 +341,14 @@ def trusted_owner(uid: int) -> bool:
     return uid in (0, os.getuid())
 
 
-def trusted_file(path: Path) -> bool:
-    """Whether `path` may be believed: a regular file, not a link, owned by this user or by root (Windows:
-    a regular file — its owners are not uids, and its folders' ACLs decide who writes them)."""
+def own_file(path: Path) -> bool:
+    """Whether `path` is this user's own regular file, not a link (Windows: a regular file, not a link —
+    its owners are not uids; in %ProgramData% only a file's maker may change it)."""
     try:
         status = path.lstat()
     except OSError:
         return False
-    return stat.S_ISREG(status.st_mode) and trusted_owner(status.st_uid)
+    return stat.S_ISREG(status.st_mode) and (sys.platform == "win32" or status.st_uid == os.getuid())
 
 
 def process_alive(pid: int) -> bool:

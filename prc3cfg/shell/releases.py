@@ -19,6 +19,12 @@ user's own state folder, which no other user sees (`unshared` is the hint that s
 per apply (`<time>-<pid>.jsonl`), whatever the plant file's folder: `scan`, which has no plant
 file, finds them by the line's identities (`prc3cfg.shell.locks.line_keys`).
 
+Another user's file there is a claim (`Pending.owner`): read as another user may have made it — a
+regular file only, never through a link, never blocking, at most `LIMIT` bytes, each field of its
+type (`passed_over` names what is none) — and told as their claim, every field escaped. It may make
+prc3cfg read (an E12 claim: the module is read in full, `prc3cfg.api`), never write: only this
+user's or root's E12 record, or the module's own refusal, makes a plan send a 10h/20h.
+
 Does not own when a release happens (`prc3cfg.shell.apply`) nor what is said of it (`prc3cfg.cli`).
 """
 
@@ -36,9 +42,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from prc3cfg.core.text import shown
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
-from prc3cfg.shell.files import write_atomically
+from prc3cfg.shell.files import FileProblem, Why, read_owned, write_atomically
 
 #: The machine's folder (it lasts across a reboot, unlike /run: /var/lib/prc3cfg; Windows:
 #: %ProgramData%\prc3cfg): an administrator makes it once for every user of the lines (`setup_machine`);
@@ -137,6 +144,10 @@ def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
     return directory, None if found is None else found[0]
 
 
+#: The largest file of records read: an apply's records are a line of about 300 bytes per module
+#: released or in E12 — 8 buses × 30 modules twice over is 150 KB, a fourteenth of this.
+LIMIT = 2 * 2**20
+
 #: What a record is of: an axis release nobody was told of, or a module that reported E12 ("system
 #: parameters not set", code 23) — which only a 10h/20h clears, so the next plan writes them first.
 RELEASE, E12 = "release", "e12"
@@ -145,7 +156,8 @@ RELEASE, E12 = "release", "e12"
 @dataclass(frozen=True, slots=True)
 class Pending:
     """A 10h/20h that went out (or was about to) — or a read a module executed as a write — that no
-    account has named yet; or (`kind` E12) a module that answered code 23 and has not been cleared."""
+    account has named yet; or (`kind` E12) a module that answered code 23 and has not been cleared.
+    Its fields are as its file says: another user's (`owner`) could say anything."""
 
     keys: tuple[str, ...]  # the line's identities
     bus: str
@@ -157,53 +169,84 @@ class Pending:
     journal: str | None
     file: Path
     kind: str = RELEASE
+    owner: str | None = None  # who wrote it, where that is another user ("alice (uid 1001)"): a claim; None: this user or root
 
     def said(self) -> str:
-        """One line: which module, when, which run — and what to do."""
-        who = f"bus {self.bus}, module {self.address} ({self.name})" if self.address else f"bus {self.bus}, every module on the line ({self.name})"
-        run = f"pid {self.pid}, {self.time}" + (f", journal {self.journal}" if self.journal else "")
-        return (f"{who}: prc3cfg {self.command} ({run}) sent it a 10h/20h, or a frame it took for one, and no account has said "
-                "so — its axes may be released: travel to the reference point before production; the next apply on this "
+        """One line: which module, when, which run — and what to do; every field escaped, another user's told as their claim."""
+        who = (f"bus {shown(self.bus)}, module {self.address} ({shown(self.name)})" if self.address
+               else f"bus {shown(self.bus)}, every module on the line ({shown(self.name)})")  # fmt: skip
+        run = f"pid {self.pid}, {shown(self.time)}" + (f", journal {shown(self.journal)}" if self.journal else "")
+        said = (f"{who}: prc3cfg {shown(self.command)} ({run}) sent it a 10h/20h, or a frame it took for one, and no account has "
+                "said so — its axes may be released: travel to the reference point before production; the next apply on this "
                 "line lists it and clears this")  # fmt: skip
+        return said if self.owner is None else f"{self.owner}'s record says: {said}"
 
 
 def pending(keys: Iterable[str], kind: str = RELEASE) -> list[Pending]:
     """Every record of `kind` on a line with one of `keys` that is not cleared yet (another user's in the
-    machine's folder too: a claim, told all the same — an untold release errs the wrong way)."""
+    machine's folder too: a claim, `owner` says whose — told all the same, an untold release errs the wrong way;
+    it may make prc3cfg read, never write)."""
     wanted = set(keys)
     found = []
-    for directory in state_dirs():
-        try:
-            files = sorted((directory / RELEASES).glob("*.jsonl"))
-        except OSError:
-            continue
-        for path in files:
-            for entry in _entries(path):
-                try:
-                    record = Pending(tuple(entry["keys"]), entry["bus"], int(entry["address"]), entry["name"], entry["time"],
-                                     int(entry["pid"]), entry["command"], entry["journal"], path, entry.get("kind", RELEASE))  # fmt: skip
-                except (KeyError, TypeError, ValueError):
-                    continue
-                if record.kind == kind and wanted & set(record.keys):
-                    found.append(record)
+    for path in _files():
+        entries, owner = _entries(path)
+        for entry in entries:
+            record = _pending(entry, path, None if platform.trusted_owner(owner) else platform.uid_name(owner))
+            if record is not None and record.kind == kind and wanted & set(record.keys):
+                found.append(record)
     return found
 
 
-def _entries(path: Path) -> list[dict]:
-    """The records of a file; a line cut by a kill as it was written is left out (its frame never left)."""
+def _pending(entry: dict[str, Any], path: Path, owner: str | None) -> Pending | None:
+    """The record a line of a file says, every field of its type (None: it is no record)."""
+    texts = [text for name in ("bus", "name", "time", "command") if isinstance(text := entry.get(name), str)]
+    keys, address, pid, journal, kind = (entry.get(name) for name in ("keys", "address", "pid", "journal", "kind"))
+    if not (isinstance(keys, list) and all(isinstance(key, str) for key in keys) and len(texts) == 4
+            and type(address) is int and type(pid) is int and (journal is None or isinstance(journal, str))
+            and kind in (None, RELEASE, E12)):  # fmt: skip
+        return None
+    bus, name, time, command = texts
+    return Pending(tuple(keys), bus, address, name, time, pid, command, journal, path, kind or RELEASE, owner)
+
+
+def _files() -> list[Path]:
+    """The files of records in every state folder."""
+    found: list[Path] = []
+    for directory in state_dirs():
+        with contextlib.suppress(OSError):
+            found += sorted((directory / RELEASES).glob("*.jsonl"))
+    return found
+
+
+def passed_over() -> list[str]:
+    """One line for each file among the records of axis releases that is none — a FIFO, a link, a folder,
+    more than `LIMIT` bytes: what it is, and that it was passed over."""
+    said = []
+    for path in _files():
+        try:
+            read_owned(path, LIMIT)
+        except FileProblem as problem:
+            if problem.why is not Why.MISSING:
+                said.append(f"{shown(str(path))}: {problem} — passed over as no record of an axis release; remove it")
+    return said
+
+
+def _entries(path: Path) -> tuple[list[dict], int]:
+    """The records of a file — a line cut by a kill as it was written is left out (its frame never left) —
+    and its owner; none where it is no file of records (`passed_over`)."""
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError):
-        return []
+        data, owner = read_owned(path, LIMIT)
+    except FileProblem:
+        return [], 0
     entries = []
-    for line in lines:
+    for line in data.decode("utf-8", "replace").splitlines():
         try:
             entry = json.loads(line)
-        except ValueError:
+        except (ValueError, RecursionError):
             continue
         if isinstance(entry, dict):
             entries.append(entry)
-    return entries
+    return entries, owner
 
 
 class Releases:
@@ -264,7 +307,7 @@ def _keep(path: Path, keep: Callable[[dict], bool]) -> None:
     """Only the records of `path` that `keep` says; the file goes when none is left. Where this user
     may not change it (another user's record in the machine's sticky folder) it stays as it is: the
     next command warns once more, which errs the safe way."""
-    kept = [entry for entry in _entries(path) if keep(entry)]
+    kept = [entry for entry in _entries(path)[0] if keep(entry)]
     with contextlib.suppress(OSError):
         if kept:
             write_atomically(path, "".join(json.dumps(entry) + "\n" for entry in kept))

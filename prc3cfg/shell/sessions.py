@@ -32,7 +32,7 @@ from prc3cfg.core.plant_planner import Key
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import releases
+from prc3cfg.shell import bases, releases
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.phases import Progress, Quiet
@@ -151,6 +151,9 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
             raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
                             "read or written: run it again, with the file as it is now")  # fmt: skip
+        for said in [*releases.passed_over(), *(said for identities in keys.values() for said in bases.passed_over(identities)),
+                     *(said for identities in keys.values() for said in bases.settle(identities))]:  # fmt: skip
+            options.tell(said)
         for record in releases.pending(owner):
             options.tell(record.said())
         cancel = options.cancel.event if options.cancel is not None else None
