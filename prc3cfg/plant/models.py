@@ -1,40 +1,36 @@
 """The plant file as written (interfaces.md §1): pydantic models, their ranges, their JSON Schema.
 
-Owns the structure of a plant file and every rule about one value on its own: key names,
-types, ranges in human units (from `units.QUANTITIES`), whole device units, and the
-draft-07 schema generated from these models (`plant_schema`). Does not own rules that
-span values (P ≤ S1, chains, unique names: `rules`), profile layering (`profiles`) or
-where a value is in the file (`loader`).
+Owns the structure of a plant file and every rule about one value on its own: key names, types, ranges in human
+units (from `units.QUANTITIES`), whole device units, and the draft-07 schema generated from these models
+(`plant_schema`). Does not own rules that span values (P ≤ S1, chains, unique names: `rules`), profile layering
+(`profiles`) or where a value is in the file (`loader`).
 
-The schema is written for editors (yaml-language-server): every key described, every value
-with its range, and either the default a key left out stands for (the factory's S1..S12) or an
-example, which completion inserts; program keys checked as YAML integers and JSON strings;
-`$id` the same in every version.
+The schema is written for editors (yaml-language-server): every key described, every value with its range, and
+either the default a key left out stands for (the factory's S1..S12) or an example, which completion inserts;
+program keys checked as YAML integers and JSON strings; `$id` the same in every version.
 
-Every model is frozen and forbids unknown keys. A key left out is `None` ("not given
-here"), so profiles can be layered: "given" and "given as the default" differ.
+Every model is frozen and forbids unknown keys. A key left out is `None` ("not given here"), so profiles can be
+layered: "given" and "given as the default" differ.
 
-Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`, of at most 28
-digits written out (`scalars.MAX_DIGITS`), so that no conversion here is slow or infinite.
-A number field rejects booleans and strings, checks its range and its step, and hands back
-an `int`, an exact `Decimal` (human units) or, for the bus's times, a `float` of seconds.
-Its failures are `PydanticCustomError`s whose type names the problem (`not_number`,
-`not_finite`, `out_of_range`, `not_whole`, `not_allowed`; `tcp_port`, `emulator_name` for a
-port) and whose context carries the words; `messages` turns them into sentences.
+Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`, of at most 28 digits written out
+(`scalars.MAX_DIGITS`), so that no conversion here is slow or infinite. A number field rejects booleans and
+strings, checks its range and its step, and hands back an `int`, an exact `Decimal` (human units) or, for the
+bus's times, a `float` of seconds. Its failures are `PydanticCustomError`s whose type names the problem
+(`not_number`, `not_finite`, `out_of_range`, `not_whole`, `not_allowed`; `port_handler`, `port_not_device`,
+`port_not_a_line`, `tcp_port`, `emulator_name` for a port) and whose context carries the words; `messages` turns
+them into sentences.
 
-Decisions about the bus (link.md): `port` is a port a plant file may name (`core.line.port_refusal`:
-a serial device's path, `socket://`, `rfc2217://`, `emulator://NAME` — never another of pyserial's
-URL handlers, which a reviewed file must not choose) without control characters (a NUL would cut a
-device path); a `socket://` or `rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial
-would fail later, or compare None with 0), and an emulator name must be plain — letters, digits, `-`, `_`, `.` not first — because it names the file
-`.prc3cfg/emulators/NAME.json` (`emulator://../../etc` would write elsewhere; its query only tunes
-the emulator, `prc3cfg.shell.link.ports.emulator_query`); the schema's `PORT_PATTERN` says the same.
-`baud` any positive whole number (with a gateway, `rules` asks the Open Driver's own list);
-`timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz` whole milliseconds,
-0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms on an open-driver line is a `rules` check,
-SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and the Open Driver
-allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223 SYSTAT 91h), from
-`prc3cfg.core.gateway`.
+Decisions about the bus (link.md): `port` is a port a plant file may name (`core.line.port_refusal`: a serial
+device's path, `socket://`, `rfc2217://`, `emulator://NAME` — never another of pyserial's URL handlers, which a
+reviewed file must not choose) without control characters (a NUL would cut a device path); a `socket://` or
+`rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial would fail later, or compare None with 0), and
+an emulator name must be plain — letters, digits, `-`, `_`, `.` not first — as it names the file
+`.prc3cfg/emulators/NAME.json` (its query only tunes the emulator: `prc3cfg.shell.link.ports.emulator_query`); the
+schema's `PORT_PATTERN` says the same. `baud` any positive whole number (with a gateway, `rules` asks the Open
+Driver's own list); `timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz` whole milliseconds, 0.001..65.535
+s (ZVZTIM is a count of ms; ≥ 4 ms on an open-driver line is a `rules` check, SYSTAT 8Eh). The gateway's fields
+have the ranges its INIT-DB bytes and the Open Driver allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h,
+identifier 1..223 SYSTAT 91h), from `prc3cfg.core.gateway`.
 """
 
 from __future__ import annotations

@@ -136,13 +136,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
     if given is None:
         refuse_other_lines(plant, keys)
-    owner: dict[str, str] = {}
-    for name, identities in keys.items():
-        for key in identities:
-            if key in owner:
-                raise UserError(f"{plant.path}: buses {owner[key]} and {name} are one line ({key}) — "
-                                "describe each line once, as one bus")  # fmt: skip
-            owner[key] = name
+    owner = _one_bus_a_line(plant, keys)
     with contextlib.ExitStack() as stack:
         for bus in plant.buses:
             if bus.name in names:
@@ -151,11 +145,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
             raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
                             "read or written: run it again, with the file as it is now")  # fmt: skip
-        for said in [*releases.passed_over(), *(said for identities in keys.values() for said in bases.passed_over(identities)),
-                     *(said for identities in keys.values() for said in bases.settle(identities))]:  # fmt: skip
-            options.tell(said)
-        for record in releases.pending(owner):
-            options.tell(record.said())
+        _tell_records(keys, owner, options)
         cancel = options.cancel.event if options.cancel is not None else None
         module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
@@ -170,6 +160,28 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         yield links
         if options.used is not None:
             options.used(list(links.values()))
+
+
+def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> dict[str, str]:
+    """The bus of each line identity in `keys`; two buses that are one line are refused."""
+    owner: dict[str, str] = {}
+    for name, identities in keys.items():
+        for key in identities:
+            if key in owner:
+                raise UserError(f"{plant.path}: buses {owner[key]} and {name} are one line ({key}) — "
+                                "describe each line once, as one bus")  # fmt: skip
+            owner[key] = name
+    return owner
+
+
+def _tell_records(keys: Mapping[str, tuple[str, ...]], identities: Iterable[str], options: LineOptions) -> None:
+    """Under the lines' locks: the records' files passed over or moved aside, and every axis release on these lines
+    that no account has named yet."""
+    for said in [*releases.passed_over(), *(said for line in keys.values() for said in bases.passed_over(line)),
+                 *(said for line in keys.values() for said in bases.settle(line))]:  # fmt: skip
+        options.tell(said)
+    for record in releases.pending(identities):
+        options.tell(record.said())
 
 
 def _given(given: Mapping[str, Link], bus: str) -> Link:
