@@ -27,6 +27,16 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   (`reach`), or with `Verify.FULL` everything the first read-back held; `read_messages` is the fewest
   50h/51h/52h for any of these, `verification_time` what reading back the reach costs (the floor of a
   verification, which the planning of broadcasts must pay for every module a broadcast reaches).
+- A verification waits first (`settle_time`) where a copy of a step that went out, arriving late — held
+  by a gateway past its time-out and retried, or delivered twice — would undo what a later step did
+  (`undone_by_late`: a 10h–14h initialisation before the writes that follow it, a broadcast that an
+  addressed step overrides): every frame still on its way lands before the read-back, which then reads
+  what every step sent to the module could have changed. A copy of any other step, arriving whenever,
+  leaves what the plan left: no wait.
+
+On a line where nothing protects a data reply (`protects_replies`: a framing without a checksum, and
+no parity the port checks), every read is confirmed — read again until two in a row agree
+(`CONFIRMATIONS` at most): one damaged reply is never believed once, by a plan, a snapshot, a record or `read`.
 
 What is not read is not written: the desired image a targeted plan aims at is cut to the programs
 the read-back holds (`within_read`), so the planner — which never writes a program its desired
@@ -42,10 +52,10 @@ from datetime import UTC, datetime, timedelta
 from math import fsum
 from typing import TYPE_CHECKING
 
-from prc3cfg.core import codec
+from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, SystemParameters
+from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
 from prc3cfg.core.planner import Step
 
 if TYPE_CHECKING:  # they import this module: what is read decides what they plan
@@ -87,6 +97,17 @@ class Target:
 def programs_in(image: ModuleImage) -> tuple[int, ...]:
     """The programs `image` holds: of a desired image those the plant manages, of a read-back those read."""
     return tuple(n for n, p in enumerate(image.programs, start=1) if p is not None)
+
+
+#: Reads of one message, at most, on a line where nothing protects a data reply, to hear the same reply twice in a row.
+CONFIRMATIONS = 4
+
+
+def protects_replies(checked: bool, parity: str, parity_checked: bool) -> bool:
+    """Whether a damaged data reply is refused on a line: by the framing's checksum (`checked`), or by
+    a `parity` the port itself checks (`parity_checked`: a character of bad parity dropped, its frame
+    too short to decode). Else a flipped bit is a believable value, and a read is heard twice."""
+    return checked or (parity != "none" and parity_checked)
 
 
 # -- what a command reads -----------------------------------------------------------------------
@@ -280,3 +301,39 @@ def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequen
     system, programs = reach(before, predicted, steps)
     reads = read_messages(programs)[0 if system else 1 :]
     return fsum(cost.message_time(before.address, m) for m in reads)
+
+
+# -- when a verification reads: after every frame still on its way has landed ----------------------
+
+#: A frame reaches its module within this many reply deadlines of leaving, or never: the bound prc3cfg
+#: takes for a frame a gateway, a radio link or a proxy holds (TCP retransmitting a lost segment once,
+#: Linux's 200 ms at the least, stays within it at a deadline of 0.2 s and more). A link that holds frames
+#: longer needs a longer `timeout` on its bus.
+HELD_DEADLINES = 2
+
+
+def undone_by_late(final: ModuleImage, steps: Sequence[Step]) -> bool:
+    """Whether a copy of one of `steps`, executed once more after all of them (a late or duplicated
+    frame), would leave the module other than `final` (what they leave, by the device model): a 10h–14h
+    before the writes that follow it, or a broadcast an addressed step overrides. A copy landing between
+    the steps is seen by the read-back that follows them all; only one landing after it does harm."""
+    filler = default_program(final.system)
+    state = device.ModuleState(replace(final, programs=tuple(filler if p is None else p for p in final.programs)))
+    for step in steps:
+        try:
+            again = device.execute(state, step.message)
+        except codec.Rejected:  # refused: a copy changes nothing
+            continue
+        if again.image != state.image:
+            return True
+    return False
+
+
+def settle_time(cost: LineCost, timeout: float) -> float:
+    """Seconds after a line's last write until every frame still on its way has landed: `HELD_DEADLINES`
+    reply deadlines, the longest request frame's transmission, the modules' turnaround (and on open-driver
+    the gap that ends a frame)."""
+    framing = cost.framing
+    longest = framing.frame_length(codec.MAX_MESSAGE_BYTES) * (2 if framing.stuffs else 1)
+    gap = cost.zvz if framing.name == "open-driver" else 0.0
+    return HELD_DEADLINES * timeout + cost.line.transmission_time(longest) + cost.turnaround + gap

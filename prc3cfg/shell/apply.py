@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import enum
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -47,7 +48,7 @@ from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.planner import ModulePlan, Step, plan_module
 from prc3cfg.core.render import plural
-from prc3cfg.core.what_to_read import programs_in, verification_reads
+from prc3cfg.core.what_to_read import programs_in, settle_time, undone_by_late, verification_reads
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
@@ -90,6 +91,7 @@ class ModuleRun:
     watched: bool = False  # its system block was read because a release went out on its unprotected line
     system_unset: bool = False  # it answered E12 (system parameters not set): the next plan writes them first
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
+    wrote_at: float = 0.0  # time.monotonic() when its last round of steps ended: a late frame lands within the quiet period since
     failure: str | None = None
     course: Course = field(default_factory=Course)  # where the table has it, and what it does next
 
@@ -189,12 +191,15 @@ class ModuleRun:
         """Send steps in order — the plan's own, or a repair's (the state says which) — while the
         table says to send the next (`failure` says why it stopped, naming the step)."""
         what = "repair step" if self.course.state is State.REPAIRING else "step"
-        for index, step in enumerate(steps, start=1):
-            self.process(self._send(link, step, f"{what} {index} of {len(steps)} ({step.summary})"))
-            if self.course.action is not Next.SEND:
-                return
-            tick()
-        self.process(Event.ALL_SENT)
+        try:
+            for index, step in enumerate(steps, start=1):
+                self.process(self._send(link, step, f"{what} {index} of {len(steps)} ({step.summary})"))
+                if self.course.action is not Next.SEND:
+                    return
+                tick()
+            self.process(Event.ALL_SENT)
+        finally:
+            self.wrote_at = time.monotonic()
 
     def _send(self, link: Link, step: Step, where: str) -> Event:
         """One step on the line, and what came of it (`failure` says what went wrong)."""
@@ -259,10 +264,14 @@ class ModuleRun:
         while True:
             action = self.course.action
             if action is Next.READ:
-                system, programs = verification_reads(self.before, self.final or self.before, expected, self.sent[sent_before:],
-                                                      full=verify is Verify.FULL, watch_system=with_system)  # fmt: skip
+                # a late copy that could undo a step: wait for it, and read what every step sent could have changed
+                late = undone_by_late(expected, self.sent[sent_before:])
+                quiet = self.wrote_at + settle_time(cost, link.timeout) if late else 0.0
+                system, programs = verification_reads(self.before, self.before if late else self.final or self.before, expected,
+                                                      self.sent if late else self.sent[sent_before:], full=verify is Verify.FULL,
+                                                      watch_system=with_system)  # fmt: skip
                 self.watched |= with_system
-                self.process(self._verify(link, system, programs, expected, known_programs))
+                self.process(self._verify(link, system, programs, expected, known_programs, quiet))
             elif action is Next.PLAN_REPAIR:
                 assert self.final is not None  # a difference was read
                 repair = plan_module(self.final, self.desired, cost)
@@ -276,9 +285,11 @@ class ModuleRun:
                     self.failure = self._gave_up()
                 return
 
-    def _verify(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage, known_programs: frozenset[int]) -> Event:
-        """One verifying read-back, and what it found (`failure` says what went wrong)."""
+    def _verify(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage, known_programs: frozenset[int],
+                quiet: float = 0.0) -> Event:  # fmt: skip
+        """One verifying read-back, once the line is quiet (`quiet`: time.monotonic()), and what it found (`failure` says what went wrong)."""
         try:
+            _wait_until(link, quiet)
             self.final = self.verify_read(link, system, programs, expected)
         except Interrupted:
             self.stopped_verifying()
@@ -320,6 +331,15 @@ class ModuleRun:
             + (f" (last problem: {self.failure})" if self.failure else "")
             + " — check the line (damaged frames?) and the module, then apply again"
         )
+
+
+def _wait_until(link: Link, when: float) -> None:
+    """Until time.monotonic() is `when`; `Interrupted` as soon as the link's `cancel` event is set."""
+    if (left := when - time.monotonic()) > 0:
+        if link.cancel is None:
+            time.sleep(left)
+        elif link.cancel.wait(left):
+            raise Interrupted()
 
 
 def _agree(image: ModuleImage, other: ModuleImage, system: bool, programs: frozenset[int]) -> bool:

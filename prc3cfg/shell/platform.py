@@ -35,7 +35,8 @@ means the same everywhere:
   `registered_serial_ports` (Windows' registry of COM ports), `UUCP_LOCKS`
   (whether the `LCK..` convention exists here: not on Windows, where a COM port is exclusive),
   `device_identity` (the name two spellings of one device share: on Windows a COM port's,
-  `com_port_name`: `COM10`, `com10`, `\\.\COM10`);
+  `com_port_name`: `COM10`, `com10`, `\\.\COM10`), `check_parity` (INPCK and IGNPAR: a character of bad
+  parity refused; Windows: not possible, False);
 - sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
   main thread anyway: nothing), `wait_for` and `result_of` (an event's wait and a future's result
@@ -614,3 +615,26 @@ def python_command() -> str:
     if sys.platform == "win32":
         return subprocess.list2cmdline([sys.executable or "python"])
     return shlex.quote(sys.executable or "python3")
+
+
+def check_parity(port: object) -> bool:
+    """Whether the serial device open in `port` (a pyserial port) now refuses a received character whose
+    parity is wrong — POSIX: INPCK and IGNPAR set where the line has parity (pyserial clears INPCK, and a
+    character kept as NUL would pass on a framing without a checksum: dropped, its frame is too short to
+    decode), PARMRK cleared; to be called after anything that makes pyserial set the port up again (its
+    `timeout` does). Windows: False — pyserial sets the DCB's fParity, but the driver hands a bad character
+    over all the same, and a read cannot tell it. False too for a port with no parity or no device (TCP)."""
+    if sys.platform == "win32":
+        return False
+    else:
+        try:
+            fd = port.fileno()  # type: ignore[attr-defined]
+            attributes = termios.tcgetattr(fd)
+            if not attributes[2] & termios.PARENB:
+                return False
+            attributes[0] = (attributes[0] | termios.INPCK | termios.IGNPAR) & ~termios.PARMRK
+            termios.tcsetattr(fd, termios.TCSANOW, attributes)
+            held = termios.tcgetattr(fd)[0]
+        except (termios.error, OSError, AttributeError, ValueError):
+            return False
+        return bool(held & termios.INPCK and held & termios.IGNPAR)

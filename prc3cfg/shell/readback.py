@@ -11,6 +11,10 @@ clamping reaches programs the plant does not manage, and what it does to them mu
 the plan and kept in the snapshot (`after_system`); and what contradicts the line's record is
 read in full (`after_programs`). This module only reads.
 
+On a line where nothing protects a data reply (`what_to_read.protects_replies`: open-driver, and no
+parity the port checks) every read is made until two replies in a row agree (`_confirmed`): a flipped bit
+is never believed once — it costs each read's bus time again on such a line, once more per damaged reply.
+
 S9 must equal the configured address, else the wiring or the plant file is wrong.
 Buses are read in parallel (one thread per line), the modules of one line one after
 another (the line is half duplex).
@@ -25,10 +29,11 @@ from typing import TYPE_CHECKING, TypeVar
 from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.error_codes import describe, remedy
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program, SystemParameters
-from prc3cfg.core.what_to_read import Target, read_messages
+from prc3cfg.core.what_to_read import CONFIRMATIONS, Target, protects_replies, read_messages
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
+from prc3cfg.shell.link.client import LinkError
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link
@@ -71,7 +76,29 @@ Reply = TypeVar("Reply", codec.SystemReply, codec.ProgramsReply)
 
 
 def _request(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
-    """The data block of a read, of `kind` (the reply `codec.decode_reply` gives to `message`)."""
+    """The data block of a read, of `kind` (the reply `codec.decode_reply` gives to `message`) — confirmed
+    where nothing protects it (`_confirmed`)."""
+    if protects_replies(link.framing.checked, link.line.parity, link.parity_checked):
+        return _one(link, address, message, name, kind)
+    return _confirmed(link, address, message, name, kind)
+
+
+def _confirmed(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
+    """The data block of a read heard twice in a row, asking again up to `CONFIRMATIONS` times in all;
+    a `LinkError` when no two replies in a row agree (the line damages more than it carries)."""
+    heard = _one(link, address, message, name, kind)
+    for _ in range(CONFIRMATIONS - 1):
+        again = _one(link, address, message, name, kind)
+        if again == heard:
+            return again
+        heard = again
+    raise LinkError(f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: no two replies in a row to {message.ID:02X}h "
+                    f"agree in {CONFIRMATIONS} reads — the line damages what it carries (open-driver without parity detects "
+                    "nothing): check the cabling, or use parity on the line")  # fmt: skip
+
+
+def _one(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
+    """One data block of a read, as the link gives it."""
     reply = link.request(address, message)
     if isinstance(reply, int):
         where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")

@@ -47,6 +47,7 @@ from prc3cfg.core.exchange import LinkStep, Reply, judge
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
 from prc3cfg.errors import Interrupted, NotSent, UserError
+from prc3cfg.shell import platform
 from prc3cfg.shell.link.trace import Trace
 
 log = logging.getLogger(__name__)
@@ -163,6 +164,8 @@ class Link:
         #: Whether the bytes come from a UART, or over TCP, where their arrival times say nothing.
         self.uart = urlsplit(str(port.port)).scheme.lower() not in TCP_SCHEMES
         port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
+        #: whether the port refuses a character of bad parity (set after the timeout: pyserial's set-up clears it)
+        self.parity_checked = platform.check_parity(port)
         #: Once a reply started, the longest it can take to end; past it the line is not quiet.
         self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
         self._heard = False  # whether a byte ever came back on this port
