@@ -345,7 +345,7 @@ def test_the_chain_names_the_first_record_that_does_not_match(tmp_path, data, pr
 @pytest.mark.parametrize("name", ["../plant.yaml", "/etc/passwd", "a/b.json", "..", "", None, 7, "a\\b.json"])
 def test_a_record_that_names_a_path_is_not_followed_by_prune(plant, capsys, tmp_path, name):
     """prune removes what records name: a journal edited to name a file outside snapshots/ (and
-    its chain made whole again) removes nothing but the run's own files."""
+    its chain made whole again) does not verify — prune removes nothing, and names it."""
     from prc3cfg.shell.audit import file_name
 
     assert file_name(name) is None
@@ -358,8 +358,9 @@ def test_a_record_that_names_a_path_is_not_followed_by_prune(plant, capsys, tmp_
             record["path"] = name
     journal.write_bytes(chained(*records))
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # the newest run: not this one
-    run_cli(capsys, "records", "prune", plant.path, "--keep", "0")
-    assert victim.exists() and not journal.exists()
+    refused = run_cli(capsys, "records", "prune", plant.path, "--keep", "0")
+    assert refused.code == 1 and f"{journal}:" in refused.err and "nothing was removed" in refused.err
+    assert victim.exists() and journal.exists()
 
 
 def test_a_journal_the_disk_cut_short_still_verifies_and_restores(plant, capsys, tmp_path):

@@ -92,8 +92,6 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.errors import UserError as UserError
     from prc3cfg.plant import PlantError as PlantError
     from prc3cfg.shell.apply import Verify as Verify
-    from prc3cfg.shell.audit import Pruned as Pruned
-    from prc3cfg.shell.audit import RecordedRun as RecordedRun
     from prc3cfg.shell.audit import Verified as Verified
     from prc3cfg.shell.doctor import Diagnosis as Diagnosis
     from prc3cfg.shell.doctor import Search as Search
@@ -101,6 +99,8 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.shell.link.ports import FormatRefused as FormatRefused
     from prc3cfg.shell.locks import LineBusy as LineBusy
     from prc3cfg.shell.phases import Progress as Progress
+    from prc3cfg.shell.recorded_runs import Pruned as Pruned
+    from prc3cfg.shell.recorded_runs import RecordedRun as RecordedRun
     from prc3cfg.shell.sessions import BareLine as BareLine
     from prc3cfg.shell.sessions import LineOptions as LineOptions
     from prc3cfg.shell.sessions import default_parity as default_parity
@@ -121,12 +121,13 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.errors": ("UserError",),
     "prc3cfg.plant": ("PlantError",),
     "prc3cfg.shell.apply": ("Verify",),
-    "prc3cfg.shell.audit": ("Pruned", "RecordedRun", "Verified"),
+    "prc3cfg.shell.audit": ("Verified",),
     "prc3cfg.shell.doctor": ("Diagnosis", "Search"),
     "prc3cfg.shell.link.client": ("LinkError",),
     "prc3cfg.shell.link.ports": ("FormatRefused",),
     "prc3cfg.shell.locks": ("LineBusy",),
     "prc3cfg.shell.phases": ("Progress",),
+    "prc3cfg.shell.recorded_runs": ("Pruned", "RecordedRun"),
     "prc3cfg.shell.sessions": ("BareLine", "LineOptions", "default_parity"),
 }  # fmt: skip
 

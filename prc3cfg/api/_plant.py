@@ -2,8 +2,8 @@
 
 `adopt` and `write_adoption` (and `reason_for`, the reason a bus with `require_reason` needs);
 `verify_records`, `list_records`, `prune_records`; `init_data_block` of a gateway; `picture` and
-`plot_format`. Does not own rewriting the file (`prc3cfg.plant.adopt`) nor checking records
-(`prc3cfg.shell.audit`).
+`plot_format`. Does not own rewriting the file (`prc3cfg.plant.adopt`) nor checking, listing and
+pruning records (`prc3cfg.shell.audit`, `prc3cfg.shell.recorded_runs`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from decimal import Decimal
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from prc3cfg.api._plan import plan, read, select
+from prc3cfg.api._plan import load, plan, read, select
 from prc3cfg.core import gateway, plot
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
@@ -25,11 +25,12 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
-from prc3cfg.shell import audit, releases
-from prc3cfg.shell.audit import Pruned, RecordedRun, Verified
+from prc3cfg.shell import audit, recorded_runs, releases
+from prc3cfg.shell.audit import Verified
 from prc3cfg.shell.files import replace_unless_changed
 from prc3cfg.shell.locks import line_lock
 from prc3cfg.shell.platform import python_command
+from prc3cfg.shell.recorded_runs import Pruned, RecordedRun
 from prc3cfg.shell.records import Journal, reason_given
 from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys
@@ -120,14 +121,23 @@ def verify_records(paths: Iterable[Path]) -> Verified:
 
 
 def list_records(plant_path: Path) -> list[RecordedRun]:
-    """Every apply, restore and adopt beside the plant file, oldest first, as its records tell it."""
-    return audit.runs(Path(plant_path))
+    """Every apply, restore and adopt beside the plant file, oldest first, as its records tell it:
+    none for a plant file never applied — and a one-line `UserError` for a path that is no plant
+    file and has no records beside it (a typo, a folder, another file), which would list none too."""
+    found = recorded_runs.runs(Path(plant_path))
+    if not found:
+        try:
+            load(Path(plant_path))
+        except UserError as error:
+            what = str(error).split("\n", 1)[0].split(" — ", 1)[0]  # the first problem, without its remedy
+            raise UserError(f"{what} — no plant file with records: {audit.WHERE}") from None
+    return found
 
 
 def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: float | None = None, dry_run: bool = False) -> Pruned:
     """Remove the plant's runs (journal and snapshot together) beyond the newest `keep` and older
-    than `older_than_days` — never the newest snapshot of a line, never a run an axis release (or
-    an E12) nobody was told of names."""
+    than `older_than_days` — nothing while a record beside it does not verify; never the newest
+    snapshot of a line, never a run an axis release (or an E12) nobody was told of names."""
     if keep is None and older_than_days is None:
         raise UserError("say what to prune: --keep N (the newest N runs stay) or --older-than DAYS, or both")
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
@@ -136,7 +146,7 @@ def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: flo
             held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
         every = [key for identities in keys.values() for key in identities]
         protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(every, kind) if r.journal]
-        return audit.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
+        return recorded_runs.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
 
 
 def _plant_text(path: Path) -> str:

@@ -4,9 +4,12 @@
   first record that does not match, one `error: file:line: …` line each, exit 1; else what was
   checked, exit 0 (`prc3cfg.api.verify_records`).
 - `list PLANT [--json]`: every apply, restore and adopt — time, command, who, plant, lines,
-  result, snapshot, reason — oldest first.
+  result, snapshot, reason, findings — oldest first; a plant file without any: so said, exit 0.
 - `prune PLANT --keep N | --older-than DAYS [--dry-run] [--json]`: whole runs removed, and those
   kept although asked for, with why.
+
+`list` and `prune` of a path that is no plant file and has no records beside it: one line saying
+so, exit 1 — a typo lists nothing silently nowhere.
 
 Arguments and output only: the work is `prc3cfg.api`'s.
 """
@@ -25,6 +28,7 @@ from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:
     from prc3cfg.api import RecordedRun
+    from prc3cfg.plant import Plant
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print it as JSON.")]
 
@@ -58,7 +62,7 @@ def list_(plant: PlantArg, json_out: JsonOpt = False) -> None:
         print(json.dumps([run.to_json() for run in found], indent=1))
         return
     if not found:
-        print(f"No records beside {plant}.")
+        print(f"{plant}: no runs recorded yet (an apply, restore or adopt keeps them in {plant.parent / '.prc3cfg'}).")
     for run in found:
         print(_line(run))
 
@@ -67,15 +71,16 @@ def list_(plant: PlantArg, json_out: JsonOpt = False) -> None:
 def prune(
     plant: PlantArg,
     keep: Annotated[int | None, typer.Option("--keep", min=0, metavar="N", help="Keep the newest N runs.")] = None,
-    older_than: Annotated[float | None, typer.Option("--older-than", min=0, metavar="DAYS", help="Remove only runs older than this.")] = None,
+    older_than: Annotated[float | None, typer.Option("--older-than", metavar="DAYS",
+                                                     help="Remove only runs older than this (by the times in their files' names).")] = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Say what would go; remove nothing.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Remove old runs, journal and snapshot together — never the newest snapshot of a line, never a
-    run an axis release nobody was told of names."""
+    """Remove old runs, journal and snapshot together — nothing while a record beside the plant file
+    does not verify; never the newest snapshot of a line, never a run an axis release nobody was told of names."""
     from prc3cfg import api
 
-    done = api.prune_records(api.load(plant), keep=keep, older_than_days=older_than, dry_run=dry_run)
+    done = api.prune_records(_plant_file(plant), keep=keep, older_than_days=older_than, dry_run=dry_run)
     if json_out:
         print(json.dumps({"removed": [run.to_json() for run in done.removed],
                           "kept": [run.to_json() | {"why": why} for run, why in done.kept]}, indent=1))  # fmt: skip
@@ -86,6 +91,19 @@ def prune(
     for run, why in done.kept:
         print(f"Kept: {_line(run)} — {why}")
     print(f"{verb} {len(done.removed)} run{'s' if len(done.removed) != 1 else ''}; kept {len(done.kept)} of those old enough.")
+
+
+def _plant_file(path: Path) -> Plant:
+    """The plant file at `path`; where it is none and no records are beside it (a typo, a folder,
+    another file), `list_records`' one line saying so — records that outlive their plant file get
+    the plant file's own error."""
+    from prc3cfg import api
+
+    try:
+        return api.load(path)
+    except UserError:
+        api.list_records(path)
+        raise
 
 
 def _line(run: RecordedRun) -> str:
@@ -99,4 +117,5 @@ def _line(run: RecordedRun) -> str:
         parts.append(f"reason: {run.reason}")
     if run.chain != "intact":
         parts.append(f"chain {run.chain}")
+    parts += [f"finding: {finding}" for finding in run.findings]
     return shown("  ".join(parts))

@@ -1,4 +1,4 @@
-"""The records beside a plant file as an auditor reads them: checked, listed, pruned.
+"""The records beside a plant file as an auditor reads them: checked, and what keeps each from being evidence.
 
 A run — an apply, a restore, an adopt — leaves a journal (`.prc3cfg/journal/`) and, once it
 writes a module, a snapshot (`.prc3cfg/snapshots/`): `prc3cfg.shell.records` writes them. This
@@ -13,10 +13,10 @@ module reads them back:
 - `follow`: before a run writes, the plant's newest journal checked — a run does not begin a
   record that follows one that does not verify — and the link to it, for the new header.
 - `snapshot_checked`: before a restore writes, its snapshot and its journal checked.
-- `runs` (`prc3cfg records list`) and `prune` (`prc3cfg records prune`): each run in a line, and
-  runs removed whole, journal and snapshot together — never the newest snapshot of a line, never
-  the run an axis release nobody was told of names (`prc3cfg.shell.releases`; the caller says
-  which journals those are).
+- `journal_problems`: whatever keeps a journal from being evidence — its chain, its header against
+  its file name (`stamped`) and the record after it, its link to the run before (of the same plant
+  file, earlier), the snapshot it names as its own (of the same plant file, the bytes recorded,
+  its header naming this journal). `prc3cfg.shell.recorded_runs` lists and prunes runs on it.
 
 Journals written before records had headers (prc3cfg 0.1.0) are "unchained": listed, never
 refused, and said as not checked. Does not own writing the records, nor what is printed.
@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
@@ -41,7 +42,13 @@ JOURNAL_LIMIT = 1024 * 2**20
 #: What to do about a record that does not verify.
 EVIDENCE = "keep the file as it is for whoever investigates, and compare it with your backup copy (docs/security.md)"
 #: What to do about a path that names no records.
-NAME_ONE = "name a plant file, a .prc3cfg folder, a journal (.jsonl) or a snapshot (.json)"
+WHERE = "check the path; records are kept beside the plant file, in .prc3cfg/"
+NAME_ONE = f"{WHERE} — name a plant file, a .prc3cfg folder, a journal (.jsonl) or a snapshot (.json)"
+#: The time that begins every record file's name (`prc3cfg.shell.records`, `STAMP_LENGTH` long).
+STAMP_FORMAT = "%Y%m%dT%H%M%S.%fZ"
+#: How far the clock may be stepped (NTP) between two moments a run takes one after the other — its
+#: journal's name, then its header's time, then its next record's: beyond it, they disagree.
+CLOCK_SLACK = timedelta(minutes=1)
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,24 @@ def file_name(value: Any) -> str | None:
     return value
 
 
+def stamped(path: Path) -> datetime | None:
+    """The time a record file's name begins with (`TIME-PLANT.jsonl`, `TIME-PLANT.json`): when prc3cfg
+    chose the name. None when the name does not begin so."""
+    try:
+        return datetime.strptime(path.name[:STAMP_LENGTH], STAMP_FORMAT).replace(tzinfo=UTC) if path.name[STAMP_LENGTH:][:1] == "-" else None
+    except ValueError:
+        return None
+
+
+def _time(value: Any) -> datetime | None:
+    """A record's `time` as prc3cfg writes it — ISO 8601 with its UTC offset — else None."""
+    try:
+        said = datetime.fromisoformat(value) if isinstance(value, str) else None
+    except ValueError:
+        return None
+    return said if said is not None and said.utcoffset() is not None else None
+
+
 def check_journal(path: Path) -> Checked:
     """The chain of the journal at `path`. A last line without its end of line is left out and said
     (`cut`): a run the disk refused midway (full), or killed as it wrote, leaves one — and so does
@@ -103,7 +128,7 @@ def check_journal(path: Path) -> Checked:
     for number, line in enumerate(lines, 1):
         try:
             record = json.loads(line)
-        except ValueError:
+        except (ValueError, RecursionError):  # RecursionError: nested deeper than json's parser goes
             record = None
         if not isinstance(record, dict):
             return Checked(path, records, True, Mismatch(f"{path}:{number}", "not a JSON record as prc3cfg writes it"))
@@ -124,10 +149,10 @@ def check_journal(path: Path) -> Checked:
 
 def journals(plant_path: Path) -> list[Path]:
     """The plant file's journals, oldest first (by the time in their names)."""
-    return _of_plant(records_dir(plant_path, "journal"), plant_path.stem, ".jsonl")
+    return of_plant(records_dir(plant_path, "journal"), plant_path.stem, ".jsonl")
 
 
-def _of_plant(folder: Path, stem: str, suffix: str) -> list[Path]:
+def of_plant(folder: Path, stem: str, suffix: str) -> list[Path]:
     try:
         found = [p for p in folder.iterdir() if p.suffix == suffix]
     except OSError:
@@ -153,7 +178,7 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     """A snapshot about to be restored, checked against its journal: `UserError` when either does
     not verify; a note when it was written before records had headers (it cannot be checked)."""
     if snapshot.header is None:
-        for beside in _of_plant(path.resolve().parent.parent / "journal", snapshot.plant_path.stem, ".jsonl"):
+        for beside in of_plant(path.resolve().parent.parent / "journal", snapshot.plant_path.stem, ".jsonl"):
             with contextlib.suppress(FileProblem):
                 if f'"event": "snapshot", "path": {json.dumps(path.name)}'.encode() in read_regular(beside, JOURNAL_LIMIT):
                     raise UserError(f"{path}: has no header, but {beside} records it as written with one — edited since; "
@@ -174,19 +199,51 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
 
 
 def _snapshot_problem(checked: Checked, snapshot: Path) -> Mismatch | None:
-    """Whatever keeps `snapshot` from being the one its journal recorded last."""
+    """Whatever keeps `snapshot` from being the one its journal recorded last: not recorded there, of
+    another plant file, not the bytes recorded, or a snapshot whose header names another journal."""
     if checked.problem is not None:
         return checked.problem
     found = checked.snapshot_record(snapshot.name)
     if found is None:
         return Mismatch(str(snapshot), f"not recorded in its journal {checked.path}")
     line, record = found
+    if snapshot.name[STAMP_LENGTH:] != checked.path.name[STAMP_LENGTH:].removesuffix(".jsonl") + ".json":
+        return Mismatch(f"{checked.path}:{line}", f"names {snapshot.name}, a snapshot of another plant file, as its own")
     try:
-        written = line_hash(read_regular(snapshot, JOURNAL_LIMIT))
+        data = read_regular(snapshot, JOURNAL_LIMIT)
     except FileProblem as problem:
         return Mismatch(str(snapshot), str(problem))
-    if written != record.get("sha256"):
+    if line_hash(data) != record.get("sha256"):
         return Mismatch(str(snapshot), f"does not match its SHA-256 in {checked.path}:{line} — edited or replaced since it was written")
+    try:
+        header = json.loads(data).get("header")
+    except (ValueError, RecursionError, AttributeError):
+        return Mismatch(str(snapshot), "not a JSON document as prc3cfg writes a snapshot")
+    if isinstance(header, dict) and header.get("journal") != checked.path.name:
+        return Mismatch(f"{checked.path}:{line}", f"names {snapshot.name} as its own, whose header names the journal "
+                                                  f"{header.get('journal')!r} — the snapshot of another run")  # fmt: skip
+    return None
+
+
+def _header_problem(path: Path, journal: Checked) -> Mismatch | None:
+    """Whatever in a chained journal's header disagrees with what prc3cfg can check: the journal's
+    own name (`journal`), the time the name begins with, and the time of the record after the header
+    — the name is chosen first, the header written at the first record, the next record after it."""
+    header, where = journal.header or {}, f"{path}:1"
+    if header.get("journal") != path.name:
+        return Mismatch(where, f"its header names the journal {header.get('journal')!r}, not this file — renamed, or copied from another")
+    if (named := stamped(path)) is None:
+        return Mismatch(str(path), f"its name does not begin with the time prc3cfg writes ({STAMP_FORMAT}-PLANT.jsonl) — renamed")
+    if (said := _time(header.get("time"))) is None:
+        return Mismatch(where, f"its header's time {header.get('time')!r} is not an ISO 8601 time with its UTC offset, as prc3cfg "
+                               "writes it — edited")  # fmt: skip
+    if said < named - CLOCK_SLACK:
+        return Mismatch(where, f"its header's time {said.isoformat()} is before the time in its file name "
+                               f"({named.isoformat()}), which was chosen first — edited, or the file renamed")  # fmt: skip
+    after = _time(journal.records[1].get("time")) if len(journal.records) > 1 else None
+    if after is not None and said > after + CLOCK_SLACK:
+        return Mismatch(where, f"its header's time {said.isoformat()} is after the time of the record after it "
+                               f"({after.isoformat()}) — edited")  # fmt: skip
     return None
 
 
@@ -212,7 +269,8 @@ class Verified:
 
 
 def check(paths: Iterable[Path]) -> Verified:
-    """Every record under `paths` checked: a plant file (its records), a records folder, journals, snapshots."""
+    """Every record under `paths` checked: a plant file (its records), a records folder, journals,
+    snapshots — and a problem for each path that names none."""
     result = Verified()
     wanted_journals, wanted_snapshots = _wanted(paths, result)
     checked: dict[Path, Checked] = {}
@@ -222,9 +280,6 @@ def check(paths: Iterable[Path]) -> Verified:
     for path in wanted_snapshots:
         if path.resolve() not in done:
             _check_alone(path, result, checked)
-    if not wanted_journals and not wanted_snapshots and not result.problems:
-        result.problems.extend(Mismatch(str(p), "no records there", "an apply, restore or adopt keeps them in .prc3cfg/ beside the plant file")
-                               for p in paths)  # fmt: skip
     return result
 
 
@@ -234,53 +289,67 @@ def _wanted(paths: Iterable[Path], result: Verified) -> tuple[dict[Path, None], 
     wanted_snapshots: dict[Path, None] = {}
     for path in paths:
         folder = _records_folder(path)
+        found: list[Path] = []
         if path.suffix.lower() in (".yaml", ".yml") and not path.is_dir():  # a plant file: its own records
-            wanted_journals.update(dict.fromkeys(journals(path)))
-            wanted_snapshots.update(dict.fromkeys(_of_plant(records_dir(path, "snapshots"), path.stem, ".json")))
+            found = journals(path)
+            wanted_journals.update(dict.fromkeys(found))
+            found += (snapshots := of_plant(records_dir(path, "snapshots"), path.stem, ".json"))
+            wanted_snapshots.update(dict.fromkeys(snapshots))
+            none = "no such file" if not path.exists() else "no runs of it recorded in the .prc3cfg/ folder beside it"
         elif folder is not None:
             for kind, into, suffix in (("journal", wanted_journals, ".jsonl"), ("snapshots", wanted_snapshots, ".json")):
                 with contextlib.suppress(OSError):
-                    into.update(dict.fromkeys(sorted(p for p in (folder / kind).iterdir() if p.suffix == suffix)))
-        elif path.suffix == ".jsonl":
-            wanted_journals[path] = None
-        elif path.suffix == ".json":
-            wanted_snapshots[path] = None
+                    found += (these := sorted(p for p in (folder / kind).iterdir() if p.suffix == suffix))
+                    into.update(dict.fromkeys(these))
+            none = "a folder with no records in it (no journal/ or snapshots/ with any)"
+        elif path.suffix in (".jsonl", ".json"):
+            found = [path]
+            (wanted_journals if path.suffix == ".jsonl" else wanted_snapshots)[path] = None
         else:
-            result.problems.append(Mismatch(str(path), "not a plant file, records folder, journal (.jsonl) or snapshot (.json)", NAME_ONE))
+            found = []
+            none = "no such file" if not os.path.lexists(path) else "not a plant file, records folder, journal (.jsonl) or snapshot (.json)"
+        if not found:
+            result.problems.append(Mismatch(str(path), none, NAME_ONE))
     return wanted_journals, wanted_snapshots
 
 
 def _check_chained(path: Path, result: Verified, done: set[Path]) -> Checked:
-    """A journal checked into `result`: its chain, its link to the run before and the snapshot it
-    records last (added to `done`, so that it is not checked again on its own)."""
+    """A journal checked into `result` (`journal_problems`); the snapshot it records last added to
+    `done`, so that it is not checked again on its own."""
     journal = check_journal(path)
     result.journals += 1
-    if journal.problem is not None:
-        result.problems.append(journal.problem)
-        return journal
-    if journal.cut:
+    if journal.cut and journal.problem is None:
         result.notes.append(f"{path}:{len(journal.records) + 1}: its last record was cut short — the disk refused it, or the "
                             "run was killed as it wrote it — and is left out")  # fmt: skip
-    if not journal.chained:
+    if not journal.chained and journal.problem is None:
         result.unchained += 1
-        return journal
-    header = journal.header or {}
-    if (problem := _link_problem(path, header.get("previous"), result.notes)) is not None:
-        result.problems.append(problem)
-    if (found := journal.snapshot_record()) is None:
-        return journal
-    if (name := file_name(found[1].get("path"))) is None:
-        result.problems.append(Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)"))
-        return journal
-    snapshot = path.resolve().parent.parent / "snapshots" / name
-    done.add(snapshot)
-    result.snapshots += 1
-    if not snapshot.exists():
-        result.problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
-                                       "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
-    elif (problem := _snapshot_problem(journal, snapshot)) is not None:
-        result.problems.append(problem)
+    problems, snapshot = journal_problems(path, journal, result.notes)
+    result.problems.extend(problems)
+    if snapshot is not None:
+        done.add(snapshot)
+        result.snapshots += 1
     return journal
+
+
+def journal_problems(path: Path, journal: Checked, notes: list[str]) -> tuple[list[Mismatch], Path | None]:
+    """Whatever keeps a journal from being evidence: its chain; then its header against its name and
+    records, its link to the run before, and the snapshot it records last (given back, once named)."""
+    if journal.problem is not None:
+        return [journal.problem], None
+    if not journal.chained:
+        return [], None
+    problems = [problem for problem in (_header_problem(path, journal), _link_problem(path, journal, notes)) if problem is not None]
+    if (found := journal.snapshot_record()) is None:
+        return problems, None
+    if (name := file_name(found[1].get("path"))) is None:
+        return [*problems, Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)")], None
+    snapshot = path.resolve().parent.parent / "snapshots" / name
+    if not os.path.lexists(snapshot):
+        problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
+                                                       "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
+    elif (problem := _snapshot_problem(journal, snapshot)) is not None:
+        problems.append(problem)
+    return problems, snapshot
 
 
 def _check_alone(path: Path, result: Verified, checked: dict[Path, Checked]) -> None:
@@ -318,183 +387,26 @@ def _records_folder(path: Path) -> Path | None:
     return path / ".prc3cfg" if (path / ".prc3cfg").is_dir() and not (path / "journal").is_dir() else path
 
 
-def _link_problem(path: Path, previous: Any, notes: list[str]) -> Mismatch | None:
-    """A journal's link to the plant's journal before it: that one's line as it was when this run began."""
+def _link_problem(path: Path, journal: Checked, notes: list[str]) -> Mismatch | None:
+    """A journal's link to the plant's journal before it: one of the same plant file, begun earlier
+    (by the names' times), and that one's line as it was when this run began."""
+    previous = (journal.header or {}).get("previous")
     if not isinstance(previous, dict):
         return None
     if (name := file_name(previous.get("journal"))) is None:
         return Mismatch(f"{path}:1", "its link to the run before names no journal file")
     before = path.resolve().parent / name
-    if not before.is_file():
+    began, then = stamped(path), stamped(before)
+    if name == path.name or name[STAMP_LENGTH:] != path.name[STAMP_LENGTH:] or began is None or then is None or then > began + CLOCK_SLACK:
+        return Mismatch(f"{path}:1", f"its link to the run before names {name}, not an earlier journal of the same plant file — edited")
+    try:
+        lines = read_regular(before, JOURNAL_LIMIT).split(b"\n")
+    except FileProblem as problem:
+        if problem.why is not Why.MISSING:
+            return Mismatch(str(before), str(problem))
         notes.append(f"{path}:1: follows {before.name}, which is not there (pruned, or removed)")
         return None
-    lines = before.read_bytes().split(b"\n")
     count = previous.get("lines")
     if not isinstance(count, int) or not 0 < count <= len(lines) or line_hash(lines[count - 1]) != previous.get("sha256"):
         return Mismatch(f"{before}:{count}", f"not the record {path}:1 follows — edited since that run began")
     return None
-
-
-# -- listing and pruning ------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class RecordedRun:
-    """One apply, restore or adopt as its records tell it."""
-
-    time: str
-    command: str | None
-    user: str | None
-    host: str | None
-    plant: str | None
-    lines: tuple[str, ...]
-    result: str
-    reason: str | None
-    journal: Path | None
-    snapshot: Path | None
-    chain: str  # "intact", "broken at FILE:LINE", "unchained" (before headers)
-
-    def to_json(self) -> dict[str, Any]:
-        return {"time": self.time, "command": self.command, "user": self.user, "host": self.host, "plant": self.plant,
-                "lines": list(self.lines), "result": self.result, "reason": self.reason,
-                "journal": None if self.journal is None else str(self.journal),
-                "snapshot": None if self.snapshot is None else str(self.snapshot), "chain": self.chain}  # fmt: skip
-
-
-def _result(records: list[dict[str, Any]]) -> str:
-    """What became of a run, from its records."""
-    events = [r.get("event") for r in records]
-    results = [r for r in records if r.get("event") == "result"]
-    if "adopt" in events:
-        adopted = [r for r in records if r.get("event") == "adopted"]
-        return "unfinished" if not adopted else "adopted" if adopted[-1].get("written") else "not adopted"
-    if "interrupted" in events:
-        return "interrupted"
-    if results:
-        return "verified" if all(r.get("verified") for r in results) else "failed"
-    return "unfinished" if "snapshot" in events or "apply" in events else "nothing written"
-
-
-def runs(plant_path: Path) -> list[RecordedRun]:
-    """Every run beside the plant file, oldest first: each journal, and each snapshot without one."""
-    snapshots_dir = records_dir(plant_path, "snapshots")
-    found = [_journal_run(path, snapshots_dir) for path in journals(plant_path)]
-    named = {run.snapshot.name for run in found if run.snapshot is not None}
-    found += [_snapshot_run(path) for path in _of_plant(snapshots_dir, plant_path.stem, ".json") if path.name not in named]
-    return sorted(found, key=lambda run: run.time)
-
-
-def _journal_run(path: Path, snapshots_dir: Path) -> RecordedRun:
-    """A run as its journal tells it (one before headers: what its records say)."""
-    checked = check_journal(path)
-    records, header = checked.records, checked.header or {}
-    named = _snapshot_named(checked)
-    snapshot = None if named is None else snapshots_dir / named
-    plant = header.get("plant")
-    name = plant.get("name") if isinstance(plant, dict) else next((r.get("plant") for r in records if r.get("event") == "apply"), None)
-    chain = "intact" if checked.chained else "unchained"
-    if checked.problem is not None:
-        chain = f"broken at {checked.problem.where}"
-    return RecordedRun(str(records[0].get("time", "")) if records else "", header.get("command") or ("apply" if records else None),
-               header.get("user"), header.get("host"), name, _buses(records), _result(records), header.get("reason"), path,
-               snapshot, chain)  # fmt: skip
-
-
-def _snapshot_named(checked: Checked) -> str | None:
-    """The file name of the snapshot a journal records last."""
-    if (record := checked.snapshot_record()) is not None:
-        return file_name(record[1].get("path"))
-    if applied := [r for r in checked.records if r.get("event") == "apply" and isinstance(r.get("snapshot"), str)]:
-        return file_name(Path(applied[-1]["snapshot"]).name)  # before headers: the apply record named it by its path
-    return None
-
-
-def _buses(records: list[dict[str, Any]]) -> tuple[str, ...]:
-    """The buses a run spoke on, from its records: its exchanges', and an adopt's."""
-    buses = {str(r["bus"]) for r in records if r.get("event") in ("request", "exchange") and "bus" in r}
-    buses |= {str(bus) for r in records if r.get("event") == "adopt" for bus in r.get("buses") or ()}
-    return tuple(sorted(buses))
-
-
-def _snapshot_run(path: Path) -> RecordedRun:
-    """A run of which only the snapshot is left (written before journals named it)."""
-    try:
-        snapshot = Snapshot.load(path)
-        taken = datetime.strptime(snapshot.taken, "%Y%m%dT%H%M%S.%fZ").replace(tzinfo=UTC).isoformat()
-        lines: tuple[str, ...] = tuple(sorted({bus for bus, _ in snapshot.images}))
-    except (UserError, ValueError):
-        taken, lines = "", ()
-    return RecordedRun(taken, None, None, None, None, lines, "unknown (no journal)", None, None, path, "unchained")
-
-
-@dataclass(frozen=True)
-class Pruned:
-    """What `prune` removed, and what it kept although asked to remove it, with why."""
-
-    removed: tuple[RecordedRun, ...]
-    kept: tuple[tuple[RecordedRun, str], ...]
-
-
-def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, protected: Iterable[Path] = (),
-          dry_run: bool = False, now: datetime | None = None) -> Pruned:  # fmt: skip
-    """Remove whole runs — journal and snapshot — beyond the newest `keep` and older than
-    `older_than_days` (each only when given, both when both are): never the newest snapshot of a
-    line, never a run whose journal is in `protected` (an axis release nobody was told of names it),
-    never the plant's newest run (the next one follows it). The caller holds the plant's lines: no
-    run of them is being written meanwhile."""
-    every = runs(plant_path)
-    now = now or datetime.now(UTC)
-    cut = None if older_than_days is None else now - timedelta(days=older_than_days)
-    beyond = set(range(len(every) - keep)) if keep is not None else set(range(len(every)))
-    candidates = [i for i in sorted(beyond) if cut is None or (every[i].time and datetime.fromisoformat(every[i].time) < cut)]
-    why = _kept(every, protected)
-    removed, kept = [], []
-    for index in candidates:
-        run = every[index]
-        if index in why:
-            kept.append((run, why[index]))
-            continue
-        if not dry_run:
-            for path in (run.snapshot, run.journal):
-                if path is not None:
-                    path.unlink(missing_ok=True)
-        removed.append(run)
-    return Pruned(tuple(removed), tuple(kept))
-
-
-def _kept(every: list[RecordedRun], protected: Iterable[Path]) -> dict[int, str]:
-    """Why each run that prune must keep is kept, by its index in `every` (oldest first): the newest
-    snapshot of a line, the plant's newest run, a run an axis release nobody was told of names."""
-    guarded = {p.name for p in protected}  # by name: a record may name the journal by a path relative to another folder
-    newest: dict[str, tuple[int, str]] = {}
-    for index, run in enumerate(every):
-        for identity, said in _lines(run).items():
-            newest[identity] = (index, said)  # `every` is oldest first: the last one seen is the newest
-    lines: dict[int, list[str]] = {}
-    for index, said in newest.values():
-        if said not in lines.setdefault(index, []):
-            lines[index].append(said)
-    why = {index: "the newest snapshot of " + " and of ".join(said) for index, said in lines.items()}
-    if every and every[-1].journal is not None:
-        why.setdefault(len(every) - 1, "the plant's newest run: the next run's journal follows it")
-    for index, run in enumerate(every):
-        if run.journal is not None and run.journal.name in guarded:
-            why[index] = "an axis release nobody was told of names this run (prc3cfg.shell.releases): kept until an apply's account names it"
-    return why
-
-
-def _lines(run: RecordedRun) -> dict[str, str]:
-    """The lines whose modules a run's snapshot holds: each of a line's identities (`LineTaken.keys`:
-    a line named by another bus name since is still that line), with the line in words."""
-    if run.snapshot is None or not run.snapshot.exists():
-        return {}
-    try:
-        snapshot = Snapshot.load(run.snapshot)
-    except UserError:
-        return {f"unreadable {run.snapshot.name}": f"a snapshot prc3cfg cannot read ({run.snapshot.name})"}
-    found: dict[str, str] = {}
-    for bus in sorted({bus for bus, _ in snapshot.images}):
-        line = snapshot.lines.get(bus)
-        said = f"bus {bus}'s line" + (f" ({line.port})" if line is not None else "")
-        found |= {key: said for key in line.keys} if line is not None and line.keys else {f"bus {bus}": said}
-    return found

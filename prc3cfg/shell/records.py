@@ -18,7 +18,8 @@
   record carries the snapshot file's SHA-256 — the journal begins with the read-back, before the
   snapshot exists, so the header cannot; and the header of a journal carries `previous`, the
   name, line count and last line's SHA-256 of the plant's newest journal when it began (that
-  journal is checked first: `prc3cfg.shell.audit`, which also checks, lists and prunes records).
+  journal is checked first: `prc3cfg.shell.audit`, which also checks records;
+  `prc3cfg.shell.recorded_runs` lists and prunes them).
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
   modules and programs left the plant file — they stay on the hardware as they are. (What the
