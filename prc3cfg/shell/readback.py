@@ -33,7 +33,6 @@ from prc3cfg.core.what_to_read import CONFIRMATIONS, Target, protects_replies, r
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only
-from prc3cfg.shell.link.client import LinkError
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link
@@ -86,6 +85,8 @@ def _request(link: Link, address: int, message: codec.Message, name: str, kind: 
 def _confirmed(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
     """The data block of a read heard twice in a row, asking again up to `CONFIRMATIONS` times in all;
     a `LinkError` when no two replies in a row agree (the line damages more than it carries)."""
+    from prc3cfg.shell.link.client import LinkError  # here: a command that opens no line (`plan --actual`) loads no link
+
     heard = _one(link, address, message, name, kind)
     for _ in range(CONFIRMATIONS - 1):
         again = _one(link, address, message, name, kind)
