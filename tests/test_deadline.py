@@ -11,11 +11,15 @@ from pathlib import Path
 import pytest
 from emulated import run_cli
 from emulator_client import serve
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from test_codec_properties import MESSAGE_STRATEGIES
+from test_framing_properties import lines
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import DEADLINE_MARGIN, LineCost
 from prc3cfg.core.device import ModuleState
-from prc3cfg.core.framing import get_framing
+from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.image import Program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.shell.emulator.server import Emulator
@@ -49,6 +53,41 @@ def seconds(chars: int, bits: float, baud: int, turnaround: float = 0.010, gaps:
 def test_the_deadline_of_each_message_kind_comes_from_the_line(message, framing, line, expected):
     cost = LineCost.of(framing, line, 0.010, 0.020)
     assert cost.reply_deadline(1, message) == pytest.approx(expected, abs=1e-9)
+
+
+def no_reply_comes_later(framing: str, line: LineSettings, address: int, message: codec.Message, reply: bytes) -> None:
+    """The deadline is never shorter than what any reply the message can have takes on the line — its
+    frame as the framing encodes those bytes (stx stuffing them as they are), after the request frame
+    and the turnaround: as long as the emulator at line speed takes to answer."""
+    cost = LineCost.of(framing, line, 0.010, 0.020)
+    encoded = get_framing(framing)
+    taken = (len(encoded.encode(Direction.REQUEST, address, message.encode())) + len(encoded.encode(Direction.REPLY, address, reply)))
+    gaps = 2 * 0.020 if framing == "open-driver" else 0.0
+    assert cost.reply_deadline(address, message) >= taken * line.char_time + 0.010 + gaps
+
+
+exchanges = st.tuples(st.sampled_from(["crc16", "stx", "open-driver"]), lines, st.integers(1, 30),
+                      st.sampled_from(list(MESSAGE_STRATEGIES)).flatmap(lambda kind: MESSAGE_STRATEGIES[kind]))  # fmt: skip
+
+
+def replies(message: codec.Message) -> st.SearchStrategy[bytes]:
+    """Any reply `message` can have: a code word, or (a read) its data block — every byte 7Eh allowed."""
+    codes = st.binary(min_size=2, max_size=2)
+    return st.one_of(codes, st.binary(min_size=codec.reply_length(message), max_size=codec.reply_length(message))) if message.IS_READ else codes
+
+
+@settings(max_examples=60)
+@given(exchanges, st.data())
+def test_no_reply_comes_later_than_its_deadline(exchange, data):
+    framing, line, address, message = exchange
+    no_reply_comes_later(framing, line, address, message, data.draw(replies(message)))
+
+
+@pytest.mark.soak
+@given(exchanges, st.data())
+def test_no_reply_comes_later_than_its_deadline_soak(exchange, data):
+    framing, line, address, message = exchange
+    no_reply_comes_later(framing, line, address, message, data.draw(replies(message)))
 
 
 def test_the_deadline_covers_the_exchange_priced_and_grows_with_the_turnaround():

@@ -15,12 +15,15 @@ import os
 import select
 import shutil
 import signal
+import string
 import subprocess
 import sys
 import uuid
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from prc3cfg.shell import serial_lock
 from prc3cfg.shell.locks import device_path, line_keys, line_lock
@@ -138,6 +141,30 @@ def test_lock_names_are_written_as_uucp_minicom_and_picocom_write_them(path, uuc
     each spelling is checked and written."""
     assert {name: naming(path) for name, naming in serial_lock.NAMINGS.items()} == {"UUCP": uucp, "minicom": minicom, "picocom": picocom}
     assert serial_lock.lock_names(path) == tuple(f"LCK..{name}" for name in dict.fromkeys((uucp, minicom, picocom)))
+
+
+device_paths = st.lists(st.text(string.ascii_letters + string.digits + "-_.", min_size=1, max_size=12).filter(lambda p: p not in (".", "..")),
+                        min_size=1, max_size=4).map(lambda parts: "/dev/" + "/".join(parts))  # fmt: skip
+
+
+def names_of(path: str) -> None:
+    """Every spelling of a device path below /dev is a name of its own (no /), once: the UUCP one and minicom's, which picocom's equals."""
+    names = serial_lock.lock_names(path)
+    assert len(set(names)) == len(names) and all(name.startswith("LCK..") and "/" not in name for name in names)
+    assert {f"LCK..{os.path.basename(path)}", f"LCK..{path.removeprefix('/dev/').replace('/', '_')}"} <= set(names)
+    assert serial_lock.NAMINGS["minicom"](path) == serial_lock.NAMINGS["picocom"](path)
+
+
+@settings(max_examples=50)
+@given(device_paths)
+def test_every_spelling_of_a_device_below_dev_is_a_lock_name(path):
+    names_of(path)
+
+
+@pytest.mark.soak
+@given(device_paths)
+def test_every_spelling_of_a_device_below_dev_is_a_lock_name_soak(path):
+    names_of(path)
 
 
 @pytest.mark.parametrize("named", ["given", "real"])
