@@ -304,7 +304,8 @@ def test_a_line_that_never_goes_quiet_ends_in_one_line(tmp_path, capsys):
         result = run_cli(capsys, "read", plant.path, "--retries", "1")
         assert result.code == 1
         (line,) = result.problems
-        assert line.startswith("error: bus booth-a, module 1: no reply within 0.1 s to 50h after 2 attempts")
+        # the bus's 0.1 s on top of the line's own 0.083 s: a 50h's frames and two ZVZ gaps, the turnaround
+        assert line.startswith("error: bus booth-a, module 1: no reply within 0.183 s to 50h after 2 attempts")
 
 
 # -- 7. values a module should not hold ------------------------------------------------------

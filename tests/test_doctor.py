@@ -5,6 +5,8 @@ and measuring those turnarounds — across the real emulator and the real pyseri
 from __future__ import annotations
 
 import logging
+import math
+import random
 import time
 from types import SimpleNamespace
 
@@ -19,7 +21,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received
-from prc3cfg.shell.doctor import Search
+from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, Timing
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
 from prc3cfg.shell.link.client import Link
 from prc3cfg.shell.link.ports import open_link, open_port
@@ -200,3 +202,41 @@ def test_over_rfc2217_an_exchange_does_not_ask_the_gateway_to_purge(caplog):
             port.close()
     assert all(isinstance(reply, codec.SystemReply) for reply in replies)
     assert not [r for r in caplog.records if "purge" in r.getMessage()]
+
+
+@pytest.mark.parametrize(("answers", "timeout"), [
+    pytest.param({1: (0.050, 0.052, 0.054)}, None, id="steady: the turnaround alone, the default timeout"),
+    pytest.param({1: (0.100, 0.900, 0.400), 2: (0.050, 0.060, 0.055)}, 0.8, id="one module varies by 0.8 s: a timeout of 0.8 s"),
+    pytest.param({1: (0.100, 0.6005)}, 0.501, id="just over the default: rounded up to the millisecond"),
+    pytest.param({1: (0.100, 0.600)}, None, id="by the default exactly: the default"),
+    pytest.param({1: (0.050, 0.900), 2: ()}, 0.85, id="a module that never answered varies by nothing"),
+])  # fmt: skip
+def test_doctor_proposes_a_timeout_only_where_answers_varied_more_than_the_default_allows(answers, timeout):
+    """The wait for a reply is the line's own time, the turnaround (the slowest answer measured) and the
+    bus's `timeout` on top: a module whose answers varied by more than the default `timeout` may next
+    answer later than the slowest seen by as much — doctor proposes that much, and nothing otherwise."""
+    found = LineCandidate("crc16", LineSettings(1200, 8, "even", 1))
+    modules = tuple(Timing(address, turnarounds, 0, 0) for address, turnarounds in answers.items())
+    keys = Diagnosis("/dev/ttyUSB0", found, 0.020, True, modules).plant_keys()
+    assert keys.get("timeout") == timeout
+    assert keys["turnaround"] == math.ceil(max(max(t) for t in answers.values() if t) * 1000) / 1000
+
+
+def test_doctor_measures_a_module_slower_than_its_probes_allow_and_proposes_a_timeout(capsys):
+    """A module answering in 0.1..0.9 s at 1200 baud (0.5 s ± a seeded 0.4 s): found by a probe (its first
+    answer is quick), then every timed exchange answered however late — none counted lost — and a
+    `timeout` proposed for answers that vary that much."""
+    seed, jitter = 57, 0.400
+    draws = random.Random(seed)  # the emulator's: `Emulator.turnaround_of`
+    first, *timed = (0.500 + draws.uniform(-jitter, jitter) for _ in range(5))
+    assert first < 0.2 and max(timed) - min(timed) > 0.55  # what the seed was chosen for
+    line = LineSettings(1200, 8, "even", 1)
+    with Emulator({1: ModuleState.factory(1)}, line=line, line_speed=True, turnaround=0.500, jitter=jitter,
+                  faults=FaultInjection(seed=seed)) as emulator:  # fmt: skip
+        result, keys = doctor_line(capsys, emulator, "--framing", "crc16", "--baud", "1200", "--parity", "even", "--modules", "1",
+                                   "--exchanges", "4")  # fmt: skip
+    assert result.code == 0, result.err
+    ((_, worst),) = turnarounds(result.out).values()
+    assert abs(worst - max(timed)) < 0.05 and "4/4" in result.out
+    assert float(keys["timeout"]) == pytest.approx(max(timed) - min(timed), abs=0.05)
+    assert float(keys["turnaround"]) >= worst

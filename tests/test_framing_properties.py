@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from test_codec_properties import MESSAGE_STRATEGIES
 
 from prc3cfg.core import codec
-from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.bustime import DEADLINE_MARGIN, LineCost
 from prc3cfg.core.framing import FRAMINGS, NEED_DATA, Decoder, Direction, Discarded, Frame, Framing
 from prc3cfg.core.line import LineSettings
 
@@ -211,6 +211,17 @@ def encoded_time(cost: LineCost, address: int, message: codec.Message) -> float:
     return (len(request) + len(reply)) * cost.line.char_time + cost.turnaround + gaps
 
 
+def encoded_deadline(cost: LineCost, address: int, message: codec.Message) -> float:
+    """How long a reply is waited for, by the encoded request frame and the longest reply frame: on stx a
+    reply of 7Eh bytes, every byte after the start code stuffed (`bustime.DEADLINE_MARGIN` on the characters)."""
+    request = cost.framing.encode(Direction.REQUEST, address, message.encode())
+    reply = len(cost.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message))))
+    if cost.framing.name == "stx":  # 7Eh, CMD|ADDR, N, the data, CHK: each byte after the 7Eh may be a 7Eh, stuffed
+        reply = 2 * (1 + 2 + codec.reply_length(message) + 1) - 1
+    gaps = 2 * cost.zvz if cost.framing.name == "open-driver" else 0.0
+    return (len(request) + reply) * cost.line.char_time * (1 + DEADLINE_MARGIN) + cost.turnaround + gaps
+
+
 @pytest.mark.parametrize("kind", list(MESSAGE_STRATEGIES), ids=lambda kind: kind.__name__)
 @settings(max_examples=40, deadline=None)
 @given(framing=st.sampled_from(list(FRAMINGS)), line=lines, address=st.integers(0, 30), data=st.data())
@@ -222,5 +233,5 @@ def test_a_message_is_priced_by_the_length_of_its_frames(kind, framing, line, ad
     request = len(cost.framing.encode(Direction.REQUEST, 0, message.encode()))
     gap = cost.zvz if framing == "open-driver" else 0.0
     assert cost.broadcast_time(message) == request * line.char_time + cost.turnaround + gap
-    request = len(cost.framing.encode(Direction.REQUEST, 1, message.encode()))
-    assert cost.silence_time(message, 0.1) == request * line.char_time + 0.1 + gap
+    assert cost.reply_deadline(1, message) == pytest.approx(encoded_deadline(cost, 1, message), rel=1e-12)
+    assert cost.silence_time(message, 0.1) == cost.reply_deadline(1, message) + 0.1  # the whole wait, the bus's timeout on top

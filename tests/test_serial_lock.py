@@ -15,12 +15,15 @@ import os
 import select
 import shutil
 import signal
+import string
 import subprocess
 import sys
 import uuid
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from prc3cfg.shell import serial_lock
 from prc3cfg.shell.locks import device_path, line_keys, line_lock
@@ -126,6 +129,44 @@ def test_the_device_a_port_names(port, device):
     assert device_path(port) == device
 
 
+@pytest.mark.parametrize(("path", "uucp", "minicom", "picocom"), [
+    ("/dev/ttyUSB0", "ttyUSB0", "ttyUSB0", "ttyUSB0"),  # every convention agrees on a device directly in /dev
+    ("/dev/pts/0", "0", "pts_0", "pts_0"),  # minicom and picocom: the path below /dev with its / as _
+    ("/dev/serial/by-id/usb-FTDI-if00", "usb-FTDI-if00", "serial_by-id_usb-FTDI-if00", "serial_by-id_usb-FTDI-if00"),
+    ("/srv/lines/booth-a", "booth-a", "booth-a", "lines_booth-a"),  # outside /dev: minicom the last part, picocom all but the first
+])  # fmt: skip
+def test_lock_names_are_written_as_uucp_minicom_and_picocom_write_them(path, uucp, minicom, picocom):
+    """The UUCP convention (cu, HDB) names a lock file after the path's last part, minicom (`mbasename`)
+    and picocom built with UUCP locks (`uucp_lockname`) after the path below /dev with its / as _:
+    each spelling is checked and written."""
+    assert {name: naming(path) for name, naming in serial_lock.NAMINGS.items()} == {"UUCP": uucp, "minicom": minicom, "picocom": picocom}
+    assert serial_lock.lock_names(path) == tuple(f"LCK..{name}" for name in dict.fromkeys((uucp, minicom, picocom)))
+
+
+device_paths = st.lists(st.text(string.ascii_letters + string.digits + "-_.", min_size=1, max_size=12).filter(lambda p: p not in (".", "..")),
+                        min_size=1, max_size=4).map(lambda parts: "/dev/" + "/".join(parts))  # fmt: skip
+
+
+def names_of(path: str) -> None:
+    """Every spelling of a device path below /dev is a name of its own (no /), once: the UUCP one and minicom's, which picocom's equals."""
+    names = serial_lock.lock_names(path)
+    assert len(set(names)) == len(names) and all(name.startswith("LCK..") and "/" not in name for name in names)
+    assert {f"LCK..{os.path.basename(path)}", f"LCK..{path.removeprefix('/dev/').replace('/', '_')}"} <= set(names)
+    assert serial_lock.NAMINGS["minicom"](path) == serial_lock.NAMINGS["picocom"](path)
+
+
+@settings(max_examples=50)
+@given(device_paths)
+def test_every_spelling_of_a_device_below_dev_is_a_lock_name(path):
+    names_of(path)
+
+
+@pytest.mark.soak
+@given(device_paths)
+def test_every_spelling_of_a_device_below_dev_is_a_lock_name_soak(path):
+    names_of(path)
+
+
 @pytest.mark.parametrize("named", ["given", "real"])
 def test_a_lock_file_of_a_live_process_refuses_naming_it_and_is_left(tmp_path, sleeper, named):
     with emulator_pty() as pty:
@@ -186,7 +227,8 @@ def test_its_own_lock_files_hold_its_pid_while_it_runs_and_go_after(tmp_path):
         while not select.select([master], [], [], 1)[0]:  # its first request: the line is held
             assert process.poll() is None, process.stderr.read()
         os.read(master, 4096)
-        names = {link.name, Path(os.ttyname(terminal)).name}
+        names = {name.removeprefix("LCK..") for name in serial_lock.lock_names(str(link))}
+        assert {link.name, Path(os.ttyname(terminal)).name, os.ttyname(terminal).removeprefix("/dev/").replace("/", "_")} <= names
         assert {name: lock_file(name).read_bytes() for name in names} == dict.fromkeys(names, hdb(process.pid))
         process.send_signal(signal.SIGINT)  # stopped mid-scan: the lock files go all the same
         process.communicate()
@@ -257,3 +299,90 @@ def test_minicom_in_the_system_lock_folder_is_honoured_and_its_stale_lock_taken_
     finally:
         if pid is not None and held.exists() and held.read_bytes() == hdb(pid):  # a failure above: not left to the machine
             held.unlink()
+
+
+def shown_until_it_ends(argv: list[str]) -> tuple[int, bytes]:
+    """A terminal program (minicom, picocom) run on a pty as its terminal until it ends by itself: its exit
+    code and what it showed (a program that does not end within 30 s fails the test)."""
+    master, terminal = os.openpty()
+    process = subprocess.Popen(argv, stdin=terminal, stdout=terminal, stderr=terminal, start_new_session=True)
+    os.close(terminal)
+    shown = b""
+    try:
+        while select.select([master], [], [], 30)[0]:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:  # EIO: the program ended and its terminal closed
+                break
+            if not chunk:
+                break
+            shown += chunk
+        else:
+            raise AssertionError(f"{argv[0]} is still running, having shown {shown[-300:]!r}")
+        return process.wait(), shown
+    finally:
+        process.kill()
+        process.wait()
+        os.close(master)
+
+
+@contextlib.contextmanager
+def system_lock_folder(monkeypatch, device: str):
+    """The machine's /var/lock, where minicom looks, for the test's lock files; afterwards no lock file of
+    `device` is left that names a process of this test (a killed minicom leaves its own)."""
+    monkeypatch.delenv("PRC3CFG_UUCP_LOCK_DIR")
+    ours: set[int] = {os.getpid()}
+    try:
+        yield ours
+    finally:
+        minicoms = f"LCK..{device.removeprefix('/dev/').replace('/', '_')}"
+        for name in {*serial_lock.lock_names(device), minicoms}:
+            path = serial_lock.SYSTEM_LOCK_DIR / name
+            if path.exists() and path.read_bytes() in {hdb(pid) for pid in ours}:
+                path.unlink()
+
+
+@pytest.mark.skipif(SOCAT is None or MINICOM is None, reason="socat and minicom are not installed (.ci/run installs them)")
+@pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
+def test_minicom_holding_a_nested_device_path_is_named(tmp_path, monkeypatch):
+    """minicom on /dev/pts/N writes LCK..pts_N (the path below /dev, / as _), where the UUCP convention
+    writes LCK..N: prc3cfg checks both, by the path as minicom was given it and through a link to it."""
+    with socat_port(tmp_path / "booth-a") as link:
+        device = os.path.realpath(link)
+        with system_lock_folder(monkeypatch, device) as ours:
+            with on_a_terminal([MINICOM, "-D", device], b"Press CTRL-A Z") as minicom:
+                ours.add(minicom.pid)
+                held = serial_lock.SYSTEM_LOCK_DIR / f"LCK..{device.removeprefix('/dev/').replace('/', '_')}"
+                assert held.read_bytes() == hdb(minicom.pid)
+                refused = {spelling: scan(spelling) for spelling in (device, link)}
+    for spelling, result in refused.items():
+        assert result.returncode != 0
+        assert f"the serial port {spelling} is in use by minicom (pid {minicom.pid}) — close it and run again" in result.stderr
+
+
+@pytest.mark.skipif(PICOCOM is None or MINICOM is None, reason="picocom and minicom are not installed (.ci/run installs them)")
+@pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
+def test_minicom_and_picocom_refuse_a_device_prc3cfg_holds(monkeypatch):
+    """A real `prc3cfg scan` holding /dev/pts/N (nothing answers it; it waits 10 s at each address): minicom
+    finds prc3cfg's LCK..pts_N and refuses, picocom as Debian builds it finds the device's flock and refuses."""
+    master, terminal = os.openpty()
+    device = os.ttyname(terminal)
+    try:
+        with system_lock_folder(monkeypatch, device) as ours:
+            argv = [sys.executable, "-m", "prc3cfg", "scan", "--port", device, "--parity", "none", "--timeout", "10", "--retries", "0"]
+            process = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+            ours.add(process.pid)
+            try:
+                while not select.select([master], [], [], 1)[0]:  # its first request: the line is held
+                    assert process.poll() is None, process.stderr.read()
+                minicom = shown_until_it_ends([MINICOM, "-D", device])
+                picocom = shown_until_it_ends([PICOCOM, "-b", "9600", device])
+                assert process.poll() is None  # still holding the line throughout
+            finally:
+                process.send_signal(signal.SIGINT)
+                process.communicate()
+    finally:
+        os.close(master)
+        os.close(terminal)
+    assert minicom == (1, f"Device {device} is locked.\r\n".encode())
+    assert picocom[0] == 1 and f"FATAL: cannot lock {device}: Resource temporarily unavailable".encode() in picocom[1]

@@ -45,7 +45,7 @@ ParityOpt = Annotated[str | None, typer.Option(callback=one_of(PARITY_NAMES), me
                                                help=" | ".join(PARITY_NAMES))]
 DataBitsOpt = Annotated[int, typer.Option(callback=frame_data_bits, metavar="BITS", help="8: a PRC 3 frame is binary")]
 StopBitsOpt = Annotated[float, typer.Option(callback=one_of(STOP_BITS), metavar="BITS", help=" | ".join(map(str, STOP_BITS)))]
-TimeoutOpt = Annotated[float, typer.Option(parser=duration(0.001, 3600), metavar="TIME", help=f"How long to wait for a reply ({TIMES}).")]
+TimeoutOpt = Annotated[float, typer.Option(parser=duration(0.001, 3600), metavar="TIME", help=f"How long to wait for a reply beyond the line's own time: its frames at the baud and character format, the turnaround ({TIMES}).")]
 ZvzOpt = Annotated[float, typer.Option(parser=duration(0.004, 65.535), metavar="TIME",
                                        help=f"open-driver: the character delay time ZVZ that ends a frame ({TIMES}).")]
 

@@ -9,9 +9,18 @@ no reply frame. (reading) It still costs the turnaround (and an open-driver line
 the request): the master cannot send the next frame sooner, and gets no reply that would say
 the modules are ready.
 
-Owns the cost of exchanges, and when exchanges that took longer than priced say the line is
-slower than its settings (`slower_than_priced`). Does not own which exchanges a plan makes
-(`prc3cfg.core.planner`). Pure.
+How long the master waits for a reply follows from the same figures (`LineCost.reply_deadline`):
+
+    deadline = (request frame bytes + longest reply frame bytes) × bits_per_char / baud × (1 + DEADLINE_MARGIN)
+               + turnaround  (+ 2 × ZVZ for open-driver)
+
+with the longest reply the message can have — a read's data block, a write's code word — and on a
+framing that stuffs, every byte after its start code stuffed. The plant file's `timeout` is waited
+on top of it: a reply is never given up on while the line can still be carrying it, at any baud.
+
+Owns the cost of exchanges, the deadline of their replies, and when exchanges that took longer than
+priced say the line is slower than its settings (`slower_than_priced`). Does not own which exchanges
+a plan makes (`prc3cfg.core.planner`). Pure.
 """
 
 from __future__ import annotations
@@ -21,6 +30,10 @@ from dataclasses import dataclass
 from prc3cfg.core import codec
 from prc3cfg.core.framing import Direction, Framing, get_framing
 from prc3cfg.core.line import LineSettings
+
+#: A reply is waited for this fraction of its frames' time more than they take at the line's settings:
+#: a UART's clock may run a few per cent slow, and a sender may leave a little idle time between characters.
+DEADLINE_MARGIN = 0.10
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,6 +59,21 @@ class LineCost:
         gaps = 2 * self.zvz if framing.name == "open-driver" else 0.0
         return chars * self.line.char_time + self.turnaround + gaps
 
+    def reply_deadline(self, address: int, message: codec.Message) -> float:
+        """Seconds from the frame of `message` to `address` leaving until the longest reply it can have
+        has come: both frames at the character time with `DEADLINE_MARGIN` more, the turnaround, and on
+        open-driver the ZVZ that ends each frame. What a plant file's `timeout` adds is the link's."""
+        framing = self.framing
+        reply = framing.frame_length(codec.reply_length(message))
+        if framing.stuffs:
+            reply += reply - 1  # at worst every byte after the start code is stuffed: the reply's bytes are not known yet
+        chars = self._request(address, message) + reply
+        return chars * self.line.char_time * (1 + DEADLINE_MARGIN) + self.turnaround + self._gaps(2)
+
+    def _gaps(self, frames: int) -> float:
+        """The silence that ends `frames` frames on open-driver (none on a framing with a length)."""
+        return frames * self.zvz if self.framing.name == "open-driver" else 0.0
+
     def _request(self, address: int, message: codec.Message) -> int:
         """Bytes of the request frame of `message` to `address`."""
         framing = self.framing
@@ -53,15 +81,13 @@ class LineCost:
         return chars + framing.stuffing(Direction.REQUEST, address, message.encode()) if framing.stuffs else chars
 
     def silence_time(self, message: codec.Message, timeout: float) -> float:
-        """Seconds an exchange with an address where nobody answers holds the line: the request
-        frame, then the wait of `timeout` for a reply that never comes (and on open-driver the gap)."""
-        gap = self.zvz if self.framing.name == "open-driver" else 0.0
-        return self._request(1, message) * self.line.char_time + timeout + gap
+        """Seconds an exchange with an address where nobody answers holds the line: the whole wait
+        for a reply that never comes — its deadline, then `timeout` more (the plant file's, on top)."""
+        return self.reply_deadline(1, message) + timeout
 
     def broadcast_time(self, message: codec.Message) -> float:
         """Seconds a broadcast of `message` holds the line: request frame and turnaround."""
-        gap = self.zvz if self.framing.name == "open-driver" else 0.0
-        return self._request(0, message) * self.line.char_time + self.turnaround + gap
+        return self._request(0, message) * self.line.char_time + self.turnaround + self._gaps(1)
 
 
 #: A line is slower than its settings when its exchanges took more than this many times their price …

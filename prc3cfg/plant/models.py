@@ -424,8 +424,10 @@ class BusLine(FileModel):
     parity: Parity = Field("even", description="the parity bit of each character")
     data_bits: Annotated[int, _data_bits()] = FRAME_DATA_BITS
     stop_bits: Annotated[float, _one_of(STOP_BITS, "1, 1.5 or 2")] = 1.0
-    timeout: Annotated[float, _number(Decimal("0.001"), unit="s", out=float, description="s to wait for a reply")] = 0.5
-    turnaround: Annotated[float, _number(0, unit="s", out=float, description="s, the module's turnaround, for the bus-time estimate")] = 0.010
+    timeout: Annotated[float, _number(Decimal("0.001"), unit="s", out=float, description=(
+        "s to wait for a reply beyond the line's own time (its frames at its baud and format, the turnaround)"))] = 0.5
+    turnaround: Annotated[float, _number(0, unit="s", out=float, description=(
+        "s, the module's turnaround, for the bus-time estimate and the wait for a reply"))] = 0.010
     zvz: Annotated[float, _number(
         Decimal("0.001"), Decimal("65.535"), step=Decimal("0.001"), unit="s", step_name="milliseconds",
         what="character delay times are", out=float, description="s, character delay time ZVZ (open-driver)",

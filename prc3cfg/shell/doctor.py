@@ -13,7 +13,11 @@ character of fewer bits loses its top bits. Stop bits cannot be found: a UART ch
 A turnaround is what the bus-time model (`prc3cfg.core.bustime`) must add to the line's time to
 give the time an exchange took — from its frame leaving to its reply having come, less the frames'
 transmission (and on open-driver the two ZVZ gaps) — so a plan priced with it is priced as the
-line measured.
+line measured, and a reply is waited for as long as the slowest module measured takes
+(`LineCost.reply_deadline`). A timed exchange waits `MEASURE_ALLOWANCE` beyond the line's time, so
+a module slower than the probes allow is measured, not counted lost; one whose answers varied by
+more than a plant file's default `timeout` gets that spread proposed as its `timeout`, the wait on
+top of the slowest answer seen.
 
 Owns the search and the measuring. Does not own locking the line (`prc3cfg.api.doctor`), the
 port (`prc3cfg.shell.link.ports`) nor the output (`prc3cfg.cli`).
@@ -31,6 +35,7 @@ from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import LineSettings
+from prc3cfg.plant.models import BusLine
 from prc3cfg.shell.link.client import Exchange, Link, Port
 from prc3cfg.shell.probe import probe
 
@@ -40,6 +45,10 @@ BAUDS = (9600, 19200, 4800, 2400, 1200, 38400, 57600, 600, 300)
 FRAMINGS = ("crc16", "stx", "open-driver")
 #: The longest a module may take to start its answer, on top of the frames' own time, while probing.
 PROBE_ALLOWANCE = 0.2
+#: … and once found, in a timed exchange: a module that slow is measured, not counted lost.
+MEASURE_ALLOWANCE = 2.0
+#: The plant file's `timeout` when it gives none: the wait on top of the line's own time it already allows.
+DEFAULT_TIMEOUT: float = BusLine.model_fields["timeout"].default
 
 
 @dataclass(frozen=True)
@@ -93,6 +102,11 @@ class Timing:
     def worst(self) -> float:
         return max(self.turnarounds, default=math.nan)
 
+    @property
+    def spread(self) -> float:
+        """How much the answers varied: the slowest less the quickest (0 with none)."""
+        return self.worst - min(self.turnarounds) if self.turnarounds else 0.0
+
 
 @dataclass(frozen=True)
 class Diagnosis:
@@ -109,7 +123,9 @@ class Diagnosis:
 
     def plant_keys(self) -> dict[str, object]:
         """The bus keys of a plant file for this line; `turnaround` the slowest answer measured,
-        rounded up to the millisecond — a broadcast waits it for the slowest module."""
+        rounded up to the millisecond — a broadcast waits it for the slowest module; `timeout` only
+        where a module's answers varied by more than `DEFAULT_TIMEOUT`: by that much, the next may come
+        later than the slowest seen."""
         if self.found is None:
             return {}
         line = self.found.line
@@ -119,8 +135,16 @@ class Diagnosis:
             keys["zvz"] = self.zvz
         worst = [t.worst for t in self.modules if t.turnarounds]
         if worst:
-            keys["turnaround"] = math.ceil(round(max(worst) * 1000, 6)) / 1000
+            keys["turnaround"] = _millis(max(worst))
+        spread = max((t.spread for t in self.modules), default=0.0)
+        if spread > DEFAULT_TIMEOUT:
+            keys["timeout"] = _millis(spread)
         return keys
+
+
+def _millis(seconds: float) -> float:
+    """Seconds rounded up to the millisecond (a plant file's times are written so)."""
+    return math.ceil(round(seconds * 1000, 6)) / 1000
 
 
 @dataclass
@@ -163,19 +187,13 @@ def diagnose(
                         skipped += 1
                         continue
                 progress(candidate)
-                link = Link(port, get_framing(candidate.framing), bus=port_name, line=line, timeout=_wait(candidate, zvz),
-                            zvz=zvz, retries=0)  # fmt: skip
+                link = Link(port, get_framing(candidate.framing), bus=port_name, line=line, timeout=PROBE_ALLOWANCE, zvz=zvz, retries=0)
                 probes += len(wanted)
                 found = [address for address in wanted if _answers(link, address)]
                 if found:
                     timings = tuple(_measure(link, candidate, address, zvz, exchanges) for address in found)
                     return Diagnosis(port_name, candidate, zvz, settings_found, timings, probes, skipped)
     return Diagnosis(port_name, None, zvz, settings_found, (), probes, skipped)
-
-
-def _wait(candidate: LineCandidate, zvz: float) -> float:
-    """How long a probe waits for an answer: the exchange's own time at these settings and an allowance."""
-    return LineCost.of(candidate.framing, candidate.line, PROBE_ALLOWANCE, zvz).message_time(1, codec.ReadSystem())
 
 
 def _answers(link: Link, address: int) -> bool:
@@ -193,7 +211,7 @@ def _measure(link: Link, candidate: LineCandidate, address: int, zvz: float, exc
     turnarounds, damaged, lost = [], 0, 0
     for _ in range(exchanges):
         discarded, before = link.discarded, len(counts.attempts)
-        heard = probe(link, address, link.timeout)
+        heard = probe(link, address, MEASURE_ALLOWANCE)
         reply = heard.reply if heard is not None else None
         attempts = counts.attempts[before:]
         if isinstance(reply, codec.SystemReply):

@@ -1,11 +1,13 @@
 """A local serial device as every program on the machine locks it, not only prc3cfg.
 
 Owns two conventions of Linux serial programs. The UUCP lock file: `LCK..NAME` in the system's
-lock folder (`uucp_lock_dir`: `PRC3CFG_UUCP_LOCK_DIR` when set, else /var/lock), NAME the last
-part of the device path, holding its owner's pid in HDB form (ASCII, right-aligned in 10
-characters, a newline) — minicom, cu, and picocom built with UUCP locks write it; picocom names it
-after the path it was given, so a symlink (/dev/serial/by-id/…) and its real path are two names,
-and both are checked and taken. And the kernel lock (`flock`) on the device itself, which
+lock folder (`uucp_lock_dir`: `PRC3CFG_UUCP_LOCK_DIR` when set, else /var/lock), holding its
+owner's pid in HDB form (ASCII, right-aligned in 10 characters, a newline). Its NAME is spelled
+three ways (`NAMINGS`): the UUCP convention (cu, HDB UUCP) takes the path's last part — /dev/pts/0
+is LCK..0 —, minicom and picocom built with UUCP locks the path below /dev with its / as _ —
+LCK..pts_0 —, and outside /dev minicom the last part, picocom all but the first part. Each names
+the path it was given, so a symlink (/dev/serial/by-id/…) and its real path are more names still:
+every spelling of both is checked and taken. And the kernel lock (`flock`) on the device itself, which
 picocom as Debian builds it and pyserial's `exclusive=True` take: its holder is found in
 /proc/locks by the device's inode, to be named. Windows has neither convention — it opens a COM port
 for one program at a time — and there `take` takes nothing (`platform.UUCP_LOCKS`); what differs
@@ -29,7 +31,7 @@ import contextlib
 import os
 import stat
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,10 +54,29 @@ def uucp_lock_dir() -> Path:
     return Path(os.environ.get("PRC3CFG_UUCP_LOCK_DIR") or SYSTEM_LOCK_DIR)
 
 
+def _below_dev(path: str) -> str:
+    """minicom's `mbasename`: a path in /dev without /dev/ and with its / as _; elsewhere the last part."""
+    return path.removeprefix("/dev/").replace("/", "_") if path.startswith("/dev/") else os.path.basename(path)
+
+
+def _all_but_first(path: str) -> str:
+    """picocom's `uucp_lockname`: the path from after the first / past its first character (/dev/, or any
+    first folder), its / as _ — a path with no such / whole."""
+    cut = path.find("/", 1)
+    return (path[cut + 1 :] if cut >= 0 else path).replace("/", "_")
+
+
+#: What NAME in `LCK..NAME` is for a device path, by the programs that write it.
+NAMINGS: dict[str, Callable[[str], str]] = {
+    "UUCP": os.path.basename,  # cu, HDB UUCP: the last part
+    "minicom": _below_dev,
+    "picocom": _all_but_first,
+}
+
+
 def lock_names(device: str) -> tuple[str, ...]:
-    """`LCK..NAME` for the device as given and for its real path (one name when they agree)."""
-    names = [f"LCK..{os.path.basename(device)}", f"LCK..{os.path.basename(os.path.realpath(device))}"]
-    return tuple(dict.fromkeys(names))
+    """`LCK..NAME` in every spelling of `NAMINGS`, for the device as given and for its real path (each name once)."""
+    return tuple(dict.fromkeys(f"LCK..{naming(path)}" for path in (device, os.path.realpath(device)) for naming in NAMINGS.values()))
 
 
 def _is_device(path: str) -> bool:

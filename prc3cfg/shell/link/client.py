@@ -6,7 +6,10 @@ what came back to each attempt is judged by `prc3cfg.core.exchange` (an answer, 
 damaged reply to ask for again, a code to confirm, a line to stop) and the link does what
 the verdict says; every retry is logged and traced. The reply's address is checked here, its
 length by the codec. Time-outs are detected here, with the port's timeout fixed at the framing's gap
-(link.md: `inter_byte_timeout` does nothing on Linux).
+(link.md: `inter_byte_timeout` does nothing on Linux). How long a reply is waited for comes from the
+line (`LineCost.reply_deadline`: the frames at its baud and character format, the turnaround, a
+margin), with the link's `timeout` — a plant file's — on top: a reply is never given up on while the
+line can still be carrying it, at any baud.
 
 The link decodes replies as the port delivers them: from a UART (a device path, a pty)
 with the framing's inter-character or message time-out; over TCP (a `socket://` or
@@ -31,6 +34,7 @@ to open (`prc3cfg.shell.link.ports`).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -125,7 +129,9 @@ class Exchange:
 
 
 class Link:
-    """One line: a port, a framing, a reply time-out and a retry policy."""
+    """One line: a port, a framing, a reply time-out and a retry policy. `timeout` is the wait beyond
+    the line's own time for a reply (`wait`); `cost` prices exchanges and gives the turnaround the
+    deadlines allow (else `LineCost`'s default)."""
 
     def __init__(
         self,
@@ -177,6 +183,8 @@ class Link:
         self.sent_at = self.replied_at = 0.0
         #: the line's settings as a plant file gives them, pricing each exchange (`prc3cfg.core.bustime`)
         self.cost = cost
+        #: the same settings giving each reply its deadline (a port without a plant file's: the default turnaround)
+        self._timing = cost if cost is not None else LineCost(framing, line, zvz=zvz)
         #: the port as the operator names it (a plant file's `port`), for what is said about the line
         self.port_name = port_name or str(port.port)
         #: exchanges answered, the seconds they took (frame out to reply in) and what `cost` priced them at
@@ -201,13 +209,13 @@ class Link:
         `LinkError` names the bus and module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent` before the
         first: the frame never left; `announce` may raise it too, to keep a frame back).
         """
-        data, attempts = message.encode(), 1 + self.retries
+        data, attempts, wait = message.encode(), 1 + self.retries, self.wait(address, message)
         heard: int | None = None  # a code heard once on a line without a checksum, for the next attempt to confirm
         for attempt in range(1, attempts + 1):
             if self.cancel is not None and self.cancel.is_set():
                 raise NotSent() if attempt == 1 else Interrupted()
-            raw = self._attempt(address, message, data, attempt)
-            verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=self.timeout)
+            raw = self._attempt(address, message, data, attempt, wait)
+            verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=wait)
             if verdict.step is LinkStep.ANSWER:
                 assert verdict.reply is not None  # an answer is a reply decoded
                 return self._answered(address, verdict.reply)
@@ -230,16 +238,24 @@ class Link:
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
         )
 
+    def wait(self, address: int, message: codec.Message, timeout: float | None = None) -> float:
+        """Seconds to wait for the reply to `message` from its frame leaving: its deadline on this line
+        (none where the far end takes no line time), then `timeout` — the link's own by default — more;
+        rounded up to the millisecond, as it is said."""
+        line = self._timing.reply_deadline(address, message) if self.takes_line_time else 0.0
+        return math.ceil(round((line + (self.timeout if timeout is None else timeout)) * 1000, 6)) / 1000
+
     def probe(self, address: int, message: codec.Message, timeout: float) -> Reply | None:
-        """Whether a module answers at `address`: one attempt, waiting `timeout`; silence is None —
-        an absent address is normal on a scan, and is not asked again. Something heard but not
-        usable (a damaged reply) gets the usual retries (`request`)."""
+        """Whether a module answers at `address`: one attempt, waiting the line's time and `timeout`
+        more (`wait`); silence is None — an absent address is normal on a scan, and is not asked
+        again. Something heard but not usable (a damaged reply) gets the usual retries (`request`)."""
         if self.cancel is not None and self.cancel.is_set():
             raise Interrupted()
-        raw = self._attempt(address, message, message.encode(), 1, timeout)
+        wait = self.wait(address, message, timeout)
+        raw = self._attempt(address, message, message.encode(), 1, wait)
         if raw is None:
             return None
-        verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=timeout)
+        verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=wait)
         if verdict.step is LinkStep.POSSIBLE_WRITE:
             raise PossibleWrite(self.bus, address, message, self.owed.get(address, 0))
         if verdict.step is LinkStep.ANSWER:
@@ -264,12 +280,12 @@ class Link:
             time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
         self._observe(0, data, None, 1, started)
 
-    def _attempt(self, address: int, message: codec.Message, data: bytes, attempt: int, timeout: float | None = None) -> bytes | None:
+    def _attempt(self, address: int, message: codec.Message, data: bytes, attempt: int, wait: float) -> bytes | None:
         """One attempt, told to `announce` before its frame leaves and to `observer` after: the reply
         message, or None (`_exchange`)."""
         started = time.time()
         self._announce(address, data, attempt, started)
-        raw = self._exchange(address, data, timeout)
+        raw = self._exchange(address, data, wait)
         if raw is None and not message.IS_READ:
             self.owed[address] = self.owed.get(address, 0) + 1
         self._observe(address, data, raw, attempt, started)
@@ -329,12 +345,11 @@ class Link:
                               f"before any reply: {_said(error)}) — wait for that client to finish, then try again")  # fmt: skip
         return PortFailed(f"bus {self.bus}: cannot {doing} the port ({_said(error)}) — check the adapter and cable")
 
-    def _exchange(self, address: int, data: bytes, timeout: float | None = None) -> bytes | None:
-        """One attempt: the reply message from `address`, or None (nothing valid within `timeout`,
-        the link's own by default)."""
+    def _exchange(self, address: int, data: bytes, wait: float) -> bytes | None:
+        """One attempt: the reply message from `address`, or None (nothing valid within `wait` s)."""
         self._send(self.framing.encode(Direction.REQUEST, address, data))
         decoder = self.framing.decoder(Direction.REPLY, self.line, zvz=self.zvz, uart=self.uart)
-        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
+        deadline = time.monotonic() + wait
         last_call = deadline + self._longest_reply  # even a line that never goes quiet ends here
         pending = False  # bytes of a frame that only a gap can end
         while True:
@@ -365,11 +380,11 @@ class Link:
                     self.trace.remark(self.bus, f"reply from address {event.address}, expected {address}: ignored")
             if now >= deadline and not pending:
                 if self.trace:
-                    self.trace.remark(self.bus, f"timeout after {self.timeout:g} s waiting for module {address}")
+                    self.trace.remark(self.bus, f"timeout after {wait:g} s waiting for module {address}")
                 return None
             if now >= last_call:
                 if self.trace:
-                    self.trace.remark(self.bus, f"the line did not go quiet within {last_call - deadline + self.timeout:.3f} s")
+                    self.trace.remark(self.bus, f"the line did not go quiet within {last_call - deadline + wait:.3f} s")
                 return None
 
 
