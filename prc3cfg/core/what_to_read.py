@@ -329,11 +329,12 @@ def undone_by_late(final: ModuleImage, steps: Sequence[Step]) -> bool:
     return False
 
 
-def settle_time(cost: LineCost, timeout: float) -> float:
+def settle_time(cost: LineCost, deadline: float) -> float:
     """Seconds after a line's last write until every frame still on its way has landed: `HELD_DEADLINES`
-    reply deadlines, the longest request frame's transmission, the modules' turnaround (and on open-driver
-    the gap that ends a frame)."""
+    reply deadlines (`deadline`: the longest wait for a reply to the steps sent — the line's time and the bus's
+    `timeout` — as the link waits it), the longest request frame's transmission, the modules' turnaround (and
+    on open-driver the gap that ends a frame)."""
     framing = cost.framing
     longest = framing.frame_length(codec.MAX_MESSAGE_BYTES) * (2 if framing.stuffs else 1)
     gap = cost.zvz if framing.name == "open-driver" else 0.0
-    return HELD_DEADLINES * timeout + cost.line.transmission_time(longest) + cost.turnaround + gap
+    return HELD_DEADLINES * deadline + cost.line.transmission_time(longest) + cost.turnaround + gap

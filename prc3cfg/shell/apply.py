@@ -266,7 +266,8 @@ class ModuleRun:
             if action is Next.READ:
                 # a late copy that could undo a step: wait for it, and read what every step sent could have changed
                 late = undone_by_late(expected, self.sent[sent_before:])
-                quiet = self.wrote_at + settle_time(cost, link.timeout) if late else 0.0
+                quiet = self.wrote_at + settle_time(cost, max(link.wait(self.address, step.message) for step in self.sent)) \
+                    if late else 0.0  # fmt: skip
                 system, programs = verification_reads(self.before, self.before if late else self.final or self.before, expected,
                                                       self.sent if late else self.sent[sent_before:], full=verify is Verify.FULL,
                                                       watch_system=with_system)  # fmt: skip
