@@ -85,7 +85,8 @@ def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(app
     applied.emulators["booth-a"].update(2, image=ModuleImage.factory(2))
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
     assert planned.code == 2
-    assert "read in full: booth-a/booth-a-right (its system parameters are not those on record)" in planned.out
+    assert ("read in full: booth-a/booth-a-left (booth-a/booth-a-right on its line: its system parameters are not those on record), "
+            "booth-a/booth-a-right (its system parameters are not those on record)") in planned.out  # the line opened
     assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release").code == 0
     assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
 
@@ -96,7 +97,8 @@ def test_a_spare_with_the_same_system_block_is_found_by_the_program_the_change_r
     booth.update(2, image=replace(ModuleImage.factory(2), system=held.system))  # a spare, its system block set by hand
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # the change reads program 1 only
     planned = run_cli(capsys, "plan", applied.path)
-    assert "read in full: booth-a/booth-a-right (program 1 is not as on record)" in planned.out
+    assert ("read in full: booth-a/booth-a-left (booth-a/booth-a-right on its line: program 1 is not as on record), "
+            "booth-a/booth-a-right (program 1 is not as on record)") in planned.out  # the line opened
     assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
     assert holds_the_plant_file(applied, "booth-a", "booth-a-right")  # programs 2 and 3 too, not only program 1
 

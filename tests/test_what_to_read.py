@@ -151,9 +151,10 @@ def test_the_modules_read_in_full_say_why_and_the_evidence_comes_second():
     why = {("line", 3): "not on the line's record", ("line", 4): "not on the line's record"}
     assert what_to_read.read_in_full([wanted(a) for a in (1, 2, 3, 4)], targets, images, why) == (
         "line/m1 (program 2 is not as on record)",  # contradicted by its read-back
+        "line/m2 (line/m1 on its line: program 2 is not as on record)",  # read as on record, on a line m1 opened
         "line/m3 (not on the line's record)",
         "line/m4 (not on the line's record)",  # why, though it was not read (the read stopped)
-    )  # m2 read as on record: taken
+    )
 
 
 # -- a verification --------------------------------------------------------------------------------

@@ -21,8 +21,11 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   could clamp (decided on the system block just read: the module's own clamping reaches programs the
   plant does not manage), and what is read is evidence (`contradiction`) — a system block or a program
   other than the record's means someone else changed the module, and it is read in full and planned
-  in full. What no read can see: a program the change does not read, changed by another tool on a
-  module whose system block is unchanged, within the record's age.
+  in full — and so is every other module of its line, in that run (`opens_line`): a module that
+  contradicts the record is evidence of another hand on the line (two controllers swapped: the other
+  one's system block agrees with the record, its programs do not). What no read can see: a program
+  the change does not read, changed by another tool on a module whose system block is unchanged, on a
+  line no module of which the change reads contradicts the record, within the record's age.
 - A verification (`verification_reads`) reads what the steps that went out could have changed
   (`reach`), or with `Verify.FULL` everything the first read-back held; `read_messages` is the fewest
   50h/51h/52h for any of these, `verification_time` what reading back the reach costs (the floor of a
@@ -204,13 +207,39 @@ def contradiction(known: ModuleImage, read: ModuleImage) -> str | None:
     return None
 
 
+def opens_line(target: Target, read: ModuleImage) -> str | None:
+    """Why the read-back of `target` opens its whole line ("bus/name: why"; None: it does not): it
+    contradicts the record. Someone other than prc3cfg had their hands on that line — two controllers
+    swapped hold each other's programs under system blocks that agree, so the other one's 50h proves
+    nothing — and nothing of the record is taken for any module of it in that run (`opened`, `still_to_read`)."""
+    said = None if target.known is None else contradiction(target.known, read)
+    return None if said is None else f"{target.bus}/{target.name}: {said}"
+
+
+def opened(target: Target) -> Target:
+    """`target` on a line opened before it is read: every managed program, with no record to agree with."""
+    return replace(target, programs=tuple(sorted(set(target.programs) | set(target.managed))), known=None)
+
+
+def still_to_read(target: Target, read: ModuleImage) -> frozenset[int]:
+    """The managed programs of `target`, read as `read` before its line opened, that are still to read."""
+    return frozenset(target.managed) - set(programs_in(read))
+
+
 def read_in_full(modules: Iterable[Wanted], targets: Iterable[Target], images: Mapping[Key, ModuleImage],
                  why: Mapping[Key, str]) -> tuple[str, ...]:  # fmt: skip
     """"bus/name (why)" of each of `modules` a targeted read read in full: for `why` (before any
-    evidence: not on record, too old, E12), or for what its read-back contradicted of the record."""
+    evidence: not on record, too old, E12), for what its read-back contradicted of the record, or for
+    the first module of its line (in the line's order) that did (`opens_line`)."""
+    targets = list(targets)
     evidence = {(t.bus, t.address): said for t in targets if t.known is not None and (t.bus, t.address) in images
                 and (said := contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
-    return tuple(f"{m.bus}/{m.name} ({said})" for m in modules if (said := why.get(m.key) or evidence.get(m.key)) is not None)
+    lines: dict[str, str] = {}
+    for t in targets:
+        if (t.bus, t.address) in evidence:
+            lines.setdefault(t.bus, f"{t.bus}/{t.name} on its line: {evidence[(t.bus, t.address)]}")
+    return tuple(f"{m.bus}/{m.name} ({said})" for m in modules
+                 if (said := why.get(m.key) or evidence.get(m.key) or lines.get(m.bus)) is not None)  # fmt: skip
 
 
 # -- what is read decides what is planned, and what the record becomes ------------------------------

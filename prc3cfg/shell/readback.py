@@ -9,7 +9,8 @@ when the system parameters a plan will write can clamp programs (a lower S1 or S
 prc3-protocol.md §4.2), every program is read, not only the managed ones — the module's own
 clamping reaches programs the plant does not manage, and what it does to them must be shown in
 the plan and kept in the snapshot (`after_system`); and what contradicts the line's record is
-read in full (`after_programs`). This module only reads.
+read in full (`after_programs`) — with every other module of its line, those read before it again
+for the rest (`opens_line`). This module only reads.
 
 On a line where nothing protects a data reply (`what_to_read.protects_replies`: open-driver, and no
 parity the port checks) every read is made until two replies in a row agree (`_confirmed`): a flipped bit
@@ -155,9 +156,19 @@ def read_all(
 
     def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
-        for t in bus_targets:
+        opened = False  # a module contradicted the record: every module of the line is read in full (`what_to_read.opens_line`)
+        for index, t in enumerate(bus_targets):
+            t = what_to_read.opened(t) if opened else t
             image = images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by,
                                                              known=t.known, managed=t.managed)  # fmt: skip
+            if not opened and what_to_read.opens_line(t, image) is not None:
+                opened = True
+                for earlier in bus_targets[:index]:  # read before the line opened: the rest of them now
+                    key = (earlier.bus, earlier.address)
+                    if more := what_to_read.still_to_read(earlier, images[key]):
+                        images[key] = images[key].with_programs(read_programs(links[t.bus], earlier.address, more, name=earlier.name))
+                        if each is not None:
+                            each(earlier, images[key])
             if progress:
                 progress()
             if each is not None:
