@@ -85,12 +85,15 @@ buses:
 """
 
 
-def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object, read_first: bool = False, **emulated) -> dict:
-    """The plan file of `source` on emulators; `read_first`: after a `read`, which the line's record then holds (a targeted plan)."""
+def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object, read_first: bool = False,
+            apply_first: bool = False, **emulated) -> dict:  # fmt: skip
+    """The plan file of `source` on emulators; `read_first`: after a `read`, which the line's record then holds (a targeted plan);
+    `apply_first`: after an apply (a targeted plan that takes every program from the record)."""
     directory = tmp_path / name
     directory.mkdir()
     with emulated_plant(directory, **({"source": source} if source else {}), **emulated) as plant:
         assert not read_first or run_cli(capsys, "read", plant.path).code == 0
+        assert not apply_first or run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
         out = directory / "plan.json"
         result = run_cli(capsys, "plan", plant.path, "--out", out, *args)
         assert result.code == 0, result.err
@@ -109,6 +112,7 @@ def test_a_plan_file_has_exactly_the_keys_docs_files_lists(tmp_path, capsys):
     seen |= paths(planned(tmp_path, capsys, "unlisted", declared, unlisted={"line": [29]}), maps=SYMBOLS)
     seen |= paths(planned(tmp_path, capsys, "clamping", clamping), maps=SYMBOLS)
     seen |= paths(planned(tmp_path, capsys, "targeted", None, read_first=True), maps=SYMBOLS)
+    seen |= paths(planned(tmp_path, capsys, "taken", None, apply_first=True), maps=SYMBOLS)
     assert seen == set(documented)
 
 

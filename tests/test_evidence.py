@@ -44,8 +44,8 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
     headline = next(line for line in human.out.splitlines() if line.startswith("No changes"))
     assert EVERY_MODULE not in human.out
     assert headline.startswith("No changes to what was read now (the system blocks of 6 modules) or to what prc3cfg last "
-                               f"verified ({programs} programs of 6 modules, apply of {plant.path} by ")  # fmt: skip
-    assert " UTC" in headline
+                               f"read or verified ({programs} programs of 6 modules, the oldest apply of {plant.path} by ")  # fmt: skip
+    assert headline.endswith(" UTC).")
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
     assert markdown.code == 0 and EVERY_MODULE not in markdown.out and "No changes to what was read now" in markdown.out
     for document in (json.loads(run_cli(capsys, "plan", plant.path, "--json").out), json.loads((tmp_path / "plan.json").read_text())):

@@ -22,7 +22,7 @@ from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
 from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
-from prc3cfg.core.plant_plan import PlantPlan, Reading
+from prc3cfg.core.plant_plan import Oldest, PlantPlan, Reading
 from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
 from prc3cfg.core.render import Drift, drifted
 from prc3cfg.core.text import shown
@@ -95,9 +95,10 @@ class Reads:
         other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
         # a module whose programs were not read is on the record (`to_read`), but for an apply of a plan file whose
         # record changed since: left out, and the plan file's `taken` then refused (`plan_file.check_plan`)
-        taken = {f"{bus.name}/{m.name}": self.known[key].said() for bus, m in chosen
-                 if skipped.get(key := (bus.name, m.address)) and key in self.known}  # fmt: skip
-        return Reading(self.base, unread, skipped, other, taken)
+        resting = {f"{bus.name}/{m.name}": self.known[key] for bus, m in chosen if skipped.get(key := (bus.name, m.address)) and key in self.known}
+        oldest = min(resting.items(), key=lambda item: datetime.fromisoformat(item[1].since), default=None)
+        return Reading(self.base, unread, skipped, other, {name: known.said() for name, known in resting.items()},
+                       None if oldest is None else Oldest(oldest[0], oldest[1].since, oldest[1].by))  # fmt: skip
 
 
 def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:

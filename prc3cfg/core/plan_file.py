@@ -127,6 +127,7 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
         "estimated_time_s": round(fsum(phases.values()), 3),
         "message_count": plan.message_count,
         "axis_releases": [f"{m.bus}/{m.name}" for m in plan.axis_releases],
+        "evidence": evidence(plan),
     } | ({"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)} if plan.unshared_bus_time is not None else {}) | (
         {"read": _reading_json(plan.reading)} if plan.reading is not None else {})  # fmt: skip
 
@@ -159,6 +160,23 @@ def _module_json(change: ModuleChange, hashes: bool) -> dict[str, Any]:
 def _proof_json(proof: LineProof) -> dict[str, Any]:
     return ({"proven_silent": list(proof.silent)} if proof.silent else {}) | (
         {"unlisted_modules": list(proof.answered)} if proof.answered else {})
+
+
+def evidence(plan: PlantPlan) -> dict[str, Any]:
+    """What the plan's word rests on, as its headline says it: what was read now (each module's system
+    block, and the programs read), what was taken from the line's record instead (programs, of how many
+    modules) and the oldest of that (the module, since when, by whom); `complete` — every value the plan
+    covers read in this run — is what "every module matches the plant file" needs."""
+    not_read = {} if plan.reading is None else plan.reading.programs_not_read
+    oldest = None if plan.reading is None else plan.reading.oldest
+    taken = [programs for programs in not_read.values() if programs]
+    return {
+        "complete": not taken and not (plan.reading is not None and plan.reading.modules_not_read),
+        "read_now": {"system_blocks": len(plan.modules),
+                     "programs": sum(1 for m in plan.modules for program in m.actual.programs if program is not None)},
+        "from_record": {"modules": len(taken), "programs": sum(map(len, taken))},
+        "oldest": None if oldest is None else {"module": oldest.module, "since": oldest.since, "by": oldest.by},
+    }  # fmt: skip
 
 
 def _reading_json(reading: Reading) -> dict[str, Any]:
@@ -317,6 +335,31 @@ class _Phases(BaseModel):
     verifying: Number
 
 
+class _Oldest(BaseModel):
+    model_config = LATER
+
+    module: Text
+    since: Text
+    by: Text
+
+
+class _Counted(BaseModel):
+    model_config = LATER
+
+    modules: Whole = 0
+    programs: Whole
+    system_blocks: Whole = 0
+
+
+class _Evidence(BaseModel):
+    model_config = LATER
+
+    complete: Flag
+    read_now: _Counted
+    from_record: _Counted
+    oldest: _Oldest | None
+
+
 class ShownPlanDocument(PlanDocument):
     buses: list[_ShownBus]  # type: ignore[assignment]  # a bus as shown is a bus
     axis_releases: list[Text]
@@ -326,6 +369,7 @@ class ShownPlanDocument(PlanDocument):
     left_alone: list[Text] = Field(default_factory=list)
     estimated_time_s: Number = 0.0
     estimated_phases_s: _Phases = Field(default_factory=lambda: _Phases(reading=0.0, writing=0.0, verifying=0.0))
+    evidence: _Evidence | None = None  # none in plan files before issue 41: their headline says nothing of it
 
 
 @dataclass(frozen=True, slots=True)

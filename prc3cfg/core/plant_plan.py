@@ -82,18 +82,29 @@ class LineProof:
 
 
 @dataclass(frozen=True, slots=True)
+class Oldest:
+    """The oldest evidence a targeted plan took from the line's record instead of reading it: the module
+    ("bus/name"), since when its record's oldest value was read or verified (ISO 8601, UTC), and by whom."""
+
+    module: str
+    since: str
+    by: str
+
+
+@dataclass(frozen=True, slots=True)
 class Reading:
     """How a plan's read-back was targeted (`prc3cfg.core.what_to_read`): the record it was compared with,
     in words, the modules not read at all (none: every module's system block is read), per module read
     the managed programs not read — taken as known from the record, with who verified them when
-    (`taken`, "bus/name" → words) — and the modules read in full, each with why. A plan without one
-    read every chosen module in full."""
+    (`taken`, "bus/name" → words; the `oldest` of them) — and the modules read in full, each with why. A
+    plan without one read every chosen module in full."""
 
     base: str
     modules_not_read: tuple[str, ...]  # "bus/name"
     programs_not_read: dict[tuple[str, int], tuple[int, ...]]
     not_as_verified: tuple[str, ...] = ()  # "bus/name (why)": read in full, not taken from the record
     taken: dict[str, str] = field(default_factory=dict)  # "bus/name" → whose read or verification its unread programs rest on, when
+    oldest: Oldest | None = None  # of the modules whose programs were taken: None when none was
 
 
 @dataclass(frozen=True, slots=True)

@@ -43,6 +43,7 @@ from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
+from prc3cfg.core.what_to_read import to_the_minute
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"
@@ -376,17 +377,41 @@ def _broadcast_lines(bus: dict[str, Any]) -> list[str]:
 PHASES = {"reading": "reading back", "writing": "writing", "verifying": "verifying"}
 
 
-def summary_line(document: dict[str, Any]) -> str:
+def summary_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str:
+    """The plan's headline: what changes and what it costs — or that nothing does, and on what evidence
+    (`no_changes`), its texts `shown` as the medium needs."""
     modules = _modules(document)
     changed = sum(1 for _, m in modules if m["steps"])
     if not changed:
-        return "No changes: every module matches the plant file."
+        return no_changes(document.get("evidence"), shown)
     releases = len(document["axis_releases"])
     return (
         f"Plan: {changed} of {plural(len(modules), 'module')} change{'s' if changed == 1 else ''}, "
         f"{plural(document['message_count'], 'message')}, " + estimate(document)
         + (f"; ⚠ {plural(releases, 'module')} release{'s' if releases == 1 else ''} the axes" if releases else "")
     )
+
+
+#: The headline of a plan without changes that read every value it covers in that run.
+EVERY_MODULE = "No changes: every module matches the plant file."
+
+
+def no_changes(evidence: dict[str, Any] | None, shown: Callable[[str], str] = escape.shown) -> str:
+    """The headline of a plan without changes, naming its evidence (`plan_file.evidence`): "every module
+    matches the plant file" only when every value it covers was read in that run; else "No changes to
+    what was read now (the system blocks of 6 modules) or to what prc3cfg last read or verified (82
+    programs of 6 modules, the oldest apply of /p/a.yaml by ana@pc since 2026-11-26 03:27 UTC)"."""
+    if evidence is None:  # a plan file written before plans said what they rest on
+        return "No changes (the plan file does not say what was read, or taken from the line's record)."
+    if evidence["complete"]:
+        return EVERY_MODULE
+    now, record, oldest = evidence["read_now"], evidence["from_record"], evidence["oldest"]
+    read = f"the system blocks of {plural(now['system_blocks'], 'module')}"
+    read += f" and {plural(now['programs'], 'program')}" if now["programs"] else ""
+    rests = f"{plural(record['programs'], 'program')} of {plural(record['modules'], 'module')}"
+    if oldest is not None:
+        rests += f", the oldest {shown(oldest['by'])} since {to_the_minute(oldest['since']) or shown(oldest['since'])}"
+    return f"No changes to what was read now ({read}) or to what prc3cfg last read or verified ({rests})."
 
 
 def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str | None:
@@ -556,7 +581,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     fit, and a last line saying how many were left out and where the full plan is."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
-    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document), "",
+    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document, cell), "",
             *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]  # fmt: skip
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):

@@ -80,7 +80,15 @@ class Known:
 
     def said(self) -> str:
         """"apply of /p/a.yaml by ana@pc-3 (since 2026-11-26 03:27 UTC)": whose read or verification, to the minute."""
-        return f"{self.by} (since {datetime.fromisoformat(self.since).astimezone(UTC):%Y-%m-%d %H:%M} UTC)"
+        return f"{self.by} (since {to_the_minute(self.since)})"
+
+
+def to_the_minute(when: str) -> str | None:
+    """An ISO 8601 time as the record's words say it: "2026-11-26 03:27 UTC"; None for a text that is none."""
+    try:
+        return f"{datetime.fromisoformat(when).astimezone(UTC):%Y-%m-%d %H:%M} UTC"
+    except ValueError:
+        return None
 
 
 @dataclass(frozen=True, slots=True)
