@@ -64,6 +64,21 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
                                     "from_record": {"modules": 0, "programs": 0}, "oldest": None}  # fmt: skip
 
 
+def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_as_saying_nothing(plant, capsys, tmp_path):
+    applied(plant, capsys)
+    saved = tmp_path / "plan.json"
+    assert run_cli(capsys, "plan", plant.path, "--out", saved).code == 0
+    document = json.loads(saved.read_text())
+    document["evidence"]["complete"] = True  # a file that claims every value was read
+    saved.write_text(json.dumps(document))
+    refused = run_cli(capsys, "apply", plant.path, "--plan", saved, "--auto-approve")
+    assert refused.code == 1 and "evidence.complete is not what prc3cfg wrote for this plan" in refused.err, refused.err
+    del document["evidence"]  # a plan file from before plans named their evidence
+    saved.write_text(json.dumps(document))
+    shown = run_cli(capsys, "show", saved)
+    assert shown.code == 0 and "No changes (the plan file does not say what was read" in shown.out and EVERY_MODULE not in shown.out
+
+
 def test_the_recipes_replan_reads_in_full():
     """The job that plans main's plant file against the modules now takes nothing from the record."""
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
