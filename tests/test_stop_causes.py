@@ -1,0 +1,144 @@
+"""Issue 40, item 4: each stop names its likeliest cause — by the framing's protection and by what
+was seen on the line (`prc3cfg.core.exchange.ACK_TO_READ`, `FIRMWARE_ADDED`), row by row, then across
+the real link and the real emulator."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from pair import PairPort
+from test_link import LatePort
+
+from prc3cfg.core import codec
+from prc3cfg.core.device import ModuleState
+from prc3cfg.core.exchange import ACK_TO_READ, FIRMWARE_ADDED, Asked, LinkStep, Protection, asked, judge, protection
+from prc3cfg.core.framing import Direction, get_framing
+from prc3cfg.errors import UserError
+from prc3cfg.shell.emulator.server import Emulator
+from prc3cfg.shell.emulator.state import FORMAT, load_state
+from prc3cfg.shell.link.client import Link, LinkError, OldFirmware, PossibleWrite
+
+# -- the table of causes, row by row -------------------------------------------------------------
+
+#: What each row must say: the cause it names first, and whether it tells of damage and parity.
+ROWS = {
+    (Protection.CHECKSUM, True): ("the late acknowledgement of", False),
+    (Protection.CHECKSUM, False): ("a duplicated acknowledgement", False),
+    (Protection.PARITY, True): ("the late acknowledgement of", True),
+    (Protection.PARITY, False): ("a duplicated acknowledgement", True),
+    (Protection.NONE, True): ("the late acknowledgement of", True),
+    (Protection.NONE, False): ("a damaged frame the module took for a write", True),
+}
+
+
+@pytest.mark.parametrize(("row", "expected"), ROWS.items(), ids=[f"{p.value}-{'owed' if o else 'none-owed'}" for p, o in ROWS])
+def test_each_row_of_the_causes_names_what_was_seen_first(row, expected):
+    first, damage = expected
+    cause = ACK_TO_READ[row]
+    assert cause.likeliest.startswith(first.split(" {")[0])
+    assert ("damage" in cause.likeliest + cause.also) is damage
+    assert ("parity" in cause.remedy) is (row[0] is Protection.NONE)
+    assert "timeout" not in cause.likeliest + cause.also + cause.remedy  # the deadline comes from the line now
+    assert set(ACK_TO_READ) == set(ROWS)
+
+
+def test_protection_is_the_checksum_else_the_parity_the_port_checks():
+    assert protection(get_framing("crc16"), parity_checked=False) is Protection.CHECKSUM
+    assert protection(get_framing("stx"), parity_checked=True) is Protection.CHECKSUM
+    assert protection(get_framing("open-driver"), parity_checked=True) is Protection.PARITY
+    assert protection(get_framing("open-driver"), parity_checked=False) is Protection.NONE
+
+
+@pytest.mark.parametrize("message", [codec.WriteF2(((1, 0),)), codec.ReadSystem(), codec.ReadProgram(1), codec.ReadPrograms(1, 2)])
+def test_code_10_to_a_message_newer_firmware_added_is_old_firmware_not_damage(message):
+    assert message.ID in FIRMWARE_ADDED and asked(message) is (Asked.READ if message.IS_READ else Asked.ADDED)
+    verdict = judge(message, codec.encode_code(10), checked=True, heard=None, attempts_left=3, timeout=0.1)
+    assert verdict.step is LinkStep.OLD_FIRMWARE
+    heard_once = judge(message, codec.encode_code(10), checked=False, heard=None, attempts_left=3, timeout=0.1)
+    assert heard_once.step is LinkStep.CONFIRM  # no checksum: heard twice before it is believed
+    twice = judge(message, codec.encode_code(10), checked=False, heard=10, attempts_left=3, timeout=0.1)
+    assert twice.step is LinkStep.OLD_FIRMWARE
+
+
+def test_code_10_to_a_message_every_firmware_has_is_damage_asked_again():
+    verdict = judge(codec.WriteF1(((1, 0),)), codec.encode_code(10), checked=True, heard=None, attempts_left=3, timeout=0.1)
+    assert verdict.step is LinkStep.RETRY and "damaged" in verdict.problem
+
+
+# -- across the link and the emulator ------------------------------------------------------------
+
+
+# an in-memory line carries no gap between two replies: open-driver's (which a gap ends) are said apart below
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_read_answered_by_a_late_acknowledgement_names_the_write_that_went_unanswered(framing):
+    with Emulator({1: ModuleState.factory(1)}, framing=framing) as emulator:
+        link = Link(LatePort(emulator, late=1), get_framing(framing), bus="test", timeout=0.01, retries=0)
+        with pytest.raises(LinkError, match="no reply within"):
+            link.request(1, codec.WriteSpeeds(((1, 100),)))
+        with pytest.raises(PossibleWrite) as stopped:
+            link.request(1, codec.ReadSystem())
+    said = str(stopped.value)
+    assert said.startswith("bus test, module 1: a read (50h) was answered as a write is — likeliest the late acknowledgement "
+                           "of a write to it (41h) that went unanswered at first")  # fmt: skip
+    assert "damage" not in said and "parity" not in said and "timeout" not in said
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx"])
+def test_a_read_answered_by_an_acknowledgement_nothing_owed_names_a_duplicate_on_a_checksummed_line(framing):
+    with Emulator({1: ModuleState.factory(1)}, framing=framing) as emulator:
+        port = LatePort(emulator, late=0)
+        link = Link(port, get_framing(framing), bus="test", timeout=0.01, retries=0)
+        assert link.request(1, codec.WriteSpeeds(((1, 100),))) == 0
+        port.late = 1  # a copy of the write, delivered again by the line: its acknowledgement answers the read
+        port.write(get_framing(framing).encode(Direction.REQUEST, 1, codec.WriteSpeeds(((1, 100),)).encode()))
+        with pytest.raises(PossibleWrite) as stopped:
+            link.request(1, codec.ReadSystem())
+    said = str(stopped.value)
+    assert said.startswith("bus test, module 1: a read (50h) was answered as a write is — likeliest a duplicated acknowledgement")
+    assert "parity" not in said and "damaged frame" not in said
+
+
+@pytest.mark.parametrize(("owed", "checked", "first", "last"), [
+    ((0x41,), False, "the late acknowledgement of a write to it (41h) that went unanswered at first",
+     "or, as likely on a line without a checksum or parity, a damaged frame the module took for a write"),
+    ((0x41, 0x41), True, "the late acknowledgement of one of 2 writes to it (41h) that went unanswered at first",
+     "or, less likely, a damaged frame the module took for a write and executed, which may have changed any value or released "
+     "its axes (10h/20h) with two bits flipped, which parity misses"),
+    ((), False, "a damaged frame the module took for a write", "or a duplicated acknowledgement"),
+    ((), True, "a duplicated acknowledgement", "or, less likely, a damaged frame"),
+])  # fmt: skip
+def test_open_driver_stops_say_damage_by_the_parity_the_port_checks(owed, checked, first, last):
+    link_said = str(PossibleWrite("test", 1, codec.ReadSystem(), owed, protection(get_framing("open-driver"), parity_checked=checked)))
+    assert link_said.startswith(f"bus test, module 1: a read (50h) was answered as a write is — likeliest {first}")
+    assert last in link_said
+    assert ("use parity on the line" in link_said) is (not checked)
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
+def test_code_10_to_45h_from_firmware_before_3_02_1_is_one_line_naming_it_not_retried_as_damage(framing):
+    old = ModuleState(ModuleState.factory(1).image, read_messages=False, f2_messages=False)  # PRC 3.01.1
+    with Emulator({1: old}, framing=framing) as emulator:
+        link = Link(PairPort(emulator), get_framing(framing), bus="test", timeout=0.05, retries=3)
+        with pytest.raises(OldFirmware) as stopped:
+            link.request(1, codec.WriteF2(((1, 50),)))
+        assert link.exchanges == (1 if framing != "open-driver" else 2)  # believed on a checksum, else heard twice
+        assert link.request(1, codec.WriteF1(((1, 50),))) == 0  # every other write it takes
+    assert str(stopped.value) == ("bus test, module 1: answers 45h (function outputs F2) as an unknown message — its firmware is "
+                                  "older than PRC 3.02.1, which added them: update the module's firmware, or leave f2 out of "
+                                  "this module's programs in the plant file")  # fmt: skip
+    assert "\n" not in str(stopped.value)
+
+
+def test_firmware_without_f2_has_no_reads_either():
+    with pytest.raises(ValueError, match=r"3\.02\.1"):
+        ModuleState(ModuleState.factory(1).image, f2_messages=False)
+
+
+def test_a_state_file_of_firmware_without_f2_but_with_reads_is_one_line(tmp_path):
+    path = tmp_path / "state.json"
+    document = {"format": FORMAT, "modules": [ModuleState.factory(1).to_json() | {"f2_messages": False}]}
+    path.write_text(json.dumps(document))
+    with pytest.raises(UserError) as refused:
+        load_state(path)
+    assert str(refused.value).startswith(f"{path}: module 1: a module without function output F2 (firmware before PRC 3.02.1)")
