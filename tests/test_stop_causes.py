@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from emulated import emulated_plant, run_cli
 from pair import PairPort
 from test_link import LatePort
 
@@ -14,10 +15,12 @@ from prc3cfg.core import codec
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.exchange import ACK_TO_READ, FIRMWARE_ADDED, Asked, LinkStep, Protection, asked, judge, protection
 from prc3cfg.core.framing import Direction, get_framing
+from prc3cfg.core.image import ModuleImage
 from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator.server import Emulator
 from prc3cfg.shell.emulator.state import FORMAT, load_state
 from prc3cfg.shell.link.client import Link, LinkError, OldFirmware, PossibleWrite
+from prc3cfg.shell.plant_files import load_plant
 
 # -- the table of causes, row by row -------------------------------------------------------------
 
@@ -142,3 +145,39 @@ def test_a_state_file_of_firmware_without_f2_but_with_reads_is_one_line(tmp_path
     with pytest.raises(UserError) as refused:
         load_state(path)
     assert str(refused.value).startswith(f"{path}: module 1: a module without function output F2 (firmware before PRC 3.02.1)")
+
+
+# -- a fault state a write revealed stays, and is told ---------------------------------------------
+
+
+def _matching(plant, bus: str, address: int) -> ModuleImage:
+    """What module `address` holds with every value the plant file gives it."""
+    module = next(m for b, m in load_plant(plant.path).modules() if b.name == bus and m.address == address)
+    desired, held = module.desired_image(), plant.emulators[bus].module(address).image
+    return ModuleImage(address, desired.system, tuple(w or h for h, w in zip(held.programs, desired.programs, strict=True)))
+
+
+@pytest.mark.parametrize("fault", ["E09", "E21"])
+def test_a_fault_a_write_revealed_is_told_by_read_scan_and_plan_until_a_write_is_acknowledged(tmp_path, capsys, fault):
+    with emulated_plant(tmp_path) as plant:
+        emulator = plant.emulators["booth-a"]
+        emulator.update(2, fault=fault)
+        refused = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert refused.code == 1 and f"operating condition is error {fault}" in refused.err
+        emulator.update(2, image=_matching(plant, "booth-a", 2))  # its values match now; it is still in the fault
+        said = f"bus booth-a, module 2 (booth-a-right): is in {fault} ("
+        planned = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
+        assert planned.code == 0  # nothing to write: the fault is told, not a change
+        assert said in planned.err
+        assert "No changes: every module matches the plant file." not in planned.out
+        assert f"⚠ booth-a/booth-a-right is in {fault}" in planned.out
+        assert said in run_cli(capsys, "read", plant.path).err
+        port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
+        assert said in run_cli(capsys, "scan", "--port", port).err
+        emulator.update(2, fault=None)  # cleared on the floor; the next write to it is acknowledged
+        text = plant.path.read_text()
+        assert "        position: 2.0\n" in text
+        plant.path.write_text(text.replace("        position: 2.0\n", "        position: 1.99\n", 1))  # a write to it
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        after = run_cli(capsys, "plan", plant.path)
+        assert said not in after.err and "No changes" in after.out

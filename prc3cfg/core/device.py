@@ -20,16 +20,13 @@ from typing import Any
 
 from prc3cfg.core import codec
 from prc3cfg.core.codec import Message, Rejected
-from prc3cfg.core.error_codes import ACCEPTED
+from prc3cfg.core.error_codes import ACCEPTED, FAULT_STATES
 from prc3cfg.core.exchange import FIRMWARE_ADDED
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, SystemParameters, default_program
 
 MODES = ("stop", "run", "manual")
 #: A fault condition → the code every write is rejected with (§4.4).
-FAULT_CODES: dict[str, int] = {
-    "E09": 21, "E10": 22, "E12": 23, "E20": 24, "E21": 25,
-    "E22": 26, "E23": 27, "E24": 28, "E25": 29, "fault": 30,
-}  # fmt: skip
+FAULT_CODES: dict[str, int] = {name: code for code, name in FAULT_STATES.items()}  # fmt: skip
 
 #: Fixed value ranges, kind → (lowest, highest, code below, code above) (§4.5 step 9): the one
 #: table of the device's ranges. The plant file's bounds (`prc3cfg.core.units`), the emulator's
