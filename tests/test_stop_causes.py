@@ -5,16 +5,21 @@ the real link and the real emulator."""
 from __future__ import annotations
 
 import json
+import random
+import re
+from pathlib import Path
 
 import pytest
 from emulated import emulated_plant, run_cli
+from lossy import Loss
 from pair import PairPort
+from test_late_writes import FRAMINGS, READS, proxied, simplified
 from test_link import LatePort
 
 from prc3cfg.core import codec
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.exchange import ACK_TO_READ, FIRMWARE_ADDED, Asked, LinkStep, Protection, asked, judge, protection
-from prc3cfg.core.framing import Direction, get_framing
+from prc3cfg.core.framing import Direction, Frame, get_framing
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator.server import Emulator
@@ -181,3 +186,85 @@ def test_a_fault_a_write_revealed_is_told_by_read_scan_and_plan_until_a_write_is
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
         after = run_cli(capsys, "plan", plant.path)
         assert said not in after.err and "No changes" in after.out
+
+
+# -- across the real client, a proxy that holds or repeats frames, and the real emulator -------------
+
+#: What each stop must name first, by the line's protection over TCP (open-driver: no parity a port checks)
+#: and what the proxy did: a held write was retried (owed) — or, where a read's data settled what was owed
+#: before it came, it reads as repeated; a copy is a duplicate; without a checksum damage comes first or beside.
+NAMED = {
+    ("crc16", Loss.LATE): ("likeliest the late acknowledgement", "likeliest a duplicated acknowledgement"),
+    ("stx", Loss.LATE): ("likeliest the late acknowledgement", "likeliest a duplicated acknowledgement"),
+    ("open-driver", Loss.LATE): ("likeliest the late acknowledgement", "likeliest a damaged frame"),
+    ("crc16", Loss.DUPLICATE): ("likeliest a duplicated acknowledgement",),
+    ("stx", Loss.DUPLICATE): ("likeliest a duplicated acknowledgement",),
+    ("open-driver", Loss.DUPLICATE): ("likeliest a damaged frame the module took for a write and executed, which may have changed "
+                                      "any value or released its axes (10h/20h); or a duplicated acknowledgement",),
+}  # fmt: skip
+
+
+def held_until_a_read(framing: str, loss: Loss, nth: int, k: int, directory: Path, capsys) -> str:
+    """The apply of `simplified` with the `nth` write held (or copied) and delivered just before the `k`-th
+    read to that module after it: what the apply said on stderr, every held frame delivered after it."""
+    armed, writes, target, reads = False, 0, {"address": None}, 0
+
+    def rule(frame: Frame, _: int) -> set[Loss]:
+        nonlocal writes
+        if not armed or frame.message[0] in READS:
+            return set()
+        writes += 1
+        if writes == nth:
+            target["address"] = frame.address
+            return {loss}
+        return set()
+
+    def until(frame: Frame, _: int) -> bool:
+        nonlocal reads
+        if target["address"] is None or frame.address != target["address"] or frame.message[0] not in READS:
+            return False
+        reads += 1
+        return reads >= k
+
+    with proxied(directory, FRAMINGS[framing], rule, until, hold=30.0) as (plant, proxy):
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        simplified(plant)
+        armed = True
+        applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        proxy.flush()
+        return applied.err
+
+
+def assert_named(err: str, framing: str, loss: Loss) -> int:
+    """Each stop in `err` names what the proxy did first (`NAMED`), never a slow line; how many there were
+    (one stop of the line is told on every module of it the apply had)."""
+    stops = set(re.findall(r"bus line, module \d+: a read \(..h\) was answered as a write is.*", err))
+    for line in stops:
+        assert any(words in line for words in NAMED[framing, loss]), line
+        assert "timeout" not in line
+        assert ("use parity on the line" in line) is (framing == "open-driver")
+    return len(stops)
+
+
+@pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
+def test_a_held_write_whose_acknowledgement_answers_a_read_is_named_late(tmp_path, capsys, framing):
+    err = held_until_a_read(framing, Loss.LATE, 1, 1, tmp_path, capsys)
+    assert assert_named(err, framing, Loss.LATE) == 1, err
+    assert "likeliest the late acknowledgement of a write to it (" in err
+
+
+@pytest.mark.parametrize("framing", ["crc16", "open-driver"])
+def test_a_repeated_write_whose_acknowledgement_answers_a_read_is_named_duplicated(tmp_path, capsys, framing):
+    err = held_until_a_read(framing, Loss.DUPLICATE, 1, 1, tmp_path, capsys)
+    assert assert_named(err, framing, Loss.DUPLICATE) == 1, err
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("seed", range(18))
+def test_every_stop_names_what_the_proxy_did(tmp_path, capsys, seed):
+    """A seeded framing, fault (LATE, DUPLICATE), write (by its running number) and read after it before which
+    the held frame is delivered: every stop names what the proxy did (`NAMED`)."""
+    draw = random.Random(seed)
+    framing, loss = draw.choice(list(FRAMINGS)), draw.choice([Loss.LATE, Loss.DUPLICATE])
+    err = held_until_a_read(framing, loss, draw.randint(1, 3), draw.randint(1, 2), tmp_path, capsys)
+    assert_named(err, framing, loss)  # 12 of these 18 seeds stop the line (a held 43h to m2 can be settled by m2's reads)
