@@ -12,10 +12,11 @@ from __future__ import annotations
 import pytest
 
 from prc3cfg.core import codec
-from prc3cfg.core.exchange import FAULTS, VERDICTS, Arrival, Asked, Fault, LinkStep, judge
+from prc3cfg.core.exchange import FAULTS, VERDICTS, Arrival, Fault, LinkStep, asked, judge
 from prc3cfg.core.image import DEFAULT_SYSTEM
 
 READ, WRITE = codec.ReadSystem(), codec.InitSystem()  # 50h, 10h
+ADDED = codec.WriteF2(((1, 50),))  # 45h: PRC 3.02.1 added it
 DATA = codec.SystemReply(DEFAULT_SYSTEM, 5).encode()  # 50h's reply: 22 bytes
 SHORT = bytes(4)  # neither a code word nor 50h's data block
 
@@ -46,11 +47,11 @@ CASES = [
     pytest.param(code(0), READ, NO_CHECKSUM, None, 3, LinkStep.POSSIBLE_WRITE, "", id="a read accepted without a checksum, at once"),
     pytest.param(code(0), READ, NO_CHECKSUM, 20, 0, LinkStep.POSSIBLE_WRITE, "", id="a read accepted after another code"),
     # 10, an unknown message: to a read, firmware without reads — once believed
-    pytest.param(code(10), READ, CHECKSUM, None, 3, LinkStep.NO_READ_MESSAGES, "", id="a read unknown, with a checksum"),
+    pytest.param(code(10), READ, CHECKSUM, None, 3, LinkStep.OLD_FIRMWARE, "", id="a read unknown, with a checksum"),
     pytest.param(code(10), READ, NO_CHECKSUM, None, 3, LinkStep.CONFIRM,
                  "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
                  id="a read unknown, once without a checksum"),
-    pytest.param(code(10), READ, NO_CHECKSUM, 10, 2, LinkStep.NO_READ_MESSAGES, "", id="a read unknown, twice in a row"),
+    pytest.param(code(10), READ, NO_CHECKSUM, 10, 2, LinkStep.OLD_FIRMWARE, "", id="a read unknown, twice in a row"),
     pytest.param(code(10), READ, NO_CHECKSUM, 20, 2, LinkStep.CONFIRM,
                  "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
                  id="a read unknown after another code"),
@@ -91,6 +92,22 @@ CASES = [
     # a data block: a read's answer, at once
     pytest.param(DATA, READ, CHECKSUM, None, 3, LinkStep.ANSWER, "", id="data to a read"),
     pytest.param(DATA, READ, NO_CHECKSUM, 20, 0, LinkStep.ANSWER, "", id="data to a read without a checksum, after a code"),
+    # a write a later firmware added: as any write, but 10 is that older firmware, never damage
+    pytest.param(None, ADDED, CHECKSUM, None, 1, LinkStep.RETRY, "no reply within 0.5 s", id="nothing to 45h"),
+    pytest.param(SHORT, ADDED, NO_CHECKSUM, None, 1, LinkStep.RETRY, "bad reply (4 bytes in reply to 45h, expected 2)",
+                 id="garbled to 45h"),
+    pytest.param(code(0), ADDED, NO_CHECKSUM, None, 1, LinkStep.ANSWER, "", id="45h accepted"),
+    pytest.param(code(10), ADDED, CHECKSUM, None, 3, LinkStep.OLD_FIRMWARE, "", id="45h unknown, with a checksum"),
+    pytest.param(code(10), ADDED, NO_CHECKSUM, None, 3, LinkStep.CONFIRM,
+                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
+                 id="45h unknown, once without a checksum"),
+    pytest.param(code(10), ADDED, NO_CHECKSUM, 10, 2, LinkStep.OLD_FIRMWARE, "", id="45h unknown, twice in a row"),
+    pytest.param(code(12), ADDED, CHECKSUM, None, 1, LinkStep.RETRY,
+                 "the module reports a damaged message (code 12: invalid length (message longer than 64 bytes))", id="45h damaged 12"),
+    pytest.param(code(25), ADDED, CHECKSUM, None, 1, LinkStep.ANSWER, "", id="45h refused, with a checksum"),
+    pytest.param(code(25), ADDED, NO_CHECKSUM, None, 1, LinkStep.CONFIRM,
+                 "code 25: operating condition is error E21 (positioning error) on a line without a checksum, asking again to "
+                 "confirm it", id="45h refused once, without a checksum"),
 ]  # fmt: skip
 
 
@@ -118,12 +135,12 @@ def test_the_cases_reach_every_row_and_column_of_the_verdicts():
         raw, message, checked, heard, left, _, _ = case.values
         verdict = verdict_of(raw, message, checked, heard, left)
         believed = checked or (heard is not None and verdict.reply == heard)
-        reached.add((verdict.arrival, Asked.READ if message.IS_READ else Asked.WRITE, believed))
-    for (came, asked), steps in VERDICTS.items():
-        columns = {believed for c, a, believed in reached if (c, a) == (came, asked)}
-        assert columns, f"no case of {came} to a {asked.value}"
+        reached.add((verdict.arrival, asked(message), believed))
+    for (came, kind), steps in VERDICTS.items():
+        columns = {believed for c, a, believed in reached if (c, a) == (came, kind)}
+        assert columns, f"no case of {came} to a {kind.value}"
         if steps.believed is not steps.heard_once:
-            assert columns == {True, False}, f"{came} to a {asked.value}: one column without a case"
+            assert columns == {True, False}, f"{came} to a {kind.value}: one column without a case"
     assert {came for came, _, _ in reached} == set(Arrival)  # every kind of arrival, made from bytes
 
 

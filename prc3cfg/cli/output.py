@@ -11,7 +11,7 @@ import contextlib
 import itertools
 import json
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
@@ -22,7 +22,8 @@ from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
 
 
-def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str]) -> None:
+def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str],
+              faults: Sequence[str] = ()) -> None:  # fmt: skip
     document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
@@ -32,9 +33,10 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
             sys.stdout.write(text)
         print()
     elif markdown:
-        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=f"`{out.name}`" if out else "the plan file"))
+        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=f"`{out.name}`" if out else "the plan file",
+                              faults=faults))  # fmt: skip
     else:
-        print_lines(render.human(plan, notes=notes))  # the plan made now: its words are prc3cfg's, not a file's
+        print_lines(render.human(plan, notes=notes, faults=faults))  # the plan made now: its words are prc3cfg's, not a file's
         if out is not None:
             print(f"Plan written to {out}; apply it with: prc3cfg apply --plan {out}")
 

@@ -20,15 +20,13 @@ from typing import Any
 
 from prc3cfg.core import codec
 from prc3cfg.core.codec import Message, Rejected
-from prc3cfg.core.error_codes import ACCEPTED
+from prc3cfg.core.error_codes import ACCEPTED, FAULT_STATES
+from prc3cfg.core.exchange import FIRMWARE_ADDED
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, SystemParameters, default_program
 
 MODES = ("stop", "run", "manual")
 #: A fault condition → the code every write is rejected with (§4.4).
-FAULT_CODES: dict[str, int] = {
-    "E09": 21, "E10": 22, "E12": 23, "E20": 24, "E21": 25,
-    "E22": 26, "E23": 27, "E24": 28, "E25": 29, "fault": 30,
-}  # fmt: skip
+FAULT_CODES: dict[str, int] = {name: code for code, name in FAULT_STATES.items()}  # fmt: skip
 
 #: Fixed value ranges, kind → (lowest, highest, code below, code above) (§4.5 step 9): the one
 #: table of the device's ranges. The plant file's bounds (`prc3cfg.core.units`), the emulator's
@@ -91,8 +89,13 @@ class ModuleState:
     #: module answers them as it answers any ID it does not know (code 10). (reading: the manual names
     #: the firmware that added them, not how an older one answers; any unknown ID is refused with 10.)
     read_messages: bool = True
+    #: False for firmware before PRC 3.02.1 (February 1994), which added function output F2 (45h): such a
+    #: module answers 45h with code 10, and — older than 3.03.1 too — its reads as well.
+    f2_messages: bool = True
 
     def __post_init__(self) -> None:
+        if not self.f2_messages and self.read_messages:
+            raise ValueError("a module without function output F2 (firmware before PRC 3.02.1) has no read messages either (PRC 3.03.1)")
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {self.mode!r}")
         if self.fault is not None and self.fault not in FAULT_CODES:
@@ -117,7 +120,7 @@ class ModuleState:
             "active_program": self.active_program,
             "fault": self.fault,
             "referenced": self.referenced,
-        } | ({} if self.read_messages else {"read_messages": False})
+        } | ({} if self.read_messages else {"read_messages": False}) | ({} if self.f2_messages else {"f2_messages": False})
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> ModuleState:
@@ -128,6 +131,7 @@ class ModuleState:
             fault=data.get("fault"),
             referenced=data.get("referenced", True),
             read_messages=data.get("read_messages", True),
+            f2_messages=data.get("f2_messages", True),
         )
 
 
@@ -159,11 +163,11 @@ def _set_system(state: ModuleState, system: SystemParameters) -> ModuleState:
 def _with_image(state: ModuleState, image: ModuleImage) -> ModuleState:
     """`state` holding `image`: what most writes do — built directly, as `dataclasses.replace` costs
     three times as much (a plan's proof and the broadcast search run 100,000 writes for 32 × 30 modules)."""
-    return ModuleState(image, state.mode, state.active_program, state.fault, state.referenced, state.read_messages)
+    return ModuleState(image, state.mode, state.active_program, state.fault, state.referenced, state.read_messages, state.f2_messages)
 
 
 # `_with_image` names every field of a state: one added would otherwise fall back to its default on each write.
-assert [f.name for f in fields(ModuleState)] == ["image", "mode", "active_program", "fault", "referenced", "read_messages"]
+assert [f.name for f in fields(ModuleState)] == ["image", "mode", "active_program", "fault", "referenced", "read_messages", "f2_messages"]
 
 
 def _init_programs(state: ModuleState, numbers: range | tuple[int, ...]) -> ModuleState:
@@ -282,8 +286,8 @@ def process(state: ModuleState, data: bytes, *, broadcast: bool = False) -> Outc
         return Outcome(state, None)
     try:
         message = codec.decode_message(data)
-        if message.IS_READ and not state.read_messages:
-            raise Rejected(10, f"ID {message.ID:02X}h: firmware before PRC 3.03.1")
+        if (message.IS_READ and not state.read_messages) or (message.ID == codec.WriteF2.ID and not state.f2_messages):
+            raise Rejected(10, f"ID {message.ID:02X}h: firmware before PRC {FIRMWARE_ADDED[message.ID][0]}")
         if message.IS_READ:
             new_state, reply = state, read(state, message)
         else:

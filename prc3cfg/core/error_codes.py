@@ -78,6 +78,20 @@ ERROR_CODES: dict[int, ErrorCode] = {
 }
 
 
+#: The codes a module in a fault state refuses every write with (§4.4), by code: the fault's name on
+#: the module's display. The device model's `FAULT_CODES` is this, turned round.
+FAULT_STATES: dict[int, str] = {
+    21: "E09", 22: "E10", 23: "E12", 24: "E20", 25: "E21", 26: "E22", 27: "E23", 28: "E24", 29: "E25", 30: "fault",
+}  # fmt: skip
+
+
+def fault_said(code: int) -> str:
+    """A fault state as told to a person: its name and what it is ("E21 (positioning error)")."""
+    meaning = ERROR_CODES[code].meaning
+    what = meaning.split("(", 1)[1].rstrip(")") if "(" in meaning else meaning.removeprefix("operating condition is ")
+    return f"{FAULT_STATES[code]} ({what})" if FAULT_STATES[code] != "fault" else "an undefinable fault"
+
+
 def describe(code: int) -> str:
     """The meaning of a reply code, as shown to people; "unknown code N" outside the table."""
     if code == ACCEPTED:

@@ -11,9 +11,12 @@ The rules the verdicts keep:
 - every PRC 3 message is idempotent (an absolute write or a read): a lost reply, one that does
   not decode, and a structural error code (11..15, and 10 to a write: we only send messages the
   codec built, so the module saw ours damaged on the line) are asked for again;
-- a read answered with an acknowledgement was taken by the module for a write — a damaged frame
-  it executed, any write: nothing more may be sent on the line, and it is never asked again;
-- a read answered as an unknown message (10) is firmware before PRC 3.03.1, which has no reads;
+- a read answered with an acknowledgement: nothing more may be sent on the line, and it is never
+  asked again; its likeliest cause (`ACK_TO_READ`) is by the line's protection (`Protection`) and by
+  what was seen: the late acknowledgement of a write to that module that went unanswered at first,
+  a duplicated one (a checksum rules damage out), or a damaged frame the module executed as a write;
+- a message some firmware lacks (`FIRMWARE_ADDED`: 45h came with PRC 3.02.1, the reads with 3.03.1)
+  answered as an unknown message (10) is that older firmware, never damage to ask again about;
 - on a framing without a checksum (open-driver) a damaged reply can look like any code: an
   error code there is believed only when the module gives the same one twice in a row (asking
   again is harmless: the message is idempotent);
@@ -32,10 +35,20 @@ from typing import Final, NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.error_codes import ACCEPTED, describe
+from prc3cfg.core.framing import Framing
 
 #: Codes of the structural checks (prc3-protocol.md §4.5 steps 1–5): to us, damage on the line.
 DAMAGED_CODES: Final = frozenset(range(10, 16))
-UNKNOWN_ID: Final = 10  # to a read: damage — or firmware before PRC 3.03.1, which has no read messages
+UNKNOWN_ID: Final = 10  # damage — or, to a message of `FIRMWARE_ADDED`, firmware older than the one that added it
+
+#: The messages a firmware after the first added (the manual's version table: PRC 3.01.1 had neither),
+#: by ID: the version that added it, and what it is, as said to a person.
+FIRMWARE_ADDED: Final[dict[int, tuple[str, str]]] = {
+    0x45: ("3.02.1", "function outputs F2"),  # "PRC 3.02.1 February 1994 Function Output 2 (End)"
+    0x50: ("3.03.1", "read messages"),  # "PRC 3.03.1 June 1994 Read Data Blocks interface"
+    0x51: ("3.03.1", "read messages"),
+    0x52: ("3.03.1", "read messages"),
+}
 
 
 class Arrival(enum.Enum):
@@ -52,7 +65,15 @@ class Arrival(enum.Enum):
 
 class Asked(enum.Enum):
     READ = "read"  # 50h..52h
-    WRITE = "write"  # every other message
+    WRITE = "write"  # every write every firmware has
+    ADDED = "added write"  # a write a later firmware added (`FIRMWARE_ADDED`: 45h)
+
+
+def asked(message: codec.Message) -> Asked:
+    """What `message` is, to the verdicts."""
+    if message.IS_READ:
+        return Asked.READ
+    return Asked.ADDED if message.ID in FIRMWARE_ADDED else Asked.WRITE
 
 
 class LinkStep(enum.Enum):
@@ -62,7 +83,7 @@ class LinkStep(enum.Enum):
     RETRY = "retry"  # lost or damaged: ask again
     CONFIRM = "confirm"  # a code heard once on a line without a checksum: ask again, believe it heard twice
     POSSIBLE_WRITE = "possible write"  # stop the line (`PossibleWrite`)
-    NO_READ_MESSAGES = "no read messages"  # stop: the firmware has no reads (`NoReadMessages`)
+    OLD_FIRMWARE = "old firmware"  # stop: the firmware predates the message (`OldFirmware`, `NoReadMessages`)
     GIVE_UP = "give up"  # a retry or a confirmation with no attempt left (`LinkError`)
 
 
@@ -81,13 +102,20 @@ VERDICTS: Final[dict[tuple[Arrival, Asked], Steps]] = {
     (Arrival.GARBLED,    Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
     (Arrival.ACCEPTED,   Asked.READ):  Steps(LinkStep.POSSIBLE_WRITE,   LinkStep.POSSIBLE_WRITE),
     (Arrival.ACCEPTED,   Asked.WRITE): Steps(LinkStep.ANSWER,           LinkStep.ANSWER),
-    (Arrival.UNKNOWN_ID, Asked.READ):  Steps(LinkStep.NO_READ_MESSAGES, LinkStep.CONFIRM),
+    (Arrival.UNKNOWN_ID, Asked.READ):  Steps(LinkStep.OLD_FIRMWARE,     LinkStep.CONFIRM),
     (Arrival.UNKNOWN_ID, Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
     (Arrival.DAMAGED,    Asked.READ):  Steps(LinkStep.RETRY,            LinkStep.RETRY),
     (Arrival.DAMAGED,    Asked.WRITE): Steps(LinkStep.RETRY,            LinkStep.RETRY),
     (Arrival.REFUSED,    Asked.READ):  Steps(LinkStep.ANSWER,           LinkStep.CONFIRM),
     (Arrival.REFUSED,    Asked.WRITE): Steps(LinkStep.ANSWER,           LinkStep.CONFIRM),
     (Arrival.DATA,       Asked.READ):  Steps(LinkStep.ANSWER,           LinkStep.ANSWER),
+    # a write a later firmware added: as any write, but for the code that says the firmware predates it
+    (Arrival.NOTHING,    Asked.ADDED): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.GARBLED,    Asked.ADDED): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.ACCEPTED,   Asked.ADDED): Steps(LinkStep.ANSWER,           LinkStep.ANSWER),
+    (Arrival.UNKNOWN_ID, Asked.ADDED): Steps(LinkStep.OLD_FIRMWARE,     LinkStep.CONFIRM),
+    (Arrival.DAMAGED,    Asked.ADDED): Steps(LinkStep.RETRY,            LinkStep.RETRY),
+    (Arrival.REFUSED,    Asked.ADDED): Steps(LinkStep.ANSWER,           LinkStep.CONFIRM),
     # a data block to a write does not decode (a write's reply is a code): GARBLED
 }  # fmt: skip
 #: The steps that ask again: on the last attempt, the link gives up instead (`LinkStep.GIVE_UP`).
@@ -97,6 +125,48 @@ CODE_PROBLEMS: Final = {
     LinkStep.RETRY: "the module reports a damaged message ({code})",
     LinkStep.CONFIRM: "{code} on a line without a checksum, asking again to confirm it",
 }
+
+
+class Protection(enum.Enum):
+    """What keeps a damaged frame from being taken for another on a line."""
+
+    CHECKSUM = "checksum"  # crc16, stx: a damaged frame is discarded
+    PARITY = "parity"  # open-driver, the port refusing a character of bad parity: one flipped bit is caught, two are not
+    NONE = "none"  # open-driver without a parity the port checks: a damaged frame can be any other
+
+
+def protection(framing: Framing, *, parity_checked: bool) -> Protection:
+    """The line's protection: the framing's checksum, else the parity its port checks (`platform.check_parity`)."""
+    if framing.checked:
+        return Protection.CHECKSUM
+    return Protection.PARITY if parity_checked else Protection.NONE
+
+
+class Cause(NamedTuple):
+    """What most likely made a module answer a read as a write is answered, and what to do."""
+
+    likeliest: str  # "{write}" and "{owed}": the write that went unanswered, how many
+    also: str  # what else it may be ("" where nothing else is likely)
+    remedy: str
+
+
+_LATE = "the late acknowledgement of {owed} to it ({write}) that went unanswered at first — it executed, as the retry did"
+_DUPLICATE = ("a duplicated acknowledgement: a write to it delivered twice, or held and delivered after its retry, by something "
+              "on the line (a gateway, a converter, a radio link)")  # fmt: skip
+_DAMAGE = "a damaged frame the module took for a write and executed, which may have changed any value or released its axes (10h/20h)"
+_SLOW_PARTS = "find what on the line holds or repeats frames"
+#: The likeliest cause of a read answered with an acknowledgement, by the line's protection and by
+#: whether a write to that module went unanswered since its last data reply (`Link.owed`).
+ACK_TO_READ: Final[dict[tuple[Protection, bool], Cause]] = {
+    (Protection.CHECKSUM, True):  Cause(_LATE, "", _SLOW_PARTS),
+    (Protection.CHECKSUM, False): Cause(_DUPLICATE, "", _SLOW_PARTS),
+    (Protection.PARITY, True):    Cause(_LATE, "or, less likely, " + _DAMAGE + " with two bits flipped, which parity misses", _SLOW_PARTS),
+    (Protection.PARITY, False):   Cause(_DUPLICATE, "or, less likely, " + _DAMAGE + " with two bits flipped, which parity misses",
+                                        _SLOW_PARTS),
+    (Protection.NONE, True):      Cause(_LATE, "or, as likely on a line without a checksum or parity, " + _DAMAGE,
+                                        "use parity on the line, and " + _SLOW_PARTS),
+    (Protection.NONE, False):     Cause(_DAMAGE, "or a duplicated acknowledgement", "use parity on the line"),
+}  # fmt: skip
 
 
 class Fault(enum.Enum):
@@ -167,7 +237,7 @@ def judge(message: codec.Message, raw: bytes | None, *, checked: bool, heard: in
             came, problem = Arrival.GARBLED, f"bad reply ({error})"
         else:
             came, problem = arrival(reply), ""
-    steps = VERDICTS[came, Asked.READ if message.IS_READ else Asked.WRITE]
+    steps = VERDICTS[came, asked(message)]
     step = steps.believed if checked or (heard is not None and reply == heard) else steps.heard_once
     if isinstance(reply, int) and step in CODE_PROBLEMS:
         problem = CODE_PROBLEMS[step].format(code=describe(reply))

@@ -491,7 +491,18 @@ def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
     return f"Time: {sum(took.values()):.1f} s (estimated {sum(estimated.values()):.1f} s) — {phases}"
 
 
-def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown: Collection[str] = ()) -> str:
+def faulted_summary(document: dict[str, Any], faults: Sequence[str], shown: Callable[[str], str] = escape.shown) -> list[str]:
+    """The summary, with the modules a write found in a fault state (`faults`: "bus/module is in E21 (…)",
+    kept in the records until a write to it is acknowledged): a plan with nothing to write for them does
+    not say all is well — its headline names the fault."""
+    said = [f"⚠ {shown(fault)} — a read cannot tell whether it still is: clear the fault on the module" for fault in faults]
+    if faults and not any(m["steps"] for _, m in _modules(document)):
+        return [f"No changes to write, but {plural(len(faults), 'module')} reported a fault state:", *said]
+    return [summary_line(document, shown), *said]
+
+
+def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown: Collection[str] = (),
+          faults: Sequence[str] = ()) -> str:  # fmt: skip
     """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
     each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary. The
     buses `shown` already (`line_part`, as their writes began) are named, not shown again."""
@@ -503,7 +514,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
-    out.append(summary_line(document))
+    out += faulted_summary(document, faults)
     out += [line for line in [reading_line(document, claimed=isinstance(plan, dict))] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in _modules(document)):
@@ -573,7 +584,7 @@ def fenced(lines: Sequence[str], info: str = "") -> list[str]:
 
 
 def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
-             full_plan: str = "the plan file") -> str:  # fmt: skip
+             full_plan: str = "the plan file", faults: Sequence[str] = ()) -> str:  # fmt: skip
     """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
     the marker, the summary, every axis-release warning, how many programs are clamped, what was not
     read, what is left as it is and the table of changed modules always;
@@ -581,7 +592,7 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     fit, and a last line saying how many were left out and where the full plan is."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
-    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", summary_line(document, cell), "",
+    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", *faulted_summary(document, faults, cell), "",
             *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]  # fmt: skip
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 from prc3cfg.core.apply_states import REPAIRS, Course, Event, Next, State, repair_event, reply_event
 from prc3cfg.core.axes import Release
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.error_codes import describe, remedy
+from prc3cfg.core.error_codes import FAULT_STATES, describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.planner import ModulePlan, Step, plan_module
 from prc3cfg.core.render import plural
@@ -90,6 +90,7 @@ class ModuleRun:
     possibly_written: bool = False  # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
     watched: bool = False  # its system block was read because a release went out on its unprotected line
     system_unset: bool = False  # it answered E12 (system parameters not set): the next plan writes them first
+    fault: int | None = None  # it refused a write with another fault state's code (E09, E21, …: `FAULT_STATES`): kept, told
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     wrote_at: float = 0.0  # time.monotonic() when its last round of steps ended: a late frame lands within the quiet period since
     failure: str | None = None
@@ -227,6 +228,7 @@ class ModuleRun:
         elif event is Event.RUNNING:
             self.failure = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
         else:
+            self.fault = reply if reply in FAULT_STATES else self.fault
             self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
         return event
 

@@ -132,12 +132,13 @@ class Keeping:
             except OSError as error:
                 self._journal_failed(error)
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = releases.RELEASE) -> None:
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = releases.RELEASE,
+               code: int | None = None) -> None:  # fmt: skip
         """`releases.Releases.record`, a failure kept as the apply's trouble."""
         try:
-            self.records.record(keys, bus, address, name, kind)
+            self.records.record(keys, bus, address, name, kind, code)
         except (OSError, UserError) as error:
-            self.failed(RELEASE_RECORD if kind == releases.RELEASE else E12_RECORD, error, self.records.path)
+            self.failed(RELEASE_RECORD if kind == releases.RELEASE else FAULT_RECORD, error, self.records.path)
 
     def stopped_reading(self) -> None:
         """Where the disk refused the journal a read-back's record (that read stayed back, `announce`)
@@ -153,7 +154,8 @@ class Keeping:
 
 #: The records an apply keeps, as its account names one it could not keep.
 JOURNAL, SNAPSHOT, LINE_RECORD = "the journal", "the snapshot", "the line's record of what its modules hold"
-RELEASE_RECORD, E12_RECORD, APPLIED = "the record of an axis release", "the record of a module in E12", "the copy of the plant file applied in full"
+RELEASE_RECORD, FAULT_RECORD, APPLIED = ("the record of an axis release", "the record of a module in a fault state (E12, E21, …)",
+                                         "the copy of the plant file applied in full")
 
 
 def _refusal(error: OSError | UserError, path: Path | None) -> str:
@@ -165,6 +167,22 @@ def _refusal(error: OSError | UserError, path: Path | None) -> str:
         return inner[1] if (inner := re.fullmatch(r"cannot keep .*? \((.*)\) — .*", said)) else said
     where = path or error.filename
     return f"{where}: {error.strerror}" if where and error.strerror else (error.strerror or str(error))
+
+
+def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Sequence[ModuleRun]) -> None:
+    """The fault states the writes revealed, recorded; those a write since shows gone, cleared. E12: kept for
+    the next plan, which writes the system parameters first, cleared once verified; any other (E09, E21, …):
+    told by every command on the line until a write to the module is acknowledged (a read cannot see it)."""
+    for run in runs:
+        if run.system_unset:
+            keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
+        elif run.fault is not None:
+            keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.FAULT, run.fault)
+    every = [k for ks in keys.values() for k in ks]
+    releases.cleared(r for r in releases.pending(every, releases.E12)
+                     if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
+    releases.cleared(r for r in releases.pending(every, releases.FAULT)
+                     if any(run.written and (run.bus, run.address) == (r.bus, r.address) for run in runs))
 
 
 class Writing:
@@ -291,11 +309,7 @@ class Writing:
         if keeping.trouble is not None:
             for run in runs:
                 run.stopped_by("a record could not be kept")
-        for run in runs:  # E12: kept for the next plan, which writes the system parameters first; cleared once verified
-            if run.system_unset:
-                keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
-        releases.cleared(r for r in releases.pending((k for ks in keys.values() for k in ks), releases.E12)
-                         if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
+        _keep_faults(keeping, keys, runs)
         for run in runs:
             keeping.note(
                 "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,

@@ -42,6 +42,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from prc3cfg.core.error_codes import FAULT_STATES, fault_said
 from prc3cfg.core.text import shown
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
@@ -149,8 +150,10 @@ def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
 LIMIT = 2 * 2**20
 
 #: What a record is of: an axis release nobody was told of, or a module that reported E12 ("system
-#: parameters not set", code 23) — which only a 10h/20h clears, so the next plan writes them first.
-RELEASE, E12 = "release", "e12"
+#: parameters not set", code 23) — which only a 10h/20h clears, so the next plan writes them first —
+#: or another fault state (E09, E21, …: its `code`), which a read cannot see: told by every command
+#: that opens the line until a write to the module is acknowledged.
+RELEASE, E12, FAULT = "release", "e12", "fault"
 
 
 @dataclass(frozen=True, slots=True)
@@ -170,13 +173,18 @@ class Pending:
     file: Path
     kind: str = RELEASE
     owner: str | None = None  # who wrote it, where that is another user ("alice (uid 1001)"): a claim; None: this user or root
+    code: int | None = None  # `kind` FAULT: the code the module refused a write with (`FAULT_STATES`)
 
     def said(self) -> str:
         """One line: which module, when, which run — and what to do; every field escaped, another user's told as their claim."""
         who = (f"bus {shown(self.bus)}, module {self.address} ({shown(self.name)})" if self.address
                else f"bus {shown(self.bus)}, every module on the line ({shown(self.name)})")  # fmt: skip
         run = f"pid {self.pid}, {shown(self.time)}" + (f", journal {shown(self.journal)}" if self.journal else "")
-        said = (f"{who}: prc3cfg {shown(self.command)} ({run}) sent it a 10h/20h, or a frame it took for one, and no account has "
+        said = (f"{who}: is in {fault_said(self.code)} — it refused a write of prc3cfg {shown(self.command)} ({run}) so, and a "
+                "read cannot tell whether it still is: its values may match the plant file, the machine is not in production "
+                "order; clear the fault on the module — the next write to it acknowledged clears this"
+                if self.kind == FAULT and self.code is not None else
+                f"{who}: prc3cfg {shown(self.command)} ({run}) sent it a 10h/20h, or a frame it took for one, and no account has "
                 "said so — its axes may be released: travel to the reference point before production; the next apply on this "
                 "line lists it and clears this")  # fmt: skip
         return said if self.owner is None else f"{self.owner}'s record says: {said}"
@@ -200,13 +208,14 @@ def pending(keys: Iterable[str], kind: str = RELEASE) -> list[Pending]:
 def _pending(entry: dict[str, Any], path: Path, owner: str | None) -> Pending | None:
     """The record a line of a file says, every field of its type (None: it is no record)."""
     texts = [text for name in ("bus", "name", "time", "command") if isinstance(text := entry.get(name), str)]
-    keys, address, pid, journal, kind = (entry.get(name) for name in ("keys", "address", "pid", "journal", "kind"))
+    keys, address, pid, journal, kind, code = (entry.get(name) for name in ("keys", "address", "pid", "journal", "kind", "code"))
     if not (isinstance(keys, list) and all(isinstance(key, str) for key in keys) and len(texts) == 4
             and type(address) is int and type(pid) is int and (journal is None or isinstance(journal, str))
-            and kind in (None, RELEASE, E12)):  # fmt: skip
+            and kind in (None, RELEASE, E12, FAULT) and (kind != FAULT or (type(code) is int and code in FAULT_STATES))):  # fmt: skip
         return None
     bus, name, time, command = texts
-    return Pending(tuple(keys), bus, address, name, time, pid, command, journal, path, kind or RELEASE, owner)
+    return Pending(tuple(keys), bus, address, name, time, pid, command, journal, path, kind or RELEASE, owner,
+                   code if kind == FAULT else None)  # fmt: skip
 
 
 def _files() -> list[Path]:
@@ -258,8 +267,9 @@ class Releases:
         self._lock = threading.Lock()
         self._recorded: set[tuple[str, str, int]] = set()
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = RELEASE) -> None:
-        """Durably, before the frame leaves: a 10h/20h to `address` on the line `keys` (once per module)."""
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = RELEASE, code: int | None = None) -> None:
+        """Durably, before the frame leaves: a 10h/20h to `address` on the line `keys` (once per module);
+        or a module that reported a fault state (`kind` E12, FAULT with its `code`)."""
         with self._lock:
             if (kind, bus, address) in self._recorded:
                 return
@@ -268,7 +278,8 @@ class Releases:
                 self._path = folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
             line = json.dumps({"kind": kind, "keys": list(keys), "bus": bus, "address": address, "name": name,
                                "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "command": self.command,
-                               "journal": None if self.journal is None else str(self.journal)})  # fmt: skip
+                               "journal": None if self.journal is None else str(self.journal)}
+                              | ({"code": code} if code is not None else {}))  # fmt: skip
             fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | platform.NO_INHERIT, 0o644)
             try:
                 os.write(fd, (line + "\n").encode())

@@ -118,7 +118,7 @@ def line_cost(bus: Bus) -> LineCost:
 class Records(Protocol):
     """Where an axis release is recorded: `releases.Releases`, or an apply's `Keeping` of it."""
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ...) -> None: ...
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ..., code: int | None = ...) -> None: ...
 
 
 @contextlib.contextmanager
@@ -175,12 +175,12 @@ def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> dict[s
 
 
 def _tell_records(keys: Mapping[str, tuple[str, ...]], identities: Iterable[str], options: LineOptions) -> None:
-    """Under the lines' locks: the records' files passed over or moved aside, and every axis release on these lines
-    that no account has named yet."""
+    """Under the lines' locks: the records' files passed over or moved aside, every axis release on these lines
+    that no account has named yet, and every module a write found in a fault state not seen cleared since."""
     for said in [*releases.passed_over(), *(said for line in keys.values() for said in bases.passed_over(line)),
                  *(said for line in keys.values() for said in bases.settle(line))]:  # fmt: skip
         options.tell(said)
-    for record in releases.pending(identities):
+    for record in [*releases.pending(identities), *releases.pending(identities, releases.FAULT)]:
         options.tell(record.said())
 
 
@@ -285,7 +285,7 @@ def bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[s
         raise UserError(problem)
     keys = line_keys(port)
     with line_lock(keys, port, port=port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting):
-        for record in releases.pending(keys):
+        for record in [*releases.pending(keys), *releases.pending(keys, releases.FAULT)]:
             options.tell(record.said())
         yield keys
 

@@ -235,7 +235,10 @@ def _modules(path: Path, data: object) -> dict[int, ModuleState]:
     for entry in checked.modules:
         if entry.address in modules:
             raise UserError(f"{path}: module address {entry.address} appears twice — keep one entry")
-        modules[entry.address] = entry.state()
+        try:
+            modules[entry.address] = entry.state()
+        except ValueError as error:  # what no one field says (`ModuleState`): firmware without F2 has no reads either
+            raise UserError(f"{path}: module {entry.address}: {error} — fix or delete the entry") from None
     return modules
 
 
@@ -276,11 +279,13 @@ class _Module(BaseModel):
     fault: Annotated[str, Strict(), one_of(device.FAULT_CODES)] | None = None
     referenced: Flag = True
     read_messages: Flag = True
+    f2_messages: Flag = True
 
     def state(self) -> ModuleState:
         image = ModuleImage(self.address, SystemParameters(**vars(self.system)),
                             tuple(Program(**vars(program)) for program in self.programs))  # fmt: skip
-        return ModuleState(image, self.mode, self.active_program, self.fault, self.referenced, self.read_messages)
+        return ModuleState(image, self.mode, self.active_program, self.fault, self.referenced, self.read_messages,
+                           self.f2_messages)
 
 
 class _StateFile(BaseModel):

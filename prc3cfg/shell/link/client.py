@@ -47,7 +47,7 @@ from serial import rfc2217
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.exchange import LinkStep, Reply, judge
+from prc3cfg.core.exchange import ACK_TO_READ, FIRMWARE_ADDED, LinkStep, Protection, Reply, judge, protection
 from prc3cfg.core.framing import NEED_DATA, Direction, Discarded, Framing
 from prc3cfg.core.line import TCP_SCHEMES, LineSettings
 from prc3cfg.errors import Interrupted, NotSent, UserError
@@ -87,30 +87,41 @@ class PortFailed(LinkError):
     """The port itself failed to read or write: no module is to blame, and no retry helps."""
 
 
-class NoReadMessages(LinkError):
-    """A module answered a read as an unknown message: its firmware is older than PRC 3.03.1, which
-    added 50h..52h. prc3cfg can neither plan nor verify such a module; asking again will not help."""
+class OldFirmware(LinkError):
+    """A module answered a message a later firmware added as an unknown one (`FIRMWARE_ADDED`): its
+    firmware predates it; asking again will not help."""
 
     def __init__(self, bus: str, address: int, message: codec.Message) -> None:
+        version, what = FIRMWARE_ADDED[message.ID]
         super().__init__(
+            f"bus {bus}, module {address}: answers {message.ID:02X}h ({what}) as an unknown message — its firmware is older "
+            f"than PRC {version}, which added them: update the module's firmware, or leave {message.FIELD.lower()} out of "
+            "this module's programs in the plant file" if isinstance(message, codec.WriteField) else
             f"bus {bus}, module {address}: answers {message.ID:02X}h as an unknown message — its firmware has no read "
-            "messages (they came with PRC 3.03.1), so prc3cfg can neither plan nor verify it: update the module's firmware"
-        )
+            f"messages (they came with PRC {version}), so prc3cfg can neither plan nor verify it: update the module's firmware"
+        )  # fmt: skip
+
+
+class NoReadMessages(OldFirmware):
+    """A read answered as an unknown message: firmware before PRC 3.03.1, which added 50h..52h. prc3cfg
+    can neither plan nor verify such a module."""
 
 
 class PossibleWrite(LinkError):
-    """A read was answered with an acknowledgement: the module received a damaged frame as a write
-    and executed it — any write, 10h and 20h among them — or, where writes to that module before
-    it went unanswered (`owed` attempts), the acknowledgement is the late reply to one of them. Either way nothing
-    more may be sent on the line until a person has looked; never retried."""
+    """A read was answered with an acknowledgement: a write's late or duplicated acknowledgement, or a
+    damaged frame the module executed as a write — likeliest first by the line's protection and by
+    whether writes to that module went unanswered (`owed` attempts): `exchange.ACK_TO_READ`. Either
+    way nothing more may be sent on the line until a person has looked; never retried."""
 
-    def __init__(self, bus: str, address: int, message: codec.Message, owed: int = 0) -> None:
-        late = (f"the late reply to {'a write' if owed == 1 else f'one of {owed} writes'} before it that went "
-                "unanswered (raise the bus's timeout if the line is slow), or " if owed else "")  # fmt: skip
+    def __init__(self, bus: str, address: int, message: codec.Message, owed: tuple[int, ...] = (),
+                 protection: Protection = Protection.NONE) -> None:  # fmt: skip
+        cause = ACK_TO_READ[protection, bool(owed)]
+        writes = "a write" if len(owed) == 1 else f"one of {len(owed)} writes"
+        likeliest = cause.likeliest.format(owed=writes, write=", ".join(f"{i:02X}h" for i in dict.fromkeys(owed)))
         super().__init__(
-            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — {late}the module took a damaged "
-            "frame for a write and executed it, which may have changed any value or released its axes (10h/20h): "
-            "nothing more is sent on this line; travel the module to its reference point, read it back, and use parity on the line"
+            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — likeliest {likeliest}"
+            f"{'; ' + cause.also if cause.also else ''}: nothing more is sent on this line; travel the module to its reference "
+            f"point, read it back, and {cause.remedy}"
         )
         self.bus, self.address = bus, address
 
@@ -190,10 +201,15 @@ class Link:
         #: exchanges answered, the seconds they took (frame out to reply in) and what `cost` priced them at
         self.answered = 0
         self.answered_time = self.priced_time = 0.0
-        #: per module, write attempts that went unanswered since its reply last carried data (a read's):
-        #: their acknowledgements may still come, late, as the reply to a later frame to it (a reply
-        #: from another address is never taken: `PossibleWrite` says so)
-        self.owed: dict[int, int] = {}
+        #: per module, the IDs of write attempts that went unanswered since its reply last carried data (a
+        #: read's): their acknowledgements may still come, late, as the reply to a later frame to it (a
+        #: reply from another address is never taken: `PossibleWrite` says so)
+        self.owed: dict[int, list[int]] = {}
+
+    def _possible_write(self, address: int, message: codec.Message) -> PossibleWrite:
+        """A read to `address` answered as a write is, named by what this line protects and what was owed."""
+        return PossibleWrite(self.bus, address, message, tuple(self.owed.get(address, ())),
+                             protection(self.framing, parity_checked=self.parity_checked))  # fmt: skip
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
@@ -204,7 +220,7 @@ class Link:
         Each attempt's reply goes by `prc3cfg.core.exchange.VERDICTS`: a lost reply, a damaged one,
         and a structural error code (the module got our message damaged) are retried — but a read
         answered with an acknowledgement is `PossibleWrite`, and one answered as unknown is
-        `NoReadMessages` (on a line without a checksum once heard twice). On a framing without a
+        `NoReadMessages` (a write a later firmware added: `OldFirmware`; on a line without a checksum once heard twice). On a framing without a
         checksum an error code is asked for again until two agree. After the last attempt a
         `LinkError` names the bus and module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent` before the
         first: the frame never left; `announce` may raise it too, to keep a frame back).
@@ -220,9 +236,9 @@ class Link:
                 assert verdict.reply is not None  # an answer is a reply decoded
                 return self._answered(address, verdict.reply)
             if verdict.step is LinkStep.POSSIBLE_WRITE:  # the verdicts that stop the line
-                raise PossibleWrite(self.bus, address, message, self.owed.get(address, 0))
-            if verdict.step is LinkStep.NO_READ_MESSAGES:
-                raise NoReadMessages(self.bus, address, message)
+                raise self._possible_write(address, message)
+            if verdict.step is LinkStep.OLD_FIRMWARE:
+                raise (NoReadMessages if message.IS_READ else OldFirmware)(self.bus, address, message)
             if verdict.step is LinkStep.GIVE_UP:
                 break
             heard = verdict.unconfirmed
@@ -257,7 +273,7 @@ class Link:
             return None
         verdict = judge(message, raw, checked=self.framing.checked, heard=None, attempts_left=0, timeout=wait)
         if verdict.step is LinkStep.POSSIBLE_WRITE:
-            raise PossibleWrite(self.bus, address, message, self.owed.get(address, 0))
+            raise self._possible_write(address, message)
         if verdict.step is LinkStep.ANSWER:
             assert verdict.reply is not None  # an answer is a reply decoded
             return self._answered(address, verdict.reply)
@@ -287,7 +303,7 @@ class Link:
         self._announce(address, data, attempt, started)
         raw = self._exchange(address, data, wait)
         if raw is None and not message.IS_READ:
-            self.owed[address] = self.owed.get(address, 0) + 1
+            self.owed.setdefault(address, []).append(message.ID)
         self._observe(address, data, raw, attempt, started)
         self._timed(address, message, raw)
         return raw
