@@ -35,9 +35,10 @@ def factory_images(plant: Path, out: Path) -> Path:
     return out
 
 
-def made_before(plant: Path) -> str:
-    """The plan file the code before wrote for `plant` at factory defaults, as if made there by this version."""
-    text = (CONTRACTS / "plan.json").read_text()
+def made_before(plant: Path, name: str = "plan.json") -> str:
+    """The plan file the code before wrote for `plant` at factory defaults, as if made there by this version:
+    `plan.json` before plans named their evidence (issue 41), `plan-evidence.json` since — its one addition."""
+    text = (CONTRACTS / name).read_text()
     return text.replace('"VERSION"', json.dumps(__version__)).replace('"PLANT_PATH"', json.dumps(str(plant.resolve())))
 
 
@@ -45,7 +46,7 @@ def test_a_plan_file_is_written_byte_for_byte_as_before(tmp_path, capsys):
     plant = plant_here(tmp_path)
     out = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant, "--actual", factory_images(plant, tmp_path / "images.json"), "--out", out).code == 0
-    assert out.read_text() == made_before(plant)
+    assert out.read_text() == made_before(plant, "plan-evidence.json")
 
 
 def test_a_plan_file_written_before_is_read_shown_and_proved(tmp_path, capsys):

@@ -633,6 +633,8 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
     # a plan made in another checkout: its path, and its line endings (`to_apply` found the text the same)
     written = write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
+    if "evidence" not in plan_file.document:  # a plan file from before issue 41 says nothing of what was read: no claim to prove
+        del written["evidence"]
     if isinstance(said := plan_file.document.get("read"), dict) and "read" in written:
         written["read"]["not_as_verified"] = said.get("not_as_verified")
         if (at := _differs_at(said, written["read"], "read")) is not None:
