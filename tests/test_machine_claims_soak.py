@@ -25,7 +25,7 @@ from pathlib import Path
 import pytest
 from emulated import emulated_plant
 from test_locks import ROOT
-from test_machine_folder import RAW
+from test_machine_folder import RAW, plant_unreadable
 
 from prc3cfg.shell.bases import FORMAT
 from prc3cfg.shell.sessions import bus_line_keys
@@ -51,15 +51,8 @@ def plant_one(rng: random.Random, state: Path, keys: dict[str, tuple[str, ...]],
     path = state / "lines" / f"{stem}.{OTHER_UID}.{n}.json" if lines else state / "releases" / f"2099{n:04d}T000000.000000Z-{n}.jsonl"
     path.parent.mkdir(exist_ok=True)
     now = datetime.now(UTC) + timedelta(seconds=rng.choice([0, 1, 3600]))
-    if kind == "fifo":
-        os.mkfifo(path)
-    elif kind == "zero":
-        path.symlink_to("/dev/zero")
-    elif kind == "sparse":
-        with open(path, "wb") as file:
-            file.truncate(rng.choice([2**21 + 1, 2**28]))
-    elif kind == "folder":
-        path.mkdir()
+    if kind in ("fifo", "zero", "sparse", "folder"):
+        plant_unreadable(path, kind, rng.choice([2**21 + 1, 2**28]) if kind == "sparse" else 0)  # the seeds draw as before
     elif kind == "garbage":
         path.write_bytes(rng.choice([b"\xef\xbb\xbf{not json", b"[" * 100_000, b'{"format": 1}', b"\x1b[2J\n" * 10]))
     elif kind in ("wrong-key", "forged-line"):

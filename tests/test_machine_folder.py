@@ -44,6 +44,20 @@ def machine(monkeypatch):
         shutil.rmtree(outer)
 
 
+def plant_unreadable(path: Path, kind: str, size: int) -> None:
+    """What another user may leave in the records' folders that is no regular file of a bounded size: a FIFO
+    (`fifo`), a link to /dev/zero (`zero`), a sparse file of `size` bytes (`sparse`), a folder (`folder`)."""
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "zero":
+        path.symlink_to("/dev/zero")
+    elif kind == "sparse":
+        with open(path, "wb") as file:
+            file.truncate(size)
+    else:
+        path.mkdir()
+
+
 def made(folder: Path) -> Path:
     folder.mkdir()
     return folder
@@ -332,15 +346,7 @@ def test_a_planted_file_in_the_records_folders_neither_hangs_nor_breaks_a_comman
         stem = sorted(path.name.split(".")[0] for path in (state / "lines").glob("*.json"))[0]
         planted = [state / "releases" / "20990101T000000.000000Z-1.jsonl", state / "lines" / f"{stem}.4242.json"]
         for path in planted:
-            if kind == "fifo":
-                os.mkfifo(path)
-            elif kind == "zero":
-                path.symlink_to("/dev/zero")
-            elif kind == "sparse":
-                with open(path, "wb") as file:
-                    file.truncate(2**28)  # 256 MiB of nothing: read whole, a 3 GB one ended in MemoryError
-            else:
-                path.mkdir()
+            plant_unreadable(path, kind, 2**28)  # sparse: 256 MiB of nothing — read whole, a 3 GB one ended in MemoryError
         planned = cli("plan", str(plant.path), "--detailed-exitcode")
         assert planned.returncode == 0, planned.stdout + planned.stderr
         assert "taken as known" in planned.stdout  # this user's own record still counts
