@@ -376,9 +376,30 @@ class WritePhase:
         for channels in self.subsets():
             writes = self.evaluate(channels, bound)
             if writes is not None:
+                writes = self._groups_whole(channels, writes)
                 found.append(writes)
                 bound = min(bound, writes.estimate)
         return sorted(found, key=ESTIMATE)
+
+    def _groups_whole(self, channels: Channels, writes: Writes) -> Writes:
+        """`writes`, or cheaper: the programs of one of its 40h..46h fields or 33h runs written whole
+        (21h), the rest of the phase searched again — until no such group pays.
+
+        The DP credits 21h only with the header of the first message of a field they empty
+        (`_live`: removals up to `rho`), and judges each field alone: 21h that pay only by emptying
+        a field of more than one message, or several fields and a run together, it does not see.
+        """
+        while True:
+            groups = {mask for mask in (*writes.items, writes.addresses) if mask}
+            groups.update(sum(1 << i for i in range(first, last + 1)) for first, last in writes.part_runs)
+            better = writes
+            for mask in sorted(groups):
+                found = self.evaluate(channels, better.estimate - NEAR, whole=writes.whole | mask)
+                if found is not None and found.estimate < better.estimate - NEAR:
+                    better = found
+            if better is writes:
+                return writes
+            writes = better
 
     def forced(self, channels: Channels) -> int:
         """Programs that differ in a field no open message writes: they take a 21h."""
