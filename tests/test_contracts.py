@@ -1,7 +1,8 @@
 """The JSON files prc3cfg writes are read back as they were written, and written again byte for
 byte: a plan file made by the code before its contracts were pydantic models
 (`contracts/plan.json`, from `contracts/plant.yaml` at factory defaults, its version and plant path
-left as VERSION and PLANT_PATH) is the file written now, and is read, shown and proved; module
+left as VERSION and PLANT_PATH) is read and shown, and `plan-evidence.json`, its one addition, is the
+file written now and is proved; module
 images, snapshots and emulator state files read and written again are the same bytes."""
 
 from __future__ import annotations
@@ -9,12 +10,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from emulated import run_cli
 
 from prc3cfg import __version__, api
 from prc3cfg.api._apply import prove, read_plan
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage, images_from_json
+from prc3cfg.errors import UserError
 from prc3cfg.shell.emulator.state import load_state, save_state
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.records import LineTaken, Snapshot
@@ -49,7 +52,10 @@ def test_a_plan_file_is_written_byte_for_byte_as_before(tmp_path, capsys):
     assert out.read_text() == made_before(plant, "plan-evidence.json")
 
 
-def test_a_plan_file_written_before_is_read_shown_and_proved(tmp_path, capsys):
+def test_a_plan_file_written_before_is_read_and_shown_and_apply_asks_for_a_plan_that_names_its_evidence(tmp_path, capsys):
+    """A plan file from before plans named their evidence (issue 41) is shown as it was; `apply --plan` proves
+    every step of it, then refuses it in one line: it does not say what its plan rests on, and a current plan
+    file with its `evidence` cut out would look the same."""
     plant = plant_here(tmp_path)
     path = tmp_path / "before.json"
     path.write_text(made_before(plant))
@@ -58,6 +64,9 @@ def test_a_plan_file_written_before_is_read_shown_and_proved(tmp_path, capsys):
     loaded = load_plant(plant)
     pairs = api.select(loaded)
     images = api.load_images(factory_images(plant, tmp_path / "images.json"), loaded)
+    with pytest.raises(UserError, match=r'before\.json: it does not say what its plan rests on \(no "evidence"\).*nothing was written'):
+        prove(path, read_plan(path, loaded), loaded, pairs, images)
+    path.write_text(made_before(plant, "plan-evidence.json"))
     proved = prove(path, read_plan(path, loaded), loaded, pairs, images)
     assert proved.message_count == 26 and len(proved.changes) == 6
 

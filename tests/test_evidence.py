@@ -64,7 +64,7 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
                                     "from_record": {"modules": 0, "programs": 0}, "oldest": None}  # fmt: skip
 
 
-def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_as_saying_nothing(plant, capsys, tmp_path):
+def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_as_saying_nothing_and_refused(plant, capsys, tmp_path):
     applied(plant, capsys)
     saved = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant.path, "--out", saved).code == 0
@@ -77,6 +77,8 @@ def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_a
     saved.write_text(json.dumps(document))
     shown = run_cli(capsys, "show", saved)
     assert shown.code == 0 and "No changes (the plan file does not say what was read" in shown.out and EVERY_MODULE not in shown.out
+    refused = run_cli(capsys, "apply", plant.path, "--plan", saved, "--auto-approve")
+    assert refused.code == 1 and 'it does not say what its plan rests on (no "evidence")' in refused.err, refused.err
 
 
 def test_the_recipes_replan_reads_in_full():

@@ -632,8 +632,10 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     said = plan_file.document.get("left_alone")
     kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
     # a plan made in another checkout: its path, and its line endings (`to_apply` found the text the same)
-    written = _as_claimed(write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256},
-                          plan_file.document)  # fmt: skip
+    written = write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
+    if "evidence" not in plan_file.document:  # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
+        raise UserError(f"{path}: it does not say what its plan rests on (no \"evidence\"): made before plans named their evidence, "
+                        "or changed after it was made; nothing was written: plan again and review it")  # fmt: skip
     if isinstance(said := plan_file.document.get("read"), dict) and "read" in written:
         written["read"]["not_as_verified"] = said.get("not_as_verified")
         if (at := _differs_at(said, written["read"], "read")) is not None:
@@ -642,12 +644,6 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     if (at := _differs_at(plan_file.document, written)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
-
-
-def _as_claimed(written: dict[str, Any], document: dict[str, Any]) -> dict[str, Any]:
-    """The plan file prc3cfg writes, less the `evidence` a plan file from before issue 41 has none of: it says
-    nothing of what was read, so there is no claim of it to prove."""
-    return written if "evidence" in document else {key: value for key, value in written.items() if key != "evidence"}
 
 
 def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:
