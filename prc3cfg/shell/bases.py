@@ -25,6 +25,11 @@ this user's own name and is not this user's file (a link, a folder, a FIFO, anot
 is moved aside, or where the folder does not allow it this user's record goes to the next free
 name (`settle`): nobody can lock a user out of their record.
 
+A `socket://` or `rfc2217://` line's record is read beside the records of the same gateway's other
+ports (`_other_ports`: the same address, another TCP port — a ser2net may serve one device on two):
+a module whose entry there is newer and holds other values is not known, so an apply through the
+other port is never taken for what the module still holds (docs/line.md says why they stay apart).
+
 Does not own what is read (`prc3cfg.core.what_to_read`) nor when (`prc3cfg.api`).
 """
 
@@ -45,7 +50,7 @@ from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known
 from prc3cfg.errors import UserError
-from prc3cfg.shell import platform
+from prc3cfg.shell import locks, platform
 from prc3cfg.shell.files import NOT_FILES, FileProblem, Why, parse_json, read_owned, write_atomically
 from prc3cfg.shell.releases import LINES, folder, state_dirs
 
@@ -103,17 +108,23 @@ class _Entry:
 def _parsed(key: str, data: bytes) -> dict[str, _Entry]:
     """The entries of a record file of line `key` by address: `FileProblem` where it is not one — not
     JSON, not a line record, another line's — and an entry whose address or time is no such is left out."""
+    of, entries = _entries(data)
+    if of != key:
+        raise FileProblem(Why.NOT_JSON, "the record of another line (its key is not this line's)")
+    return entries
+
+
+def _entries(data: bytes) -> tuple[object, dict[str, _Entry]]:
+    """The key a line record says it is of, and its entries by address (`_parsed`); `FileProblem` where it is no line record."""
     document = parse_json(data)
     if not isinstance(document, dict) or document.get("format") != FORMAT or not isinstance(document.get("modules"), dict):
         raise FileProblem(Why.NOT_JSON, "not a line record prc3cfg wrote")
-    if document.get("key") != key:
-        raise FileProblem(Why.NOT_JSON, "the record of another line (its key is not this line's)")
     entries = {}
     for address, entry in document["modules"].items():
         with contextlib.suppress(TypeError, ValueError):
             if isinstance(entry, dict) and address.isdigit() and 1 <= int(address) <= 30 and (at := datetime.fromisoformat(entry["at"])).tzinfo:
                 entries[str(int(address))] = _Entry(at, entry)
-    return entries
+    return document.get("key"), entries
 
 
 def _read(path: Path, key: str) -> tuple[dict[str, _Entry], int]:
@@ -149,6 +160,41 @@ def _newest(keys: Iterable[str]) -> tuple[dict[str, _Entry], dict[str, tuple[_En
     return trusted, claimed
 
 
+def _other_ports(keys: Iterable[str]) -> dict[str, tuple[_Entry, str, int]]:
+    """Per module, the newest entry in the records of the other ports of the gateways these identities
+    reach (`locks.gateway_port`: the same address, another TCP port — a ser2net may serve one device on
+    several), with that port's identity and the file's owner; none for a line that is no TCP gateway's.
+    Such files are found by the key inside them (their names are hashes), read as any record is, and
+    only ever make a module read (`read`)."""
+    ours = set(keys)
+    addresses = {gateway[0] for key in ours if (gateway := locks.gateway_port(key)) is not None}
+    newest: dict[str, tuple[_Entry, str, int]] = {}
+    if not addresses:
+        return newest
+    own_stems = {_stem(key) for key in ours}
+    for directory in state_dirs():
+        try:
+            paths = sorted((directory / KIND).glob("*.json"))
+        except OSError:
+            continue
+        for path in paths:
+            if path.name.partition(".")[0] in own_stems:
+                continue
+            try:
+                data, owner = read_owned(path, LIMIT)
+                key, entries = _entries(data)
+            except FileProblem:
+                continue  # no record of any line: nothing said of this one
+            if not isinstance(key, str) or key in ours or (gateway := locks.gateway_port(key)) is None or gateway[0] not in addresses:
+                continue
+            if path.name.partition(".")[0] != _stem(key):
+                continue  # under another key's name: no record of the port it names
+            for address, entry in entries.items():
+                if address not in newest or entry.at > newest[address][0].at:
+                    newest[address] = (entry, key, owner)
+    return newest
+
+
 def passed_over(keys: Iterable[str]) -> list[str]:
     """One line for each file among the line's records that is not one: what it is, and that it was passed over."""
     said = []
@@ -177,13 +223,19 @@ def read(keys: Iterable[str]) -> tuple[dict[int, Known], dict[int, str]]:
     """What the record of the line with these identities says of each module it knows — and the
     modules another user's file has a newer entry for than this user's and root's, with what that
     entry claims (escaped): not known (it changed since), and why each is read in full."""
+    keys = tuple(keys)
     trusted, claimed = _newest(keys)
     known, overruled = {}, {}
     for address, (entry, owner) in claimed.items():
         if address not in trusted or entry.at > trusted[address].at:
-            by = entry.fields.get("by")
-            overruled[int(address)] = (f"another user's record is newer (it claims: {shown(by) if isinstance(by, str) else 'a command'}, "
-                                       f"{entry.at.isoformat()}; written by {platform.uid_name(owner)})")  # fmt: skip
+            overruled[int(address)] = (f"another user's record is newer (it claims: {_by(entry)}, {entry.at.isoformat()}; "
+                                       f"written by {platform.uid_name(owner)})")  # fmt: skip
+    for address, (entry, key, owner) in _other_ports(keys).items():
+        mine = trusted.get(address)
+        if mine is not None and entry.at >= mine.at and entry.fields.get("image") != mine.fields.get("image"):
+            whose = "" if not platform.OWNERS or owner == platform.user_id() else f"; written by {platform.uid_name(owner)}"
+            overruled.setdefault(int(address), f"a record of another port of this gateway is newer ({shown(key)}: {_by(entry)}, "
+                                                f"{entry.at.isoformat()}{whose}) — one device may be behind both ports")  # fmt: skip
     for address, entry in trusted.items():
         if int(address) in overruled:
             continue
@@ -196,6 +248,12 @@ def read(keys: Iterable[str]) -> tuple[dict[int, Known], dict[int, str]]:
         except (TypeError, ValueError, KeyError, AttributeError):
             continue  # an entry this prc3cfg cannot read: the module is not known
     return known, overruled
+
+
+def _by(entry: _Entry) -> str:
+    """Which command an entry says wrote it, escaped — anyone who may write its file may write that."""
+    by = entry.fields.get("by")
+    return shown(by) if isinstance(by, str) else "a command"
 
 
 def settle(keys: Iterable[str]) -> list[str]:

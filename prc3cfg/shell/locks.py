@@ -108,6 +108,14 @@ def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ..
     return (port,)
 
 
+def gateway_port(key: str) -> tuple[str, str] | None:
+    """The address and TCP port of a `socket://` or `rfc2217://` identity (`tcp/ADDRESS/PORT`, `line_keys`):
+    one gateway's other ports share its address; None for an identity of any other kind."""
+    kind, _, rest = key.partition("/")
+    address, _, tcp_port = rest.rpartition("/")
+    return (address, tcp_port) if kind == "tcp" and address and tcp_port.isdigit() else None
+
+
 def device_path(port: str) -> str | None:
     """The local device `port` names, as written: the port itself when it is a path, the absolute
     path of a pyserial URL wrapping one (`spy:///dev/ttyUSB0?file=…`); None for any other."""
