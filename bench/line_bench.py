@@ -20,17 +20,19 @@ and the client do not share an interpreter), then
   fourth changes one system parameter on every module (the acceleration: a change that can
   clamp no program, so no program is read for it).
 
-After commissioning, `plan` and `apply` read back every module's system block (the evidence) and
-of the programs only those the line's record does not show holding the plant file's values
-(`prc3cfg.core.what_to_read`; the record is the bench's own, in its temporary folder); `--full-read`
-measures the same with every module read in full, as every apply did before targeted read-backs.
-
-`--gaps`: each apply's frame trace (`--trace`) shows where its line stood idle — the time from
-the end of one exchange (its reply; a broadcast's frame sent and its turnaround passed) to the next request on the same line:
-the largest, the sum, and the one from the read-back's last reply to the first write (the line
-waiting for the plan); acceptance: every gap under 50 ms.
-
-Wall times include each command's start-up (imports, about 0.3 s), reported separately.
+What the link's protections cost (issue 40, acceptance at 9600 baud on 30 modules: the two program
+changes ≤ 10 s, the system change ≤ 5 s, wall): on `--framing open-driver` (the plant's `parity: none`,
+its risk accepted) nothing protects a data reply, so every read is made until two replies agree — the
+estimates count each read twice (`CONFIRMED`) and the verification floor doubles; the quiet period
+before a verification that a late copy could undo (`what_to_read.undone_by_late`) would show as the
+verification on the line above its estimate. Measured (2 cores, shared): crc16 — 6.71 s, 5.12 s,
+3.34 s, verification on the line 1.02× its estimate (none of the three plans waits a quiet period:
+no 10h–14h, and no addressed step overrides the broadcast), so a checked line pays nothing;
+open-driver unprotected — 18.17 s, 15.34 s, 9.96 s (read-back 10.15/8.85/4.69 s and verification
+5.45/4.18/4.70 s on the line, twice the exchanges of one read, 1.01× the doubled estimate): over
+the limits, the price of reading twice at 9600 baud with open-driver's gaps. A serial device with
+`parity: even` on POSIX or Windows checks parity at the port and reads once (docs/line.md); over
+TCP an open-driver line reads twice whatever its parity.
 """
 
 from __future__ import annotations
@@ -48,8 +50,12 @@ from pathlib import Path
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import LineSettings
-from prc3cfg.core.what_to_read import read_messages
+from prc3cfg.core.what_to_read import protects_replies, read_messages
+
+#: Reads of each message the estimates count: 2 where nothing protects a data reply (set in `main`).
+CONFIRMED = 1
 
 
 def changed_programs(changed: set[int] = frozenset(), faster: set[int] = frozenset()) -> str:
@@ -70,7 +76,7 @@ buses:
     port: {port}
     framing: {framing}
     baud: {baud}
-    parity: none
+    parity: none{accepted}
     timeout: 1.0
     modules:
 {modules}
@@ -149,8 +155,8 @@ def verification_floor(plan: dict, cost: LineCost) -> tuple[int, float]:
             reads = read_messages({n for m in steps for n in m.touched_programs()})
             if not any(m.RELEASES_AXES for m in steps):
                 reads = reads[1:]  # no system step: no 50h
-            exchanges += len(reads)
-            seconds += sum(cost.message_time(module["address"], m) for m in reads)
+            exchanges += len(reads) * CONFIRMED
+            seconds += sum(cost.message_time(module["address"], m) for m in reads) * CONFIRMED
     return exchanges, seconds
 
 
@@ -165,7 +171,7 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
     trace.unlink(missing_ok=True)  # --trace appends
     wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release", *read, *(["--trace", str(trace)] if gaps else [])])
     if "read" in plan:  # a targeted read-back: what the plan says it reads
-        read_estimate = plan["estimated_phases_s"]["reading"]
+        read_estimate = plan["estimated_phases_s"]["reading"] * CONFIRMED
         exchanges = sum(len(read_messages(m["read"]["programs"])) for bus in plan["buses"] for m in bus["modules"])
         print(f"  targeted read-back: {exchanges} exchanges for {sum(len(b['modules']) for b in plan['buses'])} modules read")
     estimate = read_estimate + plan["estimated_bus_time_s"] + floor_time
@@ -197,6 +203,9 @@ def main() -> None:
     parser.add_argument("--full-read", action="store_true", help="plan and apply with --full-read (every module read in full)")
     parser.add_argument("--gaps", action="store_true", help="each apply's idle gaps on the line, from its frame trace")
     args = parser.parse_args()
+    global CONFIRMED
+    CONFIRMED = 1 if protects_replies(get_framing(args.framing).checked, "none", False) else 2
+    accepted = "" if CONFIRMED == 1 else "\n    accept_undetected_damage: true"
     read = ["--full-read"] if args.full_read else []
     prc3cfg = [sys.executable, "-m", "prc3cfg"]
     startup, _ = run([*prc3cfg, "--help"])
@@ -213,10 +222,11 @@ def main() -> None:
             port = emulator.stdout.readline().split()[2]
             plant = Path(work) / "plant.yaml"
             modules = "".join(MODULE.format(address=a, programs=PROGRAMS, acceleration="1.500") for a in range(1, args.modules + 1))
-            plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=modules))
-            read_estimate = args.modules * sum(cost.message_time(1, m) for m in read_messages(range(1, 65)))
+            plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=modules, accepted=accepted))
+            read_estimate = args.modules * sum(cost.message_time(1, m) for m in read_messages(range(1, 65))) * CONFIRMED
             print(f"{args.modules} modules, {args.framing}, {args.baud} baud 8N1, turnaround 10 ms; "
-                  f"command start-up {startup:.2f} s (included below)")  # fmt: skip
+                  f"command start-up {startup:.2f} s (included below)"
+                  + ("" if CONFIRMED == 1 else "; no check protects a reply: every read made until two agree, counted twice"))  # fmt: skip
             if not args.skip_read:
                 wall, _ = run([*prc3cfg, "read", str(plant), "--json"])
                 print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio {wall / read_estimate:.3f}")
@@ -232,7 +242,7 @@ def main() -> None:
                 ):  # fmt: skip
                     changed = "".join(MODULE.format(address=a, programs=programs(a), acceleration=acceleration)
                                       for a in range(1, args.modules + 1))  # fmt: skip
-                    plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=changed))
+                    plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud, modules=changed, accepted=accepted))
                     measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate, read, args.gaps)
         finally:
             emulator.terminate()

@@ -185,9 +185,11 @@ def test_a_code_span_shows_its_text_as_written(text):
 
 def test_the_budget_is_kept_for_any_size(tmp_path):
     plan = full_line_plan(tmp_path)
-    for budget in (5_000, 20_000, 200_000):
-        text = render.markdown(plan, max_chars=budget)
-        assert len(text) <= max(budget, len(render.markdown(plan, max_chars=1)))  # the table and warnings always
+    with pytest.raises(render.BudgetTooSmall) as refused:  # the table and warnings always, or no comment
+        render.markdown(plan, max_chars=1)
+    for budget in (refused.value.needed, 5_000, 20_000, 200_000):
+        if budget >= refused.value.needed:
+            assert len(render.markdown(plan, max_chars=budget)) <= budget
     assert "left out" not in render.markdown(plan, max_chars=10_000_000)
 
 
@@ -338,7 +340,9 @@ def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released
     document["read"] = {"base": "the plant file last applied in full here", "modules_not_read": ["a/x", "a/y"], "not_as_verified": []}
     for module in [m for bus in document["buses"] for m in bus["modules"]]:
         module["read"] = {"programs": [1, 2], "programs_not_read": []}
-    text = markdown(document, max_chars=1)
+    with pytest.raises(render.BudgetTooSmall) as refused:
+        markdown(document, max_chars=1)
+    text = markdown(document, max_chars=refused.value.needed)
     assert "left out" in text and "<details>" not in text
     assert "⚠ 2 modules release the axes" in text and "2 modules (a/x, a/y)" in text
     assert "> ⚠ 2 programs the plant does not manage are clamped by 2 modules as their system parameters change" in text

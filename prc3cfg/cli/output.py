@@ -33,8 +33,9 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
             sys.stdout.write(text)
         print()
     elif markdown:
-        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=f"`{out.name}`" if out else "the plan file",
-                              faults=faults))  # fmt: skip
+        full_plan = f"`{out.name}`" if out else "the plan file"
+        # the comment's last line end is its own, counted in the budget
+        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=full_plan, faults=faults), end="")
     else:
         print_lines(render.human(plan, notes=notes, faults=faults))  # the plan made now: its words are prc3cfg's, not a file's
         if out is not None:
@@ -57,7 +58,8 @@ def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | No
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
-        print(render.drift_markdown(document, max_chars=max_chars, full_drift=f"`{out.name}`" if out else "the drift file"))
+        full_drift = f"`{out.name}`" if out else "the drift file"
+        print(render.drift_markdown(document, max_chars=max_chars, full_drift=full_drift), end="")  # its line end is counted in the budget
     else:
         print("\n".join(render.drift_lines(drifted, modules)))
         if out is not None:

@@ -136,7 +136,7 @@ def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: in
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
-        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`"))
+        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`"), end="")  # its line end is counted in the budget
     else:
         print_lines(render.human(document))
 

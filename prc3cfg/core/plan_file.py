@@ -609,10 +609,10 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     1.0987 s). What stays on the hardware is what the plan's maker compared with: the file's own
     `left_alone`, else `notes()`.
     """
-    for proof in ours.proofs:
-        if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
-            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {words.address_ranges(proof.answered)}, which the "
-                            "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
+    if "evidence" not in plan_file.document:  # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
+        raise UserError(f"{path}: it does not say what its plan rests on (no \"evidence\"): made before plans named their evidence, "
+                        "or changed after it was made; nothing was written: plan again and review it")  # fmt: skip
+    _no_new_module_hears(path, plan_file, ours, words)
     for entry, change in zip(plan_file.modules, ours.modules):
         edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
                   "after it was made; nothing was written: plan again and review it")  # fmt: skip
@@ -633,9 +633,6 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
     # a plan made in another checkout: its path, and its line endings (`to_apply` found the text the same)
     written = write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
-    if "evidence" not in plan_file.document:  # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
-        raise UserError(f"{path}: it does not say what its plan rests on (no \"evidence\"): made before plans named their evidence, "
-                        "or changed after it was made; nothing was written: plan again and review it")  # fmt: skip
     if isinstance(said := plan_file.document.get("read"), dict) and "read" in written:
         written["read"]["not_as_verified"] = said.get("not_as_verified")
         if (at := _differs_at(said, written["read"], "read")) is not None:
@@ -644,6 +641,14 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     if (at := _differs_at(plan_file.document, written)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
+
+
+def _no_new_module_hears(path: Path, plan_file: PlanFile, ours: PlantPlan, words: Words) -> None:
+    """Refused where a module the plant file does not list now answers on a bus the plan file broadcasts on."""
+    for proof in ours.proofs:
+        if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {words.address_ranges(proof.answered)}, which the "
+                            "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
 
 
 def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:

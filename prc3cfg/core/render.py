@@ -44,6 +44,7 @@ from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
 from prc3cfg.core.what_to_read import to_the_minute
+from prc3cfg.errors import UserError
 
 AXIS_WARNING = "releases the axes: travel to reference point required after apply"
 CLAMPED = "clamped by the module itself when its system parameters change"
@@ -583,13 +584,47 @@ def fenced(lines: Sequence[str], info: str = "") -> list[str]:
     return [fence + info, *lines, fence]
 
 
+class BudgetTooSmall(UserError):
+    """`--max-chars` below what a comment never leaves out; `needed` is the least it takes."""
+
+    def __init__(self, max_chars: int, what: str, needed: int) -> None:
+        super().__init__(f"--max-chars {max_chars:,} cannot hold {what} ({needed:,} characters, never left out) — "
+                         f"give --max-chars {needed} or more")  # fmt: skip
+        self.needed = needed
+
+
+def _budgeted(head: str, parts: Iterable[str], count: int, closing: Callable[[int, int], str], max_chars: int, what: str) -> str:
+    """`head`, then each of the `count` `parts` while it fits in `max_chars` characters with the
+    `closing` line that says how many were left out (none when all are shown; it may name the
+    budget): the comment as printed, its last line end counted. `BudgetTooSmall` where `head` and
+    the closing of all left out do not fit, with the least budget that holds them.
+
+    Before each part, what is taken and the closing of the parts from it on fit (for the first part,
+    the check below; for each next, the previous part's), so the comment never exceeds the budget."""
+    if count and len(head) + len(closing(count, max_chars)) > max_chars:
+        needed = len(head)
+        while (more := len(head) + len(closing(count, needed))) > needed:  # the closing may name the budget: its own digits
+            needed = more
+        raise BudgetTooSmall(max_chars, what, needed)
+    if len(head) > max_chars:
+        raise BudgetTooSmall(max_chars, what, len(head))
+    text = head
+    for shown, part in enumerate(parts):
+        after = count - shown - 1
+        if len(text) + len(part) + (len(closing(after, max_chars)) if after else 0) > max_chars:
+            return text + closing(count - shown, max_chars)
+        text += part
+    return text
+
+
 def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
              full_plan: str = "the plan file", faults: Sequence[str] = ()) -> str:  # fmt: skip
-    """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters:
-    the marker, the summary, every axis-release warning, how many programs are clamped, what was not
-    read, what is left as it is and the table of changed modules always;
-    then each module's details (with a stroke chart per changed chain, for a live plan) while they
-    fit, and a last line saying how many were left out and where the full plan is."""
+    """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters
+    as printed (its last line end counted): the marker, the summary, every axis-release warning, how
+    many programs are clamped, what was not read, what is left as it is and the table of changed
+    modules always — `BudgetTooSmall` where they do not fit; then each module's details (with a stroke
+    chart per changed chain, for a live plan) while they fit, and a last line saying how many were
+    left out and where the full plan is."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", *faulted_summary(document, faults, cell), "",
@@ -597,16 +632,13 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     for bus in document["buses"]:
         if lines := _broadcast_lines(bus):
             head += [*fenced(lines[:-1]), ""]
-    text = "\n".join(head)
-    for shown, (bus, m) in enumerate(changed):
-        block = _details(bus, m, live)
-        left = len(changed) - shown
-        closing = (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
-                   f"{max_chars:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
-        if len(text) + len(block) + (len(closing) if left > 1 else 0) > max_chars:
-            return text + closing
-        text += block
-    return text
+
+    def closing(left: int, budget: int) -> str:
+        return (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
+                f"{budget:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
+
+    return _budgeted("\n".join(head).rstrip("\n") + "\n", (_details(bus, m, live) for bus, m in changed), len(changed), closing,
+                     max_chars, "the plan's summary, warnings and table of changed modules")  # fmt: skip
 
 
 def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *, claimed: bool) -> list[str]:
@@ -724,18 +756,14 @@ def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET,
     drifted, modules = document["drifted"], document["modules"]
     summary = (f"**Drift:** {len(drifted)} of {plural(modules, 'module')} hold{'s' if len(drifted) == 1 else ''} something other "
                "than the plant file says (file → module)." if drifted else "**No drift:** every module holds what the plant file says.")  # fmt: skip
-    out = [DRIFT_MARKER, f"### prc3cfg drift — {code(document['plant'])}", "", summary, ""]
-    used = sum(len(line) + 1 for line in out)
-    for shown, found in enumerate(drifted):
-        part = [f"- **{cell(found['bus'])} / {cell(found['name'])}** (address {found['address']})",
-                *(f"  - {cell(text)}" for text in found["differences"])]  # fmt: skip
-        size = sum(len(line) + 1 for line in part)
-        if used + size + 200 > max_chars:
-            out += ["", f"… and {plural(len(drifted) - shown, 'more module')} that drifted: see {full_drift}."]
-            break
-        out += part
-        used += size
-    return "\n".join(out)
+    head = "\n".join([DRIFT_MARKER, f"### prc3cfg drift — {code(document['plant'])}", "", summary, "", ""])
+    parts = ("\n".join([f"- **{cell(found['bus'])} / {cell(found['name'])}** (address {found['address']})",
+                        *(f"  - {cell(text)}" for text in found["differences"]), ""]) for found in drifted)  # fmt: skip
+
+    def closing(left: int, _budget: int) -> str:
+        return f"\n… and {plural(left, 'more module')} that drifted: see {full_drift}.\n"
+
+    return _budgeted(head, parts, len(drifted), closing, max_chars, "the drift's summary")
 
 
 class Run(Protocol):

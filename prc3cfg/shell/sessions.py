@@ -78,31 +78,50 @@ class LineOptions:
 
 
 def bus_line_keys(plant: Plant, bus: Bus) -> tuple[str, ...]:
-    """The identities of a bus's line: its port, or for `emulator://` the emulator's state file."""
+    """The identities of a bus's line: its port, or for `emulator://` the emulator's state file — and
+    where `PORTS_VARIABLE` gives the line other spellings (`machine_lines`), theirs too: one lock and
+    one record of what its modules hold, whichever spelling a plant file names."""
     from prc3cfg.shell.link.ports import emulator_state_path
 
-    state = emulator_state_path(plant.path, bus.port) if bus.port.startswith(EMULATOR_SCHEME) else None
-    return line_keys(bus.port, emulator_state=state)
+    if bus.port.startswith(EMULATOR_SCHEME):
+        return line_keys(bus.port, emulator_state=emulator_state_path(plant.path, bus.port))
+    keys = line_keys(bus.port)
+    for spellings in machine_lines():
+        if not spellings.isdisjoint(keys):
+            keys += tuple(sorted(spellings.difference(keys)))
+    return keys
 
 
-#: The ports of this machine's lines, `;` between them: where it is set (the runner wired to a line, in its own
-#: configuration), a plant file's bus opens only a line it names — a pull request's plant file, planned there,
-#: cannot make it open another device or connect to another host. `emulator://` opens none, and is not listed.
+#: The ports of this machine's lines, `;` between lines and `|` between spellings of one line: where it is set
+#: (the runner wired to a line, in its own configuration), a plant file's bus opens only a line it names — a pull
+#: request's plant file, planned there, cannot make it open another device or connect to another host. A line
+#: reached two ways (a ser2net serving one device on a raw and an RFC 2217 port: `socket://gw:4001|rfc2217://gw:4002`)
+#: is one line by either: one lock, one record. `emulator://` opens none, and is not listed.
 PORTS_VARIABLE = "PRC3CFG_PORTS"
+
+
+def _listed() -> list[list[str]]:
+    """The lines `PORTS_VARIABLE` lists, each as its spellings; `UserError` for a port no plant file could name."""
+    listed = os.environ.get(PORTS_VARIABLE, "")
+    lines = [[port.strip() for port in line.split("|") if port.strip()] for line in listed.split(";")]
+    for port in (port for line in lines for port in line):
+        if (problem := port_error("port", port, operators=True)) is not None:
+            raise UserError(f"{PORTS_VARIABLE}: {problem}")
+    return [line for line in lines if line]
+
+
+def machine_lines() -> list[frozenset[str]]:
+    """Each line `PORTS_VARIABLE` lists, as the identities of all its spellings (`line_keys`)."""
+    return [frozenset(key for port in line if not port.startswith(EMULATOR_SCHEME) for key in line_keys(port)) for line in _listed()]
 
 
 def refuse_other_lines(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
     """Refuse, before any line is opened, a bus (by its line's identities, `keys`) that `PORTS_VARIABLE` does not
     name where it is set: one of its ports must be that line, as any spelling of it (`line_keys`)."""
-    listed = os.environ.get(PORTS_VARIABLE)
-    if listed is None:
+    if os.environ.get(PORTS_VARIABLE) is None:
         return
-    ports = [port.strip() for port in listed.split(";") if port.strip()]
-    machine: set[str] = set()
-    for port in ports:
-        if (problem := port_error("port", port, operators=True)) is not None:
-            raise UserError(f"{PORTS_VARIABLE}: {problem}")
-        machine.update(line_keys(port) if not port.startswith(EMULATOR_SCHEME) else ())
+    ports = [port for line in _listed() for port in line]
+    machine = frozenset().union(*machine_lines())
     for bus in plant.buses:
         if bus.name in keys and not bus.port.startswith(EMULATOR_SCHEME) and not machine.intersection(keys[bus.name]):
             raise UserError(f"{plant.path}: bus {bus.name}: port {bus.port} is not a line of this machine — {PORTS_VARIABLE}, the "
