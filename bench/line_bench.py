@@ -22,17 +22,19 @@ and the client do not share an interpreter), then
 
 What the link's protections cost (issue 40, acceptance at 9600 baud on 30 modules: the two program
 changes ≤ 10 s, the system change ≤ 5 s, wall): on `--framing open-driver` (the plant's `parity: none`,
-its risk accepted) nothing protects a data reply, so every read is made until two replies agree — the
-estimates count each read twice (`CONFIRMED`) and the verification floor doubles; the quiet period
-before a verification that a late copy could undo (`what_to_read.undone_by_late`) would show as the
-verification on the line above its estimate. Measured (2 cores, shared): crc16 — 6.71 s, 5.12 s,
-3.34 s, verification on the line 1.02× its estimate (none of the three plans waits a quiet period:
-no 10h–14h, and no addressed step overrides the broadcast), so a checked line pays nothing;
-open-driver unprotected — 18.17 s, 15.34 s, 9.96 s (read-back 10.15/8.85/4.69 s and verification
-5.45/4.18/4.70 s on the line, twice the exchanges of one read, 1.01× the doubled estimate): over
-the limits, the price of reading twice at 9600 baud with open-driver's gaps. A serial device with
-`parity: even` on POSIX or Windows checks parity at the port and reads once (docs/line.md); over
-TCP an open-driver line reads twice whatever its parity.
+its risk accepted) nothing protects a data reply, so a read is believed only when it agrees with another
+observation — the line's record or the write being verified, else a second reply (`read` of modules no
+record knows: counted twice, `CONFIRMED`); the quiet period before a verification that a late copy could
+undo (`what_to_read.undone_by_late`) would show as the verification on the line above its estimate.
+Measured (2 cores, shared): crc16 — 6.71 s, 5.12 s, 3.34 s, verification on the line 1.02× its estimate
+(none of the three plans waits a quiet period: no 10h–14h, and no addressed step overrides the
+broadcast), so a checked line pays nothing. Open-driver unprotected — 10.68 s, 8.91 s, 5.32 s (was
+18.17 s, 15.34 s, 9.96 s when every read was made twice): each read of an apply is as the record or its
+writes say and is made once, so the confirmations cost nothing there; what is left over the limits is
+open-driver's own line time (the estimates: 9.69 s, 8.17 s, 4.68 s, at 1.02× on the line, plus the
+commands' start-up). `read` of 30 modules nothing expects: 124.24 s, twice its one-read time.
+A serial device with `parity: even` on POSIX checks parity at the port and reads once (docs/line.md);
+over TCP an open-driver line confirms whatever its parity.
 """
 
 from __future__ import annotations
@@ -54,7 +56,8 @@ from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.what_to_read import protects_replies, read_messages
 
-#: Reads of each message the estimates count: 2 where nothing protects a data reply (set in `main`).
+#: Reads of each message `read`'s estimate counts: 2 where nothing protects a data reply and no record says
+#: what it holds (set in `main`); an apply's reads are as the record or its writes say: once.
 CONFIRMED = 1
 
 
@@ -155,8 +158,8 @@ def verification_floor(plan: dict, cost: LineCost) -> tuple[int, float]:
             reads = read_messages({n for m in steps for n in m.touched_programs()})
             if not any(m.RELEASES_AXES for m in steps):
                 reads = reads[1:]  # no system step: no 50h
-            exchanges += len(reads) * CONFIRMED
-            seconds += sum(cost.message_time(module["address"], m) for m in reads) * CONFIRMED
+            exchanges += len(reads)  # each as the plan expects it: believed at once, confirmed or not
+            seconds += sum(cost.message_time(module["address"], m) for m in reads)
     return exchanges, seconds
 
 
@@ -171,7 +174,7 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
     trace.unlink(missing_ok=True)  # --trace appends
     wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release", *read, *(["--trace", str(trace)] if gaps else [])])
     if "read" in plan:  # a targeted read-back: what the plan says it reads
-        read_estimate = plan["estimated_phases_s"]["reading"] * CONFIRMED
+        read_estimate = plan["estimated_phases_s"]["reading"]  # as the line's record says: believed at once
         exchanges = sum(len(read_messages(m["read"]["programs"])) for bus in plan["buses"] for m in bus["modules"])
         print(f"  targeted read-back: {exchanges} exchanges for {sum(len(b['modules']) for b in plan['buses'])} modules read")
     estimate = read_estimate + plan["estimated_bus_time_s"] + floor_time
@@ -226,7 +229,7 @@ def main() -> None:
             read_estimate = args.modules * sum(cost.message_time(1, m) for m in read_messages(range(1, 65))) * CONFIRMED
             print(f"{args.modules} modules, {args.framing}, {args.baud} baud 8N1, turnaround 10 ms; "
                   f"command start-up {startup:.2f} s (included below)"
-                  + ("" if CONFIRMED == 1 else "; no check protects a reply: every read made until two agree, counted twice"))  # fmt: skip
+                  + ("" if CONFIRMED == 1 else "; no check protects a reply: a read nothing expects is confirmed, counted twice"))  # fmt: skip
             if not args.skip_read:
                 wall, _ = run([*prc3cfg, "read", str(plant), "--json"])
                 print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio {wall / read_estimate:.3f}")

@@ -26,7 +26,7 @@ import serial
 from emulated import DEMO, run_cli
 from lossy import Loss, LossyProxy
 
-from prc3cfg.core.framing import Frame, get_framing
+from prc3cfg.core.framing import Direction, Frame, get_framing
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.what_to_read import protects_replies
@@ -43,8 +43,11 @@ class Flips:
 
     def __init__(self, seed: int) -> None:
         self.draw, self.rate, self.flipped = random.Random(seed), 0.0, 0
+        self.asked: list[tuple[int, bytes]] = []  # the reads asked, by address and message
 
     def __call__(self, frame: Frame, _: int) -> set[Loss]:
+        if frame.direction is Direction.REQUEST and frame.message[0] in READS:
+            self.asked.append((frame.address, frame.message))
         if frame.message[0] in READS and self.draw.random() < self.rate:
             self.flipped += 1
             return {Loss.FLIP}
@@ -109,6 +112,29 @@ def test_a_flipped_bit_in_a_read_reply_is_never_believed(tmp_path, capsys):
     with flipping(tmp_path, seed=5) as (plant, flips):
         check_everything(plant, flips, capsys, rate=0.15)
         assert flips.flipped > 0
+
+
+def test_a_reply_as_the_record_or_a_verified_write_says_is_believed_at_once(tmp_path, capsys):
+    """On the unprotected line, a read whose reply is what another observation says the module holds (the
+    line's record, what the apply wrote) is made once; one with nothing to agree with is made until two
+    replies agree: a `plan --full-read` asks each read twice, a plan from the record and an apply's
+    verification each once — and a flipped reply, which agrees with neither, is still never believed
+    (`test_a_flipped_bit_in_a_read_reply_is_never_believed`)."""
+    with flipping(tmp_path, seed=1) as (plant, flips):
+        asked = flips.asked
+        plant.path.write_text(plant.path.read_text().replace("position: 2.0\n", "position: 1.99\n", 1))
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        for args, times in ((("--full-read",), 2), ((), 1)):
+            asked.clear()
+            assert run_cli(capsys, "plan", plant.path, *args).code == 0
+            counts = {read: asked.count(read) for read in asked}
+            assert asked and set(counts.values()) == {times}, (args, counts)
+        plant.path.write_text(plant.path.read_text().replace("position: 1.99\n", "position: 1.98\n", 1))
+        asked.clear()
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve").code == 0
+        # each module's 50h and program 1 of module 2 before the write, as the record says, and its verification: each once
+        assert sorted(asked) == sorted([(1, b"P\x00"), (2, b"P\x00"), (5, b"P\x00"), (2, b"Q\x01"), (2, b"Q\x01")]), asked
+        assert plant.matches_plant()
 
 
 def test_a_line_protects_a_reply_by_a_checksum_or_by_parity_the_port_checks():

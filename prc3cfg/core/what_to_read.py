@@ -38,8 +38,9 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   leaves what the plan left: no wait.
 
 On a line where nothing protects a data reply (`protects_replies`: a framing without a checksum, and
-no parity the port checks), every read is confirmed — read again until two in a row agree
-(`CONFIRMATIONS` at most): one damaged reply is never believed once, by a plan, a snapshot, a record or `read`.
+no parity the port checks), every read is confirmed — by what the line's record or the write being
+verified says the module holds, else read again until two in a row agree (`CONFIRMATIONS` at most;
+`prc3cfg.shell.readback`): one damaged reply is never believed once, by a plan, a snapshot, a record or `read`.
 
 What is not read is not written: the desired image a targeted plan aims at is cut to the programs
 the read-back holds (`within_read`), so the planner — which never writes a program its desired

@@ -238,8 +238,9 @@ class ModuleRun:
         known = self.final or self.before
 
         def once() -> ModuleImage:
-            read = read_system(link, self.address, name=self.name) if system else known.system
-            found: dict[int, Program] = dict(read_programs(link, self.address, programs, name=self.name))
+            read = read_system(link, self.address, name=self.name, expected=expected.system) if system else known.system
+            told = {n: p for n in programs if (p := expected.programs[n - 1]) is not None}
+            found: dict[int, Program] = dict(read_programs(link, self.address, programs, name=self.name, expected=told))
             return replace(known, system=read).with_programs(found)
 
         previous = once()

@@ -13,8 +13,11 @@ read in full (`after_programs`) — with every other module of its line, those r
 for the rest (`opens_line`). This module only reads.
 
 On a line where nothing protects a data reply (`what_to_read.protects_replies`: open-driver, and no
-parity the port checks) every read is made until two replies in a row agree (`_confirmed`): a flipped bit
-is never believed once — it costs each read's bus time again on such a line, once more per damaged reply.
+parity the port checks) a reply is believed once it agrees with another observation (`_confirmed`): what
+an independent source said the module holds — the line's record, or what a verified write put there — or
+else the next reply to the same read. A flipped bit is never believed once: to pass, it would have to turn
+what the module holds into exactly what the other observation says, which is as likely as two damaged
+replies that agree. A read whose reply is as expected costs one exchange; any other, one more at least.
 
 S9 must equal the configured address, else the wiring or the plant file is wrong.
 Buses are read in parallel (one thread per line), the modules of one line one after
@@ -23,7 +26,7 @@ another (the line is half duplex).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING, TypeVar
 
@@ -66,29 +69,36 @@ def read_module(
     means the module was changed by another hand, and every `managed` program is read too —
     nothing of the record is taken then (`prc3cfg.core.what_to_read.after_system`, `after_programs`).
     """
-    system = read_system(link, address, name=name)
+    expected = None if known is None else {n: p for n, p in enumerate(known.programs, start=1) if p is not None}
+    system = read_system(link, address, name=name, expected=None if known is None else known.system)
     image = ModuleImage(address=address, system=system, programs=(None,) * PROGRAM_COUNT)
-    image = image.with_programs(read_programs(link, address, what_to_read.after_system(system, programs, clamped_by, known, managed), name=name))
-    return image.with_programs(read_programs(link, address, what_to_read.after_programs(image, known, managed), name=name))
+    first = what_to_read.after_system(system, programs, clamped_by, known, managed)
+    image = image.with_programs(read_programs(link, address, first, name=name, expected=expected))
+    return image.with_programs(read_programs(link, address, what_to_read.after_programs(image, known, managed), name=name, expected=expected))
 
 
 Reply = TypeVar("Reply", codec.SystemReply, codec.ProgramsReply)
 
 
-def _request(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
+def _request(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply],
+             expected: Callable[[Reply], bool] | None = None) -> Reply:  # fmt: skip
     """The data block of a read, of `kind` (the reply `codec.decode_reply` gives to `message`) — confirmed
-    where nothing protects it (`_confirmed`)."""
+    where nothing protects it (`_confirmed`; `expected`: whether a reply is what another observation says)."""
     if protects_replies(link.framing.checked, link.line.parity, link.parity_checked):
         return _one(link, address, message, name, kind)
-    return _confirmed(link, address, message, name, kind)
+    return _confirmed(link, address, message, name, kind, expected)
 
 
-def _confirmed(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
-    """The data block of a read heard twice in a row, asking again up to `CONFIRMATIONS` times in all;
-    a `LinkError` when no two replies in a row agree (the line damages more than it carries)."""
+def _confirmed(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply],
+               expected: Callable[[Reply], bool] | None) -> Reply:  # fmt: skip
+    """The data block of a read as soon as it is what `expected` says (another observation: the record, or
+    a verified write), else heard twice in a row, asking again up to `CONFIRMATIONS` times in all; a
+    `LinkError` when no two replies in a row agree (the line damages more than it carries)."""
     from prc3cfg.shell.link.client import LinkError  # here: a command that opens no line (`plan --actual`) loads no link
 
     heard = _one(link, address, message, name, kind)
+    if expected is not None and expected(heard):
+        return heard
     for _ in range(CONFIRMATIONS - 1):
         again = _one(link, address, message, name, kind)
         if again == heard:
@@ -110,9 +120,13 @@ def _one(link: Link, address: int, message: codec.Message, name: str, kind: type
     return reply
 
 
-def read_system(link: Link, address: int, *, name: str = "") -> SystemParameters:
-    """One 50h: the system parameters; S9 must be `address`."""
-    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply)
+def read_system(link: Link, address: int, *, name: str = "", expected: SystemParameters | None = None) -> SystemParameters:
+    """One 50h: the system parameters; S9 must be `address`. `expected`: what another observation says they are."""
+
+    def as_expected(reply: codec.SystemReply) -> bool:
+        return reply.address == address and reply.system == expected
+
+    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply, None if expected is None else as_expected)
     if reply.address != address:
         raise ReadBackError(
             f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering at address "
@@ -121,12 +135,20 @@ def read_system(link: Link, address: int, *, name: str = "") -> SystemParameters
     return reply.system
 
 
-def read_programs(link: Link, address: int, programs: Iterable[int], *, name: str = "") -> dict[int, Program]:
-    """The given programs, in the fewest 51h/52h exchanges (`read_messages`)."""
+def read_programs(link: Link, address: int, programs: Iterable[int], *, name: str = "",
+                  expected: Mapping[int, Program] | None = None) -> dict[int, Program]:  # fmt: skip
+    """The given programs, in the fewest 51h/52h exchanges (`read_messages`). `expected`: what another
+    observation says some of them are."""
     wanted = set(programs)
     found: dict[int, Program] = {}
+
+    def as_expected(reply: codec.ProgramsReply) -> bool:
+        told = expected or {}
+        return all(reply.first + offset not in wanted or told.get(reply.first + offset) == program
+                   for offset, program in enumerate(reply.programs))  # fmt: skip
+
     for message in read_messages(wanted)[1:]:
-        reply = _request(link, address, message, name, codec.ProgramsReply)
+        reply = _request(link, address, message, name, codec.ProgramsReply, None if expected is None else as_expected)
         for offset, program in enumerate(reply.programs):
             if reply.first + offset in wanted:
                 found[reply.first + offset] = program
