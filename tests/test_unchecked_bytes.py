@@ -55,8 +55,9 @@ class Flips:
 
 
 @contextlib.contextmanager
-def flipping(directory: Path, seed: int) -> Iterator[tuple[EmulatedPlant, Flips]]:
-    """The demo plant on emulators, booth-a reached through a proxy that flips bits of read replies."""
+def flipping(directory: Path, seed: int, parity: str = "none") -> Iterator[tuple[EmulatedPlant, Flips]]:
+    """The demo plant on emulators, booth-a reached through a proxy that flips bits of read replies — with
+    `parity` on the line, which over TCP nobody checks (`test_a_link_over_tcp_checks_no_parity`)."""
     flips = Flips(seed)
     with contextlib.ExitStack() as stack:
 
@@ -66,7 +67,7 @@ def flipping(directory: Path, seed: int) -> Iterator[tuple[EmulatedPlant, Flips]
             proxy = LossyProxy((host, port), flips, framing="open-driver", zvz=UNCHECKED["zvz"], seed=seed)
             return stack.enter_context(proxy).listen()
 
-        yield stack.enter_context(emulate(DEMO, directory, route=route, timeout=0.1, **UNCHECKED)), flips
+        yield stack.enter_context(emulate(DEMO, directory, route=route, timeout=0.1, **(UNCHECKED | {"parity": parity}))), flips
 
 
 def held(plant: EmulatedPlant, bus: str, address: int) -> ModuleImage:
@@ -187,8 +188,10 @@ def test_a_link_over_tcp_checks_no_parity(tmp_path):
 
 
 @pytest.mark.soak
+@pytest.mark.parametrize("parity", ["none", "even"])
 @pytest.mark.parametrize("rate", [0.05, 0.15, 0.30])
 @pytest.mark.parametrize("seed", range(4))
-def test_flipped_bits_at_any_rate_are_never_believed(tmp_path, capsys, seed, rate):
-    with flipping(tmp_path, seed=seed) as (plant, flips):
+def test_flipped_bits_at_any_rate_are_never_believed(tmp_path, capsys, seed, rate, parity):
+    """Without parity, and with parity on a line no port checks it on (the proxy's TCP): never believed once."""
+    with flipping(tmp_path, seed=seed, parity=parity) as (plant, flips):
         check_everything(plant, flips, capsys, rate=rate)
