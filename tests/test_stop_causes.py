@@ -176,6 +176,9 @@ def test_a_fault_a_write_revealed_is_told_by_read_scan_and_plan_until_a_write_is
         assert said in planned.err
         assert "No changes: every module matches the plant file." not in planned.out
         assert f"⚠ booth-a/booth-a-right is in {fault}" in planned.out
+        document = json.loads(run_cli(capsys, "plan", plant.path, "--json").out)  # what a CI step reads says it too
+        assert [f for f in document["faults"] if f.startswith(f"booth-a/booth-a-right is in {fault}")], document.get("faults")
+        assert f"booth-a/booth-a-right is in {fault}" in run_cli(capsys, "plan", plant.path, "--markdown").out
         assert said in run_cli(capsys, "read", plant.path).err
         port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
         assert said in run_cli(capsys, "scan", "--port", port).err

@@ -27,8 +27,9 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
     document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
-    if json_out:  # streamed, 10,000 pieces a write: one string of 8 × 30 × 64 is 80 MB of pieces, one write a piece 2 s
-        pieces = json.JSONEncoder(indent=1).iterencode(document)
+    if json_out and document is not None:  # streamed, 10,000 pieces a write: one string of 8 × 30 × 64 is 80 MB of pieces, one write a piece 2 s
+        # the fault states a write revealed, kept in the records (the plan file leaves them out: apply --plan tells its own)
+        pieces = json.JSONEncoder(indent=1).iterencode(document | ({"faults": list(faults)} if faults else {}))
         for text in iter(lambda: "".join(itertools.islice(pieces, 10_000)), ""):
             sys.stdout.write(text)
         print()
