@@ -56,6 +56,7 @@ USAGE = {
     "the emulator's 7 data bits": (["emulator", "serve", "--listen", "127.0.0.1:9", "--data-bits", "7"], "error: prc3cfg emulator serve: Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: give 8 or leave the option out — see prc3cfg emulator serve --help"),
     "scan's stop bits": (["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"], "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 — see prc3cfg scan --help"),
     "refresh-only with --plot": (["plan", "p.yaml", "--refresh-only", "--plot", "p.svg", "--module", "m"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --plot — see prc3cfg plan --help"),
+    "refresh-only with --previous": (["plan", "p.yaml", "--refresh-only", "--previous", "old.yaml"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --previous — see prc3cfg plan --help"),
     "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
     "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),
     "terraform's -lock-timeout=": (["apply", "p.yaml", "-lock-timeout=10"], "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?"),

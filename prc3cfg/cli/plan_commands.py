@@ -74,8 +74,9 @@ def plan(
     from prc3cfg import api
     from prc3cfg.cli import output
 
-    if refresh_only and plot is not None:
-        raise click_errors.UsageError("--refresh-only reports drift and makes no plan — leave out --plot", ctx=ctx)
+    if refresh_only and (plot is not None or previous is not None):
+        given = "--plot" if plot is not None else "--previous"  # --previous: what a plan leaves as it is — there is no plan
+        raise click_errors.UsageError(f"--refresh-only reports drift and makes no plan — leave out {given}", ctx=ctx)
     if plot is not None and len(module or []) != 1:
         raise click_errors.UsageError("--plot draws one module — name it with --module NAME", ctx=ctx)
     fmt = api.plot_format(plot) if plot is not None else None
