@@ -188,9 +188,10 @@ def test_snapshot_and_restore(plant, capsys, tmp_path):
     snapshot = json.loads(snapshots[0].read_text())
     assert snapshot["plant_sha256"] and len(snapshot["modules"]) == 6
     refused = run_cli(capsys, "restore", snapshots[0], "--auto-approve")
-    assert refused.code == 1 and "--allow-axis-release" in refused.err
+    assert refused.code == 1 and "nothing was written; restore again with --allow-axis-release" in refused.err, refused.err
     restored = run_cli(capsys, "restore", snapshots[0], "--auto-approve", "--allow-axis-release")
     assert restored.code == 0, restored.err
+    assert "Restore complete: 6 modules written and verified." in restored.out and "Apply complete" not in restored.out
     after = plant.images()
     for key, image in before.items():
         assert after[key].system == image.system

@@ -257,10 +257,10 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
     if releasing and not allow_axis_release:
         raise AxisReleaseRefused(
             f"the plan releases the axes of {', '.join(releasing)} (10h/20h: they must travel to their "
-            "reference point before production) — nothing was written; apply again with --allow-axis-release"
+            f"reference point before production) — nothing was written; {writing.command} again with --allow-axis-release"
         )
     if gates.approve is not None and not gates.approve(the_plan):
-        raise NotApproved("not applied — nothing was written")
+        raise NotApproved(f"not {'restored' if writing.command == 'restore' else 'applied'} — nothing was written")
     return the_plan, images, allow_axis_release, reading
 
 

@@ -144,11 +144,11 @@ def accounted() -> Iterator[None]:
         raise
 
 
-def applied(result: ApplyResult) -> None:
+def applied(result: ApplyResult, command: str = "apply") -> None:
     if result.runs or result.earlier:
         report(result)
     if result.runs:
-        print(f"Apply complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
+        print(f"{command.capitalize()} complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
         print(render.timing(result.plan.phases(), result.took))
 
 

@@ -174,4 +174,4 @@ def restore(
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options), verify=api.Verify(verify.value),
                              options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip
-    output.applied(result)
+    output.applied(result, "restore")
