@@ -152,6 +152,19 @@ def test_stale_plan_refused_after_teach_in(plant, capsys, tmp_path):
     assert plant.images() == before
 
 
+def test_a_plan_of_another_plant_is_refused_as_such_not_as_a_change(plant, capsys, tmp_path):
+    """A plan file made from another plant file (another `plant:` name) is not "the plant file changed":
+    it names both plants and nothing is sent."""
+    run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
+    other = tmp_path / "other" / "plant.yaml"
+    other.parent.mkdir()
+    other.write_text(plant.path.read_text().replace("plant: demo-line", "plant: other-line", 1))
+    result = run_cli(capsys, "apply", other, "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    assert result.code == 1 and result.err.count("\n") == 1, result.err
+    assert f"the plan of plant demo-line ({plant.path.resolve()}), not of other-line ({other})" in result.err
+    assert "changed since" not in result.err and not (other.parent / ".prc3cfg" / "journal").exists()
+
+
 def test_stale_plan_refused_after_plant_file_change(plant, capsys, tmp_path):
     run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     plant.path.write_text(plant.path.read_text().replace("dwell: 0.5", "dwell: 0.6", 1))

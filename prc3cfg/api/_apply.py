@@ -64,7 +64,7 @@ def read_plan(path: Path, plant: Plant) -> PlanFile:
         alike = plan_file.same_text(plant.path.read_bytes())
     except OSError:  # gone since it was loaded: the plant file's own digest alone, which the lines' check then finds changed
         alike = frozenset()
-    return plan_file.to_apply(_plan_input(path), path, plant.path, plant.sha256, alike)
+    return plan_file.to_apply(_plan_input(path), path, plant.path, plant.sha256, alike, plant.name)
 
 
 def plan_document(path: Path) -> dict[str, Any]:

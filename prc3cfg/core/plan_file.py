@@ -54,6 +54,7 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planner.check import MAX_STEPS
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan, Reading
+from prc3cfg.core.text import shown
 from prc3cfg.errors import UserError
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -527,14 +528,19 @@ def checked(document: Any, path: Path, *, shown: bool = False) -> PlanFile:
         raise UserError(f"{path}: {error}") from None
 
 
-def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, alike: frozenset[str] = frozenset()) -> PlanFile:
-    """The plan file at `path` (as parsed) for `apply --plan` of the plant file at `plant_path`:
-    refused (one line) when damaged, made by another prc3cfg or for another plant file (`StalePlan`).
-    A plan made from the same text with other line endings (`alike`, of `same_text`) is the plan of this
-    plant file: a plan made on Linux applies from a Windows checkout, and the other way round."""
+def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, alike: frozenset[str] = frozenset(),
+             plant_name: str | None = None) -> PlanFile:  # fmt: skip
+    """The plan file at `path` (as parsed) for `apply --plan` of the plant file at `plant_path` (its plant
+    `plant_name`): refused (one line) when damaged, made by another prc3cfg, of another plant or for another
+    version of this plant file (`StalePlan`). A plan made from the same text with other line endings (`alike`,
+    of `same_text`) is the plan of this plant file: a plan made on Linux applies from a Windows checkout, and
+    the other way round."""
     plan_file = checked(document, path)
     if plan_file.version != __version__:
         raise StalePlan(f"{path}: made by prc3cfg {plan_file.version}, this is {__version__} — plan again with this version")
+    if plant_name is not None and plan_file.plant != plant_name:
+        raise UserError(f"{path}: the plan of plant {shown(plan_file.plant)} ({shown(plan_file.plant_path)}), not of {plant_name} "
+                        f"({plant_path}) — nothing was written: apply it with its own plant file, or plan this one")  # fmt: skip
     if plan_file.plant_sha256 != plant_sha256 and plan_file.plant_sha256 not in alike:
         raise StalePlan(f"{path}: stale plan — the plant file {plant_path} changed since the plan was made; plan again")
     return plan_file
