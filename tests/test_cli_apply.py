@@ -165,6 +165,19 @@ def test_a_plan_of_another_plant_is_refused_as_such_not_as_a_change(plant, capsy
     assert "changed since" not in result.err and not (other.parent / ".prc3cfg" / "journal").exists()
 
 
+def test_on_the_embedded_emulator_the_time_says_why_it_is_below_the_estimate(plant, capsys, tmp_path):
+    """The embedded emulator answers at once: a 0.2 s apply "estimated 6.0 s" says that the estimate is the line's."""
+    embedded = tmp_path / "embedded" / "plant.yaml"
+    embedded.parent.mkdir()
+    embedded.write_text("plant: p\nbuses:\n  - name: line\n    port: emulator://line\n    modules:\n"
+                        "      - address: 1\n        name: m1\n        programs:\n          1: {position: 0.3, speed: 0.3}\n")
+    done = run_cli(capsys, "apply", embedded, "--auto-approve")
+    assert done.code == 0, done.err
+    assert "— the embedded emulator answers at once: the estimate is what a line at the plant file's baud takes" in done.out
+    over_a_socket = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+    assert over_a_socket.code == 0 and "Time: " in over_a_socket.out and "embedded emulator" not in over_a_socket.out
+
+
 def test_stale_plan_refused_after_plant_file_change(plant, capsys, tmp_path):
     run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     plant.path.write_text(plant.path.read_text().replace("dwell: 0.5", "dwell: 0.6", 1))

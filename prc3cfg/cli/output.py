@@ -144,12 +144,15 @@ def accounted() -> Iterator[None]:
         raise
 
 
-def applied(result: ApplyResult, command: str = "apply") -> None:
+def applied(result: ApplyResult, command: str = "apply", *, emulated: bool = False) -> None:
+    """The account of a finished apply (or restore) and its time; `emulated`: every line is the embedded
+    emulator, which answers at once, so the time taken is far below the estimate of a real line."""
     if result.runs or result.earlier:
         report(result)
     if result.runs:
         print(f"{command.capitalize()} complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
-        print(render.timing(result.plan.phases(), result.took))
+        print(render.timing(result.plan.phases(), result.took)
+              + (" — the embedded emulator answers at once: the estimate is what a line at the plant file's baud takes" if emulated else ""))
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:

@@ -12,6 +12,7 @@ import typer
 
 from prc3cfg.cli import ExitStatus, app, click_errors
 from prc3cfg.cli.common import LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, VerifyChoice, check_output, line_options
+from prc3cfg.core.line import EMULATOR_SCHEME
 
 EXIT_CHANGES = 2
 
@@ -151,7 +152,7 @@ def apply(
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options),
                            verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read,
                            reason=reason)  # fmt: skip
-    output.applied(result)
+    output.applied(result, emulated=all(bus.port.startswith(EMULATOR_SCHEME) for bus in loaded.buses))
 
 
 @app.command()
