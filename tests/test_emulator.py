@@ -217,7 +217,7 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
 @pytest.mark.parametrize(
     ("options", "says"),
     [
-        (["--max-connections", "0"], "Invalid value for '--max-connections': Input should be greater than or equal to 1"),
+        (["--max-connections", "0"], "Invalid value for '--max-connections': must be 1 or more"),
         (["--idle-timeout", "0"], "Invalid value for '--idle-timeout': 0 is less than 1ms"),
         (["--parity", "weird"], "Invalid value for '--parity': 'weird' is not one of none, odd, even"),
         (["--framing", "xyz"], "Invalid value for '--framing': 'xyz' is not one of crc16, open-driver, stx"),
@@ -228,7 +228,7 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
         (["--module-turnaround", "31=5ms"], "Invalid value for '--module-turnaround': '31' is outside 1..30"),
         (["--module-turnaround", "3=11s"], "Invalid value for '--module-turnaround': '11s' is not a turnaround of 0..10 s"),
         (["--jitter", "-1ms"], "Invalid value for '--jitter'"),
-        (["--line-speed", "0"], "Invalid value for '--line-speed': Input should be greater than or equal to 1"),
+        (["--line-speed", "0"], "Invalid value for '--line-speed': must be 1 or more"),
         (["--data-bits", "9"], "Invalid value for '--data-bits': 9 data bits cannot carry a PRC 3 frame"),
         (["--data-bits", "7"], "Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame"),
         (["--modules", "0-40"], "Invalid value for '--modules': '0-40' is outside 1..30 — module addresses are 1..30"),
