@@ -373,9 +373,7 @@ HOSTILE = "\u202eevil\u2066\u2028\x1b[2J\u200d\ufeff"
 
 
 def raw(output: str) -> list[str]:
-    """The characters of `output` no output may hold raw — but the zero-width joiner markdown puts after an
-    "@" of its own making (`text.markdown`: no mention)."""
-    output = output.replace("@\u200d", "@")
+    """The characters of `output` no output may hold raw."""
     return sorted({f"U+{ord(c):04X}" for c in output if c != "\n" and unicodedata.category(c) in UNPRINTABLE})
 
 

@@ -14,7 +14,7 @@ prints such text in:
   `%`, CR and LF as `%25`, `%0D`, `%0A`, and in a property `:` and `,` too (docs.github.com,
   "Workflow commands for GitHub Actions"), so that nothing from a file starts a command line;
 - `markdown` — a pull-request comment's paragraph or table cell: markdown's and HTML's
-  metacharacters as entities, an `@` followed by a zero-width joiner and the `:` of a URL and the
+  metacharacters as entities, an `@` followed by an empty HTML comment and the `:` of a URL and the
   `.` of `www.` as entities, so that no text from a file makes a mention, a link, an image,
   emphasis, a table cell or HTML; `markdown_html` — the same inside HTML (`<summary>`), where
   markdown is not read: `<`, `>`, `&` as entities, `@` and URLs broken alike.
@@ -87,5 +87,6 @@ def markdown_html(text: str) -> str:
 
 
 def _dead(match: re.Match[str]) -> str:
-    """What GitHub would make live, made text: "@" with a zero-width joiner after it, ":" or "." as an entity."""
-    return "@\u200d" if match.group() == "@" else f"&#{ord(match.group())};"
+    """What GitHub would make live, made text: "@" with an empty HTML comment after it (rendered as nothing, and
+    copied from the page as nothing — a zero-width joiner came along into every paste), ":" or "." as an entity."""
+    return "@<!-- -->" if match.group() == "@" else f"&#{ord(match.group())};"
