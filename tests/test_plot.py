@@ -95,6 +95,15 @@ def test_svg_and_png_are_drawn_and_the_same_every_time(matplotlib, tmp_path):
     (tmp_path / "chains.png").write_bytes(png)
 
 
+def test_the_legend_names_only_the_output_bands_drawn(matplotlib):
+    """A chain whose programs set F1 only has no "F2 set" in its legend (matplotlib writes each text as a comment)."""
+    f1_only = TWO_PROGRAMS.with_programs({1: Program(P=1800, V=600, T=5, F1=1100, A=2)})
+    svg = picture(f1_only, fmt="svg", title="module test")
+    assert b"F1 set" in svg and b"F2 set" not in svg
+    both = picture(CHANGED, TWO_PROGRAMS, fmt="svg", title="module test")
+    assert b"F1 set" in both and b"F2 set" in both
+
+
 def test_without_matplotlib_plotting_says_to_install_matplotlib_into_the_python_that_runs_prc3cfg(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib → ImportError
     for draw in (lambda python: picture(TWO_PROGRAMS, fmt="svg", title="module test", python=python),

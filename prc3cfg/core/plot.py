@@ -84,7 +84,8 @@ def picture(after: ModuleImage, before: ModuleImage | None = None, *, fmt: str, 
         figure.suptitle(title, fontsize=10)
         for axes, (was, will) in zip(figure.subplots(len(pairs), 1, squeeze=False)[:, 0], pairs):
             _chain(axes, was, will, overlay=before is not None)
-        figure.legend(handles=_legend(before is not None), loc="outside lower center", ncols=6, frameon=False)
+        drawn = {interval.output for pair in pairs for motion in pair if motion is not None for interval in motion.outputs}
+        figure.legend(handles=_legend(before is not None, drawn), loc="outside lower center", ncols=6, frameon=False)
         out = io.BytesIO()
         figure.savefig(out, format=fmt, metadata={"Date": None} if fmt == "svg" else {"Software": None})
     return out.getvalue()
@@ -137,7 +138,8 @@ def _caption(was: ChainMotion | None, will: ChainMotion | None, *, overlay: bool
     return f"before {was.label}: {times(was)} · after {will.label}: {times(will)}"
 
 
-def _legend(overlay: bool) -> list[Artist]:
+def _legend(overlay: bool, outputs: set[str]) -> list[Artist]:
+    """The legend of what is drawn: the bands of the function `outputs` that are set somewhere, no others."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -145,7 +147,7 @@ def _legend(overlay: bool) -> list[Artist]:
         Line2D([], [], color=AFTER, label="after" if overlay else "position"),
         Line2D([], [], color=AFTER, linewidth=4, alpha=0.6, label="dwell"),
         Line2D([], [], color=AFTER, marker="o", linestyle="", markersize=4, label="turning point (program)"),
-        *(Patch(color=colour, alpha=0.15, label=f"{output} set") for output, colour in BANDS.items()),
+        *(Patch(color=colour, alpha=0.15, label=f"{output} set") for output, colour in BANDS.items() if output in outputs),
     ]
     if overlay:
         handles.insert(1, Line2D([], [], color=BEFORE, linestyle="--", label="before"))
