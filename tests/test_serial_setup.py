@@ -56,9 +56,13 @@ def test_a_parity_hint_is_written_as_the_place_it_is_read_says_it(tmp_path, caps
         assert scanned.err.endswith("a pseudo-terminal carries no parity: give --parity none\n"), scanned.err
         plant = tmp_path / "plant.yaml"
         plant.write_text(f"plant: p\nbuses:\n  - name: line\n    port: {pty}\n    parity: even\n    modules:\n      - {{address: 1, name: m1}}\n")
-        planned = run_cli(capsys, "plan", plant)
-        assert planned.code == 1
-        assert planned.err.endswith("a pseudo-terminal carries no parity: set parity: none\n"), planned.err
+        said = f"error: {plant}:5:13: port {pty} is a pseudo-terminal, which carries no parity (parity even) — set parity: none"
+        for command in ("validate", "plan"):  # validate says what plan would refuse, where the file says it
+            refused = run_cli(capsys, command, plant)
+            assert refused.code == 1 and refused.problems == [said], refused.err
+        plant.write_text(plant.read_text().replace("    parity: even\n", ""))  # the default, even, is said at the port
+        assert run_cli(capsys, "validate", plant).problems == [
+            f"error: {plant}:4:5: port {pty} is a pseudo-terminal, which carries no parity (the default parity even) — set parity: none"]
 
 
 def free_port() -> int:

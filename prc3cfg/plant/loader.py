@@ -27,7 +27,7 @@ and as text by YAML 1.2 — give a number in m").
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -53,15 +53,16 @@ _SETTINGS = tuple(ProfileSpec.model_fields)
 _PROFILE_STAND_IN: dict[str, Any] = {}
 
 
-def parse_plant(path: str | Path, data: bytes) -> Plant:
+def parse_plant(path: str | Path, data: bytes, *, pseudo_terminal: Callable[[str], bool] = lambda port: False) -> Plant:
     """The plant in `data`, the bytes of the file `path` (read by the shell, `prc3cfg.shell.plant_files`,
-    or a file before it is written); `PlantError` with its problems ("file:line:column: …") otherwise."""
+    or a file before it is written); `PlantError` with its problems ("file:line:column: …") otherwise.
+    `pseudo_terminal`: whether a port is one on this machine (the shell's to know: it carries no parity)."""
     path = Path(path)
     document = parse_document(str(path), data)
     _check_sizes(document)
     problems = _Problems(MAX_PROBLEMS - len(document.problems))
     try:
-        buses = _checked(document.data, problems)
+        buses = _checked(document.data, problems, pseudo_terminal)
     except _Enough:
         raise PlantError(_lines(document, problems, stopped=True)) from None
     if problems or document.problems:
@@ -92,7 +93,7 @@ class _Problems(list[Problem]):
             raise _Enough
 
 
-def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, list[Module]]]:
+def _checked(data: dict[Any, Any], problems: _Problems, pseudo_terminal: Callable[[str], bool]) -> list[tuple[BusLine, list[Module]]]:
     """Every bus's line and its modules that have no problem; the problems go to `problems`."""
     problems.add(())  # the reading may have found enough already
     spec, found = _validated(PlantSpec, _with_stand_ins(data), (), data)
@@ -108,7 +109,7 @@ def _checked(data: dict[Any, Any], problems: _Problems) -> list[tuple[BusLine, l
     alike: dict[tuple[str, ...], Effective] = {}  # the settings of modules that add nothing to their profiles, checked
     for bus_path, raw_bus in mappings_in(data, ("buses",)):
         line = spec.buses[int(bus_path[1])] if spec is not None else _line(raw_bus)
-        problems.add(rules.check_bus(bus_path, line) if line else ())
+        problems.add(rules.check_bus(bus_path, line, pseudo_terminal) if line else ())
         modules = []
         for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
             module, found = _validated(ModuleSpec, raw_module, module_path, data)

@@ -27,7 +27,7 @@ still lets P ≤ S1 be checked. Does not check single values (`models`). Pure.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 from prc3cfg.core import gateway
@@ -137,18 +137,24 @@ _ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0, i
 LINE_KEYS = frozenset({"framing", "baud", "parity", "data_bits", "stop_bits", "zvz", "gateway"})
 
 
-def check_bus(path: Path_, bus: BusLine) -> list[Problem]:
-    """What the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any
+def check_bus(path: Path_, bus: BusLine, pseudo_terminal: Callable[[str], bool] = lambda port: False) -> list[Problem]:
+    """A parity on a port that is a pseudo-terminal (`pseudo_terminal`, the shell's to tell), which carries none;
+    and what the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any
     open-driver line — and a ZVZ not longer than one character, which it takes but ends frames by after every byte."""
+    problems = []
+    if bus.parity != "none" and pseudo_terminal(bus.port):
+        given = "parity" in bus.model_fields_set
+        problems.append(Problem(path + (("parity",) if given else ("port",)), f"port {bus.port} is a pseudo-terminal, which "
+                                f"carries no parity ({'' if given else 'the default '}parity {bus.parity}) — set parity: none",
+                                at_key=not given))  # fmt: skip
     if bus.gateway is None and bus.framing != "open-driver":
-        return []
+        return problems
     words = bus.gateway or _ANY_GATEWAY
     settings = gateway.GatewaySettings(
         receive_db=words.receive_db, receive_dw=words.receive_dw, cpu=words.cpu,
         identifier=words.identifier, zvz_ms=round(bus.zvz * 1000),
         line=LineSettings(baud=bus.baud, data_bits=bus.data_bits, parity=bus.parity, stop_bits=bus.stop_bits),
     )
-    problems = []
     for refusal in gateway.refusals(settings):
         key = {"zvz_ms": "zvz"}.get(refusal.field, refusal.field.removeprefix("line."))
         if bus.gateway is None and key != "zvz":

@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from prc3cfg.plant import Plant, PlantError, parse_plant
+from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, Why, read_regular
 
 #: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
@@ -28,8 +29,15 @@ _REMEDIES = {
 
 
 def load_plant(path: str | Path) -> Plant:
-    """The plant in the file `path`; `PlantError` with its problems ("file:line:column: …") otherwise."""
-    return parse_plant(path, plant_bytes(path))
+    """The plant in the file `path`; `PlantError` with its problems ("file:line:column: …") otherwise — a
+    bus with parity on a port that is this machine's pseudo-terminal among them (its device is looked up,
+    never opened)."""
+    return parse_plant(path, plant_bytes(path), pseudo_terminal=_pseudo_terminal)
+
+
+def _pseudo_terminal(port: str) -> bool:
+    """Whether a plant file's port is a pseudo-terminal here: a device path whose device is one (stat, no open)."""
+    return "://" not in port and platform.is_pseudo_terminal(port)
 
 
 def plant_bytes(path: str | Path) -> bytes:
