@@ -57,6 +57,7 @@ USAGE = {
     "scan's stop bits": (["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"], "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 — see prc3cfg scan --help"),
     "refresh-only with --plot": (["plan", "p.yaml", "--refresh-only", "--plot", "p.svg", "--module", "m"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --plot — see prc3cfg plan --help"),
     "verify not a choice": (["apply", "p.yaml", "--verify", "bogus"], "error: prc3cfg apply: Invalid value for '--verify': 'bogus' is not one of 'floor', 'full' — see prc3cfg apply --help"),
+    "completion for a named shell": (["--install-completion", "zsh"], "error: prc3cfg: --install-completion takes no shell name (zsh): it is for the shell it is run in — run prc3cfg --install-completion from that shell"),
     "refresh-only with --previous": (["plan", "p.yaml", "--refresh-only", "--previous", "old.yaml"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --previous — see prc3cfg plan --help"),
     "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
     "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),

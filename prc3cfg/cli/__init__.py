@@ -133,6 +133,16 @@ _PYDANTIC_WORDS = (
 )
 
 
+def _completion_for(args: list[str]) -> str | None:
+    """`--install-completion zsh`: typer installs for the shell it runs in and drops the name — bash
+    completion for a zsh user, said as done. Refused, saying how to get what was asked for."""
+    for at, arg in enumerate(args[:-1]):
+        if arg in ("--install-completion", "--show-completion") and not args[at + 1].startswith("-"):
+            return (f"prc3cfg: {arg} takes no shell name ({shown(args[at + 1])}): it is for the shell it is run in — run "
+                    f"prc3cfg {arg} from that shell")  # fmt: skip
+    return None
+
+
 def _usage(error: click_errors.UsageError) -> str:
     command = error.ctx.command_path if error.ctx is not None else "prc3cfg"
     message = shown(" ".join(error.format_message().split()).rstrip("."))
@@ -149,7 +159,7 @@ def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else list(argv)
     COMMAND_LINE[:] = ["prc3cfg", *args]
     try:
-        if (habit := _single_dash_habit(args)) is not None:
+        if (habit := _single_dash_habit(args) or _completion_for(args)) is not None:
             print(f"error: {habit}", file=sys.stderr)
             sys.exit(EXIT_USAGE)
         with CANCEL.handling():
