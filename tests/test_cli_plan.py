@@ -28,6 +28,21 @@ def test_read_json_is_exactly_what_the_emulators_hold(plant, capsys):
         assert entry["system"] == image.system.to_json()
 
 
+def test_a_step_s_bytes_are_shown_only_with_frames_and_always_kept_in_the_plan_file(plant, capsys, tmp_path):
+    """People read what a step does; its bytes in hex only with --frames (plan, show, markdown) — the plan
+    file keeps them, as apply --plan sends them."""
+    system_step = re.compile(r"^ +1\. (?:([0-9a-f]{8,}) +)?write system parameters", re.MULTILINE)
+    saved = tmp_path / "plan.json"
+    plain = run_cli(capsys, "plan", plant.path, "--out", saved)
+    framed = run_cli(capsys, "plan", plant.path, "--frames")
+    frame = json.loads(saved.read_text())["buses"][0]["modules"][0]["steps"][0]["message"]
+    assert [m.group(1) for m in system_step.finditer(plain.out)] == [None] * 6
+    assert next(m.group(1) for m in system_step.finditer(framed.out)) == frame
+    for args in (("show", saved), ("show", saved, "--markdown"), ("plan", plant.path, "--markdown")):
+        assert frame not in run_cli(capsys, *args).out, args
+        assert frame in run_cli(capsys, *args, "--frames").out, args
+
+
 def test_plan_from_factory_shows_changes_and_axis_warnings_everywhere(plant, capsys, tmp_path):
     human = run_cli(capsys, "plan", plant.path, "--detailed-exitcode", "--out", tmp_path / "plan.json")
     assert human.code == 2

@@ -212,6 +212,7 @@ TraceOpt = Annotated[
     typer.Option(callback=_output_option("--trace"), metavar="FILE", help="Write every frame, both directions, with timestamps, in hex."),
 ]
 RetriesOpt = Annotated[int, typer.Option(min=0, max=100, metavar="N", help="Retries of a lost or damaged reply, per message.")]
+FramesOpt = Annotated[bool, typer.Option("--frames", help="Show each step's bytes as sent, in hex (a plan file always keeps them).")]
 LockOpt = Annotated[float, typer.Option("--lock-timeout", parser=duration(0), metavar="TIME",
                                         help=f"How long to wait while another prc3cfg uses the line ({TIMES}).")]
 

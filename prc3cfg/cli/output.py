@@ -23,7 +23,7 @@ from prc3cfg.errors import UserError
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str],
-              faults: Sequence[str] = ()) -> None:  # fmt: skip
+              faults: Sequence[str] = (), frames: bool = False) -> None:  # fmt: skip
     document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
@@ -36,9 +36,9 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
     elif markdown:
         full_plan = f"`{out.name}`" if out else "the plan file"
         # the comment's last line end is its own, counted in the budget
-        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=full_plan, faults=faults), end="")
+        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=full_plan, faults=faults, frames=frames), end="")
     else:
-        print_lines(render.human(plan, notes=notes, faults=faults))  # the plan made now: its words are prc3cfg's, not a file's
+        print_lines(render.human(plan, notes=notes, faults=faults, frames=frames))  # the plan made now: its words are prc3cfg's, not a file's
         if out is not None:
             print(f"Plan written to {out}; apply it with: prc3cfg apply --plan {out}")
 
@@ -67,7 +67,7 @@ def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | No
             print(f"Drift written to {out}")
 
 
-def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions) -> Gates:
+def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions, frames: bool = False) -> Gates:
     """Show the plan — the read-back's progress taken off the screen first — and ask about axis
     releases and the apply itself on a terminal (`ask`), unless told not to."""
 
@@ -75,14 +75,14 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
 
     def show_line(line_plan: PlantPlan) -> None:
         shown.update(change.bus for change in line_plan.modules)
-        options.progress.note(render.line_part(line_plan))
+        options.progress.note(render.line_part(line_plan, frames))
 
     def show(the_plan: PlantPlan) -> None:
         if isinstance(options.progress, TerminalProgress):
             options.progress.stop()
         if plan_file is not None:
             print(f"Applying {plan_file}, proved against the modules as read back now:")
-        print_lines(render.human(the_plan, shown=shown))
+        print_lines(render.human(the_plan, shown=shown, frames=frames))
         if not the_plan.changes:
             print("Nothing to do: every module matches the plant file.")
 

@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from prc3cfg.cli import ExitStatus, app, click_errors
-from prc3cfg.cli.common import LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, VerifyChoice, check_output, line_options
+from prc3cfg.cli.common import FramesOpt, LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, VerifyChoice, check_output, line_options
 from prc3cfg.core.line import EMULATOR_SCHEME
 
 EXIT_CHANGES = 2
@@ -70,6 +70,7 @@ def plan(
     trace: TraceOpt = None,
     retries: RetriesOpt = 5,
     lock_timeout: LockOpt = 0.0,
+    frames: FramesOpt = False,
 ) -> None:
     """Read back, diff against the plant file and print the cheapest plan."""
     from prc3cfg import api
@@ -103,7 +104,7 @@ def plan(
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options, previous=previous, full_read=full_read)
     faults = api.faults(loaded, module) if images is None else []  # a fault a write revealed, on the lines read (not a file's images)
-    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes, faults=faults)
+    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes, faults=faults, frames=frames)
     if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
     if detailed_exitcode and result.changes:
@@ -132,6 +133,7 @@ def apply(
     previous: PreviousOpt = None,
     full_read: FullReadOpt = False,
     reason: ReasonOpt = None,
+    frames: FramesOpt = False,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
@@ -149,7 +151,7 @@ def apply(
     loaded = api.load(plant)
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
-        result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options),
+        result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options, frames),
                            verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read,
                            reason=reason)  # fmt: skip
     output.applied(result, emulated=all(bus.port.startswith(EMULATOR_SCHEME) for bus in loaded.buses))
@@ -167,12 +169,13 @@ def restore(
     onto_current_lines: Annotated[bool, typer.Option("--onto-current-lines", help=(
         "Restore onto the lines the plant file names now, though they are not those the snapshot was taken on."))] = False,
     reason: ReasonOpt = None,
+    frames: FramesOpt = False,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
     from prc3cfg.cli import output
 
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
-        result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options), verify=api.Verify(verify.value),
+        result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options, frames), verify=api.Verify(verify.value),
                              options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip
     output.applied(result, "restore")

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from prc3cfg.cli import app
-from prc3cfg.cli.common import check_output, stdout_console
+from prc3cfg.cli.common import FramesOpt, check_output, stdout_console
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
@@ -95,11 +95,12 @@ def show(
         help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
     actual: Annotated[Path | None, typer.Option(metavar="FILE",
         help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
+    frames: FramesOpt = False,
 ) -> None:
     """Print a module's effective configuration and where each value came from, or draw its chains;
     or show a saved plan file as `plan` shows a plan (human, --json, --markdown)."""
     if plant.suffix == ".json":
-        _show_plan_file(plant, json_out=json_out, markdown=markdown, max_chars=max_chars)
+        _show_plan_file(plant, json_out=json_out, markdown=markdown, max_chars=max_chars, frames=frames)
         return
     from prc3cfg import api
 
@@ -124,7 +125,7 @@ def show(
     _plot_module(loaded, chosen, plot, fmt, actual)
 
 
-def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: int) -> None:
+def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: int, frames: bool) -> None:
     """A saved plan file as the plan was shown — its steps' summaries worked out again from their bytes."""
     import json
 
@@ -136,9 +137,9 @@ def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: in
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
-        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`"), end="")  # its line end is counted in the budget
+        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`", frames=frames), end="")  # its line end is counted in the budget
     else:
-        print_lines(render.human(document))
+        print_lines(render.human(document, frames=frames))
 
 
 @app.command()

@@ -238,9 +238,11 @@ def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, 
     return f"{head}: {plural(steps, 'step')}{received}, {seconds:.3f} s{warn}"
 
 
-def step_line(index: int, message_hex: str, summary: str, releases: bool, broadcast: bool) -> str:
-    """One step: number, the message as sent, what it does, and what it means for the axes."""
-    return (f"{index:>3}. {message_hex:<24} {summary}" + ("  (broadcast)" if broadcast else "")
+def step_line(index: int, message_hex: str | None, summary: str, releases: bool, broadcast: bool) -> str:
+    """One step: number, the message as sent (`--frames`: its bytes in hex; None: left out), what it does,
+    and what it means for the axes."""
+    frame = "" if message_hex is None else f"{message_hex:<24} "
+    return (f"{index:>3}. {frame}{summary}" + ("  (broadcast)" if broadcast else "")
             + ("  ⚠ RELEASES AXES" if releases else ""))  # fmt: skip
 
 
@@ -332,8 +334,8 @@ def _header(bus: str, module: dict[str, Any]) -> str:
                        module.get("estimated_bus_time_s", 0.0), module["releases_axes"])  # fmt: skip
 
 
-def _step_lines(module: dict[str, Any]) -> list[str]:
-    return [step_line(i, s["message"], s["summary"], s["releases_axes"], bool(s.get("broadcast")))
+def _step_lines(module: dict[str, Any], frames: bool) -> list[str]:
+    return [step_line(i, s["message"] if frames else None, s["summary"], s["releases_axes"], bool(s.get("broadcast")))
             for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
 
 
@@ -362,7 +364,7 @@ def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.shown) 
     return None
 
 
-def _broadcast_lines(bus: dict[str, Any]) -> list[str]:
+def _broadcast_lines(bus: dict[str, Any], frames: bool) -> list[str]:
     """A bus's broadcasts, once: one step for all of its modules — and what proved nobody else hears them."""
     steps = bus.get("broadcasts", [])
     proof = line_proof(bus)
@@ -370,7 +372,8 @@ def _broadcast_lines(bus: dict[str, Any]) -> list[str]:
         return [proof, ""] if proof else []
     head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all {len(steps[0]['modules'])} modules "
             "(address 0), each verified by reading back")  # fmt: skip
-    return [head, *(f"    {step_line(i, s['message'], s['summary'], s['releases_axes'], True)}" for i, s in enumerate(steps, 1)),
+    return [head, *(f"    {step_line(i, s['message'] if frames else None, s['summary'], s['releases_axes'], True)}"
+                    for i, s in enumerate(steps, 1)),
             *([f"    {proof}"] if proof else []), ""]
 
 
@@ -503,15 +506,16 @@ def faulted_summary(document: dict[str, Any], faults: Sequence[str], shown: Call
 
 
 def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown: Collection[str] = (),
-          faults: Sequence[str] = ()) -> str:  # fmt: skip
+          faults: Sequence[str] = (), frames: bool = False) -> str:  # fmt: skip
     """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
     each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary. The
-    buses `shown` already (`line_part`, as their writes began) are named, not shown again."""
+    buses `shown` already (`line_part`, as their writes began) are named, not shown again. `frames`:
+    each step's bytes in hex too (the plan file always keeps them)."""
     document, live = _outline(plan, notes)
     out = [f"Plant {document['plant']}", ""]
     for bus in document["buses"]:
-        out += _broadcast_lines(bus) if bus["name"] not in shown else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""]
-    out += _module_sections(document, live, shown)
+        out += _broadcast_lines(bus, frames) if bus["name"] not in shown else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""]
+    out += _module_sections(document, live, frames, shown)
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
@@ -523,20 +527,21 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
     return "\n".join(out)
 
 
-def line_part(plan: PlantPlan) -> str:
+def line_part(plan: PlantPlan, frames: bool = False) -> str:
     """One line's plan (`plan` holds its modules only), shown as its writes begin while the other lines
     are still read (`apply --auto-approve --allow-axis-release`): its broadcasts, its modules, its axis releases."""
     document, live = _outline(plan, ())
     out = [f"Writing bus {', '.join(bus['name'] for bus in document['buses'])} now, as planned:", ""]
     for bus in document["buses"]:
-        out += _broadcast_lines(bus)
-    out += _module_sections(document, live)
+        out += _broadcast_lines(bus, frames)
+    out += _module_sections(document, live, frames)
     if document["axis_releases"]:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     return "\n".join(out)
 
 
-def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], shown: Collection[str] = ()) -> list[str]:
+def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], frames: bool,
+                     shown: Collection[str] = ()) -> list[str]:  # fmt: skip
     """Each module's diff and steps (a line for one without changes), those of the buses `shown` left out."""
     out = []
     for bus, module in _modules(document):
@@ -545,7 +550,7 @@ def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], Modul
         if not module["steps"]:
             out.append(_header(bus, module))
             continue
-        lines = [_header(bus, module), *module_lines(_changes(bus, module, live, charts=False)), "steps:", *_step_lines(module)]
+        lines = [_header(bus, module), *module_lines(_changes(bus, module, live, charts=False)), "steps:", *_step_lines(module, frames)]
         out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
     return out
 
@@ -618,26 +623,26 @@ def _budgeted(head: str, parts: Iterable[str], count: int, closing: Callable[[in
 
 
 def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
-             full_plan: str = "the plan file", faults: Sequence[str] = ()) -> str:  # fmt: skip
+             full_plan: str = "the plan file", faults: Sequence[str] = (), frames: bool = False) -> str:  # fmt: skip
     """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters
     as printed (its last line end counted): the marker, the summary, every axis-release warning, how
     many programs are clamped, what was not read, what is left as it is and the table of changed
     modules always — `BudgetTooSmall` where they do not fit; then each module's details (with a stroke
     chart per changed chain, for a live plan) while they fit, and a last line saying how many were
-    left out and where the full plan is."""
+    left out and where the full plan is. `frames`: each step's bytes in hex too."""
     document, live = _outline(plan, notes)
     changed = [(bus, m) for bus, m in _modules(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", *faulted_summary(document, faults, cell), "",
             *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]  # fmt: skip
     for bus in document["buses"]:
-        if lines := _broadcast_lines(bus):
+        if lines := _broadcast_lines(bus, frames):
             head += [*fenced(lines[:-1]), ""]
 
     def closing(left: int, budget: int) -> str:
         return (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
                 f"{budget:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
 
-    return _budgeted("\n".join(head).rstrip("\n") + "\n", (_details(bus, m, live) for bus, m in changed), len(changed), closing,
+    return _budgeted("\n".join(head).rstrip("\n") + "\n", (_details(bus, m, live, frames) for bus, m in changed), len(changed), closing,
                      max_chars, "the plan's summary, warnings and table of changed modules")  # fmt: skip
 
 
@@ -667,7 +672,7 @@ def _changed_table(changed: list[tuple[str, dict[str, Any]]]) -> list[str]:
     return [*out, ""]
 
 
-def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str:
+def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChange], frames: bool) -> str:
     changes = _changes(bus, m, live)
     return "\n".join([
         f"<details><summary>{escape.markdown_html(bus)} / {escape.markdown_html(m['name'])} (address {m['address']})"
@@ -675,7 +680,7 @@ def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChan
         "",
         *fenced(module_lines(changes), "diff"),
         "",
-        *fenced(_step_lines(m)),
+        *fenced(_step_lines(m, frames)),
         *changes.get("charts", []),
         "</details>",
         "",
