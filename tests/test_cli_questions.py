@@ -44,9 +44,9 @@ def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> str
     return first
 
 
-def answers_both_questions(pane: Pane) -> None:
+def answers_both_questions(pane: Pane, command: str = "apply") -> None:
     """The axis question, then the confirmation, each asked whole with no progress on screen; yes to
-    both; the one module written and verified."""
+    both; the one module written and verified, as the `command`'s own words say."""
     try:
         shown = asked(pane, ALLOW, "Plan: 1 of 1 module changes")
         assert shown.rstrip().splitlines()[-3:-1] == SUMMARY, shown
@@ -54,7 +54,7 @@ def answers_both_questions(pane: Pane) -> None:
         asked(pane, APPROVE, ALLOW + " yes")
         pane.type("yes")
         assert pane.exit_status() == 0, pane.screen()
-        assert "Apply complete: 1 module written and verified." in pane.screen()
+        assert f"{command.capitalize()} complete: 1 module written and verified." in pane.screen()
     finally:
         pane.close()
 
@@ -70,7 +70,7 @@ def test_restore_asks_its_questions_whole_with_no_progress_on_screen(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         api.told(api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)))
         snapshot, = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
-        answers_both_questions(Pane(tmp_path, prc3cfg("restore", snapshot), environment()))
+        answers_both_questions(Pane(tmp_path, prc3cfg("restore", snapshot), environment()), "restore")
 
 
 @pytest.mark.parametrize("question", ["axis release", "apply"])
