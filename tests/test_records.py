@@ -196,6 +196,20 @@ def test_records_list_says_who_what_where_and_the_result(plant, capsys, tmp_path
     assert human.code == 0 and "verified" in human.out and "first" in human.out
 
 
+def test_a_refused_run_says_why_in_its_journal_and_in_the_list(plant, capsys, tmp_path):
+    """An apply refused at a gate after its read-back keeps the journal of what it read, ending in why it was
+    refused — `records list` says it, `records verify` still verifies the chain."""
+    refused = run_cli(capsys, "apply", plant.path, "--auto-approve")
+    assert refused.code == 1 and "apply again with --allow-axis-release" in refused.err
+    (journal,) = journals(tmp_path)
+    last = json.loads(journal.read_text().splitlines()[-1])
+    assert last["event"] == "refused" and last["why"] == refused.err.removeprefix("error: ").strip()
+    (run,) = json.loads(run_cli(capsys, "records", "list", plant.path, "--json").out)
+    assert run["result"] == f"refused, nothing written: {last['why']}"
+    assert "refused, nothing written: the plan releases the axes of" in run_cli(capsys, "records", "list", plant.path).out
+    assert run_cli(capsys, "records", "verify", plant.path).code == 0
+
+
 def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release_needs(plant, capsys, tmp_path):
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-b-left", *APPLY).code == 0

@@ -190,6 +190,11 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
                 if written.verified and desired is None and len(chosen) == len(plant.modules()):
                     written = _keep_applied(plant, written, keeping)
                 return _judged(written, journal.path, earlier, records)
+    except (ApplyFailed, ApplyInterrupted):
+        raise  # a result: its journal says what was written
+    except UserError as stopped:  # refused before any write (a gate, a stale plan, a line): the journal says why
+        journal.refused(str(stopped))
+        raise
     finally:
         keeping.close()
 

@@ -74,6 +74,8 @@ def _result(records: list[dict[str, Any]]) -> str:
         return "interrupted"
     if results:
         return "verified" if all(r.get("verified") for r in results) else "failed"
+    if refused := [r for r in records if r.get("event") == "refused"]:
+        return f"refused, nothing written: {_text(refused[-1].get('why'))}"
     return "unfinished" if "snapshot" in events or "apply" in events else "nothing written"
 
 
