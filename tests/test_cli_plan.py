@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import html
 import json
+import os
 import re
+import subprocess
+import sys
 from dataclasses import replace
 
-from emulated import run_cli
+from emulated import emulated_plant, run_cli
 
 from prc3cfg.core import codec, render
 from prc3cfg.core.plan_file import image_sha256
@@ -41,6 +44,21 @@ def test_a_step_s_bytes_are_shown_only_with_frames_and_always_kept_in_the_plan_f
     for args in (("show", saved), ("show", saved, "--markdown"), ("plan", plant.path, "--markdown")):
         assert frame not in run_cli(capsys, *args).out, args
         assert frame in run_cli(capsys, *args, "--frames").out, args
+
+
+def test_the_command_a_plan_prints_to_apply_it_runs_as_printed_from_a_folder_with_spaces(tmp_path, capsys):
+    """"apply it with: prc3cfg apply --plan …" names a path with spaces and non-ASCII letters: pasted into
+    the shell as printed, it runs (issue 42: unquoted, it failed with exit 64 under C:\\Users\\First Last)."""
+    folder = tmp_path / "Anlage Süd – Linie 3"
+    folder.mkdir()
+    with emulated_plant(folder) as plant:
+        planned = run_cli(capsys, "plan", plant.path, "--out", folder / "plan (reviewed).json")
+        printed = planned.out.rsplit("apply it with: ", 1)[1].strip()
+        assert printed == f"prc3cfg apply --plan '{folder / 'plan (reviewed).json'}'"
+        pasted = subprocess.run(["sh", "-c", f"{printed} --auto-approve --allow-axis-release"], capture_output=True, text=True,
+                                cwd=tmp_path, env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)}, check=False)  # fmt: skip
+        assert pasted.returncode == 0, pasted.stderr
+        assert plant.matches_plant()
 
 
 def test_plan_from_factory_shows_changes_and_axis_warnings_everywhere(plant, capsys, tmp_path):

@@ -325,6 +325,19 @@ def test_text_files_are_opened_through_the_seam():
              if isinstance(node, ast.Call) and (getattr(node.func, "id", None) == "open" or getattr(node.func, "attr", None) in ("open", "fdopen"))
              and any(isinstance(a, ast.Constant) and a.value in ("w", "a", "wt", "at") for a in [*node.args, *(k.value for k in node.keywords)])}
     assert not wrong, sorted(wrong)
+@pytest.mark.parametrize(("system", "words", "command"), [
+    ("linux", ["prc3cfg", "restore", "/home/jörg/Anlage Süd – Linie 3/s.json"], "prc3cfg restore '/home/jörg/Anlage Süd – Linie 3/s.json'"),
+    ("linux", ["prc3cfg", "apply", "--plan", "it's.json"], "prc3cfg apply --plan 'it'\"'\"'s.json'"),
+    ("win32", ["prc3cfg", "restore", r"C:\Users\Jörg Müller\Anlage Süd – Linie 3\s.json"],
+     r'prc3cfg restore "C:\Users\Jörg Müller\Anlage Süd – Linie 3\s.json"'),
+    ("win32", ["prc3cfg", "doctor", "--port", "COM10"], "prc3cfg doctor --port COM10"),
+    ("win32", ["prc3cfg", "restore", "D:\\a&b (1)\\"], 'prc3cfg restore "D:\\a&b (1)\\\\"'),  # the closing quote not escaped
+])  # fmt: skip
+def test_a_command_printed_for_a_person_is_quoted_for_the_system_s_shell(monkeypatch, system, words, command):
+    monkeypatch.setattr(sys, "platform", system)
+    assert platform.command_line(*words) == command
+
+
 @pytest.mark.parametrize(("system", "executable", "command"), [
     ("linux", "/usr/bin/python3", "/usr/bin/python3"),
     ("linux", "/opt/my python/bin/python3", "'/opt/my python/bin/python3'"),

@@ -19,6 +19,7 @@ from prc3cfg.core.render import plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module
 from prc3cfg.shell import releases
+from prc3cfg.shell.platform import command_line
 
 if TYPE_CHECKING:
     from prc3cfg.shell.apply import ModuleRun
@@ -41,13 +42,13 @@ class ApplyFailed(UserError):
     def __init__(self, result: ApplyResult) -> None:
         failed = [r for r in result.runs if not r.verified]
         said = [*result.unread]  # lines not written: what stopped their read-back or plan, one line each
+        restore = command_line("prc3cfg", "restore", str(result.snapshot))
         if failed or not said:
-            said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: "
-                        f"prc3cfg restore {result.snapshot}")  # fmt: skip
+            said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: {restore}")
         else:
             written = len(result.runs)
             said[-1] += (f"; the {plural(written, 'module')} of the other lines {'was' if written == 1 else 'were'} written and "
-                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: prc3cfg restore {result.snapshot}")  # fmt: skip
+                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: {restore}")  # fmt: skip
         super().__init__("\n".join(said))
         self.result = result
 
@@ -67,7 +68,7 @@ class RecordsFailed(ApplyFailed):
         elif result.verified:
             said = f"every module was written and verified (see above), but {incomplete} — free the space (or fix the folder)"
         else:
-            then = "plan and apply again" + (f", or restore: prc3cfg restore {result.snapshot}" if result.snapshot else "")
+            then = "plan and apply again" + (f", or restore: {command_line('prc3cfg', 'restore', str(result.snapshot))}" if result.snapshot else "")
             said = (f"every line stopped before its next frame — the account above says what each module was sent and holds; "
                     f"{incomplete}; free the space (or fix the folder), then {then}")  # fmt: skip
         self.args = (f"{trouble}: {said}",)

@@ -21,7 +21,7 @@ import typer
 from prc3cfg.errors import UserError
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import write_atomically
-from prc3cfg.shell.platform import open_text
+from prc3cfg.shell.platform import command_line, open_text
 
 if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3cfg --help` stays quick
     from rich.console import Console
@@ -417,7 +417,7 @@ def note_slow(links: Iterable[Link]) -> None:
         ports.append(shown(link.port_name))
     if not said:
         return
-    measured = [f"prc3cfg doctor --port {port}" for port in ports if measurable(port)]
+    measured = [command_line("prc3cfg", "doctor", "--port", port) for port in ports if measurable(port)]
     remedies = [f"measure the line with {' and '.join(measured)} and put the bus keys it prints into the plant file"] if measured else []
     if len(measured) < len(ports):  # an emulator:// port answers as its URL says: doctor cannot reach it
         remedies.append("an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same")

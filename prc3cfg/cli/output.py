@@ -20,6 +20,7 @@ from prc3cfg.core import render
 from prc3cfg.core.plan_file import write as plan_file
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
+from prc3cfg.shell.platform import command_line
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str],
@@ -40,7 +41,7 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
     else:
         print_lines(render.human(plan, notes=notes, faults=faults, frames=frames))  # the plan made now: its words are prc3cfg's, not a file's
         if out is not None:
-            print(f"Plan written to {out}; apply it with: prc3cfg apply --plan {out}")
+            print(f"Plan written to {out}; apply it with: {command_line('prc3cfg', 'apply', '--plan', str(out))}")
 
 
 def targeting(modules: list[str] | None) -> None:
@@ -134,9 +135,10 @@ def accounted() -> Iterator[None]:
             print(line, file=sys.stderr)
         failed = [r for r in stopped.result.runs if not r.verified]
         touched = sum(1 for r in failed if r.sent)
+        restore = command_line("prc3cfg", "restore", str(stopped.result.snapshot))
         print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of {render.plural(len(stopped.result.runs), 'module')} "
               "written and verified, "
-              + (f"{touched} written in part or whole but not verified — restore them with: prc3cfg restore {stopped.result.snapshot}" if touched
+              + (f"{touched} written in part or whole but not verified — restore them with: {restore}" if touched
                  else "nothing sent to the others"))  # fmt: skip
         raise
     except ApplyFailed as failed:

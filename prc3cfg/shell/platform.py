@@ -41,8 +41,8 @@ means the same everywhere:
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
   main thread anyway: nothing), `wait_for` and `result_of` (an event's wait and a future's result
   that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
-- this Python as a command a person pastes into the system's shell: `python_command` (POSIX
-  shell quoting; Windows: cmd's double quotes).
+- commands a person pastes into the system's shell: `command_line` and `python_command` (POSIX
+  shell quoting; Windows: double quotes cmd and PowerShell both read).
 
 Branches are `sys.platform` tests, which mypy follows: `mypy --platform win32` and `--platform
 darwin` check the other systems' branches. Does not own what any of it is used for.
@@ -64,7 +64,6 @@ import shlex
 import signal
 import socket
 import stat
-import subprocess
 import sys
 import threading
 from collections.abc import Iterable, Iterator
@@ -610,11 +609,25 @@ def block_signals(signals: Iterable[signal.Signals]) -> None:
 
 def python_command() -> str:
     """The Python running prc3cfg, as a command to paste into this system's shell (a hint to install
-    something into it): its path quoted as the shell needs — POSIX: shlex's quoting; Windows: cmd's
-    double quotes around a path with a space (PowerShell runs a quoted command after `&`)."""
+    something into it): its path quoted as the shell needs (`command_line`; PowerShell runs a quoted
+    command after `&`)."""
+    return command_line(sys.executable or ("python" if sys.platform == "win32" else "python3"))
+
+
+#: What an argument may hold and still be read as one word, unquoted, by cmd and PowerShell alike.
+_WINDOWS_PLAIN = frozenset("_-.:\\/=+")
+
+
+def command_line(*words: str) -> str:
+    """A command prc3cfg prints for a person to run (`prc3cfg restore SNAPSHOT`), each word quoted as this
+    system's shell reads it back as that one word — POSIX: shlex's quoting; Windows: double quotes around a
+    word with anything but letters, digits and `_-.:\\/=+` (a space, `&`, `(`, a quote …), which cmd and
+    PowerShell both read as one word (a path holds no double quote; backslashes before the closing quote
+    doubled, as the C runtime wants)."""
     if sys.platform == "win32":
-        return subprocess.list2cmdline([sys.executable or "python"])
-    return shlex.quote(sys.executable or "python3")
+        return " ".join(w if w and all(c.isalnum() or c in _WINDOWS_PLAIN for c in w) else f'"{w}{w[len(w.rstrip(chr(92))):]}"'
+                        for w in words)  # fmt: skip
+    return shlex.join(words)
 
 
 def check_parity(port: object) -> bool:
