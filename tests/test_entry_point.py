@@ -51,6 +51,14 @@ def test_the_schema_is_written_whole_whatever_the_code_page(tmp_path):
     assert written.read_bytes() == (ROOT / "schemas" / "plant.schema.json").read_bytes()
 
 
+def test_the_schema_written_with_out_is_the_schema_in_utf_8(tmp_path):
+    """`prc3cfg schema --out FILE`: what PowerShell 5.1's `>` cannot do (it writes UTF-16) — UTF-8, whatever the code page."""
+    written = tmp_path / "plant.schema.json"
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "schema", "--out", str(written)], capture_output=True, env=in_cp1252())
+    assert done.returncode == 0 and done.stdout == b"", done.stderr.decode()
+    assert written.read_bytes() == (ROOT / "schemas" / "plant.schema.json").read_bytes()
+
+
 def test_a_plan_piped_on_prints_its_signs_whatever_the_code_page(tmp_path):
     """`prc3cfg plan plants/demo-line.yaml | cat` under cp1252: ⚠ and → in UTF-8, no traceback."""
     plant = tmp_path / "demo-line.yaml"

@@ -45,7 +45,8 @@ def test_a_served_pty_is_scanned_and_imported_with_the_defaults(tmp_path, capsys
         assert imported.code == 0, imported.err
         assert "parity: none" in imported.out
         plant = tmp_path / "plant.yaml"
-        plant.write_text(imported.out)
+        written = run_cli(capsys, "import", "--port", pty, "--modules", "1-3", "--timeout", "0.2", "--out", plant)
+        assert written.code == 0 and written.out == "" and plant.read_text(encoding="utf-8") == imported.out, written.err
         assert run_cli(capsys, "plan", plant, "--detailed-exitcode").code == 0
 
 

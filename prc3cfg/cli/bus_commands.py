@@ -20,6 +20,7 @@ from prc3cfg.cli.common import (
     STOP_BITS,
     TIMES,
     LockOpt,
+    OutFileOpt,
     PlantArg,
     RetriesOpt,
     TraceOpt,
@@ -30,6 +31,7 @@ from prc3cfg.cli.common import (
     line_options,
     one_of,
     parse_addresses,
+    printed_or_written,
     stderr_console,
     stdout_console,
 )
@@ -159,8 +161,9 @@ def import_plant(
     modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Addresses to import, e.g. 1,3-5 (default: scan 1..30).")] = None,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
+    out: OutFileOpt = None,
 ) -> None:
-    """Write a plant file (to stdout) from the live modules of one bus or more (a --port each, with the same line settings)."""
+    """Write a plant file (to stdout, or --out) from the live modules of one bus or more (a --port each, with the same line settings)."""
     from prc3cfg import api
     from prc3cfg.core.render import plural
 
@@ -173,7 +176,7 @@ def import_plant(
     buses = {name: _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz) for name, port in zip(names, ports)}
     with line_options(trace, retries, lock_timeout) as options, _said_as_options():
         text, count = api.import_plant(buses, parse_addresses(modules) if modules is not None else None, options, plant_name=plant_name)
-    print(text, end="")
+    printed_or_written(text, out)
     stderr_console().print(f"imported {plural(count, 'module')} from {', '.join(ports)}")
 
 

@@ -166,6 +166,21 @@ def _output_option(option: str) -> Callable[[Path | None], Path | None]:
     return lambda value: check_output(value, option)
 
 
+#: `--out FILE` of a command that prints a file (import, schema): written as UTF-8 whatever the shell — Windows
+#: PowerShell 5.1's `>` writes UTF-16, which no plant file may be.
+OutFileOpt = Annotated[Path | None, typer.Option("--out", callback=_output_option("--out"), metavar="FILE",
+                                                 help="Write it to FILE (UTF-8), not to stdout.")]  # fmt: skip
+
+
+def printed_or_written(text: str, out: Path | None) -> None:
+    """`text` printed, or written to `out` (`OutFileOpt`) with a line saying where."""
+    if out is None:
+        sys.stdout.write(text)
+        return
+    write_output(out, text, "--out")
+    print(f"Written to {out}", file=sys.stderr)
+
+
 #: A time on the command line: seconds, or a number with a unit (`parse_duration`).
 _DURATION = re.compile(r"(\d+(?:\.\d*)?|\.\d+)(ms|s|m|h)?")
 _SECONDS = {"ms": Decimal("0.001"), "s": Decimal(1), "m": Decimal(60), "h": Decimal(3600)}

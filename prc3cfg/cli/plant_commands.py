@@ -16,14 +16,13 @@
 from __future__ import annotations
 
 import enum
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from prc3cfg.cli import app
-from prc3cfg.cli.common import FramesOpt, check_output, stdout_console
+from prc3cfg.cli.common import FramesOpt, OutFileOpt, check_output, printed_or_written, stdout_console
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
@@ -143,11 +142,11 @@ def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: in
 
 
 @app.command()
-def schema() -> None:
+def schema(out: OutFileOpt = None) -> None:
     """Print the JSON Schema of plant files (draft-07; schemas/plant.schema.json)."""
     from prc3cfg.plant import plant_schema_text
 
-    sys.stdout.write(plant_schema_text())
+    printed_or_written(plant_schema_text(), out)
 
 
 def _count(n: int, one: str, many: str) -> str:

@@ -197,6 +197,9 @@ def spans(text: str) -> Span:
 
 def parse_document(name: str, data: bytes) -> Document:
     """Parse `data`, the bytes of the file `name`; `PlantError` if it is not a YAML mapping at all."""
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16's byte order mark: what Windows PowerShell 5.1's > writes
+        raise PlantError([f"{name}:1:1: UTF-16 text, as Windows PowerShell 5.1's > writes it — a plant file is UTF-8: write it with "
+                          "--out (prc3cfg import … --out plant.yaml), or save it as UTF-8"])  # fmt: skip
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
