@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from emulated import emulated_plant, run_cli
 
 from prc3cfg.shell import platform
 
@@ -315,6 +316,32 @@ def test_text_is_written_as_given_in_utf_8(tmp_path):
     with platform.open_text(path, "a") as handle:
         handle.write("c: ⚠ →\r\n")
     assert path.read_bytes() == "a: 1\r\nb: 2 ✓\nc: ⚠ →\r\n".encode()
+
+
+def test_paths_are_resolved_through_the_seam():
+    """`Path.resolve()` and `os.path.realpath()` raise on Windows for a path over 260 characters (WinError 234): outside
+    the seam they are called only through `platform.resolved` / `real_path`, which fall back to the absolute path."""
+    wrong = {f"{path.relative_to(ROOT)}:{node.lineno}"
+             for path in PACKAGE.rglob("*.py") if path != SEAM
+             for node in ast.walk(ast.parse(path.read_text()))
+             if (isinstance(node, ast.Call) and not node.args and getattr(node.func, "attr", None) == "resolve")
+             or (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "realpath")}  # PyYAML's resolve(node, …) is no path's
+    assert not wrong, sorted(wrong)
+
+
+def test_a_plant_under_a_path_windows_will_not_resolve_is_planned_and_applied(tmp_path, capsys, monkeypatch):
+    """Where the system refuses to resolve a path (Windows without long paths, over 260 characters: OSError 234),
+    plan and apply go on with the absolute path: no traceback, the records name it."""
+    with emulated_plant(tmp_path) as plant:
+        def refused(self, strict=False):
+            raise OSError(234, "More data is available")
+
+        monkeypatch.setattr(Path, "resolve", refused)
+        monkeypatch.setattr(os.path, "realpath", lambda path, **_: refused(path))
+        assert run_cli(capsys, "plan", plant.path).code == 0
+        applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+        assert applied.code == 0 and "Traceback" not in applied.err, applied.err
+        assert plant.matches_plant()
 
 
 def test_text_files_are_opened_through_the_seam():

@@ -32,6 +32,7 @@ from prc3cfg.plant import Bus, Plant, parse_plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
+from prc3cfg.shell.platform import resolved
 from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
@@ -253,7 +254,7 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
 def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False) -> Planner:
     """A `Planner` of the lines of these modules' buses."""
     buses = {bus.name: bus for bus, _ in pairs}
-    return Planner(plant.name, str(plant.path.resolve()), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset,
+    return Planner(plant.name, str(resolved(plant.path)), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset,
                    only_read=only_read)  # fmt: skip
 
 

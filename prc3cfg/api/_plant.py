@@ -30,7 +30,7 @@ from prc3cfg.shell import audit, recorded_runs, releases
 from prc3cfg.shell.audit import Verified
 from prc3cfg.shell.files import replace_unless_changed
 from prc3cfg.shell.locks import line_lock
-from prc3cfg.shell.platform import python_command
+from prc3cfg.shell.platform import python_command, resolved
 from prc3cfg.shell.recorded_runs import Pruned, RecordedRun
 from prc3cfg.shell.records import Journal, reason_given
 from prc3cfg.shell.records import header as run_header
@@ -75,7 +75,7 @@ def write_adoption(adoption: Adoption) -> None:
     (through a link, to the file linked to) — refused if the file changed since it was read, which is
     checked once the new text is on disk, around the rename (`replace_unless_changed`). A journal
     says who adopted what and why, before and after (`prc3cfg.shell.records`)."""
-    target = adoption.path.resolve()
+    target = resolved(adoption.path)
     before = adoption.before.encode("utf-8")
     said = run_header("adopt", adoption.path, adoption.plant, hashlib.sha256(before).hexdigest(), reason=adoption.reason,
                       argv=adoption.command_line)  # fmt: skip

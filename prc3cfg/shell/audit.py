@@ -35,6 +35,7 @@ from typing import Any
 
 from prc3cfg.errors import UserError
 from prc3cfg.shell.files import FileProblem, Why, read_regular
+from prc3cfg.shell.platform import resolved
 from prc3cfg.shell.records import STAMP_LENGTH, Snapshot, line_hash, records_dir
 
 #: The largest journal read: 30 modules × 8 buses, every program written and verified, is a few MB.
@@ -178,7 +179,7 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     """A snapshot about to be restored, checked against its journal: `UserError` when either does
     not verify; a note when it was written before records had headers (it cannot be checked)."""
     if snapshot.header is None:
-        for beside in of_plant(path.resolve().parent.parent / "journal", snapshot.plant_path.stem, ".jsonl"):
+        for beside in of_plant(resolved(path).parent.parent / "journal", snapshot.plant_path.stem, ".jsonl"):
             with contextlib.suppress(FileProblem):
                 if f'"event": "snapshot", "path": {json.dumps(path.name)}'.encode() in read_regular(beside, JOURNAL_LIMIT):
                     raise UserError(f"{path}: has no header, but {beside} records it as written with one — edited since; "
@@ -187,7 +188,7 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     name = file_name(snapshot.header.get("journal"))
     if name is None:
         raise UserError(f"{path}: its header names no journal file — the snapshot cannot be checked, nothing was written; {EVIDENCE}")
-    candidates = [path.resolve().parent.parent / "journal" / name, records_dir(snapshot.plant_path, "journal") / name]
+    candidates = [resolved(path).parent.parent / "journal" / name, records_dir(snapshot.plant_path, "journal") / name]
     journal = next((c for c in candidates if c.is_file()), None)
     if journal is None:
         raise UserError(f"{path}: its journal {name} is in neither {candidates[0].parent} nor {candidates[1].parent} — the "
@@ -276,9 +277,9 @@ def check(paths: Iterable[Path]) -> Verified:
     checked: dict[Path, Checked] = {}
     done: set[Path] = set()  # snapshots checked with their journal
     for path in wanted_journals:
-        checked[path.resolve()] = _check_chained(path, result, done)
+        checked[resolved(path)] = _check_chained(path, result, done)
     for path in wanted_snapshots:
-        if path.resolve() not in done:
+        if resolved(path) not in done:
             _check_alone(path, result, checked)
     return result
 
@@ -343,7 +344,7 @@ def journal_problems(path: Path, journal: Checked, notes: list[str]) -> tuple[li
         return problems, None
     if (name := file_name(found[1].get("path"))) is None:
         return [*problems, Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)")], None
-    snapshot = path.resolve().parent.parent / "snapshots" / name
+    snapshot = resolved(path).parent.parent / "snapshots" / name
     if not os.path.lexists(snapshot):
         problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
                                                        "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
@@ -367,7 +368,7 @@ def _check_alone(path: Path, result: Verified, checked: dict[Path, Checked]) -> 
     if (name := file_name(taken.header.get("journal"))) is None:
         result.problems.append(Mismatch(str(path), "its header names no journal file"))
         return
-    journal_path = path.resolve().parent.parent / "journal" / name
+    journal_path = resolved(path).parent.parent / "journal" / name
     if not journal_path.is_file():
         result.problems.append(Mismatch(str(path), f"its journal {journal_path} is not there"))
         return
@@ -395,7 +396,7 @@ def _link_problem(path: Path, journal: Checked, notes: list[str]) -> Mismatch | 
         return None
     if (name := file_name(previous.get("journal"))) is None:
         return Mismatch(f"{path}:1", "its link to the run before names no journal file")
-    before = path.resolve().parent / name
+    before = resolved(path).parent / name
     began, then = stamped(path), stamped(before)
     if name == path.name or name[STAMP_LENGTH:] != path.name[STAMP_LENGTH:] or began is None or then is None or then > began + CLOCK_SLACK:
         return Mismatch(f"{path}:1", f"its link to the run before names {name}, not an earlier journal of the same plant file — edited")

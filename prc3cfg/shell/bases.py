@@ -67,7 +67,7 @@ def now() -> str:
 
 def who(command: str, plant_path: Path) -> str:
     """`by` of a record: "apply of /plants/a.yaml by ana@laptop-3"."""
-    return f"{command} of {plant_path.resolve()} by {platform.user_name()}@{socket.gethostname()}"
+    return f"{command} of {platform.resolved(plant_path)} by {platform.user_name()}@{socket.gethostname()}"
 
 
 def _stem(key: str) -> str:

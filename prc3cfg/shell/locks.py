@@ -88,7 +88,7 @@ def line_keys(port: str, *, emulator_state: Path | None = None) -> tuple[str, ..
     if scheme == "emulator":
         if emulator_state is None:
             raise ValueError(f"{port}: an emulator line is known by its state file — pass emulator_state")
-        return (f"emulator/{os.path.realpath(emulator_state)}",)
+        return (f"emulator/{platform.real_path(emulator_state)}",)
     if scheme in TCP_SCHEMES:
         parts = urlsplit(port)
         try:

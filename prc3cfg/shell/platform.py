@@ -41,6 +41,8 @@ means the same everywhere:
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
   main thread anyway: nothing), `wait_for` and `result_of` (an event's wait and a future's result
   that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
+- paths: `resolved` and `real_path` (links followed; where Windows refuses a long path, absolute as
+  written);
 - commands a person pastes into the system's shell: `command_line` and `python_command` (POSIX
   shell quoting; Windows: double quotes cmd and PowerShell both read).
 
@@ -605,6 +607,24 @@ def block_signals(signals: Iterable[signal.Signals]) -> None:
 
 
 # -- this Python -------------------------------------------------------------------------
+
+
+def resolved(path: Path) -> Path:
+    """`path` absolute, its links followed where the system can (`Path.resolve`) — else absolute as written:
+    Windows refuses to resolve a path over 260 characters without long paths enabled (WinError 234), and
+    a folder named by such a path is still a folder prc3cfg can name in its records and messages."""
+    try:
+        return path.resolve()
+    except OSError:
+        return Path(os.path.abspath(path))
+
+
+def real_path(path: str | os.PathLike[str]) -> str:
+    """`os.path.realpath`, with `resolved`'s fallback to the absolute path where the system refuses."""
+    try:
+        return os.path.realpath(path)
+    except OSError:
+        return os.path.abspath(path)
 
 
 def python_command() -> str:

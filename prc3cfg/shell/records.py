@@ -56,7 +56,7 @@ from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
-from prc3cfg.shell.platform import open_text
+from prc3cfg.shell.platform import open_text, resolved
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Exchange
@@ -96,7 +96,7 @@ def git_state(plant_path: Path) -> dict[str, Any]:
     with a time-out, without the repository's file-system monitor (a program its config names) and
     without taking the index's lock."""
     unknown = {"commit": None, "clean": None, "plant_file": None}
-    folder = plant_path.resolve().parent
+    folder = resolved(plant_path).parent
     env = os.environ | {"GIT_OPTIONAL_LOCKS": "0", "LC_ALL": "C"}
 
     def git(*args: str) -> str:
@@ -114,7 +114,7 @@ def git_state(plant_path: Path) -> dict[str, Any]:
         except LookupError:
             commit = None  # a repository without a commit yet
         clean = git("status", "--porcelain=v1", "--untracked-files=no") == ""
-        mark = git("status", "--porcelain=v1", "--untracked-files=all", "--ignored", "--", plant_path.resolve().name)[:2]
+        mark = git("status", "--porcelain=v1", "--untracked-files=all", "--ignored", "--", resolved(plant_path).name)[:2]
         state = {"": "committed", "??": "untracked", "!!": "ignored"}.get(mark, "changed")
         return {"commit": commit, "clean": clean, "plant_file": state, "said": None if commit else "no commit yet"}
     except FileNotFoundError:
@@ -136,7 +136,7 @@ def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *
     plan = None
     if plan_file is not None:
         try:
-            plan = {"path": str(plan_file.resolve()), "sha256": hashlib.sha256(plan_file.read_bytes()).hexdigest()}
+            plan = {"path": str(resolved(plan_file)), "sha256": hashlib.sha256(plan_file.read_bytes()).hexdigest()}
         except OSError as error:
             raise UserError(f"{plan_file}: cannot read it ({error.strerror}) — nothing was written") from None
     return {
@@ -147,7 +147,7 @@ def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *
         "pid": os.getpid(),
         "prc3cfg": __version__,
         "argv": list(sys.argv if argv is None else argv),
-        "plant": {"name": plant_name, "path": str(plant_path.resolve()), "sha256": plant_sha256, "git": git_state(plant_path)},
+        "plant": {"name": plant_name, "path": str(resolved(plant_path)), "sha256": plant_sha256, "git": git_state(plant_path)},
         "plan_file": plan,
         "reason": reason_given(reason),
     }
@@ -247,7 +247,7 @@ class Snapshot:
     @classmethod
     def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage],
              lines: dict[str, LineTaken], header: dict[str, Any] | None = None) -> Snapshot:  # fmt: skip
-        return cls(plant_path.resolve(), plant_sha256, _stamp(), dict(images), dict(lines), header)
+        return cls(resolved(plant_path), plant_sha256, _stamp(), dict(images), dict(lines), header)
 
     @classmethod
     def load(cls, path: Path) -> Snapshot:
@@ -265,7 +265,7 @@ class Snapshot:
                 raise ValueError(said(error, lambda loc: json_path(loc, "the snapshot"), _SnapshotDocument)) from None
             images = {(m.bus, image.address): image for m, image in zip(document.modules, images_from_json(data["modules"], "modules"))}
             plant = Path(document.plant)
-            beside = path.resolve().parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
+            beside = resolved(path).parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
             lines = {bus: LineTaken(line.port, line.framing, tuple(line.keys)) for bus, line in document.lines.items()}

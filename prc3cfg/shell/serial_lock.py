@@ -76,7 +76,7 @@ NAMINGS: dict[str, Callable[[str], str]] = {
 
 def lock_names(device: str) -> tuple[str, ...]:
     """`LCK..NAME` in every spelling of `NAMINGS`, for the device as given and for its real path (each name once)."""
-    return tuple(dict.fromkeys(f"LCK..{naming(path)}" for path in (device, os.path.realpath(device)) for naming in NAMINGS.values()))
+    return tuple(dict.fromkeys(f"LCK..{naming(path)}" for path in (device, platform.real_path(device)) for naming in NAMINGS.values()))
 
 
 def _is_device(path: str) -> bool:

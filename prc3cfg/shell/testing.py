@@ -33,6 +33,7 @@ from prc3cfg.plant import Plant
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
 from prc3cfg.shell.files import FileProblem, read_json
 from prc3cfg.shell.plant_files import load_plant
+from prc3cfg.shell.platform import resolved
 
 
 @dataclass
@@ -119,7 +120,7 @@ def emulate(
             bus_document["port"] = route(bus.name, host, port) if route else f"socket://{host}:{port}"
             emulators[bus.name] = emulator
         copy = directory / "plant.yaml"
-        if copy.resolve() == source.resolve():
+        if resolved(copy) == resolved(source):
             raise UserError(f"{source}: the emulated copy would overwrite the plant file — give another directory")
         copy.write_text(yaml.safe_dump(document, sort_keys=False))
         yield EmulatedPlant(copy, load_plant(copy), emulators)
