@@ -358,6 +358,15 @@ def test_emulator_serve_pty_is_refused_in_one_line(wine, demo):
     assert refused.err.strip().splitlines() == ["error: --pty: Windows has no pseudo-terminals — serve over TCP (--listen HOST:PORT) and use socket://HOST:PORT"]
 
 
+def test_setup_machine_speaks_windows(wine, demo):
+    """No group on Windows (the folder's rights share it): --group is refused in one line, not ignored."""
+    refused = wine.run("setup-machine", "--group", "dialout", cwd=demo)
+    assert refused.code == 1, refused
+    assert refused.err.strip().splitlines() == [
+        "error: --group dialout: this system shares the folder by its rights, not by a group — run setup-machine without --group; "
+        "every user of the machine may then keep records there, each file its maker's"]
+
+
 def test_output_redirected_to_a_file_is_whole_utf_8(wine, demo):
     """`cmd /c prc3cfg … > file`: Windows' own redirection (Wine cannot hand a Linux-side file to
     a Windows program as its stdout)."""

@@ -119,10 +119,13 @@ def unshared() -> str | None:
     problems = [problem for kind in (RELEASES, LINES) if (problem := _machine_problem(kind)) is not None]
     if not problems:
         return None
-    run = "as an administrator" if sys.platform == "win32" else "with sudo"
     return (f"this machine's records of axis releases and of what the modules hold are kept in {platform.user_state_dir()}, "
-            f"which its other users do not see ({problems[0]}) — an administrator makes the shared folder once: "
-            f"prc3cfg setup-machine, {run}")  # fmt: skip
+            f"which its other users do not see ({problems[0]}) — an administrator makes the shared folder once: {_AS_ADMINISTRATOR}")
+
+
+#: How an administrator runs setup-machine, in the system's own words.
+_AS_ADMINISTRATOR = ("prc3cfg setup-machine from a prompt opened with Run as administrator" if sys.platform == "win32"
+                     else "sudo prc3cfg setup-machine")  # fmt: skip
 
 
 def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
@@ -130,6 +133,9 @@ def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
     by this user (an administrator) and the serial ports' group (`group`, else dialout or uucp), which
     writes in them and whose files none of them may remove or replace but their maker (mode 3775).
     Made or put right; the folder and the group."""
+    if group is not None and not platform.OWNERS:
+        raise UserError(f"--group {group}: this system shares the folder by its rights, not by a group — run setup-machine without "
+                        "--group; every user of the machine may then keep records there, each file its maker's")  # fmt: skip
     found = platform.serial_group(group)
     if platform.OWNERS and found is None:
         raise UserError((f"there is no group {group} on this machine" if group else "this machine has no dialout or uucp group")
@@ -141,7 +147,7 @@ def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
             platform.make_group_folder(folder, None if found is None else found[1])
     except OSError as error:
         raise UserError(f"cannot make {error.filename or directory} ({error.strerror}) — prc3cfg setup-machine is run by an "
-                        "administrator (sudo prc3cfg setup-machine)") from None  # fmt: skip
+                        f"administrator: {_AS_ADMINISTRATOR}") from None  # fmt: skip
     return directory, None if found is None else found[0]
 
 
