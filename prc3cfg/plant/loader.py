@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -64,9 +65,9 @@ def parse_plant(path: str | Path, data: bytes, *, pseudo_terminal: Callable[[str
     try:
         buses = _checked(document.data, problems, pseudo_terminal)
     except _Enough:
-        raise PlantError(_lines(document, problems, stopped=True)) from None
+        raise PlantError(_lines(document, _one_per_cause(problems), stopped=True)) from None
     if problems or document.problems:
-        raise PlantError(_lines(document, problems, stopped=False))
+        raise PlantError(_lines(document, _one_per_cause(problems), stopped=False))
     return Plant(
         name=document.data["plant"],
         buses=tuple(Bus(**{k: getattr(line, k) for k in line.model_fields_set if k != "modules"}, modules=tuple(modules))
@@ -122,6 +123,21 @@ def _checked(data: dict[Any, Any], problems: _Problems, pseudo_terminal: Callabl
         if line is not None:
             buses.append((line, modules))
     return buses
+
+
+def _one_per_cause(problems: list[Problem]) -> list[Problem]:
+    """The problems, those of one profile's value in several modules said once: "in modules m1, m2 and m3, …"
+    (a mistake in a profile thirty modules use is one mistake, not thirty lines)."""
+    causes: dict[Problem, list[str]] = {}
+    for problem in problems:
+        causes.setdefault(replace(problem, modules=()), []).extend(problem.modules)
+    out = []
+    for cause, names in causes.items():
+        if names:
+            listed = f"module {names[0]}" if len(names) == 1 else f"modules {', '.join(names[:-1])} and {names[-1]}"
+            cause = replace(cause, message=f"in {listed}, {cause.message}")
+        out.append(cause)
+    return out
 
 
 def _lines(document: Document, problems: list[Problem], *, stopped: bool) -> list[str]:

@@ -34,7 +34,8 @@ class Problem:
     `first` is the earlier of two things that must differ; the message says where it is
     with `FIRST`. `models_fix`: what the models would have the value be (a number in m, one
     of set, reset) is a better "what to do" than this message's own, which cannot know what
-    the key wants; the loader puts theirs in when they object to the same value.
+    the key wants; the loader puts theirs in when they object to the same value. `modules`: the
+    modules a problem of a profile's value is found in (the loader says it once, naming them all).
     """
 
     path: Path_
@@ -43,6 +44,7 @@ class Problem:
     at: tuple[int, int] | None = None
     first: Path_ | None = None
     models_fix: bool = False
+    modules: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -47,8 +47,7 @@ Unknown = frozenset[tuple[Any, ...]]
 def check_module(name: str, path: Path_, settings: Effective, unknown: Unknown = frozenset()) -> list[Problem]:
     """The problems of one module's effective settings (module `name` at `path`), but of what is `unknown`."""
     problems = [*_missing_fields(settings, unknown), *_speeds_and_positions(settings, unknown), *_jumps(settings, unknown)]
-    return [p if p.path[: len(path)] == path else Problem(p.path, f"in module {name}, {p.message}", p.at_key)
-            for p in problems]
+    return [p if p.path[: len(path)] == path else Problem(p.path, p.message, p.at_key, modules=(name,)) for p in problems]
 
 
 def _known(unknown: Unknown, section: Any, key: Any) -> bool:

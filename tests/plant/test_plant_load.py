@@ -339,7 +339,8 @@ def test_modules_that_add_nothing_to_a_profile_take_its_settings_each_at_its_own
     assert n.settings.programs[1]["position"].source == "profile a"
 
 
-def test_a_profile_problem_is_said_in_the_name_of_every_module_that_takes_it(tmp_path: Path) -> None:
+def test_a_profile_problem_is_said_once_in_the_names_of_every_module_that_takes_it(tmp_path: Path) -> None:
+    """One mistake in a profile is one line naming the modules it reaches (issue 42: 130 lines for one mistake)."""
     with pytest.raises(PlantError) as raised:
         with_profiles(tmp_path, """\
             a:
@@ -350,7 +351,7 @@ def test_a_profile_problem_is_said_in_the_name_of_every_module_that_takes_it(tmp
             - {address: 2, name: "n", profiles: a}
             """)
     assert [line.partition(": ")[2] for line in raised.value.problems] == [
-        f"in module {name}, program 1 has no speed — give speed: in the module or in one of its profiles" for name in ("m", "n")
+        "in modules m and n, program 1 has no speed — give speed: in the module or in one of its profiles"
     ]
 
 
