@@ -9,6 +9,7 @@ the journal (`prc3cfg.shell.engine`), nor what a plan file is (`prc3cfg.core.pla
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import time
 from collections.abc import Collection, Iterable, Mapping
@@ -192,8 +193,10 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
                 return _judged(written, journal.path, earlier, records)
     except (ApplyFailed, ApplyInterrupted):
         raise  # a result: its journal says what was written
-    except UserError as stopped:  # refused before any write (a gate, a stale plan, a line): the journal says why
-        journal.refused(str(stopped))
+    except UserError as stopped:  # refused before any write (a gate, a stale plan, a line): the journal it began says why
+        if journal.begun:
+            with contextlib.suppress(OSError):  # not kept: the refusal itself is what the person is told
+                journal.record("refused", why=str(stopped))
         raise
     finally:
         keeping.close()

@@ -32,7 +32,6 @@ its snapshot and journal must not start writing modules.
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import hashlib
 import json
@@ -353,13 +352,10 @@ class Journal:
             duration_s=round(exchange.duration, 6),
         )
 
-    def refused(self, why: str) -> None:
-        """The run ends refused (`why`, its one line) before any write: said in the journal it began, if it
-        began one — a run refused before the line was reached leaves none. A record that cannot be kept
-        here is left out: the refusal itself is what the person is told."""
-        with contextlib.suppress(OSError):
-            if self._handle is not None:
-                self.record("refused", why=why)
+    @property
+    def begun(self) -> bool:
+        """Whether the journal's file was made (its first record kept): a run that never reached the line has none."""
+        return self._handle is not None
 
     def close(self) -> None:
         if self._handle is not None:
