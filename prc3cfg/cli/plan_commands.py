@@ -76,11 +76,7 @@ def plan(
     from prc3cfg import api
     from prc3cfg.cli import output
 
-    if refresh_only and (plot is not None or previous is not None):
-        given = "--plot" if plot is not None else "--previous"  # --previous: what a plan leaves as it is — there is no plan
-        raise click_errors.UsageError(f"--refresh-only reports drift and makes no plan — leave out {given}", ctx=ctx)
-    if plot is not None and len(module or []) != 1:
-        raise click_errors.UsageError("--plot draws one module — name it with --module NAME", ctx=ctx)
+    _plan_options(ctx, refresh_only, plot, previous, module)
     fmt = api.plot_format(plot) if plot is not None else None
     check_output(out, "--out", plant=plant)
     check_output(plot, "--plot", plant=plant)
@@ -90,11 +86,8 @@ def plan(
         output.targeting(module)
     images = None if actual is None else api.load_images(actual, loaded, module)
     if refresh_only:
-        if images is None:
-            with line_options(trace, retries, lock_timeout) as options:
-                drifted = api.drift(loaded, module, options=options)
-        else:
-            drifted = api.drift(loaded, module, images=images)
+        with line_options(trace, retries, lock_timeout) as options:  # a lock taken only where the line is read
+            drifted = api.drift(loaded, module, images=images) if images is not None else api.drift(loaded, module, options=options)
         output.emit_drift(drifted, loaded.name, len(api.select(loaded, module)), out=out, json_out=json_out, markdown=markdown,
                           max_chars=max_chars)  # fmt: skip
         if drifted and detailed_exitcode:
@@ -109,6 +102,16 @@ def plan(
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
     if detailed_exitcode and result.changes:
         raise ExitStatus(EXIT_CHANGES)
+
+
+def _plan_options(ctx: typer.Context, refresh_only: bool, plot: Path | None, previous: Path | None, module: list[str] | None) -> None:
+    """Refused in one line: what `--refresh-only` (drift, no plan) leaves out — a plot, what a plan leaves as it is
+    (`--previous`) — and a plot of other than one module."""
+    for given, name in ((plot, "--plot"), (previous, "--previous")):
+        if refresh_only and given is not None:
+            raise click_errors.UsageError(f"--refresh-only reports drift and makes no plan — leave out {name}", ctx=ctx)
+    if plot is not None and len(module or []) != 1:
+        raise click_errors.UsageError("--plot draws one module — name it with --module NAME", ctx=ctx)
 
 
 ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for confirmation.")]
