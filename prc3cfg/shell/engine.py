@@ -208,8 +208,9 @@ class Writing:
         self._costs = {name: line_cost(bus) for name, bus in buses.items()}
 
     def _runs(self, changes: Iterable[ModuleChange]) -> list[ModuleRun]:
-        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed)
-                for c in changes if c.steps or c.bus in self._exposed]  # fmt: skip
+        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed,
+                          frozenset(c.assumed))
+                for c in changes if c.steps or c.bus in self._exposed or c.assumed]  # fmt: skip
 
     def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None, at: float | None = None) -> None:
         """The plant's plan is whole (`show`n, the display held still) — since `at`, if not now: the
