@@ -119,6 +119,11 @@ def test_a_factory_fresh_line_is_commissioned_without_reading_what_it_writes_and
         for address, programs in read_before_writing(journal).items():
             assert not programs & set(MANAGED), (address, programs)
             assert programs == (set(PROGRAM_NUMBERS) - set(MANAGED) if clamping else set()), address
+        # the snapshot undoes the commissioning: the factory's where it planned from them, what it read elsewhere
+        (snapshot,) = (plant.path.parent / ".prc3cfg" / "snapshots").iterdir()
+        api.told(api.restore(snapshot, gates=api.Gates(allow_axis_release=True)))
+        assert emulator.module(1).image == ModuleImage.factory(1)
+        assert {n: emulator.module(2).image.program(n) for n in kept} == kept
 
 
 def test_a_reset_plant_file_reads_only_the_system_blocks_and_verifies_every_program(tmp_path, capsys):
@@ -162,7 +167,7 @@ def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends
         api.told(result)
         assert result.verified and plant.matches_plant(), seed
         assert not claims_what_was_not_read(result.plan), seed
-        for bus, module in plant.plant.modules():
+        for _, module in plant.plant.modules():
             desired, held = module.desired_image(), emulator.module(module.address).image
             for number, (want, have, was) in enumerate(zip(desired.programs, held.programs, before[module.address].programs), 1):
                 assert have == (was if want is None else want), (seed, module.address, number)

@@ -101,7 +101,6 @@ class Reads:
         return Reading(self.base, unread, skipped, other, {name: known.said() for name, known in resting.items()},
                        None if oldest is None else Oldest(oldest[0], oldest[1].since, oldest[1].by))  # fmt: skip
 
-
     def _taken(self, desired: ModuleImage, image: ModuleImage) -> tuple[int, ...]:
         """The managed programs `image` lacks that were taken from the line's record: not those planned from the factory's."""
         assumed = what_to_read.assumed(desired, image) if self.from_factory else ()

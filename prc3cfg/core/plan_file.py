@@ -358,7 +358,6 @@ class _Evidence(BaseModel):
     read_now: _Counted
     from_record: _Counted
     oldest: _Oldest | None
-    from_factory: _Counted = Field(default_factory=lambda: _Counted(programs=0))  # an apply's: planned from the factory's, not read
 
 
 class ShownPlanDocument(PlanDocument):
