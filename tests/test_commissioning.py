@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
-from prc3cfg.core import codec, what_to_read
+from prc3cfg.core import codec, render, what_to_read
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program
 from prc3cfg.core.plan_file import evidence
 from prc3cfg.core.plant_plan import PlantPlan
@@ -167,6 +167,9 @@ def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends
         api.told(result)
         assert result.verified and plant.matches_plant(), seed
         assert not claims_what_was_not_read(result.plan), seed
+        shown = render.human(result.plan)
+        assert render.EVERY_MODULE not in shown, seed
+        assert ("Not read before writing" in shown) == any(change.assumed for change in result.plan.modules), seed
         for _, module in plant.plant.modules():
             desired, held = module.desired_image(), emulator.module(module.address).image
             for number, (want, have, was) in enumerate(zip(desired.programs, held.programs, before[module.address].programs), 1):
