@@ -126,17 +126,26 @@ def test_a_factory_fresh_line_is_commissioned_without_reading_what_it_writes_and
         assert {n: emulator.module(2).image.program(n) for n in kept} == kept
 
 
-def test_a_reset_plant_file_reads_only_the_system_blocks_and_verifies_every_program(tmp_path, capsys):
+@pytest.mark.parametrize("approved", [False, True], ids=["by line", "whole plan approved"])
+def test_a_reset_plant_file_reads_only_the_system_blocks_and_verifies_every_program(tmp_path, approved):
     """`unmanaged_programs: reset`: every program managed — the apply reads one 50h per module before
     writing; another tool's programs on a factory-fresh module end at the factory's defaults, found by the
-    verification that reads every program planned from the factory image."""
+    verification that reads every program planned from the factory image. The plan a person approves says
+    what it did not read."""
     source = plant_file(tmp_path, {1: "reset", 2: "reset"})
+    shown: list[PlantPlan] = []
+    gates = api.Gates(allow_axis_release=True, approve=lambda the_plan: not shown.append(the_plan)) if approved else \
+        api.Gates(allow_axis_release=True)  # fmt: skip
     with emulated_plant(tmp_path, source=source) as plant:
         emulator = plant.emulators["line"]
         emulator.update(2, image=emulator.module(2).image.with_programs({40: OTHER, 64: OTHER}))
-        result = api.apply(plant.plant, gates=api.Gates(allow_axis_release=True))
+        result = api.apply(plant.plant, gates=gates)
         api.told(result)
         assert result.verified and plant.matches_plant()
+        assert len(shown) == approved
+        for the_plan in [result.plan, *shown]:
+            assert evidence(the_plan)["from_factory"] == {"modules": 2, "programs": 128}
+            assert not evidence(the_plan)["complete"] and evidence(the_plan)["read_now"]["programs"] == 0
         assert read_before_writing(result.journal) == {1: set(), 2: set()}
         assert emulator.module(2).image.programs == ModuleImage.factory(2).with_programs(
             {n: p for n, p in enumerate(plant.plant.buses[0].modules[1].desired_image().programs, 1) if p is not None}).programs
