@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from prc3cfg.api._plan import (
     Reads,
+    commissioned,
     left_alone,
     make_plan,
     plan_file_reads,
@@ -129,7 +130,10 @@ def apply(
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
-    wanted = plan_file_reads(plant, *planned, pairs) if planned is not None else reads(plant, pairs, full_read)
+    if planned is not None:
+        wanted = plan_file_reads(plant, *planned, pairs)
+    else:  # a factory-fresh module is commissioned: the programs it will be written are not read first, but after
+        wanted = reads(plant, pairs, full_read) if full_read else commissioned(reads(plant, pairs))
     return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links)
 
 
@@ -233,7 +237,8 @@ def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ..
 def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
     """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
     as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
-    planner = planner_for(plant, wanted.pairs, unset_systems(plant, writing.buses.values()), only_read=wanted.base is not None)
+    planner = planner_for(plant, wanted.pairs, unset_systems(plant, writing.buses.values()), only_read=wanted.base is not None,
+                          from_factory=wanted.from_factory)  # fmt: skip
     want = to_plan(wanted.pairs, desired)
     by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(link) for name, link in writing.links.items()},
                      reading=lambda read: wanted.reading(chosen, read), show=gates.show, show_line=gates.show_line)  # fmt: skip
@@ -249,7 +254,7 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
     started = time.monotonic()
     if plan_file is None:
         images, the_plan = read_and_plan(plant, pairs, to_read, links, options, desired, command=writing.command,
-                                          only_read=wanted.base is not None)  # fmt: skip
+                                          only_read=wanted.base is not None, from_factory=wanted.from_factory)  # fmt: skip
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
         images = read_targets(to_read, links, options, then=seen(plant, writing.command))

@@ -86,13 +86,14 @@ class Reads:
     base: str | None = None
     why: dict[Key, str] = field(default_factory=dict)  # read in full before any evidence: not on record, too old, E12
     known: dict[Key, Known] = field(default_factory=dict)
+    from_factory: bool = False  # an apply's: factory-fresh modules' managed programs planned from the factory's (`commissioned`)
 
     def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
         """What the plan says it read now and took as known, once `images` are read."""
         if self.base is None:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
-        skipped = {key: what_to_read.not_read(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
+        skipped = {key: self._taken(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
         other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
         # a module whose programs were not read is on the record (`to_read`), but for an apply of a plan file whose
         # record changed since: left out, and the plan file's `taken` then refused (`plan_file.check_plan`)
@@ -100,6 +101,17 @@ class Reads:
         oldest = min(resting.items(), key=lambda item: datetime.fromisoformat(item[1].since), default=None)
         return Reading(self.base, unread, skipped, other, {name: known.said() for name, known in resting.items()},
                        None if oldest is None else Oldest(oldest[0], oldest[1].since, oldest[1].by))  # fmt: skip
+
+    def _taken(self, desired: ModuleImage, image: ModuleImage) -> tuple[int, ...]:
+        """The managed programs `image` lacks that were taken from the line's record: not those planned from the factory's."""
+        assumed = what_to_read.assumed(desired, image) if self.from_factory else ()
+        return tuple(n for n in what_to_read.not_read(desired, image) if n not in assumed)
+
+
+def commissioned(wanted: Reads) -> Reads:
+    """An apply's reads: a factory-fresh module's managed programs planned from the factory's, not read before
+    writing, and read back after (`what_to_read.factory_fresh`)."""
+    return replace(wanted, targets=what_to_read.commissioning(wanted.targets), from_factory=True)
 
 
 def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
@@ -156,12 +168,12 @@ def read_targets(targets_: list[Target], links: dict[str, Link], options: LineOp
 
 def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
                    desired: dict[Key, ModuleImage] | None = None, *, command: str,
-                   only_read: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
+                   only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
     """Read back and plan, each module planned as soon as it is read and each line as soon as its
     last module is — while the other lines are still being read: the lines never wait for all of
-    the planning. `only_read`: see `Planner`."""
+    the planning. `only_read`, `from_factory`: see `Planner`."""
     buses = {bus.name: bus for bus, _ in pairs}
-    planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read)
+    planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read, from_factory=from_factory)
     wanted = to_plan(pairs, desired)
     images = read_targets(to_read, links, options, each=planning_each(planner, wanted),
                    then=seen(plant, command, lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus]))))  # fmt: skip
@@ -251,11 +263,11 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
     return planner_for(plant, pairs, unset, only_read=only_read).plan(to_plan(pairs, desired), actual, probers)
 
 
-def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False) -> Planner:
+def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False, from_factory: bool = False) -> Planner:
     """A `Planner` of the lines of these modules' buses."""
     buses = {bus.name: bus for bus, _ in pairs}
     return Planner(plant.name, str(resolved(plant.path)), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset,
-                   only_read=only_read)  # fmt: skip
+                   only_read=only_read, from_factory=from_factory)  # fmt: skip
 
 
 def _line(bus: Bus) -> Line:

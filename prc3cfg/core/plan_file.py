@@ -166,18 +166,19 @@ def _proof_json(proof: LineProof) -> dict[str, Any]:
 def evidence(plan: PlantPlan) -> dict[str, Any]:
     """What the plan's word rests on, as its headline says it: what was read now (each module's system
     block, and the programs read), what was taken from the line's record instead (programs, of how many
-    modules) and the oldest of that (the module, since when, by whom); `complete` — every value the plan
-    covers read in this run — is what "every module matches the plant file" needs."""
+    modules) and the oldest of that (the module, since when, by whom) — and, an apply's, what it planned from
+    the factory's programs without reading them (`from_factory`, only where it did: `what_to_read.assumed`);
+    `complete` — every value the plan covers read in this run — is what "every module matches the plant file" needs."""
     not_read = {} if plan.reading is None else plan.reading.programs_not_read
     oldest = None if plan.reading is None else plan.reading.oldest
     taken = [programs for programs in not_read.values() if programs]
+    assumed = [m.assumed for m in plan.modules if m.assumed]
     return {
-        "complete": not taken and not (plan.reading is not None and plan.reading.modules_not_read),
-        "read_now": {"system_blocks": len(plan.modules),
-                     "programs": sum(1 for m in plan.modules for program in m.actual.programs if program is not None)},
+        "complete": not taken and not assumed and not (plan.reading is not None and plan.reading.modules_not_read),
+        "read_now": {"system_blocks": len(plan.modules), "programs": sum(len(m.programs_read) for m in plan.modules)},
         "from_record": {"modules": len(taken), "programs": sum(map(len, taken))},
         "oldest": None if oldest is None else {"module": oldest.module, "since": oldest.since, "by": oldest.by},
-    }  # fmt: skip
+    } | ({"from_factory": {"modules": len(assumed), "programs": sum(map(len, assumed))}} if assumed else {})  # fmt: skip
 
 
 def _reading_json(reading: Reading) -> dict[str, Any]:
@@ -186,8 +187,7 @@ def _reading_json(reading: Reading) -> dict[str, Any]:
 
 
 def _module_read(reading: Reading, change: ModuleChange) -> dict[str, Any]:
-    read = [n for n, program in enumerate(change.actual.programs, 1) if program is not None]
-    return {"programs": read, "programs_not_read": list(reading.programs_not_read.get((change.bus, change.address), ()))}
+    return {"programs": list(change.programs_read), "programs_not_read": list(reading.programs_not_read.get((change.bus, change.address), ()))}
 
 
 # -- reading ---------------------------------------------------------------------------------

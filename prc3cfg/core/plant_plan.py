@@ -40,6 +40,9 @@ class ModuleChange:
     #: a targeted read's: the plant file's whole image, `desired` being cut to what was read — its other
     #: programs the line's record showed held (`prc3cfg.core.what_to_read`)
     wanted: ModuleImage | None = None
+    #: an apply's: the managed programs planned from the factory's, not read — `actual` holds the factory's
+    #: there (`what_to_read.assumed`), and the verification reads them back whatever the steps
+    assumed: tuple[int, ...] = ()
 
     def as_known(self, image: ModuleImage) -> ModuleImage:
         """`image` (the read-back, or what the plan leaves) with the programs taken as known filled in:
@@ -49,13 +52,17 @@ class ModuleChange:
     @property
     def reading_time(self) -> float:
         """Seconds the read-back it was planned from took on the line: a 50h and the fewest 51h/52h."""
-        read = [n for n, program in enumerate(self.actual.programs, 1) if program is not None]
-        return 0.0 if self.cost is None else fsum(self.cost.message_time(self.address, m) for m in read_messages(read))
+        return 0.0 if self.cost is None else fsum(self.cost.message_time(self.address, m) for m in read_messages(self.programs_read))
+
+    @property
+    def programs_read(self) -> tuple[int, ...]:
+        """The programs its read-back read: those `actual` holds but the ones planned from the factory's."""
+        return tuple(n for n, program in enumerate(self.actual.programs, 1) if program is not None and n not in self.assumed)
 
     @property
     def verifying_time(self) -> float:
         """Seconds the verifying read-back takes on the line (`Verify.FLOOR`: what the steps can change)."""
-        return 0.0 if self.cost is None else verification_time(self.actual, self.plan.predicted, self.steps, self.cost)
+        return 0.0 if self.cost is None else verification_time(self.actual, self.plan.predicted, self.steps, self.cost, self.assumed)
 
     @property
     def address(self) -> int:

@@ -125,12 +125,14 @@ class Planner:
     planned once).
 
     `only_read`: a targeted read-back — each module's desired image is cut to the programs read
-    (`what_to_read.within_read`): what was not read is not written."""
+    (`what_to_read.within_read`): what was not read is not written. `from_factory`: an apply's — the managed
+    programs a factory-fresh module's read-back lacks are planned from the factory's (`what_to_read.assumed`),
+    and written or not as they differ; the verification reads them back (`ModuleChange.assumed`)."""
 
     def __init__(self, plant: str, plant_path: str, plant_sha256: str, lines: Mapping[str, Line],
-                 unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> None:  # fmt: skip
+                 unset: frozenset[Key] = frozenset(), *, only_read: bool = False, from_factory: bool = False) -> None:  # fmt: skip
         self.plant, self.plant_path, self.plant_sha256 = plant, plant_path, plant_sha256
-        self.lines, self.unset, self.only_read = lines, unset, only_read
+        self.lines, self.unset, self.only_read, self.from_factory = lines, unset, only_read, from_factory
         self._cache = PlanCache()
         self._planned: dict[str, _Planned] = {}
 
@@ -175,13 +177,15 @@ class Planner:
 
     def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
         unset = wanted.key in self.unset
+        assumed = what_to_read.assumed(wanted.desired, actual) if self.from_factory else ()
+        actual = what_to_read.from_factory(actual, assumed)
         desired = what_to_read.within_read(wanted.desired, actual) if self.only_read else wanted.desired
         try:
             module_plan = self._cache.plan(actual, desired, line.cost, unset)
         except UnreachableImage as error:
             raise UserError(f"bus {wanted.bus}, module {wanted.address} ({wanted.name}): {error}") from None
         return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset, cost=line.cost,
-                            wanted=wanted.desired if self.only_read else None)  # fmt: skip
+                            wanted=wanted.desired if self.only_read else None, assumed=assumed)  # fmt: skip
 
     def _keep(self, bus: str, planned: _Planned) -> None:
         with self._cache.lock:

@@ -418,6 +418,18 @@ def no_changes(evidence: dict[str, Any] | None, shown: Callable[[str], str] = es
     return f"No changes to what was read now ({read}) or to what prc3cfg last read or verified ({rests})."
 
 
+def factory_line(document: dict[str, Any]) -> str | None:
+    """What an apply planned from the factory's programs without reading them, in one line (None: nothing):
+    on a factory-fresh module (`what_to_read.factory_fresh`) the programs the plant file manages are
+    written over, not read first — and every one of them is read back after the writes."""
+    said = (document.get("evidence") or {}).get("from_factory")
+    if not isinstance(said, dict) or not said.get("programs"):
+        return None
+    return (f"Not read before writing: {plural(said['programs'], 'program')} of {plural(said['modules'], 'module')} whose system "
+            "parameters read as the factory's — planned as the factory's, not read before writing; the verification reads every "
+            "one of them back after the writes, and repairs what another tool changed there")  # fmt: skip
+
+
 def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str | None:
     """How many programs the plant does not manage the modules' own clamping changes, and on how many modules,
     in one line — said by every output whatever it leaves out of the details; None where there are none."""
@@ -520,7 +532,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
     out += faulted_summary(document, faults)
-    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict))] if line]
+    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in _modules(document)):
         out.append(LEGEND)
@@ -650,6 +662,7 @@ def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange
     """A comment's quoted paragraphs under its summary, each only when it has something to say: what was
     not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
     out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed)) else []
+    out += [f"> {line}", ""] if (line := factory_line(document)) else []
     if document["axis_releases"]:
         out += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                 + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip

@@ -42,6 +42,17 @@ no parity the port checks), every read is confirmed — by what the line's recor
 verified says the module holds, else read again until two in a row agree (`CONFIRMATIONS` at most;
 `prc3cfg.shell.readback`): one damaged reply is never believed once, by a plan, a snapshot, a record or `read`.
 
+A factory-fresh module (`factory_fresh`: its 50h reads the factory's system parameters, the plant file wants
+others, and nothing in the line's record says otherwise) is where an apply commissions: what it holds is very
+likely the factory's programs — not certainly (another tool may have written programs and left the system
+block). An apply (`fresh` targets, `commissioning`; not `plan`, `read`, a plan file or a restore) reads no
+program the plant file manages there before writing: it plans them from the factory's (`assumed`,
+`from_factory`) and the verification reads every one of them back after the writes, whether a step wrote it
+or not (`prc3cfg.shell.apply`), so one another tool changed is found and goes through the repair round. What
+the plant file leaves unmanaged is read as before — where the plant's system parameters can clamp it — or
+not at all; the planner never writes, initialises or relies on a program its desired image leaves `None`, so
+an unmanaged program is never changed unread. The plan says which programs it did not read (its `evidence`).
+
 What is not read is not written: the desired image a targeted plan aims at is cut to the programs
 the read-back holds (`within_read`), so the planner — which never writes a program its desired
 image leaves `None` (`prc3cfg.core.planner.check`, rule 2), and so never sends an 11h/13h/14h across
@@ -59,7 +70,7 @@ from typing import TYPE_CHECKING
 from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
 from prc3cfg.core.planner import Step
 
 if TYPE_CHECKING:  # they import this module: what is read decides what they plan
@@ -104,6 +115,7 @@ class Target:
     clamped_by: SystemParameters | None = None
     known: ModuleImage | None = None  # a targeted read's evidence, and the programs it reads in full then: `after_programs`
     managed: tuple[int, ...] = ()
+    fresh: bool = False  # an apply's: a factory-fresh module's managed programs are planned from the factory's, not read (`after_system`)
 
 
 def programs_in(image: ModuleImage) -> tuple[int, ...]:
@@ -128,7 +140,7 @@ def protects_replies(checked: bool, parity: str, parity_checked: bool) -> bool:
 def in_full(modules: Iterable[Wanted]) -> list[Target]:
     """Every module read in full: each program its desired image holds (managed, or a snapshot's), and
     every program its desired system parameters could clamp."""
-    return [Target(m.bus, m.address, m.name, programs_in(m.desired), m.desired.system) for m in modules]
+    return [Target(m.bus, m.address, m.name, programs_in(m.desired), m.desired.system, managed=programs_in(m.desired)) for m in modules]
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,14 +199,49 @@ def for_plan_file(entries: Sequence[PlannedModule], desired: Mapping[Key, Module
 
 
 def after_system(system: SystemParameters, programs: Iterable[int], clamped_by: SystemParameters | None,
-                 known: ModuleImage | None, managed: Iterable[int]) -> frozenset[int]:  # fmt: skip
+                 known: ModuleImage | None, managed: Iterable[int], *, fresh: bool = False) -> frozenset[int]:  # fmt: skip
     """The programs to read once the 50h answered `system`: `programs` — every program, when writing
     `clamped_by` (the system parameters a plan will write) can clamp programs here; and every `managed`
-    program too when `system` is not the record's (`known`): the module was changed by another hand."""
+    program too when `system` is not the record's (`known`): the module was changed by another hand.
+    With `fresh` (an apply's), none of the `managed` ones on a factory-fresh module (`factory_fresh`)."""
     wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
+    if fresh and clamped_by is not None and factory_fresh(system, clamped_by, known):
+        return frozenset(wanted - set(managed))
     if known is not None and system != known.system:
         wanted |= set(managed)
     return frozenset(wanted)
+
+
+def factory_fresh(system: SystemParameters, wanted: SystemParameters, known: ModuleImage | None) -> bool:
+    """Whether a module whose 50h answered `system` is commissioned from the factory: it holds the factory's
+    system parameters, the plant file wants others (`wanted`: a 10h/20h will go out, and a verification after
+    it), and the line's record (`known`) says nothing else — neither other system parameters nor a program
+    other than the factory's."""
+    if system != DEFAULT_SYSTEM or wanted == DEFAULT_SYSTEM:
+        return False
+    factory = default_program(DEFAULT_SYSTEM)
+    return known is None or (known.system == DEFAULT_SYSTEM and all(p is None or p == factory for p in known.programs))
+
+
+def commissioning(targets: Iterable[Target]) -> list[Target]:
+    """An apply's targets: a factory-fresh module's managed programs planned from the factory's, not read (`after_system`)."""
+    return [replace(t, fresh=True) for t in targets]
+
+
+def assumed(desired: ModuleImage, actual: ModuleImage) -> tuple[int, ...]:
+    """The managed programs of `desired` an apply plans from the factory's, not read: those `actual` (the
+    read-back) lacks where it holds the factory's system parameters and the plant file wants others —
+    what `after_system` left unread there (or, on a line whose record it took them from, what the record
+    showed: planned from the factory's all the same, and read back after the writes)."""
+    if actual.system != DEFAULT_SYSTEM or desired.system == DEFAULT_SYSTEM:
+        return ()
+    return not_read(desired, actual)
+
+
+def from_factory(actual: ModuleImage, programs: Iterable[int]) -> ModuleImage:
+    """`actual` with `programs` holding the factory's: what the plan is made from where they were not read."""
+    factory = default_program(DEFAULT_SYSTEM)
+    return actual.with_programs({n: factory for n in programs})
 
 
 def after_programs(read: ModuleImage, known: ModuleImage | None, managed: Iterable[int]) -> frozenset[int]:
@@ -226,8 +273,9 @@ def opens_line(target: Target, read: ModuleImage) -> str | None:
 
 
 def opened(target: Target) -> Target:
-    """`target` on a line opened before it is read: every managed program, with no record to agree with."""
-    return replace(target, programs=tuple(sorted(set(target.programs) | set(target.managed))), known=None)
+    """`target` on a line opened before it is read: every managed program, with no record to agree with, none
+    planned from the factory's."""
+    return replace(target, programs=tuple(sorted(set(target.programs) | set(target.managed))), known=None, fresh=False)
 
 
 def still_to_read(target: Target, read: ModuleImage) -> frozenset[int]:
@@ -334,10 +382,12 @@ def verification_reads(first: ModuleImage, last: ModuleImage, predicted: ModuleI
     return system or watch_system, programs
 
 
-def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step], cost: LineCost) -> float:
-    """Seconds the fewest reads of what `steps` can change take on the line."""
+def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step], cost: LineCost,
+                      unread: Iterable[int] = ()) -> float:  # fmt: skip
+    """Seconds the fewest reads of what `steps` can change take on the line — and of the programs planned
+    from the factory's, not read (`unread`: `assumed`), which the verification reads whatever the steps."""
     system, programs = reach(before, predicted, steps)
-    reads = read_messages(programs)[0 if system else 1 :]
+    reads = read_messages(programs | set(unread))[0 if system else 1 :]
     return fsum(cost.message_time(before.address, m) for m in reads)
 
 

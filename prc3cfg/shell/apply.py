@@ -9,8 +9,9 @@ the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success m
 
 Verification reads exactly what the steps that went out could have changed
 (`prc3cfg.core.what_to_read.verification_reads`): the system block if a system step went out, the programs
-the steps write and the programs the module's own clamping changes — in the fewest
-50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
+the steps write and the programs the module's own clamping changes — and the programs its plan took as the
+factory's without reading them (`ModuleRun.assumed`: a factory-fresh module, `what_to_read.factory_fresh`) —
+in the fewest 50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
 read-back instead, for the paranoid. A difference counts only when two reads agree on it.
 
 What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
@@ -85,6 +86,9 @@ class ModuleRun:
     #: on a line without error detection (open-driver, no parity): a damaged frame meant for another
     #: module — or a read — can reach this one as a 10h/20h
     exposed: bool = False
+    #: the managed programs its plan took as the factory's, not read (`what_to_read.assumed`): its first
+    #: verification reads them whatever the steps wrote, so one another tool changed goes through the repair round
+    assumed: frozenset[int] = frozenset()
     sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
     written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
     possibly_written: bool = False  # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
@@ -274,6 +278,7 @@ class ModuleRun:
                 system, programs = verification_reads(self.before, self.before if late else self.final or self.before, expected,
                                                       self.sent if late else self.sent[sent_before:], full=verify is Verify.FULL,
                                                       watch_system=with_system)  # fmt: skip
+                programs |= self.assumed if self.final is None else frozenset()  # not read yet: never taken as planned
                 self.watched |= with_system
                 self.process(self._verify(link, system, programs, expected, known_programs, quiet))
             elif action is Next.PLAN_REPAIR:

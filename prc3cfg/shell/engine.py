@@ -208,8 +208,9 @@ class Writing:
         self._costs = {name: line_cost(bus) for name, bus in buses.items()}
 
     def _runs(self, changes: Iterable[ModuleChange]) -> list[ModuleRun]:
-        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed)
-                for c in changes if c.steps or c.bus in self._exposed]  # fmt: skip
+        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed,
+                          frozenset(c.assumed))
+                for c in changes if c.steps or c.bus in self._exposed or c.assumed]  # fmt: skip
 
     def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None, at: float | None = None) -> None:
         """The plant's plan is whole (`show`n, the display held still) — since `at`, if not now: the
@@ -281,11 +282,13 @@ class Writing:
         return known
 
     def _snapshot_with(self, runs: list[ModuleRun], images: Mapping[Key, ModuleImage]) -> tuple[Path, str]:
-        """The apply's one snapshot, with the runs' modules as read before writing, saved whole: its path and digest."""
+        """The apply's one snapshot, with the runs' modules as read before writing, saved whole: its path and digest.
+        A factory-fresh module's programs planned as the factory's (`ModuleRun.assumed`) hold the factory's there:
+        not read, what a restore puts back — the undo of a commissioning."""
         if self._taken is None:
             taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
             self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
-        self._taken.images.update({(r.bus, r.address): images[(r.bus, r.address)] for r in runs})
+        self._taken.images.update({(r.bus, r.address): what_to_read.from_factory(images[(r.bus, r.address)], r.assumed) for r in runs})
         return self._taken.saved()
 
     def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:

@@ -59,7 +59,7 @@ class LinesFailed(UserError):
 
 def read_module(
     link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None,
-    known: ModuleImage | None = None, managed: Iterable[int] = (),
+    known: ModuleImage | None = None, managed: Iterable[int] = (), fresh: bool = False,
 ) -> ModuleImage:  # fmt: skip
     """The image of the module at `address`: system parameters and the given programs (others None).
 
@@ -67,12 +67,13 @@ def read_module(
     writing them can clamp programs on this module. With `known` (what the line's record says the
     module holds), what is read is evidence: a system block or a program other than the record's
     means the module was changed by another hand, and every `managed` program is read too —
-    nothing of the record is taken then (`prc3cfg.core.what_to_read.after_system`, `after_programs`).
+    nothing of the record is taken then (`prc3cfg.core.what_to_read.after_system`, `after_programs`). With
+    `fresh` (an apply's), the `managed` programs of a factory-fresh module are not read (`what_to_read.factory_fresh`).
     """
     expected = None if known is None else {n: p for n, p in enumerate(known.programs, start=1) if p is not None}
     system = read_system(link, address, name=name, expected=None if known is None else known.system)
     image = ModuleImage(address=address, system=system, programs=(None,) * PROGRAM_COUNT)
-    first = what_to_read.after_system(system, programs, clamped_by, known, managed)
+    first = what_to_read.after_system(system, programs, clamped_by, known, managed, fresh=fresh)
     image = image.with_programs(read_programs(link, address, first, name=name, expected=expected))
     return image.with_programs(read_programs(link, address, what_to_read.after_programs(image, known, managed), name=name, expected=expected))
 
@@ -182,7 +183,7 @@ def read_all(
         for index, t in enumerate(bus_targets):
             t = what_to_read.opened(t) if opened else t
             image = images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by,
-                                                             known=t.known, managed=t.managed)  # fmt: skip
+                                                             known=t.known, managed=t.managed, fresh=t.fresh)  # fmt: skip
             if not opened and what_to_read.opens_line(t, image) is not None:
                 opened = True
                 for earlier in bus_targets[:index]:  # read before the line opened: the rest of them now
