@@ -309,5 +309,14 @@ def test_full_verification_reads_the_system_and_every_program(plant, capsys, tmp
 
 
 def test_a_system_step_is_verified_with_the_system_block(plant, capsys, tmp_path):
+    """On a commissioned module (a factory-fresh one has every managed program verified: test_commissioning),
+    a 20h and a 33h are verified by the system block and the programs they wrote."""
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-b-pretreat", "--auto-approve", "--allow-axis-release").code == 0
-    assert verification(tmp_path) == ["5000", "52000102"]  # the system, and programs 1..2 (33h, 46h)
+    document = yaml.safe_load(plant.path.read_text())
+    (pretreat,) = [m for bus in document["buses"] for m in bus["modules"] if m["name"] == "booth-b-pretreat"]
+    pretreat["system"]["upper_reversing_point"] = 2.0
+    pretreat["programs"][1]["position"] = 1.95
+    plant.path.write_text(yaml.safe_dump(document, sort_keys=False))
+    second = run_cli(capsys, "apply", plant.path, "--module", "booth-b-pretreat", "--auto-approve", "--allow-axis-release")
+    assert second.code == 0, second.err
+    assert verification(tmp_path) == ["5000", "5101"], second.out  # the system, and program 1 (32h)
