@@ -56,6 +56,8 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
         assert evidence["oldest"]["by"].startswith(f"apply of {plant.path} by ") and evidence["oldest"]["since"].endswith("+00:00")
     shown = run_cli(capsys, "show", tmp_path / "plan.json")
     assert shown.code == 0 and "No changes to what was read now" in shown.out and EVERY_MODULE not in shown.out
+    again = run_cli(capsys, "apply", plant.path, "--auto-approve")  # apply's own words claim no more than its plan
+    assert again.code == 0 and "every module matches" not in again.out and "Nothing to do: nothing was written" in again.out
     # read in full: the headline may say every module now, and the JSON says so too
     full = run_cli(capsys, "plan", plant.path, "--full-read", "--detailed-exitcode")
     assert full.code == 0 and EVERY_MODULE in full.out

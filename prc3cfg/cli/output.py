@@ -85,7 +85,7 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
             print(f"Applying {plan_file}, proved against the modules as read back now:")
         print_lines(render.human(the_plan, shown=shown, frames=frames))
         if not the_plan.changes:
-            print("Nothing to do: every module matches the plant file.")
+            print("Nothing to do: nothing was written (the headline above says what the plan rests on).")
 
     def allow(names: list[str]) -> bool:
         if auto_approve or not sys.stdin.isatty():
