@@ -95,6 +95,22 @@ def test_only_yes_typed_out_answers_a_question_that_writes(tmp_path, question):
         assert plant.images() == before
 
 
+def test_with_stdout_in_a_file_the_plan_asked_about_is_on_the_terminal_too(tmp_path):
+    """`prc3cfg apply plant.yaml > apply.log`: the questions are asked on the terminal, and the plan they are
+    about is shown there too, not only written to the file (issue 42: the question reached the terminal, the plan did not)."""
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        log = tmp_path / "apply.log"
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment(), stdout=log)
+        try:
+            screen = asked(pane, ALLOW, None)
+            assert "~ bus booth-a, module 1 (booth-a-left):" in screen and "Plan: 1 of 1 module changes" in screen, screen
+            pane.type("no")
+            assert pane.exit_status() == 1, pane.screen()
+        finally:
+            pane.close()
+        assert "~ bus booth-a, module 1 (booth-a-left):" in log.read_text()
+
+
 @pytest.mark.parametrize("stdout", ["terminal", "file"])
 def test_adopt_asks_on_the_terminal_the_answer_comes_from(tmp_path, stdout):
     """With stdout in a file (`prc3cfg adopt plant.yaml > adopt.log`) the question is still asked

@@ -336,6 +336,14 @@ YES, NO = ("y", "yes"), ("n", "no", "")
 TYPED_YES = "yes"
 
 
+def to_the_terminal(text: str) -> None:
+    """`text` written to the terminal answers come from (stdin's), beside stdout in a file: a question's subject."""
+    from prc3cfg.api import terminal_path
+
+    with open_text(terminal_path(sys.stdin.fileno())) as terminal:
+        terminal.write(text + "\n")
+
+
 def ask(question: str, options: LineOptions | None = None, *, typed: bool = False) -> bool:
     """A yes/no question, default no, asked whole where the operator sees it: every question goes
     through here. The progress display of `options` is taken off the screen first (a bar redrawn

@@ -15,7 +15,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
-from prc3cfg.cli.common import TerminalProgress, ask, print_lines, write_output
+from prc3cfg.cli.common import TerminalProgress, ask, print_lines, to_the_terminal, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plan_file import write as plan_file
 from prc3cfg.core.plant_plan import PlantPlan
@@ -83,7 +83,11 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
             options.progress.stop()
         if plan_file is not None:
             print(f"Applying {plan_file}, proved against the modules as read back now:")
-        print_lines(render.human(the_plan, shown=shown, frames=frames))
+        text = render.human(the_plan, shown=shown, frames=frames)
+        print_lines(text)
+        questions = not auto_approve or (the_plan.axis_releases and not allow_axis_release)
+        if the_plan.changes and questions and sys.stdin.isatty() and not sys.stdout.isatty():
+            to_the_terminal(text)  # stdout is a file (`apply > apply.log`): what is asked about goes where it is asked
         if not the_plan.changes:
             print("Nothing to do: nothing was written (the headline above says what the plan rests on).")
 
