@@ -52,6 +52,18 @@ class Result:
         return [line for line in self.err.splitlines() if not line.startswith("note: ")]
 
 
+def roll_order(path: Path, bus: str) -> list[str]:
+    """The names of `bus`'s modules in the order rolling evidence reads them in full (`what_to_read.rolling`):
+    oldest record first, ties by address — the first is the one the next plan rolls."""
+    from prc3cfg.api._plan import record  # the lines' records, as the plan reads them
+    from prc3cfg.shell.plant_files import load_plant
+
+    plant = load_plant(path)
+    names = {(b.name, m.address): m.name for b, m in plant.modules()}
+    known = record(plant, [b for b in plant.buses if b.name == bus])
+    return [names[key] for key in sorted(known, key=lambda key: (known[key].since, key[1]))]
+
+
 def run_cli(capsys: pytest.CaptureFixture, *args: str) -> Result:
     """Run `prc3cfg ARGS` in this process, as the console script does."""
     capsys.readouterr()

@@ -11,7 +11,7 @@ import random
 from dataclasses import replace
 
 import pytest
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, roll_order, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -24,13 +24,6 @@ from prc3cfg.shell.testing import EmulatedPlant
 
 def applied(plant: EmulatedPlant, capsys: pytest.CaptureFixture) -> None:
     assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-
-
-def by_since(plant: EmulatedPlant, bus: str) -> list[int]:
-    """The addresses of `bus`'s modules, oldest record first (ties by address): the order they roll in."""
-    plant_ = api.load(plant.path)
-    known = record(plant_, [b for b in plant_.buses if b.name == bus])
-    return sorted((a for b, a in known if b == bus), key=lambda a: (known[(bus, a)].since, a))
 
 
 def changed_by_another_tool(plant: EmulatedPlant, bus: str, address: int, number: int) -> None:
@@ -93,8 +86,8 @@ def test_a_program_another_tool_changed_is_found_within_as_many_plans_as_its_lin
     "No changes" for it until the record expired. Rolling finds it within 3 plans (booth-b has 3 modules) —
     the module whose record is the newest, so the last to roll — and the apply writes it back."""
     applied(plant, capsys)
-    address = by_since(plant, "booth-b")[-1]
-    name = {1: "booth-b-left", 3: "booth-b-right", 4: "booth-b-pretreat"}[address]
+    name = roll_order(plant.path, "booth-b")[-1]
+    address = next(m.address for _, m in api.load(plant.path).modules() if m.name == name)
     changed_by_another_tool(plant, "booth-b", address, 1)
     text = plant.path.read_text()
     plant.path.write_text(text.replace("1: {position: 1.750}", "1: {position: 1.700}", 1))  # booth-a-top's program 1
@@ -117,7 +110,7 @@ def test_a_program_another_tool_changed_is_found_within_as_many_plans_as_its_lin
 def test_a_plan_file_with_a_rolled_module_is_proved_by_reading_the_same_programs(plant, capsys, tmp_path):
     """`apply --plan` reads again exactly what its plan read: the rolled module in full, the rest as the plan did."""
     applied(plant, capsys)
-    oldest = by_since(plant, "booth-a")[0]
+    name = roll_order(plant.path, "booth-a")[0]
     text = plant.path.read_text()
     plant.path.write_text(text.replace("1: {position: 1.750}", "1: {position: 1.700}", 1))
     saved = tmp_path / "plan.json"
@@ -125,7 +118,6 @@ def test_a_plan_file_with_a_rolled_module_is_proved_by_reading_the_same_programs
     assert planned.code == 0, planned.err
     assert "rolling evidence: the oldest record of its line, since " in planned.out
     document = json.loads(saved.read_text())
-    name = {1: "booth-a-left", 2: "booth-a-right", 5: "booth-a-top"}[oldest]
     wanted = {m.name: m for _, m in api.load(plant.path).modules()}
     read = module_in(document, name)["read"]  # every program managed, and every one the record holds
     assert set(read["programs"]) >= set(wanted[name].managed_programs()) and read["programs_not_read"] == []
@@ -148,9 +140,10 @@ def oldest_words(plant: EmulatedPlant, whose: bool = True) -> str:
     takes (not the module each line rolls, read now), the one with the oldest record."""
     plant_ = api.load(plant.path)
     known = record(plant_, plant_.buses)
-    rolled = {bus: by_since(plant, bus)[0] for bus in ("booth-a", "booth-b")}
-    bus, address = min((key for key in known if rolled[key[0]] != key[1]), key=lambda key: (known[key].since, key))
-    name = next(m.name for b, m in plant_.modules() if (b.name, m.address) == (bus, address))
+    names = {(b.name, m.address): m.name for b, m in plant_.modules()}
+    rolled = {roll_order(plant.path, bus)[0] for bus in ("booth-a", "booth-b")}
+    bus, address = min((key for key in known if names[key] not in rolled), key=lambda key: (known[key].since, key))
+    name = names[(bus, address)]
     by = f" as {known[(bus, address)].by} read or verified them" if whose else ""
     return f"oldest value taken from the record: {bus}/{name}'s programs,{by} since {what_to_read.to_the_minute(known[(bus, address)].since)}"
 
@@ -203,7 +196,7 @@ def test_any_program_another_tool_changes_is_found_within_the_bound(tmp_path_fac
         bus = rnd.choice(sorted(DECLARED))
         address = rnd.choice(sorted(DECLARED[bus]))
         changed_by_another_tool(plant, bus, address, rnd.choice(DECLARED[bus][address]))
-        for n in range(1, len(DECLARED[bus]) + 1):
+        for _ in range(len(DECLARED[bus])):
             planned = api.plan(api.load(plant.path))
             if any(m.steps for m in planned.modules if (m.bus, m.address) == (bus, address)):
                 break
