@@ -52,16 +52,15 @@ class Result:
         return [line for line in self.err.splitlines() if not line.startswith("note: ")]
 
 
-def roll_order(path: Path, bus: str) -> list[str]:
-    """The names of `bus`'s modules in the order rolling evidence reads them in full (`what_to_read.rolling`):
-    oldest record first, ties by address — the first is the one the next plan rolls."""
-    from prc3cfg.api._plan import record  # the lines' records, as the plan reads them
+def read_next(path: Path) -> dict[str, tuple[int, ...]]:
+    """By module name, the programs the next plan of the plant file at `path` reads (not `--full-read`): what
+    the change needs, and what rolling evidence adds (`what_to_read.rolling`) — as the lines' records stand."""
+    from prc3cfg.api._plan import reads, select  # what a plan reads, worked out as the plan does
     from prc3cfg.shell.plant_files import load_plant
 
     plant = load_plant(path)
     names = {(b.name, m.address): m.name for b, m in plant.modules()}
-    known = record(plant, [b for b in plant.buses if b.name == bus])
-    return [names[key] for key in sorted(known, key=lambda key: (known[key].since, key[1]))]
+    return {names[(t.bus, t.address)]: t.programs for t in reads(plant, select(plant)).targets}
 
 
 def run_cli(capsys: pytest.CaptureFixture, *args: str) -> Result:

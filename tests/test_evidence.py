@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant, roll_order, run_cli
+from emulated import emulated_plant, read_next, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -33,11 +33,12 @@ def managed_count(plant: EmulatedPlant) -> int:
     return sum(len(m.managed_programs()) for _, m in api.load(plant.path).modules())
 
 
-def taken_count(plant: EmulatedPlant) -> int:
-    """The managed programs the next plan of the unchanged plant takes from the record: all but those of the
-    module of each line that rolling evidence reads in full."""
-    rolled = {roll_order(plant.path, bus)[0] for bus in ("booth-a", "booth-b")}
-    return sum(len(m.managed_programs()) for _, m in api.load(plant.path).modules() if m.name not in rolled)
+def taken(plant: EmulatedPlant) -> tuple[int, int]:
+    """The modules, and the managed programs, the next plan of the unchanged plant takes from the record: all
+    but those rolling evidence reads."""
+    read = read_next(plant.path)
+    left = [set(m.managed_programs()) - set(read[m.name]) for _, m in api.load(plant.path).modules()]
+    return sum(1 for programs in left if programs), sum(map(len, left))
 
 
 # -- 1. headlines name their evidence ------------------------------------------------------------
@@ -45,24 +46,24 @@ def taken_count(plant: EmulatedPlant) -> int:
 
 def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(plant, capsys, tmp_path):
     applied(plant, capsys)
-    programs, taken = managed_count(plant), [taken_count(plant)]
+    programs, expected = managed_count(plant), [taken(plant)]
     human = run_cli(capsys, "plan", plant.path, "--detailed-exitcode", "--out", tmp_path / "plan.json")
     assert human.code == 0, human.err  # scripts rely on it: no changes is 0, however much was read
     headline = next(line for line in human.out.splitlines() if line.startswith("No changes"))
     assert EVERY_MODULE not in human.out
     assert headline.startswith("No changes to what was read now (the system blocks of 6 modules and ")  # and the rolled modules' programs
-    assert (f" programs) or to what prc3cfg last read or verified ({taken[0]} programs of 4 modules; oldest value taken from the record: "
-            in headline and f"'s programs, as apply of {plant.path} by ") in headline  # fmt: skip
+    assert (f" programs) or to what prc3cfg last read or verified ({expected[0][1]} programs of {expected[0][0]} modules; "
+            "oldest value taken from the record: " in headline and f"'s programs, as apply of {plant.path} by ") in headline  # fmt: skip
     assert headline.endswith(" UTC).")
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
     assert markdown.code == 0 and EVERY_MODULE not in markdown.out and "No changes to what was read now" in markdown.out
-    taken.append(taken_count(plant))
-    for document, programs_taken in ((json.loads(run_cli(capsys, "plan", plant.path, "--json").out), taken[1]),
-                                     (json.loads((tmp_path / "plan.json").read_text()), taken[0])):  # fmt: skip
+    expected.append(taken(plant))
+    for document, (modules, from_record) in ((json.loads(run_cli(capsys, "plan", plant.path, "--json").out), expected[1]),
+                                          (json.loads((tmp_path / "plan.json").read_text()), expected[0])):  # fmt: skip
         evidence = document["evidence"]
         assert evidence["complete"] is False
-        assert evidence["read_now"]["system_blocks"] == 6 and evidence["read_now"]["programs"] > 0  # the two modules rolled
-        assert evidence["from_record"] == {"modules": 4, "programs": programs_taken}
+        assert evidence["read_now"]["system_blocks"] == 6 and evidence["read_now"]["programs"] == 64  # 8 windows of 4 a line, rolled
+        assert evidence["from_record"] == {"modules": modules, "programs": from_record}
         assert f" of {plant.path} by " in evidence["oldest"]["by"]  # the apply's, or a plan's that rolled the module
         assert evidence["oldest"]["since"].endswith("+00:00")
     shown = run_cli(capsys, "show", tmp_path / "plan.json")
@@ -150,7 +151,7 @@ def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant
     applied(plant, capsys)
     swap(plant, "booth-a", 1, 2)
     edit(plant.path, *change)
-    rolled = roll_order(plant.path, "booth-b")[0]  # the other line's module that rolling evidence reads in full
+    rolled = read_next(plant.path)  # what rolling evidence reads of the other line
     planned = run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     assert planned.code == 0, planned.err
     modules = {m["name"]: m for bus in json.loads((tmp_path / "plan.json").read_text())["buses"] for m in bus["modules"]}
@@ -158,8 +159,8 @@ def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant
     for name in ("booth-a-left", "booth-a-right", "booth-a-top"):  # the whole line, read in full (a rolled one: all its record held)
         assert set(modules[name]["read"]["programs"]) >= set(wanted[name].managed_programs()), name
         assert modules[name]["read"]["programs_not_read"] == [], name
-    for name in {"booth-b-left", "booth-b-right", "booth-b-pretreat"} - {rolled}:
-        assert modules[name]["read"]["programs_not_read"], name  # the other line: as its record says
+    for name in ("booth-b-left", "booth-b-right", "booth-b-pretreat"):  # the other line: as its record says, and rolling
+        assert modules[name]["read"]["programs"] == list(rolled[name]), name
     assert "booth-a/booth-a-left (program 1 is not as on record), booth-a/booth-a-right (program 1 is not as on record), " \
            "booth-a/booth-a-top (booth-a/booth-a-left on its line: program 1 is not as on record)" in planned.out
     done = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve")

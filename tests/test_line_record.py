@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from emulated import emulated_plant, roll_order, run_cli
+from emulated import emulated_plant, read_next, run_cli
 
 from prc3cfg import api
 from prc3cfg.api._plan import RECORD
@@ -74,12 +74,13 @@ def test_what_an_apply_wrote_and_verified_is_known_to_the_next_plan(applied, cap
     the one module of each line that rolling evidence reads in full."""
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")
     assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
-    rolled = {f"{bus}/{roll_order(applied.path, bus)[0]}" for bus in ("booth-a", "booth-b")}
+    rolled = read_next(applied.path)
     planned = run_cli(capsys, "plan", applied.path, "--json", "--detailed-exitcode")
     document = json.loads(planned.out)
     assert planned.code == 0
-    assert {said.split(" (rolling evidence: ")[0] for said in document["read"]["not_as_verified"]} == rolled
-    assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"] if f"{bus['name']}/{m['name']}" not in rolled)
+    assert all(" (rolling evidence: programs " in said for said in document["read"]["not_as_verified"])
+    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"] for m in bus["modules"])
+    assert sum(map(len, rolled.values())) == 2 * 8 * 4  # each line: 8 windows of 4 programs, nothing else
 
 
 def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(applied, capsys):
@@ -122,8 +123,7 @@ def test_two_modules_swapped_are_each_read_in_full_and_put_right(applied, capsys
 
 
 def test_drift_a_full_read_found_is_written_back_by_the_next_apply(applied, capsys):
-    newest = roll_order(applied.path, "booth-a")[-1]
-    assert newest == "booth-a-top"  # booth-a's last to roll: the apply verified it last
+    assert 2 not in read_next(applied.path)["booth-a-top"]  # rolling evidence does not read it in this plan
     applied.emulators["booth-a"].teach_in(5, 2, 180)  # booth-a-top, program 2, taught on the floor
     assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # not read: the stated limit, until it rolls
     full = run_cli(capsys, "plan", applied.path, "--full-read", "--detailed-exitcode")
@@ -157,12 +157,12 @@ def test_a_reviewed_plan_is_stale_once_the_record_no_longer_vouches_for_what_it_
 
 def test_the_record_is_shared_by_every_plant_file_and_names_who_verified_what_was_not_read(applied, capsys, tmp_path):
     other = second_checkout(applied, tmp_path)
-    rolled = {roll_order(applied.path, bus)[0] for bus in ("booth-a", "booth-b")}
+    rolled = read_next(applied.path)
     planned = run_cli(capsys, "plan", other, "--json")
     document = json.loads(planned.out)
     assert document["read"]["base"] == RECORD  # B never applied here: A's verification is B's record too
     assert all(said.startswith(f"apply of {applied.path} by ") and "(since " in said for said in document["read"]["taken"].values())
-    assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"] if m["name"] not in rolled)
+    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"] for m in bus["modules"])
 
 
 def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_told_to_every_plant_file(applied, capsys, tmp_path):

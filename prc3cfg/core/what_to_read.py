@@ -15,12 +15,12 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   program the record shows as the plant file wants it is taken as known, not read. A module the record
   does not know, knows only from longer ago than the bus's `record_max_age`, or that reported E12
   since, is read in full.
-- Rolling evidence (`with_rolling`): a plan also reads in full, per line, the module whose record is
-  the oldest (`rolling`, `ROLLED_PER_LINE`: the budget, and the bound it gives) — every program the
-  plant file manages and its record holds (`rolled`), with the record to agree with: the read is
-  evidence like any other, and the record of that module is as new as the plan after it, so the next
-  plan rolls the next oldest. A program another tool changed is found within as many whole-line plans
-  as the line has modules, not only once its record outgrows `record_max_age`.
+- Rolling evidence (`with_rolling`): a plan also reads, per line, the programs whose values on record
+  are the oldest, a few windows of four (`rolling`, `ROLLED_WINDOWS`: the budget, and the bound it
+  gives), with the record to agree with: the read is evidence like any other, and those values are as
+  new as the plan after it (`Known.read_at`), so the next plan rolls the next oldest. A program another
+  tool changed is found within a bounded number of whole-line plans, not only once the record outgrows
+  `record_max_age`.
 - A plan file (`for_plan_file`) reads again exactly what its plan read — and is stale when the record
   no longer shows a module holding what the plan took as known without reading it.
 - Each read widens on what it finds (`after_system`, `after_programs`): every program a system change
@@ -57,7 +57,7 @@ one — cannot write, initialise or rely on a program it did not read.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime, timedelta
 from math import fsum
 from typing import TYPE_CHECKING
@@ -79,11 +79,17 @@ UNSET = "it reported E12 (system parameters not set)"
 @dataclass(frozen=True, slots=True)
 class Known:
     """What a line's record says a module holds: its image (a program not known: None), since when
-    the oldest value in it was read or verified (ISO 8601, UTC), and by which command, file and user."""
+    the oldest value in it was read or verified (ISO 8601, UTC), and by which command, file and user;
+    and when each program read or verified later than that was (`read_at`: by number; the rest, `since`)."""
 
     image: ModuleImage
     since: str
     by: str
+    read_at: Mapping[int, str] = field(default_factory=dict)
+
+    def age(self, number: int) -> datetime:
+        """When program `number`'s value on record was last read or verified."""
+        return datetime.fromisoformat(self.read_at.get(number, self.since))
 
     def said(self) -> str:
         """"apply of /p/a.yaml by ana@pc-3 (since 2026-11-26 03:27 UTC)": whose read or verification, to the minute."""
@@ -174,40 +180,61 @@ def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: M
     return targets, why
 
 
-#: Rolling evidence, the budget: per line and per targeted plan, the one module whose record is the oldest
-#: (`rolling`) is read in full besides what the change reads — at most 16 52h beyond its 50h (every program
-#: the plant file manages and its record holds): 1.46 s of line time at 9600 baud on crc16, 0.12 s at 115200.
-#: Its record is then as new as the plan, so the next plan rolls the next oldest: every program the plant
-#: file declares on a line of N modules is read again within N whole-line plans, whatever `record_max_age`.
-ROLLED_PER_LINE = 1
+#: Rolling evidence, the budget: per line and per targeted plan, the `ROLLED_WINDOWS` windows of four
+#: programs (one 52h each: 1–4, 5–8, …, 61–64) whose values on record are the oldest (`rolling`) are read
+#: besides what the change reads — 0.73 s of line time at 9600 baud on crc16, 0.06 s at 115200. What they
+#: read is as new as the plan after it (`Known.read_at`), so the next plan rolls the next oldest: every
+#: program the plant file declares on a line is read again within ⌈W / 8⌉ plans of the whole line, W the
+#: windows of its modules that hold a managed program or one on record (at most 16 a module: 60 plans for
+#: 30 fully managed modules, 6 for a line of 3), whatever `record_max_age`.
+ROLLED_WINDOWS = 8
 
 
 def with_rolling(targets: Sequence[Target], why: Mapping[Key, str], known: Mapping[Key, Known]) -> tuple[list[Target], dict[Key, str]]:
-    """A targeted plan's `targets` (`for_plan`) and why each module is read in full, with rolling evidence:
-    the modules `rolling` picks read in full (`rolled`), and why."""
+    """A targeted plan's `targets` (`for_plan`) and why a module is read in full, with rolling evidence:
+    the programs `rolling` picks read too, with the record to agree with (what they find is evidence like
+    any other: `opens_line`); a module whose every program is read then is said to be read in full for it."""
     roll = rolling(targets, known)
-    return [rolled(t, known[key]) if (key := (t.bus, t.address)) in roll else t for t in targets], dict(why) | roll
+    rolled = [replace(t, programs=tuple(sorted(set(t.programs) | set(roll[(t.bus, t.address)][0])))) if (t.bus, t.address) in roll else t
+              for t in targets]  # fmt: skip
+    return rolled, dict(why) | {(t.bus, t.address): roll[(t.bus, t.address)][1] for t in rolled
+                                if (t.bus, t.address) in roll and set(t.managed) <= set(t.programs)}  # fmt: skip
 
 
-def rolling(targets: Sequence[Target], known: Mapping[Key, Known]) -> dict[Key, str]:
-    """The modules a targeted plan reads in full for rolling evidence, with why: per line, the
-    `ROLLED_PER_LINE` whose record (`known`) is the oldest — ties by address — of those it would take
-    programs of from the record (a module read in full already, or not on record, is read anyway)."""
-    candidates: dict[str, list[tuple[str, int]]] = {}
+def rolling(targets: Sequence[Target], known: Mapping[Key, Known]) -> dict[Key, tuple[tuple[int, ...], str]]:
+    """The programs a targeted plan reads for rolling evidence, by module, with why: per line the
+    `ROLLED_WINDOWS` windows of four programs (1–4, 5–8, …) whose oldest value on record (`Known.age`)
+    is the oldest — ties by address, then window — of those holding a program the plant file manages or
+    the record holds that the plan does not read anyway (a module not on record is read in full anyway)."""
+    windows: dict[str, list[tuple[datetime, int, int, tuple[int, ...]]]] = {}
     for t in targets:
-        key = (t.bus, t.address)
-        if t.known is not None and key in known and set(rolled(t, known[key]).programs) - set(t.programs):
-            candidates.setdefault(t.bus, []).append((known[key].since, t.address))
-    return {(bus, address): f"rolling evidence: the oldest record of its line, since {to_the_minute(since)}"
-            for bus, line in candidates.items()
-            for since, address in sorted(line, key=lambda c: (datetime.fromisoformat(c[0]), c[1]))[:ROLLED_PER_LINE]}  # fmt: skip
+        record = known.get((t.bus, t.address))
+        if t.known is None or record is None:
+            continue
+        left = (set(t.managed) | set(programs_in(record.image))) - set(t.programs)
+        for first in range(1, len(PROGRAM_NUMBERS) + 1, codec.MAX_READ_PROGRAMS):
+            numbers = tuple(n for n in range(first, first + codec.MAX_READ_PROGRAMS) if n in left)
+            if numbers:
+                windows.setdefault(t.bus, []).append((min(record.age(n) for n in numbers), t.address, first, numbers))
+    picked: dict[Key, list[tuple[datetime, tuple[int, ...]]]] = {}
+    for bus, line in windows.items():
+        for age, address, _, numbers in sorted(line)[:ROLLED_WINDOWS]:
+            picked.setdefault((bus, address), []).append((age, numbers))
+    return {key: (tuple(n for _, numbers in chosen for n in numbers),
+                  f"rolling evidence: programs {_ranges([n for _, numbers in chosen for n in numbers])}, the oldest on its line, "
+                  f"since {to_the_minute(min(age for age, _ in chosen).isoformat())}")
+            for key, chosen in picked.items()}  # fmt: skip
 
 
-def rolled(target: Target, known: Known) -> Target:
-    """`target` read in full for rolling evidence: every program the plant file manages and the record
-    (`known`) holds — so that the record of it is as new as the read (`merged`) — with the record to agree with."""
-    return replace(target, programs=tuple(sorted(set(target.programs) | set(target.managed) | set(programs_in(known.image)))),
-                   known=known.image)  # fmt: skip
+def _ranges(numbers: Sequence[int]) -> str:
+    """"1–8, 13": program numbers as runs."""
+    runs: list[list[int]] = []
+    for n in sorted(numbers):
+        if runs and n == runs[-1][-1] + 1:
+            runs[-1].append(n)
+        else:
+            runs.append([n])
+    return ", ".join(f"{run[0]}–{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
 
 
 def for_plan_file(entries: Sequence[PlannedModule], desired: Mapping[Key, ModuleImage], known: Mapping[Key, Known],
@@ -325,12 +352,18 @@ def merged(known: Known | None, read: ModuleImage, when: str, by: str) -> Known:
 def verified(known: Known | None, held: ModuleImage, when: str, by: str) -> Known:
     """The record of a module prc3cfg wrote and verified `when`, by `by`, to hold `held` (what it read
     back, and what its steps wrote): that, with the values of the record it neither wrote nor read —
-    what the writes changed is no contradiction. Its `since` stays the record's while any of those is kept."""
+    what the writes changed is no contradiction. Its `since` is the oldest time of the values it keeps
+    (`read_at`, else the record's `since`; none kept: `when`), and every program of `held` is as of `when`."""
     if known is None:
         return Known(held, when, by)
     programs = tuple(now if now is not None else was for was, now in zip(known.image.programs, held.programs))
-    kept = any(now is None and was is not None for was, now in zip(known.image.programs, held.programs))
-    return Known(replace(held, programs=programs), known.since if kept else when, known.by if kept else by)
+    kept = {n: known.read_at.get(n, known.since) for n, (was, now) in enumerate(zip(known.image.programs, held.programs), start=1)
+            if now is None and was is not None}  # fmt: skip
+    if not kept:
+        return Known(replace(held, programs=programs), when, by)
+    since = min(kept.values(), key=datetime.fromisoformat)
+    read_at = {n: at for n, at in kept.items() if at != since} | {n: when for n in programs_in(held)}
+    return Known(replace(held, programs=programs), since, known.by, read_at)
 
 
 # -- what a verification reads, and what it costs ---------------------------------------------------
