@@ -43,8 +43,9 @@ changes ≤ 10 s, the system change ≤ 5 s, wall): on `--framing open-driver` (
 its risk accepted) nothing protects a data reply, so a read is believed only when it agrees with another
 observation — the line's record or the write being verified, else a second reply (`read` of modules no
 record knows: counted twice, `CONFIRMED`); the quiet period before a verification that a late copy could
-undo (`what_to_read.undone_by_late`) would show as the verification on the line above its estimate.
-Measured (2 cores, shared): crc16 — 6.71 s, 5.12 s, 3.34 s, verification on the line 1.02× its estimate
+undo (`late_frames.undone_by_late`) would show as the verification on the line above its estimate.
+Measured (2 cores, shared): crc16 — 6.71 s, 5.12 s, 3.34 s (8.21 s, 6.23 s, 4.21 s with rolling evidence's eight
+52h a plan, `what_to_read.ROLLED_WINDOWS`: 0.73 s on the line), verification on the line 1.02× its estimate
 (none of the three plans waits a quiet period: no 10h–14h, and no addressed step overrides the
 broadcast), so a checked line pays nothing. Open-driver unprotected — 10.68 s, 8.91 s, 5.32 s (was
 18.17 s, 15.34 s, 9.96 s when every read was made twice): each read of an apply is as the record or its

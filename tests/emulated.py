@@ -52,6 +52,17 @@ class Result:
         return [line for line in self.err.splitlines() if not line.startswith("note: ")]
 
 
+def read_next(path: Path) -> dict[str, tuple[int, ...]]:
+    """By module name, the programs the next plan of the plant file at `path` reads (not `--full-read`): what
+    the change needs, and what rolling evidence adds (`what_to_read.rolling`) — as the lines' records stand."""
+    from prc3cfg.api._plan import reads, select  # what a plan reads, worked out as the plan does
+    from prc3cfg.shell.plant_files import load_plant
+
+    plant = load_plant(path)
+    names = {(b.name, m.address): m.name for b, m in plant.modules()}
+    return {names[(t.bus, t.address)]: t.programs for t in reads(plant, select(plant)).targets}
+
+
 def run_cli(capsys: pytest.CaptureFixture, *args: str) -> Result:
     """Run `prc3cfg ARGS` in this process, as the console script does."""
     capsys.readouterr()

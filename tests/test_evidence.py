@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, read_next, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -33,27 +33,39 @@ def managed_count(plant: EmulatedPlant) -> int:
     return sum(len(m.managed_programs()) for _, m in api.load(plant.path).modules())
 
 
+def taken(plant: EmulatedPlant) -> tuple[int, int]:
+    """The modules, and the managed programs, the next plan of the unchanged plant takes from the record: all
+    but those rolling evidence reads."""
+    read = read_next(plant.path)
+    left = [set(m.managed_programs()) - set(read[m.name]) for _, m in api.load(plant.path).modules()]
+    return sum(1 for programs in left if programs), sum(map(len, left))
+
+
 # -- 1. headlines name their evidence ------------------------------------------------------------
 
 
 def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(plant, capsys, tmp_path):
     applied(plant, capsys)
-    programs = managed_count(plant)
+    programs, expected = managed_count(plant), [taken(plant)]
     human = run_cli(capsys, "plan", plant.path, "--detailed-exitcode", "--out", tmp_path / "plan.json")
     assert human.code == 0, human.err  # scripts rely on it: no changes is 0, however much was read
     headline = next(line for line in human.out.splitlines() if line.startswith("No changes"))
     assert EVERY_MODULE not in human.out
-    assert headline.startswith("No changes to what was read now (the system blocks of 6 modules) or to what prc3cfg last "
-                               f"read or verified ({programs} programs of 6 modules, the oldest apply of {plant.path} by ")  # fmt: skip
+    assert headline.startswith("No changes to what was read now (the system blocks of 6 modules and ")  # and the rolled modules' programs
+    assert (f" programs) or to what prc3cfg last read or verified ({expected[0][1]} programs of {expected[0][0]} modules; "
+            "oldest value taken from the record: " in headline and f"'s programs, as apply of {plant.path} by ") in headline  # fmt: skip
     assert headline.endswith(" UTC).")
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
     assert markdown.code == 0 and EVERY_MODULE not in markdown.out and "No changes to what was read now" in markdown.out
-    for document in (json.loads(run_cli(capsys, "plan", plant.path, "--json").out), json.loads((tmp_path / "plan.json").read_text())):
+    expected.append(taken(plant))
+    for document, (modules, from_record) in ((json.loads(run_cli(capsys, "plan", plant.path, "--json").out), expected[1]),
+                                          (json.loads((tmp_path / "plan.json").read_text()), expected[0])):  # fmt: skip
         evidence = document["evidence"]
         assert evidence["complete"] is False
-        assert evidence["read_now"] == {"system_blocks": 6, "programs": 0}
-        assert evidence["from_record"] == {"modules": 6, "programs": programs}
-        assert evidence["oldest"]["by"].startswith(f"apply of {plant.path} by ") and evidence["oldest"]["since"].endswith("+00:00")
+        assert evidence["read_now"]["system_blocks"] == 6 and evidence["read_now"]["programs"] == 64  # 8 windows of 4 a line, rolled
+        assert evidence["from_record"] == {"modules": modules, "programs": from_record}
+        assert f" of {plant.path} by " in evidence["oldest"]["by"]  # the apply's, or a plan's that rolled the module
+        assert evidence["oldest"]["since"].endswith("+00:00")
     shown = run_cli(capsys, "show", tmp_path / "plan.json")
     assert shown.code == 0 and "No changes to what was read now" in shown.out and EVERY_MODULE not in shown.out
     again = run_cli(capsys, "apply", plant.path, "--auto-approve")  # apply's own words claim no more than its plan
@@ -141,13 +153,16 @@ def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant
     applied(plant, capsys)
     swap(plant, "booth-a", 1, 2)
     edit(plant.path, *change)
+    rolled = read_next(plant.path)  # what rolling evidence reads of the other line
     planned = run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     assert planned.code == 0, planned.err
     modules = {m["name"]: m for bus in json.loads((tmp_path / "plan.json").read_text())["buses"] for m in bus["modules"]}
     wanted = {m.name: m for _, m in api.load(plant.path).modules()}
-    for name in ("booth-a-left", "booth-a-right", "booth-a-top"):  # the whole line, read in full
-        assert modules[name]["read"] == {"programs": list(wanted[name].managed_programs()), "programs_not_read": []}, name
-    assert modules["booth-b-left"]["read"]["programs_not_read"]  # the other line: as its record says
+    for name in ("booth-a-left", "booth-a-right", "booth-a-top"):  # the whole line, read in full (a rolled one: all its record held)
+        assert set(modules[name]["read"]["programs"]) >= set(wanted[name].managed_programs()), name
+        assert modules[name]["read"]["programs_not_read"] == [], name
+    for name in ("booth-b-left", "booth-b-right", "booth-b-pretreat"):  # the other line: as its record says, and rolling
+        assert modules[name]["read"]["programs"] == list(rolled[name]), name
     assert "booth-a/booth-a-left (program 1 is not as on record), booth-a/booth-a-right (program 1 is not as on record), " \
            "booth-a/booth-a-top (booth-a/booth-a-left on its line: program 1 is not as on record)" in planned.out
     done = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, read_next, run_cli
 
 from prc3cfg import api
 from prc3cfg.api._plan import RECORD
@@ -70,14 +70,17 @@ def test_another_plant_file_on_the_same_line_is_seen_and_written_back(applied, c
 
 def test_what_an_apply_wrote_and_verified_is_known_to_the_next_plan(applied, capsys, tmp_path):
     """The writes of a verified apply are no contradiction of the record: the next plan reads the system
-    blocks only, not every program of the modules it wrote (the bench's third apply read them all)."""
+    blocks only, not every program of the modules it wrote (the bench's third apply read them all) — but for
+    the one module of each line that rolling evidence reads in full."""
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")
     assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
+    rolled = read_next(applied.path)
     planned = run_cli(capsys, "plan", applied.path, "--json", "--detailed-exitcode")
     document = json.loads(planned.out)
     assert planned.code == 0
-    assert document["read"]["not_as_verified"] == []
-    assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"])
+    assert all(" (rolling evidence: programs " in said for said in document["read"]["not_as_verified"])
+    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"] for m in bus["modules"])
+    assert sum(map(len, rolled.values())) == 2 * 8 * 4  # each line: 8 windows of 4 programs, nothing else
 
 
 def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(applied, capsys):
@@ -85,8 +88,10 @@ def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(app
     applied.emulators["booth-a"].update(2, image=ModuleImage.factory(2))
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
     assert planned.code == 2
-    assert ("read in full: booth-a/booth-a-left (booth-a/booth-a-right on its line: its system parameters are not those on record), "
-            "booth-a/booth-a-right (its system parameters are not those on record)") in planned.out  # the line opened
+    said = next(line for line in planned.out.splitlines() if "read in full: " in line)
+    assert "booth-a/booth-a-right (its system parameters are not those on record)" in said  # the line opened: booth-a-left too, on its line or rolled
+    assert "booth-a/booth-a-top (booth-a/booth-a-right on its line: its system parameters are not those on record)" in said
+    assert "booth-a/booth-a-left (" in said
     assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release").code == 0
     assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
 
@@ -97,8 +102,10 @@ def test_a_spare_with_the_same_system_block_is_found_by_the_program_the_change_r
     booth.update(2, image=replace(ModuleImage.factory(2), system=held.system))  # a spare, its system block set by hand
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # the change reads program 1 only
     planned = run_cli(capsys, "plan", applied.path)
-    assert ("read in full: booth-a/booth-a-left (booth-a/booth-a-right on its line: program 1 is not as on record), "
-            "booth-a/booth-a-right (program 1 is not as on record)") in planned.out  # the line opened
+    said = next(line for line in planned.out.splitlines() if "read in full: " in line)
+    assert "booth-a/booth-a-right (program 1 is not as on record)" in said  # the line opened: booth-a-left too, on its line or rolled
+    assert "booth-a/booth-a-top (booth-a/booth-a-right on its line: program 1 is not as on record)" in said
+    assert "booth-a/booth-a-left (" in said
     assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
     assert holds_the_plant_file(applied, "booth-a", "booth-a-right")  # programs 2 and 3 too, not only program 1
 
@@ -116,15 +123,16 @@ def test_two_modules_swapped_are_each_read_in_full_and_put_right(applied, capsys
 
 
 def test_drift_a_full_read_found_is_written_back_by_the_next_apply(applied, capsys):
-    applied.emulators["booth-a"].teach_in(1, 2, 180)  # booth-a-left, program 2, taught on the floor
-    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # not read: the stated limit
+    assert 2 not in read_next(applied.path)["booth-a-top"]  # rolling evidence does not read it in this plan
+    applied.emulators["booth-a"].teach_in(5, 2, 180)  # booth-a-top, program 2, taught on the floor
+    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # not read: the stated limit, until it rolls
     full = run_cli(capsys, "plan", applied.path, "--full-read", "--detailed-exitcode")
     assert full.code == 2 and "program 2: position 0.180 m → 0.150 m" in full.out
     again = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")  # a targeted plan: the record holds what was seen
     assert again.code == 2 and "program 2: position 0.180 m → 0.150 m" in again.out
     result = run_cli(capsys, "apply", applied.path, "--auto-approve")
     assert result.code == 0 and "verified" in result.out
-    assert holds_the_plant_file(applied, "booth-a", "booth-a-left")
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-top")
 
 
 def test_refresh_only_and_read_update_the_record_too(applied, capsys):
@@ -149,11 +157,12 @@ def test_a_reviewed_plan_is_stale_once_the_record_no_longer_vouches_for_what_it_
 
 def test_the_record_is_shared_by_every_plant_file_and_names_who_verified_what_was_not_read(applied, capsys, tmp_path):
     other = second_checkout(applied, tmp_path)
+    rolled = read_next(applied.path)
     planned = run_cli(capsys, "plan", other, "--json")
     document = json.loads(planned.out)
     assert document["read"]["base"] == RECORD  # B never applied here: A's verification is B's record too
     assert all(said.startswith(f"apply of {applied.path} by ") and "(since " in said for said in document["read"]["taken"].values())
-    assert all(m["read"]["programs"] == [] for bus in document["buses"] for m in bus["modules"])
+    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"] for m in bus["modules"])
 
 
 def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_told_to_every_plant_file(applied, capsys, tmp_path):

@@ -337,7 +337,7 @@ def test_show_says_who_a_plan_file_claims_verified_what_it_did_not_read_as_the_f
 
 #: An edit of a proved field of `read`: what `apply --plan` then names.
 PROVED_READ = {
-    "taken": (SAFETY_OFFICER, "read.taken.booth-a/booth-a-left"),
+    "taken": (SAFETY_OFFICER, "read.taken."),  # the first module taken (`edited_read`)
     "base": (f"the records of the safety officer ({SAFETY_OFFICER})", "read.base"),
     "modules_not_read": (["booth-b/booth-b-pretreat"], "read.modules_not_read"),
 }

@@ -106,8 +106,8 @@ def test_what_a_plan_file_reads_again(known, programs_read, expected):
 def test_a_full_read_and_a_restore_read_every_program_their_image_holds_and_what_it_can_clamp():
     snapshot = replace(FACTORY, address=2, system=LOWER_S1)
     modules = [wanted(1), Wanted("line", 2, "m2", snapshot)]
-    assert what_to_read.in_full(modules) == [Target("line", 1, "m1", MANAGED, DESIRED.system),
-                                             Target("line", 2, "m2", tuple(PROGRAM_NUMBERS), LOWER_S1)]  # fmt: skip
+    assert what_to_read.in_full(modules) == [Target("line", 1, "m1", MANAGED, DESIRED.system, managed=MANAGED),
+                                             Target("line", 2, "m2", tuple(PROGRAM_NUMBERS), LOWER_S1, managed=tuple(PROGRAM_NUMBERS))]  # fmt: skip
 
 
 # -- a read widens on what it finds ----------------------------------------------------------------

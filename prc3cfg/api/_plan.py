@@ -118,7 +118,8 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
     records know none of them; else of each module its system block and the managed programs the
     record does not show holding the plant file's values (`what_to_read.for_plan`) — every managed
-    program of one the record does not know, knows from too long ago, or that reported E12 since."""
+    program of one the record does not know, knows from too long ago, or that reported E12 since; and
+    every program of the module of each line whose record is the oldest (`what_to_read.with_rolling`)."""
     buses = {bus.name: bus for bus, _ in pairs}
     known: dict[Key, Known] = {}
     overruled: dict[Key, str] = {}
@@ -134,7 +135,7 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
     if targeted is None:
         return Reads(pairs, targets(pairs))
-    to_read, why = targeted
+    to_read, why = what_to_read.with_rolling(*targeted, known)
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 

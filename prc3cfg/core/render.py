@@ -404,7 +404,8 @@ def no_changes(evidence: dict[str, Any] | None, shown: Callable[[str], str] = es
     """The headline of a plan without changes, naming its evidence (`plan_file.evidence`): "every module
     matches the plant file" only when every value it covers was read in that run; else "No changes to
     what was read now (the system blocks of 6 modules) or to what prc3cfg last read or verified (82
-    programs of 6 modules, the oldest apply of /p/a.yaml by ana@pc since 2026-11-26 03:27 UTC)"."""
+    programs of 4 modules; oldest value taken from the record: line/m4's programs, as apply of /p/a.yaml by ana@pc
+    read or verified them since 2026-11-26 03:27 UTC)"."""
     if evidence is None:  # a plan file written before plans said what they rest on
         return "No changes (the plan file does not say what was read, or taken from the line's record)."
     if evidence["complete"]:
@@ -413,8 +414,7 @@ def no_changes(evidence: dict[str, Any] | None, shown: Callable[[str], str] = es
     read = f"the system blocks of {plural(now['system_blocks'], 'module')}"
     read += f" and {plural(now['programs'], 'program')}" if now["programs"] else ""
     rests = f"{plural(record['programs'], 'program')} of {plural(record['modules'], 'module')}"
-    if oldest is not None:
-        rests += f", the oldest {shown(oldest['by'])} since {to_the_minute(oldest['since']) or shown(oldest['since'])}"
+    rests += f"; {oldest_taken(oldest, shown)}" if oldest is not None else ""
     return f"No changes to what was read now ({read}) or to what prc3cfg last read or verified ({rests})."
 
 
@@ -428,6 +428,15 @@ def factory_line(document: dict[str, Any]) -> str | None:
     return (f"Not read before writing: {plural(said['programs'], 'program')} of {plural(said['modules'], 'module')} whose system "
             "parameters read as the factory's — planned as the factory's, not read before writing; the verification reads every "
             "one of them back after the writes, and repairs what another tool changed there")  # fmt: skip
+
+
+def oldest_taken(oldest: dict[str, Any], shown: Callable[[str], str] = escape.shown, *, whose: bool = True) -> str:
+    """The oldest evidence a plan relied on (`evidence.oldest`), in words: "oldest value taken from the record:
+    line/m4's programs, as apply of /p/a.yaml by ana@pc read or verified them since 2026-11-26 03:27 UTC"
+    (without `whose`: "…: line/m4's programs, since 2026-11-26 03:27 UTC")."""
+    since = to_the_minute(oldest["since"]) or shown(oldest["since"])
+    by = f" as {shown(oldest['by'])} read or verified them" if whose else ""
+    return f"oldest value taken from the record: {shown(oldest['module'])}'s programs,{by} since {since}"
 
 
 def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str | None:
@@ -477,6 +486,8 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
     claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
     if whose and not claimed:
         not_read[0] += f", as {whose}"
+    if not_read and isinstance(oldest := (document.get("evidence") or {}).get("oldest"), dict):
+        not_read[0] += f" ({oldest_taken(oldest, shown, whose=False)})"
     parts = [f"Read now: {read}"]
     parts += [f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"] if not_read else []
     parts += [other] if other and not claimed else []

@@ -15,6 +15,12 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   program the record shows as the plant file wants it is taken as known, not read. A module the record
   does not know, knows only from longer ago than the bus's `record_max_age`, or that reported E12
   since, is read in full.
+- Rolling evidence (`with_rolling`): a plan also reads, per line, the programs whose values on record
+  are the oldest, a few windows of four (`rolling`, `ROLLED_WINDOWS`: the budget, and the bound it
+  gives), with the record to agree with: the read is evidence like any other, and those values are as
+  new as the plan after it (`Known.read_at`), so the next plan rolls the next oldest. A program another
+  tool changed is found within a bounded number of whole-line plans, not only once the record outgrows
+  `record_max_age`.
 - A plan file (`for_plan_file`) reads again exactly what its plan read — and is stale when the record
   no longer shows a module holding what the plan took as known without reading it.
 - Each read widens on what it finds (`after_system`, `after_programs`): every program a system change
@@ -25,17 +31,12 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   contradicts the record is evidence of another hand on the line (two controllers swapped: the other
   one's system block agrees with the record, its programs do not). What no read can see: a program
   the change does not read, changed by another tool on a module whose system block is unchanged, on a
-  line no module of which the change reads contradicts the record, within the record's age.
+  line no module of which the change reads contradicts the record — until rolling evidence reads it.
 - A verification (`verification_reads`) reads what the steps that went out could have changed
   (`reach`), or with `Verify.FULL` everything the first read-back held; `read_messages` is the fewest
   50h/51h/52h for any of these, `verification_time` what reading back the reach costs (the floor of a
   verification, which the planning of broadcasts must pay for every module a broadcast reaches).
-- A verification waits first (`settle_time`) where a copy of a step that went out, arriving late — held
-  by a gateway past its time-out and retried, or delivered twice — would undo what a later step did
-  (`undone_by_late`: a 10h–14h initialisation before the writes that follow it, a broadcast that an
-  addressed step overrides): every frame still on its way lands before the read-back, which then reads
-  what every step sent to the module could have changed. A copy of any other step, arriving whenever,
-  leaves what the plan left: no wait.
+- When a verification reads — after every frame still on its way has landed — is `prc3cfg.core.late_frames`'s.
 
 On a line where nothing protects a data reply (`protects_replies`: a framing without a checksum, and
 no parity the port checks), every read is confirmed — by what the line's record or the write being
@@ -62,12 +63,12 @@ one — cannot write, initialise or rely on a program it did not read.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime, timedelta
 from math import fsum
 from typing import TYPE_CHECKING
 
-from prc3cfg.core import codec, device
+from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
@@ -84,11 +85,17 @@ UNSET = "it reported E12 (system parameters not set)"
 @dataclass(frozen=True, slots=True)
 class Known:
     """What a line's record says a module holds: its image (a program not known: None), since when
-    the oldest value in it was read or verified (ISO 8601, UTC), and by which command, file and user."""
+    the oldest value in it was read or verified (ISO 8601, UTC), and by which command, file and user;
+    and when each program read or verified later than that was (`read_at`: by number; the rest, `since`)."""
 
     image: ModuleImage
     since: str
     by: str
+    read_at: Mapping[int, str] = field(default_factory=dict)
+
+    def age(self, number: int) -> datetime:
+        """When program `number`'s value on record was last read or verified."""
+        return datetime.fromisoformat(self.read_at.get(number, self.since))
 
     def said(self) -> str:
         """"apply of /p/a.yaml by ana@pc-3 (since 2026-11-26 03:27 UTC)": whose read or verification, to the minute."""
@@ -178,6 +185,63 @@ def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: M
         if decision.why is not None:
             why[m.key] = UNSET if m.key in unset else overruled.get(m.key, decision.why)
     return targets, why
+
+
+#: Rolling evidence, the budget: per line and per targeted plan, the `ROLLED_WINDOWS` windows of four
+#: programs (one 52h each: 1–4, 5–8, …, 61–64) whose values on record are the oldest (`rolling`) are read
+#: besides what the change reads — 0.73 s of line time at 9600 baud on crc16, 0.06 s at 115200. What they
+#: read is as new as the plan after it (`Known.read_at`), so the next plan rolls the next oldest: every
+#: program the plant file declares on a line is read again within ⌈W / 8⌉ plans of the whole line, W the
+#: windows of its modules that hold a managed program or one on record (at most 16 a module: 60 plans for
+#: 30 fully managed modules, 6 for a line of 3), whatever `record_max_age`.
+ROLLED_WINDOWS = 8
+
+
+def with_rolling(targets: Sequence[Target], why: Mapping[Key, str], known: Mapping[Key, Known]) -> tuple[list[Target], dict[Key, str]]:
+    """A targeted plan's `targets` (`for_plan`) and why a module is read in full, with rolling evidence:
+    the programs `rolling` picks read too, with the record to agree with (what they find is evidence like
+    any other: `opens_line`); a module whose every program is read then is said to be read in full for it."""
+    roll = rolling(targets, known)
+    rolled = [replace(t, programs=tuple(sorted(set(t.programs) | set(roll[(t.bus, t.address)][0])))) if (t.bus, t.address) in roll else t
+              for t in targets]  # fmt: skip
+    return rolled, dict(why) | {(t.bus, t.address): roll[(t.bus, t.address)][1] for t in rolled
+                                if (t.bus, t.address) in roll and set(t.managed) <= set(t.programs)}  # fmt: skip
+
+
+def rolling(targets: Sequence[Target], known: Mapping[Key, Known]) -> dict[Key, tuple[tuple[int, ...], str]]:
+    """The programs a targeted plan reads for rolling evidence, by module, with why: per line the
+    `ROLLED_WINDOWS` windows of four programs (1–4, 5–8, …) whose oldest value on record (`Known.age`)
+    is the oldest — ties by address, then window — of those holding a program the plant file manages or
+    the record holds that the plan does not read anyway (a module not on record is read in full anyway)."""
+    windows: dict[str, list[tuple[datetime, int, int, tuple[int, ...]]]] = {}
+    for t in targets:
+        record = known.get((t.bus, t.address))
+        if t.known is None or record is None:
+            continue
+        left = (set(t.managed) | set(programs_in(record.image))) - set(t.programs)
+        for first in range(1, len(PROGRAM_NUMBERS) + 1, codec.MAX_READ_PROGRAMS):
+            numbers = tuple(n for n in range(first, first + codec.MAX_READ_PROGRAMS) if n in left)
+            if numbers:
+                windows.setdefault(t.bus, []).append((min(record.age(n) for n in numbers), t.address, first, numbers))
+    picked: dict[Key, list[tuple[datetime, tuple[int, ...]]]] = {}
+    for bus, line in windows.items():
+        for age, address, _, numbers in sorted(line)[:ROLLED_WINDOWS]:
+            picked.setdefault((bus, address), []).append((age, numbers))
+    return {key: (tuple(n for _, numbers in chosen for n in numbers),
+                  f"rolling evidence: programs {_ranges([n for _, numbers in chosen for n in numbers])}, the oldest on its line, "
+                  f"since {to_the_minute(min(age for age, _ in chosen).isoformat())}")
+            for key, chosen in picked.items()}  # fmt: skip
+
+
+def _ranges(numbers: Sequence[int]) -> str:
+    """"1–8, 13": program numbers as runs."""
+    runs: list[list[int]] = []
+    for n in sorted(numbers):
+        if runs and n == runs[-1][-1] + 1:
+            runs[-1].append(n)
+        else:
+            runs.append([n])
+    return ", ".join(f"{run[0]}–{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
 
 
 def for_plan_file(entries: Sequence[PlannedModule], desired: Mapping[Key, ModuleImage], known: Mapping[Key, Known],
@@ -285,9 +349,10 @@ def still_to_read(target: Target, read: ModuleImage) -> frozenset[int]:
 
 def read_in_full(modules: Iterable[Wanted], targets: Iterable[Target], images: Mapping[Key, ModuleImage],
                  why: Mapping[Key, str]) -> tuple[str, ...]:  # fmt: skip
-    """"bus/name (why)" of each of `modules` a targeted read read in full: for `why` (before any
-    evidence: not on record, too old, E12), for what its read-back contradicted of the record, or for
-    the first module of its line (in the line's order) that did (`opens_line`)."""
+    """"bus/name (why)" of each of `modules` a targeted read read in full: for what its read-back
+    contradicted of the record, for `why` (before any evidence: not on record, too old, E12; or rolling
+    evidence, `rolling`), or for the first module of its line (in the line's order) that contradicted it
+    (`opens_line`)."""
     targets = list(targets)
     evidence = {(t.bus, t.address): said for t in targets if t.known is not None and (t.bus, t.address) in images
                 and (said := contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
@@ -296,7 +361,7 @@ def read_in_full(modules: Iterable[Wanted], targets: Iterable[Target], images: M
         if (t.bus, t.address) in evidence:
             lines.setdefault(t.bus, f"{t.bus}/{t.name} on its line: {evidence[(t.bus, t.address)]}")
     return tuple(f"{m.bus}/{m.name} ({said})" for m in modules
-                 if (said := why.get(m.key) or evidence.get(m.key) or lines.get(m.bus)) is not None)  # fmt: skip
+                 if (said := evidence.get(m.key) or why.get(m.key) or lines.get(m.bus)) is not None)  # fmt: skip
 
 
 # -- what is read decides what is planned, and what the record becomes ------------------------------
@@ -330,12 +395,18 @@ def merged(known: Known | None, read: ModuleImage, when: str, by: str) -> Known:
 def verified(known: Known | None, held: ModuleImage, when: str, by: str) -> Known:
     """The record of a module prc3cfg wrote and verified `when`, by `by`, to hold `held` (what it read
     back, and what its steps wrote): that, with the values of the record it neither wrote nor read —
-    what the writes changed is no contradiction. Its `since` stays the record's while any of those is kept."""
+    what the writes changed is no contradiction. Its `since` is the oldest time of the values it keeps
+    (`read_at`, else the record's `since`; none kept: `when`), and every program of `held` is as of `when`."""
     if known is None:
         return Known(held, when, by)
     programs = tuple(now if now is not None else was for was, now in zip(known.image.programs, held.programs))
-    kept = any(now is None and was is not None for was, now in zip(known.image.programs, held.programs))
-    return Known(replace(held, programs=programs), known.since if kept else when, known.by if kept else by)
+    kept = {n: known.read_at.get(n, known.since) for n, (was, now) in enumerate(zip(known.image.programs, held.programs), start=1)
+            if now is None and was is not None}  # fmt: skip
+    if not kept:
+        return Known(replace(held, programs=programs), when, by)
+    since = min(kept.values(), key=datetime.fromisoformat)
+    read_at = {n: at for n, at in kept.items() if at != since} | {n: when for n in programs_in(held)}
+    return Known(replace(held, programs=programs), since, known.by, read_at)
 
 
 # -- what a verification reads, and what it costs ---------------------------------------------------
@@ -389,40 +460,3 @@ def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequen
     system, programs = reach(before, predicted, steps)
     reads = read_messages(programs | set(unread))[0 if system else 1 :]
     return fsum(cost.message_time(before.address, m) for m in reads)
-
-
-# -- when a verification reads: after every frame still on its way has landed ----------------------
-
-#: A frame reaches its module within this many reply deadlines of leaving, or never: the bound prc3cfg
-#: takes for a frame a gateway, a radio link or a proxy holds (TCP retransmitting a lost segment once,
-#: Linux's 200 ms at the least, stays within it at a deadline of 0.2 s and more). A link that holds frames
-#: longer needs a longer `timeout` on its bus.
-HELD_DEADLINES = 2
-
-
-def undone_by_late(final: ModuleImage, steps: Sequence[Step]) -> bool:
-    """Whether a copy of one of `steps`, executed once more after all of them (a late or duplicated
-    frame), would leave the module other than `final` (what they leave, by the device model): a 10h–14h
-    before the writes that follow it, or a broadcast an addressed step overrides. A copy landing between
-    the steps is seen by the read-back that follows them all; only one landing after it does harm."""
-    filler = default_program(final.system)
-    state = device.ModuleState(replace(final, programs=tuple(filler if p is None else p for p in final.programs)))
-    for step in steps:
-        try:
-            again = device.execute(state, step.message)
-        except codec.Rejected:  # refused: a copy changes nothing
-            continue
-        if again.image != state.image:
-            return True
-    return False
-
-
-def settle_time(cost: LineCost, deadline: float) -> float:
-    """Seconds after a line's last write until every frame still on its way has landed: `HELD_DEADLINES`
-    reply deadlines (`deadline`: the longest wait for a reply to the steps sent — the line's time and the bus's
-    `timeout` — as the link waits it), the longest request frame's transmission, the modules' turnaround (and
-    on open-driver the gap that ends a frame)."""
-    framing = cost.framing
-    longest = framing.frame_length(codec.MAX_MESSAGE_BYTES) * (2 if framing.stuffs else 1)
-    gap = cost.zvz if framing.name == "open-driver" else 0.0
-    return HELD_DEADLINES * deadline + cost.line.transmission_time(longest) + cost.turnaround + gap

@@ -47,9 +47,10 @@ from prc3cfg.core.axes import Release
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import FAULT_STATES, describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
+from prc3cfg.core.late_frames import settle_time, undone_by_late
 from prc3cfg.core.planner import ModulePlan, Step, plan_module
 from prc3cfg.core.render import plural
-from prc3cfg.core.what_to_read import programs_in, settle_time, undone_by_late, verification_reads
+from prc3cfg.core.what_to_read import programs_in, verification_reads
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.cancel import main_thread_only

@@ -6,9 +6,9 @@ Every read updates it with what it saw (`saw`: drift included, so the next plan 
 before an apply's first write on a line the modules it writes are dropped from it (`forget`,
 durably), and once a module verified, what it was verified to hold goes back in (`saw` again). A
 module's entry holds its image (a program not known: null), since when the oldest value in it is
-known, by which command of which plant file and which user on which host, and when the entry was
-written; a dropped module's entry holds no image, so that an older copy elsewhere cannot bring it
-back.
+known (and when each program read later than that was: `read_at`, what rolling evidence orders by),
+by which command of which plant file and which user on which host, and when the entry was written; a
+dropped module's entry holds no image, so that an older copy elsewhere cannot bring it back.
 
 One file per identity of the line (`prc3cfg.shell.locks.line_keys`: two spellings of one line share
 a record) and user (`platform.user_tag`: in the machine's folder, which every user of the line
@@ -192,10 +192,22 @@ def read(keys: Iterable[str]) -> tuple[dict[int, Known], dict[int, str]]:
             if fields.get("image") is not None and isinstance(fields.get("since"), str) and isinstance(fields.get("by"), str):
                 if datetime.fromisoformat(fields["since"]).tzinfo is None:
                     continue  # a time without its zone (another tool's): its age cannot be told
-                known[int(address)] = Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"])
+                known[int(address)] = Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"], _read_at(fields))
         except (TypeError, ValueError, KeyError, AttributeError):
             continue  # an entry this prc3cfg cannot read: the module is not known
     return known, overruled
+
+
+def _read_at(fields: dict) -> dict[int, str]:
+    """An entry's `read_at` (program → when, later than `since`): what is not one — not a program, not a
+    time with its zone, not later than `since` — is left out, its program as old as `since` (never newer)."""
+    since, said = datetime.fromisoformat(fields["since"]), fields.get("read_at")
+    read_at = {}
+    for number, when in (said.items() if isinstance(said, dict) else ()):
+        with contextlib.suppress(TypeError, ValueError):
+            if number.isdigit() and 1 <= int(number) <= 64 and (at := datetime.fromisoformat(when)).tzinfo and at > since:
+                read_at[int(number)] = when
+    return read_at
 
 
 def settle(keys: Iterable[str]) -> list[str]:
@@ -242,7 +254,8 @@ def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:
     if not changes:
         return
     keys, at = tuple(keys), now()
-    entries = {str(address): {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()})
+    entries = {str(address): {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()}
+                                           | ({"read_at": {str(n): when for n, when in sorted(k.read_at.items())}} if k and k.read_at else {}))
                for address, k in changes.items()}  # fmt: skip
     directory = folder(KIND, WHAT).parent  # the machine's, once an administrator made it; else this user's
     try:
