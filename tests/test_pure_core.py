@@ -200,6 +200,7 @@ def imported_alone() -> dict[str, str]:
     return json.loads(result.stdout)
 
 
+@pytest.mark.xdist_group("core_imported_alone")  # one worker runs the fixture's one process for all 40
 @pytest.mark.parametrize("module", CORE)
 def test_core_module_imports_without_serial_and_socket(module, imported_alone):
     assert imported_alone[module] == "ok"
