@@ -18,6 +18,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from tools import INSTALL
 
 TESTS = Path(__file__).resolve().parent
@@ -98,6 +100,40 @@ def wall_clock_assertions(source: str) -> Iterator[int]:
 )
 def test_the_check_finds_a_clock_asserted_from_above(source: str, lines: list[int]) -> None:
     assert list(wall_clock_assertions(source)) == lines
+
+
+#: A clock reading (a name assigned from one, through another name, or the call itself) and an expression without one.
+CLOCKED = ["took", "time.monotonic() - started", "elapsed", "(time.perf_counter() - t0) * 1000"]
+PLAIN = ["0.3", "line_time", "cost.message_time(1, message)", "2 * expected"]
+OPERATORS = {"<": "upper", "<=": "upper", ">": "lower", ">=": "lower", "==": "both", "!=": "both"}
+
+
+def a_test_asserting(left: str, operator: str, right: str, inside_a_wait: bool) -> str:
+    body = f"assert {left} {operator} {right}"
+    if inside_a_wait:
+        body = f"while busy():\n        {body}"
+    return f"def t():\n    started = t0 = time.monotonic()\n    took = time.monotonic() - started\n    elapsed = took\n    {body}\n"
+
+
+def flagged_as_it_should_be(left: str, operator: str, right: str, inside_a_wait: bool) -> None:
+    """Flagged exactly when a clock is compared other than as a lower bound (outside a wait's loop)."""
+    clocked = (left in CLOCKED, right in CLOCKED)
+    lower = (OPERATORS[operator], clocked) in (("lower", (True, False)), ("upper", (False, True)))
+    expected = [5] if any(clocked) and not lower and not inside_a_wait else []
+    assert list(wall_clock_assertions(a_test_asserting(left, operator, right, inside_a_wait))) == expected
+
+
+@settings(max_examples=30)
+@given(st.sampled_from(CLOCKED + PLAIN), st.sampled_from(sorted(OPERATORS)), st.sampled_from(CLOCKED + PLAIN), st.booleans())
+def test_the_check_flags_exactly_a_clock_compared_other_than_from_below(left, operator, right, inside_a_wait) -> None:
+    flagged_as_it_should_be(left, operator, right, inside_a_wait)
+
+
+@pytest.mark.soak
+@settings()  # the profile's examples: every combination (8 × 6 × 8 × 2) many times over
+@given(st.sampled_from(CLOCKED + PLAIN), st.sampled_from(sorted(OPERATORS)), st.sampled_from(CLOCKED + PLAIN), st.booleans())
+def test_the_check_flags_exactly_a_clock_compared_other_than_from_below_soak(left, operator, right, inside_a_wait) -> None:
+    flagged_as_it_should_be(left, operator, right, inside_a_wait)
 
 
 def test_no_test_asserts_a_wall_clock_time_from_above() -> None:
