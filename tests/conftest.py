@@ -1,5 +1,5 @@
 """What every test shares: a lock directory of its own, the demo plant on emulators, the
-worktree's wheel, and the hypothesis profile of its tier.
+worktree's wheel, the hypothesis profile of its tier, and the command line's click command built once.
 
 The suite has two tiers: `pytest` runs the fast one (the README's command), `pytest -m soak`
 the tests marked `soak` — many races, seeds or examples of behaviours the fast tier tests with
