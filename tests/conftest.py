@@ -1,5 +1,5 @@
 """What every test shares: a lock directory of its own, the demo plant on emulators, the
-worktree's wheel, and the hypothesis profile of its tier.
+worktree's wheel, the hypothesis profile of its tier, and the command line's click command built once.
 
 The suite has two tiers: `pytest` runs the fast one (the README's command), `pytest -m soak`
 the tests marked `soak` — many races, seeds or examples of behaviours the fast tier tests with
@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import typer.main
 from emulated import emulated_plant
 from hypothesis import settings
 
@@ -29,6 +30,28 @@ settings.register_profile("soak", parent=settings.get_profile("fast"), max_examp
 settings.load_profile(os.environ.get("PRC3CFG_HYPOTHESIS_PROFILE", "fast"))
 
 ROOT = Path(__file__).resolve().parents[1]
+
+_built: dict[tuple, object] = {}
+_get_command = typer.main.get_command
+
+
+def _shape(app: typer.Typer) -> tuple:
+    """What a typer app's click command is built from that can change: the commands and groups registered."""
+    return (id(app), len(app.registered_commands), tuple(_shape(group.typer_instance) for group in app.registered_groups if group.typer_instance))
+
+
+def _get_command_once(app: typer.Typer):
+    """typer builds the whole click command tree again on every call of the app (0.065 s of CPU for prc3cfg's
+    36 commands: the type hints and signatures of each) — once a process for the console script, but once
+    for each of the thousands of commands the tests run in this process (`run_cli`). Built once for each
+    shape of the app instead; the only input typer reads besides the app is this environment variable."""
+    key = (_shape(app), os.environ.get("_TYPER_COMPLETE_TEST_DISABLE_SHELL_DETECTION"))
+    if key not in _built:
+        _built[key] = _get_command(app)
+    return _built[key]
+
+
+typer.main.get_command = _get_command_once
 
 
 @pytest.fixture(autouse=True)

@@ -10,17 +10,16 @@ from __future__ import annotations
 import os
 import re
 import shlex
-import shutil
 import subprocess
 import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
 
-import pytest
+from tools import needs, which
 
-TMUX = shutil.which("tmux")
-needs_tmux = pytest.mark.skipif(TMUX is None, reason="tmux is not installed (apt-get install -y tmux): a real terminal is needed")
+TMUX = which("tmux")
+needs_tmux = needs("tmux")
 
 #: Captures of the screen a wait makes at most, one every `POLL` seconds: polling, bounded.
 POLLS = 1_200

@@ -1,5 +1,5 @@
 """The acceptance run of `apply` under line faults: every framing, 40 seeds each in the soak tier
-(4 in the fast tier).
+(2 in the fast tier).
 
 Emulators start from seeded, non-factory modules — programs the plant does not manage
 among them, some of which the plant's lower upper reversing point makes the module clamp —
@@ -29,7 +29,7 @@ from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.plant_files import load_plant
 
 #: Seeds per framing: a few in the fast tier, the acceptance's 40 in the soak tier.
-SEEDS = [4, pytest.param(40, marks=pytest.mark.soak)]
+SEEDS = [2, pytest.param(40, marks=pytest.mark.soak)]
 TRAVEL = "Travel to reference point required before production on:"
 
 
@@ -105,4 +105,4 @@ def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, fra
         ]
         verified = sum(result.returncode == 0 for result in results)
     assert not failures, "\n\n".join(failures)
-    assert verified >= seeds // 4, f"only {verified} of {seeds} runs got through: the faults are too heavy to test anything"
+    assert verified >= max(1, seeds // 4), f"only {verified} of {seeds} runs got through: the faults are too heavy to test anything"

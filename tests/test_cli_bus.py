@@ -202,8 +202,9 @@ def test_import_reads_every_line_given_into_one_plant_file_that_plans_to_no_chan
     with emulated_plant(tmp_path) as emulated:
         assert run_cli(capsys, "apply", emulated.path, "--auto-approve", "--allow-axis-release").code == 0
         ports = [bus.port for bus in emulated.plant.buses]
+        # the emulated plant's timeout: 27 absent addresses on each line are waited out
         imported = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left", "--bus-name", "right",
-                           "--timeout", "0.2")  # fmt: skip
+                           "--timeout", "0.1")  # fmt: skip
         assert imported.code == 0, imported.err
         assert imported.err.strip() == f"imported 6 modules from {ports[0]}, {ports[1]}"
         plant = tmp_path / "imported.yaml"

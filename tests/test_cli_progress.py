@@ -35,20 +35,6 @@ def test_an_apply_ends_with_its_time_by_phase_against_the_estimate(tmp_path, cap
     assert reading >= 0.85 * phases["reading"] and writing >= 0.85 * phases["writing"]
 
 
-@needs_tmux
-def test_verification_shows_its_progress_on_a_terminal(tmp_path):
-    """`--verify full` reads every program back: seconds at 9600 baud, counted module by module."""
-    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"), environment())
-        try:
-            shown = pane.wait(lambda screen: re.search(r"^verifying .* \d/6 ", screen, re.MULTILINE) is not None, "verifying n/6")
-            assert "Snapshot of the modules before writing" in shown
-            assert pane.exit_status() == 0, pane.screen()
-            assert TIME.search(pane.screen()) is not None
-        finally:
-            pane.close()
-
-
 #: A phase on the progress display: its name, steps done of all, time taken, time left at the rate so far.
 SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+):(\d\d):(\d\d) +(?:(\d+):(\d\d):(\d\d)|-:--:--) left$",
                    re.MULTILINE)  # fmt: skip
@@ -58,7 +44,8 @@ SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+)
 def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
     """On a terminal, reading and verifying each say how long is left — before any module is done
     "-:--:--", then the modules to go at the time a module has taken so far (9600 baud, `--verify full`:
-    seconds a module), counting down: never more than that rate gives for the modules still to go."""
+    seconds a module), counting down: never more than that rate gives for the modules still to go. And
+    the apply's snapshot and its time by phase on the same screen (`--verify full` reads every program back)."""
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"), environment())
         try:
@@ -72,8 +59,10 @@ def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
                     seen.setdefault(phase, []).append((int(done), int(total), took, to_go))
                 return any(done >= 3 and to_go is not None for done, _, _, to_go in seen.get("verifying", []))
 
-            pane.wait(verifying_half_done, "verifying 3/6 or more with the time left")
+            shown = pane.wait(verifying_half_done, "verifying 3/6 or more with the time left")
+            assert "Snapshot of the modules before writing" in shown
             assert pane.exit_status() == 0, pane.screen()
+            assert TIME.search(pane.screen()) is not None
         finally:
             pane.close()
     for phase in ("reading modules", "verifying"):

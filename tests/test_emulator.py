@@ -15,6 +15,7 @@ from dataclasses import replace
 from types import SimpleNamespace
 
 import pytest
+from emulated import run_cli
 from emulator_client import Client, answered, hang_up, serve
 from pair import PairPort
 
@@ -240,13 +241,20 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
         (["--listen", ""], "Invalid value for '--listen': '' is not HOST:PORT — for example 127.0.0.1:7001"),
     ],
 )
-def test_a_bad_option_value_is_a_usage_error(options, says):
-    """A value no emulator can take is a usage error (exit 64), before anything starts."""
-    result = subprocess.run([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", *options],
+def test_a_bad_option_value_is_a_usage_error(capsys, options, says):
+    """A value no emulator can take is a usage error (exit 64), before anything starts (in this process:
+    test_a_bad_option_value_is_a_usage_error_of_the_process runs one as a command of its own)."""
+    result = run_cli(capsys, "emulator", "serve", "--listen", "127.0.0.1:0", *options)
+    assert result.code == 64
+    assert result.err.count("\n") == 1 and result.err.startswith("error: prc3cfg emulator serve: "), result.err
+    assert says in result.err and result.out == ""
+
+
+def test_a_bad_option_value_is_a_usage_error_of_the_process():
+    result = subprocess.run([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--turnaround", "nan"],
                             capture_output=True, text=True, timeout=30)  # fmt: skip
-    assert result.returncode == 64
-    assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: prc3cfg emulator serve: "), result.stderr
-    assert says in result.stderr and result.stdout == ""
+    assert (result.returncode, result.stdout) == (64, "")
+    assert result.stderr.startswith("error: prc3cfg emulator serve: Invalid value for '--turnaround'") and result.stderr.count("\n") == 1
 
 
 def state_file(path, *entries: dict):

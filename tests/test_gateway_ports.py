@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import os
 import random
-import shutil
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,14 +17,15 @@ from pathlib import Path
 import pytest
 from emulated import Result, run_cli
 from test_serial_setup import free_port, listening, served_pty
+from tools import needs, which
 
 from prc3cfg.errors import UserError
 from prc3cfg.shell.locks import line_keys
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.sessions import PORTS_VARIABLE, bus_line_keys, refuse_other_lines
 
-SER2NET = shutil.which("ser2net")
-needs_ser2net = pytest.mark.skipif(SER2NET is None, reason="ser2net is not installed (apt-get install -y ser2net)")
+SER2NET = which("ser2net")
+needs_ser2net = needs("ser2net")
 
 PLANT = """plant: p
 buses:

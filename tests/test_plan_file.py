@@ -27,6 +27,7 @@ import pytest
 from emulated import emulated_plant, run_cli
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tools import require
 
 from prc3cfg import api
 from prc3cfg.api import _apply
@@ -136,8 +137,7 @@ TOOLS = {
 
 @pytest.mark.parametrize("tool", TOOLS)
 def test_a_plan_file_passed_through_jq_or_node_is_the_plan_file(made, tmp_path, tool):
-    if shutil.which(TOOLS[tool][0]) is None:
-        pytest.skip(f"{tool} is not installed")
+    require(tool)
     path = tmp_path / "plan.json"
     path.write_bytes(subprocess.run(TOOLS[tool], input=made.text.encode(), capture_output=True, check=True, timeout=60).stdout)
     assert path.read_bytes() != made.text.encode()

@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import re
 import shlex
-import shutil
 import subprocess
 import sys
 import tomllib
@@ -21,6 +20,7 @@ import pytest
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 from test_motion import TWO_PROGRAMS, image
+from tools import needs, which
 from typer.testing import CliRunner
 
 import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
@@ -157,7 +157,7 @@ def test_a_module_without_chains_and_an_unknown_format_are_one_line(matplotlib):
 
 # -- the SVG in a browser ------------------------------------------------------------------------
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMIUM = which("chromium")
 
 
 def open_in_chromium(svg: Path, out: Path) -> tuple[Path, str, list[str]]:
@@ -174,7 +174,7 @@ def open_in_chromium(svg: Path, out: Path) -> tuple[Path, str, list[str]]:
     return screenshot, done.stdout, [line for line in done.stderr.splitlines() if ":CONSOLE" in line]
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed: apt-get install -y chromium")
+@needs("chromium")
 def test_the_svg_opens_in_headless_chromium_without_errors(matplotlib, tmp_path):
     svg = tmp_path / "plot.svg"
     svg.write_bytes(picture(CHANGED, TWO_PROGRAMS, fmt="svg", title="module test: before (dashed) and after"))
@@ -184,7 +184,7 @@ def test_the_svg_opens_in_headless_chromium_without_errors(matplotlib, tmp_path)
     assert console == []
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed: apt-get install -y chromium")
+@needs("chromium")
 def test_the_browser_check_sees_a_broken_svg_and_console_errors(tmp_path):
     """The check itself can fail: a damaged SVG gives a parser error page, a script a console line."""
     broken, noisy = tmp_path / "broken.svg", tmp_path / "noisy.svg"

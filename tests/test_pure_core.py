@@ -10,6 +10,7 @@ imports — fails here.
 from __future__ import annotations
 
 import ast
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -159,17 +160,52 @@ print("ok")
 """
 
 
+#: BLOCKING_IMPORT of each module alone, in one process: a child forked for each from a parent that has
+#: loaded the dependencies and the blocker and nothing of prc3cfg — what a process of its own would hold,
+#: without an interpreter's start-up a module (40 of them: 18 s of the fast tier, one process each). POSIX's fork: the
+#: fast tier runs on Linux.
+BLOCKING_EACH = BLOCKING_IMPORT.replace("""for name in sys.argv[2:]:
+    importlib.import_module(name)
+print("ok")""", """import json, os, traceback
+said = {}
+for name in sys.argv[2:]:
+    read, write = os.pipe()
+    child = os.fork()
+    if child == 0:
+        os.close(read)
+        try:
+            importlib.import_module(name)
+            message = "ok"
+        except BaseException:
+            message = traceback.format_exc()
+        os.write(write, message.encode())
+        os._exit(0)
+    os.close(write)
+    with os.fdopen(read, "rb") as pipe:
+        said[name] = pipe.read().decode()
+    os.waitpid(child, 0)
+print(json.dumps(said))""")
+
+
 def run(script: str, *modules: str) -> subprocess.CompletedProcess[str]:
-    first = [",".join(third_party_of_core())] if script == BLOCKING_IMPORT else []
+    first = [",".join(third_party_of_core())] if script in (BLOCKING_IMPORT, BLOCKING_EACH) else []
     return subprocess.run(
         [sys.executable, "-c", script, *first, *modules], cwd=ROOT, capture_output=True, text=True, timeout=60
     )
 
 
+@pytest.fixture(scope="module")
+def imported_alone() -> dict[str, str]:
+    """Each core module imported alone behind the blocker: module → "ok" or its traceback."""
+    result = run(BLOCKING_EACH, *CORE)
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout)
+
+
+@pytest.mark.xdist_group("core_imported_alone")  # one worker runs the fixture's one process for all 40
 @pytest.mark.parametrize("module", CORE)
-def test_core_module_imports_without_serial_and_socket(module):
-    result = run(BLOCKING_IMPORT, module)
-    assert result.stdout.strip() == "ok", result.stderr
+def test_core_module_imports_without_serial_and_socket(module, imported_alone):
+    assert imported_alone[module] == "ok"
 
 
 def test_the_whole_core_imports_together():
@@ -184,6 +220,12 @@ def test_the_blocker_blocks(module):
     result = run(BLOCKING_IMPORT, module)
     assert result.returncode != 0
     assert "is blocked: the pure core must not import it" in result.stderr
+
+
+def test_the_blocker_blocks_in_each_forked_child_alone():
+    said = json.loads(run(BLOCKING_EACH, "socketserver", "prc3cfg.core.codec", "serial").stdout)
+    assert "is blocked: the pure core must not import it" in said["socketserver"] and said["prc3cfg.core.codec"] == "ok"
+    assert "is blocked: the pure core must not import it" in said["serial"]  # socketserver's child loaded nothing for the next
 
 
 def api_names_used(path: Path) -> set[str]:

@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import os
 import select
-import shutil
 import signal
 import string
 import subprocess
@@ -24,11 +23,12 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from tools import needs, which
 
 from prc3cfg.shell import serial_lock
 from prc3cfg.shell.locks import device_path, line_keys, line_lock
 
-SOCAT, PICOCOM, MINICOM = shutil.which("socat"), shutil.which("picocom"), shutil.which("minicom")
+SOCAT, PICOCOM, MINICOM = which("socat"), which("picocom"), which("minicom")
 
 
 def prc3cfg(*args: str) -> subprocess.CompletedProcess:
@@ -265,7 +265,7 @@ def test_a_lock_folder_that_is_missing_is_passed_over_in_silence(tmp_path, monke
         os.close(terminal)
 
 
-@pytest.mark.skipif(SOCAT is None or PICOCOM is None, reason="socat and picocom are not installed (.ci/run installs them)")
+@needs("socat", "picocom")
 def test_picocom_holding_the_port_is_named(tmp_path):
     with socat_port(tmp_path / "booth-a") as port, on_a_terminal([PICOCOM, "-b", "9600", port], b"Terminal ready") as picocom:
         refused = {spelling: scan(spelling) for spelling in (port, os.path.realpath(port))}
@@ -278,7 +278,7 @@ def writable_system_lock_dir() -> bool:
     return os.access(serial_lock.SYSTEM_LOCK_DIR, os.W_OK)
 
 
-@pytest.mark.skipif(SOCAT is None or MINICOM is None, reason="socat and minicom are not installed (.ci/run installs them)")
+@needs("socat", "minicom")
 @pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
 def test_minicom_in_the_system_lock_folder_is_honoured_and_its_stale_lock_taken_over(tmp_path, monkeypatch):
     monkeypatch.delenv("PRC3CFG_UUCP_LOCK_DIR")
@@ -342,7 +342,7 @@ def system_lock_folder(monkeypatch, device: str):
                 path.unlink()
 
 
-@pytest.mark.skipif(SOCAT is None or MINICOM is None, reason="socat and minicom are not installed (.ci/run installs them)")
+@needs("socat", "minicom")
 @pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
 def test_minicom_holding_a_nested_device_path_is_named(tmp_path, monkeypatch):
     """minicom on /dev/pts/N writes LCK..pts_N (the path below /dev, / as _), where the UUCP convention
@@ -360,7 +360,7 @@ def test_minicom_holding_a_nested_device_path_is_named(tmp_path, monkeypatch):
         assert f"the serial port {spelling} is in use by minicom (pid {minicom.pid}) — close it and run again" in result.stderr
 
 
-@pytest.mark.skipif(PICOCOM is None or MINICOM is None, reason="picocom and minicom are not installed (.ci/run installs them)")
+@needs("picocom", "minicom")
 @pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
 def test_minicom_and_picocom_refuse_a_device_prc3cfg_holds(monkeypatch):
     """A real `prc3cfg scan` holding /dev/pts/N (nothing answers it; it waits 10 s at each address): minicom

@@ -7,17 +7,16 @@ with `?ign_set_control`, as the README's ser2net configuration says.
 from __future__ import annotations
 
 import contextlib
-import shutil
 import socket
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
 from emulated import run_cli
+from tools import needs, which
 
-SER2NET = shutil.which("ser2net")
+SER2NET = which("ser2net")
 
 
 @contextlib.contextmanager
@@ -78,7 +77,7 @@ def listening(port: int) -> bool:
     return any(row.split()[1] == f"0100007F:{port:04X}" and row.split()[3] == "0A" for row in rows)
 
 
-@pytest.mark.skipif(SER2NET is None, reason="ser2net is not installed (apt-get install -y ser2net)")
+@needs("ser2net")
 def test_rfc2217_through_ser2net_onto_a_device_without_modem_lines(tmp_path, capsys):
     """The README's ser2net 4 configuration, its device a pty (no modem lines, like an RS-422 adapter)."""
     port = free_port()

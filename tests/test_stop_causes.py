@@ -181,7 +181,7 @@ def test_a_fault_a_write_revealed_is_told_by_read_scan_and_plan_until_a_write_is
         assert f"booth-a/booth-a-right is in {fault}" in run_cli(capsys, "plan", plant.path, "--markdown").out
         assert said in run_cli(capsys, "read", plant.path).err
         port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
-        assert said in run_cli(capsys, "scan", "--port", port).err
+        assert said in run_cli(capsys, "scan", "--port", port, "--timeout", "0.1").err  # the emulated plant's: 29 addresses waited out
         emulator.update(2, fault=None)  # cleared on the floor; the next write to it is acknowledged
         text = plant.path.read_text()
         assert "        position: 2.0\n" in text

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from emulated import run_cli
 from typer.testing import CliRunner
 
 import prc3cfg.cli.plant_commands  # noqa: F401  (registers the commands on `app`)
@@ -154,9 +155,19 @@ TAGGED = "plant: demo\nbuses:\n  - name: a\n    port: socket://127.0.0.1:9\n    
     ("gateway", "!!map {receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}", "5:14", "!!map"),
 ])  # fmt: skip
 @pytest.mark.parametrize("command", ["validate", "plan"])
-def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, command: str, key: str, value: str, at: str, tag: str) -> None:
+def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, capsys, command: str, key: str, value: str, at: str, tag: str) -> None:
+    """In this process (the first case also as a command of its own: test_a_tag_is_one_line_of_the_process)."""
     path = tmp_path / "plant.yaml"
     path.write_text(TAGGED.format(key=key, value=value))
+    done = run_cli(capsys, command, path)
+    assert (done.code, done.out) == (1, "")
+    assert done.err == f"error: {path}:{at}: tags are not used in plant files — remove {tag}\n"
+
+
+@pytest.mark.parametrize("command", ["validate", "plan"])
+def test_a_tag_is_one_line_of_the_process(tmp_path: Path, command: str) -> None:
+    path = tmp_path / "plant.yaml"
+    path.write_text(TAGGED.format(key="timeout", value="!!bool x"))
     done = subprocess.run([sys.executable, "-m", "prc3cfg", command, str(path)], capture_output=True, text=True, cwd=tmp_path)
     assert (done.returncode, done.stdout) == (1, "")
-    assert done.stderr == f"error: {path}:{at}: tags are not used in plant files — remove {tag}\n"
+    assert done.stderr == f"error: {path}:5:14: tags are not used in plant files — remove !!bool\n"

@@ -11,18 +11,18 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
+from tools import needs, which
 
 from prc3cfg.plant import PlantError
 from prc3cfg.shell.plant_files import load_plant
 
 SCHEMA = Path(__file__).parents[2] / "schemas" / "plant.schema.json"
-SERVER = shutil.which("yaml-language-server")
-pytestmark = pytest.mark.skipif(SERVER is None, reason="yaml-language-server is not installed (npm install -g yaml-language-server)")
+SERVER = which("yaml-language-server")
+pytestmark = needs("yaml-language-server")
 
 PLANT = f"""\
 # yaml-language-server: $schema={SCHEMA}
