@@ -56,19 +56,38 @@ def one_device_two_ports(tmp_path: Path) -> Iterator[tuple[str, str]]:
                 with contextlib.suppress(subprocess.TimeoutExpired):
                     ser2net.wait(0.01)
                 assert ser2net.returncode is None, ser2net.stdout.read()
-            yield f"socket://127.0.0.1:{raw}", f"rfc2217://127.0.0.1:{telnet}?ign_set_control"
+            urls = (f"socket://127.0.0.1:{raw}", f"rfc2217://127.0.0.1:{telnet}?ign_set_control")
+            SERVING[urls] = (ser2net.pid, os.path.realpath(pty))
+            yield urls
         finally:
+            SERVING.pop(urls, None)
             ser2net.terminate()
             ser2net.wait()
             ser2net.stdout.close()
 
 
+#: The ser2net serving each pair of ports (`one_device_two_ports`): its pid and the device it opens for a connection.
+SERVING: dict[tuple[str, ...], tuple[int, str]] = {}
+
+
+def holds(pid: int, device: str) -> bool:
+    """Whether process `pid` has `device` open, as /proc says."""
+    fds = Path(f"/proc/{pid}/fd")
+    with contextlib.suppress(OSError):
+        return any(os.path.realpath(fd) == device for fd in fds.iterdir())
+    return False
+
+
 def let_go(*urls: str) -> None:
-    """Until ser2net has closed every connection to these ports, as the kernel's socket table says: a
-    connection it is still closing may hold the device open and take the next one's replies."""
+    """Until ser2net has closed every connection to these ports, as the kernel's socket table says, and the
+    device behind them, as /proc says: a connection it is still closing may hold the device open and take
+    the next one's replies, and one accepted while it still holds it is dropped (a broken pipe)."""
     ports = {f"0100007F:{int(url.rpartition(':')[2].partition('?')[0]):04X}" for url in urls}
     while any(row.split()[1] in ports and row.split()[3] != "0A" for row in Path("/proc/net/tcp").read_text().splitlines()[1:]):
         os.sched_yield()
+    if (serving := SERVING.get(urls)) is not None:
+        while holds(*serving):
+            os.sched_yield()
 
 
 def through(capsys: pytest.CaptureFixture, ports: tuple[str, str], *args: object) -> Result:
