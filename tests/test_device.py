@@ -752,7 +752,7 @@ def test_52h_five_programs_is_15():
     assert send(STOP, "5200 0105").reply == h("0F00")
 
 
-# -- the state-file entry (interfaces.md §3) -------------------------------------------------------
+# -- the state-file entry (docs/files.md "Emulator state") -------------------------------------------------------
 
 STATE_FILE_CASES = [
     case("factory", ModuleState.factory(1)),

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 from emulated import emulated_plant, run_cli
@@ -168,10 +170,74 @@ def test_the_readme_points_at_docs_and_at_no_folder_outside_the_repository():
             assert (DOCS / target).is_file(), f"{document.name} → {target}"
 
 
-def test_the_readme_names_everything_the_api_exports():
-    """`api.__all__` is what users' scripts call: the README's Python API names each of it."""
+def test_the_api_doc_names_everything_the_api_exports():
+    """`api.__all__` is what users' scripts call: docs/api.md's Python API names each of it."""
     from prc3cfg import api
 
-    readme = (ROOT / "README.md").read_text()
-    text = readme[readme.index("\n## Python API") : readme.index("\n## ", readme.index("\n## Python API") + 1)]
+    text = section("api.md", "Python API")
     assert api.__all__ and [name for name in api.__all__ if not re.search(rf"\b{name}\b", text)] == []
+
+
+# -- the README: what a newcomer reads first ----------------------------------------------------------
+
+README_MOST = 12 * 1024  # bytes: the first screen, the two commands, the day's workflow; the rest is in docs/
+VENV = {"sh": "python3 -m venv .venv && . .venv/bin/activate && ", "powershell": "py -m venv .venv; .venv\\Scripts\\Activate.ps1; "}
+
+
+def readme_commands(language: str) -> list[str]:
+    """The README's two commands in `language` (sh: Linux and macOS; powershell: Windows), from "## Two commands"."""
+    readme = (ROOT / "README.md").read_text()
+    start = readme.index("\n## Two commands")
+    block = re.search(rf"```{language}\n(.*?)```", readme[start : readme.index("\n## ", start + 1)], re.S)
+    assert block, language
+    return block.group(1).strip().splitlines()
+
+
+def test_the_readme_fits_in_twelve_kilobytes():
+    assert len((ROOT / "README.md").read_bytes()) <= README_MOST
+
+
+def test_the_readme_s_two_commands_make_a_venv_then_run_the_demo_and_the_tests_and_ci_runs_the_second_verbatim():
+    """Plain Debian has no `python` and refuses `pip install` outside a venv (PEP 668): each command makes and
+    enters one first. Windows' are the same commands in PowerShell 5.1's words (`;` for `&&`)."""
+    demo, tests = readme_commands("sh")
+    assert demo.startswith(VENV["sh"] + "python -m pip install . && prc3cfg plan plants/demo-line.yaml && prc3cfg apply ")
+    assert tests == VENV["sh"] + "python -m pip install -e '.[test]' && python -m pytest"
+    as_powershell = [VENV["powershell"] + command.removeprefix(VENV["sh"]).replace(" && ", "; ") for command in (demo, tests)]
+    assert readme_commands("powershell") == as_powershell
+    assert f"time {{ {tests}; }}" in (ROOT / ".ci" / "run").read_text().splitlines()  # timed: test_test_shape
+
+
+def test_the_readme_s_demo_command_plans_and_applies_as_written(tmp_path):
+    """What follows the install in the README's first command, run by bash in a copy of plants/ with this tree's
+    prc3cfg (the install itself, on Debian's own Python, is tests/test_install.py's, in the soak tier)."""
+    shutil.copytree(ROOT / "plants", tmp_path / "plants", ignore=shutil.ignore_patterns(".prc3cfg"))
+    shutil.copytree(ROOT / "schemas", tmp_path / "schemas")
+    demo = readme_commands("sh")[0].removeprefix(VENV["sh"]).split(" && ", 1)[1]
+    done = subprocess.run(["bash", "-ec", demo], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "Apply complete: 6 modules written and verified." in done.stdout and "Traceback" not in done.stderr
+
+
+def test_the_readme_links_into_docs_for_everything_else():
+    readme = (ROOT / "README.md").read_text()
+    linked = set(re.findall(r"\]\((docs/[^)#]+)", readme))
+    wanted = ["commands", "plant-files", "files", "safety", "security", "windows", "ci", "api", "testing"]
+    assert {f"docs/{name}.md" for name in wanted} <= linked
+
+
+def test_no_text_cites_a_specification_the_repository_does_not_have():
+    """The design's contract of files and commands (interfaces) is not in the repository: docs/ says it to a user."""
+    texts = [*(ROOT / "prc3cfg").rglob("*.py"), *(ROOT / "tests").rglob("*.py"), *DOCS.glob("*.md"), ROOT / "README.md"]
+    cited = [path.relative_to(ROOT) for path in texts if "interfaces" + ".md" in path.read_text()]
+    assert cited == []
+
+
+def test_every_command_the_readme_names_is_one_prc3cfg_has(capsys):
+    """A command renamed or removed takes the README's line with it: each `prc3cfg COMMAND` there answers --help."""
+    readme = (ROOT / "README.md").read_text()
+    named = set(re.findall(r"(?:^|`|&& |; )prc3cfg ((?:records |emulator )?[a-z-]+)", readme, re.M))
+    assert {"import", "validate", "plan", "apply", "adopt", "records list", "restore", "doctor"} <= named
+    for command in sorted(named):
+        helped = run_cli(capsys, *command.split(), "--help")
+        assert helped.code == 0 and "Usage" in helped.out, (command, helped)

@@ -97,8 +97,8 @@ def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_a
 
 def test_the_recipes_replan_reads_in_full():
     """The job that plans main's plant file against the modules now takes nothing from the record."""
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    job = readme[readme.index("  replan:"):readme.index("  apply:", readme.index("  replan:"))]
+    recipe = (Path(__file__).resolve().parents[1] / "docs" / "ci.md").read_text()
+    job = recipe[recipe.index("  replan:"):recipe.index("  apply:", recipe.index("  replan:"))]
     plan = next(line for line in job.splitlines() if "/bin/prc3cfg\" plan" in line)
     assert "--full-read" in plan
 

@@ -1,27 +1,20 @@
-"""The README's set-up on Debian's own Python, as a newcomer runs it: the venv line (PEP 668 refuses
-`pip install` outside one), then the first command — install, plan, apply against the embedded
+"""The README's first command on Debian's own Python, as a newcomer runs it: a virtual environment (PEP 668
+refuses `pip install` outside one; plain Debian has no `python`), install, plan, apply against the embedded
 emulator — in a copy of this tree, the dependencies from the package index. Soak tier: it installs
 from the network, about a minute."""
 
 from __future__ import annotations
 
 import os
-import re
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
+from test_docs import readme_commands
 
 ROOT = Path(__file__).resolve().parents[1]
 DEBIAN_PYTHON = Path("/usr/bin/python3")
-
-
-def block_after(text: str, words: str, language: str) -> str:
-    """The first ```language block of the README after `words`."""
-    found = re.search(re.escape(words) + r".*?```" + language + r"\n(.*?)```", text, re.S)
-    assert found, words
-    return found.group(1).strip()
 
 
 @pytest.mark.soak
@@ -29,15 +22,13 @@ def block_after(text: str, words: str, language: str) -> str:
 def test_the_readme_s_setup_on_debian_s_own_python_installs_plans_and_applies(tmp_path):
     if subprocess.run([DEBIAN_PYTHON, "-c", "import ensurepip, venv"], capture_output=True).returncode != 0:
         pytest.skip("Debian's Python without python3-venv (apt install python3-venv)")
-    readme = (ROOT / "README.md").read_text()
-    venv_line = block_after(readme, "On **Debian** and Ubuntu", "sh")
-    first = block_after(readme, "## Try it", "sh")
-    assert venv_line.startswith("python3 -m venv .venv") and first.startswith("python -m pip install . &&")
+    first = readme_commands("sh")[0]
+    assert first.startswith("python3 -m venv .venv && . .venv/bin/activate && python -m pip install . &&")
     tree = tmp_path / "prc3cfg"
     shutil.copytree(ROOT, tree, ignore=shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.egg-info", ".prc3cfg", "build", ".*_cache"))
     env = {key: value for key, value in os.environ.items() if not key.startswith(("PYTHON", "VIRTUAL_ENV", "PYENV"))}
     env["PATH"] = "/usr/bin:/bin"  # Debian's python3 first: not this test's interpreter, not pyenv's shims
-    done = subprocess.run(["bash", "-ec", f"{venv_line}\n{first}"], cwd=tree, env=env, capture_output=True, text=True, timeout=900)
+    done = subprocess.run(["bash", "-ec", first], cwd=tree, env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert "Apply complete: 6 modules written and verified." in done.stdout
     assert (tree / ".venv" / "bin" / "prc3cfg").exists() and "Traceback" not in done.stderr

@@ -200,7 +200,7 @@ def test_an_interruption_python_wraps_while_a_class_is_made_is_still_an_interrup
 @pytest.mark.parametrize("point", STARTS)
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_while_starting_is_one_line_and_exit_130(tmp_path, signum, point):
-    """Before Python runs prc3cfg's first line, a signal ends it as Python's default does (README) —
+    """Before Python runs prc3cfg's first line, a signal ends it as Python's default does (docs/commands.md) —
     not tested: no process says when that is. From then on, one line and exit 130; the emulator,
     once it said "listening on", stops as it does at any time then (exit 0)."""
     module, *args = STARTS[point]

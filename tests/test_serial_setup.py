@@ -1,7 +1,7 @@
 """Serial setup that works the first time: a pseudo-terminal from `emulator serve --pty` is
 scanned, imported and planned with the defaults; a hint is written in the syntax of the place it
 is read; and `rfc2217://` through a real ser2net onto a device without modem lines (a pty) works
-with `?ign_set_control`, as the README's ser2net configuration says.
+with `?ign_set_control`, as docs/plant-files.md's ser2net configuration says.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def listening(port: int) -> bool:
 
 @needs("ser2net")
 def test_rfc2217_through_ser2net_onto_a_device_without_modem_lines(tmp_path, capsys):
-    """The README's ser2net 4 configuration, its device a pty (no modem lines, like an RS-422 adapter)."""
+    """docs/plant-files.md's ser2net 4 configuration, its device a pty (no modem lines, like an RS-422 adapter)."""
     port = free_port()
     with served_pty() as pty:
         config = tmp_path / "ser2net.yaml"

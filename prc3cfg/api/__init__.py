@@ -9,8 +9,9 @@
     result = api.apply(plant, gates=api.Gates(allow_axis_release=True))
     assert result.verified and not api.plan(plant).changes
     print("travel to reference point:", [run.name for run in result.released])
+    api.told(result)                                # shown: the records of those releases go
 
-(a test runs this example, and the README's, against emulated buses.)
+(a test runs this example, and docs/api.md's, against emulated buses.)
 
 Each function returns values — a `Plant`, module images, a `PlantPlan`, an `ApplyResult` —
 and raises a `UserError` subclass whose `str()` is one line saying what is wrong and what to

@@ -210,7 +210,7 @@ def doctor(
     modules: Annotated[str | None, typer.Option(callback=addresses_option, metavar="ADDRESSES", help="Addresses to probe, e.g. 1,3-5 (default 1..30).")] = None,
     exchanges: Annotated[int, typer.Option(min=1, max=1000, metavar="N", help="Timed exchanges with each module that answers.")] = 10,
     allow_unchecked_probes: Annotated[bool, typer.Option("--allow-unchecked-probes",
-                                                         help="Probe in framings without a checksum (open-driver) without asking (see README).")] = False,
+                                                         help="Probe in framings without a checksum (open-driver) without asking (see docs/commands.md).")] = False,
     lock_timeout: LockOpt = 0.0,
 ) -> None:
     """Which framing, baud and parity a line speaks, and each module's turnaround, measured."""

@@ -1,4 +1,4 @@
-"""`prc3cfg emulator serve`: run a bus emulator until SIGINT/SIGTERM (interfaces.md §5) — made and
+"""`prc3cfg emulator serve`: run a bus emulator until SIGINT/SIGTERM (docs/commands.md) — made and
 served by the API (`prc3cfg.api.emulator`); here, its options and what it prints."""
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ there is never a second, slightly different copy of these rules.
 Owns: the operating state (mode, active program, fault, referenced), the checks 6–9 of
 §4.5 in their order (checks 1–5 are decoding, `prc3cfg.core.codec.decode_message`), atomic
 rejection, defaults, clamping after 10h/20h, axis release, and the state-file entry of a
-module (interfaces.md §3). Does not own bytes on a line (`prc3cfg.core.framing`) or the bus
+module (docs/files.md "Emulator state"). Does not own bytes on a line (`prc3cfg.core.framing`) or the bus
 (`prc3cfg.shell.emulator`). Pure: no I/O; a state is an immutable value and every message gives
 a new one.
 """

@@ -2,7 +2,7 @@
 
 Owns the value types shared by the codec, the device model, plant files, read-back and the
 planner, their factory defaults (prc3-protocol.md §4.1) and the module image JSON
-(interfaces.md §2), which the dataclasses' own fields check as it is read (pydantic,
+(docs/files.md "Module image"), which the dataclasses' own fields check as it is read (pydantic,
 `images_from_json`). Owns no behaviour of a module: what a module *does* with a message is
 `prc3cfg.core.device`. Pure: no I/O.
 """
@@ -99,7 +99,7 @@ def default_program(system: SystemParameters) -> Program:
 
 @dataclass(frozen=True, slots=True)
 class ModuleImage:
-    """A module's contents (interfaces.md §2): S9 as `address`, system parameters, 64 programs.
+    """A module's contents (docs/files.md "Module image"): S9 as `address`, system parameters, 64 programs.
 
     `programs[i]` is program i + 1; `None` marks a program that was not read (or, in a
     desired image, is not managed).
@@ -147,7 +147,7 @@ class ModuleImage:
 
     @classmethod
     def from_json(cls, data: Any) -> ModuleImage:
-        """The image a JSON object holds (interfaces.md §2); ValueError saying where and what in words."""
+        """The image a JSON object holds (docs/files.md "Module image"); ValueError saying where and what in words."""
         try:
             return _IMAGES.validate_python([data])[0]
         except ValidationError as error:

@@ -1,4 +1,4 @@
-"""The plan file `prc3cfg-plan/1` (interfaces.md §4): written, read back, checked, shown and proved.
+"""The plan file `prc3cfg-plan/1` (docs/files.md "Plan file"): written, read back, checked, shown and proved.
 
 Owns the format, its writer beside its reader (as Terraform keeps its planfile's): a plan's data as
 the file holds it (`to_json`: per bus, per module, the steps as sent, the hashes they were planned

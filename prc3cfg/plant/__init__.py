@@ -2,7 +2,7 @@
 
     from prc3cfg.plant import parse_plant, PlantError, Plant, Bus, Module
 
-`parse_plant(path, data)` reads the bytes `data` of the plant file `path` (interfaces.md §1)
+`parse_plant(path, data)` reads the bytes `data` of the plant file `path` (docs/plant-files.md)
 and returns a `Plant`, or raises `PlantError` listing every problem as `file:line:column: what
 is wrong — what would be right`. Pure: the shell reads the file (`prc3cfg.shell.plant_files`).
 The parts: `models` (the file's structure and the JSON Schema), `document` (YAML with

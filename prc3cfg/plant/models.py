@@ -1,4 +1,4 @@
-"""The plant file as written (interfaces.md §1): pydantic models, their ranges, their JSON Schema.
+"""The plant file as written (docs/plant-files.md): pydantic models, their ranges, their JSON Schema.
 
 Owns the structure of a plant file and every rule about one value on its own: key names, types, ranges in human
 units (from `units.QUANTITIES`), whole device units, and the draft-07 schema generated from these models

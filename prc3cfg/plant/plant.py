@@ -2,7 +2,7 @@
 
 What the rest of prc3cfg uses: a bus's port, framing, line settings and times; a module's
 address, name, the programs the plant manages, and its desired `ModuleImage` in device
-units (interfaces.md §2), converted once and kept. A `Module` also keeps its effective settings
+units (docs/files.md "Module image"), converted once and kept. A `Module` also keeps its effective settings
 with their sources (`profiles.Effective`) for `prc3cfg show`. Built only by `loader.parse_plant`,
 after every rule passed — so converting to device units cannot fail here.
 """

@@ -1,4 +1,4 @@
-"""The offline rules that span more than one value (interfaces.md §1, prc3-protocol.md §4.5).
+"""The offline rules that span more than one value (docs/plant-files.md, prc3-protocol.md §4.5).
 
 On a module's effective settings (after profiles):
 - every listed program has a position and a speed (given in the module or a profile);

@@ -29,7 +29,7 @@ from prc3cfg.plant.models import FunctionOutputSpec, ProgramSpec, SystemSpec
 from prc3cfg.plant.problems import Path_
 from prc3cfg.plant.scalars import DECIMAL_NUMBER, core_schema
 
-#: The order keys are written in where a key is added: a module's own keys as the README's
+#: The order keys are written in where a key is added: a module's own keys as docs/plant-files.md's
 #: plant files write them, then the models' order of system, program and F1/F2 keys.
 KEY_ORDER = ("address", "name", "profiles", "unmanaged_programs", "system", "programs", "chains",
              *SystemSpec.model_fields, *ProgramSpec.model_fields, *FunctionOutputSpec.model_fields)  # fmt: skip

@@ -216,7 +216,7 @@ def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
     Checked as late as can be: once `text` is on disk, the file is linked to a second name and
     compared, then the new file renamed over it, then the file it replaced compared once more through
     that name — a save in place that came between the two puts that file back. What this cannot see
-    (README, adopt): a save that renames its own file into place between the first comparison and the
+    (docs/commands.md, adopt): a save that renames its own file into place between the first comparison and the
     rename, and one that keeps writing into the file it opened before the rename after the second.
     """
     tmp = _written_beside(path, text, stat.S_IMODE(os.stat(path).st_mode))

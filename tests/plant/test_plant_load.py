@@ -111,7 +111,7 @@ def test_coating_line_has_thirty_modules_on_two_buses() -> None:
 
 
 def test_the_contract_example(tmp_path: Path) -> None:
-    """interfaces.md §1, with programs 10..12 listed (its chain names them); 1 is manual example 21h."""
+    """The design's example plant file, with programs 10..12 listed (its chain names them); 1 is manual example 21h."""
     plant = load_text(tmp_path, """\
         plant: coating-line-1
         buses:

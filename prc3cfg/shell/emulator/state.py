@@ -1,4 +1,4 @@
-"""Where an emulator keeps its modules: the state file `prc3-emulator/1` (interfaces.md §3)
+"""Where an emulator keeps its modules: the state file `prc3-emulator/1` (docs/files.md "Emulator state")
 and, while it runs, the journal beside it.
 
 The state file is the contract other programs read. It is written whole, atomically
@@ -16,7 +16,7 @@ answered — microseconds of CPU and one disk flush:
 
 The bond between the two is an identifier inside the state file, not its bytes: every save
 gives the state file a new `"generation"` (a random hex string) and names the one it
-replaces, `"replaces"` — extension keys of interfaces.md §3's file — so a state file that
+replaces, `"replaces"` — extension keys of the file docs/files.md describes ("Emulator state") — so a state file that
 was reformatted, pretty-printed or given a byte-order mark or a final newline still bonds
 with its journal (CRLF line ends and a byte-order mark in the journal, blank lines and a
 last line cut by a kill — never acknowledged — are read past too).
@@ -54,7 +54,7 @@ because no message can carry it: each system parameter and program field must be
 number within the device's range for its kind (`prc3cfg.core.device.widest_range`; P within
 0..9999 and V within 1..600, the widest S1, S4 and S5 allow — all well inside a 16-bit
 data word), the address S9 within 1..30, a program list of exactly 64, `mode`, `fault`,
-`active_program` and `referenced` as interfaces.md §3 lists them. Relations between
+`active_program` and `referenced` as docs/files.md lists them ("Emulator state"). Relations between
 values are not checked: a real module can hold a position above its S1 after a Teach In.
 A journal line that is not an address and a message is refused with its line number.
 """

@@ -138,7 +138,7 @@ class EmulatorQuery:
     seed: int | None = None
 
 
-#: The keys of an `emulator://` query, as the README and the refusal of any other key say them.
+#: The keys of an `emulator://` query, as docs/plant-files.md and the refusal of any other key say them.
 EMULATOR_KEYS = "line-speed=BAUD, turnaround=S, module-turnaround=ADDRESS:S, jitter=S, seed=N"
 
 
