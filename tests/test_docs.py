@@ -169,8 +169,9 @@ def test_the_readme_points_at_docs_and_at_no_folder_outside_the_repository():
         assert (ROOT / target).is_file(), target
     assert {"docs/protocol.md", "docs/line.md", "docs/files.md"} <= set(re.findall(r"\]\((docs/[^)#]+)", readme))
     for document in DOCS.glob("*.md"):
-        for target in re.findall(r"\]\(([a-z]+\.md)\)", document.read_text()):
+        for target in re.findall(r"\]\(([a-z-]+\.md)\)", document.read_text()):
             assert (DOCS / target).is_file(), f"{document.name} → {target}"
+        assert "](docs/" not in document.read_text(), f"{document.name}: a link in docs/ is relative to docs/"
 
 
 def test_the_api_doc_names_everything_the_api_exports():
