@@ -10,12 +10,15 @@ specification a user of the repository does not have.
 from __future__ import annotations
 
 import json
+import random
 import re
 import shutil
 import subprocess
 from pathlib import Path
 
+import pytest
 from emulated import emulated_plant, run_cli
+from emulator_client import serve
 from test_broadcast import declared as declared_line
 from test_broadcast import full_line
 
@@ -166,8 +169,9 @@ def test_the_readme_points_at_docs_and_at_no_folder_outside_the_repository():
         assert (ROOT / target).is_file(), target
     assert {"docs/protocol.md", "docs/line.md", "docs/files.md"} <= set(re.findall(r"\]\((docs/[^)#]+)", readme))
     for document in DOCS.glob("*.md"):
-        for target in re.findall(r"\]\(([a-z]+\.md)\)", document.read_text()):
+        for target in re.findall(r"\]\(([a-z-]+\.md)\)", document.read_text()):
             assert (DOCS / target).is_file(), f"{document.name} → {target}"
+        assert "](docs/" not in document.read_text(), f"{document.name}: a link in docs/ is relative to docs/"
 
 
 def test_the_api_doc_names_everything_the_api_exports():
@@ -241,3 +245,69 @@ def test_every_command_the_readme_names_is_one_prc3cfg_has(capsys):
     for command in sorted(named):
         helped = run_cli(capsys, *command.split(), "--help")
         assert helped.code == 0 and "Usage" in helped.out, (command, helped)
+
+
+#: What a script adds to the README's day where a person would answer at a terminal, and what keeps it short.
+ADDED = {"import": " --modules 1-3", "apply": " --auto-approve --allow-axis-release", "adopt": " --auto-approve",
+         "restore": " --auto-approve --allow-axis-release"}  # fmt: skip
+
+
+def the_day() -> list[str]:
+    """The command lines of the README's "A day with prc3cfg", comments left out, in their order."""
+    readme = (ROOT / "README.md").read_text()
+    block = re.search(r"## A day with prc3cfg\n.*?```sh\n(.*?)```", readme, re.S)
+    assert block
+    return [line.split("  #", 1)[0].strip() for line in block.group(1).splitlines() if line.strip()]
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("seed", range(3))
+def test_the_readme_s_day_runs_line_by_line_on_an_emulated_line(tmp_path, seed):
+    """Each line of the README's day, by bash in its order, with `emulator serve` (three modules) in place of
+    /dev/ttyUSB0 and only what `ADDED` says added: after `import` a seeded change of one module's program is
+    written into the plant file (so there is a plan to apply), and before the drift line another plant file
+    teaches the module another position (so there is drift to adopt); the restore takes the apply's snapshot."""
+    rng = random.Random(seed)
+    address, program = rng.randint(1, 3), rng.randint(1, 64)
+    planned, taught = rng.sample(range(60, 400), 2)  # mm, within the factory S2..S1
+    day = the_day()
+    assert [line.split()[1] for line in day] == ["import", "validate", "plan", "apply", "plan", "adopt", "records", "restore"]
+    with serve(tmp_path, "--modules", "1-3", "--state", str(tmp_path / "state.json")) as served:
+        url = f"socket://127.0.0.1:{served.port}"
+
+        def run(line: str) -> subprocess.CompletedProcess:
+            command = line.split()[1]
+            line = line.replace("/dev/ttyUSB0", url).replace("SNAPSHOT.json", snapshot()) if "restore" in line else line.replace("/dev/ttyUSB0", url)
+            head, redirect = (line.split(" > ", 1) + [""])[:2]
+            line = head + ADDED.get(command, "") + (f" > {redirect}" if redirect else "")
+            done = subprocess.run(["bash", "-ec", line], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+            assert done.returncode == 0 and "Traceback" not in done.stderr, (line, done.stdout[-2000:], done.stderr[-2000:])
+            return done
+
+        def snapshot() -> str:
+            (found, *_) = sorted((tmp_path / ".prc3cfg" / "snapshots").glob("*.json"))
+            return found.name
+
+        def plant_with(position: int) -> str:
+            module = f"{{address: {address}, name: bus-1-{address}, profiles: [common]}}"
+            assert module in imported, imported
+            return imported.replace(module, module[:-1] + f", programs: {{{program}: {{position: {position / 1000:.3f}, speed: 0.050}}}}}}")
+
+        run(day[0])
+        imported = (tmp_path / "plant.yaml").read_text()
+        (tmp_path / "plant.yaml").write_text(plant_with(planned))
+        for line in day[1:4]:
+            run(line)
+        (tmp_path / "teach").mkdir()
+        (tmp_path / "teach" / "plant.yaml").write_text(plant_with(taught))
+        run(f"prc3cfg apply teach/plant.yaml{ADDED['apply']}")  # a hand on the floor
+        drift = run(day[4])
+        assert f"{taught / 1000:.3f}" in drift.stdout, drift.stdout
+        run(day[5])
+        assert f"position: {taught / 1000:.3f}" in (tmp_path / "plant.yaml").read_text()
+        assert run("prc3cfg plan plant.yaml --detailed-exitcode").returncode == 0
+        listed = run(day[6])
+        assert listed.stdout.count("apply") >= 1 and "adopt" in listed.stdout, listed.stdout
+        run(day[7])  # back to the modules as the apply found them (factory defaults): the adopted file has a change again
+        again = subprocess.run(["prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=tmp_path, capture_output=True, text=True)
+        assert again.returncode == 2 and f"bus-1-{address}" in again.stdout, again.stdout + again.stderr
