@@ -16,6 +16,7 @@ the locks and the links themselves (`prc3cfg.shell.locks`, `prc3cfg.shell.link`)
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import os
 import threading
@@ -111,8 +112,15 @@ def _listed() -> list[list[str]]:
 
 
 def machine_lines() -> list[frozenset[str]]:
-    """Each line `PORTS_VARIABLE` lists, as the identities of all its spellings (`line_keys`)."""
-    return [frozenset(key for port in line if not port.startswith(EMULATOR_SCHEME) for key in line_keys(port)) for line in _listed()]
+    """Each line `PORTS_VARIABLE` lists, as the identities of all its spellings (`line_keys`) — worked out once
+    a process for each value of the variable: a command asks for a bus's identities several times, and a host
+    name among the spellings would be resolved on every one."""
+    return list(_identities(tuple(tuple(line) for line in _listed())))
+
+
+@functools.lru_cache(maxsize=4)
+def _identities(lines: tuple[tuple[str, ...], ...]) -> tuple[frozenset[str], ...]:
+    return tuple(frozenset(key for port in line if not port.startswith(EMULATOR_SCHEME) for key in line_keys(port)) for line in lines)
 
 
 def refuse_other_lines(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
