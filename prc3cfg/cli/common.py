@@ -14,7 +14,7 @@ import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from decimal import Decimal
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, TextIO
 
 import typer
 
@@ -336,11 +336,16 @@ YES, NO = ("y", "yes"), ("n", "no", "")
 TYPED_YES = "yes"
 
 
-def to_the_terminal(text: str) -> None:
-    """`text` written to the terminal answers come from (stdin's), beside stdout in a file: a question's subject."""
+def _answering_terminal() -> TextIO:
+    """The terminal answers come from (stdin's), opened to write to — not stdout, which may be a file."""
     from prc3cfg.api import terminal_path
 
-    with open_text(terminal_path(sys.stdin.fileno())) as terminal:
+    return open_text(terminal_path(sys.stdin.fileno()))
+
+
+def to_the_terminal(text: str) -> None:
+    """`text` written to the terminal answers come from, beside stdout in a file: a question's subject."""
+    with _answering_terminal() as terminal:
         terminal.write(text + "\n")
 
 
@@ -355,9 +360,7 @@ def ask(question: str, options: LineOptions | None = None, *, typed: bool = Fals
         options.progress.stop()
     sys.stdout.flush()
     sys.stderr.flush()
-    from prc3cfg.api import terminal_path
-
-    with open_text(terminal_path(sys.stdin.fileno())) as terminal:
+    with _answering_terminal() as terminal:
         if typed:
             terminal.write(f"{question} Only '{TYPED_YES}' will be accepted: ")
             terminal.flush()
