@@ -6,9 +6,9 @@ consecutive programs (33h, or 32h for one), one field of many programs (40h..45h
 and unlink ranges (30h/31h) and jump addresses (46h). The values written are always the
 desired ones. Program sets are bit masks over indices 0..63.
 
-Order of the messages: inits before the system step, the system step, inits after it,
-link/unlink ranges, 21h, 33h/32h, 40h..45h, 46h; within a kind by program number. Each
-later kind may overwrite what an earlier one left (a 21h after a link range, a 46h after
+Order of the messages: inits before the system step (over programs initialised again after
+it, where that saves: `init_runs`), the system step, inits after it, link/unlink ranges,
+21h, 33h/32h, 40h..45h, 46h; within a kind by program number. Each later kind may overwrite what an earlier one left (a 21h after a link range, a 46h after
 it), never the other way round.
 
 Owns turning decisions into messages. Does not own choosing them (`prc3cfg.core.planner.optimise`).
@@ -48,6 +48,25 @@ def runs_of(kinds: tuple[int, ...], kind: int) -> list[tuple[int, int]]:
     return runs
 
 
+def init_runs(kinds: tuple[int, ...], kind: int) -> list[tuple[int, int]]:
+    """The runs (first, last index) the init messages of `kind` cover. An INIT_BEFORE run also
+    covers the INIT_AFTER programs between it and the next one, or up to program 64: they are
+    initialised again after the system step, and one message instead of two, or a 13h instead of a
+    14h, is cheaper (whatever the framing stuffs: one byte less or a whole message less)."""
+    runs = runs_of(kinds, kind)
+    if kind != INIT_BEFORE or not runs:
+        return runs
+    joined = [runs[0]]
+    for first, last in runs[1:]:
+        if all(k == INIT_AFTER for k in kinds[joined[-1][1] + 1 : first]):
+            joined[-1] = (joined[-1][0], last)
+        else:
+            joined.append((first, last))
+    if all(k == INIT_AFTER for k in kinds[joined[-1][1] + 1 :]):
+        joined[-1] = (joined[-1][0], PROGRAM_COUNT - 1)
+    return joined
+
+
 def init_message(first: int, last: int) -> codec.Message:
     """The cheapest init of programs first..last (indices): 11h, 12h, 13h or 14h."""
     if first == last:
@@ -78,10 +97,10 @@ class Layout:
     def messages(self, problem: PlanningProblem) -> list[codec.Message]:
         desired = problem.desired.known  # the programs written are managed: known
         w = self.writes
-        out = [init_message(a, b) for a, b in runs_of(self.kinds, INIT_BEFORE)]
+        out = [init_message(a, b) for a, b in init_runs(self.kinds, INIT_BEFORE)]
         if problem.system_step is not None:
             out.append(problem.system_step)
-        out += [init_message(a, b) for a, b in runs_of(self.kinds, INIT_AFTER)]
+        out += [init_message(a, b) for a, b in init_runs(self.kinds, INIT_AFTER)]
         out += [
             (codec.LinkPrograms if link else codec.UnlinkPrograms)(first + 1, last + 1)
             for link, first, last in w.ranges

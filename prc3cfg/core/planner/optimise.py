@@ -88,7 +88,7 @@ from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
-from prc3cfg.core.planner.layout import Layout, Writes, members, runs_of
+from prc3cfg.core.planner.layout import Layout, Writes, init_runs, members, runs_of
 from prc3cfg.core.planner.pricing import Prices
 from prc3cfg.core.planner.problem import (
     A_BIT,
@@ -1289,7 +1289,7 @@ def init_cost(problem: PlanningProblem, kinds: Kinds) -> float:
     prices = problem.prices
     total = 0.0
     for kind in problem.kinds[1:]:
-        for first, last in runs_of(kinds, kind):
+        for first, last in init_runs(kinds, kind):
             total += prices.init if first == last or last == PROGRAM_COUNT - 1 else prices.init_range
     return total
 
