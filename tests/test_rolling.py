@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
-from prc3cfg.api._plan import record
+from prc3cfg.api._plan import line_records, record
 from prc3cfg.core import what_to_read
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.shell.testing import EmulatedPlant
@@ -113,7 +113,7 @@ def windows(plant: EmulatedPlant, bus: str) -> int:
     """W of `bus`: its modules' windows of four programs that hold a program the plant file manages or the
     record holds — the bound on the plans that find a change is ⌈W / 8⌉."""
     plant_ = api.load(plant.path)
-    known = record(plant_, plant_.buses)
+    known = record(line_records(plant_, plant_.buses))
     count = 0
     for b, m in plant_.modules():
         if b.name == bus:
@@ -125,7 +125,7 @@ def windows(plant: EmulatedPlant, bus: str) -> int:
 def newest(plant: EmulatedPlant, bus: str) -> tuple[str, int]:
     """The name and address of `bus`'s module whose record is the newest (ties: the highest address): its programs roll last."""
     plant_ = api.load(plant.path)
-    known = record(plant_, plant_.buses)
+    known = record(line_records(plant_, plant_.buses))
     module = max((m for b, m in plant_.modules() if b.name == bus), key=lambda m: (known[(bus, m.address)].since, m.address))
     return module.name, module.address
 
@@ -198,7 +198,7 @@ def oldest_words(plant: EmulatedPlant, whose: bool = True) -> str:
     """The oldest value the next plan takes from the record, in its words: of the modules whose programs it
     takes (not those it reads, rolled ones included), the one with the oldest record."""
     plant_ = api.load(plant.path)
-    known = record(plant_, plant_.buses)
+    known = record(line_records(plant_, plant_.buses))
     names = {(b.name, m.address): m.name for b, m in plant_.modules()}
     read = read_next(plant.path)
     taken = {(b.name, m.address) for b, m in plant_.modules() if set(m.managed_programs()) - set(read[m.name])}
@@ -273,10 +273,10 @@ def test_the_record_file_keeps_read_at_and_passes_over_what_is_none():
     from prc3cfg.shell import bases
 
     keys = ("socket://127.0.0.1:4001",)
-    bases.update(keys, {3: known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))})
-    assert bases.load(keys)[3] == known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))
+    bases.LineRecord(keys).update({3: known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))})
+    assert bases.LineRecord(keys).known()[3] == known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))
     (path,) = [p for p in (Path(os.environ["PRC3CFG_STATE_DIR"]) / "lines").glob("*.json")]
     document = json.loads(path.read_text())
     document["modules"]["3"]["read_at"] = {"1": T3, "2": "2026-11-28T09:00:00", "3": "2000-01-01T00:00:00+00:00", "70": T3, "x": T3, "4": 5}
     path.write_text(json.dumps(document))
-    assert bases.load(keys)[3].read_at == {1: T3}
+    assert bases.LineRecord(keys).known()[3].read_at == {1: T3}

@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import time
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,6 +22,7 @@ from prc3cfg.api._plan import (
     commissioned,
     left_alone,
     make_plan,
+    plan_file_pairs,
     plan_file_reads,
     planner_for,
     planning_each,
@@ -47,6 +48,7 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import Verify
+from prc3cfg.shell.bases import LineRecord
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
@@ -92,7 +94,7 @@ def plan_file_plant(path: Path) -> Path:
     return Path(recorded)
 
 
-def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage],
+def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage], records: Mapping[str, LineRecord],
           probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
     """The plan file's plan, proved before anything is written (`prc3cfg.core.plan_file`): what is
     applied is then the plan prc3cfg makes from this read-back."""
@@ -102,7 +104,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     buses = {bus.name: bus for bus, _ in chosen}.values()
     ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, buses), only_read=planned.targeted)
     if planned.targeted:  # what this apply read, and whose verification what it did not read rests on: its line's record now
-        ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(plant, buses)).reading(pairs, images))
+        ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(records)).reading(pairs, images))
     plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
     return ours
 
@@ -130,11 +132,15 @@ def apply(
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
-    if planned is not None:
-        wanted = plan_file_reads(plant, *planned, pairs)
-    else:  # a factory-fresh module is commissioned: the programs it will be written are not read first, but after
-        wanted = reads(plant, pairs, full_read) if full_read else commissioned(reads(plant, pairs))
-    return _apply(plant, pairs, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links)
+
+    def wanted(records: Mapping[str, LineRecord]) -> Reads:
+        if planned is not None:
+            return plan_file_reads(plant, *planned, pairs, records)
+        # a factory-fresh module is commissioned: the programs it will be written are not read first, but after
+        return reads(plant, pairs, full_read) if full_read else commissioned(reads(plant, pairs, records=records))
+
+    on_lines = pairs if planned is None else plan_file_pairs(planned[1], pairs)
+    return _apply(plant, pairs, on_lines, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links)
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
@@ -157,14 +163,16 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
             raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
                             f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
                             "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
-    to_read = what_to_read.in_full(to_plan(pairs, taken.images))  # every program the snapshot holds
-    return _apply(plant, pairs, Reads(pairs, to_read), taken.images, None, gates, verify, options, reason=reason, links=links)
+    wanted = Reads(pairs, what_to_read.in_full(to_plan(pairs, taken.images)))  # every program the snapshot holds
+    return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links)
 
 
-def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
-           plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify, options: LineOptions, *,
-           reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
-    buses = {bus.name: bus for bus, _ in wanted.pairs}
+def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[Mapping[str, LineRecord]], Reads],
+           desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify,
+           options: LineOptions, *, reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
+    """Apply (or restore) `chosen`, reading the modules `on_lines`: what to read of them is worked out from the
+    lines' records as read under the lines' locks (`wanted_of`)."""
+    buses = {bus.name: bus for bus, _ in on_lines}
     command = "restore" if desired is not None else "apply"
     reason = _ready(plant, buses.values(), reason, command)
     said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
@@ -178,9 +186,10 @@ def _apply(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Module
     keeping = Keeping(plant, buses, keys, journal, records, options.cancel.event)
     try:
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
-                   given=links) as open_links:  # fmt: skip
+                   given=links) as held:  # fmt: skip
             earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            writing = Writing(plant, keys, buses, open_links, keeping, verify, options, records.command)
+            wanted = wanted_of(held.records)
+            writing = Writing(plant, keys, buses, held, keeping, verify, options, records.command)
             whole = None
             if plan_file is not None or gates.asks:
                 try:
@@ -243,7 +252,7 @@ def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Modu
     by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(link) for name, link in writing.links.items()},
                      reading=lambda read: wanted.reading(chosen, read), show=gates.show, show_line=gates.show_line)  # fmt: skip
     return by_line.run(lambda line: read_all(wanted.targets, writing.links, progress=writing.phases.read, each=planning_each(planner, want),
-                                             then=seen(plant, writing.command, line)))  # fmt: skip
+                                             then=seen(plant, writing.command, writing.records, line)))  # fmt: skip
 
 
 def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None,
@@ -253,12 +262,12 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
     pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
     started = time.monotonic()
     if plan_file is None:
-        images, the_plan = read_and_plan(plant, pairs, to_read, links, options, desired, command=writing.command,
+        images, the_plan = read_and_plan(plant, pairs, to_read, writing.held, options, desired, command=writing.command,
                                           only_read=wanted.base is not None, from_factory=wanted.from_factory)  # fmt: skip
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
-        images = read_targets(to_read, links, options, then=seen(plant, writing.command))
-        the_plan = prove(*plan_file, plant, chosen, images, {name: prober(link) for name, link in links.items()})
+        images = read_targets(to_read, links, options, then=seen(plant, writing.command, writing.records))
+        the_plan = prove(*plan_file, plant, chosen, images, writing.records, {name: prober(link) for name, link in links.items()})
     reading = time.monotonic() - started
     if gates.show is not None:
         gates.show(the_plan)

@@ -36,7 +36,7 @@ from prc3cfg.shell.platform import resolved
 from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
-from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
+from prc3cfg.shell.sessions import LineOptions, Lines, bus_line_keys, line_cost, lines
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link
@@ -68,9 +68,15 @@ def targets(pairs: Pairs) -> list[Target]:
     return what_to_read.in_full(to_plan(pairs, None))
 
 
-def record(plant: Plant, buses: Iterable[Bus]) -> dict[Key, Known]:
+def record(records: Mapping[str, bases.LineRecord]) -> dict[Key, Known]:
     """What the records of these buses' lines say their modules hold, by (bus, address)."""
-    return {(bus.name, address): known for bus in buses for address, known in bases.load(bus_line_keys(plant, bus)).items()}
+    return {(bus, address): known for bus, line in records.items() for address, known in line.known().items()}
+
+
+def line_records(plant: Plant, buses: Iterable[Bus]) -> dict[str, bases.LineRecord]:
+    """The records of these buses' lines as they stand, read now — outside a command holding the lines
+    (`lines` reads them under their locks)."""
+    return {bus.name: bases.LineRecord(bus_line_keys(plant, bus)) for bus in buses}
 
 
 @dataclass(frozen=True)
@@ -114,17 +120,19 @@ def commissioned(wanted: Reads) -> Reads:
     return replace(wanted, targets=what_to_read.commissioning(wanted.targets), from_factory=True)
 
 
-def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
+def reads(plant: Plant, pairs: Pairs, full_read: bool = False, records: Mapping[str, bases.LineRecord] | None = None) -> Reads:
     """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
     records know none of them; else of each module its system block and the managed programs the
     record does not show holding the plant file's values (`what_to_read.for_plan`) — every managed
     program of one the record does not know, knows from too long ago, or that reported E12 since; and
-    every program of the module of each line whose record is the oldest (`what_to_read.with_rolling`)."""
+    every program of the module of each line whose record is the oldest (`what_to_read.with_rolling`).
+    `records`: the lines' records as the command holding the lines read them (else read now)."""
     buses = {bus.name: bus for bus, _ in pairs}
+    on_line = {} if full_read else line_records(plant, buses.values()) if records is None else records
     known: dict[Key, Known] = {}
     overruled: dict[Key, str] = {}
-    for bus in [] if full_read else buses.values():
-        on_record, newer = bases.read(bus_line_keys(plant, bus))
+    for bus in () if full_read else buses.values():
+        on_record, newer = on_line[bus.name].read()
         known |= {(bus.name, address): k for address, k in on_record.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
     for key, said in e12_claims(plant, buses.values()).items():  # another user's E12: read the module in full, never write for it
@@ -139,15 +147,16 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False) -> Reads:
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
-def seen(plant: Plant, command: str, then: LineRead | None = None) -> LineRead:
+def seen(plant: Plant, command: str, records: Mapping[str, bases.LineRecord], then: LineRead | None = None) -> LineRead:
     """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.bases`):
-    what `command` saw — drift included, so the next plan writes it back — then `then`."""
-    by, buses = bases.who(command, plant.path), {bus.name: bus for bus in plant.buses}
+    what `command` saw — drift included, so the next plan writes it back — then `then`. Written with
+    the line's next write of the record (an apply's before its first frame), else when the command ends."""
+    by = bases.who(command, plant.path)
 
     def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
-        keys = bus_line_keys(plant, buses[bus])
-        known, when = bases.load(keys), bases.now()
-        bases.update(keys, {a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
+        record, when = records[bus], bases.now()
+        known = record.known()
+        record.saw({a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
         if then is not None:
             then(bus, images)
 
@@ -167,7 +176,7 @@ def read_targets(targets_: list[Target], links: dict[str, Link], options: LineOp
     return images
 
 
-def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict[str, Link], options: LineOptions,
+def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines, options: LineOptions,
                    desired: dict[Key, ModuleImage] | None = None, *, command: str,
                    only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
     """Read back and plan, each module planned as soon as it is read and each line as soon as its
@@ -176,8 +185,12 @@ def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], links: dict
     buses = {bus.name: bus for bus, _ in pairs}
     planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read, from_factory=from_factory)
     wanted = to_plan(pairs, desired)
-    images = read_targets(to_read, links, options, each=planning_each(planner, wanted),
-                   then=seen(plant, command, lambda bus, read: planner.plan_line(bus, wanted, read, prober(links[bus]))))  # fmt: skip
+    links = held.links
+
+    def plan_line(bus: str, read: dict[Key, ModuleImage]) -> None:
+        planner.plan_line(bus, wanted, read, prober(links[bus]))
+
+    images = read_targets(to_read, links, options, each=planning_each(planner, wanted), then=seen(plant, command, held.records, plan_line))
     return images, planner.plan(wanted, images)
 
 
@@ -195,8 +208,8 @@ def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOption
     (every function that reads takes them)."""
     options = options or LineOptions()
     pairs = select(plant, modules)
-    with lines(plant, {bus.name for bus, _ in pairs}, options, given=links) as open_links:
-        return read_targets(targets(pairs), open_links, options, then=seen(plant, command))
+    with lines(plant, {bus.name for bus, _ in pairs}, options, given=links) as held:
+        return read_targets(targets(pairs), held.links, options, then=seen(plant, command, held.records))
 
 
 def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
@@ -249,9 +262,9 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
     pairs = select(plant, modules)
     if images is not None:
         return make_plan(plant, pairs, images)
-    wanted = reads(plant, pairs, full_read)
-    with lines(plant, {bus.name for bus, _ in wanted.pairs}, options, purpose="plan", given=links) as open_links:
-        read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, open_links, options, command="plan",
+    with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan", given=links) as held:
+        wanted = reads(plant, pairs, full_read, held.records)
+        read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, held, options, command="plan",
                                         only_read=wanted.base is not None)  # fmt: skip
     return replace(planned, reading=wanted.reading(pairs, read_))
 
@@ -304,7 +317,7 @@ def e12_claims(plant: Plant, buses: Iterable[Bus]) -> dict[Key, str]:
     return said
 
 
-def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -> Reads:
+def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, records: Mapping[str, bases.LineRecord]) -> Reads:
     """What to read for a plan file: every chosen module in full, or — for a plan made from a
     targeted read-back — exactly the modules and programs its plan read, with the line's record as
     evidence; refused as stale when the record no longer shows a module holding what the plan took
@@ -313,14 +326,23 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs) -
         return Reads(pairs, targets(pairs))
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
-    buses = {bus.name: bus for bus, _ in (names[(e.bus, e.address)] for e in entries)}
+    buses = {bus.name: bus for bus, _ in plan_file_pairs(planned, pairs)}
     desired, max_age = {key: m.desired_image() for key, (_, m) in names.items()}, {name: bus.record_max_age for name, bus in buses.items()}
-    to_read, stale = what_to_read.for_plan_file(entries, desired, record(plant, buses.values()), max_age, datetime.now(UTC))
+    to_read, stale = what_to_read.for_plan_file(entries, desired, record(records), max_age, datetime.now(UTC))
     if stale is not None:
         raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
                         "holding what the plan took as known without reading it (written or read by another run since, or "
                         "older than record_max_age); nothing was written — plan again")  # fmt: skip
-    return Reads([names[(e.bus, e.address)] for e in entries], to_read, RECORD)
+    return Reads(plan_file_pairs(planned, pairs), to_read, RECORD)
+
+
+def plan_file_pairs(planned: PlanFile, pairs: Pairs) -> Pairs:
+    """The modules a plan file's apply reads: every chosen one, or for a targeted plan those of its plan
+    among them (the rest is refused by `prove`)."""
+    if not planned.targeted:
+        return pairs
+    names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
+    return [names[(e.bus, e.address)] for e in planned.modules if (e.bus, e.address) in names]
 
 
 def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:

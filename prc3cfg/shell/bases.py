@@ -2,9 +2,11 @@
 file, checkout and user of the line on this machine — the base of a targeted read-back
 (`prc3cfg.core.what_to_read`).
 
-Every read updates it with what it saw (`saw`: drift included, so the next plan writes it back);
-before an apply's first write on a line the modules it writes are dropped from it (`forget`,
-durably), and once a module verified, what it was verified to hold goes back in (`saw` again). A
+A command holding the line's lock reads it once (`LineRecord`). Every read updates it with what it
+saw (`LineRecord.saw`: drift included, so the next plan writes it back); before an apply's first
+write on a line the modules it writes are dropped from it (`forget`, durably, with what was seen),
+and once a module verified, what it was verified to hold goes back in — two writes for a line an
+apply changes, one for a line it only read. A
 module's entry holds its image (a program not known: null), since when the oldest value in it is
 known (and when each program read later than that was: `read_at`, what rolling evidence orders by),
 by which command of which plant file and which user on which host, and when the entry was written; a
@@ -130,72 +132,122 @@ def _files(keys: Iterable[str]) -> Iterator[tuple[Path, str]]:
                 yield from ((path, key) for path in sorted((directory / KIND).glob(f"{_stem(key)}.*.json")))
 
 
-def _newest(keys: Iterable[str]) -> tuple[dict[str, _Entry], dict[str, tuple[_Entry, int]]]:
-    """Per module, the newest entry of a file this user may believe (its own, root's) and the newest of
-    any other user's with its owner, across the line's files in every state folder."""
-    trusted: dict[str, _Entry] = {}
-    claimed: dict[str, tuple[_Entry, int]] = {}
-    for path, key in _files(keys):
-        try:
-            entries, owner = _read(path, key)
-        except FileProblem:
-            continue  # `passed_over` says so
-        for address, entry in entries.items():
-            if platform.trusted_owner(owner):
-                if address not in trusted or entry.at > trusted[address].at:
-                    trusted[address] = entry
-            elif address not in claimed or entry.at > claimed[address][0].at:
-                claimed[address] = (entry, owner)
-    return trusted, claimed
-
-
-def passed_over(keys: Iterable[str]) -> list[str]:
-    """One line for each file among the line's records that is not one: what it is, and that it was passed over."""
-    said = []
-    for path, key in _files(keys):
-        try:
-            _read(path, key)
-        except FileProblem as problem:
-            if problem.why is not Why.MISSING:
-                said.append(f"{shown(str(path))}: {problem}{_of_whom(path)} — passed over as no record of the line (its modules are "
-                            "read in full); remove it")  # fmt: skip
-    return said
-
-
 def _of_whom(path: Path) -> str:
     with contextlib.suppress(OSError):
         return f", made by {platform.uid_name(path.lstat().st_uid)}" if platform.OWNERS else ""
     return ""
 
 
-def load(keys: Iterable[str]) -> dict[int, Known]:
-    """What the record of the line with these identities says of each module it knows (`read`)."""
-    return read(keys)[0]
+class LineRecord:
+    """The record of one line as one command holding the line's lock uses it. Its files are read once,
+    when it is made: every prc3cfg command on the line holds that lock while it uses the record, so
+    nothing writes this user's file meanwhile, and what another user's file said then is what the
+    command goes by. The command's changes are known at once (`saw`) and written to this user's file
+    where safety needs it (`write`): before a line's first frame of writes, after its verification, and
+    at the end of the command for what was only read."""
 
+    def __init__(self, keys: Iterable[str]) -> None:
+        self.keys = tuple(keys)
+        self._files: list[tuple[Path, dict[str, _Entry], int]] = []
+        self._problems: list[tuple[Path, FileProblem]] = []
+        for path, key in _files(self.keys):
+            try:
+                entries, owner = _read(path, key)
+            except FileProblem as problem:
+                self._problems.append((path, problem))
+                continue
+            self._files.append((path, entries, owner))
+        self._changed: dict[str, dict] = {}  # this command's entries, by address (an entry without an image: not known)
+        self._waiting: set[str] = set()  # those not written yet
 
-def read(keys: Iterable[str]) -> tuple[dict[int, Known], dict[int, str]]:
-    """What the record of the line with these identities says of each module it knows — and the
-    modules another user's file has a newer entry for than this user's and root's, with what that
-    entry claims (escaped): not known (it changed since), and why each is read in full."""
-    trusted, claimed = _newest(keys)
-    known, overruled = {}, {}
-    for address, (entry, owner) in claimed.items():
-        if address not in trusted or entry.at > trusted[address].at:
-            by = entry.fields.get("by")
-            overruled[int(address)] = (f"another user's record is newer (it claims: {shown(by) if isinstance(by, str) else 'a command'}, "
-                                       f"{entry.at.isoformat()}; written by {platform.uid_name(owner)})")  # fmt: skip
-    for address, entry in trusted.items():
-        if int(address) in overruled:
-            continue
-        fields = entry.fields
+    def passed_over(self) -> list[str]:
+        """One line for each file among the line's records that is not one: what it is, and that it was passed over."""
+        return [f"{shown(str(path))}: {problem}{_of_whom(path)} — passed over as no record of the line (its modules are read in "
+                "full); remove it" for path, problem in self._problems if problem.why is not Why.MISSING]  # fmt: skip
+
+    def known(self) -> dict[int, Known]:
+        """What the record says of each module it knows (`read`)."""
+        return self.read()[0]
+
+    def read(self) -> tuple[dict[int, Known], dict[int, str]]:
+        """What the record says of each module it knows — and the modules another user's file has a newer
+        entry for than this user's and root's, with what that entry claims (escaped): not known (it changed
+        since), and why each is read in full. This command's own changes are the newest."""
+        trusted, claimed = self._newest()
+        known, overruled = {}, {}
+        for address, (entry, owner) in claimed.items():
+            if address not in trusted or entry.at > trusted[address].at:
+                by = entry.fields.get("by")
+                overruled[int(address)] = (f"another user's record is newer (it claims: {shown(by) if isinstance(by, str) else 'a command'}, "
+                                           f"{entry.at.isoformat()}; written by {platform.uid_name(owner)})")  # fmt: skip
+        for address, entry in trusted.items():
+            if int(address) not in overruled and (k := _known(entry.fields)) is not None:
+                known[int(address)] = k
+        return known, overruled
+
+    def _newest(self) -> tuple[dict[str, _Entry], dict[str, tuple[_Entry, int]]]:
+        """Per module, the newest entry of a file this user may believe (its own, root's, this command's) and
+        the newest of any other user's with its owner, across the line's files in every state folder."""
+        trusted: dict[str, _Entry] = {}
+        claimed: dict[str, tuple[_Entry, int]] = {}
+        for _, entries, owner in self._files:
+            for address, entry in entries.items():
+                if platform.trusted_owner(owner):
+                    if address not in trusted or entry.at > trusted[address].at:
+                        trusted[address] = entry
+                elif address not in claimed or entry.at > claimed[address][0].at:
+                    claimed[address] = (entry, owner)
+        for address, fields in self._changed.items():
+            trusted[address] = _Entry(datetime.fromisoformat(fields["at"]), fields)
+            claimed.pop(address, None)
+        return trusted, claimed
+
+    def saw(self, changes: Mapping[int, Known | None]) -> None:
+        """Set these modules' entries (None: the module is no longer known), to be written by `write`."""
+        at = now()
+        for address, k in changes.items():
+            self._changed[str(address)] = {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()}
+                                          | ({"read_at": {str(n): when for n, when in sorted(k.read_at.items())}} if k.read_at else {}))  # fmt: skip
+            self._waiting.add(str(address))
+
+    def update(self, changes: Mapping[int, Known | None]) -> None:
+        """`saw` these changes and `write` them."""
+        self.saw(changes)
+        self.write()
+
+    def forget(self, addresses: Iterable[int]) -> None:
+        """These modules are about to be written: not known until they verify (durably, before the first frame)."""
+        self.update(dict.fromkeys(addresses))
+
+    def write(self) -> None:
+        """The changes not written yet into this user's file of each of the line's identities, in the state
+        folder it writes (`releases.folder`), with what that file held; `UserError` when it cannot."""
+        if not self._waiting:
+            return
+        directory = folder(KIND, WHAT).parent  # the machine's, once an administrator made it; else this user's
+        held = {path: entries for path, entries, _ in self._files}
         try:
-            if fields.get("image") is not None and isinstance(fields.get("since"), str) and isinstance(fields.get("by"), str):
-                if datetime.fromisoformat(fields["since"]).tzinfo is None:
-                    continue  # a time without its zone (another tool's): its age cannot be told
-                known[int(address)] = Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"], _read_at(fields))
-        except (TypeError, ValueError, KeyError, AttributeError):
-            continue  # an entry this prc3cfg cannot read: the module is not known
-    return known, overruled
+            for key in self.keys:
+                path = _own_file(directory, key)
+                kept = {address: entry.fields for address, entry in held.get(path, {}).items()}
+                modules = dict(sorted((kept | self._changed).items(), key=lambda entry: int(entry[0])))
+                write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}), platform.SHARED_READ)
+        except OSError as error:
+            raise UserError(f"cannot keep {WHAT} ({error.filename or directory}: {error.strerror}) — set PRC3CFG_STATE_DIR to a "
+                            "folder this user can write") from None  # fmt: skip
+        self._waiting.clear()
+
+
+def _known(fields: dict) -> Known | None:
+    """What an entry says a module holds; None where it says nothing this prc3cfg can read."""
+    try:
+        if fields.get("image") is not None and isinstance(fields.get("since"), str) and isinstance(fields.get("by"), str):
+            if datetime.fromisoformat(fields["since"]).tzinfo is None:
+                return None  # a time without its zone (another tool's): its age cannot be told
+            return Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"], _read_at(fields))
+    except (TypeError, ValueError, KeyError, AttributeError):
+        pass  # an entry this prc3cfg cannot read: the module is not known
+    return None
 
 
 def _read_at(fields: dict) -> dict[int, str]:
@@ -218,7 +270,7 @@ def settle(keys: Iterable[str]) -> list[str]:
     try:
         directory = folder(KIND, WHAT).parent
     except UserError:
-        return []  # no record is kept: `update` says so
+        return []  # no record is kept: `LineRecord.write` says so
     said = []
     for key in keys:
         path = next(_names(directory, key))
@@ -246,36 +298,3 @@ def _what(path: Path) -> str:
         return "a folder"
     kind = NOT_FILES.get(stat.S_IFMT(status.st_mode), "a file")
     return f"{kind} of {platform.uid_name(status.st_uid)}" if platform.OWNERS else kind
-
-
-def update(keys: Iterable[str], changes: Mapping[int, Known | None]) -> None:
-    """Set these modules' entries (None: the module is no longer known) in this user's file of each of the
-    line's identities, in the state folder it writes (`releases.folder`); `UserError` when it cannot."""
-    if not changes:
-        return
-    keys, at = tuple(keys), now()
-    entries = {str(address): {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()}
-                                           | ({"read_at": {str(n): when for n, when in sorted(k.read_at.items())}} if k and k.read_at else {}))
-               for address, k in changes.items()}  # fmt: skip
-    directory = folder(KIND, WHAT).parent  # the machine's, once an administrator made it; else this user's
-    try:
-        for key in keys:
-            path = _own_file(directory, key)
-            modules = dict(sorted((_kept(path, key) | entries).items(), key=lambda entry: int(entry[0])))
-            write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}), platform.SHARED_READ)
-    except OSError as error:
-        raise UserError(f"cannot keep {WHAT} ({error.filename or directory}: {error.strerror}) — set PRC3CFG_STATE_DIR to a "
-                        "folder this user can write") from None  # fmt: skip
-
-
-def _kept(path: Path, key: str) -> dict[str, dict]:
-    """The entries of this user's own record file to keep as they are (none where it is missing or no record)."""
-    try:
-        return {address: entry.fields for address, entry in _read(path, key)[0].items()}
-    except FileProblem:
-        return {}
-
-
-def forget(keys: Iterable[str], addresses: Iterable[int]) -> None:
-    """These modules are about to be written: not known until they verify (durably, before the first frame)."""
-    update(tuple(keys), dict.fromkeys(addresses))

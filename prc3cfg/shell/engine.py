@@ -34,12 +34,12 @@ from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import main_thread_only
-from prc3cfg.shell.link.client import Exchange, Link
+from prc3cfg.shell.link.client import Exchange
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.platform import result_of
 from prc3cfg.shell.readback import LineRead, LinesFailed
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot
-from prc3cfg.shell.sessions import LineOptions, line_cost
+from prc3cfg.shell.sessions import LineOptions, Lines, line_cost
 
 
 @dataclass(frozen=True)
@@ -191,9 +191,10 @@ class Writing:
     their line — added to the apply's one snapshot file, written whole and atomically each time —
     and journalled, then written and verified (`execute`); then the account of every run."""
 
-    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], links: dict[str, Link], keeping: Keeping,
+    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], held: Lines, keeping: Keeping,
                  verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
-        self.plant, self.keys, self.buses, self.links, self.keeping = plant, keys, buses, links, keeping
+        self.plant, self.keys, self.buses, self.keeping = plant, keys, buses, keeping
+        self.held, self.links, self.records = held, held.links, held.records
         self.journal = keeping.journal
         self.verify, self.options, self.command = verify, options, command
         self.phases = Phases(options.progress.start, options.progress.advance)
@@ -259,12 +260,12 @@ class Writing:
         known is given back, for then — and added to the snapshot, journalled. When either cannot be
         kept, that is the apply's trouble (`Keeping.failed`): these writes stay back, as do every
         other line's next frames."""
-        known = {bus: bases.load(self.keys[bus]) for bus in {r.bus for r in runs}}
+        known = {bus: self.records[bus].known() for bus in {r.bus for r in runs}}
         with self._lock:
             self.runs.extend(runs)
             try:
                 for bus in known:
-                    bases.forget(self.keys[bus], [r.address for r in runs if r.bus == bus])
+                    self.records[bus].forget([r.address for r in runs if r.bus == bus])
             except UserError as error:  # another line's writes may have begun: this one's stay back
                 self.keeping.failed(LINE_RECORD, error)
                 return known
@@ -298,7 +299,7 @@ class Writing:
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
             try:
-                bases.update(self.keys[bus], {a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
+                self.records[bus].update({a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
             except UserError as error:  # they stay unknown (forgotten before the writes): the next plan reads them in full
                 self.keeping.failed(LINE_RECORD, error)
 

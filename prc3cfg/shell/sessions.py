@@ -148,12 +148,21 @@ class Records(Protocol):
     def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ..., code: int | None = ...) -> None: ...
 
 
+@dataclass(frozen=True)
+class Lines:
+    """The lines a command holds: a `Link` per bus, and each line's record as read under its lock (`bases.LineRecord`)."""
+
+    links: dict[str, Link]
+    records: dict[str, bases.LineRecord]
+
+
 @contextlib.contextmanager
 def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
           announce: Observer | None = None, records: Records | None = None,
-          given: Mapping[str, Link] | None = None) -> Iterator[dict[str, Link]]:  # fmt: skip
+          given: Mapping[str, Link] | None = None) -> Iterator[Lines]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time —
-    opened from the plant file's ports, or those `given`, already open (`lent`). Every axis release
+    opened from the plant file's ports, or those `given`, already open (`lent`) — and each line's
+    record, read once under its lock and written at the end with what the command saw. Every axis release
     on these lines that no account has named yet is told (`LineOptions.tell`), and a read a module
     answers as a write is recorded as one in `records` (`PossibleWrite`).
 
@@ -172,7 +181,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
             raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
                             "read or written: run it again, with the file as it is now")  # fmt: skip
-        _tell_records(keys, owner, options)
+        held = _line_records(keys, owner, options)
         cancel = options.cancel.event if options.cancel is not None else None
         module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
@@ -184,7 +193,15 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         else:
             lending = {bus.name: _given(given, bus.name) for bus in plant.buses if bus.name in names}  # in the plant's order
             links = stack.enter_context(lent(lending, watch, announce, cancel))
-        yield links
+        try:
+            yield Lines(links, held)
+        except BaseException:  # what was read is kept all the same (drift included: the next plan writes it back)
+            for record in held.values():
+                with contextlib.suppress(UserError):
+                    record.write()
+            raise
+        for record in held.values():
+            record.write()
         if options.used is not None:
             options.used(list(links.values()))
 
@@ -201,14 +218,17 @@ def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> dict[s
     return owner
 
 
-def _tell_records(keys: Mapping[str, tuple[str, ...]], identities: Iterable[str], options: LineOptions) -> None:
-    """Under the lines' locks: the records' files passed over or moved aside, every axis release on these lines
-    that no account has named yet, and every module a write found in a fault state not seen cleared since."""
-    for said in [*releases.passed_over(), *(said for line in keys.values() for said in bases.passed_over(line)),
-                 *(said for line in keys.values() for said in bases.settle(line))]:  # fmt: skip
-        options.tell(said)
+def _line_records(keys: Mapping[str, tuple[str, ...]], identities: Iterable[str], options: LineOptions) -> dict[str, bases.LineRecord]:
+    """Under the lines' locks: each line's record, read once (this user's names made theirs first: `bases.settle`),
+    with its files passed over or moved aside told, every axis release on these lines that no account has named
+    yet, and every module a write found in a fault state not seen cleared since."""
+    said = [*releases.passed_over(), *(said for line in keys.values() for said in bases.settle(line))]
+    records = {bus: bases.LineRecord(line) for bus, line in keys.items()}
+    for line in [*said, *(said for record in records.values() for said in record.passed_over())]:
+        options.tell(line)
     for record in [*releases.pending(identities), *releases.pending(identities, releases.FAULT)]:
         options.tell(record.said())
+    return records
 
 
 def _given(given: Mapping[str, Link], bus: str) -> Link:

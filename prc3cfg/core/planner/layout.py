@@ -8,8 +8,8 @@ desired ones. Program sets are bit masks over indices 0..63.
 
 Order of the messages: inits before the system step (over programs initialised again after
 it, where that saves: `init_runs`), the system step, inits after it, link/unlink ranges,
-21h, 33h/32h, 40h..45h, 46h; within a kind by program number. Each later kind may overwrite what an earlier one left (a 21h after a link range, a 46h after
-it), never the other way round.
+21h, 33h/32h, 40h..45h, 46h; within a kind by program number. Each later kind may overwrite
+what an earlier one left (a 21h after a link range, a 46h after it), never the other way round.
 
 Owns turning decisions into messages. Does not own choosing them (`prc3cfg.core.planner.optimise`).
 """

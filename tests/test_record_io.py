@@ -1,0 +1,76 @@
+"""The line's record read once a command and written only where safety needs it (issue 41, item 5):
+counted in a real prc3cfg process by Python's audit hooks — every open of a record file, every file
+moved into the records' folder — against the demo plant on emulators.
+
+An apply reads each of a line's record files once, under the line's lock; it writes a line it changes
+twice — before the first write (the modules it writes dropped, what was read kept) and after the
+verification — and a line it leaves unchanged once, after."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from emulated import emulated_plant, run_cli
+
+#: Runs prc3cfg with an audit hook that writes, for each open of a file under `lines/` and each file
+#: moved there, one JSON line to the file descriptor given: the hook opens nothing itself.
+COUNTING = """
+import json, os, sys
+fd = int(sys.argv[1])
+def hook(event, args):
+    if event == "open" and "/lines/" in str(args[0]) and not str(args[0]).endswith(".lock"):
+        os.write(fd, (json.dumps(["open", str(args[0]), args[2]]) + "\\n").encode())
+    elif event == "os.rename" and "/lines/" in str(args[1]):
+        os.write(fd, (json.dumps(["write", str(args[1])]) + "\\n").encode())
+sys.addaudithook(hook)
+from prc3cfg.__main__ import main
+sys.argv = ["prc3cfg", *sys.argv[2:]]
+main()
+"""
+
+
+def counted(tmp_path: Path, *args: object) -> tuple[subprocess.CompletedProcess, Counter, Counter]:
+    """`prc3cfg ARGS` in a process of its own: its result, the record files it opened for reading (by
+    name, each time) and those it wrote (by name)."""
+    log = tmp_path / "record-io.log"
+    with log.open("wb") as sink:
+        done = subprocess.run([sys.executable, "-c", COUNTING, str(sink.fileno()), *map(str, args)], pass_fds=(sink.fileno(),),
+                              capture_output=True, text=True, env=os.environ | {"COLUMNS": "200"}, check=False)  # fmt: skip
+    reads, writes = Counter(), Counter()
+    for line in log.read_text().splitlines():
+        event = json.loads(line)
+        if event[0] == "write":
+            writes[Path(event[1]).name] += 1
+        elif not event[2] & (os.O_WRONLY | os.O_RDWR):
+            reads[Path(event[1]).name] += 1
+    log.unlink()
+    return done, reads, writes
+
+
+def edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new, 1))
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="counts opens by POSIX path")
+def test_an_apply_reads_each_record_file_once_and_writes_a_changed_line_twice_an_unchanged_one_once(tmp_path, capsys):
+    with emulated_plant(tmp_path) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        edit(plant.path, "position: 2.0\n", "position: 1.9\n")  # booth-a-right's program 1: one line changes
+        done, reads, writes = counted(tmp_path, "apply", plant.path, "--auto-approve")
+        assert done.returncode == 0, done.stdout + done.stderr
+        files = sorted((Path(os.environ["PRC3CFG_STATE_DIR"]) / "lines").glob("*.json"))
+        assert len(files) == 2  # one per line: booth-a's and booth-b's
+        assert reads and max(reads.values()) == 1, reads  # every record file read once
+        assert sorted(writes.values()) == [1, 2], writes  # booth-b once (after), booth-a twice (before its write, after)
+
+        done, reads, writes = counted(tmp_path, "plan", plant.path)
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert max(reads.values()) == 1 and sorted(writes.values()) == [1, 1], (reads, writes)
