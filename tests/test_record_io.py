@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from emulated import emulated_plant, run_cli
+from terminal import Pane, environment, needs_tmux, prc3cfg
 
 #: Runs prc3cfg with an audit hook that writes, for each open of a file under `lines/` and each file
 #: moved there, one JSON line to the file descriptor given: the hook opens nothing itself.
@@ -74,3 +75,31 @@ def test_an_apply_reads_each_record_file_once_and_writes_a_changed_line_twice_an
         done, reads, writes = counted(tmp_path, "plan", plant.path)
         assert done.returncode == 0, done.stdout + done.stderr
         assert max(reads.values()) == 1 and sorted(writes.values()) == [1, 1], (reads, writes)
+
+
+@needs_tmux
+def test_a_plan_waiting_for_the_line_reads_the_record_an_apply_holding_it_left(tmp_path, capsys):
+    """The record is read once the line's lock is held: a plan that waited for the line while another plant file's
+    apply wrote a program there (its system block unchanged) sees that apply's record, not the one from before it
+    waited — else it takes the program as it was and says "No changes" over a module holding other values."""
+    with emulated_plant(tmp_path) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        other = tmp_path / "checkout-b" / "plant.yaml"
+        other.parent.mkdir()
+        other.write_text(plant.path.read_text())
+        edit(other, "position: 2.0\n", "position: 1.9\n")  # booth-a-right's program 1
+        pane = Pane(tmp_path, prc3cfg("apply", other), environment())
+        try:
+            pane.wait(lambda screen: "Only 'yes' will be accepted:" in screen, "the apply's question")  # it holds the lines
+            waiting = subprocess.Popen(prc3cfg("plan", plant.path, "--detailed-exitcode", "--lock-timeout", "600"),
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=os.environ | {"COLUMNS": "200"})  # fmt: skip
+            assert waiting.stderr is not None
+            told = waiting.stderr.readline()
+            assert "waiting for the line lock held by" in told, told
+            pane.type("yes")
+            assert pane.exit_status() == 0, pane.screen()
+        finally:
+            pane.close()
+        out, err = waiting.communicate()
+        assert waiting.returncode == 2, out + err  # changes: program 1 of booth-a-right is put back
+        assert "program 1: position 1.900 m → 2.000 m" in out, out
