@@ -643,7 +643,7 @@ class WritePhase:
         steps = self._address_steps(whole)
         cheapest = self._ranges_and_misses(whole, open46, self._cheapest_moves(steps, open46))
         messages = -(-cheapest.items.bit_count() // codec.MAX_ADDRESS_ITEMS)
-        if messages <= 1:
+        if not messages:  # one 46h saved may pay for ranges: its header too, where ranges take every item
             return (cheapest,)
         return (cheapest, *(self._ranges_and_misses(whole, True, moves) for moves in self._fewer_messages(steps, messages)))
 
