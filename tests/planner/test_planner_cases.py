@@ -345,7 +345,7 @@ def test_of_two_link_ranges_that_pay_alike_one_saves_a_46h(framing: str) -> None
 
 #: Modules on which the planner once missed the exact optimum by more than it does now (the exact
 #: reference's soak properties found them, tests/planner/test_exact_reference.py, which proves each
-#: `optimum` again), or would miss it for a change that no other case notices (the last: a search
+#: `optimum` again), or would miss it for a change that no other case notices (one: a search
 #: step left out that way made it 0.7 % dearer): the read-back, the plant file's image, the line, the
 #: optimum's bus time and the planner's (seconds). A planner that does better updates `planned`.
 FOUND_CASES = json.loads((Path(__file__).parent / "found_cases.json").read_text(encoding="utf-8"))

@@ -163,7 +163,7 @@ SLACK_ITEMS = 2
 #: address item out too).
 ADDRESS_SLACK = 5
 #: How many init choices closest to the best (within an exchange) `_header_targets` starts from in each round.
-TARGETED = 2
+TARGETED = 4
 
 
 @dataclass(frozen=True, slots=True)
