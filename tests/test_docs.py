@@ -226,8 +226,20 @@ def test_the_readme_s_demo_command_plans_and_applies_as_written(tmp_path):
 def test_the_readme_links_into_docs_for_everything_else():
     readme = (ROOT / "README.md").read_text()
     linked = set(re.findall(r"\]\((docs/[^)#]+)", readme))
-    wanted = ["commands", "plant-files", "files", "safety", "security", "windows", "ci", "api", "testing"]
+    wanted = ["commands", "plant-files", "files", "safety", "security", "windows", "ci", "api", "testing", "design"]
     assert {f"docs/{name}.md" for name in wanted} <= linked
+
+
+def test_each_library_decision_names_tests_that_exist_and_the_libraries_kept_out_are_not_dependencies():
+    """docs/design.md: for each need a library could meet, the decision and the tests that prove the guarantee
+    kept — each a test function of the suite; a library prc3cfg decided against is not among its dependencies."""
+    table = [row for row in (DOCS / "design.md").read_text().splitlines() if row.startswith("| ") and not row.startswith("| Need")]
+    defined = {name for path in (ROOT / "tests").rglob("test_*.py") for name in re.findall(r"^def (test_\w+)", path.read_text(), re.M)}
+    named = [name for row in table for name in re.findall(r"`(test_\w+)`", row.split("|")[-2])]
+    assert len(table) >= 4 and all(re.findall(r"`(test_\w+)`", row.split("|")[-2]) for row in table), table
+    assert set(named) <= defined, set(named) - defined
+    dependencies = (ROOT / "pyproject.toml").read_text().split("[project.optional-dependencies]")[0]
+    assert not [library for library in ("platformdirs", "filelock", "portalocker", "ruamel", "atomicwrites") if library in dependencies]
 
 
 def test_no_text_cites_a_specification_the_repository_does_not_have():
