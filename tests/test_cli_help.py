@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 
+import pytest
 from emulated import DEMO, emulated_plant
 
 from prc3cfg.cli.common import ADDRESSES, DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, VerifyChoice
@@ -25,18 +26,19 @@ LISTING = """
 import sys
 from prc3cfg.cli import main
 try:
-    main(["--help"])
+    main({args})
 except SystemExit:
     pass
-heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib",
-                                                            "concurrent", "secrets")
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in {tops}
                or m in ("prc3cfg.api", "prc3cfg.core.planner", "prc3cfg.shell.link", "prc3cfg.plant", "prc3cfg.shell.emulator"))
 print("heavy:", heavy, file=sys.stderr)
 """
+#: What the listing of the commands loads none of (the modules' first names).
+LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent", "secrets")
 
 
 def test_listing_the_commands_loads_nothing_heavy():
-    done = subprocess.run([sys.executable, "-c", LISTING], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", LISTING.format(args=["--help"], tops=LISTING_SPARES)], capture_output=True, text=True)
     assert "Commands" in done.stdout and "apply" in done.stdout
     assert done.stderr.strip() == "heavy: []"
 
@@ -109,3 +111,29 @@ def test_a_plan_loads_what_it_runs_only(tmp_path):
 def _no_terminal() -> dict[str, str]:
     """This environment without what makes rich take a pipe for a terminal."""
     return {name: value for name, value in os.environ.items() if name not in ("TTY_COMPATIBLE", "FORCE_COLOR")}
+
+
+def _command_lines(command=None, words: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Every command and sub-command of `prc3cfg`, as the words that name it."""
+    import typer
+
+    from prc3cfg.cli import _register_commands, app
+
+    if command is None:
+        _register_commands()
+        command = typer.main.get_command(app)
+    found = [words] if words else []
+    for name, sub in sorted(getattr(command, "commands", {}).items()):
+        found += _command_lines(sub, (*words, name))
+    return found
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("words", _command_lines(), ids=" ".join)
+def test_every_commands_help_loads_nothing_heavy(words):
+    """The listing's guarantee (`test_listing_the_commands_loads_nothing_heavy`) for each command's own `--help` — but
+    pydantic and what it loads: typer checks a command's options with it."""
+    done = subprocess.run([sys.executable, "-c", LISTING.format(args=[*words, "--help"], tops=("serial", "yaml", "rich"))],
+                          capture_output=True, text=True)  # fmt: skip
+    assert "Usage" in done.stdout, done.stderr
+    assert done.stderr.strip() == "heavy: []"
