@@ -1,14 +1,18 @@
 """`prc3cfg --help` is quick because the commands import what they use only when they run: listing
-them loads typer and prc3cfg's command modules, never the plant loader, the planner or the link;
-and a command that talks on no line (`plan --actual`, `validate`) loads no link."""
+them loads typer and prc3cfg's command modules, never the plant loader, the planner, the link, rich,
+nor the standard library's logging, sockets, hashes or thread pools; a command that talks on no line
+(`plan --actual`, `validate`) loads no link; a plan loads no doctor, no importer, no rich when nothing it
+writes to is a terminal, and no emulator server unless its port is `emulator://`. (How fast: bench/startup_bench.py.)"""
 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
-from emulated import DEMO
+import pytest
+from emulated import DEMO, emulated_plant
 
 from prc3cfg.cli.common import ADDRESSES, DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, VerifyChoice
 from prc3cfg.core import line
@@ -22,17 +26,19 @@ LISTING = """
 import sys
 from prc3cfg.cli import main
 try:
-    main(["--help"])
+    main({args})
 except SystemExit:
     pass
-heavy = sorted(m for m in sys.modules if m.split(".")[0] in ("pydantic", "serial", "yaml")
+heavy = sorted(m for m in sys.modules if m.split(".")[0] in {tops}
                or m in ("prc3cfg.api", "prc3cfg.core.planner", "prc3cfg.shell.link", "prc3cfg.plant", "prc3cfg.shell.emulator"))
 print("heavy:", heavy, file=sys.stderr)
 """
+#: What the listing of the commands loads none of (the modules' first names).
+LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent", "secrets")
 
 
 def test_listing_the_commands_loads_nothing_heavy():
-    done = subprocess.run([sys.executable, "-c", LISTING], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", LISTING.format(args=["--help"], tops=LISTING_SPARES)], capture_output=True, text=True)
     assert "Commands" in done.stdout and "apply" in done.stdout
     assert done.stderr.strip() == "heavy: []"
 
@@ -69,3 +75,65 @@ def test_a_plan_against_saved_images_loads_no_link(tmp_path):
     assert done.stderr.strip().splitlines()[-1] == "loaded: []"
     validated = subprocess.run([sys.executable, "-c", LOADED_BY, "validate", str(plant)], capture_output=True, text=True)
     assert validated.stderr.strip().splitlines()[-1] == "loaded: []"
+
+
+#: Runs the command line's arguments in this process (stdout and stderr pipes), then names what it loaded of these.
+LOADED_OF = """
+import sys
+from prc3cfg.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit as stop:
+    assert stop.code in (0, 2), stop.code
+loaded = sorted(m for m in sys.modules if m.split(".")[0] == "rich" or m in ("prc3cfg.shell.doctor", "prc3cfg.plant.importer",
+                "prc3cfg.shell.emulator.server"))
+print("loaded:", loaded, file=sys.stderr)
+"""
+
+
+def test_a_plan_loads_what_it_runs_only(tmp_path):
+    """Piped, `plan` loads no rich (its progress bar and colours are for a terminal), nor doctor's search or the importer
+    (it asks only whether doctor could measure a port); on `emulator://` it runs the emulator, on `socket://` it does not."""
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(DEMO.read_text())
+    on_emulator = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path,
+                                 env=_no_terminal())  # fmt: skip
+    assert "booth-a-left" in on_emulator.stdout, on_emulator.stderr
+    assert on_emulator.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.shell.emulator.server']"
+    (tmp_path / "socket").mkdir()
+    with emulated_plant(tmp_path / "socket") as emulated:
+        on_socket = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(emulated.path)], capture_output=True, text=True,
+                                   cwd=tmp_path, env=_no_terminal())  # fmt: skip
+    assert "booth-a-left" in on_socket.stdout, on_socket.stderr
+    assert on_socket.stderr.strip().splitlines()[-1] == "loaded: []"
+
+
+def _no_terminal() -> dict[str, str]:
+    """This environment without what makes rich take a pipe for a terminal."""
+    return {name: value for name, value in os.environ.items() if name not in ("TTY_COMPATIBLE", "FORCE_COLOR")}
+
+
+def _command_lines(command=None, words: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Every command and sub-command of `prc3cfg`, as the words that name it."""
+    import typer
+
+    from prc3cfg.cli import _register_commands, app
+
+    if command is None:
+        _register_commands()
+        command = typer.main.get_command(app)
+    found = [words] if words else []
+    for name, sub in sorted(getattr(command, "commands", {}).items()):
+        found += _command_lines(sub, (*words, name))
+    return found
+
+
+@pytest.mark.soak
+@pytest.mark.parametrize("words", _command_lines(), ids=" ".join)
+def test_every_commands_help_loads_nothing_heavy(words):
+    """The listing's guarantee (`test_listing_the_commands_loads_nothing_heavy`) for each command's own `--help` — but
+    pydantic and what it loads: typer checks a command's options with it."""
+    done = subprocess.run([sys.executable, "-c", LISTING.format(args=[*words, "--help"], tops=("serial", "yaml", "rich"))],
+                          capture_output=True, text=True)  # fmt: skip
+    assert "Usage" in done.stdout, done.stderr
+    assert done.stderr.strip() == "heavy: []"

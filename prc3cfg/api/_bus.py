@@ -10,21 +10,23 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import replace
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
 from prc3cfg.core import bustime, codec
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, PROGRAM_NUMBERS, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
-from prc3cfg.plant.importer import bus_entry, imported_plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, diagnose
 from prc3cfg.shell.link.client import Link, Port
 from prc3cfg.shell.link.ports import open_port
 from prc3cfg.shell.locks import line_keys
 from prc3cfg.shell.probe import probe, probe_timeout
 from prc3cfg.shell.readback import read_module
 from prc3cfg.shell.sessions import BareLine, LineOptions, bare_link, bare_lock
+
+if TYPE_CHECKING:  # doctor's search and the importer load where `doctor` and `import_plant` run: `plan` asks `measurable`
+    from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search
 
 
 def slower_than_priced(links: Iterable[Link]) -> list[Link]:
@@ -64,6 +66,8 @@ def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *
     answering module's turnaround over `exchanges` timed 50h (`prc3cfg.shell.doctor`). Over
     `socket://` the gateway fixes baud and character format: only framings are tried, at `bare.line`.
     A probe in a framing without a checksum waits for `allow_unchecked()` (asked once)."""
+    from prc3cfg.shell.doctor import diagnose
+
     options = options or LineOptions()
     settable = urlsplit(bare.port).scheme.lower() != "socket"
     if not settable:
@@ -109,6 +113,8 @@ def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None 
     describes: what they all hold alike once, in one profile; `unmanaged_programs: reset`, so planning
     it against those lines is empty. Two names for one line, and a port no plant file may name (a
     pyserial handler's URL: `core.line.port_refusal`), are refused before any is read."""
+    from prc3cfg.plant.importer import bus_entry, imported_plant
+
     owner: dict[str, str] = {}
     for name, bare in buses.items():
         if port_error("port", bare.port, operators=True) is None and (problem := port_error("--port", bare.port)) is not None:

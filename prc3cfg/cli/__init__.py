@@ -11,7 +11,6 @@ can end into one line on stderr and an exit code:
 - stdout closed by its reader (`prc3cfg read … | head -1`): quietly, exit 141 (`EXIT_BROKEN_PIPE`).
 """
 
-from __future__ import annotations
 
 import os
 import re

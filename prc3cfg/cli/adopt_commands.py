@@ -9,7 +9,6 @@ file is written only if it is still the one that was read; its permissions are k
 Arguments, prompts and output only: the work is `prc3cfg.api`'s.
 """
 
-from __future__ import annotations
 
 import sys
 from typing import Annotated

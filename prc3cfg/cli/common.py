@@ -20,7 +20,6 @@ import typer
 
 from prc3cfg.errors import UserError
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.files import write_atomically
 from prc3cfg.shell.platform import command_line, open_text
 
 if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3cfg --help` stays quick
@@ -77,13 +76,18 @@ def stderr_console() -> Console:
     return Console(stderr=True)
 
 
+def may_be_terminal(stream: TextIO) -> bool:
+    """Whether rich could take `stream` for a terminal: it is one, or TTY_COMPATIBLE or FORCE_COLOR
+    tells rich to treat any stream as one. Where not, rich is not imported (16 ms; its progress bar 22)."""
+    return stream.isatty() or bool({"TTY_COMPATIBLE", "FORCE_COLOR"} & os.environ.keys())
+
+
 def print_lines(text: str) -> None:
     """Print plan or account text: coloured by each line's leading symbol on a terminal (and not
-    under NO_COLOR, which rich honours), plain when piped — without importing rich (16 ms) where
-    it could not take stdout for a terminal: no terminal, and neither TTY_COMPATIBLE nor FORCE_COLOR,
-    with which rich treats any stream as one. Plain, it is one write (as `TerminalProgress.note`'s):
+    under NO_COLOR, which rich honours), plain when piped — without importing rich where it could
+    not take stdout for a terminal (`may_be_terminal`). Plain, it is one write (as `TerminalProgress.note`'s):
     the lines' threads may note their plans meanwhile."""
-    if sys.stdout.isatty() or {"TTY_COMPATIBLE", "FORCE_COLOR"} & os.environ.keys():
+    if may_be_terminal(sys.stdout):
         from rich.console import Console
 
         console = Console(highlight=False)
@@ -152,6 +156,8 @@ def check_output(path: Path | None, option: str, *, plant: Path | None = None) -
 
 def write_output(path: Path, text: str, option: str) -> None:
     """Write an output file: a regular file atomically, a device or FIFO as it is; one line if it fails."""
+    from prc3cfg.shell.files import write_atomically  # json, secrets and tempfile: not for `--help`
+
     try:
         if path.exists() and not path.is_file():
             with open_text(path) as handle:
@@ -294,6 +300,8 @@ class TerminalProgress:
         stack.callback(self.stop)
 
     def start(self, what: str, total: int) -> None:
+        if self._bar is None and not may_be_terminal(sys.stderr):  # a bar nobody sees
+            return
         from rich.progress import (
             BarColumn,
             MofNCompleteColumn,

@@ -1,10 +1,8 @@
 """`prc3cfg emulator serve`: run a bus emulator until SIGINT/SIGTERM (docs/commands.md) — made and
 served by the API (`prc3cfg.api.emulator`); here, its options and what it prints."""
 
-from __future__ import annotations
 
 import contextlib
-import logging
 import signal
 import threading
 from pathlib import Path
@@ -111,6 +109,8 @@ def serve(
     keeps its state and the write gets no reply: the master repeats it.
     Warnings and errors are logged on stderr.
     """
+    import logging  # the server's log: only where it serves
+
     from prc3cfg import api
     from prc3cfg.core.line import LineSettings
 

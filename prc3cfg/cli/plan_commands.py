@@ -3,7 +3,6 @@
 Arguments, prompts and output only: the work is `prc3cfg.api`'s.
 """
 
-from __future__ import annotations
 
 from pathlib import Path
 from typing import Annotated

@@ -58,22 +58,20 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import getpass
-import hashlib
 import os
 import select
 import shlex
 import signal
-import socket
 import stat
 import sys
 import threading
 from collections.abc import Iterable, Iterator
-from concurrent.futures import Future
 from pathlib import Path
-from typing import Literal, TextIO, TypeVar
+from typing import TYPE_CHECKING, Literal, TextIO, TypeVar
 
-from prc3cfg.core.line import COM_PORT
+if TYPE_CHECKING:  # the rest where a call needs it: every command imports this module first, `--help` too
+    import socket
+    from concurrent.futures import Future
 
 T = TypeVar("T")
 
@@ -291,6 +289,8 @@ def user_tag() -> str:
     """What tells this user's files from others' in a folder all users share: the uid (Windows: a
     digest of the user name)."""
     if sys.platform == "win32":
+        import hashlib
+
         return hashlib.sha256(user_name().encode()).hexdigest()[:12]
     return str(os.getuid())
 
@@ -307,6 +307,8 @@ def user_state_dir() -> Path:
 
 def user_name() -> str:
     """The login name of this process's user, else `uid N` (no login name and no passwd entry: a container)."""
+    import getpass
+
     try:
         return getpass.getuser()
     except (KeyError, OSError, ImportError):  # ImportError: Windows without USERNAME, before Python 3.13 (getpass imports pwd)
@@ -461,6 +463,8 @@ def is_pseudo_terminal(path: str) -> bool:
 
 def com_port_name(port: str) -> str | None:
     r"""The Windows serial port `port` names, in capitals (`com10`, `\\.\COM10`: COM10); None for any other port."""
+    from prc3cfg.core.line import COM_PORT
+
     named = COM_PORT.fullmatch(port)
     return named.group(1).upper() if named else None
 
@@ -551,6 +555,8 @@ def kernel_lock_holders(device: str) -> Iterator[int | None]:
 def bytes_waiting(sock: socket.socket) -> int:
     """How many bytes have arrived on `sock` and not been read (Windows: as many as one peek sees)."""
     if sys.platform == "win32":
+        import socket
+
         try:
             return len(sock.recv(65536, socket.MSG_PEEK))
         except BlockingIOError:
@@ -565,6 +571,8 @@ def hung_up(conn: socket.socket) -> bool:
         poll = select.poll()
         poll.register(conn, select.POLLRDHUP)
         return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL) for _, events in poll.poll(0))
+    import socket
+
     try:
         readable, _, _ = select.select([conn], [], [], 0)
         return bool(readable) and conn.recv(1, socket.MSG_PEEK) == b""

@@ -49,8 +49,6 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import platform
 from prc3cfg.shell.emulator import ptys
-from prc3cfg.shell.emulator.server import Emulator, FaultInjection
-from prc3cfg.shell.emulator.state import load_state
 from prc3cfg.shell.link.client import Exchange, Link
 from prc3cfg.shell.link.trace import Trace
 
@@ -250,6 +248,9 @@ def open_link(
     with contextlib.ExitStack() as stack:
         url, takes_line_time = bus.port, True
         if url.startswith(EMULATOR_SCHEME):
+            from prc3cfg.shell.emulator.server import Emulator, FaultInjection  # the embedded emulator: for emulator:// only
+            from prc3cfg.shell.emulator.state import load_state
+
             try:
                 query = emulator_query(url)
             except ValueError as error:

@@ -1,0 +1,77 @@
+"""What CI pays per command: `prc3cfg --help`'s start-up CPU, and the demo's plan + apply on `emulator://` against the line.
+
+    python bench/startup_bench.py [--runs 20] [--demo-runs 3]
+
+Prints, medians of the runs (each a subprocess, as CI and the tests run prc3cfg):
+
+- **start-up**: CPU time (user + system) of `python -m prc3cfg --help`, beside the interpreter's own
+  start-up in the same environment (`python -c pass`: site-packages' .pth files included) — what
+  prc3cfg adds is the difference; acceptance: `--help` under 60 ms CPU;
+- **CI speed**: wall time of the demo plant (plants/demo-line.yaml) planned, then applied
+  (`apply --auto-approve --allow-axis-release`, from factory defaults), in a fresh folder, its buses on
+  `emulator://` as written, against the same with each port `emulator://NAME?line-speed=9600`
+  (the emulator answers in the time the real line takes: docs/line.md); acceptance: at least 20 times
+  faster.
+
+CPU is read from the children's resource usage (POSIX's `resource`): run it on Linux or macOS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import resource
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from line_bench import run  # the wall time and output of a command that must succeed
+
+DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
+
+
+def cpu_ms(command: list[str]) -> float:
+    """The CPU time (user + system, ms) of running `command` to its end."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    run(command)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return 1000 * (after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+
+
+def demo_seconds(line_speed: int | None) -> float:
+    """Wall time of the demo's plan, then its apply, in a fresh folder (the emulators' state starts at factory defaults)."""
+    text = DEMO.read_text()
+    if line_speed is not None:
+        text = re.sub(r"(port: emulator://[\w-]+)", rf"\1?line-speed={line_speed}", text)
+    with tempfile.TemporaryDirectory() as folder:
+        plant = Path(folder) / "plant.yaml"
+        plant.write_text(text)
+        command = [sys.executable, "-m", "prc3cfg"]
+        start = time.perf_counter()
+        run([*command, "plan", str(plant)])
+        run([*command, "apply", str(plant), "--auto-approve", "--allow-axis-release"])
+        return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=20, help="start-up runs of each command")
+    parser.add_argument("--demo-runs", type=int, default=3, help="runs of the demo's plan + apply, each way")
+    args = parser.parse_args()
+
+    bare = statistics.median(cpu_ms([sys.executable, "-c", "pass"]) for _ in range(args.runs))
+    helped = statistics.median(cpu_ms([sys.executable, "-m", "prc3cfg", "--help"]) for _ in range(args.runs))
+    print(f"start-up: prc3cfg --help {helped:.0f} ms CPU (the interpreter alone {bare:.0f} ms: prc3cfg adds {helped - bare:.0f}); "
+          f"target under 60 — {'met' if helped < 60 else 'NOT met'}")  # fmt: skip
+
+    emulated = statistics.median(demo_seconds(None) for _ in range(args.demo_runs))
+    line = statistics.median(demo_seconds(9600) for _ in range(args.demo_runs))
+    ratio = line / emulated
+    print(f"CI speed: the demo's plan + apply {emulated:.2f} s on emulator://, {line:.2f} s at 9600 baud: {ratio:.1f}× "
+          f"(target at least 20× — {'met' if ratio >= 20 else 'NOT met'})")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
