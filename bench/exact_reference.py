@@ -292,6 +292,8 @@ class _Programme:
                 if after is not None:
                     self.row({end[n]: 1.0, after: 1.0}, -np.inf, 1.0)
         prices = {run: self.price(message(*run)) for run in _runs(self.managed)}
+        if not prices:  # no program is managed: no run to initialise, link or unlink
+            return _Segments(on, start, end, message)
         common = Counter(round(p, 12) for p in prices.values()).most_common(1)[0][0]
         for n in self.numbers:
             self.costs[start[n]] = common
