@@ -15,7 +15,7 @@ from emulated import run_cli
 
 from prc3cfg import __version__, api
 from prc3cfg.api._apply import prove, read_plan
-from prc3cfg.api._plan import line_records
+from prc3cfg.api._plan import as_it_stands
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage, images_from_json
 from prc3cfg.errors import UserError
@@ -66,9 +66,9 @@ def test_a_plan_file_written_before_is_read_and_shown_and_apply_asks_for_a_plan_
     pairs = api.select(loaded)
     images = api.load_images(factory_images(plant, tmp_path / "images.json"), loaded)
     with pytest.raises(UserError, match=r'before\.json: it does not say what its plan rests on \(no "evidence"\).*nothing was written'):
-        prove(path, read_plan(path, loaded), loaded, pairs, images, line_records(loaded, loaded.buses))
+        prove(path, read_plan(path, loaded), loaded, pairs, images, as_it_stands(loaded, loaded.buses))
     path.write_text(made_before(plant, "plan-evidence.json"))
-    proved = prove(path, read_plan(path, loaded), loaded, pairs, images, line_records(loaded, loaded.buses))
+    proved = prove(path, read_plan(path, loaded), loaded, pairs, images, as_it_stands(loaded, loaded.buses))
     assert proved.message_count == 26 and len(proved.changes) == 6
 
 

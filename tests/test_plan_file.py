@@ -31,7 +31,7 @@ from tools import require
 
 from prc3cfg import api
 from prc3cfg.api import _apply
-from prc3cfg.api._plan import RECORD, line_records
+from prc3cfg.api._plan import RECORD, as_it_stands
 from prc3cfg.core import plan_file, render
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.image import ModuleImage
@@ -78,7 +78,7 @@ def made(tmp_path_factory) -> Made:
 def prove(made: Made, path: Path) -> PlantPlan:
     """What `apply --plan` does with the plan file at `path` before its first write: read it, prove it."""
     return _apply.prove(path, _apply.read_plan(path, made.plant), made.plant, api.select(made.plant), made.images,
-                        line_records(made.plant, made.plant.buses))
+                        as_it_stands(made.plant, made.plant.buses))
 
 
 def test_a_plan_file_is_read_back_as_the_plan_written(made):

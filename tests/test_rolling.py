@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prc3cfg import api
-from prc3cfg.api._plan import line_records, record
+from prc3cfg.api._plan import as_it_stands, record
 from prc3cfg.core import what_to_read
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.shell.testing import EmulatedPlant
@@ -113,7 +113,7 @@ def windows(plant: EmulatedPlant, bus: str) -> int:
     """W of `bus`: its modules' windows of four programs that hold a program the plant file manages or the
     record holds — the bound on the plans that find a change is ⌈W / 8⌉."""
     plant_ = api.load(plant.path)
-    known = record(line_records(plant_, plant_.buses))
+    known = record(as_it_stands(plant_, plant_.buses))
     count = 0
     for b, m in plant_.modules():
         if b.name == bus:
@@ -125,7 +125,7 @@ def windows(plant: EmulatedPlant, bus: str) -> int:
 def newest(plant: EmulatedPlant, bus: str) -> tuple[str, int]:
     """The name and address of `bus`'s module whose record is the newest (ties: the highest address): its programs roll last."""
     plant_ = api.load(plant.path)
-    known = record(line_records(plant_, plant_.buses))
+    known = record(as_it_stands(plant_, plant_.buses))
     module = max((m for b, m in plant_.modules() if b.name == bus), key=lambda m: (known[(bus, m.address)].since, m.address))
     return module.name, module.address
 
@@ -198,7 +198,7 @@ def oldest_words(plant: EmulatedPlant, whose: bool = True) -> str:
     """The oldest value the next plan takes from the record, in its words: of the modules whose programs it
     takes (not those it reads, rolled ones included), the one with the oldest record."""
     plant_ = api.load(plant.path)
-    known = record(line_records(plant_, plant_.buses))
+    known = record(as_it_stands(plant_, plant_.buses))
     names = {(b.name, m.address): m.name for b, m in plant_.modules()}
     read = read_next(plant.path)
     taken = {(b.name, m.address) for b, m in plant_.modules() if set(m.managed_programs()) - set(read[m.name])}

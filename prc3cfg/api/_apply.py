@@ -48,7 +48,6 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import Verify
-from prc3cfg.shell.bases import LineRecord
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
@@ -56,7 +55,7 @@ from prc3cfg.shell.probe import prober
 from prc3cfg.shell.readback import read_all
 from prc3cfg.shell.records import Journal, Snapshot, applied_copy, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
-from prc3cfg.shell.sessions import LineOptions, bus_line_keys, line_cost, lines
+from prc3cfg.shell.sessions import LineOptions, OnRecord, bus_line_keys, line_cost, lines
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link
@@ -94,7 +93,7 @@ def plan_file_plant(path: Path) -> Path:
     return Path(recorded)
 
 
-def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage], records: Mapping[str, LineRecord],
+def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage], held: OnRecord,
           probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
     """The plan file's plan, proved before anything is written (`prc3cfg.core.plan_file`): what is
     applied is then the plan prc3cfg makes from this read-back."""
@@ -102,9 +101,9 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     plan_file.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     buses = {bus.name: bus for bus, _ in chosen}.values()
-    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, buses), only_read=planned.targeted)
+    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, buses, held), only_read=planned.targeted)
     if planned.targeted:  # what this apply read, and whose verification what it did not read rests on: its line's record now
-        ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(records)).reading(pairs, images))
+        ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(held)).reading(pairs, images))
     plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
     return ours
 
@@ -133,11 +132,11 @@ def apply(
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
 
-    def wanted(records: Mapping[str, LineRecord]) -> Reads:
+    def wanted(held: OnRecord) -> Reads:
         if planned is not None:
-            return plan_file_reads(plant, *planned, pairs, records)
+            return plan_file_reads(plant, *planned, pairs, held)
         # a factory-fresh module is commissioned: the programs it will be written are not read first, but after
-        return reads(plant, pairs, full_read) if full_read else commissioned(reads(plant, pairs, records=records))
+        return reads(plant, pairs, True, held) if full_read else commissioned(reads(plant, pairs, held=held))
 
     on_lines = pairs if planned is None else plan_file_pairs(planned[1], pairs)
     return _apply(plant, pairs, on_lines, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links)
@@ -167,7 +166,7 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
     return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links)
 
 
-def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[Mapping[str, LineRecord]], Reads],
+def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[OnRecord], Reads],
            desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify,
            options: LineOptions, *, reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
     """Apply (or restore) `chosen`, reading the modules `on_lines`: what to read of them is worked out from the
@@ -187,8 +186,8 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[Ma
     try:
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
                    given=links) as held:  # fmt: skip
-            earlier = tuple(releases.pending(key for identities in keys.values() for key in identities))
-            wanted = wanted_of(held.records)
+            earlier = tuple(r for r in held.on_record.pending if r.kind == releases.RELEASE)
+            wanted = wanted_of(held.on_record)
             writing = Writing(plant, keys, buses, held, keeping, verify, options, records.command)
             whole = None
             if plan_file is not None or gates.asks:
@@ -246,13 +245,13 @@ def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ..
 def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
     """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
     as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
-    planner = planner_for(plant, wanted.pairs, unset_systems(plant, writing.buses.values()), only_read=wanted.base is not None,
-                          from_factory=wanted.from_factory)  # fmt: skip
+    unset = unset_systems(plant, writing.buses.values(), writing.held.on_record)
+    planner = planner_for(plant, wanted.pairs, unset, only_read=wanted.base is not None, from_factory=wanted.from_factory)
     want = to_plan(wanted.pairs, desired)
     by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(link) for name, link in writing.links.items()},
                      reading=lambda read: wanted.reading(chosen, read), show=gates.show, show_line=gates.show_line)  # fmt: skip
     return by_line.run(lambda line: read_all(wanted.targets, writing.links, progress=writing.phases.read, each=planning_each(planner, want),
-                                             then=seen(plant, writing.command, writing.records, line)))  # fmt: skip
+                                             then=seen(plant, writing.command, writing.held.on_record, line)))  # fmt: skip
 
 
 def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None,
@@ -266,8 +265,8 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
                                           only_read=wanted.base is not None, from_factory=wanted.from_factory)  # fmt: skip
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
-        images = read_targets(to_read, links, options, then=seen(plant, writing.command, writing.records))
-        the_plan = prove(*plan_file, plant, chosen, images, writing.records, {name: prober(link) for name, link in links.items()})
+        images = read_targets(to_read, links, options, then=seen(plant, writing.command, writing.held.on_record))
+        the_plan = prove(*plan_file, plant, chosen, images, writing.held.on_record, {name: prober(link) for name, link in links.items()})
     reading = time.monotonic() - started
     if gates.show is not None:
         gates.show(the_plan)

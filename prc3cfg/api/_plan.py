@@ -36,7 +36,7 @@ from prc3cfg.shell.platform import resolved
 from prc3cfg.shell.probe import probe_timeout, prober
 from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
-from prc3cfg.shell.sessions import LineOptions, Lines, bus_line_keys, line_cost, lines
+from prc3cfg.shell.sessions import LineOptions, Lines, OnRecord, bus_line_keys, line_cost, lines, on_record
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link
@@ -68,15 +68,15 @@ def targets(pairs: Pairs) -> list[Target]:
     return what_to_read.in_full(to_plan(pairs, None))
 
 
-def record(records: Mapping[str, bases.LineRecord]) -> dict[Key, Known]:
+def record(held: OnRecord) -> dict[Key, Known]:
     """What the records of these buses' lines say their modules hold, by (bus, address)."""
-    return {(bus, address): known for bus, line in records.items() for address, known in line.known().items()}
+    return {(bus, address): known for bus, line in held.records.items() for address, known in line.known().items()}
 
 
-def line_records(plant: Plant, buses: Iterable[Bus]) -> dict[str, bases.LineRecord]:
-    """The records of these buses' lines as they stand, read now — outside a command holding the lines
-    (`lines` reads them under their locks)."""
-    return {bus.name: bases.LineRecord(bus_line_keys(plant, bus)) for bus in buses}
+def as_it_stands(plant: Plant, buses: Iterable[Bus]) -> OnRecord:
+    """What is on record of these buses' lines, read now — outside a command holding the lines (`lines` reads it
+    under their locks)."""
+    return on_record({bus.name: bus_line_keys(plant, bus) for bus in buses})
 
 
 @dataclass(frozen=True)
@@ -120,25 +120,25 @@ def commissioned(wanted: Reads) -> Reads:
     return replace(wanted, targets=what_to_read.commissioning(wanted.targets), from_factory=True)
 
 
-def reads(plant: Plant, pairs: Pairs, full_read: bool = False, records: Mapping[str, bases.LineRecord] | None = None) -> Reads:
+def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | None = None) -> Reads:
     """What to read of the chosen modules: everything (`targets`) with `full_read` or when the lines'
     records know none of them; else of each module its system block and the managed programs the
     record does not show holding the plant file's values (`what_to_read.for_plan`) — every managed
     program of one the record does not know, knows from too long ago, or that reported E12 since; and
     every program of the module of each line whose record is the oldest (`what_to_read.with_rolling`).
-    `records`: the lines' records as the command holding the lines read them (else read now)."""
+    `held`: what is on record of the lines, as the command holding them read it (else read now)."""
     buses = {bus.name: bus for bus, _ in pairs}
-    on_line = {} if full_read else line_records(plant, buses.values()) if records is None else records
+    held = as_it_stands(plant, buses.values()) if held is None else held
     known: dict[Key, Known] = {}
     overruled: dict[Key, str] = {}
     for bus in () if full_read else buses.values():
-        on_record, newer = on_line[bus.name].read()
-        known |= {(bus.name, address): k for address, k in on_record.items()}
+        on_line, newer = held.records[bus.name].read()
+        known |= {(bus.name, address): k for address, k in on_line.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
-    for key, said in e12_claims(plant, buses.values()).items():  # another user's E12: read the module in full, never write for it
+    for key, said in e12_claims(plant, buses.values(), held).items():  # another user's E12: read the module in full, never write for it
         known.pop(key, None)
         overruled.setdefault(key, said)
-    unset = unset_systems(plant, buses.values()) if known or overruled else frozenset()  # of no use without a record
+    unset = unset_systems(plant, buses.values(), held) if known or overruled else frozenset()  # of no use without a record
     max_age = {name: bus.record_max_age for name, bus in buses.items()}
     targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
     if targeted is None:
@@ -147,14 +147,14 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, records: Mapping[
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
-def seen(plant: Plant, command: str, records: Mapping[str, bases.LineRecord], then: LineRead | None = None) -> LineRead:
+def seen(plant: Plant, command: str, held: OnRecord, then: LineRead | None = None) -> LineRead:
     """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.bases`):
     what `command` saw — drift included, so the next plan writes it back — then `then`. Written with
     the line's next write of the record (an apply's before its first frame), else when the command ends."""
     by = bases.who(command, plant.path)
 
     def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
-        record, when = records[bus], bases.now()
+        record, when = held.records[bus], bases.now()
         known = record.known()
         record.saw({a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
         if then is not None:
@@ -183,14 +183,14 @@ def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines
     last module is — while the other lines are still being read: the lines never wait for all of
     the planning. `only_read`, `from_factory`: see `Planner`."""
     buses = {bus.name: bus for bus, _ in pairs}
-    planner = planner_for(plant, pairs, unset_systems(plant, buses.values()), only_read=only_read, from_factory=from_factory)
+    planner = planner_for(plant, pairs, unset_systems(plant, buses.values(), held.on_record), only_read=only_read, from_factory=from_factory)
     wanted = to_plan(pairs, desired)
     links = held.links
 
     def plan_line(bus: str, read: dict[Key, ModuleImage]) -> None:
         planner.plan_line(bus, wanted, read, prober(links[bus]))
 
-    images = read_targets(to_read, links, options, each=planning_each(planner, wanted), then=seen(plant, command, held.records, plan_line))
+    images = read_targets(to_read, links, options, each=planning_each(planner, wanted), then=seen(plant, command, held.on_record, plan_line))
     return images, planner.plan(wanted, images)
 
 
@@ -209,7 +209,7 @@ def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOption
     options = options or LineOptions()
     pairs = select(plant, modules)
     with lines(plant, {bus.name for bus, _ in pairs}, options, given=links) as held:
-        return read_targets(targets(pairs), held.links, options, then=seen(plant, command, held.records))
+        return read_targets(targets(pairs), held.links, options, then=seen(plant, command, held.on_record))
 
 
 def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
@@ -263,7 +263,7 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
     if images is not None:
         return make_plan(plant, pairs, images)
     with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan", given=links) as held:
-        wanted = reads(plant, pairs, full_read, held.records)
+        wanted = reads(plant, pairs, full_read, held.on_record)
         read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, held, options, command="plan",
                                         only_read=wanted.base is not None)  # fmt: skip
     return replace(planned, reading=wanted.reading(pairs, read_))
@@ -298,26 +298,25 @@ def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted
             for bus, m in pairs]  # fmt: skip
 
 
-def unset_systems(plant: Plant, buses: Iterable[Bus]) -> frozenset[Key]:
+def unset_systems(plant: Plant, buses: Iterable[Bus], held: OnRecord) -> frozenset[Key]:
     """The modules of these buses that reported E12 to an earlier apply of this user's or root's and were
-    not cleared since: their plan writes the system parameters first (a 10h/20h)."""
-    return frozenset((r.bus, r.address) for bus in buses for r in releases.pending(bus_line_keys(plant, bus), releases.E12)
-                     if r.owner is None)  # fmt: skip
+    not cleared since (as `held` has it): their plan writes the system parameters first (a 10h/20h)."""
+    return frozenset((r.bus, r.address) for bus in buses for r in held.of(releases.E12, bus_line_keys(plant, bus)) if r.owner is None)
 
 
-def e12_claims(plant: Plant, buses: Iterable[Bus]) -> dict[Key, str]:
+def e12_claims(plant: Plant, buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
     """The modules of these buses another user's record says reported E12, with whose claim: a reason to
     read them in full, never to release their axes — only the module's own refusal (code 23, to a write
     of this run) or this user's or root's record makes a plan write the system parameters."""
     said = {}
     for bus in buses:
-        for r in releases.pending(bus_line_keys(plant, bus), releases.E12):
+        for r in held.of(releases.E12, bus_line_keys(plant, bus)):
             if r.owner is not None:  # keyed by the plant's bus: the record's own bus name is part of the claim
                 said[(bus.name, r.address)] = f"{r.owner}'s record says it reported E12 (system parameters not set), from {shown(r.time)}"
     return said
 
 
-def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, records: Mapping[str, bases.LineRecord]) -> Reads:
+def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, held: OnRecord) -> Reads:
     """What to read for a plan file: every chosen module in full, or — for a plan made from a
     targeted read-back — exactly the modules and programs its plan read, with the line's record as
     evidence; refused as stale when the record no longer shows a module holding what the plan took
@@ -328,7 +327,7 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, r
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
     buses = {bus.name: bus for bus, _ in plan_file_pairs(planned, pairs)}
     desired, max_age = {key: m.desired_image() for key, (_, m) in names.items()}, {name: bus.record_max_age for name, bus in buses.items()}
-    to_read, stale = what_to_read.for_plan_file(entries, desired, record(records), max_age, datetime.now(UTC))
+    to_read, stale = what_to_read.for_plan_file(entries, desired, record(held), max_age, datetime.now(UTC))
     if stale is not None:
         raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
                         "holding what the plan took as known without reading it (written or read by another run since, or "

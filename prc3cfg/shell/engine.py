@@ -194,7 +194,7 @@ class Writing:
     def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], held: Lines, keeping: Keeping,
                  verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
         self.plant, self.keys, self.buses, self.keeping = plant, keys, buses, keeping
-        self.held, self.links, self.records = held, held.links, held.records
+        self.held, self.links, self.records = held, held.links, held.on_record.records
         self.journal = keeping.journal
         self.verify, self.options, self.command = verify, options, command
         self.phases = Phases(options.progress.start, options.progress.advance)

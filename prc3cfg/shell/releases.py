@@ -196,8 +196,8 @@ class Pending:
         return said if self.owner is None else f"{self.owner}'s record says: {said}"
 
 
-def pending(keys: Iterable[str], kind: str = RELEASE) -> list[Pending]:
-    """Every record of `kind` on a line with one of `keys` that is not cleared yet (another user's in the
+def pending(keys: Iterable[str], kind: str | None = RELEASE) -> list[Pending]:
+    """Every record of `kind` (None: of every kind) on a line with one of `keys` that is not cleared yet (another user's in the
     machine's folder too: a claim, `owner` says whose — told all the same, an untold release errs the wrong way;
     it may make prc3cfg read, never write)."""
     wanted = set(keys)
@@ -206,7 +206,7 @@ def pending(keys: Iterable[str], kind: str = RELEASE) -> list[Pending]:
         entries, owner = _entries(path)
         for entry in entries:
             record = _pending(entry, path, None if platform.trusted_owner(owner) else platform.uid_name(owner))
-            if record is not None and record.kind == kind and wanted & set(record.keys):
+            if record is not None and kind in (None, record.kind) and wanted & set(record.keys):
                 found.append(record)
     return found
 

@@ -149,11 +149,32 @@ class Records(Protocol):
 
 
 @dataclass(frozen=True)
+class OnRecord:
+    """What is on record of the lines a command uses, read once — under the lines' locks where the command holds
+    them (`lines`), else as it stands (`on_record`): each line's record of what its modules hold, by bus, and every
+    record of an axis release, an E12 or a fault state on them not cleared yet (`releases.pending`)."""
+
+    records: dict[str, bases.LineRecord]
+    pending: tuple[releases.Pending, ...]
+
+    def of(self, kind: str, keys: Iterable[str]) -> list[releases.Pending]:
+        """The records of `kind` not cleared yet on the line with these identities."""
+        wanted = set(keys)
+        return [r for r in self.pending if r.kind == kind and wanted & set(r.keys)]
+
+
+def on_record(keys: Mapping[str, tuple[str, ...]]) -> OnRecord:
+    """What is on record of the lines with these identities (by bus), read now."""
+    return OnRecord({bus: bases.LineRecord(line) for bus, line in keys.items()},
+                    tuple(releases.pending((key for line in keys.values() for key in line), None)))  # fmt: skip
+
+
+@dataclass(frozen=True)
 class Lines:
-    """The lines a command holds: a `Link` per bus, and each line's record as read under its lock (`bases.LineRecord`)."""
+    """The lines a command holds: a `Link` per bus, and what is on record of them, read under their locks."""
 
     links: dict[str, Link]
-    records: dict[str, bases.LineRecord]
+    on_record: OnRecord
 
 
 @contextlib.contextmanager
@@ -172,7 +193,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
     if given is None:
         refuse_other_lines(plant, keys)
-    owner = _one_bus_a_line(plant, keys)
+    _one_bus_a_line(plant, keys)
     with contextlib.ExitStack() as stack:
         for bus in plant.buses:
             if bus.name in names:
@@ -181,7 +202,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         if _sha256_of(plant.path) != plant.sha256:  # edited (or adopted into) while this waited for the line
             raise UserError(f"{plant.path}: the plant file changed while this command waited for the line — nothing was "
                             "read or written: run it again, with the file as it is now")  # fmt: skip
-        held = _line_records(keys, owner, options)
+        held = _line_records(keys, options)
         cancel = options.cancel.event if options.cancel is not None else None
         module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
@@ -196,11 +217,11 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         try:
             yield Lines(links, held)
         except BaseException:  # what was read is kept all the same (drift included: the next plan writes it back)
-            for record in held.values():
+            for record in held.records.values():
                 with contextlib.suppress(UserError):
                     record.write()
             raise
-        for record in held.values():
+        for record in held.records.values():
             record.write()
         if options.used is not None:
             options.used(list(links.values()))
@@ -218,17 +239,18 @@ def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> dict[s
     return owner
 
 
-def _line_records(keys: Mapping[str, tuple[str, ...]], identities: Iterable[str], options: LineOptions) -> dict[str, bases.LineRecord]:
-    """Under the lines' locks: each line's record, read once (this user's names made theirs first: `bases.settle`),
-    with its files passed over or moved aside told, every axis release on these lines that no account has named
-    yet, and every module a write found in a fault state not seen cleared since."""
+def _line_records(keys: Mapping[str, tuple[str, ...]], options: LineOptions) -> OnRecord:
+    """Under the lines' locks: what is on record of them, read once (this user's names made theirs first:
+    `bases.settle`), with the records' files passed over or moved aside told, every axis release on these lines
+    that no account has named yet, and every module a write found in a fault state not seen cleared since."""
     said = [*releases.passed_over(), *(said for line in keys.values() for said in bases.settle(line))]
-    records = {bus: bases.LineRecord(line) for bus, line in keys.items()}
-    for line in [*said, *(said for record in records.values() for said in record.passed_over())]:
+    held = on_record(keys)
+    for line in [*said, *(said for record in held.records.values() for said in record.passed_over())]:
         options.tell(line)
-    for record in [*releases.pending(identities), *releases.pending(identities, releases.FAULT)]:
-        options.tell(record.said())
-    return records
+    for record in held.pending:
+        if record.kind in (releases.RELEASE, releases.FAULT):
+            options.tell(record.said())
+    return held
 
 
 def _given(given: Mapping[str, Link], bus: str) -> Link:
