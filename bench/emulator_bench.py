@@ -13,7 +13,7 @@ programs reset. Prints, medians of `--runs`:
   emulators without a state path); acceptance: at most 1.3;
 - **against the real line**: `--buses` buses of `--modules` modules through `emulator://`
   against the time the real line would take — every exchange of the apply's journal (the
-  read-back, the plan's writes, the verification) priced at 9600 baud 8E1 by link.md's cost
+  read-back, the plan's writes, the verification) priced at 9600 baud 8E1 by docs/line.md's cost
   model (beside the plan's own estimated bus time of its writes, from `plan --json`);
   acceptance: at least 10 times faster. Two figures for the real line: summed over the
   buses, as the plan file sums its estimate, and the slowest bus alone, as buses are

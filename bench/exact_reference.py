@@ -30,7 +30,7 @@ The plans it chooses from: the canonical order of a module's plan —
 What each message does is the device model's (`prc3cfg.core.device`): the bases — a program after the
 system step, with no init, with an init after it or an init before it — come from running 10h/20h and
 11h on the model, never from a copy of its rules; link ranges set A(i) = i + 1 but on the last program
-of the range (0), unlink ranges 0 (prc3-protocol.md §2), which the replay checks.
+of the range (0), unlink ranges 0 (docs/protocol.md "Messages"), which the replay checks.
 
 The programme: init runs and link/unlink ranges as columns per program (covered, a run starts, a run
 ends: `_Programme._segments`); a binary column per 21h and per 32h/33h run; binary items and integer

@@ -6,7 +6,7 @@ Starts `prc3cfg emulator serve --line-speed BAUD` (a separate process, so the em
 and the client do not share an interpreter), then
 
 - **read**: `prc3cfg read --json` of a plant of N fully managed modules (one 50h and
-  sixteen 52h each) — prints the wall time, the bus-time estimate (link.md's cost model
+  sixteen 52h each) — prints the wall time, the bus-time estimate (docs/line.md's cost model
   summed over those exchanges) and the ratio; acceptance: at most 1.10;
 - **apply**: `prc3cfg apply` of the same plant from factory defaults (commissioning: see below), then
   of a change of `--changed` programs per module (default 2: a position and a speed) —
@@ -25,7 +25,7 @@ download* is what a tool that knows nothing of the modules does to put the plant
 it: per module, addressed, one 20h and one 21h for every program the plant file sets (with `unmanaged_programs:
 reset` every program, the unmanaged ones at the factory's), then read back what it wrote — a 50h and the fewest
 51h/52h over those programs; no read before writing (it writes everything whatever the modules hold), no
-broadcast. Its time is the cost model's (link.md), which the line matches within 1.02× (the ratios below): at
+broadcast. Its time is the cost model's (docs/line.md), which the line matches within 1.02× (the ratios below): at
 9600 baud on 30 modules of this plant, 76.6 s of writes and 45.2 s of read-back, 121.8 s. Commissioning is the
 wall time of `prc3cfg apply` on factory-fresh modules, its evidence included: a 50h of every module, which shows
 the factory's system parameters — so the programs the plant file manages are planned as the factory's, not read

@@ -1,4 +1,4 @@
-"""The codec against prc3-protocol.md: the manual's worked examples (§5) byte for byte, one
+"""The codec against docs/protocol.md: the manual's worked examples (§5) byte for byte, one
 hand-written vector per message ID, the build-time limits, the structural checks 1–5 of §4.5
 with their codes and order, reply decoding, and the error-code texts."""
 

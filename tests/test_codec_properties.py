@@ -80,7 +80,7 @@ def test_every_message_round_trips(message):
 
 
 # -- decode_message on arbitrary bytes -------------------------------------------------------
-# An independent reading of prc3-protocol.md §2 and §4.5 checks 1–5: per ID, the header words
+# An independent reading of docs/protocol.md "Messages" and §4.5 checks 1–5: per ID, the header words
 # and the length the header gives, and which bytes are don't-care ("xx").
 
 BARE = {0x10: 1, 0x11: 1, 0x50: 1}  # [ID xx]

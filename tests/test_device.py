@@ -1,4 +1,4 @@
-"""The device model against prc3-protocol.md §4: every check of §4.5 and every error code,
+"""The device model against docs/protocol.md "What a module does": every check of §4.5 and every error code,
 their order, atomic rejection, operating states, defaults, clamping, link/unlink, reads and
 the state-file entry. Each case is (state, message bytes) → (state, reply)."""
 

@@ -18,7 +18,7 @@ PROPERTY = settings(
     max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
 )
 
-#: The fixed ranges of prc3-protocol.md §1 (P and V depend on S1, S4, S5).
+#: The fixed ranges of docs/protocol.md "Values" (P and V depend on S1, S4, S5).
 SYSTEM_RANGES = {
     "S1": (100, 9999), "S2": (50, 500), "S3": (1, 9999), "S4": (1, 600), "S5": (1, 600), "S6": (1000, 1500),
     "S7": (800, 1500), "S8": (0, 1), "S10": (1, 9999), "S11": (1, 1500), "S12": (5, 50),
@@ -141,7 +141,7 @@ def invariants_hold(state: ModuleState) -> bool:
 
 
 def data_block_length(data: bytes) -> int:
-    """The read reply's length, from the request's bytes (prc3-protocol.md §3)."""
+    """The read reply's length, from the request's bytes (docs/protocol.md "Messages")."""
     if data[0] == 0x50:
         return 22
     if data[0] == 0x51:

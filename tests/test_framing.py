@@ -1,4 +1,4 @@
-"""The three framings against fixed byte vectors (link.md), and their decoders as tables of cases.
+"""The three framings against fixed byte vectors (docs/line.md), and their decoders as tables of cases.
 
 Line: 9600 baud 8E1, one character = 11/9600 s = 1.146 ms; crc16 inter-character time-out
 5 characters = 5.729 ms; stx SPD message time-out 32 ms; open-driver ZVZ 20 ms.

@@ -204,7 +204,7 @@ def test_stx_frame_length_counts_every_stuffed_byte(address, message):
 
 
 def encoded_time(cost: LineCost, address: int, message: codec.Message) -> float:
-    """What an exchange costs by its encoded frames (link.md "Bus time"), as bustime priced it before."""
+    """What an exchange costs by its encoded frames (docs/line.md "Bus time"), as bustime priced it before."""
     request = cost.framing.encode(Direction.REQUEST, address, message.encode())
     reply = cost.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message)))
     gaps = 2 * cost.zvz if cost.framing.name == "open-driver" else 0.0

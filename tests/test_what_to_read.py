@@ -25,7 +25,7 @@ FACTORY = ModuleImage.factory(1)  # what the module holds: defaults throughout
 #: The plant file manages programs 1..3 and wants program 2 other than the module holds it.
 DESIRED = FACTORY.with_programs({n: None for n in range(4, 65)}).with_programs({2: replace(FACTORY.known(2), T=7)})
 MANAGED = (1, 2, 3)
-LOWER_S1 = replace(DEFAULT_SYSTEM, S1=DEFAULT_SYSTEM.S1 - 100)  # clamps positions (prc3-protocol.md §4.2)
+LOWER_S1 = replace(DEFAULT_SYSTEM, S1=DEFAULT_SYSTEM.S1 - 100)  # clamps positions (docs/protocol.md "What a module does")
 OTHER_S6 = replace(DEFAULT_SYSTEM, S6=DEFAULT_SYSTEM.S6 + 1)  # clamps nothing
 M1, M2 = ("line", 1), ("line", 2)
 

@@ -1,4 +1,4 @@
-"""Bus time: what one exchange costs on a line (link.md "Bus time — the cost a plan is judged by").
+"""Bus time: what one exchange costs on a line (docs/line.md "Bus time — the cost a plan is judged by").
 
     t = (bytes_request + bytes_reply) × bits_per_char / baud + turnaround (+ 2 × ZVZ for open-driver)
 

@@ -1,6 +1,6 @@
 """PRC 3 messages (10h..52h) and replies as immutable values that encode to and decode from bytes.
 
-A message is a sequence of 16-bit data words sent high byte first (prc3-protocol.md §1, §2):
+A message is a sequence of 16-bit data words sent high byte first (docs/protocol.md "Values", "Messages"):
 
     10h  [10 00]                                    init system parameters (releases the axes)
     11h  [11 00]          12h [12 PN]   13h [13 PN]  init programs: all / one / PN..64

@@ -1,4 +1,4 @@
-"""The PRC 3 module: exactly what one module does with a message (prc3-protocol.md §4).
+"""The PRC 3 module: exactly what one module does with a message (docs/protocol.md "What a module does").
 
 This is *the* model of a module. The emulator serves it and the planner runs plans on it
 to predict what the modules will do on their own (clamping, defaults, link/unlink), so

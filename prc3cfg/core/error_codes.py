@@ -1,4 +1,4 @@
-"""The PRC 3 error codes (manual §3, prc3-protocol.md §4.5): number → meaning → what to do.
+"""The PRC 3 error codes (manual §3, docs/protocol.md "What a module does"): number → meaning → what to do.
 
 One table, used by the device model's tests, the link client and every message shown to a
 person. Pure.

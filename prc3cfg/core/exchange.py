@@ -37,7 +37,7 @@ from prc3cfg.core import codec
 from prc3cfg.core.error_codes import ACCEPTED, describe
 from prc3cfg.core.framing import Framing
 
-#: Codes of the structural checks (prc3-protocol.md §4.5 steps 1–5): to us, damage on the line.
+#: Codes of the structural checks (docs/protocol.md "What a module does" steps 1–5): to us, damage on the line.
 DAMAGED_CODES: Final = frozenset(range(10, 16))
 UNKNOWN_ID: Final = 10  # damage — or, to a message of `FIRMWARE_ADDED`, firmware older than the one that added it
 

@@ -260,8 +260,8 @@ def init_data_block(settings: GatewaySettings) -> tuple[int, ...]:
 
 
 # S5 constant formats, as the DB189 listing of §10.3.2 writes them.
-# (reading) The manual prints KF with five digits ("KF = +00220"); link.md, the project's
-# source of truth, writes "KF = +220" — the tool follows link.md.
+# (reading) The manual prints KF with five digits ("KF = +00220"); docs/line.md, the project's
+# source of truth, writes "KF = +220" — the tool follows docs/line.md.
 # (reading) KF is a signed word (-32768..+32767); ZVZTIM and XOFFTIM run to 65535 ms, so a
 # word above 32767 is written as KH rather than as a negative KF.
 _NOTATIONS: dict[str, Callable[[int], str]] = {
@@ -292,7 +292,7 @@ def zvz_too_short(zvz: float, line: LineSettings) -> str | None:
     """Why a character delay time of `zvz` seconds cannot end frames on `line`: it is not longer
     than one character, so the driver's time runs out between any two characters, back to back
     as they are, and it ends a frame after every byte (seed 004 §5.2.8: "ZVZ must be greater than
-    the time between two characters"; link.md, framing open-driver). None when it is longer."""
+    the time between two characters"; docs/line.md, framing open-driver). None when it is longer."""
     if zvz > line.char_time:
         return None
     guide = ZVZ_GUIDE_MS.get(line.baud)

@@ -1,7 +1,7 @@
 """What a PRC 3 module holds, in device units: system parameters, programs, the module image.
 
 Owns the value types shared by the codec, the device model, plant files, read-back and the
-planner, their factory defaults (prc3-protocol.md §4.1) and the module image JSON
+planner, their factory defaults (docs/protocol.md "What a module does") and the module image JSON
 (docs/files.md "Module image"), which the dataclasses' own fields check as it is read (pydantic,
 `images_from_json`). Owns no behaviour of a module: what a module *does* with a message is
 `prc3cfg.core.device`. Pure: no I/O.
@@ -79,7 +79,7 @@ class Program:
         return dict(zip(PROGRAM_FIELDS, self.values()))
 
 
-#: Factory defaults after 10h (prc3-protocol.md §4.1). (reading) S2 = 50, not the
+#: Factory defaults after 10h (docs/protocol.md "What a module does"). (reading) S2 = 50, not the
 #: "0.500 m" printed in manual §2.3.1, which contradicts its own example words.
 DEFAULT_SYSTEM = SystemParameters(
     S1=400, S2=50, S3=754, S4=600, S5=10, S6=1500, S7=1000, S8=0, S10=583, S11=1100, S12=10

@@ -1,4 +1,4 @@
-r"""Line settings of an RS-422 line and the times that follow from them (link.md "The line").
+r"""Line settings of an RS-422 line and the times that follow from them (docs/line.md "The line").
 
 Owns the character format and the character time, the URL schemes of ports that are not
 UARTs (TCP, the emulator), and which ports a plant file may name (`port_refusal`). Does not own
@@ -24,7 +24,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal, get_args
 
-#: Ports whose bytes come over TCP (pyserial URLs): `HOST:PORT`, no UART between (link.md).
+#: Ports whose bytes come over TCP (pyserial URLs): `HOST:PORT`, no UART between (docs/line.md).
 TCP_SCHEMES = ("socket", "rfc2217")
 #: The in-process emulator a plant file can name as its port: `emulator://NAME`.
 EMULATOR_SCHEME = "emulator://"

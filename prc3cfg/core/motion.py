@@ -21,7 +21,7 @@ The manual gives the numbers, not the kinematics; these are the project's readin
   on in the same direction; then it dwells T (0.1 s) there.
 - (reading) The relative speed Vr is a speed relative to the conveyor (manual §2.2; S10..S12
   synchronise with it). It does not change the stroke drawn here and is not used.
-- (reading) F = action × 1000 + distance (prc3-protocol.md §1.1; action 1 sets the output, 0
+- (reading) F = action × 1000 + distance (docs/protocol.md "Values"; action 1 sets the output, 0
   resets it). F1 acts once the axis has travelled the distance since the START of the
   program's move; F2 once it is the distance or less before P. On a move shorter than the
   distance F1 does not act and F2 acts at START. F = 0 resets the output at START (manual §3,
@@ -53,7 +53,7 @@ from prc3cfg.errors import UserError
 MOVE = "move"
 DWELL = "dwell"
 OUTPUTS = ("F1", "F2")
-#: Function output values the motion can read (prc3-protocol.md §1.1): those a module holds.
+#: Function output values the motion can read (docs/protocol.md "Values"): those a module holds.
 OUTPUT_RANGE = range(widest_range("F1")[0], widest_range("F1")[1] + 1)
 
 

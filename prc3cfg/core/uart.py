@@ -1,5 +1,5 @@
 """What a UART receives of characters sent at other line settings: the bytes a frame becomes on a
-line whose two ends disagree about the baud rate or the character format (link.md "The line").
+line whose two ends disagree about the baud rate or the character format (docs/line.md "The line").
 
     idle ‾‾‾‾|start| d0 d1 … d(n-1) |parity|stop…|‾‾‾‾ idle
               0     LSB first         even/odd  1

@@ -1,7 +1,7 @@
 """Human units ↔ device units, exactly: the one table of every PRC 3 value a plant file sets.
 
 A plant file says metres, m/s, seconds and m/s²; a module holds integers in mm, mm/s,
-0.1 s and 0.001 m/s² (prc3-protocol.md §1). The conversion is decimal arithmetic on the
+0.1 s and 0.001 m/s² (docs/protocol.md "Values"). The conversion is decimal arithmetic on the
 number as written: `step` is the size of one device unit in human units, a human value
 must be a whole number of steps (0.0005 m is an error, never rounded), and device → human
 is `device × step` (1050 → Decimal("1.050")). F1/F2 are `{action, distance}` ↔
@@ -23,7 +23,7 @@ from typing import Any, Literal, get_args
 from prc3cfg.core.device import widest_range
 
 MM = Decimal("0.001")
-#: F1/F2: action × `PER_ACTION` + distance in mm (prc3-protocol.md §1.1).
+#: F1/F2: action × `PER_ACTION` + distance in mm (docs/protocol.md "Values").
 PER_ACTION = 1000
 
 

@@ -1,6 +1,6 @@
 """Adopting what the modules hold into the plant file: the Teach-In round trip (issue 13).
 
-Teach In changes positions on the floor (manual §2.6, prc3-protocol.md §6), and the plant
+Teach In changes positions on the floor (manual §2.6, docs/protocol.md "Readings of the manual"), and the plant
 file then says otherwise. `adopt` works out the plant file that describes what the modules
 hold, changing only the values that drifted, in the layer they came from:
 
@@ -222,7 +222,7 @@ def _changes(said: Any, held: Any, symbols: Iterable[str]) -> list[FieldChange]:
 
 def _check(after: ModuleImage, numbers: list[int], where: str) -> None:
     """`AdoptRefused` for a value of `after` — the module as the plant file would describe it —
-    that a plant file cannot hold: the device's own checks (prc3-protocol.md §4.5)."""
+    that a plant file cannot hold: the device's own checks (docs/protocol.md "What a module does")."""
     system = after.system
     for key in SYSTEM_KEYS:
         _in_range(key, getattr(system, key), system, f"{where}: system")

@@ -20,7 +20,7 @@ bus's times, a `float` of seconds. Its failures are `PydanticCustomError`s whose
 `port_not_a_line`, `tcp_port`, `emulator_name` for a port) and whose context carries the words; `messages` turns
 them into sentences.
 
-Decisions about the bus (link.md): `port` is a port a plant file may name (`core.line.port_refusal`: a serial
+Decisions about the bus (docs/line.md): `port` is a port a plant file may name (`core.line.port_refusal`: a serial
 device's path, `socket://`, `rfc2217://`, `emulator://NAME` — never another of pyserial's URL handlers, which a
 reviewed file must not choose) without control characters (a NUL would cut a device path); a `socket://` or
 `rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial would fail later, or compare None with 0), and
@@ -396,7 +396,7 @@ class ModuleSpec(ProfileSpec):
 
 
 class Gateway(FileModel):
-    """The CP 524/525 running the Open Driver that this line ends in (link.md, INIT-DB words 1 and 2)."""
+    """The CP 524/525 running the Open Driver that this line ends in (docs/line.md, INIT-DB words 1 and 2)."""
 
     receive_db: Annotated[int, _number(
         gateway.MIN_RECEIVE_DB, 255, step=1, out=int, description="EMPFDB, the receive data block",
@@ -415,11 +415,11 @@ class Gateway(FileModel):
 
 
 class BusLine(FileModel):
-    """A bus without its modules: where it is and how it talks (link.md)."""
+    """A bus without its modules: where it is and how it talks (docs/line.md)."""
 
     name: Name = Field(description="unique in the plant", examples=["line-1"])
     port: Port
-    framing: FramingName = Field("crc16", description="how messages are framed on the line (link.md)")
+    framing: FramingName = Field("crc16", description="how messages are framed on the line (docs/line.md)")
     baud: Annotated[int, _number(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud")] = 9600
     parity: Parity = Field("even", description="the parity bit of each character")
     data_bits: Annotated[int, _data_bits()] = FRAME_DATA_BITS

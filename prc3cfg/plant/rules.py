@@ -1,4 +1,4 @@
-"""The offline rules that span more than one value (docs/plant-files.md, prc3-protocol.md §4.5).
+"""The offline rules that span more than one value (docs/plant-files.md, docs/protocol.md "What a module does").
 
 On a module's effective settings (after profiles):
 - every listed program has a position and a speed (given in the module or a profile);

@@ -6,7 +6,7 @@ takes 1 + 16 exchanges.
 
 What to read is decided in `prc3cfg.core.what_to_read`, also where a read widens on what it finds:
 when the system parameters a plan will write can clamp programs (a lower S1 or S4, a higher S5:
-prc3-protocol.md §4.2), every program is read, not only the managed ones — the module's own
+docs/protocol.md "What a module does"), every program is read, not only the managed ones — the module's own
 clamping reaches programs the plant does not manage, and what it does to them must be shown in
 the plan and kept in the snapshot (`after_system`); and what contradicts the line's record is
 read in full (`after_programs`) — with every other module of its line, those read before it again

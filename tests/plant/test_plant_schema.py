@@ -94,7 +94,7 @@ def test_the_factory_defaults_are_the_devices():
         "upper_reversing_point": 0.4, "reference_point": 0.05, "increment_pulses": 754, "max_speed": 0.6,
         "min_speed": 0.01, "acceleration": 1.5, "circuit_gain": 1000, "alarm": False, "sync_increment": 583,
         "sync_circuit_gain": 1100, "sync_conveyor_sequence": 0.01,
-    }  # prc3-protocol.md's factory table
+    }  # docs/protocol.md's factory table
 
 
 def from_examples(value: dict) -> object:

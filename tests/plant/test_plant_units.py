@@ -99,7 +99,7 @@ def test_every_plant_file_bound_is_the_device_range_converted() -> None:
 
 
 def test_manual_examples_of_function_outputs() -> None:
-    """prc3-protocol.md §1.1: F1 = 1010 sets 0.010 m after START, 50 resets at 0.050 m."""
+    """docs/protocol.md "Values": F1 = 1010 sets 0.010 m after START, 50 resets at 0.050 m."""
     assert function_output("set", Decimal("0.010")) == 1010
     assert function_output("reset", Decimal("0.050")) == 50
     assert human_text("F1", 1050) == "set at 0.050 m"

@@ -1,6 +1,6 @@
 """Framings: how a PRC 3 message and its module address become the bytes of one frame, and back.
 
-Three framings (link.md), one module each, with the frame layout drawn in its docstring:
+Three framings (docs/line.md), one module each, with the frame layout drawn in its docstring:
 `crc16` (start code, length, CRC), `open-driver` (raw bytes ended by silence) and `stx`
 (7Eh, stuffing, sum). Sans-IO like h11: no port, no socket, no sleeping, no clock; a
 decoder is fed bytes with their arrival times and hands back `Frame`, `Discarded` or

@@ -168,7 +168,7 @@ FramingName = Literal["crc16", "open-driver", "stx"]
 
 
 class Framing(abc.ABC):
-    """One way to put a message and its module address on the line (link.md "Framing …")."""
+    """One way to put a message and its module address on the line (docs/line.md "Framing …")."""
 
     name: ClassVar[FramingName]
     checked: ClassVar[bool]  # a checksum protects the frame: a damaged one is discarded, never delivered

@@ -1,4 +1,4 @@
-"""Framing `crc16`: start code, length and CRC, after the Parker Compax3 binary record (link.md).
+"""Framing `crc16`: start code, length and CRC, after the Parker Compax3 binary record (docs/line.md).
 
     +------+------+-----+-------------+-------+-------+
     | A5h  | ADDR | N-1 | D0 … D(N-1) | CRC_H | CRC_L |   request
@@ -15,14 +15,14 @@ than the inter-character time-out inside it (default 5 character times: 5.7 ms a
 inter-character time-out is infinite, so a frame split and delayed by the network or a
 paused process is still taken whole.
 
-Readings (where link.md is silent):
+Readings (where docs/line.md is silent):
 - Bytes before a start code, a start code of the other direction included, are skipped and
   reported as one `Discarded` when a start code, a gap longer than the time-out or
   `line_idle()` ends the run (reading).
 - After a bad CRC, hunting resumes after the whole discarded frame, as a receiver that has
   read N bytes would; not at the byte after its start code (reading).
 - After a gap, the byte that arrived after it starts the hunt for a new start code (reading).
-- `encode` takes addresses 0..30 (link.md); a decoder delivers any address byte and leaves
+- `encode` takes addresses 0..30 (docs/line.md); a decoder delivers any address byte and leaves
   it to the receiver to ignore addresses it does not have (reading).
 - `zvz` is not used by this framing (reading).
 """

@@ -15,7 +15,7 @@ silence before a chunk is measured). A `zvz` not longer than one character time 
 after every byte, as the driver does: its time runs out before the next byte is in (seed 004
 §5.2.8; plant files refuse such a ZVZ, `prc3cfg.core.gateway.zvz_too_short`).
 
-Readings (where link.md is silent):
+Readings (where docs/line.md is silent):
 - A frame of only the address byte is a `Frame` with message b"": the module answers it
   with error 11 (reading).
 - The decoder delivers any address byte 0..255 and frames of any length; `encode` takes

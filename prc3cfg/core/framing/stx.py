@@ -1,4 +1,4 @@
-"""Framing `stx`: start byte, stuffing and a sum, after the Parker SPD converter protocol (link.md).
+"""Framing `stx`: start byte, stuffing and a sum, after the Parker SPD converter protocol (docs/line.md).
 
     +-----+----------+---+-------------+-----+
     | 7Eh | CMD|ADDR | N | D0 … D(N-1) | CHK |
@@ -10,11 +10,11 @@
     starts a new frame. CHK is the sum of the unstuffed bytes.
 
 From a UART the whole frame must arrive within the SPD message time-out for the baud,
-counted from its 7Eh, plus the frame's own transmission time (link.md). From a TCP stream
+counted from its 7Eh, plus the frame's own transmission time (docs/line.md). From a TCP stream
 (`uart=False`, see `base`) there is no message time-out: a frame ends by its N alone, so a
 frame split and delayed by the network or a paused process is still taken whole.
 
-Readings (where link.md is silent):
+Readings (where docs/line.md is silent):
 - SPD time-out for a baud not in the table: the entry of the next lower listed baud; below
   600 baud 512 ms × 600 / baud; above 57600 baud 8 ms (reading).
 - The frame's transmission time counts its bytes on the line, stuffing included, as far as

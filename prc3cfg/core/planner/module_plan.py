@@ -61,7 +61,7 @@ class Step:
 class ModulePlan:
     """The steps that take one module from its read-back to its desired image.
 
-    `bus_time` is the estimated bus time of the steps (link.md "Bus time"); `naive_bus_time`
+    `bus_time` is the estimated bus time of the steps (docs/line.md "Bus time"); `naive_bus_time`
     that of the naive download (20h if the system differs, one 21h per changed program).
     `predicted` is the device model's result of the steps: every managed program, and every
     unmanaged one that was read, as the module's own clamping leaves it (`check.run_steps`).

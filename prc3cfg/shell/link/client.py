@@ -6,7 +6,7 @@ what came back to each attempt is judged by `prc3cfg.core.exchange` (an answer, 
 damaged reply to ask for again, a code to confirm, a line to stop) and the link does what
 the verdict says; every retry is logged and traced. The reply's address is checked here, its
 length by the codec. Time-outs are detected here, with the port's timeout fixed at the framing's gap
-(link.md: `inter_byte_timeout` does nothing on Linux). How long a reply is waited for comes from the
+(docs/line.md: `inter_byte_timeout` does nothing on Linux). How long a reply is waited for comes from the
 line (`LineCost.reply_deadline`: the frames at its baud and character format, the turnaround, a
 margin), with the link's `timeout` — a plant file's — on top: a reply is never given up on while the
 line can still be carrying it, at any baud.
