@@ -32,12 +32,7 @@ def load_plant(path: str | Path) -> Plant:
     """The plant in the file `path`; `PlantError` with its problems ("file:line:column: …") otherwise — a
     bus with parity on a port that is this machine's pseudo-terminal among them (its device is looked up,
     never opened)."""
-    return parse_plant(path, plant_bytes(path), pseudo_terminal=_pseudo_terminal)
-
-
-def _pseudo_terminal(port: str) -> bool:
-    """Whether a plant file's port is a pseudo-terminal here: a device path whose device is one (stat, no open)."""
-    return "://" not in port and platform.is_pseudo_terminal(port)
+    return parse_plant(path, plant_bytes(path), pseudo_terminal=platform.is_pseudo_terminal)
 
 
 def plant_bytes(path: str | Path) -> bytes:

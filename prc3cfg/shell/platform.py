@@ -452,10 +452,13 @@ def device_number(status: os.stat_result) -> tuple[int, int] | None:
     return os.major(status.st_rdev), os.minor(status.st_rdev)
 
 
-def is_pseudo_terminal(path: str) -> bool:
-    """Whether the device path `path` is Linux's pseudo-terminal (/dev/pts/N)."""
+def is_pseudo_terminal(port: str) -> bool:
+    """Whether the port `port` is a device path of Linux's pseudo-terminal (/dev/pts/N: `emulator serve --pty`,
+    socat's pty), which carries no parity — looked up by stat, never opened; a URL (`socket://…`) is none."""
+    if "://" in port:
+        return False
     try:
-        number = device_number(os.stat(path))
+        number = device_number(os.stat(port))
     except (OSError, ValueError):
         return False
     return number is not None and number[0] in PTY_MAJORS

@@ -33,7 +33,7 @@ from prc3cfg.core.plant_planner import Key
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import bases, releases
+from prc3cfg.shell import bases, platform, releases
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.phases import Progress, Quiet
@@ -338,9 +338,7 @@ class BareLine:
 def default_parity(port: str) -> str:
     """The parity of a bare line whose parity is not given: none on a pseudo-terminal, which carries
     none, else even (a PRC 3 line's)."""
-    from prc3cfg.shell.link.ports import is_pseudo_terminal
-
-    return "none" if is_pseudo_terminal(port) else "even"
+    return "none" if platform.is_pseudo_terminal(port) else "even"
 
 
 @contextlib.contextmanager

@@ -56,13 +56,6 @@ PARITY = {"none": serial.PARITY_NONE, "odd": serial.PARITY_ODD, "even": serial.P
 STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: serial.STOPBITS_TWO}
 
 
-def is_pseudo_terminal(port: str) -> bool:
-    """Whether `port` is a device path of a pseudo-terminal (`emulator serve --pty`, socat's pty), which carries no parity."""
-    if "://" in port:
-        return False
-    return platform.is_pseudo_terminal(port)
-
-
 @dataclass(frozen=True)
 class SerialPort:
     """A serial port of this machine: the `device` a plant file's `port` names (COM3, /dev/ttyUSB0),
