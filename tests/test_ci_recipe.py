@@ -243,9 +243,9 @@ def test_each_job_installs_the_locked_dependencies_by_hash_and_prc3cfg_by_its_co
     assert WORKFLOW["env"]["REQUIREMENTS"] == ".github/prc3cfg-requirements.txt" and "requirements/runner.txt" in SECTION
 
 
-def lock_entries() -> dict[str, tuple[str, list[str]]]:
-    """requirements/runner.txt as pip reads it: name → (pinned version, sha256 hashes)."""
-    text = re.sub(r"\\\n", " ", LOCK.read_text())
+def lock_entries(lock: Path = LOCK) -> dict[str, tuple[str, list[str]]]:
+    """requirements/runner.txt (or `lock`) as pip reads it: name → (pinned version, sha256 hashes)."""
+    text = re.sub(r"\\\n", " ", lock.read_text())
     entries: dict[str, tuple[str, list[str]]] = {}
     for line in text.splitlines():
         if not line.strip() or line.startswith("#"):
@@ -271,6 +271,19 @@ def test_the_requirements_file_holds_every_dependency_of_pyproject_at_a_version_
     compiled = [name for name, (_, hashes) in entries.items() if len(hashes) > 1]  # a wheel for each CPython, 3.11–3.14
     assert "pydantic-core" in compiled and all(len(entries[name][1]) == 4 for name in compiled), compiled
     assert "Written by `python .ci/lock`" in LOCK.read_text()
+
+
+def test_the_windows_tier_installs_every_dependency_by_hash_at_a_version_pyproject_allows():
+    """requirements/windows.txt (.ci/windows installs it with --require-hashes): every dependency, colorama (typer's on
+    Windows) and pip, one win_amd64 wheel each. Else: `python .ci/lock` (with the network) writes it anew."""
+    lock = ROOT / "requirements" / "windows.txt"
+    entries = lock_entries(lock)
+    for requirement in (Requirement(text) for text in PYPROJECT["project"]["dependencies"]):
+        name = canonicalize_name(requirement.name)
+        assert name in entries and requirement.specifier.contains(entries[name][0], prereleases=True), f"{name}: run python .ci/lock"
+    assert {"colorama", "pip", "pydantic-core"} <= set(entries) and all(len(hashes) == 1 for _, hashes in entries.values())
+    windows = (ROOT / ".ci" / "windows").read_text()
+    assert "requirements/windows.txt" in windows and windows.count("--require-hashes") == 2
 
 
 def test_the_jobs_that_reach_the_line_run_nothing_of_a_pull_request():
