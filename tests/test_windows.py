@@ -40,7 +40,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = Path(os.environ.get("PRC3CFG_WINE_CACHE") or Path.home() / ".cache" / "prc3cfg-wine")
 ENV_FILE = CACHE / "env"
-COM = 7  # the COM port number the tier maps to an emulator's pty
+COM = 12  # the COM port number the tier maps to an emulator's pty: two digits, which Windows names \\.\COM12
 
 pytestmark = pytest.mark.windows
 
@@ -290,7 +290,7 @@ def test_two_applies_on_one_line_one_is_refused_in_one_line(wine, demo):
 
 @pytest.fixture
 def com_port(wine, tmp_path) -> Iterator[str]:
-    """COM7: a Linux `emulator serve --pty` (modules 1, 2, 5) behind Wine's COM7, registered in
+    """COM12: a Linux `emulator serve --pty` (modules 1, 2, 5) behind Wine's COM12, registered in
     HKLM\\Software\\Wine\\Ports so that Wine's services list it (HARDWARE\\DEVICEMAP\\SERIALCOMM)."""
     log = tmp_path / "pty.log"
     with log.open("w") as stderr:
@@ -415,3 +415,43 @@ def test_a_plan_made_on_linux_applies_from_a_crlf_checkout(wine, demo):
         applied = wine.run("apply", plant.relative_to(demo), "--plan", "plan.json", "--auto-approve", "--allow-axis-release", cwd=demo)
         assert len(applied.err.splitlines()) <= 1, applied  # at worst refused in one line
         assert applied.code == 0, applied
+
+
+# -- the default folders, under a user folder with a space and non-ASCII letters; the records commands --------
+
+
+def test_default_folders_a_non_ascii_checkout_and_the_records_commands(wine, demo):
+    """No PRC3CFG_STATE_DIR or PRC3CFG_LOCK_DIR, as on a laptop: the line's record goes to the user's %LOCALAPPDATA%\\prc3cfg
+    and the line locks to %ProgramData%\\prc3cfg\\locks (Wine's, in its prefix); the plant repository is checked out
+    under "Jürgen Müller\\plant repo", and `records list`, `verify` and `prune` read what the apply kept beside it."""
+    checkout = demo / "Jürgen Müller" / "plant repo"
+    for folder in ("plants", "schemas"):
+        shutil.copytree(demo / folder, checkout / folder)
+    env = {key: value for key, value in wine.env().items() if key not in ("PRC3CFG_STATE_DIR", "PRC3CFG_LOCK_DIR")}
+    records = wine.prefix / "drive_c" / "users"
+    before = set(records.glob("*/AppData/Local/prc3cfg/lines/*.json"))
+
+    def run(*args: str) -> Result:
+        done = subprocess.run(wine.command(*args), cwd=checkout, env=env, stdin=subprocess.DEVNULL, capture_output=True, timeout=180)
+        result = Result(done.returncode, text(done.stdout), text(done.stderr))
+        assert "Traceback" not in result.out + result.err, result
+        return result
+
+    made: set[Path] = set()
+    try:
+        applied = run("apply", "plants/demo-line.yaml", "--auto-approve", "--allow-axis-release")
+        made = set(records.glob("*/AppData/Local/prc3cfg/lines/*.json")) - before
+        assert applied.code == 0 and "Apply complete: 6 modules written and verified." in applied.out, applied
+        assert len(made) == 2, applied  # each line's record, in the user's own folder
+        assert list((wine.prefix / "drive_c" / "ProgramData" / "prc3cfg" / "locks").glob("*.lock")), applied
+        assert list((checkout / "plants" / ".prc3cfg" / "journal").glob("*.jsonl")), applied
+        assert run("plan", "plants/demo-line.yaml", "--detailed-exitcode").code == 0
+        listed = run("records", "list", "plants/demo-line.yaml", "--json")
+        assert listed.code == 0 and [r["command"] for r in json.loads(listed.out)] == ["apply"], listed
+        verified = run("records", "verify", "plants/demo-line.yaml")
+        assert verified.code == 0 and verified.out.startswith("Records verified:"), verified
+        pruned = run("records", "prune", "plants/demo-line.yaml", "--keep", "1", "--dry-run")
+        assert pruned.code == 0, pruned
+    finally:  # the prefix is cached from run to run
+        for path in made:
+            path.unlink()
