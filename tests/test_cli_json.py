@@ -11,6 +11,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import jsonschema
@@ -19,6 +20,8 @@ from emulated import emulated_plant, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMAS = ROOT / "schemas"
+#: The environment of a CI step: Python buffers a pipe's writes (what PYTHONUNBUFFERED would hide).
+BUFFERED = {name: value for name, value in os.environ.items() if name != "PYTHONUNBUFFERED"}
 
 
 def schema(kind: str) -> jsonschema.Draft7Validator:
@@ -93,6 +96,32 @@ def test_apply_json_is_a_stream_of_events_a_ci_step_reads_line_by_line(plant):
 
     again = run_in_process_events(plant.path, "--auto-approve")
     assert again[-1]["status"] == "nothing to do" and not [e for e in again if e["event"] in ("module", "question")]
+
+
+def test_each_event_is_on_the_pipe_as_it_happens(tmp_path, capsys):
+    """The first frame on each line is held until the test has read the first event (the reading's progress,
+    a short line) from the process's stdout: an event kept in a buffer until more come would never be read,
+    and the frames would go out late."""
+    seen, held, armed = threading.Event(), [], threading.Event()
+
+    def hold_first_frame(frame, _):
+        if armed.is_set() and len(held) < 2:
+            held.append(seen.wait(timeout=60))
+        return set()
+
+    # a reply may be waited for 5 s, 6 times: the test reads the event while the frame is held, however busy the machine
+    with emulated_plant(tmp_path, timeout=5.0, lossy={"booth-a": hold_first_frame, "booth-b": hold_first_frame}) as plant:
+        armed.set()
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--json", "--auto-approve", "--allow-axis-release"],
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, encoding="utf-8",
+                                   env=BUFFERED | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+        assert process.stdout is not None
+        first = process.stdout.readline()
+        seen.set()
+        out, err = process.communicate(timeout=120)
+    assert process.returncode == 0, err
+    assert held == [True, True]  # the frames waited for the test, which had read the event while the process ran
+    assert json.loads(first)["event"] == "progress" and events(first + out)[-1]["status"] == "verified"
 
 
 def run_in_process_events(path: Path, *args: str) -> list[dict]:
