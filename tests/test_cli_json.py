@@ -149,6 +149,14 @@ def test_a_release_not_allowed_is_answered_no_and_the_account_says_refused(plant
     assert not [e for e in found if e["event"] == "module"] and not plant.matches_plant()
 
 
+def test_a_plant_file_refused_ends_the_stream_with_its_account(plant, capsys):
+    plant.path.write_text(plant.path.read_text(encoding="utf-8").replace("max_speed: 0.5\n", "max_speed: 9.5\n"), encoding="utf-8")
+    result = run_cli(capsys, "apply", plant.path, "--json", "--auto-approve")
+    (account,) = events(result.out)
+    assert result.code == 1 and account["status"] == "refused" and account["exit"] == 1
+    assert [f"error: {line}" for line in account["errors"]] == result.problems and "max_speed 9.5 m/s is out of range" in result.err
+
+
 def test_a_reviewed_plan_file_is_applied_with_json_without_auto_approve(plant, capsys, tmp_path):
     assert run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json").code == 0
     result = run_cli(capsys, "apply", "--plan", tmp_path / "plan.json", "--json", "--allow-axis-release")

@@ -167,16 +167,18 @@ def apply(
         raise click_errors.UsageError(f"{plant} is a plan file — did you mean prc3cfg apply PLANT --plan {plant}?", ctx=ctx)
     _answered(ctx, json_out, auto_approve or plan_file is not None, "or apply a reviewed plan file with --plan FILE")
     check_output(trace, "--trace", plant=plant)
-    loaded = api.load(plant)
     verified = api.Verify(verify.value)
     if json_out:
         from prc3cfg.cli import stream
 
         events = stream.Stream("apply")
-        with stream.accounted(events) as finished, line_options(trace, retries, lock_timeout, stream.Progress(events)) as options:
-            finished.append(api.apply(loaded, module, plan_file=plan_file, gates=stream.gates(events, plan_file, auto_approve, allow_axis_release),
-                                      verify=verified, options=options, previous=previous, full_read=full_read, reason=reason))  # fmt: skip
+        with stream.accounted(events) as finished:  # a plant file refused ends the stream with its account too
+            loaded = api.load(plant)
+            with line_options(trace, retries, lock_timeout, stream.Progress(events)) as options:
+                finished.append(api.apply(loaded, module, plan_file=plan_file, gates=stream.gates(events, plan_file, auto_approve, allow_axis_release),
+                                          verify=verified, options=options, previous=previous, full_read=full_read, reason=reason))  # fmt: skip
         return
+    loaded = api.load(plant)
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options, frames),
