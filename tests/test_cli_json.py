@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -122,6 +123,35 @@ def test_each_event_is_on_the_pipe_as_it_happens(tmp_path, capsys):
     assert process.returncode == 0, err
     assert held == [True, True]  # the frames waited for the test, which had read the event while the process ran
     assert json.loads(first)["event"] == "progress" and events(first + out)[-1]["status"] == "verified"
+
+
+def test_an_interrupted_apply_ends_its_stream_with_every_module_and_its_account(tmp_path):
+    """SIGINT once every line has begun to write (seen on the frame trace, a FIFO): the accounts of the modules,
+    then `interrupted`, exit 130 — what the human account says, as events."""
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--json", "--auto-approve", "--allow-axis-release",
+                                    "--trace", str(fifo)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, encoding="utf-8",
+                                   env=BUFFERED | {"PYTHONPATH": str(ROOT), "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")})  # fmt: skip
+        with fifo.open() as trace:
+            writing: set[str] = set()
+            for line in trace:
+                _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
+                if direction == ">" and int(frame[6:8], 16) < 0x50:  # a crc16 request (A5h, address, length, ID): a write
+                    writing.add(bus)
+                if writing == set(plant.emulators):
+                    process.send_signal(signal.SIGINT)
+                    break
+            threading.Thread(target=trace.read, daemon=True).start()
+            out, err = process.communicate(timeout=60)
+    found = events(out)
+    assert process.returncode == 130 and err.splitlines()[-1] == "error: interrupted"
+    account = found[-1]
+    assert (account["status"], account["exit"], account["errors"]) == ("interrupted", 130, ["interrupted"])
+    ran = [e for e in found if e["event"] == "module"]
+    assert len(ran) == 6 and any(e["result"] == "failed" for e in ran) and all(e["text"] for e in ran)
+    assert account["snapshot"] and account["written"] == sum(e["result"] == "verified" for e in ran)
 
 
 def run_in_process_events(path: Path, *args: str) -> list[dict]:
