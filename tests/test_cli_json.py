@@ -242,8 +242,10 @@ def test_adopt_json_says_what_it_adopts_and_writes_it(plant, capsys):
 
 def test_every_other_command_prints_a_document_its_schema_takes(plant, capsys, tmp_path):
     port = plant.plant.buses[0].port
-    plan = run_cli(capsys, "plan", plant.path, "--json")
-    assert plan.code == 0 and valid("plan", json.loads(plan.out))
+    plan = run_cli(capsys, "plan", plant.path, "--json", "--out", tmp_path / "plan.json")
+    assert plan.code == 0 and valid("plan", json.loads(plan.out)) == valid("plan", json.loads((tmp_path / "plan.json").read_text(encoding="utf-8")))
+    shown = run_cli(capsys, "show", tmp_path / "plan.json", "--json")
+    assert shown.code == 0 and valid("plan", json.loads(shown.out))["buses"] == json.loads(plan.out)["buses"]
 
     scan = run_cli(capsys, "scan", "--port", port, "--json")
     assert scan.code == 0, scan.err
