@@ -86,8 +86,9 @@ def test_drift_and_adopt_are_api_values(tmp_path):
         assert prc3cfg.api.drift(emulated.plant) == []
         bus, module = emulated.plant.modules()[0]
         emulated.emulators[bus.name].teach_in(module.address, 1, 1234)
+        said = "program 1 position 2.100 m → 1.234 m"  # says → holds, as adopt
         assert prc3cfg.api.drift(emulated.plant) == [prc3cfg.api.Drift(
-            bus.name, module.address, module.name, ("program 1 position 2.100 m → 1.234 m",))]  # says → holds, as adopt
+            bus.name, module.address, module.name, (said,), ({"program": 1, "field": "P", "before": 2100, "after": 1234, "text": said},))]
         adoption = prc3cfg.api.adopt(emulated.plant)
         assert [value.text for value in adoption.adopted] == [
             f"+ {bus.name}/{module.name}: program 1 position 2.100 m → 1.234 m (new in the module: profile reciprocator keeps its value)"]

@@ -24,7 +24,7 @@ from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
 from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
 from prc3cfg.core.plant_plan import Oldest, PlantPlan, Reading
 from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
-from prc3cfg.core.render import Drift, drifted
+from prc3cfg.core.render import Drift, drift_changes
 from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
@@ -384,7 +384,7 @@ def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Ke
         images = read(plant, modules, options, command="plan --refresh-only", links=links)
     found = []
     for bus, module in select(plant, modules):
-        said = drifted(module.desired_image(), images[(bus.name, module.address)])
+        said = drift_changes(module.desired_image(), images[(bus.name, module.address)])
         if said:
-            found.append(Drift(bus.name, module.address, module.name, tuple(said)))
+            found.append(Drift(bus.name, module.address, module.name, tuple(change["text"] for change in said), tuple(said)))
     return found

@@ -11,11 +11,12 @@ Arguments, prompts and output only: the work is `prc3cfg.api`'s.
 
 
 import sys
-from typing import Annotated
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from prc3cfg.cli import ExitStatus, app
+from prc3cfg.cli import ExitStatus, app, click_errors
 from prc3cfg.cli.common import (
     LockOpt,
     ModuleOpt,
@@ -26,9 +27,13 @@ from prc3cfg.cli.common import (
     check_output,
     line_options,
     print_lines,
+    unanswered,
 )
 from prc3cfg.cli.plan_commands import EXIT_CHANGES, ApproveOpt, ReasonOpt
 from prc3cfg.errors import UserError
+
+if TYPE_CHECKING:
+    from prc3cfg.api import Adoption
 
 ProgramOpt = Annotated[
     list[int] | None,
@@ -39,6 +44,7 @@ CheckOpt = Annotated[bool, typer.Option("--check", help="Show the diff; exit 2 i
 
 @app.command()
 def adopt(
+    ctx: typer.Context,
     plant: PlantArg,
     module: ModuleOpt = None,
     program: ProgramOpt = None,
@@ -48,14 +54,19 @@ def adopt(
     retries: RetriesOpt = 5,
     lock_timeout: LockOpt = 0.0,
     reason: ReasonOpt = None,
+    json_out: Annotated[bool, typer.Option("--json", help=(
+        "Print events, one JSON object a line (prc3cfg-event/1: plan, question, account); needs --auto-approve or --check."))] = False,
 ) -> None:
     """Rewrite the plant file in place to describe what the modules hold (positions taught on the
     floor): only the values that drifted, in the layer they came from; comments and layout kept."""
-    import difflib
-
     from prc3cfg import api
 
+    if (why := unanswered(json_out, auto_approve or check, "or --check to see the diff only")) is not None:
+        raise click_errors.UsageError(why, ctx=ctx)
     check_output(trace, "--trace", plant=plant)
+    if json_out:
+        _adopt_events(plant, module, program, check=check, trace=trace, retries=retries, lock_timeout=lock_timeout, reason=reason)
+        return
     loaded = api.load(plant)
     with line_options(trace, retries, lock_timeout) as options:
         adoption = api.adopt(loaded, module, program, options, reason=reason, check=check)
@@ -63,8 +74,7 @@ def adopt(
         print("No drift to adopt: the modules hold what the plant file says.")
         return
     print_lines("\n".join(value.text for value in adoption.adopted))
-    diff = difflib.unified_diff(adoption.before.splitlines(), adoption.after.splitlines(), str(plant), f"{plant} (adopted)", lineterm="")
-    print("\n".join(diff))
+    print(_diff(adoption, plant))
     if check:
         raise ExitStatus(EXIT_CHANGES)
     question = f"Write {_count(len(adoption.adopted))} into {plant}?"
@@ -77,6 +87,43 @@ def adopt(
     api.write_adoption(adoption)
     print(f"Adopted {_count(len(adoption.adopted))} into {plant}: it describes what the modules hold now "
           "— review the diff and commit it.")  # fmt: skip
+
+
+def _diff(adoption: Adoption, plant: Path) -> str:
+    """The unified diff of the plant file, as adopted."""
+    import difflib
+
+    return "\n".join(difflib.unified_diff(adoption.before.splitlines(), adoption.after.splitlines(), str(plant), f"{plant} (adopted)",
+                                          lineterm=""))  # fmt: skip
+
+
+def _adopt_events(plant: Path, module: list[str] | None, program: list[int] | None, *, check: bool, trace: Path | None, retries: int,
+                  lock_timeout: float, reason: str | None) -> None:  # fmt: skip
+    """`adopt --json`: what it would write and the diff (`plan`), the write approved by `--auto-approve` (`question`),
+    and the `account` — `adopted`, `drift` (`--check`, exit 2) or `no drift` — also when it ends in an error."""
+    from prc3cfg import api
+    from prc3cfg.cli.stream import Progress, Stream
+    from prc3cfg.core import events
+
+    said = Stream("adopt")
+    try:
+        loaded = api.load(plant)
+        with line_options(trace, retries, lock_timeout, Progress(said)) as options:
+            adoption = api.adopt(loaded, module, program, options, reason=reason, check=check)
+        said.event("plan", adopted=[{"modules": list(value.modules), "what": value.what, "layer": value.layer} for value in adoption.adopted],
+                   diff=_diff(adoption, plant))  # fmt: skip
+        values = len(adoption.adopted)
+        if adoption.adopted and not check:
+            said.emit(events.question("adopt", f"Write {_count(values)} into {plant}?", True, "--auto-approve"))
+            api.write_adoption(adoption)
+    except UserError as error:
+        said.emit(events.account("adopt", "refused", error.exit_code, errors=str(error).split("\n"), plant=str(plant)))
+        raise
+    status, code = ("no drift", 0) if not values else ("drift", EXIT_CHANGES) if check else ("adopted", 0)
+    said.emit(events.account("adopt", status, code, modules=len({name for value in adoption.adopted for name in value.modules}),
+                             written=0 if check else values, plant=str(plant)))  # fmt: skip
+    if code:
+        raise ExitStatus(code)
 
 
 def _count(values: int) -> str:

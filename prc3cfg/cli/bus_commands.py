@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -31,14 +31,20 @@ from prc3cfg.cli.common import (
     line_options,
     one_of,
     parse_addresses,
+    print_document,
     printed_or_written,
     stderr_console,
     stdout_console,
+    write_output,
 )
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:
     from prc3cfg import api
+    from prc3cfg.api import Diagnosis
+
+#: The `--json` documents of `scan`, `import` and `doctor` (`schemas/scan.schema.json`, …).
+SCAN_FORMAT, IMPORT_FORMAT, DOCTOR_FORMAT = "prc3cfg-scan/1", "prc3cfg-import/1", "prc3cfg-doctor/1"
 
 PortOpt = Annotated[str, typer.Option("--port", metavar="PORT", help="Device path or pyserial URL (e.g. /dev/ttyUSB0, socket://host:7001).")]
 FramingOpt = Annotated[str, typer.Option(callback=one_of(FRAMING_NAMES), metavar="FRAMING", help=f"Framing: {' | '.join(FRAMING_NAMES)}.")]
@@ -121,6 +127,7 @@ def scan(
     retries: RetriesOpt = 1,
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
+    json_out: Annotated[bool, typer.Option("--json", help=f"Print what answered as a {SCAN_FORMAT} document (system parameters in device units).")] = False,
 ) -> None:
     """Which addresses 1..30 answer, with their S9 and system parameters."""
     from rich.table import Table
@@ -131,10 +138,14 @@ def scan(
 
     check_output(trace, "--trace")
     bare = _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz)
-    with line_options(trace, retries, lock_timeout) as options, _said_as_options():
+    with line_options(trace, retries, lock_timeout, json_out=json_out) as options, _said_as_options():
         found = api.scan(bare, options)
     if not found:
         raise UserError(f"{port}: no module answered at any address 1..30 — check the framing ({framing}), line settings and wiring")
+    if json_out:
+        print_document({"format": SCAN_FORMAT, "port": port, "framing": framing,
+                        "modules": [{"address": address, "s9": reply.address, "system": reply.system.to_json()} for address, reply in found.items()]})  # fmt: skip
+        return
     table = Table("address", "S9", *(f"{k} {BY_SYMBOL[k].key}" for k in ("S1", "S2", "S4", "S5", "S6")), "others")
     for address, reply in found.items():
         s = reply.system
@@ -162,6 +173,8 @@ def import_plant(
     trace: TraceOpt = None,
     lock_timeout: LockOpt = 0.0,
     out: OutFileOpt = None,
+    json_out: Annotated[bool, typer.Option("--json", help=(
+        f"Print a {IMPORT_FORMAT} document: the buses and modules imported, and the plant file's text (null where it was written with --out)."))] = False,
 ) -> None:
     """Write a plant file (to stdout, or --out) from the live modules of one bus or more (a --port each, with the same line settings)."""
     from prc3cfg import api
@@ -174,8 +187,14 @@ def import_plant(
     if len(set(names)) != len(names):
         raise UserError(f"--bus-name {next(n for n in names if names.count(n) > 1)} is given twice: each bus needs a name of its own")
     buses = {name: _bare_line(port, framing, baud, parity, data_bits, stop_bits, timeout, zvz) for name, port in zip(names, ports)}
-    with line_options(trace, retries, lock_timeout) as options, _said_as_options():
+    with line_options(trace, retries, lock_timeout, json_out=json_out) as options, _said_as_options():
         text, count = api.import_plant(buses, parse_addresses(modules) if modules is not None else None, options, plant_name=plant_name)
+    if json_out:
+        if out is not None:
+            write_output(out, text, "--out")
+        print_document({"format": IMPORT_FORMAT, "plant": plant_name, "buses": [{"name": n, "port": p} for n, p in zip(names, ports)],
+                        "modules": count, "out": None if out is None else str(out), "plant_file": text if out is None else None})  # fmt: skip
+        return
     printed_or_written(text, out)
     stderr_console().print(f"imported {plural(count, 'module')} from {', '.join(ports)}")
 
@@ -212,6 +231,8 @@ def doctor(
     allow_unchecked_probes: Annotated[bool, typer.Option("--allow-unchecked-probes",
                                                          help="Probe in framings without a checksum (open-driver) without asking (see docs/commands.md).")] = False,
     lock_timeout: LockOpt = 0.0,
+    json_out: Annotated[bool, typer.Option("--json", help=(
+        f"Print a {DOCTOR_FORMAT} document: what the line speaks, each module's turnarounds (s), the plant file's keys."))] = False,
 ) -> None:
     """Which framing, baud and parity a line speaks, and each module's turnaround, measured."""
     import sys
@@ -229,7 +250,7 @@ def doctor(
     search = api.Search(framings=(framing,) if framing else tried.framings, bauds=(baud,) if baud else tried.bauds,
                         parities=(parity,) if parity else tried.parities, stop_bits=stop_bits)  # fmt: skip
     bare = api.BareLine(port, "crc16", LineSettings(baud or 9600, 8, parity or "even", stop_bits), zvz=zvz)
-    with line_options(None, 0, lock_timeout) as options, _said_as_options():
+    with line_options(None, 0, lock_timeout, json_out=json_out) as options, _said_as_options():
 
         def allow() -> bool:
             question = ("No module answered in a framing with a checksum. Probe in open-driver, which has none? A probe at the "
@@ -244,6 +265,9 @@ def doctor(
                    "give --allow-unchecked-probes to make them") if found.skipped_unchecked else ""  # fmt: skip
         raise UserError(f"{port}: no module answered at any framing, baud and parity tried ({plural(found.probes, 'probe')}){skipped} "
                         "— check the wiring, the power and the addresses (--modules)")  # fmt: skip
+    if json_out:
+        print_document(_diagnosis(found, exchanges))
+        return
     print(f"{port} speaks {found.found.said()} ({plural(len(found.modules), 'module')} answered, after {plural(found.probes, 'probe')}).")
     if not found.settings_found:
         print("socket://: the gateway fixes the baud rate and character format, so only the framing was probed; the baud, "
@@ -257,3 +281,12 @@ def doctor(
     print("The plant file's keys for this bus:")
     for key, value in found.plant_keys().items():
         print(f"    {key}: {value:g}" if isinstance(value, float) else f"    {key}: {value}")
+
+
+def _diagnosis(found: Diagnosis, exchanges: int) -> dict[str, Any]:
+    """`doctor --json`'s document: what the line speaks, how each module answered, the plant file's keys."""
+    assert found.found is not None  # (a line nothing answered on is an error, said before)
+    return {"format": DOCTOR_FORMAT, "port": found.port, "speaks": found.found.said(), "settings_found": found.settings_found,
+            "probes": found.probes, "skipped_unchecked": found.skipped_unchecked, "plant_keys": found.plant_keys(),
+            "modules": [{"address": t.address, "turnarounds_s": list(t.turnarounds), "median_s": t.median, "worst_s": t.worst,
+                         "exchanges": exchanges, "damaged": t.damaged, "lost": t.lost} for t in found.modules]}  # fmt: skip

@@ -27,6 +27,7 @@ if TYPE_CHECKING:  # what the commands use when they run is imported then: `prc3
     from rich.progress import Progress, TaskID
 
     from prc3cfg.api import LineOptions
+    from prc3cfg.api import Progress as LineProgress
     from prc3cfg.shell.link.client import Link
 
 #: The framings, as option help names them (a test checks them against `prc3cfg.core.framing.FRAMINGS`).
@@ -178,6 +179,13 @@ OutFileOpt = Annotated[Path | None, typer.Option("--out", callback=_output_optio
                                                  help="Write it to FILE (UTF-8), not to stdout.")]  # fmt: skip
 
 
+def print_document(document: Any) -> None:
+    """A `--json` document on stdout (its `format` first: `prc3cfg-KIND/1`, `schemas/KIND.schema.json`)."""
+    import json
+
+    print(json.dumps(document, indent=1, ensure_ascii=False))
+
+
 def printed_or_written(text: str, out: Path | None) -> None:
     """`text` printed, or written to `out` (`OutFileOpt`) with a line saying where."""
     if out is None:
@@ -185,6 +193,14 @@ def printed_or_written(text: str, out: Path | None) -> None:
         return
     write_output(out, text, "--out")
     print(f"Written to {out}", file=sys.stderr)
+
+
+def unanswered(json_out: bool, answered: bool, instead: str) -> str | None:
+    """Why `--json` cannot run as asked, or None: a stream of events asks no question (Terraform's `apply -json`
+    neither), so the approval must be given on the command line — `--auto-approve`, or what `instead` names."""
+    if json_out and not answered:
+        return f"--json asks no question — pass --auto-approve ({instead})"
+    return None
 
 
 #: A time on the command line: seconds, or a number with a unit (`parse_duration`).
@@ -294,9 +310,10 @@ class TerminalProgress:
     phase's steps, time taken and time left (`_time_left`), notes on stdout. `stop` takes the bar off
     the screen — before the plan and before a question (`ask`) — and the next phase's `start` shows it again."""
 
-    def __init__(self, stack: contextlib.ExitStack) -> None:
+    def __init__(self, stack: contextlib.ExitStack, notes: TextIO | None = None) -> None:
         self._bar: Progress | None = None
         self._task: TaskID | None = None
+        self._notes = notes  # None: stdout (as it is when the note is written)
         stack.callback(self.stop)
 
     def start(self, what: str, total: int) -> None:
@@ -329,7 +346,7 @@ class TerminalProgress:
     def note(self, text: str) -> None:
         # one write, its newline in it: the lines' threads note their plans at once, and print's two
         # writes let another line's text in before a newline ("…pretreatWriting bus booth-a now")
-        print(f"{text}\n", end="", flush=True)
+        print(f"{text}\n", end="", flush=True, file=self._notes or sys.stdout)
 
     def stop(self) -> None:
         """The bar off the screen, its lines cleared (nothing drawn until the next `start`)."""
@@ -390,8 +407,10 @@ COMMAND_LINE: list[str] = []
 
 
 @contextlib.contextmanager
-def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Iterator[LineOptions]:
-    """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal;
+def line_options(trace: Path | None, retries: int, lock_timeout: float, progress: LineProgress | None = None, *,
+                 json_out: bool = False) -> Iterator[LineOptions]:  # fmt: skip
+    """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal (or
+    `progress`: `--json`'s events; with `json_out` its notes on stderr, stdout kept for the document);
     after a command that succeeded, a note for every line that had to repeat exchanges, and one if a
     line was slower than its settings."""
     from prc3cfg.api import LineOptions
@@ -399,7 +418,7 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float) -> Itera
     used: list[Link] = []
     with contextlib.ExitStack() as stack:
         options = LineOptions(
-            retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=TerminalProgress(stack),
+            retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=progress or TerminalProgress(stack, sys.stderr if json_out else None),
             trace=stack.enter_context(open_text(trace, "a")) if trace else None,
             waiting=lambda text: print(text, file=sys.stderr, flush=True), used=used.extend,
             notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),

@@ -10,7 +10,18 @@ from typing import Annotated
 import typer
 
 from prc3cfg.cli import ExitStatus, app, click_errors
-from prc3cfg.cli.common import FramesOpt, LockOpt, ModuleOpt, PlantArg, RetriesOpt, TraceOpt, VerifyChoice, check_output, line_options
+from prc3cfg.cli.common import (
+    FramesOpt,
+    LockOpt,
+    ModuleOpt,
+    PlantArg,
+    RetriesOpt,
+    TraceOpt,
+    VerifyChoice,
+    check_output,
+    line_options,
+    unanswered,
+)
 from prc3cfg.core.line import EMULATOR_SCHEME
 
 EXIT_CHANGES = 2
@@ -117,6 +128,9 @@ ApproveOpt = Annotated[bool, typer.Option("--auto-approve", help="Do not ask for
 ReasonOpt = Annotated[str | None, typer.Option("--reason", metavar="TEXT", help=(
     "Why: kept in the journal's and the snapshot's header (default: $PRC3CFG_REASON); a bus with require_reason: true needs one."))]
 AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps that release the axes (10h, 20h).")]
+EventsOpt = Annotated[bool, typer.Option("--json", help=(
+    "Print events, one JSON object a line as they happen (prc3cfg-event/1: plan, question, progress, module, travel, account); "
+    "needs --auto-approve (or --plan FILE): no question is asked."))]
 VerifyOpt = Annotated[VerifyChoice, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
 
@@ -136,6 +150,7 @@ def apply(
     full_read: FullReadOpt = False,
     reason: ReasonOpt = None,
     frames: FramesOpt = False,
+    json_out: EventsOpt = False,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
@@ -149,18 +164,36 @@ def apply(
         raise click_errors.UsageError("name the plant file, or a plan file with --plan", ctx=ctx)
     if plant.suffix.lower() == ".json":  # Terraform's `apply PLAN`
         raise click_errors.UsageError(f"{plant} is a plan file — did you mean prc3cfg apply PLANT --plan {plant}?", ctx=ctx)
+    _answered(ctx, json_out, auto_approve or plan_file is not None, "or apply a reviewed plan file with --plan FILE")
     check_output(trace, "--trace", plant=plant)
+    verified = api.Verify(verify.value)
+    if json_out:
+        from prc3cfg.cli import stream
+
+        events = stream.Stream("apply")
+        with stream.accounted(events) as finished:  # a plant file refused ends the stream with its account too
+            loaded = api.load(plant)
+            with line_options(trace, retries, lock_timeout, stream.Progress(events)) as options:
+                finished.append(api.apply(loaded, module, plan_file=plan_file, gates=stream.gates(events, plan_file, auto_approve, allow_axis_release),
+                                          verify=verified, options=options, previous=previous, full_read=full_read, reason=reason))  # fmt: skip
+        return
     loaded = api.load(plant)
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options, frames),
-                           verify=api.Verify(verify.value), options=options, previous=previous, full_read=full_read,
-                           reason=reason)  # fmt: skip
+                           verify=verified, options=options, previous=previous, full_read=full_read, reason=reason)  # fmt: skip
     output.applied(result, emulated=all(bus.port.startswith(EMULATOR_SCHEME) for bus in loaded.buses))
+
+
+def _answered(ctx: typer.Context, json_out: bool, auto_approve: bool, instead: str) -> None:
+    """`--json` asks no question: refused in one line, before the line is used, where one would be asked."""
+    if (why := unanswered(json_out, auto_approve, instead)) is not None:
+        raise click_errors.UsageError(why, ctx=ctx)
 
 
 @app.command()
 def restore(
+    ctx: typer.Context,
     snapshot: Annotated[Path, typer.Argument(metavar="SNAPSHOT", help="A snapshot under .prc3cfg/snapshots/.", show_default=False)],
     auto_approve: ApproveOpt = False,
     allow_axis_release: AxesOpt = False,
@@ -172,11 +205,22 @@ def restore(
         "Restore onto the lines the plant file names now, though they are not those the snapshot was taken on."))] = False,
     reason: ReasonOpt = None,
     frames: FramesOpt = False,
+    json_out: EventsOpt = False,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
     from prc3cfg.cli import output
 
+    _answered(ctx, json_out, auto_approve, "a snapshot is restored as planned now: nothing reviewed it")
+    if json_out:
+        from prc3cfg.cli import stream
+
+        events = stream.Stream("restore")
+        with stream.accounted(events) as finished, line_options(trace, retries, lock_timeout, stream.Progress(events)) as options:
+            finished.append(api.restore(snapshot, gates=stream.gates(events, None, auto_approve, allow_axis_release),
+                                        verify=api.Verify(verify.value), options=options, onto_current_lines=onto_current_lines,
+                                        reason=reason))  # fmt: skip
+        return
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options, frames), verify=api.Verify(verify.value),
                              options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip

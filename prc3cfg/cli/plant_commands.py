@@ -4,7 +4,8 @@
   stderr, one `error: file:line:column: …` line each, exit 1. `--format github` says the
   problems as GitHub workflow-command annotations (`::error file=…,line=…,col=…::…`, on stdout),
   `--format json` as a JSON list of {file, line, column, message} (line and column null for
-  a problem of the whole file; `[]` when valid): the exit codes are the same.
+  a problem of the whole file; `[]` when valid): the exit codes are the same. `--json` is
+  `--format json`, as the other commands spell it.
 - `show PLANT [--module NAME]`: a module's effective configuration in human units, each
   value with its device value and where it came from (default, profile NAME, module);
   without `--module`, the plant's modules. `--plot FILE.svg|png` draws the module's chains
@@ -21,7 +22,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from prc3cfg.cli import app
+from prc3cfg.cli import app, click_errors
 from prc3cfg.cli.common import FramesOpt, OutFileOpt, check_output, printed_or_written, stdout_console
 from prc3cfg.errors import UserError
 
@@ -46,16 +47,23 @@ class Format(enum.StrEnum):
 
 @app.command()
 def validate(
+    ctx: typer.Context,
     plant: PlantPath,
     fmt: Annotated[Format, typer.Option("--format", metavar="text|github|json", help=(
         "text: one line per problem on stderr; github: workflow-command annotations at file:line:col (CI); "
         "json: a list of {file, line, column, message}."))] = Format.TEXT,
+    json_out: Annotated[bool, typer.Option("--json", help="The same as --format json (schemas/validate.schema.json).")] = False,
 ) -> None:
     """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
     import json
 
     from prc3cfg import api
     from prc3cfg.plant import PlantError
+
+    if json_out and fmt is Format.GITHUB:
+        raise click_errors.UsageError("--json is --format json — give one of them", ctx=ctx)
+    if json_out:
+        fmt = Format.JSON
 
     try:
         loaded = api.load(plant)

@@ -31,25 +31,34 @@ if TYPE_CHECKING:
     from prc3cfg.plant import Plant
 
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print it as JSON.")]
+#: `records verify --json`'s document (`schemas/records-verify.schema.json`).
+VERIFY_FORMAT = "prc3cfg-records-verify/1"
 
 
 @records_app.command()
 def verify(
     paths: Annotated[list[Path], typer.Argument(metavar="PATH...", help=(
         "Plant files (their records), .prc3cfg folders, journals (.jsonl) or snapshots (.json).", ), show_default=False)],
+    json_out: Annotated[bool, typer.Option("--json", help=(
+        f"Print a {VERIFY_FORMAT} document: what was checked, and each problem (exit 1 as without it)."))] = False,
 ) -> None:
     """Check the hash chain of journals and each snapshot against its journal: name the first record that does not match."""
     import sys
 
     from prc3cfg import api
+    from prc3cfg.cli.common import print_document
     from prc3cfg.core.text import shown
 
     result = api.verify_records(paths)
     for note in result.notes:
         print(f"note: {shown(note)}", file=sys.stderr)
+    if json_out:
+        print_document({"format": VERIFY_FORMAT, "verified": not result.problems, "journals": result.journals, "snapshots": result.snapshots,
+                        "unchained": result.unchained, "problems": result.said(), "notes": result.notes, "summary": result.summary()})  # fmt: skip
     if result.problems:
         raise UserError("\n".join(result.said()))
-    print(f"Records verified: {result.summary()}.")
+    if not json_out:
+        print(f"Records verified: {result.summary()}.")
 
 
 @records_app.command("list")

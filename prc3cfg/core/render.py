@@ -17,7 +17,7 @@ anyone may have edited.
 
 It is long because it is the one home of the words people read of a module: a field's name and
 value in human units (`field_name`, `format_value`), two images' differences (`differences`,
-`drifted`), a comment's escaping and budget (`cell`, `code`, `COMMENT_BUDGET`) serve the plan's
+`drift_changes`), a comment's escaping and budget (`cell`, `code`, `COMMENT_BUDGET`) serve the plan's
 three outputs, drift, the account of an apply and `show` alike; split by output, each module would
 import the others' pieces. Plans come first; `# --` rulers mark the other two parts: `read`, drift
 and the account, then `show`.
@@ -134,12 +134,20 @@ def clamped_changes(change: ModuleChange) -> list[FieldChange]:
     return _program_changes(change.actual.programs, change.plan.predicted.programs, unmanaged)
 
 
-def drifted(said: ModuleImage, held: ModuleImage) -> list[str]:
+#: A drifted jump's `field` (`drift_changes`): a chain or a jump in words, not a field of a program.
+JUMPS = "jumps"
+
+
+def drift_changes(said: ModuleImage, held: ModuleImage) -> list[dict[str, Any]]:
     """Where a module holds something else than the plant file says, as a change made on the floor —
-    "what the file says → what the module holds", the direction `adopt` shows it in."""
-    fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text}" for f in field_changes(said, held)]
+    "what the file says → what the module holds", the direction `adopt` shows it in: each a field as a
+    plan file's `changes` give it (`FieldChange.to_json`: program, field symbol, before and after in device
+    units), or a jump (`JUMPS`: before, after a chain in words, null where there is none); `text` the sentence."""
+    fields = [f.to_json() | {"text": f"{'system' if f.program is None else f'program {f.program}'} {f.text}"}
+              for f in field_changes(said, held)]  # fmt: skip
     in_module, in_file = chain_changes(held, said)
-    return fields + [f"{c}: in the module only" for c in in_module] + [f"{c}: in the plant file only" for c in in_file]
+    return (fields + [{"program": None, "field": JUMPS, "before": None, "after": c, "text": f"{c}: in the module only"} for c in in_module]
+            + [{"program": None, "field": JUMPS, "before": c, "after": None, "text": f"{c}: in the plant file only"} for c in in_file])  # fmt: skip
 
 
 def differences(have: ModuleImage, want: ModuleImage) -> list[str]:
@@ -749,6 +757,8 @@ class Drift:
     address: int
     name: str
     differences: tuple[str, ...]
+    #: the same differences as fields, before and after (`drift_changes`)
+    changes: tuple[dict[str, Any], ...] = ()
 
 
 def drift_lines(drifts: Sequence[Drift], modules: int) -> list[str]:
@@ -773,9 +783,11 @@ DRIFT_FORMAT = "prc3cfg-drift/1"
 
 def drift_json(plant: str, drifts: Sequence[Drift], modules: int) -> dict[str, Any]:
     """Drift as a document (`plan --refresh-only --json`, `--out`): the plant, how many modules were
-    read, and each module that drifted with its differences (file → module, in human units)."""
+    read, and each module that drifted with its differences (file → module): in human units, and as
+    `changes` of a field from before to after (`drift_changes`)."""
     return {"format": DRIFT_FORMAT, "plant": plant, "modules": modules,
-            "drifted": [{"bus": d.bus, "address": d.address, "name": d.name, "differences": list(d.differences)} for d in drifts]}  # fmt: skip
+            "drifted": [{"bus": d.bus, "address": d.address, "name": d.name, "differences": list(d.differences),
+                         "changes": list(d.changes)} for d in drifts]}  # fmt: skip
 
 
 def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET, full_drift: str = "the drift file") -> str:
