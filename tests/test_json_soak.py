@@ -74,6 +74,8 @@ def test_the_event_stream_tells_what_the_exit_code_and_the_modules_tell(tmp_path
     assert {(e["bus"], e["name"]) for e in ran if e["released"] != "no"} <= travel
     phases = [e["phase"] for e in found if e["event"] == "progress" and e["done"] == 0]
     assert phases == [p for p in ("reading modules", "writing", "verifying") if p in phases] and phases[:1] == ["reading modules"]
+    over = [e for e in found if e["event"] == "progress" and e["done"] > e["total"]]
+    assert not over, over  # a repair's write counts among the writes, never among the modules verified
 
 
 def load_plant_modules():

@@ -259,3 +259,14 @@ def test_the_api_imports_each_name_from_where_the_type_checker_finds_it():
     assert len(imported) == len(checking.body) == len(prc3cfg.api.__all__) and imported == homes
     with pytest.raises(AttributeError, match="has no attribute 'nothing_of_this_name'"):
         prc3cfg.api.nothing_of_this_name  # noqa: B018 — a name outside the API is no name of it
+
+
+def test_every_module_of_the_package_imports():
+    """Each module imported in a fresh interpreter: an annotation evaluated at import (a module without
+    `from __future__ import annotations`) that names a type imported only for the type checker fails here, not
+    at the first run of its command."""
+    modules = sorted(".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+                     for path in (ROOT / "prc3cfg").rglob("*.py"))  # fmt: skip
+    script = "import importlib, sys\nfor name in sys.argv[1:]:\n    importlib.import_module(name)\n"
+    done = subprocess.run([sys.executable, "-c", script, *modules], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr

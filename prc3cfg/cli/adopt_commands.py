@@ -89,7 +89,7 @@ def adopt(
           "— review the diff and commit it.")  # fmt: skip
 
 
-def _diff(adoption: Adoption, plant: Path) -> str:
+def _diff(adoption: "Adoption", plant: Path) -> str:
     """The unified diff of the plant file, as adopted."""
     import difflib
 

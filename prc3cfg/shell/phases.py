@@ -49,7 +49,7 @@ class Phases:
     def __init__(self, start: Callable[[str, int], None], advance: Callable[[], None]) -> None:
         self._start, self._advance = start, advance
         self._phase = ""
-        self._lines = self._lines_written = self._wrote = self._verified = self._modules = 0
+        self._lines = self._lines_written = self._wrote = self._verified = self._modules = self._messages = 0
         self._lock = threading.Lock()
         self._began = time.monotonic()
         self._read_at: float | None = None
@@ -78,17 +78,19 @@ class Phases:
         with self._lock:
             if self._phase == "reading":
                 self._read_at = now
-            self._phase, self._writing_at, self._modules, self._lines = "writing", now, modules, lines
+            self._phase, self._writing_at, self._modules, self._lines, self._messages = "writing", now, modules, lines, messages
             self._start("writing", messages)
-            for _ in range(self._wrote):
+            for _ in range(min(self._wrote, messages)):
                 self._advance()
             self._writes_ended()
 
     def wrote(self) -> None:
-        """A write acknowledged (a repair's too: it shows in the phase it happens in)."""
+        """A write acknowledged: one of the plan's messages written, up to their number — a repair's write
+        (a line verifying while another still writes) is part of its module's verification, which counts
+        modules: the display never says more done than there is."""
         with self._lock:
             self._wrote += 1
-            if self._phase != "reading":
+            if self._phase == "writing" and self._wrote <= self._messages:
                 self._advance()
 
     def line_written(self) -> None:
