@@ -52,6 +52,25 @@ class Result:
         return [line for line in self.err.splitlines() if not line.startswith("note: ")]
 
 
+#: The heading of an account's reference-travel list (`render.TRAVEL`, without its sign).
+TRAVEL = "Travel to reference point required before production on:"
+
+
+def travel_list(out: str) -> str:
+    """What an account's reference-travel lists say, on one line ("" where there is none): each heading with the
+    indented lines of modules under it (`render.travel_list` wraps them), and each earlier release's line."""
+    said, lines = [], out.splitlines()
+    for at, line in enumerate(lines):
+        if TRAVEL in line:
+            block = [line]
+            for following in lines[at + 1 :]:
+                if not following.startswith("    "):
+                    break
+                block.append(following.strip())
+            said.append(" ".join(block))
+    return " ".join(said)
+
+
 def read_next(path: Path) -> dict[str, tuple[int, ...]]:
     """By module name, the programs the next plan of the plant file at `path` reads (not `--full-read`): what
     the change needs, and what rolling evidence adds (`what_to_read.rolling`) — as the lines' records stand."""

@@ -21,14 +21,13 @@ from dataclasses import replace
 
 import pytest
 import yaml
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, run_cli, travel_list
 from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
 from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.plant_files import load_plant
 
-TRAVEL = "Travel to reference point required before production on:"
 FAST = 2  # seeds in the fast tier
 
 
@@ -44,7 +43,7 @@ def named(plant, *texts: str) -> set[tuple[str, int]]:
     """The modules the texts put on a reference-travel list or warn of: by name, or every module of a
     line a broadcast release was recorded on."""
     found = set()
-    lines = [line for text in texts for line in text.splitlines() if TRAVEL in line or "warning" in line]
+    lines = [travel_list(text) for text in texts] + [line for text in texts for line in text.splitlines() if "warning" in line]
     for bus in load_plant(plant.path).buses:
         for module in bus.modules:
             if any(f"{bus.name}/{module.name}" in line or f"bus {bus.name}, module {module.address} " in line for line in lines):

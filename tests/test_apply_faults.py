@@ -21,7 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import pytest
-from emulated import emulated_plant
+from emulated import emulated_plant, travel_list
 
 from prc3cfg.core import codec, device
 from prc3cfg.core.image import PROGRAM_COUNT, ModuleImage, Program
@@ -30,8 +30,6 @@ from prc3cfg.shell.plant_files import load_plant
 
 #: Seeds per framing: a few in the fast tier, the acceptance's 40 in the soak tier.
 SEEDS = [2, pytest.param(40, marks=pytest.mark.soak)]
-TRAVEL = "Travel to reference point required before production on:"
-
 
 def seeded_image(chooser: random.Random, address: int) -> ModuleImage:
     """A module as found on the floor: a high upper reversing point, programs anywhere below it."""
@@ -53,7 +51,7 @@ def check(plant, initial, returncode: int, out: str, err: str) -> list[str]:
         return [f"stderr is not one line per problem:\n{err}"]
     problems = []
     named = {line.split(":")[0].removeprefix("✗ ") for line in err.splitlines() if line.startswith("✗ bus")}
-    travel = next((line for line in out.splitlines() if TRAVEL in line), "")
+    travel = travel_list(out)
     for bus, module in load_plant(plant.path).modules():
         state = plant.emulators[bus.name].module(module.address)
         held, was, want = state.image, initial[(bus.name, module.address)], module.desired_image()

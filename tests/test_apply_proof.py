@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, run_cli, travel_list
 from lossy import Loss
 from test_broadcast import declared, full_line
 
@@ -25,8 +25,6 @@ from prc3cfg.shell.emulator.server import Emulator
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.testing import EmulatedPlant
-
-TRAVEL = "Travel to reference point required before production on:"
 
 
 def journal_events(directory: Path) -> list[dict]:
@@ -210,7 +208,7 @@ def test_a_read_the_module_executes_as_a_10h_is_a_possible_release_never_accepte
         assert "bus booth-a, module 2 (booth-a-right): prc3cfg plan" in again.err and "may be released" in again.err
         applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert applied.code == 0, applied.err
-        assert "booth-a/booth-a-right" in next(line for line in applied.out.splitlines() if TRAVEL in line)
+        assert "booth-a/booth-a-right" in travel_list(applied.out)
 
 
 def test_a_write_whose_address_became_the_broadcast_is_found_on_every_module_of_the_line(tmp_path, capsys):
@@ -224,7 +222,7 @@ def test_a_write_whose_address_became_the_broadcast_is_found_on_every_module_of_
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert not plant.emulators["booth-a"].module(2).referenced and not plant.emulators["booth-a"].module(5).referenced
         assert result.code == 1, result.out
-        travel = next(line for line in result.out.splitlines() if TRAVEL in line)
+        travel = travel_list(result.out)
         assert "booth-a/booth-a-left" in travel and "booth-a/booth-a-right" in travel and "booth-a/booth-a-top" in travel
         assert not [line for line in result.out.splitlines() if "✓ bus booth-a, module 2" in line or "✓ bus booth-a, module 5" in line]
         assert "✗ bus booth-a, module 2 (booth-a-right): the read-back shows other system parameters" in result.err
@@ -256,7 +254,7 @@ def test_a_verifying_read_executed_as_a_10h_stops_the_line_and_names_the_module(
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert after, "the verifying read was never sent"
         assert result.code == 1
-        assert "booth-a/booth-a-right" in next(line for line in result.out.splitlines() if TRAVEL in line)
+        assert "booth-a/booth-a-right" in travel_list(result.out)
         assert "✗ bus booth-a, module 2 (booth-a-right): bus booth-a, module 2: a read (51h) was answered as a write is" in result.err \
             or "a read (52h) was answered as a write is" in result.err
         assert [f.message[:1] for f in after[1:]] == [b"\x50"] * len(after[1:])  # afterwards: its system block read, nothing else

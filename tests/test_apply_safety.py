@@ -18,7 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, run_cli, travel_list
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lossy import Loss, lose_replies_to
@@ -26,12 +26,6 @@ from lossy import Loss, lose_replies_to
 from prc3cfg.core import codec
 from prc3cfg.core.image import ModuleImage, Program, SystemParameters, default_program
 from prc3cfg.shell.records import Snapshot
-
-TRAVEL = "Travel to reference point required before production on:"
-
-
-def travel_list(out: str) -> str:
-    return next((line for line in out.splitlines() if TRAVEL in line), "")
 
 
 def journal_events(directory: Path) -> list[dict]:

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 import yaml
-from emulated import DEMO, emulated_plant, run_cli
+from emulated import DEMO, emulated_plant, run_cli, travel_list
 
 from prc3cfg.shell.emulator.server import FaultInjection
 from prc3cfg.shell.locks import line_keys, line_lock
@@ -21,7 +21,7 @@ def test_apply_converges_and_replan_is_empty(plant, capsys):
     assert result.code == 0, result.err
     assert plant.matches_plant()
     assert "Apply complete: 6 modules written and verified." in result.out
-    assert "Travel to reference point required before production on: booth-a/booth-a-left" in result.out
+    assert travel_list(result.out).startswith("⚠ Travel to reference point required before production on: booth-a/booth-a-left,")
     assert all(not s.referenced for e in plant.emulators.values() for s in e.modules().values())
     assert run_cli(capsys, "plan", plant.path, "--detailed-exitcode").code == 0
 

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from emulated import DEMO, emulated_plant
+from emulated import DEMO, emulated_plant, travel_list
 from lossy import Loss
 
 from prc3cfg.core.framing import Frame
@@ -43,7 +43,6 @@ AS_ROOT = pytest.mark.skipif(sys.platform != "linux" or os.geteuid() != 0, reaso
 #: The link's reply time-out: long enough that a busy machine repeats no exchange, so that a frame's
 #: number in a clean run is its number in every run.
 UNHURRIED = 2.0
-TRAVEL = "⚠ Travel to reference point required before production on:"
 READS = (0x50, 0x51, 0x52)
 #: What the disk says when it refuses (ENOSPC, EROFS, EFBIG), or what prc3cfg says of a state folder it cannot write.
 OS_ERRORS = r"(No space left on device|Read-only file system|File too large|not writable)"
@@ -168,7 +167,7 @@ def account_problems(plant: EmulatedPlant, before: dict[tuple[str, int], ModuleI
     if not all(line.startswith(("✗", "    ", "error: ", "note: ")) for line in err.splitlines()):
         problems.append("stderr is not one line per problem")
     blocks = {block.split(" (", 1)[0]: block for block in err.split("✗ ")[1:]}
-    travel = next((line for line in out.splitlines() if line.startswith(TRAVEL)), "")
+    travel = travel_list(out)
     for bus, module in plant.plant.modules():
         where, key = f"bus {bus.name}, module {module.address}", (bus.name, module.address)
         state = plant.emulators[bus.name].module(module.address)

@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant
+from emulated import emulated_plant, travel_list
 
 from prc3cfg import api
 from prc3cfg.core.device import ModuleState
@@ -25,7 +25,6 @@ from prc3cfg.errors import Interrupted, interruption_within
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.plant_files import load_plant
 
-TRAVEL = "Travel to reference point required before production on:"
 #: What an interrupted module's account line may say became of it — always in words.
 STATES = re.compile(r": interrupted (before step \d+ of \d+ \(.+\)|before broadcast \d+ of \d+ \(.+\)"
                     r"|while verifying: \d+ of \d+ steps? acknowledged(, \d+ broadcasts? sent)?(, after \d+ repair rounds?)?, not verified"
@@ -75,7 +74,7 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
         for entry in untouched:
             bus, address = entry.split(",")[0].removeprefix("bus "), int(entry.split("module ")[1].split(" ")[0])
             assert plant.emulators[bus].module(address).image == factory[address], entry
-        travel = next((line for line in out.splitlines() if TRAVEL in line), "")
+        travel = travel_list(out)
         for bus, module in load_plant(plant.path).modules():
             if not plant.emulators[bus.name].module(module.address).referenced:
                 assert f"{bus.name}/{module.name}" in travel

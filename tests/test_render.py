@@ -262,6 +262,24 @@ def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broad
         "Bus line: broadcast after addresses 3–5 answered no probe — only the plan's modules heard it"]
 
 
+def test_the_travel_list_groups_its_modules_by_bus_on_lines_a_screen_holds() -> None:
+    """30 released modules on a line and one possibly released on another: a heading, then each bus's modules on
+    lines of their own, each line within TRAVEL_WIDTH, wrapped between modules, every module named once."""
+    from types import SimpleNamespace
+
+    from prc3cfg.core.axes import Release
+
+    runs = [SimpleNamespace(bus="booth-a", name=f"reciprocator-{n:02d}", released=Release.YES) for n in range(1, 31)]
+    runs += [SimpleNamespace(bus="booth-b", name="pretreat", released=Release.POSSIBLY),
+             SimpleNamespace(bus="booth-b", name="x", released=Release.NO)]
+    heading, *lines = render.travel_list(runs).splitlines()
+    assert heading == render.TRAVEL and len(lines) > 2
+    assert all(len(line) <= render.TRAVEL_WIDTH and line.startswith("    ") for line in lines), lines
+    named = [name.strip() for line in lines for name in line.split(",") if name.strip()]
+    assert named == [f"booth-a/reciprocator-{n:02d}" for n in range(1, 31)] + ["booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"]
+    assert lines[-1] == "    booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"  # another bus, another line
+
+
 #: Texts a plant or plan file could bring into a pull-request comment, meant to do more than be read.
 HOSTILE = {
     "a mention": "@octocat",

@@ -76,7 +76,7 @@ def travel(command: str, runs: Sequence[render.Run], earlier: Iterable[render.Un
     modules += [{"bus": r.bus, "name": r.name, "released": Release.POSSIBLY.value} for r in told]
     if not modules:
         return None
-    lines = [text for text in (render.travel_list(runs),) if text is not None] + render.earlier_releases(told)
+    lines = [*(render.travel_list(runs) or "").splitlines(), *render.earlier_releases(told)]
     return event("travel", command, modules=modules, text=lines)
 
 

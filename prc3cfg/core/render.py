@@ -880,16 +880,30 @@ def account(run: Run) -> str | None:
 TRAVEL = "⚠ Travel to reference point required before production on:"
 
 
+#: How wide the lines of the travel list are, its indent included.
+TRAVEL_WIDTH = 100
+
+
 def travel_list(runs: Sequence[Run]) -> str | None:
-    """The modules whose axes were — or may have been — released: they must travel to their reference point."""
+    """The modules whose axes were — or may have been — released: they must travel to their reference point.
+    The heading, then each bus's modules on lines of their own, indented, wrapped between modules at
+    `TRAVEL_WIDTH` (30 modules on a line are no 300-character line)."""
     released = to_travel(runs)
     if not released:
         return None
-    names = ", ".join(
-        f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
-        for r in released
-    )
-    return f"{TRAVEL} {names}"
+    lines = [TRAVEL]
+    for bus in dict.fromkeys(r.bus for r in released):
+        names = [f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
+                 for r in released if r.bus == bus]  # fmt: skip
+        line = "   "
+        for n, name in enumerate(names):
+            piece = f" {name}" + ("," if n < len(names) - 1 else "")
+            if len(line) + len(piece) > TRAVEL_WIDTH and line.strip():
+                lines.append(line)
+                line = "   "
+            line += piece
+        lines.append(line)
+    return "\n".join(lines)
 
 
 class Untold(Protocol):
