@@ -53,7 +53,7 @@ from prc3cfg.core.planner import (
     run_steps,
     summarise,
 )
-from prc3cfg.core.what_to_read import read_messages, verification_time
+from prc3cfg.core.what_to_read import reading_time, verification_time
 
 #: Items per message of the per-field messages (40h..45h; 46h carries 31).
 FIELD_ITEMS = codec.MAX_FIELD_ITEMS
@@ -405,8 +405,7 @@ class _Floor:
         """What reading back `programs` (and the system block) costs, as `verification_time` prices it."""
         key = (programs, system)
         if key not in self._reads:
-            reads = read_messages(_numbers(programs))[0 if system else 1 :]
-            self._reads[key] = sum(self._cost.message_time(self._address, m) for m in reads)
+            self._reads[key] = reading_time(self._address, _numbers(programs), system, self._cost)
         return self._reads[key]
 
 

@@ -458,5 +458,11 @@ def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequen
     """Seconds the fewest reads of what `steps` can change take on the line — and of the programs planned
     from the factory's, not read (`unread`: `assumed`), which the verification reads whatever the steps."""
     system, programs = reach(before, predicted, steps)
-    reads = read_messages(programs | set(unread))[0 if system else 1 :]
-    return fsum(cost.message_time(before.address, m) for m in reads)
+    return reading_time(before.address, programs | set(unread), system, cost)
+
+
+def reading_time(address: int, programs: Iterable[int], system: bool, cost: LineCost) -> float:
+    """Seconds the fewest reads of `programs` (and of the system block, with `system`) take on the line:
+    summed with `math.fsum`, correctly rounded, so that every place that prices a read-back agrees to the bit."""
+    reads = read_messages(programs)[0 if system else 1 :]
+    return fsum(cost.message_time(address, m) for m in reads)
