@@ -39,7 +39,6 @@ from prc3cfg.api._plan import (
 from prc3cfg.api._plant import reason_for
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
 from prc3cfg.core import plan_file, render, what_to_read
-from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
@@ -219,7 +218,7 @@ def _ready(plant: Plant, buses: Collection[Bus], reason: str | None, command: st
     given back), error detection or its risk accepted, and records that can be kept."""
     reason = reason_for(plant, buses, reason, command)
     for bus in buses:
-        if not detects_damage(bus.framing, bus.line.parity) and not bus.accept_undetected_damage:
+        if not bus.detects_damage and not bus.accept_undetected_damage:
             raise UserError(f"{plant.path}: bus {bus.name}: {bus.framing} with parity none detects no damage — a damaged frame can "
                             "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
                             "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip

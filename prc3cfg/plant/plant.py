@@ -14,6 +14,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict
 
+from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.units import PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, function_output
@@ -87,6 +88,12 @@ class Bus(BusLine):
     @property
     def line(self) -> LineSettings:
         return LineSettings(baud=self.baud, data_bits=self.data_bits, parity=self.parity, stop_bits=self.stop_bits)
+
+    @property
+    def detects_damage(self) -> bool:
+        """Whether a damaged frame on this line is detected — by its framing's check or by parity (`framing.detects_damage`):
+        where not, a damaged frame can become another write, and an apply refuses unless `accept_undetected_damage`."""
+        return detects_damage(self.framing, self.parity)
 
 
 class Plant(BaseModel):

@@ -24,7 +24,6 @@ from typing import Any
 from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.apply_states import Event
 from prc3cfg.core.axes import to_travel
-from prc3cfg.core.framing import detects_damage
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.plant_planner import Key, Planner, Prober, Wanted
@@ -205,7 +204,7 @@ class Writing:
         self._lock = threading.Lock()
         # on a line without error detection every module is watched, the unchanged ones too: a damaged
         # frame meant for another can release its axes
-        self._exposed = {name for name, bus in buses.items() if not detects_damage(bus.framing, bus.line.parity)}
+        self._exposed = {name for name, bus in buses.items() if not bus.detects_damage}
         self._costs = {name: line_cost(bus) for name, bus in buses.items()}
 
     def _runs(self, changes: Iterable[ModuleChange]) -> list[ModuleRun]:
