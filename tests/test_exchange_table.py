@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from prc3cfg.core import codec
-from prc3cfg.core.exchange import FAULTS, VERDICTS, Arrival, Fault, LinkStep, asked, judge
+from prc3cfg.core.exchange import FAULTS, VERDICTS, Arrival, Fault, LinkStep, answered_as_write, asked, judge
 from prc3cfg.core.image import DEFAULT_SYSTEM
 
 READ, WRITE = codec.ReadSystem(), codec.InitSystem()  # 50h, 10h
@@ -176,3 +176,15 @@ def test_the_fault_cases_are_every_row_and_every_fault():
     assert {case.values[:3] for case in FAULT_CASES} == set(FAULTS)
     assert {case.values[3] for case in FAULT_CASES} == set(Fault)
     assert (False, False, True) not in FAULTS  # no side is drawn when nothing is due
+
+
+def test_a_read_answered_as_a_write_is_the_table_s_possible_write_for_every_message():
+    """`answered_as_write`, which the lines' observers record as an axis release, decides by the verdicts: an
+    acknowledgement to any read, nothing else — a data block, another code, no reply, bytes no message is."""
+    reads = [codec.ReadSystem(), codec.ReadPrograms(1, 4)]
+    writes = [codec.InitSystem(), codec.WriteSpeeds(((7, 100),))]
+    for message in reads + writes:
+        request = message.encode()
+        assert answered_as_write(request, codec.encode_code(0)) is message.IS_READ, message
+        assert not answered_as_write(request, None) and not answered_as_write(request, codec.encode_code(21))
+    assert not answered_as_write(b"\x99\x00", codec.encode_code(0))

@@ -223,6 +223,17 @@ def arrival(reply: Reply) -> Arrival:
     return Arrival.DAMAGED if reply in DAMAGED_CODES else Arrival.REFUSED
 
 
+def answered_as_write(request: bytes, raw: bytes | None) -> bool:
+    """Whether `raw`, the reply message to the message `request`, says the module executed it as a write — a
+    read answered with an acknowledgement — by the verdicts' table (`LinkStep.POSSIBLE_WRITE`); what a journal
+    or an observer of the line decides with the link alike."""
+    try:
+        message = codec.decode_message(request)
+    except codec.Rejected:
+        return False  # no message of ours: nothing the link sends
+    return judge(message, raw, checked=True, heard=None, attempts_left=1, timeout=0.0).step is LinkStep.POSSIBLE_WRITE
+
+
 def judge(message: codec.Message, raw: bytes | None, *, checked: bool, heard: int | None, attempts_left: int, timeout: float) -> Verdict:
     """The verdict on one attempt of `message`, whose reply message was `raw` (None: nothing
     within `timeout` seconds). `checked`: the framing has a checksum; `heard`: the code the attempt

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, TextIO, TypeAlias
 
-from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.exchange import answered_as_write
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.core.plant_planner import Key
@@ -316,7 +316,7 @@ def written_reads(names: dict[Key, str], keys: dict[str, tuple[str, ...]], recor
     def watch(exchange: Exchange) -> None:
         if observer is not None:
             observer(exchange)
-        if exchange.reply == codec.encode_code(0) and codec.MESSAGE_TYPES[exchange.request[0]].IS_READ:
+        if answered_as_write(exchange.request, exchange.reply):
             name = names.get((exchange.bus, exchange.address), f"address {exchange.address}")
             records.record(keys[exchange.bus], exchange.bus, exchange.address, name)
 
