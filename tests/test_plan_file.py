@@ -206,6 +206,14 @@ def test_each_field_of_a_plan_file_changed_is_refused(made, tmp_path):
     assert accepted == []
 
 
+def test_a_plan_file_s_version_text_is_refused_escaped_on_one_line(made, tmp_path):
+    """The version a plan file says made it is the file's text: refused in one line, escaped (the soak tier's
+    example: a new line in it split the refusal)."""
+    document = changed(json.loads(made.text), ("prc3cfg_version",), "9.9\n\x1b[2J error: forged")
+    assert refusal(made, tmp_path, document).endswith("made by prc3cfg 9.9\\n\\x1b[2J error: forged, this is "
+                                                      f"{json.loads(made.text)['prc3cfg_version']} — plan again with this version")
+
+
 def other(value: Any) -> Any:
     """Another value of the kind of `value` (a null becomes a text)."""
     return {bool: lambda: not value, int: lambda: value + 1, float: lambda: value + 0.001, str: lambda: value + "0"}.get(type(value), lambda: "")()

@@ -537,7 +537,7 @@ def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, ali
     the other way round."""
     plan_file = checked(document, path)
     if plan_file.version != __version__:
-        raise StalePlan(f"{path}: made by prc3cfg {plan_file.version}, this is {__version__} — plan again with this version")
+        raise StalePlan(f"{path}: made by prc3cfg {shown(plan_file.version)}, this is {__version__} — plan again with this version")
     if plant_name is not None and plan_file.plant != plant_name:
         raise UserError(f"{path}: the plan of plant {shown(plan_file.plant)} ({shown(plan_file.plant_path)}), not of {plant_name} "
                         f"({plant_path}) — nothing was written: apply it with its own plant file, or plan this one")  # fmt: skip
