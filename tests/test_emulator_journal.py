@@ -187,8 +187,9 @@ def test_a_write_the_journal_cannot_take_is_taken_back_and_neither_answered_nor_
 
 # -- SIGKILL of a real `prc3cfg emulator serve` -----------------------------------------------
 
-#: Kill-and-restart rounds: a few in the fast tier, 24 in the soak tier.
-ROUNDS = [6, pytest.param(24, marks=pytest.mark.soak)]
+#: Kill-and-restart rounds: a few in the fast tier, 24 in the soak tier. The fast tier's 4 (its schedule drawn
+#: from random.Random(5)) still hold a round past a compaction (1,224 writes), two short ones and a kill during a start.
+ROUNDS = [4, pytest.param(24, marks=pytest.mark.soak)]
 MODULES = 30
 
 

@@ -50,8 +50,9 @@ def reference_replayed(actual: ModuleImage, desired: ModuleImage, cost: LineCost
 @pytest.mark.parametrize(
     ("scenario", "profile"),
     [
-        ("commissioning, every field", "open-driver/100ms"),
-        ("commissioning", "stx"),
+        # about 4 s of CPU each: commissioning in the fast tier is test_commissioning_every_field_takes_27_messages's
+        pytest.param("commissioning, every field", "open-driver/100ms", marks=pytest.mark.soak),
+        pytest.param("commissioning", "stx", marks=pytest.mark.soak),
         ("lower S1, clamping", "crc16"),
         ("large mixed change", "open-driver/100ms"),
         ("cleanup (reset)", "stx"),
@@ -96,7 +97,15 @@ def test_commissioning_every_field_takes_27_messages() -> None:
     assert [sum(m.ID == kind for m in reference.messages) for kind in (0x33, 0x42, 0x43, 0x44, 0x45)] == [4] * 5
 
 
-@pytest.mark.parametrize("case", FOUND_CASES, ids=lambda case: case["found"].split(":")[0])
+#: The found case the exact search takes about 4 s of CPU on (the others: a second at most), in the soak tier.
+SLOW_FOUND = "open-driver: a link range over 16..60 that fits one 46h once five 21h take their items out"
+
+
+@pytest.mark.parametrize(
+    "case",
+    [pytest.param(case, marks=pytest.mark.soak) if case["found"] == SLOW_FOUND else case for case in FOUND_CASES],
+    ids=lambda case: case["found"].split(":")[0],
+)
 def test_the_found_cases_optimum_is_the_exact_references(case: dict) -> None:
     """The optimum test_planner_cases holds the planner to on each case the soak properties found."""
     actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
