@@ -4,9 +4,12 @@ repositories use it), reached through a lossy proxy where a test says, and the C
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+import subprocess
+import threading
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import pytest
 from lossy import LossyProxy, Rule
@@ -69,6 +72,21 @@ def travel_list(out: str) -> str:
                 block.append(following.strip())
             said.append(" ".join(block))
     return " ".join(said)
+
+
+def signal_once_every_line_writes(trace: TextIO, process: subprocess.Popen, buses: Iterable[str], signum: int) -> None:
+    """Read `process`'s frame trace (the FIFO its `--trace` writes) until a first write has gone out on every one
+    of `buses`, then send it `signum` — synchronised on what the process traced, never on time — and read the
+    rest of the trace in the background, so that the process never waits on it."""
+    writing: set[str] = set()
+    for line in trace:
+        _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
+        if direction == ">" and int(frame[6:8], 16) < 0x50:  # a crc16 request (A5h, address, length, ID): a write
+            writing.add(bus)
+        if writing == set(buses):
+            process.send_signal(signum)
+            break
+    threading.Thread(target=trace.read, daemon=True).start()
 
 
 def read_next(path: Path) -> dict[str, tuple[int, ...]]:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import jsonschema
 import pytest
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, run_cli, signal_once_every_line_writes
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMAS = ROOT / "schemas"
@@ -137,15 +137,7 @@ def test_an_interrupted_apply_ends_its_stream_with_every_module_and_its_account(
                                     "--trace", str(fifo)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, encoding="utf-8",
                                    env=BUFFERED | {"PYTHONPATH": str(ROOT), "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")})  # fmt: skip
         with fifo.open() as trace:
-            writing: set[str] = set()
-            for line in trace:
-                _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
-                if direction == ">" and int(frame[6:8], 16) < 0x50:  # a crc16 request (A5h, address, length, ID): a write
-                    writing.add(bus)
-                if writing == set(plant.emulators):
-                    process.send_signal(signal.SIGINT)
-                    break
-            threading.Thread(target=trace.read, daemon=True).start()
+            signal_once_every_line_writes(trace, process, plant.emulators, signal.SIGINT)
             out, err = process.communicate(timeout=60)
     found = events(out)
     assert process.returncode == 130 and err.splitlines()[-1] == "error: interrupted"

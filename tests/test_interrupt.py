@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant, travel_list
+from emulated import emulated_plant, signal_once_every_line_writes, travel_list
 
 from prc3cfg import api
 from prc3cfg.core.device import ModuleState
@@ -52,16 +52,8 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
-        with fifo.open() as trace:
-            writing: set[str] = set()
-            for line in trace:
-                _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
-                if direction == ">" and int(frame[6:8], 16) < 0x50:  # a crc16 request (A5h, address, length, ID): a write
-                    writing.add(bus)
-                if writing == set(plant.emulators):  # a first write on every line: they write on their own now (a line
-                    process.send_signal(signum)  # not read back yet is named as such, its modules not: commissioning reads little)
-                    break
-            drain(trace)
+        with fifo.open() as trace:  # a first write on every line: they write on their own now (a line not read back
+            signal_once_every_line_writes(trace, process, plant.emulators, signum)  # yet is named as such: commissioning reads little)
             out, err = process.communicate(timeout=60)
         assert process.returncode == 130
         assert err.splitlines()[-1] == "error: interrupted"
