@@ -21,7 +21,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from emulated import emulated_plant, run_cli
+from emulated import emulated_plant, run_cli, travel_list
 
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.shell.testing import EmulatedPlant
@@ -127,10 +127,11 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
         assert nothing_sent, "the limit stopped no module before its first frame"
         assert any(image != factory[key] for key, image in held.items()), "the limit stopped every module before its first frame"
         # the travel list names exactly the modules whose system block a 20h changed (none: no list)
-        travel = [line for line in result.stdout.splitlines() if line.startswith("⚠ Travel to reference point required before")]
+        travel = travel_list(result.stdout)
         released = {key for key, image in held.items() if image.system != factory[key].system}
         names = {(bus.name, m.address): f"{bus.name}/{m.name}" for bus, m in plant.plant.modules()}
-        assert [sorted(line.split(": ", 1)[1].split(", ")) for line in travel] == ([sorted(names[key] for key in released)] if released else [])
+        said = sorted(name.strip() for name in travel.split(": ", 1)[1].split(",")) if travel else []
+        assert said == sorted(names[key] for key in released), travel
         # the journal holds every frame that left: each module that holds anything new has its requests in it
         requested = set()
         for raw in journal_of(tmp_path / "line").read_bytes().splitlines():

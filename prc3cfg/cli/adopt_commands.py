@@ -102,13 +102,13 @@ def _adopt_events(plant: Path, module: list[str] | None, program: list[int] | No
     """`adopt --json`: what it would write and the diff (`plan`), the write approved by `--auto-approve` (`question`),
     and the `account` — `adopted`, `drift` (`--check`, exit 2) or `no drift` — also when it ends in an error."""
     from prc3cfg import api
-    from prc3cfg.cli.stream import Progress, Stream
+    from prc3cfg.cli.stream import EventProgress, Stream
     from prc3cfg.core import events
 
     said = Stream("adopt")
     try:
         loaded = api.load(plant)
-        with line_options(trace, retries, lock_timeout, Progress(said)) as options:
+        with line_options(trace, retries, lock_timeout, EventProgress(said)) as options:
             adoption = api.adopt(loaded, module, program, options, reason=reason, check=check)
         said.event("plan", adopted=[{"modules": list(value.modules), "what": value.what, "layer": value.layer} for value in adoption.adopted],
                    diff=_diff(adoption, plant))  # fmt: skip

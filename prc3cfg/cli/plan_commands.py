@@ -173,7 +173,7 @@ def apply(
         events = stream.Stream("apply")
         with stream.accounted(events) as finished:  # a plant file refused ends the stream with its account too
             loaded = api.load(plant)
-            with line_options(trace, retries, lock_timeout, stream.Progress(events)) as options:
+            with line_options(trace, retries, lock_timeout, stream.EventProgress(events)) as options:
                 finished.append(api.apply(loaded, module, plan_file=plan_file, gates=stream.gates(events, plan_file, auto_approve, allow_axis_release),
                                           verify=verified, options=options, previous=previous, full_read=full_read, reason=reason))  # fmt: skip
         return
@@ -216,7 +216,7 @@ def restore(
         from prc3cfg.cli import stream
 
         events = stream.Stream("restore")
-        with stream.accounted(events) as finished, line_options(trace, retries, lock_timeout, stream.Progress(events)) as options:
+        with stream.accounted(events) as finished, line_options(trace, retries, lock_timeout, stream.EventProgress(events)) as options:
             finished.append(api.restore(snapshot, gates=stream.gates(events, None, auto_approve, allow_axis_release),
                                         verify=api.Verify(verify.value), options=options, onto_current_lines=onto_current_lines,
                                         reason=reason))  # fmt: skip

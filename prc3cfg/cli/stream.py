@@ -43,7 +43,7 @@ class Stream:
         self.emit(events.event(kind, self.command, **fields))
 
 
-class Progress:
+class EventProgress:
     """`api.Progress` as `progress` events: a phase's start (`done` 0) and each step of it."""
 
     def __init__(self, stream: Stream) -> None:
