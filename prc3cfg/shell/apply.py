@@ -43,7 +43,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 from prc3cfg.core.apply_states import REPAIRS, Course, Event, Next, State, repair_event, reply_event
-from prc3cfg.core.axes import Release
+from prc3cfg.core.axes import Release, concluded
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import FAULT_STATES, describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
@@ -132,19 +132,10 @@ class ModuleRun:
 
     @property
     def released(self) -> Release:
-        if self.release_acknowledged:
-            return Release.YES
-        changed = self.final is not None and self.final.system != self.before.system
-        if self.possibly_written or (self.exposed and changed):
-            # a damaged frame executed as a write: a 10h leaves a module at defaults as it was
-            return Release.YES if changed else Release.POSSIBLY
-        if not self.release_sent:
-            return Release.NO
-        if self.final is None:
-            return Release.POSSIBLY
-        # A 10h/20h is only sent when the system parameters differ: if they still read as
-        # before, none of them was executed.
-        return Release.YES if changed else Release.NO
+        """Whether its axes were released, as `axes.concluded` decides from this run's facts."""
+        return concluded(acknowledged=self.release_acknowledged, sent=self.release_sent, possibly_written=self.possibly_written,
+                         exposed=self.exposed, read_back=self.final is not None,
+                         changed=self.final is not None and self.final.system != self.before.system)  # fmt: skip
 
     @property
     def unchanged(self) -> bool:
