@@ -285,3 +285,19 @@ def test_a_broken_record_is_a_problem_in_the_document_and_exit_1(plant, capsys):
     document = valid("records-verify", json.loads(result.out))
     assert result.code == 1 and not document["verified"] and document["problems"]
     assert [f"error: {line}" for line in document["problems"]] == result.problems
+
+
+def test_an_event_or_a_document_is_printed_in_ascii_with_every_other_character_escaped(capsys):
+    """A C1 control, a line separator or a letter in what a stream or a document carries (another user's record
+    in a travel event, a journal's text in records verify) is a JSON escape on stdout: the same value to a
+    reader, no control to a terminal that shows the stream, and any pipe's encoding carries it."""
+    from prc3cfg.cli.common import print_document
+    from prc3cfg.cli.stream import Stream
+
+    said = "bob\u009b2J\u2028Jürgen"
+    Stream("apply").event("travel", modules=[{"bus": said, "name": said, "released": "possibly"}], text=[said])
+    print_document({"format": "prc3cfg-scan/1", "port": said})
+    out = capsys.readouterr().out
+    assert out.isascii() and "\\u009b" in out and "\\u2028" in out
+    event, document = json.loads(out.splitlines()[0]), json.loads("\n".join(out.splitlines()[1:]))
+    assert event["modules"][0]["name"] == said and document["port"] == said

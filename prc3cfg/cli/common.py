@@ -180,10 +180,11 @@ OutFileOpt = Annotated[Path | None, typer.Option("--out", callback=_output_optio
 
 
 def print_document(document: Any) -> None:
-    """A `--json` document on stdout (its `format` first: `prc3cfg-KIND/1`, `schemas/KIND.schema.json`)."""
+    """A `--json` document on stdout (its `format` first: `prc3cfg-KIND/1`, `schemas/KIND.schema.json`), in ASCII
+    as every JSON prc3cfg prints: what it read from a bus or a journal reaches no terminal as a control."""
     import json
 
-    print(json.dumps(document, indent=1, ensure_ascii=False))
+    print(json.dumps(document, indent=1))
 
 
 def printed_or_written(text: str, out: Path | None) -> None:
