@@ -100,7 +100,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     plan_file.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     buses = {bus.name: bus for bus, _ in chosen}.values()
-    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(plant, buses, held), only_read=planned.targeted)
+    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(buses, held), only_read=planned.targeted)
     if planned.targeted:  # what this apply read, and whose verification what it did not read rests on: its line's record now
         ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(held)).reading(pairs, images))
     plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
@@ -244,7 +244,7 @@ def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ..
 def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
     """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
     as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
-    unset = unset_systems(plant, writing.buses.values(), writing.held.on_record)
+    unset = unset_systems(writing.buses.values(), writing.held.on_record)
     planner = planner_for(plant, wanted.pairs, unset, only_read=wanted.base is not None, from_factory=wanted.from_factory)
     want = to_plan(wanted.pairs, desired)
     by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(link) for name, link in writing.links.items()},

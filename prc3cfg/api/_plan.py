@@ -135,10 +135,10 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | 
         on_line, newer = held.records[bus.name].read()
         known |= {(bus.name, address): k for address, k in on_line.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
-    for key, said in e12_claims(plant, buses.values(), held).items():  # another user's E12: read the module in full, never write for it
+    for key, said in e12_claims(buses.values(), held).items():  # another user's E12: read the module in full, never write for it
         known.pop(key, None)
         overruled.setdefault(key, said)
-    unset = unset_systems(plant, buses.values(), held) if known or overruled else frozenset()  # of no use without a record
+    unset = unset_systems(buses.values(), held) if known or overruled else frozenset()  # of no use without a record
     max_age = {name: bus.record_max_age for name, bus in buses.items()}
     targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
     if targeted is None:
@@ -183,7 +183,7 @@ def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines
     last module is — while the other lines are still being read: the lines never wait for all of
     the planning. `only_read`, `from_factory`: see `Planner`."""
     buses = {bus.name: bus for bus, _ in pairs}
-    planner = planner_for(plant, pairs, unset_systems(plant, buses.values(), held.on_record), only_read=only_read, from_factory=from_factory)
+    planner = planner_for(plant, pairs, unset_systems(buses.values(), held.on_record), only_read=only_read, from_factory=from_factory)
     wanted = to_plan(pairs, desired)
     links = held.links
 
@@ -298,19 +298,19 @@ def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted
             for bus, m in pairs]  # fmt: skip
 
 
-def unset_systems(plant: Plant, buses: Iterable[Bus], held: OnRecord) -> frozenset[Key]:
+def unset_systems(buses: Iterable[Bus], held: OnRecord) -> frozenset[Key]:
     """The modules of these buses that reported E12 to an earlier apply of this user's or root's and were
     not cleared since (as `held` has it): their plan writes the system parameters first (a 10h/20h)."""
-    return frozenset((r.bus, r.address) for bus in buses for r in held.of(releases.E12, bus_line_keys(plant, bus)) if r.owner is None)
+    return frozenset((r.bus, r.address) for bus in buses for r in held.of(releases.E12, bus.name) if r.owner is None)
 
 
-def e12_claims(plant: Plant, buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
+def e12_claims(buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
     """The modules of these buses another user's record says reported E12, with whose claim: a reason to
     read them in full, never to release their axes — only the module's own refusal (code 23, to a write
     of this run) or this user's or root's record makes a plan write the system parameters."""
     said = {}
     for bus in buses:
-        for r in held.of(releases.E12, bus_line_keys(plant, bus)):
+        for r in held.of(releases.E12, bus.name):
             if r.owner is not None:  # keyed by the plant's bus: the record's own bus name is part of the claim
                 said[(bus.name, r.address)] = f"{r.owner}'s record says it reported E12 (system parameters not set), from {shown(r.time)}"
     return said
@@ -325,14 +325,15 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, h
         return Reads(pairs, targets(pairs))
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
-    buses = {bus.name: bus for bus, _ in plan_file_pairs(planned, pairs)}
+    chosen = plan_file_pairs(planned, pairs)
+    buses = {bus.name: bus for bus, _ in chosen}
     desired, max_age = {key: m.desired_image() for key, (_, m) in names.items()}, {name: bus.record_max_age for name, bus in buses.items()}
     to_read, stale = what_to_read.for_plan_file(entries, desired, record(held), max_age, datetime.now(UTC))
     if stale is not None:
         raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
                         "holding what the plan took as known without reading it (written or read by another run since, or "
                         "older than record_max_age); nothing was written — plan again")  # fmt: skip
-    return Reads(plan_file_pairs(planned, pairs), to_read, RECORD)
+    return Reads(chosen, to_read, RECORD)
 
 
 def plan_file_pairs(planned: PlanFile, pairs: Pairs) -> Pairs:

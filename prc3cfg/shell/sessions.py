@@ -157,9 +157,9 @@ class OnRecord:
     records: dict[str, bases.LineRecord]
     pending: tuple[releases.Pending, ...]
 
-    def of(self, kind: str, keys: Iterable[str]) -> list[releases.Pending]:
-        """The records of `kind` not cleared yet on the line with these identities."""
-        wanted = set(keys)
+    def of(self, kind: str, bus: str) -> list[releases.Pending]:
+        """The records of `kind` not cleared yet on the line of `bus` (by that line's identities: any spelling)."""
+        wanted = set(self.records[bus].keys)
         return [r for r in self.pending if r.kind == kind and wanted & set(r.keys)]
 
 
@@ -227,16 +227,15 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
             options.used(list(links.values()))
 
 
-def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> dict[str, str]:
-    """The bus of each line identity in `keys`; two buses that are one line are refused."""
-    owner: dict[str, str] = {}
+def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
+    """Two buses that are one line (an identity in `keys` of both) are refused."""
+    owner: dict[str, str] = {}  # the bus of each identity seen
     for name, identities in keys.items():
         for key in identities:
             if key in owner:
                 raise UserError(f"{plant.path}: buses {owner[key]} and {name} are one line ({key}) — "
                                 "describe each line once, as one bus")  # fmt: skip
             owner[key] = name
-    return owner
 
 
 def _line_records(keys: Mapping[str, tuple[str, ...]], options: LineOptions) -> OnRecord:
