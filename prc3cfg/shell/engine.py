@@ -312,6 +312,11 @@ class Writing:
         if keeping.trouble is not None:
             for run in runs:
                 run.stopped_by("a record could not be kept")
+        for record in self.records.values():  # what a line left as it was read: kept here, where a failure is
+            try:  # the account's trouble (`RecordsFailed`, every run said), not an error after it that hides it
+                record.write()
+            except UserError as error:
+                keeping.failed(LINE_RECORD, error)
         _keep_faults(keeping, keys, runs)
         for run in runs:
             keeping.note(
