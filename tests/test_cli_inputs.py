@@ -171,6 +171,17 @@ def test_a_closed_stdout_pipe_ends_quietly_as_git_does(tmp_path, capsys, command
     assert (done.returncode, done.stderr) == (141, "")
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="closes descriptors with a POSIX shell")
+def test_a_command_started_without_standard_streams_still_exits_with_its_outcome(tmp_path):
+    """pythonw, a service, `>&- 2>&-`: Python's sys.stdout and sys.stderr are None; the exit status
+    still says valid or not (before, the first word ended every command in exit 1, said to nobody)."""
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(DEMO.read_text().replace("max_speed: 0.500", "max_speed: 9.500", 1))
+    codes = [subprocess.run(["sh", "-c", 'exec "$0" -m prc3cfg validate "$1" >&- 2>&-', sys.executable, str(path)]).returncode
+             for path in (DEMO, wrong)]  # fmt: skip
+    assert codes == [0, 1]
+
+
 # -- plan files and other JSON inputs ------------------------------------------------------------
 
 

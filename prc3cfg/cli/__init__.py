@@ -150,8 +150,18 @@ def _usage(error: click_errors.UsageError) -> str:
     return f"error: {command}: {message} — see {command} --help"
 
 
+def _streams_where_there_are_none() -> None:
+    """Started with no standard output or error — pythonw, a Windows service, a descriptor closed —
+    Python leaves them None and the first word said would end the command in an error nobody sees:
+    what the command says goes to the null device instead, and its exit status still tells."""
+    for name in ("stdout", "stderr"):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))  # noqa: SIM115 — open for the process's life
+
+
 def main(argv: list[str] | None = None) -> None:
     """The console script; `argv` (default: sys.argv) lets tests run a command in-process."""
+    _streams_where_there_are_none()
     _register_commands()
     from prc3cfg.cli.common import CANCEL, COMMAND_LINE
 
