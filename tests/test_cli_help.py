@@ -12,6 +12,7 @@ import subprocess
 import sys
 
 import pytest
+import typer
 from emulated import DEMO, emulated_plant
 
 from prc3cfg.cli.common import ADDRESSES, DATA_BITS, FRAMING_NAMES, PARITY_NAMES, STOP_BITS, VerifyChoice
@@ -41,6 +42,39 @@ def test_listing_the_commands_loads_nothing_heavy():
     done = subprocess.run([sys.executable, "-c", LISTING.format(args=["--help"], tops=LISTING_SPARES)], capture_output=True, text=True)
     assert "Commands" in done.stdout and "apply" in done.stdout
     assert done.stderr.strip() == "heavy: []"
+
+
+def test_the_table_of_command_modules_is_what_the_modules_register():
+    """`COMMAND_MODULES` names each command's and group's module, in the listing's order: a command
+    line loads only the module its table entry names, so an entry that is wrong runs no command."""
+    from prc3cfg.cli import COMMAND_MODULES, _register_commands, app
+
+    _register_commands()
+    registered = [(info.name or typer.main.get_command_name(info.callback.__name__), info.callback.__module__)
+                  for info in app.registered_commands]  # fmt: skip
+    registered += [(group.name, {c.callback.__module__ for c in group.typer_instance.registered_commands}.pop())
+                   for group in app.registered_groups]  # fmt: skip
+    assert sorted(registered) == sorted((name, f"prc3cfg.cli.{module}") for name, module in COMMAND_MODULES.items())
+    listed = typer.main.get_command(app).list_commands(None)
+    assert listed == list(COMMAND_MODULES)
+
+
+@pytest.mark.parametrize("command", ["validate", "records", "emulator"])
+def test_a_command_line_loads_only_its_command_s_module(command):
+    """typer builds every registered command before it runs one: a command line registers its own module's only."""
+    probe = f"""
+import sys
+from prc3cfg.cli import main
+try:
+    main([{command!r}, "--help"])
+except SystemExit:
+    pass
+print(sorted(m for m in sys.modules if m.endswith("_commands")), file=sys.stderr)
+"""
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    from prc3cfg.cli import COMMAND_MODULES
+
+    assert done.stderr.strip() == str([f"prc3cfg.cli.{COMMAND_MODULES[command]}"]), done.stderr
 
 
 def test_the_names_the_help_uses_are_the_real_ones():

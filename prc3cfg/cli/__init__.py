@@ -45,14 +45,28 @@ records_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="The
 app.add_typer(link_app, name="link")
 app.add_typer(records_app, name="records")
 
-COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands", "adopt_commands",
-                                    "records_commands")
+#: The module of each command and group, in the order `prc3cfg --help` lists them (groups last). typer builds every
+#: registered command from its signature before it runs one, so a command line registers only its own
+#: command's module (`_register_commands`); a test holds this table to what the modules register.
+COMMAND_MODULES: dict[str, str] = {
+    "validate": "plant_commands", "show": "plant_commands", "schema": "plant_commands",
+    "read": "plan_commands", "plan": "plan_commands", "apply": "plan_commands", "restore": "plan_commands",
+    "ports": "bus_commands", "setup-machine": "bus_commands", "scan": "bus_commands", "import": "bus_commands",
+    "doctor": "bus_commands",
+    "adopt": "adopt_commands",
+    "emulator": "emulator_commands", "link": "bus_commands", "records": "records_commands",
+}  # fmt: skip
 
 
-def _register_commands() -> None:
+def _register_commands(args: list[str] | None = None) -> None:
+    """Import the command modules, which register their commands on `app`: of a command line `args`
+    that names a command, only that command's; of any other (`--help`, a typo, shell completion), all."""
     import importlib
 
-    for name in COMMAND_MODULES:
+    named = next((arg for arg in args or [] if not arg.startswith("-")), None)
+    completing = any(key.endswith("_COMPLETE") for key in os.environ)  # click's completion: `_PRC3CFG_COMPLETE`
+    names = [COMMAND_MODULES[named]] if named in COMMAND_MODULES and not completing else COMMAND_MODULES.values()
+    for name in dict.fromkeys(names):
         importlib.import_module(f"prc3cfg.cli.{name}")
 
 
@@ -162,10 +176,10 @@ def _streams_where_there_are_none() -> None:
 def main(argv: list[str] | None = None) -> None:
     """The console script; `argv` (default: sys.argv) lets tests run a command in-process."""
     _streams_where_there_are_none()
-    _register_commands()
+    args = sys.argv[1:] if argv is None else list(argv)
+    _register_commands(args)
     from prc3cfg.cli.common import CANCEL, COMMAND_LINE
 
-    args = sys.argv[1:] if argv is None else list(argv)
     COMMAND_LINE[:] = ["prc3cfg", *args]
     try:
         if (habit := _single_dash_habit(args) or _completion_for(args)) is not None:
