@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import compileall
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -90,19 +89,14 @@ def plant(tmp_path):
         yield emulated
 
 
-#: What a build of the worktree leaves out (.gitignore's): caches, records, and other builds.
-NOT_SOURCES = shutil.ignore_patterns(".git", "__pycache__", "*.egg-info", "build", "dist", ".hypothesis", ".pytest_cache", ".prc3cfg", ".venv")
 
 
 @pytest.fixture(scope="session")
 def wheel(tmp_path_factory) -> Path:
-    """The worktree's wheel, built once a session from a copy of its sources: no build meets
-    another (or an old one's files) in the worktree's build/. Tests using it are in the xdist group
-    "wheel", so one worker builds it once."""
-    sources = tmp_path_factory.mktemp("sources") / "prc3cfg"
-    shutil.copytree(ROOT, sources, ignore=NOT_SOURCES)
+    """The worktree's wheel, as a release builds it (`.ci/release --wheel-only`: from a copy of the
+    sources), once a session. Tests using it are in the xdist group "wheel", so one worker builds it once."""
     wheels = tmp_path_factory.mktemp("wheels")
-    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-w", wheels, sources], capture_output=True, text=True)
+    built = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--wheel-only", "--out", wheels], capture_output=True, text=True)
     assert built.returncode == 0, built.stderr
     (path,) = wheels.glob("prc3cfg-*.whl")
     return path

@@ -36,6 +36,7 @@ import sys
 import threading
 import time
 import warnings
+import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,14 +95,17 @@ class Wine:
         env.update(WINEPREFIX=str(self.prefix), WINEDEBUG="-all", DISPLAY="", WINEDLLOVERRIDES="mscoree,mshtml=")
         return env
 
-    def command(self, *args: str, module: bool = False) -> list[str]:
+    def command(self, *args: str, module: bool = False, python: bool = False) -> list[str]:
+        """prc3cfg as pip's launcher starts it; as `python.exe -m prc3cfg` (`module`); or python.exe given `args` (`python`)."""
+        if python:
+            return [self.wine, self.python, *args]
         return [self.wine, self.python, "-m", "prc3cfg", *args] if module else [self.wine, self.launcher, *args]
 
-    def run(self, *args: str | Path, cwd: Path, timeout: float = 120, module: bool = False) -> Result:
+    def run(self, *args: str | Path, cwd: Path, timeout: float = 120, module: bool = False, python: bool = False) -> Result:
         """`prc3cfg ARGS` run to its end, its output through pipes; a traceback fails the test. Run
         once more, with a warning, where it failed without a word (the docstring's end: Wine's fault)."""
         for attempt in (1, 2):
-            done = subprocess.run(self.command(*(str(a) for a in args), module=module), cwd=cwd, env=self.env(),
+            done = subprocess.run(self.command(*(str(a) for a in args), module=module, python=python), cwd=cwd, env=self.env(),
                                   stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout)  # fmt: skip
             result = Result(done.returncode, text(done.stdout), text(done.stderr))
             if result.code == 0 or result.out or result.err or attempt == 2:
@@ -193,6 +197,35 @@ def test_validate_says_valid_and_points_at_a_mistake(wine, demo):
     invalid = wine.run("validate", "plants/wrong.yaml", cwd=demo)
     assert invalid.code == 1, invalid
     assert re.search(r"wrong\.yaml:\d+:\d+: .*max_speed", invalid.out + invalid.err), invalid
+
+
+# -- the release's bundle for a Windows laptop, installed offline by hash ---------------------------
+
+
+def test_the_release_bundle_installs_offline_by_hash_and_runs(wine, demo, tmp_path):
+    """`.ci/release`'s zip, as INSTALL.txt says: pip with --no-index --require-hashes, nothing fetched,
+    nothing built — into a folder of its own here (the embeddable CPython has no venv), then run."""
+    made = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--out", tmp_path / "dist", "--wheels", wine.wheels],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    wheel, bundle = (Path(line) for line in made.stdout.split())
+    with zipfile.ZipFile(bundle) as archive:
+        archive.extractall(tmp_path / "unpacked")
+    (folder,) = (tmp_path / "unpacked").iterdir()
+    install = (folder / "INSTALL.txt").read_text(encoding="utf-8")
+    assert "--no-index --find-links wheels --require-hashes -r requirements.txt" in install
+    (pip,) = sorted(wine.wheels.glob("pip-*.whl"))[-1:]
+    installed = wine.tool(wine.python, win(pip) + "\\pip", "--isolated", "install", "--no-index", "--find-links", win(folder / "wheels"),
+                          "--require-hashes", "-r", win(folder / "requirements.txt"), "--target", win(tmp_path / "site"),
+                          "--no-warn-script-location", "--disable-pip-version-check", timeout=300)  # fmt: skip
+    assert installed.returncode == 0, installed.stdout.decode() + installed.stderr.decode()
+    assert {path.name.split("-")[0] for path in (tmp_path / "site").glob("*.dist-info")} >= {"prc3cfg", "pydantic_core", "typer", "colorama"}
+    run = ("import runpy, sys; sys.path.insert(0, sys.argv.pop(1)); import prc3cfg; "
+           "assert prc3cfg.__file__.startswith(sys.path[0]), prc3cfg.__file__; runpy.run_module('prc3cfg', run_name='__main__')")  # fmt: skip
+    version = wine.run("-c", run, win(tmp_path / "site"), "--version", cwd=demo, python=True)
+    assert version.out.strip() == f"prc3cfg {wheel.name.split('-')[1]}", version
+    valid = wine.run("-c", run, win(tmp_path / "site"), "validate", "plants/demo-line.yaml", cwd=demo, python=True)
+    assert valid.code == 0 and "valid (2 buses, 6 modules)" in valid.out, valid
 
 
 # -- over TCP: an emulator on Linux, one served by the Windows Python ----------------------
