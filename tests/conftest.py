@@ -89,8 +89,6 @@ def plant(tmp_path):
         yield emulated
 
 
-
-
 @pytest.fixture(scope="session")
 def wheel(tmp_path_factory) -> Path:
     """The worktree's wheel, as a release builds it (`.ci/release --wheel-only`: from a copy of the

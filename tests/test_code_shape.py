@@ -175,3 +175,33 @@ def test_a_complex_function_says_why_in_its_docstring_or_top_comment() -> None:
         (_, function), *_ = functions(ast.parse(source))
         assert complexity(function) == COMPLEX + 1
         assert _says_why_complex(function, _comments(source)) is says, source
+
+
+def _imports(module: str, path: Path, modules: set[str]) -> set[str]:
+    """The modules of prc3cfg `path` (module `module`) imports anywhere in it — at its top, in a function,
+    under TYPE_CHECKING: `from prc3cfg.core import codec` names prc3cfg.core.codec, not the package."""
+    found: set[str] = set()
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names if alias.name in modules}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative: from the module's package up
+                base = ".".join([*package.split(".")[: len(package.split(".")) - node.level + 1], *([base] if base else [])])
+            for alias in node.names:
+                found |= {f"{base}.{alias.name}"} & modules or {base} & modules
+    return found - {module}
+
+
+def test_no_files_import_each_other_in_a_circle() -> None:
+    """Issue 43: layers point down, and within one no two files need each other — also not for types only
+    (a circle under TYPE_CHECKING is a circle a reader has to hold in mind all the same)."""
+    import graphlib
+
+    paths = {".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): path for path in PACKAGE.rglob("*.py")}
+    graph = {module: _imports(module, path, set(paths)) for module, path in paths.items()}
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as circle:
+        raise AssertionError(f"an import circle: {' -> '.join(circle.args[1])}") from None

@@ -11,10 +11,9 @@ from datetime import UTC, datetime, timedelta
 import pytest
 
 from prc3cfg.core import codec, what_to_read
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Wanted
 from prc3cfg.core.plan_file import PlannedModule
 from prc3cfg.core.planner import Step
-from prc3cfg.core.plant_planner import Wanted
 from prc3cfg.core.what_to_read import UNSET, Known, Target
 
 NOW = datetime(2026, 11, 26, 12, 0, tzinfo=UTC)

@@ -39,10 +39,10 @@ from prc3cfg.api._plan import (
 from prc3cfg.api._plant import reason_for
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
 from prc3cfg.core import plan_file, render, what_to_read
-from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
-from prc3cfg.core.plant_planner import Key, Prober
+from prc3cfg.core.plant_planner import Prober
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases

@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING, Any
 from prc3cfg.api._types import Pairs
 from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage, images_from_json
+from prc3cfg.core.image import MAX_MODULE_ADDRESS, Key, ModuleImage, Wanted, images_from_json
 from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
 from prc3cfg.core.plant_plan import Oldest, PlantPlan, Reading
-from prc3cfg.core.plant_planner import Key, Line, Planner, Prober, Wanted
+from prc3cfg.core.plant_planner import Line, Planner, Prober
 from prc3cfg.core.render import Drift, drift_changes
 from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known, Target

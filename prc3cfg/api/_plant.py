@@ -19,9 +19,8 @@ from typing import TYPE_CHECKING
 from prc3cfg.api._plan import load, plan, read, select
 from prc3cfg.core import gateway, plot
 from prc3cfg.core.error_codes import fault_said
-from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
-from prc3cfg.core.plant_planner import Key
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.adopt import Adopted

@@ -176,3 +176,20 @@ def images_from_json(data: Any, at: str = "") -> list[ModuleImage]:
         return _IMAGES.validate_python(data)
     except ValidationError as error:
         raise ValueError(said(error, lambda loc: json_path([at, *loc], "the list"), _Images)) from None
+
+
+Key = tuple[str, int]  # a module on the plant's buses: (bus name, module address)
+
+
+@dataclass(frozen=True, slots=True)
+class Wanted:
+    """One module to plan: where it is, its name, and the image it should hold."""
+
+    bus: str
+    address: int
+    name: str
+    desired: ModuleImage
+
+    @property
+    def key(self) -> Key:
+        return (self.bus, self.address)

@@ -27,12 +27,11 @@ from math import fsum
 
 from prc3cfg.core import codec, sharing, what_to_read
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import MAX_MODULE_ADDRESS, ModuleImage
+from prc3cfg.core.image import MAX_MODULE_ADDRESS, Key, ModuleImage, Wanted
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.errors import UserError
 
-Key = tuple[str, int]  # (bus name, module address)
 #: Which of the addresses given answer a 50h (`PROOF_PROBES` tries each): the line's, under its lock.
 Prober = Callable[[list[int]], list[int]]
 
@@ -62,20 +61,6 @@ class Line:
     def proof_time(self) -> float:
         """The line time of proving every unlisted address silent (`PROOF_PROBES` probes each)."""
         return len(self.unlisted()) * PROOF_PROBES * self.cost.silence_time(codec.ReadSystem(), self.probe_timeout)
-
-
-@dataclass(frozen=True, slots=True)
-class Wanted:
-    """One module to plan: where it is, its name, and the image it should hold."""
-
-    bus: str
-    address: int
-    name: str
-    desired: ModuleImage
-
-    @property
-    def key(self) -> Key:
-        return (self.bus, self.address)
 
 
 @dataclass(frozen=True, slots=True)

@@ -66,17 +66,13 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime, timedelta
 from math import fsum
-from typing import TYPE_CHECKING
+from typing import Protocol, TypeVar
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, SystemParameters, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, Key, ModuleImage, SystemParameters, Wanted, default_program
 from prc3cfg.core.planner import Step
-
-if TYPE_CHECKING:  # they import this module: what is read decides what they plan
-    from prc3cfg.core.plan_file import PlannedModule
-    from prc3cfg.core.plant_planner import Key, Wanted
 
 #: Why a module that reported E12 (system parameters not set) is read in full: its record says nothing.
 UNSET = "it reported E12 (system parameters not set)"
@@ -244,8 +240,25 @@ def _ranges(numbers: Sequence[int]) -> str:
     return ", ".join(f"{run[0]}–{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
 
 
-def for_plan_file(entries: Sequence[PlannedModule], desired: Mapping[Key, ModuleImage], known: Mapping[Key, Known],
-                  max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], PlannedModule | None]:  # fmt: skip
+class PlanEntry(Protocol):
+    """A module's entry of a plan file, as much of it as `for_plan_file` reads (`prc3cfg.core.plan_file.PlannedModule`,
+    which imports this module: what is read decides what a plan file is proved against)."""
+
+    @property
+    def bus(self) -> str: ...
+    @property
+    def address(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def programs_read(self) -> tuple[int, ...] | None: ...
+
+
+Entry = TypeVar("Entry", bound=PlanEntry)
+
+
+def for_plan_file(entries: Sequence[Entry], desired: Mapping[Key, ModuleImage], known: Mapping[Key, Known],
+                  max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], Entry | None]:  # fmt: skip
     """What `apply --plan` reads for the modules of a plan made from a targeted read-back: exactly the
     programs its plan read, with the record as evidence — and the first module the record no longer shows
     holding what the plan took as known without reading it (None: none): the plan is stale then."""

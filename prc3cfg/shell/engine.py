@@ -24,9 +24,9 @@ from typing import Any
 from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.apply_states import Event
 from prc3cfg.core.axes import to_travel
-from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.image import Key, ModuleImage, Wanted
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
-from prc3cfg.core.plant_planner import Key, Planner, Prober, Wanted
+from prc3cfg.core.plant_planner import Planner, Prober
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant

@@ -28,8 +28,8 @@ from typing import TYPE_CHECKING, Protocol, TextIO, TypeAlias
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.exchange import answered_as_write
 from prc3cfg.core.framing import get_framing
+from prc3cfg.core.image import Key
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
-from prc3cfg.core.plant_planner import Key
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
