@@ -20,9 +20,11 @@ from lossy import Loss
 
 from prc3cfg.core import codec, device, sharing
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters, Wanted, default_program
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import plan_module
+from prc3cfg.core.plant_plan import LineProof, PlantPlan
+from prc3cfg.core.plant_planner import Line, Planner
 from prc3cfg.core.sharing import SharingMemo, SharingModule, share
 
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
@@ -265,6 +267,29 @@ buses:
     port: socket://127.0.0.1:1
     modules:
 """
+
+
+def test_a_line_s_broadcasts_wait_for_the_proof_the_caller_gets():
+    """The core never probes (issue 43): `draft_line` names the unlisted addresses its broadcasts need
+    silent, and `settle_line` takes what answered there — none: broadcasts; one: none, and the module
+    named; no proof at all (planning from saved images): none."""
+    listed = range(1, 29)  # 28 modules, every one wanting the same speed; 29 and 30 not listed
+    wanted = [Wanted("a", address, f"m{address}", ModuleImage.factory(address).with_programs({5: Program(P=150, V=300)})) for address in listed]
+    actual = {w.key: ModuleImage.factory(w.address) for w in wanted}
+    lines = {"a": Line("a", COST, frozenset(listed), complete=True, probe_timeout=0.01)}  # a quick proof: the broadcast saves more
+
+    def settled(answered: list[int] | None) -> PlantPlan:
+        planner = Planner("p", "p.yaml", "0" * 64, lines)
+        draft = planner.draft_line("a", wanted, actual)
+        assert draft.to_prove == (29, 30)
+        planner.settle_line(draft, answered)
+        return planner.plan(wanted, actual)
+
+    proved, answered, unproved = settled([]), settled([30]), settled(None)
+    assert proved.broadcast_time > 0 and proved.proofs == (LineProof("a", silent=(29, 30)),)
+    assert answered.broadcast_time == 0 and answered.proofs == (LineProof("a", answered=(30,)),)
+    assert unproved.broadcast_time == 0 and unproved.proofs == ()
+    assert Planner("p", "p.yaml", "0" * 64, lines).draft_line("a", wanted, actual, probing=False).shared is None
 
 
 def full_line(tmp_path: Path, speed: str = "0.300", modules: int = 30) -> Path:

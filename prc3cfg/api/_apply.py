@@ -42,7 +42,6 @@ from prc3cfg.core import plan_file, render, what_to_read
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
-from prc3cfg.core.plant_planner import Prober
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, bases, releases
@@ -50,7 +49,6 @@ from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.probe import prober
 from prc3cfg.shell.readback import read_all
 from prc3cfg.shell.records import Journal, Snapshot, applied_copy, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
@@ -93,14 +91,14 @@ def plan_file_plant(path: Path) -> Path:
 
 
 def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dict[Key, ModuleImage], held: OnRecord,
-          probers: dict[str, Prober] | None = None) -> PlantPlan:  # fmt: skip
+          links: Mapping[str, Link] | None = None) -> PlantPlan:  # fmt: skip
     """The plan file's plan, proved before anything is written (`prc3cfg.core.plan_file`): what is
     applied is then the plan prc3cfg makes from this read-back."""
     modules = {(bus.name, m.address): (bus, m) for bus, m in pairs}
     plan_file.check_modules(path, planned, {key: m.name for key, (_, m) in modules.items()}, images)
     chosen = [modules[(entry.bus, entry.address)] for entry in planned.modules]
     buses = {bus.name: bus for bus, _ in chosen}.values()
-    ours = make_plan(plant, chosen, images, probers=probers, unset=unset_systems(buses, held), only_read=planned.targeted)
+    ours = make_plan(plant, chosen, images, links=links, unset=unset_systems(buses, held), only_read=planned.targeted)
     if planned.targeted:  # what this apply read, and whose verification what it did not read rests on: its line's record now
         ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(held)).reading(pairs, images))
     plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
@@ -247,8 +245,8 @@ def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Modu
     unset = unset_systems(writing.buses.values(), writing.held.on_record)
     planner = planner_for(plant, wanted.pairs, unset, only_read=wanted.base is not None, from_factory=wanted.from_factory)
     want = to_plan(wanted.pairs, desired)
-    by_line = ByLine(writing, planner, want, wanted.targets, probers={name: prober(link) for name, link in writing.links.items()},
-                     reading=lambda read: wanted.reading(chosen, read), show=gates.show, show_line=gates.show_line)  # fmt: skip
+    by_line = ByLine(writing, planner, want, wanted.targets, reading=lambda read: wanted.reading(chosen, read), show=gates.show,
+                     show_line=gates.show_line)  # fmt: skip
     return by_line.run(lambda line: read_all(wanted.targets, writing.links, progress=writing.phases.read, each=planning_each(planner, want),
                                              then=seen(plant, writing.command, writing.held.on_record, line)))  # fmt: skip
 
@@ -265,7 +263,7 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
         images = read_targets(to_read, links, options, then=seen(plant, writing.command, writing.held.on_record))
-        the_plan = prove(*plan_file, plant, chosen, images, writing.held.on_record, {name: prober(link) for name, link in links.items()})
+        the_plan = prove(*plan_file, plant, chosen, images, writing.held.on_record, links)
     reading = time.monotonic() - started
     if gates.show is not None:
         gates.show(the_plan)

@@ -23,7 +23,7 @@ from prc3cfg.core.device import can_clamp
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, Key, ModuleImage, Wanted, images_from_json
 from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
 from prc3cfg.core.plant_plan import Oldest, PlantPlan, Reading
-from prc3cfg.core.plant_planner import Line, Planner, Prober
+from prc3cfg.core.plant_planner import Line, Planner
 from prc3cfg.core.render import Drift, drift_changes
 from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known, Target
@@ -33,7 +33,7 @@ from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.platform import resolved
-from prc3cfg.shell.probe import probe_timeout, prober
+from prc3cfg.shell.probe import probe_timeout, proved_line
 from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
 from prc3cfg.shell.sessions import LineOptions, Lines, OnRecord, bus_line_keys, line_cost, lines, on_record
@@ -188,7 +188,7 @@ def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines
     links = held.links
 
     def plan_line(bus: str, read: dict[Key, ModuleImage]) -> None:
-        planner.plan_line(bus, wanted, read, prober(links[bus]))
+        proved_line(planner, bus, wanted, read, links[bus])
 
     images = read_targets(to_read, links, options, each=planning_each(planner, wanted), then=seen(plant, command, held.on_record, plan_line))
     return images, planner.plan(wanted, images)
@@ -270,11 +270,15 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
 
 
 def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,
-              probers: dict[str, Prober] | None = None, unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> PlantPlan:  # fmt: skip
+              links: Mapping[str, Link] | None = None, unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> PlantPlan:  # fmt: skip
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
-    line's `probers` (`Planner.plan_line`). `only_read`: see `Planner`."""
-    return planner_for(plant, pairs, unset, only_read=only_read).plan(to_plan(pairs, desired), actual, probers)
+    line's probes on its link in `links` (`proved_line`). `only_read`: see `Planner`."""
+    planner, wanted = planner_for(plant, pairs, unset, only_read=only_read), to_plan(pairs, desired)
+    for bus in dict.fromkeys(w.bus for w in wanted):
+        if links is not None and bus in links:
+            proved_line(planner, bus, wanted, actual, links[bus])
+    return planner.plan(wanted, actual)
 
 
 def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False, from_factory: bool = False) -> Planner:

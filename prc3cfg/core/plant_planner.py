@@ -11,17 +11,21 @@
   read: `plan_module`), then its broadcasts where every receiver is known — and the plant's plan
   from them (`PlantPlan`).
 
-A broadcast reaches every module on the line, so it needs proof that nobody else is there:
-the caller hands `Planner.plan_line` a `Prober` (the line's, under its lock, in this run) that
-says which of the addresses the plant does not list answer. Reading the modules, locking and
-probing the lines is the caller's (`prc3cfg.api`); what a plant file says, the plant's
-(`prc3cfg.plant`). Pure: the lock is a thread lock, nothing here reads or writes outside.
+A broadcast reaches every module on the line, so it needs proof that nobody else is there. A
+line is planned in two steps, and the proof is got between them by the caller: `draft_line`
+plans it and names, in `LineDraft.to_prove`, the addresses the plant does not list that must be
+found silent for the broadcasts that save line time; the caller probes them on the line, under
+its lock, in this run (`prc3cfg.shell.probe`), and `settle_line` takes what answered — or None,
+where it could not probe (planning from saved images): no broadcast then. Reading the modules,
+locking and probing the lines is the caller's (`prc3cfg.api`); what a plant file says, the
+plant's (`prc3cfg.plant`). Pure: the lock is a thread lock, nothing here reads or writes outside,
+and nothing here calls out.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from math import fsum
 
@@ -33,7 +37,6 @@ from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.errors import UserError
 
 #: Which of the addresses given answer a 50h (`PROOF_PROBES` tries each): the line's, under its lock.
-Prober = Callable[[list[int]], list[int]]
 
 #: The longest a probe waits at an address (or the line's time-out, if shorter) — a scan's, a
 #: broadcast's proof: a module answers a 50h within tens of milliseconds even at 9600 baud.
@@ -96,6 +99,17 @@ class PlanCache:
 
 
 @dataclass(frozen=True, slots=True)
+class LineDraft:
+    """A line planned but for the proof its broadcasts need (`Planner.draft_line`): its modules' changes,
+    the broadcasts that would save line time (None: none), and the addresses `to_prove` silent first."""
+
+    bus: str
+    changes: list[ModuleChange]
+    shared: sharing.Shared | None = None
+    to_prove: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
 class _Planned:
     """One line's part of the plan: its modules' changes, its broadcasts' line time, its proof."""
 
@@ -123,42 +137,48 @@ class Planner:
 
     def plan_module(self, wanted: Wanted, actual: ModuleImage) -> None:
         """Plan one module as soon as it is read, while the rest of its line is read: its own plan is
-        kept (`PlanCache`) for `plan_line`, which then only decides the line's broadcasts."""
+        kept (`PlanCache`) for `draft_line`, which then only decides the line's broadcasts."""
         with self._cache.lock:
             self._change(self.lines[wanted.bus], wanted, actual)
 
     def line_changes(self, bus: str) -> list[ModuleChange]:
-        """The changes of a line `plan_line` planned, in the order of its modules."""
+        """The changes of a line `settle_line` settled, in the order of its modules."""
         with self._cache.lock:
             return list(self._planned[bus].changes)
 
-    def plan_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], probe: Prober | None = None) -> None:
-        """Plan the modules of one line among `modules`, and its broadcasts — where the plant lists
-        every module of the line and the plan covers them all, and then only once `probe` (the line's,
-        in this run, under its lock) has found every other address silent: a declaration in a file is
-        no proof. The probes cost line time, which the broadcasts must save; without `probe` (planning
-        from saved images) a line whose every address the plant does not list gets no broadcast."""
+    def draft_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], *, probing: bool = True) -> LineDraft:
+        """Plan the modules of one line among `modules`, and the broadcasts that save line time — where
+        the plant lists every module of the line and the plan covers them all. They need every other
+        address found silent first (`to_prove`: a declaration in a file is no proof), whose probes cost
+        line time the broadcasts must save too; `settle_line` takes what the probes found. Without
+        `probing` (nothing can probe the line) no broadcast is searched for where one needs a proof."""
         line = self.lines[bus]
         with self._cache.lock:
             changes = [self._change(line, wanted, actual[wanted.key]) for wanted in modules if wanted.bus == bus]
-        others = line.unlisted()
         covered = line.complete and {c.address for c in changes} == line.listed
-        if not changes or not covered or (others and probe is None):
-            self._keep(bus, _Planned(changes))
-            return
-        proof_time = line.proof_time()
+        if not changes or not covered or (line.unlisted() and not probing):
+            return LineDraft(bus, changes)
         with self._cache.lock:
-            shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing, proof_time)
-        if not shared.broadcasts:
+            shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing,
+                                   line.proof_time())  # fmt: skip
+        return LineDraft(bus, changes, shared, tuple(line.unlisted())) if shared.broadcasts else LineDraft(bus, changes)
+
+    def settle_line(self, draft: LineDraft, answered: Sequence[int] | None) -> None:
+        """The line's plan, of its `draft` and what answered at the addresses it had to prove silent —
+        None where they could not be probed (planning from saved images): a broadcast that needs a proof
+        is then left out, as where a module answered (and the plan names it: the plant file is wrong
+        about its line)."""
+        bus, changes, shared = draft.bus, draft.changes, draft.shared
+        if shared is None or (draft.to_prove and answered is None):
             self._keep(bus, _Planned(changes))
-            return
-        answered = probe(others) if probe is not None and others else ()
-        if answered:  # the plant file is wrong about its line: no broadcast, and the modules named
+        elif answered:
             self._keep(bus, _Planned(changes, proof=LineProof(bus, answered=tuple(answered))))
-            return
-        changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
-        seconds = fsum(line.cost.broadcast_time(step.message) for step in shared.broadcasts) + (proof_time if others else 0.0)
-        self._keep(bus, _Planned(changes, seconds, LineProof(bus, silent=tuple(others)) if others else None))
+        else:
+            line = self.lines[bus]
+            changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
+            seconds = fsum(line.cost.broadcast_time(step.message) for step in shared.broadcasts)
+            proof = LineProof(bus, silent=draft.to_prove) if draft.to_prove else None
+            self._keep(bus, _Planned(changes, seconds + (line.proof_time() if proof else 0.0), proof))
 
     def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
         unset = wanted.key in self.unset
@@ -176,12 +196,13 @@ class Planner:
         with self._cache.lock:
             self._planned[bus] = planned
 
-    def plan(self, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], probers: Mapping[str, Prober] | None = None) -> PlantPlan:
-        """The plant's plan, in the order of `modules`: lines not planned yet are planned now."""
+    def plan(self, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage]) -> PlantPlan:
+        """The plant's plan, in the order of `modules`: lines not settled yet are planned now, without
+        the broadcasts that need a proof (none could be got)."""
         buses = list(dict.fromkeys(wanted.bus for wanted in modules))
         for bus in buses:
             if bus not in self._planned:
-                self.plan_line(bus, modules, actual, (probers or {}).get(bus))
+                self.settle_line(self.draft_line(bus, modules, actual, probing=False), None)
         changes = {(c.bus, c.address): c for planned in self._planned.values() for c in planned.changes}
         ordered = tuple(changes[wanted.key] for wanted in modules)
         broadcast_time = fsum(planned.broadcast_time for planned in self._planned.values())

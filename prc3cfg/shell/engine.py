@@ -26,7 +26,7 @@ from prc3cfg.core.apply_states import Event
 from prc3cfg.core.axes import to_travel
 from prc3cfg.core.image import Key, ModuleImage, Wanted
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
-from prc3cfg.core.plant_planner import Planner, Prober
+from prc3cfg.core.plant_planner import Planner
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant
@@ -36,6 +36,7 @@ from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Exchange
 from prc3cfg.shell.phases import Phases
 from prc3cfg.shell.platform import result_of
+from prc3cfg.shell.probe import proved_line
 from prc3cfg.shell.readback import LineRead, LinesFailed
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot
 from prc3cfg.shell.sessions import LineOptions, Lines, line_cost
@@ -344,9 +345,9 @@ class ByLine:
     planned so far is shared under one lock."""
 
     def __init__(self, writing: Writing, planner: Planner, want: list[Wanted], targets: Sequence[Target], *,
-                 probers: Mapping[str, Prober], reading: Callable[[dict[Key, ModuleImage]], Reading | None],
+                 reading: Callable[[dict[Key, ModuleImage]], Reading | None],
                  show: Callable[[PlantPlan], None] | None = None, show_line: Callable[[PlantPlan], None] | None = None) -> None:  # fmt: skip
-        self.writing, self.planner, self.want, self._probers, self._reading = writing, planner, want, probers, reading
+        self.writing, self.planner, self.want, self._reading = writing, planner, want, reading
         self._show, self._show_line = show, show_line
         self._modules = len(targets)
         self._lines = {target.bus for target in targets}  # the lines to read
@@ -365,7 +366,7 @@ class ByLine:
 
     def line(self, bus: str, read: dict[Key, ModuleImage]) -> None:
         """A line's read-back is in: plan it, then write it."""
-        self.planner.plan_line(bus, self.want, read, self._probers[bus])
+        proved_line(self.planner, bus, self.want, read, self.writing.links[bus])
         with self._lock:
             self._images.update(read)
             self._planned.append(bus)
