@@ -67,6 +67,20 @@ def test_each_layer_imports_only_the_layers_below_it(layer):
     assert not wrong, sorted(wrong)
 
 
+#: What the core never imports (issue 43): it takes no lock and starts no thread — the lines' threads
+#: take turns with it in the shell (`prc3cfg.shell.planning`) — and it never waits on anything.
+CORE_NEVER = ("threading", "_thread", "concurrent", "multiprocessing", "asyncio", "queue", "time")
+
+
+def test_the_core_never_locks_nor_waits():
+    found = {f"{path.relative_to(ROOT)} imports {alias.name if isinstance(node, ast.Import) else node.module}"
+             for path in (PACKAGE / "core").rglob("*.py") for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+             if isinstance(node, ast.Import | ast.ImportFrom)
+             for alias in node.names
+             if ((alias.name if isinstance(node, ast.Import) else node.module or "").split(".")[0] in CORE_NEVER)}  # fmt: skip
+    assert not found, sorted(found)
+
+
 #: What the command line may import: the API, and what it needs to parse arguments, ask and render
 #: (style.md §1: "The CLI parses arguments, asks, and renders: nothing else"). The workflow's
 #: parts — planner, device model, read-back, apply, locks, records, adopt, importer — only through

@@ -48,6 +48,7 @@ from prc3cfg.shell import audit, bases, releases
 from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
+from prc3cfg.shell.planning import SharedPlanner
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.readback import read_all
 from prc3cfg.shell.records import Journal, Snapshot, applied_copy, check_writable, save_applied
@@ -243,7 +244,7 @@ def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, Modu
     """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
     as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
     unset = unset_systems(writing.buses.values(), writing.held.on_record)
-    planner = planner_for(plant, wanted.pairs, unset, only_read=wanted.base is not None, from_factory=wanted.from_factory)
+    planner = SharedPlanner(planner_for(plant, wanted.pairs, unset, only_read=wanted.base is not None, from_factory=wanted.from_factory))
     want = to_plan(wanted.pairs, desired)
     by_line = ByLine(writing, planner, want, wanted.targets, reading=lambda read: wanted.reading(chosen, read), show=gates.show,
                      show_line=gates.show_line)  # fmt: skip

@@ -31,9 +31,10 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
 from prc3cfg.shell import bases, releases
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
+from prc3cfg.shell.planning import SharedPlanner
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.platform import resolved
-from prc3cfg.shell.probe import probe_timeout, proved_line
+from prc3cfg.shell.probe import probe_timeout
 from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
 from prc3cfg.shell.sessions import LineOptions, Lines, OnRecord, bus_line_keys, line_cost, lines, on_record
@@ -183,18 +184,19 @@ def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines
     last module is — while the other lines are still being read: the lines never wait for all of
     the planning. `only_read`, `from_factory`: see `Planner`."""
     buses = {bus.name: bus for bus, _ in pairs}
-    planner = planner_for(plant, pairs, unset_systems(buses.values(), held.on_record), only_read=only_read, from_factory=from_factory)
+    planner = SharedPlanner(planner_for(plant, pairs, unset_systems(buses.values(), held.on_record), only_read=only_read,
+                                        from_factory=from_factory))  # fmt: skip
     wanted = to_plan(pairs, desired)
     links = held.links
 
     def plan_line(bus: str, read: dict[Key, ModuleImage]) -> None:
-        proved_line(planner, bus, wanted, read, links[bus])
+        planner.plan_line(bus, wanted, read, links[bus])
 
     images = read_targets(to_read, links, options, each=planning_each(planner, wanted), then=seen(plant, command, held.on_record, plan_line))
     return images, planner.plan(wanted, images)
 
 
-def planning_each(planner: Planner, wanted: list[Wanted]) -> Callable[[Target, ModuleImage], None]:
+def planning_each(planner: SharedPlanner, wanted: list[Wanted]) -> Callable[[Target, ModuleImage], None]:
     """Each module planned as soon as it is read (`Planner.plan_module`)."""
     by_key = {w.key: w for w in wanted}
     return lambda target, image: planner.plan_module(by_key[(target.bus, target.address)], image)
@@ -273,11 +275,11 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
               links: Mapping[str, Link] | None = None, unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> PlantPlan:  # fmt: skip
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
-    line's probes on its link in `links` (`proved_line`). `only_read`: see `Planner`."""
-    planner, wanted = planner_for(plant, pairs, unset, only_read=only_read), to_plan(pairs, desired)
+    line's probes on its link in `links` (`SharedPlanner.plan_line`). `only_read`: see `Planner`."""
+    planner, wanted = SharedPlanner(planner_for(plant, pairs, unset, only_read=only_read)), to_plan(pairs, desired)
     for bus in dict.fromkeys(w.bus for w in wanted):
         if links is not None and bus in links:
-            proved_line(planner, bus, wanted, actual, links[bus])
+            planner.plan_line(bus, wanted, actual, links[bus])
     return planner.plan(wanted, actual)
 
 

@@ -5,8 +5,7 @@
 - `Wanted`: one module to plan, with the image it should hold.
 - `PlanCache`: the module plans of a plant by what they depend on (`sharing.alike`), so that
   modules alike on any line are planned once (a plant commissioned from factory defaults is one
-  plan per line profile), and the broadcast search's memo; with the lock the lines' threads
-  take in turn to use them.
+  plan per line profile), and the broadcast search's memo.
 - `Planner`: the plan of each line — its modules' own plans (each as soon as its module is
   read: `plan_module`), then its broadcasts where every receiver is known — and the plant's plan
   from them (`PlantPlan`).
@@ -15,16 +14,15 @@ A broadcast reaches every module on the line, so it needs proof that nobody else
 line is planned in two steps, and the proof is got between them by the caller: `draft_line`
 plans it and names, in `LineDraft.to_prove`, the addresses the plant does not list that must be
 found silent for the broadcasts that save line time; the caller probes them on the line, under
-its lock, in this run (`prc3cfg.shell.probe`), and `settle_line` takes what answered — or None,
+its lock, in this run (`prc3cfg.shell.planning`), and `settle_line` takes what answered — or None,
 where it could not probe (planning from saved images): no broadcast then. Reading the modules,
-locking and probing the lines is the caller's (`prc3cfg.api`); what a plant file says, the
-plant's (`prc3cfg.plant`). Pure: the lock is a thread lock, nothing here reads or writes outside,
-and nothing here calls out.
+locking and probing the lines is the caller's, and so is taking turns with one planner among
+the lines' threads (`prc3cfg.shell.planning.SharedPlanner`); what a plant file says, the
+plant's (`prc3cfg.plant`). Pure: nothing here reads or writes outside, calls out or locks.
 """
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from math import fsum
@@ -75,12 +73,10 @@ class _PlanKey:
 
 
 class PlanCache:
-    """The plans of modules alike but for their address, made once; the broadcast search's memo
-    (`sharing.share`); and `lock`, which whoever uses them holds — the lines are planned in their
-    own threads."""
+    """The plans of modules alike but for their address, made once; and the broadcast search's memo
+    (`sharing.share`)."""
 
     def __init__(self) -> None:
-        self.lock = threading.Lock()
         self._plans: dict[_PlanKey, ModulePlan] = {}
         self.sharing = sharing.SharingMemo()
 
@@ -119,9 +115,9 @@ class _Planned:
 
 
 class Planner:
-    """The plan of a plant, made line by line — each line as soon as its modules are read, in the
-    line's own thread (one at a time: the `PlanCache` is shared, so modules alike on any line are
-    planned once).
+    """The plan of a plant, made line by line — each line as soon as its modules are read (the lines'
+    threads take turns with one planner, `prc3cfg.shell.planning`: its `PlanCache` is shared, so
+    modules alike on any line are planned once).
 
     `only_read`: a targeted read-back — each module's desired image is cut to the programs read
     (`what_to_read.within_read`): what was not read is not written. `from_factory`: an apply's — the managed
@@ -138,13 +134,11 @@ class Planner:
     def plan_module(self, wanted: Wanted, actual: ModuleImage) -> None:
         """Plan one module as soon as it is read, while the rest of its line is read: its own plan is
         kept (`PlanCache`) for `draft_line`, which then only decides the line's broadcasts."""
-        with self._cache.lock:
-            self._change(self.lines[wanted.bus], wanted, actual)
+        self._change(self.lines[wanted.bus], wanted, actual)
 
     def line_changes(self, bus: str) -> list[ModuleChange]:
         """The changes of a line `settle_line` settled, in the order of its modules."""
-        with self._cache.lock:
-            return list(self._planned[bus].changes)
+        return list(self._planned[bus].changes)
 
     def draft_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], *, probing: bool = True) -> LineDraft:
         """Plan the modules of one line among `modules`, and the broadcasts that save line time — where
@@ -153,14 +147,12 @@ class Planner:
         line time the broadcasts must save too; `settle_line` takes what the probes found. Without
         `probing` (nothing can probe the line) no broadcast is searched for where one needs a proof."""
         line = self.lines[bus]
-        with self._cache.lock:
-            changes = [self._change(line, wanted, actual[wanted.key]) for wanted in modules if wanted.bus == bus]
+        changes = [self._change(line, wanted, actual[wanted.key]) for wanted in modules if wanted.bus == bus]
         covered = line.complete and {c.address for c in changes} == line.listed
         if not changes or not covered or (line.unlisted() and not probing):
             return LineDraft(bus, changes)
-        with self._cache.lock:
-            shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing,
-                                   line.proof_time())  # fmt: skip
+        shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing,
+                               line.proof_time())  # fmt: skip
         return LineDraft(bus, changes, shared, tuple(line.unlisted())) if shared.broadcasts else LineDraft(bus, changes)
 
     def settle_line(self, draft: LineDraft, answered: Sequence[int] | None) -> None:
@@ -170,15 +162,15 @@ class Planner:
         about its line)."""
         bus, changes, shared = draft.bus, draft.changes, draft.shared
         if shared is None or (draft.to_prove and answered is None):
-            self._keep(bus, _Planned(changes))
+            self._planned[bus] = _Planned(changes)
         elif answered:
-            self._keep(bus, _Planned(changes, proof=LineProof(bus, answered=tuple(answered))))
+            self._planned[bus] = _Planned(changes, proof=LineProof(bus, answered=tuple(answered)))
         else:
             line = self.lines[bus]
             changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
             seconds = fsum(line.cost.broadcast_time(step.message) for step in shared.broadcasts)
             proof = LineProof(bus, silent=draft.to_prove) if draft.to_prove else None
-            self._keep(bus, _Planned(changes, seconds + (line.proof_time() if proof else 0.0), proof))
+            self._planned[bus] = _Planned(changes, seconds + (line.proof_time() if proof else 0.0), proof)
 
     def _change(self, line: Line, wanted: Wanted, actual: ModuleImage) -> ModuleChange:
         unset = wanted.key in self.unset
@@ -191,10 +183,6 @@ class Planner:
             raise UserError(f"bus {wanted.bus}, module {wanted.address} ({wanted.name}): {error}") from None
         return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset, cost=line.cost,
                             wanted=wanted.desired if self.only_read else None, assumed=assumed)  # fmt: skip
-
-    def _keep(self, bus: str, planned: _Planned) -> None:
-        with self._cache.lock:
-            self._planned[bus] = planned
 
     def plan(self, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage]) -> PlantPlan:
         """The plant's plan, in the order of `modules`: lines not settled yet are planned now, without

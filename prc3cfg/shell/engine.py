@@ -26,7 +26,6 @@ from prc3cfg.core.apply_states import Event
 from prc3cfg.core.axes import to_travel
 from prc3cfg.core.image import Key, ModuleImage, Wanted
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
-from prc3cfg.core.plant_planner import Planner
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant
@@ -35,8 +34,8 @@ from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Exchange
 from prc3cfg.shell.phases import Phases
+from prc3cfg.shell.planning import SharedPlanner
 from prc3cfg.shell.platform import result_of
-from prc3cfg.shell.probe import proved_line
 from prc3cfg.shell.readback import LineRead, LinesFailed
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot
 from prc3cfg.shell.sessions import LineOptions, Lines, line_cost
@@ -344,7 +343,7 @@ class ByLine:
     `line` is called from each line's thread with its read-back; what the lines have read and
     planned so far is shared under one lock."""
 
-    def __init__(self, writing: Writing, planner: Planner, want: list[Wanted], targets: Sequence[Target], *,
+    def __init__(self, writing: Writing, planner: SharedPlanner, want: list[Wanted], targets: Sequence[Target], *,
                  reading: Callable[[dict[Key, ModuleImage]], Reading | None],
                  show: Callable[[PlantPlan], None] | None = None, show_line: Callable[[PlantPlan], None] | None = None) -> None:  # fmt: skip
         self.writing, self.planner, self.want, self._reading = writing, planner, want, reading
@@ -366,7 +365,7 @@ class ByLine:
 
     def line(self, bus: str, read: dict[Key, ModuleImage]) -> None:
         """A line's read-back is in: plan it, then write it."""
-        proved_line(self.planner, bus, self.want, read, self.writing.links[bus])
+        self.planner.plan_line(bus, self.want, read, self.writing.links[bus])
         with self._lock:
             self._images.update(read)
             self._planned.append(bus)

@@ -1,6 +1,6 @@
 """A probe: whether anything answers a 50h at an address, and what — the one reading of a probe's
 outcome that a scan, the proof that a line's unlisted addresses are silent (`answering`, for
-`proved_line`) and the doctor's search all share.
+`prc3cfg.shell.planning`) and the doctor's search all share.
 
 Silence is an empty address (None); something heard that never became a usable reply — garbled,
 damaged on every retry — is not (`Heard` with no reply). A failing port, a read a module took for
@@ -18,10 +18,8 @@ from prc3cfg.core import codec
 from prc3cfg.core.plant_planner import PROBE_TIMEOUT, PROOF_PROBES
 
 if TYPE_CHECKING:
-    from collections.abc import Mapping, Sequence
+    from collections.abc import Sequence
 
-    from prc3cfg.core.image import Key, ModuleImage, Wanted
-    from prc3cfg.core.plant_planner import Planner
     from prc3cfg.shell.link.client import Link
 
 
@@ -58,10 +56,3 @@ def answering(link: Link, addresses: Sequence[int]) -> list[int]:
     """The addresses among those given where something answers a 50h (`PROOF_PROBES` tries each)."""
     return [address for address in addresses if probe(link, address, probe_timeout(link.timeout), PROOF_PROBES) is not None]
 
-
-def proved_line(planner: Planner, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], link: Link | None) -> None:
-    """One line planned (`Planner.draft_line`), the addresses its broadcasts need silent probed on `link`
-    — the line's, under its lock, in this run — and settled with what answered (`Planner.settle_line`).
-    Without a link (planning from saved images) no broadcast that needs a proof is planned."""
-    draft = planner.draft_line(bus, modules, actual, probing=link is not None)
-    planner.settle_line(draft, None if link is None else answering(link, draft.to_prove))
