@@ -74,7 +74,6 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._plan import select as select
     from prc3cfg.api._plant import Adoption as Adoption
     from prc3cfg.api._plant import adopt as adopt
-    from prc3cfg.api._plant import faults as faults
     from prc3cfg.api._plant import init_data_block as init_data_block
     from prc3cfg.api._plant import list_records as list_records
     from prc3cfg.api._plant import picture as picture
@@ -114,7 +113,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._emulator": ("emulator", "listen", "open_pty", "served_pty"),
     "prc3cfg.api._machine": ("SerialPort", "device_number", "serial_ports", "setup_machine", "terminal_path", "unshared_records", "wait_for"),
     "prc3cfg.api._plan": ("drift", "left_alone", "load", "load_images", "plan", "read", "select"),
-    "prc3cfg.api._plant": ("Adoption", "adopt", "faults", "init_data_block", "list_records", "picture", "plot_format", "prune_records",
+    "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records",
                            "verify_records", "write_adoption"),
     "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
     "prc3cfg.core.plan_file": ("StalePlan",),

@@ -183,7 +183,7 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[On
     keeping = Keeping(plant, buses, keys, journal, records, options.cancel.event)
     try:
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
-                   given=links) as held:  # fmt: skip
+                   given=links, identities=keys) as held:  # fmt: skip
             earlier = tuple(r for r in held.on_record.pending if r.kind == releases.RELEASE)
             wanted = wanted_of(held.on_record)
             writing = Writing(plant, keys, buses, held, keeping, verify, options, records.command)

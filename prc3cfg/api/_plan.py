@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from prc3cfg.api._types import Pairs
 from prc3cfg.core import what_to_read
 from prc3cfg.core.device import can_clamp
+from prc3cfg.core.error_codes import fault_said
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, Key, ModuleImage, Wanted, images_from_json
 from prc3cfg.core.plan_file import RECORD, PlanFile, StalePlan
 from prc3cfg.core.plant_plan import Oldest, PlantPlan, Reading
@@ -268,7 +269,22 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
         wanted = reads(plant, pairs, full_read, held.on_record)
         read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, held, options, command="plan",
                                         only_read=wanted.base is not None)  # fmt: skip
-    return replace(planned, reading=wanted.reading(pairs, read_))
+        return replace(planned, reading=wanted.reading(pairs, read_), faults=in_fault(pairs, held.on_record))
+
+
+def in_fault(pairs: Pairs, held: OnRecord) -> tuple[str, ...]:
+    """The chosen modules a write found in a fault state (E09, E21, …) that no write since was acknowledged
+    by, as the plan's headline names them: "booth-a/booth-a-right is in E21 (positioning error)" — another
+    user's record told as their claim (`releases.Pending.owner`). From the lines' records as read under
+    their locks (`OnRecord`)."""
+    chosen = {(bus.name, module.address): f"{bus.name}/{module.name}" for bus, module in pairs}
+    said = []
+    for bus in dict.fromkeys(bus.name for bus, _ in pairs):
+        for record in held.of(releases.FAULT, bus):
+            if (bus, record.address) in chosen and record.code is not None:
+                claim = f" ({record.owner}'s record says so)" if record.owner is not None else ""
+                said.append(f"{chosen[bus, record.address]} is in {fault_said(record.code)}{claim}")
+    return tuple(dict.fromkeys(said))
 
 
 def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,

@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING
 
 from prc3cfg.api._plan import load, plan, read, select
 from prc3cfg.core import gateway, plot
-from prc3cfg.core.error_codes import fault_said
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
@@ -197,17 +196,3 @@ def plot_format(path: Path) -> str:
     """"svg" or "png", the format of a picture to write to `path` (by its suffix) — a PlotError for any
     other, and when matplotlib is missing, naming the command that installs it into this Python."""
     return plot.plot_format(path, python=python_command())
-
-
-def faults(plant: Plant, names: Iterable[str] | None = None) -> list[str]:
-    """The chosen modules a write found in a fault state (E09, E21, …) that no write since was acknowledged
-    by, as the plan's headline names them: "booth-a/booth-a-right is in E21 (positioning error)" — another
-    user's record told as their claim (`releases.Pending.owner`)."""
-    chosen = {(bus.name, module.address): f"{bus.name}/{module.name}" for bus, module in select(plant, names)}
-    said = []
-    for bus in plant.buses:
-        for record in releases.pending(bus_line_keys(plant, bus), releases.FAULT):
-            if (bus.name, record.address) in chosen and record.code is not None:
-                claim = f" ({record.owner}'s record says so)" if record.owner is not None else ""
-                said.append(f"{chosen[bus.name, record.address]} is in {fault_said(record.code)}{claim}")
-    return list(dict.fromkeys(said))

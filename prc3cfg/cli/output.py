@@ -11,7 +11,7 @@ import contextlib
 import itertools
 import json
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator
 from pathlib import Path
 
 from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
@@ -24,7 +24,8 @@ from prc3cfg.shell.platform import command_line
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str],
-              faults: Sequence[str] = (), frames: bool = False) -> None:  # fmt: skip
+              frames: bool = False) -> None:  # fmt: skip
+    faults = plan.faults  # a fault a write revealed, on the lines read (a plan of a file's images names none)
     document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")

@@ -106,8 +106,7 @@ def plan(
     notes = [] if module else api.left_alone(loaded, previous)  # a bad --previous is said before the line is used
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options, previous=previous, full_read=full_read)
-    faults = api.faults(loaded, module) if images is None else []  # a fault a write revealed, on the lines read (not a file's images)
-    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes, faults=faults, frames=frames)
+    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes, frames=frames)
     if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
     if detailed_exitcode and result.changes:

@@ -126,6 +126,9 @@ class PlantPlan:
     unshared_bus_time: float | None = None  # the same changes without broadcasts, where some were shared
     proofs: tuple[LineProof, ...] = ()  # per line probed: what answered at the addresses the plant does not list
     reading: Reading | None = None  # a targeted read-back: what was read, what was taken as last verified
+    #: the chosen modules a write found in a fault state (E09, E21, …) no write since was acknowledged by, as the
+    #: records read with the lines said — the plan's headline words ("booth-a/booth-a-right is in E21 (…)")
+    faults: tuple[str, ...] = ()
 
     def proof(self, bus: str) -> LineProof | None:
         return next((p for p in self.proofs if p.bus == bus), None)

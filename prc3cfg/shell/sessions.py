@@ -179,8 +179,8 @@ class Lines:
 
 @contextlib.contextmanager
 def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: str = "read", observer: Observer | None = None,
-          announce: Observer | None = None, records: Records | None = None,
-          given: Mapping[str, Link] | None = None) -> Iterator[Lines]:  # fmt: skip
+          announce: Observer | None = None, records: Records | None = None, given: Mapping[str, Link] | None = None,
+          identities: Mapping[str, tuple[str, ...]] | None = None) -> Iterator[Lines]:  # fmt: skip
     """A `Link` per named bus, each line locked first: only one prc3cfg talks on a line at a time —
     opened from the plant file's ports, or those `given`, already open (`lent`) — and each line's
     record, read once under its lock and written at the end with what the command saw. Every axis release
@@ -188,9 +188,10 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
     answers as a write is recorded as one in `records` (`PossibleWrite`).
 
     Two buses that are one line (two spellings of one address) are refused: they would wait
-    for each other's lock."""
+    for each other's lock. Each line's identities (`bus_line_keys`) are resolved here, unless the
+    caller resolved them already (`identities`: once a command, a name resolved twice may differ)."""
     names = set(buses)
-    keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
+    keys = {bus.name: identities[bus.name] if identities is not None else bus_line_keys(plant, bus) for bus in plant.buses if bus.name in names}
     if given is None:
         refuse_other_lines(plant, keys)
     _one_bus_a_line(plant, keys)
