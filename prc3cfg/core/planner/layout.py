@@ -11,7 +11,7 @@ it, where that saves: `init_runs`), the system step, inits after it, link/unlink
 21h, 33h/32h, 40h..45h, 46h; within a kind by program number. Each later kind may overwrite
 what an earlier one left (a 21h after a link range, a 46h after it), never the other way round.
 
-Owns turning decisions into messages. Does not own choosing them (`prc3cfg.core.planner.optimise`).
+Owns turning decisions into messages. Does not own choosing them (`prc3cfg.core.planner.init_search`).
 """
 
 from __future__ import annotations
