@@ -16,9 +16,8 @@ from collections.abc import Sequence
 from enum import Enum, IntEnum
 from typing import NamedTuple
 
-from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
-from prc3cfg.core.planner.pricing import Prices
+from prc3cfg.core.planner.pricing import ADDRESSES, Prices
 from prc3cfg.core.planner.terms import INF, Range
 
 #: Jump addresses above what fewer 46h messages hold that `AddressDP._fewer_messages` leaves for
@@ -118,7 +117,7 @@ class AddressDP:
             return (Addresses((), 0, 0),)
         steps = self._address_steps(whole)
         cheapest = self._ranges_and_misses(whole, open46, self._cheapest_moves(steps, open46))
-        messages = -(-cheapest.items.bit_count() // codec.MAX_ADDRESS_ITEMS)
+        messages = ADDRESSES.messages(cheapest.items.bit_count())
         if not messages:  # one 46h saved may pay for ranges: its header too, where ranges take every item
             return (cheapest,)
         return (cheapest, *(self._ranges_and_misses(whole, True, moves) for moves in self._fewer_messages(steps, messages)))
@@ -181,7 +180,7 @@ class AddressDP:
         draw) — and with up to ADDRESS_SLACK more, which 21h may take out (`PartsDP` counts them).
         Each state keeps the counts that cost less than every smaller count (a Pareto front), and
         none above what fewer messages hold with that slack."""
-        most = codec.MAX_ADDRESS_ITEMS * (messages - 1) + ADDRESS_SLACK
+        most = ADDRESSES.capacity * (messages - 1) + ADDRESS_SLACK
         fronts: list[dict[int, float]] = [{0: 0.0}, {}, {}, {}, {}]
         back: list[list[dict[int, tuple[int, RangeMove, int]]]] = []
         for step in steps:
@@ -258,7 +257,7 @@ def _fewer_counts(last: dict[int, float], messages: int) -> list[int]:
     chosen: list[int] = []
     for fewer in range(messages - 1, -1, -1):
         for slack in range(ADDRESS_SLACK + 1):
-            fit = [n for n in last if n <= codec.MAX_ADDRESS_ITEMS * fewer + slack]
+            fit = [n for n in last if n <= ADDRESSES.capacity * fewer + slack]
             if fit and (n := min(fit, key=last.__getitem__)) not in chosen:
                 chosen.append(n)
     return chosen

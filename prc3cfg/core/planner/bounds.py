@@ -13,17 +13,11 @@ import functools
 from collections.abc import Sequence
 from math import fsum
 
-from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
 from prc3cfg.core.planner.layout import members
-from prc3cfg.core.planner.pricing import Prices
+from prc3cfg.core.planner.pricing import ADDRESSES, FIELDS, PARTS, Prices
 from prc3cfg.core.planner.problem import A_BIT, FIELD_BIT, P_BIT, PV_BITS, V_BIT, PlanningProblem
-from prc3cfg.core.planner.terms import INF, PLAIN_BITS, Residual, Table
-
-
-def messages(n: int, capacity: int) -> int:
-    """How many messages n items need (none for none or fewer)."""
-    return -(-n // capacity) if n > 0 else 0
+from prc3cfg.core.planner.terms import INF, KIND_OF_BIT, PLAIN_BITS, Residual, Table
 
 
 def floor_of(prices: Prices, target_a: Sequence[int], changed: dict[int, int]) -> Residual:
@@ -37,9 +31,9 @@ def floor_of(prices: Prices, target_a: Sequence[int], changed: dict[int, int]) -
     def share(bit: int, header: float, capacity: int) -> float:
         return header / max(min(changed[bit].bit_count(), capacity), 1)
 
-    field = {bit: prices.field_item + share(bit, prices.field_header, codec.MAX_FIELD_ITEMS) for bit in (P_BIT, V_BIT, *PLAIN_BITS)}
-    address = prices.address_item + share(A_BIT, prices.address_header, codec.MAX_ADDRESS_ITEMS)
-    needers = max(min((changed[P_BIT] | changed[V_BIT]).bit_count(), codec.MAX_FIELD_ITEMS), 1)
+    field = {bit: prices.item(kind) + share(bit, prices.header(kind), kind.capacity) for bit, kind in KIND_OF_BIT.items()}
+    address = field[A_BIT]
+    needers = max(min((changed[P_BIT] | changed[V_BIT]).bit_count(), PARTS.capacity), 1)
     pair, single = prices.parts_item + prices.parts_header / needers, prices.parts(1)  # a 33h's share, a 32h
 
     def cost(i: int, mask: int) -> float:
@@ -133,7 +127,7 @@ class HeadersBound:
         rest = self.relevant_programs & ~whole
         spent = [items[i] for i in members(rest)]
         extra = sorted(prices.program - c for c in spent)
-        plain = [(self.changed[bit] & ~whole).bit_count() for bit in PLAIN_BITS]
+        plain = [(prices.header(KIND_OF_BIT[bit]), KIND_OF_BIT[bit], (self.changed[bit] & ~whole).bit_count()) for bit in PLAIN_BITS]
         addresses = (itemised & ~whole).bit_count()
         ranged = (self.changed[A_BIT] & ~itemised & ~whole).bit_count()
         p, v = (self.changed[P_BIT] & ~whole).bit_count(), (self.changed[V_BIT] & ~whole).bit_count()
@@ -145,8 +139,8 @@ class HeadersBound:
             if paid >= least and (w == len(extra) or extra[w] >= 0):
                 break  # more 21h, each costing more than its items: no fewer headers pay for them
             headers = fsum((
-                *(prices.field_header * messages(n - w, codec.MAX_FIELD_ITEMS) for n in plain),
-                prices.address_header * messages(addresses - w, codec.MAX_ADDRESS_ITEMS),
+                *(header * kind.messages(n - w) for header, kind, n in plain),
+                prices.address_header * ADDRESSES.messages(addresses - w),
                 self._pv_headers(p - w, v - w, both - w),
                 max(ranges * prices.link, min(prices.link, (ranged - w) * prices.address_item) if ranged > w else 0.0),
             ))  # fmt: skip
@@ -157,12 +151,11 @@ class HeadersBound:
     def _pv_headers(self, p: int, v: int, both: int) -> float:
         """The headers of P and V at least, for `p` programs that differ in P, `v` in V, `both` in either:
         with R 33h (or 32h), each over at most 15 of them, the rest need 40h for P and 41h for V."""
-        prices, capacity = self.prices, codec.MAX_FIELD_ITEMS
+        prices, capacity = self.prices, PARTS.capacity
         run, header, least = min(prices.parts_header, prices.parts(1) - prices.parts_item), prices.field_header, INF
-        for r in range(messages(both, capacity) + 1):
+        for r in range(PARTS.messages(both) + 1):
             covered = capacity * r  # a sum of two floats is rounded once, as fsum's is
-            value = r * run + header * max(messages(p - covered, capacity) + messages(v - covered, capacity),
-                                           messages(both - covered, capacity))  # fmt: skip
+            value = r * run + header * max(FIELDS.messages(p - covered) + FIELDS.messages(v - covered), FIELDS.messages(both - covered))
             if value < least:
                 least = value
         return least

@@ -11,10 +11,10 @@ import operator
 from collections.abc import Callable
 from math import fsum
 
-from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
 from prc3cfg.core.planner.init_dp import TIE
 from prc3cfg.core.planner.layout import Writes
+from prc3cfg.core.planner.pricing import PARTS
 from prc3cfg.core.planner.problem import A_BIT, P_BIT, PV_BITS, V_BIT, PlanningProblem
 from prc3cfg.core.planner.terms import INF, ITEM_BITS, PLAIN_BITS, Residual, Run, Table
 from prc3cfg.core.planner.write_phase import WritePhase
@@ -116,7 +116,7 @@ def _joining(phase: WritePhase, i: int, run: Run, need: int) -> float:
         return INF
     low, high = (others & -others).bit_length() - 1, others.bit_length() - 1
     span = max(high, i) - min(low, i) + 1
-    if span > codec.MAX_FIELD_ITEMS:
+    if span > PARTS.capacity:
         return INF
     return phase.parts_price[span] - phase.parts_price[high - low + 1]
 

@@ -61,8 +61,9 @@ from prc3cfg.core.planner.bounds import floor_of, inits_floor, over_every_kind
 from prc3cfg.core.planner.charges import Charges, linear, marginal, shared
 from prc3cfg.core.planner.init_dp import choose_inits, init_cost
 from prc3cfg.core.planner.layout import Layout, Writes, members, runs_of
+from prc3cfg.core.planner.pricing import FIELDS
 from prc3cfg.core.planner.problem import A_BIT, INIT_AFTER, INIT_BEFORE, KEEP, PV_BITS, PlanningProblem
-from prc3cfg.core.planner.terms import ESTIMATE, INF, ITEM_BITS, Kinds, Run, Table, all_of, all_runs
+from prc3cfg.core.planner.terms import ESTIMATE, INF, ITEM_BITS, KIND_OF_BIT, Kinds, Run, Table, all_of, all_runs
 from prc3cfg.core.planner.write_phase import WritePhase
 
 #: Items per message assumed by one of the init choices (few items: headers matter).
@@ -86,7 +87,7 @@ class ItemChannel(NamedTuple):
 
     bit: int  # FIELD_BIT
     mask: int  # the programs with an item
-    capacity: int  # items per message
+    kind: codec.ItemsKind  # its message
 
 
 class Overflow(NamedTuple):
@@ -203,8 +204,7 @@ class InitSearch:
 
 def _item_channels(writes: Writes) -> list[ItemChannel]:
     """Every 40h..46h field of `writes`."""
-    channels = [ItemChannel(bit, mask, codec.MAX_FIELD_ITEMS) for bit, mask in zip(ITEM_BITS, writes.items)]
-    return [*channels, ItemChannel(A_BIT, writes.addresses, codec.MAX_ADDRESS_ITEMS)]
+    return [ItemChannel(bit, mask, KIND_OF_BIT[bit]) for bit, mask in zip((*ITEM_BITS, A_BIT), (*writes.items, writes.addresses))]
 
 
 def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
@@ -213,9 +213,9 @@ def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
     33h runs."""
     outside = ~all_runs(layout.writes.part_runs)
     goals = []
-    for bit, mask, capacity in _item_channels(layout.writes):
+    for bit, mask, kind in _item_channels(layout.writes):
         n = mask.bit_count()
-        goal = capacity * ((n - 1) // capacity)
+        goal = n - kind.in_last(n)
         reducible = sum(1 for i in members(mask) if any(not problem.masks[k][i] & bit for k in problem.kinds))
         if goal and n - reducible <= goal:
             goals.append(Overflow(bit, goal, n - goal, outside if bit & PV_BITS else ~0))
@@ -233,8 +233,7 @@ def _header_targets(problem: PlanningProblem, phase: WritePhase, charges: Charge
     found: dict[Kinds, None] = {}  # a set in the order found
     for chosen in dict.fromkeys([tuple(goals), *((goal,) for goal in goals if alone)]) if goals else ():
         # removing the overflow saves a header: start from that header spread over the overflow
-        shares = {bit: (problem.prices.address_header if bit == A_BIT else problem.prices.field_header) / over
-                  for bit, _, over, _ in chosen}  # fmt: skip
+        shares = {bit: problem.prices.header(KIND_OF_BIT[bit]) / over for bit, _, over, _ in chosen}
         low, high = dict.fromkeys(shares, 0.0), dict.fromkeys(shares, INF)
         for _ in range(TARGET_PROBES):
             kinds = choose_inits(problem, charges.alike(shared(phase, shares)))
@@ -310,7 +309,7 @@ def _short_runs_out(problem: PlanningProblem, kinds: Kinds, runs: list[Run]) -> 
     pays them)."""
     adds = [all_of(tuple(problem.masks[KEEP][i] for i in range(first, last + 1))) for first, last in runs]
     for fields in set(adds):
-        changed, room = list(kinds), codec.MAX_FIELD_ITEMS
+        changed, room = list(kinds), FIELDS.capacity
         for first, last in sorted((run for run, added in zip(runs, adds) if not added & ~fields),
                                   key=lambda run: run[1] - run[0]):  # fmt: skip
             room -= last - first + 1
@@ -324,7 +323,7 @@ def _message_initialised(problem: PlanningProblem, layout: Layout) -> Iterator[K
     """Per 40h..46h message of `layout` (a field that fits one) and per 33h run, its programs
     initialised where that takes their item out (together they save the message)."""
     kinds = layout.kinds
-    one_message = [(bit, mask) for bit, mask, capacity in _item_channels(layout.writes) if mask.bit_count() <= capacity]
+    one_message = [(bit, mask) for bit, mask, kind in _item_channels(layout.writes) if kind.messages(mask.bit_count()) <= 1]
     runs33 = [(PV_BITS, (1 << (last + 1)) - (1 << first)) for first, last in layout.writes.part_runs]
     for bits, mask in one_message + runs33:
         changed = list(kinds)

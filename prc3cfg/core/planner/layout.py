@@ -114,9 +114,9 @@ class Layout:
                 out.append(codec.WritePartPrograms(first + 1, pairs))
         for name, mask in zip(ITEM_FIELDS, w.items):
             items = [(i + 1, getattr(desired(i + 1), name)) for i in members(mask)]
-            out += _chunked(codec.FIELD_MESSAGES[name], items, codec.MAX_FIELD_ITEMS)
+            out += _chunked(codec.FIELD_MESSAGES[name], items, codec.FIELD_KINDS[name].capacity)
         items = [(i + 1, desired(i + 1).A) for i in members(w.addresses)]
-        out += _chunked(codec.WriteAddresses, items, codec.MAX_ADDRESS_ITEMS)
+        out += _chunked(codec.WriteAddresses, items, codec.FIELD_KINDS["A"].capacity)
         return out
 
 

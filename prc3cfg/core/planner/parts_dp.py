@@ -26,9 +26,9 @@ from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
 from prc3cfg.core.planner.layout import members
 from prc3cfg.core.planner.parts_states import BEAM, FIELD, NOT_ROOMS, STATE_BITS, States, Window, merged, with_rooms
-from prc3cfg.core.planner.pricing import Prices
+from prc3cfg.core.planner.pricing import ADDRESSES, FIELDS, PARTS, Prices
 from prc3cfg.core.planner.problem import P_BIT, V_BIT
-from prc3cfg.core.planner.terms import INF, PLAIN_BITS, Channels, Run, all_of
+from prc3cfg.core.planner.terms import INF, KIND_OF_BIT, PLAIN_BITS, Channels, Run, all_of
 
 #: The most 42h..46h fields (alike ones as one) `PartsDP` counts removals of:
 #: those that need fewest.
@@ -68,7 +68,7 @@ class LiveChannel(NamedTuple):
     mask: int  # the programs with an item
     n: int  # how many
     rho: int  # removals that save a message
-    capacity: int  # items per message
+    kind: codec.ItemsKind  # the message of one of them (alike in capacity)
     header: float  # the headers of those fields, together
 
 
@@ -113,18 +113,18 @@ def live_channels(phase: PartsPhase, whole: int, addresses: int, need: int) -> l
     field where they do not is left out: its items are priced one by one (its header count
     is that of the programs left to it). Of the rest, the LIVE that need fewest removals."""
     prices = phase.prices
-    fields = [(phase.changed[bit] & ~whole, codec.MAX_FIELD_ITEMS, prices.field_header) for bit in PLAIN_BITS]
-    fields.append((addresses & ~whole, codec.MAX_ADDRESS_ITEMS, prices.address_header))
-    grouped: dict[tuple[int, int], list[float]] = {}
-    for mask, capacity, header in fields:
+    fields = [(phase.changed[bit] & ~whole, KIND_OF_BIT[bit]) for bit in PLAIN_BITS]
+    fields.append((addresses & ~whole, ADDRESSES))
+    grouped: dict[tuple[int, int], tuple[codec.ItemsKind, list[float]]] = {}
+    for mask, kind in fields:
         if mask:
-            grouped.setdefault((mask, capacity), []).append(header)
+            grouped.setdefault((mask, kind.capacity), (kind, []))[1].append(prices.header(kind))
     channels = []
-    for (mask, capacity), headers in grouped.items():
+    for (mask, _), (kind, headers) in grouped.items():
         n = mask.bit_count()
-        channels.append(LiveChannel(mask, n, n - capacity * ((n - 1) // capacity), capacity, fsum(headers)))
+        channels.append(LiveChannel(mask, n, kind.in_last(n), kind, fsum(headers)))
     n = need.bit_count()  # a 33h saved too where the removals take the P and V left down a run
-    runs_out = n - codec.MAX_FIELD_ITEMS * ((n - 1) // codec.MAX_FIELD_ITEMS) if n else PROGRAM_COUNT + 1
+    runs_out = PARTS.in_last(n) if n else PROGRAM_COUNT + 1
     live = []
     extra = {i: _extra_cost(phase, i, need, addresses) for i in members(all_of(tuple(c.mask for c in channels)))}
     for c in channels:
@@ -201,7 +201,7 @@ class PartsDP:
         self.phase, self.need, self.movable, self.addresses, self.live = phase, need, movable, addresses, live
         self.positions, self.speeds, self.runs_allowed = channels.positions, channels.speeds, channels.parts
         self.states = States((prices.field_header, prices.field_header, *(c.header for c in live)),
-                             (codec.MAX_FIELD_ITEMS, codec.MAX_FIELD_ITEMS, *(c.rho for c in live)))  # fmt: skip
+                             (FIELDS.capacity, FIELDS.capacity, *(c.rho for c in live)))  # fmt: skip
         self.more_p = suffix_counts(need & phase.changed[P_BIT])
         self.more_v = suffix_counts(need & phase.changed[V_BIT])
         self.windows: dict[int, Window] = {}  # per state a run may end in: its starts
@@ -269,7 +269,7 @@ class PartsDP:
         cost a call per state."""
         phase, windows = self.phase, self.windows
         prices, m, needs = phase.prices, phase.masks[j], self.need >> j & 1
-        item, capacity = prices.field_item, codec.MAX_FIELD_ITEMS
+        item, capacity = prices.field_item, FIELDS.capacity
         opened = item + prices.field_header  # an item that opens a 40h/41h
         p, v = m & P_BIT, m & V_BIT
         as_items = needs and (self.positions or not p) and (self.speeds or not v)
@@ -318,9 +318,9 @@ class PartsDP:
         """The 33h runs that end at program j, the cheapest start in each state's window."""
         prices, windows = self.phase.prices, self.windows
         head, run, to_j = prices.parts_header, PartsMove.RUN, prices.parts_item * (j + 1)
-        gone = j - codec.MAX_FIELD_ITEMS  # a run is at most 15 programs long: starts up to here are out
+        gone = j - PARTS.capacity  # a run is at most 15 programs long: starts up to here are out
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
-        capped = left_p < codec.MAX_FIELD_ITEMS or left_v < codec.MAX_FIELD_ITEMS  # as in `moves`
+        capped = left_p < FIELDS.capacity or left_v < FIELDS.capacity  # as in `moves`
         for state, window in list(windows.items()):
             after = state
             if capped:
@@ -345,7 +345,7 @@ class PartsDP:
         """The cheapest state after the last program, the live fields' headers counted."""
         final, total = 0, INF
         for state, b in best.items():
-            value = b + fsum(c.header * -((States.field(state, k + 2) - c.n) // c.capacity) for k, c in enumerate(self.live))
+            value = b + fsum(c.header * c.kind.messages(c.n - States.field(state, k + 2)) for k, c in enumerate(self.live))
             if value < total:
                 final, total = state, value
         return final

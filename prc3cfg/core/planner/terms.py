@@ -14,6 +14,7 @@ import operator
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from prc3cfg.core import codec
 from prc3cfg.core.planner.problem import FIELD_BIT, P_BIT, PLAIN_FIELDS, V_BIT
 
 INF = float("inf")
@@ -35,6 +36,8 @@ FIELDS_OF = [tuple(bit for bit in FIELD_BIT.values() if mask & bit) for mask in 
 #: The fields of 40h..45h, in `Writes.items` order.
 ITEM_BITS = (P_BIT, V_BIT, *PLAIN_BITS)
 ESTIMATE = operator.attrgetter("estimate")
+#: The message of one field of arbitrary programs (40h..46h, `codec.FIELD_KINDS`), by FIELD_BIT.
+KIND_OF_BIT = {FIELD_BIT[name]: kind for name, kind in codec.FIELD_KINDS.items()}
 #: Costs closer than this (seconds) are the same cost, the difference rounding's (the DP's sums of the
 #: same prices in another order): a state the same cost as one ahead of it is beaten (`States`).
 #: `States.windows_kept` rounds its starts' costs to NEAR_DIGITS to sort them.

@@ -16,12 +16,12 @@ from __future__ import annotations
 import functools
 from math import fsum
 
-from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
 from prc3cfg.core.planner.address_dp import AddressDP, Addresses
 from prc3cfg.core.planner.bounds import HeadersBound, floor_of
 from prc3cfg.core.planner.layout import Layout, Writes
 from prc3cfg.core.planner.parts_dp import Parts, solve_parts
+from prc3cfg.core.planner.pricing import PARTS
 from prc3cfg.core.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, V_BIT, PlanningProblem
 from prc3cfg.core.planner.terms import ESTIMATE, FIELDS_OF, INF, NEAR, PLAIN_BITS, PLAIN_MASK, Channels, Kinds, Range, Run
 
@@ -60,7 +60,7 @@ class WritePhase:
     @functools.cached_property
     def parts_price(self) -> list[float]:
         """P and V of n programs (a 32h, a 33h) by n; INF for none."""
-        return [INF, *(self.prices.parts(n) for n in range(1, codec.MAX_FIELD_ITEMS + 1))]
+        return [INF, *(self.prices.parts(n) for n in range(1, PARTS.capacity + 1))]
 
     @functools.cached_property
     def plain_items(self) -> list[float]:
