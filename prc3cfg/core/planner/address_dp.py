@@ -219,19 +219,18 @@ class AddressDP:
         outer: list[Range] = []
         inner: list[Range] = []
         items = extra = 0
-        keep = RangeMove.KEEP  # locals: fast
         for i, move in enumerate(moves):
             if not self.managed[i]:
                 continue
             if move in OUTER_STARTS:
                 outer.append((move is RangeMove.LINK, i, i))
-            elif move is not keep:  # the outer range goes on or ends here
+            elif move is not RangeMove.KEEP:  # the outer range goes on or ends here
                 outer[-1] = (*outer[-1][:2], i)
                 if move in INNER_STARTS:
                     inner.append((move is RangeMove.INNER_LINK, i, i))
                 elif move in INNER_GOING or move in (RangeMove.INNER_END, RangeMove.INNER_UNLINK_END):
                     inner[-1] = (*inner[-1][:2], i)
-            value = self.base_a[i] if move is keep else i + 2 if move in NEXT_MOVES else 0
+            value = self.base_a[i] if move is RangeMove.KEEP else i + 2 if move in NEXT_MOVES else 0
             if not whole >> i & 1 and value != self.target_a[i]:
                 if open46:
                     items |= 1 << i

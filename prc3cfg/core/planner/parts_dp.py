@@ -15,6 +15,7 @@ channels are open (`write_phase`).
 
 from __future__ import annotations
 
+import functools
 import operator
 from collections import deque
 from collections.abc import Sequence
@@ -40,11 +41,7 @@ _rho = operator.attrgetter("rho")
 
 
 class PartsMove(Enum):
-    """How the P and V DP (`PartsDP`) covers a program: its backtracking's actions.
-
-    The DPs bind the members they use to locals: looking a member up on its class costs more
-    than the rest of a DP step (the class's metaclass has a `__getattr__`).
-    """
+    """How the P and V DP (`PartsDP`) covers a program: its backtracking's actions."""
 
     NOTHING = "no P or V to write"
     ITEMS = "40h/41h items"
@@ -264,60 +261,53 @@ class PartsDP:
 
     def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float], dict[int, Back]]:
         """The states after program j by its own moves (items, a 32h, a 21h, nothing), and the
-        runs that may start at it. Complex because it is the DP's inner loop, one pass over the
-        states with every move in it, run for each state of each program: split, each move would
-        cost a call per state."""
-        phase, windows = self.phase, self.windows
+        runs that may start at it: one pass over the states, each state's moves in that order (a tie
+        goes to the first)."""
+        phase = self.phase
         prices, m, needs = phase.prices, phase.masks[j], self.need >> j & 1
-        item, capacity = prices.field_item, FIELDS.capacity
-        opened = item + prices.field_header  # an item that opens a 40h/41h
-        p, v = m & P_BIT, m & V_BIT
-        as_items = needs and (self.positions or not p) and (self.speeds or not v)
-        runs = needs and self.runs_allowed
+        as_items = needs and (self.positions or not m & P_BIT) and (self.speeds or not m & V_BIT)
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
-        capped = left_p < capacity or left_v < capacity  # else no room is beyond what the programs left could use
-        single, per = phase.parts_price[1], prices.parts_item
-        nothing, items, whole, run = PartsMove.NOTHING, PartsMove.ITEMS, PartsMove.WHOLE, PartsMove.RUN  # locals: fast
+        opened = prices.field_item + prices.field_header  # an item that opens a 40h/41h
+        add_p, rooms_p = _items_field(prices.field_item, opened, bool(m & P_BIT), left_p)
+        add_v, rooms_v = _items_field(prices.field_item, opened, bool(m & V_BIT), left_v)
+        runs = needs and self.runs_allowed
+        capped = left_p < FIELDS.capacity or left_v < FIELDS.capacity  # else no room is beyond what the programs left could use
+        single = phase.parts_price[1]
         new: dict[int, float] = {}
         step: dict[int, Back] = {}
         for state, b in best.items():
             was_p, was_v = state & FIELD, state >> STATE_BITS & FIELD
             if as_items:
-                c, room_p, room_v = b, was_p, was_v
-                if p:
-                    c += item if room_p else opened
-                    room_p = (room_p or capacity) - 1
-                if v:
-                    c += item if room_v else opened
-                    room_v = (room_v or capacity) - 1
-                # `with_rooms`, written out: the DP's inner loop
-                after = (state & NOT_ROOMS | (room_p if room_p < left_p else left_p)
-                         | (room_v if room_v < left_v else left_v) << STATE_BITS)  # fmt: skip
+                c = b + add_p[was_p] + add_v[was_v]
+                after = state & NOT_ROOMS | rooms_p[was_p] | rooms_v[was_v] << STATE_BITS
                 if c < new.get(after, INF):
-                    new[after], step[after] = c, (state, items, j, 0)
+                    new[after], step[after] = c, (state, PartsMove.ITEMS, j, 0)
             # the other moves leave the state as it was, but for room no item left could use
             kept = with_rooms(state, was_p, was_v, left_p, left_v) if capped else state
-            if runs:  # a run may start here: pushed onto its state's window (`Window`)
-                if (starts := windows.get(kept)) is None:
-                    starts = windows[kept] = deque()
-                key = b - per * j
-                while starts and starts[-1][0] >= key:
-                    starts.pop()
-                starts.append((key, j, state, 0))
+            if runs:
+                self._run_starts(kept, j, b - prices.parts_item * j, state)
                 if b + single < new.get(kept, INF):
-                    new[kept], step[kept] = b + single, (state, run, j, 0)
+                    new[kept], step[kept] = b + single, (state, PartsMove.RUN, j, 0)
             elif not needs and b < new.get(kept, INF):
-                new[kept], step[kept] = b, (state, nothing, j, 0)
+                new[kept], step[kept] = b, (state, PartsMove.NOTHING, j, 0)
             if alone < INF:
                 after = self._after(kept, out) if out else kept
                 if b + alone < new.get(after, INF):
-                    new[after], step[after] = b + alone, (state, whole, j, 0)
+                    new[after], step[after] = b + alone, (state, PartsMove.WHOLE, j, 0)
         return new, step
+
+    def _run_starts(self, kept: int, j: int, key: float, state: int) -> None:
+        """A 33h run may start at program j from `state`: pushed onto the window of `kept` (`Window`)."""
+        if (starts := self.windows.get(kept)) is None:
+            starts = self.windows[kept] = deque()
+        while starts and starts[-1][0] >= key:
+            starts.pop()
+        starts.append((key, j, state, 0))
 
     def ends(self, j: int, new: dict[int, float], step: dict[int, Back]) -> None:
         """The 33h runs that end at program j, the cheapest start in each state's window."""
         prices, windows = self.phase.prices, self.windows
-        head, run, to_j = prices.parts_header, PartsMove.RUN, prices.parts_item * (j + 1)
+        head, to_j = prices.parts_header, prices.parts_item * (j + 1)
         gone = j - PARTS.capacity  # a run is at most 15 programs long: starts up to here are out
         left_p, left_v = self.more_p[j + 1], self.more_v[j + 1]
         capped = left_p < FIELDS.capacity or left_v < FIELDS.capacity  # as in `moves`
@@ -339,7 +329,7 @@ class PartsDP:
                 continue
             key, i, began, inside = window[0]
             if (through := key + head + to_j) < new.get(after, INF):
-                new[after], step[after] = through, (began, run, i, inside)
+                new[after], step[after] = through, (began, PartsMove.RUN, i, inside)
 
     def final(self, best: dict[int, float]) -> int:
         """The cheapest state after the last program, the live fields' headers counted."""
@@ -349,6 +339,17 @@ class PartsDP:
             if value < total:
                 final, total = state, value
         return final
+
+
+@functools.lru_cache(maxsize=1024)  # per line's prices and items left: a few hundred in a plant
+def _items_field(item: float, opened: float, takes: bool, left: int) -> tuple[tuple[float, ...], tuple[int, ...]]:
+    """P (or V) of a program as a 40h (41h) item where it `takes` one, by the room left in the last such
+    message (0: none open): what it adds — the item that opens a message pays its header — and the room
+    after, no more than the `left` items from the next program on could use."""
+    rooms = range(FIELDS.capacity + 1)
+    if not takes:
+        return (0.0,) * len(rooms), tuple(min(room, left) for room in rooms)
+    return tuple(item if room else opened for room in rooms), tuple(min((room or FIELDS.capacity) - 1, left) for room in rooms)
 
 
 def suffix_counts(mask: int) -> list[int]:
