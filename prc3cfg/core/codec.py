@@ -24,7 +24,8 @@ them (§4.5 steps 7 and 9), after the operating state. Pure: no I/O.
 
 It is long because it holds every layout drawn above, once: two dozen message classes built on a
 few shared shapes (`_Bare`, `_OneProgram`, `_ProgramRange`, `_WriteItems`) and word checks, the
-table that decodes each by its ID (`MESSAGE_TYPES`), and the replies that answer them. Split by
+table that decodes each by its ID (`MESSAGE_TYPES`), the table of those made of a header and items
+(`ITEMS_KINDS`), and the replies that answer them. Split by
 family, the shapes and the table would be imported across the parts, and a message's bytes would no
 longer be read beside their drawing. The `# --` rulers mark words, messages and replies.
 """
@@ -411,10 +412,12 @@ class WritePartPrograms(Message):
     items: tuple[tuple[int, int], ...]  # (P, V) per program
     ID: ClassVar[int] = 0x33
     HEADER_WORDS: ClassVar[int] = 2
+    ITEM_WORDS: ClassVar[int] = 2  # P V
+    MAX_ITEMS: ClassVar[int] = MAX_FIELD_ITEMS
 
     def __post_init__(self) -> None:
-        if not 1 <= len(self.items) <= MAX_FIELD_ITEMS:
-            raise MessageError(f"33h carries 1..{MAX_FIELD_ITEMS} programs, not {len(self.items)}")
+        if not 1 <= len(self.items) <= self.MAX_ITEMS:
+            raise MessageError(f"33h carries 1..{self.MAX_ITEMS} programs, not {len(self.items)}")
         _check_range(self.first, self.last)
         for position, speed in self.items:
             _check_kf("P", position)
@@ -618,6 +621,45 @@ MESSAGE_TYPES: dict[int, type[Message]] = {
 FIELD_MESSAGES: dict[str, type[WriteField]] = {
     cls.FIELD: cls for cls in MESSAGE_TYPES.values() if issubclass(cls, WriteField)
 }
+
+
+@dataclass(frozen=True, slots=True)
+class ItemsKind:
+    """A kind of message made of a header and items, up to `capacity` items a message (33h, 40h..46h):
+    n items take header_bytes + n × item_bytes, in `messages(n)` messages. Every price, bound and
+    search of the planner that counts items and headers derives from these rows (`ITEMS_KINDS`)."""
+
+    message: type[WritePartPrograms] | type[_WriteItems]
+    header_bytes: int
+    item_bytes: int
+    capacity: int
+    fields: tuple[str, ...]  # the program fields an item writes
+    broadcast: bool  # the broadcast search (`prc3cfg.core.sharing`) sends items every module shares in it
+
+    @classmethod
+    def of(cls, message: type[WritePartPrograms] | type[_WriteItems], fields: tuple[str, ...], broadcast: bool) -> ItemsKind:
+        return cls(message, 2 * message.HEADER_WORDS, 2 * message.ITEM_WORDS, message.MAX_ITEMS, fields, broadcast)
+
+    def messages(self, n: int) -> int:
+        """How many messages n items need (none for none)."""
+        return -(-n // self.capacity) if n > 0 else 0
+
+    def in_last(self, n: int) -> int:
+        """The items in the last of the messages n > 0 items need."""
+        return n - self.capacity * ((n - 1) // self.capacity)
+
+
+#: The messages of a header and items, by ID.
+ITEMS_KINDS: dict[int, ItemsKind] = {
+    kind.message.ID: kind
+    for kind in (
+        ItemsKind.of(WritePartPrograms, ("P", "V"), broadcast=False),
+        *(ItemsKind.of(cls, (cls.FIELD,), broadcast=True) for cls in FIELD_MESSAGES.values()),
+        ItemsKind.of(WriteAddresses, ("A",), broadcast=True),
+    )
+}
+#: The message of one field of arbitrary programs (40h..46h), by program field name.
+FIELD_KINDS: dict[str, ItemsKind] = {kind.fields[0]: kind for kind in ITEMS_KINDS.values() if len(kind.fields) == 1}
 
 
 def decode_message(data: bytes) -> Message:

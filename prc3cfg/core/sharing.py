@@ -41,7 +41,7 @@ from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
 from prc3cfg.core.planner import (
     ModulePlan,
     PlanVerificationError,
@@ -55,8 +55,6 @@ from prc3cfg.core.planner import (
 )
 from prc3cfg.core.what_to_read import reading_time, verification_time
 
-#: Items per message of the per-field messages (40h..45h; 46h carries 31).
-FIELD_ITEMS = codec.MAX_FIELD_ITEMS
 #: A set of broadcasts wins by more than this; a floor drops one unplanned only where it is above
 #: the bound by more than this (floors and prices add the same figures in other orders).
 _WINS_BY = 1e-9
@@ -166,11 +164,12 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
         groups.append((Step(message, summarise(message, first.actual.system), True),))
     desired = [[m.desired.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]  # by program, then module
     actual = [[m.actual.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]
-    for field in PROGRAM_FIELDS:
+    for field, kind in codec.FIELD_KINDS.items():
+        if not kind.broadcast:
+            continue
         items = _shared_items(field, desired, actual)
-        kind = codec.WriteAddresses if field == "A" else codec.FIELD_MESSAGES[field]
-        size = codec.MAX_ADDRESS_ITEMS if field == "A" else FIELD_ITEMS
-        messages = [kind(tuple(items[i : i + size])) for i in range(0, len(items), size)]
+        cls = codec.WriteAddresses if field == "A" else codec.FIELD_MESSAGES[field]
+        messages = [cls(tuple(items[i : i + kind.capacity])) for i in range(0, len(items), kind.capacity)]
         if messages:
             groups.append(tuple(Step(m, summarise(m, first.actual.system), False) for m in messages))
     return groups

@@ -1,4 +1,4 @@
-"""The init DP of one init kind (`optimise._one_kind`) is the DP of several (`optimise._kinds`) written
+"""The init DP of one init kind (`init_dp._one_kind`) is the DP of several (`init_dp._kinds`) written
 out for one: the same back pointers and the same costs after the last program, to the last bit, on
 charge tables full of ties (the DP breaks them by state) and with programs outside the plan file."""
 
@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from prc3cfg.core.image import PROGRAM_COUNT
-from prc3cfg.core.planner.optimise import TIE, _kinds, _one_kind
+from prc3cfg.core.planner.init_dp import TIE, _kinds, _one_kind
 
 #: Seconds: few values, so that sums tie, and the same less TIE, as `Charges` gives an init kind.
 CHARGES = (0.0, 0.0045833333333333334, 0.0114583, 0.016041633333333334, 0.05)

@@ -1,4 +1,4 @@
-"""The states the write phase's DP keeps (`optimise.States.undominated`): none that another it keeps beats.
+"""The states the write phase's DP keeps (`parts_states.States.undominated`): none that another it keeps beats.
 
 A state is the room left in the last 40h and 41h and, per live 42h..46h field, the programs a 21h
 took out of it; one ahead of another in some fields can gain at most those fields' headers over it,
@@ -13,7 +13,8 @@ import random
 from hypothesis import given
 from hypothesis import strategies as st
 
-from prc3cfg.core.planner.optimise import NEAR, STATE_BITS, States
+from prc3cfg.core.planner.parts_states import STATE_BITS, States
+from prc3cfg.core.planner.terms import NEAR
 
 #: Seconds: a 40h..45h's header and two item prices of crc16 at 9600 baud (roughly), to sum costs from.
 HEADER, ITEM, PART = 0.0114583, 0.0045833333333333334, 0.0022916666666666667

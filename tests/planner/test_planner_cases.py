@@ -16,8 +16,8 @@ from prc3cfg.core import codec
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
 from prc3cfg.core.planner.module_plan import program_list, summarise
-from prc3cfg.core.planner.optimise import WritePhase
 from prc3cfg.core.planner.problem import FIELD_BIT, KEEP, PlanningProblem, diff_mask
+from prc3cfg.core.planner.write_phase import WritePhase
 
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
 

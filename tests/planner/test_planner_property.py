@@ -27,8 +27,9 @@ from prc3cfg.core.image import (
     default_program,
 )
 from prc3cfg.core.planner import plan_module
-from prc3cfg.core.planner.optimise import WritePhase, search
+from prc3cfg.core.planner.init_search import search
 from prc3cfg.core.planner.problem import PlanningProblem
+from prc3cfg.core.planner.write_phase import WritePhase
 
 
 def random_system(rnd: random.Random) -> SystemParameters:

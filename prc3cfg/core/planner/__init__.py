@@ -1,7 +1,7 @@
 """The planner: per module, the cheapest message sequence that turns the read-back into the desired image.
 
 `plan_module(actual, desired, cost)` derives the module's problem (`problem`), searches
-for cheap layouts (`optimise`), builds their messages (`layout`), prices them exactly
+for cheap layouts (`init_search`), builds their messages (`layout`), prices them exactly
 with the line's `LineCost`, keeps the cheapest (`cheapest_messages`), and proves it, once, on
 the device model from the read-back (`check.run_steps`, the same proof a plan file passes
 before `apply --plan` sends it): every step accepted, the desired image on the system and
@@ -21,10 +21,11 @@ from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import ModuleImage, default_program
 from prc3cfg.core.planner.check import StepProblem, run_steps
+from prc3cfg.core.planner.init_search import search
 from prc3cfg.core.planner.layout import Layout, init_message, runs_of
 from prc3cfg.core.planner.module_plan import Action, ModulePlan, PlanVerificationError, Step, UnreachableImage, summarise
-from prc3cfg.core.planner.optimise import search, whole_programs
 from prc3cfg.core.planner.problem import KEEP, PlanningProblem
+from prc3cfg.core.planner.write_phase import whole_programs
 
 #: What a 20h that writes the system parameters a module already holds is for.
 E12_SUMMARY = "write the system parameters it holds: it reported E12 (system parameters not set), which only this clears"
@@ -117,7 +118,7 @@ def _cheapest(problem: PlanningProblem, cost: LineCost, layouts: list[Layout]) -
 def _trimmed(problem: PlanningProblem, cost: LineCost, layout: Layout) -> Layout:
     """`layout` with each init run's message the cheapest on the line of those without some of the
     programs at its ends that hold the plant file's values initialised or not (the search grows runs
-    over them on a tie: `optimise.TIE`) — on stx a run's bounds and check byte may be stuffed, and a
+    over them on a tie: `init_dp.TIE`) — on stx a run's bounds and check byte may be stuffed, and a
     shorter run not. At most TRIMS programs an end are tried; the rest of the plan is the same either
     way (those programs take no write)."""
     kinds = list(layout.kinds)

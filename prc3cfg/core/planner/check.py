@@ -56,8 +56,7 @@ class StepProblem(ValueError):
 def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[codec.Message], *, system_unset: bool = False) -> ModuleImage:
     """The image the steps leave on the module (programs read or managed), or `StepProblem`.
     `system_unset`: the module is in E12, which only a 10h/20h clears — one may go for it, first.
-    Complex because it is the proof as the module docstring numbers it, rule by rule in that order, each
-    refusal with its own words: split, the rules a plan file must pass would no longer read as one list."""
+    The rules are checked in the order the module docstring numbers them, each refusal with its own words."""
     if len(messages) > MAX_STEPS:
         raise StepProblem(MAX_STEPS + 1, f"{len(messages)} steps for one module, more than any plan needs ({MAX_STEPS})")
     filler = default_program(actual.system)
@@ -66,28 +65,45 @@ def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[code
     releases = 0
     for index, message in enumerate(messages, start=1):
         step = _StepName(index, message)
-        if message.IS_READ:
-            raise StepProblem(index, f"{step} is a read ({message.ID:02X}h), not a write")
-        trespass = unmanaged.intersection(message.touched_programs())
-        if trespass:
-            which = f"program {program_list(trespass)}" if len(trespass) == 1 else f"programs {program_list(trespass)}"
-            raise StepProblem(index, f"{step} writes {which}, which the plant file does not manage")
+        _check_write(step, unmanaged)
         if message.RELEASES_AXES:
             releases += 1
-            if actual.system == desired.system and not (system_unset and index == 1):
-                raise StepProblem(index, f"{step} releases the axes, but the system parameters already match the plant file")
-            if releases > 1:
-                raise StepProblem(index, f"{step} releases the axes a second time")
+            _check_release(step, releases, matching=actual.system == desired.system and not (system_unset and index == 1))
         try:
             state = device.execute(state, message)
         except codec.Rejected as rejected:
             raise StepProblem(index, f"{step} would be refused by the module with {describe(rejected.code)}") from None
     image = state.image
+    _check_reached(image, desired)
+    known = tuple(p if (a is not None or w is not None) else None for p, a, w in zip(image.programs, actual.programs, desired.programs))
+    return replace(image, programs=known)
+
+
+def _check_write(step: _StepName, unmanaged: set[int]) -> None:
+    """A step is a write, of managed programs only."""
+    message = step.message
+    if message.IS_READ:
+        raise StepProblem(step.index, f"{step} is a read ({message.ID:02X}h), not a write")
+    trespass = unmanaged.intersection(message.touched_programs())
+    if trespass:
+        which = f"program {program_list(trespass)}" if len(trespass) == 1 else f"programs {program_list(trespass)}"
+        raise StepProblem(step.index, f"{step} writes {which}, which the plant file does not manage")
+
+
+def _check_release(step: _StepName, releases: int, matching: bool) -> None:
+    """A step that releases the axes (the `releases`-th) is the only one, and goes only where the system
+    parameters differ from the plant file's (`matching`: they do not, and no E12 asks for it)."""
+    if matching:
+        raise StepProblem(step.index, f"{step} releases the axes, but the system parameters already match the plant file")
+    if releases > 1:
+        raise StepProblem(step.index, f"{step} releases the axes a second time")
+
+
+def _check_reached(image: ModuleImage, desired: ModuleImage) -> None:
+    """After the steps, the system parameters and every managed program are the plant file's."""
     if image.system != desired.system:
         raise StepProblem(0, "after the steps the system parameters differ from the plant file's")
     wrong = [n for n, (have, want) in enumerate(zip(image.programs, desired.programs), 1) if want is not None and have != want]
     if wrong:
         which = f"program {wrong[0]} differs" if len(wrong) == 1 else f"programs {program_list(wrong)} differ"
         raise StepProblem(0, f"after the steps {which} from the plant file")
-    known = tuple(p if (a is not None or w is not None) else None for p, a, w in zip(image.programs, actual.programs, desired.programs))
-    return replace(image, programs=known)

@@ -11,7 +11,7 @@ it, where that saves: `init_runs`), the system step, inits after it, link/unlink
 21h, 33h/32h, 40h..45h, 46h; within a kind by program number. Each later kind may overwrite
 what an earlier one left (a 21h after a link range, a 46h after it), never the other way round.
 
-Owns turning decisions into messages. Does not own choosing them (`prc3cfg.core.planner.optimise`).
+Owns turning decisions into messages. Does not own choosing them (`prc3cfg.core.planner.init_search`).
 """
 
 from __future__ import annotations
@@ -114,9 +114,9 @@ class Layout:
                 out.append(codec.WritePartPrograms(first + 1, pairs))
         for name, mask in zip(ITEM_FIELDS, w.items):
             items = [(i + 1, getattr(desired(i + 1), name)) for i in members(mask)]
-            out += _chunked(codec.FIELD_MESSAGES[name], items, codec.MAX_FIELD_ITEMS)
+            out += _chunked(codec.FIELD_MESSAGES[name], items, codec.FIELD_KINDS[name].capacity)
         items = [(i + 1, desired(i + 1).A) for i in members(w.addresses)]
-        out += _chunked(codec.WriteAddresses, items, codec.MAX_ADDRESS_ITEMS)
+        out += _chunked(codec.WriteAddresses, items, codec.FIELD_KINDS["A"].capacity)
         return out
 
 

@@ -1,7 +1,7 @@
 """A module's plan as data: the steps to send, what they cost, what they are predicted to do.
 
 Owns `Step`, `ModulePlan`, the `Action` of each change, the one-line device-terms summary of
-a step, and the planner's errors. Does not own how a plan is found (`prc3cfg.core.planner.optimise`), how it is rendered
+a step, and the planner's errors. Does not own how a plan is found (`prc3cfg.core.planner.init_search`), how it is rendered
 for people (`prc3cfg.core.render`) or the plant-wide plan file (`prc3cfg.core.plant_plan`). Pure.
 """
 

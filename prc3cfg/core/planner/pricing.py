@@ -7,14 +7,14 @@ line's own `LineCost` by pricing two probe messages, so every framing and line s
 priced by `prc3cfg.core.bustime`, never by a copy of its rules. The formula is exact up to stx
 stuffing; the final plans are priced exactly with `LineCost.message_time`.
 
-Message sizes are measured on `prc3cfg.core.codec` messages, not written down again here.
+Message sizes are measured on `prc3cfg.core.codec` messages or read from its table of messages of a
+header and items (`codec.ITEMS_KINDS`), not written down again here.
 Owns: the formula and the sizes. Does not own the cost of an exchange (`prc3cfg.core.bustime`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from math import ceil
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
@@ -25,19 +25,18 @@ def _size(message: codec.Message) -> int:
     return message.size()
 
 
-_ITEM = ((1, 0),)
-#: Bytes of the messages the planner sends, measured on the codec.
+#: Bytes of the messages the planner sends whole, measured on the codec.
 INIT_SIZE = _size(codec.InitProgram(1))  # 11h, 12h and 13h alike
 INIT_RANGE_SIZE = _size(codec.InitPrograms(1, 2))  # 14h
 LINK_SIZE = _size(codec.LinkPrograms(1, 2))  # 30h and 31h alike
 PROGRAM_SIZE = _size(codec.WriteProgram(1, Program(0, 1)))  # 21h
 PART_SIZE = _size(codec.WritePartProgram(1, 0, 1))  # 32h
-PARTS_ITEM_SIZE = _size(codec.WritePartPrograms(1, _ITEM * 2)) - _size(codec.WritePartPrograms(1, _ITEM))
-PARTS_HEADER_SIZE = _size(codec.WritePartPrograms(1, _ITEM)) - PARTS_ITEM_SIZE  # 33h
-FIELD_ITEM_SIZE = _size(codec.WritePositions(_ITEM * 2)) - _size(codec.WritePositions(_ITEM))
-FIELD_HEADER_SIZE = _size(codec.WritePositions(_ITEM)) - FIELD_ITEM_SIZE  # 40h..45h
-ADDRESS_ITEM_SIZE = _size(codec.WriteAddresses(_ITEM * 2)) - _size(codec.WriteAddresses(_ITEM))
-ADDRESS_HEADER_SIZE = _size(codec.WriteAddresses(_ITEM)) - ADDRESS_ITEM_SIZE  # 46h
+#: The messages of a header and items, as the codec's table gives them (`codec.ITEMS_KINDS`).
+PARTS = codec.ITEMS_KINDS[codec.WritePartPrograms.ID]  # 33h
+FIELDS = codec.FIELD_KINDS["P"]  # 40h..45h: the DPs price every one of them as this row
+ADDRESSES = codec.FIELD_KINDS["A"]  # 46h
+if len({(k.header_bytes, k.item_bytes, k.capacity) for name, k in codec.FIELD_KINDS.items() if name != "A"}) != 1:
+    raise RuntimeError("codec.FIELD_KINDS: the planner prices 40h..45h alike (`FIELDS`); give each field its own price first")
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,19 +71,17 @@ class Prices:
         put("init_range", self.message(INIT_RANGE_SIZE))
         put("link", self.message(LINK_SIZE))
         put("program", self.message(PROGRAM_SIZE))
-        put("field_item", self.byte * FIELD_ITEM_SIZE)
-        put("address_item", self.byte * ADDRESS_ITEM_SIZE)
-        put("field_header", self.message(FIELD_HEADER_SIZE))
-        put("parts_header", self.message(PARTS_HEADER_SIZE))
-        put("parts_item", self.byte * PARTS_ITEM_SIZE)
-        runs = (self.parts_header + n * self.parts_item for n in range(2, codec.MAX_FIELD_ITEMS + 1))
+        put("field_item", self.byte * FIELDS.item_bytes)
+        put("address_item", self.byte * ADDRESSES.item_bytes)
+        put("field_header", self.message(FIELDS.header_bytes))
+        put("parts_header", self.message(PARTS.header_bytes))
+        put("parts_item", self.byte * PARTS.item_bytes)
+        runs = (self.parts_header + n * self.parts_item for n in range(2, PARTS.capacity + 1))
         put("_parts", (0.0, self.message(PART_SIZE), *runs))
         counts = range(PROGRAM_COUNT + 1)
-        put("_fields", tuple(ceil(n / codec.MAX_FIELD_ITEMS) * self.field_header + n * self.field_item
-                             for n in counts))  # fmt: skip
-        put("address_header", self.message(ADDRESS_HEADER_SIZE))
-        put("_addresses", tuple(ceil(n / codec.MAX_ADDRESS_ITEMS) * self.address_header + n * self.address_item
-                                for n in counts))  # fmt: skip
+        put("_fields", tuple(FIELDS.messages(n) * self.field_header + n * self.field_item for n in counts))
+        put("address_header", self.message(ADDRESSES.header_bytes))
+        put("_addresses", tuple(ADDRESSES.messages(n) * self.address_header + n * self.address_item for n in counts))
 
     @classmethod
     def measure(cls, cost: LineCost, address: int) -> Prices:
@@ -99,14 +96,22 @@ class Prices:
     def message(self, size: int) -> float:
         return self.exchange + self.byte * size
 
+    def header(self, kind: codec.ItemsKind) -> float:
+        """A message of `kind` (33h, 40h..46h) without its items."""
+        return self.parts_header if kind is PARTS else self.address_header if kind is ADDRESSES else self.field_header
+
+    def item(self, kind: codec.ItemsKind) -> float:
+        """One more item in a message of `kind`."""
+        return self.parts_item if kind is PARTS else self.address_item if kind is ADDRESSES else self.field_item
+
     def parts(self, n: int) -> float:
         """P and V of n consecutive programs: a 32h for one, a 33h for more."""
         return self._parts[n]
 
     def fields(self, n: int) -> float:
-        """n items of one field (40h..45h), in as few messages as the 15-item limit allows."""
+        """n items of one field (40h..45h), in as few messages as their limit allows."""
         return self._fields[n]
 
     def addresses(self, n: int) -> float:
-        """n jump addresses (46h), in as few messages as the 31-item limit allows."""
+        """n jump addresses (46h), in as few messages as their limit allows."""
         return self._addresses[n]

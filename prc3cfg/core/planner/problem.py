@@ -13,7 +13,7 @@ step, so the module's clamping acts on the defaults of the old system parameters
 only when that gives something different). Programs are indexed 0..63 here.
 
 Owns the validation that a desired image is reachable at all (`UnreachableImage`).
-Does not own the search (`prc3cfg.core.planner.optimise`). Pure.
+Does not own the search (`prc3cfg.core.planner.init_search`). Pure.
 """
 
 from __future__ import annotations
