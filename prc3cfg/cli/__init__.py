@@ -170,7 +170,9 @@ def _streams_where_there_are_none() -> None:
     what the command says goes to the null device instead, and its exit status still tells."""
     for name in ("stdout", "stderr"):
         if getattr(sys, name) is None:
-            setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))  # noqa: SIM115 — open for the process's life
+            from prc3cfg.shell.platform import open_text
+
+            setattr(sys, name, open_text(os.devnull))  # open for the process's life
 
 
 def main(argv: list[str] | None = None) -> None:
