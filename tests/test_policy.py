@@ -6,6 +6,8 @@ The moment windows are judged at is `PRC3CFG_POLICY_NOW` in the command tests (t
 
 from __future__ import annotations
 
+import functools
+import itertools
 import json
 import re
 from datetime import UTC, datetime, timedelta
@@ -15,6 +17,8 @@ from zoneinfo import ZoneInfo
 import jsonschema
 import pytest
 from emulated import DEMO, emulated_plant, run_cli
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from prc3cfg.core import policy
 from prc3cfg.plant import PlantError
@@ -272,3 +276,69 @@ def test_the_policy_schema_in_schemas_is_the_one_the_models_make():
                                                                     "duration": "1h", "time_zone": "Europe/Berlin"}]}, schema)
     with pytest.raises(jsonschema.ValidationError):  # the check can fail
         jsonschema.validate({"format": "prc3cfg-policy/1", "envelopes": [{"name": "e", "limits": {"sped": {"max": 1}}}]}, schema)
+
+
+# -- windows against a brute force: every UTC minute of the days around, each checked on its own ---------------------------
+
+ZONES = ("Europe/Berlin", "America/New_York", "Australia/Sydney", "Australia/Lord_Howe", "Asia/Kathmandu", "Pacific/Chatham", "UTC")
+
+
+@st.composite
+def windows_and_instants(draw):
+    """A window (its cron's sets kept apart, for the oracle), and an instant: anywhere in 2026, or within two days of
+    one of its zone's changes of offset."""
+    zone = draw(st.sampled_from(ZONES))
+    minutes = draw(st.sets(st.integers(0, 59), min_size=1, max_size=3))
+    hours = draw(st.sets(st.integers(0, 23), min_size=1, max_size=3))
+    days = draw(st.one_of(st.none(), st.sets(st.integers(1, 31), min_size=1, max_size=3)))
+    weekdays = draw(st.one_of(st.none(), st.sets(st.integers(0, 6), min_size=1, max_size=3)))
+    text = " ".join([",".join(map(str, sorted(minutes))), ",".join(map(str, sorted(hours))),
+                     "*" if days is None else ",".join(map(str, sorted(days))), "*",
+                     "*" if weekdays is None else ",".join(map(str, sorted(weekdays)))])  # fmt: skip
+    duration = timedelta(minutes=draw(st.integers(1, 12 * 60)))
+    changes = _changes(ZoneInfo(zone))
+    base = draw(st.sampled_from(changes)) if changes and draw(st.booleans()) else datetime(2026, 1, 1, tzinfo=UTC)
+    now = base + timedelta(seconds=draw(st.integers(-2 * 86400, 2 * 86400 if base.month > 1 else 365 * 86400)))
+    return _window(text, duration, zone), (minutes, hours, days, weekdays), now
+
+
+@functools.cache
+def _changes(zone: ZoneInfo) -> list[datetime]:
+    """The instants in 2026 at which `zone` changes its offset, to the hour."""
+    hours = [datetime(2026, 1, 1, tzinfo=UTC) + timedelta(hours=h) for h in range(365 * 24)]
+    return [b for a, b in itertools.pairwise(hours) if a.astimezone(zone).utcoffset() != b.astimezone(zone).utcoffset()]
+
+
+def _brute_force(window: policy.Window, sets, now: datetime) -> datetime | None:
+    """The latest start in (now − duration, now]: every UTC minute u there, and every wall time W that some offset of the
+    zone around it gives, W a start at u when the cron's sets take W and W read in the zone (first of two) is u."""
+    minutes, hours, days, weekdays = sets
+    zone = window.time_zone
+    offsets = {(now + timedelta(hours=h)).astimezone(zone).utcoffset() for h in range(-72, 73)}
+    minute = now.replace(second=0, microsecond=0)
+    found = None
+    while minute > now - window.duration:
+        for offset in offsets:
+            wall = (minute + offset).replace(tzinfo=None)  # type: ignore[operator]
+            in_days = days is not None and wall.day in days
+            in_weekdays = weekdays is not None and wall.isoweekday() % 7 in weekdays
+            day = (in_days or in_weekdays) if days is not None and weekdays is not None else (days is None or in_days) and (
+                weekdays is None or in_weekdays)
+            if wall.minute in minutes and wall.hour in hours and day and wall.replace(tzinfo=zone, fold=0).astimezone(UTC) == minute:
+                found = max(found or minute, minute)
+        minute -= timedelta(minutes=1)
+    return found
+
+
+@settings(max_examples=15)
+@given(windows_and_instants())
+def test_a_window_is_open_exactly_when_a_brute_force_over_utc_minutes_says(case):
+    window, sets, now = case
+    assert policy.open_since(window, now) == _brute_force(window, sets, now)
+
+
+@pytest.mark.soak
+@given(windows_and_instants())
+def test_a_window_is_open_exactly_when_a_brute_force_over_utc_minutes_says_soak(case):
+    window, sets, now = case
+    assert policy.open_since(window, now) == _brute_force(window, sets, now)
