@@ -342,3 +342,25 @@ def test_a_window_is_open_exactly_when_a_brute_force_over_utc_minutes_says(case)
 def test_a_window_is_open_exactly_when_a_brute_force_over_utc_minutes_says_soak(case):
     window, sets, now = case
     assert policy.open_since(window, now) == _brute_force(window, sets, now)
+
+
+def test_a_value_the_plant_file_leaves_to_the_factory_is_said_at_its_module(tmp_path, source):
+    from prc3cfg import api
+
+    (tmp_path / "rules.yaml").write_text("format: prc3cfg-policy/1\nenvelopes:\n"
+                                         "  - {name: sync, level: advisory, modules: [booth-b-left], limits: {sync_conveyor_sequence: {min: 1}}}\n")
+    report = api.policy(api.load(source), now=datetime(2026, 11, 29, tzinfo=UTC))
+    assert report is not None and report.clock == "given"
+    ((finding, line),) = report.findings
+    assert (finding.kind, finding.level) == ("envelope", "advisory")
+    at = int(re.match(r".*source\.yaml:(\d+):\d+: ", line).group(1))  # type: ignore[union-attr]
+    assert "name: booth-b-left" in source.read_text().splitlines()[at] and "sync_conveyor_sequence 0.010 m is below 1.000 m" in line
+
+
+def test_a_moment_that_is_not_an_instant_with_its_offset_is_refused_in_one_line(plant, capsys, monkeypatch):
+    (plant.path.parent / "rules.yaml").write_text(SHIFT)
+    monkeypatch.setenv("PRC3CFG_POLICY_NOW", "2026-11-30 09:00")
+    result = run_cli(capsys, "apply", plant.path, "--auto-approve")
+    assert result.code == 1 and _untouched(plant)
+    assert result.err.strip().splitlines() == ["error: PRC3CFG_POLICY_NOW='2026-11-30 09:00' is not an ISO 8601 instant with its offset "
+                                               "(2026-03-30T09:00:00+02:00) — set it so, or unset it to use the clock"]
