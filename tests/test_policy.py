@@ -364,3 +364,19 @@ def test_a_moment_that_is_not_an_instant_with_its_offset_is_refused_in_one_line(
     assert result.code == 1 and _untouched(plant)
     assert result.err.strip().splitlines() == ["error: PRC3CFG_POLICY_NOW='2026-11-30 09:00' is not an ISO 8601 instant with its offset "
                                                "(2026-03-30T09:00:00+02:00) — set it so, or unset it to use the clock"]
+
+
+def test_a_restore_in_a_deny_window_is_refused_and_goes_on_with_an_override(plant, capsys, monkeypatch):
+    (plant.path.parent / "rules.yaml").write_text(SHIFT)
+    monkeypatch.setenv("PRC3CFG_POLICY_NOW", SUNDAY)
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    applied = plant.images()
+    (snapshot,) = (plant.path.parent / ".prc3cfg" / "snapshots").iterdir()
+    monkeypatch.setenv("PRC3CFG_POLICY_NOW", MONDAY_MORNING)
+    refused = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release")
+    assert refused.code == 1 and "deny window 'production' is open" in refused.err and "--override-window REASON" in refused.err
+    assert plant.images() == applied
+    restored = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release", "--override-window", "roll back the trial")
+    assert restored.code == 0, restored.err
+    assert plant.images() == FACTORY[id(plant)]
+    assert _journal_header(plant)["policy"]["overridden"][0]["reason"] == "roll back the trial"

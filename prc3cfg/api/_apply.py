@@ -38,7 +38,7 @@ from prc3cfg.api._plan import (
     unset_systems,
 )
 from prc3cfg.api._plant import reason_for
-from prc3cfg.api._policy import policy
+from prc3cfg.api._policy import PolicyReport, policy
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
 from prc3cfg.core import plan_file, render, what_to_read
 from prc3cfg.core.image import ModuleImage
@@ -136,10 +136,7 @@ def apply(
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
-    judged = policy(plant, modules, now)  # just before the line opens: a window may have opened since the plan
-    said = None if judged is None else judged.gate(overrides or {})
-    for overridden in (said or {}).get("overridden", ()):
-        (options or LineOptions()).tell(f"{overridden['finding']} — overridden by {overridden['user']}: {overridden['reason']}")
+    said = _policy_gate(policy(plant, modules, now), overrides, options)  # just before the line opens: a window may have opened since the plan
 
     def wanted(held: OnRecord) -> Reads:
         if planned is not None:
@@ -152,12 +149,22 @@ def apply(
                   policy_said=said)  # fmt: skip
 
 
+def _policy_gate(judged: PolicyReport | None, overrides: Mapping[str, str] | None, options: LineOptions | None) -> dict[str, Any] | None:
+    """What the policy's `gate` lets through, for the journal's header (`PolicyRefused` otherwise); each override said."""
+    said = None if judged is None else judged.gate(overrides or {})
+    for overridden in (said or {}).get("overridden", ()):
+        (options or LineOptions()).tell(f"{overridden['finding']} — overridden by {overridden['user']}: {overridden['reason']}")
+    return said
+
+
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
-            onto_current_lines: bool = False, reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
+            onto_current_lines: bool = False, reason: str | None = None, links: Mapping[str, Link] | None = None,
+            overrides: Mapping[str, str] | None = None, now: datetime | None = None) -> ApplyResult:  # fmt: skip
     """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
     onto the lines it was taken on: a bus of the plant file that now names another line (port or
     framing) is refused, unless `onto_current_lines`; and a snapshot that its journal does not
-    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused."""
+    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused. The plant's policy windows
+    are judged at `now` as `apply` judges them (`overrides`); no envelope judges a snapshot."""
     options = options or LineOptions()
     taken = Snapshot.load(snapshot)
     if (note := audit.snapshot_checked(snapshot, taken)) is not None:
@@ -172,8 +179,11 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
             raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
                             f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
                             "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
+    judged = policy(plant, [m.name for _, m in pairs], now)
+    said = _policy_gate(None if judged is None else judged.windows_only(), overrides, options)
     wanted = Reads(pairs, what_to_read.in_full(to_plan(pairs, taken.images)))  # every program the snapshot holds
-    return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links)
+    return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links,
+                  policy_said=said)  # fmt: skip
 
 
 def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[OnRecord], Reads],

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import Any
 
@@ -46,6 +46,10 @@ class PolicyReport:
         head = f"Policy {self.file} (sha256 {self.sha256[:12]}), judged at {self.now.isoformat()}"
         head += f" — set by {NOW_VARIABLE}, not the clock" if self.clock != "system" else ""
         return [head, *(f"  {line}" for _, line in self.findings)] if self.findings else [head + ": no findings"]
+
+    def windows_only(self) -> PolicyReport:
+        """What the windows found: a restore writes a snapshot back, which no envelope judges, at a moment windows do."""
+        return replace(self, findings=tuple((f, line) for f, line in self.findings if f.kind == "window"))
 
     def gate(self, overrides: Mapping[str, str]) -> dict[str, Any]:
         """`PolicyRefused` when something refuses despite `overrides`; else what goes into the journal's header."""

@@ -179,9 +179,7 @@ def apply(
     _answered(ctx, json_out, auto_approve or plan_file is not None, "or apply a reviewed plan file with --plan FILE")
     check_output(trace, "--trace", plant=plant)
     verified = api.Verify(verify.value)
-    overrides = {kind: why for kind, why in (("window", override_window), ("envelope", override_envelope)) if why is not None}
-    if any(not why.strip() for why in overrides.values()):
-        raise click_errors.UsageError("an override needs a reason: --override-window/--override-envelope TEXT", ctx=ctx)
+    overrides = _overrides(ctx, override_window, override_envelope)
     if json_out:
         from prc3cfg.cli import stream
 
@@ -200,6 +198,14 @@ def apply(
                            verify=verified, options=options, previous=previous, full_read=full_read, reason=reason,
                            overrides=overrides)  # fmt: skip
     output.applied(result, emulated=all(bus.port.startswith(EMULATOR_SCHEME) for bus in loaded.buses))
+
+
+def _overrides(ctx: typer.Context, window: str | None, envelope: str | None) -> dict[str, str]:
+    """The policy's overrides by kind (`api.apply`'s `overrides`); refused in one line without a reason."""
+    overrides = {kind: why for kind, why in (("window", window), ("envelope", envelope)) if why is not None}
+    if any(not why.strip() for why in overrides.values()):
+        raise click_errors.UsageError("an override needs a reason: --override-window/--override-envelope REASON", ctx=ctx)
+    return overrides
 
 
 def _answered(ctx: typer.Context, json_out: bool, auto_approve: bool, instead: str) -> None:
@@ -223,12 +229,14 @@ def restore(
     reason: ReasonOpt = None,
     frames: FramesOpt = False,
     json_out: EventsOpt = False,
+    override_window: OverrideWindowOpt = None,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
     from prc3cfg.cli import output
 
     _answered(ctx, json_out, auto_approve, "a snapshot is restored as planned now: nothing reviewed it")
+    overrides = _overrides(ctx, override_window, None)
     if json_out:
         from prc3cfg.cli import stream
 
@@ -236,9 +244,9 @@ def restore(
         with stream.accounted(events) as finished, line_options(trace, retries, lock_timeout, stream.EventProgress(events)) as options:
             finished.append(api.restore(snapshot, gates=stream.gates(events, None, auto_approve, allow_axis_release),
                                         verify=api.Verify(verify.value), options=options, onto_current_lines=onto_current_lines,
-                                        reason=reason))  # fmt: skip
+                                        reason=reason, overrides=overrides))  # fmt: skip
         return
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options, frames), verify=api.Verify(verify.value),
-                             options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip
+                             options=options, onto_current_lines=onto_current_lines, reason=reason, overrides=overrides)  # fmt: skip
     output.applied(result, "restore")
