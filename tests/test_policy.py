@@ -380,3 +380,20 @@ def test_a_restore_in_a_deny_window_is_refused_and_goes_on_with_an_override(plan
     assert restored.code == 0, restored.err
     assert plant.images() == FACTORY[id(plant)]
     assert _journal_header(plant)["policy"]["overridden"][0]["reason"] == "roll back the trial"
+
+
+def test_validate_annotates_envelope_findings_and_policy_file_problems_for_a_pull_request(tmp_path, source, capsys):
+    rules = tmp_path / "rules.yaml"
+    rules.write_text(SPEEDS.format(level="hard") + "  - {name: dwell, level: advisory, limits: {dwell: {max: 0.2}}}\n" + SHIFT.split("\n", 1)[1]
+                     .replace('"0 6 * * 1-5"', '"* * * * *"'))  # fmt: skip  # a window open whenever: validate judges no moment
+    annotated = run_cli(capsys, "validate", source, "--format", "github")
+    assert annotated.code == 1
+    kinds = {(line.split(" ", 1)[0], "hard" in line) for line in annotated.out.splitlines()}
+    assert kinds == {("::error", True), ("::warning", False)} and "window" not in annotated.out
+    at = rf"::error file={re.escape(str(source))},line=\d+,col=\d+,title=prc3cfg::"
+    assert re.search(at + "hard: module booth-a-left: program 1 speed", annotated.out)
+    problems = json.loads(run_cli(capsys, "validate", source, "--json").out)
+    assert problems and all(p["message"].startswith("hard: ") for p in problems)
+    rules.write_text("format: prc3cfg-policy/1\nenvelopes: 3\n")
+    broken = run_cli(capsys, "validate", source, "--format", "github")
+    assert broken.code == 1 and broken.out.startswith(f"::error file={rules},line=2,col=12,title=prc3cfg::'envelopes' is not valid")

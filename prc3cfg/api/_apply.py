@@ -180,7 +180,7 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
                             f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
                             "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
     judged = policy(plant, [m.name for _, m in pairs], now)
-    said = _policy_gate(None if judged is None else judged.windows_only(), overrides, options)
+    said = _policy_gate(None if judged is None else judged.only("window"), overrides, options)
     wanted = Reads(pairs, what_to_read.in_full(to_plan(pairs, taken.images)))  # every program the snapshot holds
     return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links,
                   policy_said=said)  # fmt: skip

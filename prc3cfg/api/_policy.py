@@ -16,9 +16,11 @@ from typing import Any
 
 from prc3cfg.api._plan import select
 from prc3cfg.core import policy as rules
+from prc3cfg.core.text import shown
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
 from prc3cfg.plant.policy import placed, plant_values
+from prc3cfg.plant.problems import Finding
 from prc3cfg.shell import platform
 from prc3cfg.shell.plant_files import load_policy, plant_document
 
@@ -40,16 +42,22 @@ class PolicyReport:
     sha256: str
     now: datetime
     clock: str  # "system", or NOW_VARIABLE when that set it
-    findings: tuple[tuple[rules.RuleFinding, str], ...]
+    placed: tuple[tuple[rules.RuleFinding, Finding], ...]  # each finding and where it is said
+
+    @property
+    def findings(self) -> tuple[tuple[rules.RuleFinding, str], ...]:
+        """Each finding and its line, "file:line:column: level: what"."""
+        return tuple((f, shown(f"{at.file}:{at.line}:{at.column}: {at.message}")) for f, at in self.placed)
 
     def lines(self) -> list[str]:
         head = f"Policy {self.file} (sha256 {self.sha256[:12]}), judged at {self.now.isoformat()}"
         head += f" — set by {NOW_VARIABLE}, not the clock" if self.clock != "system" else ""
         return [head, *(f"  {line}" for _, line in self.findings)] if self.findings else [head + ": no findings"]
 
-    def windows_only(self) -> PolicyReport:
-        """What the windows found: a restore writes a snapshot back, which no envelope judges, at a moment windows do."""
-        return replace(self, findings=tuple((f, line) for f, line in self.findings if f.kind == "window"))
+    def only(self, kind: str) -> PolicyReport:
+        """What the rules of one kind found: a restore is judged by windows only (no envelope judges a snapshot),
+        `validate` by envelopes only (it judges no moment)."""
+        return replace(self, placed=tuple((f, at) for f, at in self.placed if f.kind == kind))
 
     def gate(self, overrides: Mapping[str, str]) -> dict[str, Any]:
         """`PolicyRefused` when something refuses despite `overrides`; else what goes into the journal's header."""
@@ -93,5 +101,4 @@ def policy(plant: Plant, modules: Iterable[str] | None = None, now: datetime | N
     pairs = select(plant, modules)
     found = rules.findings(plant_values(pairs), [bus.name for bus, _ in pairs], loaded.rules, moment)
     document = plant_document(plant) if any(f.value_at is not None for f in found) else None
-    lines = tuple((f, placed(f, document, loaded)) for f in found)
-    return PolicyReport(str(loaded.path), loaded.sha256, moment, clock, lines)
+    return PolicyReport(str(loaded.path), loaded.sha256, moment, clock, tuple((f, placed(f, document, loaded)) for f in found))

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import enum
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -65,30 +66,44 @@ def validate(
     if json_out:
         fmt = Format.JSON
 
+    file = plant
     try:
         loaded = api.load(plant)
+        file = loaded.policy_path or plant
+        judged = api.policy(loaded)  # the policy file's problems, then what its envelopes find (windows judge an apply's moment)
     except PlantError as error:
         if fmt is Format.TEXT:
             raise  # one `error:` line per problem, as every error
-        findings = error.findings(str(plant))
+        findings = error.findings(str(file))
         if fmt is Format.JSON:
             print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in findings], indent=1))
         else:
             print("\n".join(github_annotation(f) for f in findings))
         raise typer.Exit(1) from None
+    found = [] if judged is None else judged.only("envelope").placed
+    hard = [at for f, at in found if f.level == "hard"]
+    if fmt is Format.JSON:  # the problems: a hard envelope's findings refuse the plant file as a problem does
+        print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in hard], indent=1))
+    elif fmt is Format.GITHUB:
+        for f, at in found:
+            print(github_annotation(at, "error" if f.level == "hard" else "warning"))
+    else:
+        for f, line in () if judged is None else judged.only("envelope").findings:
+            print(f"{'error' if f.level == 'hard' else 'warning'}: {line}", file=sys.stderr)
+    if hard:
+        raise typer.Exit(1)
     if fmt is Format.JSON:
-        print("[]")
         return
     modules = len(loaded.modules())
     print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, {_count(modules, 'module', 'modules')})")
 
 
-def github_annotation(finding: Finding) -> str:
-    """A problem as GitHub's `::error` workflow command, escaped as its rules want (`prc3cfg.core.text`)."""
+def github_annotation(finding: Finding, kind: str = "error") -> str:
+    """A problem as GitHub's `::error` (or `::warning`) workflow command, escaped as its rules want (`prc3cfg.core.text`)."""
     from prc3cfg.core.text import github_data, github_property
 
     place = "" if finding.line is None else f",line={finding.line},col={finding.column}"
-    return f"::error file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}"
+    return f"::{kind} file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}"
 
 
 @app.command()

@@ -107,6 +107,11 @@ class Plant(BaseModel):
     sha256: str
     policy: str | None = None  # the policy file the plant file names, relative to it (docs/policy.md)
 
+    @property
+    def policy_path(self) -> Path | None:
+        """The policy file this plant file names, as a path (relative to the plant file's folder as given)."""
+        return None if self.policy is None else self.path.parent / self.policy
+
     def modules(self) -> tuple[tuple[Bus, Module], ...]:
         """Every module of the plant with its bus, in file order."""
         return tuple((bus, module) for bus in self.buses for module in bus.modules)

@@ -34,7 +34,7 @@ from prc3cfg.core.units import QUANTITIES
 from prc3cfg.plant.document import Document, parse_document
 from prc3cfg.plant.models import Draft07, FileModel, Name, Text
 from prc3cfg.plant.plant import Bus, Module
-from prc3cfg.plant.problems import Path_, PlantError, Problem
+from prc3cfg.plant.problems import Finding, Path_, PlantError, Problem
 
 FORMAT = "prc3cfg-policy/1"
 #: A duration: whole days, hours and minutes, in that order ("10h", "1h30m", "2d").
@@ -196,14 +196,15 @@ def _module_at(bus: Bus, module: Module) -> Path_:
     return ("buses", bus.name, "modules", module.name)  # resolved by `placed` through names, see `_in_plant`
 
 
-def placed(finding: policy.RuleFinding, plant_document: Document | None, loaded: LoadedPolicy) -> str:
-    """One line: at the plant file's value where there is one (`plant_document` given), else at the rule; the other place named in it."""
-    rule_at = loaded.document.lines([Problem(finding.rule_at, "")])[0][1].rstrip(": ")
+def placed(finding: policy.RuleFinding, plant_document: Document | None, loaded: LoadedPolicy) -> Finding:
+    """Where a finding is said: at the plant file's value where there is one (`plant_document` given), naming the rule's
+    place; else at the rule."""
+    (line, column), _ = loaded.document.lines([Problem(finding.rule_at, "")])[0]
     said = f"{finding.level}: {finding.message}"
     if finding.value_at is None or plant_document is None:
-        return f"{rule_at}: {said}"
-    value_at = plant_document.lines([Problem(_in_plant(plant_document, finding.value_at), "")])[0][1].rstrip(": ")
-    return f"{value_at}: {said} (rule at {rule_at})"
+        return Finding(loaded.document.name, line, column, said)
+    (at_line, at_column), _ = plant_document.lines([Problem(_in_plant(plant_document, finding.value_at), "")])[0]
+    return Finding(plant_document.name, at_line, at_column, f"{said} (rule at {loaded.document.name}:{line}:{column})")
 
 
 def _in_plant(document: Document, path: Path_) -> Path_:

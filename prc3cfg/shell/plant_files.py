@@ -48,9 +48,9 @@ def plant_bytes(path: str | Path) -> bytes:
 def load_policy(plant: Plant) -> LoadedPolicy | None:
     """The policy file `plant` names (relative to the plant file), None when it names none; `PlantError` with its
     problems, or saying it cannot be read — a plant file that names a policy is never used without it."""
-    if plant.policy is None:
+    path = plant.policy_path
+    if path is None:
         return None
-    path = plant.path.parent / plant.policy
     try:
         data = read_regular(path, MAX_BYTES)
     except FileProblem as problem:
