@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
     from rich.console import Console
     from rich.table import Table
 
+    from prc3cfg.api import PolicyReport
     from prc3cfg.core import render
     from prc3cfg.plant import Module, Plant
     from prc3cfg.plant.problems import Finding
@@ -80,22 +81,30 @@ def validate(
         else:
             print("\n".join(github_annotation(f) for f in findings))
         raise typer.Exit(1) from None
-    found = [] if judged is None else judged.only("envelope").placed
-    hard = [at for f, at in found if f.level == "hard"]
-    if fmt is Format.JSON:  # the problems: a hard envelope's findings refuse the plant file as a problem does
-        print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in hard], indent=1))
-    elif fmt is Format.GITHUB:
-        for f, at in found:
-            print(github_annotation(at, "error" if f.level == "hard" else "warning"))
-    else:
-        for f, line in () if judged is None else judged.only("envelope").findings:
-            print(f"{'error' if f.level == 'hard' else 'warning'}: {line}", file=sys.stderr)
-    if hard:
+    if _envelopes_refuse(None if judged is None else judged.only("envelope"), fmt):
         raise typer.Exit(1)
     if fmt is Format.JSON:
         return
     modules = len(loaded.modules())
     print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, {_count(modules, 'module', 'modules')})")
+
+
+def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
+    """Say what the policy's envelopes found, in `fmt`; whether a hard one refuses the plant file. JSON lists the hard
+    ones only: they are its problems (`[]`, valid, as before); the others are warnings (stderr, `::warning`)."""
+    import json
+
+    found = [] if judged is None else judged.placed
+    hard = [at for f, at in found if f.level == "hard"]
+    if fmt is Format.JSON:
+        print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in hard], indent=1))
+    elif fmt is Format.GITHUB:
+        for f, at in found:
+            print(github_annotation(at, "error" if f.level == "hard" else "warning"))
+    else:
+        for f, line in () if judged is None else judged.findings:
+            print(f"{'error' if f.level == 'hard' else 'warning'}: {line}", file=sys.stderr)
+    return bool(hard)
 
 
 def github_annotation(finding: Finding, kind: str = "error") -> str:
