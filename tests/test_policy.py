@@ -107,6 +107,7 @@ def test_an_advisory_envelope_is_shown_and_refuses_nothing(plant, capsys, monkey
     assert "advisory: module booth-a-left: program 1 speed 0.350 m/s is above 0.300 m/s" in planned.out
     applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
     assert applied.code == 0, applied.err
+    assert "advisory: module booth-a-left: program 1 speed 0.350 m/s is above 0.300 m/s" in applied.err  # said on the apply too
     assert plant.matches_plant()
 
 

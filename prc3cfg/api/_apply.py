@@ -150,8 +150,12 @@ def apply(
 
 
 def _policy_gate(judged: PolicyReport | None, overrides: Mapping[str, str] | None, options: LineOptions | None) -> dict[str, Any] | None:
-    """What the policy's `gate` lets through, for the journal's header (`PolicyRefused` otherwise); each override said."""
+    """What the policy's `gate` lets through, for the journal's header (`PolicyRefused` otherwise); each advisory finding
+    and each override said."""
     said = None if judged is None else judged.gate(overrides or {})
+    for finding, line in () if judged is None else judged.findings:
+        if finding.level == "advisory":
+            (options or LineOptions()).tell(line)
     for overridden in (said or {}).get("overridden", ()):
         (options or LineOptions()).tell(f"{overridden['finding']} — overridden by {overridden['user']}: {overridden['reason']}")
     return said
