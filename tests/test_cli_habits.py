@@ -173,7 +173,7 @@ def test_the_help_names_what_to_give_in_words():
     for path, text in helps.items():
         options = text.split("\nOptions:\n", 1)[-1]
         assert not re.search(r"<[a-z]", options) and "plant" not in text.split("\n", 1)[0], text
-        metavars = re.findall(r"^\s+(?:-\w, )?--[\w-]+ (\S+)", options, re.M)
+        metavars = re.findall(r"^  (?:-\w, )?--[\w-]+ (\S+)", options, re.M)  # an option starts its line, a wrapped help line does not
         assert all(m == m.upper() or "|" in m for m in metavars), (path, metavars)
     assert "Usage: prc3cfg plan [OPTIONS] {PLANT}" in helps["prc3cfg plan"]
     for option in ("--module NAME", "--trace FILE", "--lock-timeout TIME", "--out FILE"):

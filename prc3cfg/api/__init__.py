@@ -81,6 +81,9 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._plant import prune_records as prune_records
     from prc3cfg.api._plant import verify_records as verify_records
     from prc3cfg.api._plant import write_adoption as write_adoption
+    from prc3cfg.api._policy import PolicyRefused as PolicyRefused
+    from prc3cfg.api._policy import PolicyReport as PolicyReport
+    from prc3cfg.api._policy import policy as policy
     from prc3cfg.api._types import ApplyFailed as ApplyFailed
     from prc3cfg.api._types import ApplyInterrupted as ApplyInterrupted
     from prc3cfg.api._types import ApplyResult as ApplyResult
@@ -115,6 +118,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._plan": ("drift", "left_alone", "load", "load_images", "plan", "read", "select"),
     "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records",
                            "verify_records", "write_adoption"),
+    "prc3cfg.api._policy": ("PolicyRefused", "PolicyReport", "policy"),
     "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
     "prc3cfg.core.plan_file": ("StalePlan",),
     "prc3cfg.core.render": ("Drift",),

@@ -14,6 +14,7 @@ import hashlib
 import time
 from collections.abc import Callable, Collection, Iterable, Mapping
 from dataclasses import replace
+from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -37,6 +38,7 @@ from prc3cfg.api._plan import (
     unset_systems,
 )
 from prc3cfg.api._plant import reason_for
+from prc3cfg.api._policy import PolicyReport, policy
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
 from prc3cfg.core import plan_file, render, what_to_read
 from prc3cfg.core.image import Key, ModuleImage
@@ -118,17 +120,22 @@ def apply(
     full_read: bool = False,
     reason: str | None = None,
     links: Mapping[str, Link] | None = None,
+    overrides: Mapping[str, str] | None = None,
+    now: datetime | None = None,
 ) -> ApplyResult:
     """Lock, read back, plan (or prove `plan_file`), pass the `gates`, snapshot, write, verify.
 
     What is read back is what `plan` reads (`previous`, `full_read`); for `plan_file`, exactly
     what its plan read. `reason` (else `PRC3CFG_REASON`) goes into the records' header — a bus
-    with `require_reason` refuses to start without one. Returns the result when every module
-    verified; raises `ApplyFailed` or `ApplyInterrupted`, each with the result, otherwise; before
+    with `require_reason` refuses to start without one. The plant's policy is judged at `now` (default:
+    `_policy.policy_now`) before the line is opened: `PolicyRefused` unless what refuses is soft and its kind
+    is in `overrides` (kind → reason), which the header records with the user. Returns the result when every
+    module verified; raises `ApplyFailed` or `ApplyInterrupted`, each with the result, otherwise; before
     anything is written, any other `UserError`.
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
+    said = _policy_gate(policy(plant, modules, now), overrides, options)  # just before the line opens: a window may have opened since the plan
 
     def wanted(held: OnRecord) -> Reads:
         if planned is not None:
@@ -137,15 +144,30 @@ def apply(
         return reads(plant, pairs, True, held) if full_read else commissioned(reads(plant, pairs, held=held))
 
     on_lines = pairs if planned is None else plan_file_pairs(planned[1], pairs)
-    return _apply(plant, pairs, on_lines, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links)
+    return _apply(plant, pairs, on_lines, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links,
+                  policy_said=said)  # fmt: skip
+
+
+def _policy_gate(judged: PolicyReport | None, overrides: Mapping[str, str] | None, options: LineOptions | None) -> dict[str, Any] | None:
+    """What the policy's `gate` lets through, for the journal's header (`PolicyRefused` otherwise); each advisory finding
+    and each override said."""
+    said = None if judged is None else judged.gate(overrides or {})
+    for finding, line in () if judged is None else judged.findings:
+        if finding.level == "advisory":
+            (options or LineOptions()).tell(line)
+    for overridden in (said or {}).get("overridden", ()):
+        (options or LineOptions()).tell(f"{overridden['finding']} — overridden by {overridden['user']}: {overridden['reason']}")
+    return said
 
 
 def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.FLOOR, options: LineOptions | None = None,
-            onto_current_lines: bool = False, reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
+            onto_current_lines: bool = False, reason: str | None = None, links: Mapping[str, Link] | None = None,
+            overrides: Mapping[str, str] | None = None, now: datetime | None = None) -> ApplyResult:  # fmt: skip
     """Plan and apply the modules back to what a snapshot holds, with the same gates as `apply` —
     onto the lines it was taken on: a bus of the plant file that now names another line (port or
     framing) is refused, unless `onto_current_lines`; and a snapshot that its journal does not
-    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused."""
+    show as written (`prc3cfg.shell.audit.snapshot_checked`) is refused. The plant's policy windows
+    are judged at `now` as `apply` judges them (`overrides`); no envelope judges a snapshot."""
     options = options or LineOptions()
     taken = Snapshot.load(snapshot)
     if (note := audit.snapshot_checked(snapshot, taken)) is not None:
@@ -160,20 +182,25 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
             raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which the plant file now puts at "
                             f"{bus.port} ({bus.framing}) — restoring there would write one line's modules onto another; nothing "
                             "was written: give --onto-current-lines if that is what you mean")  # fmt: skip
+    judged = policy(plant, [m.name for _, m in pairs], now)
+    said = _policy_gate(None if judged is None else judged.only("window"), overrides, options)
     wanted = Reads(pairs, what_to_read.in_full(to_plan(pairs, taken.images)))  # every program the snapshot holds
-    return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links)
+    return _apply(plant, pairs, pairs, lambda _: wanted, taken.images, None, gates, verify, options, reason=reason, links=links,
+                  policy_said=said)  # fmt: skip
 
 
 def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[OnRecord], Reads],
            desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None, gates: Gates, verify: Verify,
-           options: LineOptions, *, reason: str | None = None, links: Mapping[str, Link] | None = None) -> ApplyResult:  # fmt: skip
+           options: LineOptions, *, reason: str | None = None, links: Mapping[str, Link] | None = None,
+           policy_said: dict[str, Any] | None = None) -> ApplyResult:  # fmt: skip
     """Apply (or restore) `chosen`, reading the modules `on_lines`: what to read of them is worked out from the
-    lines' records as read under the lines' locks (`wanted_of`)."""
+    lines' records as read under the lines' locks (`wanted_of`); `policy_said` (what the policy found and what
+    was overridden) goes into the journal's header."""
     buses = {bus.name: bus for bus, _ in on_lines}
     command = "restore" if desired is not None else "apply"
     reason = _ready(plant, buses.values(), reason, command)
     said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
-                      argv=options.command_line)  # fmt: skip
+                      argv=options.command_line, policy=policy_said)  # fmt: skip
     journal = Journal(plant.path, said, audit.follow(plant.path))  # its file is made at the first record: not for a busy line
     records = releases.Releases(command, journal.path)
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once

@@ -14,32 +14,38 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
-from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions
+from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions, PolicyReport
 from prc3cfg.cli.common import TerminalProgress, ask, print_lines, to_the_terminal, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plan_file import write as plan_file
 from prc3cfg.core.plant_plan import PlantPlan
+from prc3cfg.core.text import markdown as markdown_text
 from prc3cfg.errors import UserError
 from prc3cfg.shell.platform import command_line
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str],
-              frames: bool = False) -> None:  # fmt: skip
+              frames: bool = False, policy: PolicyReport | None = None) -> None:  # fmt: skip
+    """The plan for people, as markdown or as JSON, and into `out`; with what the plant's `policy` found, in each."""
     faults = plan.faults  # a fault a write revealed, on the lines read (a plan of a file's images names none)
     document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
     if json_out and document is not None:  # streamed, 10,000 pieces a write: one string of 8 × 30 × 64 is 80 MB of pieces, one write a piece 2 s
         # the fault states a write revealed, kept in the records (the plan file leaves them out: apply --plan tells its own)
-        pieces = json.JSONEncoder(indent=1).iterencode(document | ({"faults": list(faults)} if faults else {}))
+        extra = ({"faults": list(faults)} if faults else {}) | ({"policy": policy.to_json()} if policy is not None else {})
+        pieces = json.JSONEncoder(indent=1).iterencode(document | extra)
         for text in iter(lambda: "".join(itertools.islice(pieces, 10_000)), ""):
             sys.stdout.write(text)
         print()
     elif markdown:
         full_plan = f"`{out.name}`" if out else "the plan file"
-        # the comment's last line end is its own, counted in the budget
-        print(render.markdown(plan, max_chars=max_chars, notes=notes, full_plan=full_plan, faults=faults, frames=frames), end="")
+        # the policy's findings first, never cut (a reviewer must see them); the comment's last line end is its own, counted in the budget
+        said = "" if policy is None else "\n".join(["#### Policy", "", *(f"- {markdown_text(line.strip())}" for line in policy.lines())]) + "\n\n"
+        print(said + render.markdown(plan, max_chars=max_chars - len(said), notes=notes, full_plan=full_plan, faults=faults, frames=frames), end="")
     else:
+        if policy is not None:
+            print_lines("\n".join(policy.lines()))
         print_lines(render.human(plan, notes=notes, faults=faults, frames=frames))  # the plan made now: its words are prc3cfg's, not a file's
         if out is not None:
             print(f"Plan written to {out}; apply it with: {command_line('prc3cfg', 'apply', '--plan', str(out))}")

@@ -25,6 +25,8 @@ from prc3cfg.cli.common import (
 from prc3cfg.core.line import EMULATOR_SCHEME
 
 EXIT_CHANGES = 2
+#: `plan`: a hard rule of the plant's policy refuses what the plan would write (docs/commands.md).
+EXIT_POLICY = 3
 
 PreviousOpt = Annotated[Path | None, typer.Option("--previous", metavar="PLANT", help=(
     "The plant file as it was (e.g. on the main branch), taken as what the modules hold: only what the change from it touches is "
@@ -104,11 +106,15 @@ def plan(
             raise ExitStatus(EXIT_CHANGES)
         return
     notes = [] if module else api.left_alone(loaded, previous)  # a bad --previous is said before the line is used
+    judged = api.policy(loaded, module)  # a bad policy file is said before the line is used
     with line_options(trace, retries, lock_timeout) as options:
         result = api.plan(loaded, module, images=images, options=options, previous=previous, full_read=full_read)
-    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes, frames=frames)
+    output.emit_plan(result, out=out, json_out=json_out, markdown=markdown, max_chars=max_chars, notes=notes, frames=frames,
+                     policy=judged)  # fmt: skip
     if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
+    if judged is not None and any(f.kind == "envelope" and f.level == "hard" for f, _ in judged.findings):
+        raise ExitStatus(EXIT_POLICY)  # windows judge the moment of an apply, not a plan
     if detailed_exitcode and result.changes:
         raise ExitStatus(EXIT_CHANGES)
 
@@ -130,6 +136,10 @@ AxesOpt = Annotated[bool, typer.Option("--allow-axis-release", help="Allow steps
 EventsOpt = Annotated[bool, typer.Option("--json", help=(
     "Print events, one JSON object a line as they happen (prc3cfg-event/1: plan, question, progress, module, travel, account); "
     "needs --auto-approve (or --plan FILE): no question is asked."))]
+OverrideWindowOpt = Annotated[str | None, typer.Option("--override-window", metavar="REASON", help=(
+    "Apply though a soft window of the plant's policy refuses now; the reason and who gave it go into the journal."))]
+OverrideEnvelopeOpt = Annotated[str | None, typer.Option("--override-envelope", metavar="REASON", help=(
+    "Apply though a soft envelope of the plant's policy refuses; the reason and who gave it go into the journal."))]
 VerifyOpt = Annotated[VerifyChoice, typer.Option(metavar="floor|full", help="floor: read back what the steps could have changed; full: the system and every program read before.")]
 
 
@@ -150,6 +160,8 @@ def apply(
     reason: ReasonOpt = None,
     frames: FramesOpt = False,
     json_out: EventsOpt = False,
+    override_window: OverrideWindowOpt = None,
+    override_envelope: OverrideEnvelopeOpt = None,
 ) -> None:
     """Plan and apply the plant file (or apply a plan file), then verify by reading back."""
     from prc3cfg import api
@@ -166,6 +178,7 @@ def apply(
     _answered(ctx, json_out, auto_approve or plan_file is not None, "or apply a reviewed plan file with --plan FILE")
     check_output(trace, "--trace", plant=plant)
     verified = api.Verify(verify.value)
+    overrides = _overrides(ctx, override_window, override_envelope)
     if json_out:
         from prc3cfg.cli import stream
 
@@ -174,14 +187,24 @@ def apply(
             loaded = api.load(plant)
             with line_options(trace, retries, lock_timeout, stream.EventProgress(events)) as options:
                 finished.append(api.apply(loaded, module, plan_file=plan_file, gates=stream.gates(events, plan_file, auto_approve, allow_axis_release),
-                                          verify=verified, options=options, previous=previous, full_read=full_read, reason=reason))  # fmt: skip
+                                          verify=verified, options=options, previous=previous, full_read=full_read, reason=reason,
+                                          overrides=overrides))  # fmt: skip
         return
     loaded = api.load(plant)
     output.targeting(module)
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.apply(loaded, module, plan_file=plan_file, gates=output.gates(plan_file, auto_approve, allow_axis_release, options, frames),
-                           verify=verified, options=options, previous=previous, full_read=full_read, reason=reason)  # fmt: skip
+                           verify=verified, options=options, previous=previous, full_read=full_read, reason=reason,
+                           overrides=overrides)  # fmt: skip
     output.applied(result, emulated=all(bus.port.startswith(EMULATOR_SCHEME) for bus in loaded.buses))
+
+
+def _overrides(ctx: typer.Context, window: str | None, envelope: str | None) -> dict[str, str]:
+    """The policy's overrides by kind (`api.apply`'s `overrides`); refused in one line without a reason."""
+    overrides = {kind: why for kind, why in (("window", window), ("envelope", envelope)) if why is not None}
+    if any(not why.strip() for why in overrides.values()):
+        raise click_errors.UsageError("an override needs a reason: --override-window/--override-envelope REASON", ctx=ctx)
+    return overrides
 
 
 def _answered(ctx: typer.Context, json_out: bool, auto_approve: bool, instead: str) -> None:
@@ -205,12 +228,14 @@ def restore(
     reason: ReasonOpt = None,
     frames: FramesOpt = False,
     json_out: EventsOpt = False,
+    override_window: OverrideWindowOpt = None,
 ) -> None:
     """Plan and apply the modules back to a snapshot an apply took, with the same gates."""
     from prc3cfg import api
     from prc3cfg.cli import output
 
     _answered(ctx, json_out, auto_approve, "a snapshot is restored as planned now: nothing reviewed it")
+    overrides = _overrides(ctx, override_window, None)
     if json_out:
         from prc3cfg.cli import stream
 
@@ -218,9 +243,9 @@ def restore(
         with stream.accounted(events) as finished, line_options(trace, retries, lock_timeout, stream.EventProgress(events)) as options:
             finished.append(api.restore(snapshot, gates=stream.gates(events, None, auto_approve, allow_axis_release),
                                         verify=api.Verify(verify.value), options=options, onto_current_lines=onto_current_lines,
-                                        reason=reason))  # fmt: skip
+                                        reason=reason, overrides=overrides))  # fmt: skip
         return
     with line_options(trace, retries, lock_timeout) as options, output.accounted():
         result = api.restore(snapshot, gates=output.gates(None, auto_approve, allow_axis_release, options, frames), verify=api.Verify(verify.value),
-                             options=options, onto_current_lines=onto_current_lines, reason=reason)  # fmt: skip
+                             options=options, onto_current_lines=onto_current_lines, reason=reason, overrides=overrides)  # fmt: skip
     output.applied(result, "restore")

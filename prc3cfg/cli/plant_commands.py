@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import enum
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -30,6 +31,7 @@ if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
     from rich.console import Console
     from rich.table import Table
 
+    from prc3cfg.api import PolicyReport
     from prc3cfg.core import render
     from prc3cfg.plant import Module, Plant
     from prc3cfg.plant.problems import Finding
@@ -65,30 +67,52 @@ def validate(
     if json_out:
         fmt = Format.JSON
 
+    file = plant
     try:
         loaded = api.load(plant)
+        file = loaded.policy_path or plant
+        judged = api.policy(loaded)  # the policy file's problems, then what its envelopes find (windows judge an apply's moment)
     except PlantError as error:
         if fmt is Format.TEXT:
             raise  # one `error:` line per problem, as every error
-        findings = error.findings(str(plant))
+        findings = error.findings(str(file))
         if fmt is Format.JSON:
             print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in findings], indent=1))
         else:
             print("\n".join(github_annotation(f) for f in findings))
         raise typer.Exit(1) from None
+    if _envelopes_refuse(None if judged is None else judged.only("envelope"), fmt):
+        raise typer.Exit(1)
     if fmt is Format.JSON:
-        print("[]")
         return
     modules = len(loaded.modules())
     print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, {_count(modules, 'module', 'modules')})")
 
 
-def github_annotation(finding: Finding) -> str:
-    """A problem as GitHub's `::error` workflow command, escaped as its rules want (`prc3cfg.core.text`)."""
+def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
+    """Say what the policy's envelopes found, in `fmt`; whether a hard one refuses the plant file. JSON lists the hard
+    ones only: they are its problems (`[]`, valid, as before); the others are warnings (stderr, `::warning`)."""
+    import json
+
+    found = [] if judged is None else judged.placed
+    hard = [at for f, at in found if f.level == "hard"]
+    if fmt is Format.JSON:
+        print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in hard], indent=1))
+    elif fmt is Format.GITHUB:
+        for f, at in found:
+            print(github_annotation(at, "error" if f.level == "hard" else "warning"))
+    else:
+        for f, line in () if judged is None else judged.findings:
+            print(f"{'error' if f.level == 'hard' else 'warning'}: {line}", file=sys.stderr)
+    return bool(hard)
+
+
+def github_annotation(finding: Finding, kind: str = "error") -> str:
+    """A problem as GitHub's `::error` (or `::warning`) workflow command, escaped as its rules want (`prc3cfg.core.text`)."""
     from prc3cfg.core.text import github_data, github_property
 
     place = "" if finding.line is None else f",line={finding.line},col={finding.column}"
-    return f"::error file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}"
+    return f"::{kind} file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}"
 
 
 @app.command()

@@ -74,6 +74,7 @@ def parse_plant(path: str | Path, data: bytes, *, pseudo_terminal: Callable[[str
                     for line, modules in buses),
         path=path,
         sha256=document.sha256,
+        policy=document.data.get("policy"),
     )
 
 

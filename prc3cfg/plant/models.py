@@ -328,8 +328,7 @@ class ChainSpec(FileModel):
     Written as a list of program numbers or as `{programs: [...], loop: true}`.
     """
 
-    programs: tuple[ProgramNumber, ...] = Field(min_length=1, description="program numbers in the order they run",
-                                                examples=[[1, 2]])
+    programs: tuple[ProgramNumber, ...] = Field(min_length=1, description="program numbers in the order they run", examples=[[1, 2]])
     loop: Annotated[bool, Field(strict=True, description="true: the last program jumps back to the first")] = False
 
     @model_validator(mode="before")
@@ -461,6 +460,7 @@ class PlantSpec(FileModel):
     plant: Name = Field(description="the plant's name", examples=["paint-shop"])
     profiles: Omittable[dict[Name, ProfileSpec]] = Field(None, description="named settings that modules use and override")
     buses: tuple[BusSpec, ...] = Field(min_length=1, description="the RS-422 lines, each with its modules")
+    policy: Omittable[Text] = Field(None, description="the policy file (docs/policy.md), relative to this one", examples=["line-rules.yaml"])
 
 
 class Draft07(GenerateJsonSchema):

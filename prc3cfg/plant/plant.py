@@ -97,7 +97,7 @@ class Bus(BusLine):
 
 
 class Plant(BaseModel):
-    """A plant file, loaded: its name, its buses, the file and the SHA-256 of its bytes."""
+    """A plant file, loaded: its name, its buses, the file, the SHA-256 of its bytes and the policy file it names."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
@@ -105,6 +105,12 @@ class Plant(BaseModel):
     buses: tuple[Bus, ...]
     path: Path
     sha256: str
+    policy: str | None = None  # the policy file the plant file names, relative to it (docs/policy.md)
+
+    @property
+    def policy_path(self) -> Path | None:
+        """The policy file this plant file names, as a path (relative to the plant file's folder as given)."""
+        return None if self.policy is None else self.path.parent / self.policy
 
     def modules(self) -> tuple[tuple[Bus, Module], ...]:
         """Every module of the plant with its bus, in file order."""

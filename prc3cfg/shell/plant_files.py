@@ -10,6 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from prc3cfg.plant import Plant, PlantError, parse_plant
+from prc3cfg.plant.document import Document, parse_document
+from prc3cfg.plant.policy import LoadedPolicy, parse_policy
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, Why, read_regular
 
@@ -41,3 +43,21 @@ def plant_bytes(path: str | Path) -> bytes:
         return read_regular(Path(path), MAX_BYTES)
     except FileProblem as problem:
         raise PlantError([f"{path}: {problem} — {_REMEDIES[problem.why]}"]) from None
+
+
+def load_policy(plant: Plant) -> LoadedPolicy | None:
+    """The policy file `plant` names (relative to the plant file), None when it names none; `PlantError` with its
+    problems, or saying it cannot be read — a plant file that names a policy is never used without it."""
+    path = plant.policy_path
+    if path is None:
+        return None
+    try:
+        data = read_regular(path, MAX_BYTES)
+    except FileProblem as problem:
+        raise PlantError([f"{path}: {problem} (the policy file {plant.path} names) — {_REMEDIES[problem.why]}"]) from None
+    return parse_policy(path, data)
+
+
+def plant_document(plant: Plant) -> Document:
+    """The plant file read again as a document, to place what a policy found in it."""
+    return parse_document(str(plant.path), plant_bytes(plant.path))

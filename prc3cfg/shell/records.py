@@ -128,10 +128,10 @@ def git_state(plant_path: Path) -> dict[str, Any]:
 
 
 def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *, reason: str | None,
-           plan_file: Path | None = None, argv: Sequence[str] | None = None) -> dict[str, Any]:  # fmt: skip
+           plan_file: Path | None = None, argv: Sequence[str] | None = None, policy: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
     """Who runs `command` on the plant file, where, with what and why — the first record of a
     journal and the `header` of its snapshot (`Journal` adds the journal's name and its link to the
-    plant's journal before)."""
+    plant's journal before); `policy`: what the policy file the plant file names found and what was overridden, or None."""
     plan = None
     if plan_file is not None:
         try:
@@ -149,6 +149,7 @@ def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *
         "plant": {"name": plant_name, "path": str(resolved(plant_path)), "sha256": plant_sha256, "git": git_state(plant_path)},
         "plan_file": plan,
         "reason": reason_given(reason),
+        "policy": policy,
     }
 
 
