@@ -12,6 +12,7 @@ JavaScript's `JSON.stringify` and jq 1.6 write as 0. The proof is the API's (`_a
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import hashlib
 import json
@@ -26,7 +27,7 @@ from typing import Any
 
 import pytest
 from emulated import emulated_plant, run_cli
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from tools import require
 
@@ -467,15 +468,28 @@ def mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, An
     return copied, "".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip(".")
 
 
-def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: st.DataObject) -> None:
-    document, where = mutated(data, targeted.document)
-    path = targeted.plan.with_name("mutated.json")
-    path.write_text(as_text(document))
+@contextlib.contextmanager
+def as_found(targeted: Targeted) -> Iterator[dict[tuple[str, int], ModuleImage]]:
+    """The modules' images now; then the modules and the line's record put back as the plan found them, for
+    the next example."""
     before, state = targeted.emulated.images(), targeted.plan.parent / "state"
     kept = targeted.plan.parent / "state-before"
     shutil.rmtree(kept, ignore_errors=True)
     shutil.copytree(state, kept)
     try:
+        yield before
+    finally:
+        for (bus, address), image in before.items():
+            targeted.emulated.emulators[bus].update(address, image=image)
+        shutil.rmtree(state)
+        shutil.copytree(kept, state)
+
+
+def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: st.DataObject) -> None:
+    document, where = mutated(data, targeted.document)
+    path = targeted.plan.with_name("mutated.json")
+    path.write_text(as_text(document))
+    with as_found(targeted) as before:
         for args in (["show", path], ["show", path, "--markdown"],
                      ["apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release"]):  # fmt: skip
             done = run_cli(capsys, *args)
@@ -483,11 +497,6 @@ def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: s
             assert done.code == 0 or len(done.problems) == 1, (where, args, done.err)
         if targeted.emulated.images() != before:  # written: only where the file's words changed
             assert where.startswith(WORDS) and targeted.emulated.matches_plant(), where
-    finally:  # the modules and the line's record as the plan found them, for the next example
-        for (bus, address), image in before.items():
-            targeted.emulated.emulators[bus].update(address, image=image)
-        shutil.rmtree(state)
-        shutil.copytree(kept, state)
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -683,6 +692,7 @@ def review_mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[
 
 def review_verdicts(made: Made, tmp_path: Path, data: st.DataObject) -> None:
     document, verdict = review_mutated(data, json.loads(made.text))
+    event(verdict)
     refused = refusal(made, tmp_path, document)
     assert (refused is None) == (verdict == "proved"), (verdict, refused)
 
@@ -694,7 +704,26 @@ def test_a_plan_file_s_review_steps_or_figures_mutated_get_their_verdicts(made, 
 
 
 @pytest.mark.soak
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])  # 40 ms each: 16 s
 @given(data=st.data())
 def test_many_plan_files_with_review_steps_or_figures_mutated_get_their_verdicts(made, tmp_path, data):
     review_verdicts(made, tmp_path, data)
+
+
+@pytest.mark.soak
+@settings(max_examples=16, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_process_of_their_own_as_their_verdicts_say(targeted, data):
+    """`prc3cfg apply --plan` in a process of its own, on the emulators: a review worded otherwise with its digest
+    made again writes the plan; an edited review, step or figure writes nothing and says why in one line."""
+    document, verdict = review_mutated(data, targeted.document)
+    event(verdict)
+    path = written(targeted, document, "mutated.json")
+    with as_found(targeted) as before:
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(targeted.emulated.path), "--plan", str(path), "--auto-approve",
+                               "--allow-axis-release"], capture_output=True, text=True, timeout=300)  # fmt: skip
+        problems = [line for line in done.stderr.splitlines() if not line.startswith("note: ")]
+        if verdict == "proved":
+            assert done.returncode == 0 and targeted.emulated.matches_plant(), done.stderr
+        else:
+            assert done.returncode == 1 and len(problems) == 1 and targeted.emulated.images() == before, done.stderr
