@@ -216,6 +216,12 @@ def test_a_plan_file_s_version_text_is_refused_escaped_on_one_line(made, tmp_pat
                                                       f"{json.loads(made.text)['prc3cfg_version']} — plan again with this version")
 
 
+def test_a_bus_the_plant_file_does_not_have_is_refused_escaped_on_one_line(made, tmp_path):
+    """The soak tier's example: a bus renamed "\\n" split the refusal that named it."""
+    document = changed(json.loads(made.text), ("buses", 0, "name"), "\n\x1b[2J")
+    assert "bus \\n\\x1b[2J, module 1 is not among the modules to apply" in refusal(made, tmp_path, document)
+
+
 def other(value: Any) -> Any:
     """Another value of the kind of `value` (a null becomes a text)."""
     return {bool: lambda: not value, int: lambda: value + 1, float: lambda: value + 0.001, str: lambda: value + "0"}.get(type(value), lambda: "")()

@@ -434,12 +434,12 @@ class PlanFile:
         return self.read is not None
 
 
-def read(data: Any, *, shown: bool = False) -> PlanFile:
+def read(data: Any, *, for_show: bool = False) -> PlanFile:
     """A parsed plan file; raises PlanFileError.
 
     Refused here, before the line is touched: a file beyond any plan file prc3cfg writes
     (`within_bounds`), a damaged file — a key missing, a value of another kind (`PlanDocument`;
-    with `shown`, all that `show` shows, `ShownPlanDocument`) — a base other than `RECORD`, a
+    with `for_show`, all that `show` shows, `ShownPlanDocument`) — a base other than `RECORD`, a
     module listed twice, more steps than any plan needs (`MAX_STEPS`), a message that is not
     in the bytes prc3cfg sends for it (a "don't care" byte changed), and `releases_axes` flags
     that are not what the steps' bytes say.
@@ -448,7 +448,7 @@ def read(data: Any, *, shown: bool = False) -> PlanFile:
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
     try:
-        contract = ShownPlanDocument if shown else PlanDocument
+        contract = ShownPlanDocument if for_show else PlanDocument
         document = contract.model_validate(data)
     except ValidationError as error:
         raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'), contract)} — {AGAIN}") from None
@@ -465,7 +465,7 @@ def read(data: Any, *, shown: bool = False) -> PlanFile:
                 raise PlanFileError(f"damaged plan file: buses[{b}].modules[{m}] {'lacks' if targeted else 'has'} the \"read\" "
                                     f"of a plan made from a {'targeted' if targeted else 'full'} read-back — {AGAIN}")  # fmt: skip
             if (entry.bus, entry.address) in seen:
-                raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
+                raise PlanFileError(f"bus {shown(entry.bus)}, module {entry.address} is listed twice — {AGAIN}")
             seen.add((entry.bus, entry.address))
             modules.append(entry)
         if isinstance(bus, _ShownBus):
@@ -518,7 +518,7 @@ def _place(at: tuple[Any, ...]) -> str:
 
 def _planned_module(bus: str, module: _ModuleEntry, at: str) -> PlannedModule:
     """A module's entry, at `at` ("buses[0].modules[2]")."""
-    where = f"bus {bus}, module {module.address}"
+    where = f"bus {shown(bus)}, module {module.address}"
     if len(module.steps) > MAX_STEPS:
         raise PlanFileError(f"{where}: {len(module.steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
     messages, flags = [], []
@@ -568,10 +568,10 @@ def same_text(data: bytes) -> frozenset[str]:
     return frozenset(hashlib.sha256(form).hexdigest() for form in (text, text.replace(b"\n", b"\r\n")))
 
 
-def checked(document: Any, path: Path, *, shown: bool = False) -> PlanFile:
+def checked(document: Any, path: Path, *, for_show: bool = False) -> PlanFile:
     """The plan file at `path` (as parsed), `read`; a `UserError` of one line naming `path` otherwise."""
     try:
-        return read(document, shown=shown)
+        return read(document, for_show=for_show)
     except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
 
@@ -600,7 +600,7 @@ def to_show(document: Any, path: Path) -> dict[str, Any]:
     one line), each module's `review` said (`Review`: whether its review text is the one its digest was
     written for — `show` marks any other as the file's words), and every step's summary worked out again
     from its bytes — what is shown is what would be sent."""
-    plan_file = checked(document, path, shown=True)
+    plan_file = checked(document, path, for_show=True)
     entries = iter(plan_file.modules)  # in the file's order
     for bus in plan_file.document["buses"]:
         for module, entry in zip(bus["modules"], entries):
@@ -630,7 +630,7 @@ def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images
     plant file's order) or is called otherwise, when a module changed since the plan was made
     (`StalePlan`), and when the modules are not listed in the plant file's order."""
     for entry in plan_file.modules:
-        where = f"bus {entry.bus}, module {entry.address}"
+        where = f"bus {shown(entry.bus)}, module {entry.address}"  # a name the plant may not have: escaped
         if (entry.bus, entry.address) not in names:
             raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
         name = names[(entry.bus, entry.address)]
