@@ -177,12 +177,12 @@ TAMPERING = {
     "an address 2.7": (lambda d: module_entry(d, "booth-a", 2).update(address=2.7), "buses[0].modules[1].address is 2.7, where a whole number"),
     "another prc3cfg version": (lambda d: d.update(prc3cfg_version="0.0.9"), "made by prc3cfg 0.0.9"),
     "a summary reworded": (lambda d: module_entry(d, "booth-a", 2)["steps"][0].update(summary="write nothing"),
-                           "buses[0].modules[1].steps[0].summary is not what prc3cfg wrote for this plan"),
+                           "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest of the review text"),
     "the axis warning removed": (lambda d: module_entry(d, "booth-a", 2)["changes"].update(warning=None),
-                                 "buses[0].modules[1].changes.warning is not what prc3cfg wrote"),
+                                 "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest"),
     "a field's value in the review": (lambda d: module_entry(d, "booth-a", 2)["changes"]["fields"][0].update(after=1),
-                                      "buses[0].modules[1].changes.fields[0].after is not what"),
-    "notes that are no text": (lambda d: d.update(left_alone=[{"step": 1}]), ": left_alone is not what"),
+                                      "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest"),
+    "notes that are no text": (lambda d: d.update(left_alone=[{"step": 1}]), "damaged plan file: left_alone[0] is an object, where text belongs"),
 }
 
 

@@ -22,6 +22,7 @@ from prc3cfg.core import codec, device, sharing
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters, Wanted, default_program
 from prc3cfg.core.line import LineSettings
+from prc3cfg.core.plan_file import review_sha256
 from prc3cfg.core.planner import plan_module
 from prc3cfg.core.plant_plan import LineProof, PlantPlan
 from prc3cfg.core.plant_planner import Line, Planner
@@ -388,5 +389,32 @@ def test_a_plan_file_with_broadcasts_is_applied_as_made_and_refused_when_edited(
         refused = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve", "--allow-axis-release")
         assert refused.code == 1 and "bus line, module 5 (m5): 0 of its steps are marked broadcast, where the plan has" in refused.err
         applied = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve", "--allow-axis-release")
+        assert applied.code == 0, applied.err
+        assert plant.matches_plant()
+
+
+def test_a_broadcast_is_said_in_the_words_its_modules_steps_say_it(tmp_path, capsys):
+    """A broadcast's summary is review text: the words the first module receiving it says it in (held to that
+    module's digest), never prc3cfg's words of today — reworded everywhere with the digests made again, the plan
+    applies; reworded at the bus alone, it is refused naming the place."""
+    with emulated_plant(tmp_path, source=full_line(tmp_path)) as plant:
+        made = tmp_path / "plan.json"
+        assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
+        document = json.loads(made.read_text())
+        bus = document["buses"][0]
+        alone = tmp_path / "alone.json"
+        alone.write_text(json.dumps({**document, "buses": [{**bus, "broadcasts": [{**bus["broadcasts"][0], "summary": "send the system block"},
+                                                                                  *bus["broadcasts"][1:]]}]}))  # fmt: skip
+        refused = run_cli(capsys, "apply", plant.path, "--plan", alone, "--auto-approve", "--allow-axis-release")
+        assert refused.code == 1 and "buses[0].broadcasts[0].summary is not what prc3cfg wrote" in refused.err, refused.err
+        for broadcast in bus["broadcasts"]:
+            broadcast["summary"] = "send " + broadcast["summary"]
+        for module in bus["modules"]:
+            for step in module["steps"]:
+                step["summary"] = "send " + step["summary"]
+            module["review_sha256"] = review_sha256(module)
+        reworded = tmp_path / "reworded.json"
+        reworded.write_text(json.dumps(document))
+        applied = run_cli(capsys, "apply", plant.path, "--plan", reworded, "--auto-approve", "--allow-axis-release")
         assert applied.code == 0, applied.err
         assert plant.matches_plant()

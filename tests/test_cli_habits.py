@@ -14,6 +14,8 @@ import sys
 import yaml
 from emulated import DEMO, run_cli
 
+from prc3cfg.core import render
+
 
 def edit(plant, change) -> None:
     document = yaml.safe_load(plant.path.read_text())
@@ -130,11 +132,14 @@ def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsy
     made = tmp_path / "plan.json"
     planned = run_cli(capsys, "plan", plant.path, "--out", made)
     shown = run_cli(capsys, "show", made)
-    assert shown.code == 0 and shown.out == planned.out.replace(f"Plan written to {made}; apply it with: prc3cfg apply --plan {made}\n", "")
+    assert shown.code == 0 and f"\n{render.REVIEW_AS_WRITTEN}\n" in shown.out  # what show adds: the review is the text of its digests
+    written = f"Plan written to {made}; apply it with: prc3cfg apply --plan {made}\n"
+    assert shown.out.replace(f"{render.REVIEW_AS_WRITTEN}\n", "") == planned.out.replace(written, "")
     document = json.loads(made.read_text())
     document["buses"][0]["modules"][0]["steps"][1]["summary"] = "harmless, look away"  # a lie beside the bytes
     made.write_text(json.dumps(document))
-    assert "harmless, look away" not in run_cli(capsys, "show", made).out
+    lied = run_cli(capsys, "show", made).out
+    assert "harmless, look away" not in lied and "booth-a/booth-a-left was changed after the plan was made" in lied
     markdown = run_cli(capsys, "show", made, "--markdown")
     assert markdown.out.startswith("<!-- prc3cfg-plan -->") and "`plan.json`" not in markdown.out
     document["buses"][0]["modules"][0]["steps"][0]["releases_axes"] = False

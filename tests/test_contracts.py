@@ -1,8 +1,9 @@
 """The JSON files prc3cfg writes are read back as they were written, and written again byte for
 byte: a plan file made by the code before its contracts were pydantic models
 (`contracts/plan.json`, from `contracts/plant.yaml` at factory defaults, its version and plant path
-left as VERSION and PLANT_PATH) is read and shown, and `plan-evidence.json`, its one addition, is the
-file written now and is proved; module
+left as VERSION and PLANT_PATH) is read and shown, as is `plan-evidence.json`, its one addition (the
+evidence), made before the review had a digest; `plan-review.json`, that file with each module's
+`review_sha256` added, is the file written now and is proved; module
 images, snapshots and emulator state files read and written again are the same bytes."""
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ def factory_images(plant: Path, out: Path) -> Path:
 
 def made_before(plant: Path, name: str = "plan.json") -> str:
     """The plan file the code before wrote for `plant` at factory defaults, as if made there by this version:
-    `plan.json` before plans named their evidence (issue 41), `plan-evidence.json` since — its one addition."""
+    `plan.json` before plans named their evidence (issue 41), `plan-evidence.json` since — its one addition —
+    and `plan-review.json` since the review had its digest (issue 43)."""
     text = (CONTRACTS / name).read_text()
     return text.replace('"VERSION"', json.dumps(__version__)).replace('"PLANT_PATH"', json.dumps(str(plant.resolve())))
 
@@ -50,13 +52,14 @@ def test_a_plan_file_is_written_byte_for_byte_as_before(tmp_path, capsys):
     plant = plant_here(tmp_path)
     out = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant, "--actual", factory_images(plant, tmp_path / "images.json"), "--out", out).code == 0
-    assert out.read_text() == made_before(plant, "plan-evidence.json")
+    assert out.read_text() == made_before(plant, "plan-review.json")
 
 
 def test_a_plan_file_written_before_is_read_and_shown_and_apply_asks_for_a_plan_that_names_its_evidence(tmp_path, capsys):
     """A plan file from before plans named their evidence (issue 41) is shown as it was; `apply --plan` proves
     every step of it, then refuses it in one line: it does not say what its plan rests on, and a current plan
-    file with its `evidence` cut out would look the same."""
+    file with its `evidence` cut out would look the same. One from before its review had a digest is shown,
+    saying so, and refused as made by an older prc3cfg; one written now is proved."""
     plant = plant_here(tmp_path)
     path = tmp_path / "before.json"
     path.write_text(made_before(plant))
@@ -68,6 +71,11 @@ def test_a_plan_file_written_before_is_read_and_shown_and_apply_asks_for_a_plan_
     with pytest.raises(UserError, match=r'before\.json: it does not say what its plan rests on \(no "evidence"\).*nothing was written'):
         prove(path, read_plan(path, loaded), loaded, pairs, images, as_it_stands(loaded, loaded.buses))
     path.write_text(made_before(plant, "plan-evidence.json"))
+    shown = run_cli(capsys, "show", path)
+    assert shown.code == 0 and "no review digest (made by an older prc3cfg)" in shown.out
+    with pytest.raises(UserError, match=r"before\.json: made by an older prc3cfg — its review text has no digest.*plan again$"):
+        prove(path, read_plan(path, loaded), loaded, pairs, images, as_it_stands(loaded, loaded.buses))
+    path.write_text(made_before(plant, "plan-review.json"))
     proved = prove(path, read_plan(path, loaded), loaded, pairs, images, as_it_stands(loaded, loaded.buses))
     assert proved.message_count == 26 and len(proved.changes) == 6
 

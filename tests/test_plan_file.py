@@ -12,7 +12,9 @@ JavaScript's `JSON.stringify` and jq 1.6 write as 0. The proof is the API's (`_a
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import hashlib
 import json
 import shutil
 import subprocess
@@ -25,7 +27,7 @@ from typing import Any
 
 import pytest
 from emulated import emulated_plant, run_cli
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from tools import require
 
@@ -212,6 +214,12 @@ def test_a_plan_file_s_version_text_is_refused_escaped_on_one_line(made, tmp_pat
     document = changed(json.loads(made.text), ("prc3cfg_version",), "9.9\n\x1b[2J error: forged")
     assert refusal(made, tmp_path, document).endswith("made by prc3cfg 9.9\\n\\x1b[2J error: forged, this is "
                                                       f"{json.loads(made.text)['prc3cfg_version']} — plan again with this version")
+
+
+def test_a_bus_the_plant_file_does_not_have_is_refused_escaped_on_one_line(made, tmp_path):
+    """The soak tier's example: a bus renamed "\\n" split the refusal that named it."""
+    document = changed(json.loads(made.text), ("buses", 0, "name"), "\n\x1b[2J")
+    assert "bus \\n\\x1b[2J, module 1 is not among the modules to apply" in refusal(made, tmp_path, document)
 
 
 def other(value: Any) -> Any:
@@ -466,15 +474,28 @@ def mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, An
     return copied, "".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip(".")
 
 
-def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: st.DataObject) -> None:
-    document, where = mutated(data, targeted.document)
-    path = targeted.plan.with_name("mutated.json")
-    path.write_text(as_text(document))
+@contextlib.contextmanager
+def as_found(targeted: Targeted) -> Iterator[dict[tuple[str, int], ModuleImage]]:
+    """The modules' images now; then the modules and the line's record put back as the plan found them, for
+    the next example."""
     before, state = targeted.emulated.images(), targeted.plan.parent / "state"
     kept = targeted.plan.parent / "state-before"
     shutil.rmtree(kept, ignore_errors=True)
     shutil.copytree(state, kept)
     try:
+        yield before
+    finally:
+        for (bus, address), image in before.items():
+            targeted.emulated.emulators[bus].update(address, image=image)
+        shutil.rmtree(state)
+        shutil.copytree(kept, state)
+
+
+def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: st.DataObject) -> None:
+    document, where = mutated(data, targeted.document)
+    path = targeted.plan.with_name("mutated.json")
+    path.write_text(as_text(document))
+    with as_found(targeted) as before:
         for args in (["show", path], ["show", path, "--markdown"],
                      ["apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release"]):  # fmt: skip
             done = run_cli(capsys, *args)
@@ -482,11 +503,6 @@ def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: s
             assert done.code == 0 or len(done.problems) == 1, (where, args, done.err)
         if targeted.emulated.images() != before:  # written: only where the file's words changed
             assert where.startswith(WORDS) and targeted.emulated.matches_plant(), where
-    finally:  # the modules and the line's record as the plan found them, for the next example
-        for (bus, address), image in before.items():
-            targeted.emulated.emulators[bus].update(address, image=image)
-        shutil.rmtree(state)
-        shutil.copytree(kept, state)
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
@@ -503,3 +519,217 @@ def test_a_mutated_plan_file_is_shown_escaped_and_writes_only_where_its_words_ch
 @given(data=st.data())
 def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_words_changed(targeted, capsys, data):
     shown_and_applied(targeted, capsys, data)
+
+
+# -- the review: the file's words, said with a digest; the steps and figures proved -------------------------
+#
+# What a plan file holds for people to read beside a module's steps — its `changes`, its `warning` and its
+# steps' `summary` — is the file's claim about itself, written with the SHA-256 of that text
+# (`review_sha256`, docs/files.md: worked out here as the docs say, not by prc3cfg's function). `apply --plan`
+# proves the steps and figures against the plan it makes now, and of the words only that they are the text
+# their digest was written for: a plan file worded by an earlier prc3cfg applies; words edited after the
+# plan was made are refused, naming where, and `show` says so.
+
+#: How an earlier prc3cfg might have worded the review: each replacement one sentence of it.
+EARLIER_WORDS = {" → ": " to ", "releases the axes: travel to reference point required after apply": "releases the axes — a "
+                 "reference travel is needed after the apply", "write ": "send "}  # fmt: skip
+
+
+def review_digest(module: dict[str, Any]) -> str:
+    """A module's `review_sha256` as docs/files.md defines it."""
+    review = {"changes": module["changes"], "warning": module["warning"], "summaries": [step["summary"] for step in module["steps"]]}
+    return hashlib.sha256(json.dumps(review, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def reworded(value: Any) -> Any:
+    """`value` with every text worded as `EARLIER_WORDS` has it."""
+    if isinstance(value, str):
+        for now, then in EARLIER_WORDS.items():
+            value = value.replace(now, then)
+        return value
+    if isinstance(value, list):
+        return [reworded(item) for item in value]
+    return {key: reworded(item) for key, item in value.items()} if isinstance(value, dict) else value
+
+
+def as_worded_earlier(document: dict[str, Any]) -> dict[str, Any]:
+    """`document` as an earlier prc3cfg would have written it: each module's review worded otherwise, its
+    digest that of the text as written — the steps, figures and names the same."""
+    copied = copy.deepcopy(document)
+    for bus in copied["buses"]:
+        for module in bus["modules"]:
+            module["changes"], module["warning"] = reworded(module["changes"]), reworded(module["warning"])
+            for step in module["steps"]:
+                step["summary"] = reworded(step["summary"])
+            module["review_sha256"] = review_digest(module)
+        for broadcast in bus.get("broadcasts", []):
+            broadcast["summary"] = reworded(broadcast["summary"])
+    return copied
+
+
+def modules_of(document: dict[str, Any]) -> list[tuple[tuple, dict[str, Any]]]:
+    """Each module of `document`, with its place."""
+    return [(("buses", b, "modules", m), module) for b, bus in enumerate(document["buses"]) for m, module in enumerate(bus["modules"])]
+
+
+def test_a_plan_file_worded_by_an_earlier_prc3cfg_is_proved(made, tmp_path):
+    """The review words prc3cfg renders now are not those of the file: the steps and figures are the plan's, and
+    the words the text their digest was written for — proved (it was refused: "… is not what prc3cfg wrote")."""
+    document = json.loads(made.text)
+    assert all(module["review_sha256"] == review_digest(module) for _, module in modules_of(document))  # as the docs say
+    earlier = as_worded_earlier(document)
+    assert earlier != document and any(" to " in json.dumps(module["changes"]) for _, module in modules_of(earlier))
+    assert any(module["warning"] and "reference travel" in module["warning"] for _, module in modules_of(earlier))
+    assert refusal(made, tmp_path, earlier) is None
+
+
+def test_an_edited_review_or_a_digest_another_is_refused_naming_where(made, tmp_path):
+    """One text of a module's review changed and its digest left as written, or the digest alone changed:
+    refused in one line naming that module's `review_sha256` by its path."""
+    document = json.loads(made.text)
+    place = next(p for p, m in modules_of(document) if m["changes"]["fields"])
+    named = f"buses[{place[1]}].modules[{place[3]}].review_sha256"
+    for edited in (changed(document, (*place, "changes", "fields", 0, "text"), "speed 0.050 m/s → 0.050 m/s (unchanged)"),
+                   changed(document, (*place, "steps", 0, "summary"), "read the module's name (no change)"),
+                   changed(document, (*place, "review_sha256"), "0" * 64)):  # fmt: skip
+        refused = refusal(made, tmp_path, edited)
+        assert refused is not None and named in refused and "changed after the plan was made" in refused, refused
+
+
+@pytest.mark.parametrize("edit", ["a step left out", "a step's message", "a figure", "a name"])
+def test_an_edited_step_or_figure_is_refused_though_its_review_digest_was_made_again(made, tmp_path, edit):
+    document = json.loads(made.text)
+    place = next(p for p, m in modules_of(document) if len(m["steps"]) > 1)
+    edited = copy.deepcopy(document)
+    entry = at(edited, place)
+    if edit == "a step left out":
+        del entry["steps"][-1]
+    elif edit == "a step's message":
+        entry["steps"][-1]["message"] = entry["steps"][0]["message"]
+    elif edit == "a figure":
+        entry["estimated_bus_time_s"] += 0.001
+    else:
+        entry["name"] += "-spare"
+    entry["review_sha256"] = review_digest(entry)
+    assert refusal(made, tmp_path, edited) is not None
+
+
+def test_a_plan_file_without_review_digests_is_refused_as_made_by_an_older_prc3cfg(made, tmp_path):
+    document = json.loads(made.text)
+    for _, module in modules_of(document):
+        del module["review_sha256"]
+    refused = refusal(made, tmp_path, document)
+    assert refused is not None and "made by an older prc3cfg" in refused and refused.endswith("plan again"), refused
+
+
+def written(targeted: Targeted, document: dict[str, Any], name: str) -> Path:
+    path = targeted.plan.with_name(name)
+    path.write_text(json.dumps(document, indent=1))
+    return path
+
+
+def test_a_plan_file_worded_by_an_earlier_prc3cfg_applies_on_the_emulators_said_in_its_own_words(targeted, capsys):
+    path = written(targeted, as_worded_earlier(targeted.document), "earlier.json")
+    applied = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release")
+    assert applied.code == 0, applied.err
+    assert targeted.emulated.matches_plant()
+    assert " to " not in "".join(line for line in applied.out.splitlines() if "position" in line) and "→" in applied.out  # its own words
+
+
+def test_an_edited_review_is_refused_by_the_apply_and_marked_by_show(targeted, capsys):
+    document = copy.deepcopy(targeted.document)
+    (place, module), *_ = [(p, m) for p, m in modules_of(document) if m["changes"]["fields"]]
+    module["changes"]["fields"][0]["text"] = SAFETY_OFFICER
+    path = written(targeted, document, "edited.json")
+    before = targeted.emulated.images()
+    refused = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release")
+    assert refused.code == 1 and targeted.emulated.images() == before
+    (line,) = refused.problems
+    assert f"buses[{place[1]}].modules[{place[3]}].review_sha256" in line and "nothing was written" in line, line
+    for output in ([], ["--markdown"]):
+        said = run_cli(capsys, "show", path, *output)
+        assert said.code == 0, said.err
+        claimed(said.out, SAFETY_OFFICER)  # never as prc3cfg's words
+        (warned,) = [line for line in said.out.splitlines() if "changed after the plan was made" in line]
+        assert module["name"] in warned and "read the steps" in warned, warned
+    intact = run_cli(capsys, "show", targeted.plan)
+    assert "changed after the plan was made" not in intact.out and "the review text is as the plan was made" in intact.out, intact.out
+
+
+def test_show_of_a_plan_file_without_review_digests_says_so(targeted, capsys):
+    document = copy.deepcopy(targeted.document)
+    for _, module in modules_of(document):
+        del module["review_sha256"]
+    said = run_cli(capsys, "show", written(targeted, document, "older.json"))
+    assert said.code == 0, said.err
+    assert "no review digest" in said.out, said.out
+    text = next(f["text"] for _, m in modules_of(document) for f in m["changes"]["fields"])
+    claimed(said.out, text)
+
+
+#: How a module's review, its steps or the figures may be mutated, and whether the apply then proves the plan.
+def review_mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """`document` with one module's review words, or a value elsewhere, changed; the digest made again or
+    not; and the verdict that must follow: "proved" (the words, with their digest made again), "refused"."""
+    copied = copy.deepcopy(document)
+    module = data.draw(st.sampled_from([m for _, m in modules_of(copied)]))
+    again = data.draw(st.booleans())
+    if data.draw(st.booleans()):  # the words
+        words = [p for p in places({"changes": module["changes"], "warning": module["warning"], "steps": module["steps"]})
+                 if p and is_value(at({"changes": module["changes"], "warning": module["warning"], "steps": module["steps"]}, p))
+                 and (p[0] != "steps" or p[-1] == "summary")]  # fmt: skip
+        where = data.draw(st.sampled_from(words))
+        at(module, where[:-1])[where[-1]] = data.draw(st.sampled_from([SAFETY_OFFICER, HOSTILE, "", "speed 0 → 9"]).filter(
+            lambda text: text != at(module, where)))  # fmt: skip
+        verdict = "proved" if again else "refused"
+    else:  # a step, a figure, a name, a hash: anything else but where the plant file was
+        fields = by_field(copied, is_value)
+        kept = {ANYWHERE, "buses[].modules[].review_sha256", "left_alone", "read.not_as_verified"}
+        chosen = data.draw(st.sampled_from(sorted(f for f in fields if f not in kept and not f.endswith("summary")
+                                                  and ".changes" not in f and not f.endswith(".warning"))))  # fmt: skip
+        spot = data.draw(st.sampled_from(fields[chosen]))
+        at(copied, spot[:-1])[spot[-1]] = other(at(copied, spot))
+        verdict = "refused"
+    if again:
+        for _, entry in modules_of(copied):
+            entry["review_sha256"] = review_digest(entry)
+    return copied, verdict
+
+
+def review_verdicts(made: Made, tmp_path: Path, data: st.DataObject) -> None:
+    document, verdict = review_mutated(data, json.loads(made.text))
+    event(verdict)
+    refused = refusal(made, tmp_path, document)
+    assert (refused is None) == (verdict == "proved"), (verdict, refused)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_a_plan_file_s_review_steps_or_figures_mutated_get_their_verdicts(made, tmp_path, data):
+    review_verdicts(made, tmp_path, data)
+
+
+@pytest.mark.soak
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])  # 40 ms each: 16 s
+@given(data=st.data())
+def test_many_plan_files_with_review_steps_or_figures_mutated_get_their_verdicts(made, tmp_path, data):
+    review_verdicts(made, tmp_path, data)
+
+
+@pytest.mark.soak
+@settings(max_examples=16, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_process_of_their_own_as_their_verdicts_say(targeted, data):
+    """`prc3cfg apply --plan` in a process of its own, on the emulators: a review worded otherwise with its digest
+    made again writes the plan; an edited review, step or figure writes nothing and says why in one line."""
+    document, verdict = review_mutated(data, targeted.document)
+    event(verdict)
+    path = written(targeted, document, "mutated.json")
+    with as_found(targeted) as before:
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(targeted.emulated.path), "--plan", str(path), "--auto-approve",
+                               "--allow-axis-release"], capture_output=True, text=True, timeout=300)  # fmt: skip
+        problems = [line for line in done.stderr.splitlines() if not line.startswith("note: ")]
+        if verdict == "proved":
+            assert done.returncode == 0 and targeted.emulated.matches_plant(), done.stderr
+        else:
+            assert done.returncode == 1 and len(problems) == 1 and targeted.emulated.images() == before, done.stderr

@@ -21,7 +21,6 @@ from typing import TYPE_CHECKING, Any
 from prc3cfg.api._plan import (
     Reads,
     commissioned,
-    left_alone,
     make_plan,
     plan_file_pairs,
     plan_file_reads,
@@ -40,7 +39,7 @@ from prc3cfg.api._plan import (
 from prc3cfg.api._plant import reason_for
 from prc3cfg.api._policy import PolicyReport, policy
 from prc3cfg.api._types import ApplyFailed, ApplyInterrupted, ApplyResult, AxisReleaseRefused, Gates, NotApproved, Pairs, RecordsFailed
-from prc3cfg.core import plan_file, render, what_to_read
+from prc3cfg.core import plan_file, what_to_read
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
@@ -104,7 +103,7 @@ def prove(path: Path, planned: PlanFile, plant: Plant, pairs: Pairs, images: dic
     ours = make_plan(plant, chosen, images, links=links, unset=unset_systems(buses, held), only_read=planned.targeted)
     if planned.targeted:  # what this apply read, and whose verification what it did not read rests on: its line's record now
         ours = replace(ours, reading=Reads(chosen, [], RECORD, known=record(held)).reading(pairs, images))
-    plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen}, lambda: left_alone(plant), render)
+    plan_file.check_plan(path, planned, ours, {bus.name: line_cost(bus) for bus, _ in chosen})
     return ours
 
 
@@ -139,7 +138,7 @@ def apply(
 
     def wanted(held: OnRecord) -> Reads:
         if planned is not None:
-            return plan_file_reads(plant, *planned, pairs, held)
+            return plan_file_reads(*planned, pairs, held)
         # a factory-fresh module is commissioned: the programs it will be written are not read first, but after
         return reads(plant, pairs, True, held) if full_read else commissioned(reads(plant, pairs, held=held))
 

@@ -338,19 +338,18 @@ def e12_claims(buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
     return said
 
 
-def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, held: OnRecord) -> Reads:
+def plan_file_reads(path: Path, planned: PlanFile, pairs: Pairs, held: OnRecord) -> Reads:
     """What to read for a plan file: every chosen module in full, or — for a plan made from a
     targeted read-back — exactly the modules and programs its plan read, with the line's record as
     evidence; refused as stale when the record no longer shows a module holding what the plan took
     as known without reading it (another apply or read since, or the record outgrew its age)."""
     if not planned.targeted:
         return Reads(pairs, targets(pairs))
-    names = {(bus.name, m.address): (bus, m) for bus, m in pairs}
-    entries = [e for e in planned.modules if (e.bus, e.address) in names]  # the rest is refused by `prove`
     chosen = plan_file_pairs(planned, pairs)
-    buses = {bus.name: bus for bus, _ in chosen}
-    desired, max_age = {key: m.desired_image() for key, (_, m) in names.items()}, {name: bus.record_max_age for name, bus in buses.items()}
-    to_read, stale = what_to_read.for_plan_file(entries, desired, record(held), max_age, datetime.now(UTC))
+    entries = {(e.bus, e.address): e for e in planned.modules}
+    desired = {(bus.name, m.address): m.desired_image() for bus, m in chosen}
+    max_age = {bus.name: bus.record_max_age for bus, _ in chosen}
+    to_read, stale = what_to_read.for_plan_file([entries[key] for key in desired], desired, record(held), max_age, datetime.now(UTC))
     if stale is not None:
         raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
                         "holding what the plan took as known without reading it (written or read by another run since, or "
@@ -359,8 +358,8 @@ def plan_file_reads(plant: Plant, path: Path, planned: PlanFile, pairs: Pairs, h
 
 
 def plan_file_pairs(planned: PlanFile, pairs: Pairs) -> Pairs:
-    """The modules a plan file's apply reads: every chosen one, or for a targeted plan those of its plan
-    among them (the rest is refused by `prove`)."""
+    """The modules a plan file's apply reads, in the plan file's order: every chosen one, or for a targeted
+    plan those of its plan among them (the rest is refused by `prove`) — picked here only."""
     if not planned.targeted:
         return pairs
     names = {(bus.name, m.address): (bus, m) for bus, m in pairs}

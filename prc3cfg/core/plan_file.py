@@ -22,10 +22,17 @@ A bus's broadcasts (`prc3cfg.core.sharing`) are the leading steps of every modul
 that sent them addressed would do the same, only slower) — and the bus lists them once under
 `"broadcasts"`.
 
-A plan file is judged by its data, never by its spelling: its steps as messages, then each of its
-values — figures, names, hashes, the review — against the value `write` writes for the plan prc3cfg
-makes now. The words are `prc3cfg.core.render`'s, handed in (`Words`): the rendering reads plan files
-and so sits above this module, and its words decide nothing that is sent. Pure: the path is only named.
+A plan file is proved by its data, never by its spelling nor by the words it shows people: its steps as
+messages, then each of its figures, names, hashes and keys against the value `to_json` writes for the
+plan prc3cfg makes now (`check_plan`). The review beside a module's steps — its `changes`, `warning` and
+steps' `summary`, `prc3cfg.core.render`'s words handed to `write` (`Words`: the rendering reads plan files
+and so sits above this module) — is the file's claim about itself, written with its digest
+(`review_sha256`, `Review`): `apply --plan` refuses a review that is not the text its digest was written
+for (the reviewer approved that text; words changed after could mislead one while the steps stay
+proved), and a plan file without digests as made by an older prc3cfg; a text its digest matches is
+taken however prc3cfg would word it now, so that a new wording refuses no plan file. The digest is no
+signature — the steps are what is proved — and `show` marks a review that is not as written as the
+file's words. Pure: the path is only named.
 
 Long because the format is one thing (over 500 lines): the writer, the two contracts it is read by
 (`PlanDocument`; `ShownPlanDocument` for `show`) and the proof name the same keys, and apart they would
@@ -37,8 +44,9 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
+from enum import StrEnum
 from math import fsum
 from pathlib import Path
 from typing import Any, Protocol
@@ -54,7 +62,7 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage
 from prc3cfg.core.planner import StepProblem, plan_from_steps, summarise
 from prc3cfg.core.planner.check import MAX_STEPS
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan, Reading
-from prc3cfg.core.text import shown
+from prc3cfg.core.text import address_ranges, shown
 from prc3cfg.errors import UserError
 
 Key = tuple[str, int]  # (bus name, module address)
@@ -80,14 +88,42 @@ MAX_ITEMS = 100_000
 
 
 class Words(Protocol):
-    """What a plan file says to people, and how its refusals name addresses: the module `prc3cfg.core.render`,
-    passed as it (it imports this one: a plan is shown from its `to_json`)."""
+    """What a plan file says to people beside a module's steps: the module `prc3cfg.core.render`, passed as it
+    to `write` (it imports this one: a plan is shown from its `to_json`). Nothing proves a plan by them."""
 
     def review(self, change: ModuleChange) -> dict[str, Any]:
         """What the file holds beside a module's steps for people to review (its `changes`, its `warning`)."""
 
-    def address_ranges(self, addresses: Iterable[int]) -> str:
-        """Addresses as a refusal names them: "address 5", "addresses 7–30"."""
+
+#: A module's review digest (docs/files.md): the SHA-256 of the words people review beside its steps, as written.
+REVIEW = "review_sha256"
+
+
+def review_sha256(module: dict[str, Any]) -> str:
+    """The digest of a module entry's review text as the file holds it: its `changes`, its `warning` and its
+    steps' `summary`, in that object's canonical JSON — keys sorted, no whitespace, every other character than
+    ASCII a \\u escape — so that a file another tool wrote again has the same digest. Any JSON (a key missing
+    is null): the text of a hostile file has a digest too."""
+    steps = module.get("steps")
+    summaries = [step.get("summary") if isinstance(step, dict) else None for step in steps] if isinstance(steps, list) else None
+    review = {"changes": module.get("changes"), "warning": module.get("warning"), "summaries": summaries}
+    return hashlib.sha256(json.dumps(review, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+class Review(StrEnum):
+    """What a module's review text is to `show`: the text its digest was written for, changed since, or
+    without a digest (a plan file made before plan files carried one)."""
+
+    AS_WRITTEN = "as written"
+    CHANGED = "changed"
+    NO_DIGEST = "no digest"
+
+    @classmethod
+    def of(cls, module: dict[str, Any]) -> Review:
+        said = module.get(REVIEW)
+        if not isinstance(said, str):
+            return cls.NO_DIGEST
+        return cls.AS_WRITTEN if said == review_sha256(module) else cls.CHANGED
 
 
 def image_sha256(image: ModuleImage) -> str:
@@ -135,11 +171,13 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
 
 def write(plan: PlantPlan, notes: Iterable[str], words: Words) -> dict[str, Any]:
     """The plan file `plan --out` writes (and `plan --json` prints): the plan's data, what stays on the
-    hardware (`notes`, as `left_alone`), and beside each module's steps what people review (`words`)."""
+    hardware (`notes`, as `left_alone`), and beside each module's steps what people review (`words`), with
+    its digest (`review_sha256`)."""
     document = to_json(plan) | {"left_alone": list(notes)}
     for bus in document["buses"]:
         for entry, change in zip(bus["modules"], plan.buses()[bus["name"]]):
             entry.update(words.review(change))
+            entry[REVIEW] = review_sha256(entry)
     return document
 
 
@@ -209,6 +247,7 @@ class PlannedModule:
     steps: tuple[codec.Message, ...]
     broadcasts: int  # how many of the leading steps are the bus's broadcasts
     programs_read: tuple[int, ...] | None = None  # a targeted plan's: exactly what to read again
+    review_sha256: str | None = None  # its review's digest (`Review`): none in plan files made before it had one
 
 
 class PlanFileError(ValueError):
@@ -245,6 +284,7 @@ class _ModuleEntry(BaseModel):
     releases_axes: Flag
     steps: list[_Step]
     read: _ModuleRead | None = None
+    review_sha256: Text | None = None  # none in plan files made before the review had a digest: `show` says so
 
 
 class _Bus(BaseModel):
@@ -254,8 +294,10 @@ class _Bus(BaseModel):
     modules: list[_ModuleEntry]
 
 
-class _Read(BaseModel):
-    """A targeted plan's read-back: the base it compared with, in words, and the modules not read."""
+class PlanRead(BaseModel):
+    """A targeted plan's `read`, as the plan file says it (parsed here only, by `read`): the base it compared
+    with, in words, the modules not read, those read in full and why, and whose verification the programs not
+    read rest on."""
 
     model_config = LATER
 
@@ -268,15 +310,16 @@ class _Read(BaseModel):
 class PlanDocument(BaseModel):
     model_config = LATER
 
-    """The plan file, as `apply --plan` reads it. The rest of it — summaries, figures, the review —
-    is held against what prc3cfg writes for the plan it proves (`check_plan`), as any JSON."""
+    """The plan file, as `apply --plan` reads it. The rest of it — the figures, held against what prc3cfg
+    writes for the plan it proves; the review, against its digest (`check_plan`) — as any JSON."""
 
     plant: Text
     plant_path: Text
     plant_sha256: Text
     prc3cfg_version: Text = "before 0.1.0"
     buses: list[_Bus]
-    read: _Read | None = None
+    read: PlanRead | None = None
+    left_alone: list[Text]
 
 
 # ... and as `show` reads it, to show it: the review beside the steps (`render.changes_json`), the
@@ -383,15 +426,20 @@ class PlanFile:
     version: str
     modules: tuple[PlannedModule, ...]
     document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
-    targeted: bool  # made from a targeted read-back (it has a `read`): read exactly what its plan read
+    read: PlanRead | None  # a targeted plan's `read`, parsed
+
+    @property
+    def targeted(self) -> bool:
+        """Made from a targeted read-back (it has a `read`): read exactly what its plan read."""
+        return self.read is not None
 
 
-def read(data: Any, *, shown: bool = False) -> PlanFile:
+def read(data: Any, *, for_show: bool = False) -> PlanFile:
     """A parsed plan file; raises PlanFileError.
 
     Refused here, before the line is touched: a file beyond any plan file prc3cfg writes
     (`within_bounds`), a damaged file — a key missing, a value of another kind (`PlanDocument`;
-    with `shown`, all that `show` shows, `ShownPlanDocument`) — a base other than `RECORD`, a
+    with `for_show`, all that `show` shows, `ShownPlanDocument`) — a base other than `RECORD`, a
     module listed twice, more steps than any plan needs (`MAX_STEPS`), a message that is not
     in the bytes prc3cfg sends for it (a "don't care" byte changed), and `releases_axes` flags
     that are not what the steps' bytes say.
@@ -400,7 +448,7 @@ def read(data: Any, *, shown: bool = False) -> PlanFile:
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise PlanFileError(f'not a plan file — expected "format": "{FORMAT}"')
     try:
-        contract = ShownPlanDocument if shown else PlanDocument
+        contract = ShownPlanDocument if for_show else PlanDocument
         document = contract.model_validate(data)
     except ValidationError as error:
         raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'), contract)} — {AGAIN}") from None
@@ -417,14 +465,14 @@ def read(data: Any, *, shown: bool = False) -> PlanFile:
                 raise PlanFileError(f"damaged plan file: buses[{b}].modules[{m}] {'lacks' if targeted else 'has'} the \"read\" "
                                     f"of a plan made from a {'targeted' if targeted else 'full'} read-back — {AGAIN}")  # fmt: skip
             if (entry.bus, entry.address) in seen:
-                raise PlanFileError(f"bus {entry.bus}, module {entry.address} is listed twice — {AGAIN}")
+                raise PlanFileError(f"bus {shown(entry.bus)}, module {entry.address} is listed twice — {AGAIN}")
             seen.add((entry.bus, entry.address))
             modules.append(entry)
         if isinstance(bus, _ShownBus):
             for index, step in enumerate(bus.broadcasts):
                 _message(step.message, f"buses[{b}].broadcasts[{index}]", f"bus {bus.name}: broadcast {index + 1}")
     return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data,
-                    document.read is not None)  # fmt: skip
+                    document.read)  # fmt: skip
 
 
 def within_bounds(data: Any) -> None:
@@ -470,7 +518,7 @@ def _place(at: tuple[Any, ...]) -> str:
 
 def _planned_module(bus: str, module: _ModuleEntry, at: str) -> PlannedModule:
     """A module's entry, at `at` ("buses[0].modules[2]")."""
-    where = f"bus {bus}, module {module.address}"
+    where = f"bus {shown(bus)}, module {module.address}"
     if len(module.steps) > MAX_STEPS:
         raise PlanFileError(f"{where}: {len(module.steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
     messages, flags = [], []
@@ -494,7 +542,7 @@ def _planned_module(bus: str, module: _ModuleEntry, at: str) -> PlannedModule:
         if list(read) != sorted(set(read)) or not all(1 <= n <= PROGRAM_COUNT for n in read):
             raise PlanFileError(f"damaged plan file: {at}.read.programs is not a list of program numbers 1..{PROGRAM_COUNT}, "
                                 f"each once, in order — {AGAIN}")  # fmt: skip
-    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags), read)
+    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags), read, module.review_sha256)
 
 
 def _message(text: str, at: str, where: str) -> codec.Message:
@@ -520,10 +568,10 @@ def same_text(data: bytes) -> frozenset[str]:
     return frozenset(hashlib.sha256(form).hexdigest() for form in (text, text.replace(b"\n", b"\r\n")))
 
 
-def checked(document: Any, path: Path, *, shown: bool = False) -> PlanFile:
+def checked(document: Any, path: Path, *, for_show: bool = False) -> PlanFile:
     """The plan file at `path` (as parsed), `read`; a `UserError` of one line naming `path` otherwise."""
     try:
-        return read(document, shown=shown)
+        return read(document, for_show=for_show)
     except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
 
@@ -549,13 +597,16 @@ def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, ali
 def to_show(document: Any, path: Path) -> dict[str, Any]:
     """The plan file at `path` (as parsed) to show (`prc3cfg show PLAN.json`): checked as `apply
     --plan` checks it before the line (damaged, edited flags, a module twice, not prc3cfg's bytes:
-    one line), and every step's summary worked out again from its bytes — what is shown is what
-    would be sent."""
-    plan_file = checked(document, path, shown=True)
+    one line), each module's `review` said (`Review`: whether its review text is the one its digest was
+    written for — `show` marks any other as the file's words), and every step's summary worked out again
+    from its bytes — what is shown is what would be sent."""
+    plan_file = checked(document, path, for_show=True)
     entries = iter(plan_file.modules)  # in the file's order
     for bus in plan_file.document["buses"]:
         for module, entry in zip(bus["modules"], entries):
-            system_keys = [f["field"] for f in module["changes"]["fields"] if f["program"] is None]
+            module["review"] = Review.of(module)  # before the summaries are made again: they are part of the text
+            said = module["changes"]["fields"] if module["review"] is Review.AS_WRITTEN else []  # the words of a 20h
+            system_keys = [f["field"] for f in said if f["program"] is None]
             for step, message in zip(module["steps"], entry.steps):
                 step["summary"] = _summary(message, system_keys)
         for broadcast in bus.get("broadcasts", []):
@@ -579,7 +630,7 @@ def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images
     plant file's order) or is called otherwise, when a module changed since the plan was made
     (`StalePlan`), and when the modules are not listed in the plant file's order."""
     for entry in plan_file.modules:
-        where = f"bus {entry.bus}, module {entry.address}"
+        where = f"bus {shown(entry.bus)}, module {entry.address}"  # a name the plant may not have: escaped
         if (entry.bus, entry.address) not in names:
             raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
         name = names[(entry.bus, entry.address)]
@@ -593,32 +644,37 @@ def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images
     _in_plant_order(path, plan_file, list(names))
 
 
-def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str, LineCost], notes: Callable[[], list[str]],
-               words: Words) -> None:  # fmt: skip
+def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str, LineCost]) -> None:
     """The plan file proved against `ours`, the plan prc3cfg makes of its modules from the read-back
-    now (each line priced by `costs`).
+    now (each line priced by `costs`): by its steps and figures, never by the words people read.
 
     Refused when its steps do anything but turn a module's read-back into the plant file's image
     (`plan_from_steps` names the rule they break); and when they are not exactly the steps —
     broadcasts included — of `ours`: the plant file and the read-back are the same as when the
-    file was made (`check_modules`), so any difference is an edit. Then any other value in it — a
-    summary, a figure, a name, an axis warning — that is not the value `write` writes for that plan
-    (with `words`) is an edit too, since people review what the file says (only `plant_path` and
-    `plant_sha256` may differ: a plan made in another checkout, whose line endings `to_apply`
-    checked). A targeted plan's `read` is what the apply read and the line's record says now (`ours`'s
-    reading), said apart — the record may have changed since, as well as the file — but for its
-    `not_as_verified`, the file's words (the module docstring says why). Values, not their spelling (`_differs_at`): a file another tool wrote again —
-    indented otherwise, its keys in another order, CRLF, a byte-order mark, 0 for 0.0 — is the
-    same plan file. Its figures come out the same on every system and Python: the times are summed
-    with `math.fsum`, correctly rounded (`sum` of floats is compensated from Python 3.12 on, plain
-    addition before: a plan made by 3.11 on Linux showed 1.0988 s where 3.13 on Windows proved
-    1.0987 s). What stays on the hardware is what the plan's maker compared with: the file's own
-    `left_alone`, else `notes()`.
+    file was made (`check_modules`), so any difference is an edit. Refused when a module's review text
+    (its `changes`, `warning`, steps' `summary`) is not the text its `review_sha256` was written for — the
+    reviewer approved that text — and, without a digest, as made by an older prc3cfg. A text its digest
+    matches is taken as the file's words, however prc3cfg would word that review now: a new prc3cfg may
+    word it otherwise. A targeted plan's `read` (as `read` parsed it) is what the apply read and the line's
+    record says now (`ours`'s reading), said apart — the record may have changed since, as well as the
+    file — but for its `not_as_verified`, the file's words (the module docstring says why). Then every
+    other value — a figure, a name, a hash, a flag, a key — that is not the value `to_json` writes for that
+    plan is an edit too (only `plant_path` and `plant_sha256` may differ: a plan made in another checkout,
+    whose line endings `to_apply` checked; and `left_alone`, what the plan's maker compared with: words
+    only, which send nothing). Values, not their spelling (`_differs_at`): a file another tool wrote again —
+    indented otherwise, its keys in another order, CRLF, a byte-order mark, 0 for 0.0 — is the same plan
+    file. Its figures come out the same on every system and Python: the times are summed with
+    `math.fsum`, correctly rounded (`sum` of floats is compensated from Python 3.12 on, plain addition
+    before: a plan made by 3.11 on Linux showed 1.0988 s where 3.13 on Windows proved 1.0987 s).
     """
-    if "evidence" not in plan_file.document:  # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
+    document = plan_file.document
+    if "evidence" not in document:  # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
         raise UserError(f"{path}: it does not say what its plan rests on (no \"evidence\"): made before plans named their evidence, "
                         "or changed after it was made; nothing was written: plan again and review it")  # fmt: skip
-    _no_new_module_hears(path, plan_file, ours, words)
+    if any(entry.review_sha256 is None for entry in plan_file.modules):
+        raise StalePlan(f"{path}: made by an older prc3cfg — its review text has no digest (review_sha256), so what was reviewed "
+                        "cannot be told from an edit; nothing was written — plan again")  # fmt: skip
+    _no_new_module_hears(path, plan_file, ours)
     for entry, change in zip(plan_file.modules, ours.modules):
         edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
                   "after it was made; nothing was written: plan again and review it")  # fmt: skip
@@ -633,27 +689,53 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
             raise UserError(edited.format(_first_difference(theirs, steps)))
         if entry.broadcasts != change.broadcasts:
             raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
-    # what stays on the hardware is what the plan's maker compared with (`plan --previous`, or the copy last
-    # applied there): words only, which send nothing — any list of them stands
-    said = plan_file.document.get("left_alone")
-    kept = said if isinstance(said, list) and all(isinstance(note, str) for note in said) else notes()
-    # a plan made in another checkout: its path, and its line endings (`to_apply` found the text the same)
-    written = write(ours, kept, words) | {"plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
-    if isinstance(said := plan_file.document.get("read"), dict) and "read" in written:
-        written["read"]["not_as_verified"] = said.get("not_as_verified")
-        if (at := _differs_at(said, written["read"], "read")) is not None:
+    for b, bus in enumerate(document["buses"]):
+        for m, module in enumerate(bus["modules"]):
+            if Review.of(module) is not Review.AS_WRITTEN:
+                raise UserError(f"{path}: buses[{b}].modules[{m}].{REVIEW} (bus {shown(bus['name'])}, module {module['address']}) is not "
+                                "the digest of the review text beside it (changes, warning, the steps' summaries): the text was changed "
+                                "after the plan was made; nothing was written: plan again and review it")  # fmt: skip
+    expected = _their_words(to_json(ours), plan_file)
+    if plan_file.read is not None and "read" in expected:
+        expected["read"]["not_as_verified"] = list(plan_file.read.not_as_verified)
+        if (at := _differs_at(plan_file.read.model_dump(), expected["read"], "read")) is not None:
             raise UserError(f"{path}: {at} is not what this apply read and the line's record says — the plan file, or the record, was "
                             "changed after the plan was made; nothing was written: plan again and review it")  # fmt: skip
-    if (at := _differs_at(plan_file.document, written)) is not None:
+    if (at := _differs_at(document, expected)) is not None:
         raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
                         "made; nothing was written: plan again and review it")  # fmt: skip
 
 
-def _no_new_module_hears(path: Path, plan_file: PlanFile, ours: PlantPlan, words: Words) -> None:
+#: The words of a module entry, its review (`Review`): the file's, held to their digest, not to the words of today's prc3cfg.
+_REVIEW_KEYS = ("changes", "warning", REVIEW)
+#: What a word the file lacks is expected as: a value of no JSON document.
+_ABSENT = object()
+
+
+def _their_words(expected: dict[str, Any], plan_file: PlanFile) -> dict[str, Any]:
+    """`expected`, the data of the plan proved (`to_json`), with the plan file's words where the file has
+    them — each module's review and its steps' summaries (held to the review's digest), each broadcast's
+    summary as the first module receiving it says it, `left_alone`, where the plant file was — so that
+    what is left to compare is the steps, the figures, the names and the keys. A word the file lacks is
+    left as prc3cfg writes it: its list of keys then differs."""
+    document = plan_file.document
+    expected |= {"left_alone": document["left_alone"], "plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
+    for bus, their_bus in zip(expected["buses"], document["buses"]):
+        for module, theirs in zip(bus["modules"], their_bus["modules"]):
+            module |= {key: theirs.get(key, _ABSENT) for key in _REVIEW_KEYS}  # absent: the keys differ
+            for step, their_step in zip(module["steps"], theirs["steps"]):
+                step["summary"] = their_step.get("summary", step["summary"])
+        for index, broadcast in enumerate(bus.get("broadcasts", [])):
+            said = [m["steps"][index] for m in their_bus["modules"] if len(m["steps"]) > index and m["steps"][index].get("broadcast")]
+            broadcast["summary"] = said[0].get("summary", broadcast["summary"]) if said else broadcast["summary"]
+    return expected
+
+
+def _no_new_module_hears(path: Path, plan_file: PlanFile, ours: PlantPlan) -> None:
     """Refused where a module the plant file does not list now answers on a bus the plan file broadcasts on."""
     for proof in ours.proofs:
         if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
-            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {words.address_ranges(proof.answered)}, which the "
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {address_ranges(proof.answered)}, which the "
                             "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
 
 

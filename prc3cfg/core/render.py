@@ -42,6 +42,7 @@ from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
+from prc3cfg.core.text import address_ranges
 from prc3cfg.core.units import BY_SYMBOL, FUNCTION_OUTPUTS, PROGRAM_QUANTITIES, SYSTEM_QUANTITIES, human_text
 from prc3cfg.core.what_to_read import to_the_minute
 from prc3cfg.errors import UserError
@@ -347,19 +348,6 @@ def _step_lines(module: dict[str, Any], frames: bool) -> list[str]:
             for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
 
 
-def address_ranges(addresses: Iterable[int]) -> str:
-    """"address 5", "addresses 7–30", "addresses 2, 4–6"."""
-    listed = sorted(addresses)
-    runs: list[list[int]] = []
-    for address in listed:
-        if runs and address == runs[-1][-1] + 1:
-            runs[-1].append(address)
-        else:
-            runs.append([address])
-    text = ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
-    return f"address{'es' if len(listed) > 1 else ''} {text}"
-
-
 def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
     """What the probes of a bus's line found at the addresses its plant file does not list, in one line
     (the bus's name `shown` as the medium needs)."""
@@ -504,6 +492,40 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
                                "change is not seen: plan --refresh-only (or --full-read) reads everything" if not_read else "")  # fmt: skip
 
 
+#: How a module's diff is shown where its review text is not the text its digest was written for: as the file's words.
+SAID = "the plan file says: "
+#: What `show` says of a plan file whose every module's review is the text its digest was written for.
+REVIEW_AS_WRITTEN = "Review: the review text is as the plan was made (each module's review_sha256 matches it) — apply --plan proves the steps"
+
+
+def review_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
+    """What `show` says of a plan file's review text, judged by `plan_file.to_show` (each module's `review`):
+    that it is the text its digests were written for — or which modules' review was changed since, or has no
+    digest, whose words are then shown as the file's (`SAID`), the steps being what `apply --plan` proves.
+    None for a document nobody judged (a live plan's)."""
+    judged = [(bus, m) for bus, m in _modules(document) if "review" in m]
+    if not judged:
+        return None
+    changed = [f"{shown(bus)}/{shown(m['name'])}" for bus, m in judged if m["review"] == plan_file.Review.CHANGED]
+    undigested = [f"{shown(bus)}/{shown(m['name'])}" for bus, m in judged if m["review"] == plan_file.Review.NO_DIGEST]
+    if not changed and not undigested:
+        return REVIEW_AS_WRITTEN
+    parts = [f"⚠ the review text of {some_of(changed)} was changed after the plan was made"] if changed else []
+    parts += [f"⚠ {some_of(undigested)}: no review digest (made by an older prc3cfg)"] if undigested else []
+    return "; ".join(parts) + (f" — its diff is shown as the file's words (\"{SAID.strip()}\"); the steps are what apply --plan proves: read "
+                               "the steps (apply --plan refuses this file: plan again)")  # fmt: skip
+
+
+def _as_written(module: dict[str, Any]) -> bool:
+    """Whether a module's review is the text its digest was written for (a live plan's: prc3cfg's own, now)."""
+    return bool(module.get("review", plan_file.Review.AS_WRITTEN) == plan_file.Review.AS_WRITTEN)
+
+
+def _as_reviewed(module: dict[str, Any], lines: list[str]) -> list[str]:
+    """A module's diff lines, each after `SAID` where its review is not the text its digest was written for."""
+    return lines if _as_written(module) else [SAID + line for line in lines]
+
+
 def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]], shown: Callable[[str], str]) -> tuple[str, list[str]]:
     """Whose reads or verifications the programs not read rest on ("" when none was taken), and what was not
     read: "79 programs of 6 modules", "2 modules (line/a, line/b)"."""
@@ -551,7 +573,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
         out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
     out += faulted_summary(document, faults)
-    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document)] if line]
+    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document), review_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in _modules(document)):
         out.append(LEGEND)
@@ -581,7 +603,8 @@ def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], Modul
         if not module["steps"]:
             out.append(_header(bus, module))
             continue
-        lines = [_header(bus, module), *module_lines(_changes(bus, module, live, charts=False)), "steps:", *_step_lines(module, frames)]
+        diff = _as_reviewed(module, module_lines(_changes(bus, module, live, charts=False)))
+        lines = [_header(bus, module), *diff, "steps:", *_step_lines(module, frames)]
         out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
     return out
 
@@ -682,6 +705,7 @@ def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange
     not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
     out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed)) else []
     out += [f"> {line}", ""] if (line := factory_line(document)) else []
+    out += [f"> {line}", ""] if (line := review_line(document, cell)) else []
     if document["axis_releases"]:
         out += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
                 + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
@@ -706,14 +730,15 @@ def _changed_table(changed: list[tuple[str, dict[str, Any]]]) -> list[str]:
 
 def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChange], frames: bool) -> str:
     changes = _changes(bus, m, live)
+    diff = _as_reviewed(m, module_lines(changes))
     return "\n".join([
         f"<details><summary>{escape.markdown_html(bus)} / {escape.markdown_html(m['name'])} (address {m['address']})"
         + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
         "",
-        *fenced(module_lines(changes), "diff"),
+        *fenced(diff, "diff"),
         "",
         *fenced(_step_lines(m, frames)),
-        *changes.get("charts", []),
+        *(changes.get("charts", []) if _as_written(m) else []),  # pictures of words that are only the file's: not drawn
         "</details>",
         "",
         "",

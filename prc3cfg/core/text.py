@@ -21,7 +21,7 @@ prints such text in:
 
 Names in a plant file are refused when they hold an `UNPRINTABLE` character (`prc3cfg.plant.models`);
 a plan file is data that anyone may have edited, so everything shown of it goes through these.
-Pure.
+Also how a set of module addresses is said, in every output and refusal (`address_ranges`). Pure.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from __future__ import annotations
 import html
 import re
 import unicodedata
+from collections.abc import Iterable
 
 #: What is not printable text, by Unicode general category: Cc (C0, DEL, C1), Cf (format: the
 #: bidirectional overrides U+202A–202E, isolates U+2066–2069 and marks U+200E/200F/061C that
@@ -90,3 +91,16 @@ def _dead(match: re.Match[str]) -> str:
     """What GitHub would make live, made text: "@" with an empty HTML comment after it (rendered as nothing, and
     copied from the page as nothing — a zero-width joiner came along into every paste), ":" or "." as an entity."""
     return "@<!-- -->" if match.group() == "@" else f"&#{ord(match.group())};"
+
+
+def address_ranges(addresses: Iterable[int]) -> str:
+    """"address 5", "addresses 7–30", "addresses 2, 4–6"."""
+    listed = sorted(addresses)
+    runs: list[list[int]] = []
+    for address in listed:
+        if runs and address == runs[-1][-1] + 1:
+            runs[-1].append(address)
+        else:
+            runs.append([address])
+    text = ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
+    return f"address{'es' if len(listed) > 1 else ''} {text}"

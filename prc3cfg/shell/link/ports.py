@@ -44,7 +44,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import get_framing
 from prc3cfg.core.image import MAX_MODULE_ADDRESS
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
-from prc3cfg.core.render import address_ranges
+from prc3cfg.core.text import address_ranges
 from prc3cfg.errors import UserError
 from prc3cfg.plant.messages import port_error
 from prc3cfg.shell import platform
