@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from decimal import Decimal
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from prc3cfg.api._plan import load, plan, read, select
 from prc3cfg.core import gateway, plot
@@ -212,3 +212,13 @@ def faults(plant: Plant, names: Iterable[str] | None = None) -> list[str]:
                 claim = f" ({record.owner}'s record says so)" if record.owner is not None else ""
                 said.append(f"{chosen[bus.name, record.address]} is in {fault_said(record.code)}{claim}")
     return list(dict.fromkeys(said))
+
+
+def status(plant: Plant) -> dict[str, Any]:
+    """The plant's configuration status from prc3cfg's records only — no bus traffic: the
+    `prc3cfg-status/1` document (`prc3cfg.core.status`), as `prc3cfg status --json` prints it."""
+    from prc3cfg.core.status import document
+    from prc3cfg.shell.status import gather
+
+    facts, notes = gather(plant)
+    return document(str(plant.path), plant.sha256, facts, notes)

@@ -46,7 +46,7 @@ app.add_typer(link_app, name="link")
 app.add_typer(records_app, name="records")
 
 COMMAND_MODULES: tuple[str, ...] = ("emulator_commands", "plant_commands", "plan_commands", "bus_commands", "adopt_commands",
-                                    "records_commands")
+                                    "records_commands", "status_commands")
 
 
 def _register_commands() -> None:
