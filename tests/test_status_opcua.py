@@ -72,15 +72,17 @@ def served(tmp_path):
             yield Served(process, url, plant), (trusted, key)
         finally:
             process.terminate()
-            process.wait(timeout=30)
+            process.communicate(timeout=30)  # drained: a server blocked on a full pipe would not see the signal
 
 
-async def connected(url: str, cert: Path, key: Path) -> Client:
+async def connected(url: str, cert: Path, key: Path, *, identified: bool = True) -> Client:
+    """asyncua's client on the secure channel with `cert`; `identified`: the user is that certificate (else anonymous)."""
     client = Client(url)
     client.application_uri = CLIENT_URI
     await client.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key), mode=ua.MessageSecurityMode.SignAndEncrypt)
-    await client.load_client_certificate(str(cert))
-    await client.load_private_key(str(key))
+    if identified:
+        await client.load_client_certificate(str(cert))
+        await client.load_private_key(str(key))
     await client.connect()
     return client
 
@@ -137,9 +139,21 @@ def test_a_client_without_a_trusted_certificate_is_refused(served, tmp_path):
     stranger, key = certificate(tmp_path / "stranger", "stranger")
 
     async def check() -> None:
-        with pytest.raises(Exception) as refused:
+        with pytest.raises(ua.UaStatusCodeError) as refused:
             client = await connected(server.url, stranger, key)
             await client.disconnect()
-        assert "Bad" in repr(refused.value) or isinstance(refused.value, (ConnectionError, asyncio.TimeoutError, TimeoutError))
+        assert type(refused.value).__name__ == "BadCertificateUntrusted", repr(refused.value)
+
+    asyncio.run(check())
+
+
+def test_a_trusted_client_without_a_user_is_refused_unless_anonymous_is_allowed(served):
+    server, (cert, key) = served
+
+    async def check() -> None:
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            client = await connected(server.url, cert, key, identified=False)
+            await client.disconnect()
+        assert type(refused.value).__name__.startswith("BadIdentityToken"), repr(refused.value)
 
     asyncio.run(check())
