@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from decimal import Decimal
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from prc3cfg.api._plan import load, plan, read, select
 from prc3cfg.core import gateway, plot
@@ -196,3 +196,13 @@ def plot_format(path: Path) -> str:
     """"svg" or "png", the format of a picture to write to `path` (by its suffix) — a PlotError for any
     other, and when matplotlib is missing, naming the command that installs it into this Python."""
     return plot.plot_format(path, python=python_command())
+
+
+def status(plant: Plant) -> dict[str, Any]:
+    """The plant's configuration status from prc3cfg's records only — no bus traffic: the
+    `prc3cfg-status/1` document (`prc3cfg.core.status`), as `prc3cfg status --json` prints it."""
+    from prc3cfg.core.status import document
+    from prc3cfg.shell.status import gather
+
+    facts, notes = gather(plant)
+    return document(str(plant.path), plant.sha256, facts, notes)

@@ -54,7 +54,7 @@ COMMAND_MODULES: dict[str, str] = {
     "ports": "bus_commands", "setup-machine": "bus_commands", "scan": "bus_commands", "import": "bus_commands",
     "doctor": "bus_commands",
     "adopt": "adopt_commands",
-    "emulator": "emulator_commands", "link": "bus_commands", "records": "records_commands",
+    "emulator": "emulator_commands", "link": "bus_commands", "records": "records_commands", "status": "status_commands",
 }  # fmt: skip
 
 

@@ -427,3 +427,27 @@ def line_lock(
     finally:
         serial_lock.release(serial_taken)
         _release(taken)
+
+
+def held_by(keys: Iterable[str]) -> str | None:
+    """Who holds the line with these identities now — any user's lock file of it, looked at only, never
+    taken (a status must not refuse an apply the line) — or None: no prc3cfg command holds it."""
+    for key in keys:
+        stem = _stem(key)
+        try:
+            names = sorted(os.listdir(lock_dir()))
+        except OSError:
+            return None  # no lock folder: nobody has held a line yet
+        for name in names:
+            if not (name.startswith(f"{stem}.") and name.endswith(".lock")):
+                continue
+            try:
+                fd = os.open(lock_dir() / name, os.O_RDONLY | _OPEN_FLAGS)
+            except OSError:
+                continue
+            try:
+                if stat.S_ISREG(os.fstat(fd).st_mode) and platform.is_locked(fd):
+                    return _holder(fd)
+            finally:
+                os.close(fd)
+    return None

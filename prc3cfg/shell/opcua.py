@@ -1,0 +1,203 @@
+"""`prc3cfg status serve`: the configuration status on OPC UA (asyncua, the optional extra `opcua`), read-only.
+
+Address space, DI-shaped (OPC UA for Devices, namespace `DI`): asyncua ships no DI nodeset and none is
+fetched, so the nodes carry DI's browse names in the DI namespace without DI's types (docs/status.md):
+
+    Objects/DeviceSet/
+        LINE/                           one object per line (bus), DeviceHealth: its modules' worst
+            MODULE/                     one object per module
+                RevisionCounter         Int32: verified applies and restores that changed it
+                SoftwareRevision        String: firmware where known, else ""
+                DeviceHealth            Int32: DeviceHealthEnumeration (NORMAL 0 … MAINTENANCE_REQUIRED 4)
+                Configuration/          PlantFile, Commit, PlantHash, LastVerifiedTime, LastVerifiedBy,
+                                        DriftFound, PendingTravel, HealthReason
+
+Node ids are strings, `LINE`, `LINE/ADDRESS`, `LINE/ADDRESS/NAME`, in prc3cfg's namespace. No node is
+writable (AccessLevel CurrentRead). Every `POLL` s the records' files are looked at (size and time of
+change, `prc3cfg.shell.status.fingerprint`); when they changed the status is gathered again and published —
+never a frame on the bus.
+
+Security: Basic256Sha256 SignAndEncrypt only; the server's certificate given, or made once into the
+user's state folder; a client's application certificate must be in the `--trust` folder (else its
+channel is refused), and it is identified by that certificate (X509 identity) unless `--allow-anonymous`.
+`--no-security`: the None endpoint alone, anonymous (the CLI warns).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+from asyncua import Node, Server, ua
+from asyncua.crypto import cert_gen
+from asyncua.crypto.permission_rules import SimpleRoleRuleset
+from asyncua.crypto.truststore import TrustStore
+from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+from asyncua.server.user_managers import CertificateUserManager
+from cryptography.x509.oid import ExtendedKeyUsageOID
+
+from prc3cfg.core.status import ModuleFacts, health, worst
+from prc3cfg.errors import UserError
+from prc3cfg.plant import Plant
+from prc3cfg.shell import platform
+from prc3cfg.shell.status import fingerprint, gather
+
+DI = "http://opcfoundation.org/UA/DI/"
+NAMESPACE = "urn:prc3cfg:status"
+APPLICATION_URI = "urn:prc3cfg:status-server"
+#: Seconds between looks at the records' files.
+POLL = 1.0
+#: The Configuration group's variables: browse name → (value from a module's facts, variant type).
+CONFIGURATION: dict[str, tuple[Callable[[ModuleFacts], Any], ua.VariantType]] = {
+    "PlantFile": (lambda f: (f.last_verified and f.last_verified.plant_file) or "", ua.VariantType.String),
+    "Commit": (lambda f: (f.last_verified and f.last_verified.commit) or "", ua.VariantType.String),
+    "PlantHash": (lambda f: (f.last_verified and f.last_verified.plant_sha256) or "", ua.VariantType.String),
+    "LastVerifiedTime": (lambda f: f.last_verified.time if f.last_verified else "", ua.VariantType.String),
+    "LastVerifiedBy": (lambda f: (f.last_verified and f.last_verified.by) or "", ua.VariantType.String),
+    "DriftFound": (lambda f: f.drift_seen, ua.VariantType.Boolean),
+    "PendingTravel": (lambda f: f.travel_pending, ua.VariantType.Boolean),
+    "HealthReason": (lambda f: health(f)[1], ua.VariantType.String),
+}
+
+
+@dataclass(frozen=True)
+class Settings:
+    listen: str
+    certificate: Path | None
+    private_key: Path | None
+    trust: Path | None
+    allow_anonymous: bool
+    no_security: bool
+
+
+def _values(facts: ModuleFacts) -> dict[str, tuple[Any, ua.VariantType]]:
+    """Every variable of a module by its path below the module's object."""
+    values = {"RevisionCounter": (facts.revision, ua.VariantType.Int32), "SoftwareRevision": (facts.firmware, ua.VariantType.String),
+              "DeviceHealth": (int(health(facts)[0]), ua.VariantType.Int32)}  # fmt: skip
+    values |= {f"Configuration/{name}": (get(facts), kind) for name, (get, kind) in CONFIGURATION.items()}
+    return values
+
+
+def _endpoint(listen: str) -> str:
+    parts = urlsplit(listen)
+    if parts.scheme != "opc.tcp" or not parts.hostname or parts.port is None:
+        raise UserError(f"--listen {listen}: not opc.tcp://HOST:PORT — e.g. --listen opc.tcp://0.0.0.0:4840")
+    return listen
+
+
+async def _server_certificate(settings: Settings) -> tuple[Path, Path]:
+    """The server's certificate and key: those given, else the ones made on the first start in the user's state folder."""
+    if settings.certificate is not None and settings.private_key is not None:
+        return settings.certificate, settings.private_key
+    folder = platform.user_state_dir() / "opcua"
+    folder.mkdir(parents=True, exist_ok=True)
+    cert, key = folder / "server-certificate.der", folder / "server-key.pem"
+    await cert_gen.setup_self_signed_certificate(key, cert, APPLICATION_URI, socket.gethostname(), [ExtendedKeyUsageOID.SERVER_AUTH],
+                                                 {"commonName": "prc3cfg status", "organizationName": "prc3cfg"})  # fmt: skip
+    return cert, key
+
+
+async def _secured(server: Server, settings: Settings) -> None:
+    if settings.no_security:
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        server.set_identity_tokens([ua.AnonymousIdentityToken])
+        return
+    assert settings.trust is not None  # the CLI asks for it
+    if not settings.trust.is_dir():
+        raise UserError(f"--trust {settings.trust}: no such folder — give the folder of client certificates (DER or PEM) allowed to connect")
+    cert, key = await _server_certificate(settings)
+    try:
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+    except (OSError, ValueError) as error:
+        raise UserError(f"{cert}, {key}: not a certificate and its private key ({error}) — give a DER or PEM pair") from None
+    server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt], permission_ruleset=SimpleRoleRuleset())
+    store = TrustStore([settings.trust], [])
+    await store.load()
+    validator = CertificateValidator(CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT, store)
+    server.set_certificate_validator(validator)
+    server.set_identity_tokens([ua.X509IdentityToken, *([ua.AnonymousIdentityToken] if settings.allow_anonymous else [])])
+
+
+def _id(text: str, index: int) -> ua.NodeId:
+    return ua.NodeId(ua.String(text), ua.Int16(index))
+
+
+async def _variable(parent: Node, index: int, node_id: str, name: str, value: Any, kind: ua.VariantType, di: int) -> Node:
+    node = await parent.add_variable(_id(node_id, index), ua.QualifiedName(name, di), ua.Variant(value, kind))
+    await node.write_attribute(ua.AttributeIds.AccessLevel, ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte)))
+    await node.write_attribute(ua.AttributeIds.UserAccessLevel, ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte)))
+    return node
+
+
+async def _run(plant: Plant, settings: Settings) -> None:
+    users = None if settings.no_security else CertificateUserManager()
+    server = Server(user_manager=users)  # type: ignore[arg-type]  # asyncua's own manager, typed apart from its protocol
+    await server.init()
+    server.set_endpoint(_endpoint(settings.listen))
+    server.set_server_name("prc3cfg status")
+    await server.set_application_uri(APPLICATION_URI)
+    await _secured(server, settings)
+    if users is not None and settings.trust is not None:
+        for file in sorted(settings.trust.iterdir()):
+            with contextlib.suppress(Exception):  # what is no certificate is no user
+                await users.add_user(file, name=file.name)
+    index = await server.register_namespace(NAMESPACE)
+    di = await server.register_namespace(DI)
+    device_set = await server.nodes.objects.add_folder(_id("DeviceSet", index), ua.QualifiedName("DeviceSet", di))
+    facts, _ = gather(plant)
+    variables: dict[str, Node] = {}
+    lines: dict[str, Node] = {}
+    for f in facts:
+        if f.bus not in lines:
+            lines[f.bus] = await device_set.add_object(_id(f.bus, index), ua.QualifiedName(f.bus, index))
+            variables[f"{f.bus}/DeviceHealth"] = await _variable(lines[f.bus], index, f"{f.bus}/DeviceHealth", "DeviceHealth", 0,
+                                                                 ua.VariantType.Int32, di)  # fmt: skip
+        module = await lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index), ua.QualifiedName(f.name, index))
+        group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index), ua.QualifiedName("Configuration", di))
+        for path, (value, kind) in _values(f).items():
+            parent, name = (group, path.partition("/")[2]) if path.startswith("Configuration/") else (module, path)
+            node_id = f"{f.bus}/{f.address}/{path}"
+            variables[node_id] = await _variable(parent, index, node_id, name, value, kind, di)
+    async with server:
+        await _publish(server, variables, facts)
+        print(f"listening on {settings.listen}", flush=True)
+        seen = fingerprint(plant)
+        while True:
+            await asyncio.sleep(POLL)  # the polling period, not a synchronisation
+            now = fingerprint(plant)
+            if now != seen:
+                seen = now
+                await _publish(server, variables, gather(plant)[0])
+
+
+async def _publish(server: Server, variables: dict[str, Node], facts: list[ModuleFacts]) -> None:
+    """Write the values of `facts` into the nodes (server side: clients cannot)."""
+    by_line: dict[str, list[ModuleFacts]] = {}
+    for f in facts:
+        by_line.setdefault(f.bus, []).append(f)
+        for path, (value, kind) in _values(f).items():
+            if (node := variables.get(f"{f.bus}/{f.address}/{path}")) is not None:
+                await server.write_attribute_value(node.nodeid, ua.DataValue(ua.Variant(value, kind)))
+    for bus, found in by_line.items():
+        value = int(worst([health(f)[0] for f in found]))
+        await server.write_attribute_value(variables[f"{bus}/DeviceHealth"].nodeid, ua.DataValue(ua.Variant(value, ua.VariantType.Int32)))
+
+
+def serve(plant: Plant, settings: Settings) -> None:
+    """Serve until interrupted."""
+    logging.getLogger("asyncua").setLevel(logging.ERROR)  # its warnings are for its developers; refusals are its clients' to see
+    try:
+        asyncio.run(_run(plant, settings))
+    except OSError as error:
+        raise UserError(f"--listen {settings.listen}: cannot listen there ({error.strerror or error}) — choose another port") from None
+    except KeyboardInterrupt:
+        print("stopped", file=sys.stderr)

@@ -1,0 +1,159 @@
+"""`prc3cfg status serve` (issue 44, item 2): a real server process started by the CLI, read with asyncua's own
+client — every node, RevisionCounter and DeviceHealth around an apply on the emulator, a client without a
+trusted certificate refused, every write refused. Synchronised on the "listening on" line and on node values
+(polled, bounded), never on a sleep. Skipped, naming the install command, where asyncua is missing."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+asyncua = pytest.importorskip("asyncua", reason='asyncua is not installed: pip install "prc3cfg[opcua]"')
+
+from asyncua import Client, ua  # noqa: E402
+from asyncua.crypto import cert_gen  # noqa: E402
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256  # noqa: E402
+from cryptography.x509.oid import ExtendedKeyUsageOID  # noqa: E402
+from emulated import emulated_plant, run_cli  # noqa: E402
+
+from prc3cfg.shell.locks import line_lock  # noqa: E402
+from prc3cfg.shell.sessions import bus_line_keys  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CLIENT_URI = "urn:prc3cfg:test-client"
+#: The longest a published value may take to follow the records: the server looks every second.
+WAIT = 30.0
+VARIABLES = ("RevisionCounter", "SoftwareRevision", "DeviceHealth", "Configuration/PlantFile", "Configuration/Commit",
+             "Configuration/PlantHash", "Configuration/LastVerifiedTime", "Configuration/LastVerifiedBy",
+             "Configuration/DriftFound", "Configuration/PendingTravel", "Configuration/HealthReason")  # fmt: skip
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def certificate(folder: Path, name: str) -> tuple[Path, Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    cert, key = folder / f"{name}.der", folder / f"{name}-key.pem"
+    asyncio.run(cert_gen.setup_self_signed_certificate(key, cert, CLIENT_URI, "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH],
+                                                       {"commonName": name}))  # fmt: skip
+    return cert, key
+
+
+class Served:
+    def __init__(self, process: subprocess.Popen, url: str, plant) -> None:
+        self.process, self.url, self.plant = process, url, plant
+
+
+@pytest.fixture
+def served(tmp_path):
+    """The emulated demo plant, a trusted client certificate, and `status serve` on it as a real process."""
+    trusted, key = certificate(tmp_path / "client", "trusted")
+    (tmp_path / "trust").mkdir()
+    (tmp_path / "trust" / "trusted.der").write_bytes(trusted.read_bytes())
+    with emulated_plant(tmp_path) as plant:
+        url = f"opc.tcp://127.0.0.1:{free_port()}"
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "status", "serve", str(plant.path), "--listen", url,
+                                    "--trust", str(tmp_path / "trust")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+        try:
+            line = process.stdout.readline()
+            assert line.strip() == f"listening on {url}", (line, process.stderr.read() if process.poll() is not None else "")
+            yield Served(process, url, plant), (trusted, key)
+        finally:
+            process.terminate()
+            process.communicate(timeout=30)  # drained: a server blocked on a full pipe would not see the signal
+
+
+async def connected(url: str, cert: Path, key: Path, *, identified: bool = True) -> Client:
+    """asyncua's client on the secure channel with `cert`; `identified`: the user is that certificate (else anonymous)."""
+    client = Client(url)
+    client.application_uri = CLIENT_URI
+    await client.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key), mode=ua.MessageSecurityMode.SignAndEncrypt)
+    if identified:
+        await client.load_client_certificate(str(cert))
+        await client.load_private_key(str(key))
+    await client.connect()
+    return client
+
+
+async def node(client: Client, path: str):
+    index = await client.get_namespace_index("urn:prc3cfg:status")
+    return client.get_node(ua.NodeId(path, index))
+
+
+async def wait_for(client: Client, path: str, wanted) -> None:
+    """Poll the node until it holds `wanted`, bounded by WAIT."""
+    target = await node(client, path)
+    deadline = time.monotonic() + WAIT
+    while (value := await target.read_value()) != wanted:
+        assert time.monotonic() < deadline, f"{path} stayed {value!r}, never {wanted!r}"
+        await asyncio.sleep(0.1)
+
+
+def test_a_trusted_client_reads_every_node_and_sees_an_apply(served, capsys):
+    server, (cert, key) = served
+    plant = server.plant
+
+    async def check() -> None:
+        client = await connected(server.url, cert, key)
+        try:
+            di = await client.get_namespace_index("http://opcfoundation.org/UA/DI/")
+            device_set = await client.nodes.objects.get_child(ua.QualifiedName("DeviceSet", di))
+            lines = await device_set.get_children()
+            assert len(lines) == 2  # booth-a, booth-b
+            for path in ("booth-a/DeviceHealth", *(f"booth-a/1/{v}" for v in VARIABLES)):
+                await (await node(client, path)).read_value()  # each is there and readable
+            assert await (await node(client, "booth-a/1/RevisionCounter")).read_value() == 0
+            bus = next(b for b in plant.plant.buses if b.name == "booth-a")
+            with line_lock(bus_line_keys(plant.plant, bus), "test: an apply holds the line"):
+                await wait_for(client, "booth-a/1/DeviceHealth", 2)  # CHECK_FUNCTION
+            result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+            assert result.code == 0, result.err
+            await wait_for(client, "booth-a/1/RevisionCounter", 1)
+            await wait_for(client, "booth-a/1/DeviceHealth", 0)  # NORMAL
+            assert (await (await node(client, "booth-a/1/Configuration/PlantHash")).read_value())
+            target = await node(client, "booth-a/1/RevisionCounter")
+            with pytest.raises(ua.UaStatusCodeError) as refused:
+                await target.write_value(ua.DataValue(ua.Variant(7, ua.VariantType.Int32)))
+            assert type(refused.value).__name__ in ("BadUserAccessDenied", "BadNotWritable")
+            assert await target.read_value() == 1
+        finally:
+            await client.disconnect()
+
+    asyncio.run(check())
+
+
+def test_a_client_without_a_trusted_certificate_is_refused(served, tmp_path):
+    server, _ = served
+    stranger, key = certificate(tmp_path / "stranger", "stranger")
+
+    async def check() -> None:
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            client = await connected(server.url, stranger, key)
+            await client.disconnect()
+        assert type(refused.value).__name__ == "BadCertificateUntrusted", repr(refused.value)
+
+    asyncio.run(check())
+
+
+def test_a_trusted_client_without_a_user_is_refused_unless_anonymous_is_allowed(served):
+    server, (cert, key) = served
+
+    async def check() -> None:
+        with pytest.raises(ua.UaStatusCodeError) as refused:
+            client = await connected(server.url, cert, key, identified=False)
+            await client.disconnect()
+        assert type(refused.value).__name__.startswith("BadIdentityToken"), repr(refused.value)
+
+    asyncio.run(check())
