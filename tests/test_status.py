@@ -19,7 +19,7 @@ from emulated import emulated_plant, run_cli
 from test_cli_json import valid
 
 from prc3cfg import api
-from prc3cfg.core.status import Health, ModuleFacts, Verified, drifted, health, worst
+from prc3cfg.core.status import Health, LastVerified, ModuleFacts, drifted, health, worst
 from prc3cfg.shell.locks import line_lock
 from prc3cfg.shell.records import Journal
 from prc3cfg.shell.sessions import bus_line_keys
@@ -163,7 +163,7 @@ def _check_history(seed: int, root: Path, runs: int) -> None:
         assert (health(f)[0] is Health.FAILURE) == failed  # nothing else holds here: no apply runs, no travel; no record: maintenance
         assert health(f)[0] in (Health.FAILURE, Health.MAINTENANCE_REQUIRED)
         if f.last_verified is not None:
-            assert isinstance(f.last_verified, Verified) and f.last_verified.commit is not None and len(f.last_verified.commit) == 40
+            assert isinstance(f.last_verified, LastVerified) and f.last_verified.commit is not None and len(f.last_verified.commit) == 40
 
 
 def test_a_few_record_histories_give_what_a_plain_reading_gives(tmp_path):

@@ -79,6 +79,7 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._plant import picture as picture
     from prc3cfg.api._plant import plot_format as plot_format
     from prc3cfg.api._plant import prune_records as prune_records
+    from prc3cfg.api._plant import serve_status as serve_status
     from prc3cfg.api._plant import status as status
     from prc3cfg.api._plant import verify_records as verify_records
     from prc3cfg.api._plant import write_adoption as write_adoption
@@ -118,7 +119,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._machine": ("SerialPort", "device_number", "serial_ports", "setup_machine", "terminal_path", "unshared_records", "wait_for"),
     "prc3cfg.api._plan": ("drift", "left_alone", "load", "load_images", "plan", "read", "select"),
     "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records",
-                           "status", "verify_records", "write_adoption"),
+                           "serve_status", "status", "verify_records", "write_adoption"),
     "prc3cfg.api._policy": ("PolicyRefused", "PolicyReport", "policy"),
     "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
     "prc3cfg.core.plan_file": ("StalePlan",),

@@ -206,3 +206,16 @@ def status(plant: Plant) -> dict[str, Any]:
 
     facts, notes = gather(plant)
     return document(str(plant.path), plant.sha256, facts, notes)
+
+
+def serve_status(plant: Plant, listen: str, *, certificate: Path | None, private_key: Path | None, trust: Path | None,
+                 allow_anonymous: bool, no_security: bool) -> None:  # fmt: skip
+    """Publish the plant's status read-only on OPC UA until interrupted (`prc3cfg.shell.opcua`): a
+    `UserError` naming the command that installs the optional extra where asyncua is missing."""
+    try:
+        from prc3cfg.shell import opcua
+    except ImportError as error:
+        if error.name is None or not error.name.startswith("asyncua"):
+            raise
+        raise UserError('prc3cfg status serve needs the OPC UA library asyncua — install it: pip install "prc3cfg[opcua]"') from None
+    opcua.serve(plant, opcua.ServerSettings(listen, certificate, private_key, trust, allow_anonymous, no_security))

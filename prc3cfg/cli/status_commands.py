@@ -20,8 +20,6 @@ from prc3cfg.cli import app
 from prc3cfg.cli.common import PlantArg
 from prc3cfg.errors import UserError
 
-INSTALL = 'pip install "prc3cfg[opcua]"'
-
 
 class _PlantOrServe(TyperGroup):
     """`status PLANT` shows, `status serve PLANT` serves: a first word that is no subcommand is the plant file."""
@@ -82,12 +80,6 @@ def serve(
 
     from prc3cfg import api
 
-    try:
-        from prc3cfg.shell import opcua
-    except ImportError as error:
-        if error.name is None or not error.name.startswith("asyncua"):
-            raise
-        raise UserError(f"prc3cfg status serve needs the OPC UA library asyncua — install it: {INSTALL}") from None
     if (certificate is None) != (private_key is None):
         raise UserError("--certificate and --private-key go together: give both, or neither to use the one made in the state folder")
     if not no_security and trust is None:
@@ -96,4 +88,5 @@ def serve(
         print("warning: --no-security: the status is served without signing or encryption — anyone who reaches the port reads it",
               file=sys.stderr)  # fmt: skip
     loaded = api.load(plant)
-    opcua.serve(loaded, opcua.Settings(listen, certificate, private_key, trust, allow_anonymous, no_security))
+    api.serve_status(loaded, listen, certificate=certificate, private_key=private_key, trust=trust, allow_anonymous=allow_anonymous,
+                     no_security=no_security)  # fmt: skip

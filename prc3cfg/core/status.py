@@ -37,7 +37,7 @@ class Health(IntEnum):
 
 
 @dataclass(frozen=True, slots=True)
-class Verified:
+class LastVerified:
     """The last verified apply or restore that changed a module, as its journal's header says it (text: a
     record may say anything; None where it says nothing)."""
 
@@ -57,7 +57,7 @@ class ModuleFacts:
     address: int
     name: str
     revision: int  # verified applies and restores that changed it
-    last_verified: Verified | None
+    last_verified: LastVerified | None
     last_failed: bool  # the newest run that wrote it did not verify it
     apply_running: bool
     travel_pending: bool

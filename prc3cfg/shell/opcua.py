@@ -69,7 +69,7 @@ CONFIGURATION: dict[str, tuple[Callable[[ModuleFacts], Any], ua.VariantType]] = 
 
 
 @dataclass(frozen=True)
-class Settings:
+class ServerSettings:
     listen: str
     certificate: Path | None
     private_key: Path | None
@@ -93,7 +93,7 @@ def _endpoint(listen: str) -> str:
     return listen
 
 
-async def _server_certificate(settings: Settings) -> tuple[Path, Path]:
+async def _server_certificate(settings: ServerSettings) -> tuple[Path, Path]:
     """The server's certificate and key: those given, else the ones made on the first start in the user's state folder."""
     if settings.certificate is not None and settings.private_key is not None:
         return settings.certificate, settings.private_key
@@ -105,7 +105,7 @@ async def _server_certificate(settings: Settings) -> tuple[Path, Path]:
     return cert, key
 
 
-async def _secured(server: Server, settings: Settings) -> None:
+async def _secured(server: Server, settings: ServerSettings) -> None:
     if settings.no_security:
         server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
         server.set_identity_tokens([ua.AnonymousIdentityToken])
@@ -138,7 +138,7 @@ async def _variable(parent: Node, index: int, node_id: str, name: str, value: An
     return node
 
 
-async def _run(plant: Plant, settings: Settings) -> None:
+async def _run(plant: Plant, settings: ServerSettings) -> None:
     users = None if settings.no_security else CertificateUserManager()
     server = Server(user_manager=users)  # type: ignore[arg-type]  # asyncua's own manager, typed apart from its protocol
     await server.init()
@@ -192,7 +192,7 @@ async def _publish(server: Server, variables: dict[str, Node], facts: list[Modul
         await server.write_attribute_value(variables[f"{bus}/DeviceHealth"].nodeid, ua.DataValue(ua.Variant(value, ua.VariantType.Int32)))
 
 
-def serve(plant: Plant, settings: Settings) -> None:
+def serve(plant: Plant, settings: ServerSettings) -> None:
     """Serve until interrupted."""
     logging.getLogger("asyncua").setLevel(logging.ERROR)  # its warnings are for its developers; refusals are its clients' to see
     try:

@@ -17,7 +17,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from prc3cfg.core.status import ModuleFacts, Verified, drifted
+from prc3cfg.core.status import LastVerified, ModuleFacts, drifted
 from prc3cfg.core.text import shown
 from prc3cfg.plant import Plant
 from prc3cfg.shell import bases, releases
@@ -33,7 +33,7 @@ CHANGING = ("apply", "restore")
 @dataclass
 class _History:
     revision: int = 0
-    last_verified: Verified | None = None
+    last_verified: LastVerified | None = None
     last_failed: bool = False
 
 
@@ -41,12 +41,12 @@ def _text(value: Any) -> str | None:
     return shown(value) if isinstance(value, str) else None
 
 
-def _verified(path: Path, header: dict[str, Any]) -> Verified:
+def _verified(path: Path, header: dict[str, Any]) -> LastVerified:
     plant = header["plant"] if isinstance(header.get("plant"), dict) else {}
     git = plant["git"] if isinstance(plant.get("git"), dict) else {}
     user, host = _text(header.get("user")), _text(header.get("host"))
     when = stamped(path)
-    return Verified(time="" if when is None else when.isoformat(timespec="microseconds"), by=None if user is None else f"{user}@{host or '?'}",
+    return LastVerified(time="" if when is None else when.isoformat(timespec="microseconds"), by=None if user is None else f"{user}@{host or '?'}",
                     plant_file=_text(plant.get("path")), plant_sha256=_text(plant.get("sha256")), commit=_text(git.get("commit")))  # fmt: skip
 
 
