@@ -157,3 +157,26 @@ def test_a_trusted_client_without_a_user_is_refused_unless_anonymous_is_allowed(
         assert type(refused.value).__name__.startswith("BadIdentityToken"), repr(refused.value)
 
     asyncio.run(check())
+
+
+@pytest.mark.parametrize("content", [None, b"not a certificate"], ids=["empty", "no certificate"])
+def test_a_trust_folder_without_certificates_is_one_line(tmp_path, content):
+    """An empty folder, or one holding no certificate, ended in asyncua's traceback ("can't create an empty store")."""
+    (tmp_path / "trust").mkdir()
+    if content is not None:
+        (tmp_path / "trust" / "client.der").write_bytes(content)
+    with emulated_plant(tmp_path) as plant:
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "status", "serve", str(plant.path), "--listen", f"opc.tcp://127.0.0.1:{free_port()}",
+                               "--trust", str(tmp_path / "trust")], capture_output=True, text=True, timeout=60,
+                              env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith(f"error: --trust {tmp_path / 'trust'}: ") and "certificates of the clients allowed to connect" in line, line
+
+
+def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_alone(served, tmp_path):
+    """Made on the first start where no --certificate is given: in PRC3CFG_STATE_DIR (the tests' own), mode 0600."""
+    key = Path(os.environ["PRC3CFG_STATE_DIR"]) / "opcua" / "server-key.pem"
+    assert key.is_file()
+    if sys.platform != "win32":
+        assert key.stat().st_mode & 0o777 == 0o600

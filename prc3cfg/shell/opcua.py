@@ -47,7 +47,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 from prc3cfg.core.status import ModuleFacts, health, worst
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
-from prc3cfg.shell import platform
+from prc3cfg.shell import platform, releases
 from prc3cfg.shell.status import fingerprint, gather
 
 DI = "http://opcfoundation.org/UA/DI/"
@@ -94,14 +94,18 @@ def _endpoint(listen: str) -> str:
 
 
 async def _server_certificate(settings: ServerSettings) -> tuple[Path, Path]:
-    """The server's certificate and key: those given, else the ones made on the first start in the user's state folder."""
+    """The server's certificate and key: those given, else the ones made on the first start in this user's own
+    state folder (`PRC3CFG_STATE_DIR` where set; never the machine's, which other users read) — the key
+    readable by this user alone."""
     if settings.certificate is not None and settings.private_key is not None:
         return settings.certificate, settings.private_key
-    folder = platform.user_state_dir() / "opcua"
+    folder = releases.state_dirs()[-1] / "opcua"
     folder.mkdir(parents=True, exist_ok=True)
     cert, key = folder / "server-certificate.der", folder / "server-key.pem"
     await cert_gen.setup_self_signed_certificate(key, cert, APPLICATION_URI, socket.gethostname(), [ExtendedKeyUsageOID.SERVER_AUTH],
                                                  {"commonName": "prc3cfg status", "organizationName": "prc3cfg"})  # fmt: skip
+    with key.open("rb") as handle:
+        platform.set_mode(handle.fileno(), 0o600)
     return cert, key
 
 
@@ -121,7 +125,13 @@ async def _secured(server: Server, settings: ServerSettings) -> None:
         raise UserError(f"{cert}, {key}: not a certificate and its private key ({error}) — give a DER or PEM pair") from None
     server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt], permission_ruleset=SimpleRoleRuleset())
     store = TrustStore([settings.trust], [])
-    await store.load()
+    try:
+        await store.load()
+    except ValueError as error:  # asyncua: "can't create an empty store", or a file there that is no certificate
+        empty = not any(p.is_file() for p in settings.trust.iterdir())
+        found = "holds no client certificate" if empty else f"cannot be read as certificates ({error})"
+        raise UserError(f"--trust {settings.trust}: {found} — put there the DER or PEM certificates of the clients allowed to "
+                        "connect") from None  # fmt: skip
     validator = CertificateValidator(CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT, store)
     server.set_certificate_validator(validator)
     server.set_identity_tokens([ua.X509IdentityToken, *([ua.AnonymousIdentityToken] if settings.allow_anonymous else [])])
