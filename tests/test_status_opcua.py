@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-asyncua = pytest.importorskip("asyncua", reason='asyncua is not installed: pip install "prc3cfg[opcua]"')
+asyncua = pytest.importorskip("asyncua", reason="asyncua is not installed: pip install -e '.[opcua]'")
 
 from asyncua import Client, ua  # noqa: E402
 from asyncua.crypto import cert_gen  # noqa: E402

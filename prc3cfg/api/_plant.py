@@ -217,5 +217,6 @@ def serve_status(plant: Plant, listen: str, *, certificate: Path | None, private
     except ImportError as error:
         if error.name is None or not error.name.startswith("asyncua"):
             raise
-        raise UserError('prc3cfg status serve needs the OPC UA library asyncua — install it: pip install "prc3cfg[opcua]"') from None
+        raise UserError(f"prc3cfg status serve needs the OPC UA library asyncua (the extra opcua), which the Python running prc3cfg "
+                        f"does not have — install it there: {python_command()} -m pip install asyncua") from None  # fmt: skip
     opcua.serve(plant, opcua.ServerSettings(listen, certificate, private_key, trust, allow_anonymous, no_security))

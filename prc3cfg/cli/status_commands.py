@@ -67,9 +67,9 @@ def _module_line(module: dict[str, Any]) -> str:
 @status_app.command()
 def serve(
     plant: PlantArg,
-    listen: Annotated[str, typer.Option("--listen", metavar="opc.tcp://HOST:PORT", help="Where the OPC UA server listens.")],
-    certificate: Annotated[Path | None, typer.Option("--certificate", help="The server's certificate (DER or PEM).")] = None,
-    private_key: Annotated[Path | None, typer.Option("--private-key", help="The certificate's private key (PEM).")] = None,
+    listen: Annotated[str, typer.Option("--listen", metavar="URL", help="Where the OPC UA server listens: opc.tcp://HOST:PORT.")],
+    certificate: Annotated[Path | None, typer.Option("--certificate", metavar="FILE", help="The server's certificate (DER or PEM).")] = None,
+    private_key: Annotated[Path | None, typer.Option("--private-key", metavar="FILE", help="The certificate's private key (PEM).")] = None,
     trust: Annotated[Path | None, typer.Option("--trust", metavar="DIR", help="Folder of client certificates allowed to connect.")] = None,
     allow_anonymous: Annotated[bool, typer.Option("--allow-anonymous", help="Let a trusted client in without a user.")] = False,
     no_security: Annotated[bool, typer.Option("--no-security", help=(
