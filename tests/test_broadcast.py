@@ -1,6 +1,6 @@
 """Broadcasts: what every module of a full line needs alike goes once to address 0.
 
-The pure part (`prc3cfg.core.sharing`) as tables of lines; then a 30-module line on a real
+The pure part (`prc3cfg.core.broadcast_search`) as tables of lines; then a 30-module line on a real
 emulator: commissioning and a shared change by broadcast, each receiver verified by reading
 back, a lost broadcast repaired with addressed writes, and a plan file with broadcasts.
 """
@@ -18,7 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from lossy import Loss
 
-from prc3cfg.core import codec, device, sharing
+from prc3cfg.core import broadcast_search, codec, device
+from prc3cfg.core.broadcast_search import SharingMemo, SharingModule, share
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters, Wanted, default_program
 from prc3cfg.core.line import LineSettings
@@ -26,7 +27,6 @@ from prc3cfg.core.plan_file import review_sha256
 from prc3cfg.core.planner import plan_module
 from prc3cfg.core.plant_plan import LineProof, PlantPlan
 from prc3cfg.core.plant_planner import Line, Planner
-from prc3cfg.core.sharing import SharingMemo, SharingModule, share
 
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
 
@@ -114,11 +114,11 @@ def unpruned(modules: list[SharingModule], cost: LineCost, proof_time: float) ->
     """The broadcasts and each module's own steps as the search chose them before it had floors
     (and as it must still choose them): every set it tries priced in full, no bound, no order."""
     memo = SharingMemo()
-    groups = sharing._candidates(modules)
+    groups = broadcast_search._candidates(modules)
     modules = [replace(m, kind=memo.kind(m, cost)) for m in modules]
 
-    def attempt(chosen: list) -> sharing._Attempt | None:
-        return sharing._attempt(tuple(step for group in chosen for step in group), modules, cost, memo)
+    def attempt(chosen: list) -> broadcast_search._Attempt | None:
+        return broadcast_search._attempt(tuple(step for group in chosen for step in group), modules, cost, memo)
 
     nothing = attempt([])
     added, chosen = nothing, []
@@ -195,14 +195,14 @@ def check_floors_and_choice(modules: list[SharingModule], cost: LineCost, proof_
     few), no module's floor of its own steps or of its verification is above what they cost there;
     and the search with floors and bounds chooses what the unpruned one does."""
     memo = SharingMemo()
-    groups = sharing._candidates(modules)
+    groups = broadcast_search._candidates(modules)
     kinds = [replace(m, kind=memo.kind(m, cost)) for m in modules]
-    floors = sharing._Floors(groups, kinds, cost)
+    floors = broadcast_search._Floors(groups, kinds, cost)
     every = (1 << len(groups)) - 1
     each = range(len(groups))
     tried = {0, every} | {1 << i for i in each} | {every & ~(1 << i) for i in each} | {(1 << i) - 1 for i in each}
     for chosen in sorted(tried):
-        priced = sharing._attempt(tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g), kinds, cost, memo)
+        priced = broadcast_search._attempt(tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g), kinds, cost, memo)
         if priced is not None:
             for floor, own in zip(floors.modules, priced.owns, strict=True):
                 steps, verification = floor.parts(floors.chosen(chosen))
@@ -243,12 +243,12 @@ def test_a_line_of_modules_with_programs_of_their_own_is_not_planned_behind_sets
         desired = replace(desired, programs=tuple(p if n in profile else None for n, p in enumerate(desired.programs, 1)))
         modules.append(SharingModule(actual, desired, plan_module(actual, desired, COST)))
     planned: list[int] = []
-    cheapest = sharing.cheapest_messages
-    monkeypatch.setattr(sharing, "cheapest_messages", lambda *args: planned.append(1) or cheapest(*args))
+    cheapest = broadcast_search.cheapest_messages
+    monkeypatch.setattr(broadcast_search, "cheapest_messages", lambda *args: planned.append(1) or cheapest(*args))
     shared = share(modules, COST)
     assert [s.message.ID for s in shared.broadcasts] == [0x20, 0x40, 0x40, 0x41, 0x41, 0x43, 0x43]
     assert len(planned) == 30  # the four groups; no other set is planned on any module
-    monkeypatch.setattr(sharing, "cheapest_messages", cheapest)
+    monkeypatch.setattr(broadcast_search, "cheapest_messages", cheapest)
     assert unpruned(modules, COST, 0.0)[0] == shared.broadcasts
 
 

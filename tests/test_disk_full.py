@@ -225,7 +225,7 @@ class Refused:
 
     def check(self, kind: str | None) -> None:
         """The account is exact, and the last line names the record of `kind` (any, where None) and the OS error."""
-        # the line's record is named by its state folder where the disk refused its nameless file (`prc3cfg.shell.bases`)
+        # the line's record is named by its state folder where the disk refused its nameless file (`prc3cfg.shell.line_record`)
         folder = None if kind is None else self.folders[kind].parent if kind == "lines" else self.folders[kind]
         problems = account_problems(self.plant, self.before, self.lines, self.result) + refused_problems(self.result, kind, folder)
         assert not problems, "\n".join(problems) + f"\n--- stdout\n{self.result.stdout}\n--- stderr\n{self.result.stderr}"

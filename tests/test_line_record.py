@@ -1,4 +1,4 @@
-"""The line's record (`prc3cfg.shell.bases`): one base per line, shared by every plant file, checkout
+"""The line's record (`prc3cfg.shell.line_record`): one base per line, shared by every plant file, checkout
 and user of it, and checked by evidence at every plan — each test a way something other than this
 plant file's last apply touched the line, across the real emulator and link client: another plant
 file or checkout, a module reset or replaced by a spare, two modules swapped, drift a full read

@@ -1,4 +1,4 @@
-"""Other users' records are claims (`prc3cfg.shell.bases`, `prc3cfg.shell.releases`): a seeded family of
+"""Other users' records are claims (`prc3cfg.shell.line_record`, `prc3cfg.shell.releases`): a seeded family of
 files planted among the line records and the axis-release records — a FIFO, a link to /dev/zero, a sparse
 file far over the bound, a folder, bytes that are no JSON, records of another line, forged fields full of
 terminal commands and bidi overrides, forged E12 and release records — each held against real processes:
@@ -27,7 +27,7 @@ from emulated import emulated_plant
 from test_locks import ROOT
 from test_machine_folder import RAW, plant_unreadable
 
-from prc3cfg.shell.bases import FORMAT
+from prc3cfg.shell.line_record import FORMAT
 from prc3cfg.shell.sessions import bus_line_keys
 
 #: The uid the planted files belong to: another user, neither root nor this one.

@@ -1,4 +1,4 @@
-"""The machine's folder of records (`prc3cfg.shell.releases`, `prc3cfg.shell.bases`): every user of a
+"""The machine's folder of records (`prc3cfg.shell.releases`, `prc3cfg.shell.line_record`): every user of a
 line sees the axis releases and what the modules hold, once an administrator made it
 (`prc3cfg setup-machine`); until then each user's records are their own, and a command on a real line
 says so in one line. Another user's file there vouches for nothing, but tells that a module changed.

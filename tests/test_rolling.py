@@ -270,13 +270,13 @@ def test_any_program_another_tool_changes_is_found_within_the_bound(tmp_path_fac
 def test_the_record_file_keeps_read_at_and_passes_over_what_is_none():
     """`read_at` goes into the line's record file and back; a program that is none, a time without its zone or
     not later than `since` (another tool's edit) is taken as old as `since` — rolled sooner, never later."""
-    from prc3cfg.shell import bases
+    from prc3cfg.shell import line_record
 
     keys = ("socket://127.0.0.1:4001",)
-    bases.LineRecord(keys).update({3: known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))})
-    assert bases.LineRecord(keys).known()[3] == known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))
+    line_record.LineRecord(keys).update({3: known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))})
+    assert line_record.LineRecord(keys).known()[3] == known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))
     (path,) = [p for p in (Path(os.environ["PRC3CFG_STATE_DIR"]) / "lines").glob("*.json")]
     document = json.loads(path.read_text())
     document["modules"]["3"]["read_at"] = {"1": T3, "2": "2026-11-28T09:00:00", "3": "2000-01-01T00:00:00+00:00", "70": T3, "x": T3, "4": 5}
     path.write_text(json.dumps(document))
-    assert bases.LineRecord(keys).known()[3].read_at == {1: T3}
+    assert line_record.LineRecord(keys).known()[3].read_at == {1: T3}

@@ -45,7 +45,7 @@ from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
-from prc3cfg.shell import audit, bases, releases
+from prc3cfg.shell import audit, line_record, releases
 from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
@@ -249,7 +249,7 @@ def _ready(plant: Plant, buses: Collection[Bus], reason: str | None, command: st
                             "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
     check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
     releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
-    releases.folder(bases.KIND, bases.WHAT)
+    releases.folder(line_record.KIND, line_record.WHAT)
     return reason
 
 

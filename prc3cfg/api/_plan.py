@@ -30,7 +30,7 @@ from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
-from prc3cfg.shell import bases, releases
+from prc3cfg.shell import line_record, releases
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
 from prc3cfg.shell.planning import SharedPlanner
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
@@ -150,13 +150,13 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | 
 
 
 def seen(plant: Plant, command: str, held: OnRecord, then: LineRead | None = None) -> LineRead:
-    """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.bases`):
+    """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.line_record`):
     what `command` saw — drift included, so the next plan writes it back — then `then`. Written with
     the line's next write of the record (an apply's before its first frame), else when the command ends."""
-    by = bases.who(command, plant.path)
+    by = line_record.who(command, plant.path)
 
     def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
-        record, when = held.records[bus], bases.now()
+        record, when = held.records[bus], line_record.now()
         known = record.known()
         record.saw({a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
         if then is not None:

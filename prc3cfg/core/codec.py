@@ -634,7 +634,7 @@ class ItemsKind:
     item_bytes: int
     capacity: int
     fields: tuple[str, ...]  # the program fields an item writes
-    broadcast: bool  # the broadcast search (`prc3cfg.core.sharing`) sends items every module shares in it
+    broadcast: bool  # the broadcast search (`prc3cfg.core.broadcast_search`) sends items every module shares in it
 
     @classmethod
     def of(cls, message: type[WritePartPrograms] | type[_WriteItems], fields: tuple[str, ...], broadcast: bool) -> ItemsKind:

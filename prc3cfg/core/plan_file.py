@@ -17,7 +17,7 @@ modules were read in full, and why) rests on the record as it was before the pla
 be, and — like `left_alone` — is words only: shown by `show` as what the plan file says, never by the
 apply as its own, and never consulted for what is read or sent.
 
-A bus's broadcasts (`prc3cfg.core.sharing`) are the leading steps of every module of that bus, marked
+A bus's broadcasts (`prc3cfg.core.broadcast_search`) are the leading steps of every module of that bus, marked
 `"broadcast": true` — so each module's steps still say, in order, everything that reaches it (a reader
 that sent them addressed would do the same, only slower) — and the bus lists them once under
 `"broadcasts"`.
@@ -69,7 +69,7 @@ Key = tuple[str, int]  # (bus name, module address)
 
 FORMAT = "prc3cfg-plan/1"
 
-#: What a targeted read-back compares with, in words: a plan file's `read.base` (`prc3cfg.shell.bases`).
+#: What a targeted read-back compares with, in words: a plan file's `read.base` (`prc3cfg.shell.line_record`).
 RECORD = "the line's record of what prc3cfg last read or verified"
 
 #: The largest plan file prc3cfg reads: the largest it writes, of the largest plant (8 buses × 30 modules,

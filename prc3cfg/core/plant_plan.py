@@ -6,7 +6,7 @@ so a stale plan can be refused) and what they are predicted to do. The optimiser
 module's steps is `prc3cfg.core.planner`; rendering is `prc3cfg.core.render`; the plan file
 `prc3cfg-plan/1`, written and read back, is `prc3cfg.core.plan_file`.
 
-A bus may start with broadcasts (`prc3cfg.core.sharing`): steps sent once to address 0 that
+A bus may start with broadcasts (`prc3cfg.core.broadcast_search`): steps sent once to address 0 that
 every module of the line processes — the leading `broadcasts` steps of each module of that bus. Pure.
 """
 

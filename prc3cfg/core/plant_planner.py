@@ -3,7 +3,7 @@
 - `Line`: a line as the planning sees it — what its exchanges cost, which addresses the plant
   lists there and whether it says it lists every module of the line, how long a probe waits.
 - `Wanted`: one module to plan, with the image it should hold.
-- `PlanCache`: the module plans of a plant by what they depend on (`sharing.alike`), so that
+- `PlanCache`: the module plans of a plant by what they depend on (`broadcast_search.alike`), so that
   modules alike on any line are planned once (a plant commissioned from factory defaults is one
   plan per line profile), and the broadcast search's memo.
 - `Planner`: the plan of each line — its modules' own plans (each as soon as its module is
@@ -27,7 +27,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from math import fsum
 
-from prc3cfg.core import codec, sharing, what_to_read
+from prc3cfg.core import broadcast_search, codec, what_to_read
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.image import MAX_MODULE_ADDRESS, Key, ModuleImage, Wanted
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
@@ -66,7 +66,7 @@ class Line:
 
 @dataclass(frozen=True, slots=True)
 class _PlanKey:
-    """What a module's own plan depends on: `sharing.alike`, and whether it reported E12."""
+    """What a module's own plan depends on: `broadcast_search.alike`, and whether it reported E12."""
 
     alike: tuple[object, ...]
     system_unset: bool
@@ -74,15 +74,15 @@ class _PlanKey:
 
 class PlanCache:
     """The plans of modules alike but for their address, made once; and the broadcast search's memo
-    (`sharing.share`)."""
+    (`broadcast_search.share`)."""
 
     def __init__(self) -> None:
         self._plans: dict[_PlanKey, ModulePlan] = {}
-        self.sharing = sharing.SharingMemo()
+        self.sharing = broadcast_search.SharingMemo()
 
     def plan(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost, system_unset: bool = False) -> ModulePlan:
         """`plan_module`, once for modules alike but for their address."""
-        key = _PlanKey(sharing.alike(actual, desired, cost), system_unset)
+        key = _PlanKey(broadcast_search.alike(actual, desired, cost), system_unset)
         found = self._plans.get(key)
         if found is None:
             found = plan_module(actual, desired, cost, system_unset=system_unset)
@@ -101,7 +101,7 @@ class LineDraft:
 
     bus: str
     changes: list[ModuleChange]
-    shared: sharing.Shared | None = None
+    shared: broadcast_search.Shared | None = None
     to_prove: tuple[int, ...] = ()
 
 
@@ -151,8 +151,8 @@ class Planner:
         covered = line.complete and {c.address for c in changes} == line.listed
         if not changes or not covered or (line.unlisted() and not probing):
             return LineDraft(bus, changes)
-        shared = sharing.share([sharing.SharingModule(c.actual, c.desired, c.plan) for c in changes], line.cost, self._cache.sharing,
-                               line.proof_time())  # fmt: skip
+        receivers = [broadcast_search.SharingModule(c.actual, c.desired, c.plan) for c in changes]
+        shared = broadcast_search.share(receivers, line.cost, self._cache.sharing, line.proof_time())
         return LineDraft(bus, changes, shared, tuple(line.unlisted())) if shared.broadcasts else LineDraft(bus, changes)
 
     def settle_line(self, draft: LineDraft, answered: Sequence[int] | None) -> None:

@@ -3,7 +3,7 @@ line's record of them becomes from what was read: the one answer, from the recor
 evidence. Pure: the callers read the record and the lines (`prc3cfg.api`, `prc3cfg.shell.readback`,
 `prc3cfg.shell.apply`) and hand over plain values.
 
-The *record* of a line (`prc3cfg.shell.bases`) says what prc3cfg last read or verified each of its
+The *record* of a line (`prc3cfg.shell.line_record`) says what prc3cfg last read or verified each of its
 modules to hold — whichever plant file, checkout or user it was — with when and by whom (`Known`).
 
 - A full read (`in_full`: `read`, a plan with `--full-read` or with no record, a plan file made from

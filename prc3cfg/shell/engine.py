@@ -29,7 +29,7 @@ from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant
-from prc3cfg.shell import bases, releases
+from prc3cfg.shell import line_record, releases
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Exchange
@@ -294,7 +294,7 @@ class Writing:
     def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
         """What the modules that verified hold, back into their lines' records: the read-back with the
         steps' effect, and what the record knew of the rest (`what_to_read.verified`)."""
-        when, by = bases.now(), bases.who(self.command, self.plant.path)
+        when, by = line_record.now(), line_record.who(self.command, self.plant.path)
         for bus, held in known.items():
             done = {r.address: r for r in runs if r.bus == bus and r.verified}
             try:

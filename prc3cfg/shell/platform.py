@@ -262,7 +262,7 @@ def serial_group(name: str | None = None) -> tuple[str, int] | None:
 
 
 #: The permissions of a record in the machine's folder that every user of the line reads and only its
-#: maker writes (a line's record, `prc3cfg.shell.bases`): 0640, its group the folder's (`make_group_folder`:
+#: maker writes (a line's record, `prc3cfg.shell.line_record`): 0640, its group the folder's (`make_group_folder`:
 #: setgid) — the serial ports' group. Windows keeps no POSIX permissions: the ACL a file inherits from
 #: %ProgramData%\prc3cfg gives every user read and its maker (CREATOR OWNER) alone the right to change it.
 SHARED_READ = 0o640

@@ -23,7 +23,7 @@
 - The plant file last applied in full (`.prc3cfg/applied/<plant>.yaml`, a copy written after
   an apply that verified every module of the plant): what `plan` compares with to say which
   modules and programs left the plant file — they stay on the hardware as they are. (What the
-  modules hold is the line's record's: `prc3cfg.shell.bases`.)
+  modules hold is the line's record's: `prc3cfg.shell.line_record`.)
 
 `check_writable` tells, before an apply opens a line, whether these can be written at all (a
 read-only checkout, a full disk, a file where `.prc3cfg` belongs): an apply that could not keep

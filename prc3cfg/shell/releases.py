@@ -53,7 +53,7 @@ from prc3cfg.shell.files import FileProblem, Why, read_owned, write_atomically
 #: `PRC3CFG_MACHINE_STATE_DIR` names another. Until it is there, each user keeps the records in their own
 #: state folder — which no other user sees: `unshared` says so.
 SYSTEM_STATE_DIR = platform.SYSTEM_STATE_DIR
-#: What the machine's folder holds, a folder each: axis releases not yet told, the lines' records (`prc3cfg.shell.bases`).
+#: What the machine's folder holds, a folder each: axis releases not yet told, the lines' records (`prc3cfg.shell.line_record`).
 RELEASES, LINES = "releases", "lines"
 
 

@@ -33,7 +33,7 @@ from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import bases, platform, releases
+from prc3cfg.shell import line_record, platform, releases
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.phases import Progress, Quiet
@@ -154,7 +154,7 @@ class OnRecord:
     them (`lines`), else as it stands (`on_record`): each line's record of what its modules hold, by bus, and every
     record of an axis release, an E12 or a fault state on them not cleared yet (`releases.pending`)."""
 
-    records: dict[str, bases.LineRecord]
+    records: dict[str, line_record.LineRecord]
     pending: tuple[releases.Pending, ...]
 
     def of(self, kind: str, bus: str) -> list[releases.Pending]:
@@ -165,7 +165,7 @@ class OnRecord:
 
 def on_record(keys: Mapping[str, tuple[str, ...]]) -> OnRecord:
     """What is on record of the lines with these identities (by bus), read now."""
-    return OnRecord({bus: bases.LineRecord(line) for bus, line in keys.items()},
+    return OnRecord({bus: line_record.LineRecord(line) for bus, line in keys.items()},
                     tuple(releases.pending((key for line in keys.values() for key in line), None)))  # fmt: skip
 
 
@@ -241,9 +241,9 @@ def _one_bus_a_line(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> None:
 
 def _line_records(keys: Mapping[str, tuple[str, ...]], options: LineOptions) -> OnRecord:
     """Under the lines' locks: what is on record of them, read once (this user's names made theirs first:
-    `bases.settle`), with the records' files passed over or moved aside told, every axis release on these lines
+    `line_record.settle`), with the records' files passed over or moved aside told, every axis release on these lines
     that no account has named yet, and every module a write found in a fault state not seen cleared since."""
-    said = [*releases.passed_over(), *(said for line in keys.values() for said in bases.settle(line))]
+    said = [*releases.passed_over(), *(said for line in keys.values() for said in line_record.settle(line))]
     held = on_record(keys)
     for line in [*said, *(said for record in held.records.values() for said in record.passed_over())]:
         options.tell(line)

@@ -1,6 +1,6 @@
 """The facts of `prc3cfg status`, gathered from prc3cfg's records only — never the bus (the line stays one
 writer's): the journals beside the plant file (revision counter, last verified, last failed), each line's
-record of what its modules hold (drift, evidence age: `prc3cfg.shell.bases`), the records of pending
+record of what its modules hold (drift, evidence age: `prc3cfg.shell.line_record`), the records of pending
 axis releases (`prc3cfg.shell.releases`) and the line's lock (an apply runs: `prc3cfg.shell.locks.held_by`).
 
 Another user's records are data: read bounded by the modules that read them, every text in them escaped
@@ -20,7 +20,7 @@ from typing import Any
 from prc3cfg.core.status import LastVerified, ModuleFacts, drifted
 from prc3cfg.core.text import shown
 from prc3cfg.plant import Plant
-from prc3cfg.shell import bases, releases
+from prc3cfg.shell import line_record, releases
 from prc3cfg.shell.audit import check_journal, journals, stamped
 from prc3cfg.shell.locks import held_by, lock_dir
 from prc3cfg.shell.records import records_dir
@@ -79,7 +79,7 @@ def gather(plant: Plant, now: datetime | None = None) -> tuple[list[ModuleFacts]
     for bus in plant.buses:
         keys = bus_line_keys(plant, bus)
         running = held_by(keys) is not None
-        record = bases.LineRecord(keys)
+        record = line_record.LineRecord(keys)
         notes += record.passed_over()
         known = record.known()
         pending = releases.pending(keys, releases.RELEASE)
@@ -99,7 +99,7 @@ def watched(plant: Plant) -> Iterator[Path]:
     yield plant.path
     yield records_dir(plant.path, "journal")
     for directory in releases.state_dirs():
-        yield directory / bases.KIND
+        yield directory / line_record.KIND
         yield directory / releases.RELEASES
     yield lock_dir()
 
