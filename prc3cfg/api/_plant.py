@@ -26,6 +26,7 @@ from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.shell import audit, recorded_runs, releases
 from prc3cfg.shell.audit import Verified
+from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import replace_unless_changed
 from prc3cfg.shell.locks import line_lock
 from prc3cfg.shell.platform import python_command, resolved
@@ -209,9 +210,9 @@ def status(plant: Plant) -> dict[str, Any]:
 
 
 def serve_status(plant: Plant, listen: str, *, certificate: Path | None, private_key: Path | None, trust: Path | None,
-                 allow_anonymous: bool, no_security: bool) -> None:  # fmt: skip
-    """Publish the plant's status read-only on OPC UA until interrupted (`prc3cfg.shell.opcua`): a
-    `UserError` naming the command that installs the optional extra where asyncua is missing."""
+                 allow_anonymous: bool, no_security: bool, cancel: Cancellation) -> None:  # fmt: skip
+    """Publish the plant's status read-only on OPC UA until `cancel` is (a signal, with `Cancellation.handling`)
+    (`prc3cfg.shell.opcua`): a `UserError` naming the command that installs the optional extra where asyncua is missing."""
     try:
         from prc3cfg.shell import opcua
     except ImportError as error:
@@ -219,4 +220,4 @@ def serve_status(plant: Plant, listen: str, *, certificate: Path | None, private
             raise
         raise UserError(f"prc3cfg status serve needs the OPC UA library asyncua (the extra opcua), which the Python running prc3cfg "
                         f"does not have — install it there: {python_command()} -m pip install asyncua") from None  # fmt: skip
-    opcua.serve(plant, opcua.ServerSettings(listen, certificate, private_key, trust, allow_anonymous, no_security))
+    opcua.serve(plant, opcua.ServerSettings(listen, certificate, private_key, trust, allow_anonymous, no_security), cancel)

@@ -79,6 +79,7 @@ def serve(
     import sys
 
     from prc3cfg import api
+    from prc3cfg.cli.common import CANCEL
 
     if (certificate is None) != (private_key is None):
         raise UserError("--certificate and --private-key go together: give both, or neither to use the one made in the state folder")
@@ -89,4 +90,4 @@ def serve(
               file=sys.stderr)  # fmt: skip
     loaded = api.load(plant)
     api.serve_status(loaded, listen, certificate=certificate, private_key=private_key, trust=trust, allow_anonymous=allow_anonymous,
-                     no_security=no_security)  # fmt: skip
+                     no_security=no_security, cancel=CANCEL)  # fmt: skip

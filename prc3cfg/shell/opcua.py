@@ -30,6 +30,8 @@ import contextlib
 import logging
 import socket
 import sys
+import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +50,7 @@ from prc3cfg.core.status import ModuleFacts, health, worst
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
 from prc3cfg.shell import platform, releases
+from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.status import fingerprint, gather
 
 DI = "http://opcfoundation.org/UA/DI/"
@@ -55,6 +58,8 @@ NAMESPACE = "urn:prc3cfg:status"
 APPLICATION_URI = "urn:prc3cfg:status-server"
 #: Seconds between looks at the records' files.
 POLL = 1.0
+#: How often the server looks whether it was asked to stop (SIGINT, SIGTERM: `Cancellation.event`).
+STOP_CHECK = 0.1
 #: The Configuration group's variables: browse name → (value from a module's facts, variant type).
 CONFIGURATION: dict[str, tuple[Callable[[ModuleFacts], Any], ua.VariantType]] = {
     "PlantFile": (lambda f: (f.last_verified and f.last_verified.plant_file) or "", ua.VariantType.String),
@@ -148,7 +153,7 @@ async def _variable(parent: Node, index: int, node_id: str, name: str, value: An
     return node
 
 
-async def _run(plant: Plant, settings: ServerSettings) -> None:
+async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) -> None:
     users = None if settings.no_security else CertificateUserManager()
     server = Server(user_manager=users)  # type: ignore[arg-type]  # asyncua's own manager, typed apart from its protocol
     await server.init()
@@ -180,13 +185,14 @@ async def _run(plant: Plant, settings: ServerSettings) -> None:
     async with server:
         await _publish(server, variables, facts)
         print(f"listening on {settings.listen}", flush=True)
-        seen = fingerprint(plant)
-        while True:
-            await asyncio.sleep(POLL)  # the polling period, not a synchronisation
-            now = fingerprint(plant)
-            if now != seen:
-                seen = now
-                await _publish(server, variables, gather(plant)[0])
+        seen, looked = fingerprint(plant), time.monotonic()
+        while not stop.is_set():
+            await asyncio.sleep(STOP_CHECK)  # the polling period, not a synchronisation
+            if time.monotonic() - looked >= POLL:
+                now, looked = fingerprint(plant), time.monotonic()
+                if now != seen:
+                    seen = now
+                    await _publish(server, variables, gather(plant)[0])
 
 
 async def _publish(server: Server, variables: dict[str, Node], facts: list[ModuleFacts]) -> None:
@@ -202,12 +208,14 @@ async def _publish(server: Server, variables: dict[str, Node], facts: list[Modul
         await server.write_attribute_value(variables[f"{bus}/DeviceHealth"].nodeid, ua.DataValue(ua.Variant(value, ua.VariantType.Int32)))
 
 
-def serve(plant: Plant, settings: ServerSettings) -> None:
-    """Serve until interrupted."""
+def serve(plant: Plant, settings: ServerSettings, cancel: Cancellation) -> None:
+    """Serve until SIGINT or SIGTERM (`cancel`, handling them): the signal only sets its event, and the
+    server stops between two looks at it — an exception raised by the signal inside asyncua's own
+    callbacks (a client's handshake) was caught there, and the server went on serving."""
     logging.getLogger("asyncua").setLevel(logging.ERROR)  # its warnings are for its developers; refusals are its clients' to see
     try:
-        asyncio.run(_run(plant, settings))
+        with cancel.deferred():
+            asyncio.run(_run(plant, settings, cancel.event))
     except OSError as error:
         raise UserError(f"--listen {settings.listen}: cannot listen there ({error.strerror or error}) — choose another port") from None
-    except KeyboardInterrupt:
-        print("stopped", file=sys.stderr)
+    print("stopped", file=sys.stderr)
