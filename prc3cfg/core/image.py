@@ -10,7 +10,7 @@ planner, their factory defaults (docs/protocol.md "What a module does") and the 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Annotated, Any
+from typing import Annotated, Any, Protocol
 
 from pydantic import TypeAdapter, ValidationError
 
@@ -179,6 +179,17 @@ def images_from_json(data: Any, at: str = "") -> list[ModuleImage]:
 
 
 Key = tuple[str, int]  # a module on the plant's buses: (bus name, module address)
+
+
+class Placed(Protocol):
+    """A module where the plant file has it, as what reads of a module's entry or run names it by."""
+
+    @property
+    def bus(self) -> str: ...
+    @property
+    def address(self) -> int: ...
+    @property
+    def name(self) -> str: ...
 
 
 @dataclass(frozen=True, slots=True)

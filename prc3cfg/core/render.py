@@ -37,7 +37,7 @@ from prc3cfg.core import text as escape
 from prc3cfg.core.axes import Release, to_travel
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
-from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
+from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Placed, Program, SystemParameters
 from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action, Step
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
@@ -832,15 +832,9 @@ def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET,
     return _budgeted(head, parts, len(drifted), closing, max_chars, "the drift's summary")
 
 
-class Run(Protocol):
+class Run(Placed, Protocol):
     """What the account of an apply reads of one module's run (`prc3cfg.shell.apply.ModuleRun`)."""
 
-    @property
-    def bus(self) -> str: ...
-    @property
-    def address(self) -> int: ...
-    @property
-    def name(self) -> str: ...
     @property
     def desired(self) -> ModuleImage: ...
     @property

@@ -71,7 +71,7 @@ from typing import Protocol, TypeVar
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, Key, ModuleImage, SystemParameters, Wanted, default_program
+from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, Key, ModuleImage, Placed, SystemParameters, Wanted, default_program
 from prc3cfg.core.planner import Step
 
 #: Why a module that reported E12 (system parameters not set) is read in full: its record says nothing.
@@ -240,16 +240,10 @@ def _ranges(numbers: Sequence[int]) -> str:
     return ", ".join(f"{run[0]}–{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
 
 
-class PlanEntry(Protocol):
+class PlanEntry(Placed, Protocol):
     """A module's entry of a plan file, as much of it as `for_plan_file` reads (`prc3cfg.core.plan_file.PlannedModule`,
     which imports this module: what is read decides what a plan file is proved against)."""
 
-    @property
-    def bus(self) -> str: ...
-    @property
-    def address(self) -> int: ...
-    @property
-    def name(self) -> str: ...
     @property
     def programs_read(self) -> tuple[int, ...] | None: ...
 
