@@ -23,7 +23,7 @@ from prc3cfg.core.status import Health, LastVerified, ModuleFacts, drifted, heal
 from prc3cfg.shell.locks import line_lock
 from prc3cfg.shell.records import Journal
 from prc3cfg.shell.sessions import bus_line_keys
-from prc3cfg.shell.status import gather
+from prc3cfg.shell.status import gather, identities
 
 ROOT = Path(__file__).resolve().parents[1]
 NORMAL = ModuleFacts("a", 1, "m", 3, None, last_failed=False, apply_running=False, travel_pending=False, drift_seen=False,
@@ -157,7 +157,7 @@ def _check_history(seed: int, root: Path, runs: int) -> None:
     plant_path.write_bytes(plant.path.read_bytes())
     plant = api.load(plant_path)
     expected = _history(seed, plant_path, [(bus.name, module.address) for bus, module in plant.modules()], runs)
-    facts, _ = gather(plant, now=datetime.now(UTC))
+    facts, _ = gather(plant, identities(plant), now=datetime.now(UTC))
     for f in facts:
         count, failed, by = expected[(f.bus, f.address)]
         assert (f.revision, f.last_failed, f.last_verified.by if f.last_verified else None) == (count, failed, by), (seed, f)

@@ -203,9 +203,9 @@ def status(plant: Plant) -> dict[str, Any]:
     """The plant's configuration status from prc3cfg's records only — no bus traffic: the
     `prc3cfg-status/1` document (`prc3cfg.core.status`), as `prc3cfg status --json` prints it."""
     from prc3cfg.core.status import document
-    from prc3cfg.shell.status import gather
+    from prc3cfg.shell.status import gather, identities
 
-    facts, notes = gather(plant)
+    facts, notes = gather(plant, identities(plant))
     return document(str(plant.path), plant.sha256, facts, notes)
 
 

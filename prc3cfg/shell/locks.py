@@ -432,12 +432,12 @@ def line_lock(
 def held_by(keys: Iterable[str]) -> str | None:
     """Who holds the line with these identities now — any user's lock file of it, looked at only, never
     taken (a status must not refuse an apply the line) — or None: no prc3cfg command holds it."""
+    try:
+        names = sorted(os.listdir(lock_dir()))
+    except OSError:
+        return None  # no lock folder: nobody has held a line yet
     for key in keys:
         stem = _stem(key)
-        try:
-            names = sorted(os.listdir(lock_dir()))
-        except OSError:
-            return None  # no lock folder: nobody has held a line yet
         for name in names:
             if not (name.startswith(f"{stem}.") and name.endswith(".lock")):
                 continue

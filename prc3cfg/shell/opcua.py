@@ -31,7 +31,6 @@ import logging
 import socket
 import sys
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,15 +50,13 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
 from prc3cfg.shell import platform, releases
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.status import fingerprint, gather
+from prc3cfg.shell.status import fingerprint, gather, identities
 
 DI = "http://opcfoundation.org/UA/DI/"
 NAMESPACE = "urn:prc3cfg:status"
 APPLICATION_URI = "urn:prc3cfg:status-server"
 #: Seconds between looks at the records' files.
 POLL = 1.0
-#: How often the server looks whether it was asked to stop (SIGINT, SIGTERM: `Cancellation.event`).
-STOP_CHECK = 0.1
 #: The Configuration group's variables: browse name → (value from a module's facts, variant type).
 CONFIGURATION: dict[str, tuple[Callable[[ModuleFacts], Any], ua.VariantType]] = {
     "PlantFile": (lambda f: (f.last_verified and f.last_verified.plant_file) or "", ua.VariantType.String),
@@ -168,7 +165,8 @@ async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) ->
     index = await server.register_namespace(NAMESPACE)
     di = await server.register_namespace(DI)
     device_set = await server.nodes.objects.add_folder(_id("DeviceSet", index), ua.QualifiedName("DeviceSet", di))
-    facts, _ = gather(plant)
+    keys = identities(plant)
+    facts, _ = gather(plant, keys)
     variables: dict[str, Node] = {}
     lines: dict[str, Node] = {}
     for f in facts:
@@ -185,14 +183,11 @@ async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) ->
     async with server:
         await _publish(server, variables, facts)
         print(f"listening on {settings.listen}", flush=True)
-        seen, looked = fingerprint(plant), time.monotonic()
-        while not stop.is_set():
-            await asyncio.sleep(STOP_CHECK)  # the polling period, not a synchronisation
-            if time.monotonic() - looked >= POLL:
-                now, looked = fingerprint(plant), time.monotonic()
-                if now != seen:
-                    seen = now
-                    await _publish(server, variables, gather(plant)[0])
+        seen = fingerprint(plant, keys)
+        while not await asyncio.to_thread(stop.wait, POLL):  # the polling period, cut short by a stop
+            if (now := fingerprint(plant, keys)) != seen:
+                seen = now
+                await _publish(server, variables, gather(plant, keys)[0])
 
 
 async def _publish(server: Server, variables: dict[str, Node], facts: list[ModuleFacts]) -> None:
@@ -209,8 +204,8 @@ async def _publish(server: Server, variables: dict[str, Node], facts: list[Modul
 
 
 def serve(plant: Plant, settings: ServerSettings, cancel: Cancellation) -> None:
-    """Serve until SIGINT or SIGTERM (`cancel`, handling them): the signal only sets its event, and the
-    server stops between two looks at it — an exception raised by the signal inside asyncua's own
+    """Serve until SIGINT or SIGTERM (`cancel`, handling them): the signal only sets its event, which
+    ends the server's wait for its next look at the records — an exception raised by the signal inside asyncua's own
     callbacks (a client's handshake) was caught there, and the server went on serving."""
     logging.getLogger("asyncua").setLevel(logging.ERROR)  # its warnings are for its developers; refusals are its clients' to see
     try:

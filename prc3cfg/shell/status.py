@@ -11,7 +11,7 @@ files whose change means the status may have changed; the decision is `prc3cfg.c
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -71,18 +71,24 @@ def histories(plant_path: Path) -> dict[tuple[str, int], _History]:
     return found
 
 
-def gather(plant: Plant, now: datetime | None = None) -> tuple[list[ModuleFacts], list[str]]:
-    """Every module's facts, in the plant file's order, and notes on records passed over."""
+def identities(plant: Plant) -> dict[str, tuple[str, ...]]:
+    """Each bus's line identities (`bus_line_keys`), resolved once: a server that looks every second
+    resolved every line's address twice a look."""
+    return {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
+
+
+def gather(plant: Plant, keys: Mapping[str, tuple[str, ...]], now: datetime | None = None) -> tuple[list[ModuleFacts], list[str]]:
+    """Every module's facts, in the plant file's order, and notes on records passed over; `keys`: `identities`."""
     now = now or datetime.now(UTC)
     done = histories(plant.path)
     facts, notes = [], []
     for bus in plant.buses:
-        keys = bus_line_keys(plant, bus)
-        running = held_by(keys) is not None
-        record = line_record.LineRecord(keys)
+        line = keys[bus.name]
+        running = held_by(line) is not None
+        record = line_record.LineRecord(line)
         notes += record.passed_over()
         known = record.known()
-        pending = releases.pending(keys, releases.RELEASE)
+        pending = releases.pending(line, releases.RELEASE)
         for module in bus.modules:
             history = done.get((bus.name, module.address), _History())
             k = known.get(module.address)
@@ -104,7 +110,7 @@ def watched(plant: Plant) -> Iterator[Path]:
     yield lock_dir()
 
 
-def fingerprint(plant: Plant) -> tuple[tuple[str, int, int], ...]:
+def fingerprint(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> tuple[tuple[str, int, int], ...]:
     """What `watched` looks like now (name, size, time of change, folders with their entries') — polled by
     `status serve` to publish again when it changes; held locks change no file, so the lock's holder is asked too."""
     seen = []
@@ -114,5 +120,5 @@ def fingerprint(plant: Plant) -> tuple[tuple[str, int, int], ...]:
             seen.append((str(path), status.st_size, status.st_mtime_ns))
             if path.is_dir():
                 seen += [(str(p), (s := p.stat()).st_size, s.st_mtime_ns) for p in sorted(path.iterdir())]
-    seen += [(bus.name, int(held_by(bus_line_keys(plant, bus)) is not None), 0) for bus in plant.buses]
+    seen += [(bus.name, int(held_by(keys[bus.name]) is not None), 0) for bus in plant.buses]
     return tuple(seen)
