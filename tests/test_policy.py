@@ -398,3 +398,46 @@ def test_validate_annotates_envelope_findings_and_policy_file_problems_for_a_pul
     rules.write_text("format: prc3cfg-policy/1\nenvelopes: 3\n")
     broken = run_cli(capsys, "validate", source, "--format", "github")
     assert broken.code == 1 and broken.out.startswith(f"::error file={rules},line=2,col=12,title=prc3cfg::'envelopes' is not valid")
+
+
+CHAINS = """format: prc3cfg-policy/1
+envelopes:
+  - {name: hood, level: hard, buses: [booth-a], limits: {stroke_length: {max: 1.800}}}
+  - {name: takt, level: advisory, modules: [booth-b-pretreat], limits: {pass_time: {max: 13.0}}}
+  - {name: guns, level: soft, modules: [booth-a-top], limits: {function_distance: {max: 0.050}}}
+"""
+
+
+def test_a_chains_stroke_length_and_pass_time_and_the_function_outputs_distances_are_bounded(tmp_path, source):
+    """What a chain's motion reaches is judged as the plan's stroke charts draw it: the left and top stroke 1.950 m and
+    1.600 m; the pretreatment loop turns in 13.53 s; F1/F2 distances are every managed program's."""
+    from prc3cfg import api
+
+    (tmp_path / "rules.yaml").write_text(CHAINS)
+    source.write_text(source.read_text().replace("1: {position: 1.750}", "1: {position: 1.750, f1: {action: set, distance: 0.080}}"))
+    report = api.policy(api.load(source), now=datetime(2026, 11, 29, tzinfo=UTC))
+    assert report is not None
+    rules = tmp_path / "rules.yaml"
+
+    def rule(line: int) -> str:
+        return f"(rule at {rules}:{line}:{rules.read_text().splitlines()[line - 1].index('{max') + 1})"
+
+    said = sorted(line.split(": ", 1)[1] for _, line in report.findings)
+    assert said == [
+        f"advisory: module booth-b-pretreat: chain 1 → 2 → 1 pass_time 13.53 s is above 13.00 s, the limit of envelope 'takt' {rule(4)}",
+        f"hard: module booth-a-left: chain 1 → 2 → 1 stroke_length 1.950 m is above 1.800 m, the limit of envelope 'hood' {rule(3)}",
+        f"hard: module booth-a-right: chain 1 → 2 → 1 stroke_length 1.850 m is above 1.800 m, the limit of envelope 'hood' {rule(3)}",
+        f"soft: module booth-a-top: program 1 function_distance 0.080 m is above 0.050 m, the limit of envelope 'guns' {rule(5)}",
+    ]
+
+
+def test_a_chain_outside_its_envelope_is_placed_at_its_first_program(tmp_path, source):
+    from prc3cfg import api
+
+    (tmp_path / "rules.yaml").write_text(CHAINS.replace("max: 1.800", "max: 0.500"))
+    report = api.policy(api.load(source), now=datetime(2026, 11, 29, tzinfo=UTC))
+    assert report is not None
+    lines = source.read_text().splitlines()
+    touch_up = next(line for _, line in report.findings if "chain 3 → 10 → 11 → stop stroke_length 0.600 m" in line)
+    at = int(re.match(r".*source\.yaml:(\d+):\d+: ", touch_up).group(1))  # type: ignore[union-attr]
+    assert lines[at - 1].strip().startswith("3: {position: 1.100, next: 10}")

@@ -99,6 +99,6 @@ def policy(plant: Plant, modules: Iterable[str] | None = None, now: datetime | N
         return None
     moment, clock = (now, "given") if now is not None else policy_now()
     pairs = select(plant, modules)
-    found = rules.findings(plant_values(pairs), [bus.name for bus, _ in pairs], loaded.rules, moment)
+    found = rules.findings(plant_values(pairs, loaded.rules.limited), [bus.name for bus, _ in pairs], loaded.rules, moment)
     document = plant_document(plant) if any(f.value_at is not None for f in found) else None
     return PolicyReport(str(loaded.path), loaded.sha256, moment, clock, tuple((f, placed(f, document, loaded)) for f in found))

@@ -5,8 +5,12 @@ with a level as HashiCorp Sentinel has them (`LEVELS`): `advisory` is said and n
 refuses unless overridden with a recorded reason, `hard` always refuses.
 
 - An `Envelope` bounds the values of the modules it covers (buses and module names, by glob) in the plant
-  file's human units: a program field (`position`, `speed`, `relative_speed`, `dwell`) in every managed
-  program, or a system parameter (`upper_reversing_point`, `max_speed`, …) — `units.QUANTITIES` keys.
+  file's human units (`KEYS`): a program field (`position`, `speed`, `relative_speed`, `dwell`, and
+  `function_distance`, the distance of F1 and of F2) in every managed program, a system parameter
+  (`upper_reversing_point`, `max_speed`, …), or what a chain's motion reaches (`CHAIN_KEYS`, worked out by
+  `prc3cfg.core.motion` from the desired image): `stroke_length`, from its lowest to its highest reversing
+  point, and `pass_time`, one turn of a loop in production or, for a chain that stops, its pass from the
+  reference point.
 - A `Window` is a cron expression (5 fields, `Cron`), a duration and an IANA time zone, `deny` or `allow`,
   over the buses it names. Deny wins: a deny window open at `now` refuses at its level; where allow windows
   cover a bus, being outside all of them refuses at the highest of their levels.
@@ -30,13 +34,17 @@ from decimal import Decimal
 from typing import Literal
 from zoneinfo import ZoneInfo
 
-from prc3cfg.core.units import QUANTITIES
+from prc3cfg.core.units import DISTANCE, QUANTITIES, Quantity
 
 Level = Literal["advisory", "soft", "hard"]
 #: The levels, weakest first (Sentinel's advisory, soft-mandatory, hard-mandatory).
 LEVELS: tuple[Level, ...] = ("advisory", "soft", "hard")
 #: The program fields an envelope may bound; every other key of `QUANTITIES` it may bound is a system parameter.
 PROGRAM_KEYS = ("position", "speed", "relative_speed", "dwell")
+#: What a chain's motion reaches (`Value.chain`): in steps that say a pass as the plan's stroke charts do.
+CHAIN_KEYS = {q.key: q for q in (Quantity("stroke_length", "", Decimal("0.001"), "m"), Quantity("pass_time", "", Decimal("0.01"), "s"))}
+#: Every key an envelope may bound, and its unit and step: F1's and F2's distance is `function_distance`.
+KEYS: dict[str, Quantity] = QUANTITIES | {"function_distance": DISTANCE} | CHAIN_KEYS
 Path_ = tuple[str | int, ...]
 
 #: Each cron field: its name and the values it takes (day of week 0..7, 0 and 7 both Sunday).
@@ -129,10 +137,16 @@ class Policy:
     envelopes: tuple[Envelope, ...]
     windows: tuple[Window, ...]
 
+    @property
+    def limited(self) -> frozenset[str]:
+        """The keys some envelope bounds: the values a plan's judgement needs."""
+        return frozenset(limit.key for envelope in self.envelopes for limit in envelope.limits)
+
 
 @dataclass(frozen=True, slots=True)
 class Value:
-    """One value a plan's desired image reaches: `program` None for a system parameter; `at` its place in the plant file."""
+    """One value a plan's desired image reaches: `program` None for a system parameter; `chain` the chain's label
+    ("chain 1 → 2 → 1", `motion.ChainMotion.label`) for what its motion reaches; `at` its place in the plant file."""
 
     bus: str
     module: str
@@ -140,6 +154,12 @@ class Value:
     program: int | None
     value: Decimal
     at: Path_
+    chain: str | None = None
+
+    @property
+    def subject(self) -> str:
+        """What the value is of, as a finding says it: "program 1 speed", "chain 1 → 2 → 1 pass_time", "max_speed"."""
+        return f"{self.chain} {self.key}" if self.chain else f"program {self.program} {self.key}" if self.program is not None else self.key
 
 
 @dataclass(frozen=True, slots=True)
@@ -188,11 +208,10 @@ def findings(values: Iterable[Value], buses: Iterable[str], policy: Policy, now:
 
 
 def _outside(envelope: Envelope, value: Value, limit: Limit) -> RuleFinding | None:
-    quantity = QUANTITIES[value.key]
-    which = f"program {value.program} {value.key}" if value.program is not None else value.key
+    quantity = KEYS[value.key]
     for bound, word in ((limit.hi, "above"), (limit.lo, "below")):
         if bound is not None and (value.value > bound if word == "above" else value.value < bound):
-            said = f"{which} {_in_steps(value.value, quantity.step)} {quantity.unit}".rstrip()
+            said = f"{value.subject} {_in_steps(value.value, quantity.step)} {quantity.unit}".rstrip()
             return RuleFinding("envelope", envelope.name, envelope.level,
                            f"module {value.module}: {said} is {word} {_in_steps(bound, quantity.step)} {quantity.unit}".rstrip()
                            + f", the limit of envelope '{envelope.name}'", limit.at, value.at)  # fmt: skip

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Set
 from dataclasses import dataclass
 from datetime import timedelta
 from decimal import Decimal
@@ -29,7 +29,7 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 from pydantic import AfterValidator, Field, PlainValidator, ValidationError, WithJsonSchema
 
-from prc3cfg.core import policy
+from prc3cfg.core import motion, policy
 from prc3cfg.core.units import QUANTITIES
 from prc3cfg.plant.document import Document, parse_document
 from prc3cfg.plant.models import Draft07, FileModel, Name, Text
@@ -37,12 +37,13 @@ from prc3cfg.plant.plant import Bus, Module
 from prc3cfg.plant.problems import Finding, Path_, PlantError, Problem
 
 FORMAT = "prc3cfg-policy/1"
+POSITION = QUANTITIES["position"]
 #: A duration: whole days, hours and minutes, in that order ("10h", "1h30m", "2d").
 _DURATION = re.compile(r"(?:(\d+)d)?(?:(\d+)h)?(?:(\d+)m)?")
 #: Longest a window may last: a start is looked for this far back.
 MAX_DURATION = timedelta(days=31)
-LimitKey = Literal["position", "speed", "relative_speed", "dwell", "upper_reversing_point", "reference_point", "max_speed",
-                   "min_speed", "acceleration", "sync_conveyor_sequence"]  # fmt: skip
+LimitKey = Literal["position", "speed", "relative_speed", "dwell", "function_distance", "upper_reversing_point", "reference_point",
+                   "max_speed", "min_speed", "acceleration", "sync_conveyor_sequence", "stroke_length", "pass_time"]  # fmt: skip
 
 
 def _number(value: Any) -> Decimal:
@@ -174,9 +175,9 @@ def _problem(error: Any) -> Problem:
     return Problem(loc, f"'{key}' is not valid ({error['msg'].lower()}) — see schemas/policy.schema.json")
 
 
-def plant_values(pairs: Iterable[tuple[Bus, Module]]) -> list[policy.Value]:
-    """Every value an envelope may bound of each module's settings (its desired image in human units), with its place:
-    a default the file does not write is placed at the module."""
+def plant_values(pairs: Iterable[tuple[Bus, Module]], keys: Set[str]) -> list[policy.Value]:
+    """Every value of the limited `keys` each module's settings reach (its desired image in human units), with its place:
+    a default the file does not write is placed at the module, a chain's motion at its first program."""
     values = []
     for bus, module in pairs:
         settings = module.settings
@@ -184,12 +185,32 @@ def plant_values(pairs: Iterable[tuple[Bus, Module]]) -> list[policy.Value]:
         for key, sourced in settings.system.items():
             values.append(policy.Value(bus.name, module.name, key, None, Decimal(sourced.value), sourced.path or module_at))
         for number, fields in settings.programs.items():
+            program_at = settings.program_paths.get(number, module_at)
             for key in policy.PROGRAM_KEYS:
                 if key in fields:
                     sourced = fields[key]
-                    values.append(policy.Value(bus.name, module.name, key, number, Decimal(sourced.value),
-                                               sourced.path or settings.program_paths.get(number, module_at)))  # fmt: skip
-    return [v for v in values if v.key in QUANTITIES]
+                    values.append(policy.Value(bus.name, module.name, key, number, Decimal(sourced.value), sourced.path or program_at))
+            for output in ("f1", "f2"):
+                sourced = fields[output]
+                values.append(policy.Value(bus.name, module.name, "function_distance", number, sourced.value.distance,
+                                           sourced.path or program_at))  # fmt: skip
+        if keys & policy.CHAIN_KEYS.keys():
+            values += _chain_values(bus, module, module_at)
+    return [v for v in values if v.key in keys]
+
+
+def _chain_values(bus: Bus, module: Module, module_at: Path_) -> list[policy.Value]:
+    """What each chain's motion reaches (`policy.CHAIN_KEYS`), placed at its first program: the stroke from the programs'
+    positions (exact), the pass time as the motion works it out, to its step (0.01 s)."""
+    image, values = module.desired_image(), []
+    for chain in motion.chain_motions(image):
+        at = module.settings.program_paths.get(chain.programs[0], module_at)
+        reversing = [image.known(number).P for number in chain.programs]
+        seconds = chain.cycle_time if chain.loops else chain.duration
+        reached = {"stroke_length": POSITION.in_unit(max(reversing) - min(reversing)),
+                   "pass_time": Decimal(repr(seconds)).quantize(policy.CHAIN_KEYS["pass_time"].step)}  # fmt: skip
+        values += [policy.Value(bus.name, module.name, key, chain.programs[0], value, at, chain.label) for key, value in reached.items()]
+    return values
 
 
 def _module_at(bus: Bus, module: Module) -> Path_:
