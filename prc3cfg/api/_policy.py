@@ -49,6 +49,11 @@ class PolicyReport:
         """Each finding and its line, "file:line:column: level: what"."""
         return tuple((f, shown(f"{at.file}:{at.line}:{at.column}: {at.message}")) for f, at in self.placed)
 
+    @property
+    def fails_plan(self) -> bool:
+        """Whether these findings fail a plan and a plant file (`core.policy.fails_plan`)."""
+        return rules.fails_plan(f for f, _ in self.placed)
+
     def lines(self) -> list[str]:
         head = f"Policy {self.file} (sha256 {self.sha256[:12]}), judged at {self.now.isoformat()}"
         head += f" — set by {NOW_VARIABLE}, not the clock" if self.clock != "system" else ""

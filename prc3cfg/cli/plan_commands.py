@@ -113,8 +113,8 @@ def plan(
                      policy=judged)  # fmt: skip
     if plot is not None and module is not None and fmt is not None:  # one module, a format: checked above
         output.write_picture(plot, api.picture(loaded, module[0], fmt=fmt, planned=result), module[0])
-    if judged is not None and any(f.kind == "envelope" and f.level == "hard" for f, _ in judged.findings):
-        raise ExitStatus(EXIT_POLICY)  # windows judge the moment of an apply, not a plan
+    if judged is not None and judged.fails_plan:
+        raise ExitStatus(EXIT_POLICY)
     if detailed_exitcode and result.changes:
         raise ExitStatus(EXIT_CHANGES)
 

@@ -104,7 +104,7 @@ def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
     else:
         for f, line in () if judged is None else judged.findings:
             print(f"{'error' if f.level == 'hard' else 'warning'}: {line}", file=sys.stderr)
-    return bool(hard)
+    return judged is not None and judged.fails_plan
 
 
 def github_annotation(finding: Finding, kind: str = "error") -> str:

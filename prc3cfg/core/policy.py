@@ -242,3 +242,9 @@ def refusing(found: Iterable[RuleFinding], overridden: Iterable[str] = ()) -> li
     """The findings that refuse: every hard one, and every soft one whose kind is not `overridden`."""
     kinds = set(overridden)
     return [f for f in found if f.level == "hard" or (f.level == "soft" and f.kind not in kinds)]
+
+
+def fails_plan(found: Iterable[RuleFinding]) -> bool:
+    """Whether findings fail a plan (`plan` exits 3) and a plant file (`validate`): a hard envelope. A window judges the
+    moment of an apply, and a plan reviewed in a freeze may be applied after it: it never fails a plan."""
+    return any(f.kind == "envelope" and f.level == "hard" for f in found)
