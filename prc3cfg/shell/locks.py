@@ -257,34 +257,45 @@ def _others_holder(path: Path) -> str | None:
 
 
 def _other_holder_now(path: Path) -> tuple[str, int] | None:
-    """The first other user's lock file of `path`'s key held now: its holder and its owner's uid."""
-    stem = path.name.partition(".")[0]
+    """The first other user's lock file of `path`'s key held now: its holder and its owner's uid. A lock file that
+    cannot be read counts as held: another user's apply may be behind it."""
     try:
-        names = sorted(os.listdir(path.parent))
+        for other, opened in _lock_files(path.parent, path.name.partition(".")[0], but=path.name):
+            if isinstance(opened, OSError):
+                with contextlib.suppress(OSError):
+                    owner = os.lstat(other).st_uid
+                    return f"a process of {platform.uid_name(owner)} (its lock file {other} cannot be read)", owner
+            elif (held := _held(opened)) is not None:
+                return held, os.fstat(opened).st_uid
     except OSError:
         return "another process (the lock directory cannot be read)", 0
-    for name in names:
-        if name == path.name or not (name.startswith(f"{stem}.") and name.endswith(".lock")):
+    return None
+
+
+def _lock_files(directory: Path, stem: str, but: str = "") -> Iterator[tuple[Path, int | OSError]]:
+    """Each lock file of the line `stem` in `directory` but `but`, opened to be looked at: its descriptor (closed when
+    the caller asks for the next), or why it could not be opened. A link, a folder or a file gone meanwhile is passed
+    over: prc3cfg makes none. OSError when `directory` cannot be listed."""
+    for name in sorted(os.listdir(directory)):
+        if name == but or not (name.startswith(f"{stem}.") and name.endswith(".lock")):
             continue
-        other = path.parent / name
         try:
-            fd = os.open(other, os.O_RDONLY | _OPEN_FLAGS)
+            fd = os.open(directory / name, os.O_RDONLY | _OPEN_FLAGS)
         except (FileNotFoundError, IsADirectoryError):
             continue
         except OSError as error:
-            if error.errno == errno.ELOOP:  # a symbolic link: no prc3cfg locks one
-                continue
-            with contextlib.suppress(OSError):
-                owner = os.lstat(other).st_uid
-                return f"a process of {platform.uid_name(owner)} (its lock file {other} cannot be read)", owner
+            if error.errno != errno.ELOOP:  # a symbolic link: no prc3cfg locks one
+                yield directory / name, error
             continue
         try:
-            status = os.fstat(fd)
-            if stat.S_ISREG(status.st_mode) and platform.is_locked(fd):
-                return _holder(fd), status.st_uid
+            yield directory / name, fd
         finally:
             os.close(fd)
-    return None
+
+
+def _held(fd: int) -> str | None:
+    """The holder a lock file names, where it is a plain file some process holds now; else None."""
+    return _holder(fd) if stat.S_ISREG(os.fstat(fd).st_mode) and platform.is_locked(fd) else None
 
 
 def _same_file(fd: int, path: Path) -> bool:
@@ -431,23 +442,13 @@ def line_lock(
 
 def held_by(keys: Iterable[str]) -> str | None:
     """Who holds the line with these identities now — any user's lock file of it, looked at only, never
-    taken (a status must not refuse an apply the line) — or None: no prc3cfg command holds it."""
+    taken (a status must not refuse an apply the line) — or None: no prc3cfg command holds it. A lock file
+    that cannot be read is passed over: a status says what it sees (the lock code counts it as held)."""
     try:
-        names = sorted(os.listdir(lock_dir()))
+        for key in keys:
+            for _, opened in _lock_files(lock_dir(), _stem(key)):
+                if not isinstance(opened, OSError) and (held := _held(opened)) is not None:
+                    return held
     except OSError:
-        return None  # no lock folder: nobody has held a line yet
-    for key in keys:
-        stem = _stem(key)
-        for name in names:
-            if not (name.startswith(f"{stem}.") and name.endswith(".lock")):
-                continue
-            try:
-                fd = os.open(lock_dir() / name, os.O_RDONLY | _OPEN_FLAGS)
-            except OSError:
-                continue
-            try:
-                if stat.S_ISREG(os.fstat(fd).st_mode) and platform.is_locked(fd):
-                    return _holder(fd)
-            finally:
-                os.close(fd)
+        pass  # no lock folder: nobody has held a line yet
     return None
