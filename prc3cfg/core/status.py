@@ -64,7 +64,7 @@ class ModuleFacts:
     drift_seen: bool
     evidence_age: float | None
     evidence_bound: float
-    firmware: str = ""
+    firmware: str = ""  # no PRC 3 message names it: empty until a module can tell (docs/status.md)
 
 
 def _evidence_too_old(facts: ModuleFacts) -> bool:

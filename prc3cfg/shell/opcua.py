@@ -7,7 +7,7 @@ fetched, so the nodes carry DI's browse names in the DI namespace without DI's t
         LINE/                           one object per line (bus), DeviceHealth: its modules' worst
             MODULE/                     one object per module
                 RevisionCounter         Int32: verified applies and restores that changed it
-                SoftwareRevision        String: firmware where known, else ""
+                SoftwareRevision        String: "" (no PRC 3 message names its firmware)
                 DeviceHealth            Int32: DeviceHealthEnumeration (NORMAL 0 … MAINTENANCE_REQUIRED 4)
                 Configuration/          PlantFile, Commit, PlantHash, LastVerifiedTime, LastVerifiedBy,
                                         DriftFound, PendingTravel, HealthReason
