@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import asyncio
 import os
+import queue
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -184,3 +186,59 @@ def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_
     assert key.is_file()
     if sys.platform != "win32":
         assert key.stat().st_mode & 0o777 == 0o600
+
+
+def _said(process: subprocess.Popen, start: str) -> str:
+    """The next line the server prints on stdout that starts with `start` (it prints one each time the plant file it
+    serves changes), read by a thread so that a server that never says it fails the test within WAIT, not hangs it."""
+    lines: queue.Queue[str] = queue.Queue()
+
+    def read() -> None:
+        while (line := process.stdout.readline()) and not line.startswith(start):
+            pass
+        lines.put(line.strip())
+
+    threading.Thread(target=read, daemon=True).start()
+    try:
+        return lines.get(timeout=WAIT)
+    except queue.Empty:
+        raise AssertionError(f"the server did not say {start!r} within {WAIT} s") from None
+
+
+def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_broken_file_keeps_the_last(served):
+    server, (cert, key) = served
+    path = server.plant.path
+    text = path.read_text()
+    broken = text.replace("    name: booth-a-left\n", "    name: booth-a-left\n    bogus: 1\n", 1)
+    assert broken != text
+    path.write_text(broken)
+    said = _said(server.process, f"{path}:")
+    assert "unknown key 'bogus'" in said and said.endswith("still publishing its last valid version"), said
+    grown = text.replace("  - address: 5\n", "  - address: 7\n    name: booth-a-new\n    profiles: reciprocator\n  - address: 5\n", 1)
+    assert grown != text
+    path.write_text(grown)
+    assert _said(server.process, f"{path}:") == f"{path}: changed — publishing 7 modules (added booth-a-new, removed none)"
+
+    async def check() -> None:
+        client = await connected(server.url, cert, key)
+        try:
+            for v in VARIABLES:
+                await (await node(client, f"booth-a/7/{v}")).read_value()  # each is there and readable
+        finally:
+            await client.disconnect()
+
+    asyncio.run(check())
+    path.write_text(text)
+    assert _said(server.process, f"{path}:") == f"{path}: changed — publishing 6 modules (added none, removed booth-a-new)"
+
+    async def gone() -> None:
+        client = await connected(server.url, cert, key)
+        try:
+            with pytest.raises(ua.UaStatusCodeError) as unknown:
+                await (await node(client, "booth-a/7/RevisionCounter")).read_value()
+            assert type(unknown.value).__name__ == "BadNodeIdUnknown"
+            assert await (await node(client, "booth-a/1/RevisionCounter")).read_value() == 0  # the others stay
+        finally:
+            await client.disconnect()
+
+    asyncio.run(gone())

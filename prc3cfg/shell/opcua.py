@@ -33,6 +33,7 @@ import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from hashlib import sha256
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -50,6 +51,7 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
 from prc3cfg.shell import platform, releases
 from prc3cfg.shell.cancel import Cancellation
+from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.status import fingerprint, gather, identities
 
 DI = "http://opcfoundation.org/UA/DI/"
@@ -164,30 +166,82 @@ async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) ->
                 await users.add_user(file, name=file.name)
     index = await server.register_namespace(NAMESPACE)
     di = await server.register_namespace(DI)
-    device_set = await server.nodes.objects.add_folder(_id("DeviceSet", index), ua.QualifiedName("DeviceSet", di))
+    space = _Space(server, await server.nodes.objects.add_folder(_id("DeviceSet", index), ua.QualifiedName("DeviceSet", di)), index, di)
     keys = identities(plant)
     facts, _ = gather(plant, keys)
-    variables: dict[str, Node] = {}
-    lines: dict[str, Node] = {}
-    for f in facts:
-        if f.bus not in lines:
-            lines[f.bus] = await device_set.add_object(_id(f.bus, index), ua.QualifiedName(f.bus, index))
-            variables[f"{f.bus}/DeviceHealth"] = await _variable(lines[f.bus], index, f"{f.bus}/DeviceHealth", "DeviceHealth", 0,
-                                                                 ua.VariantType.Int32, di)  # fmt: skip
-        module = await lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index), ua.QualifiedName(f.name, index))
+    await space.follow(facts)
+    async with server:
+        await _publish(server, space.variables, facts)
+        print(f"listening on {settings.listen}", flush=True)
+        seen = fingerprint(plant, keys)
+        while not await asyncio.to_thread(stop.wait, POLL):  # the polling period, cut short by a stop
+            if (now := fingerprint(plant, keys)) == seen:
+                continue
+            seen = now
+            if (changed := _reloaded(plant)) is not None:
+                plant, keys = changed, identities(changed)
+                seen = fingerprint(plant, keys)
+            facts = gather(plant, keys)[0]
+            if changed is not None:
+                added, removed = await space.follow(facts)
+                print(f"{plant.path}: changed — publishing {len(facts)} modules (added {', '.join(added) or 'none'}, "
+                      f"removed {', '.join(removed) or 'none'})", flush=True)  # fmt: skip
+            await _publish(server, space.variables, facts)
+
+
+def _reloaded(plant: Plant) -> Plant | None:
+    """The plant file again where its bytes changed; None where they did not, or where it is no longer valid (said in one
+    line: the server goes on publishing the plant it last read whole)."""
+    try:
+        if sha256(plant_bytes(plant.path)).hexdigest() == plant.sha256:
+            return None
+        return load_plant(plant.path)
+    except UserError as error:
+        problem = str(error).splitlines()[0]
+        print(f"{problem if problem.startswith(str(plant.path)) else f'{plant.path}: {problem}'} — still publishing its last valid "
+              f"version", flush=True)  # fmt: skip
+        return None
+
+
+class _Space:
+    """The DeviceSet's nodes: a line object per bus, a module object per module with its variables. `follow` makes them
+    what the plant file holds now: the nodes of a module added to it are added, those of one taken out deleted."""
+
+    def __init__(self, server: Server, device_set: Node, index: int, di: int) -> None:
+        self.server, self.device_set, self.index, self.di = server, device_set, index, di
+        self.variables: dict[str, Node] = {}
+        self.lines: dict[str, Node] = {}
+        self.modules: dict[str, tuple[str, Node]] = {}  # "LINE/ADDRESS" → (module name, its object)
+
+    async def follow(self, facts: list[ModuleFacts]) -> tuple[list[str], list[str]]:
+        """Add the nodes of modules not published yet, delete those of modules gone: their names, added and removed."""
+        wanted = {f"{f.bus}/{f.address}": f for f in facts}
+        removed = [name for key, (name, _) in self.modules.items() if key not in wanted or wanted[key].name != name]
+        for key in [key for key, (name, _) in self.modules.items() if name in removed]:
+            await self.server.delete_nodes([self.modules.pop(key)[1]], recursive=True)
+            self.variables = {path: n for path, n in self.variables.items() if not path.startswith(f"{key}/")}
+        for bus in [bus for bus in self.lines if not any(f.bus == bus for f in facts)]:
+            await self.server.delete_nodes([self.lines.pop(bus)], recursive=True)
+            del self.variables[f"{bus}/DeviceHealth"]
+        added = [f.name for key, f in wanted.items() if key not in self.modules]
+        for key, f in wanted.items():
+            if key not in self.modules:
+                self.modules[key] = (f.name, await self._module(f))
+        return added, removed
+
+    async def _module(self, f: ModuleFacts) -> Node:
+        index, di = self.index, self.di
+        if f.bus not in self.lines:
+            self.lines[f.bus] = await self.device_set.add_object(_id(f.bus, index), ua.QualifiedName(f.bus, index))
+            self.variables[f"{f.bus}/DeviceHealth"] = await _variable(self.lines[f.bus], index, f"{f.bus}/DeviceHealth",
+                                                                      "DeviceHealth", 0, ua.VariantType.Int32, di)  # fmt: skip
+        module = await self.lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index), ua.QualifiedName(f.name, index))
         group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index), ua.QualifiedName("Configuration", di))
         for path, (value, kind) in _values(f).items():
             parent, name = (group, path.partition("/")[2]) if path.startswith("Configuration/") else (module, path)
             node_id = f"{f.bus}/{f.address}/{path}"
-            variables[node_id] = await _variable(parent, index, node_id, name, value, kind, di)
-    async with server:
-        await _publish(server, variables, facts)
-        print(f"listening on {settings.listen}", flush=True)
-        seen = fingerprint(plant, keys)
-        while not await asyncio.to_thread(stop.wait, POLL):  # the polling period, cut short by a stop
-            if (now := fingerprint(plant, keys)) != seen:
-                seen = now
-                await _publish(server, variables, gather(plant, keys)[0])
+            self.variables[node_id] = await _variable(parent, index, node_id, name, value, kind, di)
+        return module
 
 
 async def _publish(server: Server, variables: dict[str, Node], facts: list[ModuleFacts]) -> None:
