@@ -20,7 +20,7 @@ from lossy import Loss, Rule
 from prc3cfg import api
 from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Frame
-from prc3cfg.shell import releases
+from prc3cfg.shell import pending_records
 from prc3cfg.shell.plant_files import load_plant
 from prc3cfg.shell.sessions import bus_line_keys
 from prc3cfg.shell.testing import EmulatedPlant
@@ -170,10 +170,10 @@ def test_the_release_records_of_a_line_read_back_in_part_hold_exactly_the_releas
         result = failed.value.result
         assert [(r.bus, r.address) for r in result.runs] == [("short", 1)] and result.runs[0].verified
         assert len(result.unread) == 1 and result.unread[0].startswith("bus long, module 6 (long-6): read 50h refused")
-        assert [(r.bus, r.address) for r in releases.pending(keys["short"])] == [("short", 1)]
-        assert releases.pending(keys["long"]) == []
+        assert [(r.bus, r.address) for r in pending_records.of_line(keys["short"])] == [("short", 1)]
+        assert pending_records.of_line(keys["long"]) == []
         api.told(result)
-        assert releases.pending(keys["short"]) == []
+        assert pending_records.of_line(keys["short"]) == []
 
 
 def test_ctrl_c_while_one_line_writes_and_the_other_still_reads_says_which_line_was_not_written(tmp_path):

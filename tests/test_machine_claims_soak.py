@@ -1,4 +1,4 @@
-"""Other users' records are claims (`prc3cfg.shell.line_record`, `prc3cfg.shell.releases`): a seeded family of
+"""Other users' records are claims (`prc3cfg.shell.line_record`, `prc3cfg.shell.pending_records`): a seeded family of
 files planted among the line records and the axis-release records — a FIFO, a link to /dev/zero, a sparse
 file far over the bound, a folder, bytes that are no JSON, records of another line, forged fields full of
 terminal commands and bidi overrides, forged E12 and release records — each held against real processes:

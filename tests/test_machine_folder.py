@@ -1,4 +1,4 @@
-"""The machine's folder of records (`prc3cfg.shell.releases`, `prc3cfg.shell.line_record`): every user of a
+"""The machine's folder of records (`prc3cfg.shell.machine_folder`, `prc3cfg.shell.pending_records`, `prc3cfg.shell.line_record`): every user of a
 line sees the axis releases and what the modules hold, once an administrator made it
 (`prc3cfg setup-machine`); until then each user's records are their own, and a command on a real line
 says so in one line. Another user's file there vouches for nothing, but tells that a module changed.
@@ -179,7 +179,7 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         assert "program 1: position 1.900 m → 2.000 m" in again.out
         # a release their run recorded and never told (killed after its 20h) is told to root's plan
         keys = bus_line_keys(plant.plant, plant.plant.buses[0])
-        script = ("import sys; from prc3cfg.shell.releases import Releases; "
+        script = ("import sys; from prc3cfg.shell.pending_records import Releases; "
                   "Releases('apply').record(tuple(sys.argv[1:]), 'booth-a', 2, 'booth-a-right')")  # fmt: skip
         recorded = as_user(user, machine, packages, "-c", script, *keys)
         assert recorded.returncode == 0, recorded.stderr
@@ -240,7 +240,7 @@ def plant_of(user: pwd.struct_passwd, machine: Path, text: str, name: str = "pla
 def record(user: pwd.struct_passwd, machine: Path, packages: Path, keys: tuple[str, ...], bus: str, address: int, name: str,
            kind: str = "release") -> None:  # fmt: skip
     """A record of `kind` (an axis release, an E12) that `user` writes through prc3cfg into the machine's folder."""
-    script = ("import sys; from prc3cfg.shell.releases import Releases; "
+    script = ("import sys; from prc3cfg.shell.pending_records import Releases; "
               "Releases('apply').record(tuple(sys.argv[5:]), sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4])")  # fmt: skip
     recorded = run_as(user, machine, packages, "-c", script, bus, address, name, kind, *keys)
     assert recorded.returncode == 0, recorded.stderr
@@ -297,7 +297,7 @@ def test_another_user_s_release_record_is_told_as_their_claim_escaped(machine, p
     with emulated_plant(made(machine / "a")) as plant:
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
         keys = bus_line_keys(plant.plant, plant.plant.buses[0])
-        from prc3cfg.shell.releases import Releases
+        from prc3cfg.shell.pending_records import Releases
 
         Releases("apply").record(keys, "booth-a", 2, "booth-a-right")  # root's own, real: a run killed after its 20h
         record(user, machine, packages, keys, "\x1b[1A\x1b[2K\x1b[1A\x1b[2Kbooth-a\u202e", 1, "all good\u2028\x9b2J")

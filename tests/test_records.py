@@ -18,7 +18,7 @@ import yaml
 from emulated import emulated_plant, run_cli
 
 from prc3cfg import __version__
-from prc3cfg.shell import releases
+from prc3cfg.shell import pending_records
 from prc3cfg.shell.locks import line_keys
 
 APPLY = ("--auto-approve", "--allow-axis-release")
@@ -224,7 +224,7 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     assert json.loads(run_cli(capsys, "records", "prune", plant.path, "--older-than", "1", "--json").out)["removed"] == []
     # an untold axis release recorded by the first run (as an apply killed after its 10h leaves it)
     bus = plant.plant.buses[0]
-    releases.Releases("apply", runs[0]).record(line_keys(bus.port), bus.name, 1, "booth-a-left")
+    pending_records.Releases("apply", runs[0]).record(line_keys(bus.port), bus.name, 1, "booth-a-left")
     kept_back = json.loads(run_cli(capsys, "records", "prune", plant.path, "--keep", "0", "--json").out)
     assert [r["journal"] for r in kept_back["removed"]] == [str(runs[3])]
     assert not runs[3].exists() and runs[0].exists() and taken[0].exists()
@@ -232,7 +232,7 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     assert "axis release" in why[str(runs[0])] and "newest run" in why[str(runs[4])]
     assert "newest snapshot" in why[str(runs[1])] and "newest snapshot" in why[str(runs[2])]
 
-    releases.cleared(releases.pending(line_keys(bus.port)))
+    pending_records.cleared(pending_records.of_line(line_keys(bus.port)))
     pruned = run_cli(capsys, "records", "prune", plant.path, "--keep", "0", "--json")
     assert pruned.code == 0, pruned.err
     assert [r["journal"] for r in json.loads(pruned.out)["removed"]] == [str(runs[0])]

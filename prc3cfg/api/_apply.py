@@ -45,7 +45,7 @@ from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
-from prc3cfg.shell import audit, line_record, releases
+from prc3cfg.shell import audit, line_record, machine_folder, pending_records
 from prc3cfg.shell.apply import Verify
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
@@ -201,7 +201,7 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[On
     said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0] if plan_file else None,
                       argv=options.command_line, policy=policy_said)  # fmt: skip
     journal = Journal(plant.path, said, audit.follow(plant.path))  # its file is made at the first record: not for a busy line
-    records = releases.Releases(command, journal.path)
+    records = pending_records.Releases(command, journal.path)
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}  # each line's identities, resolved once
     if options.cancel is None:  # the event that stops the lines when a record cannot be kept
         options = replace(options, cancel=Cancellation())
@@ -210,7 +210,7 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[On
     try:
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
                    given=links, identities=keys) as held:  # fmt: skip
-            earlier = tuple(r for r in held.on_record.pending if r.kind == releases.RELEASE)
+            earlier = tuple(r for r in held.on_record.pending if r.kind == pending_records.RELEASE)
             wanted = wanted_of(held.on_record)
             writing = Writing(plant, keys, buses, held, keeping, verify, options, records.command)
             whole = None
@@ -248,12 +248,12 @@ def _ready(plant: Plant, buses: Collection[Bus], reason: str | None, command: st
                             "become another write, a read a write, a module's address the broadcast 0; nothing was written: set "
                             "parity: even (or odd) on the bus and its devices, or accept the risk with accept_undetected_damage: true")  # fmt: skip
     check_writable(plant.path)  # before the line: an apply that cannot keep its records writes nothing
-    releases.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
-    releases.folder(line_record.KIND, line_record.WHAT)
+    machine_folder.folder()  # nor one that could not record an axis release before its frame, or drop a module from its line's record
+    machine_folder.folder(line_record.KIND, line_record.WHAT)
     return reason
 
 
-def _judged(written: Written, journal: Path, earlier: tuple[releases.Pending, ...], records: releases.Releases) -> ApplyResult:
+def _judged(written: Written, journal: Path, earlier: tuple[pending_records.Pending, ...], records: pending_records.Releases) -> ApplyResult:
     """The result of what the writes came to: `RecordsFailed`, `ApplyInterrupted` or `ApplyFailed`
     unless every module verified."""
     result = ApplyResult(written.plan, written.runs, written.snapshot, journal, earlier, records.path, written.took, written.unread)
@@ -321,8 +321,8 @@ def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, Module
 def told(result: ApplyResult) -> None:
     """The account of `result` — `released` and `earlier` — has been shown to the operator: the
     records of those releases, kept on disk since before their frames left, can go
-    (`prc3cfg.shell.releases`). Until this is called, every command on these lines warns of them."""
-    releases.told(result.records, result.earlier)
+    (`prc3cfg.shell.pending_records`). Until this is called, every command on these lines warns of them."""
+    pending_records.told(result.records, result.earlier)
 
 
 def _keep_applied(plant: Plant, written: Written, keeping: Keeping) -> Written:

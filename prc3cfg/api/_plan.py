@@ -30,7 +30,7 @@ from prc3cfg.core.text import shown
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
-from prc3cfg.shell import line_record, releases
+from prc3cfg.shell import line_record, pending_records
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
 from prc3cfg.shell.planning import SharedPlanner
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
@@ -275,12 +275,12 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
 def in_fault(pairs: Pairs, held: OnRecord) -> tuple[str, ...]:
     """The chosen modules a write found in a fault state (E09, E21, …) that no write since was acknowledged
     by, as the plan's headline names them: "booth-a/booth-a-right is in E21 (positioning error)" — another
-    user's record told as their claim (`releases.Pending.owner`). From the lines' records as read under
+    user's record told as their claim (`pending_records.Pending.owner`). From the lines' records as read under
     their locks (`OnRecord`)."""
     chosen = {(bus.name, module.address): f"{bus.name}/{module.name}" for bus, module in pairs}
     said = []
     for bus in dict.fromkeys(bus.name for bus, _ in pairs):
-        for record in held.of(releases.FAULT, bus):
+        for record in held.of(pending_records.FAULT, bus):
             if (bus, record.address) in chosen and record.code is not None:
                 claim = f" ({record.owner}'s record says so)" if record.owner is not None else ""
                 said.append(f"{chosen[bus, record.address]} is in {fault_said(record.code)}{claim}")
@@ -323,7 +323,7 @@ def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted
 def unset_systems(buses: Iterable[Bus], held: OnRecord) -> frozenset[Key]:
     """The modules of these buses that reported E12 to an earlier apply of this user's or root's and were
     not cleared since (as `held` has it): their plan writes the system parameters first (a 10h/20h)."""
-    return frozenset((r.bus, r.address) for bus in buses for r in held.of(releases.E12, bus.name) if r.owner is None)
+    return frozenset((r.bus, r.address) for bus in buses for r in held.of(pending_records.E12, bus.name) if r.owner is None)
 
 
 def e12_claims(buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
@@ -332,7 +332,7 @@ def e12_claims(buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
     of this run) or this user's or root's record makes a plan write the system parameters."""
     said = {}
     for bus in buses:
-        for r in held.of(releases.E12, bus.name):
+        for r in held.of(pending_records.E12, bus.name):
             if r.owner is not None:  # keyed by the plant's bus: the record's own bus name is part of the claim
                 said[(bus.name, r.address)] = f"{r.owner}'s record says it reported E12 (system parameters not set), from {shown(r.time)}"
     return said

@@ -24,7 +24,7 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.adopt import Adopted
 from prc3cfg.plant.adopt import adopt as adopt_text
-from prc3cfg.shell import audit, recorded_runs, releases
+from prc3cfg.shell import audit, pending_records, recorded_runs
 from prc3cfg.shell.audit import Verified
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.files import replace_unless_changed
@@ -145,7 +145,8 @@ def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: flo
         for bus in plant.buses:
             held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
         every = [key for identities in keys.values() for key in identities]
-        protected = [Path(r.journal) for kind in (releases.RELEASE, releases.E12) for r in releases.pending(every, kind) if r.journal]
+        protected = [Path(r.journal) for kind in (pending_records.RELEASE, pending_records.E12)
+                     for r in pending_records.of_line(every, kind) if r.journal]
         return recorded_runs.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
 
 

@@ -18,7 +18,7 @@ from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.render import plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module
-from prc3cfg.shell import releases
+from prc3cfg.shell import pending_records
 from prc3cfg.shell.platform import command_line
 
 if TYPE_CHECKING:
@@ -97,7 +97,7 @@ class ApplyResult:
     journal: Path
     #: axis releases earlier applies on these lines left untold (killed after a 10h/20h): this
     #: apply's account lists them too
-    earlier: tuple[releases.Pending, ...] = ()
+    earlier: tuple[pending_records.Pending, ...] = ()
     #: the file of this apply's records of axis releases, not yet told (None: it made none) — `prc3cfg.api.told`
     records: Path | None = None
     #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate

@@ -29,7 +29,7 @@ from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
 from prc3cfg.plant import Bus, Plant
-from prc3cfg.shell import line_record, releases
+from prc3cfg.shell import line_record, pending_records
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Exchange
@@ -74,7 +74,7 @@ class Keeping:
     written no more (a later record would follow a cut one), the others go on being kept."""
 
     def __init__(self, plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
-                 records: releases.Releases, stop: threading.Event) -> None:  # fmt: skip
+                 records: pending_records.Releases, stop: threading.Event) -> None:  # fmt: skip
         self.journal, self.records, self._keys, self._stop = journal, records, keys, stop
         self._names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         self._buses = buses
@@ -131,13 +131,13 @@ class Keeping:
             except OSError as error:
                 self._journal_failed(error)
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = releases.RELEASE,
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = pending_records.RELEASE,
                code: int | None = None) -> None:  # fmt: skip
-        """`releases.Releases.record`, a failure kept as the apply's trouble."""
+        """`pending_records.Releases.record`, a failure kept as the apply's trouble."""
         try:
             self.records.record(keys, bus, address, name, kind, code)
         except (OSError, UserError) as error:
-            self.failed(RELEASE_RECORD if kind == releases.RELEASE else FAULT_RECORD, error, self.records.path)
+            self.failed(RELEASE_RECORD if kind == pending_records.RELEASE else FAULT_RECORD, error, self.records.path)
 
     def stopped_reading(self) -> None:
         """Where the disk refused the journal a read-back's record (that read stayed back, `announce`)
@@ -174,13 +174,13 @@ def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Seque
     told by every command on the line until a write to the module is acknowledged (a read cannot see it)."""
     for run in runs:
         if run.system_unset:
-            keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.E12)
+            keeping.record(keys[run.bus], run.bus, run.address, run.name, pending_records.E12)
         elif run.fault is not None:
-            keeping.record(keys[run.bus], run.bus, run.address, run.name, releases.FAULT, run.fault)
+            keeping.record(keys[run.bus], run.bus, run.address, run.name, pending_records.FAULT, run.fault)
     every = [k for ks in keys.values() for k in ks]
-    releases.cleared(r for r in releases.pending(every, releases.E12)
+    pending_records.cleared(r for r in pending_records.of_line(every, pending_records.E12)
                      if any(run.verified and (run.bus, run.address) == (r.bus, r.address) for run in runs))
-    releases.cleared(r for r in releases.pending(every, releases.FAULT)
+    pending_records.cleared(r for r in pending_records.of_line(every, pending_records.FAULT)
                      if any(run.written and (run.bus, run.address) == (r.bus, r.address) for run in runs))
 
 

@@ -15,7 +15,7 @@ dropped module's entry holds no image, so that an older copy elsewhere cannot br
 One file per identity of the line (`prc3cfg.shell.locks.line_keys`: two spellings of one line share
 a record) and user (`platform.user_tag`: in the machine's folder, which every user of the line
 writes, none may replace another's file) in `lines/` of the state folder
-(`prc3cfg.shell.releases.state_dirs`), written atomically under the line's lock, readable by every
+(`prc3cfg.shell.machine_folder.state_dirs`), written atomically under the line's lock, readable by every
 user of the line (`platform.SHARED_READ`) and written by its maker alone. The newest entry of a
 module across the files is the one taken — if it is this user's or root's: another user's file
 vouches for nothing (it could say anything), but its newer entry still means the module changed
@@ -49,7 +49,7 @@ from prc3cfg.core.what_to_read import Known
 from prc3cfg.errors import UserError
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import NOT_FILES, FileProblem, Why, parse_json, read_owned, write_atomically
-from prc3cfg.shell.releases import LINES, folder, state_dirs
+from prc3cfg.shell.machine_folder import LINES, folder, state_dirs
 
 FORMAT = "prc3cfg-line-record/1"
 KIND = LINES
@@ -221,7 +221,7 @@ class LineRecord:
 
     def write(self) -> None:
         """The changes not written yet into this user's file of each of the line's identities, in the state
-        folder it writes (`releases.folder`), with what that file held; `UserError` when it cannot."""
+        folder it writes (`machine_folder.folder`), with what that file held; `UserError` when it cannot."""
         if not self._waiting:
             return
         directory = folder(KIND, WHAT).parent  # the machine's, once an administrator made it; else this user's

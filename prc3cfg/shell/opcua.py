@@ -49,7 +49,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 from prc3cfg.core.status import ModuleFacts, health, worst
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Plant
-from prc3cfg.shell import platform, releases
+from prc3cfg.shell import machine_folder, platform
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.status import fingerprint, gather, identities
@@ -103,7 +103,7 @@ async def _server_certificate(settings: ServerSettings) -> tuple[Path, Path]:
     readable by this user alone."""
     if settings.certificate is not None and settings.private_key is not None:
         return settings.certificate, settings.private_key
-    folder = releases.state_dirs()[-1] / "opcua"
+    folder = machine_folder.state_dirs()[-1] / "opcua"
     folder.mkdir(parents=True, exist_ok=True)
     cert, key = folder / "server-certificate.der", folder / "server-key.pem"
     await cert_gen.setup_self_signed_certificate(key, cert, APPLICATION_URI, socket.gethostname(), [ExtendedKeyUsageOID.SERVER_AUTH],

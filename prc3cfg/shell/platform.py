@@ -20,7 +20,7 @@ means the same everywhere:
   and `is_locked` (a lock someone else holds, seen without holding it);
 - the machine's folders: `LOCK_FOLDERS` (the lock folder's candidates, `prc3cfg.shell.locks`),
   `SYSTEM_STATE_DIR` and `user_state_dir` (axis releases and the lines' records,
-  `prc3cfg.shell.releases`) — POSIX's /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows'
+  `prc3cfg.shell.machine_folder`) — POSIX's /run/lock, /var/lock, /tmp, /var/lib, XDG; Windows'
   %ProgramData%\prc3cfg and %LOCALAPPDATA%; `serial_group` and `make_group_folder` (the machine's
   folder an administrator makes once for the users of the lines: POSIX's dialout or uucp group, mode
   3775; `SHARED_READ`, its records' mode), `user_tag` (this user's files in it);

@@ -31,7 +31,7 @@ from prc3cfg.shell.testing import EmulatedPlant, emulate
 @pytest.fixture
 def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., EmulatedPlant]]:
     """Put a plant file's buses on emulators: `prc3cfg_emulated("plant.yaml", images=None)`. The records
-    of axis releases on them (`prc3cfg.shell.releases`) are kept in the test's own folder: an emulated
+    of axis releases on them (`prc3cfg.shell.pending_records`) are kept in the test's own folder: an emulated
     release is no business of the machine's."""
     monkeypatch.setenv("PRC3CFG_STATE_DIR", str(tmp_path / "prc3cfg-state"))
     numbers = itertools.count(1)

@@ -7,7 +7,7 @@
   the plant's records folder — of any plant file there — does not verify (`prc3cfg.shell.audit.check`)
   it names each and removes nothing: a record that does not verify may name what is not its run's.
   Then never the newest snapshot of a line, never the plant's newest run, never a file of another
-  plant file, never the run an axis release nobody was told of names (`prc3cfg.shell.releases`; the
+  plant file, never the run an axis release nobody was told of names (`prc3cfg.shell.pending_records`; the
   caller says which journals those are).
 
 Does not own checking the records (`prc3cfg.shell.audit`), nor writing them, nor what is printed.
@@ -223,7 +223,7 @@ def _kept(every: list[RecordedRun], protected: Iterable[Path], stem: str) -> dic
         if run.snapshot is not None and run.snapshot.name[STAMP_LENGTH:] != f"-{stem}.json":
             why[run] = f"its journal names {run.snapshot.name}, a snapshot of another plant file: prune removes only this plant file's"
         if run.journal is not None and run.journal.name in guarded:
-            why[run] = "an axis release nobody was told of names this run (prc3cfg.shell.releases): kept until an apply's account names it"
+            why[run] = "an axis release nobody was told of names this run (prc3cfg.shell.pending_records): kept until an apply's account names it"
     return why
 
 

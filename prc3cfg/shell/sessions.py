@@ -33,7 +33,7 @@ from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.plant.messages import port_error
-from prc3cfg.shell import line_record, platform, releases
+from prc3cfg.shell import line_record, pending_records, platform
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.locks import line_keys, line_lock
 from prc3cfg.shell.phases import Progress, Quiet
@@ -64,7 +64,7 @@ class LineOptions:
     #: called after a command that succeeded with the links it used: their `repeated` exchanges, their times
     used: Callable[[list[Link]], None] | None = None
     #: called with each warning a command has for the operator (an axis release nobody was told
-    #: of, `prc3cfg.shell.releases`)
+    #: of, `prc3cfg.shell.pending_records`)
     notice: Callable[[str], None] | None = None
     #: the command line a run's records name (their header): the program's, `sys.argv`, unless told
     command_line: tuple[str, ...] | None = None
@@ -143,7 +143,7 @@ def line_cost(bus: Bus) -> LineCost:
 
 
 class Records(Protocol):
-    """Where an axis release is recorded: `releases.Releases`, or an apply's `Keeping` of it."""
+    """Where an axis release is recorded: `pending_records.Releases`, or an apply's `Keeping` of it."""
 
     def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = ..., code: int | None = ...) -> None: ...
 
@@ -152,12 +152,12 @@ class Records(Protocol):
 class OnRecord:
     """What is on record of the lines a command uses, read once — under the lines' locks where the command holds
     them (`lines`), else as it stands (`on_record`): each line's record of what its modules hold, by bus, and every
-    record of an axis release, an E12 or a fault state on them not cleared yet (`releases.pending`)."""
+    record of an axis release, an E12 or a fault state on them not cleared yet (`pending_records.of_line`)."""
 
     records: dict[str, line_record.LineRecord]
-    pending: tuple[releases.Pending, ...]
+    pending: tuple[pending_records.Pending, ...]
 
-    def of(self, kind: str, bus: str) -> list[releases.Pending]:
+    def of(self, kind: str, bus: str) -> list[pending_records.Pending]:
         """The records of `kind` not cleared yet on the line of `bus` (by that line's identities: any spelling)."""
         wanted = set(self.records[bus].keys)
         return [r for r in self.pending if r.kind == kind and wanted & set(r.keys)]
@@ -166,7 +166,7 @@ class OnRecord:
 def on_record(keys: Mapping[str, tuple[str, ...]]) -> OnRecord:
     """What is on record of the lines with these identities (by bus), read now."""
     return OnRecord({bus: line_record.LineRecord(line) for bus, line in keys.items()},
-                    tuple(releases.pending((key for line in keys.values() for key in line), None)))  # fmt: skip
+                    tuple(pending_records.of_line((key for line in keys.values() for key in line), None)))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -206,7 +206,7 @@ def lines(plant: Plant, buses: Iterable[str], options: LineOptions, *, purpose: 
         held = _line_records(keys, options)
         cancel = options.cancel.event if options.cancel is not None else None
         module_names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
-        watch = written_reads(module_names, keys, records or releases.Releases(purpose), observer)
+        watch = written_reads(module_names, keys, records or pending_records.Releases(purpose), observer)
         if given is None:
             from prc3cfg.shell.link.ports import open_plant_links
 
@@ -243,12 +243,12 @@ def _line_records(keys: Mapping[str, tuple[str, ...]], options: LineOptions) -> 
     """Under the lines' locks: what is on record of them, read once (this user's names made theirs first:
     `line_record.settle`), with the records' files passed over or moved aside told, every axis release on these lines
     that no account has named yet, and every module a write found in a fault state not seen cleared since."""
-    said = [*releases.passed_over(), *(said for line in keys.values() for said in line_record.settle(line))]
+    said = [*pending_records.passed_over(), *(said for line in keys.values() for said in line_record.settle(line))]
     held = on_record(keys)
     for line in [*said, *(said for record in held.records.values() for said in record.passed_over())]:
         options.tell(line)
     for record in held.pending:
-        if record.kind in (releases.RELEASE, releases.FAULT):
+        if record.kind in (pending_records.RELEASE, pending_records.FAULT):
             options.tell(record.said())
     return held
 
@@ -352,7 +352,7 @@ def bare_lock(port: str, options: LineOptions, purpose: str) -> Iterator[tuple[s
         raise UserError(problem)
     keys = line_keys(port)
     with line_lock(keys, port, port=port, timeout=options.lock_timeout, purpose=purpose, waiting=options.waiting):
-        for record in [*releases.pending(keys), *releases.pending(keys, releases.FAULT)]:
+        for record in [*pending_records.of_line(keys), *pending_records.of_line(keys, pending_records.FAULT)]:
             options.tell(record.said())
         yield keys
 
@@ -364,7 +364,7 @@ def bare_link(bare: BareLine, options: LineOptions, purpose: str, given: Link | 
     cancel = options.cancel.event if options.cancel is not None else None
     with contextlib.ExitStack() as stack:
         keys = stack.enter_context(bare_lock(bare.port, options, purpose))
-        watch = written_reads({}, {bare.port: keys}, releases.Releases(purpose))
+        watch = written_reads({}, {bare.port: keys}, pending_records.Releases(purpose))
         if given is not None:
             yield stack.enter_context(lent({bare.port: _given({bare.port: given}, bare.port)}, watch, None, cancel))[bare.port]
             return

@@ -1,7 +1,7 @@
 """The facts of `prc3cfg status`, gathered from prc3cfg's records only — never the bus (the line stays one
 writer's): the journals beside the plant file (revision counter, last verified, last failed), each line's
 record of what its modules hold (drift, evidence age: `prc3cfg.shell.line_record`), the records of pending
-axis releases (`prc3cfg.shell.releases`) and the line's lock (an apply runs: `prc3cfg.shell.locks.held_by`).
+axis releases (`prc3cfg.shell.pending_records`) and the line's lock (an apply runs: `prc3cfg.shell.locks.held_by`).
 
 Another user's records are data: read bounded by the modules that read them, every text in them escaped
 where it is shown (`prc3cfg.core.text.shown`), and nothing here writes. Owns gathering and `watched`, the
@@ -20,7 +20,7 @@ from typing import Any
 from prc3cfg.core.status import LastVerified, ModuleFacts, drifted
 from prc3cfg.core.text import shown
 from prc3cfg.plant import Plant
-from prc3cfg.shell import line_record, releases
+from prc3cfg.shell import line_record, machine_folder, pending_records
 from prc3cfg.shell.audit import check_journal, journals, stamped
 from prc3cfg.shell.locks import held_by, lock_dir
 from prc3cfg.shell.records import records_dir
@@ -88,7 +88,7 @@ def gather(plant: Plant, keys: Mapping[str, tuple[str, ...]], now: datetime | No
         record = line_record.LineRecord(line)
         notes += record.passed_over()
         known = record.known()
-        pending = releases.pending(line, releases.RELEASE)
+        pending = pending_records.of_line(line, pending_records.RELEASE)
         for module in bus.modules:
             history = done.get((bus.name, module.address), _History())
             k = known.get(module.address)
@@ -104,9 +104,9 @@ def watched(plant: Plant) -> Iterator[Path]:
     """The files and folders whose size or time of change tells that the status may have changed."""
     yield plant.path
     yield records_dir(plant.path, "journal")
-    for directory in releases.state_dirs():
+    for directory in machine_folder.state_dirs():
         yield directory / line_record.KIND
-        yield directory / releases.RELEASES
+        yield directory / machine_folder.RELEASES
     yield lock_dir()
 
 

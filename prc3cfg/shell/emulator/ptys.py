@@ -19,7 +19,7 @@ from pathlib import Path
 
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, read_json, write_atomically
-from prc3cfg.shell.releases import state_dirs
+from prc3cfg.shell.machine_folder import state_dirs
 
 
 def folder() -> Path:
