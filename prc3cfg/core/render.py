@@ -34,12 +34,13 @@ from typing import Any, NamedTuple, Protocol
 
 from prc3cfg.core import plan_file
 from prc3cfg.core import text as escape
-from prc3cfg.core.axes import Release, to_travel
+from prc3cfg.core.axes import Release
 from prc3cfg.core.chains import jumps_as_chains
 from prc3cfg.core.device import widest_range
-from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Placed, Program, SystemParameters
+from prc3cfg.core.image import PROGRAM_FIELDS, PROGRAM_NUMBERS, SYSTEM_KEYS, ModuleImage, Program, SystemParameters
 from prc3cfg.core.motion import MotionError, paired_chains
-from prc3cfg.core.planner import Action, Step
+from prc3cfg.core.outcome import ModuleOutcome, to_travel
+from prc3cfg.core.planner import Action
 from prc3cfg.core.plant_plan import LineProof, ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
 from prc3cfg.core.text import address_ranges
@@ -832,40 +833,7 @@ def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET,
     return _budgeted(head, parts, len(drifted), closing, max_chars, "the drift's summary")
 
 
-class Run(Placed, Protocol):
-    """What the account of an apply reads of one module's run (`prc3cfg.shell.apply.ModuleRun`)."""
-
-    @property
-    def desired(self) -> ModuleImage: ...
-    @property
-    def steps(self) -> tuple[Step, ...]: ...
-    @property
-    def sent(self) -> list[Step]: ...
-    @property
-    def written(self) -> list[Step]: ...
-    @property
-    def unacknowledged(self) -> tuple[Step, ...]: ...
-    @property
-    def unsent(self) -> tuple[Step, ...]: ...
-    @property
-    def broadcasts(self) -> int: ...
-    @property
-    def watched(self) -> bool: ...
-    @property
-    def final(self) -> ModuleImage | None: ...
-    @property
-    def unchanged(self) -> bool: ...
-    @property
-    def failure(self) -> str | None: ...
-    @property
-    def verified(self) -> bool: ...
-    @property
-    def repairs(self) -> int: ...
-    @property
-    def released(self) -> Release: ...
-
-
-def account(run: Run) -> str | None:
+def account(run: ModuleOutcome) -> str | None:
     """What was and was not written to one module, and what a read-back says it holds now (None: a
     module not in the plan that was not looked at — nothing to say)."""
     head = f"bus {run.bus}, module {run.address} ({run.name})"
@@ -903,7 +871,7 @@ TRAVEL = "⚠ Travel to reference point required before production on:"
 TRAVEL_WIDTH = 100
 
 
-def travel_list(runs: Sequence[Run]) -> str | None:
+def travel_list(runs: Sequence[ModuleOutcome]) -> str | None:
     """The modules whose axes were — or may have been — released: they must travel to their reference point.
     The heading, then each bus's modules on lines of their own, indented, wrapped between modules at
     `TRAVEL_WIDTH` (30 modules on a line are no 300-character line)."""
@@ -954,7 +922,7 @@ def earlier_releases(records: Iterable[Untold]) -> list[str]:
             + (f"; journal {shown(r.journal)})" if r.journal else ")") for r in records]  # fmt: skip
 
 
-def broadcasts_heard(proofs: Iterable[LineProof], runs: Sequence[Run]) -> list[str]:
+def broadcasts_heard(proofs: Iterable[LineProof], runs: Sequence[ModuleOutcome]) -> list[str]:
     """After an apply, each line that took a broadcast where the probes had found every address the
     plant file does not list silent: only the plan's modules heard it."""
     return [f"Bus {proof.bus}: broadcast after {address_ranges(proof.silent)} answered no probe — only the plan's modules heard it"
