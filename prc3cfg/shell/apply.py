@@ -15,10 +15,10 @@ in the fewest 50h/51h/52h exchanges; a repair round reads what it repairs. `Veri
 read-back instead, for the paranoid. A difference counts only when two reads agree on it.
 
 What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
-acknowledgement was lost released the axes all the same. `Release` says for each module
-(`prc3cfg.core.outcome.ModuleOutcome.released`) whether its axes were released — certainly (acknowledged, or the read-back shows other
-system parameters than before), possibly (a 10h/20h went out and no reply or read-back
-settles it), or not.
+acknowledgement was lost released the axes all the same. Each module's outcome
+(`ModuleRun.outcome`, a frozen `prc3cfg.core.outcome.ModuleOutcome`) says whether its axes were
+released — certainly (acknowledged, or the read-back shows other system parameters than before),
+possibly (a 10h/20h went out and no reply or read-back settles it), or not.
 
 An error code stops that module for good (the link confirms codes on lines without a
 checksum) — naming the step, the code, its meaning and what to do — while the other
