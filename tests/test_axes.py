@@ -1,4 +1,4 @@
-"""Whether a module's axes were released (`prc3cfg.core.axes.concluded`), as a table: each row a run as the
+"""Whether a module's axes were released (`prc3cfg.core.axes.released`), as a table: each row a run as the
 apply sees it — what went out, what was acknowledged, what the verifying read-back shows — and the conclusion
 the account, the journal and the travel list take from it. Every combination of the facts is in a row's reach
 (`test_every_combination_is_one_rule`)."""
@@ -9,7 +9,7 @@ import itertools
 
 import pytest
 
-from prc3cfg.core.axes import Release, concluded
+from prc3cfg.core.axes import Release, released
 
 FACTS = ("acknowledged", "sent", "possibly_written", "exposed", "read_back", "changed")
 
@@ -33,7 +33,7 @@ ROWS = [
 
 @pytest.mark.parametrize(("holds", "expected", "why"), ROWS, ids=[why for _, _, why in ROWS])
 def test_a_run_s_facts_conclude_its_axes(holds: set[str], expected: Release, why: str) -> None:
-    assert concluded(**{fact: fact in holds for fact in FACTS}) is expected, why
+    assert released(**{fact: fact in holds for fact in FACTS}) is expected, why
 
 
 def test_every_combination_is_one_rule() -> None:
@@ -44,7 +44,7 @@ def test_every_combination_is_one_rule() -> None:
         facts = dict(zip(FACTS, values))
         if facts["changed"] and not facts["read_back"]:
             continue  # a change is only seen by a read-back
-        said = concluded(**facts)
+        said = released(**facts)
         if facts["acknowledged"] or (facts["changed"] and (facts["sent"] or facts["exposed"] or facts["possibly_written"])):
             assert said is Release.YES, facts
         if said is Release.NO:

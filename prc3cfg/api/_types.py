@@ -11,18 +11,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from prc3cfg.core.axes import to_travel
+from prc3cfg.core.outcome import ModuleOutcome, to_travel
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.render import plural
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Module
 from prc3cfg.shell import pending_records
 from prc3cfg.shell.platform import command_line
-
-if TYPE_CHECKING:
-    from prc3cfg.shell.apply import ModuleRun
 
 #: (bus, module) pairs of a plant, as `select` gives them
 Pairs = list[tuple[Bus, Module]]
@@ -89,10 +85,10 @@ class ApplyInterrupted(Interrupted):
 
 @dataclass(frozen=True)
 class ApplyResult:
-    """What an apply did: the plan it ran, every module's run, the snapshot and journal it left."""
+    """What an apply did: the plan it ran, every module's outcome, the snapshot and journal it left."""
 
     plan: PlantPlan
-    runs: tuple[ModuleRun, ...]
+    runs: tuple[ModuleOutcome, ...]
     snapshot: Path | None
     journal: Path
     #: axis releases earlier applies on these lines left untold (killed after a 10h/20h): this
@@ -111,7 +107,7 @@ class ApplyResult:
         return not self.unread and all(run.verified for run in self.runs)
 
     @property
-    def released(self) -> tuple[ModuleRun, ...]:
+    def released(self) -> tuple[ModuleOutcome, ...]:
         """Every module whose axes were — or may have been — released: it must travel to its reference point."""
         return tuple(to_travel(self.runs))
 

@@ -1,17 +1,16 @@
 """What an apply concludes of a module's axes: released, not, or possibly (`Release`).
 
 A 10h/20h releases the axes, and a module whose axes were released must travel to its reference
-point before it runs again. Which of the three a module's run is, `concluded` decides from what went
-out, what was acknowledged and what the verifying read-back shows (`prc3cfg.shell.apply.ModuleRun`
-gives it those facts); the account says it (`prc3cfg.core.render`), and the journal and the API's
-result name every module not `NO` (`to_travel`). Pure.
+point before it runs again. Which of the three a module's run is, `released` decides from what went
+out, what was acknowledged and what the verifying read-back shows — once, as the module's outcome is
+built (`prc3cfg.core.outcome.ModuleOutcome`, which names those facts); the account says it
+(`prc3cfg.core.render`), and the journal and the API's result name every module not `NO`
+(`prc3cfg.core.outcome.to_travel`). Pure.
 """
 
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterable
-from typing import Protocol, TypeVar
 
 
 class Release(enum.Enum):
@@ -22,7 +21,7 @@ class Release(enum.Enum):
     POSSIBLY = "possibly"  # a 10h/20h went out unacknowledged, and no read-back settles it
 
 
-def concluded(*, acknowledged: bool, sent: bool, possibly_written: bool, exposed: bool, read_back: bool, changed: bool) -> Release:
+def released(*, acknowledged: bool, sent: bool, possibly_written: bool, exposed: bool, read_back: bool, changed: bool) -> Release:
     """Whether a module's axes were released, by the first of these that holds:
 
     1. a 10h/20h to it was acknowledged (`acknowledged`): YES;
@@ -43,18 +42,3 @@ def concluded(*, acknowledged: bool, sent: bool, possibly_written: bool, exposed
     if not read_back:
         return Release.POSSIBLY
     return Release.YES if changed else Release.NO
-
-
-class Concluded(Protocol):
-    """A module's run as far as its axes go (`prc3cfg.shell.apply.ModuleRun`)."""
-
-    @property
-    def released(self) -> Release: ...
-
-
-R = TypeVar("R", bound=Concluded)
-
-
-def to_travel(runs: Iterable[R]) -> list[R]:
-    """The runs whose axes were — or may have been — released: they must travel to their reference point."""
-    return [run for run in runs if run.released is not Release.NO]

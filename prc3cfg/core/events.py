@@ -21,7 +21,8 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from prc3cfg.core import render
-from prc3cfg.core.axes import Release, to_travel
+from prc3cfg.core.axes import Release
+from prc3cfg.core.outcome import ModuleOutcome, to_travel
 
 FORMAT = "prc3cfg-event/1"
 #: Every kind of event, in the order a run emits them (a kind may repeat: a plan per line, a module each).
@@ -45,7 +46,7 @@ def _summaries(steps: Iterable[Any]) -> list[str]:
     return [step.summary for step in steps]
 
 
-def _read_back(run: render.Run) -> dict[str, Any]:
+def _read_back(run: ModuleOutcome) -> dict[str, Any]:
     """What the module's read-back says: it matches the plant file, unchanged, differs (how), or unknown."""
     if run.final is None:
         return {"read_back": "unknown", "differences": []}
@@ -56,7 +57,7 @@ def _read_back(run: render.Run) -> dict[str, Any]:
     return {"read_back": "differs", "differences": render.differences(run.final, run.desired)}
 
 
-def module(command: str, run: render.Run) -> dict[str, Any] | None:
+def module(command: str, run: ModuleOutcome) -> dict[str, Any] | None:
     """One module's account as an event (None where the human account says nothing: a module not in the
     plan that was not looked at)."""
     text = render.account(run)
@@ -69,7 +70,7 @@ def module(command: str, run: render.Run) -> dict[str, Any] | None:
                  **_read_back(run), text=text)  # fmt: skip
 
 
-def travel(command: str, runs: Sequence[render.Run], earlier: Iterable[render.Untold]) -> dict[str, Any] | None:
+def travel(command: str, runs: Sequence[ModuleOutcome], earlier: Iterable[render.Untold]) -> dict[str, Any] | None:
     """The modules that must travel to their reference point before production (None: none must)."""
     modules = [{"bus": r.bus, "name": r.name, "released": r.released.value} for r in to_travel(runs)]
     told = list(earlier)

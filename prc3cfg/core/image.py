@@ -182,7 +182,7 @@ Key = tuple[str, int]  # a module on the plant's buses: (bus name, module addres
 
 
 class Placed(Protocol):
-    """A module where the plant file has it, as what reads of a module's entry or run names it by."""
+    """A module where the plant file has it, as what reads of a module's plan-file entry names it by (`what_to_read.PlanEntry`)."""
 
     @property
     def bus(self) -> str: ...

@@ -15,10 +15,10 @@ in the fewest 50h/51h/52h exchanges; a repair round reads what it repairs. `Veri
 read-back instead, for the paranoid. A difference counts only when two reads agree on it.
 
 What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
-acknowledgement was lost released the axes all the same. `Release` says for each module
-whether its axes were released — certainly (acknowledged, or the read-back shows other
-system parameters than before), possibly (a 10h/20h went out and no reply or read-back
-settles it), or not.
+acknowledgement was lost released the axes all the same. Each module's outcome
+(`ModuleRun.outcome`, a frozen `prc3cfg.core.outcome.ModuleOutcome`) says whether its axes were
+released — certainly (acknowledged, or the read-back shows other system parameters than before),
+possibly (a 10h/20h went out and no reply or read-back settles it), or not.
 
 An error code stops that module for good (the link confirms codes on lines without a
 checksum) — naming the step, the code, its meaning and what to do — while the other
@@ -43,11 +43,11 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 from prc3cfg.core.apply_states import REPAIRS, Course, Event, Next, State, repair_event, reply_event
-from prc3cfg.core.axes import Release, concluded
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import FAULT_STATES, describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
 from prc3cfg.core.late_frames import settle_time, undone_by_late
+from prc3cfg.core.outcome import INTERRUPTED, ModuleOutcome
 from prc3cfg.core.planner import ModulePlan, Step, plan_module
 from prc3cfg.core.render import plural
 from prc3cfg.core.what_to_read import programs_in, verification_reads
@@ -57,9 +57,6 @@ from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Link, LinkError, PossibleWrite
 from prc3cfg.shell.readback import read_programs, read_system
 
-#: How a module's `failure` begins when the lines were stopped — by Ctrl-C, SIGTERM, or (`ModuleRun.stopped_by`)
-#: another reason.
-INTERRUPTED = "interrupted"
 #: Reads to confirm a difference: on a line without a checksum a damaged reply looks like
 #: one, so a difference counts only when two reads in a row agree on it.
 CONFIRMING_READS = 4
@@ -98,7 +95,7 @@ class ModuleRun:
     fault: int | None = None  # it refused a write with another fault state's code (E09, E21, …: `FAULT_STATES`): kept, told
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
     wrote_at: float = 0.0  # time.monotonic() when its last round of steps ended: a late frame lands within the quiet period since
-    failure: str | None = None
+    problem: str | None = None  # the last thing that went wrong, in words: the outcome's `failure` says it
     course: Course = field(default_factory=Course)  # where the table has it, and what it does next
 
     @property
@@ -126,24 +123,12 @@ class ModuleRun:
         """Whether a 10h/20h went out on the line (a broadcast one counts)."""
         return any(step.releases_axes for step in self.sent)
 
-    @property
-    def release_acknowledged(self) -> bool:
-        return any(step.releases_axes for step in self.written)
-
-    @property
-    def released(self) -> Release:
-        """Whether its axes were released, as `axes.concluded` decides from this run's facts."""
-        return concluded(acknowledged=self.release_acknowledged, sent=self.release_sent, possibly_written=self.possibly_written,
-                         exposed=self.exposed, read_back=self.final is not None,
-                         changed=self.final is not None and self.final.system != self.before.system)  # fmt: skip
-
-    @property
-    def unchanged(self) -> bool:
-        """Whether the last read-back shows the module as it was before the apply."""
-        final = self.final
-        return final is not None and final.system == self.before.system and all(
-            have is None or have == was for have, was in zip(final.programs, self.before.programs)
-        )
+    def outcome(self, stopped: str | None = None) -> ModuleOutcome:
+        """What its run came to, once it ended: the frozen value everything after the apply takes (`stopped`: why
+        the lines were stopped, when not by a signal)."""
+        return ModuleOutcome(self.bus, self.address, self.name, self.before, self.desired, self.steps, self.broadcasts, tuple(self.sent),
+                       tuple(self.written), self.final, self.course, self.exposed, self.possibly_written, self.watched,
+                       self.system_unset, self.fault, self.problem, stopped)  # fmt: skip
 
     def trespassed(self) -> str | None:
         """A program the plant does not manage that the last read-back shows other than the module's
@@ -155,20 +140,8 @@ class ModuleRun:
                         "before the apply (and than the module's clamping leaves it) — check the line and restore it from the snapshot")  # fmt: skip
         return None
 
-    @property
-    def unacknowledged(self) -> tuple[Step, ...]:
-        """Steps that went out but no reply acknowledged (their effect may be there: see `final`)."""
-        written = {step.message for step in self.written}
-        return tuple(dict.fromkeys(step for step in self.sent if step.message not in written))
-
-    @property
-    def unsent(self) -> tuple[Step, ...]:
-        """Planned steps that never went out."""
-        sent = {step.message for step in self.sent}
-        return tuple(step for step in self.steps if step.message not in sent)
-
     def stopped_verifying(self) -> None:
-        """Ctrl-C during the verifying read-back: `failure` says what was acknowledged, and that it
+        """Ctrl-C during the verifying read-back: `problem` says what was acknowledged, and that it
         was not verified (and what went wrong before, if anything did); the table is told by the caller."""
         written, sent = {step.message for step in self.written}, {step.message for step in self.sent}
         own = self.steps[self.broadcasts :]
@@ -177,16 +150,11 @@ class ModuleRun:
             said += f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent"
         if self.repairs:
             said += f", after {plural(self.repairs, 'repair round')}"
-        self.failure = f"{said}, not verified" + (f" (before that: {self.failure})" if self.failure else "")
-
-    def stopped_by(self, why: str) -> None:
-        """The lines were stopped for `why`, not by a signal: `failure` says so where it says "interrupted"."""
-        if self.interrupted and self.failure is not None and self.failure.startswith(INTERRUPTED):
-            self.failure = f"stopped ({why}){self.failure.removeprefix(INTERRUPTED)}"
+        self.problem = f"{said}, not verified" + (f" (before that: {self.problem})" if self.problem else "")
 
     def run(self, link: Link, steps: Sequence[Step], tick: Callable[[], None]) -> None:
         """Send steps in order — the plan's own, or a repair's (the state says which) — while the
-        table says to send the next (`failure` says why it stopped, naming the step)."""
+        table says to send the next (`problem` says why it stopped, naming the step)."""
         what = "repair step" if self.course.state is State.REPAIRING else "step"
         try:
             for index, step in enumerate(steps, start=1):
@@ -199,7 +167,7 @@ class ModuleRun:
             self.wrote_at = time.monotonic()
 
     def _send(self, link: Link, step: Step, where: str) -> Event:
-        """One step on the line, and what came of it (`failure` says what went wrong)."""
+        """One step on the line, and what came of it (`problem` says what went wrong)."""
         try:
             if link.cancel is not None and link.cancel.is_set():
                 raise Interrupted()
@@ -208,10 +176,10 @@ class ModuleRun:
         except Interrupted as stop:  # before this step, or between its attempts (then it counts as sent)
             if isinstance(stop, NotSent):  # its frame never left
                 self.sent.pop()
-            self.failure = f"{INTERRUPTED} before {where}"
+            self.problem = f"{INTERRUPTED} before {where}"
             return Event.CANCELLED
         except LinkError as error:
-            self.failure = f"{where}: {error}"
+            self.problem = f"{where}: {error}"
             return Event.NO_REPLY
         assert isinstance(reply, int)  # a write is answered with a code word only (decode_reply sees to it)
         event = reply_event(reply, after_broadcast=self.broadcasts > 0)
@@ -219,13 +187,13 @@ class ModuleRun:
             self.written.append(step)
         elif event is Event.E12:
             self.system_unset = True
-            self.failure = (f"{where} was refused: the module is in E12 (system parameters not set), which only a 10h/20h "
+            self.problem = (f"{where} was refused: the module is in E12 (system parameters not set), which only a 10h/20h "
                             "clears — plan again: the new plan writes its system parameters first (20h, releasing its axes)")  # fmt: skip
         elif event is Event.RUNNING:
-            self.failure = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
+            self.problem = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
         else:
             self.fault = reply if reply in FAULT_STATES else self.fault
-            self.failure = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
+            self.problem = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
         return event
 
     def verify_read(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage) -> ModuleImage:
@@ -283,12 +251,12 @@ class ModuleRun:
                 self.run(link, repair.steps, tick)
             else:
                 if action is Next.GIVE_UP:
-                    self.failure = self._gave_up()
+                    self.problem = self._gave_up()
                 return
 
     def _verify(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage, known_programs: frozenset[int],
                 quiet: float = 0.0) -> Event:  # fmt: skip
-        """One verifying read-back, once the line is quiet (`quiet`: time.monotonic()), and what it found (`failure` says what went wrong)."""
+        """One verifying read-back, once the line is quiet (`quiet`: time.monotonic()), and what it found (`problem` says what went wrong)."""
         try:
             _wait_until(link, quiet)
             self.final = self.verify_read(link, system, programs, expected)
@@ -298,24 +266,23 @@ class ModuleRun:
         except PossibleWrite:
             raise  # the line stops: `execute` says so for every module on it
         except LinkError as error:
-            self.failure = f"verification: {error}"
+            self.problem = f"verification: {error}"
             return Event.NO_REPLY
         except UserError as error:
-            self.failure = f"verification: {error}"
+            self.problem = f"verification: {error}"
             return Event.READ_REFUSED
         if not _agree(self.final, self.desired, True, known_programs):
             return Event.DIFFERS
         if trespass := self.trespassed():
-            self.failure = trespass
+            self.problem = trespass
             return Event.TRESPASSED
-        self.failure = None
         return Event.AGREES
 
     def _consent(self, repair: ModulePlan, consented: frozenset[tuple[str, int]]) -> Event:
-        """Whether the repair may go (`failure` says why not)."""
+        """Whether the repair may go (`problem` says why not)."""
         event = repair_event(repair.releases_axes, (self.bus, self.address) in consented)
         if event is Event.REPAIR_UNCONSENTED:
-            self.failure = (
+            self.problem = (
                 "the read-back shows other system parameters than the plan expected (changed on the floor "
                 "meanwhile" + (", or by a damaged frame meant for another module" if self.exposed else "") + "?); writing "
                 "them would release the axes, which the plan agreed to did not — nothing more was sent to it: plan "
@@ -326,10 +293,10 @@ class ModuleRun:
     def _gave_up(self) -> str:
         """Why a module that had every round is not verified."""
         if self.final is None:
-            return f"could not be read back to verify it ({self.failure}) — check the line and the module, then apply again"
+            return f"could not be read back to verify it ({self.problem}) — check the line and the module, then apply again"
         return (
             f"still differs from the plant file after {REPAIRS} repairs"
-            + (f" (last problem: {self.failure})" if self.failure else "")
+            + (f" (last problem: {self.problem})" if self.problem else "")
             + " — check the line (damaged frames?) and the module, then apply again"
         )
 
@@ -361,12 +328,12 @@ def broadcast(link: Link, turnaround: float, runs: list[ModuleRun], tick: Callab
             link.broadcast(step.message, turnaround)
         except Interrupted:
             for run in receivers:
-                run.failure = f"{INTERRUPTED} before broadcast {index} of {len(steps)} ({step.summary})"
+                run.problem = f"{INTERRUPTED} before broadcast {index} of {len(steps)} ({step.summary})"
                 run.process(Event.CANCELLED)
             return
         except LinkError as error:
             for run in receivers:
-                run.failure = f"broadcast {index} of {len(steps)} ({step.summary}): {error}"
+                run.problem = f"broadcast {index} of {len(steps)} ({step.summary}): {error}"
             return
         for run in receivers:
             run.sent.append(step)  # it may have reached every module: they count it as sent
@@ -383,7 +350,7 @@ def stopped(link: Link, runs: list[ModuleRun], error: PossibleWrite) -> None:
             with contextlib.suppress(LinkError, UserError):  # not read back: `released` says "possibly"
                 run.final = replace(run.final or run.before, system=read_system(link, run.address, name=run.name))
         if not run.verified:
-            run.failure = str(error)
+            run.problem = str(error)
             run.process(Event.LINE_STOPPED)
 
 

@@ -23,8 +23,8 @@ from typing import Any
 
 from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.apply_states import Event
-from prc3cfg.core.axes import to_travel
 from prc3cfg.core.image import Key, ModuleImage, Wanted
+from prc3cfg.core.outcome import ModuleOutcome, to_travel
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
 from prc3cfg.core.what_to_read import Known, Target
 from prc3cfg.errors import Interrupted, NotSent, UserError
@@ -43,13 +43,13 @@ from prc3cfg.shell.sessions import LineOptions, Lines, line_cost
 
 @dataclass(frozen=True)
 class Written:
-    """What an apply's writes came to: the plan, every run in the plan's order, the snapshot, the
+    """What an apply's writes came to: the plan, every module's outcome in the plan's order, the snapshot, the
     seconds of each phase — and why it stopped short: lines not written (`unread`, one line each),
     a record that could not be kept midway (`trouble`, the first; `lost`, every one), Ctrl-C or
     SIGTERM (`interrupted`)."""
 
     plan: PlantPlan
-    runs: tuple[ModuleRun, ...] = ()
+    runs: tuple[ModuleOutcome, ...] = ()
     snapshot: Path | None = None
     took: dict[str, float] = field(default_factory=dict)
     unread: tuple[str, ...] = ()
@@ -168,7 +168,7 @@ def _refusal(error: OSError | UserError, path: Path | None) -> str:
     return f"{where}: {error.strerror}" if where and error.strerror else (error.strerror or str(error))
 
 
-def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Sequence[ModuleRun]) -> None:
+def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Sequence[ModuleOutcome]) -> None:
     """The fault states the writes revealed, recorded; those a write since shows gone, cleared. E12: kept for
     the next plan, which writes the system parameters first, cleared once verified; any other (E09, E21, …):
     told by every command on the line until a write to the module is acknowledged (a read cannot see it)."""
@@ -239,7 +239,7 @@ class Writing:
         if self.keeping.trouble is not None:
             for run in runs:
                 run.process(Event.CANCELLED)
-                run.failure = "nothing was sent to it"
+                run.problem = "nothing was sent to it"
             started()
             return
         consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
@@ -303,15 +303,13 @@ class Writing:
                 self.keeping.failed(LINE_RECORD, error)
 
     def account(self, the_plan: PlantPlan, took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> Written:
-        """What the writes came to, every run in the plan's order — recorded (E12 kept for the next
+        """What the writes came to, every module's outcome in the plan's order — recorded (E12 kept for the next
         plan, cleared once verified) and journalled, with the travel to the reference point and, when
         a signal stopped the lines, that it did."""
         order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
-        runs = tuple(sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
         keys, keeping = self.keys, self.keeping
-        if keeping.trouble is not None:
-            for run in runs:
-                run.stopped_by("a record could not be kept")
+        stopped = None if keeping.trouble is None else "a record could not be kept"
+        runs = tuple(run.outcome(stopped) for run in sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
         for record in self.records.values():  # what a line left as it was read: kept here, where a failure is
             try:  # the account's trouble (`RecordsFailed`, every run said), not an error after it that hides it
                 record.write()
