@@ -79,7 +79,7 @@ def travel_list(runs: Sequence[ModuleOutcome]) -> str | None:
 
 class Untold(Protocol):
     """What the account reads of an axis release an earlier apply sent and never told of — it was
-    killed after its 10h/20h (`prc3cfg.shell.releases.Pending`)."""
+    killed after its 10h/20h (`prc3cfg.shell.pending_records.Pending`)."""
 
     @property
     def bus(self) -> str: ...
