@@ -142,3 +142,27 @@ def test_any_consent_short_of_every_release_sends_nothing(data):
         said = _write_stage(emulated, frozenset(consent))
         assert all((f"bus {bus}, module {address} (" in said) == ((bus, address) not in consent) for bus, address in releasing)
         assert emulated.images() == before
+
+
+def test_each_line_s_plan_is_shown_by_the_caller_s_thread_before_that_line_writes(tmp_path):
+    """Without a question (`Gates.asks`), `show_line` and `show` run in the thread that called `api.apply` — between
+    the stages, never from a line's thread — and a line's modules hold what they held until its plan was shown."""
+    with emulated_plant(tmp_path) as emulated:
+        before, shown, whole = emulated.images(), [], []
+
+        def show_line(line_plan) -> None:
+            assert threading.current_thread() is threading.main_thread()
+            shown.extend(line_plan.buses())
+            assert all(emulated.images()[key] == before[key] for key in before if key[0] in line_plan.buses())
+
+        def show(the_plan) -> None:
+            assert threading.current_thread() is threading.main_thread()
+            whole.append(the_plan)
+
+        gates = api.Gates(show=show, show_line=show_line, allow_axis_release=True)
+        result = api.apply(emulated.plant, gates=gates)
+        assert result.verified and emulated.matches_plant()
+        assert sorted(shown) == sorted(bus.name for bus in emulated.plant.buses)
+        again = api.apply(emulated.plant, gates=gates)  # nothing to write: no line's plan, the plant's on the lines' records
+    assert len(whole) == 2 and whole[0].modules == result.plan.modules and whole[1].modules == again.plan.modules
+    assert whole[1].reading is not None and whole[1].reading == again.plan.reading  # what it read, worked out by the API

@@ -146,7 +146,7 @@ class ByLine:
                 with self._lock:  # a line that tells its plan now writes nothing, and none waits for the caller
                     self._closed = True
                 while not self._told.empty():
-                    if isinstance(left := self._told.get(), _Told):
+                    if isinstance(left := self._told.get_nowait(), _Told):
                         left.done.set()
             try:
                 result_of(reading)
