@@ -288,13 +288,13 @@ def test_the_registry_s_com_ports_are_windows_only():
 
 
 def test_no_wait_without_a_timeout_outside_the_seam():
-    """`Event.wait()`, `Future.result()`, `Thread.join()` without a timeout: on Windows no Ctrl-C handler
-    runs inside them (an apply answered Ctrl-C only when its lines were done; `emulator serve` never).
-    They are `platform.wait_for` and `platform.result_of`."""
+    """`Event.wait()`, `Future.result()`, `Thread.join()`, `Queue.get()` without a timeout: on Windows no Ctrl-C
+    handler runs inside them (an apply answered Ctrl-C only when its lines were done; `emulator serve` never).
+    They are `platform.wait_for`, `platform.result_of` and `platform.next_of`."""
     wrong = {f"{path.relative_to(ROOT)}:{node.lineno}: .{node.func.attr}()"
              for path in PACKAGE.rglob("*.py") if path != SEAM
              for node in ast.walk(ast.parse(path.read_text()))
-             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("wait", "result", "join")
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("wait", "result", "join", "get")
              and not node.args and not node.keywords and not (isinstance(node.func.value, ast.Name) and node.func.value.id in ("os", "str"))}
     assert not wrong, sorted(wrong)
 
@@ -311,6 +311,20 @@ def test_a_wait_ends_when_its_event_is_set_and_a_result_is_the_future_s():
         assert platform.result_of(pool.submit(lambda: 42)) == 42
         with pytest.raises(ZeroDivisionError):
             platform.result_of(pool.submit(lambda: 1 / 0))
+
+
+@pytest.mark.parametrize("system", ["linux", "win32"])
+def test_the_next_item_is_the_queue_s_as_it_comes(system, monkeypatch):
+    """`platform.next_of`: each item in order, one put by another thread while it waits — on Windows too (in slices)."""
+    import queue
+    import threading
+
+    monkeypatch.setattr(sys, "platform", system)
+    items: queue.SimpleQueue[int] = queue.SimpleQueue()
+    items.put(1)
+    assert platform.next_of(items) == 1
+    threading.Timer(0.25, items.put, (2,)).start()  # later than a slice: Windows' waits more than once
+    assert platform.next_of(items) == 2
 
 
 def test_text_is_written_as_given_in_utf_8(tmp_path):

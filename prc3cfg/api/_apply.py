@@ -2,7 +2,7 @@
 
 `apply` and `restore` check what must hold before a line is opened (a reason, parity, records that
 can be kept), read back and plan the whole plant and pass the `Gates`, or — with no
-question to ask — write each line as soon as its plan is whole (`prc3cfg.shell.engine`). Plan files:
+question to ask — write each line as soon as its plan is whole (`prc3cfg.shell.by_line`). Plan files:
 `read_plan`, `prove`, `plan_document`, `plan_file_plant`. Does not own the writes, the snapshot and
 the journal (`prc3cfg.shell.engine`), nor what a plan file is (`prc3cfg.core.plan_file`).
 """
@@ -24,15 +24,13 @@ from prc3cfg.api._plan import (
     make_plan,
     plan_file_pairs,
     plan_file_reads,
-    planner_for,
-    planning_each,
     read_and_plan,
     read_input,
     read_targets,
     reads,
     record,
-    seen,
     select,
+    shared_planner,
     to_plan,
     unset_systems,
 )
@@ -47,11 +45,10 @@ from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, line_record, machine_folder, pending_records
 from prc3cfg.shell.apply import Verify
+from prc3cfg.shell.by_line import ByLine, LinePlanned
 from prc3cfg.shell.cancel import Cancellation
-from prc3cfg.shell.engine import APPLIED, ByLine, Keeping, Writing, Written
-from prc3cfg.shell.planning import SharedPlanner
+from prc3cfg.shell.engine import APPLIED, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
-from prc3cfg.shell.readback import read_all
 from prc3cfg.shell.records import Journal, Snapshot, applied_copy, check_writable, save_applied
 from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, OnRecord, bus_line_keys, line_cost, lines
@@ -223,7 +220,7 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[On
             # from the first read when each line is written as soon as its plan is whole, else from the snapshot, to the end
             # of the account, a signal waits its turn
             with options.deferred():
-                written = _by_line(plant, chosen, wanted, desired, gates, writing) if whole is None else _write_whole(writing, *whole)
+                written = _by_line(plant, wanted, chosen, desired, gates, writing) if whole is None else _write_whole(writing, *whole)
                 if written.verified and desired is None and len(chosen) == len(plant.modules()):
                     written = _keep_applied(plant, written, keeping)
                 return _judged(written, journal.path, earlier, records)
@@ -266,22 +263,32 @@ def _judged(written: Written, journal: Path, earlier: tuple[pending_records.Pend
     return result
 
 
-def _by_line(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
+def _by_line(plant: Plant, wanted: Reads, chosen: Pairs, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
     """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
-    as its own plan is whole (`ByLine`), the plant's plan shown once whole (`Gates.show`)."""
-    unset = unset_systems(writing.buses.values(), writing.held.on_record)
-    planner = SharedPlanner(planner_for(plant, wanted.pairs, unset, only_read=wanted.base is not None, from_factory=wanted.from_factory))
-    want = to_plan(wanted.pairs, desired)
-    by_line = ByLine(writing, planner, want, wanted.targets, reading=lambda read: wanted.reading(chosen, read), show=gates.show,
-                     show_line=gates.show_line)  # fmt: skip
-    return by_line.run(lambda line: read_all(wanted.targets, writing.links, progress=writing.phases.read, each=planning_each(planner, want),
-                                             then=seen(plant, writing.command, writing.held.on_record, line)))  # fmt: skip
+    as its own plan is whole (`ByLine`), consented as the gates allowed up front; here, between the stages the
+    lines' threads run, each line's plan shown before its writes (`Gates.show_line`) and the plant's once whole
+    (`Gates.show`), with what it read (`Reads.reading`)."""
+    planner = shared_planner(plant, wanted.pairs, writing.held.on_record, desired, only_read=wanted.base is not None,
+                             from_factory=wanted.from_factory)  # fmt: skip
+    consent = frozenset((bus.name, m.address) for bus, m in wanted.pairs) if gates.allow_axis_release is True else frozenset()
+    by_line = ByLine(writing, planner, wanted.targets, consent, show_lines=gates.show_line is not None)
+    for planned in by_line.run():
+        if isinstance(planned, LinePlanned):
+            if gates.show_line is not None:
+                gates.show_line(planned.plan)
+            continue
+        the_plan = replace(planned.plan, reading=wanted.reading(chosen, planned.read))
+        if gates.show is not None:
+            gates.show(the_plan)
+        writing.whole(the_plan, planned.at)
+    written = by_line.account()
+    return replace(written, plan=replace(written.plan, reading=wanted.reading(chosen, by_line.images)))
 
 
 def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None,
-                gates: Gates, writing: Writing, options: LineOptions) -> tuple[PlantPlan, dict[Key, ModuleImage], bool, float]:  # fmt: skip
+                gates: Gates, writing: Writing, options: LineOptions) -> tuple[PlantPlan, dict[Key, ModuleImage], frozenset[Key], float]:  # fmt: skip
     """Read back and plan the whole plant (or prove the plan file), show it and pass the gates: the
-    plan, what was read, whether its axis releases are allowed, and the seconds the reading took."""
+    plan, what was read, the modules whose axes the answers consent to release, and the seconds the reading took."""
     pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
     started = time.monotonic()
     if plan_file is None:
@@ -289,13 +296,13 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
                                           only_read=wanted.base is not None, from_factory=wanted.from_factory)  # fmt: skip
         the_plan = replace(the_plan, reading=wanted.reading(chosen, images))
     else:
-        images = read_targets(to_read, links, options, then=seen(plant, writing.command, writing.held.on_record))
+        images = read_targets(to_read, writing.held, options, writing.command, plant)
         the_plan = prove(*plan_file, plant, chosen, images, writing.held.on_record, links)
     reading = time.monotonic() - started
     if gates.show is not None:
         gates.show(the_plan)
     if not the_plan.changes:
-        return the_plan, images, False, reading
+        return the_plan, images, frozenset(), reading
     releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
     allow = gates.allow_axis_release
     allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
@@ -306,15 +313,16 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
         )
     if gates.approve is not None and not gates.approve(the_plan):
         raise NotApproved(f"not {'restored' if writing.command == 'restore' else 'applied'} — nothing was written")
-    return the_plan, images, allow_axis_release, reading
+    consent = frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allow_axis_release else frozenset()
+    return the_plan, images, consent, reading
 
 
-def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, ModuleImage], allow_axis_release: bool, reading: float) -> Written:
-    """The whole plan written, every line at once: the snapshot, the writes, the account."""
+def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, ModuleImage], consent: frozenset[Key], reading: float) -> Written:
+    """The whole plan written, every line at once: the snapshot, the writes (`consent`: see `Writing.write`), the account."""
     if not the_plan.changes:
         return Written(the_plan)
     writing.whole(the_plan)
-    writing.write(the_plan.modules, images, allow_axis_release)
+    writing.write(the_plan.modules, images, consent)
     return writing.account(the_plan, {"reading": reading})
 
 

@@ -2,7 +2,7 @@
 
 `load` and `select` the plant's modules; what to read (`targets`, `reads`, `Reads`, the reads of
 a plan file, `plan_file_reads`) and the line's record it rests on; `read` them back, each line's
-read-back into its record (`seen`); `plan` from the read-back, or `make_plan` from images at hand,
+read-back into its record (`read_targets`); `plan` from the read-back, or `make_plan` from images at hand,
 each module planned as soon as it is read (`read_and_plan`); `drift`, and what the plant file
 leaves alone (`left_alone`). Does not own proving a plan file and writing (`prc3cfg.api._apply`),
 nor the planner itself (`prc3cfg.core.plant_planner`).
@@ -11,7 +11,7 @@ nor the planner itself (`prc3cfg.core.plant_planner`).
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -32,11 +32,10 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
 from prc3cfg.shell import line_record, pending_records
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
-from prc3cfg.shell.planning import SharedPlanner
+from prc3cfg.shell.planning import SharedPlanner, read_lines
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.platform import resolved
 from prc3cfg.shell.probe import probe_timeout
-from prc3cfg.shell.readback import LineRead, read_all
 from prc3cfg.shell.records import applied_copy
 from prc3cfg.shell.sessions import LineOptions, Lines, OnRecord, bus_line_keys, line_cost, lines, on_record
 
@@ -149,58 +148,37 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | 
     return Reads(pairs, to_read, RECORD, why=why, known=known)
 
 
-def seen(plant: Plant, command: str, held: OnRecord, then: LineRead | None = None) -> LineRead:
-    """Each line's read-back, as soon as it is read, into the line's record (`prc3cfg.shell.line_record`):
-    what `command` saw — drift included, so the next plan writes it back — then `then`. Written with
-    the line's next write of the record (an apply's before its first frame), else when the command ends."""
-    by = line_record.who(command, plant.path)
-
-    def record_and_then(bus: str, images: dict[Key, ModuleImage]) -> None:
-        record, when = held.records[bus], line_record.now()
-        known = record.known()
-        record.saw({a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
-        if then is not None:
-            then(bus, images)
-
-    return record_and_then
-
-
-def read_targets(targets_: list[Target], links: dict[str, Link], options: LineOptions, each: Callable[[Target, ModuleImage], None] | None = None,
-          then: LineRead | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
-    """Every target read back; a Ctrl-C stops after the exchange in flight (`Interrupted`) — also
-    one that came during the last exchanges, when the read ended anyway: it is not forgotten. Each
-    line's read goes into its record by `then` (`seen`)."""
+def read_targets(targets_: list[Target], held: Lines, options: LineOptions, command: str, plant: Plant,
+                 planner: SharedPlanner | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
+    """Every target read back, each line's read-back into its record as `command`'s (`planning.read_lines`) — with
+    a `planner`, each module planned as soon as it is read and each line as soon as its last module is, while the
+    other lines are still being read: the lines never wait for all of the planning. A Ctrl-C stops after the
+    exchange in flight (`Interrupted`) — also one that came during the last exchanges, when the read ended anyway:
+    it is not forgotten."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
-        images = read_all(targets_, links, progress=options.progress.advance, each=each, then=then)
+        images = read_lines(targets_, held.links, held.on_record, line_record.who(command, plant.path), planner,
+                            progress=options.progress.advance)  # fmt: skip
     if options.cancel is not None:
         options.cancel.check()
     return images
 
 
 def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines, options: LineOptions,
-                   desired: dict[Key, ModuleImage] | None = None, *, command: str,
-                   only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
-    """Read back and plan, each module planned as soon as it is read and each line as soon as its
-    last module is — while the other lines are still being read: the lines never wait for all of
-    the planning. `only_read`, `from_factory`: see `Planner`."""
-    buses = {bus.name: bus for bus, _ in pairs}
-    planner = SharedPlanner(planner_for(plant, pairs, unset_systems(buses.values(), held.on_record), only_read=only_read,
-                                        from_factory=from_factory))  # fmt: skip
-    wanted = to_plan(pairs, desired)
-    links = held.links
-
-    def plan_line(bus: str, read: dict[Key, ModuleImage]) -> None:
-        planner.plan_line(bus, wanted, read, links[bus])
-
-    images = read_targets(to_read, links, options, each=planning_each(planner, wanted), then=seen(plant, command, held.on_record, plan_line))
-    return images, planner.plan(wanted, images)
+                  desired: dict[Key, ModuleImage] | None = None, *, command: str,
+                  only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
+    """Read back and plan (`read_targets` with a planner). `only_read`, `from_factory`: see `Planner`."""
+    planner = shared_planner(plant, pairs, held.on_record, desired, only_read=only_read, from_factory=from_factory)
+    images = read_targets(to_read, held, options, command, plant, planner)
+    return images, planner.plan(images)
 
 
-def planning_each(planner: SharedPlanner, wanted: list[Wanted]) -> Callable[[Target, ModuleImage], None]:
-    """Each module planned as soon as it is read (`Planner.plan_module`)."""
-    by_key = {w.key: w for w in wanted}
-    return lambda target, image: planner.plan_module(by_key[(target.bus, target.address)], image)
+def shared_planner(plant: Plant, pairs: Pairs, held: OnRecord, desired: dict[Key, ModuleImage] | None = None, *,
+                   only_read: bool = False, from_factory: bool = False) -> SharedPlanner:  # fmt: skip
+    """The planner of these modules to `desired` (else the plant file's) the lines' threads share, with the E12s on
+    record (`unset_systems`). `only_read`, `from_factory`: see `Planner`."""
+    unset = unset_systems({bus.name: bus for bus, _ in pairs}.values(), held)
+    return SharedPlanner(planner_for(plant, pairs, unset, only_read=only_read, from_factory=from_factory), to_plan(pairs, desired))
 
 
 def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None, *,
@@ -212,7 +190,7 @@ def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOption
     options = options or LineOptions()
     pairs = select(plant, modules)
     with lines(plant, {bus.name for bus, _ in pairs}, options, given=links) as held:
-        return read_targets(targets(pairs), held.links, options, then=seen(plant, command, held.on_record))
+        return read_targets(targets(pairs), held, options, command, plant)
 
 
 def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) -> dict[Key, ModuleImage]:
@@ -292,11 +270,11 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
     line's probes on its link in `links` (`SharedPlanner.plan_line`). `only_read`: see `Planner`."""
-    planner, wanted = SharedPlanner(planner_for(plant, pairs, unset, only_read=only_read)), to_plan(pairs, desired)
-    for bus in dict.fromkeys(w.bus for w in wanted):
+    planner = SharedPlanner(planner_for(plant, pairs, unset, only_read=only_read), to_plan(pairs, desired))
+    for bus in dict.fromkeys(w.bus for w in planner.wanted):
         if links is not None and bus in links:
-            planner.plan_line(bus, wanted, actual, links[bus])
-    return planner.plan(wanted, actual)
+            planner.plan_line(bus, actual, links[bus])
+    return planner.plan(actual)
 
 
 def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False, from_factory: bool = False) -> Planner:

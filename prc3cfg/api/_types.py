@@ -124,13 +124,14 @@ class Gates:
 
     Without a question (`asks`) each line is written as soon as its own plan is whole, while the
     other lines are still read — `show_line` sees that line's plan before its first write — and
-    `show` sees the plant's plan once it is whole, writes going on.
+    `show` sees the plant's plan once it is whole, writes going on. Every gate is called from the
+    thread that called `apply` (or `restore`), between the stages: never from a line's thread.
     """
 
     show: Callable[[PlantPlan], None] | None = None
     allow_axis_release: bool | Callable[[list[str]], bool] = False
     approve: Callable[[PlantPlan], bool] | None = None
-    #: without a question: each line's own plan, before that line's first write (from its thread)
+    #: without a question: each line's own plan, before that line's first write (the line waits for it)
     show_line: Callable[[PlantPlan], None] | None = None
 
     @property

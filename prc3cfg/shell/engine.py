@@ -2,8 +2,8 @@
 
 `Keeping` is the journal and the records of axis releases (and E12), and stops every line when
 one of them cannot be kept; `Writing` takes the snapshot, writes and verifies (`execute`) a line's
-or the whole plan's changes, and keeps the account (`Written`); `ByLine` plans and writes each
-line as soon as its own read-back is in, while the other lines are still read.
+or the whole plan's changes — refusing a 10h/20h to a module its consent does not name (`NotConsented`) —
+and keeps the account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
 
 Does not own what is read and planned, nor the questions asked before writing and what an apply's
 outcome means (`prc3cfg.api`), nor how a module is written and verified (`prc3cfg.shell.apply`).
@@ -14,29 +14,23 @@ from __future__ import annotations
 import contextlib
 import re
 import threading
-import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from prc3cfg.core import codec, what_to_read
 from prc3cfg.core.apply_states import Event
-from prc3cfg.core.image import Key, ModuleImage, Wanted
+from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.outcome import ModuleOutcome, to_travel
-from prc3cfg.core.plant_plan import ModuleChange, PlantPlan, Reading
-from prc3cfg.core.what_to_read import Known, Target
-from prc3cfg.errors import Interrupted, NotSent, UserError
+from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
+from prc3cfg.core.what_to_read import Known
+from prc3cfg.errors import NotSent, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import line_record, pending_records
 from prc3cfg.shell.apply import ModuleRun, Verify, execute
-from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.link.client import Exchange
 from prc3cfg.shell.phases import Phases
-from prc3cfg.shell.planning import SharedPlanner
-from prc3cfg.shell.platform import result_of
-from prc3cfg.shell.readback import LineRead, LinesFailed
 from prc3cfg.shell.records import Journal, LineTaken, Snapshot
 from prc3cfg.shell.sessions import LineOptions, Lines, line_cost
 
@@ -61,6 +55,11 @@ class Written:
     def verified(self) -> bool:
         """Every module the plan changes written and verified, and every record kept: nothing stopped short."""
         return bool(self.runs) and all(run.verified for run in self.runs) and not (self.unread or self.trouble or self.interrupted)
+
+
+class NotConsented(UserError):
+    """The write stage was given a change that releases axes (10h/20h) of a module its consent does not name:
+    nothing was sent."""
 
 
 class Keeping:
@@ -212,11 +211,11 @@ class Writing:
                           frozenset(c.assumed))
                 for c in changes if c.steps or c.bus in self._exposed or c.assumed]  # fmt: skip
 
-    def whole(self, the_plan: PlantPlan, show: Callable[[PlantPlan], None] | None = None, at: float | None = None) -> None:
-        """The plant's plan is whole (`show`n, the display held still) — since `at`, if not now: the
-        writing phase, and the snapshot's path told once it holds every module the plan writes."""
+    def whole(self, the_plan: PlantPlan, at: float | None = None) -> None:
+        """The plant's plan is whole (and shown) — since `at`, if not now: the writing phase, and the
+        snapshot's path told once it holds every module the plan writes."""
         runs = self._runs(the_plan.modules)
-        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), lambda: show(the_plan) if show else None, at)
+        self.phases.writing(the_plan.message_count, len(runs), len({r.bus for r in runs}), at)
         with self._lock:
             self._whole = True
             self._tell_snapshot(len(runs))
@@ -225,11 +224,17 @@ class Writing:
         if self._whole and self._taken is not None and len(self._taken.images) == modules:
             self.options.progress.note(f"Snapshot of the modules before writing: {self.snapshot}")
 
-    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], allow_axis_release: bool,
+    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], consent: frozenset[Key],
               started: Callable[[], None] | None = None) -> None:  # fmt: skip
         """Write and verify these changes — one line's, or every line's — once their modules are in
-        the snapshot and the journal. Consent is per module: the releases of these changes, if allowed
-        (a repair may not add one). `started()` at each write acknowledged, or at once with none to make."""
+        the snapshot and the journal. `consent`: the modules whose axes the operator agreed to release (with the
+        plan shown, or up front): a change that releases another's is refused, before anything — `NotConsented` —
+        and a repair may release only those a change of the plan releases. `started()` at each write
+        acknowledged, or at once with none to make."""
+        if refused := [c for c in changes if c.releases_axes and (c.bus, c.address) not in consent]:
+            raise NotConsented(f"{', '.join(f'bus {c.bus}, module {c.address} ({c.name})' for c in refused)}: the plan releases the "
+                               "axes (10h/20h), and no consent to that was given with it — nothing was sent to any module: review "
+                               "the plan, and allow the release (--allow-axis-release)")  # fmt: skip
         started = started or _nothing
         runs = self._runs(changes)
         if not runs:
@@ -242,7 +247,7 @@ class Writing:
                 run.problem = "nothing was sent to it"
             started()
             return
-        consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes) if allow_axis_release else frozenset()
+        consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes)  # each in `consent`: refused above else
 
         def wrote() -> None:
             self.phases.wrote()
@@ -329,89 +334,6 @@ class Writing:
             keeping.note("interrupted")
         return Written(the_plan, runs, self.snapshot, (took or {}) | self.phases.took(), unread, keeping.trouble, interrupted,
                        tuple(keeping.lost))
-
-
-class ByLine:
-    """An apply with no question between the plan and the writes: each module planned as soon as it
-    is read, and each line — its broadcasts decided once its last module is read — written as soon as
-    its own plan is whole, while the other lines are still read and planned: no line waits for
-    another. The plant's plan is shown once whole, the writes going on. A line whose read-back or
-    plan fails is not written; the others are, and the account says both (`Written.unread`).
-
-    `line` is called from each line's thread with its read-back; what the lines have read and
-    planned so far is shared under one lock."""
-
-    def __init__(self, writing: Writing, planner: SharedPlanner, want: list[Wanted], targets: Sequence[Target], *,
-                 reading: Callable[[dict[Key, ModuleImage]], Reading | None],
-                 show: Callable[[PlantPlan], None] | None = None, show_line: Callable[[PlantPlan], None] | None = None) -> None:  # fmt: skip
-        self.writing, self.planner, self.want, self._reading = writing, planner, want, reading
-        self._show, self._show_line = show, show_line
-        self._modules = len(targets)
-        self._lines = {target.bus for target in targets}  # the lines to read
-        self._lock = threading.Lock()
-        self._images: dict[Key, ModuleImage] = {}
-        self._planned: list[str] = []
-        self._whole_at: float | None = None  # when the last line's plan was whole
-        self._shown: list[Future[None]] = []
-        self._showing: ThreadPoolExecutor | None = None
-
-    def plan(self) -> PlantPlan:
-        """The plan of the lines planned so far, with what they read."""
-        with self._lock:
-            read, done = dict(self._images), set(self._planned)
-        return replace(self.planner.plan([w for w in self.want if w.bus in done], read), reading=self._reading(read))
-
-    def line(self, bus: str, read: dict[Key, ModuleImage]) -> None:
-        """A line's read-back is in: plan it, then write it."""
-        self.planner.plan_line(bus, self.want, read, self.writing.links[bus])
-        with self._lock:
-            self._images.update(read)
-            self._planned.append(bus)
-            whole = len(self._planned) == len(self._lines)
-            if whole:
-                self._whole_at = time.monotonic()
-        changes = self.planner.line_changes(bus)
-        if self._show_line is not None and any(c.steps for c in changes):  # what a line's writes follow is shown before them
-            self._show_line(self.planner.plan([w for w in self.want if w.bus == bus], read))
-        # the plant's plan shown once the last line's first write is acknowledged: its rendering never holds that frame back
-        self.writing.write(changes, read, True, started=self._whole if whole else None)
-
-    def _whole(self) -> None:
-        """The plant's plan shown (once), beside the writes; the writing phase began when it became whole."""
-        with self._lock:
-            if not self._shown and self._showing is not None:
-                self._shown.append(self._showing.submit(lambda: self.writing.whole(self.plan(), self._show, self._whole_at)))
-
-    def run(self, read: Callable[[LineRead], object]) -> Written:
-        """`read(line)` reads every line back, calling `line` with each line's read-back as soon as it is
-        in; then the account. A signal must wait its turn meanwhile (`LineOptions.deferred`, the caller's)."""
-        writing = self.writing
-        unread: tuple[str, ...] = ()
-        with ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as self._showing:
-            writing.phases.reading(self._modules)
-            try:
-                read(self.line)
-            except Interrupted:
-                if not writing.runs:
-                    writing.keeping.stopped_reading()
-                    raise
-                unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
-                               for bus in sorted(self._lines - set(self._planned)))  # fmt: skip
-            except LinesFailed as error:
-                if not writing.runs:
-                    writing.keeping.stopped_reading()
-                    raise
-                unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
-            if len(self._planned) == len(self._lines):
-                self._whole()  # not yet, when no write of the last line was acknowledged
-            for future in self._shown:
-                result_of(future)
-            if writing.options.cancel is not None and not writing.runs:
-                writing.options.cancel.check()
-            planned = self.plan()
-            if not writing.runs:
-                return Written(planned)
-            return writing.account(planned, unread=unread)
 
 
 def _nothing() -> None:

@@ -5,7 +5,7 @@ verifying them; `Phases` takes its events from every line's thread — a module 
 acknowledged, a line's writes ended, a module verified — and shows one phase at a time:
 "reading modules" until every line is read and the plan is whole, "writing" until every line has
 written, then "verifying" — each with what some line did already counted (a line is written as
-soon as its own plan is whole when no question stands between: `prc3cfg.shell.engine`). It measures each
+soon as its own plan is whole when no question stands between: `prc3cfg.shell.by_line`). It measures each
 phase with `time.monotonic`, as the plan's estimate (`PlantPlan.phases`) prices it: the wait for
 the slowest line. `Progress` is what a progress display implements (`Quiet`: none).
 """
@@ -68,13 +68,11 @@ class Phases:
             if self._phase == "reading":
                 self._advance()
 
-    def writing(self, messages: int, modules: int, lines: int, during: Callable[[], None] = lambda: None, at: float | None = None) -> None:
+    def writing(self, messages: int, modules: int, lines: int, at: float | None = None) -> None:
         """The plan is whole — `messages` to write to `modules` on `lines` — and the writes begin (or
-        go on: those some line made already are counted); `during()` is run first (to show the plan:
-        the lines' events go on meanwhile, never waiting for it). `at`: when the plan became whole
+        go on: those some line made already are counted). `at`: when the plan became whole
         (`time.monotonic`), if that was before now."""
         now = time.monotonic() if at is None else at
-        during()
         with self._lock:
             if self._phase == "reading":
                 self._read_at = now

@@ -39,8 +39,8 @@ means the same everywhere:
   parity refused; Windows: not possible, False);
 - sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
   there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
-  main thread anyway: nothing), `wait_for` and `result_of` (an event's wait and a future's result
-  that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
+  main thread anyway: nothing), `wait_for`, `result_of` and `next_of` (an event's wait, a future's result and a
+  queue's next item that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
 - paths: `resolved` and `real_path` (links followed; where Windows refuses a long path, absolute as
   written);
 - commands a person pastes into the system's shell: `command_line` and `python_command` (POSIX
@@ -59,6 +59,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import queue
 import select
 import shlex
 import signal
@@ -608,6 +609,15 @@ def result_of(future: Future[T]) -> T:
             with contextlib.suppress(TimeoutError):
                 return future.result(timeout=SIGNAL_SLICE)
     return future.result()
+
+
+def next_of(items: queue.SimpleQueue[T]) -> T:
+    """`items.get()`, a signal handler running meanwhile (Windows: in slices, as `wait_for`)."""
+    if sys.platform == "win32":
+        while True:
+            with contextlib.suppress(queue.Empty):
+                return items.get(timeout=SIGNAL_SLICE)
+    return items.get()
 
 
 def block_signals(signals: Iterable[signal.Signals]) -> None:

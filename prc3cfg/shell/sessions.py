@@ -25,10 +25,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, TextIO, TypeAlias
 
+from prc3cfg.core import what_to_read
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.exchange import answered_as_write
 from prc3cfg.core.framing import get_framing
-from prc3cfg.core.image import Key
+from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.line import EMULATOR_SCHEME, LineSettings
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
@@ -161,6 +162,14 @@ class OnRecord:
         """The records of `kind` not cleared yet on the line of `bus` (by that line's identities: any spelling)."""
         wanted = set(self.records[bus].keys)
         return [r for r in self.pending if r.kind == kind and wanted & set(r.keys)]
+
+    def saw(self, bus: str, images: Mapping[Key, ModuleImage], by: str) -> None:
+        """A line's read-back, as soon as it is in, into the line's record: what `by` saw — drift included, so the
+        next plan writes it back. Written with the line's next write of the record (an apply's before its first
+        frame), else when the command ends."""
+        record, when = self.records[bus], line_record.now()
+        known = record.known()
+        record.saw({a: what_to_read.merged(known.get(a), image, when, by) for (b, a), image in images.items() if b == bus})
 
 
 def on_record(keys: Mapping[str, tuple[str, ...]]) -> OnRecord:
