@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 import prc3cfg
 from prc3cfg import api
 from prc3cfg.api._plan import select
-from prc3cfg.shell import audit, releases
+from prc3cfg.shell import audit, pending_records
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import Keeping, NotConsented, Writing
 from prc3cfg.shell.records import Journal
@@ -97,7 +97,7 @@ def _write_stage(emulated, consent: frozenset[tuple[str, int]]) -> str:
     journal = Journal(plant.path, run_header("apply", plant.path, plant.name, plant.sha256, reason=None), audit.follow(plant.path))
     options = LineOptions(cancel=Cancellation())
     assert options.cancel is not None
-    keeping = Keeping(plant, buses, keys, journal, releases.Releases("apply", journal.path), options.cancel.event)
+    keeping = Keeping(plant, buses, keys, journal, pending_records.Releases("apply", journal.path), options.cancel.event)
     try:
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
                    identities=keys) as held:  # fmt: skip
