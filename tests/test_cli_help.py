@@ -120,14 +120,15 @@ try:
 except SystemExit as stop:
     assert stop.code in (0, 2), stop.code
 loaded = sorted(m for m in sys.modules if m.split(".")[0] == "rich" or m in ("prc3cfg.shell.doctor", "prc3cfg.plant.importer",
-                "prc3cfg.shell.emulator.server"))
+                "prc3cfg.shell.emulator.server", "prc3cfg.core.policy", "prc3cfg.plant.policy", "prc3cfg.plant.adopt"))
 print("loaded:", loaded, file=sys.stderr)
 """
 
 
 def test_a_plan_loads_what_it_runs_only(tmp_path):
     """Piped, `plan` loads no rich (its progress bar and colours are for a terminal), nor doctor's search or the importer
-    (it asks only whether doctor could measure a port); on `emulator://` it runs the emulator, on `socket://` it does not."""
+    (it asks only whether doctor could measure a port), nor the policy's rules where the plant file names no policy, nor
+    adopt's rewriting (nor does `apply`); on `emulator://` it runs the emulator, on `socket://` it does not."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(DEMO.read_text())
     on_emulator = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path,
@@ -140,6 +141,22 @@ def test_a_plan_loads_what_it_runs_only(tmp_path):
                                    cwd=tmp_path, env=_no_terminal())  # fmt: skip
     assert "booth-a-left" in on_socket.stdout, on_socket.stderr
     assert on_socket.stderr.strip().splitlines()[-1] == "loaded: []"
+    applied = subprocess.run([sys.executable, "-c", LOADED_OF, "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+                             capture_output=True, text=True, cwd=tmp_path, env=_no_terminal())  # fmt: skip
+    assert "Apply complete" in applied.stdout, applied.stderr
+    assert applied.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.shell.emulator.server']"
+
+
+def test_a_plan_loads_the_policy_its_plant_file_names(tmp_path):
+    """The other side of `test_a_plan_loads_what_it_runs_only`: a plant file that names a policy has it loaded and judged."""
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(DEMO.read_text() + "\npolicy: rules.yaml\n")
+    (tmp_path / "rules.yaml").write_text("format: prc3cfg-policy/1\nenvelopes:\n  - name: booth speeds\n    level: advisory\n"
+                                         "    buses: [booth-a]\n    limits:\n      speed: {max: 0.300}\n")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path,
+                          env=_no_terminal())  # fmt: skip
+    assert "Policy" in done.stdout + done.stderr and "booth speeds" in done.stdout + done.stderr, done.stdout + done.stderr
+    assert done.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.core.policy', 'prc3cfg.plant.policy', 'prc3cfg.shell.emulator.server']"
 
 
 def _no_terminal() -> dict[str, str]:

@@ -22,8 +22,6 @@ from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant
-from prc3cfg.plant.adopt import Adopted
-from prc3cfg.plant.adopt import adopt as adopt_text
 from prc3cfg.shell import audit, pending_records, recorded_runs
 from prc3cfg.shell.audit import Verified
 from prc3cfg.shell.cancel import Cancellation
@@ -36,6 +34,7 @@ from prc3cfg.shell.records import header as run_header
 from prc3cfg.shell.sessions import LineOptions, bus_line_keys
 
 if TYPE_CHECKING:
+    from prc3cfg.plant.adopt import Adopted
     from prc3cfg.shell.link.client import Link
 
 
@@ -65,6 +64,8 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
     given = None if check else reason_for(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason, "adopt")
     before = _plant_text(plant.path)
     images = read(plant, modules, options, command="adopt", links=links)
+    from prc3cfg.plant.adopt import adopt as adopt_text  # its YAML splicing: for adopt only, not every apply that imports this module
+
     found = adopt_text(plant, images, before, programs)
     return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
 

@@ -8,12 +8,15 @@ says what to do. What the bytes say — YAML, models, rules — is `prc3cfg.plan
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from prc3cfg.plant import Plant, PlantError, parse_plant
 from prc3cfg.plant.document import Document, parse_document
-from prc3cfg.plant.policy import LoadedPolicy, parse_policy
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, Why, read_regular
+
+if TYPE_CHECKING:
+    from prc3cfg.plant.policy import LoadedPolicy
 
 #: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
 #: comments, long names and every field, a few MB. Bytes cost little: nodes are what is bounded
@@ -55,6 +58,8 @@ def load_policy(plant: Plant) -> LoadedPolicy | None:
         data = read_regular(path, MAX_BYTES)
     except FileProblem as problem:
         raise PlantError([f"{path}: {problem} (the policy file {plant.path} names) — {_REMEDIES[problem.why]}"]) from None
+    from prc3cfg.plant.policy import parse_policy  # its models and rules: only for a plant file that names a policy
+
     return parse_policy(path, data)
 
 
