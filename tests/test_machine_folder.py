@@ -116,24 +116,34 @@ def test_a_machine_folder_another_user_could_subvert_is_not_used(machine, capsys
     assert not list((machine / "elsewhere").glob("*")) if taken == "a link" else not list(lines.glob("*"))
 
 
+#: Prints the top folder (or file) in site-packages of every third-party module prc3cfg's modules import, one a line.
+THIRD_PARTY = """
+import importlib, pkgutil, sys
+from pathlib import Path
+import prc3cfg.cli, rich.progress  # rich: imported by a command only once it shows progress
+prc3cfg.cli._register_commands()  # every command's module
+for package in ("prc3cfg.api", "prc3cfg.core", "prc3cfg.plant", "prc3cfg.shell"):  # what the commands import as they run
+    for found in pkgutil.walk_packages(importlib.import_module(package).__path__, package + "."):
+        importlib.import_module(found.name)
+for module in list(sys.modules.values()):
+    file = Path(getattr(module, "__file__", None) or "/")
+    if "site-packages" in file.parts and "prc3cfg" not in file.parts:
+        site = Path(*file.parts[: file.parts.index("site-packages") + 1])
+        print(site / file.relative_to(site).parts[0])
+"""
+
+
 @pytest.fixture(scope="session")
 def packages(tmp_path_factory) -> Path:
     """prc3cfg's dependencies where another user can import them: a world-readable copy of every
-    third-party package the command line loads — this Python's own may lie in root's home, mode 700
-    (CI's pyenv does), where another user's interpreter does not find them."""
-    import rich.progress  # noqa: F401  (imported by a command only once it shows progress)
-
-    import prc3cfg.cli  # noqa: F401  (everything a command imports)
-
+    third-party package prc3cfg's modules import — this Python's own may lie in root's home, mode 700
+    (CI's pyenv does), where another user's interpreter does not find them. Found by a fresh interpreter:
+    a test worker's own modules (hypothesis, matplotlib, numpy, … whatever its earlier tests loaded) made
+    the copy 150 MB and 13 s of a worker's time, and different from one worker to the next."""
+    listed = subprocess.run([sys.executable, "-c", THIRD_PARTY], capture_output=True, text=True, check=True).stdout.split()
     folder = Path(tempfile.mkdtemp(prefix="prc3cfg-packages-"))
-    for module in list(sys.modules.values()):
-        file = Path(getattr(module, "__file__", None) or "/")
-        if "site-packages" not in file.parts or ROOT in file.parents:
-            continue
-        site = Path(*file.parts[: file.parts.index("site-packages") + 1])
-        top = site / file.relative_to(site).parts[0]
-        if not (folder / top.name).exists():
-            (shutil.copytree if top.is_dir() else shutil.copy2)(top, folder / top.name)
+    for top in map(Path, dict.fromkeys(listed)):
+        (shutil.copytree if top.is_dir() else shutil.copy2)(top, folder / top.name)
     for path in [folder, *folder.rglob("*")]:
         path.chmod(0o755 if path.is_dir() else 0o644)
     yield folder
