@@ -159,18 +159,20 @@ def test_a_plan_loads_the_policy_its_plant_file_names(tmp_path):
     assert done.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.core.policy', 'prc3cfg.plant.policy', 'prc3cfg.shell.emulator.server']"
 
 
-def test_an_emulator_from_factory_modules_builds_no_checker_of_a_state_file(tmp_path):
-    """The state file's models (`prc3cfg.shell.emulator.state`) are built when a state file is read: a plan on
-    `emulator://` in a fresh folder reads none and builds none; the apply after it reads the plan's and builds them."""
+def test_a_plan_builds_no_checker_of_files_it_does_not_read(tmp_path):
+    """pydantic models are built when a file of theirs is first read: a plan on `emulator://` in a fresh folder reads
+    no emulator state file (`prc3cfg.shell.emulator.state`) and no snapshot (`prc3cfg.shell.records`); the apply
+    after it reads the plan's state file, and still no snapshot."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(DEMO.read_text())
-    probe = LOADED_BY.replace('print("loaded:", loaded, file=sys.stderr)', """from prc3cfg.shell.emulator import state
-print("built:", state._StateFile.__pydantic_complete__, file=sys.stderr)""")
+    probe = LOADED_BY.replace('print("loaded:", loaded, file=sys.stderr)', """from prc3cfg.shell import records
+from prc3cfg.shell.emulator import state
+print("built:", state._StateFile.__pydantic_complete__, records._SnapshotDocument.__pydantic_complete__, file=sys.stderr)""")
     planned = subprocess.run([sys.executable, "-c", probe, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path)
-    assert planned.stderr.strip().splitlines()[-1] == "built: False", planned.stderr
+    assert planned.stderr.strip().splitlines()[-1] == "built: False False", planned.stderr
     applied = subprocess.run([sys.executable, "-c", probe, "apply", str(plant), "--auto-approve", "--allow-axis-release"],
                              capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
-    assert applied.stderr.strip().splitlines()[-1] == "built: True", applied.stderr
+    assert applied.stderr.strip().splitlines()[-1] == "built: True False", applied.stderr
 
 
 def _no_terminal() -> dict[str, str]:
