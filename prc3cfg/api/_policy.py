@@ -53,6 +53,8 @@ class PolicyReport:
     @property
     def fails_plan(self) -> bool:
         """Whether these findings fail a plan and a plant file (`core.policy.fails_plan`)."""
+        from prc3cfg.core import policy as rules  # loaded with the policy itself (`policy`): a report is made of it
+
         return rules.fails_plan(f for f, _ in self.placed)
 
     def lines(self) -> list[str]:
