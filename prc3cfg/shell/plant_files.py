@@ -1,4 +1,5 @@
-"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant layer.
+"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant layer; the policy
+file a plant file names (`load_policy`) and a fleet file (`load_fleet`) are read so too.
 
 Only a regular file is read (a FIFO could block, `/dev/zero` never ends), at most `MAX_BYTES`
 of it (`prc3cfg.shell.files.read_regular`); a path that cannot be read is a `PlantError` that
@@ -11,6 +12,7 @@ from pathlib import Path
 
 from prc3cfg.plant import Plant, PlantError, parse_plant
 from prc3cfg.plant.document import Document, parse_document
+from prc3cfg.plant.fleet import Fleet, parse_fleet
 from prc3cfg.plant.policy import LoadedPolicy, parse_policy
 from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, Why, read_regular
@@ -56,6 +58,15 @@ def load_policy(plant: Plant) -> LoadedPolicy | None:
     except FileProblem as problem:
         raise PlantError([f"{path}: {problem} (the policy file {plant.path} names) — {_REMEDIES[problem.why]}"]) from None
     return parse_policy(path, data)
+
+
+def load_fleet(path: str | Path) -> Fleet:
+    """The fleet file `path` (docs/fleet.md); `PlantError` with its problems, or saying it cannot be read."""
+    try:
+        data = read_regular(Path(path), MAX_BYTES)
+    except FileProblem as problem:
+        raise PlantError([f"{path}: {problem} (the fleet file) — {_REMEDIES[problem.why].replace('plant', 'fleet')}"]) from None
+    return parse_fleet(str(path), data)
 
 
 def plant_document(plant: Plant) -> Document:
