@@ -12,7 +12,11 @@ every run the test made (the stand-in keeps no runs apart).
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
+from dataclasses import replace
 from pathlib import Path
 
 import jsonschema
@@ -244,16 +248,82 @@ def check_consistent(lines: list[lines_of.Line], changed: list[str], waiting: di
 
 
 @given(fleets())
-@settings(max_examples=15)
+@settings(max_examples=15)  # the fast tier's few; the soak tier's profile takes many
 def test_matrix_and_summary_agree_with_the_fleet(case):
     check_consistent(*case)
 
 
 @pytest.mark.soak
 @given(fleets())
-@settings(max_examples=600, deadline=None)
 def test_matrix_and_summary_agree_with_the_fleet_soak(case):
     check_consistent(*case)
+
+
+#: The addresses of the demo's first bus, which `written` gives every line.
+ADDRESSES = [module["address"] for module in yaml.safe_load(DEMO.read_text())["buses"][0]["modules"]]
+
+
+class Unshared(yaml.SafeDumper):
+    """A value the document holds twice, written out twice: a plant file refuses aliases."""
+
+    def ignore_aliases(self, data: object) -> bool:
+        return True
+
+
+def written(folder: Path, lines: list[lines_of.Line]) -> None:
+    """The fleet file and plant files of `lines` in `folder`: each plant file the demo's first bus once a line, renamed."""
+    template = yaml.safe_load(DEMO.read_text())
+    fleet: dict[str, list] = {}
+    for line in lines:
+        fleet.setdefault(line.plant, []).append({"bus": line.bus, "runner": line.runner})
+    for plant, buses in fleet.items():
+        document = dict(template, plant=Path(plant).stem, buses=[
+            dict(template["buses"][0], name=bus["bus"], port=f"emulator://{Path(plant).stem}-{bus['bus']}",
+                 modules=[dict(m, name=f"{bus['bus']}-{m['address']}") for m in template["buses"][0]["modules"]]) for bus in buses])  # fmt: skip
+        policy = next(line.policy for line in lines if line.plant == plant)
+        if policy is not None:
+            document["policy"] = Path(policy).name
+        (folder / plant).parent.mkdir(parents=True, exist_ok=True)
+        (folder / plant).write_text(yaml.dump(document, Dumper=Unshared, sort_keys=False))
+    (folder / "fleet.yaml").write_text(yaml.safe_dump({"format": "prc3cfg-fleet/1", "plants": [
+        {"plant": plant, "lines": buses} for plant, buses in fleet.items()]}))  # fmt: skip
+
+
+@pytest.mark.soak
+@given(fleets())
+@settings(max_examples=20)
+def test_the_commands_select_and_summarise_random_fleets_as_the_fleet_file_says_soak(tmp_path_factory, case):
+    """The same through real `prc3cfg fleet` processes, on fleet and plant files written to disk: every changed line
+    selected once, a summary row per line, each reported line's waiting words in its row."""
+    lines, changed, waiting = case
+    def on_disk(line: lines_of.Line) -> lines_of.Line:  # its modules as `written` names them, its policy beside its plant file
+        return replace(line, modules=tuple(f"{line.bus}-{a}" for a in ADDRESSES), policy=line.policy and f"plants/{Path(line.policy).name}")
+
+    lines, waiting = [on_disk(line) for line in lines], {on_disk(line): why for line, why in waiting.items()}
+    folder = tmp_path_factory.mktemp("fleet")
+    written(folder, lines)
+    run = {"cwd": folder, "capture_output": True, "text": True, "env": os.environ | {"PYTHONPATH": str(ROOT)}}
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "fleet", "matrix", "fleet.yaml", "--changed", "--", *changed], **run)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout) == lines_of.matrix(lines_of.selected(lines, set(changed)))
+    statuses = []
+    for n, line in enumerate(waiting):
+        (folder / str(n)).mkdir()
+        module = {"name": f"{line.bus}-1", "drift_seen": True, "travel_pending": False, "last_failed": False, "last_verified": None}
+        (folder / str(n) / "status.json").write_text(json.dumps({"format": "prc3cfg-status/1", "plant_file": line.plant,
+                                                                 "lines": [{"bus": line.bus, "health": "NORMAL", "modules": [module]}]}))  # fmt: skip
+        if waiting[line] is not None:
+            (folder / str(n) / "waiting.txt").write_text(waiting[line])
+        statuses.append(f"{n}/status.json")
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "fleet", "summary", "fleet.yaml", *statuses, "--json"], **run)
+    if not statuses:
+        assert done.returncode == 64  # STATUS_JSON… is required
+        return
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(done.stdout)["lines"]
+    assert [row["line"] for row in rows] == [line.name for line in lines]
+    assert [row["waiting"] for row in rows] == [waiting.get(line) for line in lines]
+    assert [row["drift"] for row in rows] == [[f"{line.bus}-1"] if line in waiting else None for line in lines]
 
 
 # -- the workflow ------------------------------------------------------------------------------------------------------
@@ -356,6 +426,9 @@ def test_a_merge_over_three_lines_applies_two_and_the_one_in_its_window_waits(th
     held = paint_shop.images()
     assert all(held[key] == factory[key] for key in factory if key[0] == "booth-b")  # nothing written in the shift
     assert all(held[key] != factory[key] for key in factory if key[0] == "booth-a")
+    records = {entry["bus"]: plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs - 2 + n}-{entry['id']}"
+               for n, entry in enumerate(json.loads(lines.outputs["matrix"])["include"])}  # fmt: skip
+    assert (records["booth-a"] / "snapshots").is_dir() and (records["washer"] / "journal").is_dir()  # kept for restore
 
     summary = plant.run("summary", merged, needs={"lines": lines, "apply": applies["washer"]})
     assert summary.ok, summary.output()
