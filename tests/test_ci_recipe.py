@@ -498,6 +498,7 @@ class Plant:
             condition = step.get("if", "")
             if not (evaluate(condition, values) if "always()" in condition else done.ok and (not condition or evaluate(condition, values))):
                 continue
+            values["job.status"] = "success" if done.ok else "failure"
             if "uses" in step:
                 done.steps.append(self.action(step, values))
                 continue

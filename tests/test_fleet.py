@@ -39,6 +39,7 @@ WORKFLOW_TEXT = next(block for block in BLOCKS if block.startswith("name: fleet"
 WORKFLOW = yaml.safe_load(WORKFLOW_TEXT)
 EXAMPLE = next(block for block in BLOCKS if block.startswith("format: prc3cfg-fleet/1"))
 SUMMARY = json.loads((ROOT / "schemas" / "fleet-summary.schema.json").read_text())
+SUMMARY_CHECK = jsonschema.Draft7Validator(SUMMARY)  # checked once: jsonschema.validate checks the schema on every call
 
 #: The paint shop's production shift, Monday to Friday from 06:00 Berlin time for 10 hours, on booth-b alone.
 SHIFT = """format: prc3cfg-policy/1
@@ -191,7 +192,7 @@ def test_the_summary_has_a_row_per_line_and_says_which_waits_for_a_window(fleet,
         "deny window 'production' is open until 2026-11-30 16:00 CET |",
         "| plants/washer.yaml:washer | | | | | | not in this run |"]  # fmt: skip
     document = json.loads(run_cli(capsys, "fleet", "summary", fleet, *statuses, "--json").out)
-    jsonschema.validate(document, SUMMARY)
+    SUMMARY_CHECK.validate(document)
     assert document["format"] == SUMMARY["title"] and [row["reported"] for row in document["lines"]] == [True, True, False]
 
 
@@ -240,7 +241,7 @@ def check_consistent(lines: list[lines_of.Line], changed: list[str], waiting: di
     status = {"health": "NORMAL", "modules": [{"name": "m", "drift_seen": False, "travel_pending": True, "last_failed": False,
                                                "last_verified": None}]}  # fmt: skip
     document = lines_of.summary(lines, {line: lines_of.LineStatus(status, why) for line, why in waiting.items()})
-    jsonschema.validate(document, SUMMARY)
+    SUMMARY_CHECK.validate(document)
     assert [row["line"] for row in document["lines"]] == [line.name for line in lines]  # a row per line
     assert [row["waiting"] for row in document["lines"]] == [waiting.get(line) for line in lines]
     rows = [row for row in lines_of.markdown(document).splitlines() if row.startswith("| ") and not row.startswith("| line |")]
@@ -291,7 +292,7 @@ def written(folder: Path, lines: list[lines_of.Line]) -> None:
 
 @pytest.mark.soak
 @given(fleets())
-@settings(max_examples=20)
+@settings(max_examples=12)  # two real processes each: about a second an example
 def test_the_commands_select_and_summarise_random_fleets_as_the_fleet_file_says_soak(tmp_path_factory, case):
     """The same through real `prc3cfg fleet` processes, on fleet and plant files written to disk: every changed line
     selected once, a summary row per line, each reported line's waiting words in its row."""
@@ -455,3 +456,40 @@ def test_a_commit_that_came_from_no_pull_request_is_not_applied(three_lines):
     assert sorted(applies) == ["booth-a", "booth-b"] and not any(job.ok for job in applies.values())
     assert all("came from no pull request: there is no reviewed plan to apply" in job.output() for job in applies.values())
     assert paint_shop.images() == factory
+    summary = plant.run("summary", push, needs={"lines": lines, "apply": applies["booth-a"]})
+    assert summary.ok, summary.output()
+    rows = [row for row in summary.summary.splitlines() if row.startswith("| plants/paint-shop.yaml")]
+    assert len(rows) == 2 and all(row.endswith("| refused: the job failed before its apply: see its log |") for row in rows)
+
+
+@needs("jq")
+def test_a_merge_whose_plant_file_is_not_the_reviewed_one_is_not_applied_on_its_line(three_lines):
+    """The approvals' last check: the apply job applies the plan made for the pull request's head — the reviewed commit —
+    and `apply --plan` refuses it where the merged plant file is not byte for byte the one planned."""
+    plant, paint_shop, washer_line = three_lines
+    plant.env["PRC3CFG_POLICY_NOW"] = "2026-11-29T09:00:00+01:00"  # a Sunday: no window judges this
+    washer_factory = washer_line.images()
+    event = plant.pull_request(lambda document: document.update(yaml.safe_load(SHIFT)), file="plants/rules.yaml")
+    lines = plant.run("lines", event)
+    assert all(job.ok for job in run_matrix(plant, "plan", event, lines).values())
+    plant.git("switch", "-q", "main")  # meanwhile on main: the washer's plant file, reviewed in another pull request
+    (plant.clone / "plants" / "washer.yaml").write_text((plant.clone / "plants" / "washer.yaml").read_text() + "# a comment\n")
+    plant.git("commit", "-q", "-am", "the washer, commented")
+    plant.git("push", "-q", "origin", "main")
+    before = plant.main()
+    plant.git("merge", "-q", "--no-ff", "-m", "merge the shift", "change")  # a merge commit: not the reviewed head
+    plant.git("push", "-q", "origin", "main")
+    pulls = plant.pulls()
+    pulls[-1].update(state="merged", merge_commit_sha=plant.main())
+    (plant.state / "pulls.json").write_text(json.dumps(pulls))
+    merged = {"github.event_name": "push", "github.sha": plant.main(), "github.event.before": before}
+    lines = plant.run("lines", merged)
+    applies = run_matrix(plant, "apply", merged, lines)
+    assert applies["booth-a"].ok and applies["booth-b"].ok and paint_shop.matches_plant()  # their plant file is the reviewed one
+    assert not applies["washer"].ok
+    assert "stale plan — the plant file plants/washer.yaml changed since the plan was made; plan again" in applies["washer"].output()
+    assert washer_line.images() == washer_factory  # nothing written
+    summary = plant.run("summary", merged, needs={"lines": lines, "apply": applies["washer"]})
+    rows = [row for row in summary.summary.splitlines() if row.startswith("| plants/")]
+    assert [row.rsplit("|", 2)[1].strip() for row in rows[:2]] == ["done", "done"]
+    assert "| refused: " in rows[2] and "stale plan — the plant file plants/washer.yaml changed" in rows[2]

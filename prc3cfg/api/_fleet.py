@@ -3,7 +3,8 @@
 `fleet_lines` reads the fleet file and each plant file it names (a bus no plant file has is refused at the fleet
 file's place); `fleet_matrix` selects and lays out the lines (`prc3cfg.core.fleet`); `fleet_summary` reads the lines'
 `prc3cfg status --json` documents — each line in at most one, found by its bus and the plant file the document names —
-and the `waiting.txt` beside each (the words of an apply a window refused), and makes the `prc3cfg-fleet-summary/1`
+and the `waiting.txt` and `refused.txt` beside each (the words of an apply a window refused, or that ended otherwise
+than done), and makes the `prc3cfg-fleet-summary/1`
 document. Paths are compared as normalised POSIX text, relative to the current folder (the repository's top in CI).
 """
 
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import posixpath
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +24,8 @@ from prc3cfg.plant.fleet import lines
 from prc3cfg.shell.files import FileProblem, Why, read_json, read_regular
 from prc3cfg.shell.plant_files import load_fleet, load_plant
 
-#: Beside a status document: the words of an apply a window refused on its lines.
-WAITING = "waiting.txt"
+#: Beside a status document: the words of an apply a window refused on its lines, or that ended otherwise than done.
+WAITING, REFUSED = "waiting.txt", "refused.txt"
 #: A status document is far smaller (a line of 30 modules: some 30 kB).
 STATUS_LIMIT = 4 * 2**20
 
@@ -47,7 +49,7 @@ def fleet_summary(path: str | Path, statuses: Sequence[Path]) -> dict[str, Any]:
     first: dict[fleet.Line, Path] = {}
     for status_path in statuses:
         document = _status(status_path)
-        waiting = _waiting(status_path.parent / WAITING)
+        said = fleet.LineStatus({}, _words(status_path.parent / WAITING), _words(status_path.parent / REFUSED))
         for status in document["lines"]:
             line = _line_of(everything, document["plant_file"], status["bus"])
             if line is None:
@@ -55,7 +57,7 @@ def fleet_summary(path: str | Path, statuses: Sequence[Path]) -> dict[str, Any]:
                                 f"give the status of the fleet's lines")  # fmt: skip
             if line in found:
                 raise UserError(f"{status_path}: line {line.name} is in {first[line]} too — give each line's status once")
-            found[line], first[line] = fleet.LineStatus(status, waiting), status_path
+            found[line], first[line] = replace(said, status=status), status_path
     return fleet.summary(everything, found)
 
 
@@ -74,14 +76,15 @@ def _status(path: Path) -> dict[str, Any]:
     return document
 
 
-def _waiting(path: Path) -> str | None:
+def _words(path: Path) -> str | None:
+    """What the fleet workflow's apply step wrote of its apply, on one line (None: nothing)."""
     try:
         text = read_regular(path, STATUS_LIMIT).decode("utf-8", "replace")
     except FileProblem as problem:
         if problem.why is Why.MISSING:
             return None
-        raise UserError(f"{path}: {problem} — it holds the words of an apply a window refused") from None
-    return shown(" ".join(text.split())) or "a window refused the apply"
+        raise UserError(f"{path}: {problem} — it holds the words of the line's apply (docs/fleet.md)") from None
+    return shown(" ".join(text.split())) or "(no words)"
 
 
 def _line_of(everything: list[fleet.Line], plant_file: str, bus: str) -> fleet.Line | None:

@@ -5,7 +5,8 @@ A line is one bus of one plant file, on the self-hosted runner beside it (docs/f
   names (a policy change touches every line of every plant file that names it);
 - `matrix`: the GitHub Actions matrix of lines (`strategy.matrix: ${{ fromJSON(...) }}`), one entry per line;
 - `summary`: the `prc3cfg-fleet-summary/1` document of the lines' `prc3cfg-status/1` lines, and `markdown`, its
-  table for the pull request. A line an apply left waiting for a window says so, with the window's words.
+  table for the pull request. A line an apply left waiting for a window says so, with the window's words; one whose
+  apply was refused (a stale plan, no reviewed plan, a hard rule), with the refusal's.
 
 Pure: the files are read by `prc3cfg.plant.fleet` (the fleet file) and the command (`prc3cfg.cli.fleet_commands`);
 paths are compared as the normalised POSIX text the command gives.
@@ -67,10 +68,12 @@ def matrix(lines: Iterable[Line]) -> dict[str, Any]:
 
 @dataclass(frozen=True, slots=True)
 class LineStatus:
-    """What one line's job left: its line of a `prc3cfg-status/1` document, and the words of an apply a window refused."""
+    """What one line's job left: its line of a `prc3cfg-status/1` document, and the words of an apply a window refused
+    (`waiting`) or that ended otherwise than done (`refused`)."""
 
     status: Mapping[str, Any]
     waiting: str | None = None
+    refused: str | None = None
 
 
 def summary(lines: Sequence[Line], found: Mapping[Line, LineStatus]) -> dict[str, Any]:
@@ -82,7 +85,7 @@ def _row(line: Line, found: LineStatus | None) -> dict[str, Any]:
     row: dict[str, Any] = {"line": line.name, "plant": line.plant, "bus": line.bus, "runner": line.runner}
     if found is None:
         return row | {"reported": False, "modules": None, "health": None, "drift": None, "pending_travel": None,
-                      "last_verified": None, "failed": None, "waiting": None}  # fmt: skip
+                      "last_verified": None, "failed": None, "waiting": None, "refused": None}  # fmt: skip
     modules = found.status["modules"]
     verified = [m["last_verified"] for m in modules if m["last_verified"] is not None]
     last = max(verified, key=lambda v: v["time"], default=None)
@@ -90,7 +93,7 @@ def _row(line: Line, found: LineStatus | None) -> dict[str, Any]:
                   "drift": [m["name"] for m in modules if m["drift_seen"]],
                   "pending_travel": [m["name"] for m in modules if m["travel_pending"]],
                   "last_verified": None if last is None else {"time": last["time"], "by": last["by"], "commit": last["commit"]},
-                  "failed": any(m["last_failed"] for m in modules), "waiting": found.waiting}  # fmt: skip
+                  "failed": any(m["last_failed"] for m in modules), "waiting": found.waiting, "refused": found.refused}  # fmt: skip
 
 
 def markdown(document: Mapping[str, Any]) -> str:
@@ -104,7 +107,7 @@ def markdown(document: Mapping[str, Any]) -> str:
         last = row["last_verified"]
         verified = "never" if last is None else " ".join(filter(None, (last["time"], last["by"] and f"by {last['by']}",
                                                                          last["commit"] and f"at {last['commit'][:12]}")))  # fmt: skip
-        apply = f"waiting: {row['waiting']}" if row["waiting"] is not None else "failed" if row["failed"] else "done"
+        apply = next((f"{said}: {row[said]}" for said in ("waiting", "refused") if row[said] is not None), "failed" if row["failed"] else "done")
         cells = (row["line"], str(row["modules"]), row["health"], ", ".join(row["drift"]) or "none", ", ".join(row["pending_travel"]) or "none",
                  verified, apply)  # fmt: skip
         rows.append("| " + " | ".join(_cell(cell) for cell in cells) + " |")
