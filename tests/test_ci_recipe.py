@@ -107,6 +107,9 @@ if args[0] == "api":
             sys.exit("gh: Resource not accessible by integration (HTTP 403)")
         comment["body"] = Path(option("-F").split("=@", 1)[1]).read_text()
         print(json.dumps(comment))
+    elif path.startswith("compare/"):
+        base, head = path[len("compare/"):].split("...")
+        answer({"files": [{"filename": f} for f in origin("diff", "--name-only", base, head).decode().splitlines()]})
     elif path.startswith("commits/") and path.endswith("/pulls"):
         sha = path.split("/")[1]
         answer([p for p in pulls if sha in (p["merge_commit_sha"], p["head"]["sha"])])
@@ -127,6 +130,13 @@ elif args[:2] == ["pr", "edit"]:
     pull = next(p for p in pulls if p["number"] == int(args[2]))
     pull["body"] = Path(option("--body-file")).read_text()
     pull["head"]["sha"] = origin("rev-parse", pull["head"]["ref"]).decode().strip()
+elif args[:2] == ["run", "download"] and option("--pattern") is not None:  # each artifact matched into a folder of its name
+    import fnmatch
+    found = sorted(p for p in (state / "artifacts").iterdir() if fnmatch.fnmatchcase(p.name, option("--pattern")))
+    if not found:
+        sys.exit("no valid artifacts found to download")
+    for stored in found:
+        shutil.copytree(stored, Path(option("--dir")) / stored.name, dirs_exist_ok=True)
 elif args[:2] == ["run", "download"]:
     stored = state / "artifacts" / option("--name")
     if not stored.is_dir():
@@ -211,8 +221,14 @@ def test_every_job_is_bounded_serialised_on_the_line_and_given_least_permissions
 
 
 def test_the_token_is_only_on_the_steps_that_call_github_and_no_checkout_keeps_credentials():
-    assert "GH_TOKEN" not in WORKFLOW["env"]
-    for name, job in WORKFLOW["jobs"].items():
+    token_only_where_github_is_called(WORKFLOW)
+
+
+def token_only_where_github_is_called(workflow: dict) -> None:
+    """The token only on the steps that call GitHub, never beside prc3cfg; no checkout keeps credentials; values reach a
+    script through env; nothing written to GITHUB_PATH or GITHUB_ENV."""
+    assert "GH_TOKEN" not in workflow["env"]
+    for name, job in workflow["jobs"].items():
         assert "GH_TOKEN" not in job.get("env", {}), name
         for step in job["steps"]:
             script = step.get("run", "")
@@ -315,8 +331,14 @@ def evaluate(expression: str, values: dict[str, object]) -> bool:
 
 
 def expressions(text: str, values: dict[str, object]) -> str:
-    """`${{ expr }}` filled in as GitHub would for this run (a context the run lacks is a KeyError)."""
-    return re.sub(r"\$\{\{\s*([^}]+?)\s*\}\}", lambda m: str(values[m.group(1)]), text)
+    """`${{ expr }}` filled in as GitHub would for this run (a context the run lacks is a KeyError; `a || b`: the first
+    of them the run has, and has a value for)."""
+    def value(expression: str) -> str:
+        if "||" not in expression:
+            return str(values[expression])
+        return str(next((values[part] for part in map(str.strip, expression.split("||")) if values.get(part)), ""))
+
+    return re.sub(r"\$\{\{\s*([^}]+?)\s*\}\}", lambda m: value(m.group(1)), text)
 
 
 def without_prc3cfg(path: str) -> list[str]:
@@ -334,11 +356,14 @@ exec PYTHON -m prc3cfg "$@"
 
 
 class Job:
-    """What one job did: each step's process (or None where a step ran no process), in order."""
+    """What one job did: each step's process (or None where a step ran no process), in order; the labels of the runner it
+    ran on and its outputs."""
 
     def __init__(self) -> None:
         self.steps: list[subprocess.CompletedProcess | None] = []
         self.summary = ""
+        self.labels: list[str] = []
+        self.outputs: dict[str, str] = {}
 
     @property
     def ok(self) -> bool:
@@ -349,10 +374,12 @@ class Job:
 
 
 class Plant:
-    """A plant repository on GitHub with its self-hosted runner, the plant's buses on emulators."""
+    """A plant repository on GitHub with its self-hosted runner, the plant's buses on emulators; `files` (path → text): the
+    repository's files other than `.gitignore` and `.github/` (default: the emulated plant file as `plant.yaml`), `workflow`
+    the one its jobs are of."""
 
-    def __init__(self, tmp_path: Path, emulated: EmulatedPlant) -> None:
-        self.tmp, self.emulated = tmp_path, emulated
+    def __init__(self, tmp_path: Path, emulated: EmulatedPlant, *, files: dict[str, str] | None = None, workflow: dict = WORKFLOW) -> None:
+        self.tmp, self.emulated, self.workflow = tmp_path, emulated, workflow
         self.origin = tmp_path / "origin.git"
         self.state = tmp_path / "github"
         (self.state / "artifacts").mkdir(parents=True)
@@ -373,7 +400,9 @@ class Plant:
         (self.clone / ".gitignore").write_text(".prc3cfg/\n")
         (self.clone / ".github").mkdir()
         shutil.copy(LOCK, self.clone / ".github" / "prc3cfg-requirements.txt")  # as docs/ci.md says: the release's, copied
-        shutil.copy(emulated.path, self.clone / "plant.yaml")
+        for name, text in (files or {"plant.yaml": emulated.path.read_text()}).items():
+            (self.clone / name).parent.mkdir(parents=True, exist_ok=True)
+            (self.clone / name).write_text(text)
         self.git("add", ".")
         self.git("commit", "-q", "-m", "the plant")
         self.git("clone", "-q", "--bare", str(self.clone), str(self.origin), cwd=tmp_path)
@@ -391,13 +420,14 @@ class Plant:
     def plant_text(self, ref: str = "main") -> str:
         return self.git("show", f"{ref}:plant.yaml", cwd=self.origin)
 
-    def pull_request(self, edit: Callable[[dict], object] = lambda document: None, branch: str = "change") -> dict[str, object]:
-        """A pull request from a branch of the repository with the plant file edited (its document, in place)."""
+    def pull_request(self, edit: Callable[[dict], object] = lambda document: None, branch: str = "change",
+                     file: str = "plant.yaml") -> dict[str, object]:  # fmt: skip
+        """A pull request from a branch of the repository with the plant file (or `file`) edited (its document, in place)."""
         self.pull_number += 1
         self.git("switch", "-q", "-C", branch, "main")
-        document = yaml.safe_load((self.clone / "plant.yaml").read_text())
+        document = yaml.safe_load((self.clone / file).read_text())
         edit(document)
-        (self.clone / "plant.yaml").write_text(yaml.safe_dump(document, sort_keys=False))
+        (self.clone / file).write_text(yaml.safe_dump(document, sort_keys=False))
         self.git("commit", "-q", "--allow-empty", "-am", "a change")
         self.git("push", "-q", "origin", f"{branch}:{branch}", f"{branch}:refs/pull/{self.pull_number}/head")
         self.git("switch", "-q", "main")
@@ -416,13 +446,14 @@ class Plant:
         """The pull request merged into main (fast-forward: main's commit is its head)."""
         pulls = self.pulls()
         pull = next(p for p in pulls if p["number"] == number)
+        before = self.main()
         self.git("fetch", "-q", "origin")
         self.git("push", "-q", "origin", f"{pull['head']['sha']}:refs/heads/main")
         pull.update(state="merged", merge_commit_sha=pull["head"]["sha"])
         (self.state / "pulls.json").write_text(json.dumps(pulls))
         self.git("fetch", "-q", "origin")
         self.git("reset", "-q", "--hard", "origin/main")
-        return {"github.event_name": "push", "github.sha": self.main()}
+        return {"github.event_name": "push", "github.sha": self.main(), "github.event.before": before}
 
     def pulls(self) -> list[dict]:
         file = self.state / "pulls.json"
@@ -435,17 +466,23 @@ class Plant:
     def calls(self) -> list[list[str]]:
         return [json.loads(line) for line in (self.state / "calls").read_text().splitlines()]
 
-    def run(self, job: str, event: dict[str, object], *, install: str | None = None) -> Job:
+    def run(self, job: str, event: dict[str, object], *, install: str | None = None, matrix: dict[str, str] | None = None,
+            needs: dict[str, Job] | None = None) -> Job:  # fmt: skip
         """The job as a runner runs it for `event`; `install`: run the install step with this in place
-        of the pinned release (else skipped: this process's prc3cfg is on PATH)."""
-        definition = WORKFLOW["jobs"][job]
+        of the pinned release (else skipped: this process's prc3cfg is on PATH); `matrix`: its entry of the
+        job's matrix; `needs`: the jobs it needs, done."""
+        definition = self.workflow["jobs"][job]
         self.runs += 1
         temp = self.tmp / "runner" / "_temp" / str(self.runs)
         temp.mkdir(parents=True)
         values: dict[str, object] = {"github.repository": "plant-org/plant", "github.token": "a-token", "runner.temp": str(temp),
                                      "github.server_url": "https://github.com",
                                      "github.run_id": 9000 + self.runs, "inputs.task": "", **event}  # fmt: skip
+        values |= {f"matrix.{key}": value for key, value in (matrix or {}).items()}
+        values |= {f"needs.{name}.outputs.{key}": value for name, needed in (needs or {}).items() for key, value in needed.outputs.items()}
         done = Job()
+        runs_on = definition["runs-on"]
+        done.labels = [expressions(label, values) for label in ([runs_on] if isinstance(runs_on, str) else runs_on)]
         if not evaluate(definition["if"], values):
             return done
         self.workspace.mkdir(parents=True, exist_ok=True)
@@ -455,12 +492,13 @@ class Plant:
         env = {**self.env, "GITHUB_SHA": str(values["github.sha"]), "GITHUB_EVENT_NAME": str(values["github.event_name"]),
                "GITHUB_WORKSPACE": str(self.workspace), "RUNNER_TEMP": str(temp), "GITHUB_PATH": str(files["path"]),
                "GITHUB_STEP_SUMMARY": str(files["summary"])}  # fmt: skip
-        for scope in (WORKFLOW.get("env", {}), definition.get("env", {})):
+        for scope in (self.workflow.get("env", {}), definition.get("env", {})):
             env |= {k: expressions(str(v), values) for k, v in scope.items()}
         for index, step in enumerate(definition["steps"]):
             condition = step.get("if", "")
             if not (evaluate(condition, values) if "always()" in condition else done.ok and (not condition or evaluate(condition, values))):
                 continue
+            values["job.status"] = "success" if done.ok else "failure"
             if "uses" in step:
                 done.steps.append(self.action(step, values))
                 continue
@@ -484,6 +522,7 @@ class Plant:
                 key, _, value = line.partition("=")
                 values[f"steps.{step.get('id', index)}.outputs.{key}"] = value
         done.summary = files["summary"].read_text()
+        done.outputs = {key: expressions(value, values) for key, value in definition.get("outputs", {}).items()}
         assert files["path"].read_text() == "", "a step wrote GITHUB_PATH: what later steps run depends on it"
         return done
 

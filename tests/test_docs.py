@@ -22,6 +22,7 @@ from emulator_client import serve
 from test_broadcast import declared as declared_line
 from test_broadcast import full_line
 
+from prc3cfg.api import WindowShut
 from prc3cfg.cli import EXIT_USAGE
 from prc3cfg.cli.plan_commands import EXIT_CHANGES, EXIT_POLICY
 from prc3cfg.core.codec import MESSAGE_TYPES
@@ -143,7 +144,7 @@ def test_the_records_of_an_apply_have_exactly_the_keys_docs_files_lists(tmp_path
 
 def test_the_exit_codes_are_the_codes_of_the_command_line():
     (rows,) = tables(section("files.md", "Exit codes"))
-    assert {int(row[0]) for row in rows} == {0, 1, EXIT_CHANGES, EXIT_POLICY, EXIT_USAGE, Interrupted.exit_code}
+    assert {int(row[0]) for row in rows} == {0, 1, EXIT_CHANGES, EXIT_POLICY, EXIT_USAGE, WindowShut.exit_code, Interrupted.exit_code}
 
 
 def test_the_message_table_is_the_codecs():

@@ -134,7 +134,7 @@ def test_a_deny_window_refuses_an_apply_before_the_line_opens_and_an_override_is
     assert planned.code == 0, planned.err  # a plan is read-only: a window judges the moment of an apply
     assert "soft: bus booth-a: deny window 'production' is open until 2026-11-30 16:00 CET" in planned.out
     refused = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
-    assert refused.code == 1
+    assert refused.code == 75  # only a window refuses: try again later (EX_TEMPFAIL), not a mistake (docs/fleet.md)
     assert re.search(r"rules\.yaml:3:5: soft: bus booth-a: deny window 'production' is open until 2026-11-30 16:00 CET", refused.err)
     assert "--override-window REASON" in refused.err
     assert _untouched(plant)
@@ -375,7 +375,7 @@ def test_a_restore_in_a_deny_window_is_refused_and_goes_on_with_an_override(plan
     (snapshot,) = (plant.path.parent / ".prc3cfg" / "snapshots").iterdir()
     monkeypatch.setenv("PRC3CFG_POLICY_NOW", MONDAY_MORNING)
     refused = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release")
-    assert refused.code == 1 and "deny window 'production' is open" in refused.err and "--override-window REASON" in refused.err
+    assert refused.code == 75 and "deny window 'production' is open" in refused.err and "--override-window REASON" in refused.err
     assert plant.images() == applied
     restored = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release", "--override-window", "roll back the trial")
     assert restored.code == 0, restored.err

@@ -31,10 +31,10 @@ and output (`prc3cfg.cli`). `__all__` is what the CLI and users' scripts call.
 
 Its modules, one workflow each: `_types` (the values and errors), `_plan` (load, select, what to
 read, read, plan, drift), `_apply` (apply, restore, plan files), `_bus` (scan, import, doctor),
-`_plant` (adopt, records, gateways, pictures), `_emulator` (an emulated bus) and `_machine` (the
-machine's folders, ports and terminal). Each name is imported from its module when it is first
-asked for (`__getattr__`): a script, or a command, loads what it uses — a plan from saved images no
-link, no pyserial.
+`_plant` (adopt, records, gateways, pictures), `_policy` (the policy judged), `_fleet` (a fleet's lines, its
+CI matrix and summary), `_emulator` (an emulated bus) and `_machine` (the machine's folders, ports and terminal).
+Each name is imported from its module when it is first asked for (`__getattr__`): a script, or a command,
+loads what it uses — a plan from saved images no link, no pyserial.
 """
 
 from __future__ import annotations
@@ -58,6 +58,9 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._emulator import listen as listen
     from prc3cfg.api._emulator import open_pty as open_pty
     from prc3cfg.api._emulator import served_pty as served_pty
+    from prc3cfg.api._fleet import fleet_lines as fleet_lines
+    from prc3cfg.api._fleet import fleet_matrix as fleet_matrix
+    from prc3cfg.api._fleet import fleet_summary as fleet_summary
     from prc3cfg.api._machine import SerialPort as SerialPort
     from prc3cfg.api._machine import device_number as device_number
     from prc3cfg.api._machine import serial_ports as serial_ports
@@ -85,6 +88,7 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
     from prc3cfg.api._plant import write_adoption as write_adoption
     from prc3cfg.api._policy import PolicyRefused as PolicyRefused
     from prc3cfg.api._policy import PolicyReport as PolicyReport
+    from prc3cfg.api._policy import WindowShut as WindowShut
     from prc3cfg.api._policy import policy as policy
     from prc3cfg.api._types import ApplyFailed as ApplyFailed
     from prc3cfg.api._types import ApplyInterrupted as ApplyInterrupted
@@ -120,7 +124,8 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._plan": ("drift", "left_alone", "load", "load_images", "plan", "read", "select"),
     "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records",
                            "serve_status", "status", "verify_records", "write_adoption"),
-    "prc3cfg.api._policy": ("PolicyRefused", "PolicyReport", "policy"),
+    "prc3cfg.api._fleet": ("fleet_lines", "fleet_matrix", "fleet_summary"),
+    "prc3cfg.api._policy": ("PolicyRefused", "PolicyReport", "WindowShut", "policy"),
     "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
     "prc3cfg.core.plan_file": ("StalePlan",),
     "prc3cfg.core.render": ("Drift",),

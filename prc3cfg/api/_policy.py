@@ -1,9 +1,9 @@
 """Policy: the policy file a plant file names, judged on the modules a plan or an apply takes, at a moment.
 
 `policy(plant, modules, now)` evaluates it (`prc3cfg.core.policy.findings`) and places each finding in its files;
-`PolicyReport.gate` refuses (`PolicyRefused`) what refuses unless overridden, and says what was overridden, by
-whom and why, for the journal. "Now" is the clock's, or `PRC3CFG_POLICY_NOW` (an ISO 8601 instant with its
-offset) for tests and rehearsals — said on screen and in the journal whenever it is used (`policy_now`).
+`PolicyReport.gate` refuses (`PolicyRefused`; `WindowShut`, exit 75, where only windows refuse) what refuses unless
+overridden, and says what was overridden, by whom and why, for the journal. "Now" is the clock's, or `PRC3CFG_POLICY_NOW`
+(an ISO 8601 instant with its offset) for tests and rehearsals — said on screen and in the journal whenever it is used (`policy_now`).
 """
 
 from __future__ import annotations
@@ -33,6 +33,13 @@ OVERRIDES = {"window": "--override-window", "envelope": "--override-envelope"}
 
 class PolicyRefused(UserError):
     """The policy refuses: one line per refusing finding, and what to do."""
+
+
+class WindowShut(PolicyRefused):
+    """Only windows refuse: the change waits for one to open (or shut), it is not wrong — a CI job tells it from a
+    failure by the exit code, sysexits' EX_TEMPFAIL ("try again later"; docs/fleet.md reports the line as waiting)."""
+
+    exit_code = 75
 
 
 @dataclass(frozen=True)
@@ -76,7 +83,8 @@ class PolicyReport:
             unused = sorted({f.kind for f in refusing if f.level == "soft"})
             fix = ("change the plant file or the policy (a hard rule is never overridden)" if any(f.level == "hard" for f in refusing)
                    else " or ".join(f"{OVERRIDES[k]} REASON" for k in unused) + " (an override is recorded in the journal)")
-            raise PolicyRefused("\n".join([*refused, f"the policy refuses this apply; nothing was written — {fix}"]))
+            refusal = WindowShut if all(f.kind == "window" for f in refusing) else PolicyRefused
+            raise refusal("\n".join([*refused, f"the policy refuses this apply; nothing was written — {fix}"]))
         overridden = [{"kind": f.kind, "rule": f.rule, "finding": line, "reason": overrides[f.kind], "user": platform.user_name()}
                       for f, line in self.findings if f.level == "soft" and f.kind in overrides]  # fmt: skip
         return self.to_json() | {"overridden": overridden}

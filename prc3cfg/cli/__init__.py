@@ -55,6 +55,7 @@ COMMAND_MODULES: dict[str, str] = {
     "doctor": "bus_commands",
     "adopt": "adopt_commands",
     "emulator": "emulator_commands", "link": "bus_commands", "records": "records_commands", "status": "status_commands",
+    "fleet": "fleet_commands",
 }  # fmt: skip
 
 

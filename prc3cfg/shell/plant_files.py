@@ -1,4 +1,5 @@
-"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant layer.
+"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant layer; the policy
+file a plant file names (`load_policy`) and a fleet file (`load_fleet`) are read so too.
 
 Only a regular file is read (a FIFO could block, `/dev/zero` never ends), at most `MAX_BYTES`
 of it (`prc3cfg.shell.files.read_regular`); a path that cannot be read is a `PlantError` that
@@ -16,6 +17,7 @@ from prc3cfg.shell import platform
 from prc3cfg.shell.files import FileProblem, Why, read_regular
 
 if TYPE_CHECKING:
+    from prc3cfg.plant.fleet import Fleet
     from prc3cfg.plant.policy import LoadedPolicy
 
 #: A plant of 8 buses × 30 modules with all 64 programs written out is about 1.3 MB; with long
@@ -61,6 +63,17 @@ def load_policy(plant: Plant) -> LoadedPolicy | None:
     from prc3cfg.plant.policy import parse_policy  # its models and rules: only for a plant file that names a policy
 
     return parse_policy(path, data)
+
+
+def load_fleet(path: str | Path) -> Fleet:
+    """The fleet file `path` (docs/fleet.md); `PlantError` with its problems, or saying it cannot be read."""
+    try:
+        data = read_regular(Path(path), MAX_BYTES)
+    except FileProblem as problem:
+        raise PlantError([f"{path}: {problem} (the fleet file) — {_REMEDIES[problem.why].replace('plant', 'fleet')}"]) from None
+    from prc3cfg.plant.fleet import parse_fleet  # its models: for the fleet commands only
+
+    return parse_fleet(str(path), data)
 
 
 def plant_document(plant: Plant) -> Document:
