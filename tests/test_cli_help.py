@@ -204,3 +204,14 @@ def test_every_commands_help_loads_nothing_heavy(words):
                           capture_output=True, text=True)  # fmt: skip
     assert "Usage" in done.stdout, done.stderr
     assert done.stderr.strip() == "heavy: []"
+
+
+def test_the_listing_keeps_the_table_s_order_whichever_command_module_was_imported_first():
+    """A program that runs several command lines (the tests, an embedding) imports the modules in the order it runs
+    them: the listing is still the table's."""
+    probe = ("import typer, prc3cfg.cli.plan_commands, prc3cfg.cli.records_commands\n"
+             "from prc3cfg.cli import COMMAND_MODULES, _register_commands, app\n"
+             "_register_commands()\n"
+             "print(typer.main.get_command(app).list_commands(None) == list(COMMAND_MODULES))\n")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=False)
+    assert done.stdout.strip() == "True", done.stderr

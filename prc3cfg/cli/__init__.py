@@ -69,6 +69,10 @@ def _register_commands(args: list[str] | None = None) -> None:
     names = [COMMAND_MODULES[named]] if named in COMMAND_MODULES and not completing else COMMAND_MODULES.values()
     for name in dict.fromkeys(names):
         importlib.import_module(f"prc3cfg.cli.{name}")
+    # in the table's order, whichever module a process imported first (a program that runs several command lines)
+    rank = {command: n for n, command in enumerate(COMMAND_MODULES)}.get
+    app.registered_commands.sort(key=lambda info: rank(info.name or typer.main.get_command_name(getattr(info.callback, "__name__", "")), 0))
+    app.registered_groups.sort(key=lambda group: rank(group.name or "", 0))
 
 
 def _print_version(value: bool) -> None:
