@@ -441,3 +441,17 @@ def test_a_chain_outside_its_envelope_is_placed_at_its_first_program(tmp_path, s
     touch_up = next(line for _, line in report.findings if "chain 3 → 10 → 11 → stop stroke_length 0.600 m" in line)
     at = int(re.match(r".*source\.yaml:(\d+):\d+: ", touch_up).group(1))  # type: ignore[union-attr]
     assert lines[at - 1].strip().startswith("3: {position: 1.100, next: 10}")
+
+
+def test_an_apply_of_a_plan_file_is_judged_by_the_windows_of_the_lines_it_writes_only(plant, capsys, monkeypatch):
+    """A plan file for one line is not refused by another line's window: the apply writes that line only."""
+    (plant.path.parent / "rules.yaml").write_text(SHIFT.replace("time_zone: Europe/Berlin\n", "time_zone: Europe/Berlin\n    buses: [booth-b]\n"))
+    monkeypatch.setenv("PRC3CFG_POLICY_NOW", MONDAY_MORNING)
+    saved = plant.path.parent / "booth-a.plan.json"
+    planned = run_cli(capsys, "plan", plant.path, "--module", "booth-a-left", "--out", saved)
+    assert planned.code == 0, planned.err
+    applied = run_cli(capsys, "apply", "--plan", saved, "--auto-approve", "--allow-axis-release")
+    assert applied.code == 0, applied.err
+    assert "deny window" not in applied.err
+    whole = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
+    assert whole.code == 75 and "bus booth-b: deny window 'production' is open" in whole.err  # the other line's apply waits

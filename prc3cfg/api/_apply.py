@@ -131,7 +131,10 @@ def apply(
     """
     planned = None if plan_file is None else (plan_file, read_plan(plan_file, plant))  # before any time on the line
     pairs = select(plant, modules)
-    said = _policy_gate(policy(plant, modules, now), overrides, options)  # just before the line opens: a window may have opened since the plan
+    # just before the line opens (a window may have opened since the plan), on what the apply writes: a plan file's
+    # modules with steps — another line's window does not hold back a plan file for this one
+    writes = modules if planned is None else [m.name for bus, m in pairs if (bus.name, m.address) in _with_steps(planned[1])]
+    said = _policy_gate(policy(plant, writes, now) if writes is None or writes else None, overrides, options)
 
     def wanted(held: OnRecord) -> Reads:
         if planned is not None:
@@ -142,6 +145,11 @@ def apply(
     on_lines = pairs if planned is None else plan_file_pairs(planned[1], pairs)
     return _apply(plant, pairs, on_lines, wanted, None, planned, gates, verify, options or LineOptions(), reason=reason, links=links,
                   policy_said=said)  # fmt: skip
+
+
+def _with_steps(planned: PlanFile) -> set[Key]:
+    """The modules a plan file writes to: those with steps."""
+    return {(entry.bus, entry.address) for entry in planned.modules if entry.steps}
 
 
 def _policy_gate(judged: PolicyReport | None, overrides: Mapping[str, str] | None, options: LineOptions | None) -> dict[str, Any] | None:
