@@ -11,8 +11,10 @@ the reference gives up on (`TooBig`) left out by hypothesis (reported in its sta
 
 from __future__ import annotations
 
+import json
 import math
 import random
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, Phase, event, given, reject, settings
@@ -91,12 +93,25 @@ def test_a_reference_plan_that_does_not_reach_the_plant_file_is_caught() -> None
         replayed(actual, desired, ReferencePlan(reference.messages[:-1], 0.0, 0.0))
 
 
+#: Modules where the planner's plan is dearer than the reference's (found by the soak property): the planner's
+#: bug, kept until its init search finds these plans.
+DIFFERS = json.loads((Path(__file__).parent / "reference_differs.json").read_text(encoding="utf-8"))
+
+
+@pytest.mark.xfail(strict=True, reason="issue 43: the planner's init search misses inits that leave programs out to save a 40h")
+@pytest.mark.parametrize("case", DIFFERS, ids=lambda case: case["differs"].split(":")[0])
+def test_the_planner_equals_the_reference_where_it_was_found_dearer(case: dict) -> None:
+    actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
+    reference = assert_equal_to_the_reference(actual, desired, line(case["framing"], case["turnaround"]))
+    assert reference.bus_time == pytest.approx(case["reference"], abs=EPSILON)
+
+
 #: States the soak's reference may hold a program: about ten seconds of CPU at most per module.
-SOAK_LIMIT = 20_000
+SOAK_LIMIT = 10_000
 
 
 @pytest.mark.soak
-@settings(max_examples=40, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate], report_multiple_bugs=False,
+@settings(max_examples=20, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate], report_multiple_bugs=False,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])  # fmt: skip
 @given(scenarios())
 def test_the_planner_equals_the_reference_on_the_property_modules(scenario) -> None:
