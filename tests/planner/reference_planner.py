@@ -26,12 +26,12 @@ Every run covers managed programs only. The bases (what a program holds after th
 init, or an init after or before it) come from running 10h/20h and 14h on the device model.
 
 The DP walks programs 1..64. Its state between program i and i + 1 is the runs still open past i (each
-init layer's, the 33h's, each range layer's, by their first program: what their message's price needs)
-and the number of items each field has so far; its value the cheapest bus time of every message but the
-40h..46h, which only the counts price (at the end, chunked). Of two states with the same runs open, one
-with no more items in any field and no dearer is kept, the other dropped: the rest of a plan costs the
-same after both, and items never cost less for being more (the chunks' price only grows with their
-count). That is the whole algorithm: no bound, no heuristic, no order of search.
+init layer's, each range layer's, the 33h's: what their message's price needs of their first program) and
+how many items each field's last 40h..46h message holds; its value the cheapest bus time so far, a
+header counted where an item opens a message. Of two states with the same runs open, one is dropped where
+the other costs no more even with a header more in each field where it has less room (`_pareto`): the rest
+of the plan costs the same after both but for those headers, at most one a field. That is the whole
+algorithm: no bound, no heuristic, no order of search.
 
 What is exact: every message but 40h..46h is priced by the line as sent; 40h..46h items by their header
 and item bytes, measured on the line (the values' stuffed bytes on stx counted item by item). On stx
@@ -39,8 +39,9 @@ alone, a 40h..46h message whose checksum is 7Eh costs a byte more than that; the
 (`ReferencePlan.optimum`) is then a lower bound and the plan's bus time (`bus_time`) exact for its own
 messages — equal on crc16 and open-driver.
 
-What it takes: fractions of a second for a few programs changed, seconds for a busy module; the states
-grow with the runs that could be open at once, so it gives up (`TooBig`) beyond MAX_STATES a program.
+What it takes: fractions of a second for a few programs changed, seconds for some, minutes for a busy
+module (the states grow with the runs that could be open at once); it gives up (`TooBig`) beyond `limit`
+states a program.
 """
 
 from __future__ import annotations
