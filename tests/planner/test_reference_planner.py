@@ -1,0 +1,123 @@
+"""The planner against the reference planner (issue 43): tests/planner/reference_planner.py, a plain DP
+over the same canonical plans, priced by the line and run on the device model, must give the same bus time.
+
+On crc16 and open-driver the reference's optimum is exact: the bus times must be equal. On stx the
+reference's optimum leaves out a byte a 40h..46h message's checksum of 7Eh takes: the planner's plan may
+not be below that optimum nor dearer than the reference's own plan. Every reference plan is replayed on
+the device model to the desired image. The reference takes seconds where many runs could be open at
+once: the fast tier takes the cases it plans within a few seconds; the soak tier random modules, those
+the reference gives up on (`TooBig`) left out by hypothesis (reported in its statistics).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, Phase, event, given, reject, settings
+from planner_helpers import FRAMINGS, line
+from reference_planner import ReferencePlan, TooBig, reference_plan, starting_state
+from test_planner_bruteforce import tiny_case
+from test_planner_cases import FOUND_CASES
+from test_planner_property import scenarios
+
+from prc3cfg.core import device
+from prc3cfg.core.bustime import LineCost
+from prc3cfg.core.image import ModuleImage
+from prc3cfg.core.planner import plan_module
+
+EPSILON = 1e-9
+#: The found cases (found_cases.json) the reference plans in a few seconds of CPU. The others take one to five
+#: minutes each (measured equal: "a link range over 2..64 …", 310 s; "a link range over 16..60 …", 85 s) or more.
+FAST_FOUND = ("open-driver: two link ranges that pay only together",)
+
+
+def replayed(actual: ModuleImage, desired: ModuleImage, reference: ReferencePlan) -> None:
+    """The reference's plan, run on the device model: every message accepted, none touching an unmanaged
+    program, the desired system and managed programs reached."""
+    state = starting_state(actual)
+    managed = {n for n, p in enumerate(desired.programs, start=1) if p is not None}
+    for message in reference.messages:
+        assert set(message.touched_programs()) <= managed, f"{message.hex()} touches an unmanaged program"
+        state = device.execute(state, message)
+    assert state.image.system == desired.system
+    for number, want in enumerate(desired.programs, start=1):
+        assert want is None or state.image.programs[number - 1] == want, f"program {number}"
+
+
+def assert_equal_to_the_reference(actual: ModuleImage, desired: ModuleImage, cost: LineCost, limit: int | None = None) -> ReferencePlan:
+    reference = reference_plan(actual, desired, cost) if limit is None else reference_plan(actual, desired, cost, limit=limit)
+    replayed(actual, desired, reference)
+    assert reference.bus_time == pytest.approx(math.fsum(cost.message_time(desired.address, m) for m in reference.messages), abs=EPSILON)
+    planned = plan_module(actual, desired, cost).bus_time
+    if cost.framing.stuffs:  # the reference's optimum leaves out stuffed checksums of 40h..46h
+        assert reference.optimum <= reference.bus_time + EPSILON
+        assert reference.optimum - EPSILON <= planned <= reference.bus_time + EPSILON, (
+            f"the planner's {planned * 1e3:.3f} ms, the reference's {reference.optimum * 1e3:.3f}..{reference.bus_time * 1e3:.3f} ms"
+        )
+    else:
+        assert reference.optimum == pytest.approx(reference.bus_time, abs=EPSILON)
+        assert planned == pytest.approx(reference.bus_time, abs=EPSILON), (
+            f"the planner's {planned * 1e3:.3f} ms, the reference's {reference.bus_time * 1e3:.3f} ms in {[m.hex() for m in reference.messages]}"
+        )
+    return reference
+
+
+@pytest.mark.parametrize("framing", FRAMINGS)
+@pytest.mark.parametrize("seed", [*range(10), *(pytest.param(seed, marks=pytest.mark.soak) for seed in range(10, 60))])
+def test_the_planner_equals_the_reference_on_the_brute_force_modules(framing: str, seed: int) -> None:
+    actual, desired = tiny_case(seed)
+    assert_equal_to_the_reference(actual, desired, line(framing, turnaround=random.Random(seed).choice([0.0, 0.010])))
+
+
+@pytest.mark.parametrize(
+    "case",
+    [case for case in FOUND_CASES if case["found"].startswith(FAST_FOUND)],
+    ids=lambda case: case["found"].split(":")[0],
+)
+def test_the_planner_equals_the_reference_on_the_found_cases(case: dict) -> None:
+    actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
+    reference = assert_equal_to_the_reference(actual, desired, line(case["framing"], case["turnaround"]))
+    assert reference.bus_time == pytest.approx(case["optimum"], abs=EPSILON)
+
+
+def test_a_reference_plan_that_does_not_reach_the_plant_file_is_caught() -> None:
+    """The replay can fail: a plan with its last message left out does not reach the desired image."""
+    actual, desired = tiny_case(1)
+    reference = reference_plan(actual, desired, line("crc16"))
+    assert reference.messages
+    with pytest.raises(AssertionError):
+        replayed(actual, desired, ReferencePlan(reference.messages[:-1], 0.0, 0.0))
+
+
+#: Modules where the planner's plan is dearer than the reference's (found by the soak property): the planner's
+#: bug, kept until its init search finds these plans.
+DIFFERS = json.loads((Path(__file__).parent / "reference_differs.json").read_text(encoding="utf-8"))
+
+
+@pytest.mark.xfail(strict=True, reason="issue 43: the planner's init search misses inits that leave programs out to save a 40h")
+@pytest.mark.parametrize("case", DIFFERS, ids=lambda case: case["differs"].split(":")[0])
+def test_the_planner_equals_the_reference_where_it_was_found_dearer(case: dict) -> None:
+    actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
+    reference = assert_equal_to_the_reference(actual, desired, line(case["framing"], case["turnaround"]))
+    assert reference.bus_time == pytest.approx(case["reference"], abs=EPSILON)
+
+
+#: States the soak's reference may hold a program: about ten seconds of CPU at most per module.
+SOAK_LIMIT = 10_000
+
+
+@pytest.mark.soak
+@settings(max_examples=20, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate], report_multiple_bugs=False,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])  # fmt: skip
+@given(scenarios())
+def test_the_planner_equals_the_reference_on_the_property_modules(scenario) -> None:
+    actual, desired, _, framing, turnaround = scenario
+    try:
+        assert_equal_to_the_reference(actual, desired, line(framing, turnaround), limit=SOAK_LIMIT)
+    except TooBig:
+        event("too big for the reference")
+        reject()
