@@ -223,7 +223,7 @@ def fleets(draw):
     files (and files of no line); the lines that report a status, some of them waiting."""
     plants = draw(st.lists(NAMES, min_size=1, max_size=4, unique=True))
     policies = {plant: draw(st.sampled_from([None, "plants/rules.yaml", "plants/freeze.yaml"])) for plant in plants}
-    lines = [lines_of.Line(f"plants/{plant}.yaml", bus, f"runner-{bus}", bus, (f"{bus}-1",), policies[plant])
+    lines = [lines_of.FleetLine(f"plants/{plant}.yaml", bus, f"runner-{bus}", bus, (f"{bus}-1",), policies[plant])
              for plant in plants for bus in draw(st.lists(NAMES, min_size=1, max_size=3, unique=True))]  # fmt: skip
     files = sorted({line.plant for line in lines} | {"plants/rules.yaml", "plants/freeze.yaml", "README.md"})
     changed = draw(st.lists(st.sampled_from(files), unique=True))
@@ -232,7 +232,7 @@ def fleets(draw):
     return lines, changed, waiting
 
 
-def check_consistent(lines: list[lines_of.Line], changed: list[str], waiting: dict[lines_of.Line, str | None]) -> None:
+def check_consistent(lines: list[lines_of.FleetLine], changed: list[str], waiting: dict[lines_of.FleetLine, str | None]) -> None:
     selected = lines_of.selected(lines, set(changed))
     expected = [line for line in lines if line.plant in changed or line.policy in changed]
     assert selected == expected  # every changed line, once, in the fleet's order
@@ -271,7 +271,7 @@ class Unshared(yaml.SafeDumper):
         return True
 
 
-def written(folder: Path, lines: list[lines_of.Line]) -> None:
+def written(folder: Path, lines: list[lines_of.FleetLine]) -> None:
     """The fleet file and plant files of `lines` in `folder`: each plant file the demo's first bus once a line, renamed."""
     template = yaml.safe_load(DEMO.read_text())
     fleet: dict[str, list] = {}
@@ -297,7 +297,7 @@ def test_the_commands_select_and_summarise_random_fleets_as_the_fleet_file_says_
     """The same through real `prc3cfg fleet` processes, on fleet and plant files written to disk: every changed line
     selected once, a summary row per line, each reported line's waiting words in its row."""
     lines, changed, waiting = case
-    def on_disk(line: lines_of.Line) -> lines_of.Line:  # its modules as `written` names them, its policy beside its plant file
+    def on_disk(line: lines_of.FleetLine) -> lines_of.FleetLine:  # its modules as `written` names them, its policy beside its plant file
         return replace(line, modules=tuple(f"{line.bus}-{a}" for a in ADDRESSES), policy=line.policy and f"plants/{Path(line.policy).name}")
 
     lines, waiting = [on_disk(line) for line in lines], {on_disk(line): why for line, why in waiting.items()}

@@ -30,7 +30,7 @@ WAITING, REFUSED = "waiting.txt", "refused.txt"
 STATUS_LIMIT = 4 * 2**20
 
 
-def fleet_lines(path: str | Path) -> list[fleet.Line]:
+def fleet_lines(path: str | Path) -> list[fleet.FleetLine]:
     """The lines of the fleet file `path`, in its order; `PlantError` with the problems of it or of a plant file it names."""
     return lines(load_fleet(path), load_plant)
 
@@ -45,8 +45,8 @@ def fleet_summary(path: str | Path, statuses: Sequence[Path]) -> dict[str, Any]:
     """The `prc3cfg-fleet-summary/1` document of the fleet's lines from their status documents `statuses`; a line in two of
     them, or a document's bus that is no line of the fleet, is refused in one line."""
     everything = fleet_lines(path)
-    found: dict[fleet.Line, fleet.LineStatus] = {}
-    first: dict[fleet.Line, Path] = {}
+    found: dict[fleet.FleetLine, fleet.LineStatus] = {}
+    first: dict[fleet.FleetLine, Path] = {}
     for status_path in statuses:
         document = _status(status_path)
         said = fleet.LineStatus({}, _words(status_path.parent / WAITING), _words(status_path.parent / REFUSED))
@@ -87,7 +87,7 @@ def _words(path: Path) -> str | None:
     return shown(" ".join(text.split())) or "(no words)"
 
 
-def _line_of(everything: list[fleet.Line], plant_file: str, bus: str) -> fleet.Line | None:
+def _line_of(everything: list[fleet.FleetLine], plant_file: str, bus: str) -> fleet.FleetLine | None:
     """The fleet's line of `bus` of the plant file a status document names (as the command that made it was given it:
     the line's path, relative to the repository, ends it)."""
     parts = _normal(plant_file).split("/")

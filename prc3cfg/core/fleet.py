@@ -25,7 +25,7 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 
 
 @dataclass(frozen=True, slots=True)
-class Line:
+class FleetLine:
     """One line of the fleet: its plant file and bus, the runner label beside it, the environment whose reviewers approve
     its applies, the modules on it and the policy file its plant file names (None: none)."""
 
@@ -52,12 +52,12 @@ class Line:
         return f"prc3cfg-line {self.name}"
 
 
-def selected(lines: Iterable[Line], changed: Collection[str] | None) -> list[Line]:
+def selected(lines: Iterable[FleetLine], changed: Collection[str] | None) -> list[FleetLine]:
     """The lines a change of the files `changed` touches, in the fleet's order (`changed` None: every line)."""
     return [line for line in lines if changed is None or line.plant in changed or (line.policy is not None and line.policy in changed)]
 
 
-def matrix(lines: Iterable[Line]) -> dict[str, Any]:
+def matrix(lines: Iterable[FleetLine]) -> dict[str, Any]:
     """The matrix of `lines` for `strategy.matrix`: one entry per line (`policy` "" for none; `modules` one a line, for
     a shell's `while read` to make `--module` options of)."""
     return {"include": [{"line": line.name, "id": line.id, "plant": line.plant, "bus": line.bus, "runner": line.runner,
@@ -76,12 +76,12 @@ class LineStatus:
     refused: str | None = None
 
 
-def summary(lines: Sequence[Line], found: Mapping[Line, LineStatus]) -> dict[str, Any]:
+def summary(lines: Sequence[FleetLine], found: Mapping[FleetLine, LineStatus]) -> dict[str, Any]:
     """`prc3cfg fleet summary --json`: one row per line of the fleet, in its order (a line without status: not in this run)."""
     return {"format": SUMMARY_FORMAT, "lines": [_row(line, found.get(line)) for line in lines]}
 
 
-def _row(line: Line, found: LineStatus | None) -> dict[str, Any]:
+def _row(line: FleetLine, found: LineStatus | None) -> dict[str, Any]:
     row: dict[str, Any] = {"line": line.name, "plant": line.plant, "bus": line.bus, "runner": line.runner}
     if found is None:
         return row | {"reported": False, "modules": None, "health": None, "drift": None, "pending_travel": None,

@@ -9,7 +9,7 @@
 
 `parse_fleet` reads the bytes with the plant file's YAML reader (`document`: positions, no aliases, no tags) and the
 models here (`fleet_schema`: `schemas/fleet.schema.json`); `lines` then checks each line against its plant file (the
-bus is one of its buses) and builds `core.fleet.Line`s, or raises `PlantError` with one line per problem, at the
+bus is one of its buses) and builds `core.fleet.FleetLine`s, or raises `PlantError` with one line per problem, at the
 fleet file's key or value. Plant file paths are relative to the fleet file. Pure: the shell reads the files
 (`prc3cfg.cli.fleet_commands`).
 """
@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 from pydantic import Field, ValidationError
 
-from prc3cfg.core.fleet import Line
+from prc3cfg.core.fleet import FleetLine
 from prc3cfg.plant.document import Document, parse_document
 from prc3cfg.plant.models import Draft07, FileModel, Name, Text
 from prc3cfg.plant.plant import Plant
@@ -42,7 +42,7 @@ class LineSpec(FileModel):
                                                        "the line (default: the bus's name)")  # fmt: skip
 
 
-class PlantSpec(FileModel):
+class FleetPlant(FileModel):
     """A plant file and its lines."""
 
     plant: Text = Field(description="the plant file, relative to the fleet file", examples=["plants/paint-shop.yaml"])
@@ -53,7 +53,7 @@ class FleetSpec(FileModel):
     """A fleet file: every plant file's lines and the runner at each."""
 
     format: Literal["prc3cfg-fleet/1"] = Field(description="the format of this file")
-    plants: tuple[PlantSpec, ...] = Field(min_length=1, description="the plant files of the fleet")
+    plants: tuple[FleetPlant, ...] = Field(min_length=1, description="the plant files of the fleet")
 
 
 @dataclass(frozen=True)
@@ -86,11 +86,11 @@ def parse_fleet(path: str, data: bytes) -> Fleet:
     return Fleet(spec, document)
 
 
-def lines(fleet: Fleet, load: Callable[[str], Plant]) -> list[Line]:
+def lines(fleet: Fleet, load: Callable[[str], Plant]) -> list[FleetLine]:
     """The fleet's lines, each bus checked against its plant file (`load`: the plant file at a path the fleet gives,
     relative to the current folder); `PlantError` naming the fleet file's place of every bus no plant file has, or of a
     line named twice."""
-    found: list[Line] = []
+    found: list[FleetLine] = []
     problems: list[Problem] = []
     seen: dict[str, tuple[str | int, ...]] = {}
     for p, (spec, path) in enumerate(zip(fleet.spec.plants, fleet.plant_paths(), strict=True)):
@@ -102,7 +102,7 @@ def lines(fleet: Fleet, load: Callable[[str], Plant]) -> list[Line]:
             if line.bus not in buses:
                 problems.append(Problem(at, f"bus '{line.bus}' is not in {path} — it has {', '.join(sorted(buses))}"))
                 continue
-            made = Line(path, line.bus, line.runner, line.environment or line.bus, tuple(m.name for m in buses[line.bus].modules), policy)
+            made = FleetLine(path, line.bus, line.runner, line.environment or line.bus, tuple(m.name for m in buses[line.bus].modules), policy)
             if made.id in seen:
                 problems.append(Problem(at, f"line {made.name} is named twice (or its id {made.id} is another line's) — name each line once",
                                         first=seen[made.id]))  # fmt: skip
