@@ -182,6 +182,26 @@ class Course:
         return Course(state, action, self.rounds + (action is Next.READ), repairs)
 
 
+class Coursed:
+    """What a module's course says of it, for whatever holds one as `course`: the run while it goes on
+    (`prc3cfg.shell.apply.ModuleRun`) and the outcome it leaves (`prc3cfg.core.outcome.ModuleOutcome`)."""
+
+    __slots__ = ()
+    course: Course
+
+    @property
+    def verified(self) -> bool:
+        return self.course.state is State.VERIFIED
+
+    @property
+    def interrupted(self) -> bool:
+        return self.course.state is State.INTERRUPTED
+
+    @property
+    def repairs(self) -> int:
+        return self.course.repairs
+
+
 def reply_event(code: int, *, after_broadcast: bool) -> Event:
     """A write's reply as an event; `after_broadcast`: the module received the bus's broadcasts."""
     if code in REPLIES:

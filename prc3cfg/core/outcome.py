@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from dataclasses import InitVar, dataclass, field
 
 from prc3cfg.core import axes
-from prc3cfg.core.apply_states import Course, State
+from prc3cfg.core.apply_states import Course, Coursed, State
 from prc3cfg.core.axes import Release
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import Step
@@ -26,7 +26,7 @@ INTERRUPTED = "interrupted"
 
 
 @dataclass(frozen=True, slots=True)
-class ModuleOutcome:
+class ModuleOutcome(Coursed):
     """One module's part of an apply, once it ended. `problem` is the last thing that went wrong in the run's
     words; `stopped`, why the lines were stopped when not by a signal (a record that could not be kept)."""
 
@@ -59,18 +59,6 @@ class ModuleOutcome:
                                  exposed=self.exposed, read_back=self.final is not None, changed=changed)  # fmt: skip
         object.__setattr__(self, "released", released)  # a frozen value's own constructor: the one place it is set
         object.__setattr__(self, "failure", said_failure(self.course.state, problem, stopped))
-
-    @property
-    def verified(self) -> bool:
-        return self.course.state is State.VERIFIED
-
-    @property
-    def interrupted(self) -> bool:
-        return self.course.state is State.INTERRUPTED
-
-    @property
-    def repairs(self) -> int:
-        return self.course.repairs
 
     @property
     def unchanged(self) -> bool:

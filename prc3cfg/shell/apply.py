@@ -42,7 +42,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
-from prc3cfg.core.apply_states import REPAIRS, Course, Event, Next, State, repair_event, reply_event
+from prc3cfg.core.apply_states import REPAIRS, Course, Coursed, Event, Next, State, repair_event, reply_event
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.error_codes import FAULT_STATES, describe, remedy
 from prc3cfg.core.image import ModuleImage, Program
@@ -70,7 +70,7 @@ class Verify(enum.Enum):
 
 
 @dataclass(slots=True)
-class ModuleRun:
+class ModuleRun(Coursed):
     """One module's part of an apply, and what happened to it."""
 
     bus: str
@@ -105,18 +105,6 @@ class ModuleRun:
     def process(self, event: Event) -> None:
         """What happened to the module, told to the table (`prc3cfg.core.apply_states`)."""
         self.course = self.course.after(event)
-
-    @property
-    def verified(self) -> bool:
-        return self.course.state is State.VERIFIED
-
-    @property
-    def interrupted(self) -> bool:
-        return self.course.state is State.INTERRUPTED
-
-    @property
-    def repairs(self) -> int:
-        return self.course.repairs
 
     @property
     def release_sent(self) -> bool:
