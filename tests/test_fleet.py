@@ -26,6 +26,8 @@ from emulated import DEMO, run_cli
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_ci_recipe import Plant, actionlint, token_only_where_github_is_called, zizmor_findings
+from test_policy import MONDAY_MORNING
+from test_policy import SHIFT_ON_BOOTH_B as SHIFT  # the paint shop's production shift, on booth-b alone
 from tools import needs
 
 from prc3cfg.core import fleet as lines_of
@@ -41,18 +43,6 @@ EXAMPLE = next(block for block in BLOCKS if block.startswith("format: prc3cfg-fl
 SUMMARY = json.loads((ROOT / "schemas" / "fleet-summary.schema.json").read_text())
 SUMMARY_CHECK = jsonschema.Draft7Validator(SUMMARY)  # checked once: jsonschema.validate checks the schema on every call
 
-#: The paint shop's production shift, Monday to Friday from 06:00 Berlin time for 10 hours, on booth-b alone.
-SHIFT = """format: prc3cfg-policy/1
-windows:
-  - name: production
-    kind: deny
-    level: soft
-    cron: "0 6 * * 1-5"
-    duration: 10h
-    time_zone: Europe/Berlin
-    buses: [booth-b]
-"""
-MONDAY_MORNING = "2026-11-30T09:00:00+01:00"
 FLEET = """format: prc3cfg-fleet/1
 plants:
   - plant: plants/paint-shop.yaml

@@ -44,6 +44,8 @@ windows:
     duration: 10h
     time_zone: Europe/Berlin
 """
+#: The same shift on booth-b alone.
+SHIFT_ON_BOOTH_B = SHIFT + "    buses: [booth-b]\n"
 MONDAY_MORNING = "2026-11-30T09:00:00+01:00"  # in the shift
 SUNDAY = "2026-11-29T09:00:00+01:00"
 
@@ -445,7 +447,7 @@ def test_a_chain_outside_its_envelope_is_placed_at_its_first_program(tmp_path, s
 
 def test_an_apply_of_a_plan_file_is_judged_by_the_windows_of_the_lines_it_writes_only(plant, capsys, monkeypatch):
     """A plan file for one line is not refused by another line's window: the apply writes that line only."""
-    (plant.path.parent / "rules.yaml").write_text(SHIFT.replace("time_zone: Europe/Berlin\n", "time_zone: Europe/Berlin\n    buses: [booth-b]\n"))
+    (plant.path.parent / "rules.yaml").write_text(SHIFT_ON_BOOTH_B)
     monkeypatch.setenv("PRC3CFG_POLICY_NOW", MONDAY_MORNING)
     saved = plant.path.parent / "booth-a.plan.json"
     planned = run_cli(capsys, "plan", plant.path, "--module", "booth-a-left", "--out", saved)
