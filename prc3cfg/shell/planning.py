@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from prc3cfg.core.image import Key, ModuleImage, Wanted
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.plant_planner import Planner
+from prc3cfg.core.stages import LinePlan
 from prc3cfg.core.what_to_read import Target
 from prc3cfg.shell.probe import answering
 from prc3cfg.shell.readback import LineRead, read_all
@@ -65,6 +66,11 @@ class SharedPlanner:
         lines = None if buses is None else set(buses)
         with self._lock:
             return self._planner.plan([w for w in self.wanted if lines is None or w.bus in lines], actual)
+
+
+def line_plan(planner: SharedPlanner, bus: str, images: Mapping[Key, ModuleImage]) -> LinePlan:
+    """The plan stage's value for a line `read_lines` read (`images`) and planned: its changes, to gate and write."""
+    return LinePlan(tuple(planner.line_changes(bus)), images)
 
 
 def read_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str, planner: SharedPlanner | None = None,
