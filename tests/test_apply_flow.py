@@ -10,15 +10,17 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import random
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from emulated import emulated_plant, run_cli
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from lossy import Loss
 
 import prc3cfg
 from prc3cfg import api
@@ -203,3 +205,53 @@ def test_the_stages_driven_one_at_a_time(tmp_path):
         assert all(image == before[key] for key, image in emulated.images().items() if key[0] != bus)
         known = writing.records[bus].known()
         assert all(run.address in known for run in outcomes)
+
+
+#: The answers a gate may be given about an axis release: up front, or asked with the modules named.
+ANSWERS: dict[str, bool | Callable[[list[str]], bool]] = {
+    "allowed": True, "refused": False, "asked, yes": lambda _: True, "asked, no": lambda _: False,
+}  # fmt: skip
+READS = (0x50, 0x51, 0x52)  # the read-backs' messages
+FAST = (1, 2)  # seeds of the fast tier — a refusal, a write line by line; the others are soak
+
+
+@pytest.mark.parametrize("seed", [seed if seed in FAST else pytest.param(seed, marks=pytest.mark.soak) for seed in range(16)])
+def test_either_path_gates_before_it_writes_and_records_what_verified(tmp_path, seed):
+    """Seeded: the gate answered any way — the release allowed up front (each line gated and written as soon as its
+    plan is whole) or refused or asked (the whole plan gated first), the plan approved, refused or not asked — on
+    the emulated demo plant, replies on booth-a lost now and then, and a module taught in by the floor between its
+    writes and its verification (a repair round writes it again). Either path: a refusal writes nothing; a consent
+    writes, verifies and repairs every module, and records it (the next plan is empty)."""
+    chooser = random.Random(seed)
+    allow, approve = chooser.choice(sorted(ANSWERS)), chooser.choice([None, True, False])
+    armed, written = False, set()
+
+    def lossy(frame, _number) -> set[Loss]:
+        """A reply lost now and then; and once, the floor teaches a module in between its writes and its verification."""
+        if not armed or not frame.address:
+            return set()
+        if frame.message[0] not in READS:
+            written.add(frame.address)
+        elif frame.address in written and not taught and chooser.random() < 0.5:
+            taught.append(frame.address)
+            emulated.emulators["booth-a"].teach_in(frame.address, 1, chooser.randint(100, 1800))
+        return {Loss.REPLY} if chooser.random() < 0.05 else set()
+
+    with emulated_plant(tmp_path, lossy={"booth-a": lossy}) as emulated:
+        before, lines_shown, taught = emulated.images(), [], []
+        gates = api.Gates(allow_axis_release=ANSWERS[allow], approve=None if approve is None else lambda _: approve,
+                          show_line=lambda line: lines_shown.extend(line.buses()))  # fmt: skip
+        consented = allow in ("allowed", "asked, yes") and approve is not False
+        armed = True
+        try:
+            result = api.apply(emulated.plant, gates=gates)
+        except (api.AxisReleaseRefused, api.NotApproved) as refused:
+            armed = False
+            assert not consented and "nothing was written" in str(refused)
+            assert emulated.images() == before and not lines_shown
+            return
+        armed = False
+        assert consented and result.verified and emulated.matches_plant()
+        assert sorted(lines_shown) == ([] if gates.asks else sorted(bus.name for bus in emulated.plant.buses))  # the path taken
+        assert not api.plan(emulated.plant).changes  # what verified is on the lines' records: nothing left to write
+        assert sum(run.course.repairs for run in result.runs) == len(taught) == 1  # write and verify: one stage, a repair in it
