@@ -1,9 +1,10 @@
 """The apply engine: an apply's writes, from the lines' threads, and what it keeps of them.
 
 `Keeping` is the journal and the records of axis releases (and E12), and stops every line when
-one of them cannot be kept; `Writing` takes the snapshot, writes and verifies (`execute`) a line's
-or the whole plan's changes — refusing a 10h/20h to a module its consent does not name (`NotConsented`) —
-and keeps the account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
+one of them cannot be kept; `Writing` runs the write stages of a line's or the whole plan's changes
+(`prc3cfg.core.stages.LinePlan`, with the gate's `Consent`) — `ready` (a 10h/20h to a module the consent does not
+name refused: `NotConsented`; the snapshot, the journal), `write_and_verify` (`execute`), `record` — and keeps the
+account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
 
 Does not own what is read and planned, nor the questions asked before writing and what an apply's
 outcome means (`prc3cfg.api`), nor how a module is written and verified (`prc3cfg.shell.apply`).
@@ -196,10 +197,11 @@ def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Seque
 
 
 class Writing:
-    """An apply's writes, a line or the whole plan at a time, from any line's thread: the runs of
-    the modules a plan changes, the snapshot of those modules saved before the first write on
+    """An apply's writes, a line or the whole plan at a time, from any line's thread (`write`: its stages in
+    turn): the runs of the modules a plan changes, the snapshot of those modules saved before the first write on
     their line — added to the apply's one snapshot file, written whole and atomically each time —
-    and journalled, then written and verified (`execute`); then the account of every run."""
+    and journalled (`ready`), then written and verified (`write_and_verify`) and recorded (`record`); then the
+    account of every run."""
 
     def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], held: Lines, keeping: Keeping,
                  verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
