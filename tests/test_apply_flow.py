@@ -26,7 +26,7 @@ import prc3cfg
 from prc3cfg import api
 from prc3cfg.api._apply import gate
 from prc3cfg.api._plan import select, shared_planner, targets
-from prc3cfg.core.stages import Consent, LinePlan
+from prc3cfg.core.stages import Consent, LinePlan, ReadBack
 from prc3cfg.shell import audit, pending_records
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import Keeping, NotConsented, Writing
@@ -189,9 +189,12 @@ def test_the_stages_driven_one_at_a_time(tmp_path):
         plant, before = emulated.plant, emulated.images()
         pairs = select(plant, None)
         planner = shared_planner(plant, pairs, writing.held.on_record)
-        images = read_lines(targets(pairs), writing.links, writing.held.on_record, "test", planner)  # read (and plan, as read)
+        read_backs: list[ReadBack] = []
+        images = read_lines(targets(pairs), writing.links, writing.held.on_record, "test", planner, then=read_backs.append)  # read
         bus = plant.buses[0].name
-        line = line_plan(planner, bus, images)  # plan: the line's changes, frozen
+        read_back = next(read for read in read_backs if read.bus == bus)
+        assert read_back.images == {key: image for key, image in images.items() if key[0] == bus}
+        line = line_plan(planner, read_back, writing.links[bus])  # plan: the line's changes, frozen
         assert {c.bus for c in line.changes} == {bus} and line.releasing
         with pytest.raises(api.AxisReleaseRefused, match="nothing was written"):
             gate(planner.plan(images, (bus,)), api.Gates(allow_axis_release=lambda _: False), "apply")

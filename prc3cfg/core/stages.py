@@ -1,10 +1,10 @@
-"""The values an apply's stages hand each other: a line's plan (`LinePlan`) and the consent to release axes the
-gate gives for it (`Consent`).
+"""The values an apply's stages hand each other.
 
 An apply runs, per line — or for every line at once, when the whole plan is reviewed first — read → plan → gate →
 write and verify → record (`prc3cfg.shell.planning.read_lines`, `prc3cfg.shell.planning.line_plan`,
 `prc3cfg.api._apply.gate`, `prc3cfg.shell.engine.Writing.write`); each stage takes values and gives values, and
-the questions are asked between them, on the caller's thread. Owns nothing but these values.
+the questions are asked between them, on the caller's thread. Owns nothing but these values: a line's read-back (`ReadBack`), its plan (`LinePlan`)
+and the consent to release axes the gate gives for it (`Consent`).
 """
 
 from __future__ import annotations
@@ -14,6 +14,14 @@ from dataclasses import dataclass
 
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plant_plan import ModuleChange
+
+
+@dataclass(frozen=True)
+class ReadBack:
+    """What the read stage gives for a line, once its last module is read: every module's image by (bus, address)."""
+
+    bus: str
+    images: Mapping[Key, ModuleImage]
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,10 @@
 """An apply without a question between the plan and the writes, line by line: `ByLine`.
 
 Each line is read back, planned and written in its own thread as soon as its own plan is whole, while the other
-lines are still read (`prc3cfg.shell.planning.read_lines`, `prc3cfg.shell.engine.Writing`). What the caller shows
+lines are still read (`prc3cfg.shell.planning.read_and_plan_lines`, `prc3cfg.shell.engine.Writing`). What the caller shows
 — each line's plan before its writes, the plant's once whole — the lines' threads give back to the caller's thread
 (`ByLine.run`, an iterator) and never call: the caller's loop shows it between the stages, and the lines go on.
-Per line the stages run in turn — read, plan (`read_lines`, `line_plan`), the gate's consent asked of the caller
+Per line the stages run in turn — read, plan (`read_and_plan_lines`), the gate's consent asked of the caller
 (`run` gives the line's plan, and is sent the `Consent` back), write and verify, record (`Writing.write`) — the
 lines at once, each in its own thread.
 
@@ -22,13 +22,13 @@ from dataclasses import dataclass, field
 
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
-from prc3cfg.core.stages import Consent
+from prc3cfg.core.stages import Consent, LinePlan, ReadBack
 from prc3cfg.core.what_to_read import Target
 from prc3cfg.errors import Interrupted
 from prc3cfg.shell import line_record
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.engine import Writing, Written
-from prc3cfg.shell.planning import SharedPlanner, line_plan, read_lines
+from prc3cfg.shell.planning import SharedPlanner, read_and_plan_lines
 from prc3cfg.shell.platform import next_of, result_of, wait_for
 from prc3cfg.shell.readback import LinesFailed
 
@@ -85,16 +85,16 @@ class ByLine:
         self._whole_told = self._closed = False
         self._unread: tuple[str, ...] = ()
 
-    def _line(self, bus: str, read: dict[Key, ModuleImage]) -> None:
-        """A line's read-back is in and planned (`read_lines`): its plan told, gated by the caller, then written — a
-        line with nothing to send needs no consent (it is only watched)."""
+    def _line(self, read_back: ReadBack, line: LinePlan) -> None:
+        """A line's read-back is in and planned (`read_and_plan_lines`): its plan told and gated by the caller, then
+        written — a line with nothing to send needs no consent (it is only watched)."""
+        bus, read = read_back.bus, read_back.images
         with self._lock:
             self.images.update(read)
             self._planned.append(bus)
             whole = len(self._planned) == len(self._lines)
             if whole:
                 self._whole_at = time.monotonic()
-        line = line_plan(self.planner, bus, read)
         consent = Consent()
         if any(c.steps for c in line.changes):  # what a line's writes follow is shown and gated before them
             told = _Told(LinePlanned(self.planner.plan(read, (bus,))))
@@ -121,7 +121,7 @@ class ByLine:
         """Every line read back, planned and written, from the lines' threads; then `_READ` told."""
         writing = self.writing
         try:
-            read_lines(self._targets, writing.links, writing.held.on_record, by, self.planner, progress=writing.phases.read, then=self._line)
+            read_and_plan_lines(self._targets, writing.links, writing.held.on_record, by, self.planner, progress=writing.phases.read, then=self._line)
         finally:
             self._told.put(_READ)
 
