@@ -41,11 +41,12 @@ from prc3cfg.core import plan_file, what_to_read
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plan_file import RECORD, PlanFile
 from prc3cfg.core.plant_plan import PlantPlan
+from prc3cfg.core.stages import Consent, LinePlan
 from prc3cfg.errors import Interrupted, UserError
 from prc3cfg.plant import Bus, Plant
 from prc3cfg.shell import audit, line_record, machine_folder, pending_records
 from prc3cfg.shell.apply import Verify
-from prc3cfg.shell.by_line import ByLine, LinePlanned
+from prc3cfg.shell.by_line import ByLine, LinePlanned, next_stage
 from prc3cfg.shell.cancel import Cancellation
 from prc3cfg.shell.engine import APPLIED, Keeping, Writing, Written
 from prc3cfg.shell.plant_files import load_plant
@@ -273,17 +274,20 @@ def _judged(written: Written, journal: Path, earlier: tuple[pending_records.Pend
 
 def _by_line(plant: Plant, wanted: Reads, chosen: Pairs, desired: dict[Key, ModuleImage] | None, gates: Gates, writing: Writing) -> Written:
     """No question stands between the plan and the writes (`Gates.asks`): each line written as soon
-    as its own plan is whole (`ByLine`), consented as the gates allowed up front; here, between the stages the
-    lines' threads run, each line's plan shown before its writes (`Gates.show_line`) and the plant's once whole
-    (`Gates.show`), with what it read (`Reads.reading`)."""
+    as its own plan is whole (`ByLine`); here, between the stages the lines' threads run, each line's plan shown
+    before its writes (`Gates.show_line`) and gated (`gate`, the consent sent back to the line), and the plant's
+    shown once whole (`Gates.show`), with what it read (`Reads.reading`)."""
     planner = shared_planner(plant, wanted.pairs, writing.held.on_record, desired, only_read=wanted.base is not None,
                              from_factory=wanted.from_factory)  # fmt: skip
-    consent = frozenset((bus.name, m.address) for bus, m in wanted.pairs) if gates.allow_axis_release is True else frozenset()
-    by_line = ByLine(writing, planner, wanted.targets, consent, show_lines=gates.show_line is not None)
-    for planned in by_line.run():
+    by_line = ByLine(writing, planner, wanted.targets)
+    stages = by_line.run()
+    consent: Consent | None = None
+    while (planned := next_stage(stages, consent)) is not None:
+        consent = None
         if isinstance(planned, LinePlanned):
             if gates.show_line is not None:
                 gates.show_line(planned.plan)
+            consent = gate(planned.plan, gates, writing.command)
             continue
         the_plan = replace(planned.plan, reading=wanted.reading(chosen, planned.read))
         if gates.show is not None:
@@ -294,9 +298,9 @@ def _by_line(plant: Plant, wanted: Reads, chosen: Pairs, desired: dict[Key, Modu
 
 
 def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None, plan_file: tuple[Path, PlanFile] | None,
-                gates: Gates, writing: Writing, options: LineOptions) -> tuple[PlantPlan, dict[Key, ModuleImage], frozenset[Key], float]:  # fmt: skip
-    """Read back and plan the whole plant (or prove the plan file), show it and pass the gates: the
-    plan, what was read, the modules whose axes the answers consent to release, and the seconds the reading took."""
+                gates: Gates, writing: Writing, options: LineOptions) -> tuple[PlantPlan, dict[Key, ModuleImage], Consent, float]:  # fmt: skip
+    """Read back and plan the whole plant (or prove the plan file), show it and pass the gate: the plan, what was
+    read, the consent to release axes the answers gave (`gate`), and the seconds the reading took."""
     pairs, to_read, links = wanted.pairs, wanted.targets, writing.links
     started = time.monotonic()
     if plan_file is None:
@@ -309,28 +313,35 @@ def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, M
     reading = time.monotonic() - started
     if gates.show is not None:
         gates.show(the_plan)
+    return the_plan, images, gate(the_plan, gates, writing.command), reading
+
+
+def gate(the_plan: PlantPlan, gates: Gates, command: str) -> Consent:
+    """The gate stage, between the plan and the writes — a line's plan or the plant's — on the caller's thread:
+    the modules whose axes the answers consent to release (`Gates.allow_axis_release`, asked only when the plan
+    releases any), once `Gates.approve` approved the plan; `AxisReleaseRefused` or `NotApproved` else, nothing
+    written. A plan that changes nothing asks nothing."""
     if not the_plan.changes:
-        return the_plan, images, frozenset(), reading
+        return Consent()
     releasing = [f"{m.bus}/{m.name}" for m in the_plan.axis_releases]
     allow = gates.allow_axis_release
-    allow_axis_release = allow(releasing) if callable(allow) and releasing else allow is True
-    if releasing and not allow_axis_release:
+    allowed = allow(releasing) if callable(allow) and releasing else allow is True
+    if releasing and not allowed:
         raise AxisReleaseRefused(
             f"the plan releases the axes of {', '.join(releasing)} (10h/20h: they must travel to their "
-            f"reference point before production) — nothing was written; {writing.command} again with --allow-axis-release"
+            f"reference point before production) — nothing was written; {command} again with --allow-axis-release"
         )
     if gates.approve is not None and not gates.approve(the_plan):
-        raise NotApproved(f"not {'restored' if writing.command == 'restore' else 'applied'} — nothing was written")
-    consent = frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allow_axis_release else frozenset()
-    return the_plan, images, consent, reading
+        raise NotApproved(f"not {'restored' if command == 'restore' else 'applied'} — nothing was written")
+    return Consent(frozenset((m.bus, m.address) for m in the_plan.axis_releases) if allowed else frozenset())
 
 
-def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, ModuleImage], consent: frozenset[Key], reading: float) -> Written:
-    """The whole plan written, every line at once: the snapshot, the writes (`consent`: see `Writing.write`), the account."""
+def _write_whole(writing: Writing, the_plan: PlantPlan, images: dict[Key, ModuleImage], consent: Consent, reading: float) -> Written:
+    """The whole plan written, every line at once: the write stages (`Writing.write`) of every line's changes, the account."""
     if not the_plan.changes:
         return Written(the_plan)
     writing.whole(the_plan)
-    writing.write(the_plan.modules, images, consent)
+    writing.write(LinePlan(the_plan.modules, images), consent)
     return writing.account(the_plan, {"reading": reading})
 
 

@@ -32,7 +32,7 @@ from prc3cfg.errors import UserError
 from prc3cfg.plant import Bus, Plant, parse_plant
 from prc3cfg.shell import line_record, pending_records
 from prc3cfg.shell.files import JSON_LIMIT, FileProblem, Why, read_json
-from prc3cfg.shell.planning import SharedPlanner, read_lines
+from prc3cfg.shell.planning import SharedPlanner, read_and_plan_lines, read_lines
 from prc3cfg.shell.plant_files import load_plant, plant_bytes
 from prc3cfg.shell.platform import resolved
 from prc3cfg.shell.probe import probe_timeout
@@ -157,8 +157,9 @@ def read_targets(targets_: list[Target], held: Lines, options: LineOptions, comm
     it is not forgotten."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
-        images = read_lines(targets_, held.links, held.on_record, line_record.who(command, plant.path), planner,
-                            progress=options.progress.advance)  # fmt: skip
+        by, advance = line_record.who(command, plant.path), options.progress.advance
+        images = read_lines(targets_, held.links, held.on_record, by, progress=advance) if planner is None else \
+            read_and_plan_lines(targets_, held.links, held.on_record, by, planner, progress=advance)  # fmt: skip
     if options.cancel is not None:
         options.cancel.check()
     return images

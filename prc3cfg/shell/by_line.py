@@ -1,10 +1,12 @@
 """An apply without a question between the plan and the writes, line by line: `ByLine`.
 
 Each line is read back, planned and written in its own thread as soon as its own plan is whole, while the other
-lines are still read (`prc3cfg.shell.planning.read_lines`, `prc3cfg.shell.engine.Writing`). What the caller shows
+lines are still read (`prc3cfg.shell.planning.read_and_plan_lines`, `prc3cfg.shell.engine.Writing`). What the caller shows
 — each line's plan before its writes, the plant's once whole — the lines' threads give back to the caller's thread
 (`ByLine.run`, an iterator) and never call: the caller's loop shows it between the stages, and the lines go on.
-The consent to release axes is a value the writes are given (`Writing.write` refuses a 10h/20h without it).
+Per line the stages run in turn — read, plan (`read_and_plan_lines`), the gate's consent asked of the caller
+(`run` gives the line's plan, and is sent the `Consent` back), write and verify, record (`Writing.write`) — the
+lines at once, each in its own thread.
 
 Does not own the writes and the account (`prc3cfg.shell.engine`), nor what is read and shown (`prc3cfg.api`).
 """
@@ -14,25 +16,26 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Generator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.plant_plan import PlantPlan
+from prc3cfg.core.stages import Consent, LinePlan, ReadBack
 from prc3cfg.core.what_to_read import Target
 from prc3cfg.errors import Interrupted
 from prc3cfg.shell import line_record
 from prc3cfg.shell.cancel import main_thread_only
 from prc3cfg.shell.engine import Writing, Written
-from prc3cfg.shell.planning import SharedPlanner, read_lines
+from prc3cfg.shell.planning import SharedPlanner, read_and_plan_lines
 from prc3cfg.shell.platform import next_of, result_of, wait_for
 from prc3cfg.shell.readback import LinesFailed
 
 
 @dataclass(frozen=True)
 class LinePlanned:
-    """A line's own plan, whole (`ByLine.run`): the line writes once it is shown."""
+    """A line's own plan, whole (`ByLine.run`): the line writes once the caller sends the gate's `Consent` back."""
 
     plan: PlantPlan
 
@@ -49,11 +52,12 @@ class WholePlanned:
 
 @dataclass
 class _Told:
-    """A line's plan told to `ByLine.run`'s caller: the line waits for `done`, and writes if it was `shown`."""
+    """A line's plan told to `ByLine.run`'s caller: the line waits for `done`, and writes with the `consent` the
+    caller sent back — none: the caller stopped first."""
 
     planned: LinePlanned
     done: threading.Event = field(default_factory=threading.Event)
-    shown: bool = False
+    consent: Consent | None = None
 
 
 _WHOLE, _READ = "whole", "read"  # told by the lines' threads: the plant's plan is whole; every line read (and written)
@@ -67,12 +71,11 @@ class ByLine:
     both (`Written.unread`).
 
     The lines' threads call nothing of the caller's: `run` gives back, in the caller's thread, each line's
-    plan before that line's first write (with `show_lines`) and the plant's plan once whole, the writes going
-    on; `account` then. `consent`: the modules whose axes the operator agreed to release (`Writing.write`)."""
+    plan before that line's first write — the caller sends back the gate's consent — and the plant's plan once
+    whole, the writes going on; `account` then."""
 
-    def __init__(self, writing: Writing, planner: SharedPlanner, targets: Sequence[Target], consent: frozenset[Key], *,
-                 show_lines: bool = False) -> None:  # fmt: skip
-        self.writing, self.planner, self._targets, self._consent, self._show_lines = writing, planner, targets, consent, show_lines
+    def __init__(self, writing: Writing, planner: SharedPlanner, targets: Sequence[Target]) -> None:
+        self.writing, self.planner, self._targets = writing, planner, targets
         self._lines = {target.bus for target in targets}  # the lines to read
         self._lock = threading.Lock()
         self.images: dict[Key, ModuleImage] = {}  # what the lines planned so far read
@@ -82,16 +85,18 @@ class ByLine:
         self._whole_told = self._closed = False
         self._unread: tuple[str, ...] = ()
 
-    def _line(self, bus: str, read: dict[Key, ModuleImage]) -> None:
-        """A line's read-back is in and planned (`read_lines`): its plan told, then it is written."""
+    def _line(self, read_back: ReadBack, line: LinePlan) -> None:
+        """A line's read-back is in and planned (`read_and_plan_lines`): its plan told and gated by the caller, then
+        written — a line with nothing to send needs no consent (it is only watched)."""
+        bus, read = read_back.bus, read_back.images
         with self._lock:
             self.images.update(read)
             self._planned.append(bus)
             whole = len(self._planned) == len(self._lines)
             if whole:
                 self._whole_at = time.monotonic()
-        changes = self.planner.line_changes(bus)
-        if self._show_lines and any(c.steps for c in changes):  # what a line's writes follow is shown before them
+        consent = Consent()
+        if any(c.steps for c in line.changes):  # what a line's writes follow is shown and gated before them
             told = _Told(LinePlanned(self.planner.plan(read, (bus,))))
             with self._lock:
                 closed = self._closed
@@ -99,10 +104,11 @@ class ByLine:
                     self._told.put(told)
             if not closed:
                 wait_for(told.done)  # the caller's `run` sets it, or its end does
-            if not told.shown:  # the caller stopped before it was shown: nothing is written on the line
+            if told.consent is None:  # the caller stopped before it gated the line: nothing is written on it
                 raise Interrupted()
+            consent = told.consent
         # the plant's plan told once the last line's first write is acknowledged: its rendering never holds that frame back
-        self.writing.write(changes, read, self._consent, started=self._whole if whole else None)
+        self.writing.write(line, consent, started=self._whole if whole else None)
 
     def _whole(self) -> None:
         """The plant's plan told (once), the writes going on."""
@@ -115,7 +121,7 @@ class ByLine:
         """Every line read back, planned and written, from the lines' threads; then `_READ` told."""
         writing = self.writing
         try:
-            read_lines(self._targets, writing.links, writing.held.on_record, by, self.planner, progress=writing.phases.read, then=self._line)
+            read_and_plan_lines(self._targets, writing.links, writing.held.on_record, by, self.planner, progress=writing.phases.read, then=self._line)
         finally:
             self._told.put(_READ)
 
@@ -124,10 +130,11 @@ class ByLine:
             read, done, at = dict(self.images), set(self._planned), self._whole_at
         return WholePlanned(self.planner.plan(read, done), read, at)
 
-    def run(self) -> Iterator[LinePlanned | WholePlanned]:
+    def run(self) -> Generator[LinePlanned | WholePlanned, Consent | None, None]:
         """Every line read back, planned and written, its threads at work while this gives back, in the caller's
-        thread, each line's plan — that line waits until the caller asks for the next — and the plant's plan once
-        whole. A signal must wait its turn meanwhile (`LineOptions.deferred`, the caller's)."""
+        thread, each line's plan — that line waits until the caller sends the gate's `Consent` back — and the plant's
+        plan once whole (nothing is sent back). A signal must wait its turn meanwhile (`LineOptions.deferred`, the
+        caller's)."""
         writing = self.writing
         with ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as reader:
             writing.phases.reading(len(self._targets))
@@ -138,8 +145,7 @@ class ByLine:
                         yield self._whole_plan()
                     elif isinstance(told, _Told):
                         try:
-                            yield told.planned
-                            told.shown = True
+                            told.consent = yield told.planned
                         finally:
                             told.done.set()
             finally:
@@ -174,3 +180,12 @@ class ByLine:
         if not writing.runs:
             return Written(planned)
         return writing.account(planned, unread=self._unread)
+
+
+def next_stage(stages: Generator[LinePlanned | WholePlanned, Consent | None, None], consent: Consent | None) -> LinePlanned | WholePlanned | None:
+    """What `ByLine.run` gives next, `consent` — the gate's for the line it gave last, else None — sent back; None
+    once it is through."""
+    try:
+        return stages.send(consent)
+    except StopIteration:
+        return None

@@ -1,9 +1,10 @@
 """The apply engine: an apply's writes, from the lines' threads, and what it keeps of them.
 
 `Keeping` is the journal and the records of axis releases (and E12), and stops every line when
-one of them cannot be kept; `Writing` takes the snapshot, writes and verifies (`execute`) a line's
-or the whole plan's changes — refusing a 10h/20h to a module its consent does not name (`NotConsented`) —
-and keeps the account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
+one of them cannot be kept; `Writing` runs the write stages of a line's or the whole plan's changes
+(`prc3cfg.core.stages.LinePlan`, with the gate's `Consent`) — `ready` (a 10h/20h to a module the consent does not
+name refused: `NotConsented`; the snapshot, the journal), `write_and_verify` (`execute`), `record` — and keeps the
+account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
 
 Does not own what is read and planned, nor the questions asked before writing and what an apply's
 outcome means (`prc3cfg.api`), nor how a module is written and verified (`prc3cfg.shell.apply`).
@@ -24,6 +25,7 @@ from prc3cfg.core.apply_states import Event
 from prc3cfg.core.image import Key, ModuleImage
 from prc3cfg.core.outcome import ModuleOutcome, to_travel
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
+from prc3cfg.core.stages import Consent, LinePlan
 from prc3cfg.core.what_to_read import Known
 from prc3cfg.errors import NotSent, UserError
 from prc3cfg.plant import Bus, Plant
@@ -55,6 +57,17 @@ class Written:
     def verified(self) -> bool:
         """Every module the plan changes written and verified, and every record kept: nothing stopped short."""
         return bool(self.runs) and all(run.verified for run in self.runs) and not (self.unread or self.trouble or self.interrupted)
+
+
+@dataclass(frozen=True)
+class Sending:
+    """A plan's writes made ready (`Writing.ready`): the runs of its modules — each filled in as it is written and
+    verified — what their lines' records knew of them before (given back once verified, `Writing.record`), and the
+    modules whose axes a repair may release."""
+
+    runs: tuple[ModuleRun, ...]
+    known: dict[str, dict[int, Known]]
+    consented: frozenset[Key]
 
 
 class NotConsented(UserError):
@@ -184,10 +197,11 @@ def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Seque
 
 
 class Writing:
-    """An apply's writes, a line or the whole plan at a time, from any line's thread: the runs of
-    the modules a plan changes, the snapshot of those modules saved before the first write on
+    """An apply's writes, a line or the whole plan at a time, from any line's thread (`write`: its stages in
+    turn): the runs of the modules a plan changes, the snapshot of those modules saved before the first write on
     their line — added to the apply's one snapshot file, written whole and atomically each time —
-    and journalled, then written and verified (`execute`); then the account of every run."""
+    and journalled (`ready`), then written and verified (`write_and_verify`) and recorded (`record`); then the
+    account of every run."""
 
     def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], held: Lines, keeping: Keeping,
                  verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
@@ -224,40 +238,52 @@ class Writing:
         if self._whole and self._taken is not None and len(self._taken.images) == modules:
             self.options.progress.note(f"Snapshot of the modules before writing: {self.snapshot}")
 
-    def write(self, changes: Sequence[ModuleChange], images: Mapping[Key, ModuleImage], consent: frozenset[Key],
-              started: Callable[[], None] | None = None) -> None:  # fmt: skip
-        """Write and verify these changes — one line's, or every line's — once their modules are in
-        the snapshot and the journal. `consent`: the modules whose axes the operator agreed to release (with the
-        plan shown, or up front): a change that releases another's is refused, before anything — `NotConsented` —
-        and a repair may release only those a change of the plan releases. `started()` at each write
+    def write(self, line: LinePlan, consent: Consent, started: Callable[[], None] | None = None) -> None:
+        """The write stages of a line's plan — or the whole plan's — in turn: `ready`, `write_and_verify`, `record`
+        (also when writing and verifying ended early: what verified is known). `started()` at each write
         acknowledged, or at once with none to make."""
-        if refused := [c for c in changes if c.releases_axes and (c.bus, c.address) not in consent]:
+        started = started or _nothing
+        sending = self.ready(line, consent)
+        if sending is None:
+            started()
+            return
+        try:
+            self.write_and_verify(sending, started)
+        finally:
+            self.record(sending)
+
+    def ready(self, line: LinePlan, consent: Consent) -> Sending | None:
+        """The runs of the changes, once their modules are in the snapshot and the journal — or None: nothing to
+        send, or the writes stay back (a record could not be kept, each run says "nothing was sent to it").
+        `consent`: the modules whose axes the operator agreed to release (with the plan shown, or up front): a
+        change that releases another's is refused, before anything — `NotConsented`."""
+        if refused := [c for c in line.changes if c.releases_axes and (c.bus, c.address) not in consent.releases]:
             raise NotConsented(f"{', '.join(f'bus {c.bus}, module {c.address} ({c.name})' for c in refused)}: the plan releases the "
                                "axes (10h/20h), and no consent to that was given with it — nothing was sent to any module: review "
                                "the plan, and allow the release (--allow-axis-release)")  # fmt: skip
-        started = started or _nothing
-        runs = self._runs(changes)
+        runs = self._runs(line.changes)
         if not runs:
-            started()
-            return
-        known = self._before_writing(runs, images)
+            return None
+        known = self._before_writing(runs, line.images)
         if self.keeping.trouble is not None:
             for run in runs:
                 run.process(Event.CANCELLED)
                 run.problem = "nothing was sent to it"
-            started()
-            return
-        consented = frozenset((c.bus, c.address) for c in changes if c.releases_axes)  # each in `consent`: refused above else
+            return None
+        return Sending(tuple(runs), known, line.releasing)  # each in `consent`: refused above else
+
+    def write_and_verify(self, sending: Sending, started: Callable[[], None]) -> None:
+        """The runs written and verified (`execute`), their outcomes left in them; a repair may release only the
+        axes a change of the plan releases. One stage, not a write and then a verify: on a line every module is
+        written before any is verified (a module's verification sees what a damaged frame meant for another did to
+        it), and a verification that finds a difference writes again (a repair round) and verifies again."""
 
         def wrote() -> None:
             self.phases.wrote()
             started()
 
-        try:
-            execute(runs, self.links, self._costs, tick=wrote,
-                    written=self.phases.line_written, verified=self.phases.verified, consented=consented, verify=self.verify)  # fmt: skip
-        finally:
-            self._verified(runs, known)
+        execute(list(sending.runs), self.links, self._costs, tick=wrote, written=self.phases.line_written, verified=self.phases.verified,
+                consented=sending.consented, verify=self.verify)  # fmt: skip
 
     def _before_writing(self, runs: list[ModuleRun], images: Mapping[Key, ModuleImage]) -> dict[str, dict[int, Known]]:
         """The runs' modules dropped from their lines' records — not known until verified; what was
@@ -296,12 +322,12 @@ class Writing:
         self._taken.images.update({(r.bus, r.address): what_to_read.from_factory(images[(r.bus, r.address)], r.assumed) for r in runs})
         return self._taken.saved()
 
-    def _verified(self, runs: list[ModuleRun], known: dict[str, dict[int, Known]]) -> None:
+    def record(self, sending: Sending) -> None:
         """What the modules that verified hold, back into their lines' records: the read-back with the
         steps' effect, and what the record knew of the rest (`what_to_read.verified`)."""
         when, by = line_record.now(), line_record.who(self.command, self.plant.path)
-        for bus, held in known.items():
-            done = {r.address: r for r in runs if r.bus == bus and r.verified}
+        for bus, held in sending.known.items():
+            done = {r.address: r for r in sending.runs if r.bus == bus and r.verified}
             try:
                 self.records[bus].update({a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
             except UserError as error:  # they stay unknown (forgotten before the writes): the next plan reads them in full

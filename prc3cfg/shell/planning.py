@@ -1,4 +1,5 @@
-"""The lines read back and planned as they are read: `read_lines`, and the plant's `Planner`
+"""The lines read back and planned as they are read — the read stage (`read_lines`, a `ReadBack` per line) and the
+plan stage (`line_plan`, a `LinePlan`), pipelined per line (`read_and_plan_lines`) — and the plant's `Planner`
 (`prc3cfg.core.plant_planner`) as the lines' threads share it: `SharedPlanner`.
 
 Each line is read, planned and written in its own thread, and modules alike on any line are
@@ -20,9 +21,10 @@ from typing import TYPE_CHECKING
 from prc3cfg.core.image import Key, ModuleImage, Wanted
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.plant_planner import Planner
+from prc3cfg.core.stages import LinePlan, ReadBack
 from prc3cfg.core.what_to_read import Target
 from prc3cfg.shell.probe import answering
-from prc3cfg.shell.readback import LineRead, read_all
+from prc3cfg.shell.readback import read_all
 
 if TYPE_CHECKING:
     from prc3cfg.shell.link.client import Link
@@ -67,17 +69,37 @@ class SharedPlanner:
             return self._planner.plan([w for w in self.wanted if lines is None or w.bus in lines], actual)
 
 
+def line_plan(planner: SharedPlanner, read: ReadBack, link: Link | None) -> LinePlan:
+    """The plan stage of a line `read_lines` read — each of its modules planned as it was read: the line settled,
+    its broadcasts' silent addresses probed on `link` (`SharedPlanner.plan_line`), and its changes, to gate and write."""
+    planner.plan_line(read.bus, read.images, link)
+    return LinePlan(tuple(planner.line_changes(read.bus)), read.images)
+
+
 def read_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str, planner: SharedPlanner | None = None,
-               *, progress: Callable[[], None] | None = None, then: LineRead | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
-    """Every target read back (`read_all`: the lines at once), each line's read-back into its record as soon as it is
-    in (`OnRecord.saw`, what `by` saw); with a `planner`, each module planned as soon as it is read and each line as
-    soon as its last module is — while the other lines are still read; then `then(bus, images)` (to write the line)."""
+               *, progress: Callable[[], None] | None = None, then: Callable[[ReadBack], None] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
+    """The read stage: every target read back (`read_all`: the lines at once), each line's read-back into its record
+    as soon as it is in (`OnRecord.saw`, what `by` saw) and given to `then` — the plan stage (`line_plan`), in the
+    line's thread, while the other lines are still read; with a `planner`, each module planned as soon as it is read."""
 
     def line_read(bus: str, images: dict[Key, ModuleImage]) -> None:
         on_record.saw(bus, images, by)
-        if planner is not None:
-            planner.plan_line(bus, images, links[bus])
         if then is not None:
-            then(bus, images)
+            then(ReadBack(bus, images))
 
     return read_all(targets, links, progress=progress, each=None if planner is None else planner.plan_module, then=line_read)
+
+
+def read_and_plan_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str, planner: SharedPlanner, *,
+                  progress: Callable[[], None] | None = None, then: Callable[[ReadBack, LinePlan], None] | None = None,
+                  ) -> dict[Key, ModuleImage]:  # fmt: skip
+    """The read and plan stages pipelined line by line (`read_lines`, `line_plan`): each line planned in its own
+    thread as soon as its last module is read — the other lines still being read — then `then(read_back, line_plan)`
+    (to gate and write the line)."""
+
+    def plan(read: ReadBack) -> None:
+        line = line_plan(planner, read, links[read.bus])
+        if then is not None:
+            then(read, line)
+
+    return read_lines(targets, links, on_record, by, planner, progress=progress, then=plan)
