@@ -321,17 +321,22 @@ def _short_runs_out(problem: PlanningProblem, kinds: Kinds, runs: list[Run]) -> 
 
 def _message_initialised(problem: PlanningProblem, layout: Layout) -> Iterator[Kinds]:
     """Per 40h..46h message of `layout` (a field that fits one) and per 33h run, its programs
-    initialised where that takes their item out (together they save the message)."""
+    initialised where that takes their item out (together they save the message) — and, the other
+    way, its initialised programs kept where their init put the item there (an 11h that wipes
+    programs already as wanted, restored by one 40h: a 14h and a 13h around them save that 40h)."""
     kinds = layout.kinds
     one_message = [(bit, mask) for bit, mask, kind in _item_channels(layout.writes) if kind.messages(mask.bit_count()) <= 1]
     runs33 = [(PV_BITS, (1 << (last + 1)) - (1 << first)) for first, last in layout.writes.part_runs]
     for bits, mask in one_message + runs33:
-        changed = list(kinds)
+        initialised, kept = list(kinds), list(kinds)
         for i in members(mask):
             fixing = [k for k in problem.kinds[1:] if not problem.masks[k][i] & bits]
             if kinds[i] == KEEP and fixing:
-                changed[i] = fixing[0]
-        yield tuple(changed)
+                initialised[i] = fixing[0]
+            elif kinds[i] != KEEP and not problem.masks[KEEP][i] & bits:
+                kept[i] = KEEP
+        yield tuple(initialised)
+        yield tuple(kept)
 
 
 def _moved_across(problem: PlanningProblem, kinds: Kinds) -> list[Kinds]:
