@@ -89,7 +89,14 @@ from typing import TYPE_CHECKING, NamedTuple
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.framing.stx import START
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    ModuleImage,
+    Program,
+    default_program,
+)
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.planner import ModulePlan, plan_module, summarise
 from prc3cfg.core.planner.problem import FIELD_BIT, INIT_AFTER, INIT_BEFORE, KEEP, PlanningProblem

@@ -54,7 +54,14 @@ from pathlib import Path
 
 from prc3cfg import api
 from prc3cfg.core import plan_file, render
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, PROGRAM_NUMBERS, ModuleImage, Program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    PROGRAM_NUMBERS,
+    ModuleImage,
+    Program,
+)
 from prc3cfg.plant.document import MAX_NODES
 from prc3cfg.plant.importer import module_entry, plant_yaml
 from prc3cfg.plant.loader import MAX_PART_NODES

@@ -52,7 +52,8 @@ def utf8_output() -> None:
 
 
 def _leave(code: str | int | None) -> None:
-    """End the process with `code`: at once where nothing is left to do (module docstring), else as Python does."""
+    """End the process with `code`: at once where nothing is left to do (module docstring), else as Python
+    does."""
     code = 0 if code is None else code
     alone = all(thread is threading.main_thread() or thread.daemon for thread in threading.enumerate())
     if not isinstance(code, int) or not alone or sys.gettrace() is not None or sys.getprofile() is not None:

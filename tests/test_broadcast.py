@@ -21,7 +21,15 @@ from lossy import Loss
 from prc3cfg.core import broadcast_search, codec, device
 from prc3cfg.core.broadcast_search import SharingMemo, SharingModule, share
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_FIELDS, ModuleImage, Program, SystemParameters, Wanted, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_FIELDS,
+    ModuleImage,
+    Program,
+    SystemParameters,
+    Wanted,
+    default_program,
+)
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.plan_file import review_sha256
 from prc3cfg.core.planner import plan_module

@@ -10,7 +10,14 @@ from types import SimpleNamespace
 
 import pytest
 
-from prc3cfg.core.gateway import GatewayRefused, GatewaySettings, Refusal, format_data_block, init_data_block, refusals
+from prc3cfg.core.gateway import (
+    GatewayRefused,
+    GatewaySettings,
+    Refusal,
+    format_data_block,
+    init_data_block,
+    refusals,
+)
 from prc3cfg.core.line import LineSettings
 from prc3cfg.errors import UserError
 

@@ -33,7 +33,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program
-from prc3cfg.core.motion import DWELL, MOVE, MotionError, OutputInterval, TurningPoint, chain_motions, paired_chains
+from prc3cfg.core.motion import (
+    DWELL,
+    MOVE,
+    MotionError,
+    OutputInterval,
+    TurningPoint,
+    chain_motions,
+    paired_chains,
+)
 
 TOLERANCE = 1e-9
 

@@ -18,7 +18,16 @@ from test_link import LatePort
 
 from prc3cfg.core import codec
 from prc3cfg.core.device import ModuleState
-from prc3cfg.core.exchange import ACK_TO_READ, FIRMWARE_ADDED, Asked, LinkStep, Protection, asked, judge, protection
+from prc3cfg.core.exchange import (
+    ACK_TO_READ,
+    FIRMWARE_ADDED,
+    Asked,
+    LinkStep,
+    Protection,
+    asked,
+    judge,
+    protection,
+)
 from prc3cfg.core.framing import Direction, Frame, get_framing
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.errors import UserError

@@ -29,12 +29,12 @@ the planner and its cache, `prc3cfg.core.plant_planner`; plant files, `prc3cfg.p
 links, locks, records, apply, files, the emulator, `prc3cfg.shell`), nor arguments, prompts
 and output (`prc3cfg.cli`). `__all__` is what the CLI and users' scripts call.
 
-Its modules, one workflow each: `_types` (the values and errors), `_plan` (load, select, what to
-read, read, plan, drift), `_apply` (apply, restore, plan files), `_bus` (scan, import, doctor),
-`_plant` (adopt, records, gateways, pictures), `_policy` (the policy judged), `_fleet` (a fleet's lines, its
-CI matrix and summary), `_emulator` (an emulated bus) and `_machine` (the machine's folders, ports and terminal).
-Each name is imported from its module when it is first asked for (`__getattr__`): a script, or a command,
-loads what it uses — a plan from saved images no link, no pyserial.
+Its modules, one workflow each: `_types` (the values and errors), `_plan` (load, select, what to read, read,
+plan, drift), `_apply` (apply, restore, plan files), `_bus` (scan, import, doctor), `_plant` (adopt, records,
+gateways, pictures), `_policy` (the policy judged), `_fleet` (a fleet's lines, its CI matrix and summary),
+`_emulator` (an emulated bus) and `_machine` (the machine's folders, ports and terminal). Each name is
+imported from its module when it is first asked for (`__getattr__`): a script, or a command, loads what it
+uses — a plan from saved images no link, no pyserial.
 """
 
 from __future__ import annotations
@@ -118,15 +118,19 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time each i
 #: Where each name of the API lives (a test checks it against the imports above).
 _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.api._apply": ("apply", "plan_document", "plan_file_plant", "restore", "told"),
-    "prc3cfg.api._bus": ("doctor", "import_modules", "import_plant", "measurable", "scan", "slower_than_priced"),
+    "prc3cfg.api._bus": ("doctor", "import_modules", "import_plant", "measurable", "scan",
+                         "slower_than_priced"),
     "prc3cfg.api._emulator": ("emulator", "listen", "open_pty", "served_pty"),
-    "prc3cfg.api._machine": ("SerialPort", "device_number", "serial_ports", "setup_machine", "terminal_path", "unshared_records", "wait_for"),
+    "prc3cfg.api._machine": ("SerialPort", "device_number", "serial_ports", "setup_machine", "terminal_path",
+                             "unshared_records", "wait_for"),
     "prc3cfg.api._plan": ("drift", "left_alone", "load", "load_images", "plan", "read", "select"),
-    "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format", "prune_records",
+    "prc3cfg.api._plant": ("Adoption", "adopt", "init_data_block", "list_records", "picture", "plot_format",
+                           "prune_records",
                            "serve_status", "status", "verify_records", "write_adoption"),
     "prc3cfg.api._fleet": ("fleet_lines", "fleet_matrix", "fleet_summary"),
     "prc3cfg.api._policy": ("PolicyRefused", "PolicyReport", "WindowShut", "policy"),
-    "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates", "NotApproved"),
+    "prc3cfg.api._types": ("ApplyFailed", "ApplyInterrupted", "ApplyResult", "AxisReleaseRefused", "Gates",
+                           "NotApproved"),
     "prc3cfg.core.plan_file": ("StalePlan",),
     "prc3cfg.core.render": ("Drift",),
     "prc3cfg.core.axes": ("Release",),
@@ -141,7 +145,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.shell.phases": ("Progress",),
     "prc3cfg.shell.recorded_runs": ("Pruned", "RecordedRun"),
     "prc3cfg.shell.sessions": ("BareLine", "LineOptions", "default_parity"),
-}  # fmt: skip
+}
 
 #: What the CLI, the pytest plugin and users' scripts call (a test keeps the CLI to these).
 __all__ = sorted(name for names in _HOMES.values() for name in names)

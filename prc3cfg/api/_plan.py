@@ -71,12 +71,13 @@ def targets(pairs: Pairs) -> list[Target]:
 
 def record(held: OnRecord) -> dict[Key, Known]:
     """What the records of these buses' lines say their modules hold, by (bus, address)."""
-    return {(bus, address): known for bus, line in held.records.items() for address, known in line.known().items()}
+    return {(bus, address): known for bus, line in held.records.items()
+            for address, known in line.known().items()}
 
 
 def as_it_stands(plant: Plant, buses: Iterable[Bus]) -> OnRecord:
-    """What is on record of these buses' lines, read now — outside a command holding the lines (`lines` reads it
-    under their locks)."""
+    """What is on record of these buses' lines, read now — outside a command holding the lines (`lines` reads
+    it under their locks)."""
     return on_record({bus.name: bus_line_keys(plant, bus) for bus in buses})
 
 
@@ -91,26 +92,33 @@ class Reads:
     pairs: Pairs
     targets: list[Target]
     base: str | None = None
-    why: dict[Key, str] = field(default_factory=dict)  # read in full before any evidence: not on record, too old, E12
+    # read in full before any evidence: not on record, too old, E12
+    why: dict[Key, str] = field(default_factory=dict)
     known: dict[Key, Known] = field(default_factory=dict)
-    from_factory: bool = False  # an apply's: factory-fresh modules' managed programs planned from the factory's (`commissioned`)
+    # an apply's: factory-fresh modules' managed programs planned from the factory's (`commissioned`)
+    from_factory: bool = False
 
     def reading(self, chosen: Pairs, images: dict[Key, ModuleImage]) -> Reading | None:
         """What the plan says it read now and took as known, once `images` are read."""
         if self.base is None:
             return None
         unread = tuple(f"{bus.name}/{m.name}" for bus, m in chosen if (bus.name, m.address) not in images)
-        skipped = {key: self._taken(m.desired_image(), images[key]) for bus, m in chosen if (key := (bus.name, m.address)) in images}
+        skipped = {key: self._taken(m.desired_image(), images[key]) for bus, m in chosen
+                   if (key := (bus.name, m.address)) in images}
         other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
-        # a module whose programs were not read is on the record (`to_read`), but for an apply of a plan file whose
-        # record changed since: left out, and the plan file's `taken` then refused (`plan_file.check_plan`)
-        resting = {f"{bus.name}/{m.name}": self.known[key] for bus, m in chosen if skipped.get(key := (bus.name, m.address)) and key in self.known}
+        # a module whose programs were not read is on the record (`to_read`), but for an apply of a plan file
+        # whose record changed since: left out, and the plan file's `taken` then refused
+        # (`plan_file.check_plan`)
+        resting = {f"{bus.name}/{m.name}": self.known[key] for bus, m in chosen
+                   if skipped.get(key := (bus.name, m.address)) and key in self.known}
         oldest = min(resting.items(), key=lambda item: datetime.fromisoformat(item[1].since), default=None)
-        return Reading(self.base, unread, skipped, other, {name: known.said() for name, known in resting.items()},
-                       None if oldest is None else Oldest(oldest[0], oldest[1].since, oldest[1].by))  # fmt: skip
+        return Reading(self.base, unread, skipped, other,
+                       {name: known.said() for name, known in resting.items()},
+                       None if oldest is None else Oldest(oldest[0], oldest[1].since, oldest[1].by))
 
     def _taken(self, desired: ModuleImage, image: ModuleImage) -> tuple[int, ...]:
-        """The managed programs `image` lacks that were taken from the line's record: not those planned from the factory's."""
+        """The managed programs `image` lacks that were taken from the line's record: not those planned from
+        the factory's."""
         assumed = what_to_read.assumed(desired, image) if self.from_factory else ()
         return tuple(n for n in what_to_read.not_read(desired, image) if n not in assumed)
 
@@ -136,12 +144,15 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | 
         on_line, newer = held.records[bus.name].read()
         known |= {(bus.name, address): k for address, k in on_line.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
-    for key, said in e12_claims(buses.values(), held).items():  # another user's E12: read the module in full, never write for it
+    # another user's E12: read the module in full, never write for it
+    for key, said in e12_claims(buses.values(), held).items():
         known.pop(key, None)
         overruled.setdefault(key, said)
-    unset = unset_systems(buses.values(), held) if known or overruled else frozenset()  # of no use without a record
+    # of no use without a record
+    unset = unset_systems(buses.values(), held) if known or overruled else frozenset()
     max_age = {name: bus.record_max_age for name, bus in buses.items()}
-    targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age, datetime.now(UTC))
+    targeted = what_to_read.for_plan(to_plan(pairs, None), known, overruled, unset, max_age,
+                                     datetime.now(UTC))
     if targeted is None:
         return Reads(pairs, targets(pairs))
     to_read, why = what_to_read.with_rolling(*targeted, known)
@@ -149,17 +160,18 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | 
 
 
 def read_targets(targets_: list[Target], held: Lines, options: LineOptions, command: str, plant: Plant,
-                 planner: SharedPlanner | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
-    """Every target read back, each line's read-back into its record as `command`'s (`planning.read_lines`) — with
-    a `planner`, each module planned as soon as it is read and each line as soon as its last module is, while the
-    other lines are still being read: the lines never wait for all of the planning. A Ctrl-C stops after the
-    exchange in flight (`Interrupted`) — also one that came during the last exchanges, when the read ended anyway:
-    it is not forgotten."""
+                 planner: SharedPlanner | None = None) -> dict[Key, ModuleImage]:
+    """Every target read back, each line's read-back into its record as `command`'s (`planning.read_lines`) —
+    with a `planner`, each module planned as soon as it is read and each line as soon as its last module is,
+    while the other lines are still being read: the lines never wait for all of the planning. A Ctrl-C stops
+    after the exchange in flight (`Interrupted`) — also one that came during the last exchanges, when the read
+    ended anyway: it is not forgotten."""
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
         by, advance = line_record.who(command, plant.path), options.progress.advance
-        images = read_lines(targets_, held.links, held.on_record, by, progress=advance) if planner is None else \
-            read_and_plan_lines(targets_, held.links, held.on_record, by, planner, progress=advance)  # fmt: skip
+        images = (read_lines(targets_, held.links, held.on_record, by, progress=advance)
+                  if planner is None else \
+            read_and_plan_lines(targets_, held.links, held.on_record, by, planner, progress=advance))
     if options.cancel is not None:
         options.cancel.check()
     return images
@@ -167,23 +179,27 @@ def read_targets(targets_: list[Target], held: Lines, options: LineOptions, comm
 
 def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines, options: LineOptions,
                   desired: dict[Key, ModuleImage] | None = None, *, command: str,
-                  only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:  # fmt: skip
+                  only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage],
+                                                                                PlantPlan]:
     """Read back and plan (`read_targets` with a planner). `only_read`, `from_factory`: see `Planner`."""
-    planner = shared_planner(plant, pairs, held.on_record, desired, only_read=only_read, from_factory=from_factory)
+    planner = shared_planner(plant, pairs, held.on_record, desired, only_read=only_read,
+                             from_factory=from_factory)
     images = read_targets(to_read, held, options, command, plant, planner)
     return images, planner.plan(images)
 
 
-def shared_planner(plant: Plant, pairs: Pairs, held: OnRecord, desired: dict[Key, ModuleImage] | None = None, *,
-                   only_read: bool = False, from_factory: bool = False) -> SharedPlanner:  # fmt: skip
-    """The planner of these modules to `desired` (else the plant file's) the lines' threads share, with the E12s on
-    record (`unset_systems`). `only_read`, `from_factory`: see `Planner`."""
+def shared_planner(plant: Plant, pairs: Pairs, held: OnRecord, desired: dict[Key, ModuleImage] | None = None,
+                   *,
+                   only_read: bool = False, from_factory: bool = False) -> SharedPlanner:
+    """The planner of these modules to `desired` (else the plant file's) the lines' threads share, with the
+    E12s on record (`unset_systems`). `only_read`, `from_factory`: see `Planner`."""
     unset = unset_systems({bus.name: bus for bus, _ in pairs}.values(), held)
-    return SharedPlanner(planner_for(plant, pairs, unset, only_read=only_read, from_factory=from_factory), to_plan(pairs, desired))
+    return SharedPlanner(planner_for(plant, pairs, unset, only_read=only_read, from_factory=from_factory),
+                         to_plan(pairs, desired))
 
 
 def read(plant: Plant, modules: Iterable[str] | None = None, options: LineOptions | None = None, *,
-         command: str = "read", links: Mapping[str, Link] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
+         command: str = "read", links: Mapping[str, Link] | None = None) -> dict[Key, ModuleImage]:
     """Read back the chosen modules: system parameters, managed programs, and every program the
     plant's system parameters could clamp — by (bus, address); what was read goes into the lines'
     records as `command`'s. Over the plant file's ports, or the `links` given by bus, already open
@@ -201,8 +217,10 @@ def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) 
     try:
         saved = [(entry.get("bus"), image) for entry, image in zip(entries, images_from_json(entries))]
     except ValueError as error:
-        raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) — {remedy}") from None
-    by_address: dict[int, list[tuple[Any, ModuleImage]]] = {}  # 32 × 30 modules: not every image for every module
+        raise UserError(f"{path}: not a list of module images as `prc3cfg read --json` writes ({error}) "
+                        f"— {remedy}") from None
+    # 32 × 30 modules: not every image for every module
+    by_address: dict[int, list[tuple[Any, ModuleImage]]] = {}
     for bus_name, image in saved:
         by_address.setdefault(image.address, []).append((bus_name, image))
     images: dict[Key, ModuleImage] = {}
@@ -215,12 +233,14 @@ def load_images(path: Path, plant: Plant, modules: Iterable[str] | None = None) 
             )
         missing = [n for n in module.managed_programs() if found[0].programs[n - 1] is None]
         if missing:
-            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program {missing[0]}, "
-                            f"which the plant manages — {remedy}")  # fmt: skip
+            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program "
+                            f"{missing[0]}, "
+                            f"which the plant manages — {remedy}")
         unread = [n for n, p in enumerate(found[0].programs, start=1) if p is None]
         if unread and can_clamp(found[0].system, module.desired_system()):
-            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program {unread[0]}, "
-                            f"which the plant's system parameters would clamp — {remedy}")  # fmt: skip
+            raise UserError(f"{path}: the image of bus {bus.name}, module {module.address} lacks program "
+                            f"{unread[0]}, "
+                            f"which the plant's system parameters would clamp — {remedy}")
         images[(bus.name, module.address)] = found[0]
     return images
 
@@ -230,12 +250,13 @@ def read_input(path: Path, what: str, remedy: str, limit: int = JSON_LIMIT) -> A
     try:
         return read_json(path, limit)
     except FileProblem as problem:
-        raise UserError(f"{problem.where(path)}: {problem} — {remedy if problem.why is Why.NOT_JSON else f'name {what}'}") from None
+        raise UserError(f"{problem.where(path)}: {problem} — "
+                        f"{remedy if problem.why is Why.NOT_JSON else f'name {what}'}") from None
 
 
 def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
          options: LineOptions | None = None, previous: Path | None = None, full_read: bool = False,
-         links: Mapping[str, Link] | None = None) -> PlantPlan:  # fmt: skip
+         links: Mapping[str, Link] | None = None) -> PlantPlan:
     """The cheapest plan from what the modules hold (read back now, or `images` as `read` or
     `load_images` gave them) to the plant file. Read back now: only what the change from a base
     touches (`previous`, else the plant file last applied in full here: `base`, `reads`) — every
@@ -247,7 +268,7 @@ def plan(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key
     with lines(plant, {bus.name for bus, _ in pairs}, options, purpose="plan", given=links) as held:
         wanted = reads(plant, pairs, full_read, held.on_record)
         read_, planned = read_and_plan(plant, wanted.pairs, wanted.targets, held, options, command="plan",
-                                        only_read=wanted.base is not None)  # fmt: skip
+                                        only_read=wanted.base is not None)
         return replace(planned, reading=wanted.reading(pairs, read_), faults=in_fault(pairs, held.on_record))
 
 
@@ -266,8 +287,10 @@ def in_fault(pairs: Pairs, held: OnRecord) -> tuple[str, ...]:
     return tuple(dict.fromkeys(said))
 
 
-def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desired: dict[Key, ModuleImage] | None = None,
-              links: Mapping[str, Link] | None = None, unset: frozenset[Key] = frozenset(), *, only_read: bool = False) -> PlantPlan:  # fmt: skip
+def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage],
+              desired: dict[Key, ModuleImage] | None = None,
+              links: Mapping[str, Link] | None = None, unset: frozenset[Key] = frozenset(), *,
+              only_read: bool = False) -> PlantPlan:
     """Plan every chosen module from its read-back to its desired image (the plant file's by default),
     then broadcast what the modules of a line share, where every receiver is known — proven by the
     line's probes on its link in `links` (`SharedPlanner.plan_line`). `only_read`: see `Planner`."""
@@ -278,11 +301,13 @@ def make_plan(plant: Plant, pairs: Pairs, actual: dict[Key, ModuleImage], desire
     return planner.plan(actual)
 
 
-def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False, from_factory: bool = False) -> Planner:
+def planner_for(plant: Plant, pairs: Pairs, unset: frozenset[Key], *, only_read: bool = False,
+                from_factory: bool = False) -> Planner:
     """A `Planner` of the lines of these modules' buses."""
     buses = {bus.name: bus for bus, _ in pairs}
-    return Planner(plant.name, str(resolved(plant.path)), plant.sha256, {name: _line(bus) for name, bus in buses.items()}, unset,
-                   only_read=only_read, from_factory=from_factory)  # fmt: skip
+    return Planner(plant.name, str(resolved(plant.path)), plant.sha256,
+                   {name: _line(bus) for name, bus in buses.items()}, unset,
+                   only_read=only_read, from_factory=from_factory)
 
 
 def _line(bus: Bus) -> Line:
@@ -295,14 +320,16 @@ def _line(bus: Bus) -> Line:
 
 def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted]:
     """The modules to plan, each with its desired image: of `desired`, else the plant file's."""
-    return [Wanted(bus.name, m.address, m.name, desired[(bus.name, m.address)] if desired is not None else m.desired_image())
-            for bus, m in pairs]  # fmt: skip
+    return [Wanted(bus.name, m.address, m.name, desired[(bus.name, m.address)] if desired is not None
+                   else m.desired_image())
+            for bus, m in pairs]
 
 
 def unset_systems(buses: Iterable[Bus], held: OnRecord) -> frozenset[Key]:
     """The modules of these buses that reported E12 to an earlier apply of this user's or root's and were
     not cleared since (as `held` has it): their plan writes the system parameters first (a 10h/20h)."""
-    return frozenset((r.bus, r.address) for bus in buses for r in held.of(pending_records.E12, bus.name) if r.owner is None)
+    return frozenset((r.bus, r.address) for bus in buses for r in held.of(pending_records.E12, bus.name)
+                     if r.owner is None)
 
 
 def e12_claims(buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
@@ -312,8 +339,10 @@ def e12_claims(buses: Iterable[Bus], held: OnRecord) -> dict[Key, str]:
     said = {}
     for bus in buses:
         for r in held.of(pending_records.E12, bus.name):
-            if r.owner is not None:  # keyed by the plant's bus: the record's own bus name is part of the claim
-                said[(bus.name, r.address)] = f"{r.owner}'s record says it reported E12 (system parameters not set), from {shown(r.time)}"
+            # keyed by the plant's bus: the record's own bus name is part of the claim
+            if r.owner is not None:
+                said[(bus.name, r.address)] = (f"{r.owner}'s record says it reported E12 (system parameters "
+                                               f"not set), from {shown(r.time)}")
     return said
 
 
@@ -328,11 +357,14 @@ def plan_file_reads(path: Path, planned: PlanFile, pairs: Pairs, held: OnRecord)
     entries = {(e.bus, e.address): e for e in planned.modules}
     desired = {(bus.name, m.address): m.desired_image() for bus, m in chosen}
     max_age = {bus.name: bus.record_max_age for bus, _ in chosen}
-    to_read, stale = what_to_read.for_plan_file([entries[key] for key in desired], desired, record(held), max_age, datetime.now(UTC))
+    to_read, stale = what_to_read.for_plan_file([entries[key] for key in desired], desired, record(held),
+                                                max_age, datetime.now(UTC))
     if stale is not None:
-        raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the line's record no longer shows it "
-                        "holding what the plan took as known without reading it (written or read by another run since, or "
-                        "older than record_max_age); nothing was written — plan again")  # fmt: skip
+        raise StalePlan(f"{path}: stale plan — bus {stale.bus}, module {stale.address} ({stale.name}): the "
+                        "line's record no longer shows it "
+                        "holding what the plan took as known without reading it (written or read by another "
+                        "run since, or "
+                        "older than record_max_age); nothing was written — plan again")
     return Reads(chosen, to_read, RECORD)
 
 
@@ -367,18 +399,19 @@ def left_alone(plant: Plant, previous: Path | None = None) -> list[str]:
         new = now.get((bus.name, old.address))
         if new is None:
             notes.append(f"{bus.name}/{old.name} (address {old.address}) is no longer in the plant file: "
-                         "it stays on the hardware as it is, no longer managed")  # fmt: skip
+                         "it stays on the hardware as it is, no longer managed")
         elif new.unmanaged_programs == "keep":
             gone = sorted(set(old.managed_programs()) - set(new.managed_programs()))
             if gone:
                 which = f"program {gone[0]}" if len(gone) == 1 else f"programs {', '.join(map(str, gone))}"
-                notes.append(f"{bus.name}/{new.name}: {which} no longer in the plant file (unmanaged_programs: keep): "
-                             "it stays on the module as it is")  # fmt: skip
+                notes.append(f"{bus.name}/{new.name}: {which} no longer in the plant file "
+                             "(unmanaged_programs: keep): "
+                             "it stays on the module as it is")
     return notes
 
 
 def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Key, ModuleImage] | None = None,
-          options: LineOptions | None = None, links: Mapping[str, Link] | None = None) -> list[Drift]:  # fmt: skip
+          options: LineOptions | None = None, links: Mapping[str, Link] | None = None) -> list[Drift]:
     """The chosen modules that drifted from the plant file — read back now, or as `images` —
     reported as drift, not as a plan (`prc3cfg plan --refresh-only`)."""
     if images is None:
@@ -387,5 +420,6 @@ def drift(plant: Plant, modules: Iterable[str] | None = None, *, images: dict[Ke
     for bus, module in select(plant, modules):
         said = drift_changes(module.desired_image(), images[(bus.name, module.address)])
         if said:
-            found.append(Drift(bus.name, module.address, module.name, tuple(change["text"] for change in said), tuple(said)))
+            found.append(Drift(bus.name, module.address, module.name,
+                               tuple(change["text"] for change in said), tuple(said)))
     return found

@@ -55,16 +55,19 @@ class Adoption:
 
 def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
           options: LineOptions | None = None, *, reason: str | None = None, check: bool = False,
-          links: Mapping[str, Link] | None = None) -> Adoption:  # fmt: skip
+          links: Mapping[str, Link] | None = None) -> Adoption:
     """Read the chosen modules and work out the plant file that describes what they hold: only the
     values that drifted, in the layer they came from (`prc3cfg.plant.adopt`); `write_adoption`
     writes it. Unless it is only a `check`, a bus with `require_reason` refuses before its line is
     opened when neither `reason` nor `PRC3CFG_REASON` gives one."""
     options = options or LineOptions()
-    given = None if check else reason_for(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason, "adopt")
+    given = (None if check
+             else reason_for(plant, {bus.name: bus for bus, _ in select(plant, modules)}.values(), reason,
+                             "adopt"))
     before = _plant_text(plant.path)
     images = read(plant, modules, options, command="adopt", links=links)
-    from prc3cfg.plant.adopt import adopt as adopt_text  # its YAML splicing: for adopt only, not every apply that imports this module
+    # its YAML splicing: for adopt only, not every apply that imports this module
+    from prc3cfg.plant.adopt import adopt as adopt_text
 
     found = adopt_text(plant, images, before, programs)
     return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
@@ -77,30 +80,41 @@ def write_adoption(adoption: Adoption) -> None:
     says who adopted what and why, before and after (`prc3cfg.shell.records`)."""
     target = resolved(adoption.path)
     before = adoption.before.encode("utf-8")
-    said = run_header("adopt", adoption.path, adoption.plant, hashlib.sha256(before).hexdigest(), reason=adoption.reason,
-                      argv=adoption.command_line)  # fmt: skip
+    said = run_header("adopt", adoption.path, adoption.plant, hashlib.sha256(before).hexdigest(),
+                      reason=adoption.reason,
+                      argv=adoption.command_line)
     journal = Journal(adoption.path, said, audit.follow(adoption.path))
     try:
-        journal.record("adopt", buses=sorted({name.partition("/")[0] for value in adoption.adopted for name in value.modules}),
-                       values=[value.text for value in adoption.adopted])  # fmt: skip
+        journal.record("adopt", buses=sorted({name.partition("/")[0] for value in adoption.adopted
+                                              for name in value.modules}),
+                       values=[value.text for value in adoption.adopted])
     except OSError as error:
-        raise UserError(f"{journal.path}: cannot write the journal ({error.strerror}) — the plant file was not changed") from None
+        raise UserError(f"{journal.path}: cannot write the journal ({error.strerror}) — the plant file was "
+                        "not changed") from None
     try:
         try:
             written = replace_unless_changed(target, adoption.after, before)
         except OSError as error:
-            raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was not changed") from None
+            raise UserError(f"{adoption.path}: cannot write it ({error.strerror}) — it was "
+                            "not changed") from None
         try:
-            journal.record("adopted", written=written, sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written else None)
-        except OSError as error:  # after the write: it is told, and the journal named as lacking its last record
-            done = "was adopted and written" if written else "changed while adopting — it was not written: adopt again"
-            raise UserError(f"could not keep the journal ({journal.path}: {error.strerror}): the plant file {adoption.path} {done}; "
-                            "the records on disk are incomplete (the journal lacks the record that says so) — free the space") from None  # fmt: skip
+            journal.record("adopted", written=written,
+                           sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written
+                           else None)
+        # after the write: it is told, and the journal named as lacking its last record
+        except OSError as error:
+            done = ("was adopted and written" if written
+                    else "changed while adopting — it was not written: adopt again")
+            raise UserError(f"could not keep the journal ({journal.path}: {error.strerror}): the plant file "
+                            f"{adoption.path} {done}; "
+                            "the records on disk are incomplete (the journal lacks the record that says so) "
+                            "— free the space") from None
     finally:
         with contextlib.suppress(OSError):  # a journal the disk refused: said above
             journal.close()
     if not written:
-        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: adopt again")
+        raise UserError(f"{adoption.path}: the plant file changed while adopting — it was not written: "
+                        "adopt again")
 
 
 def reason_for(plant: Plant, buses: Iterable[Bus], reason: str | None, command: str) -> str | None:
@@ -110,8 +124,9 @@ def reason_for(plant: Plant, buses: Iterable[Bus], reason: str | None, command: 
     requiring = [bus.name for bus in buses if bus.require_reason]
     if given is None and requiring:
         raise UserError(f"{plant.path}: {'bus' if len(requiring) == 1 else 'buses'} {', '.join(requiring)} "
-                        f"{'requires' if len(requiring) == 1 else 'require'} a reason for every {command} (require_reason: true) "
-                        "— nothing was written: give --reason TEXT or set PRC3CFG_REASON")  # fmt: skip
+                        f"{'requires' if len(requiring) == 1 else 'require'} a reason for every {command} "
+                        "(require_reason: true) "
+                        "— nothing was written: give --reason TEXT or set PRC3CFG_REASON")
     return given
 
 
@@ -135,7 +150,8 @@ def list_records(plant_path: Path) -> list[RecordedRun]:
     return found
 
 
-def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: float | None = None, dry_run: bool = False) -> Pruned:
+def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: float | None = None,
+                  dry_run: bool = False) -> Pruned:
     """Remove the plant's runs (journal and snapshot together) beyond the newest `keep` and older
     than `older_than_days` — nothing while a record beside it does not verify; never the newest
     snapshot of a line, never a run an axis release (or an E12) nobody was told of names."""
@@ -144,11 +160,13 @@ def prune_records(plant: Plant, *, keep: int | None = None, older_than_days: flo
     keys = {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
     with contextlib.ExitStack() as held:  # no apply of these lines writes its records meanwhile
         for bus in plant.buses:
-            held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})", purpose="records prune"))
+            held.enter_context(line_lock(keys[bus.name], f"bus {bus.name} ({bus.port})",
+                                         purpose="records prune"))
         every = [key for identities in keys.values() for key in identities]
         protected = [Path(r.journal) for kind in (pending_records.RELEASE, pending_records.E12)
                      for r in pending_records.of_line(every, kind) if r.journal]
-        return recorded_runs.prune(plant.path, keep=keep, older_than_days=older_than_days, protected=protected, dry_run=dry_run)
+        return recorded_runs.prune(plant.path, keep=keep, older_than_days=older_than_days,
+                                   protected=protected, dry_run=dry_run)
 
 
 def _plant_text(path: Path) -> str:
@@ -163,36 +181,41 @@ def init_data_block(plant: Plant, bus_name: str) -> list[tuple[str, str, str]]:
     data word — refused in one line where the bus has no gateway or the driver would refuse it."""
     found = [b for b in plant.buses if b.name == bus_name]
     if not found:
-        raise UserError(f"{plant.path}: no bus named {bus_name} — the plant's buses are {', '.join(b.name for b in plant.buses)}")
+        raise UserError(f"{plant.path}: no bus named {bus_name} — the plant's buses are "
+                        f"{', '.join(b.name for b in plant.buses)}")
     bus = found[0]
     if bus.gateway is None:
-        raise UserError(f"{plant.path}: bus {bus_name} has no gateway block — add gateway: {{receive_db, receive_dw, cpu, identifier}}")
+        raise UserError(f"{plant.path}: bus {bus_name} has no gateway block — add gateway: "
+                        f"{{receive_db, receive_dw, cpu, identifier}}")
     zvz_ms = Decimal(str(bus.zvz)) * 1000
     if zvz_ms != zvz_ms.to_integral_value():
-        raise UserError(f"{plant.path}: bus {bus_name}: zvz {bus.zvz} s is not a whole number of milliseconds — ZVZTIM is set in ms")
+        raise UserError(f"{plant.path}: bus {bus_name}: zvz {bus.zvz} s is not a whole number of "
+                        "milliseconds — ZVZTIM is set in ms")
     settings = gateway.GatewaySettings(
         receive_db=bus.gateway.receive_db, receive_dw=bus.gateway.receive_dw, cpu=bus.gateway.cpu,
         identifier=bus.gateway.identifier, line=bus.line, zvz_ms=int(zvz_ms),
-    )  # fmt: skip
+    )
     problems = gateway.refusals(settings)
     if problems:
-        raise UserError(f"bus {bus_name}: the CP 524/525 Open Driver would refuse these settings: " + "; ".join(map(str, problems)))
+        raise UserError(f"bus {bus_name}: the CP 524/525 Open Driver would refuse these settings: "
+                        + "; ".join(map(str, problems)))
     return gateway.format_data_block(gateway.init_data_block(settings))
 
 
 def picture(plant: Plant, module_name: str, *, fmt: str, images: dict[Key, ModuleImage] | None = None,
-            planned: PlantPlan | None = None) -> bytes:  # fmt: skip
+            planned: PlantPlan | None = None) -> bytes:
     """The chains of a module drawn (`prc3cfg.core.plot`, the plot extra): the plant file's, or what
     the module holds as before and what the plan leaves it holding as after — of `planned`, or of a
     plan from `images` (as `read` or `load_images` gave them)."""
     (bus, module), = select(plant, [module_name])
     title = f"module {module.name} — bus {bus.name}, address {module.address}"
     if images is None and planned is None:
-        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file", python=python_command())
+        return plot.picture(module.desired_image(), fmt=fmt, title=f"{title}: the plant file",
+                            python=python_command())
     planned = planned or plan(plant, [module.name], images=images)
     change = next(c for c in planned.modules if (c.bus, c.address) == (bus.name, module.address))
     return plot.picture(change.as_known(change.plan.predicted), change.as_known(change.actual), fmt=fmt,
-                        title=f"{title}: before (dashed) and after the plan", python=python_command())  # fmt: skip
+                        title=f"{title}: before (dashed) and after the plan", python=python_command())
 
 
 def plot_format(path: Path) -> str:
@@ -211,15 +234,20 @@ def status(plant: Plant) -> dict[str, Any]:
     return document(str(plant.path), plant.sha256, facts, notes)
 
 
-def serve_status(plant: Plant, listen: str, *, certificate: Path | None, private_key: Path | None, trust: Path | None,
-                 allow_anonymous: bool, no_security: bool, cancel: Cancellation) -> None:  # fmt: skip
-    """Publish the plant's status read-only on OPC UA until `cancel` is (a signal, with `Cancellation.handling`)
-    (`prc3cfg.shell.opcua`): a `UserError` naming the command that installs the optional extra where asyncua is missing."""
+def serve_status(plant: Plant, listen: str, *, certificate: Path | None, private_key: Path | None,
+                 trust: Path | None,
+                 allow_anonymous: bool, no_security: bool, cancel: Cancellation) -> None:
+    """Publish the plant's status read-only on OPC UA until `cancel` is (a signal, with
+    `Cancellation.handling`) (`prc3cfg.shell.opcua`): a `UserError` naming the command that installs the
+    optional extra where asyncua is missing."""
     try:
         from prc3cfg.shell import opcua
     except ImportError as error:
         if error.name is None or not error.name.startswith("asyncua"):
             raise
-        raise UserError(f"prc3cfg status serve needs the OPC UA library asyncua (the extra opcua), which the Python running prc3cfg "
-                        f"does not have — install it there: {python_command()} -m pip install asyncua") from None  # fmt: skip
-    opcua.serve(plant, opcua.ServerSettings(listen, certificate, private_key, trust, allow_anonymous, no_security), cancel)
+        raise UserError("prc3cfg status serve needs the OPC UA library asyncua (the extra opcua), which "
+                        "the Python running prc3cfg "
+                        f"does not have — install it there: {python_command()} -m pip "
+                        "install asyncua") from None
+    opcua.serve(plant, opcua.ServerSettings(listen, certificate, private_key, trust, allow_anonymous,
+                                            no_security), cancel)

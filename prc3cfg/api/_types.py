@@ -40,11 +40,13 @@ class ApplyFailed(UserError):
         said = [*result.unread]  # lines not written: what stopped their read-back or plan, one line each
         restore = command_line("prc3cfg", "restore", str(result.snapshot))
         if failed or not said:
-            said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) — restore with: {restore}")
+            said.append(f"apply failed on {len(failed)} of {plural(len(result.runs), 'module')} (see above) "
+                        f"— restore with: {restore}")
         else:
             written = len(result.runs)
-            said[-1] += (f"; the {plural(written, 'module')} of the other lines {'was' if written == 1 else 'were'} written and "
-                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: {restore}")  # fmt: skip
+            said[-1] += (f"; the {plural(written, 'module')} of the other lines "
+                         f"{'was' if written == 1 else 'were'} written and "
+                         f"verified (see above) — restore {'it' if written == 1 else 'them'} with: {restore}")
         super().__init__("\n".join(said))
         self.result = result
 
@@ -62,11 +64,15 @@ class RecordsFailed(ApplyFailed):
         if not any(run.sent for run in result.runs) and not result.verified:
             said = "nothing was written to any module — free the space (or fix the folder), then apply again"
         elif result.verified:
-            said = f"every module was written and verified (see above), but {incomplete} — free the space (or fix the folder)"
+            said = (f"every module was written and verified (see above), but {incomplete} — free the space "
+                    "(or fix the folder)")
         else:
-            then = "plan and apply again" + (f", or restore: {command_line('prc3cfg', 'restore', str(result.snapshot))}" if result.snapshot else "")
-            said = (f"every line stopped before its next frame — the account above says what each module was sent and holds; "
-                    f"{incomplete}; free the space (or fix the folder), then {then}")  # fmt: skip
+            then = ("plan and apply again"
+                    + (f", or restore: {command_line('prc3cfg', 'restore', str(result.snapshot))}"
+                       if result.snapshot else ""))
+            said = ("every line stopped before its next frame — the account above says what each module "
+                    "was sent and holds; "
+                    f"{incomplete}; free the space (or fix the folder), then {then}")
         self.args = (f"{trouble}: {said}",)
 
 
@@ -94,7 +100,8 @@ class ApplyResult:
     #: axis releases earlier applies on these lines left untold (killed after a 10h/20h): this
     #: apply's account lists them too
     earlier: tuple[pending_records.Pending, ...] = ()
-    #: the file of this apply's records of axis releases, not yet told (None: it made none) — `prc3cfg.api.told`
+    #: the file of this apply's records of axis releases, not yet told (None: it made none) —
+    #: `prc3cfg.api.told`
     records: Path | None = None
     #: seconds each phase took — reading back (and planning), writing, verifying — beside the plan's estimate
     took: dict[str, float] = field(default_factory=dict)
@@ -108,7 +115,8 @@ class ApplyResult:
 
     @property
     def released(self) -> tuple[ModuleOutcome, ...]:
-        """Every module whose axes were — or may have been — released: it must travel to its reference point."""
+        """Every module whose axes were — or may have been — released: it must travel to its reference
+        point."""
         return tuple(to_travel(self.runs))
 
 

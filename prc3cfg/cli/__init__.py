@@ -41,22 +41,25 @@ app = typer.Typer(
 emulator_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="A software PRC 3 bus.")
 link_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Gateway and line settings.")
 app.add_typer(emulator_app, name="emulator")
-records_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="The journals and snapshots beside a plant file.")
+records_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                          help="The journals and snapshots beside a plant file.")
 app.add_typer(link_app, name="link")
 app.add_typer(records_app, name="records")
 
-#: The module of each command and group, in the order `prc3cfg --help` lists them (groups last). typer builds every
-#: registered command from its signature before it runs one, so a command line registers only its own
+#: The module of each command and group, in the order `prc3cfg --help` lists them (groups last). typer builds
+#: every registered command from its signature before it runs one, so a command line registers only its own
 #: command's module (`_register_commands`); a test holds this table to what the modules register.
 COMMAND_MODULES: dict[str, str] = {
     "validate": "plant_commands", "show": "plant_commands", "schema": "plant_commands",
     "read": "plan_commands", "plan": "plan_commands", "apply": "plan_commands", "restore": "plan_commands",
-    "ports": "bus_commands", "setup-machine": "bus_commands", "scan": "bus_commands", "import": "bus_commands",
+    "ports": "bus_commands", "setup-machine": "bus_commands", "scan": "bus_commands",
+                                   "import": "bus_commands",
     "doctor": "bus_commands",
     "adopt": "adopt_commands",
-    "emulator": "emulator_commands", "link": "bus_commands", "records": "records_commands", "status": "status_commands",
+    "emulator": "emulator_commands", "link": "bus_commands", "records": "records_commands",
+                                   "status": "status_commands",
     "fleet": "fleet_commands",
-}  # fmt: skip
+}
 
 
 def _register_commands(args: list[str] | None = None) -> None:
@@ -65,13 +68,18 @@ def _register_commands(args: list[str] | None = None) -> None:
     import importlib
 
     named = next((arg for arg in args or [] if not arg.startswith("-")), None)
-    completing = any(key.endswith("_COMPLETE") for key in os.environ)  # click's completion: `_PRC3CFG_COMPLETE`
-    names = [COMMAND_MODULES[named]] if named in COMMAND_MODULES and not completing else COMMAND_MODULES.values()
+    # click's completion: `_PRC3CFG_COMPLETE`
+    completing = any(key.endswith("_COMPLETE") for key in os.environ)
+    names = ([COMMAND_MODULES[named]] if named in COMMAND_MODULES and not completing
+             else COMMAND_MODULES.values())
     for name in dict.fromkeys(names):
         importlib.import_module(f"prc3cfg.cli.{name}")
-    # in the table's order, whichever module a process imported first (a program that runs several command lines)
+    # in the table's order, whichever module a process imported first (a program that runs several command
+    # lines)
     rank = {command: n for n, command in enumerate(COMMAND_MODULES)}.get
-    app.registered_commands.sort(key=lambda info: rank(info.name or typer.main.get_command_name(getattr(info.callback, "__name__", "")), 0))
+    app.registered_commands.sort(key=lambda info: rank(info.name
+                                                       or typer.main.get_command_name(getattr(info.callback,
+                                                                                              "__name__", "")), 0))
     app.registered_groups.sort(key=lambda group: rank(group.name or "", 0))
 
 
@@ -83,7 +91,8 @@ def _print_version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: Annotated[bool, typer.Option("--version", callback=_print_version, is_eager=True, help="Print the version.")] = False,
+    version: Annotated[bool, typer.Option("--version", callback=_print_version, is_eager=True,
+                                          help="Print the version.")] = False,
 ) -> None:
     pass
 
@@ -110,7 +119,8 @@ class ExitStatus(Exception):
 
 def _options(command) -> dict[str, bool]:
     """Every long option of a command and of the commands under it: whether it takes a value."""
-    names = {name: not getattr(param, "is_flag", False) for param in command.params for name in param.opts if name.startswith("--")}
+    names = {name: not getattr(param, "is_flag", False) for param in command.params for name in param.opts
+             if name.startswith("--")}
     for sub in getattr(command, "commands", {}).values():
         names |= _options(sub)
     return names
@@ -126,8 +136,10 @@ def _single_dash_habit(args: list[str]) -> str | None:
         match = _SINGLE_DASH.fullmatch(arg)
         if match is None:
             continue
-        known = known or _options(typer.main.get_command(app))  # the whole command tree: only for a word that needs it
-        option, why = _TERRAFORM.get(match.group(1), (f"--{match.group(1)}", "prc3cfg options take two dashes"))
+        # the whole command tree: only for a word that needs it
+        known = known or _options(typer.main.get_command(app))
+        option, why = _TERRAFORM.get(match.group(1),
+                                     (f"--{match.group(1)}", "prc3cfg options take two dashes"))
         if option not in known:
             continue
         written, value = arg, match.group(2)
@@ -144,8 +156,10 @@ _PYDANTIC_WORDS = (
     (re.compile(r"Input should be less than or equal to (\S+)"), r"must be \1 or less"),
     (re.compile(r"Input should be greater than (\S+)"), r"must be more than \1"),
     (re.compile(r"Input should be less than (\S+)"), r"must be less than \1"),
-    (re.compile(r"Input should be a valid integer(, unable to parse string as an integer)?"), "must be a whole number"),
-    (re.compile(r"Input should be a valid number(, unable to parse string as a number)?"), "must be a number"),
+    (re.compile(r"Input should be a valid integer(, unable to parse string as an integer)?"),
+     "must be a whole number"),
+    (re.compile(r"Input should be a valid number(, unable to parse string as "
+                r"a number)?"), "must be a number"),
     (re.compile(r"Input should be "), "must be "),
     (re.compile(r"Value error, "), ""),
 )
@@ -156,8 +170,9 @@ def _completion_for(args: list[str]) -> str | None:
     completion for a zsh user, said as done. Refused, saying how to get what was asked for."""
     for at, arg in enumerate(args[:-1]):
         if arg in ("--install-completion", "--show-completion") and not args[at + 1].startswith("-"):
-            return (f"prc3cfg: {arg} takes no shell name ({shown(args[at + 1])}): it is for the shell it is run in — run "
-                    f"prc3cfg {arg} from that shell")  # fmt: skip
+            return (f"prc3cfg: {arg} takes no shell name ({shown(args[at + 1])}): it is for the shell it is "
+                    "run in — run "
+                    f"prc3cfg {arg} from that shell")
     return None
 
 

@@ -53,9 +53,11 @@ def one_of(allowed: tuple) -> Callable[[Any], Any]:
 
 
 def frame_data_bits(value: Any) -> Any:
-    """`--data-bits`'s callback: anything but 8 is a usage error, in the words a plant file's `data_bits` gets."""
+    """`--data-bits`'s callback: anything but 8 is a usage error, in the words a plant file's `data_bits`
+    gets."""
     if value is not None and value not in DATA_BITS:
-        raise typer.BadParameter(f"{value} data bits cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: "
+        raise typer.BadParameter(f"{value} data bits cannot carry a PRC 3 frame — its frames are binary and "
+                                 "need 8 data bits: "
                                  "give 8 or leave the option out")
     return value
 
@@ -141,7 +143,8 @@ def check_output(path: Path | None, option: str, *, plant: Path | None = None) -
             return path  # a device or a FIFO (/dev/stdout, a pipe): written as it is
     folder = path.parent
     if not folder.is_dir():
-        raise UserError(f"{where}: the folder {folder} does not exist — create it, or name a file in an existing folder")
+        raise UserError(f"{where}: the folder {folder} does not exist — create it, or name a file in an "
+                        "existing folder")
     try:
         fd, probe = tempfile.mkstemp(prefix=".prc3cfg-probe-", dir=folder)
         try:
@@ -151,7 +154,8 @@ def check_output(path: Path | None, option: str, *, plant: Path | None = None) -
             os.close(fd)
             os.unlink(probe)
     except OSError as error:
-        raise UserError(f"{where}: cannot write in {folder} ({error.strerror}) — name a file on a disk and in a folder you can write to") from None
+        raise UserError(f"{where}: cannot write in {folder} ({error.strerror}) — name a file on a disk and "
+                        "in a folder you can write to") from None
     return path
 
 
@@ -166,22 +170,24 @@ def write_output(path: Path, text: str, option: str) -> None:
         else:
             write_atomically(path, text)
     except OSError as error:
-        raise UserError(f"{option} {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
+        raise UserError(f"{option} {path}: cannot write it ({error.strerror}) — nothing was "
+                        "saved there") from None
 
 
 def _output_option(option: str) -> Callable[[Path | None], Path | None]:
     return lambda value: check_output(value, option)
 
 
-#: `--out FILE` of a command that prints a file (import, schema): written as UTF-8 whatever the shell — Windows
-#: PowerShell 5.1's `>` writes UTF-16, which no plant file may be.
+#: `--out FILE` of a command that prints a file (import, schema): written as UTF-8 whatever the shell —
+#: Windows PowerShell 5.1's `>` writes UTF-16, which no plant file may be.
 OutFileOpt = Annotated[Path | None, typer.Option("--out", callback=_output_option("--out"), metavar="FILE",
-                                                 help="Write it to FILE (UTF-8), not to stdout.")]  # fmt: skip
+                                                 help="Write it to FILE (UTF-8), not to stdout.")]
 
 
 def print_document(document: Any) -> None:
-    """A `--json` document on stdout (its `format` first: `prc3cfg-KIND/1`, `schemas/KIND.schema.json`), in ASCII
-    as every JSON prc3cfg prints: what it read from a bus or a journal reaches no terminal as a control."""
+    """A `--json` document on stdout (its `format` first: `prc3cfg-KIND/1`, `schemas/KIND.schema.json`), in
+    ASCII as every JSON prc3cfg prints: what it read from a bus or a journal reaches no terminal as a control.
+    """
     import json
 
     print(json.dumps(document, indent=1))
@@ -197,8 +203,9 @@ def printed_or_written(text: str, out: Path | None) -> None:
 
 
 def unanswered(json_out: bool, answered: bool, instead: str) -> str | None:
-    """Why `--json` cannot run as asked, or None: a stream of events asks no question (Terraform's `apply -json`
-    neither), so the approval must be given on the command line — `--auto-approve`, or what `instead` names."""
+    """Why `--json` cannot run as asked, or None: a stream of events asks no question (Terraform's `apply
+    -json` neither), so the approval must be given on the command line — `--auto-approve`, or what `instead`
+    names."""
     if json_out and not answered:
         return f"--json asks no question — pass --auto-approve ({instead})"
     return None
@@ -210,17 +217,20 @@ _SECONDS = {"ms": Decimal("0.001"), "s": Decimal(1), "m": Decimal(60), "h": Deci
 
 
 def parse_duration(text: str) -> float:
-    """ "30", "0.5", "500ms", "5s", "2m", "1h" → seconds; ValueError, saying what to write, for anything else."""
+    """ "30", "0.5", "500ms", "5s", "2m", "1h" → seconds; ValueError, saying what to write, for anything
+    else."""
     match = _DURATION.fullmatch(text.strip())
     if match is None:
-        raise ValueError(f"'{text}' is not a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h")
+        raise ValueError(f"'{text}' is not a time — write seconds (30, 0.5) or with a unit: 500ms, "
+                         "5s, 2m, 1h")
     return float(Decimal(match.group(1)) * _SECONDS[match.group(2) or "s"])
 
 
 def _said(seconds: float) -> str:
     """A bound as the user would write it: 4ms, 1h, 65.535s."""
     exact = Decimal(str(seconds))
-    unit = next((u for u in ("h", "m") if exact >= _SECONDS[u] and exact % _SECONDS[u] == 0), "s" if exact >= 1 or not exact else "ms")
+    unit = next((u for u in ("h", "m") if exact >= _SECONDS[u] and exact % _SECONDS[u] == 0), "s"
+                if exact >= 1 or not exact else "ms")
     return f"{(exact / _SECONDS[unit]).normalize():f}{unit}"
 
 
@@ -235,7 +245,8 @@ def duration(low: float, high: float = math.inf) -> Callable[[Any], float]:
         except ValueError as error:
             raise typer.BadParameter(str(error)) from None
         if not low <= seconds <= high:
-            raise typer.BadParameter(f"{value} is {'less' if seconds < low else 'more'} than {_said(low if seconds < low else high)}")
+            raise typer.BadParameter(f"{value} is {'less' if seconds < low else 'more'} than "
+                                     f"{_said(low if seconds < low else high)}")
         return seconds
 
     return parse
@@ -244,15 +255,21 @@ def duration(low: float, high: float = math.inf) -> Callable[[Any], float]:
 #: How a time may be written, for option help.
 TIMES = "seconds, or 500ms, 5s, 2m, 1h"
 PlantArg = Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML).", show_default=False)]
-ModuleOpt = Annotated[list[str] | None, typer.Option("--module", metavar="NAME", help="Only this module (name); repeatable.")]
+ModuleOpt = Annotated[list[str] | None,
+                      typer.Option("--module", metavar="NAME", help="Only this module (name); repeatable.")]
 TraceOpt = Annotated[
     Path | None,
-    typer.Option(callback=_output_option("--trace"), metavar="FILE", help="Write every frame, both directions, with timestamps, in hex."),
+    typer.Option(callback=_output_option("--trace"), metavar="FILE",
+                 help="Write every frame, both directions, with timestamps, in hex."),
 ]
-RetriesOpt = Annotated[int, typer.Option(min=0, max=100, metavar="N", help="Retries of a lost or damaged reply, per message.")]
-FramesOpt = Annotated[bool, typer.Option("--frames", help="Show each step's bytes as sent, in hex (a plan file always keeps them).")]
+RetriesOpt = Annotated[int, typer.Option(min=0, max=100, metavar="N",
+                                         help="Retries of a lost or damaged reply, per message.")]
+FramesOpt = Annotated[bool, typer.Option("--frames",
+                                         help="Show each step's bytes as sent, in hex (a plan file always "
+                                              "keeps them).")]
 LockOpt = Annotated[float, typer.Option("--lock-timeout", parser=duration(0), metavar="TIME",
-                                        help=f"How long to wait while another prc3cfg uses the line ({TIMES}).")]
+                                        help="How long to wait while another prc3cfg uses the line "
+                                             f"({TIMES}).")]
 
 Key = tuple[str, int]  # (bus name, module address)
 
@@ -263,14 +280,16 @@ def parse_addresses(text: str) -> list[int]:
     addresses: set[int] = set()
     for part in (p.strip() for p in text.split(",")):
         if not part:
-            raise ValueError(f"'{text}' has an empty entry — write addresses and ranges between commas, e.g. 1,3-5")
+            raise ValueError(f"'{text}' has an empty entry — write addresses and ranges between commas, "
+                             "e.g. 1,3-5")
         low, _, high = part.partition("-")
         try:
             first, last = int(low), int(high or low)
         except ValueError:
             raise ValueError(f"'{part}' is not an address or a range like 3-5") from None
         if first not in ADDRESSES or last not in ADDRESSES or first > last:
-            raise ValueError(f"'{part}' is outside 1..{ADDRESSES[-1]} — module addresses are 1..{ADDRESSES[-1]}")
+            raise ValueError(f"'{part}' is outside 1..{ADDRESSES[-1]} — module addresses are "
+                             f"1..{ADDRESSES[-1]}")
         addresses.update(range(first, last + 1))
     return sorted(addresses)
 
@@ -301,7 +320,8 @@ def _time_left() -> Any:
                 return Text("-:--:-- left", style="progress.remaining")
             per_step = (stepped - task.start_time) / task.completed
             left = max(0, round(per_step * (task.total - task.completed) - (task.get_time() - stepped)))
-            return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d} left", style="progress.remaining")
+            return Text(f"{left // 3600}:{left // 60 % 60:02d}:{left % 60:02d} left",
+                        style="progress.remaining")
 
     return TimeLeft()
 
@@ -309,7 +329,8 @@ def _time_left() -> Any:
 class TerminalProgress:
     """`api.Progress` on the terminal: a rich progress bar on stderr (when it is a terminal) with the
     phase's steps, time taken and time left (`_time_left`), notes on stdout. `stop` takes the bar off
-    the screen — before the plan and before a question (`ask`) — and the next phase's `start` shows it again."""
+    the screen — before the plan and before a question (`ask`) — and the next phase's `start` shows it again.
+    """
 
     def __init__(self, stack: contextlib.ExitStack, notes: TextIO | None = None) -> None:
         self._bar: Progress | None = None
@@ -331,16 +352,18 @@ class TerminalProgress:
         if self._bar is None:
             stderr = stderr_console()
             self._bar = Progress(
-                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), _time_left(),
+                TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                 _time_left(),
                 console=stderr, transient=True, disable=not stderr.is_terminal,
-            )  # fmt: skip
+            )
             self._bar.start()
         if self._task is not None:
             self._bar.remove_task(self._task)
         self._task = self._bar.add_task(what, total=total)
 
     def advance(self) -> None:
-        bar, task = self._bar, self._task  # another thread may `stop` it meanwhile: a stopped bar takes the step unseen
+        # another thread may `stop` it meanwhile: a stopped bar takes the step unseen
+        bar, task = self._bar, self._task
         if bar is not None and task is not None:
             bar.update(task, advance=1, stepped=bar.get_time())
 
@@ -358,7 +381,8 @@ class TerminalProgress:
 
 #: What `ask` takes for yes and for no (as click's confirm); an empty answer is no.
 YES, NO = ("y", "yes"), ("n", "no", "")
-#: The one answer a question about the machine takes (`ask(..., typed=True)`), as Terraform's apply: anything else is no.
+#: The one answer a question about the machine takes (`ask(..., typed=True)`), as Terraform's apply: anything
+#: else is no.
 TYPED_YES = "yes"
 
 
@@ -408,8 +432,9 @@ COMMAND_LINE: list[str] = []
 
 
 @contextlib.contextmanager
-def line_options(trace: Path | None, retries: int, lock_timeout: float, progress: LineProgress | None = None, *,
-                 json_out: bool = False) -> Iterator[LineOptions]:  # fmt: skip
+def line_options(trace: Path | None, retries: int, lock_timeout: float, progress: LineProgress | None = None,
+                 *,
+                 json_out: bool = False) -> Iterator[LineOptions]:
     """The `LineOptions` of a command: its trace file, Ctrl-C handling, progress on the terminal (or
     `progress`: `--json`'s events; with `json_out` its notes on stderr, stdout kept for the document);
     after a command that succeeded, a note for every line that had to repeat exchanges, and one if a
@@ -419,14 +444,16 @@ def line_options(trace: Path | None, retries: int, lock_timeout: float, progress
     used: list[Link] = []
     with contextlib.ExitStack() as stack:
         options = LineOptions(
-            retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=progress or TerminalProgress(stack, sys.stderr if json_out else None),
+            retries=retries, lock_timeout=lock_timeout, cancel=CANCEL, progress=progress
+                              or TerminalProgress(stack, sys.stderr if json_out else None),
             trace=stack.enter_context(open_text(trace, "a")) if trace else None,
             waiting=lambda text: print(text, file=sys.stderr, flush=True), used=used.extend,
             notice=lambda text: print(f"⚠ warning: {text}", file=sys.stderr, flush=True),
             command_line=tuple(COMMAND_LINE) or None,
-        )  # fmt: skip
+        )
         yield options
-        if used:  # a command that talked on no line (`plan --actual`) has nothing to note, and loads nothing for it
+        # a command that talked on no line (`plan --actual`) has nothing to note, and loads nothing for it
+        if used:
             note_repeats(used)
             note_slow(used)
             note_unshared(used)
@@ -448,9 +475,10 @@ def note_repeats(links: Iterable[Link]) -> None:
     for link in links:
         if link.repeated:
             were = "was" if link.repeated == 1 else "were"
-            print(f"note: bus {link.bus}: {link.repeated} of {plural(link.exchanges, 'exchange')} {were} lost or damaged and "
+            print(f"note: bus {link.bus}: {link.repeated} of {plural(link.exchanges, 'exchange')} {were} "
+                  "lost or damaged and "
                   "made again — check the cabling if this is not a test line (--trace shows every frame)",
-                  file=sys.stderr)  # fmt: skip
+                  file=sys.stderr)
 
 
 def note_slow(links: Iterable[Link]) -> None:
@@ -465,14 +493,19 @@ def note_slow(links: Iterable[Link]) -> None:
     for link in slower_than_priced(links):
         assert link.cost is not None  # (priced: `slower_than_priced` says so)
         answer = link.cost.turnaround + (link.answered_time - link.priced_time) / link.answered
-        said.append(f"bus {link.bus}: {plural(link.answered, 'exchange')} took {link.answered_time:.1f} s, its settings price them at "
-                    f"{link.priced_time:.1f} s (the modules answered after {answer * 1000:.0f} ms on average, turnaround: "
-                    f"{link.cost.turnaround:g} in the plant file)")  # fmt: skip
+        said.append(f"bus {link.bus}: {plural(link.answered, 'exchange')} took {link.answered_time:.1f} s, "
+                    "its settings price them at "
+                    f"{link.priced_time:.1f} s (the modules answered after {answer * 1000:.0f} ms on "
+                    "average, turnaround: "
+                    f"{link.cost.turnaround:g} in the plant file)")
         ports.append(shown(link.port_name))
     if not said:
         return
     measured = [command_line("prc3cfg", "doctor", "--port", port) for port in ports if measurable(port)]
-    remedies = [f"measure the line with {' and '.join(measured)} and put the bus keys it prints into the plant file"] if measured else []
+    remedies = [f"measure the line with {' and '.join(measured)} and put the bus keys it prints into the "
+                "plant file"] if measured else []
     if len(measured) < len(ports):  # an emulator:// port answers as its URL says: doctor cannot reach it
-        remedies.append("an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same")
-    print(f"note: the line is slower than the plant file's line settings say — {'; '.join(said)}: {'; '.join(remedies)}", file=sys.stderr)
+        remedies.append("an emulator:// port's line-speed and turnaround are slower than its bus's keys: "
+                        "give both the same")
+    print(f"note: the line is slower than the plant file's line settings say — {'; '.join(said)}: "
+          f"{'; '.join(remedies)}", file=sys.stderr)

@@ -24,41 +24,53 @@ from prc3cfg.errors import UserError
 from prc3cfg.shell.platform import command_line
 
 
-def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int, notes: list[str],
-              frames: bool = False, policy: PolicyReport | None = None) -> None:  # fmt: skip
-    """The plan for people, as markdown or as JSON, and into `out`; with what the plant's `policy` found, in each."""
+def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int,
+              notes: list[str],
+              frames: bool = False, policy: PolicyReport | None = None) -> None:
+    """The plan for people, as markdown or as JSON, and into `out`; with what the plant's `policy` found, in
+    each."""
     faults = plan.faults  # a fault a write revealed, on the lines read (a plan of a file's images names none)
     document = plan_file(plan, notes, render) if out is not None or json_out else None
     if out is not None:
         write_output(out, json.dumps(document, indent=1) + "\n", "--out")
-    if json_out and document is not None:  # streamed, 10,000 pieces a write: one string of 8 × 30 × 64 is 80 MB of pieces, one write a piece 2 s
-        # the fault states a write revealed, kept in the records (the plan file leaves them out: apply --plan tells its own)
-        extra = ({"faults": list(faults)} if faults else {}) | ({"policy": policy.to_json()} if policy is not None else {})
+    # streamed, 10,000 pieces a write: one string of 8 × 30 × 64 is 80 MB of pieces, one write a piece 2 s
+    if json_out and document is not None:
+        # the fault states a write revealed, kept in the records (the plan file leaves them out: apply --plan
+        # tells its own)
+        extra = ({"faults": list(faults)} if faults else {}) | ({"policy": policy.to_json()}
+                                                                if policy is not None else {})
         pieces = json.JSONEncoder(indent=1).iterencode(document | extra)
         for text in iter(lambda: "".join(itertools.islice(pieces, 10_000)), ""):
             sys.stdout.write(text)
         print()
     elif markdown:
         full_plan = f"`{out.name}`" if out else "the plan file"
-        # the policy's findings first, never cut (a reviewer must see them); the comment's last line end is its own, counted in the budget
-        said = "" if policy is None else "\n".join(["#### Policy", "", *(f"- {markdown_text(line.strip())}" for line in policy.lines())]) + "\n\n"
-        print(said + render.markdown(plan, max_chars=max_chars - len(said), notes=notes, full_plan=full_plan, faults=faults, frames=frames), end="")
+        # the policy's findings first, never cut (a reviewer must see them); the comment's last line end is
+        # its own, counted in the budget
+        said = "" if policy is None else "\n".join(["#### Policy", "",
+                                                    *(f"- {markdown_text(line.strip())}"
+                                                      for line in policy.lines())]) + "\n\n"
+        print(said + render.markdown(plan, max_chars=max_chars - len(said), notes=notes, full_plan=full_plan,
+                                     faults=faults, frames=frames), end="")
     else:
         if policy is not None:
             print_lines("\n".join(policy.lines()))
-        print_lines(render.human(plan, notes=notes, faults=faults, frames=frames))  # the plan made now: its words are prc3cfg's, not a file's
+        # the plan made now: its words are prc3cfg's, not a file's
+        print_lines(render.human(plan, notes=notes, faults=faults, frames=frames))
         if out is not None:
-            print(f"Plan written to {out}; apply it with: {command_line('prc3cfg', 'apply', '--plan', str(out))}")
+            print(f"Plan written to {out}; apply it with: "
+                  f"{command_line('prc3cfg', 'apply', '--plan', str(out))}")
 
 
 def targeting(modules: list[str] | None) -> None:
     """Terraform's -target warning: a plan of some modules is not the plan of the plant."""
     if modules:
         print(f"⚠ Only {', '.join(modules)} (--module): the rest of the plant file is left out of this "
-              "plan — run without --module to see everything it would change")  # fmt: skip
+              "plan — run without --module to see everything it would change")
 
 
-def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int) -> None:
+def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | None, json_out: bool,
+               markdown: bool, max_chars: int) -> None:
     """Drift (Teach In, work on the floor) as drift, not as a plan: for people (`render.drift_lines`),
     as JSON or markdown (`render.drift_json`, `drift_markdown`), and into `out` as JSON."""
     document = render.drift_json(plant, drifted, modules)
@@ -68,14 +80,16 @@ def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | No
         print(json.dumps(document, indent=1))
     elif markdown:
         full_drift = f"`{out.name}`" if out else "the drift file"
-        print(render.drift_markdown(document, max_chars=max_chars, full_drift=full_drift), end="")  # its line end is counted in the budget
+        # its line end is counted in the budget
+        print(render.drift_markdown(document, max_chars=max_chars, full_drift=full_drift), end="")
     else:
         print("\n".join(render.drift_lines(drifted, modules)))
         if out is not None:
             print(f"Drift written to {out}")
 
 
-def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions, frames: bool = False) -> Gates:
+def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, options: LineOptions,
+          frames: bool = False) -> Gates:
     """Show the plan — the read-back's progress taken off the screen first — and ask about axis
     releases and the apply itself on a terminal (`ask`), unless told not to."""
 
@@ -94,7 +108,8 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
         print_lines(text)
         questions = not auto_approve or (the_plan.axis_releases and not allow_axis_release)
         if the_plan.changes and questions and sys.stdin.isatty() and not sys.stdout.isatty():
-            to_the_terminal(text)  # stdout is a file (`apply > apply.log`): what is asked about goes where it is asked
+            # stdout is a file (`apply > apply.log`): what is asked about goes where it is asked
+            to_the_terminal(text)
         if not the_plan.changes:
             print("Nothing to do: nothing was written (the headline above says what the plan rests on).")
 
@@ -102,20 +117,26 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
         if auto_approve or not sys.stdin.isatty():
             return False  # refused, naming the flag
         summary = "\n".join(render.release_summary(names))
-        if not ask(f"{summary}\nRelease the axes of {render.plural(len(names), 'module')}?", options, typed=True):
-            raise UserError(f"axis release of {render.some_of(names)} not allowed (only 'yes' allows it) — nothing was written")
+        if not ask(f"{summary}\nRelease the axes of {render.plural(len(names), 'module')}?", options,
+                   typed=True):
+            raise UserError(f"axis release of {render.some_of(names)} not allowed (only 'yes' allows it) — "
+                            "nothing was written")
         return True
 
     def approve(the_plan: PlantPlan) -> bool:
-        question = f"Apply {render.plural(the_plan.message_count, 'message')} to {render.plural(len(the_plan.changes), 'module')}?"
+        question = (f"Apply {render.plural(the_plan.message_count, 'message')} to "
+                    f"{render.plural(len(the_plan.changes), 'module')}?")
         if not sys.stdin.isatty():
             raise UserError(f"{question} — no terminal to ask: pass --auto-approve to apply without asking")
-        return ask(f"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move. {question}",
-                   options, typed=True)  # fmt: skip
+        return ask("Every module must be in STOP and AUTOMATIC: a running one would take the new values on "
+                   f"its next move. {question}",
+                   options, typed=True)
 
-    # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan is whole (`Gates.asks`)
-    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None if auto_approve else approve,
-                 show_line=show_line)  # fmt: skip
+    # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan is
+    # whole (`Gates.asks`)
+    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None
+                 if auto_approve else approve,
+                 show_line=show_line)
 
 
 def report(result: ApplyResult) -> None:
@@ -126,7 +147,8 @@ def report(result: ApplyResult) -> None:
             print(said, file=sys.stdout if run.verified else sys.stderr)
     if (travel := render.travel_list(result.runs)) is not None:
         print(travel)
-    for line in [*render.broadcasts_heard(result.plan.proofs, result.runs), *render.earlier_releases(result.earlier)]:
+    for line in [*render.broadcasts_heard(result.plan.proofs, result.runs),
+                 *render.earlier_releases(result.earlier)]:
         print(line)
     if result.runs:
         print(f"Journal: {result.journal}", flush=True)
@@ -147,10 +169,12 @@ def accounted() -> Iterator[None]:
         failed = [r for r in stopped.result.runs if not r.verified]
         touched = sum(1 for r in failed if r.sent)
         restore = command_line("prc3cfg", "restore", str(stopped.result.snapshot))
-        print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of {render.plural(len(stopped.result.runs), 'module')} "
+        print(f"Interrupted: {len(stopped.result.runs) - len(failed)} of "
+              f"{render.plural(len(stopped.result.runs), 'module')} "
               "written and verified, "
-              + (f"{touched} written in part or whole but not verified — restore them with: {restore}" if touched
-                 else "nothing sent to the others"))  # fmt: skip
+              + (f"{touched} written in part or whole but not verified — restore them with: {restore}"
+                 if touched
+                 else "nothing sent to the others"))
         raise
     except ApplyFailed as failed:
         report(failed.result)
@@ -163,9 +187,11 @@ def applied(result: ApplyResult, command: str = "apply", *, emulated: bool = Fal
     if result.runs or result.earlier:
         report(result)
     if result.runs:
-        print(f"{command.capitalize()} complete: {render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
+        print(f"{command.capitalize()} complete: "
+              f"{render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
         print(render.timing(result.plan.phases(), result.took)
-              + (" — the embedded emulator answers at once: the estimate is what a line at the plant file's baud takes" if emulated else ""))
+              + (" — the embedded emulator answers at once: the estimate is what a line at the plant file's "
+                 "baud takes" if emulated else ""))
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:
@@ -173,5 +199,6 @@ def write_picture(path: Path, data: bytes, module: str) -> None:
     try:
         path.write_bytes(data)
     except OSError as error:
-        raise UserError(f"--plot {path}: cannot write it ({error.strerror}) — nothing was saved there") from None
+        raise UserError(f"--plot {path}: cannot write it ({error.strerror}) — nothing was "
+                        "saved there") from None
     print(f"{path}: the chains of module {module}")

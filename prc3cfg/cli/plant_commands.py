@@ -54,7 +54,9 @@ def validate(
     fmt: Annotated[Format, typer.Option("--format", metavar="text|github|json", help=(
         "text: one line per problem on stderr; github: workflow-command annotations at file:line:col (CI); "
         "json: a list of {file, line, column, message}."))] = Format.TEXT,
-    json_out: Annotated[bool, typer.Option("--json", help="The same as --format json (schemas/validate.schema.json).")] = False,
+    json_out: Annotated[bool, typer.Option("--json",
+                                           help="The same as --format json "
+                                                "(schemas/validate.schema.json).")] = False,
 ) -> None:
     """Check a plant file offline: structure, ranges, P ≤ S1, S5 ≤ V ≤ S4, chains, unique names."""
     import json
@@ -71,13 +73,15 @@ def validate(
     try:
         loaded = api.load(plant)
         file = loaded.policy_path or plant
-        judged = api.policy(loaded)  # the policy file's problems, then what its envelopes find (windows judge an apply's moment)
+        # the policy file's problems, then what its envelopes find (windows judge an apply's moment)
+        judged = api.policy(loaded)
     except PlantError as error:
         if fmt is Format.TEXT:
             raise  # one `error:` line per problem, as every error
         findings = error.findings(str(file))
         if fmt is Format.JSON:
-            print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in findings], indent=1))
+            print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message}
+                              for f in findings], indent=1))
         else:
             print("\n".join(github_annotation(f) for f in findings))
         raise typer.Exit(1) from None
@@ -86,18 +90,21 @@ def validate(
     if fmt is Format.JSON:
         return
     modules = len(loaded.modules())
-    print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, {_count(modules, 'module', 'modules')})")
+    print(f"{plant}: valid ({_count(len(loaded.buses), 'bus', 'buses')}, "
+          f"{_count(modules, 'module', 'modules')})")
 
 
 def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
-    """Say what the policy's envelopes found, in `fmt`; whether a hard one refuses the plant file. JSON lists the hard
-    ones only: they are its problems (`[]`, valid, as before); the others are warnings (stderr, `::warning`)."""
+    """Say what the policy's envelopes found, in `fmt`; whether a hard one refuses the plant file. JSON lists
+    the hard ones only: they are its problems (`[]`, valid, as before); the others are warnings (stderr,
+    `::warning`)."""
     import json
 
     found = [] if judged is None else judged.placed
     hard = [at for f, at in found if f.level == "hard"]
     if fmt is Format.JSON:
-        print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message} for f in hard], indent=1))
+        print(json.dumps([{"file": f.file, "line": f.line, "column": f.column, "message": f.message}
+                          for f in hard], indent=1))
     elif fmt is Format.GITHUB:
         for f, at in found:
             print(github_annotation(at, "error" if f.level == "hard" else "warning"))
@@ -108,22 +115,30 @@ def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
 
 
 def github_annotation(finding: Finding, kind: str = "error") -> str:
-    """A problem as GitHub's `::error` (or `::warning`) workflow command, escaped as its rules want (`prc3cfg.core.text`)."""
+    """A problem as GitHub's `::error` (or `::warning`) workflow command, escaped as its rules want
+    (`prc3cfg.core.text`)."""
     from prc3cfg.core.text import github_data, github_property
 
     place = "" if finding.line is None else f",line={finding.line},col={finding.column}"
-    return f"::{kind} file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}"
+    return (f"::{kind} file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}")
 
 
 @app.command()
 def show(
-    plant: Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML), or a plan file (JSON) made by plan --out.", show_default=False)],
-    module: Annotated[str | None, typer.Option("--module", "-m", metavar="NAME", help="The module to show, by name.")] = None,
+    plant: Annotated[Path, typer.Argument(metavar="PLANT",
+                                          help="The plant file (YAML), or a plan file (JSON) made by "
+                                               "plan --out.", show_default=False)],
+    module: Annotated[str | None,
+                      typer.Option("--module", "-m", metavar="NAME", help="The module to "
+                                                                          "show, by name.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="A plan file: print it as JSON.")] = False,
-    markdown: Annotated[bool, typer.Option("--markdown", help="A plan file: print it as markdown (PR comments).")] = False,
-    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, metavar="N", help="--markdown: at most this many characters.")] = 65_000,
+    markdown: Annotated[bool, typer.Option("--markdown",
+                                           help="A plan file: print it as markdown (PR comments).")] = False,
+    max_chars: Annotated[int, typer.Option("--max-chars", min=1000, metavar="N",
+                                           help="--markdown: at most this many characters.")] = 65_000,
     plot: Annotated[Path | None, typer.Option(metavar="FILE",
-        help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or .png file.")] = None,
+        help="Draw the module's chains (position against time, F1/F2 bands) to this .svg or "
+             ".png file.")] = None,
     actual: Annotated[Path | None, typer.Option(metavar="FILE",
         help="With --plot: overlay what the module holds (images saved by `read --json`) as before.")] = None,
     frames: FramesOpt = False,
@@ -168,7 +183,9 @@ def _show_plan_file(path: Path, *, json_out: bool, markdown: bool, max_chars: in
     if json_out:
         print(json.dumps(document, indent=1))
     elif markdown:
-        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`", frames=frames), end="")  # its line end is counted in the budget
+        # its line end is counted in the budget
+        print(render.markdown(document, max_chars=max_chars, full_plan=f"`{path.name}`", frames=frames),
+              end="")
     else:
         print_lines(render.human(document, frames=frames))
 
@@ -189,26 +206,30 @@ def _modules_table(plant: Plant) -> Table:
     from prc3cfg.core import render
 
     return _drawn(render.modules_table(plant.name, (
-        render.ModuleRow(bus.name, m.address, m.name, m.profiles, tuple(m.settings.programs), m.unmanaged_programs)
-        for bus, m in plant.modules())))  # fmt: skip
+        render.ModuleRow(bus.name, m.address, m.name, m.profiles, tuple(m.settings.programs),
+                         m.unmanaged_programs)
+        for bus, m in plant.modules())))
 
 
 def _show_module(console: Console, bus: str, module: Module) -> None:
-    """What `render.shown_module` says of the module, from the values of its plant file and where each came from."""
+    """What `render.shown_module` says of the module, from the values of its plant file and where each came
+    from."""
     from prc3cfg.core import render
     from prc3cfg.plant.profiles import Sourced
 
     settings = module.settings
     jumps = settings.jumps()
     shown = render.shown_module(render.Settings(
-        name=module.name, bus=bus, address=module.address, profiles=module.profiles, unmanaged_programs=module.unmanaged_programs,
+        name=module.name, bus=bus, address=module.address, profiles=module.profiles,
+                                                unmanaged_programs=module.unmanaged_programs,
         system=module.desired_system(), programs=module.desired_programs(),
         sources={"unmanaged_programs": settings.unmanaged_programs.source, "chains": settings.chains.source,
                  **{key: value.source for key, value in settings.system.items()}},
-        program_sources={number: {**{key: fields[key].source for key in fields}, "jump": jumps.get(number, Sourced(0)).source}
+        program_sources={number: {**{key: fields[key].source for key in fields},
+                                  "jump": jumps.get(number, Sourced(0)).source}
                          for number, fields in settings.programs.items()},
         chains=tuple((chain.programs, chain.loop) for chain in settings.chains.value),
-    ))  # fmt: skip
+    ))
     before, name, after = shown.heading
     console.print(f"{before}[bold]{name}[/]{after}")
     for block in shown.blocks:

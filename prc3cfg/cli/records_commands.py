@@ -38,11 +38,14 @@ VERIFY_FORMAT = "prc3cfg-records-verify/1"
 @records_app.command()
 def verify(
     paths: Annotated[list[Path], typer.Argument(metavar="PATH...", help=(
-        "Plant files (their records), .prc3cfg folders, journals (.jsonl) or snapshots (.json).", ), show_default=False)],
+        "Plant files (their records), .prc3cfg folders, journals (.jsonl) or snapshots (.json).", ),
+                                                show_default=False)],
     json_out: Annotated[bool, typer.Option("--json", help=(
-        f"Print a {VERIFY_FORMAT} document: what was checked, and each problem (exit 1 as without it)."))] = False,
+        f"Print a {VERIFY_FORMAT} document: what was checked, and each problem (exit 1 as "
+        "without it)."))] = False,
 ) -> None:
-    """Check the hash chain of journals and each snapshot against its journal: name the first record that does not match."""
+    """Check the hash chain of journals and each snapshot against its journal: name the first record that does
+    not match."""
     import sys
 
     from prc3cfg import api
@@ -53,8 +56,10 @@ def verify(
     for note in result.notes:
         print(f"note: {shown(note)}", file=sys.stderr)
     if json_out:
-        print_document({"format": VERIFY_FORMAT, "verified": not result.problems, "journals": result.journals, "snapshots": result.snapshots,
-                        "unchained": result.unchained, "problems": result.said(), "notes": result.notes, "summary": result.summary()})  # fmt: skip
+        print_document({"format": VERIFY_FORMAT, "verified": not result.problems, "journals": result.journals,
+                        "snapshots": result.snapshots,
+                        "unchained": result.unchained, "problems": result.said(), "notes": result.notes,
+                        "summary": result.summary()})
     if result.problems:
         raise UserError("\n".join(result.said()))
     if not json_out:
@@ -71,7 +76,8 @@ def list_(plant: PlantArg, json_out: JsonOpt = False) -> None:
         print(json.dumps([run.to_json() for run in found], indent=1))
         return
     if not found:
-        print(f"{plant}: no runs recorded yet (an apply, restore or adopt keeps them in {plant.parent / '.prc3cfg'}).")
+        print(f"{plant}: no runs recorded yet (an apply, restore or adopt keeps them in "
+              f"{plant.parent / '.prc3cfg'}).")
     for run in found:
         print(_line(run))
 
@@ -85,21 +91,22 @@ def prune(
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Say what would go; remove nothing.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Remove old runs, journal and snapshot together — nothing while a record beside the plant file
-    does not verify; never the newest snapshot of a line, never a run an axis release nobody was told of names."""
+    """Remove old runs, journal and snapshot together — nothing while a record beside the plant file does not
+    verify; never the newest snapshot of a line, never a run an axis release nobody was told of names."""
     from prc3cfg import api
 
     done = api.prune_records(_plant_file(plant), keep=keep, older_than_days=older_than, dry_run=dry_run)
     if json_out:
         print(json.dumps({"removed": [run.to_json() for run in done.removed],
-                          "kept": [run.to_json() | {"why": why} for run, why in done.kept]}, indent=1))  # fmt: skip
+                          "kept": [run.to_json() | {"why": why} for run, why in done.kept]}, indent=1))
         return
     verb = "Would remove" if dry_run else "Removed"
     for run in done.removed:
         print(f"{verb}: {_line(run)}")
     for run, why in done.kept:
         print(f"Kept: {_line(run)} — {why}")
-    print(f"{verb} {len(done.removed)} run{'s' if len(done.removed) != 1 else ''}; kept {len(done.kept)} of those old enough.")
+    print(f"{verb} {len(done.removed)} run{'s' if len(done.removed) != 1 else ''}; kept {len(done.kept)} of "
+          "those old enough.")
 
 
 def _plant_file(path: Path) -> Plant:
@@ -120,8 +127,9 @@ def _line(run: RecordedRun) -> str:
     from prc3cfg.core.text import shown
 
     who = f"{run.user}@{run.host}" if run.user else "(who: not recorded)"
-    parts = [run.time or "(no time)", run.command or "?", who, run.plant or "?", ", ".join(run.lines) or "-", run.result,
-             f"snapshot {run.snapshot.name}" if run.snapshot is not None else "no snapshot"]  # fmt: skip
+    parts = [run.time or "(no time)", run.command or "?", who, run.plant or "?", ", ".join(run.lines) or "-",
+             run.result,
+             f"snapshot {run.snapshot.name}" if run.snapshot is not None else "no snapshot"]
     if run.reason:
         parts.append(f"reason: {run.reason}")
     if run.chain != "intact":

@@ -35,7 +35,8 @@ class Stream:
         if document is None:
             return
         text = json.dumps(document) + "\n"  # ASCII: any pipe carries it, and no C1 control or line separator
-        # another user's record brought (a travel event names their claims) reaches a terminal that shows the stream
+        # another user's record brought (a travel event names their claims) reaches a terminal that shows the
+        # stream
         with self._lock:
             sys.stdout.write(text)
             sys.stdout.flush()
@@ -80,22 +81,27 @@ def gates(stream: Stream, plan_given: Path | None, auto_approve: bool, allow_axi
         stream.event("plan", lines=sorted(the_plan.buses()), whole=True, plan=document(the_plan))
         if the_plan.axis_releases and allow_axis_release:
             names = [change.name for change in the_plan.axis_releases]
-            stream.emit(events.question(stream.command, f"Release the axes of {render.plural(len(names), 'module')}?", True,
-                                        "--allow-axis-release"))  # fmt: skip
-        if the_plan.changes and (allow_axis_release or not the_plan.axis_releases):  # else refused before it is asked
+            stream.emit(events.question(stream.command,
+                                        f"Release the axes of {render.plural(len(names), 'module')}?", True,
+                                        "--allow-axis-release"))
+        # else refused before it is asked
+        if the_plan.changes and (allow_axis_release or not the_plan.axis_releases):
             stream.emit(events.question(stream.command, _approval(the_plan), True, approved_by))
 
     def refuse_release(names: list[str]) -> bool:
-        stream.emit(events.question(stream.command, f"Release the axes of {render.plural(len(names), 'module')}?", False,
-                                    "no --allow-axis-release"))  # fmt: skip
+        stream.emit(events.question(stream.command,
+                                    f"Release the axes of {render.plural(len(names), 'module')}?", False,
+                                    "no --allow-axis-release"))
         return False
 
-    return Gates(show=show, show_line=show_line, allow_axis_release=True if allow_axis_release else refuse_release)
+    return Gates(show=show, show_line=show_line, allow_axis_release=True if allow_axis_release
+                 else refuse_release)
 
 
 def _approval(the_plan: PlantPlan) -> str:
     """The question a terminal would ask before the writes (`prc3cfg.cli.output.gates`)."""
-    return f"Apply {render.plural(the_plan.message_count, 'message')} to {render.plural(len(the_plan.changes), 'module')}?"
+    return (f"Apply {render.plural(the_plan.message_count, 'message')} to "
+            f"{render.plural(len(the_plan.changes), 'module')}?")
 
 
 def accounts(stream: Stream, result: ApplyResult) -> None:
@@ -109,10 +115,12 @@ def accounts(stream: Stream, result: ApplyResult) -> None:
 
 
 def _ended(result: ApplyResult) -> dict[str, Any]:
-    return {"modules": len(result.runs), "written": sum(bool(run.steps) and run.verified for run in result.runs),
-            "journal": str(result.journal) if result.runs else None, "snapshot": None if result.snapshot is None else str(result.snapshot),
+    return {"modules": len(result.runs),
+            "written": sum(bool(run.steps) and run.verified for run in result.runs),
+            "journal": str(result.journal) if result.runs else None, "snapshot": None
+            if result.snapshot is None else str(result.snapshot),
             "took": {phase: round(seconds, 3) for phase, seconds in result.took.items()},
-            "estimated": {phase: round(seconds, 3) for phase, seconds in result.plan.phases().items()}}  # fmt: skip
+            "estimated": {phase: round(seconds, 3) for phase, seconds in result.plan.phases().items()}}
 
 
 @contextlib.contextmanager
@@ -124,8 +132,10 @@ def accounted(stream: Stream) -> Iterator[list[ApplyResult]]:
         yield finished
     except (ApplyInterrupted, ApplyFailed) as stopped:
         accounts(stream, stopped.result)
-        status, code = ("interrupted", 130) if isinstance(stopped, ApplyInterrupted) else ("failed", stopped.exit_code)
-        stream.emit(events.account(stream.command, status, code, errors=str(stopped).split("\n"), **_ended(stopped.result)))
+        status, code = ("interrupted", 130) if isinstance(stopped, ApplyInterrupted) else ("failed",
+                                                                                           stopped.exit_code)
+        stream.emit(events.account(stream.command, status, code, errors=str(stopped).split("\n"),
+                                   **_ended(stopped.result)))
         raise
     except UserError as error:  # refused (or interrupted) before any write: the plan, a gate, the line
         status = "interrupted" if isinstance(error, Interrupted) else "refused"
@@ -136,4 +146,5 @@ def accounted(stream: Stream) -> Iterator[list[ApplyResult]]:
         raise
     result = finished[0]
     accounts(stream, result)
-    stream.emit(events.account(stream.command, "verified" if result.runs else "nothing to do", 0, **_ended(result)))
+    stream.emit(events.account(stream.command, "verified" if result.runs else "nothing to do", 0,
+                               **_ended(result)))

@@ -81,7 +81,8 @@ TRANSITIONS: dict[State, dict[Event, tuple[State, Next]]] = {
         Event.ALL_SENT: (State.VERIFYING, Next.READ),
         # every PRC 3 message is idempotent: read back, and send again whatever still differs
         Event.NO_REPLY: (State.VERIFYING, Next.READ),
-        # final, unless a lost broadcast explains it: the read-back and an addressed repair get their chance first
+        # final, unless a lost broadcast explains it: the read-back and an addressed repair get their chance
+        # first
         Event.ERROR_CODE_AFTER_BROADCAST: (State.VERIFYING, Next.READ),
         Event.ERROR_CODE: (State.REFUSED, Next.READ),
         # only a 10h/20h clears E12, and this plan has none for it: the next plan writes the system first
@@ -96,7 +97,8 @@ TRANSITIONS: dict[State, dict[Event, tuple[State, Next]]] = {
         Event.TRESPASSED: (State.FAILED, Next.STOP),  # no plan may write those programs: nothing to repair
         Event.DIFFERS: (State.VERIFYING, Next.PLAN_REPAIR),
         Event.REPAIR_PLANNED: (State.REPAIRING, Next.SEND),
-        Event.REPAIR_UNCONSENTED: (State.FAILED, Next.STOP),  # it needs a plan of its own, shown and agreed to
+        # it needs a plan of its own, shown and agreed to
+        Event.REPAIR_UNCONSENTED: (State.FAILED, Next.STOP),
         Event.NO_REPLY: (State.VERIFYING, Next.READ),  # the next round reads again
         Event.READ_REFUSED: (State.FAILED, Next.STOP),
         Event.NO_ROUND_LEFT: (State.FAILED, Next.GIVE_UP),
@@ -146,7 +148,8 @@ NOT_IN_STOP = frozenset({16, 20})
 SYSTEM_UNSET = 23  # E12: every write but 10h/20h refused
 
 #: A write's reply (a code word), as an event; any code not here is an `ERROR_CODE`.
-REPLIES: dict[int, Event] = {ACCEPTED: Event.ACKNOWLEDGED, SYSTEM_UNSET: Event.E12} | {code: Event.RUNNING for code in NOT_IN_STOP}
+REPLIES: dict[int, Event] = {ACCEPTED: Event.ACKNOWLEDGED, SYSTEM_UNSET: Event.E12} | {code: Event.RUNNING
+                                                                                       for code in NOT_IN_STOP}
 
 
 class NoTransition(ValueError):

@@ -21,13 +21,15 @@ class Release(enum.Enum):
     POSSIBLY = "possibly"  # a 10h/20h went out unacknowledged, and no read-back settles it
 
 
-def released(*, acknowledged: bool, sent: bool, possibly_written: bool, exposed: bool, read_back: bool, changed: bool) -> Release:
+def released(*, acknowledged: bool, sent: bool, possibly_written: bool, exposed: bool, read_back: bool,
+             changed: bool) -> Release:
     """Whether a module's axes were released, by the first of these that holds:
 
     1. a 10h/20h to it was acknowledged (`acknowledged`): YES;
     2. a read to it was answered as a write (`possibly_written`), or its line detects no damage (`exposed`)
        and its system block reads back changed: a damaged frame executed as a write — YES where the block
-       changed (a 10h leaves a module at defaults as it was, so an unchanged block is no proof): else POSSIBLY;
+       changed (a 10h leaves a module at defaults as it was, so an unchanged block is no proof): else
+       POSSIBLY;
     3. no 10h/20h to it went out (`sent`): NO;
     4. one went out unacknowledged and no read-back came (`read_back`): POSSIBLY;
     5. a 10h/20h is only sent where the system parameters differ: a block read back as before (`changed`

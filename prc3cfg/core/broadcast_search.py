@@ -41,7 +41,14 @@ from typing import NamedTuple
 
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_NUMBERS,
+    ModuleImage,
+    Program,
+    SystemParameters,
+    default_program,
+)
 from prc3cfg.core.planner import (
     ModulePlan,
     PlanVerificationError,
@@ -114,7 +121,8 @@ class Shared:
     bus_time: float  # the broadcasts once, plus every module's own steps
 
 
-def share(modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo | None = None, proof_time: float = 0.0) -> Shared:
+def share(modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo | None = None,
+          proof_time: float = 0.0) -> Shared:
     """The cheapest broadcasts found for a line whose every module is in `modules`: groups added
     one by one while they pay, or all of them with those dropped that do not — the cheaper.
     `proof_time` is what any broadcast costs besides: proving that nobody else is on the line
@@ -136,22 +144,28 @@ def share(modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo | 
     dropped, dropped_set = search.drop(nothing)
     best = min(nothing.seconds, dropped.seconds + (proof_time if dropped.broadcasts else 0.0))
     added = search.add(nothing, best, dropped_set, proof_time)
-    broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2] + (proof_time if priced[0] else 0.0))
-    received: dict[SystemParameters, tuple[Step, ...]] = {}  # the broadcasts, summarised as each module sees them
-    plans = tuple(_plan(module, own, received, broadcasts) for module, own in zip(modules, owns)) if broadcasts else tuple(m.plan for m in modules)
+    broadcasts, owns, _ = min((nothing, added, dropped), key=lambda priced: priced[2]
+                              + (proof_time if priced[0] else 0.0))
+    # the broadcasts, summarised as each module sees them
+    received: dict[SystemParameters, tuple[Step, ...]] = {}
+    plans = (tuple(_plan(module, own, received, broadcasts) for module, own in zip(modules, owns))
+             if broadcasts else tuple(m.plan for m in modules))
     bus_time = sum(cost.broadcast_time(step.message) for step in broadcasts) + sum(p.bus_time for p in plans)
     return Shared(broadcasts, plans, bus_time)
 
 
-def _plan(module: SharingModule, own: _Own, received: dict[SystemParameters, tuple[Step, ...]], broadcasts: tuple[Step, ...]) -> ModulePlan:
+def _plan(module: SharingModule, own: _Own, received: dict[SystemParameters, tuple[Step, ...]],
+          broadcasts: tuple[Step, ...]) -> ModulePlan:
     """A module's plan behind the broadcasts: the steps that reach it, its own bus time."""
     actual = module.actual
     if actual.system not in received:
-        received[actual.system] = tuple(Step(s.message, summarise(s.message, actual.system), s.message.RELEASES_AXES) for s in broadcasts)
+        received[actual.system] = tuple(Step(s.message, summarise(s.message, actual.system),
+                                             s.message.RELEASES_AXES) for s in broadcasts)
     steps = (*received[actual.system], *own.steps)
-    predicted = own.predicted if own.predicted.address == actual.address else replace(own.predicted, address=actual.address)
+    predicted = own.predicted if own.predicted.address == actual.address else replace(own.predicted,
+                                                                                      address=actual.address)
     return ModulePlan(module.desired.address, steps, own.bus_time, module.plan.naive_bus_time,
-                      any(step.releases_axes for step in steps), predicted)  # fmt: skip
+                      any(step.releases_axes for step in steps), predicted)
 
 
 def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
@@ -159,10 +173,12 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     first = modules[0]
     groups: list[tuple[Step, ...]] = []
     wanted = first.desired.system
-    if all(m.desired.system == wanted for m in modules) and sum(m.actual.system != wanted for m in modules) >= 2:
+    if (all(m.desired.system == wanted for m in modules)
+        and sum(m.actual.system != wanted for m in modules) >= 2):
         message = codec.InitSystem() if wanted == DEFAULT_SYSTEM else codec.WriteSystem(wanted)
         groups.append((Step(message, summarise(message, first.actual.system), True),))
-    desired = [[m.desired.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]  # by program, then module
+    # by program, then module
+    desired = [[m.desired.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]
     actual = [[m.actual.programs[n - 1] for m in modules] for n in PROGRAM_NUMBERS]
     for field, kind in codec.FIELD_KINDS.items():
         if not kind.broadcast:
@@ -175,7 +191,8 @@ def _candidates(modules: Sequence[SharingModule]) -> list[tuple[Step, ...]]:
     return groups
 
 
-def _shared_items(field: str, desired: list[list[Program | None]], actual: list[list[Program | None]]) -> list[tuple[int, int]]:
+def _shared_items(field: str, desired: list[list[Program | None]],
+                  actual: list[list[Program | None]]) -> list[tuple[int, int]]:
     """(program, value) of `field` for each program every module wants alike and two or more do not hold yet
     (`desired`, `actual`: each program's, module by module)."""
     items = []
@@ -196,13 +213,15 @@ class _Search:
     """The broadcast search of one line. A set of broadcasts is a set of candidate groups: a bit per
     group, in `groups`' order, and its steps theirs in that order."""
 
-    def __init__(self, groups: list[tuple[Step, ...]], modules: list[SharingModule], cost: LineCost, memo: SharingMemo) -> None:
+    def __init__(self, groups: list[tuple[Step, ...]], modules: list[SharingModule], cost: LineCost,
+                 memo: SharingMemo) -> None:
         self.groups, self.modules, self.cost, self.memo = groups, modules, cost, memo
         self.floors = _Floors(groups, modules, cost)
 
     def attempt(self, chosen: int, bound: float = inf) -> _Attempt | None:
         steps = tuple(step for i, group in enumerate(self.groups) if chosen >> i & 1 for step in group)
-        return _attempt(steps, self.modules, self.cost, self.memo, bound, self.floors.of(chosen) if bound < inf else ())
+        return _attempt(steps, self.modules, self.cost, self.memo, bound, self.floors.of(chosen)
+                        if bound < inf else ())
 
     def drop(self, nothing: _Attempt) -> tuple[_Attempt, int]:
         """From all the groups, drop while that pays: the cheapest set found, priced, and its bits."""
@@ -232,7 +251,8 @@ class _Search:
                 added, chosen = trial, chosen | 1 << i
         return added
 
-    def _out_of_reach(self, chosen: int, seconds: float, first: int, best: float, dropped_set: int, proof_time: float) -> bool:
+    def _out_of_reach(self, chosen: int, seconds: float, first: int, best: float, dropped_set: int,
+                      proof_time: float) -> bool:
         """Whether the additions, at `chosen` (priced: `seconds`) with the groups from `first` on
         still to try, can only end at a set that is not chosen: one dearer than `best` — by its
         floor, where it is not priced — or the drops' own."""
@@ -260,7 +280,8 @@ class _Group(NamedTuple):
     def of(cls, steps: tuple[Step, ...]) -> _Group:
         messages = [step.message for step in steps]
         field = messages[0].FIELD if isinstance(messages[0], codec.WriteField) else None
-        return cls(any(m.RELEASES_AXES for m in messages), field, _bits(n for m in messages for n in m.touched_programs()))
+        return cls(any(m.RELEASES_AXES for m in messages), field,
+                   _bits(n for m in messages for n in m.touched_programs()))
 
 
 class _Chosen(NamedTuple):
@@ -301,7 +322,8 @@ class _Floors:
         programs = 0
         for g in groups:
             programs |= g.programs
-        return _Chosen(any(g.system for g in groups), {g.field: g.programs for g in groups if g.field is not None}, programs)
+        return _Chosen(any(g.system for g in groups),
+                       {g.field: g.programs for g in groups if g.field is not None}, programs)
 
     def of(self, chosen: int) -> tuple[float, ...]:
         """Each module's floor behind the groups `chosen`."""
@@ -337,26 +359,34 @@ class _Floor:
       else only its 50h is.
     """
 
-    __slots__ = ("_address", "_changed", "_cost", "_managed", "_needs", "_reads", "_system_differs", "_system_write")
+    __slots__ = ("_address", "_changed", "_cost", "_managed", "_needs", "_reads", "_system_differs",
+                 "_system_write")
 
     def __init__(self, module: SharingModule, cost: LineCost) -> None:
         actual, desired = module.actual, module.desired
         system = desired.system
         defaults = [default_program(s) for s in (actual.system, system)]
-        free = {"P": {p.P for p in defaults} | {system.S1}, "V": {p.V for p in defaults} | {system.S4, system.S5}}
-        differing = [(n, have, want) for n, (have, want) in enumerate(zip(actual.programs, desired.programs), 1)
-                     if have is not None and want is not None and have != want]  # fmt: skip
+        free = {"P": {p.P for p in defaults} | {system.S1},
+                "V": {p.V for p in defaults} | {system.S4, system.S5}}
+        differing = [(n, have, want)
+                     for n, (have, want) in enumerate(zip(actual.programs, desired.programs), 1)
+                     if have is not None and want is not None and have != want]
         needs = []
         for field in _WORD_FIELDS:
             left = free.get(field, {0})
-            bits = _bits(n for n, have, want in differing if getattr(have, field) != getattr(want, field) and getattr(want, field) not in left)
+            bits = _bits(n for n, have, want in differing if getattr(have, field) != getattr(want, field)
+                         and getattr(want, field) not in left)
             if bits:
                 needs.append((field, bits))
-        self._needs: tuple[tuple[str, int], ...] = tuple(needs)  # (field, the programs whose value there takes a word)
+        # (field, the programs whose value there takes a word)
+        self._needs: tuple[tuple[str, int], ...] = tuple(needs)
         self._managed = _bits(n for n, p in enumerate(desired.programs, 1) if p is not None)
         self._system_differs = actual.system != system
-        self._changed = self._predicted_changes(module) if self._system_differs else 0  # what differs from the read-back after a system step
-        writes = [codec.WriteSystem(system), *((codec.InitSystem(),) if system == DEFAULT_SYSTEM else ())] if self._system_differs else []
+        # what differs from the read-back after a system step
+        self._changed = self._predicted_changes(module) if self._system_differs else 0
+        writes = ([codec.WriteSystem(system),
+                  *((codec.InitSystem(),) if system == DEFAULT_SYSTEM else ())] if self._system_differs
+                  else [])
         self._system_write = min((cost.message_time(desired.address, m) for m in writes), default=0.0)
         self._address, self._cost = actual.address, cost
         self._reads: dict[tuple[int, bool], float] = {}
@@ -371,8 +401,9 @@ class _Floor:
             clamped = after(actual, [codec.WriteSystem(desired.system)])
         except codec.Rejected:
             return None
-        return _bits(n for n, (have, want, then) in enumerate(zip(actual.programs, desired.programs, clamped.programs), 1)
-                     if have is not None and (want if want is not None else then) != have)  # fmt: skip
+        return _bits(n for n, (have, want, then) in enumerate(zip(actual.programs, desired.programs,
+                                                                  clamped.programs), 1)
+                     if have is not None and (want if want is not None else then) != have)
 
     def seconds(self, chosen: _Chosen) -> float:
         """The floor behind the groups `chosen`."""
@@ -420,8 +451,9 @@ def _numbers(bits: int) -> list[int]:
     return [n for n in PROGRAM_NUMBERS if bits >> (n - 1) & 1]
 
 
-def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost, memo: SharingMemo,
-             bound: float = inf, floors: Sequence[float] = ()) -> _Attempt | None:  # fmt: skip
+def _attempt(broadcasts: tuple[Step, ...], modules: Sequence[SharingModule], cost: LineCost,
+             memo: SharingMemo,
+             bound: float = inf, floors: Sequence[float] = ()) -> _Attempt | None:
     """(broadcasts, each module's own steps, the line's bus time — broadcasts, own steps and every
     verifying read-back); None where a module cannot take the broadcasts. Each kind of module is
     priced once (`memo`); where the bus time reaches `bound` — or would, with what the modules not
@@ -454,7 +486,8 @@ class _Own:
     steps: tuple[Step, ...]  # its own steps, after the broadcasts
     bus_time: float  # its own steps'
     seconds: float  # its own steps' and the verifying read-back of everything that reaches it
-    predicted: ModuleImage  # its programs those of the desired image where they are equal: the memo holds many
+    # its programs those of the desired image where they are equal: the memo holds many
+    predicted: ModuleImage
 
 
 def _priced(broadcasts: tuple[Step, ...], module: SharingModule, cost: LineCost) -> _Own | None:
@@ -477,8 +510,11 @@ def _priced(broadcasts: tuple[Step, ...], module: SharingModule, cost: LineCost)
         except StepProblem as found:
             if 0 < found.index <= len(broadcasts):
                 return None  # a broadcast this module cannot take
-            raise PlanVerificationError(f"module {actual.address}: {found}; steps: {[m.hex() for m in messages]}") from None
+            raise PlanVerificationError(f"module {actual.address}: {found}; steps: "
+                                        f"{[m.hex() for m in messages]}") from None
         steps = tuple(Step(m, summarise(m, actual.system), m.RELEASES_AXES) for m in own)
-        programs = tuple(want if want == have else have for have, want in zip(predicted.programs, module.desired.programs))
+        programs = tuple(want if want == have else have
+                         for have, want in zip(predicted.programs, module.desired.programs))
         predicted = replace(predicted, programs=programs)
-    return _Own(steps, bus_time, bus_time + verification_time(actual, predicted, (*broadcasts, *steps), cost), predicted)
+    return _Own(steps, bus_time, bus_time + verification_time(actual, predicted, (*broadcasts, *steps), cost),
+                predicted)

@@ -11,7 +11,8 @@ the modules are ready.
 
 How long the master waits for a reply follows from the same figures (`LineCost.reply_deadline`):
 
-    deadline = (request frame bytes + longest reply frame bytes) × bits_per_char / baud × (1 + DEADLINE_MARGIN)
+    deadline = (request frame bytes + longest reply frame bytes) × bits_per_char / baud × (1 +
+    DEADLINE_MARGIN)
                + turnaround  (+ 2 × ZVZ for open-driver)
 
 with the longest reply the message can have — a read's data block, a write's code word — and on a
@@ -66,7 +67,8 @@ class LineCost:
         framing = self.framing
         reply = framing.frame_length(codec.reply_length(message))
         if framing.stuffs:
-            reply += reply - 1  # at worst every byte after the start code is stuffed: the reply's bytes are not known yet
+            # at worst every byte after the start code is stuffed: the reply's bytes are not known yet
+            reply += reply - 1
         chars = self._request(address, message) + reply
         return chars * self.line.char_time * (1 + DEADLINE_MARGIN) + self.turnaround + self._gaps(2)
 
@@ -78,7 +80,8 @@ class LineCost:
         """Bytes of the request frame of `message` to `address`."""
         framing = self.framing
         chars = framing.frame_length(message.size())
-        return chars + framing.stuffing(Direction.REQUEST, address, message.encode()) if framing.stuffs else chars
+        return (chars + framing.stuffing(Direction.REQUEST, address, message.encode()) if framing.stuffs
+                else chars)
 
     def silence_time(self, message: codec.Message, timeout: float) -> float:
         """Seconds an exchange with an address where nobody answers holds the line: the whole wait

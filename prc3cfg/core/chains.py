@@ -32,7 +32,8 @@ def jumps_as_chains(programs: dict[int, Program]) -> tuple[list[Any], dict[int, 
     return chains, nexts
 
 
-def _plain_chains(programs: dict[int, Program], link: dict[int, int], succ: dict[int, int]) -> tuple[list[Any], set[int]]:
+def _plain_chains(programs: dict[int, Program], link: dict[int, int],
+                  succ: dict[int, int]) -> tuple[list[Any], set[int]]:
     """The paths of links from a program nothing links to that end in A = 0, and the programs on them."""
     linked_to = set(link.values())
     chains: list[Any] = []
@@ -48,7 +49,8 @@ def _plain_chains(programs: dict[int, Program], link: dict[int, int], succ: dict
 
 
 def _loops(link: dict[int, int], placed: set[int]) -> list[list[int]]:
-    """The cycles among the linked programs not `placed` yet, each from its lowest program, added to `placed`."""
+    """The cycles among the linked programs not `placed` yet, each from its lowest program, added to
+    `placed`."""
     loops = []
     for start in sorted(link):
         if start in placed:

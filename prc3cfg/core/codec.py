@@ -595,7 +595,8 @@ class ReadPrograms(_ProgramRange):
     def __post_init__(self) -> None:
         _ProgramRange.__post_init__(self)
         if self.last - self.first + 1 > MAX_READ_PROGRAMS:
-            raise MessageError(f"52h reads at most {MAX_READ_PROGRAMS} programs, not {self.first}..{self.last}")
+            raise MessageError(f"52h reads at most {MAX_READ_PROGRAMS} programs, not "
+                               f"{self.first}..{self.last}")
 
     @classmethod
     def check_header(cls, data: bytes) -> None:
@@ -615,7 +616,7 @@ MESSAGE_TYPES: dict[int, type[Message]] = {
         WritePositions, WriteSpeeds, WriteRelativeSpeeds, WriteDwellTimes, WriteF1, WriteF2,
         WriteAddresses, ReadSystem, ReadProgram, ReadPrograms,
     )
-}  # fmt: skip
+}
 
 #: The per-field messages 40h..45h by program field name.
 FIELD_MESSAGES: dict[str, type[WriteField]] = {
@@ -634,11 +635,14 @@ class ItemsKind:
     item_bytes: int
     capacity: int
     fields: tuple[str, ...]  # the program fields an item writes
-    broadcast: bool  # the broadcast search (`prc3cfg.core.broadcast_search`) sends items every module shares in it
+    # the broadcast search (`prc3cfg.core.broadcast_search`) sends items every module shares in it
+    broadcast: bool
 
     @classmethod
-    def of(cls, message: type[WritePartPrograms] | type[_WriteItems], fields: tuple[str, ...], broadcast: bool) -> ItemsKind:
-        return cls(message, 2 * message.HEADER_WORDS, 2 * message.ITEM_WORDS, message.MAX_ITEMS, fields, broadcast)
+    def of(cls, message: type[WritePartPrograms] | type[_WriteItems], fields: tuple[str, ...],
+           broadcast: bool) -> ItemsKind:
+        return cls(message, 2 * message.HEADER_WORDS, 2 * message.ITEM_WORDS, message.MAX_ITEMS, fields,
+                   broadcast)
 
     def messages(self, n: int) -> int:
         """How many messages n items need (none for none)."""
@@ -659,7 +663,8 @@ ITEMS_KINDS: dict[int, ItemsKind] = {
     )
 }
 #: The message of one field of arbitrary programs (40h..46h), by program field name.
-FIELD_KINDS: dict[str, ItemsKind] = {kind.fields[0]: kind for kind in ITEMS_KINDS.values() if len(kind.fields) == 1}
+FIELD_KINDS: dict[str, ItemsKind] = {kind.fields[0]: kind for kind in ITEMS_KINDS.values()
+                                     if len(kind.fields) == 1}
 
 
 def decode_message(data: bytes) -> Message:
@@ -755,11 +760,13 @@ def decode_reply(message: Message, data: bytes) -> int | SystemReply | ProgramsR
     """
     if len(data) == 2:
         return data[0]
-    if not isinstance(message, ReadSystem | ReadProgram | ReadPrograms) or len(data) != reply_length(message):  # the reads (IS_READ)
+    # the reads (IS_READ)
+    if not isinstance(message, ReadSystem | ReadProgram | ReadPrograms) or len(data) != reply_length(message):
         raise BadReply(f"{len(data)} bytes in reply to {message.ID:02X}h, expected {reply_length(message)}")
     if isinstance(message, ReadSystem):
         return SystemReply.decode(data)
     reply = ProgramsReply.decode(data)
     if reply.block_numbers(data) != tuple(message.programs):
-        raise BadReply(f"programs {reply.block_numbers(data)} in reply to a read of {tuple(message.programs)}")
+        raise BadReply(f"programs {reply.block_numbers(data)} in reply to a read of "
+                       f"{tuple(message.programs)}")
     return reply

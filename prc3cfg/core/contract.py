@@ -1,14 +1,13 @@
 """The JSON files prc3cfg writes and reads back — plan files, module images, snapshots, an
 emulator's state — as pydantic models, and a refusal of one said in words.
 
-Owns the kinds of value those models hold (`Whole`, `Text`, `Flag`, `Number`; `within` a
-range, `one_of` some texts: never "2", 2.7 or true for a whole number) and the wording of pydantic's first error
-about a document: where in it, what is there, what belongs there — 'buses[0].modules[2] has no
-"steps"', "buses[1].name is null, where text belongs", "fault is a list, where text or null
-belongs" (`takes_null`: the contract's type there is `X | None`), "module 3: program 7: P = 12000 is
-outside 0..9999". Each contract's own module names its file, words its places when a JSON path
-is not the best name for them, and says what to do. Plant files (YAML, positions) are
-`prc3cfg.plant.messages`. Pure.
+Owns the kinds of value those models hold (`Whole`, `Text`, `Flag`, `Number`; `within` a range, `one_of` some
+texts: never "2", 2.7 or true for a whole number) and the wording of pydantic's first error about a document:
+where in it, what is there, what belongs there — 'buses[0].modules[2] has no "steps"', "buses[1].name is null,
+where text belongs", "fault is a list, where text or null belongs" (`takes_null`: the contract's type there is
+`X | None`), "module 3: program 7: P = 12000 is outside 0..9999". Each contract's own module names its file,
+words its places when a JSON path is not the best name for them, and says what to do. Plant files (YAML,
+positions) are `prc3cfg.plant.messages`. Pure.
 """
 
 from __future__ import annotations
@@ -34,10 +33,12 @@ Number = Annotated[float, Strict()]  # a whole number too, never true or "2"
 
 #: What belongs where pydantic found something else, by its error type.
 WANTED = {
-    "int_type": "a whole number", "string_type": "text", "bool_type": "true or false", "float_type": "a number",
-    "model_type": "an object", "model_attributes_type": "an object", "dataclass_type": "an object", "dict_type": "an object",
+    "int_type": "a whole number", "string_type": "text", "bool_type": "true or false",
+          "float_type": "a number",
+    "model_type": "an object", "model_attributes_type": "an object", "dataclass_type": "an object",
+          "dict_type": "an object",
     "list_type": "a list", "tuple_type": "a list",
-}  # fmt: skip
+}
 
 Place = Callable[[Sequence[str | int]], str]
 
@@ -72,7 +73,8 @@ def every_key(keys: Iterable[str]) -> BeforeValidator:
     required = tuple(keys)
 
     def check(value: Any) -> Any:
-        if isinstance(value, dict) and (missing := next((key for key in required if key not in value), None)) is not None:
+        if (isinstance(value, dict)
+            and (missing := next((key for key in required if key not in value), None)) is not None):
             raise PydanticCustomError("missing_key", "no {key}", {"key": missing})
         return value
 
@@ -110,7 +112,8 @@ def worded(detail: ErrorDetails, place: Place, contract: Any) -> str:
     if kind == "outside":
         return f"{at} = {described(value)} is outside {ctx['low']}..{ctx['high']}"
     if kind in ("too_short", "too_long") and isinstance(value, list | tuple):
-        return f"{at} is a list of {len(value)}, where a list of {ctx.get('min_length', ctx.get('max_length'))} belongs"
+        return (f"{at} is a list of {len(value)}, where a list of "
+                f"{ctx.get('min_length', ctx.get('max_length'))} belongs")
     if kind == "one_of":
         return f"{at} is {described(value)}, where {either([*map(json.dumps, ctx['values']), *null])} belongs"
     wanted = WANTED.get(kind)

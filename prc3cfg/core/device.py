@@ -22,11 +22,18 @@ from prc3cfg.core import codec
 from prc3cfg.core.codec import Message, Rejected
 from prc3cfg.core.error_codes import ACCEPTED, FAULT_STATES
 from prc3cfg.core.exchange import FIRMWARE_ADDED
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, ModuleImage, Program, SystemParameters, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    ModuleImage,
+    Program,
+    SystemParameters,
+    default_program,
+)
 
 MODES = ("stop", "run", "manual")
 #: A fault condition → the code every write is rejected with (§4.4).
-FAULT_CODES: dict[str, int] = {name: code for code, name in FAULT_STATES.items()}  # fmt: skip
+FAULT_CODES: dict[str, int] = {name: code for code, name in FAULT_STATES.items()}
 
 #: Fixed value ranges, kind → (lowest, highest, code below, code above) (§4.5 step 9): the one
 #: table of the device's ranges. The plant file's bounds (`prc3cfg.core.units`), the emulator's
@@ -67,11 +74,13 @@ def value_range(kind: str, system: SystemParameters) -> tuple[int, int, int, int
 
 #: The system parameters under which P and V may take every value any module allows: the highest
 #: S1 and S4, the lowest S5.
-WIDEST_SYSTEM = replace(DEFAULT_SYSTEM, S1=VALUE_RANGES["S1"][1], S4=VALUE_RANGES["S4"][1], S5=VALUE_RANGES["S5"][0])
+WIDEST_SYSTEM = replace(DEFAULT_SYSTEM, S1=VALUE_RANGES["S1"][1], S4=VALUE_RANGES["S4"][1],
+                        S5=VALUE_RANGES["S5"][0])
 
 
 def widest_range(kind: str) -> tuple[int, int]:
-    """The lowest and highest value of `kind` that some module holds: P 0..9999, V 1..600, the rest their fixed range."""
+    """The lowest and highest value of `kind` that some module holds: P 0..9999, V 1..600, the rest their
+    fixed range."""
     low, high, _, _ = value_range(kind, WIDEST_SYSTEM)
     return low, high
 
@@ -95,7 +104,8 @@ class ModuleState:
 
     def __post_init__(self) -> None:
         if not self.f2_messages and self.read_messages:
-            raise ValueError("a module without function output F2 (firmware before PRC 3.02.1) has no read messages either (PRC 3.03.1)")
+            raise ValueError("a module without function output F2 (firmware before PRC 3.02.1) has no read "
+                             "messages either (PRC 3.03.1)")
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, not {self.mode!r}")
         if self.fault is not None and self.fault not in FAULT_CODES:
@@ -120,7 +130,8 @@ class ModuleState:
             "active_program": self.active_program,
             "fault": self.fault,
             "referenced": self.referenced,
-        } | ({} if self.read_messages else {"read_messages": False}) | ({} if self.f2_messages else {"f2_messages": False})
+        } | ({} if self.read_messages else {"read_messages": False}) | ({} if self.f2_messages
+                                                                        else {"f2_messages": False})
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> ModuleState:
@@ -163,11 +174,14 @@ def _set_system(state: ModuleState, system: SystemParameters) -> ModuleState:
 def _with_image(state: ModuleState, image: ModuleImage) -> ModuleState:
     """`state` holding `image`: what most writes do — built directly, as `dataclasses.replace` costs
     three times as much (a plan's proof and the broadcast search run 100,000 writes for 32 × 30 modules)."""
-    return ModuleState(image, state.mode, state.active_program, state.fault, state.referenced, state.read_messages, state.f2_messages)
+    return ModuleState(image, state.mode, state.active_program, state.fault, state.referenced,
+                       state.read_messages, state.f2_messages)
 
 
-# `_with_image` names every field of a state: one added would otherwise fall back to its default on each write.
-assert [f.name for f in fields(ModuleState)] == ["image", "mode", "active_program", "fault", "referenced", "read_messages", "f2_messages"]
+# `_with_image` names every field of a state: one added would otherwise fall back to its default on each
+# write.
+assert [f.name for f in fields(ModuleState)] == ["image", "mode", "active_program", "fault", "referenced",
+                                                 "read_messages", "f2_messages"]
 
 
 def _init_programs(state: ModuleState, numbers: range | tuple[int, ...]) -> ModuleState:
@@ -184,7 +198,8 @@ def _set_fields(state: ModuleState, field: str, items: tuple[tuple[int, int], ..
     return _with_image(state, image.with_programs(changes))
 
 
-def _set_positions_and_speeds(state: ModuleState, first: int, items: tuple[tuple[int, int], ...]) -> ModuleState:
+def _set_positions_and_speeds(state: ModuleState, first: int,
+                              items: tuple[tuple[int, int], ...]) -> ModuleState:
     image = state.image
     changes = {
         first + i: image.known(first + i).with_position_and_speed(position, speed)
@@ -286,7 +301,8 @@ def process(state: ModuleState, data: bytes, *, broadcast: bool = False) -> Outc
         return Outcome(state, None)
     try:
         message = codec.decode_message(data)
-        if (message.IS_READ and not state.read_messages) or (message.ID == codec.WriteF2.ID and not state.f2_messages):
+        if (message.IS_READ and not state.read_messages) or (message.ID == codec.WriteF2.ID
+                                                             and not state.f2_messages):
             raise Rejected(10, f"ID {message.ID:02X}h: firmware before PRC {FIRMWARE_ADDED[message.ID][0]}")
         if message.IS_READ:
             new_state, reply = state, read(state, message)

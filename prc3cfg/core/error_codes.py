@@ -32,13 +32,16 @@ ERROR_CODES: dict[int, ErrorCode] = {
     20: ErrorCode("operating condition is not STOP: system parameters can only be changed in STOP", _STOP),
     21: ErrorCode("operating condition is error E09 (emergency stop)", _FAULT),
     22: ErrorCode("operating condition is error E10 (reference point not reached)", _FAULT),
-    23: ErrorCode("operating condition is error E12 (system parameters not set)", "write the system parameters (10h or 20h) first, then run again"),
+    23: ErrorCode("operating condition is error E12 (system parameters not set)",
+                  "write the system parameters (10h or 20h) first, then run again"),
     24: ErrorCode("operating condition is error E20 (upper reversing point over-run)", _FAULT),
     25: ErrorCode("operating condition is error E21 (positioning error)", _FAULT),
     26: ErrorCode("operating condition is error E22 (fault in the axis movement monitoring)", _FAULT),
     27: ErrorCode("operating condition is error E23 (fault in the dwell time monitoring)", _FAULT),
-    28: ErrorCode("operating condition is error E24 (fault in the incremental pulse generator monitoring)", _FAULT),
-    29: ErrorCode("operating condition is error E25 (fault in the incremental pulse generator monitoring)", _FAULT),
+    28: ErrorCode("operating condition is error E24 (fault in the incremental pulse generator monitoring)",
+                  _FAULT),
+    29: ErrorCode("operating condition is error E25 (fault in the incremental pulse generator monitoring)",
+                  _FAULT),
     30: ErrorCode("operating condition is an undefinable fault", _FAULT),
     31: ErrorCode("P < 0: position must not be smaller than 0", _VALUE),
     32: ErrorCode("P > S1: position must not be greater than the upper reversing point", _VALUE),
@@ -81,14 +84,16 @@ ERROR_CODES: dict[int, ErrorCode] = {
 #: The codes a module in a fault state refuses every write with (§4.4), by code: the fault's name on
 #: the module's display. The device model's `FAULT_CODES` is this, turned round.
 FAULT_STATES: dict[int, str] = {
-    21: "E09", 22: "E10", 23: "E12", 24: "E20", 25: "E21", 26: "E22", 27: "E23", 28: "E24", 29: "E25", 30: "fault",
-}  # fmt: skip
+    21: "E09", 22: "E10", 23: "E12", 24: "E20", 25: "E21", 26: "E22", 27: "E23", 28: "E24", 29: "E25",
+                                30: "fault",
+}
 
 
 def fault_said(code: int) -> str:
     """A fault state as told to a person: its name and what it is ("E21 (positioning error)")."""
     meaning = ERROR_CODES[code].meaning
-    what = meaning.split("(", 1)[1].rstrip(")") if "(" in meaning else meaning.removeprefix("operating condition is ")
+    what = (meaning.split("(", 1)[1].rstrip(")") if "(" in meaning
+            else meaning.removeprefix("operating condition is "))
     return f"{FAULT_STATES[code]} ({what})" if FAULT_STATES[code] != "fault" else "an undefinable fault"
 
 

@@ -1,12 +1,15 @@
 """The events of `apply --json`, `restore --json` and `adopt --json`: one JSON object a line, in the order
-things happen, each `{"format": "prc3cfg-event/1", "event": KIND, "command": …, …}` (`schemas/event.schema.json`).
+things happen, each `{"format": "prc3cfg-event/1", "event": KIND, "command": …, …}`
+(`schemas/event.schema.json`).
 
-    plan      the plan, as the plan file holds it (`plan`: the `prc3cfg-plan/1` document), once a line's or the
+    plan      the plan, as the plan file holds it (`plan`: the `prc3cfg-plan/1` document), once a line's or
+    the
               plant's plan is whole (`lines`: the buses it covers); adopt: the values it would write
     question  what a person would be asked, the answer the command line gave (`--auto-approve`, …) and why
     progress  a phase began (`done` 0) or a step of it was done: reading, writing, verifying
     module    one module's account: verified / failed / unchanged, what was written, sent unacknowledged, not
-              sent, what its read-back says, and the account's sentence (`text`, `prc3cfg.core.render.account`)
+              sent, what its read-back says, and the account's sentence (`text`,
+              `prc3cfg.core.render.account`)
     travel    the modules that must travel to their reference point (this run's, and earlier runs' untold)
     account   the last line: `status`, the exit code, how many modules were written and verified, the
               journal and snapshot, the times, and the error lines when it ended in one
@@ -38,7 +41,8 @@ def event(kind: str, command: str, **fields: Any) -> dict[str, Any]:
 
 
 def question(command: str, asked: str, answer: bool, by: str) -> dict[str, Any]:
-    """A question the command line answered: `asked` as a person would read it, yes or no, and what said so."""
+    """A question the command line answered: `asked` as a person would read it, yes or no, and what said
+    so."""
     return event("question", command, question=asked, answer="yes" if answer else "no", by=by)
 
 
@@ -65,12 +69,15 @@ def module(command: str, run: ModuleOutcome) -> dict[str, Any] | None:
         return None
     result = "verified" if run.verified and run.steps else "unchanged" if run.verified else "failed"
     return event("module", command, bus=run.bus, address=run.address, name=run.name, result=result,
-                 written=_summaries(run.written), unacknowledged=_summaries(run.unacknowledged), unsent=_summaries(run.unsent),
-                 broadcasts=run.broadcasts, repairs=run.repairs, failure=run.failure, released=run.released.value,
-                 **_read_back(run), text=text)  # fmt: skip
+                 written=_summaries(run.written), unacknowledged=_summaries(run.unacknowledged),
+                 unsent=_summaries(run.unsent),
+                 broadcasts=run.broadcasts, repairs=run.repairs, failure=run.failure,
+                 released=run.released.value,
+                 **_read_back(run), text=text)
 
 
-def travel(command: str, runs: Sequence[ModuleOutcome], earlier: Iterable[render.Untold]) -> dict[str, Any] | None:
+def travel(command: str, runs: Sequence[ModuleOutcome],
+           earlier: Iterable[render.Untold]) -> dict[str, Any] | None:
     """The modules that must travel to their reference point before production (None: none must)."""
     modules = [{"bus": r.bus, "name": r.name, "released": r.released.value} for r in to_travel(runs)]
     told = list(earlier)
@@ -81,9 +88,11 @@ def travel(command: str, runs: Sequence[ModuleOutcome], earlier: Iterable[render
     return event("travel", command, modules=modules, text=lines)
 
 
-def account(command: str, status: str, code: int, *, modules: int = 0, written: int = 0, errors: Sequence[str] = (),
-            **fields: Any) -> dict[str, Any]:  # fmt: skip
+def account(command: str, status: str, code: int, *, modules: int = 0, written: int = 0,
+            errors: Sequence[str] = (),
+            **fields: Any) -> dict[str, Any]:
     """The last event of a run: how it ended, its exit code, how many modules it wrote and verified of
     those in its account, and the error lines (as on stderr) when it ended in one."""
     assert status in STATUSES, status
-    return event("account", command, status=status, exit=code, modules=modules, written=written, errors=list(errors), **fields)
+    return event("account", command, status=status, exit=code, modules=modules, written=written,
+                 errors=list(errors), **fields)

@@ -37,9 +37,11 @@ from prc3cfg.core import codec
 from prc3cfg.core.error_codes import ACCEPTED, describe
 from prc3cfg.core.framing import Framing
 
-#: Codes of the structural checks (docs/protocol.md "What a module does" steps 1–5): to us, damage on the line.
+#: Codes of the structural checks (docs/protocol.md "What a module does" steps 1–5): to us, damage on the
+#: line.
 DAMAGED_CODES: Final = frozenset(range(10, 16))
-UNKNOWN_ID: Final = 10  # damage — or, to a message of `FIRMWARE_ADDED`, firmware older than the one that added it
+# damage — or, to a message of `FIRMWARE_ADDED`, firmware older than the one that added it
+UNKNOWN_ID: Final = 10
 
 #: The messages a firmware after the first added (the manual's version table: PRC 3.01.1 had neither),
 #: by ID: the version that added it, and what it is, as said to a person.
@@ -54,7 +56,8 @@ FIRMWARE_ADDED: Final[dict[int, tuple[str, str]]] = {
 class Arrival(enum.Enum):
     """What came back to one attempt, as the link sorts it."""
 
-    NOTHING = "nothing"  # no reply from the module asked within the time-out (others' replies, damaged frames: ignored)
+    # no reply from the module asked within the time-out (others' replies, damaged frames: ignored)
+    NOTHING = "nothing"
     GARBLED = "garbled"  # a reply that is not one to what was asked (`codec.BadReply`)
     ACCEPTED = "accepted"  # code 0
     UNKNOWN_ID = "unknown ID"  # code 10
@@ -117,7 +120,7 @@ VERDICTS: Final[dict[tuple[Arrival, Asked], Steps]] = {
     (Arrival.DAMAGED,    Asked.ADDED): Steps(LinkStep.RETRY,            LinkStep.RETRY),
     (Arrival.REFUSED,    Asked.ADDED): Steps(LinkStep.ANSWER,           LinkStep.CONFIRM),
     # a data block to a write does not decode (a write's reply is a code): GARBLED
-}  # fmt: skip
+}
 #: The steps that ask again: on the last attempt, the link gives up instead (`LinkStep.GIVE_UP`).
 ASK_AGAIN: Final = frozenset({LinkStep.RETRY, LinkStep.CONFIRM})
 #: What is wrong with a code the link asks again about, by why it asks.
@@ -131,12 +134,14 @@ class Protection(enum.Enum):
     """What keeps a damaged frame from being taken for another on a line."""
 
     CHECKSUM = "checksum"  # crc16, stx: a damaged frame is discarded
-    PARITY = "parity"  # open-driver, the port refusing a character of bad parity: one flipped bit is caught, two are not
+    # open-driver, the port refusing a character of bad parity: one flipped bit is caught, two are not
+    PARITY = "parity"
     NONE = "none"  # open-driver without a parity the port checks: a damaged frame can be any other
 
 
 def protection(framing: Framing, *, parity_checked: bool) -> Protection:
-    """The line's protection: the framing's checksum, else the parity its port checks (`platform.check_parity`)."""
+    """The line's protection: the framing's checksum, else the parity its port checks
+    (`platform.check_parity`)."""
     if framing.checked:
         return Protection.CHECKSUM
     return Protection.PARITY if parity_checked else Protection.NONE
@@ -150,23 +155,29 @@ class Cause(NamedTuple):
     remedy: str
 
 
-_LATE = "the late acknowledgement of {owed} to it ({write}) that went unanswered at first — it executed, as the retry did"
-_DUPLICATE = ("a duplicated acknowledgement: a write to it delivered twice, or held and delivered after its retry, by something "
-              "on the line (a gateway, a converter, a radio link)")  # fmt: skip
-_DAMAGE = "a damaged frame the module took for a write and executed, which may have changed any value or released its axes (10h/20h)"
+_LATE = ("the late acknowledgement of {owed} to it ({write}) that went unanswered at first — it executed, "
+         "as the retry did")
+_DUPLICATE = ("a duplicated acknowledgement: a write to it delivered twice, or held and delivered after its "
+              "retry, by something "
+              "on the line (a gateway, a converter, a radio link)")
+_DAMAGE = ("a damaged frame the module took for a write and executed, which may have changed any value or "
+           "released its axes (10h/20h)")
 _SLOW_PARTS = "find what on the line holds or repeats frames"
 #: The likeliest cause of a read answered with an acknowledgement, by the line's protection and by
 #: whether a write to that module went unanswered since its last data reply (`Link.owed`).
 ACK_TO_READ: Final[dict[tuple[Protection, bool], Cause]] = {
     (Protection.CHECKSUM, True):  Cause(_LATE, "", _SLOW_PARTS),
     (Protection.CHECKSUM, False): Cause(_DUPLICATE, "", _SLOW_PARTS),
-    (Protection.PARITY, True):    Cause(_LATE, "or, less likely, " + _DAMAGE + " with two bits flipped, which parity misses", _SLOW_PARTS),
-    (Protection.PARITY, False):   Cause(_DUPLICATE, "or, less likely, " + _DAMAGE + " with two bits flipped, which parity misses",
+    (Protection.PARITY, True):    Cause(_LATE, "or, less likely, " + _DAMAGE
+                                        + " with two bits flipped, which parity misses", _SLOW_PARTS),
+    (Protection.PARITY, False):   Cause(_DUPLICATE, "or, less likely, " + _DAMAGE
+                                        + " with two bits flipped, which parity misses",
                                         _SLOW_PARTS),
-    (Protection.NONE, True):      Cause(_LATE, "or, as likely on a line without a checksum or parity, " + _DAMAGE,
+    (Protection.NONE, True):      Cause(_LATE, "or, as likely on a line without a checksum or parity, "
+                                        + _DAMAGE,
                                         "use parity on the line, and " + _SLOW_PARTS),
     (Protection.NONE, False):     Cause(_DAMAGE, "or a duplicated acknowledgement", "use parity on the line"),
-}  # fmt: skip
+}
 
 
 class Fault(enum.Enum):
@@ -191,7 +202,7 @@ FAULTS: Final[dict[tuple[bool, bool, bool], Fault]] = {
     (True, False, False): Fault.REPLY_LOST,
     (True, True, False): Fault.REPLY_LOST,
     (False, True, False): Fault.REPLY_DAMAGED,
-}  # fmt: skip
+}
 
 
 Reply = int | codec.SystemReply | codec.ProgramsReply
@@ -231,10 +242,12 @@ def answered_as_write(request: bytes, raw: bytes | None) -> bool:
         message = codec.decode_message(request)
     except codec.Rejected:
         return False  # no message of ours: nothing the link sends
-    return judge(message, raw, checked=True, heard=None, attempts_left=1, timeout=0.0).step is LinkStep.POSSIBLE_WRITE
+    return judge(message, raw, checked=True, heard=None, attempts_left=1,
+                 timeout=0.0).step is LinkStep.POSSIBLE_WRITE
 
 
-def judge(message: codec.Message, raw: bytes | None, *, checked: bool, heard: int | None, attempts_left: int, timeout: float) -> Verdict:
+def judge(message: codec.Message, raw: bytes | None, *, checked: bool, heard: int | None, attempts_left: int,
+          timeout: float) -> Verdict:
     """The verdict on one attempt of `message`, whose reply message was `raw` (None: nothing
     within `timeout` seconds). `checked`: the framing has a checksum; `heard`: the code the attempt
     before asks to confirm (`Verdict.unconfirmed`); `attempts_left`: how many may follow this one."""

@@ -297,8 +297,11 @@ def zvz_too_short(zvz: float, line: LineSettings) -> str | None:
         return None
     guide = ZVZ_GUIDE_MS.get(line.baud)
     said = (f"its guide at {line.baud} baud: {guide[0]}..{guide[1]} ms" if guide else
-            "its guide: " + ", ".join(f"{baud} baud {low}..{high} ms" for baud, (low, high) in ZVZ_GUIDE_MS.items()))
+            "its guide: "
+            + ", ".join(f"{baud} baud {low}..{high} ms" for baud, (low, high) in ZVZ_GUIDE_MS.items()))
     form = f"{line.data_bits}{line.parity[0].upper()}{line.stop_bits:g}"
-    return (f"zvz {zvz:g} s is not longer than one character at {line.baud} baud, {form} ({line.bits_per_char:g} bits: "
-            f"{line.char_time * 1000:.2f} ms), so the gateway would end a frame after every byte — the character delay "
+    return (f"zvz {zvz:g} s is not longer than one character at {line.baud} baud, {form} "
+            f"({line.bits_per_char:g} bits: "
+            f"{line.char_time * 1000:.2f} ms), so the gateway would end a frame after every byte — the "
+            "character delay "
             f"time must be greater than the time between two characters (seed 004 §5.2.8; {said}): raise zvz")

@@ -107,7 +107,8 @@ class ModuleImage:
 
     address: Whole
     system: SystemParameters
-    programs: Annotated[tuple[Annotated[Program, every_key(PROGRAM_FIELDS)] | None, ...], exactly(PROGRAM_COUNT)]
+    programs: Annotated[tuple[Annotated[Program, every_key(PROGRAM_FIELDS)] | None, ...],
+                        exactly(PROGRAM_COUNT)]
 
     def __post_init__(self) -> None:
         if len(self.programs) != PROGRAM_COUNT:
@@ -128,7 +129,8 @@ class ModuleImage:
         whole); ValueError if one is None."""
         programs = tuple(p for p in self.programs if p is not None)
         if len(programs) != PROGRAM_COUNT:
-            raise ValueError(f"program {self.programs.index(None) + 1} is not in this image (not read, or not managed)")
+            raise ValueError(f"program {self.programs.index(None) + 1} is not in this image (not read, or "
+                             "not managed)")
         return programs
 
     def with_programs(self, changes: dict[int, Program]) -> ModuleImage:
@@ -147,7 +149,8 @@ class ModuleImage:
 
     @classmethod
     def from_json(cls, data: Any) -> ModuleImage:
-        """The image a JSON object holds (docs/files.md "Module image"); ValueError saying where and what in words."""
+        """The image a JSON object holds (docs/files.md "Module image"); ValueError saying where and what in
+        words."""
         try:
             return _IMAGES.validate_python([data])[0]
         except ValidationError as error:
@@ -182,7 +185,8 @@ Key = tuple[str, int]  # a module on the plant's buses: (bus name, module addres
 
 
 class Placed(Protocol):
-    """A module where the plant file has it, as what reads of a module's plan-file entry names it by (`what_to_read.PlanEntry`)."""
+    """A module where the plant file has it, as what reads of a module's plan-file entry names it by
+    (`what_to_read.PlanEntry`)."""
 
     @property
     def bus(self) -> str: ...

@@ -33,7 +33,8 @@ def undone_by_late(final: ModuleImage, steps: Sequence[Step]) -> bool:
     before the writes that follow it, or a broadcast an addressed step overrides. A copy landing between
     the steps is seen by the read-back that follows them all; only one landing after it does harm."""
     filler = default_program(final.system)
-    state = device.ModuleState(replace(final, programs=tuple(filler if p is None else p for p in final.programs)))
+    state = device.ModuleState(replace(final, programs=tuple(filler if p is None else p
+                                                             for p in final.programs)))
     for step in steps:
         try:
             again = device.execute(state, step.message)
@@ -45,8 +46,8 @@ def undone_by_late(final: ModuleImage, steps: Sequence[Step]) -> bool:
 
 
 def settle_time(cost: LineCost, deadline: float) -> float:
-    """Seconds after a line's last write until every frame still on its way has landed: `HELD_DEADLINES`
-    reply deadlines (`deadline`: the longest wait for a reply to the steps sent — the line's time and the bus's
+    """Seconds after a line's last write until every frame still on its way has landed: `HELD_DEADLINES` reply
+    deadlines (`deadline`: the longest wait for a reply to the steps sent — the line's time and the bus's
     `timeout` — as the link waits it), the longest request frame's transmission, the modules' turnaround (and
     on open-driver the gap that ends a frame)."""
     framing = cost.framing

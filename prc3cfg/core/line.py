@@ -40,7 +40,8 @@ NOT_A_LINE = r"(?:(?:tty[0-9]*|console|ptmx|pts/ptmx|std(?:in|out|err))(?![\s\S]
 PortRefusal = Literal["port_handler", "port_not_device", "port_not_a_line"]
 Parity = Literal["none", "odd", "even"]
 PARITIES: tuple[Parity, ...] = get_args(Parity)
-#: What a UART can be set to (the emulator's RFC 2217 gateway receives a client at any of them as a UART would).
+#: What a UART can be set to (the emulator's RFC 2217 gateway receives a client at any of them as a UART
+#: would).
 DATA_BITS = (5, 6, 7, 8)
 #: What a PRC 3 line takes: its frames are binary, and fewer bits lose the top of each byte.
 FRAME_DATA_BITS = 8
@@ -84,7 +85,8 @@ def port_refusal(port: str) -> tuple[PortRefusal, str] | None:
     """Why a plant file may not name `port` and the scheme it names ("" for a path); None where it may."""
     scheme, sep, _ = port.partition("://")
     if sep:
-        return None if scheme.lower() in TCP_SCHEMES or scheme == EMULATOR_SCHEME[:-3] else ("port_handler", scheme.lower())
+        return None if scheme.lower() in TCP_SCHEMES or scheme == EMULATOR_SCHEME[:-3] else ("port_handler",
+                                                                                             scheme.lower())
     if COM_PORT.fullmatch(port):
         return None
     if not port.startswith(DEVICE_FOLDER) or port == DEVICE_FOLDER or ".." in port.split("/"):

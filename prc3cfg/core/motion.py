@@ -94,11 +94,13 @@ class Segment:
         left = self.end - self.start - elapsed
         acceleration = self.peak / self.ramp
         direction = math.copysign(1.0, self.end_position - self.start_position)
-        if left < self.ramp and left < elapsed:  # decelerating: measured back from P, so it ends there exactly
+        # decelerating: measured back from P, so it ends there exactly
+        if left < self.ramp and left < elapsed:
             return self.end_position - direction * acceleration * left**2 / 2
         if elapsed <= self.ramp:
             return self.start_position + direction * acceleration * elapsed**2 / 2
-        return self.start_position + direction * (self.peak * self.ramp / 2 + self.peak * (elapsed - self.ramp))
+        return self.start_position + direction * (self.peak * self.ramp / 2
+                                                  + self.peak * (elapsed - self.ramp))
 
     def time_at(self, travelled: float) -> float:
         """When a move has travelled `travelled` m (0 ≤ travelled ≤ distance) since its START."""
@@ -204,7 +206,8 @@ def _move(number: int, start: float, start_position: int, acceleration: float, t
     else:  # too short to reach V: triangular
         peak = math.sqrt(acceleration * distance)
         duration = 2 * peak / acceleration
-    return Segment(MOVE, number, start, start + duration, begin, end_position, distance, peak / acceleration, peak)
+    return Segment(MOVE, number, start, start + duration, begin, end_position, distance, peak / acceleration,
+                   peak)
 
 
 def _action(move: Segment, output: str, value: int, travel: int) -> tuple[float, bool] | None:
@@ -224,7 +227,8 @@ class _Run:
     actions: dict[str, list[tuple[float, bool]]]
 
 
-def _run(numbers: Iterable[int], programs: dict[int, Program], start_position: int, acceleration: float) -> _Run:
+def _run(numbers: Iterable[int], programs: dict[int, Program], start_position: int,
+         acceleration: float) -> _Run:
     """The programs `numbers` one after the other from `start_position` (mm) at time 0: their
     segments, and the actions of each output in time order."""
     run = _Run([], {output: [] for output in OUTPUTS})
@@ -237,7 +241,8 @@ def _run(numbers: Iterable[int], programs: dict[int, Program], start_position: i
             if (action := _action(move, output, getattr(program, output), travel)) is not None:
                 run.actions[output].append(action)
         dwell_end = move.end + _si("T", program.T)
-        run.segments.extend((move, Segment(DWELL, number, move.end, dwell_end, move.end_position, move.end_position)))
+        run.segments.extend((move, Segment(DWELL, number, move.end, dwell_end, move.end_position,
+                                           move.end_position)))
         time, position = dwell_end, program.P
     return run
 
@@ -261,23 +266,27 @@ def _intervals(run: _Run) -> tuple[OutputInterval, ...]:
 
 def _check(image: ModuleImage, numbers: Iterable[int], programs: dict[int, Program]) -> None:
     if image.system.S6 < 1:
-        raise MotionError(f"module {image.address}: acceleration S6 = {image.system.S6} — the motion cannot be worked out without one")
+        raise MotionError(f"module {image.address}: acceleration S6 = {image.system.S6} — the motion cannot "
+                          "be worked out without one")
     for number in numbers:
         program = programs[number]
         if program.V < 1:
-            raise MotionError(f"module {image.address}, program {number}: speed V = {program.V} — the axis does not move at it")
+            raise MotionError(f"module {image.address}, program {number}: speed V = {program.V} — the axis "
+                              "does not move at it")
         if program.T < 0:
             raise MotionError(f"module {image.address}, program {number}: dwell T = {program.T} is below 0")
         for output in OUTPUTS:
             if getattr(program, output) not in OUTPUT_RANGE:
-                raise MotionError(f"module {image.address}, program {number}: {output} = {getattr(program, output)} "
-                                  f"is outside {OUTPUT_RANGE.start}..{OUTPUT_RANGE.stop - 1}")  # fmt: skip
+                raise MotionError(f"module {image.address}, program {number}: {output} = "
+                                  f"{getattr(program, output)} "
+                                  f"is outside {OUTPUT_RANGE.start}..{OUTPUT_RANGE.stop - 1}")
 
 
 def _chains(programs: dict[int, Program]) -> list[tuple[tuple[int, ...], int]]:
     """(programs in order, the jump after the last) of every chain among `programs`."""
     found, nexts = jumps_as_chains(programs)
-    chains = [(tuple(c["programs"]), c["programs"][0]) if isinstance(c, dict) else (tuple(c), 0) for c in found]
+    chains = [(tuple(c["programs"]), c["programs"][0]) if isinstance(c, dict) else (tuple(c), 0)
+              for c in found]
     jumped_to = {p.A for p in programs.values()}
     for start in sorted(set(nexts) - jumped_to):
         path = [start]
@@ -294,12 +303,14 @@ def chain_motions(image: ModuleImage) -> tuple[ChainMotion, ...]:
     motions = []
     for numbers, then in _chains(programs):
         _check(image, numbers, programs)
-        motions.append(_chain_motion(numbers, then, tuple(programs[n] for n in numbers), system.S1, system.S2, system.S6))
+        motions.append(_chain_motion(numbers, then, tuple(programs[n] for n in numbers), system.S1, system.S2,
+                                     system.S6))
     return tuple(motions)
 
 
 @functools.lru_cache(maxsize=1024)
-def _chain_motion(numbers: tuple[int, ...], then: int, chained: tuple[Program, ...], s1: int, s2: int, s6: int) -> ChainMotion:
+def _chain_motion(numbers: tuple[int, ...], then: int, chained: tuple[Program, ...], s1: int, s2: int,
+                  s6: int) -> ChainMotion:
     """The motion of one chain, the programs `numbers` (`chained`) then `then`, on a module of
     these S1, S2 and S6: all it depends on. Kept, as a chain a plan does not change is drawn
     before and after it (and modules of one profile hold the same chains)."""
@@ -310,11 +321,12 @@ def _chain_motion(numbers: tuple[int, ...], then: int, chained: tuple[Program, .
     if then in numbers:
         loop = numbers[numbers.index(then) :]
         cycle_time = _run(loop, programs, programs[numbers[-1]].P, acceleration).segments[-1].end
-    return ChainMotion(numbers, then, tuple(run.segments), _intervals(run), cycle_time, _si("S2", s2), _si("S1", s1))
+    return ChainMotion(numbers, then, tuple(run.segments), _intervals(run), cycle_time, _si("S2", s2),
+                       _si("S1", s1))
 
 
 def paired_chains(before: ModuleImage, after: ModuleImage, *, changed_only: bool = False
-                  ) -> tuple[tuple[ChainMotion | None, ChainMotion | None], ...]:  # fmt: skip
+                  ) -> tuple[tuple[ChainMotion | None, ChainMotion | None], ...]:
     """The chains of two images of one module, paired by their first program (None: the chain is
     not in that image); with `changed_only`, only pairs whose motion differs."""
     was = {m.programs[0]: m for m in chain_motions(before)}

@@ -95,7 +95,8 @@ class Words(Protocol):
         """What the file holds beside a module's steps for people to review (its `changes`, its `warning`)."""
 
 
-#: A module's review digest (docs/files.md): the SHA-256 of the words people review beside its steps, as written.
+#: A module's review digest (docs/files.md): the SHA-256 of the words people review beside its steps, as
+#: written.
 REVIEW = "review_sha256"
 
 
@@ -105,7 +106,8 @@ def review_sha256(module: dict[str, Any]) -> str:
     ASCII a \\u escape — so that a file another tool wrote again has the same digest. Any JSON (a key missing
     is null): the text of a hostile file has a digest too."""
     steps = module.get("steps")
-    summaries = [step.get("summary") if isinstance(step, dict) else None for step in steps] if isinstance(steps, list) else None
+    summaries = ([step.get("summary") if isinstance(step, dict) else None for step in steps]
+                 if isinstance(steps, list) else None)
     review = {"changes": module.get("changes"), "warning": module.get("warning"), "summaries": summaries}
     return hashlib.sha256(json.dumps(review, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
@@ -149,7 +151,9 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
         "plant_path": plan.plant_path,
         "plant_sha256": plan.plant_sha256,
         "buses": [
-            {"name": bus, "modules": [_module_json(m, hashes) | ({"read": _module_read(plan.reading, m)} if plan.reading else {}) for m in modules]}
+            {"name": bus,
+             "modules": [_module_json(m, hashes) | ({"read": _module_read(plan.reading, m)}
+                                                    if plan.reading else {}) for m in modules]}
             | (_proof_json(proof) if (proof := plan.proof(bus)) is not None else {})
             | ({"broadcasts": [
                 {"message": step.message.hex(), "summary": step.summary, "releases_axes": step.releases_axes,
@@ -165,8 +169,9 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
         "message_count": plan.message_count,
         "axis_releases": [f"{m.bus}/{m.name}" for m in plan.axis_releases],
         "evidence": evidence(plan),
-    } | ({"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)} if plan.unshared_bus_time is not None else {}) | (
-        {"read": _reading_json(plan.reading)} if plan.reading is not None else {})  # fmt: skip
+    } | ({"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)}
+         if plan.unshared_bus_time is not None else {}) | (
+        {"read": _reading_json(plan.reading)} if plan.reading is not None else {})
 
 
 def write(plan: PlantPlan, notes: Iterable[str], words: Words) -> dict[str, Any]:
@@ -202,30 +207,35 @@ def _proof_json(proof: LineProof) -> dict[str, Any]:
 
 
 def evidence(plan: PlantPlan) -> dict[str, Any]:
-    """What the plan's word rests on, as its headline says it: what was read now (each module's system
-    block, and the programs read), what was taken from the line's record instead (programs, of how many
-    modules) and the oldest of that (the module, since when, by whom) — and, an apply's, what it planned from
-    the factory's programs without reading them (`from_factory`, only where it did: `what_to_read.assumed`);
-    `complete` — every value the plan covers read in this run — is what "every module matches the plant file" needs."""
+    """What the plan's word rests on, as its headline says it: what was read now (each module's system block,
+    and the programs read), what was taken from the line's record instead (programs, of how many modules) and
+    the oldest of that (the module, since when, by whom) — and, an apply's, what it planned from the factory's
+    programs without reading them (`from_factory`, only where it did: `what_to_read.assumed`); `complete` —
+    every value the plan covers read in this run — is what "every module matches the plant file" needs."""
     not_read = {} if plan.reading is None else plan.reading.programs_not_read
     oldest = None if plan.reading is None else plan.reading.oldest
     taken = [programs for programs in not_read.values() if programs]
     assumed = [m.assumed for m in plan.modules if m.assumed]
     return {
-        "complete": not taken and not assumed and not (plan.reading is not None and plan.reading.modules_not_read),
-        "read_now": {"system_blocks": len(plan.modules), "programs": sum(len(m.programs_read) for m in plan.modules)},
+        "complete": not taken and not assumed
+            and not (plan.reading is not None and plan.reading.modules_not_read),
+        "read_now": {"system_blocks": len(plan.modules),
+                     "programs": sum(len(m.programs_read) for m in plan.modules)},
         "from_record": {"modules": len(taken), "programs": sum(map(len, taken))},
-        "oldest": None if oldest is None else {"module": oldest.module, "since": oldest.since, "by": oldest.by},
-    } | ({"from_factory": {"modules": len(assumed), "programs": sum(map(len, assumed))}} if assumed else {})  # fmt: skip
+        "oldest": None if oldest is None
+            else {"module": oldest.module, "since": oldest.since, "by": oldest.by},
+    } | ({"from_factory": {"modules": len(assumed), "programs": sum(map(len, assumed))}} if assumed else {})
 
 
 def _reading_json(reading: Reading) -> dict[str, Any]:
-    return {"base": reading.base, "modules_not_read": list(reading.modules_not_read), "not_as_verified": list(reading.not_as_verified),
-            "taken": dict(reading.taken)}  # fmt: skip
+    return {"base": reading.base, "modules_not_read": list(reading.modules_not_read),
+            "not_as_verified": list(reading.not_as_verified),
+            "taken": dict(reading.taken)}
 
 
 def _module_read(reading: Reading, change: ModuleChange) -> dict[str, Any]:
-    return {"programs": list(change.programs_read), "programs_not_read": list(reading.programs_not_read.get((change.bus, change.address), ()))}
+    return {"programs": list(change.programs_read),
+            "programs_not_read": list(reading.programs_not_read.get((change.bus, change.address), ()))}
 
 
 # -- reading ---------------------------------------------------------------------------------
@@ -247,7 +257,8 @@ class PlannedModule:
     steps: tuple[codec.Message, ...]
     broadcasts: int  # how many of the leading steps are the bus's broadcasts
     programs_read: tuple[int, ...] | None = None  # a targeted plan's: exactly what to read again
-    review_sha256: str | None = None  # its review's digest (`Review`): none in plan files made before it had one
+    # its review's digest (`Review`): none in plan files made before it had one
+    review_sha256: str | None = None
 
 
 class PlanFileError(ValueError):
@@ -284,7 +295,8 @@ class _ModuleEntry(BaseModel):
     releases_axes: Flag
     steps: list[_Step]
     read: _ModuleRead | None = None
-    review_sha256: Text | None = None  # none in plan files made before the review had a digest: `show` says so
+    # none in plan files made before the review had a digest: `show` says so
+    review_sha256: Text | None = None
 
 
 class _Bus(BaseModel):
@@ -412,7 +424,8 @@ class ShownPlanDocument(PlanDocument):
     naive_bus_time_s: Number
     left_alone: list[Text] = Field(default_factory=list)
     estimated_time_s: Number = 0.0
-    estimated_phases_s: _Phases = Field(default_factory=lambda: _Phases(reading=0.0, writing=0.0, verifying=0.0))
+    estimated_phases_s: _Phases = Field(default_factory=lambda: _Phases(reading=0.0, writing=0.0,
+                                                                        verifying=0.0))
     evidence: _Evidence | None = None  # none in plan files before issue 41: their headline says nothing of it
 
 
@@ -425,7 +438,8 @@ class PlanFile:
     plant_sha256: str
     version: str
     modules: tuple[PlannedModule, ...]
-    document: dict[str, Any]  # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
+    # as read: `apply --plan` holds it against what prc3cfg writes for the plan it proves
+    document: dict[str, Any]
     read: PlanRead | None  # a targeted plan's `read`, parsed
 
     @property
@@ -451,10 +465,13 @@ def read(data: Any, *, for_show: bool = False) -> PlanFile:
         contract = ShownPlanDocument if for_show else PlanDocument
         document = contract.model_validate(data)
     except ValidationError as error:
-        raise PlanFileError(f"damaged plan file: {said(error, lambda loc: json_path(loc, 'the plan'), contract)} — {AGAIN}") from None
+        raise PlanFileError("damaged plan file: "
+                            f"{said(error, lambda loc: json_path(loc, 'the plan'), contract)} "
+                            f"— {AGAIN}") from None
     if document.read is not None and document.read.base != RECORD:
-        raise PlanFileError(f"read.base is not {json.dumps(RECORD)}, the only base prc3cfg compares a read-back with — the plan "
-                            f"file was changed after it was made: {AGAIN}")  # fmt: skip
+        raise PlanFileError(f"read.base is not {json.dumps(RECORD)}, the only base prc3cfg compares a "
+                            "read-back with — the plan "
+                            f"file was changed after it was made: {AGAIN}")
     modules = []
     seen: set[tuple[str, int]] = set()
     for b, bus in enumerate(document.buses):
@@ -462,17 +479,22 @@ def read(data: Any, *, for_show: bool = False) -> PlanFile:
             entry = _planned_module(bus.name, module, f"buses[{b}].modules[{m}]")
             targeted = document.read is not None
             if targeted != (entry.programs_read is not None):
-                raise PlanFileError(f"damaged plan file: buses[{b}].modules[{m}] {'lacks' if targeted else 'has'} the \"read\" "
-                                    f"of a plan made from a {'targeted' if targeted else 'full'} read-back — {AGAIN}")  # fmt: skip
+                raise PlanFileError(f"damaged plan file: buses[{b}].modules[{m}] "
+                                    f"{'lacks' if targeted else 'has'} the \"read\" "
+                                    f"of a plan made from a {'targeted' if targeted else 'full'} read-back "
+                                    f"— {AGAIN}")
             if (entry.bus, entry.address) in seen:
-                raise PlanFileError(f"bus {shown(entry.bus)}, module {entry.address} is listed twice — {AGAIN}")
+                raise PlanFileError(f"bus {shown(entry.bus)}, module {entry.address} is listed twice "
+                                    f"— {AGAIN}")
             seen.add((entry.bus, entry.address))
             modules.append(entry)
         if isinstance(bus, _ShownBus):
             for index, step in enumerate(bus.broadcasts):
-                _message(step.message, f"buses[{b}].broadcasts[{index}]", f"bus {bus.name}: broadcast {index + 1}")
-    return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version, tuple(modules), data,
-                    document.read)  # fmt: skip
+                _message(step.message, f"buses[{b}].broadcasts[{index}]",
+                         f"bus {bus.name}: broadcast {index + 1}")
+    return PlanFile(document.plant, document.plant_path, document.plant_sha256, document.prc3cfg_version,
+                    tuple(modules), data,
+                    document.read)
 
 
 def within_bounds(data: Any) -> None:
@@ -485,22 +507,26 @@ def within_bounds(data: Any) -> None:
         value, depth, at = stack.pop()
         if isinstance(value, str):
             if len(value) > MAX_TEXT:
-                raise PlanFileError(f"{_place(at)} is a text of {len(value):,} characters, longer than any prc3cfg writes in a plan "
-                                    f"file ({MAX_TEXT:,}) — {AGAIN}")  # fmt: skip
+                raise PlanFileError(f"{_place(at)} is a text of {len(value):,} characters, longer than any "
+                                    "prc3cfg writes in a plan "
+                                    f"file ({MAX_TEXT:,}) — {AGAIN}")
             continue
         if not isinstance(value, dict | list):
             continue
         if depth > MAX_DEPTH:
-            raise PlanFileError(f"{_place(at)} is nested deeper than {MAX_DEPTH} levels, which no plan file prc3cfg writes is — {AGAIN}")
+            raise PlanFileError(f"{_place(at)} is nested deeper than {MAX_DEPTH} levels, which no plan file "
+                                f"prc3cfg writes is — {AGAIN}")
         if len(value) > MAX_ITEMS:
             kind = "an object of" if isinstance(value, dict) else "a list of"
-            raise PlanFileError(f"{_place(at)} is {kind} {len(value):,} {'keys' if isinstance(value, dict) else 'items'}, more than "
-                                f"any plan file prc3cfg writes holds ({MAX_ITEMS:,}) — {AGAIN}")  # fmt: skip
+            raise PlanFileError(f"{_place(at)} is {kind} {len(value):,} "
+                                f"{'keys' if isinstance(value, dict) else 'items'}, more than "
+                                f"any plan file prc3cfg writes holds ({MAX_ITEMS:,}) — {AGAIN}")
         if isinstance(value, dict):
             for key, item in value.items():
                 if len(key) > MAX_TEXT:
-                    raise PlanFileError(f"{_place(at)} has a key of {len(key):,} characters, longer than any prc3cfg writes in a plan "
-                                        f"file ({MAX_TEXT:,}) — {AGAIN}")  # fmt: skip
+                    raise PlanFileError(f"{_place(at)} has a key of {len(key):,} characters, longer than "
+                                        "any prc3cfg writes in a plan "
+                                        f"file ({MAX_TEXT:,}) — {AGAIN}")
                 stack.append((item, depth + 1, (at, key)))
         else:
             stack.extend((item, depth + 1, (at, index)) for index, item in enumerate(value))
@@ -520,29 +546,36 @@ def _planned_module(bus: str, module: _ModuleEntry, at: str) -> PlannedModule:
     """A module's entry, at `at` ("buses[0].modules[2]")."""
     where = f"bus {shown(bus)}, module {module.address}"
     if len(module.steps) > MAX_STEPS:
-        raise PlanFileError(f"{where}: {len(module.steps)} steps, more than any plan of one module needs ({MAX_STEPS}) — {AGAIN}")
+        raise PlanFileError(f"{where}: {len(module.steps)} steps, more than any plan of one module needs "
+                            f"({MAX_STEPS}) — {AGAIN}")
     messages, flags = [], []
     for index, step in enumerate(module.steps, start=1):
         flags.append(step.broadcast)
         if flags[-1] and not all(flags):
-            raise PlanFileError(f"{where}: step {index} ({step.message[:128]}) is marked broadcast after a step that is not — "
-                                f"broadcasts lead a module's steps: {AGAIN}")  # fmt: skip
+            raise PlanFileError(f"{where}: step {index} ({step.message[:128]}) is marked broadcast after a "
+                                "step that is not — "
+                                f"broadcasts lead a module's steps: {AGAIN}")
         message = _message(step.message, f"{at}.steps[{index - 1}]", f"{where}: step {index}")
         if step.releases_axes is not message.RELEASES_AXES:
             raise PlanFileError(
-                f"{where}: step {index} ({step.message}) says releases_axes: {json.dumps(step.releases_axes)}, "
-                f"but {message.ID:02X}h {'releases' if message.RELEASES_AXES else 'does not release'} the axes — {AGAIN}"
+                f"{where}: step {index} ({step.message}) says releases_axes: "
+                f"{json.dumps(step.releases_axes)}, "
+                f"but {message.ID:02X}h {'releases' if message.RELEASES_AXES else 'does not release'} the "
+                f"axes — {AGAIN}"
             )
         messages.append(message)
     if module.releases_axes is not any(m.RELEASES_AXES for m in messages):
-        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module.releases_axes)} is not what its steps do — {AGAIN}")
+        raise PlanFileError(f"{where}: releases_axes: {json.dumps(module.releases_axes)} is not what its "
+                            f"steps do — {AGAIN}")
     read = None
     if module.read is not None:
         read = tuple(module.read.programs)
         if list(read) != sorted(set(read)) or not all(1 <= n <= PROGRAM_COUNT for n in read):
-            raise PlanFileError(f"damaged plan file: {at}.read.programs is not a list of program numbers 1..{PROGRAM_COUNT}, "
-                                f"each once, in order — {AGAIN}")  # fmt: skip
-    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags), read, module.review_sha256)
+            raise PlanFileError(f"damaged plan file: {at}.read.programs is not a list of program numbers "
+                                f"1..{PROGRAM_COUNT}, "
+                                f"each once, in order — {AGAIN}")
+    return PlannedModule(bus, module.address, module.name, module.state_sha256, tuple(messages), sum(flags),
+                         read, module.review_sha256)
 
 
 def _message(text: str, at: str, where: str) -> codec.Message:
@@ -550,14 +583,17 @@ def _message(text: str, at: str, where: str) -> codec.Message:
     try:
         data = bytes.fromhex(text)
     except ValueError:
-        raise PlanFileError(f"damaged plan file: {at}.message is not a PRC 3 message in hex — {AGAIN}") from None
+        raise PlanFileError(f"damaged plan file: {at}.message is not a PRC 3 message in hex "
+                            f"— {AGAIN}") from None
     try:
         message = codec.decode_message(data)
     except codec.Rejected as rejected:
-        raise PlanFileError(f"{where} ({text[:64]}) is not a message prc3cfg sends: a module would answer it with "
-                            f"{describe(rejected.code)} — {AGAIN}") from None  # fmt: skip
+        raise PlanFileError(f"{where} ({text[:64]}) is not a message prc3cfg sends: a module would "
+                            "answer it with "
+                            f"{describe(rejected.code)} — {AGAIN}") from None
     if message.hex() != text:  # "don't care" bytes that are not 00h, upper-case digits
-        raise PlanFileError(f"{where} ({text}) is not written as prc3cfg writes that message ({message.hex()}) — {AGAIN}")
+        raise PlanFileError(f"{where} ({text}) is not written as prc3cfg writes that message "
+                            f"({message.hex()}) — {AGAIN}")
     return message
 
 
@@ -576,8 +612,9 @@ def checked(document: Any, path: Path, *, for_show: bool = False) -> PlanFile:
         raise UserError(f"{path}: {error}") from None
 
 
-def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, alike: frozenset[str] = frozenset(),
-             plant_name: str | None = None) -> PlanFile:  # fmt: skip
+def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str,
+             alike: frozenset[str] = frozenset(),
+             plant_name: str | None = None) -> PlanFile:
     """The plan file at `path` (as parsed) for `apply --plan` of the plant file at `plant_path` (its plant
     `plant_name`): refused (one line) when damaged, made by another prc3cfg, of another plant or for another
     version of this plant file (`StalePlan`). A plan made from the same text with other line endings (`alike`,
@@ -585,12 +622,16 @@ def to_apply(document: Any, path: Path, plant_path: Path, plant_sha256: str, ali
     the other way round."""
     plan_file = checked(document, path)
     if plan_file.version != __version__:
-        raise StalePlan(f"{path}: made by prc3cfg {shown(plan_file.version)}, this is {__version__} — plan again with this version")
+        raise StalePlan(f"{path}: made by prc3cfg {shown(plan_file.version)}, this is {__version__} — plan "
+                        "again with this version")
     if plant_name is not None and plan_file.plant != plant_name:
-        raise UserError(f"{path}: the plan of plant {shown(plan_file.plant)} ({shown(plan_file.plant_path)}), not of {plant_name} "
-                        f"({plant_path}) — nothing was written: apply it with its own plant file, or plan this one")  # fmt: skip
+        raise UserError(f"{path}: the plan of plant {shown(plan_file.plant)} "
+                        f"({shown(plan_file.plant_path)}), not of {plant_name} "
+                        f"({plant_path}) — nothing was written: apply it with its own plant file, or "
+                        "plan this one")
     if plan_file.plant_sha256 != plant_sha256 and plan_file.plant_sha256 not in alike:
-        raise StalePlan(f"{path}: stale plan — the plant file {plant_path} changed since the plan was made; plan again")
+        raise StalePlan(f"{path}: stale plan — the plant file {plant_path} changed since the plan was made; "
+                        "plan again")
     return plan_file
 
 
@@ -604,8 +645,10 @@ def to_show(document: Any, path: Path) -> dict[str, Any]:
     entries = iter(plan_file.modules)  # in the file's order
     for bus in plan_file.document["buses"]:
         for module, entry in zip(bus["modules"], entries):
-            module["review"] = Review.of(module)  # before the summaries are made again: they are part of the text
-            said = module["changes"]["fields"] if module["review"] is Review.AS_WRITTEN else []  # the words of a 20h
+            # before the summaries are made again: they are part of the text
+            module["review"] = Review.of(module)
+            # the words of a 20h
+            said = module["changes"]["fields"] if module["review"] is Review.AS_WRITTEN else []
             system_keys = [f["field"] for f in said if f["program"] is None]
             for step, message in zip(module["steps"], entry.steps):
                 step["summary"] = _summary(message, system_keys)
@@ -624,7 +667,8 @@ def _summary(message: codec.Message, system_keys: list[str]) -> str:
 # -- proving ---------------------------------------------------------------------------------
 
 
-def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images: dict[Key, ModuleImage]) -> None:
+def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str],
+                  images: dict[Key, ModuleImage]) -> None:
     """The first part of the proof of a plan file (`check_plan` is the rest), before prc3cfg plans
     from the read-back `images`: refused when a module is not among those to apply (`names`, in the
     plant file's order) or is called otherwise, when a module changed since the plan was made
@@ -635,7 +679,8 @@ def check_modules(path: Path, plan_file: PlanFile, names: dict[Key, str], images
             raise UserError(f"{path}: {where} is not among the modules to apply — plan again")
         name = names[(entry.bus, entry.address)]
         if entry.name != name:
-            raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {name!r} in the plant file — plan again")
+            raise UserError(f"{path}: {where} is called {entry.name!r} in the plan but {name!r} in the "
+                            "plant file — plan again")
         if image_sha256(images[(entry.bus, entry.address)]) != entry.state_sha256:
             raise StalePlan(
                 f"{path}: stale plan — {where} ({entry.name}) changed since the plan was made "
@@ -668,19 +713,24 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
     before: a plan made by 3.11 on Linux showed 1.0988 s where 3.13 on Windows proved 1.0987 s).
     """
     document = plan_file.document
-    if "evidence" not in document:  # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
-        raise UserError(f"{path}: it does not say what its plan rests on (no \"evidence\"): made before plans named their evidence, "
-                        "or changed after it was made; nothing was written: plan again and review it")  # fmt: skip
+    # a plan file from before issue 41, or one whose claim was cut out: `show` shows it
+    if "evidence" not in document:
+        raise UserError(f"{path}: it does not say what its plan rests on (no \"evidence\"): made before "
+                        "plans named their evidence, "
+                        "or changed after it was made; nothing was written: plan again and review it")
     if any(entry.review_sha256 is None for entry in plan_file.modules):
-        raise StalePlan(f"{path}: made by an older prc3cfg — its review text has no digest (review_sha256), so what was reviewed "
-                        "cannot be told from an edit; nothing was written — plan again")  # fmt: skip
+        raise StalePlan(f"{path}: made by an older prc3cfg — its review text has no digest (review_sha256), "
+                        "so what was reviewed "
+                        "cannot be told from an edit; nothing was written — plan again")
     _no_new_module_hears(path, plan_file, ours)
     for entry, change in zip(plan_file.modules, ours.modules):
-        edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file was changed "
-                  "after it was made; nothing was written: plan again and review it")  # fmt: skip
+        edited = (f"{path}: bus {entry.bus}, module {entry.address} ({entry.name}): {{}} — the plan file "
+                  "was changed "
+                  "after it was made; nothing was written: plan again and review it")
         theirs, steps = list(entry.steps), [step.message for step in change.steps]
         try:
-            plan_from_steps(change.actual, change.desired, theirs, costs[entry.bus], system_unset=change.system_unset)
+            plan_from_steps(change.actual, change.desired, theirs, costs[entry.bus],
+                            system_unset=change.system_unset)
         except StepProblem as problem:
             if problem.index:  # the step that breaks a rule
                 raise UserError(edited.format(problem)) from None
@@ -688,25 +738,31 @@ def check_plan(path: Path, plan_file: PlanFile, ours: PlantPlan, costs: dict[str
         if theirs != steps:
             raise UserError(edited.format(_first_difference(theirs, steps)))
         if entry.broadcasts != change.broadcasts:
-            raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the plan has {change.broadcasts}"))
+            raise UserError(edited.format(f"{entry.broadcasts} of its steps are marked broadcast, where the "
+                                          f"plan has {change.broadcasts}"))
     for b, bus in enumerate(document["buses"]):
         for m, module in enumerate(bus["modules"]):
             if Review.of(module) is not Review.AS_WRITTEN:
-                raise UserError(f"{path}: buses[{b}].modules[{m}].{REVIEW} (bus {shown(bus['name'])}, module {module['address']}) is not "
-                                "the digest of the review text beside it (changes, warning, the steps' summaries): the text was changed "
-                                "after the plan was made; nothing was written: plan again and review it")  # fmt: skip
+                raise UserError(f"{path}: buses[{b}].modules[{m}].{REVIEW} (bus {shown(bus['name'])}, "
+                                f"module {module['address']}) is not "
+                                "the digest of the review text beside it (changes, warning, the steps' "
+                                "summaries): the text was changed "
+                                "after the plan was made; nothing was written: plan again and review it")
     expected = _their_words(to_json(ours), plan_file)
     if plan_file.read is not None and "read" in expected:
         expected["read"]["not_as_verified"] = list(plan_file.read.not_as_verified)
         if (at := _differs_at(plan_file.read.model_dump(), expected["read"], "read")) is not None:
-            raise UserError(f"{path}: {at} is not what this apply read and the line's record says — the plan file, or the record, was "
-                            "changed after the plan was made; nothing was written: plan again and review it")  # fmt: skip
+            raise UserError(f"{path}: {at} is not what this apply read and the line's record says — the "
+                            "plan file, or the record, was "
+                            "changed after the plan was made; nothing was written: plan again and review it")
     if (at := _differs_at(document, expected)) is not None:
-        raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the plan file was changed after it was "
-                        "made; nothing was written: plan again and review it")  # fmt: skip
+        raise UserError(f"{path}: {at or 'its list of keys'} is not what prc3cfg wrote for this plan — the "
+                        "plan file was changed after it was "
+                        "made; nothing was written: plan again and review it")
 
 
-#: The words of a module entry, its review (`Review`): the file's, held to their digest, not to the words of today's prc3cfg.
+#: The words of a module entry, its review (`Review`): the file's, held to their digest, not to the words of
+#: today's prc3cfg.
 _REVIEW_KEYS = ("changes", "warning", REVIEW)
 #: What a word the file lacks is expected as: a value of no JSON document.
 _ABSENT = object()
@@ -719,24 +775,30 @@ def _their_words(expected: dict[str, Any], plan_file: PlanFile) -> dict[str, Any
     what is left to compare is the steps, the figures, the names and the keys. A word the file lacks is
     left as prc3cfg writes it: its list of keys then differs."""
     document = plan_file.document
-    expected |= {"left_alone": document["left_alone"], "plant_path": plan_file.plant_path, "plant_sha256": plan_file.plant_sha256}
+    expected |= {"left_alone": document["left_alone"], "plant_path": plan_file.plant_path,
+                 "plant_sha256": plan_file.plant_sha256}
     for bus, their_bus in zip(expected["buses"], document["buses"]):
         for module, theirs in zip(bus["modules"], their_bus["modules"]):
             module |= {key: theirs.get(key, _ABSENT) for key in _REVIEW_KEYS}  # absent: the keys differ
             for step, their_step in zip(module["steps"], theirs["steps"]):
                 step["summary"] = their_step.get("summary", step["summary"])
         for index, broadcast in enumerate(bus.get("broadcasts", [])):
-            said = [m["steps"][index] for m in their_bus["modules"] if len(m["steps"]) > index and m["steps"][index].get("broadcast")]
-            broadcast["summary"] = said[0].get("summary", broadcast["summary"]) if said else broadcast["summary"]
+            said = [m["steps"][index] for m in their_bus["modules"] if len(m["steps"]) > index
+                    and m["steps"][index].get("broadcast")]
+            broadcast["summary"] = (said[0].get("summary", broadcast["summary"]) if said
+                                    else broadcast["summary"])
     return expected
 
 
 def _no_new_module_hears(path: Path, plan_file: PlanFile, ours: PlantPlan) -> None:
-    """Refused where a module the plant file does not list now answers on a bus the plan file broadcasts on."""
+    """Refused where a module the plant file does not list now answers on a bus the plan file broadcasts
+    on."""
     for proof in ours.proofs:
         if proof.answered and any(entry.bus == proof.bus and entry.broadcasts for entry in plan_file.modules):
-            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at {address_ranges(proof.answered)}, which the "
-                            "plant file does not list: its broadcasts would reach it; nothing was written — plan again")  # fmt: skip
+            raise StalePlan(f"{path}: stale plan — on bus {proof.bus} a module now answers at "
+                            f"{address_ranges(proof.answered)}, which the "
+                            "plant file does not list: its broadcasts would reach it; nothing was written — "
+                            "plan again")
 
 
 def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:
@@ -746,9 +808,12 @@ def _in_plant_order(path: Path, plan_file: PlanFile, order: list[Key]) -> None:
     entries = plan_file.modules
     for first, then in itertools.pairwise(entries):
         if place[(then.bus, then.address)] < place[(first.bus, first.address)]:
-            raise UserError(f"{path}: bus {first.bus}, module {first.address} ({first.name}) is listed before bus {then.bus}, "
-                            f"module {then.address} ({then.name}), where prc3cfg writes the modules in the plant file's "
-                            "order — the plan file was changed after it was made; nothing was written: plan again and review it")  # fmt: skip
+            raise UserError(f"{path}: bus {first.bus}, module {first.address} ({first.name}) is listed "
+                            f"before bus {then.bus}, "
+                            f"module {then.address} ({then.name}), where prc3cfg writes the modules in the "
+                            "plant file's "
+                            "order — the plan file was changed after it was made; nothing was written: plan "
+                            "again and review it")
 
 
 def _differs_at(theirs: object, ours: object, at: str = "") -> str | None:
@@ -761,9 +826,11 @@ def _differs_at(theirs: object, ours: object, at: str = "") -> str | None:
     0.0 as 0); whitespace, line endings, a byte-order mark and escapes are gone once parsed. A text, a
     flag, a count or a null is the value prc3cfg writes or another: `true` is no 1, 2.0 no count."""
     if isinstance(theirs, dict) and isinstance(ours, dict) and theirs.keys() == ours.keys():
-        return next((f for k in ours if (f := _differs_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
+        return next((f for k in ours
+                     if (f := _differs_at(theirs[k], ours[k], f"{at}.{k}".lstrip("."))) is not None), None)
     if isinstance(theirs, list) and isinstance(ours, list) and len(theirs) == len(ours):
-        return next((f for i, (a, b) in enumerate(zip(theirs, ours)) if (f := _differs_at(a, b, f"{at}[{i}]")) is not None), None)
+        return next((f for i, (a, b) in enumerate(zip(theirs, ours))
+                     if (f := _differs_at(a, b, f"{at}[{i}]")) is not None), None)
     same_kind = type(theirs) is type(ours) or (type(ours) is float and type(theirs) is int)
     return None if same_kind and theirs == ours else at
 

@@ -52,17 +52,20 @@ class ModuleChange:
     @property
     def reading_time(self) -> float:
         """Seconds the read-back it was planned from took on the line: a 50h and the fewest 51h/52h."""
-        return 0.0 if self.cost is None else fsum(self.cost.message_time(self.address, m) for m in read_messages(self.programs_read))
+        return 0.0 if self.cost is None else fsum(self.cost.message_time(self.address, m)
+                                                  for m in read_messages(self.programs_read))
 
     @property
     def programs_read(self) -> tuple[int, ...]:
         """The programs its read-back read: those `actual` holds but the ones planned from the factory's."""
-        return tuple(n for n, program in enumerate(self.actual.programs, 1) if program is not None and n not in self.assumed)
+        return tuple(n for n, program in enumerate(self.actual.programs, 1) if program is not None
+                     and n not in self.assumed)
 
     @property
     def verifying_time(self) -> float:
         """Seconds the verifying read-back takes on the line (`Verify.FLOOR`: what the steps can change)."""
-        return 0.0 if self.cost is None else verification_time(self.actual, self.plan.predicted, self.steps, self.cost, self.assumed)
+        return 0.0 if self.cost is None else verification_time(self.actual, self.plan.predicted, self.steps,
+                                                               self.cost, self.assumed)
 
     @property
     def address(self) -> int:
@@ -110,7 +113,8 @@ class Reading:
     modules_not_read: tuple[str, ...]  # "bus/name"
     programs_not_read: dict[tuple[str, int], tuple[int, ...]]
     not_as_verified: tuple[str, ...] = ()  # "bus/name (why)": read in full, not taken from the record
-    taken: dict[str, str] = field(default_factory=dict)  # "bus/name" → whose read or verification its unread programs rest on, when
+    # "bus/name" → whose read or verification its unread programs rest on, when
+    taken: dict[str, str] = field(default_factory=dict)
     oldest: Oldest | None = None  # of the modules whose programs were taken: None when none was
 
 
@@ -124,10 +128,12 @@ class PlantPlan:
     modules: tuple[ModuleChange, ...]
     broadcast_time: float = 0.0  # every bus's broadcasts, once each, and the probes that proved them safe
     unshared_bus_time: float | None = None  # the same changes without broadcasts, where some were shared
-    proofs: tuple[LineProof, ...] = ()  # per line probed: what answered at the addresses the plant does not list
+    # per line probed: what answered at the addresses the plant does not list
+    proofs: tuple[LineProof, ...] = ()
     reading: Reading | None = None  # a targeted read-back: what was read, what was taken as last verified
-    #: the chosen modules a write found in a fault state (E09, E21, …) no write since was acknowledged by, as the
-    #: records read with the lines said — the plan's headline words ("booth-a/booth-a-right is in E21 (…)")
+    #: the chosen modules a write found in a fault state (E09, E21, …) no write since was acknowledged by, as
+    #: the records read with the lines said — the plan's headline words ("booth-a/booth-a-right is in E21
+    #: (…)")
     faults: tuple[str, ...] = ()
 
     def proof(self, bus: str) -> LineProof | None:
@@ -153,7 +159,8 @@ class PlantPlan:
 
         def writing(bus: str, modules: list[ModuleChange]) -> float:
             cost = modules[0].cost
-            shared = fsum(cost.broadcast_time(step.message) for step in self.broadcasts(bus)) if cost is not None else 0.0
+            shared = (fsum(cost.broadcast_time(step.message) for step in self.broadcasts(bus))
+                      if cost is not None else 0.0)
             return fsum(m.plan.bus_time for m in modules) + shared
 
         return {
@@ -173,7 +180,8 @@ class PlantPlan:
     @property
     def message_count(self) -> int:
         """Messages on the lines: every module's own steps, and each broadcast once."""
-        return sum(len(m.steps) - m.broadcasts for m in self.modules) + sum(len(self.broadcasts(b)) for b in self.buses())
+        return sum(len(m.steps) - m.broadcasts for m in self.modules) + sum(len(self.broadcasts(b))
+                                                                            for b in self.buses())
 
     @property
     def axis_releases(self) -> tuple[ModuleChange, ...]:

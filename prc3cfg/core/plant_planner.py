@@ -61,7 +61,8 @@ class Line:
 
     def proof_time(self) -> float:
         """The line time of proving every unlisted address silent (`PROOF_PROBES` probes each)."""
-        return len(self.unlisted()) * PROOF_PROBES * self.cost.silence_time(codec.ReadSystem(), self.probe_timeout)
+        return len(self.unlisted()) * PROOF_PROBES * self.cost.silence_time(codec.ReadSystem(),
+                                                                            self.probe_timeout)
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,18 +81,21 @@ class PlanCache:
         self._plans: dict[_PlanKey, ModulePlan] = {}
         self.sharing = broadcast_search.SharingMemo()
 
-    def plan(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost, system_unset: bool = False) -> ModulePlan:
+    def plan(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost,
+             system_unset: bool = False) -> ModulePlan:
         """`plan_module`, once for modules alike but for their address."""
         key = _PlanKey(broadcast_search.alike(actual, desired, cost), system_unset)
         found = self._plans.get(key)
         if found is None:
             found = plan_module(actual, desired, cost, system_unset=system_unset)
             # the desired programs themselves where predicted alike: the cache holds a plan of every module
-            programs = tuple(want if want == have else have for have, want in zip(found.predicted.programs, desired.programs))
+            programs = tuple(want if want == have else have
+                             for have, want in zip(found.predicted.programs, desired.programs))
             found = self._plans[key] = replace(found, predicted=replace(found.predicted, programs=programs))
         if found.address == actual.address:
             return found
-        return replace(found, address=actual.address, predicted=replace(found.predicted, address=actual.address))
+        return replace(found, address=actual.address,
+                       predicted=replace(found.predicted, address=actual.address))
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,7 +129,8 @@ class Planner:
     and written or not as they differ; the verification reads them back (`ModuleChange.assumed`)."""
 
     def __init__(self, plant: str, plant_path: str, plant_sha256: str, lines: Mapping[str, Line],
-                 unset: frozenset[Key] = frozenset(), *, only_read: bool = False, from_factory: bool = False) -> None:  # fmt: skip
+                 unset: frozenset[Key] = frozenset(), *, only_read: bool = False,
+                 from_factory: bool = False) -> None:
         self.plant, self.plant_path, self.plant_sha256 = plant, plant_path, plant_sha256
         self.lines, self.unset, self.only_read, self.from_factory = lines, unset, only_read, from_factory
         self._cache = PlanCache()
@@ -140,7 +145,8 @@ class Planner:
         """The changes of a line `settle_line` settled, in the order of its modules."""
         return list(self._planned[bus].changes)
 
-    def draft_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], *, probing: bool = True) -> LineDraft:
+    def draft_line(self, bus: str, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage], *,
+                   probing: bool = True) -> LineDraft:
         """Plan the modules of one line among `modules`, and the broadcasts that save line time — where
         the plant lists every module of the line and the plan covers them all. They need every other
         address found silent first (`to_prove`: a declaration in a file is no proof), whose probes cost
@@ -153,7 +159,8 @@ class Planner:
             return LineDraft(bus, changes)
         receivers = [broadcast_search.SharingModule(c.actual, c.desired, c.plan) for c in changes]
         shared = broadcast_search.share(receivers, line.cost, self._cache.sharing, line.proof_time())
-        return LineDraft(bus, changes, shared, tuple(line.unlisted())) if shared.broadcasts else LineDraft(bus, changes)
+        return (LineDraft(bus, changes, shared, tuple(line.unlisted())) if shared.broadcasts
+                else LineDraft(bus, changes))
 
     def settle_line(self, draft: LineDraft, answered: Sequence[int] | None) -> None:
         """The line's plan, of its `draft` and what answered at the addresses it had to prove silent —
@@ -167,7 +174,8 @@ class Planner:
             self._planned[bus] = _Planned(changes, proof=LineProof(bus, answered=tuple(answered)))
         else:
             line = self.lines[bus]
-            changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts)) for c, plan_ in zip(changes, shared.plans)]
+            changes = [replace(c, plan=plan_, broadcasts=len(shared.broadcasts))
+                       for c, plan_ in zip(changes, shared.plans)]
             seconds = fsum(line.cost.broadcast_time(step.message) for step in shared.broadcasts)
             proof = LineProof(bus, silent=draft.to_prove) if draft.to_prove else None
             self._planned[bus] = _Planned(changes, seconds + (line.proof_time() if proof else 0.0), proof)
@@ -181,8 +189,9 @@ class Planner:
             module_plan = self._cache.plan(actual, desired, line.cost, unset)
         except UnreachableImage as error:
             raise UserError(f"bus {wanted.bus}, module {wanted.address} ({wanted.name}): {error}") from None
-        return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset, cost=line.cost,
-                            wanted=wanted.desired if self.only_read else None, assumed=assumed)  # fmt: skip
+        return ModuleChange(wanted.bus, wanted.name, actual, desired, module_plan, system_unset=unset,
+                            cost=line.cost,
+                            wanted=wanted.desired if self.only_read else None, assumed=assumed)
 
     def plan(self, modules: Sequence[Wanted], actual: Mapping[Key, ModuleImage]) -> PlantPlan:
         """The plant's plan, in the order of `modules`: lines not settled yet are planned now, without
@@ -196,8 +205,9 @@ class Planner:
         broadcast_time = fsum(planned.broadcast_time for planned in self._planned.values())
         proofs = tuple(proof for bus in buses if (proof := self._planned[bus].proof) is not None)
         return PlantPlan(self.plant, self.plant_path, self.plant_sha256, ordered, broadcast_time,
-                         None if not broadcast_time else self._unshared(ordered), proofs)  # fmt: skip
+                         None if not broadcast_time else self._unshared(ordered), proofs)
 
     def _unshared(self, ordered: tuple[ModuleChange, ...]) -> float:
         """The same changes as addressed plans only (for the plan's "without broadcasts" figure)."""
-        return fsum(self._cache.plan(c.actual, c.desired, self.lines[c.bus].cost, c.system_unset).bus_time for c in ordered)
+        return fsum(self._cache.plan(c.actual, c.desired, self.lines[c.bus].cost, c.system_unset).bus_time
+                    for c in ordered)

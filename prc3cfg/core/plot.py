@@ -52,7 +52,8 @@ class PlotError(UserError):
 def missing_matplotlib(python: str) -> str:
     """What to do without matplotlib: install it into `python` (the Python that runs prc3cfg, as a
     command to paste into this system's shell) — matplotlib itself, never an extra of prc3cfg."""
-    return f"plotting needs {PLOT_PACKAGE}, which the Python running prc3cfg does not have — install it there: {python} -m pip install {PLOT_PACKAGE}"
+    return (f"plotting needs {PLOT_PACKAGE}, which the Python running prc3cfg does not have — install it "
+            f"there: {python} -m pip install {PLOT_PACKAGE}")
 
 
 def plot_format(path: Path, *, python: str = "python") -> str:
@@ -68,7 +69,8 @@ def plot_format(path: Path, *, python: str = "python") -> str:
     return fmt
 
 
-def picture(after: ModuleImage, before: ModuleImage | None = None, *, fmt: str, title: str, python: str = "python") -> bytes:
+def picture(after: ModuleImage, before: ModuleImage | None = None, *, fmt: str, title: str,
+            python: str = "python") -> bytes:
     """The chains of `after` (and, overlaid, of `before`) drawn as `fmt` ("svg" or "png"); without
     matplotlib, a PlotError that says how to install it into `python`."""
     try:
@@ -78,14 +80,17 @@ def picture(after: ModuleImage, before: ModuleImage | None = None, *, fmt: str, 
         raise PlotError(missing_matplotlib(python)) from None
     pairs = tuple((None, m) for m in chain_motions(after)) if before is None else paired_chains(before, after)
     if not pairs:
-        raise PlotError(f"{title}: no chain to draw — a chain is programs linked by their jumps (chains: or next: in the plant file)")
+        raise PlotError(f"{title}: no chain to draw — a chain is programs linked by their jumps (chains: or "
+                        "next: in the plant file)")
     with matplotlib.rc_context({"svg.hashsalt": "prc3cfg", "svg.fonttype": "path", "font.size": 8}):
         figure = Figure(figsize=(WIDTH, CHAIN_HEIGHT * len(pairs) + 0.5), dpi=DPI, layout="constrained")
         figure.suptitle(title, fontsize=10)
         for axes, (was, will) in zip(figure.subplots(len(pairs), 1, squeeze=False)[:, 0], pairs):
             _chain(axes, was, will, overlay=before is not None)
-        drawn = {interval.output for pair in pairs for motion in pair if motion is not None for interval in motion.outputs}
-        figure.legend(handles=_legend(before is not None, drawn), loc="outside lower center", ncols=6, frameon=False)
+        drawn = {interval.output for pair in pairs for motion in pair if motion is not None
+                 for interval in motion.outputs}
+        figure.legend(handles=_legend(before is not None, drawn), loc="outside lower center", ncols=6,
+                      frameon=False)
         out = io.BytesIO()
         figure.savefig(out, format=fmt, metadata={"Date": None} if fmt == "svg" else {"Software": None})
     return out.getvalue()
@@ -101,16 +106,20 @@ def _chain(axes: Axes, was: ChainMotion | None, will: ChainMotion | None, *, ove
         axes.plot(times, positions, style, color=colour, linewidth=1.4)
         for s in motion.segments:
             if s.kind == DWELL and s.end > s.start:
-                axes.plot([s.start, s.end], [s.end_position] * 2, color=colour, linewidth=4, alpha=0.6, solid_capstyle="butt")
+                axes.plot([s.start, s.end], [s.end_position] * 2, color=colour, linewidth=4, alpha=0.6,
+                          solid_capstyle="butt")
         for point in motion.turning_points:
-            axes.plot(point.time, point.position, "o", color=colour, markersize=4, fillstyle="full" if motion is will else "none")
-            axes.annotate(str(point.program), (point.time, point.position), xytext=(3, 3), textcoords="offset points", color=colour)
+            axes.plot(point.time, point.position, "o", color=colour, markersize=4, fillstyle="full"
+                      if motion is will else "none")
+            axes.annotate(str(point.program), (point.time, point.position), xytext=(3, 3),
+                          textcoords="offset points", color=colour)
         for interval in motion.outputs:
             if motion is will:
-                axes.axvspan(interval.start, interval.end, color=BANDS[interval.output], alpha=0.15, linewidth=0)
+                axes.axvspan(interval.start, interval.end, color=BANDS[interval.output], alpha=0.15,
+                             linewidth=0)
             else:
                 axes.axvspan(interval.start, interval.end, fill=False, hatch=HATCHES[interval.output],
-                             edgecolor=BANDS[interval.output], alpha=0.35, linewidth=0)  # fmt: skip
+                             edgecolor=BANDS[interval.output], alpha=0.35, linewidth=0)
     axes.axhline(upper, color="black", linewidth=0.6, linestyle=":")
     axes.annotate("S1", (0, upper), xytext=(2, -9), textcoords="offset points")
     axes.set_xlim(0, 1.03 * max(m.duration for m in shown) or 1.0)
@@ -147,7 +156,8 @@ def _legend(overlay: bool, outputs: set[str]) -> list[Artist]:
         Line2D([], [], color=AFTER, label="after" if overlay else "position"),
         Line2D([], [], color=AFTER, linewidth=4, alpha=0.6, label="dwell"),
         Line2D([], [], color=AFTER, marker="o", linestyle="", markersize=4, label="turning point (program)"),
-        *(Patch(color=colour, alpha=0.15, label=f"{output} set") for output, colour in BANDS.items() if output in outputs),
+        *(Patch(color=colour, alpha=0.15, label=f"{output} set") for output, colour in BANDS.items()
+          if output in outputs),
     ]
     if overlay:
         handles.insert(1, Line2D([], [], color=BEFORE, linestyle="--", label="before"))
@@ -157,11 +167,13 @@ def _legend(overlay: bool, outputs: set[str]) -> list[Artist]:
 def mermaid(before: ChainMotion | None, after: ChainMotion | None) -> str:
     """One chain before (grey) and after (blue) as a mermaid xychart: both sampled on one time grid
     of `MERMAID_POINTS` values over the longer pass (a shorter pass stays where it ends)."""
-    shown = [(m, colour, name) for m, colour, name in ((before, BEFORE, "before"), (after, AFTER, "after")) if m is not None]
+    shown = [(m, colour, name) for m, colour, name in ((before, BEFORE, "before"), (after, AFTER, "after"))
+             if m is not None]
     until = max(m.duration for m, _, _ in shown) or 1.0
     upper = max(m.upper for m, _, _ in shown)
     palette = ", ".join(colour for _, colour, _ in shown)
-    passes = ", ".join(f"{name} {m.duration:.2f} s ({'grey' if colour == BEFORE else 'blue'})" for m, colour, name in shown)
+    passes = ", ".join(f"{name} {m.duration:.2f} s ({'grey' if colour == BEFORE else 'blue'})"
+                       for m, colour, name in shown)
     lines = [
         "```mermaid",
         '%%{init: {"themeVariables": {"xyChart": {"plotColorPalette": "' + palette + '"}}}}%%',
@@ -169,7 +181,8 @@ def mermaid(before: ChainMotion | None, after: ChainMotion | None) -> str:
         f'    title "{shown[-1][0].label} · pass: {passes}"',
         f'    x-axis "time (s)" 0 --> {_number(until)}',
         f'    y-axis "position (m)" 0 --> {_number(upper)}',
-        *(f"    line [{', '.join(_number(x) for _, x in m.samples(MERMAID_POINTS, until))}]" for m, _, _ in shown),
+        *(f"    line [{', '.join(_number(x) for _, x in m.samples(MERMAID_POINTS, until))}]"
+          for m, _, _ in shown),
         "```",
     ]
     return "\n".join(lines)

@@ -39,16 +39,20 @@ from prc3cfg.core.units import DISTANCE, QUANTITIES, Quantity
 Level = Literal["advisory", "soft", "hard"]
 #: The levels, weakest first (Sentinel's advisory, soft-mandatory, hard-mandatory).
 LEVELS: tuple[Level, ...] = ("advisory", "soft", "hard")
-#: The program fields an envelope may bound; every other key of `QUANTITIES` it may bound is a system parameter.
+#: The program fields an envelope may bound; every other key of `QUANTITIES` it may bound is a system
+#: parameter.
 PROGRAM_KEYS = ("position", "speed", "relative_speed", "dwell")
 #: What a chain's motion reaches (`Value.chain`): in steps that say a pass as the plan's stroke charts do.
-CHAIN_KEYS = {q.key: q for q in (Quantity("stroke_length", "", Decimal("0.001"), "m"), Quantity("pass_time", "", Decimal("0.01"), "s"))}
+CHAIN_KEYS = {q.key: q
+              for q in (Quantity("stroke_length", "", Decimal("0.001"), "m"),
+                        Quantity("pass_time", "", Decimal("0.01"), "s"))}
 #: Every key an envelope may bound, and its unit and step: F1's and F2's distance is `function_distance`.
 KEYS: dict[str, Quantity] = QUANTITIES | {"function_distance": DISTANCE} | CHAIN_KEYS
 Path_ = tuple[str | int, ...]
 
 #: Each cron field: its name and the values it takes (day of week 0..7, 0 and 7 both Sunday).
-CRON_FIELDS = (("minute", 0, 59), ("hour", 0, 23), ("day of month", 1, 31), ("month", 1, 12), ("day of week", 0, 7))
+CRON_FIELDS = (("minute", 0, 59), ("hour", 0, 23), ("day of month", 1, 31), ("month", 1, 12),
+               ("day of week", 0, 7))
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,14 +78,17 @@ class Cron:
 
 
 def parse_cron(text: str) -> Cron:
-    """`text` as a cron expression: 5 fields of `*`, `N`, `N-M`, each with an optional `/STEP`, joined by commas;
-    ValueError saying what is wrong otherwise (names such as MON and JAN are not taken: numbers only)."""
+    """`text` as a cron expression: 5 fields of `*`, `N`, `N-M`, each with an optional `/STEP`, joined by
+    commas; ValueError saying what is wrong otherwise (names such as MON and JAN are not taken: numbers only).
+    """
     fields = text.split()
     if len(fields) != len(CRON_FIELDS):
-        raise ValueError(f"a cron expression has 5 fields (minute hour day-of-month month day-of-week), this has {len(fields)}")
+        raise ValueError("a cron expression has 5 fields (minute hour day-of-month month day-of-week), "
+                         f"this has {len(fields)}")
     sets = [_cron_field(field, *spec) for field, spec in zip(fields, CRON_FIELDS)]
     minutes, hours, days, months, weekdays = sets
-    return Cron(minutes, hours, days, months, frozenset(d % 7 for d in weekdays), days_any=fields[2] == "*", weekdays_any=fields[4] == "*")
+    return Cron(minutes, hours, days, months, frozenset(d % 7 for d in weekdays), days_any=fields[2] == "*",
+                weekdays_any=fields[4] == "*")
 
 
 def _cron_field(text: str, name: str, lo: int, hi: int) -> frozenset[int]:
@@ -93,16 +100,19 @@ def _cron_field(text: str, name: str, lo: int, hi: int) -> frozenset[int]:
             first, _, last = span.partition("-")
             start, end = (lo, hi) if span == "*" else (int(first), int(last) if last else int(first))
         except ValueError:
-            raise ValueError(f"the {name} field '{text}' is not *, N, N-M or those with /STEP, by commas") from None
+            raise ValueError(f"the {name} field '{text}' is not *, N, N-M or those with /STEP, "
+                             "by commas") from None
         if step < 1 or not lo <= start <= end <= hi or (step_text and not last and span != "*"):
-            raise ValueError(f"the {name} field '{text}' must stay within {lo}..{hi}, ranges low-high, steps 1 or more")
+            raise ValueError(f"the {name} field '{text}' must stay within {lo}..{hi}, ranges low-high, "
+                             "steps 1 or more")
         values.update(range(start, end + 1, step))
     return frozenset(values)
 
 
 @dataclass(frozen=True, slots=True)
 class Limit:
-    """Bounds on one key (`QUANTITIES`), in human units; `at`: where the rule's limit is in the policy file."""
+    """Bounds on one key (`QUANTITIES`), in human units; `at`: where the rule's limit is in the policy
+    file."""
 
     key: str
     lo: Decimal | None
@@ -145,8 +155,9 @@ class Policy:
 
 @dataclass(frozen=True, slots=True)
 class Value:
-    """One value a plan's desired image reaches: `program` None for a system parameter; `chain` the chain's label
-    ("chain 1 → 2 → 1", `motion.ChainMotion.label`) for what its motion reaches; `at` its place in the plant file."""
+    """One value a plan's desired image reaches: `program` None for a system parameter; `chain` the chain's
+    label ("chain 1 → 2 → 1", `motion.ChainMotion.label`) for what its motion reaches; `at` its place in the
+    plant file."""
 
     bus: str
     module: str
@@ -158,13 +169,16 @@ class Value:
 
     @property
     def subject(self) -> str:
-        """What the value is of, as a finding says it: "program 1 speed", "chain 1 → 2 → 1 pass_time", "max_speed"."""
-        return f"{self.chain} {self.key}" if self.chain else f"program {self.program} {self.key}" if self.program is not None else self.key
+        """What the value is of, as a finding says it: "program 1 speed", "chain 1 → 2 → 1 pass_time",
+        "max_speed"."""
+        return (f"{self.chain} {self.key}" if self.chain else f"program {self.program} {self.key}"
+                if self.program is not None else self.key)
 
 
 @dataclass(frozen=True, slots=True)
 class RuleFinding:
-    """What a rule found: `value_at` the plant file's value (None for a window), `rule_at` the rule in the policy."""
+    """What a rule found: `value_at` the plant file's value (None for a window), `rule_at` the rule in the
+    policy."""
 
     kind: Literal["envelope", "window"]
     rule: str
@@ -179,7 +193,8 @@ def _covers(globs: tuple[str, ...], name: str) -> bool:
 
 
 def starts(window: Window, since: datetime, until: datetime) -> Iterator[datetime]:
-    """The instants (UTC) in [since, until] at which `window` starts, in order, by the rule in the module's docstring."""
+    """The instants (UTC) in [since, until] at which `window` starts, in order, by the rule in the module's
+    docstring."""
     zone = window.time_zone
     day = (since.astimezone(zone) - timedelta(days=1)).date()  # a day's margin: offsets are under a day
     last = (until.astimezone(zone) + timedelta(days=1)).date()
@@ -187,24 +202,29 @@ def starts(window: Window, since: datetime, until: datetime) -> Iterator[datetim
         if window.cron.day_matches(day):
             for hour in sorted(window.cron.hours):
                 for minute in sorted(window.cron.minutes):
-                    start = datetime(day.year, day.month, day.day, hour, minute, tzinfo=zone, fold=0).astimezone(UTC)
+                    start = datetime(day.year, day.month, day.day, hour, minute, tzinfo=zone,
+                                     fold=0).astimezone(UTC)
                     if since <= start <= until:
                         yield start
         day += timedelta(days=1)
 
 
 def open_since(window: Window, now: datetime) -> datetime | None:
-    """The start of the occurrence of `window` that `now` is in (the latest, if several overlap); None when it is shut."""
+    """The start of the occurrence of `window` that `now` is in (the latest, if several overlap); None when it
+    is shut."""
     found = list(starts(window, now - window.duration + timedelta(microseconds=1), now))
     return found[-1] if found else None
 
 
-def findings(values: Iterable[Value], buses: Iterable[str], policy: Policy, now: datetime) -> list[RuleFinding]:
-    """Every finding of `policy` on the `values` of a plan's desired images and on the `buses` it writes, at `now`."""
+def findings(values: Iterable[Value], buses: Iterable[str], policy: Policy,
+             now: datetime) -> list[RuleFinding]:
+    """Every finding of `policy` on the `values` of a plan's desired images and on the `buses` it writes, at
+    `now`."""
     found = [_outside(envelope, value, limit) for value in values for envelope in policy.envelopes
              if _covers(envelope.buses, value.bus) and _covers(envelope.modules, value.module)
              for limit in envelope.limits if limit.key == value.key]
-    return [f for f in found if f is not None] + [f for bus in dict.fromkeys(buses) for f in _windows(policy.windows, bus, now)]
+    return [f for f in found if f is not None] + [f for bus in dict.fromkeys(buses)
+                                                  for f in _windows(policy.windows, bus, now)]
 
 
 def _outside(envelope: Envelope, value: Value, limit: Limit) -> RuleFinding | None:
@@ -213,15 +233,18 @@ def _outside(envelope: Envelope, value: Value, limit: Limit) -> RuleFinding | No
         if bound is not None and (value.value > bound if word == "above" else value.value < bound):
             said = f"{value.subject} {_in_steps(value.value, quantity.step)} {quantity.unit}".rstrip()
             return RuleFinding("envelope", envelope.name, envelope.level,
-                           f"module {value.module}: {said} is {word} {_in_steps(bound, quantity.step)} {quantity.unit}".rstrip()
-                           + f", the limit of envelope '{envelope.name}'", limit.at, value.at)  # fmt: skip
+                           f"module {value.module}: {said} is {word} {_in_steps(bound, quantity.step)} "
+                           f"{quantity.unit}".rstrip()
+                           + f", the limit of envelope '{envelope.name}'", limit.at, value.at)
     return None
 
 
 def _in_steps(number: Decimal, step: Decimal) -> Decimal:
-    """`number` with at least the digits of its quantity's step (0.35 m as 0.350 m), never fewer than written."""
+    """`number` with at least the digits of its quantity's step (0.35 m as 0.350 m), never fewer than
+    written."""
     exponent, steps = number.as_tuple().exponent, step.as_tuple().exponent
-    return number.quantize(step) if isinstance(exponent, int) and isinstance(steps, int) and exponent > steps else number
+    return (number.quantize(step) if isinstance(exponent, int) and isinstance(steps, int)
+            and exponent > steps else number)
 
 
 def _windows(windows: Iterable[Window], bus: str, now: datetime) -> Iterator[RuleFinding]:
@@ -230,12 +253,14 @@ def _windows(windows: Iterable[Window], bus: str, now: datetime) -> Iterator[Rul
         if window.kind == "deny" and (start := open_since(window, now)) is not None:
             until = (start + window.duration).astimezone(window.time_zone)
             yield RuleFinding("window", window.name, window.level,
-                          f"bus {bus}: deny window '{window.name}' is open until {until:%Y-%m-%d %H:%M %Z}", window.at)
+                          f"bus {bus}: deny window '{window.name}' is open until {until:%Y-%m-%d %H:%M %Z}",
+                              window.at)
     allowing = [w for w in ours if w.kind == "allow"]
     if allowing and all(open_since(w, now) is None for w in allowing):
         strongest = max(allowing, key=lambda w: LEVELS.index(w.level))
         names = ", ".join(f"'{w.name}'" for w in allowing)
-        yield RuleFinding("window", strongest.name, strongest.level, f"bus {bus}: outside every allow window ({names})", strongest.at)
+        yield RuleFinding("window", strongest.name, strongest.level,
+                          f"bus {bus}: outside every allow window ({names})", strongest.at)
 
 
 def refusing(found: Iterable[RuleFinding], overridden: Iterable[str] = ()) -> list[RuleFinding]:
@@ -245,6 +270,7 @@ def refusing(found: Iterable[RuleFinding], overridden: Iterable[str] = ()) -> li
 
 
 def fails_plan(found: Iterable[RuleFinding]) -> bool:
-    """Whether findings fail a plan (`plan` exits 3) and a plant file (`validate`): a hard envelope. A window judges the
-    moment of an apply, and a plan reviewed in a freeze may be applied after it: it never fails a plan."""
+    """Whether findings fail a plan (`plan` exits 3) and a plant file (`validate`): a hard envelope. A window
+    judges the moment of an apply, and a plan reviewed in a freeze may be applied after it: it never fails a
+    plan."""
     return any(f.kind == "envelope" and f.level == "hard" for f in found)

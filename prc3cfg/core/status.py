@@ -92,11 +92,13 @@ def health(facts: ModuleFacts) -> tuple[Health, str]:
 def drifted(desired: ModuleImage, recorded: ModuleImage) -> bool:
     """Whether what the record says the module holds differs from the plant file where both say something
     (a program the record does not know, or the plant file does not manage, is no drift)."""
-    return desired.system != recorded.system or any(d is not None and r is not None and d != r for d, r in zip(desired.programs, recorded.programs))
+    return desired.system != recorded.system or any(d is not None and r is not None and d != r
+                                                    for d, r in zip(desired.programs, recorded.programs))
 
 
 def worst(values: Sequence[Health]) -> Health:
-    """A line's health: its modules' most pressing (CHECK_FUNCTION over FAILURE over MAINTENANCE_REQUIRED over NORMAL)."""
+    """A line's health: its modules' most pressing (CHECK_FUNCTION over FAILURE over MAINTENANCE_REQUIRED over
+    NORMAL)."""
     order = [value for _, value, _ in RULES] + [Health.NORMAL]
     return min(values, key=order.index, default=Health.NORMAL)
 
@@ -104,20 +106,27 @@ def worst(values: Sequence[Health]) -> Health:
 def module_json(facts: ModuleFacts) -> dict[str, Any]:
     value, why = health(facts)
     last = facts.last_verified
-    return {"bus": facts.bus, "address": facts.address, "name": facts.name, "health": value.name, "health_value": int(value),
+    return {"bus": facts.bus, "address": facts.address, "name": facts.name, "health": value.name,
+            "health_value": int(value),
             "why": why, "revision_counter": facts.revision, "software_revision": facts.firmware,
-            "last_verified": None if last is None else {"time": last.time, "by": last.by, "plant_file": last.plant_file,
-                                                         "plant_sha256": last.plant_sha256, "commit": last.commit},
-            "apply_running": facts.apply_running, "last_failed": facts.last_failed, "travel_pending": facts.travel_pending,
-            "drift_seen": facts.drift_seen, "evidence_age_s": facts.evidence_age, "evidence_bound_s": facts.evidence_bound}  # fmt: skip
+            "last_verified": None if last is None
+            else {"time": last.time, "by": last.by, "plant_file": last.plant_file,
+                                                         "plant_sha256": last.plant_sha256,
+                  "commit": last.commit},
+            "apply_running": facts.apply_running, "last_failed": facts.last_failed,
+            "travel_pending": facts.travel_pending,
+            "drift_seen": facts.drift_seen, "evidence_age_s": facts.evidence_age,
+            "evidence_bound_s": facts.evidence_bound}
 
 
-def document(plant_file: str, plant_sha256: str, modules: Sequence[ModuleFacts], notes: Sequence[str] = ()) -> dict[str, Any]:
+def document(plant_file: str, plant_sha256: str, modules: Sequence[ModuleFacts],
+             notes: Sequence[str] = ()) -> dict[str, Any]:
     """`prc3cfg status --json`: the plant file, and per line (bus) its health and its modules' status."""
     lines: dict[str, list[ModuleFacts]] = {}
     for facts in modules:
         lines.setdefault(facts.bus, []).append(facts)
     return {"format": FORMAT, "plant_file": plant_file, "plant_sha256": plant_sha256,
-            "lines": [{"bus": bus, "health": worst([health(f)[0] for f in found]).name, "apply_running": any(f.apply_running for f in found),
+            "lines": [{"bus": bus, "health": worst([health(f)[0] for f in found]).name,
+                       "apply_running": any(f.apply_running for f in found),
                        "modules": [module_json(f) for f in found]} for bus, found in lines.items()],
-            "notes": list(notes)}  # fmt: skip
+            "notes": list(notes)}

@@ -46,18 +46,21 @@ def _unprintable(c: str) -> bool:
 
 def has_control(text: str) -> bool:
     """Whether `text` holds a character that is not printable text (`UNPRINTABLE`)."""
-    return not text.isprintable() and any(map(_unprintable, text))  # isprintable is False for every such character
+    # isprintable is False for every such character
+    return not text.isprintable() and any(map(_unprintable, text))
 
 
 def shown(text: str) -> str:
-    """`text` for a terminal or a log: every `UNPRINTABLE` character as repr escapes it, "m1\\x1b[2J" → "m1\\\\x1b[2J"."""
+    """`text` for a terminal or a log: every `UNPRINTABLE` character as repr escapes it, "m1\\x1b[2J" →
+    "m1\\\\x1b[2J"."""
     if text.isprintable():
         return text
     return "".join(repr(c)[1:-1] if _unprintable(c) else c for c in text)
 
 
 def github_data(text: str) -> str:
-    """`text` as the message of a GitHub workflow command: `%`, CR, LF escaped; other unprintable characters as `shown`."""
+    """`text` as the message of a GitHub workflow command: `%`, CR, LF escaped; other unprintable characters
+    as `shown`."""
     return shown(text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A"))
 
 
@@ -83,13 +86,15 @@ def markdown(text: str) -> str:
 
 
 def markdown_html(text: str) -> str:
-    """`text` inside HTML in a markdown comment (`<summary>…</summary>`): shown as written, nothing in it live."""
+    """`text` inside HTML in a markdown comment (`<summary>…</summary>`): shown as written, nothing in it
+    live."""
     return _LIVE.sub(_dead, html.escape(shown(text), quote=False))
 
 
 def _dead(match: re.Match[str]) -> str:
-    """What GitHub would make live, made text: "@" with an empty HTML comment after it (rendered as nothing, and
-    copied from the page as nothing — a zero-width joiner came along into every paste), ":" or "." as an entity."""
+    """What GitHub would make live, made text: "@" with an empty HTML comment after it (rendered as nothing,
+    and copied from the page as nothing — a zero-width joiner came along into every paste), ":" or "." as an
+    entity."""
     return "@<!-- -->" if match.group() == "@" else f"&#{ord(match.group())};"
 
 

@@ -49,7 +49,8 @@ def _levels(data: bytes, line: LineSettings) -> list[tuple[Fraction, int]]:
 def received(data: bytes, sent: LineSettings, receiver: LineSettings) -> bytes:
     """The bytes a UART at `receiver`'s settings makes of `data` sent at `sent`'s."""
     if agree(sent, receiver):
-        return data if sent.data_bits == 8 else bytes(b & ((1 << sent.data_bits) - 1) for b in data)  # the top bits never left
+        # the top bits never left
+        return data if sent.data_bits == 8 else bytes(b & ((1 << sent.data_bits) - 1) for b in data)
     changes = _levels(data, sent)
     starts = [t for t, _ in changes]
 
@@ -70,13 +71,15 @@ def received(data: bytes, sent: LineSettings, receiver: LineSettings) -> bytes:
     for edge, value in changes:
         if value != 0 or edge < hunt:
             continue  # not a falling edge, or one inside the character being received
-        samples = [level(edge + bit * (Fraction(1, 2) + i)) for i in range(2 + receiver.data_bits + (receiver.parity != "none"))]
+        samples = [level(edge + bit * (Fraction(1, 2) + i))
+                   for i in range(2 + receiver.data_bits + (receiver.parity != "none"))]
         start, bits, stop = samples[0], samples[1 : 1 + receiver.data_bits], samples[-1]
         hunt = edge + bit * (Fraction(1, 2) + len(samples) - 1)
         if start != 0:
             hunt = edge + bit / 2  # a glitch: hunt again after it
             continue
-        parity_ok = receiver.parity == "none" or (sum(bits) + samples[-2] + (receiver.parity == "odd")) % 2 == 0
+        parity_ok = (receiver.parity == "none"
+                     or (sum(bits) + samples[-2] + (receiver.parity == "odd")) % 2 == 0)
         if parity_ok and stop == 1:
             out.append(sum(b << i for i, b in enumerate(bits)))
     return bytes(out)

@@ -67,7 +67,8 @@ class Quantity:
 
     def to_device(self, human: Decimal | int | bool) -> int:
         """The device value of an in-range human value; ValueError if not a whole number of steps."""
-        units = human / self.step  # exact: a Decimal of at most 28 digits, an int or a bool, by a power of ten
+        # exact: a Decimal of at most 28 digits, an int or a bool, by a power of ten
+        units = human / self.step
         whole = int(units)
         if units != whole:
             raise ValueError(f"{human} {self.unit} is not a whole number of {self.step_name}")

@@ -38,10 +38,10 @@ modules to hold — whichever plant file, checkout or user it was — with when 
   verification, which the planning of broadcasts must pay for every module a broadcast reaches).
 - When a verification reads — after every frame still on its way has landed — is `prc3cfg.core.late_frames`'s.
 
-On a line where nothing protects a data reply (`protects_replies`: a framing without a checksum, and
-no parity the port checks), every read is confirmed — by what the line's record or the write being
-verified says the module holds, else read again until two in a row agree (`CONFIRMATIONS` at most;
-`prc3cfg.shell.readback`): one damaged reply is never believed once, by a plan, a snapshot, a record or `read`.
+On a line where nothing protects a data reply (`protects_replies`: a framing without a checksum, and no parity
+the port checks), every read is confirmed — by what the line's record or the write being verified says the
+module holds, else read again until two in a row agree (`CONFIRMATIONS` at most; `prc3cfg.shell.readback`):
+one damaged reply is never believed once, by a plan, a snapshot, a record or `read`.
 
 A factory-fresh module (`factory_fresh`: its 50h reads the factory's system parameters, the plant file wants
 others, and nothing in the line's record says otherwise) is where an apply commissions: what it holds is very
@@ -71,7 +71,16 @@ from typing import Protocol, TypeVar
 from prc3cfg.core import codec
 from prc3cfg.core.bustime import LineCost
 from prc3cfg.core.device import can_clamp
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_NUMBERS, Key, ModuleImage, Placed, SystemParameters, Wanted, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_NUMBERS,
+    Key,
+    ModuleImage,
+    Placed,
+    SystemParameters,
+    Wanted,
+    default_program,
+)
 from prc3cfg.core.planner import Step
 
 #: Why a module that reported E12 (system parameters not set) is read in full: its record says nothing.
@@ -94,7 +103,8 @@ class Known:
         return datetime.fromisoformat(self.read_at.get(number, self.since))
 
     def said(self) -> str:
-        """"apply of /p/a.yaml by ana@pc-3 (since 2026-11-26 03:27 UTC)": whose read or verification, to the minute."""
+        """"apply of /p/a.yaml by ana@pc-3 (since 2026-11-26 03:27 UTC)": whose read or verification, to the
+        minute."""
         return f"{self.by} (since {to_the_minute(self.since)})"
 
 
@@ -116,9 +126,12 @@ class Target:
     name: str
     programs: tuple[int, ...]
     clamped_by: SystemParameters | None = None
-    known: ModuleImage | None = None  # a targeted read's evidence, and the programs it reads in full then: `after_programs`
+    # a targeted read's evidence, and the programs it reads in full then: `after_programs`
+    known: ModuleImage | None = None
     managed: tuple[int, ...] = ()
-    fresh: bool = False  # an apply's: a factory-fresh module's managed programs are planned from the factory's, not read (`after_system`)
+    # an apply's: a factory-fresh module's managed programs are planned from the factory's, not read
+    # (`after_system`)
+    fresh: bool = False
 
 
 def programs_in(image: ModuleImage) -> tuple[int, ...]:
@@ -126,7 +139,8 @@ def programs_in(image: ModuleImage) -> tuple[int, ...]:
     return tuple(n for n, p in enumerate(image.programs, start=1) if p is not None)
 
 
-#: Reads of one message, at most, on a line where nothing protects a data reply, to hear the same reply twice in a row.
+#: Reads of one message, at most, on a line where nothing protects a data reply, to hear the same reply twice
+#: in a row.
 CONFIRMATIONS = 4
 
 
@@ -143,7 +157,8 @@ def protects_replies(checked: bool, parity: str, parity_checked: bool) -> bool:
 def in_full(modules: Iterable[Wanted]) -> list[Target]:
     """Every module read in full: each program its desired image holds (managed, or a snapshot's), and
     every program its desired system parameters could clamp."""
-    return [Target(m.bus, m.address, m.name, programs_in(m.desired), m.desired.system, managed=programs_in(m.desired)) for m in modules]
+    return [Target(m.bus, m.address, m.name, programs_in(m.desired), m.desired.system,
+                   managed=programs_in(m.desired)) for m in modules]
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,12 +177,15 @@ def to_read(known: Known | None, desired: ModuleImage, now: datetime, max_age: f
     if known is None:
         return ToRead(managed, None, "not on the line's record")
     if now - datetime.fromisoformat(known.since) > timedelta(seconds=max_age):
-        return ToRead(managed, None, f"its record ({known.since}) is older than record_max_age ({max_age:g} s)")
-    return ToRead(tuple(n for n in managed if known.image.program(n) != desired.program(n)), known.image, None)
+        return ToRead(managed, None,
+                      f"its record ({known.since}) is older than record_max_age ({max_age:g} s)")
+    return ToRead(tuple(n for n in managed if known.image.program(n) != desired.program(n)), known.image,
+                  None)
 
 
-def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: Mapping[Key, str], unset: frozenset[Key],
-             max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], dict[Key, str]] | None:  # fmt: skip
+def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: Mapping[Key, str],
+             unset: frozenset[Key],
+             max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], dict[Key, str]] | None:
     """What a plan reads of `modules` (each with the plant file's image), given the lines' record
     (`known`), the modules another user's newer entry took off it (`overruled`, with whose claim), those
     that reported E12 since (`unset`) and each bus's `record_max_age`: the targets, and why each module
@@ -177,7 +195,8 @@ def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: M
     targets, why = [], {}
     for m in modules:
         decision = to_read(None if m.key in unset else known.get(m.key), m.desired, now, max_age[m.bus])
-        targets.append(Target(m.bus, m.address, m.name, decision.programs, m.desired.system, decision.known, programs_in(m.desired)))
+        targets.append(Target(m.bus, m.address, m.name, decision.programs, m.desired.system, decision.known,
+                              programs_in(m.desired)))
         if decision.why is not None:
             why[m.key] = UNSET if m.key in unset else overruled.get(m.key, decision.why)
     return targets, why
@@ -193,15 +212,17 @@ def for_plan(modules: Sequence[Wanted], known: Mapping[Key, Known], overruled: M
 ROLLED_WINDOWS = 8
 
 
-def with_rolling(targets: Sequence[Target], why: Mapping[Key, str], known: Mapping[Key, Known]) -> tuple[list[Target], dict[Key, str]]:
+def with_rolling(targets: Sequence[Target], why: Mapping[Key, str],
+                 known: Mapping[Key, Known]) -> tuple[list[Target], dict[Key, str]]:
     """A targeted plan's `targets` (`for_plan`) and why a module is read in full, with rolling evidence:
     the programs `rolling` picks read too, with the record to agree with (what they find is evidence like
     any other: `opens_line`); a module whose every program is read then is said to be read in full for it."""
     roll = rolling(targets, known)
-    rolled = [replace(t, programs=tuple(sorted(set(t.programs) | set(roll[(t.bus, t.address)][0])))) if (t.bus, t.address) in roll else t
-              for t in targets]  # fmt: skip
+    rolled = [replace(t, programs=tuple(sorted(set(t.programs) | set(roll[(t.bus, t.address)][0]))))
+              if (t.bus, t.address) in roll else t
+              for t in targets]
     return rolled, dict(why) | {(t.bus, t.address): roll[(t.bus, t.address)][1] for t in rolled
-                                if (t.bus, t.address) in roll and set(t.managed) <= set(t.programs)}  # fmt: skip
+                                if (t.bus, t.address) in roll and set(t.managed) <= set(t.programs)}
 
 
 def rolling(targets: Sequence[Target], known: Mapping[Key, Known]) -> dict[Key, tuple[tuple[int, ...], str]]:
@@ -218,15 +239,17 @@ def rolling(targets: Sequence[Target], known: Mapping[Key, Known]) -> dict[Key, 
         for first in range(1, len(PROGRAM_NUMBERS) + 1, codec.MAX_READ_PROGRAMS):
             numbers = tuple(n for n in range(first, first + codec.MAX_READ_PROGRAMS) if n in left)
             if numbers:
-                windows.setdefault(t.bus, []).append((min(record.age(n) for n in numbers), t.address, first, numbers))
+                windows.setdefault(t.bus, []).append((min(record.age(n) for n in numbers), t.address, first,
+                                                      numbers))
     picked: dict[Key, list[tuple[datetime, tuple[int, ...]]]] = {}
     for bus, line in windows.items():
         for age, address, _, numbers in sorted(line)[:ROLLED_WINDOWS]:
             picked.setdefault((bus, address), []).append((age, numbers))
     return {key: (tuple(n for _, numbers in chosen for n in numbers),
-                  f"rolling evidence: programs {_ranges([n for _, numbers in chosen for n in numbers])}, the oldest on its line, "
+                  f"rolling evidence: programs {_ranges([n for _, numbers in chosen for n in numbers])}, "
+                  "the oldest on its line, "
                   f"since {to_the_minute(min(age for age, _ in chosen).isoformat())}")
-            for key, chosen in picked.items()}  # fmt: skip
+            for key, chosen in picked.items()}
 
 
 def _ranges(numbers: Sequence[int]) -> str:
@@ -241,8 +264,9 @@ def _ranges(numbers: Sequence[int]) -> str:
 
 
 class PlanEntry(Placed, Protocol):
-    """A module's entry of a plan file, as much of it as `for_plan_file` reads (`prc3cfg.core.plan_file.PlannedModule`,
-    which imports this module: what is read decides what a plan file is proved against)."""
+    """A module's entry of a plan file, as much of it as `for_plan_file` reads
+    (`prc3cfg.core.plan_file.PlannedModule`, which imports this module: what is read decides what a plan file
+    is proved against)."""
 
     @property
     def programs_read(self) -> tuple[int, ...] | None: ...
@@ -252,7 +276,7 @@ Entry = TypeVar("Entry", bound=PlanEntry)
 
 
 def for_plan_file(entries: Sequence[Entry], desired: Mapping[Key, ModuleImage], known: Mapping[Key, Known],
-                  max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], Entry | None]:  # fmt: skip
+                  max_age: Mapping[str, float], now: datetime) -> tuple[list[Target], Entry | None]:
     """What `apply --plan` reads for the modules of a plan made from a targeted read-back: exactly the
     programs its plan read, with the record as evidence — and the first module the record no longer shows
     holding what the plan took as known without reading it (None: none): the plan is stale then."""
@@ -262,7 +286,8 @@ def for_plan_file(entries: Sequence[Entry], desired: Mapping[Key, ModuleImage], 
         decision = to_read(known.get(key), desired[key], now, max_age[e.bus])
         if not set(decision.programs) <= set(e.programs_read or ()):
             return targets, e
-        targets.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known, programs_in(desired[key])))
+        targets.append(Target(e.bus, e.address, e.name, e.programs_read or (), None, decision.known,
+                              programs_in(desired[key])))
     return targets, None
 
 
@@ -270,12 +295,13 @@ def for_plan_file(entries: Sequence[Entry], desired: Mapping[Key, ModuleImage], 
 
 
 def after_system(system: SystemParameters, programs: Iterable[int], clamped_by: SystemParameters | None,
-                 known: ModuleImage | None, managed: Iterable[int], *, fresh: bool = False) -> frozenset[int]:  # fmt: skip
+                 known: ModuleImage | None, managed: Iterable[int], *, fresh: bool = False) -> frozenset[int]:
     """The programs to read once the 50h answered `system`: `programs` — every program, when writing
     `clamped_by` (the system parameters a plan will write) can clamp programs here; and every `managed`
     program too when `system` is not the record's (`known`): the module was changed by another hand.
     With `fresh` (an apply's), none of the `managed` ones on a factory-fresh module (`factory_fresh`)."""
-    wanted = set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by) else set(programs)
+    wanted = (set(PROGRAM_NUMBERS) if clamped_by is not None and can_clamp(system, clamped_by)
+              else set(programs))
     if fresh and clamped_by is not None and factory_fresh(system, clamped_by, known):
         return frozenset(wanted - set(managed))
     if known is not None and system != known.system:
@@ -291,11 +317,13 @@ def factory_fresh(system: SystemParameters, wanted: SystemParameters, known: Mod
     if system != DEFAULT_SYSTEM or wanted == DEFAULT_SYSTEM:
         return False
     factory = default_program(DEFAULT_SYSTEM)
-    return known is None or (known.system == DEFAULT_SYSTEM and all(p is None or p == factory for p in known.programs))
+    return known is None or (known.system == DEFAULT_SYSTEM
+                             and all(p is None or p == factory for p in known.programs))
 
 
 def commissioning(targets: Iterable[Target]) -> list[Target]:
-    """An apply's targets: a factory-fresh module's managed programs planned from the factory's, not read (`after_system`)."""
+    """An apply's targets: a factory-fresh module's managed programs planned from the factory's, not read
+    (`after_system`)."""
     return [replace(t, fresh=True) for t in targets]
 
 
@@ -338,7 +366,8 @@ def opens_line(target: Target, read: ModuleImage) -> str | None:
     """Why the read-back of `target` opens its whole line ("bus/name: why"; None: it does not): it
     contradicts the record. Someone other than prc3cfg had their hands on that line — two controllers
     swapped hold each other's programs under system blocks that agree, so the other one's 50h proves
-    nothing — and nothing of the record is taken for any module of it in that run (`opened`, `still_to_read`)."""
+    nothing — and nothing of the record is taken for any module of it in that run (`opened`, `still_to_read`).
+    """
     said = None if target.known is None else contradiction(target.known, read)
     return None if said is None else f"{target.bus}/{target.name}: {said}"
 
@@ -346,7 +375,8 @@ def opens_line(target: Target, read: ModuleImage) -> str | None:
 def opened(target: Target) -> Target:
     """`target` on a line opened before it is read: every managed program, with no record to agree with, none
     planned from the factory's."""
-    return replace(target, programs=tuple(sorted(set(target.programs) | set(target.managed))), known=None, fresh=False)
+    return replace(target, programs=tuple(sorted(set(target.programs) | set(target.managed))), known=None,
+                   fresh=False)
 
 
 def still_to_read(target: Target, read: ModuleImage) -> frozenset[int]:
@@ -355,20 +385,21 @@ def still_to_read(target: Target, read: ModuleImage) -> frozenset[int]:
 
 
 def read_in_full(modules: Iterable[Wanted], targets: Iterable[Target], images: Mapping[Key, ModuleImage],
-                 why: Mapping[Key, str]) -> tuple[str, ...]:  # fmt: skip
+                 why: Mapping[Key, str]) -> tuple[str, ...]:
     """"bus/name (why)" of each of `modules` a targeted read read in full: for what its read-back
     contradicted of the record, for `why` (before any evidence: not on record, too old, E12; or rolling
     evidence, `rolling`), or for the first module of its line (in the line's order) that contradicted it
     (`opens_line`)."""
     targets = list(targets)
-    evidence = {(t.bus, t.address): said for t in targets if t.known is not None and (t.bus, t.address) in images
-                and (said := contradiction(t.known, images[(t.bus, t.address)])) is not None}  # fmt: skip
+    evidence = {(t.bus, t.address): said for t in targets if t.known is not None
+                and (t.bus, t.address) in images
+                and (said := contradiction(t.known, images[(t.bus, t.address)])) is not None}
     lines: dict[str, str] = {}
     for t in targets:
         if (t.bus, t.address) in evidence:
             lines.setdefault(t.bus, f"{t.bus}/{t.name} on its line: {evidence[(t.bus, t.address)]}")
     return tuple(f"{m.bus}/{m.name} ({said})" for m in modules
-                 if (said := evidence.get(m.key) or why.get(m.key) or lines.get(m.bus)) is not None)  # fmt: skip
+                 if (said := evidence.get(m.key) or why.get(m.key) or lines.get(m.bus)) is not None)
 
 
 # -- what is read decides what is planned, and what the record becomes ------------------------------
@@ -376,12 +407,14 @@ def read_in_full(modules: Iterable[Wanted], targets: Iterable[Target], images: M
 
 def within_read(desired: ModuleImage, actual: ModuleImage) -> ModuleImage:
     """`desired` cut to the programs `actual` (a read-back) holds: the others are not the plan's."""
-    return replace(desired, programs=tuple(None if a is None else d for d, a in zip(desired.programs, actual.programs)))
+    return replace(desired, programs=tuple(None if a is None else d
+                                           for d, a in zip(desired.programs, actual.programs)))
 
 
 def not_read(desired: ModuleImage, actual: ModuleImage) -> tuple[int, ...]:
     """The programs `desired` manages that the read-back `actual` does not hold: taken as last verified."""
-    return tuple(n for n, (d, a) in enumerate(zip(desired.programs, actual.programs), start=1) if d is not None and a is None)
+    return tuple(n for n, (d, a) in enumerate(zip(desired.programs, actual.programs), start=1)
+                 if d is not None and a is None)
 
 
 def with_known(image: ModuleImage, desired: ModuleImage) -> ModuleImage:
@@ -396,7 +429,8 @@ def merged(known: Known | None, read: ModuleImage, when: str, by: str) -> Known:
     """The record of a module after `read` was read (or verified) `when` by `by`: what was read,
     with the values of the record it did not read again — unless it contradicts the record, which
     then goes whole. Its `since` stays the record's while any value of the record is kept."""
-    return verified(None if known is None or contradiction(known.image, read) is not None else known, read, when, by)
+    return verified(None if known is None or contradiction(known.image, read) is not None else known, read,
+                    when, by)
 
 
 def verified(known: Known | None, held: ModuleImage, when: str, by: str) -> Known:
@@ -407,8 +441,9 @@ def verified(known: Known | None, held: ModuleImage, when: str, by: str) -> Know
     if known is None:
         return Known(held, when, by)
     programs = tuple(now if now is not None else was for was, now in zip(known.image.programs, held.programs))
-    kept = {n: known.read_at.get(n, known.since) for n, (was, now) in enumerate(zip(known.image.programs, held.programs), start=1)
-            if now is None and was is not None}  # fmt: skip
+    kept = {n: known.read_at.get(n, known.since)
+            for n, (was, now) in enumerate(zip(known.image.programs, held.programs), start=1)
+            if now is None and was is not None}
     if not kept:
         return Known(replace(held, programs=programs), when, by)
     since = min(kept.values(), key=datetime.fromisoformat)
@@ -443,12 +478,13 @@ def reach(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step]) ->
     system = any(step.releases_axes for step in steps)
     programs = {n for step in steps for n in step.message.touched_programs()}
     if system:
-        programs |= {n for n, (b, p) in enumerate(zip(before.programs, predicted.programs), 1) if b is not None and p != b}
+        programs |= {n for n, (b, p) in enumerate(zip(before.programs, predicted.programs), 1)
+                     if b is not None and p != b}
     return system, frozenset(programs)
 
 
 def verification_reads(first: ModuleImage, last: ModuleImage, predicted: ModuleImage, sent: Sequence[Step], *,
-                       full: bool, watch_system: bool) -> tuple[bool, frozenset[int]]:  # fmt: skip
+                       full: bool, watch_system: bool) -> tuple[bool, frozenset[int]]:
     """What a verifying read-back reads — whether the system block, and which programs: with `full`
     (`Verify.FULL`) the system and every program the first read-back (`first`) held; else what the steps
     `sent` since the module read as `last` could have changed (`reach`), and the system block where a
@@ -461,7 +497,7 @@ def verification_reads(first: ModuleImage, last: ModuleImage, predicted: ModuleI
 
 
 def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequence[Step], cost: LineCost,
-                      unread: Iterable[int] = ()) -> float:  # fmt: skip
+                      unread: Iterable[int] = ()) -> float:
     """Seconds the fewest reads of what `steps` can change take on the line — and of the programs planned
     from the factory's, not read (`unread`: `assumed`), which the verification reads whatever the steps."""
     system, programs = reach(before, predicted, steps)
@@ -470,6 +506,7 @@ def verification_time(before: ModuleImage, predicted: ModuleImage, steps: Sequen
 
 def reading_time(address: int, programs: Iterable[int], system: bool, cost: LineCost) -> float:
     """Seconds the fewest reads of `programs` (and of the system block, with `system`) take on the line:
-    summed with `math.fsum`, correctly rounded, so that every place that prices a read-back agrees to the bit."""
+    summed with `math.fsum`, correctly rounded, so that every place that prices a read-back agrees to the bit.
+    """
     reads = read_messages(programs)[0 if system else 1 :]
     return fsum(cost.message_time(address, m) for m in reads)

@@ -17,4 +17,5 @@ from prc3cfg.plant.models import Gateway, plant_schema, plant_schema_text
 from prc3cfg.plant.plant import Bus, Module, Plant
 from prc3cfg.plant.problems import PlantError
 
-__all__ = ["Bus", "Gateway", "Module", "Plant", "PlantError", "parse_plant", "plant_schema", "plant_schema_text"]
+__all__ = ["Bus", "Gateway", "Module", "Plant", "PlantError", "parse_plant", "plant_schema",
+           "plant_schema_text"]

@@ -1,8 +1,8 @@
 """Adopting what the modules hold into the plant file: the Teach-In round trip (issue 13).
 
-Teach In changes positions on the floor (manual §2.6, docs/protocol.md "Readings of the manual"), and the plant
-file then says otherwise. `adopt` works out the plant file that describes what the modules
-hold, changing only the values that drifted, in the layer they came from:
+Teach In changes positions on the floor (manual §2.6, docs/protocol.md "Readings of the manual"), and the
+plant file then says otherwise. `adopt` works out the plant file that describes what the modules hold,
+changing only the values that drifted, in the layer they came from:
 
     adoption = adopt(plant, images, text)   # images: api.read's; text: the plant file as loaded
     adoption.adopted                        # each value adopted, `Adopted.text` says it
@@ -78,10 +78,12 @@ class Adopted:
     def text(self) -> str:
         """One line: "~ booth-a/booth-a-right: program 1 position 2.000 m → 1.987 m (in the module)"."""
         if self.layer != MODULE:
-            return f"~ {self.layer}: {self.what} (every module that takes it from there holds it: {', '.join(self.modules)})"
+            return (f"~ {self.layer}: {self.what} (every module that takes it from there holds it: "
+                    f"{', '.join(self.modules)})")
         if not self.override:
             return f"~ {self.modules[0]}: {self.what} (in the module)"
-        why = "the plant file left it at its default" if self.source == DEFAULT else f"{self.source} keeps its value"
+        why = ("the plant file left it at its default" if self.source == DEFAULT
+               else f"{self.source} keeps its value")
         return f"+ {self.modules[0]}: {self.what} (new in the module: {why})"
 
 
@@ -103,7 +105,8 @@ class _Drift:
 
     name: str                # "bus/module"
     path: Path_              # the module in the file
-    within: Path_            # in a layer: ("programs", 3, "position"), ("system", "max_speed"), ("programs", 7)
+    # in a layer: ("programs", 3, "position"), ("system", "max_speed"), ("programs", 7)
+    within: Path_
     value: Any               # in human units: a number, {action, distance}, or a whole program
     what: str
     sourced: Sourced | None  # None: a program no layer lists
@@ -111,20 +114,26 @@ class _Drift:
     @property
     def profile(self) -> Path_ | None:
         """Where the value is in its profile, if it came from one."""
-        return self.sourced.path if self.sourced is not None and self.sourced.source.startswith(PROFILE) else None
+        return (self.sourced.path if self.sourced is not None and self.sourced.source.startswith(PROFILE)
+                else None)
 
 
-def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Iterable[int] | None = None) -> AdoptedText:
+def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str,
+          programs: Iterable[int] | None = None) -> AdoptedText:
     """The plant file `text` (of `plant`, as loaded) rewritten to describe what the modules in
     `images` hold — only `programs` of them, if given; `AdoptRefused` for what it cannot say."""
     if hashlib.sha256(text.encode("utf-8")).hexdigest() != plant.sha256:
-        raise UserError(f"{plant.path}: the plant file changed since it was loaded — nothing was adopted: adopt again")
+        raise UserError(f"{plant.path}: the plant file changed since it was loaded — nothing was adopted: "
+                        "adopt again")
     scope = None if programs is None else frozenset(programs)
-    chosen = [(bus, module, path) for bus, module, path in _modules(plant) if (bus.name, module.address) in images]
-    if scope is not None and not any(scope.intersection(module.managed_programs()) for _, module, _ in chosen):
+    chosen = [(bus, module, path) for bus, module, path in _modules(plant)
+              if (bus.name, module.address) in images]
+    if (scope is not None
+        and not any(scope.intersection(module.managed_programs()) for _, module, _ in chosen)):
         raise UserError(f"program {', '.join(map(str, sorted(scope)))}: no chosen module manages "
-                        f"{'it' if len(scope) == 1 else 'any of them'} — name a program the plant file lists")  # fmt: skip
-    drifts = [d for bus, module, path in chosen for d in _drifts(bus, module, path, images[(bus.name, module.address)], scope)]
+                        f"{'it' if len(scope) == 1 else 'any of them'} — name a program the plant file lists")
+    drifts = [d for bus, module, path in chosen
+              for d in _drifts(bus, module, path, images[(bus.name, module.address)], scope)]
     wanted: dict[Any, Any] = {}
     adopted = []
     for target, found in _placed(plant, drifts).items():
@@ -132,11 +141,13 @@ def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str, programs: Ite
         _want(wanted, target, first.value)
         source = DEFAULT if first.sourced is None else first.sourced.source
         layer = MODULE if target[0] == "buses" else source
-        adopted.append(Adopted(tuple(d.name for d in found), first.what, layer, layer == MODULE and source != MODULE, source))
+        adopted.append(Adopted(tuple(d.name for d in found), first.what, layer, layer == MODULE
+                               and source != MODULE, source))
     if not wanted:
         return AdoptedText((), text)
     rewritten = splice.rewrite(text, wanted)
-    _check_rewritten(plant, {key: _adopted_image(module, images.get(key), scope) for key, module in _keyed(plant)}, rewritten)
+    _check_rewritten(plant, {key: _adopted_image(module, images.get(key), scope)
+                             for key, module in _keyed(plant)}, rewritten)
     return AdoptedText(tuple(adopted), rewritten)
 
 
@@ -150,8 +161,10 @@ def _adopted_image(module: Module, have: ModuleImage | None, scope: frozenset[in
     desired = module.desired_image()
     if have is None:
         return desired
-    numbers = [n for n in module.managed_programs() if (scope is None or n in scope) and have.program(n) is not None]
-    return replace(desired.with_programs({n: have.known(n) for n in numbers}), system=have.system if scope is None else desired.system)
+    numbers = [n for n in module.managed_programs() if (scope is None or n in scope)
+               and have.program(n) is not None]
+    return replace(desired.with_programs({n: have.known(n) for n in numbers}), system=have.system
+                   if scope is None else desired.system)
 
 
 def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -> None:
@@ -162,16 +175,19 @@ def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -
     except PlantError as error:
         raise _rewriter_bug(plant, f"it would not load: {error.problems[0]}") from None
     same = [bus.model_dump(exclude={"modules"}) for bus in plant.buses] == [bus.model_dump(exclude={"modules"}) for bus in after.buses]
-    if after.name != plant.name or not same or [(k, m.name) for k, m in _keyed(plant)] != [(k, m.name) for k, m in _keyed(after)]:
+    if after.name != plant.name or not same or [(k, m.name) for k, m in _keyed(plant)] != [(k, m.name)
+                                                                                           for k, m in _keyed(after)]:
         raise _rewriter_bug(plant, "its plant, buses or modules would differ")
     for (bus, address), module in _keyed(after):
         if (said := module.desired_image()) != (held := adopted[(bus, address)]):
             found = "; ".join(differences(held, said)) or "the programs it manages"
-            raise _rewriter_bug(plant, f"bus {bus}, module {address} ({module.name}): {found} (held → written)")
+            raise _rewriter_bug(plant, f"bus {bus}, module {address} ({module.name}): {found} (held "
+                                       "→ written)")
 
 
 def _rewriter_bug(plant: Plant, what: str) -> AdoptRefused:
-    return AdoptRefused(f"{plant.path}: the rewritten plant file would not describe what the modules hold — {what}; "
+    return AdoptRefused(f"{plant.path}: the rewritten plant file would not describe what the modules hold "
+                        f"— {what}; "
                         "nothing was adopted: this is a bug in prc3cfg, please report it with the plant file")
 
 
@@ -185,28 +201,36 @@ def _modules(plant: Plant) -> Iterator[tuple[Bus, Module, Path_]]:
 # -- what drifted -------------------------------------------------------------------------
 
 
-def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: frozenset[int] | None) -> list[_Drift]:
+def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage,
+            scope: frozenset[int] | None) -> list[_Drift]:
     """What `module` holds (`have`) other than the plant file says, within `scope`; refused when
     it cannot be adopted (a jump, a value a plant file cannot hold)."""
     name, where = f"{bus.name}/{module.name}", f"bus {bus.name}, module {module.address} ({module.name})"
     desired, settings = module.desired_image(), module.settings
-    numbers = [n for n in module.managed_programs() if (scope is None or n in scope) and have.program(n) is not None]
+    numbers = [n for n in module.managed_programs() if (scope is None or n in scope)
+               and have.program(n) is not None]
     for number in numbers:
         jumps, said_jumps = have.known(number).A, desired.known(number).A
         if jumps != said_jumps:
-            raise AdoptRefused(f"{where}: program {number} jumps to {jumps or 'no program'} on the module where the plant "
-                               f"file says {said_jumps or 'no program'} — adopt leaves jumps (chains, next:) alone: edit them "
-                               "in the plant file by hand, or apply it to set the jump back, then adopt again")  # fmt: skip
+            raise AdoptRefused(f"{where}: program {number} jumps to {jumps or 'no program'} on the module "
+                               "where the plant "
+                               f"file says {said_jumps or 'no program'} — adopt leaves jumps (chains, "
+                               "next:) alone: edit them "
+                               "in the plant file by hand, or apply it to set the jump back, then "
+                               "adopt again")
     system = have.system if scope is None else desired.system
     _check(_adopted_image(module, have, scope), numbers, where)
-    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), plant_value(c.symbol, c.after), f"system {c.text}",
-                     settings.system[BY_SYMBOL[c.symbol].key]) for c in _changes(desired.system, system, SYSTEM_KEYS)]  # fmt: skip
+    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), plant_value(c.symbol, c.after),
+                     f"system {c.text}",
+                     settings.system[BY_SYMBOL[c.symbol].key])
+              for c in _changes(desired.system, system, SYSTEM_KEYS)]
     for number in numbers:
         held = have.program(number)
         if number in settings.programs:
-            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]), plant_value(c.symbol, c.after),
+            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]),
+                              plant_value(c.symbol, c.after),
                               f"program {number} {c.text}", settings.programs[number][FIELD_KEYS[c.symbol]])
-                       for c in _changes(desired.program(number), held, FIELD_KEYS)]  # fmt: skip
+                       for c in _changes(desired.program(number), held, FIELD_KEYS)]
         elif held != default_program(system):  # unlisted under reset: listed now, with all it holds
             symbols = [s for s in FIELD_KEYS if s in ("P", "V") or getattr(held, s)]
             said = ", ".join(f"{field_name(s)} {format_value(s, getattr(held, s))}" for s in symbols)
@@ -217,7 +241,8 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage, scope: fro
 
 def _changes(said: Any, held: Any, symbols: Iterable[str]) -> list[FieldChange]:
     """The fields `symbols` of two programs, or of two sets of system parameters, that differ."""
-    return [FieldChange.of(None, s, getattr(said, s), getattr(held, s)) for s in symbols if getattr(said, s) != getattr(held, s)]
+    return [FieldChange.of(None, s, getattr(said, s), getattr(held, s)) for s in symbols
+            if getattr(said, s) != getattr(held, s)]
 
 
 def _check(after: ModuleImage, numbers: list[int], where: str) -> None:
@@ -229,7 +254,7 @@ def _check(after: ModuleImage, numbers: list[int], where: str) -> None:
     if system.S4 < system.S5:
         raise AdoptRefused(f"{where}: system max speed {format_value('S4', system.S4)} is below min speed "
                            f"{format_value('S5', system.S5)} — a plant file cannot say that: "
-                           "set the module's system parameters right, then adopt again")  # fmt: skip
+                           "set the module's system parameters right, then adopt again")
     for number in numbers:
         for symbol in FIELD_KEYS:
             _in_range(symbol, getattr(after.program(number), symbol), system, f"{where}: program {number}")
@@ -238,10 +263,12 @@ def _check(after: ModuleImage, numbers: list[int], where: str) -> None:
 def _in_range(symbol: str, device: int, system: SystemParameters, where: str) -> None:
     low, high, _, _ = value_range(symbol, system)
     if not low <= device <= high:
-        said = (f"{format_value(symbol, device)}, outside {format_value(symbol, low)}..{format_value(symbol, high)}"
+        said = (f"{format_value(symbol, device)}, outside "
+                f"{format_value(symbol, low)}..{format_value(symbol, high)}"
                 if symbol in ("P", "V") else f"{device} (device units), outside {low}..{high}")
-        raise AdoptRefused(f"{where} holds {field_name(symbol)} {said} — a plant file cannot say that: set it right on "
-                           "the module (teach it again), then adopt again")  # fmt: skip
+        raise AdoptRefused(f"{where} holds {field_name(symbol)} {said} — a plant file cannot say that: set "
+                           "it right on "
+                           "the module (teach it again), then adopt again")
 
 
 # -- where each drift goes ----------------------------------------------------------------
@@ -250,7 +277,8 @@ def _in_range(symbol: str, device: int, system: SystemParameters, where: str) ->
 def _placed(plant: Plant, drifts: list[_Drift]) -> dict[Path_, list[_Drift]]:
     """Each place to write, with the drifts written there: a profile's value when every module
     that takes it from there drifted to one new value, else the module (in place or an override)."""
-    users = Counter(v.path for _, module, _ in _modules(plant) for v in _values(module) if v.source.startswith(PROFILE))
+    users = Counter(v.path for _, module, _ in _modules(plant) for v in _values(module)
+                    if v.source.startswith(PROFILE))
     alike: dict[Path_, list[_Drift]] = {}
     for drift in drifts:
         if drift.profile is not None:
@@ -258,7 +286,8 @@ def _placed(plant: Plant, drifts: list[_Drift]) -> dict[Path_, list[_Drift]]:
     placed: dict[Path_, list[_Drift]] = {}
     for drift in drifts:
         place, profile = drift.path + drift.within, drift.profile
-        if profile is not None and (shared := alike[profile]) and len(shared) == users[profile] and all(d.value == drift.value for d in shared):
+        if (profile is not None and (shared := alike[profile]) and len(shared) == users[profile]
+            and all(d.value == drift.value for d in shared)):
             place = profile
         placed.setdefault(place, []).append(drift)
     return placed

@@ -95,7 +95,8 @@ _DIGITS = re.compile(r"[0-9]+")
 #: where it differs: libyaml's stop is said as it is when the pure parser does not re-read the
 #: file, see `_REREAD_EVENTS`); the flag says the error is best shown where the construct
 #: began (an unclosed quote), not where PyYAML gave up (the end of the file).
-_INDENTED = ("this line is indented differently from the lines above it — line it up with the keys beside it", False)
+_INDENTED = ("this line is indented differently from the lines above it — line it up with the keys beside it",
+             False)
 _COLON = ("a colon where no key can start — indent this key under its parent, or put a value that contains "
           "': ' in quotes", False)
 _SYNTAX_HINTS = {
@@ -109,13 +110,15 @@ _SYNTAX_HINTS = {
     "did not find expected '-' indicator": _INDENTED,
     "while scanning a quoted scalar": ("a quoted value that never ends — close the quote", True),
     "expected a single document": ("a second YAML document (---) — a plant file is one document", False),
-    "found duplicate anchor": ("an anchor (&name) given twice — a plant file needs no anchors: remove them", False),
+    "found duplicate anchor": ("an anchor (&name) given twice — a plant file needs no anchors: remove them",
+                               False),
 }
 #: What PyYAML refuses as not printable (`_not_text` looks for a byte order mark apart).
 _NOT_PRINTABLE = yaml.reader.Reader.NON_PRINTABLE
 _BYTE_ORDER_MARK = "\ufeff"
 #: The tag of a mapping or a list that has none written.
-_COLLECTIONS: dict[type[CollectionStartEvent], str] = {MappingStartEvent: "tag:yaml.org,2002:map", SequenceStartEvent: "tag:yaml.org,2002:seq"}
+_COLLECTIONS: dict[type[CollectionStartEvent], str] = {MappingStartEvent: "tag:yaml.org,2002:map",
+                                                       SequenceStartEvent: "tag:yaml.org,2002:seq"}
 Position = tuple[int, int]  # 1-based line and column
 
 
@@ -138,7 +141,8 @@ class Document:
         is left, the nearest enclosing node is meant. The places of the paths so found are
         read in one more pass over the file (`_Reader` with `wanted`), only when needed.
         """
-        paths = [(_in_file(self.data, p.path), None if p.first is None else _in_file(self.data, p.first)) for p in problems]
+        paths = [(_in_file(self.data, p.path), None if p.first is None else _in_file(self.data, p.first))
+                 for p in problems]
         wanted: dict[Any, Any] = {}
         for problem, (path, first) in zip(problems, paths):
             if problem.at is None:
@@ -197,9 +201,11 @@ def spans(text: str) -> Span:
 
 def parse_document(name: str, data: bytes) -> Document:
     """Parse `data`, the bytes of the file `name`; `PlantError` if it is not a YAML mapping at all."""
-    if data.startswith((b"\xff\xfe", b"\xfe\xff")):  # UTF-16's byte order mark: what Windows PowerShell 5.1's > writes
-        raise PlantError([f"{name}:1:1: UTF-16 text, as Windows PowerShell 5.1's > writes it — a plant file is UTF-8: write it with "
-                          "--out (prc3cfg import … --out plant.yaml), or save it as UTF-8"])  # fmt: skip
+    # UTF-16's byte order mark: what Windows PowerShell 5.1's > writes
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise PlantError([f"{name}:1:1: UTF-16 text, as Windows PowerShell 5.1's > writes it — a plant file "
+                          "is UTF-8: write it with "
+                          "--out (prc3cfg import … --out plant.yaml), or save it as UTF-8"])
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as error:
@@ -214,7 +220,8 @@ def parse_document(name: str, data: bytes) -> Document:
     reader = _read(name, text)
     root, value = reader.root, reader.value
     if root is None or (type(root) is ScalarEvent and reader.tag(root) == NULL_TAG):
-        raise PlantError([f"{name}:1:1: the file is empty — a plant file starts with 'plant: NAME' and 'buses:'"])
+        raise PlantError([f"{name}:1:1: the file is empty — a plant file starts with 'plant: NAME' "
+                          "and 'buses:'"])
     if type(root) is not MappingStartEvent:
         line, column = _position(root)
         kind = f"the value {root.value!r}" if isinstance(root, ScalarEvent) else "a list"
@@ -290,22 +297,27 @@ class _Events:
                 nodes += 1
                 if nodes > MAX_NODES:
                     line, column = _position(event)
-                    raise PlantError([f"{self.name}:{line}:{column}: more than {MAX_NODES:,} keys, values, lists and "
-                                      "mappings — 8 buses of 30 modules with all 64 programs written out have about "
+                    raise PlantError([f"{self.name}:{line}:{column}: more than {MAX_NODES:,} keys, values, "
+                                      "lists and "
+                                      "mappings — 8 buses of 30 modules with all 64 programs written out "
+                                      "have about "
                                       "160,000: check that this is the plant file"])
                 if kind is AliasEvent:
                     self.aliases.setdefault(event.anchor, []).append(_position(event))
                 elif event.anchor is not None and self.document == 1:
                     if event.anchor in anchors and self.stop is None:
-                        self.stop = ComposerError("found duplicate anchor; first occurrence", anchors[event.anchor],
+                        self.stop = ComposerError("found duplicate anchor; first occurrence",
+                                                  anchors[event.anchor],
                                                   "second occurrence", event.start_mark)
                     anchors.setdefault(event.anchor, event.start_mark)
                 if kind is not ScalarEvent and kind is not AliasEvent:
                     depth += 1
                     if depth > MAX_DEPTH:
                         line, column = _position(event)
-                        raise PlantError([f"{self.name}:{line}:{column}: lists and mappings nested more than {MAX_DEPTH} "
-                                          "deep — a plant file needs fewer than ten: check the brackets and the indentation"])
+                        raise PlantError([f"{self.name}:{line}:{column}: lists and mappings nested more "
+                                          f"than {MAX_DEPTH} "
+                                          "deep — a plant file needs fewer than ten: check the brackets and "
+                                          "the indentation"])
             elif kind is MappingEndEvent or kind is SequenceEndEvent:
                 depth -= 1
             elif kind is DocumentStartEvent:
@@ -321,8 +333,10 @@ class _Events:
         lines = []
         for anchor, uses in self.aliases.items():
             (line, column), times = uses[0], f", used {len(uses)} times" if len(uses) > 1 else ""
-            lines.append(f"{self.name}:{line}:{column}: an alias (*{anchor}{times}) — a plant file does not use aliases: "
-                         "share settings with profiles: and a module's profiles: [NAME], or write the value out")
+            lines.append(f"{self.name}:{line}:{column}: an alias (*{anchor}{times}) — a plant file does not "
+                         "use aliases: "
+                         "share settings with profiles: and a module's profiles: [NAME], or write the "
+                         "value out")
         if lines:
             raise PlantError(lines)
 
@@ -342,7 +356,8 @@ class _Reader:
     `spans`: only then does it keep the last event it was given and go through `spanned`.
     """
 
-    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None, spans: bool = False) -> None:
+    def __init__(self, events: Iterable[yaml.Event], wanted: dict[Any, Any] | None = None,
+                 spans: bool = False) -> None:
         self.next: Callable[[], yaml.Event] = iter(events).__next__
         #: The value of the node that an event begins, read to its end: `read_node`, or `spanned`.
         self.node: Callable[[yaml.Event, Path_, Mapping[Any, Any] | None], Any] = self.read_node
@@ -421,20 +436,23 @@ class _Reader:
             items.append(self.entry(path + (len(items),), None, item, wanted))
         return items
 
-    def entry(self, path: Path_, key: yaml.Event | None, event: yaml.Event, wanted: Mapping[Any, Any] | None) -> Any:
+    def entry(self, path: Path_, key: yaml.Event | None, event: yaml.Event,
+              wanted: Mapping[Any, Any] | None) -> Any:
         """The value of a list item or mapping value at `path`; passed over when locating another path."""
         if wanted is None:
             return self.node(event, path, None)
         below = wanted.get(path[-1])
         if below is not None:
             key_at = None if key is None else _position(key)
-            self.positions[path] = (key_at, key_at if key_at is not None and self.empty(event) else _position(event))
+            self.positions[path] = (key_at, key_at if key_at is not None and self.empty(event)
+                                    else _position(event))
         if below is None or below is _LEAF:
             self.skip(event)
             return None
         return self.node(event, path, below)
 
-    def mapping(self, start: MappingStartEvent, path: Path_, wanted: Mapping[Any, Any] | None) -> dict[Any, Any]:
+    def mapping(self, start: MappingStartEvent, path: Path_,
+                wanted: Mapping[Any, Any] | None) -> dict[Any, Any]:
         result: dict[Any, Any] = {}
         keys: dict[Any, yaml.Event] = {}  # each key read here, by its event
         before: tuple[Any, yaml.Event] | None = None  # the key read last and its value's first event
@@ -444,10 +462,12 @@ class _Reader:
             value_event = self.next()
             if self.merge_key(key_event):
                 self.problem(Problem(path, "a YAML merge key (<<) — share settings with "
-                                     "profiles: and a module's profiles: [NAME] instead", at=_position(key_event)))
+                                     "profiles: and a module's profiles: [NAME] instead",
+                                     at=_position(key_event)))
                 self.skip(value_event)
                 continue
-            if before is not None and start.flow_style and (written := self.split_number(before[1], key_event, value_event)):
+            if before is not None and start.flow_style and (written := self.split_number(before[1], key_event,
+                                                                                         value_event)):
                 point = written.replace(",", ".")
                 result[before[0]] = Decimal(point)  # what was meant, for the models to judge
                 self.problem(Problem(path, DECIMAL_COMMA.format(what=before[0], written=written, point=point),
@@ -455,7 +475,8 @@ class _Reader:
                 continue
             key = self.scalar(key_event, path, "key") if type(key_event) is ScalarEvent else None
             if key is None or (type(key) is not str and not _hashable(key)):
-                self.problem(Problem(path, "a key that is not a name or a number — write a plain key", at=_position(key_event)))
+                self.problem(Problem(path, "a key that is not a name or a number — write a plain key",
+                                     at=_position(key_event)))
                 self.skip(value_event)
                 continue
             if key in keys:
@@ -485,7 +506,8 @@ class _Reader:
             event = self.next()
 
     def tag(self, event: yaml.Event) -> str | None:
-        """A node's tag as PyYAML's composer gives it: the one written, else YAML 1.1's reading; None for an alias."""
+        """A node's tag as PyYAML's composer gives it: the one written, else YAML 1.1's reading; None for an
+        alias."""
         if type(event) is ScalarEvent:
             return self.scalar_tag(event)
         if not isinstance(event, CollectionStartEvent):
@@ -493,7 +515,8 @@ class _Reader:
         return event.tag if event.tag is not None and event.tag != "!" else _COLLECTIONS[type(event)]
 
     def scalar_tag(self, event: ScalarEvent) -> str:
-        return event.tag if event.tag is not None and event.tag != "!" else self.readings.tag(event.value, event.implicit)
+        return event.tag if event.tag is not None and event.tag != "!" else self.readings.tag(event.value,
+                                                                                              event.implicit)
 
     def merge_key(self, event: yaml.Event) -> bool:
         """`<<`, or any key tagged `!!merge`."""
@@ -552,8 +575,10 @@ def _in_file(data: Any, path: Path_) -> Path_:
     for part in path:
         key: Any = part  # the file's own key (a Decimal, a float) where pydantic wrote its repr
         if isinstance(data, dict):
-            if isinstance(part, str) and part not in data:  # pydantic writes a key that is no str or int as its repr
-                key = next((k for k in data if isinstance(k, Decimal | float) and part in (str(k), repr(k))), part)
+            # pydantic writes a key that is no str or int as its repr
+            if isinstance(part, str) and part not in data:
+                key = next((k for k in data if isinstance(k, Decimal | float) and part in (str(k), repr(k))),
+                           part)
             present = _hashable(key) and key in data
         else:
             present = isinstance(data, list) and isinstance(part, int) and 0 <= part < len(data)
@@ -587,7 +612,8 @@ def _position(event: yaml.Event) -> Position:
 
 
 def marked(mark: yaml.error.Mark | yaml._yaml.Mark | None) -> yaml.error.Mark | yaml._yaml.Mark:
-    """An event's start or end: the parser marks every event (the stubs allow None, for events made by hand)."""
+    """An event's start or end: the parser marks every event (the stubs allow None, for events made by
+    hand)."""
     assert mark is not None
     return mark
 
@@ -610,7 +636,9 @@ def _syntax_error(name: str, error: yaml.MarkedYAMLError) -> str:
     said = f"{problem} {error.context or ''}"
     hint, at_start = next((h for piece, h in _SYNTAX_HINTS.items() if piece in said), (None, False))
     if hint is None:
-        where = f" ({error.context} at line {error.context_mark.line + 1})" if error.context and error.context_mark else ""
+        where = (f" ({error.context} at line {error.context_mark.line + 1})" if error.context
+                 and error.context_mark else "")
         hint = f"not valid YAML: {problem}{where} — check the indentation, colons, quotes and brackets here"
-    mark = marked((error.context_mark if at_start else error.problem_mark) or error.problem_mark or error.context_mark)
+    mark = marked((error.context_mark if at_start else error.problem_mark) or error.problem_mark
+                  or error.context_mark)
     return f"{name}:{mark.line + 1}:{mark.column + 1}: {hint}"

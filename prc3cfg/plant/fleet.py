@@ -7,11 +7,11 @@
           - {bus: booth-a, runner: line-booth-a, environment: booth-a}
           - {bus: booth-b, runner: line-booth-b}
 
-`parse_fleet` reads the bytes with the plant file's YAML reader (`document`: positions, no aliases, no tags) and the
-models here (`fleet_schema`: `schemas/fleet.schema.json`); `lines` then checks each line against its plant file (the
-bus is one of its buses) and builds `core.fleet.FleetLine`s, or raises `PlantError` with one line per problem, at the
-fleet file's key or value. Plant file paths are relative to the fleet file. Pure: the shell reads the files
-(`prc3cfg.cli.fleet_commands`).
+`parse_fleet` reads the bytes with the plant file's YAML reader (`document`: positions, no aliases, no tags)
+and the models here (`fleet_schema`: `schemas/fleet.schema.json`); `lines` then checks each line against its
+plant file (the bus is one of its buses) and builds `core.fleet.FleetLine`s, or raises `PlantError` with one
+line per problem, at the fleet file's key or value. Plant file paths are relative to the fleet file. Pure: the
+shell reads the files (`prc3cfg.cli.fleet_commands`).
 """
 
 from __future__ import annotations
@@ -37,15 +37,18 @@ class LineSpec(FileModel):
     """One bus of the plant file, and where its jobs run."""
 
     bus: Name = Field(description="the bus, as the plant file names it", examples=["booth-a"])
-    runner: Text = Field(description="the label of the self-hosted runner beside the line", examples=["line-booth-a"])
-    environment: Name | None = Field(None, description="the GitHub environment whose required reviewers approve an apply to "
-                                                       "the line (default: the bus's name)")  # fmt: skip
+    runner: Text = Field(description="the label of the self-hosted runner beside the line",
+                         examples=["line-booth-a"])
+    environment: Name | None = Field(None, description="the GitHub environment whose required reviewers "
+                                                       "approve an apply to "
+                                                       "the line (default: the bus's name)")
 
 
 class FleetPlant(FileModel):
     """A plant file and its lines."""
 
-    plant: Text = Field(description="the plant file, relative to the fleet file", examples=["plants/paint-shop.yaml"])
+    plant: Text = Field(description="the plant file, relative to the fleet file",
+                        examples=["plants/paint-shop.yaml"])
     lines: tuple[LineSpec, ...] = Field(min_length=1, description="its buses, each a line")
 
 
@@ -78,7 +81,8 @@ def parse_fleet(path: str, data: bytes) -> Fleet:
     except ValidationError as error:
         errors = error.errors(include_url=False)
         # a list too short *after* an item of it failed says that item's problem again
-        within = [e["loc"][:n] for e in errors for n in range(len(e["loc"]))]  # the places an error is inside of
+        # the places an error is inside of
+        within = [e["loc"][:n] for e in errors for n in range(len(e["loc"]))]
         problems += [_problem(e) for e in errors if not (e["type"] == "too_short" and e["loc"] in within)]
         raise PlantError([text for _, text in sorted(document.lines(problems))]) from None
     if problems:
@@ -87,25 +91,29 @@ def parse_fleet(path: str, data: bytes) -> Fleet:
 
 
 def lines(fleet: Fleet, load: Callable[[str], Plant]) -> list[FleetLine]:
-    """The fleet's lines, each bus checked against its plant file (`load`: the plant file at a path the fleet gives,
-    relative to the current folder); `PlantError` naming the fleet file's place of every bus no plant file has, or of a
-    line named twice."""
+    """The fleet's lines, each bus checked against its plant file (`load`: the plant file at a path the fleet
+    gives, relative to the current folder); `PlantError` naming the fleet file's place of every bus no plant
+    file has, or of a line named twice."""
     found: list[FleetLine] = []
     problems: list[Problem] = []
     seen: dict[str, tuple[str | int, ...]] = {}
     for p, (spec, path) in enumerate(zip(fleet.spec.plants, fleet.plant_paths(), strict=True)):
         plant = load(path)
         buses: Mapping[str, Any] = {bus.name: bus for bus in plant.buses}
-        policy = None if plant.policy_path is None else posixpath.normpath(str(plant.policy_path).replace("\\", "/"))
+        policy = (None if plant.policy_path is None
+                  else posixpath.normpath(str(plant.policy_path).replace("\\", "/")))
         for n, line in enumerate(spec.lines):
             at = ("plants", p, "lines", n, "bus")
             if line.bus not in buses:
-                problems.append(Problem(at, f"bus '{line.bus}' is not in {path} — it has {', '.join(sorted(buses))}"))
+                problems.append(Problem(at, f"bus '{line.bus}' is not in {path} — it has "
+                                            f"{', '.join(sorted(buses))}"))
                 continue
-            made = FleetLine(path, line.bus, line.runner, line.environment or line.bus, tuple(m.name for m in buses[line.bus].modules), policy)
+            made = FleetLine(path, line.bus, line.runner, line.environment or line.bus,
+                             tuple(m.name for m in buses[line.bus].modules), policy)
             if made.id in seen:
-                problems.append(Problem(at, f"line {made.name} is named twice (or its id {made.id} is another line's) — name each line once",
-                                        first=seen[made.id]))  # fmt: skip
+                problems.append(Problem(at, f"line {made.name} is named twice (or its id {made.id} is "
+                                            "another line's) — name each line once",
+                                        first=seen[made.id]))
                 continue
             seen[made.id] = at
             found.append(made)

@@ -28,8 +28,10 @@ from prc3cfg.plant.profiles import PROGRAM_DEFAULTS
 
 
 def _program_entry(program: Program, next_program: int | None) -> dict[str, Any]:
-    entry: dict[str, Any] = {q.key: plant_value(q.symbol, getattr(program, q.symbol)) for q in PROGRAM_QUANTITIES
-                             if q.key not in PROGRAM_DEFAULTS or getattr(program, q.symbol)}  # an omitted key means 0
+    entry: dict[str, Any] = {q.key: plant_value(q.symbol, getattr(program, q.symbol))
+                             for q in PROGRAM_QUANTITIES
+                             # an omitted key means 0
+                             if q.key not in PROGRAM_DEFAULTS or getattr(program, q.symbol)}
     for symbol in FUNCTION_OUTPUTS:
         if value := getattr(program, symbol):
             entry[symbol.lower()] = plant_value(symbol, value)
@@ -72,7 +74,8 @@ def module_entry(image: ModuleImage, name: str) -> dict[str, Any]:
 def _alike(mappings: list[dict[Any, Any]]) -> dict[Any, Any]:
     """The keys every mapping has with the same value, in the first's order."""
     first, *rest = mappings
-    return {key: value for key, value in first.items() if all(key in other and other[key] == value for other in rest)}
+    return {key: value for key, value in first.items()
+            if all(key in other and other[key] == value for other in rest)}
 
 
 def shared_profile(entries: list[dict[str, Any]]) -> tuple[dict[str, Any] | None, list[dict[str, Any]]]:
@@ -92,10 +95,11 @@ def _common(entries: list[dict[str, Any]]) -> dict[str, Any]:
         profile["system"] = system
     listed = [entry.get("programs", {}) for entry in entries]
     programs = {number: fields for number in listed[0] if all(number in other for other in listed[1:])
-                and (fields := _alike([other[number] for other in listed]))}  # fmt: skip
+                and (fields := _alike([other[number] for other in listed]))}
     if programs:
         profile["programs"] = programs
-    profile |= {key: value for key, value in _alike(entries).items() if key in ("chains", "unmanaged_programs")}
+    profile |= {key: value for key, value in _alike(entries).items()
+                if key in ("chains", "unmanaged_programs")}
     return profile
 
 
@@ -106,10 +110,11 @@ def _own(entry: dict[str, Any], profile: dict[str, Any]) -> dict[str, Any]:
     if own := {key: value for key, value in entry.get("system", {}).items() if key not in system}:
         module["system"] = own
     own = {number: rest for number, fields in entry.get("programs", {}).items()
-           if (rest := {key: value for key, value in fields.items() if key not in programs.get(number, {})})}  # fmt: skip
+           if (rest := {key: value for key, value in fields.items() if key not in programs.get(number, {})})}
     if own:
         module["programs"] = own
-    module |= {key: entry[key] for key in ("chains", "unmanaged_programs") if key in entry and key not in profile}
+    module |= {key: entry[key] for key in ("chains", "unmanaged_programs") if key in entry
+               and key not in profile}
     return module
 
 
@@ -121,15 +126,20 @@ class _OneLine(dict):
     """A mapping written on one line: a module with nothing of its own but its profile."""
 
 
-_Dumper.add_representer(Decimal, lambda dumper, value: dumper.represent_scalar("tag:yaml.org,2002:float", str(value)))
-_Dumper.add_representer(_OneLine, lambda dumper, value: dumper.represent_mapping("tag:yaml.org,2002:map", value, flow_style=True))
+_Dumper.add_representer(Decimal, lambda dumper,
+                        value: dumper.represent_scalar("tag:yaml.org,2002:float", str(value)))
+_Dumper.add_representer(_OneLine, lambda dumper,
+                        value: dumper.represent_mapping("tag:yaml.org,2002:map", value, flow_style=True))
 
 
-def bus_entry(name: str, port: str, framing: str, line: LineSettings, timeout: float, zvz: float) -> dict[str, Any]:
+def bus_entry(name: str, port: str, framing: str, line: LineSettings, timeout: float,
+              zvz: float) -> dict[str, Any]:
     """A bus of a plant file, without its modules: the line the modules were read on (its `zvz` on
     open-driver only, where it counts)."""
-    bus: dict[str, Any] = {"name": name, "port": port, "framing": framing, "baud": line.baud, "parity": line.parity,
-                           "data_bits": line.data_bits, "stop_bits": line.stop_bits, "timeout": Decimal(str(timeout))}  # fmt: skip
+    bus: dict[str, Any] = {"name": name, "port": port, "framing": framing, "baud": line.baud,
+                           "parity": line.parity,
+                           "data_bits": line.data_bits, "stop_bits": line.stop_bits,
+                           "timeout": Decimal(str(timeout))}
     if framing == "open-driver":
         bus["zvz"] = Decimal(str(zvz))
     return bus
@@ -140,7 +150,8 @@ def imported_plant(plant: str, buses: Sequence[tuple[dict[str, Any], Iterable[Mo
     return plant_yaml(plant, [(bus, [module_entry(image, f"{bus['name']}-{image.address}") for image in images]) for bus, images in buses])
 
 
-def plant_yaml(plant: str, buses: Sequence[tuple[dict[str, Any], list[dict[str, Any]]]], schema: str = SCHEMA) -> str:
+def plant_yaml(plant: str, buses: Sequence[tuple[dict[str, Any], list[dict[str, Any]]]],
+               schema: str = SCHEMA) -> str:
     """The YAML text of a plant file of buses with their `module_entry`s: what every module of every bus
     holds alike in one profile."""
     profile, modules = shared_profile([module for _, entries in buses for module in entries])
@@ -150,6 +161,8 @@ def plant_yaml(plant: str, buses: Sequence[tuple[dict[str, Any], list[dict[str, 
     document["buses"] = []
     for bus, entries in buses:
         own, modules = modules[: len(entries)], modules[len(entries) :]
-        document["buses"].append({**bus, "modules": [_OneLine(m) if m.keys() <= {"address", "name", "profiles"} else m for m in own]})
+        document["buses"].append({**bus, "modules": [_OneLine(m)
+                                                     if m.keys() <= {"address", "name", "profiles"} else m
+                                                     for m in own]})
     head = f"# yaml-language-server: $schema={schema}\n"
     return head + yaml.dump(document, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=110)

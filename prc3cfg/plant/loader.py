@@ -49,12 +49,14 @@ M = TypeVar("M", bound=BaseModel)
 MAX_PART_NODES = 10_000
 #: What stands for a module or a profile while the rest of the file is validated.
 _MODULE_STAND_IN = {"address": 1, "name": "-"}
-#: A module's own settings, each laid over its profiles' (`profiles.resolve`): a module that gives none has theirs.
+#: A module's own settings, each laid over its profiles' (`profiles.resolve`): a module that gives none has
+#: theirs.
 _SETTINGS = tuple(ProfileSpec.model_fields)
 _PROFILE_STAND_IN: dict[str, Any] = {}
 
 
-def parse_plant(path: str | Path, data: bytes, *, pseudo_terminal: Callable[[str], bool] = lambda port: False) -> Plant:
+def parse_plant(path: str | Path, data: bytes, *,
+                pseudo_terminal: Callable[[str], bool] = lambda port: False) -> Plant:
     """The plant in `data`, the bytes of the file `path` (read by the shell, `prc3cfg.shell.plant_files`,
     or a file before it is written); `PlantError` with its problems ("file:line:column: …") otherwise.
     `pseudo_terminal`: whether a port is one on this machine (the shell's to know: it carries no parity)."""
@@ -70,7 +72,8 @@ def parse_plant(path: str | Path, data: bytes, *, pseudo_terminal: Callable[[str
         raise PlantError(_lines(document, _one_per_cause(problems), stopped=False))
     return Plant(
         name=document.data["plant"],
-        buses=tuple(Bus(**{k: getattr(line, k) for k in line.model_fields_set if k != "modules"}, modules=tuple(modules))
+        buses=tuple(Bus(**{k: getattr(line, k) for k in line.model_fields_set if k != "modules"},
+                        modules=tuple(modules))
                     for line, modules in buses),
         path=path,
         sha256=document.sha256,
@@ -95,7 +98,8 @@ class _Problems(list[Problem]):
             raise _Enough
 
 
-def _checked(data: dict[Any, Any], problems: _Problems, pseudo_terminal: Callable[[str], bool]) -> list[tuple[BusLine, list[Module]]]:
+def _checked(data: dict[Any, Any], problems: _Problems,
+             pseudo_terminal: Callable[[str], bool]) -> list[tuple[BusLine, list[Module]]]:
     """Every bus's line and its modules that have no problem; the problems go to `problems`."""
     problems.add(())  # the reading may have found enough already
     spec, found = _validated(PlantSpec, _with_stand_ins(data), (), data)
@@ -108,7 +112,8 @@ def _checked(data: dict[Any, Any], problems: _Problems, pseudo_terminal: Callabl
         if isinstance(profile_path[1], str):
             profiles[profile_path[1]] = (profile, frozenset()) if profile is not None else _salvaged(ProfileSpec, raw)
     buses = []
-    alike: dict[tuple[str, ...], Effective] = {}  # the settings of modules that add nothing to their profiles, checked
+    # the settings of modules that add nothing to their profiles, checked
+    alike: dict[tuple[str, ...], Effective] = {}
     for bus_path, raw_bus in mappings_in(data, ("buses",)):
         line = spec.buses[int(bus_path[1])] if spec is not None else _line(raw_bus)
         problems.add(rules.check_bus(bus_path, line, pseudo_terminal) if line else ())
@@ -116,7 +121,8 @@ def _checked(data: dict[Any, Any], problems: _Problems, pseudo_terminal: Callabl
         for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
             module, found = _validated(ModuleSpec, raw_module, module_path, data)
             problems.add(found)
-            checked, unknown = (module, frozenset()) if module is not None else _salvaged(ModuleSpec, raw_module)
+            checked, unknown = (module, frozenset()) if module is not None else _salvaged(ModuleSpec,
+                                                                                          raw_module)
             if checked is not None:
                 found, built = _module(checked, module_path, profiles, unknown, alike)
                 problems.add(found)
@@ -135,7 +141,8 @@ def _one_per_cause(problems: list[Problem]) -> list[Problem]:
     out = []
     for cause, names in causes.items():
         if names:
-            listed = f"module {names[0]}" if len(names) == 1 else f"modules {', '.join(names[:-1])} and {names[-1]}"
+            listed = (f"module {names[0]}" if len(names) == 1
+                      else f"modules {', '.join(names[:-1])} and {names[-1]}")
             cause = replace(cause, message=f"in {listed}, {cause.message}")
         out.append(cause)
     return out
@@ -164,22 +171,26 @@ def _lines(document: Document, problems: list[Problem], *, stopped: bool) -> lis
     if stopped or len(ordered) > MAX_PROBLEMS:
         ordered = ordered[:MAX_PROBLEMS]
         (line, column), _ = ordered[-1]
-        ordered.append(((line, column), f"{document.name}:{line}:{column}: more than {MAX_PROBLEMS} problems, the "
+        ordered.append(((line, column),
+                        f"{document.name}:{line}:{column}: more than {MAX_PROBLEMS} problems, the "
                         "file was checked no further — fix those listed and check it again"))
     return [text for _, text in ordered]
 
 
 def _check_sizes(document: Document) -> None:
-    """`PlantError` at the node where a part passes `MAX_PART_NODES`: the rest of the file, a profile, a module."""
+    """`PlantError` at the node where a part passes `MAX_PART_NODES`: the rest of the file, a profile, a
+    module."""
     data = document.data
     parts = [((), _with_stand_ins(data)), *_profiles(data), *_modules(data)]
     for path, value in parts:
         if _size(value) > MAX_PART_NODES:
             reached, at_key = _node_past(value, path, MAX_PART_NODES)
             nodes = f"more than {MAX_PART_NODES:,} keys, values, lists and mappings"
-            message = (f"{what(path, data)} has {nodes} — a module with every field of all 64 programs written out "
+            message = (f"{what(path, data)} has {nodes} — a module with every field of all 64 programs "
+                       "written out "
                        "has about 2,000" if path else
-                       f"the plant file has {nodes} besides its modules and profiles — 8 buses of 30 modules have "
+                       f"the plant file has {nodes} besides its modules and profiles — 8 buses of 30 "
+                       "modules have "
                        "about 1,300")
             problem = Problem(reached, f"{message}: check that this is the plant file", at_key=at_key)
             raise PlantError([text for _, text in document.lines([problem])])
@@ -195,7 +206,8 @@ def _size(value: Any) -> int:
 
 
 def _node_past(value: Any, path: Path_, limit: int) -> tuple[Path_, bool]:
-    """The node of `value` (at `path`) after the first `limit`, in file order: its path, and whether it is a key."""
+    """The node of `value` (at `path`) after the first `limit`, in file order: its path, and whether it is a
+    key."""
     count, stack = 0, [(path, value, False)]
     while stack:
         at, item, is_key = stack.pop()
@@ -211,10 +223,12 @@ def _node_past(value: Any, path: Path_, limit: int) -> tuple[Path_, bool]:
 
 
 def _with_stand_ins(data: dict[Any, Any]) -> dict[Any, Any]:
-    """The file with a valid stand-in for each profile and module that is a mapping (validated on their own)."""
+    """The file with a valid stand-in for each profile and module that is a mapping (validated on their
+    own)."""
     result = dict(data)
     if isinstance(data.get("profiles"), dict):
-        result["profiles"] = {name: _PROFILE_STAND_IN if isinstance(p, dict) else p for name, p in data["profiles"].items()}
+        result["profiles"] = {name: _PROFILE_STAND_IN if isinstance(p, dict) else p
+                              for name, p in data["profiles"].items()}
     if isinstance(data.get("buses"), list):
         result["buses"] = [
             {**bus, "modules": [_MODULE_STAND_IN if isinstance(m, dict) else m for m in bus["modules"]]}
@@ -239,15 +253,18 @@ def _modules(data: dict[Any, Any]) -> Iterator[tuple[Path_, dict[Any, Any]]]:
 
 
 def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[ProfileSpec | None, rules.Unknown]],
-            unknown: rules.Unknown, alike: dict[tuple[str, ...], Effective]) -> tuple[list[Problem], Module | None]:
-    """The problems of one module, and the module when it has none (`unknown`: what its problems took out of it).
+            unknown: rules.Unknown, alike: dict[tuple[str, ...], Effective]) -> tuple[list[Problem],
+                                                                                      Module | None]:
+    """The problems of one module, and the module when it has none (`unknown`: what its problems took out of
+    it).
 
     A module that adds nothing to its profiles has their settings, and their problems: its profiles'
     settings are resolved and checked once for all such modules (`alike`, by profiles) — where they
     have none; where they have some, each module says them in its own name."""
     not_found = [
         Problem(path + ("profiles", k), f"unknown profile '{name}' — "
-                + (f"the profiles are {', '.join(profiles)}" if profiles else "the file has no profiles: section"))
+                + (f"the profiles are {', '.join(profiles)}" if profiles
+                   else "the file has no profiles: section"))
         for k, name in enumerate(module.profiles) if name not in profiles
     ]
     if not_found or any(profiles[name][0] is None for name in module.profiles):
@@ -257,7 +274,8 @@ def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[Profil
     if adds_nothing and module.profiles in alike:
         settings, problems = alike[module.profiles], []
     else:
-        settings = resolve(module_layers(module, path, {name: p for name, (p, _) in profiles.items() if p is not None}))
+        settings = resolve(module_layers(module, path,
+                                         {name: p for name, (p, _) in profiles.items() if p is not None}))
         problems = rules.check_module(module.name, path, settings, unknown)
         if adds_nothing and not problems:
             alike[module.profiles] = settings
@@ -269,8 +287,8 @@ def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[Profil
 
 
 def _line(raw_bus: dict[Any, Any]) -> BusLine | None:
-    """A bus's line, for its rules (`rules.check_bus`): valid whole, or without the keys that are not, where the
-    rules need none of them (a wrong `timeout` does not hide a ZVZ the Open Driver refuses)."""
+    """A bus's line, for its rules (`rules.check_bus`): valid whole, or without the keys that are not, where
+    the rules need none of them (a wrong `timeout` does not hide a ZVZ the Open Driver refuses)."""
     raw = {key: value for key, value in raw_bus.items() if key != "modules"}
     try:
         return BusLine.model_validate(raw)
@@ -278,7 +296,8 @@ def _line(raw_bus: dict[Any, Any]) -> BusLine | None:
         wrong = {e["loc"][0] for e in error.errors(include_url=False) if e["loc"]}
     if wrong & rules.LINE_KEYS:
         return None
-    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-", "port": "emulator://-"})
+    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-",
+                                                                                             "port": "emulator://-"})
 
 
 def _salvaged(model: type[M], raw: dict[Any, Any]) -> tuple[M | None, rules.Unknown]:
@@ -286,7 +305,8 @@ def _salvaged(model: type[M], raw: dict[Any, Any]) -> tuple[M | None, rules.Unkn
     taken out (`rules.Unknown`) — so that the rules check what is valid in it; None where nothing can be
     taken out for them (its `profiles:` list) or what is left still fails."""
     data, unknown = copy.deepcopy(raw), set[tuple[Any, ...]]()
-    for _ in range(3):  # a value taken out can leave its mapping empty or a required key missing: a round each
+    # a value taken out can leave its mapping empty or a required key missing: a round each
+    for _ in range(3):
         try:
             return model.model_validate(data), frozenset(unknown)
         except ValidationError as error:
@@ -305,7 +325,8 @@ def _take_out(data: dict[Any, Any], loc: tuple[Any, ...], unknown: set[tuple[Any
     elif head == "system" and rest and rest[0] != "[key]" and isinstance(data.get("system"), dict):
         data["system"].pop(rest[0], None)
         unknown.add(("system", rest[0]))
-    elif head == "programs" and rest and isinstance(data.get("programs"), dict) and rest[0] in data["programs"]:
+    elif (head == "programs" and rest and isinstance(data.get("programs"), dict)
+          and rest[0] in data["programs"]):
         program = data["programs"][rest[0]]
         if len(rest) > 1 and rest[1] != "[key]" and isinstance(program, dict):
             program.pop(rest[1], None)
@@ -328,7 +349,8 @@ def _validated(model: type[M], data: Any, path: Path_, document: Any) -> tuple[M
     try:
         return model.model_validate(data), []
     except ValidationError as error:
-        found = (from_pydantic({**e, "loc": path + tuple(e["loc"])}, document) for e in error.errors(include_url=False))
+        found = (from_pydantic({**e, "loc": path + tuple(e["loc"])}, document)
+                 for e in error.errors(include_url=False))
         return None, [problem for problem in found if problem is not None]
 
 

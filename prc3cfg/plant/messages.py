@@ -69,21 +69,27 @@ TEMPLATES = {
     "chain_type": "{what} is {input}, not a chain — write a list of program numbers or "
     "{{programs: [...], loop: true}}",
     "string_too_short": "{what} is empty — give it a name",
-    "tcp_port": "{what} {input} has no TCP port 1..65535 — write {scheme}://HOST:PORT, e.g. {scheme}://127.0.0.1:7001",
+    "tcp_port": "{what} {input} has no TCP port 1..65535 — write {scheme}://HOST:PORT, e.g. "
+                "{scheme}://127.0.0.1:7001",
     "emulator_name": "{what} {input} does not end in a plain emulator name — the name is a file in "
     ".prc3cfg/emulators/: letters, digits, '-', '_' and '.' (not first), e.g. emulator://booth-a",
     "too_short": "{what} is empty — list at least one {item}",
     "program_key": "{what} {input} is written with a decimal point — {fix}",
     "port_control": "{what} {input} holds a control character — write the device path or URL as plain text",
-    "port_handler": "{what} {input} uses pyserial's {scheme}:// handler, which a plant file may not name — write a device path, "
+    "port_handler": "{what} {input} uses pyserial's {scheme}:// handler, which a plant file may not name — "
+                    "write a device path, "
     "socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME (trace a line with prc3cfg's --trace)",
-    "port_not_device": "{what} {input} is not a serial device's full path — write the device's path under /dev (/dev/ttyUSB0, "
+    "port_not_device": "{what} {input} is not a serial device's full path — write the device's path under "
+                       "/dev (/dev/ttyUSB0, "
     "/dev/serial/by-id/…), COMn or \\\\.\\COMn, socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME",
-    "port_not_a_line": "{what} {input} is this machine's own terminal, console or files, not a serial line — write the path "
+    "port_not_a_line": "{what} {input} is this machine's own terminal, console or files, not a serial line "
+                       "— write the path "
     "of the line's adapter, e.g. /dev/ttyUSB0",
-    "name_control": "{what} {input} holds a control character — a name is printable text: write it without line breaks, "
+    "name_control": "{what} {input} holds a control character — a name is printable text: write it without "
+                    "line breaks, "
     "escapes or other control characters",
-    "data_bits": "{what} {value} cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: write {bits}",
+    "data_bits": "{what} {value} cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: "
+                 "write {bits}",
 }
 _LIST_ITEMS: dict[str | int, str] = {"buses": "bus", "modules": "module", "programs": "program"}
 _DECIMAL_COMMA = re.compile(r"[-+]?[0-9]+,[0-9]+")
@@ -148,8 +154,8 @@ PLANT_FILE_ONLY = frozenset(get_args(PortRefusal))
 
 
 def port_error(what_: str, port: str, *, operators: bool = False) -> str | None:
-    """What is wrong with `port` as a plant file's bus would say it, about `what_` ("--port"); None if nothing.
-    `operators`: the port is the operator's own choice (a command line's), which may name any of
+    """What is wrong with `port` as a plant file's bus would say it, about `what_` ("--port"); None if
+    nothing. `operators`: the port is the operator's own choice (a command line's), which may name any of
     pyserial's handlers and any path (`core.line.port_refusal` is for reviewed files)."""
     try:
         TypeAdapter(Port).validate_python(port)
@@ -188,7 +194,8 @@ def _item(parent: str, last: Any, path: Path_, data: Any) -> str:
     else by its place counted from 1; a program by its number."""
     label = ITEMS[parent][0]
     name = _lookup(data, path + ("name",)) if parent in ("buses", "modules") else None
-    if isinstance(name, str) and name and not has_control(name):  # a name that is not printable text is not one
+    # a name that is not printable text is not one
+    if isinstance(name, str) and name and not has_control(name):
         return f"{label} {name}"
     return f"{label} {last + 1 if isinstance(last, int) and parent != 'programs' else last}"
 

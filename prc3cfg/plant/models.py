@@ -1,36 +1,37 @@
 """The plant file as written (docs/plant-files.md): pydantic models, their ranges, their JSON Schema.
 
-Owns the structure of a plant file and every rule about one value on its own: key names, types, ranges in human
-units (from `units.QUANTITIES`), whole device units, and the draft-07 schema generated from these models
-(`plant_schema`). Does not own rules that span values (P ≤ S1, chains, unique names: `rules`), profile layering
-(`profiles`) or where a value is in the file (`loader`).
+Owns the structure of a plant file and every rule about one value on its own: key names, types, ranges in
+human units (from `units.QUANTITIES`), whole device units, and the draft-07 schema generated from these models
+(`plant_schema`). Does not own rules that span values (P ≤ S1, chains, unique names: `rules`), profile
+layering (`profiles`) or where a value is in the file (`loader`).
 
 The schema is written for editors (yaml-language-server): every key described, every value with its range, and
 either the default a key left out stands for (the factory's S1..S12) or an example, which completion inserts;
 program keys checked as YAML integers and JSON strings; `$id` the same in every version.
 
-Every model is frozen and forbids unknown keys. A key left out is `None` ("not given here"), so profiles can be
-layered: "given" and "given as the default" differ.
+Every model is frozen and forbids unknown keys. A key left out is `None` ("not given here"), so profiles can
+be layered: "given" and "given as the default" differ.
 
 Numbers arrive as `Decimal` (the loader keeps the text as written) or `int`, of at most 28 digits written out
 (`scalars.MAX_DIGITS`), so that no conversion here is slow or infinite. A number field rejects booleans and
 strings, checks its range and its step, and hands back an `int`, an exact `Decimal` (human units) or, for the
 bus's times, a `float` of seconds. Its failures are `PydanticCustomError`s whose type names the problem
 (`not_number`, `not_finite`, `out_of_range`, `not_whole`, `not_allowed`; `port_handler`, `port_not_device`,
-`port_not_a_line`, `tcp_port`, `emulator_name` for a port) and whose context carries the words; `messages` turns
-them into sentences.
+`port_not_a_line`, `tcp_port`, `emulator_name` for a port) and whose context carries the words; `messages`
+turns them into sentences.
 
-Decisions about the bus (docs/line.md): `port` is a port a plant file may name (`core.line.port_refusal`: a serial
-device's path, `socket://`, `rfc2217://`, `emulator://NAME` — never another of pyserial's URL handlers, which a
-reviewed file must not choose) without control characters (a NUL would cut a device path); a `socket://` or
-`rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial would fail later, or compare None with 0), and
-an emulator name must be plain — letters, digits, `-`, `_`, `.` not first — as it names the file
-`.prc3cfg/emulators/NAME.json` (its query only tunes the emulator: `prc3cfg.shell.link.ports.emulator_query`); the
-schema's `PORT_PATTERN` says the same. `baud` any positive whole number (with a gateway, `rules` asks the Open
-Driver's own list); `timeout` at least 0.001 s; `turnaround` at least 0 s; `zvz` whole milliseconds, 0.001..65.535
-s (ZVZTIM is a count of ms; ≥ 4 ms on an open-driver line is a `rules` check, SYSTAT 8Eh). The gateway's fields
-have the ranges its INIT-DB bytes and the Open Driver allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h,
-identifier 1..223 SYSTAT 91h), from `prc3cfg.core.gateway`.
+Decisions about the bus (docs/line.md): `port` is a port a plant file may name (`core.line.port_refusal`: a
+serial device's path, `socket://`, `rfc2217://`, `emulator://NAME` — never another of pyserial's URL handlers,
+which a reviewed file must not choose) without control characters (a NUL would cut a device path); a
+`socket://` or `rfc2217://` URL must end its host in a TCP port 1..65535 (pyserial would fail later, or
+compare None with 0), and an emulator name must be plain — letters, digits, `-`, `_`, `.` not first — as it
+names the file `.prc3cfg/emulators/NAME.json` (its query only tunes the emulator:
+`prc3cfg.shell.link.ports.emulator_query`); the schema's `PORT_PATTERN` says the same. `baud` any positive
+whole number (with a gateway, `rules` asks the Open Driver's own list); `timeout` at least 0.001 s;
+`turnaround` at least 0 s; `zvz` whole milliseconds, 0.001..65.535 s (ZVZTIM is a count of ms; ≥ 4 ms on an
+open-driver line is a `rules` check, SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and
+the Open Driver allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223 SYSTAT 91h), from
+`prc3cfg.core.gateway`.
 """
 
 from __future__ import annotations
@@ -64,7 +65,16 @@ from pydantic_core import PydanticCustomError, core_schema
 from prc3cfg.core import gateway
 from prc3cfg.core.framing import FramingName
 from prc3cfg.core.image import DEFAULT_SYSTEM, MAX_MODULE_ADDRESS, PROGRAM_COUNT, default_program
-from prc3cfg.core.line import DEVICE_FOLDER, EMULATOR_SCHEME, FRAME_DATA_BITS, NOT_A_LINE, STOP_BITS, TCP_SCHEMES, Parity, port_refusal
+from prc3cfg.core.line import (
+    DEVICE_FOLDER,
+    EMULATOR_SCHEME,
+    FRAME_DATA_BITS,
+    NOT_A_LINE,
+    STOP_BITS,
+    TCP_SCHEMES,
+    Parity,
+    port_refusal,
+)
 from prc3cfg.core.text import has_control
 from prc3cfg.core.units import DISTANCE, QUANTITIES, Action, Quantity, human_text
 
@@ -75,7 +85,8 @@ SCHEMA_DIALECT = "http://json-schema.org/draft-07/schema#"
 SCHEMA_ID = "urn:prc3cfg:plant-file"
 #: A program number key: "1".."64" where keys are strings (JSON), 1..64 where a YAML editor
 #: keeps them integers. A quoted "7" passes here; the loader asks for it without quotes.
-PROGRAM_KEY: JsonDict = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5][0-9]|6[0-4])$", "minimum": 1, "maximum": 64}
+PROGRAM_KEY: JsonDict = {"type": ["string", "integer"], "pattern": "^([1-9]|[1-5][0-9]|6[0-4])$",
+                         "minimum": 1, "maximum": 64}
 #: An emulator's name: it names the file of its state.
 EMULATOR_NAME = "[A-Za-z0-9_-][A-Za-z0-9_.-]*"
 #: `?line-speed=9600` and the like, which the link reads (and names what it does not know).
@@ -87,10 +98,10 @@ def _either_case(word: str) -> str:
     return "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else re.escape(c) for c in word)
 
 
-#: A port as the schema checks it (`core.line.port_refusal`, `_port`): a path under /dev, without `://` or a `..`,
-#: not the machine's own terminal; a COM port; a TCP URL with HOST:DIGITS; a plain emulator name. Draft-07
-#: `pattern` is an ECMA 262 search, without flags (a scheme pyserial lowercases is spelt in either case); the end
-#: is a lookahead, not `$`, which Python (but not ECMA) also finds before a final newline.
+#: A port as the schema checks it (`core.line.port_refusal`, `_port`): a path under /dev, without `://` or a
+#: `..`, not the machine's own terminal; a COM port; a TCP URL with HOST:DIGITS; a plain emulator name.
+#: Draft-07 `pattern` is an ECMA 262 search, without flags (a scheme pyserial lowercases is spelt in either
+#: case); the end is a lookahead, not `$`, which Python (but not ECMA) also finds before a final newline.
 PORT_PATTERN = (rf"^(?![\s\S]*://)(?![\s\S]*/\.\.(?![^/])){DEVICE_FOLDER}(?!{NOT_A_LINE})[\s\S]"
                 rf"|^(\\\\\.\\)?{_either_case('COM')}[1-9][0-9]*(?![\s\S])"
                 f"|^({'|'.join(map(_either_case, TCP_SCHEMES))})://[^/?#]*:[0-9]+(?![^/?#])"
@@ -135,14 +146,16 @@ def _number(
     for, where the model's own default is None), else an example: `example`, else `lo`. Not both:
     given both, yaml-language-server completes with neither.
     """
-    lo_, hi_, step_ = Decimal(lo), None if hi is None else Decimal(hi), None if step is None else Decimal(step)
+    lo_, hi_, step_ = (Decimal(lo), None if hi is None else Decimal(hi), None if step is None
+                       else Decimal(step))
     with_unit: Callable[[object], str] = (lambda x: f"{x} {unit}") if unit else str
     allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
     # The whole numbers that pass, where they are a range (an `int` out, a step of 1 or none, a top): an
     # `int` is looked up there, not worked out in decimals. Program numbers (keys, chains) are a third of the
     # numbers of 8 × 30 modules as `prc3cfg import` writes them; with a `Decimal` taken as it is, without the
     # checks for other types, those modules validate in 0.08 s, not 0.11 (bench/plan_time_bench.py --mixes).
-    whole = range(math.ceil(lo_), math.floor(hi_) + 1) if out is int and hi_ is not None and step_ in (None, 1) else range(0)
+    whole = (range(math.ceil(lo_), math.floor(hi_) + 1) if out is int and hi_ is not None
+             and step_ in (None, 1) else range(0))
 
     def validate(value: Any) -> Any:
         if type(value) is int and value in whole:
@@ -152,7 +165,8 @@ def _number(
         elif type(value) is bool or not isinstance(value, (int, float, Decimal)):
             raise PydanticCustomError("not_number", "not a number", {"whole": out is int, "unit": unit})
         else:
-            number = value if isinstance(value, Decimal) else Decimal(repr(value)) if isinstance(value, float) else Decimal(value)
+            number = (value if isinstance(value, Decimal) else Decimal(repr(value))
+                      if isinstance(value, float) else Decimal(value))
         if not number.is_finite():
             raise PydanticCustomError("not_finite", "not a finite number", {"value": str(value)})
         out_of_range = number < lo_ or (hi_ is not None and number > hi_)
@@ -174,12 +188,15 @@ def _number(
     return _Number(out, PlainValidator(validate), WithJsonSchema(schema))
 
 
-def _quantity(q: Quantity, description: str, *, default: Decimal | int | None = None, example: Decimal | int | None = None) -> _Number:
-    """A value of `QUANTITIES`: an `int` if it is a plain count, else a `Decimal` (the field's annotation says which)."""
+def _quantity(q: Quantity, description: str, *, default: Decimal | int | None = None,
+              example: Decimal | int | None = None) -> _Number:
+    """A value of `QUANTITIES`: an `int` if it is a plain count, else a `Decimal` (the field's annotation says
+    which)."""
     return _number(
         q.human_lo, q.human_hi, step=q.step, unit=q.unit, step_name=q.step_name, what=q.what,
         out=int if q.integer else Decimal,
-        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}", default=default, example=example,
+        description=f"{q.symbol}{', ' + q.unit if q.unit else ''}: {description}", default=default,
+                   example=example,
     )
 
 
@@ -187,7 +204,8 @@ def _system(key: str, description: str) -> _Number:
     """S1..S12 (not S8, S9): a key left out is the factory default, which the schema names."""
     q = QUANTITIES[key]
     factory = q.to_human(getattr(DEFAULT_SYSTEM, q.symbol))
-    return _quantity(q, f"{description} (factory {human_text(q.symbol, getattr(DEFAULT_SYSTEM, q.symbol))})", default=factory)
+    return _quantity(q, f"{description} (factory {human_text(q.symbol, getattr(DEFAULT_SYSTEM, q.symbol))})",
+                     default=factory)
 
 
 def _one_of(allowed: tuple[int | float, ...], description: str) -> _Number:
@@ -195,10 +213,12 @@ def _one_of(allowed: tuple[int | float, ...], description: str) -> _Number:
 
     def validate(value: Any) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float, Decimal)) or value not in allowed:
-            raise PydanticCustomError("not_allowed", "not allowed", {"expected": ", ".join(map(str, allowed))})
+            raise PydanticCustomError("not_allowed", "not allowed",
+                                      {"expected": ", ".join(map(str, allowed))})
         return float(value)
 
-    return _Number(float, PlainValidator(validate), WithJsonSchema({"enum": list(allowed), "description": description}))
+    return _Number(float, PlainValidator(validate),
+                   WithJsonSchema({"enum": list(allowed), "description": description}))
 
 
 def _data_bits() -> _Number:
@@ -208,11 +228,13 @@ def _data_bits() -> _Number:
         if isinstance(value, bool) or not isinstance(value, (int, Decimal)):
             raise PydanticCustomError("not_number", "not a number", {"whole": True, "unit": ""})
         if value != FRAME_DATA_BITS:
-            raise PydanticCustomError("data_bits", "not 8 data bits", {"value": str(value), "bits": FRAME_DATA_BITS})
+            raise PydanticCustomError("data_bits", "not 8 data bits",
+                                      {"value": str(value), "bits": FRAME_DATA_BITS})
         return FRAME_DATA_BITS
 
     description = f"always {FRAME_DATA_BITS}: a PRC 3 frame is binary"
-    return _Number(int, PlainValidator(validate), WithJsonSchema({"enum": [FRAME_DATA_BITS], "description": description,
+    return _Number(int, PlainValidator(validate),
+                   WithJsonSchema({"enum": [FRAME_DATA_BITS], "description": description,
                                                                   "default": FRAME_DATA_BITS}))
 
 
@@ -250,7 +272,8 @@ def _port(url: str) -> str:
     scheme = url.partition("://")[0]
     if scheme.lower() in TCP_SCHEMES and not _tcp_port(url):
         raise PydanticCustomError("tcp_port", "no TCP port", {"scheme": scheme})
-    if url.startswith(EMULATOR_SCHEME) and not re.fullmatch(EMULATOR_NAME + EMULATOR_QUERY, url.removeprefix(EMULATOR_SCHEME)):
+    if url.startswith(EMULATOR_SCHEME) and not re.fullmatch(EMULATOR_NAME + EMULATOR_QUERY,
+                                                            url.removeprefix(EMULATOR_SCHEME)):
         raise PydanticCustomError("emulator_name", "not a plain emulator name")
     return url
 
@@ -266,10 +289,13 @@ def _tcp_port(url: str) -> bool:
 
 Port = Annotated[
     Text, AfterValidator(_port),
-    Field(description="a serial device (/dev/ttyUSB0, COM3), socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME",
-          json_schema_extra={"pattern": PORT_PATTERN}, examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
+    Field(description="a serial device (/dev/ttyUSB0, COM3), socket://HOST:PORT, rfc2217://HOST:PORT or "
+                      "emulator://NAME",
+          json_schema_extra={"pattern": PORT_PATTERN},
+          examples=["/dev/ttyUSB0", "emulator://line-1", "socket://192.0.2.10:4001"]),
 ]
-ProgramNumber = Annotated[int, _number(1, PROGRAM_COUNT, step=1, out=int, description="a program number, 1..64")]
+ProgramNumber = Annotated[int, _number(1, PROGRAM_COUNT, step=1, out=int,
+                                       description="a program number, 1..64")]
 
 
 class FileModel(BaseModel):
@@ -281,9 +307,11 @@ class FileModel(BaseModel):
 class SystemSpec(FileModel):
     """System parameters S1..S12 (not S9) in human units; a key left out is the factory default."""
 
-    upper_reversing_point: Annotated[Decimal | None, _system("upper_reversing_point", "upper reversing point")] = None
+    upper_reversing_point: Annotated[Decimal | None,
+                                     _system("upper_reversing_point", "upper reversing point")] = None
     reference_point: Annotated[Decimal | None, _system("reference_point", "reference point")] = None
-    increment_pulses: Annotated[int | None, _system("increment_pulses", "increment pulse generator, pulses/dm")] = None
+    increment_pulses: Annotated[int | None,
+                                _system("increment_pulses", "increment pulse generator, pulses/dm")] = None
     max_speed: Annotated[Decimal | None, _system("max_speed", "maximum speed")] = None
     min_speed: Annotated[Decimal | None, _system("min_speed", "minimum speed")] = None
     acceleration: Annotated[Decimal | None, _system("acceleration", "acceleration")] = None
@@ -291,8 +319,10 @@ class SystemSpec(FileModel):
     alarm: Annotated[Omittable[StrictBool], WithJsonSchema({
         "type": "boolean", "description": "S8: alarm (factory false)", "default": False})] = None
     sync_increment: Annotated[int | None, _system("sync_increment", "sync increment")] = None
-    sync_circuit_gain: Annotated[int | None, _system("sync_circuit_gain", "sync circuit amplification")] = None
-    sync_conveyor_sequence: Annotated[Decimal | None, _system("sync_conveyor_sequence", "sync conveyor sequence")] = None
+    sync_circuit_gain: Annotated[int | None,
+                                 _system("sync_circuit_gain", "sync circuit amplification")] = None
+    sync_conveyor_sequence: Annotated[Decimal | None,
+                                      _system("sync_conveyor_sequence", "sync conveyor sequence")] = None
 
 
 class FunctionOutputSpec(FileModel):
@@ -309,17 +339,25 @@ _RESET_AT_ZERO: JsonDict = {"action": "reset", "distance": 0}
 class ProgramSpec(FileModel):
     """One program in human units; every field may come from a profile instead."""
 
-    position: Annotated[Decimal | None, _quantity(QUANTITIES["position"], "position, at most the upper reversing point",
+    position: Annotated[Decimal | None,
+                        _quantity(QUANTITIES["position"], "position, at most the upper reversing point",
                                                   example=QUANTITIES["position"].to_human(_FACTORY_PROGRAM.P))] = None
     speed: Annotated[Decimal | None, _quantity(QUANTITIES["speed"], "speed, between min_speed and max_speed",
                                                example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V))] = None
-    relative_speed: Annotated[Decimal | None, _quantity(QUANTITIES["relative_speed"], "relative speed (default 0)", default=0)] = None
-    dwell: Annotated[Decimal | None, _quantity(QUANTITIES["dwell"], "dwell time (default 0)", default=0)] = None
-    f1: Omittable[FunctionOutputSpec] = Field(None, description="F1, counted after START (default: reset at 0)",
+    relative_speed: Annotated[Decimal | None,
+                              _quantity(QUANTITIES["relative_speed"], "relative speed "
+                                                                      "(default 0)", default=0)] = None
+    dwell: Annotated[Decimal | None,
+                     _quantity(QUANTITIES["dwell"], "dwell time (default 0)", default=0)] = None
+    f1: Omittable[FunctionOutputSpec] = Field(None, description="F1, counted after START (default: "
+                                                                "reset at 0)",
                                    json_schema_extra={"default": _RESET_AT_ZERO})
-    f2: Omittable[FunctionOutputSpec] = Field(None, description="F2, counted before the reversing point (default: reset at 0)",
+    f2: Omittable[FunctionOutputSpec] = Field(None, description="F2, counted before the reversing point "
+                                                                "(default: reset at 0)",
                                    json_schema_extra={"default": _RESET_AT_ZERO})
-    next: Annotated[int | None, _number(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to jump to next")] = None
+    next: Annotated[int | None,
+                    _number(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to "
+                                                                           "jump to next")] = None
 
 
 class ChainSpec(FileModel):
@@ -328,8 +366,11 @@ class ChainSpec(FileModel):
     Written as a list of program numbers or as `{programs: [...], loop: true}`.
     """
 
-    programs: tuple[ProgramNumber, ...] = Field(min_length=1, description="program numbers in the order they run", examples=[[1, 2]])
-    loop: Annotated[bool, Field(strict=True, description="true: the last program jumps back to the first")] = False
+    programs: tuple[ProgramNumber, ...] = Field(min_length=1,
+                                                description="program numbers in the order they run",
+                                                examples=[[1, 2]])
+    loop: Annotated[bool, Field(strict=True, description="true: the last program jumps back to "
+                                                         "the first")] = False
 
     @model_validator(mode="before")
     @classmethod
@@ -341,7 +382,8 @@ class ChainSpec(FileModel):
         return data
 
     @classmethod
-    def __get_pydantic_json_schema__(cls, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler) -> JsonSchemaValue:
+    def __get_pydantic_json_schema__(cls, schema: core_schema.CoreSchema,
+                                     handler: GetJsonSchemaHandler) -> JsonSchemaValue:
         as_object = handler.resolve_ref_schema(handler(schema))
         as_list = {"type": "array", "items": as_object["properties"]["programs"]["items"], "minItems": 1}
         return {"anyOf": [as_list, dict(as_object)], "description": (cls.__doc__ or "").split("\n")[0]}
@@ -364,10 +406,14 @@ Programs = dict[ProgramKey, ProgramSpec]
 class ProfileSpec(FileModel):
     """What modules share: system parameters, programs, chains, the unmanaged-program policy."""
 
-    system: Omittable[SystemSpec] = Field(None, description="system parameters S1..S12 (not S9); a key left out is the factory default")
-    programs: Omittable[Programs] = Field(None, json_schema_extra={"propertyNames": PROGRAM_KEY}, description="programs by number 1..64")
-    chains: Omittable[tuple[ChainSpec, ...]] = Field(None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop",
-                                                     examples=[[[1, 2, 3]], [{"programs": [1, 2], "loop": True}]])
+    system: Omittable[SystemSpec] = Field(None, description="system parameters S1..S12 (not S9); a key left "
+                                                            "out is the factory default")
+    programs: Omittable[Programs] = Field(None, json_schema_extra={"propertyNames": PROGRAM_KEY},
+                                          description="programs by number 1..64")
+    chains: Omittable[tuple[ChainSpec, ...]] = Field(None, description="jump addresses A: [1, 2, 3] means "
+                                                                       "1→2→3→stop",
+                                                     examples=[[[1, 2, 3]],
+                                                               [{"programs": [1, 2], "loop": True}]])
     unmanaged_programs: Omittable[UnmanagedPrograms] = Field(
         None, description="keep (default): programs not listed are neither read nor written; "
         "reset: they must hold factory defaults", json_schema_extra={"default": "keep"},
@@ -381,7 +427,8 @@ def _names(value: Any) -> Any:
 class ModuleSpec(ProfileSpec):
     """One PRC 3 module: its address (S9), its name, the profiles it uses, its own settings."""
 
-    address: Annotated[int, _number(1, MAX_MODULE_ADDRESS, step=1, out=int, description="S9, 1..30, set by Address Init on the module")]
+    address: Annotated[int, _number(1, MAX_MODULE_ADDRESS, step=1, out=int,
+                                    description="S9, 1..30, set by Address Init on the module")]
     name: Name = Field(description="unique in the plant", examples=["booth-1-left"])
     profiles: Annotated[
         tuple[Name, ...],
@@ -419,19 +466,22 @@ class BusLine(FileModel):
     name: Name = Field(description="unique in the plant", examples=["line-1"])
     port: Port
     framing: FramingName = Field("crc16", description="how messages are framed on the line (docs/line.md)")
-    baud: Annotated[int, _number(1, step=1, out=int, description="line speed; PRC 3 lines run 9600 baud")] = 9600
+    baud: Annotated[int, _number(1, step=1, out=int, description="line speed; PRC 3 lines run "
+                                                                 "9600 baud")] = 9600
     parity: Parity = Field("even", description="the parity bit of each character")
     data_bits: Annotated[int, _data_bits()] = FRAME_DATA_BITS
     stop_bits: Annotated[float, _one_of(STOP_BITS, "1, 1.5 or 2")] = 1.0
     timeout: Annotated[float, _number(Decimal("0.001"), unit="s", out=float, description=(
-        "s to wait for a reply beyond the line's own time (its frames at its baud and format, the turnaround)"))] = 0.5
+        "s to wait for a reply beyond the line's own time (its frames at its baud and format, the "
+        "turnaround)"))] = 0.5
     turnaround: Annotated[float, _number(0, unit="s", out=float, description=(
         "s, the module's turnaround, for the bus-time estimate and the wait for a reply"))] = 0.010
     zvz: Annotated[float, _number(
         Decimal("0.001"), Decimal("65.535"), step=Decimal("0.001"), unit="s", step_name="milliseconds",
         what="character delay times are", out=float, description="s, character delay time ZVZ (open-driver)",
     )] = 0.020
-    gateway: Omittable[Gateway] = Field(None, description="the Siemens CP 524/525 (Open Driver) the line ends in, if any")
+    gateway: Omittable[Gateway] = Field(None, description="the Siemens CP 524/525 (Open Driver) the line "
+                                                          "ends in, if any")
     only_these_modules: Annotated[bool, Field(strict=True, description=(
         "true: the modules listed are every module on this line — prc3cfg may then send what they all need "
         "alike once, as a broadcast to address 0 (a full line of 30 modules needs no saying)"))] = False
@@ -440,16 +490,20 @@ class BusLine(FileModel):
         "again — past it, a plan reads every module in full (0: always)"))] = 28_800.0
     accept_undetected_damage: Annotated[bool, Field(strict=True, description=(
         "true: apply on this line although it has no error detection (open-driver with parity none), knowing "
-        "that a damaged frame can become another write, a read a write, an address the broadcast — prefer parity"))] = False
+        "that a damaged frame can become another write, a read a write, an address the broadcast — "
+        "prefer parity"))] = False
     require_reason: Annotated[bool, Field(strict=True, description=(
-        "true: every apply, restore and adopt of this line's modules must say why (--reason TEXT or PRC3CFG_REASON) — "
-        "refused before the line is opened otherwise; the reason is kept in the journal and the snapshot"))] = False
+        "true: every apply, restore and adopt of this line's modules must say why (--reason TEXT or "
+        "PRC3CFG_REASON) — "
+        "refused before the line is opened otherwise; the reason is kept in the journal and "
+        "the snapshot"))] = False
 
 
 class BusSpec(BusLine):
     """A bus as a plant file writes it: its line and its modules."""
 
-    modules: tuple[ModuleSpec, ...] = Field(min_length=1, description="the PRC 3 modules on this line, up to 30")
+    modules: tuple[ModuleSpec, ...] = Field(min_length=1,
+                                            description="the PRC 3 modules on this line, up to 30")
 
 
 class PlantSpec(FileModel):
@@ -458,15 +512,19 @@ class PlantSpec(FileModel):
     model_config = ConfigDict(title="PRC 3 plant")
 
     plant: Name = Field(description="the plant's name", examples=["paint-shop"])
-    profiles: Omittable[dict[Name, ProfileSpec]] = Field(None, description="named settings that modules use and override")
+    profiles: Omittable[dict[Name, ProfileSpec]] = Field(None, description="named settings that modules use "
+                                                                           "and override")
     buses: tuple[BusSpec, ...] = Field(min_length=1, description="the RS-422 lines, each with its modules")
-    policy: Omittable[Text] = Field(None, description="the policy file (docs/policy.md), relative to this one", examples=["line-rules.yaml"])
+    policy: Omittable[Text] = Field(None, description="the policy file (docs/policy.md), relative "
+                                                      "to this one", examples=["line-rules.yaml"])
 
 
 class Draft07(GenerateJsonSchema):
-    """pydantic's schema, made draft-07: `definitions`, no `default: null` for "not given", no field titles."""
+    """pydantic's schema, made draft-07: `definitions`, no `default: null` for "not given", no field
+    titles."""
 
-    def generate(self, schema: core_schema.CoreSchema, mode: JsonSchemaMode = "validation") -> JsonSchemaValue:
+    def generate(self, schema: core_schema.CoreSchema,
+                 mode: JsonSchemaMode = "validation") -> JsonSchemaValue:
         result = super().generate(schema, mode)
         definitions = result.pop("$defs", {})
         return {"$schema": SCHEMA_DIALECT, "$id": SCHEMA_ID, **result, "definitions": definitions}

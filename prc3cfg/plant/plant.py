@@ -63,7 +63,8 @@ class Module(BaseModel):
 def _in_device_units(settings: Effective) -> tuple[SystemParameters, tuple[Program | None, ...]]:
     """The system parameters and the 64 programs that `settings` describe, in device units: unlisted
     programs `None` with keep, factory defaults with reset."""
-    system = SystemParameters(**{q.symbol: q.to_device(settings.system[q.key].value) for q in SYSTEM_QUANTITIES})
+    system = SystemParameters(**{q.symbol: q.to_device(settings.system[q.key].value)
+                                 for q in SYSTEM_QUANTITIES})
     jumps = settings.jumps()
     programs = {}
     for number, fields in settings.programs.items():
@@ -87,17 +88,20 @@ class Bus(BusLine):
 
     @property
     def line(self) -> LineSettings:
-        return LineSettings(baud=self.baud, data_bits=self.data_bits, parity=self.parity, stop_bits=self.stop_bits)
+        return LineSettings(baud=self.baud, data_bits=self.data_bits, parity=self.parity,
+                            stop_bits=self.stop_bits)
 
     @property
     def detects_damage(self) -> bool:
-        """Whether a damaged frame on this line is detected — by its framing's check or by parity (`framing.detects_damage`):
-        where not, a damaged frame can become another write, and an apply refuses unless `accept_undetected_damage`."""
+        """Whether a damaged frame on this line is detected — by its framing's check or by parity
+        (`framing.detects_damage`): where not, a damaged frame can become another write, and an apply refuses
+        unless `accept_undetected_damage`."""
         return detects_damage(self.framing, self.parity)
 
 
 class Plant(BaseModel):
-    """A plant file, loaded: its name, its buses, the file, the SHA-256 of its bytes and the policy file it names."""
+    """A plant file, loaded: its name, its buses, the file, the SHA-256 of its bytes and the policy file it
+    names."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 

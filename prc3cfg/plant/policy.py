@@ -1,10 +1,12 @@
-"""Policy files (`prc3cfg-policy/1`, docs/policy.md): read, validated with file:line:col, and their findings placed.
+"""Policy files (`prc3cfg-policy/1`, docs/policy.md): read, validated with file:line:col, and their findings
+placed.
 
     format: prc3cfg-policy/1
     envelopes:
       - {name: booth speeds, level: hard, buses: [booth-*], limits: {speed: {max: 0.400}}}
     windows:
-      - {name: production, kind: deny, level: soft, cron: "0 6 * * 1-5", duration: 10h, time_zone: Europe/Berlin}
+      - {name: production, kind: deny, level: soft, cron: "0 6 * * 1-5", duration: 10h, time_zone:
+        Europe/Berlin}
 
 The plant file names its policy (`policy: line-rules.yaml`, relative to it). `parse_policy` reads the bytes
 with the plant file's YAML reader (`document`: exact numbers, no aliases, positions) and the models here
@@ -42,8 +44,10 @@ POSITION = QUANTITIES["position"]
 _DURATION = re.compile(r"(?:(\d+)d)?(?:(\d+)h)?(?:(\d+)m)?")
 #: Longest a window may last: a start is looked for this far back.
 MAX_DURATION = timedelta(days=31)
-LimitKey = Literal["position", "speed", "relative_speed", "dwell", "function_distance", "upper_reversing_point", "reference_point",
-                   "max_speed", "min_speed", "acceleration", "sync_conveyor_sequence", "stroke_length", "pass_time"]  # fmt: skip
+LimitKey = Literal["position", "speed", "relative_speed", "dwell", "function_distance",
+                   "upper_reversing_point", "reference_point",
+                   "max_speed", "min_speed", "acceleration", "sync_conveyor_sequence", "stroke_length",
+                   "pass_time"]
 
 
 def _number(value: Any) -> Decimal:
@@ -81,7 +85,8 @@ def _zone(text: str) -> str:
     try:
         ZoneInfo(text)
     except (ZoneInfoNotFoundError, ValueError):
-        raise ValueError(f"'{text}' is not an IANA time zone — write one such as Europe/Berlin or America/New_York") from None
+        raise ValueError(f"'{text}' is not an IANA time zone — write one such as Europe/Berlin or "
+                         "America/New_York") from None
     return text
 
 
@@ -96,7 +101,9 @@ class EnvelopeSpec(FileModel):
     """Limits the modules it covers may reach: program fields in every managed program, system parameters."""
 
     name: Name = Field(description="what the rule is called in findings", examples=["booth speeds"])
-    level: Literal["advisory", "soft", "hard"] = Field("hard", description="advisory: warn; soft: refused unless overridden; hard: refused")
+    level: Literal["advisory", "soft",
+                   "hard"] = Field("hard", description="advisory: warn; soft: refused unless overridden; "
+                                                       "hard: refused")
     buses: Globs = Field((), description="the buses covered (all when left out)")
     modules: Globs = Field((), description="the modules covered, by name or glob (all when left out)")
     limits: dict[LimitKey, LimitSpec] = Field(min_length=1, description="bounds by plant-file key")
@@ -106,12 +113,18 @@ class WindowSpec(FileModel):
     """A time a change may not (deny) or may only (allow) be applied in."""
 
     name: Name = Field(description="what the window is called in findings", examples=["production"])
-    kind: Literal["deny", "allow"] = Field(description="deny: apply refused while open (deny wins); allow: refused outside every allow window")
-    level: Literal["advisory", "soft", "hard"] = Field("soft", description="soft: --override-window REASON applies anyway")
-    cron: Annotated[Text, AfterValidator(_cron)] = Field(description="when it opens: minute hour day-of-month month day-of-week",
+    kind: Literal["deny", "allow"] = Field(description="deny: apply refused while open (deny wins); allow: "
+                                                       "refused outside every allow window")
+    level: Literal["advisory", "soft",
+                   "hard"] = Field("soft", description="soft: --override-window REASON applies anyway")
+    cron: Annotated[Text, AfterValidator(_cron)] = Field(description="when it opens: minute hour "
+                                                                     "day-of-month month day-of-week",
                                                           examples=["0 6 * * 1-5"])
-    duration: Annotated[Text, AfterValidator(_duration)] = Field(description="how long it stays open: 10h, 1h30m, 2d", examples=["10h"])
-    time_zone: Annotated[Text, AfterValidator(_zone)] = Field(description="the IANA time zone the cron is read in", examples=["Europe/Berlin"])
+    duration: Annotated[Text, AfterValidator(_duration)] = Field(description="how long it stays open: 10h, "
+                                                                             "1h30m, 2d", examples=["10h"])
+    time_zone: Annotated[Text, AfterValidator(_zone)] = Field(description="the IANA time zone the cron "
+                                                                          "is read in",
+                                                              examples=["Europe/Berlin"])
     buses: Globs = Field((), description="the buses covered (all when left out)")
 
 
@@ -122,7 +135,8 @@ class PolicySpec(FileModel):
     envelopes: tuple[EnvelopeSpec, ...] = ()
     windows: tuple[WindowSpec, ...] = ()
     approvers: dict[Name, tuple[Text, ...]] | None = Field(
-        None, description="teams that approve a change to each bus — documentation: enforced by CODEOWNERS and environments")
+        None, description="teams that approve a change to each bus — documentation: enforced by CODEOWNERS "
+                          "and environments")
 
 
 @dataclass(frozen=True)
@@ -136,7 +150,8 @@ class LoadedPolicy:
 
 
 def parse_policy(path: str | Path, data: bytes) -> LoadedPolicy:
-    """The policy in `data`, the bytes of the file `path`; `PlantError` with one line per problem otherwise."""
+    """The policy in `data`, the bytes of the file `path`; `PlantError` with one line per problem
+    otherwise."""
     document = parse_document(str(path), data)
     problems = list(document.problems)
     try:
@@ -152,11 +167,13 @@ def parse_policy(path: str | Path, data: bytes) -> LoadedPolicy:
 
 
 def _limits(envelope: EnvelopeSpec, n: int) -> tuple[policy.Limit, ...]:
-    return tuple(policy.Limit(key, limit.min, limit.max, ("envelopes", n, "limits", key)) for key, limit in envelope.limits.items())
+    return tuple(policy.Limit(key, limit.min, limit.max, ("envelopes", n, "limits", key))
+                 for key, limit in envelope.limits.items())
 
 
 def _window(window: WindowSpec, n: int) -> policy.Window:
-    return policy.Window(window.name, window.level, window.kind, policy.parse_cron(window.cron), _as_timedelta(window.duration),
+    return policy.Window(window.name, window.level, window.kind, policy.parse_cron(window.cron),
+                         _as_timedelta(window.duration),
                          ZoneInfo(window.time_zone), window.buses, ("windows", n))
 
 
@@ -176,40 +193,45 @@ def _problem(error: Any) -> Problem:
 
 
 def plant_values(pairs: Iterable[tuple[Bus, Module]], keys: Set[str]) -> list[policy.Value]:
-    """Every value of the limited `keys` each module's settings reach (its desired image in human units), with its place:
-    a default the file does not write is placed at the module, a chain's motion at its first program."""
+    """Every value of the limited `keys` each module's settings reach (its desired image in human units), with
+    its place: a default the file does not write is placed at the module, a chain's motion at its first
+    program."""
     values = []
     for bus, module in pairs:
         settings = module.settings
         module_at = _module_at(bus, module)
         for key, sourced in settings.system.items():
-            values.append(policy.Value(bus.name, module.name, key, None, Decimal(sourced.value), sourced.path or module_at))
+            values.append(policy.Value(bus.name, module.name, key, None, Decimal(sourced.value),
+                                       sourced.path or module_at))
         for number, fields in settings.programs.items():
             program_at = settings.program_paths.get(number, module_at)
             for key in policy.PROGRAM_KEYS:
                 if key in fields:
                     sourced = fields[key]
-                    values.append(policy.Value(bus.name, module.name, key, number, Decimal(sourced.value), sourced.path or program_at))
+                    values.append(policy.Value(bus.name, module.name, key, number, Decimal(sourced.value),
+                                               sourced.path or program_at))
             for output in ("f1", "f2"):
                 sourced = fields[output]
-                values.append(policy.Value(bus.name, module.name, "function_distance", number, sourced.value.distance,
-                                           sourced.path or program_at))  # fmt: skip
+                values.append(policy.Value(bus.name, module.name, "function_distance", number,
+                                           sourced.value.distance,
+                                           sourced.path or program_at))
         if keys & policy.CHAIN_KEYS.keys():
             values += _chain_values(bus, module, module_at)
     return [v for v in values if v.key in keys]
 
 
 def _chain_values(bus: Bus, module: Module, module_at: Path_) -> list[policy.Value]:
-    """What each chain's motion reaches (`policy.CHAIN_KEYS`), placed at its first program: the stroke from the programs'
-    positions (exact), the pass time as the motion works it out, to its step (0.01 s)."""
+    """What each chain's motion reaches (`policy.CHAIN_KEYS`), placed at its first program: the stroke from
+    the programs' positions (exact), the pass time as the motion works it out, to its step (0.01 s)."""
     image, values = module.desired_image(), []
     for chain in motion.chain_motions(image):
         at = module.settings.program_paths.get(chain.programs[0], module_at)
         reversing = [image.known(number).P for number in chain.programs]
         seconds = chain.cycle_time if chain.loops else chain.duration
         reached = {"stroke_length": POSITION.in_unit(max(reversing) - min(reversing)),
-                   "pass_time": Decimal(repr(seconds)).quantize(policy.CHAIN_KEYS["pass_time"].step)}  # fmt: skip
-        values += [policy.Value(bus.name, module.name, key, chain.programs[0], value, at, chain.label) for key, value in reached.items()]
+                   "pass_time": Decimal(repr(seconds)).quantize(policy.CHAIN_KEYS["pass_time"].step)}
+        values += [policy.Value(bus.name, module.name, key, chain.programs[0], value, at, chain.label)
+                   for key, value in reached.items()]
     return values
 
 
@@ -218,14 +240,15 @@ def _module_at(bus: Bus, module: Module) -> Path_:
 
 
 def placed(finding: policy.RuleFinding, plant_document: Document | None, loaded: LoadedPolicy) -> Finding:
-    """Where a finding is said: at the plant file's value where there is one (`plant_document` given), naming the rule's
-    place; else at the rule."""
+    """Where a finding is said: at the plant file's value where there is one (`plant_document` given), naming
+    the rule's place; else at the rule."""
     (line, column), _ = loaded.document.lines([Problem(finding.rule_at, "")])[0]
     said = f"{finding.level}: {finding.message}"
     if finding.value_at is None or plant_document is None:
         return Finding(loaded.document.name, line, column, said)
     (at_line, at_column), _ = plant_document.lines([Problem(_in_plant(plant_document, finding.value_at), "")])[0]
-    return Finding(plant_document.name, at_line, at_column, f"{said} (rule at {loaded.document.name}:{line}:{column})")
+    return Finding(plant_document.name, at_line, at_column,
+                   f"{said} (rule at {loaded.document.name}:{line}:{column})")
 
 
 def _in_plant(document: Document, path: Path_) -> Path_:

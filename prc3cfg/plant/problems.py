@@ -1,9 +1,9 @@
 """What is wrong with a plant file: a `Problem` at a place in the document, and `PlantError`.
 
-A `Problem` names its place as a path of keys and indexes from the top of the document
-(`("buses", 0, "modules", 2, "programs", 3, "speed")`); the loader turns the path into
-`file:line:column`. `PlantError` carries the problems of one file, one printable line each (`shown`): every one,
-up to `MAX_PROBLEMS`; `PlantError.findings` the same problems as `Finding`s, for tools.
+A `Problem` names its place as a path of keys and indexes from the top of the document (`("buses", 0,
+"modules", 2, "programs", 3, "speed")`); the loader turns the path into `file:line:column`. `PlantError`
+carries the problems of one file, one printable line each (`shown`): every one, up to `MAX_PROBLEMS`;
+`PlantError.findings` the same problems as `Finding`s, for tools.
 """
 
 from __future__ import annotations
@@ -65,7 +65,8 @@ class PlantError(UserError):
     """A plant file that cannot be used; `str()` is every problem, one line each, sorted by line."""
 
     def __init__(self, problems: Sequence[str]) -> None:
-        self.problems = [shown(problem) for problem in problems]  # what the file holds: one line each, printable
+        # what the file holds: one line each, printable
+        self.problems = [shown(problem) for problem in problems]
         super().__init__("\n".join(self.problems))
 
     def findings(self, file: str) -> list[Finding]:

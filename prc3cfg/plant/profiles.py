@@ -79,7 +79,8 @@ class ProgramFields(Mapping[str, Sourced]):
     __slots__ = ("_layers",)
 
     def __init__(self, layers: tuple[tuple[str, Path_, Mapping[str, Any]], ...]) -> None:
-        self._layers = layers  # each layer that lists the program, lowest first: (source, its path, the fields it gives)
+        # each layer that lists the program, lowest first: (source, its path, the fields it gives)
+        self._layers = layers
 
     def __getitem__(self, key: str) -> Sourced:
         found = self._given(key)
@@ -172,7 +173,9 @@ def resolve(layers: tuple[Layer, ...]) -> Effective:
                 system[key] = Sourced(getattr(spec.system, key), source, layer.path + ("system", key))
         for number, program in (spec.programs or {}).items():
             path = layer.path + ("programs", number)
-            programs.setdefault(number, []).append((source, path, {key: getattr(program, key) for key in program.model_fields_set}))
+            programs.setdefault(number, []).append((source, path,
+                                                    {key: getattr(program, key)
+                                                     for key in program.model_fields_set}))
             program_paths[number] = path
         if spec.chains is not None:
             chains = Sourced(spec.chains, source, layer.path + ("chains",))

@@ -1,4 +1,5 @@
-"""The offline rules that span more than one value (docs/plant-files.md, docs/protocol.md "What a module does").
+"""The offline rules that span more than one value (docs/plant-files.md, docs/protocol.md "What a module
+does").
 
 On a module's effective settings (after profiles):
 - every listed program has a position and a speed (given in the module or a profile);
@@ -44,10 +45,13 @@ from prc3cfg.plant.profiles import DEFAULT, Effective, Sourced
 Unknown = frozenset[tuple[Any, ...]]
 
 
-def check_module(name: str, path: Path_, settings: Effective, unknown: Unknown = frozenset()) -> list[Problem]:
+def check_module(name: str, path: Path_, settings: Effective,
+                 unknown: Unknown = frozenset()) -> list[Problem]:
     """The problems of one module's effective settings (module `name` at `path`), but of what is `unknown`."""
-    problems = [*_missing_fields(settings, unknown), *_speeds_and_positions(settings, unknown), *_jumps(settings, unknown)]
-    return [p if p.path[: len(path)] == path else Problem(p.path, p.message, p.at_key, modules=(name,)) for p in problems]
+    problems = [*_missing_fields(settings, unknown), *_speeds_and_positions(settings, unknown),
+                *_jumps(settings, unknown)]
+    return [p if p.path[: len(path)] == path else Problem(p.path, p.message, p.at_key, modules=(name,))
+            for p in problems]
 
 
 def _known(unknown: Unknown, section: Any, key: Any) -> bool:
@@ -55,7 +59,8 @@ def _known(unknown: Unknown, section: Any, key: Any) -> bool:
 
 
 def _missing_fields(settings: Effective, unknown: Unknown) -> Iterator[Problem]:
-    taken_out = {program for program, _ in unknown}  # a key taken out of a program may be the one missing, mistyped
+    # a key taken out of a program may be the one missing, mistyped
+    taken_out = {program for program, _ in unknown}
     for number, fields in settings.programs.items():
         for key in ("position", "speed"):
             if key not in fields and number not in taken_out:
@@ -75,25 +80,30 @@ def _speeds_and_positions(settings: Effective, unknown: Unknown) -> Iterator[Pro
                       "— max_speed (S4) must be at least min_speed (S5)")
         known_speeds = False  # no speed is between them
     for number, fields in settings.programs.items():
-        values = fields.plain_values()  # a field's `Sourced` made for its message alone: 8 × 30 modules have 15,000 programs
+        # a field's `Sourced` made for its message alone: 8 × 30 modules have 15,000 programs
+        values = fields.plain_values()
         position = values.get("position") if known_s1 and _known(unknown, number, "position") else None
         speed = values.get("speed") if known_speeds and _known(unknown, number, "speed") else None
         if position is not None and position > s1.value:
             given = fields["position"]
             yield Problem(given.place, f"position {_said(given, 'position')} is above upper_reversing_point "
-                          f"{_said(s1, 'upper_reversing_point', given)} — a position must be at most the upper reversing point "
+                          f"{_said(s1, 'upper_reversing_point', given)} — a position must be at most the "
+                          "upper reversing point "
                           "(P ≤ S1): lower it or raise upper_reversing_point")
         if speed is not None and not s5.value <= speed <= s4.value:
             given = fields["speed"]
             limit, word = (s4, "max_speed") if speed > s4.value else (s5, "min_speed")
             side = "above" if limit is s4 else "below"
-            yield Problem(given.place, f"speed {_said(given, 'speed')} is {side} {word} {_said(limit, word, given)} "
-                          f"— a speed must be min_speed..max_speed (S5 ≤ V ≤ S4), here {s5.value}..{s4.value} m/s")
+            yield Problem(given.place,
+                          f"speed {_said(given, 'speed')} is {side} {word} {_said(limit, word, given)} "
+                          "— a speed must be min_speed..max_speed (S5 ≤ V ≤ S4), here "
+                          f"{s5.value}..{s4.value} m/s")
 
 
 def _jumps(settings: Effective, unknown: Unknown) -> Iterator[Problem]:
     listed = settings.programs
-    all_listed = ("programs", "*") not in unknown  # else a jump to a program taken out is not known to be wrong
+    # else a jump to a program taken out is not known to be wrong
+    all_listed = ("programs", "*") not in unknown
     chained: dict[int, int] = {}  # program → chain number (1-based)
     for k, chain in enumerate(settings.chains.value if ("chains", "*") not in unknown else ()):
         at = settings.chains.place + (k,)
@@ -108,7 +118,8 @@ def _jumps(settings: Effective, unknown: Unknown) -> Iterator[Problem]:
                                   f"name listed programs: list program {number} or drop it from the chain")
             elif number in chained:
                 where = "this chain" if chained[number] == k + 1 else f"chain {chained[number]}"
-                yield Problem(item, f"program {number} is already in {where} — a program may be in one chain, once")
+                yield Problem(item, f"program {number} is already in {where} — a program may be in one "
+                                    "chain, once")
             else:
                 chained[number] = k + 1
     for number, fields in listed.items():
@@ -129,23 +140,28 @@ def _said(value: Sourced, key: str, beside: Sourced | None = None) -> str:
 
 
 #: Gateway words the Open Driver accepts, to check an `open-driver` line that has no `gateway:`.
-_ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0, identifier=gateway.IDENTIFIERS.start)
+_ANY_GATEWAY = Gateway(receive_db=gateway.MIN_RECEIVE_DB, receive_dw=0, cpu=0,
+                       identifier=gateway.IDENTIFIERS.start)
 
 
 #: The keys of a bus `check_bus` reads.
 LINE_KEYS = frozenset({"framing", "baud", "parity", "data_bits", "stop_bits", "zvz", "gateway"})
 
 
-def check_bus(path: Path_, bus: BusLine, pseudo_terminal: Callable[[str], bool] = lambda port: False) -> list[Problem]:
-    """A parity on a port that is a pseudo-terminal (`pseudo_terminal`, the shell's to tell), which carries none;
-    and what the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on any
-    open-driver line — and a ZVZ not longer than one character, which it takes but ends frames by after every byte."""
+def check_bus(path: Path_, bus: BusLine,
+              pseudo_terminal: Callable[[str], bool] = lambda port: False) -> list[Problem]:
+    """A parity on a port that is a pseudo-terminal (`pseudo_terminal`, the shell's to tell), which carries
+    none; and what the Open Driver would refuse about this line (SYSTAT 8Bh..95h): all with a gateway, ZVZ on
+    any open-driver line — and a ZVZ not longer than one character, which it takes but ends frames by after
+    every byte."""
     problems = []
     if bus.parity != "none" and pseudo_terminal(bus.port):
         given = "parity" in bus.model_fields_set
-        problems.append(Problem(path + (("parity",) if given else ("port",)), f"port {bus.port} is a pseudo-terminal, which "
-                                f"carries no parity ({'' if given else 'the default '}parity {bus.parity}) — set parity: none",
-                                at_key=not given))  # fmt: skip
+        problems.append(Problem(path + (("parity",) if given else ("port",)),
+                                f"port {bus.port} is a pseudo-terminal, which "
+                                f"carries no parity ({'' if given else 'the default '}parity {bus.parity}) "
+                                "— set parity: none",
+                                at_key=not given))
     if bus.gateway is None and bus.framing != "open-driver":
         return problems
     words = bus.gateway or _ANY_GATEWAY
@@ -162,7 +178,8 @@ def check_bus(path: Path_, bus: BusLine, pseudo_terminal: Callable[[str], bool] 
             at, given = path + ("gateway", key), True
         else:
             at, given = path + (key,), key in bus.model_fields_set
-        problems.append(Problem(at if given else path + ("gateway",), f"{refusal.reason} — the gateway's Open "
+        problems.append(Problem(at if given else path + ("gateway",),
+                                f"{refusal.reason} — the gateway's Open "
                                 f"Driver refuses it (SYSTAT {refusal.systat:02X}h): change {key}",
                                 at_key=not given))
     if bus.framing == "open-driver" and (reason := gateway.zvz_too_short(bus.zvz, settings.line)) is not None:
@@ -185,7 +202,8 @@ def check_unique(data: Any) -> list[Problem]:
         addresses: dict[Any, Path_] = {}
         for module_path, module in mappings_in(bus, bus_path + ("modules",)):
             _unique(problems, module, module_path, "name", module_names,
-                    f"module name '{{}}' is already used ({FIRST}) — module names must be unique in the plant")
+                    f"module name '{{}}' is already used ({FIRST}) — module names must be unique in "
+                    "the plant")
             _unique(problems, module, module_path, "address", addresses,
                     f"address {{}} is already used on this bus ({FIRST}) — each module on a bus needs its "
                     "own address (its S9)")

@@ -4,14 +4,13 @@ where the two differ.
 `document`'s reader hands every untagged scalar here (`Readings.of`), so that
 - a float keeps the text it was written with: `0.1` becomes `Decimal("0.1")`, never the
   binary 0.1000000000000000055…; integers, booleans, strings are what both YAML versions read;
-- a plain scalar that YAML 1.1 (PyYAML) and YAML 1.2 (yaml-language-server, JSON Schema
-  tools, most other readers) read differently is a problem that says what to write: `010` is
-  8 to one and 10 to the other, `on` true or text, `1:30` 90 or text, `1e3` text or 1000,
-  `0b101`, `1_000`, `2024-01-01`, `=`. The 1.2 side is `core_schema`, the YAML 1.2.2 core
-  schema's table (§10.3.2); the 1.1 side is PyYAML's resolver, and the 1.1 type repository's
-  `y`, `Y`, `n`, `N` as booleans (PyYAML reads them as text, other 1.1 readers as true and false). Quoted scalars are
-  never ambiguous. The value kept is the YAML 1.2 reading, what editors and schema tools
-  see; the models' objection to it, if any, says what the key wants;
+- a plain scalar that YAML 1.1 (PyYAML) and YAML 1.2 (yaml-language-server, JSON Schema tools, most other
+  readers) read differently is a problem that says what to write: `010` is 8 to one and 10 to the other, `on`
+  true or text, `1:30` 90 or text, `1e3` text or 1000, `0b101`, `1_000`, `2024-01-01`, `=`. The 1.2 side is
+  `core_schema`, the YAML 1.2.2 core schema's table (§10.3.2); the 1.1 side is PyYAML's resolver, and the 1.1
+  type repository's `y`, `Y`, `n`, `N` as booleans (PyYAML reads them as text, other 1.1 readers as true and
+  false). Quoted scalars are never ambiguous. The value kept is the YAML 1.2 reading, what editors and schema
+  tools see; the models' objection to it, if any, says what the key wants;
 - a number has at most `MAX_DIGITS` digits written out in full (`1e30` has 31): decimal
   arithmetic is exact to that precision, and reading `1e999999` as an integer would take
   seconds, `1.0e+400` as a float would be infinite.
@@ -59,12 +58,14 @@ _CORE_SCHEMA: tuple[tuple[str, re.Pattern[str], Callable[[str], Any]], ...] = tu
         (_INT_TAG, r"0o[0-7]+", lambda text: int(text[2:], 8)),
         (_INT_TAG, r"0x[0-9a-fA-F]+", lambda text: int(text[2:], 16)),
         (_FLOAT_TAG, DECIMAL_NUMBER.pattern, Decimal),
-        (_FLOAT_TAG, r"[-+]?(\.inf|\.Inf|\.INF)|\.nan|\.NaN|\.NAN", lambda text: Decimal(_SPECIAL_FLOATS[text.lower()])),
+        (_FLOAT_TAG, r"[-+]?(\.inf|\.Inf|\.INF)|\.nan|\.NaN|\.NAN",
+         lambda text: Decimal(_SPECIAL_FLOATS[text.lower()])),
     )
 )
 _CORE_TAGS = {tag for tag, _, _ in _CORE_SCHEMA} | {_STR_TAG}  # every tag YAML 1.2 can give a plain scalar
 #: The table as one pattern: the name of the group that matches is the rule's index.
-_CORE_PATTERN = re.compile("|".join(f"(?P<r{index}>{pattern.pattern})" for index, (_, pattern, _) in enumerate(_CORE_SCHEMA)))
+_CORE_PATTERN = re.compile("|".join(f"(?P<r{index}>{pattern.pattern})"
+                                    for index, (_, pattern, _) in enumerate(_CORE_SCHEMA)))
 #: How a message says what a reader takes a plain scalar for, by its tag (and value).
 _READINGS: dict[str, Callable[[Any], str]] = {
     _INT_TAG: lambda value: _as_written(value),
@@ -95,7 +96,8 @@ class Readings:
         self.known: dict[str, Reading] = {}  # a plain scalar's, by its text
 
     def tag(self, text: str, implicit: tuple[bool, bool]) -> str:
-        """YAML 1.1's tag of `text`, as PyYAML's resolver gives it (`implicit`: the event's, plain or quoted)."""
+        """YAML 1.1's tag of `text`, as PyYAML's resolver gives it (`implicit`: the event's, plain or
+        quoted)."""
         if (tag := self.tags.get((text, implicit))) is None:
             tag = self.constructor.resolve(ScalarNode, text, implicit)
             _remember(self.tags, (text, implicit), tag)
@@ -114,8 +116,10 @@ class Readings:
         """How an untagged plain scalar reads, its YAML 1.1 tag given (`Reading`)."""
         core_tag, core_value = _core_rule(text)
         if (tag in _NUMBER_TAGS or core_tag in _NUMBER_TAGS) and _too_long(text):
-            return text, lambda key: (f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, written out "
-                                      f"— a plant file's numbers are read exactly: write at most {MAX_DIGITS} digits"), False
+            return text, lambda key: (f"{_subject(key, text, False)} has more than {MAX_DIGITS} digits, "
+                                      "written out "
+                                      "— a plant file's numbers are read exactly: write at most "
+                                      f"{MAX_DIGITS} digits"), False
         # a tag the core schema does not have (a date, `=`) differs without building a value
         yaml11 = (tag, self.construct(tag, text) if tag in _CORE_TAGS else None)
         if tag == _STR_TAG and text in _YES_NO:  # the 1.1 type repository's y and n, which PyYAML leaves out
@@ -146,7 +150,8 @@ class Readings:
 
 
 def _remember(cache: dict[Any, Any], key: Any, value: Any) -> None:
-    """`cache[key] = value`, the cache emptied first when it is full: a file of all different values gains nothing."""
+    """`cache[key] = value`, the cache emptied first when it is full: a file of all different values gains
+    nothing."""
     if len(cache) >= _CACHE_SIZE:
         cache.clear()
     cache[key] = value
@@ -177,7 +182,8 @@ def _ambiguity(subject: str, yaml11: tuple[str, Any], yaml12: tuple[str, Any]) -
     said = (f"{subject} is read as {_READINGS[yaml11[0]](yaml11[1])} by YAML 1.1 "
             f"and as {_READINGS[yaml12[0]](yaml12[1])} by YAML 1.2")
     if yaml11[0] in _NUMBER_TAGS and yaml12[0] in _NUMBER_TAGS:  # only a leading zero does that: 010
-        return f"{said} — write {_as_written(yaml12[1])} (or {_as_written(yaml11[1])}), without the leading zero"
+        return (f"{said} — write {_as_written(yaml12[1])} (or {_as_written(yaml11[1])}), without the "
+                "leading zero")
     tag, value = yaml11 if yaml12[0] == _STR_TAG else yaml12
     if tag in _NUMBER_TAGS:
         return f"{said} — write {_as_written(value)}, or quote it"

@@ -32,7 +32,7 @@ from prc3cfg.plant.scalars import DECIMAL_NUMBER, core_schema
 #: The order keys are written in where a key is added: a module's own keys as docs/plant-files.md's
 #: plant files write them, then the models' order of system, program and F1/F2 keys.
 KEY_ORDER = ("address", "name", "profiles", "unmanaged_programs", "system", "programs", "chains",
-             *SystemSpec.model_fields, *ProgramSpec.model_fields, *FunctionOutputSpec.model_fields)  # fmt: skip
+             *SystemSpec.model_fields, *ProgramSpec.model_fields, *FunctionOutputSpec.model_fields)
 #: How a new mapping of each kind is written when the file has none of that kind to follow.
 DEFAULT_FLOW = {"system": False, "programs": False, "program": True, "output": True}
 DEFAULT_INDENT = 2
@@ -43,7 +43,8 @@ BYTE_ORDER_MARK = "\ufeff"
 
 
 def rewrite(text: str, wanted: dict[Any, Any]) -> str:
-    """`text` with each value of the trie `wanted` set at its path: replaced where the file has it, added where not."""
+    """`text` with each value of the trie `wanted` set at its path: replaced where the file has it, added
+    where not."""
     return _Rewrite(text).apply(wanted)
 
 
@@ -94,7 +95,8 @@ class _Conventions:
         """Decimals for a new value of `key`: as the file writes most of them, else as its step needs."""
         if key in self.decimals:
             return self.decimals[key].most_common(1)[0][0]
-        return max(0, -int(QUANTITIES[key].step.as_tuple().exponent))  # a finite step: its exponent is a number
+        # a finite step: its exponent is a number
+        return max(0, -int(QUANTITIES[key].step.as_tuple().exponent))
 
     def flow_style(self, kind: str) -> bool:
         return self.flow[kind].most_common(1)[0][0] if kind in self.flow else DEFAULT_FLOW[kind]
@@ -163,7 +165,8 @@ class _Rewrite:
             tail = _ALIGNED_COMMENT.match(self.text, last, _line_end(self.text, last))
             if growth and tail is not None:
                 spaces = tail.end(1) - tail.start(1)
-                self.splices.append((tail.start(1), tail.end(1), len(self.splices), " " * max(2, spaces - growth)))
+                self.splices.append((tail.start(1), tail.end(1), len(self.splices),
+                                     " " * max(2, spaces - growth)))
 
     def _set(self, node: Span, path: Path_, wanted: dict[Any, Any]) -> None:
         missing = []
@@ -206,7 +209,8 @@ class _Rewrite:
             else:
                 self._insert_block(node, path, after, group, wanted)
 
-    def _insert_flow(self, node: Span, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert_flow(self, node: Span, path: Path_, after: Any, keys: list[Any],
+                     wanted: dict[Any, Any]) -> None:
         items = ", ".join(f"{key}: {self._flow(path + (key,), wanted[key])}" for key in keys)
         if after is not None:
             self._add(node.children[after].end, f", {items}")
@@ -215,7 +219,8 @@ class _Rewrite:
         else:
             self._add(node.start + 1, items)
 
-    def _insert_block(self, node: Span, path: Path_, after: Any, keys: list[Any], wanted: dict[Any, Any]) -> None:
+    def _insert_block(self, node: Span, path: Path_, after: Any, keys: list[Any],
+                      wanted: dict[Any, Any]) -> None:
         first = min(node.keys, key=node.keys.__getitem__)
         column = _column(self.text, node.keys[first])
         lines = [line for key in keys for line in self._block(path + (key,), wanted[key], column)]
@@ -238,11 +243,12 @@ class _Rewrite:
     def _flow(self, path: Path_, value: Any) -> str:
         if not isinstance(value, dict):
             return self._scalar(path[-1], value)
-        return "{" + ", ".join(f"{k}: {self._flow(path + (k,), value[k])}" for k in sorted(value, key=_rank)) + "}"
+        return ("{" + ", ".join(f"{k}: {self._flow(path + (k,), value[k])}" for k in sorted(value, key=_rank)) + "}")
 
     def _block(self, path: Path_, value: Any, column: int) -> list[str]:
         pad = " " * column
         if not isinstance(value, dict) or self.conventions.flow_style(_kind(path) or ""):
             return [f"{pad}{path[-1]}: {self._flow(path, value)}"]
         inner = column + self.conventions.indent
-        return [f"{pad}{path[-1]}:", *(line for k in sorted(value, key=_rank) for line in self._block(path + (k,), value[k], inner))]
+        return [f"{pad}{path[-1]}:",
+                *(line for k in sorted(value, key=_rank) for line in self._block(path + (k,), value[k], inner))]

@@ -8,11 +8,12 @@ reply carries no checksum). A difference (a lost or damaged exchange, a module c
 the floor meanwhile) is planned and repaired, at most `REPAIRS` times. Success means verified.
 
 Verification reads exactly what the steps that went out could have changed
-(`prc3cfg.core.what_to_read.verification_reads`): the system block if a system step went out, the programs
-the steps write and the programs the module's own clamping changes — and the programs its plan took as the
+(`prc3cfg.core.what_to_read.verification_reads`): the system block if a system step went out, the programs the
+steps write and the programs the module's own clamping changes — and the programs its plan took as the
 factory's without reading them (`ModuleRun.assumed`: a factory-fresh module, `what_to_read.factory_fresh`) —
-in the fewest 50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and every program known from the first
-read-back instead, for the paranoid. A difference counts only when two reads agree on it.
+in the fewest 50h/51h/52h exchanges; a repair round reads what it repairs. `Verify.FULL` reads the system and
+every program known from the first read-back instead, for the paranoid. A difference counts only when two
+reads agree on it.
 
 What may have reached a module counts, not only what it acknowledged: a 10h/20h whose
 acknowledgement was lost released the axes all the same. Each module's outcome
@@ -85,16 +86,20 @@ class ModuleRun(Coursed):
     #: module — or a read — can reach this one as a 10h/20h
     exposed: bool = False
     #: the managed programs its plan took as the factory's, not read (`what_to_read.assumed`): its first
-    #: verification reads them whatever the steps wrote, so one another tool changed goes through the repair round
+    #: verification reads them whatever the steps wrote, so one another tool changed goes through the repair
+    #: round
     assumed: frozenset[int] = frozenset()
     sent: list[Step] = field(default_factory=list)  # put on the line, over all rounds
     written: list[Step] = field(default_factory=list)  # acknowledged, over all rounds
-    possibly_written: bool = False  # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
+    # it answered a read as a write is: it executed a damaged frame (`PossibleWrite`)
+    possibly_written: bool = False
     watched: bool = False  # its system block was read because a release went out on its unprotected line
     system_unset: bool = False  # it answered E12 (system parameters not set): the next plan writes them first
-    fault: int | None = None  # it refused a write with another fault state's code (E09, E21, …: `FAULT_STATES`): kept, told
+    # it refused a write with another fault state's code (E09, E21, …: `FAULT_STATES`): kept, told
+    fault: int | None = None
     final: ModuleImage | None = None  # the first read-back, updated by every verifying read since
-    wrote_at: float = 0.0  # time.monotonic() when its last round of steps ended: a late frame lands within the quiet period since
+    # time.monotonic() when its last round of steps ended: a late frame lands within the quiet period since
+    wrote_at: float = 0.0
     problem: str | None = None  # the last thing that went wrong, in words: the outcome's `failure` says it
     course: Course = field(default_factory=Course)  # where the table has it, and what it does next
 
@@ -112,20 +117,24 @@ class ModuleRun(Coursed):
         return any(step.releases_axes for step in self.sent)
 
     def outcome(self, stopped: str | None = None) -> ModuleOutcome:
-        """What its run came to, once it ended: the frozen value everything after the apply takes (`stopped`: why
-        the lines were stopped, when not by a signal)."""
-        return ModuleOutcome(self.bus, self.address, self.name, self.before, self.desired, self.steps, self.broadcasts, tuple(self.sent),
-                       tuple(self.written), self.final, self.course, self.exposed, self.possibly_written, self.watched,
-                       self.system_unset, self.fault, self.problem, stopped)  # fmt: skip
+        """What its run came to, once it ended: the frozen value everything after the apply takes (`stopped`:
+        why the lines were stopped, when not by a signal)."""
+        return ModuleOutcome(self.bus, self.address, self.name, self.before, self.desired, self.steps,
+                             self.broadcasts, tuple(self.sent),
+                       tuple(self.written), self.final, self.course, self.exposed, self.possibly_written,
+                             self.watched,
+                       self.system_unset, self.fault, self.problem, stopped)
 
     def trespassed(self) -> str | None:
         """A program the plant does not manage that the last read-back shows other than the module's
         own clamping leaves it (a damaged frame on a line without a checksum can do that)."""
         assert self.final is not None
-        for number, (have, want, kept) in enumerate(zip(self.final.programs, self.desired.programs, self.predicted.programs), 1):
+        for number, (have, want, kept) in enumerate(zip(self.final.programs, self.desired.programs,
+                                                        self.predicted.programs), 1):
             if want is None and have is not None and have != kept:
                 return (f"program {number}, which the plant file does not manage, reads back other than "
-                        "before the apply (and than the module's clamping leaves it) — check the line and restore it from the snapshot")  # fmt: skip
+                        "before the apply (and than the module's clamping leaves it) — check the line and "
+                        "restore it from the snapshot")
         return None
 
     def stopped_verifying(self) -> None:
@@ -133,9 +142,10 @@ class ModuleRun(Coursed):
         was not verified (and what went wrong before, if anything did); the table is told by the caller."""
         written, sent = {step.message for step in self.written}, {step.message for step in self.sent}
         own = self.steps[self.broadcasts :]
-        said = f"{INTERRUPTED} while verifying: {sum(s.message in written for s in own)} of {plural(len(own), 'step')} acknowledged"
+        said = (f"{INTERRUPTED} while verifying: {sum(s.message in written for s in own)} of "
+                f"{plural(len(own), 'step')} acknowledged")
         if self.broadcasts:
-            said += f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent"
+            said += (f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent")
         if self.repairs:
             said += f", after {plural(self.repairs, 'repair round')}"
         self.problem = f"{said}, not verified" + (f" (before that: {self.problem})" if self.problem else "")
@@ -175,24 +185,30 @@ class ModuleRun(Coursed):
             self.written.append(step)
         elif event is Event.E12:
             self.system_unset = True
-            self.problem = (f"{where} was refused: the module is in E12 (system parameters not set), which only a 10h/20h "
-                            "clears — plan again: the new plan writes its system parameters first (20h, releasing its axes)")  # fmt: skip
+            self.problem = (f"{where} was refused: the module is in E12 (system parameters not set), which "
+                            "only a 10h/20h "
+                            "clears — plan again: the new plan writes its system parameters first (20h, "
+                            "releasing its axes)")
         elif event is Event.RUNNING:
-            self.problem = f"running: {where} was refused with {describe(reply)} — stop it (STOP and AUTOMATIC) and apply again"
+            self.problem = (f"running: {where} was refused with {describe(reply)} — stop it (STOP and "
+                            "AUTOMATIC) and apply again")
         else:
             self.fault = reply if reply in FAULT_STATES else self.fault
             self.problem = f"{where} was refused with {describe(reply)} — {remedy(reply)}"
         return event
 
-    def verify_read(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage) -> ModuleImage:
+    def verify_read(self, link: Link, system: bool, programs: frozenset[int],
+                    expected: ModuleImage) -> ModuleImage:
         """`known` with what the module holds now in `system`/`programs`: as soon as a read shows
         what is `expected` there, else once two reads in a row agree."""
         known = self.final or self.before
 
         def once() -> ModuleImage:
-            read = read_system(link, self.address, name=self.name, expected=expected.system) if system else known.system
+            read = (read_system(link, self.address, name=self.name, expected=expected.system) if system
+                    else known.system)
             told = {n: p for n in programs if (p := expected.programs[n - 1]) is not None}
-            found: dict[int, Program] = dict(read_programs(link, self.address, programs, name=self.name, expected=told))
+            found: dict[int, Program] = dict(read_programs(link, self.address, programs, name=self.name,
+                                                           expected=told))
             return replace(known, system=read).with_programs(found)
 
         previous = once()
@@ -205,8 +221,9 @@ class ModuleRun(Coursed):
             previous = current
         return previous
 
-    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None], consented: frozenset[tuple[str, int]],
-                 verify: Verify = Verify.FLOOR, with_system: bool = False) -> None:  # fmt: skip
+    def converge(self, link: Link, cost: LineCost, tick: Callable[[], None],
+                 consented: frozenset[tuple[str, int]],
+                 verify: Verify = Verify.FLOOR, with_system: bool = False) -> None:
         """Read back what the steps could have changed; while the module differs from the desired
         image and may be repaired, plan, repair, and read back what the repair could have changed.
 
@@ -219,14 +236,19 @@ class ModuleRun(Coursed):
         while True:
             action = self.course.action
             if action is Next.READ:
-                # a late copy that could undo a step: wait for it, and read what every step sent could have changed
+                # a late copy that could undo a step: wait for it, and read what every step sent could have
+                # changed
                 late = undone_by_late(expected, self.sent[sent_before:])
-                quiet = self.wrote_at + settle_time(cost, max(link.wait(self.address, step.message) for step in self.sent)) \
-                    if late else 0.0  # fmt: skip
-                system, programs = verification_reads(self.before, self.before if late else self.final or self.before, expected,
-                                                      self.sent if late else self.sent[sent_before:], full=verify is Verify.FULL,
-                                                      watch_system=with_system)  # fmt: skip
-                programs |= self.assumed if self.final is None else frozenset()  # not read yet: never taken as planned
+                quiet = self.wrote_at + settle_time(cost, max(link.wait(self.address, step.message)
+                                                              for step in self.sent)) \
+                    if late else 0.0
+                system, programs = verification_reads(self.before, self.before if late else self.final
+                                                      or self.before, expected,
+                                                      self.sent if late else self.sent[sent_before:],
+                                                      full=verify is Verify.FULL,
+                                                      watch_system=with_system)
+                # not read yet: never taken as planned
+                programs |= self.assumed if self.final is None else frozenset()
                 self.watched |= with_system
                 self.process(self._verify(link, system, programs, expected, known_programs, quiet))
             elif action is Next.PLAN_REPAIR:
@@ -242,9 +264,11 @@ class ModuleRun(Coursed):
                     self.problem = self._gave_up()
                 return
 
-    def _verify(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage, known_programs: frozenset[int],
-                quiet: float = 0.0) -> Event:  # fmt: skip
-        """One verifying read-back, once the line is quiet (`quiet`: time.monotonic()), and what it found (`problem` says what went wrong)."""
+    def _verify(self, link: Link, system: bool, programs: frozenset[int], expected: ModuleImage,
+                known_programs: frozenset[int],
+                quiet: float = 0.0) -> Event:
+        """One verifying read-back, once the line is quiet (`quiet`: time.monotonic()), and what it found
+        (`problem` says what went wrong)."""
         try:
             _wait_until(link, quiet)
             self.final = self.verify_read(link, system, programs, expected)
@@ -272,8 +296,10 @@ class ModuleRun(Coursed):
         if event is Event.REPAIR_UNCONSENTED:
             self.problem = (
                 "the read-back shows other system parameters than the plan expected (changed on the floor "
-                "meanwhile" + (", or by a damaged frame meant for another module" if self.exposed else "") + "?); writing "
-                "them would release the axes, which the plan agreed to did not — nothing more was sent to it: plan "
+                "meanwhile" + (", or by a damaged frame meant for another module" if self.exposed else "")
+                            + "?); writing "
+                "them would release the axes, which the plan agreed to did not — nothing more was sent to "
+                "it: plan "
                 "again and review the new plan"
             )
         return event
@@ -281,7 +307,8 @@ class ModuleRun(Coursed):
     def _gave_up(self) -> str:
         """Why a module that had every round is not verified."""
         if self.final is None:
-            return f"could not be read back to verify it ({self.problem}) — check the line and the module, then apply again"
+            return (f"could not be read back to verify it ({self.problem}) — check the line and the module, "
+                    "then apply again")
         return (
             f"still differs from the plant file after {REPAIRS} repairs"
             + (f" (last problem: {self.problem})" if self.problem else "")
@@ -336,7 +363,8 @@ def stopped(link: Link, runs: list[ModuleRun], error: PossibleWrite) -> None:
         if run.address == error.address:
             run.possibly_written = True
             with contextlib.suppress(LinkError, UserError):  # not read back: `released` says "possibly"
-                run.final = replace(run.final or run.before, system=read_system(link, run.address, name=run.name))
+                run.final = replace(run.final or run.before,
+                                    system=read_system(link, run.address, name=run.name))
         if not run.verified:
             run.problem = str(error)
             run.process(Event.LINE_STOPPED)

@@ -41,7 +41,8 @@ from prc3cfg.shell.records import STAMP_LENGTH, Snapshot, line_hash, records_dir
 #: The largest journal read: 30 modules × 8 buses, every program written and verified, is a few MB.
 JOURNAL_LIMIT = 1024 * 2**20
 #: What to do about a record that does not verify.
-EVIDENCE = "keep the file as it is for whoever investigates, and compare it with your backup copy (docs/security.md)"
+EVIDENCE = ("keep the file as it is for whoever investigates, and compare it with your backup copy "
+            "(docs/security.md)")
 #: What to do about a path that names no records.
 WHERE = "check the path; records are kept beside the plant file, in .prc3cfg/"
 NAME_ONE = f"{WHERE} — name a plant file, a .prc3cfg folder, a journal (.jsonl) or a snapshot (.json)"
@@ -82,14 +83,16 @@ class Checked:
 
     def snapshot_record(self, name: str | None = None) -> tuple[int, dict[str, Any]] | None:
         """The last `snapshot` record (naming `name`), with its line number."""
-        found = [(n, r) for n, r in enumerate(self.records, 1) if r.get("event") == "snapshot" and (name is None or r.get("path") == name)]
+        found = [(n, r) for n, r in enumerate(self.records, 1) if r.get("event") == "snapshot"
+                 and (name is None or r.get("path") == name)]
         return found[-1] if found else None
 
 
 def file_name(value: Any) -> str | None:
     """`value` when a record names a file beside it by it — a bare name, no folder, not `..` — else
     None: a record is data anyone may have edited, and prune removes what records name."""
-    if not isinstance(value, str) or value in ("", ".", "..") or "/" in value or "\\" in value or "\0" in value:
+    if (not isinstance(value, str) or value in ("", ".", "..") or "/" in value or "\\" in value
+        or "\0" in value):
         return None
     return value
 
@@ -98,7 +101,8 @@ def stamped(path: Path) -> datetime | None:
     """The time a record file's name begins with (`TIME-PLANT.jsonl`, `TIME-PLANT.json`): when prc3cfg
     chose the name. None when the name does not begin so."""
     try:
-        return datetime.strptime(path.name[:STAMP_LENGTH], STAMP_FORMAT).replace(tzinfo=UTC) if path.name[STAMP_LENGTH:][:1] == "-" else None
+        return (datetime.strptime(path.name[:STAMP_LENGTH], STAMP_FORMAT).replace(tzinfo=UTC)
+                if path.name[STAMP_LENGTH:][:1] == "-" else None)
     except ValueError:
         return None
 
@@ -119,7 +123,8 @@ def check_journal(path: Path) -> Checked:
     try:
         data = read_regular(path, JOURNAL_LIMIT)
     except FileProblem as problem:
-        return Checked(path, [], False, Mismatch(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
+        return Checked(path, [], False,
+                       Mismatch(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
     lines = data.split(b"\n")
     cut = bool(lines.pop())  # what follows the last newline: nothing, in a whole journal
     if not lines:
@@ -132,19 +137,22 @@ def check_journal(path: Path) -> Checked:
         except (ValueError, RecursionError):  # RecursionError: nested deeper than json's parser goes
             record = None
         if not isinstance(record, dict):
-            return Checked(path, records, True, Mismatch(f"{path}:{number}", "not a JSON record as prc3cfg writes it"))
+            return Checked(path, records, True,
+                           Mismatch(f"{path}:{number}", "not a JSON record as prc3cfg writes it"))
         records.append(record)
     if records[0].get("event") != "header":
         if not any("prev" in record for record in records):
             return Checked(path, records, False, None, line_hash(lines[-1]), cut)  # before headers
-        return Checked(path, records, True, Mismatch(f"{path}:1", "no header: a journal begins with who, where, what and why"))
+        return Checked(path, records, True,
+                       Mismatch(f"{path}:1", "no header: a journal begins with who, where, what and why"))
     if records[0].get("prev") is not None:
         return Checked(path, records, True, Mismatch(f"{path}:1", "a header that follows another record"))
     for number in range(1, len(lines)):
         if records[number].get("prev") != line_hash(lines[number - 1]):
             return Checked(path, records, True, Mismatch(
-                f"{path}:{number}", f"not the record the next one (line {number + 1}) was written after — this one edited, "
-                "or records removed or inserted here"))  # fmt: skip
+                f"{path}:{number}", f"not the record the next one (line {number + 1}) was written after — "
+                                    "this one edited, "
+                "or records removed or inserted here"))
     return Checked(path, records, True, None, line_hash(lines[-1]), cut)
 
 
@@ -169,9 +177,11 @@ def follow(plant_path: Path) -> dict[str, Any] | None:
         return None
     checked = check_journal(found[-1])
     if checked.problem is not None:
-        raise UserError(f"{checked.problem.said()} — the plant's newest journal does not verify, and this run's journal "
-                        f"would follow it: nothing was written; {EVIDENCE}, then move it (and its snapshot) out of "
-                        f"{found[-1].parent} and run again")  # fmt: skip
+        raise UserError(f"{checked.problem.said()} — the plant's newest journal does not verify, and this "
+                        "run's journal "
+                        f"would follow it: nothing was written; {EVIDENCE}, then move it (and its "
+                        "snapshot) out of "
+                        f"{found[-1].parent} and run again")
     return {"journal": found[-1].name, "lines": len(checked.records), "sha256": checked.last}
 
 
@@ -181,18 +191,24 @@ def snapshot_checked(path: Path, snapshot: Snapshot) -> str | None:
     if snapshot.header is None:
         for beside in of_plant(resolved(path).parent.parent / "journal", snapshot.plant_path.stem, ".jsonl"):
             with contextlib.suppress(FileProblem):
-                if f'"event": "snapshot", "path": {json.dumps(path.name)}'.encode() in read_regular(beside, JOURNAL_LIMIT):
-                    raise UserError(f"{path}: has no header, but {beside} records it as written with one — edited since; "
-                                    f"nothing was written; {EVIDENCE}")  # fmt: skip
+                if ('"event": "snapshot", "path": '
+                    f'{json.dumps(path.name)}').encode() in read_regular(beside, JOURNAL_LIMIT):
+                    raise UserError(f"{path}: has no header, but {beside} records it as written with one — "
+                                    "edited since; "
+                                    f"nothing was written; {EVIDENCE}")
         return f"{path}: written before records had headers — its integrity cannot be checked"
     name = file_name(snapshot.header.get("journal"))
     if name is None:
-        raise UserError(f"{path}: its header names no journal file — the snapshot cannot be checked, nothing was written; {EVIDENCE}")
-    candidates = [resolved(path).parent.parent / "journal" / name, records_dir(snapshot.plant_path, "journal") / name]
+        raise UserError(f"{path}: its header names no journal file — the snapshot cannot be checked, "
+                        f"nothing was written; {EVIDENCE}")
+    candidates = [resolved(path).parent.parent / "journal" / name,
+                  records_dir(snapshot.plant_path, "journal") / name]
     journal = next((c for c in candidates if c.is_file()), None)
     if journal is None:
-        raise UserError(f"{path}: its journal {name} is in neither {candidates[0].parent} nor {candidates[1].parent} — the "
-                        "snapshot cannot be checked, nothing was written: put the journal back from your backup")  # fmt: skip
+        raise UserError(f"{path}: its journal {name} is in neither {candidates[0].parent} nor "
+                        f"{candidates[1].parent} — the "
+                        "snapshot cannot be checked, nothing was written: put the journal back from "
+                        "your backup")
     problem = _snapshot_problem(check_journal(journal), path)
     if problem is not None:
         raise UserError(f"{problem.said()} — nothing was written; {EVIDENCE}")
@@ -209,20 +225,24 @@ def _snapshot_problem(checked: Checked, snapshot: Path) -> Mismatch | None:
         return Mismatch(str(snapshot), f"not recorded in its journal {checked.path}")
     line, record = found
     if snapshot.name[STAMP_LENGTH:] != checked.path.name[STAMP_LENGTH:].removesuffix(".jsonl") + ".json":
-        return Mismatch(f"{checked.path}:{line}", f"names {snapshot.name}, a snapshot of another plant file, as its own")
+        return Mismatch(f"{checked.path}:{line}",
+                        f"names {snapshot.name}, a snapshot of another plant file, as its own")
     try:
         data = read_regular(snapshot, JOURNAL_LIMIT)
     except FileProblem as problem:
         return Mismatch(str(snapshot), str(problem))
     if line_hash(data) != record.get("sha256"):
-        return Mismatch(str(snapshot), f"does not match its SHA-256 in {checked.path}:{line} — edited or replaced since it was written")
+        return Mismatch(str(snapshot),
+                        f"does not match its SHA-256 in {checked.path}:{line} — edited or replaced since it "
+                        "was written")
     try:
         header = json.loads(data).get("header")
     except (ValueError, RecursionError, AttributeError):
         return Mismatch(str(snapshot), "not a JSON document as prc3cfg writes a snapshot")
     if isinstance(header, dict) and header.get("journal") != checked.path.name:
-        return Mismatch(f"{checked.path}:{line}", f"names {snapshot.name} as its own, whose header names the journal "
-                                                  f"{header.get('journal')!r} — the snapshot of another run")  # fmt: skip
+        return Mismatch(f"{checked.path}:{line}",
+                        f"names {snapshot.name} as its own, whose header names the journal "
+                                                  f"{header.get('journal')!r} — the snapshot of another run")
     return None
 
 
@@ -232,19 +252,24 @@ def _header_problem(path: Path, journal: Checked) -> Mismatch | None:
     — the name is chosen first, the header written at the first record, the next record after it."""
     header, where = journal.header or {}, f"{path}:1"
     if header.get("journal") != path.name:
-        return Mismatch(where, f"its header names the journal {header.get('journal')!r}, not this file — renamed, or copied from another")
+        return Mismatch(where, f"its header names the journal {header.get('journal')!r}, not this file — "
+                               "renamed, or copied from another")
     if (named := stamped(path)) is None:
-        return Mismatch(str(path), f"its name does not begin with the time prc3cfg writes ({STAMP_FORMAT}-PLANT.jsonl) — renamed")
+        return Mismatch(str(path),
+                        f"its name does not begin with the time prc3cfg writes ({STAMP_FORMAT}-PLANT.jsonl) "
+                        "— renamed")
     if (said := _time(header.get("time"))) is None:
-        return Mismatch(where, f"its header's time {header.get('time')!r} is not an ISO 8601 time with its UTC offset, as prc3cfg "
-                               "writes it — edited")  # fmt: skip
+        return Mismatch(where, f"its header's time {header.get('time')!r} is not an ISO 8601 time with its "
+                               "UTC offset, as prc3cfg "
+                               "writes it — edited")
     if said < named - CLOCK_SLACK:
         return Mismatch(where, f"its header's time {said.isoformat()} is before the time in its file name "
-                               f"({named.isoformat()}), which was chosen first — edited, or the file renamed")  # fmt: skip
+                               f"({named.isoformat()}), which was chosen first — edited, or the file renamed")
     after = _time(journal.records[1].get("time")) if len(journal.records) > 1 else None
     if after is not None and said > after + CLOCK_SLACK:
-        return Mismatch(where, f"its header's time {said.isoformat()} is after the time of the record after it "
-                               f"({after.isoformat()}) — edited")  # fmt: skip
+        return Mismatch(where, f"its header's time {said.isoformat()} is after the time of the record "
+                               "after it "
+                               f"({after.isoformat()}) — edited")
     return None
 
 
@@ -264,9 +289,11 @@ class Verified:
 
     def summary(self) -> str:
         """What was checked, in one line."""
-        unchained = f"; {self.unchained} written before records had headers: not checked" if self.unchained else ""
+        unchained = (f"; {self.unchained} written before records had headers: not checked"
+                     if self.unchained else "")
         journals = f"{self.journals} journal{'s' if self.journals != 1 else ''}"
-        return f"{journals} and {self.snapshots} snapshot{'s' if self.snapshots != 1 else ''} checked{unchained}"
+        return (f"{journals} and {self.snapshots} snapshot{'s' if self.snapshots != 1 else ''} "
+                f"checked{unchained}")
 
 
 def check(paths: Iterable[Path]) -> Verified:
@@ -285,7 +312,8 @@ def check(paths: Iterable[Path]) -> Verified:
 
 
 def _wanted(paths: Iterable[Path], result: Verified) -> tuple[dict[Path, None], dict[Path, None]]:
-    """The journals and the snapshots `paths` name, each once, in order; a problem for a path that names no records."""
+    """The journals and the snapshots `paths` name, each once, in order; a problem for a path that names no
+    records."""
     wanted_journals: dict[Path, None] = {}
     wanted_snapshots: dict[Path, None] = {}
     for path in paths:
@@ -296,9 +324,11 @@ def _wanted(paths: Iterable[Path], result: Verified) -> tuple[dict[Path, None], 
             wanted_journals.update(dict.fromkeys(found))
             found += (snapshots := of_plant(records_dir(path, "snapshots"), path.stem, ".json"))
             wanted_snapshots.update(dict.fromkeys(snapshots))
-            none = "no such file" if not path.exists() else "no runs of it recorded in the .prc3cfg/ folder beside it"
+            none = ("no such file" if not path.exists()
+                    else "no runs of it recorded in the .prc3cfg/ folder beside it")
         elif folder is not None:
-            for kind, into, suffix in (("journal", wanted_journals, ".jsonl"), ("snapshots", wanted_snapshots, ".json")):
+            for kind, into, suffix in (("journal", wanted_journals, ".jsonl"),
+                                       ("snapshots", wanted_snapshots, ".json")):
                 with contextlib.suppress(OSError):
                     found += (these := sorted(p for p in (folder / kind).iterdir() if p.suffix == suffix))
                     into.update(dict.fromkeys(these))
@@ -308,7 +338,8 @@ def _wanted(paths: Iterable[Path], result: Verified) -> tuple[dict[Path, None], 
             (wanted_journals if path.suffix == ".jsonl" else wanted_snapshots)[path] = None
         else:
             found = []
-            none = "no such file" if not os.path.lexists(path) else "not a plant file, records folder, journal (.jsonl) or snapshot (.json)"
+            none = ("no such file" if not os.path.lexists(path)
+                    else "not a plant file, records folder, journal (.jsonl) or snapshot (.json)")
         if not found:
             result.problems.append(Mismatch(str(path), none, NAME_ONE))
     return wanted_journals, wanted_snapshots
@@ -320,8 +351,9 @@ def _check_chained(path: Path, result: Verified, done: set[Path]) -> Checked:
     journal = check_journal(path)
     result.journals += 1
     if journal.cut and journal.problem is None:
-        result.notes.append(f"{path}:{len(journal.records) + 1}: its last record was cut short — the disk refused it, or the "
-                            "run was killed as it wrote it — and is left out")  # fmt: skip
+        result.notes.append(f"{path}:{len(journal.records) + 1}: its last record was cut short — the disk "
+                            "refused it, or the "
+                            "run was killed as it wrote it — and is left out")
     if not journal.chained and journal.problem is None:
         result.unchained += 1
     problems, snapshot = journal_problems(path, journal, result.notes)
@@ -343,11 +375,14 @@ def journal_problems(path: Path, journal: Checked, notes: list[str]) -> tuple[li
     if (found := journal.snapshot_record()) is None:
         return problems, None
     if (name := file_name(found[1].get("path"))) is None:
-        return [*problems, Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in snapshots/)")], None
+        return [*problems,
+                Mismatch(f"{path}:{found[0]}", "names no snapshot file (a path, not a name in "
+                                               "snapshots/)")], None
     snapshot = resolved(path).parent.parent / "snapshots" / name
     if not os.path.lexists(snapshot):
         problems.append(Mismatch(f"{path}:{found[0]}", f"names the snapshot {snapshot}, which is not there — "
-                                                       "removed by hand (prune removes a run's journal and snapshot together)"))  # fmt: skip
+                                                       "removed by hand (prune removes a run's journal and "
+                                                       "snapshot together)"))
     elif (problem := _snapshot_problem(journal, snapshot)) is not None:
         problems.append(problem)
     return problems, snapshot
@@ -398,8 +433,11 @@ def _link_problem(path: Path, journal: Checked, notes: list[str]) -> Mismatch | 
         return Mismatch(f"{path}:1", "its link to the run before names no journal file")
     before = resolved(path).parent / name
     began, then = stamped(path), stamped(before)
-    if name == path.name or name[STAMP_LENGTH:] != path.name[STAMP_LENGTH:] or began is None or then is None or then > began + CLOCK_SLACK:
-        return Mismatch(f"{path}:1", f"its link to the run before names {name}, not an earlier journal of the same plant file — edited")
+    if (name == path.name or name[STAMP_LENGTH:] != path.name[STAMP_LENGTH:] or began is None
+        or then is None or then > began + CLOCK_SLACK):
+        return Mismatch(f"{path}:1",
+                        f"its link to the run before names {name}, not an earlier journal of the same plant "
+                        "file — edited")
     try:
         lines = read_regular(before, JOURNAL_LIMIT).split(b"\n")
     except FileProblem as problem:
@@ -408,6 +446,7 @@ def _link_problem(path: Path, journal: Checked, notes: list[str]) -> Mismatch | 
         notes.append(f"{path}:1: follows {before.name}, which is not there (pruned, or removed)")
         return None
     count = previous.get("lines")
-    if not isinstance(count, int) or not 0 < count <= len(lines) or line_hash(lines[count - 1]) != previous.get("sha256"):
+    if (not isinstance(count, int) or not 0 < count <= len(lines)
+        or line_hash(lines[count - 1]) != previous.get("sha256")):
         return Mismatch(f"{before}:{count}", f"not the record {path}:1 follows — edited since that run began")
     return None

@@ -1,12 +1,12 @@
 """An apply without a question between the plan and the writes, line by line: `ByLine`.
 
-Each line is read back, planned and written in its own thread as soon as its own plan is whole, while the other
-lines are still read (`prc3cfg.shell.planning.read_and_plan_lines`, `prc3cfg.shell.engine.Writing`). What the caller shows
-— each line's plan before its writes, the plant's once whole — the lines' threads give back to the caller's thread
-(`ByLine.run`, an iterator) and never call: the caller's loop shows it between the stages, and the lines go on.
-Per line the stages run in turn — read, plan (`read_and_plan_lines`), the gate's consent asked of the caller
-(`run` gives the line's plan, and is sent the `Consent` back), write and verify, record (`Writing.write`) — the
-lines at once, each in its own thread.
+Each line is read back, planned and written in its own thread as soon as its own plan is whole, while the
+other lines are still read (`prc3cfg.shell.planning.read_and_plan_lines`, `prc3cfg.shell.engine.Writing`).
+What the caller shows — each line's plan before its writes, the plant's once whole — the lines' threads give
+back to the caller's thread (`ByLine.run`, an iterator) and never call: the caller's loop shows it between the
+stages, and the lines go on. Per line the stages run in turn — read, plan (`read_and_plan_lines`), the gate's
+consent asked of the caller (`run` gives the line's plan, and is sent the `Consent` back), write and verify,
+record (`Writing.write`) — the lines at once, each in its own thread.
 
 Does not own the writes and the account (`prc3cfg.shell.engine`), nor what is read and shown (`prc3cfg.api`).
 """
@@ -35,15 +35,16 @@ from prc3cfg.shell.readback import LinesFailed
 
 @dataclass(frozen=True)
 class LinePlanned:
-    """A line's own plan, whole (`ByLine.run`): the line writes once the caller sends the gate's `Consent` back."""
+    """A line's own plan, whole (`ByLine.run`): the line writes once the caller sends the gate's `Consent`
+    back."""
 
     plan: PlantPlan
 
 
 @dataclass(frozen=True)
 class WholePlanned:
-    """The plant's plan (`ByLine.run`), from what was `read`: whole since `at` (`time.monotonic`), told once the last
-    line's first write is acknowledged — the writes go on while it is shown."""
+    """The plant's plan (`ByLine.run`), from what was `read`: whole since `at` (`time.monotonic`), told once
+    the last line's first write is acknowledged — the writes go on while it is shown."""
 
     plan: PlantPlan
     read: dict[Key, ModuleImage]
@@ -52,15 +53,16 @@ class WholePlanned:
 
 @dataclass
 class _Told:
-    """A line's plan told to `ByLine.run`'s caller: the line waits for `done`, and writes with the `consent` the
-    caller sent back — none: the caller stopped first."""
+    """A line's plan told to `ByLine.run`'s caller: the line waits for `done`, and writes with the `consent`
+    the caller sent back — none: the caller stopped first."""
 
     planned: LinePlanned
     done: threading.Event = field(default_factory=threading.Event)
     consent: Consent | None = None
 
 
-_WHOLE, _READ = "whole", "read"  # told by the lines' threads: the plant's plan is whole; every line read (and written)
+# told by the lines' threads: the plant's plan is whole; every line read (and written)
+_WHOLE, _READ = "whole", "read"
 
 
 class ByLine:
@@ -86,8 +88,8 @@ class ByLine:
         self._unread: tuple[str, ...] = ()
 
     def _line(self, read_back: ReadBack, line: LinePlan) -> None:
-        """A line's read-back is in and planned (`read_and_plan_lines`): its plan told and gated by the caller, then
-        written — a line with nothing to send needs no consent (it is only watched)."""
+        """A line's read-back is in and planned (`read_and_plan_lines`): its plan told and gated by the
+        caller, then written — a line with nothing to send needs no consent (it is only watched)."""
         bus, read = read_back.bus, read_back.images
         with self._lock:
             self.images.update(read)
@@ -107,7 +109,8 @@ class ByLine:
             if told.consent is None:  # the caller stopped before it gated the line: nothing is written on it
                 raise Interrupted()
             consent = told.consent
-        # the plant's plan told once the last line's first write is acknowledged: its rendering never holds that frame back
+        # the plant's plan told once the last line's first write is acknowledged: its rendering never holds
+        # that frame back
         self.writing.write(line, consent, started=self._whole if whole else None)
 
     def _whole(self) -> None:
@@ -121,7 +124,8 @@ class ByLine:
         """Every line read back, planned and written, from the lines' threads; then `_READ` told."""
         writing = self.writing
         try:
-            read_and_plan_lines(self._targets, writing.links, writing.held.on_record, by, self.planner, progress=writing.phases.read, then=self._line)
+            read_and_plan_lines(self._targets, writing.links, writing.held.on_record, by, self.planner,
+                                progress=writing.phases.read, then=self._line)
         finally:
             self._told.put(_READ)
 
@@ -131,10 +135,10 @@ class ByLine:
         return WholePlanned(self.planner.plan(read, done), read, at)
 
     def run(self) -> Generator[LinePlanned | WholePlanned, Consent | None, None]:
-        """Every line read back, planned and written, its threads at work while this gives back, in the caller's
-        thread, each line's plan — that line waits until the caller sends the gate's `Consent` back — and the plant's
-        plan once whole (nothing is sent back). A signal must wait its turn meanwhile (`LineOptions.deferred`, the
-        caller's)."""
+        """Every line read back, planned and written, its threads at work while this gives back, in the
+        caller's thread, each line's plan — that line waits until the caller sends the gate's `Consent` back —
+        and the plant's plan once whole (nothing is sent back). A signal must wait its turn meanwhile
+        (`LineOptions.deferred`, the caller's)."""
         writing = self.writing
         with ThreadPoolExecutor(max_workers=1, initializer=main_thread_only) as reader:
             writing.phases.reading(len(self._targets))
@@ -149,7 +153,8 @@ class ByLine:
                         finally:
                             told.done.set()
             finally:
-                with self._lock:  # a line that tells its plan now writes nothing, and none waits for the caller
+                # a line that tells its plan now writes nothing, and none waits for the caller
+                with self._lock:
                     self._closed = True
                 while not self._told.empty():
                     if isinstance(left := self._told.get_nowait(), _Told):
@@ -160,13 +165,15 @@ class ByLine:
                 if not writing.runs:
                     writing.keeping.stopped_reading()
                     raise
-                self._unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — nothing was written on it"
-                                     for bus in sorted(self._lines - set(self._planned)))  # fmt: skip
+                self._unread = tuple(f"bus {bus}: interrupted before its read-back and plan were whole — "
+                                     "nothing was written on it"
+                                     for bus in sorted(self._lines - set(self._planned)))
             except LinesFailed as error:
                 if not writing.runs:
                     writing.keeping.stopped_reading()
                     raise
-                self._unread = tuple(f"{said} — nothing was written on bus {bus}" for bus, said in error.failed.items())
+                self._unread = tuple(f"{said} — nothing was written on bus {bus}"
+                                     for bus, said in error.failed.items())
         if len(self._planned) == len(self._lines) and not self._whole_told:
             self._whole_told = True
             yield self._whole_plan()  # not yet, when no write of the last line was acknowledged
@@ -182,9 +189,10 @@ class ByLine:
         return writing.account(planned, unread=self._unread)
 
 
-def next_stage(stages: Generator[LinePlanned | WholePlanned, Consent | None, None], consent: Consent | None) -> LinePlanned | WholePlanned | None:
-    """What `ByLine.run` gives next, `consent` — the gate's for the line it gave last, else None — sent back; None
-    once it is through."""
+def next_stage(stages: Generator[LinePlanned | WholePlanned, Consent | None, None],
+               consent: Consent | None) -> LinePlanned | WholePlanned | None:
+    """What `ByLine.run` gives next, `consent` — the gate's for the line it gave last, else None — sent back;
+    None once it is through."""
     try:
         return stages.send(consent)
     except StopIteration:

@@ -11,12 +11,11 @@ after the exchange in flight with `Interrupted`. What else happens depends on th
 - elsewhere (loading, planning, rendering, prompts) the handler raises `Interrupted` at
   once, so a long plan or a question stops on the spot.
 
-`Interrupted` is a `UserError` (exit 130): the CLI prints its one line, `error: interrupted`.
-Before a command handles signals, and after, `exit_on_signal` (installed by the entry point
-before it imports anything else) ends the process with that line and exit 130 at once: a
-Ctrl-C while Python imports the command line is not a `KeyboardInterrupt` traceback, a SIGTERM
-not a death by signal. Owns the signal handling. Does not own what is said about the work that stopped (`apply`,
-the CLI).
+`Interrupted` is a `UserError` (exit 130): the CLI prints its one line, `error: interrupted`. Before a command
+handles signals, and after, `exit_on_signal` (installed by the entry point before it imports anything else)
+ends the process with that line and exit 130 at once: a Ctrl-C while Python imports the command line is not a
+`KeyboardInterrupt` traceback, a SIGTERM not a death by signal. Owns the signal handling. Does not own what is
+said about the work that stopped (`apply`, the CLI).
 """
 
 from __future__ import annotations

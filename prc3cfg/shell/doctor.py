@@ -130,7 +130,7 @@ class Diagnosis:
             return {}
         line = self.found.line
         keys: dict[str, object] = {"framing": self.found.framing, "baud": line.baud, "parity": line.parity,
-                                   "data_bits": line.data_bits, "stop_bits": line.stop_bits}  # fmt: skip
+                                   "data_bits": line.data_bits, "stop_bits": line.stop_bits}
         if self.found.framing == "open-driver":
             keys["zvz"] = self.zvz
         worst = [t.worst for t in self.modules if t.turnarounds]
@@ -187,7 +187,8 @@ def diagnose(
                         skipped += 1
                         continue
                 progress(candidate)
-                link = Link(port, get_framing(candidate.framing), bus=port_name, line=line, timeout=PROBE_ALLOWANCE, zvz=zvz, retries=0)
+                link = Link(port, get_framing(candidate.framing), bus=port_name, line=line,
+                            timeout=PROBE_ALLOWANCE, zvz=zvz, retries=0)
                 probes += len(wanted)
                 found = [address for address in wanted if _answers(link, address)]
                 if found:
@@ -197,7 +198,8 @@ def diagnose(
 
 
 def _answers(link: Link, address: int) -> bool:
-    """Whether a module at these settings answers at `address` (heard but garbled: nothing such a module would answer)."""
+    """Whether a module at these settings answers at `address` (heard but garbled: nothing such a module would
+    answer)."""
     heard = probe(link, address, link.timeout)
     return heard is not None and isinstance(heard.reply, codec.SystemReply)
 
@@ -207,7 +209,8 @@ def _measure(link: Link, candidate: LineCandidate, address: int, zvz: float, exc
     valid reply counts as damaged (bytes came back, or a frame was discarded) or lost (silence)."""
     counts = _Counts()
     link.observer = counts
-    line_time = LineCost.of(candidate.framing, candidate.line, 0.0, zvz).message_time(address, codec.ReadSystem())
+    line_time = LineCost.of(candidate.framing, candidate.line, 0.0,
+                            zvz).message_time(address, codec.ReadSystem())
     turnarounds, damaged, lost = [], 0, 0
     for _ in range(exchanges):
         discarded, before = link.discarded, len(counts.attempts)

@@ -1,10 +1,10 @@
 """The apply engine: an apply's writes, from the lines' threads, and what it keeps of them.
 
-`Keeping` is the journal and the records of axis releases (and E12), and stops every line when
-one of them cannot be kept; `Writing` runs the write stages of a line's or the whole plan's changes
-(`prc3cfg.core.stages.LinePlan`, with the gate's `Consent`) — `ready` (a 10h/20h to a module the consent does not
-name refused: `NotConsented`; the snapshot, the journal), `write_and_verify` (`execute`), `record` — and keeps the
-account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
+`Keeping` is the journal and the records of axis releases (and E12), and stops every line when one of them
+cannot be kept; `Writing` runs the write stages of a line's or the whole plan's changes
+(`prc3cfg.core.stages.LinePlan`, with the gate's `Consent`) — `ready` (a 10h/20h to a module the consent does
+not name refused: `NotConsented`; the snapshot, the journal), `write_and_verify` (`execute`), `record` — and
+keeps the account (`Written`). A line written as soon as its own plan is whole: `prc3cfg.shell.by_line`.
 
 Does not own what is read and planned, nor the questions asked before writing and what an apply's
 outcome means (`prc3cfg.api`), nor how a module is written and verified (`prc3cfg.shell.apply`).
@@ -55,15 +55,18 @@ class Written:
 
     @property
     def verified(self) -> bool:
-        """Every module the plan changes written and verified, and every record kept: nothing stopped short."""
-        return bool(self.runs) and all(run.verified for run in self.runs) and not (self.unread or self.trouble or self.interrupted)
+        """Every module the plan changes written and verified, and every record kept: nothing stopped
+        short."""
+        return bool(self.runs) and all(run.verified for run in self.runs) and not (self.unread
+                                                                                   or self.trouble
+                                                                                   or self.interrupted)
 
 
 @dataclass(frozen=True)
 class Sending:
-    """A plan's writes made ready (`Writing.ready`): the runs of its modules — each filled in as it is written and
-    verified — what their lines' records knew of them before (given back once verified, `Writing.record`), and the
-    modules whose axes a repair may release."""
+    """A plan's writes made ready (`Writing.ready`): the runs of its modules — each filled in as it is written
+    and verified — what their lines' records knew of them before (given back once verified, `Writing.record`),
+    and the modules whose axes a repair may release."""
 
     runs: tuple[ModuleRun, ...]
     known: dict[str, dict[int, Known]]
@@ -85,8 +88,9 @@ class Keeping:
     a frame keeps that frame back (`announce` raises `NotSent`); a journal that refused a record is
     written no more (a later record would follow a cut one), the others go on being kept."""
 
-    def __init__(self, plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]], journal: Journal,
-                 records: pending_records.Releases, stop: threading.Event) -> None:  # fmt: skip
+    def __init__(self, plant: Plant, buses: dict[str, Bus], keys: dict[str, tuple[str, ...]],
+                 journal: Journal,
+                 records: pending_records.Releases, stop: threading.Event) -> None:
         self.journal, self.records, self._keys, self._stop = journal, records, keys, stop
         self._names = {(bus.name, m.address): m.name for bus, m in plant.modules()}
         self._buses = buses
@@ -122,8 +126,9 @@ class Keeping:
             raise NotSent() from None
         if codec.MESSAGE_TYPES[exchange.request[0]].RELEASES_AXES:
             name = self._names.get((exchange.bus, exchange.address)) if exchange.address else \
-                ", ".join(m.name for m in self._buses[exchange.bus].modules)  # fmt: skip
-            self.record(self._keys[exchange.bus], exchange.bus, exchange.address, name or f"address {exchange.address}")
+                ", ".join(m.name for m in self._buses[exchange.bus].modules)
+            self.record(self._keys[exchange.bus], exchange.bus, exchange.address, name
+                        or f"address {exchange.address}")
             if self.trouble is not None:
                 raise NotSent()
 
@@ -143,19 +148,23 @@ class Keeping:
             except OSError as error:
                 self._journal_failed(error)
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = pending_records.RELEASE,
-               code: int | None = None) -> None:  # fmt: skip
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str,
+               kind: str = pending_records.RELEASE,
+               code: int | None = None) -> None:
         """`pending_records.Releases.record`, a failure kept as the apply's trouble."""
         try:
             self.records.record(keys, bus, address, name, kind, code)
         except (OSError, UserError) as error:
-            self.failed(RELEASE_RECORD if kind == pending_records.RELEASE else FAULT_RECORD, error, self.records.path)
+            self.failed(RELEASE_RECORD if kind == pending_records.RELEASE else FAULT_RECORD, error,
+                        self.records.path)
 
     def stopped_reading(self) -> None:
         """Where the disk refused the journal a read-back's record (that read stayed back, `announce`)
-        before any write began: that is what stopped the apply, not an interruption — a `UserError` saying so."""
+        before any write began: that is what stopped the apply, not an interruption — a `UserError` saying so.
+        """
         if self.trouble is not None:
-            raise UserError(f"{self.trouble} while the modules were read back — nothing was written to any module; "
+            raise UserError(f"{self.trouble} while the modules were read back — nothing was written to "
+                            "any module; "
                             "free the space (or fix the folder), then apply again") from None
 
     def close(self) -> None:
@@ -165,7 +174,8 @@ class Keeping:
 
 #: The records an apply keeps, as its account names one it could not keep.
 JOURNAL, SNAPSHOT, LINE_RECORD = "the journal", "the snapshot", "the line's record of what its modules hold"
-RELEASE_RECORD, FAULT_RECORD, APPLIED = ("the record of an axis release", "the record of a module in a fault state (E12, E21, …)",
+RELEASE_RECORD, FAULT_RECORD, APPLIED = ("the record of an axis release",
+                                         "the record of a module in a fault state (E12, E21, …)",
                                          "the copy of the plant file applied in full")
 
 
@@ -198,13 +208,14 @@ def _keep_faults(keeping: Keeping, keys: dict[str, tuple[str, ...]], runs: Seque
 
 class Writing:
     """An apply's writes, a line or the whole plan at a time, from any line's thread (`write`: its stages in
-    turn): the runs of the modules a plan changes, the snapshot of those modules saved before the first write on
-    their line — added to the apply's one snapshot file, written whole and atomically each time —
-    and journalled (`ready`), then written and verified (`write_and_verify`) and recorded (`record`); then the
+    turn): the runs of the modules a plan changes, the snapshot of those modules saved before the first write
+    on their line — added to the apply's one snapshot file, written whole and atomically each time — and
+    journalled (`ready`), then written and verified (`write_and_verify`) and recorded (`record`); then the
     account of every run."""
 
-    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], held: Lines, keeping: Keeping,
-                 verify: Verify, options: LineOptions, command: str) -> None:  # fmt: skip
+    def __init__(self, plant: Plant, keys: dict[str, tuple[str, ...]], buses: dict[str, Bus], held: Lines,
+                 keeping: Keeping,
+                 verify: Verify, options: LineOptions, command: str) -> None:
         self.plant, self.keys, self.buses, self.keeping = plant, keys, buses, keeping
         self.held, self.links, self.records = held, held.links, held.on_record.records
         self.journal = keeping.journal
@@ -221,9 +232,10 @@ class Writing:
         self._costs = {name: line_cost(bus) for name, bus in buses.items()}
 
     def _runs(self, changes: Iterable[ModuleChange]) -> list[ModuleRun]:
-        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted, c.broadcasts, c.bus in self._exposed,
+        return [ModuleRun(c.bus, c.address, c.name, c.actual, c.desired, c.steps, c.plan.predicted,
+                          c.broadcasts, c.bus in self._exposed,
                           frozenset(c.assumed))
-                for c in changes if c.steps or c.bus in self._exposed or c.assumed]  # fmt: skip
+                for c in changes if c.steps or c.bus in self._exposed or c.assumed]
 
     def whole(self, the_plan: PlantPlan, at: float | None = None) -> None:
         """The plant's plan is whole (and shown) — since `at`, if not now: the writing phase, and the
@@ -239,9 +251,9 @@ class Writing:
             self.options.progress.note(f"Snapshot of the modules before writing: {self.snapshot}")
 
     def write(self, line: LinePlan, consent: Consent, started: Callable[[], None] | None = None) -> None:
-        """The write stages of a line's plan — or the whole plan's — in turn: `ready`, `write_and_verify`, `record`
-        (also when writing and verifying ended early: what verified is known). `started()` at each write
-        acknowledged, or at once with none to make."""
+        """The write stages of a line's plan — or the whole plan's — in turn: `ready`, `write_and_verify`,
+        `record` (also when writing and verifying ended early: what verified is known). `started()` at each
+        write acknowledged, or at once with none to make."""
         started = started or _nothing
         sending = self.ready(line, consent)
         if sending is None:
@@ -253,14 +265,15 @@ class Writing:
             self.record(sending)
 
     def ready(self, line: LinePlan, consent: Consent) -> Sending | None:
-        """The runs of the changes, once their modules are in the snapshot and the journal — or None: nothing to
-        send, or the writes stay back (a record could not be kept, each run says "nothing was sent to it").
+        """The runs of the changes, once their modules are in the snapshot and the journal — or None: nothing
+        to send, or the writes stay back (a record could not be kept, each run says "nothing was sent to it").
         `consent`: the modules whose axes the operator agreed to release (with the plan shown, or up front): a
         change that releases another's is refused, before anything — `NotConsented`."""
-        if refused := [c for c in line.changes if c.releases_axes and (c.bus, c.address) not in consent.releases]:
+        if refused := [c for c in line.changes if c.releases_axes
+                       and (c.bus, c.address) not in consent.releases]:
             raise NotConsented(f"{', '.join(f'bus {c.bus}, module {c.address} ({c.name})' for c in refused)}: the plan releases the "
                                "axes (10h/20h), and no consent to that was given with it — nothing was sent to any module: review "
-                               "the plan, and allow the release (--allow-axis-release)")  # fmt: skip
+                               "the plan, and allow the release (--allow-axis-release)")
         runs = self._runs(line.changes)
         if not runs:
             return None
@@ -273,19 +286,22 @@ class Writing:
         return Sending(tuple(runs), known, line.releasing)  # each in `consent`: refused above else
 
     def write_and_verify(self, sending: Sending, started: Callable[[], None]) -> None:
-        """The runs written and verified (`execute`), their outcomes left in them; a repair may release only the
-        axes a change of the plan releases. One stage, not a write and then a verify: on a line every module is
-        written before any is verified (a module's verification sees what a damaged frame meant for another did to
-        it), and a verification that finds a difference writes again (a repair round) and verifies again."""
+        """The runs written and verified (`execute`), their outcomes left in them; a repair may release only
+        the axes a change of the plan releases. One stage, not a write and then a verify: on a line every
+        module is written before any is verified (a module's verification sees what a damaged frame meant for
+        another did to it), and a verification that finds a difference writes again (a repair round) and
+        verifies again."""
 
         def wrote() -> None:
             self.phases.wrote()
             started()
 
-        execute(list(sending.runs), self.links, self._costs, tick=wrote, written=self.phases.line_written, verified=self.phases.verified,
-                consented=sending.consented, verify=self.verify)  # fmt: skip
+        execute(list(sending.runs), self.links, self._costs, tick=wrote, written=self.phases.line_written,
+                verified=self.phases.verified,
+                consented=sending.consented, verify=self.verify)
 
-    def _before_writing(self, runs: list[ModuleRun], images: Mapping[Key, ModuleImage]) -> dict[str, dict[int, Known]]:
+    def _before_writing(self, runs: list[ModuleRun],
+                        images: Mapping[Key, ModuleImage]) -> dict[str, dict[int, Known]]:
         """The runs' modules dropped from their lines' records — not known until verified; what was
         known is given back, for then — and added to the snapshot, journalled. When either cannot be
         kept, that is the apply's trouble (`Keeping.failed`): these writes stay back, as do every
@@ -301,25 +317,29 @@ class Writing:
                 return known
             try:
                 self.snapshot, written = self._snapshot_with(runs, images)
-            except OSError as error:  # the snapshot on disk, if any, holds the modules of the lines written before
+            # the snapshot on disk, if any, holds the modules of the lines written before
+            except OSError as error:
                 self.keeping.failed(SNAPSHOT, error, self._taken.path if self._taken is not None else None)
                 return known
             # under the lock: the last snapshot record is the file's
             self.keeping.note("snapshot", path=self.snapshot.name, sha256=written)
             if self._whole:
                 self._tell_snapshot(len(self._taken.images) if self._taken is not None else 0)
-        self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256, snapshot=str(self.snapshot),
-                          modules=[f"{r.bus}/{r.address}" for r in runs])  # fmt: skip
+        self.keeping.note("apply", plant=self.plant.name, plant_sha256=self.plant.sha256,
+                          snapshot=str(self.snapshot),
+                          modules=[f"{r.bus}/{r.address}" for r in runs])
         return known
 
     def _snapshot_with(self, runs: list[ModuleRun], images: Mapping[Key, ModuleImage]) -> tuple[Path, str]:
-        """The apply's one snapshot, with the runs' modules as read before writing, saved whole: its path and digest.
-        A factory-fresh module's programs planned as the factory's (`ModuleRun.assumed`) hold the factory's there:
-        not read, what a restore puts back — the undo of a commissioning."""
+        """The apply's one snapshot, with the runs' modules as read before writing, saved whole: its path and
+        digest. A factory-fresh module's programs planned as the factory's (`ModuleRun.assumed`) hold the
+        factory's there: not read, what a restore puts back — the undo of a commissioning."""
         if self._taken is None:
-            taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name]) for name, bus in self.buses.items()}
+            taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name])
+                        for name, bus in self.buses.items()}
             self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
-        self._taken.images.update({(r.bus, r.address): what_to_read.from_factory(images[(r.bus, r.address)], r.assumed) for r in runs})
+        self._taken.images.update({(r.bus, r.address): what_to_read.from_factory(images[(r.bus, r.address)],
+                                                                                 r.assumed) for r in runs})
         return self._taken.saved()
 
     def record(self, sending: Sending) -> None:
@@ -329,20 +349,25 @@ class Writing:
         for bus, held in sending.known.items():
             done = {r.address: r for r in sending.runs if r.bus == bus and r.verified}
             try:
-                self.records[bus].update({a: what_to_read.verified(held.get(a), _holds(run), when, by) for a, run in done.items()})
-            except UserError as error:  # they stay unknown (forgotten before the writes): the next plan reads them in full
+                self.records[bus].update({a: what_to_read.verified(held.get(a), _holds(run), when, by)
+                                          for a, run in done.items()})
+            # they stay unknown (forgotten before the writes): the next plan reads them in full
+            except UserError as error:
                 self.keeping.failed(LINE_RECORD, error)
 
-    def account(self, the_plan: PlantPlan, took: dict[str, float] | None = None, unread: tuple[str, ...] = ()) -> Written:
-        """What the writes came to, every module's outcome in the plan's order — recorded (E12 kept for the next
-        plan, cleared once verified) and journalled, with the travel to the reference point and, when
-        a signal stopped the lines, that it did."""
+    def account(self, the_plan: PlantPlan, took: dict[str, float] | None = None,
+                unread: tuple[str, ...] = ()) -> Written:
+        """What the writes came to, every module's outcome in the plan's order — recorded (E12 kept for the
+        next plan, cleared once verified) and journalled, with the travel to the reference point and, when a
+        signal stopped the lines, that it did."""
         order = {(c.bus, c.address): index for index, c in enumerate(the_plan.modules)}
         keys, keeping = self.keys, self.keeping
         stopped = None if keeping.trouble is None else "a record could not be kept"
-        runs = tuple(run.outcome(stopped) for run in sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
+        runs = tuple(run.outcome(stopped)
+                     for run in sorted(self.runs, key=lambda run: order[(run.bus, run.address)]))
         for record in self.records.values():  # what a line left as it was read: kept here, where a failure is
-            try:  # the account's trouble (`RecordsFailed`, every run said), not an error after it that hides it
+            # the account's trouble (`RecordsFailed`, every run said), not an error after it that hides it
+            try:
                 record.write()
             except UserError as error:
                 keeping.failed(LINE_RECORD, error)
@@ -352,13 +377,15 @@ class Writing:
                 "result", bus=run.bus, address=run.address, verified=run.verified, failure=run.failure,
                 released_axes=run.released.value, written=[s.message.hex() for s in run.written],
                 interrupted=run.interrupted,
-            )  # fmt: skip
+            )
         if released := to_travel(runs):
             keeping.note("travel_to_reference_point", modules=[f"{r.bus}/{r.address}" for r in released])
-        interrupted = keeping.trouble is None and self.options.cancel is not None and self.options.cancel.requested
+        interrupted = (keeping.trouble is None and self.options.cancel is not None
+                       and self.options.cancel.requested)
         if interrupted:
             keeping.note("interrupted")
-        return Written(the_plan, runs, self.snapshot, (took or {}) | self.phases.took(), unread, keeping.trouble, interrupted,
+        return Written(the_plan, runs, self.snapshot, (took or {}) | self.phases.took(), unread,
+                       keeping.trouble, interrupted,
                        tuple(keeping.lost))
 
 
@@ -367,6 +394,8 @@ def _nothing() -> None:
 
 
 def _holds(run: ModuleRun) -> ModuleImage:
-    """What a verified module holds: its last read-back, and the device model's prediction where that read nothing."""
+    """What a verified module holds: its last read-back, and the device model's prediction where that read
+    nothing."""
     final = run.final or run.predicted
-    return replace(final, programs=tuple(f if f is not None else p for f, p in zip(final.programs, run.predicted.programs)))
+    return replace(final, programs=tuple(f if f is not None else p
+                                         for f, p in zip(final.programs, run.predicted.programs)))

@@ -60,7 +60,7 @@ MAX_DIGITS = 4300
 NOT_FILES = {
     stat.S_IFIFO: "a named pipe (FIFO)", stat.S_IFCHR: "a device", stat.S_IFBLK: "a device",
     stat.S_IFSOCK: "a socket",
-}  # fmt: skip
+}
 
 
 class Why(enum.Enum):
@@ -100,9 +100,10 @@ def read_regular(path: Path, limit: int) -> bytes:
 
 
 def read_owned(path: Path, limit: int) -> tuple[bytes, int]:
-    """The bytes of the regular file `path` — not a link, opened without blocking (`platform.open_unfollowed`),
-    at most `limit` — and its owner's uid as the open file says (Windows: 0): what another user may have
-    put in a folder all users share is read so, and its owner judged on the very file read."""
+    """The bytes of the regular file `path` — not a link, opened without blocking
+    (`platform.open_unfollowed`), at most `limit` — and its owner's uid as the open file says (Windows: 0):
+    what another user may have put in a folder all users share is read so, and its owner judged on the very
+    file read."""
     try:
         return _bounded(platform.open_unfollowed(path), limit)
     except FileNotFoundError:
@@ -116,7 +117,8 @@ def read_owned(path: Path, limit: int) -> tuple[bytes, int]:
 
 
 def _bounded(fd: int, limit: int) -> tuple[bytes, int]:
-    """At most `limit` bytes of the regular file open in `fd` (closed after), and its owner; `FileProblem` for more, or for no regular file."""
+    """At most `limit` bytes of the regular file open in `fd` (closed after), and its owner; `FileProblem` for
+    more, or for no regular file."""
     with open(fd, "rb") as file:
         status = os.fstat(file.fileno())
         _regular(status.st_mode)  # checked on the file opened: it may have changed since any look by name
@@ -139,25 +141,32 @@ def read_json(path: Path, limit: int = JSON_LIMIT) -> Any:
 def parse_json(data: bytes) -> Any:
     """The JSON document `data` holds, within the bounds above; `FileProblem` otherwise."""
     if data.count(b"{") + data.count(b"[") > MAX_CONTAINERS:
-        raise FileProblem(Why.TOO_LARGE, f"more than {MAX_CONTAINERS:,} objects and lists (counting '{{' and '['), "
-                                         "more than any file prc3cfg writes holds")  # fmt: skip
+        raise FileProblem(Why.TOO_LARGE,
+                          f"more than {MAX_CONTAINERS:,} objects and lists (counting '{{' and '['), "
+                                         "more than any file prc3cfg writes holds")
     if data.count(b",") >= MAX_VALUES:
-        raise FileProblem(Why.TOO_LARGE, f"more than {MAX_VALUES:,} values (counting ','), more than any file prc3cfg writes holds")
+        raise FileProblem(Why.TOO_LARGE,
+                          f"more than {MAX_VALUES:,} values (counting ','), more than any file prc3cfg "
+                          "writes holds")
     # int() refuses as many digits itself where Python's limit is MAX_DIGITS or lower: the hook, a call an
     # integer (110,000 in the images of 8 × 30 modules: 17 ms), is needed only where the environment lifts it
     parse_int = None if 0 < sys.get_int_max_str_digits() <= MAX_DIGITS else _integer
     try:
         return json.loads(data, parse_int=parse_int, object_pairs_hook=_object)
     except _KeyTwice as twice:
-        raise FileProblem(Why.NOT_JSON, f"the key {json.dumps(twice.key)} is given twice in one object") from None
+        raise FileProblem(Why.NOT_JSON,
+                          f"the key {json.dumps(twice.key)} is given twice in one object") from None
     except json.JSONDecodeError as error:
-        raise FileProblem(Why.NOT_JSON, f"not valid JSON ({error.msg})", (error.lineno, error.colno)) from None
+        raise FileProblem(Why.NOT_JSON, f"not valid JSON ({error.msg})",
+                          (error.lineno, error.colno)) from None
     except UnicodeDecodeError:
         raise FileProblem(Why.NOT_JSON, "not UTF-8 text") from None
     except RecursionError:
         raise FileProblem(Why.NOT_JSON, "nested too deeply for any file prc3cfg writes") from None
     except ValueError:  # the only other ValueError: an integer longer than `_integer` converts
-        raise FileProblem(Why.NOT_JSON, f"a number of more than {MAX_DIGITS} digits, which no file prc3cfg writes holds") from None
+        raise FileProblem(Why.NOT_JSON,
+                          f"a number of more than {MAX_DIGITS} digits, which no file prc3cfg "
+                          "writes holds") from None
 
 
 class _KeyTwice(Exception):
@@ -187,7 +196,8 @@ def _regular(mode: int) -> None:
     if stat.S_ISDIR(mode):
         raise FileProblem(Why.DIRECTORY, "is a directory")
     if not stat.S_ISREG(mode):
-        raise FileProblem(Why.NOT_A_FILE, f"is {NOT_FILES.get(stat.S_IFMT(mode), 'not a regular file')}, not a file")
+        raise FileProblem(Why.NOT_A_FILE,
+                          f"is {NOT_FILES.get(stat.S_IFMT(mode), 'not a regular file')}, not a file")
 
 
 def _size(limit: int) -> str:
@@ -213,11 +223,11 @@ def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
     """Replace `path` with `text` atomically, as `write_atomically` does, keeping its permissions, unless
     `path` no longer holds `expected`: then False, and `path` is as the other writer left it.
 
-    Checked as late as can be: once `text` is on disk, the file is linked to a second name and
-    compared, then the new file renamed over it, then the file it replaced compared once more through
-    that name — a save in place that came between the two puts that file back. What this cannot see
-    (docs/commands.md, adopt): a save that renames its own file into place between the first comparison and the
-    rename, and one that keeps writing into the file it opened before the rename after the second.
+    Checked as late as can be: once `text` is on disk, the file is linked to a second name and compared, then
+    the new file renamed over it, then the file it replaced compared once more through that name — a save in
+    place that came between the two puts that file back. What this cannot see (docs/commands.md, adopt): a
+    save that renames its own file into place between the first comparison and the rename, and one that keeps
+    writing into the file it opened before the rename after the second.
     """
     tmp = _written_beside(path, text, stat.S_IMODE(os.stat(path).st_mode))
     assert tmp is not None  # not `new`: always a name to rename
@@ -232,7 +242,8 @@ def replace_unless_changed(path: Path, text: str, expected: bytes) -> bool:
         same = os.stat(path).st_ino == os.stat(seen).st_ino and seen.read_bytes() == expected
         if same:
             os.replace(tmp, path)
-            if linked and was.read_bytes() != expected:  # written into in place around the rename: it goes back
+            # written into in place around the rename: it goes back
+            if linked and was.read_bytes() != expected:
                 os.replace(was, path)
                 same = False
     finally:
@@ -288,7 +299,8 @@ def _linked(unnamed: str, folder: int, path: Path, new: bool) -> Path | None:
 
 
 def _named_beside(path: Path, text: str, mode: int | None) -> Path:
-    """`_written_beside` where there are no unnamed files: a named temporary file, removed if writing fails."""
+    """`_written_beside` where there are no unnamed files: a named temporary file, removed if writing
+    fails."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with platform.open_text(fd) as handle:

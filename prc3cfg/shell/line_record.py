@@ -90,8 +90,9 @@ def _own_file(directory: Path, key: str) -> Path:
     for path in _names(directory, key):
         if not os.path.lexists(path) or platform.own_file(path):
             return path
-    raise UserError(f"{directory / KIND}: every name this user may keep the record of line {shown(key)} under holds another "
-                    "user's file — remove them, or set PRC3CFG_STATE_DIR to a folder this user can write")  # fmt: skip
+    raise UserError(f"{directory / KIND}: every name this user may keep the record of line {shown(key)} "
+                    "under holds another "
+                    "user's file — remove them, or set PRC3CFG_STATE_DIR to a folder this user can write")
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,14 +107,16 @@ def _parsed(key: str, data: bytes) -> dict[str, _Entry]:
     """The entries of a record file of line `key` by address: `FileProblem` where it is not one — not
     JSON, not a line record, another line's — and an entry whose address or time is no such is left out."""
     document = parse_json(data)
-    if not isinstance(document, dict) or document.get("format") != FORMAT or not isinstance(document.get("modules"), dict):
+    if (not isinstance(document, dict) or document.get("format") != FORMAT
+        or not isinstance(document.get("modules"), dict)):
         raise FileProblem(Why.NOT_JSON, "not a line record prc3cfg wrote")
     if document.get("key") != key:
         raise FileProblem(Why.NOT_JSON, "the record of another line (its key is not this line's)")
     entries = {}
     for address, entry in document["modules"].items():
         with contextlib.suppress(TypeError, ValueError):
-            if isinstance(entry, dict) and address.isdigit() and 1 <= int(address) <= 30 and (at := datetime.fromisoformat(entry["at"])).tzinfo:
+            if (isinstance(entry, dict) and address.isdigit() and 1 <= int(address) <= 30
+                and (at := datetime.fromisoformat(entry["at"])).tzinfo):
                 entries[str(int(address))] = _Entry(at, entry)
     return entries
 
@@ -157,13 +160,16 @@ class LineRecord:
                 self._problems.append((path, problem))
                 continue
             self._files.append((path, entries, owner))
-        self._changed: dict[str, dict] = {}  # this command's entries, by address (an entry without an image: not known)
+        # this command's entries, by address (an entry without an image: not known)
+        self._changed: dict[str, dict] = {}
         self._waiting: set[str] = set()  # those not written yet
 
     def passed_over(self) -> list[str]:
-        """One line for each file among the line's records that is not one: what it is, and that it was passed over."""
-        return [f"{shown(str(path))}: {problem}{_of_whom(path)} — passed over as no record of the line (its modules are read in "
-                "full); remove it" for path, problem in self._problems if problem.why is not Why.MISSING]  # fmt: skip
+        """One line for each file among the line's records that is not one: what it is, and that it was passed
+        over."""
+        return [f"{shown(str(path))}: {problem}{_of_whom(path)} — passed over as no record of the line (its "
+                "modules are read in "
+                "full); remove it" for path, problem in self._problems if problem.why is not Why.MISSING]
 
     def known(self) -> dict[int, Known]:
         """What the record says of each module it knows (`read`)."""
@@ -178,8 +184,9 @@ class LineRecord:
         for address, (entry, owner) in claimed.items():
             if address not in trusted or entry.at > trusted[address].at:
                 by = entry.fields.get("by")
-                overruled[int(address)] = (f"another user's record is newer (it claims: {shown(by) if isinstance(by, str) else 'a command'}, "
-                                           f"{entry.at.isoformat()}; written by {platform.uid_name(owner)})")  # fmt: skip
+                overruled[int(address)] = ("another user's record is newer (it claims: "
+                                           f"{shown(by) if isinstance(by, str) else 'a command'}, "
+                                           f"{entry.at.isoformat()}; written by {platform.uid_name(owner)})")
         for address, entry in trusted.items():
             if int(address) not in overruled and (k := _known(entry.fields)) is not None:
                 known[int(address)] = k
@@ -206,8 +213,12 @@ class LineRecord:
         """Set these modules' entries (None: the module is no longer known), to be written by `write`."""
         at = now()
         for address, k in changes.items():
-            self._changed[str(address)] = {"at": at} | ({} if k is None else {"since": k.since, "by": k.by, "image": k.image.to_json()}
-                                          | ({"read_at": {str(n): when for n, when in sorted(k.read_at.items())}} if k.read_at else {}))  # fmt: skip
+            self._changed[str(address)] = {"at": at} | ({} if k is None
+                                                        else {"since": k.since, "by": k.by,
+                                                              "image": k.image.to_json()}
+                                          | ({"read_at": {str(n): when
+                                                          for n, when in sorted(k.read_at.items())}}
+                                             if k.read_at else {}))
             self._waiting.add(str(address))
 
     def update(self, changes: Mapping[int, Known | None]) -> None:
@@ -216,7 +227,8 @@ class LineRecord:
         self.write()
 
     def forget(self, addresses: Iterable[int]) -> None:
-        """These modules are about to be written: not known until they verify (durably, before the first frame)."""
+        """These modules are about to be written: not known until they verify (durably, before the first
+        frame)."""
         self.update(dict.fromkeys(addresses))
 
     def write(self) -> None:
@@ -224,27 +236,32 @@ class LineRecord:
         folder it writes (`machine_folder.folder`), with what that file held; `UserError` when it cannot."""
         if not self._waiting:
             return
-        directory = folder(KIND, WHAT).parent  # the machine's, once an administrator made it; else this user's
+        # the machine's, once an administrator made it; else this user's
+        directory = folder(KIND, WHAT).parent
         held = {path: entries for path, entries, _ in self._files}
         try:
             for key in self.keys:
                 path = _own_file(directory, key)
                 kept = {address: entry.fields for address, entry in held.get(path, {}).items()}
                 modules = dict(sorted((kept | self._changed).items(), key=lambda entry: int(entry[0])))
-                write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}), platform.SHARED_READ)
+                write_atomically(path, json.dumps({"format": FORMAT, "key": key, "modules": modules}),
+                                 platform.SHARED_READ)
         except OSError as error:
-            raise UserError(f"cannot keep {WHAT} ({error.filename or directory}: {error.strerror}) — set PRC3CFG_STATE_DIR to a "
-                            "folder this user can write") from None  # fmt: skip
+            raise UserError(f"cannot keep {WHAT} ({error.filename or directory}: {error.strerror}) — set "
+                            "PRC3CFG_STATE_DIR to a "
+                            "folder this user can write") from None
         self._waiting.clear()
 
 
 def _known(fields: dict) -> Known | None:
     """What an entry says a module holds; None where it says nothing this prc3cfg can read."""
     try:
-        if fields.get("image") is not None and isinstance(fields.get("since"), str) and isinstance(fields.get("by"), str):
+        if (fields.get("image") is not None and isinstance(fields.get("since"), str)
+            and isinstance(fields.get("by"), str)):
             if datetime.fromisoformat(fields["since"]).tzinfo is None:
                 return None  # a time without its zone (another tool's): its age cannot be told
-            return Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"], _read_at(fields))
+            return Known(ModuleImage.from_json(fields["image"]), fields["since"], fields["by"],
+                         _read_at(fields))
     except (TypeError, ValueError, KeyError, AttributeError):
         pass  # an entry this prc3cfg cannot read: the module is not known
     return None
@@ -257,7 +274,8 @@ def _read_at(fields: dict) -> dict[int, str]:
     read_at = {}
     for number, when in (said.items() if isinstance(said, dict) else ()):
         with contextlib.suppress(TypeError, ValueError):
-            if number.isdigit() and 1 <= int(number) <= 64 and (at := datetime.fromisoformat(when)).tzinfo and at > since:
+            if (number.isdigit() and 1 <= int(number) <= 64
+                and (at := datetime.fromisoformat(when)).tzinfo and at > since):
                 read_at[int(number)] = when
     return read_at
 
@@ -280,17 +298,21 @@ def settle(keys: Iterable[str]) -> list[str]:
         aside = path.with_name(f"{path.name}.planted-{datetime.now(UTC):%Y%m%dT%H%M%S.%fZ}")
         try:
             os.rename(path, aside)
-            said.append(f"{shown(str(path))} was not this user's record of the line ({what}) — moved aside to {shown(aside.name)}; "
-                        "the record is written afresh")  # fmt: skip
+            said.append(f"{shown(str(path))} was not this user's record of the line ({what}) — moved aside "
+                        f"to {shown(aside.name)}; "
+                        "the record is written afresh")
         except OSError as error:
             with contextlib.suppress(UserError):
-                said.append(f"{shown(str(path))} is not this user's record of the line ({what}) and cannot be moved aside "
-                            f"({error.strerror}) — this user's record is kept in {shown(_own_file(directory, key).name)} instead")  # fmt: skip
+                said.append(f"{shown(str(path))} is not this user's record of the line ({what}) and cannot "
+                            "be moved aside "
+                            f"({error.strerror}) — this user's record is kept in "
+                            f"{shown(_own_file(directory, key).name)} instead")
     return said
 
 
 def _what(path: Path) -> str:
-    """What stands at `path`: "a symbolic link", "a folder", "a named pipe (FIFO)", "a file of alice (uid 1001)"."""
+    """What stands at `path`: "a symbolic link", "a folder", "a named pipe (FIFO)", "a file of alice (uid
+    1001)"."""
     status = path.lstat()
     if stat.S_ISLNK(status.st_mode):
         return "a symbolic link"

@@ -185,11 +185,13 @@ def _make_lock_dir(description: str) -> Path:
     except FileExistsError:
         pass
     except OSError as error:
-        raise UserError(f"{description}: cannot make the lock directory {directory} ({error.strerror}) — set PRC3CFG_LOCK_DIR") from None
+        raise UserError(f"{description}: cannot make the lock directory {directory} ({error.strerror}) — "
+                        "set PRC3CFG_LOCK_DIR") from None
     try:
         status = os.lstat(directory)
     except OSError as error:
-        raise UserError(f"{description}: cannot read the lock directory {directory} ({error.strerror}) — set PRC3CFG_LOCK_DIR") from None
+        raise UserError(f"{description}: cannot read the lock directory {directory} ({error.strerror}) — "
+                        "set PRC3CFG_LOCK_DIR") from None
     if stat.S_ISLNK(status.st_mode):
         raise UserError(f"{description}: the lock directory {directory} is a symbolic link, not used — "
                         "an administrator removes it, or set PRC3CFG_LOCK_DIR")
@@ -197,8 +199,10 @@ def _make_lock_dir(description: str) -> Path:
         raise UserError(f"{description}: the lock directory {directory} is no directory — "
                         "an administrator removes it, or set PRC3CFG_LOCK_DIR")
     if not platform.trusted_owner(status.st_uid):
-        raise UserError(f"{description}: the lock directory {directory} belongs to {platform.uid_name(status.st_uid)}, "
-                        "who could remove the locks in it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")
+        raise UserError(f"{description}: the lock directory {directory} belongs to "
+                        f"{platform.uid_name(status.st_uid)}, "
+                        "who could remove the locks in it, so it is not used — an administrator removes it, "
+                        "or set PRC3CFG_LOCK_DIR")
     return directory
 
 
@@ -231,8 +235,10 @@ def _open(path: Path, description: str) -> tuple[int, bool]:
                         "an administrator removes it, or set PRC3CFG_LOCK_DIR")
     if platform.OWNERS and status.st_uid != platform.user_id():
         os.close(fd)
-        raise UserError(f"{description}: the line lock {path} belongs to {platform.uid_name(status.st_uid)}, who could remove it "
-                        "while this process holds it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")
+        raise UserError(f"{description}: the line lock {path} belongs to "
+                        f"{platform.uid_name(status.st_uid)}, who could remove it "
+                        "while this process holds it, so it is not used — an administrator removes it, or "
+                        "set PRC3CFG_LOCK_DIR")
     return fd, writable
 
 
@@ -242,7 +248,8 @@ def _others_holder(path: Path) -> str | None:
     only looked at — its owner may remove it whoever holds it — and one this user may not read
     counts as held. Two users taking the line at one instant each hold their own and see the
     other's: the lower uid waits up to `RACE_WAIT` s for the other to let go, the higher lets go at
-    once, so one of them takes the line. Windows: every user locks one file (`lock_path`), there is no other."""
+    once, so one of them takes the line. Windows: every user locks one file (`lock_path`), there is no other.
+    """
     if not platform.OWNERS:
         return None
     deadline = time.monotonic() + RACE_WAIT
@@ -257,14 +264,15 @@ def _others_holder(path: Path) -> str | None:
 
 
 def _other_holder_now(path: Path) -> tuple[str, int] | None:
-    """The first other user's lock file of `path`'s key held now: its holder and its owner's uid. A lock file that
-    cannot be read counts as held: another user's apply may be behind it."""
+    """The first other user's lock file of `path`'s key held now: its holder and its owner's uid. A lock file
+    that cannot be read counts as held: another user's apply may be behind it."""
     try:
         for other, opened in _lock_files(path.parent, path.name.partition(".")[0], but=path.name):
             if isinstance(opened, OSError):
                 with contextlib.suppress(OSError):
                     owner = os.lstat(other).st_uid
-                    return f"a process of {platform.uid_name(owner)} (its lock file {other} cannot be read)", owner
+                    return (f"a process of {platform.uid_name(owner)} (its lock file {other} "
+                            "cannot be read)"), owner
             elif (held := _held(opened)) is not None:
                 return held, os.fstat(opened).st_uid
     except OSError:
@@ -273,9 +281,9 @@ def _other_holder_now(path: Path) -> tuple[str, int] | None:
 
 
 def _lock_files(directory: Path, stem: str, but: str = "") -> Iterator[tuple[Path, int | OSError]]:
-    """Each lock file of the line `stem` in `directory` but `but`, opened to be looked at: its descriptor (closed when
-    the caller asks for the next), or why it could not be opened. A link, a folder or a file gone meanwhile is passed
-    over: prc3cfg makes none. OSError when `directory` cannot be listed."""
+    """Each lock file of the line `stem` in `directory` but `but`, opened to be looked at: its descriptor
+    (closed when the caller asks for the next), or why it could not be opened. A link, a folder or a file gone
+    meanwhile is passed over: prc3cfg makes none. OSError when `directory` cannot be listed."""
     for name in sorted(os.listdir(directory)):
         if name == but or not (name.startswith(f"{stem}.") and name.endswith(".lock")):
             continue
@@ -315,7 +323,8 @@ def _holder(fd: int) -> str:
     "another process" when it names no one (a holder between its lock and its details)."""
     try:
         record = json.loads(platform.read_at(fd, 4096, 0))
-        claim = f"{record['holder']} (pid {record['pid']}, {record['purpose']} since {record['since']}) as its lock file says"
+        claim = (f"{record['holder']} (pid {record['pid']}, {record['purpose']} since {record['since']}) as "
+                 "its lock file says")
         claimed_user = str(record["holder"]).rpartition("@")[0]
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return "another process"
@@ -427,7 +436,7 @@ def line_lock(
         "since": datetime.now(UTC).isoformat(timespec="seconds"),
         "purpose": purpose,
         "line": description,
-    }).encode()  # fmt: skip
+    }).encode()
     try:
         for fd, writable in taken:
             if writable:

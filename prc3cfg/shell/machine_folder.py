@@ -1,12 +1,13 @@
-r"""The machine's folder: where records every user of a line must see are kept, and how an administrator makes it.
+r"""rThe machine's folder: where records every user of a line must see are kept, and how an administrator
+rmakes it.
 
 A line's records that another user's command must see — axis releases nobody was told of and E12/fault claims
 (`prc3cfg.shell.pending_records`), what the modules hold (`prc3cfg.shell.line_record`) — live in the machine's
 folder (`machine_dir`: /var/lib/prc3cfg; Windows: %ProgramData%\prc3cfg), a folder each (`RELEASES`, `LINES`).
 An administrator makes it once with the serial ports' group (`setup_machine`, `prc3cfg setup-machine`): every
-user of the lines writes there, none removes another's file. Until it is there each user keeps them in their own
-state folder, which no other user sees (`unshared` is the hint that says so); `PRC3CFG_STATE_DIR` chooses one
-folder for everything (`state_dirs`), and `folder` is where this process writes a kind of record.
+user of the lines writes there, none removes another's file. Until it is there each user keeps them in their
+own state folder, which no other user sees (`unshared` is the hint that says so); `PRC3CFG_STATE_DIR` chooses
+one folder for everything (`state_dirs`), and `folder` is where this process writes a kind of record.
 
 Does not own what the records hold nor how they are read (`pending_records`, `line_record`).
 """
@@ -26,7 +27,8 @@ from prc3cfg.shell import platform
 #: `PRC3CFG_MACHINE_STATE_DIR` names another. Until it is there, each user keeps the records in their own
 #: state folder — which no other user sees: `unshared` says so.
 SYSTEM_STATE_DIR = platform.SYSTEM_STATE_DIR
-#: What the machine's folder holds, a folder each: axis releases not yet told, the lines' records (`prc3cfg.shell.line_record`).
+#: What the machine's folder holds, a folder each: axis releases not yet told, the lines' records
+#: (`prc3cfg.shell.line_record`).
 RELEASES, LINES = "releases", "lines"
 
 
@@ -80,7 +82,7 @@ def folder(kind: str = RELEASES, what: str = "the record of an axis release") ->
         except OSError as error:
             problems.append(f"{folder}: {error.strerror}")
     raise UserError(f"cannot keep {what} ({'; '.join(problems)}) — nothing was written; "
-                    "set PRC3CFG_STATE_DIR to a folder this user can write")  # fmt: skip
+                    "set PRC3CFG_STATE_DIR to a folder this user can write")
 
 
 def unshared() -> str | None:
@@ -92,13 +94,16 @@ def unshared() -> str | None:
     problems = [problem for kind in (RELEASES, LINES) if (problem := _machine_problem(kind)) is not None]
     if not problems:
         return None
-    return (f"this machine's records of axis releases and of what the modules hold are kept in {platform.user_state_dir()}, "
-            f"which its other users do not see ({problems[0]}) — an administrator makes the shared folder once: {_AS_ADMINISTRATOR}")
+    return ("this machine's records of axis releases and of what the modules hold are kept in "
+            f"{platform.user_state_dir()}, "
+            f"which its other users do not see ({problems[0]}) — an administrator makes the shared folder "
+            f"once: {_AS_ADMINISTRATOR}")
 
 
 #: How an administrator runs setup-machine, in the system's own words.
-_AS_ADMINISTRATOR = ("prc3cfg setup-machine from a prompt opened with Run as administrator" if sys.platform == "win32"
-                     else "sudo prc3cfg setup-machine")  # fmt: skip
+_AS_ADMINISTRATOR = ("prc3cfg setup-machine from a prompt opened with Run as administrator"
+                     if sys.platform == "win32"
+                     else "sudo prc3cfg setup-machine")
 
 
 def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
@@ -107,18 +112,23 @@ def setup_machine(group: str | None = None) -> tuple[Path, str | None]:
     writes in them and whose files none of them may remove or replace but their maker (mode 3775).
     Made or put right; the folder and the group."""
     if group is not None and not platform.OWNERS:
-        raise UserError(f"--group {group}: this system shares the folder by its rights, not by a group — run setup-machine without "
-                        "--group; every user of the machine may then keep records there, each file its maker's")  # fmt: skip
+        raise UserError(f"--group {group}: this system shares the folder by its rights, not by a group — "
+                        "run setup-machine without "
+                        "--group; every user of the machine may then keep records there, each file "
+                        "its maker's")
     found = platform.serial_group(group)
     if platform.OWNERS and found is None:
-        raise UserError((f"there is no group {group} on this machine" if group else "this machine has no dialout or uucp group")
-                        + " — name the group of the lines' users with --group (ls -l on a serial port shows it)")  # fmt: skip
+        raise UserError((f"there is no group {group} on this machine" if group
+                         else "this machine has no dialout or uucp group")
+                        + " — name the group of the lines' users with --group (ls -l on a serial port "
+                          "shows it)")
     directory = machine_dir()
     try:
         directory.parent.mkdir(parents=True, exist_ok=True)
         for folder in (directory, directory / RELEASES, directory / LINES):
             platform.make_group_folder(folder, None if found is None else found[1])
     except OSError as error:
-        raise UserError(f"cannot make {error.filename or directory} ({error.strerror}) — prc3cfg setup-machine is run by an "
-                        f"administrator: {_AS_ADMINISTRATOR}") from None  # fmt: skip
+        raise UserError(f"cannot make {error.filename or directory} ({error.strerror}) — prc3cfg "
+                        "setup-machine is run by an "
+                        f"administrator: {_AS_ADMINISTRATOR}") from None
     return directory, None if found is None else found[0]

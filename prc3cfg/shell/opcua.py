@@ -1,4 +1,5 @@
-"""`prc3cfg status serve`: the configuration status on OPC UA (asyncua, the optional extra `opcua`), read-only.
+"""`prc3cfg status serve`: the configuration status on OPC UA (asyncua, the optional extra `opcua`),
+read-only.
 
 Address space, DI-shaped (OPC UA for Devices, namespace `DI`): asyncua ships no DI nodeset and none is
 fetched, so the nodes carry DI's browse names in the DI namespace without DI's types (docs/status.md):
@@ -84,8 +85,9 @@ class ServerSettings:
 
 def _values(facts: ModuleFacts) -> dict[str, tuple[Any, ua.VariantType]]:
     """Every variable of a module by its path below the module's object."""
-    values = {"RevisionCounter": (facts.revision, ua.VariantType.Int32), "SoftwareRevision": (facts.firmware, ua.VariantType.String),
-              "DeviceHealth": (int(health(facts)[0]), ua.VariantType.Int32)}  # fmt: skip
+    values = {"RevisionCounter": (facts.revision, ua.VariantType.Int32),
+              "SoftwareRevision": (facts.firmware, ua.VariantType.String),
+              "DeviceHealth": (int(health(facts)[0]), ua.VariantType.Int32)}
     values |= {f"Configuration/{name}": (get(facts), kind) for name, (get, kind) in CONFIGURATION.items()}
     return values
 
@@ -106,8 +108,10 @@ async def _server_certificate(settings: ServerSettings) -> tuple[Path, Path]:
     folder = machine_folder.state_dirs()[-1] / "opcua"
     folder.mkdir(parents=True, exist_ok=True)
     cert, key = folder / "server-certificate.der", folder / "server-key.pem"
-    await cert_gen.setup_self_signed_certificate(key, cert, APPLICATION_URI, socket.gethostname(), [ExtendedKeyUsageOID.SERVER_AUTH],
-                                                 {"commonName": "prc3cfg status", "organizationName": "prc3cfg"})  # fmt: skip
+    await cert_gen.setup_self_signed_certificate(key, cert, APPLICATION_URI, socket.gethostname(),
+                                                 [ExtendedKeyUsageOID.SERVER_AUTH],
+                                                 {"commonName": "prc3cfg status",
+                                                  "organizationName": "prc3cfg"})
     with key.open("rb") as handle:
         platform.set_mode(handle.fileno(), 0o600)
     return cert, key
@@ -120,35 +124,44 @@ async def _secured(server: Server, settings: ServerSettings) -> None:
         return
     assert settings.trust is not None  # the CLI asks for it
     if not settings.trust.is_dir():
-        raise UserError(f"--trust {settings.trust}: no such folder — give the folder of client certificates (DER or PEM) allowed to connect")
+        raise UserError(f"--trust {settings.trust}: no such folder — give the folder of client certificates "
+                        "(DER or PEM) allowed to connect")
     cert, key = await _server_certificate(settings)
     try:
         await server.load_certificate(str(cert))
         await server.load_private_key(str(key))
     except (OSError, ValueError) as error:
-        raise UserError(f"{cert}, {key}: not a certificate and its private key ({error}) — give a DER or PEM pair") from None
-    server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt], permission_ruleset=SimpleRoleRuleset())
+        raise UserError(f"{cert}, {key}: not a certificate and its private key ({error}) — give a DER "
+                        "or PEM pair") from None
+    server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt],
+                               permission_ruleset=SimpleRoleRuleset())
     store = TrustStore([settings.trust], [])
     try:
         await store.load()
-    except ValueError as error:  # asyncua: "can't create an empty store", or a file there that is no certificate
+    # asyncua: "can't create an empty store", or a file there that is no certificate
+    except ValueError as error:
         empty = not any(p.is_file() for p in settings.trust.iterdir())
         found = "holds no client certificate" if empty else f"cannot be read as certificates ({error})"
-        raise UserError(f"--trust {settings.trust}: {found} — put there the DER or PEM certificates of the clients allowed to "
-                        "connect") from None  # fmt: skip
+        raise UserError(f"--trust {settings.trust}: {found} — put there the DER or PEM certificates of the "
+                        "clients allowed to "
+                        "connect") from None
     validator = CertificateValidator(CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT, store)
     server.set_certificate_validator(validator)
-    server.set_identity_tokens([ua.X509IdentityToken, *([ua.AnonymousIdentityToken] if settings.allow_anonymous else [])])
+    server.set_identity_tokens([ua.X509IdentityToken,
+                                *([ua.AnonymousIdentityToken] if settings.allow_anonymous else [])])
 
 
 def _id(text: str, index: int) -> ua.NodeId:
     return ua.NodeId(ua.String(text), ua.Int16(index))
 
 
-async def _variable(parent: Node, index: int, node_id: str, name: str, value: Any, kind: ua.VariantType, di: int) -> Node:
+async def _variable(parent: Node, index: int, node_id: str, name: str, value: Any, kind: ua.VariantType,
+                    di: int) -> Node:
     node = await parent.add_variable(_id(node_id, index), ua.QualifiedName(name, di), ua.Variant(value, kind))
-    await node.write_attribute(ua.AttributeIds.AccessLevel, ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte)))
-    await node.write_attribute(ua.AttributeIds.UserAccessLevel, ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte)))
+    await node.write_attribute(ua.AttributeIds.AccessLevel,
+                               ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte)))
+    await node.write_attribute(ua.AttributeIds.UserAccessLevel,
+                               ua.DataValue(ua.Variant(ua.AccessLevel.CurrentRead.mask, ua.VariantType.Byte)))
     return node
 
 
@@ -166,7 +179,9 @@ async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) ->
                 await users.add_user(file, name=file.name)
     index = await server.register_namespace(NAMESPACE)
     di = await server.register_namespace(DI)
-    space = _Space(server, await server.nodes.objects.add_folder(_id("DeviceSet", index), ua.QualifiedName("DeviceSet", di)), index, di)
+    space = _Space(server, await server.nodes.objects.add_folder(_id("DeviceSet", index),
+                                                                 ua.QualifiedName("DeviceSet", di)), index,
+                   di)
     keys = identities(plant)
     facts, _ = gather(plant, keys)
     await space.follow(facts)
@@ -184,28 +199,31 @@ async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) ->
             facts = gather(plant, keys)[0]
             if changed is not None:
                 added, removed = await space.follow(facts)
-                print(f"{plant.path}: changed — publishing {len(facts)} modules (added {', '.join(added) or 'none'}, "
-                      f"removed {', '.join(removed) or 'none'})", flush=True)  # fmt: skip
+                print(f"{plant.path}: changed — publishing {len(facts)} modules (added "
+                      f"{', '.join(added) or 'none'}, "
+                      f"removed {', '.join(removed) or 'none'})", flush=True)
             await _publish(server, space.variables, facts)
 
 
 def _reloaded(plant: Plant) -> Plant | None:
-    """The plant file again where its bytes changed; None where they did not, or where it is no longer valid (said in one
-    line: the server goes on publishing the plant it last read whole)."""
+    """The plant file again where its bytes changed; None where they did not, or where it is no longer valid
+    (said in one line: the server goes on publishing the plant it last read whole)."""
     try:
         if sha256(plant_bytes(plant.path)).hexdigest() == plant.sha256:
             return None
         return load_plant(plant.path)
     except UserError as error:
         problem = str(error).splitlines()[0]
-        print(f"{problem if problem.startswith(str(plant.path)) else f'{plant.path}: {problem}'} — still publishing its last valid "
-              f"version", flush=True)  # fmt: skip
+        print(f"{problem if problem.startswith(str(plant.path)) else f'{plant.path}: {problem}'} — still "
+              "publishing its last valid "
+              f"version", flush=True)
         return None
 
 
 class _Space:
-    """The DeviceSet's nodes: a line object per bus, a module object per module with its variables. `follow` makes them
-    what the plant file holds now: the nodes of a module added to it are added, those of one taken out deleted."""
+    """The DeviceSet's nodes: a line object per bus, a module object per module with its variables. `follow`
+    makes them what the plant file holds now: the nodes of a module added to it are added, those of one taken
+    out deleted."""
 
     def __init__(self, server: Server, device_set: Node, index: int, di: int) -> None:
         self.server, self.device_set, self.index, self.di = server, device_set, index, di
@@ -214,9 +232,11 @@ class _Space:
         self.modules: dict[str, tuple[str, Node]] = {}  # "LINE/ADDRESS" → (module name, its object)
 
     async def follow(self, facts: list[ModuleFacts]) -> tuple[list[str], list[str]]:
-        """Add the nodes of modules not published yet, delete those of modules gone: their names, added and removed."""
+        """Add the nodes of modules not published yet, delete those of modules gone: their names, added and
+        removed."""
         wanted = {f"{f.bus}/{f.address}": f for f in facts}
-        removed = [name for key, (name, _) in self.modules.items() if key not in wanted or wanted[key].name != name]
+        removed = [name for key, (name, _) in self.modules.items() if key not in wanted
+                   or wanted[key].name != name]
         for key in [key for key, (name, _) in self.modules.items() if name in removed]:
             await self.server.delete_nodes([self.modules.pop(key)[1]], recursive=True)
             self.variables = {path: n for path, n in self.variables.items() if not path.startswith(f"{key}/")}
@@ -232,11 +252,16 @@ class _Space:
     async def _module(self, f: ModuleFacts) -> Node:
         index, di = self.index, self.di
         if f.bus not in self.lines:
-            self.lines[f.bus] = await self.device_set.add_object(_id(f.bus, index), ua.QualifiedName(f.bus, index))
-            self.variables[f"{f.bus}/DeviceHealth"] = await _variable(self.lines[f.bus], index, f"{f.bus}/DeviceHealth",
-                                                                      "DeviceHealth", 0, ua.VariantType.Int32, di)  # fmt: skip
-        module = await self.lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index), ua.QualifiedName(f.name, index))
-        group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index), ua.QualifiedName("Configuration", di))
+            self.lines[f.bus] = await self.device_set.add_object(_id(f.bus, index),
+                                                                 ua.QualifiedName(f.bus, index))
+            self.variables[f"{f.bus}/DeviceHealth"] = await _variable(self.lines[f.bus], index,
+                                                                      f"{f.bus}/DeviceHealth",
+                                                                      "DeviceHealth", 0, ua.VariantType.Int32,
+                                                                      di)
+        module = await self.lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index),
+                                                    ua.QualifiedName(f.name, index))
+        group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index),
+                                        ua.QualifiedName("Configuration", di))
         for path, (value, kind) in _values(f).items():
             parent, name = (group, path.partition("/")[2]) if path.startswith("Configuration/") else (module, path)
             node_id = f"{f.bus}/{f.address}/{path}"
@@ -254,17 +279,20 @@ async def _publish(server: Server, variables: dict[str, Node], facts: list[Modul
                 await server.write_attribute_value(node.nodeid, ua.DataValue(ua.Variant(value, kind)))
     for bus, found in by_line.items():
         value = int(worst([health(f)[0] for f in found]))
-        await server.write_attribute_value(variables[f"{bus}/DeviceHealth"].nodeid, ua.DataValue(ua.Variant(value, ua.VariantType.Int32)))
+        await server.write_attribute_value(variables[f"{bus}/DeviceHealth"].nodeid,
+                                           ua.DataValue(ua.Variant(value, ua.VariantType.Int32)))
 
 
 def serve(plant: Plant, settings: ServerSettings, cancel: Cancellation) -> None:
-    """Serve until SIGINT or SIGTERM (`cancel`, handling them): the signal only sets its event, which
-    ends the server's wait for its next look at the records — an exception raised by the signal inside asyncua's own
+    """Serve until SIGINT or SIGTERM (`cancel`, handling them): the signal only sets its event, which ends the
+    server's wait for its next look at the records — an exception raised by the signal inside asyncua's own
     callbacks (a client's handshake) was caught there, and the server went on serving."""
-    logging.getLogger("asyncua").setLevel(logging.ERROR)  # its warnings are for its developers; refusals are its clients' to see
+    # its warnings are for its developers; refusals are its clients' to see
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
     try:
         with cancel.deferred():
             asyncio.run(_run(plant, settings, cancel.event))
     except OSError as error:
-        raise UserError(f"--listen {settings.listen}: cannot listen there ({error.strerror or error}) — choose another port") from None
+        raise UserError(f"--listen {settings.listen}: cannot listen there ({error.strerror or error}) — "
+                        "choose another port") from None
     print("stopped", file=sys.stderr)

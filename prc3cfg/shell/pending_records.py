@@ -14,10 +14,10 @@ lists it in its own account and so clears it.
 
 The records live in the machine's folder (`prc3cfg.shell.machine_folder`: /var/lib/prc3cfg; Windows:
 %ProgramData%\prc3cfg), which an administrator makes once with the serial ports' group (`prc3cfg
-setup-machine`: every user of the lines writes there, none removes another's file) — else in the
-user's own state folder, which no other user sees (`machine_folder.unshared` is the hint that says so). One file
-per apply (`<time>-<pid>.jsonl`), whatever the plant file's folder: `scan`, which has no plant
-file, finds them by the line's identities (`prc3cfg.shell.locks.line_keys`).
+setup-machine`: every user of the lines writes there, none removes another's file) — else in the user's own
+state folder, which no other user sees (`machine_folder.unshared` is the hint that says so). One file per
+apply (`<time>-<pid>.jsonl`), whatever the plant file's folder: `scan`, which has no plant file, finds them by
+the line's identities (`prc3cfg.shell.locks.line_keys`).
 
 Another user's file there is a claim (`Pending.owner`): read as another user may have made it — a
 regular file only, never through a link, never blocking, at most `LIMIT` bytes, each field of its
@@ -69,38 +69,47 @@ class Pending:
     name: str  # the module, or for a broadcast the modules the plant knows on the line
     time: str
     pid: int
-    command: str  # the prc3cfg command that sent it: apply, restore — or plan, read, when a read became a write
+    # the prc3cfg command that sent it: apply, restore — or plan, read, when a read became a write
+    command: str
     journal: str | None
     file: Path
     kind: str = RELEASE
-    owner: str | None = None  # who wrote it, where that is another user ("alice (uid 1001)"): a claim; None: this user or root
+    # who wrote it, where that is another user ("alice (uid 1001)"): a claim; None: this user or root
+    owner: str | None = None
     code: int | None = None  # `kind` FAULT: the code the module refused a write with (`FAULT_STATES`)
 
     def said(self) -> str:
-        """One line: which module, when, which run — and what to do; every field escaped, another user's told as their claim."""
+        """One line: which module, when, which run — and what to do; every field escaped, another user's told
+        as their claim."""
         who = (f"bus {shown(self.bus)}, module {self.address} ({shown(self.name)})" if self.address
-               else f"bus {shown(self.bus)}, every module on the line ({shown(self.name)})")  # fmt: skip
-        run = f"pid {self.pid}, {shown(self.time)}" + (f", journal {shown(self.journal)}" if self.journal else "")
-        said = (f"{who}: is in {fault_said(self.code)} — it refused a write of prc3cfg {shown(self.command)} ({run}) so, and a "
-                "read cannot tell whether it still is: its values may match the plant file, the machine is not in production "
+               else f"bus {shown(self.bus)}, every module on the line ({shown(self.name)})")
+        run = f"pid {self.pid}, {shown(self.time)}" + (f", journal {shown(self.journal)}" if self.journal
+                                                       else "")
+        said = (f"{who}: is in {fault_said(self.code)} — it refused a write of prc3cfg "
+                f"{shown(self.command)} ({run}) so, and a "
+                "read cannot tell whether it still is: its values may match the plant file, the machine is "
+                "not in production "
                 "order; clear the fault on the module — the next write to it acknowledged clears this"
                 if self.kind == FAULT and self.code is not None else
-                f"{who}: prc3cfg {shown(self.command)} ({run}) sent it a 10h/20h, or a frame it took for one, and no account has "
-                "said so — its axes may be released: travel to the reference point before production; the next apply on this "
-                "line lists it and clears this")  # fmt: skip
+                f"{who}: prc3cfg {shown(self.command)} ({run}) sent it a 10h/20h, or a frame it took for "
+                "one, and no account has "
+                "said so — its axes may be released: travel to the reference point before production; the "
+                "next apply on this "
+                "line lists it and clears this")
         return said if self.owner is None else f"{self.owner}'s record says: {said}"
 
 
 def of_line(keys: Iterable[str], kind: str | None = RELEASE) -> list[Pending]:
-    """Every record of `kind` (None: of every kind) on a line with one of `keys` that is not cleared yet (another user's in the
-    machine's folder too: a claim, `owner` says whose — told all the same, an untold release errs the wrong way;
-    it may make prc3cfg read, never write)."""
+    """Every record of `kind` (None: of every kind) on a line with one of `keys` that is not cleared yet
+    (another user's in the machine's folder too: a claim, `owner` says whose — told all the same, an untold
+    release errs the wrong way; it may make prc3cfg read, never write)."""
     wanted = set(keys)
     found = []
     for path in _files():
         entries, owner = _entries(path)
         for entry in entries:
-            record = _pending(entry, path, None if platform.trusted_owner(owner) else platform.uid_name(owner))
+            record = _pending(entry, path,
+                              None if platform.trusted_owner(owner) else platform.uid_name(owner))
             if record is not None and kind in (None, record.kind) and wanted & set(record.keys):
                 found.append(record)
     return found
@@ -109,14 +118,17 @@ def of_line(keys: Iterable[str], kind: str | None = RELEASE) -> list[Pending]:
 def _pending(entry: dict[str, Any], path: Path, owner: str | None) -> Pending | None:
     """The record a line of a file says, every field of its type (None: it is no record)."""
     texts = [text for name in ("bus", "name", "time", "command") if isinstance(text := entry.get(name), str)]
-    keys, address, pid, journal, kind, code = (entry.get(name) for name in ("keys", "address", "pid", "journal", "kind", "code"))
+    keys, address, pid, journal, kind, code = (entry.get(name)
+                                               for name in ("keys", "address", "pid", "journal", "kind",
+                                                            "code"))
     if not (isinstance(keys, list) and all(isinstance(key, str) for key in keys) and len(texts) == 4
             and type(address) is int and type(pid) is int and (journal is None or isinstance(journal, str))
-            and kind in (None, RELEASE, E12, FAULT) and (kind != FAULT or (type(code) is int and code in FAULT_STATES))):  # fmt: skip
+            and kind in (None, RELEASE, E12, FAULT)
+            and (kind != FAULT or (type(code) is int and code in FAULT_STATES))):
         return None
     bus, name, time, command = texts
     return Pending(tuple(keys), bus, address, name, time, pid, command, journal, path, kind or RELEASE, owner,
-                   code if kind == FAULT else None)  # fmt: skip
+                   code if kind == FAULT else None)
 
 
 def _files() -> list[Path]:
@@ -137,7 +149,8 @@ def passed_over() -> list[str]:
             read_owned(path, LIMIT)
         except FileProblem as problem:
             if problem.why is not Why.MISSING:
-                said.append(f"{shown(str(path))}: {problem} — passed over as no record of an axis release; remove it")
+                said.append(f"{shown(str(path))}: {problem} — passed over as no record of an axis release; "
+                            "remove it")
     return said
 
 
@@ -168,7 +181,8 @@ class Releases:
         self._lock = threading.Lock()
         self._recorded: set[tuple[str, str, int]] = set()
 
-    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = RELEASE, code: int | None = None) -> None:
+    def record(self, keys: tuple[str, ...], bus: str, address: int, name: str, kind: str = RELEASE,
+               code: int | None = None) -> None:
         """Durably, before the frame leaves: a 10h/20h to `address` on the line `keys` (once per module);
         or a module that reported a fault state (`kind` E12, FAULT with its `code`)."""
         with self._lock:
@@ -178,9 +192,10 @@ class Releases:
             if self._path is None:
                 self._path = folder() / f"{stamp.strftime('%Y%m%dT%H%M%S.%fZ')}-{os.getpid()}.jsonl"
             line = json.dumps({"kind": kind, "keys": list(keys), "bus": bus, "address": address, "name": name,
-                               "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(), "command": self.command,
+                               "time": stamp.isoformat(timespec="seconds"), "pid": os.getpid(),
+                               "command": self.command,
                                "journal": None if self.journal is None else str(self.journal)}
-                              | ({"code": code} if code is not None else {}))  # fmt: skip
+                              | ({"code": code} if code is not None else {}))
             fd = os.open(self._path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | platform.NO_INHERIT, 0o644)
             try:
                 os.write(fd, (line + "\n").encode())

@@ -1,6 +1,6 @@
-"""The lines read back and planned as they are read — the read stage (`read_lines`, a `ReadBack` per line) and the
-plan stage (`line_plan`, a `LinePlan`), pipelined per line (`read_and_plan_lines`) — and the plant's `Planner`
-(`prc3cfg.core.plant_planner`) as the lines' threads share it: `SharedPlanner`.
+"""The lines read back and planned as they are read — the read stage (`read_lines`, a `ReadBack` per line) and
+the plan stage (`line_plan`, a `LinePlan`), pipelined per line (`read_and_plan_lines`) — and the plant's
+`Planner` (`prc3cfg.core.plant_planner`) as the lines' threads share it: `SharedPlanner`.
 
 Each line is read, planned and written in its own thread, and modules alike on any line are
 planned once — so the planner is one, and the lines take turns with it, under one lock. The
@@ -32,7 +32,8 @@ if TYPE_CHECKING:
 
 
 class SharedPlanner:
-    """A `Planner` of the modules `wanted` (each with its desired image) the lines' threads use one at a time."""
+    """A `Planner` of the modules `wanted` (each with its desired image) the lines' threads use one at a
+    time."""
 
     def __init__(self, planner: Planner, wanted: Sequence[Wanted]) -> None:
         self._planner = planner
@@ -62,40 +63,47 @@ class SharedPlanner:
             return self._planner.line_changes(bus)
 
     def plan(self, actual: Mapping[Key, ModuleImage], buses: Iterable[str] | None = None) -> PlantPlan:
-        """`Planner.plan`: the plant's plan — of the modules of `buses`, if given — of the lines settled (the others
-        planned now, without a proof)."""
+        """`Planner.plan`: the plant's plan — of the modules of `buses`, if given — of the lines settled (the
+        others planned now, without a proof)."""
         lines = None if buses is None else set(buses)
         with self._lock:
             return self._planner.plan([w for w in self.wanted if lines is None or w.bus in lines], actual)
 
 
 def line_plan(planner: SharedPlanner, read: ReadBack, link: Link | None) -> LinePlan:
-    """The plan stage of a line `read_lines` read — each of its modules planned as it was read: the line settled,
-    its broadcasts' silent addresses probed on `link` (`SharedPlanner.plan_line`), and its changes, to gate and write."""
+    """The plan stage of a line `read_lines` read — each of its modules planned as it was read: the line
+    settled, its broadcasts' silent addresses probed on `link` (`SharedPlanner.plan_line`), and its changes,
+    to gate and write."""
     planner.plan_line(read.bus, read.images, link)
     return LinePlan(tuple(planner.line_changes(read.bus)), read.images)
 
 
-def read_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str, planner: SharedPlanner | None = None,
-               *, progress: Callable[[], None] | None = None, then: Callable[[ReadBack], None] | None = None) -> dict[Key, ModuleImage]:  # fmt: skip
-    """The read stage: every target read back (`read_all`: the lines at once), each line's read-back into its record
-    as soon as it is in (`OnRecord.saw`, what `by` saw) and given to `then` — the plan stage (`line_plan`), in the
-    line's thread, while the other lines are still read; with a `planner`, each module planned as soon as it is read."""
+def read_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str,
+               planner: SharedPlanner | None = None,
+               *, progress: Callable[[], None] | None = None,
+               then: Callable[[ReadBack], None] | None = None) -> dict[Key, ModuleImage]:
+    """The read stage: every target read back (`read_all`: the lines at once), each line's read-back into its
+    record as soon as it is in (`OnRecord.saw`, what `by` saw) and given to `then` — the plan stage
+    (`line_plan`), in the line's thread, while the other lines are still read; with a `planner`, each module
+    planned as soon as it is read."""
 
     def line_read(bus: str, images: dict[Key, ModuleImage]) -> None:
         on_record.saw(bus, images, by)
         if then is not None:
             then(ReadBack(bus, images))
 
-    return read_all(targets, links, progress=progress, each=None if planner is None else planner.plan_module, then=line_read)
+    return read_all(targets, links, progress=progress, each=None if planner is None else planner.plan_module,
+                    then=line_read)
 
 
-def read_and_plan_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str, planner: SharedPlanner, *,
-                  progress: Callable[[], None] | None = None, then: Callable[[ReadBack, LinePlan], None] | None = None,
-                  ) -> dict[Key, ModuleImage]:  # fmt: skip
-    """The read and plan stages pipelined line by line (`read_lines`, `line_plan`): each line planned in its own
-    thread as soon as its last module is read — the other lines still being read — then `then(read_back, line_plan)`
-    (to gate and write the line)."""
+def read_and_plan_lines(targets: Iterable[Target], links: dict[str, Link], on_record: OnRecord, by: str,
+                        planner: SharedPlanner, *,
+                  progress: Callable[[], None] | None = None,
+                        then: Callable[[ReadBack, LinePlan], None] | None = None,
+                  ) -> dict[Key, ModuleImage]:
+    """The read and plan stages pipelined line by line (`read_lines`, `line_plan`): each line planned in its
+    own thread as soon as its last module is read — the other lines still being read — then `then(read_back,
+    line_plan)` (to gate and write the line)."""
 
     def plan(read: ReadBack) -> None:
         line = line_plan(planner, read, links[read.bus])

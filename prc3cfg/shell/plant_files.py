@@ -1,5 +1,5 @@
-"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant layer; the policy
-file a plant file names (`load_policy`) and a fleet file (`load_fleet`) are read so too.
+"""Plant files on disk: `load_plant(path)` reads one's bytes (`plant_bytes`) and hands them to the plant
+layer; the policy file a plant file names (`load_policy`) and a fleet file (`load_fleet`) are read so too.
 
 Only a regular file is read (a FIFO could block, `/dev/zero` never ends), at most `MAX_BYTES`
 of it (`prc3cfg.shell.files.read_regular`); a path that cannot be read is a `PlantError` that
@@ -51,16 +51,18 @@ def plant_bytes(path: str | Path) -> bytes:
 
 
 def load_policy(plant: Plant) -> LoadedPolicy | None:
-    """The policy file `plant` names (relative to the plant file), None when it names none; `PlantError` with its
-    problems, or saying it cannot be read — a plant file that names a policy is never used without it."""
+    """The policy file `plant` names (relative to the plant file), None when it names none; `PlantError` with
+    its problems, or saying it cannot be read — a plant file that names a policy is never used without it."""
     path = plant.policy_path
     if path is None:
         return None
     try:
         data = read_regular(path, MAX_BYTES)
     except FileProblem as problem:
-        raise PlantError([f"{path}: {problem} (the policy file {plant.path} names) — {_REMEDIES[problem.why]}"]) from None
-    from prc3cfg.plant.policy import parse_policy  # its models and rules: only for a plant file that names a policy
+        raise PlantError([f"{path}: {problem} (the policy file {plant.path} names) — "
+                          f"{_REMEDIES[problem.why]}"]) from None
+    # its models and rules: only for a plant file that names a policy
+    from prc3cfg.plant.policy import parse_policy
 
     return parse_policy(path, data)
 
@@ -70,7 +72,8 @@ def load_fleet(path: str | Path) -> Fleet:
     try:
         data = read_regular(Path(path), MAX_BYTES)
     except FileProblem as problem:
-        raise PlantError([f"{path}: {problem} (the fleet file) — {_REMEDIES[problem.why].replace('plant', 'fleet')}"]) from None
+        raise PlantError([f"{path}: {problem} (the fleet file) — "
+                          f"{_REMEDIES[problem.why].replace('plant', 'fleet')}"]) from None
     from prc3cfg.plant.fleet import parse_fleet  # its models: for the fleet commands only
 
     return parse_fleet(str(path), data)

@@ -3,11 +3,11 @@ r"""What differs between POSIX and Windows, in one place: every other module cal
 Owns the calls that exist on one system only, each behind a function or a constant that
 means the same everywhere:
 
-- open flags: `NO_INHERIT` (O_CLOEXEC; Windows: O_NOINHERIT | O_BINARY), `NO_FOLLOW`
-  (O_NOFOLLOW; Windows has no symbolic-link open flag: 0), `NON_BLOCKING` (O_NONBLOCK, so a FIFO
-  cannot block an open; Windows: 0), `open_unfollowed` (a file opened neither through a link nor
-  blocking: O_NOFOLLOW | O_NONBLOCK; Windows: a reparse point refused), `unnamed_file` (Linux's O_TMPFILE and the /proc link that
-  names it later; elsewhere None: a named temporary file is written instead);
+- open flags: `NO_INHERIT` (O_CLOEXEC; Windows: O_NOINHERIT | O_BINARY), `NO_FOLLOW` (O_NOFOLLOW; Windows has
+  no symbolic-link open flag: 0), `NON_BLOCKING` (O_NONBLOCK, so a FIFO cannot block an open; Windows: 0),
+  `open_unfollowed` (a file opened neither through a link nor blocking: O_NOFOLLOW | O_NONBLOCK; Windows: a
+  reparse point refused), `unnamed_file` (Linux's O_TMPFILE and the /proc link that names it later; elsewhere
+  None: a named temporary file is written instead);
 - folders: `make_shared_folder` (mkdir, then the mode set on the folder opened without following a
   symbolic link; Windows: mkdir);
 - file contents and durability: `open_text` (UTF-8, no newline translation: Windows' text mode
@@ -29,18 +29,17 @@ means the same everywhere:
   `process_alive` (kill(pid, 0); Windows: OpenProcess — kill(pid, 0) there is no test: signal 0 is
   CTRL_C_EVENT, a Ctrl-C sent to the process's console group), `program_name` (Linux's /proc/PID/comm);
 - terminals and serial devices: `TERMINAL_ERRORS`, `character_format` (termios; Windows: the port's DCB,
-  `dcb_format`), `is_pseudo_terminal` (Linux's pty majors), `device_number` (major and minor of a device), `terminal_path` (ttyname;
-  Windows: the console, CONOUT$), `open_pty` (POSIX only: `HAS_PTY`), `pty_line` (the baud rate and
-  stop bits a client set on a pty), `kernel_lock_holders` (Linux's /proc/locks),
-  `registered_serial_ports` (Windows' registry of COM ports), `UUCP_LOCKS`
-  (whether the `LCK..` convention exists here: not on Windows, where a COM port is exclusive),
-  `device_identity` (the name two spellings of one device share: on Windows a COM port's,
-  `com_port_name`: `COM10`, `com10`, `\\.\COM10`), `check_parity` (INPCK and IGNPAR: a character of bad
-  parity refused; Windows: not possible, False);
-- sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where
-  there is one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the
-  main thread anyway: nothing), `wait_for`, `result_of` and `next_of` (an event's wait, a future's result and a
-  queue's next item that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
+  `dcb_format`), `is_pseudo_terminal` (Linux's pty majors), `device_number` (major and minor of a device),
+  `terminal_path` (ttyname; Windows: the console, CONOUT$), `open_pty` (POSIX only: `HAS_PTY`), `pty_line`
+  (the baud rate and stop bits a client set on a pty), `kernel_lock_holders` (Linux's /proc/locks),
+  `registered_serial_ports` (Windows' registry of COM ports), `UUCP_LOCKS` (whether the `LCK..` convention
+  exists here: not on Windows, where a COM port is exclusive), `device_identity` (the name two spellings of
+  one device share: on Windows a COM port's, `com_port_name`: `COM10`, `com10`, `\\.\COM10`), `check_parity`
+  (INPCK and IGNPAR: a character of bad parity refused; Windows: not possible, False);
+- sockets and threads: `bytes_waiting` (FIONREAD; Windows: a peek), `hung_up` (poll's RDHUP where there is
+  one, else a peek), `block_signals` (pthread_sigmask; Windows delivers signals to the main thread anyway:
+  nothing), `wait_for`, `result_of` and `next_of` (an event's wait, a future's result and a queue's next item
+  that let a Ctrl-C handler run meanwhile: Windows never runs one inside a wait without a timeout);
 - paths: `resolved` and `real_path` (links followed; where Windows refuses a long path, absolute as
   written);
 - commands a person pastes into the system's shell: `command_line` and `python_command` (POSIX
@@ -243,7 +242,8 @@ if sys.platform == "win32":
     #: The machine's folder of records that last across a restart.
     SYSTEM_STATE_DIR = _PROGRAM_DATA
 else:
-    LOCK_FOLDERS = ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"), (Path("/tmp"), "prc3cfg-locks"))
+    LOCK_FOLDERS = ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"),
+                    (Path("/tmp"), "prc3cfg-locks"))
     SYSTEM_STATE_DIR = Path("/var/lib/prc3cfg")
 
 
@@ -262,8 +262,8 @@ def serial_group(name: str | None = None) -> tuple[str, int] | None:
     return None
 
 
-#: The permissions of a record in the machine's folder that every user of the line reads and only its
-#: maker writes (a line's record, `prc3cfg.shell.line_record`): 0640, its group the folder's (`make_group_folder`:
+#: The permissions of a record in the machine's folder that every user of the line reads and only its maker
+#: writes (a line's record, `prc3cfg.shell.line_record`): 0640, its group the folder's (`make_group_folder`:
 #: setgid) — the serial ports' group. Windows keeps no POSIX permissions: the ACL a file inherits from
 #: %ProgramData%\prc3cfg gives every user read and its maker (CREATOR OWNER) alone the right to change it.
 SHARED_READ = 0o640
@@ -307,12 +307,14 @@ def user_state_dir() -> Path:
 
 
 def user_name() -> str:
-    """The login name of this process's user, else `uid N` (no login name and no passwd entry: a container)."""
+    """The login name of this process's user, else `uid N` (no login name and no passwd entry: a
+    container)."""
     import getpass
 
     try:
         return getpass.getuser()
-    except (KeyError, OSError, ImportError):  # ImportError: Windows without USERNAME, before Python 3.13 (getpass imports pwd)
+    # ImportError: Windows without USERNAME, before Python 3.13 (getpass imports pwd)
+    except (KeyError, OSError, ImportError):
         if sys.platform == "win32":
             return "an unnamed user"
         return f"uid {os.getuid()}"
@@ -401,8 +403,10 @@ if sys.platform == "win32":
     TERMINAL_ERRORS, BAUDS = (), {}
 else:
     TERMINAL_ERRORS = (termios.error,)
-    BAUDS = {getattr(termios, f"B{baud}"): baud for baud in (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200,
-                                                             38400, 57600, 115200, 230400) if hasattr(termios, f"B{baud}")}  # fmt: skip
+    BAUDS = {getattr(termios, f"B{baud}"): baud
+             for baud in (50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200,
+                                                             38400, 57600, 115200, 230400)
+             if hasattr(termios, f"B{baud}")}
 #: Whether this system has pseudo-terminals (`emulator serve --pty`).
 HAS_PTY = sys.platform != "win32"
 #: Whether serial programs here lock a device with a `LCK..NAME` file (`prc3cfg.shell.serial_lock`):
@@ -454,8 +458,9 @@ def device_number(status: os.stat_result) -> tuple[int, int] | None:
 
 
 def is_pseudo_terminal(port: str) -> bool:
-    """Whether the port `port` is a device path of Linux's pseudo-terminal (/dev/pts/N: `emulator serve --pty`,
-    socat's pty), which carries no parity — looked up by stat, never opened; a URL (`socket://…`) is none."""
+    """Whether the port `port` is a device path of Linux's pseudo-terminal (/dev/pts/N: `emulator serve
+    --pty`, socat's pty), which carries no parity — looked up by stat, never opened; a URL (`socket://…`) is
+    none."""
     if "://" in port:
         return False
     try:
@@ -574,7 +579,8 @@ def hung_up(conn: socket.socket) -> bool:
     if sys.platform == "linux":
         poll = select.poll()
         poll.register(conn, select.POLLRDHUP)
-        return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL) for _, events in poll.poll(0))
+        return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL)
+                   for _, events in poll.poll(0))
     import socket
 
     try:
@@ -666,8 +672,9 @@ def command_line(*words: str) -> str:
     PowerShell both read as one word (a path holds no double quote; backslashes before the closing quote
     doubled, as the C runtime wants)."""
     if sys.platform == "win32":
-        return " ".join(w if w and all(c.isalnum() or c in _WINDOWS_PLAIN for c in w) else f'"{w}{w[len(w.rstrip(chr(92))):]}"'
-                        for w in words)  # fmt: skip
+        return " ".join(w if w and all(c.isalnum() or c in _WINDOWS_PLAIN for c in w)
+                        else f'"{w}{w[len(w.rstrip(chr(92))):]}"'
+                        for w in words)
     return shlex.join(words)
 
 

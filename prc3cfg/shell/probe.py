@@ -33,7 +33,8 @@ class Heard:
 def probe(link: Link, address: int, timeout: float, tries: int = 1) -> Heard | None:
     """A 50h at `address`, waiting `timeout` (`Link.probe`), made up to `tries` times while nothing
     answers: what was heard, or None when nothing was."""
-    from prc3cfg.shell.link.client import LinkError, NoReadMessages, PortFailed, PossibleWrite  # a plan made from images probes nothing
+    # a plan made from images probes nothing
+    from prc3cfg.shell.link.client import LinkError, NoReadMessages, PortFailed, PossibleWrite
 
     for _ in range(tries):
         try:
@@ -48,11 +49,13 @@ def probe(link: Link, address: int, timeout: float, tries: int = 1) -> Heard | N
 
 
 def probe_timeout(timeout: float) -> float:
-    """How long a probe waits at an address of a line whose reply time-out is `timeout`: at most `PROBE_TIMEOUT`."""
+    """How long a probe waits at an address of a line whose reply time-out is `timeout`: at most
+    `PROBE_TIMEOUT`."""
     return min(timeout, PROBE_TIMEOUT)
 
 
 def answering(link: Link, addresses: Sequence[int]) -> list[int]:
     """The addresses among those given where something answers a 50h (`PROOF_PROBES` tries each)."""
-    return [address for address in addresses if probe(link, address, probe_timeout(link.timeout), PROOF_PROBES) is not None]
+    return [address for address in addresses
+            if probe(link, address, probe_timeout(link.timeout), PROOF_PROBES) is not None]
 

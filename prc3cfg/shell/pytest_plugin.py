@@ -29,7 +29,8 @@ from prc3cfg.shell.testing import EmulatedPlant, emulate
 
 
 @pytest.fixture
-def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., EmulatedPlant]]:
+def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path,
+                     monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., EmulatedPlant]]:
     """Put a plant file's buses on emulators: `prc3cfg_emulated("plant.yaml", images=None)`. The records
     of axis releases on them (`prc3cfg.shell.pending_records`) are kept in the test's own folder: an emulated
     release is no business of the machine's."""
@@ -40,7 +41,8 @@ def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path, monkeypatch
         def start(plant_path: str | Path, images: str | Path | None = None, **options: Any) -> EmulatedPlant:
             root = Path(request.config.rootpath)
             path = root / plant_path
-            options["images"] = None if images is None else root / images  # both from the rootdir, wherever pytest runs
+            # both from the rootdir, wherever pytest runs
+            options["images"] = None if images is None else root / images
             folder = tmp_path / f"emulated-{next(numbers)}"
             folder.mkdir()
             return stack.enter_context(emulate(path, folder, **options))

@@ -58,31 +58,35 @@ class LinesFailed(UserError):
 
 
 def read_module(
-    link: Link, address: int, programs: Iterable[int], *, name: str = "", clamped_by: SystemParameters | None = None,
+    link: Link, address: int, programs: Iterable[int], *, name: str = "",
+                clamped_by: SystemParameters | None = None,
     known: ModuleImage | None = None, managed: Iterable[int] = (), fresh: bool = False,
-) -> ModuleImage:  # fmt: skip
+) -> ModuleImage:
     """The image of the module at `address`: system parameters and the given programs (others None).
 
-    With `clamped_by` (the system parameters a plan will write), every program is read when
-    writing them can clamp programs on this module. With `known` (what the line's record says the
-    module holds), what is read is evidence: a system block or a program other than the record's
-    means the module was changed by another hand, and every `managed` program is read too —
-    nothing of the record is taken then (`prc3cfg.core.what_to_read.after_system`, `after_programs`). With
-    `fresh` (an apply's), the `managed` programs of a factory-fresh module are not read (`what_to_read.factory_fresh`).
+    With `clamped_by` (the system parameters a plan will write), every program is read when writing them can
+    clamp programs on this module. With `known` (what the line's record says the module holds), what is read
+    is evidence: a system block or a program other than the record's means the module was changed by another
+    hand, and every `managed` program is read too — nothing of the record is taken then
+    (`prc3cfg.core.what_to_read.after_system`, `after_programs`). With `fresh` (an apply's), the `managed`
+    programs of a factory-fresh module are not read (`what_to_read.factory_fresh`).
     """
-    expected = None if known is None else {n: p for n, p in enumerate(known.programs, start=1) if p is not None}
+    expected = None if known is None else {n: p for n, p in enumerate(known.programs, start=1)
+                                           if p is not None}
     system = read_system(link, address, name=name, expected=None if known is None else known.system)
     image = ModuleImage(address=address, system=system, programs=(None,) * PROGRAM_COUNT)
     first = what_to_read.after_system(system, programs, clamped_by, known, managed, fresh=fresh)
     image = image.with_programs(read_programs(link, address, first, name=name, expected=expected))
-    return image.with_programs(read_programs(link, address, what_to_read.after_programs(image, known, managed), name=name, expected=expected))
+    return image.with_programs(read_programs(link, address,
+                                             what_to_read.after_programs(image, known, managed), name=name,
+                                             expected=expected))
 
 
 Reply = TypeVar("Reply", codec.SystemReply, codec.ProgramsReply)
 
 
 def _request(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply],
-             expected: Callable[[Reply], bool] | None = None) -> Reply:  # fmt: skip
+             expected: Callable[[Reply], bool] | None = None) -> Reply:
     """The data block of a read, of `kind` (the reply `codec.decode_reply` gives to `message`) — confirmed
     where nothing protects it (`_confirmed`; `expected`: whether a reply is what another observation says)."""
     if protects_replies(link.framing.checked, link.line.parity, link.parity_checked):
@@ -91,11 +95,12 @@ def _request(link: Link, address: int, message: codec.Message, name: str, kind: 
 
 
 def _confirmed(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply],
-               expected: Callable[[Reply], bool] | None) -> Reply:  # fmt: skip
+               expected: Callable[[Reply], bool] | None) -> Reply:
     """The data block of a read as soon as it is what `expected` says (another observation: the record, or
     a verified write), else heard twice in a row, asking again up to `CONFIRMATIONS` times in all; a
     `LinkError` when no two replies in a row agree (the line damages more than it carries)."""
-    from prc3cfg.shell.link.client import LinkError  # here: a command that opens no line (`plan --actual`) loads no link
+    # here: a command that opens no line (`plan --actual`) loads no link
+    from prc3cfg.shell.link.client import LinkError
 
     heard = _one(link, address, message, name, kind)
     if expected is not None and expected(heard):
@@ -105,9 +110,11 @@ def _confirmed(link: Link, address: int, message: codec.Message, name: str, kind
         if again == heard:
             return again
         heard = again
-    raise LinkError(f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: no two replies in a row to {message.ID:02X}h "
-                    f"agree in {CONFIRMATIONS} reads — the line damages what it carries (open-driver without parity detects "
-                    "nothing): check the cabling, or use parity on the line")  # fmt: skip
+    raise LinkError(f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: no two replies in a "
+                    f"row to {message.ID:02X}h "
+                    f"agree in {CONFIRMATIONS} reads — the line damages what it carries (open-driver "
+                    "without parity detects "
+                    "nothing): check the cabling, or use parity on the line")
 
 
 def _one(link: Link, address: int, message: codec.Message, name: str, kind: type[Reply]) -> Reply:
@@ -115,29 +122,35 @@ def _one(link: Link, address: int, message: codec.Message, name: str, kind: type
     reply = link.request(address, message)
     if isinstance(reply, int):
         where = f"bus {link.bus}, module {address}" + (f" ({name})" if name else "")
-        raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — {remedy(reply)}")
+        raise ReadBackError(f"{where}: read {message.ID:02X}h refused with {describe(reply)} — "
+                            f"{remedy(reply)}")
     if not isinstance(reply, kind):
         raise TypeError(f"a {type(reply).__name__} in reply to {message.ID:02X}h")
     return reply
 
 
-def read_system(link: Link, address: int, *, name: str = "", expected: SystemParameters | None = None) -> SystemParameters:
-    """One 50h: the system parameters; S9 must be `address`. `expected`: what another observation says they are."""
+def read_system(link: Link, address: int, *, name: str = "",
+                expected: SystemParameters | None = None) -> SystemParameters:
+    """One 50h: the system parameters; S9 must be `address`. `expected`: what another observation says they
+    are."""
 
     def as_expected(reply: codec.SystemReply) -> bool:
         return reply.address == address and reply.system == expected
 
-    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply, None if expected is None else as_expected)
+    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply, None if expected is None
+                     else as_expected)
     if reply.address != address:
         raise ReadBackError(
-            f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering at address "
-            f"{address} reports S9 = {reply.address} — check the module's Address Init and the plant file's address"
+            f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering "
+            "at address "
+            f"{address} reports S9 = {reply.address} — check the module's Address Init and the plant "
+            "file's address"
         )
     return reply.system
 
 
 def read_programs(link: Link, address: int, programs: Iterable[int], *, name: str = "",
-                  expected: Mapping[int, Program] | None = None) -> dict[int, Program]:  # fmt: skip
+                  expected: Mapping[int, Program] | None = None) -> dict[int, Program]:
     """The given programs, in the fewest 51h/52h exchanges (`read_messages`). `expected`: what another
     observation says some of them are."""
     wanted = set(programs)
@@ -146,10 +159,11 @@ def read_programs(link: Link, address: int, programs: Iterable[int], *, name: st
     def as_expected(reply: codec.ProgramsReply) -> bool:
         told = expected or {}
         return all(reply.first + offset not in wanted or told.get(reply.first + offset) == program
-                   for offset, program in enumerate(reply.programs))  # fmt: skip
+                   for offset, program in enumerate(reply.programs))
 
     for message in read_messages(wanted)[1:]:
-        reply = _request(link, address, message, name, codec.ProgramsReply, None if expected is None else as_expected)
+        reply = _request(link, address, message, name, codec.ProgramsReply, None if expected is None
+                         else as_expected)
         for offset, program in enumerate(reply.programs):
             if reply.first + offset in wanted:
                 found[reply.first + offset] = program
@@ -179,17 +193,21 @@ def read_all(
 
     def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
-        opened = False  # a module contradicted the record: every module of the line is read in full (`what_to_read.opens_line`)
+        # a module contradicted the record: every module of the line is read in full
+        # (`what_to_read.opens_line`)
+        opened = False
         for index, t in enumerate(bus_targets):
             t = what_to_read.opened(t) if opened else t
-            image = images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name, clamped_by=t.clamped_by,
-                                                             known=t.known, managed=t.managed, fresh=t.fresh)  # fmt: skip
+            image = images[(t.bus, t.address)] = read_module(links[t.bus], t.address, t.programs, name=t.name,
+                                                             clamped_by=t.clamped_by,
+                                                             known=t.known, managed=t.managed, fresh=t.fresh)
             if not opened and what_to_read.opens_line(t, image) is not None:
                 opened = True
                 for earlier in bus_targets[:index]:  # read before the line opened: the rest of them now
                     key = (earlier.bus, earlier.address)
                     if more := what_to_read.still_to_read(earlier, images[key]):
-                        images[key] = images[key].with_programs(read_programs(links[t.bus], earlier.address, more, name=earlier.name))
+                        images[key] = images[key].with_programs(read_programs(links[t.bus], earlier.address,
+                                                                              more, name=earlier.name))
                         if each is not None:
                             each(earlier, images[key])
             if progress:

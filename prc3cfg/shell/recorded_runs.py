@@ -23,7 +23,17 @@ from pathlib import Path
 from typing import Any
 
 from prc3cfg.errors import UserError
-from prc3cfg.shell.audit import EVIDENCE, Checked, check, check_journal, file_name, journal_problems, journals, of_plant, stamped
+from prc3cfg.shell.audit import (
+    EVIDENCE,
+    Checked,
+    check,
+    check_journal,
+    file_name,
+    journal_problems,
+    journals,
+    of_plant,
+    stamped,
+)
 from prc3cfg.shell.records import STAMP_LENGTH, Snapshot, records_dir
 
 #: The most `--older-than` takes, in days: a hundred years, older than any record.
@@ -51,11 +61,12 @@ class RecordedRun:
     findings: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
-        return {"time": self.time, "command": self.command, "user": self.user, "host": self.host, "plant": self.plant,
+        return {"time": self.time, "command": self.command, "user": self.user, "host": self.host,
+                "plant": self.plant,
                 "lines": list(self.lines), "result": self.result, "reason": self.reason,
                 "journal": None if self.journal is None else str(self.journal),
                 "snapshot": None if self.snapshot is None else str(self.snapshot), "chain": self.chain,
-                "findings": list(self.findings)}  # fmt: skip
+                "findings": list(self.findings)}
 
 
 def _text(value: Any) -> str | None:
@@ -85,7 +96,8 @@ def runs(plant_path: Path) -> list[RecordedRun]:
     snapshots_dir = records_dir(plant_path, "snapshots")
     found = [_journal_run(path, snapshots_dir) for path in journals(plant_path)]
     named = {run.snapshot.name for run in found if run.snapshot is not None}
-    found += [_snapshot_run(path) for path in of_plant(snapshots_dir, plant_path.stem, ".json") if path.name not in named]
+    found += [_snapshot_run(path) for path in of_plant(snapshots_dir, plant_path.stem, ".json")
+              if path.name not in named]
     return sorted(found, key=lambda run: (not run.time, run.time))
 
 
@@ -102,29 +114,36 @@ def _journal_run(path: Path, snapshots_dir: Path) -> RecordedRun:
     named = _snapshot_named(checked)
     snapshot = None if named is None else snapshots_dir / named
     plant = header.get("plant")
-    name = plant.get("name") if isinstance(plant, dict) else next((r.get("plant") for r in records if r.get("event") == "apply"), None)
+    name = plant.get("name") if isinstance(plant, dict) else next((r.get("plant") for r in records
+                                                                   if r.get("event") == "apply"), None)
     chain = "intact" if checked.chained else "unchained"
     if checked.problem is not None:
         chain = f"broken at {checked.problem.where}"
-    findings = tuple(problem.said() for problem in journal_problems(path, checked, [])[0] if problem is not checked.problem)
-    return RecordedRun(_named_time(path), _text(header.get("command")) or ("apply" if records else None), _text(header.get("user")),
-                       _text(header.get("host")), _text(name), _buses(records), _result(records), _text(header.get("reason")), path,
-                       snapshot, chain, findings)  # fmt: skip
+    findings = tuple(problem.said() for problem in journal_problems(path, checked, [])[0]
+                     if problem is not checked.problem)
+    return RecordedRun(_named_time(path), _text(header.get("command")) or ("apply" if records else None),
+                       _text(header.get("user")),
+                       _text(header.get("host")), _text(name), _buses(records), _result(records),
+                       _text(header.get("reason")), path,
+                       snapshot, chain, findings)
 
 
 def _snapshot_named(checked: Checked) -> str | None:
     """The file name of the snapshot a journal records last."""
     if (record := checked.snapshot_record()) is not None:
         return file_name(record[1].get("path"))
-    if applied := [r for r in checked.records if r.get("event") == "apply" and isinstance(r.get("snapshot"), str)]:
-        return file_name(Path(applied[-1]["snapshot"]).name)  # before headers: the apply record named it by its path
+    if applied := [r for r in checked.records if r.get("event") == "apply"
+                   and isinstance(r.get("snapshot"), str)]:
+        # before headers: the apply record named it by its path
+        return file_name(Path(applied[-1]["snapshot"]).name)
     return None
 
 
 def _buses(records: list[dict[str, Any]]) -> tuple[str, ...]:
     """The buses a run spoke on, from its records: its exchanges', and an adopt's."""
     buses = {str(r["bus"]) for r in records if r.get("event") in ("request", "exchange") and "bus" in r}
-    buses |= {str(bus) for r in records if r.get("event") == "adopt" and isinstance(r.get("buses"), list) for bus in r["buses"]}
+    buses |= {str(bus) for r in records if r.get("event") == "adopt" and isinstance(r.get("buses"), list)
+              for bus in r["buses"]}
     return tuple(sorted(buses))
 
 
@@ -134,7 +153,8 @@ def _snapshot_run(path: Path) -> RecordedRun:
         lines: tuple[str, ...] = tuple(sorted({bus for bus, _ in Snapshot.load(path).images}))
     except UserError:
         lines = ()
-    return RecordedRun(_named_time(path), None, None, None, None, lines, "unknown (no journal)", None, None, path, "unchained")
+    return RecordedRun(_named_time(path), None, None, None, None, lines, "unknown (no journal)", None, None,
+                       path, "unchained")
 
 
 @dataclass(frozen=True)
@@ -146,14 +166,16 @@ class Pruned:
 
 
 def older_than(days: float) -> timedelta:
-    """`--older-than DAYS` as a time: `ValueError`, saying what to give, unless a number of days from 0 to `MOST_DAYS`."""
+    """`--older-than DAYS` as a time: `ValueError`, saying what to give, unless a number of days from 0 to
+    `MOST_DAYS`."""
     if not 0 <= days <= MOST_DAYS:  # nan too
         raise ValueError(f"{days:g} is not a number of days from 0 to {MOST_DAYS} (a hundred years)")
     return timedelta(days=days)
 
 
-def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None, protected: Iterable[Path] = (),
-          dry_run: bool = False, now: datetime | None = None) -> Pruned:  # fmt: skip
+def prune(plant_path: Path, *, keep: int | None, older_than_days: float | None,
+          protected: Iterable[Path] = (),
+          dry_run: bool = False, now: datetime | None = None) -> Pruned:
     """Remove whole runs — journal and snapshot — beyond the newest `keep` and older than
     `older_than_days` (each only when given, both when both are), by the times in their files'
     names. Nothing while any record beside the plant file — of any plant file there — does not
@@ -194,9 +216,12 @@ def _all_verify(plant_path: Path) -> None:
     folder = records_dir(plant_path, "journal").parent
     if problems := check([folder]).problems:
         raise UserError("\n".join([
-            f"{plant_path}: nothing was removed — {len(problems)} record{'s' if len(problems) != 1 else ''} in {folder} do"
-            f"{'es' if len(problems) == 1 else ''} not verify, and prune acts only on records that do: {EVIDENCE}; then move each "
-            f"(and what it names) out of {folder} and prune again", *(problem.said() for problem in problems)]))  # fmt: skip
+            f"{plant_path}: nothing was removed — {len(problems)} record{'s' if len(problems) != 1 else ''} "
+            f"in {folder} do"
+            f"{'es' if len(problems) == 1 else ''} not verify, and prune acts only on records that do: "
+            f"{EVIDENCE}; then move each "
+            f"(and what it names) out of {folder} and "
+            "prune again", *(problem.said() for problem in problems)]))
 
 
 def _kept(every: list[RecordedRun], protected: Iterable[Path], stem: str) -> dict[RecordedRun, str]:
@@ -205,11 +230,13 @@ def _kept(every: list[RecordedRun], protected: Iterable[Path], stem: str) -> dic
     (before headers: its lines are its own word) may keep itself but never take that from a checked
     one —, the plant's newest run, a run an axis release nobody was told of names, a run that names
     a snapshot of another plant file (a journal before headers: nothing checked that)."""
-    guarded = {p.name for p in protected}  # by name: a record may name the journal by a path relative to another folder
+    # by name: a record may name the journal by a path relative to another folder
+    guarded = {p.name for p in protected}
     newest: dict[tuple[bool, str], tuple[RecordedRun, str]] = {}
     for run in every:
         for identity, said in _lines(run).items():
-            newest[(False, identity)] = (run, said)  # `every` is oldest first: the last one seen is the newest
+            # `every` is oldest first: the last one seen is the newest
+            newest[(False, identity)] = (run, said)
             if run.chain == "intact":
                 newest[(True, identity)] = (run, said)
     lines: dict[RecordedRun, list[str]] = {}
@@ -221,9 +248,11 @@ def _kept(every: list[RecordedRun], protected: Iterable[Path], stem: str) -> dic
         why.setdefault(newest_run[0], "the plant's newest run: the next run's journal follows it")
     for run in every:
         if run.snapshot is not None and run.snapshot.name[STAMP_LENGTH:] != f"-{stem}.json":
-            why[run] = f"its journal names {run.snapshot.name}, a snapshot of another plant file: prune removes only this plant file's"
+            why[run] = (f"its journal names {run.snapshot.name}, a snapshot of another plant file: prune "
+                        "removes only this plant file's")
         if run.journal is not None and run.journal.name in guarded:
-            why[run] = "an axis release nobody was told of names this run (prc3cfg.shell.pending_records): kept until an apply's account names it"
+            why[run] = ("an axis release nobody was told of names this run (prc3cfg.shell.pending_records): "
+                        "kept until an apply's account names it")
     return why
 
 

@@ -99,8 +99,9 @@ def git_state(plant_path: Path) -> dict[str, Any]:
     env = os.environ | {"GIT_OPTIONAL_LOCKS": "0", "LC_ALL": "C"}
 
     def git(*args: str) -> str:
-        done = subprocess.run(["git", "-c", "core.fsmonitor=false", "-C", str(folder), *args], capture_output=True, text=True,
-                              timeout=GIT_TIMEOUT, env=env, stdin=subprocess.DEVNULL)  # fmt: skip
+        done = subprocess.run(["git", "-c", "core.fsmonitor=false", "-C", str(folder), *args],
+                              capture_output=True, text=True,
+                              timeout=GIT_TIMEOUT, env=env, stdin=subprocess.DEVNULL)
         if done.returncode != 0:
             raise LookupError((done.stderr.strip().splitlines() or [f"git {args[0]} failed"])[0].removeprefix("fatal: "))
         return done.stdout
@@ -113,9 +114,11 @@ def git_state(plant_path: Path) -> dict[str, Any]:
         except LookupError:
             commit = None  # a repository without a commit yet
         clean = git("status", "--porcelain=v1", "--untracked-files=no") == ""
-        mark = git("status", "--porcelain=v1", "--untracked-files=all", "--ignored", "--", resolved(plant_path).name)[:2]
+        mark = git("status", "--porcelain=v1", "--untracked-files=all", "--ignored", "--",
+                   resolved(plant_path).name)[:2]
         state = {"": "committed", "??": "untracked", "!!": "ignored"}.get(mark, "changed")
-        return {"commit": commit, "clean": clean, "plant_file": state, "said": None if commit else "no commit yet"}
+        return {"commit": commit, "clean": clean, "plant_file": state, "said": None if commit
+                else "no commit yet"}
     except FileNotFoundError:
         return unknown | {"said": "git not found on PATH"}
     except subprocess.TimeoutExpired:
@@ -128,14 +131,16 @@ def git_state(plant_path: Path) -> dict[str, Any]:
 
 
 def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *, reason: str | None,
-           plan_file: Path | None = None, argv: Sequence[str] | None = None, policy: dict[str, Any] | None = None) -> dict[str, Any]:  # fmt: skip
-    """Who runs `command` on the plant file, where, with what and why — the first record of a
-    journal and the `header` of its snapshot (`Journal` adds the journal's name and its link to the
-    plant's journal before); `policy`: what the policy file the plant file names found and what was overridden, or None."""
+           plan_file: Path | None = None, argv: Sequence[str] | None = None,
+           policy: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Who runs `command` on the plant file, where, with what and why — the first record of a journal and the
+    `header` of its snapshot (`Journal` adds the journal's name and its link to the plant's journal before);
+    `policy`: what the policy file the plant file names found and what was overridden, or None."""
     plan = None
     if plan_file is not None:
         try:
-            plan = {"path": str(resolved(plan_file)), "sha256": hashlib.sha256(plan_file.read_bytes()).hexdigest()}
+            plan = {"path": str(resolved(plan_file)),
+                    "sha256": hashlib.sha256(plan_file.read_bytes()).hexdigest()}
         except OSError as error:
             raise UserError(f"{plan_file}: cannot read it ({error.strerror}) — nothing was written") from None
     return {
@@ -146,7 +151,8 @@ def header(command: str, plant_path: Path, plant_name: str, plant_sha256: str, *
         "pid": os.getpid(),
         "prc3cfg": __version__,
         "argv": list(sys.argv if argv is None else argv),
-        "plant": {"name": plant_name, "path": str(resolved(plant_path)), "sha256": plant_sha256, "git": git_state(plant_path)},
+        "plant": {"name": plant_name, "path": str(resolved(plant_path)), "sha256": plant_sha256,
+                  "git": git_state(plant_path)},
         "plan_file": plan,
         "reason": reason_given(reason),
         "policy": policy,
@@ -177,8 +183,10 @@ def check_writable(plant_path: Path) -> None:
                     probe.flush()
                     os.fsync(probe.fileno())
     except OSError as error:
-        raise UserError(f"{error.filename or records}: cannot write there ({error.strerror}) — apply keeps its snapshots and "
-                        f"journal in {records}: make that a writable folder (or free space), then apply again") from None
+        raise UserError(f"{error.filename or records}: cannot write there ({error.strerror}) — apply keeps "
+                        "its snapshots and "
+                        f"journal in {records}: make that a writable folder (or free space), then "
+                        "apply again") from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -200,8 +208,10 @@ class Snapshot:
     plant_sha256: str
     taken: str
     images: dict[tuple[str, int], ModuleImage]  # (bus, address) → image
-    lines: dict[str, LineTaken] = field(default_factory=dict)  # bus → its line (empty in snapshots before 0.1.0's)
-    header: dict[str, Any] | None = None  # who, where, what and why (`header`; none in snapshots written before records had headers)
+    # bus → its line (empty in snapshots before 0.1.0's)
+    lines: dict[str, LineTaken] = field(default_factory=dict)
+    # who, where, what and why (`header`; none in snapshots written before records had headers)
+    header: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -210,7 +220,8 @@ class Snapshot:
             "plant": str(self.plant_path),
             "plant_sha256": self.plant_sha256,
             "taken": self.taken,
-            "lines": {bus: {"port": line.port, "framing": line.framing, "keys": list(line.keys)} for bus, line in sorted(self.lines.items())},
+            "lines": {bus: {"port": line.port, "framing": line.framing, "keys": list(line.keys)}
+                      for bus, line in sorted(self.lines.items())},
             "modules": [{"bus": bus, **image.to_json()} for (bus, _), image in sorted(self.images.items())],
         }
 
@@ -246,7 +257,7 @@ class Snapshot:
 
     @classmethod
     def take(cls, plant_path: Path, plant_sha256: str, images: dict[tuple[str, int], ModuleImage],
-             lines: dict[str, LineTaken], header: dict[str, Any] | None = None) -> Snapshot:  # fmt: skip
+             lines: dict[str, LineTaken], header: dict[str, Any] | None = None) -> Snapshot:
         return cls(resolved(plant_path), plant_sha256, _stamp(), dict(images), dict(lines), header)
 
     @classmethod
@@ -263,12 +274,14 @@ class Snapshot:
                 document = _SnapshotDocument.model_validate(data)
             except ValidationError as error:
                 raise ValueError(said(error, lambda loc: json_path(loc, "the snapshot"), _SnapshotDocument)) from None
-            images = {(m.bus, image.address): image for m, image in zip(document.modules, images_from_json(data["modules"], "modules"))}
+            images = {(m.bus, image.address): image
+                      for m, image in zip(document.modules, images_from_json(data["modules"], "modules"))}
             plant = Path(document.plant)
             beside = resolved(path).parent.parent.parent / plant.name  # PLANT_DIR/.prc3cfg/snapshots/…
             if not plant.is_absolute() or (not plant.exists() and beside.exists()):
                 plant = beside  # an older relative path, or the plant repository moved
-            lines = {bus: LineTaken(line.port, line.framing, tuple(line.keys)) for bus, line in document.lines.items()}
+            lines = {bus: LineTaken(line.port, line.framing, tuple(line.keys))
+                     for bus, line in document.lines.items()}
             return cls(plant, document.plant_sha256, document.taken, images, lines, document.header)
         except ValueError as error:
             raise UserError(f"{path}: not a readable snapshot ({error}) — {remedy}") from None
@@ -322,7 +335,8 @@ class Journal:
     The file is made at the first record, after the `header`, so a run that never reached the line
     leaves none. `previous` is the plant's journal this one follows (`prc3cfg.shell.audit.follow`)."""
 
-    def __init__(self, plant_path: Path, header: dict[str, Any] | None = None, previous: dict[str, Any] | None = None) -> None:
+    def __init__(self, plant_path: Path, header: dict[str, Any] | None = None,
+                 previous: dict[str, Any] | None = None) -> None:
         self.path = records_dir(plant_path, "journal") / f"{_stamp()}-{plant_path.stem}.jsonl"
         self.header = None if header is None else header | {"journal": self.path.name, "previous": previous}
         self._handle: TextIO | None = None
@@ -348,7 +362,8 @@ class Journal:
     def request(self, exchange: Exchange) -> None:
         """An attempt about to go out (before its frame leaves: a port that fails after sending
         leaves it in the journal all the same)."""
-        self.record("request", bus=exchange.bus, address=exchange.address, request=exchange.request.hex(), attempt=exchange.attempt)
+        self.record("request", bus=exchange.bus, address=exchange.address, request=exchange.request.hex(),
+                    attempt=exchange.attempt)
 
     def exchange(self, exchange: Exchange) -> None:
         self.record(
@@ -363,7 +378,8 @@ class Journal:
 
     @property
     def begun(self) -> bool:
-        """Whether the journal's file was made (its first record kept): a run that never reached the line has none."""
+        """Whether the journal's file was made (its first record kept): a run that never reached the line has
+        none."""
         return self._handle is not None
 
     def close(self) -> None:

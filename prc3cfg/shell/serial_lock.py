@@ -56,7 +56,8 @@ def uucp_lock_dir() -> Path:
 
 def _below_dev(path: str) -> str:
     """minicom's `mbasename`: a path in /dev without /dev/ and with its / as _; elsewhere the last part."""
-    return path.removeprefix("/dev/").replace("/", "_") if path.startswith("/dev/") else os.path.basename(path)
+    return (path.removeprefix("/dev/").replace("/", "_") if path.startswith("/dev/")
+            else os.path.basename(path))
 
 
 def _all_but_first(path: str) -> str:
@@ -75,8 +76,10 @@ NAMINGS: dict[str, Callable[[str], str]] = {
 
 
 def lock_names(device: str) -> tuple[str, ...]:
-    """`LCK..NAME` in every spelling of `NAMINGS`, for the device as given and for its real path (each name once)."""
-    return tuple(dict.fromkeys(f"LCK..{naming(path)}" for path in (device, platform.real_path(device)) for naming in NAMINGS.values()))
+    """`LCK..NAME` in every spelling of `NAMINGS`, for the device as given and for its real path (each name
+    once)."""
+    return tuple(dict.fromkeys(f"LCK..{naming(path)}" for path in (device, platform.real_path(device))
+                               for naming in NAMINGS.values()))
 
 
 def _is_device(path: str) -> bool:
@@ -144,7 +147,8 @@ def _take_file(path: Path) -> tuple[Path | None, str | None]:
 def _written(folder: Path, record: bytes) -> Path:
     """A file in `folder` holding `record`, readable by every user, to be linked to a lock name."""
     temporary = folder / f"LTMP.{os.getpid()}"
-    fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | platform.NO_FOLLOW | platform.NO_INHERIT, 0o644)
+    fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | platform.NO_FOLLOW | platform.NO_INHERIT,
+                 0o644)
     try:
         platform.set_mode(fd, 0o644)  # umask aside: other programs read the pid
         os.write(fd, record)

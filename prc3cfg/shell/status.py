@@ -1,7 +1,8 @@
 """The facts of `prc3cfg status`, gathered from prc3cfg's records only — never the bus (the line stays one
 writer's): the journals beside the plant file (revision counter, last verified, last failed), each line's
 record of what its modules hold (drift, evidence age: `prc3cfg.shell.line_record`), the records of pending
-axis releases (`prc3cfg.shell.pending_records`) and the line's lock (an apply runs: `prc3cfg.shell.locks.held_by`).
+axis releases (`prc3cfg.shell.pending_records`) and the line's lock (an apply runs:
+`prc3cfg.shell.locks.held_by`).
 
 Another user's records are data: read bounded by the modules that read them, every text in them escaped
 where it is shown (`prc3cfg.core.text.shown`), and nothing here writes. Owns gathering and `watched`, the
@@ -46,8 +47,10 @@ def _verified(path: Path, header: dict[str, Any]) -> LastVerified:
     git = plant["git"] if isinstance(plant.get("git"), dict) else {}
     user, host = _text(header.get("user")), _text(header.get("host"))
     when = stamped(path)
-    return LastVerified(time="" if when is None else when.isoformat(timespec="microseconds"), by=None if user is None else f"{user}@{host or '?'}",
-                    plant_file=_text(plant.get("path")), plant_sha256=_text(plant.get("sha256")), commit=_text(git.get("commit")))  # fmt: skip
+    return LastVerified(time="" if when is None else when.isoformat(timespec="microseconds"), by=None
+                        if user is None else f"{user}@{host or '?'}",
+                    plant_file=_text(plant.get("path")), plant_sha256=_text(plant.get("sha256")),
+                        commit=_text(git.get("commit")))
 
 
 def histories(plant_path: Path) -> dict[tuple[str, int], _History]:
@@ -59,7 +62,8 @@ def histories(plant_path: Path) -> dict[tuple[str, int], _History]:
         if header.get("command", "apply") not in CHANGING:
             continue
         for record in checked.records:
-            if record.get("event") != "result" or not isinstance(record.get("bus"), str) or type(record.get("address")) is not int:
+            if (record.get("event") != "result" or not isinstance(record.get("bus"), str)
+                or type(record.get("address")) is not int):
                 continue
             if not record.get("written"):
                 continue  # nothing written: the configuration did not change
@@ -77,8 +81,10 @@ def identities(plant: Plant) -> dict[str, tuple[str, ...]]:
     return {bus.name: bus_line_keys(plant, bus) for bus in plant.buses}
 
 
-def gather(plant: Plant, keys: Mapping[str, tuple[str, ...]], now: datetime | None = None) -> tuple[list[ModuleFacts], list[str]]:
-    """Every module's facts, in the plant file's order, and notes on records passed over; `keys`: `identities`."""
+def gather(plant: Plant, keys: Mapping[str, tuple[str, ...]],
+           now: datetime | None = None) -> tuple[list[ModuleFacts], list[str]]:
+    """Every module's facts, in the plant file's order, and notes on records passed over; `keys`:
+    `identities`."""
     now = now or datetime.now(UTC)
     done = histories(plant.path)
     facts, notes = [], []
@@ -94,9 +100,11 @@ def gather(plant: Plant, keys: Mapping[str, tuple[str, ...]], now: datetime | No
             k = known.get(module.address)
             age = None if k is None else (now - datetime.fromisoformat(k.since)).total_seconds()
             travel = any(p.address in (0, module.address) for p in pending)
-            facts.append(ModuleFacts(bus.name, module.address, module.name, history.revision, history.last_verified,
-                                     history.last_failed, running, travel, k is not None and drifted(module.desired_image(), k.image),
-                                     age, bus.record_max_age))  # fmt: skip
+            facts.append(ModuleFacts(bus.name, module.address, module.name, history.revision,
+                                     history.last_verified,
+                                     history.last_failed, running, travel, k is not None
+                                     and drifted(module.desired_image(), k.image),
+                                     age, bus.record_max_age))
     return facts, notes
 
 
@@ -112,7 +120,8 @@ def watched(plant: Plant) -> Iterator[Path]:
 
 def fingerprint(plant: Plant, keys: Mapping[str, tuple[str, ...]]) -> tuple[tuple[str, int, int], ...]:
     """What `watched` looks like now (name, size, time of change, folders with their entries') — polled by
-    `status serve` to publish again when it changes; held locks change no file, so the lock's holder is asked too."""
+    `status serve` to publish again when it changes; held locks change no file, so the lock's holder is asked
+    too."""
     seen = []
     for path in watched(plant):
         with contextlib.suppress(OSError):

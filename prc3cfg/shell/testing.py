@@ -52,7 +52,8 @@ class EmulatedPlant:
         """Every module holds what the plant file says (system parameters and managed programs)."""
         for bus, module in load_plant(self.path).modules():
             held, desired = self.emulators[bus.name].module(module.address).image, module.desired_image()
-            if held.system != desired.system or any(w is not None and h != w for h, w in zip(held.programs, desired.programs)):
+            if held.system != desired.system or any(w is not None and h != w
+                                                    for h, w in zip(held.programs, desired.programs)):
                 return False
         return True
 
@@ -72,7 +73,8 @@ def seeded(images: Path) -> dict[tuple[str | None, int], ModuleState]:
         try:
             image = ModuleImage.from_json(entry)
         except (ValueError, KeyError, TypeError, AttributeError) as error:
-            raise UserError(f"{images}: not a module image as prc3cfg read --json writes it ({error}) — {remedy}") from None
+            raise UserError(f"{images}: not a module image as prc3cfg read --json writes it ({error}) "
+                            f"— {remedy}") from None
         filler = default_program(image.system)
         complete = image.with_programs({n: filler for n in PROGRAM_NUMBERS if image.program(n) is None})
         states[(entry.get("bus"), image.address)] = ModuleState(complete)
@@ -111,16 +113,19 @@ def emulate(
                 modules[module.address] = state or ModuleState.factory(module.address)
             for address in (unlisted or {}).get(bus.name, ()):
                 modules[address] = ModuleState.factory(address)
-            line = replace(bus.line, **{key: bus_document[key] for key in ("baud", "parity", "data_bits", "stop_bits") if key in bus_settings})
+            line = replace(bus.line,
+                           **{key: bus_document[key]
+                              for key in ("baud", "parity", "data_bits", "stop_bits") if key in bus_settings})
             emulator = stack.enter_context(Emulator(
                 modules, framing=bus_document.get("framing", bus.framing), line=line, line_speed=line_speed,
                 zvz=bus_document.get("zvz", bus.zvz), turnaround=bus.turnaround, faults=faults,
-            ))  # fmt: skip
+            ))
             host, port = emulator.listen("127.0.0.1", 0)
             bus_document["port"] = route(bus.name, host, port) if route else f"socket://{host}:{port}"
             emulators[bus.name] = emulator
         copy = directory / "plant.yaml"
         if resolved(copy) == resolved(source):
-            raise UserError(f"{source}: the emulated copy would overwrite the plant file — give another directory")
+            raise UserError(f"{source}: the emulated copy would overwrite the plant file — give another "
+                            "directory")
         copy.write_text(yaml.safe_dump(document, sort_keys=False))
         yield EmulatedPlant(copy, load_plant(copy), emulators)

@@ -20,7 +20,14 @@ from planner_helpers import FRAMINGS, check_plan, line, plan_bench
 
 from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    ModuleImage,
+    Program,
+    default_program,
+)
 from prc3cfg.core.planner import plan_module
 
 MANAGED = (1, 2, 3)

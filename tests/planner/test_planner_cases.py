@@ -13,7 +13,14 @@ import pytest
 from planner_helpers import FRAMINGS, check_plan, line, with_programs
 
 from prc3cfg.core import codec
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    ModuleImage,
+    Program,
+    default_program,
+)
 from prc3cfg.core.planner import ModulePlan, UnreachableImage, plan_module
 from prc3cfg.core.planner.module_plan import program_list, summarise
 from prc3cfg.core.planner.problem import FIELD_BIT, KEEP, PlanningProblem, diff_mask

@@ -10,7 +10,16 @@ decoder is fed bytes with their arrival times and hands back `Frame`, `Discarded
 
 from __future__ import annotations
 
-from prc3cfg.core.framing.base import NEED_DATA, Decoder, Direction, Discarded, Frame, Framing, FramingError, FramingName
+from prc3cfg.core.framing.base import (
+    NEED_DATA,
+    Decoder,
+    Direction,
+    Discarded,
+    Frame,
+    Framing,
+    FramingError,
+    FramingName,
+)
 from prc3cfg.core.framing.crc16 import Crc16Framing
 from prc3cfg.core.framing.open_driver import OpenDriverFraming
 from prc3cfg.core.framing.stx import StxFraming

@@ -133,7 +133,8 @@ class Decoder(abc.ABC):
 
     @abc.abstractmethod
     def _take(self, data: bytes, now: float) -> None:
-        """Take a chunk of bytes whose last byte arrived at `now` (byte i of n at `now - (n - 1 - i) × char time`)."""
+        """Take a chunk of bytes whose last byte arrived at `now` (byte i of n at `now - (n - 1 - i) × char
+        time`)."""
 
     def _silence(self, now: float, n_bytes: int) -> float:
         """How long the line was idle before `n_bytes` bytes arriving back to back up to `now`."""
@@ -190,7 +191,8 @@ class Framing(abc.ABC):
         if address not in self.addresses:
             raise FramingError(f"{self.name}: address {address} is outside {_span(self.addresses)}")
         if len(message) not in self.lengths:
-            raise FramingError(f"{self.name}: a message of {len(message)} bytes is outside {_span(self.lengths)} bytes")
+            raise FramingError(f"{self.name}: a message of {len(message)} bytes is outside "
+                               f"{_span(self.lengths)} bytes")
         return self._encode(direction, address, bytes(message))
 
     @abc.abstractmethod

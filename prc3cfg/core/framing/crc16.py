@@ -86,7 +86,8 @@ class Crc16Decoder(Decoder):
     def _clock(self, now: float, n_bytes: int) -> None:
         silence = self._silence(now, n_bytes)
         if silence > self.inter_char_timeout:
-            self._end_burst(f"then {ms(silence)} of silence (inter-character time-out {ms(self.inter_char_timeout)})")
+            self._end_burst(f"then {ms(silence)} of silence (inter-character time-out "
+                            f"{ms(self.inter_char_timeout)})")
 
     def _end_burst(self, why: str) -> None:
         if self._frame:
@@ -95,7 +96,8 @@ class Crc16Decoder(Decoder):
         self._flush_skipped(self._no_start_code)
 
     def _take(self, data: bytes, now: float) -> None:
-        """Whole runs at a time: garbage up to the next start code, then as much of the frame as N asks for."""
+        """Whole runs at a time: garbage up to the next start code, then as much of the frame as N asks
+        for."""
         i, n = 0, len(data)
         while i < n:
             frame = self._frame

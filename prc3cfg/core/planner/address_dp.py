@@ -93,7 +93,8 @@ NEXT_MOVES = frozenset((RangeMove.LINK, RangeMove.LINK_ON, RangeMove.INNER_LINK,
 INNER_STARTS = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_UNLINK, RangeMove.INNER_UNLINK_ONE))
 OUTER_STARTS = frozenset((RangeMove.LINK, RangeMove.UNLINK))
 #: The moves where an inner range goes on past the program.
-INNER_GOING = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON, RangeMove.INNER_UNLINK, RangeMove.INNER_UNLINK_ON))
+INNER_GOING = frozenset((RangeMove.INNER_LINK, RangeMove.INNER_LINK_ON, RangeMove.INNER_UNLINK,
+                         RangeMove.INNER_UNLINK_ON))
 
 
 class Addresses(NamedTuple):
@@ -107,8 +108,9 @@ class Addresses(NamedTuple):
 class AddressDP:
     """The jump-address DP of one write phase (its bases' addresses and the desired ones)."""
 
-    def __init__(self, prices: Prices, managed: Sequence[bool], target_a: Sequence[int], base_a: Sequence[int],
-                 changed_a: int) -> None:  # fmt: skip
+    def __init__(self, prices: Prices, managed: Sequence[bool], target_a: Sequence[int],
+                 base_a: Sequence[int],
+                 changed_a: int) -> None:
         self.prices, self.managed, self.target_a, self.base_a = prices, managed, target_a, base_a
         self.changed_a = changed_a  # the programs whose address differs from the desired one
 
@@ -120,7 +122,9 @@ class AddressDP:
         messages = ADDRESSES.messages(cheapest.items.bit_count())
         if not messages:  # one 46h saved may pay for ranges: its header too, where ranges take every item
             return (cheapest,)
-        return (cheapest, *(self._ranges_and_misses(whole, True, moves) for moves in self._fewer_messages(steps, messages)))
+        return (cheapest,
+                *(self._ranges_and_misses(whole, True, moves)
+                  for moves in self._fewer_messages(steps, messages)))
 
     def _address_steps(self, whole: int) -> list[tuple[bool, tuple[bool, bool, bool]] | None]:
         """What the jump-address DP sees of each program: None outside the plan file; else whether
@@ -137,7 +141,8 @@ class AddressDP:
             steps.append((goes_on, (not free and base[i] != t, not free and t != 0, not free and t != i + 2)))
         return steps
 
-    def _cheapest_moves(self, steps: list[tuple[bool, tuple[bool, bool, bool]] | None], open46: bool) -> list[RangeMove]:
+    def _cheapest_moves(self, steps: list[tuple[bool, tuple[bool, bool, bool]] | None],
+                        open46: bool) -> list[RangeMove]:
         """The DP over program numbers (`ADDRESS_MOVES`) behind `addresses`: each wrong address
         costs a 46h item (when `open46`) or a 21h, each range its message."""
         miss = self.prices.address_item if open46 else self.prices.program
@@ -146,7 +151,8 @@ class AddressDP:
         back: list[dict[int, tuple[int, RangeMove]]] = []
         # per step as the DP sees it (a few kinds in all): each move's state after and before, and
         # what it adds in the order the sum is taken — a range's message, then the address's price
-        priced_moves: dict[tuple[bool, tuple[bool, bool, bool]], list[tuple[int, int, RangeMove, float, float]]] = {}
+        priced_moves: dict[tuple[bool, tuple[bool, bool, bool]],
+                           list[tuple[int, int, RangeMove, float, float]]] = {}
         for step in steps:
             if step is None:
                 came = 0 if cost[0] <= cost[2] else 2
@@ -156,9 +162,10 @@ class AddressDP:
             if (allowed := priced_moves.get(step)) is None:
                 goes_on, wrong = step
                 allowed = priced_moves[step] = [
-                    (to, came, move, link, miss if wrong[gives] else 0.0) if starts else (to, came, move, miss if wrong[gives] else 0.0, 0.0)
+                    (to, came, move, link, miss if wrong[gives] else 0.0) if starts
+                                                else (to, came, move, miss if wrong[gives] else 0.0, 0.0)
                     for to, came, move, starts, gives, _ in (ADDRESS_MOVES if goes_on else ENDING_MOVES)
-                ]  # fmt: skip
+                ]
             new = [INF] * ADDRESS_STATES
             moves: dict[int, tuple[int, RangeMove]] = {}
             for to, came, move, first, then in allowed:
@@ -173,7 +180,8 @@ class AddressDP:
             state, found[i] = back[i][state]
         return found
 
-    def _fewer_messages(self, steps: list[tuple[bool, tuple[bool, bool, bool]] | None], messages: int) -> list[list[RangeMove]]:
+    def _fewer_messages(self, steps: list[tuple[bool, tuple[bool, bool, bool]] | None],
+                        messages: int) -> list[list[RangeMove]]:
         """The cheapest moves with each fewer 46h message than `messages`, where one exists: the DP of
         `_cheapest_moves` whose states also count the items so far — exact where pricing items one
         by one is not (one header saved may pay for ranges that no share of it on each item would
@@ -186,7 +194,8 @@ class AddressDP:
         for step in steps:
             fronts, moves = _outside(fronts) if step is None else self._counted_step(fronts, step, most)
             back.append(moves)
-        # after the last program no range goes on, as after one outside the plan file: each count ends in 0 or 2
+        # after the last program no range goes on, as after one outside the plan file: each count ends in 0 or
+        # 2
         (last, *_), (ends, *_) = _outside(fronts)
         found = []
         for n in _fewer_counts(last, messages):
@@ -198,7 +207,8 @@ class AddressDP:
         return found
 
     def _counted_step(self, fronts: list[dict[int, float]], step: tuple[bool, tuple[bool, bool, bool]],
-                      most: int) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:  # fmt: skip
+                      most: int) -> tuple[list[dict[int, float]],
+                                          list[dict[int, tuple[int, RangeMove, int]]]]:
         """One managed program of `_fewer_messages`: each state's front after it, and how each count came."""
         link, item = self.prices.link, self.prices.address_item
         goes_on, wrong = step
@@ -238,7 +248,8 @@ class AddressDP:
                     extra |= 1 << i
         return Addresses((*outer, *inner), items, extra)
 
-def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]], list[dict[int, tuple[int, RangeMove, int]]]]:
+def _outside(fronts: list[dict[int, float]]) -> tuple[list[dict[int, float]],
+                                                      list[dict[int, tuple[int, RangeMove, int]]]]:
     """A program outside the plan file in `AddressDP._fewer_messages` (and the end of its programs):
     no range goes on over it, so every count comes to state 0, from 0 or 2."""
     came: dict[int, tuple[int, RangeMove, int]] = {}

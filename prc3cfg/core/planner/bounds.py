@@ -31,7 +31,8 @@ def floor_of(prices: Prices, target_a: Sequence[int], changed: dict[int, int]) -
     def share(bit: int, header: float, capacity: int) -> float:
         return header / max(min(changed[bit].bit_count(), capacity), 1)
 
-    field = {bit: prices.item(kind) + share(bit, prices.header(kind), kind.capacity) for bit, kind in KIND_OF_BIT.items()}
+    field = {bit: prices.item(kind) + share(bit, prices.header(kind), kind.capacity)
+             for bit, kind in KIND_OF_BIT.items()}
     address = field[A_BIT]
     needers = max(min((changed[P_BIT] | changed[V_BIT]).bit_count(), PARTS.capacity), 1)
     pair, single = prices.parts_item + prices.parts_header / needers, prices.parts(1)  # a 33h's share, a 32h
@@ -67,7 +68,8 @@ def inits_floor(problem: PlanningProblem, floors: Table) -> float:
     size = 1 + 2 * count
     before, cost = 0.0, [INF] * size
     for i, row in enumerate(floors):
-        closed = [cost[0], *(min(cost[2 * n - 1] - refund, cost[2 * n]) for n in range(1, count + 1))]  # per kind
+        # per kind
+        closed = [cost[0], *(min(cost[2 * n - 1] - refund, cost[2 * n]) for n in range(1, count + 1))]
         least, then = sorted(closed)[:2]  # the least of the others' is `then` where it is `least`
         new = [least + row[0], *[INF] * (size - 1)]
         if problem.managed[i]:
@@ -83,7 +85,7 @@ class HeadersBound:
     """`at_least` of one write phase, remembered by its arguments."""
 
     def __init__(self, prices: Prices, masks: list[int], target_a: Sequence[int], changed: dict[int, int],
-                 relevant_programs: int) -> None:  # fmt: skip
+                 relevant_programs: int) -> None:
         self.prices, self.masks, self.target_a, self.changed = prices, masks, target_a, changed
         self.relevant_programs = relevant_programs
         self.pv_changed = changed[P_BIT] | changed[V_BIT]
@@ -142,8 +144,9 @@ class HeadersBound:
                 *(header * kind.messages(n - w) for header, kind, n in plain),
                 prices.address_header * ADDRESSES.messages(addresses - w),
                 self._pv_headers(p - w, v - w, both - w),
-                max(ranges * prices.link, min(prices.link, (ranged - w) * prices.address_item) if ranged > w else 0.0),
-            ))  # fmt: skip
+                max(ranges * prices.link, min(prices.link, (ranged - w) * prices.address_item)
+                    if ranged > w else 0.0),
+            ))
             least = min(least, paid + headers)  # two floats: rounded once, as fsum's sum is
         known = self._at_least[whole, ranges] = fsum((whole.bit_count() * prices.program, *spent, least))
         return known
@@ -152,10 +155,12 @@ class HeadersBound:
         """The headers of P and V at least, for `p` programs that differ in P, `v` in V, `both` in either:
         with R 33h (or 32h), each over at most 15 of them, the rest need 40h for P and 41h for V."""
         prices, capacity = self.prices, PARTS.capacity
-        run, header, least = min(prices.parts_header, prices.parts(1) - prices.parts_item), prices.field_header, INF
+        run, header, least = min(prices.parts_header,
+                                 prices.parts(1) - prices.parts_item), prices.field_header, INF
         for r in range(PARTS.messages(both) + 1):
             covered = capacity * r  # a sum of two floats is rounded once, as fsum's is
-            value = r * run + header * max(FIELDS.messages(p - covered) + FIELDS.messages(v - covered), FIELDS.messages(both - covered))
+            value = r * run + header * max(FIELDS.messages(p - covered) + FIELDS.messages(v - covered),
+                                           FIELDS.messages(both - covered))
             if value < least:
                 least = value
         return least

@@ -54,7 +54,8 @@ def shared(phase: WritePhase, shares: dict[int, float]) -> Residual:
     def cost(i: int, mask: int) -> float:
         total = fsum(item[bit] for bit in PLAIN_BITS if mask & bit)
         if mask & PV_BITS:
-            total += fsum(item[bit] for bit in (P_BIT, V_BIT) if mask & bit) if pv_items else prices.parts_item
+            total += (fsum(item[bit] for bit in (P_BIT, V_BIT) if mask & bit) if pv_items
+                      else prices.parts_item)
         if mask & A_BIT and phase.target_a[i] not in (0, i + 2):
             total += address
         return min(total, prices.program)
@@ -69,13 +70,14 @@ def marginal(phase: WritePhase, writes: Writes) -> Residual:
     """
     prices = phase.prices
     # per field, what program i's item adds to the others' — by whether i is among its n items
-    added = [(prices.fields(n + 1) - prices.fields(n) if n < PROGRAM_COUNT else INF, prices.fields(n) - prices.fields(n - 1) if n else INF)
-             for n in (mask.bit_count() for mask in writes.items)]  # fmt: skip
+    added = [(prices.fields(n + 1) - prices.fields(n) if n < PROGRAM_COUNT else INF,
+              prices.fields(n) - prices.fields(n - 1) if n else INF)
+             for n in (mask.bit_count() for mask in writes.items)]
     addresses = writes.addresses.bit_count()
     need = phase.pv_changed & ~writes.whole
     run_of = {i: (first, last) for first, last in writes.part_runs for i in range(first, last + 1)}
     ranged = {i: (i + 2 if link and i < last else 0) for link, first, last in writes.ranges
-              for i in range(first, last + 1)}  # fmt: skip
+              for i in range(first, last + 1)}
 
     (p_added, v_added, *_), (p_items, v_items, *_) = added, writes.items
     plain = list(zip(PLAIN_BITS, added[2:], writes.items[2:]))
@@ -89,7 +91,8 @@ def marginal(phase: WritePhase, writes: Writes) -> Residual:
 
     def jump(i: int, mask: int) -> float:
         if i in ranged:
-            return 0.0 if ranged[i] == phase.target_a[i] else prices.addresses(addresses + 1) - prices.addresses(addresses)
+            return (0.0 if ranged[i] == phase.target_a[i]
+                    else prices.addresses(addresses + 1) - prices.addresses(addresses))
         if not mask & A_BIT:
             return 0.0
         n = addresses - (writes.addresses >> i & 1)
@@ -130,7 +133,8 @@ class Charges:
         kinds = problem.kinds
         self.ties = [0.0, *[TIE] * (len(kinds) - 1)]
         # per program its distinct masks; over all programs the keys of `alike` (by place)
-        self.own: list[list[int]] = []  # per program and kind: its mask's place among the program's distinct masks
+        # per program and kind: its mask's place among the program's distinct masks
+        self.own: list[list[int]] = []
         self.distinct: list[list[int]] = []
         alikes: dict[object, int] = {}
         self.first: list[tuple[int, int]] = []  # per key of `alike`: the first program and mask with it

@@ -53,14 +53,17 @@ class StepProblem(ValueError):
         self.index = index
 
 
-def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[codec.Message], *, system_unset: bool = False) -> ModuleImage:
+def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[codec.Message], *,
+              system_unset: bool = False) -> ModuleImage:
     """The image the steps leave on the module (programs read or managed), or `StepProblem`.
     `system_unset`: the module is in E12, which only a 10h/20h clears — one may go for it, first.
     The rules are checked in the order the module docstring numbers them, each refusal with its own words."""
     if len(messages) > MAX_STEPS:
-        raise StepProblem(MAX_STEPS + 1, f"{len(messages)} steps for one module, more than any plan needs ({MAX_STEPS})")
+        raise StepProblem(MAX_STEPS + 1,
+                          f"{len(messages)} steps for one module, more than any plan needs ({MAX_STEPS})")
     filler = default_program(actual.system)
-    state = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
+    state = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p
+                                                              for p in actual.programs)))
     unmanaged = {n for n, p in enumerate(desired.programs, start=1) if p is None}
     releases = 0
     for index, message in enumerate(messages, start=1):
@@ -68,14 +71,17 @@ def run_steps(actual: ModuleImage, desired: ModuleImage, messages: Sequence[code
         _check_write(step, unmanaged)
         if message.RELEASES_AXES:
             releases += 1
-            _check_release(step, releases, matching=actual.system == desired.system and not (system_unset and index == 1))
+            _check_release(step, releases, matching=actual.system == desired.system
+                           and not (system_unset and index == 1))
         try:
             state = device.execute(state, message)
         except codec.Rejected as rejected:
-            raise StepProblem(index, f"{step} would be refused by the module with {describe(rejected.code)}") from None
+            raise StepProblem(index, f"{step} would be refused by the module with "
+                                     f"{describe(rejected.code)}") from None
     image = state.image
     _check_reached(image, desired)
-    known = tuple(p if (a is not None or w is not None) else None for p, a, w in zip(image.programs, actual.programs, desired.programs))
+    known = tuple(p if (a is not None or w is not None) else None
+                  for p, a, w in zip(image.programs, actual.programs, desired.programs))
     return replace(image, programs=known)
 
 
@@ -86,7 +92,8 @@ def _check_write(step: _StepName, unmanaged: set[int]) -> None:
         raise StepProblem(step.index, f"{step} is a read ({message.ID:02X}h), not a write")
     trespass = unmanaged.intersection(message.touched_programs())
     if trespass:
-        which = f"program {program_list(trespass)}" if len(trespass) == 1 else f"programs {program_list(trespass)}"
+        which = (f"program {program_list(trespass)}" if len(trespass) == 1
+                 else f"programs {program_list(trespass)}")
         raise StepProblem(step.index, f"{step} writes {which}, which the plant file does not manage")
 
 
@@ -94,7 +101,8 @@ def _check_release(step: _StepName, releases: int, matching: bool) -> None:
     """A step that releases the axes (the `releases`-th) is the only one, and goes only where the system
     parameters differ from the plant file's (`matching`: they do not, and no E12 asks for it)."""
     if matching:
-        raise StepProblem(step.index, f"{step} releases the axes, but the system parameters already match the plant file")
+        raise StepProblem(step.index,
+                          f"{step} releases the axes, but the system parameters already match the plant file")
     if releases > 1:
         raise StepProblem(step.index, f"{step} releases the axes a second time")
 
@@ -103,7 +111,8 @@ def _check_reached(image: ModuleImage, desired: ModuleImage) -> None:
     """After the steps, the system parameters and every managed program are the plant file's."""
     if image.system != desired.system:
         raise StepProblem(0, "after the steps the system parameters differ from the plant file's")
-    wrong = [n for n, (have, want) in enumerate(zip(image.programs, desired.programs), 1) if want is not None and have != want]
+    wrong = [n for n, (have, want) in enumerate(zip(image.programs, desired.programs), 1)
+             if want is not None and have != want]
     if wrong:
         which = f"program {wrong[0]} differs" if len(wrong) == 1 else f"programs {program_list(wrong)} differ"
         raise StepProblem(0, f"after the steps {which} from the plant file")

@@ -21,7 +21,8 @@ TIE = 1e-9
 
 
 def init_cost(problem: PlanningProblem, kinds: Kinds) -> float:
-    """What the init messages of `kinds` cost: one 14h per run, a 12h/13h/11h for one program or a run to 64."""
+    """What the init messages of `kinds` cost: one 14h per run, a 12h/13h/11h for one program or a run to
+    64."""
     prices = problem.prices
     total = 0.0
     for kind in problem.kinds[1:]:
@@ -60,9 +61,11 @@ def choose_inits(problem: PlanningProblem, charges: Table) -> Kinds:
 
 
 def _kinds(managed: tuple[bool, ...], charges: Table, count: int, refund: float,
-           init_range: float) -> tuple[list[Sequence[int]], list[float]]:  # fmt: skip
-    """`choose_inits`' DP: per program the state each state came from, and the cost of each state after the last."""
-    ends = [(2 * n - 1, 2 * n) for n in range(1, count + 1)]  # per init kind: its run's first state, further on
+           init_range: float) -> tuple[list[Sequence[int]], list[float]]:
+    """`choose_inits`' DP: per program the state each state came from, and the cost of each state after the
+    last."""
+    # per init kind: its run's first state, further on
+    ends = [(2 * n - 1, 2 * n) for n in range(1, count + 1)]
     no_cost, no_step = [INF] * (2 * count), [0] * (2 * count)
     cost = [0.0, *no_cost]
     back: list[Sequence[int]] = []
@@ -87,10 +90,10 @@ def _kinds(managed: tuple[bool, ...], charges: Table, count: int, refund: float,
 
 
 def _one_kind(managed: tuple[bool, ...], charges: Table, refund: float,
-              init_range: float) -> tuple[list[Sequence[int]], list[float]]:  # fmt: skip
-    """`_kinds` with one init kind, the same sums in the same order: a run of it can only begin
-    from a kept program (state 0), and the cheapest closed state is kept or the kind's.
-    Earns 5 % of planning CPU (the 352 plans of plan_bench's scenarios and plants: 3.19 s, 3.36 s by `_kinds`)."""
+              init_range: float) -> tuple[list[Sequence[int]], list[float]]:
+    """`_kinds` with one init kind, the same sums in the same order: a run of it can only begin from a kept
+    program (state 0), and the cheapest closed state is kept or the kind's. Earns 5 % of planning CPU (the 352
+    plans of plan_bench's scenarios and plants: 3.19 s, 3.36 s by `_kinds`)."""
     keep, first, further = 0.0, INF, INF
     back: list[Sequence[int]] = []
     for i, (kept, initialised) in enumerate(charges):
@@ -101,7 +104,7 @@ def _one_kind(managed: tuple[bool, ...], charges: Table, refund: float,
         if managed[i]:
             step = (came, 0, 1) if first <= further else (came, 0, 2)
             keep, first, further = (closed + kept, keep + init_range + initialised,
-                                    (first if first <= further else further) + initialised)  # fmt: skip
+                                    (first if first <= further else further) + initialised)
         else:
             step = (came, 0, 0)
             keep, first, further = closed + kept, INF, INF
@@ -110,7 +113,8 @@ def _one_kind(managed: tuple[bool, ...], charges: Table, refund: float,
 
 
 def _best_run(managed: tuple[bool, ...], charges: Table, n: int) -> float:
-    """The most a run of the n-th kind could save on `charges` (the maximum subarray, over managed programs)."""
+    """The most a run of the n-th kind could save on `charges` (the maximum subarray, over managed
+    programs)."""
     best = run = 0.0
     for i, row in enumerate(charges):
         run = run + row[0] - row[n] if managed[i] else 0.0

@@ -63,7 +63,17 @@ from prc3cfg.core.planner.init_dp import choose_inits, init_cost
 from prc3cfg.core.planner.layout import Layout, Writes, members, runs_of
 from prc3cfg.core.planner.pricing import FIELDS
 from prc3cfg.core.planner.problem import A_BIT, INIT_AFTER, INIT_BEFORE, KEEP, PV_BITS, PlanningProblem
-from prc3cfg.core.planner.terms import ESTIMATE, INF, ITEM_BITS, KIND_OF_BIT, Kinds, Run, Table, all_of, all_runs
+from prc3cfg.core.planner.terms import (
+    ESTIMATE,
+    INF,
+    ITEM_BITS,
+    KIND_OF_BIT,
+    Kinds,
+    Run,
+    Table,
+    all_of,
+    all_runs,
+)
 from prc3cfg.core.planner.write_phase import WritePhase
 
 #: Items per message assumed by one of the init choices (few items: headers matter).
@@ -119,7 +129,8 @@ class InitSearch:
     bound first, each given its own write phase; when it runs dry, the neighbours of the best plan
     and the inits that save whole messages — until none is left or SEARCHED were."""
 
-    def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout], charges: Charges) -> None:
+    def __init__(self, problem: PlanningProblem, phase: WritePhase, layouts: list[Layout],
+                 charges: Charges) -> None:
         self.problem = problem
         self.phase = phase  # the write phase without inits
         self.layouts = layouts  # every candidate found, the plans without inits first
@@ -155,7 +166,8 @@ class InitSearch:
         for kinds in dict.fromkeys(choices):
             if kinds not in self.tried:
                 self.order += 1
-                out.append((-self.improved, init_cost(problem, kinds) + self._phase(kinds).floor, self.order, kinds))
+                out.append((-self.improved, init_cost(problem, kinds) + self._phase(kinds).floor, self.order,
+                            kinds))
         heapq.heapify(out)
         return out
 
@@ -167,16 +179,19 @@ class InitSearch:
     def _first(self, writes: Writes, floors: Table) -> list[Kinds]:
         """The init DP with a program's charge estimated three ways (module docstring, 2.)."""
         phase, problem, charges = self.phase, self.problem, self.charges
-        tables = [charges.each(marginal(phase, writes)), charges.alike(linear(phase, problem.prices.field_header / INIT_SHARE)), floors]
+        tables = [charges.each(marginal(phase, writes)),
+                  charges.alike(linear(phase, problem.prices.field_header / INIT_SHARE)), floors]
         return [choose_inits(problem, table) for table in tables]
 
     def _try(self, kinds: Kinds) -> list[Kinds]:
-        """Search the write phases of `kinds`; when that gives a better plan, the init choices to try from it."""
+        """Search the write phases of `kinds`; when that gives a better plan, the init choices to try from
+        it."""
         problem = self.problem
         self.tried.add(kinds)
         base = problem.system_cost + init_cost(problem, kinds)
         with_inits = self._phase(kinds)
-        if base + with_inits.floor >= self.best.estimate or base + with_inits.at_least(0) >= self.best.estimate:
+        if (base + with_inits.floor >= self.best.estimate or base
+            + with_inits.at_least(0) >= self.best.estimate):
             return []
         self.searched += 1
         found = with_inits.solve(self.best.estimate - base)
@@ -186,25 +201,27 @@ class InitSearch:
         self.best = Layout(kinds, found[0], base + found[0].estimate)
         self.improved += 1
         return [choose_inits(problem, self.charges.each(marginal(with_inits, found[0]))),
-                *_moved_across(problem, kinds)]  # fmt: skip
+                *_moved_across(problem, kinds)]
 
     def _targets(self) -> list[Kinds]:
         """Inits that save whole messages, from the plans closest to the best (within an exchange)."""
         problem, best = self.problem, self.best
         close = sorted({layout.kinds: layout for layout in self.layouts if layout.kinds not in self.targeted
-                        and layout.estimate < best.estimate + problem.prices.exchange}.values(), key=ESTIMATE)  # fmt: skip
+                        and layout.estimate < best.estimate + problem.prices.exchange}.values(), key=ESTIMATE)
         queue: list[Kinds] = []
         for layout in close[:TARGETED]:
             self.targeted.add(layout.kinds)
             goals = _overflows(problem, layout)
-            candidates = _header_targets(problem, self.phase, self.charges, goals, alone=self.searched > 0) + _harmless_inits(problem, layout, goals)
+            candidates = _header_targets(problem, self.phase, self.charges, goals,
+                                         alone=self.searched > 0) + _harmless_inits(problem, layout, goals)
             queue += [kinds for kinds in candidates if kinds not in self.tried]
         return queue
 
 
 def _item_channels(writes: Writes) -> list[ItemChannel]:
     """Every 40h..46h field of `writes`."""
-    return [ItemChannel(bit, mask, KIND_OF_BIT[bit]) for bit, mask in zip((*ITEM_BITS, A_BIT), (*writes.items, writes.addresses))]
+    return [ItemChannel(bit, mask, KIND_OF_BIT[bit])
+            for bit, mask in zip((*ITEM_BITS, A_BIT), (*writes.items, writes.addresses))]
 
 
 def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
@@ -222,7 +239,8 @@ def _overflows(problem: PlanningProblem, layout: Layout) -> list[Overflow]:
     return goals
 
 
-def _header_targets(problem: PlanningProblem, phase: WritePhase, charges: Charges, goals: list[Overflow], alone: bool) -> list[Kinds]:
+def _header_targets(problem: PlanningProblem, phase: WritePhase, charges: Charges, goals: list[Overflow],
+                    alone: bool) -> list[Kinds]:
     """Init choices that take the overflow of the `goals` fields out, to save whole messages.
 
     For all of those fields together, and (`alone`) for each alone, header shares per field are bisected
@@ -276,7 +294,7 @@ def _harmless_runs(problem: PlanningProblem, kinds: Kinds, goal: Overflow) -> li
     harmless = [next((k for k in problem.kinds[1:] if masks[k][i] & goal.bit < keep[i] & goal.bit
                       and not masks[k][i] & ~keep[i]), None)
                 if kind == KEEP and problem.managed[i] and goal.counted >> i & 1 else None
-                for i, kind in enumerate(kinds)]  # fmt: skip
+                for i, kind in enumerate(kinds)]
     runs: list[list[tuple[int, int]]] = []
     for i, init in enumerate(harmless):
         if init is not None and runs and runs[-1][-1][0] == i - 1:
@@ -298,7 +316,7 @@ def _neighbours(problem: PlanningProblem, layout: Layout) -> list[Kinds]:
     out = [kinds[:first] + (KEEP,) * (last - first + 1) + kinds[last + 1 :] for first, last in runs]
     out += _short_runs_out(problem, kinds, runs)
     out += [kinds[:i] + (kind,) + kinds[i + 1 :] for i in members(layout.writes.whole) if kinds[i] == KEEP
-            for kind in problem.kinds[1:]]  # fmt: skip
+            for kind in problem.kinds[1:]]
     out += _message_initialised(problem, layout)
     return out
 
@@ -311,7 +329,7 @@ def _short_runs_out(problem: PlanningProblem, kinds: Kinds, runs: list[Run]) -> 
     for fields in set(adds):
         changed, room = list(kinds), FIELDS.capacity
         for first, last in sorted((run for run, added in zip(runs, adds) if not added & ~fields),
-                                  key=lambda run: run[1] - run[0]):  # fmt: skip
+                                  key=lambda run: run[1] - run[0]):
             room -= last - first + 1
             if room < 0:
                 break
@@ -325,7 +343,8 @@ def _message_initialised(problem: PlanningProblem, layout: Layout) -> Iterator[K
     way, its initialised programs kept where their init put the item there (an 11h that wipes
     programs already as wanted, restored by one 40h: a 14h and a 13h around them save that 40h)."""
     kinds = layout.kinds
-    one_message = [(bit, mask) for bit, mask, kind in _item_channels(layout.writes) if kind.messages(mask.bit_count()) <= 1]
+    one_message = [(bit, mask) for bit, mask, kind in _item_channels(layout.writes)
+                   if kind.messages(mask.bit_count()) <= 1]
     runs33 = [(PV_BITS, (1 << (last + 1)) - (1 << first)) for first, last in layout.writes.part_runs]
     for bits, mask in one_message + runs33:
         initialised, kept = list(kinds), list(kinds)

@@ -1,7 +1,7 @@
 """A module's plan as data: the steps to send, what they cost, what they are predicted to do.
 
-Owns `Step`, `ModulePlan`, the `Action` of each change, the one-line device-terms summary of
-a step, and the planner's errors. Does not own how a plan is found (`prc3cfg.core.planner.init_search`), how it is rendered
+Owns `Step`, `ModulePlan`, the `Action` of each change, the one-line device-terms summary of a step, and the
+planner's errors. Does not own how a plan is found (`prc3cfg.core.planner.init_search`), how it is rendered
 for people (`prc3cfg.core.render`) or the plant-wide plan file (`prc3cfg.core.plant_plan`). Pure.
 """
 
@@ -39,13 +39,15 @@ class Action(enum.StrEnum):
         return cls.UPDATE if steps else cls.NO_OP
 
     @classmethod
-    def of_programs(cls, actual: ModuleImage, desired: ModuleImage, numbers: Iterable[int]) -> dict[int, Action]:
+    def of_programs(cls, actual: ModuleImage, desired: ModuleImage,
+                    numbers: Iterable[int]) -> dict[int, Action]:
         """Each changed program's (by number): CREATE when it holds the factory defaults, DELETE
         when it is to hold them (of the system parameters before, and after), UPDATE otherwise."""
         was, will = default_program(actual.system), default_program(desired.system)
         create, delete, update = cls.CREATE, cls.DELETE, cls.UPDATE  # locals: a plan shows thousands
-        return {n: create if actual.programs[n - 1] == was else delete if desired.programs[n - 1] == will else update
-                for n in numbers}  # fmt: skip
+        return {n: create if actual.programs[n - 1] == was else delete if desired.programs[n - 1] == will
+                else update
+                for n in numbers}
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,7 +127,7 @@ def summarise(message: codec.Message, system_before: SystemParameters) -> str:
     """One line in device terms, e.g. "write P of programs 3, 7, 9 (40h)"."""
     if isinstance(message, codec.WriteSystem):
         changed = [key for key, old, new in zip(
-            SYSTEM_KEYS, system_before.values(), message.system.values()) if old != new]  # fmt: skip
+            SYSTEM_KEYS, system_before.values(), message.system.values()) if old != new]
         text = f"write system parameters {', '.join(changed)}"
     else:
         text = _SUMMARIES[type(message)](message)

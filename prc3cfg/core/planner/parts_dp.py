@@ -26,7 +26,16 @@ from typing import NamedTuple, Protocol
 from prc3cfg.core import codec
 from prc3cfg.core.image import PROGRAM_COUNT
 from prc3cfg.core.planner.layout import members
-from prc3cfg.core.planner.parts_states import BEAM, FIELD, NOT_ROOMS, STATE_BITS, States, Window, merged, with_rooms
+from prc3cfg.core.planner.parts_states import (
+    BEAM,
+    FIELD,
+    NOT_ROOMS,
+    STATE_BITS,
+    States,
+    Window,
+    merged,
+    with_rooms,
+)
 from prc3cfg.core.planner.pricing import ADDRESSES, FIELDS, PARTS, Prices
 from prc3cfg.core.planner.problem import P_BIT, V_BIT
 from prc3cfg.core.planner.terms import INF, KIND_OF_BIT, PLAIN_BITS, Channels, Run, all_of
@@ -123,15 +132,17 @@ def live_channels(phase: PartsPhase, whole: int, addresses: int, need: int) -> l
     n = need.bit_count()  # a 33h saved too where the removals take the P and V left down a run
     runs_out = PARTS.in_last(n) if n else PROGRAM_COUNT + 1
     live = []
-    extra = {i: _extra_cost(phase, i, need, addresses) for i in members(all_of(tuple(c.mask for c in channels)))}
+    extra = {i: _extra_cost(phase, i, need, addresses)
+             for i in members(all_of(tuple(c.mask for c in channels)))}
     for c in channels:
         others = [o for o in channels if o is not c]
-        ranked = sorted(members(c.mask), key=lambda i: extra[i] - fsum(o.header / o.rho for o in others if o.mask >> i & 1))
+        ranked = sorted(members(c.mask),
+                        key=lambda i: extra[i] - fsum(o.header / o.rho for o in others if o.mask >> i & 1))
         chosen = ranked[: c.rho]
         spent = fsum(extra[i] for i in chosen)
         taken = sum(1 << i for i in chosen)
         saved = fsum((c.header, prices.parts_header if (need & taken).bit_count() >= runs_out else 0.0,
-                      *(o.header for o in others if (o.mask & taken).bit_count() >= o.rho)))  # fmt: skip
+                      *(o.header for o in others if (o.mask & taken).bit_count() >= o.rho)))
         if spent < saved:
             live.append(c)
     return sorted(live, key=_rho)[:LIVE]
@@ -139,7 +150,8 @@ def live_channels(phase: PartsPhase, whole: int, addresses: int, need: int) -> l
 def _extra_cost(phase: PartsPhase, i: int, need: int, addresses: int) -> float:
     """What a 21h of program i costs at least beyond the items it saves."""
     prices, m = phase.prices, phase.masks[i]
-    pv = (prices.field_item if m & P_BIT else 0.0) + (prices.field_item if m & V_BIT else 0.0) if need >> i & 1 else 0.0
+    pv = ((prices.field_item if m & P_BIT else 0.0) + (prices.field_item if m & V_BIT else 0.0)
+          if need >> i & 1 else 0.0)
     return prices.program - phase.plain_items[i] - (prices.address_item if addresses >> i & 1 else 0.0) - pv
 
 def solve_parts(phase: PartsPhase, whole: int, addresses: int, channels: Channels) -> Parts:
@@ -170,7 +182,8 @@ def _traced(phase: PartsPhase, back: list[dict[int, Back]], state: int) -> Parts
             whole |= 1 << i
         j -= 1
     runs.reverse()
-    return Parts(tuple(runs), positions, speeds, whole, fsum(phase.parts_price[last - first + 1] for first, last in runs))
+    return Parts(tuple(runs), positions, speeds, whole,
+                 fsum(phase.parts_price[last - first + 1] for first, last in runs))
 
 class PartsDP:
     """One run of the DP behind `write_phase.WritePhase.parts`, over program numbers.
@@ -193,12 +206,12 @@ class PartsDP:
     """
 
     def __init__(self, phase: PartsPhase, need: int, movable: int, addresses: int, channels: Channels,
-                 live: list[LiveChannel]) -> None:  # fmt: skip
+                 live: list[LiveChannel]) -> None:
         prices = phase.prices
         self.phase, self.need, self.movable, self.addresses, self.live = phase, need, movable, addresses, live
         self.positions, self.speeds, self.runs_allowed = channels.positions, channels.speeds, channels.parts
         self.states = States((prices.field_header, prices.field_header, *(c.header for c in live)),
-                             (FIELDS.capacity, FIELDS.capacity, *(c.rho for c in live)))  # fmt: skip
+                             (FIELDS.capacity, FIELDS.capacity, *(c.rho for c in live)))
         self.more_p = suffix_counts(need & phase.changed[P_BIT])
         self.more_v = suffix_counts(need & phase.changed[V_BIT])
         self.windows: dict[int, Window] = {}  # per state a run may end in: its starts
@@ -232,7 +245,8 @@ class PartsDP:
             return 0, INF
         phase = self.phase
         out = sum(1 << k for k, c in enumerate(self.live) if c.mask >> j & 1)
-        alone = phase.prices.program - phase.plain_items[j] - (phase.prices.address_item if self.addresses >> j & 1 else 0.0)
+        alone = phase.prices.program - phase.plain_items[j] - (phase.prices.address_item
+                                                               if self.addresses >> j & 1 else 0.0)
         return out, alone if self.need >> j & 1 or out or alone < 0 else INF
 
     def _after(self, state: int, out: int) -> int:
@@ -259,7 +273,8 @@ class PartsDP:
         if len(windows) > 2 * BEAM:  # runs going on: up to twice as many as states, then as many
             self.windows = self.states.windows_kept(windows)
 
-    def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float], dict[int, Back]]:
+    def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float],
+                                                                                     dict[int, Back]]:
         """The states after program j by its own moves (items, a 32h, a 21h, nothing), and the
         runs that may start at it: one pass over the states, each state's moves in that order (a tie
         goes to the first)."""
@@ -271,7 +286,8 @@ class PartsDP:
         add_p, rooms_p = _items_field(prices.field_item, opened, bool(m & P_BIT), left_p)
         add_v, rooms_v = _items_field(prices.field_item, opened, bool(m & V_BIT), left_v)
         runs = needs and self.runs_allowed
-        capped = left_p < FIELDS.capacity or left_v < FIELDS.capacity  # else no room is beyond what the programs left could use
+        # else no room is beyond what the programs left could use
+        capped = left_p < FIELDS.capacity or left_v < FIELDS.capacity
         single = phase.parts_price[1]
         new: dict[int, float] = {}
         step: dict[int, Back] = {}
@@ -335,14 +351,16 @@ class PartsDP:
         """The cheapest state after the last program, the live fields' headers counted."""
         final, total = 0, INF
         for state, b in best.items():
-            value = b + fsum(c.header * c.kind.messages(c.n - States.field(state, k + 2)) for k, c in enumerate(self.live))
+            value = b + fsum(c.header * c.kind.messages(c.n - States.field(state, k + 2))
+                             for k, c in enumerate(self.live))
             if value < total:
                 final, total = state, value
         return final
 
 
 @functools.lru_cache(maxsize=1024)  # per line's prices and items left: a few hundred in a plant
-def _items_field(item: float, opened: float, takes: bool, left: int) -> tuple[tuple[float, ...], tuple[int, ...]]:
+def _items_field(item: float, opened: float, takes: bool, left: int) -> tuple[tuple[float, ...],
+                                                                              tuple[int, ...]]:
     """P (or V) of a program as a 40h (41h) item where it `takes` one, by the room left in the last such
     message (0: none open): what it adds — the item that opens a message pays its header — and the room
     after, no more than the `left` items from the next program on could use."""

@@ -21,7 +21,8 @@ from prc3cfg.core.planner.terms import INF, NEAR, NEAR_DIGITS
 #: The most states `PartsDP` keeps after each program (`States`); runs going on, once twice as
 #: many, are cut to as many and UNCREDITED more.
 BEAM = 24
-#: Runs going on kept by their cheapest start alone, beside the BEAM kept once credited (`States.windows_kept`).
+#: Runs going on kept by their cheapest start alone, beside the BEAM kept once credited
+#: (`States.windows_kept`).
 UNCREDITED = 8
 #: Bits of a field of a `States` state (values up to 31, and a guard bit) and the mask of one.
 STATE_BITS = 6
@@ -70,8 +71,9 @@ class States:
         self.guards = sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in fields)
         self.ones = sum(1 << (STATE_BITS * f) for f in fields)
         # what being ahead in each set of fields is worth, by the guard bits of those fields, less NEAR
-        self.ahead = {sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen): fsum(worth[f] for f in chosen) - NEAR
-                      for size in range(len(worth) + 1) for chosen in itertools.combinations(fields, size)}  # fmt: skip
+        self.ahead = {sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen): fsum(worth[f]
+                                                                                        for f in chosen) - NEAR
+                      for size in range(len(worth) + 1) for chosen in itertools.combinations(fields, size)}
         self.ceiling = fsum(worth)
         self.credit = [(STATE_BITS * f, worth[f] / count) for f, count in enumerate(needed)]
         self.credits: dict[int, float] = {}  # by state: what `credited` takes off
@@ -107,7 +109,8 @@ class States:
                 if not kept:
                     ceiling = c + self.ceiling
                 # those met just before it that cost the same to NEAR (a hair less) and it beats go
-                while kept and c - kept[-1][1] < NEAR and kept[-1][1] - c >= ahead[((kept[-1][0] | guards) - ones - state) & guards]:
+                while (kept and c - kept[-1][1] < NEAR
+                       and kept[-1][1] - c >= ahead[((kept[-1][0] | guards) - ones - state) & guards]):
                     kept.pop()
                 kept.append((state, c))
         if len(kept) > BEAM:
@@ -154,5 +157,6 @@ class States:
 def with_rooms(state: int, room_p: int, room_v: int, left_p: int, left_v: int) -> int:
     """`state` with these rooms in the last 40h and 41h, but for room no item left could use (`PartsDP`:
     `left_p`, `left_v` programs from the next on need a P, a V item at most)."""
-    return state & NOT_ROOMS | (room_p if room_p < left_p else left_p) | (room_v if room_v < left_v else left_v) << STATE_BITS
+    return state & NOT_ROOMS | (room_p if room_p < left_p else left_p) | (room_v if room_v < left_v
+                                                                          else left_v) << STATE_BITS
 

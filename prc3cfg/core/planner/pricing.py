@@ -36,7 +36,8 @@ PARTS = codec.ITEMS_KINDS[codec.WritePartPrograms.ID]  # 33h
 FIELDS = codec.FIELD_KINDS["P"]  # 40h..45h: the DPs price every one of them as this row
 ADDRESSES = codec.FIELD_KINDS["A"]  # 46h
 if len({(k.header_bytes, k.item_bytes, k.capacity) for name, k in codec.FIELD_KINDS.items() if name != "A"}) != 1:
-    raise RuntimeError("codec.FIELD_KINDS: the planner prices 40h..45h alike (`FIELDS`); give each field its own price first")
+    raise RuntimeError("codec.FIELD_KINDS: the planner prices 40h..45h alike (`FIELDS`); give each field "
+                       "its own price first")
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,7 +82,8 @@ class Prices:
         counts = range(PROGRAM_COUNT + 1)
         put("_fields", tuple(FIELDS.messages(n) * self.field_header + n * self.field_item for n in counts))
         put("address_header", self.message(ADDRESSES.header_bytes))
-        put("_addresses", tuple(ADDRESSES.messages(n) * self.address_header + n * self.address_item for n in counts))
+        put("_addresses",
+            tuple(ADDRESSES.messages(n) * self.address_header + n * self.address_item for n in counts))
 
     @classmethod
     def measure(cls, cost: LineCost, address: int) -> Prices:
@@ -98,11 +100,13 @@ class Prices:
 
     def header(self, kind: codec.ItemsKind) -> float:
         """A message of `kind` (33h, 40h..46h) without its items."""
-        return self.parts_header if kind is PARTS else self.address_header if kind is ADDRESSES else self.field_header
+        return (self.parts_header if kind is PARTS else self.address_header if kind is ADDRESSES
+                else self.field_header)
 
     def item(self, kind: codec.ItemsKind) -> float:
         """One more item in a message of `kind`."""
-        return self.parts_item if kind is PARTS else self.address_item if kind is ADDRESSES else self.field_item
+        return (self.parts_item if kind is PARTS else self.address_item if kind is ADDRESSES
+                else self.field_item)
 
     def parts(self, n: int) -> float:
         """P and V of n consecutive programs: a 32h for one, a 33h for more."""

@@ -22,7 +22,14 @@ from dataclasses import dataclass
 
 from prc3cfg.core import codec, device
 from prc3cfg.core.bustime import LineCost
-from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, ModuleImage, Program, default_program
+from prc3cfg.core.image import (
+    DEFAULT_SYSTEM,
+    PROGRAM_COUNT,
+    PROGRAM_FIELDS,
+    ModuleImage,
+    Program,
+    default_program,
+)
 from prc3cfg.core.planner.module_plan import UnreachableImage
 from prc3cfg.core.planner.pricing import Prices
 
@@ -85,14 +92,15 @@ class PlanningProblem:
         _check_reachable(desired)
         filler = default_program(actual.system)
         start = device.ModuleState(
-            ModuleImage(actual.address, actual.system, tuple(filler if p is None else p for p in actual.programs))
+            ModuleImage(actual.address, actual.system,
+                        tuple(filler if p is None else p for p in actual.programs))
         )
         step = system_step(actual, desired)
         try:
             after_system = _run(start, step)
         except codec.Rejected as rejected:
             raise UnreachableImage(f"module {desired.address}: the module rejects these system parameters "
-                                   f"with code {rejected.code}") from None  # fmt: skip
+                                   f"with code {rejected.code}") from None
         init_all = codec.InitAllPrograms()
         bases = {
             KEEP: after_system.image.complete(),

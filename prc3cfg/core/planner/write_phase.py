@@ -23,7 +23,18 @@ from prc3cfg.core.planner.layout import Layout, Writes
 from prc3cfg.core.planner.parts_dp import Parts, solve_parts
 from prc3cfg.core.planner.pricing import PARTS
 from prc3cfg.core.planner.problem import A_BIT, FIELD_BIT, KEEP, P_BIT, V_BIT, PlanningProblem
-from prc3cfg.core.planner.terms import ESTIMATE, FIELDS_OF, INF, NEAR, PLAIN_BITS, PLAIN_MASK, Channels, Kinds, Range, Run
+from prc3cfg.core.planner.terms import (
+    ESTIMATE,
+    FIELDS_OF,
+    INF,
+    NEAR,
+    PLAIN_BITS,
+    PLAIN_MASK,
+    Channels,
+    Kinds,
+    Range,
+    Run,
+)
 
 
 class WritePhase:
@@ -73,7 +84,8 @@ class WritePhase:
         """46h open, then shut (where some program differs in A): every other choice of messages
         is the DP's (`parts_dp.PartsDP`)."""
         plain = self.relevant & PLAIN_MASK
-        return [Channels(plain, True, True, True, addresses) for addresses in ((True, False) if self.relevant & A_BIT else (False,))]
+        return [Channels(plain, True, True, True, addresses)
+                for addresses in ((True, False) if self.relevant & A_BIT else (False,))]
 
     def solve(self, bound: float = INF) -> list[Writes]:
         """The cheapest write phases found, with the 46h open and shut, cheapest first; none that
@@ -92,8 +104,8 @@ class WritePhase:
         (21h), the rest of the phase searched again — until no such group pays.
 
         The DP credits 21h only with the header of the first message of a field they empty
-        (`parts_dp.live_channels`: removals up to `rho`), and judges each field alone: 21h that pay only by emptying
-        a field of more than one message, or several fields and a run together, it does not see.
+        (`parts_dp.live_channels`: removals up to `rho`), and judges each field alone: 21h that pay only by
+        emptying a field of more than one message, or several fields and a run together, it does not see.
         """
         while True:
             groups = {mask for mask in (*writes.items, writes.addresses) if mask}
@@ -121,7 +133,8 @@ class WritePhase:
         return whole
 
     def evaluate(self, channels: Channels, bound: float = INF, whole: int = 0) -> Writes | None:
-        """The cheapest write phase with these channels (and 21h for `whole`); None when it cannot beat `bound`."""
+        """The cheapest write phase with these channels (and 21h for `whole`); None when it cannot beat
+        `bound`."""
         whole |= self.forced(channels)
         if bound < INF and self.at_least(whole) >= bound:
             return None
@@ -167,7 +180,7 @@ class WritePhase:
         return self._bound.at_least(whole, ranges)
 
     def _priced(self, whole: int, runs: tuple[Run, ...], runs_cost: float, items: tuple[int, ...],
-                ranges: tuple[Range, ...], addresses: int) -> Writes:  # fmt: skip
+                ranges: tuple[Range, ...], addresses: int) -> Writes:
         prices = self.prices
         estimate = fsum((
             whole.bit_count() * prices.program,
@@ -175,7 +188,7 @@ class WritePhase:
             *(prices.fields(mask.bit_count()) for mask in items),
             len(ranges) * prices.link,
             prices.addresses(addresses.bit_count()),
-        ))  # fmt: skip
+        ))
         return Writes(whole, runs, items, ranges, addresses, estimate)
 
     # -- P and V (33h/32h runs, 40h/41h items) and the 21h: one DP ------------------------------

@@ -1,7 +1,8 @@
 """The account of an apply: what was and was not written to each module and what its read-back says
 (`account`), the modules that must travel to their reference point (`travel_list`, and `earlier_releases` an
 earlier apply left untold), and the lines whose broadcasts only the plan's modules heard (`broadcasts_heard`).
-It reads each module's outcome as the apply left it (`prc3cfg.core.outcome.ModuleOutcome`). Pure: returns strings.
+It reads each module's outcome as the apply left it (`prc3cfg.core.outcome.ModuleOutcome`). Pure: returns
+strings.
 """
 
 from __future__ import annotations
@@ -24,11 +25,15 @@ def account(run: ModuleOutcome) -> str | None:
     if run.verified and not run.steps:
         if not run.watched:
             return None
-        return f"✓ {head}: not in the plan; its system parameters read back as they were (a release went out on a line without error detection)"
+        return (f"✓ {head}: not in the plan; its system parameters read back as they were (a release went "
+                "out on a line without error detection)")
     if run.verified:
-        repaired = f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs else ""
-        received = f" and {run.broadcasts} broadcast{'s' if run.broadcasts != 1 else ''} received" if run.broadcasts else ""
-        return f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} written{received}, verified{repaired}"
+        repaired = (f", after {run.repairs} repair round{'s' if run.repairs != 1 else ''}" if run.repairs
+                    else "")
+        received = (f" and {run.broadcasts} broadcast{'s' if run.broadcasts != 1 else ''} received"
+                    if run.broadcasts else "")
+        return (f"✓ {head}: {len(run.written)} message{'s' if len(run.written) != 1 else ''} "
+                f"written{received}, verified{repaired}")
     lines = [f"✗ {head}: {run.failure}"]
     if not run.sent:
         lines.append("    nothing was sent to it")
@@ -43,7 +48,8 @@ def account(run: ModuleOutcome) -> str | None:
     elif run.unchanged:
         lines.append("    read back: unchanged, as before the apply")
     else:
-        lines.append("    read back, it differs from the plant file: " + "; ".join(differences(run.final, run.desired)))
+        lines.append("    read back, it differs from the plant file: "
+                     + "; ".join(differences(run.final, run.desired)))
     return "\n".join(lines)
 
 
@@ -64,8 +70,10 @@ def travel_list(runs: Sequence[ModuleOutcome]) -> str | None:
         return None
     lines = [TRAVEL]
     for bus in dict.fromkeys(r.bus for r in released):
-        names = [f"{r.bus}/{r.name}" + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY else "")
-                 for r in released if r.bus == bus]  # fmt: skip
+        names = [f"{r.bus}/{r.name}"
+                 + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY
+                    else "")
+                 for r in released if r.bus == bus]
         line = "   "
         for n, name in enumerate(names):
             piece = f" {name}" + ("," if n < len(names) - 1 else "")
@@ -98,16 +106,21 @@ class Untold(Protocol):
 
 
 def earlier_releases(records: Iterable[Untold]) -> list[str]:
-    """The modules whose axes an earlier apply may have released and ended before saying so: they must travel too
-    — another user's record told as their claim; every field escaped, as the file says it (`escape.shown`)."""
+    """The modules whose axes an earlier apply may have released and ended before saying so: they must travel
+    too — another user's record told as their claim; every field escaped, as the file says it
+    (`escape.shown`)."""
     shown = escape.shown
-    return [f"{TRAVEL} {shown(r.bus)}/{shown(r.name)} (possibly: " + ("" if r.owner is None else f"{r.owner}'s record says ")
-            + f"an earlier prc3cfg {shown(r.command)}, pid {r.pid} at {shown(r.time)}, sent a 10h/20h and ended before its account"
-            + (f"; journal {shown(r.journal)})" if r.journal else ")") for r in records]  # fmt: skip
+    return [f"{TRAVEL} {shown(r.bus)}/{shown(r.name)} (possibly: "
+            + ("" if r.owner is None else f"{r.owner}'s record says ")
+            + f"an earlier prc3cfg {shown(r.command)}, pid {r.pid} at {shown(r.time)}, sent a 10h/20h and "
+              "ended before its account"
+            + (f"; journal {shown(r.journal)})" if r.journal else ")") for r in records]
 
 
 def broadcasts_heard(proofs: Iterable[LineProof], runs: Sequence[ModuleOutcome]) -> list[str]:
     """After an apply, each line that took a broadcast where the probes had found every address the
     plant file does not list silent: only the plan's modules heard it."""
-    return [f"Bus {proof.bus}: broadcast after {address_ranges(proof.silent)} answered no probe — only the plan's modules heard it"
-            for proof in proofs if proof.silent and any(run.bus == proof.bus and run.broadcasts for run in runs)]  # fmt: skip
+    return [f"Bus {proof.bus}: broadcast after {address_ranges(proof.silent)} answered no probe — only the "
+            "plan's modules heard it"
+            for proof in proofs if proof.silent
+            and any(run.bus == proof.bus and run.broadcasts for run in runs)]

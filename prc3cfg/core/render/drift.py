@@ -1,6 +1,6 @@
 """What `read` and drift say of modules: a module as read (`image_lines`), and a module that holds something
-other than the plant file says (`Drift`), as lines (`drift_lines`) and as a document (`drift_json`; the comment is
-`prc3cfg.core.render.markdown`'s). Pure: returns strings and dicts.
+other than the plant file says (`Drift`), as lines (`drift_lines`) and as a document (`drift_json`; the
+comment is `prc3cfg.core.render.markdown`'s). Pure: returns strings and dicts.
 """
 
 from __future__ import annotations
@@ -16,10 +16,12 @@ from prc3cfg.core.render.words import field_name, format_value, plural
 def image_lines(bus: str, name: str, image: ModuleImage) -> list[str]:
     """A module as `prc3cfg read` shows it: where it is, its system parameters, each program read."""
     lines = [f"bus {bus}, module {image.address} ({name})",
-             "  system: " + ", ".join(f"{field_name(k)} {format_value(k, v)}" for k, v in image.system.to_json().items())]  # fmt: skip
+             "  system: "
+             + ", ".join(f"{field_name(k)} {format_value(k, v)}" for k, v in image.system.to_json().items())]
     for number, program in enumerate(image.programs, start=1):
         if program is not None:
-            values = ", ".join(f"{field_name(k)} {format_value(k, v)}" for k, v in program.to_json().items() if k != "A")
+            values = ", ".join(f"{field_name(k)} {format_value(k, v)}"
+                               for k, v in program.to_json().items() if k != "A")
             lines.append(f"  program {number}: {values}" + (f", next {program.A}" if program.A else ""))
     return lines
 
@@ -43,11 +45,13 @@ def drift_lines(drifts: Sequence[Drift], modules: int) -> list[str]:
     `modules` read drifted."""
     lines = []
     for found in drifts:
-        lines.append(f"~ bus {found.bus}, module {found.address} ({found.name}) drifted from the plant file (file → module):")
+        lines.append(f"~ bus {found.bus}, module {found.address} ({found.name}) drifted from the plant file "
+                     "(file → module):")
         lines.extend(f"    {text}" for text in found.differences)
     if drifts:
-        lines.append(f"Drift: {len(drifts)} of {plural(modules, 'module')} hold{'s' if len(drifts) == 1 else ''} "
-                     "something other than the plant file says.")  # fmt: skip
+        lines.append(f"Drift: {len(drifts)} of {plural(modules, 'module')} "
+                     f"hold{'s' if len(drifts) == 1 else ''} "
+                     "something other than the plant file says.")
     else:
         lines.append("No drift: every module holds what the plant file says.")
     return lines
@@ -63,5 +67,6 @@ def drift_json(plant: str, drifts: Sequence[Drift], modules: int) -> dict[str, A
     read, and each module that drifted with its differences (file → module): in human units, and as
     `changes` of a field from before to after (`drift_changes`)."""
     return {"format": DRIFT_FORMAT, "plant": plant, "modules": modules,
-            "drifted": [{"bus": d.bus, "address": d.address, "name": d.name, "differences": list(d.differences),
-                         "changes": list(d.changes)} for d in drifts]}  # fmt: skip
+            "drifted": [{"bus": d.bus, "address": d.address, "name": d.name,
+                         "differences": list(d.differences),
+                         "changes": list(d.changes)} for d in drifts]}

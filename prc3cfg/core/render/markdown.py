@@ -1,7 +1,7 @@
 """A plan and drift as pull-request comments (`markdown`, `drift_markdown`): within a comment's size
-(`COMMENT_BUDGET`, `--max-chars`), the summary, warnings and table always, each module's details — with a stroke
-chart per changed chain — while they fit, and a last line that says how many were left out. Every text from a
-file is escaped for markdown (`cell`, `code`). Pure: returns strings.
+(`COMMENT_BUDGET`, `--max-chars`), the summary, warnings and table always, each module's details — with a
+stroke chart per changed chain — while they fit, and a last line that says how many were left out. Every text
+from a file is escaped for markdown (`cell`, `code`). Pure: returns strings.
 """
 
 from __future__ import annotations
@@ -40,12 +40,14 @@ class BudgetTooSmall(UserError):
     """`--max-chars` below what a comment never leaves out; `needed` is the least it takes."""
 
     def __init__(self, max_chars: int, what: str, needed: int) -> None:
-        super().__init__(f"--max-chars {max_chars:,} cannot hold {what} ({needed:,} characters, never left out) — "
-                         f"give --max-chars {needed} or more")  # fmt: skip
+        super().__init__(f"--max-chars {max_chars:,} cannot hold {what} ({needed:,} characters, never "
+                         "left out) — "
+                         f"give --max-chars {needed} or more")
         self.needed = needed
 
 
-def _budgeted(head: str, parts: Iterable[str], count: int, closing: Callable[[int, int], str], max_chars: int, what: str) -> str:
+def _budgeted(head: str, parts: Iterable[str], count: int, closing: Callable[[int, int], str], max_chars: int,
+              what: str) -> str:
     """`head`, then each of the `count` `parts` while it fits in `max_chars` characters with the
     `closing` line that says how many were left out (none when all are shown; it may name the
     budget): the comment as printed, its last line end counted. `BudgetTooSmall` where `head` and
@@ -55,7 +57,8 @@ def _budgeted(head: str, parts: Iterable[str], count: int, closing: Callable[[in
     the check below; for each next, the previous part's), so the comment never exceeds the budget."""
     if count and len(head) + len(closing(count, max_chars)) > max_chars:
         needed = len(head)
-        while (more := len(head) + len(closing(count, needed))) > needed:  # the closing may name the budget: its own digits
+        # the closing may name the budget: its own digits
+        while (more := len(head) + len(closing(count, needed))) > needed:
             needed = more
         raise BudgetTooSmall(max_chars, what, needed)
     if len(head) > max_chars:
@@ -70,7 +73,7 @@ def _budgeted(head: str, parts: Iterable[str], count: int, closing: Callable[[in
 
 
 def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGET, notes: Iterable[str] = (),
-             full_plan: str = "the plan file", faults: Sequence[str] = (), frames: bool = False) -> str:  # fmt: skip
+             full_plan: str = "the plan file", faults: Sequence[str] = (), frames: bool = False) -> str:
     """A plan (or a plan file's document) as a pull-request comment of at most `max_chars` characters
     as printed (its last line end counted): the marker, the summary, every axis-release warning, how
     many programs are clamped, what was not read, what is left as it is and the table of changed
@@ -79,29 +82,33 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     left out and where the full plan is. `frames`: each step's bytes in hex too."""
     document, live = outline(plan, notes)
     changed = [(bus, m) for bus, m in modules_in(document) if m["steps"]]
-    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "", *faulted_summary(document, faults, cell), "",
-            *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]  # fmt: skip
+    head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "",
+            *faulted_summary(document, faults, cell), "",
+            *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]
     for bus in document["buses"]:
         if lines := broadcast_lines(bus, frames):
             head += [*fenced(lines[:-1]), ""]
 
     def closing(left: int, budget: int) -> str:
         return (f"\n_The details of {plural(left, 'module')} are left out to keep this comment under "
-                f"{budget:,} characters: the full plan is {full_plan}._\n")  # fmt: skip
+                f"{budget:,} characters: the full plan is {full_plan}._\n")
 
-    return _budgeted("\n".join(head).rstrip("\n") + "\n", (_details(bus, m, live, frames) for bus, m in changed), len(changed), closing,
-                     max_chars, "the plan's summary, warnings and table of changed modules")  # fmt: skip
+    return _budgeted("\n".join(head).rstrip("\n") + "\n",
+                     (_details(bus, m, live, frames) for bus, m in changed), len(changed), closing,
+                     max_chars, "the plan's summary, warnings and table of changed modules")
 
 
-def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *, claimed: bool) -> list[str]:
+def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *,
+              claimed: bool) -> list[str]:
     """A comment's quoted paragraphs under its summary, each only when it has something to say: what was
     not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
     out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed)) else []
     out += [f"> {line}", ""] if (line := factory_line(document)) else []
     out += [f"> {line}", ""] if (line := review_line(document, cell)) else []
     if document["axis_releases"]:
-        out += ["> [!WARNING]", "> These modules release their axes: **travel to reference point required after apply** — "
-                + ", ".join(code(name) for name in document["axis_releases"]), ""]  # fmt: skip
+        out += ["> [!WARNING]",
+                "> These modules release their axes: **travel to reference point required after apply** — "
+                + ", ".join(code(name) for name in document["axis_releases"]), ""]
     out += [f"> {line}", ""] if (line := clamped_line(document, live)) else []
     left_alone = document.get("left_alone", [])
     out += [f"> Left as it is: {cell(note)}" for note in left_alone] + ([""] if left_alone else [])
@@ -117,7 +124,7 @@ def _changed_table(changed: list[tuple[str, dict[str, Any]]]) -> list[str]:
     for bus, m in changed:
         axes = "⚠ released: travel to reference point required" if m["releases_axes"] else ""
         out.append(f"| {cell(bus)} | {cell(m['name'])} | {m['address']} | {len(m['steps'])} | "
-                   f"{m.get('estimated_bus_time_s', 0.0):.3f} s | {axes} |")  # fmt: skip
+                   f"{m.get('estimated_bus_time_s', 0.0):.3f} s | {axes} |")
     return [*out, ""]
 
 
@@ -125,29 +132,34 @@ def _details(bus: str, m: dict[str, Any], live: dict[tuple[str, int], ModuleChan
     changes = changes_of(bus, m, live)
     diff = as_reviewed(m, module_lines(changes))
     return "\n".join([
-        f"<details><summary>{escape.markdown_html(bus)} / {escape.markdown_html(m['name'])} (address {m['address']})"
+        f"<details><summary>{escape.markdown_html(bus)} / {escape.markdown_html(m['name'])} (address "
+        f"{m['address']})"
         + (" ⚠ releases axes" if m["releases_axes"] else "") + "</summary>",
         "",
         *fenced(diff, "diff"),
         "",
         *fenced(step_lines(m, frames)),
-        *(changes.get("charts", []) if as_written(m) else []),  # pictures of words that are only the file's: not drawn
+        # pictures of words that are only the file's: not drawn
+        *(changes.get("charts", []) if as_written(m) else []),
         "</details>",
         "",
         "",
-    ])  # fmt: skip
+    ])
 
 
-def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET, full_drift: str = "the drift file") -> str:
+def drift_markdown(document: dict[str, Any], *, max_chars: int = COMMENT_BUDGET,
+                   full_drift: str = "the drift file") -> str:
     """Drift as a pull-request comment of at most `max_chars` characters: the marker, the summary,
     then each module's differences while they fit, and how many were left out. Every text from the
     plant file or the modules is escaped (`cell`): nothing in it is live."""
     drifted, modules = document["drifted"], document["modules"]
-    summary = (f"**Drift:** {len(drifted)} of {plural(modules, 'module')} hold{'s' if len(drifted) == 1 else ''} something other "
-               "than the plant file says (file → module)." if drifted else "**No drift:** every module holds what the plant file says.")  # fmt: skip
+    summary = (f"**Drift:** {len(drifted)} of {plural(modules, 'module')} "
+               f"hold{'s' if len(drifted) == 1 else ''} something other "
+               "than the plant file says (file → module)." if drifted
+               else "**No drift:** every module holds what the plant file says.")
     head = "\n".join([DRIFT_MARKER, f"### prc3cfg drift — {code(document['plant'])}", "", summary, "", ""])
     parts = ("\n".join([f"- **{cell(found['bus'])} / {cell(found['name'])}** (address {found['address']})",
-                        *(f"  - {cell(text)}" for text in found["differences"]), ""]) for found in drifted)  # fmt: skip
+                        *(f"  - {cell(text)}" for text in found["differences"]), ""]) for found in drifted)
 
     def closing(left: int, _budget: int) -> str:
         return f"\n… and {plural(left, 'more module')} that drifted: see {full_drift}.\n"

@@ -1,13 +1,15 @@
 """A plan as the terminal shows it (`human`, `line_part`) and the words around it that every output of a plan
-says: the headline and its evidence (`summary_line`, `no_changes`, `reading_line`, `factory_line`, `review_line`),
-the clamped programs, each bus's broadcasts and line proof, the estimate and the time taken; and what a plan file
-keeps beside a module's steps for people (`changes_json`, `review`, which `prc3cfg.core.plan_file.write` is given).
+says: the headline and its evidence (`summary_line`, `no_changes`, `reading_line`, `factory_line`,
+`review_line`), the clamped programs, each bus's broadcasts and line proof, the estimate and the time taken;
+and what a plan file keeps beside a module's steps for people (`changes_json`, `review`, which
+`prc3cfg.core.plan_file.write` is given).
 
-A plan is shown from its document (`outline`: a plan file's, or a live plan's), each module's diff worked out as
-it is shown (`changes_of`: kept for all 240 modules of a large plant, the diffs would hold 20 MB). Every text a
-plan or plan file brings (names, the base, notes, a field's words) is shown escaped (`prc3cfg.core.text`), and a
-plan file's stroke charts only in the shape prc3cfg writes them (`CHART`): a plan file is data anyone may have
-edited. Reasons shown here never steer an apply (the plan's steps do). Pure: returns strings.
+A plan is shown from its document (`outline`: a plan file's, or a live plan's), each module's diff worked out
+as it is shown (`changes_of`: kept for all 240 modules of a large plant, the diffs would hold 20 MB). Every
+text a plan or plan file brings (names, the base, notes, a field's words) is shown escaped
+(`prc3cfg.core.text`), and a plan file's stroke charts only in the shape prc3cfg writes them (`CHART`): a plan
+file is data anyone may have edited. Reasons shown here never steer an apply (the plan's steps do). Pure:
+returns strings.
 """
 
 from __future__ import annotations
@@ -23,7 +25,18 @@ from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
-from prc3cfg.core.render.words import AXIS_WARNING, CLAMPED, clamped_changes, code, header_line, module_diff, module_lines, plural, some_of, step_line
+from prc3cfg.core.render.words import (
+    AXIS_WARNING,
+    CLAMPED,
+    clamped_changes,
+    code,
+    header_line,
+    module_diff,
+    module_lines,
+    plural,
+    some_of,
+    step_line,
+)
 from prc3cfg.core.text import address_ranges
 from prc3cfg.core.what_to_read import to_the_minute
 
@@ -50,7 +63,9 @@ def review(change: ModuleChange) -> dict[str, Any]:
     return {"changes": changes_json(change), "warning": AXIS_WARNING if change.releases_axes else None}
 
 
-def outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
+def outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any],
+                                                                             dict[tuple[str, int],
+                                                                                  ModuleChange]]:
     """What the human and markdown outputs are made from, every text in it `shown`: a plan file's
     document, or a live plan's without its read-backs' hashes (neither output shows one) and without the
     modules' `changes`, each worked out by `changes_of` as its module is shown (all of them at once, for
@@ -63,8 +78,8 @@ def outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dic
 
 
 def _plain_names(document: dict[str, Any]) -> dict[str, Any]:
-    """A live plan's document with the texts files gave it `shown`: its names, its base, its notes (the words of
-    its steps are prc3cfg's own; a plan file's are not: `_plain_texts`)."""
+    """A live plan's document with the texts files gave it `shown`: its names, its base, its notes (the words
+    of its steps are prc3cfg's own; a plan file's are not: `_plain_texts`)."""
     document["plant"] = escape.shown(document["plant"])
     for key in ("axis_releases", "left_alone"):
         document[key] = [escape.shown(text) for text in document[key]]
@@ -84,7 +99,8 @@ CHART = re.compile(
     rf"\"({AFTER}|{BEFORE}, {AFTER}|{BEFORE})\"\}}\}}\}}\}}%%\n"
     r"xychart-beta\n    title \"[0-9a-z →·:.,() ]*\"\n    x-axis \"time \(s\)\" 0 --> [0-9.]+\n"
     r"    y-axis \"position \(m\)\" 0 --> [0-9.]+\n(    line \[[0-9., -]*\]\n){1,2}```"
-    r"|\n_[0-9]+ more chains? changed: `prc3cfg show PLANT --module [^`\n]* --plot FILE\.svg` draws them all\._|"
+    r"|\n_[0-9]+ more chains? changed: `prc3cfg show PLANT --module [^`\n]* --plot FILE\.svg` draws "
+    r"them all\._|"
 )
 
 
@@ -96,11 +112,13 @@ def _plain_texts(value: Any) -> Any:
         return [_plain_texts(item) for item in value]
     if isinstance(value, dict):
         return {key: [c for c in item if isinstance(c, str) and CHART.fullmatch(c)]
-                if key == "charts" and isinstance(item, list) else _plain_texts(item) for key, item in value.items()}  # fmt: skip
+                if key == "charts" and isinstance(item, list) else _plain_texts(item)
+                for key, item in value.items()}
     return value
 
 
-def changes_of(bus: str, module: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *, charts: bool = True) -> dict[str, Any]:
+def changes_of(bus: str, module: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *,
+               charts: bool = True) -> dict[str, Any]:
     """A module's `changes` (`changes_json`): the plan file's, or worked out now from the live plan (without
     its `charts` when not asked for)."""
     return changes_json(live[(bus, module["address"])], charts=charts) if live else module["changes"]
@@ -112,24 +130,29 @@ def modules_in(document: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
 
 def _header(bus: str, module: dict[str, Any]) -> str:
     steps = module["steps"]
-    return header_line(bus, module["address"], module["name"], len(steps), sum(bool(s.get("broadcast")) for s in steps),
-                       module.get("estimated_bus_time_s", 0.0), module["releases_axes"])  # fmt: skip
+    return header_line(bus, module["address"], module["name"], len(steps),
+                       sum(bool(s.get("broadcast")) for s in steps),
+                       module.get("estimated_bus_time_s", 0.0), module["releases_axes"])
 
 
 def step_lines(module: dict[str, Any], frames: bool) -> list[str]:
-    return [step_line(i, s["message"] if frames else None, s["summary"], s["releases_axes"], bool(s.get("broadcast")))
-            for i, s in enumerate(module["steps"], start=1)]  # fmt: skip
+    return [step_line(i, s["message"] if frames else None, s["summary"], s["releases_axes"],
+                      bool(s.get("broadcast")))
+            for i, s in enumerate(module["steps"], start=1)]
 
 
 def line_proof(bus: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
     """What the probes of a bus's line found at the addresses its plant file does not list, in one line
     (the bus's name `shown` as the medium needs)."""
     if bus.get("unlisted_modules"):
-        return (f"⚠ bus {shown(bus['name'])}: a module answers at {address_ranges(bus['unlisted_modules'])}, which the plant file does not "
-                "list — the line has modules the plant does not know, so it gets no broadcast: add them to the plant file, "
-                "or drop only_these_modules")  # fmt: skip
+        return (f"⚠ bus {shown(bus['name'])}: a module answers at "
+                f"{address_ranges(bus['unlisted_modules'])}, which the plant file does not "
+                "list — the line has modules the plant does not know, so it gets no broadcast: add them to "
+                "the plant file, "
+                "or drop only_these_modules")
     if bus.get("proven_silent"):
-        return f"bus {shown(bus['name'])}: {address_ranges(bus['proven_silent'])} answered no probe — the broadcasts reach the plan's modules only"
+        return (f"bus {shown(bus['name'])}: {address_ranges(bus['proven_silent'])} answered no probe — the "
+                "broadcasts reach the plan's modules only")
     return None
 
 
@@ -139,8 +162,9 @@ def broadcast_lines(bus: dict[str, Any], frames: bool) -> list[str]:
     proof = line_proof(bus)
     if not steps:
         return [proof, ""] if proof else []
-    head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all {len(steps[0]['modules'])} modules "
-            "(address 0), each verified by reading back")  # fmt: skip
+    head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all "
+            f"{len(steps[0]['modules'])} modules "
+            "(address 0), each verified by reading back")
     return [head, *(f"    {step_line(i, s['message'] if frames else None, s['summary'], s['releases_axes'], True)}"
                     for i, s in enumerate(steps, 1)),
             *([f"    {proof}"] if proof else []), ""]
@@ -161,7 +185,8 @@ def summary_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
     return (
         f"Plan: {changed} of {plural(len(modules), 'module')} change{'s' if changed == 1 else ''}, "
         f"{plural(document['message_count'], 'message')}, " + estimate(document)
-        + (f"; ⚠ {plural(releases, 'module')} release{'s' if releases == 1 else ''} the axes" if releases else "")
+        + (f"; ⚠ {plural(releases, 'module')} release{'s' if releases == 1 else ''} the axes" if releases
+           else "")
     )
 
 
@@ -171,10 +196,10 @@ EVERY_MODULE = "No changes: every module matches the plant file."
 
 def no_changes(evidence: dict[str, Any] | None, shown: Callable[[str], str] = escape.shown) -> str:
     """The headline of a plan without changes, naming its evidence (`plan_file.evidence`): "every module
-    matches the plant file" only when every value it covers was read in that run; else "No changes to
-    what was read now (the system blocks of 6 modules) or to what prc3cfg last read or verified (82
-    programs of 4 modules; oldest value taken from the record: line/m4's programs, as apply of /p/a.yaml by ana@pc
-    read or verified them since 2026-11-26 03:27 UTC)"."""
+    matches the plant file" only when every value it covers was read in that run; else "No changes to what was
+    read now (the system blocks of 6 modules) or to what prc3cfg last read or verified (82 programs of 4
+    modules; oldest value taken from the record: line/m4's programs, as apply of /p/a.yaml by ana@pc read or
+    verified them since 2026-11-26 03:27 UTC)"."""
     if evidence is None:  # a plan file written before plans said what they rest on
         return "No changes (the plan file does not say what was read, or taken from the line's record)."
     if evidence["complete"]:
@@ -194,15 +219,18 @@ def factory_line(document: dict[str, Any]) -> str | None:
     said = (document.get("evidence") or {}).get("from_factory")
     if not isinstance(said, dict) or not said.get("programs"):
         return None
-    return (f"Not read before writing: {plural(said['programs'], 'program')} of {plural(said['modules'], 'module')} whose system "
-            "parameters read as the factory's — planned as the factory's, not read before writing; the verification reads every "
-            "one of them back after the writes, and repairs what another tool changed there")  # fmt: skip
+    return (f"Not read before writing: {plural(said['programs'], 'program')} of "
+            f"{plural(said['modules'], 'module')} whose system "
+            "parameters read as the factory's — planned as the factory's, not read before writing; the "
+            "verification reads every "
+            "one of them back after the writes, and repairs what another tool changed there")
 
 
-def oldest_taken(oldest: dict[str, Any], shown: Callable[[str], str] = escape.shown, *, whose: bool = True) -> str:
-    """The oldest evidence a plan relied on (`evidence.oldest`), in words: "oldest value taken from the record:
-    line/m4's programs, as apply of /p/a.yaml by ana@pc read or verified them since 2026-11-26 03:27 UTC"
-    (without `whose`: "…: line/m4's programs, since 2026-11-26 03:27 UTC")."""
+def oldest_taken(oldest: dict[str, Any], shown: Callable[[str], str] = escape.shown, *,
+                 whose: bool = True) -> str:
+    """The oldest evidence a plan relied on (`evidence.oldest`), in words: "oldest value taken from the
+    record: line/m4's programs, as apply of /p/a.yaml by ana@pc read or verified them since 2026-11-26 03:27
+    UTC" (without `whose`: "…: line/m4's programs, since 2026-11-26 03:27 UTC")."""
     since = to_the_minute(oldest["since"]) or shown(oldest["since"])
     by = f" as {shown(oldest['by'])} read or verified them" if whose else ""
     return f"oldest value taken from the record: {shown(oldest['module'])}'s programs,{by} since {since}"
@@ -214,29 +242,35 @@ def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleCha
     if live:
         counts = [len({f.program for f in clamped_changes(change)}) for change in live.values()]
     else:
-        counts = [len({f["program"] for f in m.get("changes", {}).get("clamped", [])}) for _, m in modules_in(document)]
+        counts = [len({f["program"] for f in m.get("changes", {}).get("clamped", [])})
+                  for _, m in modules_in(document)]
     programs, modules = sum(counts), sum(1 for count in counts if count)
     if not programs:
         return None
-    return (f"⚠ {plural(programs, 'program')} the plant does not manage {'is' if programs == 1 else 'are'} clamped by "
+    return (f"⚠ {plural(programs, 'program')} the plant does not manage {'is' if programs == 1 else 'are'} "
+            "clamped by "
             f"{plural(modules, 'module')} as {'its' if modules == 1 else 'their'} system parameters change "
-            "(unmanaged_programs: keep) — each module's diff lists them")  # fmt: skip
+            "(unmanaged_programs: keep) — each module's diff lists them")
 
 
 def estimate(document: dict[str, Any]) -> str:
     """The time an apply of the plan takes, the total first, then by phase, with the writes' bus time
     beside the naive download's: "estimated time 9.6 s: reading back 4.1 s, writing 1.1 s (bus time
     1.099 s, naive download 1.149 s), verifying 4.4 s" (a plan file without phases: the bus times)."""
-    bus_times = f"bus time {document['estimated_bus_time_s']:.3f} s, naive download {document['naive_bus_time_s']:.3f} s"
+    bus_times = (f"bus time {document['estimated_bus_time_s']:.3f} s, naive download "
+                 f"{document['naive_bus_time_s']:.3f} s")
     phases = document.get("estimated_phases_s")
     if not isinstance(phases, dict):
         return f"estimated {bus_times}"
-    total = document.get("estimated_time_s", sum(phases[phase] for phase in PHASES))  # a plan file may lack either
+    # a plan file may lack either
+    total = document.get("estimated_time_s", sum(phases[phase] for phase in PHASES))
     return (f"estimated time {total:.1f} s: {PHASES['reading']} {phases['reading']:.1f} s, "
-            f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} {phases['verifying']:.1f} s")  # fmt: skip
+            f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} "
+            f"{phases['verifying']:.1f} s")
 
 
-def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown, *, claimed: bool = False) -> str | None:
+def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown, *,
+                 claimed: bool = False) -> str | None:
     """What a targeted plan read now and what it took as known from the line's record, in one line,
     its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
     30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
@@ -249,26 +283,33 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
         return None
     modules = modules_in(document)
     programs = sum(len(m["read"]["programs"]) for _, m in modules)
-    read = f"the system parameters of {plural(len(modules), 'module')} and {plural(programs, 'program')}" if modules else "nothing"
+    read = (f"the system parameters of {plural(len(modules), 'module')} and "
+            f"{plural(programs, 'program')}") if modules else "nothing"
     whose, not_read = _not_read(said, modules, shown)
-    other = f"read in full: {', '.join(shown(name) for name in said['not_as_verified'])}" if said["not_as_verified"] else ""
+    other = (f"read in full: {', '.join(shown(name) for name in said['not_as_verified'])}"
+             if said["not_as_verified"] else "")
     claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
     if whose and not claimed:
         not_read[0] += f", as {whose}"
     if not_read and isinstance(oldest := (document.get("evidence") or {}).get("oldest"), dict):
         not_read[0] += f" ({oldest_taken(oldest, shown, whose=False)})"
     parts = [f"Read now: {read}"]
-    parts += [f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"] if not_read else []
+    parts += ([f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"]
+              if not_read else [])
     parts += [other] if other and not claimed else []
     parts += [f"the plan file says: {claims} (apply --plan proves whose, not why)"] if claims else []
-    return "; ".join(parts) + (" — a program not read that another tool changed on a module whose system parameters did not "
-                               "change is not seen: plan --refresh-only (or --full-read) reads everything" if not_read else "")  # fmt: skip
+    return ("; ".join(parts)
+            + (" — a program not read that another tool changed on a module whose system parameters did not "
+                               "change is not seen: plan --refresh-only (or --full-read) reads everything"
+               if not_read else ""))
 
 
-#: How a module's diff is shown where its review text is not the text its digest was written for: as the file's words.
+#: How a module's diff is shown where its review text is not the text its digest was written for: as the
+#: file's words.
 SAID = "the plan file says: "
 #: What `show` says of a plan file whose every module's review is the text its digest was written for.
-REVIEW_AS_WRITTEN = "Review: the review text is as the plan was made (each module's review_sha256 matches it) — apply --plan proves the steps"
+REVIEW_AS_WRITTEN = ("Review: the review text is as the plan was made (each module's review_sha256 matches "
+                     "it) — apply --plan proves the steps")
 
 
 def review_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown) -> str | None:
@@ -279,27 +320,35 @@ def review_line(document: dict[str, Any], shown: Callable[[str], str] = escape.s
     judged = [(bus, m) for bus, m in modules_in(document) if "review" in m]
     if not judged:
         return None
-    changed = [f"{shown(bus)}/{shown(m['name'])}" for bus, m in judged if m["review"] == plan_file.Review.CHANGED]
-    undigested = [f"{shown(bus)}/{shown(m['name'])}" for bus, m in judged if m["review"] == plan_file.Review.NO_DIGEST]
+    changed = [f"{shown(bus)}/{shown(m['name'])}" for bus, m in judged
+               if m["review"] == plan_file.Review.CHANGED]
+    undigested = [f"{shown(bus)}/{shown(m['name'])}" for bus, m in judged
+                  if m["review"] == plan_file.Review.NO_DIGEST]
     if not changed and not undigested:
         return REVIEW_AS_WRITTEN
-    parts = [f"⚠ the review text of {some_of(changed)} was changed after the plan was made"] if changed else []
+    parts = ([f"⚠ the review text of {some_of(changed)} was changed after the plan was made"] if changed
+             else [])
     parts += [f"⚠ {some_of(undigested)}: no review digest (made by an older prc3cfg)"] if undigested else []
-    return "; ".join(parts) + (f" — its diff is shown as the file's words (\"{SAID.strip()}\"); the steps are what apply --plan proves: read "
-                               "the steps (apply --plan refuses this file: plan again)")  # fmt: skip
+    return ("; ".join(parts)
+            + (f" — its diff is shown as the file's words (\"{SAID.strip()}\"); the steps are what apply "
+               "--plan proves: read "
+                               "the steps (apply --plan refuses this file: plan again)"))
 
 
 def as_written(module: dict[str, Any]) -> bool:
-    """Whether a module's review is the text its digest was written for (a live plan's: prc3cfg's own, now)."""
+    """Whether a module's review is the text its digest was written for (a live plan's: prc3cfg's own,
+    now)."""
     return bool(module.get("review", plan_file.Review.AS_WRITTEN) == plan_file.Review.AS_WRITTEN)
 
 
 def as_reviewed(module: dict[str, Any], lines: list[str]) -> list[str]:
-    """A module's diff lines, each after `SAID` where its review is not the text its digest was written for."""
+    """A module's diff lines, each after `SAID` where its review is not the text its digest was written
+    for."""
     return lines if as_written(module) else [SAID + line for line in lines]
 
 
-def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]], shown: Callable[[str], str]) -> tuple[str, list[str]]:
+def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]],
+              shown: Callable[[str], str]) -> tuple[str, list[str]]:
     """Whose reads or verifications the programs not read rest on ("" when none was taken), and what was not
     read: "79 programs of 6 modules", "2 modules (line/a, line/b)"."""
     skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
@@ -307,32 +356,38 @@ def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]], s
         whose, parts = "", []
     else:
         sources = sorted({shown(source) for source in said.get("taken", {}).values()})
-        whose = f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or verified them" if sources else ""
-        parts = [f"{plural(skipped, 'program')} of {plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"]
+        whose = (f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or "
+                 "verified them") if sources else ""
+        parts = [f"{plural(skipped, 'program')} of "
+                 f"{plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"]
     unread = [shown(name) for name in said["modules_not_read"]]
-    parts += [f"{plural(len(unread), 'module')} ({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
+    parts += [f"{plural(len(unread), 'module')} "
+              f"({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
     return whose, parts
 
 
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
     """An apply's time, estimated against taken, in total and by phase, in one line: "Time: 6.4 s
     (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.7 s (0.5 s)"."""
-    phases = ", ".join(f"{words} {took[phase]:.1f} s ({estimated[phase]:.1f} s)" for phase, words in PHASES.items())
+    phases = ", ".join(f"{words} {took[phase]:.1f} s ({estimated[phase]:.1f} s)"
+                       for phase, words in PHASES.items())
     return f"Time: {sum(took.values()):.1f} s (estimated {sum(estimated.values()):.1f} s) — {phases}"
 
 
-def faulted_summary(document: dict[str, Any], faults: Sequence[str], shown: Callable[[str], str] = escape.shown) -> list[str]:
+def faulted_summary(document: dict[str, Any], faults: Sequence[str],
+                    shown: Callable[[str], str] = escape.shown) -> list[str]:
     """The summary, with the modules a write found in a fault state (`faults`: "bus/module is in E21 (…)",
     kept in the records until a write to it is acknowledged): a plan with nothing to write for them does
     not say all is well — its headline names the fault."""
-    said = [f"⚠ {shown(fault)} — a read cannot tell whether it still is: clear the fault on the module" for fault in faults]
+    said = [f"⚠ {shown(fault)} — a read cannot tell whether it still is: clear the fault on the module"
+            for fault in faults]
     if faults and not any(m["steps"] for _, m in modules_in(document)):
         return [f"No changes to write, but {plural(len(faults), 'module')} reported a fault state:", *said]
     return [summary_line(document, shown), *said]
 
 
 def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown: Collection[str] = (),
-          faults: Sequence[str] = (), frames: bool = False) -> str:  # fmt: skip
+          faults: Sequence[str] = (), frames: bool = False) -> str:
     """A plan (or a plan file's document) as the terminal shows it: per module its diff and steps,
     each bus's broadcasts once, the reference-travel warning, what stays as it is, the summary. The
     buses `shown` already (`line_part`, as their writes began) are named, not shown again. `frames`:
@@ -340,13 +395,16 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
     document, live = outline(plan, notes)
     out = [f"Plant {document['plant']}", ""]
     for bus in document["buses"]:
-        out += broadcast_lines(bus, frames) if bus["name"] not in shown else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""]
+        out += (broadcast_lines(bus, frames) if bus["name"] not in shown
+                else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""])
     out += _module_sections(document, live, frames, shown)
     if document["axis_releases"]:
-        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+        out.append("⚠ Travel to reference point required after apply on: "
+                   + ", ".join(document["axis_releases"]))
     out += [line for line in [clamped_line(document, live)] if line]
     out += faulted_summary(document, faults)
-    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document), review_line(document)] if line]
+    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document),
+                              review_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in modules_in(document)):
         out.append(LEGEND)
@@ -354,20 +412,22 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
 
 
 def line_part(plan: PlantPlan, frames: bool = False) -> str:
-    """One line's plan (`plan` holds its modules only), shown as its writes begin while the other lines
-    are still read (`apply --auto-approve --allow-axis-release`): its broadcasts, its modules, its axis releases."""
+    """One line's plan (`plan` holds its modules only), shown as its writes begin while the other lines are
+    still read (`apply --auto-approve --allow-axis-release`): its broadcasts, its modules, its axis releases.
+    """
     document, live = outline(plan, ())
     out = [f"Writing bus {', '.join(bus['name'] for bus in document['buses'])} now, as planned:", ""]
     for bus in document["buses"]:
         out += broadcast_lines(bus, frames)
     out += _module_sections(document, live, frames)
     if document["axis_releases"]:
-        out.append("⚠ Travel to reference point required after apply on: " + ", ".join(document["axis_releases"]))
+        out.append("⚠ Travel to reference point required after apply on: "
+                   + ", ".join(document["axis_releases"]))
     return "\n".join(out)
 
 
 def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], frames: bool,
-                     shown: Collection[str] = ()) -> list[str]:  # fmt: skip
+                     shown: Collection[str] = ()) -> list[str]:
     """Each module's diff and steps (a line for one without changes), those of the buses `shown` left out."""
     out = []
     for bus, module in modules_in(document):

@@ -1,6 +1,6 @@
 """What `show` says of a plant file's modules: the table of its modules (`modules_table`) and one module's
-effective configuration, each value in human and device units and where it came from (`shown_module`) — words and
-rows; the terminal draws them. Pure.
+effective configuration, each value in human and device units and where it came from (`shown_module`) — words
+and rows; the terminal draws them. Pure.
 """
 
 from __future__ import annotations
@@ -37,8 +37,9 @@ class ModuleRow:
 
 def modules_table(plant: str, modules: Iterable[ModuleRow]) -> Table:
     """The modules of a plant, one row each ("-" for no profile, no program listed)."""
-    rows = tuple((m.bus, str(m.address), m.name, ", ".join(m.profiles) or "-", ", ".join(map(str, m.programs)) or "-",
-                  m.unmanaged_programs) for m in modules)  # fmt: skip
+    rows = tuple((m.bus, str(m.address), m.name, ", ".join(m.profiles) or "-",
+                  ", ".join(map(str, m.programs)) or "-",
+                  m.unmanaged_programs) for m in modules)
     return Table(f"plant {plant}", ("bus", "address", "module", "profiles", "programs", "unmanaged"), (rows,))
 
 
@@ -76,16 +77,23 @@ def _setting(key: str, symbol: str, device: int, source: str) -> tuple[str, str,
 
 
 def shown_module(settings: Settings) -> Shown:
-    """A module's effective configuration: each value in human units and device units, and where it came from."""
-    where = f" — bus {settings.bus}, address {settings.address}, profiles: {', '.join(settings.profiles) or 'none'}"
-    unmanaged = f"unmanaged_programs: {settings.unmanaged_programs} ({settings.sources['unmanaged_programs']})"
-    system = tuple(_setting(q.key, q.symbol, getattr(settings.system, q.symbol), settings.sources[q.key]) for q in SYSTEM_QUANTITIES)
+    """A module's effective configuration: each value in human units and device units, and where it came
+    from."""
+    where = (f" — bus {settings.bus}, address {settings.address}, profiles: "
+             f"{', '.join(settings.profiles) or 'none'}")
+    unmanaged = (f"unmanaged_programs: {settings.unmanaged_programs} "
+                 f"({settings.sources['unmanaged_programs']})")
+    system = tuple(_setting(q.key, q.symbol, getattr(settings.system, q.symbol), settings.sources[q.key])
+                   for q in SYSTEM_QUANTITIES)
     sections = []
     for number, program in settings.programs.items():
         sources = settings.program_sources[number]
-        rows = [_setting(q.key, q.symbol, getattr(program, q.symbol), sources[q.key]) for q in PROGRAM_QUANTITIES]
-        rows += [_setting(symbol.lower(), symbol, getattr(program, symbol), sources[symbol.lower()]) for symbol in FUNCTION_OUTPUTS]
-        rows.append(("jump (A)", f"program {program.A}" if program.A else "stop", str(program.A), sources["jump"]))
+        rows = [_setting(q.key, q.symbol, getattr(program, q.symbol), sources[q.key])
+                for q in PROGRAM_QUANTITIES]
+        rows += [_setting(symbol.lower(), symbol, getattr(program, symbol), sources[symbol.lower()])
+                 for symbol in FUNCTION_OUTPUTS]
+        rows.append(("jump (A)", f"program {program.A}" if program.A else "stop", str(program.A),
+                     sources["jump"]))
         sections.append(tuple((str(number) if i == 0 else "", *row) for i, row in enumerate(rows)))
     blocks: list[str | Table] = [
         unmanaged,
@@ -93,7 +101,8 @@ def shown_module(settings: Settings) -> Shown:
         Table("programs", ("#", "key", "value", "device", "from"), tuple(sections)),
     ]
     if settings.chains:
-        blocks.append(f"chains ({settings.sources['chains']}): {'; '.join(chain_text(*chain) for chain in settings.chains)}")
+        blocks.append(f"chains ({settings.sources['chains']}): "
+                      f"{'; '.join(chain_text(*chain) for chain in settings.chains)}")
     return Shown(("module ", settings.name, where), blocks)
 
 

@@ -1,8 +1,8 @@
 """The words every output of prc3cfg shares: a field's name and value in human units (`field_name`,
-`format_value`), two images' differences field by field (`field_changes`, `differences`, `drift_changes`) and a
-module's diff (`ModuleDiff`, `module_lines`), a plan's module and step lines (`header_line`, `step_line`), counts
-(`plural`, `some_of`), the axis question's summary, and text from a file made safe for markdown (`cell`, `code`,
-`fenced`). The units are `prc3cfg.core.units`. Pure: returns strings.
+`format_value`), two images' differences field by field (`field_changes`, `differences`, `drift_changes`) and
+a module's diff (`ModuleDiff`, `module_lines`), a plan's module and step lines (`header_line`, `step_line`),
+counts (`plural`, `some_of`), the axis question's summary, and text from a file made safe for markdown
+(`cell`, `code`, `fenced`). The units are `prc3cfg.core.units`. Pure: returns strings.
 """
 
 from __future__ import annotations
@@ -59,7 +59,8 @@ class FieldChange:
         return cls(program, symbol, before, after, text)
 
     def to_json(self) -> dict[str, Any]:
-        return {"program": self.program, "field": self.symbol, "before": self.before, "after": self.after, "text": self.text}
+        return {"program": self.program, "field": self.symbol, "before": self.before, "after": self.after,
+                "text": self.text}
 
 
 def field_changes(actual: ModuleImage, desired: ModuleImage) -> list[FieldChange]:
@@ -98,7 +99,8 @@ def chain_changes(actual: ModuleImage, desired: ModuleImage) -> tuple[list[str],
     """(jumps removed, jumps added) among the managed programs."""
     managed = {n for n, p in enumerate(desired.programs, start=1) if p is not None}
     if all(actual.known(n).A == desired.known(n).A for n in managed):
-        return [], []  # the same jump addresses, the same jumps (`jumps` reads A alone): most plans change none
+        # the same jump addresses, the same jumps (`jumps` reads A alone): most plans change none
+        return [], []
     before, after = jumps(actual, managed), jumps(desired, managed)
     return sorted(before - after), sorted(after - before)
 
@@ -114,20 +116,23 @@ JUMPS = "jumps"
 
 
 def drift_changes(said: ModuleImage, held: ModuleImage) -> list[dict[str, Any]]:
-    """Where a module holds something else than the plant file says, as a change made on the floor —
-    "what the file says → what the module holds", the direction `adopt` shows it in: each a field as a
-    plan file's `changes` give it (`FieldChange.to_json`: program, field symbol, before and after in device
-    units), or a jump (`JUMPS`: before, after a chain in words, null where there is none); `text` the sentence."""
+    """Where a module holds something else than the plant file says, as a change made on the floor — "what the
+    file says → what the module holds", the direction `adopt` shows it in: each a field as a plan file's
+    `changes` give it (`FieldChange.to_json`: program, field symbol, before and after in device units), or a
+    jump (`JUMPS`: before, after a chain in words, null where there is none); `text` the sentence."""
     fields = [f.to_json() | {"text": f"{'system' if f.program is None else f'program {f.program}'} {f.text}"}
-              for f in field_changes(said, held)]  # fmt: skip
+              for f in field_changes(said, held)]
     in_module, in_file = chain_changes(held, said)
-    return (fields + [{"program": None, "field": JUMPS, "before": None, "after": c, "text": f"{c}: in the module only"} for c in in_module]
-            + [{"program": None, "field": JUMPS, "before": c, "after": None, "text": f"{c}: in the plant file only"} for c in in_file])  # fmt: skip
+    return (fields + [{"program": None, "field": JUMPS, "before": None, "after": c,
+                       "text": f"{c}: in the module only"} for c in in_module]
+            + [{"program": None, "field": JUMPS, "before": c, "after": None,
+                "text": f"{c}: in the plant file only"} for c in in_file])
 
 
 def differences(have: ModuleImage, want: ModuleImage) -> list[str]:
     """Where a module holds something else than the plant file says, "what it holds → what it should"."""
-    fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text}" for f in field_changes(have, want)]
+    fields = [f"{'system' if f.program is None else f'program {f.program}'} {f.text}"
+              for f in field_changes(have, want)]
     removed, added = chain_changes(have, want)
     return fields + [f"has {c}" for c in removed] + [f"lacks {c}" for c in added]
 
@@ -152,7 +157,8 @@ def module_diff(change: ModuleChange) -> ModuleDiff:
     removed, added = chain_changes(change.actual, change.desired)
     return ModuleDiff(
         fields=tuple(fields),
-        actions=Action.of_programs(change.actual, change.desired, {f.program for f in fields if f.program is not None}),
+        actions=Action.of_programs(change.actual, change.desired,
+                                   {f.program for f in fields if f.program is not None}),
         chains_removed=tuple(removed),
         chains_added=tuple(added),
         clamped=tuple(clamped_changes(change)),
@@ -171,12 +177,14 @@ def module_lines(changes: dict[str, Any]) -> list[str]:
             programs.setdefault(f["program"], []).append(f["text"])
     symbols = changes.get("symbols", {})
     lines += [f"{symbols.get(str(number), Action.UPDATE)} program {number}: {', '.join(texts)}"
-              for number, texts in programs.items()]  # fmt: skip
-    lines += [f"{Action.DELETE} {c}" for c in changes["chains_removed"]] + [f"{Action.CREATE} {c}" for c in changes["chains_added"]]
+              for number, texts in programs.items()]
+    lines += [f"{Action.DELETE} {c}" for c in changes["chains_removed"]] + [f"{Action.CREATE} {c}"
+                                                                            for c in changes["chains_added"]]
     clamped: dict[int, list[str]] = {}
     for f in changes["clamped"]:
         clamped.setdefault(f["program"], []).append(f["text"])
-    lines += [f"{Action.UPDATE} program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}" for n, texts in clamped.items()]
+    lines += [f"{Action.UPDATE} program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}"
+              for n, texts in clamped.items()]
     return lines
 
 
@@ -195,7 +203,8 @@ def some_of(names: Sequence[str], budget: int = RELEASE_NAMES_BUDGET) -> str:
     shown: list[str] = []
     for index, name in enumerate(names):
         rest = len(names) - index
-        if shown and len(", ".join([*shown, name])) + (len(f" and {rest - 1} more") if rest > 1 else 0) > budget:
+        if (shown and len(", ".join([*shown, name]))
+            + (len(f" and {rest - 1} more") if rest > 1 else 0) > budget):
             return f"{', '.join(shown)} and {rest} more"
         shown.append(name)
     return ", ".join(shown)
@@ -206,12 +215,15 @@ def release_summary(names: Sequence[str]) -> list[str]:
     release their axes and which (`some_of`), and what that means for production."""
     count = len(names)
     return [
-        f"⚠ {plural(count, 'module')} will release {'its' if count == 1 else 'their'} axes (10h/20h): {some_of(names)}",
-        f"  {'It loses its' if count == 1 else 'Each loses its'} reference point and must travel to it before production.",
+        f"⚠ {plural(count, 'module')} will release {'its' if count == 1 else 'their'} axes (10h/20h): "
+        f"{some_of(names)}",
+        f"  {'It loses its' if count == 1 else 'Each loses its'} reference point and must travel to it "
+        "before production.",
     ]
 
 
-def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float, releases: bool) -> str:
+def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float,
+                releases: bool) -> str:
     """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
     head = f"{Action.of_module(steps)} bus {bus}, module {address} ({name})"
     if not steps:
@@ -226,11 +238,12 @@ def step_line(index: int, message_hex: str | None, summary: str, releases: bool,
     and what it means for the axes."""
     frame = "" if message_hex is None else f"{message_hex:<24} "
     return (f"{index:>3}. {frame}{summary}" + ("  (broadcast)" if broadcast else "")
-            + ("  ⚠ RELEASES AXES" if releases else ""))  # fmt: skip
+            + ("  ⚠ RELEASES AXES" if releases else ""))
 
 
 def cell(text: str) -> str:
-    """Text from a file for a markdown table cell or paragraph: shown as written, nothing in it live (`text.markdown`)."""
+    """Text from a file for a markdown table cell or paragraph: shown as written, nothing in it live
+    (`text.markdown`)."""
     return escape.markdown(text)
 
 
@@ -245,6 +258,7 @@ def code(text: str) -> str:
 
 
 def fenced(lines: Sequence[str], info: str = "") -> list[str]:
-    """`lines` as a markdown fenced block: its fence longer than any run of backticks in them, so no line closes it."""
+    """`lines` as a markdown fenced block: its fence longer than any run of backticks in them, so no line
+    closes it."""
     fence = "`" * max(3, max((len(run) + 1 for line in lines for run in re.findall("`+", line)), default=0))
     return [fence + info, *lines, fence]

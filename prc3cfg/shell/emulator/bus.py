@@ -29,7 +29,8 @@ class EmulatedBus:
     def __init__(self, modules: dict[int, ModuleState]) -> None:
         for address, state in modules.items():
             if not 1 <= address <= MAX_MODULE_ADDRESS or state.address != address:
-                raise ValueError(f"module at address {address} must have S9 = {address} in 1..{MAX_MODULE_ADDRESS}")
+                raise ValueError(f"module at address {address} must have S9 = {address} in "
+                                 f"1..{MAX_MODULE_ADDRESS}")
         self.modules = dict(sorted(modules.items()))
 
     def deliver(self, address: int, message: bytes) -> Delivery:

@@ -6,7 +6,8 @@ tries prc3cfg on without hardware. While one serves, a file `ptys/PID.json` (`{"
 so; it goes when the emulator stops. A file whose process is gone (a killed emulator), whose
 pseudo-terminal is gone, or that is no such record is left out — and removed.
 
-Does not own the pseudo-terminal (`prc3cfg.shell.emulator.server`) nor the listing (`prc3cfg.shell.link.ports`).
+Does not own the pseudo-terminal (`prc3cfg.shell.emulator.server`) nor the listing
+(`prc3cfg.shell.link.ports`).
 """
 
 from __future__ import annotations
@@ -52,8 +53,9 @@ def serving() -> list[tuple[str, int, list[int]]]:
         try:
             entry = read_json(record)
             path, pid, modules = entry["path"], entry["pid"], entry["modules"]
-            usable = (isinstance(path, str) and type(pid) is int and isinstance(modules, list) and all(type(m) is int for m in modules)
-                      and platform.process_alive(pid) and Path(path).exists())  # fmt: skip
+            usable = (isinstance(path, str) and type(pid) is int and isinstance(modules, list)
+                      and all(type(m) is int for m in modules)
+                      and platform.process_alive(pid) and Path(path).exists())
         except (FileProblem, KeyError, TypeError):
             usable = False
         if usable:

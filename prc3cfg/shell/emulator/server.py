@@ -171,7 +171,8 @@ class Emulator:
             try:
                 self._store.start(self._all())
             except OSError as error:
-                raise UserError(f"{cannot_save(self._store.path, error)} — check the path, its folder and the disk") from None
+                raise UserError(f"{cannot_save(self._store.path, error)} — check the path, its folder "
+                                "and the disk") from None
 
     # -- the Python API ----------------------------------------------------------------
 
@@ -239,7 +240,8 @@ class Emulator:
         i = self._random.randrange(len(frame))
         if self.line.parity != "none":  # a parity error: the UART drops the character
             return frame[:i] + frame[i + 1 :]
-        return frame[:i] + bytes([frame[i] ^ (1 << self._random.randrange(self.line.data_bits))]) + frame[i + 1 :]
+        return (frame[:i] + bytes([frame[i] ^ (1 << self._random.randrange(self.line.data_bits))])
+                + frame[i + 1 :])
 
     def _received(self, data: bytes) -> Frame | None:
         """The request frame a module's receiver finds in damaged bytes, if any."""
@@ -294,7 +296,8 @@ class Emulator:
         if damaged is None:
             log.info("fault injection: request to %d damaged and discarded", frame.address)
         else:
-            log.info("fault injection: request damaged, delivered to %d as %s", damaged.address, damaged.message.hex())
+            log.info("fault injection: request damaged, delivered to %d as %s", damaged.address,
+                     damaged.message.hex())
         return damaged
 
     def _deliver(self, address: int, message: bytes) -> bytes | None:
@@ -309,7 +312,8 @@ class Emulator:
             except OSError as error:
                 assert self._store is not None  # only a store fails to save
                 to = "all modules (broadcast)" if address == BROADCAST else f"module {address}"
-                log.error("%s — the write to %s is not answered and not applied", cannot_save(self._store.path, error), to)
+                log.error("%s — the write to %s is not answered and not applied",
+                          cannot_save(self._store.path, error), to)
                 return None
         return None if address == BROADCAST else delivery.reply
 
@@ -381,7 +385,8 @@ class Emulator:
         """Accept TCP connections (pyserial `socket://HOST:PORT`); returns the bound address.
         `rfc2217`: they speak RFC 2217 (`rfc2217://HOST:PORT`), as ser2net's `telnet(rfc2217)`
         accepter: the client sets the baud rate and character format of its end of the line."""
-        server = socket.create_server((host, port), backlog=socket.SOMAXCONN)  # a burst of connections waits in the kernel
+        # a burst of connections waits in the kernel
+        server = socket.create_server((host, port), backlog=socket.SOMAXCONN)
         server.settimeout(POLL)
 
         def stop_listening() -> None:
@@ -405,7 +410,8 @@ class Emulator:
                 if self._closing.is_set():
                     return
                 if not failing:
-                    log.error("cannot accept a connection (%s) — trying again every %g s", error.strerror or error, ACCEPT_BACKOFF)
+                    log.error("cannot accept a connection (%s) — trying again every %g s", error.strerror
+                              or error, ACCEPT_BACKOFF)
                     failing = True
                 self._closing.wait(ACCEPT_BACKOFF)
                 continue
@@ -423,7 +429,8 @@ class Emulator:
             if not full:
                 self._connections.add(conn)
         if full:
-            log.warning("%s: refused — the most connections allowed (%d) are open", name, self.max_connections)
+            log.warning("%s: refused — the most connections allowed (%d) are open", name,
+                        self.max_connections)
             conn.close()
             return
         log.info("%s: connected", name)
@@ -461,7 +468,8 @@ class Emulator:
         try:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, REPLY_BUFFER)
-            self._serve_stream(recv, send_on, name=name, uart=False, idle_timeout=self.idle_timeout, client_line=client_line)
+            self._serve_stream(recv, send_on, name=name, uart=False, idle_timeout=self.idle_timeout,
+                               client_line=client_line)
         except OSError as error:
             log.info("%s: %s", name, error.strerror or error)
         finally:
@@ -499,7 +507,8 @@ class Emulator:
             baud, two_stop_bits = found
             return replace(self.line, baud=baud, stop_bits=2 if two_stop_bits else 1)
 
-        self._start(lambda: self._serve_stream(recv, send, name=path, uart=True, client_line=client_line), "emulator-pty")
+        self._start(lambda: self._serve_stream(recv, send, name=path, uart=True, client_line=client_line),
+                    "emulator-pty")
         return path
 
     # -- lifetime ----------------------------------------------------------------------
@@ -519,7 +528,8 @@ class Emulator:
                 try:
                     self._store.close(self._all())
                 except OSError as error:
-                    log.error("%s — its journal keeps every write for the next start", cannot_save(self._store.path, error))
+                    log.error("%s — its journal keeps every write for the next start",
+                              cannot_save(self._store.path, error))
 
     def __enter__(self) -> Emulator:
         return self
@@ -568,7 +578,8 @@ def _rfc2217(
         def write(self, data: bytes) -> None:
             send(data)
 
-    manager = PortManager(cast(rfc2217.Serial, end), cast(rfc2217.Serial, Connection()))  # what it uses of a port, and a writer
+    # what it uses of a port, and a writer
+    manager = PortManager(cast(rfc2217.Serial, end), cast(rfc2217.Serial, Connection()))
 
     def receive(timeout: float) -> bytes | None:
         data = recv(timeout)

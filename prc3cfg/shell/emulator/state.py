@@ -14,12 +14,11 @@ answered — microseconds of CPU and one disk flush:
     ADDRESS MESSAGE                       a write a module accepted: its address 1..30 and
     …                                     the PRC 3 message in lower-case hex
 
-The bond between the two is an identifier inside the state file, not its bytes: every save
-gives the state file a new `"generation"` (a random hex string) and names the one it
-replaces, `"replaces"` — extension keys of the file docs/files.md describes ("Emulator state") — so a state file that
-was reformatted, pretty-printed or given a byte-order mark or a final newline still bonds
-with its journal (CRLF line ends and a byte-order mark in the journal, blank lines and a
-last line cut by a kill — never acknowledged — are read past too).
+The bond between the two is an identifier inside the state file, not its bytes: every save gives the state
+file a new `"generation"` (a random hex string) and names the one it replaces, `"replaces"` — extension keys
+of the file docs/files.md describes ("Emulator state") — so a state file that was reformatted, pretty-printed
+or given a byte-order mark or a final newline still bonds with its journal (CRLF line ends and a byte-order
+mark in the journal, blank lines and a last line cut by a kill — never acknowledged — are read past too).
 
 `load_state` reads the state file and replays the journal on it with the device model, so
 a killed emulator loses no write it acknowledged. A broadcast is one line per module it
@@ -116,35 +115,45 @@ def load_state(path: Path) -> dict[int, ModuleState]:
         data = read_json(path)
     except FileProblem as problem:
         if problem.why is Why.MISSING:
-            raise UserError(f"{path}: missing, but its journal {keep} — put the state file back, or move the journal "
-                            "aside to start from factory modules") from None  # fmt: skip
-        raise UserError(f"{problem.where(path)}: {problem}, and its journal {keep} — fix the state file (the journal "
-                        "replays onto it)") from None  # fmt: skip
+            raise UserError(f"{path}: missing, but its journal {keep} — put the state file back, or move "
+                            "the journal "
+                            "aside to start from factory modules") from None
+        raise UserError(f"{problem.where(path)}: {problem}, and its journal {keep} — fix the state file "
+                        "(the journal "
+                        "replays onto it)") from None
     modules = _modules(path, data)
     header, writes = ((lines[0] if lines else b"").split(b" ") + [b""])[:2], lines[1:]
     generation, replaces = (data.get(key) for key in ("generation", "replaces"))
-    if header[0] == JOURNAL_FORMAT.encode() and generation is not None and header[1] == str(generation).encode():
+    if (header[0] == JOURNAL_FORMAT.encode() and generation is not None
+        and header[1] == str(generation).encode()):
         pass
-    elif header[0] == JOURNAL_FORMAT.encode() and replaces is not None and header[1] == str(replaces).encode():
+    elif (header[0] == JOURNAL_FORMAT.encode() and replaces is not None
+          and header[1] == str(replaces).encode()):
         return modules  # the state file took this journal in
-    elif header[0] == _OLD_JOURNAL_FORMAT.encode() and header[1] == hashlib.sha256(read_regular(path, JSON_LIMIT)).hexdigest().encode():
+    elif (header[0] == _OLD_JOURNAL_FORMAT.encode()
+          and header[1] == hashlib.sha256(read_regular(path, JSON_LIMIT)).hexdigest().encode()):
         pass
     else:
         found = (f"generation {header[1].decode('ascii', 'replace')}" if header[0] == JOURNAL_FORMAT.encode()
                  else "a damaged header" if lines else "no header (it is empty)")
         held = f"generation {generation}" if generation is not None else "no generation"
-        raise UserError(f"{journal}: {found}, and {path} beside it has {held} — the journal cannot be replayed onto it. "
-                        f"Put back the state file it follows, or move the journal aside to start from {path} alone "
-                        "(its writes are then lost)")  # fmt: skip
+        raise UserError(f"{journal}: {found}, and {path} beside it has {held} — the journal cannot be "
+                        "replayed onto it. "
+                        "Put back the state file it follows, or move the journal aside to start from "
+                        f"{path} alone "
+                        "(its writes are then lost)")
     for number, (address, message) in enumerate(_writes(journal, writes), 2):
         if not 1 <= address <= MAX_MODULE_ADDRESS:
-            raise UserError(f"{journal}:{number}: address {address} is outside 1..{MAX_MODULE_ADDRESS} — fix or delete the line")
-        state = modules.get(address) or ModuleState.factory(address)  # a module the file lacks was served from factory defaults
+            raise UserError(f"{journal}:{number}: address {address} is outside 1..{MAX_MODULE_ADDRESS} — "
+                            "fix or delete the line")
+        # a module the file lacks was served from factory defaults
+        state = modules.get(address) or ModuleState.factory(address)
         modules[address] = device.process(state, message).state
     return modules
 
 
-def modules_to_serve(path: Path | None, addresses: list[int] | None) -> tuple[dict[int, ModuleState], dict[int, ModuleState]]:
+def modules_to_serve(path: Path | None, addresses: list[int] | None) -> tuple[dict[int, ModuleState],
+                                                                              dict[int, ModuleState]]:
     """(served, unserved) for `emulator serve --state PATH`: the modules at `addresses` — else
     those of the state file at `path`, else 1..30 — as the state file holds them or at factory
     defaults, and the modules the state file holds that are not served (kept in it untouched).
@@ -192,8 +201,10 @@ def _journal_lines(path: Path) -> list[bytes] | None:
     except FileProblem as problem:
         if problem.why is Why.MISSING:
             return None
-        raise UserError(f"{journal_path(path)}: {problem} — it holds writes acknowledged since {path} was saved: make it readable") from None
-    lines = [line.rstrip() for line in text.removeprefix(b"\xef\xbb\xbf").split(b"\n")[:-1]]  # the last: b"" or a torn line
+        raise UserError(f"{journal_path(path)}: {problem} — it holds writes acknowledged since {path} was "
+                        "saved: make it readable") from None
+    # the last: b"" or a torn line
+    lines = [line.rstrip() for line in text.removeprefix(b"\xef\xbb\xbf").split(b"\n")[:-1]]
     return [line for line in lines if line]
 
 
@@ -205,7 +216,8 @@ def _writes(journal: Path, lines: list[bytes]) -> list[tuple[int, bytes]]:
         try:
             writes.append((int(address.decode("ascii")), bytes.fromhex(message.decode("ascii"))))
         except ValueError:
-            raise UserError(f"{journal}:{number}: not an address and a message in hex — fix or delete the line") from None
+            raise UserError(f"{journal}:{number}: not an address and a message in hex — fix or "
+                            "delete the line") from None
     return writes
 
 
@@ -216,7 +228,8 @@ def _load_file(path: Path) -> dict[int, ModuleState]:
     except FileProblem as problem:
         if problem.why is Why.MISSING:
             return {}
-        remedy = "fix or delete it" if problem.why is Why.NOT_JSON else "give an emulator state file, or a path where none is yet"
+        remedy = ("fix or delete it" if problem.why is Why.NOT_JSON
+                  else "give an emulator state file, or a path where none is yet")
         raise UserError(f"{problem.where(path)}: {problem} — {remedy}") from None
     return _modules(path, data)
 
@@ -230,20 +243,23 @@ def _modules(path: Path, data: object) -> dict[int, ModuleState]:
     except ValidationError as error:
         detail = error.errors(include_url=False)[0]
         remedy = "fix or delete the entry" if len(detail["loc"]) > 1 else "fix or delete it"
-        raise UserError(f"{path}: {worded(detail, lambda loc: _place(data, loc), _StateFile)} — {remedy}") from None
+        raise UserError(f"{path}: {worded(detail, lambda loc: _place(data, loc), _StateFile)} "
+                        f"— {remedy}") from None
     modules: dict[int, ModuleState] = {}
     for entry in checked.modules:
         if entry.address in modules:
             raise UserError(f"{path}: module address {entry.address} appears twice — keep one entry")
         try:
             modules[entry.address] = entry.state()
-        except ValueError as error:  # what no one field says (`ModuleState`): firmware without F2 has no reads either
+        # what no one field says (`ModuleState`): firmware without F2 has no reads either
+        except ValueError as error:
             raise UserError(f"{path}: module {entry.address}: {error} — fix or delete the entry") from None
     return modules
 
 
 def _place(data: dict[str, Any], loc: Sequence[str | int]) -> str:
-    """A place in a state file as its modules are named: "module 3: program 7: P", "module entry 0: address S9"."""
+    """A place in a state file as its modules are named: "module 3: program 7: P", "module entry 0: address
+    S9"."""
     if len(loc) < 2:
         return "modules"
     entry = data["modules"][loc[1]]
@@ -285,8 +301,9 @@ class _Module(BaseModel):
 
     def state(self) -> ModuleState:
         image = ModuleImage(self.address, SystemParameters(**vars(self.system)),
-                            tuple(Program(**vars(program)) for program in self.programs))  # fmt: skip
-        return ModuleState(image, self.mode, self.active_program, self.fault, self.referenced, self.read_messages,
+                            tuple(Program(**vars(program)) for program in self.programs))
+        return ModuleState(image, self.mode, self.active_program, self.fault, self.referenced,
+                           self.read_messages,
                            self.f2_messages)
 
 
@@ -309,9 +326,11 @@ def _generation(path: Path) -> str | None:
     return str(generation) if generation is not None else None
 
 
-def state_document(modules: Mapping[int, ModuleState], generation: str | None = None, replaces: str | None = None) -> dict:
+def state_document(modules: Mapping[int, ModuleState], generation: str | None = None,
+                   replaces: str | None = None) -> dict:
     """The state file of `modules`; with the `generation` its journal names, and the one it `replaces`."""
-    bond = {"generation": generation, **({"replaces": replaces} if replaces is not None else {})} if generation is not None else {}
+    bond = ({"generation": generation, **({"replaces": replaces} if replaces is not None else {})}
+            if generation is not None else {})
     return {"format": FORMAT, **bond, "modules": [modules[a].to_json() for a in sorted(modules)]}
 
 
@@ -332,7 +351,8 @@ class Store:
         self.journal = journal_path(path)
         self.compact_every = compact_every
         self._fd: int | None = None  # the journal being appended to; None: the next write compacts
-        self._files: tuple[tuple[int, ...], tuple[int, ...]] | None = None  # the state file and journal as last written
+        # the state file and journal as last written
+        self._files: tuple[tuple[int, ...], tuple[int, ...]] | None = None
         self._entries = 0  # lines in the journal
         self._size = 0  # bytes in the journal
         self._without_journal = False  # a journal could not be begun (logged once)
@@ -357,18 +377,21 @@ class Store:
             raise
 
     def _taken_in(self) -> bool:
-        """Whether the journal is one the state file took in (its generation is the one the state file replaces)."""
+        """Whether the journal is one the state file took in (its generation is the one the state file
+        replaces)."""
         try:
             data = read_json(self.path)
             lines = _journal_lines(self.path)
         except (FileProblem, UserError):
             return False
         replaces = data.get("replaces") if isinstance(data, dict) else None
-        return lines is not None and lines[:1] == [f"{JOURNAL_FORMAT} {replaces}".encode()] and replaces is not None
+        return (lines is not None and lines[:1] == [f"{JOURNAL_FORMAT} {replaces}".encode()]
+                and replaces is not None)
 
     def _own(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)  # as the state file's first save would
-        fd = os.open(owner_path(self.path), os.O_RDWR | os.O_CREAT | platform.NO_INHERIT | platform.NO_FOLLOW, 0o644)
+        fd = os.open(owner_path(self.path), os.O_RDWR | os.O_CREAT | platform.NO_INHERIT | platform.NO_FOLLOW,
+                     0o644)
         if not platform.try_lock(fd):
             try:
                 record = json.loads(platform.read_at(fd, 4096, 0))
@@ -377,8 +400,9 @@ class Store:
                 holder = "starting"
             finally:
                 os.close(fd)
-            raise UserError(f"{self.path}: the state file is in use by another emulator ({holder}) — stop that "
-                            "emulator first, or give this one another state file") from None  # fmt: skip
+            raise UserError(f"{self.path}: the state file is in use by another emulator ({holder}) — "
+                            "stop that "
+                            "emulator first, or give this one another state file") from None
         record = {"pid": os.getpid(), "since": datetime.now(UTC).isoformat(timespec="seconds")}
         with contextlib.suppress(OSError):  # the details only name the owner to a second emulator
             os.ftruncate(fd, 0)
@@ -408,7 +432,8 @@ class Store:
         except OSError:
             with contextlib.suppress(OSError):  # take back what reached the file, as the modules are put back
                 os.ftruncate(self._fd, self._size)
-            self._close_journal()  # and never append after a line that may be cut short: the next write compacts
+            # and never append after a line that may be cut short: the next write compacts
+            self._close_journal()
             raise
         self._entries += len(writes)
         self._size += len(lines)
@@ -436,7 +461,8 @@ class Store:
             with contextlib.suppress(OSError):  # an old journal must not outlive the state file it follows
                 self.journal.unlink(missing_ok=True)
             if not self._without_journal:
-                log.warning("%s: cannot keep a journal (%s) — every write rewrites the state file", self.journal, error.strerror or error)
+                log.warning("%s: cannot keep a journal (%s) — every write rewrites the state file",
+                            self.journal, error.strerror or error)
                 self._without_journal = True
             return
         if self._without_journal:
@@ -452,7 +478,8 @@ class Store:
         try:
             if self._fd is None and not self.journal.exists():
                 return
-            if self._fd is None or self._entries or not self._unchanged():  # after a failed append the journal holds lines
+            # after a failed append the journal holds lines
+            if self._fd is None or self._entries or not self._unchanged():
                 self._generation = save_state(self.path, modules, replaces=self._generation)
             self._close_journal()
             self.journal.unlink(missing_ok=True)

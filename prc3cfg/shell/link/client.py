@@ -94,12 +94,16 @@ class OldFirmware(LinkError):
     def __init__(self, bus: str, address: int, message: codec.Message) -> None:
         version, what = FIRMWARE_ADDED[message.ID]
         super().__init__(
-            f"bus {bus}, module {address}: answers {message.ID:02X}h ({what}) as an unknown message — its firmware is older "
-            f"than PRC {version}, which added them: update the module's firmware, or leave {message.FIELD.lower()} out of "
+            f"bus {bus}, module {address}: answers {message.ID:02X}h ({what}) as an unknown message — its "
+            "firmware is older "
+            f"than PRC {version}, which added them: update the module's firmware, or leave "
+            f"{message.FIELD.lower()} out of "
             "this module's programs in the plant file" if isinstance(message, codec.WriteField) else
-            f"bus {bus}, module {address}: answers {message.ID:02X}h as an unknown message — its firmware has no read "
-            f"messages (they came with PRC {version}), so prc3cfg can neither plan nor verify it: update the module's firmware"
-        )  # fmt: skip
+            f"bus {bus}, module {address}: answers {message.ID:02X}h as an unknown message — its firmware "
+            "has no read "
+            f"messages (they came with PRC {version}), so prc3cfg can neither plan nor verify it: update "
+            "the module's firmware"
+        )
 
 
 class NoReadMessages(OldFirmware):
@@ -114,13 +118,16 @@ class PossibleWrite(LinkError):
     way nothing more may be sent on the line until a person has looked; never retried."""
 
     def __init__(self, bus: str, address: int, message: codec.Message, owed: tuple[int, ...] = (),
-                 protection: Protection = Protection.NONE) -> None:  # fmt: skip
+                 protection: Protection = Protection.NONE) -> None:
         cause = ACK_TO_READ[protection, bool(owed)]
         writes = "a write" if len(owed) == 1 else f"one of {len(owed)} writes"
-        likeliest = cause.likeliest.format(owed=writes, write=", ".join(f"{i:02X}h" for i in dict.fromkeys(owed)))
+        likeliest = cause.likeliest.format(owed=writes,
+                                           write=", ".join(f"{i:02X}h" for i in dict.fromkeys(owed)))
         super().__init__(
-            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — likeliest {likeliest}"
-            f"{'; ' + cause.also if cause.also else ''}: nothing more is sent on this line; travel the module to its reference "
+            f"bus {bus}, module {address}: a read ({message.ID:02X}h) was answered as a write is — "
+            f"likeliest {likeliest}"
+            f"{'; ' + cause.also if cause.also else ''}: nothing more is sent on this line; travel the "
+            "module to its reference "
             f"point, read it back, and {cause.remedy}"
         )
         self.bus, self.address = bus, address
@@ -181,20 +188,23 @@ class Link:
         #: Whether the bytes come from a UART, or over TCP, where their arrival times say nothing.
         self.uart = urlsplit(str(port.port)).scheme.lower() not in TCP_SCHEMES
         port.timeout = zvz if self._gap_ends_frame else min(READ_SLICE, timeout)
-        #: whether the port refuses a character of bad parity (set after the timeout: pyserial's set-up clears it)
+        #: whether the port refuses a character of bad parity (set after the timeout: pyserial's set-up clears
+        #: it)
         self.parity_checked = platform.check_parity(port)
         #: Once a reply started, the longest it can take to end; past it the line is not quiet.
         self._longest_reply = line.transmission_time(LONGEST_REPLY_FRAME) + 2 * zvz
         self._heard = False  # whether a byte ever came back on this port
         self.exchanges = 0  # attempts made, for benchmarks and summaries
         self.repeated = 0  # attempts that failed (lost, damaged, unconfirmed) and were made again
-        self.discarded = 0  # pieces of bytes the framing threw away (damaged frames, garbage), for `prc3cfg doctor`
+        # pieces of bytes the framing threw away (damaged frames, garbage), for `prc3cfg doctor`
+        self.discarded = 0
         #: time.monotonic() when the last frame had left, and when the last reply had come: the line's part
         #: of an exchange, without what the port adds before sending (RFC 2217's purge waits 50 ms)
         self.sent_at = self.replied_at = 0.0
         #: the line's settings as a plant file gives them, pricing each exchange (`prc3cfg.core.bustime`)
         self.cost = cost
-        #: the same settings giving each reply its deadline (a port without a plant file's: the default turnaround)
+        #: the same settings giving each reply its deadline (a port without a plant file's: the default
+        #: turnaround)
         self._timing = cost if cost is not None else LineCost(framing, line, zvz=zvz)
         #: the port as the operator names it (a plant file's `port`), for what is said about the line
         self.port_name = port_name or str(port.port)
@@ -209,7 +219,7 @@ class Link:
     def _possible_write(self, address: int, message: codec.Message) -> PossibleWrite:
         """A read to `address` answered as a write is, named by what this line protects and what was owed."""
         return PossibleWrite(self.bus, address, message, tuple(self.owed.get(address, ())),
-                             protection(self.framing, parity_checked=self.parity_checked))  # fmt: skip
+                             protection(self.framing, parity_checked=self.parity_checked))
 
     def _where(self, address: int) -> str:
         return f"bus {self.bus}, module {address}"
@@ -217,21 +227,23 @@ class Link:
     def request(self, address: int, message: codec.Message) -> Reply:
         """Send `message` to the module at `address`; its error code (0 = accepted) or data block.
 
-        Each attempt's reply goes by `prc3cfg.core.exchange.VERDICTS`: a lost reply, a damaged one,
-        and a structural error code (the module got our message damaged) are retried — but a read
-        answered with an acknowledgement is `PossibleWrite`, and one answered as unknown is
-        `NoReadMessages` (a write a later firmware added: `OldFirmware`; on a line without a checksum once heard twice). On a framing without a
-        checksum an error code is asked for again until two agree. After the last attempt a
-        `LinkError` names the bus and module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent` before the
-        first: the frame never left; `announce` may raise it too, to keep a frame back).
+        Each attempt's reply goes by `prc3cfg.core.exchange.VERDICTS`: a lost reply, a damaged one, and a
+        structural error code (the module got our message damaged) are retried — but a read answered with an
+        acknowledgement is `PossibleWrite`, and one answered as unknown is `NoReadMessages` (a write a later
+        firmware added: `OldFirmware`; on a line without a checksum once heard twice). On a framing without a
+        checksum an error code is asked for again until two agree. After the last attempt a `LinkError` names
+        the bus and module. `Interrupted` when the link's `cancel` event is set before an attempt (`NotSent`
+        before the first: the frame never left; `announce` may raise it too, to keep a frame back).
         """
         data, attempts, wait = message.encode(), 1 + self.retries, self.wait(address, message)
-        heard: int | None = None  # a code heard once on a line without a checksum, for the next attempt to confirm
+        # a code heard once on a line without a checksum, for the next attempt to confirm
+        heard: int | None = None
         for attempt in range(1, attempts + 1):
             if self.cancel is not None and self.cancel.is_set():
                 raise NotSent() if attempt == 1 else Interrupted()
             raw = self._attempt(address, message, data, attempt, wait)
-            verdict = judge(message, raw, checked=self.framing.checked, heard=heard, attempts_left=attempts - attempt, timeout=wait)
+            verdict = judge(message, raw, checked=self.framing.checked, heard=heard,
+                            attempts_left=attempts - attempt, timeout=wait)
             if verdict.step is LinkStep.ANSWER:
                 assert verdict.reply is not None  # an answer is a reply decoded
                 return self._answered(address, verdict.reply)
@@ -242,13 +254,15 @@ class Link:
             if verdict.step is LinkStep.GIVE_UP:
                 break
             heard = verdict.unconfirmed
-            note = f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h, retrying ({attempt + 1} of {attempts})"
+            note = (f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h, retrying "
+                    f"({attempt + 1} of {attempts})")
             self.repeated += 1
             log.info(note)
             if self.trace:
                 self.trace.remark(self.bus, note)
         raise LinkError(
-            f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h after {attempts} attempts — check that "
+            f"{self._where(address)}: {verdict.problem} to {message.ID:02X}h after {attempts} attempts — "
+            "check that "
             f"the module is powered, in STOP and AUTOMATIC, at address {address}, and that the bus's framing "
             f"({self.framing.name}) and line settings ({self.line.baud} baud, {self.line.data_bits}"
             f"{self.line.parity[0].upper()}{self.line.stop_bits:g}) match the line"
@@ -277,7 +291,8 @@ class Link:
         if verdict.step is LinkStep.ANSWER:
             assert verdict.reply is not None  # an answer is a reply decoded
             return self._answered(address, verdict.reply)
-        return self.request(address, message)  # heard, not usable (even a read answered as unknown): the usual retries
+        # heard, not usable (even a read answered as unknown): the usual retries
+        return self.request(address, message)
 
     def broadcast(self, message: codec.Message, turnaround: float) -> None:
         """Send `message` to address 0: every module processes it, none answers. Where frames take
@@ -296,7 +311,8 @@ class Link:
             time.sleep(self.line.transmission_time(len(frame)) + turnaround + gap)
         self._observe(0, data, None, 1, started)
 
-    def _attempt(self, address: int, message: codec.Message, data: bytes, attempt: int, wait: float) -> bytes | None:
+    def _attempt(self, address: int, message: codec.Message, data: bytes, attempt: int,
+                 wait: float) -> bytes | None:
         """One attempt, told to `announce` before its frame leaves and to `observer` after: the reply
         message, or None (`_exchange`)."""
         started = time.time()
@@ -323,7 +339,8 @@ class Link:
             self.observer(Exchange(self.bus, address, data, raw, attempt, started, time.time() - started))
 
     def _timed(self, address: int, message: codec.Message, raw: bytes | None) -> None:
-        """An answered exchange's time on the line, beside its price (an unanswered one is a repeat, said apart)."""
+        """An answered exchange's time on the line, beside its price (an unanswered one is a repeat, said
+        apart)."""
         if raw is not None and self.cost is not None:
             self.answered += 1
             self.answered_time += self.replied_at - self.sent_at
@@ -357,9 +374,12 @@ class Link:
         """The port failed `doing` ("read from", "write to"): a TCP gateway that ended the
         connection before any byte came back refused this client, another holding the line."""
         if not self.uart and not self._heard:
-            return PortFailed(f"bus {self.bus}: the gateway is busy: another client holds the line (it ended the connection "
-                              f"before any reply: {_said(error)}) — wait for that client to finish, then try again")  # fmt: skip
-        return PortFailed(f"bus {self.bus}: cannot {doing} the port ({_said(error)}) — check the adapter and cable")
+            return PortFailed(f"bus {self.bus}: the gateway is busy: another client holds the line (it "
+                              "ended the connection "
+                              f"before any reply: {_said(error)}) — wait for that client to finish, then "
+                              "try again")
+        return PortFailed(f"bus {self.bus}: cannot {doing} the port ({_said(error)}) — check the adapter "
+                          "and cable")
 
     def _exchange(self, address: int, data: bytes, wait: float) -> bytes | None:
         """One attempt: the reply message from `address`, or None (nothing valid within `wait` s)."""
@@ -388,19 +408,22 @@ class Link:
                         self.trace.discarded(self.bus, event.data, event.reason)
                     continue
                 if self.trace:
-                    self.trace.received(self.bus, self.framing.encode(Direction.REPLY, event.address, event.message))
+                    self.trace.received(self.bus,
+                                        self.framing.encode(Direction.REPLY, event.address, event.message))
                 if event.address == address:
                     self.replied_at = now
                     return event.message
                 if self.trace:
-                    self.trace.remark(self.bus, f"reply from address {event.address}, expected {address}: ignored")
+                    self.trace.remark(self.bus,
+                                      f"reply from address {event.address}, expected {address}: ignored")
             if now >= deadline and not pending:
                 if self.trace:
                     self.trace.remark(self.bus, f"timeout after {wait:g} s waiting for module {address}")
                 return None
             if now >= last_call:
                 if self.trace:
-                    self.trace.remark(self.bus, f"the line did not go quiet within {last_call - deadline + wait:.3f} s")
+                    self.trace.remark(self.bus,
+                                      f"the line did not go quiet within {last_call - deadline + wait:.3f} s")
                 return None
 
 

@@ -59,7 +59,8 @@ STOP_BITS = {1: serial.STOPBITS_ONE, 1.5: serial.STOPBITS_ONE_POINT_FIVE, 2: ser
 @dataclass(frozen=True)
 class SerialPort:
     """A serial port of this machine: the `device` a plant file's `port` names (COM3, /dev/ttyUSB0),
-    the system's `description` of it ("" when it has none), and a USB adapter's `usb` VID:PID ("0403:6001")."""
+    the system's `description` of it ("" when it has none), and a USB adapter's `usb` VID:PID ("0403:6001").
+    """
 
     device: str
     description: str
@@ -72,15 +73,17 @@ def serial_ports() -> list[SerialPort]:
     load (Windows' cfgmgr32 without a function it needs: Wine 8), the registry's COM ports, without
     description or VID:PID."""
     emulated = [SerialPort(path, f"prc3cfg emulator serve --pty (pid {pid}), {address_ranges(modules)}", None)
-                for path, pid, modules in ptys.serving()]  # fmt: skip
+                for path, pid, modules in ptys.serving()]
     try:
         from serial.tools import list_ports
     except (AttributeError, OSError):  # ctypes: a system DLL without the function pyserial binds at import
-        return [SerialPort(name, "", None) for name in sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))] + emulated
+        return [SerialPort(name, "", None)
+                for name in sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))] + emulated
 
     return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
-                       f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None else None)
-            for info in sorted(list_ports.comports())] + emulated  # fmt: skip
+                       f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None
+                       else None)
+            for info in sorted(list_ports.comports())] + emulated
 
 
 class FormatRefused(UserError):
@@ -89,8 +92,9 @@ class FormatRefused(UserError):
     for a command line to say its own (`--parity none`)."""
 
     def __init__(self, bus: str, url: str, line: LineSettings) -> None:
-        self.refusal = (f"port {url} refuses {line.data_bits} data bits, parity {line.parity}, {line.stop_bits:g} stop bits "
-                        "— a pseudo-terminal carries no parity")  # fmt: skip
+        self.refusal = (f"port {url} refuses {line.data_bits} data bits, parity {line.parity}, "
+                        f"{line.stop_bits:g} stop bits "
+                        "— a pseudo-terminal carries no parity")
         super().__init__(f"bus {bus}: {self.refusal}: set parity: none")
 
 
@@ -144,7 +148,8 @@ def emulator_query(port: str) -> EmulatorQuery:
         if key == "module-turnaround":
             address, _, seconds = value.partition(":")
             if not (address.isascii() and address.isdigit() and 1 <= int(address) <= MAX_MODULE_ADDRESS):
-                raise ValueError(f"module-turnaround '{value}' is not ADDRESS:SECONDS — write e.g. module-turnaround=3:0.040")
+                raise ValueError(f"module-turnaround '{value}' is not ADDRESS:SECONDS — write e.g. "
+                                 "module-turnaround=3:0.040")
             turnarounds[int(address)] = _seconds(key, seconds)
         elif key not in ("line-speed", "turnaround", "jitter", "seed"):
             raise ValueError(f"unknown option '{key}' — emulator:// takes {EMULATOR_KEYS}")
@@ -153,7 +158,8 @@ def emulator_query(port: str) -> EmulatorQuery:
         else:
             given[key] = value
     return EmulatorQuery(
-        line_speed=_whole(given["line-speed"], "a baud rate", "line-speed=9600") if "line-speed" in given else None,
+        line_speed=_whole(given["line-speed"], "a baud rate", "line-speed=9600") if "line-speed" in given
+                         else None,
         turnaround=_seconds("turnaround", given["turnaround"]) if "turnaround" in given else None,
         turnarounds=turnarounds,
         jitter=_seconds("jitter", given["jitter"]) if "jitter" in given else 0.0,
@@ -163,7 +169,8 @@ def emulator_query(port: str) -> EmulatorQuery:
 
 def _whole(value: str, what: str, example: str, least: int = 1) -> int:
     if not value.isascii() or not value.isdigit() or int(value) < least:
-        raise ValueError(f"{example.partition('=')[0]} '{value}' is not {what} — write a whole number, e.g. {example}")
+        raise ValueError(f"{example.partition('=')[0]} '{value}' is not {what} — write a whole number, e.g. "
+                         f"{example}")
     return int(value)
 
 
@@ -191,8 +198,9 @@ def open_port(url: str, line: LineSettings, *, bus: str, operators: bool = False
         raise UserError(f"bus {bus}: {problem}")
     is_url = "://" in url
     refused = FormatRefused(bus, url, line)
-    settings: dict[str, Any] = {"baudrate": line.baud, "bytesize": line.data_bits, "parity": PARITY[line.parity],
-                                "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}  # fmt: skip
+    settings: dict[str, Any] = {"baudrate": line.baud, "bytesize": line.data_bits,
+                                "parity": PARITY[line.parity],
+                                "stopbits": STOP_BITS[line.stop_bits], "timeout": 0.05}
     port: serial.Serial | TcpPort
     try:
         if url.partition("://")[0].lower() == "socket":
@@ -204,13 +212,17 @@ def open_port(url: str, line: LineSettings, *, bus: str, operators: bool = False
     except platform.TERMINAL_ERRORS:
         raise refused from None
     except (serial.SerialException, ValueError, OSError) as error:
-        if url.lower().startswith("rfc2217://") and "option 'control'" in str(error):  # pyserial waits for SET_CONTROL's answer
-            raise UserError(f"bus {bus}: cannot open port {url} ({error}) — a port without modem lines (ser2net's local) does "
-                            "not answer it: add ?ign_set_control to the rfc2217:// URL") from None  # fmt: skip
-        raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path or the URL") from None
+        # pyserial waits for SET_CONTROL's answer
+        if url.lower().startswith("rfc2217://") and "option 'control'" in str(error):
+            raise UserError(f"bus {bus}: cannot open port {url} ({error}) — a port without modem lines "
+                            "(ser2net's local) does "
+                            "not answer it: add ?ign_set_control to the rfc2217:// URL") from None
+        raise UserError(f"bus {bus}: cannot open port {url} ({error}) — check the adapter, the path "
+                        "or the URL") from None
     except Exception as error:  # noqa: BLE001 — a pyserial URL handler (alt://, spy://, …) failing its own way
-        raise UserError(f"bus {bus}: cannot open port {url} (pyserial's {url.partition('://')[0]}:// handler failed: "
-                        f"{type(error).__name__}: {error}) — check the URL's options") from None  # fmt: skip
+        raise UserError(f"bus {bus}: cannot open port {url} (pyserial's {url.partition('://')[0]}:// "
+                        "handler failed: "
+                        f"{type(error).__name__}: {error}) — check the URL's options") from None
     if not is_url and not _holds(port, line):
         port.close()
         raise refused
@@ -241,7 +253,8 @@ def open_link(
     with contextlib.ExitStack() as stack:
         url, takes_line_time = bus.port, True
         if url.startswith(EMULATOR_SCHEME):
-            from prc3cfg.shell.emulator.server import Emulator, FaultInjection  # the embedded emulator: for emulator:// only
+            # the embedded emulator: for emulator:// only
+            from prc3cfg.shell.emulator.server import Emulator, FaultInjection
             from prc3cfg.shell.emulator.state import load_state
 
             try:
@@ -255,10 +268,12 @@ def open_link(
                 modules.setdefault(module.address, ModuleState.factory(module.address))
             emulator = stack.enter_context(
                 Emulator(modules, framing=bus.framing, zvz=bus.zvz, state_path=state_path,
-                         turnaround=bus.turnaround if query.turnaround is None else query.turnaround, turnarounds=query.turnarounds,
+                         turnaround=bus.turnaround if query.turnaround is None else query.turnaround,
+                         turnarounds=query.turnarounds,
                          jitter=query.jitter, faults=FaultInjection(seed=query.seed),
-                         line=replace(bus.line, baud=line_speed or bus.line.baud), line_speed=line_speed is not None)
-            )  # fmt: skip
+                         line=replace(bus.line, baud=line_speed or bus.line.baud),
+                         line_speed=line_speed is not None)
+            )
             host, tcp_port = emulator.listen("127.0.0.1", 0)
             url, takes_line_time = f"socket://{host}:{tcp_port}", line_speed is not None
         port = open_port(url, bus.line, bus=bus.name)
