@@ -149,7 +149,7 @@ def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsy
 
 
 def test_times_are_taken_as_durations(plant, capsys):
-    from prc3cfg.cli.common import parse_duration
+    from prc3cfg.cli.durations import parse_duration
 
     assert [parse_duration(t) for t in ("5s", "2m", "1h", "30", "0.5", "500ms", "1.5m")] == [5, 120, 3600, 30, 0.5, 0.5, 90]
     assert run_cli(capsys, "plan", plant.path, "--lock-timeout", "2m").code == 0

@@ -127,8 +127,8 @@ def import_plant(buses: Mapping[str, BareLine], addresses: Iterable[int] | None 
 
     owner: dict[str, str] = {}
     for name, bare in buses.items():
-        if port_error("port", bare.port, operators=True) is None and (problem := port_error("--port",
-                                                                                            bare.port)) is not None:
+        readable = port_error("port", bare.port, operators=True) is None
+        if readable and (problem := port_error("--port", bare.port)) is not None:
             # fine to read, but no plant file may name it
             raise UserError(f"{problem}: import writes it into the plant file")
         try:

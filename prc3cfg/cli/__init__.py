@@ -74,12 +74,13 @@ def _register_commands(args: list[str] | None = None) -> None:
              else COMMAND_MODULES.values())
     for name in dict.fromkeys(names):
         importlib.import_module(f"prc3cfg.cli.{name}")
-    # in the table's order, whichever module a process imported first (a program that runs several command
-    # lines)
+    # in the table's order, whichever module a process imported first (a program running many command lines)
     rank = {command: n for n, command in enumerate(COMMAND_MODULES)}.get
-    app.registered_commands.sort(key=lambda info: rank(info.name
-                                                       or typer.main.get_command_name(getattr(info.callback,
-                                                                                              "__name__", "")), 0))
+
+    def command_name(info: typer.models.CommandInfo) -> str:
+        return info.name or typer.main.get_command_name(getattr(info.callback, "__name__", ""))
+
+    app.registered_commands.sort(key=lambda info: rank(command_name(info), 0))
     app.registered_groups.sort(key=lambda group: rank(group.name or "", 0))
 
 

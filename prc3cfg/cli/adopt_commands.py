@@ -119,8 +119,9 @@ def _adopt_events(plant: Path, module: list[str] | None, program: list[int] | No
         loaded = api.load(plant)
         with line_options(trace, retries, lock_timeout, EventProgress(said)) as options:
             adoption = api.adopt(loaded, module, program, options, reason=reason, check=check)
-        said.event("plan", adopted=[{"modules": list(value.modules), "what": value.what, "layer": value.layer} for value in adoption.adopted],
-                   diff=_diff(adoption, plant))
+        adopted = [{"modules": list(value.modules), "what": value.what, "layer": value.layer}
+                   for value in adoption.adopted]
+        said.event("plan", adopted=adopted, diff=_diff(adoption, plant))
         values = len(adoption.adopted)
         if adoption.adopted and not check:
             said.emit(events.question("adopt", f"Write {_count(values)} "

@@ -18,7 +18,6 @@ from prc3cfg.cli.common import (
     FRAMING_NAMES,
     PARITY_NAMES,
     STOP_BITS,
-    TIMES,
     LockOpt,
     OutFileOpt,
     PlantArg,
@@ -26,7 +25,6 @@ from prc3cfg.cli.common import (
     TraceOpt,
     addresses_option,
     check_output,
-    duration,
     frame_data_bits,
     line_options,
     one_of,
@@ -37,6 +35,7 @@ from prc3cfg.cli.common import (
     stdout_console,
     write_output,
 )
+from prc3cfg.cli.durations import TIMES, duration
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:
@@ -169,8 +168,9 @@ def scan(
         raise UserError(f"{port}: no module answered at any address 1..30 — check the framing ({framing}), "
                         "line settings and wiring")
     if json_out:
-        print_document({"format": SCAN_FORMAT, "port": port, "framing": framing,
-                        "modules": [{"address": address, "s9": reply.address, "system": reply.system.to_json()} for address, reply in found.items()]})
+        modules = [{"address": address, "s9": reply.address, "system": reply.system.to_json()}
+                   for address, reply in found.items()]
+        print_document({"format": SCAN_FORMAT, "port": port, "framing": framing, "modules": modules})
         return
     table = Table("address", "S9", *(f"{k} {BY_SYMBOL[k].key}" for k in ("S1", "S2", "S4", "S5", "S6")),
                   "others")
@@ -357,5 +357,5 @@ def _diagnosis(found: Diagnosis, exchanges: int) -> dict[str, Any]:
             "probes": found.probes, "skipped_unchecked": found.skipped_unchecked,
             "plant_keys": found.plant_keys(),
             "modules": [{"address": t.address, "turnarounds_s": list(t.turnarounds), "median_s": t.median,
-                         "worst_s": t.worst,
-                         "exchanges": exchanges, "damaged": t.damaged, "lost": t.lost} for t in found.modules]}
+                         "worst_s": t.worst, "exchanges": exchanges, "damaged": t.damaged, "lost": t.lost}
+                        for t in found.modules]}

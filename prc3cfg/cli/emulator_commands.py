@@ -15,14 +15,12 @@ from prc3cfg.cli.common import (
     FRAMING_NAMES,
     PARITY_NAMES,
     STOP_BITS,
-    TIMES,
     addresses_option,
-    duration,
     frame_data_bits,
     one_of,
     parse_addresses,
-    parse_duration,
 )
+from prc3cfg.cli.durations import TIMES, duration, parse_duration
 
 DEFAULT_LISTEN = "127.0.0.1:7001"
 
@@ -122,16 +120,20 @@ def serve(
                                              help="Fraction of exchanges lost (request or reply).")] = 0.0,
     corrupt_rate: Annotated[float, typer.Option(min=0, max=1, metavar="FRACTION",
                                                 help="Fraction of exchanges with one bit flipped.")] = 0.0,
-    seed: Annotated[int | None, typer.Option(metavar="N", help="Seed for fault injection "
-                                                               "and jitter.")] = None,
+    seed: Annotated[int | None,
+                    typer.Option(metavar="N", help="Seed for fault injection and jitter.")] = None,
     max_connections: Annotated[int | None,
                                typer.Option("--max-connections", min=1, max=100_000, metavar="N",
                                             help="TCP clients served at once (default 1: one client per "
                                                  "line, as ser2net); one more is closed at once "
                                                  "(logged).")] = None,
     idle_timeout: Annotated[float | None,
-                            typer.Option("--idle-timeout", parser=duration(0.001, 10_000_000), metavar="TIME", help=f"Close a TCP connection that sends nothing for this long ({TIMES}; default 300).")] = None,
-    verbose: Annotated[bool, typer.Option("--verbose", help="Also log connections, discarded bytes and injected faults.")] = False,
+                            typer.Option("--idle-timeout", parser=duration(0.001, 10_000_000), metavar="TIME",
+                                         help=f"Close a TCP connection that sends nothing for this long "
+                                              f"({TIMES}; default 300).")] = None,
+    verbose: Annotated[bool,
+                       typer.Option("--verbose", help="Also log connections, discarded bytes and injected "
+                                                      "faults.")] = False,
 ) -> None:
     """Run a PRC 3 bus emulator until SIGINT or SIGTERM (exit 0).
 

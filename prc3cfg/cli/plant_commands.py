@@ -24,7 +24,14 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from prc3cfg.cli import app, click_errors
-from prc3cfg.cli.common import FramesOpt, OutFileOpt, check_output, printed_or_written, stdout_console
+from prc3cfg.cli.common import (
+    FramesOpt,
+    OutFileOpt,
+    PlantArg,
+    check_output,
+    printed_or_written,
+    stdout_console,
+)
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
@@ -35,8 +42,6 @@ if TYPE_CHECKING:  # imported when a command runs: `prc3cfg --help` stays quick
     from prc3cfg.core import render
     from prc3cfg.plant import Module, Plant
     from prc3cfg.plant.problems import Finding
-
-PlantPath = Annotated[Path, typer.Argument(metavar="PLANT", help="The plant file (YAML).", show_default=False)]
 
 
 class Format(enum.StrEnum):
@@ -50,7 +55,7 @@ class Format(enum.StrEnum):
 @app.command()
 def validate(
     ctx: typer.Context,
-    plant: PlantPath,
+    plant: PlantArg,
     fmt: Annotated[Format, typer.Option("--format", metavar="text|github|json", help=(
         "text: one line per problem on stderr; github: workflow-command annotations at file:line:col (CI); "
         "json: a list of {file, line, column, message}."))] = Format.TEXT,
@@ -120,7 +125,8 @@ def github_annotation(finding: Finding, kind: str = "error") -> str:
     from prc3cfg.core.text import github_data, github_property
 
     place = "" if finding.line is None else f",line={finding.line},col={finding.column}"
-    return (f"::{kind} file={github_property(finding.file)}{place},title=prc3cfg::{github_data(finding.message)}")
+    file, message = github_property(finding.file), github_data(finding.message)
+    return f"::{kind} file={file}{place},title=prc3cfg::{message}"
 
 
 @app.command()

@@ -85,9 +85,12 @@ def list_(plant: PlantArg, json_out: JsonOpt = False) -> None:
 @records_app.command()
 def prune(
     plant: PlantArg,
-    keep: Annotated[int | None, typer.Option("--keep", min=0, metavar="N", help="Keep the newest N runs.")] = None,
-    older_than: Annotated[float | None, typer.Option("--older-than", metavar="DAYS",
-                                                     help="Remove only runs older than this (by the times in their files' names).")] = None,
+    keep: Annotated[int | None,
+                    typer.Option("--keep", min=0, metavar="N", help="Keep the newest N runs.")] = None,
+    older_than: Annotated[float | None,
+                          typer.Option("--older-than", metavar="DAYS",
+                                       help="Remove only runs older than this (by the times in their files' "
+                                            "names).")] = None,
     dry_run: Annotated[bool, typer.Option("--dry-run", help="Say what would go; remove nothing.")] = False,
     json_out: JsonOpt = False,
 ) -> None:

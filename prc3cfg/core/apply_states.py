@@ -148,8 +148,8 @@ NOT_IN_STOP = frozenset({16, 20})
 SYSTEM_UNSET = 23  # E12: every write but 10h/20h refused
 
 #: A write's reply (a code word), as an event; any code not here is an `ERROR_CODE`.
-REPLIES: dict[int, Event] = {ACCEPTED: Event.ACKNOWLEDGED, SYSTEM_UNSET: Event.E12} | {code: Event.RUNNING
-                                                                                       for code in NOT_IN_STOP}
+REPLIES: dict[int, Event] = ({ACCEPTED: Event.ACKNOWLEDGED, SYSTEM_UNSET: Event.E12}
+                              | dict.fromkeys(NOT_IN_STOP, Event.RUNNING))
 
 
 class NoTransition(ValueError):

@@ -29,6 +29,9 @@ of broadcasts is planned on every module only where it could win: what each modu
 behind it whatever its own steps (`_Floor`: the words of the values it must still send, the
 verification it must pay) drops the others unplanned — a line of modules that each hold
 programs of their own is planned behind the set that wins, and hardly another. Pure.
+
+It is long because the search and its bound are one algorithm: `_Floors` prunes the candidates of
+`_Search` by the very prices `_attempt` charges, and apart each would have to repeat the other's terms.
 """
 
 from __future__ import annotations

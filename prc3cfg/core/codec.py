@@ -708,7 +708,8 @@ class SystemReply:
 
     def encode(self) -> bytes:
         s = self.system
-        return _pack([s.S1, s.S2, s.S3, s.S4, s.S5, s.S6, s.S7, s.S8 << 8 | self.address, s.S10, s.S11, s.S12])
+        s8_s9 = s.S8 << 8 | self.address
+        return _pack([s.S1, s.S2, s.S3, s.S4, s.S5, s.S6, s.S7, s8_s9, s.S10, s.S11, s.S12])
 
     @classmethod
     def decode(cls, data: bytes) -> SystemReply:

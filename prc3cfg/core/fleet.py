@@ -46,7 +46,8 @@ class FleetLine:
     @property
     def id(self) -> str:
         """The line in an artifact's name: letters, digits, `.`, `_` and `-` of its plant file and bus."""
-        return _UNSAFE.sub("-", f"{self.plant.removesuffix('.yaml').removesuffix('.yml')}-{self.bus}").strip("-")
+        plant = self.plant.removesuffix(".yaml").removesuffix(".yml")
+        return _UNSAFE.sub("-", f"{plant}-{self.bus}").strip("-")
 
     @property
     def group(self) -> str:

@@ -58,6 +58,9 @@ What is not read is not written: the desired image a targeted plan aims at is cu
 the read-back holds (`within_read`), so the planner — which never writes a program its desired
 image leaves `None` (`prc3cfg.core.planner.check`, rule 2), and so never sends an 11h/13h/14h across
 one — cannot write, initialise or rely on a program it did not read.
+
+It is long because it is the one answer to "what to read" for all four callers, in the record's
+terms (`Known`, `Target`): split by caller, each part would restate the rules the others rely on.
 """
 
 from __future__ import annotations
@@ -422,7 +425,8 @@ def with_known(image: ModuleImage, desired: ModuleImage) -> ModuleImage:
     filled in with the plant file's values — what the line's record showed them holding, which is why
     they were not read (`to_read`): the values a picture of the module's chains must use, never a
     chain cut where a program was not read."""
-    return image.with_programs({n: d for n, (d, a) in enumerate(zip(desired.programs, image.programs), start=1) if d is not None and a is None})
+    pairs = enumerate(zip(desired.programs, image.programs), start=1)
+    return image.with_programs({n: d for n, (d, a) in pairs if d is not None and a is None})
 
 
 def merged(known: Known | None, read: ModuleImage, when: str, by: str) -> Known:

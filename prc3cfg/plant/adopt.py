@@ -174,9 +174,13 @@ def _check_rewritten(plant: Plant, adopted: dict[Key, ModuleImage], text: str) -
         after = parse_plant(plant.path, text.encode("utf-8"))
     except PlantError as error:
         raise _rewriter_bug(plant, f"it would not load: {error.problems[0]}") from None
-    same = [bus.model_dump(exclude={"modules"}) for bus in plant.buses] == [bus.model_dump(exclude={"modules"}) for bus in after.buses]
-    if after.name != plant.name or not same or [(k, m.name) for k, m in _keyed(plant)] != [(k, m.name)
-                                                                                           for k, m in _keyed(after)]:
+    def buses(of: Plant) -> list[dict[str, Any]]:
+        return [bus.model_dump(exclude={"modules"}) for bus in of.buses]
+
+    def names(of: Plant) -> list[tuple[Key, str]]:
+        return [(k, m.name) for k, m in _keyed(of)]
+
+    if after.name != plant.name or buses(plant) != buses(after) or names(plant) != names(after):
         raise _rewriter_bug(plant, "its plant, buses or modules would differ")
     for (bus, address), module in _keyed(after):
         if (said := module.desired_image()) != (held := adopted[(bus, address)]):

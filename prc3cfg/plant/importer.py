@@ -147,7 +147,9 @@ def bus_entry(name: str, port: str, framing: str, line: LineSettings, timeout: f
 
 def imported_plant(plant: str, buses: Sequence[tuple[dict[str, Any], Iterable[ModuleImage]]]) -> str:
     """The plant file of these buses (`bus_entry`) holding these modules, each named BUS-ADDRESS."""
-    return plant_yaml(plant, [(bus, [module_entry(image, f"{bus['name']}-{image.address}") for image in images]) for bus, images in buses])
+    return plant_yaml(plant, [(bus, [module_entry(image, f"{bus['name']}-{image.address}")
+                                     for image in images])
+                              for bus, images in buses])
 
 
 def plant_yaml(plant: str, buses: Sequence[tuple[dict[str, Any], list[dict[str, Any]]]],

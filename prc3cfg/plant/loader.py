@@ -110,7 +110,8 @@ def _checked(data: dict[Any, Any], problems: _Problems,
         profile, found = _validated(ProfileSpec, raw, profile_path, data)
         problems.add(found)
         if isinstance(profile_path[1], str):
-            profiles[profile_path[1]] = (profile, frozenset()) if profile is not None else _salvaged(ProfileSpec, raw)
+            salvaged = (profile, frozenset()) if profile is not None else _salvaged(ProfileSpec, raw)
+            profiles[profile_path[1]] = salvaged
     buses = []
     # the settings of modules that add nothing to their profiles, checked
     alike: dict[tuple[str, ...], Effective] = {}

@@ -32,6 +32,9 @@ whole number (with a gateway, `rules` asks the Open Driver's own list); `timeout
 open-driver line is a `rules` check, SYSTAT 8Eh). The gateway's fields have the ranges its INIT-DB bytes and
 the Open Driver allow (receive_db ≥ 3 SYSTAT 8Fh, cpu ≤ 4 SYSTAT 90h, identifier 1..223 SYSTAT 91h), from
 `prc3cfg.core.gateway`.
+
+It is long because it is the plant file's whole format, one model per section, from which the one
+schema is generated: the sections refer to each other, and the schema needs them all.
 """
 
 from __future__ import annotations
@@ -341,9 +344,10 @@ class ProgramSpec(FileModel):
 
     position: Annotated[Decimal | None,
                         _quantity(QUANTITIES["position"], "position, at most the upper reversing point",
-                                                  example=QUANTITIES["position"].to_human(_FACTORY_PROGRAM.P))] = None
-    speed: Annotated[Decimal | None, _quantity(QUANTITIES["speed"], "speed, between min_speed and max_speed",
-                                               example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V))] = None
+                                  example=QUANTITIES["position"].to_human(_FACTORY_PROGRAM.P))] = None
+    speed: Annotated[Decimal | None,
+                     _quantity(QUANTITIES["speed"], "speed, between min_speed and max_speed",
+                               example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V))] = None
     relative_speed: Annotated[Decimal | None,
                               _quantity(QUANTITIES["relative_speed"], "relative speed "
                                                                       "(default 0)", default=0)] = None

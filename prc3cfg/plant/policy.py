@@ -161,7 +161,8 @@ def parse_policy(path: str | Path, data: bytes) -> LoadedPolicy:
         raise PlantError([text for _, text in sorted(document.lines(problems))]) from None
     if problems:
         raise PlantError([text for _, text in sorted(document.lines(problems))])
-    envelopes = tuple(policy.Envelope(e.name, e.level, e.buses, e.modules, _limits(e, n), ("envelopes", n)) for n, e in enumerate(spec.envelopes))
+    envelopes = tuple(policy.Envelope(e.name, e.level, e.buses, e.modules, _limits(e, n), ("envelopes", n))
+                      for n, e in enumerate(spec.envelopes))
     windows = tuple(_window(w, n) for n, w in enumerate(spec.windows))
     return LoadedPolicy(Path(path), document.sha256, policy.Policy(envelopes, windows), document)
 
@@ -246,7 +247,8 @@ def placed(finding: policy.RuleFinding, plant_document: Document | None, loaded:
     said = f"{finding.level}: {finding.message}"
     if finding.value_at is None or plant_document is None:
         return Finding(loaded.document.name, line, column, said)
-    (at_line, at_column), _ = plant_document.lines([Problem(_in_plant(plant_document, finding.value_at), "")])[0]
+    at = _in_plant(plant_document, finding.value_at)
+    (at_line, at_column), _ = plant_document.lines([Problem(at, "")])[0]
     return Finding(plant_document.name, at_line, at_column,
                    f"{said} (rule at {loaded.document.name}:{line}:{column})")
 

@@ -88,7 +88,8 @@ class _Conventions:
                 if (kind := _kind(path + (key,))) is not None:
                     self.flow.setdefault(kind, Counter())[child.flow] += 1
                 if not node.flow and not child.flow and child.keys and node.keys:
-                    self.steps[_column(text, min(child.keys.values())) - _column(text, min(node.keys.values()))] += 1
+                    step = _column(text, min(child.keys.values())) - _column(text, min(node.keys.values()))
+                    self.steps[step] += 1
             self._walk(text, child, path + (key,))
 
     def places(self, key: Any) -> int:
@@ -243,12 +244,14 @@ class _Rewrite:
     def _flow(self, path: Path_, value: Any) -> str:
         if not isinstance(value, dict):
             return self._scalar(path[-1], value)
-        return ("{" + ", ".join(f"{k}: {self._flow(path + (k,), value[k])}" for k in sorted(value, key=_rank)) + "}")
+        items = (f"{k}: {self._flow(path + (k,), value[k])}" for k in sorted(value, key=_rank))
+        return "{" + ", ".join(items) + "}"
 
     def _block(self, path: Path_, value: Any, column: int) -> list[str]:
         pad = " " * column
         if not isinstance(value, dict) or self.conventions.flow_style(_kind(path) or ""):
             return [f"{pad}{path[-1]}: {self._flow(path, value)}"]
         inner = column + self.conventions.indent
+        keys = sorted(value, key=_rank)
         return [f"{pad}{path[-1]}:",
-                *(line for k in sorted(value, key=_rank) for line in self._block(path + (k,), value[k], inner))]
+                *(line for k in keys for line in self._block(path + (k,), value[k], inner))]

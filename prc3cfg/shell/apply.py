@@ -145,7 +145,8 @@ class ModuleRun(Coursed):
         said = (f"{INTERRUPTED} while verifying: {sum(s.message in written for s in own)} of "
                 f"{plural(len(own), 'step')} acknowledged")
         if self.broadcasts:
-            said += (f", {plural(sum(s.message in sent for s in self.steps[: self.broadcasts]), 'broadcast')} sent")
+            broadcast = sum(s.message in sent for s in self.steps[: self.broadcasts])
+            said += f", {plural(broadcast, 'broadcast')} sent"
         if self.repairs:
             said += f", after {plural(self.repairs, 'repair round')}"
         self.problem = f"{said}, not verified" + (f" (before that: {self.problem})" if self.problem else "")

@@ -123,8 +123,8 @@ def check_journal(path: Path) -> Checked:
     try:
         data = read_regular(path, JOURNAL_LIMIT)
     except FileProblem as problem:
-        return Checked(path, [], False,
-                       Mismatch(str(path), str(problem), NAME_ONE if problem.why is Why.MISSING else EVIDENCE))
+        told = NAME_ONE if problem.why is Why.MISSING else EVIDENCE
+        return Checked(path, [], False, Mismatch(str(path), str(problem), told))
     lines = data.split(b"\n")
     cut = bool(lines.pop())  # what follows the last newline: nothing, in a whole journal
     if not lines:
@@ -371,7 +371,8 @@ def journal_problems(path: Path, journal: Checked, notes: list[str]) -> tuple[li
         return [journal.problem], None
     if not journal.chained:
         return [], None
-    problems = [problem for problem in (_header_problem(path, journal), _link_problem(path, journal, notes)) if problem is not None]
+    found_problems = (_header_problem(path, journal), _link_problem(path, journal, notes))
+    problems = [problem for problem in found_problems if problem is not None]
     if (found := journal.snapshot_record()) is None:
         return problems, None
     if (name := file_name(found[1].get("path"))) is None:

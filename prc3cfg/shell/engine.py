@@ -271,9 +271,10 @@ class Writing:
         change that releases another's is refused, before anything — `NotConsented`."""
         if refused := [c for c in line.changes if c.releases_axes
                        and (c.bus, c.address) not in consent.releases]:
-            raise NotConsented(f"{', '.join(f'bus {c.bus}, module {c.address} ({c.name})' for c in refused)}: the plan releases the "
-                               "axes (10h/20h), and no consent to that was given with it — nothing was sent to any module: review "
-                               "the plan, and allow the release (--allow-axis-release)")
+            modules = ", ".join(f"bus {c.bus}, module {c.address} ({c.name})" for c in refused)
+            raise NotConsented(f"{modules}: the plan releases the axes (10h/20h), and no consent to that "
+                               "was given with it — nothing was sent to any module: review the plan, and "
+                               "allow the release (--allow-axis-release)")
         runs = self._runs(line.changes)
         if not runs:
             return None

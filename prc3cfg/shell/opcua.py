@@ -143,9 +143,9 @@ async def _secured(server: Server, settings: ServerSettings) -> None:
         empty = not any(p.is_file() for p in settings.trust.iterdir())
         found = "holds no client certificate" if empty else f"cannot be read as certificates ({error})"
         raise UserError(f"--trust {settings.trust}: {found} — put there the DER or PEM certificates of the "
-                        "clients allowed to "
-                        "connect") from None
-    validator = CertificateValidator(CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT, store)
+                        "clients allowed to connect") from None
+    options = CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
+    validator = CertificateValidator(options, store)
     server.set_certificate_validator(validator)
     server.set_identity_tokens([ua.X509IdentityToken,
                                 *([ua.AnonymousIdentityToken] if settings.allow_anonymous else [])])
@@ -263,7 +263,8 @@ class _Space:
         group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index),
                                         ua.QualifiedName("Configuration", di))
         for path, (value, kind) in _values(f).items():
-            parent, name = (group, path.partition("/")[2]) if path.startswith("Configuration/") else (module, path)
+            configured = path.startswith("Configuration/")
+            parent, name = (group, path.partition("/")[2]) if configured else (module, path)
             node_id = f"{f.bus}/{f.address}/{path}"
             self.variables[node_id] = await _variable(parent, index, node_id, name, value, kind, di)
         return module

@@ -76,7 +76,8 @@ class Phases:
         with self._lock:
             if self._phase == "reading":
                 self._read_at = now
-            self._phase, self._writing_at, self._modules, self._lines, self._messages = "writing", now, modules, lines, messages
+            self._phase, self._writing_at = "writing", now
+            self._modules, self._lines, self._messages = modules, lines, messages
             self._start("writing", messages)
             for _ in range(min(self._wrote, messages)):
                 self._advance()

@@ -471,7 +471,8 @@ def is_pseudo_terminal(port: str) -> bool:
 
 
 def com_port_name(port: str) -> str | None:
-    r"""The Windows serial port `port` names, in capitals (`com10`, `\\.\COM10`: COM10); None for any other port."""
+    r"""The Windows serial port `port` names, in capitals (`com10`, `\\.\COM10`: COM10); None for any other
+    port."""
     from prc3cfg.core.line import COM_PORT
 
     named = COM_PORT.fullmatch(port)

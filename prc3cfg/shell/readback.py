@@ -222,7 +222,8 @@ def read_all(
     errors: dict[str, str] = {}
     interrupted = False
     with ThreadPoolExecutor(max_workers=max(1, len(per_bus)), initializer=main_thread_only) as pool:
-        for bus, future in [(bus, pool.submit(read_bus, bus_targets)) for bus, bus_targets in per_bus.items()]:
+        futures = [(bus, pool.submit(read_bus, bus_targets)) for bus, bus_targets in per_bus.items()]
+        for bus, future in futures:
             try:
                 images = platform.result_of(future)
                 result.update(images)

@@ -103,7 +103,8 @@ def git_state(plant_path: Path) -> dict[str, Any]:
                               capture_output=True, text=True,
                               timeout=GIT_TIMEOUT, env=env, stdin=subprocess.DEVNULL)
         if done.returncode != 0:
-            raise LookupError((done.stderr.strip().splitlines() or [f"git {args[0]} failed"])[0].removeprefix("fatal: "))
+            first = (done.stderr.strip().splitlines() or [f"git {args[0]} failed"])[0]
+            raise LookupError(first.removeprefix("fatal: "))
         return done.stdout
 
     try:
@@ -273,7 +274,8 @@ class Snapshot:
             try:
                 document = _SnapshotDocument.model_validate(data)
             except ValidationError as error:
-                raise ValueError(said(error, lambda loc: json_path(loc, "the snapshot"), _SnapshotDocument)) from None
+                where = "the snapshot"
+                raise ValueError(said(error, lambda loc: json_path(loc, where), _SnapshotDocument)) from None
             images = {(m.bus, image.address): image
                       for m, image in zip(document.modules, images_from_json(data["modules"], "modules"))}
             plant = Path(document.plant)
@@ -354,7 +356,8 @@ class Journal:
 
     def _write(self, event: str, fields: dict[str, Any]) -> None:
         assert self._handle is not None
-        line = json.dumps({"time": datetime.now(UTC).isoformat(), "event": event, **fields, "prev": self._prev})
+        now = datetime.now(UTC).isoformat()
+        line = json.dumps({"time": now, "event": event, **fields, "prev": self._prev})
         self._handle.write(line + "\n")
         self._handle.flush()
         self._prev = line_hash(line.encode("utf-8"))

@@ -310,7 +310,8 @@ def lent(links: dict[str, Link], observer: Observer | None, announce: Observer |
         yield links
     finally:
         for name, (own_observer, own_announce, own_cancel) in kept.items():
-            links[name].observer, links[name].announce, links[name].cancel = own_observer, own_announce, own_cancel
+            link = links[name]
+            link.observer, link.announce, link.cancel = own_observer, own_announce, own_cancel
 
 
 def _then(first: Observer | None, then: Observer | None) -> Observer | None:

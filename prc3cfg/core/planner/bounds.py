@@ -96,7 +96,8 @@ class HeadersBound:
         """The programs whose jump address takes a 46h item (or a 21h), and each program's
         differences as items at their cheapest (`at_least`)."""
         prices, target_a = self.prices, self.target_a
-        itemised = sum(1 << i for i, m in enumerate(self.masks) if m & A_BIT and target_a[i] not in (0, i + 2))
+        itemised = sum(1 << i for i, m in enumerate(self.masks)
+                       if m & A_BIT and target_a[i] not in (0, i + 2))
         by_mask: dict[int, float] = {}
         costs = []
         for i, mask in enumerate(self.masks):
@@ -129,7 +130,8 @@ class HeadersBound:
         rest = self.relevant_programs & ~whole
         spent = [items[i] for i in members(rest)]
         extra = sorted(prices.program - c for c in spent)
-        plain = [(prices.header(KIND_OF_BIT[bit]), KIND_OF_BIT[bit], (self.changed[bit] & ~whole).bit_count()) for bit in PLAIN_BITS]
+        plain = [(prices.header(KIND_OF_BIT[bit]), KIND_OF_BIT[bit], (self.changed[bit] & ~whole).bit_count())
+                 for bit in PLAIN_BITS]
         addresses = (itemised & ~whole).bit_count()
         ranged = (self.changed[A_BIT] & ~itemised & ~whole).bit_count()
         p, v = (self.changed[P_BIT] & ~whole).bit_count(), (self.changed[V_BIT] & ~whole).bit_count()

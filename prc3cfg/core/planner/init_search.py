@@ -257,7 +257,8 @@ def _header_targets(problem: PlanningProblem, phase: WritePhase, charges: Charge
             kinds = choose_inits(problem, charges.alike(shared(phase, shares)))
             left = 0
             for bit, goal, _, counted in chosen:
-                over = sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit and counted >> i & 1) - goal
+                items = sum(1 for i, k in enumerate(kinds) if problem.masks[k][i] & bit and counted >> i & 1)
+                over = items - goal
                 left += max(over, 0)
                 if over > 0:
                     low[bit] = shares[bit]

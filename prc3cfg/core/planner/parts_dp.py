@@ -367,7 +367,8 @@ def _items_field(item: float, opened: float, takes: bool, left: int) -> tuple[tu
     rooms = range(FIELDS.capacity + 1)
     if not takes:
         return (0.0,) * len(rooms), tuple(min(room, left) for room in rooms)
-    return tuple(item if room else opened for room in rooms), tuple(min((room or FIELDS.capacity) - 1, left) for room in rooms)
+    return (tuple(item if room else opened for room in rooms),
+            tuple(min((room or FIELDS.capacity) - 1, left) for room in rooms))
 
 
 def suffix_counts(mask: int) -> list[int]:

@@ -71,9 +71,11 @@ class States:
         self.guards = sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in fields)
         self.ones = sum(1 << (STATE_BITS * f) for f in fields)
         # what being ahead in each set of fields is worth, by the guard bits of those fields, less NEAR
-        self.ahead = {sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen): fsum(worth[f]
-                                                                                        for f in chosen) - NEAR
-                      for size in range(len(worth) + 1) for chosen in itertools.combinations(fields, size)}
+        self.ahead = {}
+        for size in range(len(worth) + 1):
+            for chosen in itertools.combinations(fields, size):
+                guards = sum(1 << (STATE_BITS * f + STATE_BITS - 1) for f in chosen)
+                self.ahead[guards] = fsum(worth[f] for f in chosen) - NEAR
         self.ceiling = fsum(worth)
         self.credit = [(STATE_BITS * f, worth[f] / count) for f, count in enumerate(needed)]
         self.credits: dict[int, float] = {}  # by state: what `credited` takes off
@@ -150,7 +152,8 @@ class States:
     def credited(self, state: int, cost: float) -> float:
         """`cost` less what `state` is ahead of nothing (class docstring)."""
         if (credit := self.credits.get(state)) is None:
-            credit = self.credits[state] = fsum((state >> shift & FIELD) * each for shift, each in self.credit)
+            credit = fsum((state >> shift & FIELD) * each for shift, each in self.credit)
+            self.credits[state] = credit
         return cost - credit
 
 

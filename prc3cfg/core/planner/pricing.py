@@ -35,7 +35,8 @@ PART_SIZE = _size(codec.WritePartProgram(1, 0, 1))  # 32h
 PARTS = codec.ITEMS_KINDS[codec.WritePartPrograms.ID]  # 33h
 FIELDS = codec.FIELD_KINDS["P"]  # 40h..45h: the DPs price every one of them as this row
 ADDRESSES = codec.FIELD_KINDS["A"]  # 46h
-if len({(k.header_bytes, k.item_bytes, k.capacity) for name, k in codec.FIELD_KINDS.items() if name != "A"}) != 1:
+if len({(k.header_bytes, k.item_bytes, k.capacity) for name, k in codec.FIELD_KINDS.items()
+         if name != "A"}) != 1:
     raise RuntimeError("codec.FIELD_KINDS: the planner prices 40h..45h alike (`FIELDS`); give each field "
                        "its own price first")
 

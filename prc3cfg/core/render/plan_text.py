@@ -162,11 +162,11 @@ def broadcast_lines(bus: dict[str, Any], frames: bool) -> list[str]:
     proof = line_proof(bus)
     if not steps:
         return [proof, ""] if proof else []
-    head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all "
-            f"{len(steps[0]['modules'])} modules "
-            "(address 0), each verified by reading back")
-    return [head, *(f"    {step_line(i, s['message'] if frames else None, s['summary'], s['releases_axes'], True)}"
-                    for i, s in enumerate(steps, 1)),
+    head = (f"~ bus {bus['name']}: {plural(len(steps), 'broadcast')} to all {len(steps[0]['modules'])} "
+            "modules (address 0), each verified by reading back")
+    lines = (step_line(i, s["message"] if frames else None, s["summary"], s["releases_axes"], True)
+             for i, s in enumerate(steps, 1))
+    return [head, *(f"    {line}" for line in lines),
             *([f"    {proof}"] if proof else []), ""]
 
 

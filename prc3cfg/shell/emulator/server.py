@@ -272,7 +272,8 @@ class Emulator:
             reply = self.framing.encode(Direction.REPLY, frame.address, answer)
             if self.line_speed:
                 request_bytes = len(self.framing.encode(Direction.REQUEST, frame.address, frame.message))
-                line_time = (request_bytes + len(reply)) * self.line.char_time + self.turnaround_of(frame.address)
+                line_time = ((request_bytes + len(reply)) * self.line.char_time
+                             + self.turnaround_of(frame.address))
                 time.sleep(max(0.0, received_at + line_time - time.monotonic()))
             if fault is Fault.REPLY_LOST:
                 log.info("fault injection: reply from %d lost", frame.address)

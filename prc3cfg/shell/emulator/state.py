@@ -56,6 +56,9 @@ data word), the address S9 within 1..30, a program list of exactly 64, `mode`, `
 `active_program` and `referenced` as docs/files.md lists them ("Emulator state"). Relations between
 values are not checked: a real module can hold a position above its S1 after a Teach In.
 A journal line that is not an address and a message is refused with its line number.
+
+It is long because the state file and its journal are one contract: a start replays the journal onto
+the file, and a compaction rewrites both; `Store` and the loaders share every check.
 """
 
 from __future__ import annotations

@@ -77,8 +77,8 @@ def serial_ports() -> list[SerialPort]:
     try:
         from serial.tools import list_ports
     except (AttributeError, OSError):  # ctypes: a system DLL without the function pyserial binds at import
-        return [SerialPort(name, "", None)
-                for name in sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))] + emulated
+        registered = sorted(platform.registered_serial_ports(), key=lambda name: (len(name), name))
+        return [SerialPort(name, "", None) for name in registered] + emulated
 
     return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
                        f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None
