@@ -207,13 +207,13 @@ def restore(snapshot: Path, *, gates: Gates = Gates(), verify: Verify = Verify.F
                         "snapshot — nothing was written")
     for bus in {bus.name: bus for bus, _ in pairs}.values():
         line = taken.lines.get(bus.name)
-        if line is not None and not onto_current_lines and not line.same_line(bus.port, bus.framing,
-                                                                              bus_line_keys(plant, bus)):
+        if line is None or onto_current_lines:
+            continue
+        if not line.same_line(bus.port, bus.framing, bus_line_keys(plant, bus)):
             raise UserError(f"{snapshot}: taken on bus {bus.name} at {line.port} ({line.framing}), which "
-                            "the plant file now puts at "
-                            f"{bus.port} ({bus.framing}) — restoring there would write one line's modules "
-                            "onto another; nothing "
-                            "was written: give --onto-current-lines if that is what you mean")
+                            f"the plant file now puts at {bus.port} ({bus.framing}) — restoring there would "
+                            "write one line's modules onto another; nothing was written: give "
+                            "--onto-current-lines if that is what you mean")
     judged = policy(plant, [m.name for _, m in pairs], now)
     said = _policy_gate(None if judged is None else judged.only("window"), overrides, options)
     # every program the snapshot holds
@@ -343,9 +343,8 @@ def _by_line(plant: Plant, wanted: Reads, chosen: Pairs, desired: dict[Key, Modu
 
 def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,
                 plan_file: tuple[Path, PlanFile] | None,
-                gates: Gates, writing: Writing, options: LineOptions) -> tuple[PlantPlan,
-                                                                               dict[Key, ModuleImage],
-                                                                               Consent, float]:
+                gates: Gates, writing: Writing,
+                options: LineOptions) -> tuple[PlantPlan, dict[Key, ModuleImage], Consent, float]:
     """Read back and plan the whole plant (or prove the plan file), show it and pass the gate: the plan, what
     was read, the consent to release axes the answers gave (`gate`), and the seconds the reading took."""
     pairs, to_read, links = wanted.pairs, wanted.targets, writing.links

@@ -179,8 +179,8 @@ def read_targets(targets_: list[Target], held: Lines, options: LineOptions, comm
 
 def read_and_plan(plant: Plant, pairs: Pairs, to_read: list[Target], held: Lines, options: LineOptions,
                   desired: dict[Key, ModuleImage] | None = None, *, command: str,
-                  only_read: bool = False, from_factory: bool = False) -> tuple[dict[Key, ModuleImage],
-                                                                                PlantPlan]:
+                  only_read: bool = False,
+                  from_factory: bool = False) -> tuple[dict[Key, ModuleImage], PlantPlan]:
     """Read back and plan (`read_targets` with a planner). `only_read`, `from_factory`: see `Planner`."""
     planner = shared_planner(plant, pairs, held.on_record, desired, only_read=only_read,
                              from_factory=from_factory)

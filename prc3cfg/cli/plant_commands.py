@@ -135,8 +135,8 @@ def show(
                                           help="The plant file (YAML), or a plan file (JSON) made by "
                                                "plan --out.", show_default=False)],
     module: Annotated[str | None,
-                      typer.Option("--module", "-m", metavar="NAME", help="The module to "
-                                                                          "show, by name.")] = None,
+                      typer.Option("--module", "-m", metavar="NAME",
+                                   help="The module to show, by name.")] = None,
     json_out: Annotated[bool, typer.Option("--json", help="A plan file: print it as JSON.")] = False,
     markdown: Annotated[bool, typer.Option("--markdown",
                                            help="A plan file: print it as markdown (PR comments).")] = False,

@@ -132,8 +132,8 @@ def accounted(stream: Stream) -> Iterator[list[ApplyResult]]:
         yield finished
     except (ApplyInterrupted, ApplyFailed) as stopped:
         accounts(stream, stopped.result)
-        status, code = ("interrupted", 130) if isinstance(stopped, ApplyInterrupted) else ("failed",
-                                                                                           stopped.exit_code)
+        interrupted = isinstance(stopped, ApplyInterrupted)
+        status, code = ("interrupted", 130) if interrupted else ("failed", stopped.exit_code)
         stream.emit(events.account(stream.command, status, code, errors=str(stopped).split("\n"),
                                    **_ended(stopped.result)))
         raise

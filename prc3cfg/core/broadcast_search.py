@@ -165,8 +165,9 @@ def _plan(module: SharingModule, own: _Own, received: dict[SystemParameters, tup
         received[actual.system] = tuple(Step(s.message, summarise(s.message, actual.system),
                                              s.message.RELEASES_AXES) for s in broadcasts)
     steps = (*received[actual.system], *own.steps)
-    predicted = own.predicted if own.predicted.address == actual.address else replace(own.predicted,
-                                                                                      address=actual.address)
+    predicted = own.predicted
+    if predicted.address != actual.address:
+        predicted = replace(predicted, address=actual.address)
     return ModulePlan(module.desired.address, steps, own.bus_time, module.plan.naive_bus_time,
                       any(step.releases_axes for step in steps), predicted)
 

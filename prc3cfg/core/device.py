@@ -124,14 +124,15 @@ class ModuleState:
         return self.image.address
 
     def to_json(self) -> dict[str, Any]:
+        older = ({} if self.read_messages else {"read_messages": False}) | (
+            {} if self.f2_messages else {"f2_messages": False})
         return {
             **self.image.to_json(),
             "mode": self.mode,
             "active_program": self.active_program,
             "fault": self.fault,
             "referenced": self.referenced,
-        } | ({} if self.read_messages else {"read_messages": False}) | ({} if self.f2_messages
-                                                                        else {"f2_messages": False})
+        } | older
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> ModuleState:

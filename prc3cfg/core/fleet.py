@@ -118,10 +118,12 @@ def markdown(document: Mapping[str, Any]) -> str:
             rows.append(f"| {_cell(row['line'])} | | | | | | not in this run |")
             continue
         last = row["last_verified"]
-        verified = "never" if last is None else " ".join(filter(None, (last["time"], last["by"]
-                                                                       and f"by {last['by']}",
-                                                                         last["commit"]
-                                                                       and f"at {last['commit'][:12]}")))
+        if last is None:
+            verified = "never"
+        else:
+            by = last["by"] and f"by {last['by']}"
+            commit = last["commit"] and f"at {last['commit'][:12]}"
+            verified = " ".join(filter(None, (last["time"], by, commit)))
         apply = next((f"{said}: {row[said]}" for said in ("waiting", "refused") if row[said] is not None),
                      "failed" if row["failed"] else "done")
         cells = (row["line"], str(row["modules"]), row["health"], ", ".join(row["drift"]) or "none",

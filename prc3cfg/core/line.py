@@ -85,8 +85,8 @@ def port_refusal(port: str) -> tuple[PortRefusal, str] | None:
     """Why a plant file may not name `port` and the scheme it names ("" for a path); None where it may."""
     scheme, sep, _ = port.partition("://")
     if sep:
-        return None if scheme.lower() in TCP_SCHEMES or scheme == EMULATOR_SCHEME[:-3] else ("port_handler",
-                                                                                             scheme.lower())
+        allowed = scheme.lower() in TCP_SCHEMES or scheme == EMULATOR_SCHEME[:-3]
+        return None if allowed else ("port_handler", scheme.lower())
     if COM_PORT.fullmatch(port):
         return None
     if not port.startswith(DEVICE_FOLDER) or port == DEVICE_FOLDER or ".." in port.split("/"):

@@ -424,8 +424,8 @@ class ShownPlanDocument(PlanDocument):
     naive_bus_time_s: Number
     left_alone: list[Text] = Field(default_factory=list)
     estimated_time_s: Number = 0.0
-    estimated_phases_s: _Phases = Field(default_factory=lambda: _Phases(reading=0.0, writing=0.0,
-                                                                        verifying=0.0))
+    estimated_phases_s: _Phases = Field(
+        default_factory=lambda: _Phases(reading=0.0, writing=0.0, verifying=0.0))
     evidence: _Evidence | None = None  # none in plan files before issue 41: their headline says nothing of it
 
 

@@ -180,8 +180,8 @@ class PlantPlan:
     @property
     def message_count(self) -> int:
         """Messages on the lines: every module's own steps, and each broadcast once."""
-        return sum(len(m.steps) - m.broadcasts for m in self.modules) + sum(len(self.broadcasts(b))
-                                                                            for b in self.buses())
+        own = sum(len(m.steps) - m.broadcasts for m in self.modules)
+        return own + sum(len(self.broadcasts(b)) for b in self.buses())
 
     @property
     def axis_releases(self) -> tuple[ModuleChange, ...]:

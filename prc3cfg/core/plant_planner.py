@@ -61,8 +61,8 @@ class Line:
 
     def proof_time(self) -> float:
         """The line time of proving every unlisted address silent (`PROOF_PROBES` probes each)."""
-        return len(self.unlisted()) * PROOF_PROBES * self.cost.silence_time(codec.ReadSystem(),
-                                                                            self.probe_timeout)
+        each = self.cost.silence_time(codec.ReadSystem(), self.probe_timeout)
+        return len(self.unlisted()) * PROOF_PROBES * each
 
 
 @dataclass(frozen=True, slots=True)

@@ -466,8 +466,8 @@ class _Reader:
                                      at=_position(key_event)))
                 self.skip(value_event)
                 continue
-            if before is not None and start.flow_style and (written := self.split_number(before[1], key_event,
-                                                                                         value_event)):
+            if before is not None and start.flow_style and (
+                    written := self.split_number(before[1], key_event, value_event)):
                 point = written.replace(",", ".")
                 result[before[0]] = Decimal(point)  # what was meant, for the models to judge
                 self.problem(Problem(path, DECIMAL_COMMA.format(what=before[0], written=written, point=point),
@@ -515,8 +515,9 @@ class _Reader:
         return event.tag if event.tag is not None and event.tag != "!" else _COLLECTIONS[type(event)]
 
     def scalar_tag(self, event: ScalarEvent) -> str:
-        return event.tag if event.tag is not None and event.tag != "!" else self.readings.tag(event.value,
-                                                                                              event.implicit)
+        if event.tag is not None and event.tag != "!":
+            return event.tag
+        return self.readings.tag(event.value, event.implicit)
 
     def merge_key(self, event: yaml.Event) -> bool:
         """`<<`, or any key tagged `!!merge`."""

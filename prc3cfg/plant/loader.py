@@ -122,8 +122,8 @@ def _checked(data: dict[Any, Any], problems: _Problems,
         for module_path, raw_module in mappings_in(raw_bus, bus_path + ("modules",)):
             module, found = _validated(ModuleSpec, raw_module, module_path, data)
             problems.add(found)
-            checked, unknown = (module, frozenset()) if module is not None else _salvaged(ModuleSpec,
-                                                                                          raw_module)
+            checked, unknown = ((module, frozenset()) if module is not None
+                                else _salvaged(ModuleSpec, raw_module))
             if checked is not None:
                 found, built = _module(checked, module_path, profiles, unknown, alike)
                 problems.add(found)
@@ -254,8 +254,8 @@ def _modules(data: dict[Any, Any]) -> Iterator[tuple[Path_, dict[Any, Any]]]:
 
 
 def _module(module: ModuleSpec, path: Path_, profiles: Mapping[str, tuple[ProfileSpec | None, rules.Unknown]],
-            unknown: rules.Unknown, alike: dict[tuple[str, ...], Effective]) -> tuple[list[Problem],
-                                                                                      Module | None]:
+            unknown: rules.Unknown,
+            alike: dict[tuple[str, ...], Effective]) -> tuple[list[Problem], Module | None]:
     """The problems of one module, and the module when it has none (`unknown`: what its problems took out of
     it).
 
@@ -297,8 +297,8 @@ def _line(raw_bus: dict[Any, Any]) -> BusLine | None:
         wrong = {e["loc"][0] for e in error.errors(include_url=False) if e["loc"]}
     if wrong & rules.LINE_KEYS:
         return None
-    return _valid(BusLine, {key: value for key, value in raw.items() if key not in wrong} | {"name": "-",
-                                                                                             "port": "emulator://-"})
+    line = {key: value for key, value in raw.items() if key not in wrong}
+    return _valid(BusLine, line | {"name": "-", "port": "emulator://-"})
 
 
 def _salvaged(model: type[M], raw: dict[Any, Any]) -> tuple[M | None, rules.Unknown]:

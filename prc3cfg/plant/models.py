@@ -349,8 +349,8 @@ class ProgramSpec(FileModel):
                      _quantity(QUANTITIES["speed"], "speed, between min_speed and max_speed",
                                example=QUANTITIES["speed"].to_human(_FACTORY_PROGRAM.V))] = None
     relative_speed: Annotated[Decimal | None,
-                              _quantity(QUANTITIES["relative_speed"], "relative speed "
-                                                                      "(default 0)", default=0)] = None
+                              _quantity(QUANTITIES["relative_speed"], "relative speed (default 0)",
+                                        default=0)] = None
     dwell: Annotated[Decimal | None,
                      _quantity(QUANTITIES["dwell"], "dwell time (default 0)", default=0)] = None
     f1: Omittable[FunctionOutputSpec] = Field(None, description="F1, counted after START (default: "
@@ -360,8 +360,8 @@ class ProgramSpec(FileModel):
                                                                 "(default: reset at 0)",
                                    json_schema_extra={"default": _RESET_AT_ZERO})
     next: Annotated[int | None,
-                    _number(1, PROGRAM_COUNT, step=1, out=int, description="A: the program to "
-                                                                           "jump to next")] = None
+                    _number(1, PROGRAM_COUNT, step=1, out=int,
+                            description="A: the program to jump to next")] = None
 
 
 class ChainSpec(FileModel):
@@ -414,10 +414,9 @@ class ProfileSpec(FileModel):
                                                             "out is the factory default")
     programs: Omittable[Programs] = Field(None, json_schema_extra={"propertyNames": PROGRAM_KEY},
                                           description="programs by number 1..64")
-    chains: Omittable[tuple[ChainSpec, ...]] = Field(None, description="jump addresses A: [1, 2, 3] means "
-                                                                       "1→2→3→stop",
-                                                     examples=[[[1, 2, 3]],
-                                                               [{"programs": [1, 2], "loop": True}]])
+    chains: Omittable[tuple[ChainSpec, ...]] = Field(
+        None, description="jump addresses A: [1, 2, 3] means 1→2→3→stop",
+        examples=[[[1, 2, 3]], [{"programs": [1, 2], "loop": True}]])
     unmanaged_programs: Omittable[UnmanagedPrograms] = Field(
         None, description="keep (default): programs not listed are neither read nor written; "
         "reset: they must hold factory defaults", json_schema_extra={"default": "keep"},
@@ -516,8 +515,8 @@ class PlantSpec(FileModel):
     model_config = ConfigDict(title="PRC 3 plant")
 
     plant: Name = Field(description="the plant's name", examples=["paint-shop"])
-    profiles: Omittable[dict[Name, ProfileSpec]] = Field(None, description="named settings that modules use "
-                                                                           "and override")
+    profiles: Omittable[dict[Name, ProfileSpec]] = Field(
+        None, description="named settings that modules use and override")
     buses: tuple[BusSpec, ...] = Field(min_length=1, description="the RS-422 lines, each with its modules")
     policy: Omittable[Text] = Field(None, description="the policy file (docs/policy.md), relative "
                                                       "to this one", examples=["line-rules.yaml"])

@@ -115,16 +115,14 @@ class WindowSpec(FileModel):
     name: Name = Field(description="what the window is called in findings", examples=["production"])
     kind: Literal["deny", "allow"] = Field(description="deny: apply refused while open (deny wins); allow: "
                                                        "refused outside every allow window")
-    level: Literal["advisory", "soft",
-                   "hard"] = Field("soft", description="soft: --override-window REASON applies anyway")
-    cron: Annotated[Text, AfterValidator(_cron)] = Field(description="when it opens: minute hour "
-                                                                     "day-of-month month day-of-week",
-                                                          examples=["0 6 * * 1-5"])
-    duration: Annotated[Text, AfterValidator(_duration)] = Field(description="how long it stays open: 10h, "
-                                                                             "1h30m, 2d", examples=["10h"])
-    time_zone: Annotated[Text, AfterValidator(_zone)] = Field(description="the IANA time zone the cron "
-                                                                          "is read in",
-                                                              examples=["Europe/Berlin"])
+    level: Literal["advisory", "soft", "hard"] = Field(
+        "soft", description="soft: --override-window REASON applies anyway")
+    cron: Annotated[Text, AfterValidator(_cron)] = Field(
+        description="when it opens: minute hour day-of-month month day-of-week", examples=["0 6 * * 1-5"])
+    duration: Annotated[Text, AfterValidator(_duration)] = Field(
+        description="how long it stays open: 10h, 1h30m, 2d", examples=["10h"])
+    time_zone: Annotated[Text, AfterValidator(_zone)] = Field(
+        description="the IANA time zone the cron is read in", examples=["Europe/Berlin"])
     buses: Globs = Field((), description="the buses covered (all when left out)")
 
 

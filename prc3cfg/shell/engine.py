@@ -57,9 +57,8 @@ class Written:
     def verified(self) -> bool:
         """Every module the plan changes written and verified, and every record kept: nothing stopped
         short."""
-        return bool(self.runs) and all(run.verified for run in self.runs) and not (self.unread
-                                                                                   or self.trouble
-                                                                                   or self.interrupted)
+        stopped = self.unread or self.trouble or self.interrupted
+        return bool(self.runs) and all(run.verified for run in self.runs) and not stopped
 
 
 @dataclass(frozen=True)
@@ -339,8 +338,9 @@ class Writing:
             taken_on = {name: LineTaken(bus.port, bus.framing, self.keys[name])
                         for name, bus in self.buses.items()}
             self._taken = Snapshot.take(self.plant.path, self.plant.sha256, {}, taken_on, self.journal.header)
-        self._taken.images.update({(r.bus, r.address): what_to_read.from_factory(images[(r.bus, r.address)],
-                                                                                 r.assumed) for r in runs})
+        factory = what_to_read.from_factory
+        self._taken.images.update({(r.bus, r.address): factory(images[(r.bus, r.address)], r.assumed)
+                                   for r in runs})
         return self._taken.saved()
 
     def record(self, sending: Sending) -> None:

@@ -252,12 +252,11 @@ class _Space:
     async def _module(self, f: ModuleFacts) -> Node:
         index, di = self.index, self.di
         if f.bus not in self.lines:
-            self.lines[f.bus] = await self.device_set.add_object(_id(f.bus, index),
-                                                                 ua.QualifiedName(f.bus, index))
-            self.variables[f"{f.bus}/DeviceHealth"] = await _variable(self.lines[f.bus], index,
-                                                                      f"{f.bus}/DeviceHealth",
-                                                                      "DeviceHealth", 0, ua.VariantType.Int32,
-                                                                      di)
+            line = await self.device_set.add_object(_id(f.bus, index), ua.QualifiedName(f.bus, index))
+            self.lines[f.bus] = line
+            health = f"{f.bus}/DeviceHealth"
+            self.variables[health] = await _variable(line, index, health, "DeviceHealth", 0,
+                                                     ua.VariantType.Int32, di)
         module = await self.lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index),
                                                     ua.QualifiedName(f.name, index))
         group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index),

@@ -206,8 +206,8 @@ def read_all(
                 for earlier in bus_targets[:index]:  # read before the line opened: the rest of them now
                     key = (earlier.bus, earlier.address)
                     if more := what_to_read.still_to_read(earlier, images[key]):
-                        images[key] = images[key].with_programs(read_programs(links[t.bus], earlier.address,
-                                                                              more, name=earlier.name))
+                        programs = read_programs(links[t.bus], earlier.address, more, name=earlier.name)
+                        images[key] = images[key].with_programs(programs)
                         if each is not None:
                             each(earlier, images[key])
             if progress:

@@ -67,8 +67,8 @@ def plan_module(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *,
                                     f"{[m.hex() for m in best]}") from None
 
 
-def cheapest_messages(actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> tuple[list[codec.Message],
-                                                                                          float, float]:
+def cheapest_messages(actual: ModuleImage, desired: ModuleImage,
+                      cost: LineCost) -> tuple[list[codec.Message], float, float]:
     """The cheapest messages found from `actual` to `desired`, not yet proved on the device model
     (`plan_module` proves them; the sharing proves them behind its broadcasts), their bus time and
     the naive download's. Raises `UnreachableImage`."""
@@ -126,8 +126,8 @@ def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[co
     )
 
 
-def _cheapest(problem: PlanningProblem, cost: LineCost, layouts: list[Layout]) -> tuple[list[codec.Message],
-                                                                                        float]:
+def _cheapest(problem: PlanningProblem, cost: LineCost,
+              layouts: list[Layout]) -> tuple[list[codec.Message], float]:
     """The messages of the layout that is cheapest on the line, and their bus time."""
     priced = []
     for layout in layouts:

@@ -273,8 +273,8 @@ class PartsDP:
         if len(windows) > 2 * BEAM:  # runs going on: up to twice as many as states, then as many
             self.windows = self.states.windows_kept(windows)
 
-    def moves(self, j: int, best: dict[int, float], out: int, alone: float) -> tuple[dict[int, float],
-                                                                                     dict[int, Back]]:
+    def moves(self, j: int, best: dict[int, float], out: int,
+              alone: float) -> tuple[dict[int, float], dict[int, Back]]:
         """The states after program j by its own moves (items, a 32h, a 21h, nothing), and the
         runs that may start at it: one pass over the states, each state's moves in that order (a tie
         goes to the first)."""
@@ -359,8 +359,8 @@ class PartsDP:
 
 
 @functools.lru_cache(maxsize=1024)  # per line's prices and items left: a few hundred in a plant
-def _items_field(item: float, opened: float, takes: bool, left: int) -> tuple[tuple[float, ...],
-                                                                              tuple[int, ...]]:
+def _items_field(item: float, opened: float, takes: bool,
+                 left: int) -> tuple[tuple[float, ...], tuple[int, ...]]:
     """P (or V) of a program as a 40h (41h) item where it `takes` one, by the room left in the last such
     message (0: none open): what it adds — the item that opens a message pays its header — and the room
     after, no more than the `left` items from the next program on could use."""

@@ -160,6 +160,7 @@ class States:
 def with_rooms(state: int, room_p: int, room_v: int, left_p: int, left_v: int) -> int:
     """`state` with these rooms in the last 40h and 41h, but for room no item left could use (`PartsDP`:
     `left_p`, `left_v` programs from the next on need a P, a V item at most)."""
-    return state & NOT_ROOMS | (room_p if room_p < left_p else left_p) | (room_v if room_v < left_v
-                                                                          else left_v) << STATE_BITS
+    p = room_p if room_p < left_p else left_p  # (min() costs a call: this runs per state and program)
+    v = room_v if room_v < left_v else left_v
+    return state & NOT_ROOMS | p | v << STATE_BITS
 

@@ -63,9 +63,8 @@ def review(change: ModuleChange) -> dict[str, Any]:
     return {"changes": changes_json(change), "warning": AXIS_WARNING if change.releases_axes else None}
 
 
-def outline(plan: PlantPlan | dict[str, Any], notes: Iterable[str]) -> tuple[dict[str, Any],
-                                                                             dict[tuple[str, int],
-                                                                                  ModuleChange]]:
+def outline(plan: PlantPlan | dict[str, Any],
+            notes: Iterable[str]) -> tuple[dict[str, Any], dict[tuple[str, int], ModuleChange]]:
     """What the human and markdown outputs are made from, every text in it `shown`: a plan file's
     document, or a live plan's without its read-backs' hashes (neither output shows one) and without the
     modules' `changes`, each worked out by `changes_of` as its module is shown (all of them at once, for

@@ -178,8 +178,8 @@ def module_lines(changes: dict[str, Any]) -> list[str]:
     symbols = changes.get("symbols", {})
     lines += [f"{symbols.get(str(number), Action.UPDATE)} program {number}: {', '.join(texts)}"
               for number, texts in programs.items()]
-    lines += [f"{Action.DELETE} {c}" for c in changes["chains_removed"]] + [f"{Action.CREATE} {c}"
-                                                                            for c in changes["chains_added"]]
+    lines += [f"{Action.DELETE} {c}" for c in changes["chains_removed"]]
+    lines += [f"{Action.CREATE} {c}" for c in changes["chains_added"]]
     clamped: dict[int, list[str]] = {}
     for f in changes["clamped"]:
         clamped.setdefault(f["program"], []).append(f["text"])

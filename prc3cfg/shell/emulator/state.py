@@ -155,8 +155,8 @@ def load_state(path: Path) -> dict[int, ModuleState]:
     return modules
 
 
-def modules_to_serve(path: Path | None, addresses: list[int] | None) -> tuple[dict[int, ModuleState],
-                                                                              dict[int, ModuleState]]:
+def modules_to_serve(path: Path | None,
+                     addresses: list[int] | None) -> tuple[dict[int, ModuleState], dict[int, ModuleState]]:
     """(served, unserved) for `emulator serve --state PATH`: the modules at `addresses` — else
     those of the state file at `path`, else 1..30 — as the state file holds them or at factory
     defaults, and the modules the state file holds that are not served (kept in it untouched).
