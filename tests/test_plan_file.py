@@ -86,7 +86,7 @@ def prove(made: Made, path: Path) -> PlantPlan:
 def test_a_plan_file_is_read_back_as_the_plan_written(made):
     """The writer and the reader agree: each module's steps as messages, its broadcasts, its read-back's hash."""
     plan = api.plan(made.plant, images=made.images)
-    read = plan_file.read(json.loads(json.dumps(plan_file.write(plan, [], render))))
+    read = plan_file.parse(json.loads(json.dumps(plan_file.write(plan, [], render))))
     assert [(e.bus, e.address, e.name, e.state_sha256, e.steps, e.broadcasts) for e in read.modules] == [
         (c.bus, c.address, c.name, plan_file.image_sha256(c.actual), tuple(s.message for s in c.steps), c.broadcasts) for c in plan.modules]
     assert json.loads(made.text) == json.loads(json.dumps(plan_file.write(plan, api.left_alone(made.plant), render)))  # what plan --out wrote

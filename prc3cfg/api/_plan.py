@@ -141,7 +141,7 @@ def reads(plant: Plant, pairs: Pairs, full_read: bool = False, held: OnRecord | 
     known: dict[Key, Known] = {}
     overruled: dict[Key, str] = {}
     for bus in () if full_read else buses.values():
-        on_line, newer = held.records[bus.name].read()
+        on_line, newer = held.records[bus.name].entries()
         known |= {(bus.name, address): k for address, k in on_line.items()}
         overruled |= {(bus.name, address): said for address, said in newer.items()}
     # another user's E12: read the module in full, never write for it

@@ -448,7 +448,7 @@ class PlanFile:
         return self.read is not None
 
 
-def read(data: Any, *, for_show: bool = False) -> PlanFile:
+def parse(data: Any, *, for_show: bool = False) -> PlanFile:
     """A parsed plan file; raises PlanFileError.
 
     Refused here, before the line is touched: a file beyond any plan file prc3cfg writes
@@ -605,9 +605,9 @@ def same_text(data: bytes) -> frozenset[str]:
 
 
 def checked(document: Any, path: Path, *, for_show: bool = False) -> PlanFile:
-    """The plan file at `path` (as parsed), `read`; a `UserError` of one line naming `path` otherwise."""
+    """The plan file at `path` (its JSON loaded), `parse`d; else a `UserError` of one line naming `path`."""
     try:
-        return read(document, for_show=for_show)
+        return parse(document, for_show=for_show)
     except PlanFileError as error:
         raise UserError(f"{path}: {error}") from None
 

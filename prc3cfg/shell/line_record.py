@@ -172,10 +172,10 @@ class LineRecord:
                 "full); remove it" for path, problem in self._problems if problem.why is not Why.MISSING]
 
     def known(self) -> dict[int, Known]:
-        """What the record says of each module it knows (`read`)."""
-        return self.read()[0]
+        """What the record says of each module it knows (`entries`)."""
+        return self.entries()[0]
 
-    def read(self) -> tuple[dict[int, Known], dict[int, str]]:
+    def entries(self) -> tuple[dict[int, Known], dict[int, str]]:
         """What the record says of each module it knows — and the modules another user's file has a newer
         entry for than this user's and root's, with what that entry claims (escaped): not known (it changed
         since), and why each is read in full. This command's own changes are the newest."""
