@@ -188,14 +188,16 @@ async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) ->
     async with server:
         await _publish(server, space.variables, facts)
         print(f"listening on {settings.listen}", flush=True)
-        seen = fingerprint(plant, keys)
+        # None: the first look checks again — what changed between the start's reads and this line, said to
+        # the client already, would otherwise pass unseen; nor is `seen` taken again after a reload (a write
+        # just after it would be missed): new keys only cost one more look
+        seen: tuple[tuple[str, int, int], ...] | None = None
         while not await asyncio.to_thread(stop.wait, POLL):  # the polling period, cut short by a stop
             if (now := fingerprint(plant, keys)) == seen:
                 continue
             seen = now
             if (changed := _reloaded(plant)) is not None:
                 plant, keys = changed, identities(changed)
-                seen = fingerprint(plant, keys)
             facts = gather(plant, keys)[0]
             if changed is not None:
                 added, removed = await space.follow(facts)
