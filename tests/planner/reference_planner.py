@@ -61,6 +61,8 @@ OUTER, INNER, PARTS = "outer", "inner", "parts"
 LAYERS = (BEFORE, AFTER, OUTER, INNER, PARTS)
 #: The kinds of run: an init, a link or an unlink range, P and V of consecutive programs.
 INIT, LINK, UNLINK = "init", "link", "unlink"
+#: A 21h: a "run" of one program, priced like the others (`_Module.run_price`).
+WHOLE = "whole"
 #: States (runs open, item counts) beyond which one program's step of the DP gives up.
 MAX_STATES = 200_000
 ITEM_MESSAGES = {name: kind.message for name, kind in codec.FIELD_KINDS.items()}
@@ -144,9 +146,18 @@ class _Module:
             OUTER: any(base[n].A != w.A for base in self.bases.values() for n, w in wanted),
         }
         self.offered[INNER] = self.offered[OUTER]
+        self.run_prices: dict[tuple[str, int, int], float] = {}  # (kind, first, last): see `run_price`
+        self.wrongs: dict[tuple[int, str, int, bool], tuple[tuple[str, ...], float]] = {}  # see `wrong`
 
     def price(self, message: codec.Message) -> float:
         return self.cost.message_time(self.desired.address, message)
+
+    def run_price(self, kind: str, first: int, last: int) -> float:
+        """The price of a run's message, worked out once: the DP asks for the same runs again and again."""
+        key = (kind, first, last)
+        if key not in self.run_prices:
+            self.run_prices[key] = self.price(self.message(kind, first, last))
+        return self.run_prices[key]
 
     # -- runs: their messages, and what of their first program their price needs ---------------
 
@@ -158,6 +169,8 @@ class _Module:
         if kind == UNLINK:
             return codec.UnlinkPrograms(first, last)
         known = self.desired.known  # PARTS: a 32h for one program, a 33h for more
+        if kind == WHOLE:
+            return codec.WriteProgram(first, known(first))
         if first == last:
             return codec.WritePartProgram(first, known(first).P, known(first).V)
         return codec.WritePartPrograms(first, tuple((known(n).P, known(n).V) for n in range(first, last + 1)))
@@ -172,7 +185,7 @@ class _Module:
 
     def closing(self, kind: str, kept: int, last: int) -> float:
         """The price of a run of `kind` that started before `last` and ends there."""
-        return self.price(self.message(kind, kept or last - 1, last))
+        return self.run_price(kind, kept or last - 1, last)
 
     def layer_options(self, open_: Open, number: int, must_end: bool, kinds: tuple[str, ...]) -> Iterator[tuple[Mark, Open, float]]:
         """A layer at program `number`: (the run over it, the run open past it, the price of the run that ends here)."""
@@ -185,7 +198,7 @@ class _Module:
         yield None, None, 0.0
         for kind in kinds:
             if kind != LINK:  # a link range of one program is an unlink range of it
-                yield (kind, True, True), None, self.price(self.message(kind, number, number))
+                yield (kind, True, True), None, self.run_price(kind, number, number)
             if not must_end:
                 yield (kind, True, False), (kind, self.opened(kind, number)), 0.0
 
@@ -241,7 +254,9 @@ class _Module:
 
     def moves(self, number: int, runs: tuple[Open, ...]) -> Iterator[tuple[tuple[Open, ...], tuple[Mark, ...], float, bool, tuple[str, ...]]]:
         """Every choice at program `number` from the runs open: (the runs open past it, the runs over it,
-        the price of the runs that end here and of its 21h, whether a 21h writes it, its items' fields)."""
+        the price of the runs that end here and of its 21h, whether a 21h writes it, its items' fields).
+        Of the choices that leave the same runs open and write the same way only the cheapest is kept:
+        the rest of the plan cannot tell them apart."""
         want = self.desired.programs[number - 1]
         if want is None:  # no run covers an unmanaged program, and nothing writes it
             if runs == NO_RUNS:
@@ -253,28 +268,46 @@ class _Module:
         def options(layer: str, open_: Open, kinds: tuple[str, ...]) -> list[tuple[Mark, Open, float]]:
             return list(self.layer_options(open_, number, must_end, kinds)) if self.offered[layer] else [(None, None, 0.0)]
 
+        cheapest: dict[tuple[tuple[Open, ...], bool, tuple[str, ...]], tuple[float, tuple[Mark, ...]]] = {}
+        parts_options = options(PARTS, parts, (PARTS,))
         for b_mark, b_open, b_price in options(BEFORE, before, (INIT,)):
             for a_mark, a_open, a_price in options(AFTER, after, (INIT,)):
-                base = self.bases[AFTER if a_mark else BEFORE if b_mark else KEEP][number - 1]
+                base = AFTER if a_mark else BEFORE if b_mark else KEEP
                 for o_mark, o_open, o_price in options(OUTER, outer, (LINK, UNLINK)):
                     inner_kinds = () if o_mark is None else (UNLINK,) if o_mark[0] == LINK else (LINK,)
                     for i_mark, i_open, i_price in options(INNER, inner, inner_kinds):
                         if i_mark is not None and (o_mark is None or (o_mark[2] and not i_mark[2])):
                             continue  # an inner range lies inside an outer range
-                        shown = base.A
+                        shown = self.bases[base][number - 1].A
                         for mark in (o_mark, i_mark):  # the inner range, sent after the outer, has the last word
                             if mark is not None:
                                 shown = number + 1 if mark[0] == LINK and not mark[2] else 0
-                        for p_mark, p_open, p_price in options(PARTS, parts, (PARTS,)):
-                            wrong = tuple(f for f in PROGRAM_FIELDS if (shown if f == "A" else getattr(base, f)) != getattr(want, f)
-                                          and not (p_mark and f in "PV"))  # fmt: skip
+                        for p_mark, p_open, p_price in parts_options:
+                            wrong, stuffed = self.wrong(number, base, shown, p_mark is not None)
                             next_runs = (b_open, a_open, o_open, i_open, p_open)
                             marks = (b_mark, a_mark, o_mark, i_mark, p_mark)
                             price = math.fsum((b_price, a_price, o_price, i_price, p_price))
-                            stuffed = math.fsum(self.stuffed(f, number, getattr(want, f)) for f in wrong)
-                            yield next_runs, marks, price + stuffed, False, wrong
+                            choices = [(price + stuffed, False, wrong)]
                             if wrong:
-                                yield next_runs, marks, price + self.price(codec.WriteProgram(number, want)), True, ()
+                                choices.append((price + self.run_price(WHOLE, number, number), True, ()))
+                            for total, whole, written in choices:
+                                key = (next_runs, whole, written)
+                                if key not in cheapest or total < cheapest[key][0]:
+                                    cheapest[key] = (total, marks)
+        for (next_runs, whole, written), (total, marks) in cheapest.items():
+            yield next_runs, marks, total, whole, written
+
+    def wrong(self, number: int, base: str, shown: int, parts: bool) -> tuple[tuple[str, ...], float]:
+        """The fields of program `number` still wrong over `base` with address `shown` (P and V right
+        where a 32h/33h writes them), and what stx stuffs into their items; worked out once."""
+        key = (number, base, shown, parts)
+        if key not in self.wrongs:
+            want, held = self.desired.programs[number - 1], self.bases[base][number - 1]
+            assert want is not None
+            fields = tuple(f for f in PROGRAM_FIELDS if (shown if f == "A" else getattr(held, f)) != getattr(want, f)
+                           and not (parts and f in "PV"))  # fmt: skip
+            self.wrongs[key] = fields, math.fsum(self.stuffed(f, number, getattr(want, f)) for f in fields)
+        return self.wrongs[key]
 
     def messages(self, chain: Choice | None) -> list[codec.Message]:
         """The plan of the DP's choices, in the canonical order."""
