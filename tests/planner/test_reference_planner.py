@@ -34,7 +34,7 @@ EPSILON = 1e-9
 FAST_FOUND = ("open-driver: two link ranges that pay only together", "open-driver: programs 36, 37 written as 33h")
 #: Those it plans in under two minutes of CPU each (the soak tier; measured equal: 41 s, 52 s, 15 s, 109 s).
 SOAK_FOUND = ("open-driver: a link range over 16..60", "crc16: a busy module whose plan wrote programs 15 and 16",
-              "crc16: programs 1..31 put back", "crc16: a link range over 2..64")  # fmt: skip
+              "crc16: programs 1..31 put back", "crc16: a link range over 2..64")
 
 
 def replayed(actual: ModuleImage, desired: ModuleImage, reference: ReferencePlan) -> None:
