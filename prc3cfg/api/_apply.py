@@ -157,8 +157,8 @@ def apply(
     def wanted(held: OnRecord) -> Reads:
         if planned is not None:
             return plan_file_reads(*planned, pairs, held)
-        # a factory-fresh module is commissioned: the programs it will be written are not read first, but
-        # after
+        # a factory-fresh module is commissioned: the programs it will be written are not read
+        # first, but after
         return reads(plant, pairs, True, held) if full_read else commissioned(reads(plant, pairs, held=held))
 
     on_lines = pairs if planned is None else plan_file_pairs(planned[1], pairs)

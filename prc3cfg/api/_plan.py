@@ -106,9 +106,9 @@ class Reads:
         skipped = {key: self._taken(m.desired_image(), images[key]) for bus, m in chosen
                    if (key := (bus.name, m.address)) in images}
         other = what_to_read.read_in_full(to_plan(chosen, None), self.targets, images, self.why)
-        # a module whose programs were not read is on the record (`to_read`), but for an apply of a plan file
-        # whose record changed since: left out, and the plan file's `taken` then refused
-        # (`plan_file.check_plan`)
+        # a module whose programs were not read is on the record (`to_read`), but for an apply
+        # of a plan file whose record changed since: left out, and the plan file's `taken`
+        # then refused (`plan_file.check_plan`)
         resting = {f"{bus.name}/{m.name}": self.known[key] for bus, m in chosen
                    if skipped.get(key := (bus.name, m.address)) and key in self.known}
         oldest = min(resting.items(), key=lambda item: datetime.fromisoformat(item[1].since), default=None)
@@ -169,9 +169,9 @@ def read_targets(targets_: list[Target], held: Lines, options: LineOptions, comm
     options.progress.start("reading modules", len(targets_))
     with options.deferred():
         by, advance = line_record.who(command, plant.path), options.progress.advance
-        images = (read_lines(targets_, held.links, held.on_record, by, progress=advance)
-                  if planner is None else \
-            read_and_plan_lines(targets_, held.links, held.on_record, by, planner, progress=advance))
+        links, on_record = held.links, held.on_record
+        images = (read_lines(targets_, links, on_record, by, progress=advance) if planner is None
+                  else read_and_plan_lines(targets_, links, on_record, by, planner, progress=advance))
     if options.cancel is not None:
         options.cancel.check()
     return images

@@ -37,8 +37,8 @@ def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bo
     if json_out and document is not None:
         # the fault states a write revealed, kept in the records (the plan file leaves them out: apply --plan
         # tells its own)
-        extra = ({"faults": list(faults)} if faults else {}) | ({"policy": policy.to_json()}
-                                                                if policy is not None else {})
+        extra = (({"faults": list(faults)} if faults else {})
+                 | ({"policy": policy.to_json()} if policy is not None else {}))
         pieces = json.JSONEncoder(indent=1).iterencode(document | extra)
         for text in iter(lambda: "".join(itertools.islice(pieces, 10_000)), ""):
             sys.stdout.write(text)
@@ -132,11 +132,10 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
                    f"its next move. {question}",
                    options, typed=True)
 
-    # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan is
-    # whole (`Gates.asks`)
-    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow, approve=None
-                 if auto_approve else approve,
-                 show_line=show_line)
+    # --auto-approve with --allow-axis-release: no question, so each line is written as soon as its plan
+    # is whole (`Gates.asks`)
+    return Gates(show=show, allow_axis_release=True if allow_axis_release else allow,
+                 approve=None if auto_approve else approve, show_line=show_line)
 
 
 def report(result: ApplyResult) -> None:

@@ -35,8 +35,8 @@ class Stream:
         if document is None:
             return
         text = json.dumps(document) + "\n"  # ASCII: any pipe carries it, and no C1 control or line separator
-        # another user's record brought (a travel event names their claims) reaches a terminal that shows the
-        # stream
+        # another user's record brought (a travel event names their claims) reaches a terminal that
+        # shows the stream
         with self._lock:
             sys.stdout.write(text)
             sys.stdout.flush()

@@ -81,8 +81,8 @@ TRANSITIONS: dict[State, dict[Event, tuple[State, Next]]] = {
         Event.ALL_SENT: (State.VERIFYING, Next.READ),
         # every PRC 3 message is idempotent: read back, and send again whatever still differs
         Event.NO_REPLY: (State.VERIFYING, Next.READ),
-        # final, unless a lost broadcast explains it: the read-back and an addressed repair get their chance
-        # first
+        # final, unless a lost broadcast explains it: the read-back and an addressed repair get
+        # their chance first
         Event.ERROR_CODE_AFTER_BROADCAST: (State.VERIFYING, Next.READ),
         Event.ERROR_CODE: (State.REFUSED, Next.READ),
         # only a 10h/20h clears E12, and this plan has none for it: the next plan writes the system first

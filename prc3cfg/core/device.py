@@ -179,8 +179,8 @@ def _with_image(state: ModuleState, image: ModuleImage) -> ModuleState:
                        state.read_messages, state.f2_messages)
 
 
-# `_with_image` names every field of a state: one added would otherwise fall back to its default on each
-# write.
+# `_with_image` names every field of a state: one added would otherwise fall back to its default
+# on each write.
 assert [f.name for f in fields(ModuleState)] == ["image", "mode", "active_program", "fault", "referenced",
                                                  "read_messages", "f2_messages"]
 

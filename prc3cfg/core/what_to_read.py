@@ -132,8 +132,8 @@ class Target:
     # a targeted read's evidence, and the programs it reads in full then: `after_programs`
     known: ModuleImage | None = None
     managed: tuple[int, ...] = ()
-    # an apply's: a factory-fresh module's managed programs are planned from the factory's, not read
-    # (`after_system`)
+    # an apply's: a factory-fresh module's managed programs are planned from the factory's,
+    # not read (`after_system`)
     fresh: bool = False
 
 

@@ -237,8 +237,8 @@ class ModuleRun(Coursed):
         while True:
             action = self.course.action
             if action is Next.READ:
-                # a late copy that could undo a step: wait for it, and read what every step sent could have
-                # changed
+                # a late copy that could undo a step: wait for it, and read what every step sent
+                # could have changed
                 late = undone_by_late(expected, self.sent[sent_before:])
                 quiet = self.wrote_at + settle_time(cost, max(link.wait(self.address, step.message)
                                                               for step in self.sent)) \

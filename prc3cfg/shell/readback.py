@@ -193,8 +193,8 @@ def read_all(
 
     def read_bus(bus_targets: list[Target]) -> dict[tuple[str, int], ModuleImage]:
         images = {}
-        # a module contradicted the record: every module of the line is read in full
-        # (`what_to_read.opens_line`)
+        # a module contradicted the record: every module of the line is read
+        # in full (`what_to_read.opens_line`)
         opened = False
         for index, t in enumerate(bus_targets):
             t = what_to_read.opened(t) if opened else t

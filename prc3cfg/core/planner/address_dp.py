@@ -194,8 +194,8 @@ class AddressDP:
         for step in steps:
             fronts, moves = _outside(fronts) if step is None else self._counted_step(fronts, step, most)
             back.append(moves)
-        # after the last program no range goes on, as after one outside the plan file: each count ends in 0 or
-        # 2
+        # after the last program no range goes on, as after one outside the plan file: each count ends in
+        # 0 or 2
         (last, *_), (ends, *_) = _outside(fronts)
         found = []
         for n in _fewer_counts(last, messages):
