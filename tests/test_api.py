@@ -62,9 +62,12 @@ def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel
     the demo plant and docs/api.md's test, and run pytest there."""
     assert "prc3cfg/py.typed" in zipfile.ZipFile(wheel).namelist()  # type checkers read the API's annotations
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", venv], check=True)
+    # no pip in it (ensurepip's unpacking and compiling of pip was a third of the test), this Python's pip installing
+    # into it; --no-compile: each module is compiled when the run below imports it, not all of pydantic's and pytest's
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", venv], check=True)
     python = venv / "bin" / "python"
-    installed = subprocess.run([python, "-m", "pip", "install", "-q", wheel, "pytest"], capture_output=True, text=True)
+    install = [sys.executable, "-m", "pip", "--python", python, "install", "-q", "--no-compile", wheel, "pytest"]
+    installed = subprocess.run(install, capture_output=True, text=True)
     assert installed.returncode == 0, installed.stderr
     repository = tmp_path / "plant-repo"
     repository.mkdir()
