@@ -41,6 +41,8 @@ from pathlib import Path
 
 import pytest
 
+#: Every race on one worker, whose module fixtures start the lines' servers once (once a worker, when spread).
+pytestmark = pytest.mark.xdist_group("lock_race")
 LINES = 2  # raced side by side, each with its own emulator and lock: a wave; the soak tier's counts are multiples of it
 #: Races per test: a few in the fast tier, the acceptance's 200 in the soak tier.
 ROUNDS = [LINES, pytest.param(200, marks=pytest.mark.soak)]

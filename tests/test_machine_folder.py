@@ -133,6 +133,10 @@ for module in list(sys.modules.values()):
 """
 
 
+#: The tests of another user's interpreter, on one worker: the copy of `packages` is made once a session, not once a worker.
+ONE_COPY = pytest.mark.xdist_group("packages")
+
+
 @pytest.fixture(scope="session")
 def packages(tmp_path_factory) -> Path:
     """prc3cfg's dependencies where another user can import them: a world-readable copy of every
@@ -161,6 +165,7 @@ def as_user(user: pwd.struct_passwd, machine: Path, packages: Path, *argv: str) 
                           capture_output=True, text=True, env=env, cwd=machine, timeout=120)  # fmt: skip
 
 
+@ONE_COPY
 @pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="running a process as another user takes root")
 def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_for_nothing(machine, packages, capsys):
     """Root applied plant file A; the user prc3cfg-other applies plant file B, which sets module 2's
@@ -260,6 +265,7 @@ def record(user: pwd.struct_passwd, machine: Path, packages: Path, keys: tuple[s
 RAW = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069\u200e\u200f\u061c]")
 
 
+@ONE_COPY
 @needs_root
 @pytest.mark.parametrize("writer", ["root", THIRD])
 def test_a_user_sees_the_newer_apply_another_user_of_the_line_made(machine, packages, capsys, writer):
@@ -298,6 +304,7 @@ def test_a_user_sees_the_newer_apply_another_user_of_the_line_made(machine, pack
         assert plant.matches_plant()
 
 
+@ONE_COPY
 @needs_root
 def test_another_user_s_release_record_is_told_as_their_claim_escaped(machine, packages, capsys):
     """prc3cfg-other's release record for module 2 whose fields hold terminal commands (erase the line
@@ -320,6 +327,7 @@ def test_another_user_s_release_record_is_told_as_their_claim_escaped(machine, p
         assert f"{user.pw_name} (uid {user.pw_uid})'s record says: " in claim and "\\u202e" in claim and "\\u2028\\x9b2J" in claim
 
 
+@ONE_COPY
 @needs_root
 def test_another_user_s_e12_record_makes_prc3cfg_read_never_write(machine, packages, capsys):
     """A forged E12 record for module 2 from prc3cfg-other: root's plan reads the module in full, saying
@@ -363,6 +371,7 @@ def test_a_planted_file_in_the_records_folders_neither_hangs_nor_breaks_a_comman
         assert any(str(planted[0]) in line for line in planned.stderr.splitlines())  # passed over, and said so
 
 
+@ONE_COPY
 @needs_root
 def test_a_file_planted_at_a_user_s_record_name_in_the_shared_folder_does_not_lock_them_out(machine, packages, capsys):
     """In the sticky machine's folder user A cannot move another user's file away: where one stands at A's
