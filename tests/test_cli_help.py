@@ -34,14 +34,33 @@ heavy = sorted(m for m in sys.modules if m.split(".")[0] in {tops}
                or m in ("prc3cfg.api", "prc3cfg.core.planner", "prc3cfg.shell.link", "prc3cfg.plant", "prc3cfg.shell.emulator"))
 print("heavy:", heavy, file=sys.stderr)
 """
-#: What the listing of the commands loads none of (the modules' first names).
-LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent", "secrets")
+#: What the listing of the commands loads none of (the modules' first names): json and html are a records
+#: command's output and `core.text`'s markdown, imported where they run.
+LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent", "secrets",
+                  "json", "html")  # fmt: skip
+#: The whole of prc3cfg that `prc3cfg --help` loads besides the command modules: what their signatures and `main` use.
+LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.core", "prc3cfg.core.line",
+                 "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell", "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]
 
 
 def test_listing_the_commands_loads_nothing_heavy():
     done = subprocess.run([sys.executable, "-c", LISTING.format(args=["--help"], tops=LISTING_SPARES)], capture_output=True, text=True)
     assert "Commands" in done.stdout and "apply" in done.stdout
     assert done.stderr.strip() == "heavy: []"
+
+
+def test_the_listing_loads_of_prc3cfg_its_command_modules_and_what_they_need_only():
+    """`prc3cfg --help` as the console script runs it: a module a command module imports at its top (for a default,
+    an annotation) is paid by every start-up — one more here is a decision, not an accident."""
+    probe = ("import sys, prc3cfg.__main__\nfrom prc3cfg.cli import main\ntry:\n    main(['--help'])\n"
+             "except SystemExit:\n    pass\nprint(sorted(m for m in sys.modules if m.startswith('prc3cfg')), file=sys.stderr)")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    from prc3cfg.cli import COMMAND_MODULES
+
+    commands = {f"prc3cfg.cli.{module}" for module in COMMAND_MODULES.values()}
+    assert "Commands" in done.stdout, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == str(sorted([*LISTING_LOADS, *commands]))
+
 
 
 def test_the_table_of_command_modules_is_what_the_modules_register():

@@ -16,14 +16,13 @@ Arguments and output only: the work is `prc3cfg.api`'s.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from prc3cfg.cli import records_app
-from prc3cfg.cli.common import PlantArg
+from prc3cfg.cli.common import PlantArg, print_document
 from prc3cfg.errors import UserError
 
 if TYPE_CHECKING:
@@ -49,7 +48,6 @@ def verify(
     import sys
 
     from prc3cfg import api
-    from prc3cfg.cli.common import print_document
     from prc3cfg.core.text import shown
 
     result = api.verify_records(paths)
@@ -73,7 +71,7 @@ def list_(plant: PlantArg, json_out: JsonOpt = False) -> None:
 
     found = api.list_records(plant)
     if json_out:
-        print(json.dumps([run.to_json() for run in found], indent=1))
+        print_document([run.to_json() for run in found])
         return
     if not found:
         print(f"{plant}: no runs recorded yet (an apply, restore or adopt keeps them in "
@@ -100,8 +98,8 @@ def prune(
 
     done = api.prune_records(_plant_file(plant), keep=keep, older_than_days=older_than, dry_run=dry_run)
     if json_out:
-        print(json.dumps({"removed": [run.to_json() for run in done.removed],
-                          "kept": [run.to_json() | {"why": why} for run, why in done.kept]}, indent=1))
+        print_document({"removed": [run.to_json() for run in done.removed],
+                        "kept": [run.to_json() | {"why": why} for run, why in done.kept]})
         return
     verb = "Would remove" if dry_run else "Removed"
     for run in done.removed:

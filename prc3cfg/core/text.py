@@ -26,7 +26,6 @@ Also how a set of module addresses is said, in every output and refusal (`addres
 
 from __future__ import annotations
 
-import html
 import re
 import unicodedata
 from collections.abc import Iterable
@@ -88,6 +87,8 @@ def markdown(text: str) -> str:
 def markdown_html(text: str) -> str:
     """`text` inside HTML in a markdown comment (`<summary>…</summary>`): shown as written, nothing in it
     live."""
+    import html  # here: every command's start-up (`--help` too) imports this module for `shown`
+
     return _LIVE.sub(_dead, html.escape(shown(text), quote=False))
 
 
