@@ -5,8 +5,6 @@ Without `--parity`, scan and import use even parity (a PRC 3 line's), and none o
 pseudo-terminal, which carries no parity (`emulator serve --pty` defaults to none as well).
 """
 
-from __future__ import annotations
-
 import contextlib
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Annotated, Any
@@ -69,7 +67,7 @@ ZvzOpt = Annotated[float, typer.Option(parser=duration(0.004, 65.535), metavar="
 
 
 def _bare_line(port: str, framing: str, baud: int, parity: str | None, data_bits: int, stop_bits: float,
-               timeout: float, zvz: float) -> api.BareLine:
+               timeout: float, zvz: float) -> "api.BareLine":
     from prc3cfg import api
     from prc3cfg.core.line import LineSettings
 
@@ -349,7 +347,7 @@ def doctor(
         print(f"    {key}: {value:g}" if isinstance(value, float) else f"    {key}: {value}")
 
 
-def _diagnosis(found: Diagnosis, exchanges: int) -> dict[str, Any]:
+def _diagnosis(found: "Diagnosis", exchanges: int) -> dict[str, Any]:
     """`doctor --json`'s document: what the line speaks, how each module answered, the plant file's keys."""
     assert found.found is not None  # (a line nothing answered on is an error, said before)
     return {"format": DOCTOR_FORMAT, "port": found.port, "speaks": found.found.said(),

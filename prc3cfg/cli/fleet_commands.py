@@ -12,8 +12,6 @@ Arguments and output only: what is selected and summarised is `prc3cfg.api`'s (`
 `fleet_summary`).
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated
 

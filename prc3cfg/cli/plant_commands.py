@@ -14,8 +14,6 @@
 - `schema`: the plant file's JSON Schema (draft-07), as `schemas/plant.schema.json` holds it.
 """
 
-from __future__ import annotations
-
 import enum
 import sys
 from pathlib import Path
@@ -99,7 +97,7 @@ def validate(
           f"{_count(modules, 'module', 'modules')})")
 
 
-def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
+def _envelopes_refuse(judged: "PolicyReport | None", fmt: Format) -> bool:
     """Say what the policy's envelopes found, in `fmt`; whether a hard one refuses the plant file. JSON lists
     the hard ones only: they are its problems (`[]`, valid, as before); the others are warnings (stderr,
     `::warning`)."""
@@ -119,7 +117,7 @@ def _envelopes_refuse(judged: PolicyReport | None, fmt: Format) -> bool:
     return judged is not None and judged.fails_plan
 
 
-def github_annotation(finding: Finding, kind: str = "error") -> str:
+def github_annotation(finding: "Finding", kind: str = "error") -> str:
     """A problem as GitHub's `::error` (or `::warning`) workflow command, escaped as its rules want
     (`prc3cfg.core.text`)."""
     from prc3cfg.core.text import github_data, github_property
@@ -208,7 +206,7 @@ def _count(n: int, one: str, many: str) -> str:
     return f"{n} {one if n == 1 else many}"
 
 
-def _modules_table(plant: Plant) -> Table:
+def _modules_table(plant: "Plant") -> "Table":
     from prc3cfg.core import render
 
     return _drawn(render.modules_table(plant.name, (
@@ -217,7 +215,7 @@ def _modules_table(plant: Plant) -> Table:
         for bus, m in plant.modules())))
 
 
-def _show_module(console: Console, bus: str, module: Module) -> None:
+def _show_module(console: "Console", bus: str, module: "Module") -> None:
     """What `render.shown_module` says of the module, from the values of its plant file and where each came
     from."""
     from prc3cfg.core import render
@@ -242,7 +240,7 @@ def _show_module(console: Console, bus: str, module: Module) -> None:
         console.print(block if isinstance(block, str) else _drawn(block, no_wrap=True))
 
 
-def _drawn(table: render.Table, *, no_wrap: bool = False) -> Table:
+def _drawn(table: "render.Table", *, no_wrap: bool = False) -> "Table":
     """A table of `show` drawn for the terminal: a line under the head and between its sections."""
     from rich import box
     from rich.table import Table
@@ -256,7 +254,7 @@ def _drawn(table: render.Table, *, no_wrap: bool = False) -> Table:
     return drawn
 
 
-def _plot_module(plant: Plant, module: Module, path: Path, fmt: str, actual: Path | None) -> None:
+def _plot_module(plant: "Plant", module: "Module", path: Path, fmt: str, actual: Path | None) -> None:
     """Draw the module's chains as the plant file says them; with `actual`, what it holds now as
     before and what the plan leaves it holding as after (`prc3cfg.api.picture`)."""
     from prc3cfg import api

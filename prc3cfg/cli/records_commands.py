@@ -14,8 +14,6 @@ so, exit 1 — a typo lists nothing silently nowhere.
 Arguments and output only: the work is `prc3cfg.api`'s.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -110,7 +108,7 @@ def prune(
           "those old enough.")
 
 
-def _plant_file(path: Path) -> Plant:
+def _plant_file(path: Path) -> "Plant":
     """The plant file at `path`; where it is none and no records are beside it (a typo, a folder,
     another file), `list_records`' one line saying so — records that outlive their plant file get
     the plant file's own error."""
@@ -123,7 +121,7 @@ def _plant_file(path: Path) -> Plant:
         raise
 
 
-def _line(run: RecordedRun) -> str:
+def _line(run: "RecordedRun") -> str:
     """A run in one line, everything from the files `shown`."""
     from prc3cfg.core.text import shown
 

@@ -8,8 +8,6 @@
 Arguments and output only: the status is `prc3cfg.api.status`'s.
 """
 
-from __future__ import annotations
-
 from pathlib import Path
 from typing import Annotated, Any
 
