@@ -36,11 +36,13 @@ print("heavy:", heavy, file=sys.stderr)
 """
 #: What the listing of the commands loads none of (the modules' first names): json and html are a records
 #: command's output and `core.text`'s markdown, imported where they run.
-LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent", "secrets",
-                  "json", "html")  # fmt: skip
-#: The whole of prc3cfg that `prc3cfg --help` loads besides the command modules: what their signatures and `main` use.
-LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.core", "prc3cfg.core.line",
-                 "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell", "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]
+LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent",
+                  "secrets", "json", "html")  # fmt: skip
+#: The whole of prc3cfg that `prc3cfg --help` loads besides the command modules: what their signatures and
+#: `main` use.
+LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.core",
+                 "prc3cfg.core.line", "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell",
+                 "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]  # fmt: skip
 
 
 def test_listing_the_commands_loads_nothing_heavy():
@@ -50,10 +52,11 @@ def test_listing_the_commands_loads_nothing_heavy():
 
 
 def test_the_listing_loads_of_prc3cfg_its_command_modules_and_what_they_need_only():
-    """`prc3cfg --help` as the console script runs it: a module a command module imports at its top (for a default,
-    an annotation) is paid by every start-up — one more here is a decision, not an accident."""
+    """`prc3cfg --help` as the console script runs it: a module a command module imports at its top (for a
+    default, an annotation) is paid by every start-up — one more here is a decision, not an accident."""
     probe = ("import sys, prc3cfg.__main__\nfrom prc3cfg.cli import main\ntry:\n    main(['--help'])\n"
-             "except SystemExit:\n    pass\nprint(sorted(m for m in sys.modules if m.startswith('prc3cfg')), file=sys.stderr)")
+             "except SystemExit:\n    pass\n"
+             "print(sorted(m for m in sys.modules if m.startswith('prc3cfg')), file=sys.stderr)")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
     from prc3cfg.cli import COMMAND_MODULES
 
@@ -63,9 +66,10 @@ def test_the_listing_loads_of_prc3cfg_its_command_modules_and_what_they_need_onl
 
 
 def test_the_commands_signatures_are_objects_not_strings():
-    """typer reads a command's signature three or four times to build it (its parameters, its callback, …) and
-    evaluates a string annotation (`from __future__ import annotations`) each time: 12 of the listing's 25 ms CPU.
-    The modules that declare commands write their annotations as objects, quoting only what only mypy imports."""
+    """typer reads a command's signature three or four times to build it (its parameters, its callback, …)
+    and evaluates a string annotation (`from __future__ import annotations`) each time: 12 of the listing's
+    25 ms CPU. The modules that declare commands write their annotations as objects, quoting only what only
+    mypy imports."""
     from prc3cfg.cli import _register_commands, app
 
     _register_commands()
@@ -76,8 +80,8 @@ def test_the_commands_signatures_are_objects_not_strings():
         for sub in group.registered_groups:
             yield from callbacks(sub.typer_instance)
 
-    strings = [f"{f.__module__}.{f.__name__}: {name}" for f in callbacks(app) for name, annotation in f.__annotations__.items()
-               if isinstance(annotation, str)]  # fmt: skip
+    strings = [f"{f.__module__}.{f.__name__}: {name}" for f in callbacks(app)
+               for name, annotation in f.__annotations__.items() if isinstance(annotation, str)]  # fmt: skip
     assert strings == []
 
 
@@ -252,3 +256,37 @@ def test_the_listing_keeps_the_table_s_order_whichever_command_module_was_import
              "print(typer.main.get_command(app).list_commands(None) == list(COMMAND_MODULES))\n")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=False)
     assert done.stdout.strip() == "True", done.stderr
+
+
+#: One process runs every command line's `--help` in this seed's order (as a program that embeds the command
+#: line would).
+HELP_IN_ORDER = """
+import contextlib, io, json, random, sys
+from prc3cfg.cli import main
+lines = json.loads(sys.argv[1])
+random.Random(int(sys.argv[2])).shuffle(lines)
+said = {}
+for words in lines:
+    with contextlib.redirect_stdout(io.StringIO()) as out:
+        try:
+            main([*words, "--help"])
+        except SystemExit:
+            pass
+    said[" ".join(words)] = out.getvalue()
+print(json.dumps(said))
+"""
+
+
+@pytest.mark.soak
+def test_each_help_is_the_fresh_processs_whatever_ran_before_it():
+    """Each command line's `--help` in its own `python -m prc3cfg` process, as a person runs it, is what one
+    process that ran other command lines first (their modules imported, their commands built) prints, in every
+    seed's order."""
+    lines = [list(words) for words in [(), *_command_lines()]]
+    fresh = {" ".join(words): subprocess.run([sys.executable, "-m", "prc3cfg", *words, "--help"],
+                                             capture_output=True, text=True, check=True).stdout
+             for words in lines}  # fmt: skip
+    for seed in range(4):
+        done = subprocess.run([sys.executable, "-c", HELP_IN_ORDER, json.dumps(lines), str(seed)],
+                              capture_output=True, text=True, check=True)  # fmt: skip
+        assert json.loads(done.stdout) == fresh, f"seed {seed}"
