@@ -152,17 +152,17 @@ def _single_dash_habit(args: list[str]) -> str | None:
 
 
 #: pydantic's words (typer checks an option's type and bounds with it) → the tool's: what the value must be.
+#: Patterns, not compiled ones: only a usage error needs them (`re` compiles and keeps them then), not each start-up.
 _PYDANTIC_WORDS = (
-    (re.compile(r"Input should be greater than or equal to (\S+)"), r"must be \1 or more"),
-    (re.compile(r"Input should be less than or equal to (\S+)"), r"must be \1 or less"),
-    (re.compile(r"Input should be greater than (\S+)"), r"must be more than \1"),
-    (re.compile(r"Input should be less than (\S+)"), r"must be less than \1"),
-    (re.compile(r"Input should be a valid integer(, unable to parse string as an integer)?"),
+    (r"Input should be greater than or equal to (\S+)", r"must be \1 or more"),
+    (r"Input should be less than or equal to (\S+)", r"must be \1 or less"),
+    (r"Input should be greater than (\S+)", r"must be more than \1"),
+    (r"Input should be less than (\S+)", r"must be less than \1"),
+    (r"Input should be a valid integer(, unable to parse string as an integer)?",
      "must be a whole number"),
-    (re.compile(r"Input should be a valid number(, unable to parse string as "
-                r"a number)?"), "must be a number"),
-    (re.compile(r"Input should be "), "must be "),
-    (re.compile(r"Value error, "), ""),
+    (r"Input should be a valid number(, unable to parse string as a number)?", "must be a number"),
+    (r"Input should be ", "must be "),
+    (r"Value error, ", ""),
 )
 
 
@@ -181,7 +181,7 @@ def _usage(error: click_errors.UsageError) -> str:
     command = error.ctx.command_path if error.ctx is not None else "prc3cfg"
     message = shown(" ".join(error.format_message().split()).rstrip("."))
     for pattern, words in _PYDANTIC_WORDS:
-        message = pattern.sub(words, message)
+        message = re.sub(pattern, words, message)
     return f"error: {command}: {message} — see {command} --help"
 
 
