@@ -152,7 +152,8 @@ def _single_dash_habit(args: list[str]) -> str | None:
 
 
 #: pydantic's words (typer checks an option's type and bounds with it) → the tool's: what the value must be.
-#: Patterns, not compiled ones: only a usage error needs them (`re` compiles and keeps them then), not each start-up.
+#: Patterns, not compiled ones: only a usage error needs them (`re` compiles and keeps them then), not
+#: each start-up.
 _PYDANTIC_WORDS = (
     (r"Input should be greater than or equal to (\S+)", r"must be \1 or more"),
     (r"Input should be less than or equal to (\S+)", r"must be \1 or less"),
