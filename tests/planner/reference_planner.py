@@ -46,6 +46,7 @@ states a program.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
@@ -61,8 +62,6 @@ OUTER, INNER, PARTS = "outer", "inner", "parts"
 LAYERS = (BEFORE, AFTER, OUTER, INNER, PARTS)
 #: The kinds of run: an init, a link or an unlink range, P and V of consecutive programs.
 INIT, LINK, UNLINK = "init", "link", "unlink"
-#: A 21h: a "run" of one program, priced like the others (`_Module.run_price`).
-WHOLE = "whole"
 #: States (runs open, item counts) beyond which one program's step of the DP gives up.
 MAX_STATES = 200_000
 ITEM_MESSAGES = {name: kind.message for name, kind in codec.FIELD_KINDS.items()}
@@ -76,6 +75,12 @@ EPSILON = 1e-9
 Open = tuple[str, int] | None
 #: A run over a program: its kind, whether it starts there, whether it ends there.
 Mark = tuple[str, bool, bool] | None
+#: A layer's choice at a program: the run over it, the run open past it, the price of the run that ends there.
+LayerOption = tuple[Mark, Open, float]
+#: The runs open past a program, one a layer.
+Runs = tuple[Open, ...]
+#: Items each field's last 40h..46h message still takes (0: full, or none yet): an item where it is 0 opens one.
+Rooms = tuple[int, ...]
 
 
 class TooBig(RuntimeError):
@@ -91,13 +96,16 @@ class ReferencePlan:
 
 @dataclass(frozen=True, slots=True)
 class Choice:
-    """What the DP decided at one program (a link in the chain back to program 1)."""
+    """What the DP decided at one program."""
 
     number: int
     marks: tuple[Mark, ...]  # per layer
     whole: bool  # a 21h
     items: tuple[str, ...]  # the fields written as 40h..46h items
-    previous: Choice | None
+
+
+#: The choices so far, the last first: (the last, the chain of the ones before it).
+Chain = tuple[Choice, "Chain"] | None
 
 
 def reference_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, limit: int = MAX_STATES) -> ReferencePlan:
@@ -130,6 +138,10 @@ class _Module:
 
     def __init__(self, start: device.ModuleState, desired: ModuleImage, step: codec.Message | None, cost: LineCost) -> None:
         self.desired, self.step, self.cost = desired, step, cost
+        self.prices: dict[codec.Message, float] = {}
+        # the DP asks the same of the same programs again and again: each answer is worked out once
+        self.layer_options = functools.cache(self.layer_options)  # type: ignore[method-assign]
+        self.filled = functools.cache(self.filled)  # type: ignore[method-assign]
         after_step = start if step is None else device.execute(start, step)
         before = device.execute(start, codec.InitAllPrograms())
         self.bases = {
@@ -146,18 +158,12 @@ class _Module:
             OUTER: any(base[n].A != w.A for base in self.bases.values() for n, w in wanted),
         }
         self.offered[INNER] = self.offered[OUTER]
-        self.run_prices: dict[tuple[str, int, int], float] = {}  # (kind, first, last): see `run_price`
-        self.wrongs: dict[tuple[int, str, int, bool], tuple[tuple[str, ...], float]] = {}  # see `wrong`
 
     def price(self, message: codec.Message) -> float:
-        return self.cost.message_time(self.desired.address, message)
-
-    def run_price(self, kind: str, first: int, last: int) -> float:
-        """The price of a run's message, worked out once: the DP asks for the same runs again and again."""
-        key = (kind, first, last)
-        if key not in self.run_prices:
-            self.run_prices[key] = self.price(self.message(kind, first, last))
-        return self.run_prices[key]
+        """The bus time of `message` by the line (each message priced once: the DP asks again and again)."""
+        if message not in self.prices:
+            self.prices[message] = self.cost.message_time(self.desired.address, message)
+        return self.prices[message]
 
     # -- runs: their messages, and what of their first program their price needs ---------------
 
@@ -169,8 +175,6 @@ class _Module:
         if kind == UNLINK:
             return codec.UnlinkPrograms(first, last)
         known = self.desired.known  # PARTS: a 32h for one program, a 33h for more
-        if kind == WHOLE:
-            return codec.WriteProgram(first, known(first))
         if first == last:
             return codec.WritePartProgram(first, known(first).P, known(first).V)
         return codec.WritePartPrograms(first, tuple((known(n).P, known(n).V) for n in range(first, last + 1)))
@@ -185,22 +189,24 @@ class _Module:
 
     def closing(self, kind: str, kept: int, last: int) -> float:
         """The price of a run of `kind` that started before `last` and ends there."""
-        return self.run_price(kind, kept or last - 1, last)
+        return self.price(self.message(kind, kept or last - 1, last))
 
-    def layer_options(self, open_: Open, number: int, must_end: bool, kinds: tuple[str, ...]) -> Iterator[tuple[Mark, Open, float]]:
-        """A layer at program `number`: (the run over it, the run open past it, the price of the run that ends here)."""
+    def layer_options(self, open_: Open, number: int, must_end: bool, kinds: tuple[str, ...]) -> list[LayerOption]:
+        """A layer at program `number`: (the run over it, the run open past it, the price of the run that
+        ends here) for each choice."""
         if open_ is not None:
             kind, kept = open_
-            yield (kind, False, True), None, self.closing(kind, kept, number)
-            if not must_end and not (kind == PARTS and number - kept + 1 == PARTS_CAPACITY):
-                yield (kind, False, False), open_, 0.0
-            return
-        yield None, None, 0.0
+            ends: list[LayerOption] = [((kind, False, True), None, self.closing(kind, kept, number))]
+            if must_end or (kind == PARTS and number - kept + 1 == PARTS_CAPACITY):
+                return ends
+            return [*ends, ((kind, False, False), open_, 0.0)]
+        options: list[LayerOption] = [(None, None, 0.0)]
         for kind in kinds:
             if kind != LINK:  # a link range of one program is an unlink range of it
-                yield (kind, True, True), None, self.run_price(kind, number, number)
+                options.append(((kind, True, True), None, self.price(self.message(kind, number, number))))
             if not must_end:
-                yield (kind, True, False), (kind, self.opened(kind, number)), 0.0
+                options.append(((kind, True, False), (kind, self.opened(kind, number)), 0.0))
+        return options
 
     # -- 40h..46h items: a header for each message opened, the item's bytes for each item ------
 
@@ -222,41 +228,69 @@ class _Module:
         one = ITEM_MESSAGES[name](((number, value),))
         return one.encode()[2 * one.HEADER_WORDS :].count(0x7E) * self.cost.line.char_time
 
+    def items_after(self, number: int) -> tuple[int, ...]:
+        """The most items each field can still take after program `number`: the managed programs past
+        it whose field some base (or, for A, a range) can leave wrong."""
+        later = [n for n in range(number + 1, PROGRAM_COUNT + 1) if self.desired.programs[n - 1] is not None]
+        ranges = self.offered[OUTER]
+
+        def shown(name: str, n: int) -> set[int]:
+            held = {getattr(base[n - 1], name) for base in self.bases.values()}
+            return held | {n + 1, 0} if name == "A" and ranges else held
+
+        wanted = self.desired.known
+        return tuple(sum(shown(name, n) != {getattr(wanted(n), name)} for n in later) for name in PROGRAM_FIELDS)
+
+    def filled(self, rooms: Rooms, written: tuple[str, ...], number: int) -> tuple[Rooms, float]:
+        """The rooms after program `number`'s items of `written`, and the headers and items they cost.
+        A room larger than the items its field can still take is as good as any other such room: it is
+        cut to that many (`items_after`), so that states which differ only there are one."""
+        new, spent = list(rooms), 0.0
+        for k, name in enumerate(PROGRAM_FIELDS):
+            if name in written:
+                spent += self.items[k] + (self.headers[k] if rooms[k] == 0 else 0.0)
+                new[k] = CAPACITY[name] - 1 if rooms[k] == 0 else rooms[k] - 1
+        return tuple(map(min, new, self.later[number])), spent
+
     # -- the DP --------------------------------------------------------------------------------
 
     def solve(self, limit: int) -> ReferencePlan:
-        headers, items = zip(*map(self.item_prices, PROGRAM_FIELDS))
-        # runs open (per layer) -> {items in each field's last message: (bus time so far, the choices)}
-        states: dict[tuple[Open, ...], dict[tuple[int, ...], tuple[float, Choice | None]]] = {
+        self.headers, self.items = zip(*map(self.item_prices, PROGRAM_FIELDS))
+        self.later = {number: self.items_after(number) for number in range(1, PROGRAM_COUNT + 1)}
+        # runs open (per layer) -> {rooms of each field's last message: (bus time so far, the choices)}
+        states: dict[Runs, dict[Rooms, tuple[float, Chain]]] = {
             NO_RUNS: {(0,) * len(PROGRAM_FIELDS): (0.0 if self.step is None else self.price(self.step), None)}
         }
         for number in range(1, PROGRAM_COUNT + 1):
-            following: dict[tuple[Open, ...], dict[tuple[int, ...], tuple[float, Choice | None]]] = {}
+            following: dict[Runs, dict[Rooms, tuple[float, Chain]]] = {}
             for runs, entries in states.items():
-                for next_runs, marks, added, whole, written in self.moves(number, runs):
-                    fields = [k for k, name in enumerate(PROGRAM_FIELDS) if name in written]
+                for (next_runs, written), (added, choice) in self.moves(number, runs).items():
                     bucket = following.setdefault(next_runs, {})
-                    for fill, (spent, chain) in entries.items():
-                        # an item opens a message where the last one is full (or there is none): its header
-                        total, new = spent + added, list(fill)
-                        for k in fields:
-                            total += items[k] + (headers[k] if fill[k] == 0 else 0.0)
-                            new[k] = (fill[k] + 1) % CAPACITY[PROGRAM_FIELDS[k]]
-                        key = tuple(new)
+                    for rooms, (spent, chain) in entries.items():
+                        key, items = self.filled(rooms, written, number)
+                        total = spent + added + items
                         if key not in bucket or total < bucket[key][0]:
-                            bucket[key] = (total, Choice(number, marks, whole, written, chain))
-            states = {runs: _pareto(bucket, headers) for runs, bucket in following.items()}
+                            bucket[key] = (total, (choice, chain))
+            states = {runs: _pareto(bucket, self.headers) for runs, bucket in following.items()}
             if sum(map(len, states.values())) > limit:
                 raise TooBig(f"module {self.desired.address}: more than {limit} states at program {number}")
         optimum, chain = min(states[NO_RUNS].values(), key=lambda entry: entry[0])
         messages = self.messages(chain)
         return ReferencePlan(tuple(messages), math.fsum(map(self.price, messages)), optimum)
 
-    def moves(self, number: int, runs: tuple[Open, ...]) -> Iterator[tuple[tuple[Open, ...], tuple[Mark, ...], float, bool, tuple[str, ...]]]:
+    def moves(self, number: int, runs: Runs) -> dict[tuple[Runs, tuple[str, ...]], tuple[float, Choice]]:
+        """The cheapest choice at program `number` from the runs open, for each pair of the runs open past
+        it and the fields it leaves to 40h..46h items: all that the rest of the plan depends on."""
+        cheapest: dict[tuple[Runs, tuple[str, ...]], tuple[float, Choice]] = {}
+        for next_runs, marks, added, whole, written in self.choices(number, runs):
+            key = (next_runs, written)
+            if key not in cheapest or added < cheapest[key][0]:
+                cheapest[key] = (added, Choice(number, marks, whole, written))
+        return cheapest
+
+    def choices(self, number: int, runs: Runs) -> Iterator[tuple[Runs, tuple[Mark, ...], float, bool, tuple[str, ...]]]:
         """Every choice at program `number` from the runs open: (the runs open past it, the runs over it,
-        the price of the runs that end here and of its 21h, whether a 21h writes it, its items' fields).
-        Of the choices that leave the same runs open and write the same way only the cheapest is kept:
-        the rest of the plan cannot tell them apart."""
+        the price of the runs that end here and of its 21h, whether a 21h writes it, its items' fields)."""
         want = self.desired.programs[number - 1]
         if want is None:  # no run covers an unmanaged program, and nothing writes it
             if runs == NO_RUNS:
@@ -264,57 +298,42 @@ class _Module:
             return
         must_end = number == PROGRAM_COUNT or self.desired.programs[number] is None
         before, after, outer, inner, parts = runs
+        whole = self.price(codec.WriteProgram(number, want))
+        stuffed = {f: self.stuffed(f, number, getattr(want, f)) for f in PROGRAM_FIELDS}
 
-        def options(layer: str, open_: Open, kinds: tuple[str, ...]) -> list[tuple[Mark, Open, float]]:
-            return list(self.layer_options(open_, number, must_end, kinds)) if self.offered[layer] else [(None, None, 0.0)]
+        def options(layer: str, open_: Open, kinds: tuple[str, ...]) -> list[LayerOption]:
+            if not self.offered[layer]:
+                return [(None, None, 0.0)]
+            return self.layer_options(open_, number, must_end, kinds)
 
-        cheapest: dict[tuple[tuple[Open, ...], bool, tuple[str, ...]], tuple[float, tuple[Mark, ...]]] = {}
-        parts_options = options(PARTS, parts, (PARTS,))
         for b_mark, b_open, b_price in options(BEFORE, before, (INIT,)):
             for a_mark, a_open, a_price in options(AFTER, after, (INIT,)):
-                base = AFTER if a_mark else BEFORE if b_mark else KEEP
+                base = self.bases[AFTER if a_mark else BEFORE if b_mark else KEEP][number - 1]
                 for o_mark, o_open, o_price in options(OUTER, outer, (LINK, UNLINK)):
                     inner_kinds = () if o_mark is None else (UNLINK,) if o_mark[0] == LINK else (LINK,)
                     for i_mark, i_open, i_price in options(INNER, inner, inner_kinds):
                         if i_mark is not None and (o_mark is None or (o_mark[2] and not i_mark[2])):
                             continue  # an inner range lies inside an outer range
-                        shown = self.bases[base][number - 1].A
+                        shown = base.A
                         for mark in (o_mark, i_mark):  # the inner range, sent after the outer, has the last word
                             if mark is not None:
                                 shown = number + 1 if mark[0] == LINK and not mark[2] else 0
-                        for p_mark, p_open, p_price in parts_options:
-                            wrong, stuffed = self.wrong(number, base, shown, p_mark is not None)
+                        for p_mark, p_open, p_price in options(PARTS, parts, (PARTS,)):
+                            wrong = tuple(f for f in PROGRAM_FIELDS if not (p_mark and f in "PV")
+                                          and (shown if f == "A" else getattr(base, f)) != getattr(want, f))
                             next_runs = (b_open, a_open, o_open, i_open, p_open)
                             marks = (b_mark, a_mark, o_mark, i_mark, p_mark)
                             price = math.fsum((b_price, a_price, o_price, i_price, p_price))
-                            choices = [(price + stuffed, False, wrong)]
+                            yield next_runs, marks, price + math.fsum(stuffed[f] for f in wrong), False, wrong
                             if wrong:
-                                choices.append((price + self.run_price(WHOLE, number, number), True, ()))
-                            for total, whole, written in choices:
-                                key = (next_runs, whole, written)
-                                if key not in cheapest or total < cheapest[key][0]:
-                                    cheapest[key] = (total, marks)
-        for (next_runs, whole, written), (total, marks) in cheapest.items():
-            yield next_runs, marks, total, whole, written
+                                yield next_runs, marks, price + whole, True, ()
 
-    def wrong(self, number: int, base: str, shown: int, parts: bool) -> tuple[tuple[str, ...], float]:
-        """The fields of program `number` still wrong over `base` with address `shown` (P and V right
-        where a 32h/33h writes them), and what stx stuffs into their items; worked out once."""
-        key = (number, base, shown, parts)
-        if key not in self.wrongs:
-            want, held = self.desired.programs[number - 1], self.bases[base][number - 1]
-            assert want is not None
-            fields = tuple(f for f in PROGRAM_FIELDS if (shown if f == "A" else getattr(held, f)) != getattr(want, f)
-                           and not (parts and f in "PV"))  # fmt: skip
-            self.wrongs[key] = fields, math.fsum(self.stuffed(f, number, getattr(want, f)) for f in fields)
-        return self.wrongs[key]
-
-    def messages(self, chain: Choice | None) -> list[codec.Message]:
+    def messages(self, chain: Chain) -> list[codec.Message]:
         """The plan of the DP's choices, in the canonical order."""
         choices: list[Choice] = []
         while chain is not None:
-            choices.append(chain)
-            chain = chain.previous
+            choice, chain = chain
+            choices.append(choice)
         choices.reverse()
         runs: dict[str, list[codec.Message]] = {}
         for k, layer in enumerate(LAYERS):
@@ -337,24 +356,18 @@ class _Module:
         return out
 
 
-def room(fill: int, name: str) -> int:
-    """Items a field's last message still takes, by the items in it (0: full, or none yet)."""
-    return CAPACITY[name] - fill if fill else 0
-
-
-def _pareto(
-    bucket: dict[tuple[int, ...], tuple[float, Choice | None]], headers: tuple[float, ...]
-) -> dict[tuple[int, ...], tuple[float, Choice | None]]:
+def _pareto(bucket: dict[Rooms, tuple[float, Chain]], headers: tuple[float, ...]) -> dict[Rooms, tuple[float, Chain]]:
     """The entries no other entry beats. The rest of a plan costs the same after two entries but for
     the headers of the 40h..46h messages it opens, and less room in a field's last message costs at
     most one header more there (the same items, at most one message more): an entry whose bus time
     and a header for each field where it has less room is at most another's beats it."""
-    kept: list[tuple[tuple[int, ...], float, list[int]]] = []  # fill, bus time, rooms
-    for fill, entry in sorted(bucket.items(), key=lambda pair: pair[1][0]):
-        rooms = [room(f, name) for f, name in zip(fill, PROGRAM_FIELDS)]
-        if not any(spent + sum(h for h, r, o in zip(headers, rooms, other) if o < r) <= entry[0] + EPSILON for _, spent, other in kept):
-            kept.append((fill, entry[0], rooms))
-    return {fill: bucket[fill] for fill, _, _ in kept}
+    kept: list[tuple[Rooms, float]] = []
+    for rooms, (spent, _) in sorted(bucket.items(), key=lambda pair: pair[1][0]):
+        if kept and kept[0][1] + sum(headers) <= spent + EPSILON:
+            break  # the cheapest, a header more in every field, beats this one and every dearer one
+        if not any(cost + sum(h for h, r, o in zip(headers, rooms, other) if o < r) <= spent + EPSILON for other, cost in kept):
+            kept.append((rooms, spent))
+    return {rooms: bucket[rooms] for rooms, _ in kept}
 
 
 __all__ = ["ReferencePlan", "TooBig", "reference_plan"]
