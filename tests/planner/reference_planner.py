@@ -27,11 +27,14 @@ init, or an init after or before it) come from running 10h/20h and 14h on the de
 
 The DP walks programs 1..64. Its state between program i and i + 1 is the runs still open past i (each
 init layer's, each range layer's, the 33h's: what their message's price needs of their first program) and
-how many items each field's last 40h..46h message holds; its value the cheapest bus time so far, a
-header counted where an item opens a message. Of two states with the same runs open, one is dropped where
-the other costs no more even with a header more in each field where it has less room (`_pareto`): the rest
-of the plan costs the same after both but for those headers, at most one a field. That is the whole
-algorithm: no bound, no heuristic, no order of search.
+the room left in each field's last 40h..46h message; its value the cheapest bus time so far, a header
+counted where an item finds no room. Three things keep it small, each exact:
+- at a program, of the choices that leave the same runs open and the same fields to items, only the
+  cheapest is kept (the rest of the plan depends on nothing else);
+- a room larger than the items its field can still take past i is cut to that many (no header follows);
+- of two states with the same runs open, one is dropped where the other costs no more even with a header
+  more in each field where it has less room (`_pareto`): at most one header a field separates them.
+That is the whole algorithm: no bound, no heuristic, no order of search.
 
 What is exact: every message but 40h..46h is priced by the line as sent; 40h..46h items by their header
 and item bytes, measured on the line (the values' stuffed bytes on stx counted item by item). On stx
@@ -39,9 +42,9 @@ alone, a 40h..46h message whose checksum is 7Eh costs a byte more than that; the
 (`ReferencePlan.optimum`) is then a lower bound and the plan's bus time (`bus_time`) exact for its own
 messages — equal on crc16 and open-driver.
 
-What it takes: fractions of a second for a few programs changed, seconds for some, minutes for a busy
-module (the states grow with the runs that could be open at once); it gives up (`TooBig`) beyond `limit`
-states a program.
+What it takes (one core): under a second to 20 s on crc16 and open-driver modules (55 s for the found
+case "a link range over 2..64"); on stx, where every open run keeps its first program, minutes. It gives
+up (`TooBig`) beyond `limit` states a program.
 """
 
 from __future__ import annotations
@@ -77,9 +80,11 @@ Open = tuple[str, int] | None
 Mark = tuple[str, bool, bool] | None
 #: A layer's choice at a program: the run over it, the run open past it, the price of the run that ends there.
 LayerOption = tuple[Mark, Open, float]
+#: The runs over a program, one a layer.
+Marks = tuple[Mark, ...]
 #: The runs open past a program, one a layer.
 Runs = tuple[Open, ...]
-#: Items each field's last 40h..46h message still takes (0: full, or none yet): an item where it is 0 opens one.
+#: Items each field's last 40h..46h message still takes (0: full, or none yet: an item there opens one).
 Rooms = tuple[int, ...]
 
 
@@ -106,6 +111,8 @@ class Choice:
 
 #: The choices so far, the last first: (the last, the chain of the ones before it).
 Chain = tuple[Choice, "Chain"] | None
+#: A state's value: its bus time so far and its choices.
+Entry = tuple[float, Chain]
 
 
 def reference_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, limit: int = MAX_STATES) -> ReferencePlan:
@@ -191,7 +198,8 @@ class _Module:
         """The price of a run of `kind` that started before `last` and ends there."""
         return self.price(self.message(kind, kept or last - 1, last))
 
-    def layer_options(self, open_: Open, number: int, must_end: bool, kinds: tuple[str, ...]) -> list[LayerOption]:
+    def layer_options(self, open_: Open, number: int, must_end: bool, kinds: tuple[str, ...]
+                      ) -> list[LayerOption]:
         """A layer at program `number`: (the run over it, the run open past it, the price of the run that
         ends here) for each choice."""
         if open_ is not None:
@@ -239,7 +247,8 @@ class _Module:
             return held | {n + 1, 0} if name == "A" and ranges else held
 
         wanted = self.desired.known
-        return tuple(sum(shown(name, n) != {getattr(wanted(n), name)} for n in later) for name in PROGRAM_FIELDS)
+        return tuple(sum(shown(name, n) != {getattr(wanted(n), name)} for n in later)
+                     for name in PROGRAM_FIELDS)
 
     def filled(self, rooms: Rooms, written: tuple[str, ...], number: int) -> tuple[Rooms, float]:
         """The rooms after program `number`'s items of `written`, and the headers and items they cost.
@@ -288,7 +297,7 @@ class _Module:
                 cheapest[key] = (added, Choice(number, marks, whole, written))
         return cheapest
 
-    def choices(self, number: int, runs: Runs) -> Iterator[tuple[Runs, tuple[Mark, ...], float, bool, tuple[str, ...]]]:
+    def choices(self, number: int, runs: Runs) -> Iterator[tuple[Runs, Marks, float, bool, tuple[str, ...]]]:
         """Every choice at program `number` from the runs open: (the runs open past it, the runs over it,
         the price of the runs that end here and of its 21h, whether a 21h writes it, its items' fields)."""
         want = self.desired.programs[number - 1]
@@ -356,7 +365,7 @@ class _Module:
         return out
 
 
-def _pareto(bucket: dict[Rooms, tuple[float, Chain]], headers: tuple[float, ...]) -> dict[Rooms, tuple[float, Chain]]:
+def _pareto(bucket: dict[Rooms, Entry], headers: tuple[float, ...]) -> dict[Rooms, Entry]:
     """The entries no other entry beats. The rest of a plan costs the same after two entries but for
     the headers of the 40h..46h messages it opens, and less room in a field's last message costs at
     most one header more there (the same items, at most one message more): an entry whose bus time
@@ -365,7 +374,8 @@ def _pareto(bucket: dict[Rooms, tuple[float, Chain]], headers: tuple[float, ...]
     for rooms, (spent, _) in sorted(bucket.items(), key=lambda pair: pair[1][0]):
         if kept and kept[0][1] + sum(headers) <= spent + EPSILON:
             break  # the cheapest, a header more in every field, beats this one and every dearer one
-        if not any(cost + sum(h for h, r, o in zip(headers, rooms, other) if o < r) <= spent + EPSILON for other, cost in kept):
+        if not any(cost + sum(h for h, r, o in zip(headers, rooms, other) if o < r) <= spent + EPSILON
+                   for other, cost in kept):
             kept.append((rooms, spent))
     return {rooms: bucket[rooms] for rooms, _ in kept}
 
