@@ -28,18 +28,21 @@ GIVEN = {1: 0.080, 2: 0.120, 3: 0.160}
 def doctor(framing: str, exchanges: int, seed: int) -> dict[int, tuple[float, float]]:
     """address → (median, worst) in s, as `prc3cfg doctor` printed them."""
     line = LineSettings(9600, 8, "even", 1)
-    with Emulator({a: ModuleState.factory(a) for a in GIVEN}, framing=framing, line=line, line_speed=True, turnarounds=GIVEN,
+    with Emulator({a: ModuleState.factory(a) for a in GIVEN}, framing=framing, line=line, line_speed=True,
+                  turnarounds=GIVEN,
                   jitter=0.004, faults=FaultInjection(seed=seed)) as emulator:  # fmt: skip
         host, tcp = emulator.listen(rfc2217=True)
         out = io.StringIO()
         with redirect_stdout(out), redirect_stderr(io.StringIO()):
             try:
-                main(["doctor", "--port", f"rfc2217://{host}:{tcp}", "--framing", framing, "--baud", "9600", "--parity", "even",
+                main(["doctor", "--port", f"rfc2217://{host}:{tcp}", "--framing", framing, "--baud", "9600",
+                      "--parity", "even",
                       "--modules", "1-3", "--exchanges", str(exchanges), "--allow-unchecked-probes"])  # fmt: skip
             except SystemExit as exit_:
                 if exit_.code:
                     sys.exit(f"doctor failed on {framing}: exit {exit_.code}")
-    rows = [line.split("│") for line in out.getvalue().splitlines() if line.startswith("│") and "ms" in line]  # doctor's table
+    # doctor's table
+    rows = [line.split("│") for line in out.getvalue().splitlines() if line.startswith("│") and "ms" in line]
     return {int(r[1]): (float(r[2].split()[0]) / 1000, float(r[3].split()[0]) / 1000) for r in rows}
 
 
@@ -56,7 +59,8 @@ def main_() -> None:
             median, worst = measured[address]
             error = (median - given) / given
             worst_error = max(worst_error, abs(error))
-            print(f"{framing:<12} {address:>6} {given * 1000:>6.0f}ms {median * 1000:>6.1f}ms {worst * 1000:>6.1f}ms {error:>+7.1%}")
+            print(f"{framing:<12} {address:>6} {given * 1000:>6.0f}ms {median * 1000:>6.1f}ms "
+                  f"{worst * 1000:>6.1f}ms {error:>+7.1%}")
     print(f"largest error of a median: {worst_error:.1%} (acceptance: within 10 % on an idle machine)")
 
 

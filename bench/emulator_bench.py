@@ -62,7 +62,9 @@ MODULE = """\
 {programs}
         chains: [[1, 2, 3, 4], {{programs: [10, 11], loop: true}}]
 """
-PROGRAMS = "\n".join(f"          {n}: {{position: {0.5 + n / 100:.3f}, speed: 0.{200 + n:03d}, dwell: {n % 7}.5}}" for n in range(1, 33))
+PROGRAMS = "\n".join(f"          {n}: "
+                     f"{{position: {0.5 + n / 100:.3f}, speed: 0.{200 + n:03d}, dwell: {n % 7}.5}}"
+                     for n in range(1, 33))
 #: `prc3cfg` whose in-process emulators keep no state file: the apply without persistence.
 WITHOUT_STATE_FILE = (
     "import prc3cfg.shell.link.ports as ports\n"
@@ -79,7 +81,9 @@ TURNAROUND, ZVZ = 0.010, 0.020
 def write_plant(folder: Path, buses: int, modules: int, framing: str) -> Path:
     plant = folder / "plant.yaml"
     text = "".join(
-        BUS.format(bus=b, framing=framing, modules="".join(MODULE.format(bus=b, address=a, programs=PROGRAMS) for a in range(1, modules + 1)))
+        BUS.format(bus=b, framing=framing,
+                   modules="".join(MODULE.format(bus=b, address=a, programs=PROGRAMS)
+                                   for a in range(1, modules + 1)))
         for b in range(1, buses + 1)
     )
     plant.write_text(PLANT.format(buses=text))
@@ -98,7 +102,8 @@ def apply(prc3cfg: list[str], buses: int, modules: int, framing: str, *, estimat
     """One apply from factory defaults in a fresh folder (after `plan --json`, with `estimate`)."""
     with tempfile.TemporaryDirectory() as work:
         plant = write_plant(Path(work), buses, modules, framing)
-        planned = json.loads(run([*prc3cfg, "plan", str(plant), "--json"])[1])["estimated_bus_time_s"] if estimate else 0.0
+        planned = (json.loads(run([*prc3cfg, "plan", str(plant), "--json"])[1])["estimated_bus_time_s"]
+                   if estimate else 0.0)
         started = time.time()
         wall, _ = run([*prc3cfg, "apply", str(plant), "--auto-approve", "--allow-axis-release"])
         (journal,) = (Path(work) / ".prc3cfg" / "journal").iterdir()
@@ -108,7 +113,8 @@ def apply(prc3cfg: list[str], buses: int, modules: int, framing: str, *, estimat
     for record in exchanges:
         message = codec.decode_message(bytes.fromhex(record["request"]))
         address = record["address"]
-        line[record["bus"]] += cost.broadcast_time(message) if address == BROADCAST else cost.message_time(address, message)
+        line[record["bus"]] += (cost.broadcast_time(message) if address == BROADCAST
+                                else cost.message_time(address, message))
     return Applied(wall, dict(line), planned, phases(exchanges, started, wall))
 
 
@@ -117,7 +123,8 @@ def phases(exchanges: list[dict], started: float, wall: float) -> dict[str, floa
     ends = [datetime.fromisoformat(r["time"]).timestamp() - started for r in exchanges]
     writes = [i for i, r in enumerate(exchanges) if not r["request"].startswith(READS)]
     first, last = writes[0], writes[-1]
-    return {"start": ends[0] - exchanges[0]["duration_s"], "read-back": ends[first - 1], "planning": ends[first],
+    return {"start": ends[0] - exchanges[0]["duration_s"], "read-back": ends[first - 1],
+            "planning": ends[first],
             "writes": ends[last], "verification": ends[-1], "end": wall}  # fmt: skip
 
 
@@ -134,20 +141,27 @@ def main() -> None:
     print(f"{args.framing}, runs {args.runs} (medians); command start-up {startup:.2f} s (included below)")
 
     kept = statistics.median(apply(prc3cfg, 1, args.modules, args.framing).wall for _ in range(args.runs))
-    bare = statistics.median(apply(without_state, 1, args.modules, args.framing).wall for _ in range(args.runs))
-    print(f"  persistence, 1 bus × {args.modules} modules: with the state file {kept:6.2f} s   without {bare:6.2f} s"
-          f"   ratio {kept / bare:.2f} (acceptance ≤ 1.3; without start-up {(kept - startup) / (bare - startup):.2f})")  # fmt: skip
+    bare = statistics.median(apply(without_state, 1, args.modules, args.framing).wall
+                             for _ in range(args.runs))
+    print(f"  persistence, 1 bus × {args.modules} modules: with the state file {kept:6.2f} s   without "
+          f"{bare:6.2f} s"
+          f"   ratio {kept / bare:.2f} (acceptance ≤ 1.3; without start-up "
+          f"{(kept - startup) / (bare - startup):.2f})")  # fmt: skip
 
     runs = [apply(prc3cfg, args.buses, args.modules, args.framing, estimate=n == 0) for n in range(args.runs)]
     wall = statistics.median(r.wall for r in runs)
     summed, slowest = sum(runs[0].line.values()), max(runs[0].line.values())
-    print(f"  real line, {args.buses} buses × {args.modules} modules: emulator:// {wall:6.2f} s; at {REAL_LINE.baud} baud 8E1 "
+    print(f"  real line, {args.buses} buses × {args.modules} modules: emulator:// {wall:6.2f} s; at "
+          f"{REAL_LINE.baud} baud 8E1 "
           f"{summed:.2f} s summed over the buses (the plan's estimate {runs[0].planned:.2f} s + read-backs "
           f"{summed - runs[0].planned:.2f} s), {slowest:.2f} s on the slowest bus")  # fmt: skip
-    print(f"    {summed / wall:.1f}× faster than the buses summed, {slowest / wall:.1f}× than the slowest bus (acceptance ≥ 10)")
+    print(f"    {summed / wall:.1f}× faster than the buses summed, {slowest / wall:.1f}× than the slowest "
+          "bus (acceptance ≥ 10)")
     middle = sorted(runs, key=lambda r: r.wall)[len(runs) // 2]
     marks = list(middle.phases.items())
-    print("    where the time goes: " + ", ".join(f"{name} {end - (marks[i - 1][1] if i else 0):.2f} s" for i, (name, end) in enumerate(marks)))
+    print("    where the time goes: "
+          + ", ".join(f"{name} {end - (marks[i - 1][1] if i else 0):.2f} s"
+                      for i, (name, end) in enumerate(marks)))
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@ five).
 
 The plans it chooses from: the canonical order of a module's plan —
 
-    inits before the system step · the system step · inits · link/unlink ranges · 21h · 32h/33h · 40h..45h · 46h
+    inits before the system step · the system step · inits · link/unlink ranges · 21h · 32h/33h · 40h..45h ·
+    46h
 
 - the system step: none when the system parameters match, else a 20h of the desired ones, or a 10h where
   those are the factory defaults (each option is tried; the cheapest wins);
@@ -98,7 +99,8 @@ class ReferencePlan:
     bound: float
 
 
-def exact_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, time_limit: float = 600.0) -> ReferencePlan:
+def exact_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *,
+               time_limit: float = 600.0) -> ReferencePlan:
     """The cheapest plan in the canonical order from `actual` (the read-back; `None`: not read) to
     `desired` (`None`: unmanaged), replayed on the device model (AssertionError if it does not reach
     `desired`). `time_limit`: seconds HiGHS may take per system step option (RuntimeError beyond)."""
@@ -111,7 +113,8 @@ def exact_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, tim
     return replace(best, bound=min(plan.bound for plan in plans))
 
 
-def replay(actual: ModuleImage, desired: ModuleImage, messages: Iterable[codec.Message]) -> device.ModuleState:
+def replay(actual: ModuleImage, desired: ModuleImage,
+           messages: Iterable[codec.Message]) -> device.ModuleState:
     """Run `messages` on the device model from the read-back; assert each is accepted, none touches an
     unmanaged program, and the desired system and managed programs result. The final state."""
     state = _start(actual)
@@ -129,10 +132,12 @@ def replay(actual: ModuleImage, desired: ModuleImage, messages: Iterable[codec.M
 def _start(actual: ModuleImage) -> device.ModuleState:
     """The read-back as a module: programs not read hold their defaults (they are never written)."""
     filler = default_program(actual.system)
-    return device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
+    return device.ModuleState(replace(actual, programs=tuple(filler if p is None else p
+                                                             for p in actual.programs)))
 
 
-def _system_steps(actual: ModuleImage, desired: ModuleImage, start: device.ModuleState, cost: LineCost) -> list[codec.Message | None]:
+def _system_steps(actual: ModuleImage, desired: ModuleImage, start: device.ModuleState,
+                  cost: LineCost) -> list[codec.Message | None]:
     """Every system step that gives the desired system parameters: none when they match; else 20h of
     them, and 10h where they are the factory defaults — of steps that leave the same module (on its
     programs as read, and as an init leaves them), the cheapest only."""
@@ -176,7 +181,8 @@ def _parts_message(first: int, last: int, desired: ModuleImage) -> codec.Message
     if first == last:
         program = desired.known(first)
         return codec.WritePartProgram(first, program.P, program.V)
-    return codec.WritePartPrograms(first, tuple((desired.known(n).P, desired.known(n).V) for n in range(first, last + 1)))
+    return codec.WritePartPrograms(first, tuple((desired.known(n).P, desired.known(n).V)
+                                                for n in range(first, last + 1)))
 
 
 class _Segments(NamedTuple):
@@ -210,7 +216,8 @@ class _Programme:
     column of the difference that the constraints tie to that run being drawn (`_segments`).
     """
 
-    def __init__(self, start: device.ModuleState, desired: ModuleImage, step: codec.Message | None, cost: LineCost) -> None:
+    def __init__(self, start: device.ModuleState, desired: ModuleImage, step: codec.Message | None,
+                 cost: LineCost) -> None:
         self.desired, self.step, self.cost = desired, step, cost
         self.address = desired.address
         self.managed = [p is not None for p in desired.programs]
@@ -218,7 +225,8 @@ class _Programme:
         self.wanted = {n: desired.known(n) for n in self.numbers}
         after_step = start if step is None else device.execute(start, step)
         init_all = codec.InitAllPrograms()
-        self.bases = {KEEP: after_step.image.complete(), AFTER: device.execute(after_step, init_all).image.complete()}
+        self.bases = {KEEP: after_step.image.complete(),
+                      AFTER: device.execute(after_step, init_all).image.complete()}
         before = device.execute(start, init_all)
         before = (before if step is None else device.execute(before, step)).image.complete()
         if before != self.bases[AFTER]:
@@ -285,8 +293,10 @@ class _Programme:
                 else:  # what goes on past n is what is on at n+1 and did not start there
                     self.row({on[n]: 1.0, end[n]: -1.0, after: -1.0, start[n + 1]: 1.0}, 0.0, 0.0)
             else:  # starts and ends exactly where `on` changes
-                self.row({on[n]: 1.0, start[n]: -1.0, **({before: -1.0} if before is not None else {})}, -np.inf, 0.0)
-                self.row({on[n]: 1.0, end[n]: -1.0, **({after: -1.0} if after is not None else {})}, -np.inf, 0.0)
+                self.row({on[n]: 1.0, start[n]: -1.0, **({before: -1.0} if before is not None else {})},
+                         -np.inf, 0.0)
+                self.row({on[n]: 1.0, end[n]: -1.0, **({after: -1.0} if after is not None else {})}, -np.inf,
+                         0.0)
                 if before is not None:
                     self.row({start[n]: 1.0, before: 1.0}, -np.inf, 1.0)
                 if after is not None:
@@ -324,11 +334,13 @@ class _Programme:
 
     def _build(self) -> None:
         bases, numbers, wanted = self.bases, self.numbers, self.wanted
-        differs = {kind: {n: {name: getattr(base[n - 1], name) != getattr(wanted[n], name) for name in PROGRAM_FIELDS}
+        differs = {kind: {n: {name: getattr(base[n - 1], name) != getattr(wanted[n], name)
+                              for name in PROGRAM_FIELDS}
                           for n in numbers} for kind, base in bases.items()}  # fmt: skip
         # inits, per side of the system step; the kind of each program: AFTER where a run after covers
         # it, else BEFORE where one before does, else KEEP
-        self.inits = {kind: self._segments(lambda a, b: min(_init_messages(a, b), key=self.price), separate=False)
+        self.inits = {kind: self._segments(lambda a, b: min(_init_messages(a, b), key=self.price),
+                                           separate=False)
                       for kind in (BEFORE, AFTER) if kind in bases}  # fmt: skip
         kind_of: dict[str, dict[int, int]] = {KEEP: {}, AFTER: self.inits[AFTER].on}
         for n in numbers:
@@ -362,7 +374,8 @@ class _Programme:
         self.counts: dict[str, int] = {}
         for name in PROGRAM_FIELDS:
             header, byte = self._item_prices(name)
-            self.items[name] = {n: self.column(byte * self._item_bytes(name, n, getattr(wanted[n], name))) for n in numbers}
+            self.items[name] = {n: self.column(byte * self._item_bytes(name, n, getattr(wanted[n], name)))
+                                for n in numbers}
             count = self.counts[name] = self.column(header, upper=math.ceil(PROGRAM_COUNT / CAPACITY[name]))
             self.row({**dict.fromkeys(self.items[name].values(), 1.0), count: -CAPACITY[name]}, -np.inf, 0.0)
             for item in self.items[name].values():  # an item needs a message (implied, but not by the LP)
@@ -375,7 +388,8 @@ class _Programme:
                 if left(n, name):
                     self.row({**left(n, name), **writers}, -np.inf, 0.0)
         self.ranges: dict[tuple[bool, int], _Segments] = {}
-        if any(left(n, "A") for n in numbers):  # else every address is right, whatever the inits: no range helps
+        # else every address is right, whatever the inits: no range helps
+        if any(left(n, "A") for n in numbers):
             self._addresses(left)
 
     def _addresses(self, left: Callable[[int, str], dict[int, float]]) -> None:
@@ -395,14 +409,17 @@ class _Programme:
             # what n shows, one of three: the next program (a link range goes on past n), 0 (a link
             # range ends at n, or an unlink range covers it), or, under no range, its base's address
             shows = {
-                n + 1: _add({l1.on[n]: 1.0, l1.end[n]: -1.0, u2.on[n]: -1.0}, {l2.on[n]: 1.0, l2.end[n]: -1.0}),
+                n + 1: _add(
+                    {l1.on[n]: 1.0, l1.end[n]: -1.0, u2.on[n]: -1.0}, {l2.on[n]: 1.0, l2.end[n]: -1.0}
+                ),
                 0: _add({l1.end[n]: 1.0, u2.on[n]: 1.0, u1.on[n]: 1.0, l2.on[n]: -1.0}, {l2.end[n]: 1.0}),
             }
             target = self.wanted[n].A
             wrong = self.column(0.0, integral=False)
             shown_wrong = _add(*(terms for value, terms in shows.items() if value != target), {wrong: -1.0})
             self.row(shown_wrong, -np.inf, 0.0)
-            wrong_bases = {table[n]: 1.0 for kind, table in self.kind_of.items() if self.bases[kind][n - 1].A != target}
+            wrong_bases = {table[n]: 1.0 for kind, table in self.kind_of.items()
+                           if self.bases[kind][n - 1].A != target}
             if wrong_bases:
                 self.row(_add(shown_wrong, wrong_bases, {l1.on[n]: -1.0, u1.on[n]: -1.0}), -np.inf, 0.0)
             self.row({wrong: 1.0, self.whole[n]: -1.0, self.items["A"][n]: -1.0}, -np.inf, 0.0)
@@ -419,17 +436,21 @@ class _Programme:
                 data.append(value)
         matrix = coo_array((data, (rows, cols)), shape=(len(self.rows), size)).tocsr()
         result = milp(
-            np.array(self.costs), integrality=np.array(self.integral), bounds=Bounds(np.zeros(size), np.array(self.upper)),
+            np.array(self.costs), integrality=np.array(self.integral),
+                      bounds=Bounds(np.zeros(size), np.array(self.upper)),
             constraints=LinearConstraint(matrix, [r[1] for r in self.rows], [r[2] for r in self.rows]),
             options={"time_limit": time_limit, "mip_rel_gap": 0.0},
         )  # fmt: skip
         if result.status != 0:
             raise RuntimeError(f"module {self.address}: HiGHS did not prove an optimum: {result.message}")
         messages = self._messages(result.x)
-        plan = ReferencePlan(tuple(messages), math.fsum(map(self.price, messages)), self.fixed + float(result.fun))
+        plan = ReferencePlan(tuple(messages), math.fsum(map(self.price, messages)), self.fixed
+                             + float(result.fun))
         # the programme prices every message exactly but for a stx checksum of 7Eh in 40h..46h
-        slack = 0.0 if not self.cost.framing.stuffs else self.cost.line.char_time * sum(m.ID >= codec.WritePositions.ID for m in messages)
-        assert plan.bound - EPSILON <= plan.bus_time <= plan.bound + slack + EPSILON, (plan.bound, plan.bus_time)
+        slack = (0.0 if not self.cost.framing.stuffs
+                 else self.cost.line.char_time * sum(m.ID >= codec.WritePositions.ID for m in messages))
+        assert plan.bound - EPSILON <= plan.bus_time <= plan.bound + slack + EPSILON, (plan.bound,
+                                                                                       plan.bus_time)
         return plan
 
     def _messages(self, x: np.ndarray) -> list[codec.Message]:
@@ -441,9 +462,11 @@ class _Programme:
             for link in (True, False):
                 out += self.ranges[(link, layer)].chosen(x) if self.ranges else []
         out += [codec.WriteProgram(n, self.wanted[n]) for n, j in self.whole.items() if x[j] > 0.5]
-        out += [_parts_message(first, last, self.desired) for (first, last), j in sorted(self.parts.items()) if x[j] > 0.5]
+        out += [_parts_message(first, last, self.desired)
+                for (first, last), j in sorted(self.parts.items()) if x[j] > 0.5]
         for name in PROGRAM_FIELDS:
-            out += self._grouped(name, [(n, getattr(self.wanted[n], name)) for n, j in self.items[name].items() if x[j] > 0.5])
+            out += self._grouped(name, [(n, getattr(self.wanted[n], name))
+                                        for n, j in self.items[name].items() if x[j] > 0.5])
         return out
 
     def _grouped(self, name: str, items: list[tuple[int, int]]) -> list[codec.Message]:

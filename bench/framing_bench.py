@@ -49,7 +49,8 @@ def main() -> None:
         good = frame * (size // len(frame))
         clean = noise.replace(start, bytes(1))
         print(f"{name:6} garbage without start codes {throughput(name, clean):7.1f} MB/s   "
-              f"random garbage {throughput(name, noise):7.1f} MB/s   good frames {throughput(name, good):6.1f} MB/s")  # fmt: skip
+              f"random garbage {throughput(name, noise):7.1f} MB/s   good frames "
+              f"{throughput(name, good):6.1f} MB/s")  # fmt: skip
 
 
 if __name__ == "__main__":

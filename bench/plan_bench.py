@@ -15,15 +15,14 @@ plants — N modules × 64 programs, fully managed, each with one of the scenari
 ("mixed"), or each commissioned or changed a lot ("heavy") — from images saved as JSON, and
 prints the total CPU time (acceptance: under 1 s for 30 modules).
 
-The lower bound is the optimum of a relaxation R: a problem every plan maps into at no
-more than its bus time, solved exactly, or bounded from below where the search below stops.
-A message of n bytes costs `exchange + byte × n` (`Prices`, measured on the line's own
-`LineCost`; exact but for stx stuffing, which only adds bytes: R counts the stuffed bytes
-of the values it writes, never a stuffed checksum). Every plan has the same system step
-(a 10h for factory parameters, else a 20h; none if they match). Take any plan and look at each managed program after its last init
-(before or after the system step, or none: the bases and difference masks of
-`PlanningProblem`, predicted on the device model): every field that still differs from the plant
-file has a last writer after that init, and R is what those last writers must cost:
+The lower bound is the optimum of a relaxation R: a problem every plan maps into at no more than its bus time,
+solved exactly, or bounded from below where the search below stops. A message of n bytes costs `exchange +
+byte × n` (`Prices`, measured on the line's own `LineCost`; exact but for stx stuffing, which only adds bytes:
+R counts the stuffed bytes of the values it writes, never a stuffed checksum). Every plan has the same system
+step (a 10h for factory parameters, else a 20h; none if they match). Take any plan and look at each managed
+program after its last init (before or after the system step, or none: the bases and difference masks of
+`PlanningProblem`, predicted on the device model): every field that still differs from the plant file has a
+last writer after that init, and R is what those last writers must cost:
 
 - inits: the programs whose last init comes after the system step form runs, each at least
   one 11h..14h; those initialised before it (they may also be initialised after) form runs
@@ -119,7 +118,8 @@ def recipe_program(rnd: random.Random, number: int, system=SYSTEM) -> Program:
 
 
 def plant(rnd: random.Random, address: int = 1) -> ModuleImage:
-    programs = [recipe_program(rnd, n) if n <= USED else default_program(SYSTEM) for n in range(1, PROGRAM_COUNT + 1)]
+    programs = [recipe_program(rnd, n) if n <= USED else default_program(SYSTEM)
+                for n in range(1, PROGRAM_COUNT + 1)]
     return ModuleImage(address, SYSTEM, tuple(programs))
 
 
@@ -145,7 +145,8 @@ def teach_in_revert(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, 
     desired = plant(rnd, address)
     p = desired.programs
     taught = {
-        n: replace(p[n - 1], P=p[n - 1].P + rnd.choice([-15, -5, 5, 15])) for n in rnd.sample(range(1, USED + 1), 12)
+        n: replace(p[n - 1], P=p[n - 1].P + rnd.choice([-15, -5, 5, 15]))
+              for n in rnd.sample(range(1, USED + 1), 12)
     }
     return changed(desired, taught), desired
 
@@ -184,19 +185,22 @@ def factory_reset(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, Mo
 
 def full_rewrite(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
     """A new recipe on all 64 programs over an old one."""
-    actual, desired = (ModuleImage(address, SYSTEM, tuple(recipe_program(rnd, n) for n in range(1, PROGRAM_COUNT + 1)))
+    actual, desired = (ModuleImage(address, SYSTEM,
+                                   tuple(recipe_program(rnd, n) for n in range(1, PROGRAM_COUNT + 1)))
                        for _ in range(2))  # fmt: skip
     return actual, desired
 
 
 def large_mixed(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
-    """Narrower speeds, a new recipe on 20 programs, dwell and outputs, a rechain, a cleanup, kept programs."""
+    """Narrower speeds, a new recipe on 20 programs, dwell and outputs, a rechain, a cleanup, kept
+    programs."""
     actual = plant(rnd, address)
     actual = changed(actual, {n: recipe_program(rnd, n) for n in range(50, PROGRAM_COUNT + 1)})
     system = replace(SYSTEM, S4=400, S5=40)
     programs = [replace(p, V=max(min(p.V, system.S4), system.S5)) for p in actual.programs]
     for n in rnd.sample(range(1, USED + 1), 20):
-        programs[n - 1] = replace(programs[n - 1], P=rnd.randrange(300, system.S1, 5), V=rnd.randrange(50, 400, 10))
+        programs[n - 1] = replace(programs[n - 1], P=rnd.randrange(300, system.S1, 5),
+                                  V=rnd.randrange(50, 400, 10))
     for n in rnd.sample(range(1, USED + 1), 10):
         programs[n - 1] = replace(programs[n - 1], T=rnd.choice([0, 15, 30]), F1=rnd.choice([0, 1020]))
     for n in range(21, 31):
@@ -210,10 +214,12 @@ def large_mixed(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, Modu
 
 
 def full_program(rnd: random.Random, number: int, system=SYSTEM) -> Program:
-    """A program that differs from the defaults in every field: relative speed, dwell and both outputs set, chains of four."""
+    """A program that differs from the defaults in every field: relative speed, dwell and both outputs set,
+    chains of four."""
     return Program(
         P=rnd.randrange(300, system.S1, 5), V=rnd.randrange(max(system.S5, 50), system.S4, 10),
-        Vr=rnd.choice([-1, 1]) * rnd.randrange(5, 100, 5), T=rnd.randrange(1, 100), F1=rnd.choice([20, 1010, 1050]),
+        Vr=rnd.choice([-1, 1]) * rnd.randrange(5, 100, 5), T=rnd.randrange(1, 100),
+                   F1=rnd.choice([20, 1010, 1050]),
         F2=rnd.choice([30, 1050]), A=number + 1 if number % 4 else 0,
     )  # fmt: skip
 
@@ -236,15 +242,19 @@ def full_rewrite_every_field(rnd: random.Random, address: int = 1) -> tuple[Modu
 def half_rewrite(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
     """32 programs, anywhere, rewritten in every field."""
     actual = full_module(rnd, address)
-    return actual, changed(actual, {n: full_program(rnd, n) for n in rnd.sample(range(1, PROGRAM_COUNT + 1), 32)})
+    return actual, changed(actual, {n: full_program(rnd, n)
+                                    for n in rnd.sample(range(1, PROGRAM_COUNT + 1), 32)})
 
 
 def narrower_speeds(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, ModuleImage]:
-    """S4 and S5 narrowed: the module clamps the speeds outside, and the plant file sets six speeds otherwise."""
+    """S4 and S5 narrowed: the module clamps the speeds outside, and the plant file sets six speeds
+    otherwise."""
     actual = plant(rnd, address)
     s4, s5 = 300, 60
-    programs: dict[int, Program | None] = {n: replace(p, V=max(min(p.V, s4), s5)) for n, p in enumerate(actual.programs, start=1)}
-    programs |= {n: replace(actual.programs[n - 1], V=rnd.randrange(100, s4, 10)) for n in rnd.sample(range(1, USED + 1), 6)}
+    programs: dict[int, Program | None] = {n: replace(p, V=max(min(p.V, s4), s5))
+                                           for n, p in enumerate(actual.programs, start=1)}
+    programs |= {n: replace(actual.programs[n - 1], V=rnd.randrange(100, s4, 10))
+                 for n in rnd.sample(range(1, USED + 1), 6)}
     return actual, changed(actual, programs, S4=s4, S5=s5)
 
 
@@ -323,9 +333,12 @@ RANGE_MOVES = {
                (NO_RANGE, ZERO, 1, False, False), (UNLINK, ZERO, 1, False, True)),
     LINK: ((LINK, NEXT, 0, True, True), (NO_RANGE, ZERO, 0, True, False),
            (LINK_UNLINK, ZERO, 1, False, True), (LINK, ZERO, 1, False, False)),
-    LINK_UNLINK: ((LINK_UNLINK, ZERO, 0, True, True), (LINK, ZERO, 0, True, False), (NO_RANGE, ZERO, 0, True, False)),
-    UNLINK: ((UNLINK, ZERO, 0, True, True), (NO_RANGE, ZERO, 0, True, False), (UNLINK_LINK, NEXT, 1, False, True)),
-    UNLINK_LINK: ((UNLINK_LINK, NEXT, 0, True, True), (UNLINK, ZERO, 0, True, False), (NO_RANGE, ZERO, 0, True, False)),
+    LINK_UNLINK: ((LINK_UNLINK, ZERO, 0, True, True), (LINK, ZERO, 0, True, False),
+                  (NO_RANGE, ZERO, 0, True, False)),
+    UNLINK: ((UNLINK, ZERO, 0, True, True), (NO_RANGE, ZERO, 0, True, False),
+             (UNLINK_LINK, NEXT, 1, False, True)),
+    UNLINK_LINK: ((UNLINK_LINK, NEXT, 0, True, True), (UNLINK, ZERO, 0, True, False),
+                  (NO_RANGE, ZERO, 0, True, False)),
 }  # fmt: skip
 
 
@@ -340,12 +353,14 @@ class Relaxation:
     def __init__(self, actual: ModuleImage, desired: ModuleImage, cost: LineCost) -> None:
         problem = PlanningProblem.build(actual, desired, cost)
         self.prices = prices = problem.prices
-        self.fixed = 0.0 if problem.system_step is None else cost.message_time(problem.address, problem.system_step)
+        self.fixed = 0.0 if problem.system_step is None else cost.message_time(problem.address,
+                                                                               problem.system_step)
         self.kinds = problem.kinds
         self.managed = problem.managed
         stx = cost.framing.name == "stx"
         self.stuffing = [
-            {name: stuffed(value) * prices.byte if stx else 0.0 for name, value in zip(PROGRAM_FIELDS, want.values())}
+            {name: stuffed(value) * prices.byte if stx else 0.0
+             for name, value in zip(PROGRAM_FIELDS, want.values())}
             if want is not None else None
             for want in desired.programs
         ]  # fmt: skip
@@ -373,7 +388,11 @@ class Relaxation:
         two = INIT_BEFORE in self.kinds
         side_moves = {
             OUT: ((OUT, 0.0, False), (ONE, prices.init, False)),
-            ONE: ((OUT, 0.0, False), (MORE, prices.init_range - prices.init, True), (ONE, prices.init, False)),
+            ONE: (
+                (OUT, 0.0, False),
+                (MORE, prices.init_range - prices.init, True),
+                (ONE, prices.init, False),
+            ),
             MORE: ((OUT, 0.0, False), (MORE, 0.0, True), (ONE, prices.init, False)),
         }
         self.init_moves = {}
@@ -417,7 +436,8 @@ class Relaxation:
                     if not exact:
                         row.append(((min(items, whole) + extra, ()),))
                     else:
-                        uses = tuple((not right) if name == "A" else bool(mask & FIELD_BIT[name]) and not (in_run and name in PV)
+                        uses = tuple((not right) if name == "A" else bool(mask & FIELD_BIT[name])
+                                     and not (in_run and name in PV)
                                      for name in exact)  # fmt: skip
                         row.append(((items + extra, uses), (whole + extra, (False,) * len(exact))))
                 rows.append(row)
@@ -432,7 +452,9 @@ class Relaxation:
         cheaper than `limit`."""
         prices = self.prices
         head, per, link = prices.parts_header, prices.parts_item, prices.link
-        price = {name: self.item[name] + shares.get(name, 0.0) if name in opened else INF for name in CHANNELS}
+        price = {
+            name: self.item[name] + shares.get(name, 0.0) if name in opened else INF for name in CHANNELS
+        }
         for name in exact:
             price[name] = self.item[name]
         capacity, header = [CAPACITY[name] for name in exact], [self.header[name] for name in exact]
@@ -482,7 +504,9 @@ class Relaxation:
                 kind = self.kind(sides)
                 row = options[i][kind][run > 0]
                 right = self.address_ok[i][kind]
-                for new_rng, seen, opens, same, goes_on in RANGE_MOVES[rng] if self.ranges_matter else RANGE_MOVES[0][:1]:
+                for new_rng, seen, opens, same, goes_on in (
+                    RANGE_MOVES[rng] if self.ranges_matter else RANGE_MOVES[0][:1]
+                ):
                     if new_rng != NO_RANGE and not ranges_on:
                         continue
                     if seen == UNCOVERED or kind == KEEP:
@@ -496,7 +520,8 @@ class Relaxation:
                             total, new_count = c + opens * link + cost, count
                             if any(uses):
                                 total += sum(h for h, n, u in zip(header, count, uses) if u and n == 0)
-                                new_count = tuple((n + 1) % m if u else n for n, m, u in zip(count, capacity, uses))
+                                new_count = tuple((n + 1) % m if u else n
+                                                  for n, m, u in zip(count, capacity, uses))
                             key = (sides, run, new_rng, how if goes_on else FREE, new_count)
                             if total < cut and total < done.get(key, INF):
                                 done[key], back_done[key] = total, (state, ok)
@@ -523,7 +548,8 @@ class Relaxation:
                 items = [name for name in ITEM_FIELDS if mask & FIELD_BIT[name] and not (run and name in PV)]
                 items += [] if ok else ["A"]
                 stuffing = self.stuffing[i]
-                if sum(price[name] + stuffing.get(name, 0.0) for name in items) <= self.prices.program + sum(stuffing.values()):
+                if (sum(price[name] + stuffing.get(name, 0.0) for name in items) <= self.prices.program
+                    + sum(stuffing.values())):
                     for name in items:
                         counts[name] += 1
             state = back_init[back_run[before]]
@@ -590,11 +616,13 @@ class Relaxation:
         alone = {}
         for name in sorted(order, key=lambda name: capacity[name] * top[name] - counts[name]):
             best, alone[name] = self._exact((name,), opened, vectors, low, best)
-        for names in itertools.combinations(sorted(order, key=alone.__getitem__, reverse=True), EXACT_TOGETHER):
+        for names in itertools.combinations(sorted(order, key=alone.__getitem__, reverse=True),
+                                            EXACT_TOGETHER):
             best, _ = self._exact(names, opened, vectors, low, best)
         return best, [low[k] for k in vectors if low[k] < best]
 
-    def _exact(self, names: tuple[str, ...], opened: frozenset, vectors: list, low: dict, best: float) -> tuple[float, float]:
+    def _exact(self, names: tuple[str, ...], opened: frozenset, vectors: list, low: dict,
+               best: float) -> tuple[float, float]:
         """Raise `low` of the vectors still below `best` by R with the channels `names` counted
         exactly; the best value found and the bound (-INF when nothing was left to bound)."""
         order = sorted(opened)
@@ -608,7 +636,8 @@ class Relaxation:
         for k in live:
             low[k] = max(low[k], value + sum(k[j] * head[other] for j, other in others))
         if n is not None:
-            best = min(best, value + sum(max(1, ceil(n[other] / capacity[other])) * head[other] for _, other in others))
+            best = min(best, value
+                       + sum(max(1, ceil(n[other] / capacity[other])) * head[other] for _, other in others))
         return best, value
 
 
@@ -642,8 +671,10 @@ def exact_table(profiles: list[str], seeds: int, with_bound: bool) -> list[Compa
     from exact_reference import exact_plan  # scipy: the bench extra, needed here only
 
     scenarios = SCENARIOS | MORE_SCENARIOS
-    print(f"{'family':<16} {'scenario':<29} {'profile':<18} {'plan ms':>9} {'msgs':>4} {'exact ms':>10} {'msgs':>4} "
-          f"{'plan/exact':>10} {'naive ms':>9} {'cpu ms':>7} {'exact s':>7}" + (f" {'R bound ms':>10}" if with_bound else ""))  # fmt: skip
+    print(f"{'family':<16} {'scenario':<29} {'profile':<18} {'plan ms':>9} {'msgs':>4} {'exact ms':>10} "
+          f"{'msgs':>4} "
+          f"{'plan/exact':>10} {'naive ms':>9} {'cpu ms':>7} {'exact s':>7}"
+          + (f" {'R bound ms':>10}" if with_bound else ""))  # fmt: skip
     compared = []
     for profile in profiles:
         cost = line_cost(profile)
@@ -660,10 +691,14 @@ def exact_table(profiles: list[str], seeds: int, with_bound: bool) -> list[Compa
                 case = Compared(family, label, profile, actual, plan, reference)
                 compared.append(case)
                 mark = "+" if reference.bus_time > reference.bound + 1e-9 else " "
-                bound = f" {Relaxation(actual, desired, cost).bound(plan.bus_time)[0] * 1e3:10.1f}" if with_bound else ""
-                print(f"{family:<16} {label:<29} {profile:<18} {plan.bus_time * 1e3:9.1f} {len(plan.steps):4d} "
-                      f"{reference.bus_time * 1e3:9.1f}{mark} {len(reference.messages):4d} {case.ratio:10.4f} "
-                      f"{plan.naive_bus_time * 1e3:9.1f} {cpu * 1e3:7.1f} {exact_cpu:7.1f}{bound}", flush=True)  # fmt: skip
+                bound = (f" {Relaxation(actual, desired, cost).bound(plan.bus_time)[0] * 1e3:10.1f}"
+                         if with_bound else "")
+                print(f"{family:<16} {label:<29} {profile:<18} {plan.bus_time * 1e3:9.1f} "
+                      f"{len(plan.steps):4d} "
+                      f"{reference.bus_time * 1e3:9.1f}{mark} {len(reference.messages):4d} "
+                      f"{case.ratio:10.4f} "
+                      f"{plan.naive_bus_time * 1e3:9.1f} {cpu * 1e3:7.1f} {exact_cpu:7.1f}{bound}",
+                      flush=True)  # fmt: skip
     return compared
 
 
@@ -677,7 +712,8 @@ def exact_summary(compared: list[Compared]) -> None:
     for (family, profile), cases in groups.items():
         total = sum(c.plan.bus_time for c in cases) / (sum(c.reference.bus_time for c in cases) or 1.0)
         worst = max(cases, key=lambda c: c.ratio)
-        above = f"{worst.ratio:.4f} ({worst.scenario})" if worst.ratio > 1 + 1e-9 else "every plan at the optimum"
+        above = (f"{worst.ratio:.4f} ({worst.scenario})" if worst.ratio > 1 + 1e-9
+                 else "every plan at the optimum")
         print(f"{family:<16} {profile:<18} {len(cases):9d} {total:16.4f}  {above}")
     worst = max(compared, key=lambda c: c.ratio)
     print(f"\nworst: {worst.scenario} on {worst.profile}, plan/exact {worst.ratio:.4f}")
@@ -687,7 +723,8 @@ def exact_summary(compared: list[Compared]) -> None:
         total = sum(cost.message_time(worst.actual.address, m) for m in messages)
         print(f"  {name}: {len(messages)} messages, {total * 1e3:.1f} ms")
         for message in messages:
-            print(f"    {cost.message_time(worst.actual.address, message) * 1e3:7.1f} ms  {summarise(message, worst.actual.system)}")
+            print(f"    {cost.message_time(worst.actual.address, message) * 1e3:7.1f} ms  "
+                  f"{summarise(message, worst.actual.system)}")
 
 
 def plant_run(profile: str, modules: int, scenarios: list[str], label: str) -> None:
@@ -698,13 +735,17 @@ def plant_run(profile: str, modules: int, scenarios: list[str], label: str) -> N
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "images.json"
         path.write_text(json.dumps([[a.to_json(), d.to_json()] for a, d in cases]))
-        saved = [(ModuleImage.from_json(a), ModuleImage.from_json(d)) for a, d in json.loads(path.read_text())]
+        saved = [
+            (ModuleImage.from_json(a), ModuleImage.from_json(d)) for a, d in json.loads(path.read_text())
+        ]
     cost = line_cost(profile)
     start = time.process_time()
     plans = [plan_module(actual, desired, cost) for actual, desired in saved]
     cpu = time.process_time() - start
-    print(f"{label} plant, {modules} modules × {PROGRAM_COUNT} programs, {profile}: planning CPU {cpu * 1e3:.0f} ms, "
-          f"bus time {sum(p.bus_time for p in plans):.2f} s (naive {sum(p.naive_bus_time for p in plans):.2f} s), "
+    print(f"{label} plant, {modules} modules × {PROGRAM_COUNT} programs, {profile}: planning CPU "
+          f"{cpu * 1e3:.0f} ms, "
+          f"bus time {sum(p.bus_time for p in plans):.2f} s (naive "
+          f"{sum(p.naive_bus_time for p in plans):.2f} s), "
           f"{sum(len(p.steps) for p in plans)} messages")  # fmt: skip
 
 
@@ -712,7 +753,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--profile", action="append", choices=list(PROFILES))
     parser.add_argument("--modules", type=int, default=30)
-    parser.add_argument("--seeds", type=int, default=1, help="seeds of each scenario compared with the exact optimum")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="seeds of each scenario compared with the exact optimum")
     parser.add_argument("--bound", action="store_true", help="show the lower bound R too (slow)")
     args = parser.parse_args()
     exact_summary(exact_table(args.profile or list(EXACT_PROFILES), args.seeds, args.bound))

@@ -70,7 +70,8 @@ BUSES, MODULES = 8, 30
 SYSTEM = replace(DEFAULT_SYSTEM, S1=2000, S4=500)
 PROGRAM = "{{position: {P:.3f}, speed: {V:.3f}, dwell: {T:.1f}, relative_speed: {Vr:.3f}}}"
 FULL_PROGRAM = ("{{position: {P:.3f}, speed: {V:.3f}, dwell: {T:.1f}, relative_speed: {Vr:.3f}, "
-                "f1: {{action: set, distance: 0.010}}, f2: {{action: reset, distance: 0.050}}, next: {next}}}")
+                "f1: {{action: set, distance: 0.010}}, f2: {{action: reset, distance: 0.050}}, "
+                "next: {next}}}")
 
 
 def write_plant(folder: Path, program: str = PROGRAM) -> tuple[Path, Path]:
@@ -81,13 +82,17 @@ def write_plant(folder: Path, program: str = PROGRAM) -> tuple[Path, Path]:
         text.append(f"  - name: bus{b}\n    port: socket://127.0.0.1:{7000 + b}\n    modules:\n")
         for address in range(1, MODULES + 1):
             programs = "".join(
-                f"          {n}: " + program.format(P=rnd.randrange(100, 1900) / 1000, V=rnd.randrange(20, 480) / 1000,
-                                                    T=rnd.randrange(0, 50) / 10, Vr=rnd.randrange(-50, 50) / 1000,
+                f"          {n}: " + program.format(P=rnd.randrange(100, 1900) / 1000,
+                                                    V=rnd.randrange(20, 480) / 1000,
+                                                    T=rnd.randrange(0, 50) / 10,
+                                                    Vr=rnd.randrange(-50, 50) / 1000,
                                                     next=n % 64 + 1) + "\n"
                 for n in PROGRAM_NUMBERS
             )
-            text.append(f"      - address: {address}\n        name: b{b}m{address}\n        unmanaged_programs: reset\n"
-                        f"        system: {{upper_reversing_point: 2.000, max_speed: 0.500}}\n        programs:\n{programs}")
+            text.append(f"      - address: {address}\n        name: b{b}m{address}\n        "
+                        "unmanaged_programs: reset\n"
+                        f"        system: {{upper_reversing_point: 2.000, max_speed: 0.500}}\n        "
+                        f"programs:\n{programs}")
             held = tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(0, 50))
                          for _ in PROGRAM_NUMBERS)
             images.append({"bus": f"bus{b}", **ModuleImage(address, SYSTEM, held).to_json()})
@@ -143,7 +148,8 @@ def recipe(rnd: random.Random) -> tuple[Program, ...]:
     def sometimes(share: float, value: int) -> int:
         return value if rnd.random() < share else 0
 
-    return tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), Vr=sometimes(0.25, rnd.randrange(1, 50)),
+    return tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480),
+                         Vr=sometimes(0.25, rnd.randrange(1, 50)),
                          T=sometimes(0.5, rnd.randrange(1, 50)), F1=sometimes(1 / 3, rnd.randrange(1, 2000)),
                          F2=sometimes(1 / 3, rnd.randrange(1, 2000)), A=a)
                  for a in chained(rnd))  # fmt: skip
@@ -204,18 +210,23 @@ ONE_PROFILE_BUSES = 32
 def write_one_profile_plant(folder: Path) -> tuple[Path, Path, Path]:
     """A plant of 32 × 30 modules taking one profile, factory images, images of programs of their own."""
     rnd = random.Random(2)
-    programs = "".join(f"      {n}: " + PROGRAM.format(P=rnd.randrange(100, 1900) / 1000, V=rnd.randrange(20, 480) / 1000,
+    programs = "".join(f"      {n}: "
+                       + PROGRAM.format(P=rnd.randrange(100, 1900) / 1000, V=rnd.randrange(20, 480) / 1000,
                                                       T=rnd.randrange(0, 50) / 10, Vr=0) + "\n"
                        for n in PROGRAM_NUMBERS)  # fmt: skip
     text = ["plant: one-profile\nprofiles:\n  line:\n    unmanaged_programs: reset\n",
-            f"    system: {{upper_reversing_point: 2.000, max_speed: 0.500}}\n    programs:\n{programs}buses:\n"]
+            f"    system: {{upper_reversing_point: 2.000, max_speed: 0.500}}\n    "
+            f"programs:\n{programs}buses:\n"]
     factory, own = [], []
     for b in range(ONE_PROFILE_BUSES):
         text.append(f"  - name: bus{b}\n    port: socket://127.0.0.1:{7000 + b}\n    modules:\n")
         for address in range(1, MODULES + 1):
             text.append(f"      - {{address: {address}, name: b{b}m{address}, profiles: line}}\n")
             factory.append({"bus": f"bus{b}", **ModuleImage.factory(address).to_json()})
-            held = tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(0, 50)) for _ in PROGRAM_NUMBERS)
+            held = tuple(
+                Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(0, 50))
+                for _ in PROGRAM_NUMBERS
+            )
             own.append({"bus": f"bus{b}", **replace(ModuleImage.factory(address), programs=held).to_json()})
     plant, commissioning, drifted = folder / "one-profile.yaml", folder / "factory.json", folder / "own.json"
     plant.write_text("".join(text))
@@ -252,7 +263,9 @@ def run_process(command: list[str], ok: tuple[int, ...] = (0,)) -> Run:
         measured = subprocess.run([sys.executable, "-c", _MEASURE, str(out), str(err), *command],
                                   check=True, capture_output=True, text=True)
         wall, cpu, rss_kib, code = json.loads(measured.stdout)
-        said = (err.read_bytes()[:4000] or out.read_bytes()[:4000]).decode(errors="replace").partition("\n")[0]
+        said = (
+            (err.read_bytes()[:4000] or out.read_bytes()[:4000]).decode(errors="replace").partition("\n")[0]
+        )
     if code not in ok:
         sys.exit(f"{' '.join(command)} ended with {code}: {said}")
     return Run(wall, cpu, rss_kib / 1024, said)
@@ -260,7 +273,8 @@ def run_process(command: list[str], ok: tuple[int, ...] = (0,)) -> Run:
 
 def median_run(command: list[str], runs: int, ok: tuple[int, ...] = (0,)) -> Run:
     results = [run_process(command, ok) for _ in range(runs)]
-    return Run(*(statistics.median(getattr(r, f) for r in results) for f in ("wall", "cpu", "rss_mb")), results[0].said)
+    return Run(*(statistics.median(getattr(r, f) for r in results) for f in ("wall", "cpu", "rss_mb")),
+               results[0].said)
 
 
 def timed(run: Callable[[], object]) -> tuple[float, object]:
@@ -296,12 +310,16 @@ def worst_files(folder: Path) -> dict[str, Path]:
     one = "buses: [{name: a, port: emulator://a, modules: [{address: 1, name: m}]}]\n"
     texts = {
         f"{MAX_NODES:,} one-character list items": "plant: x\nbuses: [" + "a, " * MAX_NODES + "]\n",
-        f"{MAX_PART_NODES:,} one-character list items": "plant: x\nbuses: [" + "a, " * (MAX_PART_NODES - 10) + "]\n",
+        f"{MAX_PART_NODES:,} one-character list items": "plant: x\nbuses: [" + "a, " * (MAX_PART_NODES - 10)
+             + "]\n",
         f"{profiles} profiles of {keys:,} keys 'on'": "plant: x\nprofiles:\n"
-        + "".join(f"  p{p}:\n" + "".join(f"    k{k}: on\n" for k in range(keys)) for p in range(profiles)) + one,
+        + "".join(f"  p{p}:\n" + "".join(f"    k{k}: on\n" for k in range(keys)) for p in range(profiles))
+             + one,
         f"{profiles} profiles of {keys:,} keys, all different": "plant: x\nprofiles:\n"
-        + "".join(f"  p{p}:\n" + "".join(f"    k{p}_{k}: v{p}_{k}\n" for k in range(keys)) for p in range(profiles)) + one,
-        "the largest plant with every speed out of range": largest.read_text().replace("speed: 0.", "speed: 9."),
+        + "".join(f"  p{p}:\n" + "".join(f"    k{p}_{k}: v{p}_{k}\n" for k in range(keys))
+                  for p in range(profiles)) + one,
+        "the largest plant with every speed out of range": largest.read_text().replace("speed: 0.",
+                                                                                       "speed: 9."),
         "the largest plant with a syntax error at its end": largest.read_text() + "  oops\n",
     }
     files = {"the largest valid plant (f1, f2, next on every program)": largest}
@@ -316,22 +334,27 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--keep", type=Path, help="write the files into this folder and keep them")
     parser.add_argument("--worst", action="store_true", help="also validate files at the plant file's limits")
-    parser.add_argument("--one-profile", action="store_true", help="also plan 32 × 30 modules that take one profile")
+    parser.add_argument("--one-profile", action="store_true",
+                        help="also plan 32 × 30 modules that take one profile")
     parser.add_argument("--mixes", action="store_true", help="also plan every change mix (MIXES)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as temporary:
         folder = args.keep or Path(temporary)
         folder.mkdir(parents=True, exist_ok=True)
         plant, actual = write_plant(folder)
-        print(f"{BUSES} buses × {MODULES} modules, 64 programs each: plant file {plant.stat().st_size / 1e6:.2f} MB, "
+        print(f"{BUSES} buses × {MODULES} modules, 64 programs each: plant file "
+              f"{plant.stat().st_size / 1e6:.2f} MB, "
               f"images {actual.stat().st_size / 1e6:.2f} MB; median of {args.runs} runs")
-        compileall.compile_dir(Path(api.__file__).parents[1], quiet=1)  # the tool as installed (module docstring)
+        # the tool as installed (module docstring)
+        compileall.compile_dir(Path(api.__file__).parents[1], quiet=1)
         prc3cfg = [sys.executable, "-m", "prc3cfg"]
         plan = [*prc3cfg, "plan", str(plant), "--actual", str(actual)]
-        script = Path(sys.executable).with_name("prc3cfg")  # what a user runs: the script pip installed beside python
+        # what a user runs: the script pip installed beside python
+        script = Path(sys.executable).with_name("prc3cfg")
         commands = {"prc3cfg --help": [str(script), "--help"] if script.exists() else [*prc3cfg, "--help"],
                     "validate": [*prc3cfg, "validate", str(plant)], "plan --actual": plan,
-                    "plan --actual --json": [*plan, "--json"], "plan --actual --markdown": [*plan, "--markdown"]}
+                    "plan --actual --json": [*plan, "--json"],
+                    "plan --actual --markdown": [*plan, "--markdown"]}
         for name, command in commands.items():
             run = median_run(command, args.runs)
             print(f"  {name:<26} {run.wall:6.2f} s wall  {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS")
@@ -341,24 +364,29 @@ def main() -> None:
         for name in parts[0]:
             print(f"    {name:<24} {statistics.median(p[name] for p in parts):6.2f} s")
         if args.mixes:
-            print(f"change mixes, {BUSES} × {MODULES} modules: plan --actual in a fresh process, and planning alone in "
+            print(f"change mixes, {BUSES} × {MODULES} modules: plan --actual in a fresh process, and "
+                  "planning alone in "
                   f"this one (issue 29: ≤ 2 s CPU each)")
             mixes = folder / "mixes"
             mixes.mkdir(exist_ok=True)
-            files = {"P, V, T, Vr (the bench's plant)": (plant, actual)} | {name: write_mix(mixes, name) for name in MIXES}
+            files = {"P, V, T, Vr (the bench's plant)": (plant, actual)} | {name: write_mix(mixes, name)
+                                                                            for name in MIXES}
             for name, (mix_plant, images) in files.items():
                 run = median_run([*prc3cfg, "plan", str(mix_plant), "--actual", str(images)], args.runs)
                 alone = statistics.median(planning_cpu(mix_plant, images) for _ in range(args.runs))
-                print(f"  {name:<34} {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS  planning {alone:5.2f} s CPU, "
+                print(f"  {name:<34} {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS  planning "
+                      f"{alone:5.2f} s CPU, "
                       f"{alone / (BUSES * MODULES) * 1e3:5.1f} ms a module")
         if args.one_profile:
             one = folder / "one-profile"
             one.mkdir(exist_ok=True)
             plant, commissioning, drifted = write_one_profile_plant(one)
             print(f"{ONE_PROFILE_BUSES} buses × {MODULES} modules from one profile, plan --actual:")
-            for name, images in (("commissioning (factory images)", commissioning), ("programs of their own", drifted)):
+            for name, images in (("commissioning (factory images)", commissioning),
+                                 ("programs of their own", drifted)):
                 run = median_run([*prc3cfg, "plan", str(plant), "--actual", str(images)], args.runs)
-                print(f"  {name:<32} {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS  ({run.wall:.2f} s wall)")
+                print(f"  {name:<32} {run.cpu:6.2f} s CPU  {run.rss_mb:6.1f} MiB max RSS  "
+                      f"({run.wall:.2f} s wall)")
         if args.worst:
             print("validate at the limits:")
             for name, path in worst_files(folder).items():

@@ -1,4 +1,5 @@
-"""What CI pays per command: `prc3cfg --help`'s start-up CPU, and the demo's plan + apply on `emulator://` against the line.
+"""What CI pays per command: `prc3cfg --help`'s start-up CPU, and the demo's plan + apply on `emulator://`
+against the line.
 
     python bench/startup_bench.py [--runs 20] [--demo-runs 3]
 
@@ -45,7 +46,8 @@ def cpu_ms(command: list[str]) -> float:
 
 
 def demo_seconds(line_speed: int | None) -> float:
-    """Wall time of the demo's plan, then its apply, in a fresh folder (the emulators' state starts at factory defaults)."""
+    """Wall time of the demo's plan, then its apply, in a fresh folder (the emulators' state starts at factory
+    defaults)."""
     text = DEMO.read_text()
     if line_speed is not None:
         text = re.sub(r"(port: emulator://[\w-]+)", rf"\1?line-speed={line_speed}", text)
@@ -65,18 +67,21 @@ def main() -> None:
     parser.add_argument("--demo-runs", type=int, default=3, help="runs of the demo's plan + apply, each way")
     args = parser.parse_args()
 
-    compileall.compile_dir(Path(__file__).resolve().parents[1] / "prc3cfg", quiet=2)  # as pip's install does: no module compiled per run
+    # as pip's install does: no module compiled per run
+    compileall.compile_dir(Path(__file__).resolve().parents[1] / "prc3cfg", quiet=2)
     bare = statistics.median(cpu_ms([sys.executable, "-c", "pass"]) for _ in range(args.runs))
     typed = statistics.median(cpu_ms([sys.executable, "-c", "import typer"]) for _ in range(args.runs))
     helped = statistics.median(cpu_ms([sys.executable, "-m", "prc3cfg", "--help"]) for _ in range(args.runs))
-    print(f"start-up: prc3cfg --help {helped:.0f} ms CPU (the interpreter alone {bare:.0f} ms, with typer imported "
+    print(f"start-up: prc3cfg --help {helped:.0f} ms CPU (the interpreter alone {bare:.0f} ms, with typer "
+          "imported "
           f"{typed:.0f}: prc3cfg adds {helped - bare:.0f}, {helped - typed:.0f} of it its own); "
           f"target under 60 — {'met' if helped < 60 else 'NOT met'}")  # fmt: skip
 
     emulated = statistics.median(demo_seconds(None) for _ in range(args.demo_runs))
     line = statistics.median(demo_seconds(9600) for _ in range(args.demo_runs))
     ratio = line / emulated
-    print(f"CI speed: the demo's plan + apply {emulated:.2f} s on emulator://, {line:.2f} s at 9600 baud: {ratio:.1f}× "
+    print(f"CI speed: the demo's plan + apply {emulated:.2f} s on emulator://, {line:.2f} s at 9600 baud: "
+          f"{ratio:.1f}× "
           f"(target at least 20× — {'met' if ratio >= 20 else 'NOT met'})")  # fmt: skip
 
 

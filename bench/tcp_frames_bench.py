@@ -54,7 +54,8 @@ def client(url: str, framing: str, exchanges: int, uart: bool) -> None:
 
     line = LineSettings()
     stream = CountingTrace()
-    link = Link(open_port(url, line, bus="bench"), get_framing(framing), bus="bench", line=line, retries=5, trace=Trace(stream))
+    link = Link(open_port(url, line, bus="bench"), get_framing(framing), bus="bench", line=line, retries=5,
+                trace=Trace(stream))
     link.uart = uart
     messages = [codec.ReadSystem(), codec.ReadPrograms(1, 4), codec.ReadProgram(9)]
     start = time.perf_counter()
@@ -109,7 +110,8 @@ def main() -> None:
     try:
         url = "socket://" + emulator.stdout.readline().split()[2]
         worker = subprocess.Popen(
-            [sys.executable, __file__, "--client", url, "--framing", args.framing, "--exchanges", str(args.exchanges),
+            [sys.executable, __file__, "--client", url, "--framing", args.framing, "--exchanges",
+             str(args.exchanges),
              *(["--uart-timeouts"] if args.uart_timeouts else [])],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
@@ -118,7 +120,8 @@ def main() -> None:
         pauses: list[int] = []
         if not args.no_pauses:
             pauser = threading.Thread(
-                target=lambda: pauses.append(pause_at_random([worker.pid, emulator.pid], running, random.Random(args.seed)))
+                target=lambda: pauses.append(pause_at_random([worker.pid, emulator.pid], running,
+                                                             random.Random(args.seed)))
             )
             pauser.start()
         output, _ = worker.communicate()
@@ -138,7 +141,8 @@ def main() -> None:
     counts = json.loads(output)
     emulator_discards = sum("discarded" in line for line in server_log)
     print(f"{args.framing}{' (client decoding as from a UART)' if args.uart_timeouts else ''}: "
-          f"{counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} busy processes and "
+          f"{counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} "
+          "busy processes and "
           f"{pauses[0] if pauses else 0} SIGSTOP/SIGCONT pauses of the client or the emulator")  # fmt: skip
     print(f"  good frames discarded by the client {counts['discarded']}, link retries {counts['retries']}, "
           f"discarded by the emulator {emulator_discards}   (acceptance: all 0)")  # fmt: skip

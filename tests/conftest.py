@@ -37,7 +37,8 @@ _get_command = typer.main.get_command
 
 def _shape(app: typer.Typer) -> tuple:
     """What a typer app's click command is built from that can change: the commands and groups registered."""
-    return (id(app), len(app.registered_commands), tuple(_shape(group.typer_instance) for group in app.registered_groups if group.typer_instance))
+    return (id(app), len(app.registered_commands),
+            tuple(_shape(group.typer_instance) for group in app.registered_groups if group.typer_instance))
 
 
 def _get_command_once(app: typer.Typer):
@@ -55,10 +56,10 @@ typer.main.get_command = _get_command_once
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """prc3cfg's bytecode written once, before any test: the tests start `python -m prc3cfg` hundreds of times,
-    and where PYTHONDONTWRITEBYTECODE is set (CI images set it) and the tree is a fresh clone, each of those
-    processes would compile every module it imports again — 0.15 s of a `plan`'s 0.37 s. Up-to-date files are
-    left as they are, so the workers' calls cost a `stat` each."""
+    """prc3cfg's bytecode written once, before any test: the tests start `python -m prc3cfg` hundreds of
+    times, and where PYTHONDONTWRITEBYTECODE is set (CI images set it) and the tree is a fresh clone, each of
+    those processes would compile every module it imports again — 0.15 s of a `plan`'s 0.37 s. Up-to-date
+    files are left as they are, so the workers' calls cost a `stat` each."""
     compileall.compile_dir(ROOT / "prc3cfg", quiet=2)
 
 
@@ -77,9 +78,11 @@ def private_locks(tmp_path, monkeypatch):
     leaves nothing to the next."""
     monkeypatch.setenv("PRC3CFG_LOCK_DIR", str(tmp_path / "locks"))
     monkeypatch.setenv("PRC3CFG_STATE_DIR", str(tmp_path / "state"))
-    (tmp_path / "uucp").mkdir()  # the serial devices' LCK.. files: machine state, left to the tests that mean it
+    # the serial devices' LCK.. files: machine state, left to the tests that mean it
+    (tmp_path / "uucp").mkdir()
     monkeypatch.setenv("PRC3CFG_UUCP_LOCK_DIR", str(tmp_path / "uucp"))
-    monkeypatch.delenv("PRC3CFG_PORTS", raising=False)  # a machine's list of its lines: the tests' emulators are none of them
+    # a machine's list of its lines: the tests' emulators are none of them
+    monkeypatch.delenv("PRC3CFG_PORTS", raising=False)
 
 
 @pytest.fixture
@@ -94,7 +97,8 @@ def wheel(tmp_path_factory) -> Path:
     """The worktree's wheel, as a release builds it (`.ci/release --wheel-only`: from a copy of the
     sources), once a session. Tests using it are in the xdist group "wheel", so one worker builds it once."""
     wheels = tmp_path_factory.mktemp("wheels")
-    built = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--wheel-only", "--out", wheels], capture_output=True, text=True)
+    built = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--wheel-only", "--out", wheels],
+                           capture_output=True, text=True)
     assert built.returncode == 0, built.stderr
     (path,) = wheels.glob("prc3cfg-*.whl")
     return path

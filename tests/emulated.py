@@ -23,7 +23,8 @@ DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
 
 @contextlib.contextmanager
 def emulated_plant(
-    directory: Path, *, faults: FaultInjection = FaultInjection(), timeout: float = 0.1, framing: str = "crc16",
+    directory: Path, *, faults: FaultInjection = FaultInjection(), timeout: float = 0.1,
+                   framing: str = "crc16",
     line_speed: bool = False, source: Path = DEMO, lossy: dict[str, Rule] | None = None, zvz: float = 0.020,
     unlisted: dict[str, list[int]] | None = None, **bus_settings: object,
 ) -> Iterator[EmulatedPlant]:
@@ -34,10 +35,13 @@ def emulated_plant(
 
         def route(bus: str, host: str, port: int) -> str:
             if lossy and bus in lossy:
-                return stack.enter_context(LossyProxy((host, port), lossy[bus], framing=framing, zvz=zvz)).listen()
+                return stack.enter_context(
+                    LossyProxy((host, port), lossy[bus], framing=framing, zvz=zvz)
+                ).listen()
             return f"socket://{host}:{port}"
 
-        emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed, route=route,
+        emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed,
+                                               route=route,
                                                unlisted=unlisted, timeout=timeout, framing=framing, zvz=zvz,
                                                **bus_settings))  # fmt: skip
         yield emulated
@@ -60,8 +64,9 @@ TRAVEL = "Travel to reference point required before production on:"
 
 
 def travel_list(out: str) -> str:
-    """What an account's reference-travel lists say, on one line ("" where there is none): each heading with the
-    indented lines of modules under it (`render.travel_list` wraps them), and each earlier release's line."""
+    """What an account's reference-travel lists say, on one line ("" where there is none): each heading with
+    the indented lines of modules under it (`render.travel_list` wraps them), and each earlier release's line.
+    """
     said, lines = [], out.splitlines()
     for at, line in enumerate(lines):
         if TRAVEL in line:
@@ -74,14 +79,16 @@ def travel_list(out: str) -> str:
     return " ".join(said)
 
 
-def signal_once_every_line_writes(trace: TextIO, process: subprocess.Popen, buses: Iterable[str], signum: int) -> None:
-    """Read `process`'s frame trace (the FIFO its `--trace` writes) until a first write has gone out on every one
-    of `buses`, then send it `signum` — synchronised on what the process traced, never on time — and read the
-    rest of the trace in the background, so that the process never waits on it."""
+def signal_once_every_line_writes(trace: TextIO, process: subprocess.Popen, buses: Iterable[str],
+                                  signum: int) -> None:
+    """Read `process`'s frame trace (the FIFO its `--trace` writes) until a first write has gone out on every
+    one of `buses`, then send it `signum` — synchronised on what the process traced, never on time — and read
+    the rest of the trace in the background, so that the process never waits on it."""
     writing: set[str] = set()
     for line in trace:
         _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
-        if direction == ">" and int(frame[6:8], 16) < 0x50:  # a crc16 request (A5h, address, length, ID): a write
+        # a crc16 request (A5h, address, length, ID): a write
+        if direction == ">" and int(frame[6:8], 16) < 0x50:
             writing.add(bus)
         if writing == set(buses):
             process.send_signal(signum)
@@ -91,7 +98,8 @@ def signal_once_every_line_writes(trace: TextIO, process: subprocess.Popen, buse
 
 def read_next(path: Path) -> dict[str, tuple[int, ...]]:
     """By module name, the programs the next plan of the plant file at `path` reads (not `--full-read`): what
-    the change needs, and what rolling evidence adds (`what_to_read.rolling`) — as the lines' records stand."""
+    the change needs, and what rolling evidence adds (`what_to_read.rolling`) — as the lines' records stand.
+    """
     from prc3cfg.api._plan import reads, select  # what a plan reads, worked out as the plan does
     from prc3cfg.shell.plant_files import load_plant
 

@@ -23,9 +23,11 @@ class Client:
     """A master on the line, built from the real framing and pyserial — or on an in-memory line
     (`PairPort`), where silence is known at once."""
 
-    def __init__(self, url: str | PairPort, framing: str = "crc16", *, timeout: float = 0.3, **settings) -> None:
+    def __init__(self, url: str | PairPort, framing: str = "crc16", *, timeout: float = 0.3,
+                 **settings) -> None:
         self.framing = get_framing(framing)
-        self.port = url if isinstance(url, PairPort) else serial.serial_for_url(url, timeout=timeout, **settings)
+        self.port = url if isinstance(url, PairPort) else serial.serial_for_url(url, timeout=timeout,
+                                                                                **settings)
         self.line = LineSettings(parity="none") if settings.get("parity") == "N" else LineSettings()
 
     def send_raw(self, frame: bytes) -> bytes | None:

@@ -1,13 +1,12 @@
 """Test support: a lossy TCP proxy between the link client and an emulator.
 
-The proxy decodes the client's request frames with the real framing, forwards each one
-to the emulator and its reply back — unless its rule says to lose the request or the
-reply. Losing a reply after the module executed the request is the fault a checksum
-cannot help with: the module did it, the master never heard so. The rule sees every
-request frame with its running number (1-based) and answers a set of `Loss`es:
-`REFUSAL` replaces the module's reply with a well-formed error code 32 (what a damaged
-reply can look like on a line without a checksum), `FLIP` flips one bit of the reply, `FLOOD` answers with bytes that never
-stop (a line that never goes quiet).
+The proxy decodes the client's request frames with the real framing, forwards each one to the emulator and its
+reply back — unless its rule says to lose the request or the reply. Losing a reply after the module executed
+the request is the fault a checksum cannot help with: the module did it, the master never heard so. The rule
+sees every request frame with its running number (1-based) and answers a set of `Loss`es: `REFUSAL` replaces
+the module's reply with a well-formed error code 32 (what a damaged reply can look like on a line without a
+checksum), `FLIP` flips one bit of the reply, `FLOOD` answers with bytes that never stop (a line that never
+goes quiet).
 """
 
 from __future__ import annotations
@@ -51,7 +50,8 @@ Until = Callable[[Frame, int], bool]
 def lose_replies_to(
     message_id: int | None, *, address: int | None = None, times: int | None = None, loss: Loss = Loss.REPLY
 ) -> Rule:
-    """A rule: `loss` for requests with this message ID (any: None) to `address` (any: None), the first `times`."""
+    """A rule: `loss` for requests with this message ID (any: None) to `address` (any: None), the first
+    `times`."""
     seen = 0
 
     def rule(frame: Frame, _: int) -> set[Loss]:
@@ -144,13 +144,17 @@ class LossyProxy:
                 if not isinstance(event, Frame):
                     continue
                 self.requests += 1
-                self._deliver(upstream, time.monotonic() if self.until(event, self.requests) else time.monotonic() - self.hold)
+                self._deliver(upstream, time.monotonic() if self.until(event, self.requests)
+                              else time.monotonic() - self.hold)
                 losses = self.rule(event, self.requests)
                 self.lost += [(loss, event) for loss in sorted(losses, key=lambda x: x.value)]
                 flood.set() if Loss.FLOOD in losses else flood.clear()
                 if losses & {Loss.LATE, Loss.DUPLICATE}:
                     with self._held_lock:
-                        self._held.append((time.monotonic(), self.framing.encode(Direction.REQUEST, event.address, event.message)))
+                        self._held.append((
+                            time.monotonic(),
+                            self.framing.encode(Direction.REQUEST, event.address, event.message),
+                        ))
                 if losses & {Loss.REQUEST, Loss.LATE}:
                     continue
                 swallow.set() if losses & {Loss.REPLY, Loss.REFUSAL, Loss.FLOOD} else swallow.clear()
@@ -171,7 +175,8 @@ class LossyProxy:
             self.delivered_late += 1
 
     def flush(self) -> None:
-        """Every frame still held, to the emulator now: the latest a held frame can come (after the client is done)."""
+        """Every frame still held, to the emulator now: the latest a held frame can come (after the client is
+        done)."""
         if self._line is not None:
             self._deliver(self._line, time.monotonic())
 

@@ -29,7 +29,8 @@ class PairPort:
         self.timeout = timeout
         self.is_open = True
         self._emulator = emulator
-        self._decoder = emulator.framing.decoder(Direction.REQUEST, emulator.line, zvz=emulator.zvz, uart=False)
+        self._decoder = emulator.framing.decoder(Direction.REQUEST, emulator.line, zvz=emulator.zvz,
+                                                 uart=False)
         self._replies = bytearray()
 
     @property
@@ -49,7 +50,8 @@ class PairPort:
     def read(self, size: int = 1, /) -> bytes:
         if not self._replies:
             if self.timeout:
-                time.sleep(self.timeout)  # a port's read waits its time-out; here nothing can arrive meanwhile
+                # a port's read waits its time-out; here nothing can arrive meanwhile
+                time.sleep(self.timeout)
             return b""
         data = bytes(self._replies[:size])
         del self._replies[:size]

@@ -34,7 +34,8 @@ class Pane:
     """One tmux server of its own (its own socket), one window, one command; the pane stays after
     the command ends, so its last screen and exit status can be read."""
 
-    def __init__(self, folder: Path, command: list[str], env: dict[str, str], *, stdout: Path | None = None, width: int = 160,
+    def __init__(self, folder: Path, command: list[str], env: dict[str, str], *, stdout: Path | None = None,
+                 width: int = 160,
                  height: int = 100) -> None:  # fmt: skip
         """Start `command` with `env` (and its stdout into the file `stdout`, if given) in a new pane."""
         assert TMUX is not None
@@ -45,10 +46,12 @@ class Pane:
         if stdout is not None:
             line += f" > {shlex.quote(str(stdout))}"
         line += "; printf '\\n[exit %d]\\n' $?"
-        self._tmux("-f", str(config), "new-session", "-d", "-x", str(width), "-y", str(height), "-s", "t", line)
+        self._tmux("-f", str(config), "new-session", "-d", "-x", str(width), "-y", str(height), "-s", "t",
+                   line)
 
     def _tmux(self, *args: str) -> str:
-        return subprocess.run([TMUX or "tmux", "-L", self._socket, *args], check=True, capture_output=True, text=True).stdout
+        return subprocess.run([TMUX or "tmux", "-L", self._socket, *args], check=True, capture_output=True,
+                              text=True).stdout
 
     def screen(self) -> str:
         """What the pane shows now, its scrollback included, wrapped lines joined."""
@@ -96,4 +99,5 @@ def prc3cfg(*args: object) -> list[str]:
 
 def environment() -> dict[str, str]:
     """What a command in the pane needs of this test's environment: its lock and state folders."""
-    return {key: os.environ[key] for key in ("PRC3CFG_LOCK_DIR", "PRC3CFG_STATE_DIR", "PATH") if key in os.environ}
+    return {key: os.environ[key] for key in ("PRC3CFG_LOCK_DIR", "PRC3CFG_STATE_DIR", "PATH")
+            if key in os.environ}

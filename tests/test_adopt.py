@@ -68,14 +68,18 @@ def test_taught_positions_are_adopted_where_they_came_from_and_nothing_else_chan
     assert checked.code == 2, checked.err
     assert plant.read_text() == original
     assert checked.out.splitlines()[:5] == [
-        "~ profile booth: program 2 position 0.150 m → 0.160 m (every module that takes it from there holds it: "
+        "~ profile booth: program 2 position 0.150 m → 0.160 m (every module that takes it from there "
+        "holds it: "
         "line-a/a-left, line-a/a-right, line-a/a-top, line-b/b-left)",
-        "+ line-a/a-left: program 3 position 1.200 m → 1.150 m (new in the module: profile booth keeps its value)",
+        "+ line-a/a-left: program 3 position 1.200 m → 1.150 m (new in the module: profile booth keeps "
+        "its value)",
         "~ line-a/a-right: program 1 position 2.000 m → 1.987 m (in the module)",
-        "+ line-a/a-top: program 1 position 2.100 m → 2.050 m (new in the module: profile booth keeps its value)",
+        "+ line-a/a-top: program 1 position 2.100 m → 2.050 m (new in the module: profile booth keeps "
+        "its value)",
         "~ line-b/b-left: program 4 position 0.900 m → 0.950 m (in the module)",
     ]
-    assert f"--- {plant}" in checked.out and "+      2: {position: 0.160, speed: 0.350, dwell: 0.5}   # stroke down" in checked.out
+    assert (f"--- {plant}" in checked.out
+            and "+      2: {position: 0.160, speed: 0.350, dwell: 0.5}   # stroke down" in checked.out)
 
     adopted = run_cli(capsys, "adopt", plant, "--auto-approve")
     assert adopted.code == 0, adopted.err
@@ -87,10 +91,13 @@ def test_taught_positions_are_adopted_where_they_came_from_and_nothing_else_chan
             ["        profiles: [booth, 'spray-gun']", "        programs:", "          3: {position: 1.150}"],
         "          1: {position: 2.000}       # the right side has a lower hood":
             ["          1: {position: 1.987}       # the right side has a lower hood"],
-        "      - {address: 3, name: a-top, profiles: [booth], programs: {4: {position: 1.000, speed: 0.100}}}  # one flow mapping":
-            ["      - {address: 3, name: a-top, profiles: [booth], programs: {1: {position: 2.050}, 4: {position: 1.000, "
+        "      - {address: 3, name: a-top, profiles: [booth], programs: {4: {position: 1.000, speed: "
+        "0.100}}}  # one flow mapping":
+            ["      - {address: 3, name: a-top, profiles: [booth], programs: {1: {position: 2.050}, 4: "
+             "{position: 1.000, "
              "speed: 0.100}}}  # one flow mapping"],
-        "            position: 0.900          # park for cleaning": ["            position: 0.950          # park for cleaning"],
+        "            position: 0.900          # park "
+        "for cleaning": ["            position: 0.950          # park for cleaning"],
     })  # fmt: skip
     assert run_cli(capsys, "validate", plant).code == 0
     planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
@@ -98,7 +105,8 @@ def test_taught_positions_are_adopted_where_they_came_from_and_nothing_else_chan
 
     again = plant.read_bytes()
     nothing = run_cli(capsys, "adopt", plant, "--check")
-    assert (nothing.code, nothing.out) == (0, "No drift to adopt: the modules hold what the plant file says.\n")
+    assert (nothing.code,
+            nothing.out) == (0, "No drift to adopt: the modules hold what the plant file says.\n")
     assert run_cli(capsys, "adopt", plant, "--auto-approve").code == 0
     assert plant.read_bytes() == again
 
@@ -110,8 +118,10 @@ def test_every_program_field_and_system_parameter_is_adopted_in_its_own_layer(re
     floor.write_text(original.replace("min_speed: 0.020", "min_speed: 0.030")
                      .replace("f1: {action: set, distance: 0.020}", "f1: {action: reset, distance: 0.030}")
                      .replace("max_speed: 0.450", "max_speed: 0.440")
-                     .replace("            dwell: 12.0", "            dwell: 9.5\n            relative_speed: -0.015")
-                     .replace("1: {position: 2.000}", "1: {position: 2.000, f2: {action: set, distance: 0.005}}"))  # fmt: skip
+                     .replace("            dwell: 12.0",
+                              "            dwell: 9.5\n            relative_speed: -0.015")
+                     .replace("1: {position: 2.000}",
+                              "1: {position: 2.000, f2: {action: set, distance: 0.005}}"))  # fmt: skip
     assert run_cli(capsys, "apply", floor, "--auto-approve", "--allow-axis-release").code == 0
 
     adopted = run_cli(capsys, "adopt", plant, "--auto-approve")
@@ -120,9 +130,11 @@ def test_every_program_field_and_system_parameter_is_adopted_in_its_own_layer(re
         "      min_speed: 0.020               # S5": ["      min_speed: 0.030               # S5"],
         "        f1: {action: set, distance: 0.020}             # gun on after START":
             ["        f1: {action: reset, distance: 0.030}           # gun on after START"],
-        "          max_speed: 0.450           # a slower drive": ["          max_speed: 0.440           # a slower drive"],
+        "          max_speed: 0.450           # a "
+        "slower drive": ["          max_speed: 0.440           # a slower drive"],
         "          1: {position: 2.000}       # the right side has a lower hood":
-            ["          1: {position: 2.000, f2: {action: set, distance: 0.005}}  # the right side has a lower hood"],
+            ["          1: {position: 2.000, f2: {action: set, distance: 0.005}}  # the right side has a "
+             "lower hood"],
         "            speed: 0.200": ["            speed: 0.200", "            relative_speed: -0.015"],
         "            dwell: 12.0": ["            dwell: 9.5"],
     })  # fmt: skip
@@ -148,10 +160,12 @@ def test_module_and_program_limit_what_is_adopted(repository, capsys):
     program = run_cli(capsys, "adopt", plant, "--program", "4", "--auto-approve")
     assert program.code == 0, program.err
     assert plant.read_text().splitlines() == edited(before, {
-        "            position: 0.900          # park for cleaning": ["            position: 0.950          # park for cleaning"],
+        "            position: 0.900          # park "
+        "for cleaning": ["            position: 0.950          # park for cleaning"],
     })  # fmt: skip
     assert run_cli(capsys, "plan", plant, "--module", "a-left", "--detailed-exitcode").code == 0
-    assert run_cli(capsys, "plan", plant, "--module", "b-left", "--detailed-exitcode").code == 2  # program 2 left alone
+    # program 2 left alone
+    assert run_cli(capsys, "plan", plant, "--module", "b-left", "--detailed-exitcode").code == 2
     unmanaged = run_cli(capsys, "adopt", plant, "--program", "9", "--check")
     assert unmanaged.code == 1 and unmanaged.problems == [
         "error: program 9: no chosen module manages it — name a program the plant file lists"]
@@ -163,7 +177,8 @@ def test_what_the_plant_file_cannot_say_is_refused_naming_module_and_program(rep
     emulators["line-a"].teach_in(2, 1, 2300)  # above the upper reversing point 2.200 m
     refused = run_cli(capsys, "adopt", plant, "--auto-approve")
     assert refused.code == 1 and refused.problems == [
-        "error: bus line-a, module 2 (a-right): program 1 holds position 2.300 m, outside 0.000 m..2.200 m — a plant "
+        "error: bus line-a, module 2 (a-right): program 1 holds position 2.300 m, outside 0.000 m..2.200 m "
+        "— a plant "
         "file cannot say that: set it right on the module (teach it again), then adopt again"]  # fmt: skip
     assert plant.read_bytes() == original
 
@@ -173,8 +188,10 @@ def test_what_the_plant_file_cannot_say_is_refused_naming_module_and_program(rep
     assert run_cli(capsys, "apply", floor, "--auto-approve", "--allow-axis-release").code == 0
     jumps = run_cli(capsys, "adopt", plant, "--check")
     assert jumps.code == 1 and jumps.problems == [
-        "error: bus line-a, module 1 (a-left): program 2 jumps to no program on the module where the plant file says 1 "
-        "— adopt leaves jumps (chains, next:) alone: edit them in the plant file by hand, or apply it to set the jump "
+        "error: bus line-a, module 1 (a-left): program 2 jumps to no program on the module where the plant "
+        "file says 1 "
+        "— adopt leaves jumps (chains, next:) alone: edit them in the plant file by hand, or apply it to "
+        "set the jump "
         "back, then adopt again"]  # fmt: skip
     assert plant.read_bytes() == original
 
@@ -196,7 +213,8 @@ def answered(args: list, answer: str) -> str:
     master, terminal = os.openpty()
     try:
         os.write(master, answer.encode())
-        done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], stdin=terminal, capture_output=True,
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], stdin=terminal,
+                              capture_output=True,
                               text=True, timeout=60)  # fmt: skip
         os.set_blocking(master, False)
         shown = b""
@@ -215,7 +233,8 @@ def test_on_a_terminal_adopt_asks_before_it_writes_and_keeps_the_file_mode(repos
     plant.chmod(0o664)
     original = plant.read_bytes()
     declined = answered(["adopt", plant], "n\n")
-    assert f"Write 1 value into {plant}? [y/N]" in declined and "error: not adopted — the plant file was not changed" in declined
+    assert (f"Write 1 value into {plant}? [y/N]" in declined
+            and "error: not adopted — the plant file was not changed" in declined)
     assert plant.read_bytes() == original
     accepted = answered(["adopt", plant], "y\n")
     assert f"Adopted 1 value into {plant}" in accepted
@@ -227,7 +246,8 @@ def test_a_file_with_crlf_line_ends_and_no_final_newline_keeps_both():
     text = "\r\n".join([
         "plant: tiny", "profiles:", "  r:", "    programs:", "      1: {position: 0.300, speed: 0.100}",
         "buses:", "  - name: b", "    port: emulator://tiny", "    modules:",
-        "      - {address: 1, name: m1, profiles: r}", "      - address: 2", "        name: m2", "        profiles: r",
+        "      - {address: 1, name: m1, profiles: r}", "      - address: 2", "        name: m2",
+                        "        profiles: r",
     ])  # fmt: skip
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "plant.yaml"
@@ -244,11 +264,14 @@ def test_a_file_with_crlf_line_ends_and_no_final_newline_keeps_both():
 #: line, tabs in comments; each `FORMS` case saves it another way (a test of each splice's offsets).
 ODD = "\n".join([
     "plant: Anlage Süd", "profiles:", "  r:\t# a tab\tbefore and inside a comment", "    programs:",
-    "      1: {position: 0.300, speed: 0.100}\t# 塗装 läuft", "buses:", "  - name: Kabine-Süd", "    port: emulator://tiny",
-    "    modules:", "      - {address: 1, name: 塗装, profiles: r, programs: {2: {position: 0.350, speed: 0.100}}}  # 塗装",
+    "      1: {position: 0.300, speed: 0.100}\t# 塗装 läuft", "buses:", "  - name: Kabine-Süd",
+                 "    port: emulator://tiny",
+    "    modules:", "      - {address: 1, name: 塗装, profiles: r, programs: {2: {position: 0.350, speed: "
+                    "0.100}}}  # 塗装",
     "      - address: 2", '        name: "Kabine Süd 2"\t# über', "        profiles: r", "",
 ])  # fmt: skip
-ADOPTED = ODD.replace("{2: {position: 0.350,", "{2: {position: 0.320,") + "        programs:\n          1: {position: 0.250}\n"
+ADOPTED = (ODD.replace("{2: {position: 0.350,", "{2: {position: 0.320,")
+           + "        programs:\n          1: {position: 0.250}\n")
 FORMS = {
     "as written": lambda text: text,
     "byte order mark": lambda text: "\ufeff" + text,
@@ -259,14 +282,16 @@ FORMS = {
 
 
 def taught_odd(text: str, tmp_path: Path) -> tuple[Path, dict]:
-    """`text` saved as a plant file, and its modules as taught: 塗装's program 2 at 0.320 m, module 2's program 1 at 0.250 m."""
+    """`text` saved as a plant file, and its modules as taught: 塗装's program 2 at 0.320 m, module 2's program
+    1 at 0.250 m."""
     path = tmp_path / "plant.yaml"
     path.write_bytes(text.encode())
     plant = load_plant(path)
     images = {(bus.name, m.address): m.desired_image() for bus, m in plant.modules()}
     for address, number, position in ((1, 2, 320), (2, 1, 250)):
         image = images[("Kabine-Süd", address)]
-        images[("Kabine-Süd", address)] = image.with_programs({number: replace(image.program(number), P=position)})
+        images[("Kabine-Süd", address)] = image.with_programs({number: replace(image.program(number),
+                                                                               P=position)})
     return path, images
 
 
@@ -279,15 +304,19 @@ def test_every_splice_lands_in_files_saved_by_any_editor(tmp_path, form):
     assert not api.plan(load_plant(path), images=images).changes
 
 
-def test_a_rewrite_that_does_not_describe_the_modules_is_refused_and_nothing_is_written(tmp_path, monkeypatch, capsys):
+def test_a_rewrite_that_does_not_describe_the_modules_is_refused_and_nothing_is_written(tmp_path, monkeypatch,
+                                                                                        capsys):
     path, images = taught_odd(ODD, tmp_path)
     plant = load_plant(path)
-    monkeypatch.setattr(splice, "rewrite", lambda text, wanted: text.replace("0.350", "0.380"))  # a splice gone wrong
+    # a splice gone wrong
+    monkeypatch.setattr(splice, "rewrite", lambda text, wanted: text.replace("0.350", "0.380"))
     with pytest.raises(adopt.AdoptRefused) as refused:
         adopt.adopt(plant, images, ODD)
     assert str(refused.value) == (
-        f"{path}: the rewritten plant file would not describe what the modules hold — bus Kabine-Süd, module 1 (塗装): "
-        "program 2 position 0.320 m → 0.380 m (held → written); nothing was adopted: this is a bug in prc3cfg, "
+        f"{path}: the rewritten plant file would not describe what the modules hold — bus Kabine-Süd, "
+        "module 1 (塗装): "
+        "program 2 position 0.320 m → 0.380 m (held → written); nothing was adopted: this is a bug in "
+        "prc3cfg, "
         "please report it with the plant file")
     assert path.read_text() == ODD
 
@@ -342,8 +371,10 @@ def race_an_editor(plant: Path, emulators: dict, trials: int) -> list[str]:
         output, into = os.pipe()  # adopt → editor; the editor runs first, so that it sees the temporary file
         editor = subprocess.Popen([sys.executable, "-c", EDITOR, str(plant), trigger, mark], stdin=output,
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
-        adopting = subprocess.Popen([sys.executable, "-m", "prc3cfg", "adopt", plant, "--auto-approve"], stdout=into,
-                                    stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
+        adopting = subprocess.Popen([sys.executable, "-m", "prc3cfg", "adopt", plant, "--auto-approve"],
+                                    stdout=into,
+                                    stderr=subprocess.PIPE, text=True,
+                                    env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
         os.close(output)
         os.close(into)
         err = adopting.stderr.read()
@@ -369,7 +400,8 @@ def test_adopt_racing_an_editor_60_times_keeps_every_edit(repository):
 
 
 def run_cli_process(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True, text=True, timeout=60)
+    return subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True, text=True,
+                          timeout=60)
 
 
 @st.composite
@@ -395,12 +427,15 @@ def test_adopting_any_teach_in_leaves_a_valid_file_that_plans_no_changes(taught)
     for index, number, position in taught:
         bus, module = plant.modules()[index]
         image = images[(bus.name, module.address)]
-        images[(bus.name, module.address)] = image.with_programs({number: replace(image.program(number), P=position)})
+        images[(bus.name, module.address)] = image.with_programs({number: replace(image.program(number),
+                                                                                  P=position)})
     adoption = adopt.adopt(plant, images, text)
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "demo-line.yaml"
         path.write_text(adoption.text)
         adopted = load_plant(path)
     assert not api.plan(adopted, images=images).changes
-    changed = Counter(line[0] for line in difflib.ndiff(text.splitlines(), adoption.text.splitlines()) if line[0] in "+-")
-    assert changed["-"] <= len(taught) and changed["+"] <= 2 * len(taught)  # a value changed, or an override added
+    changed = Counter(line[0] for line in difflib.ndiff(text.splitlines(), adoption.text.splitlines())
+                      if line[0] in "+-")
+    # a value changed, or an override added
+    assert changed["-"] <= len(taught) and changed["+"] <= 2 * len(taught)

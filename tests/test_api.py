@@ -46,7 +46,8 @@ def test_the_api_docstring_example_runs(tmp_path, monkeypatch, capsys):
 
 
 def test_the_documented_api_example_runs_and_tells_what_it_released(tmp_path, monkeypatch, capsys):
-    """It shows the releases and says so (`told`): the commands after it warn of no release nobody was told of."""
+    """It shows the releases and says so (`told`): the commands after it warn of no release nobody was told
+    of."""
     (tmp_path / "plants").mkdir()
     shutil.copy(DEMO, tmp_path / "plants" / "demo-line.yaml")  # emulator:// buses, state beside it
     monkeypatch.chdir(tmp_path)
@@ -62,19 +63,24 @@ def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel
     the demo plant and docs/api.md's test, and run pytest there."""
     assert "prc3cfg/py.typed" in zipfile.ZipFile(wheel).namelist()  # type checkers read the API's annotations
     venv = tmp_path / "venv"
-    # no pip in it (ensurepip's unpacking and compiling of pip was a third of the test), this Python's pip installing
-    # into it; --no-compile: each module is compiled when the run below imports it, not all of pydantic's and pytest's
+    # no pip in it (ensurepip's unpacking and compiling of pip was a third of the test), this Python's pip
+    # installing into it; --no-compile: each module is compiled when the run below imports it, not all of
+    # pydantic's and pytest's
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", venv], check=True)
     python = venv / "bin" / "python"
-    install = [sys.executable, "-m", "pip", "--python", python, "install", "-q", "--no-compile", wheel, "pytest"]
+    install = [sys.executable, "-m", "pip", "--python", python, "install", "-q", "--no-compile", wheel,
+               "pytest"]
     installed = subprocess.run(install, capture_output=True, text=True)
     assert installed.returncode == 0, installed.stderr
     repository = tmp_path / "plant-repo"
     repository.mkdir()
     shutil.copy(DEMO, repository / "plant.yaml")
     (repository / "test_plant.py").write_text(doc_block("Testing a plant repository"))
-    env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"} | {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
-    ran = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider"], cwd=repository, capture_output=True, text=True, env=env)
+    env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"} | {
+        "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")
+    }
+    ran = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider"], cwd=repository,
+                         capture_output=True, text=True, env=env)
     assert ran.returncode == 0, ran.stdout + ran.stderr
     assert "1 passed" in ran.stdout
     schema = subprocess.run([venv / "bin" / "prc3cfg", "schema"], capture_output=True, text=True)
@@ -91,12 +97,16 @@ def test_drift_and_adopt_are_api_values(tmp_path):
         emulated.emulators[bus.name].teach_in(module.address, 1, 1234)
         said = "program 1 position 2.100 m → 1.234 m"  # says → holds, as adopt
         assert prc3cfg.api.drift(emulated.plant) == [prc3cfg.api.Drift(
-            bus.name, module.address, module.name, (said,), ({"program": 1, "field": "P", "before": 2100, "after": 1234, "text": said},))]
+            bus.name, module.address, module.name, (said,), ({"program": 1, "field": "P", "before": 2100,
+                                                              "after": 1234, "text": said},))]
         adoption = prc3cfg.api.adopt(emulated.plant)
         assert [value.text for value in adoption.adopted] == [
-            f"+ {bus.name}/{module.name}: program 1 position 2.100 m → 1.234 m (new in the module: profile reciprocator keeps its value)"]
-        added = [line for line in difflib.ndiff(adoption.before.splitlines(), adoption.after.splitlines()) if line[0] in "+-"]
-        assert [line.split() for line in added] == [["+", "programs:"], ["+", "1:"], ["+", "position:", "1.234"]]
+            f"+ {bus.name}/{module.name}: program 1 position 2.100 m → 1.234 m (new in the module: profile "
+            "reciprocator keeps its value)"]
+        added = [line for line in difflib.ndiff(adoption.before.splitlines(), adoption.after.splitlines())
+                 if line[0] in "+-"]
+        assert [line.split() for line in added] == [["+", "programs:"], ["+", "1:"],
+                                                    ["+", "position:", "1.234"]]
         assert emulated.path.read_text() == adoption.before  # not written yet
         prc3cfg.api.write_adoption(adoption)
         assert emulated.path.read_text() == adoption.after
@@ -118,7 +128,8 @@ def test_an_adoption_is_not_written_over_a_file_edited_meanwhile(tmp_path):
 def test_import_plant_gives_a_plant_file_that_plans_to_no_changes(tmp_path):
     with emulated_plant(tmp_path) as emulated:
         bus = emulated.plant.buses[0]
-        text, count = prc3cfg.api.import_plant({"b": prc3cfg.api.BareLine(bus.port, timeout=0.1)}, plant_name="again")
+        text, count = prc3cfg.api.import_plant({"b": prc3cfg.api.BareLine(bus.port, timeout=0.1)},
+                                               plant_name="again")
         assert count == len(bus.modules)
         (tmp_path / "imported.yaml").write_text(text)
         imported = prc3cfg.api.load(tmp_path / "imported.yaml")
@@ -135,9 +146,12 @@ def paired(tmp_path: Path, stack: contextlib.ExitStack) -> tuple[EmulatedPlant, 
     path = tmp_path / "plant.yaml"
     path.write_text(yaml.safe_dump(document, sort_keys=False))
     plant = prc3cfg.api.load(path)
-    emulators = {bus.name: stack.enter_context(Emulator({m.address: ModuleState.factory(m.address) for m in bus.modules}, framing=bus.framing,
-                                                        zvz=bus.zvz, turnaround=bus.turnaround)) for bus in plant.buses}  # fmt: skip
-    links = {bus.name: Link(PairPort(emulators[bus.name]), get_framing(bus.framing), bus=bus.name, line=bus.line, timeout=bus.timeout,
+    emulators = {bus.name: stack.enter_context(Emulator({m.address: ModuleState.factory(m.address)
+                                                         for m in bus.modules}, framing=bus.framing,
+                                                        zvz=bus.zvz, turnaround=bus.turnaround))
+                 for bus in plant.buses}  # fmt: skip
+    links = {bus.name: Link(PairPort(emulators[bus.name]), get_framing(bus.framing), bus=bus.name,
+                            line=bus.line, timeout=bus.timeout,
                             zvz=bus.zvz) for bus in plant.buses}  # fmt: skip
     return EmulatedPlant(path, plant, emulators), links
 
@@ -152,15 +166,18 @@ def test_plan_and_apply_through_the_api_over_links_handed_to_it(tmp_path):
         used: list[Link] = []
         planned = prc3cfg.api.plan(plant, options=prc3cfg.api.LineOptions(used=used.extend), links=links)
         assert {c.bus for c in planned.changes} == {bus.name for bus in plant.buses}
-        assert used == list(links.values())  # the links it used, told to the caller: nothing filled into the options
+        # the links it used, told to the caller: nothing filled into the options
+        assert used == list(links.values())
         result = prc3cfg.api.apply(plant, gates=prc3cfg.api.Gates(allow_axis_release=True), links=links)
         assert result.verified and len(result.runs) == len(planned.changes) and emulated.matches_plant()
         journal = [line for line in result.journal.read_text().splitlines() if '"event": "exchange"' in line]
-        assert all(any(f'"bus": "{bus.name}"' in line for line in journal) for bus in plant.buses)  # every line's exchanges journalled
+        # every line's exchanges journalled
+        assert all(any(f'"bus": "{bus.name}"' in line for line in journal) for bus in plant.buses)
         prc3cfg.api.told(result)
         assert not prc3cfg.api.plan(plant, links=links).changes
         assert not prc3cfg.api.drift(plant, links=links)
-        assert all(link.observer is None and link.announce is None and link.cancel is None for link in links.values())
+        assert all(link.observer is None and link.announce is None and link.cancel is None
+                   for link in links.values())
 
 
 def test_links_handed_to_the_api_are_one_per_bus_each_for_its_bus(tmp_path):
@@ -168,9 +185,11 @@ def test_links_handed_to_the_api_are_one_per_bus_each_for_its_bus(tmp_path):
         emulated, links = paired(tmp_path, stack)
         plant = emulated.plant
         first, second = (bus.name for bus in plant.buses)
-        with pytest.raises(prc3cfg.api.UserError, match=f"no link given for bus {second} — give an open link for every bus"):
+        with pytest.raises(prc3cfg.api.UserError,
+                           match=f"no link given for bus {second} — give an open link for every bus"):
             prc3cfg.api.read(plant, links={first: links[first]})
-        with pytest.raises(prc3cfg.api.UserError, match=f"the link given for bus {first} speaks for bus {second}"):
+        with pytest.raises(prc3cfg.api.UserError,
+                           match=f"the link given for bus {first} speaks for bus {second}"):
             prc3cfg.api.plan(plant, links={first: links[second], second: links[first]})
         assert not any(link.exchanges for link in links.values())  # refused before a frame left
 
@@ -179,7 +198,8 @@ def test_a_scan_through_the_api_over_a_link_handed_to_it(tmp_path):
     """A bare line's scan over a link already open (the in-memory pair): the port is locked, never opened."""
     port = "socket://127.0.0.1:9"  # nothing listens: an open would fail at once
     with Emulator({3: ModuleState.factory(3), 7: ModuleState.factory(7)}) as emulator:
-        link = Link(PairPort(emulator), get_framing("crc16"), bus=port, timeout=0.02)  # a short wait at each silent address
+        # a short wait at each silent address
+        link = Link(PairPort(emulator), get_framing("crc16"), bus=port, timeout=0.02)
         found = prc3cfg.api.scan(prc3cfg.api.BareLine(port), link=link)
     assert sorted(found) == [3, 7] and found[7].system == ModuleState.factory(7).image.system
     assert link.observer is None and link.cancel is None

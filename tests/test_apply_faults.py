@@ -34,11 +34,13 @@ SEEDS = [2, pytest.param(40, marks=pytest.mark.soak)]
 def seeded_image(chooser: random.Random, address: int) -> ModuleImage:
     """A module as found on the floor: a high upper reversing point, programs anywhere below it."""
     factory = ModuleImage.factory(address)
-    system = replace(factory.system, S1=chooser.randrange(1900, 3000), S4=chooser.randrange(300, 601), S5=chooser.randrange(5, 30))
+    system = replace(factory.system, S1=chooser.randrange(1900, 3000), S4=chooser.randrange(300, 601),
+                     S5=chooser.randrange(5, 30))
 
     def program() -> Program:
         return Program(P=chooser.randrange(0, system.S1 + 1), V=chooser.randrange(system.S5, system.S4 + 1),
-                       T=chooser.randrange(0, 100), A=chooser.choice([0, 0, chooser.randrange(1, 65)]))  # fmt: skip
+                       T=chooser.randrange(0, 100),
+                       A=chooser.choice([0, 0, chooser.randrange(1, 65)]))  # fmt: skip
 
     return ModuleImage(address, system, tuple(program() for _ in range(PROGRAM_COUNT)))
 
@@ -57,7 +59,8 @@ def check(plant, initial, returncode: int, out: str, err: str) -> list[str]:
         held, was, want = state.image, initial[(bus.name, module.address)], module.desired_image()
         where = f"bus {bus.name}, module {module.address} ({module.name})"
         # an unmanaged program may only be what the module's own clamping made of it
-        kept = device.execute(device.ModuleState(was), codec.WriteSystem(held.system)).image if held.system != was.system else was
+        kept = (device.execute(device.ModuleState(was), codec.WriteSystem(held.system)).image
+                if held.system != was.system else was)
         wrong = held.system != want.system or any(
             h != (k if w is None else w) for h, w, k in zip(held.programs, want.programs, kept.programs)
         )
@@ -78,10 +81,12 @@ def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, fra
         runs = []
         for seed in range(seeds):
             chooser = random.Random(f"{framing}/{seed}")
-            faults = FaultInjection(drop_rate=chooser.uniform(0.05, 0.40), corrupt_rate=chooser.uniform(0.05, 0.10), seed=seed)
+            faults = FaultInjection(drop_rate=chooser.uniform(0.05, 0.40),
+                                    corrupt_rate=chooser.uniform(0.05, 0.10), seed=seed)
             directory = tmp_path / str(seed)
             directory.mkdir()
-            plant = stack.enter_context(emulated_plant(directory, faults=faults, framing=framing, timeout=timeout, zvz=zvz))
+            plant = stack.enter_context(emulated_plant(directory, faults=faults, framing=framing,
+                                                       timeout=timeout, zvz=zvz))
             initial = {
                 (bus, address): emulator.update(address, image=seeded_image(chooser, address)).image
                 for bus, emulator in plant.emulators.items()
@@ -90,7 +95,8 @@ def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, fra
             runs.append((seed, plant, initial))
 
         def apply(plant) -> subprocess.CompletedProcess:
-            command = [sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve", "--allow-axis-release", "--retries", "8"]
+            command = [sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve",
+                       "--allow-axis-release", "--retries", "8"]
             env = {**os.environ, "PRC3CFG_LOCK_DIR": str(plant.path.parent / "locks")}
             return subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
 
@@ -103,4 +109,5 @@ def test_apply_under_faults_never_leaves_an_unreported_wrong_value(tmp_path, fra
         ]
         verified = sum(result.returncode == 0 for result in results)
     assert not failures, "\n\n".join(failures)
-    assert verified >= max(1, seeds // 4), f"only {verified} of {seeds} runs got through: the faults are too heavy to test anything"
+    assert verified >= max(1, seeds // 4), (f"only {verified} of {seeds} runs got through: the faults are "
+                                            "too heavy to test anything")

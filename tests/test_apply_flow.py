@@ -1,10 +1,11 @@
-"""The apply flows one way (issue 43, item 2): the lower layers (`prc3cfg.core`, `prc3cfg.shell`) never call back
-into the API or the command line while an apply reads, plans, writes and verifies — the API's loop calls the
-stages and shows what they give back between them; and the write stage takes the consent to release axes as a
-value, refusing a 10h/20h to any module it does not name. The stages — read, plan, gate, write and verify, record — are
-functions of values, which a test can drive one at a time.
+"""The apply flows one way (issue 43, item 2): the lower layers (`prc3cfg.core`, `prc3cfg.shell`) never call
+back into the API or the command line while an apply reads, plans, writes and verifies — the API's loop calls
+the stages and shows what they give back between them; and the write stage takes the consent to release axes
+as a value, refusing a 10h/20h to any module it does not name. The stages — read, plan, gate, write and
+verify, record — are functions of values, which a test can drive one at a time.
 
-The calls are counted on a real apply of the demo plant on emulators, every thread traced (`sys.setprofile`)."""
+The calls are counted on a real apply of the demo plant on emulators, every thread traced (`sys.setprofile`).
+"""
 
 from __future__ import annotations
 
@@ -37,8 +38,9 @@ from prc3cfg.shell.sessions import LineOptions, bus_line_keys, lines
 
 PACKAGE = Path(prc3cfg.__file__).resolve().parent
 LOWER, HIGHER = {"core", "shell"}, {"api", "cli"}
-#: Ports the shell declares and a higher layer implements — the progress display (`prc3cfg.shell.phases.Progress`):
-#: the one kind of call up that stays (the display is told as the lines' threads work; issue 43 item 2 leaves it)
+#: Ports the shell declares and a higher layer implements — the progress display
+#: (`prc3cfg.shell.phases.Progress`): the one kind of call up that stays (the display is told as the lines'
+#: threads work; issue 43 item 2 leaves it)
 PORTS = {"start", "advance", "note"}
 
 
@@ -63,7 +65,8 @@ def calls_up(*args: str, capsys: pytest.CaptureFixture) -> tuple[int, collection
         for code in (callee, caller):
             if code.co_filename not in layers:
                 layers[code.co_filename] = _layer(code.co_filename)
-        if layers[caller.co_filename] in LOWER and layers[callee.co_filename] in HIGHER and callee.co_name not in PORTS:
+        if (layers[caller.co_filename] in LOWER and layers[callee.co_filename] in HIGHER
+            and callee.co_name not in PORTS):
             up[f"{caller.co_qualname} → {callee.co_qualname}"] += 1
 
     threading.setprofile(profile)
@@ -79,7 +82,8 @@ def calls_up(*args: str, capsys: pytest.CaptureFixture) -> tuple[int, collection
 def test_an_auto_approved_apply_never_calls_up_a_layer(tmp_path, capsys):
     """`apply --auto-approve --allow-axis-release` (each line written as soon as its plan is whole, the lines'
     threads at work at once): no call from the shell or the core into the API or the CLI — the planner, the
-    line's record, the plan's `reading`, the plans shown (each line's and the plant's) are all the API loop's."""
+    line's record, the plan's `reading`, the plans shown (each line's and the plant's) are all the API loop's.
+    """
     with emulated_plant(tmp_path) as emulated:
         code, up = calls_up("apply", emulated.path, "--auto-approve", "--allow-axis-release", capsys=capsys)
         assert code == 0 and emulated.matches_plant()
@@ -87,10 +91,12 @@ def test_an_auto_approved_apply_never_calls_up_a_layer(tmp_path, capsys):
 
 
 def test_a_reviewed_apply_never_calls_up_a_layer(tmp_path, capsys):
-    """With the plant's plan reviewed first (`--json`: the questions answered on the command line, each an event)."""
+    """With the plant's plan reviewed first (`--json`: the questions answered on the command line, each an
+    event)."""
     with emulated_plant(tmp_path) as emulated:
         code, up = calls_up("apply", emulated.path, "--auto-approve", "--json", capsys=capsys)
-        assert code != 0 and not emulated.matches_plant()  # the demo plant releases axes: refused, nothing written
+        # the demo plant releases axes: refused, nothing written
+        assert code != 0 and not emulated.matches_plant()
     assert up == {}, "\n".join(f"{n} × {call}" for call, n in up.most_common())
 
 
@@ -99,12 +105,15 @@ def _writing(plant) -> Iterator[Writing]:
     """The write stage's `Writing` on the plant's lines, held and journalled as an apply holds them."""
     buses = {bus.name: bus for bus, _ in select(plant, None)}
     keys = {name: bus_line_keys(plant, bus) for name, bus in buses.items()}
-    journal = Journal(plant.path, run_header("apply", plant.path, plant.name, plant.sha256, reason=None), audit.follow(plant.path))
+    journal = Journal(plant.path, run_header("apply", plant.path, plant.name, plant.sha256, reason=None),
+                      audit.follow(plant.path))
     options = LineOptions(cancel=Cancellation())
     assert options.cancel is not None
-    keeping = Keeping(plant, buses, keys, journal, pending_records.Releases("apply", journal.path), options.cancel.event)
+    keeping = Keeping(plant, buses, keys, journal, pending_records.Releases("apply", journal.path),
+                      options.cancel.event)
     try:
-        with lines(plant, buses, options, purpose="apply", observer=keeping.observe, announce=keeping.announce, records=keeping,
+        with lines(plant, buses, options, purpose="apply", observer=keeping.observe,
+                   announce=keeping.announce, records=keeping,
                    identities=keys) as held:  # fmt: skip
             yield Writing(plant, keys, buses, held, keeping, api.Verify.FLOOR, options, "apply")
     finally:
@@ -112,8 +121,8 @@ def _writing(plant) -> Iterator[Writing]:
 
 
 def _write_stage(emulated, consent: frozenset[tuple[str, int]]) -> str:
-    """The write stage run on the demo plant's plan (fresh modules: every one released) with `consent`: what it
-    refused, in one line — nothing, when every module it releases is consented."""
+    """The write stage run on the demo plant's plan (fresh modules: every one released) with `consent`: what
+    it refused, in one line — nothing, when every module it releases is consented."""
     the_plan = api.plan(emulated.plant)
     images = {(c.bus, c.address): c.actual for c in the_plan.modules}
     with _writing(emulated.plant) as writing:
@@ -133,7 +142,8 @@ def test_the_write_stage_refuses_an_axis_release_without_consent(tmp_path):
         assert len(releasing) > 1
         said = _write_stage(emulated, frozenset(releasing[1:]))
         bus, address = releasing[0]
-        assert said.startswith(f"bus {bus}, module {address} (") and "10h/20h" in said and "nothing was sent" in said
+        assert (said.startswith(f"bus {bus}, module {address} (") and "10h/20h" in said
+                and "nothing was sent" in said)
         assert "\n" not in said
         assert emulated.images() == before
         assert _write_stage(emulated, frozenset(releasing)) == ""
@@ -144,8 +154,8 @@ def test_the_write_stage_refuses_an_axis_release_without_consent(tmp_path):
 @settings(max_examples=12)
 @given(st.data())
 def test_any_consent_short_of_every_release_sends_nothing(data):
-    """Seeded (the profile's derandomised examples): any subset of the releasing modules short of all of them — a
-    module left out anywhere in the plan — is refused before a frame, naming every one left out."""
+    """Seeded (the profile's derandomised examples): any subset of the releasing modules short of all of them
+    — a module left out anywhere in the plan — is refused before a frame, naming every one left out."""
     import tempfile
 
     with tempfile.TemporaryDirectory() as directory, emulated_plant(Path(directory)) as emulated:
@@ -153,13 +163,15 @@ def test_any_consent_short_of_every_release_sends_nothing(data):
         releasing = sorted((c.bus, c.address) for c in api.plan(emulated.plant).axis_releases)
         consent = data.draw(st.sets(st.sampled_from(releasing), max_size=len(releasing) - 1))
         said = _write_stage(emulated, frozenset(consent))
-        assert all((f"bus {bus}, module {address} (" in said) == ((bus, address) not in consent) for bus, address in releasing)
+        assert all((f"bus {bus}, module {address} (" in said) == ((bus, address) not in consent)
+                   for bus, address in releasing)
         assert emulated.images() == before
 
 
 def test_each_line_s_plan_is_shown_by_the_caller_s_thread_before_that_line_writes(tmp_path):
-    """Without a question (`Gates.asks`), `show_line` and `show` run in the thread that called `api.apply` — between
-    the stages, never from a line's thread — and a line's modules hold what they held until its plan was shown."""
+    """Without a question (`Gates.asks`), `show_line` and `show` run in the thread that called `api.apply` —
+    between the stages, never from a line's thread — and a line's modules hold what they held until its plan
+    was shown."""
     with emulated_plant(tmp_path) as emulated:
         before, shown, whole = emulated.images(), [], []
 
@@ -176,21 +188,26 @@ def test_each_line_s_plan_is_shown_by_the_caller_s_thread_before_that_line_write
         result = api.apply(emulated.plant, gates=gates)
         assert result.verified and emulated.matches_plant()
         assert sorted(shown) == sorted(bus.name for bus in emulated.plant.buses)
-        again = api.apply(emulated.plant, gates=gates)  # nothing to write: no line's plan, the plant's on the lines' records
-    assert len(whole) == 2 and whole[0].modules == result.plan.modules and whole[1].modules == again.plan.modules
-    assert whole[1].reading is not None and whole[1].reading == again.plan.reading  # what it read, worked out by the API
+        # nothing to write: no line's plan, the plant's on the lines' records
+        again = api.apply(emulated.plant, gates=gates)
+    assert (len(whole) == 2 and whole[0].modules == result.plan.modules
+            and whole[1].modules == again.plan.modules)
+    # what it read, worked out by the API
+    assert whole[1].reading is not None and whole[1].reading == again.plan.reading
 
 
 def test_the_stages_driven_one_at_a_time(tmp_path):
-    """Read, plan, gate, write and verify, record — each a function of values, driven here one after another on the
-    emulated demo plant: the gate refusing the release (an answer, a value) writes nothing; the consent it gives
-    then writes and verifies the line, and records what its modules now hold."""
+    """Read, plan, gate, write and verify, record — each a function of values, driven here one after another
+    on the emulated demo plant: the gate refusing the release (an answer, a value) writes nothing; the consent
+    it gives then writes and verifies the line, and records what its modules now hold."""
     with emulated_plant(tmp_path) as emulated, _writing(emulated.plant) as writing:
         plant, before = emulated.plant, emulated.images()
         pairs = select(plant, None)
         planner = shared_planner(plant, pairs, writing.held.on_record)
         read_backs: list[ReadBack] = []
-        images = read_lines(targets(pairs), writing.links, writing.held.on_record, "test", planner, then=read_backs.append)  # read
+        # read
+        images = read_lines(targets(pairs), writing.links, writing.held.on_record, "test", planner,
+                            then=read_backs.append)
         bus = plant.buses[0].name
         read_back = next(read for read in read_backs if read.bus == bus)
         assert read_back.images == {key: image for key, image in images.items() if key[0] == bus}
@@ -218,19 +235,22 @@ READS = (0x50, 0x51, 0x52)  # the read-backs' messages
 FAST = (1, 2)  # seeds of the fast tier — a refusal, a write line by line; the others are soak
 
 
-@pytest.mark.parametrize("seed", [seed if seed in FAST else pytest.param(seed, marks=pytest.mark.soak) for seed in range(16)])
+@pytest.mark.parametrize("seed", [seed if seed in FAST else pytest.param(seed, marks=pytest.mark.soak)
+                                  for seed in range(16)])
 def test_either_path_gates_before_it_writes_and_records_what_verified(tmp_path, seed):
-    """Seeded: the gate answered any way — the release allowed up front (each line gated and written as soon as its
-    plan is whole) or refused or asked (the whole plan gated first), the plan approved, refused or not asked — on
-    the emulated demo plant, replies on booth-a lost now and then, and a module taught in by the floor between its
-    writes and its verification (a repair round writes it again). Either path: a refusal writes nothing; a consent
-    writes, verifies and repairs every module, and records it (the next plan is empty)."""
+    """Seeded: the gate answered any way — the release allowed up front (each line gated and written as soon
+    as its plan is whole) or refused or asked (the whole plan gated first), the plan approved, refused or not
+    asked — on the emulated demo plant, replies on booth-a lost now and then, and a module taught in by the
+    floor between its writes and its verification (a repair round writes it again). Either path: a refusal
+    writes nothing; a consent writes, verifies and repairs every module, and records it (the next plan is
+    empty)."""
     chooser = random.Random(seed)
     allow, approve = chooser.choice(sorted(ANSWERS)), chooser.choice([None, True, False])
     armed, written = False, set()
 
     def lossy(frame, _number) -> set[Loss]:
-        """A reply lost now and then; and once, the floor teaches a module in between its writes and its verification."""
+        """A reply lost now and then; and once, the floor teaches a module in between its writes and its
+        verification."""
         if not armed or not frame.address:
             return set()
         if frame.message[0] not in READS:
@@ -242,7 +262,8 @@ def test_either_path_gates_before_it_writes_and_records_what_verified(tmp_path, 
 
     with emulated_plant(tmp_path, lossy={"booth-a": lossy}) as emulated:
         before, lines_shown, taught = emulated.images(), [], []
-        gates = api.Gates(allow_axis_release=ANSWERS[allow], approve=None if approve is None else lambda _: approve,
+        gates = api.Gates(allow_axis_release=ANSWERS[allow], approve=None if approve is None
+                          else lambda _: approve,
                           show_line=lambda line: lines_shown.extend(line.buses()))  # fmt: skip
         consented = allow in ("allowed", "asked, yes") and approve is not False
         armed = True
@@ -255,6 +276,9 @@ def test_either_path_gates_before_it_writes_and_records_what_verified(tmp_path, 
             return
         armed = False
         assert consented and result.verified and emulated.matches_plant()
-        assert sorted(lines_shown) == ([] if gates.asks else sorted(bus.name for bus in emulated.plant.buses))  # the path taken
-        assert not api.plan(emulated.plant).changes  # what verified is on the lines' records: nothing left to write
-        assert sum(run.course.repairs for run in result.runs) == len(taught) == 1  # write and verify: one stage, a repair in it
+        # the path taken
+        assert sorted(lines_shown) == ([] if gates.asks else sorted(bus.name for bus in emulated.plant.buses))
+        # what verified is on the lines' records: nothing left to write
+        assert not api.plan(emulated.plant).changes
+        # write and verify: one stage, a repair in it
+        assert sum(run.course.repairs for run in result.runs) == len(taught) == 1

@@ -29,7 +29,8 @@ from prc3cfg.shell.testing import EmulatedPlant
 
 def journal_events(directory: Path) -> list[dict]:
     folder = directory / ".prc3cfg" / "journal"
-    return [json.loads(line) for path in sorted(folder.glob("*.jsonl")) for line in path.read_text().splitlines()]
+    return [json.loads(line) for path in sorted(folder.glob("*.jsonl"))
+            for line in path.read_text().splitlines()]
 
 
 def sent(directory: Path) -> list[tuple[int, str]]:
@@ -53,7 +54,8 @@ def test_a_repair_never_releases_the_axes_of_a_module_the_operator_was_not_asked
 
     def floor(frame, _):
         nonlocal floor_changed
-        if armed and frame.address == 2 and frame.message[:1] not in (b"\x50", b"\x51", b"\x52") and not floor_changed:
+        if (armed and frame.address == 2 and frame.message[:1] not in (b"\x50", b"\x51", b"\x52")
+            and not floor_changed):
             floor_changed = True  # as booth-a-right's own write goes out, someone changes its S7 on the panel
             emulator = plant.emulators["booth-a"]
             image = emulator.module(2).image
@@ -62,15 +64,18 @@ def test_a_repair_never_releases_the_axes_of_a_module_the_operator_was_not_asked
 
     with emulated_plant(tmp_path, lossy={"booth-a": floor}) as plant:
         commissioned(plant, capsys)
-        edit(plant.path, "name: booth-a-left\n", "name: booth-a-left\n    system: {upper_reversing_point: 2.3}\n")
+        edit(plant.path, "name: booth-a-left\n",
+             "name: booth-a-left\n    system: {upper_reversing_point: 2.3}\n")
         edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
         before, armed = len(sent(tmp_path)), True
-        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full")
+        result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify",
+                         "full")
         assert floor_changed
         assert result.code == 1, result.out + result.err
         assert "booth-a-right" in result.err and "plan again" in result.err
         releases = [(a, r) for a, r in sent(tmp_path)[before:] if r[:2] in ("10", "20")]
-        assert releases and {a for a, _ in releases} == {1}  # booth-a-left's, agreed to; none to booth-a-right
+        # booth-a-left's, agreed to; none to booth-a-right
+        assert releases and {a for a, _ in releases} == {1}
         assert plant.emulators["booth-a"].module(2).referenced
         assert plant.emulators["booth-a"].module(2).image.system.S7 == 900
 
@@ -78,11 +83,14 @@ def test_a_repair_never_releases_the_axes_of_a_module_the_operator_was_not_asked
 # -- 4. a release is recorded before its frame leaves, and told until an account names it -------
 
 
-def test_an_apply_killed_after_its_20h_leaves_every_later_command_saying_so_until_an_account_lists_it(tmp_path, capsys):
+def test_an_apply_killed_after_its_20h_leaves_every_later_command_saying_so_until_an_account_lists_it(
+    tmp_path, capsys
+):
     fifo = tmp_path / "trace.fifo"
     os.mkfifo(fifo)
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve",
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path),
+                                    "--auto-approve",
                                     "--allow-axis-release", "--trace", str(fifo)], text=True,
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
         with fifo.open() as trace:
@@ -139,7 +147,8 @@ def test_a_module_the_plant_does_not_list_stops_every_broadcast_and_is_named(tmp
         assert plant.matches_plant()
 
 
-def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does_not_list_answers(tmp_path, capsys):
+def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does_not_list_answers(tmp_path,
+                                                                                                  capsys):
     source = declared(full_line(tmp_path, modules=28))
     powered = False  # module 30, which the plant does not list, is switched off while the plan is made
     off = lambda frame, _: {Loss.REQUEST} if frame.address == 30 and not powered else set()  # noqa: E731
@@ -149,7 +158,8 @@ def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does
         document = json.loads(made.read_text())
         assert document["buses"][0]["broadcasts"] and document["buses"][0]["proven_silent"] == [29, 30]
         powered = True
-        refused = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve", "--allow-axis-release")
+        refused = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve",
+                          "--allow-axis-release")
         assert refused.code == 1
         assert "stale plan — on bus line a module now answers at address 30" in refused.err
         assert not [r for _, r in sent(tmp_path) if r[:2] not in ("50", "51", "52")]  # nothing written
@@ -157,8 +167,8 @@ def test_a_reviewed_plan_with_broadcasts_is_refused_once_a_module_the_plant_does
 
 # -- 3. on a line without error detection a read can become a write -----------------------------
 
-#: open-driver ends a frame by the gap ZVZ, waited after every frame at each end: 8 ms (over seven
-#: characters at 9600 8N1) rather than the default 20 ms, so a test's hundreds of exchanges take half the time.
+#: open-driver ends a frame by the gap ZVZ, waited after every frame at each end: 8 ms (over seven characters
+#: at 9600 8N1) rather than the default 20 ms, so a test's hundreds of exchanges take half the time.
 UNCHECKED = {"framing": "open-driver", "parity": "none", "accept_undetected_damage": True, "zvz": 0.008}
 
 
@@ -177,7 +187,8 @@ class Once:
 
 
 def commissioned(plant: EmulatedPlant, capsys: pytest.CaptureFixture) -> None:
-    """The plant applied from factory modules, and every module of booth-a travelled to its reference point."""
+    """The plant applied from factory modules, and every module of booth-a travelled to its reference
+    point."""
     assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
     for address in (1, 2, 5):
         plant.emulators["booth-a"].update(address, referenced=True)
@@ -205,7 +216,8 @@ def test_a_read_the_module_executes_as_a_10h_is_a_possible_release_never_accepte
         assert "bus booth-a, module 2: a read (50h) was answered as a write is" in planned.err
         assert not plant.emulators["booth-a"].module(2).referenced  # it did execute a 10h
         again = run_cli(capsys, "plan", plant.path)
-        assert "bus booth-a, module 2 (booth-a-right): prc3cfg plan" in again.err and "may be released" in again.err
+        assert ("bus booth-a, module 2 (booth-a-right): prc3cfg plan" in again.err
+                and "may be released" in again.err)
         applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert applied.code == 0, applied.err
         assert "booth-a/booth-a-right" in travel_list(applied.out)
@@ -220,13 +232,18 @@ def test_a_write_whose_address_became_the_broadcast_is_found_on_every_module_of_
         edit(plant.path, "name: booth-a-left\n", "name: booth-a-left\n    system: {circuit_gain: 900}\n")
         flip.armed = True
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
-        assert not plant.emulators["booth-a"].module(2).referenced and not plant.emulators["booth-a"].module(5).referenced
+        assert (not plant.emulators["booth-a"].module(2).referenced
+                and not plant.emulators["booth-a"].module(5).referenced)
         assert result.code == 1, result.out
         travel = travel_list(result.out)
-        assert "booth-a/booth-a-left" in travel and "booth-a/booth-a-right" in travel and "booth-a/booth-a-top" in travel
-        assert not [line for line in result.out.splitlines() if "✓ bus booth-a, module 2" in line or "✓ bus booth-a, module 5" in line]
-        assert "✗ bus booth-a, module 2 (booth-a-right): the read-back shows other system parameters" in result.err
-        differs = [line for line in result.err.splitlines() if "read back, it differs from the plant file:" in line]
+        assert ("booth-a/booth-a-left" in travel and "booth-a/booth-a-right" in travel
+                and "booth-a/booth-a-top" in travel)
+        assert not [line for line in result.out.splitlines() if "✓ bus booth-a, module 2" in line
+                    or "✓ bus booth-a, module 5" in line]
+        assert ("✗ bus booth-a, module 2 (booth-a-right): the read-back shows other system "
+                "parameters") in result.err
+        differs = [line for line in result.err.splitlines()
+                   if "read back, it differs from the plant file:" in line]
         assert len(differs) == 2 and all("circuit gain" in line for line in differs)
         assert "✓ bus booth-b" not in result.out  # no release on that line: nothing to watch for
 
@@ -255,9 +272,11 @@ def test_a_verifying_read_executed_as_a_10h_stops_the_line_and_names_the_module(
         assert after, "the verifying read was never sent"
         assert result.code == 1
         assert "booth-a/booth-a-right" in travel_list(result.out)
-        assert "✗ bus booth-a, module 2 (booth-a-right): bus booth-a, module 2: a read (51h) was answered as a write is" in result.err \
+        assert ("✗ bus booth-a, module 2 (booth-a-right): bus booth-a, module 2: a read (51h) was answered "
+                "as a write is") in result.err \
             or "a read (52h) was answered as a write is" in result.err
-        assert [f.message[:1] for f in after[1:]] == [b"\x50"] * len(after[1:])  # afterwards: its system block read, nothing else
+        # afterwards: its system block read, nothing else
+        assert [f.message[:1] for f in after[1:]] == [b"\x50"] * len(after[1:])
 
 
 # -- 7. a module in RUN ---------------------------------------------------------------------
@@ -280,22 +299,27 @@ def test_a_running_module_is_told_to_stop_and_left_out_never_written_in_a_loop(t
 # -- 8. a module in E12 ----------------------------------------------------------------------
 
 
-def test_a_module_in_e12_is_given_its_system_parameters_by_the_next_plan_gated_and_saying_why(tmp_path, capsys):
+def test_a_module_in_e12_is_given_its_system_parameters_by_the_next_plan_gated_and_saying_why(tmp_path,
+                                                                                              capsys):
     with emulated_plant(tmp_path) as plant:
         commissioned(plant, capsys)
         emulator = plant.emulators["booth-a"]
-        emulator.update(2, fault="E12")  # its system parameters read back as the plant file's, yet it is in E12
+        # its system parameters read back as the plant file's, yet it is in E12
+        emulator.update(2, fault="E12")
         edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program change only
         first = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert first.code == 1
-        assert "the module is in E12 (system parameters not set), which only a 10h/20h clears — plan again" in first.err
+        assert ("the module is in E12 (system parameters not set), which only a 10h/20h clears — "
+                "plan again") in first.err
         assert emulator.module(2).referenced  # nothing released without asking
 
         planned = run_cli(capsys, "plan", plant.path)
-        assert "it reported E12 (system parameters not set), which only this clears (20h)  ⚠ RELEASES AXES" in planned.out
+        assert ("it reported E12 (system parameters not set), which only this clears (20h)  ⚠ "
+                "RELEASES AXES") in planned.out
         assert "⚠ Travel to reference point required after apply on: booth-a/booth-a-right" in planned.out
         refused = run_cli(capsys, "apply", plant.path, "--auto-approve")
-        assert refused.code == 1 and "the plan releases the axes of booth-a/booth-a-right" in refused.err  # gated like any release
+        # gated like any release
+        assert refused.code == 1 and "the plan releases the axes of booth-a/booth-a-right" in refused.err
         second = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert second.code == 0, second.err
         assert emulator.module(2).fault is None and plant.matches_plant()
@@ -305,16 +329,27 @@ def test_a_module_in_e12_is_given_its_system_parameters_by_the_next_plan_gated_a
 # -- 9. firmware without read messages -------------------------------------------------------
 
 
-def test_a_module_whose_firmware_has_no_read_messages_is_said_so_once_not_blamed_on_the_line(tmp_path, capsys):
+def test_a_module_whose_firmware_has_no_read_messages_is_said_so_once_not_blamed_on_the_line(tmp_path,
+                                                                                             capsys):
     asked: list[bytes] = []
-    count = lambda frame, _: (asked.append(frame.message) if frame.address == 2 else None) or set()  # noqa: E731
+
+    def count(frame, _):
+        if frame.address == 2:
+            asked.append(frame.message)
+        return set()
+
     with emulated_plant(tmp_path, lossy={"booth-a": count}) as plant:
         plant.emulators["booth-a"].update(2, read_messages=False)  # PRC 3 before firmware 3.03.1
         result = run_cli(capsys, "plan", plant.path)
         assert result.code == 1
         (line,) = result.problems
-        assert line == ("error: bus booth-a, module 2: answers 50h as an unknown message — its firmware has no read messages "
-                        "(they came with PRC 3.03.1), so prc3cfg can neither plan nor verify it: update the module's firmware")
+        assert (
+            line
+            == "error: bus booth-a, module 2: answers 50h as an unknown message — its firmware has "
+            "no read messages "
+            "(they came with PRC 3.03.1), so prc3cfg can neither plan nor verify it: update the "
+            "module's firmware"
+        )
         assert asked == [bytes([0x50, 0])]  # asked once: a checksum passed, so it is no damage
 
 
@@ -325,17 +360,20 @@ def test_an_apply_that_waited_for_the_line_refuses_a_plant_file_edited_meanwhile
     with emulated_plant(tmp_path) as plant:
         port = next(bus.port for bus in load_plant(plant.path).buses if bus.name == "booth-a")
         with line_lock(line_keys(port), "another apply"):
-            process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve",
+            process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path),
+                                        "--auto-approve",
                                         "--allow-axis-release", "--lock-timeout", "600"], text=True,
                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
             assert "waiting for the line lock held by" in process.stderr.readline()
             edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # adopt, or an editor, while it waits
         out, err = process.communicate(timeout=120)
     assert process.returncode == 1, out + err
-    assert err.splitlines()[-1] == (f"error: {plant.path}: the plant file changed while this command waited for the line — "
+    assert err.splitlines()[-1] == (f"error: {plant.path}: the plant file changed while this command waited "
+                                    "for the line — "
                                     "nothing was read or written: run it again, with the file as it is now")
     assert not (tmp_path / ".prc3cfg" / "journal").exists()
-    assert all(state.image == ModuleState.factory(a).image for a, state in plant.emulators["booth-a"].modules().items())
+    assert all(state.image == ModuleState.factory(a).image
+               for a, state in plant.emulators["booth-a"].modules().items())
 
 
 # -- 6. a snapshot goes back onto the line it was taken on --------------------------------------
@@ -351,9 +389,12 @@ def test_restore_refuses_a_snapshot_of_one_line_onto_another_unless_told(tmp_pat
         refused = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release")
         assert refused.code == 1
         assert refused.problems == [
-            f"error: {snapshot}: taken on bus booth-a at {old_port} (crc16), which the plant file now puts at socket://{host}:{port} "
-            "(crc16) — restoring there would write one line's modules onto another; nothing was written: give "
+            f"error: {snapshot}: taken on bus booth-a at {old_port} (crc16), which the plant file now puts "
+            f"at socket://{host}:{port} "
+            "(crc16) — restoring there would write one line's modules onto another; nothing was "
+            "written: give "
             "--onto-current-lines if that is what you mean"]
         assert all(s.image == ModuleState.factory(a).image for a, s in other.modules().items())
-        told = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release", "--onto-current-lines")
+        told = run_cli(capsys, "restore", snapshot, "--auto-approve", "--allow-axis-release",
+                       "--onto-current-lines")
         assert told.code == 0, told.err

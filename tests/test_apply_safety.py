@@ -30,12 +30,14 @@ from prc3cfg.shell.records import Snapshot
 
 def journal_events(directory: Path) -> list[dict]:
     folder = directory / ".prc3cfg" / "journal"
-    return [json.loads(line) for path in sorted(folder.glob("*.jsonl")) for line in path.read_text().splitlines()]
+    return [json.loads(line) for path in sorted(folder.glob("*.jsonl"))
+            for line in path.read_text().splitlines()]
 
 
 def writes(directory: Path) -> list[str]:
     """Every write request any apply under `directory` put on a line (hex)."""
-    return [e["request"] for e in journal_events(directory) if e["event"] == "exchange" and e["request"][:2] not in ("50", "51", "52")]
+    return [e["request"] for e in journal_events(directory) if e["event"] == "exchange"
+            and e["request"][:2] not in ("50", "51", "52")]
 
 
 # -- 1. a 10h/20h that may have reached a module counts as a release ---------------------------
@@ -49,7 +51,8 @@ def test_a_20h_whose_every_acknowledgement_is_lost_still_counts_as_a_release(tmp
         assert not plant.emulators["booth-a"].module(1).referenced  # the module did release its axes
         assert "booth-a/booth-a-left" in travel_list(result.out)
         results = {(e["bus"], e["address"]): e for e in journal_events(tmp_path) if e["event"] == "result"}
-        assert results[("booth-a", 1)]["released_axes"] == "yes"  # the read-back shows the new system parameters
+        # the read-back shows the new system parameters
+        assert results[("booth-a", 1)]["released_axes"] == "yes"
 
 
 def test_a_20h_acknowledged_after_a_lost_reply_counts_once(tmp_path, capsys):
@@ -61,7 +64,8 @@ def test_a_20h_acknowledged_after_a_lost_reply_counts_once(tmp_path, capsys):
 
 
 def test_a_module_silent_after_its_20h_is_listed_as_possibly_released(tmp_path, capsys):
-    """From its 20h on, every reply of module 3 is lost: the 20h may have been executed, no read-back can tell."""
+    """From its 20h on, every reply of module 3 is lost: the 20h may have been executed, no read-back can
+    tell."""
     silent = False
 
     def rule(frame, _):
@@ -73,7 +77,8 @@ def test_a_module_silent_after_its_20h_is_listed_as_possibly_released(tmp_path, 
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 1
         assert not plant.emulators["booth-b"].module(3).referenced
-        assert "booth-b/booth-b-right (possibly: its 10h/20h went out unacknowledged)" in travel_list(result.out)
+        assert ("booth-b/booth-b-right (possibly: its 10h/20h went out "
+                "unacknowledged)") in travel_list(result.out)
         assert "✗ bus booth-b, module 3 (booth-b-right)" in result.err
         assert "not read back: what the module holds is not known" in result.err
         assert "restore with: prc3cfg restore" in result.problems[-1]
@@ -106,7 +111,8 @@ def edit(path: Path, change) -> None:
 
 
 def module_entry(document: dict, bus: str, address: int) -> dict:
-    return next(m for b in document["buses"] if b["name"] == bus for m in b["modules"] if m["address"] == address)
+    return next(m for b in document["buses"] if b["name"] == bus for m in b["modules"]
+                if m["address"] == address)
 
 
 def step(message: codec.Message) -> dict:
@@ -145,7 +151,8 @@ def swap_steps(document):
 def change_position(document):
     steps = module_entry(document, "booth-a", 1)["steps"]
     program = codec.decode_message(bytes.fromhex(steps[1]["message"]))
-    steps[1]["message"] = codec.WriteProgram(program.pn, replace(program.program, P=program.program.P - 1)).hex()
+    steps[1]["message"] = codec.WriteProgram(program.pn,
+                                             replace(program.program, P=program.program.P - 1)).hex()
 
 
 def list_twice(document):
@@ -159,30 +166,66 @@ def hide_the_release(document):
 
 
 TAMPERING = {
-    "init all programs inserted": (insert(1, codec.InitAllPrograms()), "step 2 (1100) writes programs 4..64, which the plant file does not manage"),
-    "an unmanaged program's dwell": (insert(4, codec.WriteDwellTimes(((7, 50),))),
-                                     "step 5 (430107000032) writes program 7, which the plant file does not manage"),
-    "20,000 steps appended": (insert(4, *[codec.ReadSystem()] * 20_000),
-                              "bus booth-a, module 1: 20004 steps, more than any plan of one module needs (128)"),
+    "init all programs inserted": (
+        insert(1, codec.InitAllPrograms()),
+        "step 2 (1100) writes programs 4..64, which the plant file does not manage",
+    ),
+    "an unmanaged program's dwell": (
+        insert(4, codec.WriteDwellTimes(((7, 50),))),
+        "step 5 (430107000032) writes program 7, which the plant file does not manage",
+    ),
+    "20,000 steps appended": (
+        insert(4, *[codec.ReadSystem()] * 20_000),
+        "bus booth-a, module 1: 20004 steps, more than any plan of one module needs (128)",
+    ),
     "a read as a step": (insert(4, codec.ReadSystem()), "step 5 (5000) is a read (50h), not a write"),
     "a second axis release": (insert(4, codec.InitSystem()), "step 5 (1000) releases the axes a second time"),
     "the release hidden": (hide_the_release, "step 1 (20000898"),
-    "a releases_axes flag flipped": (set_step(0, releases_axes=False), "says releases_axes: false, but 20h releases the axes"),
-    "a position changed": (change_position, "step 2 is 21010833015e00000005000000000200, where the plan made from this read-back has 21010834015e"),
-    "the system step dropped": (drop_step(0), "step 1 (2103044c00fa001e000003fc00320a00) would be refused by the module with code 32: P > S1"),
-    "two steps swapped": (swap_steps, "step 5 is 4603010202010a0b, where the plan made from this read-back has 43020100000502000005"),
+    "a releases_axes flag flipped": (
+        set_step(0, releases_axes=False),
+        "says releases_axes: false, but 20h releases the axes",
+    ),
+    "a position changed": (
+        change_position,
+        (
+            "step 2 is 21010833015e00000005000000000200, where the plan made from this "
+            "read-back has 21010834015e"
+        ),
+    ),
+    "the system step dropped": (
+        drop_step(0),
+        "step 1 (2103044c00fa001e000003fc00320a00) would be refused by the module with code 32: P > S1",
+    ),
+    "two steps swapped": (
+        swap_steps,
+        "step 5 is 4603010202010a0b, where the plan made from this read-back has 43020100000502000005",
+    ),
     "a module listed twice": (list_twice, "bus booth-a, module 1 is listed twice"),
-    "an address as text": (lambda d: module_entry(d, "booth-a", 2).update(address="2"),
-                           'damaged plan file: buses[0].modules[1].address is the text "2", where a whole number belongs'),
-    "an address 2.7": (lambda d: module_entry(d, "booth-a", 2).update(address=2.7), "buses[0].modules[1].address is 2.7, where a whole number"),
+    "an address as text": (
+        lambda d: module_entry(d, "booth-a", 2).update(address="2"),
+        'damaged plan file: buses[0].modules[1].address is the text "2", where a whole number belongs',
+    ),
+    "an address 2.7": (
+        lambda d: module_entry(d, "booth-a", 2).update(address=2.7),
+        "buses[0].modules[1].address is 2.7, where a whole number",
+    ),
     "another prc3cfg version": (lambda d: d.update(prc3cfg_version="0.0.9"), "made by prc3cfg 0.0.9"),
-    "a summary reworded": (lambda d: module_entry(d, "booth-a", 2)["steps"][0].update(summary="write nothing"),
-                           "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest of the review text"),
-    "the axis warning removed": (lambda d: module_entry(d, "booth-a", 2)["changes"].update(warning=None),
-                                 "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest"),
-    "a field's value in the review": (lambda d: module_entry(d, "booth-a", 2)["changes"]["fields"][0].update(after=1),
-                                      "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest"),
-    "notes that are no text": (lambda d: d.update(left_alone=[{"step": 1}]), "damaged plan file: left_alone[0] is an object, where text belongs"),
+    "a summary reworded": (
+        lambda d: module_entry(d, "booth-a", 2)["steps"][0].update(summary="write nothing"),
+        "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest of the review text",
+    ),
+    "the axis warning removed": (
+        lambda d: module_entry(d, "booth-a", 2)["changes"].update(warning=None),
+        "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest",
+    ),
+    "a field's value in the review": (
+        lambda d: module_entry(d, "booth-a", 2)["changes"]["fields"][0].update(after=1),
+        "buses[0].modules[1].review_sha256 (bus booth-a, module 2) is not the digest",
+    ),
+    "notes that are no text": (
+        lambda d: d.update(left_alone=[{"step": 1}]),
+        "damaged plan file: left_alone[0] is an object, where text belongs",
+    ),
 }
 
 
@@ -191,7 +234,8 @@ def test_a_tampered_plan_file_is_refused_before_the_first_write(plant, plan_file
     change, expected = TAMPERING[case]
     edit(plan_file, change)
     before = plant.images()
-    result = run_cli(capsys, "apply", plant.path, "--plan", plan_file, "--auto-approve", "--allow-axis-release")
+    result = run_cli(capsys, "apply", plant.path, "--plan", plan_file, "--auto-approve",
+                     "--allow-axis-release")
     assert result.code == 1
     (line,) = result.problems
     assert line.startswith(f"error: {plan_file}: ") and expected in line
@@ -200,7 +244,8 @@ def test_a_tampered_plan_file_is_refused_before_the_first_write(plant, plan_file
     assert all(s.referenced for e in plant.emulators.values() for s in e.modules().values())
 
 
-@settings(max_examples=25, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_any_edit_of_a_step_is_refused(plant, plan_file, capsys, tmp_path, data):
     """Whatever a hex digit of whatever step becomes, what reaches the modules changed: refused."""
@@ -225,7 +270,8 @@ def test_an_untouched_plan_file_is_applied_from_any_directory(plant, capsys, tmp
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
-    result = run_cli(capsys, "apply", "--plan", tmp_path / "plan.json", "--auto-approve", "--allow-axis-release")
+    result = run_cli(capsys, "apply", "--plan", tmp_path / "plan.json", "--auto-approve",
+                     "--allow-axis-release")
     assert result.code == 0, result.err
     assert "proved against the modules as read back now" in result.out
     assert plant.matches_plant()
@@ -255,7 +301,8 @@ def test_clamping_of_kept_programs_is_shown_snapshotted_and_restored(tmp_path, c
     source.write_text(CLAMPING_PLANT)
     with emulated_plant(tmp_path, source=source) as plant:
         emulator = plant.emulators["line"]
-        system = SystemParameters(S1=2500, S2=50, S3=754, S4=600, S5=10, S6=1500, S7=1000, S8=0, S10=583, S11=1100, S12=10)
+        system = SystemParameters(S1=2500, S2=50, S3=754, S4=600, S5=10, S6=1500, S7=1000, S8=0, S10=583,
+                                  S11=1100, S12=10)
         kept = {7: Program(P=2400, V=600, T=30), 8: Program(P=1000, V=300)}
         image = ModuleImage(1, system, (default_program(system),) * 64).with_programs(kept)
         emulator.update(1, image=image)
@@ -265,7 +312,11 @@ def test_clamping_of_kept_programs_is_shown_snapshotted_and_restored(tmp_path, c
         assert [(c["program"], c["field"], c["before"], c["after"]) for c in changes["clamped"]] == [
             (7, "P", 2400, 2200), (7, "V", 600, 500)]  # fmt: skip
         human = run_cli(capsys, "plan", plant.path)
-        assert "~ program 7 (not managed, kept): position 2.400 m → 2.200 m, speed 0.600 m/s → 0.500 m/s — clamped by the module" in human.out
+        assert (
+            "~ program 7 (not managed, kept): position 2.400 m → 2.200 m, speed 0.600 m/s → 0.500 m/s — "
+            "clamped by the module"
+            in human.out
+        )
         assert "program 8" not in human.out
 
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
@@ -299,7 +350,8 @@ def test_a_line_that_never_goes_quiet_ends_in_one_line(tmp_path, capsys):
         assert result.code == 1
         (line,) = result.problems
         # the bus's 0.1 s on top of the line's own 0.083 s: a 50h's frames and two ZVZ gaps, the turnaround
-        assert line.startswith("error: bus booth-a, module 1: no reply within 0.183 s to 50h after 2 attempts")
+        assert line.startswith("error: bus booth-a, module 1: no reply within 0.183 s to 50h after "
+                               "2 attempts")
 
 
 # -- 7. values a module should not hold ------------------------------------------------------
@@ -333,10 +385,13 @@ def test_snapshots_are_whole_whenever_an_apply_is_killed(tmp_path, kills):
     fifo = tmp_path / "trace.fifo"
     os.mkfifo(fifo)
     with emulated_plant(tmp_path) as plant:
-        planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant.path, "--trace", tmp_path / "plan.trace"], env=env)
+        planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant.path, "--trace",
+                                  tmp_path / "plan.trace"], env=env)
         assert planned.returncode == 0
-        reads = len((tmp_path / "plan.trace").read_text().splitlines())  # an apply's trace, up to its snapshot
-        command = [sys.executable, "-m", "prc3cfg", "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo]
+        # an apply's trace, up to its snapshot
+        reads = len((tmp_path / "plan.trace").read_text().splitlines())
+        command = [sys.executable, "-m", "prc3cfg", "apply", plant.path, "--auto-approve",
+                   "--allow-axis-release", "--trace", fifo]
         for _ in range(kills):
             point = chooser.randrange(reads - 8, reads + 40)
             process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
@@ -350,7 +405,8 @@ def test_snapshots_are_whole_whenever_an_apply_is_killed(tmp_path, kills):
     snapshots = list((tmp_path / ".prc3cfg" / "snapshots").glob("*"))
     assert snapshots, "no apply got as far as its snapshot"
     for path in snapshots:
-        if path.suffix != ".json":  # the one name a kill may leave beside a snapshot (shell.files: a file saved again)
+        # the one name a kill may leave beside a snapshot (shell.files: a file saved again)
+        if path.suffix != ".json":
             beside = re.fullmatch(r"\.(.+\.json)\.[0-9a-f]{8}\.tmp", path.name)
             assert beside and (path.parent / beside[1]).is_file(), f"a temporary file was left: {path.name}"
         Snapshot.load(path)  # raises on a truncated file

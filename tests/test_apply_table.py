@@ -68,7 +68,8 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize(("state", "event", "after", "action"), CASES, ids=[f"{s.name}-{e.name}" for s, e, _, _ in CASES])
+@pytest.mark.parametrize(("state", "event", "after", "action"), CASES,
+                         ids=[f"{s.name}-{e.name}" for s, e, _, _ in CASES])
 def test_transition(state: State, event: Event, after: State, action: Next) -> None:
     course = Course(state).after(event)  # no round or repair had yet: no budget is spent
     assert (course.state, course.action) == (after, action)
@@ -97,34 +98,45 @@ def test_the_ends_take_nothing_but_a_line_stopping() -> None:
     interrupted one only that."""
     assert TRANSITIONS[S.VERIFIED] == {}
     assert set(TRANSITIONS[S.FAILED]) == set(TRANSITIONS[S.INTERRUPTED]) == {E.LINE_STOPPED}
-    assert all(action in (N.STOP, N.GIVE_UP) for s in (S.VERIFIED, S.FAILED, S.INTERRUPTED) for _, action in TRANSITIONS[s].values())
+    assert all(action in (N.STOP, N.GIVE_UP) for s in (S.VERIFIED, S.FAILED, S.INTERRUPTED)
+               for _, action in TRANSITIONS[s].values())
 
 
 # -- the budgets: a round is counted when a read is ordered, a repair when one is planned ----------
 
 #: (course, event) → course after: where a budget is spent, its own event's transition.
 BUDGETS = [
-    pytest.param(Course(S.WRITING), E.ALL_SENT, Course(S.VERIFYING, N.READ, rounds=1), id="the first read is a round"),
-    pytest.param(Course(S.VERIFYING, N.READ, rounds=1), E.NO_REPLY, Course(S.VERIFYING, N.READ, rounds=2), id="a lost read is a round"),
-    pytest.param(Course(S.VERIFYING, N.READ, rounds=ROUNDS), E.NO_REPLY, Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS),
+    pytest.param(Course(S.WRITING), E.ALL_SENT, Course(S.VERIFYING, N.READ, rounds=1),
+                 id="the first read is a round"),
+    pytest.param(Course(S.VERIFYING, N.READ, rounds=1), E.NO_REPLY, Course(S.VERIFYING, N.READ, rounds=2),
+                 id="a lost read is a round"),
+    pytest.param(Course(S.VERIFYING, N.READ, rounds=ROUNDS), E.NO_REPLY,
+                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS),
                  id="no round left after a lost read"),
-    pytest.param(Course(S.REPAIRING, N.SEND, rounds=ROUNDS, repairs=1), E.ALL_SENT, Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=1),
+    pytest.param(Course(S.REPAIRING, N.SEND, rounds=ROUNDS, repairs=1), E.ALL_SENT,
+                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=1),
                  id="no round left to read a repair back"),
-    pytest.param(Course(S.REPAIRING, N.SEND, rounds=ROUNDS, repairs=1), E.NO_REPLY, Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=1),
+    pytest.param(Course(S.REPAIRING, N.SEND, rounds=ROUNDS, repairs=1), E.NO_REPLY,
+                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=1),
                  id="no round left after a repair's lost step"),
-    pytest.param(Course(S.REFUSED, N.READ, rounds=ROUNDS), E.NO_REPLY, Course(S.FAILED, N.STOP, rounds=ROUNDS),
+    pytest.param(Course(S.REFUSED, N.READ, rounds=ROUNDS), E.NO_REPLY,
+                 Course(S.FAILED, N.STOP, rounds=ROUNDS),
                  id="no round left for a refused module: its failure stands"),
-    pytest.param(Course(S.REPAIRING, N.SEND, rounds=ROUNDS, repairs=1), E.E12, Course(S.FAILED, N.STOP, rounds=ROUNDS, repairs=1),
+    pytest.param(Course(S.REPAIRING, N.SEND, rounds=ROUNDS, repairs=1), E.E12,
+                 Course(S.FAILED, N.STOP, rounds=ROUNDS, repairs=1),
                  id="no round left after a repair refused"),
-    pytest.param(Course(S.VERIFYING, N.READ, rounds=1), E.DIFFERS, Course(S.VERIFYING, N.PLAN_REPAIR, rounds=1), id="a repair to plan"),
-    pytest.param(Course(S.VERIFYING, N.PLAN_REPAIR, rounds=1), E.REPAIR_PLANNED, Course(S.REPAIRING, N.SEND, rounds=1, repairs=1),
+    pytest.param(Course(S.VERIFYING, N.READ, rounds=1), E.DIFFERS,
+                 Course(S.VERIFYING, N.PLAN_REPAIR, rounds=1), id="a repair to plan"),
+    pytest.param(Course(S.VERIFYING, N.PLAN_REPAIR, rounds=1), E.REPAIR_PLANNED,
+                 Course(S.REPAIRING, N.SEND, rounds=1, repairs=1),
                  id="a repair planned is counted"),
     pytest.param(Course(S.VERIFYING, N.READ, rounds=2, repairs=REPAIRS - 1), E.DIFFERS,
                  Course(S.VERIFYING, N.PLAN_REPAIR, rounds=2, repairs=REPAIRS - 1), id="the last repair"),
     pytest.param(Course(S.VERIFYING, N.READ, rounds=ROUNDS, repairs=REPAIRS), E.DIFFERS,
                  Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=REPAIRS), id="no repair left"),
     pytest.param(Course(S.VERIFYING, N.READ, rounds=ROUNDS, repairs=REPAIRS), E.AGREES,
-                 Course(S.VERIFIED, N.STOP, rounds=ROUNDS, repairs=REPAIRS), id="the last round's read agrees"),
+                 Course(S.VERIFIED, N.STOP, rounds=ROUNDS, repairs=REPAIRS), id="the last round's "
+                                                                                "read agrees"),
     pytest.param(Course(S.REFUSED, N.READ, rounds=ROUNDS), E.DIFFERS, Course(S.FAILED, N.STOP, rounds=ROUNDS),
                  id="a refused module is never repaired"),
 ]
@@ -143,28 +155,44 @@ def test_the_budgets() -> None:
 # -- whole courses: the events one module meets, from its first step to its end --------------------
 
 COURSES = [
-    pytest.param([E.ACKNOWLEDGED, E.ACKNOWLEDGED, E.ALL_SENT, E.AGREES], Course(S.VERIFIED, N.STOP, rounds=1), id="written and verified"),
+    pytest.param([E.ACKNOWLEDGED, E.ACKNOWLEDGED, E.ALL_SENT, E.AGREES], Course(S.VERIFIED, N.STOP, rounds=1),
+                 id="written and verified"),
     pytest.param([E.ACKNOWLEDGED, E.CANCELLED], Course(S.INTERRUPTED, N.STOP), id="Ctrl-C between two steps"),
-    pytest.param([E.ALL_SENT, E.CANCELLED], Course(S.INTERRUPTED, N.STOP, rounds=1), id="Ctrl-C while verifying"),
-    pytest.param([E.ALL_SENT, E.NO_REPLY, E.NO_REPLY, E.NO_REPLY], Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS), id="never read back"),
+    pytest.param([E.ALL_SENT, E.CANCELLED], Course(S.INTERRUPTED, N.STOP, rounds=1),
+                 id="Ctrl-C while verifying"),
+    pytest.param([E.ALL_SENT, E.NO_REPLY, E.NO_REPLY, E.NO_REPLY], Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS),
+                 id="never read back"),
     pytest.param([E.ALL_SENT, *[E.DIFFERS, E.REPAIR_PLANNED, E.ALL_SENT] * REPAIRS, E.DIFFERS],
-                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=REPAIRS), id="still differs after every repair"),
-    pytest.param([E.ALL_SENT, E.NO_REPLY, E.DIFFERS, E.REPAIR_PLANNED, E.ALL_SENT, E.DIFFERS, E.REPAIR_PLANNED, E.ALL_SENT],
-                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=REPAIRS), id="a lost read costs the last repair its read-back"),
+                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=REPAIRS),
+                 id="still differs after every repair"),
+    pytest.param([E.ALL_SENT, E.NO_REPLY, E.DIFFERS, E.REPAIR_PLANNED, E.ALL_SENT, E.DIFFERS,
+                  E.REPAIR_PLANNED, E.ALL_SENT],
+                 Course(S.FAILED, N.GIVE_UP, rounds=ROUNDS, repairs=REPAIRS),
+                 id="a lost read costs the last repair its read-back"),
     pytest.param([E.NO_REPLY, E.DIFFERS, E.REPAIR_PLANNED, E.ACKNOWLEDGED, E.ALL_SENT, E.AGREES],
-                 Course(S.VERIFIED, N.STOP, rounds=2, repairs=1), id="a module that stopped answering, repaired"),
+                 Course(S.VERIFIED, N.STOP, rounds=2, repairs=1),
+                 id="a module that stopped answering, repaired"),
     pytest.param([E.ERROR_CODE_AFTER_BROADCAST, E.DIFFERS, E.REPAIR_PLANNED, E.ALL_SENT, E.AGREES],
-                 Course(S.VERIFIED, N.STOP, rounds=2, repairs=1), id="a refusal a lost broadcast explains, repaired"),
-    pytest.param([E.ERROR_CODE_AFTER_BROADCAST, E.DIFFERS, E.REPAIR_PLANNED, E.ERROR_CODE_AFTER_BROADCAST, E.DIFFERS],
+                 Course(S.VERIFIED, N.STOP, rounds=2, repairs=1),
+                 id="a refusal a lost broadcast explains, repaired"),
+    pytest.param([E.ERROR_CODE_AFTER_BROADCAST, E.DIFFERS, E.REPAIR_PLANNED, E.ERROR_CODE_AFTER_BROADCAST,
+                  E.DIFFERS],
                  Course(S.FAILED, N.STOP, rounds=2, repairs=1), id="the repair refused too: final"),
-    pytest.param([E.ACKNOWLEDGED, E.E12, E.DIFFERS], Course(S.FAILED, N.STOP, rounds=1), id="E12: read back, not repaired"),
-    pytest.param([E.RUNNING, E.AGREES], Course(S.VERIFIED, N.STOP, rounds=1), id="refused, yet the read-back agrees"),
-    pytest.param([E.ERROR_CODE, E.NO_REPLY, E.NO_REPLY, E.NO_REPLY], Course(S.FAILED, N.STOP, rounds=ROUNDS), id="refused, never read back"),
-    pytest.param([E.ALL_SENT, E.DIFFERS, E.REPAIR_UNCONSENTED], Course(S.FAILED, N.STOP, rounds=1), id="a repair that needs consent"),
+    pytest.param([E.ACKNOWLEDGED, E.E12, E.DIFFERS], Course(S.FAILED, N.STOP, rounds=1),
+                 id="E12: read back, not repaired"),
+    pytest.param([E.RUNNING, E.AGREES], Course(S.VERIFIED, N.STOP, rounds=1),
+                 id="refused, yet the read-back agrees"),
+    pytest.param([E.ERROR_CODE, E.NO_REPLY, E.NO_REPLY, E.NO_REPLY], Course(S.FAILED, N.STOP, rounds=ROUNDS),
+                 id="refused, never read back"),
+    pytest.param([E.ALL_SENT, E.DIFFERS, E.REPAIR_UNCONSENTED], Course(S.FAILED, N.STOP, rounds=1),
+                 id="a repair that needs consent"),
     pytest.param([E.ALL_SENT, E.READ_REFUSED], Course(S.FAILED, N.STOP, rounds=1), id="a read refused"),
-    pytest.param([E.ALL_SENT, E.TRESPASSED], Course(S.FAILED, N.STOP, rounds=1), id="an unmanaged program changed"),
-    pytest.param([E.ALL_SENT, E.DIFFERS, E.REPAIR_PLANNED, E.LINE_STOPPED], Course(S.FAILED, N.STOP, rounds=1, repairs=1), id="the line stopped"),
-    pytest.param([E.ALL_SENT, E.DIFFERS, E.REPAIR_UNCONSENTED, E.LINE_STOPPED], Course(S.FAILED, N.STOP, rounds=1),
+    pytest.param([E.ALL_SENT, E.TRESPASSED], Course(S.FAILED, N.STOP, rounds=1),
+                 id="an unmanaged program changed"),
+    pytest.param([E.ALL_SENT, E.DIFFERS, E.REPAIR_PLANNED, E.LINE_STOPPED],
+                 Course(S.FAILED, N.STOP, rounds=1, repairs=1), id="the line stopped"),
+    pytest.param([E.ALL_SENT, E.DIFFERS, E.REPAIR_UNCONSENTED, E.LINE_STOPPED],
+                 Course(S.FAILED, N.STOP, rounds=1),
                  id="failed, then the line stopped"),
 ]
 

@@ -39,7 +39,8 @@ from prc3cfg.core.plant_planner import Line, Planner
 COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
 
 
-def line(changes: dict[int, dict[int, Program | None]], *, count: int = 30, actual_changes=None) -> list[SharingModule]:
+def line(changes: dict[int, dict[int, Program | None]], *, count: int = 30,
+         actual_changes=None) -> list[SharingModule]:
     """`count` factory modules; module a's desired image has `changes.get(a, changes[0])` programs."""
     modules = []
     for address in range(1, count + 1):
@@ -52,7 +53,8 @@ def line(changes: dict[int, dict[int, Program | None]], *, count: int = 30, actu
 def test_the_same_speed_on_every_module_is_one_broadcast():
     shared = share(line({0: {5: Program(P=150, V=300)}}), COST)
     assert [s.message for s in shared.broadcasts] == [codec.WriteSpeeds(((5, 300),))]
-    assert all([s.message for s in p.steps] == [codec.WriteSpeeds(((5, 300),))] and p.bus_time == 0 for p in shared.plans)
+    assert all([s.message for s in p.steps] == [codec.WriteSpeeds(((5, 300),))] and p.bus_time == 0
+               for p in shared.plans)
     assert shared.bus_time == COST.broadcast_time(codec.WriteSpeeds(((5, 300),)))
 
 
@@ -70,7 +72,8 @@ def test_values_that_differ_between_modules_are_sent_to_each():
 
 def test_a_broadcast_may_not_write_a_program_a_module_leaves_alone():
     modules = line({0: {5: Program(P=150, V=300)}})
-    keep = modules[4].desired.with_programs({n: None for n in range(1, 65) if n != 6})  # module 5 manages only program 6
+    # module 5 manages only program 6
+    keep = modules[4].desired.with_programs({n: None for n in range(1, 65) if n != 6})
     modules[4] = SharingModule(modules[4].actual, keep, plan_module(modules[4].actual, keep, COST))
     assert share(modules, COST).broadcasts == ()
 
@@ -78,18 +81,21 @@ def test_a_broadcast_may_not_write_a_program_a_module_leaves_alone():
 def test_a_system_block_is_broadcast_only_when_every_module_needs_it():
     new_system = replace(ModuleImage.factory(1).system, S1=2000)
     everyone = line({0: {}}, count=30)
-    everyone = [SharingModule(m.actual, replace(m.desired, system=new_system), plan_module(m.actual, replace(m.desired, system=new_system), COST))
+    everyone = [SharingModule(m.actual, replace(m.desired, system=new_system),
+                              plan_module(m.actual, replace(m.desired, system=new_system), COST))
                 for m in everyone]  # fmt: skip
     assert [s.message.ID for s in share(everyone, COST).broadcasts] == [0x20]
     but_one = everyone[:29] + [line({0: {}}, count=30)[29]]
-    assert all(s.message.ID != 0x20 for s in share(but_one, COST).broadcasts)  # module 30 would release its axes for nothing
+    # module 30 would release its axes for nothing
+    assert all(s.message.ID != 0x20 for s in share(but_one, COST).broadcasts)
 
 
 def device_runs(monkeypatch) -> list[codec.Message]:
     """Every message the device model runs from here on (each plan's proof, each prediction)."""
     ran: list[codec.Message] = []
     execute = device.execute
-    monkeypatch.setattr(device, "execute", lambda state, message: ran.append(message) or execute(state, message))
+    monkeypatch.setattr(device, "execute", lambda state, message: ran.append(message)
+                        or execute(state, message))
     return ran
 
 
@@ -106,7 +112,8 @@ def test_a_line_of_modules_alike_is_planned_and_proved_once_per_set_of_broadcast
 
 
 def test_plans_that_take_no_broadcast_are_not_proved_again(monkeypatch):
-    modules = line({a: {5: Program(P=100 + a, V=200 + a)} for a in range(31)})  # the same program, its own values on each
+    # the same program, its own values on each
+    modules = line({a: {5: Program(P=100 + a, V=200 + a)} for a in range(31)})
     ran = device_runs(monkeypatch)
     shared = share(modules, COST)
     assert shared.broadcasts == () and shared.plans == tuple(m.plan for m in modules)
@@ -126,7 +133,8 @@ def unpruned(modules: list[SharingModule], cost: LineCost, proof_time: float) ->
     modules = [replace(m, kind=memo.kind(m, cost)) for m in modules]
 
     def attempt(chosen: list) -> broadcast_search._Attempt | None:
-        return broadcast_search._attempt(tuple(step for group in chosen for step in group), modules, cost, memo)
+        return broadcast_search._attempt(tuple(step for group in chosen for step in group), modules, cost,
+                                         memo)
 
     nothing = attempt([])
     added, chosen = nothing, []
@@ -141,7 +149,8 @@ def unpruned(modules: list[SharingModule], cost: LineCost, proof_time: float) ->
         trial = attempt(rest) or nothing
         if trial.seconds < dropped.seconds - 1e-9:
             kept, dropped = rest, trial
-    best = min((nothing, added, dropped), key=lambda priced: priced.seconds + (proof_time if priced.broadcasts else 0.0))
+    best = min((nothing, added, dropped), key=lambda priced: priced.seconds
+               + (proof_time if priced.broadcasts else 0.0))
     return best.broadcasts, tuple(own.steps for own in best.owns) if best.broadcasts else ()
 
 
@@ -156,7 +165,8 @@ def a_program(rnd: random.Random, system: SystemParameters) -> Program:
     return Program(P=rnd.choice([system.S1, default_program(system).P, rnd.randint(0, system.S1)]),
                    V=rnd.choice([system.S4, system.S5, rnd.randint(system.S5, system.S4)]),
                    Vr=rnd.choice([0, rnd.randint(-600, 600)]), T=rnd.choice([0, rnd.randint(0, 600)]),
-                   F1=rnd.choice([0, 1010]), F2=rnd.choice([0, rnd.randint(0, 1999)]), A=rnd.choice([0, 0, rnd.randint(0, 64)]))  # fmt: skip
+                   F1=rnd.choice([0, 1010]), F2=rnd.choice([0, rnd.randint(0, 1999)]),
+                   A=rnd.choice([0, 0, rnd.randint(0, 64)]))  # fmt: skip
 
 
 @st.composite
@@ -165,21 +175,25 @@ def lines_to_share(draw: st.DrawFn) -> tuple[list[SharingModule], LineCost, floa
     already, some factory-fresh or holding programs of their own — on any framing. (A seed, not
     hypothesis's own random: its draws lean to the first of each choice, and these lines need all.)"""
     rnd = random.Random(draw(st.integers(0, 2**32)))
-    cost = LineCost.of(draw(st.sampled_from(FRAMINGS)), LineSettings(), rnd.choice([0.0, 0.010, 0.050]), rnd.choice([0.020, 0.100]))
-    systems = [DEFAULT_SYSTEM, replace(DEFAULT_SYSTEM, S1=2000, S4=500), replace(DEFAULT_SYSTEM, S1=1500, S2=200, S5=40)]
+    cost = LineCost.of(draw(st.sampled_from(FRAMINGS)), LineSettings(), rnd.choice([0.0, 0.010, 0.050]),
+                       rnd.choice([0.020, 0.100]))
+    systems = [DEFAULT_SYSTEM, replace(DEFAULT_SYSTEM, S1=2000, S4=500),
+               replace(DEFAULT_SYSTEM, S1=1500, S2=200, S5=40)]
     system = rnd.choice(systems)
     size = rnd.choice([1, 4, 12, 30])
     first = rnd.randint(1, 65 - size)
     managed = range(first, first + size) if rnd.random() < 0.5 else rnd.sample(range(1, 65), size)
     cleared = rnd.choice([0, 0, size // 2, size])  # programs back to what an init leaves
-    profile = {n: default_program(system) if i < cleared else a_program(rnd, system) for i, n in enumerate(managed)}
+    profile = {n: default_program(system) if i < cleared else a_program(rnd, system)
+               for i, n in enumerate(managed)}
     modules = []
     for address in rnd.sample(range(1, 31), rnd.randint(2, 5)):
         wanted = system if rnd.random() < 0.8 else rnd.choice(systems)
         desired = {}
         for n, p in profile.items():
             field = rnd.choice(PROGRAM_FIELDS)
-            desired[n] = valid_under(p if rnd.random() < 0.8 else p.with_field(field, getattr(a_program(rnd, wanted), field)), wanted)
+            desired[n] = valid_under(p if rnd.random() < 0.8
+                                     else p.with_field(field, getattr(a_program(rnd, wanted), field)), wanted)
         held = rnd.choice([DEFAULT_SYSTEM, wanted, rnd.choice(systems)])
         kind = rnd.choice(["factory", "desired", "own", "drifted"])
         actual = []
@@ -194,7 +208,8 @@ def lines_to_share(draw: st.DrawFn) -> tuple[list[SharingModule], LineCost, floa
                 actual.append(valid_under(desired[n], held))
         actual_image = ModuleImage(address, held, tuple(actual))
         desired_image = ModuleImage(address, wanted, tuple(desired.get(n) for n in range(1, 65)))
-        modules.append(SharingModule(actual_image, desired_image, plan_module(actual_image, desired_image, cost)))
+        modules.append(SharingModule(actual_image, desired_image,
+                                     plan_module(actual_image, desired_image, cost)))
     return modules, cost, rnd.choice([0.0, 0.5, 5.0])
 
 
@@ -208,9 +223,12 @@ def check_floors_and_choice(modules: list[SharingModule], cost: LineCost, proof_
     floors = broadcast_search._Floors(groups, kinds, cost)
     every = (1 << len(groups)) - 1
     each = range(len(groups))
-    tried = {0, every} | {1 << i for i in each} | {every & ~(1 << i) for i in each} | {(1 << i) - 1 for i in each}
+    tried = {0, every} | {1 << i for i in each} | {every & ~(1 << i) for i in each} | {(1 << i) - 1
+                                                                                       for i in each}
     for chosen in sorted(tried):
-        priced = broadcast_search._attempt(tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g), kinds, cost, memo)
+        priced = broadcast_search._attempt(
+            tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g), kinds, cost, memo
+        )
         if priced is not None:
             for floor, own in zip(floors.modules, priced.owns, strict=True):
                 steps, verification = floor.parts(floors.chosen(chosen))
@@ -219,7 +237,8 @@ def check_floors_and_choice(modules: list[SharingModule], cost: LineCost, proof_
     shared = share(modules, cost, proof_time=proof_time)
     broadcasts, owns = unpruned(modules, cost, proof_time)
     assert shared.broadcasts == broadcasts
-    assert tuple(p.steps[len(broadcasts) :] for p in shared.plans) == (owns or tuple(m.plan.steps for m in modules))
+    assert tuple(p.steps[len(broadcasts) :] for p in shared.plans) == (owns or tuple(m.plan.steps
+                                                                                     for m in modules))
 
 
 # 10 examples (about 0.35 s each): the soak twin below tries 600
@@ -242,17 +261,22 @@ def test_a_line_of_modules_with_programs_of_their_own_is_not_planned_behind_sets
     every module cannot beat all four groups — known from their floors, without planning them."""
     rnd = random.Random(3)
     system = replace(DEFAULT_SYSTEM, S1=2000, S4=500)
-    profile = {n: Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(1, 50)) for n in range(1, 17)}
+    profile = {n: Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(1, 50))
+               for n in range(1, 17)}
     modules = []
     for address in range(1, 31):
-        actual = ModuleImage.factory(address).with_programs({n: Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(1, 50))
+        actual = ModuleImage.factory(address).with_programs({n: Program(P=rnd.randrange(100, 1900),
+                                                                        V=rnd.randrange(20, 480),
+                                                                        T=rnd.randrange(1, 50))
                                                              for n in profile})  # fmt: skip
         desired = replace(actual, system=system).with_programs(profile)
-        desired = replace(desired, programs=tuple(p if n in profile else None for n, p in enumerate(desired.programs, 1)))
+        desired = replace(desired, programs=tuple(p if n in profile else None
+                                                  for n, p in enumerate(desired.programs, 1)))
         modules.append(SharingModule(actual, desired, plan_module(actual, desired, COST)))
     planned: list[int] = []
     cheapest = broadcast_search.cheapest_messages
-    monkeypatch.setattr(broadcast_search, "cheapest_messages", lambda *args: planned.append(1) or cheapest(*args))
+    monkeypatch.setattr(broadcast_search, "cheapest_messages", lambda *args: planned.append(1)
+                        or cheapest(*args))
     shared = share(modules, COST)
     assert [s.message.ID for s in shared.broadcasts] == [0x20, 0x40, 0x40, 0x41, 0x41, 0x43, 0x43]
     assert len(planned) == 30  # the four groups; no other set is planned on any module
@@ -283,9 +307,12 @@ def test_a_line_s_broadcasts_wait_for_the_proof_the_caller_gets():
     silent, and `settle_line` takes what answered there — none: broadcasts; one: none, and the module
     named; no proof at all (planning from saved images): none."""
     listed = range(1, 29)  # 28 modules, every one wanting the same speed; 29 and 30 not listed
-    wanted = [Wanted("a", address, f"m{address}", ModuleImage.factory(address).with_programs({5: Program(P=150, V=300)})) for address in listed]
+    wanted = [Wanted("a", address, f"m{address}",
+                     ModuleImage.factory(address).with_programs({5: Program(P=150, V=300)}))
+              for address in listed]
     actual = {w.key: ModuleImage.factory(w.address) for w in wanted}
-    lines = {"a": Line("a", COST, frozenset(listed), complete=True, probe_timeout=0.01)}  # a quick proof: the broadcast saves more
+    # a quick proof: the broadcast saves more
+    lines = {"a": Line("a", COST, frozenset(listed), complete=True, probe_timeout=0.01)}
 
     def settled(answered: list[int] | None) -> PlantPlan:
         planner = Planner("p", "p.yaml", "0" * 64, lines)
@@ -298,13 +325,16 @@ def test_a_line_s_broadcasts_wait_for_the_proof_the_caller_gets():
     assert proved.broadcast_time > 0 and proved.proofs == (LineProof("a", silent=(29, 30)),)
     assert answered.broadcast_time == 0 and answered.proofs == (LineProof("a", answered=(30,)),)
     assert unproved.broadcast_time == 0 and unproved.proofs == ()
-    assert Planner("p", "p.yaml", "0" * 64, lines).draft_line("a", wanted, actual, probing=False).shared is None
+    assert Planner("p", "p.yaml", "0" * 64, lines).draft_line("a", wanted, actual,
+                                                              probing=False).shared is None
 
 
 def full_line(tmp_path: Path, speed: str = "0.300", modules: int = 30) -> Path:
     source = tmp_path / "source.yaml"
-    source.write_text(FULL_LINE.replace("2: {position: 0.200, speed: 0.300", f"2: {{position: 0.200, speed: {speed}")
-                      + "".join(f"      - {{address: {a}, name: m{a}, profiles: booth}}\n" for a in range(1, modules + 1)))  # fmt: skip
+    source.write_text(FULL_LINE.replace("2: {position: 0.200, speed: 0.300",
+                                        f"2: {{position: 0.200, speed: {speed}")
+                      + "".join(f"      - {{address: {a}, name: m{a}, profiles: booth}}\n"
+                                for a in range(1, modules + 1)))  # fmt: skip
     return source
 
 
@@ -322,14 +352,17 @@ def test_commissioning_and_a_shared_change_go_by_broadcast_and_every_module_is_r
         assert all(not s.referenced for s in plant.emulators["line"].modules().values())
         assert first.out.count("broadcasts received, verified") == 30
 
-        plant.path.write_text(plant.path.read_text().replace("speed: 0.3\n", "speed: 0.31\n", 1))  # program 1, every module
+        # program 1, every module
+        plant.path.write_text(plant.path.read_text().replace("speed: 0.3\n", "speed: 0.31\n", 1))
         second = run_cli(capsys, "apply", plant.path, "--auto-approve")
         assert second.code == 0, second.err
         exchanges = journal(tmp_path)
         writes = [e for e in exchanges if e["request"][:2] not in ("50", "51", "52")]
         assert [(e["address"], e["request"]) for e in writes] == [(0, codec.WriteSpeeds(((1, 310),)).hex())]
         verifying = exchanges[exchanges.index(writes[0]) + 1 :]
-        assert sorted(e["address"] for e in verifying) == list(range(1, 31)) and {e["request"] for e in verifying} == {"5101"}
+        assert sorted(e["address"] for e in verifying) == list(range(1, 31)) and {
+            e["request"] for e in verifying
+        } == {"5101"}
         assert plant.matches_plant()
 
 
@@ -345,14 +378,17 @@ def declared(source: Path) -> Path:
     return source
 
 
-def test_a_line_declared_complete_gets_broadcasts_once_its_other_addresses_are_proven_silent(tmp_path, capsys):
+def test_a_line_declared_complete_gets_broadcasts_once_its_other_addresses_are_proven_silent(tmp_path,
+                                                                                             capsys):
     with emulated_plant(tmp_path, source=declared(full_line(tmp_path, modules=28))) as plant:
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, result.err
         exchanges = journal(tmp_path)
         first_broadcast = next(i for i, e in enumerate(exchanges) if e["address"] == 0)
         probes = [e["address"] for e in exchanges[:first_broadcast] if e["address"] > 28]
-        assert sorted(set(probes)) == [29, 30] and all(e["request"] == "5000" for e in exchanges[:first_broadcast] if e["address"] > 28)
+        assert sorted(set(probes)) == [29, 30] and all(e["request"] == "5000"
+                                                       for e in exchanges[:first_broadcast]
+                                                       if e["address"] > 28)
         assert {e["address"] for e in exchanges if e["request"][:2] not in ("50", "51", "52")} == {0}
         assert result.out.count("broadcasts received, verified") == 28
         assert "Bus line: broadcast after addresses 29, 30 answered no probe" in result.out
@@ -371,7 +407,13 @@ def test_proving_a_line_of_12_declared_modules_costs_more_than_its_broadcasts_sa
 
 def test_a_lost_broadcast_is_repaired_with_addressed_writes(tmp_path, capsys):
     lost: list = []
-    rule = lambda frame, number: (lost.append(frame) or {Loss.REQUEST}) if frame.address == 0 and not lost else set()  # noqa: E731
+
+    def rule(frame, number):
+        if frame.address == 0 and not lost:
+            lost.append(frame)
+            return {Loss.REQUEST}
+        return set()
+
     # A broadcast has no reply to wait for, and the lost one is found by the read-back, so no exchange here
     # waits out the link's time-out: a long one costs little (0.2 s), and a reply a busy machine delays past
     # the default 0.1 s is not heard late, as the answer to the next request (which the apply rightly takes
@@ -381,7 +423,8 @@ def test_a_lost_broadcast_is_repaired_with_addressed_writes(tmp_path, capsys):
         assert result.code == 0, result.err
         assert plant.matches_plant()
         assert "after 1 repair round" in result.out
-        assert lost and lost[0].message[:1] == b"\x20"  # the system block never arrived: repaired module by module
+        # the system block never arrived: repaired module by module
+        assert lost and lost[0].message[:1] == b"\x20"
 
 
 def test_a_plan_file_with_broadcasts_is_applied_as_made_and_refused_when_edited(tmp_path, capsys):
@@ -389,32 +432,42 @@ def test_a_plan_file_with_broadcasts_is_applied_as_made_and_refused_when_edited(
         made = tmp_path / "plan.json"
         assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
         document = json.loads(made.read_text())
-        assert document["buses"][0]["broadcasts"] and document["buses"][0]["broadcasts"][0]["modules"] == list(range(1, 31))
+        assert (document["buses"][0]["broadcasts"]
+                and document["buses"][0]["broadcasts"][0]["modules"] == list(range(1, 31)))
         for step in document["buses"][0]["modules"][4]["steps"]:
             step.pop("broadcast")  # module 5's steps sent addressed: not the plan that was made
         edited = tmp_path / "edited.json"
         edited.write_text(json.dumps(document))
-        refused = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve", "--allow-axis-release")
-        assert refused.code == 1 and "bus line, module 5 (m5): 0 of its steps are marked broadcast, where the plan has" in refused.err
-        applied = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve", "--allow-axis-release")
+        refused = run_cli(capsys, "apply", plant.path, "--plan", edited, "--auto-approve",
+                          "--allow-axis-release")
+        assert (refused.code == 1
+                and "bus line, module 5 (m5): 0 of its steps are marked broadcast, where "
+                    "the plan has" in refused.err)
+        applied = run_cli(capsys, "apply", plant.path, "--plan", made, "--auto-approve",
+                          "--allow-axis-release")
         assert applied.code == 0, applied.err
         assert plant.matches_plant()
 
 
 def test_a_broadcast_is_said_in_the_words_its_modules_steps_say_it(tmp_path, capsys):
     """A broadcast's summary is review text: the words the first module receiving it says it in (held to that
-    module's digest), never prc3cfg's words of today — reworded everywhere with the digests made again, the plan
-    applies; reworded at the bus alone, it is refused naming the place."""
+    module's digest), never prc3cfg's words of today — reworded everywhere with the digests made again, the
+    plan applies; reworded at the bus alone, it is refused naming the place."""
     with emulated_plant(tmp_path, source=full_line(tmp_path)) as plant:
         made = tmp_path / "plan.json"
         assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
         document = json.loads(made.read_text())
         bus = document["buses"][0]
         alone = tmp_path / "alone.json"
-        alone.write_text(json.dumps({**document, "buses": [{**bus, "broadcasts": [{**bus["broadcasts"][0], "summary": "send the system block"},
+        alone.write_text(json.dumps({**document,
+                                     "buses": [{**bus, "broadcasts": [{**bus["broadcasts"][0],
+                                                                       "summary": "send the system block"},
                                                                                   *bus["broadcasts"][1:]]}]}))  # fmt: skip
-        refused = run_cli(capsys, "apply", plant.path, "--plan", alone, "--auto-approve", "--allow-axis-release")
-        assert refused.code == 1 and "buses[0].broadcasts[0].summary is not what prc3cfg wrote" in refused.err, refused.err
+        refused = run_cli(capsys, "apply", plant.path, "--plan", alone, "--auto-approve",
+                          "--allow-axis-release")
+        assert (
+            refused.code == 1 and "buses[0].broadcasts[0].summary is not what prc3cfg wrote" in refused.err
+        ), refused.err
         for broadcast in bus["broadcasts"]:
             broadcast["summary"] = "send " + broadcast["summary"]
         for module in bus["modules"]:
@@ -423,6 +476,7 @@ def test_a_broadcast_is_said_in_the_words_its_modules_steps_say_it(tmp_path, cap
             module["review_sha256"] = review_sha256(module)
         reworded = tmp_path / "reworded.json"
         reworded.write_text(json.dumps(document))
-        applied = run_cli(capsys, "apply", plant.path, "--plan", reworded, "--auto-approve", "--allow-axis-release")
+        applied = run_cli(capsys, "apply", plant.path, "--plan", reworded, "--auto-approve",
+                          "--allow-axis-release")
         assert applied.code == 0, applied.err
         assert plant.matches_plant()

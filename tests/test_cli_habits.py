@@ -25,8 +25,10 @@ def edit(plant, change) -> None:
 
 def test_a_targeted_plan_and_apply_say_that_the_rest_is_left_out(plant, capsys):
     planned = run_cli(capsys, "plan", plant.path, "--module", "booth-a-top")
-    assert planned.out.startswith("⚠ Only booth-a-top (--module): the rest of the plant file is left out of this plan")
-    applied = run_cli(capsys, "apply", plant.path, "--module", "booth-a-top", "--auto-approve", "--allow-axis-release")
+    assert planned.out.startswith("⚠ Only booth-a-top (--module): the rest of the plant file is left out of "
+                                  "this plan")
+    applied = run_cli(capsys, "apply", plant.path, "--module", "booth-a-top", "--auto-approve",
+                      "--allow-axis-release")
     assert applied.code == 0 and applied.out.startswith("⚠ Only booth-a-top (--module)")
 
 
@@ -42,9 +44,11 @@ def test_modules_and_kept_programs_that_leave_the_plant_file_stay_on_the_hardwar
     edit(plant, remove)
     result = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
     assert result.code == 0  # nothing to write: leaving them alone is not a change
-    assert ("Left as it is: booth-b/booth-b-pretreat (address 4) is no longer in the plant file: it stays on the "
+    assert ("Left as it is: booth-b/booth-b-pretreat (address 4) is no longer in the plant file: it "
+            "stays on the "
             "hardware as it is, no longer managed") in result.out  # fmt: skip
-    assert ("Left as it is: booth-b/booth-b-right: program 4 no longer in the plant file (unmanaged_programs: keep): "
+    assert ("Left as it is: booth-b/booth-b-right: program 4 no longer in the plant file "
+            "(unmanaged_programs: keep): "
             "it stays on the module as it is") in result.out  # fmt: skip
     assert plant.emulators["booth-b"].module(3).image.program(4).T == 120  # still there, untouched
 
@@ -64,7 +68,8 @@ def test_a_previous_plant_file_says_what_left_it_and_a_broken_one_is_said(plant,
 
 def test_refresh_only_reports_drift_not_a_plan(plant, capsys):
     assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
-    assert run_cli(capsys, "plan", plant.path, "--refresh-only", "--detailed-exitcode").out.startswith("No drift")
+    assert run_cli(capsys, "plan", plant.path, "--refresh-only",
+                   "--detailed-exitcode").out.startswith("No drift")
     plant.emulators["booth-a"].teach_in(2, 1, 1987)  # taught on the floor
     result = run_cli(capsys, "plan", plant.path, "--refresh-only", "--detailed-exitcode")
     assert result.code == 2
@@ -80,7 +85,8 @@ def test_tables_are_never_cut_when_piped(tmp_path):
     plant = tmp_path / "plant.yaml"
     long_name = "booth-a-left-with-a-name-long-enough-to-overflow-eighty-columns-of-a-narrow-terminal"
     plant.write_text(DEMO.read_text().replace("name: booth-a-left", f"name: {long_name}"))
-    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "show", plant], capture_output=True, text=True, env={**os.environ, "COLUMNS": "40"})
+    shown = subprocess.run([sys.executable, "-m", "prc3cfg", "show", plant], capture_output=True, text=True,
+                           env={**os.environ, "COLUMNS": "40"})
     assert shown.returncode == 0, shown.stderr
     assert long_name in shown.stdout and "…" not in shown.stdout
 
@@ -89,8 +95,10 @@ def test_shell_completion_is_offered():
     """What bash asks of the script `--install-completion` installs (the same `--show-completion`
     prints, for the shell it finds running it): its script, then the words that complete a line."""
     env = {key: value for key, value in os.environ.items() if "COMP" not in key}
-    script = subprocess.run([sys.executable, "-m", "prc3cfg"], capture_output=True, text=True, env=env | {"_PRC3CFG_COMPLETE": "source_bash"})
-    assert script.returncode == 0 and "_prc3cfg_completion" in script.stdout and "complete_bash" in script.stdout
+    script = subprocess.run([sys.executable, "-m", "prc3cfg"], capture_output=True, text=True,
+                            env=env | {"_PRC3CFG_COMPLETE": "source_bash"})
+    assert (script.returncode == 0 and "_prc3cfg_completion" in script.stdout
+            and "complete_bash" in script.stdout)
     asked = env | {"_PRC3CFG_COMPLETE": "complete_bash", "COMP_WORDS": "prc3cfg pl", "COMP_CWORD": "1"}
     completed = subprocess.run([sys.executable, "-m", "prc3cfg"], capture_output=True, text=True, env=asked)
     assert completed.stdout.split() == ["plan"], completed.stderr
@@ -99,7 +107,8 @@ def test_shell_completion_is_offered():
 def on_a_terminal(args: list, env: dict) -> bytes:
     """What `prc3cfg ARGS` writes to stdout when stdout is a terminal."""
     master, slave = os.openpty()
-    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], stdout=slave, stderr=subprocess.DEVNULL,
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], stdout=slave,
+                               stderr=subprocess.DEVNULL,
                                env={**os.environ, **env})  # fmt: skip
     os.close(slave)
     chunks = []
@@ -124,7 +133,8 @@ def test_plans_are_coloured_on_a_terminal_unless_no_color(tmp_path):
     coloured = on_a_terminal(["plan", plant], env)
     assert b"\x1b[32m    + program 1: position" in coloured  # what the plan sets up: green
     assert b"\x1b[3" not in on_a_terminal(["plan", plant], env | {"NO_COLOR": "1"})
-    piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True, env={**os.environ, **env})
+    piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True,
+                           env={**os.environ, **env})
     assert b"\x1b[" not in piped.stdout
 
 
@@ -132,14 +142,17 @@ def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsy
     made = tmp_path / "plan.json"
     planned = run_cli(capsys, "plan", plant.path, "--out", made)
     shown = run_cli(capsys, "show", made)
-    assert shown.code == 0 and f"\n{render.REVIEW_AS_WRITTEN}\n" in shown.out  # what show adds: the review is the text of its digests
+    # what show adds: the review is the text of its digests
+    assert shown.code == 0 and f"\n{render.REVIEW_AS_WRITTEN}\n" in shown.out
     written = f"Plan written to {made}; apply it with: prc3cfg apply --plan {made}\n"
     assert shown.out.replace(f"{render.REVIEW_AS_WRITTEN}\n", "") == planned.out.replace(written, "")
     document = json.loads(made.read_text())
-    document["buses"][0]["modules"][0]["steps"][1]["summary"] = "harmless, look away"  # a lie beside the bytes
+    # a lie beside the bytes
+    document["buses"][0]["modules"][0]["steps"][1]["summary"] = "harmless, look away"
     made.write_text(json.dumps(document))
     lied = run_cli(capsys, "show", made).out
-    assert "harmless, look away" not in lied and "booth-a/booth-a-left was changed after the plan was made" in lied
+    assert ("harmless, look away" not in lied
+            and "booth-a/booth-a-left was changed after the plan was made" in lied)
     markdown = run_cli(capsys, "show", made, "--markdown")
     assert markdown.out.startswith("<!-- prc3cfg-plan -->") and "`plan.json`" not in markdown.out
     document["buses"][0]["modules"][0]["steps"][0]["releases_axes"] = False
@@ -151,7 +164,8 @@ def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsy
 def test_times_are_taken_as_durations(plant, capsys):
     from prc3cfg.cli.durations import parse_duration
 
-    assert [parse_duration(t) for t in ("5s", "2m", "1h", "30", "0.5", "500ms", "1.5m")] == [5, 120, 3600, 30, 0.5, 0.5, 90]
+    assert [parse_duration(t) for t in ("5s", "2m", "1h", "30", "0.5", "500ms", "1.5m")] == [5, 120, 3600, 30,
+                                                                                             0.5, 0.5, 90]
     assert run_cli(capsys, "plan", plant.path, "--lock-timeout", "2m").code == 0
 
 
@@ -174,11 +188,13 @@ def test_the_help_names_what_to_give_in_words():
     """`--module NAME`, `--trace FILE`, `PLANT`: never `<list[str]>`, `<path>`, `<float range>`, `{plant}`
     (typer braces a required argument in the usage line and writes its type after it in the list:
     `{PLANT}`, `PLANT <path>`)."""
-    helps = {" ".join(path): command.get_help(command.context_class(command, info_name=" ".join(path))) for path, command in every_command()}
+    helps = {" ".join(path): command.get_help(command.context_class(command, info_name=" ".join(path)))
+             for path, command in every_command()}
     for path, text in helps.items():
         options = text.split("\nOptions:\n", 1)[-1]
         assert not re.search(r"<[a-z]", options) and "plant" not in text.split("\n", 1)[0], text
-        metavars = re.findall(r"^  (?:-\w, )?--[\w-]+ (\S+)", options, re.M)  # an option starts its line, a wrapped help line does not
+        # an option starts its line, a wrapped help line does not
+        metavars = re.findall(r"^  (?:-\w, )?--[\w-]+ (\S+)", options, re.M)
         assert all(m == m.upper() or "|" in m for m in metavars), (path, metavars)
     assert "Usage: prc3cfg plan [OPTIONS] {PLANT}" in helps["prc3cfg plan"]
     for option in ("--module NAME", "--trace FILE", "--lock-timeout TIME", "--out FILE"):
@@ -201,10 +217,13 @@ def test_plot_without_the_plot_extra_fails_before_the_line_is_read(plant, tmp_pa
     (hidden / "sitecustomize.py").write_text(BLOCK_MATPLOTLIB)
     env = {**os.environ, "PYTHONPATH": str(hidden)}
     trace = tmp_path / "trace.txt"
-    for args in (["plan", plant.path, "--module", "booth-a-top", "--plot", tmp_path / "a.svg", "--trace", trace],
+    for args in (["plan", plant.path, "--module", "booth-a-top", "--plot", tmp_path / "a.svg", "--trace",
+                  trace],
                  ["show", plant.path, "--module", "booth-a-top", "--plot", tmp_path / "a.svg"]):
-        done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True, text=True, env=env)
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True,
+                              text=True, env=env)
         assert (done.returncode, done.stdout) == (1, "")
-        assert done.stderr == ("error: plotting needs matplotlib, which the Python running prc3cfg does not have — install it there: "
+        assert done.stderr == ("error: plotting needs matplotlib, which the Python running prc3cfg does not "
+                               "have — install it there: "
                                f"{shlex.quote(sys.executable)} -m pip install matplotlib\n")  # fmt: skip
         assert not trace.exists() or trace.read_text() == ""  # not one frame on the line

@@ -1,8 +1,8 @@
-"""`prc3cfg --help` is quick because the commands import what they use only when they run: listing
-them loads typer and prc3cfg's command modules, never the plant loader, the planner, the link, rich,
-nor the standard library's logging, sockets, hashes or thread pools; a command that talks on no line
-(`plan --actual`, `validate`) loads no link; a plan loads no doctor, no importer, no rich when nothing it
-writes to is a terminal, and no emulator server unless its port is `emulator://`. (How fast: bench/startup_bench.py.)"""
+"""`prc3cfg --help` is quick because the commands import what they use only when they run: listing them loads
+typer and prc3cfg's command modules, never the plant loader, the planner, the link, rich, nor the standard
+library's logging, sockets, hashes or thread pools; a command that talks on no line (`plan --actual`,
+`validate`) loads no link; a plan loads no doctor, no importer, no rich when nothing it writes to is a
+terminal, and no emulator server unless its port is `emulator://`. (How fast: bench/startup_bench.py.)"""
 
 from __future__ import annotations
 
@@ -40,13 +40,15 @@ LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "ha
                   "secrets", "json", "html")  # fmt: skip
 #: The whole of prc3cfg that `prc3cfg --help` loads besides the command modules: what their signatures and
 #: `main` use.
-LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.cli.durations", "prc3cfg.core",
+LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.cli.durations",
+                 "prc3cfg.core",
                  "prc3cfg.core.line", "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell",
                  "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]  # fmt: skip
 
 
 def test_listing_the_commands_loads_nothing_heavy():
-    done = subprocess.run([sys.executable, "-c", LISTING.format(args=["--help"], tops=LISTING_SPARES)], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", LISTING.format(args=["--help"], tops=LISTING_SPARES)],
+                          capture_output=True, text=True)
     assert "Commands" in done.stdout and "apply" in done.stdout
     assert done.stderr.strip() == "heavy: []"
 
@@ -93,16 +95,19 @@ def test_the_table_of_command_modules_is_what_the_modules_register():
     _register_commands()
     registered = [(info.name or typer.main.get_command_name(info.callback.__name__), info.callback.__module__)
                   for info in app.registered_commands]  # fmt: skip
-    registered += [(group.name, {c.callback.__module__ for c in group.typer_instance.registered_commands}.pop())
+    registered += [(group.name,
+                    {c.callback.__module__ for c in group.typer_instance.registered_commands}.pop())
                    for group in app.registered_groups]  # fmt: skip
-    assert sorted(registered) == sorted((name, f"prc3cfg.cli.{module}") for name, module in COMMAND_MODULES.items())
+    assert sorted(registered) == sorted((name, f"prc3cfg.cli.{module}")
+                                        for name, module in COMMAND_MODULES.items())
     listed = typer.main.get_command(app).list_commands(None)
     assert listed == list(COMMAND_MODULES)
 
 
 @pytest.mark.parametrize("command", ["validate", "records", "emulator"])
 def test_a_command_line_loads_only_its_command_s_module(command):
-    """typer builds every registered command before it runs one: a command line registers its own module's only."""
+    """typer builds every registered command before it runs one: a command line registers its own module's
+    only."""
     probe = f"""
 import sys
 from prc3cfg.cli import main
@@ -145,14 +150,17 @@ def test_a_plan_against_saved_images_loads_no_link(tmp_path):
     images = tmp_path / "images.json"
     images.write_text(json.dumps([{"bus": bus.name, **ModuleState.factory(m.address).image.to_json()}
                                   for bus in load_plant(plant).buses for m in bus.modules]))  # fmt: skip
-    done = subprocess.run([sys.executable, "-c", LOADED_BY, "plan", str(plant), "--actual", str(images)], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", LOADED_BY, "plan", str(plant), "--actual", str(images)],
+                          capture_output=True, text=True)
     assert "booth-a-left" in done.stdout, done.stderr  # the plan was made and shown
     assert done.stderr.strip().splitlines()[-1] == "loaded: []"
-    validated = subprocess.run([sys.executable, "-c", LOADED_BY, "validate", str(plant)], capture_output=True, text=True)
+    validated = subprocess.run([sys.executable, "-c", LOADED_BY, "validate", str(plant)], capture_output=True,
+                               text=True)
     assert validated.stderr.strip().splitlines()[-1] == "loaded: []"
 
 
-#: Runs the command line's arguments in this process (stdout and stderr pipes), then names what it loaded of these.
+#: Runs the command line's arguments in this process (stdout and stderr pipes), then names what it loaded of
+#: these.
 LOADED_OF = """
 import sys
 from prc3cfg.cli import main
@@ -167,58 +175,77 @@ print("loaded:", loaded, file=sys.stderr)
 
 
 def test_a_plan_loads_what_it_runs_only(tmp_path):
-    """Piped, `plan` loads no rich (its progress bar and colours are for a terminal), nor doctor's search or the importer
-    (it asks only whether doctor could measure a port), nor the policy's rules where the plant file names no policy, nor
-    adopt's rewriting (nor does `apply`); on `emulator://` it runs the emulator, on `socket://` it does not."""
+    """Piped, `plan` loads no rich (its progress bar and colours are for a terminal), nor doctor's search or
+    the importer (it asks only whether doctor could measure a port), nor the policy's rules where the plant
+    file names no policy, nor adopt's rewriting (nor does `apply`); on `emulator://` it runs the emulator, on
+    `socket://` it does not."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(DEMO.read_text())
-    on_emulator = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path,
+    on_emulator = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True,
+                                 text=True, cwd=tmp_path,
                                  env=_no_terminal())  # fmt: skip
     assert "booth-a-left" in on_emulator.stdout, on_emulator.stderr
     assert on_emulator.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.shell.emulator.server']"
     (tmp_path / "socket").mkdir()
     with emulated_plant(tmp_path / "socket") as emulated:
-        on_socket = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(emulated.path)], capture_output=True, text=True,
+        on_socket = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(emulated.path)],
+                                   capture_output=True, text=True,
                                    cwd=tmp_path, env=_no_terminal())  # fmt: skip
     assert "booth-a-left" in on_socket.stdout, on_socket.stderr
     assert on_socket.stderr.strip().splitlines()[-1] == "loaded: []"
-    applied = subprocess.run([sys.executable, "-c", LOADED_OF, "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+    applied = subprocess.run([sys.executable, "-c", LOADED_OF, "apply", str(plant), "--auto-approve",
+                              "--allow-axis-release"],
                              capture_output=True, text=True, cwd=tmp_path, env=_no_terminal())  # fmt: skip
     assert "Apply complete" in applied.stdout, applied.stderr
     assert applied.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.shell.emulator.server']"
 
 
 def test_a_plan_loads_the_policy_its_plant_file_names(tmp_path):
-    """The other side of `test_a_plan_loads_what_it_runs_only`: a plant file that names a policy has it loaded and judged."""
+    """The other side of `test_a_plan_loads_what_it_runs_only`: a plant file that names a policy has it loaded
+    and judged."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(DEMO.read_text() + "\npolicy: rules.yaml\n")
-    (tmp_path / "rules.yaml").write_text("format: prc3cfg-policy/1\nenvelopes:\n  - name: booth speeds\n    level: advisory\n"
-                                         "    buses: [booth-a]\n    limits:\n      speed: {max: 0.300}\n")  # fmt: skip
-    done = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path,
+    (tmp_path / "rules.yaml").write_text("format: prc3cfg-policy/1\nenvelopes:\n  - name: booth speeds\n    "
+                                         "level: advisory\n"
+                                         "    buses: [booth-a]\n    limits:\n      speed: "
+                                         "{max: 0.300}\n")  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True,
+                          text=True, cwd=tmp_path,
                           env=_no_terminal())  # fmt: skip
-    assert "Policy" in done.stdout + done.stderr and "booth speeds" in done.stdout + done.stderr, done.stdout + done.stderr
-    assert done.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.core.policy', 'prc3cfg.plant.policy', 'prc3cfg.shell.emulator.server']"
+    assert "Policy" in done.stdout + done.stderr and "booth speeds" in done.stdout + done.stderr, (
+        done.stdout + done.stderr
+    )
+    assert done.stderr.strip().splitlines()[-1] == ("loaded: ['prc3cfg.core.policy', "
+                                                    "'prc3cfg.plant.policy', "
+                                                    "'prc3cfg.shell.emulator.server']")
 
 
 def test_a_plan_builds_no_checker_of_files_it_does_not_read(tmp_path):
-    """pydantic models are built when a file of theirs is first read: a plan on `emulator://` in a fresh folder reads
-    no emulator state file (`prc3cfg.shell.emulator.state`) and no snapshot (`prc3cfg.shell.records`); the apply
-    after it reads the plan's state file, and still no snapshot."""
+    """pydantic models are built when a file of theirs is first read: a plan on `emulator://` in a fresh
+    folder reads no emulator state file (`prc3cfg.shell.emulator.state`) and no snapshot
+    (`prc3cfg.shell.records`); the apply after it reads the plan's state file, and still no snapshot."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(DEMO.read_text())
-    probe = LOADED_BY.replace('print("loaded:", loaded, file=sys.stderr)', """from prc3cfg.shell import records
+    probe = LOADED_BY.replace(
+        'print("loaded:", loaded, file=sys.stderr)',
+        """from prc3cfg.shell import records
 from prc3cfg.shell.emulator import state
-print("built:", state._StateFile.__pydantic_complete__, records._SnapshotDocument.__pydantic_complete__, file=sys.stderr)""")
-    planned = subprocess.run([sys.executable, "-c", probe, "plan", str(plant)], capture_output=True, text=True, cwd=tmp_path)
+print("built:", state._StateFile.__pydantic_complete__, records._SnapshotDocument.__pydantic_complete__, file=sys.stderr)""",
+    )
+    planned = subprocess.run([sys.executable, "-c", probe, "plan", str(plant)], capture_output=True,
+                             text=True, cwd=tmp_path)
     assert planned.stderr.strip().splitlines()[-1] == "built: False False", planned.stderr
-    applied = subprocess.run([sys.executable, "-c", probe, "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+    applied = subprocess.run([sys.executable, "-c", probe, "apply", str(plant), "--auto-approve",
+                              "--allow-axis-release"],
                              capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
     assert applied.stderr.strip().splitlines()[-1] == "built: True False", applied.stderr
 
 
 def _no_terminal() -> dict[str, str]:
     """This environment without what makes rich take a pipe for a terminal."""
-    return {name: value for name, value in os.environ.items() if name not in ("TTY_COMPATIBLE", "FORCE_COLOR")}
+    return {
+        name: value for name, value in os.environ.items() if name not in ("TTY_COMPATIBLE", "FORCE_COLOR")
+    }
 
 
 def _command_lines(command=None, words: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
@@ -239,17 +266,18 @@ def _command_lines(command=None, words: tuple[str, ...] = ()) -> list[tuple[str,
 @pytest.mark.soak
 @pytest.mark.parametrize("words", _command_lines(), ids=" ".join)
 def test_every_commands_help_loads_nothing_heavy(words):
-    """The listing's guarantee (`test_listing_the_commands_loads_nothing_heavy`) for each command's own `--help` — but
-    pydantic and what it loads: typer checks a command's options with it."""
-    done = subprocess.run([sys.executable, "-c", LISTING.format(args=[*words, "--help"], tops=("serial", "yaml", "rich"))],
+    """The listing's guarantee (`test_listing_the_commands_loads_nothing_heavy`) for each command's own
+    `--help` — but pydantic and what it loads: typer checks a command's options with it."""
+    done = subprocess.run([sys.executable, "-c",
+                           LISTING.format(args=[*words, "--help"], tops=("serial", "yaml", "rich"))],
                           capture_output=True, text=True)  # fmt: skip
     assert "Usage" in done.stdout, done.stderr
     assert done.stderr.strip() == "heavy: []"
 
 
 def test_the_listing_keeps_the_table_s_order_whichever_command_module_was_imported_first():
-    """A program that runs several command lines (the tests, an embedding) imports the modules in the order it runs
-    them: the listing is still the table's."""
+    """A program that runs several command lines (the tests, an embedding) imports the modules in the order it
+    runs them: the listing is still the table's."""
     probe = ("import typer, prc3cfg.cli.plan_commands, prc3cfg.cli.records_commands\n"
              "from prc3cfg.cli import COMMAND_MODULES, _register_commands, app\n"
              "_register_commands()\n"

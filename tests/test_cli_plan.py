@@ -55,8 +55,10 @@ def test_the_command_a_plan_prints_to_apply_it_runs_as_printed_from_a_folder_wit
         planned = run_cli(capsys, "plan", plant.path, "--out", folder / "plan (reviewed).json")
         printed = planned.out.rsplit("apply it with: ", 1)[1].strip()
         assert printed == f"prc3cfg apply --plan '{folder / 'plan (reviewed).json'}'"
-        pasted = subprocess.run(["sh", "-c", f"{printed} --auto-approve --allow-axis-release"], capture_output=True, text=True,
-                                cwd=tmp_path, env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)}, check=False)  # fmt: skip
+        pasted = subprocess.run(["sh", "-c", f"{printed} --auto-approve --allow-axis-release"],
+                                capture_output=True, text=True,
+                                cwd=tmp_path, env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)},
+                                check=False)  # fmt: skip
         assert pasted.returncode == 0, pasted.stderr
         assert plant.matches_plant()
 
@@ -142,7 +144,8 @@ def test_a_silent_bus_is_one_line_naming_bus_and_module(plant, capsys):
     plant.emulators["booth-b"].update(3, mode="manual")
     result = run_cli(capsys, "plan", plant.path, "--module", "booth-b-right", "--retries", "1")
     assert result.code == 1
-    assert result.err.startswith("error: bus booth-b, module 3: no reply within 0.153 s")  # the line's 0.053 s, the bus's 0.1 s on top
+    # the line's 0.053 s, the bus's 0.1 s on top
+    assert result.err.startswith("error: bus booth-b, module 3: no reply within 0.153 s")
     assert result.err.count("\n") == 1
 
 
@@ -154,7 +157,8 @@ def test_a_saved_plan_shows_what_the_live_plan_showed_charts_and_marks_included(
     assert live.code == 0 and live.out.count("```mermaid") >= 1
     shown = run_cli(capsys, "show", saved, "--markdown")
     assert shown.code == 0
-    said = f"> {render.REVIEW_AS_WRITTEN}\n\n"  # what show adds: the review text is the one its digests were written for
+    # what show adds: the review text is the one its digests were written for
+    said = f"> {render.REVIEW_AS_WRITTEN}\n\n"
     assert said in shown.out and shown.out.replace(said, "", 1) == live.out
     human = run_cli(capsys, "plan", plant.path)
     assert human.out.splitlines()[-1] == render.LEGEND
@@ -166,7 +170,8 @@ def test_a_saved_plan_without_its_total_time_is_shown_with_the_sum_of_its_phases
     assert run_cli(capsys, "plan", plant.path, "--out", saved).code == 0
     document = json.loads(saved.read_text())
     phases = document["estimated_phases_s"]
-    del document["estimated_time_s"]  # an older or a hand-trimmed file: show shows it all the same (apply --plan refuses it)
+    # an older or a hand-trimmed file: show shows it all the same (apply --plan refuses it)
+    del document["estimated_time_s"]
     saved.write_text(json.dumps(document))
     shown = run_cli(capsys, "show", saved)
     assert shown.code == 0, shown.err
@@ -174,7 +179,8 @@ def test_a_saved_plan_without_its_total_time_is_shown_with_the_sum_of_its_phases
 
 
 #: Not printable text (C0, DEL, C1, the line and paragraph separators, lone surrogates).
-CONTROL = re.compile("[\x00-\x09\x0b-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")  # a new line (\x0a) apart: outputs have lines
+# a new line (\x0a) apart: outputs have lines
+CONTROL = re.compile("[\x00-\x09\x0b-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
 HOSTILE = "\x1b]0;owned\x07\x1b[2J\u2028\ud800"
 
 
@@ -188,7 +194,8 @@ def test_the_texts_of_a_plan_file_are_shown_escaped_by_show_and_apply(plant, cap
     made = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant.path, "--out", made).code == 0
     document = json.loads(made.read_text())
-    assert document["read"]["base"] == "the line's record of what prc3cfg last read or verified"  # a targeted plan: it says its base
+    # a targeted plan: it says its base
+    assert document["read"]["base"] == "the line's record of what prc3cfg last read or verified"
     first = next(iter(document["read"]["taken"]))
     document["read"]["taken"][first] += HOSTILE
     document["left_alone"] = [f"a note{HOSTILE}"]
@@ -208,25 +215,32 @@ def test_the_texts_of_a_plan_file_are_shown_escaped_by_show_and_apply(plant, cap
 
 def test_a_comment_cut_to_its_budget_still_counts_the_clamped_programs_and_the_releases(tmp_path, capsys):
     """4 modules lower S1 under 60 programs the plant does not manage each: 240 programs clamped. A comment of
-    3,000 characters has no room for the details; its head still says how many are clamped, and on how many modules."""
+    3,000 characters has no room for the details; its head still says how many are clamped, and on how many
+    modules."""
     import yaml
 
     from prc3cfg.core.image import ModuleImage, Program
 
     plant = tmp_path / "plant.yaml"
     modules = [{"address": a, "name": f"m{a}", "system": {"upper_reversing_point": 1.0}} for a in range(1, 5)]
-    plant.write_text(yaml.safe_dump({"plant": "p", "buses": [{"name": "b", "port": "socket://127.0.0.1:9", "modules": modules}]}))
+    plant.write_text(yaml.safe_dump({"plant": "p",
+                                     "buses": [{"name": "b", "port": "socket://127.0.0.1:9",
+                                                "modules": modules}]}))
     held = [ModuleImage.factory(a) for a in range(1, 5)]
-    held = [replace(image, system=replace(image.system, S1=2500)).with_programs({n: Program(P=2000, V=50) for n in range(1, 61)})
+    held = [replace(image, system=replace(image.system, S1=2500)).with_programs({n: Program(P=2000, V=50)
+                                                                                 for n in range(1, 61)})
             for image in held]  # fmt: skip
     saved = tmp_path / "actual.json"
     saved.write_text(json.dumps([{"bus": "b", **image.to_json()} for image in held]))
     for made in ("plan", "show"):
-        args = ["plan", plant, "--actual", saved, "--out", tmp_path / "plan.json"] if made == "plan" else ["show", tmp_path / "plan.json"]
+        args = (["plan", plant, "--actual", saved, "--out", tmp_path / "plan.json"] if made == "plan"
+                else ["show", tmp_path / "plan.json"])
         cut = run_cli(capsys, *args, "--markdown", "--max-chars", "3000")
         assert cut.code == 0, cut.err
-        assert "are left out to keep this comment under 3,000 characters" in cut.out and "<details>" not in cut.out
-        assert "> ⚠ 240 programs the plant does not manage are clamped by 4 modules as their system parameters change" in cut.out
+        assert ("are left out to keep this comment under 3,000 characters" in cut.out
+                and "<details>" not in cut.out)
+        assert ("> ⚠ 240 programs the plant does not manage are clamped by 4 modules as their system "
+                "parameters change") in cut.out
         assert "⚠ 4 modules release the axes" in cut.out
     human = run_cli(capsys, "show", tmp_path / "plan.json")
     assert "⚠ 240 programs the plant does not manage are clamped by 4 modules" in human.out

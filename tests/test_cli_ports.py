@@ -18,7 +18,8 @@ from serial.tools.list_ports_common import ListPortInfo
 from prc3cfg.shell import platform
 
 
-def port(device: str, description: str = "n/a", vid: int | None = None, pid: int | None = None) -> ListPortInfo:
+def port(device: str, description: str = "n/a", vid: int | None = None,
+         pid: int | None = None) -> ListPortInfo:
     info = ListPortInfo(device, skip_link_detection=True)
     info.description, info.vid, info.pid = description, vid, pid
     return info
@@ -56,7 +57,8 @@ def test_the_ports_as_json(laptop, capsys):
 
 
 def test_a_port_without_a_description_has_none(monkeypatch, capsys):
-    monkeypatch.setattr(list_ports, "comports", lambda include_links=False: [port("/dev/ttyS0"), port("/dev/ttyUSB0", "ttyUSB0")])
+    monkeypatch.setattr(list_ports, "comports",
+                        lambda include_links=False: [port("/dev/ttyS0"), port("/dev/ttyUSB0", "ttyUSB0")])
     assert run_cli(capsys, "ports").out.splitlines() == ["/dev/ttyS0    -", "/dev/ttyUSB0  -"]
 
 
@@ -64,7 +66,9 @@ def test_where_pyserial_s_listing_cannot_load_the_registry_s_com_ports_are_liste
     """Wine 8's cfgmgr32 lacks a function pyserial's Windows listing binds at import (AttributeError from
     ctypes): the ports Windows' registry names are listed, in number order, without description."""
     monkeypatch.setattr(platform, "registered_serial_ports", lambda: ["COM10", "COM7", "COM1"])
-    monkeypatch.setattr("builtins.__import__", failing_import(__import__, "serial.tools", AttributeError("function 'CM_MapCrToWin32Err' not found")))
+    monkeypatch.setattr("builtins.__import__",
+                        failing_import(__import__, "serial.tools",
+                                       AttributeError("function 'CM_MapCrToWin32Err' not found")))
     result = run_cli(capsys, "ports")
     assert result.code == 0, result.err
     assert result.out.splitlines() == ["COM1   -", "COM7   -", "COM10  -"]
@@ -87,14 +91,16 @@ def test_no_port_is_said_on_stderr(monkeypatch, capsys):
 
 
 def test_this_machine_s_ports_are_listed_without_a_traceback():
-    done = subprocess.run([sys.executable, "-m", "prc3cfg", "ports", "--json"], capture_output=True, text=True, timeout=60)
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "ports", "--json"], capture_output=True,
+                          text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert isinstance(json.loads(done.stdout), list)
 
 
 @pytest.mark.skipif(not platform.HAS_PTY, reason="no pseudo-terminals here")
 def test_a_pseudo_terminal_is_not_listed():
-    """As docs/commands.md says: pyserial lists the machine's serial devices, not its ptys (`emulator serve --pty` prints its path)."""
+    """As docs/commands.md says: pyserial lists the machine's serial devices, not its ptys (`emulator serve
+    --pty` prints its path)."""
     from prc3cfg import api
 
     master, slave, path = platform.open_pty()
@@ -109,13 +115,16 @@ def test_a_pseudo_terminal_is_not_listed():
 def test_an_emulator_s_pty_is_listed_while_it_serves_and_not_after(capsys):
     """The port a person tries prc3cfg on without hardware: `emulator serve --pty`'s, which the system
     lists among no serial ports — listed with its process and modules while it serves."""
-    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--modules", "1,3-5"],
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--modules",
+                                "1,3-5"],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
     try:
         assert process.stdout is not None
         pty = process.stdout.readline().strip().removeprefix("pty: ")  # printed once it serves
         listed = run_cli(capsys, "ports", "--json")
-        assert {"device": pty, "description": f"prc3cfg emulator serve --pty (pid {process.pid}), addresses 1, 3–5", "usb": None} \
+        assert {"device": pty,
+                "description": f"prc3cfg emulator serve --pty (pid {process.pid}), addresses 1, 3–5",
+                "usb": None} \
             in json.loads(listed.out), listed.out  # fmt: skip
     finally:
         process.send_signal(signal.SIGINT)

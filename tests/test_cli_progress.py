@@ -16,7 +16,8 @@ from terminal import Pane, environment, needs_tmux, prc3cfg
 from prc3cfg import api
 from prc3cfg.core.bustime import slower_than_priced
 
-TIME = re.compile(r"Time: (\S+) s \(estimated (\S+) s\) — reading back (\S+) s \((\S+) s\), writing (\S+) s \((\S+) s\), "
+TIME = re.compile(r"Time: (\S+) s \(estimated (\S+) s\) — reading back (\S+) s \((\S+) s\), writing (\S+) s "
+                  r"\((\S+) s\), "
                   r"verifying (\S+) s \((\S+) s\)")  # fmt: skip
 
 
@@ -25,23 +26,31 @@ def test_an_apply_ends_with_its_time_by_phase_against_the_estimate(tmp_path, cap
     test_commissioning), the apply's time by phase against the estimate its plan gave."""
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         api.told(api.apply(plant.plant, gates=api.Gates(allow_axis_release=True)))
-        plant.path.write_text(plant.path.read_text().replace("dwell: 0.5\n", "dwell: 0.6\n"))  # on every module that has one
+        # on every module that has one
+        plant.path.write_text(plant.path.read_text().replace("dwell: 0.5\n", "dwell: 0.6\n"))
         planned = run_cli(capsys, "plan", plant.path, "--json")
         applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
     assert applied.code == 0, applied.err
     last = applied.out.splitlines()[-1]
     found = TIME.fullmatch(last)
     assert found is not None, last
-    took, estimated, reading, reading_estimate, writing, writing_estimate, verifying, verifying_estimate = map(float, found.groups())
+    took, estimated, reading, reading_estimate, writing, writing_estimate, verifying, verifying_estimate = (
+        map(float, found.groups())
+    )
     phases = json.loads(planned.out)["estimated_phases_s"]
-    assert (reading_estimate, writing_estimate, verifying_estimate) == tuple(round(phases[p], 1) for p in ("reading", "writing", "verifying"))
+    assert (reading_estimate, writing_estimate, verifying_estimate) == tuple(round(phases[p], 1)
+                                                                             for p in ("reading", "writing",
+                                                                                       "verifying"))
     # an emulator at line speed is never faster than the line: the model is not an overestimate
-    assert abs(took - (reading + writing + verifying)) <= 0.15 and abs(estimated - sum(phases.values())) <= 0.05  # the totals: sums, rounded
+    # the totals: sums, rounded
+    assert (abs(took - (reading + writing + verifying)) <= 0.15
+            and abs(estimated - sum(phases.values())) <= 0.05)
     assert reading >= 0.85 * phases["reading"] and writing >= 0.85 * phases["writing"]
 
 
 #: A phase on the progress display: its name, steps done of all, time taken, time left at the rate so far.
-SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+):(\d\d):(\d\d) +(?:(\d+):(\d\d):(\d\d)|-:--:--) left$",
+SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+):(\d\d):(\d\d) "
+                   r"+(?:(\d+):(\d\d):(\d\d)|-:--:--) left$",
                    re.MULTILINE)  # fmt: skip
 
 
@@ -50,9 +59,14 @@ def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
     """On a terminal, reading and verifying each say how long is left — before any module is done
     "-:--:--", then the modules to go at the time a module has taken so far (9600 baud, `--verify full`:
     seconds a module), counting down: never more than that rate gives for the modules still to go. And
-    the apply's snapshot and its time by phase on the same screen (`--verify full` reads every program back)."""
+    the apply's snapshot and its time by phase on the same screen (`--verify full` reads every program back).
+    """
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"), environment())
+        pane = Pane(
+            tmp_path,
+            prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"),
+            environment(),
+        )
         try:
             seen: dict[str, list[tuple[int, int, int, int | None]]] = {}
 
@@ -60,7 +74,8 @@ def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
                 for found in SHOWN.finditer(screen):
                     phase, done, total, h, m, s, *left = found.groups()
                     took = int(h) * 3600 + int(m) * 60 + int(s)
-                    to_go = None if left[0] is None else int(left[0]) * 3600 + int(left[1]) * 60 + int(left[2])
+                    to_go = (None if left[0] is None else int(left[0]) * 3600 + int(left[1]) * 60
+                             + int(left[2]))
                     seen.setdefault(phase, []).append((int(done), int(total), took, to_go))
                 return any(done >= 3 and to_go is not None for done, _, _, to_go in seen.get("verifying", []))
 
@@ -73,13 +88,18 @@ def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
     for phase in ("reading modules", "verifying"):
         assert phase in seen, seen
         for done, total, took, to_go in seen[phase]:
-            assert (to_go is None) == (done == 0), (phase, seen[phase])  # a time left once a module is done, not before
-            if to_go is not None:  # the rate so far, counted down: at most the time per module so far for those to go (whole seconds)
+            # a time left once a module is done, not before
+            assert (to_go is None) == (done == 0), (phase, seen[phase])
+            # the rate so far, counted down: at most the time per module so far for those to go (whole
+            # seconds)
+            if to_go is not None:
                 assert to_go <= (took + 1) / done * (total - done) + 1, (phase, seen[phase])
 
 
-SLOW = re.compile(r"note: the line is slower than the plant file's line settings say — bus booth-a: (\d+) exchanges took (\S+) s, its "
-                  r"settings price them at (\S+) s \(the modules answered after (\d+) ms on average, turnaround: 0\.01 in the plant "
+SLOW = re.compile(r"note: the line is slower than the plant file's line settings say — bus booth-a: (\d+) "
+                  r"exchanges took (\S+) s, its "
+                  r"settings price them at (\S+) s \(the modules answered after (\d+) ms on average, "
+                  r"turnaround: 0\.01 in the plant "
                   r"file\): (.*)")  # fmt: skip
 
 
@@ -106,7 +126,8 @@ def slow_notes(err: str) -> list[re.Match[str]]:
     return [f for f in found if f is not None]
 
 
-@pytest.mark.parametrize(("query", "noted"), [("?line-speed=9600&turnaround=0.060", True), ("?line-speed=9600", False)])
+@pytest.mark.parametrize(("query", "noted"),
+                         [("?line-speed=9600&turnaround=0.060", True), ("?line-speed=9600", False)])
 def test_a_line_slower_than_its_settings_is_noted_once_per_command(tmp_path, capsys, query, noted):
     """Modules that answer after 60 ms on a bus whose plant file says turnaround: 0.010: plan and
     apply (reading, writing, verifying) each end with one note giving the figures; with the emulator
@@ -118,7 +139,8 @@ def test_a_line_slower_than_its_settings_is_noted_once_per_command(tmp_path, cap
     plant = tmp_path / "plant.yaml"
     plant.write_text(yaml.safe_dump(document, sort_keys=False))
     planned = run_cli(capsys, "plan", plant, "--module", "booth-a-left")
-    applied = run_cli(capsys, "apply", plant, "--module", "booth-a-left", "--auto-approve", "--allow-axis-release")
+    applied = run_cli(capsys, "apply", plant, "--module", "booth-a-left", "--auto-approve",
+                      "--allow-axis-release")
     assert planned.code == applied.code == 0, applied.err
     for result in (planned, applied):
         notes = slow_notes(result.err)
@@ -126,16 +148,19 @@ def test_a_line_slower_than_its_settings_is_noted_once_per_command(tmp_path, cap
         for note in notes:
             _, took, priced, answered, remedy = note.groups()
             assert float(took) > 1.25 * float(priced) and int(answered) >= 55
-            assert remedy == "an emulator:// port's line-speed and turnaround are slower than its bus's keys: give both the same"
+            assert remedy == ("an emulator:// port's line-speed and turnaround are slower than its bus's "
+                              "keys: give both the same")
 
 
 def test_a_slow_line_points_at_doctor_with_its_port(tmp_path, capsys):
     """A real port (here the emulator behind socket://) whose module answers after 60 ms: the note
     says which command measures it."""
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        plant.emulators["booth-a"].turnarounds[1] = 0.060  # booth-a-left, as emulator serve --module-turnaround 1=60ms
+        # booth-a-left, as emulator serve --module-turnaround 1=60ms
+        plant.emulators["booth-a"].turnarounds[1] = 0.060
         planned = run_cli(capsys, "plan", plant.path, "--module", "booth-a-left")
         port = plant.plant.buses[0].port
     assert planned.code == 0, planned.err
     note, = slow_notes(planned.err)
-    assert note.group(5) == f"measure the line with prc3cfg doctor --port {port} and put the bus keys it prints into the plant file"
+    assert note.group(5) == (f"measure the line with prc3cfg doctor --port {port} and put the bus keys it "
+                             "prints into the plant file")

@@ -18,15 +18,17 @@ pytestmark = needs_tmux
 SUMMARY = ["⚠ 1 module will release its axes (10h/20h): booth-a/booth-a-left",
            "  It loses its reference point and must travel to it before production."]
 ALLOW = "Release the axes of 1 module? Only 'yes' will be accepted:"
-APPROVE = re.compile(r"Every module must be in STOP and AUTOMATIC: a running one would take the new values on its next move\. "
+APPROVE = re.compile(r"Every module must be in STOP and AUTOMATIC: a running one would take the new values "
+                     r"on its next move\. "
                      r"Apply \d+ messages? to 1 module\? Only 'yes' will be accepted:")  # fmt: skip
 #: Screens watched while a question waits: well over one redraw of a progress display (rich: 10 a second).
 WATCHED = 8
 
 
 def asked(pane: Pane, question: str | re.Pattern[str], after: str | None) -> str:
-    """The pane waits for an answer to `question`: it is the last line of the screen, whole, below
-    `after` (what was printed last before it, if it is on this terminal), and stays so with no progress display anywhere on the screen."""
+    """The pane waits for an answer to `question`: it is the last line of the screen, whole, below `after`
+    (what was printed last before it, if it is on this terminal), and stays so with no progress display
+    anywhere on the screen."""
 
     def last_line(screen: str) -> str:
         return (screen.rstrip().splitlines() or [""])[-1].rstrip()  # a terminal shows no trailing blank
@@ -61,7 +63,8 @@ def answers_both_questions(pane: Pane, command: str = "apply") -> None:
 
 def test_apply_asks_both_questions_whole_with_no_progress_on_screen(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        answers_both_questions(Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment()))
+        answers_both_questions(Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"),
+                                    environment()))
         assert plant.matches_plant() is False  # the other modules were left out
         assert not api.plan(plant.plant, ["booth-a-left"]).changes
 
@@ -87,8 +90,10 @@ def test_only_yes_typed_out_answers_a_question_that_writes(tmp_path, question):
                 asked(pane, APPROVE, ALLOW + " yes")
             pane.type("y")
             assert pane.exit_status() == 1, pane.screen()
-            refused = ("error: axis release of booth-a/booth-a-left not allowed (only 'yes' allows it) — nothing was written"
-                       if question == "axis release" else "error: not applied — nothing was written")  # fmt: skip
+            refused = ("error: axis release of booth-a/booth-a-left not allowed (only 'yes' allows it) — "
+                       "nothing was written"
+                       if question == "axis release" else "error: not applied — nothing "
+                                                          "was written")  # fmt: skip
             assert refused in pane.screen()
         finally:
             pane.close()
@@ -97,13 +102,18 @@ def test_only_yes_typed_out_answers_a_question_that_writes(tmp_path, question):
 
 def test_with_stdout_in_a_file_the_plan_asked_about_is_on_the_terminal_too(tmp_path):
     """`prc3cfg apply plant.yaml > apply.log`: the questions are asked on the terminal, and the plan they are
-    about is shown there too, not only written to the file (issue 42: the question reached the terminal, the plan did not)."""
+    about is shown there too, not only written to the file (issue 42: the question reached the terminal, the
+    plan did not)."""
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         log = tmp_path / "apply.log"
-        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment(), stdout=log)
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--module", "booth-a-left"), environment(),
+                    stdout=log)
         try:
             screen = asked(pane, ALLOW, None)
-            assert "~ bus booth-a, module 1 (booth-a-left):" in screen and "Plan: 1 of 1 module changes" in screen, screen
+            assert (
+                "~ bus booth-a, module 1 (booth-a-left):" in screen
+                and "Plan: 1 of 1 module changes" in screen
+            ), screen
             pane.type("no")
             assert pane.exit_status() == 1, pane.screen()
         finally:
@@ -119,7 +129,8 @@ def test_adopt_asks_on_the_terminal_the_answer_comes_from(tmp_path, stdout):
         api.told(api.apply(plant.plant, ["booth-a-left"], gates=api.Gates(allow_axis_release=True)))
         plant.emulators["booth-a"].teach_in(1, 1, 2080)
         log = tmp_path / "adopt.log" if stdout == "file" else None
-        pane = Pane(tmp_path, prc3cfg("adopt", plant.path, "--module", "booth-a-left"), environment(), stdout=log)
+        pane = Pane(tmp_path, prc3cfg("adopt", plant.path, "--module", "booth-a-left"), environment(),
+                    stdout=log)
         question = f"Write 1 value into {plant.path}? [y/N]:"
         try:
             asked(pane, question, None if log else f"+++ {plant.path} (adopted)")

@@ -49,7 +49,8 @@ Function = ast.FunctionDef | ast.AsyncFunctionDef
 
 
 def _match_cases(node: ast.Match) -> int:
-    catch_all = any(isinstance(case.pattern, ast.MatchAs) and case.pattern.pattern is None for case in node.cases)
+    catch_all = any(isinstance(case.pattern, ast.MatchAs) and case.pattern.pattern is None
+                    for case in node.cases)
     return max(0, len(node.cases) - catch_all)
 
 
@@ -130,20 +131,24 @@ def offenders() -> list[tuple[str, str]]:
 def test_long_files_and_complex_functions_say_why() -> None:
     unexplained = [f"{what} ({why})" for what, why in offenders()]
     assert not unexplained, (
-        f"over {LONG_FILE} lines or complexity {COMPLEX} without saying why — split or simplify it, or say why "
-        f"at its top ('long because' in the module docstring, 'complex because' in the function's): {unexplained}")
+        f"over {LONG_FILE} lines or complexity {COMPLEX} without saying why — split or simplify it, "
+        "or say why "
+        "at its top ('long because' in the module docstring, 'complex because' in the function's): "
+        f"{unexplained}")
 
 
 @pytest.mark.parametrize(("source", "expected"), [
     ("def f():\n    return 1", 1),
     ("def f(a=1 if x else 2):\n    return a", 1),  # a default value is not the function's
-    ("def f(x):\n    if x:\n        return 1\n    elif x > 1:\n        return 2\n    else:\n        return 3", 3),
+    ("def f(x):\n    if x:\n        return 1\n    elif x > 1:\n        return 2\n    else:\n        return 3",
+     3),
     ("def f(x):\n    return 1 if x else 2", 2),
     ("def f(x):\n    for i in x:\n        pass\n    else:\n        pass\n    while x:\n        break", 4),
     ("async def f(x):\n    async for i in x:\n        pass\n    async with x:\n        pass", 2),
     ("def f():\n    try:\n        pass\n    except A:\n        pass\n    except B:\n        pass\n    else:\n"
      "        pass\n    finally:\n        pass", 4),
-    ("def f():\n    try:\n        pass\n    except* A:\n        pass", 1),  # radon 6 does not know try/except*
+    # radon 6 does not know try/except*
+    ("def f():\n    try:\n        pass\n    except* A:\n        pass", 1),
     ("def f(a, b, c):\n    return a and b or c", 3),
     ("def f(a, b, c):\n    return a and b and c", 3),  # one BoolOp of three operands
     ("def f(x):\n    return [i for i in x if i if i > 1 for j in i]", 5),
@@ -169,7 +174,8 @@ def test_a_complex_function_says_why_in_its_docstring_or_top_comment() -> None:
         'def f(x):\n    """Complex because each value is its own answer."""\n' + branches: True,
         "def f(x):  # complex because each value is its own answer\n" + branches: True,
         "def f(x):\n    # Complex because each value is its own answer.\n" + branches: True,
-        "def f(x):\n    pass\n    # complex because: a comment below the top is not at its top\n" + branches: False,
+        "def f(x):\n    pass\n    # complex because: a comment below the top is not at its top\n"
+             + branches: False,
     }
     for source, says in cases.items():
         (_, function), *_ = functions(ast.parse(source))
@@ -188,7 +194,8 @@ def _imports(module: str, path: Path, modules: set[str]) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:  # relative: from the module's package up
-                base = ".".join([*package.split(".")[: len(package.split(".")) - node.level + 1], *([base] if base else [])])
+                base = ".".join([*package.split(".")[: len(package.split(".")) - node.level + 1],
+                                 *([base] if base else [])])
             for alias in node.names:
                 found |= {f"{base}.{alias.name}"} & modules or {base} & modules
     return found - {module}
@@ -199,7 +206,8 @@ def test_no_files_import_each_other_in_a_circle() -> None:
     (a circle under TYPE_CHECKING is a circle a reader has to hold in mind all the same)."""
     import graphlib
 
-    paths = {".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): path for path in PACKAGE.rglob("*.py")}
+    paths = {".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): path
+             for path in PACKAGE.rglob("*.py")}
     graph = {module: _imports(module, path, set(paths)) for module, path in paths.items()}
     try:
         graphlib.TopologicalSorter(graph).prepare()

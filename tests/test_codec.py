@@ -69,7 +69,8 @@ MANUAL_REQUESTS = [
     case("30h-2.3.8", "3000 0530", LinkPrograms(5, 48)),
     case("31h-2.3.9", "3100 0540", UnlinkPrograms(5, 64)),
     case("32h-2.3.10", "3205 041A 012C", WritePartProgram(5, 1050, 300)),
-    case("46h-2.3.17-first-four", "4604 0110 0501 0805 1401", WriteAddresses(((1, 16), (5, 1), (8, 5), (20, 1)))),
+    case("46h-2.3.17-first-four", "4604 0110 0501 0805 1401",
+         WriteAddresses(((1, 16), (5, 1), (8, 5), (20, 1)))),
     case("50h-2.4.1", "5000", ReadSystem()),
     case("51h-2.4.2", "5106", ReadProgram(6)),
     case("52h-2.4.3", "5200 0406", ReadPrograms(4, 6)),
@@ -90,7 +91,8 @@ def test_manual_request_decodes_from_the_manuals_words(words, message):
 MANUAL_REPLIES = [
     case("50h-2.4.1-address-1", ReadSystem(), MANUAL_50H_REPLY, SystemReply(DEFAULT_SYSTEM, 1)),
     case("51h-2.4.2", ReadProgram(6), MANUAL_51H_REPLY, ProgramsReply(6, (MANUAL_PROGRAM_6,))),
-    case("52h-2.4.3-three-blocks", ReadPrograms(4, 6), MANUAL_52H_REPLY, ProgramsReply(4, MANUAL_PROGRAMS_4_TO_6)),
+    case("52h-2.4.3-three-blocks", ReadPrograms(4, 6), MANUAL_52H_REPLY,
+         ProgramsReply(4, MANUAL_PROGRAMS_4_TO_6)),
     case("error-reply-32", WritePartProgram(5, 1050, 300), h("2000"), 32),
     case("accepted", WriteProgram(10, MANUAL_PROGRAM_10), h("0000"), 0),
 ]
@@ -115,7 +117,8 @@ def test_manual_50h_reply_carries_s8_and_s9_in_one_word():
 
 # -- one hand-written vector per message ID -----------------------------------------------
 
-SYSTEM_1800 = SystemParameters(S1=1800, S2=60, S3=754, S4=500, S5=20, S6=1200, S7=900, S8=1, S10=583, S11=1100, S12=50)
+SYSTEM_1800 = SystemParameters(S1=1800, S2=60, S3=754, S4=500, S5=20, S6=1200, S7=900, S8=1, S10=583,
+                               S11=1100, S12=50)
 
 EVERY_ID = [
     case("10h", "1000", InitSystem()),
@@ -123,13 +126,16 @@ EVERY_ID = [
     case("12h-manual-2.3.3", "120A", InitProgram(10)),
     case("13h-manual-2.3.4", "130A", InitProgramsFrom(10)),
     case("14h-manual-2.3.5", "1400 0A14", InitPrograms(10, 20)),
-    case("20h-manual-2.3.6-defaults", "2000 0190 0032 02F2 0258 000A 05DC 03E8 0000 0247 044C 000A", WriteSystem(DEFAULT_SYSTEM)),
+    case("20h-manual-2.3.6-defaults", "2000 0190 0032 02F2 0258 000A 05DC 03E8 0000 0247 044C 000A",
+         WriteSystem(DEFAULT_SYSTEM)),
     case("20h", "2000 0708 003C 02F2 01F4 0014 04B0 0384 0100 0247 044C 0032", WriteSystem(SYSTEM_1800)),
-    case("21h-limits", "2140 0000 0258 FDA8 0258 07CF 0000 4000", WriteProgram(64, Program(0, 600, -600, 600, 1999, 0, 64))),
+    case("21h-limits", "2140 0000 0258 FDA8 0258 07CF 0000 4000",
+         WriteProgram(64, Program(0, 600, -600, 600, 1999, 0, 64))),
     case("30h", "3000 0102", LinkPrograms(1, 2)),
     case("31h", "3100 4040", UnlinkPrograms(64, 64)),
     case("32h", "3240 0000 0001", WritePartProgram(64, 0, 1)),
-    case("33h", "3300 3E40 0064 000A 00C8 0014 012C 001E", WritePartPrograms(62, ((100, 10), (200, 20), (300, 30)))),
+    case("33h", "3300 3E40 0064 000A 00C8 0014 012C 001E",
+         WritePartPrograms(62, ((100, 10), (200, 20), (300, 30)))),
     case("40h-negative-kf", "4002 0100 0320 4000 FFFF", WritePositions(((1, 800), (64, -1)))),
     case("41h", "4101 0500 012C", WriteSpeeds(((5, 300),))),
     case("42h", "4202 0100 0320 0500 FE0C", WriteRelativeSpeeds(((1, 800), (5, -500)))),
@@ -167,8 +173,10 @@ def test_message_decodes(words, message):
         case("10h-low-byte", "10FF", InitSystem()),
         case("11h-low-byte", "11A5", InitAllPrograms()),
         case("14h-low-byte", "14FF 0A14", InitPrograms(10, 20)),
-        case("20h-id-and-s8-low-bytes", "20FF 0190 0032 02F2 0258 000A 05DC 03E8 01FF 0247 044C 000A", WriteSystem(replace(DEFAULT_SYSTEM, S8=1))),
-        case("21h-a-low-byte", "210A 041A 012C 0035 0014 03F2 0032 05FF", WriteProgram(10, MANUAL_PROGRAM_10)),
+        case("20h-id-and-s8-low-bytes", "20FF 0190 0032 02F2 0258 000A 05DC 03E8 01FF 0247 044C 000A",
+             WriteSystem(replace(DEFAULT_SYSTEM, S8=1))),
+        case("21h-a-low-byte", "210A 041A 012C 0035 0014 03F2 "
+                               "0032 05FF", WriteProgram(10, MANUAL_PROGRAM_10)),
         case("30h-low-byte", "3001 0530", LinkPrograms(5, 48)),
         case("31h-low-byte", "3180 0540", UnlinkPrograms(5, 64)),
         case("33h-low-byte", "33FF 0101 0064 000A", WritePartPrograms(1, ((100, 10),))),
@@ -205,7 +213,8 @@ P = Program(P=100, V=50)
 FIELD_CLASSES = list(codec.FIELD_MESSAGES.values())
 
 BUILD_ERRORS = [
-    *(case(f"{c.ID:02X}h-16-items", lambda c=c: c(tuple((n, 100) for n in range(1, 17)))) for c in FIELD_CLASSES),
+    *(case(f"{c.ID:02X}h-16-items", lambda c=c: c(tuple((n, 100) for n in range(1, 17))))
+      for c in FIELD_CLASSES),
     *(case(f"{c.ID:02X}h-no-items", lambda c=c: c(())) for c in FIELD_CLASSES),
     case("46h-32-items", lambda: WriteAddresses(tuple((n, 0) for n in range(1, 33)))),
     case("46h-no-items", lambda: WriteAddresses(())),
@@ -262,7 +271,8 @@ def test_building_a_message_the_protocol_cannot_carry_raises(build):
 @pytest.mark.parametrize(
     "build",
     [
-        case("21h-kf-extremes", lambda: WriteProgram(1, Program(P=32767, V=-32768, Vr=-32768, T=32767, F1=-1, F2=0, A=255))),
+        case("21h-kf-extremes",
+             lambda: WriteProgram(1, Program(P=32767, V=-32768, Vr=-32768, T=32767, F1=-1, F2=0, A=255))),
         case("20h-s8-255", lambda: WriteSystem(replace(DEFAULT_SYSTEM, S8=255))),
         case("40h-item-pn-0-is-the-modules-to-check", lambda: WritePositions(((0, 100),))),
         case("46h-item-pn-65-is-the-modules-to-check", lambda: WriteAddresses(((65, 1),))),
@@ -363,7 +373,8 @@ REPLIES = [
     case("read-rejected-15", ReadPrograms(4, 6), h("0F00"), 15),
     case("50h-block", ReadSystem(), MANUAL_50H_REPLY, SystemReply(DEFAULT_SYSTEM, 1)),
     case("51h-block", ReadProgram(6), MANUAL_51H_REPLY, ProgramsReply(6, (MANUAL_PROGRAM_6,))),
-    case("52h-one-block", ReadPrograms(5, 5), MANUAL_52H_REPLY[16:32], ProgramsReply(5, MANUAL_PROGRAMS_4_TO_6[1:2])),
+    case("52h-one-block", ReadPrograms(5, 5), MANUAL_52H_REPLY[16:32],
+         ProgramsReply(5, MANUAL_PROGRAMS_4_TO_6[1:2])),
     case("52h-three-blocks", ReadPrograms(4, 6), MANUAL_52H_REPLY, ProgramsReply(4, MANUAL_PROGRAMS_4_TO_6)),
     case(
         "51h-block-dont-care-bytes",
@@ -392,7 +403,8 @@ BAD_REPLIES = [
     case("52h-two-of-three-blocks", ReadPrograms(4, 6), MANUAL_52H_REPLY[:32]),
     case("52h-four-blocks-for-three", ReadPrograms(4, 6), MANUAL_52H_REPLY + MANUAL_51H_REPLY),
     case("51h-block-numbered-7", ReadProgram(6), h("0700") + MANUAL_51H_REPLY[2:]),
-    case("52h-blocks-numbered-4-5-7", ReadPrograms(4, 6), MANUAL_52H_REPLY[:32] + h("0700") + MANUAL_52H_REPLY[34:]),
+    case("52h-blocks-numbered-4-5-7", ReadPrograms(4, 6), MANUAL_52H_REPLY[:32] + h("0700")
+         + MANUAL_52H_REPLY[34:]),
     case("52h-blocks-numbered-5-6-7", ReadPrograms(4, 6), b"".join(
         h(f"0{n}00") + MANUAL_52H_REPLY[16 * b + 2 : 16 * b + 16] for b, n in enumerate((5, 6, 7))
     )),

@@ -48,8 +48,8 @@ OTHER = Program(P=300, V=300, T=20)
 
 
 def plant_file(directory: Path, unmanaged: dict[int, str], clamping: bool = True) -> Path:
-    """Modules 1.. with `unmanaged_programs` as given; `clamping`: the plant's system parameters can clamp programs
-    (a lower max_speed than the factory's), else they only raise the upper reversing point."""
+    """Modules 1.. with `unmanaged_programs` as given; `clamping`: the plant's system parameters can clamp
+    programs (a lower max_speed than the factory's), else they only raise the upper reversing point."""
     system = ", max_speed: 0.500" if clamping else ""
     modules = "".join(MODULE.format(address=a, unmanaged=u, clamping=system) for a, u in unmanaged.items())
     path = directory / "source.yaml"
@@ -66,8 +66,10 @@ def read_before_writing(journal: Path) -> dict[int, set[int]]:
         message = codec.decode_message(bytes.fromhex(record["request"]))
         if not message.IS_READ:
             break
-        read.setdefault(record["address"], set()).update(message.programs if isinstance(message, codec.ReadProgram) else
-                                                         range(message.first, message.last + 1) if isinstance(message, codec.ReadPrograms) else ())
+        read.setdefault(record["address"], set()).update(message.programs
+                                                         if isinstance(message, codec.ReadProgram) else
+                                                         range(message.first, message.last + 1)
+                                                         if isinstance(message, codec.ReadPrograms) else ())
     return read
 
 
@@ -82,23 +84,29 @@ def test_the_factory_programs_the_plant_file_will_write_are_planned_not_read():
     cases = [  # (50h, plant system, record) → programs read
         (DEFAULT_SYSTEM, plant_system, None, unmanaged),
         (DEFAULT_SYSTEM, quiet, None, set()),
-        (DEFAULT_SYSTEM, DEFAULT_SYSTEM, None, set(MANAGED)),  # nothing says fresh: the plant wants the factory's
+        # nothing says fresh: the plant wants the factory's
+        (DEFAULT_SYSTEM, DEFAULT_SYSTEM, None, set(MANAGED)),
         (plant_system, quiet, None, set(MANAGED)),  # not factory-fresh: as before
-        (DEFAULT_SYSTEM, quiet, replace(factory, system=quiet), set(MANAGED)),  # the record says otherwise: read in full
+        # the record says otherwise: read in full
+        (DEFAULT_SYSTEM, quiet, replace(factory, system=quiet), set(MANAGED)),
     ]
     for system, wanted, known, read in cases:
-        assert what_to_read.after_system(system, MANAGED, wanted, known, MANAGED, fresh=True) == read, (system, wanted)
-        assert what_to_read.after_system(system, MANAGED, wanted, known, MANAGED) >= set(MANAGED)  # not an apply: every managed one
+        assert what_to_read.after_system(system, MANAGED, wanted, known, MANAGED,
+                                         fresh=True) == read, (system, wanted)
+        # not an apply: every managed one
+        assert what_to_read.after_system(system, MANAGED, wanted, known, MANAGED) >= set(MANAGED)
 
 
 @pytest.mark.parametrize("clamping", [True, False])
-def test_a_factory_fresh_line_is_commissioned_without_reading_what_it_writes_and_keeps_what_it_does_not_manage(tmp_path, capsys, clamping):
+def test_a_factory_fresh_line_is_commissioned_without_reading_what_it_writes_and_keeps_what_it_does_not_manage(
+    tmp_path, capsys, clamping
+):
     """Three factory-fresh modules (system block as the factory left it): m1 untouched; on m2 another tool
     changed programs the plant file does not manage (keep); on m3 it changed managed ones — program 7, which
-    the plant file wants as the factory's (no write planned for it), and a field of program 2 the plan's writes
-    may not cover. The apply reads no managed program before writing, ends verified with every managed program
-    as the plant file says (m3 through the repair round, said in the account), m2's unmanaged programs byte for
-    byte as the other tool left them, and says which programs it did not read."""
+    the plant file wants as the factory's (no write planned for it), and a field of program 2 the plan's
+    writes may not cover. The apply reads no managed program before writing, ends verified with every managed
+    program as the plant file says (m3 through the repair round, said in the account), m2's unmanaged programs
+    byte for byte as the other tool left them, and says which programs it did not read."""
     source = plant_file(tmp_path, {1: "keep", 2: "keep", 3: "keep"}, clamping)
     with emulated_plant(tmp_path, source=source) as plant:
         emulator = plant.emulators["line"]
@@ -119,7 +127,8 @@ def test_a_factory_fresh_line_is_commissioned_without_reading_what_it_writes_and
         for address, programs in read_before_writing(journal).items():
             assert not programs & set(MANAGED), (address, programs)
             assert programs == (set(PROGRAM_NUMBERS) - set(MANAGED) if clamping else set()), address
-        # the snapshot undoes the commissioning: the factory's where it planned from them, what it read elsewhere
+        # the snapshot undoes the commissioning: the factory's where it planned from them, what it read
+        # elsewhere
         (snapshot,) = (plant.path.parent / ".prc3cfg" / "snapshots").iterdir()
         api.told(api.restore(snapshot, gates=api.Gates(allow_axis_release=True)))
         assert emulator.module(1).image == ModuleImage.factory(1)
@@ -134,8 +143,9 @@ def test_a_reset_plant_file_reads_only_the_system_blocks_and_verifies_every_prog
     what it did not read."""
     source = plant_file(tmp_path, {1: "reset", 2: "reset"})
     shown: list[PlantPlan] = []
-    gates = api.Gates(allow_axis_release=True, approve=lambda the_plan: not shown.append(the_plan)) if approved else \
-        api.Gates(allow_axis_release=True)  # fmt: skip
+    gates = (api.Gates(allow_axis_release=True, approve=lambda the_plan: not shown.append(the_plan))
+             if approved else \
+        api.Gates(allow_axis_release=True))  # fmt: skip
     with emulated_plant(tmp_path, source=source) as plant:
         emulator = plant.emulators["line"]
         emulator.update(2, image=emulator.module(2).image.with_programs({40: OTHER, 64: OTHER}))
@@ -148,13 +158,17 @@ def test_a_reset_plant_file_reads_only_the_system_blocks_and_verifies_every_prog
             assert not evidence(the_plan)["complete"] and evidence(the_plan)["read_now"]["programs"] == 0
         assert read_before_writing(result.journal) == {1: set(), 2: set()}
         assert emulator.module(2).image.programs == ModuleImage.factory(2).with_programs(
-            {n: p for n, p in enumerate(plant.plant.buses[0].modules[1].desired_image().programs, 1) if p is not None}).programs
+            {n: p for n, p in enumerate(plant.plant.buses[0].modules[1].desired_image().programs, 1)
+             if p is not None}).programs
 
 
 @pytest.mark.soak
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1))
-def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends_at_the_plant_file(tmp_path_factory, seed):
+def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends_at_the_plant_file(
+    tmp_path_factory, seed
+):
     """Seeded: on factory-fresh modules (keep or reset, a system change that clamps or not) another tool
     changed some programs, managed or not, leaving the system block; the apply ends with every managed
     program as the plant file says, every unmanaged one byte for byte as it was, and no headline that
@@ -168,9 +182,11 @@ def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends
         for address in modules:
             image = emulator.module(address).image
             changed = rnd.sample(PROGRAM_NUMBERS, rnd.randint(0, 4))
-            emulator.update(address, image=image.with_programs({n: replace(OTHER, T=rnd.randint(0, 90)) for n in changed}))
+            emulator.update(address, image=image.with_programs({n: replace(OTHER, T=rnd.randint(0, 90))
+                                                                for n in changed}))
         before = {a: emulator.module(a).image for a in modules}
-        if rnd.random() < 0.3:  # a plan first: the line's record then holds what it read, the other tool's programs too
+        # a plan first: the line's record then holds what it read, the other tool's programs too
+        if rnd.random() < 0.3:
             api.plan(plant.plant)
         result = api.apply(plant.plant, gates=api.Gates(allow_axis_release=True))
         api.told(result)
@@ -178,13 +194,17 @@ def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends
         assert not claims_what_was_not_read(result.plan), seed
         shown = render.human(result.plan)
         assert render.EVERY_MODULE not in shown, seed
-        assert ("Not read before writing" in shown) == any(change.assumed for change in result.plan.modules), seed
+        assert ("Not read before writing" in shown) == any(
+            change.assumed for change in result.plan.modules
+        ), seed
         for _, module in plant.plant.modules():
             desired, held = module.desired_image(), emulator.module(module.address).image
-            for number, (want, have, was) in enumerate(zip(desired.programs, held.programs, before[module.address].programs), 1):
+            for number, (want, have, was) in enumerate(zip(desired.programs, held.programs,
+                                                           before[module.address].programs), 1):
                 assert have == (was if want is None else want), (seed, module.address, number)
 
 
 def claims_what_was_not_read(the_plan: PlantPlan) -> bool:
-    """Whether the plan's evidence says every value it covers was read, where it planned programs from the factory image."""
+    """Whether the plan's evidence says every value it covers was read, where it planned programs from the
+    factory image."""
     return any(change.assumed for change in the_plan.modules) and evidence(the_plan)["complete"]

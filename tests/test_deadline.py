@@ -1,8 +1,8 @@
-"""The reply deadline comes from the line: each exchange waits as long as its frames take at the
-line's baud and character format, the module's turnaround and a margin — the plant file's `timeout`
-only adds to that. The deadline as a table of cases (`LineCost.reply_deadline`), and the
-workflow of the README and docs/commands.md (plan, apply, read, import, doctor) on a real `prc3cfg emulator serve --rfc2217` that
-answers at line speed, with zero exchanges lost."""
+"""The reply deadline comes from the line: each exchange waits as long as its frames take at the line's baud
+and character format, the module's turnaround and a margin — the plant file's `timeout` only adds to that. The
+deadline as a table of cases (`LineCost.reply_deadline`), and the workflow of the README and docs/commands.md
+(plan, apply, read, import, doctor) on a real `prc3cfg emulator serve --rfc2217` that answers at line speed,
+with zero exchanges lost."""
 
 from __future__ import annotations
 
@@ -28,11 +28,13 @@ from prc3cfg.shell.link.ports import open_port
 
 READ_FOUR = codec.ReadPrograms(1, 4)
 WRITE_ONE = codec.WriteProgram(1, Program(P=100, V=200, Vr=0, T=0, F1=0, F2=0, A=0))
-L_8E1, L_8N1, L_8O2 = LineSettings(1200, 8, "even", 1), LineSettings(9600, 8, "none", 1), LineSettings(300, 8, "odd", 2)
+L_8E1, L_8N1, L_8O2 = LineSettings(1200, 8, "even", 1), LineSettings(9600, 8, "none",
+                                                                     1), LineSettings(300, 8, "odd", 2)
 
 
 def seconds(chars: int, bits: float, baud: int, turnaround: float = 0.010, gaps: float = 0.0) -> float:
-    """What a deadline must be: the characters at their bits and baud, with the margin, the turnaround and the gaps."""
+    """What a deadline must be: the characters at their bits and baud, with the margin, the turnaround and the
+    gaps."""
     return chars * bits / baud * (1 + DEADLINE_MARGIN) + turnaround + gaps
 
 
@@ -42,26 +44,32 @@ def seconds(chars: int, bits: float, baud: int, turnaround: float = 0.010, gaps:
     pytest.param(codec.ReadSystem(), "crc16", L_8E1, seconds(7 + 27, 11, 1200), id="50h, crc16, 1200 8E1"),
     pytest.param(codec.ReadProgram(5), "crc16", L_8N1, seconds(7 + 21, 10, 9600), id="51h, crc16, 9600 8N1"),
     # a write's reply is its code word: 2 bytes in the frame
-    pytest.param(WRITE_ONE, "crc16", L_8O2, seconds(WRITE_ONE.size() + 5 + 2 + 5, 12, 300), id="21h, crc16, 300 8O2"),
-    # stx: 4 bytes of overhead; the request's stuffing as its bytes make it (none here), the reply's at worst every byte after 7Eh
+    pytest.param(WRITE_ONE, "crc16", L_8O2, seconds(WRITE_ONE.size() + 5 + 2 + 5, 12, 300),
+                 id="21h, crc16, 300 8O2"),
+    # stx: 4 bytes of overhead; the request's stuffing as its bytes make it (none here), the reply's at worst
+    # every byte after 7Eh
     pytest.param(READ_FOUR, "stx", L_8E1, seconds(8 + 68 + 67, 11, 1200), id="52h x4, stx, 1200 8E1"),
     pytest.param(codec.ReadSystem(), "stx", L_8N1, seconds(6 + 26 + 25, 10, 9600), id="50h, stx, 9600 8N1"),
     # open-driver: the address byte only, and a ZVZ of silence after each frame
-    pytest.param(READ_FOUR, "open-driver", L_8E1, seconds(5 + 65, 11, 1200, gaps=2 * 0.020), id="52h x4, open-driver, 1200 8E1"),
-    pytest.param(codec.ReadSystem(), "open-driver", L_8O2, seconds(3 + 23, 12, 300, gaps=2 * 0.020), id="50h, open-driver, 300 8O2"),
+    pytest.param(READ_FOUR, "open-driver", L_8E1, seconds(5 + 65, 11, 1200, gaps=2 * 0.020),
+                 id="52h x4, open-driver, 1200 8E1"),
+    pytest.param(codec.ReadSystem(), "open-driver", L_8O2, seconds(3 + 23, 12, 300, gaps=2 * 0.020),
+                 id="50h, open-driver, 300 8O2"),
 ])  # fmt: skip
 def test_the_deadline_of_each_message_kind_comes_from_the_line(message, framing, line, expected):
     cost = LineCost.of(framing, line, 0.010, 0.020)
     assert cost.reply_deadline(1, message) == pytest.approx(expected, abs=1e-9)
 
 
-def no_reply_comes_later(framing: str, line: LineSettings, address: int, message: codec.Message, reply: bytes) -> None:
+def no_reply_comes_later(framing: str, line: LineSettings, address: int, message: codec.Message,
+                         reply: bytes) -> None:
     """The deadline is never shorter than what any reply the message can have takes on the line — its
     frame as the framing encodes those bytes (stx stuffing them as they are), after the request frame
     and the turnaround: as long as the emulator at line speed takes to answer."""
     cost = LineCost.of(framing, line, 0.010, 0.020)
     encoded = get_framing(framing)
-    taken = (len(encoded.encode(Direction.REQUEST, address, message.encode())) + len(encoded.encode(Direction.REPLY, address, reply)))
+    taken = (len(encoded.encode(Direction.REQUEST, address, message.encode()))
+             + len(encoded.encode(Direction.REPLY, address, reply)))
     gaps = 2 * 0.020 if framing == "open-driver" else 0.0
     assert cost.reply_deadline(address, message) >= taken * line.char_time + 0.010 + gaps
 
@@ -73,7 +81,8 @@ exchanges = st.tuples(st.sampled_from(["crc16", "stx", "open-driver"]), lines, s
 def replies(message: codec.Message) -> st.SearchStrategy[bytes]:
     """Any reply `message` can have: a code word, or (a read) its data block — every byte 7Eh allowed."""
     codes = st.binary(min_size=2, max_size=2)
-    return st.one_of(codes, st.binary(min_size=codec.reply_length(message), max_size=codec.reply_length(message))) if message.IS_READ else codes
+    return st.one_of(codes, st.binary(min_size=codec.reply_length(message),
+                                      max_size=codec.reply_length(message))) if message.IS_READ else codes
 
 
 @settings(max_examples=60)
@@ -138,16 +147,19 @@ WORKFLOW = ("plan", "apply", "read", "import", "doctor")
 
 
 def remarks(trace: Path) -> list[str]:
-    """The trace's remarks (time-outs, retries, replies ignored) and discarded bytes: on a clean line, none."""
+    """The trace's remarks (time-outs, retries, replies ignored) and discarded bytes: on a clean line,
+    none."""
     return [line for line in trace.read_text().splitlines() if line.split("\t")[2] in ("!", "x")]
 
 
-def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16", commands: tuple[str, ...] = WORKFLOW) -> None:
+def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16",
+                    commands: tuple[str, ...] = WORKFLOW) -> None:
     """`commands` of the workflow on one module of four programs behind a real `emulator serve
     --rfc2217 --line-speed BAUD` (8E1): each succeeds, no exchange is lost or repeated (the traces say
     no time-out, retry or discarded byte; no note says an exchange was made again), and doctor finds the
     line and counts every exchange answered."""
-    options = ("--rfc2217", "--line-speed", str(baud), "--parity", "even", "--framing", framing, "--modules", "1",
+    options = ("--rfc2217", "--line-speed", str(baud), "--parity", "even", "--framing", framing, "--modules",
+               "1",
                "--state", str(tmp_path / "state.json"))  # fmt: skip
     line = ("--framing", framing, "--baud", str(baud), "--parity", "even")
     traces = {command: tmp_path / f"{command}.trace" for command in commands if command != "doctor"}
@@ -156,14 +168,18 @@ def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16"
         url = f"rfc2217://127.0.0.1:{served.port}"
         plant = tmp_path / "plant.yaml"
         plant.write_text(PLANT.format(port=url, framing=framing, baud=baud))
-        arguments = {"plan": ("plan", plant), "apply": ("apply", plant, "--auto-approve"), "read": ("read", plant),
+        arguments = {"plan": ("plan", plant), "apply": ("apply", plant, "--auto-approve"),
+                     "read": ("read", plant),
                      "import": ("import", "--port", url, *line, "--modules", "1"),
-                     "doctor": ("doctor", "--port", url, *line, "--modules", "1", "--exchanges", "3", "--allow-unchecked-probes")}  # fmt: skip
+                     "doctor": ("doctor", "--port", url, *line, "--modules", "1", "--exchanges", "3",
+                                "--allow-unchecked-probes")}  # fmt: skip
         for command in commands:
             traced = ("--trace", traces[command]) if command in traces else ()
             results[command] = result = run_cli(capsys, *arguments[command], *traced)
-            said = [line for line in result.err.splitlines() if not line.startswith("imported 1 module from ")]
-            assert result.code == 0 and said == [], (command, result)  # no note: no exchange made again, no line slower than its keys
+            said = [line for line in result.err.splitlines() if not line.startswith("imported 1 "
+                                                                                    "module from ")]
+            # no note: no exchange made again, no line slower than its keys
+            assert result.code == 0 and said == [], (command, result)
     for command, trace in traces.items():
         assert remarks(trace) == [], (command, remarks(trace))
     if "plan" in results:
@@ -175,7 +191,8 @@ def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16"
         assert "{position: 0.350, speed: 0.300}" in results["import"].out
     if "doctor" in results:
         out = results["doctor"].out
-        keys = dict(entry.strip().split(": ", 1) for entry in out.partition("The plant file's keys for this bus:\n")[2].splitlines())
+        keys = dict(entry.strip().split(": ", 1)
+                    for entry in out.partition("The plant file's keys for this bus:\n")[2].splitlines())
         assert (keys["framing"], keys["baud"], keys["parity"]) == (framing, str(baud), "even")
         row = next(row for row in out.splitlines() if row.startswith("│") and "ms" in row)
         assert [cell.strip() for cell in row.split("│")[4:7]] == ["3/3", "0", "0"]  # answered, damaged, lost

@@ -71,7 +71,8 @@ def marked(state: ModuleState) -> ModuleState:
     """Every program holds a distinctive non-default value (valid for the module's system)."""
     s = state.image.system
     return with_programs(
-        state, {n: Program(P=min(90 + n, s.S1), V=s.S4, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1) for n in range(1, 65)}
+        state, {n: Program(P=min(90 + n, s.S1), V=s.S4, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1)
+                for n in range(1, 65)}
     )
 
 
@@ -186,7 +187,8 @@ def test_a_bad_field_in_its_own_4xh_message(field, value, code):
     assert outcome.state == STOP
 
 
-@pytest.mark.parametrize(("field", "value", "code"), [case(f"{f}={v}", f, v, c) for f, v, c in BAD_FIELDS if f in "PV"])
+@pytest.mark.parametrize(("field", "value", "code"),
+                         [case(f"{f}={v}", f, v, c) for f, v, c in BAD_FIELDS if f in "PV"])
 def test_a_bad_p_or_v_in_33h(field, value, code):
     pair = (value, 50) if field == "P" else (100, value)
     outcome = send(STOP, WritePartPrograms(6, ((100, 50), pair)))
@@ -220,7 +222,9 @@ ORDER_CASES = [
     case("fault-before-value", module(fault="E21"), WritePartProgram(5, -1, 50), 25),
     case("e12-run-20h-gives-20", module(mode="run", fault="E12"), WriteSystem(DEFAULT_SYSTEM), 20),
     case("e12-run-10h-gives-20", module(mode="run", fault="E12"), InitSystem(), 20),
-    case("e12-bad-20h-gives-value-code", module(fault="E12"), WriteSystem(replace(DEFAULT_SYSTEM, S1=99)), 100),
+    case(
+        "e12-bad-20h-gives-value-code", module(fault="E12"), WriteSystem(replace(DEFAULT_SYSTEM, S1=99)), 100
+    ),
     # values in message order: 21h
     case("21h-p-before-v", STOP, WriteProgram(1, program_with(P=-1, V=9)), 31),
     case("21h-p-above-before-a", STOP, WriteProgram(1, program_with(P=401, A=65)), 32),
@@ -253,7 +257,12 @@ ORDER_CASES = [
     case("20h-s8-before-s10", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S8=2, S10=0)), 116),
     case("20h-s10-before-s11", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S10=10000, S11=0)), 118),
     case("20h-s11-before-s12", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S11=1501, S12=4)), 120),
-    case("20h-equal-s4-s5-is-fine-then-s6", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S4=20, S5=20, S6=999)), 112),
+    case(
+        "20h-equal-s4-s5-is-fine-then-s6",
+        STOP,
+        WriteSystem(replace(DEFAULT_SYSTEM, S4=20, S5=20, S6=999)),
+        112,
+    ),
     # P and V against the S1, S4, S5 in force (not the factory ones, not those of the message)
     case("p-against-s1-in-force", module(system={"S1": 1000}), WritePartProgram(1, 1001, 50), 32),
     case("v-against-s4-in-force", module(system={"S4": 300}), WriteSpeeds(((1, 301),)), 41),
@@ -276,9 +285,12 @@ LOWER = Program(P=0, V=10, Vr=-600, T=0, F1=0, F2=0, A=0)
 @pytest.mark.parametrize(
     ("state", "message", "number", "expected"),
     [
-        case("p-equal-to-s1-in-force", module(system={"S1": 1000}), WritePartProgram(1, 1000, 50), 1, Program(1000, 50)),
-        case("v-equal-to-s4-in-force", module(system={"S4": 300}), WritePartProgram(1, 150, 300), 1, Program(150, 300)),
-        case("v-equal-to-s5-in-force", module(system={"S5": 100}), WritePartProgram(1, 150, 100), 1, Program(150, 100)),
+        case("p-equal-to-s1-in-force", module(system={"S1": 1000}), WritePartProgram(1, 1000, 50), 1,
+             Program(1000, 50)),
+        case("v-equal-to-s4-in-force", module(system={"S4": 300}), WritePartProgram(1, 150, 300), 1,
+             Program(150, 300)),
+        case("v-equal-to-s5-in-force", module(system={"S5": 100}), WritePartProgram(1, 150, 100), 1,
+             Program(150, 100)),
         case("p-0", STOP, WritePartProgram(64, 0, 50), 64, Program(0, 50)),
         case("manual-21h-with-s1-9999", WIDE, WriteProgram(10, MANUAL_10), 10, MANUAL_10),
         case("21h-upper-limits", WIDE, WriteProgram(1, UPPER), 1, UPPER),
@@ -361,7 +373,8 @@ NOT_TOUCHING_10 = [
     case("30h", LinkPrograms(1, 9), lambda s: program(s, 9).A == 0 and program(s, 8).A == 9),
     case("31h", UnlinkPrograms(11, 64), lambda s: program(s, 11).A == program(s, 64).A == 0),
     case("32h", WritePartProgram(9, 123, 45), lambda s: (program(s, 9).P, program(s, 9).V) == (123, 45)),
-    case("33h", WritePartPrograms(11, ((123, 45),)), lambda s: (program(s, 11).P, program(s, 11).V) == (123, 45)),
+    case("33h", WritePartPrograms(11, ((123, 45),)),
+         lambda s: (program(s, 11).P, program(s, 11).V) == (123, 45)),
     *(
         case(
             f"{cls.ID:02X}h",
@@ -396,7 +409,8 @@ def test_run_rejects_10h_and_20h_with_20(message, active):
 
 @pytest.mark.parametrize(
     ("message", "length"),
-    [case("50h", ReadSystem(), 22), case("51h-active", ReadProgram(10), 16), case("52h-around-active", ReadPrograms(9, 12), 64)],
+    [case("50h", ReadSystem(), 22), case("51h-active", ReadProgram(10), 16),
+     case("52h-around-active", ReadPrograms(9, 12), 64)],
 )
 def test_run_reads_are_answered(message, length):
     state = marked(RUN_10)
@@ -449,7 +463,9 @@ def test_a_fault_rejects_every_write_with_its_code(fault, code, message):
     assert outcome.state == state
 
 
-@pytest.mark.parametrize("message", [case("50h", ReadSystem()), case("51h", ReadProgram(1)), case("52h", ReadPrograms(1, 4))])
+@pytest.mark.parametrize("message",
+                         [case("50h", ReadSystem()), case("51h", ReadProgram(1)),
+                          case("52h", ReadPrograms(1, 4))])
 @pytest.mark.parametrize("fault", list(device.FAULT_CODES))
 @pytest.mark.parametrize("mode", ["stop", "run"])
 def test_a_fault_still_answers_reads(fault, mode, message):
@@ -460,7 +476,9 @@ def test_a_fault_still_answers_reads(fault, mode, message):
     assert outcome.state == state
 
 
-@pytest.mark.parametrize("message", [case("10h", InitSystem()), case("20h", WriteSystem(replace(DEFAULT_SYSTEM, S1=1800)))])
+@pytest.mark.parametrize("message",
+                         [case("10h", InitSystem()),
+                          case("20h", WriteSystem(replace(DEFAULT_SYSTEM, S1=1800)))])
 def test_e12_accepts_10h_and_20h_and_clears_the_fault(message):
     state = module(fault="E12")
     outcome = send(state, message)
@@ -525,14 +543,16 @@ def test_a_broadcast_write_changes_the_module():
 
 
 def test_10h_sets_the_exact_default_words_and_keeps_s9():
-    others = {"S1": 2000, "S2": 300, "S3": 1, "S4": 500, "S5": 100, "S6": 1000, "S7": 800, "S8": 1, "S10": 1, "S11": 1, "S12": 50}
+    others = {"S1": 2000, "S2": 300, "S3": 1, "S4": 500, "S5": 100, "S6": 1000, "S7": 800, "S8": 1, "S10": 1,
+              "S11": 1, "S12": 50}
     state = module(7, system=others)
     outcome = send(state, InitSystem())
     assert outcome.reply == ACCEPTED
     assert outcome.state.image.system == SystemParameters(
         S1=400, S2=50, S3=754, S4=600, S5=10, S6=1500, S7=1000, S8=0, S10=583, S11=1100, S12=10
     )
-    assert send(outcome.state, ReadSystem()).reply == h("0190 0032 02F2 0258 000A 05DC 03E8 0007 0247 044C 000A")
+    assert send(outcome.state,
+                ReadSystem()).reply == h("0190 0032 02F2 0258 000A 05DC 03E8 0007 0247 044C 000A")
     assert outcome.state.address == 7
 
 
@@ -573,7 +593,8 @@ def test_init_sets_the_default_program(system, default, message, numbers):
 # -- clamping after 10h and 20h ------------------------------------------------------------------
 
 CLAMP_CASES = [
-    case("p-above-new-s1", {"S1": 2000}, Program(1500, 300, 5, 6, 7, 8, 9), {"S1": 1000}, Program(1000, 300, 5, 6, 7, 8, 9)),
+    case("p-above-new-s1", {"S1": 2000}, Program(1500, 300, 5, 6, 7, 8, 9), {"S1": 1000},
+         Program(1000, 300, 5, 6, 7, 8, 9)),
     case("p-equal-new-s1", {"S1": 2000}, Program(1000, 300), {"S1": 1000}, Program(1000, 300)),
     case("v-above-new-s4", {}, Program(100, 590, -5), {"S4": 400}, Program(100, 400, -5)),
     case("v-below-new-s5", {}, Program(100, 15, 0, 9), {"S5": 200}, Program(100, 200, 0, 9)),
@@ -600,7 +621,8 @@ def test_20h_clamps_only_the_programs_outside():
 
 
 def test_10h_clamps_to_the_defaults():
-    state = with_programs(module(system={"S1": 2000, "S5": 1}), {1: Program(1500, 5, 1, 2, 3, 4, 5), 2: Program(300, 600)})
+    state = with_programs(module(system={"S1": 2000, "S5": 1}),
+                          {1: Program(1500, 5, 1, 2, 3, 4, 5), 2: Program(300, 600)})
     outcome = send(state, InitSystem())
     assert outcome.reply == ACCEPTED
     assert program(outcome.state, 1) == Program(400, 10, 1, 2, 3, 4, 5)
@@ -705,7 +727,9 @@ def test_33h_writes_consecutive_programs():
     state = marked(STOP)
     outcome = send(state, WritePartPrograms(62, ((100, 10), (200, 20), (300, 30))))
     assert outcome.reply == ACCEPTED
-    assert [(program(outcome.state, n).P, program(outcome.state, n).V) for n in (62, 63, 64)] == [(100, 10), (200, 20), (300, 30)]
+    assert [(program(outcome.state, n).P, program(outcome.state, n).V) for n in (62, 63, 64)] == [(100, 10),
+                                                                                                  (200, 20),
+                                                                                                  (300, 30)]
     assert program(outcome.state, 62) == replace(program(state, 62), P=100, V=10)
     assert outcome.state.image.programs[:61] == state.image.programs[:61]
 
@@ -717,7 +741,8 @@ def test_33h_writes_consecutive_programs():
 def test_50h_reports_s9_as_the_address(address):
     outcome = send(module(address, system={"S8": 1}), ReadSystem())
     assert outcome.reply[14:16] == bytes([1, address])
-    assert codec.decode_reply(ReadSystem(), outcome.reply) == codec.SystemReply(replace(DEFAULT_SYSTEM, S8=1), address)
+    assert codec.decode_reply(ReadSystem(), outcome.reply) == codec.SystemReply(replace(DEFAULT_SYSTEM, S8=1),
+                                                                                address)
 
 
 def test_51h_and_52h_the_manuals_reads():
@@ -752,7 +777,8 @@ def test_52h_five_programs_is_15():
     assert send(STOP, "5200 0105").reply == h("0F00")
 
 
-# -- the state-file entry (docs/files.md "Emulator state") -------------------------------------------------------
+# -- the state-file entry (docs/files.md "Emulator state")
+# -------------------------------------------------------
 
 STATE_FILE_CASES = [
     case("factory", ModuleState.factory(1)),
@@ -785,10 +811,12 @@ def test_state_file_entry_shape(state):
 def test_state_file_entry_of_the_factory_module():
     entry = ModuleState.factory(3).to_json()
     assert entry["system"] == {
-        "S1": 400, "S2": 50, "S3": 754, "S4": 600, "S5": 10, "S6": 1500, "S7": 1000, "S8": 0, "S10": 583, "S11": 1100, "S12": 10
+        "S1": 400, "S2": 50, "S3": 754, "S4": 600, "S5": 10, "S6": 1500, "S7": 1000, "S8": 0, "S10": 583,
+                               "S11": 1100, "S12": 10
     }  # fmt: skip
     assert entry["programs"][0] == {"P": 150, "V": 50, "Vr": 0, "T": 0, "F1": 0, "F2": 0, "A": 0}
-    assert (entry["mode"], entry["active_program"], entry["fault"], entry["referenced"]) == ("stop", None, None, True)
+    assert (entry["mode"], entry["active_program"], entry["fault"], entry["referenced"]) == ("stop", None,
+                                                                                             None, True)
 
 
 def test_a_bare_module_image_reads_as_a_stopped_referenced_module():

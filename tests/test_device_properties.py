@@ -82,7 +82,8 @@ def messages_for(draw, state: ModuleState) -> bytes:
     item_pn = st.one_of(pn, byte) if wild else pn
     programs = st.builds(Program, **{k: v[k] for k in ("P", "V", "Vr", "T", "F1", "F2", "A")})
     any_system = st.builds(
-        SystemParameters, **{k: st.one_of(in_range(*r), kf if k != "S8" else byte) for k, r in SYSTEM_RANGES.items()}
+        SystemParameters, **{k: st.one_of(in_range(*r), kf if k != "S8" else byte)
+                             for k, r in SYSTEM_RANGES.items()}
     )
     first = draw(pn)
     last = draw(st.integers(first, 64))
@@ -219,10 +220,13 @@ def test_in_run_the_active_program_is_never_written(case):
 
 
 @pytest.mark.soak
-@settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])  # the soak profile's count
+# the soak profile's count
+@settings(suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(cases(), st.booleans())
 def test_every_property_holds_in_many_more_cases(case, broadcast):
     test_process_never_raises_and_replies_in_shape.hypothesis.inner_test(case, broadcast)
-    for check in (test_a_broadcast_does_what_an_addressed_message_does, test_only_an_accepted_write_changes_the_state,
-                  test_an_accepted_write_keeps_every_invariant, test_in_run_the_active_program_is_never_written):  # fmt: skip
+    for check in (test_a_broadcast_does_what_an_addressed_message_does,
+                  test_only_an_accepted_write_changes_the_state,
+                  test_an_accepted_write_keeps_every_invariant,
+                  test_in_run_the_active_program_is_never_written):  # fmt: skip
         check.hypothesis.inner_test(case)

@@ -77,7 +77,8 @@ def paths(value: object, at: str = "", maps: dict[str, str | None] | None = None
     return found
 
 
-SYMBOLS = {"buses[].modules[].changes.symbols": None, "read.taken": None}  # keyed by program number; by "bus/module"
+# keyed by program number; by "bus/module"
+SYMBOLS = {"buses[].modules[].changes.symbols": None, "read.taken": None}
 
 CLAMPING = """\
 plant: short
@@ -91,15 +92,18 @@ buses:
 """
 
 
-def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object, read_first: bool = False,
+def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object,
+            read_first: bool = False,
             apply_first: bool = False, **emulated) -> dict:  # fmt: skip
-    """The plan file of `source` on emulators; `read_first`: after a `read`, which the line's record then holds (a targeted plan);
-    `apply_first`: after an apply (a targeted plan that takes every program from the record)."""
+    """The plan file of `source` on emulators; `read_first`: after a `read`, which the line's record then
+    holds (a targeted plan); `apply_first`: after an apply (a targeted plan that takes every program from the
+    record)."""
     directory = tmp_path / name
     directory.mkdir()
     with emulated_plant(directory, **({"source": source} if source else {}), **emulated) as plant:
         assert not read_first or run_cli(capsys, "read", plant.path).code == 0
-        assert not apply_first or run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        assert not apply_first or run_cli(capsys, "apply", plant.path, "--auto-approve",
+                                          "--allow-axis-release").code == 0
         out = directory / "plan.json"
         result = run_cli(capsys, "plan", plant.path, "--out", out, *args)
         assert result.code == 0, result.err
@@ -128,7 +132,8 @@ def test_the_records_of_an_apply_have_exactly_the_keys_docs_files_lists(tmp_path
     with emulated_plant(tmp_path) as plant:
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
     (snapshot,) = (tmp_path / ".prc3cfg" / "snapshots").iterdir()
-    found = paths(json.loads(snapshot.read_text()), maps={"lines": "BUS", "modules[].system": None, "modules[].programs[]": None})
+    found = paths(json.loads(snapshot.read_text()),
+                  maps={"lines": "BUS", "modules[].system": None, "modules[].programs[]": None})
     assert found == {key(row[0]) for row in snapshot_rows}
     (journal,) = (tmp_path / ".prc3cfg" / "journal").iterdir()
     events: dict[str, set[str]] = {}
@@ -137,14 +142,19 @@ def test_the_records_of_an_apply_have_exactly_the_keys_docs_files_lists(tmp_path
         events.setdefault(entry.pop("event"), set()).update(set(entry) - {"time"})
     documented = {key(row[0]): set(re.findall(r"`([a-z_0-9]+)`", row[1])) for row in journal_rows}
     assert {event: documented[event] for event in events} == events
-    api = "".join(path.read_text() for path in [*(ROOT / "prc3cfg" / "api").glob("*.py"), ROOT / "prc3cfg" / "shell" / "engine.py"])
-    # interrupted: on Ctrl-C (the apply engine's `Keeping.note`); adopt, adopted: an adopt's (`write_adoption`)
-    assert all(event in events or f'keeping.note("{event}"' in api or f'journal.record("{event}"' in api for event in documented)
+    api = "".join(path.read_text()
+                  for path in [*(ROOT / "prc3cfg" / "api").glob("*.py"),
+                               ROOT / "prc3cfg" / "shell" / "engine.py"])
+    # interrupted: on Ctrl-C (the apply engine's `Keeping.note`); adopt, adopted: an adopt's
+    # (`write_adoption`)
+    assert all(event in events or f'keeping.note("{event}"' in api or f'journal.record("{event}"' in api
+               for event in documented)
 
 
 def test_the_exit_codes_are_the_codes_of_the_command_line():
     (rows,) = tables(section("files.md", "Exit codes"))
-    assert {int(row[0]) for row in rows} == {0, 1, EXIT_CHANGES, EXIT_POLICY, EXIT_USAGE, WindowShut.exit_code, Interrupted.exit_code}
+    assert {int(row[0]) for row in rows} == {0, 1, EXIT_CHANGES, EXIT_POLICY, EXIT_USAGE,
+                                             WindowShut.exit_code, Interrupted.exit_code}
 
 
 def test_the_message_table_is_the_codecs():
@@ -154,12 +164,14 @@ def test_the_message_table_is_the_codecs():
 
 def test_the_error_codes_are_the_codes_with_their_meanings():
     (rows,) = tables(section("protocol.md", "Error codes"))
-    assert {int(row[0]): row[1] for row in rows} == {code: entry.meaning for code, entry in ERROR_CODES.items()}
+    assert {int(row[0]): row[1] for row in rows} == {code: entry.meaning
+                                                     for code, entry in ERROR_CODES.items()}
 
 
 def test_every_reading_in_the_code_is_listed():
     readings = section("protocol.md", "Readings")
-    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py") if re.search(r"(?<!\w)\(reading\)", path.read_text())}
+    marked = {path.name for path in (ROOT / "prc3cfg").rglob("*.py")
+              if re.search(r"(?<!\w)\(reading\)", path.read_text())}
     assert marked and {name for name in marked if name not in readings} == set()
 
 
@@ -168,7 +180,8 @@ def test_the_readme_points_at_docs_and_at_no_folder_outside_the_repository():
     assert "../shared" not in readme
     for target in re.findall(r"\]\((docs/[^)#]+)", readme):
         assert (ROOT / target).is_file(), target
-    assert {"docs/protocol.md", "docs/line.md", "docs/files.md"} <= set(re.findall(r"\]\((docs/[^)#]+)", readme))
+    assert {"docs/protocol.md", "docs/line.md", "docs/files.md"} <= set(re.findall(r"\]\((docs/[^)#]+)",
+                                                                                   readme))
     for document in DOCS.glob("*.md"):
         for target in re.findall(r"\]\(([a-z-]+\.md)\)", document.read_text()):
             assert (DOCS / target).is_file(), f"{document.name} → {target}"
@@ -186,11 +199,13 @@ def test_the_api_doc_names_everything_the_api_exports():
 # -- the README: what a newcomer reads first ----------------------------------------------------------
 
 README_MOST = 12 * 1024  # bytes: the first screen, the two commands, the day's workflow; the rest is in docs/
-VENV = {"sh": "python3 -m venv .venv && . .venv/bin/activate && ", "powershell": "py -m venv .venv; .venv\\Scripts\\Activate.ps1; "}
+VENV = {"sh": "python3 -m venv .venv && . .venv/bin/activate && ",
+        "powershell": "py -m venv .venv; .venv\\Scripts\\Activate.ps1; "}
 
 
 def readme_commands(language: str) -> list[str]:
-    """The README's two commands in `language` (sh: Linux and macOS; powershell: Windows), from "## Two commands"."""
+    """The README's two commands in `language` (sh: Linux and macOS; powershell: Windows), from "## Two
+    commands"."""
     readme = (ROOT / "README.md").read_text()
     start = readme.index("\n## Two commands")
     block = re.search(rf"```{language}\n(.*?)```", readme[start : readme.index("\n## ", start + 1)], re.S)
@@ -206,16 +221,20 @@ def test_the_readme_s_two_commands_make_a_venv_then_run_the_demo_and_the_tests_a
     """Plain Debian has no `python` and refuses `pip install` outside a venv (PEP 668): each command makes and
     enters one first. Windows' are the same commands in PowerShell 5.1's words (`;` for `&&`)."""
     demo, tests = readme_commands("sh")
-    assert demo.startswith(VENV["sh"] + "python -m pip install . && prc3cfg plan plants/demo-line.yaml && prc3cfg apply ")
+    assert demo.startswith(VENV["sh"]
+                           + "python -m pip install . && prc3cfg plan plants/demo-line.yaml && "
+                             "prc3cfg apply ")
     assert tests == VENV["sh"] + "python -m pip install -e '.[test]' && python -m pytest"
-    as_powershell = [VENV["powershell"] + command.removeprefix(VENV["sh"]).replace(" && ", "; ") for command in (demo, tests)]
+    as_powershell = [VENV["powershell"] + command.removeprefix(VENV["sh"]).replace(" && ", "; ")
+                     for command in (demo, tests)]
     assert readme_commands("powershell") == as_powershell
     assert f"time {{ {tests}; }}" in (ROOT / ".ci" / "run").read_text().splitlines()  # timed: test_test_shape
 
 
 def test_the_readme_s_demo_command_plans_and_applies_as_written(tmp_path):
-    """What follows the install in the README's first command, run by bash in a copy of plants/ with this tree's
-    prc3cfg (the install itself, on Debian's own Python, is tests/test_install.py's, in the soak tier)."""
+    """What follows the install in the README's first command, run by bash in a copy of plants/ with this
+    tree's prc3cfg (the install itself, on Debian's own Python, is tests/test_install.py's, in the soak tier).
+    """
     shutil.copytree(ROOT / "plants", tmp_path / "plants", ignore=shutil.ignore_patterns(".prc3cfg"))
     shutil.copytree(ROOT / "schemas", tmp_path / "schemas")
     demo = readme_commands("sh")[0].removeprefix(VENV["sh"]).split(" && ", 1)[1]
@@ -227,33 +246,44 @@ def test_the_readme_s_demo_command_plans_and_applies_as_written(tmp_path):
 def test_the_readme_links_into_docs_for_everything_else():
     readme = (ROOT / "README.md").read_text()
     linked = set(re.findall(r"\]\((docs/[^)#]+)", readme))
-    wanted = ["commands", "plant-files", "files", "safety", "security", "windows", "ci", "api", "testing", "design"]
+    wanted = ["commands", "plant-files", "files", "safety", "security", "windows", "ci", "api", "testing",
+              "design"]
     assert {f"docs/{name}.md" for name in wanted} <= linked
 
 
 def test_each_library_decision_names_tests_that_exist_and_the_libraries_kept_out_are_not_dependencies():
     """docs/design.md: for each need a library could meet, the decision and the tests that prove the guarantee
-    kept — each a test function of the suite; a library prc3cfg decided against is not among its dependencies."""
-    table = [row for row in (DOCS / "design.md").read_text().splitlines() if row.startswith("| ") and not row.startswith("| Need")]
-    defined = {name for path in (ROOT / "tests").rglob("test_*.py") for name in re.findall(r"^def (test_\w+)", path.read_text(), re.M)}
+    kept — each a test function of the suite; a library prc3cfg decided against is not among its dependencies.
+    """
+    table = [row for row in (DOCS / "design.md").read_text().splitlines() if row.startswith("| ")
+             and not row.startswith("| Need")]
+    defined = {name for path in (ROOT / "tests").rglob("test_*.py")
+               for name in re.findall(r"^def (test_\w+)", path.read_text(), re.M)}
     named = [name for row in table for name in re.findall(r"`(test_\w+)`", row.split("|")[-2])]
     assert len(table) >= 4 and all(re.findall(r"`(test_\w+)`", row.split("|")[-2]) for row in table), table
     assert set(named) <= defined, set(named) - defined
     dependencies = (ROOT / "pyproject.toml").read_text().split("[project.optional-dependencies]")[0]
-    assert not [library for library in ("platformdirs", "filelock", "portalocker", "ruamel", "atomicwrites") if library in dependencies]
+    assert not [
+        library
+        for library in ("platformdirs", "filelock", "portalocker", "ruamel", "atomicwrites")
+        if library in dependencies
+    ]
 
 
 def test_no_text_cites_a_specification_the_repository_does_not_have():
-    """The design's specifications (interfaces, link, prc3-protocol) are not in the repository: docs/ says it to a user
-    and a maintainer (docs/files.md, docs/line.md, docs/protocol.md)."""
-    texts = [*(ROOT / "prc3cfg").rglob("*.py"), *(ROOT / "tests").rglob("*.py"), *(ROOT / "bench").rglob("*.py"), *DOCS.glob("*.md"),
+    """The design's specifications (interfaces, link, prc3-protocol) are not in the repository: docs/ says it
+    to a user and a maintainer (docs/files.md, docs/line.md, docs/protocol.md)."""
+    texts = [*(ROOT / "prc3cfg").rglob("*.py"), *(ROOT / "tests").rglob("*.py"),
+             *(ROOT / "bench").rglob("*.py"), *DOCS.glob("*.md"),
              ROOT / "README.md"]  # fmt: skip
-    cited = [path.relative_to(ROOT) for path in texts if any(f"{name}.md" in path.read_text() for name in ("interfaces", "link", "prc3-protocol"))]
+    cited = [path.relative_to(ROOT) for path in texts
+             if any(f"{name}.md" in path.read_text() for name in ("interfaces", "link", "prc3-protocol"))]
     assert cited == []
 
 
 def test_every_command_the_readme_names_is_one_prc3cfg_has(capsys):
-    """A command renamed or removed takes the README's line with it: each `prc3cfg COMMAND` there answers --help."""
+    """A command renamed or removed takes the README's line with it: each `prc3cfg COMMAND` there answers
+    --help."""
     readme = (ROOT / "README.md").read_text()
     named = set(re.findall(r"(?:^|`|&& |; )prc3cfg ((?:records |emulator )?[a-z-]+)", readme, re.M))
     assert {"import", "validate", "plan", "apply", "adopt", "records list", "restore", "doctor"} <= named
@@ -263,7 +293,8 @@ def test_every_command_the_readme_names_is_one_prc3cfg_has(capsys):
 
 
 #: What a script adds to the README's day where a person would answer at a terminal, and what keeps it short.
-ADDED = {"import": " --modules 1-3", "apply": " --auto-approve --allow-axis-release", "adopt": " --auto-approve",
+ADDED = {"import": " --modules 1-3", "apply": " --auto-approve --allow-axis-release",
+         "adopt": " --auto-approve",
          "restore": " --auto-approve --allow-axis-release"}  # fmt: skip
 
 
@@ -281,22 +312,27 @@ def test_the_readme_s_day_runs_line_by_line_on_an_emulated_line(tmp_path, seed):
     """Each line of the README's day, by bash in its order, with `emulator serve` (three modules) in place of
     /dev/ttyUSB0 and only what `ADDED` says added: after `import` a seeded change of one module's program is
     written into the plant file (so there is a plan to apply), and before the drift line another plant file
-    teaches the module another position (so there is drift to adopt); the restore takes the apply's snapshot."""
+    teaches the module another position (so there is drift to adopt); the restore takes the apply's snapshot.
+    """
     rng = random.Random(seed)
     address, program = rng.randint(1, 3), rng.randint(1, 64)
     planned, taught = rng.sample(range(60, 400), 2)  # mm, within the factory S2..S1
     day = the_day()
-    assert [line.split()[1] for line in day] == ["import", "validate", "plan", "apply", "plan", "adopt", "records", "restore"]
+    assert [line.split()[1] for line in day] == ["import", "validate", "plan", "apply", "plan", "adopt",
+                                                 "records", "restore"]
     with serve(tmp_path, "--modules", "1-3", "--state", str(tmp_path / "state.json")) as served:
         url = f"socket://127.0.0.1:{served.port}"
 
         def run(line: str) -> subprocess.CompletedProcess:
             command = line.split()[1]
-            line = line.replace("/dev/ttyUSB0", url).replace("SNAPSHOT.json", snapshot()) if "restore" in line else line.replace("/dev/ttyUSB0", url)
+            line = (line.replace("/dev/ttyUSB0", url).replace("SNAPSHOT.json", snapshot())
+                    if "restore" in line else line.replace("/dev/ttyUSB0", url))
             head, redirect = (line.split(" > ", 1) + [""])[:2]
             line = head + ADDED.get(command, "") + (f" > {redirect}" if redirect else "")
-            done = subprocess.run(["bash", "-ec", line], cwd=tmp_path, capture_output=True, text=True, timeout=120)
-            assert done.returncode == 0 and "Traceback" not in done.stderr, (line, done.stdout[-2000:], done.stderr[-2000:])
+            done = subprocess.run(["bash", "-ec", line], cwd=tmp_path, capture_output=True, text=True,
+                                  timeout=120)
+            assert done.returncode == 0 and "Traceback" not in done.stderr, (line, done.stdout[-2000:],
+                                                                             done.stderr[-2000:])
             return done
 
         def snapshot() -> str:
@@ -306,7 +342,9 @@ def test_the_readme_s_day_runs_line_by_line_on_an_emulated_line(tmp_path, seed):
         def plant_with(position: int) -> str:
             module = f"{{address: {address}, name: bus-1-{address}, profiles: [common]}}"
             assert module in imported, imported
-            return imported.replace(module, module[:-1] + f", programs: {{{program}: {{position: {position / 1000:.3f}, speed: 0.050}}}}}}")
+            return imported.replace(module, module[:-1]
+                                    + ", programs: "
+                                      f"{{{program}: {{position: {position / 1000:.3f}, speed: 0.050}}}}}}")
 
         run(day[0])
         imported = (tmp_path / "plant.yaml").read_text()
@@ -323,6 +361,8 @@ def test_the_readme_s_day_runs_line_by_line_on_an_emulated_line(tmp_path, seed):
         assert run("prc3cfg plan plant.yaml --detailed-exitcode").returncode == 0
         listed = run(day[6])
         assert listed.stdout.count("apply") >= 1 and "adopt" in listed.stdout, listed.stdout
-        run(day[7])  # back to the modules as the apply found them (factory defaults): the adopted file has a change again
-        again = subprocess.run(["prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=tmp_path, capture_output=True, text=True)
+        # back to the modules as the apply found them (factory defaults): the adopted file has a change again
+        run(day[7])
+        again = subprocess.run(["prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"], cwd=tmp_path,
+                               capture_output=True, text=True)
         assert again.returncode == 2 and f"bus-1-{address}" in again.stdout, again.stdout + again.stderr

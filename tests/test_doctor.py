@@ -43,10 +43,12 @@ def test_a_uart_checks_one_stop_bit_so_stop_bits_cannot_be_told_apart(data, line
 def test_a_frame_at_other_settings_arrives_as_other_bytes():
     frame = get_framing("crc16").encode(Direction.REQUEST, 1, codec.ReadSystem().encode())
     at = LineSettings(9600, 8, "even", 1)
-    for other in (LineSettings(19200, 8, "even", 1), LineSettings(4800, 8, "even", 1), LineSettings(9600, 8, "none", 1),
+    for other in (LineSettings(19200, 8, "even", 1), LineSettings(4800, 8, "even", 1),
+                  LineSettings(9600, 8, "none", 1),
                   LineSettings(9600, 8, "odd", 1)):  # fmt: skip
         assert received(frame, other, at) != frame
-    assert received(frame, at, LineSettings(9600, 7, "even", 1)) != frame  # a character of 7 bits loses the top bit
+    # a character of 7 bits loses the top bit
+    assert received(frame, at, LineSettings(9600, 7, "even", 1)) != frame
     assert received(b"\xa5", LineSettings(9600, 7, "odd", 1), LineSettings(9600, 7, "odd", 1)) == b"\x25"
 
 
@@ -80,7 +82,8 @@ def test_on_a_pty_the_emulator_answers_only_a_client_at_its_baud():
 
 def test_jitter_is_seeded_and_within_its_bounds():
     def draws(seed: int) -> list[float]:
-        with Emulator({1: ModuleState.factory(1)}, turnaround=0.020, jitter=0.004, faults=FaultInjection(seed=seed)) as emulator:
+        with Emulator({1: ModuleState.factory(1)}, turnaround=0.020, jitter=0.004,
+                      faults=FaultInjection(seed=seed)) as emulator:
             return [emulator.turnaround_of(1) for _ in range(50)]
 
     first = draws(7)
@@ -90,14 +93,16 @@ def test_jitter_is_seeded_and_within_its_bounds():
 
 
 def test_each_module_answers_after_its_own_turnaround(tmp_path):
-    bus = SimpleNamespace(name="b1", port="emulator://slow?line-speed=9600&turnaround=0.002&module-turnaround=2:0.080",
+    bus = SimpleNamespace(name="b1",
+                          port="emulator://slow?line-speed=9600&turnaround=0.002&module-turnaround=2:0.080",
                           framing="crc16", line=LineSettings(), zvz=0.020, turnaround=0.010, timeout=5.0,
                           modules=[SimpleNamespace(address=1), SimpleNamespace(address=2)])  # fmt: skip
     cost = LineCost.of("crc16", LineSettings(), 0.080, 0.020)
     with open_link(bus, tmp_path / "plant.yaml") as link:
         started = time.monotonic()
         assert isinstance(link.request(2, codec.ReadSystem()), codec.SystemReply)
-        assert time.monotonic() - started >= cost.message_time(2, codec.ReadSystem())  # 80 ms and the line: never sooner
+        # 80 ms and the line: never sooner
+        assert time.monotonic() - started >= cost.message_time(2, codec.ReadSystem())
 
 
 def doctor_line(capsys, emulator: Emulator, *options: str) -> tuple[Result, dict[str, str]]:
@@ -117,8 +122,10 @@ def turnarounds(out: str) -> dict[int, tuple[float, float]]:
 def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
     line = LineSettings(19200, 8, "odd", 1)
     modules = {1: ModuleState.factory(1), 2: ModuleState.factory(2)}
-    # turnarounds of tens of ms, as a PRC 3's; how close doctor measures them is bench/doctor_bench.py's (a wall-clock figure)
-    with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.050, turnarounds={2: 0.100}, jitter=0.004,
+    # turnarounds of tens of ms, as a PRC 3's; how close doctor measures them is bench/doctor_bench.py's (a
+    # wall-clock figure)
+    with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.050,
+                  turnarounds={2: 0.100}, jitter=0.004,
                   faults=FaultInjection(seed=1)) as emulator:  # fmt: skip
         result, keys = doctor_line(capsys, emulator, "--baud", "19200", "--modules", "1-2")
     assert result.code == 0, result.err
@@ -128,17 +135,21 @@ def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
     assert set(measured) == {1, 2}
     for address, turnaround in ((1, 0.050), (2, 0.100)):
         median, worst = measured[address]
-        assert median >= 0.9 * turnaround, (address, median)  # never short of the module's wait (a busy machine only adds to it)
+        # never short of the module's wait (a busy machine only adds to it)
+        assert median >= 0.9 * turnaround, (address, median)
         assert worst >= median
     assert float(keys["turnaround"]) >= measured[2][1]  # a broadcast waits for the slowest module
 
 
 def test_doctor_asks_before_probing_in_a_framing_without_a_checksum(capsys):
-    with Emulator({1: ModuleState.factory(1)}, framing="open-driver", line=LineSettings(9600, 8, "even", 1)) as emulator:
+    with Emulator({1: ModuleState.factory(1)}, framing="open-driver",
+                  line=LineSettings(9600, 8, "even", 1)) as emulator:
         refused, _ = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1")
         assert refused.code == 1 and refused.err.count("\n") == 1
-        assert "(2 probes); 1 probe in open-driver, which has no checksum, was not made — give --allow-unchecked-probes" in refused.err
-        found, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1", "--allow-unchecked-probes")
+        assert ("(2 probes); 1 probe in open-driver, which has no checksum, was not made — give "
+                "--allow-unchecked-probes") in refused.err
+        found, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1",
+                                  "--allow-unchecked-probes")
     assert found.code == 0, found.err
     assert keys["framing"] == "open-driver" and keys["zvz"] == "0.02"
 
@@ -146,7 +157,8 @@ def test_doctor_asks_before_probing_in_a_framing_without_a_checksum(capsys):
 def test_doctor_finds_the_baud_of_a_pty(capsys):
     with Emulator({1: ModuleState.factory(1)}, line=LineSettings(4800, 8, "none", 1)) as emulator:
         pty = emulator.open_pty()
-        result = run_cli(capsys, "doctor", "--port", pty, "--framing", "crc16", "--modules", "1", "--exchanges", "2")
+        result = run_cli(capsys, "doctor", "--port", pty, "--framing", "crc16", "--modules", "1",
+                         "--exchanges", "2")
     assert result.code == 0, result.err
     assert f"{pty} speaks crc16, 4800 baud, 8N1" in result.out
 
@@ -155,8 +167,10 @@ def test_doctor_tries_and_proposes_8_data_bits_only(capsys):
     """A PRC 3 frame is binary: every setting doctor tries has 8 data bits, and so has every bus it proposes —
     a line whose UART is set to 7 answers none of its probes, and no 7 is proposed for it."""
     assert {c.line.data_bits for c in Search().candidates()} == {8}
-    with Emulator({1: ModuleState.factory(1)}, framing="crc16", line=LineSettings(9600, 7, "even", 1)) as emulator:
-        result, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1", "--exchanges", "1")
+    with Emulator({1: ModuleState.factory(1)}, framing="crc16",
+                  line=LineSettings(9600, 7, "even", 1)) as emulator:
+        result, keys = doctor_line(capsys, emulator, "--baud", "9600", "--parity", "even", "--modules", "1",
+                                   "--exchanges", "1")
     assert result.code == 1 and keys == {}, (result.out, result.err)
 
 
@@ -165,8 +179,10 @@ def test_doctor_tries_and_proposes_8_data_bits_only(capsys):
 @pytest.mark.parametrize("parity", ["none", "odd", "even"])
 @pytest.mark.parametrize("baud", [4800, 19200])
 def test_doctor_finds_every_framing_and_character_format(capsys, framing, parity, baud):
-    with Emulator({7: ModuleState.factory(7)}, framing=framing, line=LineSettings(baud, 8, parity, 1)) as emulator:
-        result, keys = doctor_line(capsys, emulator, "--modules", "7", "--exchanges", "2", "--allow-unchecked-probes")
+    with Emulator({7: ModuleState.factory(7)}, framing=framing,
+                  line=LineSettings(baud, 8, parity, 1)) as emulator:
+        result, keys = doctor_line(capsys, emulator, "--modules", "7", "--exchanges", "2",
+                                   "--allow-unchecked-probes")
     assert result.code == 0, result.err
     assert (keys["framing"], keys["baud"], keys["parity"]) == (framing, str(baud), parity)
 
@@ -174,12 +190,15 @@ def test_doctor_finds_every_framing_and_character_format(capsys, framing, parity
 @pytest.mark.soak
 @pytest.mark.parametrize("framing", ["crc16", "stx", "open-driver"])
 def test_doctor_measures_each_module_s_turnaround_on_every_framing(capsys, framing):
-    """Each module measured on its own, its median never short of its turnaround (90 % of it: the jitter and the
-    line's time taken off); how close above it, a wall-clock figure, is bench/doctor_bench.py's."""
-    given = {1: 0.080, 2: 0.120, 3: 0.160}  # 10 % of them is more than the gap detection an open-driver line adds (a few ms)
-    with Emulator({a: ModuleState.factory(a) for a in given}, framing=framing, line=LineSettings(9600, 8, "even", 1), line_speed=True,
+    """Each module measured on its own, its median never short of its turnaround (90 % of it: the jitter and
+    the line's time taken off); how close above it, a wall-clock figure, is bench/doctor_bench.py's."""
+    # 10 % of them is more than the gap detection an open-driver line adds (a few ms)
+    given = {1: 0.080, 2: 0.120, 3: 0.160}
+    with Emulator({a: ModuleState.factory(a) for a in given}, framing=framing,
+                  line=LineSettings(9600, 8, "even", 1), line_speed=True,
                   turnarounds=given, jitter=0.004, faults=FaultInjection(seed=3)) as emulator:  # fmt: skip
-        result, _ = doctor_line(capsys, emulator, "--framing", framing, "--baud", "9600", "--parity", "even", "--modules", "1-4",
+        result, _ = doctor_line(capsys, emulator, "--framing", framing, "--baud", "9600", "--parity", "even",
+                                "--modules", "1-4",
                                 "--exchanges", "15", "--allow-unchecked-probes")  # fmt: skip
     assert result.code == 0, result.err
     measured = turnarounds(result.out)
@@ -208,7 +227,8 @@ def test_over_rfc2217_an_exchange_does_not_ask_the_gateway_to_purge(caplog):
 
 @pytest.mark.parametrize(("answers", "timeout"), [
     pytest.param({1: (0.050, 0.052, 0.054)}, None, id="steady: the turnaround alone, the default timeout"),
-    pytest.param({1: (0.100, 0.900, 0.400), 2: (0.050, 0.060, 0.055)}, 0.8, id="one module varies by 0.8 s: a timeout of 0.8 s"),
+    pytest.param({1: (0.100, 0.900, 0.400), 2: (0.050, 0.060, 0.055)}, 0.8,
+                 id="one module varies by 0.8 s: a timeout of 0.8 s"),
     pytest.param({1: (0.100, 0.6005)}, 0.501, id="just over the default: rounded up to the millisecond"),
     pytest.param({1: (0.100, 0.600)}, None, id="by the default exactly: the default"),
     pytest.param({1: (0.050, 0.900), 2: ()}, 0.85, id="a module that never answered varies by nothing"),
@@ -235,7 +255,8 @@ def test_doctor_measures_a_module_slower_than_its_probes_allow_and_proposes_a_ti
     line = LineSettings(1200, 8, "even", 1)
     with Emulator({1: ModuleState.factory(1)}, line=line, line_speed=True, turnaround=0.500, jitter=jitter,
                   faults=FaultInjection(seed=seed)) as emulator:  # fmt: skip
-        result, keys = doctor_line(capsys, emulator, "--framing", "crc16", "--baud", "1200", "--parity", "even", "--modules", "1",
+        result, keys = doctor_line(capsys, emulator, "--framing", "crc16", "--baud", "1200", "--parity",
+                                   "even", "--modules", "1",
                                    "--exchanges", "4")  # fmt: skip
     assert result.code == 0, result.err
     ((_, worst),) = turnarounds(result.out).values()

@@ -163,7 +163,8 @@ def test_serve_command_answers_and_saves(tmp_path):
             assert client.send(2, b"\x50\x00") is None
         finally:
             client.close()
-        assert load_state(state)[4].image.program(10) == WRITE_P10.program  # the journal holds the tail meanwhile
+        # the journal holds the tail meanwhile
+        assert load_state(state)[4].image.program(10) == WRITE_P10.program
     saved = json.loads(state.read_text())  # after a clean exit the state file holds everything
     assert [m["address"] for m in saved["modules"]] == [1, 3, 4]
     assert saved["modules"][2]["programs"][9] == WRITE_P10.program.to_json()
@@ -196,8 +197,10 @@ def busy_port() -> socket.socket:
     [
         (["--listen", "127.0.0.1:{busy}"], "cannot listen (Address already in use) — choose a free port"),
         (["--state", "{tmp}"], "is a directory — give an emulator state file, or a path where none is yet"),
-        (["--state", "{tmp}/broken.json"], "broken.json:1:43: not valid JSON (Expecting value) — fix or delete it"),
-        (["--state", "{tmp}/odd.json"], "odd.json: module 3: program 7: P = 12000 is outside 0..9999 — fix or delete the entry"),
+        (["--state", "{tmp}/broken.json"],
+         "broken.json:1:43: not valid JSON (Expecting value) — fix or delete it"),
+        (["--state", "{tmp}/odd.json"],
+         "odd.json: module 3: program 7: P = 12000 is outside 0..9999 — fix or delete the entry"),
     ],
 )
 def test_serve_errors_are_one_line(tmp_path, options, says):
@@ -208,7 +211,8 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
     with busy_port() as busy:
         arguments = [o.format(tmp=tmp_path, busy=busy.getsockname()[1]) for o in options]
         result = subprocess.run(
-            [sys.executable, "-m", "prc3cfg", "emulator", "serve", *arguments], capture_output=True, text=True, timeout=30
+            [sys.executable, "-m", "prc3cfg", "emulator", "serve", *arguments], capture_output=True,
+                                text=True, timeout=30
         )
     assert result.returncode == 1
     assert result.stderr.count("\n") == 1 and result.stderr.startswith("error: "), result.stderr
@@ -222,21 +226,45 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
         (["--idle-timeout", "0"], "Invalid value for '--idle-timeout': 0 is less than 1ms"),
         (["--parity", "weird"], "Invalid value for '--parity': 'weird' is not one of none, odd, even"),
         (["--framing", "xyz"], "Invalid value for '--framing': 'xyz' is not one of crc16, open-driver, stx"),
-        (["--zvz", "-1"], "Invalid value for '--zvz': '-1' is not a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h"),
+        (
+            ["--zvz", "-1"],
+            (
+                "Invalid value for '--zvz': '-1' is not a time — write seconds (30, 0.5) or with a unit:"
+                " 500ms, 5s, 2m, 1h"
+            ),
+        ),
         (["--zvz", "nan"], "Invalid value for '--zvz'"),
         (["--turnaround", "nan"], "Invalid value for '--turnaround'"),
-        (["--module-turnaround", "3"], "Invalid value for '--module-turnaround': '3' is not ADDRESSES=TIME — for example 3-5=40ms"),
+        (
+            ["--module-turnaround", "3"],
+            "Invalid value for '--module-turnaround': '3' is not ADDRESSES=TIME — for example 3-5=40ms",
+        ),
         (["--module-turnaround", "31=5ms"], "Invalid value for '--module-turnaround': '31' is outside 1..30"),
-        (["--module-turnaround", "3=11s"], "Invalid value for '--module-turnaround': '11s' is not a turnaround of 0..10 s"),
+        (
+            ["--module-turnaround", "3=11s"],
+            "Invalid value for '--module-turnaround': '11s' is not a turnaround of 0..10 s",
+        ),
         (["--jitter", "-1ms"], "Invalid value for '--jitter'"),
         (["--line-speed", "0"], "Invalid value for '--line-speed': must be 1 or more"),
         (["--data-bits", "9"], "Invalid value for '--data-bits': 9 data bits cannot carry a PRC 3 frame"),
         (["--data-bits", "7"], "Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame"),
-        (["--modules", "0-40"], "Invalid value for '--modules': '0-40' is outside 1..30 — module addresses are 1..30"),
-        (["--modules", "1,,2"], "Invalid value for '--modules': '1,,2' has an empty entry — write addresses and ranges between commas, e.g. 1,3-5"),
+        (
+            ["--modules", "0-40"],
+            "Invalid value for '--modules': '0-40' is outside 1..30 — module addresses are 1..30",
+        ),
+        (
+            ["--modules", "1,,2"],
+            (
+                "Invalid value for '--modules': '1,,2' has an empty entry — write addresses and ranges"
+                " between commas, e.g. 1,3-5"
+            ),
+        ),
         (["--modules", "1,2,"], "Invalid value for '--modules': '1,2,' has an empty entry"),
         (["--modules", ""], "Invalid value for '--modules': '' has an empty entry"),
-        (["--listen", "nonsense"], "Invalid value for '--listen': 'nonsense' is not HOST:PORT — for example 127.0.0.1:7001"),
+        (
+            ["--listen", "nonsense"],
+            "Invalid value for '--listen': 'nonsense' is not HOST:PORT — for example 127.0.0.1:7001",
+        ),
         (["--listen", "127.0.0.1:70000"], "Invalid value for '--listen': '127.0.0.1:70000' is not HOST:PORT"),
         (["--listen", ""], "Invalid value for '--listen': '' is not HOST:PORT — for example 127.0.0.1:7001"),
     ],
@@ -246,15 +274,19 @@ def test_a_bad_option_value_is_a_usage_error(capsys, options, says):
     test_a_bad_option_value_is_a_usage_error_of_the_process runs one as a command of its own)."""
     result = run_cli(capsys, "emulator", "serve", "--listen", "127.0.0.1:0", *options)
     assert result.code == 64
-    assert result.err.count("\n") == 1 and result.err.startswith("error: prc3cfg emulator serve: "), result.err
+    assert result.err.count("\n") == 1 and result.err.startswith(
+        "error: prc3cfg emulator serve: "
+    ), result.err
     assert says in result.err and result.out == ""
 
 
 def test_a_bad_option_value_is_a_usage_error_of_the_process():
-    result = subprocess.run([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--turnaround", "nan"],
+    result = subprocess.run([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
+                             "--turnaround", "nan"],
                             capture_output=True, text=True, timeout=30)  # fmt: skip
     assert (result.returncode, result.stdout) == (64, "")
-    assert result.stderr.startswith("error: prc3cfg emulator serve: Invalid value for '--turnaround'") and result.stderr.count("\n") == 1
+    assert (result.stderr.startswith("error: prc3cfg emulator serve: Invalid value for '--turnaround'")
+            and result.stderr.count("\n") == 1)
 
 
 def state_file(path, *entries: dict):
@@ -276,23 +308,31 @@ def module_3(change) -> dict:
         (lambda m: m["programs"][0].update(V=0), "module 3: program 1: V = 0 is outside 1..600"),
         (lambda m: m["programs"][1].update(Vr=-601), "module 3: program 2: Vr = -601 is outside -600..600"),
         (lambda m: m["programs"][63].update(A=65), "module 3: program 64: A = 65 is outside 0..64"),
-        (lambda m: m["programs"][2].update(T=1.5), "module 3: program 3: T is 1.5, where a whole number belongs"),
-        (lambda m: m["programs"][2].update(F1=True), "module 3: program 3: F1 is true, where a whole number belongs"),
+        (lambda m: m["programs"][2].update(T=1.5),
+         "module 3: program 3: T is 1.5, where a whole number belongs"),
+        (lambda m: m["programs"][2].update(F1=True),
+         "module 3: program 3: F1 is true, where a whole number belongs"),
         (lambda m: m["programs"][4].pop("F2"), 'module 3: program 5 has no "F2"'),
-        (lambda m: m["programs"].__setitem__(8, None), "module 3: program 9 is null, where an object belongs"),
+        (lambda m: m["programs"].__setitem__(8, None), "module 3: program 9 is null, where an "
+                                                       "object belongs"),
         (lambda m: m["programs"].pop(), "module 3: programs is a list of 63, where a list of 64 belongs"),
         (lambda m: m["system"].update(S6=999), "module 3: system: S6 = 999 is outside 1000..1500"),
         (lambda m: m["system"].update(S1=70000), "module 3: system: S1 = 70000 is outside 100..9999"),
-        (lambda m: m["system"].update(S1="400"), 'module 3: system: S1 is the text "400", where a whole number belongs'),
+        (lambda m: m["system"].update(S1="400"),
+         'module 3: system: S1 is the text "400", where a whole number belongs'),
         (lambda m: m["system"].pop("S12"), 'module 3: system has no "S12"'),
         (lambda m: m.update(address=40), "module entry 0: address S9 = 40 is outside 1..30"),
-        (lambda m: m.update(mode="flying"), 'module 3: mode is the text "flying", where "stop", "run" or "manual" belongs'),
+        (lambda m: m.update(mode="flying"),
+         'module 3: mode is the text "flying", where "stop", "run" or "manual" belongs'),
         (lambda m: m.update(fault=["E09"]), "module 3: fault is a list, where text or null belongs"),
-        (lambda m: m.update(fault="E99"), 'module 3: fault is the text "E99", where "E09", "E10", "E12", "E20", "E21", "E22", "E23", "E24", '
+        (lambda m: m.update(fault="E99"),
+         'module 3: fault is the text "E99", where "E09", "E10", "E12", "E20", "E21", "E22", "E23", "E24", '
                                           '"E25", "fault" or null belongs'),
         (lambda m: m.update(active_program=65), "module 3: active_program = 65 is outside 1..64"),
-        (lambda m: m.update(active_program="3"), 'module 3: active_program is the text "3", where a whole number or null belongs'),
-        (lambda m: m.update(referenced="yes"), 'module 3: referenced is the text "yes", where true or false belongs'),
+        (lambda m: m.update(active_program="3"),
+         'module 3: active_program is the text "3", where a whole number or null belongs'),
+        (lambda m: m.update(referenced="yes"),
+         'module 3: referenced is the text "yes", where true or false belongs'),
     ],
 )
 def test_state_file_values_no_message_can_carry_are_refused_naming_module_and_field(tmp_path, change, says):
@@ -320,7 +360,8 @@ def test_corruption_on_open_driver_respects_parity(parity, undetected):
     """A flipped bit on a line with parity is a parity error the UART drops: the module then sees a
     message one byte short (refused as damaged), never a valid different one. Without parity it can."""
     line = LineSettings(parity=parity)
-    with Emulator(modules(1), framing="open-driver", line=line, faults=FaultInjection(corrupt_rate=1.0, seed=5)) as emulator:
+    with Emulator(modules(1), framing="open-driver", line=line,
+                  faults=FaultInjection(corrupt_rate=1.0, seed=5)) as emulator:
         outcomes = set()
         for n in range(1, 301):
             before = emulator.module(1).image
@@ -338,7 +379,8 @@ def device_after(image, message):
 
 
 def test_a_damaged_reply_with_parity_is_a_character_short():
-    with Emulator(modules(1), framing="open-driver", faults=FaultInjection(corrupt_rate=1.0, seed=2)) as emulator:
+    with Emulator(modules(1), framing="open-driver",
+                  faults=FaultInjection(corrupt_rate=1.0, seed=2)) as emulator:
         replies = [emulator.exchange(Frame(Direction.REQUEST, 1, b"\x50\x00"), 0.0) for _ in range(40)]
     whole = 1 + 2 * 11  # address and the 11 words of 50h's reply
     # a damaged reply lacks a character; a damaged request (one byte short) is answered with a code word
@@ -378,7 +420,8 @@ def slow_clock(monkeypatch):
     """The server's clock moves a second every time it is read: every silence is far longer than
     any inter-character or message time-out."""
     seconds = itertools.count()
-    monkeypatch.setattr(server, "time", SimpleNamespace(monotonic=lambda: float(next(seconds)), sleep=time.sleep))
+    monkeypatch.setattr(server, "time",
+                        SimpleNamespace(monotonic=lambda: float(next(seconds)), sleep=time.sleep))
 
 
 @pytest.mark.parametrize("framing", ["crc16", "stx"])
@@ -485,7 +528,8 @@ def test_a_write_that_cannot_be_saved_is_not_answered_and_changes_nothing(tmp_pa
             conn.sendall(crc16.encode(Direction.REQUEST, 0, codec.WriteSpeeds(((4, 123),)).encode()))
             conn.sendall(crc16.encode(Direction.REQUEST, 1, WRITE_P10.encode()))
             reply = answered(conn, 1, codec.ReadProgram(10).encode())  # the first reply: the read's
-            assert codec.decode_reply(codec.ReadProgram(10), reply).programs == (ModuleState.factory(1).image.program(10),)
+            assert codec.decode_reply(codec.ReadProgram(10),
+                                      reply).programs == (ModuleState.factory(1).image.program(10),)
             assert emulator.modules() == modules(1, 3)
             with pytest.raises(OSError):
                 emulator.update(1, mode="run")

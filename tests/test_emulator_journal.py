@@ -70,10 +70,15 @@ def test_a_write_goes_into_the_journal_and_the_state_file_takes_it_on_exit(tmp_p
         lines = journal_path(state).read_text().splitlines()
         assert lines[0] == f"{JOURNAL_FORMAT} {json.loads(state.read_text())['generation']}"
         assert lines[1:] == [f"1 {write(n, 100 + n).hex()}" for n in (4, 5, 6)]
-        assert load_state(state) == emulator.modules()  # the state file and its journal: what was acknowledged
+        # the state file and its journal: what was acknowledged
+        assert load_state(state) == emulator.modules()
     assert not journal_path(state).exists()
     saved = json.loads(state.read_text())  # the contract alone, after a clean exit
-    assert [m["programs"][n - 1]["P"] for m in saved["modules"] if m["address"] == 1 for n in (4, 5, 6)] == [104, 105, 106]
+    assert [m["programs"][n - 1]["P"] for m in saved["modules"] if m["address"] == 1 for n in (4, 5, 6)] == [
+        104,
+        105,
+        106,
+    ]
 
 
 def test_what_is_on_disk_is_what_was_acknowledged_after_every_write(tmp_path):
@@ -87,9 +92,11 @@ def test_what_is_on_disk_is_what_was_acknowledged_after_every_write(tmp_path):
         try:
             for step in range(60):
                 address = rng.choice([BROADCAST, 1, 2, 3])
-                message = write(rng.randrange(1, 65), rng.choice([50, 150, 250, 399, 5000]))  # 5000: refused, P > S1
+                # 5000: refused, P > S1
+                message = write(rng.randrange(1, 65), rng.choice([50, 150, 250, 399, 5000]))
                 send_only(client, address, message) if address == BROADCAST else client.send(address, message)
-                assert client.send(1, codec.ReadSystem().encode()) is not None  # a broadcast is processed by now
+                # a broadcast is processed by now
+                assert client.send(1, codec.ReadSystem().encode()) is not None
                 copy = tmp_path / f"copy-{step}"
                 shutil.copytree(state.parent, copy)
                 assert load_state(copy / "bus.json") == {**kept, **emulator.modules()}, f"step {step}"
@@ -113,12 +120,15 @@ def test_a_journal_left_behind_is_replayed_and_compacted_at_start(tmp_path):
         shutil.copytree(state.parent, killed)  # what SIGKILL would leave behind
         held = emulator.modules()
     left = killed / "bus.json"
-    assert len(journal_path(left).read_text().splitlines()) == 1 + 1 + 2  # the header, the write, the broadcast to both
+    # the header, the write, the broadcast to both
+    assert len(journal_path(left).read_text().splitlines()) == 1 + 1 + 2
     assert load_state(left) == held
     with Emulator(load_state(left), state_path=left) as restarted:
         assert load_state(left) == held
         assert store._load_file(left) == held  # compacted: the state file alone holds it all
-        assert journal_path(left).read_text().splitlines() == [f"{JOURNAL_FORMAT} {json.loads(left.read_text())['generation']}"]
+        assert journal_path(left).read_text().splitlines() == [
+            f"{JOURNAL_FORMAT} {json.loads(left.read_text())['generation']}"
+        ]
         assert restarted.modules() == held
 
 
@@ -134,12 +144,17 @@ def test_a_cut_line_is_ignored_and_a_journal_the_state_file_took_in_has_nothing_
     state.write_text(json.dumps(state_document(modules(1), GENERATION, replaces="0123")))
     factory = modules(1)
     written = ModuleState.factory(1).image.with_programs({3: Program(P=200, V=100)})
-    journal(state, f"1 {write(3, 200).hex()}", f"1 {write(4, 300).hex()[:9]}", end="")  # the last line cut by a kill
+    # the last line cut by a kill
+    journal(state, f"1 {write(3, 200).hex()}", f"1 {write(4, 300).hex()[:9]}", end="")
     assert load_state(state) == {1: ModuleState(written)}
-    journal(state, f"1 {write(3, 200).hex()}", generation="0123")  # killed between saving the state file and a fresh journal
+    # killed between saving the state file and a fresh journal
+    journal(state, f"1 {write(3, 200).hex()}", generation="0123")
     assert load_state(state) == factory
     journal(state, f"2 {write(3, 200).hex()}")  # a module served from factory defaults, not yet in the file
-    assert load_state(state) == {**factory, 2: ModuleState(ModuleState.factory(2).image.with_programs({3: Program(P=200, V=100)}))}
+    assert load_state(state) == {
+        **factory,
+        2: ModuleState(ModuleState.factory(2).image.with_programs({3: Program(P=200, V=100)})),
+    }
 
 
 @pytest.mark.parametrize(
@@ -159,7 +174,8 @@ def test_a_journal_line_that_is_not_a_write_is_refused_with_its_line_number(tmp_
     assert str(refused.value) == f"{tmp_path}/{says}"
 
 
-def test_a_write_the_journal_cannot_take_is_taken_back_and_neither_answered_nor_applied(tmp_path, monkeypatch, caplog):
+def test_a_write_the_journal_cannot_take_is_taken_back_and_neither_answered_nor_applied(tmp_path, monkeypatch,
+                                                                                        caplog):
     state = tmp_path / "bus.json"
     sync = os.fdatasync
     failures = [OSError(errno.EIO, "Input/output error")]
@@ -188,14 +204,16 @@ def test_a_write_the_journal_cannot_take_is_taken_back_and_neither_answered_nor_
 # -- SIGKILL of a real `prc3cfg emulator serve` -----------------------------------------------
 
 #: Kill-and-restart rounds: a few in the fast tier, 24 in the soak tier. The fast tier's 4 (its schedule drawn
-#: from random.Random(5)) still hold a round past a compaction (1,224 writes), two short ones and a kill during a start.
+#: from random.Random(5)) still hold a round past a compaction (1,224 writes), two short ones and a kill
+#: during a start.
 ROUNDS = [4, pytest.param(24, marks=pytest.mark.soak)]
 MODULES = 30
 
 
 def written(state: Path) -> dict[tuple[int, int], int]:
     """Every program's position in the state file alone (the contract), by (address, program)."""
-    return {(m["address"], n): p["P"] for m in json.loads(state.read_text())["modules"] for n, p in enumerate(m["programs"], 1)}
+    return {(m["address"], n): p["P"] for m in json.loads(state.read_text())["modules"]
+            for n, p in enumerate(m["programs"], 1)}
 
 
 def kill_during_start(process, state: Path, before: tuple[int, int, int] | None) -> None:
@@ -234,7 +252,8 @@ def test_a_killed_emulator_loses_no_acknowledged_write(tmp_path, rounds):
         served = listening(process, log)
         held = written(state)
         for key, positions in allowed.items():
-            assert held[key] in positions, f"round {round_}: {key} holds {held[key]}, acknowledged {positions}"
+            assert held[key] in positions, (f"round {round_}: {key} holds {held[key]}, acknowledged "
+                                            f"{positions}")
         allowed = {key: {held[key]} for key in allowed}
         if round_ == rounds:
             process.terminate()
@@ -319,7 +338,8 @@ def test_an_emulator_owns_its_state_file_while_it_runs(tmp_path):
     process, log = spawn(tmp_path, "--state", str(state), "--modules", "1")
     served = listening(process, log)
     try:
-        apply = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+        apply = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve",
+                                "--allow-axis-release"],
                                capture_output=True, text=True)  # fmt: skip
         second = refused_serve(tmp_path / "second", "--state", str(state))
     finally:
@@ -328,9 +348,11 @@ def test_an_emulator_owns_its_state_file_while_it_runs(tmp_path):
     for refused in (apply, second):
         assert refused.returncode == 1 and refused.stdout in ("", None), refused
         assert refused.stderr.count("\n") == 1, refused.stderr
-        in_use = f"error: {state}: the state file is in use by another emulator (pid {served.process.pid}, since 20"
+        in_use = (f"error: {state}: the state file is in use by another emulator (pid "
+                  f"{served.process.pid}, since 20")
         assert refused.stderr.startswith(in_use), refused.stderr
-    assert "Apply complete" in subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve", "--allow-axis-release"],
+    assert "Apply complete" in subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant),
+                                               "--auto-approve", "--allow-axis-release"],
                                               capture_output=True, text=True).stdout  # fmt: skip
     assert written(state)[(1, 1)] == 200
 
@@ -355,7 +377,8 @@ DAMAGE = {  # name: (what is done to the state file's text, to the journal's tex
     "state: keys sorted": (_reformat(2, sort_keys=True), None, "replays"),
     "state: CRLF line ends": (lambda t: t.replace("\n", "\r\n"), None, "replays"),
     "state: tab indents": (_reformat("\t"), None, "replays"),
-    "state: a byte-order mark, CRLF and a final newline": (lambda t: "\ufeff" + t.replace("\n", "\r\n") + "\r\n", None, "replays"),
+    "state: a byte-order mark, CRLF and a final newline": (lambda t: "\ufeff" + t.replace("\n", "\r\n")
+                                                           + "\r\n", None, "replays"),
     "journal: CRLF line ends": (None, lambda t: t.replace("\n", "\r\n"), "replays"),
     "journal: a byte-order mark": (None, lambda t: "\ufeff" + t, "replays"),
     "journal: a last line cut by a kill": (None, lambda t: t + "1 2104", "replays"),
@@ -365,21 +388,25 @@ DAMAGE = {  # name: (what is done to the state file's text, to the journal's tex
     "journal: CRLF, state pretty-printed": (_reformat(4), lambda t: t.replace("\n", "\r\n"), "replays"),
     "journal: a damaged header": (None, lambda t: t.replace("-journal/2 ", "-journal/2 x", 1), "refuses"),
     "journal: no header": (None, lambda t: t.partition("\n")[2], "refuses"),
-    "journal: a header of an unknown format": (None, lambda t: t.replace("journal/2", "journal/9", 1), "refuses"),
+    "journal: a header of an unknown format": (None, lambda t: t.replace("journal/2", "journal/9", 1),
+                                               "refuses"),
     "journal: emptied": (None, lambda t: "", "refuses"),
     "journal: only a header cut short": (None, lambda t: t[:12], "refuses"),
     "state: deleted": ("delete", None, "refuses"),
     "state: emptied": (lambda t: "", None, "refuses"),
-    "state: another emulator's": (lambda t: json.dumps({**json.loads(t), "generation": "another"}), None, "refuses"),
+    "state: another emulator's": (lambda t: json.dumps({**json.loads(t), "generation": "another"}), None,
+                                  "refuses"),
     "state: the extension keys dropped by a tool": (
-        lambda t: json.dumps({k: v for k, v in json.loads(t).items() if k in ("format", "modules")}), None, "refuses"),
+        lambda t: json.dumps({k: v for k, v in json.loads(t).items() if k in ("format", "modules")}), None,
+                                                    "refuses"),
     "state: took the journal in, killed before a fresh one": ("compacted", None, "replays"),
 }
 
 
 @pytest.fixture(scope="module")
 def killed(tmp_path_factory) -> tuple[Path, dict[int, ModuleState]]:
-    """A folder as SIGKILL leaves it — a state file and a journal of acknowledged writes — and the modules acknowledged."""
+    """A folder as SIGKILL leaves it — a state file and a journal of acknowledged writes — and the modules
+    acknowledged."""
     state = tmp_path_factory.mktemp("live") / "bus.json"
     with Emulator(modules(1, 2), state_path=state) as emulator:
         client = client_of(emulator)
@@ -393,7 +420,8 @@ def killed(tmp_path_factory) -> tuple[Path, dict[int, ModuleState]]:
         for path in (state, journal_path(state)):
             shutil.copy(path, copy / path.name)
         held = emulator.modules()
-    assert held != modules(1, 2) and len(journal_path(copy / "bus.json").read_text().splitlines()) == 1 + 3 + 2 + 1
+    assert (held != modules(1, 2) and len(journal_path(copy / "bus.json").read_text().splitlines()) == 1 + 3
+            + 2 + 1)
     return copy / "bus.json", held
 
 
@@ -437,7 +465,8 @@ def test_a_journal_the_state_file_took_in_is_gone_before_the_next_save(tmp_path,
     journal_path(state).write_text(journal_text)
     state.write_text(json.dumps(state_document(held, "next", replaces=journal_text.split()[1])))
     with Emulator(load_state(state), state_path=state) as restarted:
-        assert not journal_path(state).exists()  # the state file holds it all: the first write begins a journal
+        # the state file holds it all: the first write begins a journal
+        assert not journal_path(state).exists()
         assert restarted.modules() == held
         client = client_of(restarted)
         try:

@@ -46,7 +46,8 @@ class Load(NamedTuple):
 
 LOADS = [
     pytest.param(Load(flood=300, garbage=10_000_000, churn=2_000, server_files=256), id="fast"),
-    pytest.param(Load(flood=1_100, garbage=100_000_000, churn=20_000, server_files=1024), id="acceptance", marks=pytest.mark.soak),
+    pytest.param(Load(flood=1_100, garbage=100_000_000, churn=20_000, server_files=1024), id="acceptance",
+                 marks=pytest.mark.soak),
 ]  # fmt: skip
 REPLY_TIMEOUT = 10.0  # s a client waits for a reply that must come: only a failing test waits it out
 
@@ -54,7 +55,8 @@ REPLY_TIMEOUT = 10.0  # s a client waits for a reply that must come: only a fail
 def factory_reply(client: Client, address: int) -> bool:
     """Whether a 50h read of `address` is answered, and with the factory's system parameters."""
     reply = client.send(address, codec.ReadSystem().encode())
-    return reply is not None and codec.decode_reply(codec.ReadSystem(), reply) == codec.SystemReply(DEFAULT_SYSTEM, address)
+    return (reply is not None
+            and codec.decode_reply(codec.ReadSystem(), reply) == codec.SystemReply(DEFAULT_SYSTEM, address))
 
 
 def connect(served: Served) -> socket.socket:
@@ -82,7 +84,8 @@ def garbage_block(seed: int, size: int = 1_000_000) -> bytes:
     out = bytearray()
     while len(out) < size:
         out += rng.randbytes(4096).replace(b"\xa5", b"\xa4")
-        frame = bytearray(framing.encode(Direction.REQUEST, rng.randrange(1, 31), rng.randbytes(rng.randrange(1, 65))))
+        frame = bytearray(framing.encode(Direction.REQUEST, rng.randrange(1, 31),
+                                         rng.randbytes(rng.randrange(1, 65))))
         frame[-1] ^= 0x01
         out += frame
     return bytes(out[:size])
@@ -137,11 +140,13 @@ def many_files(load: Load) -> Iterator[None]:
 
 
 @pytest.mark.parametrize("load", LOADS)
-def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_back(tmp_path, load, many_files):
+def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_back(tmp_path, load,
+                                                                                     many_files):
     with serve(tmp_path, "--modules", "1-30", "--max-connections", str(MAX_CONNECTIONS)) as served:
         _, hard = resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE)
         resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE, (load.server_files, hard))
-        good = Client(served.url, timeout=REPLY_TIMEOUT)  # before the flood: a low fd, which pyserial's select() needs
+        # before the flood: a low fd, which pyserial's select() needs
+        good = Client(served.url, timeout=REPLY_TIMEOUT)
         try:
             # warm-up: every kind of work once, so the baseline holds what the server keeps for it
             flood(served, 200, good)
@@ -152,7 +157,8 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
             assert factory_reply(good, 1)
             baseline = served.rss_kib()
 
-            # the flood, all at once: the first 63 are served (the good client holds a slot), the rest closed at once
+            # the flood, all at once: the first 63 are served (the good client holds a slot), the rest closed
+            # at once
             flood(served, load.flood, good)
             fresh = Client(served.url, timeout=REPLY_TIMEOUT)
             try:
@@ -171,13 +177,15 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
                     conn.sendall(block)
                 hang_up(conn)  # the server has read every byte
 
-            reads = while_running([threading.Thread(target=send_garbage) for _ in range(GARBAGE_CONNECTIONS)], good)
+            reads = while_running([threading.Thread(target=send_garbage) for _ in range(GARBAGE_CONNECTIONS)],
+                                  good)
             assert reads > 0
             assert is_open(never_ends)
             hang_up(never_ends)
 
             # connect/close cycles
-            workers = [threading.Thread(target=churn, args=(served, load.churn // CHURN_WORKERS)) for _ in range(CHURN_WORKERS)]
+            workers = [threading.Thread(target=churn, args=(served, load.churn // CHURN_WORKERS))
+                       for _ in range(CHURN_WORKERS)]
             reads = while_running(workers, good)
             assert reads > 0
 
@@ -193,7 +201,8 @@ def test_keeps_answering_through_a_flood_garbage_and_churn_and_gives_its_memory_
 
 
 def logged(served: Served, text: str, polls: int = 2_000) -> None:
-    """Once the emulator's log says `text` (a bounded number of looks, 10 ms apart: on what the process printed)."""
+    """Once the emulator's log says `text` (a bounded number of looks, 10 ms apart: on what the process
+    printed)."""
     for _ in range(polls):
         if text in served.log.read_text():
             return
@@ -206,7 +215,8 @@ def test_running_out_of_file_descriptors_only_pauses_accepting(tmp_path):
         spare = 3
         _, hard = resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE)
         resource.prlimit(served.process.pid, resource.RLIMIT_NOFILE, (served.open_fds() + spare, hard))
-        waiting = [connect(served) for _ in range(3 * spare + 1)]  # all connected; the kernel holds those not accepted
+        # all connected; the kernel holds those not accepted
+        waiting = [connect(served) for _ in range(3 * spare + 1)]
         read_system = codec.ReadSystem().encode()
         first = True
         while waiting:
@@ -214,8 +224,10 @@ def test_running_out_of_file_descriptors_only_pauses_accepting(tmp_path):
             for conn in batch:  # served while the next ones wait on a full descriptor table
                 reply = answered(conn, 1, read_system)
                 assert codec.decode_reply(codec.ReadSystem(), reply) == codec.SystemReply(DEFAULT_SYSTEM, 1)
-            if first:  # the table is full now: held open until the server says it cannot accept the next — on a
-                logged(served, "cannot accept a connection")  # busy machine its accept may come after a hang-up else
+            # the table is full now: held open until the server says it cannot accept the next — on a
+            if first:
+                # busy machine its accept may come after a hang-up else
+                logged(served, "cannot accept a connection")
                 first = False
             for conn in batch:
                 hang_up(conn)
@@ -227,7 +239,8 @@ def test_running_out_of_file_descriptors_only_pauses_accepting(tmp_path):
 
 def test_a_write_that_cannot_be_saved_is_neither_answered_nor_applied(tmp_path):
     state = tmp_path / "bus.json"
-    first, refused, last = (codec.WriteProgram(n, Program(P=p, V=100)) for n, p in ((4, 111), (4, 222), (6, 333)))
+    first, refused, last = (codec.WriteProgram(n, Program(P=p, V=100))
+                            for n, p in ((4, 111), (4, 222), (6, 333)))
     read_4, read_system = codec.ReadProgram(4), codec.ReadSystem()
     with serve(tmp_path, "--state", str(state), "--modules", "1-3") as served:
         with connect(served) as conn:
@@ -240,7 +253,8 @@ def test_a_write_that_cannot_be_saved_is_neither_answered_nor_applied(tmp_path):
             log = served.log.read_text()
             assert f"{state}: cannot save the emulator state file (Is a directory)" in log
             assert "the write to module 2 is not answered and not applied" in log
-            assert codec.decode_reply(read_system, answered(conn, 3, read_system.encode())).system == DEFAULT_SYSTEM
+            assert codec.decode_reply(read_system,
+                                      answered(conn, 3, read_system.encode())).system == DEFAULT_SYSTEM
             state.rmdir()
             assert answered(conn, 2, last.encode()) == b"\x00\x00"
             hang_up(conn)
@@ -272,15 +286,18 @@ def test_one_client_per_line_by_default_and_the_next_is_told_the_gateway_is_busy
     with serve(tmp_path, "--modules", "1") as served:
         plant.write_text(ONE_MODULE_PLANT.format(port=served.port))
         with connect(served) as holder:
-            assert codec.decode_reply(codec.ReadSystem(), answered(holder, 1, read_system)).system == DEFAULT_SYSTEM
+            assert codec.decode_reply(codec.ReadSystem(),
+                                      answered(holder, 1, read_system)).system == DEFAULT_SYSTEM
             with connect(served) as second:
                 assert second.recv(1) == b""  # closed at once
-            result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True, text=True)
+            result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)],
+                                    capture_output=True, text=True)
             assert result.returncode == 1, result
             busy = "error: bus booth-a: the gateway is busy: another client holds the line"
             assert result.stderr.count("\n") == 1 and result.stderr.startswith(busy), result.stderr
             hang_up(holder)
-        result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True, text=True)
+        result = subprocess.run([sys.executable, "-m", "prc3cfg", "read", str(plant)], capture_output=True,
+                                text=True)
         assert result.returncode == 0, result.stderr
         log = served.log.read_text()
     assert log.count("refused — the most connections allowed (1) are open") == 2

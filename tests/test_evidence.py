@@ -51,25 +51,35 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
     assert human.code == 0, human.err  # scripts rely on it: no changes is 0, however much was read
     headline = next(line for line in human.out.splitlines() if line.startswith("No changes"))
     assert EVERY_MODULE not in human.out
-    assert headline.startswith("No changes to what was read now (the system blocks of 6 modules and ")  # and the rolled modules' programs
-    assert (f" programs) or to what prc3cfg last read or verified ({expected[0][1]} programs of {expected[0][0]} modules; "
-            "oldest value taken from the record: " in headline and f"'s programs, as apply of {plant.path} by ") in headline  # fmt: skip
+    # and the rolled modules' programs
+    assert headline.startswith("No changes to what was read now (the system blocks of 6 modules and ")
+    assert (f" programs) or to what prc3cfg last read or verified ({expected[0][1]} programs of "
+            f"{expected[0][0]} modules; "
+            "oldest value taken from the record: " in headline
+            and f"'s programs, as apply of {plant.path} by ") in headline  # fmt: skip
     assert headline.endswith(" UTC).")
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
-    assert markdown.code == 0 and EVERY_MODULE not in markdown.out and "No changes to what was read now" in markdown.out
+    assert (markdown.code == 0 and EVERY_MODULE not in markdown.out
+            and "No changes to what was read now" in markdown.out)
     expected.append(taken(plant))
-    for document, (modules, from_record) in ((json.loads(run_cli(capsys, "plan", plant.path, "--json").out), expected[1]),
+    for document, (modules, from_record) in ((json.loads(run_cli(capsys, "plan", plant.path, "--json").out),
+                                              expected[1]),
                                           (json.loads((tmp_path / "plan.json").read_text()), expected[0])):  # fmt: skip
         evidence = document["evidence"]
         assert evidence["complete"] is False
-        assert evidence["read_now"]["system_blocks"] == 6 and evidence["read_now"]["programs"] == 64  # 8 windows of 4 a line, rolled
+        # 8 windows of 4 a line, rolled
+        assert evidence["read_now"]["system_blocks"] == 6 and evidence["read_now"]["programs"] == 64
         assert evidence["from_record"] == {"modules": modules, "programs": from_record}
-        assert f" of {plant.path} by " in evidence["oldest"]["by"]  # the apply's, or a plan's that rolled the module
+        # the apply's, or a plan's that rolled the module
+        assert f" of {plant.path} by " in evidence["oldest"]["by"]
         assert evidence["oldest"]["since"].endswith("+00:00")
     shown = run_cli(capsys, "show", tmp_path / "plan.json")
-    assert shown.code == 0 and "No changes to what was read now" in shown.out and EVERY_MODULE not in shown.out
-    again = run_cli(capsys, "apply", plant.path, "--auto-approve")  # apply's own words claim no more than its plan
-    assert again.code == 0 and "every module matches" not in again.out and "Nothing to do: nothing was written" in again.out
+    assert (shown.code == 0 and "No changes to what was read now" in shown.out
+            and EVERY_MODULE not in shown.out)
+    # apply's own words claim no more than its plan
+    again = run_cli(capsys, "apply", plant.path, "--auto-approve")
+    assert (again.code == 0 and "every module matches" not in again.out
+            and "Nothing to do: nothing was written" in again.out)
     # read in full: the headline may say every module now, and the JSON says so too
     full = run_cli(capsys, "plan", plant.path, "--full-read", "--detailed-exitcode")
     assert full.code == 0 and EVERY_MODULE in full.out
@@ -78,7 +88,9 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
                                     "from_record": {"modules": 0, "programs": 0}, "oldest": None}  # fmt: skip
 
 
-def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_as_saying_nothing_and_refused(plant, capsys, tmp_path):
+def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_as_saying_nothing_and_refused(
+    plant, capsys, tmp_path
+):
     applied(plant, capsys)
     saved = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant.path, "--out", saved).code == 0
@@ -86,13 +98,18 @@ def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_a
     document["evidence"]["complete"] = True  # a file that claims every value was read
     saved.write_text(json.dumps(document))
     refused = run_cli(capsys, "apply", plant.path, "--plan", saved, "--auto-approve")
-    assert refused.code == 1 and "evidence.complete is not what prc3cfg wrote for this plan" in refused.err, refused.err
+    assert (
+        refused.code == 1 and "evidence.complete is not what prc3cfg wrote for this plan" in refused.err
+    ), refused.err
     del document["evidence"]  # a plan file from before plans named their evidence
     saved.write_text(json.dumps(document))
     shown = run_cli(capsys, "show", saved)
-    assert shown.code == 0 and "No changes (the plan file does not say what was read" in shown.out and EVERY_MODULE not in shown.out
+    assert (shown.code == 0 and "No changes (the plan file does not say what was read" in shown.out
+            and EVERY_MODULE not in shown.out)
     refused = run_cli(capsys, "apply", plant.path, "--plan", saved, "--auto-approve")
-    assert refused.code == 1 and 'it does not say what its plan rests on (no "evidence")' in refused.err, refused.err
+    assert (
+        refused.code == 1 and 'it does not say what its plan rests on (no "evidence")' in refused.err
+    ), refused.err
 
 
 def test_the_recipes_replan_reads_in_full():
@@ -107,7 +124,8 @@ def test_the_recipes_replan_reads_in_full():
 
 
 def test_the_line_opens_on_a_module_that_contradicts_its_record_table():
-    """(what each module of a line read, against its record) → why the line is read in full (None: it is not)."""
+    """(what each module of a line read, against its record) → why the line is read in full (None: it is
+    not)."""
     held = ModuleImage.factory(1).with_programs({1: replace(ModuleImage.factory(1).known(1), P=2000)})
     cut = held.with_programs({n: None for n in range(2, PROGRAM_COUNT + 1)})
     other = cut.with_programs({1: replace(held.known(1), P=2100)})
@@ -144,8 +162,10 @@ def edit(path: Path, old: str, new: str) -> None:
 
 
 @pytest.mark.parametrize("change", [
-    ("position: 2.1\n", "position: 2.05\n"),  # booth-a-left's program 1: the first module read contradicts its record
-    ("position: 2.0\n", "position: 1.95\n"),  # booth-a-right's: the second — the first, read already, is read again
+    # booth-a-left's program 1: the first module read contradicts its record
+    ("position: 2.1\n", "position: 2.05\n"),
+    # booth-a-right's: the second — the first, read already, is read again
+    ("position: 2.0\n", "position: 1.95\n"),
 ])  # fmt: skip
 def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant, capsys, tmp_path, change):
     """The issue's case on a 3-module line: the change reads program 1 of one swapped module, which is not
@@ -156,28 +176,38 @@ def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant
     rolled = read_next(plant.path)  # what rolling evidence reads of the other line
     planned = run_cli(capsys, "plan", plant.path, "--out", tmp_path / "plan.json")
     assert planned.code == 0, planned.err
-    modules = {m["name"]: m for bus in json.loads((tmp_path / "plan.json").read_text())["buses"] for m in bus["modules"]}
+    modules = {m["name"]: m for bus in json.loads((tmp_path / "plan.json").read_text())["buses"]
+               for m in bus["modules"]}
     wanted = {m.name: m for _, m in api.load(plant.path).modules()}
-    for name in ("booth-a-left", "booth-a-right", "booth-a-top"):  # the whole line, read in full (a rolled one: all its record held)
+    # the whole line, read in full (a rolled one: all its record held)
+    for name in ("booth-a-left", "booth-a-right", "booth-a-top"):
         assert set(modules[name]["read"]["programs"]) >= set(wanted[name].managed_programs()), name
         assert modules[name]["read"]["programs_not_read"] == [], name
-    for name in ("booth-b-left", "booth-b-right", "booth-b-pretreat"):  # the other line: as its record says, and rolling
+    # the other line: as its record says, and rolling
+    for name in ("booth-b-left", "booth-b-right", "booth-b-pretreat"):
         assert modules[name]["read"]["programs"] == list(rolled[name]), name
-    assert "booth-a/booth-a-left (program 1 is not as on record), booth-a/booth-a-right (program 1 is not as on record), " \
-           "booth-a/booth-a-top (booth-a/booth-a-left on its line: program 1 is not as on record)" in planned.out
+    assert (
+        "booth-a/booth-a-left (program 1 is not as on record), booth-a/booth-a-right (program 1 is not as on"
+        " record), booth-a/booth-a-top (booth-a/booth-a-left on its line: program 1 is not as on record)"
+        in planned.out
+    )
     done = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve")
     assert done.code == 0, done.err
     assert plant.matches_plant()  # both swapped modules written back: the issue's module 2 stayed wrong
 
 
 #: The plant file's change of program 1 of each module of booth-a.
-PROGRAM_1 = {1: ("position: 2.1\n", "position: 2.05\n"), 2: ("position: 2.0\n", "position: 1.95\n"), 5: ("position: 1.75\n", "position: 1.7\n")}
+PROGRAM_1 = {1: ("position: 2.1\n", "position: 2.05\n"), 2: ("position: 2.0\n", "position: 1.95\n"),
+             5: ("position: 1.75\n", "position: 1.7\n")}
 
 
 @pytest.mark.soak
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=40, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1))
-def test_whatever_another_hand_changed_on_a_line_an_apply_that_reads_one_of_it_ends_at_the_plant_file(tmp_path_factory, seed):
+def test_whatever_another_hand_changed_on_a_line_an_apply_that_reads_one_of_it_ends_at_the_plant_file(
+    tmp_path_factory, seed
+):
     """Seeded: after an apply, another tool changes programs of modules of a line (a swap, a program
     rewritten, a module put back to factory programs), and the plant file changes program 1 of one module
     whose program 1 the other tool changed; the apply that follows ends with every module of the line as the
@@ -199,14 +229,18 @@ def test_whatever_another_hand_changed_on_a_line_an_apply_that_reads_one_of_it_e
                 emulator.update(other, image=replace(there, programs=image.programs))
             elif kind == "rewrite":
                 number = rnd.choice([1, 2, 3])
-                emulator.update(address, image=image.with_programs({number: replace(image.known(number), T=image.known(number).T + 1)}))
+                emulator.update(address, image=image.with_programs({number: replace(image.known(number),
+                                                                                    T=image.known(number).T
+                                                                                    + 1)}))
             else:
                 emulator.update(address, image=replace(image, programs=ModuleImage.factory(address).programs))
         changed = [a for a in addresses if emulator.module(a).image.program(1) != before[a].program(1)]
-        if not changed:  # the change below must read something another hand changed: else it is the stated limit
+        # the change below must read something another hand changed: else it is the stated limit
+        if not changed:
             address = rnd.choice(addresses)
             image = emulator.module(address).image
-            emulator.update(address, image=image.with_programs({1: replace(image.known(1), T=image.known(1).T + 1)}))
+            emulator.update(address, image=image.with_programs({1: replace(image.known(1),
+                                                                           T=image.known(1).T + 1)}))
             changed = [address]
         edit(plant.path, *PROGRAM_1[rnd.choice(changed)])
         result = api.apply(api.load(plant.path), gates=api.Gates(allow_axis_release=True))

@@ -31,67 +31,96 @@ def code(number: int) -> bytes:
 #   → what the link does next, and what it says (the log's note, the error's reason)
 CASES = [
     # nothing came back: ask again, on every line, to every message
-    pytest.param(None, READ, CHECKSUM, None, 3, LinkStep.RETRY, "no reply within 0.5 s", id="nothing to a read"),
-    pytest.param(None, WRITE, NO_CHECKSUM, None, 1, LinkStep.RETRY, "no reply within 0.5 s", id="nothing to a write"),
-    pytest.param(None, READ, NO_CHECKSUM, None, 0, LinkStep.GIVE_UP, "no reply within 0.5 s", id="nothing on the last attempt"),
+    pytest.param(None, READ, CHECKSUM, None, 3, LinkStep.RETRY, "no reply within 0.5 s",
+                 id="nothing to a read"),
+    pytest.param(None, WRITE, NO_CHECKSUM, None, 1, LinkStep.RETRY, "no reply within 0.5 s",
+                 id="nothing to a write"),
+    pytest.param(None, READ, NO_CHECKSUM, None, 0, LinkStep.GIVE_UP, "no reply within 0.5 s",
+                 id="nothing on the last attempt"),
     # a reply that is none to what was asked
-    pytest.param(SHORT, READ, CHECKSUM, None, 1, LinkStep.RETRY, "bad reply (4 bytes in reply to 50h, expected 22)", id="garbled to a read"),
-    pytest.param(DATA, WRITE, NO_CHECKSUM, None, 1, LinkStep.RETRY, "bad reply (22 bytes in reply to 10h, expected 2)",
+    pytest.param(SHORT, READ, CHECKSUM, None, 1, LinkStep.RETRY,
+                 "bad reply (4 bytes in reply to 50h, expected 22)", id="garbled to a read"),
+    pytest.param(DATA, WRITE, NO_CHECKSUM, None, 1, LinkStep.RETRY,
+                 "bad reply (22 bytes in reply to 10h, expected 2)",
                  id="a data block to a write is garbled"),
-    pytest.param(SHORT, WRITE, CHECKSUM, None, 0, LinkStep.GIVE_UP, "bad reply (4 bytes in reply to 10h, expected 2)",
+    pytest.param(SHORT, WRITE, CHECKSUM, None, 0, LinkStep.GIVE_UP,
+                 "bad reply (4 bytes in reply to 10h, expected 2)",
                  id="garbled on the last attempt"),
     # accepted: a write's answer; to a read, the module executed a damaged frame as a write
     pytest.param(code(0), WRITE, CHECKSUM, None, 3, LinkStep.ANSWER, "", id="a write accepted"),
-    pytest.param(code(0), WRITE, NO_CHECKSUM, None, 0, LinkStep.ANSWER, "", id="a write accepted without a checksum, at once"),
+    pytest.param(code(0), WRITE, NO_CHECKSUM, None, 0, LinkStep.ANSWER, "",
+                 id="a write accepted without a checksum, at once"),
     pytest.param(code(0), READ, CHECKSUM, None, 3, LinkStep.POSSIBLE_WRITE, "", id="a read accepted"),
-    pytest.param(code(0), READ, NO_CHECKSUM, None, 3, LinkStep.POSSIBLE_WRITE, "", id="a read accepted without a checksum, at once"),
-    pytest.param(code(0), READ, NO_CHECKSUM, 20, 0, LinkStep.POSSIBLE_WRITE, "", id="a read accepted after another code"),
+    pytest.param(code(0), READ, NO_CHECKSUM, None, 3, LinkStep.POSSIBLE_WRITE, "",
+                 id="a read accepted without a checksum, at once"),
+    pytest.param(code(0), READ, NO_CHECKSUM, 20, 0, LinkStep.POSSIBLE_WRITE, "",
+                 id="a read accepted after another code"),
     # 10, an unknown message: to a read, firmware without reads — once believed
-    pytest.param(code(10), READ, CHECKSUM, None, 3, LinkStep.OLD_FIRMWARE, "", id="a read unknown, with a checksum"),
+    pytest.param(code(10), READ, CHECKSUM, None, 3, LinkStep.OLD_FIRMWARE, "",
+                 id="a read unknown, with a checksum"),
     pytest.param(code(10), READ, NO_CHECKSUM, None, 3, LinkStep.CONFIRM,
-                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
+                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to "
+                 "confirm it",
                  id="a read unknown, once without a checksum"),
-    pytest.param(code(10), READ, NO_CHECKSUM, 10, 2, LinkStep.OLD_FIRMWARE, "", id="a read unknown, twice in a row"),
+    pytest.param(code(10), READ, NO_CHECKSUM, 10, 2, LinkStep.OLD_FIRMWARE, "",
+                 id="a read unknown, twice in a row"),
     pytest.param(code(10), READ, NO_CHECKSUM, 20, 2, LinkStep.CONFIRM,
-                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
+                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to "
+                 "confirm it",
                  id="a read unknown after another code"),
     pytest.param(code(10), READ, NO_CHECKSUM, None, 0, LinkStep.GIVE_UP,
-                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
+                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to "
+                 "confirm it",
                  id="a read unknown once, on the last attempt"),
     # 10 to a write, and 11..15: the module got our message damaged
     pytest.param(code(10), WRITE, CHECKSUM, None, 3, LinkStep.RETRY,
-                 "the module reports a damaged message (code 10: invalid identification number (ID))", id="a write unknown"),
+                 "the module reports a damaged message (code 10: invalid identification number (ID))",
+                 id="a write unknown"),
     pytest.param(code(10), WRITE, NO_CHECKSUM, 10, 3, LinkStep.RETRY,
-                 "the module reports a damaged message (code 10: invalid identification number (ID))", id="a write unknown twice"),
+                 "the module reports a damaged message (code 10: invalid identification number (ID))",
+                 id="a write unknown twice"),
     pytest.param(code(11), READ, CHECKSUM, None, 1, LinkStep.RETRY,
-                 "the module reports a damaged message (code 11: invalid length (message shorter than 1 byte))", id="damaged 11"),
+                 "the module reports a damaged message (code 11: invalid length (message shorter "
+                 "than 1 byte))", id="damaged 11"),
     pytest.param(code(15), READ, NO_CHECKSUM, 15, 1, LinkStep.RETRY,
-                 "the module reports a damaged message (code 15: invalid program number)", id="damaged 15 twice"),
+                 "the module reports a damaged message (code 15: invalid program number)",
+                 id="damaged 15 twice"),
     pytest.param(code(13), WRITE, CHECKSUM, None, 1, LinkStep.RETRY,
-                 "the module reports a damaged message (code 13: data block not complete (message shorter than its data block))",
+                 "the module reports a damaged message (code 13: data block not complete (message shorter "
+                 "than its data block))",
                  id="a write damaged 13"),
     pytest.param(code(14), WRITE, NO_CHECKSUM, None, 0, LinkStep.GIVE_UP,
-                 "the module reports a damaged message (code 14: data block too long (message longer than its data block))",
+                 "the module reports a damaged message (code 14: data block too long (message longer than "
+                 "its data block))",
                  id="damaged on the last attempt"),
     # any other code: the module's answer — on a line without a checksum once it came twice in a row
-    pytest.param(code(20), WRITE, CHECKSUM, None, 3, LinkStep.ANSWER, "", id="a write refused, with a checksum"),
+    pytest.param(code(20), WRITE, CHECKSUM, None, 3, LinkStep.ANSWER, "",
+                 id="a write refused, with a checksum"),
     pytest.param(code(20), WRITE, NO_CHECKSUM, None, 3, LinkStep.CONFIRM,
-                 "code 20: operating condition is not STOP: system parameters can only be changed in STOP on a line without a checksum, "
+                 "code 20: operating condition is not STOP: system parameters can only be changed in STOP "
+                 "on a line without a checksum, "
                  "asking again to confirm it", id="a write refused once, without a checksum"),
-    pytest.param(code(20), WRITE, NO_CHECKSUM, 20, 2, LinkStep.ANSWER, "", id="a write refused twice in a row"),
+    pytest.param(code(20), WRITE, NO_CHECKSUM, 20, 2, LinkStep.ANSWER, "", id="a write refused "
+                                                                              "twice in a row"),
     pytest.param(code(20), WRITE, NO_CHECKSUM, 21, 2, LinkStep.CONFIRM,
-                 "code 20: operating condition is not STOP: system parameters can only be changed in STOP on a line without a checksum, "
+                 "code 20: operating condition is not STOP: system parameters can only be changed in STOP "
+                 "on a line without a checksum, "
                  "asking again to confirm it", id="a write refused after another code"),
     pytest.param(code(200), WRITE, NO_CHECKSUM, None, 0, LinkStep.GIVE_UP,
-                 "unknown code 200 on a line without a checksum, asking again to confirm it", id="refused once, on the last attempt"),
-    pytest.param(code(16), READ, CHECKSUM, None, 3, LinkStep.ANSWER, "", id="a read refused, with a checksum"),
+                 "unknown code 200 on a line without a checksum, asking again to confirm it",
+                 id="refused once, on the last attempt"),
+    pytest.param(code(16), READ, CHECKSUM, None, 3, LinkStep.ANSWER, "", id="a read refused, with "
+                                                                            "a checksum"),
     pytest.param(code(16), READ, NO_CHECKSUM, None, 3, LinkStep.CONFIRM,
-                 "code 16: program is active: its data cannot be written while it runs on a line without a checksum, "
+                 "code 16: program is active: its data cannot be written while it runs on a line without a "
+                 "checksum, "
                  "asking again to confirm it", id="a read refused once, without a checksum"),
-    pytest.param(code(16), READ, NO_CHECKSUM, 16, 0, LinkStep.ANSWER, "", id="a read refused twice, on the last attempt"),
+    pytest.param(code(16), READ, NO_CHECKSUM, 16, 0, LinkStep.ANSWER, "",
+                 id="a read refused twice, on the last attempt"),
     # a data block: a read's answer, at once
     pytest.param(DATA, READ, CHECKSUM, None, 3, LinkStep.ANSWER, "", id="data to a read"),
-    pytest.param(DATA, READ, NO_CHECKSUM, 20, 0, LinkStep.ANSWER, "", id="data to a read without a checksum, after a code"),
+    pytest.param(DATA, READ, NO_CHECKSUM, 20, 0, LinkStep.ANSWER, "",
+                 id="data to a read without a checksum, after a code"),
     # a write a later firmware added: as any write, but 10 is that older firmware, never damage
     pytest.param(None, ADDED, CHECKSUM, None, 1, LinkStep.RETRY, "no reply within 0.5 s", id="nothing to 45h"),
     pytest.param(SHORT, ADDED, NO_CHECKSUM, None, 1, LinkStep.RETRY, "bad reply (4 bytes in reply to 45h, expected 2)",

@@ -56,7 +56,8 @@ def unnamed(folder):
     try:
         os.link(f"/proc/self/fd/{fd}", folder / "probe", src_dir_fd=directory)
     except OSError as error:
-        pytest.skip(f"an unnamed file cannot be linked in here ({error}): write_atomically writes a named temporary file")
+        pytest.skip(f"an unnamed file cannot be linked in here ({error}): write_atomically writes a named "
+                    "temporary file")
     finally:
         os.close(fd)
         os.close(directory)
@@ -65,7 +66,8 @@ def unnamed(folder):
 
 
 def killed_writing(target, text, point, nth=1, expected=None):
-    done = subprocess.run([sys.executable, "-c", KILLED_AT, point, str(nth), str(target), text, *([expected] if expected else [])])
+    done = subprocess.run([sys.executable, "-c", KILLED_AT, point, str(nth), str(target), text,
+                           *([expected] if expected else [])])
     return done.returncode
 
 

@@ -188,7 +188,8 @@ CRC16_CASES = [
     case("two-frames-in-one-chunk",
          ((0, REQ_50 + "A5000111001F4D"), [F(1, "5000"), F(0, "1100")])),
     case("bad-crc",
-         ((0, "A5010150005705" + REQ_50), [D("A5010150005705", "bad CRC 5705h, expected 5704h"), F(1, "5000")])),
+         ((0, "A5010150005705" + REQ_50), [D("A5010150005705", "bad CRC 5705h, "
+                                                               "expected 5704h"), F(1, "5000")])),
     # reading: hunting resumes after the whole bad frame, so the valid frame inside its data is not seen
     case("bad-crc-skips-whole-frame",
          ((0, "A50005" + "A5010050BF36" + "0000"), [D("A50005A5010050BF360000", "bad CRC 0000h")]),
@@ -413,7 +414,8 @@ def test_events_are_frozen_and_need_data_is_a_sentinel():
     assert get_framing("stx").decoder(REQUEST, LINE).next_event() is NEED_DATA
 
 
-ALLOWED_IMPORTS = {"__future__", "abc", "binascii", "collections", "dataclasses", "enum", "typing", "prc3cfg.core.line"}
+ALLOWED_IMPORTS = {"__future__", "abc", "binascii", "collections", "dataclasses", "enum", "typing",
+                   "prc3cfg.core.line"}
 
 
 def test_framing_package_imports_no_io():
@@ -425,8 +427,11 @@ def test_framing_package_imports_no_io():
                 names = [node.module]
             else:
                 continue
-            assert all(n in ALLOWED_IMPORTS or n.startswith("prc3cfg.core.framing") for n in names), f"{path.name}: {names}"
-    blocked = "import sys; sys.modules.update(serial=None, socket=None, time=None); import prc3cfg.core.framing"
+            assert all(
+                n in ALLOWED_IMPORTS or n.startswith("prc3cfg.core.framing") for n in names
+            ), f"{path.name}: {names}"
+    blocked = ("import sys; sys.modules.update(serial=None, socket=None, time=None); import "
+               "prc3cfg.core.framing")
     subprocess.run([sys.executable, "-c", blocked], check=True)
 
 
@@ -442,7 +447,8 @@ def test_garbage_outside_frames_is_reported_in_bounded_pieces(name):
     decoder.line_idle()
     while (event := decoder.next_event()) is not NEED_DATA:
         events.append(event)
-    assert all(isinstance(e, Discarded) and len(e.data) <= prc3cfg.core.framing.base.MAX_SKIPPED for e in events)
+    assert all(isinstance(e, Discarded) and len(e.data) <= prc3cfg.core.framing.base.MAX_SKIPPED
+               for e in events)
     assert b"".join(e.data for e in events) == garbage
 
 
@@ -476,7 +482,8 @@ def test_an_open_driver_frame_that_never_ends_is_discarded_in_pieces():
 
 
 def test_only_open_driver_lacks_a_checksum():
-    assert {name: f.checked for name, f in FRAMINGS.items()} == {"crc16": True, "open-driver": False, "stx": True}
+    assert {name: f.checked for name, f in FRAMINGS.items()} == {"crc16": True, "open-driver": False,
+                                                                 "stx": True}
 
 
 def test_an_open_driver_zvz_not_longer_than_a_character_ends_a_frame_after_every_byte():
@@ -488,7 +495,8 @@ def test_an_open_driver_zvz_not_longer_than_a_character_ends_a_frame_after_every
         decoder.receive_data(b"\x01\x02\x03", 0.0)
         decoder.line_idle()
         events.append(list(iter(decoder.next_event, NEED_DATA)))
-    assert events == [[Frame(REQUEST, 1, b""), Frame(REQUEST, 2, b""), Frame(REQUEST, 3, b"")], [Frame(REQUEST, 1, b"\x02\x03")]]
+    assert events == [[Frame(REQUEST, 1, b""), Frame(REQUEST, 2, b""), Frame(REQUEST, 3, b"")],
+                      [Frame(REQUEST, 1, b"\x02\x03")]]
 
 
 def test_the_framing_names_a_plant_file_takes_are_the_framings() -> None:

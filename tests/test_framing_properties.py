@@ -85,7 +85,8 @@ def test_round_trip_in_random_pieces_after_garbage(combo, line, data):
     address, message = data.draw(frame_contents(framing))
     garbage = b""
     if name != "open-driver":
-        garbage = bytes(data.draw(st.lists(st.integers(0, 255).filter(lambda b: b != START_CODE[combo]), max_size=20)))
+        garbage = bytes(data.draw(st.lists(st.integers(0, 255).filter(lambda b: b != START_CODE[combo]),
+                                           max_size=20)))
     decoder = framing.decoder(direction, line, zvz=ZVZ)
     feed_back_to_back(decoder, split(data.draw, garbage + framing.encode(direction, address, message)), line)
     decoder.line_idle()
@@ -135,7 +136,8 @@ def test_open_driver_frames_separated_by_zvz(direction, line, by_idle, data):
     now = 0.0
     for address, message in contents:
         now += ZVZ + data.draw(st.floats(1e-6, 0.1))
-        now = feed_back_to_back(decoder, split(data.draw, framing.encode(direction, address, message)), line, now)
+        now = feed_back_to_back(decoder, split(data.draw, framing.encode(direction, address, message)), line,
+                                now)
     frames = [Frame(direction, address, message) for address, message in contents]
     assert drain(decoder, now) == frames[:-1]  # the last frame waits for its silence
     if by_idle:
@@ -147,10 +149,17 @@ def test_open_driver_frames_separated_by_zvz(direction, line, by_idle, data):
 def line_activity(draw, name: str, direction: Direction) -> list[tuple]:
     """Arbitrary bytes, pieces of valid frames, pauses and idle reports, at non-decreasing times."""
     framing = FRAMINGS[name]
-    frame_piece = frame_contents(framing).map(lambda c: framing.encode(direction, *c)).flatmap(
-        lambda raw: st.tuples(st.integers(0, len(raw)), st.integers(0, len(raw))).map(lambda ab: raw[min(ab) : max(ab)])
+    frame_piece = (
+        frame_contents(framing)
+        .map(lambda c: framing.encode(direction, *c))
+        .flatmap(
+            lambda raw: st.tuples(st.integers(0, len(raw)), st.integers(0, len(raw))).map(
+                lambda ab: raw[min(ab) : max(ab)]
+            )
+        )
     )
-    special = st.lists(st.sampled_from([0x7E, 0x00, 0xA5, 0x05, 0x21, 0x41, 0x01, 0x02]), max_size=12).map(bytes)
+    special = st.lists(st.sampled_from([0x7E, 0x00, 0xA5, 0x05, 0x21, 0x41, 0x01, 0x02]),
+                       max_size=12).map(bytes)
     pause = st.floats(0, 0.2, allow_nan=False)
     action = st.one_of(
         st.tuples(st.just("data"), st.one_of(st.binary(max_size=40), frame_piece, special), pause),
@@ -197,7 +206,8 @@ def test_frame_length_is_the_length_of_the_encoded_frame(combo, data):
     assert_frame_length(FRAMINGS[name], direction, address, message)
 
 
-@pytest.mark.parametrize(("address", "message"), [(1, bytes([0x7E - 0x21 - 1])), (0, bytes(0x7E)), (2, bytes([0x7E] * 3))],
+@pytest.mark.parametrize(("address", "message"),
+                         [(1, bytes([0x7E - 0x21 - 1])), (0, bytes(0x7E)), (2, bytes([0x7E] * 3))],
                          ids=["checksum 7Eh", "N = 7Eh", "data 7Eh"])  # fmt: skip  # 21h + 01h + 5Ch = 7Eh
 def test_stx_frame_length_counts_every_stuffed_byte(address, message):
     assert_frame_length(FRAMINGS["stx"], Direction.REQUEST, address, message)
@@ -213,10 +223,12 @@ def encoded_time(cost: LineCost, address: int, message: codec.Message) -> float:
 
 def encoded_deadline(cost: LineCost, address: int, message: codec.Message) -> float:
     """How long a reply is waited for, by the encoded request frame and the longest reply frame: on stx a
-    reply of 7Eh bytes, every byte after the start code stuffed (`bustime.DEADLINE_MARGIN` on the characters)."""
+    reply of 7Eh bytes, every byte after the start code stuffed (`bustime.DEADLINE_MARGIN` on the characters).
+    """
     request = cost.framing.encode(Direction.REQUEST, address, message.encode())
     reply = len(cost.framing.encode(Direction.REPLY, address, bytes(codec.reply_length(message))))
-    if cost.framing.name == "stx":  # 7Eh, CMD|ADDR, N, the data, CHK: each byte after the 7Eh may be a 7Eh, stuffed
+    # 7Eh, CMD|ADDR, N, the data, CHK: each byte after the 7Eh may be a 7Eh, stuffed
+    if cost.framing.name == "stx":
         reply = 2 * (1 + 2 + codec.reply_length(message) + 1) - 1
     gaps = 2 * cost.zvz if cost.framing.name == "open-driver" else 0.0
     return (len(request) + reply) * cost.line.char_time * (1 + DEADLINE_MARGIN) + cost.turnaround + gaps
@@ -234,4 +246,5 @@ def test_a_message_is_priced_by_the_length_of_its_frames(kind, framing, line, ad
     gap = cost.zvz if framing == "open-driver" else 0.0
     assert cost.broadcast_time(message) == request * line.char_time + cost.turnaround + gap
     assert cost.reply_deadline(1, message) == pytest.approx(encoded_deadline(cost, 1, message), rel=1e-12)
-    assert cost.silence_time(message, 0.1) == cost.reply_deadline(1, message) + 0.1  # the whole wait, the bus's timeout on top
+    # the whole wait, the bus's timeout on top
+    assert cost.silence_time(message, 0.1) == cost.reply_deadline(1, message) + 0.1

@@ -48,11 +48,15 @@ def one_device_two_ports(tmp_path: Path) -> Iterator[tuple[str, str]]:
     with served_pty() as pty:
         config = tmp_path / "ser2net.yaml"
         config.write_text("".join(f"connection: &{name}\n  accepter: {accepter},127.0.0.1,{port}\n"
-                                  f"  connector: serialdev,{pty},9600n81,local\n  options:\n    max-connections: 1\n"
-                                  for name, accepter, port in (("raw", "tcp", raw), ("rfc", "telnet(rfc2217),tcp", telnet))))  # fmt: skip
-        ser2net = subprocess.Popen([SER2NET, "-n", "-c", config], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                                  f"  connector: serialdev,{pty},9600n81,local\n  options:\n    "
+                                  "max-connections: 1\n"
+                                  for name, accepter, port in (("raw", "tcp", raw),
+                                                               ("rfc", "telnet(rfc2217),tcp", telnet))))  # fmt: skip
+        ser2net = subprocess.Popen([SER2NET, "-n", "-c", config], stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, text=True)
         try:
-            while not (listening(raw) and listening(telnet)):  # ser2net says nothing once it listens: the socket table does
+            # ser2net says nothing once it listens: the socket table does
+            while not (listening(raw) and listening(telnet)):
                 with contextlib.suppress(subprocess.TimeoutExpired):
                     ser2net.wait(0.01)
                 assert ser2net.returncode is None, ser2net.stdout.read()
@@ -66,7 +70,8 @@ def one_device_two_ports(tmp_path: Path) -> Iterator[tuple[str, str]]:
             ser2net.stdout.close()
 
 
-#: The ser2net serving each pair of ports (`one_device_two_ports`): its pid and the device it opens for a connection.
+#: The ser2net serving each pair of ports (`one_device_two_ports`): its pid and the device it opens for a
+#: connection.
 SERVING: dict[tuple[str, ...], tuple[int, str]] = {}
 
 
@@ -83,7 +88,8 @@ def let_go(*urls: str) -> None:
     device behind them, as /proc says: a connection it is still closing may hold the device open and take
     the next one's replies, and one accepted while it still holds it is dropped (a broken pipe)."""
     ports = {f"0100007F:{int(url.rpartition(':')[2].partition('?')[0]):04X}" for url in urls}
-    while any(row.split()[1] in ports and row.split()[3] != "0A" for row in Path("/proc/net/tcp").read_text().splitlines()[1:]):
+    while any(row.split()[1] in ports and row.split()[3] != "0A"
+              for row in Path("/proc/net/tcp").read_text().splitlines()[1:]):
         os.sched_yield()
     if (serving := SERVING.get(urls)) is not None:
         while holds(*serving):
@@ -118,8 +124,10 @@ def test_an_apply_through_one_port_is_seen_by_a_plan_through_the_other(tmp_path,
         a = plant_file(tmp_path / "a" / "plant.yaml", other, "1.9")
         applied = through(capsys, ports, "apply", b, "--auto-approve", "--allow-axis-release")
         assert applied.code == 0, applied.err
-        assert through(capsys, ports, "plan", b, "--detailed-exitcode").code == 0  # the line's record knows the module
-        assert through(capsys, ports, "apply", a, "--auto-approve").code == 0  # through the other port: position 1.9
+        # the line's record knows the module
+        assert through(capsys, ports, "plan", b, "--detailed-exitcode").code == 0
+        # through the other port: position 1.9
+        assert through(capsys, ports, "apply", a, "--auto-approve").code == 0
         planned = through(capsys, ports, "plan", b, "--detailed-exitcode")
         assert planned.code == 2, planned.out + planned.err
         assert "program 1: position 1.900 m → 2.000 m" in planned.out
@@ -132,7 +140,8 @@ def test_an_apply_through_one_port_is_seen_by_a_plan_through_the_other(tmp_path,
 @needs_ser2net
 @pytest.mark.soak
 @pytest.mark.parametrize("seed", range(8))
-def test_applies_through_either_port_in_any_order_leave_no_silent_wrong_value(tmp_path, capsys, monkeypatch, seed):
+def test_applies_through_either_port_in_any_order_leave_no_silent_wrong_value(tmp_path, capsys, monkeypatch,
+                                                                              seed):
     """A seeded run of applies through either port, each of its own plant file's position: every plan
     afterwards shows a change exactly where the module holds another position than its plant file."""
     rng = random.Random(seed)
@@ -167,7 +176,8 @@ def test_spellings_the_machine_lists_as_one_line_share_their_identities(tmp_path
     assert set(keys_of(tmp_path, RAW)) == set(keys_of(tmp_path, TELNET)) == both
     assert keys_of(tmp_path, ELSEWHERE) == line_keys(ELSEWHERE)
     plant = load_plant(tmp_path / "plant.yaml")
-    refuse_other_lines(plant, {plant.buses[0].name: keys_of(tmp_path, TELNET)})  # either spelling is a line of the machine
+    # either spelling is a line of the machine
+    refuse_other_lines(plant, {plant.buses[0].name: keys_of(tmp_path, TELNET)})
 
 
 def test_a_spelling_in_the_list_that_is_no_port_is_refused_in_one_line(tmp_path, monkeypatch):

@@ -28,19 +28,25 @@ from prc3cfg.shell import files
 from prc3cfg.shell.plant_files import load_plant
 
 #: What a message a person reads must never show: Python's own words for what went wrong.
-PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no len|not subscriptable|\bdict\b|\bstr\b|\bint\b")
+PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no len|not "
+                    r"subscriptable|\bdict\b|\bstr\b|\bint\b")
 
 
 def nowhere_plant(folder: Path) -> Path:
     """The demo plant on ports where nothing listens."""
     plant = folder / "plant.yaml"
-    plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9").replace("emulator://demo-b", "socket://127.0.0.1:19"))
+    plant.write_text(
+        DEMO.read_text()
+        .replace("emulator://demo-a", "socket://127.0.0.1:9")
+        .replace("emulator://demo-b", "socket://127.0.0.1:19")
+    )
     return plant
 
 
 def factory_images(plant: Path, out: Path) -> Path:
     """A `read --json` file of the plant's modules at factory defaults (made without a line)."""
-    entries = [{"bus": bus.name, **ModuleState.factory(module.address).image.to_json()} for bus, module in load_plant(plant).modules()]
+    entries = [{"bus": bus.name, **ModuleState.factory(module.address).image.to_json()}
+               for bus, module in load_plant(plant).modules()]
     out.write_text(json.dumps(entries, indent=1))
     return out
 
@@ -78,13 +84,16 @@ def big_number_inputs(tmp_path: Path, plant: Path) -> dict[str, tuple[list[str],
         "show PLAN": (["show", plan], plan, "make the plan again"),
         "apply --plan": (["apply", plant, "--plan", plan], plan, "make the plan again"),
         "apply --plan, no plant": (["apply", "--plan", plan], plan, "make the plan again"),
-        "plan --actual": (["plan", plant, "--actual", images], images, "save the images again with prc3cfg read --json"),
+        "plan --actual": (["plan", plant, "--actual", images], images,
+                          "save the images again with prc3cfg read --json"),
         "restore": (["restore", snapshot], snapshot, "name a file under .prc3cfg/snapshots/"),
-        "emulator serve --state": (["emulator", "serve", "--state", state, "--listen", "127.0.0.1:0"], state, "fix or delete it"),
+        "emulator serve --state": (["emulator", "serve", "--state", state, "--listen", "127.0.0.1:0"], state,
+                                   "fix or delete it"),
     }
 
 
-@pytest.mark.parametrize("case", ["show PLAN", "apply --plan", "apply --plan, no plant", "plan --actual", "restore", "emulator serve --state"])
+@pytest.mark.parametrize("case", ["show PLAN", "apply --plan", "apply --plan, no plant", "plan --actual",
+                                  "restore", "emulator serve --state"])
 def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsys, case):
     args, path, remedy = big_number_inputs(tmp_path, nowhere)[case]
     line = one_line(run_cli(capsys, *args), f"error: {path}: ")
@@ -95,12 +104,28 @@ def test_a_number_of_5000_digits_is_refused_in_one_line(nowhere, tmp_path, capsy
 # -- module images and snapshots whose structure is damaged -----------------------------------------
 
 IMAGES = {
-    "an image without its system": ('[{"bus": "booth-a", "address": 1, "programs": []}]', '[0] has no "system"'),
-    "a program that is a list": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": [[1]]}}]',
-                                 "[0].programs[0] is a list, where an object or null belongs"),
-    "programs that are an object": (f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())}, "programs": {{}}}}]',
-                                    "[0].programs is an object, where a list belongs"),
-    "a system parameter missing": ('[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]', '[0].system has no "S2"'),
+    "an image without its system": (
+        '[{"bus": "booth-a", "address": 1, "programs": []}]',
+        '[0] has no "system"',
+    ),
+    "a program that is a list": (
+        (
+            f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())},'
+            ' "programs": [[1]]}]'
+        ),
+        "[0].programs[0] is a list, where an object or null belongs",
+    ),
+    "programs that are an object": (
+        (
+            f'[{{"bus": "booth-a", "address": 1, "system": {json.dumps(DEFAULT_SYSTEM.to_json())},'
+            ' "programs": {}}]'
+        ),
+        "[0].programs is an object, where a list belongs",
+    ),
+    "a system parameter missing": (
+        '[{"bus": "booth-a", "address": 1, "system": {"S1": 1}, "programs": []}]',
+        '[0].system has no "S2"',
+    ),
 }
 
 
@@ -115,8 +140,10 @@ def test_a_damaged_images_file_says_what_is_missing_in_words(nowhere, tmp_path, 
 
 SNAPSHOTS = {
     "no modules": ('{"format": "prc3cfg-snapshot/1", "plant": "/p.yaml"}', 'the snapshot has no "modules"'),
-    "a module without its bus": ('{"format": "prc3cfg-snapshot/1", "modules": [{"address": 1}]}', 'modules[0] has no "bus"'),
-    "an image without programs": ('{"format": "prc3cfg-snapshot/1", "plant": "/p.yaml", "plant_sha256": "0", "taken": "t", '
+    "a module without its bus": ('{"format": "prc3cfg-snapshot/1", "modules": [{"address": 1}]}',
+                                 'modules[0] has no "bus"'),
+    "an image without programs": ('{"format": "prc3cfg-snapshot/1", "plant": "/p.yaml", "plant_sha256": '
+                                  '"0", "taken": "t", '
                                   '"modules": [{"bus": "a", "address": 1}]}',
                                   'modules[0] has no "system"'),
 }
@@ -138,7 +165,8 @@ def test_a_document_of_too_many_objects_is_refused_before_it_is_parsed(nowhere, 
     plan = tmp_path / "bomb.json"
     plan.write_text("[" + "{}," * files.MAX_CONTAINERS + "{}]")  # 1.5 MB here; 63 MB took 1.6 GB to parse
     line = one_line(run_cli(capsys, "apply", nowhere, "--plan", plan), f"error: {plan}: ")
-    assert line == (f"error: {plan}: more than {files.MAX_CONTAINERS:,} objects and lists (counting '{{' and '['), more than any "
+    assert line == (f"error: {plan}: more than {files.MAX_CONTAINERS:,} objects and lists (counting "
+                    f"'{{' and '['), more than any "
                     "file prc3cfg writes holds — name the plan file prc3cfg plan --out wrote")  # fmt: skip
 
 
@@ -146,7 +174,8 @@ def test_a_document_of_too_many_objects_is_refused_before_it_is_parsed(nowhere, 
 def test_every_json_input_counts_its_objects_and_lists(nowhere, tmp_path, capsys, case):
     args, path, _ = big_number_inputs(tmp_path, nowhere)[case]
     path.write_text("[" + "[]," * files.MAX_CONTAINERS + "[]]")
-    line = one_line(run_cli(capsys, *args), f"error: {path}: more than {files.MAX_CONTAINERS:,} objects and lists")
+    line = one_line(run_cli(capsys, *args),
+                    f"error: {path}: more than {files.MAX_CONTAINERS:,} objects and lists")
     assert "Traceback" not in line
 
 
@@ -160,7 +189,8 @@ def test_a_document_of_too_many_values_is_refused_before_it_is_parsed(nowhere, t
     plan = tmp_path / "numbers.json"
     plan.write_text("[" + "1e1," * files.MAX_VALUES + "1]")  # 10 MB here; 64 MiB of them took 0.8 GB to parse
     line = one_line(run_cli(capsys, "apply", nowhere, "--plan", plan), f"error: {plan}: ")
-    assert line == (f"error: {plan}: more than {files.MAX_VALUES:,} values (counting ','), more than any file prc3cfg "
+    assert line == (f"error: {plan}: more than {files.MAX_VALUES:,} values (counting ','), more than any "
+                    "file prc3cfg "
                     "writes holds — name the plan file prc3cfg plan --out wrote")  # fmt: skip
     at_the_limit = tmp_path / "at-the-limit.json"
     at_the_limit.write_text("[" + "0," * (files.MAX_VALUES - 1) + "0]")
@@ -175,7 +205,8 @@ def test_a_long_integer_is_refused_even_where_python_would_convert_it(tmp_path):
              "try: files.read_json(Path(sys.argv[1]))\nexcept files.FileProblem as problem: print(problem)"
     done = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True,
                           env={**os.environ, "PYTHONINTMAXSTRDIGITS": "0"})  # fmt: skip
-    assert done.stdout == f"a number of more than {files.MAX_DIGITS} digits, which no file prc3cfg writes holds\n", done.stderr
+    assert done.stdout == (f"a number of more than {files.MAX_DIGITS} digits, which no file prc3cfg "
+                           "writes holds\n"), done.stderr
 
 
 # -- plan files whose structure is damaged ------------------------------------------------------------
@@ -211,17 +242,22 @@ def first_module(document: dict) -> dict:
 DAMAGE = {
     "no buses": (lambda d: d.pop("buses"), 'the plan has no "buses"'),
     "buses null": (lambda d: d.update(buses=None), "buses is null, where a list belongs"),
-    "a bus that is a number": (lambda d: d["buses"].__setitem__(0, 7), "buses[0] is 7, where an object belongs"),
+    "a bus that is a number": (lambda d: d["buses"].__setitem__(0, 7),
+                               "buses[0] is 7, where an object belongs"),
     "a bus without modules": (lambda d: d["buses"][0].pop("modules"), 'buses[0] has no "modules"'),
-    "steps null": (lambda d: first_module(d).update(steps=None), "buses[0].modules[0].steps is null, where a list belongs"),
-    "a step without its message": (lambda d: first_module(d)["steps"][0].pop("message"), 'buses[0].modules[0].steps[0] has no "message"'),
+    "steps null": (lambda d: first_module(d).update(steps=None),
+                   "buses[0].modules[0].steps is null, where a list belongs"),
+    "a step without its message": (lambda d: first_module(d)["steps"][0].pop("message"),
+                                   'buses[0].modules[0].steps[0] has no "message"'),
     "a message that is not hex": (lambda d: first_module(d)["steps"][0].update(message="zz"),
                                   "buses[0].modules[0].steps[0].message is not a PRC 3 message in hex"),
     "a message as a number": (lambda d: first_module(d)["steps"][0].update(message=2000),
                               "buses[0].modules[0].steps[0].message is 2000, where text belongs"),
     "no plant": (lambda d: d.pop("plant"), 'has no "plant"'),
-    "plant_sha256 false": (lambda d: d.update(plant_sha256=False), "plant_sha256 is false, where text belongs"),
-    "a name that is a list": (lambda d: first_module(d).update(name=["a"]), "buses[0].modules[0].name is a list, where text belongs"),
+    "plant_sha256 false": (lambda d: d.update(plant_sha256=False), "plant_sha256 is false, where "
+                                                                   "text belongs"),
+    "a name that is a list": (lambda d: first_module(d).update(name=["a"]),
+                              "buses[0].modules[0].name is a list, where text belongs"),
 }
 
 
@@ -243,9 +279,11 @@ def test_a_shown_plan_file_says_where_null_may_stand(made_plan, tmp_path, capsys
     may be null says so."""
     _, document = made_plan
     path = tmp_path / "damaged.json"
-    path.write_text(json.dumps(damage(document, lambda d: first_module(d)["changes"]["fields"][0].update(program="3"))))
+    path.write_text(json.dumps(damage(document,
+                                      lambda d: first_module(d)["changes"]["fields"][0].update(program="3"))))
     line = one_line(run_cli(capsys, "show", path), f"error: {path}: ")
-    assert 'buses[0].modules[0].changes.fields[0].program is the text "3", where a whole number or null belongs' in line, line
+    assert ('buses[0].modules[0].changes.fields[0].program is the text "3", where a whole number or '
+            'null belongs') in line, line
 
 
 def paths(value, at: tuple = ()) -> list[tuple]:
@@ -267,7 +305,8 @@ OTHERS = [None, True, False, 0, -1, 2.5, 1e300, "", "x", "20", [], {}, [None], {
 TWICE = ["format", "plant_sha256", "buses", "modules", "address", "steps", "message", "broadcast"]
 
 
-@settings(max_examples=25, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_path, capsys, data):
     """Drop a key or an item, give a value of another type, or a key twice, anywhere: `show` and
@@ -277,7 +316,8 @@ def test_a_plan_file_of_mangled_structure_is_refused_in_words(made_plan, tmp_pat
 
 
 @pytest.mark.soak
-@settings(max_examples=1000, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=1000, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_1000_mangled_plan_files_are_refused_in_words(made_plan, tmp_path, capsys, data):
     mangled_plan_is_said_in_words(made_plan, tmp_path, capsys, data)
@@ -297,7 +337,8 @@ def mangled_plan_is_said_in_words(made_plan, tmp_path, capsys, data) -> None:
         if data.draw(st.booleans()):
             del parent[place[-1]]
         else:
-            parent[place[-1]] = copy.deepcopy(data.draw(st.sampled_from(OTHERS)))  # a copy: OTHERS stays as it is, no list holds itself
+            # a copy: OTHERS stays as it is, no list holds itself
+            parent[place[-1]] = copy.deepcopy(data.draw(st.sampled_from(OTHERS)))
     text = json.dumps(mangled)
     twice = data.draw(st.sampled_from([None, *TWICE]))
     if twice is not None:
@@ -315,7 +356,8 @@ def mangled_plan_is_said_in_words(made_plan, tmp_path, capsys, data) -> None:
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture])  # the soak profile's count
 @given(data=st.data())
 def test_a_plan_file_of_many_more_mangled_structures_is_refused_in_words(made_plan, tmp_path, capsys, data):
-    test_a_plan_file_of_mangled_structure_is_refused_in_words.hypothesis.inner_test(made_plan, tmp_path, capsys, data=data)
+    test_a_plan_file_of_mangled_structure_is_refused_in_words.hypothesis.inner_test(made_plan, tmp_path,
+                                                                                    capsys, data=data)
 
 
 # -- plan files beyond any plan prc3cfg writes: nesting, size, texts, lists ---------------------------
@@ -331,29 +373,48 @@ def with_text(document: dict, change) -> str:
 
 #: A plan file beyond what prc3cfg writes (as text, from the plan file made), and what its one line says.
 BEYOND = {
-    "nested 900 deep": (lambda d: with_text(d, lambda d: first_module(d)["changes"].update(symbols={"1": json.loads(deep(900))})),
-                        "buses[0].modules[0].changes.symbols.1"),
-    "nested 100,000 deep": (lambda d: json.dumps(d)[:-1] + ', "x": ' + deep(100_000) + "}", "nested too deeply"),
-    "a text of 10 MB": (lambda d: with_text(d, lambda d: first_module(d).update(name="a" * 10_000_000)),
-                        "buses[0].modules[0].name is a text of 10,000,000 characters"),
+    "nested 900 deep": (
+        lambda d: with_text(
+            d, lambda d: first_module(d)["changes"].update(symbols={"1": json.loads(deep(900))})
+        ),
+        "buses[0].modules[0].changes.symbols.1",
+    ),
+    "nested 100,000 deep": (
+        lambda d: json.dumps(d)[:-1] + ', "x": ' + deep(100_000) + "}",
+        "nested too deeply",
+    ),
+    "a text of 10 MB": (
+        lambda d: with_text(d, lambda d: first_module(d).update(name="a" * 10_000_000)),
+        "buses[0].modules[0].name is a text of 10,000,000 characters",
+    ),
     "a file of 50 MB": (lambda d: json.dumps(d) + " " * 50_000_000, "larger than 32 MiB"),
-    "a list of 200,000 items": (lambda d: with_text(d, lambda d: d.update(left_alone=[""] * 200_000)), "left_alone is a list of 200,000 items"),
-    "an object of 200,000 keys": (lambda d: with_text(d, lambda d: first_module(d)["changes"].update(symbols={str(n): "~" for n in range(200_000)})),
-                                  "buses[0].modules[0].changes.symbols is an object of 200,000 keys"),
+    "a list of 200,000 items": (
+        lambda d: with_text(d, lambda d: d.update(left_alone=[""] * 200_000)),
+        "left_alone is a list of 200,000 items",
+    ),
+    "an object of 200,000 keys": (
+        lambda d: with_text(
+            d, lambda d: first_module(d)["changes"].update(symbols={str(n): "~" for n in range(200_000)})
+        ),
+        "buses[0].modules[0].changes.symbols is an object of 200,000 keys",
+    ),
 }
 
 
 @pytest.mark.parametrize("case", BEYOND, ids=list(BEYOND))
 @pytest.mark.parametrize("command", ["show", "apply"])
-def test_a_plan_file_beyond_any_prc3cfg_writes_is_refused_in_one_line(made_plan, tmp_path, capsys, case, command):
-    """Deeper, larger, longer than any plan prc3cfg writes: one line naming where and the bound, before the line is used."""
+def test_a_plan_file_beyond_any_prc3cfg_writes_is_refused_in_one_line(made_plan, tmp_path, capsys, case,
+                                                                      command):
+    """Deeper, larger, longer than any plan prc3cfg writes: one line naming where and the bound, before the
+    line is used."""
     plant, document = made_plan
     make, expected = BEYOND[case]
     path = tmp_path / "beyond.json"
     path.write_text(make(document))
     args = ["show", path] if command == "show" else ["apply", plant, "--plan", path, "--auto-approve"]
     line = one_line(run_cli(capsys, *args), f"error: {path}: ")
-    assert expected in line and line.endswith(("make the plan again", "make the plan again with prc3cfg plan --out",
+    assert expected in line and line.endswith(("make the plan again",
+                                               "make the plan again with prc3cfg plan --out",
                                                "name the plan file prc3cfg plan --out wrote")), line
 
 
@@ -364,7 +425,8 @@ def test_a_plan_file_beyond_any_prc3cfg_writes_is_one_line_from_the_console_scri
     make, expected = BEYOND[case]
     path = tmp_path / "beyond.json"
     path.write_text(make(document))
-    done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(path)], capture_output=True, timeout=120)
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(path)], capture_output=True,
+                          timeout=120)
     assert (done.returncode, done.stdout) == (1, b"")
     (line,) = done.stderr.decode().splitlines()
     assert line.startswith(f"error: {path}: ") and expected in line and not PYTHON.search(line), line
@@ -377,7 +439,9 @@ def test_a_state_file_in_a_missing_folder_is_refused_before_the_emulator_starts(
     state = tmp_path / "new" / "a" / "b.json"
     # an address of no host here: refused if it came first
     result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "192.0.2.1:7001")
-    assert (result.code, result.err) == (1, f"error: --state {state}: the folder {tmp_path}/new/a does not exist — create it first\n")
+    assert (result.code,
+            result.err) == (1, f"error: --state {state}: the folder {tmp_path}/new/a does not exist — "
+                               "create it first\n")
     assert not (tmp_path / "new").exists()
 
 
@@ -386,4 +450,6 @@ def test_a_state_file_whose_folder_is_a_file_is_refused(tmp_path, capsys):
     state = tmp_path / "file" / "b.json"
     # an address of no host here: refused if it came first
     result = run_cli(capsys, "emulator", "serve", "--state", state, "--listen", "192.0.2.1:7001")
-    assert (result.code, result.err) == (1, f"error: --state {state}: {tmp_path}/file is not a folder — name a state file in a folder\n")
+    assert (result.code,
+            result.err) == (1, f"error: --state {state}: {tmp_path}/file is not a folder — name a state "
+                               "file in a folder\n")

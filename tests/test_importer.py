@@ -42,7 +42,8 @@ def test_table():
 
 def test_path_into_a_loop_keeps_every_jump():
     chains, nexts = jumps_as_chains(programs_with({1: 2, 2: 3, 3: 2}))
-    assert rebuild(chains, nexts) | {n: 0 for n in range(4, 65)} == {1: 2, 2: 3, 3: 2} | {n: 0 for n in range(4, 65)}
+    assert rebuild(chains, nexts) | {n: 0 for n in range(4, 65)} == {1: 2, 2: 3,
+                                                                     3: 2} | {n: 0 for n in range(4, 65)}
     placed = [n for c in chains for n in (c["programs"] if isinstance(c, dict) else c)]
     assert len(placed) == len(set(placed)) and not set(placed) & set(nexts)
 

@@ -25,10 +25,14 @@ def test_the_readme_s_setup_on_debian_s_own_python_installs_plans_and_applies(tm
     first = readme_commands("sh")[0]
     assert first.startswith("python3 -m venv .venv && . .venv/bin/activate && python -m pip install . &&")
     tree = tmp_path / "prc3cfg"
-    shutil.copytree(ROOT, tree, ignore=shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.egg-info", ".prc3cfg", "build", ".*_cache"))
-    env = {key: value for key, value in os.environ.items() if not key.startswith(("PYTHON", "VIRTUAL_ENV", "PYENV"))}
+    shutil.copytree(ROOT, tree,
+                    ignore=shutil.ignore_patterns(".git", ".venv", "__pycache__", "*.egg-info", ".prc3cfg",
+                                                  "build", ".*_cache"))
+    env = {key: value for key, value in os.environ.items()
+           if not key.startswith(("PYTHON", "VIRTUAL_ENV", "PYENV"))}
     env["PATH"] = "/usr/bin:/bin"  # Debian's python3 first: not this test's interpreter, not pyenv's shims
-    done = subprocess.run(["bash", "-ec", first], cwd=tree, env=env, capture_output=True, text=True, timeout=900)
+    done = subprocess.run(["bash", "-ec", first], cwd=tree, env=env, capture_output=True, text=True,
+                          timeout=900)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert "Apply complete: 6 modules written and verified." in done.stdout
     assert (tree / ".venv" / "bin" / "prc3cfg").exists() and "Traceback" not in done.stderr

@@ -27,7 +27,8 @@ from prc3cfg.shell.plant_files import load_plant
 
 #: What an interrupted module's account line may say became of it — always in words.
 STATES = re.compile(r": interrupted (before step \d+ of \d+ \(.+\)|before broadcast \d+ of \d+ \(.+\)"
-                    r"|while verifying: \d+ of \d+ steps? acknowledged(, \d+ broadcasts? sent)?(, after \d+ repair rounds?)?, not verified"
+                    r"|while verifying: \d+ of \d+ steps? acknowledged(, \d+ broadcasts? sent)?(, after \d+ "
+                    r"repair rounds?)?, not verified"
                     r"|before repair step \d+ of \d+ \(.+\))")
 
 
@@ -46,14 +47,18 @@ def prc3cfg(tmp_path: Path, *args: object, **popen) -> subprocess.Popen:
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_for_every_module(tmp_path, signum):
+def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_for_every_module(tmp_path,
+                                                                                               signum):
     fifo = tmp_path / "trace.fifo"
     os.mkfifo(fifo)
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo,
+        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace",
+                          fifo,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
-        with fifo.open() as trace:  # a first write on every line: they write on their own now (a line not read back
-            signal_once_every_line_writes(trace, process, plant.emulators, signum)  # yet is named as such: commissioning reads little)
+        # a first write on every line: they write on their own now (a line not read back
+        with fifo.open() as trace:
+            # yet is named as such: commissioning reads little)
+            signal_once_every_line_writes(trace, process, plant.emulators, signum)
             out, err = process.communicate(timeout=60)
         assert process.returncode == 130
         assert err.splitlines()[-1] == "error: interrupted"
@@ -64,7 +69,9 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
         assert untouched, "an interrupted apply still wrote every module"
         factory = {address: ModuleState.factory(address).image for address in range(1, 31)}
         for entry in untouched:
-            bus, address = entry.split(",")[0].removeprefix("bus "), int(entry.split("module ")[1].split(" ")[0])
+            bus, address = entry.split(",")[0].removeprefix("bus "), int(
+                entry.split("module ")[1].split(" ")[0]
+            )
             assert plant.emulators[bus].module(address).image == factory[address], entry
         travel = travel_list(out)
         for bus, module in load_plant(plant.path).modules():
@@ -81,13 +88,15 @@ def test_a_module_written_but_not_yet_verified_says_so(tmp_path):
     fifo = tmp_path / "trace.fifo"
     os.mkfifo(fifo)
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace", fifo,
+        process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace",
+                          fifo,
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
         with fifo.open() as trace:
             for line in trace:
                 _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
                 # a crc16 request: A5h, address, length, message ID — a write is below 50h
-                if (bus, direction) == ("booth-a", ">") and int(frame[2:4], 16) == 2 and int(frame[6:8], 16) < 0x50:
+                if ((bus, direction) == ("booth-a", ">") and int(frame[2:4], 16) == 2
+                    and int(frame[6:8], 16) < 0x50):
                     process.send_signal(signal.SIGINT)
                     break
             drain(trace)
@@ -96,7 +105,8 @@ def test_a_module_written_but_not_yet_verified_says_so(tmp_path):
     accounts = accounts_of(out, err)
     assert len(accounts) == 6
     (first,) = [line for line in accounts if line.startswith("✗ bus booth-a, module 1 (booth-a-left): ")]
-    assert re.search(r": interrupted while verifying: (\d+) of \1 steps acknowledged, not verified$", first), first
+    assert re.search(r": interrupted while verifying: (\d+) of \1 steps acknowledged, not verified$",
+                     first), first
 
 
 def drain(stream) -> threading.Thread:
@@ -110,7 +120,8 @@ def test_plan_and_read_stop_promptly_with_one_line(tmp_path, command):
     fifo = tmp_path / "trace.fifo"
     os.mkfifo(fifo)
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        process = prc3cfg(tmp_path, command, plant.path, "--trace", fifo, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        process = prc3cfg(tmp_path, command, plant.path, "--trace", fifo, stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE)
         with fifo.open() as trace:
             for line in trace:
                 if "\t>\t" in line:  # the first request is on the line
@@ -125,13 +136,16 @@ def test_plan_and_read_stop_promptly_with_one_line(tmp_path, command):
 
 def test_a_wait_for_the_lock_stops_on_ctrl_c(tmp_path):
     with emulated_plant(tmp_path) as plant:
-        port = next(line.split("port:")[1].strip() for line in plant.path.read_text().splitlines() if "socket://" in line)
+        port = next(line.split("port:")[1].strip() for line in plant.path.read_text().splitlines()
+                    if "socket://" in line)
         os.environ["PRC3CFG_LOCK_DIR"] = str(tmp_path / "locks")
         try:
             with line_lock(line_keys(port), "another apply"):
-                process = prc3cfg(tmp_path, "plan", plant.path, "--lock-timeout", 600, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                process = prc3cfg(tmp_path, "plan", plant.path, "--lock-timeout", 600, stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE)
                 waiting = process.stderr.readline()
-                assert "waiting for the line lock held by" in waiting and f"(pid {os.getpid()}, apply since" in waiting
+                assert ("waiting for the line lock held by" in waiting
+                        and f"(pid {os.getpid()}, apply since" in waiting)
                 process.send_signal(signal.SIGINT)
                 _, err = process.communicate(timeout=60)
         finally:
@@ -143,12 +157,14 @@ def test_a_wait_for_the_lock_stops_on_ctrl_c(tmp_path):
 DEMO = Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml"
 
 
-def signalled_while_starting(tmp_path: Path, signum: int, module: str, *args: object) -> tuple[int, str, list[str]]:
+def signalled_while_starting(tmp_path: Path, signum: int, module: str, *args: object) -> tuple[int, str,
+                                                                                               list[str]]:
     """`prc3cfg ARGS`, run with -X importtime (which says on stderr each module as its import ends),
     sent `signum` as soon as `module` is imported: its exit code, stdout, and the lines of its
     stderr that are not import times."""
     env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "PYTHONUNBUFFERED": "1"}
-    process = subprocess.Popen([sys.executable, "-X", "importtime", "-m", "prc3cfg", *map(str, args)], env=env, text=True,
+    process = subprocess.Popen([sys.executable, "-X", "importtime", "-m", "prc3cfg", *map(str, args)],
+                               env=env, text=True,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
     said = []
     for line in process.stderr:
@@ -159,7 +175,8 @@ def signalled_while_starting(tmp_path: Path, signum: int, module: str, *args: ob
     else:
         pytest.fail(f"{module} was never imported: {''.join(said)[-2000:]}")
     out, rest = process.communicate(timeout=60)
-    lines = [line.rstrip("\n") for line in [*said, *rest.splitlines(keepends=True)] if not line.startswith("import time:")]
+    lines = [line.rstrip("\n") for line in [*said, *rest.splitlines(keepends=True)]
+             if not line.startswith("import time:")]
     return process.returncode, out, lines
 
 
@@ -169,7 +186,13 @@ def signalled_while_starting(tmp_path: Path, signum: int, module: str, *args: ob
 STARTS = {
     "typer": ("typer", "validate", DEMO),
     "yaml": ("yaml", "validate", DEMO),
-    "the emulator's server": ("prc3cfg.shell.emulator.server", "emulator", "serve", "--listen", "127.0.0.1:0"),
+    "the emulator's server": (
+        "prc3cfg.shell.emulator.server",
+        "emulator",
+        "serve",
+        "--listen",
+        "127.0.0.1:0",
+    ),
 }
 
 
@@ -208,14 +231,17 @@ class Masks:
     one a SIGINT or SIGTERM is delivered to."""
 
     def __init__(self) -> None:
-        self.workers: list[bool] = []  # per step reported from a thread other than the main one: it takes signals
+        # per step reported from a thread other than the main one: it takes signals
+        self.workers: list[bool] = []
 
     def start(self, what: str, total: int) -> None:
         pass
 
     def advance(self) -> None:
         if threading.current_thread() is not threading.main_thread():
-            self.workers.append(not {signal.SIGINT, signal.SIGTERM} <= signal.pthread_sigmask(signal.SIG_BLOCK, []))
+            self.workers.append(
+                not {signal.SIGINT, signal.SIGTERM} <= signal.pthread_sigmask(signal.SIG_BLOCK, [])
+            )
 
     def note(self, text: str) -> None:
         pass
@@ -230,6 +256,8 @@ def test_only_the_main_thread_takes_a_signal(tmp_path, how):
     the kernel gives them to the main thread, whose wait they end at once."""
     with emulated_plant(tmp_path) as plant:
         masks = Masks()
-        gates = api.Gates(allow_axis_release=True, approve=(lambda _: True) if how == "the whole plan" else None)
+        gates = api.Gates(allow_axis_release=True, approve=(lambda _: True) if how == "the whole plan"
+                          else None)
         api.told(api.apply(api.load(plant.path), gates=gates, options=api.LineOptions(progress=masks)))
-    assert masks.workers and not any(masks.workers)  # steps were reported from worker threads, none of which takes a signal
+    # steps were reported from worker threads, none of which takes a signal
+    assert masks.workers and not any(masks.workers)

@@ -47,12 +47,14 @@ FRAMINGS = {
     "open-driver": {"framing": "open-driver", "parity": "even", "zvz": 0.008},
 }
 TIMEOUT = 0.2  # s: the bus's reply time-out
-HOLD = 0.3  # s: past the time-out (the client retries a LATE frame first), within the quiet period (2 × 0.2 s and more)
+# s: past the time-out (the client retries a LATE frame first), within the quiet period (2 × 0.2 s and more)
+HOLD = 0.3
 READS = (0x50, 0x51, 0x52)
 
 
 @contextlib.contextmanager
-def proxied(directory: Path, settings: dict, rule: Rule, until: Until, hold: float = HOLD) -> Iterator[tuple[EmulatedPlant, LossyProxy]]:
+def proxied(directory: Path, settings: dict, rule: Rule, until: Until,
+            hold: float = HOLD) -> Iterator[tuple[EmulatedPlant, LossyProxy]]:
     """`SOURCE` on an emulator reached through a `LossyProxy` with `rule`, `until` and `hold`."""
     source = directory / "source.yaml"
     source.write_text(SOURCE)
@@ -60,7 +62,8 @@ def proxied(directory: Path, settings: dict, rule: Rule, until: Until, hold: flo
     with contextlib.ExitStack() as stack:
 
         def route(bus: str, host: str, port: int) -> str:
-            proxy = LossyProxy((host, port), rule, framing=settings["framing"], zvz=settings.get("zvz", 0.020), hold=hold, until=until)
+            proxy = LossyProxy((host, port), rule, framing=settings["framing"],
+                               zvz=settings.get("zvz", 0.020), hold=hold, until=until)
             proxies.append(stack.enter_context(proxy))
             return proxy.listen()
 
@@ -69,20 +72,28 @@ def proxied(directory: Path, settings: dict, rule: Rule, until: Until, hold: flo
 
 
 def simplified(plant: EmulatedPlant) -> None:
-    """m1's programs 1–3 lose their dwell and relative speed in the plant file (14h, then 33h), m2's program 1 its dwell."""
+    """m1's programs 1–3 lose their dwell and relative speed in the plant file (14h, then 33h), m2's program 1
+    its dwell."""
     text = plant.path.read_text()
-    edited = text.replace("        dwell: 0.5\n        relative_speed: 0.03\n", "").replace("        dwell: 0.5\n", "")
+    edited = text.replace("        dwell: 0.5\n        relative_speed: 0.03\n",
+                          "").replace("        dwell: 0.5\n", "")
     assert edited != text
     plant.path.write_text(edited)
 
 
 def writes_to(address: int, message_id: int | None, loss: Loss, times: int = 1) -> Rule:
-    """A rule: `loss` for the first `times` requests with this message ID to `address`, once armed (`rule.armed`)."""
+    """A rule: `loss` for the first `times` requests with this message ID to `address`, once armed
+    (`rule.armed`)."""
     seen = 0
 
     def rule(frame: Frame, _: int) -> set[Loss]:
         nonlocal seen
-        if getattr(rule, "armed", False) and frame.address == address and (message_id is None or frame.message[0] == message_id) and seen < times:
+        if (
+            getattr(rule, "armed", False)
+            and frame.address == address
+            and (message_id is None or frame.message[0] == message_id)
+            and seen < times
+        ):
             seen += 1
             return {loss}
         return set()
@@ -133,15 +144,17 @@ def test_an_initialisation_delivered_late_is_caught_before_the_verification(tmp_
         rule.armed = True  # type: ignore[attr-defined]
         applied = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert proxy.lost and proxy.lost[0][0] is loss, "the 14h was not held: the plan no longer initialises"
-        assert proxy.holding == 0, "the held 14h was still on its way after the apply: it was verified before it landed"
+        assert proxy.holding == 0, ("the held 14h was still on its way after the apply: it was verified "
+                                    "before it landed")
         assert applied.code == 0, applied.out + applied.err
         assert_no_silent_wrong_value(plant, proxy, applied, capsys)
         assert "No changes" in run_cli(capsys, "plan", plant.path).out
 
 
 def test_a_plan_whose_late_copies_change_nothing_is_verified_without_waiting(tmp_path, capsys):
-    """m2's change alone (its 32h writes a whole program): a copy of it, delivered whenever, leaves what the plan
-    left — the verification follows the writes at once, and a duplicate delivered after it does no harm."""
+    """m2's change alone (its 32h writes a whole program): a copy of it, delivered whenever, leaves what the
+    plan left — the verification follows the writes at once, and a duplicate delivered after it does no harm.
+    """
     rule = writes_to(2, None, Loss.DUPLICATE)
     with proxied(tmp_path, FRAMINGS["crc16"], rule, lambda frame, n: False, hold=30.0) as (plant, proxy):
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
@@ -182,7 +195,8 @@ def test_late_and_duplicated_writes_never_leave_a_silent_wrong_value(tmp_path, c
         return later["after"] is not None and n >= later["after"] + k
 
     armed = False
-    with proxied(tmp_path, FRAMINGS[framing], rule, until, hold=draw.uniform(TIMEOUT + 0.02, 2 * TIMEOUT)) as (plant, proxy):
+    with proxied(tmp_path, FRAMINGS[framing], rule, until,
+                 hold=draw.uniform(TIMEOUT + 0.02, 2 * TIMEOUT)) as (plant, proxy):
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
         simplified(plant)
         armed = True

@@ -51,7 +51,8 @@ def second_checkout(plant: EmulatedPlant, tmp_path: Path) -> Path:
 def holds_the_plant_file(plant: EmulatedPlant, bus: str, name: str) -> bool:
     module = next(m for b, m in api.load(plant.path).modules() if b.name == bus and m.name == name)
     held, wanted = plant.emulators[bus].module(module.address).image, module.desired_image()
-    return held.system == wanted.system and all(held.program(n) == wanted.program(n) for n in module.managed_programs())
+    return held.system == wanted.system and all(held.program(n) == wanted.program(n)
+                                                for n in module.managed_programs())
 
 
 def test_another_plant_file_on_the_same_line_is_seen_and_written_back(applied, capsys, tmp_path):
@@ -79,7 +80,8 @@ def test_what_an_apply_wrote_and_verified_is_known_to_the_next_plan(applied, cap
     document = json.loads(planned.out)
     assert planned.code == 0
     assert all(" (rolling evidence: programs " in said for said in document["read"]["not_as_verified"])
-    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"] for m in bus["modules"])
+    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"]
+               for m in bus["modules"])
     assert sum(map(len, rolled.values())) == 2 * 8 * 4  # each line: 8 windows of 4 programs, nothing else
 
 
@@ -89,25 +91,32 @@ def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(app
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
     assert planned.code == 2
     said = next(line for line in planned.out.splitlines() if "read in full: " in line)
-    assert "booth-a/booth-a-right (its system parameters are not those on record)" in said  # the line opened: booth-a-left too, on its line or rolled
-    assert "booth-a/booth-a-top (booth-a/booth-a-right on its line: its system parameters are not those on record)" in said
+    # the line opened: booth-a-left too, on its line or rolled
+    assert "booth-a/booth-a-right (its system parameters are not those on record)" in said
+    assert ("booth-a/booth-a-top (booth-a/booth-a-right on its line: its system parameters are not those "
+            "on record)") in said
     assert "booth-a/booth-a-left (" in said
     assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release").code == 0
     assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
 
 
-def test_a_spare_with_the_same_system_block_is_found_by_the_program_the_change_reads_and_set_up_whole(applied, capsys):
+def test_a_spare_with_the_same_system_block_is_found_by_the_program_the_change_reads_and_set_up_whole(
+    applied, capsys
+):
     booth = applied.emulators["booth-a"]
     held = booth.module(2).image
-    booth.update(2, image=replace(ModuleImage.factory(2), system=held.system))  # a spare, its system block set by hand
+    # a spare, its system block set by hand
+    booth.update(2, image=replace(ModuleImage.factory(2), system=held.system))
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # the change reads program 1 only
     planned = run_cli(capsys, "plan", applied.path)
     said = next(line for line in planned.out.splitlines() if "read in full: " in line)
-    assert "booth-a/booth-a-right (program 1 is not as on record)" in said  # the line opened: booth-a-left too, on its line or rolled
+    # the line opened: booth-a-left too, on its line or rolled
+    assert "booth-a/booth-a-right (program 1 is not as on record)" in said
     assert "booth-a/booth-a-top (booth-a/booth-a-right on its line: program 1 is not as on record)" in said
     assert "booth-a/booth-a-left (" in said
     assert run_cli(capsys, "apply", applied.path, "--auto-approve").code == 0
-    assert holds_the_plant_file(applied, "booth-a", "booth-a-right")  # programs 2 and 3 too, not only program 1
+    # programs 2 and 3 too, not only program 1
+    assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
 
 
 def test_two_modules_swapped_are_each_read_in_full_and_put_right(applied, capsys):
@@ -119,16 +128,19 @@ def test_two_modules_swapped_are_each_read_in_full_and_put_right(applied, capsys
     assert planned.code == 2
     assert "booth-a/booth-a-left (its system parameters are not those on record)" in planned.out
     assert run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release").code == 0
-    assert holds_the_plant_file(applied, "booth-a", "booth-a-left") and holds_the_plant_file(applied, "booth-a", "booth-a-top")
+    assert (holds_the_plant_file(applied, "booth-a", "booth-a-left")
+            and holds_the_plant_file(applied, "booth-a", "booth-a-top"))
 
 
 def test_drift_a_full_read_found_is_written_back_by_the_next_apply(applied, capsys):
     assert 2 not in read_next(applied.path)["booth-a-top"]  # rolling evidence does not read it in this plan
     applied.emulators["booth-a"].teach_in(5, 2, 180)  # booth-a-top, program 2, taught on the floor
-    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # not read: the stated limit, until it rolls
+    # not read: the stated limit, until it rolls
+    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0
     full = run_cli(capsys, "plan", applied.path, "--full-read", "--detailed-exitcode")
     assert full.code == 2 and "program 2: position 0.180 m → 0.150 m" in full.out
-    again = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")  # a targeted plan: the record holds what was seen
+    # a targeted plan: the record holds what was seen
+    again = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
     assert again.code == 2 and "program 2: position 0.180 m → 0.150 m" in again.out
     result = run_cli(capsys, "apply", applied.path, "--auto-approve")
     assert result.code == 0 and "verified" in result.out
@@ -144,36 +156,47 @@ def test_refresh_only_and_read_update_the_record_too(applied, capsys):
     assert "program 3: position 1.100 m → 1.200 m" in run_cli(capsys, "plan", applied.path).out
 
 
-def test_a_reviewed_plan_is_stale_once_the_record_no_longer_vouches_for_what_it_did_not_read(applied, capsys, tmp_path):
+def test_a_reviewed_plan_is_stale_once_the_record_no_longer_vouches_for_what_it_did_not_read(applied, capsys,
+                                                                                             tmp_path):
     other = second_checkout(applied, tmp_path)
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # plan A reads booth-a-right's program 1
     assert run_cli(capsys, "plan", applied.path, "--out", tmp_path / "p.json").code == 0
-    edit(other, "position: 0.15\n", "position: 0.14\n")  # B changes program 2 everywhere: A's plan did not read it
+    # B changes program 2 everywhere: A's plan did not read it
+    edit(other, "position: 0.15\n", "position: 0.14\n")
     assert run_cli(capsys, "apply", other, "--auto-approve").code == 0
     refused = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve")
-    assert refused.code == 1 and "stale plan" in refused.err and "the line's record no longer shows it" in refused.err
+    assert (refused.code == 1 and "stale plan" in refused.err
+            and "the line's record no longer shows it" in refused.err)
     assert applied.emulators["booth-a"].module(2).image.known(1).P == 2000  # nothing was written
 
 
-def test_the_record_is_shared_by_every_plant_file_and_names_who_verified_what_was_not_read(applied, capsys, tmp_path):
+def test_the_record_is_shared_by_every_plant_file_and_names_who_verified_what_was_not_read(applied, capsys,
+                                                                                           tmp_path):
     other = second_checkout(applied, tmp_path)
     rolled = read_next(applied.path)
     planned = run_cli(capsys, "plan", other, "--json")
     document = json.loads(planned.out)
     assert document["read"]["base"] == RECORD  # B never applied here: A's verification is B's record too
-    assert all(said.startswith(f"apply of {applied.path} by ") and "(since " in said for said in document["read"]["taken"].values())
-    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"] for m in bus["modules"])
+    assert all(said.startswith(f"apply of {applied.path} by ") and "(since " in said
+               for said in document["read"]["taken"].values())
+    assert all(m["read"]["programs"] == list(rolled[m["name"]]) for bus in document["buses"]
+               for m in bus["modules"])
 
 
-def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_told_to_every_plant_file(applied, capsys, tmp_path):
+def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_told_to_every_plant_file(
+    applied, capsys, tmp_path
+):
     other = second_checkout(applied, tmp_path)
-    edit(other, "upper_reversing_point: 1.8\n", "upper_reversing_point: 1.9\n")  # B: booth-a-top's system block
+    # B: booth-a-top's system block
+    edit(other, "upper_reversing_point: 1.8\n", "upper_reversing_point: 1.9\n")
     fifo = tmp_path / "trace.fifo"
     os.mkfifo(fifo)
     for emulator in applied.emulators.values():
         emulator.line_speed = True
-    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(other), "--auto-approve", "--allow-axis-release",
-                                "--trace", str(fifo)], text=True, stdout=subprocess.DEVNULL, stderr=(tmp_path / "stderr").open("w"))  # fmt: skip
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(other), "--auto-approve",
+                                "--allow-axis-release",
+                                "--trace", str(fifo)], text=True, stdout=subprocess.DEVNULL,
+                               stderr=(tmp_path / "stderr").open("w"))  # fmt: skip
     def unblock() -> None:  # a process that ends before it opens the trace must not leave the test waiting
         process.wait()
         with fifo.open("w"):
@@ -183,7 +206,8 @@ def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_to
     with fifo.open() as trace:
         for line in trace:
             _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
-            if (bus, direction) == ("booth-a", ">") and frame[6:8] == "20":  # crc16: A5h, address, length, message ID
+            # crc16: A5h, address, length, message ID
+            if (bus, direction) == ("booth-a", ">") and frame[6:8] == "20":
                 process.kill()  # the 20h is on the line: no account will ever be printed
                 break
         threading.Thread(target=trace.read, daemon=True).start()
@@ -193,7 +217,8 @@ def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_to
         emulator.line_speed = False
     assert not applied.emulators["booth-a"].module(5).referenced  # it did release the axes
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
-    assert "bus booth-a, module 5 (booth-a-top)" in planned.err and "may be released" in planned.err  # told, to plant file A
+    # told, to plant file A
+    assert "bus booth-a, module 5 (booth-a-top)" in planned.err and "may be released" in planned.err
     assert planned.code == 2 and "booth-a/booth-a-top (not on the line's record)" in planned.out
     result = run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release")
     assert result.code == 0 and "booth-a/booth-a-top" in result.out
@@ -201,19 +226,22 @@ def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_to
 
 
 def test_an_apply_whose_state_folder_cannot_be_written_writes_nothing(applied, capsys, tmp_path, monkeypatch):
-    """Release records and the line's record are proven writable before the first frame, not at the first 10h/20h."""
+    """Release records and the line's record are proven writable before the first frame, not at the first
+    10h/20h."""
     blocked = tmp_path / "not-a-folder"
     blocked.write_text("a file where the state folder should be")
     monkeypatch.setenv("PRC3CFG_STATE_DIR", str(blocked))
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")  # booth-a-right: a program, written first
-    edit(applied.path, "upper_reversing_point: 1.8\n", "upper_reversing_point: 1.9\n")  # booth-a-top: a 20h after it
+    # booth-a-top: a 20h after it
+    edit(applied.path, "upper_reversing_point: 1.8\n", "upper_reversing_point: 1.9\n")
     refused = run_cli(capsys, "apply", applied.path, "--auto-approve", "--allow-axis-release")
     assert refused.code == 1 and "cannot keep" in refused.err and "nothing was written" in refused.err
     assert applied.emulators["booth-a"].module(2).image.known(1).P == 2000
     assert applied.emulators["booth-a"].module(5).image.system.S1 == 1800
 
 
-def test_a_chart_of_a_targeted_plan_draws_the_chain_with_the_programs_taken_as_known(applied, capsys, tmp_path):
+def test_a_chart_of_a_targeted_plan_draws_the_chain_with_the_programs_taken_as_known(applied, capsys,
+                                                                                     tmp_path):
     """Program 1 of booth-a-right changes; program 2, its loop's other half, is taken as known, not read:
     the chart draws the loop 1 → 2 → 1 from the record's value, never a chain cut where it was not read."""
     edit(applied.path, "position: 2.0\n", "position: 1.99\n")
@@ -224,13 +252,16 @@ def test_a_chart_of_a_targeted_plan_draws_the_chain_with_the_programs_taken_as_k
     assert 'title "chain 1 → 2 → 1 · pass: before' in shown.out and "(not held)" not in shown.out
 
 
-@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="giving a file to another user takes root")
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0,
+                    reason="giving a file to another user takes root")
 def test_a_record_another_user_made_or_linked_is_not_believed(applied, capsys, tmp_path):
     """In the machine's folder anyone may make a file: a record that vouches for the modules, planted by
     another (non-root) user or as a link, is read as no record — every module is read in full."""
-    applied.emulators["booth-a"].teach_in(2, 2, 180)  # booth-a-right's program 2: a plan taking the record would not read it
+    # booth-a-right's program 2: a plan taking the record would not read it
+    applied.emulators["booth-a"].teach_in(2, 2, 180)
     records = sorted((tmp_path / "state" / "lines").glob("*.json"))
-    vouching = {path: path.read_bytes() for path in records}  # as the apply wrote them: every module as planned
+    # as the apply wrote them: every module as planned
+    vouching = {path: path.read_bytes() for path in records}
     for path in records:
         os.chown(path, 4242, 4242)  # the same bytes, but another user's
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
@@ -245,14 +276,16 @@ def test_a_record_another_user_made_or_linked_is_not_believed(applied, capsys, t
     for path, text in vouching.items():  # the control: the same bytes as a file of root's are believed
         path.unlink()
         path.write_bytes(text)
-    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0  # program 2 not read: the stated limit
+    # program 2 not read: the stated limit
+    assert run_cli(capsys, "plan", applied.path, "--detailed-exitcode").code == 0
 
 
 def test_a_record_another_tool_wrote_or_damaged_is_no_record(applied, capsys, tmp_path):
     """A record file rewritten by another tool — a time without its zone, an image that is no image, an
     address that is no number, bytes that are no JSON — is read as no record, never as a traceback:
     the modules are read in full and the drift found."""
-    applied.emulators["booth-a"].teach_in(2, 2, 180)  # booth-a-right's program 2: a plan taking the record would not read it
+    # booth-a-right's program 2: a plan taking the record would not read it
+    applied.emulators["booth-a"].teach_in(2, 2, 180)
     records = sorted((tmp_path / "state" / "lines").glob("*.json"))
     kept = {path: json.loads(path.read_text()) for path in records}
 
@@ -269,7 +302,10 @@ def test_a_record_another_tool_wrote_or_damaged_is_no_record(applied, capsys, tm
                 damage(entry)
             path.write_text(json.dumps(changed, indent=2).replace("\n", "\r\n"))  # pretty-printed, CRLF
         planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
-        assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, (damage.__name__, planned.err)
+        assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, (
+            damage.__name__,
+            planned.err,
+        )
         assert "taken as known" not in planned.out  # nothing on record: every module read in full
     for path in records:
         path.write_bytes(b"\xef\xbb\xbf{not json")
@@ -280,17 +316,23 @@ def test_a_record_another_tool_wrote_or_damaged_is_no_record(applied, capsys, tm
 def test_another_line_s_record_under_this_line_s_name_is_no_record(applied, capsys, tmp_path):
     """A record whose line key is another line's — copied, or renamed, under this line's file name — vouches
     for nothing here: the modules are read in full and the drift found."""
-    applied.emulators["booth-a"].teach_in(2, 2, 180)  # booth-a-right's program 2: a plan taking the record would not read it
+    # booth-a-right's program 2: a plan taking the record would not read it
+    applied.emulators["booth-a"].teach_in(2, 2, 180)
     for path in (tmp_path / "state" / "lines").glob("*.json"):
         document = json.loads(path.read_text())
-        path.write_text(json.dumps(document | {"key": "tcp/127.0.0.1/9"}))  # another line's, same bytes otherwise
+        # another line's, same bytes otherwise
+        path.write_text(json.dumps(document | {"key": "tcp/127.0.0.1/9"}))
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
-    assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, planned.out + planned.err
+    assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, (
+        planned.out + planned.err
+    )
     assert "taken as known" not in planned.out
 
 
 @pytest.mark.parametrize("kind", ["file", "link", "folder", "fifo"])
-def test_a_file_planted_at_this_user_s_record_name_is_moved_aside_and_the_record_written_afresh(applied, capsys, tmp_path, kind):
+def test_a_file_planted_at_this_user_s_record_name_is_moved_aside_and_the_record_written_afresh(
+    applied, capsys, tmp_path, kind
+):
     """Whatever stands at this user's own record name — a file of another owner, a link, a folder, a FIFO —
     does not lock the user out: it is moved aside (said in one line), the record written afresh and used."""
     lines = tmp_path / "state" / "lines"
@@ -312,12 +354,16 @@ def test_a_file_planted_at_this_user_s_record_name_is_moved_aside_and_the_record
     notes = [line for line in planned.err.splitlines() if "moved aside" in line]
     assert len(notes) == len(records) and all(".tmp" not in line for line in notes), planned.err
     for path in records:
-        assert path.is_file() and not path.is_symlink() and json.loads(path.read_text())["format"] == "prc3cfg-line-record/1"
+        assert (path.is_file() and not path.is_symlink()
+                and json.loads(path.read_text())["format"] == "prc3cfg-line-record/1")
         (aside,) = lines.glob(f"{path.name}.planted-*")
-        assert aside.is_symlink() if kind == "link" else aside.is_dir() if kind == "folder" else aside.exists()
+        assert (aside.is_symlink() if kind == "link" else aside.is_dir() if kind == "folder"
+                else aside.exists())
         assert any(str(path) in line and aside.name in line for line in notes)
-    assert "taken as known" in run_cli(capsys, "plan", applied.path).out  # the record written afresh is this user's again
+    # the record written afresh is this user's again
+    assert "taken as known" in run_cli(capsys, "plan", applied.path).out
     assert not (tmp_path / "elsewhere.json").exists()
+
 
 # -- adversarial: seeded scenario families, the claims held against what the modules hold ---------
 
@@ -327,7 +373,8 @@ def test_a_file_planted_at_this_user_s_record_name_is_moved_aside_and_the_record
 FAMILIES = ("other-plant-file", "other-tool", "reset", "swap", "spare")
 
 
-def disturb(plant: EmulatedPlant, tmp_path: Path, capsys: pytest.CaptureFixture, rnd: random.Random) -> tuple[str, set]:
+def disturb(plant: EmulatedPlant, tmp_path: Path, capsys: pytest.CaptureFixture,
+            rnd: random.Random) -> tuple[str, set]:
     """One disturbance, drawn; the (bus, address, program) no read can see (the stated limit): a program
     changed by another hand on a module whose system block is the one on record."""
     family = rnd.choice(FAMILIES)
@@ -338,7 +385,8 @@ def disturb(plant: EmulatedPlant, tmp_path: Path, capsys: pytest.CaptureFixture,
     managed = module.managed_programs()
     if family == "other-plant-file":
         document = yaml.safe_load(plant.path.read_text())
-        entry = next(m for b in document["buses"] if b["name"] == bus.name for m in b["modules"] if m["address"] == module.address)
+        entry = next(m for b in document["buses"] if b["name"] == bus.name for m in b["modules"]
+                     if m["address"] == module.address)
         number = rnd.choice(managed)
         entry.setdefault("programs", {})[number] = {"position": round(rnd.uniform(0.2, 1.0), 3), "speed": 0.2}
         other = tmp_path / f"b-{rnd.random():.6f}" / "plant.yaml"
@@ -348,7 +396,9 @@ def disturb(plant: EmulatedPlant, tmp_path: Path, capsys: pytest.CaptureFixture,
         return family, set()
     if family == "other-tool":
         number = rnd.choice(managed)
-        emulator.update(module.address, image=held.with_programs({number: replace(held.known(number), P=rnd.randrange(200, 1000))}))
+        emulator.update(module.address,
+                        image=held.with_programs({number: replace(held.known(number),
+                                                                  P=rnd.randrange(200, 1000))}))
         return family, {(bus.name, module.address, number)}
     if family == "reset":
         emulator.update(module.address, image=ModuleImage.factory(module.address))
@@ -359,7 +409,8 @@ def disturb(plant: EmulatedPlant, tmp_path: Path, capsys: pytest.CaptureFixture,
         emulator.update(module.address, image=replace(theirs, address=module.address))
         emulator.update(partner.address, image=replace(held, address=partner.address))
         same = held.system == theirs.system  # then only a program the change reads can tell
-        return family, {(bus.name, m.address, n) for m in (module, partner) for n in range(1, 65)} if same else set()
+        return (family, {(bus.name, m.address, n) for m in (module, partner) for n in range(1, 65)}
+                if same else set())
     emulator.update(module.address, image=replace(ModuleImage.factory(module.address), system=held.system))
     return family, {(bus.name, module.address, n) for n in range(1, 65)}
 
@@ -370,7 +421,8 @@ def differences(plant: EmulatedPlant) -> set[tuple[str, int, int]]:
     for bus, module in api.load(plant.path).modules():
         held, wanted = plant.emulators[bus.name].module(module.address).image, module.desired_image()
         found |= {(bus.name, module.address, 0)} if held.system != wanted.system else set()
-        found |= {(bus.name, module.address, n) for n in module.managed_programs() if held.program(n) != wanted.program(n)}
+        found |= {(bus.name, module.address, n) for n in module.managed_programs()
+                  if held.program(n) != wanted.program(n)}
     return found
 
 
@@ -386,9 +438,11 @@ def claims_hold(directory: Path, capsys: pytest.CaptureFixture, seed: int) -> No
             assert differences(plant) <= unseen, (seed, family, planned.out)
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, (seed, family, result.err)
-        assert differences(plant) <= unseen, (seed, family, result.out)  # "verified" means it, but for the stated limit
+        # "verified" means it, but for the stated limit
+        assert differences(plant) <= unseen, (seed, family, result.out)
         if unseen:
-            assert "plan --refresh-only (or --full-read) reads everything" in planned.out  # the limit is said where relied on
+            # the limit is said where relied on
+            assert "plan --refresh-only (or --full-read) reads everything" in planned.out
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -36,18 +36,22 @@ def teach(state: ModuleState, changes: dict[int, Program]) -> ModuleState:
     return replace(state, image=state.image.with_programs(changes))
 
 
-def connect(emulator: Emulator, framing: str = "crc16", *, retries: int = 3, timeout: float = 0.3, **kw) -> Link:
+def connect(emulator: Emulator, framing: str = "crc16", *, retries: int = 3, timeout: float = 0.3,
+            **kw) -> Link:
     """A link to `emulator` over an in-memory line."""
-    return Link(PairPort(emulator), get_framing(framing), bus="test", line=LineSettings(), timeout=timeout, retries=retries, **kw)
+    return Link(PairPort(emulator), get_framing(framing), bus="test", line=LineSettings(), timeout=timeout,
+                retries=retries, **kw)
 
 
 def test_a_link_reads_back_over_socket():
     """The link over pyserial's socket:// to the emulator's TCP server: what `connect` does in memory."""
-    programs = {n: Program(P=100 + n, V=200, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1) for n in range(1, 9)}
+    programs = {n: Program(P=100 + n, V=200, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1)
+                for n in range(1, 9)}
     state = teach(ModuleState.factory(7), programs)
     with Emulator({7: state}) as emulator:
         host, port = emulator.listen()
-        link = Link(open_port(f"socket://{host}:{port}", LineSettings(), bus="test"), get_framing("crc16"), bus="test")
+        link = Link(open_port(f"socket://{host}:{port}", LineSettings(), bus="test"), get_framing("crc16"),
+                    bus="test")
         try:
             image = read_module(link, 7, range(1, 9))
         finally:
@@ -58,7 +62,8 @@ def test_a_link_reads_back_over_socket():
 
 @pytest.mark.parametrize("framing", FRAMINGS)
 def test_read_back_of_a_full_module_takes_17_exchanges(framing):
-    programs = {n: Program(P=100 + n, V=200, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1) for n in range(1, 65)}
+    programs = {n: Program(P=100 + n, V=200, Vr=-n, T=n, F1=1000 + n, F2=n, A=(n % 64) + 1)
+                for n in range(1, 65)}
     state = teach(ModuleState.factory(7), programs)
     with Emulator({7: state}, framing=framing) as emulator:
         link = connect(emulator, framing)
@@ -97,7 +102,8 @@ def test_read_messages_are_the_fewest(programs, expected):
 def test_retries_survive_lost_and_damaged_frames():
     with Emulator({1: ModuleState.factory(1)}, faults=FaultInjection(0.3, 0.2, seed=3)) as emulator:
         trace_text = io.StringIO()
-        link = connect(emulator, retries=8, timeout=0.02, trace=Trace(trace_text))  # in memory: every reply is there at once
+        # in memory: every reply is there at once
+        link = connect(emulator, retries=8, timeout=0.02, trace=Trace(trace_text))
         for n in range(1, 21):
             assert link.request(1, codec.WriteSpeeds(((n, 100 + n),))) == 0
         link.port.close()
@@ -109,8 +115,10 @@ def test_retries_survive_lost_and_damaged_frames():
 def test_a_silent_module_names_bus_and_address():
     with Emulator({1: ModuleState.factory(1)}) as emulator:
         link = connect(emulator, retries=1, timeout=0.1)
-        # the bus's 0.1 s on top of the line's own 0.053 s: a 50h's frames at 9600 baud 8E1 with the margin, the turnaround
-        with pytest.raises(LinkError, match=r"^bus test, module 4: no reply within 0.153 s to 50h after 2 attempts"):
+        # the bus's 0.1 s on top of the line's own 0.053 s: a 50h's frames at 9600 baud 8E1 with the margin,
+        # the turnaround
+        with pytest.raises(LinkError,
+                           match=r"^bus test, module 4: no reply within 0.153 s to 50h after 2 attempts"):
             link.request(4, codec.ReadSystem())
         link.port.close()
 
@@ -144,8 +152,10 @@ def test_a_read_answered_as_a_write_after_an_unanswered_write_names_the_late_rep
             link.request(1, codec.WriteSpeeds(((1, 100),)))
         with pytest.raises(PossibleWrite) as stopped:
             link.request(1, codec.ReadSystem())
-        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — likeliest the late "
-                                             "acknowledgement of a write to it (41h) that went unanswered at first")  # fmt: skip
+        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — "
+                                             "likeliest the late "
+                                             "acknowledgement of a write to it (41h) that went "
+                                             "unanswered at first")  # fmt: skip
         assert "travel the module to its reference point" in str(stopped.value)
 
 
@@ -163,7 +173,8 @@ def test_a_read_answered_as_a_write_with_no_write_owed_blames_a_duplicate_alone(
         port.write(get_framing("crc16").encode(Direction.REQUEST, 1, codec.WriteSpeeds(((3, 100),)).encode()))
         with pytest.raises(PossibleWrite) as stopped:
             link.request(1, codec.ReadSystem())
-        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — likeliest a duplicated ack")
+        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — "
+                                             "likeliest a duplicated ack")
 
 
 def test_an_unanswered_write_to_another_module_does_not_explain_an_acknowledged_read():
@@ -175,10 +186,13 @@ def test_an_unanswered_write_to_another_module_does_not_explain_an_acknowledged_
         with pytest.raises(LinkError, match="no reply within"):
             link.request(2, codec.WriteSpeeds(((1, 100),)))
         port.late = 1
-        port.write(get_framing("crc16").encode(Direction.REQUEST, 1, codec.WriteSpeeds(((3, 100),)).encode()))  # another master's
+        # another master's
+        port.write(get_framing("crc16").encode(Direction.REQUEST, 1, codec.WriteSpeeds(((3, 100),)).encode()))
         with pytest.raises(PossibleWrite) as stopped:
-            link.request(1, codec.ReadSystem())  # answered by module 2's late acknowledgement (ignored), then module 1's
-        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — likeliest a duplicated ack")
+            # answered by module 2's late acknowledgement (ignored), then module 1's
+            link.request(1, codec.ReadSystem())
+        assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — "
+                                             "likeliest a duplicated ack")
 
 
 def test_a_wrong_framing_is_a_silent_line():
@@ -261,7 +275,8 @@ def test_a_fresh_pty_that_drops_parity_is_refused_at_once_in_one_line(use):
         if use == "second":
             with pytest.raises(UserError):
                 open_port(name, LineSettings(parity="even"), bus="b")
-        with pytest.raises(UserError, match=rf"^bus b: port {name} refuses 8 data bits, parity even, 1 stop bits — "):
+        with pytest.raises(UserError,
+                           match=rf"^bus b: port {name} refuses 8 data bits, parity even, 1 stop bits — "):
             open_port(name, LineSettings(parity="even"), bus="b")
         open_port(name, LineSettings(parity="none"), bus="b").close()  # what a pty can carry
     finally:
@@ -293,7 +308,8 @@ def test_a_reply_split_by_a_pause_over_tcp_is_taken_whole(framing):
         read, heard, silent = port.read, [], []
 
         def read_and_count_silence(size: int = 1) -> bytes:
-            data = read(size)  # an empty read has waited a read slice (50 ms): 150 ms > 63 ms for stx, 5.7 ms for crc16
+            # an empty read has waited a read slice (50 ms): 150 ms > 63 ms for stx, 5.7 ms for crc16
+            data = read(size)
             heard.append(data) if data else silent.append(heard != [])
             if sum(silent) == 3:
                 paused.set()
@@ -313,7 +329,8 @@ def test_a_reply_split_by_a_pause_over_tcp_is_taken_whole(framing):
 
 def emulator_bus(port: str) -> SimpleNamespace:
     """A plant bus with one module, as `open_link` reads it."""
-    return SimpleNamespace(name="b1", port=port, framing="crc16", line=LineSettings(), zvz=0.020, turnaround=0.010,
+    return SimpleNamespace(name="b1", port=port, framing="crc16", line=LineSettings(), zvz=0.020,
+                           turnaround=0.010,
                            timeout=5.0, modules=[SimpleNamespace(address=1)])  # fmt: skip
 
 
@@ -322,9 +339,11 @@ def test_an_emulator_at_line_speed_answers_no_sooner_than_the_line_would(tmp_pat
         started = time.monotonic()
         assert link.request(1, codec.ReadSystem()) == codec.SystemReply(DEFAULT_SYSTEM, 1)
         took = time.monotonic() - started
-    line_time = LineCost.of("crc16", LineSettings(baud=1200), 0.010, 0.020).message_time(1, codec.ReadSystem())
+    line_time = LineCost.of("crc16", LineSettings(baud=1200), 0.010,
+                            0.020).message_time(1, codec.ReadSystem())
     assert took >= line_time  # 34 bytes of 11 bits at 1200 baud and the turnaround: 0.32 s
-    assert (tmp_path / ".prc3cfg" / "emulators" / "rehearsal.json").exists()  # the query is no part of the name
+    # the query is no part of the name
+    assert (tmp_path / ".prc3cfg" / "emulators" / "rehearsal.json").exists()
     assert link.takes_line_time  # so a broadcast waits as on the line
 
 
@@ -340,13 +359,16 @@ def test_an_emulator_takes_frames_at_once_so_a_broadcast_waits_for_nothing(tmp_p
     [
         ("?speed=9600", f"unknown option 'speed' — emulator:// takes {EMULATOR_KEYS}"),
         ("?line-speed=9600&trace=1", f"unknown option 'trace' — emulator:// takes {EMULATOR_KEYS}"),
-        ("?line-speed=fast", "line-speed 'fast' is not a baud rate — write a whole number, e.g. line-speed=9600"),
+        ("?line-speed=fast",
+         "line-speed 'fast' is not a baud rate — write a whole number, e.g. line-speed=9600"),
         ("?line-speed=0", "line-speed '0' is not a baud rate — write a whole number, e.g. line-speed=9600"),
         ("?line-speed", "line-speed '' is not a baud rate — write a whole number, e.g. line-speed=9600"),
         ("?line-speed=9600&line-speed=1200", "line-speed is given more than once — give it once"),
-        ("?turnaround=10ms", "turnaround '10ms' is not a time of 0..10 s — write seconds, e.g. turnaround=0.010"),
+        ("?turnaround=10ms",
+         "turnaround '10ms' is not a time of 0..10 s — write seconds, e.g. turnaround=0.010"),
         ("?jitter=-1", "jitter '-1' is not a time of 0..10 s — write seconds, e.g. jitter=0.010"),
-        ("?module-turnaround=31:0.01", "module-turnaround '31:0.01' is not ADDRESS:SECONDS — write e.g. module-turnaround=3:0.040"),
+        ("?module-turnaround=31:0.01",
+         "module-turnaround '31:0.01' is not ADDRESS:SECONDS — write e.g. module-turnaround=3:0.040"),
         ("?seed=x", "seed 'x' is not a seed — write a whole number, e.g. seed=1"),
     ],
 )

@@ -43,7 +43,8 @@ import pytest
 
 #: Every race on one worker, whose module fixtures start the lines' servers once (once a worker, when spread).
 pytestmark = pytest.mark.xdist_group("lock_race")
-LINES = 2  # raced side by side, each with its own emulator and lock: a wave; the soak tier's counts are multiples of it
+# raced side by side, each with its own emulator and lock: a wave; the soak tier's counts are multiples of it
+LINES = 2
 #: Races per test: a few in the fast tier, the acceptance's 200 in the soak tier.
 ROUNDS = [LINES, pytest.param(200, marks=pytest.mark.soak)]
 READS = {0x50, 0x51, 0x52}
@@ -88,7 +89,8 @@ def _child(plant: Path, release: int) -> None:
     os.dup2(out, 1)
     os.dup2(err, 2)
     code = 70
-    if os.environ.get("RACE_OWN_TMPDIR"):  # each apply in a shell of its own: its own TMPDIR, no PRC3CFG_LOCK_DIR
+    # each apply in a shell of its own: its own TMPDIR, no PRC3CFG_LOCK_DIR
+    if os.environ.get("RACE_OWN_TMPDIR"):
         os.environ["TMPDIR"] = str(plant.parent)
         os.environ.pop("PRC3CFG_LOCK_DIR", None)
         tempfile.tempdir = None
@@ -191,11 +193,13 @@ def waves() -> Iterator[int]:
     return itertools.count()
 
 
-def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iterator[int], own_tmpdir: bool = False) -> list[dict]:
+def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iterator[int],
+          own_tmpdir: bool = False) -> list[dict]:
     """Run the driver in a process of its own (no thread of pytest's, no BLAS threads); with
     `own_tmpdir` every apply has its own TMPDIR and the machine's lock folder."""
     numbers = [next(waves) for _ in range(rounds // LINES)]
-    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+    env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1",
+           "OMP_NUM_THREADS": "1",
            **({"RACE_OWN_TMPDIR": "1"} if own_tmpdir else {})}  # fmt: skip
     command = [sys.executable, __file__, str(tmp_path), str(len(numbers)), str(numbers[0]), json.dumps(lines)]
     driver = subprocess.run(command, env=env, capture_output=True, text=True)
@@ -203,7 +207,8 @@ def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iter
     return json.loads(driver.stdout)
 
 
-def _judge(results: list[dict], rounds: int, refusal: str | tuple[str, ...] = "the line is locked by") -> None:
+def _judge(results: list[dict], rounds: int,
+           refusal: str | tuple[str, ...] = "the line is locked by") -> None:
     """In every race exactly one apply wrote, and completed; each other one was refused (`refusal`)
     or found nothing left to do."""
     refusals = (refusal,) if isinstance(refusal, str) else refusal
@@ -217,7 +222,9 @@ def _judge(results: list[dict], rounds: int, refusal: str | tuple[str, ...] = "t
         for other in set(range(len(r["writes"]))) - set(writer):
             refused = r["codes"][other] == 1 and any(text in r["err"][other] for text in refusals)
             idle = r["codes"][other] == 0 and "Nothing to do" in r["out"][other]
-            assert refused or idle, f"{r['race']}: apply {other} neither was refused nor found nothing to do: {r}"
+            assert (
+                refused or idle
+            ), f"{r['race']}: apply {other} neither was refused nor found nothing to do: {r}"
 
 
 @pytest.mark.parametrize("rounds", ROUNDS)
@@ -235,30 +242,38 @@ def test_two_spellings_of_one_address_never_both_write(tmp_path, lines, waves, r
 def test_two_applies_with_their_own_tmpdir_never_both_write(tmp_path, lines, waves, rounds):
     """Two shells with another TMPDIR and no PRC3CFG_LOCK_DIR: both wrote in 4 of 5 races when the
     lock folder followed TMPDIR."""
-    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], rounds, waves, own_tmpdir=True), rounds)
+    _judge(_race(tmp_path, [(f"socket://127.0.0.1:{p}",) * 2 for p in lines], rounds, waves, own_tmpdir=True),
+           rounds)
 
 
 @pytest.mark.parametrize("rounds", [LINES, pytest.param(200, marks=pytest.mark.soak)])
 def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_address, waves, rounds):
     spellings = [(f"socket://127.0.0.1:{p}", f"socket://127.0.0.2:{p}") for p in lines_on_every_address]
-    _judge(_race(tmp_path, spellings, rounds, waves), rounds, refusal="the gateway is busy: another client holds the line")
+    _judge(_race(tmp_path, spellings, rounds, waves), rounds,
+           refusal="the gateway is busy: another client holds the line")
 
 
 #: Every spelling of one gateway listening on 0.0.0.0 a client can use: each resolves to a lock key of
 #: its own or shares one — either way the gateway, or the lock, lets one writer through.
-SPELLINGS = ["socket://127.0.0.1:{p}", "socket://localhost:{p}", "socket://127.0.0.2:{p}", "socket://0.0.0.0:{p}",
+SPELLINGS = ["socket://127.0.0.1:{p}", "socket://localhost:{p}", "socket://127.0.0.2:{p}",
+             "socket://0.0.0.0:{p}",
              "socket://127.0.0.3:{p}", "socket://[::ffff:127.0.0.1]:{p}"]  # fmt: skip
 
 
-@pytest.mark.parametrize(("racers", "rounds"), [(6, LINES), *[pytest.param(k, 20, marks=pytest.mark.soak) for k in range(2, 7)]])
-def test_two_to_six_applies_with_every_spelling_and_environment_never_overlap(tmp_path, lines_on_every_address, waves, racers, rounds):
+@pytest.mark.parametrize(("racers", "rounds"),
+                         [(6, LINES), *[pytest.param(k, 20, marks=pytest.mark.soak) for k in range(2, 7)]])
+def test_two_to_six_applies_with_every_spelling_and_environment_never_overlap(tmp_path,
+                                                                              lines_on_every_address, waves,
+                                                                              racers, rounds):
     """2–6 applies at once on one line, each through another spelling of the gateway and in a shell of
     its own (its own TMPDIR, no PRC3CFG_LOCK_DIR: the machine's lock folder): one writes, the others are
     refused by the lock or by the gateway, or find nothing left to do. Soak: 100 races."""
     spellings = [tuple(SPELLINGS[i].format(p=p) for i in range(racers)) for p in lines_on_every_address]
     _judge(_race(tmp_path, spellings, rounds, waves, own_tmpdir=True), rounds,
-           refusal=("the line is locked by", "the gateway is busy: another client holds the line"))  # fmt: skip
+           refusal=("the line is locked by", "the gateway is busy: another client "
+                                             "holds the line"))  # fmt: skip
 
 
 if __name__ == "__main__":  # the driver: WORKDIR WAVES FIRST_WAVE LINES (JSON: [[port, port], …])
-    json.dump(drive(json.loads(sys.argv[4]), int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[1])), sys.stdout)
+    json.dump(drive(json.loads(sys.argv[4]), int(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[1])),
+              sys.stdout)

@@ -49,10 +49,13 @@ KEY = "tcp/127.0.0.1/7001"
 
 
 @contextlib.contextmanager
-def holding(*argv: str, script: str = HOLDER, env: dict[str, str] | None = None, command: list[str] | None = None):
-    """A process that holds a lock until its stdin gets a line (or closes); `command` runs it otherwise (as another user)."""
+def holding(*argv: str, script: str = HOLDER, env: dict[str, str] | None = None,
+            command: list[str] | None = None):
+    """A process that holds a lock until its stdin gets a line (or closes); `command` runs it otherwise (as
+    another user)."""
     command = command or [sys.executable, "-c", script, *argv]
-    process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env, cwd=Path(__file__).resolve().parents[1])
+    process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+                               cwd=Path(__file__).resolve().parents[1])
     try:
         assert process.stdout.readline() == "locked\n"
         yield process
@@ -73,7 +76,8 @@ def test_a_held_line_is_refused_naming_the_holder():
                 pass
     assert str(refused.value).startswith("bus a (socket://127.0.0.1:7001): the line is locked by ")
     assert f"@{socket.gethostname()} (pid {holder.pid}, apply since 20" in str(refused.value)
-    assert str(refused.value).endswith(") as its lock file says — wait for it to finish, or pass --lock-timeout SECONDS to wait")
+    assert str(refused.value).endswith(") as its lock file says — wait for it to finish, or pass "
+                                       "--lock-timeout SECONDS to wait")
 
 
 def test_the_lock_file_names_the_holder_while_held_and_stays():
@@ -99,7 +103,8 @@ def test_the_lock_dies_with_its_process():
             assert json.loads(path.read_text())["pid"] == os.getpid()
 
 
-@pytest.mark.parametrize("content", ["", "{garbage", '{"holder": "alice@floor", "pid": 99999999, "since": "2026"}'])
+@pytest.mark.parametrize("content",
+                         ["", "{garbage", '{"holder": "alice@floor", "pid": 99999999, "since": "2026"}'])
 def test_a_lock_file_left_behind_does_not_block(content):
     lock_path(KEY).parent.mkdir(parents=True)
     lock_path(KEY).write_text(content)
@@ -129,13 +134,15 @@ def test_waiting_is_told_once_naming_the_holder_and_the_lock_follows_its_release
             assert json.loads(path.read_text())["pid"] == os.getpid()
     (text,) = told
     assert text.startswith("bus a (socket://127.0.0.1:7001): waiting for the line lock held by ")
-    assert f"(pid {holder.pid}, apply since 20" in text and text.endswith(") as its lock file says — up to 600 s")
+    assert (f"(pid {holder.pid}, apply since 20" in text
+            and text.endswith(") as its lock file says — up to 600 s"))
 
 
 def test_a_wait_that_runs_out_is_refused_and_told_once():
     told = []
     with held(KEY):
-        refusal = r"^bus a: the line is locked by .* after waiting 0.3 s — wait for it to finish, or pass a longer --lock-timeout$"
+        refusal = (r"^bus a: the line is locked by .* after waiting 0.3 s — wait for it to finish, or pass "
+                   r"a longer --lock-timeout$")
         with pytest.raises(LineBusy, match=refusal):
             with line_lock((KEY,), "bus a", timeout=0.3, waiting=told.append):
                 pass
@@ -176,7 +183,8 @@ def test_shared_directory_and_files_whatever_the_umask(tmp_path, monkeypatch):
     finally:
         os.umask(previous)
     assert stat.S_IMODE(path.parent.stat().st_mode) == 0o1777
-    assert stat.S_IMODE(path.stat().st_mode) == 0o644  # every user reads who holds it; only its owner writes it
+    # every user reads who holds it; only its owner writes it
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
 
 
 # A process trying a lock, at once: prints "took" or the refusal.
@@ -195,7 +203,8 @@ def without_lock_dir(tmpdir) -> dict[str, str]:
     """This environment without PRC3CFG_LOCK_DIR, with its own TMPDIR (and user and home)."""
     env = {k: v for k, v in os.environ.items() if k != "PRC3CFG_LOCK_DIR"}
     tmpdir.mkdir()
-    return {**env, "TMPDIR": str(tmpdir), "TMP": str(tmpdir), "TEMP": str(tmpdir), "HOME": str(tmpdir), "USER": tmpdir.name}
+    return {**env, "TMPDIR": str(tmpdir), "TMP": str(tmpdir), "TEMP": str(tmpdir), "HOME": str(tmpdir),
+            "USER": tmpdir.name}
 
 
 def test_the_lock_is_one_place_for_the_machine_whatever_the_environment(tmp_path):
@@ -204,9 +213,13 @@ def test_the_lock_is_one_place_for_the_machine_whatever_the_environment(tmp_path
     key = f"test/{uuid.uuid4()}"  # machine-wide: a key no other run uses
     first, second = without_lock_dir(tmp_path / "alice"), without_lock_dir(tmp_path / "bob")
     with holding(json.dumps([key]), env=first) as holder:
-        tried = subprocess.run([sys.executable, "-c", TRIER, json.dumps([key])], env=second, capture_output=True, text=True)
-    assert tried.stdout.startswith("bus a: the line is locked by ") and f"(pid {holder.pid}, " in tried.stdout, tried
-    folder = Path(subprocess.run([sys.executable, "-c", "from prc3cfg.shell.locks import lock_dir; print(lock_dir())"],
+        tried = subprocess.run([sys.executable, "-c", TRIER, json.dumps([key])], env=second,
+                               capture_output=True, text=True)
+    assert (
+        tried.stdout.startswith("bus a: the line is locked by ") and f"(pid {holder.pid}, " in tried.stdout
+    ), tried
+    folder = Path(subprocess.run([sys.executable, "-c",
+                                  "from prc3cfg.shell.locks import lock_dir; print(lock_dir())"],
                                  env=first, capture_output=True, text=True, check=True).stdout.strip())  # fmt: skip
     assert folder in (Path("/run/lock/prc3cfg"), Path("/var/lock/prc3cfg"), Path("/tmp/prc3cfg-locks"))
     assert stat.S_IMODE(folder.stat().st_mode) == 0o1777
@@ -217,9 +230,11 @@ def test_the_lock_is_one_place_for_the_machine_whatever_the_environment(tmp_path
     ("shared", "chosen"),
     [
         ({"run/lock": 0o1777, "var/lock": 0o1777, "tmp": 0o1777}, "run/lock/prc3cfg"),
-        ({"run/lock": 0o755, "var/lock": 0o1777, "tmp": 0o1777}, "var/lock/prc3cfg"),  # a lock folder only root writes
+        # a lock folder only root writes
+        ({"run/lock": 0o755, "var/lock": 0o1777, "tmp": 0o1777}, "var/lock/prc3cfg"),
         ({"run/lock": 0o755, "tmp": 0o1777}, "tmp/prc3cfg-locks"),
-        ({"run/lock": 0o755, "run/lock/prc3cfg": 0o1777, "tmp": 0o1777}, "run/lock/prc3cfg"),  # made by an administrator
+        # made by an administrator
+        ({"run/lock": 0o755, "run/lock/prc3cfg": 0o1777, "tmp": 0o1777}, "run/lock/prc3cfg"),
         ({"tmp": 0o1777, "tmp/prc3cfg-locks": 0o1777}, "tmp/prc3cfg-locks"),
         ({}, "tmp/prc3cfg-locks"),
     ],
@@ -229,7 +244,8 @@ def test_the_lock_folder_is_chosen_by_the_machine_not_by_who_asks(tmp_path, monk
         (tmp_path / folder).mkdir(parents=True, exist_ok=True)
         (tmp_path / folder).chmod(mode)
     monkeypatch.delenv("PRC3CFG_LOCK_DIR")
-    monkeypatch.setattr(locks, "LOCK_FOLDERS", tuple((tmp_path / base.relative_to("/"), name) for base, name in locks.LOCK_FOLDERS))
+    monkeypatch.setattr(locks, "LOCK_FOLDERS",
+                        tuple((tmp_path / base.relative_to("/"), name) for base, name in locks.LOCK_FOLDERS))
     assert lock_dir() == tmp_path / chosen
 
 
@@ -269,7 +285,8 @@ def other_user() -> pwd.struct_passwd:
         pass
     if shutil.which("useradd") is None:
         pytest.skip(f"no useradd to make the user {OTHER}")
-    made = subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", OTHER], capture_output=True, text=True)
+    made = subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", OTHER],
+                          capture_output=True, text=True)
     try:
         return pwd.getpwnam(OTHER)
     except KeyError:
@@ -294,7 +311,8 @@ def as_other(user: pwd.struct_passwd, script: str, *argv: str) -> list[str]:
     setpriv = shutil.which("setpriv")
     if setpriv is None:
         pytest.skip("no setpriv to run a process as another user")
-    return [setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups", sys.executable, "-c", script, *argv]
+    return [setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups", sys.executable,
+            "-c", script, *argv]
 
 
 @pytest.mark.parametrize("owner", [OTHER, "uid 54321"])
@@ -311,19 +329,23 @@ def test_a_lock_folder_another_user_owns_is_refused(owner):
     with pytest.raises(UserError) as refused:
         with line_lock((KEY,), "bus a"):
             pass
-    assert str(refused.value) == (f"bus a: the lock directory {folder} belongs to {name}, who could remove the locks in it, "
-                                  "so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")  # fmt: skip
+    assert str(refused.value) == (f"bus a: the lock directory {folder} belongs to {name}, who could remove "
+                                  "the locks in it, "
+                                  "so it is not used — an administrator removes it, or set "
+                                  "PRC3CFG_LOCK_DIR")  # fmt: skip
     assert list(folder.iterdir()) == []
 
 
 @pytest.mark.parametrize("target", ["a folder", "nothing"])
 def test_a_symlink_in_place_of_the_lock_folder_is_not_followed(tmp_path, target):
-    """A symlink someone put where the lock folder goes made root make world-writable files where it points."""
+    """A symlink someone put where the lock folder goes made root make world-writable files where it
+    points."""
     elsewhere = tmp_path / "elsewhere"
     if target == "a folder":
         elsewhere.mkdir()
     lock_dir().symlink_to(elsewhere)
-    refusal = r"^bus a: the lock directory .*/locks is a symbolic link, not used — an administrator removes it, or set PRC3CFG_LOCK_DIR$"
+    refusal = (r"^bus a: the lock directory .*/locks is a symbolic link, not used — an administrator "
+               r"removes it, or set PRC3CFG_LOCK_DIR$")
     with pytest.raises(UserError, match=refusal):
         with line_lock((KEY,), "bus a"):
             pass
@@ -337,7 +359,9 @@ def test_a_second_name_of_another_file_is_not_a_lock_file(tmp_path):
     precious.write_text("root:secret\n")
     lock_dir().mkdir()
     os.link(precious, lock_path(KEY))
-    with pytest.raises(UserError, match=r"^bus a: the line lock .* is a second name of another file, not used — an administrator"):
+    with pytest.raises(UserError,
+                       match=r"^bus a: the line lock .* is a second name of another file, not used — an "
+                             r"administrator"):
         with line_lock((KEY,), "bus a"):
             pass
     assert precious.read_text() == "root:secret\n"
@@ -346,7 +370,8 @@ def test_a_second_name_of_another_file_is_not_a_lock_file(tmp_path):
 def test_a_fifo_in_place_of_a_lock_file_is_refused_not_waited_on():
     lock_dir().mkdir()
     os.mkfifo(lock_path(KEY))
-    with pytest.raises(UserError, match=r"^bus a: the line lock .* is no plain file, not used — an administrator"):
+    with pytest.raises(UserError,
+                       match=r"^bus a: the line lock .* is no plain file, not used — an administrator"):
         with line_lock((KEY,), "bus a"):
             pass
 
@@ -370,7 +395,9 @@ def test_a_lock_file_replaced_between_its_open_and_its_lock_is_not_taken(shared_
                 lock_path(KEY).unlink()
                 command = as_other(user, HOLDER, json.dumps([KEY])) if user is not None else None
                 claims_root = {**os.environ, "USER": "root", "LOGNAME": "root"}  # getpass believes them
-                holders.append(stack.enter_context(holding(json.dumps([KEY]), command=command, env=claims_root)))
+                holders.append(
+                    stack.enter_context(holding(json.dumps([KEY]), command=command, env=claims_root))
+                )
             return try_lock(fd)
 
         monkeypatch.setattr(platform, "try_lock", replaced_first)
@@ -389,11 +416,14 @@ def test_another_user_can_neither_remove_a_held_lock_nor_take_the_line(shared_lo
     """The folder is sticky: another user's prc3cfg sees root's lock and waits, and cannot remove it."""
     user = other_user()
     with line_lock((KEY,), "bus a") as (path,):
-        remover = "import os, sys\ntry:\n    os.unlink(sys.argv[2])\nexcept OSError as e:\n    print(e.strerror)\n" + TRIER
-        tried = subprocess.run(as_other(user, remover, json.dumps([KEY]), str(path)), capture_output=True, text=True, cwd=ROOT, timeout=60)
+        remover = ("import os, sys\ntry:\n    os.unlink(sys.argv[2])\nexcept OSError as e:\n    "
+                   "print(e.strerror)\n") + TRIER
+        tried = subprocess.run(as_other(user, remover, json.dumps([KEY]), str(path)), capture_output=True,
+                               text=True, cwd=ROOT, timeout=60)
         assert path.exists()
     assert tried.stdout.splitlines()[0] == "Operation not permitted", tried
-    assert tried.stdout.splitlines()[1].startswith("bus a: the line is locked by ") and f"(pid {os.getpid()}, apply since " in tried.stdout
+    assert (tried.stdout.splitlines()[1].startswith("bus a: the line is locked by ")
+            and f"(pid {os.getpid()}, apply since " in tried.stdout)
 
 
 # Another user's prc3cfg: takes and lets go of the line once, then removes every file of its own in
@@ -422,7 +452,8 @@ def test_a_lock_file_another_user_made_is_never_the_one_held(shared_locks):
     user = other_user()
     shared_locks.mkdir(mode=0o1777)
     shared_locks.chmod(0o1777)
-    other = subprocess.Popen(as_other(user, REMOVER_THEN_TRIER, json.dumps([KEY])), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+    other = subprocess.Popen(as_other(user, REMOVER_THEN_TRIER, json.dumps([KEY])), stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE,
                              text=True, cwd=ROOT)  # fmt: skip
     try:
         assert other.stdout.readline() == "made\n"  # its lock file, made and let go of
@@ -432,7 +463,11 @@ def test_a_lock_file_another_user_made_is_never_the_one_held(shared_locks):
         other.kill()
         other.wait()
     *removed, tried = out.splitlines()
-    assert removed and tried.startswith("bus a: the line is locked by ") and f"(pid {os.getpid()}, apply since 20" in tried, out
+    assert (
+        removed
+        and tried.startswith("bus a: the line is locked by ")
+        and f"(pid {os.getpid()}, apply since 20" in tried
+    ), out
 
 
 def test_a_lock_file_in_this_users_name_that_another_user_owns_is_refused():
@@ -445,8 +480,10 @@ def test_a_lock_file_in_this_users_name_that_another_user_owns_is_refused():
     with pytest.raises(UserError) as refused:
         with line_lock((KEY,), "bus a"):
             pass
-    assert str(refused.value) == (f"bus a: the line lock {lock_path(KEY)} belongs to uid 54321, who could remove it while this process "
-                                  "holds it, so it is not used — an administrator removes it, or set PRC3CFG_LOCK_DIR")  # fmt: skip
+    assert str(refused.value) == (f"bus a: the line lock {lock_path(KEY)} belongs to uid 54321, who could "
+                                  "remove it while this process "
+                                  "holds it, so it is not used — an administrator removes it, or set "
+                                  "PRC3CFG_LOCK_DIR")  # fmt: skip
 
 
 def test_an_older_prc3cfgs_lock_file_is_seen():
@@ -466,9 +503,13 @@ def test_a_lock_file_another_user_cannot_read_counts_as_held(shared_locks):
     with line_lock((KEY,), "bus a") as (path,):
         pass
     path.chmod(0)
-    tried = subprocess.run(as_other(user, TRIER, json.dumps([KEY])), capture_output=True, text=True, cwd=ROOT, timeout=60)
-    assert tried.stdout == f"bus a: the line is locked by a process of root (uid 0) (its lock file {path} cannot be read) — " \
-                           "wait for it to finish, or pass --lock-timeout SECONDS to wait\n", tried
+    tried = subprocess.run(as_other(user, TRIER, json.dumps([KEY])), capture_output=True, text=True, cwd=ROOT,
+                           timeout=60)
+    assert (
+        tried.stdout
+        == f"bus a: the line is locked by a process of root (uid 0) (its lock file {path} cannot be read) — "
+        "wait for it to finish, or pass --lock-timeout SECONDS to wait\n"
+    ), tried
 
 
 # A racer: at every line on stdin it tries the line at once; holding it, it makes the file argv[2]
@@ -520,7 +561,8 @@ def test_two_users_racing_for_a_line_never_both_hold_it(shared_locks):
         for racer in racers:
             racer.stdin.close()
             racer.wait(timeout=60)
-    assert all(set(r) <= {"took", "busy"} for r in rounds), rounds  # "both": one made its file while the other held the line
+    # "both": one made its file while the other held the line
+    assert all(set(r) <= {"took", "busy"} for r in rounds), rounds
     assert sum("took" in r for r in rounds) >= len(rounds) // 2, rounds
 
 
@@ -528,14 +570,17 @@ def test_holder_details_are_shown_as_claims_with_the_file_owner():
     """Anyone who may write a lock file may write any holder into it: the message says whose claim it
     is, and whose file it is where that is not the user it claims."""
     lock_dir().mkdir()
-    forged = json.dumps({"holder": "alice@floor", "pid": 1, "purpose": "apply", "since": "2026-01-01T00:00:00+00:00"})
+    forged = json.dumps({"holder": "alice@floor", "pid": 1, "purpose": "apply",
+                         "since": "2026-01-01T00:00:00+00:00"})
     with holding(str(lock_path(KEY)), forged, script=RAW_HOLDER):
         with pytest.raises(LineBusy) as refused:
             with line_lock((KEY,), "bus a"):
                 pass
     owner = platform.uid_name(os.getuid())
-    assert str(refused.value) == (f"bus a: the line is locked by alice@floor (pid 1, apply since 2026-01-01T00:00:00+00:00) as its lock "
-                                  f"file says, a file of {owner} — wait for it to finish, or pass --lock-timeout SECONDS to wait")  # fmt: skip
+    assert str(refused.value) == ("bus a: the line is locked by alice@floor (pid 1, apply since "
+                                  "2026-01-01T00:00:00+00:00) as its lock "
+                                  f"file says, a file of {owner} — wait for it to finish, or pass "
+                                  "--lock-timeout SECONDS to wait")  # fmt: skip
 
 
 # -- the identities of a line --------------------------------------------------------------
@@ -606,7 +651,9 @@ def test_an_emulator_is_known_by_its_state_file(tmp_path):
     state = tmp_path / "plant" / ".prc3cfg" / "emulators" / "demo-a.json"
     via_link = tmp_path / "checkout" / ".prc3cfg" / "emulators" / "demo-a.json"
     assert line_keys("emulator://demo-a", emulator_state=via_link) == (f"emulator/{os.path.realpath(state)}",)
-    assert line_keys("emulator://demo-a", emulator_state=state) != line_keys("emulator://demo-b", emulator_state=state.with_name("demo-b.json"))
+    assert line_keys("emulator://demo-a", emulator_state=state) != line_keys(
+        "emulator://demo-b", emulator_state=state.with_name("demo-b.json")
+    )
     with pytest.raises(ValueError, match="emulator_state"):
         line_keys("emulator://demo-a")
 

@@ -31,7 +31,8 @@ def built(kind: codec.ItemsKind, n: int) -> codec.Message:
 
 
 def test_the_table_has_the_rows_the_protocol_draws() -> None:
-    table = [(k.message.ID, k.header_bytes, k.item_bytes, k.capacity, k.fields, k.broadcast) for k in codec.ITEMS_KINDS.values()]
+    table = [(k.message.ID, k.header_bytes, k.item_bytes, k.capacity, k.fields, k.broadcast)
+             for k in codec.ITEMS_KINDS.values()]
     assert table == ROWS
 
 
@@ -45,14 +46,23 @@ def test_a_row_gives_the_bytes_of_every_message_of_its_kind(kind: codec.ItemsKin
         assert message.size() == len(message.encode()) == kind.header_bytes + n * kind.item_bytes
         for way in framings:  # the frame bus time is priced by (`bustime`), stuffing aside
             frame = way.encode(Direction.REQUEST, 1, message.encode())
-            assert way.frame_length(message.size()) + way.stuffing(Direction.REQUEST, 1, message.encode()) == len(frame)
+            assert (way.frame_length(message.size())
+                    + way.stuffing(Direction.REQUEST, 1, message.encode()) == len(frame))
         assert {name for name, _ in message.checked_values()} == set(kind.fields)
         assert kind.messages(n) == 1 and kind.in_last(n) == n
     with pytest.raises(codec.MessageError):
         built(kind, kind.capacity + 1)
     assert kind.messages(0) == 0
-    assert [kind.messages(n) for n in (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)] == [2, 2, 3]
-    assert [kind.in_last(n) for n in (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)] == [1, kind.capacity, 1]
+    assert [kind.messages(n) for n in (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)] == [
+        2,
+        2,
+        3,
+    ]
+    assert [kind.in_last(n) for n in (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)] == [
+        1,
+        kind.capacity,
+        1,
+    ]
 
 
 def test_every_field_of_a_program_has_one_kind_of_its_own() -> None:

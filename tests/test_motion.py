@@ -48,11 +48,13 @@ TOLERANCE = 1e-9
 
 def image(programs: dict[int, Program], **system: int) -> ModuleImage:
     """A module image holding only `programs` (others not read), with these system parameters."""
-    return ModuleImage(1, replace(DEFAULT_SYSTEM, **system), tuple(programs.get(n) for n in range(1, PROGRAM_COUNT + 1)))
+    return ModuleImage(1, replace(DEFAULT_SYSTEM, **system),
+                       tuple(programs.get(n) for n in range(1, PROGRAM_COUNT + 1)))
 
 
 TWO_PROGRAMS = image(
-    {1: Program(P=2000, V=500, T=10, F1=1100, F2=1050, A=2), 2: Program(P=200, V=400, T=0, F1=200, F2=100, A=1)},
+    {1: Program(P=2000, V=500, T=10, F1=1100, F2=1050, A=2),
+     2: Program(P=200, V=400, T=0, F1=200, F2=100, A=1)},
     S1=2500, S2=50, S6=1200,
 )
 
@@ -72,8 +74,10 @@ def test_the_known_two_program_loop_matches_the_hand_calculation():
     assert (move1.start, move1.start_position, move1.end_position) == (0.0, 0.05, 2.0)
     assert close(move1.ramp, Fraction(5, 12)) and move1.peak == 0.5
     assert close(move1.end, Fraction(259, 60))
-    assert close(move1.position(float(Fraction(5, 12))), Fraction(1, 20) + Fraction(5, 48))  # end of acceleration
-    assert close(move1.position(float(Fraction(259, 60) - Fraction(5, 12))), 2 - Fraction(5, 48))  # start of deceleration
+    # end of acceleration
+    assert close(move1.position(float(Fraction(5, 12))), Fraction(1, 20) + Fraction(5, 48))
+    # start of deceleration
+    assert close(move1.position(float(Fraction(259, 60) - Fraction(5, 12))), 2 - Fraction(5, 48))
     # dwell 1: a plateau of 1.0 s at P1
     assert close(dwell1.start, Fraction(259, 60)) and close(dwell1.end, Fraction(319, 60))
     assert dwell1.start_position == dwell1.end_position == 2.0
@@ -83,7 +87,8 @@ def test_the_known_two_program_loop_matches_the_hand_calculation():
     assert dwell2.start == dwell2.end == move2.end
     # turning points, the pass, the cycle
     assert [(p.program, p.position) for p in motion.turning_points] == [(1, 2.0), (2, 0.2)]
-    assert close(motion.turning_points[0].time, Fraction(259, 60)) and close(motion.turning_points[1].time, Fraction(609, 60))
+    assert close(motion.turning_points[0].time, Fraction(259, 60)) and close(motion.turning_points[1].time,
+                                                                             Fraction(609, 60))
     assert close(motion.duration, Fraction(609, 60))
     assert close(motion.cycle_time, Fraction(591, 60))
     # the outputs
@@ -132,7 +137,8 @@ def test_an_output_set_for_no_time_has_no_interval():
 
 def test_chains_are_paths_of_jumps_and_loops_are_measured_in_production():
     programs = {
-        1: Program(P=300, V=100, A=2), 2: Program(P=600, V=100, A=3), 3: Program(P=400, V=100, T=5, A=2),  # 1 runs into the loop 2 ⇄ 3
+        # 1 runs into the loop 2 ⇄ 3
+        1: Program(P=300, V=100, A=2), 2: Program(P=600, V=100, A=3), 3: Program(P=400, V=100, T=5, A=2),
         5: Program(P=300, V=100, A=6), 6: Program(P=200, V=100),  # stops
         7: Program(P=300, V=100, A=9),  # jumps to a program the image does not hold
         8: Program(P=900, V=100),  # neither jumps nor is jumped to: not a chain
@@ -149,12 +155,14 @@ def test_chains_are_paths_of_jumps_and_loops_are_measured_in_production():
 
 def test_the_relative_speed_does_not_change_the_stroke():
     with_vr = image({1: Program(P=2000, V=500, Vr=300, T=10, F1=1100, F2=1050, A=2),
-                     2: Program(P=200, V=400, Vr=-600, T=0, F1=200, F2=100, A=1)}, S1=2500, S2=50, S6=1200)  # fmt: skip
+                     2: Program(P=200, V=400, Vr=-600, T=0, F1=200, F2=100, A=1)}, S1=2500, S2=50,
+                    S6=1200)  # fmt: skip
     assert chain_motions(with_vr) == chain_motions(TWO_PROGRAMS)
 
 
 def test_paired_chains_pair_by_first_program_and_keep_the_changed():
-    changed = TWO_PROGRAMS.with_programs({1: Program(P=1800, V=500, T=10, A=2), 5: Program(P=400, V=100, A=6), 6: Program(P=300, V=100)})
+    changed = TWO_PROGRAMS.with_programs({1: Program(P=1800, V=500, T=10, A=2), 5: Program(P=400, V=100, A=6),
+                                          6: Program(P=300, V=100)})
     pairs = paired_chains(TWO_PROGRAMS, changed)
     assert [(b and b.programs, a and a.programs) for b, a in pairs] == [((1, 2), (1, 2)), (None, (5, 6))]
     unchanged = TWO_PROGRAMS.with_programs({5: Program(P=400, V=100, A=6), 6: Program(P=300, V=100)})
@@ -164,7 +172,8 @@ def test_paired_chains_pair_by_first_program_and_keep_the_changed():
 @pytest.mark.parametrize(("program", "system", "message"), [
     (Program(P=300, V=0, A=1), {}, "module 1, program 1: speed V = 0 — the axis does not move at it"),
     (Program(P=300, V=100, F2=2000, A=1), {}, "module 1, program 1: F2 = 2000 is outside 0..1999"),
-    (Program(P=300, V=100, A=1), {"S6": 0}, "module 1: acceleration S6 = 0 — the motion cannot be worked out without one"),
+    (Program(P=300, V=100, A=1), {"S6": 0},
+     "module 1: acceleration S6 = 0 — the motion cannot be worked out without one"),
 ])  # fmt: skip
 def test_a_damaged_read_back_is_one_line(program, system, message):
     with pytest.raises(MotionError) as raised:
@@ -187,7 +196,8 @@ def chain_images(draw) -> tuple[ModuleImage, tuple[int, ...], bool]:
         target = numbers[i + 1] if i + 1 < len(numbers) else (numbers[0] if loop else 0)
         programs[number] = Program(
             P=draw(st.integers(0, s1)), V=draw(st.integers(1, 600)), Vr=draw(st.integers(-600, 600)),
-            T=draw(st.integers(0, 600)), F1=draw(st.integers(0, 1999)), F2=draw(st.integers(0, 1999)), A=target,
+            T=draw(st.integers(0, 600)), F1=draw(st.integers(0, 1999)), F2=draw(st.integers(0, 1999)),
+                                   A=target,
         )  # fmt: skip
     return image(programs, **system), numbers, loop
 
@@ -227,12 +237,14 @@ def test_the_motion_keeps_to_the_axis_and_to_the_programs(case):
         assert close(dwell.end - dwell.start, program.T / 10)
         assert dwell.start_position == dwell.end_position == move.end_position
         assert close(motion.position((dwell.start + dwell.end) / 2), program.P / 1000)
-    assert motion.turning_points == tuple(TurningPoint(s.program, s.end, s.end_position) for s in motion.segments[::2])
+    assert motion.turning_points == tuple(TurningPoint(s.program, s.end, s.end_position)
+                                          for s in motion.segments[::2])
     for output in ("F1", "F2"):
         intervals = [i for i in motion.outputs if i.output == output]
         assert all(0 <= i.start < i.end <= motion.duration for i in intervals)
         assert all(a.end <= b.start for a, b in itertools.pairwise(intervals))
     if loop:
         # in production the loop comes round from the last P: a pass that starts there takes the cycle time
-        from_last = image({n: img.program(n) for n in numbers}, **{**img.system.to_json(), "S2": img.program(numbers[-1]).P})
+        from_last = image({n: img.program(n) for n in numbers},
+                          **{**img.system.to_json(), "S2": img.program(numbers[-1]).P})
         assert close(motion.cycle_time, chain_motions(from_last)[0].duration)

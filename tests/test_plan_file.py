@@ -47,7 +47,8 @@ CONTRACTS = Path(__file__).resolve().parent / "contracts"
 
 @dataclass(frozen=True)
 class Made:
-    """The plant, the images its plan was made from, and the plan file (not shown: a failing example shows the document)."""
+    """The plant, the images its plan was made from, and the plan file (not shown: a failing example shows the
+    document)."""
 
     plant: Plant = field(repr=False)
     images: dict[tuple[str, int], ModuleImage] = field(repr=False)
@@ -57,14 +58,18 @@ class Made:
 
 @pytest.fixture(scope="module")
 def made(tmp_path_factory) -> Made:
-    """The contracts' plant, its images (booth-a-right as its plan would leave it), and the plan file `plan --out` wrote."""
+    """The contracts' plant, its images (booth-a-right as its plan would leave it), and the plan file `plan
+    --out` wrote."""
     folder = tmp_path_factory.mktemp("made")
     (folder / "plant.yaml").write_bytes((CONTRACTS / "plant.yaml").read_bytes())
     plant = api.load(folder / "plant.yaml")
     images = {(bus.name, m.address): ModuleState.factory(m.address).image for bus, m in api.select(plant)}
-    right = next(change for change in api.plan(plant, images=images).modules if change.name == "booth-a-right")
+    right = next(
+        change for change in api.plan(plant, images=images).modules if change.name == "booth-a-right"
+    )
     images[(right.bus, right.address)] = right.plan.predicted
-    (folder / "images.json").write_text(json.dumps([{"bus": bus, **image.to_json()} for (bus, _), image in images.items()]))
+    (folder / "images.json").write_text(json.dumps([{"bus": bus, **image.to_json()}
+                                                    for (bus, _), image in images.items()]))
     out = folder / "plan.json"
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("PRC3CFG_LOCK_DIR", str(folder / "locks"))
@@ -72,24 +77,30 @@ def made(tmp_path_factory) -> Made:
         from prc3cfg.cli import main
 
         with pytest.raises(SystemExit) as done:
-            main(["plan", str(folder / "plant.yaml"), "--actual", str(folder / "images.json"), "--out", str(out)])
+            main(["plan", str(folder / "plant.yaml"), "--actual", str(folder / "images.json"), "--out",
+                  str(out)])
     assert done.value.code in (0, None)
     return Made(plant, images, out.read_text(), json.loads(out.read_text())["message_count"])
 
 
 def prove(made: Made, path: Path) -> PlantPlan:
     """What `apply --plan` does with the plan file at `path` before its first write: read it, prove it."""
-    return _apply.prove(path, _apply.read_plan(path, made.plant), made.plant, api.select(made.plant), made.images,
+    return _apply.prove(path, _apply.read_plan(path, made.plant), made.plant, api.select(made.plant),
+                        made.images,
                         as_it_stands(made.plant, made.plant.buses))
 
 
 def test_a_plan_file_is_read_back_as_the_plan_written(made):
-    """The writer and the reader agree: each module's steps as messages, its broadcasts, its read-back's hash."""
+    """The writer and the reader agree: each module's steps as messages, its broadcasts, its read-back's
+    hash."""
     plan = api.plan(made.plant, images=made.images)
     read = plan_file.parse(json.loads(json.dumps(plan_file.write(plan, [], render))))
     assert [(e.bus, e.address, e.name, e.state_sha256, e.steps, e.broadcasts) for e in read.modules] == [
-        (c.bus, c.address, c.name, plan_file.image_sha256(c.actual), tuple(s.message for s in c.steps), c.broadcasts) for c in plan.modules]
-    assert json.loads(made.text) == json.loads(json.dumps(plan_file.write(plan, api.left_alone(made.plant), render)))  # what plan --out wrote
+        (c.bus, c.address, c.name, plan_file.image_sha256(c.actual), tuple(s.message for s in c.steps),
+         c.broadcasts) for c in plan.modules]
+    # what plan --out wrote
+    assert json.loads(made.text) == json.loads(json.dumps(plan_file.write(plan, api.left_alone(made.plant),
+                                                                          render)))
 
 
 def reordered(value: Any) -> Any:
@@ -100,7 +111,8 @@ def reordered(value: Any) -> Any:
 
 
 def whole_as_int(value: Any) -> Any:
-    """Every float that is a whole number written as an integer, as JavaScript's `JSON.stringify` writes it."""
+    """Every float that is a whole number written as an integer, as JavaScript's `JSON.stringify` writes
+    it."""
     if isinstance(value, dict):
         return {key: whole_as_int(item) for key, item in value.items()}
     if isinstance(value, list):
@@ -113,10 +125,16 @@ RESPELT = {
     "indented by 4": lambda d: json.dumps(d, indent=4).encode(),
     "every object's keys reversed": lambda d: json.dumps(reordered(d)).encode(),
     "CRLF line endings": lambda d: json.dumps(d, indent=1).replace("\n", "\r\n").encode(),
-    "a byte-order mark and CRLF": lambda d: ("\ufeff" + json.dumps(d, indent=2).replace("\n", "\r\n")).encode(),
+    "a byte-order mark and CRLF": (
+        lambda d: ("\ufeff" + json.dumps(d, indent=2).replace("\n", "\r\n")).encode()
+    ),
     "UTF-8 instead of escapes": lambda d: json.dumps(d, ensure_ascii=False).encode(),
     "0 for 0.0": lambda d: json.dumps(whole_as_int(d), separators=(",", ":")).encode(),
-    "all of them at once": lambda d: ("\ufeff" + json.dumps(whole_as_int(reordered(d)), indent=4, ensure_ascii=False)).replace("\n", "\r\n").encode(),
+    "all of them at once": (
+        lambda d: ("\ufeff" + json.dumps(whole_as_int(reordered(d)), indent=4, ensure_ascii=False))
+        .replace("\n", "\r\n")
+        .encode()
+    ),
 }
 
 
@@ -134,7 +152,9 @@ def test_a_plan_file_written_again_by_another_tool_is_the_plan_file(made, tmp_pa
 #: Tools found on the machine that read JSON and write it again, as a CI step may.
 TOOLS = {
     "jq": ["jq", "."],
-    "node": ["node", "-e", "process.stdout.write(JSON.stringify(JSON.parse(require('fs').readFileSync(0, 'utf8')), null, 2))"],
+    "node": ["node", "-e",
+             "process.stdout.write(JSON.stringify(JSON.parse(require('fs').readFileSync(0, 'utf8')), "
+             "null, 2))"],
 }
 
 
@@ -142,7 +162,8 @@ TOOLS = {
 def test_a_plan_file_passed_through_jq_or_node_is_the_plan_file(made, tmp_path, tool):
     require(tool)
     path = tmp_path / "plan.json"
-    path.write_bytes(subprocess.run(TOOLS[tool], input=made.text.encode(), capture_output=True, check=True, timeout=60).stdout)
+    path.write_bytes(subprocess.run(TOOLS[tool], input=made.text.encode(), capture_output=True, check=True,
+                                    timeout=60).stdout)
     assert path.read_bytes() != made.text.encode()
     assert prove(made, path).message_count == made.message_count
 
@@ -168,7 +189,8 @@ def by_field(document: Any, holding: Callable[[Any], bool]) -> dict[str, list[tu
     found: dict[str, list[tuple]] = {}
     for place in places(document):
         if holding(at(document, place)):
-            found.setdefault("".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip("."), []).append(place)
+            found.setdefault("".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip("."),
+                             []).append(place)
     return found
 
 
@@ -182,7 +204,8 @@ ANYWHERE = "plant_path"
 
 
 def refusal(made: Made, tmp_path: Path, document: dict[str, Any]) -> str | None:
-    """The one line `apply --plan` refuses the plan file `document` with, before the first write; None if it proves it."""
+    """The one line `apply --plan` refuses the plan file `document` with, before the first write; None if it
+    proves it."""
     path = tmp_path / "changed.json"
     path.write_text(json.dumps(document, indent=1))
     try:
@@ -203,8 +226,10 @@ def test_each_field_of_a_plan_file_changed_is_refused(made, tmp_path):
     """Every field, at its first place: a flag flipped, a number or a text changed, a null given a value."""
     document = json.loads(made.text)
     fields = {field: found[0] for field, found in by_field(document, is_value).items() if field != ANYWHERE}
-    assert len(fields) > 30 and "estimated_phases_s.reading" in fields and "buses[].modules[].changes.fields[].text" in fields
-    accepted = [field for field, place in fields.items() if refusal(made, tmp_path, changed(document, place, other(at(document, place)))) is None]
+    assert (len(fields) > 30 and "estimated_phases_s.reading" in fields
+            and "buses[].modules[].changes.fields[].text" in fields)
+    accepted = [field for field, place in fields.items()
+                if refusal(made, tmp_path, changed(document, place, other(at(document, place)))) is None]
     assert accepted == []
 
 
@@ -213,7 +238,8 @@ def test_a_plan_file_s_version_text_is_refused_escaped_on_one_line(made, tmp_pat
     example: a new line in it split the refusal)."""
     document = changed(json.loads(made.text), ("prc3cfg_version",), "9.9\n\x1b[2J error: forged")
     assert refusal(made, tmp_path, document).endswith("made by prc3cfg 9.9\\n\\x1b[2J error: forged, this is "
-                                                      f"{json.loads(made.text)['prc3cfg_version']} — plan again with this version")
+                                                      f"{json.loads(made.text)['prc3cfg_version']} — plan "
+                                                      "again with this version")
 
 
 def test_a_bus_the_plant_file_does_not_have_is_refused_escaped_on_one_line(made, tmp_path):
@@ -224,7 +250,8 @@ def test_a_bus_the_plant_file_does_not_have_is_refused_escaped_on_one_line(made,
 
 def other(value: Any) -> Any:
     """Another value of the kind of `value` (a null becomes a text)."""
-    return {bool: lambda: not value, int: lambda: value + 1, float: lambda: value + 0.001, str: lambda: value + "0"}.get(type(value), lambda: "")()
+    return {bool: lambda: not value, int: lambda: value + 1, float: lambda: value + 0.001,
+            str: lambda: value + "0"}.get(type(value), lambda: "")()
 
 
 def same_value(a: Any, b: Any) -> bool:
@@ -238,7 +265,8 @@ OTHERS = [None, True, False, 0, -1, 2.5, "", "x", [], {}, ["x"], {"note": "revie
 
 def another(value: Any) -> st.SearchStrategy[Any]:
     """A value that is not `value`: of its kind, or of another."""
-    kind = {bool: st.just(not value), int: st.integers(-(10**6), 10**6), float: st.floats(-1e6, 1e6, allow_nan=False),
+    kind = {bool: st.just(not value), int: st.integers(-(10**6), 10**6),
+            float: st.floats(-1e6, 1e6, allow_nan=False),
             str: st.text(max_size=12)}.get(type(value), st.nothing())  # fmt: skip
     return st.one_of(kind, st.sampled_from(OTHERS)).filter(lambda other: not same_value(other, value))
 
@@ -259,11 +287,14 @@ def one_key_changed(data: st.DataObject, document: dict[str, Any]) -> dict[str, 
     if keys and data.draw(st.booleans()):
         del keys[data.draw(st.sampled_from(sorted(keys)))]
     else:
-        keys[data.draw(st.sampled_from(["note", "reviewed_by", "summary"]).filter(lambda key: key not in keys))] = "ok"
+        keys[
+            data.draw(st.sampled_from(["note", "reviewed_by", "summary"]).filter(lambda key: key not in keys))
+        ] = "ok"
     return copied
 
 
-# A few examples in the fast tier (a proof takes 0.17 s: 100 took 17 s of a worker), the soak tier's many below.
+# A few examples in the fast tier (a proof takes 0.17 s: 100 took 17 s of a worker), the soak tier's many
+# below.
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_a_plan_file_with_any_one_value_changed_is_refused(made, tmp_path, data):
@@ -281,7 +312,12 @@ def test_a_plan_file_with_a_key_added_or_left_out_is_refused(made, tmp_path, dat
 @given(data=st.data())
 def test_a_plan_file_with_any_one_of_many_more_values_or_keys_changed_is_refused(made, tmp_path, data):
     document = json.loads(made.text)
-    assert refusal(made, tmp_path, data.draw(st.sampled_from([one_value_changed, one_key_changed]))(data, document)) is not None
+    assert (
+        refusal(
+            made, tmp_path, data.draw(st.sampled_from([one_value_changed, one_key_changed]))(data, document)
+        )
+        is not None
+    )
 
 
 def test_the_one_value_left_to_the_file_is_where_the_plant_file_was(made, tmp_path):
@@ -340,17 +376,20 @@ def edited_read(targeted: Targeted, key: str, value: Any) -> Path:
 def claimed(out: str, words: str) -> None:
     """`words` are on one line of `out`, after "the plan file says", never as prc3cfg's own."""
     lines = [line for line in out.splitlines() if words in line]
-    assert lines and all("the plan file says: " in line and line.index("the plan file says: ") < line.index(words) for line in lines), out
+    assert lines and all("the plan file says: " in line
+                         and line.index("the plan file says: ") < line.index(words) for line in lines), out
 
 
 def test_show_says_who_a_plan_file_claims_verified_what_it_did_not_read_as_the_files_words(targeted, capsys):
     said = run_cli(capsys, "show", edited_read(targeted, "taken", SAFETY_OFFICER))
     assert said.code == 0, said.err
     claimed(said.out, SAFETY_OFFICER)
-    said = run_cli(capsys, "show", edited_read(targeted, "not_as_verified", [f"booth-a/booth-a-top ({SAFETY_OFFICER})"]))
+    said = run_cli(capsys, "show",
+                   edited_read(targeted, "not_as_verified", [f"booth-a/booth-a-top ({SAFETY_OFFICER})"]))
     assert said.code == 0, said.err
     claimed(said.out, SAFETY_OFFICER)
-    claimed(run_cli(capsys, "show", "--markdown", targeted.plan).out, "read or verified them")  # its path and user as markdown escapes them
+    # its path and user as markdown escapes them
+    claimed(run_cli(capsys, "show", "--markdown", targeted.plan).out, "read or verified them")
 
 
 #: An edit of a proved field of `read`: what `apply --plan` then names.
@@ -365,14 +404,16 @@ PROVED_READ = {
 def test_apply_of_a_plan_file_whose_read_was_edited_names_the_field_and_writes_nothing(targeted, capsys, key):
     value, named = PROVED_READ[key]
     before = targeted.emulated.images()
-    refused = run_cli(capsys, "apply", targeted.emulated.path, "--plan", edited_read(targeted, key, value), "--auto-approve")
+    refused = run_cli(capsys, "apply", targeted.emulated.path, "--plan", edited_read(targeted, key, value),
+                      "--auto-approve")
     assert refused.code == 1, refused.out
     (line,) = refused.problems
     assert named in line and ("nothing was written" in line or line.endswith(plan_file.AGAIN)), line
     assert targeted.emulated.images() == before
 
 
-def test_what_a_plan_file_says_it_read_in_full_and_why_steers_nothing_and_is_not_said_by_the_apply(targeted, capsys):
+def test_what_a_plan_file_says_it_read_in_full_and_why_steers_nothing_and_is_not_said_by_the_apply(targeted,
+                                                                                                   capsys):
     """The reasons rest on the record before the plan's own read: the apply cannot work them out again, so it
     applies the proved steps and says only what it saw itself."""
     path = edited_read(targeted, "not_as_verified", [f"booth-a/booth-a-top ({SAFETY_OFFICER})"])
@@ -382,7 +423,8 @@ def test_what_a_plan_file_says_it_read_in_full_and_why_steers_nothing_and_is_not
     assert targeted.emulated.matches_plant()
 
 
-# -- every text of a plan file is shown escaped ---------------------------------------------------------------
+# -- every text of a plan file is shown escaped
+# ---------------------------------------------------------------
 
 #: What no output may hold raw (the test's own account, by Unicode category): control, format — bidirectional
 #: overrides and isolates, zero-width joiners —, surrogates, line and paragraph separators; a new line apart.
@@ -397,7 +439,8 @@ def raw(output: str) -> list[str]:
 
 def test_every_text_of_a_plan_file_is_shown_escaped(made, tmp_path, capsys):
     """Each text of the file, in turn, given bidirectional overrides, a line separator, an escape sequence and
-    zero-width characters: `show` (human, markdown, JSON) shows the file or refuses it, in words with none of them raw."""
+    zero-width characters: `show` (human, markdown, JSON) shows the file or refuses it, in words with none of
+    them raw."""
     document = json.loads(made.text)
     texts = by_field(document, lambda value: isinstance(value, str))
     assert len(texts) > 15 and "buses[].modules[].changes.fields[].text" in texts
@@ -410,7 +453,8 @@ def test_every_text_of_a_plan_file_is_shown_escaped(made, tmp_path, capsys):
 
 
 def test_a_plan_file_of_hostile_texts_reaches_the_terminal_as_escapes(made, tmp_path):
-    """Every text `show` shows at once, from a process of its own: its bytes hold no override, separator or escape."""
+    """Every text `show` shows at once, from a process of its own: its bytes hold no override, separator or
+    escape."""
     document = json.loads(made.text)
     document["plant"] += HOSTILE
     document["left_alone"] = [f"booth-a/old{HOSTILE} is no longer in the plant file"]
@@ -423,10 +467,12 @@ def test_a_plan_file_of_hostile_texts_reaches_the_terminal_as_escapes(made, tmp_
     path = tmp_path / "hostile.json"
     path.write_text(json.dumps(document, ensure_ascii=False))
     for output in ([], ["--markdown"], ["--json"]):
-        done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(path), *output], capture_output=True, timeout=120)
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(path), *output],
+                              capture_output=True, timeout=120)
         assert done.returncode == 0, done.stderr
         assert "\\u202eevil\\u2066\\u2028" in done.stdout.decode() or "\\\\u202eevil" in done.stdout.decode()
-        assert raw(done.stdout.decode()) == [] and not any(c.encode() in done.stdout for c in HOSTILE if raw(c)), output
+        assert raw(done.stdout.decode()) == [] and not any(c.encode() in done.stdout for c in HOSTILE
+                                                           if raw(c)), output
 
 
 # -- mutations of a real plan file, shown and applied on the emulators ---------------------------------------
@@ -436,7 +482,8 @@ def test_a_plan_file_of_hostile_texts_reaches_the_terminal_as_escapes(made, tmp_
 WORDS = ("plant_path", "left_alone", "read.not_as_verified")
 #: What a mutation puts in: hostile text, values of other kinds, deep, long and wide values.
 MUTANTS = st.one_of(
-    st.sampled_from([None, True, 0, -1, 2.5, "", [], {}, SAFETY_OFFICER, HOSTILE, "\u202e", "\u2028", "\x1b[2J", "\u200d"]),
+    st.sampled_from([None, True, 0, -1, 2.5, "", [], {}, SAFETY_OFFICER, HOSTILE, "\u202e", "\u2028",
+                     "\x1b[2J", "\u200d"]),
     st.text(st.characters(whitelist_categories=["Cc", "Cf", "Zl", "Zp", "Ll"]), max_size=12),
     st.integers(8, 100_000).map(lambda n: Deep(n)),
     st.sampled_from([65_537, 2_000_000]).map(lambda n: "x" * n),
@@ -446,14 +493,16 @@ MUTANTS = st.one_of(
 
 @dataclass(frozen=True)
 class Deep:
-    """Lists in lists, `levels` deep: written as text (`as_text`), as Python's own JSON would recurse that deep."""
+    """Lists in lists, `levels` deep: written as text (`as_text`), as Python's own JSON would recurse that
+    deep."""
 
     levels: int
 
 
 def as_text(document: dict[str, Any]) -> str:
     deep: list[int] = []
-    text = json.dumps(document, default=lambda value: f"Deep-{len(deep)}" if deep.append(value.levels) is None else "")
+    text = json.dumps(document, default=lambda value: f"Deep-{len(deep)}"
+                      if deep.append(value.levels) is None else "")
     for index, levels in enumerate(deep):
         text = text.replace(json.dumps(f"Deep-{index}"), "[" * levels + "]" * levels)
     return text
@@ -469,7 +518,11 @@ def mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, An
     if how == "drop":
         del parent[key]
     elif how == "add":
-        parent[data.draw(st.sampled_from(["note", "reviewed_by", "\u202ereviewed"]).filter(lambda k: k not in parent))] = SAFETY_OFFICER
+        parent[
+            data.draw(
+                st.sampled_from(["note", "reviewed_by", "\u202ereviewed"]).filter(lambda k: k not in parent)
+            )
+        ] = SAFETY_OFFICER
     else:
         parent[key] = data.draw(MUTANTS.filter(lambda value: not same_value(value, at(document, place))))
     return copied, "".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip(".")
@@ -498,7 +551,8 @@ def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: s
     path.write_text(as_text(document))
     with as_found(targeted) as before:
         for args in (["show", path], ["show", path, "--markdown"],
-                     ["apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release"]):  # fmt: skip
+                     ["apply", targeted.emulated.path, "--plan", path, "--auto-approve",
+                      "--allow-axis-release"]):  # fmt: skip
             done = run_cli(capsys, *args)
             assert done.code in (0, 1) and raw(done.out + done.err) == [], (where, args, done)
             assert done.code == 0 or len(done.problems) == 1, (where, args, done.err)
@@ -506,7 +560,8 @@ def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: s
             assert where.startswith(WORDS) and targeted.emulated.matches_plant(), where
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(max_examples=6, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
 def test_a_mutated_plan_file_is_shown_escaped_and_writes_only_where_its_words_changed(targeted, capsys, data):
     """A value replaced (hostile text, another kind, 3,000 deep, 2 MB long, 300,000 wide), a key left out or
@@ -516,9 +571,11 @@ def test_a_mutated_plan_file_is_shown_escaped_and_writes_only_where_its_words_ch
 
 
 @pytest.mark.soak
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
-def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_words_changed(targeted, capsys, data):
+def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_words_changed(targeted, capsys,
+                                                                                            data):
     shown_and_applied(targeted, capsys, data)
 
 
@@ -532,13 +589,15 @@ def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_wo
 # plan was made are refused, naming where, and `show` says so.
 
 #: How an earlier prc3cfg might have worded the review: each replacement one sentence of it.
-EARLIER_WORDS = {" → ": " to ", "releases the axes: travel to reference point required after apply": "releases the axes — a "
+EARLIER_WORDS = {" → ": " to ",
+                 "releases the axes: travel to reference point required after apply": "releases the axes — a "
                  "reference travel is needed after the apply", "write ": "send "}  # fmt: skip
 
 
 def review_digest(module: dict[str, Any]) -> str:
     """A module's `review_sha256` as docs/files.md defines it."""
-    review = {"changes": module["changes"], "warning": module["warning"], "summaries": [step["summary"] for step in module["steps"]]}
+    review = {"changes": module["changes"], "warning": module["warning"],
+              "summaries": [step["summary"] for step in module["steps"]]}
     return hashlib.sha256(json.dumps(review, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
 
 
@@ -570,17 +629,22 @@ def as_worded_earlier(document: dict[str, Any]) -> dict[str, Any]:
 
 def modules_of(document: dict[str, Any]) -> list[tuple[tuple, dict[str, Any]]]:
     """Each module of `document`, with its place."""
-    return [(("buses", b, "modules", m), module) for b, bus in enumerate(document["buses"]) for m, module in enumerate(bus["modules"])]
+    return [(("buses", b, "modules", m), module) for b, bus in enumerate(document["buses"])
+            for m, module in enumerate(bus["modules"])]
 
 
 def test_a_plan_file_worded_by_an_earlier_prc3cfg_is_proved(made, tmp_path):
-    """The review words prc3cfg renders now are not those of the file: the steps and figures are the plan's, and
-    the words the text their digest was written for — proved (it was refused: "… is not what prc3cfg wrote")."""
+    """The review words prc3cfg renders now are not those of the file: the steps and figures are the plan's,
+    and the words the text their digest was written for — proved (it was refused: "… is not what prc3cfg
+    wrote")."""
     document = json.loads(made.text)
-    assert all(module["review_sha256"] == review_digest(module) for _, module in modules_of(document))  # as the docs say
+    # as the docs say
+    assert all(module["review_sha256"] == review_digest(module) for _, module in modules_of(document))
     earlier = as_worded_earlier(document)
-    assert earlier != document and any(" to " in json.dumps(module["changes"]) for _, module in modules_of(earlier))
-    assert any(module["warning"] and "reference travel" in module["warning"] for _, module in modules_of(earlier))
+    assert earlier != document and any(" to " in json.dumps(module["changes"])
+                                       for _, module in modules_of(earlier))
+    assert any(module["warning"] and "reference travel" in module["warning"]
+               for _, module in modules_of(earlier))
     assert refusal(made, tmp_path, earlier) is None
 
 
@@ -590,11 +654,14 @@ def test_an_edited_review_or_a_digest_another_is_refused_naming_where(made, tmp_
     document = json.loads(made.text)
     place = next(p for p, m in modules_of(document) if m["changes"]["fields"])
     named = f"buses[{place[1]}].modules[{place[3]}].review_sha256"
-    for edited in (changed(document, (*place, "changes", "fields", 0, "text"), "speed 0.050 m/s → 0.050 m/s (unchanged)"),
+    for edited in (changed(document, (*place, "changes", "fields", 0, "text"),
+                           "speed 0.050 m/s → 0.050 m/s (unchanged)"),
                    changed(document, (*place, "steps", 0, "summary"), "read the module's name (no change)"),
                    changed(document, (*place, "review_sha256"), "0" * 64)):  # fmt: skip
         refused = refusal(made, tmp_path, edited)
-        assert refused is not None and named in refused and "changed after the plan was made" in refused, refused
+        assert (
+            refused is not None and named in refused and "changed after the plan was made" in refused
+        ), refused
 
 
 @pytest.mark.parametrize("edit", ["a step left out", "a step's message", "a figure", "a name"])
@@ -620,7 +687,9 @@ def test_a_plan_file_without_review_digests_is_refused_as_made_by_an_older_prc3c
     for _, module in modules_of(document):
         del module["review_sha256"]
     refused = refusal(made, tmp_path, document)
-    assert refused is not None and "made by an older prc3cfg" in refused and refused.endswith("plan again"), refused
+    assert (
+        refused is not None and "made by an older prc3cfg" in refused and refused.endswith("plan again")
+    ), refused
 
 
 def written(targeted: Targeted, document: dict[str, Any], name: str) -> Path:
@@ -629,12 +698,16 @@ def written(targeted: Targeted, document: dict[str, Any], name: str) -> Path:
     return path
 
 
-def test_a_plan_file_worded_by_an_earlier_prc3cfg_applies_on_the_emulators_said_in_its_own_words(targeted, capsys):
+def test_a_plan_file_worded_by_an_earlier_prc3cfg_applies_on_the_emulators_said_in_its_own_words(targeted,
+                                                                                                 capsys):
     path = written(targeted, as_worded_earlier(targeted.document), "earlier.json")
-    applied = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release")
+    applied = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve",
+                      "--allow-axis-release")
     assert applied.code == 0, applied.err
     assert targeted.emulated.matches_plant()
-    assert " to " not in "".join(line for line in applied.out.splitlines() if "position" in line) and "→" in applied.out  # its own words
+    # its own words
+    assert (" to " not in "".join(line for line in applied.out.splitlines() if "position" in line)
+            and "→" in applied.out)
 
 
 def test_an_edited_review_is_refused_by_the_apply_and_marked_by_show(targeted, capsys):
@@ -643,10 +716,13 @@ def test_an_edited_review_is_refused_by_the_apply_and_marked_by_show(targeted, c
     module["changes"]["fields"][0]["text"] = SAFETY_OFFICER
     path = written(targeted, document, "edited.json")
     before = targeted.emulated.images()
-    refused = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve", "--allow-axis-release")
+    refused = run_cli(capsys, "apply", targeted.emulated.path, "--plan", path, "--auto-approve",
+                      "--allow-axis-release")
     assert refused.code == 1 and targeted.emulated.images() == before
     (line,) = refused.problems
-    assert f"buses[{place[1]}].modules[{place[3]}].review_sha256" in line and "nothing was written" in line, line
+    assert (
+        f"buses[{place[1]}].modules[{place[3]}].review_sha256" in line and "nothing was written" in line
+    ), line
     for output in ([], ["--markdown"]):
         said = run_cli(capsys, "show", path, *output)
         assert said.code == 0, said.err
@@ -654,7 +730,10 @@ def test_an_edited_review_is_refused_by_the_apply_and_marked_by_show(targeted, c
         (warned,) = [line for line in said.out.splitlines() if "changed after the plan was made" in line]
         assert module["name"] in warned and "read the steps" in warned, warned
     intact = run_cli(capsys, "show", targeted.plan)
-    assert "changed after the plan was made" not in intact.out and "the review text is as the plan was made" in intact.out, intact.out
+    assert (
+        "changed after the plan was made" not in intact.out
+        and "the review text is as the plan was made" in intact.out
+    ), intact.out
 
 
 def test_show_of_a_plan_file_without_review_digests_says_so(targeted, capsys):
@@ -676,17 +755,21 @@ def review_mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[
     module = data.draw(st.sampled_from([m for _, m in modules_of(copied)]))
     again = data.draw(st.booleans())
     if data.draw(st.booleans()):  # the words
-        words = [p for p in places({"changes": module["changes"], "warning": module["warning"], "steps": module["steps"]})
-                 if p and is_value(at({"changes": module["changes"], "warning": module["warning"], "steps": module["steps"]}, p))
+        words = [p for p in places({"changes": module["changes"], "warning": module["warning"],
+                                    "steps": module["steps"]})
+                 if p and is_value(at({"changes": module["changes"], "warning": module["warning"],
+                                       "steps": module["steps"]}, p))
                  and (p[0] != "steps" or p[-1] == "summary")]  # fmt: skip
         where = data.draw(st.sampled_from(words))
-        at(module, where[:-1])[where[-1]] = data.draw(st.sampled_from([SAFETY_OFFICER, HOSTILE, "", "speed 0 → 9"]).filter(
+        at(module, where[:-1])[where[-1]] = data.draw(st.sampled_from([SAFETY_OFFICER, HOSTILE, "",
+                                                                       "speed 0 → 9"]).filter(
             lambda text: text != at(module, where)))  # fmt: skip
         verdict = "proved" if again else "refused"
     else:  # a step, a figure, a name, a hash: anything else but where the plant file was
         fields = by_field(copied, is_value)
         kept = {ANYWHERE, "buses[].modules[].review_sha256", "left_alone", "read.not_as_verified"}
-        chosen = data.draw(st.sampled_from(sorted(f for f in fields if f not in kept and not f.endswith("summary")
+        chosen = data.draw(st.sampled_from(sorted(f for f in fields if f not in kept
+                                                  and not f.endswith("summary")
                                                   and ".changes" not in f and not f.endswith(".warning"))))  # fmt: skip
         spot = data.draw(st.sampled_from(fields[chosen]))
         at(copied, spot[:-1])[spot[-1]] = other(at(copied, spot))
@@ -711,26 +794,35 @@ def test_a_plan_file_s_review_steps_or_figures_mutated_get_their_verdicts(made, 
 
 
 @pytest.mark.soak
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])  # 40 ms each: 16 s
+# 40 ms each: 16 s
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_many_plan_files_with_review_steps_or_figures_mutated_get_their_verdicts(made, tmp_path, data):
     review_verdicts(made, tmp_path, data)
 
 
 @pytest.mark.soak
-@settings(max_examples=16, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@settings(max_examples=16, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
-def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_process_of_their_own_as_their_verdicts_say(targeted, data):
-    """`prc3cfg apply --plan` in a process of its own, on the emulators: a review worded otherwise with its digest
-    made again writes the plan; an edited review, step or figure writes nothing and says why in one line."""
+def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_process_of_their_own_as_their_verdicts_say(
+    targeted, data
+):
+    """`prc3cfg apply --plan` in a process of its own, on the emulators: a review worded otherwise with its
+    digest made again writes the plan; an edited review, step or figure writes nothing and says why in one
+    line."""
     document, verdict = review_mutated(data, targeted.document)
     event(verdict)
     path = written(targeted, document, "mutated.json")
     with as_found(targeted) as before:
-        done = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(targeted.emulated.path), "--plan", str(path), "--auto-approve",
-                               "--allow-axis-release"], capture_output=True, text=True, timeout=300)  # fmt: skip
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(targeted.emulated.path),
+                               "--plan", str(path), "--auto-approve",
+                               "--allow-axis-release"], capture_output=True, text=True,
+                              timeout=300)  # fmt: skip
         problems = [line for line in done.stderr.splitlines() if not line.startswith("note: ")]
         if verdict == "proved":
             assert done.returncode == 0 and targeted.emulated.matches_plant(), done.stderr
         else:
-            assert done.returncode == 1 and len(problems) == 1 and targeted.emulated.images() == before, done.stderr
+            assert (
+                done.returncode == 1 and len(problems) == 1 and targeted.emulated.images() == before
+            ), done.stderr

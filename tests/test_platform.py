@@ -25,7 +25,8 @@ PACKAGE = ROOT / "prc3cfg"
 SEAM = PACKAGE / "shell" / "platform.py"
 
 #: Modules that exist on one system only: only the seam imports them.
-SYSTEM_MODULES = {"fcntl", "termios", "tty", "pty", "grp", "pwd", "resource", "msvcrt", "winreg", "_winapi", "winsound"}
+SYSTEM_MODULES = {"fcntl", "termios", "tty", "pty", "grp", "pwd", "resource", "msvcrt", "winreg", "_winapi",
+                  "winsound"}
 
 #: Imports every module of prc3cfg, then validates the demo plant, in an interpreter that looks
 #: like Windows to prc3cfg: sys.platform is "win32", the POSIX-only modules cannot be imported,
@@ -103,7 +104,8 @@ def test_only_the_seam_reads_proc():
     wrong = {f"{path.relative_to(ROOT)}:{node.lineno}"
              for path in PACKAGE.rglob("*.py") if path != SEAM
              for node in ast.walk(ast.parse(path.read_text()))
-             if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith("/proc")}
+             if isinstance(node, ast.Constant) and isinstance(node.value, str)
+             and node.value.startswith("/proc")}
     assert not wrong, sorted(wrong)
 
 
@@ -117,7 +119,8 @@ def test_every_module_imports_and_a_plant_validates_as_on_windows():
 
 
 def test_linux_keeps_its_folders():
-    assert platform.LOCK_FOLDERS == ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"), (Path("/tmp"), "prc3cfg-locks"))
+    assert platform.LOCK_FOLDERS == ((Path("/run/lock"), "prc3cfg"), (Path("/var/lock"), "prc3cfg"),
+                                     (Path("/tmp"), "prc3cfg-locks"))
     assert platform.SYSTEM_STATE_DIR == Path("/var/lib/prc3cfg")
 
 
@@ -226,8 +229,10 @@ def test_a_shared_folder_is_made_sticky_whatever_the_umask_and_never_through_a_l
 
 # -- Windows' serial ports: COM3, COM10, \\.\COM10 -----------------------------------------
 
-COM_PORTS = [("COM3", "COM3"), ("COM10", "COM10"), ("com10", "COM10"), (r"\\.\COM10", "COM10"), (r"\\.\com255", "COM255"),
-             ("COM0", None), ("COM", None), ("/dev/ttyUSB0", None), ("socket://localhost:4001", None), ("COM3:", None)]  # fmt: skip
+COM_PORTS = [("COM3", "COM3"), ("COM10", "COM10"), ("com10", "COM10"), (r"\\.\COM10", "COM10"),
+             (r"\\.\com255", "COM255"),
+             ("COM0", None), ("COM", None), ("/dev/ttyUSB0", None), ("socket://localhost:4001", None),
+             ("COM3:", None)]  # fmt: skip
 
 
 @pytest.mark.parametrize(("port", "name"), COM_PORTS)
@@ -248,19 +253,22 @@ def test_a_plant_on_com_ports_validates(tmp_path):
     assert "emulator://demo-a" in text and "emulator://demo-b" in text
     plant = tmp_path / "demo-line.yaml"
     plant.write_text(text.replace("emulator://demo-a", "COM3").replace("emulator://demo-b", "'\\\\.\\COM10'"))
-    done = subprocess.run([sys.executable, "-m", "prc3cfg", "validate", str(plant)], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "validate", str(plant)], capture_output=True,
+                          text=True)
     assert done.returncode == 0, done.stdout + done.stderr
 
 
 @pytest.mark.parametrize("port", ["COM3", r"\\.\COM10"])
 def test_a_com_port_is_a_local_device_for_its_lock(port):
-    """Locked as a local serial device (one key, `dev/…`; the serial-port lock applies to it), not as a TCP line."""
+    """Locked as a local serial device (one key, `dev/…`; the serial-port lock applies to it), not as a TCP
+    line."""
     from prc3cfg.shell.locks import device_path, line_keys
 
     assert device_path(port) == port
     keys = line_keys(port)
     assert len(keys) == 1 and keys[0].startswith("dev/")
-    assert line_keys("socket://127.0.0.1:4001") == ("tcp/127.0.0.1/4001",)  # a TCP line keeps the machine-wide key
+    # a TCP line keeps the machine-wide key
+    assert line_keys("socket://127.0.0.1:4001") == ("tcp/127.0.0.1/4001",)
 
 
 def test_on_windows_two_spellings_of_a_com_port_are_one_line(monkeypatch):
@@ -288,14 +296,16 @@ def test_the_registry_s_com_ports_are_windows_only():
 
 
 def test_no_wait_without_a_timeout_outside_the_seam():
-    """`Event.wait()`, `Future.result()`, `Thread.join()`, `Queue.get()` without a timeout: on Windows no Ctrl-C
-    handler runs inside them (an apply answered Ctrl-C only when its lines were done; `emulator serve` never).
-    They are `platform.wait_for`, `platform.result_of` and `platform.next_of`."""
+    """`Event.wait()`, `Future.result()`, `Thread.join()`, `Queue.get()` without a timeout: on Windows no
+    Ctrl-C handler runs inside them (an apply answered Ctrl-C only when its lines were done; `emulator serve`
+    never). They are `platform.wait_for`, `platform.result_of` and `platform.next_of`."""
     wrong = {f"{path.relative_to(ROOT)}:{node.lineno}: .{node.func.attr}()"
              for path in PACKAGE.rglob("*.py") if path != SEAM
              for node in ast.walk(ast.parse(path.read_text()))
-             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("wait", "result", "join", "get")
-             and not node.args and not node.keywords and not (isinstance(node.func.value, ast.Name) and node.func.value.id in ("os", "str"))}
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+             and node.func.attr in ("wait", "result", "join", "get")
+             and not node.args and not node.keywords
+             and not (isinstance(node.func.value, ast.Name) and node.func.value.id in ("os", "str"))}
     assert not wrong, sorted(wrong)
 
 
@@ -315,7 +325,8 @@ def test_a_wait_ends_when_its_event_is_set_and_a_result_is_the_future_s():
 
 @pytest.mark.parametrize("system", ["linux", "win32"])
 def test_the_next_item_is_the_queue_s_as_it_comes(system, monkeypatch):
-    """`platform.next_of`: each item in order, one put by another thread while it waits — on Windows too (in slices)."""
+    """`platform.next_of`: each item in order, one put by another thread while it waits — on Windows too (in
+    slices)."""
     import queue
     import threading
 
@@ -339,19 +350,22 @@ def test_text_is_written_as_given_in_utf_8(tmp_path):
 
 
 def test_paths_are_resolved_through_the_seam():
-    """`Path.resolve()` and `os.path.realpath()` raise on Windows for a path over 260 characters (WinError 234): outside
-    the seam they are called only through `platform.resolved` / `real_path`, which fall back to the absolute path."""
+    """`Path.resolve()` and `os.path.realpath()` raise on Windows for a path over 260 characters (WinError
+    234): outside the seam they are called only through `platform.resolved` / `real_path`, which fall back to
+    the absolute path."""
     wrong = {f"{path.relative_to(ROOT)}:{node.lineno}"
              for path in PACKAGE.rglob("*.py") if path != SEAM
              for node in ast.walk(ast.parse(path.read_text()))
-             if (isinstance(node, ast.Call) and not node.args and getattr(node.func, "attr", None) == "resolve")
-             or (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "realpath")}  # PyYAML's resolve(node, …) is no path's
+             if (isinstance(node, ast.Call) and not node.args
+                 and getattr(node.func, "attr", None) == "resolve")
+             # PyYAML's resolve(node, …) is no path's
+             or (isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "realpath")}
     assert not wrong, sorted(wrong)
 
 
 def test_a_plant_under_a_path_windows_will_not_resolve_is_planned_and_applied(tmp_path, capsys, monkeypatch):
-    """Where the system refuses to resolve a path (Windows without long paths, over 260 characters: OSError 234),
-    plan and apply go on with the absolute path: no traceback, the records name it."""
+    """Where the system refuses to resolve a path (Windows without long paths, over 260 characters: OSError
+    234), plan and apply go on with the absolute path: no traceback, the records name it."""
     with emulated_plant(tmp_path) as plant:
         def refused(self, strict=False):
             raise OSError(234, "More data is available")
@@ -365,20 +379,26 @@ def test_a_plant_under_a_path_windows_will_not_resolve_is_planned_and_applied(tm
 
 
 def test_text_files_are_opened_through_the_seam():
-    """Writing text with `open(…, "w"/"a")` outside the seam takes Windows' newline translation and code page."""
+    """Writing text with `open(…, "w"/"a")` outside the seam takes Windows' newline translation and code
+    page."""
     wrong = {f"{path.relative_to(ROOT)}:{node.lineno}"
              for path in PACKAGE.rglob("*.py") if path != SEAM
              for node in ast.walk(ast.parse(path.read_text()))
-             if isinstance(node, ast.Call) and (getattr(node.func, "id", None) == "open" or getattr(node.func, "attr", None) in ("open", "fdopen"))
-             and any(isinstance(a, ast.Constant) and a.value in ("w", "a", "wt", "at") for a in [*node.args, *(k.value for k in node.keywords)])}
+             if isinstance(node, ast.Call)
+             and (getattr(node.func, "id", None) == "open"
+                  or getattr(node.func, "attr", None) in ("open", "fdopen"))
+             and any(isinstance(a, ast.Constant) and a.value in ("w", "a", "wt", "at")
+                     for a in [*node.args, *(k.value for k in node.keywords)])}
     assert not wrong, sorted(wrong)
 @pytest.mark.parametrize(("system", "words", "command"), [
-    ("linux", ["prc3cfg", "restore", "/home/jörg/Anlage Süd – Linie 3/s.json"], "prc3cfg restore '/home/jörg/Anlage Süd – Linie 3/s.json'"),
+    ("linux", ["prc3cfg", "restore", "/home/jörg/Anlage Süd – Linie 3/s.json"],
+     "prc3cfg restore '/home/jörg/Anlage Süd – Linie 3/s.json'"),
     ("linux", ["prc3cfg", "apply", "--plan", "it's.json"], "prc3cfg apply --plan 'it'\"'\"'s.json'"),
     ("win32", ["prc3cfg", "restore", r"C:\Users\Jörg Müller\Anlage Süd – Linie 3\s.json"],
      r'prc3cfg restore "C:\Users\Jörg Müller\Anlage Süd – Linie 3\s.json"'),
     ("win32", ["prc3cfg", "doctor", "--port", "COM10"], "prc3cfg doctor --port COM10"),
-    ("win32", ["prc3cfg", "restore", "D:\\a&b (1)\\"], 'prc3cfg restore "D:\\a&b (1)\\\\"'),  # the closing quote not escaped
+    # the closing quote not escaped
+    ("win32", ["prc3cfg", "restore", "D:\\a&b (1)\\"], 'prc3cfg restore "D:\\a&b (1)\\\\"'),
 ])  # fmt: skip
 def test_a_command_printed_for_a_person_is_quoted_for_the_system_s_shell(monkeypatch, system, words, command):
     monkeypatch.setattr(sys, "platform", system)

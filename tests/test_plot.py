@@ -35,17 +35,20 @@ DEMO = ROOT / "plants" / "demo-line.yaml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: The known chain with program 1 lower and faster, and a new stopping chain 5 → 6.
 CHANGED = TWO_PROGRAMS.with_programs({1: Program(P=1800, V=600, T=5, F1=1100, F2=1050, A=2),
-                                      5: Program(P=1000, V=300, T=5, F1=1010, A=6), 6: Program(P=400, V=300, T=20)})  # fmt: skip
+                                      5: Program(P=1000, V=300, T=5, F1=1010, A=6),
+                                      6: Program(P=400, V=300, T=20)})  # fmt: skip
 #: A chain of six programs, looping: strokes up to 1.6, 1.8, 2.0 m and down to 0.2, 0.4, 0.6 m.
 SIX_PROGRAMS = image(
-    {n: Program(P=1500 + 100 * n if n % 2 else 100 * n, V=300 + 50 * n, T=5, F1=1050, F2=20, A=n % 6 + 1) for n in range(1, 7)},
+    {n: Program(P=1500 + 100 * n if n % 2 else 100 * n, V=300 + 50 * n, T=5, F1=1050, F2=20, A=n % 6 + 1)
+     for n in range(1, 7)},
     S1=2500, S2=50, S6=1200,
 )
 
 
 @pytest.fixture
 def matplotlib():
-    return pytest.importorskip("matplotlib", reason="matplotlib is not installed: python -m pip install matplotlib")
+    return pytest.importorskip("matplotlib",
+                               reason="matplotlib is not installed: python -m pip install matplotlib")
 
 
 def mermaid_values(text: str) -> list[list[float]]:
@@ -57,7 +60,8 @@ def mermaid_values(text: str) -> list[list[float]]:
 
 
 def test_mermaid_draws_one_chain_before_and_after_in_a_few_hundred_characters():
-    ((before, after),) = paired_chains(TWO_PROGRAMS, TWO_PROGRAMS.with_programs({1: CHANGED.program(1)}), changed_only=True)
+    ((before, after),) = paired_chains(TWO_PROGRAMS, TWO_PROGRAMS.with_programs({1: CHANGED.program(1)}),
+                                       changed_only=True)
     text = mermaid(before, after)
     lines = text.splitlines()
     assert lines[0] == "```mermaid" and lines[-1] == "```" and lines[2] == "xychart-beta"
@@ -96,7 +100,8 @@ def test_svg_and_png_are_drawn_and_the_same_every_time(matplotlib, tmp_path):
 
 
 def test_the_legend_names_only_the_output_bands_drawn(matplotlib):
-    """A chain whose programs set F1 only has no "F2 set" in its legend (matplotlib writes each text as a comment)."""
+    """A chain whose programs set F1 only has no "F2 set" in its legend (matplotlib writes each text as a
+    comment)."""
     f1_only = TWO_PROGRAMS.with_programs({1: Program(P=1800, V=600, T=5, F1=1100, A=2)})
     svg = picture(f1_only, fmt="svg", title="module test")
     assert b"F1 set" in svg and b"F2 set" not in svg
@@ -104,18 +109,23 @@ def test_the_legend_names_only_the_output_bands_drawn(matplotlib):
     assert b"F1 set" in both and b"F2 set" in both
 
 
-def test_without_matplotlib_plotting_says_to_install_matplotlib_into_the_python_that_runs_prc3cfg(monkeypatch):
+def test_without_matplotlib_plotting_says_to_install_matplotlib_into_the_python_that_runs_prc3cfg(
+    monkeypatch,
+):
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib → ImportError
     for draw in (lambda python: picture(TWO_PROGRAMS, fmt="svg", title="module test", python=python),
                  lambda python: plot_format(Path("a.svg"), python=python)):
         with pytest.raises(PlotError) as raised:
             draw("'/opt/python 3/bin/python3'")
-        assert str(raised.value) == ("plotting needs matplotlib, which the Python running prc3cfg does not have — "
-                                     "install it there: '/opt/python 3/bin/python3' -m pip install matplotlib")  # fmt: skip
+        assert str(raised.value) == ("plotting needs matplotlib, which the Python running prc3cfg does "
+                                     "not have — "
+                                     "install it there: '/opt/python 3/bin/python3' -m pip install "
+                                     "matplotlib")  # fmt: skip
 
 
 def hinted_packages(hint: str) -> tuple[list[str], list[Requirement]]:
-    """The command a hint says to run — `PYTHON -m pip install PACKAGE…` — as (the Python's argv, the packages)."""
+    """The command a hint says to run — `PYTHON -m pip install PACKAGE…` — as (the Python's argv, the
+    packages)."""
     python, _, packages = hint.split("install it there: ", 1)[1].partition(" -m pip install ")
     return shlex.split(python), [Requirement(package) for package in shlex.split(packages)]
 
@@ -125,33 +135,42 @@ def test_the_hint_names_on_the_package_index_only_what_the_plot_extra_names_ther
     whoever registered that name there would be installed by everyone who followed the hint. Only
     the names the `plot` extra lists (each its own project's), into this very Python."""
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    extra = {canonicalize_name(Requirement(text).name) for text in pyproject["project"]["optional-dependencies"]["plot"]}
+    extra = {canonicalize_name(Requirement(text).name)
+             for text in pyproject["project"]["optional-dependencies"]["plot"]}
     assert extra == {"matplotlib"}
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     with pytest.raises(PlotError) as raised:
         api.plot_format(Path("a.svg"))  # as the command line asks
     python, packages = hinted_packages(str(raised.value))
     assert python == [sys.executable]
-    assert packages and {canonicalize_name(p.name) for p in packages} <= extra and not any(p.extras or p.url for p in packages)
+    assert packages and {canonicalize_name(p.name) for p in packages} <= extra and not any(p.extras
+                                                                                           or p.url
+                                                                                           for p in packages)
     assert "prc3cfg" not in str(raised.value).split(" -m pip install ", 1)[1]
 
 
 def test_no_text_of_prc3cfg_says_to_install_prc3cfg_by_its_name_from_the_index():
-    """The README, docs/ and the code: `pip install prc3cfg…` (with or without an extra) would fetch
-    whatever holds that name on the index; a checkout (`-e '.[plot]'`) or a commit (`prc3cfg @ git+…`) is ours."""
+    """The README, docs/ and the code: `pip install prc3cfg…` (with or without an extra) would fetch whatever
+    holds that name on the index; a checkout (`-e '.[plot]'`) or a commit (`prc3cfg @ git+…`) is ours."""
     texts = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "prc3cfg").rglob("*.py")]
     by_name = re.compile(r"pip install[^\n`&;|]*?\s['\"]?prc3cfg(\[|['\"\s`]|$)", re.M)  # in one command
-    assert not [f"{path.relative_to(ROOT)}: {m.group(0)}" for path in texts for m in by_name.finditer(path.read_text())]
-    assert by_name.search("python -m pip install 'prc3cfg[plot]'") and by_name.search("pip install prc3cfg")  # it can fail
-    assert not by_name.search("pip install -e '.[plot]'") and not by_name.search('pip install --no-deps "$PRC3CFG"')
+    assert not [f"{path.relative_to(ROOT)}: {m.group(0)}" for path in texts
+                for m in by_name.finditer(path.read_text())]
+    # it can fail
+    assert by_name.search("python -m pip install 'prc3cfg[plot]'") and by_name.search("pip install prc3cfg")
+    assert (not by_name.search("pip install -e '.[plot]'")
+            and not by_name.search('pip install --no-deps "$PRC3CFG"'))
     assert not by_name.search("pip install . && prc3cfg plan")
 
 
 def test_a_module_without_chains_and_an_unknown_format_are_one_line(matplotlib):
-    with pytest.raises(PlotError, match=r"^module test: no chain to draw — a chain is programs linked by their jumps"):
+    with pytest.raises(PlotError,
+                       match=r"^module test: no chain to draw — a chain is programs linked by their jumps"):
         picture(image({1: Program(P=300, V=100)}), fmt="svg", title="module test")
     assert plot_format(Path("a.SVG")) == "svg" and plot_format(Path("b.png")) == "png"
-    with pytest.raises(PlotError, match=r"^c\.pdf: a plot is drawn as SVG or PNG — name a file ending in \.svg or \.png$"):
+    with pytest.raises(PlotError,
+                       match=r"^c\.pdf: a plot is drawn as SVG or PNG — name a file ending in \.svg "
+                             r"or \.png$"):
         plot_format(Path("c.pdf"))
 
 
@@ -207,17 +226,21 @@ def test_show_plot_draws_the_plant_files_chains_and_overlays_a_read_back(matplot
     assert ET.parse(svg).getroot().tag == "{http://www.w3.org/2000/svg}svg"
     actual = tmp_path / "read.json"
     actual.write_text(json.dumps([{"bus": "booth-a", **ModuleImage.factory(5).to_json()}]))  # no chains yet
-    result = runner.invoke(app, ["show", str(DEMO), "-m", "booth-a-top", "--plot", str(png), "--actual", str(actual)])
+    result = runner.invoke(app, ["show", str(DEMO), "-m", "booth-a-top", "--plot", str(png), "--actual",
+                                 str(actual)])
     assert result.exit_code == 0, result.stderr
     assert png.read_bytes().startswith(PNG_MAGIC)
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--module", "booth-a-top", "--plot", "top.pdf"], "error: top.pdf: a plot is drawn as SVG or PNG — name a file ending in .svg or .png"),
+    (["--module", "booth-a-top", "--plot", "top.pdf"],
+     "error: top.pdf: a plot is drawn as SVG or PNG — name a file ending in .svg or .png"),
     (["--plot", "top.svg"], "error: --plot draws one module — name it with --module NAME"),
-    (["--module", "booth-a-top", "--actual", "read.json"], "error: --actual is what --plot overlays — give --plot FILE.svg or FILE.png too"),
+    (["--module", "booth-a-top", "--actual", "read.json"],
+     "error: --actual is what --plot overlays — give --plot FILE.svg or FILE.png too"),
     (["--module", "booth-a-top", "--plot", "missing/top.svg"],
-     "error: --plot missing/top.svg: the folder missing does not exist — create it, or name a file in an existing folder"),
+     "error: --plot missing/top.svg: the folder missing does not exist — create it, or name a file in an "
+     "existing folder"),
 ])  # fmt: skip
 def test_show_plot_mistakes_are_one_line_before_any_work(args, message, tmp_path):
     done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(DEMO), *args],

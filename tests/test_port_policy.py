@@ -31,14 +31,18 @@ from prc3cfg.shell.plant_files import load_plant
 ROOT = Path(__file__).resolve().parents[1]
 
 #: The bus's `port:` is on line 4 of `plant_with`'s file, its value at column 11.
-PLANT = 'plant: p\nbuses:\n  - name: a\n    port: "{port}"\n    parity: none\n    modules:\n      - {{address: 1, name: m1}}\n'
+PLANT = ('plant: p\nbuses:\n  - name: a\n    port: "{port}"\n    parity: none\n    modules:\n      - '
+         '{{address: 1, name: m1}}\n')
 AT = "4:11"
 
-HANDLER = ("uses pyserial's {scheme}:// handler, which a plant file may not name — write a device path, socket://HOST:PORT, "
+HANDLER = ("uses pyserial's {scheme}:// handler, which a plant file may not name — write a device path, "
+           "socket://HOST:PORT, "
            "rfc2217://HOST:PORT or emulator://NAME (trace a line with prc3cfg's --trace)")  # fmt: skip
 NOT_DEVICE = ("is not a serial device's full path — write the device's path under /dev (/dev/ttyUSB0, "
-              "/dev/serial/by-id/…), COMn or \\\\.\\COMn, socket://HOST:PORT, rfc2217://HOST:PORT or emulator://NAME")  # fmt: skip
-NOT_A_LINE = "is this machine's own terminal, console or files, not a serial line — write the path of the line's adapter, e.g. /dev/ttyUSB0"
+              "/dev/serial/by-id/…), COMn or \\\\.\\COMn, socket://HOST:PORT, rfc2217://HOST:PORT or "
+              "emulator://NAME")  # fmt: skip
+NOT_A_LINE = ("is this machine's own terminal, console or files, not a serial line — write the path of the "
+              "line's adapter, e.g. /dev/ttyUSB0")
 
 #: Hostile ports, and the end of the one line `validate` says about each.
 HOSTILE = {
@@ -112,7 +116,8 @@ def test_validate_takes_the_ports_a_plant_file_may_name(tmp_path, capsys, case):
 
 
 def test_a_plant_file_naming_spy_leaves_the_file_it_names_untouched(tmp_path):
-    """The issue's case across a real process: `plan` of `port: spy:///dev/null?file=victim.txt` truncated it."""
+    """The issue's case across a real process: `plan` of `port: spy:///dev/null?file=victim.txt` truncated
+    it."""
     folder = tmp_path / "repository"
     folder.mkdir()
     victim = folder / "victim.txt"
@@ -120,7 +125,8 @@ def test_a_plant_file_naming_spy_leaves_the_file_it_names_untouched(tmp_path):
     path = plant_with(folder, "spy:///dev/null?file=victim.txt")
     env = os.environ | {"PYTHONPATH": str(ROOT)}
     for command in (["plan", path.name], ["read", path.name], ["apply", path.name, "--auto-approve"]):
-        ran = subprocess.run([sys.executable, "-m", "prc3cfg", *command], cwd=folder, env=env, capture_output=True, text=True,
+        ran = subprocess.run([sys.executable, "-m", "prc3cfg", *command], cwd=folder, env=env,
+                             capture_output=True, text=True,
                              timeout=60)  # fmt: skip
         assert ran.returncode == 1 and ran.stdout == "", ran
         (line,) = ran.stderr.splitlines()
@@ -129,9 +135,11 @@ def test_a_plant_file_naming_spy_leaves_the_file_it_names_untouched(tmp_path):
     assert sorted(p.name for p in folder.iterdir()) == ["plant.yaml", "victim.txt"]
 
 
-@pytest.mark.parametrize("port", ["spy:///dev/null?file=victim.txt", "alt:///dev/ptmx?class=PosixPollSerial", "loop://",
+@pytest.mark.parametrize("port", ["spy:///dev/null?file=victim.txt", "alt:///dev/ptmx?class=PosixPollSerial",
+                                  "loop://",
                                   "ttyUSB0", "/dev/tty"])  # fmt: skip
-def test_open_port_refuses_what_a_plant_file_may_not_name_before_pyserial_sees_it(tmp_path, monkeypatch, port):
+def test_open_port_refuses_what_a_plant_file_may_not_name_before_pyserial_sees_it(tmp_path, monkeypatch,
+                                                                                  port):
     folder = tmp_path / "cwd"
     folder.mkdir()
     monkeypatch.chdir(folder)
@@ -151,25 +159,31 @@ def test_an_api_users_bus_with_another_handler_is_refused_before_the_line(tmp_pa
     plant = load_plant(plant_with(folder, "socket://127.0.0.1:9"))
     victim = folder / "victim.txt"
     victim.write_text("kept\n")
-    forged = plant.model_copy(update={"buses": (plant.buses[0].model_copy(update={"port": "spy:///dev/null?file=victim.txt"}),)})
+    forged = plant.model_copy(
+        update={"buses": (plant.buses[0].model_copy(update={"port": "spy:///dev/null?file=victim.txt"}),)}
+    )
     with pytest.raises(UserError) as refused:
         api.plan(forged)
-    assert str(refused.value) == f"bus a: port 'spy:///dev/null?file=victim.txt' {HANDLER.format(scheme='spy')}"
+    assert str(refused.value) == ("bus a: port 'spy:///dev/null?file=victim.txt' "
+                                  f"{HANDLER.format(scheme='spy')}")
     assert victim.read_text() == "kept\n"
 
 
 def test_a_command_lines_port_may_name_any_handler_of_pyserial(tmp_path, capsys, monkeypatch):
-    """The operator's own choice at the machine: `scan --port loop://` opens pyserial's loop (where nothing answers)."""
+    """The operator's own choice at the machine: `scan --port loop://` opens pyserial's loop (where nothing
+    answers)."""
     monkeypatch.chdir(tmp_path)
     result = run_cli(capsys, "scan", "--port", "loop://", "--parity", "none", "--timeout", "0.01")
-    assert result.err.splitlines()[-1].startswith("error: loop://: no module answered at any address 1..30"), result.err
+    assert result.err.splitlines()[-1].startswith("error: loop://: no module answered at any "
+                                                  "address 1..30"), result.err
 
 
 def test_import_refuses_a_port_it_could_not_write_into_a_plant_file(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = run_cli(capsys, "import", "--port", "loop://", "--parity", "none")
     assert (result.code, result.out) == (1, "")
-    assert result.err == f"error: --port 'loop://' {HANDLER.format(scheme='loop')}: import writes it into the plant file\n"
+    assert result.err == (f"error: --port 'loop://' {HANDLER.format(scheme='loop')}: import writes it into "
+                          "the plant file\n")
 
 
 def test_the_schema_refuses_the_handlers_and_paths_validate_refuses():
@@ -177,7 +191,9 @@ def test_the_schema_refuses_the_handlers_and_paths_validate_refuses():
     schema = jsonschema.Draft7Validator(plant_schema())
 
     def takes(port: str) -> bool:
-        return schema.is_valid({"plant": "p", "buses": [{"name": "a", "port": port, "modules": [{"address": 1, "name": "m"}]}]})
+        return schema.is_valid(
+            {"plant": "p", "buses": [{"name": "a", "port": port, "modules": [{"address": 1, "name": "m"}]}]}
+        )
 
     for port, _ in HOSTILE.values():
         assert not takes(_unquoted(port)), port
@@ -186,23 +202,27 @@ def test_the_schema_refuses_the_handlers_and_paths_validate_refuses():
 
 
 def test_an_emulators_name_and_query_select_no_path_a_plant_file_chooses(tmp_path, capsys):
-    """`emulator://NAME` keeps its state in .prc3cfg/emulators/NAME.json beside the plant file; its query only tunes
-    the emulator (`emulator_query`), so a key naming a path is refused in one line and nothing is made there."""
+    """`emulator://NAME` keeps its state in .prc3cfg/emulators/NAME.json beside the plant file; its query only
+    tunes the emulator (`emulator_query`), so a key naming a path is refused in one line and nothing is made
+    there."""
     elsewhere = tmp_path / "elsewhere.json"
     (tmp_path / "repository").mkdir()
     path = plant_with(tmp_path / "repository", f"emulator://a?state={elsewhere}")
     result = run_cli(capsys, "read", path)
     assert (result.code, result.out) == (1, "")
-    assert result.err.startswith(f"error: bus a: port emulator://a?state={elsewhere}: unknown option 'state' — emulator:// takes ")
+    assert result.err.startswith(f"error: bus a: port emulator://a?state={elsewhere}: unknown option "
+                                 "'state' — emulator:// takes ")
     assert not elsewhere.exists() and not (path.parent / ".prc3cfg").exists()
     assert run_cli(capsys, "read", plant_with(path.parent, "emulator://a?line-speed=9600")).code == 0
-    assert {p.name.partition(".")[0] for p in (path.parent / ".prc3cfg" / "emulators").iterdir()} == {"a"}  # a.json, its lock
+    # a.json, its lock
+    assert {p.name.partition(".")[0] for p in (path.parent / ".prc3cfg" / "emulators").iterdir()} == {"a"}
 
 
 # -- the machine at the line: PRC3CFG_PORTS --------------------------------------------------------
 
 #: The refusal of a bus whose port the machine does not list, after "bus NAME: port PORT".
-NOT_LISTED = (" is not a line of this machine — PRC3CFG_PORTS, the machine's own list, names {listed}: name one of those in "
+NOT_LISTED = (" is not a line of this machine — PRC3CFG_PORTS, the machine's own list, names {listed}: name "
+              "one of those in "
               "the plant file, or add the port to PRC3CFG_PORTS in the machine's configuration")  # fmt: skip
 
 
@@ -211,11 +231,14 @@ def test_where_the_machine_lists_its_ports_a_plant_file_opens_only_those(plant, 
     monkeypatch.setenv("PRC3CFG_PORTS", ports["booth-a"])
     refused = run_cli(capsys, "plan", plant.path)
     assert (refused.code, refused.out) == (1, "")
-    assert refused.err == f"error: {plant.path}: bus booth-b: port {ports['booth-b']}{NOT_LISTED.format(listed=ports['booth-a'])}\n"
+    assert refused.err == (f"error: {plant.path}: bus booth-b: port "
+                           f"{ports['booth-b']}{NOT_LISTED.format(listed=ports['booth-a'])}\n")
     monkeypatch.setenv("PRC3CFG_PORTS", "")
     assert run_cli(capsys, "read", plant.path).err.endswith(NOT_LISTED.format(listed="none") + "\n")
-    # another spelling of a listed line is that line (`line_keys`): 0.0.0.0 is the loopback a connection reaches
-    monkeypatch.setenv("PRC3CFG_PORTS", f" {ports['booth-a']} ;{ports['booth-b'].replace('127.0.0.1', '0.0.0.0')}; ")
+    # another spelling of a listed line is that line (`line_keys`): 0.0.0.0 is the loopback a connection
+    # reaches
+    monkeypatch.setenv("PRC3CFG_PORTS",
+                       f" {ports['booth-a']} ;{ports['booth-b'].replace('127.0.0.1', '0.0.0.0')}; ")
     planned = run_cli(capsys, "plan", plant.path, "--detailed-exitcode")
     assert planned.code == 2, planned
 
@@ -229,7 +252,9 @@ def test_the_emulator_inside_prc3cfg_is_no_port_of_the_machine(tmp_path, capsys,
 def test_a_machine_list_with_a_control_character_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("PRC3CFG_PORTS", "/dev/ttyUSB0\x1b[2K")
     result = run_cli(capsys, "read", plant_with(tmp_path, "/dev/ttyUSB1"))
-    assert (result.code, result.err) == (1, "error: PRC3CFG_PORTS: port '/dev/ttyUSB0\\x1b[2K' holds a control character — write "
+    assert (result.code,
+            result.err) == (1, "error: PRC3CFG_PORTS: port '/dev/ttyUSB0\\x1b[2K' holds a control "
+                               "character — write "
                                             "the device path or URL as plain text\n")  # fmt: skip
 
 
@@ -244,12 +269,14 @@ def test_a_pull_requests_plant_file_cannot_make_the_runner_open_another_port(pla
         pull_request.parent.mkdir()
         pull_request.write_text(plant.path.read_text().replace(ports["booth-b"], elsewhere))
         env = os.environ | {"PYTHONPATH": str(ROOT)}
-        for listed, connected in ((";".join(ports.values()), False), (None, True)):  # and without the list, as a control
+        # and without the list, as a control
+        for listed, connected in ((";".join(ports.values()), False), (None, True)):
             ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", pull_request, "--detailed-exitcode"], capture_output=True,
                                  text=True, timeout=120, env=env | ({"PRC3CFG_PORTS": listed} if listed else {}))  # fmt: skip
             assert ran.returncode == 1, ran
             if not connected:
-                assert ran.stderr == f"error: {pull_request}: bus booth-b: port {elsewhere}{NOT_LISTED.format(listed=', '.join(ports.values()))}\n"
+                assert ran.stderr == (f"error: {pull_request}: bus booth-b: port "
+                                      f"{elsewhere}{NOT_LISTED.format(listed=', '.join(ports.values()))}\n")
                 with pytest.raises(BlockingIOError):
                     other.accept()  # the process has ended: a connection it made would be waiting here
             else:
@@ -258,14 +285,18 @@ def test_a_pull_requests_plant_file_cannot_make_the_runner_open_another_port(pla
 
 # -- soak: random URL-ish ports --------------------------------------------------------------------
 
-#: pyserial's handlers (`serial.protocol_handler_packages`: serial.urlhandler's protocol_*.py), prc3cfg's own, others.
-SCHEMES = [*sorted(path.stem.removeprefix("protocol_") for path in Path(serial.urlhandler.__file__).parent.glob("protocol_*.py")),
+#: pyserial's handlers (`serial.protocol_handler_packages`: serial.urlhandler's protocol_*.py), prc3cfg's own,
+#: others.
+SCHEMES = [*sorted(path.stem.removeprefix("protocol_")
+                   for path in Path(serial.urlhandler.__file__).parent.glob("protocol_*.py")),
            "emulator", "EMULATOR", "Socket", "file", "http", "xyz", ""]  # fmt: skip
 PORTS = st.builds(
     "{}{}{}{}".format,
     st.sampled_from([f"{s}://" for s in SCHEMES] + ["", "/dev/", "/tmp/", "COM", "\\\\.\\COM", "./"]),
-    st.sampled_from(["", "/dev/null", "/dev/ptmx", "ttyUSB0", "h:1", "127.0.0.1:7001", "a", "..", "../..", "victim.txt", "1", "0"]),
-    st.sampled_from(["", "?", "?file=victim.txt", "?class=PosixPollSerial", "?logging=debug", "?line-speed=1200",
+    st.sampled_from(["", "/dev/null", "/dev/ptmx", "ttyUSB0", "h:1", "127.0.0.1:7001", "a", "..", "../..",
+                     "victim.txt", "1", "0"]),
+    st.sampled_from(["", "?", "?file=victim.txt", "?class=PosixPollSerial", "?logging=debug",
+                     "?line-speed=1200",
                      "?state=/tmp/x", "#x", "/x"]),
     st.text(alphabet="/?&=:.%\\ab", max_size=6),
 )
@@ -284,8 +315,9 @@ def test_random_ports_are_allowed_or_refused_in_one_line_and_write_nothing(tmp_p
 
 
 def taken_or_refused(folder: Path, port: str) -> None:
-    """`validate` takes `port` only where the allowed set holds it, else refuses it in one line at file:line:col;
-    `open_port` refuses it as well, before pyserial sees it; in the folder they ran in, no file appeared."""
+    """`validate` takes `port` only where the allowed set holds it, else refuses it in one line at
+    file:line:col; `open_port` refuses it as well, before pyserial sees it; in the folder they ran in, no file
+    appeared."""
     before = os.getcwd()
     os.chdir(folder)
     try:
@@ -323,12 +355,13 @@ def _allowed(port: str) -> bool:
 @pytest.mark.soak
 @pytest.mark.parametrize("scheme", SCHEMES)
 def test_plan_across_a_real_process_refuses_every_handler_and_writes_nothing(tmp_path, scheme):
-    """Each of pyserial's handlers (and others, and prc3cfg's own with no TCP port or a path for a name), as `plan`
-    of a plant file naming it would open it: one line at the port, and no file."""
+    """Each of pyserial's handlers (and others, and prc3cfg's own with no TCP port or a path for a name), as
+    `plan` of a plant file naming it would open it: one line at the port, and no file."""
     folder = tmp_path / "repository"
     folder.mkdir()
     path = plant_with(folder, f"{scheme}:///dev/ptmx?file=victim.txt&class=PosixPollSerial&logging=debug")
-    ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", path.name], cwd=folder, env=os.environ | {"PYTHONPATH": str(ROOT)},
+    ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", path.name], cwd=folder,
+                         env=os.environ | {"PYTHONPATH": str(ROOT)},
                          capture_output=True, text=True, timeout=60)  # fmt: skip
     (line,) = ran.stderr.splitlines()
     assert (ran.returncode, ran.stdout) == (1, "") and line.startswith(f"error: {path.name}:{AT}: port "), ran

@@ -87,9 +87,11 @@ def rechained(journal: Path, change: Callable[[list[dict]], None]) -> None:
 
 
 def relinked(after: Path, before: Path) -> None:
-    """The header of `after` made to follow `before` as it is now (and its chain made whole): the link forged too."""
+    """The header of `after` made to follow `before` as it is now (and its chain made whole): the link forged
+    too."""
     last = before.read_bytes().splitlines()[-1]
-    link = {"journal": before.name, "lines": len(before.read_bytes().splitlines()), "sha256": hashlib.sha256(last).hexdigest()}
+    link = {"journal": before.name, "lines": len(before.read_bytes().splitlines()),
+            "sha256": hashlib.sha256(last).hexdigest()}
     rechained(after, lambda records: records[0].update(previous=link))
 
 
@@ -140,7 +142,9 @@ def test_a_header_time_moved_back_does_not_make_the_newest_run_the_oldest(tmp_pa
         listed = json.loads(run_cli(capsys, "records", "list", line.p, "--json").out)
         run = next(r for r in listed if r["journal"] == str(newest))
         assert run["time"].startswith(newest.name[:4]), run
-        assert run["findings"] if forged == "rechained" else run["chain"].startswith(f"broken at {newest}:"), run
+        assert (
+            run["findings"] if forged == "rechained" else run["chain"].startswith(f"broken at {newest}:")
+        ), run
 
 
 def test_a_header_time_moved_forward_on_an_older_run_stops_prune(tmp_path, capsys):
@@ -159,7 +163,8 @@ def test_a_header_time_moved_forward_on_an_older_run_stops_prune(tmp_path, capsy
 
 @pytest.mark.parametrize("forged", ["edited", "rechained"])
 def test_a_journal_of_one_plant_naming_the_other_plants_snapshot_removes_nothing(tmp_path, capsys, forged):
-    """p's first journal made to name q's newest snapshot (its SHA-256 too): prune of p removed q's snapshot."""
+    """p's first journal made to name q's newest snapshot (its SHA-256 too): prune of p removed q's
+    snapshot."""
     with two_plants(tmp_path, capsys, "ppqp") as line:
         (q_run,) = line.runs(line.q)
         theirs = line.snapshot_of(q_run)
@@ -189,7 +194,8 @@ def test_a_journal_of_one_plant_naming_the_other_plants_snapshot_removes_nothing
 
 
 def test_a_broken_chain_anywhere_in_the_folder_stops_prune_and_names_it(tmp_path, capsys):
-    """A journal of the other plant that does not verify stops prune of this one too: it may name this one's files."""
+    """A journal of the other plant that does not verify stops prune of this one too: it may name this one's
+    files."""
     with two_plants(tmp_path, capsys, "ppqp") as line:
         (q_run,) = line.runs(line.q)
         text = q_run.read_bytes()
@@ -214,8 +220,8 @@ def test_a_renamed_journal_is_not_ordered_by_its_new_name(tmp_path, capsys):
 
 
 def test_prune_of_records_that_verify_keeps_each_lines_newest_by_the_file_names(tmp_path, capsys):
-    """Nothing edited: the runs beyond the newest go, the newest snapshot of each line and the newest run stay —
-    and the other plant's records are not touched."""
+    """Nothing edited: the runs beyond the newest go, the newest snapshot of each line and the newest run stay
+    — and the other plant's records are not touched."""
     with two_plants(tmp_path, capsys, "ppqp") as line:
         first, second, third, fourth = line.runs(line.p)
         theirs = set(line.runs(line.q)) | {line.snapshot_of(j) for j in line.runs(line.q)}
@@ -231,7 +237,8 @@ def test_prune_of_records_that_verify_keeps_each_lines_newest_by_the_file_names(
 # -- bad times and bounds: one line, never a traceback -----------------------------------------
 
 
-@pytest.mark.parametrize("value", ["yesterday", "2026-01-01T00:00", 1700000000, None, "9999-12-31T23:59:59+00:00"])
+@pytest.mark.parametrize("value", ["yesterday", "2026-01-01T00:00", 1700000000, None,
+                                   "9999-12-31T23:59:59+00:00"])
 def test_a_header_time_prc3cfg_did_not_write_is_one_line(tmp_path, capsys, value):
     with two_plants(tmp_path, capsys, "pp") as line:
         first, *_ = line.runs(line.p)
@@ -253,7 +260,9 @@ def test_a_header_time_prc3cfg_did_not_write_is_one_line(tmp_path, capsys, value
 def test_a_bad_bound_is_one_line(plant, capsys, bound):
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     result = run_cli(capsys, "records", "prune", plant.path, *bound)
-    assert result.code != 0 and len(result.err.strip().splitlines()) == 1 and bound[0] in result.err, result.err
+    assert (
+        result.code != 0 and len(result.err.strip().splitlines()) == 1 and bound[0] in result.err
+    ), result.err
     assert len(journals(plant.path.parent)) == 1
 
 
@@ -271,8 +280,10 @@ def test_records_of_a_path_that_is_no_plant_file_say_so_in_one_line(tmp_path, ca
     (tmp_path / "notes.yaml").write_text("a: 1\n")
     (tmp_path / "notes.txt").write_text("hello\n")
     (tmp_path / "folder").mkdir()
-    for path in (tmp_path / "no-such-plant.yaml", tmp_path / "folder", tmp_path / "notes.yaml", tmp_path / "notes.txt"):
-        for args in (("list", path), ("list", path, "--json"), ("verify", path), ("prune", path, "--keep", "1"),
+    for path in (tmp_path / "no-such-plant.yaml", tmp_path / "folder", tmp_path / "notes.yaml",
+                 tmp_path / "notes.txt"):
+        for args in (("list", path), ("list", path, "--json"), ("verify", path),
+                     ("prune", path, "--keep", "1"),
                      ("prune", path, "--keep", "1", "--json")):  # fmt: skip
             done = run_cli(capsys, "records", *args)
             said = done.err.strip().splitlines()
@@ -281,14 +292,17 @@ def test_records_of_a_path_that_is_no_plant_file_say_so_in_one_line(tmp_path, ca
 
 
 def test_a_typo_listed_as_json_by_the_console_script_is_an_error_not_an_empty_list(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "prc3cfg", "records", "list", str(tmp_path / "plnat.yaml"), "--json"],
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "records", "list", str(tmp_path / "plnat.yaml"),
+                           "--json"],
                           capture_output=True, text=True, timeout=60)  # fmt: skip
     assert done.returncode == 1 and done.stdout == "", (done.stdout, done.stderr)
-    assert done.stderr.startswith(f"error: {tmp_path / 'plnat.yaml'}: no such file") and "check the path" in done.stderr
+    assert (done.stderr.startswith(f"error: {tmp_path / 'plnat.yaml'}: no such file")
+            and "check the path" in done.stderr)
 
 
 def test_a_plant_file_never_applied_has_no_runs_yet(tmp_path, capsys):
-    """A real plant file with no records: list and prune say so and succeed; verify fails — it vouches for nothing."""
+    """A real plant file with no records: list and prune say so and succeed; verify fails — it vouches for
+    nothing."""
     with emulated_plant(tmp_path) as plant:
         listed = run_cli(capsys, "records", "list", plant.path)
         assert listed.code == 0 and "no runs recorded yet" in listed.out
@@ -310,14 +324,17 @@ def test_verify_of_several_paths_names_the_one_without_records(plant, capsys, tm
 # -- the seeded family -------------------------------------------------------------------------
 
 #: Header times prc3cfg never writes.
-GARBAGE_TIMES = ["yesterday", "2026-01-01T00:00", 1700000000, None, "", "9999-12-31T23:59:59+00:00", "2000-01-01T00:00:00+00:00",
+GARBAGE_TIMES = ["yesterday", "2026-01-01T00:00", 1700000000, None, "", "9999-12-31T23:59:59+00:00",
+                 "2000-01-01T00:00:00+00:00",
                  [], {"t": 1}, "2026-13-45T99:99:99Z", "1e400", -1]  # fmt: skip
 
 
 def edit(line: Line, rng: random.Random) -> str:
     """One edit as an attacker with write access to the folder would make it; what it was, in words."""
     journal = rng.choice(regular(journals(line.folder)))
-    kind = rng.choice(["none", "time", "snapshot", "drop", "duplicate", "swap", "rename", "plant", "truncate"])
+    kind = rng.choice(
+        ["none", "time", "snapshot", "drop", "duplicate", "swap", "rename", "plant", "truncate"]
+    )
     if kind == "none":
         return "nothing"
     records = parsed(journal) or [{"event": "header"}]
@@ -337,10 +354,17 @@ def edit(line: Line, rng: random.Random) -> str:
         a, b = rng.sample(range(len(records)), 2)
         records[a], records[b] = records[b], records[a]
     elif kind == "rename":
-        journal.rename(journal.with_name(f"{rng.randrange(2000, 2100)}0101T000000.000000Z-{journal.name[24:]}"))
+        journal.rename(
+            journal.with_name(f"{rng.randrange(2000, 2100)}0101T000000.000000Z-{journal.name[24:]}")
+        )
         return f"renamed {journal.name}"
     elif kind == "plant":
-        name = line.folder / ".prc3cfg" / rng.choice(["journal", "snapshots"]) / f"29990101T000000.000000Z-plant.json{rng.choice(['', 'l'])}"
+        name = (
+            line.folder
+            / ".prc3cfg"
+            / rng.choice(["journal", "snapshots"])
+            / f"29990101T000000.000000Z-plant.json{rng.choice(['', 'l'])}"
+        )
         what = rng.choice(["fifo", "folder", "link", "garbage"])
         if os.path.lexists(name):
             return "nothing"
@@ -393,7 +417,8 @@ def newest_by_line(line: Line) -> set[Path]:
 
 
 def run_family(tmp_path: Path, capsys: pytest.CaptureFixture, seeds: range) -> dict[str, int]:
-    """Each seed: the base's records copied, edited, pruned. How many prunes stopped, removed something, removed nothing."""
+    """Each seed: the base's records copied, edited, pruned. How many prunes stopped, removed something,
+    removed nothing."""
     outcomes = {"stopped": 0, "removed": 0, "none removed": 0}
     (tmp_path / "base").mkdir()
     with two_plants(tmp_path / "base", capsys, "ppqpq") as base:
@@ -403,18 +428,23 @@ def run_family(tmp_path: Path, capsys: pytest.CaptureFixture, seeds: range) -> d
             folder = tmp_path / f"seed-{seed}"
             shutil.copytree(base.folder, folder, symlinks=True)
             line = Line(folder, folder / base.p.name, folder / base.q.name)
-            said = [edit(line, rng) for _ in range(rng.choice([0, 0, 1, 1, 2, 3]))]  # none: prune must still act
+            # none: prune must still act
+            said = [edit(line, rng) for _ in range(rng.choice([0, 0, 1, 1, 2, 3]))]
             before = set(folder.rglob("*"))
             whole = run_cli(capsys, "records", "verify", folder / ".prc3cfg").code == 0
             plant = rng.choice([line.p, line.q])
-            bound = rng.choice([("--keep", str(rng.randrange(0, 4))), ("--older-than", rng.choice(["0", "0.5", "1e9", "nan"]))])
-            result = run_cli(capsys, "records", "prune", plant, *bound, *rng.choice([(), ("--dry-run",), ("--json",)]))
+            bound = rng.choice([("--keep", str(rng.randrange(0, 4))),
+                                ("--older-than", rng.choice(["0", "0.5", "1e9", "nan"]))])
+            result = run_cli(capsys, "records", "prune", plant, *bound,
+                             *rng.choice([(), ("--dry-run",), ("--json",)]))
             assert result.code in (0, 1, 64), (seed, said, result.err)
             assert "Traceback" not in result.err, (seed, said)
             after = set(folder.rglob("*"))
             if not whole or result.code != 0:
-                assert after == before, (seed, said, result.out, result.err)  # nothing acted on what does not verify
-            assert all((folder / p).exists() for p in guarded if folder / p in before), (seed, said, result.out)
+                # nothing acted on what does not verify
+                assert after == before, (seed, said, result.out, result.err)
+            assert all((folder / p).exists() for p in guarded if folder / p in before), (seed, said,
+                                                                                         result.out)
             if result.code == 0:
                 assert run_cli(capsys, "records", "verify", folder / ".prc3cfg").code == 0, (seed, said)
             outcomes["stopped" if result.code else "removed" if after != before else "none removed"] += 1

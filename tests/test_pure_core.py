@@ -74,7 +74,8 @@ CORE_NEVER = ("threading", "_thread", "concurrent", "multiprocessing", "asyncio"
 
 def test_the_core_never_locks_nor_waits():
     found = {f"{path.relative_to(ROOT)} imports {alias.name if isinstance(node, ast.Import) else node.module}"
-             for path in (PACKAGE / "core").rglob("*.py") for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+             for path in (PACKAGE / "core").rglob("*.py")
+             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
              if isinstance(node, ast.Import | ast.ImportFrom)
              for alias in node.names
              if ((alias.name if isinstance(node, ast.Import) else node.module or "").split(".")[0] in CORE_NEVER)}  # fmt: skip
@@ -88,7 +89,8 @@ def test_the_core_never_locks_nor_waits():
 CLI_MAY_IMPORT = (
     "prc3cfg.api", "prc3cfg.cli", "prc3cfg.errors",
     # rendering, and the values it shows
-    "prc3cfg.core.render", "prc3cfg.core.events", "prc3cfg.core.text", "prc3cfg.core.units", "prc3cfg.core.line.LineSettings",
+    "prc3cfg.core.render", "prc3cfg.core.events", "prc3cfg.core.text", "prc3cfg.core.units",
+                  "prc3cfg.core.line.LineSettings",
     "prc3cfg.core.fleet.markdown",  # the fleet summary's table
     "prc3cfg.core.line.EMULATOR_SCHEME",  # the time of an apply on the embedded emulator says why it is short
     "prc3cfg.core.plant_plan.PlantPlan", "prc3cfg.shell.link.client.Link",
@@ -117,14 +119,17 @@ def test_the_command_line_reaches_the_workflow_only_through_the_api():
 
 def test_the_api_never_reaches_into_the_command_line():
     """The API sits between the layers and the CLI: it may import every layer, never the CLI."""
-    assert len(list((PACKAGE / "api").glob("*.py"))) > 1 and prc3cfg_imports(PACKAGE / "api" / "_apply.py")  # the check reads something
-    assert not {name for path in (PACKAGE / "api").rglob("*.py") for name in prc3cfg_imports(path) if allowed(name, ("prc3cfg.cli",))}
+    # the check reads something
+    assert len(list((PACKAGE / "api").glob("*.py"))) > 1 and prc3cfg_imports(PACKAGE / "api" / "_apply.py")
+    assert not {name for path in (PACKAGE / "api").rglob("*.py") for name in prc3cfg_imports(path)
+                if allowed(name, ("prc3cfg.cli",))}
 
 
 def test_the_layer_check_can_fail():
     """A core module that reached for the shell would be caught."""
     assert not allowed("prc3cfg.shell.link.client.Link", MAY_IMPORT["core"])
-    assert any(not allowed(name, MAY_IMPORT["core"]) for name in prc3cfg_imports(PACKAGE / "shell" / "readback.py"))
+    assert any(not allowed(name, MAY_IMPORT["core"])
+               for name in prc3cfg_imports(PACKAGE / "shell" / "readback.py"))
 
 
 def test_every_module_is_in_a_layer():
@@ -175,9 +180,9 @@ print("ok")
 """
 
 
-#: BLOCKING_IMPORT of each module alone, in one process: a child forked for each from a parent that has
-#: loaded the dependencies and the blocker and nothing of prc3cfg — what a process of its own would hold,
-#: without an interpreter's start-up a module (40 of them: 18 s of the fast tier, one process each). POSIX's fork: the
+#: BLOCKING_IMPORT of each module alone, in one process: a child forked for each from a parent that has loaded
+#: the dependencies and the blocker and nothing of prc3cfg — what a process of its own would hold, without an
+#: interpreter's start-up a module (40 of them: 18 s of the fast tier, one process each). POSIX's fork: the
 #: fast tier runs on Linux.
 BLOCKING_EACH = BLOCKING_IMPORT.replace("""for name in sys.argv[2:]:
     importlib.import_module(name)
@@ -239,24 +244,32 @@ def test_the_blocker_blocks(module):
 
 def test_the_blocker_blocks_in_each_forked_child_alone():
     said = json.loads(run(BLOCKING_EACH, "socketserver", "prc3cfg.core.codec", "serial").stdout)
-    assert "is blocked: the pure core must not import it" in said["socketserver"] and said["prc3cfg.core.codec"] == "ok"
-    assert "is blocked: the pure core must not import it" in said["serial"]  # socketserver's child loaded nothing for the next
+    assert ("is blocked: the pure core must not import it" in said["socketserver"]
+            and said["prc3cfg.core.codec"] == "ok")
+    # socketserver's child loaded nothing for the next
+    assert "is blocked: the pure core must not import it" in said["serial"]
 
 
 def api_names_used(path: Path) -> set[str]:
     """The names a file takes from `prc3cfg.api`: `api.NAME`, and `from prc3cfg.api import NAME`."""
     tree = ast.parse(path.read_text())
-    used = {node.attr for node in ast.walk(tree)
-            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "api"}
-    used |= {a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.module == "prc3cfg.api" for a in node.names}
+    used = {
+        node.attr
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "api"
+    }
+    used |= {a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+             and node.module == "prc3cfg.api" for a in node.names}
     return used  # fmt: skip
 
 
 def test_the_command_line_calls_only_what_the_api_exports():
-    """`prc3cfg.api.__all__` is what the CLI (and a user's script) calls: the CLI reaches nothing else of it."""
+    """`prc3cfg.api.__all__` is what the CLI (and a user's script) calls: the CLI reaches nothing else of
+    it."""
     import prc3cfg.api
 
-    used = {name: path.relative_to(ROOT) for path in (PACKAGE / "cli").rglob("*.py") for name in api_names_used(path)}
+    used = {name: path.relative_to(ROOT) for path in (PACKAGE / "cli").rglob("*.py")
+            for name in api_names_used(path)}
     assert used.keys() >= {"apply", "plan", "LineOptions"}  # the check sees what the CLI uses
     assert not {f"{path} uses api.{name}" for name, path in used.items() if name not in prc3cfg.api.__all__}
     assert all(hasattr(prc3cfg.api, name) for name in prc3cfg.api.__all__)
@@ -268,8 +281,10 @@ def test_the_api_imports_each_name_from_where_the_type_checker_finds_it():
     import prc3cfg.api
 
     tree = ast.parse((PACKAGE / "api" / "__init__.py").read_text())
-    (checking,) = [node for node in tree.body if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING"]
-    imported = {(node.module, a.name) for node in checking.body if isinstance(node, ast.ImportFrom) for a in node.names if a.asname == a.name}
+    (checking,) = [node for node in tree.body if isinstance(node, ast.If)
+                   and getattr(node.test, "id", None) == "TYPE_CHECKING"]
+    imported = {(node.module, a.name) for node in checking.body if isinstance(node, ast.ImportFrom)
+                for a in node.names if a.asname == a.name}
     homes = {(module, name) for module, names in prc3cfg.api._HOMES.items() for name in names}
     assert len(imported) == len(checking.body) == len(prc3cfg.api.__all__) and imported == homes
     with pytest.raises(AttributeError, match="has no attribute 'nothing_of_this_name'"):

@@ -46,8 +46,10 @@ def counted(tmp_path: Path, *args: object) -> tuple[subprocess.CompletedProcess,
     name, each time), those it wrote (by name) and the host names it resolved (by host:port)."""
     log = tmp_path / "record-io.log"
     with log.open("wb") as sink:
-        done = subprocess.run([sys.executable, "-c", COUNTING, str(sink.fileno()), *map(str, args)], pass_fds=(sink.fileno(),),
-                              capture_output=True, text=True, env=os.environ | {"COLUMNS": "200"}, check=False)  # fmt: skip
+        done = subprocess.run([sys.executable, "-c", COUNTING, str(sink.fileno()), *map(str, args)],
+                              pass_fds=(sink.fileno(),),
+                              capture_output=True, text=True, env=os.environ | {"COLUMNS": "200"},
+                              check=False)  # fmt: skip
     reads, writes, resolved = Counter(), Counter(), Counter()
     for line in log.read_text().splitlines():
         event = json.loads(line)
@@ -68,7 +70,8 @@ def edit(path: Path, old: str, new: str) -> None:
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="counts opens by POSIX path")
-def test_an_apply_reads_each_record_file_once_and_writes_a_changed_line_twice_an_unchanged_one_once(tmp_path, capsys):
+def test_an_apply_reads_each_record_file_once_and_writes_a_changed_line_twice_an_unchanged_one_once(tmp_path,
+                                                                                                    capsys):
     with emulated_plant(tmp_path) as plant:
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
         edit(plant.path, "position: 2.0\n", "position: 1.9\n")  # booth-a-right's program 1: one line changes
@@ -79,7 +82,8 @@ def test_an_apply_reads_each_record_file_once_and_writes_a_changed_line_twice_an
         files = sorted((Path(os.environ["PRC3CFG_STATE_DIR"]) / "lines").glob("*.json"))
         assert len(files) == 2  # one per line: booth-a's and booth-b's
         assert reads and max(reads.values()) == 1, reads  # every record file read once
-        assert sorted(writes.values()) == [1, 2], writes  # booth-b once (after), booth-a twice (before its write, after)
+        # booth-b once (after), booth-a twice (before its write, after)
+        assert sorted(writes.values()) == [1, 2], writes
 
         done, reads, writes, resolved = counted(tmp_path, "plan", plant.path)
         assert done.returncode == 0, done.stdout + done.stderr
@@ -89,9 +93,10 @@ def test_an_apply_reads_each_record_file_once_and_writes_a_changed_line_twice_an
 
 @needs_tmux
 def test_a_plan_waiting_for_the_line_reads_the_record_an_apply_holding_it_left(tmp_path, capsys):
-    """The record is read once the line's lock is held: a plan that waited for the line while another plant file's
-    apply wrote a program there (its system block unchanged) sees that apply's record, not the one from before it
-    waited — else it takes the program as it was and says "No changes" over a module holding other values."""
+    """The record is read once the line's lock is held: a plan that waited for the line while another plant
+    file's apply wrote a program there (its system block unchanged) sees that apply's record, not the one from
+    before it waited — else it takes the program as it was and says "No changes" over a module holding other
+    values."""
     with emulated_plant(tmp_path) as plant:
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
         other = tmp_path / "checkout-b" / "plant.yaml"
@@ -100,9 +105,12 @@ def test_a_plan_waiting_for_the_line_reads_the_record_an_apply_holding_it_left(t
         edit(other, "position: 2.0\n", "position: 1.9\n")  # booth-a-right's program 1
         pane = Pane(tmp_path, prc3cfg("apply", other), environment())
         try:
-            pane.wait(lambda screen: "Only 'yes' will be accepted:" in screen, "the apply's question")  # it holds the lines
-            waiting = subprocess.Popen(prc3cfg("plan", plant.path, "--detailed-exitcode", "--lock-timeout", "600"),
-                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=os.environ | {"COLUMNS": "200"})  # fmt: skip
+            # it holds the lines
+            pane.wait(lambda screen: "Only 'yes' will be accepted:" in screen, "the apply's question")
+            waiting = subprocess.Popen(prc3cfg("plan", plant.path, "--detailed-exitcode", "--lock-timeout",
+                                               "600"),
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                       env=os.environ | {"COLUMNS": "200"})  # fmt: skip
             assert waiting.stderr is not None
             told = waiting.stderr.readline()
             assert "waiting for the line lock held by" in told, told

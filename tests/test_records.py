@@ -79,7 +79,8 @@ def test_header_outside_a_git_work_tree_without_a_reason(plant, capsys, tmp_path
     assert header["plant"]["path"] == str(plant.path.resolve())
     assert header["plant"]["sha256"] == sha256(plant.path)
     git_said = header["plant"]["git"]
-    assert git_said["commit"] is None and git_said["clean"] is None and "not in a git work tree" in git_said["said"]
+    assert (git_said["commit"] is None and git_said["clean"] is None
+            and "not in a git work tree" in git_said["said"])
     assert header["plan_file"] is None and header["reason"] is None
     assert header["journal"] == journal.name
     kept = json.loads(snapshot.read_text())["header"]
@@ -90,16 +91,21 @@ def test_header_in_a_git_work_tree_with_a_reason_and_a_plan_file(plant, capsys, 
     commit = committed(tmp_path)
     plan = tmp_path / "plan.json"
     assert run_cli(capsys, "plan", plant.path, "--out", plan).code == 0
-    result = run_cli(capsys, "apply", plant.path, "--plan", plan, *APPLY, "--reason", "PR #12: new stroke, run 345")
+    result = run_cli(capsys, "apply", plant.path, "--plan", plan, *APPLY, "--reason",
+                     "PR #12: new stroke, run 345")
     assert result.code == 0, result.err
     header = records_of(journals(tmp_path)[-1])[0]
-    assert header["plant"]["git"] == {"commit": commit, "clean": True, "plant_file": "committed", "said": None}
+    assert header["plant"]["git"] == {"commit": commit, "clean": True, "plant_file": "committed",
+                                      "said": None}
     assert header["plan_file"] == {"path": str(plan.resolve()), "sha256": sha256(plan)}
     assert header["reason"] == "PR #12: new stroke, run 345"
-    assert json.loads(snapshots(tmp_path)[-1].read_text())["header"]["reason"] == "PR #12: new stroke, run 345"
+    assert json.loads(snapshots(tmp_path)[-1].read_text())["header"]["reason"] == ("PR #12: new "
+                                                                                   "stroke, run 345")
 
     # the plant file changed and not committed; the reason from the environment; a restore says so too
-    edit_plant(plant.path, lambda d: d["buses"][0]["modules"][0].setdefault("programs", {}).update({7: {"position": 1.0, "speed": 0.3}}))
+    edit_plant(plant.path,
+               lambda d: d["buses"][0]["modules"][0].setdefault("programs", {}).update({7: {"position": 1.0,
+                                                                                            "speed": 0.3}}))
     monkeypatch.setenv("PRC3CFG_REASON", "ticket 77")
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     header = records_of(journals(tmp_path)[-1])[0]
@@ -118,7 +124,8 @@ def test_require_reason_refuses_before_any_frame(tmp_path, capsys, monkeypatch):
         result = run_cli(capsys, "apply", plant.path, *APPLY, "--trace", trace)
         assert result.code == 1
         (line,) = result.problems
-        assert "require_reason" in line and "--reason" in line and "PRC3CFG_REASON" in line and "nothing was written" in line
+        assert ("require_reason" in line and "--reason" in line and "PRC3CFG_REASON" in line
+                and "nothing was written" in line)
         assert plant.images() == before
         assert not trace.exists() or trace.read_text() == ""
         assert not (tmp_path / ".prc3cfg" / "journal").exists()
@@ -166,7 +173,8 @@ def test_an_edited_snapshot_is_found_and_not_restored(plant, capsys, tmp_path):
     assert restore.code == 1 and str(snapshot) in restore.err and "nothing was written" in restore.err
 
 
-def test_a_snapshot_stripped_of_its_header_is_not_restored_as_one_from_before_headers(plant, capsys, tmp_path):
+def test_a_snapshot_stripped_of_its_header_is_not_restored_as_one_from_before_headers(plant, capsys,
+                                                                                      tmp_path):
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     (snapshot,) = snapshots(tmp_path)
     document = json.loads(snapshot.read_text())
@@ -174,7 +182,8 @@ def test_a_snapshot_stripped_of_its_header_is_not_restored_as_one_from_before_he
     snapshot.write_text(json.dumps(document))
     refused = run_cli(capsys, "restore", snapshot, *APPLY)
     assert refused.code == 1 and "has no header, but" in refused.err and "nothing was written" in refused.err
-    journals(tmp_path)[0].unlink()  # with its journal gone too, it is one from before headers: restored, and said
+    # with its journal gone too, it is one from before headers: restored, and said
+    journals(tmp_path)[0].unlink()
     restored = run_cli(capsys, "restore", snapshot, *APPLY)
     assert restored.code == 0, restored.err
     assert "written before records had headers — its integrity cannot be checked" in restored.err
@@ -206,22 +215,32 @@ def test_a_refused_run_says_why_in_its_journal_and_in_the_list(plant, capsys, tm
     assert last["event"] == "refused" and last["why"] == refused.err.removeprefix("error: ").strip()
     (run,) = json.loads(run_cli(capsys, "records", "list", plant.path, "--json").out)
     assert run["result"] == f"refused, nothing written: {last['why']}"
-    assert "refused, nothing written: the plan releases the axes of" in run_cli(capsys, "records", "list", plant.path).out
+    assert "refused, nothing written: the plan releases the axes of" in run_cli(capsys, "records", "list",
+                                                                                plant.path).out
     assert run_cli(capsys, "records", "verify", plant.path).code == 0
 
 
-def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release_needs(plant, capsys, tmp_path):
+def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release_needs(plant, capsys,
+                                                                                       tmp_path):
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-b-left", *APPLY).code == 0
-    edit_plant(plant.path, lambda d: d["buses"][0]["modules"][0].setdefault("programs", {}).update({7: {"position": 1.0, "speed": 0.3}}))
+    edit_plant(plant.path,
+               lambda d: d["buses"][0]["modules"][0].setdefault("programs", {}).update({7: {"position": 1.0,
+                                                                                            "speed": 0.3}}))
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     for _ in range(2):
-        assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # no changes: no snapshot
+        # no changes: no snapshot
+        assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     runs = journals(tmp_path)
     taken = snapshots(tmp_path)
     assert len(runs) == 5 and len(taken) == 3
 
-    assert json.loads(run_cli(capsys, "records", "prune", plant.path, "--older-than", "1", "--json").out)["removed"] == []
+    assert (
+        json.loads(run_cli(capsys, "records", "prune", plant.path, "--older-than", "1", "--json").out)[
+            "removed"
+        ]
+        == []
+    )
     # an untold axis release recorded by the first run (as an apply killed after its 10h leaves it)
     bus = plant.plant.buses[0]
     pending_records.Releases("apply", runs[0]).record(line_keys(bus.port), bus.name, 1, "booth-a-left")
@@ -237,7 +256,8 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     assert pruned.code == 0, pruned.err
     assert [r["journal"] for r in json.loads(pruned.out)["removed"]] == [str(runs[0])]
     assert not runs[0].exists() and not taken[0].exists()
-    assert runs[1].exists() and taken[1].exists() and runs[2].exists() and taken[2].exists()  # newest of booth-b, of booth-a
+    # newest of booth-b, of booth-a
+    assert runs[1].exists() and taken[1].exists() and runs[2].exists() and taken[2].exists()
     assert runs[4].exists()
     assert run_cli(capsys, "records", "verify", plant.path).code == 0  # what prune leaves verifies
 
@@ -248,13 +268,16 @@ def test_refresh_only_writes_json_markdown_and_a_file(plant, capsys, tmp_path):
     assert as_json.code == 0, as_json.err
     document = json.loads(as_json.out)
     assert document == json.loads(out.read_text())
-    assert document["format"] == "prc3cfg-drift/1" and document["plant"] == "demo-line" and document["modules"] == 6
+    assert (document["format"] == "prc3cfg-drift/1" and document["plant"] == "demo-line"
+            and document["modules"] == 6)
     assert {(d["bus"], d["name"]) for d in document["drifted"]} >= {("booth-a", "booth-a-left")}
     assert all(d["differences"] for d in document["drifted"])
     markdown = run_cli(capsys, "plan", plant.path, "--refresh-only", "--markdown")
-    assert markdown.code == 0 and markdown.out.startswith("<!-- prc3cfg-drift -->") and "booth-a-left" in markdown.out
+    assert (markdown.code == 0 and markdown.out.startswith("<!-- prc3cfg-drift -->")
+            and "booth-a-left" in markdown.out)
     plain = run_cli(capsys, "plan", plant.path, "--refresh-only", "--out", out, "--detailed-exitcode")
-    assert plain.code == 2 and "drifted from the plant file" in plain.out and f"Drift written to {out}" in plain.out
+    assert (plain.code == 2 and "drifted from the plant file" in plain.out
+            and f"Drift written to {out}" in plain.out)
     assert json.loads(out.read_text()) == document
 
 
@@ -262,7 +285,8 @@ def test_git_absent_is_said(plant, capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path / "no-bin"))
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     said = records_of(journals(tmp_path)[-1])[0]["plant"]["git"]
-    assert said["commit"] is None and said["clean"] is None and "git" in said["said"] and "not found" in said["said"]
+    assert (said["commit"] is None and said["clean"] is None and "git" in said["said"]
+            and "not found" in said["said"])
 
 
 def test_records_verify_of_nothing_says_so(tmp_path, capsys):
@@ -276,7 +300,8 @@ def test_adopt_leaves_a_journal_saying_who_adopted_what_and_why(plant, capsys, t
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     plant.emulators["booth-a"].teach_in(1, 2, 160)
     before = sha256(plant.path)
-    result = run_cli(capsys, "adopt", plant.path, "--module", "booth-a-left", "--auto-approve", "--reason", "taught on the floor")
+    result = run_cli(capsys, "adopt", plant.path, "--module", "booth-a-left", "--auto-approve", "--reason",
+                     "taught on the floor")
     assert result.code == 0, result.err
     applied, journal = journals(tmp_path)
     header, *rest = records_of(journal)
@@ -285,10 +310,12 @@ def test_adopt_leaves_a_journal_saying_who_adopted_what_and_why(plant, capsys, t
     adopt, adopted = (r for r in rest if r["event"] in ("adopt", "adopted"))
     assert adopt["buses"] == ["booth-a"] and adopt["values"]
     assert adopted == adopted | {"written": True, "sha256": sha256(plant.path)}
-    assert header["previous"] == {"journal": applied.name, "lines": len(records_of(applied)), "sha256": hashlib.sha256(
+    assert header["previous"] == {"journal": applied.name, "lines": len(records_of(applied)),
+                                  "sha256": hashlib.sha256(
         applied.read_bytes().splitlines()[-1]).hexdigest()}  # it follows the apply's journal
     _, run = json.loads(run_cli(capsys, "records", "list", plant.path, "--json").out)
-    assert run["command"] == "adopt" and run["result"] == "adopted" and run["lines"] == ["booth-a"] and run["snapshot"] is None
+    assert (run["command"] == "adopt" and run["result"] == "adopted" and run["lines"] == ["booth-a"]
+            and run["snapshot"] is None)
     assert run_cli(capsys, "records", "verify", plant.path).code == 0
 
 
@@ -305,13 +332,20 @@ def test_a_run_follows_the_last_line_of_the_journal_before_it(plant, capsys, tmp
 
 
 def test_drift_in_markdown_is_inert_and_fits():
-    """A hostile module name in the drift comment: no mention, link or HTML is live; a long drift is cut with a count."""
+    """A hostile module name in the drift comment: no mention, link or HTML is live; a long drift is cut with
+    a count."""
     from prc3cfg.core.render import Drift, drift_json, drift_markdown
 
-    hostile = Drift("bus-<b>", 1, "@someone [x](https://evil.example) <img src=x>", ("program 1 position 1.000 m → 1.100 m",))
+    hostile = Drift("bus-<b>", 1, "@someone [x](https://evil.example) <img src=x>",
+                    ("program 1 position 1.000 m → 1.100 m",))
     text = drift_markdown(drift_json("p`lant", [hostile], 1))
     assert "@someone" not in text and "](https" not in text and "<img" not in text and "<b>" not in text
-    many = [Drift("b", n % 30 + 1, f"m{n}", tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 65))) for n in range(60)]
+    many = [
+        Drift(
+            "b", n % 30 + 1, f"m{n}", tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 65))
+        )
+        for n in range(60)
+    ]
     cut = drift_markdown(drift_json("plant", many, 60), max_chars=5000)
     assert len(cut) <= 5000 and cut.rstrip().endswith("that drifted: see the drift file.")
 
@@ -326,7 +360,8 @@ def chained(*records: dict) -> bytes:
     return b"".join(line + b"\n" for line in lines)
 
 
-GOOD = chained({"event": "header"}, {"event": "request", "n": 1}, {"event": "exchange", "n": 2}, {"event": "result", "n": 3})
+GOOD = chained({"event": "header"}, {"event": "request", "n": 1}, {"event": "exchange", "n": 2},
+               {"event": "result", "n": 3})
 LINES = GOOD.splitlines(keepends=True)
 
 
@@ -340,7 +375,8 @@ LINES = GOOD.splitlines(keepends=True)
     (LINES[1] + LINES[2], 1),  # no header
     (b"", None),  # empty: no line, the file itself
     (b'{"event": "apply"}\n{"event": "request"}\n', None),  # before headers: unchained, not refused
-], ids=["good", "edited", "removed", "inserted", "not-json", "cut-short", "no-header", "empty", "before-headers"])
+], ids=["good", "edited", "removed", "inserted", "not-json", "cut-short", "no-header", "empty",
+        "before-headers"])
 def test_the_chain_names_the_first_record_that_does_not_match(tmp_path, data, problem):
     from prc3cfg.shell.audit import check_journal
 
@@ -353,7 +389,9 @@ def test_the_chain_names_the_first_record_that_does_not_match(tmp_path, data, pr
         assert checked.problem is None and checked.chained == data.startswith(b'{"event": "header"')
         assert checked.cut == (not data.endswith(b"\n")) and len(checked.records) == data.count(b"\n")
     else:
-        assert checked.problem is not None and checked.problem.where == f"{journal}:{problem}", checked.problem
+        assert (
+            checked.problem is not None and checked.problem.where == f"{journal}:{problem}"
+        ), checked.problem
 
 
 @pytest.mark.parametrize("name", ["../plant.yaml", "/etc/passwd", "a/b.json", "..", "", None, 7, "a\\b.json"])
@@ -371,7 +409,8 @@ def test_a_record_that_names_a_path_is_not_followed_by_prune(plant, capsys, tmp_
         if record["event"] == "snapshot":
             record["path"] = name
     journal.write_bytes(chained(*records))
-    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0  # the newest run: not this one
+    # the newest run: not this one
+    assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     refused = run_cli(capsys, "records", "prune", plant.path, "--keep", "0")
     assert refused.code == 1 and f"{journal}:" in refused.err and "nothing was removed" in refused.err
     assert victim.exists() and journal.exists()
@@ -390,7 +429,8 @@ def test_a_journal_the_disk_cut_short_still_verifies_and_restores(plant, capsys,
     assert restored.code == 0, restored.err
 
 
-@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="needs root to give the folder to another user")
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0,
+                    reason="needs root to give the folder to another user")
 def test_git_refusing_a_repository_of_another_owner_is_said(tmp_path):
     """git's safe.directory: a work tree another user owns is not read — the header says git's reason."""
     from prc3cfg.shell.records import git_state

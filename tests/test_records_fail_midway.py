@@ -26,7 +26,8 @@ from emulated import emulated_plant, run_cli, travel_list
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.shell.testing import EmulatedPlant
 
-pytestmark = pytest.mark.skipif(not hasattr(resource, "RLIMIT_FSIZE"), reason="no file-size limit on this system")
+pytestmark = pytest.mark.skipif(not hasattr(resource, "RLIMIT_FSIZE"),
+                                reason="no file-size limit on this system")
 
 
 #: The link's reply time-out: long enough that a busy machine repeats no exchange — a repeat makes one
@@ -79,12 +80,14 @@ def limited_apply(path: Path, size: int) -> subprocess.CompletedProcess[str]:
     def limit() -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (size, size))
 
-    return subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(path), "--auto-approve", "--allow-axis-release"],
+    return subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(path), "--auto-approve",
+                           "--allow-axis-release"],
                           preexec_fn=limit, capture_output=True, text=True, timeout=120)  # fmt: skip
 
 
 @contextlib.contextmanager
-def refused_apply(tmp_path: Path, size: int) -> Iterator[tuple[EmulatedPlant, dict, subprocess.CompletedProcess[str], str]]:
+def refused_apply(tmp_path: Path, size: int) -> Iterator[tuple[EmulatedPlant, dict,
+                                                               subprocess.CompletedProcess[str], str]]:
     """An apply of a fresh line (its folder `line`) whose journal the disk refuses past `size` bytes: it
     ended with exit 1, no traceback, and an error naming the journal it could not keep. The plant (still
     emulated), its images before, the apply's result and its last line."""
@@ -96,12 +99,17 @@ def refused_apply(tmp_path: Path, size: int) -> Iterator[tuple[EmulatedPlant, di
         assert result.returncode == 1, result.stderr
         assert "Traceback" not in result.stdout + result.stderr
         error = result.stderr.strip().splitlines()[-1]
-        assert error.startswith("error: could not keep the journal ") and journal_of(line).name in error, error
+        assert (
+            error.startswith("error: could not keep the journal ") and journal_of(line).name in error
+        ), error
         yield plant, factory, result, error
 
 
-def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_frame_with_an_exact_account(tmp_path, capsys):
-    with refused_apply(tmp_path, limit_within_the_writes(tmp_path, capsys)) as (plant, factory, result, error):
+def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_frame_with_an_exact_account(
+    tmp_path, capsys
+):
+    with refused_apply(tmp_path, limit_within_the_writes(tmp_path, capsys)) as (plant, factory, result,
+                                                                                error):
         assert "every line stopped before its next frame" in error and "prc3cfg restore " in error
         held = plant.images()
         # what each module was told to have been sent is what it holds
@@ -118,14 +126,18 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
                 assert image == factory[(bus, address)]
                 nothing_sent.add((bus, address))
                 continue
-            if "nothing was sent to it" in account or "stopped (a record could not be kept) before step 1 of" in account:
+            if ("nothing was sent to it" in account
+                or "stopped (a record could not be kept) before step 1 of" in account):
                 nothing_sent.add((bus, address))
                 assert image == factory[(bus, address)], account
-            elif (done := re.search(r"verifying: (\d+) of (\d+) steps? acknowledged", account)) and done[1] == done[2]:
+            elif (done := re.search(r"verifying: (\d+) of (\d+) steps? acknowledged", account)) and done[
+                1
+            ] == done[2]:
                 all_acknowledged.add((bus, address))
                 assert matches(image, desired[(bus, address)]), account
         assert nothing_sent, "the limit stopped no module before its first frame"
-        assert any(image != factory[key] for key, image in held.items()), "the limit stopped every module before its first frame"
+        assert any(image != factory[key] for key, image in held.items()), ("the limit stopped every module "
+                                                                           "before its first frame")
         # the travel list names exactly the modules whose system block a 20h changed (none: no list)
         travel = travel_list(result.stdout)
         released = {key for key, image in held.items() if image.system != factory[key].system}
@@ -148,10 +160,11 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
         assert "Apply complete" in again.out and plant.matches_plant()
 
 
-def test_a_journal_the_disk_refuses_while_the_modules_are_read_back_is_said_so_not_an_interruption(tmp_path, capsys):
-    """The limit half way through the read-back of the line with the shorter one (measured on a twin):
-    before any line's first write. The read whose record was refused stays back, nothing is written, and the apply says
-    it could not keep its journal — it said "error: interrupted", exit 130, as if Ctrl-C."""
+def test_a_journal_the_disk_refuses_while_the_modules_are_read_back_is_said_so_not_an_interruption(tmp_path,
+                                                                                                   capsys):
+    """The limit half way through the read-back of the line with the shorter one (measured on a twin): before
+    any line's first write. The read whose record was refused stays back, nothing is written, and the apply
+    says it could not keep its journal — it said "error: interrupted", exit 130, as if Ctrl-C."""
     header, lines, _ = read_backs(twin_journal(tmp_path, capsys))
     size = header + min(lines.values()) // 2  # before any line's first write, whichever line reads back first
     with refused_apply(tmp_path, size) as (plant, factory, _, error):
@@ -160,7 +173,8 @@ def test_a_journal_the_disk_refuses_while_the_modules_are_read_back_is_said_so_n
 
 
 def matches(held: ModuleImage, desired: ModuleImage) -> bool:
-    return held.system == desired.system and all(w is None or h == w for h, w in zip(held.programs, desired.programs))
+    return held.system == desired.system and all(w is None or h == w
+                                                 for h, w in zip(held.programs, desired.programs))
 
 
 def test_an_apply_with_a_whole_disk_is_not_stopped(tmp_path, capsys):

@@ -55,7 +55,8 @@ def test_jumps(jumps_, within, expected):
 
 @pytest.mark.parametrize(
     ("symbol", "name"),
-    [("S1", "upper reversing point"), ("S12", "sync conveyor sequence"), ("Vr", "relative speed"), ("T", "dwell"), ("F2", "F2")],
+    [("S1", "upper reversing point"), ("S12", "sync conveyor sequence"), ("Vr", "relative speed"),
+     ("T", "dwell"), ("F2", "F2")],
 )
 def test_field_name(symbol, name):
     assert field_name(symbol) == name
@@ -75,9 +76,11 @@ COST = LineCost.of("crc16", LineSettings(), 0.010, 0.020)
 
 def a_change() -> ModuleChange:
     """Program 1 set up, program 2's jump changed, S1 lowered below unmanaged program 5's position."""
-    actual = ModuleImage.factory(1).with_programs({2: Program(P=300, V=100, A=3), 3: Program(P=350, V=100), 5: Program(P=390, V=90)})
+    actual = ModuleImage.factory(1).with_programs({2: Program(P=300, V=100, A=3), 3: Program(P=350, V=100),
+                                                   5: Program(P=390, V=90)})
     desired = replace(actual, system=replace(actual.system, S1=380)).with_programs(
-        {1: Program(P=200, V=60, Vr=5, F1=1010, A=2), 2: Program(P=300, V=100, A=1), **{n: None for n in range(3, 65)}})
+        {1: Program(P=200, V=60, Vr=5, F1=1010, A=2), 2: Program(P=300, V=100, A=1),
+         **{n: None for n in range(3, 65)}})
     return ModuleChange("a", "m", actual, desired, plan_module(actual, desired, COST))
 
 
@@ -85,8 +88,10 @@ def test_a_module_diff_compares_the_images_field_by_field() -> None:
     change = a_change()
     assert module_lines(changes_json(change)) == [
         "~ system: upper reversing point 0.400 m → 0.380 m",
-        "+ program 1: position 0.150 m → 0.200 m, speed 0.050 m/s → 0.060 m/s, relative speed 0.000 m/s → 0.005 m/s, "
-        "F1 reset at 0.000 m → set at 0.010 m",
+        (
+            "+ program 1: position 0.150 m → 0.200 m, speed 0.050 m/s → 0.060 m/s, relative speed 0.000 m/s →"
+            " 0.005 m/s, F1 reset at 0.000 m → set at 0.010 m"
+        ),
         "- jump 2 → 3",
         "+ chain 1 → 2 → 1",
         f"~ program 5 (not managed, kept): position 0.390 m → 0.380 m — {CLAMPED}",
@@ -126,7 +131,8 @@ def test_a_live_plan_shows_what_its_plan_file_shows() -> None:
     document = plan_file.write(plan, ["module x left the plant file: it stays on the hardware"], render)
     assert human(plan, notes=document["left_alone"]) == human(document)
     assert module_lines(changes_json(plan.changes[0]))[0] in markdown(plan)
-    assert "```diff\n" + "\n".join(module_lines(document["buses"][0]["modules"][0]["changes"])) in markdown(document)
+    assert ("```diff\n"
+            + "\n".join(module_lines(document["buses"][0]["modules"][0]["changes"])) in markdown(document))
 
 
 def full_line_plan(tmp_path):
@@ -138,13 +144,16 @@ def full_line_plan(tmp_path):
 
     modules = []
     for address in range(1, 31):
-        programs = {n: {"position": round(0.3 + (n * 7 + address) % 150 / 100, 3), "speed": round(0.05 + (n + address) % 40 / 100, 3)}
+        programs = {n: {"position": round(0.3 + (n * 7 + address) % 150 / 100, 3),
+                        "speed": round(0.05 + (n + address) % 40 / 100, 3)}
                     for n in range(1, 65)}  # fmt: skip
         name = {1: "left|right", 2: "<b>bold</b>", 3: "a & b"}.get(address, f"m{address}")
         modules.append({"address": address, "name": name, "unmanaged_programs": "reset",
                         "system": {"upper_reversing_point": 2.0, "max_speed": 0.5}, "programs": programs})  # fmt: skip
     plant_file = tmp_path / "plant.yaml"
-    plant_file.write_text(yaml.safe_dump({"plant": "full|line", "buses": [{"name": "line", "port": "socket://127.0.0.1:9", "modules": modules}]}))
+    plant_file.write_text(yaml.safe_dump({"plant": "full|line",
+                                          "buses": [{"name": "line", "port": "socket://127.0.0.1:9",
+                                                     "modules": modules}]}))
     plant = api.load(plant_file)
     return api.plan(plant, images={("line", a): ModuleImage.factory(a) for a in range(1, 31)})
 
@@ -158,7 +167,8 @@ def test_a_full_line_plan_fits_a_comment_with_every_warning_and_a_row_per_module
     text = render.markdown(plan, full_plan="`plan.json`")
     assert len(text) <= render.COMMENT_BUDGET
     assert text.startswith(render.MARKER)
-    assert len(plan.axis_releases) == 30 and all(render.code(f"line/{m.name}") in text for m in plan.axis_releases)
+    assert len(plan.axis_releases) == 30 and all(render.code(f"line/{m.name}") in text
+                                                 for m in plan.axis_releases)
     assert "are left out to keep this comment under 65,000 characters: the full plan is `plan.json`." in text
     page = cmarkgfm.github_flavored_markdown_to_html(text)
     body = page.split("<tbody>", 1)[1].split("</tbody>", 1)[0]
@@ -169,8 +179,11 @@ def test_a_full_line_plan_fits_a_comment_with_every_warning_and_a_row_per_module
     # outside the table, names read as written too: in code spans, and in each module's summary
     assert "<h3>prc3cfg plan — <code>full|line</code></h3>" in page
     warning = page.split("travel to reference point required after apply", 1)[1].split("</blockquote>", 1)[0]
-    assert re.findall(r"<code>(.*?)</code>", warning)[:3] == ["line/left|right", "line/&lt;b&gt;bold&lt;/b&gt;", "line/a &amp; b"]
-    shown = cmarkgfm.github_flavored_markdown_to_html(text, options=cmarkgfm.cmark.Options.CMARK_OPT_UNSAFE)  # as GitHub: <details> kept
+    assert re.findall(r"<code>(.*?)</code>", warning)[:3] == ["line/left|right",
+                                                              "line/&lt;b&gt;bold&lt;/b&gt;",
+                                                              "line/a &amp; b"]
+    # as GitHub: <details> kept
+    shown = cmarkgfm.github_flavored_markdown_to_html(text, options=cmarkgfm.cmark.Options.CMARK_OPT_UNSAFE)
     summaries = re.findall(r"<summary>(.*?) \(address", shown)
     assert summaries[:3] == ["line / left|right", "line / &lt;b&gt;bold&lt;/b&gt;", "line / a &amp; b"]
 
@@ -200,22 +213,29 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
     change = replace(a_change(), cost=COST)
     other = replace(change, bus="b", name="n")  # a second line, alike: it runs at the same time
     plan = PlantPlan("p", "p.yaml", "0" * 64, (change, other))
-    reading = math.fsum(COST.message_time(1, m) for m in read_messages(range(1, 65)))  # its read-back holds every program: 1 + 16 reads
+    # its read-back holds every program: 1 + 16 reads
+    reading = math.fsum(COST.message_time(1, m) for m in read_messages(range(1, 65)))
     verifying = verification_time(change.actual, change.plan.predicted, change.steps, COST)
     assert plan.phases() == {"reading": reading, "writing": change.plan.bus_time, "verifying": verifying}
     document = plan_file.write(plan, (), render)
-    assert document["estimated_phases_s"] == {phase: round(seconds, 3) for phase, seconds in plan.phases().items()}
+    assert document["estimated_phases_s"] == {phase: round(seconds, 3)
+                                              for phase, seconds in plan.phases().items()}
     assert document["estimated_time_s"] == round(reading + change.plan.bus_time + verifying, 3)
-    said = (f"estimated time {document['estimated_time_s']:.1f} s: reading back {reading:.1f} s, writing {change.plan.bus_time:.1f} s "
-            f"(bus time {plan.bus_time:.3f} s, naive download {plan.naive_bus_time:.3f} s), verifying {verifying:.1f} s; "
+    said = (f"estimated time {document['estimated_time_s']:.1f} s: reading back {reading:.1f} s, writing "
+            f"{change.plan.bus_time:.1f} s "
+            f"(bus time {plan.bus_time:.3f} s, naive download {plan.naive_bus_time:.3f} s), verifying "
+            f"{verifying:.1f} s; "
             "⚠ 2 modules release the axes")  # fmt: skip
-    assert human(plan).splitlines()[-2:] == [f"Plan: 2 of 2 modules change, {plan.message_count} messages, {said}", LEGEND]
+    assert human(plan).splitlines()[-2:] == [f"Plan: 2 of 2 modules change, {plan.message_count} "
+                                             f"messages, {said}", LEGEND]
     assert f"\n\nPlan: 2 of 2 modules change, {plan.message_count} messages, {said}\n" in markdown(plan)
 
 
 def test_an_apply_says_its_time_by_phase_against_the_estimate_in_one_line() -> None:
-    assert render.timing({"reading": 4.9, "writing": 0.61, "verifying": 0.5}, {"reading": 5.04, "writing": 0.66, "verifying": 0.52}) == (
-        "Time: 6.2 s (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.5 s (0.5 s)")
+    assert render.timing({"reading": 4.9, "writing": 0.61, "verifying": 0.5},
+                         {"reading": 5.04, "writing": 0.66, "verifying": 0.52}) == (
+        "Time: 6.2 s (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.5 "
+        "s (0.5 s)")
 
 
 def test_show_says_each_value_in_both_units_with_its_source_from_plain_values() -> None:
@@ -247,15 +267,28 @@ def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broad
 
     from prc3cfg.core.plant_plan import LineProof
 
-    killed = SimpleNamespace(bus="booth-a", name="left", command="apply", pid=41, time="2024-05-01T10:00:00", journal=None, owner=None)
-    claimed = SimpleNamespace(**vars(killed) | {"bus": "booth-a\x1b[1A\x1b[2K", "name": "left\u202e", "owner": "bob (uid 1002)"})
-    assert render.earlier_releases([killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"}), claimed]) == [
-        "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier prc3cfg apply, "
-        "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)",
-        "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier prc3cfg apply, "
-        "pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account; journal j.jsonl)",
-        "⚠ Travel to reference point required before production on: booth-a\\x1b[1A\\x1b[2K/left\\u202e (possibly: bob (uid 1002)'s "
-        "record says an earlier prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)"]
+    killed = SimpleNamespace(bus="booth-a", name="left", command="apply", pid=41, time="2024-05-01T10:00:00",
+                             journal=None, owner=None)
+    claimed = SimpleNamespace(**vars(killed) | {"bus": "booth-a\x1b[1A\x1b[2K", "name": "left\u202e",
+                                                "owner": "bob (uid 1002)"})
+    assert render.earlier_releases(
+        [killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"}), claimed]
+    ) == [
+        (
+            "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier"
+            " prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)"
+        ),
+        (
+            "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier"
+            " prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account;"
+            " journal j.jsonl)"
+        ),
+        (
+            "⚠ Travel to reference point required before production on: booth-a\\x1b[1A\\x1b[2K/left\\u202e"
+            " (possibly: bob (uid 1002)'s record says an earlier prc3cfg apply, pid 41 at"
+            " 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)"
+        ),
+    ]
     runs = [SimpleNamespace(bus="line", broadcasts=1), SimpleNamespace(bus="other", broadcasts=0)]
     proofs = [LineProof("line", silent=(3, 4, 5)), LineProof("other", silent=(9,)), LineProof("quiet")]
     assert render.broadcasts_heard(proofs, runs) == [
@@ -263,21 +296,24 @@ def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broad
 
 
 def test_the_travel_list_groups_its_modules_by_bus_on_lines_a_screen_holds() -> None:
-    """30 released modules on a line and one possibly released on another: a heading, then each bus's modules on
-    lines of their own, each line within TRAVEL_WIDTH, wrapped between modules, every module named once."""
+    """30 released modules on a line and one possibly released on another: a heading, then each bus's modules
+    on lines of their own, each line within TRAVEL_WIDTH, wrapped between modules, every module named once."""
     from types import SimpleNamespace
 
     from prc3cfg.core.axes import Release
 
-    runs = [SimpleNamespace(bus="booth-a", name=f"reciprocator-{n:02d}", released=Release.YES) for n in range(1, 31)]
+    runs = [SimpleNamespace(bus="booth-a", name=f"reciprocator-{n:02d}", released=Release.YES)
+            for n in range(1, 31)]
     runs += [SimpleNamespace(bus="booth-b", name="pretreat", released=Release.POSSIBLY),
              SimpleNamespace(bus="booth-b", name="x", released=Release.NO)]
     heading, *lines = render.travel_list(runs).splitlines()
     assert heading == render.TRAVEL and len(lines) > 2
     assert all(len(line) <= render.TRAVEL_WIDTH and line.startswith("    ") for line in lines), lines
     named = [name.strip() for line in lines for name in line.split(",") if name.strip()]
-    assert named == [f"booth-a/reciprocator-{n:02d}" for n in range(1, 31)] + ["booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"]
-    assert lines[-1] == "    booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"  # another bus, another line
+    assert (named == [f"booth-a/reciprocator-{n:02d}" for n in range(1, 31)]
+            + ["booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"])
+    # another bus, another line
+    assert lines[-1] == "    booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"
 
 
 #: Texts a plant or plan file could bring into a pull-request comment, meant to do more than be read.
@@ -311,24 +347,30 @@ def escaped(text: str) -> str:
 
 
 #: What a comment may hold as HTML: what prc3cfg writes itself.
-OUR_TAGS = {"h3", "p", "blockquote", "table", "thead", "tbody", "tr", "th", "td", "details", "summary", "pre", "code", "em", "strong"}
+OUR_TAGS = {"h3", "p", "blockquote", "table", "thead", "tbody", "tr", "th", "td", "details", "summary", "pre",
+            "code", "em", "strong"}
 
 
 @pytest.mark.parametrize("case", HOSTILE, ids=list(HOSTILE))
 def test_text_from_a_plan_file_is_never_live_in_a_comment(case):
-    """A name, a bus, a note, the base: each shown as written — no mention, link, image, HTML, cell or line of its own."""
+    """A name, a bus, a note, the base: each shown as written — no mention, link, image, HTML, cell or line of
+    its own."""
     import cmarkgfm
 
     hostile = HOSTILE[case]
-    document = plan_file.write(PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),)), [hostile], render)
+    document = plan_file.write(PlantPlan("p", "p.yaml", "0" * 64,
+                                         (replace(a_change(), bus=hostile, name=hostile),)), [hostile],
+                               render)
     document["plant"] = hostile
     document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": [hostile]}
     document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
     text = markdown(document)
-    page = cmarkgfm.github_flavored_markdown_to_html(text, options=cmarkgfm.cmark.Options.CMARK_OPT_UNSAFE)  # as GitHub: HTML kept
+    # as GitHub: HTML kept
+    page = cmarkgfm.github_flavored_markdown_to_html(text, options=cmarkgfm.cmark.Options.CMARK_OPT_UNSAFE)
     assert set(re.findall(r"<([a-z0-9]+)", page)) <= OUR_TAGS, page
     outside_code = re.sub(r"<(code|pre)>.*?</\1>", "", page, flags=re.S)
-    assert re.search(r"@[A-Za-z0-9]", html.unescape(outside_code)) is None  # GitHub makes a mention of any text but code
+    # GitHub makes a mention of any text but code
+    assert re.search(r"@[A-Za-z0-9]", html.unescape(outside_code)) is None
     assert not any(c in text for c in "\x1b\x07")
     cells = re.findall(r"<td[^>]*>(.*?)</td>", page, re.S)
     assert "\u200d" not in text  # a mention is broken by an empty comment, which a paste does not carry
@@ -338,11 +380,13 @@ def test_text_from_a_plan_file_is_never_live_in_a_comment(case):
 
 @pytest.mark.parametrize("case", HOSTILE, ids=list(HOSTILE))
 def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
-    """The human plan shows every text of a plan file with its control characters escaped: one line stays one line."""
+    """The human plan shows every text of a plan file with its control characters escaped: one line stays one
+    line."""
     hostile = HOSTILE[case] + "\u2028\x85\ud800"
     plan = PlantPlan("p", "p.yaml", "0" * 64, (replace(a_change(), bus=hostile, name=hostile),))
     live = human(plan, notes=[hostile])  # names a script gave the API, and notes, as a plan file's
-    assert CONTROL.search(live.replace("\n", "")) is None and f"Left as it is: {escaped(hostile)}" in live.splitlines()
+    assert (CONTROL.search(live.replace("\n", "")) is None
+            and f"Left as it is: {escaped(hostile)}" in live.splitlines())
     document = plan_file.write(plan, [hostile], render)
     document["read"] = {"base": hostile, "modules_not_read": [hostile], "not_as_verified": []}
     document["buses"][0]["modules"][0]["read"] = {"programs": [1, 2], "programs_not_read": []}
@@ -355,8 +399,10 @@ def test_text_from_a_plan_file_is_plain_text_on_a_terminal(case):
 
 def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released_and_not_read():
     """The head is never cut: the releases, the programs clamped, the modules taken as last verified."""
-    document = plan_file.write(PlantPlan("p", "p.yaml", "0" * 64, (a_change(), replace(a_change(), bus="b"))), (), render)
-    document["read"] = {"base": "the plant file last applied in full here", "modules_not_read": ["a/x", "a/y"], "not_as_verified": []}
+    document = plan_file.write(PlantPlan("p", "p.yaml", "0" * 64, (a_change(), replace(a_change(), bus="b"))),
+                               (), render)
+    document["read"] = {"base": "the plant file last applied in full here",
+                        "modules_not_read": ["a/x", "a/y"], "not_as_verified": []}
     for module in [m for bus in document["buses"] for m in bus["modules"]]:
         module["read"] = {"programs": [1, 2], "programs_not_read": []}
     with pytest.raises(render.BudgetTooSmall) as refused:
@@ -364,7 +410,8 @@ def test_a_comment_with_no_room_for_details_still_says_what_was_clamped_released
     text = markdown(document, max_chars=refused.value.needed)
     assert "left out" in text and "<details>" not in text
     assert "⚠ 2 modules release the axes" in text and "2 modules (a/x, a/y)" in text
-    assert "> ⚠ 2 programs the plant does not manage are clamped by 2 modules as their system parameters change" in text
+    assert ("> ⚠ 2 programs the plant does not manage are clamped by 2 modules as their system "
+            "parameters change") in text
 
 
 def test_a_plan_files_charts_are_shown_only_as_prc3cfg_draws_them():
@@ -375,7 +422,8 @@ def test_a_plan_files_charts_are_shown_only_as_prc3cfg_draws_them():
     charts = document["buses"][0]["modules"][0]["changes"]["charts"]
     assert len(charts) == 3 and charts[1].startswith("```mermaid\n")  # ours: shown
     hostile = [charts[1].replace("xychart-beta", "```\n<img src=x onerror=alert(1)>\n```mermaid"),
-               "<script>alert(1)</script>", "\n_1 more chain changed: [see](https://evil.example) draws them all._"]
+               "<script>alert(1)</script>",
+               "\n_1 more chain changed: [see](https://evil.example) draws them all._"]
     document["buses"][0]["modules"][0]["changes"]["charts"] = [*charts, *hostile]
     text = markdown(document)
     assert charts[1] in text and not any(chart in text for chart in hostile)
@@ -402,6 +450,7 @@ def test_the_axis_summary_stays_two_lines_for_a_full_line():
     """Thirty modules: the count, the first names and 'and N more', then what a release means — two
     lines of at most two terminal rows each, so the question stays on the screen with the plan's end."""
     summary = render.release_summary(THIRTY)
-    assert summary[0].startswith("⚠ 30 modules will release their axes (10h/20h): booth-a/booth-a-reciprocator-01, ")
+    assert summary[0].startswith("⚠ 30 modules will release their axes (10h/20h): "
+                                 "booth-a/booth-a-reciprocator-01, ")
     assert summary[1] == "  Each loses its reference point and must travel to it before production."
     assert len(summary) == 2 and all(len(line) <= 2 * 100 for line in summary)

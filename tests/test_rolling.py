@@ -32,7 +32,8 @@ def changed_by_another_tool(plant: EmulatedPlant, bus: str, address: int, number
     """A program the plant file declares, changed as a teach-in on the floor would: the system block stays."""
     emulator = plant.emulators[bus]
     image = emulator.module(address).image
-    emulator.update(address, image=image.with_programs({number: replace(image.known(number), T=image.known(number).T + 1)}))
+    emulator.update(address, image=image.with_programs({number: replace(image.known(number),
+                                                                        T=image.known(number).T + 1)}))
 
 
 def plan_document(plant: EmulatedPlant, capsys: pytest.CaptureFixture) -> dict:
@@ -56,39 +57,56 @@ def known_at(since: str, held: int = 64, read_at: dict[int, str] | None = None) 
     return what_to_read.Known(image, since, "apply of /p/a.yaml by ana@pc", read_at or {})
 
 
-def target(bus: str, address: int, programs: tuple[int, ...] = (), managed: tuple[int, ...] = (1, 2, 3)) -> what_to_read.Target:
+def target(bus: str, address: int, programs: tuple[int, ...] = (),
+           managed: tuple[int, ...] = (1, 2, 3)) -> what_to_read.Target:
     return what_to_read.Target(bus, address, f"m{address}", programs, None, known_at(T1).image, managed)
 
 
 def test_the_oldest_windows_of_each_line_roll_table():
-    """(targets, record) → the programs rolled: per line the 8 windows of four (1–4, 5–8, …) whose oldest value
-    on record is the oldest, ties by address then window; what the plan reads anyway, and a module not on
-    record (read in full anyway), never roll."""
+    """(targets, record) → the programs rolled: per line the 8 windows of four (1–4, 5–8, …) whose oldest
+    value on record is the oldest, ties by address then window; what the plan reads anyway, and a module not
+    on record (read in full anyway), never roll."""
     first_half, second_half = tuple(range(1, 33)), tuple(range(33, 65))
     cases = [  # (targets, {key: record}) → {key: programs rolled}
-        (([target("a", 1), target("a", 2)], {("a", 1): known_at(T2), ("a", 2): known_at(T1)}), {("a", 2): first_half}),
-        (([target("a", 1), target("a", 2)], {("a", 1): known_at(T1), ("a", 2): known_at(T1)}), {("a", 1): first_half}),  # a tie
-        (([target("a", 1)], {("a", 1): known_at(T1, read_at=dict.fromkeys(first_half, T2))}), {("a", 1): second_half}),  # read since
+        (([target("a", 1), target("a", 2)], {("a", 1): known_at(T2), ("a", 2): known_at(T1)}),
+         {("a", 2): first_half}),
+        # a tie
+        (([target("a", 1), target("a", 2)], {("a", 1): known_at(T1), ("a", 2): known_at(T1)}),
+         {("a", 1): first_half}),
+        # read since
+        (([target("a", 1)], {("a", 1): known_at(T1, read_at=dict.fromkeys(first_half, T2))}),
+         {("a", 1): second_half}),
         (([target("a", 1), target("b", 2)], {("a", 1): known_at(T3), ("b", 2): known_at(T1)}),
          {("a", 1): first_half, ("b", 2): first_half}),  # each line its own budget
-        (([target("a", 1, (1, 2, 3))], {("a", 1): known_at(T1, held=4)}), {("a", 1): (4,)}),  # what the change reads is not rolled
+        # what the change reads is not rolled
+        (([target("a", 1, (1, 2, 3))], {("a", 1): known_at(T1, held=4)}), {("a", 1): (4,)}),
         (([target("a", 1, (1, 2, 3))], {("a", 1): known_at(T1, held=3)}), {}),  # nothing left to roll
-        (([replace(target("a", 1), known=None), target("a", 2)], {("a", 1): known_at(T1), ("a", 2): known_at(T3)}),
+        (([replace(target("a", 1), known=None), target("a", 2)],
+          {("a", 1): known_at(T1), ("a", 2): known_at(T3)}),
          {("a", 2): first_half}),  # not on record (or too old): read in full anyway
-        (([target("a", 1, managed=(1, 2, 3, 40))], {("a", 1): known_at(T1, held=3)}), {("a", 1): (1, 2, 3, 40)}),  # managed, not on record
+        # managed, not on record
+        (([target("a", 1, managed=(1, 2, 3, 40))], {("a", 1): known_at(T1, held=3)}),
+         {("a", 1): (1, 2, 3, 40)}),
         (([target("a", 1), target("a", 2)], {("a", 1): known_at(T1, held=12), ("a", 2): known_at(T2)}),
-         {("a", 1): tuple(range(1, 13)), ("a", 2): tuple(range(1, 21))}),  # 3 windows of one module, then 5 of the next
+         # 3 windows of one module, then 5 of the next
+         {("a", 1): tuple(range(1, 13)), ("a", 2): tuple(range(1, 21))}),
     ]
     for (targets, records), rolled in cases:
         said = what_to_read.rolling(targets, records)
         assert {key: programs for key, (programs, _) in said.items()} == rolled, (targets, records)
     said = what_to_read.rolling([target("a", 1)], {("a", 1): known_at(T1)})
-    assert said[("a", 1)][1] == "rolling evidence: programs 1–32, the oldest on its line, since 2026-11-28 01:00 UTC"
-    # the targets: the programs added, with the record to agree with; "read in full" said only of a module read in full
+    assert (
+        said[("a", 1)][1]
+        == "rolling evidence: programs 1–32, the oldest on its line, since 2026-11-28 01:00 UTC"
+    )
+    # the targets: the programs added, with the record to agree with; "read in full" said only of a module
+    # read in full
     targets, why = what_to_read.with_rolling([target("a", 1, (2,))], {}, {("a", 1): known_at(T1, held=3)})
-    assert targets == [replace(target("a", 1, (2,)), programs=(1, 2, 3))] and why == {("a", 1): what_to_read.rolling(
-        [target("a", 1, (2,))], {("a", 1): known_at(T1, held=3)})[("a", 1)][1]}  # fmt: skip
-    targets, why = what_to_read.with_rolling([target("a", 1, (), (1, 2, 3, 40))], {}, {("a", 1): known_at(T1, held=64)})
+    assert (targets == [replace(target("a", 1, (2,)), programs=(1, 2, 3))]
+            and why == {("a", 1): what_to_read.rolling(
+        [target("a", 1, (2,))], {("a", 1): known_at(T1, held=3)})[("a", 1)][1]})  # fmt: skip
+    targets, why = what_to_read.with_rolling([target("a", 1, (), (1, 2, 3, 40))], {},
+                                             {("a", 1): known_at(T1, held=64)})
     assert targets[0].programs == first_half and why == {}  # program 40 is still to roll: not read in full
 
 
@@ -123,10 +141,12 @@ def windows(plant: EmulatedPlant, bus: str) -> int:
 
 
 def newest(plant: EmulatedPlant, bus: str) -> tuple[str, int]:
-    """The name and address of `bus`'s module whose record is the newest (ties: the highest address): its programs roll last."""
+    """The name and address of `bus`'s module whose record is the newest (ties: the highest address): its
+    programs roll last."""
     plant_ = api.load(plant.path)
     known = record(as_it_stands(plant_, plant_.buses))
-    module = max((m for b, m in plant_.modules() if b.name == bus), key=lambda m: (known[(bus, m.address)].since, m.address))
+    module = max((m for b, m in plant_.modules() if b.name == bus),
+                 key=lambda m: (known[(bus, m.address)].since, m.address))
     return module.name, module.address
 
 
@@ -142,7 +162,8 @@ def test_a_program_another_tool_changed_is_found_within_the_bound(plant, capsys,
     name, address = newest(plant, "booth-b")
     changed_by_another_tool(plant, "booth-b", address, 2)
     text = plant.path.read_text()
-    plant.path.write_text(text.replace("1: {position: 1.750}", "1: {position: 1.700}", 1))  # booth-a-top's program 1
+    # booth-a-top's program 1
+    plant.path.write_text(text.replace("1: {position: 1.750}", "1: {position: 1.700}", 1))
     plans = 0
     while plans < bound:
         plans += 1
@@ -152,7 +173,8 @@ def test_a_program_another_tool_changed_is_found_within_the_bound(plant, capsys,
     assert module_in(document, name)["steps"], f"not found within the {bound} plans"
     assert plans == 5  # the other modules' 32 older windows rolled first (4 plans), then its own 1–32
     said = document["read"]["not_as_verified"]
-    assert f"booth-b/{name} (program 2 is not as on record)" in said, said  # the rolled read is evidence: the line opens
+    # the rolled read is evidence: the line opens
+    assert f"booth-b/{name} (program 2 is not as on record)" in said, said
     assert all(m["read"]["programs_not_read"] == [] for m in document["buses"][1]["modules"])
     done = run_cli(capsys, "apply", plant.path, "--auto-approve")
     assert done.code == 0, done.err
@@ -168,7 +190,8 @@ def test_a_plan_file_with_rolled_programs_is_proved_by_reading_the_same_programs
     saved = tmp_path / "plan.json"
     planned = run_cli(capsys, "plan", plant.path, "--out", saved)
     assert planned.code == 0, planned.err
-    assert "(rolling evidence: programs 1–32, the oldest on its line, since " in planned.out  # a module read in full by it
+    # a module read in full by it
+    assert "(rolling evidence: programs 1–32, the oldest on its line, since " in planned.out
     document = json.loads(saved.read_text())
     assert sum(map(len, rolled.values())) > 1 + 2 * 8 * 4 - 4  # booth-a-top's program 1, and 8 windows a line
     for name, programs in rolled.items():
@@ -188,7 +211,8 @@ def test_full_read_and_actual_roll_nothing(plant, capsys, tmp_path):
     assert read.code == 0, read.err
     saved.write_text(read.out)
     actual = run_cli(capsys, "plan", plant.path, "--actual", saved)
-    assert actual.code == 0 and "rolling evidence" not in actual.out and "oldest value taken" not in actual.out
+    assert (actual.code == 0 and "rolling evidence" not in actual.out
+            and "oldest value taken" not in actual.out)
 
 
 # -- the oldest evidence relied on, in every medium -------------------------------------------------
@@ -201,16 +225,20 @@ def oldest_words(plant: EmulatedPlant, whose: bool = True) -> str:
     known = record(as_it_stands(plant_, plant_.buses))
     names = {(b.name, m.address): m.name for b, m in plant_.modules()}
     read = read_next(plant.path)
-    taken = {(b.name, m.address) for b, m in plant_.modules() if set(m.managed_programs()) - set(read[m.name])}
+    taken = {
+        (b.name, m.address) for b, m in plant_.modules() if set(m.managed_programs()) - set(read[m.name])
+    }
     bus, address = min(taken, key=lambda key: (known[key].since, key))
     name = names[(bus, address)]
     by = f" as {known[(bus, address)].by} read or verified them" if whose else ""
-    return f"oldest value taken from the record: {bus}/{name}'s programs,{by} since {what_to_read.to_the_minute(known[(bus, address)].since)}"
+    return (f"oldest value taken from the record: {bus}/{name}'s programs,{by} since "
+            f"{what_to_read.to_the_minute(known[(bus, address)].since)}")
 
 
 def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys, tmp_path):
-    """Neither the rolled modules (read now) nor any module read in full is the oldest evidence: of the modules
-    whose programs were taken from the record, the one with the oldest record — named with since when and by whom."""
+    """Neither the rolled modules (read now) nor any module read in full is the oldest evidence: of the
+    modules whose programs were taken from the record, the one with the oldest record — named with since when
+    and by whom."""
     applied(plant, capsys)
     saved = tmp_path / "plan.json"
     words = oldest_words(plant)
@@ -224,7 +252,9 @@ def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys
     assert shown.code == 0 and words in shown.out
     words = oldest_words(plant, whose=False)  # markdown escapes the path and user of `by`: the rest as said
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
-    assert markdown.code == 0 and words.split(",")[0] in markdown.out and words.split(",")[1] in markdown.out, markdown.out
+    assert (
+        markdown.code == 0 and words.split(",")[0] in markdown.out and words.split(",")[1] in markdown.out
+    ), markdown.out
     words = oldest_words(plant)
     document = json.loads(run_cli(capsys, "plan", plant.path, "--json").out)
     assert document["evidence"]["oldest"]["module"] == words.split(": ")[1].split("'s ")[0]
@@ -232,17 +262,20 @@ def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys
     plant.path.write_text(plant.path.read_text().replace("1: {position: 1.750}", "1: {position: 1.700}", 1))
     words = oldest_words(plant, whose=False)
     changed = run_cli(capsys, "plan", plant.path)
-    assert changed.code == 0 and words in next(line for line in changed.out.splitlines() if line.startswith("Read now:"))
+    assert changed.code == 0 and words in next(line for line in changed.out.splitlines()
+                                               if line.startswith("Read now:"))
 
 
 # -- soak: the bound --------------------------------------------------------------------------------
 
 #: The programs the plant file declares of each module of each line.
-DECLARED = {"booth-a": {1: (1, 2, 3), 2: (1, 2, 3), 5: (1, 2, 3, 10, 11)}, "booth-b": {1: (1, 2, 3), 3: (1, 2, 3, 4), 4: tuple(range(1, 65))}}
+DECLARED = {"booth-a": {1: (1, 2, 3), 2: (1, 2, 3), 5: (1, 2, 3, 10, 11)},
+            "booth-b": {1: (1, 2, 3), 3: (1, 2, 3, 4), 4: tuple(range(1, 65))}}
 
 
 @pytest.mark.soak
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1))
 def test_any_program_another_tool_changes_is_found_within_the_bound(tmp_path_factory, seed):
     """Seeded: after an apply and 0–7 plans (the roll anywhere in its turn), another tool changes one program
@@ -277,6 +310,7 @@ def test_the_record_file_keeps_read_at_and_passes_over_what_is_none():
     assert line_record.LineRecord(keys).known()[3] == known_at(T1, read_at=dict.fromkeys(range(1, 33), T2))
     (path,) = [p for p in (Path(os.environ["PRC3CFG_STATE_DIR"]) / "lines").glob("*.json")]
     document = json.loads(path.read_text())
-    document["modules"]["3"]["read_at"] = {"1": T3, "2": "2026-11-28T09:00:00", "3": "2000-01-01T00:00:00+00:00", "70": T3, "x": T3, "4": 5}
+    document["modules"]["3"]["read_at"] = {"1": T3, "2": "2026-11-28T09:00:00",
+                                           "3": "2000-01-01T00:00:00+00:00", "70": T3, "x": T3, "4": 5}
     path.write_text(json.dumps(document))
     assert line_record.LineRecord(keys).known()[3].read_at == {1: T3}

@@ -60,7 +60,8 @@ def started(argv: list[str], ready: str, *, stream: str = "stdout"):
 @contextlib.contextmanager
 def emulator_pty():
     """`prc3cfg emulator serve --pty` (modules 1 and 2): the path of its pty."""
-    argv = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--parity", "none", "--modules", "1,2"]
+    argv = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--parity", "none", "--modules",
+            "1,2"]
     with started(argv, "pty: ") as (_, line):
         yield line.removeprefix("pty: ").strip()
 
@@ -68,10 +69,12 @@ def emulator_pty():
 @contextlib.contextmanager
 def socat_port(link: Path):
     """A pty made by socat at `link` (a symlink to /dev/pts/N), joined to an emulator over TCP."""
-    argv = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--parity", "none", "--modules", "1,2"]
+    argv = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--parity",
+            "none", "--modules", "1,2"]
     with started(argv, "listening on ") as (_, line):
         address = line.split()[2]
-        with started([SOCAT, "-d", "-d", f"pty,raw,echo=0,link={link}", f"tcp:{address}"], "starting data transfer loop", stream="stderr"):
+        with started([SOCAT, "-d", "-d", f"pty,raw,echo=0,link={link}", f"tcp:{address}"],
+                     "starting data transfer loop", stream="stderr"):
             yield str(link)
 
 
@@ -132,15 +135,20 @@ def test_the_device_a_port_names(port, device):
 @pytest.mark.parametrize(("path", "uucp", "minicom", "picocom"), [
     ("/dev/ttyUSB0", "ttyUSB0", "ttyUSB0", "ttyUSB0"),  # every convention agrees on a device directly in /dev
     ("/dev/pts/0", "0", "pts_0", "pts_0"),  # minicom and picocom: the path below /dev with its / as _
-    ("/dev/serial/by-id/usb-FTDI-if00", "usb-FTDI-if00", "serial_by-id_usb-FTDI-if00", "serial_by-id_usb-FTDI-if00"),
-    ("/srv/lines/booth-a", "booth-a", "booth-a", "lines_booth-a"),  # outside /dev: minicom the last part, picocom all but the first
+    ("/dev/serial/by-id/usb-FTDI-if00", "usb-FTDI-if00", "serial_by-id_usb-FTDI-if00",
+     "serial_by-id_usb-FTDI-if00"),
+    # outside /dev: minicom the last part, picocom all but the first
+    ("/srv/lines/booth-a", "booth-a", "booth-a", "lines_booth-a"),
 ])  # fmt: skip
 def test_lock_names_are_written_as_uucp_minicom_and_picocom_write_them(path, uucp, minicom, picocom):
     """The UUCP convention (cu, HDB) names a lock file after the path's last part, minicom (`mbasename`)
     and picocom built with UUCP locks (`uucp_lockname`) after the path below /dev with its / as _:
     each spelling is checked and written."""
-    assert {name: naming(path) for name, naming in serial_lock.NAMINGS.items()} == {"UUCP": uucp, "minicom": minicom, "picocom": picocom}
-    assert serial_lock.lock_names(path) == tuple(f"LCK..{name}" for name in dict.fromkeys((uucp, minicom, picocom)))
+    assert {name: naming(path) for name, naming in serial_lock.NAMINGS.items()} == {"UUCP": uucp,
+                                                                                    "minicom": minicom,
+                                                                                    "picocom": picocom}
+    assert serial_lock.lock_names(path) == tuple(f"LCK..{name}"
+                                                 for name in dict.fromkeys((uucp, minicom, picocom)))
 
 
 device_paths = st.lists(st.text(string.ascii_letters + string.digits + "-_.", min_size=1, max_size=12).filter(lambda p: p not in (".", "..")),
@@ -148,10 +156,13 @@ device_paths = st.lists(st.text(string.ascii_letters + string.digits + "-_.", mi
 
 
 def names_of(path: str) -> None:
-    """Every spelling of a device path below /dev is a name of its own (no /), once: the UUCP one and minicom's, which picocom's equals."""
+    """Every spelling of a device path below /dev is a name of its own (no /), once: the UUCP one and
+    minicom's, which picocom's equals."""
     names = serial_lock.lock_names(path)
-    assert len(set(names)) == len(names) and all(name.startswith("LCK..") and "/" not in name for name in names)
-    assert {f"LCK..{os.path.basename(path)}", f"LCK..{path.removeprefix('/dev/').replace('/', '_')}"} <= set(names)
+    assert len(set(names)) == len(names) and all(name.startswith("LCK..") and "/" not in name
+                                                 for name in names)
+    assert {f"LCK..{os.path.basename(path)}",
+            f"LCK..{path.removeprefix('/dev/').replace('/', '_')}"} <= set(names)
     assert serial_lock.NAMINGS["minicom"](path) == serial_lock.NAMINGS["picocom"](path)
 
 
@@ -176,7 +187,8 @@ def test_a_lock_file_of_a_live_process_refuses_naming_it_and_is_left(tmp_path, s
         held.write_bytes(hdb(sleeper.pid))
         refused = scan(str(link))
     assert refused.returncode != 0
-    assert refused.stderr == f"error: {link}: the serial port {link} is in use by sleep (pid {sleeper.pid}) — close it and run again\n"
+    assert refused.stderr == (f"error: {link}: the serial port {link} is in use by sleep (pid "
+                              f"{sleeper.pid}) — close it and run again\n")
     assert held.read_bytes() == hdb(sleeper.pid)
     assert sorted(p.name for p in serial_lock.uucp_lock_dir().iterdir()) == [held.name]
 
@@ -189,7 +201,8 @@ def test_a_plant_bus_on_a_device_another_program_holds_is_refused(tmp_path, slee
         lock_file(Path(pty).name).write_bytes(hdb(sleeper.pid))
         refused = prc3cfg("plan", str(plant))
     assert refused.returncode != 0
-    assert refused.stderr == f"error: bus booth-a ({pty}): the serial port {pty} is in use by sleep (pid {sleeper.pid}) — close it and run again\n"
+    assert refused.stderr == (f"error: bus booth-a ({pty}): the serial port {pty} is in use by sleep (pid "
+                              f"{sleeper.pid}) — close it and run again\n")
 
 
 @pytest.mark.parametrize("left", ["dead pid", "old garbage"])
@@ -213,7 +226,8 @@ def test_a_lock_file_without_a_pid_is_left_to_its_writer_while_young(tmp_path):
         young.write_bytes(b"")  # another program between making its lock file and writing its pid
         refused = scan(pty)
     assert refused.returncode != 0
-    assert f"the serial port {pty} is in use by another program (its lock file {young} names no process yet)" in refused.stderr
+    assert (f"the serial port {pty} is in use by another program (its lock file {young} names no "
+            "process yet)") in refused.stderr
     assert young.exists()
 
 
@@ -222,14 +236,18 @@ def test_its_own_lock_files_hold_its_pid_while_it_runs_and_go_after(tmp_path):
     try:
         link = tmp_path / "booth-a"
         link.symlink_to(os.ttyname(terminal))
-        argv = [sys.executable, "-m", "prc3cfg", "scan", "--port", str(link), "--parity", "none", "--timeout", "0.5", "--retries", "0"]
+        argv = [sys.executable, "-m", "prc3cfg", "scan", "--port", str(link), "--parity", "none", "--timeout",
+                "0.5", "--retries", "0"]
         process = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
         while not select.select([master], [], [], 1)[0]:  # its first request: the line is held
             assert process.poll() is None, process.stderr.read()
         os.read(master, 4096)
         names = {name.removeprefix("LCK..") for name in serial_lock.lock_names(str(link))}
-        assert {link.name, Path(os.ttyname(terminal)).name, os.ttyname(terminal).removeprefix("/dev/").replace("/", "_")} <= names
-        assert {name: lock_file(name).read_bytes() for name in names} == dict.fromkeys(names, hdb(process.pid))
+        assert {link.name, Path(os.ttyname(terminal)).name,
+                os.ttyname(terminal).removeprefix("/dev/").replace("/", "_")} <= names
+        assert {name: lock_file(name).read_bytes() for name in names} == dict.fromkeys(
+            names, hdb(process.pid)
+        )
         process.send_signal(signal.SIGINT)  # stopped mid-scan: the lock files go all the same
         process.communicate()
     finally:
@@ -267,11 +285,13 @@ def test_a_lock_folder_that_is_missing_is_passed_over_in_silence(tmp_path, monke
 
 @needs("socat", "picocom")
 def test_picocom_holding_the_port_is_named(tmp_path):
-    with socat_port(tmp_path / "booth-a") as port, on_a_terminal([PICOCOM, "-b", "9600", port], b"Terminal ready") as picocom:
+    with socat_port(tmp_path / "booth-a") as port, on_a_terminal([PICOCOM, "-b", "9600", port],
+                                                                 b"Terminal ready") as picocom:
         refused = {spelling: scan(spelling) for spelling in (port, os.path.realpath(port))}
     for spelling, result in refused.items():
         assert result.returncode != 0
-        assert result.stderr == f"error: {spelling}: the serial port {spelling} is in use by picocom (pid {picocom.pid}) — close it and run again\n"
+        assert result.stderr == (f"error: {spelling}: the serial port {spelling} is in use by picocom (pid "
+                                 f"{picocom.pid}) — close it and run again\n")
 
 
 def writable_system_lock_dir() -> bool:
@@ -279,10 +299,12 @@ def writable_system_lock_dir() -> bool:
 
 
 @needs("socat", "minicom")
-@pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
+@pytest.mark.skipif(not writable_system_lock_dir(),
+                    reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
 def test_minicom_in_the_system_lock_folder_is_honoured_and_its_stale_lock_taken_over(tmp_path, monkeypatch):
     monkeypatch.delenv("PRC3CFG_UUCP_LOCK_DIR")
-    link = tmp_path / f"prc3cfg-test-{uuid.uuid4().hex[:12]}"  # /var/lock is the machine's: a name no one else has
+    # /var/lock is the machine's: a name no one else has
+    link = tmp_path / f"prc3cfg-test-{uuid.uuid4().hex[:12]}"
     held, pid = serial_lock.SYSTEM_LOCK_DIR / f"LCK..{link.name}", None
     try:
         with socat_port(link) as port:
@@ -291,13 +313,15 @@ def test_minicom_in_the_system_lock_folder_is_honoured_and_its_stale_lock_taken_
                 assert held.read_bytes() == hdb(pid)
                 refused = scan(port)
             assert refused.returncode != 0
-            assert f"the serial port {port} is in use by minicom (pid {pid}) — close it and run again" in refused.stderr
+            assert (f"the serial port {port} is in use by minicom (pid {pid}) — close it and "
+                    "run again") in refused.stderr
             assert held.read_bytes() == hdb(pid)  # killed: its lock file is left, stale
             scanned = scan(port)
         assert scanned.returncode == 0, scanned.stderr
         assert not held.exists()
     finally:
-        if pid is not None and held.exists() and held.read_bytes() == hdb(pid):  # a failure above: not left to the machine
+        # a failure above: not left to the machine
+        if pid is not None and held.exists() and held.read_bytes() == hdb(pid):
             held.unlink()
 
 
@@ -343,7 +367,8 @@ def system_lock_folder(monkeypatch, device: str):
 
 
 @needs("socat", "minicom")
-@pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
+@pytest.mark.skipif(not writable_system_lock_dir(),
+                    reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
 def test_minicom_holding_a_nested_device_path_is_named(tmp_path, monkeypatch):
     """minicom on /dev/pts/N writes LCK..pts_N (the path below /dev, / as _), where the UUCP convention
     writes LCK..N: prc3cfg checks both, by the path as minicom was given it and through a link to it."""
@@ -357,19 +382,23 @@ def test_minicom_holding_a_nested_device_path_is_named(tmp_path, monkeypatch):
                 refused = {spelling: scan(spelling) for spelling in (device, link)}
     for spelling, result in refused.items():
         assert result.returncode != 0
-        assert f"the serial port {spelling} is in use by minicom (pid {minicom.pid}) — close it and run again" in result.stderr
+        assert (f"the serial port {spelling} is in use by minicom (pid {minicom.pid}) — close it and "
+                "run again") in result.stderr
 
 
 @needs("picocom", "minicom")
-@pytest.mark.skipif(not writable_system_lock_dir(), reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
+@pytest.mark.skipif(not writable_system_lock_dir(),
+                    reason=f"{serial_lock.SYSTEM_LOCK_DIR} cannot be written by this user")
 def test_minicom_and_picocom_refuse_a_device_prc3cfg_holds(monkeypatch):
     """A real `prc3cfg scan` holding /dev/pts/N (nothing answers it; it waits 10 s at each address): minicom
-    finds prc3cfg's LCK..pts_N and refuses, picocom as Debian builds it finds the device's flock and refuses."""
+    finds prc3cfg's LCK..pts_N and refuses, picocom as Debian builds it finds the device's flock and refuses.
+    """
     master, terminal = os.openpty()
     device = os.ttyname(terminal)
     try:
         with system_lock_folder(monkeypatch, device) as ours:
-            argv = [sys.executable, "-m", "prc3cfg", "scan", "--port", device, "--parity", "none", "--timeout", "10", "--retries", "0"]
+            argv = [sys.executable, "-m", "prc3cfg", "scan", "--port", device, "--parity", "none",
+                    "--timeout", "10", "--retries", "0"]
             process = subprocess.Popen(argv, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
             ours.add(process.pid)
             try:
@@ -385,4 +414,5 @@ def test_minicom_and_picocom_refuse_a_device_prc3cfg_holds(monkeypatch):
         os.close(master)
         os.close(terminal)
     assert minicom == (1, f"Device {device} is locked.\r\n".encode())
-    assert picocom[0] == 1 and f"FATAL: cannot lock {device}: Resource temporarily unavailable".encode() in picocom[1]
+    assert (picocom[0] == 1
+            and f"FATAL: cannot lock {device}: Resource temporarily unavailable".encode() in picocom[1])

@@ -1,5 +1,5 @@
-"""`prc3cfg status serve` (issue 44, item 2): a real server process started by the CLI, read with asyncua's own
-client — every node, RevisionCounter and DeviceHealth around an apply on the emulator, a client without a
+"""`prc3cfg status serve` (issue 44, item 2): a real server process started by the CLI, read with asyncua's
+own client — every node, RevisionCounter and DeviceHealth around an apply on the emulator, a client without a
 trusted certificate refused, every write refused. Synchronised on the "listening on" line and on node values
 (polled, bounded), never on a sleep. Skipped, naming the install command, where asyncua is missing."""
 
@@ -31,9 +31,11 @@ ROOT = Path(__file__).resolve().parents[1]
 CLIENT_URI = "urn:prc3cfg:test-client"
 #: The longest a published value may take to follow the records: the server looks every second.
 WAIT = 30.0
-VARIABLES = ("RevisionCounter", "SoftwareRevision", "DeviceHealth", "Configuration/PlantFile", "Configuration/Commit",
+VARIABLES = ("RevisionCounter", "SoftwareRevision", "DeviceHealth", "Configuration/PlantFile",
+             "Configuration/Commit",
              "Configuration/PlantHash", "Configuration/LastVerifiedTime", "Configuration/LastVerifiedBy",
-             "Configuration/DriftFound", "Configuration/PendingTravel", "Configuration/HealthReason")  # fmt: skip
+             "Configuration/DriftFound", "Configuration/PendingTravel",
+             "Configuration/HealthReason")  # fmt: skip
 
 
 def free_port() -> int:
@@ -47,7 +49,8 @@ def free_port() -> int:
 def certificate(folder: Path, name: str) -> tuple[Path, Path]:
     folder.mkdir(parents=True, exist_ok=True)
     cert, key = folder / f"{name}.der", folder / f"{name}-key.pem"
-    asyncio.run(cert_gen.setup_self_signed_certificate(key, cert, CLIENT_URI, "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH],
+    asyncio.run(cert_gen.setup_self_signed_certificate(key, cert, CLIENT_URI, "localhost",
+                                                       [ExtendedKeyUsageOID.CLIENT_AUTH],
                                                        {"commonName": name}))  # fmt: skip
     return cert, key
 
@@ -65,27 +68,36 @@ def served(tmp_path):
     (tmp_path / "trust" / "trusted.der").write_bytes(trusted.read_bytes())
     with emulated_plant(tmp_path) as plant:
         url = f"opc.tcp://127.0.0.1:{free_port()}"
-        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "status", "serve", str(plant.path), "--listen", url,
-                                    "--trust", str(tmp_path / "trust")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "status", "serve", str(plant.path),
+                                    "--listen", url,
+                                    "--trust", str(tmp_path / "trust")], stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True,
                                    env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
         try:
             line = process.stdout.readline()
-            assert line.strip() == f"listening on {url}", (line, process.stderr.read() if process.poll() is not None else "")
+            assert line.strip() == f"listening on {url}", (line, process.stderr.read()
+                                                           if process.poll() is not None else "")
             yield Served(process, url, plant), (trusted, key)
         finally:
             process.terminate()
-            _, stderr = process.communicate(timeout=30)  # drained: a server blocked on a full pipe would not see the signal
-    # SIGTERM stops it between two looks at its cancel event — also after a client's refused handshake, where a
-    # signal raised inside asyncua's own callback was caught there and the server served on (a 30 s hang)
+            # drained: a server blocked on a full pipe would not see the signal
+            _, stderr = process.communicate(timeout=30)
+    # SIGTERM stops it between two looks at its cancel event — also after a client's refused handshake, where
+    # a signal raised inside asyncua's own callback was caught there and the server served on (a 30 s hang)
     if sys.platform != "win32":
-        assert process.returncode == 0 and stderr.strip().splitlines()[-1:] == ["stopped"], (process.returncode, stderr)
+        assert process.returncode == 0 and stderr.strip().splitlines()[-1:] == ["stopped"], (
+            process.returncode,
+            stderr,
+        )
 
 
 async def connected(url: str, cert: Path, key: Path, *, identified: bool = True) -> Client:
-    """asyncua's client on the secure channel with `cert`; `identified`: the user is that certificate (else anonymous)."""
+    """asyncua's client on the secure channel with `cert`; `identified`: the user is that certificate (else
+    anonymous)."""
     client = Client(url)
     client.application_uri = CLIENT_URI
-    await client.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key), mode=ua.MessageSecurityMode.SignAndEncrypt)
+    await client.set_security(SecurityPolicyBasic256Sha256, str(cert), str(key),
+                              mode=ua.MessageSecurityMode.SignAndEncrypt)
     if identified:
         await client.load_client_certificate(str(cert))
         await client.load_private_key(str(key))
@@ -167,21 +179,28 @@ def test_a_trusted_client_without_a_user_is_refused_unless_anonymous_is_allowed(
 
 @pytest.mark.parametrize("content", [None, b"not a certificate"], ids=["empty", "no certificate"])
 def test_a_trust_folder_without_certificates_is_one_line(tmp_path, content):
-    """An empty folder, or one holding no certificate, ended in asyncua's traceback ("can't create an empty store")."""
+    """An empty folder, or one holding no certificate, ended in asyncua's traceback ("can't create an empty
+    store")."""
     (tmp_path / "trust").mkdir()
     if content is not None:
         (tmp_path / "trust" / "client.der").write_bytes(content)
     with emulated_plant(tmp_path) as plant:
-        done = subprocess.run([sys.executable, "-m", "prc3cfg", "status", "serve", str(plant.path), "--listen", f"opc.tcp://127.0.0.1:{free_port()}",
-                               "--trust", str(tmp_path / "trust")], capture_output=True, text=True, timeout=60,
+        done = subprocess.run([sys.executable, "-m", "prc3cfg", "status", "serve", str(plant.path),
+                               "--listen", f"opc.tcp://127.0.0.1:{free_port()}",
+                               "--trust", str(tmp_path / "trust")], capture_output=True, text=True,
+                              timeout=60,
                               env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     (line,) = done.stderr.strip().splitlines()
-    assert line.startswith(f"error: --trust {tmp_path / 'trust'}: ") and "certificates of the clients allowed to connect" in line, line
+    assert (
+        line.startswith(f"error: --trust {tmp_path / 'trust'}: ")
+        and "certificates of the clients allowed to connect" in line
+    ), line
 
 
 def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_alone(served, tmp_path):
-    """Made on the first start where no --certificate is given: in PRC3CFG_STATE_DIR (the tests' own), mode 0600."""
+    """Made on the first start where no --certificate is given: in PRC3CFG_STATE_DIR (the tests' own), mode
+    0600."""
     key = Path(os.environ["PRC3CFG_STATE_DIR"]) / "opcua" / "server-key.pem"
     assert key.is_file()
     if sys.platform != "win32":
@@ -189,8 +208,9 @@ def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_
 
 
 def _said(process: subprocess.Popen, start: str) -> str:
-    """The next line the server prints on stdout that starts with `start` (it prints one each time the plant file it
-    serves changes), read by a thread so that a server that never says it fails the test within WAIT, not hangs it."""
+    """The next line the server prints on stdout that starts with `start` (it prints one each time the plant
+    file it serves changes), read by a thread so that a server that never says it fails the test within WAIT,
+    not hangs it."""
     lines: queue.Queue[str] = queue.Queue()
 
     def read() -> None:
@@ -205,7 +225,9 @@ def _said(process: subprocess.Popen, start: str) -> str:
         raise AssertionError(f"the server did not say {start!r} within {WAIT} s") from None
 
 
-def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_broken_file_keeps_the_last(served):
+def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_broken_file_keeps_the_last(
+    served,
+):
     server, (cert, key) = served
     path = server.plant.path
     text = path.read_text()
@@ -214,10 +236,13 @@ def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_b
     path.write_text(broken)
     said = _said(server.process, f"{path}:")
     assert "unknown key 'bogus'" in said and said.endswith("still publishing its last valid version"), said
-    grown = text.replace("  - address: 5\n", "  - address: 7\n    name: booth-a-new\n    profiles: reciprocator\n  - address: 5\n", 1)
+    grown = text.replace("  - address: 5\n",
+                         "  - address: 7\n    name: booth-a-new\n    profiles: reciprocator\n  - "
+                         "address: 5\n", 1)
     assert grown != text
     path.write_text(grown)
-    assert _said(server.process, f"{path}:") == f"{path}: changed — publishing 7 modules (added booth-a-new, removed none)"
+    assert _said(server.process,
+                 f"{path}:") == f"{path}: changed — publishing 7 modules (added booth-a-new, removed none)"
 
     async def check() -> None:
         client = await connected(server.url, cert, key)
@@ -229,7 +254,8 @@ def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_b
 
     asyncio.run(check())
     path.write_text(text)
-    assert _said(server.process, f"{path}:") == f"{path}: changed — publishing 6 modules (added none, removed booth-a-new)"
+    assert _said(server.process,
+                 f"{path}:") == f"{path}: changed — publishing 6 modules (added none, removed booth-a-new)"
 
     async def gone() -> None:
         client = await connected(server.url, cert, key)
@@ -237,7 +263,8 @@ def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_b
             with pytest.raises(ua.UaStatusCodeError) as unknown:
                 await (await node(client, "booth-a/7/RevisionCounter")).read_value()
             assert type(unknown.value).__name__ == "BadNodeIdUnknown"
-            assert await (await node(client, "booth-a/1/RevisionCounter")).read_value() == 0  # the others stay
+            # the others stay
+            assert await (await node(client, "booth-a/1/RevisionCounter")).read_value() == 0
         finally:
             await client.disconnect()
 

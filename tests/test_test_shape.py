@@ -28,7 +28,8 @@ ROOT = TESTS.parent
 #: The clocks of the `time` module a test could read the wall with.
 CLOCKS = {"monotonic", "monotonic_ns", "perf_counter", "perf_counter_ns", "time", "time_ns"}
 
-#: Programs every Linux that runs the root-only tests has (util-linux's setpriv, passwd's useradd): no install command to give.
+#: Programs every Linux that runs the root-only tests has (util-linux's setpriv, passwd's useradd): no install
+#: command to give.
 SYSTEM = {"setpriv", "useradd"}
 
 
@@ -37,7 +38,8 @@ def _reads_clock(node: ast.AST, clocked: set[str]) -> bool:
     for sub in ast.walk(node):
         if isinstance(sub, ast.Call):
             func = sub.func
-            if isinstance(func, ast.Attribute) and func.attr in CLOCKS and isinstance(func.value, ast.Name) and func.value.id == "time":
+            if (isinstance(func, ast.Attribute) and func.attr in CLOCKS
+                and isinstance(func.value, ast.Name) and func.value.id == "time"):
                 return True
             if isinstance(func, ast.Name) and func.id in CLOCKS - {"time"}:  # `from time import monotonic`
                 return True
@@ -52,7 +54,8 @@ def _clocked_names(function: ast.AST) -> set[str]:
     while True:
         before = len(clocked)
         for node in ast.walk(function):
-            assigned = isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign | ast.NamedExpr) and node.value is not None
+            assigned = (isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign | ast.NamedExpr)
+                        and node.value is not None)
             if assigned and _reads_clock(node.value, clocked):
                 targets = node.targets if isinstance(node, ast.Assign) else [node.target]
                 clocked |= {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
@@ -81,7 +84,9 @@ def wall_clock_assertions(source: str) -> Iterator[int]:
         waits = {id(n) for loop in ast.walk(function) if isinstance(loop, ast.While) for n in ast.walk(loop)}
         for node in ast.walk(function):
             if isinstance(node, ast.Assert) and id(node) not in waits and _reads_clock(node.test, clocked):
-                parts = node.test.values if isinstance(node.test, ast.BoolOp) and isinstance(node.test.op, ast.And) else [node.test]
+                parts = (node.test.values if isinstance(node.test, ast.BoolOp) and isinstance(node.test.op,
+                                                                                             ast.And)
+                         else [node.test])
                 if not all(_a_lower_bound(p, clocked) or not _reads_clock(p, clocked) for p in parts):
                     yield node.lineno
 
@@ -89,20 +94,27 @@ def wall_clock_assertions(source: str) -> Iterator[int]:
 @pytest.mark.parametrize(
     ("source", "lines"),
     [
-        ("def t():\n    started = time.monotonic()\n    work()\n    took = time.monotonic() - started\n    assert took >= 0.3\n", []),
-        ("def t():\n    started = time.monotonic()\n    took = time.monotonic() - started\n    assert took < 0.3\n", [4]),
-        ("def t():\n    started = time.perf_counter()\n    assert abs(time.perf_counter() - started - 0.05) <= 0.005\n", [3]),
-        ("def t():\n    t0 = time.time()\n    t1 = t0 + 1\n    assert 0.2 <= t1 - t0 and t1 - t0 <= 2\n", [4]),
+        ("def t():\n    started = time.monotonic()\n    work()\n    took = time.monotonic() - started\n    "
+         "assert took >= 0.3\n", []),
+        ("def t():\n    started = time.monotonic()\n    took = time.monotonic() - started\n    assert "
+         "took < 0.3\n", [4]),
+        ("def t():\n    started = time.perf_counter()\n    assert abs(time.perf_counter() - started - 0.05) "
+         "<= 0.005\n", [3]),
+        ("def t():\n    t0 = time.time()\n    t1 = t0 + 1\n    assert 0.2 <= t1 - t0 and t1 - "
+         "t0 <= 2\n", [4]),
         ("def t():\n    took = monotonic()\n    assert 1 < took and ok\n", []),
-        ("def t():\n    deadline = time.monotonic() + 60\n    while busy():\n        assert time.monotonic() < deadline\n", []),
-        ("def t():\n    assert abs(median - 0.05) <= 0.005\n", []),  # no clock read here: a figure computed elsewhere
+        ("def t():\n    deadline = time.monotonic() + 60\n    while busy():\n        assert "
+         "time.monotonic() < deadline\n", []),
+        # no clock read here: a figure computed elsewhere
+        ("def t():\n    assert abs(median - 0.05) <= 0.005\n", []),
     ],
 )
 def test_the_check_finds_a_clock_asserted_from_above(source: str, lines: list[int]) -> None:
     assert list(wall_clock_assertions(source)) == lines
 
 
-#: A clock reading (a name assigned from one, through another name, or the call itself) and an expression without one.
+#: A clock reading (a name assigned from one, through another name, or the call itself) and an expression
+#: without one.
 CLOCKED = ["took", "time.monotonic() - started", "elapsed", "(time.perf_counter() - t0) * 1000"]
 PLAIN = ["0.3", "line_time", "cost.message_time(1, message)", "2 * expected"]
 OPERATORS = {"<": "upper", "<=": "upper", ">": "lower", ">=": "lower", "==": "both", "!=": "both"}
@@ -112,7 +124,8 @@ def a_test_asserting(left: str, operator: str, right: str, inside_a_wait: bool) 
     body = f"assert {left} {operator} {right}"
     if inside_a_wait:
         body = f"while busy():\n        {body}"
-    return f"def t():\n    started = t0 = time.monotonic()\n    took = time.monotonic() - started\n    elapsed = took\n    {body}\n"
+    return ("def t():\n    started = t0 = time.monotonic()\n    took = time.monotonic() - started\n    "
+            f"elapsed = took\n    {body}\n")
 
 
 def flagged_as_it_should_be(left: str, operator: str, right: str, inside_a_wait: bool) -> None:
@@ -124,21 +137,27 @@ def flagged_as_it_should_be(left: str, operator: str, right: str, inside_a_wait:
 
 
 @settings(max_examples=30)
-@given(st.sampled_from(CLOCKED + PLAIN), st.sampled_from(sorted(OPERATORS)), st.sampled_from(CLOCKED + PLAIN), st.booleans())
-def test_the_check_flags_exactly_a_clock_compared_other_than_from_below(left, operator, right, inside_a_wait) -> None:
+@given(st.sampled_from(CLOCKED + PLAIN), st.sampled_from(sorted(OPERATORS)), st.sampled_from(CLOCKED + PLAIN),
+       st.booleans())
+def test_the_check_flags_exactly_a_clock_compared_other_than_from_below(left, operator, right,
+                                                                        inside_a_wait) -> None:
     flagged_as_it_should_be(left, operator, right, inside_a_wait)
 
 
 @pytest.mark.soak
 @settings()  # the profile's examples: every combination (8 × 6 × 8 × 2) many times over
-@given(st.sampled_from(CLOCKED + PLAIN), st.sampled_from(sorted(OPERATORS)), st.sampled_from(CLOCKED + PLAIN), st.booleans())
-def test_the_check_flags_exactly_a_clock_compared_other_than_from_below_soak(left, operator, right, inside_a_wait) -> None:
+@given(st.sampled_from(CLOCKED + PLAIN), st.sampled_from(sorted(OPERATORS)), st.sampled_from(CLOCKED + PLAIN),
+       st.booleans())
+def test_the_check_flags_exactly_a_clock_compared_other_than_from_below_soak(left, operator, right,
+                                                                             inside_a_wait) -> None:
     flagged_as_it_should_be(left, operator, right, inside_a_wait)
 
 
 def test_no_test_asserts_a_wall_clock_time_from_above() -> None:
-    found = [f"{path.relative_to(ROOT)}:{line}" for path in sorted(TESTS.rglob("*.py")) for line in wall_clock_assertions(path.read_text())]
-    assert found == [], "a wall-clock time asserted from above (a busy machine fails it): assert a lower bound, or measure it in bench/"
+    found = [f"{path.relative_to(ROOT)}:{line}" for path in sorted(TESTS.rglob("*.py"))
+             for line in wall_clock_assertions(path.read_text())]
+    assert found == [], ("a wall-clock time asserted from above (a busy machine fails it): assert a lower "
+                         "bound, or measure it in bench/")
 
 
 def test_programs_outside_python_are_found_through_tools() -> None:
@@ -148,7 +167,8 @@ def test_programs_outside_python_are_found_through_tools() -> None:
         if path.name == "tools.py":
             continue
         for node in ast.walk(ast.parse(path.read_text())):
-            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "which"
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "which"
                     and isinstance(node.func.value, ast.Name) and node.func.value.id == "shutil"):  # fmt: skip
                 named = node.args[0].value if node.args and isinstance(node.args[0], ast.Constant) else None
                 if named not in SYSTEM:
@@ -165,12 +185,15 @@ def test_docs_testing_lists_every_program_with_its_install_command() -> None:
 
 def test_ci_runs_the_readme_s_test_command_verbatim_and_prints_its_wall_and_cpu_time() -> None:
     """What a maintainer runs (the README's `python -m pytest` line) is what CI runs, timed by bash's `time`
-    with a TIMEFORMAT that prints the wall time (%R) and the CPU time (%U user, %S system) of it and its workers."""
-    commands = [line for line in (ROOT / "README.md").read_text().splitlines() if "python -m pip install" in line and "pytest" in line]
+    with a TIMEFORMAT that prints the wall time (%R) and the CPU time (%U user, %S system) of it and its
+    workers."""
+    commands = [line for line in (ROOT / "README.md").read_text().splitlines()
+                if "python -m pip install" in line and "pytest" in line]
     assert commands, "the README gives the fast tier's command on a line of its own"
     script = (ROOT / ".ci" / "run").read_text()
     (timed,) = [line for line in script.splitlines() if line.startswith("time { ")]
     assert timed.removeprefix("time { ").removesuffix("; }") in commands
     (timeformat,) = [line for line in script.splitlines() if line.startswith("TIMEFORMAT=")]
     assert all(f in timeformat for f in ("%R", "%U", "%S")) and "fast tier" in timeformat
-    assert script.index("TIMEFORMAT=") < script.index(timed) < script.index("python -m pytest -m soak")  # before the soak tier
+    # before the soak tier
+    assert script.index("TIMEFORMAT=") < script.index(timed) < script.index("python -m pytest -m soak")

@@ -58,7 +58,12 @@ def test_every_control_format_and_separator_character_is_escaped() -> None:
 def test_every_medium_escapes_as_shown_does() -> None:
     """The GitHub and markdown escapings show a file's characters as `shown` does, first."""
     hostile = "x\u202ey\u2028z"
-    assert text.github_data(hostile) == text.github_property(hostile) == text.markdown_html(hostile) == "x\\u202ey\\u2028z"
+    assert (
+        text.github_data(hostile)
+        == text.github_property(hostile)
+        == text.markdown_html(hostile)
+        == "x\\u202ey\\u2028z"
+    )
     assert text.markdown(hostile) == "x&#92;u202ey&#92;u2028z"  # a backslash in markdown is an entity
 
 
@@ -70,10 +75,14 @@ HIDDEN = {"\u202e": "control character", "\u2066": "control character", "\u200d"
 @pytest.mark.parametrize("hidden", HIDDEN, ids=[f"U+{ord(c):04X}" for c in HIDDEN])
 def test_a_plant_file_name_that_reorders_hides_or_breaks_text_is_refused_at_validate(tmp_path, hidden):
     """A module named "booth-a-\\u202etfel" shows as "booth-a-left" reversed on a screen: refused where it is
-    written, in one line naming the file, line and column — from the console script, in a process of its own."""
+    written, in one line naming the file, line and column — from the console script, in a process of its own.
+    """
     plant = tmp_path / "plant.yaml"
-    plant.write_text(DEMO.read_text(encoding="utf-8").replace("name: booth-a-left", f"name: booth-a-{hidden}tfel", 1), encoding="utf-8")
-    done = subprocess.run([sys.executable, "-m", "prc3cfg", "validate", str(plant)], capture_output=True, timeout=120)
+    plant.write_text(DEMO.read_text(encoding="utf-8").replace("name: booth-a-left",
+                                                              f"name: booth-a-{hidden}tfel", 1),
+                     encoding="utf-8")
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", "validate", str(plant)], capture_output=True,
+                          timeout=120)
     assert done.returncode == 1, done.stdout
     (line,) = done.stderr.decode().splitlines()
     assert re.match(rf"error: {re.escape(str(plant))}:\d+:\d+: ", line) and HIDDEN[hidden] in line, line

@@ -40,7 +40,8 @@ READS = (0x50, 0x51, 0x52)
 
 
 class Flips:
-    """A `LossyProxy` rule: once `rate` is set, a reply to a read has one bit flipped with that chance (seeded)."""
+    """A `LossyProxy` rule: once `rate` is set, a reply to a read has one bit flipped with that chance
+    (seeded)."""
 
     def __init__(self, seed: int) -> None:
         self.draw, self.rate, self.flipped = random.Random(seed), 0.0, 0
@@ -68,7 +69,8 @@ def flipping(directory: Path, seed: int, parity: str = "none") -> Iterator[tuple
             proxy = LossyProxy((host, port), flips, framing="open-driver", zvz=UNCHECKED["zvz"], seed=seed)
             return stack.enter_context(proxy).listen()
 
-        yield stack.enter_context(emulate(DEMO, directory, route=route, timeout=0.1, **(UNCHECKED | {"parity": parity}))), flips
+        yield stack.enter_context(emulate(DEMO, directory, route=route, timeout=0.1,
+                                          **(UNCHECKED | {"parity": parity}))), flips
 
 
 def held(plant: EmulatedPlant, bus: str, address: int) -> ModuleImage:
@@ -78,13 +80,17 @@ def held(plant: EmulatedPlant, bus: str, address: int) -> ModuleImage:
 def assert_as_held(plant: EmulatedPlant, bus: str, image: ModuleImage, what: str) -> None:
     """Every value `image` holds (a program not read: None) is the emulator's."""
     truth = held(plant, bus, image.address)
-    assert image.system == truth.system, f"{what}: the system block of module {image.address} is not what it holds"
+    assert image.system == truth.system, (f"{what}: the system block of module {image.address} is not "
+                                          "what it holds")
     for number, (seen, there) in enumerate(zip(image.programs, truth.programs), start=1):
-        assert seen is None or seen == there, f"{what}: program {number} of module {image.address} is not what it holds"
+        assert (
+            seen is None or seen == there
+        ), f"{what}: program {number} of module {image.address} is not what it holds"
 
 
 def check_everything(plant: EmulatedPlant, flips: Flips, capsys, rate: float) -> None:
-    """`read --json`, a full plan, a plan from the line's record and an apply's snapshot, with bits flipped at `rate`."""
+    """`read --json`, a full plan, a plan from the line's record and an apply's snapshot, with bits flipped at
+    `rate`."""
     assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
     flips.rate = rate
     read = run_cli(capsys, "read", plant.path, "--json")
@@ -95,7 +101,8 @@ def check_everything(plant: EmulatedPlant, flips: Flips, capsys, rate: float) ->
         assert len(read.problems) == 1 and "agree" in read.err, read.err
     for args in (("--full-read",), ()):  # the second trusts the line's record that read and the first left
         planned = run_cli(capsys, "plan", plant.path, *args)
-        assert planned.code != 0 or "No changes" in planned.out, planned.out  # the modules match the plant file
+        # the modules match the plant file
+        assert planned.code != 0 or "No changes" in planned.out, planned.out
     text = plant.path.read_text()
     plant.path.write_text(text.replace("position: 2.0\n", "position: 1.99\n", 1))
     before = {address: held(plant, "booth-a", address) for address in (1, 2, 5)}
@@ -105,7 +112,8 @@ def check_everything(plant: EmulatedPlant, flips: Flips, capsys, rate: float) ->
         for (bus, address), image in Snapshot.load(snapshots[-1]).images.items():
             if bus == "booth-a":
                 truth = before[address]
-                assert image.system == truth.system and all(p is None or p == t for p, t in zip(image.programs, truth.programs)), \
+                assert image.system == truth.system and all(p is None or p == t
+                                                            for p, t in zip(image.programs, truth.programs)), \
                     f"the snapshot of module {address} is not what it held before the apply"  # fmt: skip
         assert plant.matches_plant()
 
@@ -134,10 +142,13 @@ def test_a_reply_as_the_record_or_a_verified_write_says_is_believed_at_once(tmp_
         plant.path.write_text(plant.path.read_text().replace("position: 1.99\n", "position: 1.98\n", 1))
         asked.clear()
         assert run_cli(capsys, "apply", plant.path, "--auto-approve").code == 0
-        # each module's 50h, program 1 of module 2 (and the programs rolling evidence reads) before the write, as the
-        # record says, and program 1's verification: each once — program 1 read twice, once before and once after its write
+        # each module's 50h, program 1 of module 2 (and the programs rolling evidence reads) before the write,
+        # as the record says, and program 1's verification: each once — program 1 read twice, once before and
+        # once after its write
         counts = Counter(asked)
-        assert counts.pop((2, b"Q\x01")) == 2 and {(1, b"P\x00"), (2, b"P\x00"), (5, b"P\x00")} <= set(counts), asked
+        assert counts.pop((2, b"Q\x01")) == 2 and {(1, b"P\x00"), (2, b"P\x00"), (5, b"P\x00")} <= set(
+            counts
+        ), asked
         assert set(counts.values()) == {1}, asked
         assert plant.matches_plant()
 
@@ -169,8 +180,10 @@ def test_a_link_leaves_its_port_refusing_characters_of_bad_parity(parity):
             try:
                 termios.tcsetattr(slave, termios.TCSANOW, wanted)
             except termios.error:
-                pytest.skip("this kernel's pseudo-terminals refuse parity (PARENB): no device here to check it on")
-        port = serial.Serial(os.ttyname(slave), 9600, parity=serial.PARITY_EVEN if parity == "even" else serial.PARITY_NONE)
+                pytest.skip("this kernel's pseudo-terminals refuse parity (PARENB): no device here to "
+                            "check it on")
+        port = serial.Serial(os.ttyname(slave), 9600, parity=serial.PARITY_EVEN if parity == "even"
+                             else serial.PARITY_NONE)
         with port:
             assert not termios.tcgetattr(port.fileno())[0] & termios.INPCK  # pyserial's own set-up clears it
             link = Link(port, get_framing("open-driver"), bus="b", line=LineSettings(parity=parity))
@@ -188,7 +201,8 @@ def test_a_link_over_tcp_checks_no_parity(tmp_path):
         url = plant.path.read_text().split("port: ", 1)[1].split("\n", 1)[0]
         port = serial.serial_for_url(url, timeout=0.1)
         with port:
-            assert Link(port, get_framing("open-driver"), bus="b", line=LineSettings(parity="even")).parity_checked is False
+            assert Link(port, get_framing("open-driver"), bus="b",
+                        line=LineSettings(parity="even")).parity_checked is False
 
 
 @pytest.mark.soak
@@ -196,6 +210,7 @@ def test_a_link_over_tcp_checks_no_parity(tmp_path):
 @pytest.mark.parametrize("rate", [0.05, 0.15, 0.30])
 @pytest.mark.parametrize("seed", range(4))
 def test_flipped_bits_at_any_rate_are_never_believed(tmp_path, capsys, seed, rate, parity):
-    """Without parity, and with parity on a line no port checks it on (the proxy's TCP): never believed once."""
+    """Without parity, and with parity on a line no port checks it on (the proxy's TCP): never believed
+    once."""
     with flipping(tmp_path, seed=seed, parity=parity) as (plant, flips):
         check_everything(plant, flips, capsys, rate=rate)

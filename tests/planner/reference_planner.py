@@ -60,7 +60,8 @@ from prc3cfg.core.image import DEFAULT_SYSTEM, PROGRAM_COUNT, PROGRAM_FIELDS, Mo
 
 #: What a program holds before any write: as the system step left it, initialised after it, or before it.
 KEEP, BEFORE, AFTER = "keep", "before", "after"
-#: The layers of runs, in the order their messages are sent (the system step after BEFORE's; 21h before PARTS').
+#: The layers of runs, in the order their messages are sent (the system step after BEFORE's; 21h before
+#: PARTS').
 OUTER, INNER, PARTS = "outer", "inner", "parts"
 LAYERS = (BEFORE, AFTER, OUTER, INNER, PARTS)
 #: The kinds of run: an init, a link or an unlink range, P and V of consecutive programs.
@@ -115,20 +116,24 @@ Chain = tuple[Choice, "Chain"] | None
 Entry = tuple[float, Chain]
 
 
-def reference_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *, limit: int = MAX_STATES) -> ReferencePlan:
+def reference_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, *,
+                   limit: int = MAX_STATES) -> ReferencePlan:
     """The cheapest plan in the canonical order from `actual` to `desired` (`None` programs: unmanaged);
     `TooBig` where a program's step of the DP holds more than `limit` states."""
     start = starting_state(actual)
     steps: list[codec.Message | None] = [None]
     if actual.system != desired.system:
-        steps = [codec.WriteSystem(desired.system), *([codec.InitSystem()] if desired.system == DEFAULT_SYSTEM else [])]
-    return min((_Module(start, desired, step, cost).solve(limit) for step in steps), key=lambda plan: plan.bus_time)
+        steps = [codec.WriteSystem(desired.system),
+                 *([codec.InitSystem()] if desired.system == DEFAULT_SYSTEM else [])]
+    return min((_Module(start, desired, step, cost).solve(limit) for step in steps),
+               key=lambda plan: plan.bus_time)
 
 
 def starting_state(actual: ModuleImage) -> device.ModuleState:
     """The read-back as a module: programs not read hold their defaults (they are never written)."""
     filler = default_program(actual.system)
-    return device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
+    return device.ModuleState(replace(actual, programs=tuple(filler if p is None else p
+                                                             for p in actual.programs)))
 
 
 def init_message(first: int, last: int) -> codec.Message:
@@ -143,7 +148,8 @@ def init_message(first: int, last: int) -> codec.Message:
 class _Module:
     """One module and one system step: its bases, its prices and the DP (module docstring)."""
 
-    def __init__(self, start: device.ModuleState, desired: ModuleImage, step: codec.Message | None, cost: LineCost) -> None:
+    def __init__(self, start: device.ModuleState, desired: ModuleImage, step: codec.Message | None,
+                 cost: LineCost) -> None:
         self.desired, self.step, self.cost = desired, step, cost
         self.prices: dict[codec.Message, float] = {}
         # the DP asks the same of the same programs again and again: each answer is worked out once
@@ -161,7 +167,8 @@ class _Module:
         self.offered = {
             BEFORE: self.bases[BEFORE] not in (self.bases[KEEP], self.bases[AFTER]),
             AFTER: self.bases[AFTER] != self.bases[KEEP],
-            PARTS: any(getattr(base[n], f) != getattr(w, f) for base in self.bases.values() for n, w in wanted for f in "PV"),
+            PARTS: any(getattr(base[n], f) != getattr(w, f) for base in self.bases.values()
+                       for n, w in wanted for f in "PV"),
             OUTER: any(base[n].A != w.A for base in self.bases.values() for n, w in wanted),
         }
         self.offered[INNER] = self.offered[OUTER]
@@ -324,7 +331,8 @@ class _Module:
                         if i_mark is not None and (o_mark is None or (o_mark[2] and not i_mark[2])):
                             continue  # an inner range lies inside an outer range
                         shown = base.A
-                        for mark in (o_mark, i_mark):  # the inner range, sent after the outer, has the last word
+                        # the inner range, sent after the outer, has the last word
+                        for mark in (o_mark, i_mark):
                             if mark is not None:
                                 shown = number + 1 if mark[0] == LINK and not mark[2] else 0
                         for p_mark, p_open, p_price in options(PARTS, parts, (PARTS,)):
@@ -361,7 +369,8 @@ class _Module:
         out += runs.get(PARTS, [])
         for name in PROGRAM_FIELDS:
             items = [(c.number, getattr(known(c.number), name)) for c in choices if name in c.items]
-            out += [ITEM_MESSAGES[name](tuple(items[k : k + CAPACITY[name]])) for k in range(0, len(items), CAPACITY[name])]
+            out += [ITEM_MESSAGES[name](tuple(items[k : k + CAPACITY[name]]))
+                    for k in range(0, len(items), CAPACITY[name])]
         return out
 
 

@@ -51,7 +51,8 @@ def reference_replayed(actual: ModuleImage, desired: ModuleImage, cost: LineCost
     """The exact reference, its plan replayed on the device model and priced by the line."""
     reference = exact_reference.exact_plan(actual, desired, cost)
     exact_reference.replay(actual, desired, reference.messages)
-    assert reference.bus_time == pytest.approx(math.fsum(cost.message_time(desired.address, m) for m in reference.messages))
+    assert reference.bus_time == pytest.approx(math.fsum(cost.message_time(desired.address, m)
+                                                         for m in reference.messages))
     assert reference.bound <= reference.bus_time + EPSILON
     return reference
 
@@ -59,7 +60,8 @@ def reference_replayed(actual: ModuleImage, desired: ModuleImage, cost: LineCost
 @pytest.mark.parametrize(
     ("scenario", "profile"),
     [
-        # about 4 s of CPU each: commissioning in the fast tier is test_commissioning_every_field_takes_27_messages's
+        # about 4 s of CPU each: commissioning in the fast tier is
+        # test_commissioning_every_field_takes_27_messages's
         pytest.param("commissioning, every field", "open-driver/100ms", marks=pytest.mark.soak),
         pytest.param("commissioning", "stx", marks=pytest.mark.soak),
         ("lower S1, clamping", "crc16"),
@@ -77,7 +79,8 @@ def test_the_reference_replays_and_is_never_dearer_than_the_plan(scenario: str, 
 
 def test_programs_apart_put_back_to_their_defaults_take_an_init_each() -> None:
     """Two runs of one program each: two 12h (a run's message is priced by where it starts and ends)."""
-    actual = ModuleImage(14, DEFAULT_SYSTEM, tuple(Program(P=100 + n, V=60, T=n) for n in range(1, PROGRAM_COUNT + 1)))
+    actual = ModuleImage(14, DEFAULT_SYSTEM,
+                         tuple(Program(P=100 + n, V=60, T=n) for n in range(1, PROGRAM_COUNT + 1)))
     default = ModuleImage.factory(14).programs[0]
     desired = replace(actual, programs=(default, *actual.programs[1:4], default, *actual.programs[5:]))
     reference = reference_replayed(actual, desired, line("crc16", 0.0))
@@ -87,9 +90,12 @@ def test_programs_apart_put_back_to_their_defaults_take_an_init_each() -> None:
 def test_a_chain_among_unlinked_programs_is_a_link_range_inside_an_unlink_range() -> None:
     """Programs 1..20 unlinked but for a chain 5 → … → 10: 31h 1..20, then 30h 5..10 (the inner layer of
     ranges), where ranges side by side take three messages and a 46h more bytes."""
-    actual = ModuleImage(3, DEFAULT_SYSTEM, tuple(Program(P=100 + n, V=60, A=n * 7 % PROGRAM_COUNT + 1) for n in range(1, PROGRAM_COUNT + 1)))
+    actual = ModuleImage(3, DEFAULT_SYSTEM,
+                         tuple(Program(P=100 + n, V=60, A=n * 7 % PROGRAM_COUNT + 1)
+                               for n in range(1, PROGRAM_COUNT + 1)))
     jumps = {n: n + 1 if 5 <= n < 10 else 0 for n in range(1, 21)}
-    desired = replace(actual, programs=tuple(p.with_field("A", jumps[n]) if n in jumps else p for n, p in enumerate(actual.programs, 1)))
+    desired = replace(actual, programs=tuple(p.with_field("A", jumps[n]) if n in jumps else p
+                                             for n, p in enumerate(actual.programs, 1)))
     reference = reference_replayed(actual, desired, line("crc16"))
     assert reference.messages == (codec.UnlinkPrograms(1, 20), codec.LinkPrograms(5, 10))
 
@@ -103,7 +109,9 @@ def test_commissioning_every_field_takes_27_messages() -> None:
     assert reference.bus_time <= plan_module(actual, desired, cost).bus_time + EPSILON
     assert len(reference.messages) == 27
     assert sum(m.ID == 0x21 for m in reference.messages) == 4
-    assert [sum(m.ID == kind for m in reference.messages) for kind in (0x33, 0x42, 0x43, 0x44, 0x45)] == [4] * 5
+    assert [sum(m.ID == kind for m in reference.messages) for kind in (0x33, 0x42, 0x43, 0x44, 0x45)] == [
+        4
+    ] * 5
 
 
 #: The found case the exact search takes about 4 s of CPU on (the others: a second at most), in the soak tier.
@@ -112,13 +120,16 @@ SLOW_FOUND = "open-driver: a link range over 16..60 that fits one 46h once five 
 
 @pytest.mark.parametrize(
     "case",
-    [pytest.param(case, marks=pytest.mark.soak) if case["found"] == SLOW_FOUND else case for case in FOUND_CASES],
+    [pytest.param(case, marks=pytest.mark.soak) if case["found"] == SLOW_FOUND else case
+     for case in FOUND_CASES],
     ids=lambda case: case["found"].split(":")[0],
 )
 def test_the_found_cases_optimum_is_the_exact_references(case: dict) -> None:
     """The optimum test_planner_cases holds the planner to on each case the soak properties found."""
     actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
-    assert reference_replayed(actual, desired, line(case["framing"], case["turnaround"])).bus_time == pytest.approx(case["optimum"], abs=1e-9)
+    assert reference_replayed(
+        actual, desired, line(case["framing"], case["turnaround"])
+    ).bus_time == pytest.approx(case["optimum"], abs=1e-9)
 
 
 @pytest.mark.parametrize("case", DIFFERS, ids=lambda case: case["differs"].split(":")[0])
@@ -134,9 +145,11 @@ def busy_program(rnd: random.Random, system: SystemParameters, number: int) -> P
     """A program that differs from the defaults in every field (a commissioning or a rewrite of a recipe)."""
     chain = rnd.randint(2, 8)
     return Program(
-        P=rnd.randint(0, system.S1), V=rnd.randint(system.S5, system.S4), Vr=rnd.choice([-1, 1]) * rnd.randint(1, 600),
+        P=rnd.randint(0, system.S1), V=rnd.randint(system.S5, system.S4),
+                   Vr=rnd.choice([-1, 1]) * rnd.randint(1, 600),
         T=rnd.randint(1, 600), F1=rnd.randint(1, 1999), F2=rnd.randint(1, 1999),
-        A=0 if number == PROGRAM_COUNT else rnd.choice([number + 1 if number % chain else 0, rnd.randint(0, PROGRAM_COUNT)]),
+        A=0 if number == PROGRAM_COUNT
+                   else rnd.choice([number + 1 if number % chain else 0, rnd.randint(0, PROGRAM_COUNT)]),
     )  # fmt: skip
 
 
@@ -153,10 +166,13 @@ def busy_modules(draw: st.DrawFn) -> tuple[ModuleImage, ModuleImage, dict[int, P
     for n in range(first, first + count):
         programs[n - 1] = busy_program(rnd, system, n)
     framing = draw(st.sampled_from(FRAMINGS))
-    return actual, replace(actual, system=system, programs=tuple(programs)), {}, framing, draw(st.sampled_from([0.0, 0.010, 0.050]))
+    return actual, replace(actual, system=system,
+                           programs=tuple(programs)), {}, framing, draw(st.sampled_from([0.0, 0.010, 0.050]))
 
 
-def plan_within_one_percent(scenario: tuple[ModuleImage, ModuleImage, dict[int, Program], str, float]) -> None:
+def plan_within_one_percent(
+    scenario: tuple[ModuleImage, ModuleImage, dict[int, Program], str, float],
+) -> None:
     """The plan reaches the plant file (on the device model) and costs at most 1 % over the optimum — which
     is not above it."""
     actual, desired, unread, framing, turnaround = scenario
@@ -172,7 +188,8 @@ def plan_within_one_percent(scenario: tuple[ModuleImage, ModuleImage, dict[int, 
 
 #: Each example solves an integer programme (a second or so, up to half a minute for a full rewrite):
 #: fewer examples than the soak profile's 2,000, and none shrunk (a failure prints its example).
-EXACT_EXAMPLES = settings(deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate], report_multiple_bugs=False,
+EXACT_EXAMPLES = settings(deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate],
+                          report_multiple_bugs=False,
                           suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
 
 

@@ -16,10 +16,12 @@ REFUND, INIT_RANGE = 0.0022916666666666667, 0.0389583
 
 
 @given(
-    st.lists(st.tuples(st.sampled_from(CHARGES), st.sampled_from(CHARGES), st.booleans()), min_size=PROGRAM_COUNT, max_size=PROGRAM_COUNT),
+    st.lists(st.tuples(st.sampled_from(CHARGES), st.sampled_from(CHARGES), st.booleans()),
+             min_size=PROGRAM_COUNT, max_size=PROGRAM_COUNT),
     st.lists(st.booleans(), min_size=PROGRAM_COUNT, max_size=PROGRAM_COUNT),
 )
-def test_one_kind_is_the_dp_of_several_with_one(rows: list[tuple[float, float, bool]], managed: list[bool]) -> None:
+def test_one_kind_is_the_dp_of_several_with_one(rows: list[tuple[float, float, bool]],
+                                                managed: list[bool]) -> None:
     table = [(kept, initialised - TIE if tied else initialised) for kept, initialised, tied in rows]
     back, cost = _one_kind(tuple(managed), table, REFUND, INIT_RANGE)
     back_all, cost_all = _kinds(tuple(managed), table, 1, REFUND, INIT_RANGE)

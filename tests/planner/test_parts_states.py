@@ -1,4 +1,5 @@
-"""The states the write phase's DP keeps (`parts_states.States.undominated`): none that another it keeps beats.
+"""The states the write phase's DP keeps (`parts_states.States.undominated`): none that another it keeps
+beats.
 
 A state is the room left in the last 40h and 41h and, per live 42h..46h field, the programs a 21h
 took out of it; one ahead of another in some fields can gain at most those fields' headers over it,
@@ -24,7 +25,8 @@ def packed(fields: tuple[int, ...]) -> int:
     return sum(value << (STATE_BITS * f) for f, value in enumerate(fields))
 
 
-def beats(b: tuple[tuple[int, ...], float], a: tuple[tuple[int, ...], float], worth: tuple[float, ...]) -> bool:
+def beats(b: tuple[tuple[int, ...], float], a: tuple[tuple[int, ...], float],
+          worth: tuple[float, ...]) -> bool:
     """Whether state b beats a: a costs at least what being ahead of b in its fields can gain it (to NEAR)."""
     (fields_a, cost_a), (fields_b, cost_b) = a, b
     gain = sum(w for w, x, y in zip(worth, fields_a, fields_b) if x > y)
@@ -35,7 +37,8 @@ def test_a_state_the_same_cost_as_one_ahead_of_it_goes_whichever_comes_first() -
     states = States((HEADER, HEADER), (15, 15))
     behind, ahead = packed((6, 3)), packed((6, 4))
     same = ITEM + ITEM + HEADER
-    for costs in ((same, same), (ITEM + (ITEM + HEADER), HEADER + ITEM + ITEM)):  # the second pair differs by rounding
+    # the second pair differs by rounding
+    for costs in ((same, same), (ITEM + (ITEM + HEADER), HEADER + ITEM + ITEM)):
         for order in ((behind, ahead), (ahead, behind)):
             kept = states.undominated(dict(zip(order, costs)))
             assert list(kept) == [ahead]

@@ -36,7 +36,8 @@ def windows(draw: st.DrawFn) -> tuple:
     window = range(first, min(PROGRAM_COUNT, first + rnd.randint(0, 11)) + 1)
     outside = {n: None for n in range(1, PROGRAM_COUNT + 1) if n not in window}
     framing = draw(st.sampled_from(FRAMINGS))
-    cost = line(framing, draw(st.sampled_from([0.0, 0.010, 0.050])), zvz=draw(st.sampled_from([0.020, 0.100])))
+    cost = line(framing, draw(st.sampled_from([0.0, 0.010, 0.050])),
+                zvz=draw(st.sampled_from([0.020, 0.100])))
     return with_programs(actual, outside), with_programs(desired, outside), cost
 
 

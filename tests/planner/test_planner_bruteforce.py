@@ -56,12 +56,15 @@ def candidates(desired: ModuleImage, system_differs: bool) -> list[codec.Message
     return out
 
 
-def cheapest_short_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost, bound: float) -> float | None:
+def cheapest_short_plan(actual: ModuleImage, desired: ModuleImage, cost: LineCost,
+                        bound: float) -> float | None:
     """The bus time of the cheapest plan of at most DEPTH candidates costing less than `bound`."""
     filler = default_program(actual.system)
-    start = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p for p in actual.programs)))
+    start = device.ModuleState(replace(actual, programs=tuple(filler if p is None else p
+                                                              for p in actual.programs)))
     goal = (desired.system, tuple(desired.programs[n - 1] for n in MANAGED))
-    priced = [(cost.message_time(desired.address, m), m) for m in candidates(desired, actual.system != desired.system)]
+    priced = [(cost.message_time(desired.address, m), m)
+              for m in candidates(desired, actual.system != desired.system)]
     queue: list[tuple[float, int, int, device.ModuleState]] = [(0.0, 0, 0, start)]
     seen: set = set()
     tie = itertools.count()
@@ -119,18 +122,23 @@ def tiny_case(seed: int) -> tuple[ModuleImage, ModuleImage]:
             wanted = [p.with_field("A", m + 1 if m < 3 else 0) for m, p in enumerate(wanted, start=1)]
         else:
             wanted[n - 1] = program(n)
-    wanted = [replace(p, P=min(p.P, new_system.S1), V=min(max(p.V, new_system.S5), new_system.S4)) for p in wanted]
+    wanted = [replace(p, P=min(p.P, new_system.S1), V=min(max(p.V, new_system.S5), new_system.S4))
+              for p in wanted]
     return actual, ModuleImage(actual.address, new_system, (*wanted, *unmanaged))
 
 
 @pytest.mark.parametrize("framing", FRAMINGS)
-@pytest.mark.parametrize("seed", [*range(10), *(pytest.param(seed, marks=pytest.mark.soak) for seed in range(10, 60))])
+@pytest.mark.parametrize("seed", [*range(10),
+                                  *(pytest.param(seed, marks=pytest.mark.soak) for seed in range(10, 60))])
 def test_no_short_plan_is_cheaper(framing: str, seed: int) -> None:
     actual, desired = tiny_case(seed)
     cost = line(framing, turnaround=random.Random(seed).choice([0.0, 0.010]))
     plan = plan_module(actual, desired, cost)
     check_plan(plan, actual, desired, cost)
     cheaper = cheapest_short_plan(actual, desired, cost, bound=plan.bus_time - 1e-9)
-    assert cheaper is None, f"a plan of {cheaper * 1000:.2f} ms beats the planner's {plan.bus_time * 1000:.2f} ms"
+    assert cheaper is None, (f"a plan of {cheaper * 1000:.2f} ms beats the planner's "
+                             f"{plan.bus_time * 1000:.2f} ms")
     bound, _ = plan_bench.Relaxation(actual, desired, cost).bound()
-    assert bound <= plan.bus_time + 1e-9, f"the bound {bound * 1000:.2f} ms is above a plan of {plan.bus_time * 1000:.2f} ms"
+    assert (
+        bound <= plan.bus_time + 1e-9
+    ), f"the bound {bound * 1000:.2f} ms is above a plan of {plan.bus_time * 1000:.2f} ms"

@@ -31,7 +31,8 @@ SYSTEM = replace(DEFAULT_SYSTEM, S1=2500, S4=500, S5=20)
 
 def recipe(number: int) -> Program:
     """A realistic program: a position, a speed, a dwell, a function output, chained in fours."""
-    return Program(P=300 + 29 * number, V=100 + 5 * number, Vr=0, T=10 * (number % 3), F1=1010 if number % 2 else 0,
+    return Program(P=300 + 29 * number, V=100 + 5 * number, Vr=0, T=10 * (number % 3), F1=1010
+                   if number % 2 else 0,
                    F2=0, A=number + 1 if number % 4 else 0)  # fmt: skip
 
 
@@ -70,7 +71,8 @@ def test_teach_in_revert_of_twelve_positions_is_one_40h(framing: str) -> None:
     numbers = [2, 5, 9, 14, 20, 21, 33, 40, 41, 50, 58, 63]
     taught = with_programs(PLANT, {n: replace(recipe(n), P=recipe(n).P + 7) for n in numbers})
     plan = planned(taught, PLANT, framing)
-    assert [step.message for step in plan.steps] == [codec.WritePositions(tuple((n, recipe(n).P) for n in numbers))]
+    assert [step.message for step in plan.steps] == [codec.WritePositions(tuple((n, recipe(n).P)
+                                                                                for n in numbers))]
     assert plan.steps[0].summary == "write P of programs 2, 5, 9, 14, 20, 21, 33, 40, 41, 50, 58, 63 (40h)"
 
 
@@ -86,8 +88,10 @@ def test_commissioning_from_factory_defaults_batches(framing: str) -> None:
 
 def every_field(number: int) -> Program:
     """A program with every field set (and chained in fours): a commissioning writes all of them."""
-    return Program(P=300 + 31 * number, V=40 + 7 * number, Vr=1 + number % 40, T=1 + number % 49, F1=1 + 29 * number,
-                   F2=1 + 23 * number, A=number + 1 if number % 4 and number < PROGRAM_COUNT else 0)  # fmt: skip
+    return Program(P=300 + 31 * number, V=40 + 7 * number, Vr=1 + number % 40, T=1 + number % 49, F1=1
+                   + 29 * number,
+                   F2=1 + 23 * number,
+                   A=number + 1 if number % 4 and number < PROGRAM_COUNT else 0)  # fmt: skip
 
 
 #: The exact optimum of commissioning all 64 programs of `every_field` (bench/exact_reference.py,
@@ -103,7 +107,8 @@ def test_commissioning_every_field_is_at_the_optimum(framing: str) -> None:
     planner wrote 28 messages, 2,269 ms on crc16). The 46h is what the 30h leaves."""
     desired = ModuleImage(3, SYSTEM, tuple(every_field(n) for n in range(1, PROGRAM_COUNT + 1)))
     plan = planned(ModuleImage.factory(3), desired, framing)
-    assert ids(plan) == [0x20, 0x30, *[0x21] * 4, *[0x33] * 4, *[0x42] * 4, *[0x43] * 4, *[0x44] * 4, *[0x45] * 4, 0x46]
+    assert ids(plan) == [0x20, 0x30, *[0x21] * 4, *[0x33] * 4, *[0x42] * 4, *[0x43] * 4, *[0x44] * 4,
+                         *[0x45] * 4, 0x46]
     assert plan.bus_time == pytest.approx(OPTIMUM[framing], abs=1e-9)
 
 
@@ -116,15 +121,19 @@ def test_a_tie_between_write_phases_is_a_tie_on_every_python() -> None:
     problem = PlanningProblem.build(PLANT, PLANT, line())
     phase = WritePhase(problem, (KEEP,) * PROGRAM_COUNT)
     first, second = ((0, 0, 0, 6, 6, 12), (0, 0, 12, 6, 6, 0))
-    one, other = (phase._priced(0, (), 0.0, tuple((1 << n) - 1 for n in counts), (), 0) for counts in (first, second))
+    one, other = (phase._priced(0, (), 0.0, tuple((1 << n) - 1 for n in counts), (), 0)
+                  for counts in (first, second))
     assert one.estimate == other.estimate
     prices = problem.prices
-    assert functools.reduce(operator.add, map(prices.fields, first)) != functools.reduce(operator.add, map(prices.fields, second))
+    assert functools.reduce(operator.add, map(prices.fields, first)) != functools.reduce(operator.add,
+                                                                                         map(prices.fields,
+                                                                                             second))
 
 
 def test_lowering_s1_lets_the_module_clamp_the_positions() -> None:
     lowered = replace(SYSTEM, S1=1000)
-    desired = replace(PLANT, system=lowered, programs=tuple(replace(p, P=min(p.P, 1000)) for p in PLANT.programs))
+    desired = replace(PLANT, system=lowered,
+                      programs=tuple(replace(p, P=min(p.P, 1000)) for p in PLANT.programs))
     assert desired.programs != PLANT.programs
     plan = planned(PLANT, desired)
     assert [step.message for step in plan.steps] == [codec.WriteSystem(lowered)]
@@ -180,7 +189,8 @@ def test_unmanaged_programs_inside_chains_and_runs_are_skipped() -> None:
         None if n % 5 == 0 else replace(recipe(n), P=recipe(n).P + 1, V=recipe(n).V + 1, A=0)
         for n in range(1, PROGRAM_COUNT + 1)
     ))  # fmt: skip
-    actual = replace(PLANT, programs=tuple(None if n % 5 == 0 else recipe(n) for n in range(1, PROGRAM_COUNT + 1)))
+    actual = replace(PLANT, programs=tuple(None if n % 5 == 0 else recipe(n)
+                                           for n in range(1, PROGRAM_COUNT + 1)))
     plan = planned(actual, desired)
     for step in plan.steps:
         assert not {n for n in step.message.touched_programs() if n % 5 == 0}
@@ -194,7 +204,8 @@ def test_factory_reset_is_10h_and_11h(framing: str) -> None:
 
 
 def test_factory_system_parameters_are_10h_not_20h() -> None:
-    actual = replace(PLANT, system=SYSTEM, programs=tuple(replace(p, P=min(p.P, 400)) for p in PLANT.programs))
+    actual = replace(PLANT, system=SYSTEM,
+                     programs=tuple(replace(p, P=min(p.P, 400)) for p in PLANT.programs))
     desired = replace(actual, system=DEFAULT_SYSTEM)
     assert ids(planned(actual, desired)) == [0x10]
 
@@ -284,8 +295,10 @@ def rewritten_recipe(seed: int, managed: int) -> tuple[ModuleImage, ModuleImage]
     rnd = random.Random(seed)
 
     def program(n: int) -> Program:
-        return Program(P=rnd.randrange(300, 2500, 5), V=rnd.randrange(50, 500, 10), Vr=0, T=rnd.choice([0, 0, 5, 10, 20]),
-                       F1=rnd.choice([0, 1010, 1050]), F2=rnd.choice([0, 0, 1050]), A=n + 1 if n % 4 else 0)  # fmt: skip
+        return Program(P=rnd.randrange(300, 2500, 5), V=rnd.randrange(50, 500, 10), Vr=0,
+                       T=rnd.choice([0, 0, 5, 10, 20]),
+                       F1=rnd.choice([0, 1010, 1050]), F2=rnd.choice([0, 0, 1050]),
+                       A=n + 1 if n % 4 else 0)  # fmt: skip
 
     old = tuple(program(n) if n <= managed else None for n in range(1, PROGRAM_COUNT + 1))
     new = tuple(program(n) if n <= managed else None for n in range(1, PROGRAM_COUNT + 1))
@@ -327,7 +340,8 @@ def test_a_46h_that_would_overflow_takes_a_link_range_with_an_item_inside() -> N
     """32 jump addresses need two 46h; a 30h over 41..49 gives eight of them (44 wrong, fixed
     by its item), so one 46h is enough."""
     unchained = replace(PLANT, programs=tuple(replace(p, A=0) for p in PLANT.programs))
-    chains = {n: replace(recipe(n), A=60) for n in range(1, 25)} | {n: replace(recipe(n), A=n + 1) for n in range(41, 49)}
+    chains = {n: replace(recipe(n), A=60) for n in range(1, 25)} | {n: replace(recipe(n), A=n + 1)
+                                                                    for n in range(41, 49)}
     desired = with_programs(unchained, chains | {44: replace(recipe(44), A=10)})
     plan = planned(unchained, desired)
     assert plan.steps[0].message == codec.LinkPrograms(41, 49)
@@ -343,7 +357,8 @@ def test_of_two_link_ranges_that_pay_alike_one_saves_a_46h(framing: str) -> None
     one without the other: the items are counted, not shared."""
     unchained = replace(PLANT, programs=tuple(replace(p, A=0) for p in PLANT.programs))
     chains = {n: replace(unchained.programs[n - 1], A=n + 1) for n in [*range(1, 13), *range(41, 53)]}
-    desired = with_programs(unchained, chains | {n: replace(unchained.programs[n - 1], A=60) for n in range(21, 31)})
+    desired = with_programs(unchained,
+                            chains | {n: replace(unchained.programs[n - 1], A=60) for n in range(21, 31)})
     plan = planned(unchained, desired, framing)
     assert plan.steps[0].message == codec.LinkPrograms(1, 13)
     assert ids(plan) == [0x30, 0x46]
@@ -358,7 +373,8 @@ def test_of_two_link_ranges_that_pay_alike_one_saves_a_46h(framing: str) -> None
 FOUND_CASES = json.loads((Path(__file__).parent / "found_cases.json").read_text(encoding="utf-8"))
 
 
-@pytest.mark.parametrize("case", FOUND_CASES, ids=[case["found"].split(":")[0] + f"-{n}" for n, case in enumerate(FOUND_CASES)])
+@pytest.mark.parametrize("case", FOUND_CASES,
+                         ids=[case["found"].split(":")[0] + f"-{n}" for n, case in enumerate(FOUND_CASES)])
 def test_the_plan_of_a_found_case_is_within_one_percent_of_its_optimum(case: dict) -> None:
     actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
     cost = line(case["framing"], case["turnaround"])
@@ -398,7 +414,8 @@ def test_an_init_takes_out_the_overflow_of_items_where_runs_alike_tie(framing: s
     default = default_program(SYSTEM)
     actual = replace(PLANT, programs=tuple(None if n % 4 == 0 else replace(default, P=default.P + n)
                                            for n in range(1, PROGRAM_COUNT + 1)))  # fmt: skip
-    desired = replace(PLANT, programs=tuple(None if n % 4 == 0 else default for n in range(1, PROGRAM_COUNT + 1)))
+    desired = replace(PLANT, programs=tuple(None if n % 4 == 0 else default
+                                            for n in range(1, PROGRAM_COUNT + 1)))
     plan = planned(actual, desired, framing)
     assert plan.steps[0].message == codec.InitPrograms(1, 3)
     assert ids(plan) == [0x14, 0x40, 0x40, 0x40]
@@ -409,9 +426,11 @@ def small_groups() -> tuple[ModuleImage, ModuleImage]:
     P and V; the plant file wants them back to the defaults."""
     default = default_program(SYSTEM)
     managed = {1, 3, 4, 5, 7, 8, 9, 10, 12, 13, 14, 15, 16, *range(18, 30)}
-    actual = replace(PLANT, programs=tuple(replace(default, P=default.P + n, V=default.V + 1) if n in managed else None
+    actual = replace(PLANT, programs=tuple(replace(default, P=default.P + n, V=default.V + 1)
+                                           if n in managed else None
                                            for n in range(1, PROGRAM_COUNT + 1)))  # fmt: skip
-    desired = replace(PLANT, programs=tuple(default if n in managed else None for n in range(1, PROGRAM_COUNT + 1)))
+    desired = replace(PLANT, programs=tuple(default if n in managed else None
+                                            for n in range(1, PROGRAM_COUNT + 1)))
     return actual, desired
 
 
@@ -436,7 +455,8 @@ def test_a_33h_run_is_replaced_by_an_init_when_its_programs_want_the_defaults() 
     assert plan.steps[0].message == codec.InitPrograms(18, 29)
 
 
-@pytest.mark.parametrize("fields", [(), *((name,) for name in PROGRAM_FIELDS), PROGRAM_FIELDS, ("P", "T", "A")])
+@pytest.mark.parametrize("fields",
+                         [(), *((name,) for name in PROGRAM_FIELDS), PROGRAM_FIELDS, ("P", "T", "A")])
 def test_the_field_mask_has_the_bit_of_each_field_that_differs(fields):
     """`diff_mask` is written out field by field: its bits are FIELD_BIT's, whatever the fields."""
     have = recipe(5)

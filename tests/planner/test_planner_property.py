@@ -1,4 +1,5 @@
-"""The acceptance property of issue 5: the plan, run on the device model from the read-back, gives the desired images.
+"""The acceptance property of issue 5: the plan, run on the device model from the read-back, gives the desired
+images.
 
 Scenarios are built like real plant changes: a read-back image, then a handful of
 mutations of it for the plant file (a recipe tweak, a teach-in, new system parameters
@@ -133,7 +134,8 @@ def scenarios(draw: st.DrawFn) -> tuple[ModuleImage, ModuleImage, dict[int, Prog
             desired_programs[n - 1] = None
             if not read_too:
                 actual_programs[n - 1] = None
-                unread[n] = Program(*(rnd.randint(0, 9999), rnd.randint(1, 600), 0, 0, 0, 0, rnd.randint(0, 64)))
+                unread[n] = Program(*(rnd.randint(0, 9999), rnd.randint(1, 600), 0, 0, 0, 0,
+                                      rnd.randint(0, 64)))
         actual = replace(actual, programs=tuple(actual_programs))
         desired = replace(desired, programs=tuple(desired_programs))
     framing = draw(st.sampled_from(FRAMINGS))

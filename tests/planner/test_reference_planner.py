@@ -32,9 +32,9 @@ from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.planner import plan_module
 
 EPSILON = 1e-9
-#: The found cases (found_cases.json) the reference plans in over a few seconds of CPU (measured, one core): the
-#: soak tier's. On stx every open run keeps its first program (its message's checksum may be stuffed) and the
-#: reference takes more than 200 s: those are left out (STX_FOUND), the planner held to their optimum by
+#: The found cases (found_cases.json) the reference plans in over a few seconds of CPU (measured, one core):
+#: the soak tier's. On stx every open run keeps its first program (its message's checksum may be stuffed) and
+#: the reference takes more than 200 s: those are left out (STX_FOUND), the planner held to their optimum by
 #: test_planner_cases and test_exact_reference.
 SLOW_FOUND = {
     "crc16: a link range over 2..64": 55.0,
@@ -57,29 +57,36 @@ def replayed(actual: ModuleImage, desired: ModuleImage, reference: ReferencePlan
         assert want is None or state.image.programs[number - 1] == want, f"program {number}"
 
 
-def assert_equal_to_the_reference(actual: ModuleImage, desired: ModuleImage, cost: LineCost, limit: int | None = None) -> ReferencePlan:
-    reference = reference_plan(actual, desired, cost) if limit is None else reference_plan(actual, desired, cost, limit=limit)
+def assert_equal_to_the_reference(actual: ModuleImage, desired: ModuleImage, cost: LineCost,
+                                  limit: int | None = None) -> ReferencePlan:
+    reference = reference_plan(actual, desired, cost) if limit is None else reference_plan(actual, desired,
+                                                                                           cost, limit=limit)
     replayed(actual, desired, reference)
-    assert reference.bus_time == pytest.approx(math.fsum(cost.message_time(desired.address, m) for m in reference.messages), abs=EPSILON)
+    assert reference.bus_time == pytest.approx(math.fsum(cost.message_time(desired.address, m)
+                                                         for m in reference.messages), abs=EPSILON)
     planned = plan_module(actual, desired, cost).bus_time
     if cost.framing.stuffs:  # the reference's optimum leaves out stuffed checksums of 40h..46h
         assert reference.optimum <= reference.bus_time + EPSILON
         assert reference.optimum - EPSILON <= planned <= reference.bus_time + EPSILON, (
-            f"the planner's {planned * 1e3:.3f} ms, the reference's {reference.optimum * 1e3:.3f}..{reference.bus_time * 1e3:.3f} ms"
+            f"the planner's {planned * 1e3:.3f} ms, the reference's "
+            f"{reference.optimum * 1e3:.3f}..{reference.bus_time * 1e3:.3f} ms"
         )
     else:
         assert reference.optimum == pytest.approx(reference.bus_time, abs=EPSILON)
         assert planned == pytest.approx(reference.bus_time, abs=EPSILON), (
-            f"the planner's {planned * 1e3:.3f} ms, the reference's {reference.bus_time * 1e3:.3f} ms in {[m.hex() for m in reference.messages]}"
+            f"the planner's {planned * 1e3:.3f} ms, the reference's {reference.bus_time * 1e3:.3f} ms in "
+            f"{[m.hex() for m in reference.messages]}"
         )
     return reference
 
 
 @pytest.mark.parametrize("framing", FRAMINGS)
-@pytest.mark.parametrize("seed", [*range(10), *(pytest.param(seed, marks=pytest.mark.soak) for seed in range(10, 60))])
+@pytest.mark.parametrize("seed", [*range(10),
+                                  *(pytest.param(seed, marks=pytest.mark.soak) for seed in range(10, 60))])
 def test_the_planner_equals_the_reference_on_the_brute_force_modules(framing: str, seed: int) -> None:
     actual, desired = tiny_case(seed)
-    assert_equal_to_the_reference(actual, desired, line(framing, turnaround=random.Random(seed).choice([0.0, 0.010])))
+    assert_equal_to_the_reference(actual, desired,
+                                  line(framing, turnaround=random.Random(seed).choice([0.0, 0.010])))
 
 
 def found(case: dict) -> object:
@@ -99,9 +106,10 @@ def test_the_planner_equals_the_reference_on_the_found_cases(case: dict) -> None
     assert reference.bus_time == pytest.approx(case["optimum"], abs=EPSILON)
 
 
-#: bench/plan_bench.py's fixed cases the reference plans in seconds (2.4 to 7 s of CPU each, measured), the first in
-#: the fast tier. Left out (more than 40 s each): commissioning, cleanup and large mixed change on open-driver/100ms,
-#: factory reset on both lines, every stx case (see STX_FOUND) and the five MORE_SCENARIOS not yet measured.
+#: bench/plan_bench.py's fixed cases the reference plans in seconds (2.4 to 7 s of CPU each, measured), the
+#: first in the fast tier. Left out (more than 40 s each): commissioning, cleanup and large mixed change on
+#: open-driver/100ms, factory reset on both lines, every stx case (see STX_FOUND) and the five MORE_SCENARIOS
+#: not yet measured.
 BENCH_CASES = (
     ("teach-in revert", "crc16"),
     *((name, profile) for name in ("recipe tweak", "teach-in revert", "lower S1, clamping", "rechaining")
@@ -139,7 +147,9 @@ def test_the_planner_plans_at_the_reference_s_bus_time_where_it_was_found_dearer
     tier plans it again below)."""
     actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
     assert case["reference"] < case["planned"]
-    assert plan_module(actual, desired, line(case["framing"], case["turnaround"])).bus_time == pytest.approx(case["reference"], abs=EPSILON)
+    assert plan_module(actual, desired,
+                       line(case["framing"], case["turnaround"])).bus_time == pytest.approx(case["reference"],
+                                                                                            abs=EPSILON)
 
 
 @pytest.mark.soak
@@ -150,13 +160,14 @@ def test_the_planner_equals_the_reference_where_it_was_found_dearer(case: dict) 
     assert reference.bus_time == pytest.approx(case["reference"], abs=EPSILON)
 
 
-#: States the soak's reference may hold a program: 10 modules planned and 5 given up on (stx, mostly) in 80 s of CPU
-#: (measured, --hypothesis-seed=1).
+#: States the soak's reference may hold a program: 10 modules planned and 5 given up on (stx, mostly) in 80 s
+#: of CPU (measured, --hypothesis-seed=1).
 SOAK_LIMIT = 30_000
 
 
 @pytest.mark.soak
-@settings(max_examples=10, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate], report_multiple_bugs=False,
+@settings(max_examples=10, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate],
+          report_multiple_bugs=False,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])  # fmt: skip
 @given(scenarios())
 def test_the_planner_equals_the_reference_on_the_property_modules(scenario) -> None:

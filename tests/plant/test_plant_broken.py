@@ -104,7 +104,8 @@ def _sparse(tmp_path: Path) -> Path:
     (lambda tmp_path: tmp_path, "is a directory — give the plant file (*.yaml) in it"),
     (_sparse, "larger than 16 MiB — a plant file is far smaller: check that this is the plant file"),
 ], ids=["dev-zero", "fifo", "socket", "directory", "16-GiB"])
-def test_only_a_regular_file_is_read_and_only_its_first_16_mebibytes(tmp_path: Path, make, problem: str) -> None:
+def test_only_a_regular_file_is_read_and_only_its_first_16_mebibytes(tmp_path: Path, make,
+                                                                     problem: str) -> None:
     path = make(tmp_path)
     with pytest.raises(PlantError) as raised:
         load_plant(path)
@@ -129,24 +130,57 @@ MANY_DIGITS = ("plant: demo\nbuses:\n  - name: a\n    port: emulator://a\n    ti
 HUGE_EXPONENT = MANY_DIGITS.replace("9" * 500_000, "1.0e+" + "9" * 500_000)
 TINY_EXPONENT = MANY_DIGITS.replace("9" * 500_000, "1.0e-" + "9" * 500_000)
 BOMB_CASES = [
-    (ALIAS_BOMB, "2:9: an alias (*a, used 100000 times) — a plant file does not use aliases: share settings "
-                 "with profiles: and a module's profiles: [NAME], or write the value out"),
-    (FLOW_NESTING, "2:107: lists and mappings nested more than 100 deep — a plant file needs fewer than ten: "
-                   "check the brackets and the indentation"),
-    (BLOCK_NESTING, "101:101: lists and mappings nested more than 100 deep — a plant file needs fewer than ten: "
-                    "check the brackets and the indentation"),
-    (MANY_DIGITS, "5:14: timeout 99999999999999999999… has more than 28 digits, written out — a plant file's "
-                  "numbers are read exactly: write at most 28 digits"),
-    (HUGE_EXPONENT, "5:14: timeout 1.0e+999999999999999… has more than 28 digits, written out — a plant file's "
-                    "numbers are read exactly: write at most 28 digits"),
-    (TINY_EXPONENT, "5:14: timeout 1.0e-999999999999999… has more than 28 digits, written out — a plant file's "
-                    "numbers are read exactly: write at most 28 digits"),
+    (
+        ALIAS_BOMB,
+        (
+            "2:9: an alias (*a, used 100000 times) — a plant file does not use aliases: share settings "
+            "with profiles: and a module's profiles: [NAME], or write the value out"
+        ),
+    ),
+    (
+        FLOW_NESTING,
+        (
+            "2:107: lists and mappings nested more than 100 deep — a plant file needs fewer than ten: "
+            "check the brackets and the indentation"
+        ),
+    ),
+    (
+        BLOCK_NESTING,
+        (
+            "101:101: lists and mappings nested more than 100 deep — a plant file needs fewer than ten: "
+            "check the brackets and the indentation"
+        ),
+    ),
+    (
+        MANY_DIGITS,
+        (
+            "5:14: timeout 99999999999999999999… has more than 28 digits, written out — a plant file's "
+            "numbers are read exactly: write at most 28 digits"
+        ),
+    ),
+    (
+        HUGE_EXPONENT,
+        (
+            "5:14: timeout 1.0e+999999999999999… has more than 28 digits, written out — a plant file's "
+            "numbers are read exactly: write at most 28 digits"
+        ),
+    ),
+    (
+        TINY_EXPONENT,
+        (
+            "5:14: timeout 1.0e-999999999999999… has more than 28 digits, written out — a plant file's "
+            "numbers are read exactly: write at most 28 digits"
+        ),
+    ),
 ]
 
 
 @pytest.mark.usefixtures("each_loader")
-@pytest.mark.parametrize(("text", "problem"), BOMB_CASES, ids=["aliases", "flow-nesting", "block-nesting",
-                                                               "many-digits", "huge-exponent", "tiny-exponent"])
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    BOMB_CASES,
+    ids=["aliases", "flow-nesting", "block-nesting", "many-digits", "huge-exponent", "tiny-exponent"],
+)
 def test_bombs_are_refused_by_the_limit_they_meet_first(tmp_path: Path, text: str, problem: str) -> None:
     path = tmp_path / "plant.yaml"
     path.write_text(text)
@@ -169,7 +203,8 @@ def test_no_node_tree_is_composed(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def _plant(modules: list[str], head: str = "plant: demo\n") -> str:
-    return head + "buses:\n  - name: a\n    port: emulator://a\n    modules:\n" + "".join(f"      - {m}\n" for m in modules)
+    return head + "buses:\n  - name: a\n    port: emulator://a\n    modules:\n" + "".join(f"      - {m}\n"
+                                                                                          for m in modules)
 
 
 @pytest.mark.usefixtures("each_loader")
@@ -179,8 +214,10 @@ def test_more_nodes_than_the_limit_are_refused_where_it_is_reached(tmp_path: Pat
     path.write_text("plant: demo\nbuses: [" + "a, " * 60 + "]\n")  # the 51st node is the 46th a
     with pytest.raises(PlantError) as raised:
         load_plant(path)
-    assert raised.value.problems == [f"{path}:2:144: more than 50 keys, values, lists and mappings — 8 buses of 30 "
-                                     "modules with all 64 programs written out have about 160,000: check that this "
+    assert raised.value.problems == [f"{path}:2:144: more than 50 keys, values, lists and mappings — 8 "
+                                     "buses of 30 "
+                                     "modules with all 64 programs written out have about 160,000: check "
+                                     "that this "
                                      "is the plant file"]
 
 
@@ -188,19 +225,35 @@ PROGRAMS = "{" + ", ".join(f"{n}: {{position: 0.1, speed: 0.1}}" for n in range(
 
 
 @pytest.mark.usefixtures("each_loader")
-@pytest.mark.parametrize(("text", "problem"), [
-    # node 31 of module m2: the map, 2 keys and values, programs and its map, 6 nodes a program: program 4's speed
-    (_plant(["{address: 1, name: m1}", f"{{address: 2, name: m2, programs: {PROGRAMS}}}"]),
-     f"7:{len('      - {address: 2, name: m2, programs: ' + PROGRAMS[:PROGRAMS.index('4: {')] + '4: {position: 0.1, speed: ') + 1}: "
-     "module m2 has "
-     "more than 30 keys, values, lists and mappings — a module with every field of all 64 programs written out has "
-     "about 2,000: check that this is the plant file"),
-    # node 31 of the rest: 16 up to the modules' list, then 5 for each module's stand-in: m3's name
-    (_plant([f"{{address: {a}, name: m{a}}}" for a in range(1, 6)], head="plant: demo\nprofiles: {p: {}}\n"),
-     "9:28: the plant file has more than 30 keys, values, lists and mappings besides its modules and profiles "
-     "— 8 buses of 30 modules have about 1,300: check that this is the plant file"),
-], ids=["module", "the-rest"])
-def test_a_part_larger_than_the_limit_is_refused_where_it_is_reached(tmp_path: Path, monkeypatch, text, problem) -> None:
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [
+        # node 31 of module m2: the map, 2 keys and values, programs and its map, 6 nodes a program: program 4's
+        # speed
+        (
+            _plant(["{address: 1, name: m1}", f"{{address: 2, name: m2, programs: {PROGRAMS}}}"]),
+            (
+                f"7:{len('      - {address: 2, name: m2, programs: ' + PROGRAMS[:PROGRAMS.index('4: {')] + '4: {position: 0.1, speed: ') + 1}:"
+                " module m2 has more than 30 keys, values, lists and mappings — a module with every field of"
+                " all 64 programs written out has about 2,000: check that this is the plant file"
+            ),
+        ),
+        # node 31 of the rest: 16 up to the modules' list, then 5 for each module's stand-in: m3's name
+        (
+            _plant(
+                [f"{{address: {a}, name: m{a}}}" for a in range(1, 6)],
+                head="plant: demo\nprofiles: {p: {}}\n",
+            ),
+            (
+                "9:28: the plant file has more than 30 keys, values, lists and mappings besides its modules"
+                " and profiles — 8 buses of 30 modules have about 1,300: check that this is the plant file"
+            ),
+        ),
+    ],
+    ids=["module", "the-rest"],
+)
+def test_a_part_larger_than_the_limit_is_refused_where_it_is_reached(tmp_path: Path, monkeypatch, text,
+                                                                     problem) -> None:
     """What one pydantic call sees is bounded: each module, each profile, the rest of the file."""
     monkeypatch.setattr(loader, "MAX_PART_NODES", 30)
     path = tmp_path / "plant.yaml"
@@ -216,27 +269,35 @@ MORE = "more than 1000 problems, the file was checked no further — fix those l
 @pytest.mark.usefixtures("each_loader")
 def test_reading_stops_collecting_after_the_problem_limit(tmp_path: Path) -> None:
     path = tmp_path / "plant.yaml"
-    path.write_text("plant: demo\nextra: [" + "on, " * (MAX_PROBLEMS + 100) + "]\n" + _plant(["{address: 1, name: m1}"], ""))
+    path.write_text("plant: demo\nextra: [" + "on, " * (MAX_PROBLEMS + 100) + "]\n"
+                    + _plant(["{address: 1, name: m1}"], ""))
     with pytest.raises(PlantError) as raised:
         load_plant(path)
-    problem = "'on' is read as the boolean true by YAML 1.1 and as text by YAML 1.2 — write true or false, or quote it"
+    problem = (
+        "'on' is read as the boolean true by YAML 1.1 and as text by YAML 1.2 — write true or false, "
+        "or quote it"
+    )
     columns = [9 + 4 * k for k in range(MAX_PROBLEMS)]
-    assert raised.value.problems == [f"{path}:2:{c}: {problem}" for c in columns] + [f"{path}:2:{columns[-1]}: {MORE}"]
+    assert (raised.value.problems == [f"{path}:2:{c}: {problem}" for c in columns]
+            + [f"{path}:2:{columns[-1]}: {MORE}"])
 
 
 def test_checking_stops_after_the_problem_limit_with_the_first_problems(tmp_path: Path) -> None:
     """Parts are checked in file order until there are more problems than are listed: the first are."""
     module = "      - {{address: {a}, name: m{b}-{a}, unmanaged_programs: sometimes}}\n"
-    buses = [f"  - name: b{b}\n    port: emulator://b{b}\n    modules:\n" + "".join(module.format(a=a, b=b) for a in range(1, 31))
+    buses = [f"  - name: b{b}\n    port: emulator://b{b}\n    modules:\n"
+             + "".join(module.format(a=a, b=b) for a in range(1, 31))
              for b in range(MAX_PROBLEMS // 30 + 2)]
     path = tmp_path / "plant.yaml"
     path.write_text("plant: demo\nbuses:\n" + "".join(buses))
     with pytest.raises(PlantError) as raised:
         load_plant(path)
     *problems, more = raised.value.problems
-    lines = [6 + 33 * (k // 30) + k % 30 for k in range(MAX_PROBLEMS)]  # module k: after 2 lines and its bus's 3
+    # module k: after 2 lines and its bus's 3
+    lines = [6 + 33 * (k // 30) + k % 30 for k in range(MAX_PROBLEMS)]
     assert [int(p.split(":")[1]) for p in problems] == lines
-    assert problems[0] == f"{path}:6:54: unmanaged_programs cannot be 'sometimes' — expected one of keep, reset"
+    assert problems[0] == (f"{path}:6:54: unmanaged_programs cannot be 'sometimes' — expected one of "
+                           "keep, reset")
     assert more == problems[-1].replace(problems[-1].split(": ", 1)[1], MORE)
 
 
@@ -244,13 +305,15 @@ def test_a_problem_far_into_a_large_file_is_found_where_it_is(tmp_path: Path) ->
     """Positions are not kept while reading: a second pass finds the places of the problems only."""
     programs = "{" + ", ".join(f"{n}: {{position: 0.{n:03d}, speed: 0.300}}" for n in range(1, 65)) + "}"
     modules = [f"{{address: {a}, name: m{a}, programs: {programs}}}" for a in range(1, 31)]
-    modules[27] = modules[27].replace("40: {position: 0.040, speed: 0.300}", "40: {position: 0.040, speed: 0.900}")
+    modules[27] = modules[27].replace("40: {position: 0.040, speed: 0.300}",
+                                      "40: {position: 0.040, speed: 0.900}")
     path = tmp_path / "plant.yaml"
     path.write_text(_plant(modules))
     column = modules[27].index("speed: 0.900") + len("speed: ") + 9
     with pytest.raises(PlantError) as raised:
         load_plant(path)
-    assert raised.value.problems == [f"{path}:33:{column}: speed 0.900 m/s is out of range — speed must be 0.001..0.600 m/s"]
+    assert raised.value.problems == [f"{path}:33:{column}: speed 0.900 m/s is out of range — speed must be "
+                                     "0.001..0.600 m/s"]
 
 
 @pytest.mark.skipif(not yaml.__with_libyaml__, reason="libyaml is not installed")
@@ -260,7 +323,8 @@ def test_past_the_reread_libyaml_words_the_syntax_error(tmp_path: Path, monkeypa
     monkeypatch.setattr(document, "LOADER", yaml.CSafeLoader)
     path = tmp_path / "plant.yaml"
     path.write_text(_plant(["{address: 1, name: m1}"]) + "  other: 1\n")
-    expected = f"{path}:7:3: this line is indented differently from the lines above it — line it up with the keys beside it"
+    expected = (f"{path}:7:3: this line is indented differently from the lines above it — line it up with "
+                "the keys beside it")
     with pytest.raises(PlantError) as raised:
         load_plant(path)
     assert raised.value.problems == [expected]  # PyYAML's words
@@ -290,11 +354,14 @@ def test_the_yaml_1_2_core_schema(text: str, tag: str, value) -> None:
 # What a hurried edit leaves: YAML debris, YAML 1.1 forms, bombs in miniature, huge numbers.
 DEBRIS = [":", "- ", "[", "]", "{", "}", "'", '"', "\t", "&a ", "*a", "<<: ", "!!float ", "!!int ", "? ",
           "0", "-0.1", "0.0005", "yes", "null", ".inf", "1_000", "2:30", "2024-01-01", "x", "\n", "  ",
-          "010", "08", "on", "0b1", "0o17", "1e3", "+.5", "=", "2,000", ",", "#", "|", ">", "%", "@", "`", "!",
+          "010", "08", "on", "0b1", "0o17", "1e3", "+.5", "=", "2,000", ",", "#", "|", ">", "%", "@", "`",
+          "!",
           "---\n", "...", "~", "é", "\ufeff", "\x07", "\r", "[" * 150, "{a: " * 120, "9" * 40, "1.0e+400",
           "1e-400", "0x" + "f" * 40, "socket://h", "emulator://../x",
-          "!!bool x ", "!!timestamp x ", '!!int "" ', '!!float "_" ', "!!str ", "!foo ", "! ", "!!map ", "!!binary "]
-#: How the whole file was saved: as written, with a byte order mark, with CRLF line ends, both, without a final newline.
+          "!!bool x ", "!!timestamp x ", '!!int "" ', '!!float "_" ', "!!str ", "!foo ", "! ", "!!map ",
+          "!!binary "]
+#: How the whole file was saved: as written, with a byte order mark, with CRLF line ends, both, without a
+#: final newline.
 SAVED = [lambda t: t, lambda t: "\ufeff" + t, lambda t: t.replace("\n", "\r\n"),
          lambda t: "\ufeff" + t.replace("\n", "\r\n"), lambda t: t.rstrip("\n")]
 SOURCES = [(PLANTS / "demo-line.yaml").read_text().splitlines(keepends=True),
@@ -342,22 +409,27 @@ def _valid_yaml(text: str, loader: type) -> bool:
     return True
 
 
-@settings(max_examples=100, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=100, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(mangled_plant())
-def test_any_mistake_is_a_plant_error_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
+def test_any_mistake_is_a_plant_error_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                        text: str) -> None:
     """Every problem is one line, "file:line:column: what — what to do" or "file: what — what to do"."""
     said_once(tmp_path, monkeypatch, text)
 
 
 @pytest.mark.soak
-@settings(max_examples=2000, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=2000, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(mangled_plant())
-def test_2000_mistakes_are_plant_errors_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
+def test_2000_mistakes_are_plant_errors_never_a_traceback(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                          text: str) -> None:
     said_once(tmp_path, monkeypatch, text)
 
 
 def said_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, text: str) -> None:
-    """`text` loaded by each parser: each problem one line, the same lines from both where both read the YAML."""
+    """`text` loaded by each parser: each problem one line, the same lines from both where both read the
+    YAML."""
     path = tmp_path / "plant.yaml"
     path.write_bytes(text.encode("utf-8", "surrogatepass"))
     line = re.compile(rf"{re.escape(str(path))}(:\d+:\d+)?: [^\n]+ — [^\n]+")

@@ -30,14 +30,16 @@ def test_validate_a_good_plant() -> None:
 
 
 def validate(*args: str | Path, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "prc3cfg", "validate", *map(str, args)], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "prc3cfg", "validate", *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd)
 
 
 def test_validate_a_broken_plant_prints_the_problems_on_stderr_as_every_error_is() -> None:
     path = BROKEN / "unknown-key-program.yaml"
     done = validate(path)
     assert (done.returncode, done.stdout) == (1, "")
-    assert done.stderr == (f"error: {path}:13:13: unknown key 'sped' in program 3 — expected one of position, "
+    assert done.stderr == (f"error: {path}:13:13: unknown key 'sped' in program 3 — expected one of "
+                           "position, "
                            "speed, relative_speed, dwell, f1, f2, next\n")
 
 
@@ -46,7 +48,8 @@ def test_validate_format_json_lists_every_problem_at_its_place(tmp_path: Path) -
     done = validate(path, "--format", "json")
     assert (done.returncode, done.stderr) == (1, "")
     expected = [line.split(":", 2) for line in path.with_suffix(".expected").read_text().splitlines()]
-    assert json.loads(done.stdout) == [{"file": str(path), "line": int(line), "column": int(column), "message": message.strip()}
+    assert json.loads(done.stdout) == [{"file": str(path), "line": int(line), "column": int(column),
+                                        "message": message.strip()}
                                        for line, column, message in expected]  # fmt: skip
     missing = tmp_path / "missing.yaml"
     assert json.loads(validate(missing, "--format", "json").stdout) == [
@@ -56,7 +59,8 @@ def test_validate_format_json_lists_every_problem_at_its_place(tmp_path: Path) -
 
 
 def test_validate_format_github_annotates_each_problem_where_it_is(tmp_path: Path) -> None:
-    """GitHub's workflow commands: `%`, CR and LF escaped in the message, and `:` and `,` as well in a property."""
+    """GitHub's workflow commands: `%`, CR and LF escaped in the message, and `:` and `,` as well in a
+    property."""
     odd = tmp_path / "a,b:c%d"
     odd.mkdir()
     path = odd / "plant.yaml"
@@ -64,7 +68,8 @@ def test_validate_format_github_annotates_each_problem_where_it_is(tmp_path: Pat
                     "      - {address: 1, name: m1, programs: {3: {position: 0.2, sped: 0.3}}}\n")
     done = validate("a,b:c%d/plant.yaml", "--format", "github", cwd=tmp_path)
     assert (done.returncode, done.stderr) == (1, "")
-    assert done.stdout == ("::error file=a%2Cb%3Ac%25d/plant.yaml,line=6,col=62,title=prc3cfg::unknown key 'sped' in program 3 "
+    assert done.stdout == ("::error file=a%2Cb%3Ac%25d/plant.yaml,line=6,col=62,title=prc3cfg::unknown key "
+                           "'sped' in program 3 "
                            "— expected one of position, speed, relative_speed, dwell, f1, f2, next\n")
     assert validate("missing.yaml", "--format", "github", cwd=tmp_path).stdout == (
         "::error file=missing.yaml,title=prc3cfg::no such file — check the path\n")
@@ -90,15 +95,25 @@ def test_a_name_that_could_start_a_workflow_command_is_refused_and_every_annotat
     assert "::module 8 has no address" in done.stdout  # another problem of that module names it by its place
 
 
-# two real processes a name: an escape sequence and a C1 control in the fast tier, a bell and a line separator in the soak tier
-@pytest.mark.parametrize("name", [pytest.param("bell\a.yaml", marks=pytest.mark.soak), "clear\x1b[2J.yaml",
-                                  pytest.param("line\u2028sep.yaml", marks=pytest.mark.soak), "c1\x9b31m.yaml"])
+# two real processes a name: an escape sequence and a C1 control in the fast tier, a bell and a line separator
+# in the soak tier
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param("bell\a.yaml", marks=pytest.mark.soak),
+        "clear\x1b[2J.yaml",
+        pytest.param("line\u2028sep.yaml", marks=pytest.mark.soak),
+        "c1\x9b31m.yaml",
+    ],
+)
 def test_a_file_name_with_control_characters_is_shown_escaped(tmp_path: Path, name: str) -> None:
-    """What prc3cfg says of a file names it as printable text, in every format: nothing it prints rings, moves, colours."""
+    """What prc3cfg says of a file names it as printable text, in every format: nothing it prints rings,
+    moves, colours."""
     text = validate(tmp_path / name)
     github = validate(tmp_path / name, "--format", "github")
     assert text.returncode == github.returncode == 1
-    assert text.stderr == f"error: {str(tmp_path / name).encode('unicode_escape').decode()}: no such file — check the path\n"
+    assert text.stderr == (f"error: {str(tmp_path / name).encode('unicode_escape').decode()}: no such file "
+                           "— check the path\n")
     assert github.stdout.count("\n") == 1 and not any(c in github.stdout[:-1] for c in "\a\x1b\u2028\x9b\r\n")
 
 
@@ -142,7 +157,8 @@ def test_schema_prints_the_schema() -> None:
     assert result.stdout == plant_schema_text()
 
 
-TAGGED = "plant: demo\nbuses:\n  - name: a\n    port: socket://127.0.0.1:9\n    {key}: {value}\n    modules:\n      - {{address: 1, name: m1}}\n"
+TAGGED = ("plant: demo\nbuses:\n  - name: a\n    port: socket://127.0.0.1:9\n    {key}: {value}\n    "
+          "modules:\n      - {{address: 1, name: m1}}\n")
 
 
 @pytest.mark.parametrize(("key", "value", "at", "tag"), [
@@ -157,8 +173,10 @@ TAGGED = "plant: demo\nbuses:\n  - name: a\n    port: socket://127.0.0.1:9\n    
     ("gateway", "!!map {receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}", "5:14", "!!map"),
 ])  # fmt: skip
 @pytest.mark.parametrize("command", ["validate", "plan"])
-def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, capsys, command: str, key: str, value: str, at: str, tag: str) -> None:
-    """In this process (the first case also as a command of its own: test_a_tag_is_one_line_of_the_process)."""
+def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, capsys, command: str, key: str, value: str,
+                                              at: str, tag: str) -> None:
+    """In this process (the first case also as a command of its own:
+    test_a_tag_is_one_line_of_the_process)."""
     path = tmp_path / "plant.yaml"
     path.write_text(TAGGED.format(key=key, value=value))
     done = run_cli(capsys, command, path)
@@ -170,6 +188,7 @@ def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, capsys, command: s
 def test_a_tag_is_one_line_of_the_process(tmp_path: Path, command: str) -> None:
     path = tmp_path / "plant.yaml"
     path.write_text(TAGGED.format(key="timeout", value="!!bool x"))
-    done = subprocess.run([sys.executable, "-m", "prc3cfg", command, str(path)], capture_output=True, text=True, cwd=tmp_path)
+    done = subprocess.run([sys.executable, "-m", "prc3cfg", command, str(path)], capture_output=True,
+                          text=True, cwd=tmp_path)
     assert (done.returncode, done.stdout) == (1, "")
     assert done.stderr == f"error: {path}:5:14: tags are not used in plant files — remove !!bool\n"

@@ -57,10 +57,12 @@ class Server:
         self.last_id = 0
         self.notifications: list[dict] = []
         capabilities = {"textDocument": {"completion": {"completionItem": {"snippetSupport": True}}}}
-        self.request("initialize", {"processId": None, "rootUri": root.as_uri(), "capabilities": capabilities})
+        self.request("initialize",
+                     {"processId": None, "rootUri": root.as_uri(), "capabilities": capabilities})
         self.notify("initialized", {})
         self.notify("workspace/didChangeConfiguration",
-                    {"settings": {"yaml": {"validate": True, "completion": True, "schemaStore": {"enable": False}}}})  # fmt: skip
+                    {"settings": {"yaml": {"validate": True, "completion": True,
+                                           "schemaStore": {"enable": False}}}})  # fmt: skip
 
     def send(self, message: dict) -> None:
         body = json.dumps({"jsonrpc": "2.0", **message}).encode()
@@ -76,7 +78,8 @@ class Server:
         message = json.loads(self.process.stdout.read(length))
         if "method" in message and "id" in message:  # the server asks: settings, or anything else
             settings = [{"validate": True, "completion": True}] * len(message["params"].get("items", []))
-            self.send({"id": message["id"], "result": settings if message["method"] == "workspace/configuration" else None})
+            self.send({"id": message["id"], "result": settings
+                       if message["method"] == "workspace/configuration" else None})
         return message
 
     def request(self, method: str, params: dict) -> object:
@@ -93,7 +96,8 @@ class Server:
     def diagnostics(self, uri: str) -> list[dict]:
         while True:
             for message in self.notifications:
-                if message.get("method") == "textDocument/publishDiagnostics" and message["params"]["uri"] == uri:
+                if (message.get("method") == "textDocument/publishDiagnostics"
+                    and message["params"]["uri"] == uri):
                     return message["params"]["diagnostics"]
             self.notifications.append(self.receive())
 
@@ -112,14 +116,16 @@ def opened(tmp_path_factory):
     path.write_text(PLANT)
     server = Server(path.parent)
     uri = path.as_uri()
-    server.notify("textDocument/didOpen", {"textDocument": {"uri": uri, "languageId": "yaml", "version": 1, "text": PLANT}})
+    server.notify("textDocument/didOpen",
+                  {"textDocument": {"uri": uri, "languageId": "yaml", "version": 1, "text": PLANT}})
     yield server, uri
     server.close()
 
 
 def completions(server: Server, uri: str, line: int, column: int) -> dict[str, str]:
     """What completing at line:column would insert, by key, placeholders filled with their text."""
-    found = server.request("textDocument/completion", {"textDocument": {"uri": uri}, "position": {"line": line, "character": column}})
+    found = server.request("textDocument/completion",
+                           {"textDocument": {"uri": uri}, "position": {"line": line, "character": column}})
     items = found["items"] if isinstance(found, dict) else found
     inserted = {i["label"]: i.get("insertText") or i["textEdit"]["newText"] for i in items}
     return {label: re.sub(r"\$\{\d+:([^}]*)\}|\$\d+", r"\1", text) for label, text in inserted.items()}
@@ -155,13 +161,18 @@ def test_completing_a_program_field_inserts_a_value_prc3cfg_takes(opened, tmp_pa
 
 def test_a_program_number_out_of_range_is_marked_where_it_is_written(opened, tmp_path):
     server, uri = opened
-    marked = {d["range"]["start"]["line"]: d["message"] for d in server.diagnostics(uri) if d["severity"] == 1}
+    marked = {
+        d["range"]["start"]["line"]: d["message"] for d in server.diagnostics(uri) if d["severity"] == 1
+    }
     numbers = {i: line.split(":")[0].strip() for i, line in enumerate(PLANT.splitlines())}
     assert {numbers[line] for line in marked} == {"0", "65"}, marked
     (tmp_path / "plant.yaml").write_text(PLANT)
     with pytest.raises(PlantError) as refused:  # prc3cfg says the same of the same lines
         load_plant(tmp_path / "plant.yaml")
     problems = str(refused.value).splitlines()
-    assert sorted(int(line.split(":")[1]) - 1 for line in problems if "out of range" in line) == sorted(marked)
-    assert [line.split(": ", 1)[1] for line in problems if "out of range" not in line] == [  # checked beside them: one pass
+    assert sorted(int(line.split(":")[1]) - 1 for line in problems if "out of range" in line) == sorted(
+        marked
+    )
+    # checked beside them: one pass
+    assert [line.split(": ", 1)[1] for line in problems if "out of range" not in line] == [
         "in module m1, program 1 has no speed — give speed: in the module or in one of its profiles"]

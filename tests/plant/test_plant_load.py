@@ -47,7 +47,9 @@ def test_every_plant_in_plants_validates(path: Path) -> None:
     for _, module in plant.modules():
         image = module.desired_image()
         assert image.address == module.address
-        assert [n for n in range(1, PROGRAM_COUNT + 1) if image.program(n) is not None] == list(module.managed_programs())
+        assert [n for n in range(1, PROGRAM_COUNT + 1) if image.program(n) is not None] == list(
+            module.managed_programs()
+        )
 
 
 SPANNED = """\
@@ -60,7 +62,8 @@ buses:
 """
 
 
-@pytest.mark.parametrize("text", [SPANNED, *(p.read_text() for p in PLANTS)], ids=["quotes-flow", *(p.name for p in PLANTS)])
+@pytest.mark.parametrize("text", [SPANNED, *(p.read_text() for p in PLANTS)],
+                         ids=["quotes-flow", *(p.name for p in PLANTS)])
 def test_the_spans_adopt_splices_are_the_data_the_loader_read(text: str) -> None:
     """One reader: `document.spans` has the keys, items and scalars of the data `parse_document`
     built from the same text, each scalar's span holding its text (quotes included)."""
@@ -106,12 +109,14 @@ def test_coating_line_has_thirty_modules_on_two_buses() -> None:
     plant = load_plant(ROOT / "plants" / "examples" / "coating-line.yaml")
     assert [len(bus.modules) for bus in plant.buses] == [15, 15]
     left = plant.buses[0]
-    assert (left.framing, left.gateway.receive_db, left.gateway.identifier, left.zvz) == ("open-driver", 30, 1, 0.020)
+    assert (left.framing, left.gateway.receive_db, left.gateway.identifier, left.zvz) == ("open-driver", 30,
+                                                                                          1, 0.020)
     assert plant.buses[1].port.startswith("socket://")
 
 
 def test_the_contract_example(tmp_path: Path) -> None:
-    """The design's example plant file, with programs 10..12 listed (its chain names them); 1 is manual example 21h."""
+    """The design's example plant file, with programs 10..12 listed (its chain names them); 1 is manual
+    example 21h."""
     plant = load_text(tmp_path, """\
         plant: coating-line-1
         buses:
@@ -235,7 +240,8 @@ def test_precedence_default_then_profiles_in_order_then_module(tmp_path: Path) -
     assert system["acceleration"].source == "module"               # the module wins
     assert system["increment_pulses"].source == "default"
     p1 = module.settings.programs[1]
-    assert {k: (v.value, v.source) for k, v in p1.items() if k in ("position", "speed", "dwell", "relative_speed")} == {
+    assert {k: (v.value, v.source) for k, v in p1.items()
+            if k in ("position", "speed", "dwell", "relative_speed")} == {
         "position": (Decimal("1.500"), "module"), "speed": (Decimal("0.400"), "profile b"),
         "dwell": (Decimal("1.0"), "profile a"), "relative_speed": (Decimal(0), "default")}
     image = module.desired_image()
@@ -278,7 +284,8 @@ def test_an_empty_chains_list_drops_the_profiles_chains(tmp_path: Path) -> None:
 
 
 def test_unmanaged_programs_last_layer_wins(tmp_path: Path) -> None:
-    module = with_profiles(tmp_path, PROFILES, "- {address: 1, name: m, profiles: a, unmanaged_programs: keep}\n")
+    module = with_profiles(tmp_path, PROFILES,
+                           "- {address: 1, name: m, profiles: a, unmanaged_programs: keep}\n")
     assert module.unmanaged_programs == "keep"
     assert module.managed_programs() == (1, 2)
     assert module.desired_image().program(5) is None
@@ -320,8 +327,11 @@ def test_next_sets_a_jump_chains_cannot_say(tmp_path: Path) -> None:
     assert [module.desired_image().program(n).A for n in (1, 2, 3)] == [3, 3, 0]
 
 
-def test_modules_that_add_nothing_to_a_profile_take_its_settings_each_at_its_own_address(tmp_path: Path) -> None:
-    plant = load_text(tmp_path, "plant: p\nprofiles:\n" + textwrap.indent(textwrap.dedent(PROFILES), "  ") + textwrap.dedent("""\
+def test_modules_that_add_nothing_to_a_profile_take_its_settings_each_at_its_own_address(
+    tmp_path: Path,
+) -> None:
+    plant = load_text(tmp_path, "plant: p\nprofiles:\n" + textwrap.indent(textwrap.dedent(PROFILES), "  ")
+                      + textwrap.dedent("""\
         buses:
           - name: a
             port: emulator://a
@@ -340,7 +350,8 @@ def test_modules_that_add_nothing_to_a_profile_take_its_settings_each_at_its_own
 
 
 def test_a_profile_problem_is_said_once_in_the_names_of_every_module_that_takes_it(tmp_path: Path) -> None:
-    """One mistake in a profile is one line naming the modules it reaches (issue 42: 130 lines for one mistake)."""
+    """One mistake in a profile is one line naming the modules it reaches (issue 42: 130 lines for one
+    mistake)."""
     with pytest.raises(PlantError) as raised:
         with_profiles(tmp_path, """\
             a:

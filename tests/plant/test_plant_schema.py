@@ -28,7 +28,8 @@ def as_json(path: Path) -> dict:
 
 
 def test_the_committed_schema_is_the_generated_one() -> None:
-    assert SCHEMA_FILE.read_text() == plant_schema_text(), "run: python -m prc3cfg schema > schemas/plant.schema.json"
+    assert SCHEMA_FILE.read_text() == plant_schema_text(), ("run: python -m prc3cfg schema > "
+                                                            "schemas/plant.schema.json")
 
 
 def test_it_is_a_draft_07_schema_without_later_keywords() -> None:
@@ -49,7 +50,8 @@ def test_objects_forbid_unknown_keys_and_program_keys_have_names() -> None:
     assert all(d["additionalProperties"] is False for d in objects)
     for owner in ("ModuleSpec", "ProfileSpec"):
         keys = jsonschema.Draft7Validator(definitions[owner]["properties"]["programs"]["propertyNames"])
-        assert all(keys.is_valid(k) for k in (1, 64, "1", "64"))  # a YAML editor's integer keys, JSON's strings
+        # a YAML editor's integer keys, JSON's strings
+        assert all(keys.is_valid(k) for k in (1, 64, "1", "64"))
         assert not any(keys.is_valid(k) for k in (0, 65, 1.5, "0", "65", "01", "1.5", "abc", True))
 
 
@@ -82,7 +84,8 @@ def a_value(value: dict) -> bool:
 def test_every_key_has_a_description_and_every_value_a_valid_example(where: str, value: dict) -> None:
     assert value.get("description"), f"{where} has no description"
     if a_value(value):  # what yaml-language-server completes it with: one or the other, not both
-        assert ("examples" in value) != ("default" in value), f"{where}: an editor would complete it with nothing"
+        assert ("examples" in value) != ("default" in value), (f"{where}: an editor would complete it "
+                                                               "with nothing")
     checker = jsonschema.Draft7Validator(resolved(value))
     for example in value.get("examples", []) + ([value["default"]] if "default" in value else []):
         assert checker.is_valid(example), (where, example)
@@ -116,7 +119,8 @@ def test_a_plant_written_from_the_examples_alone_loads(tmp_path) -> None:
     """What an editor completes with is a plant prc3cfg takes: no 0 where 0 is out of range."""
     plant = from_examples(plant_schema())
     bus = plant["buses"][0]
-    bus |= {"framing": "open-driver", "modules": [{**bus["modules"][0], "profiles": "booth"}]}  # the gateway's framing
+    # the gateway's framing
+    bus |= {"framing": "open-driver", "modules": [{**bus["modules"][0], "profiles": "booth"}]}
     for layer in (plant["profiles"]["booth"], bus["modules"][0]):
         del layer["chains"]  # they name programs 1..3, where the example lists program 1 only
     del bus["modules"][0]["programs"][1]["next"]  # a program's next and a chain are alternatives
@@ -126,7 +130,8 @@ def test_a_plant_written_from_the_examples_alone_loads(tmp_path) -> None:
     assert loaded.buses[0].modules[0].desired_programs()[1].P == 150 and VALIDATOR.is_valid(as_json(source))
 
 
-JUNK = ["", "/", "?logging=debug", "#", "@", "..", ".", "-", "_", "\n", "\t", " ", "a", "é", "٣", ":", "[", "]"]
+JUNK = ["", "/", "?logging=debug", "#", "@", "..", ".", "-", "_", "\n", "\t", " ", "a", "é", "٣", ":", "[",
+        "]"]
 PORTS = st.builds(
     "".join,
     st.tuples(

@@ -42,7 +42,9 @@ def test_device_to_human_to_device_is_the_identity(case: tuple[Quantity, int]) -
 
 
 @given(quantity_and_device_value())
-def test_the_human_text_read_by_the_plant_models_gives_the_device_value_back(case: tuple[Quantity, int]) -> None:
+def test_the_human_text_read_by_the_plant_models_gives_the_device_value_back(
+    case: tuple[Quantity, int],
+) -> None:
     """What `show` prints, read back as a plant file reads a number (Decimal of its text)."""
     quantity, device = case
     text = human_text(quantity.symbol, device).split(" ")[0]
@@ -59,7 +61,8 @@ def test_function_outputs_round_trip(device: int) -> None:
 
 
 @given(st.sampled_from(["F1", "F2"]), st.integers(*widest_range("F1")))
-def test_a_function_output_as_a_plant_file_writes_it_gives_the_device_value_back(symbol: str, device: int) -> None:
+def test_a_function_output_as_a_plant_file_writes_it_gives_the_device_value_back(symbol: str,
+                                                                                 device: int) -> None:
     """`plant_value`, what import and adopt write, read back as the plant file's F1/F2 mapping."""
     written = plant_value(symbol, device)
     assert isinstance(written, dict)
@@ -84,7 +87,8 @@ def test_every_plant_file_bound_is_the_device_range_converted() -> None:
     assert widest_range("P") == (0, VALUE_RANGES["S1"][1])
     assert widest_range("V") == (VALUE_RANGES["S5"][0], VALUE_RANGES["S4"][1])
     definitions = plant_schema()["definitions"]
-    fields = {"SystemSpec": SYSTEM_QUANTITIES, "ProgramSpec": PROGRAM_QUANTITIES, "FunctionOutputSpec": (DISTANCE,)}
+    fields = {"SystemSpec": SYSTEM_QUANTITIES, "ProgramSpec": PROGRAM_QUANTITIES,
+              "FunctionOutputSpec": (DISTANCE,)}
     for model, quantities in fields.items():
         for quantity in quantities:
             schema = definitions[model]["properties"][quantity.key]
@@ -127,6 +131,7 @@ def test_every_number_field_is_annotated_with_the_type_its_validator_hands_back(
             annotated = get_args(hint)[0]  # `int | None`, or `int`
             types = set(get_args(annotated)) - {type(None)} if get_args(annotated) else {annotated}
             for number in numbers:
-                assert types == {number.out}, f"{model.__name__}.{name} is annotated {annotated}, its validator gives {number.out}"
+                assert types == {number.out}, (f"{model.__name__}.{name} is annotated {annotated}, its "
+                                               f"validator gives {number.out}")
                 checked += 1
     assert checked > 20
