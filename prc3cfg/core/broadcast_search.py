@@ -224,8 +224,8 @@ class _Search:
 
     def attempt(self, chosen: int, bound: float = inf) -> _Attempt | None:
         steps = tuple(step for i, group in enumerate(self.groups) if chosen >> i & 1 for step in group)
-        return _attempt(steps, self.modules, self.cost, self.memo, bound, self.floors.of(chosen)
-                        if bound < inf else ())
+        floors = self.floors.of(chosen) if bound < inf else ()
+        return _attempt(steps, self.modules, self.cost, self.memo, bound, floors)
 
     def drop(self, nothing: _Attempt) -> tuple[_Attempt, int]:
         """From all the groups, drop while that pays: the cheapest set found, priced, and its bits."""
@@ -388,9 +388,9 @@ class _Floor:
         self._system_differs = actual.system != system
         # what differs from the read-back after a system step
         self._changed = self._predicted_changes(module) if self._system_differs else 0
-        writes = ([codec.WriteSystem(system),
-                  *((codec.InitSystem(),) if system == DEFAULT_SYSTEM else ())] if self._system_differs
-                  else [])
+        writes: list[codec.Message] = []
+        if self._system_differs:
+            writes = [codec.WriteSystem(system), *((codec.InitSystem(),) if system == DEFAULT_SYSTEM else ())]
         self._system_write = min((cost.message_time(desired.address, m) for m in writes), default=0.0)
         self._address, self._cost = actual.address, cost
         self._reads: dict[tuple[int, bool], float] = {}

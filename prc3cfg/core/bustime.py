@@ -80,8 +80,9 @@ class LineCost:
         """Bytes of the request frame of `message` to `address`."""
         framing = self.framing
         chars = framing.frame_length(message.size())
-        return (chars + framing.stuffing(Direction.REQUEST, address, message.encode()) if framing.stuffs
-                else chars)
+        if not framing.stuffs:
+            return chars
+        return chars + framing.stuffing(Direction.REQUEST, address, message.encode())
 
     def silence_time(self, message: codec.Message, timeout: float) -> float:
         """Seconds an exchange with an address where nobody answers holds the line: the whole wait

@@ -169,9 +169,9 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
         "message_count": plan.message_count,
         "axis_releases": [f"{m.bus}/{m.name}" for m in plan.axis_releases],
         "evidence": evidence(plan),
-    } | ({"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)}
-         if plan.unshared_bus_time is not None else {}) | (
-        {"read": _reading_json(plan.reading)} if plan.reading is not None else {})
+    } | ({} if plan.unshared_bus_time is None
+         else {"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)}
+         ) | ({} if plan.reading is None else {"read": _reading_json(plan.reading)})
 
 
 def write(plan: PlantPlan, notes: Iterable[str], words: Words) -> dict[str, Any]:

@@ -109,8 +109,8 @@ def _chain(axes: Axes, was: ChainMotion | None, will: ChainMotion | None, *, ove
                 axes.plot([s.start, s.end], [s.end_position] * 2, color=colour, linewidth=4, alpha=0.6,
                           solid_capstyle="butt")
         for point in motion.turning_points:
-            axes.plot(point.time, point.position, "o", color=colour, markersize=4, fillstyle="full"
-                      if motion is will else "none")
+            axes.plot(point.time, point.position, "o", color=colour, markersize=4,
+                      fillstyle="full" if motion is will else "none")
             axes.annotate(str(point.program), (point.time, point.position), xytext=(3, 3),
                           textcoords="offset points", color=colour)
         for interval in motion.outputs:

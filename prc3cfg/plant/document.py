@@ -444,8 +444,8 @@ class _Reader:
         below = wanted.get(path[-1])
         if below is not None:
             key_at = None if key is None else _position(key)
-            self.positions[path] = (key_at, key_at if key_at is not None and self.empty(event)
-                                    else _position(event))
+            value_at = key_at if key_at is not None and self.empty(event) else _position(event)
+            self.positions[path] = (key_at, value_at)
         if below is None or below is _LEAF:
             self.skip(event)
             return None

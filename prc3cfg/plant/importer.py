@@ -163,8 +163,7 @@ def plant_yaml(plant: str, buses: Sequence[tuple[dict[str, Any], list[dict[str, 
     document["buses"] = []
     for bus, entries in buses:
         own, modules = modules[: len(entries)], modules[len(entries) :]
-        document["buses"].append({**bus, "modules": [_OneLine(m)
-                                                     if m.keys() <= {"address", "name", "profiles"} else m
-                                                     for m in own]})
+        one_line = [_OneLine(m) if m.keys() <= {"address", "name", "profiles"} else m for m in own]
+        document["buses"].append({**bus, "modules": one_line})
     head = f"# yaml-language-server: $schema={schema}\n"
     return head + yaml.dump(document, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=110)

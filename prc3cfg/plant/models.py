@@ -149,8 +149,8 @@ def _number(
     for, where the model's own default is None), else an example: `example`, else `lo`. Not both:
     given both, yaml-language-server completes with neither.
     """
-    lo_, hi_, step_ = (Decimal(lo), None if hi is None else Decimal(hi), None if step is None
-                       else Decimal(step))
+    lo_, hi_ = Decimal(lo), None if hi is None else Decimal(hi)
+    step_ = None if step is None else Decimal(step)
     with_unit: Callable[[object], str] = (lambda x: f"{x} {unit}") if unit else str
     allowed = with_unit(f"{lo_}..{hi_}") if hi_ is not None else f"at least {with_unit(lo_)}"
     # The whole numbers that pass, where they are a range (an `int` out, a step of 1 or none, a top): an

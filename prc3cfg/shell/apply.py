@@ -240,11 +240,12 @@ class ModuleRun(Coursed):
                 # a late copy that could undo a step: wait for it, and read what every step sent
                 # could have changed
                 late = undone_by_late(expected, self.sent[sent_before:])
-                quiet = self.wrote_at + settle_time(cost, max(link.wait(self.address, step.message)
-                                                              for step in self.sent)) \
-                    if late else 0.0
-                system, programs = verification_reads(self.before, self.before if late else self.final
-                                                      or self.before, expected,
+                quiet = 0.0
+                if late:
+                    waits = (link.wait(self.address, step.message) for step in self.sent)
+                    quiet = self.wrote_at + settle_time(cost, max(waits))
+                basis = self.before if late else self.final or self.before
+                system, programs = verification_reads(self.before, basis, expected,
                                                       self.sent if late else self.sent[sent_before:],
                                                       full=verify is Verify.FULL,
                                                       watch_system=with_system)

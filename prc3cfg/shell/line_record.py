@@ -42,6 +42,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.text import shown
@@ -213,12 +214,12 @@ class LineRecord:
         """Set these modules' entries (None: the module is no longer known), to be written by `write`."""
         at = now()
         for address, k in changes.items():
-            self._changed[str(address)] = {"at": at} | ({} if k is None
-                                                        else {"since": k.since, "by": k.by,
-                                                              "image": k.image.to_json()}
-                                          | ({"read_at": {str(n): when
-                                                          for n, when in sorted(k.read_at.items())}}
-                                             if k.read_at else {}))
+            change: dict[str, Any] = {"at": at}
+            if k is not None:
+                change |= {"since": k.since, "by": k.by, "image": k.image.to_json()}
+                if k.read_at:
+                    change["read_at"] = {str(n): when for n, when in sorted(k.read_at.items())}
+            self._changed[str(address)] = change
             self._waiting.add(str(address))
 
     def update(self, changes: Mapping[int, Known | None]) -> None:

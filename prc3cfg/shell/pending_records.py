@@ -83,8 +83,8 @@ class Pending:
         as their claim."""
         who = (f"bus {shown(self.bus)}, module {self.address} ({shown(self.name)})" if self.address
                else f"bus {shown(self.bus)}, every module on the line ({shown(self.name)})")
-        run = f"pid {self.pid}, {shown(self.time)}" + (f", journal {shown(self.journal)}" if self.journal
-                                                       else "")
+        journal = f", journal {shown(self.journal)}" if self.journal else ""
+        run = f"pid {self.pid}, {shown(self.time)}{journal}"
         said = (f"{who}: is in {fault_said(self.code)} — it refused a write of prc3cfg "
                 f"{shown(self.command)} ({run}) so, and a "
                 "read cannot tell whether it still is: its values may match the plant file, the machine is "

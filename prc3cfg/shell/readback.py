@@ -137,8 +137,8 @@ def read_system(link: Link, address: int, *, name: str = "",
     def as_expected(reply: codec.SystemReply) -> bool:
         return reply.address == address and reply.system == expected
 
-    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply, None if expected is None
-                     else as_expected)
+    reply = _request(link, address, codec.ReadSystem(), name, codec.SystemReply,
+                     None if expected is None else as_expected)
     if reply.address != address:
         raise ReadBackError(
             f"bus {link.bus}, module {address}{f' ({name})' if name else ''}: the module answering "
@@ -162,8 +162,8 @@ def read_programs(link: Link, address: int, programs: Iterable[int], *, name: st
                    for offset, program in enumerate(reply.programs))
 
     for message in read_messages(wanted)[1:]:
-        reply = _request(link, address, message, name, codec.ProgramsReply, None if expected is None
-                         else as_expected)
+        reply = _request(link, address, message, name, codec.ProgramsReply,
+                         None if expected is None else as_expected)
         for offset, program in enumerate(reply.programs):
             if reply.first + offset in wanted:
                 found[reply.first + offset] = program

@@ -118,8 +118,8 @@ def plan_from_steps(actual: ModuleImage, desired: ModuleImage, messages: list[co
     return ModulePlan(
         address=desired.address,
         steps=steps,
-        bus_time=fsum(cost.message_time(desired.address, m) for m in messages) if bus_time is None
-                      else bus_time,
+        bus_time=(fsum(cost.message_time(desired.address, m) for m in messages) if bus_time is None
+                  else bus_time),
         naive_bus_time=naive_bus_time(actual, desired, cost) if naive is None else naive,
         releases_axes=any(step.releases_axes for step in steps),
         predicted=predicted,

@@ -162,8 +162,8 @@ class AddressDP:
             if (allowed := priced_moves.get(step)) is None:
                 goes_on, wrong = step
                 allowed = priced_moves[step] = [
-                    (to, came, move, link, miss if wrong[gives] else 0.0) if starts
-                                                else (to, came, move, miss if wrong[gives] else 0.0, 0.0)
+                    ((to, came, move, link, miss if wrong[gives] else 0.0) if starts
+                     else (to, came, move, miss if wrong[gives] else 0.0, 0.0))
                     for to, came, move, starts, gives, _ in (ADDRESS_MOVES if goes_on else ENDING_MOVES)
                 ]
             new = [INF] * ADDRESS_STATES

@@ -146,8 +146,8 @@ class HeadersBound:
                 *(header * kind.messages(n - w) for header, kind, n in plain),
                 prices.address_header * ADDRESSES.messages(addresses - w),
                 self._pv_headers(p - w, v - w, both - w),
-                max(ranges * prices.link, min(prices.link, (ranged - w) * prices.address_item)
-                    if ranged > w else 0.0),
+                max(ranges * prices.link,
+                    min(prices.link, (ranged - w) * prices.address_item) if ranged > w else 0.0),
             ))
             least = min(least, paid + headers)  # two floats: rounded once, as fsum's sum is
         known = self._at_least[whole, ranges] = fsum((whole.bit_count() * prices.program, *spent, least))

@@ -245,8 +245,8 @@ class PartsDP:
             return 0, INF
         phase = self.phase
         out = sum(1 << k for k, c in enumerate(self.live) if c.mask >> j & 1)
-        alone = phase.prices.program - phase.plain_items[j] - (phase.prices.address_item
-                                                               if self.addresses >> j & 1 else 0.0)
+        address = phase.prices.address_item if self.addresses >> j & 1 else 0.0
+        alone = phase.prices.program - phase.plain_items[j] - address
         return out, alone if self.need >> j & 1 or out or alone < 0 else INF
 
     def _after(self, state: int, out: int) -> int:

@@ -81,8 +81,7 @@ def serial_ports() -> list[SerialPort]:
         return [SerialPort(name, "", None) for name in registered] + emulated
 
     return [SerialPort(info.device, "" if info.description in ("n/a", info.name) else info.description,
-                       f"{info.vid:04X}:{info.pid:04X}" if info.vid is not None and info.pid is not None
-                       else None)
+                       None if info.vid is None or info.pid is None else f"{info.vid:04X}:{info.pid:04X}")
             for info in sorted(list_ports.comports())] + emulated
 
 
@@ -158,8 +157,8 @@ def emulator_query(port: str) -> EmulatorQuery:
         else:
             given[key] = value
     return EmulatorQuery(
-        line_speed=_whole(given["line-speed"], "a baud rate", "line-speed=9600") if "line-speed" in given
-                         else None,
+        line_speed=(_whole(given["line-speed"], "a baud rate", "line-speed=9600") if "line-speed" in given
+                    else None),
         turnaround=_seconds("turnaround", given["turnaround"]) if "turnaround" in given else None,
         turnarounds=turnarounds,
         jitter=_seconds("jitter", given["jitter"]) if "jitter" in given else 0.0,
