@@ -38,12 +38,13 @@ That is the whole algorithm: no bound, no heuristic, no order of search.
 
 What is exact: every message but 40h..46h is priced by the line as sent; 40h..46h items by their header
 and item bytes, measured on the line (the values' stuffed bytes on stx counted item by item). On stx
-alone, a 40h..46h message whose checksum is 7Eh costs a byte more than that; the DP's optimum
-(`ReferencePlan.optimum`) is then a lower bound and the plan's bus time (`bus_time`) exact for its own
-messages — equal on crc16 and open-driver.
+alone, a message whose checksum is 7Eh costs a byte more: the DP prices a 40h..46h message, and a run of
+more than one program but a 33h, as if its checksum were not stuffed (so that an open run need not keep
+its first program). The DP's optimum (`ReferencePlan.optimum`) is then a lower bound and the plan's bus
+time (`bus_time`) exact for its own messages — equal on crc16 and open-driver.
 
-What it takes (one core): under a second to 20 s on crc16 and open-driver modules (55 s for the found
-case "a link range over 2..64"); on stx, where every open run keeps its first program, minutes. It gives
+What it takes (one core, measured): a second to 55 s on the found cases and most of bench/plan_bench.py's
+fixed cases, on every framing; 170 s on a full rewrite on crc16 or stx, over 200 s on open-driver. It gives
 up (`TooBig`) beyond `limit` states a program.
 """
 
@@ -194,16 +195,22 @@ class _Module:
         return codec.WritePartPrograms(first, tuple((known(n).P, known(n).V) for n in range(first, last + 1)))
 
     def opened(self, kind: str, first: int) -> int:
-        """What an open run keeps of its first program: all of it where the line prices its bytes (stx
-        stuffs them) or the run's length counts (PARTS); else, for an init, whether it is program 1 (a
-        14h from there to 64) — 0 stands for any other, whose messages the line prices alike."""
-        if self.cost.framing.stuffs or kind == PARTS:
+        """What an open run keeps of its first program: all of it where the run's values and length count
+        (PARTS: a 33h's P and V); else, for an init, whether it is program 1 (a 14h from there to 64) — 0
+        stands for any other, whose messages the line prices alike but for a stx checksum (`closing`)."""
+        if kind == PARTS:
             return first
         return 1 if kind == INIT and first == 1 else 0
 
     def closing(self, kind: str, kept: int, last: int) -> float:
-        """The price of a run of `kind` that started before `last` and ends there."""
-        return self.price(self.message(kind, kept or last - 1, last))
+        """The price of a run of `kind` that started before `last` (at `kept`, or anywhere but program 1
+        where 0) and ends there. On stx the one byte of an 11h..14h, 30h or 31h the line may stuff is its
+        checksum (a program number, an address or a message ID is never 7Eh): the run is priced as the
+        cheapest of two messages of its shape whose checksums differ — a price no dearer than its own."""
+        if kept or not self.cost.framing.stuffs:
+            return self.price(self.message(kind, kept or last - 1, last))
+        firsts = range(max(2 if kind == INIT else 1, last - 2), last)
+        return min(self.price(self.message(kind, first, last)) for first in firsts)
 
     def layer_options(self, open_: Open, number: int, must_end: bool, kinds: tuple[str, ...]
                       ) -> list[LayerOption]:
