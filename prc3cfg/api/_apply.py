@@ -234,8 +234,8 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[On
     buses = {bus.name: bus for bus, _ in on_lines}
     command = "restore" if desired is not None else "apply"
     reason = _ready(plant, buses.values(), reason, command)
-    said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason, plan_file=plan_file[0]
-                      if plan_file else None,
+    said = run_header(command, plant.path, plant.name, plant.sha256, reason=reason,
+                      plan_file=plan_file[0] if plan_file else None,
                       argv=options.command_line, policy=policy_said)
     # its file is made at the first record: not for a busy line
     journal = Journal(plant.path, said, audit.follow(plant.path))

@@ -91,8 +91,8 @@ def doctor(bare: BareLine, search: Search, options: LineOptions | None = None, *
         options.progress.note(f"probing {candidate.said()}")
 
     with bare_lock(bare.port, options, "doctor"):
-        return diagnose(bare.port, search, open_line, addresses=range(1, MAX_MODULE_ADDRESS + 1)
-                        if addresses is None else addresses,
+        return diagnose(bare.port, search, open_line,
+                        addresses=range(1, MAX_MODULE_ADDRESS + 1) if addresses is None else addresses,
                         zvz=bare.zvz, settings_found=settable, exchanges=exchanges,
                         allow_unchecked=allow_unchecked,
                         progress=probing)

@@ -320,8 +320,8 @@ def _line(bus: Bus) -> Line:
 
 def to_plan(pairs: Pairs, desired: dict[Key, ModuleImage] | None) -> list[Wanted]:
     """The modules to plan, each with its desired image: of `desired`, else the plant file's."""
-    return [Wanted(bus.name, m.address, m.name, desired[(bus.name, m.address)] if desired is not None
-                   else m.desired_image())
+    return [Wanted(bus.name, m.address, m.name,
+                   m.desired_image() if desired is None else desired[(bus.name, m.address)])
             for bus, m in pairs]
 
 

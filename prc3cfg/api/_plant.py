@@ -99,8 +99,8 @@ def write_adoption(adoption: Adoption) -> None:
                             "not changed") from None
         try:
             journal.record("adopted", written=written,
-                           sha256=hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written
-                           else None)
+                           sha256=(hashlib.sha256(adoption.after.encode("utf-8")).hexdigest() if written
+                                   else None))
         # after the write: it is told, and the journal named as lacking its last record
         except OSError as error:
             done = ("was adopted and written" if written

@@ -236,8 +236,8 @@ def import_plant(
             write_output(out, text, "--out")
         print_document({"format": IMPORT_FORMAT, "plant": plant_name,
                         "buses": [{"name": n, "port": p} for n, p in zip(names, ports)],
-                        "modules": count, "out": None if out is None else str(out), "plant_file": text
-                        if out is None else None})
+                        "modules": count, "out": None if out is None else str(out),
+                        "plant_file": text if out is None else None})
         return
     printed_or_written(text, out)
     stderr_console().print(f"imported {plural(count, 'module')} from {', '.join(ports)}")
@@ -303,8 +303,8 @@ def doctor(
     if parity is None and api.default_parity(port) == "none":
         parity = "none"  # a pseudo-terminal carries no other
     tried = api.Search()
-    search = api.Search(framings=(framing,) if framing else tried.framings, bauds=(baud,) if baud
-                        else tried.bauds,
+    search = api.Search(framings=(framing,) if framing else tried.framings,
+                        bauds=(baud,) if baud else tried.bauds,
                         parities=(parity,) if parity else tried.parities, stop_bits=stop_bits)
     bare = api.BareLine(port, "crc16", LineSettings(baud or 9600, 8, parity or "even", stop_bits), zvz=zvz)
     with line_options(None, 0, lock_timeout, json_out=json_out) as options, _said_as_options():
@@ -316,8 +316,8 @@ def doctor(
                         "for a write")
             return allow_unchecked_probes or (sys.stdin.isatty() and ask(question, options, typed=True))
 
-        found = api.doctor(bare, search, options, addresses=parse_addresses(modules)
-                           if modules is not None else None,
+        found = api.doctor(bare, search, options,
+                           addresses=parse_addresses(modules) if modules is not None else None,
                            exchanges=exchanges, allow_unchecked=allow)
     if found.found is None:
         were = "was" if found.skipped_unchecked == 1 else "were"

@@ -177,9 +177,10 @@ def serve(
     listen_on, open_pty, served_pty, wait_for = api.listen, api.open_pty, api.served_pty, api.wait_for
     stop = threading.Event()
     with emulator:
-        address = listen_on(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen),
-                            rfc2217=rfc2217) \
-            if listen is not None or not pty else None
+        address = None
+        if listen is not None or not pty:
+            address = listen_on(emulator, *parse_listen(DEFAULT_LISTEN if listen is None else listen),
+                                rfc2217=rfc2217)
         path = open_pty(emulator) if pty else None
         # started: a signal stops it (until now, it was interrupted) — from before it says so, which
         # is what a script waits for before it may stop it

@@ -94,8 +94,8 @@ def gates(stream: Stream, plan_given: Path | None, auto_approve: bool, allow_axi
                                     "no --allow-axis-release"))
         return False
 
-    return Gates(show=show, show_line=show_line, allow_axis_release=True if allow_axis_release
-                 else refuse_release)
+    return Gates(show=show, show_line=show_line,
+                 allow_axis_release=True if allow_axis_release else refuse_release)
 
 
 def _approval(the_plan: PlantPlan) -> str:
@@ -117,8 +117,8 @@ def accounts(stream: Stream, result: ApplyResult) -> None:
 def _ended(result: ApplyResult) -> dict[str, Any]:
     return {"modules": len(result.runs),
             "written": sum(bool(run.steps) and run.verified for run in result.runs),
-            "journal": str(result.journal) if result.runs else None, "snapshot": None
-            if result.snapshot is None else str(result.snapshot),
+            "journal": str(result.journal) if result.runs else None,
+            "snapshot": None if result.snapshot is None else str(result.snapshot),
             "took": {phase: round(seconds, 3) for phase, seconds in result.took.items()},
             "estimated": {phase: round(seconds, 3) for phase, seconds in result.plan.phases().items()}}
 
