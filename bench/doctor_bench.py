@@ -30,14 +30,14 @@ def doctor(framing: str, exchanges: int, seed: int) -> dict[int, tuple[float, fl
     line = LineSettings(9600, 8, "even", 1)
     with Emulator({a: ModuleState.factory(a) for a in GIVEN}, framing=framing, line=line, line_speed=True,
                   turnarounds=GIVEN,
-                  jitter=0.004, faults=FaultInjection(seed=seed)) as emulator:  # fmt: skip
+                  jitter=0.004, faults=FaultInjection(seed=seed)) as emulator:
         host, tcp = emulator.listen(rfc2217=True)
         out = io.StringIO()
         with redirect_stdout(out), redirect_stderr(io.StringIO()):
             try:
                 main(["doctor", "--port", f"rfc2217://{host}:{tcp}", "--framing", framing, "--baud", "9600",
                       "--parity", "even",
-                      "--modules", "1-3", "--exchanges", str(exchanges), "--allow-unchecked-probes"])  # fmt: skip
+                      "--modules", "1-3", "--exchanges", str(exchanges), "--allow-unchecked-probes"])
             except SystemExit as exit_:
                 if exit_.code:
                     sys.exit(f"doctor failed on {framing}: exit {exit_.code}")

@@ -125,7 +125,7 @@ def phases(exchanges: list[dict], started: float, wall: float) -> dict[str, floa
     first, last = writes[0], writes[-1]
     return {"start": ends[0] - exchanges[0]["duration_s"], "read-back": ends[first - 1],
             "planning": ends[first],
-            "writes": ends[last], "verification": ends[-1], "end": wall}  # fmt: skip
+            "writes": ends[last], "verification": ends[-1], "end": wall}
 
 
 def main() -> None:
@@ -146,7 +146,7 @@ def main() -> None:
     print(f"  persistence, 1 bus × {args.modules} modules: with the state file {kept:6.2f} s   without "
           f"{bare:6.2f} s"
           f"   ratio {kept / bare:.2f} (acceptance ≤ 1.3; without start-up "
-          f"{(kept - startup) / (bare - startup):.2f})")  # fmt: skip
+          f"{(kept - startup) / (bare - startup):.2f})")
 
     runs = [apply(prc3cfg, args.buses, args.modules, args.framing, estimate=n == 0) for n in range(args.runs)]
     wall = statistics.median(r.wall for r in runs)
@@ -154,7 +154,7 @@ def main() -> None:
     print(f"  real line, {args.buses} buses × {args.modules} modules: emulator:// {wall:6.2f} s; at "
           f"{REAL_LINE.baud} baud 8E1 "
           f"{summed:.2f} s summed over the buses (the plan's estimate {runs[0].planned:.2f} s + read-backs "
-          f"{summed - runs[0].planned:.2f} s), {slowest:.2f} s on the slowest bus")  # fmt: skip
+          f"{summed - runs[0].planned:.2f} s), {slowest:.2f} s on the slowest bus")
     print(f"    {summed / wall:.1f}× faster than the buses summed, {slowest / wall:.1f}× than the slowest "
           "bus (acceptance ≥ 10)")
     middle = sorted(runs, key=lambda r: r.wall)[len(runs) // 2]

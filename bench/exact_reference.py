@@ -336,12 +336,12 @@ class _Programme:
         bases, numbers, wanted = self.bases, self.numbers, self.wanted
         differs = {kind: {n: {name: getattr(base[n - 1], name) != getattr(wanted[n], name)
                               for name in PROGRAM_FIELDS}
-                          for n in numbers} for kind, base in bases.items()}  # fmt: skip
+                          for n in numbers} for kind, base in bases.items()}
         # inits, per side of the system step; the kind of each program: AFTER where a run after covers
         # it, else BEFORE where one before does, else KEEP
         self.inits = {kind: self._segments(lambda a, b: min(_init_messages(a, b), key=self.price),
                                            separate=False)
-                      for kind in (BEFORE, AFTER) if kind in bases}  # fmt: skip
+                      for kind in (BEFORE, AFTER) if kind in bases}
         kind_of: dict[str, dict[int, int]] = {KEEP: {}, AFTER: self.inits[AFTER].on}
         for n in numbers:
             keep = kind_of[KEEP][n] = self.column(0.0, integral=False)
@@ -440,7 +440,7 @@ class _Programme:
                       bounds=Bounds(np.zeros(size), np.array(self.upper)),
             constraints=LinearConstraint(matrix, [r[1] for r in self.rows], [r[2] for r in self.rows]),
             options={"time_limit": time_limit, "mip_rel_gap": 0.0},
-        )  # fmt: skip
+        )
         if result.status != 0:
             raise RuntimeError(f"module {self.address}: HiGHS did not prove an optimum: {result.message}")
         messages = self._messages(result.x)

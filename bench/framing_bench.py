@@ -50,7 +50,7 @@ def main() -> None:
         clean = noise.replace(start, bytes(1))
         print(f"{name:6} garbage without start codes {throughput(name, clean):7.1f} MB/s   "
               f"random garbage {throughput(name, noise):7.1f} MB/s   good frames "
-              f"{throughput(name, good):6.1f} MB/s")  # fmt: skip
+              f"{throughput(name, good):6.1f} MB/s")
 
 
 if __name__ == "__main__":

@@ -132,7 +132,7 @@ def journal_phases(path: Path) -> tuple[dict[str, float], int]:
         e["start"] = datetime.fromisoformat(e["time"]).timestamp() - e["duration_s"]
     writes = [i for i, e in enumerate(exchanges) if not e["request"].startswith(("50", "51", "52"))]
     spans = {"read-back": exchanges[: writes[0]], "writes": exchanges[writes[0] : writes[-1] + 1],
-             "verify": exchanges[writes[-1] + 1 :]}  # fmt: skip
+             "verify": exchanges[writes[-1] + 1 :]}
     seconds = {name: part[-1]["start"] + part[-1]["duration_s"] - part[0]["start"]
                for name, part in spans.items()}
     return seconds, len(spans["verify"])
@@ -199,13 +199,13 @@ def naive_download(plant: Path, cost: LineCost) -> tuple[float, float]:
         writes += sum(cost.message_time(address, m) for m in messages)
         reading += sum(cost.message_time(address, m)
                        for m in read_messages(module.managed_programs() if module.unmanaged_programs == "keep"
-                                                                              else range(1, 65)))  # fmt: skip
+                                                                              else range(1, 65)))
     return writes, reading
 
 
 def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost: LineCost,
                   read_estimate: float, read: list[str],
-                  gaps: bool = False, fresh: bool = False) -> float:  # fmt: skip
+                  gaps: bool = False, fresh: bool = False) -> float:
     """Measure one apply and print it; its wall time. `fresh`: factory-fresh modules — what the apply reads
     before writing is one 50h each, and its verification reads every managed program too."""
     _, plan_json = run([*prc3cfg, "plan", str(plant), "--json", *read])
@@ -231,7 +231,7 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
     estimate = read_estimate + plan["estimated_bus_time_s"] + floor_time
     print(f"  apply, {title}: wall {wall:7.2f} s   estimate {estimate:7.2f} s   ratio {wall / estimate:.3f}"
           f"   (read-back {read_estimate:.2f} s, writes {plan['estimated_bus_time_s']:.2f} s, minimal "
-          f"verification {floor_time:.2f} s)")  # fmt: skip
+          f"verification {floor_time:.2f} s)")
     (journal,) = set(journals.iterdir()) - before
     phases, verifying = journal_phases(journal)
     for name, part in (("read-back", read_estimate), ("writes", plan["estimated_bus_time_s"]),
@@ -244,13 +244,13 @@ def measure_apply(title: str, prc3cfg: list[str], plant: Path, work: Path, cost:
         for bus, (largest, where, total, to_write) in idle_gaps(trace, cost).items():
             print(f"    idle gaps on {bus}: largest {largest * 1000:6.1f} ms ({where})   sum {total:6.2f} s "
                   "  reading → writing "
-                  f"{to_write * 1000:6.1f} ms{'' if largest < GAP_LIMIT else '   ✗ over 50 ms'}")  # fmt: skip
+                  f"{to_write * 1000:6.1f} ms{'' if largest < GAP_LIMIT else '   ✗ over 50 ms'}")
     broadcasts = [b for bus in plan["buses"] for b in bus.get("broadcasts", [])]
     if broadcasts:
         print(f"    {len(broadcasts)} broadcast{'s' if len(broadcasts) != 1 else ''} to "
               f"{len(broadcasts[0]['modules'])} modules: "
               f"writes {plan['estimated_bus_time_s']:.3f} s, as addressed writes "
-              f"{plan['without_broadcasts_bus_time_s']:.3f} s")  # fmt: skip
+              f"{plan['without_broadcasts_bus_time_s']:.3f} s")
     return wall
 
 
@@ -283,7 +283,7 @@ def main() -> None:
             [*prc3cfg, "emulator", "serve", "--listen", "127.0.0.1:0", "--modules", f"1-{args.modules}",
              "--framing", args.framing, "--line-speed", str(args.baud), "--parity", "none"],
             stdout=subprocess.PIPE, text=True,
-        )  # fmt: skip
+        )
         try:
             port = emulator.stdout.readline().split()[2]
             plant = Path(work) / "plant.yaml"
@@ -298,7 +298,7 @@ def main() -> None:
                   f"command start-up {startup:.2f} s (included below)"
                   + ("" if CONFIRMED == 1
                      else "; no check protects a reply: a read nothing expects is confirmed, "
-                          "counted twice"))  # fmt: skip
+                          "counted twice"))
             if not args.skip_read:
                 wall, _ = run([*prc3cfg, "read", str(plant), "--json"])
                 print(f"  read:  wall {wall:7.2f} s   estimate {read_estimate:7.2f} s   ratio "
@@ -307,13 +307,13 @@ def main() -> None:
                 writes, reading = naive_download(plant, cost)
                 wall = measure_apply("commissioning from factory defaults", prc3cfg, plant, Path(work), cost,
                                      read_estimate, read, args.gaps,
-                                     fresh=True)  # fmt: skip
+                                     fresh=True)
                 # it reads back what it wrote: each reply believed at once, as the apply's verification
                 naive = writes + reading
                 print(f"    naive download {naive:7.2f} s (writes {writes:.2f} s, read-back "
                       f"{reading:.2f} s): "
                       f"commissioning {wall / naive:.2f}× the naive "
-                      f"download{'' if wall <= 0.7 * naive else '   ✗ over 0.70×'}")  # fmt: skip
+                      f"download{'' if wall <= 0.7 * naive else '   ✗ over 0.70×'}")
                 for title, programs, acceleration in (
                     (f"{args.changed} changed programs per module, other ones on each",
                      lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}), "1.500"),
@@ -323,9 +323,10 @@ def main() -> None:
                     ("one system change on every module (acceleration)",
                      lambda a: changed_programs({(a + k) % 32 + 1 for k in range(args.changed)}, {32}),
                      "1.200"),
-                ):  # fmt: skip
-                    changed = "".join(MODULE.format(address=a, programs=programs(a), acceleration=acceleration)
-                                      for a in range(1, args.modules + 1))  # fmt: skip
+                ):
+                    changed = "".join(MODULE.format(address=a, programs=programs(a),
+                                                    acceleration=acceleration)
+                                      for a in range(1, args.modules + 1))
                     plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing,
                                                   baud=args.baud, modules=changed, accepted=accepted))
                     measure_apply(title, prc3cfg, plant, Path(work), cost, read_estimate, read, args.gaps)

@@ -114,7 +114,7 @@ def recipe_program(rnd: random.Random, number: int, system=SYSTEM) -> Program:
         P=rnd.randrange(300, system.S1, 5), V=rnd.randrange(max(system.S5, 50), system.S4, 10),
         Vr=0, T=rnd.choice([0, 0, 5, 10, 20]), F1=rnd.choice([0, 1010, 1050]), F2=rnd.choice([0, 0, 1050]),
         A=number + 1 if number % 4 else 0,
-    )  # fmt: skip
+    )
 
 
 def plant(rnd: random.Random, address: int = 1) -> ModuleImage:
@@ -187,7 +187,7 @@ def full_rewrite(rnd: random.Random, address: int = 1) -> tuple[ModuleImage, Mod
     """A new recipe on all 64 programs over an old one."""
     actual, desired = (ModuleImage(address, SYSTEM,
                                    tuple(recipe_program(rnd, n) for n in range(1, PROGRAM_COUNT + 1)))
-                       for _ in range(2))  # fmt: skip
+                       for _ in range(2))
     return actual, desired
 
 
@@ -221,7 +221,7 @@ def full_program(rnd: random.Random, number: int, system=SYSTEM) -> Program:
         Vr=rnd.choice([-1, 1]) * rnd.randrange(5, 100, 5), T=rnd.randrange(1, 100),
                    F1=rnd.choice([20, 1010, 1050]),
         F2=rnd.choice([30, 1050]), A=number + 1 if number % 4 else 0,
-    )  # fmt: skip
+    )
 
 
 def full_module(rnd: random.Random, address: int = 1) -> ModuleImage:
@@ -339,7 +339,7 @@ RANGE_MOVES = {
              (UNLINK_LINK, NEXT, 1, False, True)),
     UNLINK_LINK: ((UNLINK_LINK, NEXT, 0, True, True), (UNLINK, ZERO, 0, True, False),
                   (NO_RANGE, ZERO, 0, True, False)),
-}  # fmt: skip
+}
 
 
 def stuffed(value: int) -> int:
@@ -363,7 +363,7 @@ class Relaxation:
              for name, value in zip(PROGRAM_FIELDS, want.values())}
             if want is not None else None
             for want in desired.programs
-        ]  # fmt: skip
+        ]
         self.masks = [{kind: problem.masks[kind][i] for kind in self.kinds} for i in range(PROGRAM_COUNT)]
         # per program and init kind: the address is right when uncovered, shown NEXT, shown ZERO, wiped
         self.address_ok = []
@@ -372,7 +372,7 @@ class Relaxation:
             for kind in self.kinds:
                 base = problem.bases[kind][i].A
                 row[kind] = (True,) * 4 if want is None else (
-                    base == want.A, want.A == i + 2, want.A == 0, kind != KEEP and base == want.A)  # fmt: skip
+                    base == want.A, want.A == i + 2, want.A == 0, kind != KEEP and base == want.A)
             self.address_ok.append(row)
         differ = 0
         for masks in self.masks:
@@ -438,14 +438,14 @@ class Relaxation:
                     else:
                         uses = tuple((not right) if name == "A" else bool(mask & FIELD_BIT[name])
                                      and not (in_run and name in PV)
-                                     for name in exact)  # fmt: skip
+                                     for name in exact)
                         row.append(((items + extra, uses), (whole + extra, (False,) * len(exact))))
                 rows.append(row)
             out[kind] = rows
         return out
 
     def solve(self, opened: frozenset, shares: dict[str, float], limit: float = INF,
-              exact: tuple[str, ...] = ()) -> tuple[float, dict[str, int] | None]:  # fmt: skip
+              exact: tuple[str, ...] = ()) -> tuple[float, dict[str, int] | None]:
         """The cheapest R without the headers of 40h..46h (but those of the `exact` channels, their
         item counts modulo their capacity in the state), items only in the `opened` channels and
         priced with their `shares` of a header; and its item counts. (INF, None) when nothing is
@@ -465,7 +465,7 @@ class Relaxation:
             least = 0.0
             if options[i] is not None:
                 least = min(min(o[0] for o in rows[0][1] + tuple((c + per, u) for c, u in rows[1][1]))
-                            for rows in options[i].values())  # fmt: skip
+                            for rows in options[i].values())
             rest[i] = rest[i + 1] + least
         slack = limit + 2 * self.end_refund + self.run_refund  # refunds still to come
         states = {((OUT, OUT), 0, NO_RANGE, FREE, (0,) * len(exact)): 0.0}
@@ -514,7 +514,7 @@ class Relaxation:
                     else:
                         before = shown if same else FREE
                         ways = tuple((ok, how) for ok, how in ((right[3], WIPED), (right[seen], SHOWN))
-                                     if before in (FREE, how))  # fmt: skip
+                                     if before in (FREE, how))
                     for ok, how in ways:
                         for cost, uses in row[ok]:
                             total, new_count = c + opens * link + cost, count
@@ -577,13 +577,13 @@ class Relaxation:
         return self.fixed + min([best, *below]), not below
 
     def _vectors(self, opened: frozenset, cost: float, top: dict[str, int], counts: dict[str, int],
-                 best: float) -> tuple[float, list[float]]:  # fmt: skip
+                 best: float) -> tuple[float, list[float]]:
         """Every message count vector of `opened` below `top` bounded, first by shares of a header,
         then with one channel counted exactly; the best value found and the bounds left below it."""
         order = sorted(opened)
         head, capacity = self.header, CAPACITY
         vectors = [k for k in itertools.product(*(range(1, top[name] + 1) for name in order))
-                   if list(k) != [top[name] for name in order]]  # fmt: skip
+                   if list(k) != [top[name] for name in order]]
         low = {k: cost + sum(n * head[name] for n, name in zip(k, order)) for k in vectors}
         tried = set()
         while True:
@@ -600,9 +600,9 @@ class Relaxation:
                 value, n = self.solve(opened, shares)
                 for k in vectors:
                     low[k] = max(low[k], value + sum(c * (head[name] - capacity[name] * shares.get(name, 0.0))
-                                                     for c, name in zip(k, order)))  # fmt: skip
+                                                     for c, name in zip(k, order)))
                 best = min(best, value - sum(shares.get(name, 0.0) * n[name] for name in order)
-                           + sum(max(1, ceil(n[name] / capacity[name])) * head[name] for name in order))  # fmt: skip
+                           + sum(max(1, ceil(n[name] / capacity[name])) * head[name] for name in order))
                 if low[target] >= best:
                     break
                 for name in over:
@@ -674,7 +674,7 @@ def exact_table(profiles: list[str], seeds: int, with_bound: bool) -> list[Compa
     print(f"{'family':<16} {'scenario':<29} {'profile':<18} {'plan ms':>9} {'msgs':>4} {'exact ms':>10} "
           f"{'msgs':>4} "
           f"{'plan/exact':>10} {'naive ms':>9} {'cpu ms':>7} {'exact s':>7}"
-          + (f" {'R bound ms':>10}" if with_bound else ""))  # fmt: skip
+          + (f" {'R bound ms':>10}" if with_bound else ""))
     compared = []
     for profile in profiles:
         cost = line_cost(profile)
@@ -698,7 +698,7 @@ def exact_table(profiles: list[str], seeds: int, with_bound: bool) -> list[Compa
                       f"{reference.bus_time * 1e3:9.1f}{mark} {len(reference.messages):4d} "
                       f"{case.ratio:10.4f} "
                       f"{plan.naive_bus_time * 1e3:9.1f} {cpu * 1e3:7.1f} {exact_cpu:7.1f}{bound}",
-                      flush=True)  # fmt: skip
+                      flush=True)
     return compared
 
 
@@ -746,7 +746,7 @@ def plant_run(profile: str, modules: int, scenarios: list[str], label: str) -> N
           f"{cpu * 1e3:.0f} ms, "
           f"bus time {sum(p.bus_time for p in plans):.2f} s (naive "
           f"{sum(p.naive_bus_time for p in plans):.2f} s), "
-          f"{sum(len(p.steps) for p in plans)} messages")  # fmt: skip
+          f"{sum(len(p.steps) for p in plans)} messages")
 
 
 def main() -> None:

@@ -152,7 +152,7 @@ def recipe(rnd: random.Random) -> tuple[Program, ...]:
                          Vr=sometimes(0.25, rnd.randrange(1, 50)),
                          T=sometimes(0.5, rnd.randrange(1, 50)), F1=sometimes(1 / 3, rnd.randrange(1, 2000)),
                          F2=sometimes(1 / 3, rnd.randrange(1, 2000)), A=a)
-                 for a in chained(rnd))  # fmt: skip
+                 for a in chained(rnd))
 
 
 def mixed_module(rnd: random.Random, address: int, mix: Mix) -> tuple[ModuleImage, ModuleImage]:
@@ -213,7 +213,7 @@ def write_one_profile_plant(folder: Path) -> tuple[Path, Path, Path]:
     programs = "".join(f"      {n}: "
                        + PROGRAM.format(P=rnd.randrange(100, 1900) / 1000, V=rnd.randrange(20, 480) / 1000,
                                                       T=rnd.randrange(0, 50) / 10, Vr=0) + "\n"
-                       for n in PROGRAM_NUMBERS)  # fmt: skip
+                       for n in PROGRAM_NUMBERS)
     text = ["plant: one-profile\nprofiles:\n  line:\n    unmanaged_programs: reset\n",
             f"    system: {{upper_reversing_point: 2.000, max_speed: 0.500}}\n    "
             f"programs:\n{programs}buses:\n"]

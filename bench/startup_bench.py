@@ -75,14 +75,14 @@ def main() -> None:
     print(f"start-up: prc3cfg --help {helped:.0f} ms CPU (the interpreter alone {bare:.0f} ms, with typer "
           "imported "
           f"{typed:.0f}: prc3cfg adds {helped - bare:.0f}, {helped - typed:.0f} of it its own); "
-          f"target under 60 — {'met' if helped < 60 else 'NOT met'}")  # fmt: skip
+          f"target under 60 — {'met' if helped < 60 else 'NOT met'}")
 
     emulated = statistics.median(demo_seconds(None) for _ in range(args.demo_runs))
     line = statistics.median(demo_seconds(9600) for _ in range(args.demo_runs))
     ratio = line / emulated
     print(f"CI speed: the demo's plan + apply {emulated:.2f} s on emulator://, {line:.2f} s at 9600 baud: "
           f"{ratio:.1f}× "
-          f"(target at least 20× — {'met' if ratio >= 20 else 'NOT met'})")  # fmt: skip
+          f"(target at least 20× — {'met' if ratio >= 20 else 'NOT met'})")
 
 
 if __name__ == "__main__":

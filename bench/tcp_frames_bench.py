@@ -65,7 +65,7 @@ def client(url: str, framing: str, exchanges: int, uart: bool) -> None:
     seconds = time.perf_counter() - start
     link.port.close()
     print(json.dumps({"exchanges": exchanges, "attempts": link.exchanges, "retries": link.repeated,
-                      "discarded": stream.kinds.get("x", 0), "seconds": seconds}))  # fmt: skip
+                      "discarded": stream.kinds.get("x", 0), "seconds": seconds}))
 
 
 def pause_at_random(pids: list[int], running: threading.Event, rng: random.Random) -> int:
@@ -102,7 +102,7 @@ def main() -> None:
         [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", "--modules", "1-30",
          "--framing", args.framing, "--verbose"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    )
     hogs = [subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(args.hogs)]
     server_log: list[str] = []
     reader = threading.Thread(target=lambda: server_log.extend(emulator.stderr), daemon=True)
@@ -114,7 +114,7 @@ def main() -> None:
              str(args.exchanges),
              *(["--uart-timeouts"] if args.uart_timeouts else [])],
             stdout=subprocess.PIPE, text=True,
-        )  # fmt: skip
+        )
         running = threading.Event()
         running.set()
         pauses: list[int] = []
@@ -143,9 +143,9 @@ def main() -> None:
     print(f"{args.framing}{' (client decoding as from a UART)' if args.uart_timeouts else ''}: "
           f"{counts['exchanges']} exchanges in {counts['seconds']:.1f} s over socket:// with {args.hogs} "
           "busy processes and "
-          f"{pauses[0] if pauses else 0} SIGSTOP/SIGCONT pauses of the client or the emulator")  # fmt: skip
+          f"{pauses[0] if pauses else 0} SIGSTOP/SIGCONT pauses of the client or the emulator")
     print(f"  good frames discarded by the client {counts['discarded']}, link retries {counts['retries']}, "
-          f"discarded by the emulator {emulator_discards}   (acceptance: all 0)")  # fmt: skip
+          f"discarded by the emulator {emulator_discards}   (acceptance: all 0)")
 
 
 if __name__ == "__main__":

@@ -43,7 +43,7 @@ def emulated_plant(
         emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed,
                                                route=route,
                                                unlisted=unlisted, timeout=timeout, framing=framing, zvz=zvz,
-                                               **bus_settings))  # fmt: skip
+                                               **bus_settings))
         yield emulated
 
 

@@ -107,7 +107,7 @@ def spawn(directory: Path, *options: str) -> tuple[subprocess.Popen, Path]:
         process = subprocess.Popen(
             [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0", *options],
             stdout=subprocess.PIPE, stderr=stderr, text=True,
-        )  # fmt: skip
+        )
     return process, log
 
 

@@ -73,7 +73,7 @@ class LossyProxy:
 
     def __init__(self, upstream: tuple[str, int], rule: Rule, *, framing: str = "crc16",
                  line: LineSettings = LineSettings(), zvz: float = 0.020, hold: float = 0.45,
-                 until: Until = lambda frame, n: False, seed: int = 0) -> None:  # fmt: skip
+                 until: Until = lambda frame, n: False, seed: int = 0) -> None:
         self.upstream = upstream
         self.rule = rule
         self.framing = get_framing(framing)
@@ -126,7 +126,7 @@ class LossyProxy:
             self._start(self._flood, client, self._flooding)
 
     def _requests(self, client: socket.socket, upstream: socket.socket, swallow: threading.Event,
-                  flood: threading.Event) -> None:  # fmt: skip
+                  flood: threading.Event) -> None:
         decoder = self.framing.decoder(Direction.REQUEST, self.line, zvz=self.zvz)
         client.settimeout(self.zvz if self.framing.name == "open-driver" else POLL)
         while not self._closing.is_set():

@@ -36,7 +36,7 @@ class Pane:
 
     def __init__(self, folder: Path, command: list[str], env: dict[str, str], *, stdout: Path | None = None,
                  width: int = 160,
-                 height: int = 100) -> None:  # fmt: skip
+                 height: int = 100) -> None:
         """Start `command` with `env` (and its stdout into the file `stdout`, if given) in a new pane."""
         assert TMUX is not None
         self._socket = f"prc3cfg-test-{uuid.uuid4().hex[:12]}"

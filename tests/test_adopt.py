@@ -98,7 +98,7 @@ def test_taught_positions_are_adopted_where_they_came_from_and_nothing_else_chan
              "speed: 0.100}}}  # one flow mapping"],
         "            position: 0.900          # park "
         "for cleaning": ["            position: 0.950          # park for cleaning"],
-    })  # fmt: skip
+    })
     assert run_cli(capsys, "validate", plant).code == 0
     planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
     assert planned.code == 0, planned.out + planned.err
@@ -121,7 +121,7 @@ def test_every_program_field_and_system_parameter_is_adopted_in_its_own_layer(re
                      .replace("            dwell: 12.0",
                               "            dwell: 9.5\n            relative_speed: -0.015")
                      .replace("1: {position: 2.000}",
-                              "1: {position: 2.000, f2: {action: set, distance: 0.005}}"))  # fmt: skip
+                              "1: {position: 2.000, f2: {action: set, distance: 0.005}}"))
     assert run_cli(capsys, "apply", floor, "--auto-approve", "--allow-axis-release").code == 0
 
     adopted = run_cli(capsys, "adopt", plant, "--auto-approve")
@@ -137,7 +137,7 @@ def test_every_program_field_and_system_parameter_is_adopted_in_its_own_layer(re
              "lower hood"],
         "            speed: 0.200": ["            speed: 0.200", "            relative_speed: -0.015"],
         "            dwell: 12.0": ["            dwell: 9.5"],
-    })  # fmt: skip
+    })
     assert run_cli(capsys, "plan", plant, "--detailed-exitcode").code == 0
 
 
@@ -155,14 +155,14 @@ def test_module_and_program_limit_what_is_adopted(repository, capsys):
     assert plant.read_text().splitlines() == edited(original, {
         "        profiles: [booth, 'spray-gun']":
             ["        profiles: [booth, 'spray-gun']", "        programs:", "          2: {position: 0.170}"],
-    })  # fmt: skip
+    })
     before = plant.read_text()
     program = run_cli(capsys, "adopt", plant, "--program", "4", "--auto-approve")
     assert program.code == 0, program.err
     assert plant.read_text().splitlines() == edited(before, {
         "            position: 0.900          # park "
         "for cleaning": ["            position: 0.950          # park for cleaning"],
-    })  # fmt: skip
+    })
     assert run_cli(capsys, "plan", plant, "--module", "a-left", "--detailed-exitcode").code == 0
     # program 2 left alone
     assert run_cli(capsys, "plan", plant, "--module", "b-left", "--detailed-exitcode").code == 2
@@ -179,7 +179,7 @@ def test_what_the_plant_file_cannot_say_is_refused_naming_module_and_program(rep
     assert refused.code == 1 and refused.problems == [
         "error: bus line-a, module 2 (a-right): program 1 holds position 2.300 m, outside 0.000 m..2.200 m "
         "— a plant "
-        "file cannot say that: set it right on the module (teach it again), then adopt again"]  # fmt: skip
+        "file cannot say that: set it right on the module (teach it again), then adopt again"]
     assert plant.read_bytes() == original
 
     emulators["line-a"].teach_in(2, 1, 2000)
@@ -192,7 +192,7 @@ def test_what_the_plant_file_cannot_say_is_refused_naming_module_and_program(rep
         "file says 1 "
         "— adopt leaves jumps (chains, next:) alone: edit them in the plant file by hand, or apply it to "
         "set the jump "
-        "back, then adopt again"]  # fmt: skip
+        "back, then adopt again"]
     assert plant.read_bytes() == original
 
 
@@ -203,7 +203,7 @@ def test_without_a_terminal_adopt_asks_for_auto_approve_and_writes_nothing(repos
     refused = run_cli(capsys, "adopt", plant)
     assert refused.code == 1 and refused.problems == [
         f"error: Write 1 value into {plant}? — no terminal to ask: pass --auto-approve to write it without "
-        "asking, or --check to see the diff only"]  # fmt: skip
+        "asking, or --check to see the diff only"]
     assert plant.read_bytes() == original
 
 
@@ -215,7 +215,7 @@ def answered(args: list, answer: str) -> str:
         os.write(master, answer.encode())
         done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], stdin=terminal,
                               capture_output=True,
-                              text=True, timeout=60)  # fmt: skip
+                              text=True, timeout=60)
         os.set_blocking(master, False)
         shown = b""
         with contextlib.suppress(BlockingIOError):
@@ -248,7 +248,7 @@ def test_a_file_with_crlf_line_ends_and_no_final_newline_keeps_both():
         "buses:", "  - name: b", "    port: emulator://tiny", "    modules:",
         "      - {address: 1, name: m1, profiles: r}", "      - address: 2", "        name: m2",
                         "        profiles: r",
-    ])  # fmt: skip
+    ])
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "plant.yaml"
         path.write_bytes(text.encode())
@@ -269,7 +269,7 @@ ODD = "\n".join([
     "    modules:", "      - {address: 1, name: 塗装, profiles: r, programs: {2: {position: 0.350, speed: "
                     "0.100}}}  # 塗装",
     "      - address: 2", '        name: "Kabine Süd 2"\t# über', "        profiles: r", "",
-])  # fmt: skip
+])
 ADOPTED = (ODD.replace("{2: {position: 0.350,", "{2: {position: 0.320,")
            + "        programs:\n          1: {position: 0.250}\n")
 FORMS = {
@@ -282,8 +282,8 @@ FORMS = {
 
 
 def taught_odd(text: str, tmp_path: Path) -> tuple[Path, dict]:
-    """`text` saved as a plant file, and its modules as taught: 塗装's program 2 at 0.320 m, module 2's program
-    1 at 0.250 m."""
+    """`text` saved as a plant file, and its modules as taught: 塗装's program 2 at 0.320 m, module 2's
+    program 1 at 0.250 m."""
     path = tmp_path / "plant.yaml"
     path.write_bytes(text.encode())
     plant = load_plant(path)
@@ -370,11 +370,11 @@ def race_an_editor(plant: Path, emulators: dict, trials: int) -> list[str]:
         mark = f"# edit {trial}\n"
         output, into = os.pipe()  # adopt → editor; the editor runs first, so that it sees the temporary file
         editor = subprocess.Popen([sys.executable, "-c", EDITOR, str(plant), trigger, mark], stdin=output,
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         adopting = subprocess.Popen([sys.executable, "-m", "prc3cfg", "adopt", plant, "--auto-approve"],
                                     stdout=into,
                                     stderr=subprocess.PIPE, text=True,
-                                    env={**os.environ, "PYTHONUNBUFFERED": "1"})  # fmt: skip
+                                    env={**os.environ, "PYTHONUNBUFFERED": "1"})
         os.close(output)
         os.close(into)
         err = adopting.stderr.read()

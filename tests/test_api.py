@@ -149,10 +149,10 @@ def paired(tmp_path: Path, stack: contextlib.ExitStack) -> tuple[EmulatedPlant, 
     emulators = {bus.name: stack.enter_context(Emulator({m.address: ModuleState.factory(m.address)
                                                          for m in bus.modules}, framing=bus.framing,
                                                         zvz=bus.zvz, turnaround=bus.turnaround))
-                 for bus in plant.buses}  # fmt: skip
+                 for bus in plant.buses}
     links = {bus.name: Link(PairPort(emulators[bus.name]), get_framing(bus.framing), bus=bus.name,
                             line=bus.line, timeout=bus.timeout,
-                            zvz=bus.zvz) for bus in plant.buses}  # fmt: skip
+                            zvz=bus.zvz) for bus in plant.buses}
     return EmulatedPlant(path, plant, emulators), links
 
 

@@ -97,7 +97,7 @@ def test_an_apply_killed_anywhere_leaves_every_possibly_released_module_named_by
         process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path),
                                     "--auto-approve",
                                     "--allow-axis-release", "--trace", str(fifo)], text=True,
-                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)  # fmt: skip
+                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         with fifo.open() as trace:
             seen = 0
             for line in trace:

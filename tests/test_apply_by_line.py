@@ -52,7 +52,7 @@ def two_lines(directory: Path) -> Path:
     """A plant of a line of six modules and a line of one."""
     source = directory / "source.yaml"
     source.write_text(PLANT.format(long="".join(MODULE.format(address=a, bus="long") for a in range(1, 7)),
-                                   short=MODULE.format(address=1, bus="short")))  # fmt: skip
+                                   short=MODULE.format(address=1, bus="short")))
     return source
 
 
@@ -77,7 +77,7 @@ def test_a_line_is_written_while_another_is_still_read_when_no_question_stands_b
     sent = requests(trace)
     first_write = next(i for i, (bus, write) in enumerate(sent) if bus == "short" and write)
     last_read = max(i for i, (bus, write) in enumerate(sent) if bus == "long" and not write and i < min(
-        j for j, (b, w) in enumerate(sent) if b == "long" and w))  # fmt: skip
+        j for j, (b, w) in enumerate(sent) if b == "long" and w))
     assert first_write < last_read, "the short line waited for the long line's read-back"
     assert ("Snapshot of the modules before writing" in applied.out
             and "Apply complete: 7 modules written and verified." in applied.out)
@@ -87,10 +87,10 @@ def test_with_a_question_every_line_is_read_and_planned_before_the_first_write(t
     shown = []
     with open(tmp_path / "apply.trace", "w") as trace, emulated_plant(tmp_path, source=two_lines(tmp_path),
                                                                       line_speed=True,
-                                                                     timeout=0.5) as plant:  # fmt: skip
-        result = api.apply(plant.plant,
-                           gates=api.Gates(show=shown.append, allow_axis_release=True, approve=lambda _: True),
-                           options=api.LineOptions(trace=trace))  # fmt: skip
+                                                                     timeout=0.5) as plant:
+        gates = api.Gates(show=shown.append, allow_axis_release=True, approve=lambda _: True)
+        result = api.apply(plant.plant, gates=gates,
+                           options=api.LineOptions(trace=trace))
     assert result.verified and len(shown) == 1 and len(shown[0].changes) == 7
     sent = requests(tmp_path / "apply.trace")
     first_write = next(i for i, (_, write) in enumerate(sent) if write)
@@ -211,7 +211,7 @@ def test_ctrl_c_while_one_line_writes_and_the_other_still_reads_says_which_line_
         process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path),
                                     "--auto-approve", "--allow-axis-release",
                                     "--trace", str(fifo)], env=env, text=True, stdout=subprocess.PIPE,
-                                   stderr=subprocess.PIPE)  # fmt: skip
+                                   stderr=subprocess.PIPE)
         with fifo.open() as trace:
             for line in trace:
                 _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]

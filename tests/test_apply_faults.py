@@ -40,7 +40,7 @@ def seeded_image(chooser: random.Random, address: int) -> ModuleImage:
     def program() -> Program:
         return Program(P=chooser.randrange(0, system.S1 + 1), V=chooser.randrange(system.S5, system.S4 + 1),
                        T=chooser.randrange(0, 100),
-                       A=chooser.choice([0, 0, chooser.randrange(1, 65)]))  # fmt: skip
+                       A=chooser.choice([0, 0, chooser.randrange(1, 65)]))
 
     return ModuleImage(address, system, tuple(program() for _ in range(PROGRAM_COUNT)))
 

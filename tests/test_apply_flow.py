@@ -114,7 +114,7 @@ def _writing(plant) -> Iterator[Writing]:
     try:
         with lines(plant, buses, options, purpose="apply", observer=keeping.observe,
                    announce=keeping.announce, records=keeping,
-                   identities=keys) as held:  # fmt: skip
+                   identities=keys) as held:
             yield Writing(plant, keys, buses, held, keeping, api.Verify.FLOOR, options, "apply")
     finally:
         keeping.close()
@@ -230,7 +230,7 @@ def test_the_stages_driven_one_at_a_time(tmp_path):
 #: The answers a gate may be given about an axis release: up front, or asked with the modules named.
 ANSWERS: dict[str, bool | Callable[[list[str]], bool]] = {
     "allowed": True, "refused": False, "asked, yes": lambda _: True, "asked, no": lambda _: False,
-}  # fmt: skip
+}
 READS = (0x50, 0x51, 0x52)  # the read-backs' messages
 FAST = (1, 2)  # seeds of the fast tier — a refusal, a write line by line; the others are soak
 
@@ -264,7 +264,7 @@ def test_either_path_gates_before_it_writes_and_records_what_verified(tmp_path, 
         before, lines_shown, taught = emulated.images(), [], []
         gates = api.Gates(allow_axis_release=ANSWERS[allow], approve=None if approve is None
                           else lambda _: approve,
-                          show_line=lambda line: lines_shown.extend(line.buses()))  # fmt: skip
+                          show_line=lambda line: lines_shown.extend(line.buses()))
         consented = allow in ("allowed", "asked, yes") and approve is not False
         armed = True
         try:

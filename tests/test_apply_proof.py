@@ -92,7 +92,7 @@ def test_an_apply_killed_after_its_20h_leaves_every_later_command_saying_so_unti
         process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path),
                                     "--auto-approve",
                                     "--allow-axis-release", "--trace", str(fifo)], text=True,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         with fifo.open() as trace:
             release: str | None = None
             for line in trace:
@@ -363,7 +363,7 @@ def test_an_apply_that_waited_for_the_line_refuses_a_plant_file_edited_meanwhile
             process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(plant.path),
                                         "--auto-approve",
                                         "--allow-axis-release", "--lock-timeout", "600"], text=True,
-                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
             assert "waiting for the line lock held by" in process.stderr.readline()
             edit(plant.path, "position: 2.0\n", "position: 1.99\n")  # adopt, or an editor, while it waits
         out, err = process.communicate(timeout=120)

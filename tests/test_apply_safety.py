@@ -310,7 +310,7 @@ def test_clamping_of_kept_programs_is_shown_snapshotted_and_restored(tmp_path, c
         shown = run_cli(capsys, "plan", plant.path, "--json")
         changes = json.loads(shown.out)["buses"][0]["modules"][0]["changes"]
         assert [(c["program"], c["field"], c["before"], c["after"]) for c in changes["clamped"]] == [
-            (7, "P", 2400, 2200), (7, "V", 600, 500)]  # fmt: skip
+            (7, "P", 2400, 2200), (7, "V", 600, 500)]
         human = run_cli(capsys, "plan", plant.path)
         assert (
             "~ program 7 (not managed, kept): position 2.400 m → 2.200 m, speed 0.600 m/s → 0.500 m/s — "
@@ -361,7 +361,7 @@ def test_values_out_of_range_on_a_module_are_shown_raw_and_fixed(plant, capsys):
     emulator = plant.emulators["booth-a"]
     image = emulator.module(1).image
     emulator.update(1, image=replace(image, system=replace(image.system, S8=5)).with_programs(
-        {1: Program(P=9000, V=700, F1=2500, F2=-3, A=200)}))  # fmt: skip
+        {1: Program(P=9000, V=700, F1=2500, F2=-3, A=200)}))
     shown = run_cli(capsys, "read", plant.path)
     assert shown.code == 0, shown.err
     assert "position 9000 (raw, outside 0..9999)" not in shown.out  # 9000 is a position, just above S1

@@ -231,6 +231,6 @@ def test_reply(code: int, after_broadcast: bool, event: Event) -> None:
     (False, True, E.REPAIR_PLANNED),
     (True, True, E.REPAIR_PLANNED),
     (True, False, E.REPAIR_UNCONSENTED),
-])  # fmt: skip
+])
 def test_repair_consent(releases_axes: bool, consented: bool, event: Event) -> None:
     assert repair_event(releases_axes, consented) is event

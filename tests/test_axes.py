@@ -32,7 +32,7 @@ ROWS = [
     ({"exposed", "read_back", "changed"}, Release.YES,
      "no write sent, but a damaged frame changed the block on a line without checks"),
     ({"exposed", "read_back"}, Release.NO, "on a line without checks, nothing sent and the block as before"),
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize(("holds", "expected", "why"), ROWS, ids=[why for _, _, why in ROWS])

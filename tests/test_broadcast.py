@@ -83,7 +83,7 @@ def test_a_system_block_is_broadcast_only_when_every_module_needs_it():
     everyone = line({0: {}}, count=30)
     everyone = [SharingModule(m.actual, replace(m.desired, system=new_system),
                               plan_module(m.actual, replace(m.desired, system=new_system), COST))
-                for m in everyone]  # fmt: skip
+                for m in everyone]
     assert [s.message.ID for s in share(everyone, COST).broadcasts] == [0x20]
     but_one = everyone[:29] + [line({0: {}}, count=30)[29]]
     # module 30 would release its axes for nothing
@@ -166,7 +166,7 @@ def a_program(rnd: random.Random, system: SystemParameters) -> Program:
                    V=rnd.choice([system.S4, system.S5, rnd.randint(system.S5, system.S4)]),
                    Vr=rnd.choice([0, rnd.randint(-600, 600)]), T=rnd.choice([0, rnd.randint(0, 600)]),
                    F1=rnd.choice([0, 1010]), F2=rnd.choice([0, rnd.randint(0, 1999)]),
-                   A=rnd.choice([0, 0, rnd.randint(0, 64)]))  # fmt: skip
+                   A=rnd.choice([0, 0, rnd.randint(0, 64)]))
 
 
 @st.composite
@@ -268,7 +268,7 @@ def test_a_line_of_modules_with_programs_of_their_own_is_not_planned_behind_sets
         actual = ModuleImage.factory(address).with_programs({n: Program(P=rnd.randrange(100, 1900),
                                                                         V=rnd.randrange(20, 480),
                                                                         T=rnd.randrange(1, 50))
-                                                             for n in profile})  # fmt: skip
+                                                             for n in profile})
         desired = replace(actual, system=system).with_programs(profile)
         desired = replace(desired, programs=tuple(p if n in profile else None
                                                   for n, p in enumerate(desired.programs, 1)))
@@ -334,7 +334,7 @@ def full_line(tmp_path: Path, speed: str = "0.300", modules: int = 30) -> Path:
     source.write_text(FULL_LINE.replace("2: {position: 0.200, speed: 0.300",
                                         f"2: {{position: 0.200, speed: {speed}")
                       + "".join(f"      - {{address: {a}, name: m{a}, profiles: booth}}\n"
-                                for a in range(1, modules + 1)))  # fmt: skip
+                                for a in range(1, modules + 1)))
     return source
 
 
@@ -462,7 +462,7 @@ def test_a_broadcast_is_said_in_the_words_its_modules_steps_say_it(tmp_path, cap
         alone.write_text(json.dumps({**document,
                                      "buses": [{**bus, "broadcasts": [{**bus["broadcasts"][0],
                                                                        "summary": "send the system block"},
-                                                                                  *bus["broadcasts"][1:]]}]}))  # fmt: skip
+                                                                                  *bus["broadcasts"][1:]]}]}))
         refused = run_cli(capsys, "apply", plant.path, "--plan", alone, "--auto-approve",
                           "--allow-axis-release")
         assert (

@@ -81,12 +81,13 @@ def answer(value):
     if option("--jq") is None:
         print(json.dumps(value))
     else:
-        sys.stdout.write(subprocess.run(["jq", "-r", option("--jq")], input=json.dumps(value), capture_output=True, text=True,
-                                        check=True).stdout)
+        sys.stdout.write(subprocess.run(["jq", "-r", option("--jq")], input=json.dumps(value),
+                                        capture_output=True, text=True, check=True).stdout)
 
 
 def origin(*command):
-    return subprocess.run(["git", "-C", os.environ["GH_ORIGIN"], *command], capture_output=True, check=True).stdout
+    return subprocess.run(["git", "-C", os.environ["GH_ORIGIN"], *command], capture_output=True,
+                          check=True).stdout
 
 
 comments, pulls = load("comments.json"), load("pulls.json")
@@ -109,7 +110,8 @@ if args[0] == "api":
         print(json.dumps(comment))
     elif path.startswith("compare/"):
         base, head = path[len("compare/"):].split("...")
-        answer({"files": [{"filename": f} for f in origin("diff", "--name-only", base, head).decode().splitlines()]})
+        changed = origin("diff", "--name-only", base, head).decode().splitlines()
+        answer({"files": [{"filename": f} for f in changed]})
     elif path.startswith("commits/") and path.endswith("/pulls"):
         sha = path.split("/")[1]
         answer([p for p in pulls if sha in (p["merge_commit_sha"], p["head"]["sha"])])
@@ -119,20 +121,24 @@ elif args[:2] == ["pr", "comment"]:
     comments.append({"id": len(comments) + 100, "issue": int(args[2]), "user": {"login": "BOT"},
                      "body": Path(option("--body-file")).read_text()})
 elif args[:2] == ["pr", "list"]:
-    answer([{"number": p["number"]} for p in pulls if p["head"]["ref"] == option("--head") and p["state"] == option("--state")])
+    answer([{"number": p["number"]} for p in pulls
+            if p["head"]["ref"] == option("--head") and p["state"] == option("--state")])
 elif args[:2] == ["pr", "create"]:
     branch = option("--head")
-    pulls.append({"number": len(pulls) + 1, "state": "open", "base": option("--base"), "title": option("--title"),
-                  "body": Path(option("--body-file")).read_text(), "merge_commit_sha": None,
+    pulls.append({"number": len(pulls) + 1, "state": "open", "base": option("--base"),
+                  "title": option("--title"), "body": Path(option("--body-file")).read_text(),
+                  "merge_commit_sha": None,
                   "head": {"ref": branch, "sha": origin("rev-parse", branch).decode().strip()}})
     print(f"https://github.com/{os.environ['GH_REPO']}/pull/{len(pulls)}")
 elif args[:2] == ["pr", "edit"]:
     pull = next(p for p in pulls if p["number"] == int(args[2]))
     pull["body"] = Path(option("--body-file")).read_text()
     pull["head"]["sha"] = origin("rev-parse", pull["head"]["ref"]).decode().strip()
-elif args[:2] == ["run", "download"] and option("--pattern") is not None:  # each artifact matched into a folder of its name
+elif args[:2] == ["run", "download"] and option("--pattern") is not None:
+    # each artifact matched into a folder of its name
     import fnmatch
-    found = sorted(p for p in (state / "artifacts").iterdir() if fnmatch.fnmatchcase(p.name, option("--pattern")))
+    found = sorted(p for p in (state / "artifacts").iterdir()
+                   if fnmatch.fnmatchcase(p.name, option("--pattern")))
     if not found:
         sys.exit("no valid artifacts found to download")
     for stored in found:
@@ -183,7 +189,7 @@ def zizmor_findings(tmp_path: Path, text: str, *options: str) -> list[dict]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("GH_", "GITHUB_"))}
     done = subprocess.run([require("zizmor"), "--offline", "--format", "json", "--no-config", *options,
                            ".github/workflows/plant.yml"],
-                          cwd=workflows.parents[1], env=env, capture_output=True, text=True)  # fmt: skip
+                          cwd=workflows.parents[1], env=env, capture_output=True, text=True)
     findings = json.loads(done.stdout)
     assert (done.returncode == 0) == (findings == []), done.stderr  # it fails exactly when it finds something
     return findings
@@ -262,7 +268,7 @@ def test_each_job_installs_the_locked_dependencies_by_hash_and_prc3cfg_by_its_co
                          f'{requirements}',
                          '"$RUNNER_TEMP/venv/bin/pip" install --quiet --no-deps --no-build-isolation '
                          '"$PRC3CFG"',
-                         '"$RUNNER_TEMP/venv/bin/pip" check'], name  # fmt: skip
+                         '"$RUNNER_TEMP/venv/bin/pip" check'], name
     every_run = "\n".join(step.get("run", "") for job in WORKFLOW["jobs"].values() for step in job["steps"])
     assert every_run.count("pip\" install") == 8  # nothing else is installed
     # the venv's, by its path: nothing on PATH is trusted
@@ -430,11 +436,11 @@ class Plant:
         # the runner's Python; this environment's prc3cfg is not on PATH
         (bin_dir / "python3").symlink_to(sys.executable)
         git = {"GIT_AUTHOR_NAME": "dev", "GIT_AUTHOR_EMAIL": "dev@example.org", "GIT_COMMITTER_NAME": "dev",
-               "GIT_COMMITTER_EMAIL": "dev@example.org"}  # fmt: skip
+               "GIT_COMMITTER_EMAIL": "dev@example.org"}
         self.env = {**{k: v for k, v in os.environ.items() if not k.startswith(("GITHUB_", "GH_"))}, **git,
                     "PATH": os.pathsep.join((str(bin_dir), *without_prc3cfg(os.environ["PATH"]))),
                     "GH_STATE": str(self.state), "GH_ORIGIN": str(self.origin),
-                    "GITHUB_REPOSITORY": "plant-org/plant"}  # fmt: skip
+                    "GITHUB_REPOSITORY": "plant-org/plant"}
         self.clone = tmp_path / "developer"  # where people commit
         self.git("init", "-q", "-b", "main", str(self.clone), cwd=tmp_path)
         (self.clone / ".gitignore").write_text(".prc3cfg/\n")
@@ -463,7 +469,7 @@ class Plant:
         return self.git("show", f"{ref}:plant.yaml", cwd=self.origin)
 
     def pull_request(self, edit: Callable[[dict], object] = lambda document: None, branch: str = "change",
-                     file: str = "plant.yaml") -> dict[str, object]:  # fmt: skip
+                     file: str = "plant.yaml") -> dict[str, object]:
         """A pull request from a branch of the repository with the plant file (or `file`) edited (its
         document, in place)."""
         self.pull_number += 1
@@ -486,7 +492,7 @@ class Plant:
         return {"github.event_name": "pull_request_target", "github.event.pull_request.number": number,
                 "github.event.pull_request.head.sha": head, "github.event.pull_request.base.sha": self.main(),
                 "github.event.pull_request.head.repo.full_name": repository,
-                "github.sha": self.main()}  # fmt: skip
+                "github.sha": self.main()}
 
     def merge(self, number: int) -> dict[str, object]:
         """The pull request merged into main (fast-forward: main's commit is its head)."""
@@ -514,7 +520,7 @@ class Plant:
 
     def run(self, job: str, event: dict[str, object], *, install: str | None = None,
             matrix: dict[str, str] | None = None,
-            needs: dict[str, Job] | None = None) -> Job:  # fmt: skip
+            needs: dict[str, Job] | None = None) -> Job:
         """The job as a runner runs it for `event`; `install`: run the install step with this in place
         of the pinned release (else skipped: this process's prc3cfg is on PATH); `matrix`: its entry of the
         job's matrix; `needs`: the jobs it needs, done."""
@@ -526,7 +532,7 @@ class Plant:
                                      "runner.temp": str(temp),
                                      "github.server_url": "https://github.com",
                                      "github.run_id": 9000 + self.runs, "inputs.task": "",
-                                     **event}  # fmt: skip
+                                     **event}
         values |= {f"matrix.{key}": value for key, value in (matrix or {}).items()}
         values |= {f"needs.{name}.outputs.{key}": value for name, needed in (needs or {}).items()
                    for key, value in needed.outputs.items()}
@@ -544,7 +550,7 @@ class Plant:
                "GITHUB_EVENT_NAME": str(values["github.event_name"]),
                "GITHUB_WORKSPACE": str(self.workspace), "RUNNER_TEMP": str(temp),
                "GITHUB_PATH": str(files["path"]),
-               "GITHUB_STEP_SUMMARY": str(files["summary"])}  # fmt: skip
+               "GITHUB_STEP_SUMMARY": str(files["summary"])}
         for scope in (self.workflow.get("env", {}), definition.get("env", {})):
             env |= {k: expressions(str(v), values) for k, v in scope.items()}
         for index, step in enumerate(definition["steps"]):
@@ -571,7 +577,7 @@ class Plant:
             step_env["GITHUB_OUTPUT"] = str(files["output"])
             result = subprocess.run(["bash", "--noprofile", "--norc", "-eo", "pipefail", "-c", script],
                                     cwd=self.workspace,
-                                    env=step_env, capture_output=True, text=True)  # fmt: skip
+                                    env=step_env, capture_output=True, text=True)
             done.steps.append(result)
             for line in files["output"].read_text().splitlines():
                 key, _, value = line.partition("=")
@@ -617,7 +623,7 @@ class Plant:
         (self.tmp / "check" / "plant.yaml").write_text(self.plant_text())
         return subprocess.run([sys.executable, "-m", "prc3cfg", "plan", "plant.yaml", "--detailed-exitcode"],
                               cwd=self.tmp / "check",
-                              env=self.env, capture_output=True, text=True).returncode  # fmt: skip
+                              env=self.env, capture_output=True, text=True).returncode
 
 
 @pytest.fixture

@@ -119,7 +119,7 @@ def test_a_plan_file_with_its_modules_reordered_is_refused_as_edited(plant, caps
         "booth-a, module 1 "
         "(booth-a-left), where prc3cfg writes the modules in the plant file's order — the plan file was "
         "changed after it "
-        "was made; nothing was written: plan again and review it"])  # fmt: skip
+        "was made; nothing was written: plan again and review it"])
     assert plant.images() == before
 
 

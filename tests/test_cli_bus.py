@@ -40,7 +40,7 @@ def test_init_db_reproduces_the_manuals_db189_example(tmp_path, capsys):
     assert [" ".join(r[2:-1]) for r in rows] == [
         "KY = 030,001", "KY = 000,001", "KM = 00000000 00110100", "KM = 00000000 00000000",
         "KH = 0000", "KH = 0000", "KF = +220", "KH = 0000",
-    ]  # fmt: skip
+    ]
     assert [r[-1] for r in rows] == ["1E01h", "0001h", "0034h", "0000h", "0000h", "0000h", "00DCh", "0000h"]
 
 
@@ -87,7 +87,7 @@ def module_states(draw, address: int) -> ModuleState:
                               S7=draw(st.integers(800, 1500)),
         S8=draw(st.integers(0, 1)), S10=draw(st.integers(1, 9999)), S11=draw(st.integers(1, 1500)),
         S12=draw(st.integers(5, 50)),
-    )  # fmt: skip
+    )
     base = ModuleImage.factory(address)
     programs = list(replace(base, system=system).programs)
     default = Program(P=min(system.S2 + 100, system.S1), V=min(max(50, system.S5), system.S4))
@@ -98,7 +98,7 @@ def module_states(draw, address: int) -> ModuleState:
             P=draw(st.integers(0, system.S1)), V=draw(st.integers(system.S5, system.S4)),
             Vr=draw(st.integers(-600, 600)), T=draw(st.integers(0, 600)), F1=draw(f), F2=draw(f),
             A=draw(st.sampled_from([0, 0, number % 64 + 1, draw(st.integers(1, 64))])),
-        )  # fmt: skip
+        )
     for number in draw(st.lists(st.integers(1, PROGRAM_COUNT), max_size=6)):
         programs[number - 1] = replace(programs[number - 1], A=draw(st.integers(0, 64)))
     return ModuleState(ModuleImage(address, system, tuple(programs)))
@@ -170,7 +170,7 @@ def test_three_identical_modules_are_one_profile_and_three_lines(tmp_path, capsy
         assert lines[0] == "# yaml-language-server: $schema=plant.schema.json"
         assert lines[-3:] == ["  - {address: 1, name: bus-1-1, profiles: [common]}",
                               "  - {address: 2, name: bus-1-2, profiles: [common]}",
-                              "  - {address: 3, name: bus-1-3, profiles: [common]}"]  # fmt: skip
+                              "  - {address: 3, name: bus-1-3, profiles: [common]}"]
         assert ("profiles:\n  common:\n    system: {upper_reversing_point: 1.800, "
                 "max_speed: 0.500}\n") in imported.out
         assert len(lines) < 30, imported.out
@@ -220,7 +220,7 @@ def test_import_reads_every_line_given_into_one_plant_file_that_plans_to_no_chan
         # the emulated plant's timeout: 27 absent addresses on each line are waited out
         imported = run_cli(capsys, "import", "--port", ports[0], "--port", ports[1], "--bus-name", "left",
                            "--bus-name", "right",
-                           "--timeout", "0.1")  # fmt: skip
+                           "--timeout", "0.1")
         assert imported.code == 0, imported.err
         assert imported.err.strip() == f"imported 6 modules from {ports[0]}, {ports[1]}"
         plant = tmp_path / "imported.yaml"

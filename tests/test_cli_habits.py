@@ -46,10 +46,10 @@ def test_modules_and_kept_programs_that_leave_the_plant_file_stay_on_the_hardwar
     assert result.code == 0  # nothing to write: leaving them alone is not a change
     assert ("Left as it is: booth-b/booth-b-pretreat (address 4) is no longer in the plant file: it "
             "stays on the "
-            "hardware as it is, no longer managed") in result.out  # fmt: skip
+            "hardware as it is, no longer managed") in result.out
     assert ("Left as it is: booth-b/booth-b-right: program 4 no longer in the plant file "
             "(unmanaged_programs: keep): "
-            "it stays on the module as it is") in result.out  # fmt: skip
+            "it stays on the module as it is") in result.out
     assert plant.emulators["booth-b"].module(3).image.program(4).T == 120  # still there, untouched
 
 
@@ -109,7 +109,7 @@ def on_a_terminal(args: list, env: dict) -> bytes:
     master, slave = os.openpty()
     process = subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], stdout=slave,
                                stderr=subprocess.DEVNULL,
-                               env={**os.environ, **env})  # fmt: skip
+                               env={**os.environ, **env})
     os.close(slave)
     chunks = []
     while True:
@@ -225,5 +225,5 @@ def test_plot_without_the_plot_extra_fails_before_the_line_is_read(plant, tmp_pa
         assert (done.returncode, done.stdout) == (1, "")
         assert done.stderr == ("error: plotting needs matplotlib, which the Python running prc3cfg does not "
                                "have — install it there: "
-                               f"{shlex.quote(sys.executable)} -m pip install matplotlib\n")  # fmt: skip
+                               f"{shlex.quote(sys.executable)} -m pip install matplotlib\n")
         assert not trace.exists() or trace.read_text() == ""  # not one frame on the line

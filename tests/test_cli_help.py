@@ -31,19 +31,20 @@ try:
 except SystemExit:
     pass
 heavy = sorted(m for m in sys.modules if m.split(".")[0] in {tops}
-               or m in ("prc3cfg.api", "prc3cfg.core.planner", "prc3cfg.shell.link", "prc3cfg.plant", "prc3cfg.shell.emulator"))
+               or m in ("prc3cfg.api", "prc3cfg.core.planner", "prc3cfg.shell.link", "prc3cfg.plant",
+                        "prc3cfg.shell.emulator"))
 print("heavy:", heavy, file=sys.stderr)
 """
 #: What the listing of the commands loads none of (the modules' first names): json and html are a records
 #: command's output and `core.text`'s markdown, imported where they run.
 LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "hashlib", "concurrent",
-                  "secrets", "json", "html")  # fmt: skip
+                  "secrets", "json", "html")
 #: The whole of prc3cfg that `prc3cfg --help` loads besides the command modules: what their signatures and
 #: `main` use.
 LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.cli.durations",
                  "prc3cfg.core",
                  "prc3cfg.core.line", "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell",
-                 "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]  # fmt: skip
+                 "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]
 
 
 def test_listing_the_commands_loads_nothing_heavy():
@@ -83,7 +84,7 @@ def test_the_commands_signatures_are_objects_not_strings():
             yield from callbacks(sub.typer_instance)
 
     strings = [f"{f.__module__}.{f.__name__}: {name}" for f in callbacks(app)
-               for name, annotation in f.__annotations__.items() if isinstance(annotation, str)]  # fmt: skip
+               for name, annotation in f.__annotations__.items() if isinstance(annotation, str)]
     assert strings == []
 
 
@@ -94,10 +95,10 @@ def test_the_table_of_command_modules_is_what_the_modules_register():
 
     _register_commands()
     registered = [(info.name or typer.main.get_command_name(info.callback.__name__), info.callback.__module__)
-                  for info in app.registered_commands]  # fmt: skip
+                  for info in app.registered_commands]
     registered += [(group.name,
                     {c.callback.__module__ for c in group.typer_instance.registered_commands}.pop())
-                   for group in app.registered_groups]  # fmt: skip
+                   for group in app.registered_groups]
     assert sorted(registered) == sorted((name, f"prc3cfg.cli.{module}")
                                         for name, module in COMMAND_MODULES.items())
     listed = typer.main.get_command(app).list_commands(None)
@@ -138,7 +139,8 @@ try:
     main(sys.argv[1:])
 except SystemExit as stop:
     assert not stop.code, stop.code
-loaded = sorted(m for m in sys.modules if m.split(".")[0] == "serial" or m.startswith(("prc3cfg.shell.link.", "prc3cfg.shell.emulator.")))
+loaded = sorted(m for m in sys.modules if m.split(".")[0] == "serial"
+                or m.startswith(("prc3cfg.shell.link.", "prc3cfg.shell.emulator.")))
 print("loaded:", loaded, file=sys.stderr)
 """
 
@@ -149,7 +151,7 @@ def test_a_plan_against_saved_images_loads_no_link(tmp_path):
     plant.write_text(DEMO.read_text())
     images = tmp_path / "images.json"
     images.write_text(json.dumps([{"bus": bus.name, **ModuleState.factory(m.address).image.to_json()}
-                                  for bus in load_plant(plant).buses for m in bus.modules]))  # fmt: skip
+                                  for bus in load_plant(plant).buses for m in bus.modules]))
     done = subprocess.run([sys.executable, "-c", LOADED_BY, "plan", str(plant), "--actual", str(images)],
                           capture_output=True, text=True)
     assert "booth-a-left" in done.stdout, done.stderr  # the plan was made and shown
@@ -168,8 +170,9 @@ try:
     main(sys.argv[1:])
 except SystemExit as stop:
     assert stop.code in (0, 2), stop.code
-loaded = sorted(m for m in sys.modules if m.split(".")[0] == "rich" or m in ("prc3cfg.shell.doctor", "prc3cfg.plant.importer",
-                "prc3cfg.shell.emulator.server", "prc3cfg.core.policy", "prc3cfg.plant.policy", "prc3cfg.plant.adopt"))
+loaded = sorted(m for m in sys.modules if m.split(".")[0] == "rich"
+                or m in ("prc3cfg.shell.doctor", "prc3cfg.plant.importer", "prc3cfg.shell.emulator.server",
+                         "prc3cfg.core.policy", "prc3cfg.plant.policy", "prc3cfg.plant.adopt"))
 print("loaded:", loaded, file=sys.stderr)
 """
 
@@ -183,19 +186,19 @@ def test_a_plan_loads_what_it_runs_only(tmp_path):
     plant.write_text(DEMO.read_text())
     on_emulator = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True,
                                  text=True, cwd=tmp_path,
-                                 env=_no_terminal())  # fmt: skip
+                                 env=_no_terminal())
     assert "booth-a-left" in on_emulator.stdout, on_emulator.stderr
     assert on_emulator.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.shell.emulator.server']"
     (tmp_path / "socket").mkdir()
     with emulated_plant(tmp_path / "socket") as emulated:
         on_socket = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(emulated.path)],
                                    capture_output=True, text=True,
-                                   cwd=tmp_path, env=_no_terminal())  # fmt: skip
+                                   cwd=tmp_path, env=_no_terminal())
     assert "booth-a-left" in on_socket.stdout, on_socket.stderr
     assert on_socket.stderr.strip().splitlines()[-1] == "loaded: []"
     applied = subprocess.run([sys.executable, "-c", LOADED_OF, "apply", str(plant), "--auto-approve",
                               "--allow-axis-release"],
-                             capture_output=True, text=True, cwd=tmp_path, env=_no_terminal())  # fmt: skip
+                             capture_output=True, text=True, cwd=tmp_path, env=_no_terminal())
     assert "Apply complete" in applied.stdout, applied.stderr
     assert applied.stderr.strip().splitlines()[-1] == "loaded: ['prc3cfg.shell.emulator.server']"
 
@@ -208,10 +211,10 @@ def test_a_plan_loads_the_policy_its_plant_file_names(tmp_path):
     (tmp_path / "rules.yaml").write_text("format: prc3cfg-policy/1\nenvelopes:\n  - name: booth speeds\n    "
                                          "level: advisory\n"
                                          "    buses: [booth-a]\n    limits:\n      speed: "
-                                         "{max: 0.300}\n")  # fmt: skip
+                                         "{max: 0.300}\n")
     done = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True,
                           text=True, cwd=tmp_path,
-                          env=_no_terminal())  # fmt: skip
+                          env=_no_terminal())
     assert "Policy" in done.stdout + done.stderr and "booth speeds" in done.stdout + done.stderr, (
         done.stdout + done.stderr
     )
@@ -230,14 +233,15 @@ def test_a_plan_builds_no_checker_of_files_it_does_not_read(tmp_path):
         'print("loaded:", loaded, file=sys.stderr)',
         """from prc3cfg.shell import records
 from prc3cfg.shell.emulator import state
-print("built:", state._StateFile.__pydantic_complete__, records._SnapshotDocument.__pydantic_complete__, file=sys.stderr)""",
+print("built:", state._StateFile.__pydantic_complete__, records._SnapshotDocument.__pydantic_complete__,
+      file=sys.stderr)""",
     )
     planned = subprocess.run([sys.executable, "-c", probe, "plan", str(plant)], capture_output=True,
                              text=True, cwd=tmp_path)
     assert planned.stderr.strip().splitlines()[-1] == "built: False False", planned.stderr
     applied = subprocess.run([sys.executable, "-c", probe, "apply", str(plant), "--auto-approve",
                               "--allow-axis-release"],
-                             capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
+                             capture_output=True, text=True, cwd=tmp_path)
     assert applied.stderr.strip().splitlines()[-1] == "built: True False", applied.stderr
 
 
@@ -270,7 +274,7 @@ def test_every_commands_help_loads_nothing_heavy(words):
     `--help` — but pydantic and what it loads: typer checks a command's options with it."""
     done = subprocess.run([sys.executable, "-c",
                            LISTING.format(args=[*words, "--help"], tops=("serial", "yaml", "rich"))],
-                          capture_output=True, text=True)  # fmt: skip
+                          capture_output=True, text=True)
     assert "Usage" in done.stdout, done.stderr
     assert done.stderr.strip() == "heavy: []"
 
@@ -313,8 +317,8 @@ def test_each_help_is_the_fresh_processs_whatever_ran_before_it():
     lines = [list(words) for words in [(), *_command_lines()]]
     fresh = {" ".join(words): subprocess.run([sys.executable, "-m", "prc3cfg", *words, "--help"],
                                              capture_output=True, text=True, check=True).stdout
-             for words in lines}  # fmt: skip
+             for words in lines}
     for seed in range(4):
         done = subprocess.run([sys.executable, "-c", HELP_IN_ORDER, json.dumps(lines), str(seed)],
-                              capture_output=True, text=True, check=True)  # fmt: skip
+                              capture_output=True, text=True, check=True)
         assert json.loads(done.stdout) == fresh, f"seed {seed}"

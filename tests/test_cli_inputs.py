@@ -313,7 +313,7 @@ def outputs(tmp_path: Path, plant: Path) -> dict[str, tuple[list[str], str]]:
 @pytest.mark.parametrize("case", ["--out in a missing folder", "--out a directory", "--out /dev/full",
                                   "--out the plant file",
                                   "--trace /dev/full", "--trace in a "
-                                                       "missing folder", "--trace the plant file"])  # fmt: skip
+                                                       "missing folder", "--trace the plant file"])
 def test_an_output_that_cannot_be_written_is_one_line_before_the_line_is_touched(nowhere, tmp_path, capsys,
                                                                                  case):
     args, line = outputs(tmp_path, nowhere)[case]
@@ -355,7 +355,7 @@ def test_a_command_started_without_standard_streams_still_exits_with_its_outcome
     wrong.write_text(DEMO.read_text().replace("max_speed: 0.500", "max_speed: 9.500", 1))
     codes = [subprocess.run(["sh", "-c", 'exec "$0" -m prc3cfg validate "$1" >&- 2>&-', sys.executable,
                              str(path)]).returncode
-             for path in (DEMO, wrong)]  # fmt: skip
+             for path in (DEMO, wrong)]
     assert codes == [0, 1]
 
 
@@ -446,7 +446,7 @@ JSON_CASES = ["a truncated plan", "a plan nested 10,000 deep", "a 300 MB plan", 
               "a plan that is a directory",
               "a missing plan", "a plan that is a list", "a plan without its plant",
               "saved images that are not JSON",
-              "saved images with text for numbers", "a snapshot that is a directory"]  # fmt: skip
+              "saved images with text for numbers", "a snapshot that is a directory"]
 
 
 @pytest.mark.parametrize("case", JSON_CASES)

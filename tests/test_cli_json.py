@@ -87,7 +87,7 @@ def test_apply_json_is_a_stream_of_events_a_ci_step_reads_line_by_line(plant):
     done = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--json",
                            "--auto-approve", "--allow-axis-release"],
                           capture_output=True, text=True, encoding="utf-8",
-                          env=os.environ | {"PYTHONPATH": str(ROOT)}, check=False)  # fmt: skip
+                          env=os.environ | {"PYTHONPATH": str(ROOT)}, check=False)
     assert done.returncode == 0, done.stderr
     found = events(done.stdout)
     assert "Traceback" not in done.stderr
@@ -134,7 +134,7 @@ def test_each_event_is_on_the_pipe_as_it_happens(tmp_path, capsys):
                                     "--auto-approve", "--allow-axis-release"],
                                    stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                    text=True, encoding="utf-8",
-                                   env=BUFFERED | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+                                   env=BUFFERED | {"PYTHONPATH": str(ROOT)})
         assert process.stdout is not None
         first = process.stdout.readline()
         seen.set()
@@ -156,7 +156,7 @@ def test_an_interrupted_apply_ends_its_stream_with_every_module_and_its_account(
                                     "--trace", str(fifo)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                    text=True, encoding="utf-8",
                                    env=BUFFERED | {"PYTHONPATH": str(ROOT),
-                                                   "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")})  # fmt: skip
+                                                   "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")})
         with fifo.open() as trace:
             signal_once_every_line_writes(trace, process, plant.emulators, signal.SIGINT)
             out, err = process.communicate(timeout=60)
@@ -173,7 +173,7 @@ def run_in_process_events(path: Path, *args: str) -> list[dict]:
     result = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(path), "--json", *args],
                             capture_output=True, text=True,
                             encoding="utf-8", env=os.environ | {"PYTHONPATH": str(ROOT)},
-                            check=False)  # fmt: skip
+                            check=False)
     return events(result.stdout)
 
 

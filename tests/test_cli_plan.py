@@ -58,7 +58,7 @@ def test_the_command_a_plan_prints_to_apply_it_runs_as_printed_from_a_folder_wit
         pasted = subprocess.run(["sh", "-c", f"{printed} --auto-approve --allow-axis-release"],
                                 capture_output=True, text=True,
                                 cwd=tmp_path, env=os.environ | {"PYTHONPATH": os.pathsep.join(sys.path)},
-                                check=False)  # fmt: skip
+                                check=False)
         assert pasted.returncode == 0, pasted.stderr
         assert plant.matches_plant()
 
@@ -81,7 +81,7 @@ def test_plan_from_factory_shows_changes_and_axis_warnings_everywhere(plant, cap
     assert as_json.code == 0
     assert json.loads(as_json.out)["axis_releases"] == [f"{b}/{n}" for b, n in (
         ("booth-a", "booth-a-left"), ("booth-a", "booth-a-right"), ("booth-a", "booth-a-top"),
-        ("booth-b", "booth-b-left"), ("booth-b", "booth-b-right"), ("booth-b", "booth-b-pretreat"))]  # fmt: skip
+        ("booth-b", "booth-b-left"), ("booth-b", "booth-b-right"), ("booth-b", "booth-b-pretreat"))]
 
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
     assert markdown.code == 0
@@ -229,7 +229,7 @@ def test_a_comment_cut_to_its_budget_still_counts_the_clamped_programs_and_the_r
     held = [ModuleImage.factory(a) for a in range(1, 5)]
     held = [replace(image, system=replace(image.system, S1=2500)).with_programs({n: Program(P=2000, V=50)
                                                                                  for n in range(1, 61)})
-            for image in held]  # fmt: skip
+            for image in held]
     saved = tmp_path / "actual.json"
     saved.write_text(json.dumps([{"bus": "b", **image.to_json()} for image in held]))
     for made in ("plan", "show"):

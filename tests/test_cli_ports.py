@@ -117,7 +117,7 @@ def test_an_emulator_s_pty_is_listed_while_it_serves_and_not_after(capsys):
     lists among no serial ports — listed with its process and modules while it serves."""
     process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--modules",
                                 "1,3-5"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert process.stdout is not None
         pty = process.stdout.readline().strip().removeprefix("pty: ")  # printed once it serves
@@ -125,7 +125,7 @@ def test_an_emulator_s_pty_is_listed_while_it_serves_and_not_after(capsys):
         assert {"device": pty,
                 "description": f"prc3cfg emulator serve --pty (pid {process.pid}), addresses 1, 3–5",
                 "usb": None} \
-            in json.loads(listed.out), listed.out  # fmt: skip
+            in json.loads(listed.out), listed.out
     finally:
         process.send_signal(signal.SIGINT)
         process.wait(timeout=30)

@@ -18,7 +18,7 @@ from prc3cfg.core.bustime import slower_than_priced
 
 TIME = re.compile(r"Time: (\S+) s \(estimated (\S+) s\) — reading back (\S+) s \((\S+) s\), writing (\S+) s "
                   r"\((\S+) s\), "
-                  r"verifying (\S+) s \((\S+) s\)")  # fmt: skip
+                  r"verifying (\S+) s \((\S+) s\)")
 
 
 def test_an_apply_ends_with_its_time_by_phase_against_the_estimate(tmp_path, capsys):
@@ -51,7 +51,7 @@ def test_an_apply_ends_with_its_time_by_phase_against_the_estimate(tmp_path, cap
 #: A phase on the progress display: its name, steps done of all, time taken, time left at the rate so far.
 SHOWN = re.compile(r"^(reading modules|writing|verifying) .*? (\d+)/(\d+) +(\d+):(\d\d):(\d\d) "
                    r"+(?:(\d+):(\d\d):(\d\d)|-:--:--) left$",
-                   re.MULTILINE)  # fmt: skip
+                   re.MULTILINE)
 
 
 @needs_tmux
@@ -100,7 +100,7 @@ SLOW = re.compile(r"note: the line is slower than the plant file's line settings
                   r"exchanges took (\S+) s, its "
                   r"settings price them at (\S+) s \(the modules answered after (\d+) ms on average, "
                   r"turnaround: 0\.01 in the plant "
-                  r"file\): (.*)")  # fmt: skip
+                  r"file\): (.*)")
 
 
 @pytest.mark.parametrize(

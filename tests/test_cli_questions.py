@@ -20,7 +20,7 @@ SUMMARY = ["⚠ 1 module will release its axes (10h/20h): booth-a/booth-a-left",
 ALLOW = "Release the axes of 1 module? Only 'yes' will be accepted:"
 APPROVE = re.compile(r"Every module must be in STOP and AUTOMATIC: a running one would take the new values "
                      r"on its next move\. "
-                     r"Apply \d+ messages? to 1 module\? Only 'yes' will be accepted:")  # fmt: skip
+                     r"Apply \d+ messages? to 1 module\? Only 'yes' will be accepted:")
 #: Screens watched while a question waits: well over one redraw of a progress display (rich: 10 a second).
 WATCHED = 8
 
@@ -93,7 +93,7 @@ def test_only_yes_typed_out_answers_a_question_that_writes(tmp_path, question):
             refused = ("error: axis release of booth-a/booth-a-left not allowed (only 'yes' allows it) — "
                        "nothing was written"
                        if question == "axis release" else "error: not applied — nothing "
-                                                          "was written")  # fmt: skip
+                                                          "was written")
             assert refused in pane.screen()
         finally:
             pane.close()

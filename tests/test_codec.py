@@ -466,5 +466,5 @@ def test_the_error_table_is_the_manuals():
     expected = {
         *range(10, 17), *range(20, 33), 40, 41, 50, 51, 60, 61, 70, 71, 72, 73, 80,
         *range(100, 111), *range(112, 123),
-    }  # fmt: skip
+    }
     assert set(error_codes.ERROR_CODES) == expected

@@ -98,7 +98,7 @@ def test_the_factory_programs_the_plant_file_will_write_are_planned_not_read():
 
 
 @pytest.mark.parametrize("clamping", [True, False])
-def test_a_factory_fresh_line_is_commissioned_without_reading_what_it_writes_and_keeps_what_it_does_not_manage(
+def test_a_factory_fresh_line_is_commissioned_unread_where_it_writes_and_keeps_what_it_does_not_manage(
     tmp_path, capsys, clamping
 ):
     """Three factory-fresh modules (system block as the factory left it): m1 untouched; on m2 another tool
@@ -145,7 +145,7 @@ def test_a_reset_plant_file_reads_only_the_system_blocks_and_verifies_every_prog
     shown: list[PlantPlan] = []
     gates = (api.Gates(allow_axis_release=True, approve=lambda the_plan: not shown.append(the_plan))
              if approved else \
-        api.Gates(allow_axis_release=True))  # fmt: skip
+        api.Gates(allow_axis_release=True))
     with emulated_plant(tmp_path, source=source) as plant:
         emulator = plant.emulators["line"]
         emulator.update(2, image=emulator.module(2).image.with_programs({40: OTHER, 64: OTHER}))

@@ -98,7 +98,7 @@ def test_module_images_and_snapshots_read_back_are_written_the_same(tmp_path):
     assert all(ModuleImage.from_json(image.to_json()) == image for image in images)
     taken = Snapshot.take(tmp_path / "plant.yaml", "0" * 64,
                           {(e["bus"], image.address): image for e, image in zip(entries, images)},
-                          {"booth-a": LineTaken("socket://127.0.0.1:9", "crc16", ("tcp:127.0.0.1:9",))})  # fmt: skip
+                          {"booth-a": LineTaken("socket://127.0.0.1:9", "crc16", ("tcp:127.0.0.1:9",))})
     written = taken.save()
     again = Snapshot.load(written)
     text = written.read_text()
@@ -111,7 +111,7 @@ def test_an_emulator_state_file_read_back_is_written_the_same(tmp_path):
     modules = {3: ModuleState.factory(3),
                7: ModuleState(ModuleImage.factory(7), mode="run", active_program=4, fault="E12",
                               referenced=False,
-                                                          read_messages=False)}  # fmt: skip
+                                                          read_messages=False)}
     save_state(path, modules)
     assert load_state(path) == modules
     first = json.loads(path.read_text())

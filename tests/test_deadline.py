@@ -55,7 +55,7 @@ def seconds(chars: int, bits: float, baud: int, turnaround: float = 0.010, gaps:
                  id="52h x4, open-driver, 1200 8E1"),
     pytest.param(codec.ReadSystem(), "open-driver", L_8O2, seconds(3 + 23, 12, 300, gaps=2 * 0.020),
                  id="50h, open-driver, 300 8O2"),
-])  # fmt: skip
+])
 def test_the_deadline_of_each_message_kind_comes_from_the_line(message, framing, line, expected):
     cost = LineCost.of(framing, line, 0.010, 0.020)
     assert cost.reply_deadline(1, message) == pytest.approx(expected, abs=1e-9)
@@ -74,8 +74,8 @@ def no_reply_comes_later(framing: str, line: LineSettings, address: int, message
     assert cost.reply_deadline(address, message) >= taken * line.char_time + 0.010 + gaps
 
 
-exchanges = st.tuples(st.sampled_from(["crc16", "stx", "open-driver"]), lines, st.integers(1, 30),
-                      st.sampled_from(list(MESSAGE_STRATEGIES)).flatmap(lambda kind: MESSAGE_STRATEGIES[kind]))  # fmt: skip
+messages = st.sampled_from(list(MESSAGE_STRATEGIES)).flatmap(lambda kind: MESSAGE_STRATEGIES[kind])
+exchanges = st.tuples(st.sampled_from(["crc16", "stx", "open-driver"]), lines, st.integers(1, 30), messages)
 
 
 def replies(message: codec.Message) -> st.SearchStrategy[bytes]:
@@ -160,7 +160,7 @@ def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16"
     line and counts every exchange answered."""
     options = ("--rfc2217", "--line-speed", str(baud), "--parity", "even", "--framing", framing, "--modules",
                "1",
-               "--state", str(tmp_path / "state.json"))  # fmt: skip
+               "--state", str(tmp_path / "state.json"))
     line = ("--framing", framing, "--baud", str(baud), "--parity", "even")
     traces = {command: tmp_path / f"{command}.trace" for command in commands if command != "doctor"}
     results = {}
@@ -172,7 +172,7 @@ def readme_workflow(tmp_path: Path, capsys, *, baud: int, framing: str = "crc16"
                      "read": ("read", plant),
                      "import": ("import", "--port", url, *line, "--modules", "1"),
                      "doctor": ("doctor", "--port", url, *line, "--modules", "1", "--exchanges", "3",
-                                "--allow-unchecked-probes")}  # fmt: skip
+                                "--allow-unchecked-probes")}
         for command in commands:
             traced = ("--trace", traces[command]) if command in traces else ()
             results[command] = result = run_cli(capsys, *arguments[command], *traced)
@@ -208,6 +208,6 @@ def test_the_readme_workflow_at_1200_baud_loses_no_exchange(tmp_path, capsys):
 @pytest.mark.parametrize(("baud", "framing", "commands"), [
     (1200, "crc16", WORKFLOW), (1200, "stx", WORKFLOW), (1200, "open-driver", WORKFLOW),
     (300, "crc16", ("plan", "apply", "read", "doctor")),  # import at 300 baud: 16 reads of 3.2 s
-])  # fmt: skip
+])
 def test_the_readme_workflow_at_slow_speeds_loses_no_exchange(tmp_path, capsys, baud, framing, commands):
     readme_workflow(tmp_path, capsys, baud=baud, framing=framing, commands=commands)

@@ -148,7 +148,7 @@ ERROR_CASES = [
     ),
     case("109-S5-601", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S4=600, S5=601)), 109),
     case("110-S4-below-S5", STOP, WriteSystem(replace(DEFAULT_SYSTEM, S4=10, S5=20)), 110),
-]  # fmt: skip
+]
 
 
 def test_every_error_code_is_produced_by_a_real_message():
@@ -168,7 +168,7 @@ BAD_FIELDS = [
     ("P", -1, 31), ("P", 401, 32), ("V", 9, 40), ("V", 601, 41), ("V", -1, 40),
     ("Vr", -601, 50), ("Vr", 601, 51), ("T", -1, 60), ("T", 601, 61),
     ("F1", -1, 70), ("F1", 2000, 71), ("F2", -1, 72), ("F2", 2000, 73), ("A", 65, 80), ("A", 255, 80),
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize(("field", "value", "code"), [case(f"{f}={v}", f, v, c) for f, v, c in BAD_FIELDS])
@@ -805,7 +805,7 @@ def test_state_file_entry_shape(state):
     assert entry["mode"] in ("stop", "run", "manual")
     assert (entry["mode"], entry["active_program"], entry["fault"], entry["referenced"]) == (
         state.mode, state.active_program, state.fault, state.referenced
-    )  # fmt: skip
+    )
 
 
 def test_state_file_entry_of_the_factory_module():
@@ -813,7 +813,7 @@ def test_state_file_entry_of_the_factory_module():
     assert entry["system"] == {
         "S1": 400, "S2": 50, "S3": 754, "S4": 600, "S5": 10, "S6": 1500, "S7": 1000, "S8": 0, "S10": 583,
                                "S11": 1100, "S12": 10
-    }  # fmt: skip
+    }
     assert entry["programs"][0] == {"P": 150, "V": 50, "Vr": 0, "T": 0, "F1": 0, "F2": 0, "A": 0}
     assert (entry["mode"], entry["active_program"], entry["fault"], entry["referenced"]) == ("stop", None,
                                                                                              None, True)

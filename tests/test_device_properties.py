@@ -22,7 +22,7 @@ PROPERTY = settings(
 SYSTEM_RANGES = {
     "S1": (100, 9999), "S2": (50, 500), "S3": (1, 9999), "S4": (1, 600), "S5": (1, 600), "S6": (1000, 1500),
     "S7": (800, 1500), "S8": (0, 1), "S10": (1, 9999), "S11": (1, 1500), "S12": (5, 50),
-}  # fmt: skip
+}
 FIELD_RANGES = {"Vr": (-600, 600), "T": (0, 600), "F1": (0, 1999), "F2": (0, 1999), "A": (0, 64)}
 READ_IDS = {0x50, 0x51, 0x52}
 
@@ -228,5 +228,5 @@ def test_every_property_holds_in_many_more_cases(case, broadcast):
     for check in (test_a_broadcast_does_what_an_addressed_message_does,
                   test_only_an_accepted_write_changes_the_state,
                   test_an_accepted_write_keeps_every_invariant,
-                  test_in_run_the_active_program_is_never_written):  # fmt: skip
+                  test_in_run_the_active_program_is_never_written):
         check.hypothesis.inner_test(case)

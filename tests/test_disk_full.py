@@ -51,11 +51,11 @@ OS_ERRORS = r"(No space left on device|Read-only file system|File too large|not 
 RELEASES = (0x10, 0x20)
 #: Where each kind of record is kept: beside the plant file (`.prc3cfg/`) or in the state folder.
 KINDS = {"journal": ".prc3cfg/journal", "snapshots": ".prc3cfg/snapshots", "applied": ".prc3cfg/applied",
-         "lines": "state/lines", "releases": "state/releases"}  # fmt: skip
+         "lines": "state/lines", "releases": "state/releases"}
 #: What the apply's closing error says it could not keep, for each kind.
 NAMED = {"journal": "the journal", "snapshots": "the snapshot",
          "applied": "the copy of the plant file applied in full",
-         "lines": "the line's record", "releases": "the record of an axis release"}  # fmt: skip
+         "lines": "the line's record", "releases": "the record of an axis release"}
 
 
 def one_line(tmp_path: Path) -> Path:
@@ -77,7 +77,7 @@ def small_disks(folders: list[Path], size: int = 4 * 2**20) -> Iterator[None]:
             folder.mkdir(parents=True, exist_ok=True)
             done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size},mode=0755", "tmpfs",
                                    str(folder)],
-                                  capture_output=True, text=True)  # fmt: skip
+                                  capture_output=True, text=True)
             if done.returncode != 0:
                 pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
             mounted.append(folder)
@@ -144,7 +144,7 @@ def first_write(frame: Frame, _: int) -> bool:
 def apply(plant: EmulatedPlant, *, limit: int | None = None, command: str = "apply",
           target: Path | None = None,
           plan: Path | None = None,
-          env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:  # fmt: skip
+          env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     """`prc3cfg apply` (or `restore` of `target`) of the plant as a process of its own — of a plan file, if
     given — with a file-size limit, if given."""
 
@@ -158,7 +158,7 @@ def apply(plant: EmulatedPlant, *, limit: int | None = None, command: str = "app
     return subprocess.run([sys.executable, "-m", "prc3cfg", command, str(target or plant.path), *planned,
                            "--auto-approve", "--allow-axis-release"],
                           preexec_fn=limited, capture_output=True, text=True, timeout=120,
-                          env=env)  # fmt: skip
+                          env=env)
 
 
 def matches(held: ModuleImage, desired: ModuleImage) -> bool:
@@ -167,7 +167,7 @@ def matches(held: ModuleImage, desired: ModuleImage) -> bool:
 
 
 def account_problems(plant: EmulatedPlant, before: dict[tuple[str, int], ModuleImage], lines: dict[str, Line],
-                     result: subprocess.CompletedProcess[str]) -> list[str]:  # fmt: skip
+                     result: subprocess.CompletedProcess[str]) -> list[str]:
     """Where the apply's output is not the whole truth of what the modules hold, by the emulators —
     or is not one line per problem without a traceback."""
     out, err = result.stdout, result.stderr
@@ -262,17 +262,17 @@ def folder_of(tmp_path: Path, kind: str) -> Path:
 
 @contextlib.contextmanager
 def refusing(tmp_path: Path, source: Path, lines: dict[str, Line], *, kinds: tuple[str, ...] = tuple(KINDS),
-             limit: int | None = None) -> Iterator[Callable[..., Refused]]:  # fmt: skip
+             limit: int | None = None) -> Iterator[Callable[..., Refused]]:
     """An emulated plant in `tmp_path/line` whose records of `kinds` each lie on a small disk of their own,
     its lines' frames watched (and refused at) as `lines` say; gives the apply to run."""
     directory = tmp_path / "line"
     directory.mkdir()
     folders = {kind: folder_of(tmp_path, kind) for kind in KINDS}
     assert os.environ["PRC3CFG_STATE_DIR"] == str(tmp_path / "state")
+    rules = {bus: line.rule for bus, line in lines.items()}
     with small_disks([folders[kind] for kind in kinds]), emulated_plant(directory, source=source,
                                                                         timeout=UNHURRIED,
-                                                                         lossy={bus: line.rule
-                                                                                for bus, line in lines.items()}) as plant:  # fmt: skip
+                                                                        lossy=rules) as plant:
         before = plant.images()
 
         def run(**options: object) -> Refused:
@@ -315,7 +315,7 @@ def test_a_journal_the_disk_refuses_while_a_plan_file_is_proved_is_said_so_and_w
         plan = tmp_path / "plan.json"
         made = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", str(tmp_path / "line" / "plant.yaml"),
                                "--out", str(plan)],
-                              capture_output=True, text=True, timeout=120)  # fmt: skip
+                              capture_output=True, text=True, timeout=120)
         assert made.returncode in (0, 2), made.stderr
         line.trigger, line.frames[:] = lambda frame, number: True, []  # the apply's first frame
         refused = run(plan=plan)
@@ -402,7 +402,7 @@ def sweep(count: int, seed: str) -> list[tuple[str, str, float]]:
 #: Two points in the fast tier (the limit; a release record's disk read-only midway), 20 in the soak tier
 #: (about 40 s on two cores).
 POINTS = [("limit", "limit", 0.5), ("releases", "read-only", 0.6),
-          *(pytest.param(*point, marks=pytest.mark.soak) for point in sweep(20, "issue 39, soak"))]  # fmt: skip
+          *(pytest.param(*point, marks=pytest.mark.soak) for point in sweep(20, "issue 39, soak"))]
 
 
 @pytest.mark.parametrize("kind, how, at", POINTS)
@@ -451,7 +451,7 @@ def adopt(plant: EmulatedPlant, reason: str, limit: int | None = None,
     return subprocess.run([sys.executable, "-m", "prc3cfg", "adopt", str(plant.path), "--auto-approve",
                            "--reason", reason],
                           preexec_fn=limited, capture_output=True, text=True, timeout=120,
-                          env=env)  # fmt: skip
+                          env=env)
 
 
 def test_a_journal_the_disk_refuses_after_an_adopt_wrote_the_plant_file_says_so_in_one_line(tmp_path):

@@ -94,7 +94,7 @@ buses:
 
 def planned(tmp_path: Path, capsys, name: str, source: Path | None = None, *args: object,
             read_first: bool = False,
-            apply_first: bool = False, **emulated) -> dict:  # fmt: skip
+            apply_first: bool = False, **emulated) -> dict:
     """The plan file of `source` on emulators; `read_first`: after a `read`, which the line's record then
     holds (a targeted plan); `apply_first`: after an apply (a targeted plan that takes every program from the
     record)."""
@@ -217,7 +217,7 @@ def test_the_readme_fits_in_twelve_kilobytes():
     assert len((ROOT / "README.md").read_bytes()) <= README_MOST
 
 
-def test_the_readme_s_two_commands_make_a_venv_then_run_the_demo_and_the_tests_and_ci_runs_the_second_verbatim():
+def test_the_readme_s_two_commands_make_a_venv_run_the_demo_and_the_tests_and_ci_runs_the_second_verbatim():
     """Plain Debian has no `python` and refuses `pip install` outside a venv (PEP 668): each command makes and
     enters one first. Windows' are the same commands in PowerShell 5.1's words (`;` for `&&`)."""
     demo, tests = readme_commands("sh")
@@ -275,7 +275,7 @@ def test_no_text_cites_a_specification_the_repository_does_not_have():
     to a user and a maintainer (docs/files.md, docs/line.md, docs/protocol.md)."""
     texts = [*(ROOT / "prc3cfg").rglob("*.py"), *(ROOT / "tests").rglob("*.py"),
              *(ROOT / "bench").rglob("*.py"), *DOCS.glob("*.md"),
-             ROOT / "README.md"]  # fmt: skip
+             ROOT / "README.md"]
     cited = [path.relative_to(ROOT) for path in texts
              if any(f"{name}.md" in path.read_text() for name in ("interfaces", "link", "prc3-protocol"))]
     assert cited == []
@@ -295,7 +295,7 @@ def test_every_command_the_readme_names_is_one_prc3cfg_has(capsys):
 #: What a script adds to the README's day where a person would answer at a terminal, and what keeps it short.
 ADDED = {"import": " --modules 1-3", "apply": " --auto-approve --allow-axis-release",
          "adopt": " --auto-approve",
-         "restore": " --auto-approve --allow-axis-release"}  # fmt: skip
+         "restore": " --auto-approve --allow-axis-release"}
 
 
 def the_day() -> list[str]:

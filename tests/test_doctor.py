@@ -27,7 +27,7 @@ from prc3cfg.shell.link.client import Link
 from prc3cfg.shell.link.ports import open_link, open_port
 
 lines = st.builds(LineSettings, st.sampled_from([1200, 2400, 4800, 9600, 19200]), st.just(8),
-                  st.sampled_from(["none", "odd", "even"]), st.sampled_from([1, 1.5, 2]))  # fmt: skip
+                  st.sampled_from(["none", "odd", "even"]), st.sampled_from([1, 1.5, 2]))
 
 
 @given(st.binary(max_size=80), lines)
@@ -45,7 +45,7 @@ def test_a_frame_at_other_settings_arrives_as_other_bytes():
     at = LineSettings(9600, 8, "even", 1)
     for other in (LineSettings(19200, 8, "even", 1), LineSettings(4800, 8, "even", 1),
                   LineSettings(9600, 8, "none", 1),
-                  LineSettings(9600, 8, "odd", 1)):  # fmt: skip
+                  LineSettings(9600, 8, "odd", 1)):
         assert received(frame, other, at) != frame
     # a character of 7 bits loses the top bit
     assert received(frame, at, LineSettings(9600, 7, "even", 1)) != frame
@@ -96,7 +96,7 @@ def test_each_module_answers_after_its_own_turnaround(tmp_path):
     bus = SimpleNamespace(name="b1",
                           port="emulator://slow?line-speed=9600&turnaround=0.002&module-turnaround=2:0.080",
                           framing="crc16", line=LineSettings(), zvz=0.020, turnaround=0.010, timeout=5.0,
-                          modules=[SimpleNamespace(address=1), SimpleNamespace(address=2)])  # fmt: skip
+                          modules=[SimpleNamespace(address=1), SimpleNamespace(address=2)])
     cost = LineCost.of("crc16", LineSettings(), 0.080, 0.020)
     with open_link(bus, tmp_path / "plant.yaml") as link:
         started = time.monotonic()
@@ -126,11 +126,11 @@ def test_doctor_finds_the_settings_and_measures_each_modules_turnaround(capsys):
     # wall-clock figure)
     with Emulator(modules, framing="stx", line=line, line_speed=True, turnaround=0.050,
                   turnarounds={2: 0.100}, jitter=0.004,
-                  faults=FaultInjection(seed=1)) as emulator:  # fmt: skip
+                  faults=FaultInjection(seed=1)) as emulator:
         result, keys = doctor_line(capsys, emulator, "--baud", "19200", "--modules", "1-2")
     assert result.code == 0, result.err
     assert keys == {"framing": "stx", "baud": "19200", "parity": "odd", "data_bits": "8", "stop_bits": "1",
-                    "turnaround": keys["turnaround"]}  # fmt: skip
+                    "turnaround": keys["turnaround"]}
     measured = turnarounds(result.out)
     assert set(measured) == {1, 2}
     for address, turnaround in ((1, 0.050), (2, 0.100)):
@@ -196,10 +196,10 @@ def test_doctor_measures_each_module_s_turnaround_on_every_framing(capsys, frami
     given = {1: 0.080, 2: 0.120, 3: 0.160}
     with Emulator({a: ModuleState.factory(a) for a in given}, framing=framing,
                   line=LineSettings(9600, 8, "even", 1), line_speed=True,
-                  turnarounds=given, jitter=0.004, faults=FaultInjection(seed=3)) as emulator:  # fmt: skip
+                  turnarounds=given, jitter=0.004, faults=FaultInjection(seed=3)) as emulator:
         result, _ = doctor_line(capsys, emulator, "--framing", framing, "--baud", "9600", "--parity", "even",
                                 "--modules", "1-4",
-                                "--exchanges", "15", "--allow-unchecked-probes")  # fmt: skip
+                                "--exchanges", "15", "--allow-unchecked-probes")
     assert result.code == 0, result.err
     measured = turnarounds(result.out)
     assert set(measured) == set(given)
@@ -232,7 +232,7 @@ def test_over_rfc2217_an_exchange_does_not_ask_the_gateway_to_purge(caplog):
     pytest.param({1: (0.100, 0.6005)}, 0.501, id="just over the default: rounded up to the millisecond"),
     pytest.param({1: (0.100, 0.600)}, None, id="by the default exactly: the default"),
     pytest.param({1: (0.050, 0.900), 2: ()}, 0.85, id="a module that never answered varies by nothing"),
-])  # fmt: skip
+])
 def test_doctor_proposes_a_timeout_only_where_answers_varied_more_than_the_default_allows(answers, timeout):
     """The wait for a reply is the line's own time, the turnaround (the slowest answer measured) and the
     bus's `timeout` on top: a module whose answers varied by more than the default `timeout` may next
@@ -254,10 +254,10 @@ def test_doctor_measures_a_module_slower_than_its_probes_allow_and_proposes_a_ti
     assert first < 0.2 and max(timed) - min(timed) > 0.55  # what the seed was chosen for
     line = LineSettings(1200, 8, "even", 1)
     with Emulator({1: ModuleState.factory(1)}, line=line, line_speed=True, turnaround=0.500, jitter=jitter,
-                  faults=FaultInjection(seed=seed)) as emulator:  # fmt: skip
+                  faults=FaultInjection(seed=seed)) as emulator:
         result, keys = doctor_line(capsys, emulator, "--framing", "crc16", "--baud", "1200", "--parity",
                                    "even", "--modules", "1",
-                                   "--exchanges", "4")  # fmt: skip
+                                   "--exchanges", "4")
     assert result.code == 0, result.err
     ((_, worst),) = turnarounds(result.out).values()
     assert abs(worst - max(timed)) < 0.05 and "4/4" in result.out

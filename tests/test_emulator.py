@@ -283,7 +283,7 @@ def test_a_bad_option_value_is_a_usage_error(capsys, options, says):
 def test_a_bad_option_value_is_a_usage_error_of_the_process():
     result = subprocess.run([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", "127.0.0.1:0",
                              "--turnaround", "nan"],
-                            capture_output=True, text=True, timeout=30)  # fmt: skip
+                            capture_output=True, text=True, timeout=30)
     assert (result.returncode, result.stdout) == (64, "")
     assert (result.stderr.startswith("error: prc3cfg emulator serve: Invalid value for '--turnaround'")
             and result.stderr.count("\n") == 1)

@@ -340,7 +340,7 @@ def test_an_emulator_owns_its_state_file_while_it_runs(tmp_path):
     try:
         apply = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant), "--auto-approve",
                                 "--allow-axis-release"],
-                               capture_output=True, text=True)  # fmt: skip
+                               capture_output=True, text=True)
         second = refused_serve(tmp_path / "second", "--state", str(state))
     finally:
         served.process.terminate()
@@ -353,7 +353,7 @@ def test_an_emulator_owns_its_state_file_while_it_runs(tmp_path):
         assert refused.stderr.startswith(in_use), refused.stderr
     assert "Apply complete" in subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant),
                                                "--auto-approve", "--allow-axis-release"],
-                                              capture_output=True, text=True).stdout  # fmt: skip
+                                              capture_output=True, text=True).stdout
     assert written(state)[(1, 1)] == 200
 
 

@@ -48,7 +48,7 @@ LOADS = [
     pytest.param(Load(flood=300, garbage=10_000_000, churn=2_000, server_files=256), id="fast"),
     pytest.param(Load(flood=1_100, garbage=100_000_000, churn=20_000, server_files=1024), id="acceptance",
                  marks=pytest.mark.soak),
-]  # fmt: skip
+]
 REPLY_TIMEOUT = 10.0  # s a client waits for a reply that must come: only a failing test waits it out
 
 

@@ -20,7 +20,7 @@ def test_a_large_output_is_whole_and_the_exit_code_the_commands(tmp_path):
     with emulated_plant(tmp_path) as plant:
         done = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant.path, "--json",
                                "--detailed-exitcode"],
-                              capture_output=True, text=True)  # fmt: skip
+                              capture_output=True, text=True)
     assert done.returncode == 2, done.stderr  # changes: exit 2, as the command returned it
     assert json.loads(done.stdout)["buses"]  # the whole document, flushed before the process ended
 

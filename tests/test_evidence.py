@@ -56,7 +56,7 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
     assert (f" programs) or to what prc3cfg last read or verified ({expected[0][1]} programs of "
             f"{expected[0][0]} modules; "
             "oldest value taken from the record: " in headline
-            and f"'s programs, as apply of {plant.path} by ") in headline  # fmt: skip
+            and f"'s programs, as apply of {plant.path} by ") in headline
     assert headline.endswith(" UTC).")
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
     assert (markdown.code == 0 and EVERY_MODULE not in markdown.out
@@ -64,7 +64,7 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
     expected.append(taken(plant))
     for document, (modules, from_record) in ((json.loads(run_cli(capsys, "plan", plant.path, "--json").out),
                                               expected[1]),
-                                          (json.loads((tmp_path / "plan.json").read_text()), expected[0])):  # fmt: skip
+                                          (json.loads((tmp_path / "plan.json").read_text()), expected[0])):
         evidence = document["evidence"]
         assert evidence["complete"] is False
         # 8 windows of 4 a line, rolled
@@ -85,7 +85,7 @@ def test_no_changes_names_its_evidence_in_every_medium_until_everything_is_read(
     assert full.code == 0 and EVERY_MODULE in full.out
     document = json.loads(run_cli(capsys, "plan", plant.path, "--full-read", "--json").out)
     assert document["evidence"] == {"complete": True, "read_now": {"system_blocks": 6, "programs": programs},
-                                    "from_record": {"modules": 0, "programs": 0}, "oldest": None}  # fmt: skip
+                                    "from_record": {"modules": 0, "programs": 0}, "oldest": None}
 
 
 def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_as_saying_nothing_and_refused(
@@ -166,7 +166,7 @@ def edit(path: Path, old: str, new: str) -> None:
     ("position: 2.1\n", "position: 2.05\n"),
     # booth-a-right's: the second — the first, read already, is read again
     ("position: 2.0\n", "position: 1.95\n"),
-])  # fmt: skip
+])
 def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant, capsys, tmp_path, change):
     """The issue's case on a 3-module line: the change reads program 1 of one swapped module, which is not
     as on record — every module of the line is read in full, and the apply writes both back."""

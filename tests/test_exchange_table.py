@@ -122,22 +122,27 @@ CASES = [
     pytest.param(DATA, READ, NO_CHECKSUM, 20, 0, LinkStep.ANSWER, "",
                  id="data to a read without a checksum, after a code"),
     # a write a later firmware added: as any write, but 10 is that older firmware, never damage
-    pytest.param(None, ADDED, CHECKSUM, None, 1, LinkStep.RETRY, "no reply within 0.5 s", id="nothing to 45h"),
-    pytest.param(SHORT, ADDED, NO_CHECKSUM, None, 1, LinkStep.RETRY, "bad reply (4 bytes in reply to 45h, expected 2)",
-                 id="garbled to 45h"),
+    pytest.param(None, ADDED, CHECKSUM, None, 1, LinkStep.RETRY, "no reply within 0.5 s",
+                 id="nothing to 45h"),
+    pytest.param(SHORT, ADDED, NO_CHECKSUM, None, 1, LinkStep.RETRY,
+                 "bad reply (4 bytes in reply to 45h, expected 2)", id="garbled to 45h"),
     pytest.param(code(0), ADDED, NO_CHECKSUM, None, 1, LinkStep.ANSWER, "", id="45h accepted"),
-    pytest.param(code(10), ADDED, CHECKSUM, None, 3, LinkStep.OLD_FIRMWARE, "", id="45h unknown, with a checksum"),
+    pytest.param(code(10), ADDED, CHECKSUM, None, 3, LinkStep.OLD_FIRMWARE, "",
+                 id="45h unknown, with a checksum"),
     pytest.param(code(10), ADDED, NO_CHECKSUM, None, 3, LinkStep.CONFIRM,
-                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to confirm it",
-                 id="45h unknown, once without a checksum"),
-    pytest.param(code(10), ADDED, NO_CHECKSUM, 10, 2, LinkStep.OLD_FIRMWARE, "", id="45h unknown, twice in a row"),
+                 "code 10: invalid identification number (ID) on a line without a checksum, asking again to "
+                 "confirm it", id="45h unknown, once without a checksum"),
+    pytest.param(code(10), ADDED, NO_CHECKSUM, 10, 2, LinkStep.OLD_FIRMWARE, "",
+                 id="45h unknown, twice in a row"),
     pytest.param(code(12), ADDED, CHECKSUM, None, 1, LinkStep.RETRY,
-                 "the module reports a damaged message (code 12: invalid length (message longer than 64 bytes))", id="45h damaged 12"),
-    pytest.param(code(25), ADDED, CHECKSUM, None, 1, LinkStep.ANSWER, "", id="45h refused, with a checksum"),
+                 "the module reports a damaged message (code 12: invalid length (message longer than 64 "
+                 "bytes))", id="45h damaged 12"),
+    pytest.param(code(25), ADDED, CHECKSUM, None, 1, LinkStep.ANSWER, "",
+                 id="45h refused, with a checksum"),
     pytest.param(code(25), ADDED, NO_CHECKSUM, None, 1, LinkStep.CONFIRM,
-                 "code 25: operating condition is error E21 (positioning error) on a line without a checksum, asking again to "
-                 "confirm it", id="45h refused once, without a checksum"),
-]  # fmt: skip
+                 "code 25: operating condition is error E21 (positioning error) on a line without a "
+                 "checksum, asking again to confirm it", id="45h refused once, without a checksum"),
+]
 
 
 def verdict_of(raw, message, checked, heard, left):

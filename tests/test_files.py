@@ -20,7 +20,8 @@ KILLED_AT = """
 import os, signal, sys
 from pathlib import Path
 from prc3cfg.shell.files import replace_unless_changed, write_atomically
-point, nth, target, text, *expected = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), sys.argv[4], *sys.argv[5:]
+point, nth, target, text = sys.argv[1], int(sys.argv[2]), Path(sys.argv[3]), sys.argv[4]
+expected = sys.argv[5:]
 real, calls = getattr(os, point), 0
 def dying(*args, **kwargs):
     global calls

@@ -105,7 +105,7 @@ def test_the_matrix_has_one_entry_per_line_with_its_runner_environment_group_and
     assert [(e["line"], e["runner"], e["environment"]) for e in entries] == [
         ("plants/paint-shop.yaml:booth-a", "line-booth-a", "booth-a"), ("plants/paint-shop.yaml:booth-b",
                                                                         "line-booth-b", "booth-b"),
-        ("plants/washer.yaml:washer", "line-washer", "washer")]  # fmt: skip
+        ("plants/washer.yaml:washer", "line-washer", "washer")]
     assert ([e["group"] for e in entries] == [f"prc3cfg-line {e['line']}" for e in entries]
             and len({e["id"] for e in entries}) == 3)
     assert entries[0]["modules"].split("\n") == ["booth-a-left", "booth-a-right", "booth-a-top"]
@@ -121,7 +121,7 @@ def test_the_matrix_has_one_entry_per_line_with_its_runner_environment_group_and
     (["./plants/../plants/washer.yaml"], ["plants/washer.yaml:washer"]),
     (["README.md"], []),
     ([], []),
-])  # fmt: skip
+])
 def test_a_change_selects_the_lines_of_its_plant_files_and_every_line_its_policy_rules(fleet, capsys, changed,
                                                                                        lines):
     assert [e["line"] for e in matrix(capsys, fleet, "--changed", "--", *changed)] == lines
@@ -149,7 +149,7 @@ def test_changed_files_without_changed_are_refused_in_one_line(fleet, capsys):
     (lambda t: t + "  - plant: plants/none.yaml\n    lines: [{bus: x, runner: r}]\n", "plants/none.yaml: "),
     (lambda t: t.replace("lines:\n      - {bus: washer, runner: line-washer}", "lines: []"),
      "fleet.yaml:8:12: 'lines' is not valid"),
-])  # fmt: skip
+])
 def test_a_mistake_in_the_fleet_file_is_one_line_at_its_file_line_and_column(fleet, capsys, edit, expected):
     Path(fleet).write_text(edit(FLEET))
     for command in (("matrix", fleet), ("summary", fleet, "none.json")):
@@ -190,7 +190,7 @@ def test_the_summary_has_a_row_per_line_and_says_which_waits_for_a_window(fleet,
     statuses = [status_of(capsys, "plants/paint-shop.yaml", tmp_path / "a", "booth-a"),
                 status_of(capsys, "plants/paint-shop.yaml", tmp_path / "b", "booth-b",
                           "rules.yaml:3:5: soft: bus booth-b: deny window "
-                          "'production' is open until 2026-11-30 16:00 CET\n")]  # fmt: skip
+                          "'production' is open until 2026-11-30 16:00 CET\n")]
     result = run_cli(capsys, "fleet", "summary", fleet, *statuses)
     assert result.code == 0, result.err
     rows = [line for line in result.out.splitlines() if line.startswith("| plants/")]
@@ -199,7 +199,7 @@ def test_the_summary_has_a_row_per_line_and_says_which_waits_for_a_window(fleet,
         "| plants/paint-shop.yaml:booth-b | 3 | MAINTENANCE_REQUIRED | none | none | never | waiting: "
         "rules.yaml:3:5: soft: bus booth-b: "
         "deny window 'production' is open until 2026-11-30 16:00 CET |",
-        "| plants/washer.yaml:washer | | | | | | not in this run |"]  # fmt: skip
+        "| plants/washer.yaml:washer | | | | | | not in this run |"]
     document = json.loads(run_cli(capsys, "fleet", "summary", fleet, *statuses, "--json").out)
     SUMMARY_CHECK.validate(document)
     assert (document["format"] == SUMMARY["title"]
@@ -213,19 +213,19 @@ def test_a_status_of_no_line_or_of_a_line_twice_is_refused_in_one_line(fleet, ca
     assert (result.code == 1
             and result.problems == [f"error: {again}: line plants/paint-shop.yaml:booth-b is in "
                                     f"{whole} too — "
-                                                    "give each line's status once"])  # fmt: skip
+                                                    "give each line's status once"])
     Path(fleet).write_text(FLEET.replace("      - {bus: booth-b, runner: line-booth-b}\n", ""))
     result = run_cli(capsys, "fleet", "summary", fleet, whole)
     assert (result.code == 1
             and result.problems == [f"error: {whole}: bus booth-b of plants/paint-shop.yaml is not a line "
                                     f"of {fleet} — "
-                                                    "give the status of the fleet's lines"])  # fmt: skip
+                                                    "give the status of the fleet's lines"])
     (tmp_path / "plan.json").write_text('{"format": "prc3cfg-plan/1"}')
     result = run_cli(capsys, "fleet", "summary", fleet, tmp_path / "plan.json")
     assert (result.code == 1
             and result.problems == [f"error: {tmp_path / 'plan.json'}: not a prc3cfg-status/1 document — "
                                                     "give what prc3cfg status PLANT "
-                                                    "--json printed"])  # fmt: skip
+                                                    "--json printed"])
 
 
 # -- the same, over random fleets (soak)
@@ -243,7 +243,7 @@ def fleets(draw):
                 for plant in plants}
     lines = [lines_of.FleetLine(f"plants/{plant}.yaml", bus, f"runner-{bus}", bus, (f"{bus}-1",),
                                 policies[plant])
-             for plant in plants for bus in draw(st.lists(NAMES, min_size=1, max_size=3, unique=True))]  # fmt: skip
+             for plant in plants for bus in draw(st.lists(NAMES, min_size=1, max_size=3, unique=True))]
     files = sorted({line.plant for line in lines} | {"plants/rules.yaml", "plants/freeze.yaml", "README.md"})
     changed = draw(st.lists(st.sampled_from(files), unique=True))
     reported = draw(st.lists(st.sampled_from(lines), unique=True)) if lines else []
@@ -262,7 +262,7 @@ def check_consistent(lines: list[lines_of.FleetLine], changed: list[str],
     ) == len(entries)
     status = {"health": "NORMAL",
               "modules": [{"name": "m", "drift_seen": False, "travel_pending": True, "last_failed": False,
-                                               "last_verified": None}]}  # fmt: skip
+                                               "last_verified": None}]}
     document = lines_of.summary(lines, {line: lines_of.LineStatus(status, why)
                                         for line, why in waiting.items()})
     SUMMARY_CHECK.validate(document)
@@ -308,14 +308,14 @@ def written(folder: Path, lines: list[lines_of.FleetLine]) -> None:
         document = dict(template, plant=Path(plant).stem, buses=[
             dict(template["buses"][0], name=bus["bus"], port=f"emulator://{Path(plant).stem}-{bus['bus']}",
                  modules=[dict(m, name=f"{bus['bus']}-{m['address']}")
-                          for m in template["buses"][0]["modules"]]) for bus in buses])  # fmt: skip
+                          for m in template["buses"][0]["modules"]]) for bus in buses])
         policy = next(line.policy for line in lines if line.plant == plant)
         if policy is not None:
             document["policy"] = Path(policy).name
         (folder / plant).parent.mkdir(parents=True, exist_ok=True)
         (folder / plant).write_text(yaml.dump(document, Dumper=Unshared, sort_keys=False))
     (folder / "fleet.yaml").write_text(yaml.safe_dump({"format": "prc3cfg-fleet/1", "plants": [
-        {"plant": plant, "lines": buses} for plant, buses in fleet.items()]}))  # fmt: skip
+        {"plant": plant, "lines": buses} for plant, buses in fleet.items()]}))
 
 
 @pytest.mark.soak
@@ -347,7 +347,7 @@ def test_the_commands_select_and_summarise_random_fleets_as_the_fleet_file_says_
                                                                  "plant_file": line.plant,
                                                                  "lines": [{"bus": line.bus,
                                                                             "health": "NORMAL",
-                                                                            "modules": [module]}]}))  # fmt: skip
+                                                                            "modules": [module]}]}))
         if waiting[line] is not None:
             (folder / str(n) / "waiting.txt").write_text(waiting[line])
         statuses.append(f"{n}/status.json")
@@ -430,10 +430,10 @@ def three_lines(tmp_path):
     with emulate(sources.parent / "plants" / "paint-shop.yaml", tmp_path / "paint-shop",
                  timeout=0.1) as paint_shop, \
          emulate(sources.parent / "plants" / "washer.yaml", tmp_path / "washer",
-                 timeout=0.1) as washer_line:  # fmt: skip
+                 timeout=0.1) as washer_line:
         files = {"fleet.yaml": FLEET, "plants/paint-shop.yaml": paint_shop.path.read_text(),
                  "plants/washer.yaml": washer_line.path.read_text(),
-                 "plants/rules.yaml": "format: prc3cfg-policy/1\n"}  # fmt: skip
+                 "plants/rules.yaml": "format: prc3cfg-policy/1\n"}
         plant = Plant(tmp_path, paint_shop, files=files, workflow=WORKFLOW)
         plant.env["PRC3CFG_POLICY_NOW"] = MONDAY_MORNING  # in the paint shop's shift
         yield plant, paint_shop, washer_line
@@ -487,8 +487,9 @@ def test_a_merge_over_three_lines_applies_two_and_the_one_in_its_window_waits(th
     # nothing written in the shift
     assert all(held[key] == factory[key] for key in factory if key[0] == "booth-b")
     assert all(held[key] != factory[key] for key in factory if key[0] == "booth-a")
-    records = {entry["bus"]: plant.state / "artifacts" / f"prc3cfg-records-{9000 + plant.runs - 2 + n}-{entry['id']}"
-               for n, entry in enumerate(json.loads(lines.outputs["matrix"])["include"])}  # fmt: skip
+    artifacts = plant.state / "artifacts"
+    records = {entry["bus"]: artifacts / f"prc3cfg-records-{9000 + plant.runs - 2 + n}-{entry['id']}"
+               for n, entry in enumerate(json.loads(lines.outputs["matrix"])["include"])}
     # kept for restore
     assert (records["booth-a"] / "snapshots").is_dir() and (records["washer"] / "journal").is_dir()
 

@@ -208,7 +208,7 @@ def test_frame_length_is_the_length_of_the_encoded_frame(combo, data):
 
 @pytest.mark.parametrize(("address", "message"),
                          [(1, bytes([0x7E - 0x21 - 1])), (0, bytes(0x7E)), (2, bytes([0x7E] * 3))],
-                         ids=["checksum 7Eh", "N = 7Eh", "data 7Eh"])  # fmt: skip  # 21h + 01h + 5Ch = 7Eh
+                         ids=["checksum 7Eh", "N = 7Eh", "data 7Eh"])  # 21h + 01h + 5Ch = 7Eh
 def test_stx_frame_length_counts_every_stuffed_byte(address, message):
     assert_frame_length(FRAMINGS["stx"], Direction.REQUEST, address, message)
 

@@ -51,7 +51,7 @@ def one_device_two_ports(tmp_path: Path) -> Iterator[tuple[str, str]]:
                                   f"  connector: serialdev,{pty},9600n81,local\n  options:\n    "
                                   "max-connections: 1\n"
                                   for name, accepter, port in (("raw", "tcp", raw),
-                                                               ("rfc", "telnet(rfc2217),tcp", telnet))))  # fmt: skip
+                                                               ("rfc", "telnet(rfc2217),tcp", telnet))))
         ser2net = subprocess.Popen([SER2NET, "-n", "-c", config], stdout=subprocess.PIPE,
                                    stderr=subprocess.STDOUT, text=True)
         try:
@@ -148,7 +148,7 @@ def test_applies_through_either_port_in_any_order_leave_no_silent_wrong_value(tm
     with one_device_two_ports(tmp_path) as ports:
         one_line(monkeypatch, ports)
         plants = {(port, position): plant_file(tmp_path / f"{n}-{position}" / "plant.yaml", port, position)
-                  for n, port in enumerate(ports) for position in ("1.9", "2.0", "2.1")}  # fmt: skip
+                  for n, port in enumerate(ports) for position in ("1.9", "2.0", "2.1")}
         for _ in range(4):  # an apply, then two plans, each through either port
             (_, held), plant = rng.choice(list(plants.items()))
             assert through(capsys, ports, "apply", plant, "--auto-approve", "--allow-axis-release").code == 0

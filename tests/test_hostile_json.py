@@ -167,7 +167,7 @@ def test_a_document_of_too_many_objects_is_refused_before_it_is_parsed(nowhere, 
     line = one_line(run_cli(capsys, "apply", nowhere, "--plan", plan), f"error: {plan}: ")
     assert line == (f"error: {plan}: more than {files.MAX_CONTAINERS:,} objects and lists (counting "
                     f"'{{' and '['), more than any "
-                    "file prc3cfg writes holds — name the plan file prc3cfg plan --out wrote")  # fmt: skip
+                    "file prc3cfg writes holds — name the plan file prc3cfg plan --out wrote")
 
 
 @pytest.mark.parametrize("case", ["show PLAN", "plan --actual", "restore", "emulator serve --state"])
@@ -191,7 +191,7 @@ def test_a_document_of_too_many_values_is_refused_before_it_is_parsed(nowhere, t
     line = one_line(run_cli(capsys, "apply", nowhere, "--plan", plan), f"error: {plan}: ")
     assert line == (f"error: {plan}: more than {files.MAX_VALUES:,} values (counting ','), more than any "
                     "file prc3cfg "
-                    "writes holds — name the plan file prc3cfg plan --out wrote")  # fmt: skip
+                    "writes holds — name the plan file prc3cfg plan --out wrote")
     at_the_limit = tmp_path / "at-the-limit.json"
     at_the_limit.write_text("[" + "0," * (files.MAX_VALUES - 1) + "0]")
     assert len(files.read_json(at_the_limit)) == files.MAX_VALUES
@@ -204,7 +204,7 @@ def test_a_long_integer_is_refused_even_where_python_would_convert_it(tmp_path):
     script = "import sys; from pathlib import Path; from prc3cfg.shell import files\n" \
              "try: files.read_json(Path(sys.argv[1]))\nexcept files.FileProblem as problem: print(problem)"
     done = subprocess.run([sys.executable, "-c", script, str(path)], capture_output=True, text=True,
-                          env={**os.environ, "PYTHONINTMAXSTRDIGITS": "0"})  # fmt: skip
+                          env={**os.environ, "PYTHONINTMAXSTRDIGITS": "0"})
     assert done.stdout == (f"a number of more than {files.MAX_DIGITS} digits, which no file prc3cfg "
                            "writes holds\n"), done.stderr
 

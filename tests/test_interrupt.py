@@ -54,7 +54,7 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace",
                           fifo,
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         # a first write on every line: they write on their own now (a line not read back
         with fifo.open() as trace:
             # yet is named as such: commissioning reads little)
@@ -90,7 +90,7 @@ def test_a_module_written_but_not_yet_verified_says_so(tmp_path):
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
         process = prc3cfg(tmp_path, "apply", plant.path, "--auto-approve", "--allow-axis-release", "--trace",
                           fifo,
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         with fifo.open() as trace:
             for line in trace:
                 _, bus, direction, frame = line.rstrip("\n").split("\t")[:4]
@@ -165,7 +165,7 @@ def signalled_while_starting(tmp_path: Path, signum: int, module: str, *args: ob
     env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "PYTHONUNBUFFERED": "1"}
     process = subprocess.Popen([sys.executable, "-X", "importtime", "-m", "prc3cfg", *map(str, args)],
                                env=env, text=True,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     said = []
     for line in process.stderr:
         said.append(line)

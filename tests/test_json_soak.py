@@ -40,7 +40,7 @@ def planned_messages(tmp_path, capsys, modules: list[str]) -> list[tuple[str, in
         picked = [arg for name in modules for arg in ("--module", name)]
         document = json.loads(run_cli(capsys, "plan", plant.path, "--json", *picked).out)
     return [(bus["name"], module["address"], int(step["message"][:2], 16))
-            for bus in document["buses"] for module in bus["modules"] for step in module["steps"]]  # fmt: skip
+            for bus in document["buses"] for module in bus["modules"] for step in module["steps"]]
 
 
 @pytest.mark.parametrize("seed", seeds())

@@ -196,7 +196,7 @@ def test_a_run_killed_after_its_20h_leaves_the_module_unknown_and_the_release_to
     process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "apply", str(other), "--auto-approve",
                                 "--allow-axis-release",
                                 "--trace", str(fifo)], text=True, stdout=subprocess.DEVNULL,
-                               stderr=(tmp_path / "stderr").open("w"))  # fmt: skip
+                               stderr=(tmp_path / "stderr").open("w"))
     def unblock() -> None:  # a process that ends before it opens the trace must not leave the test waiting
         process.wait()
         with fifo.open("w"):

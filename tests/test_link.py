@@ -155,7 +155,7 @@ def test_a_read_answered_as_a_write_after_an_unanswered_write_names_the_late_rep
         assert str(stopped.value).startswith("bus test, module 1: a read (50h) was answered as a write is — "
                                              "likeliest the late "
                                              "acknowledgement of a write to it (41h) that went "
-                                             "unanswered at first")  # fmt: skip
+                                             "unanswered at first")
         assert "travel the module to its reference point" in str(stopped.value)
 
 
@@ -331,7 +331,7 @@ def emulator_bus(port: str) -> SimpleNamespace:
     """A plant bus with one module, as `open_link` reads it."""
     return SimpleNamespace(name="b1", port=port, framing="crc16", line=LineSettings(), zvz=0.020,
                            turnaround=0.010,
-                           timeout=5.0, modules=[SimpleNamespace(address=1)])  # fmt: skip
+                           timeout=5.0, modules=[SimpleNamespace(address=1)])
 
 
 def test_an_emulator_at_line_speed_answers_no_sooner_than_the_line_would(tmp_path):

@@ -155,7 +155,7 @@ def drive(lines: list[tuple[str, str]], waves: int, first: int, workdir: Path) -
                 "writes": [_writes(p.parent) for p in racers],
                 "out": [(p.parent / "stdout").read_text() for p in racers],
                 "err": [(p.parent / "stderr").read_text() for p in racers],
-            })  # fmt: skip
+            })
     return results
 
 
@@ -166,7 +166,7 @@ def _servers(tmp_path_factory, host: str):
         for _ in range(LINES):
             state = tmp_path_factory.mktemp("line") / "state.json"
             command = [sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen", f"{host}:0",
-                       "--state", str(state), "--modules", "1"]  # fmt: skip
+                       "--state", str(state), "--modules", "1"]
             servers.append(subprocess.Popen(command, stdout=subprocess.PIPE, text=True))
         banners = [server.stdout.readline() for server in servers]
         assert all(b.startswith(f"listening on {host}:") for b in banners), banners
@@ -200,7 +200,7 @@ def _race(tmp_path: Path, lines: list[tuple[str, str]], rounds: int, waves: Iter
     numbers = [next(waves) for _ in range(rounds // LINES)]
     env = {**os.environ, "PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "OPENBLAS_NUM_THREADS": "1",
            "OMP_NUM_THREADS": "1",
-           **({"RACE_OWN_TMPDIR": "1"} if own_tmpdir else {})}  # fmt: skip
+           **({"RACE_OWN_TMPDIR": "1"} if own_tmpdir else {})}
     command = [sys.executable, __file__, str(tmp_path), str(len(numbers)), str(numbers[0]), json.dumps(lines)]
     driver = subprocess.run(command, env=env, capture_output=True, text=True)
     assert driver.returncode == 0, driver.stderr
@@ -257,7 +257,7 @@ def test_two_addresses_of_one_gateway_never_both_write(tmp_path, lines_on_every_
 #: its own or shares one — either way the gateway, or the lock, lets one writer through.
 SPELLINGS = ["socket://127.0.0.1:{p}", "socket://localhost:{p}", "socket://127.0.0.2:{p}",
              "socket://0.0.0.0:{p}",
-             "socket://127.0.0.3:{p}", "socket://[::ffff:127.0.0.1]:{p}"]  # fmt: skip
+             "socket://127.0.0.3:{p}", "socket://[::ffff:127.0.0.1]:{p}"]
 
 
 @pytest.mark.parametrize(("racers", "rounds"),
@@ -271,7 +271,7 @@ def test_two_to_six_applies_with_every_spelling_and_environment_never_overlap(tm
     spellings = [tuple(SPELLINGS[i].format(p=p) for i in range(racers)) for p in lines_on_every_address]
     _judge(_race(tmp_path, spellings, rounds, waves, own_tmpdir=True), rounds,
            refusal=("the line is locked by", "the gateway is busy: another client "
-                                             "holds the line"))  # fmt: skip
+                                             "holds the line"))
 
 
 if __name__ == "__main__":  # the driver: WORKDIR WAVES FIRST_WAVE LINES (JSON: [[port, port], …])

@@ -220,7 +220,7 @@ def test_the_lock_is_one_place_for_the_machine_whatever_the_environment(tmp_path
     ), tried
     folder = Path(subprocess.run([sys.executable, "-c",
                                   "from prc3cfg.shell.locks import lock_dir; print(lock_dir())"],
-                                 env=first, capture_output=True, text=True, check=True).stdout.strip())  # fmt: skip
+                                 env=first, capture_output=True, text=True, check=True).stdout.strip())
     assert folder in (Path("/run/lock/prc3cfg"), Path("/var/lock/prc3cfg"), Path("/tmp/prc3cfg-locks"))
     assert stat.S_IMODE(folder.stat().st_mode) == 0o1777
     assert stat.S_IMODE((folder / lock_path(key).name).stat().st_mode) & 0o444 == 0o444
@@ -332,7 +332,7 @@ def test_a_lock_folder_another_user_owns_is_refused(owner):
     assert str(refused.value) == (f"bus a: the lock directory {folder} belongs to {name}, who could remove "
                                   "the locks in it, "
                                   "so it is not used — an administrator removes it, or set "
-                                  "PRC3CFG_LOCK_DIR")  # fmt: skip
+                                  "PRC3CFG_LOCK_DIR")
     assert list(folder.iterdir()) == []
 
 
@@ -454,7 +454,7 @@ def test_a_lock_file_another_user_made_is_never_the_one_held(shared_locks):
     shared_locks.chmod(0o1777)
     other = subprocess.Popen(as_other(user, REMOVER_THEN_TRIER, json.dumps([KEY])), stdin=subprocess.PIPE,
                              stdout=subprocess.PIPE,
-                             text=True, cwd=ROOT)  # fmt: skip
+                             text=True, cwd=ROOT)
     try:
         assert other.stdout.readline() == "made\n"  # its lock file, made and let go of
         with line_lock((KEY,), "bus a"):
@@ -483,7 +483,7 @@ def test_a_lock_file_in_this_users_name_that_another_user_owns_is_refused():
     assert str(refused.value) == (f"bus a: the line lock {lock_path(KEY)} belongs to uid 54321, who could "
                                   "remove it while this process "
                                   "holds it, so it is not used — an administrator removes it, or set "
-                                  "PRC3CFG_LOCK_DIR")  # fmt: skip
+                                  "PRC3CFG_LOCK_DIR")
 
 
 def test_an_older_prc3cfgs_lock_file_is_seen():
@@ -548,7 +548,7 @@ def test_two_users_racing_for_a_line_never_both_hold_it(shared_locks):
     inside = shared_locks.parent / "marks" / "inside"
     racers = [subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=ROOT)
               for command in ([sys.executable, "-c", RACER, json.dumps([KEY]), str(inside)],
-                              as_other(user, RACER, json.dumps([KEY]), str(inside)))]  # fmt: skip
+                              as_other(user, RACER, json.dumps([KEY]), str(inside)))]
     rounds = []
     try:
         for _ in range(40):
@@ -580,7 +580,7 @@ def test_holder_details_are_shown_as_claims_with_the_file_owner():
     assert str(refused.value) == ("bus a: the line is locked by alice@floor (pid 1, apply since "
                                   "2026-01-01T00:00:00+00:00) as its lock "
                                   f"file says, a file of {owner} — wait for it to finish, or pass "
-                                  "--lock-timeout SECONDS to wait")  # fmt: skip
+                                  "--lock-timeout SECONDS to wait")
 
 
 # -- the identities of a line --------------------------------------------------------------

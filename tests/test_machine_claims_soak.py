@@ -73,7 +73,7 @@ def plant_one(rng: random.Random, state: Path, keys: dict[str, tuple[str, ...]],
                   "bus": rng.choice([bus, hostile(rng)]),
                   "address": rng.choice([1, 2, 3, 5, 0]), "name": hostile(rng), "time": hostile(rng),
                   "pid": rng.randint(1, 99999),
-                  "command": hostile(rng), "journal": rng.choice([None, hostile(rng)])}  # fmt: skip
+                  "command": hostile(rng), "journal": rng.choice([None, hostile(rng)])}
         path.write_text(json.dumps(record) + "\n")
     os.lchown(path, OTHER_UID, OTHER_UID)
     return path
@@ -84,7 +84,7 @@ def cli(*argv: object) -> subprocess.CompletedProcess[str]:
     it."""
     done = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, argv)], capture_output=True, text=True,
                           timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert "Traceback" not in done.stderr, done.stderr
     assert not RAW.search(done.stdout + done.stderr), (done.stdout + done.stderr)[:2000]
     return done

@@ -91,7 +91,7 @@ def test_setup_machine_makes_the_shared_folder_and_the_records_go_there(machine,
     assert setup.code == 0, setup.err
     assert setup.out.strip() == (f"{machine / 'machine'}: the records of axis releases and of what the "
                                  "modules hold, shared by the "
-                                "group dialout — each user's files their own")  # fmt: skip
+                                "group dialout — each user's files their own")
     for folder in (machine / "machine", machine / "machine" / "releases", machine / "machine" / "lines"):
         status = folder.lstat()
         assert (stat.S_IMODE(status.st_mode) == 0o3775 and status.st_uid == 0
@@ -135,7 +135,8 @@ import importlib, pkgutil, sys
 from pathlib import Path
 import prc3cfg.cli, rich.progress  # rich: imported by a command only once it shows progress
 prc3cfg.cli._register_commands()  # every command's module
-for package in ("prc3cfg.api", "prc3cfg.core", "prc3cfg.plant", "prc3cfg.shell"):  # what the commands import as they run
+# what the commands import as they run
+for package in ("prc3cfg.api", "prc3cfg.core", "prc3cfg.plant", "prc3cfg.shell"):
     for found in pkgutil.walk_packages(importlib.import_module(package).__path__, package + "."):
         importlib.import_module(found.name)
 for module in list(sys.modules.values()):
@@ -176,10 +177,10 @@ def as_user(user: pwd.struct_passwd, machine: Path, packages: Path,
     if setpriv is None:
         pytest.skip("no setpriv to run a process as another user")
     env = {**os.environ, "HOME": str(machine / "home"), "XDG_STATE_HOME": str(machine / "home" / "state"),
-           "PYTHONPATH": os.pathsep.join([str(ROOT), str(packages)])}  # fmt: skip
+           "PYTHONPATH": os.pathsep.join([str(ROOT), str(packages)])}
     return subprocess.run([setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups",
                            sys.executable, *argv],
-                          capture_output=True, text=True, env=env, cwd=machine, timeout=120)  # fmt: skip
+                          capture_output=True, text=True, env=env, cwd=machine, timeout=120)
 
 
 @ONE_COPY
@@ -217,13 +218,13 @@ def test_what_another_user_wrote_on_the_line_is_seen_and_their_record_vouches_fo
         # a release their run recorded and never told (killed after its 20h) is told to root's plan
         keys = bus_line_keys(plant.plant, plant.plant.buses[0])
         script = ("import sys; from prc3cfg.shell.pending_records import Releases; "
-                  "Releases('apply').record(tuple(sys.argv[1:]), 'booth-a', 2, 'booth-a-right')")  # fmt: skip
+                  "Releases('apply').record(tuple(sys.argv[1:]), 'booth-a', 2, 'booth-a-right')")
         recorded = as_user(user, machine, packages, "-c", script, *keys)
         assert recorded.returncode == 0, recorded.stderr
         told = run_cli(capsys, "plan", plant.path)
         assert any("bus booth-a, module 2 (booth-a-right): prc3cfg apply" in line
                    and "its axes may be released" in line
-                   for line in told.err.splitlines())  # fmt: skip
+                   for line in told.err.splitlines())
 
 
 # -- other users' records are claims: shared for reading, never trusted, never a reason to write ----------
@@ -243,7 +244,7 @@ def third_user(group: int) -> pwd.struct_passwd:
         pytest.skip(f"no useradd to make the user {THIRD}")
     made = subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", "--gid", str(group),
                            THIRD],
-                          capture_output=True, text=True)  # fmt: skip
+                          capture_output=True, text=True)
     try:
         return pwd.getpwnam(THIRD)
     except KeyError:
@@ -270,7 +271,7 @@ def run_as(user: pwd.struct_passwd, machine: Path, packages: Path, *argv: object
            "PYTHONPATH": os.pathsep.join([str(ROOT), str(packages)])}
     return subprocess.run([setpriv, f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--init-groups",
                            sys.executable, *map(str, argv)],
-                          capture_output=True, text=True, env=env, cwd=home, timeout=timeout)  # fmt: skip
+                          capture_output=True, text=True, env=env, cwd=home, timeout=timeout)
 
 
 def plant_of(user: pwd.struct_passwd, machine: Path, text: str, name: str = "plant.yaml") -> Path:
@@ -283,12 +284,12 @@ def plant_of(user: pwd.struct_passwd, machine: Path, text: str, name: str = "pla
 
 def record(user: pwd.struct_passwd, machine: Path, packages: Path, keys: tuple[str, ...], bus: str,
            address: int, name: str,
-           kind: str = "release") -> None:  # fmt: skip
+           kind: str = "release") -> None:
     """A record of `kind` (an axis release, an E12) that `user` writes through prc3cfg into the machine's
     folder."""
     script = ("import sys; from prc3cfg.shell.pending_records import Releases; "
               "Releases('apply').record(tuple(sys.argv[5:]), sys.argv[1], int(sys.argv[2]), sys.argv[3], "
-              "sys.argv[4])")  # fmt: skip
+              "sys.argv[4])")
     recorded = run_as(user, machine, packages, "-c", script, bus, address, name, kind, *keys)
     assert recorded.returncode == 0, recorded.stderr
 
@@ -326,7 +327,7 @@ def test_a_user_sees_the_newer_apply_another_user_of_the_line_made(machine, pack
             b = third_user(a.pw_gid)
             theirs = run_as(b, machine, packages, "-m", "prc3cfg", "apply", plant_of(b, machine, theirs_text),
                             "--auto-approve",
-                            "--allow-axis-release")  # fmt: skip
+                            "--allow-axis-release")
             assert theirs.returncode == 0, theirs.stderr
         again = run_as(a, machine, packages, "-m", "prc3cfg", "plan", mine, "--detailed-exitcode")
         assert again.returncode == 2, again.stdout + again.stderr
@@ -402,7 +403,7 @@ def test_a_planted_file_in_the_records_folders_neither_hangs_nor_breaks_a_comman
         def cli(*argv: str) -> subprocess.CompletedProcess[str]:
             done = subprocess.run([sys.executable, "-m", "prc3cfg", *argv], capture_output=True, text=True,
                                   timeout=120, cwd=machine,
-                                  env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+                                  env={**os.environ, "PYTHONPATH": str(ROOT)})
             assert "Traceback" not in done.stderr, done.stderr
             return done
 

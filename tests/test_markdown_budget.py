@@ -110,7 +110,7 @@ def comment_keeps_its_budget(names: list[tuple[str, str]], budget: int) -> None:
 def drift_keeps_its_budget(names: list[tuple[str, str]], budget: int) -> None:
     drifts = [Drift(bus, n % 30 + 1, name,
                     tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 1 + n % 9)))
-              for n, (bus, name) in enumerate(names)]  # fmt: skip
+              for n, (bus, name) in enumerate(names)]
     try:
         text = drift_markdown(drift_json("p", drifts, 30), max_chars=budget)
     except BudgetTooSmall as refused:

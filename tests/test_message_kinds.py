@@ -68,4 +68,4 @@ def test_a_row_gives_the_bytes_of_every_message_of_its_kind(kind: codec.ItemsKin
 def test_every_field_of_a_program_has_one_kind_of_its_own() -> None:
     assert {field: kind.message.ID for field, kind in codec.FIELD_KINDS.items()} == {
         "P": 0x40, "V": 0x41, "Vr": 0x42, "T": 0x43, "F1": 0x44, "F2": 0x45, "A": 0x46,
-    }  # fmt: skip
+    }

@@ -142,7 +142,7 @@ def test_chains_are_paths_of_jumps_and_loops_are_measured_in_production():
         5: Program(P=300, V=100, A=6), 6: Program(P=200, V=100),  # stops
         7: Program(P=300, V=100, A=9),  # jumps to a program the image does not hold
         8: Program(P=900, V=100),  # neither jumps nor is jumped to: not a chain
-    }  # fmt: skip
+    }
     motions = {m.programs: m for m in chain_motions(image(programs, S2=50, S6=1000))}
     assert set(motions) == {(1, 2, 3), (5, 6), (7,)}
     lasso, stops, unheld = motions[(1, 2, 3)], motions[(5, 6)], motions[(7,)]
@@ -156,7 +156,7 @@ def test_chains_are_paths_of_jumps_and_loops_are_measured_in_production():
 def test_the_relative_speed_does_not_change_the_stroke():
     with_vr = image({1: Program(P=2000, V=500, Vr=300, T=10, F1=1100, F2=1050, A=2),
                      2: Program(P=200, V=400, Vr=-600, T=0, F1=200, F2=100, A=1)}, S1=2500, S2=50,
-                    S6=1200)  # fmt: skip
+                    S6=1200)
     assert chain_motions(with_vr) == chain_motions(TWO_PROGRAMS)
 
 
@@ -174,7 +174,7 @@ def test_paired_chains_pair_by_first_program_and_keep_the_changed():
     (Program(P=300, V=100, F2=2000, A=1), {}, "module 1, program 1: F2 = 2000 is outside 0..1999"),
     (Program(P=300, V=100, A=1), {"S6": 0},
      "module 1: acceleration S6 = 0 — the motion cannot be worked out without one"),
-])  # fmt: skip
+])
 def test_a_damaged_read_back_is_one_line(program, system, message):
     with pytest.raises(MotionError) as raised:
         chain_motions(image({1: program}, **system))
@@ -198,7 +198,7 @@ def chain_images(draw) -> tuple[ModuleImage, tuple[int, ...], bool]:
             P=draw(st.integers(0, s1)), V=draw(st.integers(1, 600)), Vr=draw(st.integers(-600, 600)),
             T=draw(st.integers(0, 600)), F1=draw(st.integers(0, 1999)), F2=draw(st.integers(0, 1999)),
                                    A=target,
-        )  # fmt: skip
+        )
     return image(programs, **system), numbers, loop
 
 

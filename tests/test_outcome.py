@@ -40,7 +40,7 @@ INIT_2 = Step(codec.InitProgram(2), "program 2 to its defaults", False)
 
 def outcome(holds: set[str] = frozenset(), state: State = State.FAILED, problem: str | None = "lost",
             stopped: str | None = None,
-            ) -> ModuleOutcome:  # fmt: skip
+            ) -> ModuleOutcome:
     """A module's outcome whose run holds the facts named (`test_axes.FACTS`) and no other."""
     sent = (RELEASE, INIT_2) if {"sent", "acknowledged"} & holds else (INIT_2,)
     final = (CHANGED if "changed" in holds else BEFORE) if "read_back" in holds else None
@@ -48,7 +48,7 @@ def outcome(holds: set[str] = frozenset(), state: State = State.FAILED, problem:
                          if "acknowledged" in holds else (),
                    final, Course(state), exposed="exposed" in holds,
                          possibly_written="possibly_written" in holds,
-                   problem=problem, stopped=stopped)  # fmt: skip
+                   problem=problem, stopped=stopped)
 
 
 @pytest.mark.parametrize(("holds", "expected", "why"), ROWS, ids=[why for _, _, why in ROWS])
@@ -80,7 +80,7 @@ FAILURES = {
     "a stop leaves a failed module's words as they are": (State.FAILED, f"{INTERRUPTED} later",
                                                           "a record could "
                                                           "not be kept", f"{INTERRUPTED} later"),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize(("state", "problem", "stopped", "expected"), FAILURES.values(), ids=FAILURES)
@@ -99,7 +99,7 @@ def test_render_and_the_events_take_the_outcome_as_it_is() -> None:
         "✗ bus line, module 1 (m1): lost",
         "    written: nothing acknowledged",
         "    sent, not acknowledged: S6 up; program 2 to its defaults",
-        "    not read back: what the module holds is not known"))  # fmt: skip
+        "    not read back: what the module holds is not known"))
     assert render.travel_list([ended]) == (f"{render.TRAVEL}\n    line/m1 (possibly: its 10h/20h went out "
                                            "unacknowledged)")
     assert events.module("apply", ended)["released"] == "possibly"
@@ -128,7 +128,7 @@ def test_an_apply_hands_out_frozen_outcomes_each_concluded_once(tmp_path, monkey
 @pytest.mark.soak
 @given(holds=st.sets(st.sampled_from(FACTS)),
        state=st.sampled_from([State.VERIFIED, State.FAILED, State.INTERRUPTED]),
-       stopped=st.sampled_from([None, "a record could not be kept"]))  # fmt: skip
+       stopped=st.sampled_from([None, "a record could not be kept"]))
 def test_every_outcome_says_the_same_of_its_axes_everywhere(holds: set[str], state: State,
                                                             stopped: str | None) -> None:
     """Over runs of every combination of facts and ends: the outcome's `released` is `axes.released`'s of its
@@ -174,13 +174,13 @@ def test_an_apply_whose_exchanges_are_lost_says_the_same_of_each_module_in_its_j
         return subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(plant.path), "--auto-approve",
                                "--allow-axis-release",
                                "--retries", "1", *json], capture_output=True, text=True,
-                              timeout=120)  # fmt: skip
+                              timeout=120)
 
     with emulated_plant(tmp_path, lossy={"booth-a": rule, "booth-b": rule}) as plant:
         assert apply().returncode == 0
         plant.path.write_text(plant.path.read_text().replace("upper_reversing_point: 1.8\n",
                                                              "upper_reversing_point: 1.79\n")
-                              .replace("speed: 0.35\n", "speed: 0.34\n"))  # fmt: skip
+                              .replace("speed: 0.35\n", "speed: 0.34\n"))
         armed = True
         done = apply("--json")
         names = {(bus.name, m.address): m.name for bus, m in plant.plant.modules()}
@@ -188,7 +188,7 @@ def test_an_apply_whose_exchanges_are_lost_says_the_same_of_each_module_in_its_j
     said = [json.loads(line) for line in done.stdout.splitlines()]
     modules = {(e["bus"], e["address"]): e for e in said if e["event"] == "module"}
     journal = [json.loads(line) for path in sorted((tmp_path / ".prc3cfg" / "journal").glob("*.jsonl"))[-1:]
-               for line in path.read_text().splitlines()]  # fmt: skip
+               for line in path.read_text().splitlines()]
     results = {(e["bus"], e["address"]): e for e in journal if e["event"] == "result"}
     assert modules and modules.keys() <= results.keys()
     for key, module in modules.items():
@@ -198,4 +198,4 @@ def test_an_apply_whose_exchanges_are_lost_says_the_same_of_each_module_in_its_j
     travel = next((e for e in said if e["event"] == "travel"), {"modules": []})
     assert {(m["bus"], m["name"]) for m in travel["modules"]} == {(bus, names[bus, a])
                                                                   for (bus, a), r in results.items()
-                                                                     if r["released_axes"] != "no"}  # fmt: skip
+                                                                     if r["released_axes"] != "no"}

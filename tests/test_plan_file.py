@@ -267,7 +267,7 @@ def another(value: Any) -> st.SearchStrategy[Any]:
     """A value that is not `value`: of its kind, or of another."""
     kind = {bool: st.just(not value), int: st.integers(-(10**6), 10**6),
             float: st.floats(-1e6, 1e6, allow_nan=False),
-            str: st.text(max_size=12)}.get(type(value), st.nothing())  # fmt: skip
+            str: st.text(max_size=12)}.get(type(value), st.nothing())
     return st.one_of(kind, st.sampled_from(OTHERS)).filter(lambda other: not same_value(other, value))
 
 
@@ -552,7 +552,7 @@ def shown_and_applied(targeted: Targeted, capsys: pytest.CaptureFixture, data: s
     with as_found(targeted) as before:
         for args in (["show", path], ["show", path, "--markdown"],
                      ["apply", targeted.emulated.path, "--plan", path, "--auto-approve",
-                      "--allow-axis-release"]):  # fmt: skip
+                      "--allow-axis-release"]):
             done = run_cli(capsys, *args)
             assert done.code in (0, 1) and raw(done.out + done.err) == [], (where, args, done)
             assert done.code == 0 or len(done.problems) == 1, (where, args, done.err)
@@ -591,7 +591,7 @@ def test_many_mutated_plan_files_are_shown_escaped_and_write_only_where_their_wo
 #: How an earlier prc3cfg might have worded the review: each replacement one sentence of it.
 EARLIER_WORDS = {" → ": " to ",
                  "releases the axes: travel to reference point required after apply": "releases the axes — a "
-                 "reference travel is needed after the apply", "write ": "send "}  # fmt: skip
+                 "reference travel is needed after the apply", "write ": "send "}
 
 
 def review_digest(module: dict[str, Any]) -> str:
@@ -657,7 +657,7 @@ def test_an_edited_review_or_a_digest_another_is_refused_naming_where(made, tmp_
     for edited in (changed(document, (*place, "changes", "fields", 0, "text"),
                            "speed 0.050 m/s → 0.050 m/s (unchanged)"),
                    changed(document, (*place, "steps", 0, "summary"), "read the module's name (no change)"),
-                   changed(document, (*place, "review_sha256"), "0" * 64)):  # fmt: skip
+                   changed(document, (*place, "review_sha256"), "0" * 64)):
         refused = refusal(made, tmp_path, edited)
         assert (
             refused is not None and named in refused and "changed after the plan was made" in refused
@@ -759,18 +759,18 @@ def review_mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[
                                     "steps": module["steps"]})
                  if p and is_value(at({"changes": module["changes"], "warning": module["warning"],
                                        "steps": module["steps"]}, p))
-                 and (p[0] != "steps" or p[-1] == "summary")]  # fmt: skip
+                 and (p[0] != "steps" or p[-1] == "summary")]
         where = data.draw(st.sampled_from(words))
         at(module, where[:-1])[where[-1]] = data.draw(st.sampled_from([SAFETY_OFFICER, HOSTILE, "",
                                                                        "speed 0 → 9"]).filter(
-            lambda text: text != at(module, where)))  # fmt: skip
+            lambda text: text != at(module, where)))
         verdict = "proved" if again else "refused"
     else:  # a step, a figure, a name, a hash: anything else but where the plant file was
         fields = by_field(copied, is_value)
         kept = {ANYWHERE, "buses[].modules[].review_sha256", "left_alone", "read.not_as_verified"}
         chosen = data.draw(st.sampled_from(sorted(f for f in fields if f not in kept
                                                   and not f.endswith("summary")
-                                                  and ".changes" not in f and not f.endswith(".warning"))))  # fmt: skip
+                                                  and ".changes" not in f and not f.endswith(".warning"))))
         spot = data.draw(st.sampled_from(fields[chosen]))
         at(copied, spot[:-1])[spot[-1]] = other(at(copied, spot))
         verdict = "refused"
@@ -805,7 +805,7 @@ def test_many_plan_files_with_review_steps_or_figures_mutated_get_their_verdicts
 @settings(max_examples=16, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
-def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_process_of_their_own_as_their_verdicts_say(
+def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_process_as_their_verdicts_say(
     targeted, data
 ):
     """`prc3cfg apply --plan` in a process of its own, on the emulators: a review worded otherwise with its
@@ -818,7 +818,7 @@ def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_proces
         done = subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(targeted.emulated.path),
                                "--plan", str(path), "--auto-approve",
                                "--allow-axis-release"], capture_output=True, text=True,
-                              timeout=300)  # fmt: skip
+                              timeout=300)
         problems = [line for line in done.stderr.splitlines() if not line.startswith("note: ")]
         if verdict == "proved":
             assert done.returncode == 0 and targeted.emulated.matches_plant(), done.stderr

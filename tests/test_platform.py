@@ -34,8 +34,10 @@ SYSTEM_MODULES = {"fcntl", "termios", "tty", "pty", "grp", "pwd", "resource", "m
 #: (pydantic, typer, serial, …) is imported first, as this system has it. Not Windows: a check that
 #: nothing at import time reaches for what Windows lacks.
 AS_ON_WINDOWS = """
-import ctypes, getpass, importlib, importlib.abc, os, select, selectors, signal, socket, subprocess, sys, sysconfig, tempfile, types
-import zoneinfo, pydantic, pydantic.main, pydantic.type_adapter, rich, rich.console, rich.live, rich.progress, typer, yaml
+import ctypes, getpass, importlib, importlib.abc, os, select, selectors, signal, socket, subprocess, sys
+import sysconfig, tempfile, types, zoneinfo
+import pydantic, pydantic.main, pydantic.type_adapter, rich, rich.console, rich.live, rich.progress
+import typer, yaml
 import serial, serial.rfc2217, serial.tools.list_ports, serial.urlhandler.protocol_socket
 from pathlib import Path
 sysconfig.get_config_vars()
@@ -68,13 +70,15 @@ for file in sorted(root.rglob("*.py")):
     try:
         importlib.import_module(name)
     except ModuleNotFoundError as error:
-        if error.name not in WINDOWS_ONLY:  # the standard library's own Windows modules: not here to pretend with
+        # the standard library's own Windows modules: not here to pretend with
+        if error.name not in WINDOWS_ONLY:
             failed.append(f"{name}: {type(error).__name__}: {error}")
     except Exception as error:
         failed.append(f"{name}: {type(error).__name__}: {error}")
 print("\\n".join(failed) or "imported", flush=True)
 from prc3cfg.shell import locks
-with locks.line_lock(locks.line_keys("COM3"), "bus a") as (path,):  # no owners to check, one file for every user
+# no owners to check, one file for every user
+with locks.line_lock(locks.line_keys("COM3"), "bus a") as (path,):
     print("locked", path.name, flush=True)
 sys.argv = ["prc3cfg", "validate", sys.argv[1]]
 from prc3cfg.cli import main
@@ -232,7 +236,7 @@ def test_a_shared_folder_is_made_sticky_whatever_the_umask_and_never_through_a_l
 COM_PORTS = [("COM3", "COM3"), ("COM10", "COM10"), ("com10", "COM10"), (r"\\.\COM10", "COM10"),
              (r"\\.\com255", "COM255"),
              ("COM0", None), ("COM", None), ("/dev/ttyUSB0", None), ("socket://localhost:4001", None),
-             ("COM3:", None)]  # fmt: skip
+             ("COM3:", None)]
 
 
 @pytest.mark.parametrize(("port", "name"), COM_PORTS)
@@ -399,7 +403,7 @@ def test_text_files_are_opened_through_the_seam():
     ("win32", ["prc3cfg", "doctor", "--port", "COM10"], "prc3cfg doctor --port COM10"),
     # the closing quote not escaped
     ("win32", ["prc3cfg", "restore", "D:\\a&b (1)\\"], 'prc3cfg restore "D:\\a&b (1)\\\\"'),
-])  # fmt: skip
+])
 def test_a_command_printed_for_a_person_is_quoted_for_the_system_s_shell(monkeypatch, system, words, command):
     monkeypatch.setattr(sys, "platform", system)
     assert platform.command_line(*words) == command
@@ -410,7 +414,7 @@ def test_a_command_printed_for_a_person_is_quoted_for_the_system_s_shell(monkeyp
     ("linux", "/opt/my python/bin/python3", "'/opt/my python/bin/python3'"),
     ("win32", r"C:\Python311\python.exe", r"C:\Python311\python.exe"),
     ("win32", r"C:\Program Files\Python311\python.exe", r'"C:\Program Files\Python311\python.exe"'),
-])  # fmt: skip
+])
 def test_this_python_is_a_command_to_paste_into_the_system_s_shell(monkeypatch, system, executable, command):
     """What the plot hint names (`python -m pip install matplotlib` into the Python that runs prc3cfg)."""
     monkeypatch.setattr(sys, "platform", system)

@@ -36,7 +36,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: The known chain with program 1 lower and faster, and a new stopping chain 5 → 6.
 CHANGED = TWO_PROGRAMS.with_programs({1: Program(P=1800, V=600, T=5, F1=1100, F2=1050, A=2),
                                       5: Program(P=1000, V=300, T=5, F1=1010, A=6),
-                                      6: Program(P=400, V=300, T=20)})  # fmt: skip
+                                      6: Program(P=400, V=300, T=20)})
 #: A chain of six programs, looping: strokes up to 1.6, 1.8, 2.0 m and down to 0.2, 0.4, 0.6 m.
 SIX_PROGRAMS = image(
     {n: Program(P=1500 + 100 * n if n % 2 else 100 * n, V=300 + 50 * n, T=5, F1=1050, F2=20, A=n % 6 + 1)
@@ -120,7 +120,7 @@ def test_without_matplotlib_plotting_says_to_install_matplotlib_into_the_python_
         assert str(raised.value) == ("plotting needs matplotlib, which the Python running prc3cfg does "
                                      "not have — "
                                      "install it there: '/opt/python 3/bin/python3' -m pip install "
-                                     "matplotlib")  # fmt: skip
+                                     "matplotlib")
 
 
 def hinted_packages(hint: str) -> tuple[list[str], list[Requirement]]:
@@ -188,7 +188,7 @@ def open_in_chromium(svg: Path, out: Path) -> tuple[Path, str, list[str]]:
          f"--user-data-dir={out / 'chromium-profile'}", "--enable-logging=stderr", "--v=0",
          "--window-size=1000,800", f"--screenshot={screenshot}", "--dump-dom", svg.as_uri()],
         capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+    )
     assert done.returncode == 0, done.stderr
     return screenshot, done.stdout, [line for line in done.stderr.splitlines() if ":CONSOLE" in line]
 
@@ -241,10 +241,10 @@ def test_show_plot_draws_the_plant_files_chains_and_overlays_a_read_back(matplot
     (["--module", "booth-a-top", "--plot", "missing/top.svg"],
      "error: --plot missing/top.svg: the folder missing does not exist — create it, or name a file in an "
      "existing folder"),
-])  # fmt: skip
+])
 def test_show_plot_mistakes_are_one_line_before_any_work(args, message, tmp_path):
     done = subprocess.run([sys.executable, "-m", "prc3cfg", "show", str(DEMO), *args],
-                          capture_output=True, text=True, cwd=tmp_path)  # fmt: skip
+                          capture_output=True, text=True, cwd=tmp_path)
     assert (done.returncode, done.stderr, done.stdout) == (1, message + "\n", "")
 
 

@@ -211,7 +211,7 @@ def test_a_change_to_the_policy_shows_in_the_plan(plant, capsys, monkeypatch):
     ("format: prc3cfg-policy/1\nwindows: [{name: w, kind: deny, cron: '0 6 * * *', duration: 1h, time_zone: "
      "x, time_zone: y}]\n",
      "rules.yaml:2:"),
-])  # fmt: skip
+])
 def test_a_malformed_policy_file_is_one_line_naming_file_line_and_column(text, expected):
     with pytest.raises(PlantError) as refused:
         parse_policy("rules.yaml", text.encode())
@@ -265,7 +265,7 @@ BERLIN, NEW_YORK = "Europe/Berlin", "America/New_York"
     # Monday 09:00 EST
     (NEW_YORK, "0 9 * * 1-5", 8, "2026-11-02T14:00:00+00:00", "2026-11-02T14:00:00+00:00"),
     (NEW_YORK, "0 9 * * 1-5", 8, "2026-11-01T14:00:00+00:00", None),  # Sunday
-])  # fmt: skip
+])
 def test_a_window_opens_at_its_local_time_across_daylight_saving_changes(zone, cron, hours, now, open_since):
     window = _window(cron, timedelta(hours=hours), zone)
     found = policy.open_since(window, datetime.fromisoformat(now).astimezone(UTC))
@@ -276,7 +276,7 @@ def test_deny_wins_over_allow_and_outside_every_allow_window_refuses():
     allow = _window("0 6 * * *", timedelta(hours=12), BERLIN, "allow")
     deny = policy.Window("freeze", "hard", "deny", policy.parse_cron("0 12 * * *"), timedelta(hours=1),
                          ZoneInfo(BERLIN), ("booth-*",),
-                         ("windows", 1))  # fmt: skip
+                         ("windows", 1))
     rules = policy.Policy((), (allow, deny))
     noon = datetime(2026, 11, 30, 11, 30, tzinfo=UTC)  # 12:30 in Berlin: both open
     assert [(f.rule, f.level) for f in policy.findings([], ["booth-a"], rules, noon)] == [("freeze", "hard")]
@@ -289,7 +289,7 @@ def test_deny_wins_over_allow_and_outside_every_allow_window_refuses():
 @pytest.mark.parametrize(("text", "why"), [
     ("* * * *", "5 fields"), ("60 * * * *", "0..59"), ("* * * * 8", "0..7"), ("5-1 * * * *", "ranges"),
     ("*/0 * * * *", "steps"), ("a * * * *", "not *"), ("5/2 * * * *", "steps"),
-])  # fmt: skip
+])
 def test_a_cron_expression_outside_five_numeric_fields_is_refused(text, why):
     with pytest.raises(ValueError, match=re.escape(why)):
         policy.parse_cron(text)
@@ -332,7 +332,7 @@ def windows_and_instants(draw):
     weekdays = draw(st.one_of(st.none(), st.sets(st.integers(0, 6), min_size=1, max_size=3)))
     text = " ".join([",".join(map(str, sorted(minutes))), ",".join(map(str, sorted(hours))),
                      "*" if days is None else ",".join(map(str, sorted(days))), "*",
-                     "*" if weekdays is None else ",".join(map(str, sorted(weekdays)))])  # fmt: skip
+                     "*" if weekdays is None else ",".join(map(str, sorted(weekdays)))])
     duration = timedelta(minutes=draw(st.integers(1, 12 * 60)))
     changes = _changes(ZoneInfo(zone))
     base = draw(st.sampled_from(changes)) if changes and draw(st.booleans()) else datetime(2026, 1, 1,
@@ -443,7 +443,7 @@ def test_validate_annotates_envelope_findings_and_policy_file_problems_for_a_pul
     rules.write_text(SPEEDS.format(level="hard")
                      + "  - {name: dwell, level: advisory, limits: {dwell: {max: 0.2}}}\n"
                      + SHIFT.split("\n", 1)[1]
-                     .replace('"0 6 * * 1-5"', '"* * * * *"'))  # fmt: skip  # a window open whenever: validate judges no moment
+                     .replace('"0 6 * * 1-5"', '"* * * * *"'))  # open whenever: validate judges no moment
     annotated = run_cli(capsys, "validate", source, "--format", "github")
     assert annotated.code == 1
     kinds = {(line.split(" ", 1)[0], "hard" in line) for line in annotated.out.splitlines()}

@@ -37,10 +37,10 @@ AT = "4:11"
 
 HANDLER = ("uses pyserial's {scheme}:// handler, which a plant file may not name — write a device path, "
            "socket://HOST:PORT, "
-           "rfc2217://HOST:PORT or emulator://NAME (trace a line with prc3cfg's --trace)")  # fmt: skip
+           "rfc2217://HOST:PORT or emulator://NAME (trace a line with prc3cfg's --trace)")
 NOT_DEVICE = ("is not a serial device's full path — write the device's path under /dev (/dev/ttyUSB0, "
               "/dev/serial/by-id/…), COMn or \\\\.\\COMn, socket://HOST:PORT, rfc2217://HOST:PORT or "
-              "emulator://NAME")  # fmt: skip
+              "emulator://NAME")
 NOT_A_LINE = ("is this machine's own terminal, console or files, not a serial line — write the path of the "
               "line's adapter, e.g. /dev/ttyUSB0")
 
@@ -127,7 +127,7 @@ def test_a_plant_file_naming_spy_leaves_the_file_it_names_untouched(tmp_path):
     for command in (["plan", path.name], ["read", path.name], ["apply", path.name, "--auto-approve"]):
         ran = subprocess.run([sys.executable, "-m", "prc3cfg", *command], cwd=folder, env=env,
                              capture_output=True, text=True,
-                             timeout=60)  # fmt: skip
+                             timeout=60)
         assert ran.returncode == 1 and ran.stdout == "", ran
         (line,) = ran.stderr.splitlines()
         assert line.startswith(f"error: {path.name}:{AT}: port 'spy://") and "handler" in line, line
@@ -137,7 +137,7 @@ def test_a_plant_file_naming_spy_leaves_the_file_it_names_untouched(tmp_path):
 
 @pytest.mark.parametrize("port", ["spy:///dev/null?file=victim.txt", "alt:///dev/ptmx?class=PosixPollSerial",
                                   "loop://",
-                                  "ttyUSB0", "/dev/tty"])  # fmt: skip
+                                  "ttyUSB0", "/dev/tty"])
 def test_open_port_refuses_what_a_plant_file_may_not_name_before_pyserial_sees_it(tmp_path, monkeypatch,
                                                                                   port):
     folder = tmp_path / "cwd"
@@ -223,7 +223,7 @@ def test_an_emulators_name_and_query_select_no_path_a_plant_file_chooses(tmp_pat
 #: The refusal of a bus whose port the machine does not list, after "bus NAME: port PORT".
 NOT_LISTED = (" is not a line of this machine — PRC3CFG_PORTS, the machine's own list, names {listed}: name "
               "one of those in "
-              "the plant file, or add the port to PRC3CFG_PORTS in the machine's configuration")  # fmt: skip
+              "the plant file, or add the port to PRC3CFG_PORTS in the machine's configuration")
 
 
 def test_where_the_machine_lists_its_ports_a_plant_file_opens_only_those(plant, capsys, monkeypatch):
@@ -255,7 +255,7 @@ def test_a_machine_list_with_a_control_character_is_one_line(tmp_path, capsys, m
     assert (result.code,
             result.err) == (1, "error: PRC3CFG_PORTS: port '/dev/ttyUSB0\\x1b[2K' holds a control "
                                "character — write "
-                                            "the device path or URL as plain text\n")  # fmt: skip
+                                            "the device path or URL as plain text\n")
 
 
 def test_a_pull_requests_plant_file_cannot_make_the_runner_open_another_port(plant, tmp_path):
@@ -271,8 +271,9 @@ def test_a_pull_requests_plant_file_cannot_make_the_runner_open_another_port(pla
         env = os.environ | {"PYTHONPATH": str(ROOT)}
         # and without the list, as a control
         for listed, connected in ((";".join(ports.values()), False), (None, True)):
-            ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", pull_request, "--detailed-exitcode"], capture_output=True,
-                                 text=True, timeout=120, env=env | ({"PRC3CFG_PORTS": listed} if listed else {}))  # fmt: skip
+            planning = [sys.executable, "-m", "prc3cfg", "plan", pull_request, "--detailed-exitcode"]
+            ran = subprocess.run(planning, capture_output=True, text=True, timeout=120,
+                                 env=env | ({"PRC3CFG_PORTS": listed} if listed else {}))
             assert ran.returncode == 1, ran
             if not connected:
                 assert ran.stderr == (f"error: {pull_request}: bus booth-b: port "
@@ -289,7 +290,7 @@ def test_a_pull_requests_plant_file_cannot_make_the_runner_open_another_port(pla
 #: others.
 SCHEMES = [*sorted(path.stem.removeprefix("protocol_")
                    for path in Path(serial.urlhandler.__file__).parent.glob("protocol_*.py")),
-           "emulator", "EMULATOR", "Socket", "file", "http", "xyz", ""]  # fmt: skip
+           "emulator", "EMULATOR", "Socket", "file", "http", "xyz", ""]
 PORTS = st.builds(
     "{}{}{}{}".format,
     st.sampled_from([f"{s}://" for s in SCHEMES] + ["", "/dev/", "/tmp/", "COM", "\\\\.\\COM", "./"]),
@@ -362,7 +363,7 @@ def test_plan_across_a_real_process_refuses_every_handler_and_writes_nothing(tmp
     path = plant_with(folder, f"{scheme}:///dev/ptmx?file=victim.txt&class=PosixPollSerial&logging=debug")
     ran = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", path.name], cwd=folder,
                          env=os.environ | {"PYTHONPATH": str(ROOT)},
-                         capture_output=True, text=True, timeout=60)  # fmt: skip
+                         capture_output=True, text=True, timeout=60)
     (line,) = ran.stderr.splitlines()
     assert (ran.returncode, ran.stdout) == (1, "") and line.startswith(f"error: {path.name}:{AT}: port "), ran
     assert sorted(p.name for p in folder.iterdir()) == ["plant.yaml"]

@@ -187,7 +187,7 @@ def test_a_journal_of_one_plant_naming_the_other_plants_snapshot_removes_nothing
         kept = line.files()
         for args in (("--keep", "1"), ("--keep", "1", "--json")):  # the console script, as its own process
             done = subprocess.run([sys.executable, "-m", "prc3cfg", "records", "prune", str(line.p), *args],
-                                  capture_output=True, text=True, timeout=60)  # fmt: skip
+                                  capture_output=True, text=True, timeout=60)
             refused(Result(done.returncode, done.stdout, done.stderr), first)
             assert done.stdout == ""
         assert theirs.exists() and line.files() == kept
@@ -256,7 +256,7 @@ def test_a_header_time_prc3cfg_did_not_write_is_one_line(tmp_path, capsys, value
 
 
 @pytest.mark.parametrize("bound", [("--older-than", "1e9"), ("--older-than", "inf"), ("--older-than", "nan"),
-                                   ("--older-than", "-1"), ("--older-than", "1e400"), ("--keep", "-1")])  # fmt: skip
+                                   ("--older-than", "-1"), ("--older-than", "1e400"), ("--keep", "-1")])
 def test_a_bad_bound_is_one_line(plant, capsys, bound):
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     result = run_cli(capsys, "records", "prune", plant.path, *bound)
@@ -284,7 +284,7 @@ def test_records_of_a_path_that_is_no_plant_file_say_so_in_one_line(tmp_path, ca
                  tmp_path / "notes.txt"):
         for args in (("list", path), ("list", path, "--json"), ("verify", path),
                      ("prune", path, "--keep", "1"),
-                     ("prune", path, "--keep", "1", "--json")):  # fmt: skip
+                     ("prune", path, "--keep", "1", "--json")):
             done = run_cli(capsys, "records", *args)
             said = done.err.strip().splitlines()
             assert done.code == 1 and done.out == "" and len(said) == 1, (args, done.out, done.err)
@@ -294,7 +294,7 @@ def test_records_of_a_path_that_is_no_plant_file_say_so_in_one_line(tmp_path, ca
 def test_a_typo_listed_as_json_by_the_console_script_is_an_error_not_an_empty_list(tmp_path):
     done = subprocess.run([sys.executable, "-m", "prc3cfg", "records", "list", str(tmp_path / "plnat.yaml"),
                            "--json"],
-                          capture_output=True, text=True, timeout=60)  # fmt: skip
+                          capture_output=True, text=True, timeout=60)
     assert done.returncode == 1 and done.stdout == "", (done.stdout, done.stderr)
     assert (done.stderr.startswith(f"error: {tmp_path / 'plnat.yaml'}: no such file")
             and "check the path" in done.stderr)
@@ -326,7 +326,7 @@ def test_verify_of_several_paths_names_the_one_without_records(plant, capsys, tm
 #: Header times prc3cfg never writes.
 GARBAGE_TIMES = ["yesterday", "2026-01-01T00:00", 1700000000, None, "", "9999-12-31T23:59:59+00:00",
                  "2000-01-01T00:00:00+00:00",
-                 [], {"t": 1}, "2026-13-45T99:99:99Z", "1e400", -1]  # fmt: skip
+                 [], {"t": 1}, "2026-13-45T99:99:99Z", "1e400", -1]
 
 
 def edit(line: Line, rng: random.Random) -> str:

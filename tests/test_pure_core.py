@@ -78,7 +78,8 @@ def test_the_core_never_locks_nor_waits():
              for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
              if isinstance(node, ast.Import | ast.ImportFrom)
              for alias in node.names
-             if ((alias.name if isinstance(node, ast.Import) else node.module or "").split(".")[0] in CORE_NEVER)}  # fmt: skip
+             if ((alias.name if isinstance(node, ast.Import) else node.module or "").split(".")[0]
+                 in CORE_NEVER)}
     assert not found, sorted(found)
 
 
@@ -103,7 +104,7 @@ CLI_MAY_IMPORT = (
     # the terminal: Ctrl-C, output files
     "prc3cfg.shell.cancel", "prc3cfg.shell.files.write_atomically", "prc3cfg.shell.platform.open_text",
     "prc3cfg.shell.platform.command_line",  # a command printed for a person, quoted for their shell
-)  # fmt: skip
+)
 
 
 def test_the_command_line_reaches_the_workflow_only_through_the_api():
@@ -113,7 +114,7 @@ def test_the_command_line_reaches_the_workflow_only_through_the_api():
     assert not wrong, sorted(wrong)
     assert not allowed("prc3cfg.plant.adopt.adopt", CLI_MAY_IMPORT)  # the check can fail
     inside = {f"{path.relative_to(ROOT)} imports {name}" for path in (PACKAGE / "cli").rglob("*.py")
-              for name in prc3cfg_imports(path) if name.startswith("prc3cfg.api._")}  # fmt: skip
+              for name in prc3cfg_imports(path) if name.startswith("prc3cfg.api._")}
     assert not inside, sorted(inside)  # the API's own modules are its inside: the CLI calls `prc3cfg.api`
 
 
@@ -260,7 +261,7 @@ def api_names_used(path: Path) -> set[str]:
     }
     used |= {a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
              and node.module == "prc3cfg.api" for a in node.names}
-    return used  # fmt: skip
+    return used
 
 
 def test_the_command_line_calls_only_what_the_api_exports():
@@ -296,7 +297,7 @@ def test_every_module_of_the_package_imports():
     `from __future__ import annotations`) that names a type imported only for the type checker fails here, not
     at the first run of its command."""
     modules = sorted(".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
-                     for path in (ROOT / "prc3cfg").rglob("*.py"))  # fmt: skip
+                     for path in (ROOT / "prc3cfg").rglob("*.py"))
     script = "import importlib, sys\nfor name in sys.argv[1:]:\n    importlib.import_module(name)\n"
     done = subprocess.run([sys.executable, "-c", script, *modules], capture_output=True, text=True, cwd=ROOT)
     assert done.returncode == 0, done.stderr

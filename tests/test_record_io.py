@@ -49,7 +49,7 @@ def counted(tmp_path: Path, *args: object) -> tuple[subprocess.CompletedProcess,
         done = subprocess.run([sys.executable, "-c", COUNTING, str(sink.fileno()), *map(str, args)],
                               pass_fds=(sink.fileno(),),
                               capture_output=True, text=True, env=os.environ | {"COLUMNS": "200"},
-                              check=False)  # fmt: skip
+                              check=False)
     reads, writes, resolved = Counter(), Counter(), Counter()
     for line in log.read_text().splitlines():
         event = json.loads(line)
@@ -110,7 +110,7 @@ def test_a_plan_waiting_for_the_line_reads_the_record_an_apply_holding_it_left(t
             waiting = subprocess.Popen(prc3cfg("plan", plant.path, "--detailed-exitcode", "--lock-timeout",
                                                "600"),
                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                       env=os.environ | {"COLUMNS": "200"})  # fmt: skip
+                                       env=os.environ | {"COLUMNS": "200"})
             assert waiting.stderr is not None
             told = waiting.stderr.readline()
             assert "waiting for the line lock held by" in told, told

@@ -235,12 +235,8 @@ def test_prune_keeps_the_newest_snapshot_of_each_line_and_what_a_pending_release
     taken = snapshots(tmp_path)
     assert len(runs) == 5 and len(taken) == 3
 
-    assert (
-        json.loads(run_cli(capsys, "records", "prune", plant.path, "--older-than", "1", "--json").out)[
-            "removed"
-        ]
-        == []
-    )
+    pruned = run_cli(capsys, "records", "prune", plant.path, "--older-than", "1", "--json")
+    assert json.loads(pruned.out)["removed"] == []
     # an untold axis release recorded by the first run (as an apply killed after its 10h leaves it)
     bus = plant.plant.buses[0]
     pending_records.Releases("apply", runs[0]).record(line_keys(bus.port), bus.name, 1, "booth-a-left")

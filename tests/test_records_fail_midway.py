@@ -82,7 +82,7 @@ def limited_apply(path: Path, size: int) -> subprocess.CompletedProcess[str]:
 
     return subprocess.run([sys.executable, "-m", "prc3cfg", "apply", str(path), "--auto-approve",
                            "--allow-axis-release"],
-                          preexec_fn=limit, capture_output=True, text=True, timeout=120)  # fmt: skip
+                          preexec_fn=limit, capture_output=True, text=True, timeout=120)
 
 
 @contextlib.contextmanager

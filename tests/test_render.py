@@ -114,7 +114,7 @@ def test_each_change_carries_the_action_whose_mark_the_plan_shows() -> None:
     assert type(changes_json(change)["symbols"]["1"]) is str
     assert header_line("a", 1, "m", 0, 0, 0.0, False) == f"{Action.NO_OP} bus a, module 1 (m): no changes"
     for action, meaning in ((Action.UPDATE, "changed"), (Action.CREATE, "set up from factory defaults"),
-                            (Action.DELETE, "put back to factory defaults")):  # fmt: skip
+                            (Action.DELETE, "put back to factory defaults")):
         assert f" {action} {meaning}" in LEGEND
 
 
@@ -146,10 +146,10 @@ def full_line_plan(tmp_path):
     for address in range(1, 31):
         programs = {n: {"position": round(0.3 + (n * 7 + address) % 150 / 100, 3),
                         "speed": round(0.05 + (n + address) % 40 / 100, 3)}
-                    for n in range(1, 65)}  # fmt: skip
+                    for n in range(1, 65)}
         name = {1: "left|right", 2: "<b>bold</b>", 3: "a & b"}.get(address, f"m{address}")
         modules.append({"address": address, "name": name, "unmanaged_programs": "reset",
-                        "system": {"upper_reversing_point": 2.0, "max_speed": 0.5}, "programs": programs})  # fmt: skip
+                        "system": {"upper_reversing_point": 2.0, "max_speed": 0.5}, "programs": programs})
     plant_file = tmp_path / "plant.yaml"
     plant_file.write_text(yaml.safe_dump({"plant": "full|line",
                                           "buses": [{"name": "line", "port": "socket://127.0.0.1:9",
@@ -225,7 +225,7 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
             f"{change.plan.bus_time:.1f} s "
             f"(bus time {plan.bus_time:.3f} s, naive download {plan.naive_bus_time:.3f} s), verifying "
             f"{verifying:.1f} s; "
-            "⚠ 2 modules release the axes")  # fmt: skip
+            "⚠ 2 modules release the axes")
     assert human(plan).splitlines()[-2:] == [f"Plan: 2 of 2 modules change, {plan.message_count} "
                                              f"messages, {said}", LEGEND]
     assert f"\n\nPlan: 2 of 2 modules change, {plan.message_count} messages, {said}\n" in markdown(plan)
@@ -243,14 +243,16 @@ def test_show_says_each_value_in_both_units_with_its_source_from_plain_values() 
     factory = ModuleImage.factory(4)
     program = Program(P=1750, V=350, F1=1020, A=0)
     sources = {"unmanaged_programs": "default", "chains": "module"} | {key: "default" for key in (
-        "upper_reversing_point", "reference_point", "increment_pulses", "max_speed", "min_speed", "acceleration",
-        "circuit_gain", "alarm", "sync_increment", "sync_circuit_gain", "sync_conveyor_sequence")}  # fmt: skip
+        "upper_reversing_point", "reference_point", "increment_pulses", "max_speed", "min_speed",
+        "acceleration", "circuit_gain", "alarm", "sync_increment", "sync_circuit_gain",
+        "sync_conveyor_sequence")}
     shown = render.shown_module(render.Settings(
         name="left", bus="booth-a", address=4, profiles=(), unmanaged_programs="keep", system=factory.system,
         programs={3: program}, sources=sources | {"upper_reversing_point": "profile fast"},
-        program_sources={3: dict.fromkeys(("position", "speed", "relative_speed", "dwell", "f1", "f2", "jump"), "module")},
+        program_sources={3: dict.fromkeys(
+            ("position", "speed", "relative_speed", "dwell", "f1", "f2", "jump"), "module")},
         chains=(((3, 5), True),),
-    ))  # fmt: skip
+    ))
     assert shown.heading == ("module ", "left", " — bus booth-a, address 4, profiles: none")
     unmanaged, system, programs, chains = shown.blocks
     assert unmanaged == "unmanaged_programs: keep (default)"

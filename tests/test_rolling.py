@@ -104,13 +104,13 @@ def test_the_oldest_windows_of_each_line_roll_table():
     targets, why = what_to_read.with_rolling([target("a", 1, (2,))], {}, {("a", 1): known_at(T1, held=3)})
     assert (targets == [replace(target("a", 1, (2,)), programs=(1, 2, 3))]
             and why == {("a", 1): what_to_read.rolling(
-        [target("a", 1, (2,))], {("a", 1): known_at(T1, held=3)})[("a", 1)][1]})  # fmt: skip
+        [target("a", 1, (2,))], {("a", 1): known_at(T1, held=3)})[("a", 1)][1]})
     targets, why = what_to_read.with_rolling([target("a", 1, (), (1, 2, 3, 40))], {},
                                              {("a", 1): known_at(T1, held=64)})
     assert targets[0].programs == first_half and why == {}  # program 40 is still to roll: not read in full
 
 
-def test_the_record_keeps_when_each_program_was_read_and_its_since_advances_once_every_old_value_is_read_again():
+def test_the_record_keeps_when_each_program_was_read_and_its_since_advances_once_each_old_value_is_read():
     """`merged`: what a plan read is as of that plan (`read_at`); `since` is the oldest value kept — so the
     module's windows roll in turn, and its record is as new as its oldest value."""
     record = known_at(T1)

@@ -127,7 +127,7 @@ def dead_pid() -> int:
     ("rfc2217://gateway:7001", None),
     ("emulator://booth-a", None),
     ("loop://", None),
-])  # fmt: skip
+])
 def test_the_device_a_port_names(port, device):
     assert device_path(port) == device
 
@@ -139,7 +139,7 @@ def test_the_device_a_port_names(port, device):
      "serial_by-id_usb-FTDI-if00"),
     # outside /dev: minicom the last part, picocom all but the first
     ("/srv/lines/booth-a", "booth-a", "booth-a", "lines_booth-a"),
-])  # fmt: skip
+])
 def test_lock_names_are_written_as_uucp_minicom_and_picocom_write_them(path, uucp, minicom, picocom):
     """The UUCP convention (cu, HDB) names a lock file after the path's last part, minicom (`mbasename`)
     and picocom built with UUCP locks (`uucp_lockname`) after the path below /dev with its / as _:
@@ -151,8 +151,9 @@ def test_lock_names_are_written_as_uucp_minicom_and_picocom_write_them(path, uuc
                                                  for name in dict.fromkeys((uucp, minicom, picocom)))
 
 
-device_paths = st.lists(st.text(string.ascii_letters + string.digits + "-_.", min_size=1, max_size=12).filter(lambda p: p not in (".", "..")),
-                        min_size=1, max_size=4).map(lambda parts: "/dev/" + "/".join(parts))  # fmt: skip
+names = st.text(string.ascii_letters + string.digits + "-_.", min_size=1, max_size=12)
+device_paths = st.lists(names.filter(lambda p: p not in (".", "..")), min_size=1, max_size=4).map(
+    lambda parts: "/dev/" + "/".join(parts))
 
 
 def names_of(path: str) -> None:
@@ -197,7 +198,7 @@ def test_a_plant_bus_on_a_device_another_program_holds_is_refused(tmp_path, slee
     with emulator_pty() as pty:
         plant = tmp_path / "plant.yaml"
         plant.write_text(f"plant: t\nbuses:\n  - name: booth-a\n    port: {pty}\n    parity: none\n"
-                         "    modules:\n      - {address: 1, name: left}\n")  # fmt: skip
+                         "    modules:\n      - {address: 1, name: left}\n")
         lock_file(Path(pty).name).write_bytes(hdb(sleeper.pid))
         refused = prc3cfg("plan", str(plant))
     assert refused.returncode != 0

@@ -24,7 +24,7 @@ def served_pty(*options: str) -> Iterator[str]:
     """`prc3cfg emulator serve --pty` with `options`: the path of its pseudo-terminal."""
     process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty", "--modules",
                                 "1-3", *options],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = process.stdout.readline()
         assert line.startswith("pty: "), line + process.stderr.read()
@@ -96,7 +96,7 @@ def test_rfc2217_through_ser2net_onto_a_device_without_modem_lines(tmp_path, cap
         config = tmp_path / "ser2net.yaml"
         config.write_text(f"connection: &prc3\n  accepter: telnet(rfc2217),tcp,127.0.0.1,{port}\n"
                           f"  connector: serialdev,{pty},9600n81,local\n  options:\n    "
-                          "max-connections: 1\n")  # fmt: skip
+                          "max-connections: 1\n")
         ser2net = subprocess.Popen([SER2NET, "-n", "-c", config], stdout=subprocess.PIPE,
                                    stderr=subprocess.STDOUT, text=True)
         try:
@@ -108,7 +108,7 @@ def test_rfc2217_through_ser2net_onto_a_device_without_modem_lines(tmp_path, cap
             plant.write_text("plant: p\nbuses:\n  - name: line\n    port: "
                              f"rfc2217://127.0.0.1:{port}?ign_set_control\n"
                              "    parity: none\n    modules:\n      - {address: 1, name: m1}\n      - "
-                             "{address: 2, name: m2}\n")  # fmt: skip
+                             "{address: 2, name: m2}\n")
             planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
             assert planned.code == 0, planned.err
             assert "No changes" in planned.out

@@ -29,7 +29,7 @@ from prc3cfg.shell.status import gather, identities
 ROOT = Path(__file__).resolve().parents[1]
 NORMAL = ModuleFacts("a", 1, "m", 3, None, last_failed=False, apply_running=False, travel_pending=False,
                      drift_seen=False,
-                     evidence_age=10.0, evidence_bound=3600.0)  # fmt: skip
+                     evidence_age=10.0, evidence_bound=3600.0)
 
 #: (what differs from a healthy module, the health it gives): every row of `RULES`, and what wins when two
 #: hold.
@@ -114,13 +114,14 @@ def test_serve_without_asyncua_says_how_to_install_it(tmp_path):
     program = ("import sys; sys.modules['asyncua'] = None; from prc3cfg.cli import main; "
                f"main(['status', 'serve', {str(ROOT / 'plants' / 'demo-line.yaml')!r}, '--listen', "
                "'opc.tcp://127.0.0.1:4840', "
-               f"'--trust', {str(tmp_path)!r}])")  # fmt: skip
+               f"'--trust', {str(tmp_path)!r}])")
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, check=False,
-                          env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+                          env=os.environ | {"PYTHONPATH": str(ROOT)})
     assert done.returncode == 1 and done.stdout == ""
     (line,) = done.stderr.strip().splitlines()
-    assert line.startswith("error: prc3cfg status serve needs the OPC UA library asyncua (the extra opcua), which the Python running "
-                           "prc3cfg does not have — install it there: ") and line.endswith(" -m pip install asyncua"), line  # fmt: skip
+    assert line.startswith("error: prc3cfg status serve needs the OPC UA library asyncua (the extra opcua), "
+                           "which the Python running prc3cfg does not have — install it there: "), line
+    assert line.endswith(" -m pip install asyncua"), line
 
 
 def _journal(plant_path: Path, command: str, results: list[tuple[str, int, bool, bool]], user: str,
@@ -131,13 +132,13 @@ def _journal(plant_path: Path, command: str, results: list[tuple[str, int, bool,
         journal = Journal(plant_path,
                           {"command": command, "user": user, "host": "bench",
                            "plant": {"path": str(plant_path), "sha256": "ab" * 32,
-                                                                                                   "git": {"commit": commit}}})  # fmt: skip
+                                     "git": {"commit": commit}}})
         if not journal.path.exists():
             break
     for bus, address, verified, written in results:
         journal.record("result", bus=bus, address=address, verified=verified, failure=None if verified
                        else "no answer",
-                       released_axes="no", written=["3a"] if written else [], interrupted=False)  # fmt: skip
+                       released_axes="no", written=["3a"] if written else [], interrupted=False)
     journal.close()
     return journal.path
 

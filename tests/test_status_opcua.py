@@ -35,7 +35,7 @@ VARIABLES = ("RevisionCounter", "SoftwareRevision", "DeviceHealth", "Configurati
              "Configuration/Commit",
              "Configuration/PlantHash", "Configuration/LastVerifiedTime", "Configuration/LastVerifiedBy",
              "Configuration/DriftFound", "Configuration/PendingTravel",
-             "Configuration/HealthReason")  # fmt: skip
+             "Configuration/HealthReason")
 
 
 def free_port() -> int:
@@ -51,7 +51,7 @@ def certificate(folder: Path, name: str) -> tuple[Path, Path]:
     cert, key = folder / f"{name}.der", folder / f"{name}-key.pem"
     asyncio.run(cert_gen.setup_self_signed_certificate(key, cert, CLIENT_URI, "localhost",
                                                        [ExtendedKeyUsageOID.CLIENT_AUTH],
-                                                       {"commonName": name}))  # fmt: skip
+                                                       {"commonName": name}))
     return cert, key
 
 
@@ -72,7 +72,7 @@ def served(tmp_path):
                                     "--listen", url,
                                     "--trust", str(tmp_path / "trust")], stdout=subprocess.PIPE,
                                    stderr=subprocess.PIPE, text=True,
-                                   env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+                                   env=os.environ | {"PYTHONPATH": str(ROOT)})
         try:
             line = process.stdout.readline()
             assert line.strip() == f"listening on {url}", (line, process.stderr.read()
@@ -189,7 +189,7 @@ def test_a_trust_folder_without_certificates_is_one_line(tmp_path, content):
                                "--listen", f"opc.tcp://127.0.0.1:{free_port()}",
                                "--trust", str(tmp_path / "trust")], capture_output=True, text=True,
                               timeout=60,
-                              env=os.environ | {"PYTHONPATH": str(ROOT)})  # fmt: skip
+                              env=os.environ | {"PYTHONPATH": str(ROOT)})
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     (line,) = done.stderr.strip().splitlines()
     assert (

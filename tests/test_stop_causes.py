@@ -104,7 +104,7 @@ def test_a_read_answered_by_a_late_acknowledgement_names_the_write_that_went_una
     said = str(stopped.value)
     assert said.startswith("bus test, module 1: a read (50h) was answered as a write is — likeliest the "
                            "late acknowledgement "
-                           "of a write to it (41h) that went unanswered at first")  # fmt: skip
+                           "of a write to it (41h) that went unanswered at first")
     assert "damage" not in said and "parity" not in said and "timeout" not in said
 
 
@@ -135,7 +135,7 @@ def test_a_read_answered_by_an_acknowledgement_nothing_owed_names_a_duplicate_on
      "its axes (10h/20h) with two bits flipped, which parity misses"),
     ((), False, "a damaged frame the module took for a write", "or a duplicated acknowledgement"),
     ((), True, "a duplicated acknowledgement", "or, less likely, a damaged frame"),
-])  # fmt: skip
+])
 def test_open_driver_stops_say_damage_by_the_parity_the_port_checks(owed, checked, first, last):
     link_said = str(PossibleWrite("test", 1, codec.ReadSystem(), owed,
                                   protection(get_framing("open-driver"), parity_checked=checked)))
@@ -159,7 +159,7 @@ def test_code_10_to_45h_from_firmware_before_3_02_1_is_one_line_naming_it_not_re
                                   "message — its firmware is "
                                   "older than PRC 3.02.1, which added them: update the module's firmware, "
                                   "or leave f2 out of "
-                                  "this module's programs in the plant file")  # fmt: skip
+                                  "this module's programs in the plant file")
     assert "\n" not in str(stopped.value)
 
 
@@ -240,7 +240,7 @@ NAMED = {
                                       "which may have changed "
                                       "any value or released its axes (10h/20h); or a duplicated "
                                       "acknowledgement",),
-}  # fmt: skip
+}
 
 
 def held_until_a_read(framing: str, loss: Loss, nth: int, k: int, directory: Path, capsys) -> str:

@@ -169,7 +169,7 @@ def test_programs_outside_python_are_found_through_tools() -> None:
         for node in ast.walk(ast.parse(path.read_text())):
             if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
                 and node.func.attr == "which"
-                    and isinstance(node.func.value, ast.Name) and node.func.value.id == "shutil"):  # fmt: skip
+                    and isinstance(node.func.value, ast.Name) and node.func.value.id == "shutil"):
                 named = node.args[0].value if node.args and isinstance(node.args[0], ast.Constant) else None
                 if named not in SYSTEM:
                     found.append(f"{path.relative_to(ROOT)}:{node.lineno}: shutil.which({named!r})")

@@ -112,9 +112,9 @@ def check_everything(plant: EmulatedPlant, flips: Flips, capsys, rate: float) ->
         for (bus, address), image in Snapshot.load(snapshots[-1]).images.items():
             if bus == "booth-a":
                 truth = before[address]
-                assert image.system == truth.system and all(p is None or p == t
-                                                            for p, t in zip(image.programs, truth.programs)), \
-                    f"the snapshot of module {address} is not what it held before the apply"  # fmt: skip
+                kept = all(p is None or p == t for p, t in zip(image.programs, truth.programs))
+                assert image.system == truth.system and kept, \
+                    f"the snapshot of module {address} is not what it held before the apply"
         assert plant.matches_plant()
 
 

@@ -57,10 +57,11 @@ PLAN_CASES = {
         {M1: record(FACTORY)}, {}, frozenset(), ([target(1, (2,), FACTORY)], {})),
     "a program the record does not know: that program": (
         {M1: record(FACTORY.with_programs({3: None}))}, {}, frozenset(),
-                                                         ([target(1, (2, 3), FACTORY.with_programs({3: None}))], {})),
+        ([target(1, (2, 3), FACTORY.with_programs({3: None}))], {})),
     "a record older than record_max_age: every managed program": (
         {M1: record(DESIRED, hours=2)}, {}, frozenset(),
-        ([target(1, MANAGED, None)], {M1: f"its record ({record(DESIRED, hours=2).since}) is older than record_max_age (3600 s)"})),
+        ([target(1, MANAGED, None)],
+         {M1: f"its record ({record(DESIRED, hours=2).since}) is older than record_max_age (3600 s)"})),
     "E12 since: every managed program, whatever the record": (
         {M1: record(DESIRED)}, {}, frozenset({M1}), ([target(1, MANAGED, None)], {M1: UNSET})),
     "overruled by another user's newer entry: every managed program, and whose claim": (
@@ -68,7 +69,7 @@ PLAN_CASES = {
     "each module by its own record": (
         {M1: record(DESIRED)}, {M2: OVERRULED}, frozenset(),
         ([target(1, (), DESIRED), target(2, MANAGED, None)], {M2: OVERRULED})),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize(("known", "overruled", "unset", "expected"), PLAN_CASES.values(), ids=PLAN_CASES)
@@ -100,7 +101,7 @@ PLAN_FILE_CASES = {  # (the record now, what the plan read) → (programs read a
 def test_what_a_plan_file_reads_again(known, programs_read, expected):
     targets, stale = what_to_read.for_plan_file([entry(programs_read)], {M1: DESIRED}, {}
                                                 if known is None else {M1: known},
-                                                {"line": MAX_AGE}, NOW)  # fmt: skip
+                                                {"line": MAX_AGE}, NOW)
     if expected is None:
         assert (targets, stale) == ([], entry(programs_read))
     else:
@@ -113,8 +114,10 @@ def test_what_a_plan_file_reads_again(known, programs_read, expected):
 def test_a_full_read_and_a_restore_read_every_program_their_image_holds_and_what_it_can_clamp():
     snapshot = replace(FACTORY, address=2, system=LOWER_S1)
     modules = [wanted(1), Wanted("line", 2, "m2", snapshot)]
-    assert what_to_read.in_full(modules) == [Target("line", 1, "m1", MANAGED, DESIRED.system, managed=MANAGED),
-                                             Target("line", 2, "m2", tuple(PROGRAM_NUMBERS), LOWER_S1, managed=tuple(PROGRAM_NUMBERS))]  # fmt: skip
+    every = tuple(PROGRAM_NUMBERS)
+    assert what_to_read.in_full(modules) == [
+        Target("line", 1, "m1", MANAGED, DESIRED.system, managed=MANAGED),
+        Target("line", 2, "m2", every, LOWER_S1, managed=every)]
 
 
 # -- a read widens on what it finds ----------------------------------------------------------------
@@ -148,7 +151,7 @@ AFTER_PROGRAMS_CASES = {  # (what was read, the record's image) → programs sti
     "nothing more": (OTHER_2, FACTORY.with_programs({2: None}), set()),
     "another system block (every managed program already read): nothing more": (
         replace(FACTORY, system=OTHER_S6), FACTORY, set()),
-}  # fmt: skip
+}
 
 
 @pytest.mark.parametrize(("read", "known", "expected"), AFTER_PROGRAMS_CASES.values(),

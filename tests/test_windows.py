@@ -112,21 +112,21 @@ class Wine:
         for attempt in (1, 2):
             done = subprocess.run(self.command(*(str(a) for a in args), module=module, python=python),
                                   cwd=cwd, env=self.env(),
-                                  stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout)  # fmt: skip
+                                  stdin=subprocess.DEVNULL, capture_output=True, timeout=timeout)
             result = Result(done.returncode, text(done.stdout), text(done.stderr))
             if result.code == 0 or result.out or result.err or attempt == 2:
                 break
             warnings.warn(f"`prc3cfg {' '.join(map(str, args))}` exited {result.code} without a word, as "
                           "the Windows Python "
                           "does when Wine gives it no standard handles: run once more",
-                          stacklevel=2)  # fmt: skip
+                          stacklevel=2)
         assert "Traceback" not in result.out + result.err, result
         return result
 
     def start(self, *args: str | Path, cwd: Path, module: bool = False) -> subprocess.Popen[bytes]:
         return subprocess.Popen(self.command(*(str(a) for a in args), module=module), cwd=cwd, env=self.env(),
                                 stdin=subprocess.DEVNULL,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
     def tool(self, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[bytes]:
         """A Wine program (reg, cmd, …), its output through a pipe."""
@@ -168,12 +168,12 @@ def wine(request) -> Wine:
     settings = dict(line.split("=", 1) for line in ENV_FILE.read_text().splitlines() if "=" in line)
     found = Wine(settings["WINE"], Path(settings["WINEPREFIX"]), settings["WINE_PYTHON"],
                  Path(settings["WINE_PYTHON_DIR"]),
-                 Path(settings["WINE_WHEELS"]))  # fmt: skip
+                 Path(settings["WINE_WHEELS"]))
     (pip,) = sorted(found.wheels.glob("pip-*.whl"))[-1:]
     installed = found.tool(found.python, win(pip) + "\\pip", "--isolated", "install", "--no-index",
                            "--no-deps", "--force-reinstall",
                            "--no-warn-script-location", "--disable-pip-version-check", win(wheel),
-                           timeout=300)  # fmt: skip
+                           timeout=300)
     assert installed.returncode == 0, installed.stdout.decode() + installed.stderr.decode()
     return found
 
@@ -203,7 +203,7 @@ def test_the_readme_s_first_commands_plan_apply_and_plan_no_changes(wine, demo):
     # what was read now: the system blocks, and the programs rolling evidence reads (test_rolling)
     assert re.search(r"No changes to what was read now \(the system blocks of 6 modules( and \d+ "
                      r"programs)?\) or to what prc3cfg last "
-                     r"read or verified", again.out), again.out  # fmt: skip
+                     r"read or verified", again.out), again.out
     assert (demo / "plants" / ".prc3cfg" / "emulators" / "demo-a.json").is_file()
 
 
@@ -227,7 +227,7 @@ def test_the_release_bundle_installs_offline_by_hash_and_runs(wine, demo, tmp_pa
     nothing built — into a folder of its own here (the embeddable CPython has no venv), then run."""
     made = subprocess.run([sys.executable, ROOT / ".ci" / "release", "--out", tmp_path / "dist", "--wheels",
                            wine.wheels],
-                          capture_output=True, text=True, timeout=300)  # fmt: skip
+                          capture_output=True, text=True, timeout=300)
     assert made.returncode == 0, made.stderr
     wheel, bundle = (Path(line) for line in made.stdout.split())
     with zipfile.ZipFile(bundle) as archive:
@@ -241,7 +241,7 @@ def test_the_release_bundle_installs_offline_by_hash_and_runs(wine, demo, tmp_pa
                           "--require-hashes", "-r", win(folder / "requirements.txt"), "--target",
                           win(tmp_path / "site"),
                           "--no-warn-script-location", "--disable-pip-version-check",
-                          timeout=300)  # fmt: skip
+                          timeout=300)
     assert installed.returncode == 0, installed.stdout.decode() + installed.stderr.decode()
     assert {path.name.split("-")[0] for path in (tmp_path / "site").glob("*.dist-info")} >= {
         "prc3cfg",
@@ -251,7 +251,7 @@ def test_the_release_bundle_installs_offline_by_hash_and_runs(wine, demo, tmp_pa
     }
     run = ("import runpy, sys; sys.path.insert(0, sys.argv.pop(1)); import prc3cfg; "
            "assert prc3cfg.__file__.startswith(sys.path[0]), prc3cfg.__file__; runpy.run_module('prc3cfg', "
-           "run_name='__main__')")  # fmt: skip
+           "run_name='__main__')")
     version = wine.run("-c", run, win(tmp_path / "site"), "--version", cwd=demo, python=True)
     assert version.out.strip() == f"prc3cfg {wheel.name.split('-')[1]}", version
     valid = wine.run("-c", run, win(tmp_path / "site"), "validate", "plants/demo-line.yaml", cwd=demo,
@@ -270,7 +270,7 @@ def linux_emulator(directory: Path, modules: str, *options: str) -> Iterator[int
         process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--listen",
                                     "127.0.0.1:0", "--modules", modules,
                                     "--state", str(directory / f"linux-{modules}.json"), *options],
-                                   stdout=subprocess.PIPE, stderr=stderr, text=True)  # fmt: skip
+                                   stdout=subprocess.PIPE, stderr=stderr, text=True)
     try:
         banner = process.stdout.readline() if process.stdout else ""
         assert banner.startswith("listening on 127.0.0.1:"), banner + log.read_text()
@@ -284,10 +284,11 @@ def linux_emulator(directory: Path, modules: str, *options: str) -> Iterator[int
 def windows_emulator(wine: Wine, directory: Path, modules: str) -> Iterator[int]:
     """`prc3cfg emulator serve` of the Windows Python; its TCP port. Stopped by Ctrl-C as Wine
     delivers it (SIGINT to the Unix process: CTRL_C_EVENT), which must end it with exit 0."""
-    process = subprocess.Popen(wine.command("emulator", "serve", "--listen", "127.0.0.1:0", "--modules",
-                                            modules,
-                                            "--state", win(directory / f"windows-{modules}.json"), module=True),
-                               cwd=directory, env=wine.env(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)  # fmt: skip
+    state = win(directory / f"windows-{modules}.json")
+    serving = wine.command("emulator", "serve", "--listen", "127.0.0.1:0", "--modules", modules,
+                           "--state", state, module=True)
+    process = subprocess.Popen(serving, cwd=directory, env=wine.env(), stdin=subprocess.DEVNULL,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     lines: list[str] = []
     banner = process.stdout.readline().decode("utf-8") if process.stdout else ""
     drain = threading.Thread(
@@ -384,7 +385,7 @@ def com_port(wine, tmp_path) -> Iterator[str]:
         process = subprocess.Popen([sys.executable, "-m", "prc3cfg", "emulator", "serve", "--pty",
                                     "--modules", "1,2,5",
                                     "--state", str(tmp_path / "pty.json")], stdout=subprocess.PIPE,
-                                   stderr=stderr, text=True)  # fmt: skip
+                                   stderr=stderr, text=True)
     try:
         banner = process.stdout.readline() if process.stdout else ""
         assert banner.startswith("pty: /dev/"), banner + log.read_text()
@@ -511,7 +512,7 @@ def test_a_plan_made_on_linux_applies_from_a_crlf_checkout(wine, demo):
         plant = socket_plant(demo, port_a, port_b)
         planned = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", str(plant.relative_to(demo)),
                                   "--out", "plan.json"], cwd=demo,
-                                 capture_output=True, text=True, timeout=120)  # fmt: skip
+                                 capture_output=True, text=True, timeout=120)
         assert planned.returncode == 0, planned.stderr
         plant.write_bytes(plant.read_bytes().replace(b"\n", b"\r\n"))
         applied = wine.run("apply", plant.relative_to(demo), "--plan", "plan.json", "--auto-approve",

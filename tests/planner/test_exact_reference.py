@@ -122,9 +122,8 @@ def test_commissioning_every_field_takes_27_messages() -> None:
     assert reference.bus_time <= plan_module(actual, desired, cost).bus_time + EPSILON
     assert len(reference.messages) == 27
     assert sum(m.ID == 0x21 for m in reference.messages) == 4
-    assert [sum(m.ID == kind for m in reference.messages) for kind in (0x33, 0x42, 0x43, 0x44, 0x45)] == [
-        4
-    ] * 5
+    kinds = (0x33, 0x42, 0x43, 0x44, 0x45)
+    assert [sum(m.ID == kind for m in reference.messages) for kind in kinds] == [4] * 5
 
 
 #: The found case the exact search takes about 4 s of CPU on (the others: a second at most), in the soak tier.
@@ -140,9 +139,8 @@ SLOW_FOUND = "open-driver: a link range over 16..60 that fits one 46h once five 
 def test_the_found_cases_optimum_is_the_exact_references(case: dict) -> None:
     """The optimum test_planner_cases holds the planner to on each case the soak properties found."""
     actual, desired = ModuleImage.from_json(case["actual"]), ModuleImage.from_json(case["desired"])
-    assert reference_replayed(
-        actual, desired, line(case["framing"], case["turnaround"])
-    ).bus_time == pytest.approx(case["optimum"], abs=1e-9)
+    reference = reference_replayed(actual, desired, line(case["framing"], case["turnaround"]))
+    assert reference.bus_time == pytest.approx(case["optimum"], abs=1e-9)
 
 
 @pytest.mark.parametrize("case", DIFFERS, ids=lambda case: case["differs"].split(":")[0])
@@ -163,7 +161,7 @@ def busy_program(rnd: random.Random, system: SystemParameters, number: int) -> P
         T=rnd.randint(1, 600), F1=rnd.randint(1, 1999), F2=rnd.randint(1, 1999),
         A=0 if number == PROGRAM_COUNT
                    else rnd.choice([number + 1 if number % chain else 0, rnd.randint(0, PROGRAM_COUNT)]),
-    )  # fmt: skip
+    )
 
 
 @st.composite
@@ -203,7 +201,7 @@ def plan_within_one_percent(
 #: fewer examples than the soak profile's 2,000, and none shrunk (a failure prints its example).
 EXACT_EXAMPLES = settings(deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate],
                           report_multiple_bugs=False,
-                          suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
+                          suppress_health_check=[HealthCheck.too_slow])
 
 
 @pytest.mark.soak

@@ -98,7 +98,7 @@ def tiny_case(seed: int) -> tuple[ModuleImage, ModuleImage]:
             default_program(system),
             Program(rnd.randint(0, system.S1), rnd.randint(system.S5, system.S4), 0, rnd.choice([0, 20]),
                     rnd.choice([0, 1010]), 0, rnd.choice([0, n + 1])),
-        ])  # fmt: skip
+        ])
 
     unmanaged = (None,) * (PROGRAM_COUNT - len(MANAGED))
     programs = [program(n) for n in MANAGED]
@@ -106,7 +106,7 @@ def tiny_case(seed: int) -> tuple[ModuleImage, ModuleImage]:
     new_system = system
     if rnd.random() < 0.3:
         new_system = rnd.choice([DEFAULT_SYSTEM, replace(system, S1=rnd.randint(100, system.S1)),
-                                 replace(system, S2=rnd.randint(50, 500))])  # fmt: skip
+                                 replace(system, S2=rnd.randint(50, 500))])
     wanted = list(programs)
     for _ in range(rnd.randint(0, 3)):
         n = rnd.choice(MANAGED)

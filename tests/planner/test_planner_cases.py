@@ -33,7 +33,7 @@ def recipe(number: int) -> Program:
     """A realistic program: a position, a speed, a dwell, a function output, chained in fours."""
     return Program(P=300 + 29 * number, V=100 + 5 * number, Vr=0, T=10 * (number % 3), F1=1010
                    if number % 2 else 0,
-                   F2=0, A=number + 1 if number % 4 else 0)  # fmt: skip
+                   F2=0, A=number + 1 if number % 4 else 0)
 
 
 PLANT = ModuleImage(3, SYSTEM, tuple(recipe(n) for n in range(1, PROGRAM_COUNT + 1)))
@@ -91,7 +91,7 @@ def every_field(number: int) -> Program:
     return Program(P=300 + 31 * number, V=40 + 7 * number, Vr=1 + number % 40, T=1 + number % 49, F1=1
                    + 29 * number,
                    F2=1 + 23 * number,
-                   A=number + 1 if number % 4 and number < PROGRAM_COUNT else 0)  # fmt: skip
+                   A=number + 1 if number % 4 and number < PROGRAM_COUNT else 0)
 
 
 #: The exact optimum of commissioning all 64 programs of `every_field` (bench/exact_reference.py,
@@ -145,7 +145,7 @@ def test_a_speed_range_that_forces_values_is_written_after_the_system_step() -> 
     narrowed = replace(SYSTEM, S4=300, S5=200)
     desired = with_programs(replace(PLANT, system=narrowed), {
         n: replace(recipe(n), V=250) for n in range(1, PROGRAM_COUNT + 1)
-    })  # fmt: skip
+    })
     plan = planned(PLANT, desired)
     assert ids(plan)[0] == 0x20
 
@@ -188,7 +188,7 @@ def test_unmanaged_programs_inside_chains_and_runs_are_skipped() -> None:
     desired = replace(PLANT, programs=tuple(
         None if n % 5 == 0 else replace(recipe(n), P=recipe(n).P + 1, V=recipe(n).V + 1, A=0)
         for n in range(1, PROGRAM_COUNT + 1)
-    ))  # fmt: skip
+    ))
     actual = replace(PLANT, programs=tuple(None if n % 5 == 0 else recipe(n)
                                            for n in range(1, PROGRAM_COUNT + 1)))
     plan = planned(actual, desired)
@@ -219,7 +219,7 @@ def test_defaults_of_the_old_system_are_reached_by_initialising_before_the_syste
     assert [step.message for step in plan.steps] == [codec.InitAllPrograms(), codec.WriteSystem(new)]
     desired = replace(desired, programs=(default_program(new),) * PROGRAM_COUNT)
     assert [step.message for step in planned(actual, desired).steps] == [codec.WriteSystem(new),
-                                                                          codec.InitAllPrograms()]  # fmt: skip
+                                                                          codec.InitAllPrograms()]
 
 
 def test_a_program_that_needs_everything_is_one_21h() -> None:
@@ -298,7 +298,7 @@ def rewritten_recipe(seed: int, managed: int) -> tuple[ModuleImage, ModuleImage]
         return Program(P=rnd.randrange(300, 2500, 5), V=rnd.randrange(50, 500, 10), Vr=0,
                        T=rnd.choice([0, 0, 5, 10, 20]),
                        F1=rnd.choice([0, 1010, 1050]), F2=rnd.choice([0, 0, 1050]),
-                       A=n + 1 if n % 4 else 0)  # fmt: skip
+                       A=n + 1 if n % 4 else 0)
 
     old = tuple(program(n) if n <= managed else None for n in range(1, PROGRAM_COUNT + 1))
     new = tuple(program(n) if n <= managed else None for n in range(1, PROGRAM_COUNT + 1))
@@ -413,7 +413,7 @@ def test_an_init_takes_out_the_overflow_of_items_where_runs_alike_tie(framing: s
     40h, sixteen 14h cost more; one 14h takes out the three that overflow three full 40h."""
     default = default_program(SYSTEM)
     actual = replace(PLANT, programs=tuple(None if n % 4 == 0 else replace(default, P=default.P + n)
-                                           for n in range(1, PROGRAM_COUNT + 1)))  # fmt: skip
+                                           for n in range(1, PROGRAM_COUNT + 1)))
     desired = replace(PLANT, programs=tuple(None if n % 4 == 0 else default
                                             for n in range(1, PROGRAM_COUNT + 1)))
     plan = planned(actual, desired, framing)
@@ -428,7 +428,7 @@ def small_groups() -> tuple[ModuleImage, ModuleImage]:
     managed = {1, 3, 4, 5, 7, 8, 9, 10, 12, 13, 14, 15, 16, *range(18, 30)}
     actual = replace(PLANT, programs=tuple(replace(default, P=default.P + n, V=default.V + 1)
                                            if n in managed else None
-                                           for n in range(1, PROGRAM_COUNT + 1)))  # fmt: skip
+                                           for n in range(1, PROGRAM_COUNT + 1)))
     desired = replace(PLANT, programs=tuple(default if n in managed else None
                                             for n in range(1, PROGRAM_COUNT + 1)))
     return actual, desired

@@ -40,7 +40,7 @@ def random_system(rnd: random.Random) -> SystemParameters:
         S3=rnd.randint(1, 9999), S4=s4, S5=rnd.choice([min(10, s4), rnd.randint(1, s4)]),
         S6=rnd.randint(1000, 1500), S7=rnd.randint(800, 1500), S8=rnd.randint(0, 1),
         S10=rnd.randint(1, 9999), S11=rnd.randint(1, 1500), S12=rnd.randint(5, 50),
-    )  # fmt: skip
+    )
 
 
 def random_program(rnd: random.Random, system: SystemParameters, number: int) -> Program:

@@ -163,7 +163,7 @@ SOAK_LIMIT = 30_000
 @pytest.mark.soak
 @settings(max_examples=10, deadline=None, phases=[Phase.explicit, Phase.reuse, Phase.generate],
           report_multiple_bugs=False,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])  # fmt: skip
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 @given(scenarios())
 def test_the_planner_equals_the_reference_on_the_property_modules(scenario) -> None:
     actual, desired, _, framing, turnaround = scenario

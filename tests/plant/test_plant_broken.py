@@ -129,49 +129,19 @@ MANY_DIGITS = ("plant: demo\nbuses:\n  - name: a\n    port: emulator://a\n    ti
                + "\n    modules: [{address: 1, name: m1}]\n")
 HUGE_EXPONENT = MANY_DIGITS.replace("9" * 500_000, "1.0e+" + "9" * 500_000)
 TINY_EXPONENT = MANY_DIGITS.replace("9" * 500_000, "1.0e-" + "9" * 500_000)
+#: What the nesting and the long numbers are told, after where.
+NESTED = ("lists and mappings nested more than 100 deep — a plant file needs fewer than ten: check the "
+          "brackets and the indentation")
+DIGITS = ("has more than 28 digits, written out — a plant file's numbers are read exactly: write at most 28 "
+          "digits")
 BOMB_CASES = [
-    (
-        ALIAS_BOMB,
-        (
-            "2:9: an alias (*a, used 100000 times) — a plant file does not use aliases: share settings "
-            "with profiles: and a module's profiles: [NAME], or write the value out"
-        ),
-    ),
-    (
-        FLOW_NESTING,
-        (
-            "2:107: lists and mappings nested more than 100 deep — a plant file needs fewer than ten: "
-            "check the brackets and the indentation"
-        ),
-    ),
-    (
-        BLOCK_NESTING,
-        (
-            "101:101: lists and mappings nested more than 100 deep — a plant file needs fewer than ten: "
-            "check the brackets and the indentation"
-        ),
-    ),
-    (
-        MANY_DIGITS,
-        (
-            "5:14: timeout 99999999999999999999… has more than 28 digits, written out — a plant file's "
-            "numbers are read exactly: write at most 28 digits"
-        ),
-    ),
-    (
-        HUGE_EXPONENT,
-        (
-            "5:14: timeout 1.0e+999999999999999… has more than 28 digits, written out — a plant file's "
-            "numbers are read exactly: write at most 28 digits"
-        ),
-    ),
-    (
-        TINY_EXPONENT,
-        (
-            "5:14: timeout 1.0e-999999999999999… has more than 28 digits, written out — a plant file's "
-            "numbers are read exactly: write at most 28 digits"
-        ),
-    ),
+    (ALIAS_BOMB, "2:9: an alias (*a, used 100000 times) — a plant file does not use aliases: share settings "
+                 "with profiles: and a module's profiles: [NAME], or write the value out"),
+    (FLOW_NESTING, f"2:107: {NESTED}"),
+    (BLOCK_NESTING, f"101:101: {NESTED}"),
+    (MANY_DIGITS, f"5:14: timeout 99999999999999999999… {DIGITS}"),
+    (HUGE_EXPONENT, f"5:14: timeout 1.0e+999999999999999… {DIGITS}"),
+    (TINY_EXPONENT, f"5:14: timeout 1.0e-999999999999999… {DIGITS}"),
 ]
 
 
@@ -224,16 +194,21 @@ def test_more_nodes_than_the_limit_are_refused_where_it_is_reached(tmp_path: Pat
 PROGRAMS = "{" + ", ".join(f"{n}: {{position: 0.1, speed: 0.1}}" for n in range(1, 6)) + "}"
 
 
+#: What stands before the 31st node of module m2 on its line (see below).
+NODE_31_BEFORE = ("      - {address: 2, name: m2, programs: " + PROGRAMS[:PROGRAMS.index("4: {")]
+                  + "4: {position: 0.1, speed: ")
+
+
 @pytest.mark.usefixtures("each_loader")
 @pytest.mark.parametrize(
     ("text", "problem"),
     [
-        # node 31 of module m2: the map, 2 keys and values, programs and its map, 6 nodes a program: program 4's
-        # speed
+        # node 31 of module m2: the map, 2 keys and values, programs and its map, 6 nodes a program:
+        # program 4's speed
         (
             _plant(["{address: 1, name: m1}", f"{{address: 2, name: m2, programs: {PROGRAMS}}}"]),
             (
-                f"7:{len('      - {address: 2, name: m2, programs: ' + PROGRAMS[:PROGRAMS.index('4: {')] + '4: {position: 0.1, speed: ') + 1}:"
+                f"7:{len(NODE_31_BEFORE) + 1}:"
                 " module m2 has more than 30 keys, values, lists and mappings — a module with every field of"
                 " all 64 programs written out has about 2,000: check that this is the plant file"
             ),

@@ -50,7 +50,7 @@ def test_validate_format_json_lists_every_problem_at_its_place(tmp_path: Path) -
     expected = [line.split(":", 2) for line in path.with_suffix(".expected").read_text().splitlines()]
     assert json.loads(done.stdout) == [{"file": str(path), "line": int(line), "column": int(column),
                                         "message": message.strip()}
-                                       for line, column, message in expected]  # fmt: skip
+                                       for line, column, message in expected]
     missing = tmp_path / "missing.yaml"
     assert json.loads(validate(missing, "--format", "json").stdout) == [
         {"file": str(missing), "line": None, "column": None, "message": "no such file — check the path"}]
@@ -171,7 +171,7 @@ TAGGED = ("plant: demo\nbuses:\n  - name: a\n    port: socket://127.0.0.1:9\n   
     ("!!str timeout", "0.3", "5:5", "!!str"),
     ("timeout", "!foo 0.3", "5:14", "!foo"),
     ("gateway", "!!map {receive_db: 30, receive_dw: 1, cpu: 0, identifier: 1}", "5:14", "!!map"),
-])  # fmt: skip
+])
 @pytest.mark.parametrize("command", ["validate", "plan"])
 def test_a_tag_anywhere_is_one_line_naming_it(tmp_path: Path, capsys, command: str, key: str, value: str,
                                               at: str, tag: str) -> None:

@@ -53,7 +53,7 @@ class Server:
 
     def __init__(self, root: Path) -> None:
         self.process = subprocess.Popen([SERVER, "--stdio"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                        stderr=subprocess.DEVNULL)  # fmt: skip
+                                        stderr=subprocess.DEVNULL)
         self.last_id = 0
         self.notifications: list[dict] = []
         capabilities = {"textDocument": {"completion": {"completionItem": {"snippetSupport": True}}}}
@@ -62,7 +62,7 @@ class Server:
         self.notify("initialized", {})
         self.notify("workspace/didChangeConfiguration",
                     {"settings": {"yaml": {"validate": True, "completion": True,
-                                           "schemaStore": {"enable": False}}}})  # fmt: skip
+                                           "schemaStore": {"enable": False}}}})
 
     def send(self, message: dict) -> None:
         body = json.dumps({"jsonrpc": "2.0", **message}).encode()
