@@ -44,8 +44,8 @@ its first program). The DP's optimum (`ReferencePlan.optimum`) is then a lower b
 time (`bus_time`) exact for its own messages — equal on crc16 and open-driver.
 
 What it takes (one core, measured): a second to 55 s on the found cases and most of bench/plan_bench.py's
-fixed cases, on every framing; 170 s on a full rewrite on crc16 or stx, over 200 s on open-driver. It gives
-up (`TooBig`) beyond `limit` states a program.
+fixed cases, on every framing; 170 s on a full rewrite on crc16 or stx, 606 s on open-driver. It gives up
+(`TooBig`) beyond `limit` states a program.
 """
 
 from __future__ import annotations
