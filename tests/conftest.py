@@ -70,11 +70,11 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 def pytest_xdist_auto_num_workers(config) -> int:
-    """`-n auto` (pyproject.toml's addopts): three workers a core, not one. The fast tier waits far more than it
-    computes — on emulated lines at their speed, for the processes it starts, on terminals — so one worker a
-    core left both cores idle most of the run (4 min 47 s of CPU in 6 min 33 s on 2 cores). More a core use
-    that time: on 2 idle cores, 29 November 2026, 4 workers took 218 s, 6 took 194 s, 8 took 193 s. The tests
-    stay correct under load because none asserts a wall-clock time."""
+    """`-n auto` (pyproject.toml's addopts): three workers a core, not one. The fast tier waits far more than
+    it computes — on emulated lines at their speed, for the processes it starts, on terminals — so one worker
+    a core left both cores idle most of the run (4 min 47 s of CPU in 6 min 33 s on 2 cores). More a core use
+    that time: on 2 idle cores, 29 November 2026, 4 workers took 218 s, 6 took 194 s, 8 took 193 s. The
+    tests stay correct under load because none asserts a wall-clock time."""
     return 3 * (os.cpu_count() or 1)
 
 

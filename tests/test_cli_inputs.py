@@ -40,182 +40,37 @@ def nowhere(tmp_path) -> Path:
 
 # -- the command line ------------------------------------------------------------------------
 
+#: A table: one case a row (ruff's E501 is off for this file, pyproject.toml).
 USAGE = {
-    "apply without a plant": (
-        ["apply"],
-        "error: prc3cfg apply: name the plant file, or a plan file with --plan — see prc3cfg apply --help",
-    ),
-    "plan without a plant": (
-        ["plan"],
-        "error: prc3cfg plan: Missing argument 'PLANT' — see prc3cfg plan --help",
-    ),
+    "apply without a plant": (["apply"], "error: prc3cfg apply: name the plant file, or a plan file with --plan — see prc3cfg apply --help"),
+    "plan without a plant": (["plan"], "error: prc3cfg plan: Missing argument 'PLANT' — see prc3cfg plan --help"),
     "an unknown command": (["nosuch"], "error: prc3cfg: No such command 'nosuch' — see prc3cfg --help"),
-    "an unknown option": (
-        ["plan", "p.yaml", "--outt", "x"],
-        (
-            "error: prc3cfg plan: No such option: --outt (Possible options: --out, --plot) — "
-            "see prc3cfg plan --help"
-        ),
-    ),
-    "negative retries": (
-        ["plan", "p.yaml", "--retries", "-1"],
-        "error: prc3cfg plan: Invalid value for '--retries': must be 0 or more — see prc3cfg plan --help",
-    ),
-    "a negative lock time-out": (
-        ["apply", "p.yaml", "--lock-timeout", "-5"],
-        (
-            "error: prc3cfg apply: Invalid value for '--lock-timeout': '-5' is not a "
-            "time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h — see "
-            "prc3cfg apply --help"
-        ),
-    ),
-    "a lock time-out in parsecs": (
-        ["apply", "p.yaml", "--lock-timeout", "5pc"],
-        (
-            "error: prc3cfg apply: Invalid value for '--lock-timeout': '5pc' is not "
-            "a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h — "
-            "see prc3cfg apply --help"
-        ),
-    ),
-    "a reply time-out of two hours": (
-        ["scan", "--port", "socket://127.0.0.1:9", "--timeout", "2h"],
-        "error: prc3cfg scan: Invalid value for '--timeout': 2h is more than 1h — see prc3cfg scan --help",
-    ),
-    "a zvz below the open driver's": (
-        ["import", "--port", "socket://127.0.0.1:9", "--zvz", "1ms"],
-        "error: prc3cfg import: Invalid value for '--zvz': 1ms is less than 4ms — see prc3cfg import --help",
-    ),
-    "retries as text": (
-        ["read", "p.yaml", "--retries", "many"],
-        (
-            "error: prc3cfg read: Invalid value for '--retries': must be a whole number — see "
-            "prc3cfg read --help"
-        ),
-    ),
-    "scan's baud 0": (
-        ["scan", "--port", "socket://127.0.0.1:9", "--baud", "0"],
-        "error: prc3cfg scan: Invalid value for '--baud': must be 1 or more — see prc3cfg scan --help",
-    ),
-    "scan's parity": (
-        ["scan", "--port", "socket://127.0.0.1:9", "--parity", "x"],
-        (
-            "error: prc3cfg scan: Invalid value for '--parity': 'x' is not one of none, odd, even "
-            "— see prc3cfg scan --help"
-        ),
-    ),
-    "import's framing": (
-        ["import", "--port", "socket://127.0.0.1:9", "--framing", "modbus"],
-        (
-            "error: prc3cfg import: Invalid value for '--framing': 'modbus' is not one of "
-            "crc16, open-driver, stx — see prc3cfg import --help"
-        ),
-    ),
-    "import's empty address": (
-        ["import", "--port", "socket://127.0.0.1:9", "--modules", "1,,2"],
-        (
-            "error: prc3cfg import: Invalid value for '--modules': '1,,2' has an empty "
-            "entry — write addresses and ranges between commas, e.g. 1,3-5 — see prc3cfg "
-            "import --help"
-        ),
-    ),
-    "scan's 7 data bits": (
-        ["scan", "--port", "socket://127.0.0.1:9", "--data-bits", "7"],
-        (
-            "error: prc3cfg scan: Invalid value for '--data-bits': 7 data bits cannot carry "
-            "a PRC 3 frame — its frames are binary and need 8 data bits: give 8 or leave the "
-            "option out — see prc3cfg scan --help"
-        ),
-    ),
-    "import's 5 data bits": (
-        ["import", "--port", "socket://127.0.0.1:9", "--data-bits", "5"],
-        (
-            "error: prc3cfg import: Invalid value for '--data-bits': 5 data bits cannot "
-            "carry a PRC 3 frame — its frames are binary and need 8 data bits: give 8 or "
-            "leave the option out — see prc3cfg import --help"
-        ),
-    ),
-    "the emulator's 7 data bits": (
-        ["emulator", "serve", "--listen", "127.0.0.1:9", "--data-bits", "7"],
-        (
-            "error: prc3cfg emulator serve: Invalid value for '--data-bits': 7 data "
-            "bits cannot carry a PRC 3 frame — its frames are binary and need 8 data "
-            "bits: give 8 or leave the option out — see prc3cfg emulator "
-            "serve --help"
-        ),
-    ),
-    "scan's stop bits": (
-        ["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"],
-        (
-            "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 "
-            "— see prc3cfg scan --help"
-        ),
-    ),
-    "refresh-only with --plot": (
-        ["plan", "p.yaml", "--refresh-only", "--plot", "p.svg", "--module", "m"],
-        (
-            "error: prc3cfg plan: --refresh-only reports drift and makes no plan — "
-            "leave out --plot — see prc3cfg plan --help"
-        ),
-    ),
-    "verify not a choice": (
-        ["apply", "p.yaml", "--verify", "bogus"],
-        (
-            "error: prc3cfg apply: Invalid value for '--verify': 'bogus' is not one of "
-            "'floor', 'full' — see prc3cfg apply --help"
-        ),
-    ),
-    "completion for a named shell": (
-        ["--install-completion", "zsh"],
-        (
-            "error: prc3cfg: --install-completion takes no shell name (zsh): it is "
-            "for the shell it is run in — run prc3cfg --install-completion from "
-            "that shell"
-        ),
-    ),
-    "refresh-only with --previous": (
-        ["plan", "p.yaml", "--refresh-only", "--previous", "old.yaml"],
-        (
-            "error: prc3cfg plan: --refresh-only reports drift and makes no plan — "
-            "leave out --previous — see prc3cfg plan --help"
-        ),
-    ),
-    "terraform's -out=": (
-        ["plan", "p.yaml", "-out=plan.json"],
-        "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?",
-    ),
-    "terraform's -auto-approve": (
-        ["apply", "p.yaml", "-auto-approve"],
-        "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?",
-    ),
-    "terraform's -lock-timeout=": (
-        ["apply", "p.yaml", "-lock-timeout=10"],
-        "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?",
-    ),
-    "terraform's -target=": (
-        ["plan", "p.yaml", "-target=booth-a-top"],
-        (
-            "error: -target=booth-a-top: prc3cfg names a module with --module — did you "
-            "mean --module booth-a-top?"
-        ),
-    ),
-    "terraform's -target NAME": (
-        ["apply", "p.yaml", "-target", "booth-a-top"],
-        (
-            "error: -target booth-a-top: prc3cfg names a module with --module — did "
-            "you mean --module booth-a-top?"
-        ),
-    ),
-    "terraform's -out FILE": (
-        ["plan", "p.yaml", "-out", "plan.json"],
-        "error: -out plan.json: prc3cfg options take two dashes — did you mean --out plan.json?",
-    ),
-    "terraform's apply PLAN": (
-        ["apply", "plan.json"],
-        (
-            "error: prc3cfg apply: plan.json is a plan file — did you mean prc3cfg apply "
-            "PLANT --plan plan.json? — see prc3cfg apply --help"
-        ),
-    ),
+    "an unknown option": (["plan", "p.yaml", "--outt", "x"], "error: prc3cfg plan: No such option: --outt (Possible options: --out, --plot) — see prc3cfg plan --help"),
+    "negative retries": (["plan", "p.yaml", "--retries", "-1"], "error: prc3cfg plan: Invalid value for '--retries': must be 0 or more — see prc3cfg plan --help"),
+    "a negative lock time-out": (["apply", "p.yaml", "--lock-timeout", "-5"], "error: prc3cfg apply: Invalid value for '--lock-timeout': '-5' is not a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h — see prc3cfg apply --help"),
+    "a lock time-out in parsecs": (["apply", "p.yaml", "--lock-timeout", "5pc"], "error: prc3cfg apply: Invalid value for '--lock-timeout': '5pc' is not a time — write seconds (30, 0.5) or with a unit: 500ms, 5s, 2m, 1h — see prc3cfg apply --help"),
+    "a reply time-out of two hours": (["scan", "--port", "socket://127.0.0.1:9", "--timeout", "2h"], "error: prc3cfg scan: Invalid value for '--timeout': 2h is more than 1h — see prc3cfg scan --help"),
+    "a zvz below the open driver's": (["import", "--port", "socket://127.0.0.1:9", "--zvz", "1ms"], "error: prc3cfg import: Invalid value for '--zvz': 1ms is less than 4ms — see prc3cfg import --help"),
+    "retries as text": (["read", "p.yaml", "--retries", "many"], "error: prc3cfg read: Invalid value for '--retries': must be a whole number — see prc3cfg read --help"),
+    "scan's baud 0": (["scan", "--port", "socket://127.0.0.1:9", "--baud", "0"], "error: prc3cfg scan: Invalid value for '--baud': must be 1 or more — see prc3cfg scan --help"),
+    "scan's parity": (["scan", "--port", "socket://127.0.0.1:9", "--parity", "x"], "error: prc3cfg scan: Invalid value for '--parity': 'x' is not one of none, odd, even — see prc3cfg scan --help"),
+    "import's framing": (["import", "--port", "socket://127.0.0.1:9", "--framing", "modbus"], "error: prc3cfg import: Invalid value for '--framing': 'modbus' is not one of crc16, open-driver, stx — see prc3cfg import --help"),
+    "import's empty address": (["import", "--port", "socket://127.0.0.1:9", "--modules", "1,,2"], "error: prc3cfg import: Invalid value for '--modules': '1,,2' has an empty entry — write addresses and ranges between commas, e.g. 1,3-5 — see prc3cfg import --help"),
+    "scan's 7 data bits": (["scan", "--port", "socket://127.0.0.1:9", "--data-bits", "7"], "error: prc3cfg scan: Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: give 8 or leave the option out — see prc3cfg scan --help"),
+    "import's 5 data bits": (["import", "--port", "socket://127.0.0.1:9", "--data-bits", "5"], "error: prc3cfg import: Invalid value for '--data-bits': 5 data bits cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: give 8 or leave the option out — see prc3cfg import --help"),
+    "the emulator's 7 data bits": (["emulator", "serve", "--listen", "127.0.0.1:9", "--data-bits", "7"], "error: prc3cfg emulator serve: Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame — its frames are binary and need 8 data bits: give 8 or leave the option out — see prc3cfg emulator serve --help"),
+    "scan's stop bits": (["scan", "--port", "socket://127.0.0.1:9", "--stop-bits", "3"], "error: prc3cfg scan: Invalid value for '--stop-bits': 3.0 is not one of 1, 1.5, 2 — see prc3cfg scan --help"),
+    "refresh-only with --plot": (["plan", "p.yaml", "--refresh-only", "--plot", "p.svg", "--module", "m"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --plot — see prc3cfg plan --help"),
+    "verify not a choice": (["apply", "p.yaml", "--verify", "bogus"], "error: prc3cfg apply: Invalid value for '--verify': 'bogus' is not one of 'floor', 'full' — see prc3cfg apply --help"),
+    "completion for a named shell": (["--install-completion", "zsh"], "error: prc3cfg: --install-completion takes no shell name (zsh): it is for the shell it is run in — run prc3cfg --install-completion from that shell"),
+    "refresh-only with --previous": (["plan", "p.yaml", "--refresh-only", "--previous", "old.yaml"], "error: prc3cfg plan: --refresh-only reports drift and makes no plan — leave out --previous — see prc3cfg plan --help"),
+    "terraform's -out=": (["plan", "p.yaml", "-out=plan.json"], "error: -out=plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
+    "terraform's -auto-approve": (["apply", "p.yaml", "-auto-approve"], "error: -auto-approve: prc3cfg options take two dashes — did you mean --auto-approve?"),
+    "terraform's -lock-timeout=": (["apply", "p.yaml", "-lock-timeout=10"], "error: -lock-timeout=10: prc3cfg options take two dashes — did you mean --lock-timeout 10?"),
+    "terraform's -target=": (["plan", "p.yaml", "-target=booth-a-top"], "error: -target=booth-a-top: prc3cfg names a module with --module — did you mean --module booth-a-top?"),
+    "terraform's -target NAME": (["apply", "p.yaml", "-target", "booth-a-top"], "error: -target booth-a-top: prc3cfg names a module with --module — did you mean --module booth-a-top?"),
+    "terraform's -out FILE": (["plan", "p.yaml", "-out", "plan.json"], "error: -out plan.json: prc3cfg options take two dashes — did you mean --out plan.json?"),
+    "terraform's apply PLAN": (["apply", "plan.json"], "error: prc3cfg apply: plan.json is a plan file — did you mean prc3cfg apply PLANT --plan plan.json? — see prc3cfg apply --help"),
 }
 
 

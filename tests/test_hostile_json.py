@@ -28,8 +28,8 @@ from prc3cfg.shell import files
 from prc3cfg.shell.plant_files import load_plant
 
 #: What a message a person reads must never show: Python's own words for what went wrong.
-PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no len|not "
-                    r"subscriptable|\bdict\b|\bstr\b|\bint\b")
+PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no len|not subscriptable"
+                    r"|\bdict\b|\bstr\b|\bint\b")
 
 
 def nowhere_plant(folder: Path) -> Path:
