@@ -291,9 +291,8 @@ def main() -> None:
                               for a in range(1, args.modules + 1))
             plant.write_text(PLANT.format(port=f"socket://{port}", framing=args.framing, baud=args.baud,
                                           modules=modules, accepted=accepted))
-            read_estimate = (
-                args.modules * sum(cost.message_time(1, m) for m in read_messages(range(1, 65))) * CONFIRMED
-            )
+            read_estimate = (args.modules * sum(cost.message_time(1, m)
+                                                for m in read_messages(range(1, 65))) * CONFIRMED)
             print(f"{args.modules} modules, {args.framing}, {args.baud} baud 8N1, turnaround 10 ms; "
                   f"command start-up {startup:.2f} s (included below)"
                   + ("" if CONFIRMED == 1

@@ -386,15 +386,10 @@ class Relaxation:
         # init states (before side, after side) and their moves: (next state, cost, the same run goes on)
         sides = (OUT, ONE, MORE)
         two = INIT_BEFORE in self.kinds
-        side_moves = {
-            OUT: ((OUT, 0.0, False), (ONE, prices.init, False)),
-            ONE: (
-                (OUT, 0.0, False),
-                (MORE, prices.init_range - prices.init, True),
-                (ONE, prices.init, False),
-            ),
-            MORE: ((OUT, 0.0, False), (MORE, 0.0, True), (ONE, prices.init, False)),
-        }
+        side_moves = {OUT: ((OUT, 0.0, False), (ONE, prices.init, False)),
+                      ONE: ((OUT, 0.0, False), (MORE, prices.init_range - prices.init, True),
+                            (ONE, prices.init, False)),
+                      MORE: ((OUT, 0.0, False), (MORE, 0.0, True), (ONE, prices.init, False))}
         self.init_moves = {}
         for state in ((b, a) for b in (sides if two else (OUT,)) for a in sides):
             moves = []
@@ -452,9 +447,8 @@ class Relaxation:
         cheaper than `limit`."""
         prices = self.prices
         head, per, link = prices.parts_header, prices.parts_item, prices.link
-        price = {
-            name: self.item[name] + shares.get(name, 0.0) if name in opened else INF for name in CHANNELS
-        }
+        price = {name: self.item[name] + shares.get(name, 0.0) if name in opened else INF
+                 for name in CHANNELS}
         for name in exact:
             price[name] = self.item[name]
         capacity, header = [CAPACITY[name] for name in exact], [self.header[name] for name in exact]
@@ -504,9 +498,8 @@ class Relaxation:
                 kind = self.kind(sides)
                 row = options[i][kind][run > 0]
                 right = self.address_ok[i][kind]
-                for new_rng, seen, opens, same, goes_on in (
-                    RANGE_MOVES[rng] if self.ranges_matter else RANGE_MOVES[0][:1]
-                ):
+                for new_rng, seen, opens, same, goes_on in (RANGE_MOVES[rng] if self.ranges_matter
+                                                            else RANGE_MOVES[0][:1]):
                     if new_rng != NO_RANGE and not ranges_on:
                         continue
                     if seen == UNCOVERED or kind == KEEP:
@@ -735,9 +728,8 @@ def plant_run(profile: str, modules: int, scenarios: list[str], label: str) -> N
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "images.json"
         path.write_text(json.dumps([[a.to_json(), d.to_json()] for a, d in cases]))
-        saved = [
-            (ModuleImage.from_json(a), ModuleImage.from_json(d)) for a, d in json.loads(path.read_text())
-        ]
+        saved = [(ModuleImage.from_json(a), ModuleImage.from_json(d))
+                 for a, d in json.loads(path.read_text())]
     cost = line_cost(profile)
     start = time.process_time()
     plans = [plan_module(actual, desired, cost) for actual, desired in saved]

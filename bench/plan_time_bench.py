@@ -223,10 +223,8 @@ def write_one_profile_plant(folder: Path) -> tuple[Path, Path, Path]:
         for address in range(1, MODULES + 1):
             text.append(f"      - {{address: {address}, name: b{b}m{address}, profiles: line}}\n")
             factory.append({"bus": f"bus{b}", **ModuleImage.factory(address).to_json()})
-            held = tuple(
-                Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(0, 50))
-                for _ in PROGRAM_NUMBERS
-            )
+            held = tuple(Program(P=rnd.randrange(100, 1900), V=rnd.randrange(20, 480), T=rnd.randrange(0, 50))
+                         for _ in PROGRAM_NUMBERS)
             own.append({"bus": f"bus{b}", **replace(ModuleImage.factory(address), programs=held).to_json()})
     plant, commissioning, drifted = folder / "one-profile.yaml", folder / "factory.json", folder / "own.json"
     plant.write_text("".join(text))
@@ -263,9 +261,8 @@ def run_process(command: list[str], ok: tuple[int, ...] = (0,)) -> Run:
         measured = subprocess.run([sys.executable, "-c", _MEASURE, str(out), str(err), *command],
                                   check=True, capture_output=True, text=True)
         wall, cpu, rss_kib, code = json.loads(measured.stdout)
-        said = (
-            (err.read_bytes()[:4000] or out.read_bytes()[:4000]).decode(errors="replace").partition("\n")[0]
-        )
+        tail = err.read_bytes()[:4000] or out.read_bytes()[:4000]
+        said = tail.decode(errors="replace").partition("\n")[0]
     if code not in ok:
         sys.exit(f"{' '.join(command)} ended with {code}: {said}")
     return Run(wall, cpu, rss_kib / 1024, said)

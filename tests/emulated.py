@@ -35,9 +35,8 @@ def emulated_plant(
 
         def route(bus: str, host: str, port: int) -> str:
             if lossy and bus in lossy:
-                return stack.enter_context(
-                    LossyProxy((host, port), lossy[bus], framing=framing, zvz=zvz)
-                ).listen()
+                proxy = LossyProxy((host, port), lossy[bus], framing=framing, zvz=zvz)
+                return stack.enter_context(proxy).listen()
             return f"socket://{host}:{port}"
 
         emulated = stack.enter_context(emulate(source, directory, faults=faults, line_speed=line_speed,

@@ -151,10 +151,9 @@ class LossyProxy:
                 flood.set() if Loss.FLOOD in losses else flood.clear()
                 if losses & {Loss.LATE, Loss.DUPLICATE}:
                     with self._held_lock:
-                        self._held.append((
-                            time.monotonic(),
-                            self.framing.encode(Direction.REQUEST, event.address, event.message),
-                        ))
+                        self._held.append((time.monotonic(),
+                                           self.framing.encode(Direction.REQUEST, event.address,
+                                                               event.message)))
                 if losses & {Loss.REQUEST, Loss.LATE}:
                     continue
                 swallow.set() if losses & {Loss.REPLY, Loss.REFUSAL, Loss.FLOOD} else swallow.clear()

@@ -76,9 +76,8 @@ def test_the_readme_plugin_test_passes_in_a_plant_repository_made_from_the_wheel
     repository.mkdir()
     shutil.copy(DEMO, repository / "plant.yaml")
     (repository / "test_plant.py").write_text(doc_block("Testing a plant repository"))
-    env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"} | {
-        "PRC3CFG_LOCK_DIR": str(tmp_path / "locks")
-    }
+    env = {key: value for key, value in os.environ.items()
+           if key != "PYTHONPATH"} | {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
     ran = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider"], cwd=repository,
                          capture_output=True, text=True, env=env)
     assert ran.returncode == 0, ran.stdout + ran.stderr

@@ -74,9 +74,8 @@ def test_a_plant_that_lies_about_its_line_never_reaches_the_modules_it_does_not_
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
         assert result.code == 0, result.err
         for address in strangers:
-            assert plant.emulators["line"].module(address) == ModuleState.factory(
-                address
-            ), f"module {address} was reached"
+            held = plant.emulators["line"].module(address)
+            assert held == ModuleState.factory(address), f"module {address} was reached"
         assert "which the plant file does not list" in result.out
         assert unreferenced(plant) <= named(plant, result.out)
 

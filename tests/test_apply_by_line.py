@@ -144,9 +144,8 @@ def written_and_untouched(plant: EmulatedPlant) -> None:
     assert (held.system == short.desired_image().system
             and held.programs[:2] == short.desired_image().programs[:2])
     for address in range(1, 7):
-        assert (
-            plant.emulators["long"].module(address).image == ModuleState.factory(address).image
-        ), f"long/{address} was written"
+        held = plant.emulators["long"].module(address).image
+        assert held == ModuleState.factory(address).image, f"long/{address} was written"
 
 
 def test_a_line_whose_read_back_fails_is_not_written_and_the_other_is_written_and_verified(tmp_path, capsys):
@@ -165,9 +164,8 @@ def test_a_line_whose_read_back_fails_is_not_written_and_the_other_is_written_an
     events = [json.loads(line) for path in (tmp_path / ".prc3cfg" / "journal").iterdir()
               for line in path.read_text().splitlines()]
     assert [e["modules"] for e in events if e["event"] == "apply"] == [["short/1"]]
-    assert [(e["bus"], e["address"], e["verified"]) for e in events if e["event"] == "result"] == [
-        ("short", 1, True)
-    ]
+    assert [(e["bus"], e["address"], e["verified"]) for e in events
+            if e["event"] == "result"] == [("short", 1, True)]
     writes = {(e["bus"], e["address"]) for e in events if e["event"] == "exchange"
               and int(e["request"][:2], 16) < 0x50}
     assert writes == {("short", 1)}
@@ -223,23 +221,20 @@ def test_ctrl_c_while_one_line_writes_and_the_other_still_reads_says_which_line_
             threading.Thread(target=trace.read, daemon=True).start()
             out, err = process.communicate()
         for address in range(1, 7):
-            assert (
-                plant.emulators["long"].module(address).image == ModuleState.factory(address).image
-            ), f"long/{address} was written"
+            held = plant.emulators["long"].module(address).image
+            assert held == ModuleState.factory(address).image, f"long/{address} was written"
     assert process.returncode == 130, err
     assert err.splitlines()[-1] == "error: interrupted"
     assert ("bus long: interrupted before its read-back and plan were whole — nothing was "
             "written on it") in err.splitlines()
-    assert next(line for line in (out + err).splitlines() if line.startswith(("✓ bus", "✗ bus"))).startswith(
-        ("✓ bus short", "✗ bus short")
-    )
+    first = next(line for line in (out + err).splitlines() if line.startswith(("✓ bus", "✗ bus")))
+    assert first.startswith(("✓ bus short", "✗ bus short"))
     assert "Interrupted: " in out
     events = [json.loads(line) for path in (tmp_path / ".prc3cfg" / "journal").iterdir()
               for line in path.read_text().splitlines()]
     assert events[-1]["event"] == "interrupted"
-    assert {e["bus"] for e in events if e["event"] == "exchange" and int(e["request"][:2], 16) < 0x50} == {
-        "short"
-    }
+    assert {e["bus"] for e in events if e["event"] == "exchange"
+            and int(e["request"][:2], 16) < 0x50} == {"short"}
 
 
 class _Events:

@@ -343,13 +343,9 @@ def test_a_module_whose_firmware_has_no_read_messages_is_said_so_once_not_blamed
         result = run_cli(capsys, "plan", plant.path)
         assert result.code == 1
         (line,) = result.problems
-        assert (
-            line
-            == "error: bus booth-a, module 2: answers 50h as an unknown message — its firmware has "
-            "no read messages "
-            "(they came with PRC 3.03.1), so prc3cfg can neither plan nor verify it: update the "
-            "module's firmware"
-        )
+        assert (line == "error: bus booth-a, module 2: answers 50h as an unknown message — its firmware has "
+                        "no read messages (they came with PRC 3.03.1), so prc3cfg can neither plan nor "
+                        "verify it: update the module's firmware")
         assert asked == [bytes([0x50, 0])]  # asked once: a checksum passed, so it is no damage
 
 

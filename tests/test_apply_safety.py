@@ -312,11 +312,8 @@ def test_clamping_of_kept_programs_is_shown_snapshotted_and_restored(tmp_path, c
         assert [(c["program"], c["field"], c["before"], c["after"]) for c in changes["clamped"]] == [
             (7, "P", 2400, 2200), (7, "V", 600, 500)]
         human = run_cli(capsys, "plan", plant.path)
-        assert (
-            "~ program 7 (not managed, kept): position 2.400 m → 2.200 m, speed 0.600 m/s → 0.500 m/s — "
-            "clamped by the module"
-            in human.out
-        )
+        assert ("~ program 7 (not managed, kept): position 2.400 m → 2.200 m, speed 0.600 m/s → 0.500 m/s — "
+                "clamped by the module" in human.out)
         assert "program 8" not in human.out
 
         assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0

@@ -54,7 +54,6 @@ def test_every_combination_is_one_rule() -> None:
                                      and (facts["sent"] or facts["exposed"] or facts["possibly_written"])):
             assert said is Release.YES, facts
         if said is Release.NO:
-            assert not facts["changed"] or not (
-                facts["sent"] or facts["exposed"] or facts["possibly_written"]
-            ), facts
+            assert not facts["changed"] or not (facts["sent"] or facts["exposed"]
+                                                or facts["possibly_written"]), facts
             assert facts["read_back"] or not (facts["sent"] or facts["possibly_written"]), facts

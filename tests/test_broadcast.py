@@ -226,9 +226,8 @@ def check_floors_and_choice(modules: list[SharingModule], cost: LineCost, proof_
     tried = {0, every} | {1 << i for i in each} | {every & ~(1 << i) for i in each} | {(1 << i) - 1
                                                                                        for i in each}
     for chosen in sorted(tried):
-        priced = broadcast_search._attempt(
-            tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g), kinds, cost, memo
-        )
+        together = tuple(s for i, g in enumerate(groups) if chosen >> i & 1 for s in g)
+        priced = broadcast_search._attempt(together, kinds, cost, memo)
         if priced is not None:
             for floor, own in zip(floors.modules, priced.owns, strict=True):
                 steps, verification = floor.parts(floors.chosen(chosen))
@@ -360,9 +359,8 @@ def test_commissioning_and_a_shared_change_go_by_broadcast_and_every_module_is_r
         writes = [e for e in exchanges if e["request"][:2] not in ("50", "51", "52")]
         assert [(e["address"], e["request"]) for e in writes] == [(0, codec.WriteSpeeds(((1, 310),)).hex())]
         verifying = exchanges[exchanges.index(writes[0]) + 1 :]
-        assert sorted(e["address"] for e in verifying) == list(range(1, 31)) and {
-            e["request"] for e in verifying
-        } == {"5101"}
+        assert sorted(e["address"] for e in verifying) == list(range(1, 31))
+        assert {e["request"] for e in verifying} == {"5101"}
         assert plant.matches_plant()
 
 
@@ -465,9 +463,8 @@ def test_a_broadcast_is_said_in_the_words_its_modules_steps_say_it(tmp_path, cap
                                                                                   *bus["broadcasts"][1:]]}]}))
         refused = run_cli(capsys, "apply", plant.path, "--plan", alone, "--auto-approve",
                           "--allow-axis-release")
-        assert (
-            refused.code == 1 and "buses[0].broadcasts[0].summary is not what prc3cfg wrote" in refused.err
-        ), refused.err
+        assert (refused.code == 1
+                and "buses[0].broadcasts[0].summary is not what prc3cfg wrote" in refused.err), refused.err
         for broadcast in bus["broadcasts"]:
             broadcast["summary"] = "send " + broadcast["summary"]
         for module in bus["modules"]:

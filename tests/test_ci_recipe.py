@@ -287,9 +287,8 @@ def lock_entries(lock: Path = LOCK) -> dict[str, tuple[str, list[str]]]:
         requirement, *options = line.split()
         name, version = requirement.split("==")
         assert canonicalize_name(name) not in entries, name
-        assert options and all(
-            re.fullmatch(r"--hash=sha256:[0-9a-f]{64}", option) for option in options
-        ), line
+        assert options and all(re.fullmatch(r"--hash=sha256:[0-9a-f]{64}", option)
+                               for option in options), line
         entries[canonicalize_name(name)] = (version, [option.rsplit(":", 1)[1] for option in options])
     return entries
 
@@ -300,9 +299,8 @@ def test_the_requirements_file_holds_every_dependency_of_pyproject_at_a_version_
     wanted = [Requirement(text)
               for text in (*PYPROJECT["project"]["dependencies"], *PYPROJECT["build-system"]["requires"])]
     # the runner's
-    for requirement in (
-        r for r in wanted if r.marker is None or r.marker.evaluate({"sys_platform": "linux"})
-    ):
+    linux = [r for r in wanted if r.marker is None or r.marker.evaluate({"sys_platform": "linux"})]
+    for requirement in linux:
         name = canonicalize_name(requirement.name)
         assert name in entries, f"{name} is not in {LOCK.name}: run python .ci/lock"
         version = entries[name][0]
@@ -324,12 +322,10 @@ def test_the_windows_tier_installs_every_dependency_by_hash_at_a_version_pyproje
     entries = lock_entries(lock)
     for requirement in (Requirement(text) for text in PYPROJECT["project"]["dependencies"]):
         name = canonicalize_name(requirement.name)
-        assert name in entries and requirement.specifier.contains(
-            entries[name][0], prereleases=True
-        ), f"{name}: run python .ci/lock"
-    assert {"colorama", "pip", "pydantic-core", "tzdata"} <= set(entries) and all(
-        len(hashes) == 1 for _, hashes in entries.values()
-    )
+        allowed = name in entries and requirement.specifier.contains(entries[name][0], prereleases=True)
+        assert allowed, f"{name}: run python .ci/lock"
+    assert {"colorama", "pip", "pydantic-core", "tzdata"} <= set(entries)
+    assert all(len(hashes) == 1 for _, hashes in entries.values())
     windows = (ROOT / ".ci" / "windows").read_text()
     assert "requirements/windows.txt" in windows and windows.count("--require-hashes") == 2
 
@@ -347,9 +343,8 @@ def test_the_jobs_that_reach_the_line_run_nothing_of_a_pull_request():
                                                                      "pull-requests": "write"}
     for job in WORKFLOW["jobs"].values():
         for step in job["steps"]:
-            assert "uses" not in step or re.fullmatch(r"actions/[a-z-]+@[0-9a-f]{40}", step["uses"]), step[
-                "uses"
-            ]
+            assert "uses" not in step or re.fullmatch(r"actions/[a-z-]+@[0-9a-f]{40}",
+                                                      step["uses"]), step["uses"]
             assert ("github.event.pull_request.title" not in step.get("run", "")
                     and "head_ref" not in step.get("run", ""))
     assert "@RELEASE_COMMIT" in WORKFLOW["env"]["PRC3CFG"]
@@ -362,13 +357,11 @@ def evaluate(expression: str, values: dict[str, object]) -> bool:
     """A job's or step's `if:` as GitHub reads these: contexts, 'text', ==, !=, &&, ||, always()."""
     def token(match: re.Match) -> str:
         text = match.group(0)
-        return {"&&": " and ", "||": " or ", "always()": "True"}.get(text) or (
-            text if text[0] == "'" else repr(values.get(text, ""))
-        )
+        said = text if text[0] == "'" else repr(values.get(text, ""))
+        return {"&&": " and ", "||": " or ", "always()": "True"}.get(text) or said
 
-    return bool(
-        eval(re.sub(r"'[^']*'|&&|\|\||always\(\)|[a-z_]+(?:\.[A-Za-z_0-9-]+)+", token, expression), {})
-    )
+    python = re.sub(r"'[^']*'|&&|\|\||always\(\)|[a-z_]+(?:\.[A-Za-z_0-9-]+)+", token, expression)
+    return bool(eval(python, {}))
 
 
 def expressions(text: str, values: dict[str, object]) -> str:
@@ -641,9 +634,8 @@ def test_a_pull_request_is_planned_from_its_plant_file_as_data_and_the_merge_app
     event = plant.pull_request()  # the plant file as on main: everything to write
     job = plant.run("plan", event)
     assert job.ok and len(job.steps) == 4, job.output()  # install skipped: fetch, plan, upload, comment
-    assert (
-        plant.state / "artifacts" / f"plan-{event['github.event.pull_request.head.sha']}" / "plan.json"
-    ).exists()
+    kept = plant.state / "artifacts" / f"plan-{event['github.event.pull_request.head.sha']}" / "plan.json"
+    assert kept.exists()
     (comment,) = plant.comments()
     assert "prc3cfg plan" in comment["body"] and "<!-- prc3cfg-plan -->" in comment["body"]
     assert not (plant.workspace / ".git").exists()  # nothing was checked out
@@ -703,11 +695,8 @@ def test_a_pull_request_that_removes_a_module_says_it_stays_on_the_hardware(plan
     job = plant.run("plan", plant.pull_request(lambda document: document["buses"][0]["modules"].pop()))
     assert job.ok, job.output()
     (comment,) = plant.comments()
-    assert (
-        f"{document['buses'][0]['name']}/{removed['name']} (address {removed['address']}) is no longer in the"
-        " plant file: it stays on the hardware as it is"
-        in comment["body"]
-    )
+    assert (f"{document['buses'][0]['name']}/{removed['name']} (address {removed['address']}) is no longer "
+            "in the plant file: it stays on the hardware as it is" in comment["body"])
 
 
 def test_a_stale_plan_is_refused_and_a_replan_on_demand_is_applied(plant):
@@ -820,9 +809,8 @@ def test_the_install_step_installs_the_locked_requirements_by_hash_and_prc3cfg_a
 
 def test_a_broken_plant_file_is_annotated_at_its_line_in_the_repository_and_not_planned(plant):
     def misspelt(document: dict) -> None:
-        document["profiles"]["reciprocator"]["programs"][3]["dwel"] = document["profiles"]["reciprocator"][
-            "programs"
-        ][3].pop("dwell", 0.5)
+        programs = document["profiles"]["reciprocator"]["programs"]
+        programs[3]["dwel"] = programs[3].pop("dwell", 0.5)
 
     job = plant.run("plan", plant.pull_request(misspelt))
     assert not job.ok and not plant.comments()

@@ -128,11 +128,8 @@ def unwritable_records(tmp_path, how: str):
     folder = tmp_path / "checkout"
     folder.mkdir()
     plant = folder / "plant.yaml"
-    plant.write_text(
-        DEMO.read_text()
-        .replace("emulator://demo-a", "socket://127.0.0.1:9")
-        .replace("emulator://demo-b", "socket://127.0.0.1:19")
-    )
+    plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9")
+                     .replace("emulator://demo-b", "socket://127.0.0.1:19"))
     if how == "a file where the folder belongs":
         (folder / ".prc3cfg").write_text("")
     else:
@@ -212,11 +209,8 @@ def test_stale_plan_refused_after_plant_file_change(plant, capsys, tmp_path):
 
 
 def test_a_second_apply_on_the_same_line_is_refused(plant, capsys):
-    port = (
-        next(line for line in plant.path.read_text().splitlines() if "socket://" in line)
-        .split("port:")[1]
-        .strip()
-    )
+    port_line = next(line for line in plant.path.read_text().splitlines() if "socket://" in line)
+    port = port_line.split("port:")[1].strip()
     with line_lock(line_keys(port), "another apply"):
         result = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
     assert result.code == 1
@@ -245,9 +239,8 @@ def test_snapshot_and_restore(plant, capsys, tmp_path):
     snapshot = json.loads(snapshots[0].read_text())
     assert snapshot["plant_sha256"] and len(snapshot["modules"]) == 6
     refused = run_cli(capsys, "restore", snapshots[0], "--auto-approve")
-    assert (
-        refused.code == 1 and "nothing was written; restore again with --allow-axis-release" in refused.err
-    ), refused.err
+    assert (refused.code == 1
+            and "nothing was written; restore again with --allow-axis-release" in refused.err), refused.err
     restored = run_cli(capsys, "restore", snapshots[0], "--auto-approve", "--allow-axis-release")
     assert restored.code == 0, restored.err
     assert ("Restore complete: 6 modules written and verified." in restored.out

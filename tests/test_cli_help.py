@@ -215,9 +215,8 @@ def test_a_plan_loads_the_policy_its_plant_file_names(tmp_path):
     done = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True,
                           text=True, cwd=tmp_path,
                           env=_no_terminal())
-    assert "Policy" in done.stdout + done.stderr and "booth speeds" in done.stdout + done.stderr, (
-        done.stdout + done.stderr
-    )
+    said = done.stdout + done.stderr
+    assert "Policy" in said and "booth speeds" in said, said
     assert done.stderr.strip().splitlines()[-1] == ("loaded: ['prc3cfg.core.policy', "
                                                     "'prc3cfg.plant.policy', "
                                                     "'prc3cfg.shell.emulator.server']")
@@ -247,9 +246,8 @@ print("built:", state._StateFile.__pydantic_complete__, records._SnapshotDocumen
 
 def _no_terminal() -> dict[str, str]:
     """This environment without what makes rich take a pipe for a terminal."""
-    return {
-        name: value for name, value in os.environ.items() if name not in ("TTY_COMPATIBLE", "FORCE_COLOR")
-    }
+    return {name: value for name, value in os.environ.items()
+            if name not in ("TTY_COMPATIBLE", "FORCE_COLOR")}
 
 
 def _command_lines(command=None, words: tuple[str, ...] = ()) -> list[tuple[str, ...]]:

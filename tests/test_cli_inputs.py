@@ -30,11 +30,8 @@ EXIT_USAGE = 64
 def nowhere(tmp_path) -> Path:
     """The demo plant on a port where nothing listens: any time spent on the line is an error there."""
     plant = tmp_path / "plant.yaml"
-    plant.write_text(
-        DEMO.read_text()
-        .replace("emulator://demo-a", "socket://127.0.0.1:9")
-        .replace("emulator://demo-b", "socket://127.0.0.1:19")
-    )
+    plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9")
+                     .replace("emulator://demo-b", "socket://127.0.0.1:19"))
     return plant
 
 

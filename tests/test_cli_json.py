@@ -26,9 +26,8 @@ BUFFERED = {name: value for name, value in os.environ.items() if name != "PYTHON
 
 
 def schema(kind: str) -> jsonschema.Draft7Validator:
-    return jsonschema.Draft7Validator(
-        json.loads((SCHEMAS / f"{kind}.schema.json").read_text(encoding="utf-8"))
-    )
+    text = (SCHEMAS / f"{kind}.schema.json").read_text(encoding="utf-8")
+    return jsonschema.Draft7Validator(json.loads(text))
 
 
 def valid(kind: str, document: object) -> object:
@@ -266,16 +265,14 @@ def test_adopt_json_says_what_it_adopts_and_writes_it(plant, capsys):
 def test_every_other_command_prints_a_document_its_schema_takes(plant, capsys, tmp_path):
     port = plant.plant.buses[0].port
     plan = run_cli(capsys, "plan", plant.path, "--json", "--out", tmp_path / "plan.json")
-    assert plan.code == 0 and valid("plan", json.loads(plan.out)) == valid(
-        "plan", json.loads((tmp_path / "plan.json").read_text(encoding="utf-8"))
-    )
+    saved = json.loads((tmp_path / "plan.json").read_text(encoding="utf-8"))
+    assert plan.code == 0 and valid("plan", json.loads(plan.out)) == valid("plan", saved)
     shown = run_cli(capsys, "show", tmp_path / "plan.json", "--json")
     assert shown.code == 0, shown.err
     buses = valid("plan", json.loads(shown.out))["buses"]
     # show's verdict
-    assert [m.pop("review") for bus in buses for m in bus["modules"]] == ["as written"] * len(
-        plant.plant.modules()
-    )
+    reviews = [m.pop("review") for bus in buses for m in bus["modules"]]
+    assert reviews == ["as written"] * len(plant.plant.modules())
     assert buses == json.loads(plan.out)["buses"]
 
     # import and doctor: no scan of 1..30
@@ -283,9 +280,8 @@ def test_every_other_command_prints_a_document_its_schema_takes(plant, capsys, t
     # the silent addresses: 50 ms each, twice
     scan = run_cli(capsys, "scan", "--port", port, "--timeout", "50ms", "--json")
     assert scan.code == 0, scan.err
-    assert [m["address"] for m in valid("scan", json.loads(scan.out))["modules"]] == [
-        m.address for m in plant.plant.buses[0].modules
-    ]
+    scanned = valid("scan", json.loads(scan.out))["modules"]
+    assert [m["address"] for m in scanned] == [m.address for m in plant.plant.buses[0].modules]
 
     doctor = run_cli(capsys, "doctor", "--port", port, "--modules", addresses, "--exchanges", "2", "--json")
     assert doctor.code == 0, doctor.err

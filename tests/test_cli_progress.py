@@ -62,11 +62,8 @@ def test_each_phase_shows_the_time_left_at_its_rate_so_far(tmp_path):
     the apply's snapshot and its time by phase on the same screen (`--verify full` reads every program back).
     """
     with emulated_plant(tmp_path, line_speed=True, timeout=0.5) as plant:
-        pane = Pane(
-            tmp_path,
-            prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release", "--verify", "full"),
-            environment(),
-        )
+        pane = Pane(tmp_path, prc3cfg("apply", plant.path, "--auto-approve", "--allow-axis-release",
+                                      "--verify", "full"), environment())
         try:
             seen: dict[str, list[tuple[int, int, int, int | None]]] = {}
 

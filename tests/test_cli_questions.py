@@ -110,10 +110,8 @@ def test_with_stdout_in_a_file_the_plan_asked_about_is_on_the_terminal_too(tmp_p
                     stdout=log)
         try:
             screen = asked(pane, ALLOW, None)
-            assert (
-                "~ bus booth-a, module 1 (booth-a-left):" in screen
-                and "Plan: 1 of 1 module changes" in screen
-            ), screen
+            assert ("~ bus booth-a, module 1 (booth-a-left):" in screen
+                    and "Plan: 1 of 1 module changes" in screen), screen
             pane.type("no")
             assert pane.exit_status() == 1, pane.screen()
         finally:

@@ -194,9 +194,8 @@ def test_whatever_another_tool_wrote_on_factory_fresh_modules_commissioning_ends
         assert not claims_what_was_not_read(result.plan), seed
         shown = render.human(result.plan)
         assert render.EVERY_MODULE not in shown, seed
-        assert ("Not read before writing" in shown) == any(
-            change.assumed for change in result.plan.modules
-        ), seed
+        assert ("Not read before writing" in shown) == any(change.assumed
+                                                           for change in result.plan.modules), seed
         for _, module in plant.plant.modules():
             desired, held = module.desired_image(), emulator.module(module.address).image
             for number, (want, have, was) in enumerate(zip(desired.programs, held.programs,

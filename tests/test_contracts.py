@@ -117,6 +117,5 @@ def test_an_emulator_state_file_read_back_is_written_the_same(tmp_path):
     first = json.loads(path.read_text())
     save_state(path, load_state(path), replaces=first["generation"])
     second = json.loads(path.read_text())
-    assert {k: v for k, v in second.items() if k not in ("generation", "replaces")} == {
-        k: v for k, v in first.items() if k != "generation"
-    }
+    assert ({k: v for k, v in second.items() if k not in ("generation", "replaces")}
+            == {k: v for k, v in first.items() if k != "generation"})

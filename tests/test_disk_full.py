@@ -187,10 +187,8 @@ def account_problems(plant: EmulatedPlant, before: dict[tuple[str, int], ModuleI
         if verified:
             if not matches(held, module.desired_image()):
                 problems.append(f"{where}: said verified, holds other than the plant file")
-            if (
-                f"{len(sent)} message{'s' if len(sent) != 1 else ''} written"
-                not in out.split(f"✓ {where} ", 1)[1].splitlines()[0]
-            ):
+            said = out.split(f"✓ {where} ", 1)[1].splitlines()[0]
+            if f"{len(sent)} message{'s' if len(sent) != 1 else ''} written" not in said:
                 problems.append(f"{where}: said verified with another count of messages than the "
                                 f"{len(sent)} it was sent")
         elif block is None:
@@ -249,9 +247,8 @@ class Refused:
                   else self.folders[kind])
         problems = (account_problems(self.plant, self.before, self.lines, self.result)
                     + refused_problems(self.result, kind, folder))
-        assert not problems, (
-            "\n".join(problems) + f"\n--- stdout\n{self.result.stdout}\n--- stderr\n{self.result.stderr}"
-        )
+        assert not problems, ("\n".join(problems) + f"\n--- stdout\n{self.result.stdout}\n--- "
+                                                    f"stderr\n{self.result.stderr}")
 
 
 def folder_of(tmp_path: Path, kind: str) -> Path:
@@ -478,9 +475,6 @@ def test_a_journal_the_disk_refuses_after_an_adopt_wrote_the_plant_file_says_so_
     refused, written = adopted_line(tmp_path / "line", header + adopt_record + 40, tmp_path / "state")
     assert refused.returncode == 1 and "Traceback" not in refused.stderr, refused.stderr
     error = refused.stderr.strip().splitlines()[-1]
-    assert (
-        error.startswith("error: could not keep the journal (")
-        and "File too large" in error
-        and "was adopted and written" in error
-    ), error
+    assert (error.startswith("error: could not keep the journal (") and "File too large" in error
+            and "was adopted and written" in error), error
     assert b"position: 0.16\n" in written  # the taught value, adopted

@@ -263,11 +263,8 @@ def test_each_library_decision_names_tests_that_exist_and_the_libraries_kept_out
     assert len(table) >= 4 and all(re.findall(r"`(test_\w+)`", row.split("|")[-2]) for row in table), table
     assert set(named) <= defined, set(named) - defined
     dependencies = (ROOT / "pyproject.toml").read_text().split("[project.optional-dependencies]")[0]
-    assert not [
-        library
-        for library in ("platformdirs", "filelock", "portalocker", "ruamel", "atomicwrites")
-        if library in dependencies
-    ]
+    assert not [library for library in ("platformdirs", "filelock", "portalocker", "ruamel", "atomicwrites")
+                if library in dependencies]
 
 
 def test_no_text_cites_a_specification_the_repository_does_not_have():

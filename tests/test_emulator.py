@@ -219,64 +219,42 @@ def test_serve_errors_are_one_line(tmp_path, options, says):
     assert says in result.stderr
 
 
-@pytest.mark.parametrize(
-    ("options", "says"),
-    [
-        (["--max-connections", "0"], "Invalid value for '--max-connections': must be 1 or more"),
-        (["--idle-timeout", "0"], "Invalid value for '--idle-timeout': 0 is less than 1ms"),
-        (["--parity", "weird"], "Invalid value for '--parity': 'weird' is not one of none, odd, even"),
-        (["--framing", "xyz"], "Invalid value for '--framing': 'xyz' is not one of crc16, open-driver, stx"),
-        (
-            ["--zvz", "-1"],
-            (
-                "Invalid value for '--zvz': '-1' is not a time — write seconds (30, 0.5) or with a unit:"
-                " 500ms, 5s, 2m, 1h"
-            ),
-        ),
-        (["--zvz", "nan"], "Invalid value for '--zvz'"),
-        (["--turnaround", "nan"], "Invalid value for '--turnaround'"),
-        (
-            ["--module-turnaround", "3"],
-            "Invalid value for '--module-turnaround': '3' is not ADDRESSES=TIME — for example 3-5=40ms",
-        ),
-        (["--module-turnaround", "31=5ms"], "Invalid value for '--module-turnaround': '31' is outside 1..30"),
-        (
-            ["--module-turnaround", "3=11s"],
-            "Invalid value for '--module-turnaround': '11s' is not a turnaround of 0..10 s",
-        ),
-        (["--jitter", "-1ms"], "Invalid value for '--jitter'"),
-        (["--line-speed", "0"], "Invalid value for '--line-speed': must be 1 or more"),
-        (["--data-bits", "9"], "Invalid value for '--data-bits': 9 data bits cannot carry a PRC 3 frame"),
-        (["--data-bits", "7"], "Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame"),
-        (
-            ["--modules", "0-40"],
-            "Invalid value for '--modules': '0-40' is outside 1..30 — module addresses are 1..30",
-        ),
-        (
-            ["--modules", "1,,2"],
-            (
-                "Invalid value for '--modules': '1,,2' has an empty entry — write addresses and ranges"
-                " between commas, e.g. 1,3-5"
-            ),
-        ),
-        (["--modules", "1,2,"], "Invalid value for '--modules': '1,2,' has an empty entry"),
-        (["--modules", ""], "Invalid value for '--modules': '' has an empty entry"),
-        (
-            ["--listen", "nonsense"],
-            "Invalid value for '--listen': 'nonsense' is not HOST:PORT — for example 127.0.0.1:7001",
-        ),
-        (["--listen", "127.0.0.1:70000"], "Invalid value for '--listen': '127.0.0.1:70000' is not HOST:PORT"),
-        (["--listen", ""], "Invalid value for '--listen': '' is not HOST:PORT — for example 127.0.0.1:7001"),
-    ],
-)
+@pytest.mark.parametrize(("options", "says"), [
+    (["--max-connections", "0"], "Invalid value for '--max-connections': must be 1 or more"),
+    (["--idle-timeout", "0"], "Invalid value for '--idle-timeout': 0 is less than 1ms"),
+    (["--parity", "weird"], "Invalid value for '--parity': 'weird' is not one of none, odd, even"),
+    (["--framing", "xyz"], "Invalid value for '--framing': 'xyz' is not one of crc16, open-driver, stx"),
+    (["--zvz", "-1"], "Invalid value for '--zvz': '-1' is not a time — write seconds (30, 0.5) or with a "
+                      "unit: 500ms, 5s, 2m, 1h"),
+    (["--zvz", "nan"], "Invalid value for '--zvz'"),
+    (["--turnaround", "nan"], "Invalid value for '--turnaround'"),
+    (["--module-turnaround", "3"], "Invalid value for '--module-turnaround': '3' is not ADDRESSES=TIME — for "
+                                   "example 3-5=40ms"),
+    (["--module-turnaround", "31=5ms"], "Invalid value for '--module-turnaround': '31' is outside 1..30"),
+    (["--module-turnaround", "3=11s"], "Invalid value for '--module-turnaround': '11s' is not a turnaround "
+                                       "of 0..10 s"),
+    (["--jitter", "-1ms"], "Invalid value for '--jitter'"),
+    (["--line-speed", "0"], "Invalid value for '--line-speed': must be 1 or more"),
+    (["--data-bits", "9"], "Invalid value for '--data-bits': 9 data bits cannot carry a PRC 3 frame"),
+    (["--data-bits", "7"], "Invalid value for '--data-bits': 7 data bits cannot carry a PRC 3 frame"),
+    (["--modules", "0-40"], "Invalid value for '--modules': '0-40' is outside 1..30 — module addresses are "
+                            "1..30"),
+    (["--modules", "1,,2"], "Invalid value for '--modules': '1,,2' has an empty entry — write addresses and "
+                            "ranges between commas, e.g. 1,3-5"),
+    (["--modules", "1,2,"], "Invalid value for '--modules': '1,2,' has an empty entry"),
+    (["--modules", ""], "Invalid value for '--modules': '' has an empty entry"),
+    (["--listen", "nonsense"], "Invalid value for '--listen': 'nonsense' is not HOST:PORT — for example "
+                               "127.0.0.1:7001"),
+    (["--listen", "127.0.0.1:70000"], "Invalid value for '--listen': '127.0.0.1:70000' is not HOST:PORT"),
+    (["--listen", ""], "Invalid value for '--listen': '' is not HOST:PORT — for example 127.0.0.1:7001"),
+])
 def test_a_bad_option_value_is_a_usage_error(capsys, options, says):
     """A value no emulator can take is a usage error (exit 64), before anything starts (in this process:
     test_a_bad_option_value_is_a_usage_error_of_the_process runs one as a command of its own)."""
     result = run_cli(capsys, "emulator", "serve", "--listen", "127.0.0.1:0", *options)
     assert result.code == 64
-    assert result.err.count("\n") == 1 and result.err.startswith(
-        "error: prc3cfg emulator serve: "
-    ), result.err
+    assert result.err.count("\n") == 1, result.err
+    assert result.err.startswith("error: prc3cfg emulator serve: "), result.err
     assert says in result.err and result.out == ""
 
 

@@ -74,11 +74,8 @@ def test_a_write_goes_into_the_journal_and_the_state_file_takes_it_on_exit(tmp_p
         assert load_state(state) == emulator.modules()
     assert not journal_path(state).exists()
     saved = json.loads(state.read_text())  # the contract alone, after a clean exit
-    assert [m["programs"][n - 1]["P"] for m in saved["modules"] if m["address"] == 1 for n in (4, 5, 6)] == [
-        104,
-        105,
-        106,
-    ]
+    assert [m["programs"][n - 1]["P"] for m in saved["modules"] if m["address"] == 1
+            for n in (4, 5, 6)] == [104, 105, 106]
 
 
 def test_what_is_on_disk_is_what_was_acknowledged_after_every_write(tmp_path):
@@ -126,9 +123,8 @@ def test_a_journal_left_behind_is_replayed_and_compacted_at_start(tmp_path):
     with Emulator(load_state(left), state_path=left) as restarted:
         assert load_state(left) == held
         assert store._load_file(left) == held  # compacted: the state file alone holds it all
-        assert journal_path(left).read_text().splitlines() == [
-            f"{JOURNAL_FORMAT} {json.loads(left.read_text())['generation']}"
-        ]
+        generation = json.loads(left.read_text())["generation"]
+        assert journal_path(left).read_text().splitlines() == [f"{JOURNAL_FORMAT} {generation}"]
         assert restarted.modules() == held
 
 
@@ -151,10 +147,8 @@ def test_a_cut_line_is_ignored_and_a_journal_the_state_file_took_in_has_nothing_
     journal(state, f"1 {write(3, 200).hex()}", generation="0123")
     assert load_state(state) == factory
     journal(state, f"2 {write(3, 200).hex()}")  # a module served from factory defaults, not yet in the file
-    assert load_state(state) == {
-        **factory,
-        2: ModuleState(ModuleState.factory(2).image.with_programs({3: Program(P=200, V=100)})),
-    }
+    taught = ModuleState(ModuleState.factory(2).image.with_programs({3: Program(P=200, V=100)}))
+    assert load_state(state) == {**factory, 2: taught}
 
 
 @pytest.mark.parametrize(

@@ -98,18 +98,16 @@ def test_a_plan_files_evidence_is_proved_by_the_apply_and_one_without_is_shown_a
     document["evidence"]["complete"] = True  # a file that claims every value was read
     saved.write_text(json.dumps(document))
     refused = run_cli(capsys, "apply", plant.path, "--plan", saved, "--auto-approve")
-    assert (
-        refused.code == 1 and "evidence.complete is not what prc3cfg wrote for this plan" in refused.err
-    ), refused.err
+    assert (refused.code == 1
+            and "evidence.complete is not what prc3cfg wrote for this plan" in refused.err), refused.err
     del document["evidence"]  # a plan file from before plans named their evidence
     saved.write_text(json.dumps(document))
     shown = run_cli(capsys, "show", saved)
     assert (shown.code == 0 and "No changes (the plan file does not say what was read" in shown.out
             and EVERY_MODULE not in shown.out)
     refused = run_cli(capsys, "apply", plant.path, "--plan", saved, "--auto-approve")
-    assert (
-        refused.code == 1 and 'it does not say what its plan rests on (no "evidence")' in refused.err
-    ), refused.err
+    assert (refused.code == 1
+            and 'it does not say what its plan rests on (no "evidence")' in refused.err), refused.err
 
 
 def test_the_recipes_replan_reads_in_full():
@@ -186,11 +184,9 @@ def test_two_swapped_controllers_open_their_line_and_both_are_written_back(plant
     # the other line: as its record says, and rolling
     for name in ("booth-b-left", "booth-b-right", "booth-b-pretreat"):
         assert modules[name]["read"]["programs"] == list(rolled[name]), name
-    assert (
-        "booth-a/booth-a-left (program 1 is not as on record), booth-a/booth-a-right (program 1 is not as on"
-        " record), booth-a/booth-a-top (booth-a/booth-a-left on its line: program 1 is not as on record)"
-        in planned.out
-    )
+    assert ("booth-a/booth-a-left (program 1 is not as on record), booth-a/booth-a-right (program 1 is not "
+            "as on record), booth-a/booth-a-top (booth-a/booth-a-left on its line: program 1 is not as on "
+            "record)" in planned.out)
     done = run_cli(capsys, "apply", plant.path, "--plan", tmp_path / "plan.json", "--auto-approve")
     assert done.code == 0, done.err
     assert plant.matches_plant()  # both swapped modules written back: the module 2 stayed wrong

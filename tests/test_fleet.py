@@ -257,9 +257,8 @@ def check_consistent(lines: list[lines_of.FleetLine], changed: list[str],
     expected = [line for line in lines if line.plant in changed or line.policy in changed]
     assert selected == expected  # every changed line, once, in the fleet's order
     entries = lines_of.matrix(selected)["include"]
-    assert [e["line"] for e in entries] == [line.name for line in expected] and len(
-        {e["group"] for e in entries}
-    ) == len(entries)
+    assert [e["line"] for e in entries] == [line.name for line in expected]
+    assert len({e["group"] for e in entries}) == len(entries)
     status = {"health": "NORMAL",
               "modules": [{"name": "m", "drift_seen": False, "travel_pending": True, "last_failed": False,
                                                "last_verified": None}]}
@@ -360,9 +359,8 @@ def test_the_commands_select_and_summarise_random_fleets_as_the_fleet_file_says_
     rows = json.loads(done.stdout)["lines"]
     assert [row["line"] for row in rows] == [line.name for line in lines]
     assert [row["waiting"] for row in rows] == [waiting.get(line) for line in lines]
-    assert [row["drift"] for row in rows] == [
-        [f"{line.bus}-1"] if line in waiting else None for line in lines
-    ]
+    assert [row["drift"] for row in rows] == [[f"{line.bus}-1"] if line in waiting else None
+                                              for line in lines]
 
 
 # -- the workflow
@@ -391,9 +389,8 @@ def test_the_fleet_workflow_passes_zizmor_and_what_it_ignores_is_the_design_with
     assert sorted(rule for rule, _ in reasons) == ["dangerous-triggers"] + ["self-hosted-runner"] * 2
     assert all(len(reason.split()) >= 4 for _, reason in reasons), reasons
     kept = re.sub(r"\n +with:\n +persist-credentials: false   # main's[^\n]*", "", WORKFLOW_TEXT)
-    assert kept != WORKFLOW_TEXT and [
-        f["ident"] for f in zizmor_findings(tmp_path, kept, "--persona", persona)
-    ] == ["artipacked"]
+    assert kept != WORKFLOW_TEXT
+    assert [f["ident"] for f in zizmor_findings(tmp_path, kept, "--persona", persona)] == ["artipacked"]
 
 
 def test_each_line_job_is_on_its_runner_in_its_group_and_the_others_reach_no_line():
@@ -403,9 +400,8 @@ def test_each_line_job_is_on_its_runner_in_its_group_and_the_others_reach_no_lin
         assert isinstance(job.get("timeout-minutes"), int) and 0 < job["timeout-minutes"] <= 60, name
         assert job["name"] and job["permissions"], name
         on_a_line = name in ("plan", "apply")
-        assert job["runs-on"] == (
-            ["self-hosted", "${{ matrix.runner }}"] if on_a_line else "ubuntu-latest"
-        ), name
+        assert job["runs-on"] == (["self-hosted", "${{ matrix.runner }}"] if on_a_line
+                                  else "ubuntu-latest"), name
         assert job["concurrency"]["cancel-in-progress"] is False, name  # none cancelled midway
         assert (job["concurrency"]["group"] == "${{ matrix.group }}") == on_a_line, name
         if on_a_line:
@@ -461,9 +457,8 @@ def test_a_merge_over_three_lines_applies_two_and_the_one_in_its_window_waits(th
     lines = plant.run("lines", event)
     assert lines.ok and lines.outputs["any"] == "true", lines.output()
     plans = run_matrix(plant, "plan", event, lines)
-    assert sorted(plans) == ["booth-a", "booth-b", "washer"] and all(job.ok for job in plans.values()), [
-        j.output() for j in plans.values()
-    ]
+    assert sorted(plans) == ["booth-a", "booth-b", "washer"]
+    assert all(job.ok for job in plans.values()), [j.output() for j in plans.values()]
     comment = plant.run("comment", event, needs={"lines": lines, "plan": plans["washer"]})
     assert comment.ok, comment.output()
     (said,) = plant.comments()
@@ -512,9 +507,8 @@ def test_a_commit_that_came_from_no_pull_request_is_not_applied(three_lines):
     plant, paint_shop, _ = three_lines
     factory = paint_shop.images()
     before = plant.main()
-    (plant.clone / "plants" / "paint-shop.yaml").write_text(
-        (plant.clone / "plants" / "paint-shop.yaml").read_text() + "# pushed\n"
-    )
+    pushed = plant.clone / "plants" / "paint-shop.yaml"
+    pushed.write_text(pushed.read_text() + "# pushed\n")
     plant.git("commit", "-q", "-am", "pushed to main, reviewed by nobody")
     plant.git("push", "-q", "origin", "main")
     push = {"github.event_name": "push", "github.sha": plant.main(), "github.event.before": before}

@@ -427,9 +427,8 @@ def test_framing_package_imports_no_io():
                 names = [node.module]
             else:
                 continue
-            assert all(
-                n in ALLOWED_IMPORTS or n.startswith("prc3cfg.core.framing") for n in names
-            ), f"{path.name}: {names}"
+            assert all(n in ALLOWED_IMPORTS or n.startswith("prc3cfg.core.framing")
+                       for n in names), f"{path.name}: {names}"
     blocked = ("import sys; sys.modules.update(serial=None, socket=None, time=None); import "
                "prc3cfg.core.framing")
     subprocess.run([sys.executable, "-c", blocked], check=True)

@@ -35,11 +35,8 @@ PYTHON = re.compile(r"Traceback|Error:|Error\b|NoneType|object of type|has no le
 def nowhere_plant(folder: Path) -> Path:
     """The demo plant on ports where nothing listens."""
     plant = folder / "plant.yaml"
-    plant.write_text(
-        DEMO.read_text()
-        .replace("emulator://demo-a", "socket://127.0.0.1:9")
-        .replace("emulator://demo-b", "socket://127.0.0.1:19")
-    )
+    plant.write_text(DEMO.read_text().replace("emulator://demo-a", "socket://127.0.0.1:9")
+                     .replace("emulator://demo-b", "socket://127.0.0.1:19"))
     return plant
 
 

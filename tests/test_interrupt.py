@@ -69,9 +69,8 @@ def test_an_interrupted_apply_stops_after_the_exchange_in_flight_and_accounts_fo
         assert untouched, "an interrupted apply still wrote every module"
         factory = {address: ModuleState.factory(address).image for address in range(1, 31)}
         for entry in untouched:
-            bus, address = entry.split(",")[0].removeprefix("bus "), int(
-                entry.split("module ")[1].split(" ")[0]
-            )
+            bus = entry.split(",")[0].removeprefix("bus ")
+            address = int(entry.split("module ")[1].split(" ")[0])
             assert plant.emulators[bus].module(address).image == factory[address], entry
         travel = travel_list(out)
         for bus, module in load_plant(plant.path).modules():
@@ -239,9 +238,8 @@ class Masks:
 
     def advance(self) -> None:
         if threading.current_thread() is not threading.main_thread():
-            self.workers.append(
-                not {signal.SIGINT, signal.SIGTERM} <= signal.pthread_sigmask(signal.SIG_BLOCK, [])
-            )
+            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, [])
+            self.workers.append(not {signal.SIGINT, signal.SIGTERM} <= blocked)
 
     def note(self, text: str) -> None:
         pass

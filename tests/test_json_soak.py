@@ -66,9 +66,8 @@ def test_the_event_stream_tells_what_the_exit_code_and_the_modules_tell(tmp_path
                                                                 if line.startswith("error: ")]
     ran = [e for e in found if e["event"] == "module"]
     assert len({(e["bus"], e["address"]) for e in ran}) == len(ran)
-    assert (account["status"] == "verified") == (
-        result.code == 0 and all(e["result"] != "failed" for e in ran)
-    ), (account, ran)
+    succeeded = result.code == 0 and all(e["result"] != "failed" for e in ran)
+    assert (account["status"] == "verified") == succeeded, (account, ran)
     assert account["status"] in ("verified", "failed", "refused"), account
     if account["status"] == "failed":
         assert any(e["result"] == "failed" for e in ran) or account["errors"]

@@ -88,12 +88,8 @@ def writes_to(address: int, message_id: int | None, loss: Loss, times: int = 1) 
 
     def rule(frame: Frame, _: int) -> set[Loss]:
         nonlocal seen
-        if (
-            getattr(rule, "armed", False)
-            and frame.address == address
-            and (message_id is None or frame.message[0] == message_id)
-            and seen < times
-        ):
+        if (getattr(rule, "armed", False) and frame.address == address
+            and (message_id is None or frame.message[0] == message_id) and seen < times):
             seen += 1
             return {loss}
         return set()

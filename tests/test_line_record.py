@@ -302,10 +302,8 @@ def test_a_record_another_tool_wrote_or_damaged_is_no_record(applied, capsys, tm
                 damage(entry)
             path.write_text(json.dumps(changed, indent=2).replace("\n", "\r\n"))  # pretty-printed, CRLF
         planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
-        assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, (
-            damage.__name__,
-            planned.err,
-        )
+        assert planned.code == 2, (damage.__name__, planned.err)
+        assert "program 2: position 0.180 m → 0.150 m" in planned.out, (damage.__name__, planned.err)
         assert "taken as known" not in planned.out  # nothing on record: every module read in full
     for path in records:
         path.write_bytes(b"\xef\xbb\xbf{not json")
@@ -323,9 +321,8 @@ def test_another_line_s_record_under_this_line_s_name_is_no_record(applied, caps
         # another line's, same bytes otherwise
         path.write_text(json.dumps(document | {"key": "tcp/127.0.0.1/9"}))
     planned = run_cli(capsys, "plan", applied.path, "--detailed-exitcode")
-    assert planned.code == 2 and "program 2: position 0.180 m → 0.150 m" in planned.out, (
-        planned.out + planned.err
-    )
+    assert planned.code == 2, planned.out + planned.err
+    assert "program 2: position 0.180 m → 0.150 m" in planned.out, planned.out + planned.err
     assert "taken as known" not in planned.out
 
 

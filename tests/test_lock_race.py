@@ -222,9 +222,8 @@ def _judge(results: list[dict], rounds: int,
         for other in set(range(len(r["writes"]))) - set(writer):
             refused = r["codes"][other] == 1 and any(text in r["err"][other] for text in refusals)
             idle = r["codes"][other] == 0 and "Nothing to do" in r["out"][other]
-            assert (
-                refused or idle
-            ), f"{r['race']}: apply {other} neither was refused nor found nothing to do: {r}"
+            assert refused or idle, (f"{r['race']}: apply {other} neither was refused nor found nothing to "
+                                     f"do: {r}")
 
 
 @pytest.mark.parametrize("rounds", ROUNDS)

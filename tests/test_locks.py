@@ -215,9 +215,8 @@ def test_the_lock_is_one_place_for_the_machine_whatever_the_environment(tmp_path
     with holding(json.dumps([key]), env=first) as holder:
         tried = subprocess.run([sys.executable, "-c", TRIER, json.dumps([key])], env=second,
                                capture_output=True, text=True)
-    assert (
-        tried.stdout.startswith("bus a: the line is locked by ") and f"(pid {holder.pid}, " in tried.stdout
-    ), tried
+    assert (tried.stdout.startswith("bus a: the line is locked by ")
+            and f"(pid {holder.pid}, " in tried.stdout), tried
     folder = Path(subprocess.run([sys.executable, "-c",
                                   "from prc3cfg.shell.locks import lock_dir; print(lock_dir())"],
                                  env=first, capture_output=True, text=True, check=True).stdout.strip())
@@ -395,9 +394,8 @@ def test_a_lock_file_replaced_between_its_open_and_its_lock_is_not_taken(shared_
                 lock_path(KEY).unlink()
                 command = as_other(user, HOLDER, json.dumps([KEY])) if user is not None else None
                 claims_root = {**os.environ, "USER": "root", "LOGNAME": "root"}  # getpass believes them
-                holders.append(
-                    stack.enter_context(holding(json.dumps([KEY]), command=command, env=claims_root))
-                )
+                holders.append(stack.enter_context(holding(json.dumps([KEY]), command=command,
+                                                           env=claims_root)))
             return try_lock(fd)
 
         monkeypatch.setattr(platform, "try_lock", replaced_first)
@@ -463,11 +461,8 @@ def test_a_lock_file_another_user_made_is_never_the_one_held(shared_locks):
         other.kill()
         other.wait()
     *removed, tried = out.splitlines()
-    assert (
-        removed
-        and tried.startswith("bus a: the line is locked by ")
-        and f"(pid {os.getpid()}, apply since 20" in tried
-    ), out
+    assert (removed and tried.startswith("bus a: the line is locked by ")
+            and f"(pid {os.getpid()}, apply since 20" in tried), out
 
 
 def test_a_lock_file_in_this_users_name_that_another_user_owns_is_refused():
@@ -505,11 +500,9 @@ def test_a_lock_file_another_user_cannot_read_counts_as_held(shared_locks):
     path.chmod(0)
     tried = subprocess.run(as_other(user, TRIER, json.dumps([KEY])), capture_output=True, text=True, cwd=ROOT,
                            timeout=60)
-    assert (
-        tried.stdout
-        == f"bus a: the line is locked by a process of root (uid 0) (its lock file {path} cannot be read) — "
-        "wait for it to finish, or pass --lock-timeout SECONDS to wait\n"
-    ), tried
+    assert (tried.stdout == f"bus a: the line is locked by a process of root (uid 0) (its lock file {path} "
+                            "cannot be read) — wait for it to finish, or pass --lock-timeout SECONDS "
+                            "to wait\n"), tried
 
 
 # A racer: at every line on stdin it tries the line at once; holding it, it makes the file argv[2]
@@ -651,9 +644,8 @@ def test_an_emulator_is_known_by_its_state_file(tmp_path):
     state = tmp_path / "plant" / ".prc3cfg" / "emulators" / "demo-a.json"
     via_link = tmp_path / "checkout" / ".prc3cfg" / "emulators" / "demo-a.json"
     assert line_keys("emulator://demo-a", emulator_state=via_link) == (f"emulator/{os.path.realpath(state)}",)
-    assert line_keys("emulator://demo-a", emulator_state=state) != line_keys(
-        "emulator://demo-b", emulator_state=state.with_name("demo-b.json")
-    )
+    assert (line_keys("emulator://demo-a", emulator_state=state)
+            != line_keys("emulator://demo-b", emulator_state=state.with_name("demo-b.json")))
     with pytest.raises(ValueError, match="emulator_state"):
         line_keys("emulator://demo-a")
 

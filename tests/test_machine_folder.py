@@ -445,9 +445,8 @@ def test_a_file_planted_at_a_user_s_record_name_in_the_shared_folder_does_not_lo
                          timeout=60)
         assert planned.returncode == 0, planned.stdout + planned.stderr
         notes = [line for line in planned.stderr.splitlines() if "cannot be moved aside" in line]
-        assert len(notes) == len(names) and all(
-            ".tmp" not in line and "instead" in line for line in notes
-        ), planned.stderr
+        assert len(notes) == len(names) and all(".tmp" not in line and "instead" in line
+                                                for line in notes), planned.stderr
         for path in names:
             fresh = path.with_name(path.name.replace(".json", ".1.json"))
             assert fresh.is_file() and fresh.stat().st_uid == a.pw_uid and stat.S_ISFIFO(path.lstat().st_mode)

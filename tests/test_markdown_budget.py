@@ -35,11 +35,9 @@ def plant_of(tmp_path, modules: int) -> tuple[Path, Path]:
     plant = tmp_path / "plant.yaml"
     listed = [{"address": a, "name": f"m{a}", "programs": {1: {"position": 0.3, "speed": 0.2}}}
               for a in range(1, modules + 1)]
-    plant.write_text(
-        yaml.safe_dump(
-            {"plant": "p", "buses": [{"name": "b", "port": "socket://127.0.0.1:9", "modules": listed}]}
-        )
-    )
+    plant.write_text(yaml.safe_dump({"plant": "p",
+                                     "buses": [{"name": "b", "port": "socket://127.0.0.1:9",
+                                                "modules": listed}]}))
     held = [ModuleImage.factory(a).with_programs({n: Program(P=200, V=50) for n in range(1, 65)})
             for a in range(1, modules + 1)]
     actual = tmp_path / "actual.json"
@@ -66,10 +64,8 @@ def test_a_comment_at_1000_characters_keeps_under_them_or_is_refused(tmp_path, c
 
 def test_a_budget_too_small_for_the_head_is_refused_in_one_line(tmp_path):
     plant = tmp_path / "plant.yaml"
-    modules = [
-        {"address": a, "name": f"module-with-a-long-name-{a}", "system": {"upper_reversing_point": 1.0}}
-        for a in range(1, 31)
-    ]
+    modules = [{"address": a, "name": f"module-with-a-long-name-{a}",
+                "system": {"upper_reversing_point": 1.0}} for a in range(1, 31)]
     plant.write_text(yaml.safe_dump({"plant": "p",
                                      "buses": [{"name": "b", "port": "socket://127.0.0.1:9",
                                                 "modules": modules}]}))

@@ -53,16 +53,9 @@ def test_a_row_gives_the_bytes_of_every_message_of_its_kind(kind: codec.ItemsKin
     with pytest.raises(codec.MessageError):
         built(kind, kind.capacity + 1)
     assert kind.messages(0) == 0
-    assert [kind.messages(n) for n in (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)] == [
-        2,
-        2,
-        3,
-    ]
-    assert [kind.in_last(n) for n in (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)] == [
-        1,
-        kind.capacity,
-        1,
-    ]
+    sizes = (kind.capacity + 1, 2 * kind.capacity, 2 * kind.capacity + 1)
+    assert [kind.messages(n) for n in sizes] == [2, 2, 3]
+    assert [kind.in_last(n) for n in sizes] == [1, kind.capacity, 1]
 
 
 def test_every_field_of_a_program_has_one_kind_of_its_own() -> None:

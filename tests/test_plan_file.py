@@ -64,9 +64,8 @@ def made(tmp_path_factory) -> Made:
     (folder / "plant.yaml").write_bytes((CONTRACTS / "plant.yaml").read_bytes())
     plant = api.load(folder / "plant.yaml")
     images = {(bus.name, m.address): ModuleState.factory(m.address).image for bus, m in api.select(plant)}
-    right = next(
-        change for change in api.plan(plant, images=images).modules if change.name == "booth-a-right"
-    )
+    right = next(change for change in api.plan(plant, images=images).modules
+                 if change.name == "booth-a-right")
     images[(right.bus, right.address)] = right.plan.predicted
     (folder / "images.json").write_text(json.dumps([{"bus": bus, **image.to_json()}
                                                     for (bus, _), image in images.items()]))
@@ -125,9 +124,8 @@ RESPELT = {
     "indented by 4": lambda d: json.dumps(d, indent=4).encode(),
     "every object's keys reversed": lambda d: json.dumps(reordered(d)).encode(),
     "CRLF line endings": lambda d: json.dumps(d, indent=1).replace("\n", "\r\n").encode(),
-    "a byte-order mark and CRLF": (
-        lambda d: ("\ufeff" + json.dumps(d, indent=2).replace("\n", "\r\n")).encode()
-    ),
+    "a byte-order mark and CRLF": lambda d: ("\ufeff"
+                                             + json.dumps(d, indent=2).replace("\n", "\r\n")).encode(),
     "UTF-8 instead of escapes": lambda d: json.dumps(d, ensure_ascii=False).encode(),
     "0 for 0.0": lambda d: json.dumps(whole_as_int(d), separators=(",", ":")).encode(),
     "all of them at once": (
@@ -287,9 +285,8 @@ def one_key_changed(data: st.DataObject, document: dict[str, Any]) -> dict[str, 
     if keys and data.draw(st.booleans()):
         del keys[data.draw(st.sampled_from(sorted(keys)))]
     else:
-        keys[
-            data.draw(st.sampled_from(["note", "reviewed_by", "summary"]).filter(lambda key: key not in keys))
-        ] = "ok"
+        names = st.sampled_from(["note", "reviewed_by", "summary"])
+        keys[data.draw(names.filter(lambda key: key not in keys))] = "ok"
     return copied
 
 
@@ -312,12 +309,8 @@ def test_a_plan_file_with_a_key_added_or_left_out_is_refused(made, tmp_path, dat
 @given(data=st.data())
 def test_a_plan_file_with_any_one_of_many_more_values_or_keys_changed_is_refused(made, tmp_path, data):
     document = json.loads(made.text)
-    assert (
-        refusal(
-            made, tmp_path, data.draw(st.sampled_from([one_value_changed, one_key_changed]))(data, document)
-        )
-        is not None
-    )
+    changed = data.draw(st.sampled_from([one_value_changed, one_key_changed]))(data, document)
+    assert refusal(made, tmp_path, changed) is not None
 
 
 def test_the_one_value_left_to_the_file_is_where_the_plant_file_was(made, tmp_path):
@@ -518,11 +511,8 @@ def mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[str, An
     if how == "drop":
         del parent[key]
     elif how == "add":
-        parent[
-            data.draw(
-                st.sampled_from(["note", "reviewed_by", "\u202ereviewed"]).filter(lambda k: k not in parent)
-            )
-        ] = SAFETY_OFFICER
+        names = st.sampled_from(["note", "reviewed_by", "\u202ereviewed"])
+        parent[data.draw(names.filter(lambda k: k not in parent))] = SAFETY_OFFICER
     else:
         parent[key] = data.draw(MUTANTS.filter(lambda value: not same_value(value, at(document, place))))
     return copied, "".join("[]" if isinstance(k, int) else f".{k}" for k in place).lstrip(".")
@@ -659,9 +649,8 @@ def test_an_edited_review_or_a_digest_another_is_refused_naming_where(made, tmp_
                    changed(document, (*place, "steps", 0, "summary"), "read the module's name (no change)"),
                    changed(document, (*place, "review_sha256"), "0" * 64)):
         refused = refusal(made, tmp_path, edited)
-        assert (
-            refused is not None and named in refused and "changed after the plan was made" in refused
-        ), refused
+        assert (refused is not None and named in refused
+                and "changed after the plan was made" in refused), refused
 
 
 @pytest.mark.parametrize("edit", ["a step left out", "a step's message", "a figure", "a name"])
@@ -687,9 +676,8 @@ def test_a_plan_file_without_review_digests_is_refused_as_made_by_an_older_prc3c
     for _, module in modules_of(document):
         del module["review_sha256"]
     refused = refusal(made, tmp_path, document)
-    assert (
-        refused is not None and "made by an older prc3cfg" in refused and refused.endswith("plan again")
-    ), refused
+    assert (refused is not None and "made by an older prc3cfg" in refused
+            and refused.endswith("plan again")), refused
 
 
 def written(targeted: Targeted, document: dict[str, Any], name: str) -> Path:
@@ -720,9 +708,8 @@ def test_an_edited_review_is_refused_by_the_apply_and_marked_by_show(targeted, c
                       "--allow-axis-release")
     assert refused.code == 1 and targeted.emulated.images() == before
     (line,) = refused.problems
-    assert (
-        f"buses[{place[1]}].modules[{place[3]}].review_sha256" in line and "nothing was written" in line
-    ), line
+    assert (f"buses[{place[1]}].modules[{place[3]}].review_sha256" in line
+            and "nothing was written" in line), line
     for output in ([], ["--markdown"]):
         said = run_cli(capsys, "show", path, *output)
         assert said.code == 0, said.err
@@ -730,10 +717,8 @@ def test_an_edited_review_is_refused_by_the_apply_and_marked_by_show(targeted, c
         (warned,) = [line for line in said.out.splitlines() if "changed after the plan was made" in line]
         assert module["name"] in warned and "read the steps" in warned, warned
     intact = run_cli(capsys, "show", targeted.plan)
-    assert (
-        "changed after the plan was made" not in intact.out
-        and "the review text is as the plan was made" in intact.out
-    ), intact.out
+    assert ("changed after the plan was made" not in intact.out
+            and "the review text is as the plan was made" in intact.out), intact.out
 
 
 def test_show_of_a_plan_file_without_review_digests_says_so(targeted, capsys):
@@ -761,9 +746,8 @@ def review_mutated(data: st.DataObject, document: dict[str, Any]) -> tuple[dict[
                                        "steps": module["steps"]}, p))
                  and (p[0] != "steps" or p[-1] == "summary")]
         where = data.draw(st.sampled_from(words))
-        at(module, where[:-1])[where[-1]] = data.draw(st.sampled_from([SAFETY_OFFICER, HOSTILE, "",
-                                                                       "speed 0 → 9"]).filter(
-            lambda text: text != at(module, where)))
+        texts = st.sampled_from([SAFETY_OFFICER, HOSTILE, "", "speed 0 → 9"])
+        at(module, where[:-1])[where[-1]] = data.draw(texts.filter(lambda text: text != at(module, where)))
         verdict = "proved" if again else "refused"
     else:  # a step, a figure, a name, a hash: anything else but where the plant file was
         fields = by_field(copied, is_value)
@@ -823,6 +807,5 @@ def test_plan_files_with_review_steps_or_figures_mutated_are_applied_by_a_proces
         if verdict == "proved":
             assert done.returncode == 0 and targeted.emulated.matches_plant(), done.stderr
         else:
-            assert (
-                done.returncode == 1 and len(problems) == 1 and targeted.emulated.images() == before
-            ), done.stderr
+            assert (done.returncode == 1 and len(problems) == 1
+                    and targeted.emulated.images() == before), done.stderr

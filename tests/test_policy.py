@@ -337,9 +337,8 @@ def windows_and_instants(draw):
     changes = _changes(ZoneInfo(zone))
     base = draw(st.sampled_from(changes)) if changes and draw(st.booleans()) else datetime(2026, 1, 1,
                                                                                            tzinfo=UTC)
-    now = base + timedelta(
-        seconds=draw(st.integers(-2 * 86400, 2 * 86400 if base.month > 1 else 365 * 86400))
-    )
+    now = base + timedelta(seconds=draw(st.integers(-2 * 86400,
+                                                    2 * 86400 if base.month > 1 else 365 * 86400)))
     return _window(text, duration, zone), (minutes, hours, days, weekdays), now
 
 
@@ -365,11 +364,8 @@ def _brute_force(window: policy.Window, sets, now: datetime) -> datetime | None:
             wall = (minute + offset).replace(tzinfo=None)  # type: ignore[operator]
             in_days = days is not None and wall.day in days
             in_weekdays = weekdays is not None and wall.isoweekday() % 7 in weekdays
-            day = (
-                (in_days or in_weekdays)
-                if days is not None and weekdays is not None
-                else (days is None or in_days) and (weekdays is None or in_weekdays)
-            )
+            day = ((in_days or in_weekdays) if days is not None and weekdays is not None
+                   else (days is None or in_days) and (weekdays is None or in_weekdays))
             if (wall.minute in minutes and wall.hour in hours and day
                 and wall.replace(tzinfo=zone, fold=0).astimezone(UTC) == minute):
                 found = max(found or minute, minute)
@@ -411,12 +407,9 @@ def test_a_moment_that_is_not_an_instant_with_its_offset_is_refused_in_one_line(
     monkeypatch.setenv("PRC3CFG_POLICY_NOW", "2026-11-30 09:00")
     result = run_cli(capsys, "apply", plant.path, "--auto-approve")
     assert result.code == 1 and _untouched(plant)
-    assert result.err.strip().splitlines() == [
-        "error: PRC3CFG_POLICY_NOW='2026-11-30 09:00' is not an ISO "
-        "8601 instant with its offset "
-        "(2026-03-30T09:00:00+02:00) — set it so, or unset it to use "
-        "the clock"
-    ]
+    assert result.err.strip().splitlines() == ["error: PRC3CFG_POLICY_NOW='2026-11-30 09:00' is not an ISO "
+                                               "8601 instant with its offset (2026-03-30T09:00:00+02:00) — "
+                                               "set it so, or unset it to use the clock"]
 
 
 def test_a_restore_in_a_deny_window_is_refused_and_goes_on_with_an_override(plant, capsys, monkeypatch):

@@ -159,9 +159,8 @@ def test_an_api_users_bus_with_another_handler_is_refused_before_the_line(tmp_pa
     plant = load_plant(plant_with(folder, "socket://127.0.0.1:9"))
     victim = folder / "victim.txt"
     victim.write_text("kept\n")
-    forged = plant.model_copy(
-        update={"buses": (plant.buses[0].model_copy(update={"port": "spy:///dev/null?file=victim.txt"}),)}
-    )
+    spy = plant.buses[0].model_copy(update={"port": "spy:///dev/null?file=victim.txt"})
+    forged = plant.model_copy(update={"buses": (spy,)})
     with pytest.raises(UserError) as refused:
         api.plan(forged)
     assert str(refused.value) == ("bus a: port 'spy:///dev/null?file=victim.txt' "
@@ -191,9 +190,9 @@ def test_the_schema_refuses_the_handlers_and_paths_validate_refuses():
     schema = jsonschema.Draft7Validator(plant_schema())
 
     def takes(port: str) -> bool:
-        return schema.is_valid(
-            {"plant": "p", "buses": [{"name": "a", "port": port, "modules": [{"address": 1, "name": "m"}]}]}
-        )
+        return schema.is_valid({"plant": "p",
+                                "buses": [{"name": "a", "port": port,
+                                           "modules": [{"address": 1, "name": "m"}]}]})
 
     for port, _ in HOSTILE.values():
         assert not takes(_unquoted(port)), port

@@ -142,9 +142,8 @@ def test_a_header_time_moved_back_does_not_make_the_newest_run_the_oldest(tmp_pa
         listed = json.loads(run_cli(capsys, "records", "list", line.p, "--json").out)
         run = next(r for r in listed if r["journal"] == str(newest))
         assert run["time"].startswith(newest.name[:4]), run
-        assert (
-            run["findings"] if forged == "rechained" else run["chain"].startswith(f"broken at {newest}:")
-        ), run
+        assert (run["findings"] if forged == "rechained"
+                else run["chain"].startswith(f"broken at {newest}:")), run
 
 
 def test_a_header_time_moved_forward_on_an_older_run_stops_prune(tmp_path, capsys):
@@ -260,9 +259,8 @@ def test_a_header_time_prc3cfg_did_not_write_is_one_line(tmp_path, capsys, value
 def test_a_bad_bound_is_one_line(plant, capsys, bound):
     assert run_cli(capsys, "apply", plant.path, "--module", "booth-a-left", *APPLY).code == 0
     result = run_cli(capsys, "records", "prune", plant.path, *bound)
-    assert (
-        result.code != 0 and len(result.err.strip().splitlines()) == 1 and bound[0] in result.err
-    ), result.err
+    assert (result.code != 0 and len(result.err.strip().splitlines()) == 1
+            and bound[0] in result.err), result.err
     assert len(journals(plant.path.parent)) == 1
 
 
@@ -332,9 +330,8 @@ GARBAGE_TIMES = ["yesterday", "2026-01-01T00:00", 1700000000, None, "", "9999-12
 def edit(line: Line, rng: random.Random) -> str:
     """One edit as an attacker with write access to the folder would make it; what it was, in words."""
     journal = rng.choice(regular(journals(line.folder)))
-    kind = rng.choice(
-        ["none", "time", "snapshot", "drop", "duplicate", "swap", "rename", "plant", "truncate"]
-    )
+    kind = rng.choice(["none", "time", "snapshot", "drop", "duplicate", "swap", "rename", "plant",
+                       "truncate"])
     if kind == "none":
         return "nothing"
     records = parsed(journal) or [{"event": "header"}]
@@ -354,17 +351,12 @@ def edit(line: Line, rng: random.Random) -> str:
         a, b = rng.sample(range(len(records)), 2)
         records[a], records[b] = records[b], records[a]
     elif kind == "rename":
-        journal.rename(
-            journal.with_name(f"{rng.randrange(2000, 2100)}0101T000000.000000Z-{journal.name[24:]}")
-        )
+        renamed = f"{rng.randrange(2000, 2100)}0101T000000.000000Z-{journal.name[24:]}"
+        journal.rename(journal.with_name(renamed))
         return f"renamed {journal.name}"
     elif kind == "plant":
-        name = (
-            line.folder
-            / ".prc3cfg"
-            / rng.choice(["journal", "snapshots"])
-            / f"29990101T000000.000000Z-plant.json{rng.choice(['', 'l'])}"
-        )
+        name = (line.folder / ".prc3cfg" / rng.choice(["journal", "snapshots"])
+                / f"29990101T000000.000000Z-plant.json{rng.choice(['', 'l'])}")
         what = rng.choice(["fifo", "folder", "link", "garbage"])
         if os.path.lexists(name):
             return "nothing"

@@ -254,11 +254,8 @@ def test_the_blocker_blocks_in_each_forked_child_alone():
 def api_names_used(path: Path) -> set[str]:
     """The names a file takes from `prc3cfg.api`: `api.NAME`, and `from prc3cfg.api import NAME`."""
     tree = ast.parse(path.read_text())
-    used = {
-        node.attr
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "api"
-    }
+    used = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name) and node.value.id == "api"}
     used |= {a.name for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
              and node.module == "prc3cfg.api" for a in node.names}
     return used

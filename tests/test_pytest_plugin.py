@@ -51,9 +51,6 @@ def test_a_missing_images_file_is_named_in_one_line(pytester):
     (pytester.path / "tests" / "test_missing.py").write_text(MISSING_TEST)
     result = pytester.runpytest_subprocess()
     result.assert_outcomes(failed=1)
-    assert any(
-        "nowhere.json" in line
-        and "give the file prc3cfg read --json wrote" in line
-        and line.lstrip("E ").startswith("prc3cfg.errors.UserError")
-        for line in result.stdout.lines
-    ), result.stdout.str()
+    assert any("nowhere.json" in line and "give the file prc3cfg read --json wrote" in line
+               and line.lstrip("E ").startswith("prc3cfg.errors.UserError")
+               for line in result.stdout.lines), result.stdout.str()

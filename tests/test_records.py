@@ -306,9 +306,9 @@ def test_adopt_leaves_a_journal_saying_who_adopted_what_and_why(plant, capsys, t
     adopt, adopted = (r for r in rest if r["event"] in ("adopt", "adopted"))
     assert adopt["buses"] == ["booth-a"] and adopt["values"]
     assert adopted == adopted | {"written": True, "sha256": sha256(plant.path)}
+    last = hashlib.sha256(applied.read_bytes().splitlines()[-1]).hexdigest()
     assert header["previous"] == {"journal": applied.name, "lines": len(records_of(applied)),
-                                  "sha256": hashlib.sha256(
-        applied.read_bytes().splitlines()[-1]).hexdigest()}  # it follows the apply's journal
+                                  "sha256": last}  # it follows the apply's journal
     _, run = json.loads(run_cli(capsys, "records", "list", plant.path, "--json").out)
     assert (run["command"] == "adopt" and run["result"] == "adopted" and run["lines"] == ["booth-a"]
             and run["snapshot"] is None)
@@ -336,12 +336,8 @@ def test_drift_in_markdown_is_inert_and_fits():
                     ("program 1 position 1.000 m → 1.100 m",))
     text = drift_markdown(drift_json("p`lant", [hostile], 1))
     assert "@someone" not in text and "](https" not in text and "<img" not in text and "<b>" not in text
-    many = [
-        Drift(
-            "b", n % 30 + 1, f"m{n}", tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 65))
-        )
-        for n in range(60)
-    ]
+    many = [Drift("b", n % 30 + 1, f"m{n}",
+                  tuple(f"program {p} position 1.000 m → 1.100 m" for p in range(1, 65))) for n in range(60)]
     cut = drift_markdown(drift_json("plant", many, 60), max_chars=5000)
     assert len(cut) <= 5000 and cut.rstrip().endswith("that drifted: see the drift file.")
 
@@ -385,9 +381,8 @@ def test_the_chain_names_the_first_record_that_does_not_match(tmp_path, data, pr
         assert checked.problem is None and checked.chained == data.startswith(b'{"event": "header"')
         assert checked.cut == (not data.endswith(b"\n")) and len(checked.records) == data.count(b"\n")
     else:
-        assert (
-            checked.problem is not None and checked.problem.where == f"{journal}:{problem}"
-        ), checked.problem
+        assert (checked.problem is not None
+                and checked.problem.where == f"{journal}:{problem}"), checked.problem
 
 
 @pytest.mark.parametrize("name", ["../plant.yaml", "/etc/passwd", "a/b.json", "..", "", None, 7, "a\\b.json"])

@@ -99,9 +99,8 @@ def refused_apply(tmp_path: Path, size: int) -> Iterator[tuple[EmulatedPlant, di
         assert result.returncode == 1, result.stderr
         assert "Traceback" not in result.stdout + result.stderr
         error = result.stderr.strip().splitlines()[-1]
-        assert (
-            error.startswith("error: could not keep the journal ") and journal_of(line).name in error
-        ), error
+        assert (error.startswith("error: could not keep the journal ")
+                and journal_of(line).name in error), error
         yield plant, factory, result, error
 
 
@@ -130,9 +129,8 @@ def test_a_journal_the_disk_refuses_midway_stops_every_line_before_its_next_fram
                 or "stopped (a record could not be kept) before step 1 of" in account):
                 nothing_sent.add((bus, address))
                 assert image == factory[(bus, address)], account
-            elif (done := re.search(r"verifying: (\d+) of (\d+) steps? acknowledged", account)) and done[
-                1
-            ] == done[2]:
+            elif (done := re.search(r"verifying: (\d+) of (\d+) steps? acknowledged",
+                                    account)) and done[1] == done[2]:
                 all_acknowledged.add((bus, address))
                 assert matches(image, desired[(bus, address)]), account
         assert nothing_sent, "the limit stopped no module before its first frame"

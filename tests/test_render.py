@@ -232,10 +232,10 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
 
 
 def test_an_apply_says_its_time_by_phase_against_the_estimate_in_one_line() -> None:
-    assert render.timing({"reading": 4.9, "writing": 0.61, "verifying": 0.5},
-                         {"reading": 5.04, "writing": 0.66, "verifying": 0.52}) == (
-        "Time: 6.2 s (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.5 "
-        "s (0.5 s)")
+    said = render.timing({"reading": 4.9, "writing": 0.61, "verifying": 0.5},
+                         {"reading": 5.04, "writing": 0.66, "verifying": 0.52})
+    assert said == ("Time: 6.2 s (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), "
+                    "verifying 0.5 s (0.5 s)")
 
 
 def test_show_says_each_value_in_both_units_with_its_source_from_plain_values() -> None:
@@ -273,24 +273,16 @@ def test_an_account_names_the_releases_earlier_applies_left_untold_and_the_broad
                              journal=None, owner=None)
     claimed = SimpleNamespace(**vars(killed) | {"bus": "booth-a\x1b[1A\x1b[2K", "name": "left\u202e",
                                                 "owner": "bob (uid 1002)"})
-    assert render.earlier_releases(
-        [killed, SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"}), claimed]
-    ) == [
-        (
-            "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier"
-            " prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)"
-        ),
-        (
-            "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier"
-            " prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account;"
-            " journal j.jsonl)"
-        ),
-        (
-            "⚠ Travel to reference point required before production on: booth-a\\x1b[1A\\x1b[2K/left\\u202e"
-            " (possibly: bob (uid 1002)'s record says an earlier prc3cfg apply, pid 41 at"
-            " 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)"
-        ),
-    ]
+    told = SimpleNamespace(**vars(killed) | {"journal": "j.jsonl"})
+    assert render.earlier_releases([killed, told, claimed]) == [
+        "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier "
+        "prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account)",
+        "⚠ Travel to reference point required before production on: booth-a/left (possibly: an earlier "
+        "prc3cfg apply, pid 41 at 2024-05-01T10:00:00, sent a 10h/20h and ended before its account; "
+        "journal j.jsonl)",
+        "⚠ Travel to reference point required before production on: booth-a\\x1b[1A\\x1b[2K/left\\u202e "
+        "(possibly: bob (uid 1002)'s record says an earlier prc3cfg apply, pid 41 at 2024-05-01T10:00:00, "
+        "sent a 10h/20h and ended before its account)"]
     runs = [SimpleNamespace(bus="line", broadcasts=1), SimpleNamespace(bus="other", broadcasts=0)]
     proofs = [LineProof("line", silent=(3, 4, 5)), LineProof("other", silent=(9,)), LineProof("quiet")]
     assert render.broadcasts_heard(proofs, runs) == [

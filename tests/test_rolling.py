@@ -95,16 +95,14 @@ def test_the_oldest_windows_of_each_line_roll_table():
         said = what_to_read.rolling(targets, records)
         assert {key: programs for key, (programs, _) in said.items()} == rolled, (targets, records)
     said = what_to_read.rolling([target("a", 1)], {("a", 1): known_at(T1)})
-    assert (
-        said[("a", 1)][1]
-        == "rolling evidence: programs 1–32, the oldest on its line, since 2026-11-28 01:00 UTC"
-    )
+    assert (said[("a", 1)][1]
+            == "rolling evidence: programs 1–32, the oldest on its line, since 2026-11-28 01:00 UTC")
     # the targets: the programs added, with the record to agree with; "read in full" said only of a module
     # read in full
     targets, why = what_to_read.with_rolling([target("a", 1, (2,))], {}, {("a", 1): known_at(T1, held=3)})
+    roll = what_to_read.rolling([target("a", 1, (2,))], {("a", 1): known_at(T1, held=3)})
     assert (targets == [replace(target("a", 1, (2,)), programs=(1, 2, 3))]
-            and why == {("a", 1): what_to_read.rolling(
-        [target("a", 1, (2,))], {("a", 1): known_at(T1, held=3)})[("a", 1)][1]})
+            and why == {("a", 1): roll[("a", 1)][1]})
     targets, why = what_to_read.with_rolling([target("a", 1, (), (1, 2, 3, 40))], {},
                                              {("a", 1): known_at(T1, held=64)})
     assert targets[0].programs == first_half and why == {}  # program 40 is still to roll: not read in full
@@ -225,9 +223,8 @@ def oldest_words(plant: EmulatedPlant, whose: bool = True) -> str:
     known = record(as_it_stands(plant_, plant_.buses))
     names = {(b.name, m.address): m.name for b, m in plant_.modules()}
     read = read_next(plant.path)
-    taken = {
-        (b.name, m.address) for b, m in plant_.modules() if set(m.managed_programs()) - set(read[m.name])
-    }
+    taken = {(b.name, m.address) for b, m in plant_.modules()
+             if set(m.managed_programs()) - set(read[m.name])}
     bus, address = min(taken, key=lambda key: (known[key].since, key))
     name = names[(bus, address)]
     by = f" as {known[(bus, address)].by} read or verified them" if whose else ""
@@ -252,9 +249,8 @@ def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys
     assert shown.code == 0 and words in shown.out
     words = oldest_words(plant, whose=False)  # markdown escapes the path and user of `by`: the rest as said
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
-    assert (
-        markdown.code == 0 and words.split(",")[0] in markdown.out and words.split(",")[1] in markdown.out
-    ), markdown.out
+    assert (markdown.code == 0 and words.split(",")[0] in markdown.out
+            and words.split(",")[1] in markdown.out), markdown.out
     words = oldest_words(plant)
     document = json.loads(run_cli(capsys, "plan", plant.path, "--json").out)
     assert document["evidence"]["oldest"]["module"] == words.split(": ")[1].split("'s ")[0]

@@ -48,9 +48,8 @@ def test_a_served_pty_is_scanned_and_imported_with_the_defaults(tmp_path, capsys
         plant = tmp_path / "plant.yaml"
         written = run_cli(capsys, "import", "--port", pty, "--modules", "1-3", "--timeout", "0.2", "--out",
                           plant)
-        assert (
-            written.code == 0 and written.out == "" and plant.read_text(encoding="utf-8") == imported.out
-        ), written.err
+        assert (written.code == 0 and written.out == ""
+                and plant.read_text(encoding="utf-8") == imported.out), written.err
         assert run_cli(capsys, "plan", plant, "--detailed-exitcode").code == 0
 
 
@@ -115,10 +114,8 @@ def test_rfc2217_through_ser2net_onto_a_device_without_modem_lines(tmp_path, cap
             plant.write_text(plant.read_text().replace("?ign_set_control", ""))
             refused = run_cli(capsys, "plan", plant)
             assert refused.code == 1
-            assert refused.err.endswith(
-                "— a port without modem lines (ser2net's local) does not answer it: "
-                "add ?ign_set_control to the rfc2217:// URL\n"
-            ), refused.err
+            assert refused.err.endswith("— a port without modem lines (ser2net's local) does not answer it: "
+                                        "add ?ign_set_control to the rfc2217:// URL\n"), refused.err
         finally:
             ser2net.terminate()
             ser2net.wait()

@@ -85,10 +85,8 @@ def served(tmp_path):
     # SIGTERM stops it between two looks at its cancel event — also after a client's refused handshake, where
     # a signal raised inside asyncua's own callback was caught there and the server served on (a 30 s hang)
     if sys.platform != "win32":
-        assert process.returncode == 0 and stderr.strip().splitlines()[-1:] == ["stopped"], (
-            process.returncode,
-            stderr,
-        )
+        assert process.returncode == 0, (process.returncode, stderr)
+        assert stderr.strip().splitlines()[-1:] == ["stopped"], (process.returncode, stderr)
 
 
 async def connected(url: str, cert: Path, key: Path, *, identified: bool = True) -> Client:
@@ -192,10 +190,8 @@ def test_a_trust_folder_without_certificates_is_one_line(tmp_path, content):
                               env=os.environ | {"PYTHONPATH": str(ROOT)})
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     (line,) = done.stderr.strip().splitlines()
-    assert (
-        line.startswith(f"error: --trust {tmp_path / 'trust'}: ")
-        and "certificates of the clients allowed to connect" in line
-    ), line
+    assert (line.startswith(f"error: --trust {tmp_path / 'trust'}: ")
+            and "certificates of the clients allowed to connect" in line), line
 
 
 def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_alone(served, tmp_path):

@@ -241,9 +241,8 @@ def test_a_plan_file_whose_read_programs_are_edited_is_refused(applied, capsys, 
     document["buses"][0]["modules"][0]["read"]["programs"] = [1, 2]
     (tmp_path / "p.json").write_text(json.dumps(document))
     refused = run_cli(capsys, "apply", applied.path, "--plan", tmp_path / "p.json", "--auto-approve")
-    assert refused.code == 1 and (
-        "stale plan" in refused.err or "changed after it was made" in refused.err
-    ), refused.err
+    assert refused.code == 1 and ("stale plan" in refused.err
+                                  or "changed after it was made" in refused.err), refused.err
 
 
 def test_a_module_whose_system_block_is_not_the_bases_is_read_in_full(applied, capsys, tmp_path):
@@ -252,9 +251,8 @@ def test_a_module_whose_system_block_is_not_the_bases_is_read_in_full(applied, c
     last verified — every managed program is read and brought to the plant file."""
     booth = applied.emulators["booth-a"]
     held = booth.module(1).image  # booth-a-left, as last verified
-    other = replace(held, system=replace(held.system, S6=held.system.S6 + 1)).with_programs(
-        {2: replace(held.known(2), T=held.known(2).T + 3)}
-    )
+    program_2 = replace(held.known(2), T=held.known(2).T + 3)
+    other = replace(held, system=replace(held.system, S6=held.system.S6 + 1)).with_programs({2: program_2})
     # an acceleration that clamps nothing, and program 2, which the change below does not touch
     booth.update(1, image=other)
     edit(applied.path, "position: 2.1", "position: 2.0")  # the change touches program 1 only

@@ -83,9 +83,8 @@ def assert_as_held(plant: EmulatedPlant, bus: str, image: ModuleImage, what: str
     assert image.system == truth.system, (f"{what}: the system block of module {image.address} is not "
                                           "what it holds")
     for number, (seen, there) in enumerate(zip(image.programs, truth.programs), start=1):
-        assert (
-            seen is None or seen == there
-        ), f"{what}: program {number} of module {image.address} is not what it holds"
+        assert seen is None or seen == there, (f"{what}: program {number} of module {image.address} is not "
+                                               "what it holds")
 
 
 def check_everything(plant: EmulatedPlant, flips: Flips, capsys, rate: float) -> None:
@@ -146,9 +145,8 @@ def test_a_reply_as_the_record_or_a_verified_write_says_is_believed_at_once(tmp_
         # as the record says, and program 1's verification: each once — program 1 read twice, once before and
         # once after its write
         counts = Counter(asked)
-        assert counts.pop((2, b"Q\x01")) == 2 and {(1, b"P\x00"), (2, b"P\x00"), (5, b"P\x00")} <= set(
-            counts
-        ), asked
+        others = {(1, b"P\x00"), (2, b"P\x00"), (5, b"P\x00")}
+        assert counts.pop((2, b"Q\x01")) == 2 and others <= set(counts), asked
         assert set(counts.values()) == {1}, asked
         assert plant.matches_plant()
 

@@ -291,9 +291,8 @@ def windows_emulator(wine: Wine, directory: Path, modules: str) -> Iterator[int]
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     lines: list[str] = []
     banner = process.stdout.readline().decode("utf-8") if process.stdout else ""
-    drain = threading.Thread(
-        target=lambda: lines.extend(line.decode("utf-8") for line in process.stdout or ()), daemon=True
-    )
+    drain = threading.Thread(target=lambda: lines.extend(line.decode("utf-8")
+                                                         for line in process.stdout or ()), daemon=True)
     drain.start()
     try:
         assert banner.startswith("listening on 127.0.0.1:"), banner + (process.stdout.read().decode()
@@ -314,9 +313,8 @@ def windows_emulator(wine: Wine, directory: Path, modules: str) -> Iterator[int]
 
 def socket_plant(demo: Path, port_a: int, port_b: int, *, newline: str = "\n") -> Path:
     text = (demo / "plants" / "demo-line.yaml").read_text()
-    text = text.replace("emulator://demo-a", f"socket://127.0.0.1:{port_a}").replace(
-        "emulator://demo-b", f"socket://127.0.0.1:{port_b}"
-    )
+    text = (text.replace("emulator://demo-a", f"socket://127.0.0.1:{port_a}")
+            .replace("emulator://demo-b", f"socket://127.0.0.1:{port_b}"))
     path = demo / "plants" / "tcp-line.yaml"
     path.write_bytes(text.replace("\n", newline).encode())
     return path
@@ -448,10 +446,8 @@ def test_ports_scan_read_plan_and_apply_on_a_com_port(wine, demo, com_port):
 def test_emulator_serve_pty_is_refused_in_one_line(wine, demo):
     refused = wine.run("emulator", "serve", "--pty", cwd=demo)
     assert refused.code == 1, refused
-    assert refused.err.strip().splitlines() == [
-        "error: --pty: Windows has no pseudo-terminals — serve over "
-        "TCP (--listen HOST:PORT) and use socket://HOST:PORT"
-    ]
+    assert refused.err.strip().splitlines() == ["error: --pty: Windows has no pseudo-terminals — serve over "
+                                                "TCP (--listen HOST:PORT) and use socket://HOST:PORT"]
 
 
 def test_setup_machine_speaks_windows(wine, demo):

@@ -139,6 +139,5 @@ def test_no_short_plan_is_cheaper(framing: str, seed: int) -> None:
     assert cheaper is None, (f"a plan of {cheaper * 1000:.2f} ms beats the planner's "
                              f"{plan.bus_time * 1000:.2f} ms")
     bound, _ = plan_bench.Relaxation(actual, desired, cost).bound()
-    assert (
-        bound <= plan.bus_time + 1e-9
-    ), f"the bound {bound * 1000:.2f} ms is above a plan of {plan.bus_time * 1000:.2f} ms"
+    assert bound <= plan.bus_time + 1e-9, (f"the bound {bound * 1000:.2f} ms is above a plan of "
+                                           f"{plan.bus_time * 1000:.2f} ms")

@@ -146,11 +146,9 @@ BOMB_CASES = [
 
 
 @pytest.mark.usefixtures("each_loader")
-@pytest.mark.parametrize(
-    ("text", "problem"),
-    BOMB_CASES,
-    ids=["aliases", "flow-nesting", "block-nesting", "many-digits", "huge-exponent", "tiny-exponent"],
-)
+@pytest.mark.parametrize(("text", "problem"), BOMB_CASES,
+                         ids=["aliases", "flow-nesting", "block-nesting", "many-digits", "huge-exponent",
+                              "tiny-exponent"])
 def test_bombs_are_refused_by_the_limit_they_meet_first(tmp_path: Path, text: str, problem: str) -> None:
     path = tmp_path / "plant.yaml"
     path.write_text(text)
@@ -248,10 +246,8 @@ def test_reading_stops_collecting_after_the_problem_limit(tmp_path: Path) -> Non
                     + _plant(["{address: 1, name: m1}"], ""))
     with pytest.raises(PlantError) as raised:
         load_plant(path)
-    problem = (
-        "'on' is read as the boolean true by YAML 1.1 and as text by YAML 1.2 — write true or false, "
-        "or quote it"
-    )
+    problem = ("'on' is read as the boolean true by YAML 1.1 and as text by YAML 1.2 — write true or false, "
+               "or quote it")
     columns = [9 + 4 * k for k in range(MAX_PROBLEMS)]
     assert (raised.value.problems == [f"{path}:2:{c}: {problem}" for c in columns]
             + [f"{path}:2:{columns[-1]}: {MORE}"])

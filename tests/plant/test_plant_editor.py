@@ -161,18 +161,16 @@ def test_completing_a_program_field_inserts_a_value_prc3cfg_takes(opened, tmp_pa
 
 def test_a_program_number_out_of_range_is_marked_where_it_is_written(opened, tmp_path):
     server, uri = opened
-    marked = {
-        d["range"]["start"]["line"]: d["message"] for d in server.diagnostics(uri) if d["severity"] == 1
-    }
+    marked = {d["range"]["start"]["line"]: d["message"] for d in server.diagnostics(uri)
+              if d["severity"] == 1}
     numbers = {i: line.split(":")[0].strip() for i, line in enumerate(PLANT.splitlines())}
     assert {numbers[line] for line in marked} == {"0", "65"}, marked
     (tmp_path / "plant.yaml").write_text(PLANT)
     with pytest.raises(PlantError) as refused:  # prc3cfg says the same of the same lines
         load_plant(tmp_path / "plant.yaml")
     problems = str(refused.value).splitlines()
-    assert sorted(int(line.split(":")[1]) - 1 for line in problems if "out of range" in line) == sorted(
-        marked
-    )
+    assert sorted(int(line.split(":")[1]) - 1 for line in problems
+                  if "out of range" in line) == sorted(marked)
     # checked beside them: one pass
     assert [line.split(": ", 1)[1] for line in problems if "out of range" not in line] == [
         "in module m1, program 1 has no speed — give speed: in the module or in one of its profiles"]

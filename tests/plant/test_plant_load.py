@@ -47,9 +47,8 @@ def test_every_plant_in_plants_validates(path: Path) -> None:
     for _, module in plant.modules():
         image = module.desired_image()
         assert image.address == module.address
-        assert [n for n in range(1, PROGRAM_COUNT + 1) if image.program(n) is not None] == list(
-            module.managed_programs()
-        )
+        assert [n for n in range(1, PROGRAM_COUNT + 1)
+                if image.program(n) is not None] == list(module.managed_programs())
 
 
 SPANNED = """\
