@@ -34,9 +34,8 @@ def test_an_apply_ends_with_its_time_by_phase_against_the_estimate(tmp_path, cap
     last = applied.out.splitlines()[-1]
     found = TIME.fullmatch(last)
     assert found is not None, last
-    took, estimated, reading, reading_estimate, writing, writing_estimate, verifying, verifying_estimate = (
-        map(float, found.groups())
-    )
+    (took, estimated, reading, reading_estimate, writing, writing_estimate, verifying,
+     verifying_estimate) = map(float, found.groups())
     phases = json.loads(planned.out)["estimated_phases_s"]
     assert (reading_estimate, writing_estimate, verifying_estimate) == tuple(round(phases[p], 1)
                                                                              for p in ("reading", "writing",

@@ -337,9 +337,8 @@ def test_a_snapshot_the_disk_refuses_as_a_further_line_begins_stops_every_line_a
     with refusing(tmp_path, DEMO, {"booth-a": a, "booth-b": b}, kinds=("snapshots",)) as run:
         refused = run()
         refused.check("snapshots")
-        assert b.writes(1) == b.writes(3) == b.writes(4) == [] and a.writes(
-            1
-        ), "the refusal came elsewhere than chosen"
+        assert b.writes(1) == b.writes(3) == b.writes(4) == [] and a.writes(1), \
+            "the refusal came elsewhere than chosen"
         snapshot = re.search(r"prc3cfg restore (\S+\.json)$", refused.result.stderr.strip())
         assert snapshot, refused.result.stderr
         (folder_of(tmp_path, "snapshots") / "filler").unlink()
@@ -425,9 +424,8 @@ def test_a_disk_that_refuses_anywhere_in_an_apply_leaves_an_exact_account_and_no
         result = refused.result
         wrote = any(message[0] not in READS for _, message in line.frames)
         if result.returncode == 0:  # the refusal came after the last record of its kind that mattered
-            assert "Apply complete" in result.stdout and refused.plant.matches_plant(), (
+            assert "Apply complete" in result.stdout and refused.plant.matches_plant(), \
                 result.stdout + result.stderr
-            )
         elif not wrote:  # before the first write: one line, and nothing written
             assert result.returncode == 1 and "Traceback" not in result.stderr, result.stderr
             error = result.stderr.strip().splitlines()[-1]

@@ -246,9 +246,8 @@ def test_its_own_lock_files_hold_its_pid_while_it_runs_and_go_after(tmp_path):
         names = {name.removeprefix("LCK..") for name in serial_lock.lock_names(str(link))}
         assert {link.name, Path(os.ttyname(terminal)).name,
                 os.ttyname(terminal).removeprefix("/dev/").replace("/", "_")} <= names
-        assert {name: lock_file(name).read_bytes() for name in names} == dict.fromkeys(
-            names, hdb(process.pid)
-        )
+        lock_bytes = {name: lock_file(name).read_bytes() for name in names}
+        assert lock_bytes == dict.fromkeys(names, hdb(process.pid))
         process.send_signal(signal.SIGINT)  # stopped mid-scan: the lock files go all the same
         process.communicate()
     finally:

@@ -58,12 +58,8 @@ def test_every_control_format_and_separator_character_is_escaped() -> None:
 def test_every_medium_escapes_as_shown_does() -> None:
     """The GitHub and markdown escapings show a file's characters as `shown` does, first."""
     hostile = "x\u202ey\u2028z"
-    assert (
-        text.github_data(hostile)
-        == text.github_property(hostile)
-        == text.markdown_html(hostile)
-        == "x\\u202ey\\u2028z"
-    )
+    assert (text.github_data(hostile) == text.github_property(hostile) == text.markdown_html(hostile)
+            == "x\\u202ey\\u2028z")
     assert text.markdown(hostile) == "x&#92;u202ey&#92;u2028z"  # a backslash in markdown is an entity
 
 

@@ -75,9 +75,8 @@ def missing_reason(*programs: str) -> str | None:
     names = " and ".join(missing)
     apt = [INSTALL[p].removeprefix("apt-get install -y ") for p in missing
            if INSTALL[p].startswith("apt-get install -y ")]
-    commands = ([f"apt-get install -y {' '.join(apt)}"] if apt else []) + [
-        INSTALL[p] for p in missing if not INSTALL[p].startswith("apt-get ")
-    ]
+    commands = (([f"apt-get install -y {' '.join(apt)}"] if apt else [])
+                + [INSTALL[p] for p in missing if not INSTALL[p].startswith("apt-get ")])
     return f"{names} {'is' if len(missing) == 1 else 'are'} not installed: {'; '.join(commands)}"
 
 
