@@ -144,7 +144,7 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
     read-back's hash, and are made without them (`hashes=False`: each `state_sha256` None — 240
     modules' take 30 ms)."""
     phases = plan.phases()
-    return {
+    document = {
         "format": FORMAT,
         "prc3cfg_version": __version__,
         "plant": plan.plant,
@@ -169,9 +169,12 @@ def to_json(plan: PlantPlan, *, hashes: bool = True) -> dict[str, Any]:
         "message_count": plan.message_count,
         "axis_releases": [f"{m.bus}/{m.name}" for m in plan.axis_releases],
         "evidence": evidence(plan),
-    } | ({} if plan.unshared_bus_time is None
-         else {"without_broadcasts_bus_time_s": round(plan.unshared_bus_time, 4)}
-         ) | ({} if plan.reading is None else {"read": _reading_json(plan.reading)})
+    }
+    if plan.unshared_bus_time is not None:
+        document["without_broadcasts_bus_time_s"] = round(plan.unshared_bus_time, 4)
+    if plan.reading is not None:
+        document["read"] = _reading_json(plan.reading)
+    return document
 
 
 def write(plan: PlantPlan, notes: Iterable[str], words: Words) -> dict[str, Any]:
