@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import random
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -26,6 +27,13 @@ FRAMINGS = ("crc16", "open-driver", "stx")
 #: bench/plan_bench.py, whose lower bound the tests hold below the plans.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 plan_bench = importlib.import_module("plan_bench")
+
+
+def bench_case(scenario: str) -> tuple[ModuleImage, ModuleImage]:
+    """bench/plan_bench.py's fixed case `scenario` (of the plant runs or of the exact comparison): its
+    read-back and plant file, made from a generator seeded with its name, as the bench's exact table makes
+    its first."""
+    return (plan_bench.SCENARIOS | plan_bench.MORE_SCENARIOS)[scenario](random.Random(scenario))
 
 
 def line(framing: str = "crc16", turnaround: float = 0.010, zvz: float = 0.020) -> LineCost:

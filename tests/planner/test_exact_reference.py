@@ -21,7 +21,7 @@ from dataclasses import replace
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from planner_helpers import FRAMINGS, check_plan, line, plan_bench
+from planner_helpers import FRAMINGS, bench_case, check_plan, line, plan_bench
 from test_planner_cases import FOUND_CASES
 from test_planner_property import random_system, read_back, scenarios, valid_under
 from test_reference_planner import BENCH_LEFT_OUT, DIFFERS
@@ -71,7 +71,7 @@ def reference_replayed(actual: ModuleImage, desired: ModuleImage, cost: LineCost
     ],
 )
 def test_the_reference_replays_and_is_never_dearer_than_the_plan(scenario: str, profile: str) -> None:
-    actual, desired = (plan_bench.SCENARIOS | plan_bench.MORE_SCENARIOS)[scenario](random.Random(scenario))
+    actual, desired = bench_case(scenario)
     cost = plan_bench.line_cost(profile)
     plan = plan_module(actual, desired, cost)
     assert reference_replayed(actual, desired, cost).bus_time <= plan.bus_time + EPSILON
@@ -83,7 +83,7 @@ def test_the_plan_is_the_exact_optimum_where_the_reference_planner_is_left_out(s
                                                                                profile: str) -> None:
     """The fixed case the reference planner takes too long on (test_reference_planner.BENCH_LEFT_OUT) held
     to the exact optimum instead: about 30 s of CPU for a full rewrite."""
-    actual, desired = (plan_bench.SCENARIOS | plan_bench.MORE_SCENARIOS)[scenario](random.Random(scenario))
+    actual, desired = bench_case(scenario)
     cost = plan_bench.line_cost(profile)
     assert not cost.framing.stuffs  # where the exact reference's optimum is exact
     exact = reference_replayed(actual, desired, cost)
@@ -116,7 +116,7 @@ def test_a_chain_among_unlinked_programs_is_a_link_range_inside_an_unlink_range(
 def test_commissioning_every_field_takes_27_messages() -> None:
     """Issue 29's case: all 64 programs from factory defaults, every field, on crc16 at 9600 baud, 10 ms:
     four programs written whole (21h) let the other 60 fit four 33h and four each of 42h..45h, not five."""
-    actual, desired = plan_bench.commissioning_every_field(random.Random("commissioning, every field"))
+    actual, desired = bench_case("commissioning, every field")
     cost = plan_bench.line_cost("crc16")
     reference = reference_replayed(actual, desired, cost)
     assert reference.bus_time <= plan_module(actual, desired, cost).bus_time + EPSILON

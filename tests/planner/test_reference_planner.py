@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, Phase, event, given, reject, settings
-from planner_helpers import FRAMINGS, line, plan_bench
+from planner_helpers import FRAMINGS, bench_case, line, plan_bench
 from reference_planner import ReferencePlan, TooBig, reference_plan, starting_state
 from test_planner_bruteforce import tiny_case
 from test_planner_cases import FOUND_CASES
@@ -117,8 +117,7 @@ BENCH_CASES = [(name, profile) for name in (*plan_bench.SCENARIOS, *plan_bench.M
     [case if case == BENCH_FAST else pytest.param(*case, marks=pytest.mark.soak) for case in BENCH_CASES],
 )
 def test_the_planner_equals_the_reference_on_the_bench_cases(scenario: str, profile: str) -> None:
-    make = plan_bench.SCENARIOS.get(scenario) or plan_bench.MORE_SCENARIOS[scenario]
-    actual, desired = make(random.Random(scenario))
+    actual, desired = bench_case(scenario)
     assert_equal_to_the_reference(actual, desired, plan_bench.line_cost(profile))
 
 
