@@ -126,13 +126,17 @@ def on_a_terminal(args: list, env: dict) -> bytes:
 
 
 def test_plans_are_coloured_on_a_terminal_unless_no_color(tmp_path):
+    """Coloured on a terminal that shows colour, whatever TERM the tests run under (a maintainer's editor
+    shell, `env -i`, a CI runner may say "dumb"); not with NO_COLOR, nor on a terminal that says it is dumb,
+    nor into a pipe."""
     plant = tmp_path / "plants" / "demo-line.yaml"
     plant.parent.mkdir()
     plant.write_text(DEMO.read_text())
-    env = {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks")}
+    env = {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "TERM": "xterm-256color"}
     coloured = on_a_terminal(["plan", plant], env)
     assert b"\x1b[32m    + program 1: position" in coloured  # what the plan sets up: green
     assert b"\x1b[3" not in on_a_terminal(["plan", plant], env | {"NO_COLOR": "1"})
+    assert b"\x1b[3" not in on_a_terminal(["plan", plant], env | {"TERM": "dumb"})
     piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True,
                            env={**os.environ, **env})
     assert b"\x1b[" not in piped.stdout

@@ -80,9 +80,11 @@ def socat_port(link: Path):
 
 @contextlib.contextmanager
 def on_a_terminal(argv: list[str], ready: bytes):
-    """A terminal program (picocom, minicom) with a pty as its terminal, once it has shown `ready`."""
+    """A terminal program (picocom, minicom) with a pty as its terminal, once it has shown `ready`; the
+    terminal one it can draw on whatever TERM the tests run under (minicom ends at once on a "dumb" one)."""
     master, terminal = os.openpty()
-    process = subprocess.Popen(argv, stdin=terminal, stdout=terminal, stderr=terminal, start_new_session=True)
+    process = subprocess.Popen(argv, stdin=terminal, stdout=terminal, stderr=terminal, start_new_session=True,
+                               env={**os.environ, "TERM": "xterm"})
     os.close(terminal)
     try:
         shown = b""
