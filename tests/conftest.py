@@ -31,7 +31,7 @@ settings.load_profile(os.environ.get("PRC3CFG_HYPOTHESIS_PROFILE", "fast"))
 
 ROOT = Path(__file__).resolve().parents[1]
 
-_built: dict[tuple, object] = {}
+_built: dict[tuple, tuple[typer.Typer, object]] = {}
 _get_command = typer.main.get_command
 
 
@@ -47,9 +47,9 @@ def _get_command_once(app: typer.Typer):
     for each of the thousands of commands the tests run in this process (`run_cli`). Built once for each
     shape of the app instead; the only input typer reads besides the app is this environment variable."""
     key = (_shape(app), os.environ.get("_TYPER_COMPLETE_TEST_DISABLE_SHELL_DETECTION"))
-    if key not in _built:
-        _built[key] = _get_command(app)
-    return _built[key]
+    if key not in _built:  # the app kept with its command: while it is, no other app is given its id
+        _built[key] = (app, _get_command(app))
+    return _built[key][1]
 
 
 typer.main.get_command = _get_command_once

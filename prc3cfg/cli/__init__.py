@@ -12,6 +12,8 @@ can end into one line on stderr and an exit code:
 """
 
 
+import copy
+import inspect
 import os
 import re
 import sys
@@ -62,26 +64,64 @@ COMMAND_MODULES: dict[str, str] = {
 }
 
 
+def _completing() -> bool:
+    """Whether this process is shell completion (click's: `_PRC3CFG_COMPLETE`), which needs every command."""
+    return any(key.endswith("_COMPLETE") for key in os.environ)
+
+
+def _command_named(args: list[str]) -> str | None:
+    """The command (or group) a command line names, when it names one prc3cfg has and is not shell completion;
+    None for `--help`, no command, a typo."""
+    named = next((arg for arg in args if not arg.startswith("-")), None)
+    return named if named in COMMAND_MODULES and not _completing() else None
+
+
 def _register_commands(args: list[str] | None = None) -> None:
     """Import the command modules, which register their commands on `app`: of a command line `args`
     that names a command, only that command's; of any other (`--help`, a typo, shell completion), all."""
     import importlib
 
-    named = next((arg for arg in args or [] if not arg.startswith("-")), None)
-    # click's completion: `_PRC3CFG_COMPLETE`
-    completing = any(key.endswith("_COMPLETE") for key in os.environ)
-    names = ([COMMAND_MODULES[named]] if named in COMMAND_MODULES and not completing
-             else COMMAND_MODULES.values())
+    named = _command_named(args or [])
+    names = [COMMAND_MODULES[named]] if named is not None else COMMAND_MODULES.values()
     for name in dict.fromkeys(names):
         importlib.import_module(f"prc3cfg.cli.{name}")
     # in the table's order, whichever module a process imported first (a program running many command lines)
     rank = {command: n for n, command in enumerate(COMMAND_MODULES)}.get
-
-    def command_name(info: typer.models.CommandInfo) -> str:
-        return info.name or typer.main.get_command_name(getattr(info.callback, "__name__", ""))
-
-    app.registered_commands.sort(key=lambda info: rank(command_name(info), 0))
+    app.registered_commands.sort(key=lambda info: rank(_name_of(info), 0))
     app.registered_groups.sort(key=lambda group: rank(group.name or "", 0))
+
+
+def _listed(app: typer.Typer) -> typer.Typer:
+    """`app` as a listing shows it (`prc3cfg --help`, `prc3cfg`, a command it does not know): each command by
+    its name and help alone. typer builds every command's options from its signature before it shows a
+    listing that shows none of them — 8 ms of the 60 `--help` may take. The app itself is left as it is."""
+    listed = copy.copy(app)
+    listed.registered_commands = [_named(info) for info in app.registered_commands]
+    listed.registered_groups = []
+    for group in app.registered_groups:
+        group = copy.copy(group)
+        if group.typer_instance is not None:
+            group.typer_instance = _listed(group.typer_instance)
+        listed.registered_groups.append(group)
+    return listed
+
+
+def _name_of(info: typer.models.CommandInfo) -> str:
+    """A registered command's name, as typer names it."""
+    return info.name or typer.main.get_command_name(getattr(info.callback, "__name__", ""))
+
+
+def _named(info: typer.models.CommandInfo) -> typer.models.CommandInfo:
+    """A command as a listing shows it: its name and help, without its options (none to build)."""
+    named = copy.copy(info)
+    named.name = _name_of(info)
+    named.help = info.help if info.help is not None else inspect.getdoc(info.callback)
+    named.callback = _nothing
+    return named
+
+
+def _nothing() -> None:
+    """What a listed command runs: nothing (a listing runs none)."""
 
 
 def _print_version(value: bool) -> None:
@@ -210,7 +250,8 @@ def main(argv: list[str] | None = None) -> None:
             print(f"error: {habit}", file=sys.stderr)
             sys.exit(EXIT_USAGE)
         with CANCEL.handling():
-            code = app(args=args, prog_name="prc3cfg", standalone_mode=False)
+            run = app if _command_named(args) is not None or _completing() else _listed(app)
+            code = run(args=args, prog_name="prc3cfg", standalone_mode=False)
         sys.stdout.flush()
     except ExitStatus as outcome:
         sys.exit(outcome.code)
