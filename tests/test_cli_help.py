@@ -309,9 +309,9 @@ print(said(["--help"]) == (full, 0), said([])[0] == full, said(["schema"])[1] ==
 
 
 def test_the_listing_is_typer_s_with_every_command_built_and_leaves_the_commands_as_they_were():
-    """`prc3cfg --help` and `prc3cfg` list the commands without building their options (bench/startup_bench.py:
-    8 ms of the listing's 60): the same text as typer's listing of the commands built, and a command run after
-    it in the same process runs."""
+    """`prc3cfg --help` and `prc3cfg` list the commands without building their options
+    (bench/startup_bench.py: 8 ms of the listing's 60): the same text as typer's listing of the commands
+    built, and a command run after it in the same process runs."""
     done = subprocess.run([sys.executable, "-c", LISTED_AND_BUILT], capture_output=True, text=True,
                           env={**os.environ, "COLUMNS": "100"}, check=False)
     assert done.stdout.split() == ["True", "True", "True"], done.stderr
