@@ -70,10 +70,10 @@ def _completing() -> bool:
 
 
 def _command_named(args: list[str]) -> str | None:
-    """The command (or group) a command line names, when it names one prc3cfg has and is not shell completion;
-    None for `--help`, no command, a typo."""
+    """The command (or group) a command line names, when prc3cfg has it; None for `--help`, no command, a
+    typo."""
     named = next((arg for arg in args if not arg.startswith("-")), None)
-    return named if named in COMMAND_MODULES and not _completing() else None
+    return named if named in COMMAND_MODULES else None
 
 
 def _register_commands(args: list[str] | None = None) -> None:
@@ -82,7 +82,7 @@ def _register_commands(args: list[str] | None = None) -> None:
     import importlib
 
     named = _command_named(args or [])
-    names = [COMMAND_MODULES[named]] if named is not None else COMMAND_MODULES.values()
+    names = [COMMAND_MODULES[named]] if named is not None and not _completing() else COMMAND_MODULES.values()
     for name in dict.fromkeys(names):
         importlib.import_module(f"prc3cfg.cli.{name}")
     # in the table's order, whichever module a process imported first (a program running many command lines)
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"error: {habit}", file=sys.stderr)
             sys.exit(EXIT_USAGE)
         with CANCEL.handling():
-            run = app if _command_named(args) is not None or _completing() else _listed(app)
+            run = _listed(app) if _command_named(args) is None and not _completing() else app
             code = run(args=args, prog_name="prc3cfg", standalone_mode=False)
         sys.stdout.flush()
     except ExitStatus as outcome:
