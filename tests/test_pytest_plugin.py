@@ -54,3 +54,23 @@ def test_a_missing_images_file_is_named_in_one_line(pytester):
     assert any("nowhere.json" in line and "give the file prc3cfg read --json wrote" in line
                and line.lstrip("E ").startswith("prc3cfg.errors.UserError")
                for line in result.stdout.lines), result.stdout.str()
+
+
+UNUSED_TEST = '''
+import sys
+
+
+def test_unused():
+    print("prc3cfg imported:", sorted(name for name in sys.modules if name.startswith("prc3cfg")))
+'''
+
+
+def test_a_session_that_never_asks_for_the_fixture_imports_nothing_of_prc3cfg_but_the_plugin(pytester):
+    """pytest loads the plugin in every session where prc3cfg is installed, and rewrites whatever of prc3cfg
+    is imported then: a session that does not use it pays for the plugin module alone."""
+    pytester.makeini("[pytest]\n")
+    (pytester.path / "test_unused.py").write_text(UNUSED_TEST)
+    result = pytester.runpytest_subprocess("-s", "-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1)
+    plugin_alone = "['prc3cfg', 'prc3cfg.shell', 'prc3cfg.shell.pytest_plugin']"
+    assert f"prc3cfg imported: {plugin_alone}" in result.stdout.str(), result.stdout.str()

@@ -13,6 +13,11 @@
 `prc3cfg_emulated(path, images=None, **bus_settings)` puts the plant file's buses on emulators
 (`prc3cfg.shell.testing.emulate`): modules at factory defaults, or as a `prc3cfg read --json` file
 says; a relative path (of either file) is taken from pytest's rootdir. The emulators stop when the test ends.
+
+pytest loads this module in every session of every project whose environment has prc3cfg installed, and
+rewrites the asserts of every module of prc3cfg it imports then (a plugin's distribution is rewritten whole).
+So it imports nothing of prc3cfg until a test asks for the fixture: a session that never does pays for none
+of it.
 """
 
 from __future__ import annotations
@@ -21,11 +26,12 @@ import contextlib
 import itertools
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from prc3cfg.shell.testing import EmulatedPlant, emulate
+if TYPE_CHECKING:
+    from prc3cfg.shell.testing import EmulatedPlant
 
 
 @pytest.fixture
@@ -34,6 +40,8 @@ def prc3cfg_emulated(request: pytest.FixtureRequest, tmp_path: Path,
     """Put a plant file's buses on emulators: `prc3cfg_emulated("plant.yaml", images=None)`. The records
     of axis releases on them (`prc3cfg.shell.pending_records`) are kept in the test's own folder: an emulated
     release is no business of the machine's."""
+    from prc3cfg.shell.testing import emulate
+
     monkeypatch.setenv("PRC3CFG_STATE_DIR", str(tmp_path / "prc3cfg-state"))
     numbers = itertools.count(1)
     with contextlib.ExitStack() as stack:
