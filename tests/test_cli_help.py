@@ -172,7 +172,8 @@ except SystemExit as stop:
     assert stop.code in (0, 2), stop.code
 loaded = sorted(m for m in sys.modules if m.split(".")[0] == "rich"
                 or m in ("prc3cfg.shell.doctor", "prc3cfg.plant.importer", "prc3cfg.shell.emulator.server",
-                         "prc3cfg.core.policy", "prc3cfg.plant.policy", "prc3cfg.plant.adopt"))
+                         "prc3cfg.core.policy", "prc3cfg.plant.policy", "prc3cfg.plant.adopt",
+                         "prc3cfg.core.render.comment", "prc3cfg.core.render.show"))
 print("loaded:", loaded, file=sys.stderr)
 """
 
@@ -180,8 +181,8 @@ print("loaded:", loaded, file=sys.stderr)
 def test_a_plan_loads_what_it_runs_only(tmp_path):
     """Piped, `plan` loads no rich (its progress bar and colours are for a terminal), nor doctor's search or
     the importer (it asks only whether doctor could measure a port), nor the policy's rules where the plant
-    file names no policy, nor adopt's rewriting (nor does `apply`); on `emulator://` it runs the emulator, on
-    `socket://` it does not."""
+    file names no policy, nor adopt's rewriting, nor the pull-request comment or `show`'s words (nor does
+    `apply`); on `emulator://` it runs the emulator, on `socket://` it does not."""
     plant = tmp_path / "plant.yaml"
     plant.write_text(DEMO.read_text())
     on_emulator = subprocess.run([sys.executable, "-c", LOADED_OF, "plan", str(plant)], capture_output=True,

@@ -10,6 +10,7 @@ imports — fails here.
 from __future__ import annotations
 
 import ast
+import importlib
 import json
 import subprocess
 import sys
@@ -273,20 +274,26 @@ def test_the_command_line_calls_only_what_the_api_exports():
     assert all(hasattr(prc3cfg.api, name) for name in prc3cfg.api.__all__)
 
 
-def test_the_api_imports_each_name_from_where_the_type_checker_finds_it():
-    """`prc3cfg.api` imports each name when first asked for, from its module in `_HOMES`; the type
-    checker reads the imports under TYPE_CHECKING: the two say the same, name for name."""
-    import prc3cfg.api
-
-    tree = ast.parse((PACKAGE / "api" / "__init__.py").read_text())
+@pytest.mark.parametrize("package", ["prc3cfg.api", "prc3cfg.core.render"])
+def test_a_lazy_package_imports_each_name_from_where_the_type_checker_finds_it(package):
+    """`prc3cfg.api` and `prc3cfg.core.render` import each name when first asked for, from its module in
+    `_HOMES` (`prc3cfg.core.lazy`); the type checker reads the imports under TYPE_CHECKING: the two say the
+    same, name for name, and a name that is in neither is no name of the package."""
+    lazy = importlib.import_module(package)
+    path = PACKAGE.parent.joinpath(*package.split("."), "__init__.py")
+    tree = ast.parse(path.read_text())
     (checking,) = [node for node in tree.body if isinstance(node, ast.If)
                    and getattr(node.test, "id", None) == "TYPE_CHECKING"]
     imported = {(node.module, a.name) for node in checking.body if isinstance(node, ast.ImportFrom)
                 for a in node.names if a.asname == a.name}
-    homes = {(module, name) for module, names in prc3cfg.api._HOMES.items() for name in names}
-    assert len(imported) == len(checking.body) == len(prc3cfg.api.__all__) and imported == homes
-    with pytest.raises(AttributeError, match="has no attribute 'nothing_of_this_name'"):
-        prc3cfg.api.nothing_of_this_name  # noqa: B018 — a name outside the API is no name of it
+    homes = {(module, name) for module, names in lazy._HOMES.items() for name in names}
+    assert len(imported) == len(checking.body) == len(homes) and imported == homes
+    # a module named as a name of the package would hide that name once imported (Python binds it there)
+    assert not {home.removeprefix(f"{package}.") for home in lazy._HOMES} & {name for _, name in homes}
+    assert all(getattr(lazy, name) is getattr(importlib.import_module(home), name) for home, name in homes)
+    assert {name for _, name in homes} <= set(dir(lazy))
+    with pytest.raises(AttributeError, match=f"module '{package}' has no attribute 'nothing_of_this_name'"):
+        lazy.nothing_of_this_name  # noqa: B018 — a name outside the package is no name of it
 
 
 def test_every_module_of_the_package_imports():

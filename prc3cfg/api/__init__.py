@@ -39,8 +39,9 @@ uses — a plan from saved images no link, no pyserial.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from prc3cfg.core.lazy import lazy_names
 
 if TYPE_CHECKING:  # the names as the type checker sees them; at run time each is imported when asked for
     from prc3cfg.api._apply import apply as apply
@@ -151,15 +152,4 @@ _HOMES: dict[str, tuple[str, ...]] = {
 __all__ = sorted(name for names in _HOMES.values() for name in names)
 
 
-def __getattr__(name: str) -> object:
-    """A name of the API, imported from the module that holds it the first time it is asked for (PEP 562)."""
-    for module, names in _HOMES.items():
-        if name in names:
-            value = getattr(importlib.import_module(module), name)
-            globals()[name] = value
-            return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__getattr__, __dir__ = lazy_names(globals(), _HOMES)

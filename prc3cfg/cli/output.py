@@ -13,8 +13,8 @@ import json
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from prc3cfg.api import ApplyFailed, ApplyInterrupted, ApplyResult, Drift, Gates, LineOptions, PolicyReport
 from prc3cfg.cli.common import TerminalProgress, ask, print_lines, to_the_terminal, write_output
 from prc3cfg.core import render
 from prc3cfg.core.plan_file import write as plan_file
@@ -22,6 +22,9 @@ from prc3cfg.core.plant_plan import PlantPlan
 from prc3cfg.core.text import markdown as markdown_text
 from prc3cfg.errors import UserError
 from prc3cfg.shell.platform import command_line
+
+if TYPE_CHECKING:  # an apply's, loaded where one runs (`gates`, `accounted`): a plan needs none of them
+    from prc3cfg.api import ApplyResult, Drift, Gates, LineOptions, PolicyReport
 
 
 def emit_plan(plan: PlantPlan, *, out: Path | None, json_out: bool, markdown: bool, max_chars: int,
@@ -92,6 +95,7 @@ def gates(plan_file: Path | None, auto_approve: bool, allow_axis_release: bool, 
           frames: bool = False) -> Gates:
     """Show the plan — the read-back's progress taken off the screen first — and ask about axis
     releases and the apply itself on a terminal (`ask`), unless told not to."""
+    from prc3cfg.api import Gates
 
     shown: set[str] = set()  # the lines whose plan was shown as their writes began
 
@@ -159,6 +163,8 @@ def report(result: ApplyResult) -> None:
 @contextlib.contextmanager
 def accounted() -> Iterator[None]:
     """Run an apply; whatever becomes of it after its first write, say what it did."""
+    from prc3cfg.api import ApplyFailed, ApplyInterrupted
+
     try:
         yield
     except ApplyInterrupted as stopped:

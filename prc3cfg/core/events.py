@@ -9,7 +9,7 @@ things happen, each `{"format": "prc3cfg-event/1", "event": KIND, "command": …
     progress  a phase began (`done` 0) or a step of it was done: reading, writing, verifying
     module    one module's account: verified / failed / unchanged, what was written, sent unacknowledged, not
               sent, what its read-back says, and the account's sentence (`text`,
-              `prc3cfg.core.render.account`)
+              `prc3cfg.core.render.applied`)
     travel    the modules that must travel to their reference point (this run's, and earlier runs' untold)
     account   the last line: `status`, the exit code, how many modules were written and verified, the
               journal and snapshot, the times, and the error lines when it ended in one

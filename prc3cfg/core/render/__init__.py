@@ -5,97 +5,119 @@ One module an output, each importing only the ones below it (`words` at the bott
   counts, and text from a file made safe for markdown — what every output shares;
 - `plan_text`: a plan as the terminal shows it, and the headline, evidence and estimate every output of a plan
   says; what a plan file keeps beside a module's steps for people (`review`);
-- `markdown`: a plan and drift as pull-request comments, within a comment's size;
+- `comment`: a plan and drift as pull-request comments in markdown, within a comment's size;
 - `drift`: what `read` and drift say of modules;
-- `account`: the account of an apply, from each module's outcome (`prc3cfg.core.outcome.ModuleOutcome`), and
+- `applied`: the account of an apply, from each module's outcome (`prc3cfg.core.outcome.ModuleOutcome`), and
   the modules that must travel to their reference point;
 - `show`: what `show` says of a plant file's modules.
 
 The package's names are its modules' public ones: callers say `render.human`, `render.account`, … wherever the
-words live, and `prc3cfg.core.plan_file.write` is given the package as its `Words`. Reasons shown here never
-steer an apply (the plan's steps do). Pure: returns strings.
+words live, and `prc3cfg.core.plan_file.write` is given the package as its `Words`. Each module is imported
+the first time one of its names is asked for (PEP 562, as `prc3cfg.api` does): a plan shown on a terminal
+loads neither the pull-request comment, nor `show`, nor drift. Reasons shown here never steer an apply (the
+plan's steps do). Pure: returns strings. (No module is named as one of the package's names: importing it
+would bind its name on the package, hiding that name — the function `account` lives in `applied`.)
 """
 
-from prc3cfg.core.render.account import (
-                                         TRAVEL,
-                                         TRAVEL_WIDTH,
-                                         Untold,
-                                         account,
-                                         broadcasts_heard,
-                                         earlier_releases,
-                                         travel_list,
-)
-from prc3cfg.core.render.drift import DRIFT_FORMAT, DRIFT_MARKER, Drift, drift_json, drift_lines, image_lines
-from prc3cfg.core.render.markdown import COMMENT_BUDGET, MARKER, BudgetTooSmall, drift_markdown, markdown
-from prc3cfg.core.render.plan_text import (
-                                         CHART,
-                                         CHARTS,
-                                         EVERY_MODULE,
-                                         LEGEND,
-                                         PHASES,
-                                         REVIEW_AS_WRITTEN,
-                                         SAID,
-                                         changes_json,
-                                         clamped_line,
-                                         estimate,
-                                         factory_line,
-                                         faulted_summary,
-                                         human,
-                                         line_part,
-                                         line_proof,
-                                         no_changes,
-                                         oldest_taken,
-                                         reading_line,
-                                         review,
-                                         review_line,
-                                         summary_line,
-                                         timing,
-)
-from prc3cfg.core.render.show import (
-                                         ModuleRow,
-                                         Settings,
-                                         Shown,
-                                         Table,
-                                         chain_text,
-                                         modules_table,
-                                         shown_module,
-)
-from prc3cfg.core.render.words import (
-                                         AXIS_WARNING,
-                                         CLAMPED,
-                                         JUMPS,
-                                         RELEASE_NAMES_BUDGET,
-                                         FieldChange,
-                                         ModuleDiff,
-                                         cell,
-                                         chain_changes,
-                                         clamped_changes,
-                                         code,
-                                         differences,
-                                         drift_changes,
-                                         fenced,
-                                         field_changes,
-                                         field_name,
-                                         format_value,
-                                         header_line,
-                                         jumps,
-                                         module_diff,
-                                         module_lines,
-                                         plural,
-                                         release_summary,
-                                         some_of,
-                                         step_line,
-)
+from __future__ import annotations
 
-__all__ = [
-    "AXIS_WARNING", "CHART", "CHARTS", "CLAMPED", "COMMENT_BUDGET", "DRIFT_FORMAT", "DRIFT_MARKER",
-    "EVERY_MODULE", "JUMPS", "LEGEND", "MARKER", "PHASES", "RELEASE_NAMES_BUDGET", "REVIEW_AS_WRITTEN",
-    "SAID", "TRAVEL", "TRAVEL_WIDTH", "BudgetTooSmall", "Drift", "FieldChange", "ModuleDiff", "ModuleRow",
-    "Settings", "Shown", "Table", "Untold", "account", "broadcasts_heard", "cell", "chain_changes",
-    "chain_text", "changes_json", "clamped_changes", "clamped_line", "code", "differences", "drift_changes",
-    "drift_json", "drift_lines", "drift_markdown", "earlier_releases", "estimate", "factory_line",
-    "faulted_summary", "fenced", "field_changes", "field_name", "format_value", "header_line", "human",
-    "image_lines", "jumps", "line_part", "line_proof", "markdown", "module_diff", "module_lines",
-    "modules_table", "no_changes", "oldest_taken", "plural", "reading_line", "release_summary", "review",
-    "review_line", "shown_module", "some_of", "step_line", "summary_line", "timing", "travel_list",
-]
+from typing import TYPE_CHECKING
+
+from prc3cfg.core.lazy import lazy_names
+
+if TYPE_CHECKING:
+    from prc3cfg.core.render.applied import TRAVEL as TRAVEL
+    from prc3cfg.core.render.applied import TRAVEL_WIDTH as TRAVEL_WIDTH
+    from prc3cfg.core.render.applied import Untold as Untold
+    from prc3cfg.core.render.applied import account as account
+    from prc3cfg.core.render.applied import broadcasts_heard as broadcasts_heard
+    from prc3cfg.core.render.applied import earlier_releases as earlier_releases
+    from prc3cfg.core.render.applied import travel_list as travel_list
+    from prc3cfg.core.render.comment import COMMENT_BUDGET as COMMENT_BUDGET
+    from prc3cfg.core.render.comment import MARKER as MARKER
+    from prc3cfg.core.render.comment import BudgetTooSmall as BudgetTooSmall
+    from prc3cfg.core.render.comment import drift_markdown as drift_markdown
+    from prc3cfg.core.render.comment import markdown as markdown
+    from prc3cfg.core.render.drift import DRIFT_FORMAT as DRIFT_FORMAT
+    from prc3cfg.core.render.drift import DRIFT_MARKER as DRIFT_MARKER
+    from prc3cfg.core.render.drift import Drift as Drift
+    from prc3cfg.core.render.drift import drift_json as drift_json
+    from prc3cfg.core.render.drift import drift_lines as drift_lines
+    from prc3cfg.core.render.drift import image_lines as image_lines
+    from prc3cfg.core.render.plan_text import CHART as CHART
+    from prc3cfg.core.render.plan_text import CHARTS as CHARTS
+    from prc3cfg.core.render.plan_text import EVERY_MODULE as EVERY_MODULE
+    from prc3cfg.core.render.plan_text import LEGEND as LEGEND
+    from prc3cfg.core.render.plan_text import PHASES as PHASES
+    from prc3cfg.core.render.plan_text import REVIEW_AS_WRITTEN as REVIEW_AS_WRITTEN
+    from prc3cfg.core.render.plan_text import SAID as SAID
+    from prc3cfg.core.render.plan_text import changes_json as changes_json
+    from prc3cfg.core.render.plan_text import clamped_line as clamped_line
+    from prc3cfg.core.render.plan_text import estimate as estimate
+    from prc3cfg.core.render.plan_text import factory_line as factory_line
+    from prc3cfg.core.render.plan_text import faulted_summary as faulted_summary
+    from prc3cfg.core.render.plan_text import human as human
+    from prc3cfg.core.render.plan_text import line_part as line_part
+    from prc3cfg.core.render.plan_text import line_proof as line_proof
+    from prc3cfg.core.render.plan_text import no_changes as no_changes
+    from prc3cfg.core.render.plan_text import oldest_taken as oldest_taken
+    from prc3cfg.core.render.plan_text import reading_line as reading_line
+    from prc3cfg.core.render.plan_text import review as review
+    from prc3cfg.core.render.plan_text import review_line as review_line
+    from prc3cfg.core.render.plan_text import summary_line as summary_line
+    from prc3cfg.core.render.plan_text import timing as timing
+    from prc3cfg.core.render.show import ModuleRow as ModuleRow
+    from prc3cfg.core.render.show import Settings as Settings
+    from prc3cfg.core.render.show import Shown as Shown
+    from prc3cfg.core.render.show import Table as Table
+    from prc3cfg.core.render.show import chain_text as chain_text
+    from prc3cfg.core.render.show import modules_table as modules_table
+    from prc3cfg.core.render.show import shown_module as shown_module
+    from prc3cfg.core.render.words import AXIS_WARNING as AXIS_WARNING
+    from prc3cfg.core.render.words import CLAMPED as CLAMPED
+    from prc3cfg.core.render.words import JUMPS as JUMPS
+    from prc3cfg.core.render.words import RELEASE_NAMES_BUDGET as RELEASE_NAMES_BUDGET
+    from prc3cfg.core.render.words import FieldChange as FieldChange
+    from prc3cfg.core.render.words import ModuleDiff as ModuleDiff
+    from prc3cfg.core.render.words import cell as cell
+    from prc3cfg.core.render.words import chain_changes as chain_changes
+    from prc3cfg.core.render.words import clamped_changes as clamped_changes
+    from prc3cfg.core.render.words import code as code
+    from prc3cfg.core.render.words import differences as differences
+    from prc3cfg.core.render.words import drift_changes as drift_changes
+    from prc3cfg.core.render.words import fenced as fenced
+    from prc3cfg.core.render.words import field_changes as field_changes
+    from prc3cfg.core.render.words import field_name as field_name
+    from prc3cfg.core.render.words import format_value as format_value
+    from prc3cfg.core.render.words import header_line as header_line
+    from prc3cfg.core.render.words import jumps as jumps
+    from prc3cfg.core.render.words import module_diff as module_diff
+    from prc3cfg.core.render.words import module_lines as module_lines
+    from prc3cfg.core.render.words import plural as plural
+    from prc3cfg.core.render.words import release_summary as release_summary
+    from prc3cfg.core.render.words import some_of as some_of
+    from prc3cfg.core.render.words import step_line as step_line
+
+#: Where each name of the package lives (a test checks it against the imports above).
+_HOMES: dict[str, tuple[str, ...]] = {
+    "prc3cfg.core.render.applied": ("TRAVEL", "TRAVEL_WIDTH", "Untold", "account", "broadcasts_heard",
+                                    "earlier_releases", "travel_list"),
+    "prc3cfg.core.render.comment": ("COMMENT_BUDGET", "MARKER", "BudgetTooSmall", "drift_markdown",
+                                     "markdown"),
+    "prc3cfg.core.render.drift": ("DRIFT_FORMAT", "DRIFT_MARKER", "Drift", "drift_json", "drift_lines",
+                                  "image_lines"),
+    "prc3cfg.core.render.plan_text": ("CHART", "CHARTS", "EVERY_MODULE", "LEGEND", "PHASES",
+                                      "REVIEW_AS_WRITTEN", "SAID", "changes_json", "clamped_line",
+                                      "estimate", "factory_line", "faulted_summary", "human", "line_part",
+                                      "line_proof", "no_changes", "oldest_taken", "reading_line", "review",
+                                      "review_line", "summary_line", "timing"),
+    "prc3cfg.core.render.show": ("ModuleRow", "Settings", "Shown", "Table", "chain_text", "modules_table",
+                                 "shown_module"),
+    "prc3cfg.core.render.words": ("AXIS_WARNING", "CLAMPED", "JUMPS", "RELEASE_NAMES_BUDGET", "FieldChange",
+                                  "ModuleDiff", "cell", "chain_changes", "clamped_changes", "code",
+                                  "differences", "drift_changes", "fenced", "field_changes", "field_name",
+                                  "format_value", "header_line", "jumps", "module_diff", "module_lines",
+                                  "plural", "release_summary", "some_of", "step_line"),
+}
+
+__getattr__, __dir__ = lazy_names(globals(), _HOMES)

@@ -1,6 +1,6 @@
 """What `read` and drift say of modules: a module as read (`image_lines`), and a module that holds something
 other than the plant file says (`Drift`), as lines (`drift_lines`) and as a document (`drift_json`; the
-comment is `prc3cfg.core.render.markdown`'s). Pure: returns strings and dicts.
+comment is `prc3cfg.core.render.comment`'s). Pure: returns strings and dicts.
 """
 
 from __future__ import annotations
