@@ -23,7 +23,7 @@ from prc3cfg.core.text import markdown as markdown_text
 from prc3cfg.errors import UserError
 from prc3cfg.shell.platform import command_line
 
-if TYPE_CHECKING:  # an apply's, loaded where one runs (`gates`, `accounted`): a plan needs none of them
+if TYPE_CHECKING:  # annotations here; an apply's classes are loaded where one runs (`gates`, `accounted`)
     from prc3cfg.api import ApplyResult, Drift, Gates, LineOptions, PolicyReport
 
 
