@@ -27,8 +27,7 @@ import pytest
 # of a pytest plugin, `prc3cfg.shell.pytest_plugin`, is rewritten whole) — and keeps what it wrote only where
 # bytecode may be written. Set before anything of prc3cfg is imported (here, by `emulated`; the plugin
 # imports none of it): without it each worker rewrote every test module and every module of prc3cfg on
-# every run (collection 4.7 s of CPU a worker, 3.5 s with what was rewritten kept; 8.5 s and 3.4 s with the
-# test modules alone, before).
+# every run (collection 4.7 to 5.4 s of CPU a worker, 3.4 s with what was rewritten kept).
 sys.dont_write_bytecode = False
 
 import typer.main  # noqa: E402 — after the line above

@@ -14,7 +14,7 @@ One module an output, each importing only the ones below it (`words` at the bott
 The package's names are its modules' public ones: callers say `render.human`, `render.account`, … wherever the
 words live, and `prc3cfg.core.plan_file.write` is given the package as its `Words`. Each module is imported
 the first time one of its names is asked for (PEP 562, as `prc3cfg.api` does): a plan shown on a terminal
-loads neither the pull-request comment, nor `show`, nor drift. Reasons shown here never steer an apply (the
+loads neither the pull-request comment nor `show`. Reasons shown here never steer an apply (the
 plan's steps do). Pure: returns strings. (No module is named as one of the package's names: importing it
 would bind its name on the package, hiding that name — the function `account` lives in `applied`.)
 """
