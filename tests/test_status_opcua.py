@@ -178,7 +178,8 @@ def test_a_trusted_client_without_a_user_is_refused_unless_anonymous_is_allowed(
 @pytest.mark.parametrize("content", [None, b"not a certificate"], ids=["empty", "no certificate"])
 def test_a_trust_folder_without_certificates_is_one_line(tmp_path, content):
     """An empty folder, or one holding no certificate, ended in asyncua's traceback ("can't create an empty
-    store")."""
+    store"). It is said before the server is built: no server key is made for a start that is refused."""
+    state = tmp_path / "state"
     (tmp_path / "trust").mkdir()
     if content is not None:
         (tmp_path / "trust" / "client.der").write_bytes(content)
@@ -187,11 +188,12 @@ def test_a_trust_folder_without_certificates_is_one_line(tmp_path, content):
                                "--listen", f"opc.tcp://127.0.0.1:{free_port()}",
                                "--trust", str(tmp_path / "trust")], capture_output=True, text=True,
                               timeout=60,
-                              env=os.environ | {"PYTHONPATH": str(ROOT)})
+                              env=os.environ | {"PYTHONPATH": str(ROOT), "PRC3CFG_STATE_DIR": str(state)})
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     (line,) = done.stderr.strip().splitlines()
     assert (line.startswith(f"error: --trust {tmp_path / 'trust'}: ")
             and "certificates of the clients allowed to connect" in line), line
+    assert not (state / "opcua").exists(), sorted(state.rglob("*"))
 
 
 def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_alone(served, tmp_path):

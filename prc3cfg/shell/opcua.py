@@ -117,24 +117,15 @@ async def _server_certificate(settings: ServerSettings) -> tuple[Path, Path]:
     return cert, key
 
 
-async def _secured(server: Server, settings: ServerSettings) -> None:
+async def _trusted(settings: ServerSettings) -> TrustStore | None:
+    """The client certificates allowed in (None without security), read before the server is built — a
+    wrong `--trust` is said before asyncua's own start and before a server key is made."""
     if settings.no_security:
-        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
-        server.set_identity_tokens([ua.AnonymousIdentityToken])
-        return
+        return None
     assert settings.trust is not None  # the CLI asks for it
     if not settings.trust.is_dir():
         raise UserError(f"--trust {settings.trust}: no such folder — give the folder of client certificates "
                         "(DER or PEM) allowed to connect")
-    cert, key = await _server_certificate(settings)
-    try:
-        await server.load_certificate(str(cert))
-        await server.load_private_key(str(key))
-    except (OSError, ValueError) as error:
-        raise UserError(f"{cert}, {key}: not a certificate and its private key ({error}) — give a DER "
-                        "or PEM pair") from None
-    server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt],
-                               permission_ruleset=SimpleRoleRuleset())
     store = TrustStore([settings.trust], [])
     try:
         await store.load()
@@ -144,6 +135,23 @@ async def _secured(server: Server, settings: ServerSettings) -> None:
         found = "holds no client certificate" if empty else f"cannot be read as certificates ({error})"
         raise UserError(f"--trust {settings.trust}: {found} — put there the DER or PEM certificates of the "
                         "clients allowed to connect") from None
+    return store
+
+
+async def _secured(server: Server, settings: ServerSettings, store: TrustStore | None) -> None:
+    if store is None:
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+        server.set_identity_tokens([ua.AnonymousIdentityToken])
+        return
+    cert, key = await _server_certificate(settings)
+    try:
+        await server.load_certificate(str(cert))
+        await server.load_private_key(str(key))
+    except (OSError, ValueError) as error:
+        raise UserError(f"{cert}, {key}: not a certificate and its private key ({error}) — give a DER "
+                        "or PEM pair") from None
+    server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt],
+                               permission_ruleset=SimpleRoleRuleset())
     options = CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
     validator = CertificateValidator(options, store)
     server.set_certificate_validator(validator)
@@ -166,13 +174,14 @@ async def _variable(parent: Node, index: int, node_id: str, name: str, value: An
 
 
 async def _run(plant: Plant, settings: ServerSettings, stop: threading.Event) -> None:
+    endpoint, store = _endpoint(settings.listen), await _trusted(settings)
     users = None if settings.no_security else CertificateUserManager()
     server = Server(user_manager=users)  # type: ignore[arg-type]  # asyncua's own manager, typed apart from its protocol
     await server.init()
-    server.set_endpoint(_endpoint(settings.listen))
+    server.set_endpoint(endpoint)
     server.set_server_name("prc3cfg status")
     await server.set_application_uri(APPLICATION_URI)
-    await _secured(server, settings)
+    await _secured(server, settings, store)
     if users is not None and settings.trust is not None:
         for file in sorted(settings.trust.iterdir()):
             with contextlib.suppress(Exception):  # what is no certificate is no user
