@@ -60,15 +60,17 @@ class Result:
 
 #: The heading of an account's reference-travel list (`render.TRAVEL`, without its sign).
 TRAVEL = "Travel to reference point required before production on:"
+#: The heading of a plan's list of the modules it releases (`render.AXIS_HEADING`, without its sign).
+PLANNED_TRAVEL = "Travel to reference point required after apply on:"
 
 
-def travel_list(out: str) -> str:
-    """What an account's reference-travel lists say, on one line ("" where there is none): each heading with
-    the indented lines of modules under it (`render.travel_list` wraps them), and each earlier release's line.
-    """
+def travel_list(out: str, heading: str = TRAVEL) -> str:
+    """What an account's reference-travel lists say (a plan's, given its `heading`), on one line ("" where
+    there is none): each heading with the indented lines of modules under it (`render.listed` wraps them),
+    and each earlier release's line."""
     said, lines = [], out.splitlines()
     for at, line in enumerate(lines):
-        if TRAVEL in line:
+        if heading in line:
             block = [line]
             for following in lines[at + 1 :]:
                 if not following.startswith("    "):

@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import pytest
 import yaml
-from emulated import emulated_plant, run_cli, travel_list
+from emulated import PLANNED_TRAVEL, emulated_plant, run_cli, travel_list
 from test_broadcast import declared, full_line
 
 from prc3cfg.core.device import ModuleState
@@ -171,8 +171,7 @@ def test_consent_holds_per_module_while_the_floor_changes_modules_mid_apply(tmp_
         armed = False
         # what the operator agreed to: the plan as shown (the floor may have changed a module before it was
         # read)
-        shown = next((line for line in result.out.splitlines()
-                      if "Travel to reference point required after apply on:" in line), "")
+        shown = travel_list(result.out, PLANNED_TRAVEL)
         for address, name in ((1, "booth-a-left"), (2, "booth-a-right"), (5, "booth-a-top")):
             if f"booth-a/{name}" not in shown:
                 assert plant.emulators["booth-a"].module(address).referenced, (f"{name} released "

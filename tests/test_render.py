@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import html
+import itertools
 import math
 import re
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -302,13 +304,36 @@ def test_the_travel_list_groups_its_modules_by_bus_on_lines_a_screen_holds() -> 
              SimpleNamespace(bus="booth-b", name="x", released=Release.NO)]
     heading, *lines = render.travel_list(runs).splitlines()
     assert heading == render.TRAVEL and len(lines) > 2
-    assert all(len(line) <= render.TRAVEL_WIDTH and line.startswith("    ") for line in lines), lines
+    assert all(len(line) <= render.LIST_WIDTH and line.startswith("    ") for line in lines), lines
     named = [name.strip() for line in lines for name in line.split(",") if name.strip()]
     assert (named == [f"booth-a/reciprocator-{n:02d}" for n in range(1, 31)]
             + ["booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"])
     # another bus, another line
     assert lines[-1] == "    booth-b/pretreat (possibly: its 10h/20h went out unacknowledged)"
 
+
+def test_a_plan_lists_the_modules_it_releases_by_bus_on_lines_a_screen_holds(tmp_path) -> None:
+    """30 modules of a line whose axes the plan releases, and the demo's two buses: under the warning's
+    heading, each bus's modules on lines of their own within LIST_WIDTH, every module named once, in the
+    plan's order — as the account lists them after the apply (30 modules were one line of hundreds of
+    characters)."""
+    from prc3cfg import api
+
+    def travel(plan: PlantPlan) -> list[str]:
+        lines = render.human(plan).splitlines()
+        at = lines.index(render.AXIS_HEADING)
+        return list(itertools.takewhile(lambda line: line.startswith("    "), lines[at + 1:]))
+
+    full = full_line_plan(tmp_path)
+    lines = travel(full)
+    assert len(lines) > 2 and all(len(line) <= render.LIST_WIDTH for line in lines), lines
+    named = [name.strip() for line in lines for name in line.split(",") if name.strip()]
+    assert named == [f"line/{m.name}" for m in full.axis_releases] and len(named) == 30
+    demo = api.load(Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml")
+    factory = {(b.name, m.address): ModuleImage.factory(m.address) for b, m in demo.modules()}
+    assert travel(api.plan(demo, images=factory)) == [
+        "    booth-a/booth-a-left, booth-a/booth-a-right, booth-a/booth-a-top",
+        "    booth-b/booth-b-left, booth-b/booth-b-right, booth-b/booth-b-pretreat"]
 
 #: Texts a plant or plan file could bring into a pull-request comment, meant to do more than be read.
 HOSTILE = {

@@ -27,7 +27,6 @@ from prc3cfg.core.lazy import lazy_names
 
 if TYPE_CHECKING:
     from prc3cfg.core.render.applied import TRAVEL as TRAVEL
-    from prc3cfg.core.render.applied import TRAVEL_WIDTH as TRAVEL_WIDTH
     from prc3cfg.core.render.applied import Untold as Untold
     from prc3cfg.core.render.applied import account as account
     from prc3cfg.core.render.applied import broadcasts_heard as broadcasts_heard
@@ -44,6 +43,7 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.drift import drift_json as drift_json
     from prc3cfg.core.render.drift import drift_lines as drift_lines
     from prc3cfg.core.render.drift import image_lines as image_lines
+    from prc3cfg.core.render.plan_text import AXIS_HEADING as AXIS_HEADING
     from prc3cfg.core.render.plan_text import CHART as CHART
     from prc3cfg.core.render.plan_text import CHARTS as CHARTS
     from prc3cfg.core.render.plan_text import EVERY_MODULE as EVERY_MODULE
@@ -76,6 +76,7 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.words import AXIS_WARNING as AXIS_WARNING
     from prc3cfg.core.render.words import CLAMPED as CLAMPED
     from prc3cfg.core.render.words import JUMPS as JUMPS
+    from prc3cfg.core.render.words import LIST_WIDTH as LIST_WIDTH
     from prc3cfg.core.render.words import RELEASE_NAMES_BUDGET as RELEASE_NAMES_BUDGET
     from prc3cfg.core.render.words import FieldChange as FieldChange
     from prc3cfg.core.render.words import ModuleDiff as ModuleDiff
@@ -91,6 +92,7 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.words import format_value as format_value
     from prc3cfg.core.render.words import header_line as header_line
     from prc3cfg.core.render.words import jumps as jumps
+    from prc3cfg.core.render.words import listed as listed
     from prc3cfg.core.render.words import module_diff as module_diff
     from prc3cfg.core.render.words import module_lines as module_lines
     from prc3cfg.core.render.words import plural as plural
@@ -100,24 +102,25 @@ if TYPE_CHECKING:
 
 #: Where each name of the package lives (a test checks it against the imports above).
 _HOMES: dict[str, tuple[str, ...]] = {
-    "prc3cfg.core.render.applied": ("TRAVEL", "TRAVEL_WIDTH", "Untold", "account", "broadcasts_heard",
+    "prc3cfg.core.render.applied": ("TRAVEL", "Untold", "account", "broadcasts_heard",
                                     "earlier_releases", "travel_list"),
     "prc3cfg.core.render.comment": ("COMMENT_BUDGET", "MARKER", "BudgetTooSmall", "drift_markdown",
                                      "markdown"),
     "prc3cfg.core.render.drift": ("DRIFT_FORMAT", "DRIFT_MARKER", "Drift", "drift_json", "drift_lines",
                                   "image_lines"),
-    "prc3cfg.core.render.plan_text": ("CHART", "CHARTS", "EVERY_MODULE", "LEGEND", "PHASES",
+    "prc3cfg.core.render.plan_text": ("AXIS_HEADING", "CHART", "CHARTS", "EVERY_MODULE", "LEGEND", "PHASES",
                                       "REVIEW_AS_WRITTEN", "SAID", "changes_json", "clamped_line",
                                       "estimate", "factory_line", "faulted_summary", "human", "line_part",
                                       "line_proof", "no_changes", "oldest_taken", "reading_line", "review",
                                       "review_line", "summary_line", "timing"),
     "prc3cfg.core.render.show": ("ModuleRow", "Settings", "Shown", "Table", "chain_text", "modules_table",
                                  "shown_module"),
-    "prc3cfg.core.render.words": ("AXIS_WARNING", "CLAMPED", "JUMPS", "RELEASE_NAMES_BUDGET", "FieldChange",
-                                  "ModuleDiff", "cell", "chain_changes", "clamped_changes", "code",
-                                  "differences", "drift_changes", "fenced", "field_changes", "field_name",
-                                  "format_value", "header_line", "jumps", "module_diff", "module_lines",
-                                  "plural", "release_summary", "some_of", "step_line"),
+    "prc3cfg.core.render.words": ("AXIS_WARNING", "CLAMPED", "JUMPS", "LIST_WIDTH", "RELEASE_NAMES_BUDGET",
+                                  "FieldChange", "ModuleDiff", "cell", "chain_changes", "clamped_changes",
+                                  "code", "differences", "drift_changes", "fenced", "field_changes",
+                                  "field_name", "format_value", "header_line", "jumps", "listed",
+                                  "module_diff", "module_lines", "plural", "release_summary", "some_of",
+                                  "step_line"),
 }
 
 __getattr__, __dir__ = lazy_names(globals(), _HOMES)

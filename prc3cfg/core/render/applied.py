@@ -14,7 +14,7 @@ from prc3cfg.core import text as escape
 from prc3cfg.core.axes import Release
 from prc3cfg.core.outcome import ModuleOutcome, to_travel
 from prc3cfg.core.plant_plan import LineProof
-from prc3cfg.core.render.words import differences
+from prc3cfg.core.render.words import differences, listed
 from prc3cfg.core.text import address_ranges
 
 
@@ -57,32 +57,17 @@ def account(run: ModuleOutcome) -> str | None:
 TRAVEL = "⚠ Travel to reference point required before production on:"
 
 
-#: How wide the lines of the travel list are, its indent included.
-TRAVEL_WIDTH = 100
-
-
 def travel_list(runs: Sequence[ModuleOutcome]) -> str | None:
     """The modules whose axes were — or may have been — released: they must travel to their reference point.
-    The heading, then each bus's modules on lines of their own, indented, wrapped between modules at
-    `TRAVEL_WIDTH` (30 modules on a line are no 300-character line)."""
+    The heading, then each bus's modules on lines of their own (`listed`)."""
     released = to_travel(runs)
     if not released:
         return None
-    lines = [TRAVEL]
-    for bus in dict.fromkeys(r.bus for r in released):
-        names = [f"{r.bus}/{r.name}"
-                 + (" (possibly: its 10h/20h went out unacknowledged)" if r.released is Release.POSSIBLY
-                    else "")
-                 for r in released if r.bus == bus]
-        line = "   "
-        for n, name in enumerate(names):
-            piece = f" {name}" + ("," if n < len(names) - 1 else "")
-            if len(line) + len(piece) > TRAVEL_WIDTH and line.strip():
-                lines.append(line)
-                line = "   "
-            line += piece
-        lines.append(line)
-    return "\n".join(lines)
+    return "\n".join(listed(TRAVEL, ([f"{r.bus}/{r.name}"
+                                      + (" (possibly: its 10h/20h went out unacknowledged)"
+                                         if r.released is Release.POSSIBLY else "")
+                                      for r in released if r.bus == bus]
+                                     for bus in dict.fromkeys(r.bus for r in released))))
 
 
 class Untold(Protocol):

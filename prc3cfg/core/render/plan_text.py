@@ -31,6 +31,7 @@ from prc3cfg.core.render.words import (
     clamped_changes,
     code,
     header_line,
+    listed,
     module_diff,
     module_lines,
     plural,
@@ -396,10 +397,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
     for bus in document["buses"]:
         out += (broadcast_lines(bus, frames) if bus["name"] not in shown
                 else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""])
-    out += _module_sections(document, live, frames, shown)
-    if document["axis_releases"]:
-        out.append("⚠ Travel to reference point required after apply on: "
-                   + ", ".join(document["axis_releases"]))
+    out += _module_sections(document, live, frames, shown) + _releases(document)
     out += [line for line in [clamped_line(document, live)] if line]
     out += faulted_summary(document, faults)
     out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document),
@@ -418,11 +416,19 @@ def line_part(plan: PlantPlan, frames: bool = False) -> str:
     out = [f"Writing bus {', '.join(bus['name'] for bus in document['buses'])} now, as planned:", ""]
     for bus in document["buses"]:
         out += broadcast_lines(bus, frames)
-    out += _module_sections(document, live, frames)
-    if document["axis_releases"]:
-        out.append("⚠ Travel to reference point required after apply on: "
-                   + ", ".join(document["axis_releases"]))
+    out += _module_sections(document, live, frames) + _releases(document)
     return "\n".join(out)
+
+
+#: The heading of a plan's list of the modules whose axes it releases.
+AXIS_HEADING = "⚠ Travel to reference point required after apply on:"
+
+
+def _releases(document: dict[str, Any]) -> list[str]:
+    """The modules whose axes the plan releases, each bus's on lines of their own (`listed`)."""
+    groups = [names for bus in document["buses"]
+              if (names := [f"{bus['name']}/{m['name']}" for m in bus["modules"] if m["releases_axes"]])]
+    return listed(AXIS_HEADING, groups) if groups else []
 
 
 def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], frames: bool,

@@ -222,6 +222,27 @@ def release_summary(names: Sequence[str]) -> list[str]:
     ]
 
 
+#: How wide a list of modules is, its indent included: 30 modules of a line are not one line of hundreds of
+#: characters.
+LIST_WIDTH = 100
+
+
+def listed(heading: str, groups: Iterable[Sequence[str]]) -> list[str]:
+    """`heading`, then each group's names (a bus's modules) on lines of their own, indented, wrapped between
+    names within `LIST_WIDTH`."""
+    lines = [heading]
+    for names in groups:
+        line = "   "
+        for n, name in enumerate(names):
+            piece = f" {name}" + ("," if n < len(names) - 1 else "")
+            if len(line) + len(piece) > LIST_WIDTH and line.strip():
+                lines.append(line)
+                line = "   "
+            line += piece
+        lines.append(line)
+    return lines
+
+
 def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float,
                 releases: bool) -> str:
     """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
