@@ -25,12 +25,12 @@ from prc3cfg.core.render import (
     changes_json,
     field_changes,
     field_name,
-    header_line,
     human,
     jumps,
     markdown,
     module_diff,
     module_lines,
+    unchanged_line,
 )
 from prc3cfg.core.what_to_read import read_messages, verification_time
 
@@ -114,7 +114,7 @@ def test_each_change_carries_the_action_whose_mark_the_plan_shows() -> None:
     diff = module_diff(change)
     assert diff.actions == {1: Action.CREATE}
     assert type(changes_json(change)["symbols"]["1"]) is str
-    assert header_line("a", 1, "m", 0, 0, 0.0, False) == f"{Action.NO_OP} bus a, module 1 (m): no changes"
+    assert unchanged_line("a", [1]) == f"{Action.NO_OP} bus a: no changes at address 1"
     for action, meaning in ((Action.UPDATE, "changed"), (Action.CREATE, "set up from factory defaults"),
                             (Action.DELETE, "put back to factory defaults")):
         assert f" {action} {meaning}" in LEGEND
@@ -334,6 +334,29 @@ def test_a_plan_lists_the_modules_it_releases_by_bus_on_lines_a_screen_holds(tmp
     assert travel(api.plan(demo, images=factory)) == [
         "    booth-a/booth-a-left, booth-a/booth-a-right, booth-a/booth-a-top",
         "    booth-b/booth-b-left, booth-b/booth-b-right, booth-b/booth-b-pretreat"]
+
+
+def test_a_plan_says_which_modules_of_a_bus_it_leaves_as_they_are_in_one_line(tmp_path) -> None:
+    """One module of 30 changed was one section among 29 lines of "no changes": after a bus's changed modules,
+    one line names by address those the plan leaves as they are."""
+    from prc3cfg import api
+
+    def unchanged(plan: PlantPlan) -> list[str]:
+        return [line for line in render.human(plan).splitlines() if "no changes" in line]
+
+    demo = api.load(Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml")
+    held = {(b.name, m.address): m.desired_image() for b, m in demo.modules()}
+    text = render.human(api.plan(demo, images=held | {("booth-a", 2): ModuleImage.factory(2)}))
+    lines = text.splitlines()
+    at = lines.index(f"{Action.NO_OP} bus booth-a: no changes at addresses 1, 5")
+    assert lines[at - 2].startswith("      ") and lines[at - 1] == ""  # after the changed module's steps
+    assert lines[at + 1] == f"{Action.NO_OP} bus booth-b: no changes at addresses 1, 3, 4"
+    assert "booth-a-right" in text and "booth-a-left" not in text
+    full_line_plan(tmp_path)
+    line = api.load(tmp_path / "plant.yaml")
+    held = {(b.name, m.address): m.desired_image() for b, m in line.modules()}
+    assert unchanged(api.plan(line, images=held | {("line", 13): ModuleImage.factory(13)})) == [
+        f"{Action.NO_OP} bus line: no changes at addresses 1–12, 14–30"]
 
 #: Texts a plant or plan file could bring into a pull-request comment, meant to do more than be read.
 HOSTILE = {

@@ -99,6 +99,7 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.words import release_summary as release_summary
     from prc3cfg.core.render.words import some_of as some_of
     from prc3cfg.core.render.words import step_line as step_line
+    from prc3cfg.core.render.words import unchanged_line as unchanged_line
 
 #: Where each name of the package lives (a test checks it against the imports above).
 _HOMES: dict[str, tuple[str, ...]] = {
@@ -120,7 +121,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
                                   "code", "differences", "drift_changes", "fenced", "field_changes",
                                   "field_name", "format_value", "header_line", "jumps", "listed",
                                   "module_diff", "module_lines", "plural", "release_summary", "some_of",
-                                  "step_line"),
+                                  "step_line", "unchanged_line"),
 }
 
 __getattr__, __dir__ = lazy_names(globals(), _HOMES)

@@ -37,6 +37,7 @@ from prc3cfg.core.render.words import (
     plural,
     some_of,
     step_line,
+    unchanged_line,
 )
 from prc3cfg.core.text import address_ranges
 from prc3cfg.core.what_to_read import to_the_minute
@@ -433,17 +434,19 @@ def _releases(document: dict[str, Any]) -> list[str]:
 
 def _module_sections(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], frames: bool,
                      shown: Collection[str] = ()) -> list[str]:
-    """Each module's diff and steps (a line for one without changes), those of the buses `shown` left out."""
+    """Each bus's changed modules, their diff and steps, then one line naming those without changes (a change
+    to one module of 30 is not one section among 29 lines); the buses `shown` left out."""
     out = []
-    for bus, module in modules_in(document):
-        if bus in shown:
+    for bus in document["buses"]:
+        if (name := bus["name"]) in shown:
             continue
-        if not module["steps"]:
-            out.append(_header(bus, module))
-            continue
-        diff = as_reviewed(module, module_lines(changes_of(bus, module, live, charts=False)))
-        lines = [_header(bus, module), *diff, "steps:", *step_lines(module, frames)]
-        out.append("\n    ".join(lines) + "\n")  # one string a module: the lines of 240 would take more
+        for module in bus["modules"]:
+            if module["steps"]:
+                diff = as_reviewed(module, module_lines(changes_of(name, module, live, charts=False)))
+                lines = [_header(name, module), *diff, "steps:", *step_lines(module, frames)]
+                out.append("\n    ".join(lines) + "\n")  # a string a module: the lines of 240 would take more
+        if unchanged := [module["address"] for module in bus["modules"] if not module["steps"]]:
+            out.append(unchanged_line(name, unchanged))
     return out
 
 

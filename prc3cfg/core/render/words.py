@@ -245,13 +245,16 @@ def listed(heading: str, groups: Iterable[Sequence[str]]) -> list[str]:
 
 def header_line(bus: str, address: int, name: str, steps: int, broadcasts: int, seconds: float,
                 releases: bool) -> str:
-    """A module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
+    """A changed module's line in a plan: "~ bus booth-a, module 1 (left): 4 steps, 0.178 s  ⚠ …"."""
     head = f"{Action.of_module(steps)} bus {bus}, module {address} ({name})"
-    if not steps:
-        return f"{head}: no changes"
     received = f" ({broadcasts} by broadcast)" if broadcasts else ""
     warn = f"  ⚠ {AXIS_WARNING}" if releases else ""
     return f"{head}: {plural(steps, 'step')}{received}, {seconds:.3f} s{warn}"
+
+
+def unchanged_line(bus: str, addresses: Sequence[int]) -> str:
+    """The modules of a bus that a plan leaves as they are: "  bus a: no changes at addresses 1–4, 6"."""
+    return f"{Action.NO_OP} bus {bus}: no changes at {escape.address_ranges(addresses)}"
 
 
 def step_line(index: int, message_hex: str | None, summary: str, releases: bool, broadcast: bool) -> str:
