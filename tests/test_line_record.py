@@ -100,6 +100,19 @@ def test_a_module_reset_to_factory_defaults_is_read_in_full_and_set_up_again(app
     assert holds_the_plant_file(applied, "booth-a", "booth-a-right")
 
 
+def test_modules_read_in_full_for_one_reason_are_said_once_with_their_addresses(applied, capsys):
+    """Every module reset (a line's settings lost): the reason is said once, the modules by bus and address
+    after it — 30 modules were 30 times the same reason in one line."""
+    for bus, addresses in (("booth-a", (1, 2, 5)), ("booth-b", (1, 3, 4))):
+        for address in addresses:
+            applied.emulators[bus].update(address, image=ModuleImage.factory(address))
+    planned = run_cli(capsys, "plan", applied.path)
+    said = next(line for line in planned.out.splitlines() if "read in full: " in line)
+    assert ("read in full: its system parameters are not those on record at bus booth-a addresses 1, 2, 5 "
+            "and bus booth-b addresses 1, 3, 4") in said, said
+    assert said.count("not those on record") == 1
+
+
 def test_a_spare_with_the_same_system_block_is_found_by_the_program_the_change_reads_and_set_up_whole(
     applied, capsys
 ):

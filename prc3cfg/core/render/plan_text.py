@@ -287,8 +287,8 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
     read = (f"the system parameters of {plural(len(modules), 'module')} and "
             f"{plural(programs, 'program')}") if modules else "nothing"
     whose, not_read = _not_read(said, modules, shown)
-    other = (f"read in full: {', '.join(shown(name) for name in said['not_as_verified'])}"
-             if said["not_as_verified"] else "")
+    in_full = _in_full(said["not_as_verified"], document)
+    other = f"read in full: {', '.join(shown(words) for words in in_full)}" if in_full else ""
     claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
     if whose and not claimed:
         not_read[0] += f", as {whose}"
@@ -303,6 +303,34 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
             + (" — a program not read that another tool changed on a module whose system parameters did not "
                                "change is not seen: plan --refresh-only (or --full-read) reads everything"
                if not_read else ""))
+
+
+#: How many modules read in full for one reason are named, each with it; more are said by address.
+NAMED_IN_FULL = 3
+
+
+def _in_full(entries: Sequence[str], document: dict[str, Any]) -> list[str]:
+    """The modules read in full, each "bus/name (why)" (`ReadPlan.not_as_verified`); a reason given for more
+    than `NAMED_IN_FULL` of the document's modules said once, with their addresses by bus: "its system
+    parameters are not those on record at bus a addresses 1–30 and bus b address 4" — 30 modules were 30
+    times one reason."""
+    places = {f"{bus['name']}/{m['name']} (": (bus["name"], m["address"])
+              for bus in document["buses"] for m in bus["modules"]}
+    by_why: dict[str, list[tuple[str, tuple[str, int] | None]]] = {}
+    for entry in entries:
+        prefix = next((p for p in places if entry.startswith(p) and entry.endswith(")")), None)
+        why = entry if prefix is None else entry[len(prefix):-1]
+        by_why.setdefault(why, []).append((entry, None if prefix is None else places[prefix]))
+    said = []
+    for why, modules in by_why.items():
+        located = [place for _, place in modules if place is not None]
+        if len(located) <= NAMED_IN_FULL or len(located) < len(modules):  # or words no module of it says
+            said += [entry for entry, _ in modules]
+            continue
+        buses = {bus: [a for b, a in located if b == bus] for bus in dict.fromkeys(b for b, _ in located)}
+        said.append(f"{why} at " + " and ".join(f"bus {bus} {address_ranges(addresses)}"
+                                                for bus, addresses in buses.items()))
+    return said
 
 
 #: How a module's diff is shown where its review text is not the text its digest was written for: as the
