@@ -21,7 +21,7 @@ from prc3cfg.core.device import ModuleState
 from prc3cfg.core.framing import Direction, get_framing
 from prc3cfg.core.line import LineSettings
 from prc3cfg.core.uart import received
-from prc3cfg.shell.doctor import Diagnosis, LineCandidate, Search, Timing
+from prc3cfg.shell.doctor import DEFAULT_TIMEOUT, Diagnosis, LineCandidate, Search, Timing
 from prc3cfg.shell.emulator.server import Emulator, FaultInjection
 from prc3cfg.shell.link.client import Link
 from prc3cfg.shell.link.ports import open_link, open_port
@@ -260,6 +260,9 @@ def test_doctor_measures_a_module_slower_than_its_probes_allow_and_proposes_a_ti
                                    "--exchanges", "4")
     assert result.code == 0, result.err
     ((_, worst),) = turnarounds(result.out).values()
-    assert abs(worst - max(timed)) < 0.05 and "4/4" in result.out
-    assert float(keys["timeout"]) == pytest.approx(max(timed) - min(timed), abs=0.05)
+    # no answer comes sooner than the emulator was told to give it; how much later a busy machine measures it
+    # is bench/doctor_bench.py's (a wall-clock figure)
+    assert worst >= max(timed) - 0.005 and "4/4" in result.out
+    # a spread of the answers (at most the slowest), which varied by more than the default timeout allows
+    assert DEFAULT_TIMEOUT < float(keys["timeout"]) <= worst + 0.001
     assert float(keys["turnaround"]) >= worst
