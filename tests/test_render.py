@@ -336,6 +336,24 @@ def test_a_plan_lists_the_modules_it_releases_by_bus_on_lines_a_screen_holds(tmp
         "    booth-b/booth-b-left, booth-b/booth-b-right, booth-b/booth-b-pretreat"]
 
 
+def test_a_plan_shown_line_by_line_as_the_writes_began_lists_each_line_s_releases_once() -> None:
+    """`apply --auto-approve --allow-axis-release` shows each line's plan as its writes begin (`line_part`),
+    its releases with it; the whole plan after it leaves those lines out — it listed all 60 modules again."""
+    from prc3cfg import api
+
+    demo = api.load(Path(__file__).resolve().parent.parent / "plants" / "demo-line.yaml")
+    factory = {(b.name, m.address): ModuleImage.factory(m.address) for b, m in demo.modules()}
+    plan = api.plan(demo, images=factory)
+    booth_a = render.line_part(replace(plan, modules=tuple(m for m in plan.modules if m.bus == "booth-a")))
+    assert booth_a.splitlines()[-2:] == [
+        render.AXIS_HEADING, "    booth-a/booth-a-left, booth-a/booth-a-right, booth-a/booth-a-top"]
+    after = render.human(plan, shown={"booth-a"}).splitlines()
+    at = after.index(render.AXIS_HEADING)
+    assert after[at + 1] == "    booth-b/booth-b-left, booth-b/booth-b-right, booth-b/booth-b-pretreat"
+    assert not after[at + 2].startswith("    ")
+    assert render.AXIS_HEADING not in render.human(plan, shown={"booth-a", "booth-b"})
+
+
 def test_a_plan_says_which_modules_of_a_bus_it_leaves_as_they_are_in_one_line(tmp_path) -> None:
     """One module of 30 changed was one section among 29 lines of "no changes": after a bus's changed modules,
     one line names by address those the plan leaves as they are."""

@@ -3,8 +3,10 @@
 One module an output, each importing only the ones below it (`words` at the bottom):
 - `words`: a field's name and value in human units, two images' differences, a module's diff and step lines,
   counts, and text from a file made safe for markdown — what every output shares;
-- `plan_text`: a plan as the terminal shows it, and the headline, evidence and estimate every output of a plan
-  says; what a plan file keeps beside a module's steps for people (`review`);
+- `evidence`: what a plan read now and what it took as known from the line's record — the headline of a plan
+  without changes and the line every output of a plan says it in;
+- `plan_text`: a plan as the terminal shows it, and the summary and estimate every output of a plan says; what
+  a plan file keeps beside a module's steps for people (`review`);
 - `comment`: a plan and drift as pull-request comments in markdown, within a comment's size;
 - `drift`: what `read` and drift say of modules;
 - `applied`: the account of an apply, from each module's outcome (`prc3cfg.core.outcome.ModuleOutcome`), and
@@ -43,10 +45,14 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.drift import drift_json as drift_json
     from prc3cfg.core.render.drift import drift_lines as drift_lines
     from prc3cfg.core.render.drift import image_lines as image_lines
+    from prc3cfg.core.render.evidence import EVERY_MODULE as EVERY_MODULE
+    from prc3cfg.core.render.evidence import factory_line as factory_line
+    from prc3cfg.core.render.evidence import no_changes as no_changes
+    from prc3cfg.core.render.evidence import oldest_taken as oldest_taken
+    from prc3cfg.core.render.evidence import reading_line as reading_line
     from prc3cfg.core.render.plan_text import AXIS_HEADING as AXIS_HEADING
     from prc3cfg.core.render.plan_text import CHART as CHART
     from prc3cfg.core.render.plan_text import CHARTS as CHARTS
-    from prc3cfg.core.render.plan_text import EVERY_MODULE as EVERY_MODULE
     from prc3cfg.core.render.plan_text import LEGEND as LEGEND
     from prc3cfg.core.render.plan_text import PHASES as PHASES
     from prc3cfg.core.render.plan_text import REVIEW_AS_WRITTEN as REVIEW_AS_WRITTEN
@@ -54,14 +60,10 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.plan_text import changes_json as changes_json
     from prc3cfg.core.render.plan_text import clamped_line as clamped_line
     from prc3cfg.core.render.plan_text import estimate as estimate
-    from prc3cfg.core.render.plan_text import factory_line as factory_line
     from prc3cfg.core.render.plan_text import faulted_summary as faulted_summary
     from prc3cfg.core.render.plan_text import human as human
     from prc3cfg.core.render.plan_text import line_part as line_part
     from prc3cfg.core.render.plan_text import line_proof as line_proof
-    from prc3cfg.core.render.plan_text import no_changes as no_changes
-    from prc3cfg.core.render.plan_text import oldest_taken as oldest_taken
-    from prc3cfg.core.render.plan_text import reading_line as reading_line
     from prc3cfg.core.render.plan_text import review as review
     from prc3cfg.core.render.plan_text import review_line as review_line
     from prc3cfg.core.render.plan_text import summary_line as summary_line
@@ -109,10 +111,11 @@ _HOMES: dict[str, tuple[str, ...]] = {
                                      "markdown"),
     "prc3cfg.core.render.drift": ("DRIFT_FORMAT", "DRIFT_MARKER", "Drift", "drift_json", "drift_lines",
                                   "image_lines"),
-    "prc3cfg.core.render.plan_text": ("AXIS_HEADING", "CHART", "CHARTS", "EVERY_MODULE", "LEGEND", "PHASES",
-                                      "REVIEW_AS_WRITTEN", "SAID", "changes_json", "clamped_line",
-                                      "estimate", "factory_line", "faulted_summary", "human", "line_part",
-                                      "line_proof", "no_changes", "oldest_taken", "reading_line", "review",
+    "prc3cfg.core.render.evidence": ("EVERY_MODULE", "factory_line", "no_changes", "oldest_taken",
+                                     "reading_line"),
+    "prc3cfg.core.render.plan_text": ("AXIS_HEADING", "CHART", "CHARTS", "LEGEND", "PHASES",
+                                      "REVIEW_AS_WRITTEN", "SAID", "changes_json", "clamped_line", "estimate",
+                                      "faulted_summary", "human", "line_part", "line_proof", "review",
                                       "review_line", "summary_line", "timing"),
     "prc3cfg.core.render.show": ("ModuleRow", "Settings", "Shown", "Table", "chain_text", "modules_table",
                                  "shown_module"),

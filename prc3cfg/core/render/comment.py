@@ -12,22 +12,20 @@ from typing import Any
 from prc3cfg.core import text as escape
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.render.drift import DRIFT_MARKER
+from prc3cfg.core.render.evidence import factory_line, reading_line
 from prc3cfg.core.render.plan_text import (
     as_reviewed,
     as_written,
     broadcast_lines,
     changes_of,
     clamped_line,
-    factory_line,
     faulted_summary,
     line_proof,
-    modules_in,
     outline,
-    reading_line,
     review_line,
     step_lines,
 )
-from prc3cfg.core.render.words import cell, code, fenced, module_lines, plural
+from prc3cfg.core.render.words import cell, code, fenced, module_lines, modules_in, plural
 from prc3cfg.errors import UserError
 
 #: Marks the pull-request comment a plan is posted as, so that CI updates it instead of adding one.

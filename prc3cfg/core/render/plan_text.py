@@ -1,6 +1,6 @@
 """A plan as the terminal shows it (`human`, `line_part`) and the words around it that every output of a plan
-says: the headline and its evidence (`summary_line`, `no_changes`, `reading_line`, `factory_line`,
-`review_line`), the clamped programs, each bus's broadcasts and line proof, the estimate and the time taken;
+says: the headline (`summary_line`; its evidence is `evidence`'s), the review (`review_line`), the clamped
+programs, each bus's broadcasts and line proof, the estimate and the time taken;
 and what a plan file keeps beside a module's steps for people (`changes_json`, `review`, which
 `prc3cfg.core.plan_file.write` is given).
 
@@ -25,6 +25,7 @@ from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
+from prc3cfg.core.render.evidence import factory_line, no_changes, reading_line
 from prc3cfg.core.render.words import (
     AXIS_WARNING,
     CLAMPED,
@@ -34,13 +35,13 @@ from prc3cfg.core.render.words import (
     listed,
     module_diff,
     module_lines,
+    modules_in,
     plural,
     some_of,
     step_line,
     unchanged_line,
 )
 from prc3cfg.core.text import address_ranges
-from prc3cfg.core.what_to_read import to_the_minute
 
 
 def changes_json(change: ModuleChange, *, charts: bool = True) -> dict[str, Any]:
@@ -125,10 +126,6 @@ def changes_of(bus: str, module: dict[str, Any], live: dict[tuple[str, int], Mod
     return changes_json(live[(bus, module["address"])], charts=charts) if live else module["changes"]
 
 
-def modules_in(document: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
-    return [(bus["name"], module) for bus in document["buses"] for module in bus["modules"]]
-
-
 def _header(bus: str, module: dict[str, Any]) -> str:
     steps = module["steps"]
     return header_line(bus, module["address"], module["name"], len(steps),
@@ -191,52 +188,6 @@ def summary_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
     )
 
 
-#: The headline of a plan without changes that read every value it covers in that run.
-EVERY_MODULE = "No changes: every module matches the plant file."
-
-
-def no_changes(evidence: dict[str, Any] | None, shown: Callable[[str], str] = escape.shown) -> str:
-    """The headline of a plan without changes, naming its evidence (`plan_file.evidence`): "every module
-    matches the plant file" only when every value it covers was read in that run; else "No changes to what was
-    read now (the system blocks of 6 modules) or to what prc3cfg last read or verified (82 programs of 4
-    modules; oldest value taken from the record: line/m4's programs, as apply of /p/a.yaml by ana@pc read or
-    verified them since 2026-11-26 03:27 UTC)"."""
-    if evidence is None:  # a plan file written before plans said what they rest on
-        return "No changes (the plan file does not say what was read, or taken from the line's record)."
-    if evidence["complete"]:
-        return EVERY_MODULE
-    now, record, oldest = evidence["read_now"], evidence["from_record"], evidence["oldest"]
-    read = f"the system blocks of {plural(now['system_blocks'], 'module')}"
-    read += f" and {plural(now['programs'], 'program')}" if now["programs"] else ""
-    rests = f"{plural(record['programs'], 'program')} of {plural(record['modules'], 'module')}"
-    rests += f"; {oldest_taken(oldest, shown)}" if oldest is not None else ""
-    return f"No changes to what was read now ({read}) or to what prc3cfg last read or verified ({rests})."
-
-
-def factory_line(document: dict[str, Any]) -> str | None:
-    """What an apply planned from the factory's programs without reading them, in one line (None: nothing):
-    on a factory-fresh module (`what_to_read.factory_fresh`) the programs the plant file manages are
-    written over, not read first — and every one of them is read back after the writes."""
-    said = (document.get("evidence") or {}).get("from_factory")
-    if not isinstance(said, dict) or not said.get("programs"):
-        return None
-    return (f"Not read before writing: {plural(said['programs'], 'program')} of "
-            f"{plural(said['modules'], 'module')} whose system "
-            "parameters read as the factory's — planned as the factory's, not read before writing; the "
-            "verification reads every "
-            "one of them back after the writes, and repairs what another tool changed there")
-
-
-def oldest_taken(oldest: dict[str, Any], shown: Callable[[str], str] = escape.shown, *,
-                 whose: bool = True) -> str:
-    """The oldest evidence a plan relied on (`evidence.oldest`), in words: "oldest value taken from the
-    record: line/m4's programs, as apply of /p/a.yaml by ana@pc read or verified them since 2026-11-26 03:27
-    UTC" (without `whose`: "…: line/m4's programs, since 2026-11-26 03:27 UTC")."""
-    since = to_the_minute(oldest["since"]) or shown(oldest["since"])
-    by = f" as {shown(oldest['by'])} read or verified them" if whose else ""
-    return f"oldest value taken from the record: {shown(oldest['module'])}'s programs,{by} since {since}"
-
-
 def clamped_line(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange]) -> str | None:
     """How many programs the plant does not manage the modules' own clamping changes, and on how many modules,
     in one line — said by every output whatever it leaves out of the details; None where there are none."""
@@ -268,69 +219,6 @@ def estimate(document: dict[str, Any]) -> str:
     return (f"estimated time {total:.1f} s: {PHASES['reading']} {phases['reading']:.1f} s, "
             f"{PHASES['writing']} {phases['writing']:.1f} s ({bus_times}), {PHASES['verifying']} "
             f"{phases['verifying']:.1f} s")
-
-
-def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown, *,
-                 claimed: bool = False) -> str | None:
-    """What a targeted plan read now and what it took as known from the line's record, in one line,
-    its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
-    30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
-    modules, as apply of /p/a.yaml by ana@pc (since …) read or verified them; read in full: line/m2
-    (program 3 is not as on record) — what no read sees: …". `claimed`: the document is a plan file's,
-    whose words of whose verification was taken and of what was read in full and why are its own claim
-    (`prc3cfg.core.plan_file`): said after "the plan file says", never as prc3cfg's."""
-    said = document.get("read")
-    if not isinstance(said, dict):
-        return None
-    modules = modules_in(document)
-    programs = sum(len(m["read"]["programs"]) for _, m in modules)
-    read = (f"the system parameters of {plural(len(modules), 'module')} and "
-            f"{plural(programs, 'program')}") if modules else "nothing"
-    whose, not_read = _not_read(said, modules, shown)
-    in_full = _in_full(said["not_as_verified"], document)
-    other = f"read in full: {', '.join(shown(words) for words in in_full)}" if in_full else ""
-    claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
-    if whose and not claimed:
-        not_read[0] += f", as {whose}"
-    if not_read and isinstance(oldest := (document.get("evidence") or {}).get("oldest"), dict):
-        not_read[0] += f" ({oldest_taken(oldest, shown, whose=False)})"
-    parts = [f"Read now: {read}"]
-    parts += ([f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"]
-              if not_read else [])
-    parts += [other] if other and not claimed else []
-    parts += [f"the plan file says: {claims} (apply --plan proves whose, not why)"] if claims else []
-    return ("; ".join(parts)
-            + (" — a program not read that another tool changed on a module whose system parameters did not "
-                               "change is not seen: plan --refresh-only (or --full-read) reads everything"
-               if not_read else ""))
-
-
-#: How many modules read in full for one reason are named, each with it; more are said by address.
-NAMED_IN_FULL = 3
-
-
-def _in_full(entries: Sequence[str], document: dict[str, Any]) -> list[str]:
-    """The modules read in full, each "bus/name (why)" (`ReadPlan.not_as_verified`); a reason given for more
-    than `NAMED_IN_FULL` of the document's modules said once, with their addresses by bus: "its system
-    parameters are not those on record at bus a addresses 1–30 and bus b address 4" — 30 modules were 30
-    times one reason."""
-    places = {f"{bus['name']}/{m['name']} (": (bus["name"], m["address"])
-              for bus in document["buses"] for m in bus["modules"]}
-    by_why: dict[str, list[tuple[str, tuple[str, int] | None]]] = {}
-    for entry in entries:
-        prefix = next((p for p in places if entry.startswith(p) and entry.endswith(")")), None)
-        why = entry if prefix is None else entry[len(prefix):-1]
-        by_why.setdefault(why, []).append((entry, None if prefix is None else places[prefix]))
-    said = []
-    for why, modules in by_why.items():
-        located = [place for _, place in modules if place is not None]
-        if len(located) <= NAMED_IN_FULL or len(located) < len(modules):  # or words no module of it says
-            said += [entry for entry, _ in modules]
-            continue
-        buses = {bus: [a for b, a in located if b == bus] for bus in dict.fromkeys(b for b, _ in located)}
-        said.append(f"{why} at " + " and ".join(f"bus {bus} {address_ranges(addresses)}"
-                                                for bus, addresses in buses.items()))
-    return said
 
 
 #: How a module's diff is shown where its review text is not the text its digest was written for: as the
@@ -376,25 +264,6 @@ def as_reviewed(module: dict[str, Any], lines: list[str]) -> list[str]:
     return lines if as_written(module) else [SAID + line for line in lines]
 
 
-def _not_read(said: dict[str, Any], modules: list[tuple[str, dict[str, Any]]],
-              shown: Callable[[str], str]) -> tuple[str, list[str]]:
-    """Whose reads or verifications the programs not read rest on ("" when none was taken), and what was not
-    read: "79 programs of 6 modules", "2 modules (line/a, line/b)"."""
-    skipped = sum(len(m["read"]["programs_not_read"]) for _, m in modules)
-    if not skipped:
-        whose, parts = "", []
-    else:
-        sources = sorted({shown(source) for source in said.get("taken", {}).values()})
-        whose = (f"{'; '.join(sources[:3])}{' and others' if len(sources) > 3 else ''} read or "
-                 "verified them") if sources else ""
-        parts = [f"{plural(skipped, 'program')} of "
-                 f"{plural(sum(1 for _, m in modules if m['read']['programs_not_read']), 'module')}"]
-    unread = [shown(name) for name in said["modules_not_read"]]
-    parts += [f"{plural(len(unread), 'module')} "
-              f"({', '.join(unread[:5])}{', …' if len(unread) > 5 else ''})"] if unread else []
-    return whose, parts
-
-
 def timing(estimated: dict[str, float], took: dict[str, float]) -> str:
     """An apply's time, estimated against taken, in total and by phase, in one line: "Time: 6.4 s
     (estimated 6.0 s) — reading back 5.0 s (4.9 s), writing 0.7 s (0.6 s), verifying 0.7 s (0.5 s)"."""
@@ -426,7 +295,7 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
     for bus in document["buses"]:
         out += (broadcast_lines(bus, frames) if bus["name"] not in shown
                 else [f"bus {bus['name']}: its plan is shown above, as its writes began", ""])
-    out += _module_sections(document, live, frames, shown) + _releases(document)
+    out += _module_sections(document, live, frames, shown) + _releases(document, shown)
     out += [line for line in [clamped_line(document, live)] if line]
     out += faulted_summary(document, faults)
     out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document),
@@ -453,10 +322,11 @@ def line_part(plan: PlantPlan, frames: bool = False) -> str:
 AXIS_HEADING = "⚠ Travel to reference point required after apply on:"
 
 
-def _releases(document: dict[str, Any]) -> list[str]:
-    """The modules whose axes the plan releases, each bus's on lines of their own (`listed`)."""
-    groups = [names for bus in document["buses"]
-              if (names := [f"{bus['name']}/{m['name']}" for m in bus["modules"] if m["releases_axes"]])]
+def _releases(document: dict[str, Any], shown: Collection[str] = ()) -> list[str]:
+    """The modules whose axes the plan releases, each bus's on lines of their own (`listed`) — but for the
+    buses `shown` already, whose `line_part` listed them."""
+    groups = [names for bus in document["buses"] if bus["name"] not in shown
+              and (names := [f"{bus['name']}/{m['name']}" for m in bus["modules"] if m["releases_axes"]])]
     return listed(AXIS_HEADING, groups) if groups else []
 
 

@@ -1,8 +1,9 @@
 """The words every output of prc3cfg shares: a field's name and value in human units (`field_name`,
 `format_value`), two images' differences field by field (`field_changes`, `differences`, `drift_changes`) and
-a module's diff (`ModuleDiff`, `module_lines`), a plan's module and step lines (`header_line`, `step_line`),
-counts (`plural`, `some_of`), the axis question's summary, and text from a file made safe for markdown
-(`cell`, `code`, `fenced`). The units are `prc3cfg.core.units`. Pure: returns strings.
+a module's diff (`ModuleDiff`, `module_lines`), a plan document's modules (`modules_in`), a plan's module and
+step lines (`header_line`, `step_line`, `unchanged_line`), lists of modules by bus (`listed`), counts
+(`plural`, `some_of`), the axis question's summary, and text from a file made safe for markdown (`cell`,
+`code`, `fenced`). The units are `prc3cfg.core.units`. Pure: returns strings.
 """
 
 from __future__ import annotations
@@ -186,6 +187,10 @@ def module_lines(changes: dict[str, Any]) -> list[str]:
     lines += [f"{Action.UPDATE} program {n} (not managed, kept): {', '.join(texts)} — {CLAMPED}"
               for n, texts in clamped.items()]
     return lines
+
+
+def modules_in(document: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    return [(bus["name"], module) for bus in document["buses"] for module in bus["modules"]]
 
 
 def plural(count: int, one: str, many: str | None = None) -> str:
