@@ -376,6 +376,20 @@ def test_a_plan_says_which_modules_of_a_bus_it_leaves_as_they_are_in_one_line(tm
     assert unchanged(api.plan(line, images=held | {("line", 13): ModuleImage.factory(13)})) == [
         f"{Action.NO_OP} bus line: no changes at addresses 1–12, 14–30"]
 
+
+def test_a_reason_said_once_places_each_module_by_the_longest_name_it_begins_with() -> None:
+    """"b/m (spare) (why)" begins with "b/m (" too: read as module m's, the spare's address was lost from the
+    group (or, grouped, module m's said in its place)."""
+    why = "its system parameters are not those on record"
+    modules = [{"address": address, "name": name, "read": {"programs": [], "programs_not_read": []}}
+               for address, name in ((1, "m"), (2, "m (spare)"), (3, "x"), (4, "y"))]
+    document = {"buses": [{"name": "b", "modules": modules}],
+                "read": {"not_as_verified": [f"b/{m['name']} ({why})" for m in modules], "base": "",
+                         "modules_not_read": [], "taken": {}}}
+    assert render.reading_line(document) == (
+        f"Read now: the system parameters of 4 modules and 0 programs; read in full: {why} at bus b "
+        "addresses 1–4")
+
 #: Texts a plant or plan file could bring into a pull-request comment, meant to do more than be read.
 HOSTILE = {
     "a mention": "@octocat",

@@ -109,7 +109,9 @@ def _in_full(entries: Sequence[str], document: dict[str, Any]) -> list[str]:
               for bus in document["buses"] for m in bus["modules"]}
     by_why: dict[str, list[tuple[str, tuple[str, int] | None]]] = {}
     for entry in entries:
-        prefix = next((p for p in places if entry.startswith(p) and entry.endswith(")")), None)
+        # the longest: "b/m (spare) (why)" begins with module m's "b/m (" too
+        prefix = max((p for p in places if entry.startswith(p) and entry.endswith(")")), key=len,
+                     default=None)
         why = entry if prefix is None else entry[len(prefix):-1]
         by_why.setdefault(why, []).append((entry, None if prefix is None else places[prefix]))
     said = []
