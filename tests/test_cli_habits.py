@@ -4,12 +4,16 @@ shell completion."""
 
 from __future__ import annotations
 
+import fcntl
+import itertools
 import json
 import os
 import re
 import shlex
+import struct
 import subprocess
 import sys
+import termios
 
 import yaml
 from emulated import DEMO, run_cli
@@ -104,12 +108,14 @@ def test_shell_completion_is_offered():
     assert completed.stdout.split() == ["plan"], completed.stderr
 
 
-def on_a_terminal(args: list, env: dict) -> bytes:
-    """What `prc3cfg ARGS` writes to stdout when stdout is a terminal."""
+def on_a_terminal(args: list, env: dict, columns: int = 0) -> bytes:
+    """What `prc3cfg ARGS` writes to stdout when stdout is a terminal (`columns` wide, as the kernel tells
+    whoever asks; 0: a size the terminal does not say, as a pseudo-terminal is made)."""
     master, slave = os.openpty()
-    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], stdout=slave,
-                               stderr=subprocess.DEVNULL,
-                               env={**os.environ, **env})
+    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, columns, 0, 0))
+    sized = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}  # (pytest-xdist's workers
+    process = subprocess.Popen([sys.executable, "-m", "prc3cfg", *map(str, args)], stdout=slave,  # say 80)
+                               stderr=subprocess.DEVNULL, env=sized | env)
     os.close(slave)
     chunks = []
     while True:
@@ -140,6 +146,41 @@ def test_plans_are_coloured_on_a_terminal_unless_no_color(tmp_path):
     piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True,
                            env={**os.environ, **env})
     assert b"\x1b[" not in piped.stdout
+
+
+def test_a_plan_on_a_terminal_breaks_its_long_lines_between_fields_and_a_pipe_keeps_them_whole(tmp_path):
+    """On an 80-column terminal, the demo's plan has no line the terminal would break itself (mid-word, going
+    on at its first column): a diff line of 198 characters is broken after its commas, the lines after its
+    first under its first field, coloured as it is; so are the plans and the account of an apply, and what
+    `read` read. Into a pipe (a log, grep) each change stays one line."""
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(DEMO.read_text())
+    env = {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "TERM": "xterm-256color"}
+    piped = subprocess.run([sys.executable, "-m", "prc3cfg", "plan", plant], capture_output=True, text=True,
+                           env={**os.environ, **env}, check=True).stdout.splitlines()
+    whole = next(line for line in piped if line.startswith("    + program 3: ") and "F2 " in line)
+    assert len(whole) > 150 and max(map(len, piped)) > 150
+    screen = on_a_terminal(["plan", plant], env, columns=80).decode()
+    lines = re.sub(r"\x1b\[[0-9;]*m", "", screen).replace("\r", "").splitlines()
+    assert lines and all(len(line) < 80 for line in lines), max(lines, key=len)
+    at = lines.index(whole[:whole.index(",") + 1] + whole[whole.index(",") + 1:].split(",")[0] + ",")
+    block = [lines[at], *itertools.takewhile(lambda line: re.match(r" {17}\S", line), lines[at + 1:])]
+    assert len(block) > 2 and " ".join(block).split() == whole.split()
+    green = "\x1b[32m"
+    assert all(f"{green}{line}" in screen for line in block), screen
+    # each whole on a terminal wide enough for it
+    wide = re.sub(r"\x1b\[[0-9;]*m", "", on_a_terminal(["plan", plant], env, columns=300).decode())
+    assert whole in wide.replace("\r", "").splitlines()
+    # and so are the plans `apply --auto-approve` shows each line's as its writes begin, and its account
+    applied = on_a_terminal(["apply", plant, "--auto-approve", "--allow-axis-release"], env, columns=80)
+    lines = re.sub(r"\x1b\[[0-9;]*m", "", applied.decode()).replace("\r", "").splitlines()
+    assert "Apply complete" in " ".join(lines) and sum("Writing bus" in line for line in lines) == 2
+    assert all(len(line) < 80 or os.sep in line.split()[-1] for line in lines), lines  # a path is not broken
+    # and what `read` read (a module's system parameters: 261 characters)
+    read = re.sub(r"\x1b\[[0-9;]*m", "", on_a_terminal(["read", plant], env, columns=80).decode())
+    lines = read.replace("\r", "").splitlines()
+    assert sum("system: upper reversing point" in line for line in lines) == 6
+    assert all(len(line) < 80 for line in lines), max(lines, key=len)
 
 
 def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsys, tmp_path):

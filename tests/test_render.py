@@ -10,6 +10,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from prc3cfg.core import plan_file, render
 from prc3cfg.core.bustime import LineCost
@@ -25,6 +27,7 @@ from prc3cfg.core.render import (
     changes_json,
     field_changes,
     field_name,
+    hanging,
     human,
     jumps,
     markdown,
@@ -334,6 +337,55 @@ def test_a_plan_lists_the_modules_it_releases_by_bus_on_lines_a_screen_holds(tmp
     assert travel(api.plan(demo, images=factory)) == [
         "    booth-a/booth-a-left, booth-a/booth-a-right, booth-a/booth-a-top",
         "    booth-b/booth-b-left, booth-b/booth-b-right, booth-b/booth-b-pretreat"]
+
+
+#: Lines as plans have them: an indent, a mark, a heading before ": ", fields after it joined by ", " (a field
+#: has spaces of its own, and may be longer than a terminal is wide).
+_FIELD = st.text(st.sampled_from("abc →.²0 "), min_size=1, max_size=60).map(str.strip).filter(bool)
+PLAN_LINES = st.builds(lambda indent, head, fields: " " * indent + head + ": " + ", ".join(fields),
+                       st.integers(0, 12), st.sampled_from(["~ system", "+ program 3", "Read now", "x" * 70]),
+                       st.lists(_FIELD, min_size=1, max_size=12))
+
+
+@given(PLAN_LINES, st.integers(20, 200))
+def test_a_long_line_is_broken_between_fields_under_where_its_text_began(line, width) -> None:
+    """`hanging`: a line that fits is left whole; one that does not keeps its words in order, its first part
+    starts as it did, every later part under the text after its first ": " (or two columns in, where that is
+    past half the width), and no part is wider than `width` but for a word that alone is."""
+    parts = hanging(line, width)
+    if len(line) <= width:
+        assert parts == [line]
+        return
+    assert " ".join(" ".join(parts).split()) == " ".join(line.split())
+    assert parts[0].startswith(line[:len(line) - len(line.lstrip())] + line.lstrip().split()[0])
+    indent = len(line) - len(line.lstrip())
+    colon = line.index(": ")
+    hang = colon + 2 if colon + 2 <= width // 2 else min(indent + 2, width // 2)
+    for part in parts[1:]:
+        assert part[:hang].strip() == "" and part[hang] != " ", (parts, hang)
+    assert all(len(part) <= width or len(part.split()) == 1 for part in parts), parts
+
+
+def test_a_plan_s_lines_break_after_their_commas() -> None:
+    """The demo's longest diff line (program 3 set up from factory defaults) and its headline on an 80-column
+    terminal: each field whole, each line after the first under the first field."""
+    line = ("    + program 3: position 0.150 m → 1.200 m, speed 0.050 m/s → 0.250 m/s, relative speed "
+            "0.000 m/s → 0.030 m/s, F1 reset at 0.000 m → set at 0.020 m, "
+            "F2 reset at 0.000 m → reset at 0.050 m")
+    assert hanging(line, 79) == [
+        "    + program 3: position 0.150 m → 1.200 m, speed 0.050 m/s → 0.250 m/s,",
+        "                 relative speed 0.000 m/s → 0.030 m/s,",
+        "                 F1 reset at 0.000 m → set at 0.020 m,",
+        "                 F2 reset at 0.000 m → reset at 0.050 m"]
+    # a line ends with the comma of its last field: the field was not put on it without room for that comma
+    summary = ("Plan: 6 of 6 modules change, 26 messages, estimated time 6.0 s: reading back 4.9 s, "
+               "writing 0.6 s (bus time 1.099 s, naive download 1.149 s), verifying 0.5 s; "
+               "⚠ 6 modules release the axes")
+    assert hanging(summary, 79) == [
+        "Plan: 6 of 6 modules change, 26 messages,",
+        "      estimated time 6.0 s: reading back 4.9 s,",
+        "      writing 0.6 s (bus time 1.099 s, naive download 1.149 s),",
+        "      verifying 0.5 s; ⚠ 6 modules release the axes"]
 
 
 def test_a_plan_shown_line_by_line_as_the_writes_began_lists_each_line_s_releases_once() -> None:

@@ -84,17 +84,23 @@ def may_be_terminal(stream: TextIO) -> bool:
 
 
 def print_lines(text: str) -> None:
-    """Print plan or account text: coloured by each line's leading symbol on a terminal (and not
-    under NO_COLOR, which rich honours), plain when piped — without importing rich where it could
-    not take stdout for a terminal (`may_be_terminal`). Plain, it is one write (as `TerminalProgress.note`'s):
-    the lines' threads may note their plans meanwhile."""
+    """Print plan or account text: on a terminal, each line broken for its width (`render.hanging`) and
+    coloured by its leading symbol (not under NO_COLOR, which rich honours); piped, plain, a line of the
+    text a line of output (grep finds a change whole) — without importing rich where it could not take
+    stdout for a terminal (`may_be_terminal`). Plain, it is one write (as `TerminalProgress.note`'s): the
+    lines' threads may note their plans meanwhile."""
     if may_be_terminal(sys.stdout):
         from rich.console import Console
 
+        from prc3cfg.core.render.words import hanging
+
         console = Console(highlight=False)
-        if console.is_terminal and not console.no_color:
+        if console.is_terminal:
+            width = _width(sys.stdout)
             for line in text.splitlines():
-                console.print(line, style=COLOURS.get(line.lstrip()[:1]), markup=False, soft_wrap=True)
+                style = None if console.no_color else COLOURS.get(line.lstrip()[:1])
+                for part in hanging(line, width):
+                    console.print(part, style=style, markup=False, soft_wrap=True)
             return
     print(f"{text}\n", end="")
 
@@ -325,7 +331,8 @@ class TerminalProgress:
     def note(self, text: str) -> None:
         # one write, its newline in it: the lines' threads note their plans at once, and print's two
         # writes let another line's text in before a newline ("…pretreatWriting bus booth-a now")
-        print(f"{text}\n", end="", flush=True, file=self._notes or sys.stdout)
+        stream = self._notes or sys.stdout
+        print(f"{broken_for(stream, text)}\n", end="", flush=True, file=stream)
 
     def stop(self) -> None:
         """The bar off the screen, its lines cleared (nothing drawn until the next `start`)."""
@@ -351,7 +358,28 @@ def _answering_terminal() -> TextIO:
 def to_the_terminal(text: str) -> None:
     """`text` written to the terminal answers come from, beside stdout in a file: a question's subject."""
     with _answering_terminal() as terminal:
-        terminal.write(text + "\n")
+        terminal.write(broken_for(terminal, text) + "\n")
+
+
+def broken_for(stream: TextIO, text: str) -> str:
+    """`text` with each line broken for the terminal `stream` is, as `print_lines` breaks it."""
+    from prc3cfg.core.render.words import hanging
+
+    width = _width(stream)
+    return "\n".join(part for line in text.split("\n") for part in hanging(line, width))
+
+
+def _width(stream: TextIO) -> int:
+    """How wide lines may be on the terminal `stream` is (`render.hanging`): its columns — COLUMNS where set,
+    as rich and shutil take it — but one, spare where a terminal draws ⚠ two columns wide; 0 (lines whole)
+    where `stream` is no terminal or does not tell its size."""
+    try:
+        if not stream.isatty():
+            return 0
+        columns = os.environ.get("COLUMNS", "")
+        return (int(columns) if columns.isdigit() else os.get_terminal_size(stream.fileno()).columns) - 1
+    except (OSError, ValueError):
+        return 0
 
 
 def ask(question: str, options: LineOptions | None = None, *, typed: bool = False) -> bool:

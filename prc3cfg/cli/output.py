@@ -86,7 +86,7 @@ def emit_drift(drifted: list[Drift], plant: str, modules: int, *, out: Path | No
         # its line end is counted in the budget
         print(render.drift_markdown(document, max_chars=max_chars, full_drift=full_drift), end="")
     else:
-        print("\n".join(render.drift_lines(drifted, modules)))
+        print_lines("\n".join(render.drift_lines(drifted, modules)))
         if out is not None:
             print(f"Drift written to {out}")
 
@@ -192,11 +192,11 @@ def applied(result: ApplyResult, command: str = "apply", *, emulated: bool = Fal
     if result.runs or result.earlier:
         report(result)
     if result.runs:
-        print(f"{command.capitalize()} complete: "
-              f"{render.plural(sum(bool(run.steps) for run in result.runs), 'module')} written and verified.")
-        print(render.timing(result.plan.phases(), result.took)
-              + (" — the embedded emulator answers at once: the estimate is what a line at the plant file's "
-                 "baud takes" if emulated else ""))
+        written = render.plural(sum(bool(run.steps) for run in result.runs), "module")
+        print_lines(f"{command.capitalize()} complete: {written} written and verified.\n"
+                    + render.timing(result.plan.phases(), result.took)
+                    + (" — the embedded emulator answers at once: the estimate is what a line at the plant "
+                       "file's baud takes" if emulated else ""))
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:

@@ -20,6 +20,7 @@ from prc3cfg.cli.common import (
     VerifyChoice,
     check_output,
     line_options,
+    print_lines,
     unanswered,
 )
 from prc3cfg.core.line import EMULATOR_SCHEME
@@ -65,8 +66,8 @@ def read(
         print(json.dumps([{"bus": bus.name, **images[(bus.name, m.address)].to_json()} for bus, m in pairs],
                          indent=1))
         return
-    for bus, m in pairs:
-        print("\n".join(render.image_lines(bus.name, m.name, images[(bus.name, m.address)])))
+    print_lines("\n".join(line for bus, m in pairs
+                           for line in render.image_lines(bus.name, m.name, images[(bus.name, m.address)])))
 
 
 @app.command()

@@ -15,7 +15,7 @@ import typer
 from typer.core import TyperGroup
 
 from prc3cfg.cli import app
-from prc3cfg.cli.common import PlantArg
+from prc3cfg.cli.common import PlantArg, print_lines
 from prc3cfg.errors import UserError
 
 
@@ -52,10 +52,9 @@ def show(plant: PlantArg,
     if json_out:
         print_document(document)
         return
-    for line in document["lines"]:
-        print(f"bus {shown(line['bus'])}: {line['health']}")
-        for module in line["modules"]:
-            print(shown(_module_line(module)))
+    print_lines("\n".join(text for line in document["lines"]
+                           for text in (f"bus {shown(line['bus'])}: {line['health']}",
+                                        *(shown(_module_line(module)) for module in line["modules"]))))
 
 
 def _module_line(module: dict[str, Any]) -> str:

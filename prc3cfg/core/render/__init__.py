@@ -92,6 +92,7 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.words import field_changes as field_changes
     from prc3cfg.core.render.words import field_name as field_name
     from prc3cfg.core.render.words import format_value as format_value
+    from prc3cfg.core.render.words import hanging as hanging
     from prc3cfg.core.render.words import header_line as header_line
     from prc3cfg.core.render.words import jumps as jumps
     from prc3cfg.core.render.words import listed as listed
@@ -122,7 +123,7 @@ _HOMES: dict[str, tuple[str, ...]] = {
     "prc3cfg.core.render.words": ("AXIS_WARNING", "CLAMPED", "JUMPS", "LIST_WIDTH", "RELEASE_NAMES_BUDGET",
                                   "FieldChange", "ModuleDiff", "cell", "chain_changes", "clamped_changes",
                                   "code", "differences", "drift_changes", "fenced", "field_changes",
-                                  "field_name", "format_value", "header_line", "jumps", "listed",
+                                  "field_name", "format_value", "hanging", "header_line", "jumps", "listed",
                                   "module_diff", "module_lines", "plural", "release_summary", "some_of",
                                   "step_line", "unchanged_line"),
 }

@@ -1,15 +1,16 @@
 """The words every output of prc3cfg shares: a field's name and value in human units (`field_name`,
 `format_value`), two images' differences field by field (`field_changes`, `differences`, `drift_changes`) and
 a module's diff (`ModuleDiff`, `module_lines`), a plan document's modules (`modules_in`), a plan's module and
-step lines (`header_line`, `step_line`, `unchanged_line`), lists of modules by bus (`listed`), counts
-(`plural`, `some_of`), the axis question's summary, and text from a file made safe for markdown (`cell`,
-`code`, `fenced`). The units are `prc3cfg.core.units`. Pure: returns strings.
-"""
+step lines (`header_line`, `step_line`, `unchanged_line`), lists of modules by bus (`listed`), a line broken
+for a terminal's width (`hanging`), counts (`plural`, `some_of`), the axis question's summary, and text from a
+file made safe for markdown (`cell`, `code`, `fenced`). The units are `prc3cfg.core.units`. Pure: returns
+strings."""
 
 from __future__ import annotations
 
 import functools
 import re
+import textwrap
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -245,6 +246,34 @@ def listed(heading: str, groups: Iterable[Sequence[str]]) -> list[str]:
                 line = "   "
             line += piece
         lines.append(line)
+    return lines
+
+
+def hanging(line: str, width: int) -> list[str]:
+    """`line` as a terminal `width` columns wide shows it best: whole where it fits; else broken after its
+    commas, so that each field of a diff, each item of a list, stays whole where it fits a line (and is broken
+    at its spaces where not), each line after the first indented to where the text after the first ": "
+    begins (two columns in from the line's own indent where that is past half the width). A terminal would
+    break it at its edge, mid-word, and go on at its first column. `width` 0: whole."""
+    if len(line) <= width or width <= 0:
+        return [line]
+    indent = len(line) - len(line.lstrip())
+    colon = line.find(": ", indent)
+    hang = " " * (colon + 2 if 0 <= colon and colon + 2 <= width // 2 else min(indent + 2, width // 2))
+    packed: list[str] = []
+    fields = line.split(", ")
+    for n, field in enumerate(fields):  # room kept for the comma of a line the next field does not fit on
+        if packed and len(packed[-1]) + 2 + len(field) + (n < len(fields) - 1) <= width:
+            packed[-1] += f", {field}"
+        else:
+            if packed:
+                packed[-1] += ","
+            packed.append(hang + field if packed else field)
+    lines = []
+    for text in packed:  # its indent given as one: textwrap drops it before a word too long for its line
+        own = text[:len(text) - len(text.lstrip())]
+        lines += textwrap.wrap(text.lstrip(), width, initial_indent=own, subsequent_indent=hang,
+                               break_long_words=False, break_on_hyphens=False)
     return lines
 
 
