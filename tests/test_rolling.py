@@ -148,6 +148,14 @@ def newest(plant: EmulatedPlant, bus: str) -> tuple[str, int]:
     return module.name, module.address
 
 
+def moved(plant: EmulatedPlant) -> None:
+    """booth-a-top's program 1 moved from 1.750 m to 1.700 m in the plant file, as `emulated_plant` wrote it
+    (an edit to the demo's text, "1: {position: 1.750}", changed nothing there)."""
+    text = plant.path.read_text()
+    assert text.count("position: 1.75\n") == 1  # booth-a-top's program 1, the edit's one place
+    plant.path.write_text(text.replace("position: 1.75\n", "position: 1.7\n"))
+
+
 def test_a_program_another_tool_changed_is_found_within_the_bound(plant, capsys, tmp_path):
     """The issue's limit: after an apply, another tool changes a program the plant file declares on a module
     whose system block stays, and the plant file changes something else (another line's module): main said
@@ -159,9 +167,7 @@ def test_a_program_another_tool_changed_is_found_within_the_bound(plant, capsys,
     assert bound == 6
     name, address = newest(plant, "booth-b")
     changed_by_another_tool(plant, "booth-b", address, 2)
-    text = plant.path.read_text()
-    # booth-a-top's program 1
-    plant.path.write_text(text.replace("1: {position: 1.750}", "1: {position: 1.700}", 1))
+    moved(plant)
     plans = 0
     while plans < bound:
         plans += 1
@@ -182,8 +188,7 @@ def test_a_program_another_tool_changed_is_found_within_the_bound(plant, capsys,
 def test_a_plan_file_with_rolled_programs_is_proved_by_reading_the_same_programs(plant, capsys, tmp_path):
     """`apply --plan` reads again exactly what its plan read: the rolled programs too."""
     applied(plant, capsys)
-    text = plant.path.read_text()
-    plant.path.write_text(text.replace("1: {position: 1.750}", "1: {position: 1.700}", 1))
+    moved(plant)
     rolled = read_next(plant.path)
     saved = tmp_path / "plan.json"
     planned = run_cli(capsys, "plan", plant.path, "--out", saved)
@@ -235,7 +240,7 @@ def oldest_words(plant: EmulatedPlant, whose: bool = True) -> str:
 def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys, tmp_path):
     """Neither the rolled modules (read now) nor any module read in full is the oldest evidence: of the
     modules whose programs were taken from the record, the one with the oldest record — named with since when
-    and by whom."""
+    and by whom, once: in the headline of a plan without changes, in the "Read now" line of one with."""
     applied(plant, capsys)
     saved = tmp_path / "plan.json"
     words = oldest_words(plant)
@@ -243,6 +248,7 @@ def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys
     assert human.code == 0, human.err
     headline = next(line for line in human.out.splitlines() if line.startswith("No changes"))
     assert words in headline, headline
+    assert human.out.count("oldest value taken from the record") == 1, human.out  # the headline's: said once
     module = words.split(": ")[1].split("'s ")[0]
     assert json.loads(saved.read_text())["evidence"]["oldest"]["module"] == module
     shown = run_cli(capsys, "show", saved)
@@ -251,15 +257,18 @@ def test_every_medium_names_the_oldest_value_taken_from_the_record(plant, capsys
     markdown = run_cli(capsys, "plan", plant.path, "--markdown")
     assert (markdown.code == 0 and words.split(",")[0] in markdown.out
             and words.split(",")[1] in markdown.out), markdown.out
+    assert markdown.out.count("oldest value taken from the record") == 1, markdown.out
     words = oldest_words(plant)
     document = json.loads(run_cli(capsys, "plan", plant.path, "--json").out)
     assert document["evidence"]["oldest"]["module"] == words.split(": ")[1].split("'s ")[0]
     # a plan that changes something names it in its notes: the headline is the change's then
-    plant.path.write_text(plant.path.read_text().replace("1: {position: 1.750}", "1: {position: 1.700}", 1))
+    moved(plant)
     words = oldest_words(plant, whose=False)
     changed = run_cli(capsys, "plan", plant.path)
     assert changed.code == 0 and words in next(line for line in changed.out.splitlines()
                                                if line.startswith("Read now:"))
+    assert ("Plan: 1 of 6 modules changes" in changed.out
+            and changed.out.count("oldest value taken from the record") == 1), changed.out
 
 
 # -- soak: the bound --------------------------------------------------------------------------------

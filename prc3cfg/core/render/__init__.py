@@ -47,6 +47,7 @@ if TYPE_CHECKING:
     from prc3cfg.core.render.drift import image_lines as image_lines
     from prc3cfg.core.render.evidence import EVERY_MODULE as EVERY_MODULE
     from prc3cfg.core.render.evidence import factory_line as factory_line
+    from prc3cfg.core.render.evidence import headline_names_oldest as headline_names_oldest
     from prc3cfg.core.render.evidence import no_changes as no_changes
     from prc3cfg.core.render.evidence import oldest_taken as oldest_taken
     from prc3cfg.core.render.evidence import reading_line as reading_line
@@ -112,8 +113,8 @@ _HOMES: dict[str, tuple[str, ...]] = {
                                      "markdown"),
     "prc3cfg.core.render.drift": ("DRIFT_FORMAT", "DRIFT_MARKER", "Drift", "drift_json", "drift_lines",
                                   "image_lines"),
-    "prc3cfg.core.render.evidence": ("EVERY_MODULE", "factory_line", "no_changes", "oldest_taken",
-                                     "reading_line"),
+    "prc3cfg.core.render.evidence": ("EVERY_MODULE", "factory_line", "headline_names_oldest", "no_changes",
+                                     "oldest_taken", "reading_line"),
     "prc3cfg.core.render.plan_text": ("AXIS_HEADING", "CHART", "CHARTS", "LEGEND", "PHASES",
                                       "REVIEW_AS_WRITTEN", "SAID", "changes_json", "clamped_line", "estimate",
                                       "faulted_summary", "human", "line_part", "line_proof", "review",

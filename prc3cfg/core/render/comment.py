@@ -12,7 +12,7 @@ from typing import Any
 from prc3cfg.core import text as escape
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.render.drift import DRIFT_MARKER
-from prc3cfg.core.render.evidence import factory_line, reading_line
+from prc3cfg.core.render.evidence import factory_line, headline_names_oldest, reading_line
 from prc3cfg.core.render.plan_text import (
     as_reviewed,
     as_written,
@@ -82,7 +82,8 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
     changed = [(bus, m) for bus, m in modules_in(document) if m["steps"]]
     head = [MARKER, f"### prc3cfg plan — {code(document['plant'])}", "",
             *faulted_summary(document, faults, cell), "",
-            *_callouts(document, live, claimed=isinstance(plan, dict)), *_changed_table(changed)]
+            *_callouts(document, live, claimed=isinstance(plan, dict),
+                       oldest=not headline_names_oldest(document, faults)), *_changed_table(changed)]
     for bus in document["buses"]:
         if lines := broadcast_lines(bus, frames):
             head += [*fenced(lines[:-1]), ""]
@@ -97,10 +98,11 @@ def markdown(plan: PlantPlan | dict[str, Any], *, max_chars: int = COMMENT_BUDGE
 
 
 def _callouts(document: dict[str, Any], live: dict[tuple[str, int], ModuleChange], *,
-              claimed: bool) -> list[str]:
+              claimed: bool, oldest: bool) -> list[str]:
     """A comment's quoted paragraphs under its summary, each only when it has something to say: what was
-    not read, the axis-release warning, the clamped programs, what is left as it is, each line's proof."""
-    out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed)) else []
+    not read (`oldest`: with the oldest value taken), the axis-release warning, the clamped programs, what is
+    left as it is, each line's proof."""
+    out = [f"> {line}", ""] if (line := reading_line(document, cell, claimed=claimed, oldest=oldest)) else []
     out += [f"> {line}", ""] if (line := factory_line(document)) else []
     out += [f"> {line}", ""] if (line := review_line(document, cell)) else []
     if document["axis_releases"]:

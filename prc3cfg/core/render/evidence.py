@@ -1,6 +1,7 @@
 """What a plan read now and what it took as known from the line's record, as every output of a plan says it:
 the headline of a plan without changes (`no_changes`), the line of what was read and taken (`reading_line`,
-the modules read in full by reason), the oldest value taken (`oldest_taken`) and the programs planned from the
+the modules read in full by reason), the oldest value taken (`oldest_taken`), said once (in the headline where
+it names it: `headline_names_oldest`, else in the line of what was read) and the programs planned from the
 factory's without reading them (`factory_line`). Every text a plan file brings is `shown` as the medium
 needs; a plan file's words of what was read in full and why stay its claim. Pure: returns strings.
 """
@@ -61,15 +62,22 @@ def oldest_taken(oldest: dict[str, Any], shown: Callable[[str], str] = escape.sh
     return f"oldest value taken from the record: {shown(oldest['module'])}'s programs,{by} since {since}"
 
 
+def headline_names_oldest(document: dict[str, Any], faults: Sequence[str]) -> bool:
+    """Whether a plan's headline names the oldest value it took from the record (`no_changes`): a plan
+    without changes, whose headline is not its faults' (`faulted_summary`). Its `reading_line` does not."""
+    return not faults and not any(m["steps"] for _, m in modules_in(document))
+
+
 def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.shown, *,
-                 claimed: bool = False) -> str | None:
+                 claimed: bool = False, oldest: bool = True) -> str | None:
     """What a targeted plan read now and what it took as known from the line's record, in one line,
     its texts `shown` as the medium needs; None for a full read. "Read now: the system parameters of
     30 modules and 60 programs; taken as known from the line's record …, not read: 900 programs of 30
     modules, as apply of /p/a.yaml by ana@pc (since …) read or verified them; read in full: line/m2
     (program 3 is not as on record) — what no read sees: …". `claimed`: the document is a plan file's,
     whose words of whose verification was taken and of what was read in full and why are its own claim
-    (`prc3cfg.core.plan_file`): said after "the plan file says", never as prc3cfg's."""
+    (`prc3cfg.core.plan_file`): said after "the plan file says", never as prc3cfg's. `oldest`: the oldest
+    value taken named too (not where the headline named it: `headline_names_oldest`)."""
     said = document.get("read")
     if not isinstance(said, dict):
         return None
@@ -83,8 +91,8 @@ def reading_line(document: dict[str, Any], shown: Callable[[str], str] = escape.
     claims = "; ".join(words for words in (whose, other) if words) if claimed else ""
     if whose and not claimed:
         not_read[0] += f", as {whose}"
-    if not_read and isinstance(oldest := (document.get("evidence") or {}).get("oldest"), dict):
-        not_read[0] += f" ({oldest_taken(oldest, shown, whose=False)})"
+    if oldest and not_read and isinstance(taken := (document.get("evidence") or {}).get("oldest"), dict):
+        not_read[0] += f" ({oldest_taken(taken, shown, whose=False)})"
     parts = [f"Read now: {read}"]
     parts += ([f"taken as known from {shown(said['base'])}, not read: {' and '.join(not_read)}"]
               if not_read else [])

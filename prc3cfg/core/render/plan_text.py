@@ -25,7 +25,7 @@ from prc3cfg.core.motion import MotionError, paired_chains
 from prc3cfg.core.planner import Action
 from prc3cfg.core.plant_plan import ModuleChange, PlantPlan
 from prc3cfg.core.plot import AFTER, BEFORE, mermaid
-from prc3cfg.core.render.evidence import factory_line, no_changes, reading_line
+from prc3cfg.core.render.evidence import factory_line, headline_names_oldest, no_changes, reading_line
 from prc3cfg.core.render.words import (
     AXIS_WARNING,
     CLAMPED,
@@ -298,8 +298,9 @@ def human(plan: PlantPlan | dict[str, Any], *, notes: Iterable[str] = (), shown:
     out += _module_sections(document, live, frames, shown) + _releases(document, shown)
     out += [line for line in [clamped_line(document, live)] if line]
     out += faulted_summary(document, faults)
-    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict)), factory_line(document),
-                              review_line(document)] if line]
+    out += [line for line in [reading_line(document, claimed=isinstance(plan, dict),
+                                           oldest=not headline_names_oldest(document, faults)),
+                              factory_line(document), review_line(document)] if line]
     out += [f"Left as it is: {note}" for note in document.get("left_alone", [])]
     if any(module["steps"] for _, module in modules_in(document)):
         out.append(LEGEND)
