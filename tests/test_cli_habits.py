@@ -183,6 +183,35 @@ def test_a_plan_on_a_terminal_breaks_its_long_lines_between_fields_and_a_pipe_ke
     assert all(len(line) < 80 for line in lines), max(lines, key=len)
 
 
+#: Module names a plant file may hold that rich, which draws prc3cfg's terminal output, would take for its own
+#: markup or emoji codes: a style, a closing tag with nothing open, a link, an emoji.
+MARKUP_NAMES = ["left [red]x[/]", "right [/bold]", "top [link=https://example.com]y", "b-left :smile:"]
+
+
+def test_names_that_look_like_rich_markup_or_emoji_codes_are_shown_as_written(tmp_path):
+    """`show`, `show --module` (whose heading and tables rich draws) and `plan` print each name exactly as the
+    plant file has it, on a terminal and into a pipe: `show` ended in a traceback (rich's MarkupError), and a
+    plan on a terminal showed ":smile:" as an emoji."""
+    document = yaml.safe_load(DEMO.read_text())
+    modules = [m for bus in document["buses"] for m in bus["modules"]]
+    for module, name in zip(modules, MARKUP_NAMES):
+        module["name"] = name
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(yaml.safe_dump(document, sort_keys=False))
+    env = {"PRC3CFG_LOCK_DIR": str(tmp_path / "locks"), "TERM": "xterm-256color"}
+    for args in (["show", plant], *(["show", plant, "--module", name] for name in MARKUP_NAMES),
+                 ["plan", plant]):
+        piped = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True,
+                               text=True, env={**os.environ, **env})
+        assert piped.returncode in (0, 2) and "Traceback" not in piped.stderr, (args, piped.stderr)
+        on_screen = re.sub(r"\x1b\[[0-9;]*m|\x1b\]8;[^\x1b]*\x1b\\", "",
+                           on_a_terminal(args, env, columns=200).decode())
+        for said in (piped.stdout, on_screen):
+            named = [name for name in MARKUP_NAMES if name in said]
+            assert named == (MARKUP_NAMES if len(args) != 4 else [args[3]]), (args, said)
+            assert "😄" not in said
+
+
 def test_show_renders_a_saved_plan_as_plan_showed_it_from_its_bytes(plant, capsys, tmp_path):
     made = tmp_path / "plan.json"
     planned = run_cli(capsys, "plan", plant.path, "--out", made)

@@ -71,10 +71,16 @@ class VerifyChoice(enum.StrEnum):
 COLOURS = {"+": "green", "-": "red", "~": "yellow", "⚠": "bold red", "✗": "red", "✓": "green"}
 
 
-def stderr_console() -> Console:
+def console(**options: Any) -> Console:
+    """A rich console for prc3cfg's output, which draws every string as the text it is: names and words from
+    files are data — rich's markup ("[/]": a traceback) and emoji codes (":smile:") are read in none."""
     from rich.console import Console
 
-    return Console(stderr=True)
+    return Console(markup=False, emoji=False, **options)
+
+
+def stderr_console() -> Console:
+    return console(stderr=True)
 
 
 def may_be_terminal(stream: TextIO) -> bool:
@@ -90,17 +96,15 @@ def print_lines(text: str) -> None:
     stdout for a terminal (`may_be_terminal`). Plain, it is one write (as `TerminalProgress.note`'s): the
     lines' threads may note their plans meanwhile."""
     if may_be_terminal(sys.stdout):
-        from rich.console import Console
-
         from prc3cfg.core.render.words import hanging
 
-        console = Console(highlight=False)
-        if console.is_terminal:
+        terminal = console(highlight=False)
+        if terminal.is_terminal:
             width = _width(sys.stdout)
             for line in text.splitlines():
-                style = None if console.no_color else COLOURS.get(line.lstrip()[:1])
+                style = None if terminal.no_color else COLOURS.get(line.lstrip()[:1])
                 for part in hanging(line, width):
-                    console.print(part, style=style, markup=False, soft_wrap=True)
+                    terminal.print(part, style=style, soft_wrap=True)
             return
     print(f"{text}\n", end="")
 
@@ -108,10 +112,8 @@ def print_lines(text: str) -> None:
 def stdout_console() -> Console:
     """A console for tables on stdout: the terminal's width there; piped or redirected, as wide as the
     table needs — never cut (colour follows the terminal, and NO_COLOR is honoured)."""
-    from rich.console import Console
-
-    console = Console()
-    return console if console.is_terminal else Console(width=1_000, soft_wrap=True)
+    drawn = console()
+    return drawn if drawn.is_terminal else console(width=1_000, soft_wrap=True)
 #: Ctrl-C and SIGTERM for the running command (`main` installs the handlers).
 CANCEL = Cancellation()
 

@@ -218,6 +218,8 @@ def _modules_table(plant: "Plant") -> "Table":
 def _show_module(console: "Console", bus: str, module: "Module") -> None:
     """What `render.shown_module` says of the module, from the values of its plant file and where each came
     from."""
+    from rich.text import Text
+
     from prc3cfg.core import render
     from prc3cfg.plant.profiles import Sourced
 
@@ -235,7 +237,7 @@ def _show_module(console: "Console", bus: str, module: "Module") -> None:
         chains=tuple((chain.programs, chain.loop) for chain in settings.chains.value),
     ))
     before, name, after = shown.heading
-    console.print(f"{before}[bold]{name}[/]{after}")
+    console.print(Text.assemble(before, (name, "bold"), after))
     for block in shown.blocks:
         console.print(block if isinstance(block, str) else _drawn(block, no_wrap=True))
 
