@@ -13,7 +13,10 @@ import sys
 import unicodedata
 
 import pytest
-from emulated import DEMO
+import yaml
+from emulated import DEMO, run_cli
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from prc3cfg.core import text
 
@@ -83,3 +86,38 @@ def test_a_plant_file_name_that_reorders_hides_or_breaks_text_is_refused_at_vali
     (line,) = done.stderr.decode().splitlines()
     assert re.match(rf"error: {re.escape(str(plant))}:\d+:\d+: ", line) and HIDDEN[hidden] in line, line
     assert hidden.encode() not in done.stderr
+
+
+#: A module name a plant file may hold: printable text of any kind — letters of any script, digits,
+#: punctuation, symbols, spaces — in which rich, markdown or a shell could read marks of their own.
+NAMES = st.text(st.characters(categories=("L", "N", "P", "S", "Zs")), min_size=1, max_size=24)
+
+
+def shown_by_every_command(path, capsys, name: str) -> None:
+    """The demo's first module named `name`: `validate` takes it or refuses it in one line naming where;
+    taken, `show`, `show --module` and `plan` (all of which the terminal's rich draws) print it as written."""
+    document = yaml.safe_load(DEMO.read_text(encoding="utf-8"))
+    document["buses"][0]["modules"][0]["name"] = name
+    path.write_text(yaml.safe_dump(document, allow_unicode=True, sort_keys=False), encoding="utf-8")
+    checked = run_cli(capsys, "validate", path)
+    if checked.code != 0:
+        (line,) = checked.err.splitlines()
+        assert checked.code == 1 and line.startswith(f"error: {path}:"), checked.err
+        return
+    for args in (("show", path), ("show", path, f"--module={name}"), ("plan", path)):
+        said = run_cli(capsys, *args)
+        assert said.code == 0 and name in said.out, (args, said)
+
+
+@settings(max_examples=12, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=NAMES)
+def test_any_module_name_validate_takes_is_shown_as_written(tmp_path, capsys, name):
+    shown_by_every_command(tmp_path / "plant.yaml", capsys, name)
+
+
+@pytest.mark.soak
+@settings(max_examples=500,  # 0.1 s each: the profile's 2,000 would add 3 minutes to one worker's soak
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(name=NAMES)
+def test_any_module_name_validate_takes_is_shown_as_written_many(tmp_path, capsys, name):
+    shown_by_every_command(tmp_path / "plant.yaml", capsys, name)
