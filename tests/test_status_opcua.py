@@ -267,3 +267,35 @@ def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_b
             await client.disconnect()
 
     asyncio.run(gone())
+
+
+def test_a_line_named_like_another_line_s_module_has_nodes_of_its_own(served):
+    """Node ids are "LINE/ADDRESS/…": a line named "booth-a/1" (booth-b renamed, the file reloaded) took the
+    id of booth-a's module 1, and the server ended (BadNodeIdExists). A "/" (and a "%") in a line's name is
+    percent-encoded in its ids: its nodes are its own, and booth-a's module 1 keeps its own."""
+    server, (cert, key) = served
+    path = server.plant.path
+    text = path.read_text()
+    renamed = text.replace("- name: booth-b\n", "- name: booth-a/1\n", 1)
+    assert renamed != text
+    path.write_text(renamed)
+    assert _said(server.process, f"{path}:").startswith(f"{path}: changed — publishing 6 modules")
+
+    async def check() -> None:
+        client = await connected(server.url, cert, key)
+        try:
+            di = await client.get_namespace_index("http://opcfoundation.org/UA/DI/")
+            device_set = await client.nodes.objects.get_child(ua.QualifiedName("DeviceSet", di))
+            names = {(await line.read_browse_name()).Name for line in await device_set.get_children()}
+            assert names == {"booth-a", "booth-a/1"}
+            for path_ in ("booth-a%2F1/DeviceHealth", *(f"booth-a%2F1/{a}/{v}" for a in (1, 3, 4)
+                                                         for v in VARIABLES)):
+                await (await node(client, path_)).read_value()  # each is there and readable
+            module = await node(client, "booth-a/1")
+            assert (await module.read_browse_name()).Name == "booth-a-left"
+            module = await node(client, "booth-a%2F1/1")
+            assert (await module.read_browse_name()).Name == "booth-b-left"
+        finally:
+            await client.disconnect()
+
+    asyncio.run(check())

@@ -163,6 +163,13 @@ def _id(text: str, index: int) -> ua.NodeId:
     return ua.NodeId(ua.String(text), ua.Int16(index))
 
 
+def _path(bus: str, *parts: object) -> str:
+    """The string of a node id under a line, "LINE/ADDRESS/…" (docs/status.md): a "/" and a "%" in the line's
+    name percent-encoded (a line named "a/1" is not module 1 of line "a": one id twice was BadNodeIdExists,
+    and the server ended)."""
+    return "/".join([bus.replace("%", "%25").replace("/", "%2F"), *map(str, parts)])
+
+
 async def _variable(parent: Node, index: int, node_id: str, name: str, value: Any, kind: ua.VariantType,
                     di: int) -> Node:
     node = await parent.add_variable(_id(node_id, index), ua.QualifiedName(name, di), ua.Variant(value, kind))
@@ -245,7 +252,7 @@ class _Space:
     async def follow(self, facts: list[ModuleFacts]) -> tuple[list[str], list[str]]:
         """Add the nodes of modules not published yet, delete those of modules gone: their names, added and
         removed."""
-        wanted = {f"{f.bus}/{f.address}": f for f in facts}
+        wanted = {_path(f.bus, f.address): f for f in facts}
         removed = [name for key, (name, _) in self.modules.items() if key not in wanted
                    or wanted[key].name != name]
         for key in [key for key, (name, _) in self.modules.items() if name in removed]:
@@ -253,7 +260,7 @@ class _Space:
             self.variables = {path: n for path, n in self.variables.items() if not path.startswith(f"{key}/")}
         for bus in [bus for bus in self.lines if not any(f.bus == bus for f in facts)]:
             await self.server.delete_nodes([self.lines.pop(bus)], recursive=True)
-            del self.variables[f"{bus}/DeviceHealth"]
+            del self.variables[_path(bus, "DeviceHealth")]
         added = [f.name for key, f in wanted.items() if key not in self.modules]
         for key, f in wanted.items():
             if key not in self.modules:
@@ -263,19 +270,19 @@ class _Space:
     async def _module(self, f: ModuleFacts) -> Node:
         index, di = self.index, self.di
         if f.bus not in self.lines:
-            line = await self.device_set.add_object(_id(f.bus, index), ua.QualifiedName(f.bus, index))
+            line = await self.device_set.add_object(_id(_path(f.bus), index), ua.QualifiedName(f.bus, index))
             self.lines[f.bus] = line
-            health = f"{f.bus}/DeviceHealth"
+            health = _path(f.bus, "DeviceHealth")
             self.variables[health] = await _variable(line, index, health, "DeviceHealth", 0,
                                                      ua.VariantType.Int32, di)
-        module = await self.lines[f.bus].add_object(_id(f"{f.bus}/{f.address}", index),
+        module = await self.lines[f.bus].add_object(_id(_path(f.bus, f.address), index),
                                                     ua.QualifiedName(f.name, index))
-        group = await module.add_object(_id(f"{f.bus}/{f.address}/Configuration", index),
+        group = await module.add_object(_id(_path(f.bus, f.address, "Configuration"), index),
                                         ua.QualifiedName("Configuration", di))
         for path, (value, kind) in _values(f).items():
             configured = path.startswith("Configuration/")
             parent, name = (group, path.partition("/")[2]) if configured else (module, path)
-            node_id = f"{f.bus}/{f.address}/{path}"
+            node_id = _path(f.bus, f.address, path)
             self.variables[node_id] = await _variable(parent, index, node_id, name, value, kind, di)
         return module
 
@@ -286,11 +293,11 @@ async def _publish(server: Server, variables: dict[str, Node], facts: list[Modul
     for f in facts:
         by_line.setdefault(f.bus, []).append(f)
         for path, (value, kind) in _values(f).items():
-            if (node := variables.get(f"{f.bus}/{f.address}/{path}")) is not None:
+            if (node := variables.get(_path(f.bus, f.address, path))) is not None:
                 await server.write_attribute_value(node.nodeid, ua.DataValue(ua.Variant(value, kind)))
     for bus, found in by_line.items():
         value = int(worst([health(f)[0] for f in found]))
-        await server.write_attribute_value(variables[f"{bus}/DeviceHealth"].nodeid,
+        await server.write_attribute_value(variables[_path(bus, "DeviceHealth")].nodeid,
                                            ua.DataValue(ua.Variant(value, ua.VariantType.Int32)))
 
 
