@@ -205,6 +205,16 @@ def test_the_server_s_own_key_is_kept_in_this_user_s_state_folder_for_this_user_
         assert key.stat().st_mode & 0o777 == 0o600
 
 
+def edited(server: Served, old: str, new: str) -> str:
+    """The served plant file with its first `old` made `new` (which changes it), and the line the server says
+    of it."""
+    text = server.plant.path.read_text()
+    changed = text.replace(old, new, 1)
+    assert changed != text
+    server.plant.path.write_text(changed)
+    return _said(server.process, f"{server.plant.path}:")
+
+
 def _said(process: subprocess.Popen, start: str) -> str:
     """The next line the server prints on stdout that starts with `start` (it prints one each time the plant
     file it serves changes), read by a thread so that a server that never says it fails the test within WAIT,
@@ -229,10 +239,7 @@ def test_a_module_added_to_the_plant_file_is_published_without_a_restart_and_a_b
     server, (cert, key) = served
     path = server.plant.path
     text = path.read_text()
-    broken = text.replace("    name: booth-a-left\n", "    name: booth-a-left\n    bogus: 1\n", 1)
-    assert broken != text
-    path.write_text(broken)
-    said = _said(server.process, f"{path}:")
+    said = edited(server, "    name: booth-a-left\n", "    name: booth-a-left\n    bogus: 1\n")
     assert "unknown key 'bogus'" in said and said.endswith("still publishing its last valid version"), said
     grown = text.replace("  - address: 5\n",
                          "  - address: 7\n    name: booth-a-new\n    profiles: reciprocator\n  - "
@@ -274,12 +281,8 @@ def test_a_line_named_like_another_line_s_module_has_nodes_of_its_own(served):
     id of booth-a's module 1, and the server ended (BadNodeIdExists). A "/" (and a "%") in a line's name is
     percent-encoded in its ids: its nodes are its own, and booth-a's module 1 keeps its own."""
     server, (cert, key) = served
-    path = server.plant.path
-    text = path.read_text()
-    renamed = text.replace("- name: booth-b\n", "- name: booth-a/1\n", 1)
-    assert renamed != text
-    path.write_text(renamed)
-    assert _said(server.process, f"{path}:").startswith(f"{path}: changed — publishing 6 modules")
+    said = edited(server, "- name: booth-b\n", "- name: booth-a/1\n")
+    assert said.startswith(f"{server.plant.path}: changed — publishing 6 modules"), said
 
     async def check() -> None:
         client = await connected(server.url, cert, key)
