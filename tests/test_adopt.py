@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import json
 import os
 import subprocess
 import sys
@@ -439,3 +440,19 @@ def test_adopting_any_teach_in_leaves_a_valid_file_that_plans_no_changes(taught)
                       if line[0] in "+-")
     # a value changed, or an override added
     assert changed["-"] <= len(taught) and changed["+"] <= 2 * len(taught)
+
+
+def test_an_adopt_is_recorded_on_the_lines_it_adopted_from_by_their_whole_names(tmp_path, capsys):
+    """A line named "hall/2": its adopt's run in `records list` names that line (it named "hall": each
+    "bus/name" of an adopted value was cut at its first "/")."""
+    source = tmp_path / "source.yaml"
+    source.write_text(DEMO.read_text().replace("  - name: booth-b\n", "  - name: hall/2\n", 1))
+    assert "hall/2" in source.read_text()
+    (tmp_path / "emulated").mkdir()
+    with emulated_plant(tmp_path / "emulated", source=source) as plant:
+        assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+        plant.emulators["hall/2"].teach_in(1, 1, 1234)
+        adopted = run_cli(capsys, "adopt", plant.path, "--auto-approve")
+        assert adopted.code == 0, adopted.err
+        runs = json.loads(run_cli(capsys, "records", "list", plant.path, "--json").out)
+    assert [run["lines"] for run in runs if run["command"] == "adopt"] == [["hall/2"]], runs

@@ -41,7 +41,8 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class Adoption:
     """The plant file rewritten to describe what the modules hold (`adopt`), not written yet:
-    `before` is the file as read, `after` the new text, `adopted` each value with its one-line `text`."""
+    `before` is the file as read, `after` the new text, `adopted` each value with its one-line `text`, `buses`
+    the buses of the modules adopted from."""
 
     path: Path
     before: str
@@ -51,6 +52,7 @@ class Adoption:
     reason: str | None = None
     plant: str = ""
     command_line: tuple[str, ...] | None = None
+    buses: tuple[str, ...] = ()
 
 
 def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable[int] | None = None,
@@ -70,7 +72,8 @@ def adopt(plant: Plant, modules: Iterable[str] | None = None, programs: Iterable
     from prc3cfg.plant.adopt import adopt as adopt_text
 
     found = adopt_text(plant, images, before, programs)
-    return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line)
+    return Adoption(plant.path, before, found.text, found.adopted, given, plant.name, options.command_line,
+                    found.buses)
 
 
 def write_adoption(adoption: Adoption) -> None:
@@ -85,9 +88,7 @@ def write_adoption(adoption: Adoption) -> None:
                       argv=adoption.command_line)
     journal = Journal(adoption.path, said, audit.follow(adoption.path))
     try:
-        journal.record("adopt", buses=sorted({name.partition("/")[0] for value in adoption.adopted
-                                              for name in value.modules}),
-                       values=[value.text for value in adoption.adopted])
+        journal.record("adopt", buses=list(adoption.buses), values=[value.text for value in adoption.adopted])
     except OSError as error:
         raise UserError(f"{journal.path}: cannot write the journal ({error.strerror}) — the plant file was "
                         "not changed") from None

@@ -89,10 +89,13 @@ class Adopted:
 
 @dataclass(frozen=True, slots=True)
 class AdoptedText:
-    """What `adopt` found: the values adopted, in the order of their modules in the file, and the new text."""
+    """What `adopt` found: the values adopted, in the order of their modules in the file, the new text, and
+    the buses of the modules adopted from (by name: a "bus/name" of `Adopted.modules` cannot say which part
+    is the bus's where a name holds a "/")."""
 
     adopted: tuple[Adopted, ...]
     text: str
+    buses: tuple[str, ...] = ()
 
 
 class AdoptRefused(UserError):
@@ -104,6 +107,7 @@ class _Drift:
     """A value a module holds other than the plant file says."""
 
     name: str                # "bus/module"
+    bus: str
     path: Path_              # the module in the file
     # in a layer: ("programs", 3, "position"), ("system", "max_speed"), ("programs", 7)
     within: Path_
@@ -148,7 +152,7 @@ def adopt(plant: Plant, images: dict[Key, ModuleImage], text: str,
     rewritten = splice.rewrite(text, wanted)
     _check_rewritten(plant, {key: _adopted_image(module, images.get(key), scope)
                              for key, module in _keyed(plant)}, rewritten)
-    return AdoptedText(tuple(adopted), rewritten)
+    return AdoptedText(tuple(adopted), rewritten, tuple(sorted({d.bus for d in drifts})))
 
 
 def _keyed(plant: Plant) -> Iterator[tuple[Key, Module]]:
@@ -224,14 +228,14 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage,
                                "adopt again")
     system = have.system if scope is None else desired.system
     _check(_adopted_image(module, have, scope), numbers, where)
-    drifts = [_Drift(name, path, ("system", BY_SYMBOL[c.symbol].key), plant_value(c.symbol, c.after),
-                     f"system {c.text}",
+    drifts = [_Drift(name, bus.name, path, ("system", BY_SYMBOL[c.symbol].key),
+                     plant_value(c.symbol, c.after), f"system {c.text}",
                      settings.system[BY_SYMBOL[c.symbol].key])
               for c in _changes(desired.system, system, SYSTEM_KEYS)]
     for number in numbers:
         held = have.program(number)
         if number in settings.programs:
-            drifts += [_Drift(name, path, ("programs", number, FIELD_KEYS[c.symbol]),
+            drifts += [_Drift(name, bus.name, path, ("programs", number, FIELD_KEYS[c.symbol]),
                               plant_value(c.symbol, c.after),
                               f"program {number} {c.text}", settings.programs[number][FIELD_KEYS[c.symbol]])
                        for c in _changes(desired.program(number), held, FIELD_KEYS)]
@@ -239,7 +243,8 @@ def _drifts(bus: Bus, module: Module, path: Path_, have: ModuleImage,
             symbols = [s for s in FIELD_KEYS if s in ("P", "V") or getattr(held, s)]
             said = ", ".join(f"{field_name(s)} {format_value(s, getattr(held, s))}" for s in symbols)
             value = {FIELD_KEYS[s]: plant_value(s, getattr(held, s)) for s in symbols}
-            drifts.append(_Drift(name, path, ("programs", number), value, f"program {number} {said}", None))
+            drifts.append(_Drift(name, bus.name, path, ("programs", number), value,
+                                 f"program {number} {said}", None))
     return drifts
 
 
