@@ -236,16 +236,21 @@ LIST_WIDTH = 100
 def listed(heading: str, groups: Iterable[Sequence[str]]) -> list[str]:
     """`heading`, then each group's names (a bus's modules) on lines of their own, indented, wrapped between
     names within `LIST_WIDTH`."""
-    lines = [heading]
-    for names in groups:
-        line = "   "
-        for n, name in enumerate(names):
-            piece = f" {name}" + ("," if n < len(names) - 1 else "")
-            if len(line) + len(piece) > LIST_WIDTH and line.strip():
-                lines.append(line)
-                line = "   "
-            line += piece
-        lines.append(line)
+    return [heading, *(line for names in groups for line in _packed(names, "    ", "    ", LIST_WIDTH))]
+
+
+def _packed(items: Sequence[str], first: str, then: str, width: int) -> list[str]:
+    """`items` joined by ", " on lines within `width` where they fit (room kept for the comma that ends a
+    line), the first line begun with `first`, the others with `then`; an item wider than a line alone on one:
+    `listed`'s names and `hanging`'s fields."""
+    lines: list[str] = []
+    for n, item in enumerate(items):
+        if lines and len(lines[-1]) + 2 + len(item) + (n < len(items) - 1) <= width:
+            lines[-1] += f", {item}"
+        else:
+            if lines:
+                lines[-1] += ","
+            lines.append((then if lines else first) + item)
     return lines
 
 
@@ -260,17 +265,9 @@ def hanging(line: str, width: int) -> list[str]:
     indent = len(line) - len(line.lstrip())
     colon = line.find(": ", indent)
     hang = " " * (colon + 2 if 0 <= colon and colon + 2 <= width // 2 else min(indent + 2, width // 2))
-    packed: list[str] = []
-    fields = line.split(", ")
-    for n, field in enumerate(fields):  # room kept for the comma of a line the next field does not fit on
-        if packed and len(packed[-1]) + 2 + len(field) + (n < len(fields) - 1) <= width:
-            packed[-1] += f", {field}"
-        else:
-            if packed:
-                packed[-1] += ","
-            packed.append(hang + field if packed else field)
     lines = []
-    for text in packed:  # its indent given as one: textwrap drops it before a word too long for its line
+    for text in _packed(line.split(", "), "", hang, width):
+        # its indent given as one: textwrap drops it before a word too long for its line
         own = text[:len(text) - len(text.lstrip())]
         lines += textwrap.wrap(text.lstrip(), width, initial_indent=own, subsequent_indent=hang,
                                break_long_words=False, break_on_hyphens=False)
