@@ -131,6 +131,11 @@ def on_a_terminal(args: list, env: dict, columns: int = 0) -> bytes:
     return b"".join(chunks)
 
 
+def shown_lines(raw: bytes) -> list[str]:
+    """The lines a terminal shows of `raw`: without its colours, links and carriage returns."""
+    return re.sub(r"\x1b\[[0-9;]*m|\x1b\]8;[^\x1b]*\x1b\\", "", raw.decode()).replace("\r", "").splitlines()
+
+
 def test_plans_are_coloured_on_a_terminal_unless_no_color(tmp_path):
     """Coloured on a terminal that shows colour, whatever TERM the tests run under (a maintainer's editor
     shell, `env -i`, a CI runner may say "dumb"); not with NO_COLOR, nor on a terminal that says it is dumb,
@@ -160,25 +165,23 @@ def test_a_plan_on_a_terminal_breaks_its_long_lines_between_fields_and_a_pipe_ke
                            env={**os.environ, **env}, check=True).stdout.splitlines()
     whole = next(line for line in piped if line.startswith("    + program 3: ") and "F2 " in line)
     assert len(whole) > 150 and max(map(len, piped)) > 150
-    screen = on_a_terminal(["plan", plant], env, columns=80).decode()
-    lines = re.sub(r"\x1b\[[0-9;]*m", "", screen).replace("\r", "").splitlines()
+    raw = on_a_terminal(["plan", plant], env, columns=80)
+    lines = shown_lines(raw)
     assert lines and all(len(line) < 80 for line in lines), max(lines, key=len)
     at = lines.index(whole[:whole.index(",") + 1] + whole[whole.index(",") + 1:].split(",")[0] + ",")
     block = [lines[at], *itertools.takewhile(lambda line: re.match(r" {17}\S", line), lines[at + 1:])]
     assert len(block) > 2 and " ".join(block).split() == whole.split()
     green = "\x1b[32m"
-    assert all(f"{green}{line}" in screen for line in block), screen
+    assert all(f"{green}{line}" in raw.decode() for line in block), raw
     # each whole on a terminal wide enough for it
-    wide = re.sub(r"\x1b\[[0-9;]*m", "", on_a_terminal(["plan", plant], env, columns=300).decode())
-    assert whole in wide.replace("\r", "").splitlines()
+    assert whole in shown_lines(on_a_terminal(["plan", plant], env, columns=300))
     # and so are the plans `apply --auto-approve` shows each line's as its writes begin, and its account
-    applied = on_a_terminal(["apply", plant, "--auto-approve", "--allow-axis-release"], env, columns=80)
-    lines = re.sub(r"\x1b\[[0-9;]*m", "", applied.decode()).replace("\r", "").splitlines()
+    lines = shown_lines(on_a_terminal(["apply", plant, "--auto-approve", "--allow-axis-release"], env,
+                                      columns=80))
     assert "Apply complete" in " ".join(lines) and sum("Writing bus" in line for line in lines) == 2
     assert all(len(line) < 80 or os.sep in line.split()[-1] for line in lines), lines  # a path is not broken
     # and what `read` read (a module's system parameters: 261 characters)
-    read = re.sub(r"\x1b\[[0-9;]*m", "", on_a_terminal(["read", plant], env, columns=80).decode())
-    lines = read.replace("\r", "").splitlines()
+    lines = shown_lines(on_a_terminal(["read", plant], env, columns=80))
     assert sum("system: upper reversing point" in line for line in lines) == 6
     assert all(len(line) < 80 for line in lines), max(lines, key=len)
 
@@ -204,8 +207,7 @@ def test_names_that_look_like_rich_markup_or_emoji_codes_are_shown_as_written(tm
         piped = subprocess.run([sys.executable, "-m", "prc3cfg", *map(str, args)], capture_output=True,
                                text=True, env={**os.environ, **env})
         assert piped.returncode in (0, 2) and "Traceback" not in piped.stderr, (args, piped.stderr)
-        on_screen = re.sub(r"\x1b\[[0-9;]*m|\x1b\]8;[^\x1b]*\x1b\\", "",
-                           on_a_terminal(args, env, columns=200).decode())
+        on_screen = "\n".join(shown_lines(on_a_terminal(args, env, columns=200)))
         for said in (piped.stdout, on_screen):
             named = [name for name in MARKUP_NAMES if name in said]
             assert named == (MARKUP_NAMES if len(args) != 4 else [args[3]]), (args, said)
