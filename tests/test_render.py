@@ -211,6 +211,28 @@ def test_the_budget_is_kept_for_any_size(tmp_path):
     assert "left out" not in render.markdown(plan, max_chars=10_000_000)
 
 
+def test_an_apply_is_reckoned_as_its_lines_run() -> None:
+    """The phases as an apply measures them — until every line is read, until every line has written, the
+    rest: with a question (or a plan file) every line's writes begin once all lines are read; without, each
+    line is written and verified as soon as it is read, and a line done while another is still read adds
+    nothing. Here line a commissions (programs planned as the factory's, not read, verified after the
+    writes): it reads less than line b, which writes nothing, and is still verifying when b is read."""
+    change = replace(a_change(), cost=COST, assumed=tuple(range(8, 40)))
+    held = change.actual
+    unchanged = ModuleChange("b", "n", held, held, plan_module(held, held, COST), cost=COST)
+    asked = PlantPlan("p", "p.yaml", "0" * 64, (change, unchanged))
+    read_a, write_a, verify_a = change.reading_time, change.plan.bus_time, change.verifying_time
+    read_b = unchanged.reading_time
+    assert read_a < read_b < read_a + write_a + verify_a
+    assert asked.phases() == pytest.approx({"reading": read_b, "writing": write_a, "verifying": verify_a})
+    by_line = replace(asked, by_line=True)
+    assert by_line.phases() == pytest.approx({"reading": read_b, "writing": 0.0,
+                                              "verifying": read_a + write_a + verify_a - read_b})
+    # the total: the line that ends last
+    assert sum(by_line.phases().values()) == pytest.approx(read_a + write_a + verify_a)
+    assert sum(asked.phases().values()) == pytest.approx(read_b + write_a + verify_a)
+
+
 def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None:
     """Reading back what the plan was made from, writing, verifying: priced by the bus-time model,
     the longest line's each (lines run at once), their sum the headline of the human plan and the
@@ -221,7 +243,8 @@ def test_a_plan_states_its_time_by_phase_and_the_total_as_its_headline() -> None
     # its read-back holds every program: 1 + 16 reads
     reading = math.fsum(COST.message_time(1, m) for m in read_messages(range(1, 65)))
     verifying = verification_time(change.actual, change.plan.predicted, change.steps, COST)
-    assert plan.phases() == {"reading": reading, "writing": change.plan.bus_time, "verifying": verifying}
+    assert plan.phases() == pytest.approx({"reading": reading, "writing": change.plan.bus_time,
+                                           "verifying": verifying})
     document = plan_file.write(plan, (), render)
     assert document["estimated_phases_s"] == {phase: round(seconds, 3)
                                               for phase, seconds in plan.phases().items()}

@@ -333,12 +333,13 @@ def _by_line(plant: Plant, wanted: Reads, chosen: Pairs, desired: dict[Key, Modu
                 gates.show_line(planned.plan)
             consent = gate(planned.plan, gates, writing.command)
             continue
-        the_plan = replace(planned.plan, reading=wanted.reading(chosen, planned.read))
+        the_plan = replace(planned.plan, reading=wanted.reading(chosen, planned.read), by_line=True)
         if gates.show is not None:
             gates.show(the_plan)
         writing.whole(the_plan, planned.at)
     written = by_line.account()
-    return replace(written, plan=replace(written.plan, reading=wanted.reading(chosen, by_line.images)))
+    return replace(written, plan=replace(written.plan, reading=wanted.reading(chosen, by_line.images),
+                                         by_line=True))
 
 
 def _whole_plan(plant: Plant, chosen: Pairs, wanted: Reads, desired: dict[Key, ModuleImage] | None,

@@ -12,7 +12,6 @@ every module of the line processes — the leading `broadcasts` steps of each mo
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from math import fsum
 
@@ -135,6 +134,9 @@ class PlantPlan:
     #: the records read with the lines said — the plan's headline words ("booth-a/booth-a-right is in E21
     #: (…)")
     faults: tuple[str, ...] = ()
+    #: an apply's with no question between the plan and the writes: each line written as soon as its own plan
+    #: is whole, while other lines are still read (`prc3cfg.shell.by_line`) — its time is reckoned so
+    by_line: bool = False
 
     def proof(self, bus: str) -> LineProof | None:
         return next((p for p in self.proofs if p.bus == bus), None)
@@ -148,26 +150,29 @@ class PlantPlan:
         return fsum(m.plan.bus_time for m in self.modules) + self.broadcast_time
 
     def phases(self) -> dict[str, float]:
-        """The time the operator waits for an apply of this plan, by phase — reading back, writing,
-        verifying — each the longest of its lines' (the lines run at once, each line's modules one
-        after another), by the bus-time model. Writing counts each line's broadcasts once; the
-        probes that proved them are not counted."""
-        lines = self.buses()
-
-        def longest(seconds: Callable[[str, list[ModuleChange]], float]) -> float:
-            return max((seconds(bus, modules) for bus, modules in lines.items()), default=0.0)
-
-        def writing(bus: str, modules: list[ModuleChange]) -> float:
+        """The time the operator waits for an apply of this plan, by phase, by the bus-time model — as an
+        apply measures them (`prc3cfg.shell.phases`): reading back until every line is read, writing until
+        every line has written, verifying the rest. The lines run at once, each line's modules one after
+        another: an apply that asks before writing (or runs a plan file) writes every line once all are
+        read, one that does not (`by_line`) writes each line as soon as it is read — a line read sooner is
+        written, or verified too, while another is still read. Writing counts each line's broadcasts once;
+        the probes that proved them are not counted."""
+        times = []
+        for bus, modules in self.buses().items():
             cost = modules[0].cost
             shared = (fsum(cost.broadcast_time(step.message) for step in self.broadcasts(bus))
                       if cost is not None else 0.0)
-            return fsum(m.plan.bus_time for m in modules) + shared
-
-        return {
-            "reading": longest(lambda _, modules: fsum(m.reading_time for m in modules)),
-            "writing": longest(writing),
-            "verifying": longest(lambda _, modules: fsum(m.verifying_time for m in modules)),
-        }
+            times.append((fsum(m.reading_time for m in modules),
+                          fsum(m.plan.bus_time for m in modules) + shared,
+                          fsum(m.verifying_time for m in modules)))
+        read = max((r for r, _, _ in times), default=0.0)
+        if not self.by_line:  # every line's writes begin together
+            writing = max((w for _, w, _ in times), default=0.0)
+            return {"reading": read, "writing": writing,
+                    "verifying": max((w + v for _, w, v in times), default=0.0) - writing}
+        written = max([read] + [r + w for r, w, _ in times])
+        return {"reading": read, "writing": written - read,
+                "verifying": max([written] + [r + w + v for r, w, v in times]) - written}
 
     def broadcasts(self, bus: str) -> tuple[Step, ...]:
         """The steps sent once to address 0 on `bus`, before any module's own steps."""
