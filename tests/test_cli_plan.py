@@ -31,6 +31,28 @@ def test_read_json_is_exactly_what_the_emulators_hold(plant, capsys):
         assert entry["system"] == image.system.to_json()
 
 
+def test_read_shows_each_module_as_read_and_says_which_programs_it_did_not_read(plant, capsys):
+    """`read` reads what the plant file manages and what its system parameters could clamp: once applied,
+    booth-a-left's profile manages programs 1–3 and leaves the others alone, booth-b-pretreat
+    (`unmanaged_programs: reset`) manages every one. What was not read is said, not left for the reader to
+    take as absent."""
+    assert run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release").code == 0
+    result = run_cli(capsys, "read", plant.path)
+    assert result.code == 0, result.err
+    modules = re.split(r"^(?=bus )", result.out, flags=re.MULTILINE)[1:]
+    shown = {module.splitlines()[0]: module.splitlines()[1:] for module in modules}
+    left = shown["bus booth-a, module 1 (booth-a-left)"]
+    assert [line.split(":")[0] for line in left] == ["  system", "  program 1", "  program 2", "  program 3",
+                                                     "  not read"]
+    assert left[-1] == ("  not read: programs 4–64 — the plant file leaves them alone, and its system "
+                        "parameters cannot clamp them")
+    top = shown["bus booth-a, module 5 (booth-a-top)"]
+    assert top[-1] == ("  not read: programs 4–9, 12–64 — the plant file leaves them alone, and its system "
+                       "parameters cannot clamp them")
+    pretreat = shown["bus booth-b, module 4 (booth-b-pretreat)"]
+    assert len(pretreat) == 1 + 64 and not any("not read" in line for line in pretreat)
+
+
 def test_a_step_s_bytes_are_shown_only_with_frames_and_always_kept_in_the_plan_file(plant, capsys, tmp_path):
     """People read what a step does; its bytes in hex only with --frames (plan, show, markdown) — the plan
     file keeps them, as apply --plan sends them."""

@@ -99,14 +99,24 @@ def _dead(match: re.Match[str]) -> str:
     return "@<!-- -->" if match.group() == "@" else f"&#{ord(match.group())};"
 
 
-def address_ranges(addresses: Iterable[int]) -> str:
-    """"address 5", "addresses 7–30", "addresses 2, 4–6"."""
-    listed = sorted(addresses)
+def _runs(numbers: Iterable[int]) -> list[list[int]]:
+    """`numbers`, sorted, cut where one is not the one before plus one."""
     runs: list[list[int]] = []
-    for address in listed:
-        if runs and address == runs[-1][-1] + 1:
-            runs[-1].append(address)
+    for n in sorted(numbers):
+        if runs and n == runs[-1][-1] + 1:
+            runs[-1].append(n)
         else:
-            runs.append([address])
+            runs.append([n])
+    return runs
+
+
+def number_runs(numbers: Iterable[int]) -> str:
+    """"1–8, 13": program numbers as runs."""
+    return ", ".join(f"{run[0]}–{run[-1]}" if len(run) > 1 else str(run[0]) for run in _runs(numbers))
+
+
+def address_ranges(addresses: Iterable[int]) -> str:
+    """"address 5", "addresses 7–30", "addresses 2, 4–6" (a run of two as two)."""
+    runs = _runs(addresses)
     text = ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 2 else ", ".join(map(str, r)) for r in runs)
-    return f"address{'es' if len(listed) > 1 else ''} {text}"
+    return f"address{'es' if sum(map(len, runs)) > 1 else ''} {text}"

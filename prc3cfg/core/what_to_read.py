@@ -85,6 +85,7 @@ from prc3cfg.core.image import (
     default_program,
 )
 from prc3cfg.core.planner import Step
+from prc3cfg.core.text import number_runs
 
 #: Why a module that reported E12 (system parameters not set) is read in full: its record says nothing.
 UNSET = "it reported E12 (system parameters not set)"
@@ -249,21 +250,10 @@ def rolling(targets: Sequence[Target], known: Mapping[Key, Known]) -> dict[Key, 
         for age, address, _, numbers in sorted(line)[:ROLLED_WINDOWS]:
             picked.setdefault((bus, address), []).append((age, numbers))
     return {key: (tuple(n for _, numbers in chosen for n in numbers),
-                  f"rolling evidence: programs {_ranges([n for _, numbers in chosen for n in numbers])}, "
+                  f"rolling evidence: programs {number_runs([n for _, numbers in chosen for n in numbers])}, "
                   "the oldest on its line, "
                   f"since {to_the_minute(min(age for age, _ in chosen).isoformat())}")
             for key, chosen in picked.items()}
-
-
-def _ranges(numbers: Sequence[int]) -> str:
-    """"1–8, 13": program numbers as runs."""
-    runs: list[list[int]] = []
-    for n in sorted(numbers):
-        if runs and n == runs[-1][-1] + 1:
-            runs[-1].append(n)
-        else:
-            runs.append([n])
-    return ", ".join(f"{run[0]}–{run[-1]}" if len(run) > 1 else str(run[0]) for run in runs)
 
 
 class PlanEntry(Placed, Protocol):

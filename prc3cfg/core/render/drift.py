@@ -11,10 +11,13 @@ from typing import Any
 
 from prc3cfg.core.image import ModuleImage
 from prc3cfg.core.render.words import field_name, format_value, plural
+from prc3cfg.core.text import number_runs
 
 
 def image_lines(bus: str, name: str, image: ModuleImage) -> list[str]:
-    """A module as `prc3cfg read` shows it: where it is, its system parameters, each program read."""
+    """A module as `prc3cfg read` shows it: where it is, its system parameters, each program read — and the
+    programs it did not read, which `read` leaves alone (the plant file does not manage them, and its system
+    parameters cannot clamp them)."""
     lines = [f"bus {bus}, module {image.address} ({name})",
              "  system: "
              + ", ".join(f"{field_name(k)} {format_value(k, v)}" for k, v in image.system.to_json().items())]
@@ -23,6 +26,10 @@ def image_lines(bus: str, name: str, image: ModuleImage) -> list[str]:
             values = ", ".join(f"{field_name(k)} {format_value(k, v)}"
                                for k, v in program.to_json().items() if k != "A")
             lines.append(f"  program {number}: {values}" + (f", next {program.A}" if program.A else ""))
+    unread = [number for number, program in enumerate(image.programs, start=1) if program is None]
+    if unread:
+        lines.append(f"  not read: program{'s' if len(unread) > 1 else ''} {number_runs(unread)} — the plant "
+                     "file leaves them alone, and its system parameters cannot clamp them")
     return lines
 
 
