@@ -183,17 +183,25 @@ def test_a_plan_of_another_plant_is_refused_as_such_not_as_a_change(plant, capsy
 
 
 def test_on_the_embedded_emulator_the_time_says_why_it_is_below_the_estimate(plant, capsys, tmp_path):
-    """The embedded emulator answers at once: a 0.2 s apply "estimated 6.0 s" says that the estimate is the
-    line's."""
-    embedded = tmp_path / "embedded" / "plant.yaml"
-    embedded.parent.mkdir()
-    embedded.write_text("plant: p\nbuses:\n  - name: line\n    port: emulator://line\n    modules:\n"
-                        "      - address: 1\n        name: m1\n        programs:\n          1: {position: "
-                        "0.3, speed: 0.3}\n")
-    done = run_cli(capsys, "apply", embedded, "--auto-approve")
-    assert done.code == 0, done.err
-    assert ("— the embedded emulator answers at once: the estimate is what a line at the plant file's "
-            "baud takes") in done.out
+    """The embedded emulator answers at once: a 0.2 s apply or restore "estimated 6.0 s" says that the
+    estimate is the line's — and does not where the port gives a line speed, at which it answers as a line
+    does, nor over a socket."""
+    text = ("plant: p\nbuses:\n  - name: line\n    port: emulator://line{query}\n    modules:\n"
+            "      - address: 1\n        name: m1\n        programs:\n          1: {{position: "
+            "0.3, speed: 0.3}}\n")
+    said = ("— the embedded emulator answers at once: the estimate is what a line at the plant file's baud "
+            "takes")
+    for query, at_once in (("", True), ("?line-speed=38400", False)):
+        embedded = tmp_path / f"embedded{len(query)}" / "plant.yaml"
+        embedded.parent.mkdir()
+        embedded.write_text(text.format(query=query))
+        done = run_cli(capsys, "apply", embedded, "--auto-approve")
+        assert done.code == 0 and "Time: " in done.out, done.err
+        assert (said in done.out) is at_once, done.out
+        snapshot = next((embedded.parent / ".prc3cfg" / "snapshots").iterdir())
+        restored = run_cli(capsys, "restore", snapshot, "--auto-approve")
+        assert restored.code == 0 and "Restore complete" in restored.out, restored.err
+        assert (said in restored.out) is at_once, restored.out
     over_a_socket = run_cli(capsys, "apply", plant.path, "--auto-approve", "--allow-axis-release")
     assert (over_a_socket.code == 0 and "Time: " in over_a_socket.out
             and "embedded emulator" not in over_a_socket.out)

@@ -42,8 +42,7 @@ LISTING_SPARES = ("pydantic", "serial", "yaml", "rich", "logging", "socket", "ha
 #: The whole of prc3cfg that `prc3cfg --help` loads besides the command modules: what their signatures and
 #: `main` use.
 LISTING_LOADS = ["prc3cfg", "prc3cfg.__main__", "prc3cfg.cli", "prc3cfg.cli.common", "prc3cfg.cli.durations",
-                 "prc3cfg.core",
-                 "prc3cfg.core.line", "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell",
+                 "prc3cfg.core", "prc3cfg.core.text", "prc3cfg.errors", "prc3cfg.shell",
                  "prc3cfg.shell.cancel", "prc3cfg.shell.platform"]
 
 

@@ -267,7 +267,8 @@ def _apply(plant: Plant, chosen: Pairs, on_lines: Pairs, wanted_of: Callable[[On
                            else _write_whole(writing, *whole))
                 if written.verified and desired is None and len(chosen) == len(plant.modules()):
                     written = _keep_applied(plant, written, keeping)
-                return _judged(written, journal.path, earlier, records)
+                return _judged(written, journal.path, earlier, records,
+                               at_once=not any(link.takes_line_time for link in held.links.values()))
     except (ApplyFailed, ApplyInterrupted):
         raise  # a result: its journal says what was written
     # refused before any write (a gate, a stale plan, a line): the journal it began says why
@@ -300,11 +301,11 @@ def _ready(plant: Plant, buses: Collection[Bus], reason: str | None, command: st
 
 
 def _judged(written: Written, journal: Path, earlier: tuple[pending_records.Pending, ...],
-            records: pending_records.Releases) -> ApplyResult:
+            records: pending_records.Releases, *, at_once: bool) -> ApplyResult:
     """The result of what the writes came to: `RecordsFailed`, `ApplyInterrupted` or `ApplyFailed`
     unless every module verified."""
     result = ApplyResult(written.plan, written.runs, written.snapshot, journal, earlier, records.path,
-                         written.took, written.unread)
+                         written.took, written.unread, at_once)
     if written.trouble is not None:
         raise RecordsFailed(result, written.trouble, written.lost)
     if written.interrupted:

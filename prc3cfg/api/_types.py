@@ -108,6 +108,9 @@ class ApplyResult:
     #: lines written as soon as their own plan was whole, while another's read-back or plan failed (or
     #: Ctrl-C stopped it): what stopped that one, one line each, saying nothing was written there
     unread: tuple[str, ...] = ()
+    #: every line it talked on answers at once (the embedded emulator without a line-speed): the time it
+    #: took says nothing of a line's
+    at_once: bool = False
 
     @property
     def verified(self) -> bool:

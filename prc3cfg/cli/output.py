@@ -186,9 +186,9 @@ def accounted() -> Iterator[None]:
         raise
 
 
-def applied(result: ApplyResult, command: str = "apply", *, emulated: bool = False) -> None:
-    """The account of a finished apply (or restore) and its time; `emulated`: every line is the embedded
-    emulator, which answers at once, so the time taken is far below the estimate of a real line."""
+def applied(result: ApplyResult, command: str = "apply") -> None:
+    """The account of a finished apply (or restore) and its time — said to be far below the estimate of a
+    real line where every line was the embedded emulator, which answers at once (`ApplyResult.at_once`)."""
     if result.runs or result.earlier:
         report(result)
     if result.runs:
@@ -196,7 +196,7 @@ def applied(result: ApplyResult, command: str = "apply", *, emulated: bool = Fal
         print_lines(f"{command.capitalize()} complete: {written} written and verified.\n"
                     + render.timing(result.plan.phases(), result.took)
                     + (" — the embedded emulator answers at once: the estimate is what a line at the plant "
-                       "file's baud takes" if emulated else ""))
+                       "file's baud takes" if result.at_once else ""))
 
 
 def write_picture(path: Path, data: bytes, module: str) -> None:

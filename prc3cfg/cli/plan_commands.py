@@ -23,7 +23,6 @@ from prc3cfg.cli.common import (
     print_lines,
     unanswered,
 )
-from prc3cfg.core.line import EMULATOR_SCHEME
 
 EXIT_CHANGES = 2
 #: `plan`: a hard rule of the plant's policy refuses what the plan would write (docs/commands.md).
@@ -248,7 +247,7 @@ def apply(
                            verify=verified, options=options, previous=previous, full_read=full_read,
                            reason=reason,
                            overrides=overrides)
-    output.applied(result, emulated=all(bus.port.startswith(EMULATOR_SCHEME) for bus in loaded.buses))
+    output.applied(result)
 
 
 def _overrides(ctx: typer.Context, window: str | None, envelope: str | None) -> dict[str, str]:
