@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 from dataclasses import replace
 
 import pytest
@@ -153,6 +154,32 @@ def test_modules_alike_import_into_one_profile_and_plan_to_no_changes(tmp_path_f
         assert run_cli(capsys, "validate", plant).code == 0
         planned = run_cli(capsys, "plan", plant, "--detailed-exitcode")
         assert planned.code == 0, imported.out + planned.out + planned.err
+
+
+def test_an_imported_plant_file_s_schema_line_is_told_how_to_be_met(tmp_path, capsys):
+    """The plant file `import --out` writes names its JSON Schema beside it, for an editor: where that file is
+    not there, the import says the command that writes it — run as printed, it is, and the next import says
+    nothing of it."""
+    with Emulator({1: ModuleState(ModuleImage.factory(1))}) as emulator:
+        host, port = emulator.listen()
+        plant = tmp_path / "Anlage Süd" / "plant.yaml"
+        plant.parent.mkdir()
+
+        def imported() -> list[str]:
+            done = run_cli(capsys, "import", "--port", f"socket://{host}:{port}", "--modules", "1",
+                           "--timeout", "0.2", "--out", plant)
+            assert done.code == 0, done.err
+            return done.err.splitlines()
+
+        first = imported()
+        assert first[:2] == [f"Written to {plant}", f"imported 1 module from socket://{host}:{port}"]
+        said, _, command = first[2].partition(": ")
+        assert said == "its first line names plant.schema.json beside it, for an editor — write that with"
+        assert len(first) == 3 and shlex.split(command)[:3] == ["prc3cfg", "schema", "--out"]
+        assert run_cli(capsys, *shlex.split(command)[1:]).code == 0
+        written = (plant.parent / "plant.schema.json").read_text(encoding="utf-8")
+        assert written == run_cli(capsys, "schema").out
+        assert imported() == first[:2]
 
 
 def test_three_identical_modules_are_one_profile_and_three_lines(tmp_path, capsys):

@@ -94,7 +94,6 @@ CLI_MAY_IMPORT = (
     "prc3cfg.core.render", "prc3cfg.core.events", "prc3cfg.core.text", "prc3cfg.core.units",
                   "prc3cfg.core.line.LineSettings",
     "prc3cfg.core.fleet.markdown",  # the fleet summary's table
-    "prc3cfg.core.line.EMULATOR_SCHEME",  # the time of an apply on the embedded emulator says why it is short
     "prc3cfg.core.plant_plan.PlantPlan", "prc3cfg.shell.link.client.Link",
     # the plan file `plan --out` writes (reading one back is the workflow's: `api.read_plan`)
     "prc3cfg.core.plan_file.write",

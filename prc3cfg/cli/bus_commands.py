@@ -6,7 +6,9 @@ pseudo-terminal, which carries no parity (`emulator serve --pty` defaults to non
 """
 
 import contextlib
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
@@ -241,6 +243,19 @@ def import_plant(
         return
     printed_or_written(text, out)
     stderr_console().print(f"imported {plural(count, 'module')} from {', '.join(ports)}")
+    if out is not None:
+        _schema_beside(text, out)
+
+
+def _schema_beside(text: str, out: Path) -> None:
+    """The command that writes the JSON Schema the plant file's first line names beside it, for an editor
+    (yaml-language-server) — where that file is not there yet."""
+    from prc3cfg.shell.platform import command_line
+
+    schema = text.partition("$schema=")[2].partition("\n")[0]
+    if schema and not (out.parent / schema).exists():
+        print(f"its first line names {schema} beside it, for an editor — write that with: "
+              f"{command_line('prc3cfg', 'schema', '--out', str(out.parent / schema))}", file=sys.stderr)
 
 
 @link_app.command("init-db")
